@@ -1,0 +1,237 @@
+"""The probe's potential from first principles (PHYSICS.md §4) and the frequency it implies.
+
+For the magnet on its lever, deflected by θ in the rotation plane,
+
+    U(θ) = ½·kM·θ² − m(θ)·B(r(θ)) − a·g·r(θ),
+
+and the small-oscillation stiffness is k = U''(θs) at the rest angle θs where U'(θs) = 0.
+The published model (Eqs. 1, 4, 5) keeps the first three terms of the expansion of this
+U at θs = 0; nothing here is expanded. The frequency follows Eq. S1, f = √(k/J − δ²)/2π.
+
+Representation. U = ½·kM·θ² + W(θ): the magnetic and gravitational part W is sampled at
+Chebyshev nodes on [−w, w] (w covers the housing stop with margin) from the *actual* field,
+and held as a Chebyshev series. W is analytic on that interval (l ≪ distance to any
+source), so the series converges geometrically and its derivatives are exact to rounding.
+One vectorised solver (:class:`ArcPotential`) then serves a single probe in any field
+source (:meth:`ArcPotential.from_source`), a batch of measurements described by local field
+expansions (:meth:`ArcPotential.from_local_field`, used by the model lab), and the
+simulator's torque tables.
+
+Finite amplitude. The cantilever does not swing in a parabola: for an oscillation
+θ(t) = θc + A·cos φ, first-harmonic balance gives the effective stiffness
+k(A) = (1/(πA))·∫ U'(θc + A·cos φ)·cos φ dφ, with the cycle centre θc from the DC balance
+∫ U'(θc + A·cos φ) dφ = 0 (PHYSICS.md §5.4: for −m·B·cos θ this is m·B·2·J1(A)/A).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+DEFAULT_NODES = 32
+DEFAULT_HALF_WIDTH_RAD = 0.75
+BALANCE_POINTS = 48
+NEWTON_STEPS = 30
+
+
+def chebyshev_nodes_rad(half_width_rad: float = DEFAULT_HALF_WIDTH_RAD, n: int = DEFAULT_NODES) -> np.ndarray:
+    """Chebyshev–Gauss nodes w·cos(π(k + ½)/n), k = 0 … n−1, in radians."""
+    return half_width_rad * np.cos(np.pi * (np.arange(n) + 0.5) / n)
+
+
+def _coefficient_matrix(n: int) -> np.ndarray:
+    """Matrix taking values at the n Chebyshev–Gauss nodes to series coefficients (DCT-II)."""
+    j = np.arange(n)[:, None]
+    k = np.arange(n)[None, :]
+    m = (2.0 / n) * np.cos(np.pi * j * (k + 0.5) / n)
+    m[0] *= 0.5
+    return m
+
+
+def _derivative(coeffs: np.ndarray, scale: float) -> np.ndarray:
+    """Coefficients of d/dθ of a Chebyshev series in x = θ/w (``scale`` = 1/w), last axis."""
+    n = coeffs.shape[-1]
+    out = np.zeros_like(coeffs)
+    for j in range(n - 1, 0, -1):
+        out[..., j - 1] = 2.0 * j * coeffs[..., j] + (out[..., j + 1] if j + 1 < n else 0.0)
+    out[..., 0] *= 0.5
+    return out * scale
+
+
+def _clenshaw(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Σ c_j T_j(x) with coefficients on the last axis of ``coeffs`` (batch shape B) and
+    x of shape B + (m,); returns B + (m,)."""
+    c = coeffs[..., None, :]
+    b1 = np.zeros(np.broadcast_shapes(c.shape[:-1], x.shape))
+    b2 = np.zeros_like(b1)
+    for j in range(coeffs.shape[-1] - 1, 0, -1):
+        b1, b2 = 2.0 * x * b1 - b2 + c[..., j], b1
+    return x * b1 - b2 + c[..., 0]
+
+
+class ArcPotential:
+    """U(θ) = ½·kM·θ² + W(θ) for a batch of probes, W a Chebyshev series on [−w, w].
+
+    Parameters
+    ----------
+    spring_nm_per_rad : kM, shape B (the batch shape) or broadcastable to it.
+    inertia_kgm2, damping_per_s : J and δ of Eq. S1 (broadcastable to B).
+    energy_samples_j : W at :func:`chebyshev_nodes_rad` (``half_width_rad``, n), shape B + (n,).
+    """
+
+    def __init__(self, spring_nm_per_rad, inertia_kgm2, damping_per_s, energy_samples_j,
+                 half_width_rad: float = DEFAULT_HALF_WIDTH_RAD):
+        samples = np.asarray(energy_samples_j, dtype=float)
+        self.half_width_rad = float(half_width_rad)
+        self.batch_shape = samples.shape[:-1]
+        self.spring_nm_per_rad = np.broadcast_to(np.asarray(spring_nm_per_rad, float), self.batch_shape)
+        self.inertia_kgm2 = np.broadcast_to(np.asarray(inertia_kgm2, float), self.batch_shape)
+        self.damping_per_s = np.broadcast_to(np.asarray(damping_per_s, float), self.batch_shape)
+        self.coeffs = samples @ _coefficient_matrix(samples.shape[-1]).T
+        self.d1 = _derivative(self.coeffs, 1.0 / self.half_width_rad)
+        self.d2 = _derivative(self.d1, 1.0 / self.half_width_rad)
+
+    # --- U and its derivatives, θ of shape B + (m,) or B -----------------------------------
+    def _eval(self, coeffs, theta_rad):
+        theta = np.asarray(theta_rad, dtype=float)
+        per_row = theta.shape == self.batch_shape
+        t = theta[..., None] if per_row else theta
+        value = _clenshaw(coeffs, t / self.half_width_rad)
+        return value[..., 0] if per_row else value
+
+    def _spring(self, theta):
+        kM = self.spring_nm_per_rad
+        return kM if np.ndim(theta) == len(self.batch_shape) else kM[..., None]
+
+    def energy_j(self, theta_rad):
+        return 0.5 * self._spring(theta_rad) * np.square(theta_rad) + self._eval(self.coeffs, theta_rad)
+
+    def torque_nm(self, theta_rad):
+        """Restoring torque −dU/dθ, N·m."""
+        return -(self._spring(theta_rad) * theta_rad + self._eval(self.d1, theta_rad))
+
+    def stiffness_nm_per_rad(self, theta_rad=None):
+        """U''(θ), N·m/rad; at the exact rest angle by default."""
+        theta = self.rest_angle_rad() if theta_rad is None else theta_rad
+        return self._spring(theta) + self._eval(self.d2, theta)
+
+    # --- equilibrium, finite amplitude and frequency ----------------------------------------
+    def rest_angle_rad(self) -> np.ndarray:
+        """Exact rest angle θs (U'(θs) = 0, U''(θs) > 0) nearest 0; NaN where none is stable."""
+        return self.cycle_centre_rad(np.zeros(self.batch_shape))
+
+    def cycle_centre_rad(self, amplitude_rad) -> np.ndarray:
+        """Centre θc of an oscillation of amplitude A from the DC balance ⟨U'(θc + A·cos φ)⟩ = 0.
+
+        Solved by Newton's method from θ = 0; NaN where it does not converge inside the
+        interval or where the balance is unstable (⟨U''⟩ ≤ 0, beyond spring cancellation).
+        """
+        amplitude = np.broadcast_to(np.asarray(amplitude_rad, float), self.batch_shape)
+        cos_phi = np.cos(2.0 * np.pi * np.arange(BALANCE_POINTS) / BALANCE_POINTS)
+        offsets = amplitude[..., None] * cos_phi
+        centre = np.zeros(self.batch_shape)
+        for _ in range(NEWTON_STEPS):
+            theta = centre[..., None] + offsets
+            slope = self._spring(theta) * theta + self._eval(self.d1, theta)
+            curvature = self._spring(theta) + self._eval(self.d2, theta)
+            step = slope.mean(-1) / curvature.mean(-1)
+            centre = np.clip(centre - step, -self.half_width_rad, self.half_width_rad)
+            if np.all(np.abs(step) < 1e-15 + 1e-12 * np.abs(centre)):
+                break
+        theta = centre[..., None] + offsets
+        stable = (self._spring(theta) + self._eval(self.d2, theta)).mean(-1) > 0
+        converged = np.abs(step) < 1e-9
+        inside = np.abs(centre) + amplitude < self.half_width_rad
+        return np.where(stable & converged & inside, centre, np.nan)
+
+    def effective_stiffness_nm_per_rad(self, amplitude_rad=0.0) -> np.ndarray:
+        """First-harmonic-balance stiffness k(A) (module docstring); U''(θs) at A = 0."""
+        amplitude = np.broadcast_to(np.asarray(amplitude_rad, float), self.batch_shape)
+        centre = self.cycle_centre_rad(amplitude)
+        phi = 2.0 * np.pi * np.arange(BALANCE_POINTS) / BALANCE_POINTS
+        theta = np.nan_to_num(centre)[..., None] + amplitude[..., None] * np.cos(phi)
+        slope = self._spring(theta) * theta + self._eval(self.d1, theta)
+        small = amplitude < 1e-9
+        harmonic = 2.0 * (slope * np.cos(phi)).mean(-1) / np.where(small, 1.0, amplitude)
+        at_rest = self.stiffness_nm_per_rad(np.nan_to_num(centre))
+        return np.where(np.isnan(centre), np.nan, np.where(small, at_rest, harmonic))
+
+    def frequency_hz(self, amplitude_rad=0.0) -> np.ndarray:
+        """Ring-down frequency √(k(A)/J − δ²)/2π, Hz (Eq. S1 with the exact k); NaN if unstable."""
+        omega2 = self.effective_stiffness_nm_per_rad(amplitude_rad) / self.inertia_kgm2 - self.damping_per_s**2
+        return np.sqrt(np.where(omega2 > 0, omega2, np.nan)) / (2.0 * math.pi)
+
+    # --- builders ---------------------------------------------------------------------------
+    @classmethod
+    def from_source(cls, probe, source, pose, temperature_k=None, nodes: int = DEFAULT_NODES,
+                    half_width_rad: float = DEFAULT_HALF_WIDTH_RAD) -> "ArcPotential":
+        """The potential of ``probe`` placed at ``pose`` in the field of ``source``."""
+        theta = chebyshev_nodes_rad(half_width_rad, nodes)
+        energy = arc_energy_j(probe, source, pose, theta)
+        spring = probe.spring_nm_per_rad if temperature_k is None else probe.spring_at(temperature_k)
+        return cls(spring, probe.inertia_kgm2, probe.damping_per_s, energy, half_width_rad)
+
+    @classmethod
+    def from_local_field(cls, probe, field_t, gradient_t_per_m=None, hessian_t_per_m2=None,
+                         gravity_m_per_s2=None, spring_nm_per_rad=None, lever_m=None,
+                         damping_per_s=None, nodes: int = 24,
+                         half_width_rad: float = DEFAULT_HALF_WIDTH_RAD) -> "ArcPotential":
+        """Batch potential from the field's Taylor expansion at the magnet's rest position.
+
+        All vectors and tensors are in the **probe frame** (x', y', z'), batch-shaped:
+        field (B, 3), gradient (B, 3, 3), Hessian (B, 3, 3, 3), gravity (B, 3). Each batch
+        element is one measurement. The magnet moves by δr = l·(cos θ − 1, sin θ, 0), so
+        B(r(θ)) = B + G·δr + ½·H:δr δr exactly for a field that is quadratic over the arc.
+        ``spring_nm_per_rad``, ``lever_m`` and ``damping_per_s`` override the probe's
+        (per-row spring for thermal drift; free lever or damping in a fit).
+        """
+        theta = chebyshev_nodes_rad(half_width_rad, nodes)
+        lever = probe.lever_m if lever_m is None else np.asarray(lever_m, float)
+        field = np.asarray(field_t, float)
+        u = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], -1)      # (n, 3)
+        dr = np.stack([np.cos(theta) - 1.0, np.sin(theta), np.zeros_like(theta)], -1)
+        dr = np.multiply.outer(np.asarray(lever), dr) if np.ndim(lever) else lever * dr
+        b_along_arc = np.broadcast_to(field[..., None, :], np.broadcast_shapes(field[..., None, :].shape, dr.shape))
+        if gradient_t_per_m is not None:
+            b_along_arc = b_along_arc + np.einsum("...ij,...nj->...ni", gradient_t_per_m, dr)
+        if hessian_t_per_m2 is not None:
+            b_along_arc = b_along_arc + 0.5 * np.einsum("...ijk,...nj,...nk->...ni", hessian_t_per_m2, dr, dr)
+        energy = -probe.moment_am2 * np.einsum("nj,...nj->...n", u, b_along_arc)
+        if gravity_m_per_s2 is not None:
+            weight = probe.magnet_mass_kg * np.asarray(gravity_m_per_s2, float)
+            energy = energy - np.einsum("nj,...j->...n", u, weight) * np.asarray(lever)[..., None]
+        spring = probe.spring_nm_per_rad if spring_nm_per_rad is None else spring_nm_per_rad
+        damping = probe.damping_per_s if damping_per_s is None else damping_per_s
+        return cls(spring, probe.inertia_kgm2, damping, energy, half_width_rad)
+
+
+def arc_energy_j(probe, source, pose, theta_rad) -> np.ndarray:
+    """W(θ) = −m(θ)·B(r(θ)) − a·g·(r(θ) − pivot), J, at deflections ``theta_rad`` (PHYSICS §4)."""
+    direction = pose.moment_direction_at(theta_rad)
+    position = pose.magnet_position_at(theta_rad, probe.lever_m)
+    magnetic = -probe.moment_am2 * np.einsum("...j,...j->...", direction, source.field_t(position))
+    gravity = -probe.magnet_mass_kg * probe.lever_m * (direction @ np.asarray(pose.gravity_m_per_s2, float))
+    return magnetic + gravity
+
+
+def expansion_terms(probe, source, pose) -> dict:
+    """The pieces of k = U''(0) expanded at θ = 0 (PHYSICS.md §4), N·m/rad.
+
+    ``field`` m·Bx' (Eq. 4); ``gradient`` m·l·Gx'x' (Eq. 5); ``transverse_gradient``
+    −2·m·l·Gy'y'; ``curvature`` −m·l²·∂²Bx'/∂y'²; ``gravity`` a·l·(g·x'). The first two
+    are the published model. (U''(0) is not the stiffness at the rest angle: the static
+    deflection adds ≈ (m·By')²/kM on top, see :class:`ArcPotential`.)
+    """
+    x_axis, y_axis, _ = pose.axes()
+    where = np.asarray(pose.magnet_position_m, float)
+    b = source.field_t(where)
+    g = source.gradient_t_per_m(where)
+    h = source.hessian_t_per_m2(where)
+    m, l = probe.moment_am2, probe.lever_m
+    return {
+        "field": m * (x_axis @ b),
+        "gradient": m * l * (x_axis @ g @ x_axis),
+        "transverse_gradient": -2.0 * m * l * (y_axis @ g @ y_axis),
+        "curvature": -m * l**2 * np.einsum("i,ijk,j,k->", x_axis, h, y_axis, y_axis),
+        "gravity": probe.magnet_mass_kg * l * (x_axis @ np.asarray(pose.gravity_m_per_s2, float)),
+    }

@@ -1,0 +1,96 @@
+"""The first-principles potential against closed forms and an exact period integral."""
+import math
+
+import numpy as np
+import pytest
+from scipy import integrate, optimize, special
+
+from mows.potential import ArcPotential
+from mows.probe import PAPER_PROBE as P
+
+KM, M = P.spring_nm_per_rad, P.moment_am2
+
+
+def along(b_t):
+    return ArcPotential.from_local_field(P, np.array([b_t, 0.0, 0.0]))
+
+
+@pytest.mark.parametrize("field_t", [1e-9, 50e-6, -3e-3, 5e-3, 40e-3])
+def test_uniform_axial_field_gives_exactly_km_plus_mb(field_t):
+    # U = ½kMθ² − mB·cos θ: θs = 0 and U''(0) = kM + mB with no approximation.
+    assert along(field_t).stiffness_nm_per_rad() == pytest.approx(KM + M * field_t, rel=1e-12, abs=1e-20)
+
+
+@pytest.mark.parametrize("amplitude_deg, factor", [(15.0, 0.991), (24.0, 0.978)])
+def test_finite_amplitude_field_spring_follows_bessel_j1(amplitude_deg, factor):
+    # PHYSICS.md §5.4: first-harmonic stiffness of −mB cos θ is mB·2J1(A)/A.
+    amplitude = math.radians(amplitude_deg)
+    k = along(5e-3).effective_stiffness_nm_per_rad(amplitude)
+    assert (k - KM) / (M * 5e-3) == pytest.approx(2 * special.j1(amplitude) / amplitude, rel=1e-10)
+    assert 2 * special.j1(amplitude) / amplitude == pytest.approx(factor, abs=5e-4)
+
+
+def exact_period_s(field_t, amplitude):
+    """Period of the undamped swing from energy conservation, T = 4∫dθ/θ'."""
+    def u(theta):
+        return 0.5 * KM * theta**2 - M * field_t * math.cos(theta)
+    # θ = A sin s removes the end-point singularity.
+    integrand = lambda s: amplitude * math.cos(s) / math.sqrt(2 * (u(amplitude) - u(amplitude * math.sin(s))) / P.inertia_kgm2)
+    return 4 * integrate.quad(integrand, 0, math.pi / 2, epsabs=0, epsrel=1e-13, limit=200)[0]
+
+
+@pytest.mark.parametrize("field_t", [5e-3, -5e-3])
+def test_harmonic_balance_frequency_is_within_0p1_mhz_of_the_exact_period(field_t):
+    undamped = P.replace(damping_per_s=0.0)
+    potential = ArcPotential.from_local_field(undamped, np.array([field_t, 0.0, 0.0]))
+    amplitude = math.radians(15.0)
+    exact_hz = 1 / exact_period_s(field_t, amplitude)
+    assert abs(potential.frequency_hz(amplitude) - exact_hz) < 1e-4
+    # ...while the amplitude effect itself is far larger than that.
+    assert abs(potential.frequency_hz(0.0) - exact_hz) > 0.05
+
+
+def test_perpendicular_field_turns_the_rest_angle_and_stiffens_the_spring():
+    # U = ½kMθ² − m·B⊥·sin θ; solve U' = 0 independently and take U'' there.
+    b_perp = 170e-6
+    theta_s = optimize.brentq(lambda t: KM * t - M * b_perp * math.cos(t), -0.5, 0.5, xtol=1e-16)
+    potential = ArcPotential.from_local_field(P, np.array([0.0, b_perp, 0.0]))
+    assert potential.rest_angle_rad() == pytest.approx(theta_s, rel=1e-10)
+    assert potential.stiffness_nm_per_rad() == pytest.approx(KM + M * b_perp * math.sin(theta_s), rel=1e-12)
+    # PHYSICS.md §5.3: about 7 mHz at 170 µT.
+    assert (potential.frequency_hz() - P.f00_hz) * 1e3 == pytest.approx(7.0, abs=0.1)
+
+
+def test_spring_cancellation_drives_the_frequency_to_zero():
+    b_cancel = P.cancellation_field_t
+    freqs = [along(b_cancel * (1 - eps)).frequency_hz() for eps in (1e-2, 1e-4)]
+    # f ≈ f00·√ε near cancellation (damping makes it vanish slightly earlier).
+    assert freqs[0] == pytest.approx(P.f00_hz * 0.1, rel=0.01)
+    assert freqs[1] < 0.02 * P.f00_hz
+    assert np.isnan(along(1.01 * b_cancel).frequency_hz())
+
+
+def test_hanging_magnet_is_a_pendulum_of_about_150_microtesla():
+    # PHYSICS.md §5.5: gravity along the probe axis adds a·g·l, like a field a·g·l/m.
+    g = 9.80665
+    potential = ArcPotential.from_local_field(P, np.zeros(3), gravity_m_per_s2=np.array([g, 0.0, 0.0]))
+    assert potential.stiffness_nm_per_rad() == pytest.approx(KM + P.magnet_mass_kg * g * P.lever_m, rel=1e-12)
+    assert P.magnet_mass_kg * g * P.lever_m / M == pytest.approx(150e-6, rel=0.05)
+
+
+def test_axial_gradient_of_a_divergence_free_field_doubles_the_published_term():
+    # Axisymmetric gradient about x': Gx'x' = G, Gy'y' = Gz'z' = −G/2 (∇·B = 0).
+    # PHYSICS.md §4: k = kM + m·l·(Gx'x' − 2Gy'y') = kM + 2·m·l·G to first order in l.
+    g = 20e-3
+    gradient = np.diag([g, -g / 2, -g / 2])
+    potential = ArcPotential.from_local_field(P, np.zeros(3), gradient_t_per_m=gradient)
+    published = M * P.lever_m * g
+    assert (potential.stiffness_nm_per_rad() - KM) / published == pytest.approx(2.0, rel=1e-3)
+
+
+def test_batches_equal_single_evaluations():
+    fields = np.array([[1e-4, 0, 0], [0, 2e-4, 0], [-3e-3, 1e-4, 5e-5]])
+    amplitudes = np.radians([0.0, 10.0, 24.0])
+    batch = ArcPotential.from_local_field(P, fields).frequency_hz(amplitudes)
+    single = [ArcPotential.from_local_field(P, f).frequency_hz(a) for f, a in zip(fields, amplitudes)]
+    np.testing.assert_allclose(batch, single, rtol=1e-13)

@@ -1,0 +1,57 @@
+"""Probe constants and calibration inverses against the paper's reported numbers."""
+import math
+
+import pytest
+
+from mows.probe import PAPER_PROBE, Probe, inertia_from_beta0, lever_from_inertia, spring_from_beta0
+
+
+def test_paper_calibration_reproduces_reported_constants():
+    # Main text after Eq. 10: kM = 1.36e-5 N·m, J = 2.72e-11 kg·m²; l = 1.9 mm from a = 7.2 mg.
+    assert PAPER_PROBE.spring_nm_per_rad == pytest.approx(1.36e-5, rel=5e-3)
+    assert PAPER_PROBE.inertia_kgm2 == pytest.approx(2.72e-11, rel=5e-3)
+    assert PAPER_PROBE.lever_m == pytest.approx(1.9e-3, rel=0.03)
+    assert PAPER_PROBE.f00_hz == pytest.approx(112.48, abs=1e-9)
+    assert PAPER_PROBE.beta0_hz_per_t == pytest.approx(3.68e3, rel=1e-12)
+
+
+def test_calibration_inverses_agree_with_eq10_up_to_damping():
+    spring = spring_from_beta0(112.48, 0.89e-3, 3.68e3)
+    inertia = inertia_from_beta0(0.89e-3, 3.68e3, 112.48)
+    # Eq. 10 neglects damping: J·(2π f00)² = kM exactly.
+    assert inertia * (2 * math.pi * 112.48) ** 2 == pytest.approx(spring, rel=1e-12)
+    # The damped calibration differs by δ²/(2π f00)² only.
+    assert PAPER_PROBE.inertia_kgm2 / inertia - 1 == pytest.approx(-(1.8 / (2 * math.pi * 112.48)) ** 2, rel=1e-3)
+    assert lever_from_inertia(inertia, 7.2e-6) ** 2 * 7.2e-6 == pytest.approx(inertia, rel=1e-12)
+
+
+def test_spring_cancellation_field_is_minus_15_mT():
+    # PHYSICS.md §3: f → 0 at B = −kM/m ≈ −15.3 mT.
+    assert PAPER_PROBE.cancellation_field_t == pytest.approx(-15.3e-3, rel=5e-3)
+
+
+def test_thermal_coefficient_gives_minus_15_mhz_per_kelvin():
+    hot = PAPER_PROBE.replace(spring_nm_per_rad=PAPER_PROBE.spring_at(PAPER_PROBE.reference_temperature_k + 1.0))
+    assert (hot.f00_hz - PAPER_PROBE.f00_hz) * 1e3 == pytest.approx(-14.6, abs=0.2)
+
+
+def test_yaml_round_trip_and_f00_stand_in(tmp_path):
+    path = tmp_path / "probe.yaml"
+    PAPER_PROBE.to_yaml(path)
+    assert Probe.from_yaml(path) == PAPER_PROBE
+    data = PAPER_PROBE.to_dict()
+    del data["inertia_kgm2"]
+    assert Probe.from_dict(data).inertia_kgm2 == pytest.approx(PAPER_PROBE.inertia_kgm2, rel=1e-12)
+
+
+def test_contradictory_or_unphysical_probe_files_are_refused():
+    data = PAPER_PROBE.to_dict()
+    data["f00_hz"] = 120.0
+    with pytest.raises(ValueError, match="contradicts"):
+        Probe.from_dict(data)
+    with pytest.raises(ValueError, match="unknown probe keys"):
+        Probe.from_dict({**PAPER_PROBE.to_dict(), "moment": 1.0})
+    with pytest.raises(ValueError, match="spring_nm_per_rad"):
+        PAPER_PROBE.replace(spring_nm_per_rad=-1.0)
+    with pytest.raises(ValueError, match="overdamped"):
+        PAPER_PROBE.replace(damping_per_s=1e4)

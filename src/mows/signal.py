@@ -9,9 +9,8 @@ module is the fit model.
 from __future__ import annotations
 
 import numpy as np
-import scipy.constants
 
-MU0_OVER_4PI = scipy.constants.mu_0 / (4.0 * np.pi)  # T·m/A
+from mows.field import MU0_OVER_4PI
 
 
 def effective_distance_m(distance_m, spacing_m):

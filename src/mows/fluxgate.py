@@ -1,0 +1,201 @@
+"""Single-axis fluxgate sensors (Methods: FL1-10, ±10 µT, 0.1 nT, 20 kS/s) and their noise.
+
+Pick-up. :func:`dipole_pickup_t` gives the exact field of the moving magnet (a point dipole)
+along a sensor's axis at every time sample: Eq. S8 without its far-field reduction. On the
+sensor line with the moment in the plane it reduces to S = κ·(2a·cos θ − b·sin θ),
+κ = μ0·m/(4π r³) (Eqs. S8, S9); the difference of two parallel sensors at r and r + d is the
+same with r_eff = (1/r³ − 1/(r + d)³)^(−1/3) (Eq. S10). The paper's pair
+(:meth:`FluxgatePair.paper`) sits on the +x axis at r = 6 cm with axes along global y (b = 1);
+d is not given in the paper and follows from its r_eff = 6.75 cm: d = 2.99 cm.
+
+Digitisation. :func:`digitise` subtracts the sensor's ``offset_t``, flags and clips values
+beyond ±``range_t`` (the paper's sensors saturate during excitation), and rounds to the
+nearest multiple of ``resolution_t``.
+
+Offset nulling. With a ±10 µT range a fluxgate would saturate in the Earth's field (≈ 50 µT).
+The instruments compensate a static field; we model that as a constant ``offset_t``
+subtracted from the reading, set by :meth:`Fluxgate.with_offset_nulled` so that a given static
+field reads zero. The signal of the ringing magnet (and any change of the static field)
+remains.
+
+Noise (:class:`NoiseModel`). Common-mode noise, identical on both sensors: white, 1/f
+("pink") and optionally mains hum; independent white noise per sensor. Levels are one-sided
+amplitude spectral densities in T/√Hz (the pink level is its ASD at 1 Hz); the difference
+of the two channels removes the common part exactly.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from mows.field import dipole_field_t, unit_vector3, vector3
+
+FL1_RANGE_T = 10e-6
+FL1_RESOLUTION_T = 1e-10
+DAQ_SAMPLE_RATE_HZ = 20e3
+
+PAPER_DISTANCE_M = 0.06
+PAPER_EFFECTIVE_DISTANCE_M = 0.0675
+
+
+def spacing_for_effective_distance_m(distance_m: float, effective_distance_m: float) -> float:
+    """Sensor spacing d that gives r_eff at distance r: Eq. S10 solved for d, metres."""
+    if not 0.0 < distance_m < effective_distance_m:
+        raise ValueError(f"need 0 < distance_m < effective_distance_m, got {distance_m!r}, {effective_distance_m!r}")
+    return (distance_m**-3 - effective_distance_m**-3) ** (-1.0 / 3.0) - distance_m
+
+
+PAPER_SPACING_M = spacing_for_effective_distance_m(PAPER_DISTANCE_M, PAPER_EFFECTIVE_DISTANCE_M)
+
+
+@dataclass(frozen=True, eq=False)
+class Fluxgate:
+    """A single-axis fluxgate at ``position_m`` reading the field along unit vector ``axis``.
+
+    ``range_t``: saturation at ±range (tesla); ``resolution_t``: quantisation step (tesla);
+    ``offset_t``: static field compensated by the instrument, subtracted from the reading.
+    """
+
+    position_m: np.ndarray
+    axis: np.ndarray
+    range_t: float = FL1_RANGE_T
+    resolution_t: float = FL1_RESOLUTION_T
+    offset_t: float = 0.0
+
+    def __post_init__(self):
+        object.__setattr__(self, "position_m", vector3("position_m", self.position_m))
+        object.__setattr__(self, "axis", unit_vector3("axis", self.axis))
+        for name in ("range_t", "resolution_t"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be a finite field > 0 T, got {value!r}")
+        if not np.isfinite(self.offset_t):
+            raise ValueError(f"offset_t must be finite, got {self.offset_t!r}")
+
+    def component_t(self, field_t) -> np.ndarray:
+        """The component along the sensor axis of fields ``field_t`` (..., 3), tesla."""
+        return np.asarray(field_t, dtype=float) @ self.axis
+
+    def with_offset_nulled(self, static_field_t) -> Fluxgate:
+        """This sensor with its offset set so that the static field ``static_field_t`` (3,) reads 0."""
+        return replace(self, offset_t=float(self.component_t(static_field_t)))
+
+
+def dipole_pickup_t(sensor: Fluxgate, magnet_positions_m, moments_am2) -> np.ndarray:
+    """Exact dipole field along ``sensor.axis``, tesla, one value per time sample.
+
+    ``magnet_positions_m`` and ``moments_am2`` are (n, 3) (or broadcastable): the magnet's
+    position and moment at each sample. Eq. S8 in its exact form.
+    """
+    offsets = sensor.position_m - np.asarray(magnet_positions_m, dtype=float)
+    return dipole_field_t(moments_am2, offsets) @ sensor.axis
+
+
+def digitise(values_t, sensor: Fluxgate):
+    """The sensor's digital reading of the field component ``values_t`` (tesla).
+
+    Returns (readings_t, saturated): readings are values − offset, clipped to ±range and
+    rounded to the nearest multiple of the resolution; ``saturated`` flags the samples that
+    were beyond the range.
+    """
+    values = np.asarray(values_t, dtype=float) - sensor.offset_t
+    saturated = np.abs(values) > sensor.range_t
+    readings = np.clip(np.round(values / sensor.resolution_t) * sensor.resolution_t, -sensor.range_t, sensor.range_t)
+    return readings, saturated
+
+
+@dataclass(frozen=True, eq=False)
+class FluxgatePair:
+    """Two parallel sensors on one line with the probe; column 0 is the near one."""
+
+    sensors: tuple
+    sample_rate_hz: float = DAQ_SAMPLE_RATE_HZ
+
+    def __post_init__(self):
+        object.__setattr__(self, "sensors", tuple(self.sensors))
+        if len(self.sensors) != 2 or not all(isinstance(s, Fluxgate) for s in self.sensors):
+            raise ValueError(f"sensors must be two Fluxgate objects, got {self.sensors!r}")
+        if not (np.isfinite(self.sample_rate_hz) and self.sample_rate_hz > 0.0):
+            raise ValueError(f"sample_rate_hz must be > 0, got {self.sample_rate_hz!r}")
+
+    @classmethod
+    def paper(cls, probe_position_m=(0.0, 0.0, 0.0), distance_m: float = PAPER_DISTANCE_M,
+              spacing_m: float = PAPER_SPACING_M, direction=(1.0, 0.0, 0.0), axis=(0.0, 1.0, 0.0)) -> FluxgatePair:
+        """The paper's pair: sensors at r and r + d from the probe along ``direction``, reading
+        along ``axis`` (global y: b = 1 in Eq. S9)."""
+        probe = vector3("probe_position_m", probe_position_m)
+        line = unit_vector3("direction", direction)
+        return cls((Fluxgate(probe + distance_m * line, axis), Fluxgate(probe + (distance_m + spacing_m) * line, axis)))
+
+    @property
+    def positions_m(self) -> np.ndarray:
+        """Sensor positions, shape (2, 3)."""
+        return np.stack([s.position_m for s in self.sensors])
+
+    def pickup_t(self, magnet_positions_m, moments_am2) -> np.ndarray:
+        """:func:`dipole_pickup_t` of both sensors, shape (n, 2)."""
+        return np.stack([dipole_pickup_t(s, magnet_positions_m, moments_am2) for s in self.sensors], axis=-1)
+
+    def component_t(self, fields_t) -> np.ndarray:
+        """Axis components of fields (..., 2, 3) at the two sensors: shape (..., 2)."""
+        return np.stack([s.component_t(np.asarray(fields_t)[..., i, :]) for i, s in enumerate(self.sensors)], axis=-1)
+
+    def with_offsets_nulled(self, static_fields_t) -> FluxgatePair:
+        """Both offsets set to null the static fields (2, 3) at the two sensors."""
+        fields = np.asarray(static_fields_t, dtype=float)
+        return replace(self, sensors=tuple(s.with_offset_nulled(f) for s, f in zip(self.sensors, fields)))
+
+    def digitise(self, values_t):
+        """:func:`digitise` of columns (n, 2); returns (readings_t, saturated), both (n, 2)."""
+        values = np.asarray(values_t, dtype=float)
+        columns = [digitise(values[..., i], s) for i, s in enumerate(self.sensors)]
+        return np.stack([c[0] for c in columns], axis=-1), np.stack([c[1] for c in columns], axis=-1)
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Magnetometer noise; all levels are one-sided ASDs in T/√Hz except ``mains_t``.
+
+    Parameters
+    ----------
+    common_white_t_per_rthz : white noise common to both sensors.
+    common_pink_t_per_rthz_at_1hz : 1/f noise common to both sensors, ASD at 1 Hz
+        (ASD ∝ f^(−1/2)).
+    sensor_white_t_per_rthz : independent white noise of each sensor.
+    mains_t, mains_hz : common mains hum, peak amplitude (tesla) and frequency; random phase.
+    """
+
+    common_white_t_per_rthz: float = 0.0
+    common_pink_t_per_rthz_at_1hz: float = 0.0
+    sensor_white_t_per_rthz: float = 0.0
+    mains_t: float = 0.0
+    mains_hz: float = 50.0
+
+    def __post_init__(self):
+        for name, value in vars(self).items():
+            if not (np.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be finite and ≥ 0, got {value!r}")
+
+    def draw(self, n: int, sample_rate_hz: float, rng: np.random.Generator) -> np.ndarray:
+        """``n`` samples of both channels at ``sample_rate_hz``, tesla, shape (n, 2)."""
+        white_scale = np.sqrt(sample_rate_hz / 2.0)  # per-sample σ of a one-sided ASD of 1
+        t = np.arange(n) / sample_rate_hz
+        common = (self.common_white_t_per_rthz * white_scale * rng.standard_normal(n)
+                  + pink_noise_t(n, sample_rate_hz, self.common_pink_t_per_rthz_at_1hz, rng)
+                  + self.mains_t * np.sin(2.0 * np.pi * self.mains_hz * t + rng.uniform(0.0, 2.0 * np.pi)))
+        own = self.sensor_white_t_per_rthz * white_scale * rng.standard_normal((n, 2))
+        return common[:, None] + own
+
+
+def pink_noise_t(n: int, sample_rate_hz: float, asd_at_1hz_t_per_rthz: float, rng: np.random.Generator) -> np.ndarray:
+    """1/f noise of one-sided ASD ``asd_at_1hz``·(f/1 Hz)^(−1/2), by shaping white noise in
+    the frequency domain; no power at 0 Hz, so the record is zero-mean and periodic in n."""
+    if asd_at_1hz_t_per_rthz == 0.0 or n == 0:
+        return np.zeros(n)
+    spectrum = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, 1.0 / sample_rate_hz)
+    gain = np.zeros_like(f)
+    # Unit white noise has one-sided PSD 2/fs; this gain turns it into asd²/f.
+    gain[1:] = asd_at_1hz_t_per_rthz * np.sqrt(sample_rate_hz / (2.0 * f[1:]))
+    return np.fft.irfft(spectrum * gain, n)

@@ -1,0 +1,192 @@
+"""mows-graph: run the MOWS node graph without ``ros2 launch`` (not installed here).
+
+    mows-graph [--duration S] [--ros-args ARGS...]
+
+Starts every node's console script with its parameter file (share/<package>/config/<node>.yaml)
+and any ``--ros-args`` given here, prefixes each line a node writes with ``[node]``, and
+forwards SIGINT and SIGTERM to the nodes. Exit status: 0 when the graph was stopped (by a
+signal or after --duration) and every node stopped cleanly; 1 when a node exited by itself
+or did not stop cleanly.
+"""
+import argparse
+import ctypes
+import os
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from ament_index_python.packages import get_package_prefix, get_package_share_directory
+
+STOP_TIMEOUT_S = 10.0  # a node still running this long after SIGINT is killed
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+_prctl = ctypes.CDLL(None, use_errno=True).prctl
+
+
+@dataclass(frozen=True)
+class GraphNode:
+    """A node of the graph: its ROS name, package and console script."""
+
+    name: str
+    package: str
+    executable: str
+
+    def config_path(self) -> str:
+        share = Path(get_package_share_directory(self.package))
+        return str(share / "config" / f"{self.name}.yaml")
+
+    def command(self, ros_args: list[str]) -> list[str]:
+        # Where ros2 run and launch_ros look for an ament_python console script.
+        script = Path(get_package_prefix(self.package)) / "lib" / self.package / self.executable
+        return [str(script), "--ros-args", "--params-file", self.config_path(), *ros_args]
+
+
+NODES = (
+    GraphNode("driver", "mows_driver", "mows_driver"),
+    GraphNode("estimator", "mows_estimator", "mows_estimator"),
+    GraphNode("mapper", "mows_mapper", "mows_mapper"),
+)
+
+
+def say(text: str) -> None:
+    sys.stdout.write(f"[graph] {text}\n")
+    sys.stdout.flush()
+
+
+def _die_with_parent() -> None:
+    # Runs in the child between fork and exec: if mows-graph itself is killed, the kernel
+    # sends the node SIGTERM, which it handles like a normal stop, instead of orphaning it.
+    _prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+class Graph:
+    """The running nodes, and one queue of what happens to them: ``(kind, who)`` events
+    ``up`` (first line of output), ``exit`` and ``signal``. A SimpleQueue, because it is the
+    queue that a signal handler may put into."""
+
+    def __init__(self, nodes: tuple[GraphNode, ...], ros_args: list[str]):
+        self._nodes = nodes
+        self._ros_args = ros_args
+        self._events: queue.SimpleQueue = queue.SimpleQueue()
+        self._processes: dict[str, subprocess.Popen] = {}
+        self._pumps: list[threading.Thread] = []
+
+    def on_signal(self, signum: int, _frame) -> None:
+        self._events.put(("signal", signal.Signals(signum).name))
+
+    def start(self) -> None:
+        environment = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        for node in self._nodes:
+            process = subprocess.Popen(
+                node.command(self._ros_args),
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+                errors="replace",
+                env=environment,
+                start_new_session=True,  # a terminal's Ctrl-C reaches the nodes only through us
+                preexec_fn=_die_with_parent,
+            )
+            self._processes[node.name] = process
+            say(f"started {node.name} (pid {process.pid})")
+        # Threads only after every fork: preexec_fn is not safe while other threads run.
+        for name, process in self._processes.items():
+            pump = threading.Thread(target=self._pump, args=(name, process), daemon=True)
+            pump.start()
+            self._pumps.append(pump)
+
+    def _pump(self, name: str, process: subprocess.Popen) -> None:
+        first = True
+        for line in process.stdout:
+            sys.stdout.write(f"[{name}] {line}")
+            sys.stdout.flush()
+            if first:
+                self._events.put(("up", name))
+                first = False
+        process.wait()
+        self._events.put(("exit", name))
+
+    def wait(self, duration_s: float | None) -> str | None:
+        """Block until the graph should stop; return the name of a node that exited by
+        itself, or None for a requested stop. ``duration_s`` counts from the moment every
+        node has written its first line (a MOWS node's first line is its ``up`` message)."""
+        up: set[str] = set()
+        deadline = None
+        while True:
+            timeout = None if deadline is None else max(0.0, deadline - time.monotonic())
+            try:
+                kind, who = self._events.get(timeout=timeout)
+            except queue.Empty:
+                say(f"{duration_s} s have passed, stopping")
+                return None
+            if kind == "signal":
+                say(f"{who} received, stopping")
+                return None
+            if kind == "exit":
+                say(f"{who} exited by itself with code {self._processes[who].returncode}")
+                return who
+            up.add(who)
+            if duration_s is not None and deadline is None and len(up) == len(self._nodes):
+                deadline = time.monotonic() + duration_s
+
+    def stop(self) -> dict[str, int]:
+        """SIGINT every node still running, kill those that outlive STOP_TIMEOUT_S;
+        return each node's exit code."""
+        for process in self._processes.values():
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + STOP_TIMEOUT_S
+        for name, process in self._processes.items():
+            try:
+                process.wait(timeout=max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                say(f"{name} did not stop within {STOP_TIMEOUT_S} s, killing it")
+                process.kill()
+                process.wait()
+        for pump in self._pumps:
+            pump.join()
+        return {name: process.returncode for name, process in self._processes.items()}
+
+
+def parse_arguments(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
+    """Split ``argv`` into the runner's own options and the ROS arguments for every node."""
+    own, ros_args = argv, []
+    if "--ros-args" in argv:
+        split = argv.index("--ros-args")
+        own, ros_args = argv[:split], argv[split + 1 :]
+    parser = argparse.ArgumentParser(
+        prog="mows-graph", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="S",
+        help="stop after S seconds of every node running (default: run until SIGINT/SIGTERM)",
+    )
+    args = parser.parse_args(own)
+    if args.duration is not None and args.duration <= 0:
+        parser.error(f"--duration must be positive, got {args.duration}")
+    return args, ros_args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args, ros_args = parse_arguments(sys.argv[1:] if argv is None else argv)
+    graph = Graph(NODES, ros_args)
+    signal.signal(signal.SIGINT, graph.on_signal)
+    signal.signal(signal.SIGTERM, graph.on_signal)
+    graph.start()
+    died = graph.wait(args.duration)
+    codes = graph.stop()
+    unclean = {name: code for name, code in codes.items() if code != 0}
+    if unclean:
+        say("not stopped cleanly: " + ", ".join(f"{n} (code {c})" for n, c in unclean.items()))
+    return 1 if died is not None or unclean else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The MOWS estimator node: ring-down fits and field estimates on ROS."""

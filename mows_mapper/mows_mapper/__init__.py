@@ -1,0 +1,1 @@
+"""The MOWS mapper node: rotation sweeps, their decomposition and model reports on ROS."""

@@ -1,0 +1,50 @@
+"""A node's state on /diagnostics, once a second, in the diagnostic_msgs form that
+diagnostic aggregators and ``ros2 topic echo /diagnostics`` read."""
+from dataclasses import dataclass, field
+from typing import Callable, Mapping
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+
+DIAGNOSTICS_TOPIC = "/diagnostics"
+DIAGNOSTICS_DEPTH = 10  # reliable, volatile: the defaults of diagnostic_updater
+
+
+@dataclass(frozen=True)
+class Health:
+    """What a node reports about itself: a level (DiagnosticStatus.OK, WARN, ERROR; bytes in
+    rclpy), a line of text, and key values."""
+
+    level: bytes
+    message: str
+    values: Mapping[str, object] = field(default_factory=dict)
+
+
+class DiagnosticsPublisher:
+    """Publishes ``health()`` of ``node`` on /diagnostics every ``period_s`` seconds.
+
+    The status is named after the node's fully qualified name, so that two copies of a
+    node in different namespaces stay apart.
+    """
+
+    def __init__(self, node: Node, health: Callable[[], Health], period_s: float = 1.0):
+        self._node = node
+        self._health = health
+        self._publisher = node.create_publisher(
+            DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_DEPTH
+        )
+        self._timer = node.create_timer(period_s, self.publish)
+
+    def publish(self) -> None:
+        health = self._health()
+        array = DiagnosticArray()
+        array.header.stamp = self._node.get_clock().now().to_msg()
+        array.status = [
+            DiagnosticStatus(
+                level=health.level,
+                name=self._node.get_fully_qualified_name(),
+                message=health.message,
+                values=[KeyValue(key=k, value=str(v)) for k, v in health.values.items()],
+            )
+        ]
+        self._publisher.publish(array)

@@ -1,0 +1,82 @@
+"""Node parameters declared from one table and validated whenever they are set.
+
+A node lists its parameters once, as a tuple of ``ParamSpec``; ``declare_parameters`` turns
+each row into a ROS parameter with a descriptor (description, range, read-only) that
+``ros2 param describe`` shows, and rejects bad values with a reason that names the
+parameter, its value and what is allowed.
+"""
+from dataclasses import dataclass
+from typing import Sequence
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+Value = bool | int | float | str
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One row of a node's parameter table."""
+
+    name: str
+    default: Value
+    description: str
+    range: tuple[float, float] | None = None  # inclusive bounds for numbers
+    choices: tuple[str, ...] = ()  # allowed values of a string parameter
+    read_only: bool = False
+
+    def descriptor(self) -> ParameterDescriptor:
+        descriptor = ParameterDescriptor(
+            name=self.name, description=self.description, read_only=self.read_only
+        )
+        if self.choices:
+            descriptor.additional_constraints = "one of: " + ", ".join(self.choices)
+        if self.range is not None:
+            low, high = self.range
+            if isinstance(self.default, int):
+                descriptor.integer_range = [IntegerRange(from_value=low, to_value=high, step=0)]
+            else:
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=low, to_value=high, step=0.0)
+                ]
+        return descriptor
+
+    def problem(self, value: Value) -> str | None:
+        """Why ``value`` is not allowed for this parameter, or None if it is."""
+        if self.range is not None and not self.range[0] <= value <= self.range[1]:
+            return f"{self.name}={value!r} is outside [{self.range[0]}, {self.range[1]}]"
+        if self.choices and value not in self.choices:
+            return f"{self.name}={value!r} is not one of {', '.join(self.choices)}"
+        return None
+
+
+def declare_parameters(node: Node, table: Sequence[ParamSpec]) -> None:
+    """Declare every parameter of ``table`` on ``node`` and validate all later sets.
+
+    The check is registered before the declaration so that values from a parameter file
+    are validated too: a bad file stops the node at start-up instead of running it wrong.
+    """
+    specs = {spec.name: spec for spec in table}
+
+    def validate(parameters: list[Parameter]) -> SetParametersResult:
+        problems = [
+            problem
+            for parameter in parameters
+            if parameter.name in specs
+            and (problem := specs[parameter.name].problem(parameter.value)) is not None
+        ]
+        return SetParametersResult(successful=not problems, reason="; ".join(problems))
+
+    node.add_on_set_parameters_callback(validate)
+    node.declare_parameters("", [(spec.name, spec.default, spec.descriptor()) for spec in table])
+
+
+def parameter_values(node: Node, table: Sequence[ParamSpec]) -> dict[str, Value]:
+    """The current value of every parameter in ``table``."""
+    return {spec.name: node.get_parameter(spec.name).value for spec in table}

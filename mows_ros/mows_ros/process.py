@@ -1,0 +1,36 @@
+"""Run one node as a process: spin until SIGINT or SIGTERM, then leave cleanly (exit 0)."""
+import sys
+from typing import Callable
+
+import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+EXIT_BAD_PARAMETER = 2
+
+
+def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
+    """Create the node with ``make_node`` and spin it; return the process exit code.
+
+    ``rclpy.init`` installs handlers for SIGINT and SIGTERM that shut the context down, so
+    either signal ends ``spin`` with ``ExternalShutdownException`` (or KeyboardInterrupt when
+    it lands outside of spin): both are the normal way for a node to stop. A value from a
+    parameter file or ``-p`` that the node rejects ends it with EXIT_BAD_PARAMETER and the
+    reason, not a traceback: it is a configuration error, not a bug.
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = make_node()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (InvalidParameterValueException, InvalidParameterTypeException) as error:
+        sys.stderr.write(f"error: {error}\n")
+        return EXIT_BAD_PARAMETER
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

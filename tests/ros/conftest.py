@@ -1,0 +1,37 @@
+"""A test node spun on demand: tests wait for conditions, never for a fixed time."""
+import time
+from typing import Callable
+
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+
+# Only a bound for a test that hangs; a test passes as soon as its condition holds.
+WAIT_S = 60.0
+
+
+class RosHarness:
+    def __init__(self):
+        self.node = rclpy.create_node("mows_test")
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+
+    def wait_for(self, condition: Callable[[], object], what: str):
+        """Spin until ``condition()`` is true and return its value; fail after WAIT_S."""
+        deadline = time.monotonic() + WAIT_S
+        while not (value := condition()):
+            if time.monotonic() > deadline:
+                raise AssertionError(f"gave up after {WAIT_S} s waiting for {what}")
+            self.executor.spin_once(timeout_sec=0.1)
+        return value
+
+    def close(self):
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def ros(ros_context):
+    harness = RosHarness()
+    yield harness
+    harness.close()

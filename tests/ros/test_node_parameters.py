@@ -1,0 +1,71 @@
+"""The nodes' parameter tables: declared with descriptors, validated on set, and the same
+as the shipped parameter files."""
+import subprocess
+
+import pytest
+import yaml
+from mows_bringup.graph import NODES
+from mows_driver import node as driver
+from mows_estimator import node as estimator
+from mows_mapper import node as mapper
+from mows_ros.process import EXIT_BAD_PARAMETER
+from rclpy.parameter import Parameter
+
+pytestmark = pytest.mark.ros
+
+NODE_MODULES = {"driver": driver, "estimator": estimator, "mapper": mapper}
+NODE_CLASSES = {
+    "driver": driver.DriverNode,
+    "estimator": estimator.EstimatorNode,
+    "mapper": mapper.MapperNode,
+}
+
+
+@pytest.mark.parametrize("graph_node", NODES, ids=lambda n: n.name)
+def test_the_parameter_file_holds_every_parameter_at_its_default(graph_node):
+    with open(graph_node.config_path()) as file:
+        (key, section), = yaml.safe_load(file).items()
+    assert key == f"/**/{graph_node.name}"
+    table = NODE_MODULES[graph_node.name].PARAMETERS
+    assert section["ros__parameters"] == {spec.name: spec.default for spec in table}
+
+
+@pytest.mark.parametrize(
+    "node_name, name, value",
+    [
+        ("driver", "backend", "usb"),
+        ("driver", "block_duration_s", 0.051),
+        ("driver", "block_duration_s", 0.009),
+        ("driver", "coil_current_cap_a", 20.0),  # read-only
+        ("mapper", "repeats_per_angle", 0),
+    ],
+)
+def test_bad_values_are_rejected(ros_context, node_name, name, value):
+    node = NODE_CLASSES[node_name]()
+    before = node.get_parameter(name).value
+    (result,) = node.set_parameters([Parameter(name, value=value)])
+    assert not result.successful
+    assert name in result.reason
+    assert node.get_parameter(name).value == before
+    node.destroy_node()
+
+
+def test_good_values_are_taken_and_described(ros_context):
+    node = driver.DriverNode()
+    (result,) = node.set_parameters([Parameter("block_duration_s", value=0.05)])
+    assert result.successful, result.reason
+    assert node.get_parameter("block_duration_s").value == 0.05
+    (limits,) = node.describe_parameter("block_duration_s").floating_point_range
+    assert (limits.from_value, limits.to_value) == (0.01, 0.05)
+    assert node.describe_parameter("coil_current_cap_a").read_only
+    assert "sim" in node.describe_parameter("backend").additional_constraints
+    node.destroy_node()
+
+
+def test_a_bad_value_at_start_up_stops_the_node():
+    run = subprocess.run(
+        NODES[0].command(["-p", "backend:=usb"]), capture_output=True, text=True, timeout=120
+    )
+    assert run.returncode == EXIT_BAD_PARAMETER, run.stderr
+    assert "backend='usb' is not one of sim, serial, bag" in run.stderr
+    assert "Traceback" not in run.stderr

@@ -1,0 +1,111 @@
+"""The node graph as processes: mows-graph starts the three nodes, each reports on
+/diagnostics, and the graph stops cleanly (exit 0) after --duration or on a signal; a node
+that dies makes it fail. A node alone takes a `/**/node` parameter file in a namespace and
+stops cleanly on SIGTERM."""
+import os
+import re
+import signal
+import subprocess
+
+import pytest
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from mows_bringup.graph import NODES, parse_arguments
+
+pytestmark = pytest.mark.ros
+
+NODE_NAMES = {f"/{node.name}" for node in NODES}
+
+
+@pytest.fixture
+def diagnostics(ros):
+    """The last status heard on /diagnostics, by status name."""
+    heard = {}
+    ros.node.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda a: heard.update((s.name, s) for s in a.status), 10
+    )
+    return heard
+
+
+@pytest.fixture
+def start(tmp_path):
+    """Starts a command with its output in a log file; kills what is left at the end."""
+    processes = []
+
+    def start(*command: str) -> subprocess.Popen:
+        log_path = tmp_path / f"process-{len(processes)}.log"
+        with open(log_path, "w") as log:
+            process = subprocess.Popen(
+                command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT
+            )
+        process.log_path = log_path
+        processes.append(process)
+        return process
+
+    yield start
+    for process in processes:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+
+
+def log(process: subprocess.Popen) -> str:
+    return process.log_path.read_text()
+
+
+def hear_all(ros, heard: dict, names: set[str], process: subprocess.Popen) -> None:
+    ros.wait_for(
+        lambda: names <= heard.keys() or process.poll() is not None, f"diagnostics of {names}"
+    )
+    assert names <= heard.keys(), f"heard only {sorted(heard)}\n{log(process)}"
+    assert all(heard[name].level == DiagnosticStatus.OK for name in names)
+
+
+def exit_code(ros, process: subprocess.Popen) -> int:
+    ros.wait_for(lambda: process.poll() is not None, "the process to exit")
+    return process.returncode
+
+
+def test_graph_runs_for_its_duration_and_stops_cleanly(ros, diagnostics, start):
+    graph = start("mows-graph", "--duration", "5")
+    hear_all(ros, diagnostics, NODE_NAMES, graph)
+    assert exit_code(ros, graph) == 0, log(graph)
+
+
+def test_graph_passes_ros_arguments_and_forwards_sigterm(ros, diagnostics, start):
+    graph = start("mows-graph", "--ros-args", "-r", "__ns:=/lab")
+    hear_all(ros, diagnostics, {f"/lab{name}" for name in NODE_NAMES}, graph)
+    graph.send_signal(signal.SIGTERM)
+    assert exit_code(ros, graph) == 0, log(graph)
+    assert "SIGTERM received" in log(graph)
+
+
+def test_graph_fails_when_a_node_dies(ros, diagnostics, start):
+    graph = start("mows-graph")
+    hear_all(ros, diagnostics, NODE_NAMES, graph)
+    pid = int(re.search(r"started driver \(pid (\d+)\)", log(graph)).group(1))
+    os.kill(pid, signal.SIGKILL)
+    assert exit_code(ros, graph) == 1, log(graph)
+    assert "driver exited by itself" in log(graph)
+
+
+def test_a_node_in_a_namespace_takes_its_parameter_file_and_stops_on_sigterm(
+    ros, diagnostics, start, tmp_path
+):
+    overrides = tmp_path / "driver.yaml"
+    overrides.write_text(
+        yaml.safe_dump({"/**/driver": {"ros__parameters": {"block_duration_s": 0.04}}})
+    )
+    driver = start(*NODES[0].command(["-r", "__ns:=/lab", "--params-file", str(overrides)]))
+    hear_all(ros, diagnostics, {"/lab/driver"}, driver)
+    values = {kv.key: kv.value for kv in diagnostics["/lab/driver"].values}
+    assert values["block_duration_s"] == "0.04"
+    driver.send_signal(signal.SIGTERM)
+    assert exit_code(ros, driver) == 0, log(driver)
+
+
+def test_graph_arguments_split_at_ros_args():
+    args, ros_args = parse_arguments(["--duration", "3", "--ros-args", "-r", "__ns:=/x"])
+    assert (args.duration, ros_args) == (3.0, ["-r", "__ns:=/x"])
+    with pytest.raises(SystemExit):
+        parse_arguments(["--duration", "0"])

@@ -1,0 +1,213 @@
+"""Rotation-sweep decomposition: in-plane field and gradient from Δf(θ0) (Eqs. 11, 12, S18).
+
+Turning the probe through θ0 changes which field and gradient components it feels. With the
+in-plane field B = (Bx, By) and gradient G (G_ij = ∂B_i/∂x_j; Gs = (Gxx + Gyy)/2,
+Gd = (Gxx − Gyy)/2, Gxy), the probe axis x' = (cos θ0, sin θ0) sees
+
+    Bx' = Bx·cos θ0 + By·sin θ0,
+    Gx'x' = Gs + Gd·cos 2θ0 + Gxy·sin 2θ0,    Gy'y' = Gs − Gd·cos 2θ0 − Gxy·sin 2θ0.
+
+Two models are offered:
+
+``published``   k = kM + m·Bx' + l·m·Gx'x' in Eq. 6 (the paper's Eqs. 11-12 are its first
+                order, with the factor f00 restored, PHYSICS.md §3);
+``first_principles``  k = U''(θs) of the full potential (PHYSICS.md §4) in the local field
+                B + G·δr: exact rest angle (static deflection by By'), the lever's transverse
+                gradient term. To first order m·l·(Gx'x' − 2Gy'y') = m·l·(−Gs + 3·(Gd·cos 2θ0
+                + Gxy·sin 2θ0)): the 2θ0 harmonic is three times the published one, and the
+                constant term has the opposite sign.
+
+Both report f = f00·√(k/kM). A calibrated f00 separates the constant gradient term Gs from
+the zero-field frequency; with ``f00_free`` the constant term is absorbed and Gs is not
+determined (reported as NaN).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from mows.frequency import frequency_shift_hz
+from mows.potential import ArcPotential
+from mows.probe import Probe
+
+MODELS = ("first_principles", "published")
+MAX_HARMONIC = 4
+
+
+@dataclasses.dataclass(frozen=True)
+class Harmonics:
+    """Δf = Σ_k P_k·cos(k·θ0 + φ_k), k = 0 … K, by weighted linear least squares (Eq. 12)."""
+
+    amplitude_hz: np.ndarray
+    phase_rad: np.ndarray
+    cosine_hz: np.ndarray        # a_k of Σ a_k cos kθ0 + b_k sin kθ0
+    sine_hz: np.ndarray          # b_k
+    covariance: np.ndarray       # of (a_0, a_1, b_1, …)
+
+
+def fit_harmonics(theta0_rad, shift_hz, shift_std_hz, max_order: int = 2) -> Harmonics:
+    """Harmonic content of a sweep up to ``max_order`` (limited by the number of angles)."""
+    theta0 = np.asarray(theta0_rad, float)
+    columns = [np.ones_like(theta0)]
+    for k in range(1, max_order + 1):
+        columns += [np.cos(k * theta0), np.sin(k * theta0)]
+    design = np.stack(columns, axis=1) / np.asarray(shift_std_hz, float)[:, None]
+    coef, *_ = np.linalg.lstsq(design, np.asarray(shift_hz, float) / shift_std_hz, rcond=None)
+    covariance = np.linalg.pinv(design.T @ design)
+    a = np.concatenate([[coef[0]], coef[1::2]])
+    b = np.concatenate([[0.0], coef[2::2]])
+    # P·cos(kθ + φ) = P·cos φ·cos kθ − P·sin φ·sin kθ, so a = P·cos φ and b = −P·sin φ.
+    return Harmonics(np.hypot(a, b), np.arctan2(-b, a), a, b, covariance)
+
+
+@dataclasses.dataclass
+class Decomposition:
+    """In-plane field and gradient of one sweep, SI units; NaN unless ``ok``."""
+
+    model: str
+    ok: bool
+    message: str
+    field_t: np.ndarray = dataclasses.field(default_factory=lambda: np.full(2, np.nan))
+    field_covariance_t2: np.ndarray = dataclasses.field(default_factory=lambda: np.full((2, 2), np.nan))
+    gradient_t_per_m: np.ndarray = dataclasses.field(default_factory=lambda: np.full(3, np.nan))  # Gxx, Gxy, Gyy
+    gradient_covariance: np.ndarray = dataclasses.field(default_factory=lambda: np.full((3, 3), np.nan))
+    f00_hz: float = math.nan
+    f00_free: bool = False
+    harmonics: Harmonics | None = None
+    chi2_dof: float = math.nan
+    rms_residual_hz: float = math.nan
+    residual_hz: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+
+    def report(self) -> str:
+        if not self.ok:
+            return f"sweep decomposition ({self.model}): {self.message}"
+        sb = np.sqrt(np.diag(self.field_covariance_t2))
+        sg = np.sqrt(np.diag(self.gradient_covariance))
+        bx, by = self.field_t * 1e6
+        gxx, gxy, gyy = self.gradient_t_per_m * 1e3
+        return (f"{self.model}: B = ({bx:.3f} ± {sb[0] * 1e6:.3f}, {by:.3f} ± {sb[1] * 1e6:.3f}) µT, "
+                f"|B| = {math.hypot(bx, by):.3f} µT at {math.degrees(math.atan2(by, bx)):.1f}°; "
+                f"G = (xx {gxx:.3f} ± {sg[0] * 1e3:.3f}, xy {gxy:.3f} ± {sg[1] * 1e3:.3f}, "
+                f"yy {gyy:.3f} ± {sg[2] * 1e3:.3f}) mT/m; χ²/dof = {self.chi2_dof:.2f}, "
+                f"rms residual {self.rms_residual_hz * 1e3:.3f} mHz")
+
+
+def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, amplitude_rad: float = 0.0):
+    """Δf(θ0) for params (Bx, By, Gs, Gd, Gxy, f00 − f00_calibrated), Hz."""
+    bx, by, gs, gd, gxy, df00 = params
+    theta0 = np.asarray(theta0_rad, float)
+    c, s = np.cos(theta0), np.sin(theta0)
+    f00 = f00_hz + df00
+    if model == "published":
+        along = gs + gd * np.cos(2 * theta0) + gxy * np.sin(2 * theta0)
+        spring = probe.moment_am2 * (bx * c + by * s) + probe.lever_m * probe.moment_am2 * along
+        return f00 + frequency_shift_hz(f00, probe.spring_nm_per_rad, spring) - f00_hz
+    field = np.stack([bx * c + by * s, -bx * s + by * c, np.zeros_like(c)], axis=-1)
+    gxx, gyy = gs + gd, gs - gd
+    rotation = np.stack([np.stack([c, s, 0 * c], -1), np.stack([-s, c, 0 * c], -1),
+                         np.stack([0 * c, 0 * c, 1 + 0 * c], -1)], axis=-2)         # rows x', y', z'
+    global_gradient = np.array([[gxx, gxy, 0.0], [gxy, gyy, 0.0], [0.0, 0.0, -(gxx + gyy)]])
+    gradient = rotation @ global_gradient @ np.swapaxes(rotation, -1, -2)
+    potential = ArcPotential.from_local_field(probe, field, gradient)
+    k = potential.effective_stiffness_nm_per_rad(np.full(theta0.shape, amplitude_rad))
+    return f00 * np.sqrt(k / probe.spring_nm_per_rad) - f00_hz
+
+
+def decompose(theta0_rad, shift_hz, shift_std_hz, probe: Probe, f00_hz: float, model: str = "first_principles",
+              f00_free: bool = False, amplitude_rad: float = 0.0) -> Decomposition:
+    """Field and gradient from a rotation sweep by weighted nonlinear least squares.
+
+    Parameters
+    ----------
+    theta0_rad, shift_hz, shift_std_hz : the measured Δf = f − f00 and its σ at each θ0.
+    probe : probe constants (m, kM, l; J and δ enter the first-principles stiffness only
+        through k/kM).
+    f00_hz : calibrated zero-field frequency that ``shift_hz`` refers to.
+    model : ``first_principles`` (default) or ``published``.
+    f00_free : fit the zero-field frequency too; Gs is then not determined.
+    amplitude_rad : ring-down amplitude for the first-principles harmonic balance (0: small
+        amplitude; the probe's m and kM calibrated at the operating amplitude absorb it).
+
+    The covariance is scaled by χ²/dof when that exceeds 1, as lmfit does: a model that does
+    not fit does not get to claim the measurement errors' precision.
+    """
+    theta0 = np.asarray(theta0_rad, float)
+    shift = np.asarray(shift_hz, float)
+    std = np.asarray(shift_std_hz, float)
+    if model not in MODELS:
+        raise ValueError(f"model = {model!r}; use one of {MODELS}")
+    problem = _check(theta0, shift, std, f00_free)
+    if problem:
+        return Decomposition(model, False, problem, f00_free=f00_free)
+    harmonics = fit_harmonics(theta0, shift, std, min(MAX_HARMONIC, _distinct_angles(theta0) // 2 - 1 or 1))
+    free = np.array([True, True, not f00_free, True, True, f00_free])
+    start = _start(harmonics, probe, f00_hz, model)
+    if f00_free:
+        start[2] = 0.0        # Gs is absorbed by f00 and stays out of the fit
+
+    def residual(x):
+        params = start.copy()
+        params[free] = x
+        return (model_shift_hz(params, theta0, probe, f00_hz, model, amplitude_rad) - shift) / std
+
+    scale = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1e-3])[free]
+    result = least_squares(residual, start[free], x_scale=scale, method="lm", xtol=1e-12, ftol=1e-12)
+    params = start.copy()
+    params[free] = result.x
+    return _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics)
+
+
+def _distinct_angles(theta0) -> int:
+    return np.unique(np.round(np.mod(theta0, 2 * np.pi), 6)).size
+
+
+def _check(theta0, shift, std, f00_free) -> str:
+    if not (theta0.shape == shift.shape == std.shape and theta0.ndim == 1):
+        return f"theta0, shift and std must be equal-length 1-D arrays, got {theta0.shape}, {shift.shape}, {std.shape}"
+    if not (np.all(np.isfinite(theta0)) and np.all(np.isfinite(shift)) and np.all(np.isfinite(std))):
+        return "non-finite angle, shift or uncertainty in the sweep"
+    if np.any(std <= 0):
+        return "every shift needs a positive standard uncertainty"
+    needed = 6 if f00_free else 5
+    if _distinct_angles(theta0) < needed:
+        return (f"{_distinct_angles(theta0)} distinct orientations cannot separate field (1θ0) from gradient "
+                f"(2θ0){' and f00' if f00_free else ''}: need at least {needed}")
+    return ""
+
+
+def _start(harmonics: Harmonics, probe: Probe, f00_hz: float, model: str) -> np.ndarray:
+    """Starting point from the first-order harmonics (Eq. 11 with the factor f00)."""
+    beta0 = f00_hz * probe.moment_am2 / (2.0 * probe.spring_nm_per_rad)
+    gamma0 = beta0 * probe.lever_m
+    a, b = harmonics.cosine_hz, harmonics.sine_hz
+    second = 3.0 if model == "first_principles" else 1.0
+    constant = -1.0 if model == "first_principles" else 1.0
+    a2, b2 = (a[2], b[2]) if a.size > 2 else (0.0, 0.0)
+    return np.array([a[1] / beta0, b[1] / beta0, constant * a[0] / gamma0, a2 / (second * gamma0),
+                     b2 / (second * gamma0), 0.0])
+
+
+def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics) -> Decomposition:
+    dof = shift.size - int(free.sum())
+    chi2_dof = float(result.fun @ result.fun) / dof if dof > 0 else math.nan
+    jac = result.jac
+    cov_free = np.linalg.pinv(jac.T @ jac) * max(1.0, chi2_dof if math.isfinite(chi2_dof) else 1.0)
+    cov = np.full((6, 6), np.nan)
+    cov[np.ix_(free, free)] = cov_free
+    bx, by, gs, gd, gxy, df00 = params
+    # (Gxx, Gxy, Gyy) = (Gs + Gd, Gxy, Gs − Gd): a linear map of (Gs, Gd, Gxy).
+    to_xy = np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, -1.0, 0.0]])
+    g_cov = to_xy @ np.nan_to_num(cov[2:5, 2:5]) @ to_xy.T      # a parameter held fixed has no variance
+    gradient = np.array([gs + gd, gxy, gs - gd])
+    if f00_free:  # only (Gxx − Gyy)/2 and Gxy are determined; Gxx and Gyy alone are not
+        gradient[[0, 2]] = np.nan
+        g_cov[[0, 2], :] = g_cov[:, [0, 2]] = np.nan
+    residual = result.fun * std
+    return Decomposition(
+        model=model, ok=bool(result.success), message="" if result.success else result.message,
+        field_t=np.array([bx, by]), field_covariance_t2=cov[:2, :2], gradient_t_per_m=gradient,
+        gradient_covariance=g_cov, f00_hz=f00_hz + df00, f00_free=f00_free, harmonics=harmonics,
+        chi2_dof=chi2_dof, rms_residual_hz=float(np.sqrt(np.mean(residual**2))), residual_hz=residual)

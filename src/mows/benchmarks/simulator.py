@@ -1,0 +1,111 @@
+"""Simulator benchmark: one measurement cycle of the default scenario, and a solve_ivp baseline.
+
+A cycle is 0.5 s of excitation (2 A, the probe hammers against the stop) and 0.5 s of ring-down
+at 20 kS/s, two fluxgate channels with noise. Figures: the median time per cycle with and
+without noise, the kernel's share, numba's compilation (fresh cache) and cache-load time in a
+new process, and the same cycle's equation of motion integrated by
+``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-10) on the same torque function.
+"""
+from __future__ import annotations
+
+import math
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from mows.fluxgate import NoiseModel
+from mows.scenario import load_scenario
+from mows.simulator import SimulatedDevice, simulate_cycle
+
+_FIRST_CALL = """
+import time
+start = time.perf_counter()
+from mows.scenario import Scenario
+from mows.simulator import SimulatedDevice
+SimulatedDevice(Scenario()).integrate(10)
+print(time.perf_counter() - start)
+"""
+
+
+def _median_ms(action, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        action()
+        times.append(time.perf_counter() - start)
+    return 1e3 * statistics.median(times)
+
+
+def first_call_s() -> tuple[float, float]:
+    """(import + compile, import + cache load) of the kernel in fresh processes, s."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        runs = [float(subprocess.run([sys.executable, "-c", _FIRST_CALL], env=env, check=True, capture_output=True,
+                                     text=True).stdout) for _ in range(2)]
+    return runs[0], runs[1]
+
+
+def solve_ivp_theta(rhs, state, first_index: int, n_samples: int, sample_rate_hz: float) -> np.ndarray:
+    """θ at samples first_index … first_index + n_samples (inclusive) by DOP853 (rtol 1e-10)
+    from ``state`` (θ, θ') at the first sample."""
+    times = (first_index + np.arange(n_samples + 1)) / sample_rate_hz
+    return solve_ivp(rhs, (times[0], times[-1]), state, method="DOP853", rtol=1e-10, atol=1e-13, t_eval=times).y
+
+
+def solve_ivp_cycle(device: SimulatedDevice, amplitude_a: float, excite_s: float = 0.5,
+                    ringdown_s: float = 0.5) -> np.ndarray:
+    """θ at the samples of :func:`mows.simulator.simulate_cycle` at θ0 = 0 from rest, by DOP853
+    on the device's own equation of motion."""
+    fs = device.sample_rate_hz
+    frequency = device.expected_frequency_hz()
+    drive = device.equation_of_motion(device.scenario.setup.currents_a(0.0, amplitude_a), frequency)
+    n_excite, n_ring = int(round(excite_s * fs)), int(round(ringdown_s * fs))
+    excited = solve_ivp_theta(drive, [device.truth.rest_angle_rad, 0.0], 0, n_excite, fs)
+    ringing = solve_ivp_theta(device.equation_of_motion(), excited[:, -1], n_excite, n_ring - 1, fs)
+    return np.concatenate([excited[0, :-1], ringing[0]])
+
+
+def run(repeats: int = 20) -> dict:
+    """Figures for ``mows bench`` (milliseconds unless the key says otherwise)."""
+    compile_s, cached_s = first_call_s()
+    scenario = load_scenario()
+    amplitude = scenario.excitation.amplitude_a
+    noisy = SimulatedDevice(scenario)
+    quiet = SimulatedDevice(scenario.replace(noise=NoiseModel()))
+    simulate_cycle(noisy, 0.0, amplitude)  # warm-up
+    free = SimulatedDevice(scenario)
+    free.pluck(math.radians(23.0))
+    figures = {
+        "cycle_ms_median": _median_ms(lambda: simulate_cycle(noisy, 0.0, amplitude), repeats),
+        "cycle_ms_without_noise": _median_ms(lambda: simulate_cycle(quiet, 0.0, amplitude), repeats),
+        "kernel_ms_per_second_free": _median_ms(lambda: free.integrate(int(free.sample_rate_hz)), repeats),
+        "first_call_with_compilation_s": compile_s,
+        "first_call_from_cache_s": cached_s,
+    }
+    silent = scenario.replace(noise=NoiseModel())
+    start = time.perf_counter()
+    theta_ivp = solve_ivp_cycle(SimulatedDevice(silent), amplitude)
+    figures["solve_ivp_dop853_ms_per_cycle"] = 1e3 * (time.perf_counter() - start)
+    figures["solve_ivp_over_simulator"] = figures["solve_ivp_dop853_ms_per_cycle"] / figures["cycle_ms_without_noise"]
+    reference = SimulatedDevice(silent)
+    record = simulate_cycle(reference, 0.0, amplitude, SimulatedDevice(silent).expected_frequency_hz())
+    # With impacts DOP853 steps across the stop's force jumps; in free flight both are exact.
+    figures["max_theta_difference_cycle_rad"] = float(np.max(np.abs(record.theta_rad - theta_ivp)))
+    plucked = SimulatedDevice(silent)
+    plucked.pluck(math.radians(23.0))
+    theta_rk4, _ = plucked.integrate(int(plucked.sample_rate_hz))
+    theta_free = solve_ivp_theta(plucked.equation_of_motion(), [math.radians(23.0), 0.0], 0, len(theta_rk4) - 1,
+                                 plucked.sample_rate_hz)[0]
+    figures["max_theta_difference_free_ringdown_rad"] = float(np.max(np.abs(theta_rk4 - theta_free)))
+    return figures
+
+
+if __name__ == "__main__":
+    for key, value in run().items():
+        print(f"{key:34s} {value:.6g}")

@@ -1,0 +1,83 @@
+"""``mows sim``: simulate measurement cycles of a scenario and write the samples to .npz.
+
+For every θ0 and repeat: turn, let the scenario's gap pass, excite, record the ring-down
+(:func:`mows.simulator.simulate_cycle`). With ``--fit`` each ring-down is fitted
+(:func:`mows.ringdown.fit_ringdown`) and compared with the truth from the full potential
+(:meth:`mows.simulator.CycleRecord.ringdown_frequency_hz`).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+import yaml
+
+from mows.scenario import DEFAULT_SCENARIO, load_scenario
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO,
+                        help=f"scenario name or YAML file (default {DEFAULT_SCENARIO})")
+    parser.add_argument("--theta0-deg", type=float, nargs="+", default=None,
+                        help="probe orientations, degrees (default: the scenario's)")
+    parser.add_argument("--repeats", type=int, default=1, help="cycles per orientation (default 1)")
+    parser.add_argument("--amplitude-a", type=float, default=None,
+                        help="base coil current amplitude, A (default: the scenario's)")
+    parser.add_argument("--seed", type=int, default=None, help="noise seed (default: the scenario's)")
+    parser.add_argument("--out", default=None, help="write the cycles to this .npz file")
+    parser.add_argument("--fit", action="store_true", help="fit each ring-down and print the frequencies")
+
+
+def run(args) -> int:
+    from mows.ringdown import fit_ringdown
+    from mows.simulator import SimulatedDevice, simulate_cycle
+
+    scenario = load_scenario(args.scenario)
+    if args.seed is not None:
+        scenario = scenario.replace(seed=args.seed)
+    excitation = scenario.excitation
+    amplitude = excitation.amplitude_a if args.amplitude_a is None else args.amplitude_a
+    angles = [math.degrees(scenario.pose.theta0_rad)] if args.theta0_deg is None else args.theta0_deg
+    device = SimulatedDevice(scenario)
+    records = []
+    for theta0_deg in angles:
+        for _ in range(args.repeats):
+            device.set_orientation(math.radians(theta0_deg))
+            device.idle(excitation.gap_s)
+            record = simulate_cycle(device, math.radians(theta0_deg), amplitude, excitation.frequency_hz,
+                                    excitation.excite_s, excitation.ringdown_s)
+            records.append(record)
+            if args.fit:
+                ring = slice(record.coil_off_index, None)
+                fit = fit_ringdown(record.samples_t[ring], record.sample_rate_hz, record.theta0_rad,
+                                   record.frequency_hz, saturated=record.saturated[ring])
+                print(f"θ0 = {theta0_deg:7.2f}°: {_compare(fit, record)}")
+    if args.out:
+        np.savez_compressed(args.out, **_arrays(records), scenario_yaml=yaml.safe_dump(scenario.to_dict(), sort_keys=False))
+        print(f"wrote {len(records)} cycles to {args.out}")
+    return 0
+
+
+def _compare(fit, record) -> str:
+    """The fit against the truth: f(A(t)) of the full potential averaged over the fitted window."""
+    if not fit.ok:
+        return fit.report()
+    truth = record.ringdown_frequency_hz(fit.duration_s)
+    return (f"{fit.report()}; truth {truth:.6f} Hz from {math.degrees(record.ringdown_amplitude_rad()):.1f}° "
+            f"(fit − truth = {(fit.frequency_hz - truth) * 1e3:+.3f} mHz)")
+
+
+def _arrays(records) -> dict:
+    return {
+        "sample_rate_hz": records[0].sample_rate_hz,
+        "theta0_rad": np.array([r.theta0_rad for r in records]),
+        "frequency_hz": np.array([r.frequency_hz for r in records]),
+        "currents_a": np.stack([r.currents_a for r in records]),
+        "first_sample_index": np.array([r.block.first_sample_index for r in records]),
+        "coil_off_index": np.array([r.coil_off_index for r in records]),
+        "samples_t": np.stack([r.samples_t for r in records]),
+        "saturated": np.stack([r.saturated for r in records]),
+        "theta_rad": np.stack([r.theta_rad for r in records]),
+        "expected_frequency_hz": np.array([float(r.expected_frequency_hz()) for r in records]),
+    }

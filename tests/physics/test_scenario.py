@@ -1,0 +1,97 @@
+"""Scenario YAML: shipped files, round trips, the documented examples and the error messages."""
+import math
+import pathlib
+import re
+
+import numpy as np
+import pytest
+import yaml
+
+from mows.probe import PAPER_PROBE
+from mows.scenario import Scenario, load_scenario, shipped_scenarios
+
+DOC = pathlib.Path(__file__).parents[2] / "docs" / "scenario_format.md"
+SETUPS = {"paper_largest_spacing": "largest_spacing", "helmholtz": "helmholtz", "anti_helmholtz": "helmholtz",
+          "nearby_coil": "largest_spacing", "tilted_plane": "largest_spacing"}
+
+
+def test_the_shipped_scenarios_are_the_documented_ones():
+    assert shipped_scenarios() == sorted(SETUPS)
+
+
+@pytest.mark.parametrize("name", sorted(SETUPS))
+def test_shipped_scenario_round_trips(name, tmp_path):
+    scenario = load_scenario(name)
+    assert scenario.name == name and scenario.setup.name == SETUPS[name]
+    again = Scenario.from_dict(scenario.to_dict())
+    assert again.to_dict() == scenario.to_dict()
+    scenario.to_yaml(tmp_path / "s.yaml")
+    assert load_scenario(tmp_path / "s.yaml").to_dict() == scenario.to_dict()
+
+
+def test_the_default_is_the_paper_device_in_the_largest_spacing_setup_in_the_earths_field():
+    scenario = load_scenario()
+    assert scenario.name == "paper_largest_spacing" and scenario.probe == PAPER_PROBE
+    earth = scenario.environment.source.field_t(np.zeros(3))
+    assert np.linalg.norm(earth) == pytest.approx(48e-6, rel=0.01)
+    assert np.hypot(*earth[:2]) > 10e-6 and earth[2] < -30e-6          # horizontal and vertical parts
+    assert scenario.sample_rate_hz == 20_000.0 and scenario.sensors.null_offsets
+    assert scenario.excitation.frequency_hz is None
+
+
+def yaml_blocks(text):
+    return [yaml.safe_load(block) for block in re.findall(r"```yaml\n(.*?)```", text, flags=re.S)]
+
+
+def test_the_documented_examples_are_the_shipped_files():
+    blocks = yaml_blocks(DOC.read_text())
+    named = {b["name"]: b for b in blocks if b.get("name") in SETUPS}
+    assert set(named) == {"paper_largest_spacing", "helmholtz", "anti_helmholtz", "nearby_coil"}
+    for name, block in named.items():
+        assert Scenario.from_dict(block).to_dict() == load_scenario(name).to_dict(), name
+    minimal = Scenario.from_dict(next(b for b in blocks if b.get("name") == "one_millitesla"))
+    np.testing.assert_array_equal(minimal.environment.source.field_t(np.zeros(3)), [1e-3, 0.0, 0.0])
+
+
+def test_defaults_and_derived_sections():
+    scenario = Scenario.from_dict({"pose": {"magnet_position_m": [0.01, 0.02, 0.0], "theta0_deg": 90.0}})
+    assert scenario.pose.theta0_rad == pytest.approx(math.pi / 2)
+    # The sensors follow the magnet: the paper's pair at 6 cm and r_eff = 6.75 cm along +x.
+    np.testing.assert_allclose(scenario.sensors.pair.positions_m[0], [0.07, 0.02, 0.0])
+    tilted = Scenario.from_dict({"pose": {"tilt_deg": 30.0}})
+    assert tilted.pose.gravity_m_per_s2[1] == pytest.approx(9.80665 / 2)
+
+
+def test_probe_forms(tmp_path):
+    inline = PAPER_PROBE.replace(damping_per_s=0.5).to_dict()
+    inline.pop("f00_hz")
+    assert Scenario.from_dict({"probe": inline}).probe.damping_per_s == 0.5
+    PAPER_PROBE.to_yaml(tmp_path / "probe.yaml")
+    (tmp_path / "s.yaml").write_text("probe: probe.yaml\n")
+    assert load_scenario(tmp_path / "s.yaml").probe.to_dict() == PAPER_PROBE.to_dict()
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"colour": 1}, r"unknown keys \['colour'\].*allowed keys are \['name'"),
+    ({"noise": {"white": 1e-11}}, r"section 'noise': unknown keys \['white'\].*sensor_white_t_per_rthz"),
+    ({"pose": {"theta0_rad": 1.0}}, r"section 'pose': unknown keys \['theta0_rad'\].*theta0_deg"),
+    ({"pose": {"tilt_deg": 10.0, "gravity_m_per_s2": [0, 0, -9.8]}}, "either tilt_deg"),
+    ({"pose": {"theta0_deg": "north"}}, r"theta0_deg = 'north' must be a number"),
+    ({"excitation": {"amplitude_a": 12.0}}, "exceeds the cap of 10 A"),
+    ({"excitation": {"ringdown_s": 0.0}}, r"ringdown_s = 0.0 is out of range \(0, 3600\]"),
+    ({"sample_rate_hz": -1.0}, r"sample_rate_hz = -1.0 is out of range"),
+    ({"housing": {"restitution": 1.5}}, r"restitution = 1.5 is out of range \(0, 1\]"),
+    ({"integrator": {"substeps": 0}}, r"substeps = 0 must be an integer in \[1, 1000\]"),
+    ({"sensors": {"positions_m": [[0.06, 0, 0]]}}, "positions_m must be two 3-vectors"),
+    ({"probe": "no_such_probe.yaml"}, "neither 'paper' nor a probe file"),
+    ({"environment": {"sources": [{"type": "magnet"}]}}, "field source type 'magnet'"),
+    ({"setup": {"preset": "triangle"}}, "coil preset 'triangle'"),
+])
+def test_bad_scenarios_are_refused_with_a_message_naming_the_key(data, message):
+    with pytest.raises(ValueError, match=message):
+        Scenario.from_dict(data)
+
+
+def test_unknown_scenario_name_lists_the_shipped_ones():
+    with pytest.raises(ValueError, match="paper_largest_spacing"):
+        load_scenario("no_such_scenario")

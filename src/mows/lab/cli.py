@@ -1,0 +1,158 @@
+"""``mows lab``: compare | diagnose | add | report (docs/model_lab.md).
+
+    mows lab compare  TABLE [--probe P]              χ²/dof, residual structure, verdict
+    mows lab diagnose TABLE [--probe P]              + ranked candidate effects, groups
+    mows lab add      TABLE [--probe P] EFFECT… | --auto   refit with effects, error history
+    mows lab report   TABLE [--probe P] [-o page.html] [--auto] [EFFECT…]
+
+TABLE is a CSV file or a rosbag2 bag (``--reference`` then gives the reference field: a
+MagneticField topic or a field-source YAML). ``--json`` prints the machine-readable result.
+User errors (bad tables, probe files, unknown effects, broken plugins) end with a one-line
+message and exit status 2, never a traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import pathlib
+import sys
+
+from mows.lab.table import TableError
+
+PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "probes" / "paper.yaml"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="lab_command", required=True)
+    helps = {"compare": "how well the model explains the table: χ²/dof, residual structure, verdict",
+             "diagnose": "rank the catalog's effects as explanations of the residual",
+             "add": "refit with named effects (or --auto) and print the error history",
+             "report": "write a self-contained HTML report with plots"}
+    for name, text in helps.items():
+        command = sub.add_parser(name, help=text, description=text)
+        command.add_argument("table", help="measurement table: CSV file or rosbag2 bag directory")
+        command.add_argument("--probe", default=str(PAPER_PROBE_FILE),
+                             help="probe constants YAML (default: the paper's probe)")
+        command.add_argument("--plugin", action="append", default=[],
+                             help="plugin file (.py) or entry-point name defining extra effects (repeatable)")
+        command.add_argument("--reference", help="for bags: a sensor_msgs/MagneticField topic or a field-source YAML")
+        command.add_argument("--magnet-position", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
+                             help="probe position for a field-source reference, m")
+        command.add_argument("--drop-invalid", action="store_true",
+                             help="drop rows with missing or invalid values instead of stopping")
+        command.add_argument("--json", action="store_true", help="print JSON instead of text")
+        command.add_argument("--no-cv", action="store_true", help="skip the cross-validated errors (faster)")
+        if name in ("add", "report"):
+            command.add_argument("effects", nargs="*", metavar="EFFECT", help="effects to add, in order")
+            command.add_argument("--auto", action="store_true", help="add effects forward while the evidence is strong")
+        else:
+            command.add_argument("--effects", default="", help="comma-separated effects already in the model")
+        if name == "report":
+            command.add_argument("-o", "--output", default="lab_report.html", help="HTML file to write")
+
+
+def run(args) -> int:
+    try:
+        return _run(args)
+    except (TableError, ValueError, OSError) as error:
+        print(f"mows lab {args.lab_command}: error: {error}", file=sys.stderr)
+        return 2
+
+
+def _run(args) -> int:
+    from mows.lab.analysis import analyse
+    from mows.lab.table import load_table
+
+    probe = _probe(args.probe)
+    table = load_table(args.table, drop_invalid=args.drop_invalid,
+                       **({"reference": args.reference, "magnet_position_m": args.magnet_position}
+                          if _is_bag(args.table) else {}))
+    effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
+    report = analyse(table, probe, effects=effects, auto=getattr(args, "auto", False), plugins=args.plugin,
+                     rank=args.lab_command != "compare", cross_validate=not args.no_cv)
+    if args.lab_command == "report":
+        from mows.lab.report import write_html
+
+        path = write_html(report, args.output)
+        print(f"wrote {path}")
+    if args.json:
+        print(json.dumps(report.to_dict(), indent=2, default=float))
+    elif args.lab_command != "report":
+        print(format_text(report, table, args.lab_command))
+    return 0
+
+
+def _is_bag(source) -> bool:
+    path = pathlib.Path(source)
+    return path.is_dir() or path.suffix == ".mcap"
+
+
+def _probe(source):
+    from mows.probe import Probe
+
+    path = PAPER_PROBE_FILE if source == "paper" else pathlib.Path(source)
+    if not path.is_file():
+        raise ValueError(f"probe file {path} does not exist")
+    try:
+        return Probe.from_yaml(path)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"probe file {path}: {error}") from None
+
+
+# --- text ------------------------------------------------------------------------------------
+def format_text(report, table, command: str) -> str:
+    lines = [f"table: {table.source}: {report.n} rows, {len(set(table.sweep_ids))} sweep(s)"]
+    lines += [f"  note: {note}" for note in report.notes]
+    lines.append(f"base model (eq6, f00 fitted): χ²/dof = {report.base.chi2_dof:.3f}")
+    lines.append("")
+    lines.append(report.fit.report())
+    lines.append("")
+    lines.append(_structure_text(report.diagnosis.structure))
+    if command != "compare":
+        lines += ["", _candidates_text(report)]
+    if len(report.history) > 1 or command == "add":
+        lines += ["", _history_text(report.history)]
+    lines += ["", f"verdict: {report.verdict}", "  " + report.diagnosis.explanation]
+    return "\n".join(lines)
+
+
+def _structure_text(structure) -> str:
+    lines = ["residual structure (after what the model absorbs):",
+             "  harmonic   amplitude (mHz)   phase (deg)   p"]
+    for h in structure.harmonics:
+        lines.append(f"  {h.k:8d}   absorbed by the model" if h.absorbed else
+                     f"  {h.k:8d}   {h.amplitude_hz * 1e3:8.3f} ± {h.std_hz * 1e3:6.3f}   "
+                     f"{math.degrees(h.phase_rad):8.1f}   {h.p_value:.2g}")
+    if structure.covariates:
+        lines.append("  covariate            correlation   slope            p")
+        for c in structure.covariates:
+            lines.append(f"  {c.name:20s} {c.correlation:+8.3f}     {c.slope:+.3e}   {c.p_value:.2g}")
+    lines.append(f"  significance level per test (Bonferroni): {structure.alpha:.1e}")
+    lines.append("  " + structure.summary)
+    return "\n".join(lines)
+
+
+def _candidates_text(report) -> str:
+    lines = ["candidate effects, best first (ΔBIC > 10 is strong evidence):",
+             "  rank effect                ΔBIC        p         χ²/dof after  group  parameters"]
+    for rank, c in enumerate(report.candidates, 1):
+        values = ", ".join(f"{name} = {v:.4g} ± {s:.2g} {u}" for name, v, s, u in c.parameters)
+        lines.append(f"  {rank:4d} {c.name:20s} {c.delta_bic:9.1f}   {c.p_value:9.2g}   {c.chi2_dof_after:10.3f}   "
+                     f"{c.group or '-':>4}   {values}")
+    for group in report.groups:
+        lines.append(f"  group {group.number}: {', '.join(group.members)} cannot be told apart by this data; "
+                     f"{group.separation}")
+        lines += [f"    check {check}" for check in group.checks]
+    for name, reason in report.untestable.items():
+        lines.append(f"  not tested: {name}: {reason}")
+    return "\n".join(lines)
+
+
+def _history_text(history) -> str:
+    lines = ["error history:", "  step  model                                         χ²/dof      BIC        CV rms (mHz)"]
+    for i, step in enumerate(history):
+        name = " + ".join(["eq6"] + step.effects)
+        cv = f"{step.cv_rms_hz * 1e3:10.4f}" if math.isfinite(step.cv_rms_hz) else "         -"
+        lines.append(f"  {i:4d}  {name:45s} {step.chi2_dof:9.3f}  {step.bic:10.1f}  {cv}")
+    return "\n".join(lines)

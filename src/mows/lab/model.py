@@ -1,0 +1,291 @@
+"""The frequency model: the published model (Eq. 6) plus effects, its fit and cross-validation.
+
+``FrequencyModel(probe) + catalog()["gravity"] + …`` composes like astropy.modeling; each
+effect brings parameters with units and physical bounds like lmfit. The prediction for row i is
+
+    f_i = f00·h_i(p) + c_i(p),
+
+with h from the potential (:func:`mows.lab.physics.frequency_factor`), p the effect parameters
+and c the additive frequency contributions of plugins. The base model has no effect: h is
+Eq. 6, √(1 + (m·Bx' + l·m·Gx'x')/kM), with the table's reference field and gradient.
+
+Nuisance parameter: f00 is always fitted (the zero-field frequency drifts with wear, and the
+calibration is never perfect). Nothing else in the base model is free.
+
+Fit: weighted least squares (σ = ``f_std_hz``) by scipy's trust-region reflective method within
+the parameters' bounds, f00 started from its closed-form optimum. The Jacobian column of f00
+is exact (h); the others are forward differences with steps of 1 % of each parameter's
+typical size (the effects are smooth and nearly linear there). χ² = Σ((f − model)/σ)²,
+BIC = χ² + k·ln n (the Gaussian likelihood with known σ, k free parameters including f00).
+Uncertainties come from (JᵀJ)⁻¹ and are inflated by √(χ²/dof) when that exceeds 1 (Birge ratio:
+an incomplete model should not claim the precision of a complete one).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import scipy.optimize
+
+from mows.lab import effects as effects_module
+from mows.lab.physics import Configuration, frequency_factor
+
+FD_STEP = 1e-2          # × parameter scale
+CV_FOLDS = 10           # interleaved folds when the table has one sweep
+INVALID_RESIDUAL = 1e6  # weighted residual given to rows where the model has no real frequency
+
+
+class FrequencyModel:
+    """The published frequency model plus ``effects`` for ``probe`` (a :class:`mows.probe.Probe`).
+
+    ``model + effect`` and ``effect + effect`` give new models; parameters are named
+    ``f00_hz`` and ``<effect>.<parameter>``.
+    """
+
+    def __init__(self, probe=None, effects=()):
+        self.probe = probe
+        names = [e.name for e in effects]
+        repeated = sorted({n for n in names if names.count(n) > 1})
+        if repeated:
+            raise ValueError(f"effect {', '.join(repeated)} appears more than once in the model")
+        self.effects = tuple(effects)
+
+    @classmethod
+    def combine(cls, left, right) -> "FrequencyModel":
+        parts = [left, right]
+        probe = next((p.probe for p in parts if isinstance(p, FrequencyModel) and p.probe is not None), None)
+        found = []
+        for part in parts:
+            if isinstance(part, FrequencyModel):
+                found.extend(part.effects)
+            elif isinstance(part, effects_module.Effect):
+                found.append(part)
+            else:
+                raise TypeError(f"cannot add {type(part).__name__} to a frequency model")
+        return cls(probe, found)
+
+    def __add__(self, other):
+        return FrequencyModel.combine(self, other)
+
+    def with_probe(self, probe) -> "FrequencyModel":
+        return FrequencyModel(probe, self.effects)
+
+    # --- description ----------------------------------------------------------------------
+    @property
+    def name(self) -> str:
+        return " + ".join(["eq6"] + [e.name for e in self.effects])
+
+    @property
+    def effect_names(self) -> list:
+        return [e.name for e in self.effects]
+
+    @property
+    def parameters(self) -> list:
+        """(qualified name, Parameter) for the effect parameters, in fit order."""
+        return [(f"{e.name}.{p.name}", p) for e in self.effects for p in e.parameters]
+
+    @property
+    def parameter_names(self) -> list:
+        return ["f00_hz"] + [name for name, _ in self.parameters]
+
+    def __repr__(self):
+        return f"FrequencyModel({self.name})"
+
+    # --- evaluation -------------------------------------------------------------------------
+    def _require_probe(self):
+        if self.probe is None:
+            raise ValueError("this model has no probe: build it as FrequencyModel(probe) + effects")
+        return self.probe
+
+    def factors(self, table, values) -> tuple:
+        """(h, c) of f = f00·h + c at effect parameter values ``values`` (fit order)."""
+        probe = self._require_probe()
+        config = Configuration.base(table, probe)
+        bounds = np.cumsum([0] + [len(e.parameters) for e in self.effects])
+        ordered = sorted(range(len(self.effects)), key=lambda i: self.effects[i].stage)
+        for i in ordered:
+            self.effects[i].apply(config, table, probe, *(float(v) for v in values[bounds[i]:bounds[i + 1]]))
+        nodes = effects_module.ringdown_nodes(table, config) if config.amplitude else None
+        return frequency_factor(config, probe, nodes)
+
+    def predict(self, table, values) -> np.ndarray:
+        """f (Hz) for ``values`` = [f00, effect parameters…] (or a :class:`FitResult`)."""
+        x = values.values if isinstance(values, FitResult) else np.asarray(values, float)
+        h, c = self.factors(table, x[1:])
+        return x[0] * h + c
+
+    # --- fit ------------------------------------------------------------------------------
+    def fit(self, table, start=None) -> "FitResult":
+        """Weighted least-squares fit to ``table``; ``start`` = effect parameter values (default 0)."""
+        self._require_probe()
+        for effect in self.effects:
+            reason = effects_module.testable(effect, table, self.probe)
+            if reason:
+                raise ValueError(f"effect {effect.name} cannot be fitted to this table: {reason}")
+        problem = _Problem(self, table)
+        p0 = np.zeros(len(self.parameters)) if start is None else np.asarray(start, float)
+        x0 = np.concatenate([[problem.best_f00(p0)], p0])
+        if x0.size == 1:  # f00 alone enters linearly: the closed form is the optimum
+            return problem.result(x0, True, "f00 in closed form")
+        lower = np.array([0.0] + [p.lower for _, p in self.parameters])
+        upper = np.array([np.inf] + [p.upper for _, p in self.parameters])
+        x0 = np.clip(x0, lower, upper)
+        solution = scipy.optimize.least_squares(problem.residual, x0, jac=problem.jacobian, bounds=(lower, upper),
+                                                x_scale="jac", method="trf", xtol=1e-10, ftol=1e-12, gtol=1e-12,
+                                                max_nfev=60)
+        return problem.result(solution.x, solution.success, solution.message)
+
+
+class _Problem:
+    """Weighted residuals and their Jacobian for one model and table, with a one-point cache
+    (scipy asks for the Jacobian at the point whose residual it has just computed)."""
+
+    def __init__(self, model: FrequencyModel, table):
+        self.model, self.table = model, table
+        self.weight = 1.0 / table.f_std_hz
+        self.steps = np.array([FD_STEP * p.scale for _, p in model.parameters])
+        self.upper = np.array([p.upper for _, p in model.parameters])
+        self._cache = (None, None)
+
+    def factors(self, p):
+        key = p.tobytes()
+        if self._cache[0] != key:
+            self._cache = (key, self.model.factors(self.table, p))
+        return self._cache[1]
+
+    def best_f00(self, p) -> float:
+        h, c = self.factors(np.asarray(p, float))
+        w2 = self.weight**2
+        good = np.isfinite(h)
+        return float(np.sum((w2 * h * (self.table.f_hz - c))[good]) / np.sum((w2 * h * h)[good]))
+
+    def residual(self, x) -> np.ndarray:
+        h, c = self.factors(x[1:])
+        r = (self.table.f_hz - x[0] * h - c) * self.weight
+        return np.where(np.isfinite(r), r, INVALID_RESIDUAL)
+
+    def jacobian(self, x) -> np.ndarray:
+        h, _ = self.factors(x[1:])
+        f00_column = np.where(np.isfinite(h), -h * self.weight, 0.0)
+        return np.column_stack([f00_column, self.columns(x, range(len(self.steps)))])
+
+    def columns(self, x, indices) -> np.ndarray:
+        """Forward-difference columns d(weighted residual)/d(effect parameter j), j in ``indices``."""
+        base = self.residual(x)
+        columns = []
+        for j in indices:
+            p = x[1:].copy()
+            # Step inwards at an upper bound, so that the model is evaluated where it is defined.
+            step = -self.steps[j] if p[j] + self.steps[j] > self.upper[j] else self.steps[j]
+            p[j] += step
+            columns.append((self.residual(np.concatenate([[x[0]], p])) - base) / step)
+        return np.stack(columns, -1) if columns else np.zeros((len(base), 0))
+
+    def result(self, x, success, message) -> "FitResult":
+        residual = self.residual(x)
+        jacobian = self.jacobian(x)
+        chi2 = float(residual @ residual)
+        n, k = len(residual), len(x)
+        u, s, vt = np.linalg.svd(jacobian, full_matrices=False)
+        keep = s > s[0] * 1e-10
+        covariance = (vt[keep].T / s[keep] ** 2) @ vt[keep]
+        birge = max(1.0, chi2 / max(n - k, 1))
+        prediction = self.model.predict(self.table, x)
+        return FitResult(self.model, self.table, np.asarray(x, float), covariance * birge, chi2, n, k,
+                         prediction, jacobian, bool(success), str(message))
+
+
+@dataclasses.dataclass(eq=False)
+class FitResult:
+    """A fitted :class:`FrequencyModel`. ``values``/``covariance`` are ordered as
+    ``model.parameter_names``; ``jacobian`` is d(weighted residual)/d(values), (n, k)."""
+
+    model: FrequencyModel
+    table: object
+    values: np.ndarray
+    covariance: np.ndarray
+    chi2: float
+    n: int
+    k: int
+    prediction_hz: np.ndarray
+    jacobian: np.ndarray
+    success: bool
+    message: str
+
+    @property
+    def dof(self) -> int:
+        return self.n - self.k
+
+    @property
+    def chi2_dof(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else math.nan
+
+    @property
+    def bic(self) -> float:
+        return self.chi2 + self.k * math.log(self.n)
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    @property
+    def residual_hz(self) -> np.ndarray:
+        return self.table.f_hz - self.prediction_hz
+
+    @property
+    def weighted_residual(self) -> np.ndarray:
+        return self.residual_hz / self.table.f_std_hz
+
+    def parameters(self) -> list:
+        """[(name, value, std, unit)] for f00 and every effect parameter."""
+        units = ["Hz"] + [p.unit for _, p in self.model.parameters]
+        return list(zip(self.model.parameter_names, self.values.tolist(), self.std.tolist(), units))
+
+    def effect_parameters(self, effect_name: str) -> list:
+        """[(parameter, value, std, unit)] of one effect of the model."""
+        prefix = effect_name + "."
+        return [(name[len(prefix):], v, s, u) for name, v, s, u in self.parameters() if name.startswith(prefix)]
+
+    def extension_columns(self, effect, table=None) -> np.ndarray:
+        """d(weighted residual)/d(parameters of ``effect``) with ``effect`` added to this model at
+        0 (off) and the other parameters at their fitted values: the candidate's signature.
+        On ``table`` (default: the fitted table; e.g. a what-if variant of it)."""
+        extended = self.model + effect
+        x = np.concatenate([self.values, np.zeros(len(effect.parameters))])
+        first = len(self.model.parameters)
+        return _Problem(extended, self.table if table is None else table).columns(
+            x, range(first, first + len(effect.parameters)))
+
+    def model_jacobian(self, table) -> np.ndarray:
+        """d(weighted residual)/d(values) of this model at the fitted values on another table."""
+        return _Problem(self.model, table).jacobian(self.values)
+
+    def cross_validate(self) -> float:
+        """Leave-one-sweep-out rms prediction error, Hz (interleaved 10-fold when the table
+        has a single sweep): refit without the sweep, predict it."""
+        folds = _folds(self.table)
+        errors = np.empty(self.n)
+        for rows in folds:
+            train = np.ones(self.n, bool)
+            train[rows] = False
+            part = self.model.fit(self.table.subset(train), start=self.values[1:])
+            errors[rows] = self.table.f_hz[rows] - self.model.predict(self.table.subset(rows), part.values)
+        return float(np.sqrt(np.mean(errors**2)))
+
+    def report(self) -> str:
+        lines = [f"model {self.model.name}: n = {self.n}, χ²/dof = {self.chi2_dof:.3f}, BIC = {self.bic:.1f}"]
+        for name, value, std, unit in self.parameters():
+            lines.append(f"  {name:40s} = {value:+.6g} ± {std:.2g} {unit}")
+        if not self.success:
+            lines.append(f"  warning: the fit did not converge ({self.message})")
+        return "\n".join(lines)
+
+
+def _folds(table) -> list:
+    sweeps = table.sweep_ids
+    unique = np.unique(sweeps)
+    if len(unique) > 1:
+        return [np.flatnonzero(sweeps == s) for s in unique]
+    count = min(CV_FOLDS, len(table))
+    return [np.arange(i, len(table), count) for i in range(count)]

@@ -1,0 +1,189 @@
+"""The per-row physics configuration that effects edit, and its frequency through the potential.
+
+A :class:`Configuration` describes, for every row of a measurement table, what the probe
+feels: the orientation θ0, the field, gradient and Hessian at the magnet (global frame), which
+of their probe-frame components act, gravity, the spring, and how the frequency is read out
+(amplitude averaging, damping). The base model switches on only what Eq. 6 contains: Bx' and
+Gx'x'. For such a configuration the potential along the arc is
+
+    U(θ) = ½·kM·θ² − m·cos θ·(Bx' + l·Gx'x'·(cos θ − 1)),
+
+so U'(0) = 0 and U''(0) = kM + m·Bx' + l·m·Gx'x' exactly: Eq. 6, f = f00·√(k/kM).
+
+:func:`frequency_factor` evaluates a configuration with
+:meth:`mows.potential.ArcPotential.from_local_field` (the field's quadratic expansion along the
+lever's arc, exact for the quadratic field the lab describes): exact rest angle (Newton on
+U'(θ) = 0 from θ = 0), stiffness U''(θs), and first-harmonic balance at the ring-down's
+amplitude nodes (:mod:`mows.lab.ringdown_average`). It returns h and c with
+
+    f = f00·h + c,
+
+so that the fitted f00 enters linearly (c holds additive frequency contributions of plugins).
+
+Two effects are quadratic in their natural size (the static deflection adds ≈ (m·By')²/k;
+the finite amplitude adds ∝ A²); they are applied as strengths that blend the exact result with
+and without them, k = k_off + λ·(k_on − k_off), so that they are linear in λ near 0 (score tests)
+while λ = 1 is the exact physics, interactions included.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from mows.potential import ArcPotential
+
+NEWTON_STEPS = 40
+NEWTON_TOLERANCE_RAD = 1e-14
+
+
+@dataclasses.dataclass
+class Configuration:
+    """What each of n rows feels. Arrays are per row; vectors and tensors in the global frame.
+
+    Attributes
+    ----------
+    theta0_rad : (n,) orientation of the probe axis x'.
+    field_t, gradient_t_per_m, hessian_t_per_m2 : (n, 3), (n, 3, 3), (n, 3, 3, 3) or None.
+    moment_factor : m_effective / m (calibration error of m/kM).
+    transverse : weight of the gradient components other than Gx'x' (0 in Eq. 6, 1 in full).
+    deflection : blend weight of By' (the static deflection), 0 off, 1 exact.
+    gravity_m_per_s2 : (n, 3) or None; only its in-plane part acts.
+    spring_nm_per_rad : (n,) kM per row (temperature, drift, plugin stiffness).
+    amplitude : blend weight of the finite-amplitude readout, 0 off, 1 exact.
+    amplitude_start_rad, ringdown_damping_per_s, ringdown_duration_s : (n,) the ring-down.
+    damping : blend weight of the damped form of Eq. S1 with ``damping_per_s`` per row.
+    frequency_hz : (n,) additive frequency contributions.
+    """
+
+    theta0_rad: np.ndarray
+    field_t: np.ndarray
+    gradient_t_per_m: np.ndarray
+    spring_nm_per_rad: np.ndarray
+    amplitude_start_rad: np.ndarray
+    ringdown_damping_per_s: np.ndarray
+    ringdown_duration_s: np.ndarray
+    damping_per_s: np.ndarray
+    frequency_hz: np.ndarray
+    hessian_t_per_m2: np.ndarray | None = None
+    gravity_m_per_s2: np.ndarray | None = None
+    moment_factor: float = 1.0
+    transverse: float = 0.0
+    deflection: float = 0.0
+    amplitude: float = 0.0
+    damping: float = 0.0
+
+    @classmethod
+    def base(cls, table, probe) -> "Configuration":
+        """Eq. 6 with the table's reference field and gradient."""
+        n = len(table)
+        amplitude = table.amplitude_rad if table.amplitude_rad is not None else np.full(n, probe.theta_stop_rad)
+        ringdown_damping = table.columns.get("damping_per_s", np.full(n, probe.damping_per_s))
+        duration = table.columns.get("duration_s", 60.0 / table.f_hz)
+        return cls(theta0_rad=table.theta0_rad.copy(), field_t=table.field_t, gradient_t_per_m=table.gradient_t_per_m,
+                   spring_nm_per_rad=np.full(n, probe.spring_nm_per_rad), amplitude_start_rad=amplitude,
+                   ringdown_damping_per_s=ringdown_damping, ringdown_duration_s=duration,
+                   damping_per_s=np.full(n, probe.damping_per_s), frequency_hz=np.zeros(n))
+
+    def probe_frame(self):
+        """(axes, field', gradient', Hessian') with axes (n, 3, 3) holding rows x', y', z'."""
+        c, s = np.cos(self.theta0_rad), np.sin(self.theta0_rad)
+        axes = np.zeros((len(c), 3, 3))
+        axes[:, 0, 0], axes[:, 0, 1], axes[:, 1, 0], axes[:, 1, 1], axes[:, 2, 2] = c, s, -s, c, 1.0
+        field = np.einsum("nij,nj->ni", axes, self.field_t)
+        gradient = np.einsum("nai,nij,nbj->nab", axes, self.gradient_t_per_m, axes)
+        hessian = None if self.hessian_t_per_m2 is None else np.einsum(
+            "nai,nbj,nck,nijk->nabc", axes, axes, axes, self.hessian_t_per_m2, optimize=True)
+        return axes, field, gradient, hessian
+
+
+def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
+    """(h, c) with f = f00·h + c for every row (module docstring).
+
+    ``amplitude_nodes`` is (A_q (n, q), c_q (n, q)) from
+    :func:`mows.lab.ringdown_average.amplitude_nodes`; needed when ``config.amplitude`` ≠ 0.
+    """
+    axes, field, gradient, hessian = config.probe_frame()
+    factor = config.moment_factor
+    along = np.zeros_like(field)
+    along[:, 0] = field[:, 0]
+    active_gradient = config.transverse * gradient
+    active_gradient[:, 0, 0] = gradient[:, 0, 0]
+    variants = [along] + ([field] if config.deflection else [])
+    gravity = None if config.gravity_m_per_s2 is None else np.einsum("nij,nj->ni", axes, config.gravity_m_per_s2)
+    local = dict(gradient_t_per_m=factor * active_gradient,
+                 hessian_t_per_m2=None if hessian is None else factor * hessian,
+                 gravity_m_per_s2=gravity, spring_nm_per_rad=config.spring_nm_per_rad)
+    stiffness = [_rest_stiffness(probe, factor * b, **local) for b in variants]
+    h = _readout(config, probe, _blend(stiffness, config.deflection))
+    if config.amplitude:
+        amplitudes, weights = amplitude_nodes
+        at_amplitude = [_amplitude_stiffness(probe, factor * b, amplitudes, **local) for b in variants]
+        averaged = (weights * _readout(config, probe, _blend(at_amplitude, config.deflection))).sum(-1)
+        h = h + config.amplitude * (averaged - h)
+    return h, config.frequency_hz
+
+
+def _blend(values, weight):
+    return values[0] if len(values) == 1 else values[0] + weight * (values[1] - values[0])
+
+
+def _readout(config, probe, stiffness):
+    """h = f/f00 for stiffness k: √(k/kM) (Eq. 6), blended towards the damped form of Eq. S1,
+    √((k/J − δ²)/(kM/J − δ0²)) with δ per row."""
+    spring, inertia, damping0 = probe.spring_nm_per_rad, probe.inertia_kgm2, probe.damping_per_s
+    squared = stiffness / spring
+    if config.damping:
+        rows = (slice(None),) + (None,) * (np.ndim(stiffness) - 1)
+        damped = (stiffness / inertia - config.damping_per_s[rows] ** 2) / (spring / inertia - damping0**2)
+        squared = squared + config.damping * (damped - squared)
+    return np.sqrt(np.where(squared > 0, squared, np.nan))
+
+
+def _potential(probe, field, gradient_t_per_m, hessian_t_per_m2, gravity_m_per_s2, spring_nm_per_rad, repeat=None):
+    """ArcPotential.from_local_field for the rows, optionally each repeated ``repeat`` times."""
+    def expand(a):
+        return a if a is None or repeat is None else np.repeat(a, repeat, axis=0)
+    return ArcPotential.from_local_field(probe, expand(field), expand(gradient_t_per_m), expand(hessian_t_per_m2),
+                                         expand(gravity_m_per_s2), spring_nm_per_rad=expand(spring_nm_per_rad))
+
+
+def _rest_stiffness(probe, field, **local):
+    """U''(θs) at the exact rest angle (Newton on U'(θ) = 0 from θ = 0); NaN where unstable."""
+    potential = _potential(probe, field, **local)
+    theta = np.zeros(len(field))
+    for _ in range(NEWTON_STEPS):
+        curvature = potential.stiffness_nm_per_rad(theta)
+        step = -potential.torque_nm(theta) / curvature
+        theta = theta - step
+        if np.all(np.abs(step) < NEWTON_TOLERANCE_RAD):
+            break
+    curvature = potential.stiffness_nm_per_rad(theta)
+    good = (curvature > 0) & (np.abs(theta) < potential.half_width_rad) & (np.abs(step) < 1e-9)
+    return np.where(good, curvature, np.nan)
+
+
+def _amplitude_stiffness(probe, field, amplitudes, **local):
+    """First-harmonic-balance stiffness k(A) (n, q) at the amplitude nodes."""
+    n, q = amplitudes.shape
+    potential = _potential(probe, field, repeat=q, **local)
+    return potential.effective_stiffness_nm_per_rad(amplitudes.reshape(-1)).reshape(n, q)
+
+
+def standard_gravity_vector(down_x, down_y) -> np.ndarray:
+    """In-plane gravity g·(down_x, down_y, 0), m/s² (the normal component does not act)."""
+    from mows.pose import STANDARD_GRAVITY_M_PER_S2
+
+    return STANDARD_GRAVITY_M_PER_S2 * np.array([down_x, down_y, 0.0])
+
+
+def rotation_matrix(rotation_vector) -> np.ndarray:
+    """Rodrigues' rotation matrix of a rotation vector (axis × angle, rad)."""
+    vector = np.asarray(rotation_vector, float)
+    angle = math.sqrt(float(vector @ vector))
+    if angle == 0.0:
+        return np.eye(3)
+    k = vector / angle
+    cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(angle) * cross + (1 - math.cos(angle)) * cross @ cross

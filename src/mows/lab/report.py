@@ -1,0 +1,179 @@
+"""The lab's HTML report: one self-contained page, PNG plots embedded as base64 (matplotlib, Agg).
+
+Plots: model against measurement in the style of the paper's Fig. 3 (Δf against the field
+along the probe axis) and Fig. 4 (polar plot of |Δf(θ0)| with its decomposition into the
+field part, harmonic 1, and the gradient part, harmonic 2); residuals of the base and final
+model against θ0 and against every covariate with ±σ bands; the ranked candidates; the error
+history (χ²/dof and cross-validated rms per step).
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+import pathlib
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
+import numpy as np  # noqa: E402
+
+
+def _png(figure) -> str:
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=90, bbox_inches="tight")
+    plt.close(figure)
+    return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode()
+
+
+def _shift_hz(fit):
+    """Measured and model Δf = f − f00 (fitted f00), Hz."""
+    f00 = fit.values[0]
+    return fit.table.f_hz - f00, fit.prediction_hz - f00
+
+
+def figure_field_response(report) -> str:
+    """Fig. 3 style: Δf against Bx' (reference field along the probe axis)."""
+    fit, base = report.fit, report.base
+    table = fit.table
+    along = np.einsum("nij,nj->ni", table.probe_axes(), table.field_t)[:, 0]
+    measured, model = _shift_hz(fit)
+    _, base_model = _shift_hz(base)
+    order = np.argsort(along)
+    figure, axis = plt.subplots(figsize=(6, 4))
+    axis.errorbar(along * 1e6, measured * 1e3, table.f_std_hz * 1e3, fmt=".", color="k", label="measured")
+    axis.plot(along[order] * 1e6, base_model[order] * 1e3, "--", color="tab:gray", label="Eq. 6 (base)")
+    axis.plot(along[order] * 1e6, model[order] * 1e3, "-", color="tab:red", label=report.model)
+    axis.set(xlabel="Bx' reference field along the probe axis (µT)", ylabel="Δf = f − f00 (mHz)",
+             title="Frequency shift against field (cf. paper Fig. 3)")
+    axis.legend()
+    return _png(figure)
+
+
+def _harmonic_fit(theta, values, weights, orders=(0, 1, 2)):
+    columns = [np.cos(k * theta) for k in orders] + [np.sin(k * theta) for k in orders if k]
+    design = np.column_stack(columns)
+    coefficients, *_ = np.linalg.lstsq(design * weights[:, None], values * weights, rcond=None)
+    return dict(zip([("c", k) for k in orders] + [("s", k) for k in orders if k], coefficients))
+
+
+def figure_polar(report) -> str | None:
+    """Fig. 4 style: |Δf(θ0)| measured and model, with the field (1θ0) and gradient (2θ0) parts."""
+    fit = report.fit
+    theta = fit.table.theta0_rad
+    if len(np.unique(np.round(np.mod(theta, 2 * np.pi), 6))) < 5:
+        return None
+    measured, model = _shift_hz(fit)
+    grid = np.linspace(0, 2 * np.pi, 361)
+    coefficients = _harmonic_fit(theta, model, 1.0 / fit.table.f_std_hz)
+    parts = {k: coefficients[("c", k)] * np.cos(k * grid) + coefficients[("s", k)] * np.sin(k * grid) for k in (1, 2)}
+    figure = plt.figure(figsize=(6, 6))
+    axis = figure.add_subplot(projection="polar")
+    axis.plot(theta, np.abs(measured) * 1e3, ".", color="k", label="|Δf| measured")
+    order = np.argsort(np.mod(theta, 2 * np.pi))
+    axis.plot(np.mod(theta, 2 * np.pi)[order], np.abs(model[order]) * 1e3, "-", color="tab:red", label="|Δf| model")
+    axis.plot(grid, np.abs(parts[1]) * 1e3, ":", color="tab:purple", label="field part (1θ0)")
+    axis.plot(grid, np.abs(parts[2]) * 1e3, ":", color="tab:blue", label="gradient part (2θ0)")
+    axis.set_title("|Δf| against θ0, mHz (cf. paper Fig. 4)")
+    axis.legend(loc="lower left", bbox_to_anchor=(0.8, -0.1), fontsize=8)
+    return _png(figure)
+
+
+def _residual_panel(axis, x, fit, label):
+    residual = fit.residual_hz * 1e3
+    sigma = fit.table.f_std_hz * 1e3
+    axis.errorbar(x, residual, sigma, fmt=".", ms=3, alpha=0.7, label=label)
+
+
+def figure_residuals(report, x, xlabel) -> str:
+    """Residuals of the base and the final model against ``x``, with the ±σ band of the data."""
+    figure, axis = plt.subplots(figsize=(6, 3.2))
+    _residual_panel(axis, x, report.base, "base (Eq. 6)")
+    if report.effects:
+        _residual_panel(axis, x, report.fit, report.model)
+    sigma = np.median(report.fit.table.f_std_hz) * 1e3
+    axis.axhspan(-sigma, sigma, color="tab:green", alpha=0.15, label="±σ (median)")
+    axis.axhline(0, color="k", lw=0.5)
+    axis.set(xlabel=xlabel, ylabel="residual f − model (mHz)")
+    axis.legend(fontsize=8)
+    return _png(figure)
+
+
+def figure_candidates(report) -> str | None:
+    candidates = report.candidates
+    if not candidates:
+        return None
+    figure, axis = plt.subplots(figsize=(6, 0.35 * len(candidates) + 1))
+    values = [c.delta_bic for c in candidates]
+    colors = ["tab:red" if c.strong else "tab:gray" for c in candidates]
+    axis.barh([f"{c.name}" + (f" [group {c.group}]" if c.group else "") for c in candidates], values, color=colors)
+    axis.axvline(10, color="k", ls="--", lw=0.8)
+    axis.set_xscale("symlog", linthresh=10)
+    axis.invert_yaxis()
+    axis.set(xlabel="ΔBIC (> 10: strong evidence)", title="Candidate effects")
+    return _png(figure)
+
+
+def figure_history(report) -> str:
+    steps = report.history
+    labels = ["eq6"] + ["+ " + s.effects[-1] for s in steps[1:]]
+    figure, (left, right) = plt.subplots(1, 2, figsize=(8, 3))
+    left.plot(labels, [s.chi2_dof for s in steps], "o-")
+    left.set(yscale="log", ylabel="χ²/dof", title="fit")
+    right.plot(labels, [s.cv_rms_hz * 1e3 for s in steps], "o-", color="tab:orange")
+    right.set(ylabel="CV rms (mHz)", title="leave-one-sweep-out")
+    for axis in (left, right):
+        axis.tick_params(axis="x", rotation=30)
+    return _png(figure)
+
+
+def _img(source, alt) -> str:
+    return f'<img src="{source}" alt="{html.escape(alt)}">' if source else ""
+
+
+def _rows(cells_list) -> str:
+    return "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells) + "</tr>" for cells in cells_list)
+
+
+def render_html(report) -> str:
+    """The report page as a string."""
+    table = report.fit.table
+    covariates = table.covariates()
+    residual_plots = [_img(figure_residuals(report, np.degrees(table.theta0_rad), "θ0 (deg)"), "residual vs θ0")]
+    residual_plots += [_img(figure_residuals(report, values, name), f"residual vs {name}")
+                       for name, values in covariates.items()]
+    candidates = _rows([(i + 1, c.name, f"{c.delta_bic:.1f}", f"{c.p_value:.2g}", f"{c.chi2_dof_after:.3f}",
+                         c.group or "", "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters))
+                        for i, c in enumerate(report.candidates)])
+    history = _rows([(" + ".join(["eq6"] + s.effects), f"{s.chi2_dof:.3f}", f"{s.bic:.1f}",
+                      "-" if not math.isfinite(s.cv_rms_hz) else f"{s.cv_rms_hz * 1e3:.4f}") for s in report.history])
+    groups = "".join(f"<li>group {g.number}: {html.escape(', '.join(g.members))} — {html.escape(g.separation)}"
+                     + "".join(f"<br>check {html.escape(c)}" for c in g.checks) + "</li>" for g in report.groups)
+    parameters = _rows([(n, f"{v:.6g}", f"{s:.2g}", u) for n, v, s, u in report.fit.parameters()])
+    return f"""<!DOCTYPE html>
+<html><head><meta charset="utf-8"><title>MOWS model lab: {html.escape(table.source)}</title>
+<style>body{{font-family:sans-serif;max-width:1000px;margin:auto}} td{{padding:2px 8px}}
+table{{border-collapse:collapse}} tr:nth-child(even){{background:#f2f2f2}} img{{max-width:100%}}</style></head>
+<body><h1>MOWS model lab</h1>
+<p>Table <code>{html.escape(table.source)}</code>: {report.n} rows. Base model (Eq. 6, f00 fitted):
+χ²/dof = {report.base.chi2_dof:.3f}. Final model <b>{html.escape(report.model)}</b>: χ²/dof = {report.chi2_dof:.3f}.</p>
+<h2>Verdict: {html.escape(report.verdict)}</h2><p>{html.escape(report.diagnosis.explanation)}</p>
+<h2>Model against measurement</h2>{_img(figure_field_response(report), "Fig. 3 style")}
+{_img(figure_polar(report), "Fig. 4 style")}
+<h2>Fitted parameters</h2><table><tr><th>parameter</th><th>value</th><th>σ</th><th>unit</th></tr>{parameters}</table>
+<h2>Residuals</h2><p>{html.escape(report.structure)}</p>{''.join(residual_plots)}
+<h2>Candidate effects</h2>{_img(figure_candidates(report), "candidates")}
+<table><tr><th>rank</th><th>effect</th><th>ΔBIC</th><th>p</th><th>χ²/dof after</th><th>group</th>
+<th>parameters</th></tr>{candidates}</table><ul>{groups}</ul>
+<h2>Error history</h2>{_img(figure_history(report), "history")}
+<table><tr><th>model</th><th>χ²/dof</th><th>BIC</th><th>CV rms (mHz)</th></tr>{history}</table>
+<p>Notes: {html.escape('; '.join(report.notes) or 'none')}</p></body></html>"""
+
+
+def write_html(report, path) -> pathlib.Path:
+    """Write the report page to ``path``."""
+    path = pathlib.Path(path)
+    path.write_text(render_html(report))
+    return path

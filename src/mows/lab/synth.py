@@ -1,0 +1,113 @@
+"""Synthetic measurement tables from independent physics (the lab's test data).
+
+The truth never comes from the lab's own model. For every row:
+
+1. the **exact** field of real sources (:mod:`mows.field`: uniform fields, dipoles, current
+   loops, Helmholtz and anti-Helmholtz pairs, solenoids) is sampled along the lever's actual
+   arc, with the actual pose (θ0, gravity of a tilted plane) and the spring at the row's
+   temperature: W(θ) of :func:`mows.potential.arc_energy_j`, as
+   :meth:`mows.potential.ArcPotential.from_source` does, batched over the rows;
+2. the ring-down frequency is the damped first-harmonic-balance frequency √(k(A)/J − δ²)/2π
+   averaged over the decaying ring-down as the constant-frequency estimator sees it
+   (:mod:`mows.lab.ringdown_average`, here with 8 Gauss nodes where the lab uses 3);
+3. Gaussian noise of ``f_std_hz`` is added with the caller's generator.
+
+The reference columns are the true field and in-plane gradient at the probe (of ``reference``
+when given: a reference that misses a source), optionally with magnetometer noise.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mows.field import FieldSource
+from mows.lab import ringdown_average
+from mows.lab.table import FIELD, GRADIENT, MeasurementTable
+from mows.pose import STANDARD_GRAVITY_M_PER_S2, Pose
+from mows.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
+
+TRUTH_NODES = 8
+LEVEL = (0.0, 0.0, -STANDARD_GRAVITY_M_PER_S2)
+
+
+def _per_row(sources, n) -> list:
+    if isinstance(sources, FieldSource):
+        return [sources] * n
+    sources = list(sources)
+    if len(sources) != n:
+        raise ValueError(f"got {len(sources)} field sources for {n} rows")
+    return sources
+
+
+def true_frequency_hz(probe, sources, theta0_rad, amplitude_start_rad, temperature_k=None, gravity_m_per_s2=LEVEL,
+                      magnet_position_m=(0.0, 0.0, 0.0), duration_s=None) -> np.ndarray:
+    """Noise-free ring-down frequencies (n,), Hz, from the exact sources (module docstring).
+
+    ``sources``: one :class:`~mows.field.FieldSource` or one per row. Per-row arguments broadcast
+    to (n,); ``duration_s`` defaults to 60 periods.
+    """
+    theta0 = np.atleast_1d(np.asarray(theta0_rad, float))
+    n = len(theta0)
+    rows = _per_row(sources, n)
+    nodes = chebyshev_nodes_rad()
+    energy = np.stack([arc_energy_j(probe, source, Pose(magnet_position_m=tuple(magnet_position_m),
+                                                        theta0_rad=float(t), gravity_m_per_s2=tuple(gravity_m_per_s2)),
+                                    nodes) for source, t in zip(rows, theta0)])
+    spring = probe.spring_nm_per_rad if temperature_k is None else probe.spring_at(
+        np.broadcast_to(np.asarray(temperature_k, float), (n,)))
+    small = ArcPotential(spring, probe.inertia_kgm2, probe.damping_per_s, energy).frequency_hz(0.0)
+    duration = ringdown_average.default_duration_s(small) if duration_s is None else duration_s
+    amplitudes, weights = ringdown_average.amplitude_nodes(theta0, amplitude_start_rad, probe.damping_per_s,
+                                                           duration, nodes=TRUTH_NODES)
+    batch = ArcPotential(np.repeat(np.broadcast_to(spring, (n,)), TRUTH_NODES), probe.inertia_kgm2,
+                         probe.damping_per_s, np.repeat(energy, TRUTH_NODES, axis=0))
+    return (weights * batch.frequency_hz(amplitudes.reshape(-1)).reshape(n, TRUTH_NODES)).sum(-1)
+
+
+def synthesize(probe, sources, theta0_deg, rng: np.random.Generator, f_std_hz=1e-3, amplitude_deg=None,
+               temperature_k=None, gravity_m_per_s2=LEVEL, magnet_position_m=(0.0, 0.0, 0.0), reference=None,
+               reference_noise_t=0.0, truth_hz=None, **columns) -> MeasurementTable:
+    """A measurement table: true frequencies plus noise, and reference columns.
+
+    Parameters
+    ----------
+    probe : the true probe.
+    sources : the true field source, or one per row.
+    theta0_deg : orientations (n,).
+    rng : generator for the frequency (and reference) noise.
+    f_std_hz : noise of each frequency, written to ``f_std_hz``.
+    amplitude_deg : start amplitude of each ring-down (default: the housing stop), written to
+        ``amplitude_deg``.
+    temperature_k : per-row temperature, written to ``temperature_k`` when given.
+    gravity_m_per_s2 : global gravity (a tilted plane has an in-plane component).
+    reference : the source the reference magnetometer sees (default: ``sources``).
+    reference_noise_t : Gaussian noise added to the reference field columns.
+    truth_hz : precomputed :func:`true_frequency_hz` (to redraw noise cheaply).
+    columns : further columns (``t_s``, ``sweep``, ``coil_current_a``, covariates …).
+    """
+    theta0 = np.radians(np.asarray(theta0_deg, float))
+    n = len(theta0)
+    amplitude = np.broadcast_to(probe.theta_stop_rad if amplitude_deg is None else np.radians(amplitude_deg), (n,))
+    if truth_hz is None:
+        truth_hz = true_frequency_hz(probe, sources, theta0, amplitude, temperature_k, gravity_m_per_s2,
+                                     magnet_position_m)
+    std = np.broadcast_to(np.asarray(f_std_hz, float), (n,))
+    table = {"theta0_deg": np.degrees(theta0), "f_hz": truth_hz + rng.normal(0.0, 1.0, n) * std,
+             "f_std_hz": std.copy(), "amplitude_deg": np.degrees(amplitude)}
+    point = np.asarray(magnet_position_m, float)
+    seen = _per_row(sources if reference is None else reference, n)
+    field = np.array([s.field_t(point) for s in seen]) + rng.normal(0.0, 1.0, (n, 3)) * reference_noise_t
+    gradient = np.array([s.gradient_t_per_m(point) for s in seen])
+    table.update(zip(FIELD, field.T))
+    table.update(zip(GRADIENT, (gradient[:, 0, 0], gradient[:, 0, 1], gradient[:, 1, 1])))
+    if temperature_k is not None:
+        table["temperature_k"] = np.broadcast_to(np.asarray(temperature_k, float), (n,)).copy()
+    table.update({name: np.broadcast_to(np.asarray(v, float), (n,)).copy() for name, v in columns.items()})
+    return MeasurementTable(table, "synthetic")
+
+
+def rotation_sweeps(step_deg: float = 10.0, sweeps: int = 2, seconds_per_row: float = 10.0) -> dict:
+    """θ0 (deg), sweep number and time (s) of ``sweeps`` full rotations in steps of ``step_deg``."""
+    angles = np.arange(0.0, 360.0, step_deg)
+    theta0 = np.tile(angles, sweeps)
+    return {"theta0_deg": theta0, "sweep": np.repeat(np.arange(sweeps), len(angles)).astype(float),
+            "t_s": np.arange(len(theta0)) * seconds_per_row}

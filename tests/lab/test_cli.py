@@ -1,0 +1,73 @@
+"""`mows lab compare | diagnose | add | report`: text, JSON schema, HTML, and user errors."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from mows.cli import main
+from mows.field import UniformField
+from mows.lab import synth
+from mows.pose import Pose
+from mows.probe import PAPER_PROBE
+
+
+@pytest.fixture(scope="module")
+def tilted_csv(tmp_path_factory):
+    sweep = synth.rotation_sweeps(15.0, 2)
+    theta0 = sweep.pop("theta0_deg")
+    table = synth.synthesize(PAPER_PROBE, UniformField((2e-5, -1e-5, -4e-5)), theta0, np.random.default_rng(0),
+                             gravity_m_per_s2=Pose.tilted(math.radians(1.0)).gravity_m_per_s2, amplitude_deg=2.0,
+                             **sweep)
+    path = tmp_path_factory.mktemp("lab") / "tilted.csv"
+    table.to_csv(path)
+    return path
+
+
+def test_diagnose_json_has_the_documented_keys(tilted_csv, capsys):
+    assert main(["lab", "diagnose", str(tilted_csv), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert {"base", "candidates", "groups", "history", "verdict", "structure"} <= set(result)
+    assert set(result["base"]) >= {"chi2_dof", "n"} and result["base"]["n"] == 48
+    assert result["verdict"] == "effect_missing"
+    first = result["candidates"][0]
+    assert {"effect", "delta_bic", "p_value", "chi2_dof_after", "parameters"} <= set(first)
+    assert first["effect"] == "gravity" and first["delta_bic"] > 10
+    assert all(set(step) >= {"effects", "chi2_dof", "bic", "cv_rms"} for step in result["history"])
+
+
+def test_add_auto_prints_the_error_history(tilted_csv, capsys):
+    assert main(["lab", "add", str(tilted_csv), "--auto"]) == 0
+    out = capsys.readouterr().out
+    assert "error history" in out and "eq6 + gravity" in out and "verdict: adequate" in out
+    assert main(["lab", "add", str(tilted_csv), "gravity", "--json"]) == 0
+    history = json.loads(capsys.readouterr().out)["history"]
+    assert [step["effects"] for step in history] == [[], ["gravity"]]
+    assert history[1]["cv_rms"] < history[0]["cv_rms"]
+
+
+def test_compare_and_report(tilted_csv, tmp_path, capsys):
+    assert main(["lab", "compare", str(tilted_csv)]) == 0
+    out = capsys.readouterr().out
+    assert "harmonic" in out and "verdict: unexplained_structure" in out
+    page = tmp_path / "page.html"
+    assert main(["lab", "report", str(tilted_csv), "--auto", "-o", str(page), "--no-cv"]) == 0
+    text = page.read_text()
+    assert text.count("data:image/png;base64,") >= 6 and "gravity" in text
+
+
+@pytest.mark.parametrize("args, words", [
+    (["lab", "compare", "/nonexistent.csv"], ["cannot read"]),
+    (["lab", "add", "TABLE", "no_such_effect"], ["unknown effect", "no_such_effect"]),
+    (["lab", "diagnose", "TABLE", "--probe", "BADPROBE"], ["probe file", "moment_am2"]),
+    (["lab", "diagnose", "TABLE", "--plugin", "nothing_like_this"], ["nothing_like_this"]),
+])
+def test_user_errors_are_one_line_messages(tilted_csv, tmp_path, capsys, args, words):
+    bad_probe = tmp_path / "probe.yaml"
+    bad_probe.write_text("f00_hz: 112\n")
+    args = [str(tilted_csv) if a == "TABLE" else str(bad_probe) if a == "BADPROBE" else a for a in args]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    for word in words:
+        assert word in err

@@ -1,25 +1,200 @@
-"""The estimator node: ROS side of ring-down fitting and inversion (``mows.ringdown``,
-``mows.inversion``). Translates only: the estimation lives in ``mows``."""
+"""The estimator node: fits every ring-down announced by the driver and publishes the result.
+
+Subscribes ``/mows/raw`` (MagnetometerBlock, sensor-data QoS) and ``/mows/excitation``
+(ExcitationState). Publishes, per recorded ring-down, ``/mows/ringdown`` (RingdownFit, always,
+with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
+``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). Service
+``/mows/estimator/calibrate`` (Calibrate) sets f00 from the next ring-downs in a known field.
+The estimation itself is ``mows.segments``, ``mows.ringdown`` and ``mows.axis``.
+"""
+import collections
+import math
+import threading
+import time
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from mows_msgs.msg import ExcitationState, FieldEstimate, MagnetometerBlock, RingdownFit
+from mows_msgs.srv import Calibrate
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import MagneticField
+
+from mows.axis import estimate_along_axis
+from mows.frequency import frequency_shift_hz
+from mows.probe import PAPER_PROBE, Probe
+from mows.ringdown import FitOptions
+from mows.segments import SegmentAssembler, fit_segment
+from mows_estimator.messages import (block_from_msg, estimate_to_msg, fit_to_msg, magnetic_field_msg,
+                                     window_from_msg)
+from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
 from mows_ros.params import ParamSpec
 from mows_ros.process import run_node
+from mows_ros.qos import RESULT_QOS, STREAM_CONSUMER_QOS, STREAM_QOS
 
 NODE_NAME = "estimator"
+LATENCY_WINDOW = 500
 
 PARAMETERS = (
-    ParamSpec(
-        "probe_file",
-        "",
-        "probe constants YAML (mows.probe.Probe.from_yaml); empty: the paper's probe "
-        "(mows.probe.PAPER_PROBE)",
-    ),
+    ParamSpec("probe_file", "", "probe constants YAML (mows.probe.Probe.from_yaml); empty: the paper's probe"),
+    ParamSpec("f00_hz", 0.0, "calibrated zero-field frequency f00, Hz; 0: the probe file's f00",
+              range=(0.0, 10_000.0)),
+    ParamSpec("f00_std_hz", 0.0, "standard uncertainty of f00, Hz", range=(0.0, 10.0)),
+    ParamSpec("channels", "difference", "what to fit: the sensor difference, both, or one channel",
+              choices=("difference", "both", "channel1", "channel2")),
+    ParamSpec("sensor_axis_a", 0.0, "sensing axis (a, b) in the rotation plane, Eq. S11 (paper: 0, 1)",
+              range=(-1.0, 1.0)),
+    ParamSpec("sensor_axis_b", 1.0, "see sensor_axis_a", range=(-1.0, 1.0)),
+    ParamSpec("theta0_free", False, "fit θ0 instead of taking the commanded orientation"),
+    ParamSpec("settle_s", 0.003, "samples right after coil-off that are skipped, s", range=(0.0, 0.1)),
+    ParamSpec("min_periods", 10.0, "shortest usable ring-down, in periods", range=(2.0, 1000.0)),
+    ParamSpec("max_chi2_dof", 25.0, "above this χ²/dof a fit is refused (BAD_FIT)", range=(1.0, 1e6)),
+    ParamSpec("buffer_s", 5.0, "seconds of raw samples kept to assemble ring-downs", range=(0.5, 60.0)),
+    ParamSpec("fit_tuning_ringdowns", False, "also fit the driver's frequency-tuning ring-downs"),
+    ParamSpec("probe_frame_id", "mows_probe", "frame of the probe (x' along the moment at rest)"),
 )
 
 
 class EstimatorNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
+        self._assembler = SegmentAssembler(self.get_parameter("buffer_s").value)
+        self._probe_cache = ("", PAPER_PROBE)
+        self._latency_ms = collections.deque(maxlen=LATENCY_WINDOW)
+        self._counts = collections.Counter()
+        self._last = "no ring-down yet"
+        self._calibration = threading.Condition()
+        self._calibration_fits = None
+        stream_group = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(MagnetometerBlock, "/mows/raw", self._on_block, STREAM_CONSUMER_QOS,
+                                 callback_group=stream_group)
+        self.create_subscription(ExcitationState, "/mows/excitation", self._on_excitation, RESULT_QOS,
+                                 callback_group=stream_group)
+        self._fit_pub = self.create_publisher(RingdownFit, "/mows/ringdown", RESULT_QOS)
+        self._field_pub = self.create_publisher(FieldEstimate, "/mows/field", RESULT_QOS)
+        self._magnetic_pub = self.create_publisher(MagneticField, "/mows/magnetic_field", STREAM_QOS)
+        self.create_service(Calibrate, "/mows/estimator/calibrate", self._on_calibrate,
+                            callback_group=ReentrantCallbackGroup())
+
+    # --- parameters -------------------------------------------------------------------------
+    def _param(self, name):
+        return self.get_parameter(name).value
+
+    def probe(self) -> Probe:
+        path = self._param("probe_file")
+        if path != self._probe_cache[0]:
+            self._probe_cache = (path, Probe.from_yaml(path) if path else PAPER_PROBE)
+        return self._probe_cache[1]
+
+    def f00(self) -> tuple[float, float]:
+        f00 = self._param("f00_hz")
+        return (f00 if f00 > 0 else self.probe().f00_hz), self._param("f00_std_hz")
+
+    def _options(self) -> FitOptions:
+        return FitOptions(channels=self._param("channels"),
+                          sensor_direction=(self._param("sensor_axis_a"), self._param("sensor_axis_b")),
+                          theta0_free=self._param("theta0_free"), min_periods=self._param("min_periods"),
+                          max_chi2_dof=self._param("max_chi2_dof"))
+
+    # --- stream -----------------------------------------------------------------------------
+    def _on_excitation(self, msg: ExcitationState):
+        if msg.phase != ExcitationState.PHASE_RINGDOWN or (msg.tuning and not self._param("fit_tuning_ringdowns")):
+            return
+        arrived = time.monotonic()
+        window = window_from_msg(msg)
+        if not (math.isfinite(window.start_s) and math.isfinite(window.duration_s) and window.duration_s > 0):
+            self._counts["malformed_excitation"] += 1
+            self.get_logger().warn(f"ring-down of cycle {msg.cycle_id} announced with duration "
+                                   f"{msg.planned_duration_s!r} s: ignored")
+            return
+        for segment in self._assembler.announce(window):
+            self._process(segment, arrived)
+
+    def _on_block(self, msg: MagnetometerBlock):
+        arrived = time.monotonic()
+        try:
+            block = block_from_msg(msg)
+        except ValueError as error:           # channels of unequal length: nothing usable
+            self._counts["malformed_blocks"] += 1
+            self.get_logger().warn(f"malformed MagnetometerBlock {msg.sequence}: {error}")
+            return
+        for segment in self._assembler.add_block(block):
+            self._process(segment, arrived)
+
+    def _process(self, segment, arrived: float):
+        fit = fit_segment(segment, self._options(), self._param("settle_s"), self.probe().damping_per_s)
+        f00, f00_std = self.f00()
+        estimate = estimate_along_axis(fit, self.probe(), f00, f00_std)
+        frame = self._param("probe_frame_id")
+        fit_msg = fit_to_msg(fit, segment.window, frame, estimate.frequency_shift_hz, estimate.frequency_shift_std_hz)
+        self._fit_pub.publish(fit_msg)
+        if estimate.ok:
+            self._field_pub.publish(estimate_to_msg(estimate, fit_msg.header, segment.window))
+            self._magnetic_pub.publish(magnetic_field_msg(estimate, fit_msg.header))
+            self._offer_to_calibration(fit.frequency_hz, fit.frequency_std_hz)
+        self._latency_ms.append(1e3 * (time.monotonic() - arrived))
+        self._counts[fit.status.name] += 1
+        self._last = fit.report()
+        if not fit.ok:
+            self.get_logger().warn(f"cycle {segment.window.cycle_id} repeat {segment.window.repeat_index}: "
+                                   f"{fit.report()}")
+
+    # --- calibration ------------------------------------------------------------------------
+    def _offer_to_calibration(self, frequency_hz: float, std_hz: float):
+        with self._calibration:
+            if self._calibration_fits is not None:
+                self._calibration_fits.append((frequency_hz, std_hz))
+                self._calibration.notify_all()
+
+    def _on_calibrate(self, request: Calibrate.Request, response: Calibrate.Response):
+        """Eq. 6 solved for f00: f00 = f/√(1 + m·B/kM) for each ring-down, then averaged."""
+        probe = self.probe()
+        ratio = 1.0 + probe.moment_am2 * request.reference_field_t / probe.spring_nm_per_rad
+        if request.n_ringdowns < 1 or not (request.timeout_s > 0) or not ratio > 0:
+            response.success = False
+            response.message = (f"need n_ringdowns ≥ 1, timeout_s > 0 and a reference field above spring "
+                                f"cancellation (−kM/m = {probe.cancellation_field_t * 1e3:.2f} mT)")
+            return response
+        deadline = time.monotonic() + request.timeout_s
+        with self._calibration:     # the fits arrive on the stream callbacks' thread
+            self._calibration_fits = []
+            # Short waits, so that a shutdown is not held up by a pending calibration.
+            while (len(self._calibration_fits) < request.n_ringdowns and self.context.ok()
+                   and time.monotonic() < deadline):
+                self._calibration.wait(timeout=0.1)
+            fits, self._calibration_fits = np.array(self._calibration_fits, float).reshape(-1, 2), None
+        response.n_used = len(fits)
+        if len(fits) < request.n_ringdowns:
+            response.success = False
+            response.message = f"only {len(fits)} of {request.n_ringdowns} OK ring-downs in {request.timeout_s} s"
+            return response
+        f00_each = fits[:, 0] / math.sqrt(ratio)
+        spread = f00_each.std(ddof=1) / math.sqrt(len(fits)) if len(fits) > 1 else 0.0
+        propagated = math.sqrt(np.sum((fits[:, 1] / math.sqrt(ratio)) ** 2)) / len(fits)
+        response.f00_hz, response.f00_std_hz = float(f00_each.mean()), float(max(spread, propagated))
+        result = self.set_parameters_atomically([
+            Parameter("f00_hz", Parameter.Type.DOUBLE, response.f00_hz),
+            Parameter("f00_std_hz", Parameter.Type.DOUBLE, min(response.f00_std_hz, 10.0))])
+        response.success = result.successful
+        response.message = result.reason or (f"f00 = {response.f00_hz:.6f} ± {response.f00_std_hz * 1e3:.4f} mHz "
+                                             f"from {len(fits)} ring-downs")
+        return response
+
+    # --- health -----------------------------------------------------------------------------
+    def health(self) -> Health:
+        latency = np.array(self._latency_ms) if self._latency_ms else np.array([math.nan])
+        failed = sum(v for k, v in self._counts.items() if k != "OK")
+        missing = self._assembler.missing_samples
+        level = DiagnosticStatus.OK if not (failed or missing) else DiagnosticStatus.WARN
+        f00, f00_std = self.f00()
+        return Health(level, self._last, {
+            "fits_ok": self._counts["OK"], "fits_failed": failed,
+            **{f"status_{k}": v for k, v in self._counts.items() if k != "OK"},
+            "latency_p50_ms": float(np.percentile(latency, 50)), "latency_p99_ms": float(np.percentile(latency, 99)),
+            "missing_samples": missing, "late_windows": self._assembler.late_windows,
+            "blocks": self._assembler.blocks, "f00_hz": f00, "f00_std_hz": f00_std})
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(EstimatorNode, args)
+    return run_node(EstimatorNode, args, threads=2)

@@ -3,15 +3,19 @@ import sys
 from typing import Callable
 
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 
 EXIT_BAD_PARAMETER = 2
 
 
-def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
+def run_node(make_node: Callable[[], Node], args: list[str] | None = None, threads: int = 1) -> int:
     """Create the node with ``make_node`` and spin it; return the process exit code.
+
+    ``threads`` > 1 spins a MultiThreadedExecutor, for nodes whose services wait for data
+    that other callbacks deliver (they put those callbacks in a ReentrantCallbackGroup).
 
     ``rclpy.init`` installs handlers for SIGINT and SIGTERM that shut the context down, so
     either signal ends ``spin`` with ``ExternalShutdownException`` (or KeyboardInterrupt when
@@ -23,9 +27,16 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> in
     node = None
     try:
         node = make_node()
-        rclpy.spin(node)
+        executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RCLError:
+        # A MultiThreadedExecutor can be building its next wait set when the signal handler
+        # shuts the context down; that is the normal end too, but only if shutdown happened.
+        if rclpy.ok():
+            raise
     except (InvalidParameterValueException, InvalidParameterTypeException) as error:
         sys.stderr.write(f"error: {error}\n")
         return EXIT_BAD_PARAMETER

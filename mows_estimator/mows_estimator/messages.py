@@ -1,0 +1,74 @@
+"""Translation between mows_msgs and the dataclasses of ``mows`` (no logic of its own)."""
+import math
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from mows_msgs.msg import ExcitationState, FieldEstimate, MagnetometerBlock, RingdownFit
+from sensor_msgs.msg import MagneticField
+
+from mows.axis import AxisEstimate
+from mows.ringdown import RingdownFit as Fit
+from mows.segments import Block, RingdownWindow
+
+
+def stamp_to_s(stamp: Time) -> float:
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+def s_to_stamp(seconds: float) -> Time:
+    whole = math.floor(seconds)
+    return Time(sec=int(whole), nanosec=min(int(round((seconds - whole) * 1e9)), 999_999_999))
+
+
+def block_from_msg(msg: MagnetometerBlock) -> Block:
+    """Channels as columns; float64[] arrives as array.array, wrapped without copying."""
+    samples = np.stack([np.frombuffer(c.field_t, dtype=np.float64) for c in msg.channels], axis=1)
+    saturated = np.stack([np.asarray(c.saturated, dtype=bool) for c in msg.channels], axis=1)
+    return Block(int(msg.first_sample_index), stamp_to_s(msg.header.stamp), float(msg.sample_rate_hz),
+                 samples, saturated)
+
+
+def window_from_msg(msg: ExcitationState) -> RingdownWindow:
+    return RingdownWindow(start_s=stamp_to_s(msg.header.stamp), duration_s=float(msg.planned_duration_s),
+                          cycle_id=int(msg.cycle_id), repeat_index=int(msg.repeat_index),
+                          theta0_rad=float(msg.theta0_rad), excitation_frequency_hz=float(msg.frequency_hz))
+
+
+def fit_to_msg(fit: Fit, window: RingdownWindow, frame_id: str, shift_hz: float, shift_std_hz: float) -> RingdownFit:
+    msg = RingdownFit()
+    msg.header.stamp = s_to_stamp(window.start_s + fit.start_offset_s)
+    msg.header.frame_id = frame_id
+    msg.cycle_id, msg.repeat_index = window.cycle_id, window.repeat_index
+    msg.status, msg.status_name, msg.message = int(fit.status), fit.status.name, fit.message
+    msg.theta0_rad, msg.theta0_free = fit.theta0_rad, fit.theta0_free
+    for name in ("frequency_hz", "frequency_std_hz", "frequency_crb_hz", "damping_per_s", "amplitude_rad",
+                 "phase_rad", "kappa_t", "offset_t", "chi2_dof", "r_squared", "snr_db", "duration_s"):
+        setattr(msg, name, float(getattr(fit, name)))
+    msg.frequency_shift_hz, msg.frequency_shift_std_hz = float(shift_hz), float(shift_std_hz)
+    msg.n_samples = int(fit.n_samples)
+    msg.parameter_names = list(fit.parameter_names)
+    msg.covariance = np.asarray(fit.covariance, dtype=float).ravel().tolist()
+    return msg
+
+
+def estimate_to_msg(estimate: AxisEstimate, header, window: RingdownWindow) -> FieldEstimate:
+    msg = FieldEstimate(header=header, cycle_id=window.cycle_id, repeat_index=window.repeat_index)
+    msg.status, msg.message = int(estimate.status), estimate.message
+    for name in ("theta0_rad", "frequency_shift_hz", "frequency_shift_std_hz", "field_along_axis_t",
+                 "field_along_axis_std_t", "gradient_equivalent_t_per_m", "gradient_equivalent_std_t_per_m"):
+        setattr(msg, name, float(getattr(estimate, name)))
+    msg.assumptions = estimate.assumptions
+    return msg
+
+
+def magnetic_field_msg(estimate: AxisEstimate, header) -> MagneticField:
+    """REP-145: tesla, in the probe frame; only x' is measured, y' and z' are NaN. The
+    covariance holds the variance of x' and zeros (unknown) elsewhere."""
+    msg = MagneticField(header=header)
+    msg.magnetic_field.x = estimate.field_along_axis_t
+    msg.magnetic_field.y = math.nan
+    msg.magnetic_field.z = math.nan
+    covariance = [0.0] * 9
+    covariance[0] = estimate.field_along_axis_std_t ** 2
+    msg.magnetic_field_covariance = covariance
+    return msg

@@ -1,0 +1,175 @@
+"""Cutting ring-downs out of the sample stream.
+
+The driver streams fluxgate samples in blocks stamped by the device clock and announces each
+ring-down by the device time at which the coils switched off and how long it lasts. This
+module keeps the recent blocks and returns each announced window once every one of its
+samples has arrived, or as soon as it is certain some never will (a sequence gap, a buffer
+that has moved on). Missing samples are counted, never filled in: the fit refuses a segment
+with a gap (``FitStatus.DATA_GAP``).
+
+Device time and sample index are tied by t = t0 + (index − first_index)/fs within a block; the
+announcement's time is converted to an index with the newest block's mapping, so the start
+is exact to one sample as long as both come from the same clock.
+"""
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+
+import numpy as np
+
+from mows.ringdown import FitOptions, FitStatus, RingdownFit, failure, fit_ringdown
+
+
+@dataclasses.dataclass(frozen=True)
+class Block:
+    """Consecutive samples from the device: ``samples_t`` and ``saturated`` are (n, channels)."""
+
+    first_sample_index: int
+    t0_s: float
+    sample_rate_hz: float
+    samples_t: np.ndarray
+    saturated: np.ndarray
+
+    @property
+    def stop_index(self) -> int:
+        return self.first_sample_index + len(self.samples_t)
+
+
+@dataclasses.dataclass(frozen=True)
+class RingdownWindow:
+    """An announced free ring-down: coils off at ``start_s`` (device clock) for ``duration_s``."""
+
+    start_s: float
+    duration_s: float
+    cycle_id: int = 0
+    repeat_index: int = 0
+    theta0_rad: float = 0.0
+    excitation_frequency_hz: float = math.nan
+
+
+@dataclasses.dataclass(frozen=True)
+class Segment:
+    """The samples of one window (channels as columns), and how many of them never arrived."""
+
+    window: RingdownWindow
+    first_sample_index: int
+    sample_rate_hz: float
+    samples_t: np.ndarray
+    saturated: np.ndarray
+    missing_samples: int
+
+
+@dataclasses.dataclass
+class _Pending:
+    window: RingdownWindow
+    start_index: int
+    stop_index: int
+
+
+class SegmentAssembler:
+    """Buffers about ``buffer_s`` of blocks and assembles announced ring-down windows.
+
+    Counters (for diagnostics): ``blocks``, ``missing_samples`` (sequence gaps in the stream),
+    ``rate_changes``, ``late_windows`` (announced after their samples left the buffer).
+    """
+
+    def __init__(self, buffer_s: float = 5.0):
+        if not (math.isfinite(buffer_s) and buffer_s > 0):
+            raise ValueError(f"buffer_s = {buffer_s!r} must be a positive number of seconds")
+        self.buffer_s = buffer_s
+        self._blocks: collections.deque[Block] = collections.deque()
+        self._pending: list[_Pending] = []
+        self.blocks = 0
+        self.missing_samples = 0
+        self.rate_changes = 0
+        self.late_windows = 0
+
+    # --- input --------------------------------------------------------------------------
+    def add_block(self, block: Block) -> list[Segment]:
+        """Take a block; return the segments it completes."""
+        newest = self._blocks[-1] if self._blocks else None
+        if newest is not None and block.sample_rate_hz != newest.sample_rate_hz:
+            self.rate_changes += 1
+            self._blocks.clear()
+        elif newest is not None and block.first_sample_index > newest.stop_index:
+            self.missing_samples += block.first_sample_index - newest.stop_index
+        elif newest is not None and block.first_sample_index < newest.stop_index:
+            return []   # a repeat or an out-of-order block: the samples are already here or gone
+        self._blocks.append(block)
+        self.blocks += 1
+        self._prune()
+        return self._complete()
+
+    def announce(self, window: RingdownWindow) -> list[Segment]:
+        """Register a ring-down; return it at once if its samples are all here already."""
+        if not self._blocks:
+            self._pending.append(_Pending(window, *self._index_range(window, None)))
+            return []
+        self._pending.append(_Pending(window, *self._index_range(window, self._blocks[-1])))
+        return self._complete()
+
+    # --- assembly -----------------------------------------------------------------------
+    @staticmethod
+    def _index_range(window: RingdownWindow, reference: Block | None):
+        if reference is None:
+            return -1, -1   # resolved when the first block arrives
+        fs = reference.sample_rate_hz
+        start = reference.first_sample_index + round((window.start_s - reference.t0_s) * fs)
+        return start, start + max(1, round(window.duration_s * fs))
+
+    def _complete(self) -> list[Segment]:
+        newest = self._blocks[-1]
+        done, waiting = [], []
+        for pending in self._pending:
+            if pending.start_index < 0:
+                pending.start_index, pending.stop_index = self._index_range(pending.window, newest)
+            if pending.stop_index <= newest.stop_index:
+                done.append(self._cut(pending))
+            else:
+                waiting.append(pending)
+        self._pending = waiting
+        return done
+
+    def _cut(self, pending: _Pending) -> Segment:
+        """The window's samples from the buffer, NaN (and counted) where none arrived."""
+        first = self._blocks[0]
+        n = pending.stop_index - pending.start_index
+        channels = first.samples_t.shape[1]
+        samples = np.full((n, channels), np.nan)
+        saturated = np.zeros((n, channels), bool)
+        filled = np.zeros(n, bool)
+        for block in self._blocks:
+            lo = max(block.first_sample_index, pending.start_index)
+            hi = min(block.stop_index, pending.stop_index)
+            if lo < hi:
+                samples[lo - pending.start_index:hi - pending.start_index] = \
+                    block.samples_t[lo - block.first_sample_index:hi - block.first_sample_index]
+                saturated[lo - pending.start_index:hi - pending.start_index] = \
+                    block.saturated[lo - block.first_sample_index:hi - block.first_sample_index]
+                filled[lo - pending.start_index:hi - pending.start_index] = True
+        if pending.start_index < first.first_sample_index:
+            self.late_windows += 1
+        return Segment(pending.window, pending.start_index, first.sample_rate_hz, samples, saturated,
+                       int(np.count_nonzero(~filled)))
+
+    def _prune(self) -> None:
+        """Memory stays bounded: a window older than the buffer completes with missing samples."""
+        newest = self._blocks[-1]
+        keep_from = newest.stop_index - round(self.buffer_s * newest.sample_rate_hz)
+        while len(self._blocks) > 1 and self._blocks[0].stop_index <= keep_from:
+            self._blocks.popleft()
+
+
+def fit_segment(segment: Segment, options: FitOptions = FitOptions(), settle_s: float = 0.0,
+                damping_guess_per_s: float = 1.8) -> RingdownFit:
+    """Fit one assembled ring-down; a segment with missing samples is refused, not patched."""
+    window = segment.window
+    if segment.missing_samples:
+        return failure(FitStatus.DATA_GAP,
+                       f"{segment.missing_samples} of {len(segment.samples_t)} samples of the ring-down never "
+                       "arrived (sequence gap or late announcement); not fitted across a gap",
+                       theta0_rad=window.theta0_rad, theta0_free=options.theta0_free)
+    return fit_ringdown(segment.samples_t, segment.sample_rate_hz, window.theta0_rad,
+                        window.excitation_frequency_hz, segment.saturated, options, damping_guess_per_s, settle_s)

@@ -1,0 +1,98 @@
+"""Ring-down windows cut from a block stream: exact, complete, and honest about gaps."""
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mows.ringdown import FitStatus
+from mows.segments import Block, RingdownWindow, SegmentAssembler, fit_segment
+
+FS = 20_000.0
+EPOCH_S = 1_700_000_000.0           # device clock: seconds since its epoch
+
+
+def stream(n=40_000, seed=0):
+    samples = np.random.default_rng(seed).standard_normal((n, 2))
+    return samples, np.zeros((n, 2), bool)
+
+
+def blocks(samples, saturated, sizes, start_index=1000):
+    index = 0
+    while index < len(samples):
+        size = sizes[index % len(sizes)] if isinstance(sizes, list) else sizes
+        yield Block(start_index + index, EPOCH_S + (start_index + index) / FS, FS,
+                    samples[index:index + size], saturated[index:index + size])
+        index += size
+
+
+def window_at(index, n, start_index=1000, **kw):
+    return RingdownWindow(start_s=EPOCH_S + (start_index + index) / FS, duration_s=n / FS, **kw)
+
+
+@settings(max_examples=60, deadline=None)
+@given(sizes=st.lists(st.integers(200, 1000), min_size=1, max_size=5), start=st.integers(0, 20_000),
+       length=st.integers(1000, 10_000), announce_after=st.integers(0, 40))
+def test_any_block_split_gives_the_exact_window(sizes, start, length, announce_after):
+    samples, saturated = stream()
+    assembler = SegmentAssembler(buffer_s=2.0)
+    got = []
+    for k, block in enumerate(blocks(samples, saturated, sizes)):
+        if k == announce_after:
+            got += assembler.announce(window_at(start, length))
+        got += assembler.add_block(block)
+    assert len(got) == 1
+    segment = got[0]
+    assert segment.missing_samples == 0
+    np.testing.assert_array_equal(segment.samples_t, samples[start:start + length])
+    assert segment.first_sample_index == 1000 + start
+
+
+def test_a_sequence_gap_is_counted_and_refused():
+    samples, saturated = stream()
+    assembler = SegmentAssembler()
+    assembler.announce(window_at(1000, 10_000, theta0_rad=0.3, excitation_frequency_hz=112.0))
+    got = []
+    for block in blocks(samples, saturated, 500):
+        if block.first_sample_index == 1000 + 5000:
+            continue                               # one block lost on the way
+        got += assembler.add_block(block)
+    assert assembler.missing_samples == 500
+    assert got[0].missing_samples == 500
+    fit = fit_segment(got[0])
+    assert fit.status == FitStatus.DATA_GAP and "500" in fit.message
+
+
+def test_a_window_announced_after_its_samples_left_the_buffer():
+    samples, saturated = stream()
+    assembler = SegmentAssembler(buffer_s=0.2)
+    for block in blocks(samples, saturated, 500):
+        assembler.add_block(block)
+    late = assembler.announce(window_at(100, 2000))
+    assert late and late[0].missing_samples == 2000 and assembler.late_windows == 1
+
+
+def test_duplicates_are_ignored_and_rate_changes_restart_the_buffer():
+    samples, saturated = stream(4000)
+    assembler = SegmentAssembler()
+    first, second = list(blocks(samples, saturated, 2000))
+    assembler.add_block(first)
+    assembler.add_block(first)
+    assembler.add_block(second)
+    assert assembler.blocks == 2 and assembler.missing_samples == 0
+    faster = Block(5000, EPOCH_S + 1.0, 2 * FS, samples[:100], saturated[:100])
+    assembler.add_block(faster)
+    assert assembler.rate_changes == 1
+
+
+def test_saturation_flags_travel_with_the_samples():
+    samples, saturated = stream(20_000)
+    saturated[3000:3100, 1] = True
+    assembler = SegmentAssembler()
+    assembler.announce(window_at(2000, 5000))
+    got = [s for b in blocks(samples, saturated, 400) for s in assembler.add_block(b)]
+    assert got[0].saturated[1000:1100, 1].all() and got[0].saturated.sum() == 100
+
+
+def test_bad_buffer_length_is_an_error():
+    with pytest.raises(ValueError, match="buffer_s"):
+        SegmentAssembler(buffer_s=0.0)

@@ -21,9 +21,11 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import MagneticField
 
 from mows.axis import estimate_along_axis
+from mows.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair, pickup_harmonics
+from mows.pose import Pose
 from mows.frequency import frequency_shift_hz
 from mows.probe import PAPER_PROBE, Probe
-from mows.ringdown import FitOptions
+from mows.ringdown import FitOptions, FitStatus, failure
 from mows.segments import SegmentAssembler, fit_segment
 from mows_estimator.messages import (block_from_msg, estimate_to_msg, fit_to_msg, magnetic_field_msg,
                                      window_from_msg)
@@ -46,7 +48,12 @@ PARAMETERS = (
     ParamSpec("sensor_axis_a", 0.0, "sensing axis (a, b) in the rotation plane, Eq. S11 (paper: 0, 1)",
               range=(-1.0, 1.0)),
     ParamSpec("sensor_axis_b", 1.0, "see sensor_axis_a", range=(-1.0, 1.0)),
-    ParamSpec("theta0_free", False, "fit θ0 instead of taking the commanded orientation"),
+    ParamSpec("theta0_free", False, "fit θ0 instead of taking the commanded orientation (paper's signal model only)"),
+    ParamSpec("lever_aware", True, "fit the exact pickup of the magnet swinging on its lever "
+              "(mows.fluxgate.pickup_harmonics) instead of Eq. S11's magnet turning in place"),
+    ParamSpec("sensor_distance_m", PAPER_DISTANCE_M, "distance from the probe to the near fluxgate, along the "
+              "rotation plane's x axis, m", range=(0.005, 2.0)),
+    ParamSpec("sensor_spacing_m", PAPER_SPACING_M, "spacing of the two fluxgates, m", range=(0.001, 2.0)),
     ParamSpec("settle_s", 0.003, "samples right after coil-off that are skipped, s", range=(0.0, 0.1)),
     ParamSpec("min_periods", 10.0, "shortest usable ring-down, in periods", range=(2.0, 1000.0)),
     ParamSpec("max_chi2_dof", 25.0, "above this χ²/dof a fit is refused (BAD_FIT)", range=(1.0, 1e6)),
@@ -91,9 +98,17 @@ class EstimatorNode(MowsNode):
         f00 = self._param("f00_hz")
         return (f00 if f00 > 0 else self.probe().f00_hz), self._param("f00_std_hz")
 
-    def _options(self) -> FitOptions:
-        return FitOptions(channels=self._param("channels"),
-                          sensor_direction=(self._param("sensor_axis_a"), self._param("sensor_axis_b")),
+    def _options(self, theta0_rad: float) -> FitOptions:
+        direction = (self._param("sensor_axis_a"), self._param("sensor_axis_b"))
+        channels = self._param("channels")
+        pickup = None
+        if self._param("lever_aware") and not self._param("theta0_free") and channels != "both":
+            pair = FluxgatePair.paper(distance_m=self._param("sensor_distance_m"),
+                                      spacing_m=self._param("sensor_spacing_m"), axis=(*direction, 0.0))
+            probe = self.probe()
+            pickup = tuple(pickup_harmonics(pair, Pose(theta0_rad=theta0_rad), probe.lever_m, probe.moment_am2,
+                                            combine=channels))
+        return FitOptions(channels=channels, sensor_direction=direction, pickup=pickup,
                           theta0_free=self._param("theta0_free"), min_periods=self._param("min_periods"),
                           max_chi2_dof=self._param("max_chi2_dof"))
 
@@ -123,7 +138,13 @@ class EstimatorNode(MowsNode):
             self._process(segment, arrived)
 
     def _process(self, segment, arrived: float):
-        fit = fit_segment(segment, self._options(), self._param("settle_s"), self.probe().damping_per_s)
+        try:
+            options = self._options(segment.window.theta0_rad)
+        except ValueError as error:      # e.g. a sensing axis of (0, 0): no model to fit
+            fit = failure(FitStatus.BAD_FIT, f"cannot build the signal model: {error}",
+                          theta0_rad=segment.window.theta0_rad)
+        else:
+            fit = fit_segment(segment, options, self._param("settle_s"), self.probe().damping_per_s)
         f00, f00_std = self.f00()
         estimate = estimate_along_axis(fit, self.probe(), f00, f00_std)
         frame = self._param("probe_frame_id")

@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mows.field import dipole_field_t, unit_vector3, vector3
+from mows.field import MU0_OVER_4PI, dipole_field_t, unit_vector3, vector3
 
 FL1_RANGE_T = 10e-6
 FL1_RESOLUTION_T = 1e-10
@@ -151,6 +151,38 @@ class FluxgatePair:
         values = np.asarray(values_t, dtype=float)
         columns = [digitise(values[..., i], s) for i, s in enumerate(self.sensors)]
         return np.stack([c[0] for c in columns], axis=-1), np.stack([c[1] for c in columns], axis=-1)
+
+
+PICKUP_COMBINATIONS = {"difference": (1.0, -1.0), "channel1": (1.0, 0.0), "channel2": (0.0, 1.0)}
+
+
+def pickup_harmonics(pair: FluxgatePair, pose, lever_m: float, moment_am2: float, combine: str = "difference",
+                     order: int = 6, points: int = 64) -> np.ndarray:
+    """The sensor signal as a Fourier series in the deflection: S(θt) = Σ_k Re(C_k·e^(ikθt)).
+
+    The magnet swings on its lever, so its position moves with its moment: the exact dipole
+    pickup (Eq. S8 without the far-field and fixed-position approximations) is a smooth
+    periodic function of θt whose harmonics fall off like (3l/r)^k. Returned normalised by the
+    κ of Eq. S11 for this combination (μ0·m/4π over r³ or r_eff³, Eq. S10), so a fit's κ keeps
+    its meaning. For a magnet turning in place (l = 0) the series is the paper's model exactly:
+    C_1 = (2a + ib)·e^(iθ0), all others 0, with (a, b) the sensing axis.
+
+    Parameters
+    ----------
+    pose : :class:`mows.pose.Pose` with the probe's orientation θ0.
+    combine : 'difference' (near − far), 'channel1' or 'channel2'.
+    order : highest harmonic kept (the rest is below 1e-7 of the signal for the paper's set-up).
+    """
+    weights = np.array(PICKUP_COMBINATIONS[combine])
+    theta = 2.0 * np.pi * np.arange(points) / points - np.pi
+    moments = moment_am2 * pose.moment_direction_at(theta)
+    signal = pair.pickup_t(pose.magnet_position_at(theta, lever_m), moments) @ weights
+    # rfft refers phases to θ = −π: multiply by (−1)^k to refer them to θt = 0.
+    coefficients = np.fft.rfft(signal)[: order + 1] / points * (-1.0) ** np.arange(order + 1)
+    coefficients[1:] *= 2.0
+    distances = np.linalg.norm(pair.positions_m - np.asarray(pose.magnet_position_m, float), axis=1)
+    kappa = MU0_OVER_4PI * moment_am2 * (distances**-3.0 @ weights)
+    return coefficients / kappa
 
 
 @dataclass(frozen=True)

@@ -1,12 +1,17 @@
 """Ring-down segmentation and the fit of Eqs. S2, S11, S12 at the Cramér–Rao bound.
 
-Model of one channel (any in-plane sensor direction (a, b), Eq. S11):
+Model of one channel:
 
-    S(t) = κ·g(θ0 + x(t)) + B_DC,   g(θ) = 2a·cos θ − b·sin θ,
-    x(t) = θmax·e^(−δt)·cos(2πft + φ)   (Eq. S2, t = 0 at the first fitted sample).
+    S(t) = κ·g(x(t)) + B_DC,   x(t) = θmax·e^(−δt)·cos(2πft + φ)   (Eq. S2, t = 0 at the first
+    fitted sample),   g(x) = Σ_k Re(C_k·e^(ikx)).
 
-The paper's sensors have (a, b) = (0, 1), which is Eq. S12. θ0 is taken from the excitation
-state (the commanded orientation) or fitted.
+g is the sensor's signal as a function of the deflection, normalised by κ. The paper's model
+(Eq. S11, a sensor along (a, b) and a magnet turning in place) is the single term
+C_1 = (2a + ib)·e^(iθ0), i.e. g = 2a·cos(θ0 + x) − b·sin(θ0 + x); its sensors have
+(a, b) = (0, 1), which is Eq. S12. On a real lever the magnet also moves, and the exact
+pickup (:func:`mows.fluxgate.pickup_harmonics`) adds harmonics of relative size ~(3l/r)^k
+(0.11 for k = 2 in the paper's set-up): pass them as ``FitOptions.pickup``. θ0 is taken from
+the excitation state (the commanded orientation), or, in the paper's model, fitted.
 
 Estimator. Least squares is the maximum-likelihood estimator for white Gaussian noise, and
 reaches the Cramér–Rao bound (PHYSICS.md §7) once the fit is converged at full rate. The
@@ -57,8 +62,12 @@ class FitOptions:
 
     channels : 'difference' (channel 1 − channel 2: cancels common-mode noise),
         'both' (joint fit, a κ and an offset per channel), 'channel1' or 'channel2'.
-    sensor_direction : (a, b) of the sensing axis in the rotation plane (Eq. S11).
-    theta0_free : fit θ0 instead of taking the commanded value.
+    sensor_direction : (a, b) of the sensing axis in the rotation plane (Eq. S11), for the
+        paper's model.
+    pickup : coefficients C_k (complex, k = 0 …) of g for the commanded θ0, from
+        :func:`mows.fluxgate.pickup_harmonics`; replaces the paper's model when given.
+    theta0_free : fit θ0 instead of taking the commanded value (paper's model only: the
+        pickup's dependence on θ0 is not a rotation once the lever moves the magnet).
     search_fraction : the spectral search covers expected f ± this fraction.
     min_periods : fewer usable periods than this gives TOO_SHORT.
     min_frequency_fraction : a peak below this fraction of the expected frequency means the
@@ -69,6 +78,7 @@ class FitOptions:
 
     channels: str = "difference"
     sensor_direction: tuple = (0.0, 1.0)
+    pickup: tuple | None = None
     theta0_free: bool = False
     search_fraction: float = 0.3
     min_periods: float = 10.0
@@ -82,6 +92,21 @@ class FitOptions:
             raise ValueError(f"channels = {self.channels!r}; use difference, both, channel1 or channel2")
         if not 0.0 < self.search_fraction < 1.0:
             raise ValueError(f"search_fraction = {self.search_fraction} must be in (0, 1)")
+        if self.pickup is not None and (self.theta0_free or self.channels == "both"):
+            raise ValueError("a pickup series describes one fixed-θ0 channel: it cannot be combined with "
+                             "theta0_free or channels='both'")
+
+    def pickup_at(self, theta0_rad: float) -> np.ndarray:
+        """The coefficients C_k of g: the given pickup, or the paper's single term."""
+        if self.pickup is not None:
+            return np.asarray(self.pickup, complex)
+        return paper_pickup(theta0_rad, self.sensor_direction)
+
+
+def paper_pickup(theta0_rad: float, direction=(0.0, 1.0)) -> np.ndarray:
+    """Eq. S11 as a pickup series: 2a·cos θ − b·sin θ = Re((2a + ib)·e^(iθ)), θ = θ0 + x."""
+    a, b = direction
+    return np.array([0.0, complex(2.0 * a, b) * complex(math.cos(theta0_rad), math.sin(theta0_rad))])
 
 
 @dataclasses.dataclass
@@ -148,32 +173,28 @@ class _Shape:
     dg_dq: np.ndarray      # (len(q), n)
 
 
-def _shape(q, t, theta0_fixed, direction, theta0_free, want_derivatives=True) -> _Shape:
-    """g(θ(t)) and dg/dq at uniformly spaced times ``t`` (t[0] = 0).
+def _shape(q, t, pickup, theta0_free, want_derivatives=True) -> _Shape:
+    """g(x(t)) and dg/dq at uniformly spaced times ``t`` (t[0] = 0).
 
     The ring-down x(t) = Re(θmax·e^(iφ)·e^((−δ + 2πif)t)) is generated as a geometric
     sequence (one complex cumulative product) rather than by exp, cos and sin of every
-    sample; the accumulated rounding is ~√n·1e-16, far below any noise."""
+    sample; the accumulated rounding is ~√n·1e-16, far below any noise. With θ0 free the
+    pickup is the paper's single term rotated by θ0 = q[4], so ∂g/∂θ0 = ∂g/∂x.
+    """
     f, delta, amp, phi = q[:4]
-    theta0 = q[4] if theta0_free else theta0_fixed
-    a, b = direction
     dt = t[1] - t[0] if t.size > 1 else 1.0
     decay = math.exp(-delta * dt)
     rotor = np.full(t.size, complex(decay * math.cos(TWO_PI * f * dt), decay * math.sin(TWO_PI * f * dt)))
     rotor[0] = complex(math.cos(phi), math.sin(phi))
     unit = np.cumprod(rotor)                         # e^(−δt)·e^(i(2πft + φ))
     carrier = unit.real
-    theta = amp * carrier
-    theta += theta0
-    sin_th = np.sin(theta)
-    g = -b * sin_th
-    if a:
-        g += 2.0 * a * np.cos(theta)
+    x = amp * carrier
+    coefficients = pickup
+    if theta0_free:
+        coefficients = pickup * np.exp(1j * np.arange(pickup.size) * q[4])
+    g, dg = _pickup_series(coefficients, np.cos(x), np.sin(x), want_derivatives)
     if not want_derivatives:
         return _Shape(g, np.empty((0, t.size)))
-    dg = -b * np.cos(theta)
-    if a:
-        dg -= 2.0 * a * sin_th
     dg_dq = np.empty((5 if theta0_free else 4, t.size))
     np.multiply(dg, unit.imag, out=dg_dq[3])
     dg_dq[3] *= -amp                                          # ∂/∂φ
@@ -187,6 +208,24 @@ def _shape(q, t, theta0_fixed, direction, theta0_free, want_derivatives=True) ->
     return _Shape(g, dg_dq)
 
 
+def _pickup_series(coefficients, cos_x, sin_x, want_derivative):
+    """g = Σ Re(C_k z^k) and dg/dx = Σ Re(ik·C_k z^k) with z = e^(ix); the first harmonic
+    (the paper's whole model) is written out, higher powers by repeated multiplication."""
+    c1 = coefficients[1]
+    g = c1.real * cos_x - c1.imag * sin_x + coefficients[0].real
+    dg = -c1.real * sin_x - c1.imag * cos_x if want_derivative else None
+    if coefficients.size > 2:
+        z = cos_x + 1j * sin_x
+        power = z.copy()
+        for k in range(2, coefficients.size):
+            power *= z
+            term = coefficients[k] * power
+            g += term.real
+            if want_derivative:
+                dg -= k * term.imag
+    return g, dg
+
+
 @dataclasses.dataclass(frozen=True)
 class _Problem:
     """Data and fixed settings of one fit: y is (C, n), uniformly sampled every ``dt``."""
@@ -195,7 +234,7 @@ class _Problem:
     weights: np.ndarray      # 1/σ per channel
     t: np.ndarray            # sample times, s, t[0] = 0
     theta0: float
-    direction: tuple
+    pickup: np.ndarray       # C_k of g (complex)
     theta0_free: bool
 
     def subsampled(self, step: int) -> "_Problem":
@@ -228,8 +267,7 @@ def _evaluate(problem: _Problem, q: np.ndarray, derivatives: bool = True) -> _St
     formed explicitly: at 60 dB the shortcut yᵀy − bᵀ(LLᵀ)⁻¹b would lose ten digits.
     """
     y, w = problem.y, problem.weights
-    shape = _shape(q, problem.t, problem.theta0, problem.direction, problem.theta0_free,
-                   want_derivatives=derivatives)
+    shape = _shape(q, problem.t, problem.pickup, problem.theta0_free, want_derivatives=derivatives)
     g_mean = shape.g.mean()
     centred = shape.g - g_mean
     norm2 = centred @ centred
@@ -494,8 +532,8 @@ def _problem(y, fs, theta0, options) -> _Problem:
     noise = np.array([white_noise_std(ch) for ch in y])
     if np.any(noise <= 0):  # noiseless, or quantised to a constant: weight channels equally
         noise = np.full(y.shape[0], max(float(np.ptp(y)) * 1e-9, 1e-30))
-    return _Problem(y, 1.0 / noise, np.arange(y.shape[1]) / fs, theta0, tuple(options.sensor_direction),
-                    options.theta0_free)
+    pickup = paper_pickup(0.0, options.sensor_direction) if options.theta0_free else options.pickup_at(theta0)
+    return _Problem(y, 1.0 / noise, np.arange(y.shape[1]) / fs, theta0, pickup, options.theta0_free)
 
 
 def _coarse_start(problem, fs, expected_hz, options, damping_guess):
@@ -594,12 +632,14 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
 # --- the bound itself -------------------------------------------------------------------
 def cramer_rao_frequency_hz(n_samples, sample_rate_hz, frequency_hz, damping_per_s, amplitude_rad, phase_rad,
                             theta0_rad, kappa_t, noise_std_t, sensor_direction=(0.0, 1.0),
-                            theta0_free=False) -> float:
+                            theta0_free=False, pickup=None) -> float:
     """Cramér–Rao bound of f for one channel of ``n_samples`` in white noise σ:
     √[(JᵀJ/σ²)⁻¹]_ff (PHYSICS.md §7), J the Jacobian of the full model over all its
     parameters (f, δ, θmax, φ, [θ0], κ, B_DC) at the given values. t = 0 at the first sample.
     """
     q = np.array([frequency_hz, damping_per_s, amplitude_rad, phase_rad] + ([theta0_rad] if theta0_free else []))
-    shape = _shape(q, np.arange(int(n_samples)) / sample_rate_hz, theta0_rad, tuple(sensor_direction), theta0_free)
+    coefficients = (paper_pickup(0.0 if theta0_free else theta0_rad, sensor_direction) if pickup is None
+                    else np.asarray(pickup, complex))
+    shape = _shape(q, np.arange(int(n_samples)) / sample_rate_hz, coefficients, theta0_free)
     step = _Step(q, shape, np.array([[kappa_t, 0.0]]), np.empty((1, 0)), math.nan)
     return float(math.sqrt(scaled_inverse(_fisher(step, np.array([1.0 / noise_std_t])))[0, 0]))

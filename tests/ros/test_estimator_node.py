@@ -95,7 +95,9 @@ class Device:
 def estimator(ros, tmp_path):
     log = open(tmp_path / "estimator.log", "w")
     node = next(n for n in NODES if n.name == "estimator")
-    process = subprocess.Popen(node.command(["-p", f"f00_hz:={PAPER_PROBE.f00_hz}"]),
+    # The stand-in device streams Eq. S11 data (a magnet turning in place), so the node is
+    # told to fit that model rather than the lever-aware pickup of the real probe.
+    process = subprocess.Popen(node.command(["-p", f"f00_hz:={PAPER_PROBE.f00_hz}", "-p", "lever_aware:=false"]),
                                stdout=log, stderr=subprocess.STDOUT)
     heard = {"fits": [], "fields": [], "magnetic": [], "diagnostics": {}}
     ros.node.create_subscription(RingdownFit, "/mows/ringdown", heard["fits"].append, RESULT_QOS)

@@ -1,6 +1,7 @@
 """The estimator node: fits every ring-down announced by the driver and publishes the result.
 
-Subscribes ``/mows/raw`` (MagnetometerBlock, sensor-data QoS) and ``/mows/excitation``
+Topic and service names are relative, so the graph can run in a namespace; in the root
+namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock, sensor-data QoS) and ``/mows/excitation``
 (ExcitationState). Publishes, per recorded ring-down, ``/mows/ringdown`` (RingdownFit, always,
 with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
 ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). Service
@@ -74,14 +75,14 @@ class EstimatorNode(MowsNode):
         self._calibration = threading.Condition()
         self._calibration_fits = None
         stream_group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(MagnetometerBlock, "/mows/raw", self._on_block, STREAM_CONSUMER_QOS,
+        self.create_subscription(MagnetometerBlock, "mows/raw", self._on_block, STREAM_CONSUMER_QOS,
                                  callback_group=stream_group)
-        self.create_subscription(ExcitationState, "/mows/excitation", self._on_excitation, RESULT_QOS,
+        self.create_subscription(ExcitationState, "mows/excitation", self._on_excitation, RESULT_QOS,
                                  callback_group=stream_group)
-        self._fit_pub = self.create_publisher(RingdownFit, "/mows/ringdown", RESULT_QOS)
-        self._field_pub = self.create_publisher(FieldEstimate, "/mows/field", RESULT_QOS)
-        self._magnetic_pub = self.create_publisher(MagneticField, "/mows/magnetic_field", STREAM_QOS)
-        self.create_service(Calibrate, "/mows/estimator/calibrate", self._on_calibrate,
+        self._fit_pub = self.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
+        self._field_pub = self.create_publisher(FieldEstimate, "mows/field", RESULT_QOS)
+        self._magnetic_pub = self.create_publisher(MagneticField, "mows/magnetic_field", STREAM_QOS)
+        self.create_service(Calibrate, "mows/estimator/calibrate", self._on_calibrate,
                             callback_group=ReentrantCallbackGroup())
 
     # --- parameters -------------------------------------------------------------------------

@@ -211,3 +211,55 @@ def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmon
         field_t=np.array([bx, by]), field_covariance_t2=cov[:2, :2], gradient_t_per_m=gradient,
         gradient_covariance=g_cov, f00_hz=f00_hz + df00, f00_free=f00_free, harmonics=harmonics,
         chi2_dof=chi2_dof, rms_residual_hz=float(np.sqrt(np.mean(residual**2))), residual_hz=residual)
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepPoint:
+    """One successful ring-down of a sweep (SI units; t_s on the device clock)."""
+
+    theta0_rad: float
+    frequency_hz: float
+    frequency_std_hz: float
+    shift_hz: float
+    shift_std_hz: float
+    amplitude_rad: float
+    damping_per_s: float
+    duration_s: float
+    t_s: float
+
+
+@dataclasses.dataclass
+class SweepRecord:
+    """The ring-downs of one rotation sweep, collected as they arrive."""
+
+    points: list = dataclasses.field(default_factory=list)
+    failed: int = 0
+
+    def add(self, point: SweepPoint) -> None:
+        self.points.append(point)
+
+    def _column(self, name: str) -> np.ndarray:
+        return np.array([getattr(p, name) for p in self.points], float)
+
+    def at_angle(self, theta0_rad: float) -> tuple[float, float, int]:
+        """Inverse-variance weighted mean shift at one orientation, its σ, and the count."""
+        chosen = [p for p in self.points if abs(p.theta0_rad - theta0_rad) < 1e-9]
+        if not chosen:
+            return math.nan, math.nan, 0
+        weights = np.array([1.0 / p.shift_std_hz**2 for p in chosen])
+        shifts = np.array([p.shift_hz for p in chosen])
+        return float(weights @ shifts / weights.sum()), float(1.0 / math.sqrt(weights.sum())), len(chosen)
+
+    def decompose(self, probe: Probe, f00_hz: float, model: str = "first_principles", f00_free: bool = False,
+                  amplitude_rad: float = 0.0) -> Decomposition:
+        """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof)."""
+        return decompose(self._column("theta0_rad"), self._column("shift_hz"), self._column("shift_std_hz"),
+                         probe, f00_hz, model=model, f00_free=f00_free, amplitude_rad=amplitude_rad)
+
+    def table_columns(self) -> dict:
+        """Columns of a model-lab measurement table (docs/model_lab.md)."""
+        t = self._column("t_s")
+        return {"theta0_deg": np.degrees(self._column("theta0_rad")), "f_hz": self._column("frequency_hz"),
+                "f_std_hz": self._column("frequency_std_hz"), "t_s": t - (t.min() if t.size else 0.0),
+                "amplitude_deg": np.degrees(self._column("amplitude_rad")),
+                "damping_per_s": self._column("damping_per_s"), "duration_s": self._column("duration_s")}

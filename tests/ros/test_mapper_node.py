@@ -1,0 +1,125 @@
+"""The mapper node: a rotation sweep through a stand-in driver that answers RunCycle with
+ring-down fits computed from the exact field of a scenario, decomposed into B and G."""
+import math
+import subprocess
+
+import numpy as np
+import pytest
+from action_msgs.msg import GoalStatus
+from mows_msgs.action import RotationSweep
+from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
+from mows_msgs.srv import RunCycle
+from rclpy.action import ActionClient
+
+from mows.lab.table import reference_at
+from mows.pose import Pose
+from mows.potential import ArcPotential
+from mows.probe import PAPER_PROBE
+from mows.scenario import load_scenario
+from mows_bringup.graph import NODES
+from mows_ros.qos import MAP_QOS, RESULT_QOS
+
+pytestmark = pytest.mark.ros
+
+SCENARIO = "helmholtz"
+STD_HZ = 5e-4
+ANGLES = np.radians(np.arange(0.0, 360.0, 30.0))
+
+
+class StandInDriver:
+    """Answers RunCycle: publishes `repeats` fits of the cycle, f from the full potential."""
+
+    def __init__(self, ros, fail=False):
+        scenario = load_scenario(SCENARIO)
+        self.source, self.fail = scenario.environment.source, fail
+        self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
+        ros.node.create_service(RunCycle, "mows/driver/run_cycle", self.run_cycle)
+        self.cycle, self.rng = 0, np.random.default_rng(0)
+
+    def run_cycle(self, request, response):
+        if self.fail:
+            response.success, response.message = False, "coil current above the cap"
+            return response
+        self.cycle += 1
+        f = float(ArcPotential.from_source(PAPER_PROBE, self.source, Pose(theta0_rad=request.theta0_rad)).frequency_hz())
+        for repeat in range(request.repeats):
+            measured = f + STD_HZ * self.rng.standard_normal()
+            msg = RingdownFit(cycle_id=self.cycle, repeat_index=repeat, status=RingdownFit.STATUS_OK, status_name="OK",
+                              theta0_rad=request.theta0_rad, frequency_hz=measured, frequency_std_hz=STD_HZ,
+                              frequency_shift_hz=measured - PAPER_PROBE.f00_hz, frequency_shift_std_hz=STD_HZ,
+                              amplitude_rad=math.radians(2.0), damping_per_s=1.8, duration_s=0.5)
+            msg.header.stamp.sec = 100 + self.cycle
+            self.fits.publish(msg)
+        response.success, response.cycle_id, response.ringdowns_recorded = True, self.cycle, request.repeats
+        return response
+
+
+@pytest.fixture
+def mapper(ros, tmp_path):
+    node = next(n for n in NODES if n.name == "mapper")
+    log_path = tmp_path / "mapper.log"
+    process = subprocess.Popen(node.command(["-p", f"reference_scenario:={SCENARIO}", "-p", "lab_auto:=false"]),
+                               stdout=open(log_path, "w"), stderr=subprocess.STDOUT)
+    client = ActionClient(ros.node, RotationSweep, "mows/mapper/rotation_sweep")
+    ros.wait_for(lambda: client.server_is_ready(), "the sweep action server")
+    yield client, process
+    process.terminate()
+    try:
+        code = process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        code = process.wait()
+    assert code == 0, log_path.read_text()
+
+
+def sweep(ros, client, **goal):
+    feedback = []
+    sent = client.send_goal_async(RotationSweep.Goal(**goal), feedback_callback=lambda f: feedback.append(f.feedback))
+    handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")
+    if not handle.accepted:
+        return handle, None, feedback
+    result = handle.get_result_async()
+    done = ros.wait_for(lambda: result.done() and result.result(), "the sweep result")
+    return handle, done, feedback
+
+
+def test_a_sweep_recovers_the_field_and_reports_on_the_model(ros, mapper):
+    client, _ = mapper
+    StandInDriver(ros)
+    maps, reports = [], []
+    ros.node.create_subscription(SweepDecomposition, "mows/sweep", maps.append, MAP_QOS)
+    ros.node.create_subscription(ModelReport, "mows/model_report", reports.append, MAP_QOS)
+    _, done, feedback = sweep(ros, client, theta0_rad=ANGLES.tolist(), repeats_per_angle=2)
+    assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.success, done.result.message
+    assert [f.angle_index for f in feedback] == list(range(len(ANGLES)))
+    assert all(f.n_ok == 2 and len(f.fits) == 2 for f in feedback)
+    d = done.result.decomposition
+    truth, _ = reference_at(SCENARIO)
+    sigma = np.sqrt(np.diag(np.reshape(d.field_covariance_t2, (2, 2))))
+    assert np.all(np.abs(np.array(d.field_t) - truth[:2]) < 4 * sigma), (d.field_t, truth, sigma)
+    assert d.model == "first_principles" and d.n_points == 2 * len(ANGLES) and d.chi2_dof < 2
+    ros.wait_for(lambda: maps and reports, "the map and the model report")
+    np.testing.assert_array_equal(maps[0].field_t, d.field_t)
+    assert reports[0].n == 2 * len(ANGLES) and reports[0].verdict in ("adequate", "effect_missing",
+                                                                      "unexplained_structure")
+    # A map is latched: a subscriber that comes later still gets it.
+    late = []
+    ros.node.create_subscription(SweepDecomposition, "mows/sweep", late.append, MAP_QOS)
+    ros.wait_for(lambda: late, "the latched map")
+
+
+def test_bad_goals_are_refused(ros, mapper):
+    client, _ = mapper
+    handle, _, _ = sweep(ros, client, theta0_rad=[0.0, math.nan])
+    assert not handle.accepted
+    handle, _, _ = sweep(ros, client, theta0_rad=[0.0, 1.0], model="paper")
+    assert not handle.accepted
+
+
+def test_a_failing_driver_aborts_the_sweep_with_its_reason(ros, mapper):
+    client, process = mapper
+    StandInDriver(ros, fail=True)
+    _, done, _ = sweep(ros, client, theta0_rad=ANGLES.tolist(), repeats_per_angle=1)
+    assert done.status == GoalStatus.STATUS_ABORTED
+    assert "above the cap" in done.result.message and not done.result.success
+    assert process.poll() is None

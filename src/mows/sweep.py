@@ -32,6 +32,7 @@ from scipy.optimize import least_squares
 from mows.frequency import frequency_shift_hz
 from mows.potential import ArcPotential
 from mows.probe import Probe
+from mows.ringdown_average import amplitude_nodes
 
 MODELS = ("first_principles", "published")
 MAX_HARMONIC = 4
@@ -95,8 +96,14 @@ class Decomposition:
                 f"rms residual {self.rms_residual_hz * 1e3:.3f} mHz")
 
 
-def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, amplitude_rad: float = 0.0):
-    """Δf(θ0) for params (Bx, By, Gs, Gd, Gxy, f00 − f00_calibrated), Hz."""
+def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, amplitude_nodes=None):
+    """Δf(θ0) for params (Bx, By, Gs, Gd, Gxy, f00 − f00_calibrated), Hz.
+
+    ``amplitude_nodes`` (A_q, c_q), each (n, q): the ring-down amplitudes and weights whose
+    harmonic-balance frequencies average to what the fit of a decaying ring-down reports
+    (:mod:`mows.ringdown_average`); None for the small-amplitude stiffness. The published
+    model has no amplitude and ignores them.
+    """
     bx, by, gs, gd, gxy, df00 = params
     theta0 = np.asarray(theta0_rad, float)
     c, s = np.cos(theta0), np.sin(theta0)
@@ -112,12 +119,15 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
     global_gradient = np.array([[gxx, gxy, 0.0], [gxy, gyy, 0.0], [0.0, 0.0, -(gxx + gyy)]])
     gradient = rotation @ global_gradient @ np.swapaxes(rotation, -1, -2)
     potential = ArcPotential.from_local_field(probe, field, gradient)
-    k = potential.effective_stiffness_nm_per_rad(np.full(theta0.shape, amplitude_rad))
-    return f00 * np.sqrt(k / probe.spring_nm_per_rad) - f00_hz
+    if amplitude_nodes is None:
+        return f00 * np.sqrt(potential.stiffness_nm_per_rad() / probe.spring_nm_per_rad) - f00_hz
+    amplitudes, weights = amplitude_nodes
+    ratios = np.stack([potential.effective_stiffness_nm_per_rad(a) for a in amplitudes.T], axis=-1)
+    return f00 * np.sum(weights * np.sqrt(ratios / probe.spring_nm_per_rad), axis=-1) - f00_hz
 
 
 def decompose(theta0_rad, shift_hz, shift_std_hz, probe: Probe, f00_hz: float, model: str = "first_principles",
-              f00_free: bool = False, amplitude_rad: float = 0.0) -> Decomposition:
+              f00_free: bool = False, amplitude_nodes=None) -> Decomposition:
     """Field and gradient from a rotation sweep by weighted nonlinear least squares.
 
     Parameters
@@ -128,8 +138,11 @@ def decompose(theta0_rad, shift_hz, shift_std_hz, probe: Probe, f00_hz: float, m
     f00_hz : calibrated zero-field frequency that ``shift_hz`` refers to.
     model : ``first_principles`` (default) or ``published``.
     f00_free : fit the zero-field frequency too; Gs is then not determined.
-    amplitude_rad : ring-down amplitude for the first-principles harmonic balance (0: small
-        amplitude; the probe's m and kM calibrated at the operating amplitude absorb it).
+    amplitude_nodes : (A_q, c_q) per point, (n, q) each, for the first-principles model: the
+        ring-down's amplitudes and weights (:func:`mows.ringdown_average.amplitude_nodes`).
+        The cantilever is not a linear spring: at the 24° a ring-down starts from, the field
+        spring is ~1 % and the lever's gradient springs ~4 % weaker than at small amplitude
+        (first-harmonic balance). None: small amplitude.
 
     The covariance is scaled by χ²/dof when that exceeds 1, as lmfit does: a model that does
     not fit does not get to claim the measurement errors' precision.
@@ -151,7 +164,7 @@ def decompose(theta0_rad, shift_hz, shift_std_hz, probe: Probe, f00_hz: float, m
     def residual(x):
         params = start.copy()
         params[free] = x
-        return (model_shift_hz(params, theta0, probe, f00_hz, model, amplitude_rad) - shift) / std
+        return (model_shift_hz(params, theta0, probe, f00_hz, model, amplitude_nodes) - shift) / std
 
     scale = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1e-3])[free]
     result = least_squares(residual, start[free], x_scale=scale, method="lm", xtol=1e-12, ftol=1e-12)
@@ -250,11 +263,15 @@ class SweepRecord:
         shifts = np.array([p.shift_hz for p in chosen])
         return float(weights @ shifts / weights.sum()), float(1.0 / math.sqrt(weights.sum())), len(chosen)
 
-    def decompose(self, probe: Probe, f00_hz: float, model: str = "first_principles", f00_free: bool = False,
-                  amplitude_rad: float = 0.0) -> Decomposition:
-        """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof)."""
-        return decompose(self._column("theta0_rad"), self._column("shift_hz"), self._column("shift_std_hz"),
-                         probe, f00_hz, model=model, f00_free=f00_free, amplitude_rad=amplitude_rad)
+    def decompose(self, probe: Probe, f00_hz: float, model: str = "first_principles",
+                  f00_free: bool = False) -> Decomposition:
+        """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof), at
+        each ring-down's own amplitude, damping and fit window."""
+        theta0 = self._column("theta0_rad")
+        nodes = amplitude_nodes(theta0, self._column("amplitude_rad"), self._column("damping_per_s"),
+                                self._column("duration_s"))
+        return decompose(theta0, self._column("shift_hz"), self._column("shift_std_hz"), probe, f00_hz,
+                         model=model, f00_free=f00_free, amplitude_nodes=nodes)
 
     def table_columns(self) -> dict:
         """Columns of a model-lab measurement table (docs/model_lab.md)."""

@@ -7,7 +7,8 @@ import pytest
 
 from mows import frequency
 from mows.field import UniformField
-from mows.lab import FrequencyModel, MeasurementTable, catalog, ringdown_average
+from mows import ringdown_average
+from mows.lab import FrequencyModel, MeasurementTable, catalog
 from mows.lab.synth import true_frequency_hz
 from mows.probe import PAPER_PROBE
 from mows.ringdown import fit_ringdown

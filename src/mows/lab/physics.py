@@ -14,7 +14,7 @@ so U'(0) = 0 and U''(0) = kM + m·Bx' + l·m·Gx'x' exactly: Eq. 6, f = f00·√
 :meth:`mows.potential.ArcPotential.from_local_field` (the field's quadratic expansion along the
 lever's arc, exact for the quadratic field the lab describes): exact rest angle (Newton on
 U'(θ) = 0 from θ = 0), stiffness U''(θs), and first-harmonic balance at the ring-down's
-amplitude nodes (:mod:`mows.lab.ringdown_average`). It returns h and c with
+amplitude nodes (:mod:`mows.ringdown_average`). It returns h and c with
 
     f = f00·h + c,
 
@@ -102,7 +102,7 @@ def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
     """(h, c) with f = f00·h + c for every row (module docstring).
 
     ``amplitude_nodes`` is (A_q (n, q), c_q (n, q)) from
-    :func:`mows.lab.ringdown_average.amplitude_nodes`; needed when ``config.amplitude`` ≠ 0.
+    :func:`mows.ringdown_average.amplitude_nodes`; needed when ``config.amplitude`` ≠ 0.
     """
     axes, field, gradient, hessian = config.probe_frame()
     factor = config.moment_factor

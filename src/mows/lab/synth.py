@@ -9,7 +9,7 @@ The truth never comes from the lab's own model. For every row:
    :meth:`mows.potential.ArcPotential.from_source` does, batched over the rows;
 2. the ring-down frequency is the damped first-harmonic-balance frequency √(k(A)/J − δ²)/2π
    averaged over the decaying ring-down as the constant-frequency estimator sees it
-   (:mod:`mows.lab.ringdown_average`, here with 8 Gauss nodes where the lab uses 3);
+   (:mod:`mows.ringdown_average`, here with 8 Gauss nodes where the lab uses 3);
 3. Gaussian noise of ``f_std_hz`` is added with the caller's generator.
 
 The reference columns are the true field and in-plane gradient at the probe (of ``reference``
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from mows.field import FieldSource
-from mows.lab import ringdown_average
+from mows import ringdown_average
 from mows.lab.table import FIELD, GRADIENT, MeasurementTable
 from mows.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad

@@ -15,7 +15,7 @@ CORE_STAMP := $(VENV)/.mows-core.stamp
 BUILD_STAMP := install/.mows-build.stamp
 ACTIVATE := source $(VENV)/bin/activate
 ENVIRONMENT := $(ACTIVATE) && source install/setup.bash
-DEMO_DURATION_S ?= 20
+DEMO_ARGS ?=
 PYTEST_ARGS ?=
 BENCH_ARGS ?=
 
@@ -65,11 +65,14 @@ $(BUILD_STAMP): $(VENV_STAMP) $(ROS_SOURCES)
 test: $(BUILD_STAMP) $(CORE_STAMP)
 	$(ENVIRONMENT) && python -m pytest $(PYTEST_ARGS)
 
-# The three nodes on the simulated device for DEMO_DURATION_S seconds. DDS stays on this
-# host unless ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise.
+# The main job: the node graph on the simulated device runs a rotation sweep, decomposes it
+# into field and gradient, compares with the scene's truth and the published model, and asks
+# the model lab what physics is missing (mows_bringup/demo.py). DEMO_ARGS passes options,
+# e.g. DEMO_ARGS="--scenario anti_helmholtz --angles 12". DDS stays on this host unless
+# ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise.
 demo: $(BUILD_STAMP) $(CORE_STAMP)
 	$(ENVIRONMENT) && ROS_AUTOMATIC_DISCOVERY_RANGE=$${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST} \
-		mows-graph --duration $(DEMO_DURATION_S)
+		mows-demo $(DEMO_ARGS)
 
 bench: $(CORE_STAMP)
 	$(VENV)/bin/mows bench $(BENCH_ARGS)

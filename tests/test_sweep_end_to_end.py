@@ -37,8 +37,10 @@ def sweep():
                                cycle.saturated[start:], FitOptions(pickup=tuple(pickup)), settle_s=0.003)
             assert fit.ok, fit.message
             shift = fit.frequency_hz - probe.f00_hz
+            a = fit.parameter_names.index("amplitude_rad")
             record.add(SweepPoint(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, shift,
-                                  fit.frequency_std_hz, fit.amplitude_rad, fit.damping_per_s, fit.duration_s, 0.0))
+                                  fit.frequency_std_hz, fit.amplitude_rad, fit.damping_per_s, fit.duration_s, 0.0,
+                                  amplitude_std_rad=float(np.sqrt(fit.covariance[a, a]))))
     return scenario, record
 
 

@@ -68,9 +68,10 @@ class Graph:
     ``up`` (first line of output), ``exit`` and ``signal``. A SimpleQueue, because it is the
     queue that a signal handler may put into."""
 
-    def __init__(self, nodes: tuple[GraphNode, ...], ros_args: list[str]):
+    def __init__(self, nodes: tuple[GraphNode, ...], ros_args: list[str], output=None):
         self._nodes = nodes
         self._ros_args = ros_args
+        self._output = output or sys.stdout   # where the nodes' prefixed lines go
         self._events: queue.SimpleQueue = queue.SimpleQueue()
         self._processes: dict[str, subprocess.Popen] = {}
         self._pumps: list[threading.Thread] = []
@@ -100,11 +101,15 @@ class Graph:
             pump.start()
             self._pumps.append(pump)
 
+    def exited(self) -> list[str]:
+        """Names of the nodes that have ended (for a caller that waits on something else)."""
+        return [name for name, process in self._processes.items() if process.poll() is not None]
+
     def _pump(self, name: str, process: subprocess.Popen) -> None:
         first = True
         for line in process.stdout:
-            sys.stdout.write(f"[{name}] {line}")
-            sys.stdout.flush()
+            self._output.write(f"[{name}] {line}")
+            self._output.flush()
             if first:
                 self._events.put(("up", name))
                 first = False

@@ -140,9 +140,7 @@ class MapperNode(MowsNode):
             record.failed += 1
             return
         f00_seen.append(fit.frequency_hz - fit.frequency_shift_hz)   # the estimator's calibrated f00
-        record.add(SweepPoint(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, fit.frequency_shift_hz,
-                              fit.frequency_shift_std_hz, fit.amplitude_rad, fit.damping_per_s, fit.duration_s,
-                              fit.header.stamp.sec + 1e-9 * fit.header.stamp.nanosec))
+        record.add(sweep_point(fit))
 
     @staticmethod
     def _feedback(index, count, theta0, fits, record) -> RotationSweep.Feedback:
@@ -213,6 +211,18 @@ class MapperNode(MowsNode):
 
     def health(self) -> Health:
         return Health(DiagnosticStatus.OK, self._last, {"state": self._state, "sweeps": self._sweeps})
+
+
+def sweep_point(fit: RingdownFit) -> SweepPoint:
+    """A successful RingdownFit as a point of the sweep, with σ of θmax from its covariance."""
+    names = list(fit.parameter_names)
+    amplitude_std = math.nan
+    if "amplitude_rad" in names:
+        index = names.index("amplitude_rad")
+        amplitude_std = math.sqrt(fit.covariance[index * len(names) + index])
+    return SweepPoint(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, fit.frequency_shift_hz,
+                      fit.frequency_shift_std_hz, fit.amplitude_rad, fit.damping_per_s, fit.duration_s,
+                      fit.header.stamp.sec + 1e-9 * fit.header.stamp.nanosec, amplitude_std)
 
 
 def model_report_msg(report, header, sweep_id: int) -> ModelReport:

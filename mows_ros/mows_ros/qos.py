@@ -7,17 +7,19 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 
-# Raw blocks and per-ring-down results: a late sample is worth less than the next one.
-STREAM_QOS = qos_profile_sensor_data
-
-# A consumer of the raw stream that does real work per block (the estimator fits while
-# blocks keep coming): best effort like the stream, but a deeper queue rides out a fit.
-STREAM_CONSUMER_QOS = QoSProfile(
+# Raw blocks: the sensor-data pattern (best effort, volatile: a late sample is worth less
+# than the next one), with a deeper history than qos_profile_sensor_data's 5. At 40 blocks/s
+# five blocks are 125 ms, and with shared-memory delivery the writer's history is the buffer:
+# a consumer busy fitting on a loaded machine would lose blocks that were never late.
+STREAM_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=64,
-    reliability=ReliabilityPolicy.BEST_EFFORT,
-    durability=DurabilityPolicy.VOLATILE,
+    reliability=qos_profile_sensor_data.reliability,
+    durability=qos_profile_sensor_data.durability,
 )
+
+# A consumer of the raw stream that does real work per block (the estimator) takes the same.
+STREAM_CONSUMER_QOS = STREAM_QOS
 
 # Per-event results (excitation states, ring-down fits, field estimates): low rate, and a
 # consumer that counts them (the mapper waits for every repeat) must not lose one.

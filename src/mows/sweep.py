@@ -239,6 +239,7 @@ class SweepPoint:
     damping_per_s: float
     duration_s: float
     t_s: float
+    amplitude_std_rad: float = math.nan
 
 
 @dataclasses.dataclass
@@ -263,20 +264,36 @@ class SweepRecord:
         shifts = np.array([p.shift_hz for p in chosen])
         return float(weights @ shifts / weights.sum()), float(1.0 / math.sqrt(weights.sum())), len(chosen)
 
+    def start_amplitude_rad(self) -> float:
+        """The sweep's start amplitude: the inverse-variance weighted mean of the fits' θmax.
+
+        Every ring-down starts from the housing stop, and the perpendicular excitation scheme
+        drives every orientation alike; a single fit's θmax, though, is poorly determined near
+        θ0 = 180° (and held at a bound when unidentifiable), so the sweep's pooled value is the
+        better input to the amplitude-dependent springs. The median when no σ is known.
+        """
+        amplitude, std = self._column("amplitude_rad"), self._column("amplitude_std_rad")
+        usable = np.isfinite(std) & (std > 0)
+        if not usable.any():
+            return float(np.median(amplitude))
+        weights = 1.0 / std[usable] ** 2
+        return float(weights @ amplitude[usable] / weights.sum())
+
     def decompose(self, probe: Probe, f00_hz: float, model: str = "first_principles",
                   f00_free: bool = False) -> Decomposition:
         """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof), at
-        each ring-down's own amplitude, damping and fit window."""
+        the sweep's start amplitude and each ring-down's damping and fit window."""
         theta0 = self._column("theta0_rad")
-        nodes = amplitude_nodes(theta0, self._column("amplitude_rad"), self._column("damping_per_s"),
+        nodes = amplitude_nodes(theta0, self.start_amplitude_rad(), self._column("damping_per_s"),
                                 self._column("duration_s"))
         return decompose(theta0, self._column("shift_hz"), self._column("shift_std_hz"), probe, f00_hz,
                          model=model, f00_free=f00_free, amplitude_nodes=nodes)
 
     def table_columns(self) -> dict:
-        """Columns of a model-lab measurement table (docs/model_lab.md)."""
+        """Columns of a model-lab measurement table (docs/model_lab.md); ``amplitude_deg`` is the
+        sweep's start amplitude (:meth:`start_amplitude_rad`)."""
         t = self._column("t_s")
         return {"theta0_deg": np.degrees(self._column("theta0_rad")), "f_hz": self._column("frequency_hz"),
                 "f_std_hz": self._column("frequency_std_hz"), "t_s": t - (t.min() if t.size else 0.0),
-                "amplitude_deg": np.degrees(self._column("amplitude_rad")),
+                "amplitude_deg": np.full(len(self.points), np.degrees(self.start_amplitude_rad())),
                 "damping_per_s": self._column("damping_per_s"), "duration_s": self._column("duration_s")}

@@ -21,6 +21,15 @@ STREAM_QOS = QoSProfile(
 # A consumer of the raw stream that does real work per block (the estimator) takes the same.
 STREAM_CONSUMER_QOS = STREAM_QOS
 
+# Excitation phase changes: every one matters, and a subscriber that joins late learns the
+# present one (a RESULT_QOS subscriber, volatile, is compatible with it).
+EXCITATION_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+
 # Per-event results (excitation states, ring-down fits, field estimates): low rate, and a
 # consumer that counts them (the mapper waits for every repeat) must not lose one.
 RESULT_QOS = QoSProfile(

@@ -1,4 +1,5 @@
-"""A test node spun on demand: tests wait for conditions, never for a fixed time."""
+"""A test node spun on demand: tests wait for conditions, never for a fixed time. The ``start``
+fixture (node_processes.py) runs node processes with their output logged."""
 import time
 from typing import Callable
 
@@ -35,3 +36,6 @@ def ros(ros_context):
     harness = RosHarness()
     yield harness
     harness.close()
+
+
+from node_processes import start  # noqa: E402,F401 (the fixture, shared by the node tests)

@@ -12,6 +12,8 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mows_bringup.graph import NODES, parse_arguments
 
+from node_processes import log
+
 pytestmark = pytest.mark.ros
 
 NODE_NAMES = {f"/{node.name}" for node in NODES}
@@ -25,32 +27,6 @@ def diagnostics(ros):
         DiagnosticArray, "/diagnostics", lambda a: heard.update((s.name, s) for s in a.status), 10
     )
     return heard
-
-
-@pytest.fixture
-def start(tmp_path):
-    """Starts a command with its output in a log file; kills what is left at the end."""
-    processes = []
-
-    def start(*command: str) -> subprocess.Popen:
-        log_path = tmp_path / f"process-{len(processes)}.log"
-        with open(log_path, "w") as log:
-            process = subprocess.Popen(
-                command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT
-            )
-        process.log_path = log_path
-        processes.append(process)
-        return process
-
-    yield start
-    for process in processes:
-        if process.poll() is None:
-            process.kill()
-            process.wait()
-
-
-def log(process: subprocess.Popen) -> str:
-    return process.log_path.read_text()
 
 
 def hear_all(ros, heard: dict, names: set[str], process: subprocess.Popen) -> None:

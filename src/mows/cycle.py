@@ -1,0 +1,453 @@
+"""The measurement cycle as a state machine over device sample indices (issue: the cycle).
+
+One cycle at one orientation θ0: turn the probe and let it settle; excite at the current
+resonance estimate with the coil setup's orientation-dependent currents; switch off and
+record the free ring-down; the first ``tuning_steps`` ring-downs are fitted
+(:func:`mows.ringdown.fit_ringdown`) and retune the excitation frequency, the next
+``repeats`` are the measurements, with a pause of ``gap_s`` between ring-down and excitation.
+
+Time is the device's sample index. Every command is scheduled at a sample, and every phase
+is stamped with the sample at which the device *answered* that its command took effect, so
+that the stamp of a ring-down is the sample the coils went off, exact to one sample. A phase
+is announced once the samples have reached it.
+
+The sequencer does no I/O: it is fed samples, command results and link changes, and returns
+a :class:`Step` of commands to send, phase events to publish, the outcome of a finished
+cycle, and whether the coils must go off at once. The coils are on only in EXCITING: every
+other phase is coils off, and a fault (emergency stop, a refused or unanswered command, a
+lost link) switches them off at once. The emergency stop latches until released.
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from typing import Callable, Generator
+
+import numpy as np
+
+from mows.coils import CoilSetup, CurrentCap
+from mows.device.interface import CoilCommand, Command, CommandResult, LinkEvent, OrientationCommand, SampleChunk
+from mows.duty import DutyCycleLimit
+from mows.ringdown import FitStatus, RingdownFit, failure, fit_ringdown
+
+
+class Phase(enum.IntEnum):
+    """The numbers of mows_msgs/ExcitationState PHASE_*."""
+
+    IDLE = 0
+    SETTLING = 1
+    EXCITING = 2
+    RINGDOWN = 3
+    GAP = 4
+    FAULT = 5
+
+
+@dataclasses.dataclass(frozen=True)
+class PhaseEvent:
+    """A phase began at device sample ``sample_index`` (device time ``stamp_ns``)."""
+
+    phase: Phase
+    sample_index: int
+    stamp_ns: int
+    cycle_id: int = 0
+    repeat_index: int = 0
+    repeats: int = 0
+    tuning: bool = False
+    currents_a: tuple = ()            # signed peak current per coil, A (zeros unless EXCITING)
+    frequency_hz: float = 0.0
+    theta0_rad: float = 0.0
+    planned_duration_s: float = 0.0   # 0: open-ended
+    setup: str = ""
+    reason: str = ""                  # why, for FAULT
+
+    @property
+    def coils_on(self) -> bool:
+        return self.phase == Phase.EXCITING
+
+
+@dataclasses.dataclass(frozen=True)
+class CycleSettings:
+    """How cycles run (the driver's parameters of the same names). SI units."""
+
+    excitation_current_a: float = 2.0
+    excite_s: float = 0.5
+    ringdown_s: float = 0.5
+    gap_s: float = 1.0
+    repeats: int = 3
+    tuning_steps: int = 2
+    settle_s: float = 0.5
+    max_duty_cycle: float = 0.5
+    duty_window_s: float = 10.0
+    confirm_timeout_s: float = 0.5    # device time a command may take to be answered
+
+    def __post_init__(self):
+        for name in ("excitation_current_a", "gap_s", "settle_s"):
+            _require(name, getattr(self, name), getattr(self, name) >= 0.0, "≥ 0")
+        for name in ("excite_s", "ringdown_s", "duty_window_s", "confirm_timeout_s"):
+            _require(name, getattr(self, name), getattr(self, name) > 0.0, "> 0")
+        _require("max_duty_cycle", self.max_duty_cycle, 0.0 < self.max_duty_cycle <= 1.0, "in (0, 1]")
+        _require("repeats", self.repeats, self.repeats >= 1, "≥ 1")
+        _require("tuning_steps", self.tuning_steps, self.tuning_steps >= 0, "≥ 0")
+
+
+def _require(name: str, value, ok: bool, allowed: str) -> None:
+    if not (ok and math.isfinite(value)):
+        raise ValueError(f"{name} = {value!r} must be {allowed}")
+
+
+@dataclasses.dataclass(frozen=True)
+class CycleRequest:
+    """One cycle at ``theta0_rad``; None takes the value from the settings."""
+
+    theta0_rad: float
+    repeats: int | None = None
+    tuning_steps: int | None = None
+    gap_s: float | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class CycleOutcome:
+    success: bool
+    message: str
+    cycle_id: int
+    frequency_hz: float               # the excitation frequency after tuning
+    ringdowns_recorded: int
+    tuning_fits: tuple = ()
+
+
+@dataclasses.dataclass
+class Step:
+    """What the caller must do after feeding the sequencer: send ``commands``, publish
+    ``events``, report ``outcome`` (a cycle ended), and switch the coils off now if told."""
+
+    commands: list = dataclasses.field(default_factory=list)
+    events: list = dataclasses.field(default_factory=list)
+    outcome: CycleOutcome | None = None
+    coils_off_now: bool = False
+
+
+class CycleAborted(Exception):
+    """Ends a running cycle: the device refused or did not answer a command."""
+
+
+@dataclasses.dataclass(frozen=True)
+class _Reach:
+    """Resume once every sample before ``index`` has been received."""
+
+    index: int
+
+
+@dataclasses.dataclass(frozen=True)
+class _Answer:
+    """Resume with the result of ``command``; abort after sample ``deadline_index``."""
+
+    command: Command
+    deadline_index: int
+
+
+class _Recording:
+    """The samples [start, end) as they arrive; ``complete`` if none was missing."""
+
+    def __init__(self, start: int, end: int):
+        self.start, self.end = start, end
+        self._parts: list[SampleChunk] = []
+        self._next = start
+
+    def add(self, chunk: SampleChunk) -> None:
+        lo, hi = max(chunk.first_sample_index, self.start), min(chunk.end_index, self.end)
+        # Samples after a gap are not kept: the recording stays incomplete.
+        if lo < hi and lo == self._next:
+            self._parts.append(chunk)
+            self._next = hi
+
+    @property
+    def complete(self) -> bool:
+        return self._next == self.end
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        rows = [(max(c.first_sample_index, self.start) - c.first_sample_index,
+                 min(c.end_index, self.end) - c.first_sample_index) for c in self._parts]
+        return (np.concatenate([c.samples_t[a:b] for c, (a, b) in zip(self._parts, rows)]),
+                np.concatenate([c.saturated[a:b] for c, (a, b) in zip(self._parts, rows)]))
+
+
+@dataclasses.dataclass(frozen=True)
+class _Cycle:
+    """A running cycle's fixed choices."""
+
+    cycle_id: int
+    theta0_rad: float
+    repeats: int
+    tuning_steps: int
+    gap_s: float
+    settings: CycleSettings
+
+
+class CycleSequencer:
+    """Runs one cycle at a time on a device of ``sample_rate_hz`` with the coils of ``setup``.
+
+    ``frequency_hz`` is the first resonance estimate (retuned by every cycle);
+    ``lead_samples`` how far ahead of the newest sample commands are scheduled; ``cap`` the
+    driver's coil current cap (no command above it is ever issued).
+    """
+
+    def __init__(self, settings: CycleSettings, setup: CoilSetup, cap: CurrentCap, sample_rate_hz: float,
+                 frequency_hz: float, lead_samples: int = 0,
+                 fit: Callable[..., RingdownFit] = fit_ringdown):
+        self.settings = settings
+        self.setup = setup
+        self.cap = cap
+        self.sample_rate_hz = float(sample_rate_hz)
+        self.frequency_hz = float(frequency_hz)
+        self.lead_samples = int(lead_samples)
+        self.latched: str | None = None  # the reason of a latched emergency stop
+        self.phase = Phase.IDLE
+        self._fit = fit
+        self._duty = DutyCycleLimit(settings.max_duty_cycle, self._samples(settings.duty_window_s))
+        self._anchor: tuple[int, int] | None = None  # (sample index, stamp ns) of a received sample
+        self._next_index = 0
+        self._cycle: _Cycle | None = None
+        self._runner: Generator | None = None
+        self._wait: _Reach | _Answer | None = None
+        self._results: dict[int, CommandResult] = {}
+        self._recordings: list[_Recording] = []
+        self._unstamped: list[tuple[Phase, str]] = []  # events raised before the first sample
+        self._last_cycle_id = 0
+        self._last_command_id = 0
+        self._step = Step()
+        self._announce(Phase.IDLE, "driver started")
+
+    # --- inputs ----------------------------------------------------------------------------
+    @property
+    def busy(self) -> bool:
+        return self._runner is not None
+
+    @property
+    def next_index(self) -> int:
+        return self._next_index
+
+    @property
+    def last_cycle_id(self) -> int:
+        """The id of the cycle started last (0 before the first)."""
+        return self._last_cycle_id
+
+    def duty_fraction(self) -> float:
+        """Share of the last duty window with the coils on."""
+        return self._duty.fraction(self._next_index)
+
+    def start(self, request: CycleRequest) -> Step:
+        """Begin a cycle. ValueError, with the reason, if it cannot run."""
+        cycle = self._plan(request)
+        self._step = Step()
+        self._cycle = cycle
+        self._runner = self._run(cycle)
+        self._advance(None)
+        return self._take_step()
+
+    def on_samples(self, chunk: SampleChunk) -> Step:
+        self._anchor = (chunk.first_sample_index, chunk.stamp_ns)
+        self._next_index = chunk.end_index
+        for recording in self._recordings:
+            recording.add(chunk)
+        for phase, reason in self._unstamped:  # they hold from the first sample on
+            self._emit(phase, chunk.first_sample_index, reason=reason)
+        self._unstamped.clear()
+        self._resume()
+        return self._take_step()
+
+    def on_result(self, result: CommandResult) -> Step:
+        if self.busy:  # an answer that comes after its cycle failed has nobody waiting
+            self._results[result.command_id] = result
+            self._resume()
+        return self._take_step()
+
+    def on_link(self, event: LinkEvent) -> Step:
+        if not event.up and self.busy:
+            self._fault(f"link to the device lost: {event.reason}")
+        return self._take_step()
+
+    def abort(self, reason: str) -> Step:
+        """End the running cycle (coils off at once): the samples stopped, the driver stops."""
+        if self.busy:
+            self._fault(reason)
+        return self._take_step()
+
+    def emergency_stop(self, reason: str) -> Step:
+        """Coils off at once, the running cycle failed, and no cycle until :meth:`release`."""
+        self.latched = reason or "no reason given"
+        self._fault(f"emergency stop: {self.latched}")
+        return self._take_step()
+
+    def release(self) -> Step:
+        if self.latched is not None:
+            self.latched = None
+            self._announce(Phase.IDLE, "emergency stop released")
+        return self._take_step()
+
+    # --- the cycle -------------------------------------------------------------------------
+    def _plan(self, request: CycleRequest) -> _Cycle:
+        if self.latched is not None:
+            raise ValueError(f"emergency stop latched ({self.latched}); release it before a cycle")
+        if self.busy:
+            raise ValueError(f"cycle {self._cycle.cycle_id} is still running")
+        if self._anchor is None:
+            raise ValueError("no samples from the device yet")
+        s = self.settings
+        cycle = _Cycle(self._last_cycle_id + 1, float(request.theta0_rad),
+                       s.repeats if request.repeats is None else request.repeats,
+                       s.tuning_steps if request.tuning_steps is None else request.tuning_steps,
+                       s.gap_s if request.gap_s is None else request.gap_s, s)
+        CycleSettings(**{**dataclasses.asdict(s), "repeats": cycle.repeats, "tuning_steps": cycle.tuning_steps,
+                         "gap_s": cycle.gap_s})  # ValueError for a request out of range
+        _require("theta0_rad", cycle.theta0_rad, True, "finite")
+        self._currents(cycle)  # ValueError above the cap
+        self._duty.configure(s.max_duty_cycle, self._samples(s.duty_window_s))
+        self._duty.earliest_start(self._next_index, self._samples(s.excite_s))  # ValueError if it never fits
+        self._last_cycle_id = cycle.cycle_id
+        return cycle
+
+    def _run(self, c: _Cycle) -> Generator:
+        s = c.settings
+        excite, ringdown = self._samples(s.excite_s), self._samples(s.ringdown_s)
+        turned = yield from self._answer(self._issue(OrientationCommand, self._next_index + self.lead_samples,
+                                                     theta0_rad=c.theta0_rad))
+        settle = self._samples(s.settle_s)
+        yield from self._enter(c, Phase.SETTLING, turned, settle)
+        coils_free = turned + settle  # from here on the coils are off and nothing is scheduled
+        fits, recorded = [], 0
+        for k in range(c.tuning_steps + c.repeats):
+            tuning = k < c.tuning_steps
+            index = k if tuning else k - c.tuning_steps
+            gap = self._samples(c.gap_s) if k else 0
+            start = self._duty.earliest_start(max(coils_free + gap, self._next_index + self.lead_samples), excite)
+            currents = self._currents(c)
+            on = self._issue(CoilCommand, start, amplitudes_a=currents, frequency_hz=self.frequency_hz)
+            off = self._issue(CoilCommand, start + excite, amplitudes_a=(0.0,) * len(currents),
+                              frequency_hz=self.frequency_hz)
+            if start > coils_free:
+                yield from self._enter(c, Phase.GAP, coils_free, start - coils_free, index, tuning)
+            switched_on = yield from self._answer(on)
+            switched_off = yield from self._answer(off)
+            self._duty.record(switched_on, switched_off)
+            recording = _Recording(switched_off, switched_off + ringdown)
+            self._recordings.append(recording)
+            yield from self._enter(c, Phase.EXCITING, switched_on, switched_off - switched_on, index, tuning,
+                                   currents)
+            yield from self._enter(c, Phase.RINGDOWN, switched_off, ringdown, index, tuning)
+            yield _Reach(recording.end)
+            self._recordings.remove(recording)
+            if tuning:
+                fits.append(self._tune(c, recording))
+            else:
+                recorded += 1
+            coils_free = recording.end
+        yield from self._enter(c, Phase.IDLE, coils_free, 0)
+        failed = [f for f in fits if not f.ok]
+        message = f"{recorded} ring-downs recorded at {self.frequency_hz:.4f} Hz"
+        if failed:
+            message += f"; {len(failed)} of {len(fits)} tuning fits failed ({failed[-1].report()})"
+        return CycleOutcome(True, message, c.cycle_id, self.frequency_hz, recorded, tuple(fits))
+
+    def _tune(self, c: _Cycle, recording: _Recording) -> RingdownFit:
+        """Fit a tuning ring-down; a good fit becomes the excitation frequency."""
+        if not recording.complete:
+            return failure(FitStatus.DATA_GAP, "samples of the tuning ring-down were lost")
+        samples, saturated = recording.arrays()
+        fit = self._fit(samples, self.sample_rate_hz, c.theta0_rad, self.frequency_hz, saturated=saturated)
+        if fit.ok:
+            self.frequency_hz = float(fit.frequency_hz)
+        return fit
+
+    def _currents(self, c: _Cycle) -> tuple:
+        """The setup's coil currents at θ0, checked against the cap (ValueError above it)."""
+        currents = self.setup.currents_a(c.theta0_rad, c.settings.excitation_current_a)
+        return tuple(float(i) for i in self.cap.check(currents))
+
+    # --- waiting ---------------------------------------------------------------------------
+    def _issue(self, kind, at_index: int, **fields) -> Command:
+        self._last_command_id += 1
+        command = kind(self._last_command_id, int(at_index), **fields)
+        self._step.commands.append(command)
+        return command
+
+    def _answer(self, command: Command) -> Generator:
+        deadline = max(command.at_sample_index, self._next_index) + self._samples(self.settings.confirm_timeout_s)
+        result = yield _Answer(command, deadline)
+        if not result.accepted:
+            raise CycleAborted(f"the device refused {type(command).__name__} {command.command_id}: {result.reason}")
+        return result.applied_sample_index
+
+    def _enter(self, c: _Cycle, phase: Phase, index: int, duration_samples: int, repeat_index: int = 0,
+               tuning: bool = False, currents: tuple = ()) -> Generator:
+        yield _Reach(index + 1)
+        self._emit(phase, index, cycle=c, duration_samples=duration_samples, repeat_index=repeat_index,
+                   tuning=tuning, currents=currents)
+
+    def _resume(self) -> None:
+        while self._runner is not None:
+            wait = self._wait
+            if isinstance(wait, _Reach):
+                if self._next_index < wait.index:
+                    return
+                value = None
+            else:
+                value = self._results.pop(wait.command.command_id, None)
+                if value is None:
+                    if self._next_index > wait.deadline_index:
+                        self._fault(f"the device did not answer {type(wait.command).__name__} "
+                                    f"{wait.command.command_id} in {self.settings.confirm_timeout_s:g} s")
+                    return
+            self._advance(value)
+
+    def _advance(self, value) -> None:
+        try:
+            self._wait = self._runner.send(value)
+        except StopIteration as finished:
+            self._end(finished.value)
+        except CycleAborted as aborted:
+            self._fault(str(aborted))
+
+    def _end(self, outcome: CycleOutcome) -> None:
+        self._step.outcome = outcome
+        self._runner, self._wait, self._cycle = None, None, None
+        self._recordings.clear()
+        self._results.clear()
+
+    def _fault(self, reason: str) -> None:
+        """Coils off now; the running cycle (if any) fails with ``reason``."""
+        self._step.coils_off_now = True
+        if self._runner is not None:
+            cycle = self._cycle
+            self._runner.close()
+            self._end(CycleOutcome(False, reason, cycle.cycle_id, self.frequency_hz, 0))
+        self._announce(Phase.FAULT, reason)
+
+    # --- events ----------------------------------------------------------------------------
+    def _announce(self, phase: Phase, reason: str) -> None:
+        """A phase that begins at the device's next sample (known only once samples arrive)."""
+        if self._anchor is None:
+            self._unstamped.append((phase, reason))
+        else:
+            self._emit(phase, self._next_index, reason=reason)
+
+    def _emit(self, phase: Phase, index: int, cycle: _Cycle | None = None, duration_samples: int = 0,
+              repeat_index: int = 0, tuning: bool = False, currents: tuple = (), reason: str = "") -> None:
+        self.phase = phase
+        anchor_index, anchor_ns = self._anchor
+        n_coils = len(self.setup.phases_rad)
+        self._step.events.append(PhaseEvent(
+            phase=phase, sample_index=index,
+            stamp_ns=anchor_ns + round((index - anchor_index) * 1e9 / self.sample_rate_hz),
+            cycle_id=cycle.cycle_id if cycle else 0, repeat_index=repeat_index,
+            repeats=cycle.repeats if cycle else 0, tuning=tuning,
+            currents_a=currents or (0.0,) * n_coils, frequency_hz=self.frequency_hz,
+            theta0_rad=cycle.theta0_rad if cycle else 0.0,
+            planned_duration_s=duration_samples / self.sample_rate_hz, setup=self.setup.name, reason=reason))
+
+    def _take_step(self) -> Step:
+        step, self._step = self._step, Step()
+        return step
+
+    def _samples(self, seconds: float) -> int:
+        return int(round(seconds * self.sample_rate_hz))

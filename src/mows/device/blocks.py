@@ -1,0 +1,94 @@
+"""Cutting the sample stream into published blocks, with gaps shown and counted.
+
+Blocks hold ``block_samples`` consecutive samples. A block never spans a gap: when samples
+are missing, the block being filled is published short, the gap is counted, and the next
+block's sequence number jumps by one more than the blocks' worth of samples lost (at least
+2), so that a subscriber sees the loss in ``sequence`` as well as in ``first_sample_index``.
+Nothing is interpolated or filled in.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from mows.device.interface import SampleChunk
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Block(SampleChunk):
+    """One published block: a chunk with the block's ``sequence`` number."""
+
+    sequence: int
+
+
+class BlockAssembler:
+    """Chunks in, blocks of ``block_samples`` out (``block_samples`` may change between blocks)."""
+
+    def __init__(self, block_samples: int, sample_rate_hz: float):
+        self.block_samples = int(block_samples)
+        self.sample_rate_hz = float(sample_rate_hz)
+        self.gaps = 0               # discontinuities of the sample index
+        self.missing_samples = 0    # samples lost in them (forward jumps)
+        self.restarts = 0           # jumps backwards: the device's counter started again
+        self.samples = 0
+        self.saturated_samples = 0  # samples with any channel saturated
+        self._parts: list[SampleChunk] = []
+        self._pending = 0
+        self._expected: int | None = None
+        self._sequence = 0
+
+    def add(self, chunk: SampleChunk) -> list[Block]:
+        """The blocks completed by ``chunk``."""
+        blocks = []
+        if self._expected is not None and chunk.first_sample_index != self._expected:
+            blocks += self.flush()
+            self._sequence += self._count_gap(chunk.first_sample_index - self._expected)
+        self._expected = chunk.end_index
+        self.samples += len(chunk)
+        self.saturated_samples += int(np.count_nonzero(chunk.saturated.any(axis=1)))
+        self._parts.append(chunk)
+        self._pending += len(chunk)
+        while self._pending >= self.block_samples:
+            blocks.append(self._cut(self.block_samples))
+        return blocks
+
+    def flush(self) -> list[Block]:
+        """The block being filled, short, if it holds any samples."""
+        return [self._cut(self._pending)] if self._pending else []
+
+    def _count_gap(self, jump: int) -> int:
+        """Count a jump of the sample index; the extra sequence steps it takes."""
+        self.gaps += 1
+        if jump < 0:
+            self.restarts += 1
+            return 1
+        self.missing_samples += jump
+        return max(1, math.ceil(jump / self.block_samples))
+
+    def _cut(self, n: int) -> Block:
+        """A block of the first ``n`` pending samples."""
+        first = self._parts[0]
+        taken, rest, need = [], [], n
+        for part in self._parts:
+            if need >= len(part):
+                taken.append(part)
+                need -= len(part)
+            elif need > 0:
+                taken.append(self._slice(part, 0, need))
+                rest.append(self._slice(part, need, len(part)))
+                need = 0
+            else:
+                rest.append(part)
+        self._parts, self._pending = rest, self._pending - n
+        block = Block(first.first_sample_index, first.stamp_ns, np.concatenate([p.samples_t for p in taken]),
+                      np.concatenate([p.saturated for p in taken]), self._sequence)
+        self._sequence += 1
+        return block
+
+    def _slice(self, chunk: SampleChunk, start: int, stop: int) -> SampleChunk:
+        """Rows [start, stop) of ``chunk``, restamped (the device clock is linear in samples)."""
+        return SampleChunk(chunk.first_sample_index + start,
+                           chunk.stamp_ns + round(start * 1e9 / self.sample_rate_hz),
+                           chunk.samples_t[start:stop], chunk.saturated[start:stop])

@@ -1,0 +1,139 @@
+"""What a device is to the driver, whatever is behind it (the simulator, a serial link, a bag).
+
+The driver sends commands that take effect at a device sample index and learns, from a
+:class:`CommandResult`, the sample at which each one did (or why it was refused). It polls
+for what the device has sent since: :class:`SampleChunk` runs of consecutive samples stamped
+on the device clock, command results, and :class:`LinkEvent` changes of the link.
+"""
+from __future__ import annotations
+
+import abc
+import dataclasses
+
+import numpy as np
+
+from mows.coils import CurrentCap
+from mows.framing import DeviceInfo
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SampleChunk:
+    """Consecutive samples: row i was taken at ``stamp_ns`` + i / sample rate on the device
+    clock. ``samples_t`` (n, channels) tesla; ``saturated`` (n, channels) flags samples
+    clipped at the range limit (their value is not a measurement)."""
+
+    first_sample_index: int
+    stamp_ns: int
+    samples_t: np.ndarray
+    saturated: np.ndarray
+
+    def __len__(self) -> int:
+        return self.samples_t.shape[0]
+
+    @property
+    def end_index(self) -> int:
+        """The sample index after the last one."""
+        return self.first_sample_index + len(self)
+
+
+@dataclasses.dataclass(frozen=True)
+class CoilCommand:
+    """Drive the coils with signed peak currents ``amplitudes_a`` at ``frequency_hz`` from
+    device sample ``at_sample_index`` on; all amplitudes zero switches them off."""
+
+    command_id: int
+    at_sample_index: int
+    amplitudes_a: tuple
+    frequency_hz: float
+
+    @property
+    def off(self) -> bool:
+        return not any(self.amplitudes_a)
+
+
+@dataclasses.dataclass(frozen=True)
+class OrientationCommand:
+    """Turn the probe (the rotation stage) to ``theta0_rad`` at device sample ``at_sample_index``."""
+
+    command_id: int
+    at_sample_index: int
+    theta0_rad: float
+
+
+Command = CoilCommand | OrientationCommand
+
+
+@dataclasses.dataclass(frozen=True)
+class CommandResult:
+    """The device's answer to command ``command_id``: the sample it applies at, or why not."""
+
+    command_id: int
+    accepted: bool
+    applied_sample_index: int = -1
+    reason: str = ""
+
+
+@dataclasses.dataclass(frozen=True)
+class LinkEvent:
+    """The link to the device came up (the device answered) or went down, and why."""
+
+    up: bool
+    reason: str
+
+
+@dataclasses.dataclass(frozen=True)
+class DeviceFault:
+    """The device switched its coils off by itself (its watchdog): a running cycle is void."""
+
+    reason: str
+
+
+class NotExciting(RuntimeError):
+    """A command to a device that cannot take it now (a recording, a link that is down)."""
+
+
+class Backend(abc.ABC):
+    """Where the driver's samples come from and its commands go to.
+
+    ``info`` describes the device once it is known (None before a serial device answers);
+    ``command_lead_samples`` is how far ahead of the newest received sample a command must
+    be scheduled to reach the device in time (a late one applies at the device's next sample,
+    and its result says which).
+    """
+
+    name: str
+    info: DeviceInfo | None
+    can_excite: bool
+    command_lead_samples: int = 0
+
+    @abc.abstractmethod
+    def poll(self, timeout_s: float) -> list:
+        """What the device sent since the last poll (SampleChunk, CommandResult, LinkEvent,
+        DeviceFault and, from a recording, the recorded cycle.PhaseEvent), waiting up to
+        ``timeout_s`` for something to arrive."""
+
+    @abc.abstractmethod
+    def send(self, command: Command) -> None:
+        """Queue ``command``; its CommandResult arrives through ``poll``. ValueError for a coil
+        current above the cap (nothing is sent); NotExciting when the device cannot take it."""
+
+    @abc.abstractmethod
+    def coils_off_now(self) -> None:
+        """Switch the coils off at the device's next sample and cancel every waiting command.
+        Never raises: when the link is down the device's watchdog has switched them off."""
+
+    @abc.abstractmethod
+    def stats(self) -> dict:
+        """Counters and state for /diagnostics: always ``link`` (a word), more by backend."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Coils off, then release the device."""
+
+
+def check_coil_command(command: CoilCommand, info: DeviceInfo, cap_a: float) -> None:
+    """ValueError if ``command`` has the wrong number of coils or a current above ``cap_a``
+    or the device's own cap: such a command is never sent."""
+    if len(command.amplitudes_a) != info.n_coils:
+        raise ValueError(f"{len(command.amplitudes_a)} coil amplitudes given; the device has {info.n_coils} coils")
+    CurrentCap(min(cap_a, info.current_cap_a)).check(command.amplitudes_a)

@@ -1,0 +1,221 @@
+"""A driver session: one backend, the cycle sequencer and the block assembler, driven by one
+streaming thread, with cycles and the emergency stop requested from other threads.
+
+The streaming thread calls :meth:`DeviceSession.step` in a loop and publishes what it
+returns (blocks, phase events) in order. Requests from other threads (a cycle, the emergency
+stop) take the session's lock, act on the device at once (the emergency stop switches the
+coils off before it returns) and leave their phase events for the next ``step`` to publish.
+Nothing here knows about ROS.
+"""
+from __future__ import annotations
+
+import collections
+import dataclasses
+import threading
+import time
+from typing import Callable
+
+from mows.coils import CoilSetup, CurrentCap
+from mows.cycle import CycleOutcome, CycleRequest, CycleSequencer, CycleSettings, PhaseEvent, Step
+from mows.device.blocks import Block, BlockAssembler
+from mows.device.interface import Backend, CommandResult, DeviceFault, LinkEvent, SampleChunk
+
+STALL_TIMEOUT_S = 2.0      # a running cycle fails when no samples arrive for this long (host time)
+RATE_WINDOW_S = 5.0        # the achieved sample rate is measured over this much host time
+
+
+@dataclasses.dataclass
+class Output:
+    """What one step produced, in the order it is to be published."""
+
+    blocks: list[Block] = dataclasses.field(default_factory=list)
+    events: list[PhaseEvent] = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass(frozen=True)
+class SessionConfig:
+    block_duration_s: float
+    settings: CycleSettings
+    setup: CoilSetup
+    cap: CurrentCap
+    frequency_hz: float          # the first resonance estimate
+
+
+class DeviceSession:
+    """``backend`` streamed into blocks; cycles run by a :class:`CycleSequencer` built once the
+    device is known (a serial device describes itself when it answers)."""
+
+    def __init__(self, backend: Backend, config: SessionConfig, monotonic: Callable[[], float] = time.monotonic):
+        self.backend = backend
+        self.config = config
+        self.sequencer: CycleSequencer | None = None
+        self.assembler: BlockAssembler | None = None
+        self.link_up = backend.info is not None
+        self.link_changes = 0
+        self.last_link_reason = ""
+        self.refused_commands = 0
+        self.device_faults = 0
+        self.last_device_fault = ""
+        self._monotonic = monotonic
+        self._lock = threading.RLock()
+        self._events: list[PhaseEvent] = []
+        self._on_done: Callable[[CycleOutcome], None] | None = None
+        self._last_samples_s = monotonic()
+        self._first_samples_s: float | None = None
+        self._arrivals: collections.deque = collections.deque()  # (host time, samples) for the rate
+        if backend.info is not None:
+            self._device_known()
+
+    # --- the streaming thread --------------------------------------------------------------
+    def step(self, timeout_s: float) -> Output:
+        """Poll the backend once (up to ``timeout_s``) and act on what came."""
+        items = self.backend.poll(timeout_s)
+        with self._lock:
+            output = Output()
+            for item in items:
+                self._take(item, output)
+            if self.sequencer is not None and self.sequencer.busy \
+                    and self._monotonic() - self._last_samples_s > STALL_TIMEOUT_S:
+                self._act(self.sequencer.abort(f"no samples from the device for {STALL_TIMEOUT_S:g} s"))
+            output.events += self._events
+            self._events = []
+            return output
+
+    def _take(self, item, output: Output) -> None:
+        if isinstance(item, SampleChunk):
+            self._count_arrival(len(item))
+            output.blocks += self.assembler.add(item)
+            if self.sequencer is not None:
+                self._act(self.sequencer.on_samples(item))
+        elif isinstance(item, CommandResult):
+            self.refused_commands += not item.accepted
+            self._act(self.sequencer.on_result(item))
+        elif isinstance(item, LinkEvent):
+            self._link(item)
+        elif isinstance(item, DeviceFault):
+            self.device_faults += 1
+            self.last_device_fault = item.reason
+            if self.sequencer is not None:
+                self._act(self.sequencer.abort(item.reason))
+        else:  # a PhaseEvent replayed from a recording
+            self._events.append(item)
+
+    def _link(self, event: LinkEvent) -> None:
+        self.link_up, self.last_link_reason = event.up, event.reason
+        self.link_changes += 1
+        if event.up:
+            if self.assembler is None:
+                self._device_known()
+            # Whatever the device did while we were away, its coils go off now.
+            self.backend.coils_off_now()
+        if self.sequencer is not None:
+            self._act(self.sequencer.on_link(event))
+
+    def _device_known(self) -> None:
+        info = self.backend.info
+        self.assembler = BlockAssembler(round(self.config.block_duration_s * info.sample_rate_hz),
+                                        info.sample_rate_hz)
+        if self.backend.can_excite:
+            c = self.config
+            self.sequencer = CycleSequencer(c.settings, c.setup, c.cap, info.sample_rate_hz, c.frequency_hz,
+                                            self.backend.command_lead_samples)
+
+    def _count_arrival(self, n: int) -> None:
+        now = self._monotonic()
+        self._last_samples_s = now
+        if self._first_samples_s is None:
+            self._first_samples_s = now
+        self._arrivals.append((now, n))
+        while now - self._arrivals[0][0] > RATE_WINDOW_S:
+            self._arrivals.popleft()
+
+    def _act(self, step: Step) -> None:
+        """Carry out what the sequencer asked for."""
+        if step.coils_off_now:
+            self.backend.coils_off_now()
+        for command in step.commands:
+            try:
+                self.backend.send(command)
+            except (ValueError, RuntimeError) as refused:
+                # Refused before it left (the cap, a link that is down): the cycle learns why,
+                # fails, and the rest of its commands are not sent.
+                self._act(self.sequencer.on_result(CommandResult(command.command_id, False, reason=str(refused))))
+                break
+        self._events += step.events
+        if step.outcome is not None and self._on_done is not None:
+            done, self._on_done = self._on_done, None
+            done(step.outcome)
+
+    # --- requests from other threads -------------------------------------------------------
+    def start_cycle(self, request: CycleRequest, on_done: Callable[[CycleOutcome], None]) -> int:
+        """Start a cycle; ``on_done(outcome)`` is called (from the streaming thread, or from the
+        thread that stops it) when it ends. Returns its cycle id; ValueError if it cannot run."""
+        with self._lock:
+            if self.sequencer is None:
+                raise ValueError(f"the {self.backend.name} backend cannot run cycles"
+                                 if not self.backend.can_excite else "the device has not answered yet")
+            if not self.link_up:
+                raise ValueError(f"the link to the device is down ({self.last_link_reason})")
+            step = self.sequencer.start(request)
+            self._on_done = on_done
+            self._last_samples_s = self._monotonic()
+            self._act(step)
+            return self.sequencer.last_cycle_id
+
+    def emergency_stop(self, engage: bool, reason: str) -> bool:
+        """Engage (coils off at once, latch) or release; returns whether it is latched."""
+        with self._lock:
+            if engage:
+                self.backend.coils_off_now()
+            if self.sequencer is None:
+                return False
+            self._act(self.sequencer.emergency_stop(reason) if engage else self.sequencer.release())
+            return self.sequencer.latched is not None
+
+    def set_block_duration(self, block_duration_s: float) -> None:
+        with self._lock:
+            self.config = dataclasses.replace(self.config, block_duration_s=block_duration_s)
+            if self.assembler is not None:
+                self.assembler.block_samples = round(block_duration_s * self.assembler.sample_rate_hz)
+
+    def set_cycle_settings(self, settings: CycleSettings) -> None:
+        """Settings for the next cycle (a running one keeps its own)."""
+        with self._lock:
+            self.config = dataclasses.replace(self.config, settings=settings)
+            if self.sequencer is not None:
+                self.sequencer.settings = settings
+
+    def close(self) -> None:
+        """Coils off and the device released; a running cycle fails."""
+        with self._lock:
+            if self.sequencer is not None and self.sequencer.busy:
+                self._act(self.sequencer.abort("the driver is shutting down"))
+            self.backend.close()
+
+    # --- state -----------------------------------------------------------------------------
+    def achieved_rate_hz(self) -> float | None:
+        """Samples received per host second over the last RATE_WINDOW_S; None in the first
+        RATE_WINDOW_S of samples, when the stream catches up with the time its start took."""
+        with self._lock:
+            if self._first_samples_s is None or self._monotonic() - self._first_samples_s < RATE_WINDOW_S \
+                    or len(self._arrivals) < 2:
+                return None
+            span = self._arrivals[-1][0] - self._arrivals[0][0]
+            return sum(n for _, n in list(self._arrivals)[1:]) / span if span > 0 else None
+
+    def health(self) -> dict:
+        """Everything /diagnostics reports, as plain values."""
+        with self._lock:
+            values = {"link_up": self.link_up, "link_changes": self.link_changes,
+                      "link_reason": self.last_link_reason, "refused_commands": self.refused_commands,
+                      "device_faults": self.device_faults, "last_device_fault": self.last_device_fault,
+                      **self.backend.stats()}
+            a, s = self.assembler, self.sequencer
+            if a is not None:
+                values.update(samples=a.samples, gaps=a.gaps, missing_samples=a.missing_samples,
+                              device_restarts=a.restarts, saturated_samples=a.saturated_samples)
+            if s is not None:
+                values.update(phase=s.phase.name, cycle_running=s.busy, estop_latched=s.latched is not None,
+                              estop_reason=s.latched or "", excitation_frequency_hz=s.frequency_hz,
+                              duty_cycle=s.duty_fraction())
+            return values

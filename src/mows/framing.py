@@ -1,0 +1,378 @@
+"""The serial frame codec of the MOWS device link (docs/serial_protocol.md).
+
+A frame, little-endian::
+
+    offset  size  field
+    0       2     sync word A5 5A
+    2       1     protocol version (1)
+    3       1     frame type
+    4       2     payload length N, bytes (at most MAX_PAYLOAD_BYTES)
+    6       4     sequence number: the sender's frame counter, +1 per frame, wraps at 2**32
+    10      8     timestamp, ns: the device clock in frames from the device, the host's
+                  monotonic clock in frames from the host
+    18      N     payload (its layout depends on the type: the ``Body`` classes below)
+    18+N    4     CRC-32 (zlib/IEEE 802.3) of bytes 2 … 18+N−1 (everything after the sync word)
+
+:class:`FrameDecoder` is incremental and never raises on data: it finds frames in any byte
+stream, returns only frames whose CRC and payload check out, and counts what it throws away
+(rejected candidates by reason, and discarded bytes), so that nothing disappears unseen.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import struct
+import zlib
+from collections import Counter
+from typing import ClassVar
+
+import numpy as np
+
+SYNC = b"\xa5\x5a"
+VERSION = 1
+HEADER = struct.Struct("<BBHIQ")  # version, type, length, sequence, timestamp_ns (after SYNC)
+HEADER_BYTES = len(SYNC) + HEADER.size
+CRC = struct.Struct("<I")
+MAX_PAYLOAD_BYTES = 16384
+SEQUENCE_MODULUS = 2**32
+
+# Why a candidate frame was rejected (FrameDecoder.rejected keys).
+REJECT_VERSION = "version"      # unknown protocol version
+REJECT_LENGTH = "length"        # payload length above MAX_PAYLOAD_BYTES
+REJECT_CRC = "crc"              # CRC mismatch: corrupted or not a frame at all
+REJECT_TYPE = "type"            # CRC fine, frame type unknown
+REJECT_PAYLOAD = "payload"      # CRC fine, payload does not fit its type
+REJECT_TRUNCATED = "truncated"  # the stream ended (link lost) inside the frame
+REJECT_REASONS = (REJECT_VERSION, REJECT_LENGTH, REJECT_CRC, REJECT_TYPE, REJECT_PAYLOAD, REJECT_TRUNCATED)
+
+
+class PayloadError(ValueError):
+    """A payload that does not fit its frame type."""
+
+
+class Body:
+    """A frame's payload. Subclasses define TYPE, ``encode() -> bytes`` and ``decode(bytes)``
+    (PayloadError when the bytes do not fit)."""
+
+    TYPE: ClassVar[int]
+
+    def encode(self) -> bytes:
+        raise NotImplementedError
+
+    @classmethod
+    def decode(cls, payload: bytes) -> Body:
+        raise NotImplementedError
+
+
+def _unpack_exact(layout: struct.Struct, payload: bytes, what: str) -> tuple:
+    if len(payload) != layout.size:
+        raise PayloadError(f"{what} payload has {len(payload)} bytes, expected {layout.size}")
+    return layout.unpack(payload)
+
+
+class FixedBody(Body):
+    """A payload of fixed size: the dataclass fields, in order, packed with LAYOUT."""
+
+    LAYOUT: ClassVar[struct.Struct]
+
+    def encode(self) -> bytes:
+        return self.LAYOUT.pack(*dataclasses.astuple(self))
+
+    @classmethod
+    def decode(cls, payload: bytes) -> FixedBody:
+        return cls(*_unpack_exact(cls.LAYOUT, payload, cls.__name__))
+
+
+# --- device → host --------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class DeviceInfo(FixedBody):
+    """What the device is: sent after boot, after a reconnection and in reply to Hello."""
+
+    TYPE: ClassVar[int] = 0x01
+    LAYOUT: ClassVar[struct.Struct] = struct.Struct("<dBBdddd")
+    sample_rate_hz: float
+    n_channels: int
+    n_coils: int
+    range_t: float              # full scale of every channel, ±range_t
+    resolution_t: float         # one count of a Samples frame, tesla
+    current_cap_a: float        # the device refuses coil amplitudes above this
+    watchdog_timeout_s: float   # coils off when no host frame arrived for this long
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Samples(Body):
+    """Consecutive samples of every channel: sample i was taken at the frame's timestamp +
+    i / sample_rate_hz. ``counts`` (n, channels) int32 in units of DeviceInfo.resolution_t,
+    ``saturated`` (n, channels) bool; both sample-major on the wire, the flags packed 8 to a
+    byte, first flag in the most significant bit, unused bits zero."""
+
+    TYPE: ClassVar[int] = 0x02
+    LAYOUT: ClassVar[struct.Struct] = struct.Struct("<QHB")
+    first_sample_index: int
+    counts: np.ndarray
+    saturated: np.ndarray
+
+    def encode(self) -> bytes:
+        n, channels = self.counts.shape
+        return (self.LAYOUT.pack(self.first_sample_index, n, channels)
+                + self.counts.astype("<i4", copy=False).tobytes()
+                + np.packbits(self.saturated.astype(bool, copy=False)).tobytes())
+
+    @classmethod
+    def decode(cls, payload: bytes) -> Samples:
+        if len(payload) < cls.LAYOUT.size:
+            raise PayloadError(f"Samples payload of {len(payload)} bytes is shorter than its header")
+        first, n, channels = cls.LAYOUT.unpack_from(payload)
+        values = n * channels
+        flag_bytes = math.ceil(values / 8)
+        expected = cls.LAYOUT.size + 4 * values + flag_bytes
+        if n == 0 or channels == 0 or len(payload) != expected:
+            raise PayloadError(f"Samples payload of {len(payload)} bytes does not hold {n} samples × "
+                               f"{channels} channels ({expected} bytes)")
+        counts = np.frombuffer(payload, "<i4", values, cls.LAYOUT.size).reshape(n, channels)
+        packed = np.frombuffer(payload, np.uint8, flag_bytes, cls.LAYOUT.size + 4 * values)
+        flags = np.unpackbits(packed)
+        if flags[values:].any():
+            raise PayloadError("Samples payload has saturation bits set beyond its last sample")
+        return cls(first, counts.astype(np.int32), flags[:values].astype(bool).reshape(n, channels))
+
+    def __eq__(self, other) -> bool:
+        return (isinstance(other, Samples) and self.first_sample_index == other.first_sample_index
+                and np.array_equal(self.counts, other.counts) and np.array_equal(self.saturated, other.saturated))
+
+
+@dataclasses.dataclass(frozen=True)
+class Ack(FixedBody):
+    """The device's answer to a host command (Coils, Orientation): accepted or why not, and the
+    device sample index from which the command takes (or took) effect."""
+
+    TYPE: ClassVar[int] = 0x03
+    LAYOUT: ClassVar[struct.Struct] = struct.Struct("<IBQ")
+    OK: ClassVar[int] = 0
+    REFUSED_OVER_CAP: ClassVar[int] = 1    # a coil amplitude above DeviceInfo.current_cap_a
+    REFUSED_INVALID: ClassVar[int] = 2     # wrong coil count, non-finite value, frequency out of range
+    REFUSED_BUSY: ClassVar[int] = 3        # orientation change while the coils are on
+    REASONS: ClassVar[dict] = {0: "accepted", 1: "coil current above the device's cap",
+                               2: "invalid command", 3: "coils are on"}
+    command_sequence: int       # the sequence number of the host frame answered
+    result: int
+    applied_sample_index: int   # meaningful when result is OK
+
+    @property
+    def accepted(self) -> bool:
+        return self.result == self.OK
+
+    @property
+    def reason(self) -> str:
+        return self.REASONS.get(self.result, f"unknown result code {self.result}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Status(FixedBody):
+    """The device's heartbeat, every 100 ms, and at once when its watchdog trips: its sample
+    counter, coil state and own counters."""
+
+    TYPE: ClassVar[int] = 0x04
+    LAYOUT: ClassVar[struct.Struct] = struct.Struct("<QBIII")
+    next_sample_index: int      # the next sample the device will take
+    coils_on: bool
+    watchdog_trips: int         # times the heartbeat watchdog switched the coils off
+    dropped_frames: int         # frames the device could not send (host not reading)
+    rejected_frames: int        # host frames the device's decoder rejected
+
+    @classmethod
+    def decode(cls, payload: bytes) -> Status:
+        status = super().decode(payload)
+        if status.coils_on not in (0, 1):
+            raise PayloadError(f"Status coils_on byte is {status.coils_on}, expected 0 or 1")
+        return dataclasses.replace(status, coils_on=bool(status.coils_on))
+
+
+# --- host → device --------------------------------------------------------------------------
+class EmptyBody(Body):
+    """A body without payload: the frame type says it all."""
+
+    def encode(self) -> bytes:
+        return b""
+
+    @classmethod
+    def decode(cls, payload: bytes) -> EmptyBody:
+        if payload:
+            raise PayloadError(f"{cls.__name__} payload has {len(payload)} bytes, expected none")
+        return cls()
+
+    def __eq__(self, other) -> bool:
+        return type(other) is type(self)
+
+
+class Hello(EmptyBody):
+    """Asks the device for its DeviceInfo (sent by the host after it opens the port)."""
+
+    TYPE: ClassVar[int] = 0x10
+
+
+class Heartbeat(EmptyBody):
+    """The host is alive. The device switches the coils off when no host frame has arrived
+    for DeviceInfo.watchdog_timeout_s."""
+
+    TYPE: ClassVar[int] = 0x11
+
+
+@dataclasses.dataclass(frozen=True)
+class Coils(Body):
+    """Drive coil k with amplitudes_a[k]·sin(2πf·(t − t_on)) from device sample
+    ``at_sample_index`` on (t_on = that sample); all amplitudes 0 switches the coils off.
+
+    A command for a sample already taken applies at the next one. IMMEDIATE applies at the
+    next sample and cancels every command scheduled before (the emergency stop)."""
+
+    TYPE: ClassVar[int] = 0x12
+    LAYOUT: ClassVar[struct.Struct] = struct.Struct("<BQdB")
+    IMMEDIATE: ClassVar[int] = 0x01
+    flags: int
+    at_sample_index: int
+    frequency_hz: float
+    amplitudes_a: tuple
+
+    def encode(self) -> bytes:
+        count = len(self.amplitudes_a)
+        return (self.LAYOUT.pack(self.flags, self.at_sample_index, self.frequency_hz, count)
+                + struct.pack(f"<{count}d", *self.amplitudes_a))
+
+    @classmethod
+    def decode(cls, payload: bytes) -> Coils:
+        if len(payload) < cls.LAYOUT.size:
+            raise PayloadError(f"Coils payload of {len(payload)} bytes is shorter than its header")
+        flags, at_index, frequency, count = cls.LAYOUT.unpack_from(payload)
+        amplitudes = _unpack_exact(struct.Struct(f"<{count}d"), payload[cls.LAYOUT.size:], "Coils amplitudes")
+        if flags & ~cls.IMMEDIATE:
+            raise PayloadError(f"Coils flags 0x{flags:02x} has unknown bits")
+        return cls(flags, at_index, frequency, amplitudes)
+
+    @property
+    def immediate(self) -> bool:
+        return bool(self.flags & self.IMMEDIATE)
+
+
+@dataclasses.dataclass(frozen=True)
+class Orientation(FixedBody):
+    """Turn the probe (the rotation stage) to theta0_rad from sample ``at_sample_index`` on."""
+
+    TYPE: ClassVar[int] = 0x13
+    LAYOUT: ClassVar[struct.Struct] = struct.Struct("<Qd")
+    at_sample_index: int
+    theta0_rad: float
+
+
+BODY_TYPES: dict[int, type[Body]] = {cls.TYPE: cls for cls in
+                                     (DeviceInfo, Samples, Ack, Status, Hello, Heartbeat, Coils, Orientation)}
+
+
+@dataclasses.dataclass(frozen=True)
+class Frame:
+    """A decoded frame: the sender's sequence number and timestamp, and its body."""
+
+    sequence: int
+    timestamp_ns: int
+    body: Body
+
+
+def encode_frame(frame: Frame) -> bytes:
+    """The bytes of ``frame`` on the wire. ValueError if a field does not fit its width."""
+    payload = frame.body.encode()
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise ValueError(f"payload of {len(payload)} bytes exceeds MAX_PAYLOAD_BYTES = {MAX_PAYLOAD_BYTES}")
+    header = HEADER.pack(VERSION, frame.body.TYPE, len(payload), frame.sequence % SEQUENCE_MODULUS,
+                         frame.timestamp_ns)
+    return SYNC + header + payload + CRC.pack(zlib.crc32(payload, zlib.crc32(header)))
+
+
+class FrameDecoder:
+    """Finds frames in a byte stream fed in pieces of any size.
+
+    Invariants (tests/test_framing.py): ``feed`` never raises; every frame it returns was
+    encoded exactly so; ``bytes_in == bytes of returned frames + discarded_bytes + pending``.
+    After a rejection the decoder steps one byte past the rejected sync word and searches
+    again, so a corrupted length never swallows the good frames that follow.
+    """
+
+    def __init__(self):
+        self._buffer = bytearray()
+        self.rejected: Counter = Counter()  # by REJECT_* reason
+        self.discarded_bytes = 0            # bytes that were not part of a returned frame
+        self.frames = 0                     # frames returned
+
+    @property
+    def rejected_total(self) -> int:
+        return sum(self.rejected.values())
+
+    @property
+    def pending_bytes(self) -> int:
+        return len(self._buffer)
+
+    def feed(self, data: bytes) -> list[Frame]:
+        """The frames completed by ``data``, in stream order."""
+        self._buffer += data
+        frames = []
+        while (frame := self._next()) is not None:
+            frames.append(frame)
+        return frames
+
+    def finish(self) -> list[Frame]:
+        """The stream has ended (the link was lost): a frame begun but not completed is
+        counted as truncated and dropped; complete frames found behind it are returned."""
+        frames = self.feed(b"")
+        while self._buffer:
+            if self._buffer.startswith(SYNC):
+                self._reject(REJECT_TRUNCATED)
+            else:
+                self._discard(len(self._buffer))
+            frames += self.feed(b"")
+        return frames
+
+    def _discard(self, n: int) -> None:
+        del self._buffer[:n]
+        self.discarded_bytes += n
+
+    def _reject(self, reason: str) -> None:
+        self.rejected[reason] += 1
+        self._discard(1)
+
+    def _next(self) -> Frame | None:
+        """The next frame at the front of the buffer, or None when more bytes are needed."""
+        while True:
+            start = self._buffer.find(SYNC)
+            if start < 0:
+                # Keep a last byte that may be the first half of a sync word.
+                self._discard(len(self._buffer) - (1 if self._buffer.endswith(SYNC[:1]) else 0))
+                return None
+            self._discard(start)
+            if len(self._buffer) < HEADER_BYTES:
+                return None
+            version, kind, length, sequence, timestamp_ns = HEADER.unpack_from(self._buffer, len(SYNC))
+            if version != VERSION:
+                self._reject(REJECT_VERSION)
+                continue
+            if length > MAX_PAYLOAD_BYTES:
+                self._reject(REJECT_LENGTH)
+                continue
+            end = HEADER_BYTES + length + CRC.size
+            if len(self._buffer) < end:
+                return None
+            payload = bytes(self._buffer[HEADER_BYTES:HEADER_BYTES + length])
+            (crc,) = CRC.unpack_from(self._buffer, HEADER_BYTES + length)
+            if crc != zlib.crc32(self._buffer[len(SYNC):HEADER_BYTES + length]):
+                self._reject(REJECT_CRC)
+                continue
+            body_type = BODY_TYPES.get(kind)
+            if body_type is None:
+                self._reject(REJECT_TYPE)
+                continue
+            try:
+                body = body_type.decode(payload)
+            except PayloadError:
+                self._reject(REJECT_PAYLOAD)
+                continue
+            del self._buffer[:end]
+            self.frames += 1
+            return Frame(sequence, timestamp_ns, body)

@@ -1,0 +1,308 @@
+"""The driver node as a process: the stream (device stamps, contiguous samples, saturation
+flags), the run_cycle service end to end on the simulator, parameters, the emergency stop,
+recording to a bag that survives SIGTERM, the bag backend's replay, and a 60 s live stream
+with no unexplained gaps. Every wait ends as soon as its condition holds."""
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from mows_bringup.graph import NODES
+from mows_driver import node as driver
+from mows_msgs.msg import ExcitationState, MagnetometerBlock
+from mows_msgs.srv import EmergencyStop, RunCycle
+from mows_ros.process import EXIT_BAD_PARAMETER
+from rclpy.parameter import Parameter
+from mows_ros.qos import EXCITATION_QOS
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from mows import bags
+from mows.cycle import Phase
+from mows.device.emulator import DeviceEmulator
+from mows.scenario import load_scenario
+from mows.simulator import SimulatedDevice
+
+from node_processes import log
+
+pytestmark = pytest.mark.ros
+
+RATE_HZ = 20_000.0
+BLOCK = 500  # samples of a 25 ms block
+# A subscriber that keeps up with bursts: best effort (what the sensor-data publisher offers).
+RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
+QUICK_CYCLES = ["-p", "excite_s:=0.3", "-p", "ringdown_s:=0.3", "-p", "settle_s:=0.1"]
+
+
+@pytest.fixture
+def start_driver(start):
+    """Starts the driver with extra ROS arguments (``start`` logs its output, kills it at the end)."""
+    return lambda *ros_args: start(*NODES[0].command(list(ros_args)))
+
+
+class Listener:
+    """What the test node hears of the driver."""
+
+    def __init__(self, ros):
+        self.ros = ros
+        self.blocks: list[MagnetometerBlock] = []
+        self.states: list[ExcitationState] = []
+        self.diagnostics: dict[str, str] = {}
+        ros.node.create_subscription(MagnetometerBlock, "/mows/raw", self.blocks.append, RAW_QOS)
+        ros.node.create_subscription(ExcitationState, "/mows/excitation", self.states.append, EXCITATION_QOS)
+        ros.node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 10)
+        self.run_cycle = ros.node.create_client(RunCycle, "/mows/driver/run_cycle")
+        self.estop = ros.node.create_client(EmergencyStop, "/mows/driver/emergency_stop")
+
+    def _diagnostics(self, array: DiagnosticArray) -> None:
+        for status in array.status:
+            if status.name == "/driver":
+                self.diagnostics = {kv.key: kv.value for kv in status.values}
+                self.diagnostics["level"] = status.level
+
+    def call(self, client, request):
+        """Send ``request``; the future of its response."""
+        self.ros.wait_for(lambda: client.service_is_ready(), f"the service {client.srv_name}")
+        return client.call_async(request)
+
+    def result(self, future):
+        return self.ros.wait_for(lambda: future.done() and future.result(), "the service's response")
+
+    def phases(self, cycle_id=None):
+        return [Phase(s.phase) for s in self.states if cycle_id is None or s.cycle_id == cycle_id]
+
+
+@pytest.fixture
+def listen(ros):
+    return Listener(ros)
+
+
+def stamp_ns(message) -> int:
+    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+
+
+def field(block) -> np.ndarray:
+    return np.stack([np.frombuffer(c.field_t, float) for c in block.channels], axis=1)
+
+
+def saturated(block) -> np.ndarray:
+    return np.stack([np.array(c.saturated, bool) for c in block.channels], axis=1)
+
+
+def assert_contiguous(blocks) -> None:
+    firsts = [b.first_sample_index for b in blocks]
+    lengths = [len(b.channels[0].field_t) for b in blocks]
+    assert [a + n for a, n in zip(firsts, lengths)][:-1] == firsts[1:], "samples missing between blocks"
+    assert np.all(np.diff([b.sequence for b in blocks]) == 1)
+
+
+def test_a_cycle_streams_device_stamped_blocks_and_publishes_its_phases(start_driver, listen):
+    start_driver(*QUICK_CYCLES)
+    listen.ros.wait_for(lambda: listen.states and listen.blocks, "the first block and the present phase")
+    assert listen.phases() == [Phase.IDLE]  # transient local: learned although it came before we listened
+    request = RunCycle.Request(theta0_rad=0.6, repeats=2, tuning_steps=1, gap_s=0.1)
+    response = listen.result(listen.call(listen.run_cycle, request))
+    assert response.success, response.message
+    assert response.ringdowns_recorded == 2 and response.cycle_id == 1
+    assert 100.0 < response.excitation_frequency_hz < 125.0
+    listen.ros.wait_for(lambda: listen.phases()[-1] == Phase.IDLE, "the cycle's last phase")
+    E, R, G = Phase.EXCITING, Phase.RINGDOWN, Phase.GAP
+    assert listen.phases(1) == [Phase.SETTLING, E, R, G, E, R, G, E, R, Phase.IDLE]
+    states = [s for s in listen.states if s.cycle_id == 1]
+    assert [s.tuning for s in states if s.phase == E] == [True, False, False]
+    assert all(s.coils_on == (s.phase == E) and any(s.coil_current_amplitude_a) == s.coils_on for s in states)
+    assert [s.repeat_index for s in states if s.phase == R] == [0, 0, 1]
+    # Device stamps: one clock for all blocks (stamp − index/rate is the same), nothing lost.
+    blocks = listen.blocks
+    assert_contiguous(blocks)
+    epochs = {stamp_ns(b) - round(b.first_sample_index * 1e9 / RATE_HZ) for b in blocks}
+    assert len(epochs) == 1
+    (epoch,) = epochs
+    # Phases fall on samples of the same clock; each ring-down starts on a sample.
+    assert all((stamp_ns(s) - epoch) % 50_000 == 0 for s in states)
+    # Saturated samples are flagged and sit at the range limit; the coils saturate the sensors.
+    flags = np.concatenate([saturated(b) for b in blocks])
+    values = np.concatenate([field(b) for b in blocks])
+    assert flags.any() and not flags.all()
+    np.testing.assert_array_equal(np.abs(values[flags]), blocks[0].range_t)
+    assert np.all(np.abs(values[~flags]) <= blocks[0].range_t)
+
+
+def test_the_emergency_stop_ends_a_running_cycle_and_latches(start_driver, listen):
+    start_driver(*QUICK_CYCLES)
+    listen.ros.wait_for(lambda: listen.blocks, "the first block")
+    cycle = listen.call(listen.run_cycle, RunCycle.Request(theta0_rad=0.0, repeats=3, tuning_steps=2, gap_s=1.0))
+    listen.ros.wait_for(lambda: Phase.EXCITING in listen.phases(), "the excitation")
+    stop = listen.result(listen.call(listen.estop, EmergencyStop.Request(engage=True, reason="test")))
+    assert stop.success and stop.latched
+    response = listen.result(cycle)  # the service answered the stop while the cycle ran
+    assert not response.success and "emergency stop: test" in response.message
+    listen.ros.wait_for(lambda: listen.phases()[-1] == Phase.FAULT, "the fault phase")
+    assert not listen.states[-1].coils_on
+    refused = listen.result(listen.call(listen.run_cycle, RunCycle.Request(theta0_rad=0.0, repeats=-1,
+                                                                           tuning_steps=-1, gap_s=-1.0)))
+    assert not refused.success and "emergency stop latched (test)" in refused.message
+    release = listen.result(listen.call(listen.estop, EmergencyStop.Request(engage=False)))
+    assert release.success and not release.latched
+    listen.ros.wait_for(lambda: listen.phases()[-1] == Phase.IDLE, "idle again")
+    listen.ros.wait_for(lambda: listen.diagnostics.get("estop_latched") == "False", "diagnostics of the release")
+
+
+def test_parameters_out_of_range_are_rejected_with_their_reason(ros_context):
+    node = driver.DriverNode()
+    try:
+        for name, value, why in [("excitation_current_a", 10.5, "exceeds coil_current_cap_a=10.0"),
+                                 ("repeats", 0, "repeats out of range"), ("excite_s", 11.0, "excite_s out of range"),
+                                 ("max_duty_cycle", 0.0, "max_duty_cycle out of range"),
+                                 ("record_path", "/tmp/x", "read-only")]:
+            (result,) = node.set_parameters([Parameter(name, value=value)])
+            assert not result.successful and why in result.reason, (name, result.reason)
+        (result,) = node.set_parameters([Parameter("excite_s", value=0.2)])
+        assert result.successful
+        assert node.session.config.settings.excite_s == 0.2
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["-p", "excitation_current_a:=12.0"], "excitation_current_a=12.0 exceeds coil_current_cap_a=10.0"),
+    (["-p", "scenario:=no_such_scenario"], "scenario 'no_such_scenario' is neither"),
+    (["-p", "backend:=serial"], "backend serial needs the device's port"),
+    (["-p", "coil_setup:=helmholtz"], "does not drive the coils of scenario"),
+])
+def test_a_bad_configuration_stops_the_driver_with_its_reason(arguments, message):
+    run = subprocess.run(NODES[0].command(arguments), capture_output=True, text=True, timeout=120)
+    assert run.returncode == EXIT_BAD_PARAMETER, run.stderr
+    assert message in run.stderr and "Traceback" not in run.stderr
+
+
+def test_the_serial_driver_streams_from_the_emulator_and_survives_an_unplug(start_driver, listen, tmp_path):
+    with DeviceEmulator(SimulatedDevice(load_scenario()), tmp_path / "device") as emulator:
+        driver_process = start_driver("-p", "backend:=serial", "-p", f"serial_port:={emulator.link_path}",
+                                      *QUICK_CYCLES)
+        listen.ros.wait_for(lambda: len(listen.blocks) >= 20, "blocks from the emulated device")
+        response = listen.result(listen.call(listen.run_cycle, RunCycle.Request(theta0_rad=1.0, repeats=1,
+                                                                                tuning_steps=0, gap_s=0.0)))
+        assert response.success, response.message
+        ringdown = next(s for s in listen.states if s.phase == Phase.RINGDOWN)
+        off_index = [index for index, on in emulator.device.coil_log if not on][-1]
+        assert stamp_ns(ringdown) == emulator.clock.stamp_ns(off_index)
+        emulator.unplug()
+        listen.ros.wait_for(lambda: listen.diagnostics.get("link_up") == "False", "the driver to see the loss")
+        assert listen.diagnostics["level"] == DiagnosticStatus.ERROR
+        heard_before = len(listen.blocks)
+        emulator.replug()
+        listen.ros.wait_for(lambda: len(listen.blocks) > heard_before + 20, "blocks after the replug")
+        listen.ros.wait_for(lambda: listen.diagnostics.get("connections") == "2", "diagnostics of the reconnection")
+        assert driver_process.poll() is None
+    assert listen.diagnostics["gaps"] == "1" and int(listen.diagnostics["missing_samples"]) > 0
+    jump = [(a, b) for a, b in zip(listen.blocks, listen.blocks[1:]) if b.sequence != a.sequence + 1]
+    (before, after), = jump
+    missing = after.first_sample_index - (before.first_sample_index + len(before.channels[0].field_t))
+    assert missing == int(listen.diagnostics["missing_samples"])
+
+
+def read_blocks(path):
+    return [m.message for m in bags.read_bag(path) if m.msgtype == "mows_msgs/msg/MagnetometerBlock"]
+
+
+def test_a_recording_keeps_every_block_published_before_sigterm_and_replays(start_driver, listen, tmp_path):
+    bag = tmp_path / "recording"
+    recorder = start_driver("-p", f"record_path:={bag}")
+    listen.ros.wait_for(lambda: len(listen.blocks) >= 40, "40 blocks")
+    recorder.send_signal(signal.SIGTERM)
+    listen.ros.wait_for(lambda: recorder.poll() is not None, "the driver to stop")
+    assert recorder.returncode == 0, log(recorder)
+    heard = {b.sequence for b in listen.blocks}
+    recorded = read_blocks(bag)
+    assert heard <= {b.sequence for b in recorded}
+    assert (bag / "metadata.yaml").is_file()
+    by_sequence = {b.sequence: b for b in recorded}
+    for block in listen.blocks:
+        np.testing.assert_array_equal(field(block), np.stack([c.field_t for c in by_sequence[block.sequence].channels],
+                                                             axis=1))
+    # The bag backend replays it through the same path, with the recorded device stamps.
+    replayed = Listener(listen.ros)
+    start_driver("-p", "backend:=bag", "-p", f"bag_path:={bag}", "-p", "bag_rate:=4.0",
+                 "-p", "bag_wait_subscribers:=1")
+    last = recorded[-1].first_sample_index
+    listen.ros.wait_for(lambda: replayed.blocks and replayed.blocks[-1].first_sample_index == last, "the replay")
+    assert_contiguous(replayed.blocks)
+    source = {b.first_sample_index: b for b in recorded}
+    for block in replayed.blocks:
+        original = source[block.first_sample_index]
+        assert stamp_ns(block) == stamp_ns(original)
+        np.testing.assert_array_equal(field(block), np.stack([c.field_t for c in original.channels], axis=1))
+    listen.ros.wait_for(lambda: replayed.diagnostics.get("link") == "finished", "the end of the replay")
+
+
+def synthetic_bag(path, gap_after: int, gap_samples: int):
+    """A bag of 30 blocks with ``gap_samples`` missing after block ``gap_after``, and two phases."""
+    store = bags.typestore()
+    Block, Channel = store.types["mows_msgs/msg/MagnetometerBlock"], store.types["mows_msgs/msg/MagnetometerChannel"]
+    State, Header = store.types["mows_msgs/msg/ExcitationState"], store.types["std_msgs/msg/Header"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+
+    def header(index):
+        return Header(Time(*divmod(1_000_000_000_000 + index * 50_000, 1_000_000_000)), "m")
+
+    rng = np.random.default_rng(3)
+    messages = []
+    for k in range(30):
+        index = k * BLOCK + (gap_samples if k > gap_after else 0)
+        channels = [Channel(f"c{i}", rng.normal(0, 1e-6, BLOCK), rng.random(BLOCK) < 0.1) for i in range(2)]
+        messages.append(bags.BagMessage("/mows/raw", "mows_msgs/msg/MagnetometerBlock", k,
+                                        Block(header(index), k, index, RATE_HZ, 1e-5, 1e-10, channels)))
+    for phase, index in [(Phase.EXCITING, 2000), (Phase.RINGDOWN, 4000)]:
+        state = State(header(index), int(phase), phase.name, 7, 0, 1, False, phase == Phase.EXCITING,
+                      np.array([1.0, -1.0]) * (phase == Phase.EXCITING), 112.0, 0.5, 0.2, "largest_spacing")
+        messages.append(bags.BagMessage("/mows/excitation", "mows_msgs/msg/ExcitationState", 100 + index, state))
+    bags.write_bag(path, sorted(messages, key=lambda m: m.timestamp_ns))
+    return [m.message for m in messages[:30]]
+
+
+def test_the_bag_backend_replays_gaps_as_gaps(start_driver, listen, tmp_path):
+    recorded = synthetic_bag(tmp_path / "synthetic", gap_after=14, gap_samples=1200)
+    start_driver("-p", "backend:=bag", "-p", f"bag_path:={tmp_path / 'synthetic'}", "-p", "bag_rate:=2.0",
+                 "-p", "bag_wait_subscribers:=1")
+    listen.ros.wait_for(lambda: listen.diagnostics.get("link") == "finished" and len(listen.blocks) >= 30,
+                        "the whole replay")
+    blocks = listen.blocks
+    assert [b.first_sample_index for b in blocks] == [b.first_sample_index for b in recorded]
+    assert [stamp_ns(b) for b in blocks] == [stamp_ns(b) for b in recorded]
+    jumps = np.diff([b.sequence for b in blocks])
+    assert list(np.flatnonzero(jumps != 1)) == [14] and jumps[14] == 1 + 3  # 1200 samples: 3 blocks' worth
+    for block, original in zip(blocks, recorded):
+        np.testing.assert_array_equal(saturated(block), np.stack([c.saturated for c in original.channels], axis=1))
+    assert (listen.diagnostics["gaps"], listen.diagnostics["missing_samples"]) == ("1", "1200")
+    assert [(Phase(s.phase), s.cycle_id) for s in listen.states] == [(Phase.EXCITING, 7), (Phase.RINGDOWN, 7)]
+    assert [stamp_ns(s) for s in listen.states] == [1_000_000_000_000 + i * 50_000 for i in (2000, 4000)]
+
+
+@pytest.mark.slow
+def test_a_60_s_live_stream_has_no_unexplained_gaps(start_driver, listen):
+    start_driver()
+    listen.ros.wait_for(lambda: listen.blocks, "the first block")
+    first = listen.blocks[0].first_sample_index
+    end = first + round(60.0 * RATE_HZ)
+    deadline = time.monotonic() + 180.0  # bound for a hang only: the stream takes 60 s
+    while listen.blocks[-1].first_sample_index + BLOCK < end:
+        assert time.monotonic() < deadline, "the stream did not deliver 60 s of samples"
+        listen.ros.executor.spin_once(timeout_sec=0.1)
+    listen.ros.wait_for(lambda: listen.diagnostics.get("samples", "0") != "0", "diagnostics")
+    blocks = listen.blocks
+    print(f"60 s stream: {len(blocks)} blocks, sequences {blocks[0].sequence}…{blocks[-1].sequence}, "
+          f"driver gaps {listen.diagnostics['gaps']}, achieved rate {listen.diagnostics['achieved_sample_rate_hz']}")
+    assert len(blocks) >= 60.0 * RATE_HZ / BLOCK
+    assert_contiguous(blocks)
+    assert listen.diagnostics["gaps"] == "0" and listen.diagnostics["missing_samples"] == "0"
+
+
+def test_docs_list_every_parameter_topic_and_service():
+    text = (Path(__file__).parents[2] / "docs" / "driver.md").read_text()
+    names = [spec.name for spec in driver.PARAMETERS]
+    names += [f"/{driver.RAW_TOPIC}", f"/{driver.EXCITATION_TOPIC}", f"/{driver.RUN_CYCLE_SERVICE}",
+              f"/{driver.EMERGENCY_STOP_SERVICE}"]
+    assert [name for name in names if f"`{name}`" not in text] == []

@@ -1,0 +1,232 @@
+"""The measurement-cycle sequencer on the simulated device (unpaced: as fast as it computes):
+order of phases, tuning to the resonance, ring-down stamps exact to the sample, the
+duty-cycle limit, the emergency-stop latch, and the coil current cap (property tests)."""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mows.coils import CurrentCap, helmholtz, largest_spacing
+from mows.cycle import CycleRequest, CycleSequencer, CycleSettings, Phase
+from mows.device.backends import SimBackend
+from mows.device.interface import CoilCommand, CommandResult, SampleChunk
+from mows.device.scheduled import ScheduledDevice
+from mows.device.session import DeviceSession, SessionConfig
+from mows.scenario import load_scenario
+from mows.simulator import SimulatedDevice
+
+from device.spy import SpyDevice
+
+CAP_A = 10.0
+FAST = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.2, repeats=2, tuning_steps=2, settle_s=0.2)
+MAX_STEPS = 100_000  # bound for a cycle that never ends (a bug), not a timing
+
+
+def session_on_simulator(cycle_settings=FAST, frequency_hz=110.0, cap_a=CAP_A):
+    scenario = load_scenario()
+    backend = SimBackend(SimulatedDevice(scenario), CurrentCap(cap_a), paced=False)
+    return DeviceSession(backend, SessionConfig(0.025, cycle_settings, scenario.setup, CurrentCap(cap_a),
+                                                frequency_hz))
+
+
+def run(session, request=CycleRequest(0.3), until=None):
+    """Start a cycle and step until it ends, or until ``until(events)`` holds; returns the
+    list the outcome goes to (empty while the cycle runs) and the phase events."""
+    events, done = [], []
+    events += session.step(0.0).events
+    session.start_cycle(request, done.append)
+    for _ in range(MAX_STEPS):
+        if done or (until is not None and until(events)):
+            return done, events
+        events += session.step(0.0).events
+    raise AssertionError("the cycle did not end")
+
+
+def coil_log(session):
+    return list(session.backend.device.coil_log)
+
+
+def test_a_cycle_goes_through_its_phases_in_order():
+    session = session_on_simulator()
+    (outcome,), events = run(session)
+    assert outcome.success, outcome.message
+    cycle = [e for e in events if e.cycle_id == outcome.cycle_id]
+    T, R = True, False
+    assert [(e.phase, e.tuning, e.repeat_index) for e in cycle] == [
+        (Phase.SETTLING, R, 0),
+        (Phase.EXCITING, T, 0), (Phase.RINGDOWN, T, 0), (Phase.GAP, T, 1),
+        (Phase.EXCITING, T, 1), (Phase.RINGDOWN, T, 1), (Phase.GAP, R, 0),
+        (Phase.EXCITING, R, 0), (Phase.RINGDOWN, R, 0), (Phase.GAP, R, 1),
+        (Phase.EXCITING, R, 1), (Phase.RINGDOWN, R, 1), (Phase.IDLE, R, 0)]
+    assert all(e.coils_on == (e.phase == Phase.EXCITING) for e in events)
+    assert all(any(e.currents_a) == e.coils_on for e in events)
+    assert [e.sample_index for e in cycle] == sorted(e.sample_index for e in cycle)
+    assert outcome.ringdowns_recorded == 2
+    assert session.sequencer.phase == Phase.IDLE and not session.backend.device.coils_on
+
+
+def test_the_excitation_follows_the_setup_current_scheme():
+    session = session_on_simulator()
+    theta0 = 2.2
+    _, events = run(session, CycleRequest(theta0))
+    expected = largest_spacing().currents_a(theta0, FAST.excitation_current_a)
+    for event in (e for e in events if e.phase == Phase.EXCITING):
+        np.testing.assert_allclose(event.currents_a, expected)
+        assert event.theta0_rad == theta0
+
+
+def test_tuning_converges_to_the_resonance():
+    start_hz = 107.0  # 5 % below the probe's resonance: the drive is far off it
+    session = session_on_simulator(frequency_hz=start_hz)
+    (outcome,), events = run(session)
+    truth_hz = session.backend.device.device.expected_frequency_hz()
+    assert abs(start_hz - truth_hz) > 5.0
+    assert [fit.ok for fit in outcome.tuning_fits] == [True, True]
+    # The tuned frequency is the fitted ring-down frequency: within 10 mHz of the truth.
+    assert outcome.frequency_hz == pytest.approx(truth_hz, abs=0.01)
+    recorded = [e for e in events if e.phase == Phase.EXCITING and not e.tuning]
+    assert all(e.frequency_hz == outcome.frequency_hz for e in recorded)
+
+
+def test_ringdown_stamps_are_the_samples_where_the_coils_went_off():
+    session = session_on_simulator()
+    (outcome,), events = run(session)
+    clock = session.backend.clock
+    switches = [(e.sample_index, e.phase == Phase.EXCITING) for e in events
+                if e.phase in (Phase.EXCITING, Phase.RINGDOWN)]
+    # The device's own record of its coils (from the samples' coil flags) agrees exactly.
+    assert switches == coil_log(session)
+    assert all(e.stamp_ns == clock.stamp_ns(e.sample_index) for e in events)
+    ringdowns = [e for e in events if e.phase == Phase.RINGDOWN]
+    assert all(e.planned_duration_s == FAST.ringdown_s for e in ringdowns)
+
+
+def test_the_duty_cycle_limit_stretches_the_gaps():
+    limited = CycleSettings(excite_s=0.5, ringdown_s=0.2, gap_s=0.0, repeats=3, tuning_steps=0, settle_s=0.2,
+                            max_duty_cycle=0.3, duty_window_s=2.0)
+    session = session_on_simulator(limited)
+    (outcome,), events = run(session)
+    assert outcome.success, outcome.message
+    rate = session.backend.device.device.sample_rate_hz
+    log = coil_log(session)
+    intervals = list(zip([i for i, on in log if on], [i for i, on in log if not on]))
+    assert len(intervals) == 3
+    window = round(limited.duty_window_s * rate)
+    for _, off in intervals:  # the fullest windows end where the coils go off
+        on_samples = sum(max(0, min(b, off) - max(a, off - window)) for a, b in intervals)
+        assert on_samples <= limited.max_duty_cycle * window
+    gaps = [e for e in events if e.phase == Phase.GAP]
+    assert len(gaps) == 2 and all(g.planned_duration_s > 0.0 for g in gaps)
+
+
+def test_an_excitation_longer_than_the_duty_budget_is_refused():
+    session = session_on_simulator(CycleSettings(excite_s=0.7, max_duty_cycle=0.3, duty_window_s=2.0))
+    session.step(0.0)
+    with pytest.raises(ValueError, match="duty-cycle limit"):
+        session.start_cycle(CycleRequest(0.0), print)
+    assert coil_log(session) == []
+
+
+def test_the_emergency_stop_switches_off_at_once_and_latches():
+    session = session_on_simulator()
+    done, _ = run(session, until=lambda events: any(e.phase == Phase.EXCITING for e in events))
+    assert not done and session.backend.device.coils_on
+    stop_index = session.backend.device.next_index
+    assert session.emergency_stop(True, "operator")
+    events = session.step(0.0).events
+    # The coils are off from the device's very next sample, and what was scheduled is gone.
+    assert coil_log(session)[-1] == (stop_index, False)
+    assert [(e.phase, e.reason, e.sample_index) for e in events] == [
+        (Phase.FAULT, "emergency stop: operator", stop_index)]
+    assert not done[0].success and "emergency stop" in done[0].message
+    with pytest.raises(ValueError, match="emergency stop latched"):
+        session.start_cycle(CycleRequest(0.0), print)
+    for _ in range(200):  # 2 s of samples: the coils stay off while latched
+        session.step(0.0)
+    assert coil_log(session)[-1] == (stop_index, False)
+    assert not session.emergency_stop(False, "")
+    assert [e.phase for e in session.step(0.0).events] == [Phase.IDLE]
+    (outcome,), _ = run(session)
+    assert outcome.success
+
+
+def test_a_request_out_of_range_is_refused_with_its_reason():
+    session = session_on_simulator()
+    session.step(0.0)
+    with pytest.raises(ValueError, match="repeats = 0"):
+        session.start_cycle(CycleRequest(0.0, repeats=0), print)
+    with pytest.raises(ValueError, match="theta0_rad"):
+        session.start_cycle(CycleRequest(math.nan), print)
+
+
+# --- the cap ------------------------------------------------------------------------------
+SCENARIO = load_scenario()
+currents = st.floats(-50.0, 50.0, allow_nan=False)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(0.1, 20.0), st.lists(st.tuples(st.integers(0, 400), currents, currents), min_size=1, max_size=6))
+def test_no_coil_drive_above_the_cap_reaches_the_simulated_device(cap_a, commands):
+    spy = SpyDevice(SCENARIO)
+    device = ScheduledDevice(spy, CurrentCap(cap_a))
+    limit = min(cap_a, SCENARIO.setup.cap.limit_a)
+    for at_index, i1, i2 in commands:
+        if max(abs(i1), abs(i2)) > limit:
+            with pytest.raises(ValueError, match="exceeds the cap"):
+                device.schedule_coils(at_index, (i1, i2), 110.0)
+        else:
+            device.schedule_coils(at_index, (i1, i2), 110.0)
+    device.read_until(500)
+    assert all(np.max(np.abs(drive)) <= limit for drive in spy.drives)
+
+
+class RecordingDevice:
+    """Stands in for a device: takes every command the sequencer issues, applies it at its
+    sample (or the next one, if that has passed) and sends blank samples."""
+
+    def __init__(self):
+        self.commands = []
+
+    def run(self, sequencer, step):
+        """Serve the cycle that ``step`` began until it ends; its outcome."""
+        pending, next_index = list(step.commands), sequencer.next_index
+        for _ in range(MAX_STEPS):
+            if step.outcome is not None:
+                return step.outcome
+            if pending:
+                command = pending.pop(0)
+                self.commands.append(command)
+                applied = max(command.at_sample_index, next_index)
+                step = sequencer.on_result(CommandResult(command.command_id, True, applied))
+            else:
+                step = sequencer.on_samples(SampleChunk(next_index, next_index * 50_000, np.zeros((200, 2)),
+                                                        np.zeros((200, 2), bool)))
+                next_index += 200
+            pending += step.commands
+        raise AssertionError("the cycle did not end")
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.sampled_from([largest_spacing(), helmholtz()]), st.floats(0.1, 20.0), st.floats(0.0, 30.0),
+       st.floats(-100.0, 100.0), st.integers(1, 3), st.integers(0, 2))
+def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a, theta0, repeats, tuning):
+    quick = CycleSettings(excitation_current_a=current_a, excite_s=0.01, ringdown_s=0.01, gap_s=0.0,
+                          repeats=repeats, tuning_steps=tuning, settle_s=0.0, max_duty_cycle=1.0)
+    sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0)
+    sequencer.on_samples(SampleChunk(0, 0, np.zeros((1, 2)), np.zeros((1, 2), bool)))
+    device = RecordingDevice()
+    # The cap limits what reaches the coils: each coil's current of the orientation-dependent
+    # scheme (the base amplitude times sin(θ0 + phase)), and the setup's own amplifier limit on
+    # the base amplitude.
+    over = current_a > setup.cap.limit_a or max(abs(i) for i in setup.currents_a(theta0, current_a)) > cap_a
+    if over:
+        with pytest.raises(ValueError, match="cap"):
+            sequencer.start(CycleRequest(theta0))
+        return
+    outcome = device.run(sequencer, sequencer.start(CycleRequest(theta0)))
+    assert outcome.success
+    coil_commands = [c for c in device.commands if isinstance(c, CoilCommand)]
+    assert len(coil_commands) == 2 * (repeats + tuning)
+    assert all(max(abs(i) for i in c.amplitudes_a) <= cap_a for c in coil_commands)

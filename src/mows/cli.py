@@ -12,7 +12,7 @@ SUBCOMMANDS = {
     "sim": ("mows.simulator_cli", "simulate measurement cycles from a scenario"),
     "fit": ("mows.ringdown_cli", "fit ring-downs in a recorded bag or CSV"),
     "lab": ("mows.lab.cli", "compare the frequency model with measurements, find missing effects"),
-    "bench": ("mows.bench", "benchmarks: simulator, estimator, streaming"),
+    "bench": ("mows.bench", "benchmarks: estimator, simulator, stream, lab (figures, never a failure)"),
 }
 
 

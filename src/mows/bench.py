@@ -1,0 +1,89 @@
+"""``mows bench``: benchmark figures of the simulator, the estimator, the stream and the lab.
+
+Every figure is measured in this run, against a baseline timed in the same run where there is
+one (scipy's solve_ivp for the simulator, curve_fit for the estimator, generating the samples
+without publishing them for the stream). Nothing here fails on a figure: machines are shared
+and noisy, so speed is reported, not asserted. ``--json`` prints the figures as one JSON
+object (the estimator's keys are top level: fit_ms_median, curve_fit_ms_median,
+efficiency_min, bias_max_sigma).
+"""
+import argparse
+import importlib
+import json
+import math
+import sys
+import time
+
+SUITES = {
+    "estimator": ("mows.benchmarks.estimator", "ring-down fit: speed against curve_fit, precision against the CRB"),
+    "simulator": ("mows.benchmarks.simulator", "one measurement cycle, against solve_ivp"),
+    "stream": ("mows.benchmarks.streaming", "CPU share of one core to stream 20 kS/s × 2 channels"),
+    "lab": ("mows.benchmarks.lab", "model lab diagnose on 1000 rows with the whole catalog"),
+}
+QUICK = {"estimator": {"trials": 60}, "simulator": {"repeats": 5}, "stream": {"duration_s": 3.0}}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("suites", nargs="*", metavar="SUITE",
+                        help=f"which benchmarks (default: all): {', '.join(SUITES)}")
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    parser.add_argument("--quick", action="store_true", help="fewer trials (rough figures, for a smoke run)")
+
+
+def run(args) -> int:
+    unknown = [name for name in args.suites if name not in SUITES]
+    if unknown:
+        print(f"mows bench: unknown suite(s) {', '.join(unknown)}; choose from {', '.join(SUITES)}", file=sys.stderr)
+        return 2
+    figures = {}
+    for name in args.suites or list(SUITES):
+        module_name, what = SUITES[name]
+        if not args.json:
+            print(f"== {name}: {what}", flush=True)
+        start = time.perf_counter()
+        result = importlib.import_module(module_name).run(**(QUICK.get(name, {}) if args.quick else {}))
+        result["wall_s"] = time.perf_counter() - start
+        figures[name] = result
+        if not args.json:
+            for key, value in result.items():
+                print(f"   {key:40s} {_format(value)}")
+    if args.json:
+        flat = dict(figures.get("estimator", {}))
+        flat.update({name: values for name, values in figures.items()})
+        print(json.dumps(_finite(flat), indent=1, default=_jsonable, allow_nan=False))
+    return 0
+
+
+def _format(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}" if math.isfinite(value) else str(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_format(v) for v in value) + "]"
+    return str(value)
+
+
+def _finite(value):
+    """JSON has no NaN or infinity: such figures become null."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _jsonable(value):
+    if hasattr(value, "tolist"):
+        return _finite(value.tolist())
+    return str(value)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="mows bench", description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,105 @@
+"""mows-latency: how long after the last sample of a ring-down its fit is published, in the graph.
+
+Starts the driver (simulated device) and the estimator, asks the driver for measurement
+cycles, and, for every RingdownFit, takes the time at which this process received it minus
+the time at which it received the raw block holding the ring-down's last sample (both on this
+host's monotonic clock, so transport both ways is included). Prints the figures, or one JSON
+object with ``--json`` (used by ``mows bench``). A benchmark: it reports, it never fails on a
+figure.
+"""
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+
+from mows_bringup.graph import NODES, Graph, say
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="mows-latency", description=__doc__.splitlines()[0])
+    parser.add_argument("--cycles", type=int, default=4, help="measurement cycles (each with --repeats ring-downs)")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args(argv)
+    log = open("/dev/null", "w")
+    graph = Graph(tuple(n for n in NODES if n.name in ("driver", "estimator")),
+                  ["-p", "tuning_steps:=0", "-p", "gap_s:=0.1"], output=log)
+    graph.start()
+    try:
+        latencies = measure(args.cycles, args.repeats, graph.exited)
+    finally:
+        graph.stop()
+    figures = summary(latencies)
+    if args.json:
+        print(json.dumps(figures))
+    else:
+        for key, value in figures.items():
+            say(f"{key:28s} {value:.3f}" if isinstance(value, float) else f"{key:28s} {value}")
+    return 0 if latencies else 1
+
+
+def measure(cycles: int, repeats: int, exited) -> list:
+    import rclpy
+    from mows_msgs.msg import MagnetometerBlock, RingdownFit
+    from mows_msgs.srv import RunCycle
+
+    from mows_ros.qos import RESULT_QOS, STREAM_QOS
+
+    rclpy.init()
+    node = rclpy.create_node("mows_latency")
+    block_arrivals = {}          # stop sample index → (receive time, first sample stamp, rate)
+    fits = []
+    node.create_subscription(MagnetometerBlock, "mows/raw",
+                             lambda b: block_arrivals.__setitem__(_block_key(b), time.monotonic()), STREAM_QOS)
+    node.create_subscription(RingdownFit, "mows/ringdown", lambda f: fits.append((time.monotonic(), f)), RESULT_QOS)
+    client = node.create_client(RunCycle, "mows/driver/run_cycle")
+    try:
+        _spin_until(node, lambda: client.service_is_ready() and block_arrivals, exited, 120.0)
+        for _ in range(cycles):
+            future = client.call_async(RunCycle.Request(theta0_rad=0.0, repeats=repeats, tuning_steps=-1, gap_s=-1.0))
+            _spin_until(node, future.done, exited, 120.0)
+        _spin_until(node, lambda: len(fits) >= cycles * repeats, exited, 30.0)
+    except TimeoutError as error:
+        say(str(error))
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return [received - _last_sample_arrival(block_arrivals, fit) for received, fit in fits if fit.status == 0]
+
+
+def _block_key(block):
+    start = block.header.stamp.sec + 1e-9 * block.header.stamp.nanosec
+    n = len(block.channels[0].field_t) if block.channels else 0
+    return (start, start + n / block.sample_rate_hz)
+
+
+def _last_sample_arrival(arrivals: dict, fit) -> float:
+    """Receive time of the block that holds the last sample of the fitted window."""
+    end = fit.header.stamp.sec + 1e-9 * fit.header.stamp.nanosec + fit.duration_s
+    holding = [t for (start, stop), t in arrivals.items() if start <= end - 1e-9 < stop + 1e-9]
+    return min(holding) if holding else float("nan")
+
+
+def _spin_until(node, condition, exited, timeout_s):
+    import rclpy
+
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if exited() or time.monotonic() > deadline:
+            raise TimeoutError(f"gave up waiting (nodes ended: {exited()})")
+        rclpy.spin_once(node, timeout_sec=0.05)
+
+
+def summary(latencies) -> dict:
+    values = np.array([v for v in latencies if np.isfinite(v)]) * 1e3
+    if values.size == 0:
+        return {"ringdowns": 0}
+    return {"ringdowns": int(values.size), "latency_ms_median": float(np.median(values)),
+            "latency_ms_p99": float(np.percentile(values, 99)), "latency_ms_max": float(values.max()),
+            "goal_p99_ms": 20.0}
+
+
+if __name__ == "__main__":
+    sys.exit(main())

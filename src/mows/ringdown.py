@@ -38,6 +38,8 @@ import math
 
 import numpy as np
 
+from mows.ringdown_model import evaluate_model, levenberg_marquardt, rotated_pickup
+
 TWO_PI = 2.0 * math.pi
 
 
@@ -167,63 +169,10 @@ def _parameter_names(n_channels, theta0_free):
 
 @dataclasses.dataclass
 class _Shape:
-    """g(θ(t)) at uniformly spaced samples for q = (f, δ, θmax, φ[, θ0]), and dg/dq."""
+    """g(x(t)) and dg/dq at the samples (:mod:`mows.ringdown_model`)."""
 
     g: np.ndarray          # (n,)
     dg_dq: np.ndarray      # (len(q), n)
-
-
-def _shape(q, t, pickup, theta0_free, want_derivatives=True) -> _Shape:
-    """g(x(t)) and dg/dq at uniformly spaced times ``t`` (t[0] = 0).
-
-    The ring-down x(t) = Re(θmax·e^(iφ)·e^((−δ + 2πif)t)) is generated as a geometric
-    sequence (one complex cumulative product) rather than by exp, cos and sin of every
-    sample; the accumulated rounding is ~√n·1e-16, far below any noise. With θ0 free the
-    pickup is the paper's single term rotated by θ0 = q[4], so ∂g/∂θ0 = ∂g/∂x.
-    """
-    f, delta, amp, phi = q[:4]
-    dt = t[1] - t[0] if t.size > 1 else 1.0
-    decay = math.exp(-delta * dt)
-    rotor = np.full(t.size, complex(decay * math.cos(TWO_PI * f * dt), decay * math.sin(TWO_PI * f * dt)))
-    rotor[0] = complex(math.cos(phi), math.sin(phi))
-    unit = np.cumprod(rotor)                         # e^(−δt)·e^(i(2πft + φ))
-    carrier = unit.real
-    x = amp * carrier
-    coefficients = pickup
-    if theta0_free:
-        coefficients = pickup * np.exp(1j * np.arange(pickup.size) * q[4])
-    g, dg = _pickup_series(coefficients, np.cos(x), np.sin(x), want_derivatives)
-    if not want_derivatives:
-        return _Shape(g, np.empty((0, t.size)))
-    dg_dq = np.empty((5 if theta0_free else 4, t.size))
-    np.multiply(dg, unit.imag, out=dg_dq[3])
-    dg_dq[3] *= -amp                                          # ∂/∂φ
-    np.multiply(dg_dq[3], t, out=dg_dq[0])
-    dg_dq[0] *= TWO_PI                                        # ∂/∂f
-    np.multiply(dg, carrier, out=dg_dq[2])                    # ∂/∂θmax
-    np.multiply(dg_dq[2], t, out=dg_dq[1])
-    dg_dq[1] *= -amp                                          # ∂/∂δ
-    if theta0_free:
-        dg_dq[4] = dg
-    return _Shape(g, dg_dq)
-
-
-def _pickup_series(coefficients, cos_x, sin_x, want_derivative):
-    """g = Σ Re(C_k z^k) and dg/dx = Σ Re(ik·C_k z^k) with z = e^(ix); the first harmonic
-    (the paper's whole model) is written out, higher powers by repeated multiplication."""
-    c1 = coefficients[1]
-    g = c1.real * cos_x - c1.imag * sin_x + coefficients[0].real
-    dg = -c1.real * sin_x - c1.imag * cos_x if want_derivative else None
-    if coefficients.size > 2:
-        z = cos_x + 1j * sin_x
-        power = z.copy()
-        for k in range(2, coefficients.size):
-            power *= z
-            term = coefficients[k] * power
-            g += term.real
-            if want_derivative:
-                dg -= k * term.imag
-    return g, dg
 
 
 @dataclasses.dataclass(frozen=True)
@@ -232,13 +181,13 @@ class _Problem:
 
     y: np.ndarray
     weights: np.ndarray      # 1/σ per channel
-    t: np.ndarray            # sample times, s, t[0] = 0
+    dt: float                # sample interval, s (t = 0 at the first sample)
     theta0: float
-    pickup: np.ndarray       # C_k of g (complex)
+    pickup: np.ndarray       # C_k of g (complex); with θ0 free, the series at θ0 = 0
     theta0_free: bool
 
     def subsampled(self, step: int) -> "_Problem":
-        return dataclasses.replace(self, y=self.y[:, ::step], t=self.t[::step])
+        return dataclasses.replace(self, y=np.ascontiguousarray(self.y[:, ::step]), dt=self.dt * step)
 
 
 @dataclasses.dataclass
@@ -256,35 +205,19 @@ class _Step:
 
 
 def _evaluate(problem: _Problem, q: np.ndarray, derivatives: bool = True) -> _Step:
-    """Variable projection at q (Golub–Pereyra, with Kaufman's Jacobian).
-
-    κ and B_DC of each channel solve the linear least-squares problem on the basis
-    L = [g; 1]. The Jacobian of the model with respect to q, projected orthogonal to L, is
-    κ·P⊥·M with M = ∂g/∂q, shared by all channels, so JᵀJ = Σ w²κ²·(P⊥M)(P⊥M)ᵀ and
-    Jᵀr = Σ w²κ·M·r (r = P⊥·y already). With centred rows (m̃, g̃), P⊥m = m̃ − (m̃·g̃/|g̃|²)·g̃,
-    so (P⊥M)(P⊥M)ᵀ = M̃M̃ᵀ − ccᵀ/|g̃|² with c = M̃·g̃. Centring first matters: the uncentred
-    Gram matrix of [g, 1] is ill-conditioned near 90°, where g ≈ −1 + x²/2. The residual is
-    formed explicitly: at 60 dB the shortcut yᵀy − bᵀ(LLᵀ)⁻¹b would lose ten digits.
-    """
-    y, w = problem.y, problem.weights
-    shape = _shape(q, problem.t, problem.pickup, problem.theta0_free, want_derivatives=derivatives)
-    g_mean = shape.g.mean()
-    centred = shape.g - g_mean
-    norm2 = centred @ centred
-    y_mean = y.mean(axis=1)
-    kappa = (y @ centred) / norm2 if norm2 > 0 else np.zeros(y.shape[0])
-    coef = np.stack([kappa, y_mean - kappa * g_mean], axis=1)
-    residual = y - y_mean[:, None] - kappa[:, None] * centred
-    cost = float(np.sum((residual * w[:, None]) ** 2))
-    step = _Step(q, shape, coef, residual, cost)
-    if derivatives:
-        m = shape.dg_dq
-        m_centred = m - m.mean(axis=1, keepdims=True)
-        c = m_centred @ centred
-        scale = w**2 * kappa
-        step.jtj = float(scale @ kappa) * (m_centred @ m_centred.T - np.outer(c, c) / norm2)
-        step.jtr = m @ (residual * scale[:, None]).sum(axis=0)
-    return step
+    """Variable projection at q (Golub–Pereyra, with Kaufman's Jacobian): κ and B_DC by linear
+    least squares, the residual and the projected normal equations of q
+    (:func:`mows.ringdown_model.normal_equations`, where the numerics are explained)."""
+    n_ch, n = problem.y.shape
+    p = q.size
+    cr, ci = rotated_pickup(problem.pickup, 0.0)
+    g, m = np.empty(n), np.empty((p if derivatives else 0, n))
+    residual, coef = np.empty((n_ch, n)), np.empty((n_ch, 2))
+    jtj, jtr = np.zeros((p, p)), np.zeros(p)
+    cost = evaluate_model(np.asarray(q, float), problem.dt, cr, ci, problem.theta0_free, problem.y, problem.weights,
+                          derivatives, g, m, residual, coef, jtj, jtr)
+    return _Step(q, _Shape(g, m), coef, residual, float(cost), jtj if derivatives else None,
+                 jtr if derivatives else None)
 
 
 # --- noise level and the start ----------------------------------------------------------
@@ -296,7 +229,8 @@ def white_noise_std(y: np.ndarray) -> float:
     comes out as zero-median noise of variance 20σ² (1² + 3² + 3² + 1²); its median absolute
     value is 0.6745 of its standard deviation.
     """
-    return float(np.median(np.abs(np.diff(y, 3)))) / (0.6745 * math.sqrt(20.0))
+    third = y[3:] - y[:-3] + 3.0 * (y[1:-2] - y[2:-1])
+    return float(np.median(np.abs(third))) / (0.6745 * math.sqrt(20.0))
 
 
 @dataclasses.dataclass
@@ -354,14 +288,6 @@ def _column_scale(jtj):
     return scale
 
 
-def _solve_normal(jtj, jtr, damping):
-    """Marquardt step (JᵀJ + λ·diag(JᵀJ))⁻¹·Jᵀr."""
-    scale = _column_scale(jtj)
-    a = jtj / np.outer(scale, scale)
-    a[np.diag_indices_from(a)] *= 1.0 + damping
-    return np.linalg.solve(a, jtr / scale) / scale
-
-
 def scaled_inverse(jtj):
     """(JᵀJ)⁻¹ computed on the equilibrated matrix; raises LinAlgError if singular."""
     scale = _column_scale(jtj)
@@ -373,16 +299,18 @@ def _fisher(step: _Step, weights) -> np.ndarray:
     channel. J's columns are κ_c·∂g/∂q, g and 1, so JᵀJ is assembled from Gram sums of
     those rows without forming the n × P Jacobian."""
     m, g = step.shape.dg_dq, step.shape.g
-    rows = np.vstack([m, g, np.ones_like(g)])
-    gram = rows @ rows.T                                   # (p + 2, p + 2)
     p, n_ch = m.shape[0], step.coef.shape[0]
+    gram = np.empty((p + 2, p + 2))                          # Gram matrix of the rows M, g, 1
+    gram[:p, :p] = m @ m.T
+    gram[:p, p] = gram[p, :p] = m @ g
+    gram[:p, p + 1] = gram[p + 1, :p] = m.sum(axis=1)
+    gram[p, p], gram[p, p + 1] = g @ g, g.sum()
+    gram[p + 1, p], gram[p + 1, p + 1] = gram[p, p + 1], g.size
     fisher = np.zeros((p + 2 * n_ch, p + 2 * n_ch))
     for c in range(n_ch):
-        kappa, w2 = step.coef[c, 0], weights[c] ** 2
-        scale = np.concatenate([np.full(p, kappa), [1.0, 1.0]])
-        block = w2 * gram * np.outer(scale, scale)
+        scale = np.concatenate([np.full(p, step.coef[c, 0]), [1.0, 1.0]])
         idx = np.r_[0:p, p + 2 * c, p + 2 * c + 1]
-        fisher[np.ix_(idx, idx)] += block
+        fisher[np.ix_(idx, idx)] += weights[c] ** 2 * gram * np.outer(scale, scale)
     return fisher
 
 
@@ -397,55 +325,23 @@ def _variable_projection(problem: _Problem, q, iterations, tol_chi2, damping=1e-
     which a joint fit crawls. Converged when the Gauss–Newton step would lower χ² by less
     than ``tol_chi2``: then f is within √tol_chi2 standard errors of the optimum.
 
-    θmax is kept in ``AMPLITUDE_BOUNDS_RAD``. Near θ0 = 90° with κ free, the only handle on
-    θmax is the x⁴ term of cos x, a fraction θmax²/12 of the signal; at low SNR the optimum
-    can run to θmax → 0 with κ → ∞. There θmax is held at its bound (an active set) and f,
-    which does not depend on it, converges as usual.
+    θmax is kept in ``AMPLITUDE_BOUNDS_RAD`` without changing sign (θmax → −θmax with
+    φ → φ + π is the same ring-down, but the path through 0 is singular). Near θ0 = 90° with κ
+    free, the only handle on θmax is the x⁴ term of cos x, a fraction θmax²/12 of the signal;
+    at low SNR the optimum can run to θmax → 0 with κ → ∞. There θmax is held at its bound (an
+    active set) and f, which does not depend on it, converges as usual.
 
-    ``damping`` is the initial Marquardt λ: small when q is already near the optimum.
+    ``damping`` is the initial Marquardt λ: small when q is already near the optimum. The loop
+    is compiled (:func:`mows.ringdown_model.levenberg_marquardt`): in Python its bookkeeping
+    cost more than the model evaluations.
 
-    Returns (last accepted step, converged, iterations, free-parameter mask).
+    Returns (the step at the last accepted q, converged, iterations, free-parameter mask).
     """
-    lam = damping
-    step = _evaluate(problem, q)
-    free = np.ones(q.size, bool)
-    for it in range(iterations):
-        jtj, jtr = step.jtj, step.jtr
-        try:
-            gauss_newton = _masked_step(jtj, jtr, 0.0, free)
-            if jtr @ gauss_newton < tol_chi2:
-                return step, True, it, free
-            proposal = step.q + _masked_step(jtj, jtr, lam, free)
-        except np.linalg.LinAlgError:
-            return step, False, it, free
-        if _clamp_amplitude(proposal, step.q[AMPLITUDE]):
-            free[AMPLITUDE] = False
-        trial = _evaluate(problem, proposal)
-        if trial.cost < step.cost:
-            step, lam = trial, max(lam / 10.0, 1e-12)
-        else:
-            lam *= 10.0
-            if lam > 1e10:
-                return step, False, it + 1, free
-    return step, False, iterations, free
-
-
-def _clamp_amplitude(q, current) -> bool:
-    """Keep θmax inside its bounds without changing sign (θmax → −θmax with φ → φ + π is the
-    same ring-down, but the path through θmax = 0 is singular). True if it was clamped."""
-    low, high = AMPLITUDE_BOUNDS_RAD
-    sign = math.copysign(1.0, current)
-    magnitude = q[AMPLITUDE] * sign
-    if low <= magnitude <= high:
-        return False
-    q[AMPLITUDE] = sign * min(max(magnitude, low), high)
-    return True
-
-
-def _masked_step(jtj, jtr, damping, free):
-    step = np.zeros(jtr.size)
-    step[free] = _solve_normal(jtj[np.ix_(free, free)], jtr[free], damping)
-    return step
+    cr, ci = rotated_pickup(problem.pickup, 0.0)
+    q, converged, used, free, cost, g, m, residual, coef, jtj, jtr = levenberg_marquardt(
+        np.asarray(q, float).copy(), problem.dt, cr, ci, problem.theta0_free, problem.y, problem.weights,
+        iterations, tol_chi2, damping, *AMPLITUDE_BOUNDS_RAD, AMPLITUDE)
+    return _Step(q, _Shape(g, m), coef, residual, float(cost), jtj, jtr), bool(converged), int(used), free
 
 
 # --- segmentation -----------------------------------------------------------------------
@@ -533,13 +429,13 @@ def _problem(y, fs, theta0, options) -> _Problem:
     if np.any(noise <= 0):  # noiseless, or quantised to a constant: weight channels equally
         noise = np.full(y.shape[0], max(float(np.ptp(y)) * 1e-9, 1e-30))
     pickup = paper_pickup(0.0, options.sensor_direction) if options.theta0_free else options.pickup_at(theta0)
-    return _Problem(y, 1.0 / noise, np.arange(y.shape[1]) / fs, theta0, pickup, options.theta0_free)
+    return _Problem(np.ascontiguousarray(y, float), 1.0 / noise, 1.0 / fs, theta0, pickup, options.theta0_free)
 
 
 def _coarse_start(problem, fs, expected_hz, options, damping_guess):
     """The subsampled problem and the best spectral start on it, or (coarse, None)."""
     coarse = problem.subsampled(max(1, int(fs // (16.0 * expected_hz))))
-    starts, _, _ = _start_candidates(coarse.y.sum(axis=0), 1.0 / coarse.t[1], expected_hz, options,
+    starts, _, _ = _start_candidates(coarse.y.sum(axis=0), 1.0 / coarse.dt, expected_hz, options,
                                      damping_guess)
     if not starts:
         return coarse, None
@@ -625,7 +521,7 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
         kappa_t=float(kappa[0]), offset_t=float(step.coef[0, 1]), chi2_dof=chi2_dof,
         r_squared=1.0 - resid_power / total if total > 0 else math.nan,
         snr_db=10.0 * math.log10(signal_power / float(np.mean(noise**2))) if signal_power > 0 else -math.inf,
-        noise_std_t=float(noise.mean()), n_samples=n, duration_s=n * problem.t[1], start_offset_s=start_s,
+        noise_std_t=float(noise.mean()), n_samples=n, duration_s=n * problem.dt, start_offset_s=start_s,
         parameter_names=tuple(_parameter_names(n_ch, options.theta0_free)), covariance=covariance)
 
 
@@ -640,6 +536,8 @@ def cramer_rao_frequency_hz(n_samples, sample_rate_hz, frequency_hz, damping_per
     q = np.array([frequency_hz, damping_per_s, amplitude_rad, phase_rad] + ([theta0_rad] if theta0_free else []))
     coefficients = (paper_pickup(0.0 if theta0_free else theta0_rad, sensor_direction) if pickup is None
                     else np.asarray(pickup, complex))
-    shape = _shape(q, np.arange(int(n_samples)) / sample_rate_hz, coefficients, theta0_free)
+    problem = _Problem(np.zeros((1, int(n_samples))), np.array([1.0 / noise_std_t]), 1.0 / sample_rate_hz,
+                       theta0_rad, coefficients, theta0_free)
+    shape = _evaluate(problem, q).shape
     step = _Step(q, shape, np.array([[kappa_t, 0.0]]), np.empty((1, 0)), math.nan)
-    return float(math.sqrt(scaled_inverse(_fisher(step, np.array([1.0 / noise_std_t])))[0, 0]))
+    return float(math.sqrt(scaled_inverse(_fisher(step, problem.weights))[0, 0]))

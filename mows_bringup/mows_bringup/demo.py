@@ -102,6 +102,8 @@ def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited) -> boo
     try:
         spin_until(client.server_is_ready, 120.0, "the mapper's sweep action")
         spin_until(lambda: blocks, 60.0, "the driver's sample stream")
+        # The estimator advertises its results once its fit is compiled and loaded.
+        spin_until(lambda: node.count_publishers("mows/ringdown") > 0, 120.0, "the estimator")
         angles = np.radians(np.arange(args.angles) * 360.0 / args.angles)
         say(f"sweep: {args.angles} orientations × {args.repeats} ring-downs")
         goal = RotationSweep.Goal(theta0_rad=angles.tolist(), repeats_per_angle=args.repeats)

@@ -27,7 +27,7 @@ from mows.pose import Pose
 from mows.frequency import frequency_shift_hz
 from mows.probe import PAPER_PROBE, Probe
 from mows.ringdown import FitOptions, FitStatus, failure
-from mows.segments import SegmentAssembler, fit_segment
+from mows.segments import RingdownWindow, Segment, SegmentAssembler, fit_segment
 from mows_estimator.messages import (block_from_msg, estimate_to_msg, fit_to_msg, magnetic_field_msg,
                                      window_from_msg)
 from mows_ros.diagnostics import Health
@@ -67,8 +67,9 @@ PARAMETERS = (
 class EstimatorNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
-        self._assembler = SegmentAssembler(self.get_parameter("buffer_s").value)
         self._probe_cache = ("", PAPER_PROBE)
+        self._warm_up()
+        self._assembler = SegmentAssembler(self.get_parameter("buffer_s").value)
         self._latency_ms = collections.deque(maxlen=LATENCY_WINDOW)
         self._counts = collections.Counter()
         self._last = "no ring-down yet"
@@ -84,6 +85,19 @@ class EstimatorNode(MowsNode):
         self._magnetic_pub = self.create_publisher(MagneticField, "mows/magnetic_field", STREAM_QOS)
         self.create_service(Calibrate, "mows/estimator/calibrate", self._on_calibrate,
                             callback_group=ReentrantCallbackGroup())
+
+    def _warm_up(self):
+        """Fit one synthetic ring-down before listening: the fit's compiled kernels load from
+        numba's cache (about a second) or, on a fresh checkout, compile (about ten), and that
+        must not happen on the first real ring-down. Subscriptions and publishers come after,
+        so a node that advertises its results is ready to produce them."""
+        start = time.monotonic()
+        t = np.arange(4000) / 20_000.0
+        near = np.sin(0.3 * np.cos(2 * math.pi * 112.0 * t) * np.exp(-1.8 * t))
+        pair = np.stack([near, np.zeros_like(near)], axis=1)
+        fit_segment(Segment(RingdownWindow(0.0, 0.2, excitation_frequency_hz=112.0), 0, 20_000.0,
+                            pair, np.zeros(pair.shape, bool), 0), self._options(0.0))
+        self.get_logger().info(f"fit kernels ready in {time.monotonic() - start:.1f} s")
 
     # --- parameters -------------------------------------------------------------------------
     def _param(self, name):

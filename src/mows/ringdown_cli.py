@@ -1,0 +1,102 @@
+"""``mows fit BAG``: fit every ring-down in a bag the driver recorded, offline.
+
+The bag's ``/mows/raw`` blocks and ``/mows/excitation`` phases go through the same path as in
+the estimator node (:mod:`mows.segments`, :mod:`mows.ringdown`): each recorded RINGDOWN phase
+(tuning ones skipped unless ``--tuning``) is cut out by its device stamps and fitted with the
+lever-aware signal model of the paper's geometry (``--paper-model`` for Eq. S11). One line per
+ring-down; ``--csv`` writes a model-lab table (theta0_deg, f_hz, f_std_hz, t_s, amplitude_deg,
+damping_per_s, duration_s) of the OK fits, ready for ``mows lab``.
+"""
+import csv
+import math
+import sys
+
+import numpy as np
+
+from mows.bags import read_bag
+from mows.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair, pickup_harmonics
+from mows.pose import Pose
+from mows.probe import PAPER_PROBE, Probe
+from mows.ringdown import FitOptions
+from mows.segments import Block, RingdownWindow, SegmentAssembler, fit_segment
+
+RINGDOWN_PHASE = 3  # mows_msgs/ExcitationState PHASE_RINGDOWN
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("bag", help="a rosbag2 directory (or .mcap) recorded by the driver (record_path)")
+    parser.add_argument("--probe", help="probe constants YAML (default: the paper's probe)")
+    parser.add_argument("--raw-topic", default="/mows/raw")
+    parser.add_argument("--excitation-topic", default="/mows/excitation")
+    parser.add_argument("--paper-model", action="store_true", help="fit Eq. S11 (a magnet turning in place)")
+    parser.add_argument("--tuning", action="store_true", help="also fit the tuning ring-downs")
+    parser.add_argument("--settle-s", type=float, default=0.003, help="samples skipped after coil-off, s")
+    parser.add_argument("--sensor-distance-m", type=float, default=PAPER_DISTANCE_M,
+                        help="probe to near fluxgate along the plane's x axis, m (as the estimator's parameter)")
+    parser.add_argument("--sensor-spacing-m", type=float, default=PAPER_SPACING_M, help="fluxgate spacing, m")
+    parser.add_argument("--csv", help="write the OK fits as a model-lab table")
+
+
+def run(args) -> int:
+    probe = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
+    try:
+        fits = list(fit_bag(args.bag, probe, args))
+    except (OSError, ValueError, KeyError) as error:
+        print(f"mows fit: {args.bag}: {error}", file=sys.stderr)
+        return 2
+    for window, fit in fits:
+        print(f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):7.2f}°: "
+              f"{fit.report()}")
+    ok = [(w, f) for w, f in fits if f.ok]
+    print(f"{len(ok)} of {len(fits)} ring-downs fitted")
+    if args.csv:
+        write_table(args.csv, ok)
+    return 0 if fits else 1
+
+
+def fit_bag(path, probe: Probe, args):
+    """(window, fit) for every ring-down in the bag, in order."""
+    assembler = SegmentAssembler(buffer_s=60.0)
+    pair = FluxgatePair.paper(distance_m=args.sensor_distance_m, spacing_m=args.sensor_spacing_m)
+    for item in read_bag(path, topics=[args.raw_topic, args.excitation_topic]):
+        message = item.message
+        if item.topic == args.excitation_topic:
+            if message.phase != RINGDOWN_PHASE or (message.tuning and not args.tuning):
+                continue
+            segments = assembler.announce(RingdownWindow(
+                _seconds(message.header.stamp), message.planned_duration_s, message.cycle_id,
+                message.repeat_index, message.theta0_rad, message.frequency_hz))
+        else:
+            segments = assembler.add_block(_block(message))
+        for segment in segments:
+            yield segment.window, fit_segment(segment, _options(segment.window, pair, probe, args.paper_model),
+                                              args.settle_s, probe.damping_per_s)
+
+
+def _options(window, pair, probe, paper_model) -> FitOptions:
+    if paper_model:
+        return FitOptions()
+    return FitOptions(pickup=tuple(pickup_harmonics(pair, Pose(theta0_rad=window.theta0_rad), probe.lever_m,
+                                                    probe.moment_am2)))
+
+
+def _block(message) -> Block:
+    samples = np.stack([np.asarray(c.field_t, float) for c in message.channels], axis=1)
+    saturated = np.stack([np.asarray(c.saturated, bool) for c in message.channels], axis=1)
+    return Block(int(message.first_sample_index), _seconds(message.header.stamp), float(message.sample_rate_hz),
+                 samples, saturated)
+
+
+def _seconds(stamp) -> float:
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+def write_table(path, fits) -> None:
+    start = min((w.start_s for w, _ in fits), default=0.0)
+    with open(path, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["theta0_deg", "f_hz", "f_std_hz", "t_s", "amplitude_deg", "damping_per_s", "duration_s"])
+        for window, fit in fits:
+            writer.writerow([math.degrees(window.theta0_rad), fit.frequency_hz, fit.frequency_std_hz,
+                             window.start_s - start, math.degrees(fit.amplitude_rad), fit.damping_per_s,
+                             fit.duration_s])

@@ -38,7 +38,7 @@ import math
 
 import numpy as np
 
-from mows.ringdown_model import evaluate_model, levenberg_marquardt, rotated_pickup
+from mows.ringdown_model import evaluate_model, levenberg_marquardt, split_pickup
 
 TWO_PI = 2.0 * math.pi
 
@@ -210,7 +210,7 @@ def _evaluate(problem: _Problem, q: np.ndarray, derivatives: bool = True) -> _St
     (:func:`mows.ringdown_model.normal_equations`, where the numerics are explained)."""
     n_ch, n = problem.y.shape
     p = q.size
-    cr, ci = rotated_pickup(problem.pickup, 0.0)
+    cr, ci = split_pickup(problem.pickup)
     g, m = np.empty(n), np.empty((p if derivatives else 0, n))
     residual, coef = np.empty((n_ch, n)), np.empty((n_ch, 2))
     jtj, jtr = np.zeros((p, p)), np.zeros(p)
@@ -337,7 +337,7 @@ def _variable_projection(problem: _Problem, q, iterations, tol_chi2, damping=1e-
 
     Returns (the step at the last accepted q, converged, iterations, free-parameter mask).
     """
-    cr, ci = rotated_pickup(problem.pickup, 0.0)
+    cr, ci = split_pickup(problem.pickup)
     q, converged, used, free, cost, g, m, residual, coef, jtj, jtr = levenberg_marquardt(
         np.asarray(q, float).copy(), problem.dt, cr, ci, problem.theta0_free, problem.y, problem.weights,
         iterations, tol_chi2, damping, *AMPLITUDE_BOUNDS_RAD, AMPLITUDE)

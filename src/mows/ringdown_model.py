@@ -158,10 +158,10 @@ def _projected_normal_equations(g, g_mean, norm2, m, m_mean, residual, coef, w, 
             jtj[j, k] = value
 
 
-def rotated_pickup(pickup: np.ndarray, theta0_rad: float) -> tuple[np.ndarray, np.ndarray]:
-    """Real and imaginary parts of C_k·e^(ikθ0) (the series of a probe turned by θ0)."""
-    rotated = np.asarray(pickup, complex) * np.exp(1j * np.arange(len(pickup)) * theta0_rad)
-    return np.ascontiguousarray(rotated.real), np.ascontiguousarray(rotated.imag)
+def split_pickup(pickup) -> tuple[np.ndarray, np.ndarray]:
+    """Real and imaginary parts of the pickup coefficients C_k, as the kernels take them."""
+    coefficients = np.asarray(pickup, complex)
+    return np.ascontiguousarray(coefficients.real), np.ascontiguousarray(coefficients.imag)
 
 
 @njit(cache=True)

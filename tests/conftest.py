@@ -35,6 +35,16 @@ DOMAIN_ID, _domain_lock = claim_domain()  # held open for the whole session
 os.environ["ROS_DOMAIN_ID"] = str(DOMAIN_ID)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels():
+    """The numba kernels compiled (or loaded from the cache) once, before any test: on a fresh
+    checkout the first fit would otherwise take ~10 s inside whatever test comes first, and a
+    device link that waits on it would time out."""
+    from mows.precompile import precompile
+
+    precompile()
+
+
 def pytest_report_header() -> str:
     return f"ROS_DOMAIN_ID={DOMAIN_ID}, ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
 

@@ -31,6 +31,7 @@ from mows.cycle import CycleRequest, CycleSettings, Phase
 from mows.device.backends import BagBackend, SerialBackend, SimBackend
 from mows.device.serial_link import DEFAULT_BAUD, SerialLink
 from mows.device.session import DeviceSession, SessionConfig
+from mows.precompile import precompile
 from mows.probe import PAPER_PROBE
 from mows.scenario import DEFAULT_SCENARIO, load_scenario
 from mows.simulator import SimulatedDevice
@@ -141,6 +142,9 @@ class DriverNode(MowsNode):
             raise InvalidParameterValueException("excitation_current_a", values["excitation_current_a"], problem)
         cap = CurrentCap(values["coil_current_cap_a"])
         setup = PRESETS[values["coil_setup"]](current_limit_a=cap.limit_a)
+        # The cycle fits its tuning ring-downs and the sim backend integrates: compile both (or
+        # load them from numba's cache) now, not while the device streams.
+        self.get_logger().info(f"numba kernels ready in {precompile(simulator=values['backend'] == 'sim'):.1f} s")
         self.raw_publisher = self.create_publisher(MagnetometerBlock, RAW_TOPIC, STREAM_QOS)
         self.excitation_publisher = self.create_publisher(ExcitationState, EXCITATION_TOPIC, EXCITATION_QOS)
         try:

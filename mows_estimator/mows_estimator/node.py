@@ -27,7 +27,8 @@ from mows.pose import Pose
 from mows.frequency import frequency_shift_hz
 from mows.probe import PAPER_PROBE, Probe
 from mows.ringdown import FitOptions, FitStatus, failure
-from mows.segments import RingdownWindow, Segment, SegmentAssembler, fit_segment
+from mows.precompile import precompile
+from mows.segments import SegmentAssembler, fit_segment
 from mows_estimator.messages import (block_from_msg, estimate_to_msg, fit_to_msg, magnetic_field_msg,
                                      window_from_msg)
 from mows_ros.diagnostics import Health
@@ -87,17 +88,10 @@ class EstimatorNode(MowsNode):
                             callback_group=ReentrantCallbackGroup())
 
     def _warm_up(self):
-        """Fit one synthetic ring-down before listening: the fit's compiled kernels load from
-        numba's cache (about a second) or, on a fresh checkout, compile (about ten), and that
-        must not happen on the first real ring-down. Subscriptions and publishers come after,
-        so a node that advertises its results is ready to produce them."""
-        start = time.monotonic()
-        t = np.arange(4000) / 20_000.0
-        near = np.sin(0.3 * np.cos(2 * math.pi * 112.0 * t) * np.exp(-1.8 * t))
-        pair = np.stack([near, np.zeros_like(near)], axis=1)
-        fit_segment(Segment(RingdownWindow(0.0, 0.2, excitation_frequency_hz=112.0), 0, 20_000.0,
-                            pair, np.zeros(pair.shape, bool), 0), self._options(0.0))
-        self.get_logger().info(f"fit kernels ready in {time.monotonic() - start:.1f} s")
+        """Compile the fit (or load it from numba's cache) before listening: that must not happen
+        on the first real ring-down. Subscriptions and publishers come after, so a node that
+        advertises its results is ready to produce them."""
+        self.get_logger().info(f"fit kernels ready in {precompile(simulator=False):.1f} s")
 
     # --- parameters -------------------------------------------------------------------------
     def _param(self, name):

@@ -1,0 +1,39 @@
+"""Compile the numba kernels (or load them from numba's on-disk cache) before they are needed.
+
+The ring-down fit (:mod:`mows.ringdown_model`) and the simulator's integrator
+(:mod:`mows.simulator`) are compiled on first use: about ten seconds on a fresh checkout, about
+a second from the cache. That must not happen in the middle of a measurement (a driver that
+stalls for seconds loses its device link; an estimator that stalls misses ring-downs), so the
+nodes and the test session call :func:`precompile` first. ``python -m mows.precompile`` does it
+by hand.
+"""
+import math
+import time
+
+import numpy as np
+
+
+def precompile(simulator: bool = True) -> float:
+    """Run one small fit (and, with ``simulator``, a few simulator steps); return the seconds it
+    took."""
+    from mows.fluxgate import FluxgatePair, pickup_harmonics
+    from mows.pose import Pose
+    from mows.probe import PAPER_PROBE
+    from mows.ringdown import FitOptions, fit_ringdown
+
+    start = time.perf_counter()
+    t = np.arange(4000) / 20_000.0
+    near = np.sin(0.3 * np.cos(2 * math.pi * 112.0 * t) * np.exp(-1.8 * t))
+    pair = np.stack([near, np.zeros_like(near)], axis=1)
+    pickup = pickup_harmonics(FluxgatePair.paper(), Pose(), PAPER_PROBE.lever_m, PAPER_PROBE.moment_am2)
+    fit_ringdown(pair, 20_000.0, 0.0, 112.0, options=FitOptions(pickup=tuple(pickup)))
+    if simulator:
+        from mows.scenario import Scenario
+        from mows.simulator import SimulatedDevice
+
+        SimulatedDevice(Scenario()).read(10)
+    return time.perf_counter() - start
+
+
+if __name__ == "__main__":
+    print(f"numba kernels ready in {precompile():.1f} s")

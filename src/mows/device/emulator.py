@@ -66,6 +66,8 @@ class DeviceEmulator:
         self.info = DeviceInfo(rate, 2, device.n_coils, near.range_t, near.resolution_t, self.device.cap.limit_a,
                                watchdog_timeout_s)
         self.watchdog_trips: list[tuple[int, int]] = []  # (sample of the last host frame, sample of coils off)
+        # Host silences of at least the watchdog time: (sample of the last frame, of the next).
+        self.long_silences: list[tuple[int, int]] = []
         self.dropped_frames = 0
         self.misdirected_frames = 0
         self.decoder = FrameDecoder()
@@ -178,6 +180,12 @@ class DeviceEmulator:
             # them for a ring-down it scheduled.
             self._send(self.status(), self.clock.stamp_ns(self.device.next_index))
 
+    def silent_since(self) -> int | None:
+        """The sample of the host's last frame if its silence has reached the watchdog time."""
+        if self.device.next_index - self._last_host_index >= self._watchdog_samples:
+            return self._last_host_index
+        return None
+
     def status(self) -> Status:
         return Status(self.device.next_index, self.device.coils_on, len(self.watchdog_trips), self.dropped_frames,
                       self.decoder.rejected_total + self.misdirected_frames)
@@ -196,6 +204,8 @@ class DeviceEmulator:
                 break
             data += chunk
         for frame in self.decoder.feed(data):
+            if due - self._last_host_index >= self._watchdog_samples:
+                self.long_silences.append((self._last_host_index, due))
             self._last_host_index = due
             self._handle(frame, due)
 

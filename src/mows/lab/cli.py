@@ -113,6 +113,8 @@ def format_text(report, table, command: str) -> str:
         lines += ["", _candidates_text(report)]
     if len(report.history) > 1 or command == "add":
         lines += ["", _history_text(report.history)]
+    if report.physics_checks:
+        lines += ["", _checks_text(report.physics_checks)]
     lines += ["", f"verdict: {report.verdict}", "  " + report.diagnosis.explanation]
     return "\n".join(lines)
 
@@ -134,12 +136,13 @@ def _structure_text(structure) -> str:
 
 
 def _candidates_text(report) -> str:
-    lines = ["candidate effects, best first (ΔBIC > 10 is strong evidence):",
-             "  rank effect                ΔBIC        p         χ²/dof after  group  parameters"]
+    lines = ["candidate effects, best first, each in its better form by BIC (ΔBIC > 10 is strong evidence;",
+             "'at physics': held at its physical value, no free parameter; parameters: the free fit):",
+             "  rank effect                  form          ΔBIC        p         χ²/dof after  group  parameters"]
     for rank, c in enumerate(report.candidates, 1):
         values = ", ".join(f"{name} = {v:.4g} ± {s:.2g} {u}" for name, v, s, u in c.parameters)
-        lines.append(f"  {rank:4d} {c.name:20s} {c.delta_bic:9.1f}   {c.p_value:9.2g}   {c.chi2_dof_after:10.3f}   "
-                     f"{c.group or '-':>4}   {values}")
+        lines.append(f"  {rank:4d} {c.name:22s}  {c.form:10s} {c.delta_bic:9.1f}   {c.p_value:9.2g}   "
+                     f"{c.chi2_dof_after:10.3f}   {c.group or '-':>4}   {values}")
     for group in report.groups:
         lines.append(f"  group {group.number}: {', '.join(group.members)} cannot be told apart by this data; "
                      f"{group.separation}")
@@ -150,9 +153,19 @@ def _candidates_text(report) -> str:
 
 
 def _history_text(history) -> str:
-    lines = ["error history:", "  step  model                                         χ²/dof      BIC        CV rms (mHz)"]
+    lines = ["error history:", "  step  χ²/dof      BIC        CV rms (mHz)  change → model"]
     for i, step in enumerate(history):
         name = " + ".join(["eq6"] + step.effects)
         cv = f"{step.cv_rms_hz * 1e3:10.4f}" if math.isfinite(step.cv_rms_hz) else "         -"
-        lines.append(f"  {i:4d}  {name:45s} {step.chi2_dof:9.3f}  {step.bic:10.1f}  {cv}")
+        lines.append(f"  {i:4d}  {step.chi2_dof:9.3f}  {step.bic:10.1f}  {cv}    {step.change} → {name}")
+        lines += [f"          free fit: {name} = {v:.4g} ± {s:.2g} {u}" for name, v, s, u in step.check]
+    return "\n".join(lines)
+
+
+def _checks_text(checks) -> str:
+    lines = ["effects with a physical value, their free fit with the rest of the model against it:"]
+    for check in checks:
+        values = ", ".join(f"{name} = {v:.4g} ± {s:.2g} {u}" for name, v, s, u in check.parameters)
+        form = "held at physics" if check.held else "free"
+        lines.append(f"  {check.effect} ({form}): {values} (physical value {check.deviation_sigma:.1f}σ away)")
     return "\n".join(lines)

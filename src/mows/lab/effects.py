@@ -6,7 +6,9 @@ PHYSICS.md §4 with the exact rest angle and first-harmonic balance, so effects 
 right at mT fields. Every effect is *off* when all its parameters are 0 and is smooth there
 (score tests and refits start from 0). Where the size of an effect follows from probe
 constants (gravity: a·g·l; static deflection: m, kM and By'), the free parameter is the unknown
-geometry or a dimensionless strength with 1 = the physics as predicted.
+geometry or a dimensionless strength with 1 = the physics as predicted; an effect whose size is
+known entirely (``physical``) can also be held at it, with no free parameter
+(:meth:`Effect.at_physics`, labelled ``name (at physics)``).
 
 The catalog (:func:`catalog`) is documented with equations and residual signatures in
 docs/model_lab.md. Plugins are Python files or entry points (group ``mows.lab.effects``) that
@@ -40,6 +42,8 @@ from mows.lab.physics import Configuration, rotation_matrix, standard_gravity_ve
 from mows.lab.table import MissingColumnError
 
 ENTRY_POINT_GROUP = "mows.lab.effects"
+AT_PHYSICS = " (at physics)"  # label suffix of an effect held at its physical values
+PHYSICAL_STRENGTH = (1.0,)    # a strength of 1 is the physics as predicted
 
 # Stages: effects are applied in this order, so that e.g. an angle offset turns the probe
 # before fields are projected, and the readout comes last.
@@ -72,7 +76,10 @@ class Effect:
     order of ``parameters``). ``requires`` names table columns without which the effect cannot
     be tested. ``priority`` breaks ties inside a group of effects the data cannot tell apart
     (smaller first; docs/model_lab.md). ``check`` names an independent measurement that tests
-    the effect directly.
+    the effect directly. ``physical`` holds the parameter values at which the effect is the
+    physics as predicted from the probe constants and the table (None when its size is not
+    known, e.g. gravity's tilt): the effect can then also be tested *at physics*, with no free
+    parameter (:meth:`at_physics`).
     """
 
     name: str
@@ -86,10 +93,32 @@ class Effect:
     priority: int = 100
     check: str = ""
     origin: str = "catalog"
+    physical: tuple | None = None
+    free: "Effect | None" = None   # of an effect held at physics: the same effect with its parameters free
 
     @property
     def parameter_names(self) -> tuple:
         return tuple(p.name for p in self.parameters)
+
+    @property
+    def fixed(self) -> bool:
+        """True for an effect held at its physical values (no free parameter)."""
+        return self.free is not None
+
+    @property
+    def label(self) -> str:
+        """The name, with the form when the effect is held at physics."""
+        return f"{self.name}{AT_PHYSICS}" if self.fixed else self.name
+
+    def at_physics(self) -> "Effect":
+        """This effect held at its ``physical`` values: same name, no free parameter."""
+        if self.fixed:
+            return self
+        if self.physical is None:
+            raise ValueError(f"effect {self.name} has no physical value: its size is not known in advance")
+        apply, values = self.apply, self.physical
+        return dataclasses.replace(self, parameters=(), free=self,
+                                   apply=lambda config, rows, probe: apply(config, rows, probe, *values))
 
     def missing_columns(self, table) -> tuple:
         return tuple(name for name in self.requires if not table.has(name))
@@ -186,7 +215,7 @@ CATALOG = (
         "k = kM + m·Bx' + m·l·(Gx'x' − 2·s·Gy'y') + …, s = strength (1 = measured gradient)",
         "harmonics 0 and 2 of θ0, proportional to the gradient G; absent without gradient",
         _strength("weight of the gradient components other than Gx'x' (1 = Maxwell, as measured)"),
-        _transverse_gradient, COMPONENTS, priority=30,
+        _transverse_gradient, COMPONENTS, priority=30, physical=PHYSICAL_STRENGTH,
         check="rotate a known anti-Helmholtz gradient: the 2θ0 amplitude is 2·m·l·G/kM·f00/2 with, "
               "0.5× that without"),
     Effect(
@@ -211,7 +240,7 @@ CATALOG = (
         "k = U''(θs), U'(θs) = 0; k ≈ kM + m·Bx' + (m·By')²/kM, blended by the strength λ",
         "harmonics 0 and 2 of θ0, growing as |B|² (B⊥²); absent in a field along x'",
         _strength("blend between Eq. 6 (0) and the exact rest angle (1)"),
-        _static_deflection, COMPONENTS, priority=10,
+        _static_deflection, COMPONENTS, priority=10, physical=PHYSICAL_STRENGTH,
         check="repeat the sweep at twice the field: this effect grows 4×, field terms 2×"),
     Effect(
         "finite_amplitude",
@@ -223,7 +252,7 @@ CATALOG = (
         "k(A) = (1/πA)·∫U'(θc + A·cos φ)·cos φ dφ;  f = f(0) + s·(Σ c_q·f(A_q) − f(0))",
         "harmonic 1 of θ0 (∝ Bx'·A²), scales with the excitation amplitude squared and with |B|",
         _strength("blend between the small-amplitude (0) and the ring-down-averaged frequency (1)"),
-        _finite_amplitude, READOUT, priority=20,
+        _finite_amplitude, READOUT, priority=20, physical=PHYSICAL_STRENGTH,
         check="repeat at half the excitation amplitude: this effect falls 4×"),
     Effect(
         "gravity",
@@ -273,7 +302,7 @@ CATALOG = (
         "f = f00·√((k/J − δ_row²)/(kM/J − δ0²)) (blended by the strength)",
         "follows damping_per_s; otherwise ∝ δ0²·(k − kM) (tiny, only at mT fields)",
         _strength("blend between Eq. 6 (0) and the damped form of Eq. S1 (1)", bound=100.0),
-        _damping_shift, READOUT, priority=25,
+        _damping_shift, READOUT, priority=25, physical=PHYSICAL_STRENGTH,
         check="compare ring-downs of equal frequency but different damping"),
     Effect(
         "field_offset",
@@ -320,12 +349,15 @@ def catalog(plugins=()) -> dict:
 
 
 def resolve(names, effects: dict) -> list:
-    """The effects called ``names``; ValueError naming the unknown ones."""
-    unknown = [name for name in names if name not in effects]
+    """The effects called ``names`` (a name, or its label ``name (at physics)`` for the effect
+    held at its physical values); ValueError naming the unknown ones."""
+    bare = [name.removesuffix(AT_PHYSICS) for name in names]
+    unknown = [name for name, plain in zip(names, bare) if plain not in effects]
     if unknown:
         raise ValueError(f"unknown effect{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
                          f"known: {', '.join(effects)}")
-    return [effects[name] for name in names]
+    return [effects[plain].at_physics() if name.endswith(AT_PHYSICS) else effects[plain]
+            for name, plain in zip(names, bare)]
 
 
 # --- ring-down amplitude nodes, cached per table ---------------------------------------------

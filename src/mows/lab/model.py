@@ -74,11 +74,19 @@ class FrequencyModel:
     # --- description ----------------------------------------------------------------------
     @property
     def name(self) -> str:
-        return " + ".join(["eq6"] + [e.name for e in self.effects])
+        return " + ".join(["eq6"] + self.labels)
 
     @property
     def effect_names(self) -> list:
         return [e.name for e in self.effects]
+
+    @property
+    def labels(self) -> list:
+        """The effects' names with their form (``… (at physics)`` when held at physics)."""
+        return [e.label for e in self.effects]
+
+    def without(self, effect) -> "FrequencyModel":
+        return FrequencyModel(self.probe, [e for e in self.effects if e is not effect])
 
     @property
     def parameters(self) -> list:
@@ -241,6 +249,12 @@ class FitResult:
         """[(name, value, std, unit)] for f00 and every effect parameter."""
         units = ["Hz"] + [p.unit for _, p in self.model.parameters]
         return list(zip(self.model.parameter_names, self.values.tolist(), self.std.tolist(), units))
+
+    def values_without(self, effect) -> np.ndarray:
+        """The fitted effect parameter values (fit order) of the model without ``effect``: a
+        start for fitting ``model.without(effect)``."""
+        keep = [e is not effect for e in self.model.effects for _ in e.parameters]
+        return self.values[1:][np.array(keep, bool)]
 
     def effect_parameters(self, effect_name: str) -> list:
         """[(parameter, value, std, unit)] of one effect of the model."""

@@ -108,7 +108,7 @@ def figure_candidates(report) -> str | None:
     figure, axis = plt.subplots(figsize=(6, 0.35 * len(candidates) + 1))
     values = [c.delta_bic for c in candidates]
     colors = ["tab:red" if c.strong else "tab:gray" for c in candidates]
-    axis.barh([f"{c.name}" + (f" [group {c.group}]" if c.group else "") for c in candidates], values, color=colors)
+    axis.barh([c.label + (f" [group {c.group}]" if c.group else "") for c in candidates], values, color=colors)
     axis.axvline(10, color="k", ls="--", lw=0.8)
     axis.set_xscale("symlog", linthresh=10)
     axis.invert_yaxis()
@@ -118,14 +118,14 @@ def figure_candidates(report) -> str | None:
 
 def figure_history(report) -> str:
     steps = report.history
-    labels = ["eq6"] + ["+ " + s.effects[-1] for s in steps[1:]]
+    labels = [str(i) for i in range(len(steps))]  # the steps' changes are in the table below
     figure, (left, right) = plt.subplots(1, 2, figsize=(8, 3))
     left.plot(labels, [s.chi2_dof for s in steps], "o-")
     left.set(yscale="log", ylabel="χ²/dof", title="fit")
     right.plot(labels, [s.cv_rms_hz * 1e3 for s in steps], "o-", color="tab:orange")
     right.set(ylabel="CV rms (mHz)", title="leave-one-sweep-out")
     for axis in (left, right):
-        axis.tick_params(axis="x", rotation=30)
+        axis.set(xlabel="step")
     return _png(figure)
 
 
@@ -144,11 +144,15 @@ def render_html(report) -> str:
     residual_plots = [_img(figure_residuals(report, np.degrees(table.theta0_rad), "θ0 (deg)"), "residual vs θ0")]
     residual_plots += [_img(figure_residuals(report, values, name), f"residual vs {name}")
                        for name, values in covariates.items()]
-    candidates = _rows([(i + 1, c.name, f"{c.delta_bic:.1f}", f"{c.p_value:.2g}", f"{c.chi2_dof_after:.3f}",
+    candidates = _rows([(i + 1, c.label, f"{c.delta_bic:.1f}", f"{c.p_value:.2g}", f"{c.chi2_dof_after:.3f}",
                          c.group or "", "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters))
                         for i, c in enumerate(report.candidates)])
-    history = _rows([(" + ".join(["eq6"] + s.effects), f"{s.chi2_dof:.3f}", f"{s.bic:.1f}",
-                      "-" if not math.isfinite(s.cv_rms_hz) else f"{s.cv_rms_hz * 1e3:.4f}") for s in report.history])
+    history = _rows([(i, s.change, " + ".join(["eq6"] + s.effects), f"{s.chi2_dof:.3f}", f"{s.bic:.1f}",
+                      "-" if not math.isfinite(s.cv_rms_hz) else f"{s.cv_rms_hz * 1e3:.4f}")
+                     for i, s in enumerate(report.history)])
+    checks = _rows([(c.effect, "held at physics" if c.held else "free",
+                     "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters),
+                     f"{c.deviation_sigma:.1f}") for c in report.physics_checks])
     groups = "".join(f"<li>group {g.number}: {html.escape(', '.join(g.members))} — {html.escape(g.separation)}"
                      + "".join(f"<br>check {html.escape(c)}" for c in g.checks) + "</li>" for g in report.groups)
     parameters = _rows([(n, f"{v:.6g}", f"{s:.2g}", u) for n, v, s, u in report.fit.parameters()])
@@ -163,12 +167,16 @@ table{{border-collapse:collapse}} tr:nth-child(even){{background:#f2f2f2}} img{{
 <h2>Model against measurement</h2>{_img(figure_field_response(report), "Fig. 3 style")}
 {_img(figure_polar(report), "Fig. 4 style")}
 <h2>Fitted parameters</h2><table><tr><th>parameter</th><th>value</th><th>σ</th><th>unit</th></tr>{parameters}</table>
+<p>Effects with a physical value: their free fit with the rest of the model against it:</p>
+<table><tr><th>effect</th><th>in the model</th><th>free fit</th><th>physical value off by (σ)</th></tr>
+{checks}</table>
 <h2>Residuals</h2><p>{html.escape(report.structure)}</p>{''.join(residual_plots)}
 <h2>Candidate effects</h2>{_img(figure_candidates(report), "candidates")}
 <table><tr><th>rank</th><th>effect</th><th>ΔBIC</th><th>p</th><th>χ²/dof after</th><th>group</th>
-<th>parameters</th></tr>{candidates}</table><ul>{groups}</ul>
+<th>parameters (free fit)</th></tr>{candidates}</table><ul>{groups}</ul>
 <h2>Error history</h2>{_img(figure_history(report), "history")}
-<table><tr><th>model</th><th>χ²/dof</th><th>BIC</th><th>CV rms (mHz)</th></tr>{history}</table>
+<table><tr><th>step</th><th>change</th><th>model</th><th>χ²/dof</th><th>BIC</th><th>CV rms (mHz)</th></tr>
+{history}</table>
 <p>Notes: {html.escape('; '.join(report.notes) or 'none')}</p></body></html>"""
 
 

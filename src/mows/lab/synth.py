@@ -17,13 +17,19 @@ when given: a reference that misses a source), optionally with magnetometer nois
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from mows.field import FieldSource
 from mows import ringdown_average
-from mows.lab.table import FIELD, GRADIENT, MeasurementTable
+from mows.field import FieldSource
+from mows.fluxgate import pickup_harmonics
+from mows.lab.table import FIELD, GRADIENT, MeasurementTable, reference_columns
 from mows.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
+from mows.ringdown import FitOptions, fit_ringdown
+from mows.simulator import SimulatedDevice, simulate_cycle
+from mows.sweep import SweepPoint, SweepRecord
 
 TRUTH_NODES = 8
 LEVEL = (0.0, 0.0, -STANDARD_GRAVITY_M_PER_S2)
@@ -111,3 +117,69 @@ def rotation_sweeps(step_deg: float = 10.0, sweeps: int = 2, seconds_per_row: fl
     theta0 = np.tile(angles, sweeps)
     return {"theta0_deg": theta0, "sweep": np.repeat(np.arange(sweeps), len(angles)).astype(float),
             "t_s": np.arange(len(theta0)) * seconds_per_row}
+
+
+# --- the slow path: the time-domain simulator and the estimator ---------------------------------
+SETTLE_S = 0.003  # the coil current's decay after switch-off, left out of every fit
+
+
+def simulated_table(scenario, angles_deg, repeats: int, rng: np.random.Generator, settle_s: float = SETTLE_S,
+                    ) -> MeasurementTable:
+    """A measurement table from the time-domain simulator and the lever-aware estimator.
+
+    Independent of the lab's physics: :mod:`mows.simulator` integrates the equation of motion in
+    the scenario's actual source fields (excitation up to the housing stop, sensor noise), and
+    every ring-down is fitted by :func:`mows.ringdown.fit_ringdown` with the lever's exact
+    pickup, as the estimator node does. ``repeats`` full rotation sweeps over ``angles_deg``
+    (column ``sweep``; full sweeps rather than repeated ring-downs at each angle, so that a slow
+    drift is not confounded with θ0); each sweep is a :class:`mows.sweep.SweepRecord` whose
+    :meth:`~mows.sweep.SweepRecord.table_columns` give the frequencies, damping, fit windows and
+    that sweep's pooled start amplitude. ``t_s`` is the device time of each switch-off (the
+    pause between cycles is not simulated), ``temperature_k`` the device's temperature then.
+    The reference columns are the scenario's field and gradient at the probe
+    (:func:`mows.lab.table.reference_at`). Failed fits are left out and counted in the notes.
+    """
+    device = SimulatedDevice(scenario, rng)
+    sweeps = [_simulated_sweep(device, scenario, angles_deg, settle_s) for _ in range(repeats)]
+    columns = {name: np.concatenate([sweep[name] for sweep, _ in sweeps]) for name in sweeps[0][0]}
+    columns["sweep"] = np.concatenate([np.full(len(sweep["f_hz"]), float(i)) for i, (sweep, _) in enumerate(sweeps)])
+    columns["t_s"] = columns["t_s"] - columns["t_s"].min()
+    columns.update(reference_columns(scenario, len(columns["f_hz"])))
+    failed = sum(count for _, count in sweeps)
+    notes = (f"{failed} ring-down fits failed and were left out",) if failed else ()
+    return MeasurementTable(columns, f"simulated {scenario.name}", notes)
+
+
+def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
+    """(table columns, failed fits) of one rotation sweep: the record's columns with the
+    device time of each switch-off and the device's temperature then."""
+    record, temperatures, failed = SweepRecord(), [], 0
+    for theta0 in np.radians(np.asarray(angles_deg, float)):
+        cycle = simulate_cycle(device, theta0, scenario.excitation.amplitude_a,
+                               excite_s=scenario.excitation.excite_s, ringdown_s=scenario.excitation.ringdown_s)
+        point = _ringdown_point(scenario, cycle, settle_s)
+        if point is None:
+            failed += 1
+            continue
+        record.add(point)
+        temperatures.append(device.temperature_k)
+    columns = record.table_columns()  # its t_s counts from the sweep's start: the device time instead
+    columns.update(t_s=np.array([p.t_s for p in record.points]), temperature_k=np.array(temperatures))
+    return columns, failed
+
+
+def _ringdown_point(scenario, cycle, settle_s):
+    """The estimator's fit of one simulated ring-down as a :class:`mows.sweep.SweepPoint`
+    (None when the fit fails), with the lever-aware pickup of the commanded orientation."""
+    probe = scenario.probe
+    pickup = pickup_harmonics(scenario.sensors.pair, scenario.pose.with_theta0(cycle.theta0_rad), probe.lever_m,
+                              probe.moment_am2)
+    start = cycle.coil_off_index
+    fit = fit_ringdown(cycle.samples_t[start:], cycle.sample_rate_hz, cycle.theta0_rad, cycle.frequency_hz,
+                       cycle.saturated[start:], FitOptions(pickup=tuple(pickup)), settle_s=settle_s)
+    if not fit.ok:
+        return None
+    a = fit.parameter_names.index("amplitude_rad")
+    return SweepPoint(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, fit.frequency_hz - probe.f00_hz,
+                      fit.frequency_std_hz, fit.amplitude_rad, fit.damping_per_s, fit.duration_s,
+                      cycle.block.t0_s + start / cycle.sample_rate_hz, math.sqrt(fit.covariance[a, a]))

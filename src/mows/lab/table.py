@@ -382,8 +382,13 @@ def _reference_columns(reference, stamps, fields, magnet_position_m, path) -> di
         values = np.array([v for _, v in fields])
         nearest = np.abs(stamps[:, None] - times[None, :]).argmin(axis=1)
         return dict(zip(FIELD, values[nearest].T))
+    return reference_columns(reference, len(stamps), magnet_position_m)
+
+
+def reference_columns(reference, n: int, magnet_position_m=(0.0, 0.0, 0.0)) -> dict:
+    """The reference columns (field, in-plane gradient) of ``n`` rows in a static reference
+    (anything :func:`reference_at` takes)."""
     field, gradient = reference_at(reference, magnet_position_m)
-    n = len(stamps)
     columns = {name: np.full(n, value) for name, value in zip(FIELD, field)}
     columns.update({name: np.full(n, gradient[i, j]) for name, (i, j) in zip(GRADIENT, ((0, 0), (0, 1), (1, 1)))})
     return columns

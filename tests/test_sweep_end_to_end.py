@@ -10,9 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from mows.fluxgate import pickup_harmonics
 from mows.lab.table import reference_at
-from mows.pose import Pose
 from mows.ringdown import FitOptions, fit_ringdown
 from mows.scenario import load_scenario
 from mows.simulator import SimulatedDevice, simulate_cycle
@@ -30,17 +28,12 @@ def sweep():
     for deg in ANGLES_DEG:
         for _ in range(2):
             cycle = simulate_cycle(device, math.radians(deg), scenario.excitation.amplitude_a)
-            pickup = pickup_harmonics(scenario.sensors.pair, Pose(theta0_rad=cycle.theta0_rad), probe.lever_m,
-                                      probe.moment_am2)
             start = cycle.coil_off_index
             fit = fit_ringdown(cycle.samples_t[start:], cycle.sample_rate_hz, cycle.theta0_rad, cycle.frequency_hz,
-                               cycle.saturated[start:], FitOptions(pickup=tuple(pickup)), settle_s=0.003)
+                               cycle.saturated[start:], FitOptions.lever_aware(scenario.sensors.pair, probe,
+                                                                               cycle.theta0_rad), settle_s=0.003)
             assert fit.ok, fit.message
-            shift = fit.frequency_hz - probe.f00_hz
-            a = fit.parameter_names.index("amplitude_rad")
-            record.add(SweepPoint(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, shift,
-                                  fit.frequency_std_hz, fit.amplitude_rad, fit.damping_per_s, fit.duration_s, 0.0,
-                                  amplitude_std_rad=float(np.sqrt(fit.covariance[a, a]))))
+            record.add(SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz))
     return scenario, record
 
 

@@ -22,8 +22,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import MagneticField
 
 from mows.axis import estimate_along_axis
-from mows.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair, pickup_harmonics
-from mows.pose import Pose
+from mows.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.frequency import frequency_shift_hz
 from mows.probe import PAPER_PROBE, Probe
 from mows.ringdown import FitOptions, FitStatus, failure
@@ -110,16 +109,13 @@ class EstimatorNode(MowsNode):
     def _options(self, theta0_rad: float) -> FitOptions:
         direction = (self._param("sensor_axis_a"), self._param("sensor_axis_b"))
         channels = self._param("channels")
-        pickup = None
+        common = dict(sensor_direction=direction, min_periods=self._param("min_periods"),
+                      max_chi2_dof=self._param("max_chi2_dof"))
         if self._param("lever_aware") and not self._param("theta0_free") and channels != "both":
             pair = FluxgatePair.paper(distance_m=self._param("sensor_distance_m"),
                                       spacing_m=self._param("sensor_spacing_m"), axis=(*direction, 0.0))
-            probe = self.probe()
-            pickup = tuple(pickup_harmonics(pair, Pose(theta0_rad=theta0_rad), probe.lever_m, probe.moment_am2,
-                                            combine=channels))
-        return FitOptions(channels=channels, sensor_direction=direction, pickup=pickup,
-                          theta0_free=self._param("theta0_free"), min_periods=self._param("min_periods"),
-                          max_chi2_dof=self._param("max_chi2_dof"))
+            return FitOptions.lever_aware(pair, self.probe(), theta0_rad, channels, **common)
+        return FitOptions(channels=channels, theta0_free=self._param("theta0_free"), **common)
 
     # --- stream -----------------------------------------------------------------------------
     def _on_excitation(self, msg: ExcitationState):

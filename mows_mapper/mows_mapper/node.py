@@ -215,14 +215,8 @@ class MapperNode(MowsNode):
 
 def sweep_point(fit: RingdownFit) -> SweepPoint:
     """A successful RingdownFit as a point of the sweep, with σ of θmax from its covariance."""
-    names = list(fit.parameter_names)
-    amplitude_std = math.nan
-    if "amplitude_rad" in names:
-        index = names.index("amplitude_rad")
-        amplitude_std = math.sqrt(fit.covariance[index * len(names) + index])
-    return SweepPoint(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, fit.frequency_shift_hz,
-                      fit.frequency_shift_std_hz, fit.amplitude_rad, fit.damping_per_s, fit.duration_s,
-                      fit.header.stamp.sec + 1e-9 * fit.header.stamp.nanosec, amplitude_std)
+    return SweepPoint.from_fit(fit, fit.frequency_shift_hz, fit.frequency_shift_std_hz,
+                               fit.header.stamp.sec + 1e-9 * fit.header.stamp.nanosec)
 
 
 def model_report_msg(report, header, sweep_id: int) -> ModelReport:
@@ -230,7 +224,7 @@ def model_report_msg(report, header, sweep_id: int) -> ModelReport:
         header=header, sweep_id=sweep_id, model=report.model, effects=list(report.effects), n=report.n,
         chi2_dof=report.chi2_dof, bic=report.bic, cv_rms_hz=report.cv_rms_hz, verdict=report.verdict,
         structure=report.structure,
-        candidates=[CandidateEffect(effect=c.name, explanation=c.effect.explanation, delta_bic=c.delta_bic,
+        candidates=[CandidateEffect(effect=c.label, explanation=c.effect.explanation, delta_bic=c.delta_bic,
                                     p_value=c.p_value, chi2_dof_after=c.chi2_dof_after,
                                     parameter_names=[p[0] for p in c.parameters],
                                     parameter_values=[p[1] for p in c.parameters],

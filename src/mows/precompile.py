@@ -16,8 +16,7 @@ import numpy as np
 def precompile(simulator: bool = True) -> float:
     """Run one small fit (and, with ``simulator``, a few simulator steps); return the seconds it
     took."""
-    from mows.fluxgate import FluxgatePair, pickup_harmonics
-    from mows.pose import Pose
+    from mows.fluxgate import FluxgatePair
     from mows.probe import PAPER_PROBE
     from mows.ringdown import FitOptions, fit_ringdown
 
@@ -25,8 +24,7 @@ def precompile(simulator: bool = True) -> float:
     t = np.arange(4000) / 20_000.0
     near = np.sin(0.3 * np.cos(2 * math.pi * 112.0 * t) * np.exp(-1.8 * t))
     pair = np.stack([near, np.zeros_like(near)], axis=1)
-    pickup = pickup_harmonics(FluxgatePair.paper(), Pose(), PAPER_PROBE.lever_m, PAPER_PROBE.moment_am2)
-    fit_ringdown(pair, 20_000.0, 0.0, 112.0, options=FitOptions(pickup=tuple(pickup)))
+    fit_ringdown(pair, 20_000.0, 0.0, 112.0, options=FitOptions.lever_aware(FluxgatePair.paper(), PAPER_PROBE, 0.0))
     if simulator:
         from mows.scenario import Scenario
         from mows.simulator import SimulatedDevice

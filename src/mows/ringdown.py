@@ -98,6 +98,16 @@ class FitOptions:
             raise ValueError("a pickup series describes one fixed-θ0 channel: it cannot be combined with "
                              "theta0_free or channels='both'")
 
+    @classmethod
+    def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> "FitOptions":
+        """Options with the exact pickup of ``probe``'s magnet swinging on its lever, seen by the
+        fluxgate ``pair`` (:class:`mows.fluxgate.FluxgatePair`) with the probe at θ0."""
+        from mows.fluxgate import pickup_harmonics
+        from mows.pose import Pose
+
+        pickup = pickup_harmonics(pair, Pose(theta0_rad=theta0_rad), probe.lever_m, probe.moment_am2, combine=channels)
+        return cls(channels=channels, pickup=tuple(pickup), **others)
+
     def pickup_at(self, theta0_rad: float) -> np.ndarray:
         """The coefficients C_k of g: the given pickup, or the paper's single term."""
         if self.pickup is not None:

@@ -14,8 +14,7 @@ import sys
 import numpy as np
 
 from mows.bags import read_bag
-from mows.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair, pickup_harmonics
-from mows.pose import Pose
+from mows.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.probe import PAPER_PROBE, Probe
 from mows.ringdown import FitOptions
 from mows.segments import Block, RingdownWindow, SegmentAssembler, fit_segment
@@ -74,10 +73,7 @@ def fit_bag(path, probe: Probe, args):
 
 
 def _options(window, pair, probe, paper_model) -> FitOptions:
-    if paper_model:
-        return FitOptions()
-    return FitOptions(pickup=tuple(pickup_harmonics(pair, Pose(theta0_rad=window.theta0_rad), probe.lever_m,
-                                                    probe.moment_am2)))
+    return FitOptions() if paper_model else FitOptions.lever_aware(pair, probe, window.theta0_rad)
 
 
 def _block(message) -> Block:

@@ -10,8 +10,6 @@ import math
 import numpy as np
 import pytest
 
-from mows.fluxgate import pickup_harmonics
-from mows.pose import Pose
 from mows.ringdown import FitOptions, fit_ringdown
 from mows.scenario import load_scenario
 from mows.simulator import SimulatedDevice, simulate_cycle
@@ -27,11 +25,11 @@ def cycles():
 
 def fit(scenario, record, lever_aware):
     theta0 = record.theta0_rad
-    pickup = (tuple(pickup_harmonics(scenario.sensors.pair, Pose(theta0_rad=theta0), scenario.probe.lever_m,
-                                     scenario.probe.moment_am2)) if lever_aware else None)
+    options = (FitOptions.lever_aware(scenario.sensors.pair, scenario.probe, theta0) if lever_aware
+               else FitOptions())
     start = record.coil_off_index
     return fit_ringdown(record.samples_t[start:], record.sample_rate_hz, theta0, record.frequency_hz,
-                        record.saturated[start:], FitOptions(pickup=pickup), settle_s=0.003)
+                        record.saturated[start:], options, settle_s=0.003)
 
 
 @pytest.mark.parametrize("deg", [0, 45, 90, 135])

@@ -17,13 +17,11 @@ when given: a reference that misses a source), optionally with magnetometer nois
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
 from mows import ringdown_average
 from mows.field import FieldSource
-from mows.fluxgate import pickup_harmonics
 from mows.lab.table import FIELD, GRADIENT, MeasurementTable, reference_columns
 from mows.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
@@ -172,14 +170,11 @@ def _ringdown_point(scenario, cycle, settle_s):
     """The estimator's fit of one simulated ring-down as a :class:`mows.sweep.SweepPoint`
     (None when the fit fails), with the lever-aware pickup of the commanded orientation."""
     probe = scenario.probe
-    pickup = pickup_harmonics(scenario.sensors.pair, scenario.pose.with_theta0(cycle.theta0_rad), probe.lever_m,
-                              probe.moment_am2)
     start = cycle.coil_off_index
+    options = FitOptions.lever_aware(scenario.sensors.pair, probe, cycle.theta0_rad)
     fit = fit_ringdown(cycle.samples_t[start:], cycle.sample_rate_hz, cycle.theta0_rad, cycle.frequency_hz,
-                       cycle.saturated[start:], FitOptions(pickup=tuple(pickup)), settle_s=settle_s)
+                       cycle.saturated[start:], options, settle_s=settle_s)
     if not fit.ok:
         return None
-    a = fit.parameter_names.index("amplitude_rad")
-    return SweepPoint(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, fit.frequency_hz - probe.f00_hz,
-                      fit.frequency_std_hz, fit.amplitude_rad, fit.damping_per_s, fit.duration_s,
-                      cycle.block.t0_s + start / cycle.sample_rate_hz, math.sqrt(fit.covariance[a, a]))
+    return SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz,
+                               cycle.block.t0_s + start / cycle.sample_rate_hz)

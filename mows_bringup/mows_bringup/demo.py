@@ -150,6 +150,7 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path) -> N
             record.add(sweep_point(fit))
     f00 = float(np.mean([f.frequency_hz - f.frequency_shift_hz for f in fits if f.status == 0]))
     published = record.decompose(PAPER_PROBE, f00, model="published")
+    first_principles = record.decompose(PAPER_PROBE, f00)
     say("")
     say(f"{'':12s} {'first principles':>22s} {'truth':>10s} {'pull':>7s} {'published model':>17s}")
     for label, value, sigma, pub in zip(truth, *_values(decomposition), _values_of(published)):
@@ -165,7 +166,8 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path) -> N
         say(f"  candidate {candidate.effect:22s} ΔBIC {candidate.delta_bic:10.1f}  χ²/dof after "
             f"{candidate.chi2_dof_after:.2f}  group {candidate.group}")
     say(f"  residual structure: {report.structure}")
-    columns = record.table_columns()
+    columns = record.table_columns(record.start_amplitudes_rad(first_principles, PAPER_PROBE)
+                                   if first_principles.ok else None)
     n = len(record.points)
     columns.update({name: np.full(n, value) for name, value in zip(("ref_bx_t", "ref_by_t", "ref_bz_t"), field)})
     columns.update({"ref_gxx_t_per_m": np.full(n, gradient[0, 0]), "ref_gxy_t_per_m": np.full(n, gradient[0, 1]),

@@ -159,7 +159,7 @@ class MapperNode(MowsNode):
         self._sweep_pub.publish(msg)
         self._last = decomposition.report()
         self.get_logger().info(f"sweep {self._sweeps}: {self._last}")
-        self._publish_model_report(record, msg.header)
+        self._publish_model_report(record, msg.header, decomposition)
         if decomposition.ok:
             goal_handle.succeed()
         else:
@@ -187,13 +187,16 @@ class MapperNode(MowsNode):
         msg.chi2_dof, msg.rms_residual_hz, msg.n_points = d.chi2_dof, d.rms_residual_hz, len(record.points)
         return msg
 
-    def _publish_model_report(self, record: SweepRecord, header):
+    def _publish_model_report(self, record: SweepRecord, header, decomposition):
         reference = self._param("reference_scenario")
         if not reference:
             return
         field, gradient = reference_at(reference)
         n = len(record.points)
-        columns = record.table_columns()
+        # Each ring-down's start swing, stop − |θs|, at the decomposed field (first principles).
+        starts = (record.start_amplitudes_rad(decomposition, self.probe())
+                  if decomposition.ok and decomposition.model == "first_principles" else None)
+        columns = record.table_columns(starts)
         columns.update({"ref_bx_t": np.full(n, field[0]), "ref_by_t": np.full(n, field[1]),
                         "ref_bz_t": np.full(n, field[2]), "ref_gxx_t_per_m": np.full(n, gradient[0, 0]),
                         "ref_gxy_t_per_m": np.full(n, gradient[0, 1]), "ref_gyy_t_per_m": np.full(n, gradient[1, 1])})

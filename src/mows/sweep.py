@@ -81,6 +81,7 @@ class Decomposition:
     chi2_dof: float = math.nan
     rms_residual_hz: float = math.nan
     residual_hz: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    parameters: np.ndarray = dataclasses.field(default_factory=lambda: np.full(6, np.nan))  # Bx, By, Gs, Gd, Gxy, Δf00
 
     def report(self) -> str:
         if not self.ok:
@@ -96,38 +97,63 @@ class Decomposition:
                 f"rms residual {self.rms_residual_hz * 1e3:.3f} mHz")
 
 
-def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, amplitude_nodes=None):
-    """Δf(θ0) for params (Bx, By, Gs, Gd, Gxy, f00 − f00_calibrated), Hz.
+@dataclasses.dataclass(frozen=True)
+class Ringdowns:
+    """How a sweep's ring-downs were recorded, for the amplitude-dependent springs.
 
-    ``amplitude_nodes`` (A_q, c_q), each (n, q): the ring-down amplitudes and weights whose
-    harmonic-balance frequencies average to what the fit of a decaying ring-down reports
-    (:mod:`mows.ringdown_average`); None for the small-amplitude stiffness. The published
-    model has no amplitude and ignores them.
+    Every ring-down starts from the housing stop: at ``stop_amplitude_rad`` from the lever's
+    undeflected position, so its swing about the rest angle θs (turned by the perpendicular
+    field, PHYSICS.md §5.3) is stop − |θs|, which the model computes from its own potential.
+    ``damping_per_s`` and ``duration_s`` (per point) give the averaging of a constant-frequency
+    fit over the decaying swing (:mod:`mows.ringdown_average`).
     """
-    bx, by, gs, gd, gxy, df00 = params
+
+    stop_amplitude_rad: float
+    damping_per_s: np.ndarray
+    duration_s: np.ndarray
+
+
+def local_potential(params, theta0_rad, probe: Probe) -> ArcPotential:
+    """The potential of each point for params (Bx, By, Gs, Gd, Gxy, …): the field and gradient
+    turned into the probe frame (Gzz = −(Gxx + Gyy) by ∇·B = 0)."""
+    bx, by, gs, gd, gxy = params[:5]
     theta0 = np.asarray(theta0_rad, float)
     c, s = np.cos(theta0), np.sin(theta0)
-    f00 = f00_hz + df00
-    if model == "published":
-        along = gs + gd * np.cos(2 * theta0) + gxy * np.sin(2 * theta0)
-        spring = probe.moment_am2 * (bx * c + by * s) + probe.lever_m * probe.moment_am2 * along
-        return f00 + frequency_shift_hz(f00, probe.spring_nm_per_rad, spring) - f00_hz
     field = np.stack([bx * c + by * s, -bx * s + by * c, np.zeros_like(c)], axis=-1)
     gxx, gyy = gs + gd, gs - gd
     rotation = np.stack([np.stack([c, s, 0 * c], -1), np.stack([-s, c, 0 * c], -1),
                          np.stack([0 * c, 0 * c, 1 + 0 * c], -1)], axis=-2)         # rows x', y', z'
     global_gradient = np.array([[gxx, gxy, 0.0], [gxy, gyy, 0.0], [0.0, 0.0, -(gxx + gyy)]])
     gradient = rotation @ global_gradient @ np.swapaxes(rotation, -1, -2)
-    potential = ArcPotential.from_local_field(probe, field, gradient)
-    if amplitude_nodes is None:
+    return ArcPotential.from_local_field(probe, field, gradient)
+
+
+def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, ringdowns: Ringdowns | None = None):
+    """Δf(θ0) for params (Bx, By, Gs, Gd, Gxy, f00 − f00_calibrated), Hz.
+
+    With ``ringdowns`` the first-principles model reports what the fit of each decaying
+    ring-down reports: the weighted average of the harmonic-balance frequency over its swing
+    (:func:`mows.ringdown_average.amplitude_nodes`), from stop − |θs|. Without, the
+    small-amplitude stiffness. The published model has no amplitude.
+    """
+    bx, by, gs, gd, gxy, df00 = params
+    theta0 = np.asarray(theta0_rad, float)
+    f00 = f00_hz + df00
+    if model == "published":
+        along = gs + gd * np.cos(2 * theta0) + gxy * np.sin(2 * theta0)
+        spring = probe.moment_am2 * (bx * np.cos(theta0) + by * np.sin(theta0)) + probe.lever_m * probe.moment_am2 * along
+        return f00 + frequency_shift_hz(f00, probe.spring_nm_per_rad, spring) - f00_hz
+    potential = local_potential(params, theta0, probe)
+    if ringdowns is None:
         return f00 * np.sqrt(potential.stiffness_nm_per_rad() / probe.spring_nm_per_rad) - f00_hz
-    amplitudes, weights = amplitude_nodes
+    start = ringdowns.stop_amplitude_rad - np.abs(np.nan_to_num(potential.rest_angle_rad()))
+    amplitudes, weights = amplitude_nodes(theta0, start, ringdowns.damping_per_s, ringdowns.duration_s)
     ratios = np.stack([potential.effective_stiffness_nm_per_rad(a) for a in amplitudes.T], axis=-1)
     return f00 * np.sum(weights * np.sqrt(ratios / probe.spring_nm_per_rad), axis=-1) - f00_hz
 
 
 def decompose(theta0_rad, shift_hz, shift_std_hz, probe: Probe, f00_hz: float, model: str = "first_principles",
-              f00_free: bool = False, amplitude_nodes=None) -> Decomposition:
+              f00_free: bool = False, ringdowns: Ringdowns | None = None, start=None) -> Decomposition:
     """Field and gradient from a rotation sweep by weighted nonlinear least squares.
 
     Parameters
@@ -138,11 +164,11 @@ def decompose(theta0_rad, shift_hz, shift_std_hz, probe: Probe, f00_hz: float, m
     f00_hz : calibrated zero-field frequency that ``shift_hz`` refers to.
     model : ``first_principles`` (default) or ``published``.
     f00_free : fit the zero-field frequency too; Gs is then not determined.
-    amplitude_nodes : (A_q, c_q) per point, (n, q) each, for the first-principles model: the
-        ring-down's amplitudes and weights (:func:`mows.ringdown_average.amplitude_nodes`).
-        The cantilever is not a linear spring: at the 24° a ring-down starts from, the field
-        spring is ~1 % and the lever's gradient springs ~4 % weaker than at small amplitude
-        (first-harmonic balance). None: small amplitude.
+    ringdowns : how the ring-downs were recorded (:class:`Ringdowns`), for the first-principles
+        model. The cantilever is not a linear spring: at the 24° a ring-down starts from, the
+        field spring is ~1 % and the lever's gradient springs ~4 % weaker than at small
+        amplitude (first-harmonic balance). None: small amplitude.
+    start : parameters to start from (Bx, By, Gs, Gd, Gxy, Δf00); default: from the harmonics.
 
     The covariance is scaled by χ²/dof when that exceeds 1, as lmfit does: a model that does
     not fit does not get to claim the measurement errors' precision.
@@ -157,20 +183,22 @@ def decompose(theta0_rad, shift_hz, shift_std_hz, probe: Probe, f00_hz: float, m
         return Decomposition(model, False, problem, f00_free=f00_free)
     harmonics = fit_harmonics(theta0, shift, std, min(MAX_HARMONIC, _distinct_angles(theta0) // 2 - 1 or 1))
     free = np.array([True, True, not f00_free, True, True, f00_free])
-    start = _start(harmonics, probe, f00_hz, model)
+    start = _start(harmonics, probe, f00_hz, model) if start is None else np.array(start, float)
     if f00_free:
         start[2] = 0.0        # Gs is absorbed by f00 and stays out of the fit
 
     def residual(x):
         params = start.copy()
         params[free] = x
-        return (model_shift_hz(params, theta0, probe, f00_hz, model, amplitude_nodes) - shift) / std
+        return (model_shift_hz(params, theta0, probe, f00_hz, model, ringdowns) - shift) / std
 
     scale = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1e-3])[free]
     result = least_squares(residual, start[free], x_scale=scale, method="lm", xtol=1e-12, ftol=1e-12)
     params = start.copy()
     params[free] = result.x
-    return _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics)
+    decomposition = _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics)
+    decomposition.parameters = params
+    return decomposition
 
 
 def _distinct_angles(theta0) -> int:
@@ -276,15 +304,20 @@ class SweepRecord:
         shifts = np.array([p.shift_hz for p in chosen])
         return float(weights @ shifts / weights.sum()), float(1.0 / math.sqrt(weights.sum())), len(chosen)
 
-    def start_amplitude_rad(self) -> float:
-        """The sweep's start amplitude: the inverse-variance weighted mean of the fits' θmax.
+    def stop_amplitude_rad(self, rest_angles_rad=None) -> float:
+        """The swing a ring-down starts with when the probe rests undeflected: the
+        inverse-variance weighted mean of the fits' θmax + |θs| (θs: each point's rest angle,
+        0 when not given).
 
         Every ring-down starts from the housing stop, and the perpendicular excitation scheme
         drives every orientation alike; a single fit's θmax, though, is poorly determined near
         θ0 = 180° (and held at a bound when unidentifiable), so the sweep's pooled value is the
         better input to the amplitude-dependent springs. The median when no σ is known.
         """
-        amplitude, std = self._column("amplitude_rad"), self._column("amplitude_std_rad")
+        amplitude = self._column("amplitude_rad")
+        if rest_angles_rad is not None:
+            amplitude = amplitude + np.abs(np.asarray(rest_angles_rad, float))
+        std = self._column("amplitude_std_rad")
         usable = np.isfinite(std) & (std > 0)
         if not usable.any():
             return float(np.median(amplitude))
@@ -293,19 +326,41 @@ class SweepRecord:
 
     def decompose(self, probe: Probe, f00_hz: float, model: str = "first_principles",
                   f00_free: bool = False) -> Decomposition:
-        """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof), at
-        the sweep's start amplitude and each ring-down's damping and fit window."""
-        theta0 = self._column("theta0_rad")
-        nodes = amplitude_nodes(theta0, self.start_amplitude_rad(), self._column("damping_per_s"),
-                                self._column("duration_s"))
-        return decompose(theta0, self._column("shift_hz"), self._column("shift_std_hz"), probe, f00_hz,
-                         model=model, f00_free=f00_free, amplitude_nodes=nodes)
+        """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
 
-    def table_columns(self) -> dict:
-        """Columns of a model-lab measurement table (docs/model_lab.md); ``amplitude_deg`` is the
-        sweep's start amplitude (:meth:`start_amplitude_rad`)."""
+        The first-principles model needs the swing each ring-down starts with, stop − |θs|, and
+        θs depends on the field it is fitting: a first pass with θs = 0 gives the field, its rest
+        angles give the pooled stop amplitude, and a second pass fits with both.
+        """
+        theta0 = self._column("theta0_rad")
+        arrays = dict(theta0_rad=theta0, shift_hz=self._column("shift_hz"), shift_std_hz=self._column("shift_std_hz"),
+                      probe=probe, f00_hz=f00_hz, model=model, f00_free=f00_free)
+        if model != "first_principles":
+            return decompose(**arrays)
+
+        def ringdowns(stop):
+            return Ringdowns(stop, self._column("damping_per_s"), self._column("duration_s"))
+
+        first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad()))
+        if not first.ok:
+            return first
+        rest = np.nan_to_num(local_potential(first.parameters, theta0, probe).rest_angle_rad())
+        return decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(rest)), start=first.parameters)
+
+    def start_amplitudes_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
+        """Each ring-down's start swing, stop − |θs|, at the decomposition's field and gradient."""
+        theta0 = self._column("theta0_rad")
+        rest = np.abs(np.nan_to_num(local_potential(decomposition.parameters, theta0, probe).rest_angle_rad()))
+        return self.stop_amplitude_rad(rest) - rest
+
+    def table_columns(self, start_amplitudes_rad=None) -> dict:
+        """Columns of a model-lab measurement table (docs/model_lab.md). ``amplitude_deg`` is each
+        ring-down's start swing: ``start_amplitudes_rad`` (e.g. :meth:`start_amplitudes_rad` of
+        a decomposition), else the pooled :meth:`stop_amplitude_rad`."""
         t = self._column("t_s")
+        start = (np.full(len(self.points), self.stop_amplitude_rad()) if start_amplitudes_rad is None
+                 else np.asarray(start_amplitudes_rad, float))
         return {"theta0_deg": np.degrees(self._column("theta0_rad")), "f_hz": self._column("frequency_hz"),
                 "f_std_hz": self._column("frequency_std_hz"), "t_s": t - (t.min() if t.size else 0.0),
-                "amplitude_deg": np.full(len(self.points), np.degrees(self.start_amplitude_rad())),
+                "amplitude_deg": np.degrees(start),
                 "damping_per_s": self._column("damping_per_s"), "duration_s": self._column("duration_s")}

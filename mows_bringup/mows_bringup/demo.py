@@ -23,8 +23,9 @@ from mows_bringup.graph import NODES, Graph, say
 
 def parse_arguments(argv):
     parser = argparse.ArgumentParser(prog="mows-demo", description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", default="nearby_coil",
-                        help="simulated scene (shipped name or YAML; default: a coil 5 cm from the probe, Fig. 4d)")
+    parser.add_argument("--scenario", default="anti_helmholtz",
+                        help="simulated scene (shipped name or YAML; default: the anti-Helmholtz gradient of the "
+                             "paper's Fig. 4c; nearby_coil is Fig. 4d)")
     parser.add_argument("--angles", type=int, default=8, help="orientations in the sweep (≥ 6)")
     parser.add_argument("--repeats", type=int, default=2, help="ring-downs per orientation")
     parser.add_argument("--tuning-steps", type=int, default=1, help="frequency-tuning excitations per orientation")

@@ -71,3 +71,20 @@ def test_user_errors_are_one_line_messages(tilted_csv, tmp_path, capsys, args, w
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
     for word in words:
         assert word in err
+
+
+def test_report_polar_curve_passes_through_the_model_at_measured_orientations(tilted_csv):
+    from mows.lab import FrequencyModel, catalog, read_csv
+    from mows.lab.report import sweep_curve
+    table = read_csv(tilted_csv)
+    fit = (FrequencyModel(PAPER_PROBE) + catalog()["gravity"]).fit(table)
+    rows = table.sweep_ids == 0
+    at_measured = sweep_curve(fit, rows, table.theta0_deg[rows])
+    np.testing.assert_allclose(at_measured, fit.prediction_hz[rows], rtol=0, atol=1e-9)
+    # Between measured orientations the curve is the model itself, not a straight chord: at the
+    # midpoints it departs from the mean of its neighbours by the curvature of Δf(θ0).
+    angles = np.unique(table.theta0_deg[rows])
+    middle = sweep_curve(fit, rows, angles[:-1] + np.diff(angles) / 2)
+    chord = (fit.prediction_hz[rows][np.argsort(table.theta0_deg[rows])][:-1]
+             + fit.prediction_hz[rows][np.argsort(table.theta0_deg[rows])][1:]) / 2
+    assert np.max(np.abs(middle - chord)) > 1e-5

@@ -9,6 +9,7 @@ history (χ²/dof and cross-validated rms per step).
 from __future__ import annotations
 
 import base64
+import dataclasses
 import html
 import io
 import math
@@ -35,49 +36,72 @@ def _shift_hz(fit):
 
 
 def figure_field_response(report) -> str:
-    """Fig. 3 style: Δf against Bx' (reference field along the probe axis)."""
+    """Fig. 3 style: Δf against Bx' (reference field along the probe axis).
+
+    The models are drawn as markers at the measured rows, not as lines: Δf also follows B⊥ and
+    the gradient, so it is not a function of Bx' alone and a line through sorted Bx' zigzags.
+    """
     fit, base = report.fit, report.base
     table = fit.table
-    along = np.einsum("nij,nj->ni", table.probe_axes(), table.field_t)[:, 0]
+    along_ut = np.einsum("nij,nj->ni", table.probe_axes(), table.field_t)[:, 0] * 1e6
     measured, model = _shift_hz(fit)
     _, base_model = _shift_hz(base)
-    order = np.argsort(along)
     figure, axis = plt.subplots(figsize=(6, 4))
-    axis.errorbar(along * 1e6, measured * 1e3, table.f_std_hz * 1e3, fmt=".", color="k", label="measured")
-    axis.plot(along[order] * 1e6, base_model[order] * 1e3, "--", color="tab:gray", label="Eq. 6 (base)")
-    axis.plot(along[order] * 1e6, model[order] * 1e3, "-", color="tab:red", label=report.model)
+    axis.errorbar(along_ut, measured * 1e3, table.f_std_hz * 1e3, fmt=".", color="k", label="measured")
+    axis.plot(along_ut, base_model * 1e3, "x", color="tab:gray", label="Eq. 6 (base)")
+    axis.plot(along_ut, model * 1e3, "o", mfc="none", color="tab:red", label=report.model)
     axis.set(xlabel="Bx' reference field along the probe axis (µT)", ylabel="Δf = f − f00 (mHz)",
              title="Frequency shift against field (cf. paper Fig. 3)")
-    axis.legend()
+    axis.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3, fontsize=8)
     return _png(figure)
 
 
-def _harmonic_fit(theta, values, weights, orders=(0, 1, 2)):
-    columns = [np.cos(k * theta) for k in orders] + [np.sin(k * theta) for k in orders if k]
-    design = np.column_stack(columns)
-    coefficients, *_ = np.linalg.lstsq(design * weights[:, None], values * weights, rcond=None)
-    return dict(zip([("c", k) for k in orders] + [("s", k) for k in orders if k], coefficients))
+def _largest_sweep(table) -> np.ndarray:
+    """Rows of the sweep with the most rows: one sweep is one reference field and gradient."""
+    ids, counts = np.unique(table.sweep_ids, return_counts=True)
+    return table.sweep_ids == ids[np.argmax(counts)]
+
+
+def sweep_curve(fit, rows, theta0_deg) -> np.ndarray:
+    """The fitted model's f (Hz) at orientations ``theta0_deg`` of the sweep ``rows``.
+
+    Every other column (reference field, start amplitude, time, temperature…) is interpolated
+    periodically in θ0 between the sweep's measured orientations (repeats averaged), so the
+    curve passes through the model's value at every measured orientation.
+    """
+    sweep = fit.table.subset(rows)
+    angles, inverse = np.unique(np.mod(sweep.theta0_deg, 360.0), return_inverse=True)
+    counts = np.bincount(inverse)
+    grid = np.asarray(theta0_deg, float)
+    columns = {name: np.interp(np.mod(grid, 360.0), angles, np.bincount(inverse, values) / counts, period=360.0)
+               for name, values in sweep.columns.items()}
+    columns["theta0_deg"] = grid
+    return fit.model.predict(dataclasses.replace(sweep, columns=columns), fit.values)
 
 
 def figure_polar(report) -> str | None:
-    """Fig. 4 style: |Δf(θ0)| measured and model, with the field (1θ0) and gradient (2θ0) parts."""
+    """Fig. 4 style: |Δf(θ0)| measured and model over one sweep, with the model's field part
+    (harmonic 1 in θ0) and gradient part (harmonic 2), from the model on a 1° grid."""
     fit = report.fit
-    theta = fit.table.theta0_rad
+    rows = _largest_sweep(fit.table)
+    theta = fit.table.theta0_rad[rows]
     if len(np.unique(np.round(np.mod(theta, 2 * np.pi), 6))) < 5:
         return None
-    measured, model = _shift_hz(fit)
-    grid = np.linspace(0, 2 * np.pi, 361)
-    coefficients = _harmonic_fit(theta, model, 1.0 / fit.table.f_std_hz)
-    parts = {k: coefficients[("c", k)] * np.cos(k * grid) + coefficients[("s", k)] * np.sin(k * grid) for k in (1, 2)}
+    f00 = fit.values[0]
+    grid_deg = np.arange(0.0, 361.0)
+    curve = sweep_curve(fit, rows, grid_deg) - f00
+    spectrum = np.fft.rfft(curve[:-1]) / 360.0
+    grid = np.radians(grid_deg)
+    parts = {k: 2 * np.real(spectrum[k] * np.exp(1j * k * grid)) for k in (1, 2)}
     figure = plt.figure(figsize=(6, 6))
     axis = figure.add_subplot(projection="polar")
-    axis.plot(theta, np.abs(measured) * 1e3, ".", color="k", label="|Δf| measured")
-    order = np.argsort(np.mod(theta, 2 * np.pi))
-    axis.plot(np.mod(theta, 2 * np.pi)[order], np.abs(model[order]) * 1e3, "-", color="tab:red", label="|Δf| model")
+    axis.plot(theta, np.abs(fit.table.f_hz[rows] - f00) * 1e3, ".", color="k", label="|Δf| measured")
+    axis.plot(grid, np.abs(curve) * 1e3, "-", color="tab:red", label=f"|Δf| {report.model}")
     axis.plot(grid, np.abs(parts[1]) * 1e3, ":", color="tab:purple", label="field part (1θ0)")
     axis.plot(grid, np.abs(parts[2]) * 1e3, ":", color="tab:blue", label="gradient part (2θ0)")
-    axis.set_title("|Δf| against θ0, mHz (cf. paper Fig. 4)")
-    axis.legend(loc="lower left", bbox_to_anchor=(0.8, -0.1), fontsize=8)
+    several = len(np.unique(fit.table.sweep_ids)) > 1
+    axis.set_title("|Δf| against θ0, mHz (cf. paper Fig. 4)" + (", largest sweep" if several else ""))
+    axis.legend(loc="upper center", bbox_to_anchor=(0.5, -0.06), ncol=2, fontsize=8)
     return _png(figure)
 
 

@@ -88,3 +88,15 @@ def test_report_polar_curve_passes_through_the_model_at_measured_orientations(ti
     chord = (fit.prediction_hz[rows][np.argsort(table.theta0_deg[rows])][:-1]
              + fit.prediction_hz[rows][np.argsort(table.theta0_deg[rows])][1:]) / 2
     assert np.max(np.abs(middle - chord)) > 1e-5
+
+
+def test_diagnose_separates_a_group_on_a_table_without_amplitudes(tilted_csv, tmp_path, capsys):
+    """amplitude_deg is optional: the what-if variants (one halves the amplitude) must still
+    join the table they extend."""
+    from mows.lab import read_csv
+    table = read_csv(tilted_csv)
+    bare = tmp_path / "no_amplitude.csv"
+    type(table)({k: v for k, v in table.columns.items() if k != "amplitude_deg"}).to_csv(bare)
+    assert main(["lab", "diagnose", str(bare), "--json"]) == 0
+    groups = json.loads(capsys.readouterr().out)["groups"]
+    assert groups and all(group["separation"] for group in groups)

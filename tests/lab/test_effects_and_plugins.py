@@ -73,3 +73,23 @@ def test_unknown_plugins_and_effects_are_named():
     with pytest.raises(ValueError, match="gravit"):
         analyse({"theta0_deg": [0, 90], "f_hz": [112.5, 112.5], "f_std_hz": [1e-3, 1e-3]}, PAPER_PROBE,
                 effects=["gravit"])
+
+
+def test_the_same_table_under_two_probes_gives_each_probes_own_prediction():
+    """A table without amplitude or damping columns takes them from the probe, so a cached
+    ring-down average must not carry one probe's stop over to the other."""
+    import dataclasses
+    import math
+    table = synth.synthesize(PAPER_PROBE, UniformField((2e-4, 1e-4, 0.0)), np.arange(0.0, 360.0, 60.0),
+                             np.random.default_rng(1))
+    bare = type(table)({k: v for k, v in table.columns.items() if k not in ("amplitude_deg", "damping_per_s",
+                                                                             "duration_s")})
+    narrow = dataclasses.replace(PAPER_PROBE, theta_stop_rad=math.radians(5.0))
+    effect = catalog()["finite_amplitude"].at_physics()
+    for probe in (PAPER_PROBE, narrow):
+        model = FrequencyModel(probe) + effect
+        shared = model.predict(bare, [probe.f00_hz])
+        fresh = model.predict(bare.with_columns(), [probe.f00_hz])
+        np.testing.assert_allclose(shared, fresh, rtol=0, atol=1e-9)
+    wide, small = ((FrequencyModel(p) + effect).predict(bare, [p.f00_hz]) for p in (PAPER_PROBE, narrow))
+    assert np.max(np.abs(wide - small)) > 1e-3  # the stop matters here: the test can tell them apart

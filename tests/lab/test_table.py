@@ -57,6 +57,14 @@ def test_invalid_rows_can_be_dropped_and_text_columns_are_ignored(tmp_path):
         table.coil_current_a
 
 
+def test_a_covariate_with_nan_cells_is_ignored_not_the_table(tmp_path):
+    path = write(tmp_path, "theta0_deg,f_hz,f_std_hz,snr_db\n0,112,0.001,40\n10,112.1,0.001,nan\n")
+    for drop_invalid in (False, True):
+        table = read_csv(path, drop_invalid=drop_invalid)
+        assert len(table) == 2 and not table.has("snr_db")
+        assert any("snr_db" in note and "row 2" in note for note in table.notes)
+
+
 def test_a_bag_of_ringdown_fits_with_a_magnetometer_or_a_source_reference(tmp_path):
     store = bags.typestore()
     types = store.types

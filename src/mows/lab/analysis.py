@@ -176,7 +176,7 @@ def analyse(table, probe, effects=None, auto: bool = False, plugins=(), rank: bo
     rank : test the catalog's candidates (``False``: fit and residual structure only).
     cross_validate : compute the leave-one-sweep-out error of every step.
     """
-    table = table if isinstance(table, MeasurementTable) else load_table(table)
+    table = load_table(table)
     available = catalog(plugins)
     fit = FrequencyModel(probe).fit(table)
     base = fit

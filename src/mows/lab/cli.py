@@ -18,7 +18,7 @@ import math
 import pathlib
 import sys
 
-from mows.lab.table import TableError
+from mows.lab.table import TableError, is_bag
 
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "probes" / "paper.yaml"
 
@@ -67,7 +67,7 @@ def _run(args) -> int:
     probe = _probe(args.probe)
     table = load_table(args.table, drop_invalid=args.drop_invalid,
                        **({"reference": args.reference, "magnet_position_m": args.magnet_position}
-                          if _is_bag(args.table) else {}))
+                          if is_bag(args.table) else {}))
     effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
     report = analyse(table, probe, effects=effects, auto=getattr(args, "auto", False), plugins=args.plugin,
                      rank=args.lab_command != "compare", cross_validate=not args.no_cv)
@@ -81,11 +81,6 @@ def _run(args) -> int:
     elif args.lab_command != "report":
         print(format_text(report, table, args.lab_command))
     return 0
-
-
-def _is_bag(source) -> bool:
-    path = pathlib.Path(source)
-    return path.is_dir() or path.suffix == ".mcap"
 
 
 def _probe(source):

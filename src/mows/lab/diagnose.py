@@ -515,19 +515,19 @@ def _separate(members, fit, probe, number) -> Group:
     """The cheapest what-if variant that splits the group most; checks for what stays together."""
     names = [c.name for c in members]
     best_variant, best_parts = None, [names]
+    # The fitted signal extended to new rows: the same linear coefficients on the joined rows.
+    coefficients = {c.name: np.linalg.lstsq(c.signature.projected, c.signature.fitted_signal, rcond=None)[0]
+                    for c in members}
     for variant in variants(fit.table, probe):
-        joined = fit.table.concatenate(variant.table)
+        joined = variant.table
         model_basis = orthonormal_basis(fit.model_jacobian(joined))
         extended = {}
         for candidate in members:
             columns = np.asarray(fit.extension_columns(candidate.effect, joined))
             projected = project_out(columns, model_basis)
             basis = orthonormal_basis(projected, np.linalg.norm(columns, axis=0).max())
-            # The fitted signal extended: the same linear coefficients on the joined rows.
-            original = candidate.signature
-            coefficients, *_ = np.linalg.lstsq(original.projected, original.fitted_signal, rcond=None)
             extended[candidate.name] = Signature(basis, projected, 0.0, basis.shape[1],
-                                                 basis.T @ (projected @ coefficients))
+                                                 basis.T @ (projected @ coefficients[candidate.name]))
         parts = _partition(extended)
         if len(parts) > len(best_parts):
             best_variant, best_parts = variant, parts
@@ -547,6 +547,8 @@ def _separate(members, fit, probe, number) -> Group:
 
 @dataclasses.dataclass
 class Variant:
+    """A what-if measurement: ``table`` holds the present rows followed by the extra ones."""
+
     name: str
     description: str
     table: object
@@ -554,15 +556,16 @@ class Variant:
 
 def variants(table, probe) -> list:
     """What-if variants of ``table``, cheapest first (module docstring)."""
+    if not table.has("amplitude_deg"):  # a missing amplitude is the stop's (Configuration.base)
+        table = table.with_columns(amplitude_deg=np.full(len(table), math.degrees(probe.theta_stop_rad)))
     found = []
     angles = np.unique(np.mod(table.columns["theta0_deg"], 360.0))
     step = float(np.median(np.diff(angles))) if len(angles) > 1 else 90.0
     found.append(Variant("more_angles", f"measure also half-way between the present orientations "
                                         f"(θ0 + {step / 2:g}°)",
                          table.with_columns(theta0_deg=table.columns["theta0_deg"] + step / 2)))
-    amplitude = table.columns.get("amplitude_deg", np.full(len(table), math.degrees(probe.theta_stop_rad)))
     found.append(Variant("amplitude_halved", "repeat the sweep at half the excitation amplitude",
-                         table.with_columns(amplitude_deg=amplitude / 2)))
+                         table.with_columns(amplitude_deg=table.amplitude_deg / 2)))
     for name, factor, text in (("field_reversed", -1.0, "repeat with the applied field reversed (coil currents "
                                                         "reversed)"),
                                ("field_doubled", 2.0, "repeat with twice the applied field")):
@@ -571,7 +574,7 @@ def variants(table, probe) -> list:
     if table.has("temperature_k"):
         found.append(Variant("temperature_step", "repeat 5 K warmer (or colder)",
                              table.with_columns(temperature_k=table.temperature_k + 5.0)))
-    return found
+    return [dataclasses.replace(variant, table=table.concatenate(variant.table)) for variant in found]
 
 
 # --- verdict ------------------------------------------------------------------------------------

@@ -365,11 +365,14 @@ _NODES = weakref.WeakKeyDictionary()
 
 
 def ringdown_nodes(table, config: Configuration):
-    """Amplitude nodes of the table's ring-downs (cached: they depend on the table only)."""
-    if table not in _NODES:
-        _NODES[table] = ringdown_average.amplitude_nodes(
-            table.theta0_rad, config.amplitude_start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s)
-    return _NODES[table]
+    """Amplitude nodes of the table's ring-downs, cached per table and ring-down inputs (the
+    inputs also come from the probe where the table has no column: Configuration.base)."""
+    inputs = (config.amplitude_start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s)
+    key = b"".join(np.ascontiguousarray(values, float).tobytes() for values in inputs)
+    cached = _NODES.setdefault(table, {})
+    if key not in cached:
+        cached[key] = ringdown_average.amplitude_nodes(table.theta0_rad, *inputs)
+    return cached[key]
 
 
 # --- plugins --------------------------------------------------------------------------------

@@ -68,9 +68,6 @@ class FrequencyModel:
     def __add__(self, other):
         return FrequencyModel.combine(self, other)
 
-    def with_probe(self, probe) -> "FrequencyModel":
-        return FrequencyModel(probe, self.effects)
-
     # --- description ----------------------------------------------------------------------
     @property
     def name(self) -> str:
@@ -191,6 +188,8 @@ class _Problem:
         return np.stack(columns, -1) if columns else np.zeros((len(base), 0))
 
     def result(self, x, success, message) -> "FitResult":
+        h, c = self.factors(x[1:])
+        prediction = x[0] * h + c
         residual = self.residual(x)
         jacobian = self.jacobian(x)
         chi2 = float(residual @ residual)
@@ -199,7 +198,6 @@ class _Problem:
         keep = s > s[0] * 1e-10
         covariance = (vt[keep].T / s[keep] ** 2) @ vt[keep]
         birge = max(1.0, chi2 / max(n - k, 1))
-        prediction = self.model.predict(self.table, x)
         return FitResult(self.model, self.table, np.asarray(x, float), covariance * birge, chi2, n, k,
                          prediction, jacobian, bool(success), str(message))
 

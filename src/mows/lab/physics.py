@@ -32,10 +32,20 @@ import math
 
 import numpy as np
 
+from mows import ringdown_average
 from mows.potential import ArcPotential
 
 NEWTON_STEPS = 40
 NEWTON_TOLERANCE_RAD = 1e-14
+
+
+def probe_axes(theta0_rad) -> np.ndarray:
+    """Rows x', y', z' of the probe frame at each θ0 (rad) as (n, 3, 3): ``axes @ v`` is v in
+    the probe frame (the rotation plane is the global x–y plane)."""
+    c, s = np.cos(theta0_rad), np.sin(theta0_rad)
+    axes = np.zeros((len(c), 3, 3))
+    axes[:, 0, 0], axes[:, 0, 1], axes[:, 1, 0], axes[:, 1, 1], axes[:, 2, 2] = c, s, -s, c, 1.0
+    return axes
 
 
 @dataclasses.dataclass
@@ -80,7 +90,7 @@ class Configuration:
         n = len(table)
         amplitude = table.amplitude_rad if table.amplitude_rad is not None else np.full(n, probe.theta_stop_rad)
         ringdown_damping = table.columns.get("damping_per_s", np.full(n, probe.damping_per_s))
-        duration = table.columns.get("duration_s", 60.0 / table.f_hz)
+        duration = table.columns.get("duration_s", ringdown_average.default_duration_s(table.f_hz))
         return cls(theta0_rad=table.theta0_rad.copy(), field_t=table.field_t, gradient_t_per_m=table.gradient_t_per_m,
                    spring_nm_per_rad=np.full(n, probe.spring_nm_per_rad), amplitude_start_rad=amplitude,
                    ringdown_damping_per_s=ringdown_damping, ringdown_duration_s=duration,
@@ -88,9 +98,7 @@ class Configuration:
 
     def probe_frame(self):
         """(axes, field', gradient', Hessian') with axes (n, 3, 3) holding rows x', y', z'."""
-        c, s = np.cos(self.theta0_rad), np.sin(self.theta0_rad)
-        axes = np.zeros((len(c), 3, 3))
-        axes[:, 0, 0], axes[:, 0, 1], axes[:, 1, 0], axes[:, 1, 1], axes[:, 2, 2] = c, s, -s, c, 1.0
+        axes = probe_axes(self.theta0_rad)
         field = np.einsum("nij,nj->ni", axes, self.field_t)
         gradient = np.einsum("nai,nij,nbj->nab", axes, self.gradient_t_per_m, axes)
         hessian = None if self.hessian_t_per_m2 is None else np.einsum(

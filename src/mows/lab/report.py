@@ -43,7 +43,7 @@ def figure_field_response(report) -> str:
     """
     fit, base = report.fit, report.base
     table = fit.table
-    along_ut = np.einsum("nij,nj->ni", table.probe_axes(), table.field_t)[:, 0] * 1e6
+    along_ut = table.probe_field_t[:, 0] * 1e6
     measured, model = _shift_hz(fit)
     _, base_model = _shift_hz(base)
     figure, axis = plt.subplots(figsize=(6, 4))

@@ -32,19 +32,15 @@ from typing import Mapping
 
 import numpy as np
 
+from mows.lab.physics import probe_axes
+
 REQUIRED = ("theta0_deg", "f_hz", "f_std_hz")
 FIELD = ("ref_bx_t", "ref_by_t", "ref_bz_t")
 GRADIENT = ("ref_gxx_t_per_m", "ref_gxy_t_per_m", "ref_gyy_t_per_m")
 KNOWN = REQUIRED + ("t_s", "sweep") + FIELD + GRADIENT + (
     "coil_current_a", "amplitude_deg", "temperature_k", "damping_per_s", "duration_s")
 
-# Covariates derived from the reference, with what they mean (the diagnostics use these names).
-DERIVED_COVARIATES = {
-    "b_abs_t": "|B| of the reference field",
-    "b_perp_t": "B⊥ = By', reference field across the probe axis",
-    "b_along_t": "Bx', reference field along the probe axis",
-    "g_t_per_m": "G = Gx'x', reference gradient along the probe axis",
-}
+POSITIVE = ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k")
 NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t"}
 
 RINGDOWN_TOPIC = "/mows/ringdown"
@@ -134,15 +130,14 @@ class MeasurementTable:
         g[:, 2, 2] = -(gxx + gyy)
         return g
 
-    def probe_axes(self, theta0_rad=None) -> np.ndarray:
+    def probe_axes(self) -> np.ndarray:
         """Rows x', y', z' of each measurement as (n, 3, 3): ``axes @ v`` is v in the probe frame."""
-        theta = self.theta0_rad if theta0_rad is None else np.broadcast_to(theta0_rad, (len(self),))
-        c, s = np.cos(theta), np.sin(theta)
-        axes = np.zeros((len(self), 3, 3))
-        axes[:, 0, 0], axes[:, 0, 1] = c, s
-        axes[:, 1, 0], axes[:, 1, 1] = -s, c
-        axes[:, 2, 2] = 1.0
-        return axes
+        return probe_axes(self.theta0_rad)
+
+    @property
+    def probe_field_t(self) -> np.ndarray:
+        """Reference field (n, 3) in the probe frame: Bx' along the axis, By' = B⊥ across it."""
+        return np.einsum("nij,nj->ni", self.probe_axes(), self.field_t)
 
     # --- diagnostics --------------------------------------------------------------------------
     def covariates(self) -> dict:
@@ -151,7 +146,7 @@ class MeasurementTable:
         Bx' and G = Gx'x'. Constant ones are left out (a constant is absorbed by f00)."""
         found = {name: values for name, values in self.columns.items() if name not in NOT_COVARIATES}
         if any(self.has(name) for name in FIELD):
-            field = np.einsum("nij,nj->ni", self.probe_axes(), self.field_t)
+            field = self.probe_field_t
             found.update(b_abs_t=np.linalg.norm(self.field_t, axis=-1), b_perp_t=field[:, 1], b_along_t=field[:, 0])
         if any(self.has(name) for name in GRADIENT):
             axes = self.probe_axes()
@@ -193,26 +188,30 @@ def _validate(columns: dict) -> None:
         raise TableError(f"columns have different lengths: {lengths}")
     if lengths["f_hz"] == 0:
         raise TableError("the table has no rows")
-    for name, values in columns.items():
-        bad = np.flatnonzero(~np.isfinite(values))
-        if bad.size:
-            raise TableError(f"column '{name}' has NaN or infinite values in {_rows_text(bad)}")
+    for name, rule, rows in _broken_rules(columns):
+        raise TableError(f"column '{name}' {rule} in {_rows_text(rows)}")
     for group in (FIELD[:2], GRADIENT):
         given = [name for name in group if name in columns]
         if given and len(given) != len(group):
             raise TableError(f"column{'s' if len(given) > 1 else ''} {', '.join(given)} given without "
                              f"{', '.join(sorted(set(group) - set(given)))}: give all of {', '.join(group)}")
-    for name in ("f_std_hz", "f_hz"):
-        bad = np.flatnonzero(columns[name] <= 0)
-        if bad.size:
-            raise TableError(f"column '{name}' must be > 0: not so in {_rows_text(bad)}")
-    for name in ("amplitude_deg", "duration_s", "temperature_k"):
-        if name in columns and np.any(columns[name] <= 0):
-            raise TableError(f"column '{name}' must be > 0: not so in "
-                             f"{_rows_text(np.flatnonzero(columns[name] <= 0))}")
     if "sweep" in columns and np.any(columns["sweep"] != np.round(columns["sweep"])):
         raise TableError(f"column 'sweep' must hold integers: not so in "
                          f"{_rows_text(np.flatnonzero(columns['sweep'] != np.round(columns['sweep'])))}")
+
+
+def _broken_rules(columns: dict):
+    """(column, rule, rows) for the values no column may hold: NaN or ±inf anywhere, and
+    values ≤ 0 in the columns that are positive by nature."""
+    for name, values in columns.items():
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            yield name, "has NaN or infinite values", bad
+    for name in POSITIVE:
+        if name in columns:
+            bad = np.flatnonzero(columns[name] <= 0)
+            if bad.size:
+                yield name, "must be > 0: not so", bad
 
 
 # --- CSV ------------------------------------------------------------------------------------
@@ -246,10 +245,12 @@ def read_csv(path, drop_invalid: bool = False) -> MeasurementTable:
     columns, notes, invalid = {}, [], {}
     for j, name in enumerate(header):
         values = np.array([_number(row[j]) for row in body])
+        if name not in KNOWN:  # a covariate is kept only where every row holds a number
+            unusable = np.flatnonzero(~np.isfinite(values))
+            if unusable.size:
+                notes.append(f"column '{name}' is not a finite number in {_rows_text(unusable)}: ignored")
+                continue
         bad = np.flatnonzero(np.isnan(values) & np.array([row[j].strip().lower() != "nan" for row in body]))
-        if name not in KNOWN and bad.size:
-            notes.append(f"column '{name}' is not numeric in {_rows_text(bad)}: ignored")
-            continue
         if bad.size:
             if not drop_invalid:
                 raise TableError(f"{path}: column '{name}': {body[bad[0]][j]!r} is not a number "
@@ -273,12 +274,8 @@ def _number(cell: str) -> float:
 
 def _drop_invalid_rows(columns, invalid):
     bad = set().union(*invalid.values()) if invalid else set()
-    for name, values in columns.items():
-        if name in KNOWN:
-            bad |= set(np.flatnonzero(~np.isfinite(values)).tolist())
-    for name in ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k"):
-        if name in columns:
-            bad |= set(np.flatnonzero(columns[name] <= 0).tolist())
+    for _, _, rows in _broken_rules(columns):
+        bad |= set(rows.tolist())
     keep = np.setdiff1d(np.arange(len(next(iter(columns.values())))), sorted(bad))
     return {k: v[keep] for k, v in columns.items()}, sorted(bad)
 
@@ -300,10 +297,15 @@ def load_table(source, drop_invalid: bool = False, **bag_options) -> Measurement
         return source
     if isinstance(source, Mapping):
         return MeasurementTable({k: np.asarray(v, float) for k, v in source.items()}, "columns")
+    if is_bag(source):
+        return from_bag(pathlib.Path(source), **bag_options)
+    return read_csv(source, drop_invalid=drop_invalid)
+
+
+def is_bag(source) -> bool:
+    """A rosbag2 bag: a directory or an .mcap file."""
     path = pathlib.Path(source)
-    if path.is_dir() or path.suffix == ".mcap":
-        return from_bag(path, **bag_options)
-    return read_csv(path, drop_invalid=drop_invalid)
+    return path.is_dir() or path.suffix == ".mcap"
 
 
 # --- bags -----------------------------------------------------------------------------------

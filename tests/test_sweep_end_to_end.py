@@ -11,7 +11,7 @@ import pytest
 from scipy import stats
 
 from mows.lab.table import reference_at
-from mows.ringdown import FitOptions, fit_ringdown
+from mows.ringdown import fit_cycle
 from mows.scenario import load_scenario
 from mows.simulator import SimulatedDevice, simulate_cycle
 from mows.sweep import SweepPoint, SweepRecord
@@ -28,10 +28,7 @@ def sweep():
     for deg in ANGLES_DEG:
         for _ in range(2):
             cycle = simulate_cycle(device, math.radians(deg), scenario.excitation.amplitude_a)
-            start = cycle.coil_off_index
-            fit = fit_ringdown(cycle.samples_t[start:], cycle.sample_rate_hz, cycle.theta0_rad, cycle.frequency_hz,
-                               cycle.saturated[start:], FitOptions.lever_aware(scenario.sensors.pair, probe,
-                                                                               cycle.theta0_rad), settle_s=0.003)
+            fit = fit_cycle(cycle, scenario)
             assert fit.ok, fit.message
             record.add(SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz))
     return scenario, record

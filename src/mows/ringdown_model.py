@@ -239,12 +239,14 @@ def levenberg_marquardt(q, dt, cr, ci, theta0_free, y, w, iterations, tol_chi2, 
         proposal = q + step
         sign = 1.0 if q[amplitude_index] >= 0.0 else -1.0
         magnitude = proposal[amplitude_index] * sign
-        if magnitude < amplitude_low or magnitude > amplitude_high:
+        clamped = magnitude < amplitude_low or magnitude > amplitude_high
+        if clamped:
             proposal[amplitude_index] = sign * min(max(magnitude, amplitude_low), amplitude_high)
-            free[amplitude_index] = False
         trial = evaluate_model(proposal, dt, cr, ci, theta0_free, y, w, True, t_g, t_m, t_residual, t_coef,
                                t_jtj, t_jtr)
         if trial < cost:
+            if clamped:  # held only once the clamped point is taken: a rejected step moved nothing
+                free[amplitude_index] = False
             q, cost = proposal, trial
             g, t_g = t_g, g
             m, t_m = t_m, m

@@ -2,7 +2,7 @@
 
 For every θ0 and repeat: turn, let the scenario's gap pass, excite, record the ring-down
 (:func:`mows.simulator.simulate_cycle`). With ``--fit`` each ring-down is fitted
-(:func:`mows.ringdown.fit_ringdown`) and compared with the truth from the full potential
+as the estimator node does (:func:`mows.ringdown.fit_cycle`: the lever-aware pickup) and compared with the truth from the full potential
 (:meth:`mows.simulator.CycleRecord.ringdown_frequency_hz`).
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from mows.ringdown import fit_ringdown
+    from mows.ringdown import fit_cycle
     from mows.simulator import SimulatedDevice, simulate_cycle
 
     scenario = load_scenario(args.scenario)
@@ -49,9 +49,7 @@ def run(args) -> int:
                                     excitation.excite_s, excitation.ringdown_s)
             records.append(record)
             if args.fit:
-                ring = slice(record.coil_off_index, None)
-                fit = fit_ringdown(record.samples_t[ring], record.sample_rate_hz, record.theta0_rad,
-                                   record.frequency_hz, saturated=record.saturated[ring])
+                fit = fit_cycle(record, scenario)
                 print(f"θ0 = {theta0_deg:7.2f}°: {_compare(fit, record)}")
     if args.out:
         np.savez_compressed(args.out, **_arrays(records), scenario_yaml=yaml.safe_dump(scenario.to_dict(), sort_keys=False))

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from mows.ringdown import FitOptions, fit_ringdown
+from mows.ringdown import fit_cycle
 from mows.scenario import load_scenario
 from mows.simulator import SimulatedDevice, simulate_cycle
 
@@ -24,12 +24,7 @@ def cycles():
 
 
 def fit(scenario, record, lever_aware):
-    theta0 = record.theta0_rad
-    options = (FitOptions.lever_aware(scenario.sensors.pair, scenario.probe, theta0) if lever_aware
-               else FitOptions())
-    start = record.coil_off_index
-    return fit_ringdown(record.samples_t[start:], record.sample_rate_hz, theta0, record.frequency_hz,
-                        record.saturated[start:], options, settle_s=0.003)
+    return fit_cycle(record, scenario, paper_model=not lever_aware)
 
 
 @pytest.mark.parametrize("deg", [0, 45, 90, 135])

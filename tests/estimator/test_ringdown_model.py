@@ -64,6 +64,24 @@ def test_every_parameter_is_recovered_within_its_uncertainty():
     assert "mHz" in fit.report() and "χ²/dof" in fit.report()
 
 
+def test_theta_max_is_held_only_at_a_bound():
+    """Near 90° the start's θmax is often far off and a first step overshoots a bound; a
+    rejected step must not freeze θmax where it was (it used to, at the spectral start)."""
+    from mows.ringdown import AMPLITUDE_BOUNDS_RAD
+    rng = np.random.default_rng(5)
+    held = []
+    for _ in range(60):
+        theta0, amplitude = np.radians(rng.uniform(80, 100)), np.radians(rng.uniform(5, 25))
+        y = signal_t(T, theta0, amplitude, FREQUENCY_HZ, PHASE_RAD, DAMPING_PER_S, KAPPA_T, offset_t=OFFSET_T)
+        fit = fit_ringdown(y + 2e-10 * rng.standard_normal(N_SAMPLES), SAMPLE_RATE_HZ, theta0, 112.0)
+        assert fit.ok, fit.message
+        if "held" in fit.message:
+            held.append(abs(fit.amplitude_rad))
+        else:
+            assert abs(pull(fit, "amplitude_rad", amplitude)) < 5
+    assert all(min(abs(a - bound) for bound in AMPLITUDE_BOUNDS_RAD) < 1e-12 for a in held), np.degrees(held)
+
+
 def test_general_sensor_direction():
     # Eq. S11 with a ≠ 0: the sensor also sees the 2a·cos θ component.
     rng = np.random.default_rng(12)

@@ -25,7 +25,7 @@ from mows.field import FieldSource
 from mows.lab.table import FIELD, GRADIENT, MeasurementTable, reference_columns
 from mows.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
-from mows.ringdown import FitOptions, fit_ringdown
+from mows.ringdown import SETTLE_S, fit_cycle
 from mows.simulator import SimulatedDevice, simulate_cycle
 from mows.sweep import SweepPoint, SweepRecord
 
@@ -118,7 +118,6 @@ def rotation_sweeps(step_deg: float = 10.0, sweeps: int = 2, seconds_per_row: fl
 
 
 # --- the slow path: the time-domain simulator and the estimator ---------------------------------
-SETTLE_S = 0.003  # the coil current's decay after switch-off, left out of every fit
 
 
 def simulated_table(scenario, angles_deg, repeats: int, rng: np.random.Generator, settle_s: float = SETTLE_S,
@@ -168,13 +167,9 @@ def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
 
 def _ringdown_point(scenario, cycle, settle_s):
     """The estimator's fit of one simulated ring-down as a :class:`mows.sweep.SweepPoint`
-    (None when the fit fails), with the lever-aware pickup of the commanded orientation."""
-    probe = scenario.probe
-    start = cycle.coil_off_index
-    options = FitOptions.lever_aware(scenario.sensors.pair, probe, cycle.theta0_rad)
-    fit = fit_ringdown(cycle.samples_t[start:], cycle.sample_rate_hz, cycle.theta0_rad, cycle.frequency_hz,
-                       cycle.saturated[start:], options, settle_s=settle_s)
+    (None when the fit fails)."""
+    fit = fit_cycle(cycle, scenario, settle_s=settle_s)
     if not fit.ok:
         return None
-    return SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz,
-                               cycle.block.t0_s + start / cycle.sample_rate_hz)
+    return SweepPoint.from_fit(fit, fit.frequency_hz - scenario.probe.f00_hz, fit.frequency_std_hz,
+                               cycle.block.t0_s + cycle.coil_off_index / cycle.sample_rate_hz)

@@ -18,6 +18,7 @@ u8 = st.integers(0, 2**8 - 1)
 u32 = st.integers(0, 2**32 - 1)
 u64 = st.integers(0, 2**64 - 1)
 f64 = st.floats(allow_nan=True, allow_infinity=True)
+positive = st.floats(min_value=1e-300, max_value=1e300)
 
 
 @st.composite
@@ -31,7 +32,7 @@ def samples(draw):
 
 
 bodies = st.one_of(
-    st.builds(DeviceInfo, f64, u8, u8, f64, f64, f64, f64),
+    st.builds(DeviceInfo, positive, st.integers(1, 255), u8, positive, positive, f64, f64),
     samples(),
     st.builds(Ack, u32, u8, u64),
     st.builds(Status, u64, st.booleans(), u32, u32, u32),
@@ -140,6 +141,8 @@ def test_damaged_streams_yield_exactly_the_intact_frames(case, cuts):
     (raw_frame(Ack.TYPE, b"\x00" * 5), REJECT_PAYLOAD),
     (raw_frame(Samples.TYPE, struct.pack("<QHB", 0, 2, 1) + b"\x00" * 8 + b"\x01"), REJECT_PAYLOAD),  # stray flag bit
     (raw_frame(Coils.TYPE, struct.pack("<BQdB", 0x80, 0, 1.0, 0)), REJECT_PAYLOAD),  # unknown flag
+    (raw_frame(DeviceInfo.TYPE, DeviceInfo.LAYOUT.pack(0.0, 2, 2, 1e-5, 1e-10, 10.0, 0.2)), REJECT_PAYLOAD),  # no rate
+    (raw_frame(DeviceInfo.TYPE, DeviceInfo.LAYOUT.pack(2e4, 0, 2, 1e-5, 1e-10, 10.0, 0.2)), REJECT_PAYLOAD),
     (raw_frame(Hello.TYPE, b"\x00", version=2), REJECT_VERSION),
     (raw_frame(Hello.TYPE, b"", length=MAX_PAYLOAD_BYTES + 1), REJECT_LENGTH),
     (encode_frame(Frame(1, 2, Hello()))[:-1] + b"\x00", REJECT_CRC),

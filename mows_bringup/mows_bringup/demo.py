@@ -136,8 +136,8 @@ def print_feedback(feedback) -> None:
 
 
 def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path) -> None:
-    from mows.lab import analyse, load_table, write_report
-    from mows.lab.table import reference_at
+    from mows.lab import analyse, write_report
+    from mows.lab.table import from_sweep, reference_at
     from mows.probe import PAPER_PROBE
     from mows.sweep import SweepRecord
     from mows_mapper.node import sweep_point
@@ -167,18 +167,11 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path) -> N
         say(f"  candidate {candidate.effect:22s} ΔBIC {candidate.delta_bic:10.1f}  χ²/dof after "
             f"{candidate.chi2_dof_after:.2f}  group {candidate.group}")
     say(f"  residual structure: {report.structure}")
-    columns = record.table_columns(record.start_amplitudes_rad(first_principles, PAPER_PROBE)
-                                   if first_principles.ok else None)
-    n = len(record.points)
-    columns.update({name: np.full(n, value) for name, value in zip(("ref_bx_t", "ref_by_t", "ref_bz_t"), field)})
-    columns.update({"ref_gxx_t_per_m": np.full(n, gradient[0, 0]), "ref_gxy_t_per_m": np.full(n, gradient[0, 1]),
-                    "ref_gyy_t_per_m": np.full(n, gradient[1, 1])})
+    table = from_sweep(record, scenario, PAPER_PROBE, first_principles)
     table_path = out / "demo_sweep.csv"
-    names = list(columns)
-    np.savetxt(table_path, np.column_stack([columns[k] for k in names]), delimiter=",", header=",".join(names),
-               comments="")
+    table.to_csv(table_path)
     say(f"sweep table: {table_path} (try: mows lab diagnose {table_path} --probe <probe.yaml>)")
-    lab = analyse(load_table(columns), PAPER_PROBE, auto=True)
+    lab = analyse(table, PAPER_PROBE, auto=True)
     for step in lab.history:
         say(f"  error history: {' + '.join(['published'] + step.effects):60s} χ²/dof {step.chi2_dof:9.2f}  "
             f"cv rms {step.cv_rms_hz * 1e3:8.3f} mHz")

@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 
+from mows import stamps
 from mows_bringup.graph import NODES, Graph, say
 
 
@@ -70,14 +71,14 @@ def measure(cycles: int, repeats: int, exited) -> list:
 
 
 def _block_key(block):
-    start = block.header.stamp.sec + 1e-9 * block.header.stamp.nanosec
+    start = stamps.seconds(block.header.stamp)
     n = len(block.channels[0].field_t) if block.channels else 0
     return (start, start + n / block.sample_rate_hz)
 
 
 def _last_sample_arrival(arrivals: dict, fit) -> float:
     """Receive time of the block that holds the last sample of the fitted window."""
-    end = fit.header.stamp.sec + 1e-9 * fit.header.stamp.nanosec + fit.duration_s
+    end = stamps.seconds(fit.header.stamp) + fit.duration_s
     holding = [t for (start, stop), t in arrivals.items() if start <= end - 1e-9 < stop + 1e-9]
     return min(holding) if holding else float("nan")
 

@@ -26,6 +26,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.exceptions import InvalidParameterValueException
 
+from mows import stamps
 from mows.coils import PRESETS, CurrentCap
 from mows.cycle import CycleRequest, CycleSettings, Phase
 from mows.device.backends import BagBackend, SerialBackend, SimBackend
@@ -127,10 +128,6 @@ def make_backend(values: dict, cap: CurrentCap):
     if not values["bag_path"]:
         raise ValueError("bag_path='' : backend bag needs the bag to replay")
     return BagBackend(values["bag_path"], values["bag_rate"])
-
-
-def set_stamp(message, stamp_ns: int) -> None:
-    message.header.stamp.sec, message.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
 
 
 class DriverNode(MowsNode):
@@ -269,7 +266,7 @@ class DriverNode(MowsNode):
         message = MagnetometerBlock(sequence=block.sequence, first_sample_index=block.first_sample_index,
                                     sample_rate_hz=info.sample_rate_hz, range_t=info.range_t,
                                     resolution_t=info.resolution_t)
-        set_stamp(message, block.stamp_ns)
+        stamps.set_nanoseconds(message.header.stamp, block.stamp_ns)
         message.header.frame_id = self._values["frame_id"]
         names = self._values["sensor_frame_ids"]
         message.channels = [
@@ -285,7 +282,7 @@ class DriverNode(MowsNode):
                                   coils_on=event.coils_on, coil_current_amplitude_a=list(event.currents_a),
                                   frequency_hz=event.frequency_hz, theta0_rad=event.theta0_rad,
                                   planned_duration_s=event.planned_duration_s, setup=event.setup)
-        set_stamp(message, event.stamp_ns)
+        stamps.set_nanoseconds(message.header.stamp, event.stamp_ns)
         message.header.frame_id = self._values["probe_frame_id"]
         return message
 

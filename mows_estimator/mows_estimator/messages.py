@@ -2,43 +2,20 @@
 import math
 
 import numpy as np
-from builtin_interfaces.msg import Time
-from mows_msgs.msg import ExcitationState, FieldEstimate, MagnetometerBlock, RingdownFit
+from mows_msgs.msg import FieldEstimate, RingdownFit
 from sensor_msgs.msg import MagneticField
 
+from mows import stamps
 from mows.axis import AxisEstimate
 from mows.ringdown import RingdownFit as Fit
-from mows.segments import Block, RingdownWindow
-
-
-def stamp_to_s(stamp: Time) -> float:
-    return stamp.sec + 1e-9 * stamp.nanosec
-
-
-def s_to_stamp(seconds: float) -> Time:
-    whole = math.floor(seconds)
-    return Time(sec=int(whole), nanosec=min(int(round((seconds - whole) * 1e9)), 999_999_999))
-
-
-def block_from_msg(msg: MagnetometerBlock) -> Block:
-    """Channels as columns; float64[] arrives as array.array, wrapped without copying."""
-    samples = np.stack([np.frombuffer(c.field_t, dtype=np.float64) for c in msg.channels], axis=1)
-    saturated = np.stack([np.asarray(c.saturated, dtype=bool) for c in msg.channels], axis=1)
-    return Block(int(msg.first_sample_index), stamp_to_s(msg.header.stamp), float(msg.sample_rate_hz),
-                 samples, saturated)
-
-
-def window_from_msg(msg: ExcitationState) -> RingdownWindow:
-    return RingdownWindow(start_s=stamp_to_s(msg.header.stamp), duration_s=float(msg.planned_duration_s),
-                          cycle_id=int(msg.cycle_id), repeat_index=int(msg.repeat_index),
-                          theta0_rad=float(msg.theta0_rad), excitation_frequency_hz=float(msg.frequency_hz))
+from mows.segments import RingdownWindow
 
 
 def fit_to_msg(fit: Fit, window: RingdownWindow, frame_id: str, shift_hz: float, shift_std_hz: float) -> RingdownFit:
     msg = RingdownFit()
-    msg.header.stamp = s_to_stamp(window.start_s + fit.start_offset_s)
+    stamps.set_seconds(msg.header.stamp, window.start_s + fit.start_offset_s)
     msg.header.frame_id = frame_id
-    msg.cycle_id, msg.repeat_index = window.cycle_id, window.repeat_index
+    msg.cycle_id, msg.repeat_index, msg.tuning = window.cycle_id, window.repeat_index, window.tuning
     msg.status, msg.status_name, msg.message = int(fit.status), fit.status.name, fit.message
     msg.theta0_rad, msg.theta0_free = fit.theta0_rad, fit.theta0_free
     for name in ("frequency_hz", "frequency_std_hz", "frequency_crb_hz", "damping_per_s", "amplitude_rad",

@@ -24,23 +24,23 @@ from sensor_msgs.msg import MagneticField
 from mows.axis import estimate_along_axis
 from mows.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.frequency import frequency_shift_hz
-from mows.probe import PAPER_PROBE, Probe
+from mows.probe import Probe
 from mows.ringdown import FitOptions, FitStatus, failure
 from mows.precompile import precompile
-from mows.segments import SegmentAssembler, fit_segment
-from mows_estimator.messages import (block_from_msg, estimate_to_msg, fit_to_msg, magnetic_field_msg,
-                                     window_from_msg)
+from mows.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
+from mows_estimator.messages import estimate_to_msg, fit_to_msg, magnetic_field_msg
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
 from mows_ros.params import ParamSpec
+from mows_ros.probe import PROBE_FILE, probe_of
 from mows_ros.process import run_node
-from mows_ros.qos import RESULT_QOS, STREAM_CONSUMER_QOS, STREAM_QOS
+from mows_ros.qos import RESULT_QOS, STREAM_QOS
 
 NODE_NAME = "estimator"
 LATENCY_WINDOW = 500
 
 PARAMETERS = (
-    ParamSpec("probe_file", "", "probe constants YAML (mows.probe.Probe.from_yaml); empty: the paper's probe"),
+    PROBE_FILE,
     ParamSpec("f00_hz", 0.0, "calibrated zero-field frequency f00, Hz; 0: the probe file's f00",
               range=(0.0, 10_000.0)),
     ParamSpec("f00_std_hz", 0.0, "standard uncertainty of f00, Hz", range=(0.0, 10.0)),
@@ -58,7 +58,8 @@ PARAMETERS = (
     ParamSpec("settle_s", 0.003, "samples right after coil-off that are skipped, s", range=(0.0, 0.1)),
     ParamSpec("min_periods", 10.0, "shortest usable ring-down, in periods", range=(2.0, 1000.0)),
     ParamSpec("max_chi2_dof", 25.0, "above this χ²/dof a fit is refused (BAD_FIT)", range=(1.0, 1e6)),
-    ParamSpec("buffer_s", 5.0, "seconds of raw samples kept to assemble ring-downs", range=(0.5, 60.0)),
+    ParamSpec("buffer_s", 5.0, "seconds of raw samples kept to assemble ring-downs", range=(0.5, 60.0),
+              read_only=True),
     ParamSpec("fit_tuning_ringdowns", False, "also fit the driver's frequency-tuning ring-downs"),
     ParamSpec("probe_frame_id", "mows_probe", "frame of the probe (x' along the moment at rest)"),
 )
@@ -67,7 +68,6 @@ PARAMETERS = (
 class EstimatorNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
-        self._probe_cache = ("", PAPER_PROBE)
         self._warm_up()
         self._assembler = SegmentAssembler(self.get_parameter("buffer_s").value)
         self._latency_ms = collections.deque(maxlen=LATENCY_WINDOW)
@@ -76,7 +76,7 @@ class EstimatorNode(MowsNode):
         self._calibration = threading.Condition()
         self._calibration_fits = None
         stream_group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(MagnetometerBlock, "mows/raw", self._on_block, STREAM_CONSUMER_QOS,
+        self.create_subscription(MagnetometerBlock, "mows/raw", self._on_block, STREAM_QOS,
                                  callback_group=stream_group)
         self.create_subscription(ExcitationState, "mows/excitation", self._on_excitation, RESULT_QOS,
                                  callback_group=stream_group)
@@ -97,10 +97,7 @@ class EstimatorNode(MowsNode):
         return self.get_parameter(name).value
 
     def probe(self) -> Probe:
-        path = self._param("probe_file")
-        if path != self._probe_cache[0]:
-            self._probe_cache = (path, Probe.from_yaml(path) if path else PAPER_PROBE)
-        return self._probe_cache[1]
+        return probe_of(self._param("probe_file"))
 
     def f00(self) -> tuple[float, float]:
         f00 = self._param("f00_hz")
@@ -122,11 +119,11 @@ class EstimatorNode(MowsNode):
         if msg.phase != ExcitationState.PHASE_RINGDOWN or (msg.tuning and not self._param("fit_tuning_ringdowns")):
             return
         arrived = time.monotonic()
-        window = window_from_msg(msg)
-        if not (math.isfinite(window.start_s) and math.isfinite(window.duration_s) and window.duration_s > 0):
+        try:
+            window = window_from_message(msg)
+        except ValueError as error:
             self._counts["malformed_excitation"] += 1
-            self.get_logger().warn(f"ring-down of cycle {msg.cycle_id} announced with duration "
-                                   f"{msg.planned_duration_s!r} s: ignored")
+            self.get_logger().warn(f"{error}: ignored")
             return
         for segment in self._assembler.announce(window):
             self._process(segment, arrived)
@@ -134,8 +131,8 @@ class EstimatorNode(MowsNode):
     def _on_block(self, msg: MagnetometerBlock):
         arrived = time.monotonic()
         try:
-            block = block_from_msg(msg)
-        except ValueError as error:           # channels of unequal length: nothing usable
+            block = block_from_message(msg)
+        except ValueError as error:           # not samples a device could have sent: nothing usable
             self._counts["malformed_blocks"] += 1
             self.get_logger().warn(f"malformed MagnetometerBlock {msg.sequence}: {error}")
             return
@@ -184,6 +181,9 @@ class EstimatorNode(MowsNode):
             return response
         deadline = time.monotonic() + request.timeout_s
         with self._calibration:     # the fits arrive on the stream callbacks' thread
+            if self._calibration_fits is not None:
+                response.success, response.message = False, "a calibration is already running: try again after it"
+                return response
             self._calibration_fits = []
             # Short waits, so that a shutdown is not held up by a pending calibration.
             while (len(self._calibration_fits) < request.n_ringdowns and self.context.ok()
@@ -199,9 +199,11 @@ class EstimatorNode(MowsNode):
         spread = f00_each.std(ddof=1) / math.sqrt(len(fits)) if len(fits) > 1 else 0.0
         propagated = math.sqrt(np.sum((fits[:, 1] / math.sqrt(ratio)) ** 2)) / len(fits)
         response.f00_hz, response.f00_std_hz = float(f00_each.mean()), float(max(spread, propagated))
+        # Out-of-range values (an f00 uncertainty above 10 Hz says the ring-downs were not of one
+        # probe in one field) are refused by the parameters' ranges, with the reason.
         result = self.set_parameters_atomically([
             Parameter("f00_hz", Parameter.Type.DOUBLE, response.f00_hz),
-            Parameter("f00_std_hz", Parameter.Type.DOUBLE, min(response.f00_std_hz, 10.0))])
+            Parameter("f00_std_hz", Parameter.Type.DOUBLE, response.f00_std_hz)])
         response.success = result.successful
         response.message = result.reason or (f"f00 = {response.f00_hz:.6f} ± {response.f00_std_hz * 1e3:.4f} mHz "
                                              f"from {len(fits)} ring-downs")

@@ -22,28 +22,41 @@ from mows_msgs.srv import RunCycle
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 
-from mows.lab import analyse, load_table
-from mows.lab.table import reference_at
-from mows.probe import PAPER_PROBE, Probe
+from mows import stamps
+from mows.lab import analyse
+from mows.lab.table import from_sweep, reference_at
+from mows.probe import Probe
 from mows.sweep import MODELS, SweepPoint, SweepRecord
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
 from mows_ros.params import ParamSpec
+from mows_ros.probe import PROBE_FILE, probe_of
 from mows_ros.process import run_node
 from mows_ros.qos import MAP_QOS, RESULT_QOS
 
 NODE_NAME = "mapper"
+
+
+def reference_problem(name: str) -> str | None:
+    """Why ``reference_scenario`` cannot serve as the lab's reference, or None."""
+    try:
+        if name:
+            reference_at(name)
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        return f"reference_scenario={name!r}: {error}"
+    return None
+
 
 PARAMETERS = (
     ParamSpec("repeats_per_angle", 5, "ring-downs per orientation when the goal says 0", range=(1, 100)),
     ParamSpec("angle_step_deg", 30.0, "orientation step when the goal lists no angles, deg", range=(1.0, 180.0)),
     ParamSpec("model", "first_principles", "decomposition model when the goal names none", choices=MODELS),
     ParamSpec("f00_free", False, "fit the zero-field frequency in the decomposition (Gs is then undetermined)"),
-    ParamSpec("probe_file", "", "probe constants YAML; empty: the paper's probe"),
+    PROBE_FILE,
     ParamSpec("cycle_timeout_s", 300.0, "longest wait for the driver's cycle, s", range=(1.0, 3600.0)),
     ParamSpec("fit_timeout_s", 10.0, "longest wait for the fits of a finished cycle, s", range=(0.1, 600.0)),
     ParamSpec("reference_scenario", "", "scenario whose field at the probe is the lab's reference "
-              "(shipped name or YAML); empty: no model report"),
+              "(shipped name or YAML); empty: no model report", check=reference_problem),
     ParamSpec("lab_auto", True, "let the lab add effects while the evidence is strong"),
     ParamSpec("frame_id", "mows_rotation_plane", "frame of the sweep: x = e1, y = e2 of the rotation plane"),
 )
@@ -53,8 +66,8 @@ class MapperNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
         group = ReentrantCallbackGroup()
-        self._fits = collections.defaultdict(list)
-        self._arrived = threading.Condition()
+        self._fits = collections.defaultdict(list)   # by cycle id, while a sweep runs
+        self._arrived = threading.Condition()        # guards _fits and _state
         self._sweeps = 0
         self._state = "idle"
         self._last = "no sweep yet"
@@ -70,22 +83,27 @@ class MapperNode(MowsNode):
         return self.get_parameter(name).value
 
     def probe(self) -> Probe:
-        path = self._param("probe_file")
-        return Probe.from_yaml(path) if path else PAPER_PROBE
+        return probe_of(self._param("probe_file"))
 
     # --- inputs ---------------------------------------------------------------------------
     def _on_fit(self, msg: RingdownFit):
         with self._arrived:
-            self._fits[msg.cycle_id].append(msg)
-            self._arrived.notify_all()
+            # Fits of cycles run by others between sweeps, and tuning ring-downs, are not ours.
+            if self._state == "sweeping" and not msg.tuning:
+                self._fits[msg.cycle_id].append(msg)
+                self._arrived.notify_all()
 
     def _accept(self, goal) -> GoalResponse:
         bad = [a for a in goal.theta0_rad if not math.isfinite(a)]
-        if bad or (goal.model and goal.model not in MODELS) or self._state != "idle":
-            self.get_logger().warn(f"sweep goal refused: angles {list(goal.theta0_rad)}, model {goal.model!r}, "
-                                   f"state {self._state}")
-            return GoalResponse.REJECT
-        return GoalResponse.ACCEPT
+        with self._arrived:     # one sweep at a time: the state changes here, not when it starts
+            busy = self._state != "idle"
+            if not (bad or (goal.model and goal.model not in MODELS) or busy):
+                self._state = "sweeping"
+                self._fits.clear()
+                return GoalResponse.ACCEPT
+        self.get_logger().warn(f"sweep goal refused: angles {list(goal.theta0_rad)}, model {goal.model!r}, "
+                               f"state {self._state}")
+        return GoalResponse.REJECT
 
     # --- the sweep ------------------------------------------------------------------------
     def _execute(self, goal_handle):
@@ -94,7 +112,6 @@ class MapperNode(MowsNode):
         repeats = goal.repeats_per_angle or self._param("repeats_per_angle")
         model = goal.model or self._param("model")
         record, f00_seen = SweepRecord(), []
-        self._state = "sweeping"
         try:
             for index, theta0 in enumerate(angles):
                 if goal_handle.is_cancel_requested:
@@ -109,7 +126,9 @@ class MapperNode(MowsNode):
                 goal_handle.publish_feedback(self._feedback(index, len(angles), theta0, fits, record))
             return self._finish(goal_handle, record, model, f00_seen)
         finally:
-            self._state = "idle"
+            with self._arrived:
+                self._state = "idle"
+                self._fits.clear()
 
     def _measure(self, theta0: float, repeats: int):
         """One driver cycle at θ0 and its fits; (fits, '') or ([], what went wrong)."""
@@ -170,7 +189,7 @@ class MapperNode(MowsNode):
         msg = SweepDecomposition(sweep_id=self._sweeps, model=d.model, status=0 if d.ok else 1, message=d.message)
         msg.header.frame_id = self._param("frame_id")
         latest = max(p.t_s for p in record.points)
-        msg.header.stamp.sec, msg.header.stamp.nanosec = int(latest), int((latest % 1) * 1e9)
+        stamps.set_seconds(msg.header.stamp, latest)
         msg.field_t = d.field_t.tolist()
         msg.field_covariance_t2 = d.field_covariance_t2.ravel().tolist()
         msg.gradient_t_per_m = d.gradient_t_per_m.tolist()
@@ -191,17 +210,9 @@ class MapperNode(MowsNode):
         reference = self._param("reference_scenario")
         if not reference:
             return
-        field, gradient = reference_at(reference)
-        n = len(record.points)
-        # Each ring-down's start swing, stop − |θs|, at the decomposed field (first principles).
-        starts = (record.start_amplitudes_rad(decomposition, self.probe())
-                  if decomposition.ok and decomposition.model == "first_principles" else None)
-        columns = record.table_columns(starts)
-        columns.update({"ref_bx_t": np.full(n, field[0]), "ref_by_t": np.full(n, field[1]),
-                        "ref_bz_t": np.full(n, field[2]), "ref_gxx_t_per_m": np.full(n, gradient[0, 0]),
-                        "ref_gxy_t_per_m": np.full(n, gradient[0, 1]), "ref_gyy_t_per_m": np.full(n, gradient[1, 1])})
         try:
-            report = analyse(load_table(columns), self.probe(), auto=self._param("lab_auto"))
+            table = from_sweep(record, reference, self.probe(), decomposition)
+            report = analyse(table, self.probe(), auto=self._param("lab_auto"))
         except ValueError as error:     # a table the lab cannot use is reported, not fatal
             self.get_logger().warn(f"model lab: {error}")
             return
@@ -219,7 +230,7 @@ class MapperNode(MowsNode):
 def sweep_point(fit: RingdownFit) -> SweepPoint:
     """A successful RingdownFit as a point of the sweep, with σ of θmax from its covariance."""
     return SweepPoint.from_fit(fit, fit.frequency_shift_hz, fit.frequency_shift_std_hz,
-                               fit.header.stamp.sec + 1e-9 * fit.header.stamp.nanosec)
+                               stamps.seconds(fit.header.stamp))
 
 
 def model_report_msg(report, header, sweep_id: int) -> ModelReport:

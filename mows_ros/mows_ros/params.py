@@ -6,7 +6,7 @@ each row into a ROS parameter with a descriptor (description, range, read-only) 
 parameter, its value and what is allowed.
 """
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -30,6 +30,7 @@ class ParamSpec:
     range: tuple[float, float] | None = None  # inclusive bounds for numbers
     choices: tuple[str, ...] = ()  # allowed values of a string parameter
     read_only: bool = False
+    check: Callable[[Value], str | None] | None = None  # why a value is refused, beyond range and choices
 
     def descriptor(self) -> ParameterDescriptor:
         descriptor = ParameterDescriptor(
@@ -48,12 +49,11 @@ class ParamSpec:
         return descriptor
 
     def problem(self, value: Value) -> str | None:
-        """Why ``value`` is not allowed for this parameter, or None if it is."""
-        if self.range is not None and not self.range[0] <= value <= self.range[1]:
-            return f"{self.name}={value!r} is outside [{self.range[0]}, {self.range[1]}]"
+        """Why ``value`` is not allowed for this parameter, or None if it is. (rclpy has
+        already refused values outside the descriptor's range, NaN included.)"""
         if self.choices and value not in self.choices:
             return f"{self.name}={value!r} is not one of {', '.join(self.choices)}"
-        return None
+        return self.check(value) if self.check is not None else None
 
 
 def declare_parameters(node: Node, table: Sequence[ParamSpec]) -> None:

@@ -18,9 +18,6 @@ STREAM_QOS = QoSProfile(
     durability=qos_profile_sensor_data.durability,
 )
 
-# A consumer of the raw stream that does real work per block (the estimator) takes the same.
-STREAM_CONSUMER_QOS = STREAM_QOS
-
 # Excitation phase changes: every one matters, and a subscriber that joins late learns the
 # present one (a RESULT_QOS subscriber, volatile, is compatible with it).
 EXCITATION_QOS = QoSProfile(

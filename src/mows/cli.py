@@ -10,7 +10,7 @@ import sys
 
 SUBCOMMANDS = {
     "sim": ("mows.simulator_cli", "simulate measurement cycles from a scenario"),
-    "fit": ("mows.ringdown_cli", "fit ring-downs in a recorded bag or CSV"),
+    "fit": ("mows.ringdown_cli", "fit the ring-downs of a recorded bag (--csv: a model-lab table)"),
     "lab": ("mows.lab.cli", "compare the frequency model with measurements, find missing effects"),
     "bench": ("mows.bench", "benchmarks: estimator, simulator, stream, lab (figures, never a failure)"),
 }

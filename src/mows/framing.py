@@ -98,6 +98,17 @@ class DeviceInfo(FixedBody):
     current_cap_a: float        # the device refuses coil amplitudes above this
     watchdog_timeout_s: float   # coils off when no host frame arrived for this long
 
+    @classmethod
+    def decode(cls, payload: bytes) -> DeviceInfo:
+        info = super().decode(payload)
+        for name in ("sample_rate_hz", "range_t", "resolution_t"):
+            value = getattr(info, name)
+            if not (math.isfinite(value) and value > 0):
+                raise PayloadError(f"DeviceInfo {name} = {value!r}, expected a positive number")
+        if info.n_channels == 0:
+            raise PayloadError("DeviceInfo reports no channels")
+        return info
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Samples(Body):

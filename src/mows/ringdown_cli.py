@@ -5,21 +5,19 @@ the estimator node (:mod:`mows.segments`, :mod:`mows.ringdown`): each recorded R
 (tuning ones skipped unless ``--tuning``) is cut out by its device stamps and fitted with the
 lever-aware signal model of the paper's geometry (``--paper-model`` for Eq. S11). One line per
 ring-down; ``--csv`` writes a model-lab table (theta0_deg, f_hz, f_std_hz, t_s, amplitude_deg,
-damping_per_s, duration_s) of the OK fits, ready for ``mows lab``.
+damping_per_s, duration_s) of the OK fits, ready for ``mows lab`` (no file when none is OK).
 """
-import csv
 import math
 import sys
 
-import numpy as np
-
 from mows.bags import read_bag
+from mows.cycle import Phase
 from mows.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
+from mows.lab.table import MeasurementTable
 from mows.probe import PAPER_PROBE, Probe
 from mows.ringdown import FitOptions
-from mows.segments import Block, RingdownWindow, SegmentAssembler, fit_segment
-
-RINGDOWN_PHASE = 3  # mows_msgs/ExcitationState PHASE_RINGDOWN
+from mows.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
+from mows.sweep import SweepPoint, SweepRecord
 
 
 def add_arguments(parser) -> None:
@@ -35,7 +33,6 @@ def add_arguments(parser) -> None:
     parser.add_argument("--sensor-spacing-m", type=float, default=PAPER_SPACING_M, help="fluxgate spacing, m")
     parser.add_argument("--csv", help="write the OK fits as a model-lab table")
 
-
 def run(args) -> int:
     probe = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
     try:
@@ -48,10 +45,11 @@ def run(args) -> int:
               f"{fit.report()}")
     ok = [(w, f) for w, f in fits if f.ok]
     print(f"{len(ok)} of {len(fits)} ring-downs fitted")
-    if args.csv:
-        write_table(args.csv, ok)
+    if args.csv and ok:
+        write_table(args.csv, ok, probe)
+    elif args.csv:
+        print(f"mows fit: no ring-down fitted: {args.csv} not written", file=sys.stderr)
     return 0 if fits else 1
-
 
 def fit_bag(path, probe: Probe, args):
     """(window, fit) for every ring-down in the bag, in order."""
@@ -60,39 +58,21 @@ def fit_bag(path, probe: Probe, args):
     for item in read_bag(path, topics=[args.raw_topic, args.excitation_topic]):
         message = item.message
         if item.topic == args.excitation_topic:
-            if message.phase != RINGDOWN_PHASE or (message.tuning and not args.tuning):
+            if message.phase != Phase.RINGDOWN or (message.tuning and not args.tuning):
                 continue
-            segments = assembler.announce(RingdownWindow(
-                _seconds(message.header.stamp), message.planned_duration_s, message.cycle_id,
-                message.repeat_index, message.theta0_rad, message.frequency_hz))
+            segments = assembler.announce(window_from_message(message))
         else:
-            segments = assembler.add_block(_block(message))
+            segments = assembler.add_block(block_from_message(message))
         for segment in segments:
             yield segment.window, fit_segment(segment, _options(segment.window, pair, probe, args.paper_model),
                                               args.settle_s, probe.damping_per_s)
 
-
 def _options(window, pair, probe, paper_model) -> FitOptions:
     return FitOptions() if paper_model else FitOptions.lever_aware(pair, probe, window.theta0_rad)
 
-
-def _block(message) -> Block:
-    samples = np.stack([np.asarray(c.field_t, float) for c in message.channels], axis=1)
-    saturated = np.stack([np.asarray(c.saturated, bool) for c in message.channels], axis=1)
-    return Block(int(message.first_sample_index), _seconds(message.header.stamp), float(message.sample_rate_hz),
-                 samples, saturated)
-
-
-def _seconds(stamp) -> float:
-    return stamp.sec + 1e-9 * stamp.nanosec
-
-
-def write_table(path, fits) -> None:
-    start = min((w.start_s for w, _ in fits), default=0.0)
-    with open(path, "w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["theta0_deg", "f_hz", "f_std_hz", "t_s", "amplitude_deg", "damping_per_s", "duration_s"])
-        for window, fit in fits:
-            writer.writerow([math.degrees(window.theta0_rad), fit.frequency_hz, fit.frequency_std_hz,
-                             window.start_s - start, math.degrees(fit.amplitude_rad), fit.damping_per_s,
-                             fit.duration_s])
+def write_table(path, fits, probe: Probe) -> None:
+    """The OK fits as a model-lab table (:meth:`mows.sweep.SweepRecord.table_columns`: each
+    ring-down's start swing is the stop amplitude pooled over the fits that measured θmax)."""
+    record = SweepRecord([SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz,
+                                              window.start_s) for window, fit in fits])
+    MeasurementTable(record.table_columns(), str(path)).to_csv(path)

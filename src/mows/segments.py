@@ -19,18 +19,31 @@ import math
 
 import numpy as np
 
+from mows import stamps
 from mows.ringdown import FitOptions, FitStatus, RingdownFit, failure, fit_ringdown
 
 
 @dataclasses.dataclass(frozen=True)
 class Block:
-    """Consecutive samples from the device: ``samples_t`` and ``saturated`` are (n, channels)."""
+    """Consecutive samples from the device: ``samples_t`` and ``saturated`` are (n, channels).
+    A block that could not have come from a device raises ValueError."""
 
     first_sample_index: int
     t0_s: float
     sample_rate_hz: float
     samples_t: np.ndarray
     saturated: np.ndarray
+
+    def __post_init__(self):
+        if not (math.isfinite(self.sample_rate_hz) and self.sample_rate_hz > 0):
+            raise ValueError(f"sample rate {self.sample_rate_hz!r} Hz is not a positive number")
+        if not math.isfinite(self.t0_s):
+            raise ValueError(f"stamp {self.t0_s!r} s is not a time")
+        shape = np.shape(self.samples_t)
+        if len(shape) != 2 or shape[1] == 0:
+            raise ValueError(f"samples of shape {shape}: expected (samples, channels ≥ 1)")
+        if np.shape(self.saturated) != shape:
+            raise ValueError(f"saturation flags of shape {np.shape(self.saturated)} for samples of shape {shape}")
 
     @property
     def stop_index(self) -> int:
@@ -47,6 +60,30 @@ class RingdownWindow:
     repeat_index: int = 0
     theta0_rad: float = 0.0
     excitation_frequency_hz: float = math.nan
+    tuning: bool = False        # a frequency-tuning ring-down, not a measurement
+
+    def __post_init__(self):
+        if not (math.isfinite(self.start_s) and math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise ValueError(f"ring-down of cycle {self.cycle_id} announced at {self.start_s!r} s for "
+                             f"{self.duration_s!r} s: not a window")
+
+
+def block_from_message(message) -> Block:
+    """A ``mows_msgs/MagnetometerBlock`` (rclpy's or rosbags') as a :class:`Block`; ValueError
+    when it does not describe one (channels of unequal length, no channels, a bad rate)."""
+    if not message.channels:
+        raise ValueError("a block without channels")
+    samples = np.stack([np.asarray(c.field_t, np.float64) for c in message.channels], axis=1)
+    saturated = np.stack([np.asarray(c.saturated, bool) for c in message.channels], axis=1)
+    return Block(int(message.first_sample_index), stamps.seconds(message.header.stamp),
+                 float(message.sample_rate_hz), samples, saturated)
+
+
+def window_from_message(message) -> RingdownWindow:
+    """A ``mows_msgs/ExcitationState`` of phase RINGDOWN as a :class:`RingdownWindow`."""
+    return RingdownWindow(stamps.seconds(message.header.stamp), float(message.planned_duration_s),
+                          int(message.cycle_id), int(message.repeat_index), float(message.theta0_rad),
+                          float(message.frequency_hz), bool(message.tuning))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,7 +109,7 @@ class SegmentAssembler:
     """Buffers about ``buffer_s`` of blocks and assembles announced ring-down windows.
 
     Counters (for diagnostics): ``blocks``, ``missing_samples`` (sequence gaps in the stream),
-    ``rate_changes``, ``late_windows`` (announced after their samples left the buffer).
+    ``rate_changes`` (a new sample rate or number of channels restarts the buffer), ``late_windows`` (announced after their samples left the buffer).
     """
 
     def __init__(self, buffer_s: float = 5.0):
@@ -90,7 +127,8 @@ class SegmentAssembler:
     def add_block(self, block: Block) -> list[Segment]:
         """Take a block; return the segments it completes."""
         newest = self._blocks[-1] if self._blocks else None
-        if newest is not None and block.sample_rate_hz != newest.sample_rate_hz:
+        if newest is not None and (block.sample_rate_hz != newest.sample_rate_hz
+                                   or block.samples_t.shape[1] != newest.samples_t.shape[1]):
             self.rate_changes += 1
             self._blocks.clear()
         elif newest is not None and block.first_sample_index > newest.stop_index:

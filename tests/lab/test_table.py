@@ -79,7 +79,8 @@ def test_a_bag_of_ringdown_fits_with_a_magnetometer_or_a_source_reference(tmp_pa
         values.update(theta0_rad=theta0, frequency_hz=112.5 + theta0, frequency_std_hz=1e-3, amplitude_rad=0.4,
                       damping_per_s=1.8, duration_s=0.5)
         return types["mows_msgs/msg/RingdownFit"](
-            header=header(seconds), cycle_id=seconds, repeat_index=0, status=status, status_name="", message="",
+            header=header(seconds), cycle_id=seconds, repeat_index=0, tuning=False, status=status, status_name="",
+            message="",
             theta0_free=False, n_samples=10000, parameter_names=[], covariance=np.zeros(0), **values)
 
     def field(seconds, bx):

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from mows import stamps
 from mows_bringup.graph import NODES
 from mows_driver import node as driver
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
@@ -79,10 +80,6 @@ def listen(ros):
     return Listener(ros)
 
 
-def stamp_ns(message) -> int:
-    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
-
-
 def field(block) -> np.ndarray:
     return np.stack([np.frombuffer(c.field_t, float) for c in block.channels], axis=1)
 
@@ -117,11 +114,11 @@ def test_a_cycle_streams_device_stamped_blocks_and_publishes_its_phases(start_dr
     # Device stamps: one clock for all blocks (stamp − index/rate is the same), nothing lost.
     blocks = listen.blocks
     assert_contiguous(blocks)
-    epochs = {stamp_ns(b) - round(b.first_sample_index * 1e9 / RATE_HZ) for b in blocks}
+    epochs = {stamps.nanoseconds(b.header.stamp) - round(b.first_sample_index * 1e9 / RATE_HZ) for b in blocks}
     assert len(epochs) == 1
     (epoch,) = epochs
     # Phases fall on samples of the same clock; each ring-down starts on a sample.
-    assert all((stamp_ns(s) - epoch) % 50_000 == 0 for s in states)
+    assert all((stamps.nanoseconds(s.header.stamp) - epoch) % 50_000 == 0 for s in states)
     # Saturated samples are flagged and sit at the range limit; the coils saturate the sensors.
     flags = np.concatenate([saturated(b) for b in blocks])
     values = np.concatenate([field(b) for b in blocks])
@@ -188,7 +185,7 @@ def test_the_serial_driver_streams_from_the_emulator_and_survives_an_unplug(star
         assert response.success, response.message
         ringdown = next(s for s in listen.states if s.phase == Phase.RINGDOWN)
         off_index = [index for index, on in emulator.device.coil_log if not on][-1]
-        assert stamp_ns(ringdown) == emulator.clock.stamp_ns(off_index)
+        assert stamps.nanoseconds(ringdown.header.stamp) == emulator.clock.stamp_ns(off_index)
         emulator.unplug()
         listen.ros.wait_for(lambda: listen.diagnostics.get("link_up") == "False", "the driver to see the loss")
         assert listen.diagnostics["level"] == DiagnosticStatus.ERROR
@@ -233,12 +230,12 @@ def test_a_recording_keeps_every_block_published_before_sigterm_and_replays(star
     source = {b.first_sample_index: b for b in recorded}
     for block in replayed.blocks:
         original = source[block.first_sample_index]
-        assert stamp_ns(block) == stamp_ns(original)
+        assert stamps.nanoseconds(block.header.stamp) == stamps.nanoseconds(original.header.stamp)
         np.testing.assert_array_equal(field(block), np.stack([c.field_t for c in original.channels], axis=1))
     listen.ros.wait_for(lambda: replayed.diagnostics.get("link") == "finished", "the end of the replay")
 
 
-def synthetic_bag(path, gap_after: int, gap_samples: int):
+def synthetic_bag(path, gap_after: int, gap_samples: int, rate_hz: float = RATE_HZ):
     """A bag of 30 blocks with ``gap_samples`` missing after block ``gap_after``, and two phases."""
     store = bags.typestore()
     Block, Channel = store.types["mows_msgs/msg/MagnetometerBlock"], store.types["mows_msgs/msg/MagnetometerChannel"]
@@ -254,7 +251,7 @@ def synthetic_bag(path, gap_after: int, gap_samples: int):
         index = k * BLOCK + (gap_samples if k > gap_after else 0)
         channels = [Channel(f"c{i}", rng.normal(0, 1e-6, BLOCK), rng.random(BLOCK) < 0.1) for i in range(2)]
         messages.append(bags.BagMessage("/mows/raw", "mows_msgs/msg/MagnetometerBlock", k,
-                                        Block(header(index), k, index, RATE_HZ, 1e-5, 1e-10, channels)))
+                                        Block(header(index), k, index, rate_hz, 1e-5, 1e-10, channels)))
     for phase, index in [(Phase.EXCITING, 2000), (Phase.RINGDOWN, 4000)]:
         state = State(header(index), int(phase), phase.name, 7, 0, 1, False, phase == Phase.EXCITING,
                       np.array([1.0, -1.0]) * (phase == Phase.EXCITING), 112.0, 0.5, 0.2, "largest_spacing")
@@ -271,14 +268,22 @@ def test_the_bag_backend_replays_gaps_as_gaps(start_driver, listen, tmp_path):
                         "the whole replay")
     blocks = listen.blocks
     assert [b.first_sample_index for b in blocks] == [b.first_sample_index for b in recorded]
-    assert [stamp_ns(b) for b in blocks] == [stamp_ns(b) for b in recorded]
+    assert [stamps.nanoseconds(b.header.stamp) for b in blocks] == [stamps.nanoseconds(b.header.stamp) for b in recorded]
     jumps = np.diff([b.sequence for b in blocks])
     assert list(np.flatnonzero(jumps != 1)) == [14] and jumps[14] == 1 + 3  # 1200 samples: 3 blocks' worth
     for block, original in zip(blocks, recorded):
         np.testing.assert_array_equal(saturated(block), np.stack([c.saturated for c in original.channels], axis=1))
     assert (listen.diagnostics["gaps"], listen.diagnostics["missing_samples"]) == ("1", "1200")
     assert [(Phase(s.phase), s.cycle_id) for s in listen.states] == [(Phase.EXCITING, 7), (Phase.RINGDOWN, 7)]
-    assert [stamp_ns(s) for s in listen.states] == [1_000_000_000_000 + i * 50_000 for i in (2000, 4000)]
+    assert [stamps.nanoseconds(s.header.stamp) for s in listen.states] == [1_000_000_000_000 + i * 50_000 for i in (2000, 4000)]
+
+
+def test_a_bag_without_a_sample_rate_stops_the_driver_with_its_reason(tmp_path):
+    synthetic_bag(tmp_path / "rateless", gap_after=30, gap_samples=0, rate_hz=0.0)
+    run = subprocess.run(NODES[0].command(["-p", "backend:=bag", "-p", f"bag_path:={tmp_path / 'rateless'}"]),
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == EXIT_BAD_PARAMETER, run.stderr
+    assert "sample rate 0.0 Hz" in run.stderr and "Traceback" not in run.stderr
 
 
 @pytest.mark.slow

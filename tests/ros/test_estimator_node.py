@@ -19,7 +19,7 @@ from mows.frequency import frequency_shift_hz
 from mows.probe import PAPER_PROBE
 from mows.signal import signal_t
 from mows_bringup.graph import NODES
-from mows_estimator.messages import s_to_stamp
+from mows import stamps
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
 
 pytestmark = pytest.mark.ros
@@ -76,19 +76,23 @@ class Device:
 
     def header(self, index):
         msg = MagnetometerBlock().header
-        msg.stamp = s_to_stamp(EPOCH_S + index / FS)
+        stamps.set_seconds(msg.stamp, EPOCH_S + index / FS)
         msg.frame_id = "mows_fluxgates"
         return msg
 
-    def publish_block(self, near, far, lengths_differ=False):
-        channels = [MagnetometerChannel(frame_id=f"fluxgate_{i + 1}", field_t=data.tolist(),
-                                        saturated=[False] * (len(data) - (lengths_differ and i)))
-                    for i, data in enumerate((near, far))]
+    def publish_block(self, near, far, channels=None, sample_rate_hz=FS):
+        """A block of the two channels ``near`` and ``far``, or of ``channels`` as given."""
+        if channels is None:
+            channels = [channel(data, len(data), i) for i, data in enumerate((near, far))]
         self.raw.publish(MagnetometerBlock(header=self.header(self.index), sequence=self.sequence,
-                                           first_sample_index=self.index, sample_rate_hz=FS, range_t=1e-5,
+                                           first_sample_index=self.index, sample_rate_hz=sample_rate_hz, range_t=1e-5,
                                            resolution_t=1e-10, channels=channels))
         # Give the estimator's best-effort queue time to drain, as a real 25 ms stream would.
         self.ros.executor.spin_once(timeout_sec=0.002)
+
+
+def channel(data, flags, index=0):
+    return MagnetometerChannel(frame_id=f"fluxgate_{index + 1}", field_t=list(data), saturated=[False] * flags)
 
 
 @pytest.fixture
@@ -162,26 +166,40 @@ def test_bad_ringdowns_get_a_status_and_no_field(ros, estimator, corrupt, skip, 
 
 def test_malformed_messages_do_not_stop_the_node(ros, estimator):
     device, heard, process = estimator
-    device.publish_block(np.zeros(BLOCK), np.zeros(BLOCK), lengths_differ=True)
+    zeros = np.zeros(BLOCK)
+    malformed = [dict(channels=[channel(zeros, BLOCK), channel(zeros, BLOCK - 1)]),   # flags short in one
+                 dict(channels=[channel(zeros, 0), channel(zeros, 0)]),               # no flags at all
+                 dict(channels=[]),
+                 dict(sample_rate_hz=math.nan),
+                 dict(sample_rate_hz=0.0),
+                 dict(channels=[channel(zeros, BLOCK, i) for i in range(3)])]          # valid, one channel more
+    for changes in malformed:
+        device.publish_block(zeros, zeros, **changes)
+        device.index += BLOCK   # a malformed block is lost to the estimator: a gap before the ring-down
+        device.sequence += 1
     device.excitation.publish(ExcitationState(header=device.header(device.index), phase=ExcitationState.PHASE_RINGDOWN,
                                               planned_duration_s=math.nan, frequency_hz=112.0))
-    device.index += BLOCK   # the malformed block is lost to the estimator: a gap before the ring-down
     device.ringdown()
     ros.wait_for(lambda: heard["fits"], "a fit after malformed input")
     assert heard["fits"][-1].status == RingdownFit.STATUS_OK and process.poll() is None
     name = "/estimator"
-    ros.wait_for(lambda: name in heard["diagnostics"] and any(
-        kv.key == "status_malformed_excitation" for kv in heard["diagnostics"][name].values), "diagnostics")
+    ros.wait_for(lambda: name in heard["diagnostics"] and {"status_malformed_excitation", "status_malformed_blocks"}
+                 <= {kv.key for kv in heard["diagnostics"][name].values}, "diagnostics")
 
 
 def test_calibration_sets_f00_from_ringdowns_in_a_known_field(ros, estimator):
     device, heard, _ = estimator
     client = ros.node.create_client(Calibrate, "/mows/estimator/calibrate")
     ros.wait_for(client.service_is_ready, "the calibration service")
-    future = client.call_async(Calibrate.Request(n_ringdowns=3, reference_field_t=FIELD_T, timeout_s=60.0))
+    request = Calibrate.Request(n_ringdowns=3, reference_field_t=FIELD_T, timeout_s=60.0)
+    futures = [client.call_async(request), client.call_async(request)]   # one too many: refused, not mixed
+    ros.wait_for(lambda: any(f.done() for f in futures), "the second calibration's refusal")
+    refused = next(f for f in futures if f.done())
+    running = futures[1 - futures.index(refused)]
+    assert not refused.result().success and "already running" in refused.result().message
     for _ in range(3):
         device.ringdown()
-    response = ros.wait_for(lambda: future.done() and future.result(), "the calibration")
+    response = ros.wait_for(lambda: running.done() and running.result(), "the calibration")
     assert response.success, response.message
     assert abs(response.f00_hz - PAPER_PROBE.f00_hz) < 4 * response.f00_std_hz
     assert response.n_used == 3

@@ -29,9 +29,9 @@ ANGLES = np.radians(np.arange(0.0, 360.0, 30.0))
 class StandInDriver:
     """Answers RunCycle: publishes `repeats` fits of the cycle, f from the full potential."""
 
-    def __init__(self, ros, fail=False):
+    def __init__(self, ros, fail=False, tuning=False):
         scenario = load_scenario(SCENARIO)
-        self.source, self.fail = scenario.environment.source, fail
+        self.source, self.fail, self.tuning = scenario.environment.source, fail, tuning
         self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
         ros.node.create_service(RunCycle, "mows/driver/run_cycle", self.run_cycle)
         self.cycle, self.rng = 0, np.random.default_rng(0)
@@ -42,9 +42,11 @@ class StandInDriver:
             return response
         self.cycle += 1
         f = float(ArcPotential.from_source(PAPER_PROBE, self.source, Pose(theta0_rad=request.theta0_rad)).frequency_hz())
-        for repeat in range(request.repeats):
-            measured = f + STD_HZ * self.rng.standard_normal()
-            msg = RingdownFit(cycle_id=self.cycle, repeat_index=repeat, status=RingdownFit.STATUS_OK, status_name="OK",
+        # With ``tuning`` the estimator also fits the cycle's tuning ring-down, 1 Hz off resonance.
+        for repeat, tuning in [(0, True)] * self.tuning + [(r, False) for r in range(request.repeats)]:
+            measured = f + STD_HZ * self.rng.standard_normal() + tuning
+            msg = RingdownFit(cycle_id=self.cycle, repeat_index=repeat, tuning=tuning, status=RingdownFit.STATUS_OK,
+                              status_name="OK",
                               theta0_rad=request.theta0_rad, frequency_hz=measured, frequency_std_hz=STD_HZ,
                               frequency_shift_hz=measured - PAPER_PROBE.f00_hz, frequency_shift_std_hz=STD_HZ,
                               amplitude_rad=math.radians(2.0), damping_per_s=1.8, duration_s=0.5)
@@ -85,7 +87,7 @@ def sweep(ros, client, **goal):
 
 def test_a_sweep_recovers_the_field_and_reports_on_the_model(ros, mapper):
     client, _ = mapper
-    StandInDriver(ros)
+    StandInDriver(ros, tuning=True)   # tuning ring-downs are not measurements: the sweep leaves them out
     maps, reports = [], []
     ros.node.create_subscription(SweepDecomposition, "mows/sweep", maps.append, MAP_QOS)
     ros.node.create_subscription(ModelReport, "mows/model_report", reports.append, MAP_QOS)
@@ -114,6 +116,18 @@ def test_bad_goals_are_refused(ros, mapper):
     assert not handle.accepted
     handle, _, _ = sweep(ros, client, theta0_rad=[0.0, 1.0], model="paper")
     assert not handle.accepted
+
+
+def test_one_sweep_at_a_time(ros, mapper):
+    client, _ = mapper
+    StandInDriver(ros)
+    goals = [client.send_goal_async(RotationSweep.Goal(theta0_rad=ANGLES.tolist(), repeats_per_angle=1))
+             for _ in range(2)]
+    handles = ros.wait_for(lambda: all(g.done() for g in goals) and [g.result() for g in goals], "both answers")
+    assert sorted(h.accepted for h in handles) == [False, True]
+    result = next(h for h in handles if h.accepted).get_result_async()
+    done = ros.wait_for(lambda: result.done() and result.result(), "the accepted sweep")
+    assert done.result.success and done.result.decomposition.n_points == len(ANGLES)
 
 
 def test_a_failing_driver_aborts_the_sweep_with_its_reason(ros, mapper):

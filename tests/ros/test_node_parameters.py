@@ -37,7 +37,12 @@ def test_the_parameter_file_holds_every_parameter_at_its_default(graph_node):
         ("driver", "block_duration_s", 0.051),
         ("driver", "block_duration_s", 0.009),
         ("driver", "coil_current_cap_a", 20.0),  # read-only
+        ("driver", "block_duration_s", float("nan")),
         ("mapper", "repeats_per_angle", 0),
+        ("estimator", "buffer_s", 10.0),  # read-only
+        ("estimator", "probe_file", "/nonexistent/probe.yaml"),
+        ("mapper", "probe_file", "/nonexistent/probe.yaml"),
+        ("mapper", "reference_scenario", "no_such_scenario"),
     ],
 )
 def test_bad_values_are_rejected(ros_context, node_name, name, value):
@@ -59,6 +64,22 @@ def test_good_values_are_taken_and_described(ros_context):
     assert (limits.from_value, limits.to_value) == (0.01, 0.05)
     assert node.describe_parameter("coil_current_cap_a").read_only
     assert "sim" in node.describe_parameter("backend").additional_constraints
+    node.destroy_node()
+
+
+def test_a_probe_file_is_read_when_set_and_refused_with_its_reason(ros_context, tmp_path):
+    import dataclasses
+    from mows.probe import PAPER_PROBE
+    node = estimator.EstimatorNode()
+    path = tmp_path / "probe.yaml"
+    dataclasses.replace(PAPER_PROBE, damping_per_s=2.5).to_yaml(path)
+    (result,) = node.set_parameters([Parameter("probe_file", value=str(path))])
+    assert result.successful, result.reason
+    assert node.probe().damping_per_s == 2.5
+    path.write_text("moment_am2: -1\n")
+    (result,) = node.set_parameters([Parameter("probe_file", value=str(path))])
+    assert not result.successful and "probe_file" in result.reason and "lacks" in result.reason
+    assert node.probe().damping_per_s == 2.5   # the accepted file's probe stays in use
     node.destroy_node()
 
 

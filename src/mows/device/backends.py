@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from mows import bags
+from mows import bags, stamps
 from mows.coils import CurrentCap
 from mows.cycle import Phase, PhaseEvent
 from mows.device.clock import DeviceClock
@@ -227,9 +227,13 @@ class BagBackend(Backend):
         self._ahead = collections.deque()
         first_raw = self._first_raw()
         block = first_raw.message
+        if not (math.isfinite(block.sample_rate_hz) and block.sample_rate_hz > 0 and block.channels):
+            raise ValueError(f"the bag {self.path} starts with a block of sample rate {block.sample_rate_hz!r} Hz "
+                             f"and {len(block.channels)} channels: nothing to replay")
         self.info = DeviceInfo(block.sample_rate_hz, len(block.channels), 0, block.range_t, block.resolution_t,
                                0.0, math.inf)
-        self._anchor = (block.first_sample_index, _stamp_ns(block))  # maps device stamps to sample indices
+        # maps device stamps to sample indices
+        self._anchor = (block.first_sample_index, stamps.nanoseconds(block.header.stamp))
         self._start: tuple[int, float] | None = None  # (first device stamp, host time): set by the first poll
         self._finished = False
 
@@ -243,10 +247,11 @@ class BagBackend(Backend):
     def poll(self, timeout_s: float) -> list:
         deadline = self._monotonic() + timeout_s
         if self._start is None:  # the replay's clock starts with the first poll
-            self._start = (_stamp_ns(self._ahead[0].message), self._monotonic())
+            self._start = (stamps.nanoseconds(self._ahead[0].message.header.stamp), self._monotonic())
         items = []
         while (message := self._peek()) is not None:
-            due = self._start[1] + (_stamp_ns(message.message) - self._start[0]) / 1e9 / self.rate
+            elapsed_ns = stamps.nanoseconds(message.message.header.stamp) - self._start[0]
+            due = self._start[1] + elapsed_ns / 1e9 / self.rate
             now = self._monotonic()
             if due > now:
                 if items or now >= deadline:
@@ -281,7 +286,7 @@ class BagBackend(Backend):
         if len(lengths) != 1 or len(block.channels) != self.info.n_channels or block.sample_rate_hz != \
                 self.info.sample_rate_hz:
             raise ValueError("a block whose channels or rate do not match the recording's")
-        stamp = _stamp_ns(block)
+        stamp = stamps.nanoseconds(block.header.stamp)
         self._anchor = (block.first_sample_index, stamp)
         return SampleChunk(block.first_sample_index, stamp, np.stack([c.field_t for c in block.channels], axis=1),
                            np.stack([c.saturated for c in block.channels], axis=1).astype(bool))
@@ -289,7 +294,7 @@ class BagBackend(Backend):
     def _event(self, state) -> PhaseEvent:
         if state.phase not in set(Phase):
             raise ValueError(f"an excitation state with the unknown phase {state.phase}")
-        stamp = _stamp_ns(state)
+        stamp = stamps.nanoseconds(state.header.stamp)
         index = self._anchor[0] + round((stamp - self._anchor[1]) * self.info.sample_rate_hz / 1e9)
         return PhaseEvent(Phase(state.phase), index, stamp, state.cycle_id, state.repeat_index, state.repeats,
                           bool(state.tuning), tuple(float(i) for i in state.coil_current_amplitude_a),
@@ -308,7 +313,3 @@ class BagBackend(Backend):
 
     def close(self) -> None:
         self._messages.close()
-
-
-def _stamp_ns(message) -> int:
-    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec

@@ -32,7 +32,8 @@ from typing import Mapping
 
 import numpy as np
 
-from mows.lab.physics import probe_axes
+from mows import stamps
+from mows.pose import probe_axes
 
 REQUIRED = ("theta0_deg", "f_hz", "f_std_hz")
 FIELD = ("ref_bx_t", "ref_by_t", "ref_bz_t")
@@ -310,8 +311,7 @@ def is_bag(source) -> bool:
 
 # --- bags -----------------------------------------------------------------------------------
 def _stamp_s(message, timestamp_ns) -> float:
-    stamp = message.header.stamp
-    seconds = stamp.sec + 1e-9 * stamp.nanosec
+    seconds = stamps.seconds(message.header.stamp)
     return seconds if seconds > 0 else 1e-9 * timestamp_ns
 
 
@@ -343,6 +343,8 @@ def from_bag(path, reference=None, magnet_position_m=(0.0, 0.0, 0.0), ringdown_t
     fits, sweeps, fields, failed = [], [], [], 0
     for item in bags.read_bag(path, topics=topics):
         if item.topic == ringdown_topic:
+            if getattr(item.message, "tuning", False):
+                continue
             if item.message.status == 0:
                 fits.append((_stamp_s(item.message, item.timestamp_ns), item.message))
             else:
@@ -385,6 +387,19 @@ def _reference_columns(reference, stamps, fields, magnet_position_m, path) -> di
         nearest = np.abs(stamps[:, None] - times[None, :]).argmin(axis=1)
         return dict(zip(FIELD, values[nearest].T))
     return reference_columns(reference, len(stamps), magnet_position_m)
+
+
+def from_sweep(record, reference, probe, decomposition=None) -> MeasurementTable:
+    """The table of one rotation sweep (:class:`mows.sweep.SweepRecord`) in a static
+    ``reference`` (anything :func:`reference_at` takes). With a first-principles
+    ``decomposition`` of the sweep, each ring-down's start swing is stop − |θs| at its field
+    (:meth:`~mows.sweep.SweepRecord.start_amplitudes_rad`); else the pooled stop amplitude."""
+    starts = (record.start_amplitudes_rad(decomposition, probe)
+              if decomposition is not None and decomposition.ok and decomposition.model == "first_principles"
+              else None)
+    columns = record.table_columns(starts)
+    columns.update(reference_columns(reference, len(record.points)))
+    return MeasurementTable(columns, "sweep")
 
 
 def reference_columns(reference, n: int, magnet_position_m=(0.0, 0.0, 0.0)) -> dict:

@@ -128,9 +128,9 @@ class CoilSetup:
         """
         if not (np.isfinite(amplitude_a) and amplitude_a >= 0.0):
             raise ValueError(f"amplitude_a must be a finite current ≥ 0 A, got {amplitude_a!r}")
-        self.cap.check(amplitude_a)
+        self.cap.check(amplitude_a)   # |amplitude·sin| ≤ amplitude: every coil's current is within the cap
         theta0 = np.asarray(theta0_rad, dtype=float)
-        return self.cap.check(amplitude_a * np.sin(theta0[..., None] + np.array(self.phases_rad)))
+        return amplitude_a * np.sin(theta0[..., None] + np.array(self.phases_rad))
 
     def coil_field_per_ampere_t(self, points_m) -> np.ndarray:
         """Field of each coil per ampere at ``points_m`` (..., 3): shape (..., n_coils, 3), T/A."""

@@ -110,14 +110,11 @@ class FluxgatePair:
     """Two parallel sensors on one line with the probe; column 0 is the near one."""
 
     sensors: tuple
-    sample_rate_hz: float = DAQ_SAMPLE_RATE_HZ
 
     def __post_init__(self):
         object.__setattr__(self, "sensors", tuple(self.sensors))
         if len(self.sensors) != 2 or not all(isinstance(s, Fluxgate) for s in self.sensors):
             raise ValueError(f"sensors must be two Fluxgate objects, got {self.sensors!r}")
-        if not (np.isfinite(self.sample_rate_hz) and self.sample_rate_hz > 0.0):
-            raise ValueError(f"sample_rate_hz must be > 0, got {self.sample_rate_hz!r}")
 
     @classmethod
     def paper(cls, probe_position_m=(0.0, 0.0, 0.0), distance_m: float = PAPER_DISTANCE_M,
@@ -208,16 +205,6 @@ class NoiseModel:
         for name, value in vars(self).items():
             if not (np.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be finite and ≥ 0, got {value!r}")
-
-    def draw(self, n: int, sample_rate_hz: float, rng: np.random.Generator) -> np.ndarray:
-        """``n`` samples of both channels at ``sample_rate_hz``, tesla, shape (n, 2)."""
-        white_scale = np.sqrt(sample_rate_hz / 2.0)  # per-sample σ of a one-sided ASD of 1
-        t = np.arange(n) / sample_rate_hz
-        common = (self.common_white_t_per_rthz * white_scale * rng.standard_normal(n)
-                  + pink_noise_t(n, sample_rate_hz, self.common_pink_t_per_rthz_at_1hz, rng)
-                  + self.mains_t * np.sin(2.0 * np.pi * self.mains_hz * t + rng.uniform(0.0, 2.0 * np.pi)))
-        own = self.sensor_white_t_per_rthz * white_scale * rng.standard_normal((n, 2))
-        return common[:, None] + own
 
 
 def pink_noise_t(n: int, sample_rate_hz: float, asd_at_1hz_t_per_rthz: float, rng: np.random.Generator) -> np.ndarray:

@@ -20,6 +20,16 @@ import numpy as np
 STANDARD_GRAVITY_M_PER_S2 = 9.80665
 
 
+def probe_axes(theta0_rad) -> np.ndarray:
+    """Rows x', y', z' of the probe frame in a rotation plane that is the global x–y plane, shape
+    θ0.shape + (3, 3): ``axes @ v`` is v in the probe frame."""
+    theta = np.asarray(theta0_rad, float)
+    c, s = np.cos(theta), np.sin(theta)
+    axes = np.zeros(theta.shape + (3, 3))
+    axes[..., 0, 0], axes[..., 0, 1], axes[..., 1, 0], axes[..., 1, 1], axes[..., 2, 2] = c, s, -s, c, 1.0
+    return axes
+
+
 @dataclasses.dataclass(frozen=True)
 class Pose:
     """Placement of the probe. Vectors are global-frame, SI units."""
@@ -59,10 +69,6 @@ class Pose:
     def magnet_position_at(self, theta_rad, lever_m: float) -> np.ndarray:
         """Magnet position at deflection θ, shape θ.shape + (3,)."""
         return self.pivot_m(lever_m) + lever_m * self.moment_direction_at(theta_rad)
-
-    def to_probe_frame(self, vector) -> np.ndarray:
-        """Components (x', y', z') of a global vector (or of each row of an (n, 3) array)."""
-        return np.asarray(vector, float) @ np.stack(self.axes(), axis=1)
 
     @classmethod
     def tilted(cls, tilt_rad: float, tilt_axis_rad: float = 0.0, **kwargs) -> "Pose":

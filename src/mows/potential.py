@@ -212,26 +212,3 @@ def arc_energy_j(probe, source, pose, theta_rad) -> np.ndarray:
     magnetic = -probe.moment_am2 * np.einsum("...j,...j->...", direction, source.field_t(position))
     gravity = -probe.magnet_mass_kg * probe.lever_m * (direction @ np.asarray(pose.gravity_m_per_s2, float))
     return magnetic + gravity
-
-
-def expansion_terms(probe, source, pose) -> dict:
-    """The pieces of k = U''(0) expanded at θ = 0 (PHYSICS.md §4), N·m/rad.
-
-    ``field`` m·Bx' (Eq. 4); ``gradient`` m·l·Gx'x' (Eq. 5); ``transverse_gradient``
-    −2·m·l·Gy'y'; ``curvature`` −m·l²·∂²Bx'/∂y'²; ``gravity`` a·l·(g·x'). The first two
-    are the published model. (U''(0) is not the stiffness at the rest angle: the static
-    deflection adds ≈ (m·By')²/kM on top, see :class:`ArcPotential`.)
-    """
-    x_axis, y_axis, _ = pose.axes()
-    where = np.asarray(pose.magnet_position_m, float)
-    b = source.field_t(where)
-    g = source.gradient_t_per_m(where)
-    h = source.hessian_t_per_m2(where)
-    m, l = probe.moment_am2, probe.lever_m
-    return {
-        "field": m * (x_axis @ b),
-        "gradient": m * l * (x_axis @ g @ x_axis),
-        "transverse_gradient": -2.0 * m * l * (y_axis @ g @ y_axis),
-        "curvature": -m * l**2 * np.einsum("i,ijk,j,k->", x_axis, h, y_axis, y_axis),
-        "gravity": probe.magnet_mass_kg * l * (x_axis @ np.asarray(pose.gravity_m_per_s2, float)),
-    }

@@ -203,15 +203,13 @@ class _Problem:
 @dataclasses.dataclass
 class _Step:
     """Everything known at one parameter vector q: the shape, κ and B_DC per channel
-    (``coef``, (C, 2)), the weighted cost, and the normal equations of variable projection."""
+    (``coef``, (C, 2)) and the weighted cost."""
 
     q: np.ndarray
     shape: _Shape
     coef: np.ndarray
     residual: np.ndarray       # (C, n), unweighted
     cost: float                # Σ_c (w_c·|r_c|)²
-    jtj: np.ndarray = None     # (P, P)
-    jtr: np.ndarray = None     # (P,)
 
 
 def _evaluate(problem: _Problem, q: np.ndarray, derivatives: bool = True) -> _Step:
@@ -226,8 +224,7 @@ def _evaluate(problem: _Problem, q: np.ndarray, derivatives: bool = True) -> _St
     jtj, jtr = np.zeros((p, p)), np.zeros(p)
     cost = evaluate_model(np.asarray(q, float), problem.dt, cr, ci, problem.theta0_free, problem.y, problem.weights,
                           derivatives, g, m, residual, coef, jtj, jtr)
-    return _Step(q, _Shape(g, m), coef, residual, float(cost), jtj if derivatives else None,
-                 jtr if derivatives else None)
+    return _Step(q, _Shape(g, m), coef, residual, float(cost))
 
 
 # --- noise level and the start ----------------------------------------------------------
@@ -279,7 +276,7 @@ def _start_candidates(y, fs, expected_hz, options, damping_guess):
     floor = np.median(power[1:])
     found = [p for p in (p1, p2) if p is not None and p.power > options.detection_snr * floor]
     if not found:
-        return [], floor, power
+        return []
     # A line at f fixes φ up to the sign of κ; a line at 2f fixes 2φ up to the sign of its
     # coefficient, which depends on θ0: try every quarter turn and let the data choose.
     starts = []
@@ -288,7 +285,7 @@ def _start_candidates(y, fs, expected_hz, options, damping_guess):
     if p2 is not None and p2 in found:
         starts += [np.array([p2.frequency_hz / 2.0, damping_guess, 0.3, p2.phase_rad / 2.0 + k * math.pi / 2])
                    for k in range(4)]
-    return starts, floor, power
+    return starts
 
 
 def _column_scale(jtj):
@@ -348,10 +345,10 @@ def _variable_projection(problem: _Problem, q, iterations, tol_chi2, damping=1e-
     Returns (the step at the last accepted q, converged, iterations, free-parameter mask).
     """
     cr, ci = split_pickup(problem.pickup)
-    q, converged, used, free, cost, g, m, residual, coef, jtj, jtr = levenberg_marquardt(
+    q, converged, used, free, cost, g, m, residual, coef, _, _ = levenberg_marquardt(
         np.asarray(q, float).copy(), problem.dt, cr, ci, problem.theta0_free, problem.y, problem.weights,
         iterations, tol_chi2, damping, *AMPLITUDE_BOUNDS_RAD, AMPLITUDE)
-    return _Step(q, _Shape(g, m), coef, residual, float(cost), jtj, jtr), bool(converged), int(used), free
+    return _Step(q, _Shape(g, m), coef, residual, float(cost)), bool(converged), int(used), free
 
 
 # --- segmentation -----------------------------------------------------------------------
@@ -460,7 +457,7 @@ def _problem(y, fs, theta0, options) -> _Problem:
 def _coarse_start(problem, fs, expected_hz, options, damping_guess):
     """The subsampled problem and the best spectral start on it, or (coarse, None)."""
     coarse = problem.subsampled(max(1, int(fs // (16.0 * expected_hz))))
-    starts, _, _ = _start_candidates(coarse.y.sum(axis=0), 1.0 / coarse.dt, expected_hz, options,
+    starts = _start_candidates(coarse.y.sum(axis=0), 1.0 / coarse.dt, expected_hz, options,
                                      damping_guess)
     if not starts:
         return coarse, None

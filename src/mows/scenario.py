@@ -232,9 +232,13 @@ def _scenario_from_sections(name="custom", description="", probe=PAPER_PROBE_NAM
                    sample_rate_hz=DAQ_SAMPLE_RATE_HZ, seed=0) -> Scenario:
     the_pose = _section("pose", pose, _pose)
     fs = _number("scenario", "sample_rate_hz", sample_rate_hz)
+    setup = {"preset": "largest_spacing"} if setup is None else setup
+    _require_explicit_geometry(the_pose, setup, sensors)
+    if isinstance(setup, dict) and "preset" in setup:   # the preset's coils sit around the probe
+        setup = {"probe_position_m": list(the_pose.magnet_position_m), **setup}
     return Scenario(
         probe=_probe(probe),
-        setup=setup_from_dict(setup if setup is not None else {"preset": "largest_spacing"}),
+        setup=setup_from_dict(setup),
         environment=_section("environment", environment, _environment),
         pose=the_pose,
         sensors=_section("sensors", sensors, functools.partial(_sensors, the_pose)),
@@ -243,6 +247,21 @@ def _scenario_from_sections(name="custom", description="", probe=PAPER_PROBE_NAM
         housing=_section("housing", housing, _numbers_into(Housing)),
         integrator=_section("integrator", integrator, Integrator),
         sample_rate_hz=fs, seed=seed, name=str(name), description=str(description))
+
+
+def _require_explicit_geometry(pose: Pose, setup, sensors) -> None:
+    """The coil presets and the default sensors lie in the global x–y plane (the paper's
+    bench); a rotation plane other than x–y must say where its coils and sensors are."""
+    if (pose.plane_e1, pose.plane_e2) == ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)):
+        return
+    defaults = [what for what, default in (("setup (a coil preset)", isinstance(setup, dict) and "preset" in setup),
+                                           ("sensors (default positions)",
+                                            not isinstance(sensors, dict) or "positions_m" not in sensors))
+                if default]
+    if defaults:
+        raise ValueError(f"scenario: the rotation plane is not x–y (plane_e1 = {pose.plane_e1}, plane_e2 = "
+                         f"{pose.plane_e2}) but {' and '.join(defaults)} lie in x–y: give the coils "
+                         f"(setup: coils …) and the sensors (sensors: positions_m, axis) for this plane")
 
 
 def _section(name, data, builder):

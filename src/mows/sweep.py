@@ -29,7 +29,8 @@ import math
 import numpy as np
 from scipy.optimize import least_squares
 
-from mows.frequency import frequency_shift_hz
+from mows.frequency import sweep_shift_hz, weak_field_sensitivity_hz_per_t
+from mows.pose import probe_axes
 from mows.potential import ArcPotential
 from mows.probe import Probe
 from mows.ringdown_average import amplitude_nodes
@@ -118,11 +119,9 @@ def local_potential(params, theta0_rad, probe: Probe) -> ArcPotential:
     turned into the probe frame (Gzz = −(Gxx + Gyy) by ∇·B = 0)."""
     bx, by, gs, gd, gxy = params[:5]
     theta0 = np.asarray(theta0_rad, float)
-    c, s = np.cos(theta0), np.sin(theta0)
-    field = np.stack([bx * c + by * s, -bx * s + by * c, np.zeros_like(c)], axis=-1)
+    rotation = probe_axes(theta0)
+    field = rotation @ np.array([bx, by, 0.0])
     gxx, gyy = gs + gd, gs - gd
-    rotation = np.stack([np.stack([c, s, 0 * c], -1), np.stack([-s, c, 0 * c], -1),
-                         np.stack([0 * c, 0 * c, 1 + 0 * c], -1)], axis=-2)         # rows x', y', z'
     global_gradient = np.array([[gxx, gxy, 0.0], [gxy, gyy, 0.0], [0.0, 0.0, -(gxx + gyy)]])
     gradient = rotation @ global_gradient @ np.swapaxes(rotation, -1, -2)
     return ArcPotential.from_local_field(probe, field, gradient)
@@ -140,9 +139,9 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
     theta0 = np.asarray(theta0_rad, float)
     f00 = f00_hz + df00
     if model == "published":
-        along = gs + gd * np.cos(2 * theta0) + gxy * np.sin(2 * theta0)
-        spring = probe.moment_am2 * (bx * np.cos(theta0) + by * np.sin(theta0)) + probe.lever_m * probe.moment_am2 * along
-        return f00 + frequency_shift_hz(f00, probe.spring_nm_per_rad, spring) - f00_hz
+        shift = sweep_shift_hz(theta0, (bx, by), (gs + gd, gxy, gs - gd), f00, probe.spring_nm_per_rad,
+                               probe.moment_am2, probe.lever_m)
+        return f00 + shift - f00_hz
     potential = local_potential(params, theta0, probe)
     if ringdowns is None:
         return f00 * np.sqrt(potential.stiffness_nm_per_rad() / probe.spring_nm_per_rad) - f00_hz
@@ -221,7 +220,7 @@ def _check(theta0, shift, std, f00_free) -> str:
 
 def _start(harmonics: Harmonics, probe: Probe, f00_hz: float, model: str) -> np.ndarray:
     """Starting point from the first-order harmonics (Eq. 11 with the factor f00)."""
-    beta0 = f00_hz * probe.moment_am2 / (2.0 * probe.spring_nm_per_rad)
+    beta0 = weak_field_sensitivity_hz_per_t(f00_hz, probe.spring_nm_per_rad, probe.moment_am2)
     gamma0 = beta0 * probe.lever_m
     a, b = harmonics.cosine_hz, harmonics.sine_hz
     second = 3.0 if model == "first_principles" else 1.0

@@ -6,6 +6,7 @@ from scipy import signal
 
 from mows.fluxgate import (PAPER_SPACING_M, Fluxgate, FluxgatePair, NoiseModel, digitise, dipole_pickup_t,
                            pink_noise_t)
+from mows.simulator import NoiseStream
 
 M = 0.89e-3   # A·m², the paper's magnet
 R = 0.06      # m, probe to near sensor
@@ -107,7 +108,7 @@ def test_pink_noise_slope_and_level():
 def test_white_levels_and_common_mode_cancellation():
     model = NoiseModel(common_white_t_per_rthz=2e-11, common_pink_t_per_rthz_at_1hz=5e-11,
                        sensor_white_t_per_rthz=1e-12, mains_t=1e-9)
-    noise = model.draw(2**18, FS, np.random.default_rng(6))
+    noise = NoiseStream(model, FS, np.random.default_rng(6)).draw(0, 2**18)
     assert noise.shape == (2**18, 2)
     # The difference keeps only the two independent white parts: PSD 2·σ², flat.
     f, p = psd(noise[:, 0] - noise[:, 1], 2**12)
@@ -121,7 +122,7 @@ def test_white_levels_and_common_mode_cancellation():
     assert p[line] > 100 * np.median(p[(f > 40) & (f < 60)])
     # Without sensor noise the common part cancels exactly.
     common_only = NoiseModel(common_white_t_per_rthz=2e-11, common_pink_t_per_rthz_at_1hz=5e-11, mains_t=1e-9)
-    noise = common_only.draw(4096, FS, np.random.default_rng(7))
+    noise = NoiseStream(common_only, FS, np.random.default_rng(7)).draw(0, 4096)
     assert np.all(noise[:, 0] == noise[:, 1]) and np.std(noise[:, 0]) > 1e-10
 
 

@@ -58,6 +58,9 @@ def test_defaults_and_derived_sections():
     assert scenario.pose.theta0_rad == pytest.approx(math.pi / 2)
     # The sensors follow the magnet: the paper's pair at 6 cm and r_eff = 6.75 cm along +x.
     np.testing.assert_allclose(scenario.sensors.pair.positions_m[0], [0.07, 0.02, 0.0])
+    # So do the preset coils: their field at the magnet is what it is at the origin without the move.
+    at_origin = Scenario.from_dict({}).setup.coil_field_per_ampere_t(np.zeros(3))
+    np.testing.assert_allclose(scenario.setup.coil_field_per_ampere_t([0.01, 0.02, 0.0]), at_origin, rtol=1e-12)
     tilted = Scenario.from_dict({"pose": {"tilt_deg": 30.0}})
     assert tilted.pose.gravity_m_per_s2[1] == pytest.approx(9.80665 / 2)
 
@@ -86,6 +89,7 @@ def test_probe_forms(tmp_path):
     ({"probe": "no_such_probe.yaml"}, "neither 'paper' nor a probe file"),
     ({"environment": {"sources": [{"type": "magnet"}]}}, "field source type 'magnet'"),
     ({"setup": {"preset": "triangle"}}, "coil preset 'triangle'"),
+    ({"pose": {"plane_e1": [1, 0, 0], "plane_e2": [0, 0, 1]}}, r"not x–y .* setup \(a coil preset\) and sensors"),
 ])
 def test_bad_scenarios_are_refused_with_a_message_naming_the_key(data, message):
     with pytest.raises(ValueError, match=message):

@@ -33,19 +33,11 @@ import math
 import numpy as np
 
 from mows import ringdown_average
+from mows.pose import probe_axes
 from mows.potential import ArcPotential
 
 NEWTON_STEPS = 40
 NEWTON_TOLERANCE_RAD = 1e-14
-
-
-def probe_axes(theta0_rad) -> np.ndarray:
-    """Rows x', y', z' of the probe frame at each θ0 (rad) as (n, 3, 3): ``axes @ v`` is v in
-    the probe frame (the rotation plane is the global x–y plane)."""
-    c, s = np.cos(theta0_rad), np.sin(theta0_rad)
-    axes = np.zeros((len(c), 3, 3))
-    axes[:, 0, 0], axes[:, 0, 1], axes[:, 1, 0], axes[:, 1, 1], axes[:, 2, 2] = c, s, -s, c, 1.0
-    return axes
 
 
 @dataclasses.dataclass

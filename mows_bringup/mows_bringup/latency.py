@@ -57,7 +57,10 @@ def measure(cycles: int, repeats: int, exited) -> list:
     node.create_subscription(RingdownFit, "mows/ringdown", lambda f: fits.append((time.monotonic(), f)), RESULT_QOS)
     client = node.create_client(RunCycle, "mows/driver/run_cycle")
     try:
-        _spin_until(node, lambda: client.service_is_ready() and block_arrivals, exited, 120.0)
+        # The estimator advertises its fits once it listens (after its kernels are compiled):
+        # a cycle run before would reach it through the latched excitation states only, late.
+        _spin_until(node, lambda: client.service_is_ready() and block_arrivals
+                    and node.count_publishers("/mows/ringdown") > 0, exited, 120.0)
         for _ in range(cycles):
             future = client.call_async(RunCycle.Request(theta0_rad=0.0, repeats=repeats, tuning_steps=-1, gap_s=-1.0))
             _spin_until(node, future.done, exited, 120.0)

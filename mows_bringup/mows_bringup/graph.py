@@ -22,7 +22,8 @@ from pathlib import Path
 
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
-STOP_TIMEOUT_S = 10.0  # a node still running this long after SIGINT is killed
+STOP_TIMEOUT_S = 10.0  # a node still running this long after SIGINT is aborted
+ABORT_TIMEOUT_S = 5.0  # and killed if it outlives the abort
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 _prctl = ctypes.CDLL(None, use_errno=True).prctl
 
@@ -140,7 +141,7 @@ class Graph:
                 deadline = time.monotonic() + duration_s
 
     def stop(self) -> dict[str, int]:
-        """SIGINT every node still running, kill those that outlive STOP_TIMEOUT_S;
+        """SIGINT every node still running, abort those that outlive STOP_TIMEOUT_S;
         return each node's exit code."""
         for process in self._processes.values():
             if process.poll() is None:
@@ -150,9 +151,15 @@ class Graph:
             try:
                 process.wait(timeout=max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
-                say(f"{name} did not stop within {STOP_TIMEOUT_S} s, killing it")
-                process.kill()
-                process.wait()
+                # SIGABRT first: the node's faulthandler (mows_ros.process) writes where each of
+                # its threads is stuck into the log; SIGKILL only if even that does not end it.
+                say(f"{name} did not stop within {STOP_TIMEOUT_S} s, aborting it (its stacks follow)")
+                process.send_signal(signal.SIGABRT)
+                try:
+                    process.wait(timeout=ABORT_TIMEOUT_S)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait()
         for pump in self._pumps:
             pump.join()
         return {name: process.returncode for name, process in self._processes.items()}

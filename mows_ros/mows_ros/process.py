@@ -1,4 +1,5 @@
 """Run one node as a process: spin until SIGINT or SIGTERM, then leave cleanly (exit 0)."""
+import faulthandler
 import sys
 from typing import Callable
 
@@ -23,6 +24,7 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, threa
     parameter file or ``-p`` that the node rejects ends it with EXIT_BAD_PARAMETER and the
     reason, not a traceback: it is a configuration error, not a bug.
     """
+    faulthandler.enable()  # a node aborted because it would not stop says where it hung
     rclpy.init(args=args)
     node = None
     try:
@@ -32,9 +34,10 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, threa
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except RCLError:
-        # A MultiThreadedExecutor can be building its next wait set when the signal handler
-        # shuts the context down; that is the normal end too, but only if shutdown happened.
+    except (RCLError, RuntimeError):
+        # The signal handler shuts the context down from under the executor: one building its
+        # next wait set gets an RCLError, one taking a message a RuntimeError from the binding.
+        # Either is the normal end, but only if shutdown happened.
         if rclpy.ok():
             raise
     except (InvalidParameterValueException, InvalidParameterTypeException) as error:

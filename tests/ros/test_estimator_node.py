@@ -205,6 +205,19 @@ def test_calibration_sets_f00_from_ringdowns_in_a_known_field(ros, estimator):
     assert response.n_used == 3
 
 
+def test_a_calibration_without_enough_ringdowns_ends_at_its_timeout_and_frees_the_service(ros, estimator):
+    device, _, _ = estimator
+    client = ros.node.create_client(Calibrate, "/mows/estimator/calibrate")
+    ros.wait_for(client.service_is_ready, "the calibration service")
+    starved = client.call_async(Calibrate.Request(n_ringdowns=2, reference_field_t=FIELD_T, timeout_s=0.5))
+    response = ros.wait_for(lambda: starved.done() and starved.result(), "the timeout")
+    assert not response.success and response.n_used == 0 and "only 0 of 2" in response.message
+    again = client.call_async(Calibrate.Request(n_ringdowns=1, reference_field_t=FIELD_T, timeout_s=60.0))
+    device.ringdown()
+    response = ros.wait_for(lambda: again.done() and again.result(), "the next calibration")
+    assert response.success and response.n_used == 1, response.message
+
+
 def test_out_of_range_parameters_are_refused(ros, estimator):
     client = ros.node.create_client(SetParameters, "/estimator/set_parameters")
     ros.wait_for(client.service_is_ready, "the parameter service")

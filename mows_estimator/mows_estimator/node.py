@@ -68,16 +68,16 @@ PARAMETERS = (
 
 @dataclasses.dataclass
 class _Calibration:
-    """The OK ring-downs collected for one Calibrate request; ``done`` completes when
-    ``wanted`` of them are in (or the request's time is up)."""
+    """The OK ring-downs collected for one Calibrate request; ``finished`` completes when
+    ``wanted`` of them are in (True) or the request's time is up (False)."""
 
     wanted: int
     fits: list = dataclasses.field(default_factory=list)
-    done: Future = dataclasses.field(default_factory=Future)
+    finished: Future = dataclasses.field(default_factory=Future)
 
     def time_up(self):
-        if not self.done.done():
-            self.done.set_result(False)
+        if not self.finished.done():
+            self.finished.set_result(False)
 
 
 class EstimatorNode(MowsNode):
@@ -186,10 +186,10 @@ class EstimatorNode(MowsNode):
     # --- calibration ------------------------------------------------------------------------
     def _offer_to_calibration(self, frequency_hz: float, std_hz: float):
         calibration = self._calibration
-        if calibration is not None and not calibration.done.done():
+        if calibration is not None and not calibration.finished.done():
             calibration.fits.append((frequency_hz, std_hz))
             if len(calibration.fits) >= calibration.wanted:
-                calibration.done.set_result(True)
+                calibration.finished.set_result(True)
 
     async def _on_calibrate(self, request: Calibrate.Request, response: Calibrate.Response):
         """Eq. 6 solved for f00: f00 = f/√(1 + m·B/kM) for each ring-down, then averaged."""
@@ -206,7 +206,7 @@ class EstimatorNode(MowsNode):
         calibration = self._calibration = _Calibration(request.n_ringdowns)
         timeout = self.create_timer(request.timeout_s, calibration.time_up)
         try:
-            await calibration.done
+            await calibration.finished
         finally:
             self.destroy_timer(timeout)
             self._calibration = None

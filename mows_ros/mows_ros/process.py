@@ -4,7 +4,6 @@ import sys
 from typing import Callable
 
 import rclpy
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
@@ -34,10 +33,10 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, threa
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (RCLError, RuntimeError):
+    except RuntimeError:
         # The signal handler shuts the context down from under the executor: one building its
-        # next wait set gets an RCLError, one taking a message a RuntimeError from the binding.
-        # Either is the normal end, but only if shutdown happened.
+        # next wait set gets an RCLError, one taking a message a plain RuntimeError from the
+        # binding (RCLError is one too). Either is the normal end, but only if shutdown happened.
         if rclpy.ok():
             raise
     except (InvalidParameterValueException, InvalidParameterTypeException) as error:

@@ -3,9 +3,10 @@
 It translates only: the device, the sample stream and the measurement cycle live in
 ``mows.device`` and ``mows.cycle`` (:class:`mows.device.session.DeviceSession`). A streaming
 thread steps the session and publishes what it yields, blocks on ``mows/raw`` and phases on
-``mows/excitation``, in order, writing them to the bag first when recording. The services
-run in a MultiThreadedExecutor with a reentrant group, so that the emergency stop is served
-while ``run_cycle`` waits for its cycle. Topic and service names are relative: in the root
+``mows/excitation``, in order, writing them to the bag first when recording. Everything else
+runs on one executor thread: ``run_cycle`` awaits its cycle as a coroutine (in a reentrant
+group), so the emergency stop, the parameter services and the diagnostics are served while it
+waits. Topic and service names are relative: in the root
 namespace they are /mows/raw, /mows/excitation, /mows/driver/run_cycle and
 /mows/driver/emergency_stop (docs/driver.md).
 
@@ -25,6 +26,7 @@ from mows_msgs.srv import EmergencyStop, RunCycle
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.exceptions import InvalidParameterValueException
+from rclpy.task import Future
 
 from mows import stamps
 from mows.coils import PRESETS, CurrentCap
@@ -50,7 +52,6 @@ EXCITATION_TOPIC = "mows/excitation"
 RUN_CYCLE_SERVICE = "mows/driver/run_cycle"
 EMERGENCY_STOP_SERVICE = "mows/driver/emergency_stop"
 POLL_S = 0.02          # the streaming thread's longest wait for the device
-EXECUTOR_THREADS = 4
 RATE_TOLERANCE = 0.02  # /diagnostics warns when the achieved sample rate is further off nominal
 
 PARAMETERS = (
@@ -189,16 +190,17 @@ class DriverNode(MowsNode):
         self.session.set_cycle_settings(cycle_settings(self._values))
 
     # --- services --------------------------------------------------------------------------
-    def _run_cycle(self, request: RunCycle.Request, response: RunCycle.Response) -> RunCycle.Response:
+    async def _run_cycle(self, request: RunCycle.Request, response: RunCycle.Response) -> RunCycle.Response:
         cycle = CycleRequest(request.theta0_rad, request.repeats if request.repeats >= 0 else None,
                              request.tuning_steps if request.tuning_steps >= 0 else None,
                              request.gap_s if request.gap_s >= 0.0 else None)
-        finished = threading.Event()
-        outcomes = []
+        finished = Future()
+        executor = self.executor
 
         def done(outcome) -> None:  # called by the streaming thread (or the emergency stop)
-            outcomes.append(outcome)
-            finished.set()
+            finished.set_result(outcome)
+            if self.context.ok():  # at shutdown the session aborts the cycle, with no one waiting
+                executor.wake()    # the awaiting coroutine resumes at the executor's next turn
 
         try:
             response.cycle_id = self.session.start_cycle(cycle, done)
@@ -206,11 +208,7 @@ class DriverNode(MowsNode):
             response.success, response.message = False, f"cycle refused: {refused}"
             self.get_logger().warning(response.message)
             return response
-        while not finished.wait(0.1):
-            if not self.context.ok():
-                response.success, response.message = False, "the driver is shutting down"
-                return response
-        (outcome,) = outcomes
+        outcome = await finished
         response.success, response.message = outcome.success, outcome.message
         response.excitation_frequency_hz = outcome.frequency_hz
         response.ringdowns_recorded = outcome.ringdowns_recorded
@@ -331,6 +329,4 @@ class DriverNode(MowsNode):
 
 
 def main(args: list[str] | None = None) -> int:
-    # Threads: run_cycle waits for its cycle while the emergency stop, the parameter services
-    # and the diagnostics timer go on.
-    return run_node(DriverNode, args, threads=EXECUTOR_THREADS)
+    return run_node(DriverNode, args)

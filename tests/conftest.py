@@ -47,7 +47,7 @@ def compiled_kernels():
 
 def pytest_collection_modifyitems(items: list) -> None:
     """Slow tests first: pytest-xdist hands the first test to the first worker, so the 60 s
-    live stream (mostly waiting on the real-time device) runs while the other workers go
+    live stream (mostly waiting on the real-time device) runs while the other worker goes
     through the rest, instead of alone at the end."""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 

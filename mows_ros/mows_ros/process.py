@@ -26,9 +26,9 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, threa
     faulthandler.enable()  # a node aborted because it would not stop says where it hung
     rclpy.init(args=args)
     node = None
+    executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
     try:
         node = make_node()
-        executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -46,4 +46,8 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, threa
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        if isinstance(executor, MultiThreadedExecutor):
+            # rclpy 7.1.6 never shuts its worker pool down (later releases do, in shutdown()),
+            # and an idle worker once held the interpreter's exit for good.
+            executor._executor.shutdown(wait=False, cancel_futures=True)
     return 0

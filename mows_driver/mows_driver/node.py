@@ -6,9 +6,8 @@ thread steps the session and publishes what it yields, blocks on ``mows/raw`` an
 ``mows/excitation``, in order, writing them to the bag first when recording. Everything else
 runs on one executor thread: ``run_cycle`` awaits its cycle as a coroutine (in a reentrant
 group), so the emergency stop, the parameter services and the diagnostics are served while it
-waits. Topic and service names are relative: in the root
-namespace they are /mows/raw, /mows/excitation, /mows/driver/run_cycle and
-/mows/driver/emergency_stop (docs/driver.md).
+waits. Topic and service names are relative: in the root namespace they are /mows/raw,
+/mows/excitation, /mows/driver/run_cycle and /mows/driver/emergency_stop (docs/driver.md).
 
 The node never dies on data and never publishes a number it did not measure: what goes
 wrong is in the service responses, on /diagnostics and in the log. The coils are off in

@@ -14,8 +14,11 @@ EXIT_BAD_PARAMETER = 2
 def run_node(make_node: Callable[[], Node], args: list[str] | None = None, threads: int = 1) -> int:
     """Create the node with ``make_node`` and spin it; return the process exit code.
 
-    ``threads`` > 1 spins a MultiThreadedExecutor, for nodes whose services wait for data
-    that other callbacks deliver (they put those callbacks in a ReentrantCallbackGroup).
+    ``threads`` > 1 spins a MultiThreadedExecutor, for a node whose callbacks run long enough
+    to hold up the others (the mapper's sweep runs the lab). A callback that only waits for
+    data other callbacks deliver is better a coroutine on one thread (the driver's run_cycle,
+    the estimator's calibration): rclpy 7.1.6's MultiThreadedExecutor re-submits a callback
+    its pool has not started yet without waiting, and starves the pool of the GIL.
 
     ``rclpy.init`` installs handlers for SIGINT and SIGTERM that shut the context down, so
     either signal ends ``spin`` with ``ExternalShutdownException`` (or KeyboardInterrupt when

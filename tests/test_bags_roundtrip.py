@@ -1,4 +1,4 @@
-"""Every mows_msgs type through a rosbag2 MCAP bag (mows.bags), and rosbags' CDR against
+"""Every mows_msgs type through a rosbag2 MCAP bag (mows.device.bags), and rosbags' CDR against
 rclpy's."""
 import pytest
 import yaml
@@ -6,7 +6,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 from message_equality import assert_same
-from mows import bags
+from mows.device import bags
 from samples import BAG_TYPES, sample_message
 
 

@@ -8,14 +8,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mows.coils import CurrentCap, helmholtz, largest_spacing
-from mows.cycle import CycleRequest, CycleSequencer, CycleSettings, Phase
+from mows.physics.coils import CurrentCap, helmholtz, largest_spacing
+from mows.device.cycle import CycleRequest, CycleSequencer, CycleSettings, Phase
 from mows.device.backends import SimBackend
 from mows.device.interface import CoilCommand, CommandResult, SampleChunk
 from mows.device.scheduled import ScheduledDevice
 from mows.device.session import DeviceSession, SessionConfig
-from mows.scenario import load_scenario
-from mows.simulator import SimulatedDevice
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice
 
 from device.spy import SpyDevice
 

@@ -5,9 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from mows import bags, cli
-from mows.scenario import load_scenario
-from mows.simulator import SimulatedDevice, simulate_cycle
+from mows.device import bags
+
+from mows.cli import main as cli
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice, simulate_cycle
 
 STORE = bags.typestore()
 RAW, EXCITATION = "mows_msgs/msg/MagnetometerBlock", "mows_msgs/msg/ExcitationState"

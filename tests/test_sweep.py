@@ -4,12 +4,12 @@ import math
 import numpy as np
 import pytest
 
-from mows.field import UniformField, anti_helmholtz_pair
-from mows.frequency import sweep_shift_hz
-from mows.pose import Pose
-from mows.potential import ArcPotential
-from mows.probe import PAPER_PROBE as P
-from mows.sweep import decompose, fit_harmonics
+from mows.physics.field import UniformField, anti_helmholtz_pair
+from mows.physics.frequency import sweep_shift_hz
+from mows.physics.pose import Pose
+from mows.physics.potential import ArcPotential
+from mows.physics.probe import PAPER_PROBE as P
+from mows.sweep.decompose import decompose, fit_harmonics
 
 THETA0 = np.radians(np.arange(0.0, 360.0, 15.0))
 STD_HZ = 3e-4

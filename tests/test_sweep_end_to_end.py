@@ -11,10 +11,10 @@ import pytest
 from scipy import stats
 
 from mows.lab.table import reference_at
-from mows.ringdown import fit_cycle
-from mows.scenario import load_scenario
-from mows.simulator import SimulatedDevice, simulate_cycle
-from mows.sweep import SweepPoint, SweepRecord
+from mows.estimate.ringdown import fit_cycle
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice, simulate_cycle
+from mows.sweep.decompose import SweepPoint, SweepRecord
 
 ANGLES_DEG = np.arange(0.0, 360.0, 45.0)
 

@@ -40,7 +40,7 @@ def parse_arguments(argv):
 def write_parameters(args, directory: pathlib.Path) -> pathlib.Path:
     """One parameter file for the whole graph; each node takes its own section. The driver
     drives the coils of the scene's own set-up."""
-    from mows.scenario import load_scenario
+    from mows.sim.scenario import load_scenario
 
     setup = load_scenario(args.scenario).setup.name
     path = directory / "demo_parameters.yaml"
@@ -138,8 +138,8 @@ def print_feedback(feedback) -> None:
 def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path) -> None:
     from mows.lab import analyse, write_report
     from mows.lab.table import from_sweep, reference_at
-    from mows.probe import PAPER_PROBE
-    from mows.sweep import SweepRecord
+    from mows.physics.probe import PAPER_PROBE
+    from mows.sweep.decompose import SweepRecord
     from mows_mapper.node import sweep_point
 
     field, gradient = reference_at(scenario)

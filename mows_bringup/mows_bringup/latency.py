@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from mows import stamps
+from mows.records import stamps
 from mows_bringup.graph import NODES, Graph, say
 
 

@@ -1,7 +1,7 @@
 """The driver node: ROS side of the device (the simulator, a serial device, a recorded bag).
 
 It translates only: the device, the sample stream and the measurement cycle live in
-``mows.device`` and ``mows.cycle`` (:class:`mows.device.session.DeviceSession`). A streaming
+``mows.device`` and ``mows.device.cycle`` (:class:`mows.device.session.DeviceSession`). A streaming
 thread steps the session and publishes what it yields, blocks on ``mows/raw`` and phases on
 ``mows/excitation``, in order, writing them to the bag first when recording. Everything else
 runs on one executor thread: ``run_cycle`` awaits its cycle as a coroutine (in a reentrant
@@ -27,16 +27,16 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.task import Future
 
-from mows import stamps
-from mows.coils import PRESETS, CurrentCap
-from mows.cycle import CycleRequest, CycleSettings, Phase
+from mows.records import stamps
+from mows.physics.coils import PRESETS, CurrentCap
+from mows.device.cycle import CycleRequest, CycleSettings, Phase
 from mows.device.backends import BagBackend, SerialBackend, SimBackend
 from mows.device.serial_link import DEFAULT_BAUD, SerialLink
 from mows.device.session import DeviceSession, SessionConfig
 from mows.precompile import precompile
-from mows.probe import PAPER_PROBE
-from mows.scenario import DEFAULT_SCENARIO, load_scenario
-from mows.simulator import SimulatedDevice
+from mows.physics.probe import PAPER_PROBE
+from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
+from mows.sim.simulator import SimulatedDevice
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
 from mows_ros.params import ParamSpec, parameter_values
@@ -58,7 +58,7 @@ PARAMETERS = (
               "a serial port), bag (a recorded rosbag2 MCAP bag); fixed at start-up",
               choices=("sim", "serial", "bag"), read_only=True),
     ParamSpec("scenario", DEFAULT_SCENARIO, "backend sim: simulator scenario, a YAML file or the name of one "
-              "shipped in mows/scenarios; fixed at start-up", read_only=True),
+              "shipped in mows/sim/scenarios; fixed at start-up", read_only=True),
     ParamSpec("theta0_rad", 0.0, "backend sim: probe orientation at start-up, rad (cycles turn it)",
               range=(-2.0 * math.pi, 2.0 * math.pi), read_only=True),
     ParamSpec("serial_port", "", "backend serial: the device's port, e.g. /dev/ttyACM0; fixed at start-up",

@@ -14,7 +14,7 @@ from rclpy.serialization import serialize_message
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from mows import bags
+from mows.device import bags
 
 UNSET = QosTime(0, 0)  # rosbag2's "default" for deadline, lifespan and lease duration
 

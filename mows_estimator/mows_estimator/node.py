@@ -6,7 +6,7 @@ namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock,
 with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
 ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). Service
 ``/mows/estimator/calibrate`` (Calibrate) sets f00 from the next ring-downs in a known field.
-The estimation itself is ``mows.segments``, ``mows.ringdown`` and ``mows.axis``.
+The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` and ``mows.estimate.axis``.
 """
 import collections
 import dataclasses
@@ -22,13 +22,13 @@ from rclpy.parameter import Parameter
 from rclpy.task import Future
 from sensor_msgs.msg import MagneticField
 
-from mows.axis import estimate_along_axis
-from mows.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
-from mows.frequency import frequency_shift_hz
-from mows.probe import Probe
-from mows.ringdown import FitOptions, FitStatus, failure
+from mows.estimate.axis import estimate_along_axis
+from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
+from mows.physics.frequency import frequency_shift_hz
+from mows.physics.probe import Probe
+from mows.estimate.ringdown import FitOptions, FitStatus, failure
 from mows.precompile import precompile
-from mows.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
+from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
 from mows_estimator.messages import estimate_to_msg, fit_to_msg, magnetic_field_msg
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
@@ -52,7 +52,7 @@ PARAMETERS = (
     ParamSpec("sensor_axis_b", 1.0, "see sensor_axis_a", range=(-1.0, 1.0)),
     ParamSpec("theta0_free", False, "fit θ0 instead of taking the commanded orientation (paper's signal model only)"),
     ParamSpec("lever_aware", True, "fit the exact pickup of the magnet swinging on its lever "
-              "(mows.fluxgate.pickup_harmonics) instead of Eq. S11's magnet turning in place"),
+              "(mows.physics.fluxgate.pickup_harmonics) instead of Eq. S11's magnet turning in place"),
     ParamSpec("sensor_distance_m", PAPER_DISTANCE_M, "distance from the probe to the near fluxgate, along the "
               "rotation plane's x axis, m", range=(0.005, 2.0)),
     ParamSpec("sensor_spacing_m", PAPER_SPACING_M, "spacing of the two fluxgates, m", range=(0.001, 2.0)),

@@ -4,7 +4,7 @@ Names are relative (here as in the root namespace). Action ``/mows/mapper/rotati
 (RotationSweep): for each orientation it asks the
 driver for one measurement cycle (``/mows/driver/run_cycle``), collects that cycle's
 ring-down fits from the estimator (``/mows/ringdown``), reports them as feedback, and at the
-end decomposes the sweep (``mows.sweep``) into in-plane field and gradient. The result is
+end decomposes the sweep (``mows.sweep.decompose``) into in-plane field and gradient. The result is
 published on ``/mows/sweep`` (SweepDecomposition, reliable and transient-local: a map). With a
 reference (``reference_scenario``) the model lab (``mows.lab.analyse``) compares the
 frequency model with the sweep and publishes ``/mows/model_report`` (ModelReport).
@@ -22,11 +22,11 @@ from mows_msgs.srv import RunCycle
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 
-from mows import stamps
+from mows.records import stamps
 from mows.lab import analyse
 from mows.lab.table import from_sweep, reference_at
-from mows.probe import Probe
-from mows.sweep import MODELS, SweepPoint, SweepRecord
+from mows.physics.probe import Probe
+from mows.sweep.decompose import MODELS, SweepPoint, SweepRecord
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
 from mows_ros.params import ParamSpec

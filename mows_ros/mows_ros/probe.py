@@ -1,5 +1,5 @@
 """The ``probe_file`` parameter of the estimator and the mapper: a probe constants YAML
-(:meth:`mows.probe.Probe.from_yaml`), or empty for the paper's probe.
+(:meth:`mows.physics.probe.Probe.from_yaml`), or empty for the paper's probe.
 
 The file is read when the parameter is set, so that a missing or malformed file is refused
 with its reason by ``ros2 param set`` (or stops the node at start-up) instead of failing in
@@ -7,7 +7,7 @@ the middle of a fit; setting the same path again reads it again.
 """
 import yaml
 
-from mows.probe import PAPER_PROBE, Probe
+from mows.physics.probe import PAPER_PROBE, Probe
 from mows_ros.params import ParamSpec
 
 _READ = {"": PAPER_PROBE}   # by path, as last read when the parameter was set
@@ -26,5 +26,5 @@ def probe_of(path: str) -> Probe:
     return _READ[path]
 
 
-PROBE_FILE = ParamSpec("probe_file", "", "probe constants YAML (mows.probe.Probe.from_yaml); empty: the paper's "
+PROBE_FILE = ParamSpec("probe_file", "", "probe constants YAML (mows.physics.probe.Probe.from_yaml); empty: the paper's "
                        "probe", check=probe_file_problem)

@@ -1,7 +1,7 @@
 """Compile the numba kernels (or load them from numba's on-disk cache) before they are needed.
 
-The ring-down fit (:mod:`mows.ringdown_model`) and the simulator's integrator
-(:mod:`mows.simulator`) are compiled on first use: about ten seconds on a fresh checkout, about
+The ring-down fit (:mod:`mows.estimate.ringdown_model`) and the simulator's integrator
+(:mod:`mows.sim.simulator`) are compiled on first use: about ten seconds on a fresh checkout, about
 a second from the cache. That must not happen in the middle of a measurement (a driver that
 stalls for seconds loses its device link; an estimator that stalls misses ring-downs), so the
 nodes and the test session call :func:`precompile` first. ``python -m mows.precompile`` does it
@@ -16,9 +16,9 @@ import numpy as np
 def precompile(simulator: bool = True) -> float:
     """Run one small fit (and, with ``simulator``, a few simulator steps); return the seconds it
     took."""
-    from mows.fluxgate import FluxgatePair
-    from mows.probe import PAPER_PROBE
-    from mows.ringdown import FitOptions, fit_ringdown
+    from mows.physics.fluxgate import FluxgatePair
+    from mows.physics.probe import PAPER_PROBE
+    from mows.estimate.ringdown import FitOptions, fit_ringdown
 
     start = time.perf_counter()
     t = np.arange(4000) / 20_000.0
@@ -26,8 +26,8 @@ def precompile(simulator: bool = True) -> float:
     pair = np.stack([near, np.zeros_like(near)], axis=1)
     fit_ringdown(pair, 20_000.0, 0.0, 112.0, options=FitOptions.lever_aware(FluxgatePair.paper(), PAPER_PROBE, 0.0))
     if simulator:
-        from mows.scenario import Scenario
-        from mows.simulator import SimulatedDevice
+        from mows.sim.scenario import Scenario
+        from mows.sim.simulator import SimulatedDevice
 
         SimulatedDevice(Scenario()).read(10)
     return time.perf_counter() - start

@@ -1,7 +1,7 @@
 """A simulated device that records every coil drive it is given (what reached the device)."""
 import numpy as np
 
-from mows.simulator import SimulatedDevice
+from mows.sim.simulator import SimulatedDevice
 
 
 class SpyDevice(SimulatedDevice):

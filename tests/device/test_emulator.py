@@ -13,15 +13,15 @@ import time
 
 import pytest
 
-from mows.coils import CurrentCap
-from mows.cycle import CycleRequest, CycleSettings, Phase
+from mows.physics.coils import CurrentCap
+from mows.device.cycle import CycleRequest, CycleSettings, Phase
 from mows.device.backends import SerialBackend
 from mows.device.emulator import FRAME_S, DeviceEmulator
 from mows.device.interface import CoilCommand, LinkEvent
 from mows.device.serial_link import SerialLink
 from mows.device.session import DeviceSession, SessionConfig
-from mows.framing import Ack, Coils, Samples, Status
-from mows.scenario import load_scenario
+from mows.device.framing import Ack, Coils, Samples, Status
+from mows.sim.scenario import load_scenario
 
 from device.spy import SpyDevice
 

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from mows.axis import estimate_along_axis
-from mows.benchmarks.estimator import RingdownCase, SAMPLE_RATE_HZ
-from mows.probe import PAPER_PROBE
-from mows.ringdown import FitStatus, fit_ringdown
-from mows.signal import kappa_t
+from mows.estimate.axis import estimate_along_axis
+from mows.bench.estimator import RingdownCase, SAMPLE_RATE_HZ
+from mows.physics.probe import PAPER_PROBE
+from mows.estimate.ringdown import FitStatus, fit_ringdown
+from mows.physics.signal import kappa_t
 
 THETA0 = math.radians(30.0)
 

@@ -3,16 +3,16 @@
 On the paper's 1.9 mm lever the magnet also moves across the sensor line, which Eq. S11
 (a magnet turning in place) leaves out: the 0°:90° amplitude ratio becomes 8.6 instead of
 15.2, and near 90° the paper's model no longer describes the data. The lever-aware pickup
-(mows.fluxgate.pickup_harmonics) does, at every orientation.
+(mows.physics.fluxgate.pickup_harmonics) does, at every orientation.
 """
 import math
 
 import numpy as np
 import pytest
 
-from mows.ringdown import fit_cycle
-from mows.scenario import load_scenario
-from mows.simulator import SimulatedDevice, simulate_cycle
+from mows.estimate.ringdown import fit_cycle
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice, simulate_cycle
 
 
 @pytest.fixture(scope="module")

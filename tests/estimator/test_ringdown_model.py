@@ -4,14 +4,14 @@ import math
 import numpy as np
 import pytest
 
-from mows.axis import estimate_along_axis
-from mows.benchmarks.estimator import (AMPLITUDE_RAD, DAMPING_PER_S, FREQUENCY_HZ, KAPPA_T, N_SAMPLES, OFFSET_T,
+from mows.estimate.axis import estimate_along_axis
+from mows.bench.estimator import (AMPLITUDE_RAD, DAMPING_PER_S, FREQUENCY_HZ, KAPPA_T, N_SAMPLES, OFFSET_T,
                                        PHASE_RAD, SAMPLE_RATE_HZ)
-from mows.fluxgate import pink_noise_t
-from mows.frequency import frequency_shift_hz
-from mows.probe import PAPER_PROBE
-from mows.ringdown import FitOptions, cramer_rao_frequency_hz, fit_ringdown
-from mows.signal import signal_t
+from mows.physics.fluxgate import pink_noise_t
+from mows.physics.frequency import frequency_shift_hz
+from mows.physics.probe import PAPER_PROBE
+from mows.estimate.ringdown import FitOptions, cramer_rao_frequency_hz, fit_ringdown
+from mows.physics.signal import signal_t
 
 T = np.arange(N_SAMPLES) / SAMPLE_RATE_HZ
 TRUTH = {"frequency_hz": FREQUENCY_HZ, "damping_per_s": DAMPING_PER_S, "amplitude_rad": AMPLITUDE_RAD,
@@ -25,7 +25,7 @@ def clean(theta0, a=0.0, b=1.0, kappa=KAPPA_T):
 
 @pytest.mark.parametrize("theta0_deg, direction", [(0.0, (0.0, 1.0)), (60.0, (0.0, 1.0)), (40.0, (0.6, 0.8))])
 def test_crb_equals_fisher_of_the_printed_model(theta0_deg, direction):
-    # Differentiate Eq. S11 (mows.signal.signal_t) numerically over all seven parameters and
+    # Differentiate Eq. S11 (mows.physics.signal.signal_t) numerically over all seven parameters and
     # invert the Fisher matrix: the analytic Jacobian of the fit must give the same bound.
     theta0, sigma = math.radians(theta0_deg), 1e-9
     names = ["frequency_hz", "damping_per_s", "amplitude_rad", "phase_rad", "kappa_t", "offset_t"]
@@ -67,7 +67,7 @@ def test_every_parameter_is_recovered_within_its_uncertainty():
 def test_theta_max_is_held_only_at_a_bound():
     """Near 90° the start's θmax is often far off and a first step overshoots a bound; a
     rejected step must not freeze θmax where it was (it used to, at the spectral start)."""
-    from mows.ringdown import AMPLITUDE_BOUNDS_RAD
+    from mows.estimate.ringdown import AMPLITUDE_BOUNDS_RAD
     rng = np.random.default_rng(5)
     held = []
     for _ in range(60):

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from mows.benchmarks.estimator import FREQUENCY_HZ, RingdownCase, precision_cell
+from mows.bench.estimator import FREQUENCY_HZ, RingdownCase, precision_cell
 
 TRIALS = 40
 SNRS_DB = (20.0, 40.0, 60.0)

@@ -4,8 +4,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mows.ringdown import FitStatus
-from mows.segments import Block, RingdownWindow, SegmentAssembler, fit_segment
+from mows.estimate.ringdown import FitStatus
+from mows.estimate.segments import Block, RingdownWindow, SegmentAssembler, fit_segment
 
 FS = 20_000.0
 EPOCH_S = 1_700_000_000.0           # device clock: seconds since its epoch

@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from mows.cli import main
-from mows.field import UniformField
+from mows.cli.main import main
+from mows.physics.field import UniformField
 from mows.lab import synth
-from mows.pose import Pose
-from mows.probe import PAPER_PROBE
+from mows.physics.pose import Pose
+from mows.physics.probe import PAPER_PROBE
 
 
 @pytest.fixture(scope="module")

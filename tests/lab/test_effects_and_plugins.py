@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from mows.lab import FrequencyModel, analyse, catalog, load_plugins, synth
-from mows.field import UniformField
-from mows.probe import PAPER_PROBE
+from mows.physics.field import UniformField
+from mows.physics.probe import PAPER_PROBE
 
 PLUGIN = textwrap.dedent('''
     from mows.lab import effect

@@ -5,13 +5,13 @@ import math
 import numpy as np
 import pytest
 
-from mows import frequency
-from mows.field import UniformField
-from mows import ringdown_average
+from mows.physics import frequency
+from mows.physics.field import UniformField
+from mows.physics import ringdown_average
 from mows.lab import FrequencyModel, MeasurementTable, catalog
 from mows.lab.synth import true_frequency_hz
-from mows.probe import PAPER_PROBE
-from mows.ringdown import fit_ringdown
+from mows.physics.probe import PAPER_PROBE
+from mows.estimate.ringdown import fit_ringdown
 
 
 def random_table(rng, n=40, field_scale=2e-3, gradient_scale=0.05, **extra):

@@ -1,5 +1,5 @@
 """Tables with one hidden physical effect, from independent physics (exact sources through
-mows.potential, see mows.lab.synth): the lab must name the effect, add it, and recover it.
+mows.physics.potential, see mows.lab.synth): the lab must name the effect, add it, and recover it.
 
 Every table but the strong-field one uses a small ring-down amplitude (2°): at the usual 24°
 the finite-amplitude readout is itself a hidden effect of a few tenths of a mHz, which biases
@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from mows.field import CurrentLoop, UniformField, anti_helmholtz_pair, helmholtz_pair
+from mows.physics.field import CurrentLoop, UniformField, anti_helmholtz_pair, helmholtz_pair
 from mows.lab import analyse, synth
-from mows.pose import Pose
-from mows.probe import PAPER_PROBE
+from mows.physics.pose import Pose
+from mows.physics.probe import PAPER_PROBE
 
 EARTH = UniformField((15e-6, -12e-6, -40e-6))
 SMALL_AMPLITUDE_DEG = 2.0

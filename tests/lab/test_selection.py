@@ -7,11 +7,11 @@ import pathlib
 import numpy as np
 import pytest
 
-from mows.cli import main
-from mows.field import UniformField
+from mows.cli.main import main
+from mows.physics.field import UniformField
 from mows.lab import FrequencyModel, analyse, catalog, load_table, synth
-from mows.probe import PAPER_PROBE
-from mows.scenario import load_scenario
+from mows.physics.probe import PAPER_PROBE
+from mows.sim.scenario import load_scenario
 
 DEMO = pathlib.Path(__file__).parent / "data" / "demo_sweep.csv"
 EARTH = UniformField((15e-6, -12e-6, -40e-6))

@@ -12,8 +12,8 @@ import pytest
 
 from mows.lab import analyse, synth
 from mows.lab.table import FIELD, GRADIENT, reference_at
-from mows.pose import STANDARD_GRAVITY_M_PER_S2
-from mows.scenario import load_scenario
+from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
+from mows.sim.scenario import load_scenario
 
 ANGLES_DEG = np.arange(0.0, 360.0, 22.5)
 SWEEPS = 2

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from mows import bags
+from mows.device import bags
 from mows.lab import MissingColumnError, TableError, from_bag, load_table, read_csv
 
 HEADER = "theta0_deg,f_hz,f_std_hz,ref_bx_t,ref_by_t,ref_gxx_t_per_m,ref_gxy_t_per_m,ref_gyy_t_per_m,humidity\n"

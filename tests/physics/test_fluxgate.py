@@ -4,9 +4,9 @@ import pytest
 import scipy.constants
 from scipy import signal
 
-from mows.fluxgate import (PAPER_SPACING_M, Fluxgate, FluxgatePair, NoiseModel, digitise, dipole_pickup_t,
+from mows.physics.fluxgate import (PAPER_SPACING_M, Fluxgate, FluxgatePair, NoiseModel, digitise, dipole_pickup_t,
                            pink_noise_t)
-from mows.simulator import NoiseStream
+from mows.sim.simulator import NoiseStream
 
 M = 0.89e-3   # A·m², the paper's magnet
 R = 0.06      # m, probe to near sensor

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from mows import frequency as F
-from mows.probe import PAPER_PROBE as P
+from mows.physics import frequency as F
+from mows.physics.probe import PAPER_PROBE as P
 
 ARGS = (P.f00_hz, P.spring_nm_per_rad, P.moment_am2)
 

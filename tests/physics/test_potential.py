@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy import integrate, optimize, special
 
-from mows.potential import ArcPotential
-from mows.probe import PAPER_PROBE as P
+from mows.physics.potential import ArcPotential
+from mows.physics.probe import PAPER_PROBE as P
 
 KM, M = P.spring_nm_per_rad, P.moment_am2
 

@@ -3,7 +3,7 @@ import math
 
 import pytest
 
-from mows.probe import PAPER_PROBE, Probe, inertia_from_beta0, lever_from_inertia, spring_from_beta0
+from mows.physics.probe import PAPER_PROBE, Probe, inertia_from_beta0, lever_from_inertia, spring_from_beta0
 
 
 def test_paper_calibration_reproduces_reported_constants():

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import yaml
 
-from mows.probe import PAPER_PROBE
-from mows.scenario import Scenario, load_scenario, shipped_scenarios
+from mows.physics.probe import PAPER_PROBE
+from mows.sim.scenario import Scenario, load_scenario, shipped_scenarios
 
 DOC = pathlib.Path(__file__).parents[2] / "docs" / "scenario_format.md"
 SETUPS = {"paper_largest_spacing": "largest_spacing", "helmholtz": "helmholtz", "anti_helmholtz": "helmholtz",

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from mows.signal import effective_distance_m, kappa_t, peak_amplitude, ringdown_angle_rad, signal_t
+from mows.physics.signal import effective_distance_m, kappa_t, peak_amplitude, ringdown_angle_rad, signal_t
 
 
 def test_effective_distance_of_the_paper_setup():

@@ -2,7 +2,7 @@
 
 Frequencies are measured from the simulated θ(t) by its zero crossings (cubic Hermite
 interpolation from θ and θ' at the samples, exact to ~1e-11 s), or from the simulated
-fluxgate data with :func:`mows.ringdown.fit_ringdown`. No result of the simulator is
+fluxgate data with :func:`mows.estimate.ringdown.fit_ringdown`. No result of the simulator is
 compared with the simulator itself, except where a test says so (stream continuity).
 """
 import math
@@ -13,13 +13,13 @@ from scipy import integrate, optimize
 from scipy import signal as sp_signal
 from scipy.special import j1
 
-from mows.field import MU0_OVER_4PI, UniformField
-from mows.fluxgate import Fluxgate, FluxgatePair, NoiseModel
-from mows.pose import STANDARD_GRAVITY_M_PER_S2, Pose
-from mows.probe import PAPER_PROBE as P
-from mows.ringdown import fit_ringdown
-from mows.scenario import Environment, Integrator, Scenario, Sensors, load_scenario
-from mows.simulator import NoiseStream, SimulatedDevice, simulate_cycle
+from mows.physics.field import MU0_OVER_4PI, UniformField
+from mows.physics.fluxgate import Fluxgate, FluxgatePair, NoiseModel
+from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
+from mows.physics.probe import PAPER_PROBE as P
+from mows.estimate.ringdown import fit_ringdown
+from mows.sim.scenario import Environment, Integrator, Scenario, Sensors, load_scenario
+from mows.sim.simulator import NoiseStream, SimulatedDevice, simulate_cycle
 
 FS = 20_000.0
 KM, M, J, DELTA, L = P.spring_nm_per_rad, P.moment_am2, P.inertia_kgm2, P.damping_per_s, P.lever_m

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from mows import stamps
+from mows.records import stamps
 from mows_bringup.graph import NODES
 from mows_driver import node as driver
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
@@ -20,11 +20,11 @@ from rclpy.parameter import Parameter
 from mows_ros.qos import EXCITATION_QOS
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from mows import bags
-from mows.cycle import Phase
+from mows.device import bags
+from mows.device.cycle import Phase
 from mows.device.emulator import DeviceEmulator
-from mows.scenario import load_scenario
-from mows.simulator import SimulatedDevice
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice
 
 from node_processes import log
 

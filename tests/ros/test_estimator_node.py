@@ -14,12 +14,12 @@ from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from sensor_msgs.msg import MagneticField
 
-from mows.benchmarks.estimator import AMPLITUDE_RAD, DAMPING_PER_S, KAPPA_T, PHASE_RAD
-from mows.frequency import frequency_shift_hz
-from mows.probe import PAPER_PROBE
-from mows.signal import signal_t
+from mows.bench.estimator import AMPLITUDE_RAD, DAMPING_PER_S, KAPPA_T, PHASE_RAD
+from mows.physics.frequency import frequency_shift_hz
+from mows.physics.probe import PAPER_PROBE
+from mows.physics.signal import signal_t
 from mows_bringup.graph import NODES
-from mows import stamps
+from mows.records import stamps
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
 
 pytestmark = pytest.mark.ros

@@ -12,10 +12,10 @@ from mows_msgs.srv import RunCycle
 from rclpy.action import ActionClient
 
 from mows.lab.table import reference_at
-from mows.pose import Pose
-from mows.potential import ArcPotential
-from mows.probe import PAPER_PROBE
-from mows.scenario import load_scenario
+from mows.physics.pose import Pose
+from mows.physics.potential import ArcPotential
+from mows.physics.probe import PAPER_PROBE
+from mows.sim.scenario import load_scenario
 from mows_bringup.graph import NODES
 from mows_ros.qos import MAP_QOS, RESULT_QOS
 

@@ -69,7 +69,7 @@ def test_good_values_are_taken_and_described(ros_context):
 
 def test_a_probe_file_is_read_when_set_and_refused_with_its_reason(ros_context, tmp_path):
     import dataclasses
-    from mows.probe import PAPER_PROBE
+    from mows.physics.probe import PAPER_PROBE
     node = estimator.EstimatorNode()
     path = tmp_path / "probe.yaml"
     dataclasses.replace(PAPER_PROBE, damping_per_s=2.5).to_yaml(path)

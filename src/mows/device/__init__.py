@@ -1,4 +1,10 @@
-"""The device side of MOWS: what a device is to the driver (``interface``), its sample clock
-(``clock``), the simulated device with commands at exact sample indices (``scheduled``), the
-device emulator on a pseudo-terminal (``emulator``), the serial client (``serial_link``) and
-the driver's backends over all of them (``backends``)."""
+"""The device edge: what a device is to the driver (``interface``), the serial wire format
+(``framing``), its sample clock (``clock``), the simulated device with commands at exact sample
+indices (``scheduled``), the device emulator on a pseudo-terminal (``emulator``), the serial
+client (``serial_link``), the driver's backends over all of them (``backends``), the
+measurement cycle (``cycle``, ``duty``), the block stream (``blocks``, ``session``) and rosbag2
+recordings (``bags``).
+
+May import: ``mows.sim``, ``mows.physics``, ``mows.records``. Independent of
+``mows.estimate``: a cycle that retunes is handed its fit function.
+"""

@@ -11,16 +11,18 @@ import time
 
 import numpy as np
 
-from mows import bags, stamps
-from mows.coils import CurrentCap
-from mows.cycle import Phase, PhaseEvent
+from mows.device import bags
+
+from mows.records import stamps
+from mows.physics.coils import CurrentCap
+from mows.device.cycle import Phase, PhaseEvent
 from mows.device.clock import DeviceClock
 from mows.device.interface import (Backend, CoilCommand, Command, CommandResult, DeviceFault, LinkEvent,
                                    NotExciting, SampleChunk, check_coil_command)
 from mows.device.scheduled import ScheduledDevice
 from mows.device.serial_link import SerialLink
-from mows.framing import Ack, Coils, DeviceInfo, Frame, Orientation, Samples, Status
-from mows.simulator import SampleBlock, SimulatedDevice
+from mows.device.framing import Ack, Coils, DeviceInfo, Frame, Orientation, Samples, Status
+from mows.sim.simulator import SampleBlock, SimulatedDevice
 
 # The simulator is read in pieces of at least this: each read has a fixed cost (~0.4 ms), and
 # reads woken from sleep run on cold caches, so 25 ms pieces cost half of what 10 ms ones do.

@@ -35,13 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
-from mows.coils import CurrentCap
+from mows.physics.coils import CurrentCap
 from mows.device.clock import DeviceClock
 from mows.device.scheduled import OverCap, ScheduledDevice
-from mows.framing import (Ack, Body, Coils, DeviceInfo, Frame, FrameDecoder, Heartbeat, Hello, Orientation,
+from mows.device.framing import (Ack, Body, Coils, DeviceInfo, Frame, FrameDecoder, Heartbeat, Hello, Orientation,
                           Samples, Status, encode_frame)
-from mows.scenario import load_scenario
-from mows.simulator import SimulatedDevice
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice
 
 WATCHDOG_TIMEOUT_S = 0.15   # with host heartbeats every 50 ms; the bound is 200 ms
 FRAME_S = 0.01              # samples per Samples frame, in seconds of device time

@@ -12,8 +12,8 @@ import dataclasses
 
 import numpy as np
 
-from mows.coils import CurrentCap
-from mows.framing import DeviceInfo
+from mows.physics.coils import CurrentCap
+from mows.device.framing import DeviceInfo
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -1,7 +1,7 @@
 """A simulated device whose commands take effect at chosen sample indices.
 
 Hardware applies a command at a sample of its own clock; so does this wrapper of
-:class:`mows.simulator.SimulatedDevice`: commands wait in a queue and ``read_until`` cuts its
+:class:`mows.sim.simulator.SimulatedDevice`: commands wait in a queue and ``read_until`` cuts its
 reads at their indices. That makes the instant the coils switch off, where a ring-down
 starts, exact to the sample. The sim backend and the device emulator both run on it.
 
@@ -19,8 +19,8 @@ from typing import Callable
 
 import numpy as np
 
-from mows.coils import CurrentCap
-from mows.simulator import SampleBlock, SimulatedDevice
+from mows.physics.coils import CurrentCap
+from mows.sim.simulator import SampleBlock, SimulatedDevice
 
 COIL_LOG_LENGTH = 10000  # coil changes kept (two per excitation)
 

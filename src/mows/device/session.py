@@ -15,8 +15,8 @@ import threading
 import time
 from typing import Callable
 
-from mows.coils import CoilSetup, CurrentCap
-from mows.cycle import CycleOutcome, CycleRequest, CycleSequencer, CycleSettings, PhaseEvent, Step
+from mows.physics.coils import CoilSetup, CurrentCap
+from mows.device.cycle import CycleOutcome, CycleRequest, CycleSequencer, CycleSettings, PhaseEvent, Step
 from mows.device.blocks import Block, BlockAssembler
 from mows.device.interface import Backend, CommandResult, DeviceFault, LinkEvent, SampleChunk
 

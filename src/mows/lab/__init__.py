@@ -4,7 +4,7 @@ which physical effect is missing, and how much adding it helps (docs/model_lab.m
 Quick use::
 
     from mows.lab import load_table, analyse
-    from mows.probe import Probe
+    from mows.physics.probe import Probe
 
     report = analyse(load_table("sweep.csv"), Probe.from_yaml("probe.yaml"), auto=True)
     print(report.verdict, report.structure)

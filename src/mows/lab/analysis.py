@@ -168,7 +168,7 @@ def analyse(table, probe, effects=None, auto: bool = False, plugins=(), rank: bo
     Parameters
     ----------
     table : a :class:`MeasurementTable`, a CSV path or a bag (see :func:`load_table`).
-    probe : :class:`mows.probe.Probe`.
+    probe : :class:`mows.physics.probe.Probe`.
     effects : effect names added one by one to the base model (each a step of the history);
         ``name (at physics)`` adds the effect held at its physical value.
     auto : then select effects stepwise (module docstring).

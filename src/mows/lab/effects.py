@@ -37,7 +37,7 @@ from typing import Callable
 
 import numpy as np
 
-from mows import ringdown_average
+from mows.physics import ringdown_average
 from mows.lab.physics import Configuration, rotation_matrix, standard_gravity_vector
 from mows.lab.table import MissingColumnError
 
@@ -247,7 +247,7 @@ CATALOG = (
         "−m·B·cos θ is not a linear spring: at amplitude A the first-harmonic stiffness of the "
         "field term is m·Bx'·2·J1(A)/A (0.991 at 15°, 0.978 at 24°), and the frequency drifts "
         "as the ring-down decays. The fit reports an average over the ring-down (weights of "
-        "mows.ringdown_average) from the start amplitude (column amplitude_deg, else the "
+        "mows.physics.ringdown_average) from the start amplitude (column amplitude_deg, else the "
         "housing stop).",
         "k(A) = (1/πA)·∫U'(θc + A·cos φ)·cos φ dφ;  f = f(0) + s·(Σ c_q·f(A_q) − f(0))",
         "harmonic 1 of θ0 (∝ Bx'·A²), scales with the excitation amplitude squared and with |B|",

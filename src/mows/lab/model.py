@@ -37,7 +37,7 @@ INVALID_RESIDUAL = 1e6  # weighted residual given to rows where the model has no
 
 
 class FrequencyModel:
-    """The published frequency model plus ``effects`` for ``probe`` (a :class:`mows.probe.Probe`).
+    """The published frequency model plus ``effects`` for ``probe`` (a :class:`mows.physics.probe.Probe`).
 
     ``model + effect`` and ``effect + effect`` give new models; parameters are named
     ``f00_hz`` and ``<effect>.<parameter>``.

@@ -11,10 +11,10 @@ Gx'x'. For such a configuration the potential along the arc is
 so U'(0) = 0 and U''(0) = kM + m·Bx' + l·m·Gx'x' exactly: Eq. 6, f = f00·√(k/kM).
 
 :func:`frequency_factor` evaluates a configuration with
-:meth:`mows.potential.ArcPotential.from_local_field` (the field's quadratic expansion along the
+:meth:`mows.physics.potential.ArcPotential.from_local_field` (the field's quadratic expansion along the
 lever's arc, exact for the quadratic field the lab describes): exact rest angle (Newton on
 U'(θ) = 0 from θ = 0), stiffness U''(θs), and first-harmonic balance at the ring-down's
-amplitude nodes (:mod:`mows.ringdown_average`). It returns h and c with
+amplitude nodes (:mod:`mows.physics.ringdown_average`). It returns h and c with
 
     f = f00·h + c,
 
@@ -32,9 +32,9 @@ import math
 
 import numpy as np
 
-from mows import ringdown_average
-from mows.pose import probe_axes
-from mows.potential import ArcPotential
+from mows.physics import ringdown_average
+from mows.physics.pose import probe_axes
+from mows.physics.potential import ArcPotential
 
 NEWTON_STEPS = 40
 NEWTON_TOLERANCE_RAD = 1e-14
@@ -102,7 +102,7 @@ def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
     """(h, c) with f = f00·h + c for every row (module docstring).
 
     ``amplitude_nodes`` is (A_q (n, q), c_q (n, q)) from
-    :func:`mows.ringdown_average.amplitude_nodes`; needed when ``config.amplitude`` ≠ 0.
+    :func:`mows.physics.ringdown_average.amplitude_nodes`; needed when ``config.amplitude`` ≠ 0.
     """
     axes, field, gradient, hessian = config.probe_frame()
     factor = config.moment_factor
@@ -173,7 +173,7 @@ def _amplitude_stiffness(probe, field, amplitudes, **local):
 
 def standard_gravity_vector(down_x, down_y) -> np.ndarray:
     """In-plane gravity g·(down_x, down_y, 0), m/s² (the normal component does not act)."""
-    from mows.pose import STANDARD_GRAVITY_M_PER_S2
+    from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
 
     return STANDARD_GRAVITY_M_PER_S2 * np.array([down_x, down_y, 0.0])
 

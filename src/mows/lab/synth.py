@@ -2,14 +2,14 @@
 
 The truth never comes from the lab's own model. For every row:
 
-1. the **exact** field of real sources (:mod:`mows.field`: uniform fields, dipoles, current
+1. the **exact** field of real sources (:mod:`mows.physics.field`: uniform fields, dipoles, current
    loops, Helmholtz and anti-Helmholtz pairs, solenoids) is sampled along the lever's actual
    arc, with the actual pose (θ0, gravity of a tilted plane) and the spring at the row's
-   temperature: W(θ) of :func:`mows.potential.arc_energy_j`, as
-   :meth:`mows.potential.ArcPotential.from_source` does, batched over the rows;
+   temperature: W(θ) of :func:`mows.physics.potential.arc_energy_j`, as
+   :meth:`mows.physics.potential.ArcPotential.from_source` does, batched over the rows;
 2. the ring-down frequency is the damped first-harmonic-balance frequency √(k(A)/J − δ²)/2π
    averaged over the decaying ring-down as the constant-frequency estimator sees it
-   (:mod:`mows.ringdown_average`, here with 8 Gauss nodes where the lab uses 3);
+   (:mod:`mows.physics.ringdown_average`, here with 8 Gauss nodes where the lab uses 3);
 3. Gaussian noise of ``f_std_hz`` is added with the caller's generator.
 
 The reference columns are the true field and in-plane gradient at the probe (of ``reference``
@@ -20,14 +20,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from mows import ringdown_average
-from mows.field import FieldSource
+from mows.physics import ringdown_average
+from mows.physics.field import FieldSource
 from mows.lab.table import FIELD, GRADIENT, MeasurementTable, reference_columns
-from mows.pose import STANDARD_GRAVITY_M_PER_S2, Pose
-from mows.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
-from mows.ringdown import SETTLE_S, fit_cycle
-from mows.simulator import SimulatedDevice, simulate_cycle
-from mows.sweep import SweepPoint, SweepRecord
+from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
+from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
+from mows.estimate.ringdown import SETTLE_S, fit_cycle
+from mows.sim.simulator import SimulatedDevice, simulate_cycle
+from mows.sweep.decompose import SweepPoint, SweepRecord
 
 TRUTH_NODES = 8
 LEVEL = (0.0, 0.0, -STANDARD_GRAVITY_M_PER_S2)
@@ -46,7 +46,7 @@ def true_frequency_hz(probe, sources, theta0_rad, amplitude_start_rad, temperatu
                       magnet_position_m=(0.0, 0.0, 0.0), duration_s=None) -> np.ndarray:
     """Noise-free ring-down frequencies (n,), Hz, from the exact sources (module docstring).
 
-    ``sources``: one :class:`~mows.field.FieldSource` or one per row. Per-row arguments broadcast
+    ``sources``: one :class:`~mows.physics.field.FieldSource` or one per row. Per-row arguments broadcast
     to (n,); ``duration_s`` defaults to 60 periods.
     """
     theta0 = np.atleast_1d(np.asarray(theta0_rad, float))
@@ -124,13 +124,13 @@ def simulated_table(scenario, angles_deg, repeats: int, rng: np.random.Generator
                     ) -> MeasurementTable:
     """A measurement table from the time-domain simulator and the lever-aware estimator.
 
-    Independent of the lab's physics: :mod:`mows.simulator` integrates the equation of motion in
+    Independent of the lab's physics: :mod:`mows.sim.simulator` integrates the equation of motion in
     the scenario's actual source fields (excitation up to the housing stop, sensor noise), and
-    every ring-down is fitted by :func:`mows.ringdown.fit_ringdown` with the lever's exact
+    every ring-down is fitted by :func:`mows.estimate.ringdown.fit_ringdown` with the lever's exact
     pickup, as the estimator node does. ``repeats`` full rotation sweeps over ``angles_deg``
     (column ``sweep``; full sweeps rather than repeated ring-downs at each angle, so that a slow
-    drift is not confounded with θ0); each sweep is a :class:`mows.sweep.SweepRecord` whose
-    :meth:`~mows.sweep.SweepRecord.table_columns` give the frequencies, damping, fit windows and
+    drift is not confounded with θ0); each sweep is a :class:`mows.sweep.decompose.SweepRecord` whose
+    :meth:`~mows.sweep.decompose.SweepRecord.table_columns` give the frequencies, damping, fit windows and
     that sweep's pooled start amplitude. ``t_s`` is the device time of each switch-off (the
     pause between cycles is not simulated), ``temperature_k`` the device's temperature then.
     The reference columns are the scenario's field and gradient at the probe
@@ -166,7 +166,7 @@ def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
 
 
 def _ringdown_point(scenario, cycle, settle_s):
-    """The estimator's fit of one simulated ring-down as a :class:`mows.sweep.SweepPoint`
+    """The estimator's fit of one simulated ring-down as a :class:`mows.sweep.decompose.SweepPoint`
     (None when the fit fails)."""
     fit = fit_cycle(cycle, scenario, settle_s=settle_s)
     if not fit.ok:

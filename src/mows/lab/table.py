@@ -32,8 +32,8 @@ from typing import Mapping
 
 import numpy as np
 
-from mows import stamps
-from mows.pose import probe_axes
+from mows.records import stamps
+from mows.physics.pose import probe_axes
 
 REQUIRED = ("theta0_deg", "f_hz", "f_std_hz")
 FIELD = ("ref_bx_t", "ref_by_t", "ref_bz_t")
@@ -325,15 +325,15 @@ def from_bag(path, reference=None, magnet_position_m=(0.0, 0.0, 0.0), ringdown_t
     - ``None``: no reference columns;
     - a topic name (``"/reference/magnetic_field"``): ``sensor_msgs/msg/MagneticField``
       messages, the one nearest in time to each ring-down (header stamps, global frame);
-    - a :class:`mows.field.FieldSource`, its YAML mapping, or a YAML file holding one: the
+    - a :class:`mows.physics.field.FieldSource`, its YAML mapping, or a YAML file holding one: the
       exact field and in-plane gradient at ``magnet_position_m``;
-    - a simulator scenario (:class:`mows.scenario.Scenario`, a shipped name or a YAML file):
+    - a simulator scenario (:class:`mows.sim.scenario.Scenario`, a shipped name or a YAML file):
       its sources at its magnet position (:func:`reference_at`).
 
     Rows are numbered into sweeps by the ``SweepDecomposition`` stamps on ``sweep_topic`` when
     the bag has them (a sweep's stamp is that of its last ring-down).
     """
-    from mows import bags
+    from mows.device import bags
 
     path = pathlib.Path(path)
     if not path.exists():
@@ -390,10 +390,10 @@ def _reference_columns(reference, stamps, fields, magnet_position_m, path) -> di
 
 
 def from_sweep(record, reference, probe, decomposition=None) -> MeasurementTable:
-    """The table of one rotation sweep (:class:`mows.sweep.SweepRecord`) in a static
+    """The table of one rotation sweep (:class:`mows.sweep.decompose.SweepRecord`) in a static
     ``reference`` (anything :func:`reference_at` takes). With a first-principles
     ``decomposition`` of the sweep, each ring-down's start swing is stop − |θs| at its field
-    (:meth:`~mows.sweep.SweepRecord.start_amplitudes_rad`); else the pooled stop amplitude."""
+    (:meth:`~mows.sweep.decompose.SweepRecord.start_amplitudes_rad`); else the pooled stop amplitude."""
     starts = (record.start_amplitudes_rad(decomposition, probe)
               if decomposition is not None and decomposition.ok and decomposition.model == "first_principles"
               else None)
@@ -415,7 +415,7 @@ def reference_at(reference, magnet_position_m=(0.0, 0.0, 0.0)):
     """Field (3,) and gradient (3, 3) at the probe of a reference: a field source (object, YAML
     mapping with a ``type``, or a file holding one) or a simulator scenario (object, name or
     YAML file: its environment's sources at its pose's magnet position)."""
-    from mows import field as fields
+    from mows.physics import field as fields
 
     point = np.asarray(magnet_position_m, float)
     if isinstance(reference, (str, pathlib.Path)):
@@ -424,7 +424,7 @@ def reference_at(reference, magnet_position_m=(0.0, 0.0, 0.0)):
         path = pathlib.Path(reference)
         data = yaml.safe_load(path.read_text()) if path.is_file() else None
         if not (isinstance(data, Mapping) and "type" in data):
-            from mows.scenario import load_scenario
+            from mows.sim.scenario import load_scenario
 
             reference = load_scenario(str(reference))
         else:

@@ -21,7 +21,7 @@ Helmholtz setup, coil 1 10 cm along −y with axis +y, coil 2 10 cm along −x w
 Helmholtz pair of that setup (Pasco EM-6723A, radius = spacing = 10.5 cm, axis x) is
 :func:`pasco_pair`.
 
-The coils are LSIP-330 air coils (3.3 mH): modelled as :func:`mows.field.solenoid` of
+The coils are LSIP-330 air coils (3.3 mH): modelled as :func:`mows.physics.field.solenoid` of
 :data:`LSIP330_TURNS` turns, radius :data:`LSIP330_RADIUS_M`, length :data:`LSIP330_LENGTH_M`
 (assumed dimensions; the inductance is carried for information only).
 
@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mows.field import (FieldSource, anti_helmholtz_pair, as_points_m, check_keys, helmholtz_pair, solenoid,
+from mows.physics.field import (FieldSource, anti_helmholtz_pair, as_points_m, check_keys, helmholtz_pair, solenoid,
                         source_from_dict, source_to_dict, vector3)
 
 LSIP330_RADIUS_M = 0.025
@@ -102,7 +102,7 @@ class CoilSetup:
     Parameters
     ----------
     name : label.
-    coils : field per ampere of each coil (:class:`mows.field.FieldSource`).
+    coils : field per ampere of each coil (:class:`mows.physics.field.FieldSource`).
     phases_rad : coil k carries ``amplitude_a``·sin(θ0 + phases_rad[k]).
     inductance_h : of each coil, henry (informational: the amplifiers drive the current).
     cap : the current limit.

@@ -5,7 +5,7 @@ Equation of motion. The deflection θ (θt of Eq. S2) obeys
     J·θ'' = −U'(θ, t) − 2J·δ·θ' − Σ_k I_k(t)·W_k'(θ) + τ_stop(θ, θ'),
 
 with U(θ, t) = ½·kM(T(t))·θ² + W(θ) the full potential of PHYSICS.md §4 in the environment
-field at the current pose (gravity included, nothing expanded: :class:`mows.potential.ArcPotential`),
+field at the current pose (gravity included, nothing expanded: :class:`mows.physics.potential.ArcPotential`),
 W_k(θ) = −m(θ)·B_k(r(θ)) the energy of the magnet in coil k's field per ampere along the same
 arc, and I_k(t) = A_k·sin(2πf·(t − t_on)) the drive. Free, δ gives the envelope e^(−δt) and the
 frequency √(k/J − δ²)/2π of Eqs. S1, S2. kM follows the temperature T(t) = T0 + rate·t.
@@ -33,10 +33,10 @@ estimator resolves; its energy error, (ωh)⁶/144 per step, acts like a damping
 machine (``cache=True``, ≈ 1 s); later processes load it from the cache.
 
 Fluxgates. At every sample: the exact dipole field of the magnet at its actual position with
-its actual moment (:meth:`mows.fluxgate.FluxgatePair.pickup_t`), plus the environment field,
+its actual moment (:meth:`mows.physics.fluxgate.FluxgatePair.pickup_t`), plus the environment field,
 plus each coil's field × its current (they saturate the sensors during excitation, as in the
 paper), noise (:class:`NoiseStream`), then offset compensation, ±range clipping and
-quantisation (:meth:`mows.fluxgate.FluxgatePair.digitise`). The magnet is a point dipole: a
+quantisation (:meth:`mows.physics.fluxgate.FluxgatePair.digitise`). The magnet is a point dipole: a
 1 mm cylinder's next multipole is ~(0.5 mm/6 cm)² ≈ 1e-4 of its field at the sensors.
 
 Device clock. Sample i is taken at t = i/fs; :meth:`SimulatedDevice.read` returns the next n
@@ -52,7 +52,7 @@ import numpy as np
 from numba import njit
 from scipy import signal as sp_signal
 
-from mows.potential import DEFAULT_HALF_WIDTH_RAD, ArcPotential
+from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, ArcPotential
 
 TWO_PI = 2.0 * math.pi
 
@@ -201,7 +201,7 @@ def advance(state, first_index, sample_rate_hz, substeps, contact_substeps, para
 
 # --- noise as a stream ---------------------------------------------------------------------
 class NoiseStream:
-    """:class:`mows.fluxgate.NoiseModel` noise, continuous across blocks.
+    """:class:`mows.physics.fluxgate.NoiseModel` noise, continuous across blocks.
 
     Every sample consumes four standard normals in order (common white, 1/f driver, sensor 1,
     sensor 2), so the stream does not depend on how it is cut into blocks. The 1/f part is
@@ -300,7 +300,7 @@ class DeviceTruth:
 
 
 class SimulatedDevice:
-    """The MOWS device in a :class:`mows.scenario.Scenario`, advanced sample by sample.
+    """The MOWS device in a :class:`mows.sim.scenario.Scenario`, advanced sample by sample.
 
     The probe starts at rest at the scenario's orientation. ``rng`` defaults to
     ``numpy.random.default_rng(scenario.seed)``.

@@ -1,7 +1,7 @@
 """Simulator scenarios: what is simulated, as dataclasses and as YAML (docs/scenario_format.md).
 
 A scenario fixes the probe, the excitation coil setup, the static environment (field sources,
-temperature), where the probe sits and how it is turned (:class:`mows.pose.Pose`), the two
+temperature), where the probe sits and how it is turned (:class:`mows.physics.pose.Pose`), the two
 fluxgates, their noise, the default excitation, the housing stop and the integrator. Every
 section has defaults; ``Scenario()`` is the paper's probe in the largest-spacing setup with no
 environment field and no noise, and ``load_scenario()`` is the documented default scenario
@@ -9,7 +9,7 @@ environment field and no noise, and ``load_scenario()`` is the documented defaul
 
 YAML keys carry SI unit suffixes; degrees appear only in keys ending ``_deg``. Unknown keys,
 missing required keys and out-of-range values raise ValueError naming the section and key.
-Shipped scenarios live in ``src/mows/scenarios/<name>.yaml`` and are loaded by name.
+Shipped scenarios live in ``src/mows/sim/scenarios/<name>.yaml`` and are loaded by name.
 """
 from __future__ import annotations
 
@@ -22,11 +22,11 @@ import pathlib
 import numpy as np
 import yaml
 
-from mows.coils import CoilSetup, largest_spacing, setup_from_dict
-from mows.field import FieldSource, SumSource, check_keys, source_from_dict, source_to_dict, vector3
-from mows.fluxgate import DAQ_SAMPLE_RATE_HZ, FL1_RANGE_T, FL1_RESOLUTION_T, Fluxgate, FluxgatePair, NoiseModel
-from mows.pose import STANDARD_GRAVITY_M_PER_S2, Pose
-from mows.probe import PAPER_PROBE, Probe
+from mows.physics.coils import CoilSetup, largest_spacing, setup_from_dict
+from mows.physics.field import FieldSource, SumSource, check_keys, source_from_dict, source_to_dict, vector3
+from mows.physics.fluxgate import DAQ_SAMPLE_RATE_HZ, FL1_RANGE_T, FL1_RESOLUTION_T, Fluxgate, FluxgatePair, NoiseModel
+from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
+from mows.physics.probe import PAPER_PROBE, Probe
 
 SCENARIO_DIR = pathlib.Path(__file__).with_name("scenarios")
 DEFAULT_SCENARIO = "paper_largest_spacing"
@@ -57,7 +57,7 @@ class Environment:
     """The static surroundings: field sources (global frame) and the temperature.
 
     ``temperature_k`` at device time 0 drifts linearly at ``temperature_rate_k_per_s``; the
-    probe's kM follows it (PHYSICS.md §5.6, :meth:`mows.probe.Probe.spring_at`).
+    probe's kM follows it (PHYSICS.md §5.6, :meth:`mows.physics.probe.Probe.spring_at`).
     """
 
     sources: tuple = ()
@@ -117,7 +117,7 @@ class Excitation:
 
 @dataclasses.dataclass(frozen=True)
 class Housing:
-    """The housing stop at ±θstop as a stiff spring–dashpot contact (see :mod:`mows.simulator`).
+    """The housing stop at ±θstop as a stiff spring–dashpot contact (see :mod:`mows.sim.simulator`).
 
     ``stiffness_ratio``: contact stiffness over kM; ``restitution``: coefficient of
     restitution of one impact (sets the contact damping).
@@ -212,7 +212,7 @@ class Scenario:
 
 
 def load_scenario(name_or_path=DEFAULT_SCENARIO) -> Scenario:
-    """A shipped scenario by name (``src/mows/scenarios/<name>.yaml``) or a YAML file by path."""
+    """A shipped scenario by name (``src/mows/sim/scenarios/<name>.yaml``) or a YAML file by path."""
     path = pathlib.Path(name_or_path)
     if path.suffix not in (".yaml", ".yml"):
         path = SCENARIO_DIR / f"{name_or_path}.yaml"

@@ -20,7 +20,7 @@ import sys
 
 from mows.lab.table import TableError, is_bag
 
-PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "probes" / "paper.yaml"
+PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -84,7 +84,7 @@ def _run(args) -> int:
 
 
 def _probe(source):
-    from mows.probe import Probe
+    from mows.physics.probe import Probe
 
     path = PAPER_PROBE_FILE if source == "paper" else pathlib.Path(source)
     if not path.is_file():

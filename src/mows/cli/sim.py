@@ -1,9 +1,9 @@
 """``mows sim``: simulate measurement cycles of a scenario and write the samples to .npz.
 
 For every θ0 and repeat: turn, let the scenario's gap pass, excite, record the ring-down
-(:func:`mows.simulator.simulate_cycle`). With ``--fit`` each ring-down is fitted
-as the estimator node does (:func:`mows.ringdown.fit_cycle`: the lever-aware pickup) and compared with the truth from the full potential
-(:meth:`mows.simulator.CycleRecord.ringdown_frequency_hz`).
+(:func:`mows.sim.simulator.simulate_cycle`). With ``--fit`` each ring-down is fitted
+as the estimator node does (:func:`mows.estimate.ringdown.fit_cycle`: the lever-aware pickup) and compared with the truth from the full potential
+(:meth:`mows.sim.simulator.CycleRecord.ringdown_frequency_hz`).
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import math
 import numpy as np
 import yaml
 
-from mows.scenario import DEFAULT_SCENARIO, load_scenario
+from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,8 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from mows.ringdown import fit_cycle
-    from mows.simulator import SimulatedDevice, simulate_cycle
+    from mows.estimate.ringdown import fit_cycle
+    from mows.sim.simulator import SimulatedDevice, simulate_cycle
 
     scenario = load_scenario(args.scenario)
     if args.seed is not None:

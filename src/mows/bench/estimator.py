@@ -19,8 +19,8 @@ import time
 import numpy as np
 from scipy.optimize import curve_fit
 
-from mows import ringdown
-from mows.signal import signal_t
+from mows.estimate import ringdown
+from mows.physics.signal import signal_t
 
 SAMPLE_RATE_HZ = 20_000.0
 N_SAMPLES = 10_000                # 0.5 s, as the paper evaluates

@@ -19,8 +19,8 @@ import math
 
 import numpy as np
 
-from mows import stamps
-from mows.ringdown import FitOptions, FitStatus, RingdownFit, failure, fit_ringdown
+from mows.records import stamps
+from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure, fit_ringdown
 
 
 @dataclasses.dataclass(frozen=True)

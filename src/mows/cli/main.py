@@ -9,10 +9,10 @@ import importlib
 import sys
 
 SUBCOMMANDS = {
-    "sim": ("mows.simulator_cli", "simulate measurement cycles from a scenario"),
-    "fit": ("mows.ringdown_cli", "fit the ring-downs of a recorded bag (--csv: a model-lab table)"),
-    "lab": ("mows.lab.cli", "compare the frequency model with measurements, find missing effects"),
-    "bench": ("mows.bench", "benchmarks: estimator, simulator, stream, lab (figures, never a failure)"),
+    "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
+    "fit": ("mows.cli.fit", "fit the ring-downs of a recorded bag (--csv: a model-lab table)"),
+    "lab": ("mows.cli.lab", "compare the frequency model with measurements, find missing effects"),
+    "bench": ("mows.cli.bench", "benchmarks: estimator, simulator, stream, lab (figures, never a failure)"),
 }
 
 

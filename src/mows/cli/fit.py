@@ -1,7 +1,7 @@
 """``mows fit BAG``: fit every ring-down in a bag the driver recorded, offline.
 
 The bag's ``/mows/raw`` blocks and ``/mows/excitation`` phases go through the same path as in
-the estimator node (:mod:`mows.segments`, :mod:`mows.ringdown`): each recorded RINGDOWN phase
+the estimator node (:mod:`mows.estimate.segments`, :mod:`mows.estimate.ringdown`): each recorded RINGDOWN phase
 (tuning ones skipped unless ``--tuning``) is cut out by its device stamps and fitted with the
 lever-aware signal model of the paper's geometry (``--paper-model`` for Eq. S11). One line per
 ring-down; ``--csv`` writes a model-lab table (theta0_deg, f_hz, f_std_hz, t_s, amplitude_deg,
@@ -10,14 +10,14 @@ damping_per_s, duration_s) of the OK fits, ready for ``mows lab`` (no file when 
 import math
 import sys
 
-from mows.bags import read_bag
-from mows.cycle import Phase
-from mows.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
+from mows.device.bags import read_bag
+from mows.device.cycle import Phase
+from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.lab.table import MeasurementTable
-from mows.probe import PAPER_PROBE, Probe
-from mows.ringdown import FitOptions
-from mows.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
-from mows.sweep import SweepPoint, SweepRecord
+from mows.physics.probe import PAPER_PROBE, Probe
+from mows.estimate.ringdown import FitOptions
+from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
+from mows.sweep.decompose import SweepPoint, SweepRecord
 
 
 def add_arguments(parser) -> None:
@@ -71,7 +71,7 @@ def _options(window, pair, probe, paper_model) -> FitOptions:
     return FitOptions() if paper_model else FitOptions.lever_aware(pair, probe, window.theta0_rad)
 
 def write_table(path, fits, probe: Probe) -> None:
-    """The OK fits as a model-lab table (:meth:`mows.sweep.SweepRecord.table_columns`: each
+    """The OK fits as a model-lab table (:meth:`mows.sweep.decompose.SweepRecord.table_columns`: each
     ring-down's start swing is the stop amplitude pooled over the fits that measured θmax)."""
     record = SweepRecord([SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz,
                                               window.start_s) for window, fit in fits])

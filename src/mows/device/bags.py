@@ -17,7 +17,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 PACKAGE = "mows_msgs"
-REPOSITORY_PACKAGE = Path(__file__).resolve().parents[2] / PACKAGE
+REPOSITORY_PACKAGE = Path(__file__).resolve().parents[3] / PACKAGE
 BAG_VERSION = 9  # rosbag2's metadata version in Jazzy
 
 # The parts of a service or action definition, in the order they appear between `---` lines.

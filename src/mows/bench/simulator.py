@@ -19,15 +19,15 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from mows.fluxgate import NoiseModel
-from mows.scenario import load_scenario
-from mows.simulator import SimulatedDevice, simulate_cycle
+from mows.physics.fluxgate import NoiseModel
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice, simulate_cycle
 
 _FIRST_CALL = """
 import time
 start = time.perf_counter()
-from mows.scenario import Scenario
-from mows.simulator import SimulatedDevice
+from mows.sim.scenario import Scenario
+from mows.sim.simulator import SimulatedDevice
 SimulatedDevice(Scenario()).integrate(10)
 print(time.perf_counter() - start)
 """
@@ -60,7 +60,7 @@ def solve_ivp_theta(rhs, state, first_index: int, n_samples: int, sample_rate_hz
 
 def solve_ivp_cycle(device: SimulatedDevice, amplitude_a: float, excite_s: float = 0.5,
                     ringdown_s: float = 0.5) -> np.ndarray:
-    """θ at the samples of :func:`mows.simulator.simulate_cycle` at θ0 = 0 from rest, by DOP853
+    """θ at the samples of :func:`mows.sim.simulator.simulate_cycle` at θ0 = 0 from rest, by DOP853
     on the device's own equation of motion."""
     fs = device.sample_rate_hz
     frequency = device.expected_frequency_hz()

@@ -3,7 +3,7 @@
 One cycle at one orientation θ0: turn the probe and let it settle; excite at the current
 resonance estimate with the coil setup's orientation-dependent currents; switch off and
 record the free ring-down; the first ``tuning_steps`` ring-downs are fitted
-(:func:`mows.ringdown.fit_ringdown`) and retune the excitation frequency, the next
+(:func:`mows.estimate.ringdown.fit_ringdown`) and retune the excitation frequency, the next
 ``repeats`` are the measurements, with a pause of ``gap_s`` between ring-down and excitation.
 
 Time is the device's sample index. Every command is scheduled at a sample, and every phase
@@ -26,10 +26,10 @@ from typing import Callable, Generator
 
 import numpy as np
 
-from mows.coils import CoilSetup, CurrentCap
+from mows.physics.coils import CoilSetup, CurrentCap
 from mows.device.interface import CoilCommand, Command, CommandResult, LinkEvent, OrientationCommand, SampleChunk
-from mows.duty import DutyCycleLimit
-from mows.ringdown import FitStatus, RingdownFit, failure, fit_ringdown
+from mows.device.duty import DutyCycleLimit
+from mows.estimate.ringdown import FitStatus, RingdownFit, failure, fit_ringdown
 
 
 class Phase(enum.IntEnum):

@@ -1,9 +1,9 @@
 """Which amplitude a ring-down's frequency belongs to: the averaging of a constant-frequency fit.
 
 The probe is not a linear oscillator: its frequency depends on the amplitude A (first-harmonic
-balance, :meth:`mows.potential.ArcPotential.frequency_hz`). During one ring-down the
+balance, :meth:`mows.physics.potential.ArcPotential.frequency_hz`). During one ring-down the
 amplitude decays, A(t) = A0·e^(−δt), so the instantaneous frequency f(A(t)) drifts, while the
-estimator (:func:`mows.ringdown.fit_ringdown`) fits one constant f. What does it report?
+estimator (:func:`mows.estimate.ringdown.fit_ringdown`) fits one constant f. What does it report?
 
 Derivation. Write the signal of Eq. S11 as S = κ·g(θ0 + x) with x = A·cos Φ and
 g(θ) = 2a·cos θ − b·sin θ (sensor direction (a, b); the paper's is (0, 1)). A phase error ε

@@ -25,12 +25,12 @@ import subprocess
 import time
 from pathlib import Path
 
-from mows.coils import CurrentCap
-from mows.cycle import CycleSettings
+from mows.physics.coils import CurrentCap
+from mows.device.cycle import CycleSettings
 from mows.device.backends import SimBackend
 from mows.device.session import DeviceSession, SessionConfig
-from mows.scenario import load_scenario
-from mows.simulator import SimulatedDevice
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice
 
 GOAL_SHARE = 0.10
 BLOCK_S = 0.025  # the driver's default block, and the piece in which it reads the simulator

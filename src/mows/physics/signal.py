@@ -3,14 +3,14 @@
 The moment turns through θ = θ0 + θt with θt = θmax·cos(2πft + φ)·e^(−δt) (Eq. S2). A
 single-axis sensor along (a, b, c) on the probe's axis line reads
 S = κ·(2a·cos θ − b·sin θ) + B_DC (Eq. S11); the paper's sensors have b = 1 (Eq. S12).
-The exact field of the moving magnet at a real sensor is in :mod:`mows.fluxgate`; this
+The exact field of the moving magnet at a real sensor is in :mod:`mows.physics.fluxgate`; this
 module is the fit model.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from mows.field import MU0_OVER_4PI
+from mows.physics.field import MU0_OVER_4PI
 
 
 def effective_distance_m(distance_m, spacing_m):

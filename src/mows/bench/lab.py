@@ -13,9 +13,9 @@ import time
 
 import numpy as np
 
-from mows.field import UniformField, anti_helmholtz_pair
+from mows.physics.field import UniformField, anti_helmholtz_pair
 from mows.lab import FrequencyModel, catalog, diagnose, synth
-from mows.probe import PAPER_PROBE
+from mows.physics.probe import PAPER_PROBE
 
 ROWS_PER_SWEEP = 100
 SWEEPS = 10

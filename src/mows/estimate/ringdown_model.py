@@ -206,7 +206,7 @@ def _marquardt_step(jtj, jtr, damping, free):
 @njit(cache=True)
 def levenberg_marquardt(q, dt, cr, ci, theta0_free, y, w, iterations, tol_chi2, damping, amplitude_low,
                         amplitude_high, amplitude_index):
-    """Levenberg–Marquardt with variable projection (docstring of mows.ringdown's fit).
+    """Levenberg–Marquardt with variable projection (docstring of mows.estimate.ringdown's fit).
 
     Converged when the Gauss–Newton step would lower χ² by less than ``tol_chi2``. θmax stays
     within [amplitude_low, amplitude_high] without changing sign; once clamped it is held

@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mows.field import MU0_OVER_4PI, dipole_field_t, unit_vector3, vector3
+from mows.physics.field import MU0_OVER_4PI, dipole_field_t, unit_vector3, vector3
 
 FL1_RANGE_T = 10e-6
 FL1_RESOLUTION_T = 1e-10
@@ -166,7 +166,7 @@ def pickup_harmonics(pair: FluxgatePair, pose, lever_m: float, moment_am2: float
 
     Parameters
     ----------
-    pose : :class:`mows.pose.Pose` with the probe's orientation θ0.
+    pose : :class:`mows.physics.pose.Pose` with the probe's orientation θ0.
     combine : 'difference' (near − far), 'channel1' or 'channel2'.
     order : highest harmonic kept (the rest is below 1e-7 of the signal for the paper's set-up).
     """

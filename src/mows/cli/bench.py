@@ -15,11 +15,11 @@ import sys
 import time
 
 SUITES = {
-    "estimator": ("mows.benchmarks.estimator", "ring-down fit: speed against curve_fit, precision against the CRB"),
-    "simulator": ("mows.benchmarks.simulator", "one measurement cycle, against solve_ivp"),
-    "stream": ("mows.benchmarks.streaming", "CPU share of one core to stream 20 kS/s × 2 channels"),
-    "lab": ("mows.benchmarks.lab", "model lab diagnose on 1000 rows with the whole catalog"),
-    "latency": ("mows.benchmarks.latency", "last sample of a ring-down to its published fit, in the node graph"),
+    "estimator": ("mows.bench.estimator", "ring-down fit: speed against curve_fit, precision against the CRB"),
+    "simulator": ("mows.bench.simulator", "one measurement cycle, against solve_ivp"),
+    "stream": ("mows.bench.streaming", "CPU share of one core to stream 20 kS/s × 2 channels"),
+    "lab": ("mows.bench.lab", "model lab diagnose on 1000 rows with the whole catalog"),
+    "latency": ("mows.bench.latency", "last sample of a ring-down to its published fit, in the node graph"),
 }
 QUICK = {"estimator": {"trials": 60}, "simulator": {"repeats": 5}, "stream": {"duration_s": 3.0},
          "latency": {"cycles": 1, "repeats": 5}}

@@ -9,7 +9,7 @@ g is the sensor's signal as a function of the deflection, normalised by κ. The 
 (Eq. S11, a sensor along (a, b) and a magnet turning in place) is the single term
 C_1 = (2a + ib)·e^(iθ0), i.e. g = 2a·cos(θ0 + x) − b·sin(θ0 + x); its sensors have
 (a, b) = (0, 1), which is Eq. S12. On a real lever the magnet also moves, and the exact
-pickup (:func:`mows.fluxgate.pickup_harmonics`) adds harmonics of relative size ~(3l/r)^k
+pickup (:func:`mows.physics.fluxgate.pickup_harmonics`) adds harmonics of relative size ~(3l/r)^k
 (0.11 for k = 2 in the paper's set-up): pass them as ``FitOptions.pickup``. θ0 is taken from
 the excitation state (the commanded orientation), or, in the paper's model, fitted.
 
@@ -38,7 +38,7 @@ import math
 
 import numpy as np
 
-from mows.ringdown_model import evaluate_model, levenberg_marquardt, split_pickup
+from mows.estimate.ringdown_model import evaluate_model, levenberg_marquardt, split_pickup
 
 TWO_PI = 2.0 * math.pi
 
@@ -67,7 +67,7 @@ class FitOptions:
     sensor_direction : (a, b) of the sensing axis in the rotation plane (Eq. S11), for the
         paper's model.
     pickup : coefficients C_k (complex, k = 0 …) of g for the commanded θ0, from
-        :func:`mows.fluxgate.pickup_harmonics`; replaces the paper's model when given.
+        :func:`mows.physics.fluxgate.pickup_harmonics`; replaces the paper's model when given.
     theta0_free : fit θ0 instead of taking the commanded value (paper's model only: the
         pickup's dependence on θ0 is not a rotation once the lever moves the magnet).
     search_fraction : the spectral search covers expected f ± this fraction.
@@ -101,9 +101,9 @@ class FitOptions:
     @classmethod
     def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> "FitOptions":
         """Options with the exact pickup of ``probe``'s magnet swinging on its lever, seen by the
-        fluxgate ``pair`` (:class:`mows.fluxgate.FluxgatePair`) with the probe at θ0."""
-        from mows.fluxgate import pickup_harmonics
-        from mows.pose import Pose
+        fluxgate ``pair`` (:class:`mows.physics.fluxgate.FluxgatePair`) with the probe at θ0."""
+        from mows.physics.fluxgate import pickup_harmonics
+        from mows.physics.pose import Pose
 
         pickup = pickup_harmonics(pair, Pose(theta0_rad=theta0_rad), probe.lever_m, probe.moment_am2, combine=channels)
         return cls(channels=channels, pickup=tuple(pickup), **others)
@@ -179,7 +179,7 @@ def _parameter_names(n_channels, theta0_free):
 
 @dataclasses.dataclass
 class _Shape:
-    """g(x(t)) and dg/dq at the samples (:mod:`mows.ringdown_model`)."""
+    """g(x(t)) and dg/dq at the samples (:mod:`mows.estimate.ringdown_model`)."""
 
     g: np.ndarray          # (n,)
     dg_dq: np.ndarray      # (len(q), n)
@@ -215,7 +215,7 @@ class _Step:
 def _evaluate(problem: _Problem, q: np.ndarray, derivatives: bool = True) -> _Step:
     """Variable projection at q (Golub–Pereyra, with Kaufman's Jacobian): κ and B_DC by linear
     least squares, the residual and the projected normal equations of q
-    (:func:`mows.ringdown_model.normal_equations`, where the numerics are explained)."""
+    (:func:`mows.estimate.ringdown_model.normal_equations`, where the numerics are explained)."""
     n_ch, n = problem.y.shape
     p = q.size
     cr, ci = split_pickup(problem.pickup)
@@ -339,7 +339,7 @@ def _variable_projection(problem: _Problem, q, iterations, tol_chi2, damping=1e-
     active set) and f, which does not depend on it, converges as usual.
 
     ``damping`` is the initial Marquardt λ: small when q is already near the optimum. The loop
-    is compiled (:func:`mows.ringdown_model.levenberg_marquardt`): in Python its bookkeeping
+    is compiled (:func:`mows.estimate.ringdown_model.levenberg_marquardt`): in Python its bookkeeping
     cost more than the model evaluations.
 
     Returns (the step at the last accepted q, converged, iterations, free-parameter mask).
@@ -356,7 +356,7 @@ SETTLE_S = 0.003  # the coil current's decay after switch-off, left out of a fit
 
 
 def fit_cycle(cycle, scenario, paper_model: bool = False, settle_s: float = SETTLE_S) -> "RingdownFit":
-    """Fit the ring-down of a simulated cycle (:class:`mows.simulator.CycleRecord`) as the
+    """Fit the ring-down of a simulated cycle (:class:`mows.sim.simulator.CycleRecord`) as the
     estimator node does: the lever-aware pickup of ``scenario``'s probe seen by its fluxgates at
     the commanded θ0 (``paper_model``: Eq. S11 instead), the expected frequency the one the
     cycle excited at, the probe's damping as the start."""

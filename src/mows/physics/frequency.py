@@ -2,7 +2,7 @@
 
 ``k = kM + kB + kG`` with ``kB = m·Bx'`` (Eq. 4) and ``kG = l·m·Gx'x'`` (Eq. 5), and
 ``Δf = f00·(√(1 + (kB + kG)/kM) − 1)`` (Eq. 6). This is the model the paper fits; the
-physics it leaves out is in :mod:`mows.potential` and the model lab.
+physics it leaves out is in :mod:`mows.physics.potential` and the model lab.
 
 Corrections to the paper (PHYSICS.md §3): the Taylor form of the rotation sweep (Eq. 11 and
 the supplement's decomposition section) lacks the factor f00; here it has it. All

@@ -3,16 +3,16 @@
 A single frequency cannot separate field from gradient (Eq. 6: their springs add). The two
 numbers reported here are each the value that would explain the whole shift alone: the field
 B_x' assuming G = 0 (Eq. 6 inverted), and the gradient G_x'x' assuming B = 0 (Eq. S24).
-A rotation sweep (:mod:`mows.sweep`) separates them.
+A rotation sweep (:mod:`mows.sweep.decompose`) separates them.
 """
 from __future__ import annotations
 
 import dataclasses
 import math
 
-from mows.frequency import field_from_shift_t, gradient_from_shift_t_per_m
-from mows.probe import Probe
-from mows.ringdown import FitStatus, RingdownFit
+from mows.physics.frequency import field_from_shift_t, gradient_from_shift_t_per_m
+from mows.physics.probe import Probe
+from mows.estimate.ringdown import FitStatus, RingdownFit
 
 ASSUMPTIONS = ("published model, Eq. 6 inverted exactly: field assumes G = 0, gradient (Eq. S24) "
                "assumes B = 0; small-amplitude spring; f00 from calibration")

@@ -29,11 +29,11 @@ import math
 import numpy as np
 from scipy.optimize import least_squares
 
-from mows.frequency import sweep_shift_hz, weak_field_sensitivity_hz_per_t
-from mows.pose import probe_axes
-from mows.potential import ArcPotential
-from mows.probe import Probe
-from mows.ringdown_average import amplitude_nodes
+from mows.physics.frequency import sweep_shift_hz, weak_field_sensitivity_hz_per_t
+from mows.physics.pose import probe_axes
+from mows.physics.potential import ArcPotential
+from mows.physics.probe import Probe
+from mows.physics.ringdown_average import amplitude_nodes
 
 MODELS = ("first_principles", "published")
 MAX_HARMONIC = 4
@@ -106,7 +106,7 @@ class Ringdowns:
     undeflected position, so its swing about the rest angle θs (turned by the perpendicular
     field, PHYSICS.md §5.3) is stop − |θs|, which the model computes from its own potential.
     ``damping_per_s`` and ``duration_s`` (per point) give the averaging of a constant-frequency
-    fit over the decaying swing (:mod:`mows.ringdown_average`).
+    fit over the decaying swing (:mod:`mows.physics.ringdown_average`).
     """
 
     stop_amplitude_rad: float
@@ -132,7 +132,7 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
 
     With ``ringdowns`` the first-principles model reports what the fit of each decaying
     ring-down reports: the weighted average of the harmonic-balance frequency over its swing
-    (:func:`mows.ringdown_average.amplitude_nodes`), from stop − |θs|. Without, the
+    (:func:`mows.physics.ringdown_average.amplitude_nodes`), from stop − |θs|. Without, the
     small-amplitude stiffness. The published model has no amplitude.
     """
     bx, by, gs, gd, gxy, df00 = params
@@ -270,7 +270,7 @@ class SweepPoint:
 
     @classmethod
     def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0) -> "SweepPoint":
-        """A successful ring-down fit (:class:`mows.ringdown.RingdownFit`, or a RingdownFit
+        """A successful ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`, or a RingdownFit
         message: the fields are the same) with its frequency shift; σ of θmax from the fit's
         covariance (NaN when θmax was held at a bound)."""
         names = list(fit.parameter_names)

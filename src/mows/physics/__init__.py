@@ -1,0 +1,11 @@
+"""The physics of the magneto-oscillatory sensor, from first principles (PHYSICS.md).
+
+The probe's constants (``probe``), field sources (``field``), where the probe sits
+(``pose``), the full potential U(θ) of the magnet on its lever (``potential``), the published
+frequency model and its inverses (``frequency``, Eqs. 1, 4–8, S13–S24), the amplitude a decaying
+ring-down's frequency belongs to (``ringdown_average``), the magnetometer signal (``signal``,
+``fluxgate``) and the excitation coils (``coils``).
+
+May import: ``mows.records``, numpy, scipy, numba, pyyaml. Nothing here simulates, does I/O
+beyond reading YAML, or fits data.
+"""

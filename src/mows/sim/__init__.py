@@ -1,0 +1,6 @@
+"""The simulated world: scenario files (``scenario``) and the time-domain simulation of the
+whole measurement, sample by sample like the hardware (``simulator``).
+
+May import: ``mows.physics``, ``mows.records``. Never the estimator: a simulation knows the
+truth and must not borrow the fit's assumptions.
+"""

@@ -11,11 +11,13 @@ from hypothesis import strategies as st
 from mows.physics.coils import CurrentCap, helmholtz, largest_spacing
 from mows.device.cycle import CycleRequest, CycleSequencer, CycleSettings, Phase
 from mows.device.backends import SimBackend
-from mows.device.interface import CoilCommand, CommandResult, SampleChunk
+from mows.device.interface import CoilCommand, CommandResult
+from mows.records.samples import SampleBlock
 from mows.device.scheduled import ScheduledDevice
 from mows.device.session import DeviceSession, SessionConfig
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
+from mows.estimate.ringdown import fit_ringdown
 
 from device.spy import SpyDevice
 
@@ -28,7 +30,7 @@ def session_on_simulator(cycle_settings=FAST, frequency_hz=110.0, cap_a=CAP_A):
     scenario = load_scenario()
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(cap_a), paced=False)
     return DeviceSession(backend, SessionConfig(0.025, cycle_settings, scenario.setup, CurrentCap(cap_a),
-                                                frequency_hz))
+                                                frequency_hz, fit_ringdown))
 
 
 def run(session, request=CycleRequest(0.3), until=None):
@@ -201,8 +203,8 @@ class RecordingDevice:
                 applied = max(command.at_sample_index, next_index)
                 step = sequencer.on_result(CommandResult(command.command_id, True, applied))
             else:
-                step = sequencer.on_samples(SampleChunk(next_index, next_index * 50_000, np.zeros((200, 2)),
-                                                        np.zeros((200, 2), bool)))
+                step = sequencer.on_samples(SampleBlock(next_index, next_index * 50_000, 20_000.0,
+                                                        np.zeros((200, 2)), np.zeros((200, 2), bool)))
                 next_index += 200
             pending += step.commands
         raise AssertionError("the cycle did not end")
@@ -214,8 +216,8 @@ class RecordingDevice:
 def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a, theta0, repeats, tuning):
     quick = CycleSettings(excitation_current_a=current_a, excite_s=0.01, ringdown_s=0.01, gap_s=0.0,
                           repeats=repeats, tuning_steps=tuning, settle_s=0.0, max_duty_cycle=1.0)
-    sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0)
-    sequencer.on_samples(SampleChunk(0, 0, np.zeros((1, 2)), np.zeros((1, 2), bool)))
+    sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0, fit=fit_ringdown)
+    sequencer.on_samples(SampleBlock(0, 0, 20_000.0, np.zeros((1, 2)), np.zeros((1, 2), bool)))
     device = RecordingDevice()
     # The cap limits what reaches the coils: each coil's current of the orientation-dependent
     # scheme (the base amplitude times sin(θ0 + phase)), and the setup's own amplifier limit on

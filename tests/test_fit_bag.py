@@ -50,7 +50,7 @@ def bag(tmp_path_factory):
     for cycle, deg in enumerate((0.0, 60.0), start=1):
         record = simulate_cycle(device, math.radians(deg), scenario.excitation.amplitude_a)
         fs = record.sample_rate_hz
-        first = record.block.first_sample_index
+        first = record.block.samples.first_sample_index
         off = first + record.coil_off_index
         messages.append(bags.BagMessage("/mows/excitation", EXCITATION, int(off / fs * 1e9),
                                         ringdown_message(off, fs, cycle, record.theta0_rad, record.frequency_hz)))

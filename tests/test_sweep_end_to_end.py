@@ -11,7 +11,7 @@ import pytest
 from scipy import stats
 
 from mows.lab.table import reference_at
-from mows.estimate.ringdown import fit_cycle
+from mows.lab.synth import fit_cycle
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice, simulate_cycle
 from mows.sweep.decompose import SweepPoint, SweepRecord

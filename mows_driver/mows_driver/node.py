@@ -44,6 +44,7 @@ from mows_ros.process import run_node
 from mows_ros.qos import EXCITATION_QOS, STREAM_QOS
 
 from mows_driver.recording import BagRecorder
+from mows.estimate.ringdown import fit_ringdown
 
 NODE_NAME = "driver"
 RAW_TOPIC = "mows/raw"
@@ -150,7 +151,8 @@ class DriverNode(MowsNode):
         except (ValueError, OSError) as error:
             raise InvalidParameterValueException("backend", values["backend"], str(error)) from None
         self.session = DeviceSession(backend, SessionConfig(values["block_duration_s"], cycle_settings(values),
-                                                            setup, cap, values["initial_frequency_hz"]))
+                                                            setup, cap, values["initial_frequency_hz"],
+                                                            fit_ringdown))
         self.blocks_published = 0
         self.stream_errors = 0
         self._reported_gaps = 0

@@ -13,7 +13,7 @@ from mows.estimate.segments import RingdownWindow
 
 def fit_to_msg(fit: Fit, window: RingdownWindow, frame_id: str, shift_hz: float, shift_std_hz: float) -> RingdownFit:
     msg = RingdownFit()
-    stamps.set_seconds(msg.header.stamp, window.start_s + fit.start_offset_s)
+    stamps.set_nanoseconds(msg.header.stamp, window.start_ns + round(fit.start_offset_s * stamps.NS_PER_S))
     msg.header.frame_id = frame_id
     msg.cycle_id, msg.repeat_index, msg.tuning = window.cycle_id, window.repeat_index, window.tuning
     msg.status, msg.status_name, msg.message = int(fit.status), fit.status.name, fit.message

@@ -22,6 +22,7 @@ from mows.device.serial_link import SerialLink
 from mows.device.session import DeviceSession, SessionConfig
 from mows.device.framing import Ack, Coils, Samples, Status
 from mows.sim.scenario import load_scenario
+from mows.estimate.ringdown import fit_ringdown
 
 from device.spy import SpyDevice
 
@@ -57,7 +58,7 @@ def link(emulator):
 def session(link):
     backend = SerialBackend(link, CurrentCap(CAP_A))
     settings = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, settle_s=0.1)
-    session = DeviceSession(backend, SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0))
+    session = DeviceSession(backend, SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown))
     yield session
     session.close()
 
@@ -173,7 +174,7 @@ def test_a_cycle_over_the_link_stamps_the_ringdown_at_the_device_switch_off(emul
 def test_a_watchdog_trip_during_a_cycle_fails_it_instead_of_announcing_a_ringdown(emulator, link):
     settings = CycleSettings(excite_s=2.0, ringdown_s=0.3, repeats=1, tuning_steps=0, settle_s=0.1)
     session = DeviceSession(SerialBackend(link, CurrentCap(CAP_A)),
-                            SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0))
+                            SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown))
     step_until(session, lambda: session.health().get("samples", 0) > 0, "samples")
     done = []
     session.start_cycle(CycleRequest(0.4), done.append)

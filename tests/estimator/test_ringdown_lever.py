@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from mows.estimate.ringdown import fit_cycle
+from mows.lab.synth import fit_cycle
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice, simulate_cycle
 

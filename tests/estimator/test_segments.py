@@ -5,10 +5,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mows.estimate.ringdown import FitStatus
-from mows.estimate.segments import Block, RingdownWindow, SegmentAssembler, fit_segment
+from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
+from mows.records.samples import SampleBlock
 
 FS = 20_000.0
-EPOCH_S = 1_700_000_000.0           # device clock: seconds since its epoch
+EPOCH_NS = 1_700_000_000 * 10**9     # device clock: ns since its epoch
+NS_PER_SAMPLE = 50_000               # at FS
 
 
 def stream(n=40_000, seed=0):
@@ -20,13 +22,13 @@ def blocks(samples, saturated, sizes, start_index=1000):
     index = 0
     while index < len(samples):
         size = sizes[index % len(sizes)] if isinstance(sizes, list) else sizes
-        yield Block(start_index + index, EPOCH_S + (start_index + index) / FS, FS,
-                    samples[index:index + size], saturated[index:index + size])
+        yield SampleBlock(start_index + index, EPOCH_NS + (start_index + index) * NS_PER_SAMPLE, FS,
+                          samples[index:index + size], saturated[index:index + size])
         index += size
 
 
 def window_at(index, n, start_index=1000, **kw):
-    return RingdownWindow(start_s=EPOCH_S + (start_index + index) / FS, duration_s=n / FS, **kw)
+    return RingdownWindow(start_ns=EPOCH_NS + (start_index + index) * NS_PER_SAMPLE, duration_s=n / FS, **kw)
 
 
 @settings(max_examples=60, deadline=None)
@@ -79,7 +81,7 @@ def test_duplicates_are_ignored_and_rate_changes_restart_the_buffer():
     assembler.add_block(first)
     assembler.add_block(second)
     assert assembler.blocks == 2 and assembler.missing_samples == 0
-    faster = Block(5000, EPOCH_S + 1.0, 2 * FS, samples[:100], saturated[:100])
+    faster = SampleBlock(5000, EPOCH_NS + 10**9, 2 * FS, samples[:100], saturated[:100])
     assembler.add_block(faster)
     assert assembler.rate_changes == 1
 

@@ -143,7 +143,7 @@ def differential_half_swing_t(probe, theta0_rad, amplitude_rad):
     device = SimulatedDevice(bare(probe=probe.replace(damping_per_s=0.0), sensors=Sensors(pair),
                                   theta0_rad=theta0_rad))
     device.pluck(amplitude_rad)
-    difference = np.subtract(*device.read(2000).samples_t.T)
+    difference = np.subtract(*device.read(2000).samples.samples_t.T)
     return 0.5 * np.ptp(difference)
 
 
@@ -349,7 +349,7 @@ def test_one_read_equals_two_reads_noise_included():
     for cuts in ((4000,), (1500, 2500)):
         device = SimulatedDevice(scenario)
         device.set_coils(scenario.setup.currents_a(0.0, 2.0), P.f00_hz)
-        blocks.append(np.concatenate([device.read(n).samples_t for n in cuts]))
+        blocks.append(np.concatenate([device.read(n).samples.samples_t for n in cuts]))
     np.testing.assert_array_equal(blocks[0], blocks[1])
 
 

@@ -31,6 +31,7 @@ from mows.device.backends import SimBackend
 from mows.device.session import DeviceSession, SessionConfig
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
+from mows.estimate.ringdown import fit_ringdown
 
 GOAL_SHARE = 0.10
 BLOCK_S = 0.025  # the driver's default block, and the piece in which it reads the simulator
@@ -59,7 +60,8 @@ def session_share(duration_s: float) -> tuple[float, int]:
     """CPU share of the paced sim backend and session in this process; and the blocks made."""
     scenario = load_scenario()
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(), chunk_s=BLOCK_S)
-    session = DeviceSession(backend, SessionConfig(BLOCK_S, CycleSettings(), scenario.setup, CurrentCap(), 112.5))
+    session = DeviceSession(backend, SessionConfig(BLOCK_S, CycleSettings(), scenario.setup, CurrentCap(), 112.5,
+                                                   fit_ringdown))
     session.step(1.0)  # the compiled kernel's first call
     blocks = 0
     start_cpu, start_wall = _cpu_s(), time.monotonic()

@@ -16,6 +16,7 @@ from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePai
 from mows.lab.table import MeasurementTable
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.estimate.ringdown import FitOptions
+from mows.records.stamps import NS_PER_S
 from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
 from mows.sweep.decompose import SweepPoint, SweepRecord
 
@@ -74,5 +75,5 @@ def write_table(path, fits, probe: Probe) -> None:
     """The OK fits as a model-lab table (:meth:`mows.sweep.decompose.SweepRecord.table_columns`: each
     ring-down's start swing is the stop amplitude pooled over the fits that measured θmax)."""
     record = SweepRecord([SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz,
-                                              window.start_s) for window, fit in fits])
+                                              window.start_ns / NS_PER_S) for window, fit in fits])
     MeasurementTable(record.table_columns(), str(path)).to_csv(path)

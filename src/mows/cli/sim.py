@@ -2,7 +2,7 @@
 
 For every θ0 and repeat: turn, let the scenario's gap pass, excite, record the ring-down
 (:func:`mows.sim.simulator.simulate_cycle`). With ``--fit`` each ring-down is fitted
-as the estimator node does (:func:`mows.estimate.ringdown.fit_cycle`: the lever-aware pickup) and compared with the truth from the full potential
+as the estimator node does (:func:`mows.lab.synth.fit_cycle`: the lever-aware pickup) and compared with the truth from the full potential
 (:meth:`mows.sim.simulator.CycleRecord.ringdown_frequency_hz`).
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from mows.estimate.ringdown import fit_cycle
+    from mows.lab.synth import fit_cycle
     from mows.sim.simulator import SimulatedDevice, simulate_cycle
 
     scenario = load_scenario(args.scenario)
@@ -72,7 +72,7 @@ def _arrays(records) -> dict:
         "theta0_rad": np.array([r.theta0_rad for r in records]),
         "frequency_hz": np.array([r.frequency_hz for r in records]),
         "currents_a": np.stack([r.currents_a for r in records]),
-        "first_sample_index": np.array([r.block.first_sample_index for r in records]),
+        "first_sample_index": np.array([r.block.samples.first_sample_index for r in records]),
         "coil_off_index": np.array([r.coil_off_index for r in records]),
         "samples_t": np.stack([r.samples_t for r in records]),
         "saturated": np.stack([r.saturated for r in records]),

@@ -3,6 +3,7 @@ real time (``sim``), a device on a serial port (``serial``), a recorded bag (``b
 from __future__ import annotations
 
 import collections
+import dataclasses
 import itertools
 import math
 import os
@@ -18,11 +19,12 @@ from mows.physics.coils import CurrentCap
 from mows.device.cycle import Phase, PhaseEvent
 from mows.device.clock import DeviceClock
 from mows.device.interface import (Backend, CoilCommand, Command, CommandResult, DeviceFault, LinkEvent,
-                                   NotExciting, SampleChunk, check_coil_command)
+                                   NotExciting, check_coil_command)
 from mows.device.scheduled import ScheduledDevice
 from mows.device.serial_link import SerialLink
 from mows.device.framing import Ack, Coils, DeviceInfo, Frame, Orientation, Samples, Status
-from mows.sim.simulator import SampleBlock, SimulatedDevice
+from mows.records.samples import SampleBlock
+from mows.sim.simulator import SimulatedBlock, SimulatedDevice
 
 # The simulator is read in pieces of at least this: each read has a fixed cost (~0.4 ms), and
 # reads woken from sleep run on cold caches, so 25 ms pieces cost half of what 10 ms ones do.
@@ -39,9 +41,9 @@ def simulated_device_info(device: ScheduledDevice) -> DeviceInfo:
                       device.cap.limit_a, math.inf)
 
 
-def chunk_of(block: SampleBlock, clock: DeviceClock) -> SampleChunk:
-    return SampleChunk(block.first_sample_index, clock.stamp_ns(block.first_sample_index), block.samples_t,
-                       block.saturated)
+def stamped(block: SimulatedBlock, clock: DeviceClock) -> SampleBlock:
+    """The simulator's samples on the device clock ``clock``."""
+    return dataclasses.replace(block.samples, stamp_ns=clock.stamp_ns(block.samples.first_sample_index))
 
 
 class SimBackend(Backend):
@@ -75,7 +77,7 @@ class SimBackend(Backend):
         with self._lock:
             items, self._results = self._results, []
             if due - self.device.next_index >= self._chunk:
-                items += [chunk_of(block, self.clock) for block in self.device.read_until(due)]
+                items += [stamped(block, self.clock) for block in self.device.read_until(due)]
         return items
 
     def send(self, command: Command) -> None:
@@ -156,13 +158,13 @@ class SerialBackend(Backend):
             return []
         return [DeviceFault(f"the device's watchdog switched the coils off (trip {status.watchdog_trips})")]
 
-    def _chunk(self, frame: Frame) -> list[SampleChunk]:
+    def _chunk(self, frame: Frame) -> list[SampleBlock]:
         if not self._up:
             self.samples_before_info += 1
             return []
         body = frame.body
-        return [SampleChunk(body.first_sample_index, frame.timestamp_ns, body.counts * self.info.resolution_t,
-                            body.saturated)]
+        return [SampleBlock(body.first_sample_index, frame.timestamp_ns, self.info.sample_rate_hz,
+                            body.counts * self.info.resolution_t, body.saturated)]
 
     def _result(self, ack: Ack) -> list[CommandResult]:
         with self._lock:
@@ -283,14 +285,15 @@ class BagBackend(Backend):
         self.replayed += 1
         return [item]
 
-    def _chunk(self, block) -> SampleChunk:
+    def _chunk(self, block) -> SampleBlock:
         lengths = {len(c.field_t) for c in block.channels} | {len(c.saturated) for c in block.channels}
         if len(lengths) != 1 or len(block.channels) != self.info.n_channels or block.sample_rate_hz != \
                 self.info.sample_rate_hz:
             raise ValueError("a block whose channels or rate do not match the recording's")
         stamp = stamps.nanoseconds(block.header.stamp)
         self._anchor = (block.first_sample_index, stamp)
-        return SampleChunk(block.first_sample_index, stamp, np.stack([c.field_t for c in block.channels], axis=1),
+        return SampleBlock(block.first_sample_index, stamp, self.info.sample_rate_hz,
+                           np.stack([c.field_t for c in block.channels], axis=1),
                            np.stack([c.saturated for c in block.channels], axis=1).astype(bool))
 
     def _event(self, state) -> PhaseEvent:

@@ -8,38 +8,29 @@ Nothing is interpolated or filled in.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 
-from mows.device.interface import SampleChunk
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class Block(SampleChunk):
-    """One published block: a chunk with the block's ``sequence`` number."""
-
-    sequence: int
+from mows.records.samples import SampleBlock
 
 
 class BlockAssembler:
-    """Chunks in, blocks of ``block_samples`` out (``block_samples`` may change between blocks)."""
+    """Sample blocks as the device sent them in, blocks of ``block_samples`` numbered by ``sequence`` out (``block_samples`` may change between blocks)."""
 
-    def __init__(self, block_samples: int, sample_rate_hz: float):
+    def __init__(self, block_samples: int):
         self.block_samples = int(block_samples)
-        self.sample_rate_hz = float(sample_rate_hz)
         self.gaps = 0               # discontinuities of the sample index
         self.missing_samples = 0    # samples lost in them (forward jumps)
         self.restarts = 0           # jumps backwards: the device's counter started again
         self.samples = 0
         self.saturated_samples = 0  # samples with any channel saturated
-        self._parts: list[SampleChunk] = []
+        self._parts: list[SampleBlock] = []
         self._pending = 0
         self._expected: int | None = None
         self._sequence = 0
 
-    def add(self, chunk: SampleChunk) -> list[Block]:
+    def add(self, chunk: SampleBlock) -> list[SampleBlock]:
         """The blocks completed by ``chunk``."""
         blocks = []
         if self._expected is not None and chunk.first_sample_index != self._expected:
@@ -54,7 +45,7 @@ class BlockAssembler:
             blocks.append(self._cut(self.block_samples))
         return blocks
 
-    def flush(self) -> list[Block]:
+    def flush(self) -> list[SampleBlock]:
         """The block being filled, short, if it holds any samples."""
         return [self._cut(self._pending)] if self._pending else []
 
@@ -67,28 +58,20 @@ class BlockAssembler:
         self.missing_samples += jump
         return max(1, math.ceil(jump / self.block_samples))
 
-    def _cut(self, n: int) -> Block:
+    def _cut(self, n: int) -> SampleBlock:
         """A block of the first ``n`` pending samples."""
-        first = self._parts[0]
         taken, rest, need = [], [], n
         for part in self._parts:
             if need >= len(part):
                 taken.append(part)
                 need -= len(part)
             elif need > 0:
-                taken.append(self._slice(part, 0, need))
-                rest.append(self._slice(part, need, len(part)))
+                taken.append(part.rows(0, need))
+                rest.append(part.rows(need, len(part)))
                 need = 0
             else:
                 rest.append(part)
         self._parts, self._pending = rest, self._pending - n
-        block = Block(first.first_sample_index, first.stamp_ns, np.concatenate([p.samples_t for p in taken]),
-                      np.concatenate([p.saturated for p in taken]), self._sequence)
+        block = SampleBlock.concatenate(taken, sequence=self._sequence)
         self._sequence += 1
         return block
-
-    def _slice(self, chunk: SampleChunk, start: int, stop: int) -> SampleChunk:
-        """Rows [start, stop) of ``chunk``, restamped (the device clock is linear in samples)."""
-        return SampleChunk(chunk.first_sample_index + start,
-                           chunk.stamp_ns + round(start * 1e9 / self.sample_rate_hz),
-                           chunk.samples_t[start:stop], chunk.saturated[start:stop])

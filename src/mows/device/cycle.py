@@ -3,7 +3,7 @@
 One cycle at one orientation θ0: turn the probe and let it settle; excite at the current
 resonance estimate with the coil setup's orientation-dependent currents; switch off and
 record the free ring-down; the first ``tuning_steps`` ring-downs are fitted
-(:func:`mows.estimate.ringdown.fit_ringdown`) and retune the excitation frequency, the next
+(by the fit function the sequencer is handed, the estimator's ring-down fit in the driver) and retune the excitation frequency, the next
 ``repeats`` are the measurements, with a pause of ``gap_s`` between ring-down and excitation.
 
 Time is the device's sample index. Every command is scheduled at a sample, and every phase
@@ -27,9 +27,10 @@ from typing import Callable, Generator
 import numpy as np
 
 from mows.physics.coils import CoilSetup, CurrentCap
-from mows.device.interface import CoilCommand, Command, CommandResult, LinkEvent, OrientationCommand, SampleChunk
+from mows.device.interface import CoilCommand, Command, CommandResult, LinkEvent, OrientationCommand
 from mows.device.duty import DutyCycleLimit
-from mows.estimate.ringdown import FitStatus, RingdownFit, failure, fit_ringdown
+from mows.records.results import Result
+from mows.records.samples import SampleBlock
 
 
 class Phase(enum.IntEnum):
@@ -96,6 +97,28 @@ def _require(name: str, value, ok: bool, allowed: str) -> None:
         raise ValueError(f"{name} = {value!r} must be {allowed}")
 
 
+# (ring-down samples (n, channels) T, sample rate Hz, θ0 rad, expected frequency Hz,
+#  saturated=(n, channels) flags) → a result with ``frequency_hz``: the estimator's
+# fit_ringdown, handed in by whoever builds the sequencer (the device layer does not fit).
+TuningFit = Callable[..., Result]
+
+
+class TuningStatus(enum.Enum):
+    SAMPLES_LOST = "samples of the tuning ring-down were lost"
+
+
+@dataclasses.dataclass(frozen=True)
+class LostTuning:
+    """A tuning ring-down that was not fitted: some of its samples never arrived."""
+
+    status: TuningStatus = TuningStatus.SAMPLES_LOST
+    ok: bool = False
+    frequency_hz: float = math.nan
+
+    def report(self) -> str:
+        return self.status.value
+
+
 @dataclasses.dataclass(frozen=True)
 class CycleRequest:
     """One cycle at ``theta0_rad``; None takes the value from the settings."""
@@ -151,10 +174,10 @@ class _Recording:
 
     def __init__(self, start: int, end: int):
         self.start, self.end = start, end
-        self._parts: list[SampleChunk] = []
+        self._parts: list[SampleBlock] = []
         self._next = start
 
-    def add(self, chunk: SampleChunk) -> None:
+    def add(self, chunk: SampleBlock) -> None:
         lo, hi = max(chunk.first_sample_index, self.start), min(chunk.end_index, self.end)
         # Samples after a gap are not kept: the recording stays incomplete.
         if lo < hi and lo == self._next:
@@ -193,8 +216,7 @@ class CycleSequencer:
     """
 
     def __init__(self, settings: CycleSettings, setup: CoilSetup, cap: CurrentCap, sample_rate_hz: float,
-                 frequency_hz: float, lead_samples: int = 0,
-                 fit: Callable[..., RingdownFit] = fit_ringdown):
+                 frequency_hz: float, lead_samples: int = 0, *, fit: TuningFit):
         self.settings = settings
         self.setup = setup
         self.cap = cap
@@ -245,7 +267,7 @@ class CycleSequencer:
         self._advance(None)
         return self._take_step()
 
-    def on_samples(self, chunk: SampleChunk) -> Step:
+    def on_samples(self, chunk: SampleBlock) -> Step:
         self._anchor = (chunk.first_sample_index, chunk.stamp_ns)
         self._next_index = chunk.end_index
         for recording in self._recordings:
@@ -349,10 +371,10 @@ class CycleSequencer:
             message += f"; {len(failed)} of {len(fits)} tuning fits failed ({failed[-1].report()})"
         return CycleOutcome(True, message, c.cycle_id, self.frequency_hz, recorded, tuple(fits))
 
-    def _tune(self, c: _Cycle, recording: _Recording) -> RingdownFit:
+    def _tune(self, c: _Cycle, recording: _Recording) -> Result:
         """Fit a tuning ring-down; a good fit becomes the excitation frequency."""
         if not recording.complete:
-            return failure(FitStatus.DATA_GAP, "samples of the tuning ring-down were lost")
+            return LostTuning()
         samples, saturated = recording.arrays()
         fit = self._fit(samples, self.sample_rate_hz, c.theta0_rad, self.frequency_hz, saturated=saturated)
         if fit.ok:

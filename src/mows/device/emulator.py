@@ -161,9 +161,9 @@ class DeviceEmulator:
             self._watchdog(end)
             first = self.device.next_index
             blocks = self.device.read_until(end)
-            samples = np.concatenate([b.samples_t for b in blocks])
+            samples = np.concatenate([b.samples.samples_t for b in blocks])
             counts = np.round(samples / self.info.resolution_t).astype(np.int32)
-            self._send(Samples(first, counts, np.concatenate([b.saturated for b in blocks])),
+            self._send(Samples(first, counts, np.concatenate([b.samples.saturated for b in blocks])),
                        self.clock.stamp_ns(first))
             if end >= self._next_status:
                 self._send(self.status(), self.clock.stamp_ns(end))

@@ -2,38 +2,17 @@
 
 The driver sends commands that take effect at a device sample index and learns, from a
 :class:`CommandResult`, the sample at which each one did (or why it was refused). It polls
-for what the device has sent since: :class:`SampleChunk` runs of consecutive samples stamped
-on the device clock, command results, and :class:`LinkEvent` changes of the link.
+for what the device has sent since: :class:`~mows.records.samples.SampleBlock` runs of consecutive samples
+stamped on the device clock, command results, and :class:`LinkEvent` changes of the link.
 """
 from __future__ import annotations
 
 import abc
 import dataclasses
 
-import numpy as np
 
 from mows.physics.coils import CurrentCap
 from mows.device.framing import DeviceInfo
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class SampleChunk:
-    """Consecutive samples: row i was taken at ``stamp_ns`` + i / sample rate on the device
-    clock. ``samples_t`` (n, channels) tesla; ``saturated`` (n, channels) flags samples
-    clipped at the range limit (their value is not a measurement)."""
-
-    first_sample_index: int
-    stamp_ns: int
-    samples_t: np.ndarray
-    saturated: np.ndarray
-
-    def __len__(self) -> int:
-        return self.samples_t.shape[0]
-
-    @property
-    def end_index(self) -> int:
-        """The sample index after the last one."""
-        return self.first_sample_index + len(self)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,7 +87,7 @@ class Backend(abc.ABC):
 
     @abc.abstractmethod
     def poll(self, timeout_s: float) -> list:
-        """What the device sent since the last poll (SampleChunk, CommandResult, LinkEvent,
+        """What the device sent since the last poll (SampleBlock, CommandResult, LinkEvent,
         DeviceFault and, from a recording, the recorded cycle.PhaseEvent), waiting up to
         ``timeout_s`` for something to arrive."""
 

@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 
 from mows.physics.coils import CurrentCap
-from mows.sim.simulator import SampleBlock, SimulatedDevice
+from mows.sim.simulator import SimulatedBlock, SimulatedDevice
 
 COIL_LOG_LENGTH = 10000  # coil changes kept (two per excitation)
 
@@ -106,7 +106,7 @@ class ScheduledDevice:
         self._arrivals += 1
         return applied
 
-    def read_until(self, end_index: int) -> list[SampleBlock]:
+    def read_until(self, end_index: int) -> list[SimulatedBlock]:
         """Take samples up to ``end_index`` (exclusive), applying each command at its sample."""
         blocks = []
         while self.next_index < end_index:
@@ -118,11 +118,11 @@ class ScheduledDevice:
             blocks.append(block)
         return blocks
 
-    def _log_coils(self, block: SampleBlock) -> None:
+    def _log_coils(self, block: SimulatedBlock) -> None:
         changes = np.flatnonzero(np.diff(block.coils_on.astype(np.int8), prepend=np.int8(self._logged_on)))
         for i in changes:
             self._logged_on = bool(block.coils_on[i])
-            self.coil_log.append((block.first_sample_index + int(i), self._logged_on))
+            self.coil_log.append((block.samples.first_sample_index + int(i), self._logged_on))
 
     def _drive(self, amplitudes_a: tuple, frequency_hz: float) -> None:
         if any(amplitudes_a):

@@ -16,9 +16,11 @@ import time
 from typing import Callable
 
 from mows.physics.coils import CoilSetup, CurrentCap
-from mows.device.cycle import CycleOutcome, CycleRequest, CycleSequencer, CycleSettings, PhaseEvent, Step
-from mows.device.blocks import Block, BlockAssembler
-from mows.device.interface import Backend, CommandResult, DeviceFault, LinkEvent, SampleChunk
+from mows.device.cycle import (CycleOutcome, CycleRequest, CycleSequencer, CycleSettings, PhaseEvent, Step,
+                               TuningFit)
+from mows.device.blocks import BlockAssembler
+from mows.device.interface import Backend, CommandResult, DeviceFault, LinkEvent
+from mows.records.samples import SampleBlock
 
 STALL_TIMEOUT_S = 2.0      # a running cycle fails when no samples arrive for this long (host time)
 RATE_WINDOW_S = 5.0        # the achieved sample rate is measured over this much host time
@@ -39,6 +41,7 @@ class SessionConfig:
     setup: CoilSetup
     cap: CurrentCap
     frequency_hz: float          # the first resonance estimate
+    fit: TuningFit               # fits the tuning ring-downs (the estimator's fit_ringdown)
 
 
 class DeviceSession:
@@ -82,7 +85,7 @@ class DeviceSession:
             return output
 
     def _take(self, item, output: Output) -> None:
-        if isinstance(item, SampleChunk):
+        if isinstance(item, SampleBlock):
             self._count_arrival(len(item))
             output.blocks += self.assembler.add(item)
             if self.sequencer is not None:
@@ -113,12 +116,11 @@ class DeviceSession:
 
     def _device_known(self) -> None:
         info = self.backend.info
-        self.assembler = BlockAssembler(round(self.config.block_duration_s * info.sample_rate_hz),
-                                        info.sample_rate_hz)
+        self.assembler = BlockAssembler(round(self.config.block_duration_s * info.sample_rate_hz))
         if self.backend.can_excite:
             c = self.config
             self.sequencer = CycleSequencer(c.settings, c.setup, c.cap, info.sample_rate_hz, c.frequency_hz,
-                                            self.backend.command_lead_samples)
+                                            self.backend.command_lead_samples, fit=c.fit)
 
     def _count_arrival(self, n: int) -> None:
         now = self._monotonic()
@@ -176,7 +178,7 @@ class DeviceSession:
         with self._lock:
             self.config = dataclasses.replace(self.config, block_duration_s=block_duration_s)
             if self.assembler is not None:
-                self.assembler.block_samples = round(block_duration_s * self.assembler.sample_rate_hz)
+                self.assembler.block_samples = round(block_duration_s * self.backend.info.sample_rate_hz)
 
     def set_cycle_settings(self, settings: CycleSettings) -> None:
         """Settings for the next cycle (a running one keeps its own)."""

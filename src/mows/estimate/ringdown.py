@@ -355,18 +355,6 @@ def _variable_projection(problem: _Problem, q, iterations, tol_chi2, damping=1e-
 SETTLE_S = 0.003  # the coil current's decay after switch-off, left out of a fit by default
 
 
-def fit_cycle(cycle, scenario, paper_model: bool = False, settle_s: float = SETTLE_S) -> "RingdownFit":
-    """Fit the ring-down of a simulated cycle (:class:`mows.sim.simulator.CycleRecord`) as the
-    estimator node does: the lever-aware pickup of ``scenario``'s probe seen by its fluxgates at
-    the commanded θ0 (``paper_model``: Eq. S11 instead), the expected frequency the one the
-    cycle excited at, the probe's damping as the start."""
-    options = (FitOptions() if paper_model
-               else FitOptions.lever_aware(scenario.sensors.pair, scenario.probe, cycle.theta0_rad))
-    start = cycle.coil_off_index
-    return fit_ringdown(cycle.samples_t[start:], cycle.sample_rate_hz, cycle.theta0_rad, cycle.frequency_hz,
-                        cycle.saturated[start:], options, scenario.probe.damping_per_s, settle_s)
-
-
 def usable_window(saturated: np.ndarray, settle_samples: int = 0):
     """(start, stop) of the longest run of samples after ``settle_samples`` in which no channel
     is saturated; the coil-on tail and any clipped stretch are thereby excluded."""

@@ -20,41 +20,16 @@ import math
 import numpy as np
 
 from mows.records import stamps
+from mows.records.samples import SampleBlock
 from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure, fit_ringdown
 
 
 @dataclasses.dataclass(frozen=True)
-class Block:
-    """Consecutive samples from the device: ``samples_t`` and ``saturated`` are (n, channels).
-    A block that could not have come from a device raises ValueError."""
-
-    first_sample_index: int
-    t0_s: float
-    sample_rate_hz: float
-    samples_t: np.ndarray
-    saturated: np.ndarray
-
-    def __post_init__(self):
-        if not (math.isfinite(self.sample_rate_hz) and self.sample_rate_hz > 0):
-            raise ValueError(f"sample rate {self.sample_rate_hz!r} Hz is not a positive number")
-        if not math.isfinite(self.t0_s):
-            raise ValueError(f"stamp {self.t0_s!r} s is not a time")
-        shape = np.shape(self.samples_t)
-        if len(shape) != 2 or shape[1] == 0:
-            raise ValueError(f"samples of shape {shape}: expected (samples, channels ≥ 1)")
-        if np.shape(self.saturated) != shape:
-            raise ValueError(f"saturation flags of shape {np.shape(self.saturated)} for samples of shape {shape}")
-
-    @property
-    def stop_index(self) -> int:
-        return self.first_sample_index + len(self.samples_t)
-
-
-@dataclasses.dataclass(frozen=True)
 class RingdownWindow:
-    """An announced free ring-down: coils off at ``start_s`` (device clock) for ``duration_s``."""
+    """An announced free ring-down: coils off at ``start_ns`` (device clock, integer ns) for
+    ``duration_s``."""
 
-    start_s: float
+    start_ns: int
     duration_s: float
     cycle_id: int = 0
     repeat_index: int = 0
@@ -63,25 +38,25 @@ class RingdownWindow:
     tuning: bool = False        # a frequency-tuning ring-down, not a measurement
 
     def __post_init__(self):
-        if not (math.isfinite(self.start_s) and math.isfinite(self.duration_s) and self.duration_s > 0):
-            raise ValueError(f"ring-down of cycle {self.cycle_id} announced at {self.start_s!r} s for "
+        if not (isinstance(self.start_ns, (int, np.integer)) and math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise ValueError(f"ring-down of cycle {self.cycle_id} announced at {self.start_ns!r} ns for "
                              f"{self.duration_s!r} s: not a window")
 
 
-def block_from_message(message) -> Block:
+def block_from_message(message) -> SampleBlock:
     """A ``mows_msgs/MagnetometerBlock`` (rclpy's or rosbags') as a :class:`Block`; ValueError
     when it does not describe one (channels of unequal length, no channels, a bad rate)."""
     if not message.channels:
         raise ValueError("a block without channels")
     samples = np.stack([np.asarray(c.field_t, np.float64) for c in message.channels], axis=1)
     saturated = np.stack([np.asarray(c.saturated, bool) for c in message.channels], axis=1)
-    return Block(int(message.first_sample_index), stamps.seconds(message.header.stamp),
-                 float(message.sample_rate_hz), samples, saturated)
+    return SampleBlock(int(message.first_sample_index), stamps.nanoseconds(message.header.stamp),
+                       float(message.sample_rate_hz), samples, saturated, int(message.sequence))
 
 
 def window_from_message(message) -> RingdownWindow:
     """A ``mows_msgs/ExcitationState`` of phase RINGDOWN as a :class:`RingdownWindow`."""
-    return RingdownWindow(stamps.seconds(message.header.stamp), float(message.planned_duration_s),
+    return RingdownWindow(stamps.nanoseconds(message.header.stamp), float(message.planned_duration_s),
                           int(message.cycle_id), int(message.repeat_index), float(message.theta0_rad),
                           float(message.frequency_hz), bool(message.tuning))
 
@@ -116,7 +91,7 @@ class SegmentAssembler:
         if not (math.isfinite(buffer_s) and buffer_s > 0):
             raise ValueError(f"buffer_s = {buffer_s!r} must be a positive number of seconds")
         self.buffer_s = buffer_s
-        self._blocks: collections.deque[Block] = collections.deque()
+        self._blocks: collections.deque[SampleBlock] = collections.deque()
         self._pending: list[_Pending] = []
         self.blocks = 0
         self.missing_samples = 0
@@ -124,16 +99,16 @@ class SegmentAssembler:
         self.late_windows = 0
 
     # --- input --------------------------------------------------------------------------
-    def add_block(self, block: Block) -> list[Segment]:
+    def add_block(self, block: SampleBlock) -> list[Segment]:
         """Take a block; return the segments it completes."""
         newest = self._blocks[-1] if self._blocks else None
         if newest is not None and (block.sample_rate_hz != newest.sample_rate_hz
                                    or block.samples_t.shape[1] != newest.samples_t.shape[1]):
             self.rate_changes += 1
             self._blocks.clear()
-        elif newest is not None and block.first_sample_index > newest.stop_index:
-            self.missing_samples += block.first_sample_index - newest.stop_index
-        elif newest is not None and block.first_sample_index < newest.stop_index:
+        elif newest is not None and block.first_sample_index > newest.end_index:
+            self.missing_samples += block.first_sample_index - newest.end_index
+        elif newest is not None and block.first_sample_index < newest.end_index:
             return []   # a repeat or an out-of-order block: the samples are already here or gone
         self._blocks.append(block)
         self.blocks += 1
@@ -150,12 +125,11 @@ class SegmentAssembler:
 
     # --- assembly -----------------------------------------------------------------------
     @staticmethod
-    def _index_range(window: RingdownWindow, reference: Block | None):
+    def _index_range(window: RingdownWindow, reference: SampleBlock | None):
         if reference is None:
             return -1, -1   # resolved when the first block arrives
-        fs = reference.sample_rate_hz
-        start = reference.first_sample_index + round((window.start_s - reference.t0_s) * fs)
-        return start, start + max(1, round(window.duration_s * fs))
+        start = reference.index_at(window.start_ns)
+        return start, start + max(1, round(window.duration_s * reference.sample_rate_hz))
 
     def _complete(self) -> list[Segment]:
         newest = self._blocks[-1]
@@ -163,7 +137,7 @@ class SegmentAssembler:
         for pending in self._pending:
             if pending.start_index < 0:
                 pending.start_index, pending.stop_index = self._index_range(pending.window, newest)
-            if pending.stop_index <= newest.stop_index:
+            if pending.stop_index <= newest.end_index:
                 done.append(self._cut(pending))
             else:
                 waiting.append(pending)
@@ -180,7 +154,7 @@ class SegmentAssembler:
         filled = np.zeros(n, bool)
         for block in self._blocks:
             lo = max(block.first_sample_index, pending.start_index)
-            hi = min(block.stop_index, pending.stop_index)
+            hi = min(block.end_index, pending.stop_index)
             if lo < hi:
                 samples[lo - pending.start_index:hi - pending.start_index] = \
                     block.samples_t[lo - block.first_sample_index:hi - block.first_sample_index]
@@ -195,8 +169,8 @@ class SegmentAssembler:
     def _prune(self) -> None:
         """Memory stays bounded: a window older than the buffer completes with missing samples."""
         newest = self._blocks[-1]
-        keep_from = newest.stop_index - round(self.buffer_s * newest.sample_rate_hz)
-        while len(self._blocks) > 1 and self._blocks[0].stop_index <= keep_from:
+        keep_from = newest.end_index - round(self.buffer_s * newest.sample_rate_hz)
+        while len(self._blocks) > 1 and self._blocks[0].end_index <= keep_from:
             self._blocks.popleft()
 
 

@@ -25,7 +25,7 @@ from mows.physics.field import FieldSource
 from mows.lab.table import FIELD, GRADIENT, MeasurementTable, reference_columns
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
-from mows.estimate.ringdown import SETTLE_S, fit_cycle
+from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
 from mows.sim.simulator import SimulatedDevice, simulate_cycle
 from mows.sweep.decompose import SweepPoint, SweepRecord
 
@@ -165,6 +165,18 @@ def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
     return columns, failed
 
 
+def fit_cycle(cycle, scenario, paper_model: bool = False, settle_s: float = SETTLE_S) -> RingdownFit:
+    """Fit the ring-down of a simulated cycle (:class:`mows.sim.simulator.CycleRecord`) as the
+    estimator node does: the lever-aware pickup of ``scenario``'s probe seen by its fluxgates at
+    the commanded θ0 (``paper_model``: Eq. S11 instead), the expected frequency the one the
+    cycle excited at, the probe's damping as the start."""
+    options = (FitOptions() if paper_model
+               else FitOptions.lever_aware(scenario.sensors.pair, scenario.probe, cycle.theta0_rad))
+    start = cycle.coil_off_index
+    return fit_ringdown(cycle.samples_t[start:], cycle.sample_rate_hz, cycle.theta0_rad, cycle.frequency_hz,
+                        cycle.saturated[start:], options, scenario.probe.damping_per_s, settle_s)
+
+
 def _ringdown_point(scenario, cycle, settle_s):
     """The estimator's fit of one simulated ring-down as a :class:`mows.sweep.decompose.SweepPoint`
     (None when the fit fails)."""
@@ -172,4 +184,4 @@ def _ringdown_point(scenario, cycle, settle_s):
     if not fit.ok:
         return None
     return SweepPoint.from_fit(fit, fit.frequency_hz - scenario.probe.f00_hz, fit.frequency_std_hz,
-                               cycle.block.t0_s + cycle.coil_off_index / cycle.sample_rate_hz)
+                               (cycle.block.samples.first_sample_index + cycle.coil_off_index) / cycle.sample_rate_hz)

@@ -53,6 +53,8 @@ from numba import njit
 from scipy import signal as sp_signal
 
 from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, ArcPotential
+from mows.records.samples import SampleBlock
+from mows.records.stamps import NS_PER_S
 
 TWO_PI = 2.0 * math.pi
 
@@ -253,34 +255,30 @@ def pink_filter(sample_rate_hz: float, asd_at_1hz_t_per_rthz: float):
 
 
 # --- what the device returns ---------------------------------------------------------------
-@dataclasses.dataclass(frozen=True)
-class SampleBlock:
-    """Consecutive samples of the device. ``samples_t`` and ``saturated`` are (n, 2), column 0
-    the near sensor; ``coils_on`` (n,); sample i was taken at t0_s + i/sample_rate_hz.
-    ``theta_rad`` and ``theta_dot_rad_per_s`` are the simulation's truth at the samples and
-    ``currents_a`` (n, n_coils) the coil currents."""
+@dataclasses.dataclass(frozen=True, eq=False)
+class SimulatedBlock:
+    """What the device read (``samples``: a :class:`~mows.records.samples.SampleBlock` of both
+    fluxgates, column 0 the near sensor, stamped on a device clock that starts at 0) and the
+    simulation's truth at those samples, which hardware would not know: ``coils_on`` (n,),
+    ``theta_rad`` and ``theta_dot_rad_per_s`` (n,), the coil currents ``currents_a``
+    (n, n_coils)."""
 
-    first_sample_index: int
-    t0_s: float
-    sample_rate_hz: float
-    samples_t: np.ndarray
-    saturated: np.ndarray
+    samples: SampleBlock
     coils_on: np.ndarray
     theta_rad: np.ndarray
     theta_dot_rad_per_s: np.ndarray
     currents_a: np.ndarray
 
-    def __len__(self):
-        return self.samples_t.shape[0]
+    def __len__(self) -> int:
+        return len(self.samples)
 
     @staticmethod
-    def concatenate(blocks) -> "SampleBlock":
+    def concatenate(blocks) -> "SimulatedBlock":
         """One block of consecutive ``blocks``."""
         blocks = list(blocks)
-        first = blocks[0]
-        joined = {f.name: np.concatenate([getattr(b, f.name) for b in blocks])
-                  for f in dataclasses.fields(SampleBlock) if isinstance(getattr(first, f.name), np.ndarray)}
-        return SampleBlock(first.first_sample_index, first.t0_s, first.sample_rate_hz, **joined)
+        truth = {f.name: np.concatenate([getattr(b, f.name) for b in blocks])
+                 for f in dataclasses.fields(SimulatedBlock) if f.name != "samples"}
+        return SimulatedBlock(SampleBlock.concatenate(b.samples for b in blocks), **truth)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -451,7 +449,7 @@ class SimulatedDevice:
         t = np.asarray(sample_indices) / self.sample_rate_hz
         return np.sin(TWO_PI * self._drive_hz * (t - self._drive_t0_s))[:, None] * self._amplitudes_a
 
-    def read(self, n_samples: int) -> SampleBlock:
+    def read(self, n_samples: int) -> SimulatedBlock:
         """The next ``n_samples`` samples of both fluxgates; the probe keeps moving afterwards."""
         first = self.sample_index
         currents = self.currents_at(first + np.arange(n_samples))
@@ -461,8 +459,9 @@ class SimulatedDevice:
         field = (self._pair.pickup_t(positions, moments) + self._env_reading_t
                  + currents @ self._coil_reading_t_per_a + self._noise.draw(first, n_samples))
         readings, saturated = self._pair.digitise(field)
-        return SampleBlock(first, first / self.sample_rate_hz, self.sample_rate_hz, readings, saturated,
-                           np.full(n_samples, self._coils_on), theta, theta_dot, currents)
+        samples = SampleBlock(first, round(first * NS_PER_S / self.sample_rate_hz), self.sample_rate_hz,
+                              readings, saturated)
+        return SimulatedBlock(samples, np.full(n_samples, self._coils_on), theta, theta_dot, currents)
 
     # --- truth ---------------------------------------------------------------------------
     @property
@@ -500,21 +499,21 @@ class CycleRecord:
     theta0_rad: float
     currents_a: np.ndarray
     frequency_hz: float
-    block: SampleBlock
+    block: SimulatedBlock
     coil_off_index: int
     potential: ArcPotential
 
     @property
     def sample_rate_hz(self) -> float:
-        return self.block.sample_rate_hz
+        return self.block.samples.sample_rate_hz
 
     @property
     def samples_t(self) -> np.ndarray:
-        return self.block.samples_t
+        return self.block.samples.samples_t
 
     @property
     def saturated(self) -> np.ndarray:
-        return self.block.saturated
+        return self.block.samples.saturated
 
     @property
     def theta_rad(self) -> np.ndarray:
@@ -552,5 +551,5 @@ def simulate_cycle(device: SimulatedDevice, theta0_rad: float, amplitude_a: floa
     device.coils_off()
     potential = device.potential()
     ringdown = device.read(int(round(ringdown_s * device.sample_rate_hz)))
-    return CycleRecord(float(theta0_rad), currents, frequency, SampleBlock.concatenate([excitation, ringdown]),
+    return CycleRecord(float(theta0_rad), currents, frequency, SimulatedBlock.concatenate([excitation, ringdown]),
                        len(excitation), potential)

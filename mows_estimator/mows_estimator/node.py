@@ -26,7 +26,7 @@ from mows.estimate.axis import estimate_along_axis
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.frequency import frequency_shift_hz
 from mows.physics.probe import Probe
-from mows.estimate.ringdown import FitOptions, FitStatus, failure
+from mows.estimate.ringdown import SETTLE_S, FitOptions, FitStatus, failure
 from mows.precompile import precompile
 from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
 from mows_estimator.messages import estimate_to_msg, fit_to_msg, magnetic_field_msg
@@ -56,7 +56,7 @@ PARAMETERS = (
     ParamSpec("sensor_distance_m", PAPER_DISTANCE_M, "distance from the probe to the near fluxgate, along the "
               "rotation plane's x axis, m", range=(0.005, 2.0)),
     ParamSpec("sensor_spacing_m", PAPER_SPACING_M, "spacing of the two fluxgates, m", range=(0.001, 2.0)),
-    ParamSpec("settle_s", 0.003, "samples right after coil-off that are skipped, s", range=(0.0, 0.1)),
+    ParamSpec("settle_s", SETTLE_S, "samples right after coil-off that are skipped, s", range=(0.0, 0.1)),
     ParamSpec("min_periods", 10.0, "shortest usable ring-down, in periods", range=(2.0, 1000.0)),
     ParamSpec("max_chi2_dof", 25.0, "above this χ²/dof a fit is refused (BAD_FIT)", range=(1.0, 1e6)),
     ParamSpec("buffer_s", 5.0, "seconds of raw samples kept to assemble ring-downs", range=(0.5, 60.0),

@@ -19,7 +19,7 @@ import time
 import numpy as np
 from scipy.optimize import curve_fit
 
-from mows.estimate import ringdown
+from mows.estimate import ringdown, ringdown_problem
 from mows.physics.signal import signal_t
 
 SAMPLE_RATE_HZ = 20_000.0
@@ -51,7 +51,7 @@ class RingdownCase:
         return clean + self.noise_std_t * rng.standard_normal(N_SAMPLES)
 
     def crb_hz(self) -> float:
-        return ringdown.cramer_rao_frequency_hz(N_SAMPLES, SAMPLE_RATE_HZ, FREQUENCY_HZ, DAMPING_PER_S,
+        return ringdown_problem.cramer_rao_frequency_hz(N_SAMPLES, SAMPLE_RATE_HZ, FREQUENCY_HZ, DAMPING_PER_S,
                                                 AMPLITUDE_RAD, PHASE_RAD, self.theta0_rad, KAPPA_T,
                                                 self.noise_std_t)
 

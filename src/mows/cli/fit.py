@@ -15,7 +15,7 @@ from mows.device.cycle import Phase
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.lab.table import MeasurementTable
 from mows.physics.probe import PAPER_PROBE, Probe
-from mows.estimate.ringdown import FitOptions
+from mows.estimate.ringdown import SETTLE_S, FitOptions
 from mows.records.stamps import NS_PER_S
 from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
 from mows.sweep.decompose import SweepPoint, SweepRecord
@@ -28,7 +28,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--excitation-topic", default="/mows/excitation")
     parser.add_argument("--paper-model", action="store_true", help="fit Eq. S11 (a magnet turning in place)")
     parser.add_argument("--tuning", action="store_true", help="also fit the tuning ring-downs")
-    parser.add_argument("--settle-s", type=float, default=0.003, help="samples skipped after coil-off, s")
+    parser.add_argument("--settle-s", type=float, default=SETTLE_S, help="samples skipped after coil-off, s")
     parser.add_argument("--sensor-distance-m", type=float, default=PAPER_DISTANCE_M,
                         help="probe to near fluxgate along the plane's x axis, m (as the estimator's parameter)")
     parser.add_argument("--sensor-spacing-m", type=float, default=PAPER_SPACING_M, help="fluxgate spacing, m")

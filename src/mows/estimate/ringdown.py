@@ -1,4 +1,4 @@
-"""Ring-down segmentation and the fit of Eqs. S2, S11, S12 at the Cramér–Rao bound.
+"""The fit of one free ring-down, Eqs. S2, S11, S12, at the Cramér–Rao bound.
 
 Model of one channel:
 
@@ -38,7 +38,10 @@ import math
 
 import numpy as np
 
-from mows.estimate.ringdown_model import evaluate_model, levenberg_marquardt, split_pickup
+from mows.estimate.ringdown_model import paper_pickup
+from mows.estimate.ringdown_problem import (AMPLITUDE, NONLINEAR, RingdownProblem, evaluate, fisher_information,
+                                           scaled_inverse, variable_projection)
+from mows.estimate.ringdown_start import start_candidates, white_noise_std
 
 TWO_PI = 2.0 * math.pi
 
@@ -115,12 +118,6 @@ class FitOptions:
         return paper_pickup(theta0_rad, self.sensor_direction)
 
 
-def paper_pickup(theta0_rad: float, direction=(0.0, 1.0)) -> np.ndarray:
-    """Eq. S11 as a pickup series: 2a·cos θ − b·sin θ = Re((2a + ib)·e^(iθ)), θ = θ0 + x."""
-    a, b = direction
-    return np.array([0.0, complex(2.0 * a, b) * complex(math.cos(theta0_rad), math.sin(theta0_rad))])
-
-
 @dataclasses.dataclass
 class RingdownFit:
     """Result of :func:`fit_ringdown`. SI units; every number is NaN unless status is OK."""
@@ -165,10 +162,6 @@ def failure(status: FitStatus, message: str, **known) -> RingdownFit:
     return RingdownFit(status=status, message=message, **known)
 
 
-# --- the model ---------------------------------------------------------------------------
-NONLINEAR = ("frequency_hz", "damping_per_s", "amplitude_rad", "phase_rad")
-
-
 def _parameter_names(n_channels, theta0_free):
     names = list(NONLINEAR) + (["theta0_rad"] if theta0_free else [])
     for c in range(n_channels):
@@ -177,182 +170,10 @@ def _parameter_names(n_channels, theta0_free):
     return names
 
 
-@dataclasses.dataclass
-class _Shape:
-    """g(x(t)) and dg/dq at the samples (:mod:`mows.estimate.ringdown_model`)."""
-
-    g: np.ndarray          # (n,)
-    dg_dq: np.ndarray      # (len(q), n)
-
-
-@dataclasses.dataclass(frozen=True)
-class _Problem:
-    """Data and fixed settings of one fit: y is (C, n), uniformly sampled every ``dt``."""
-
-    y: np.ndarray
-    weights: np.ndarray      # 1/σ per channel
-    dt: float                # sample interval, s (t = 0 at the first sample)
-    theta0: float
-    pickup: np.ndarray       # C_k of g (complex); with θ0 free, the series at θ0 = 0
-    theta0_free: bool
-
-    def subsampled(self, step: int) -> "_Problem":
-        return dataclasses.replace(self, y=np.ascontiguousarray(self.y[:, ::step]), dt=self.dt * step)
-
-
-@dataclasses.dataclass
-class _Step:
-    """Everything known at one parameter vector q: the shape, κ and B_DC per channel
-    (``coef``, (C, 2)) and the weighted cost."""
-
-    q: np.ndarray
-    shape: _Shape
-    coef: np.ndarray
-    residual: np.ndarray       # (C, n), unweighted
-    cost: float                # Σ_c (w_c·|r_c|)²
-
-
-def _evaluate(problem: _Problem, q: np.ndarray, derivatives: bool = True) -> _Step:
-    """Variable projection at q (Golub–Pereyra, with Kaufman's Jacobian): κ and B_DC by linear
-    least squares, the residual and the projected normal equations of q
-    (:func:`mows.estimate.ringdown_model.normal_equations`, where the numerics are explained)."""
-    n_ch, n = problem.y.shape
-    p = q.size
-    cr, ci = split_pickup(problem.pickup)
-    g, m = np.empty(n), np.empty((p if derivatives else 0, n))
-    residual, coef = np.empty((n_ch, n)), np.empty((n_ch, 2))
-    jtj, jtr = np.zeros((p, p)), np.zeros(p)
-    cost = evaluate_model(np.asarray(q, float), problem.dt, cr, ci, problem.theta0_free, problem.y, problem.weights,
-                          derivatives, g, m, residual, coef, jtj, jtr)
-    return _Step(q, _Shape(g, m), coef, residual, float(cost))
-
-
-# --- noise level and the start ----------------------------------------------------------
-def white_noise_std(y: np.ndarray) -> float:
-    """White-noise σ per sample from the third difference, robust to outliers.
-
-    The third difference multiplies a tone at f by (2·sin(πf/fs))³ ≈ 4e-5 for the probe at
-    20 kS/s, so the ring-down itself does not leak in, while white noise of variance σ²
-    comes out as zero-median noise of variance 20σ² (1² + 3² + 3² + 1²); its median absolute
-    value is 0.6745 of its standard deviation.
-    """
-    third = y[3:] - y[:-3] + 3.0 * (y[1:-2] - y[2:-1])
-    return float(np.median(np.abs(third))) / (0.6745 * math.sqrt(20.0))
-
-
-@dataclasses.dataclass
-class _Peak:
-    frequency_hz: float
-    power: float
-    phase_rad: float
-
-
-def _windowed_spectrum(y, fs, pad):
-    spectrum = np.fft.rfft((y - y.mean()) * np.hanning(y.size), pad)
-    return spectrum, np.fft.rfftfreq(pad, 1.0 / fs)
-
-
-def _spectral_peak(spectrum, power, freqs, low_hz, high_hz, bin_hz):
-    """Strongest line in [low, high], refined by Gaussian (log-parabolic) interpolation."""
-    band = np.flatnonzero((freqs >= low_hz) & (freqs <= high_hz))
-    if band.size < 3:
-        return None
-    k = band[np.argmax(power[band])]
-    k = min(max(k, 1), power.size - 2)
-    lp = np.log(power[k - 1:k + 2] + 1e-300)
-    denom = lp[0] - 2 * lp[1] + lp[2]
-    shift = 0.5 * (lp[0] - lp[2]) / denom if denom < 0 else 0.0
-    return _Peak(freqs[k] + shift * bin_hz, power[k], float(np.angle(spectrum[k])))
-
-
-def _start_candidates(y, fs, expected_hz, options, damping_guess):
-    """Starting points (f, δ, θmax, φ) from the spectrum; the best of them is refined."""
-    pad = 1 << int(math.ceil(math.log2(4 * y.size)))
-    lo, hi = expected_hz * (1 - options.search_fraction), expected_hz * (1 + options.search_fraction)
-    spectrum, freqs = _windowed_spectrum(y, fs, pad)
-    power = np.abs(spectrum) ** 2
-    p1 = _spectral_peak(spectrum, power, freqs, lo, hi, fs / pad)
-    p2 = _spectral_peak(spectrum, power, freqs, 2 * lo, 2 * hi, fs / pad)
-    floor = np.median(power[1:])
-    found = [p for p in (p1, p2) if p is not None and p.power > options.detection_snr * floor]
-    if not found:
-        return []
-    # A line at f fixes φ up to the sign of κ; a line at 2f fixes 2φ up to the sign of its
-    # coefficient, which depends on θ0: try every quarter turn and let the data choose.
-    starts = []
-    if p1 is not None and p1 in found:
-        starts += [np.array([p1.frequency_hz, damping_guess, 0.3, p1.phase_rad + k * math.pi]) for k in (0, 1)]
-    if p2 is not None and p2 in found:
-        starts += [np.array([p2.frequency_hz / 2.0, damping_guess, 0.3, p2.phase_rad / 2.0 + k * math.pi / 2])
-                   for k in range(4)]
-    return starts
-
-
-def _column_scale(jtj):
-    """Parameters differ by ~1e20 in scale (Hz against tesla); equilibrate before solving."""
-    scale = np.sqrt(np.diag(jtj))
-    scale[scale == 0] = 1.0
-    return scale
-
-
-def scaled_inverse(jtj):
-    """(JᵀJ)⁻¹ computed on the equilibrated matrix; raises LinAlgError if singular."""
-    scale = _column_scale(jtj)
-    return np.linalg.inv(jtj / np.outer(scale, scale)) / np.outer(scale, scale)
-
-
-def _fisher(step: _Step, weights) -> np.ndarray:
-    """Fisher information (JᵀJ with weights) over all parameters: q, then κ and B_DC of each
-    channel. J's columns are κ_c·∂g/∂q, g and 1, so JᵀJ is assembled from Gram sums of
-    those rows without forming the n × P Jacobian."""
-    m, g = step.shape.dg_dq, step.shape.g
-    p, n_ch = m.shape[0], step.coef.shape[0]
-    gram = np.empty((p + 2, p + 2))                          # Gram matrix of the rows M, g, 1
-    gram[:p, :p] = m @ m.T
-    gram[:p, p] = gram[p, :p] = m @ g
-    gram[:p, p + 1] = gram[p + 1, :p] = m.sum(axis=1)
-    gram[p, p], gram[p, p + 1] = g @ g, g.sum()
-    gram[p + 1, p], gram[p + 1, p + 1] = gram[p, p + 1], g.size
-    fisher = np.zeros((p + 2 * n_ch, p + 2 * n_ch))
-    for c in range(n_ch):
-        scale = np.concatenate([np.full(p, step.coef[c, 0]), [1.0, 1.0]])
-        idx = np.r_[0:p, p + 2 * c, p + 2 * c + 1]
-        fisher[np.ix_(idx, idx)] += weights[c] ** 2 * gram * np.outer(scale, scale)
-    return fisher
-
-
-AMPLITUDE_BOUNDS_RAD = (math.radians(0.5), math.radians(90.0))
-AMPLITUDE = NONLINEAR.index("amplitude_rad")
-
-
-def _variable_projection(problem: _Problem, q, iterations, tol_chi2, damping=1e-3):
-    """Levenberg–Marquardt on the nonlinear parameters with κ and B_DC solved exactly at every
-    step (Golub–Pereyra variable projection). Eliminating the linear parameters removes the
-    curved θmax–κ valley (only κ·θmax is well determined at θ0 = 0°, κ·θmax² at 90°), in
-    which a joint fit crawls. Converged when the Gauss–Newton step would lower χ² by less
-    than ``tol_chi2``: then f is within √tol_chi2 standard errors of the optimum.
-
-    θmax is kept in ``AMPLITUDE_BOUNDS_RAD`` without changing sign (θmax → −θmax with
-    φ → φ + π is the same ring-down, but the path through 0 is singular). Near θ0 = 90° with κ
-    free, the only handle on θmax is the x⁴ term of cos x, a fraction θmax²/12 of the signal;
-    at low SNR the optimum can run to θmax → 0 with κ → ∞. There θmax is held at its bound (an
-    active set) and f, which does not depend on it, converges as usual.
-
-    ``damping`` is the initial Marquardt λ: small when q is already near the optimum. The loop
-    is compiled (:func:`mows.estimate.ringdown_model.levenberg_marquardt`): in Python its bookkeeping
-    cost more than the model evaluations.
-
-    Returns (the step at the last accepted q, converged, iterations, free-parameter mask).
-    """
-    cr, ci = split_pickup(problem.pickup)
-    q, converged, used, free, cost, g, m, residual, coef, _, _ = levenberg_marquardt(
-        np.asarray(q, float).copy(), problem.dt, cr, ci, problem.theta0_free, problem.y, problem.weights,
-        iterations, tol_chi2, damping, *AMPLITUDE_BOUNDS_RAD, AMPLITUDE)
-    return _Step(q, _Shape(g, m), coef, residual, float(cost)), bool(converged), int(used), free
-
-
-# --- segmentation -----------------------------------------------------------------------
-SETTLE_S = 0.003  # the coil current's decay after switch-off, left out of a fit by default
+# --- the usable window -----------------------------------------------------------------------
+# The coil current's decay after switch-off: what the estimator node, `mows fit` and the lab leave
+# out of a ring-down (fit_ringdown's ``settle_s``; 0 there, for data that start clean).
+SETTLE_S = 0.003
 
 
 def usable_window(saturated: np.ndarray, settle_samples: int = 0):
@@ -434,24 +255,24 @@ def fit_ringdown(samples, sample_rate_hz, theta0_rad, expected_frequency_hz, sat
                        damping_guess_per_s, start / fs, known)
 
 
-def _problem(y, fs, theta0, options) -> _Problem:
+def _problem(y, fs, theta0, options) -> RingdownProblem:
     noise = np.array([white_noise_std(ch) for ch in y])
     if np.any(noise <= 0):  # noiseless, or quantised to a constant: weight channels equally
         noise = np.full(y.shape[0], max(float(np.ptp(y)) * 1e-9, 1e-30))
     pickup = paper_pickup(0.0, options.sensor_direction) if options.theta0_free else options.pickup_at(theta0)
-    return _Problem(np.ascontiguousarray(y, float), 1.0 / noise, 1.0 / fs, theta0, pickup, options.theta0_free)
+    return RingdownProblem(np.ascontiguousarray(y, float), 1.0 / noise, 1.0 / fs, theta0, pickup, options.theta0_free)
 
 
 def _coarse_start(problem, fs, expected_hz, options, damping_guess):
     """The subsampled problem and the best spectral start on it, or (coarse, None)."""
     coarse = problem.subsampled(max(1, int(fs // (16.0 * expected_hz))))
-    starts = _start_candidates(coarse.y.sum(axis=0), 1.0 / coarse.dt, expected_hz, options,
+    starts = start_candidates(coarse.y.sum(axis=0), 1.0 / coarse.dt, expected_hz, options,
                                      damping_guess)
     if not starts:
         return coarse, None
     extra = [problem.theta0] if options.theta0_free else []
     return coarse, min((np.concatenate([s_, extra]) for s_ in starts),
-                       key=lambda q: _evaluate(coarse, q, False).cost)
+                       key=lambda q: evaluate(coarse, q, False).cost)
 
 
 def starting_point(samples, sample_rate_hz, theta0_rad, expected_frequency_hz, options: FitOptions = FitOptions(),
@@ -462,7 +283,7 @@ def starting_point(samples, sample_rate_hz, theta0_rad, expected_frequency_hz, o
     problem = _problem(y, float(sample_rate_hz), float(theta0_rad), options)
     _, q0 = _coarse_start(problem, float(sample_rate_hz), float(expected_frequency_hz), options,
                           damping_guess_per_s)
-    return None if q0 is None else np.concatenate([q0, _evaluate(problem, q0, False).coef[0]])
+    return None if q0 is None else np.concatenate([q0, evaluate(problem, q0, False).coef[0]])
 
 
 def _as_float(value) -> float:
@@ -479,9 +300,9 @@ def _fit_window(y, fs, theta0, expected_hz, options, damping_guess, start_s, kno
     if q0 is None:
         return failure(FitStatus.NO_OSCILLATION, f"no spectral line near {expected_hz:.2f} Hz or its double "
                                                  f"stands above the noise floor (×{options.detection_snr:g})", **known)
-    step, _, _, _ = _variable_projection(coarse, q0, options.max_iterations, tol_chi2=1e-2)
+    step, _, _, _ = variable_projection(coarse, q0, options.max_iterations, tol_chi2=1e-2)
     # The coarse optimum is within a few σ of the full-rate one: start as Gauss–Newton.
-    step, converged, iters, free = _variable_projection(problem, step.q, options.max_iterations, tol_chi2=1e-4,
+    step, converged, iters, free = variable_projection(problem, step.q, options.max_iterations, tol_chi2=1e-4,
                                                         damping=1e-6)
     if not converged:
         return failure(FitStatus.NOT_CONVERGED, f"the fit did not converge in {iters} iterations", **known)
@@ -496,7 +317,7 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
                        f"fitted frequency {q[0]:.3f} Hz is below {options.min_frequency_fraction:g} × the expected "
                        f"{expected_hz:.2f} Hz: the restoring spring is (nearly) cancelled (k ≤ 0 beyond B = −kM/m)",
                        **known)
-    fisher = _fisher(step, problem.weights)
+    fisher = fisher_information(step, problem.weights)
     fitted = np.concatenate([free, np.ones(2 * n_ch, bool)])
     fisher_inv = np.full(fisher.shape, np.nan)
     try:
@@ -535,19 +356,3 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
         parameter_names=tuple(_parameter_names(n_ch, options.theta0_free)), covariance=covariance)
 
 
-# --- the bound itself -------------------------------------------------------------------
-def cramer_rao_frequency_hz(n_samples, sample_rate_hz, frequency_hz, damping_per_s, amplitude_rad, phase_rad,
-                            theta0_rad, kappa_t, noise_std_t, sensor_direction=(0.0, 1.0),
-                            theta0_free=False, pickup=None) -> float:
-    """Cramér–Rao bound of f for one channel of ``n_samples`` in white noise σ:
-    √[(JᵀJ/σ²)⁻¹]_ff (PHYSICS.md §7), J the Jacobian of the full model over all its
-    parameters (f, δ, θmax, φ, [θ0], κ, B_DC) at the given values. t = 0 at the first sample.
-    """
-    q = np.array([frequency_hz, damping_per_s, amplitude_rad, phase_rad] + ([theta0_rad] if theta0_free else []))
-    coefficients = (paper_pickup(0.0 if theta0_free else theta0_rad, sensor_direction) if pickup is None
-                    else np.asarray(pickup, complex))
-    problem = _Problem(np.zeros((1, int(n_samples))), np.array([1.0 / noise_std_t]), 1.0 / sample_rate_hz,
-                       theta0_rad, coefficients, theta0_free)
-    shape = _evaluate(problem, q).shape
-    step = _Step(q, shape, np.array([[kappa_t, 0.0]]), np.empty((1, 0)), math.nan)
-    return float(math.sqrt(scaled_inverse(_fisher(step, problem.weights))[0, 0]))

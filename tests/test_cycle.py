@@ -5,21 +5,21 @@ import math
 
 import numpy as np
 import pytest
+from device.spy import SpyDevice
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mows.physics.coils import CurrentCap, helmholtz, largest_spacing
-from mows.device.cycle import CycleRequest, CycleSequencer, CycleSettings, Phase
 from mows.device.backends import SimBackend
+from mows.device.cycle import CycleSequencer
 from mows.device.interface import CoilCommand, CommandResult
-from mows.records.samples import SampleBlock
+from mows.device.phases import CycleRequest, CycleSettings, Phase
 from mows.device.scheduled import ScheduledDevice
 from mows.device.session import DeviceSession, SessionConfig
+from mows.estimate.ringdown import fit_ringdown
+from mows.physics.coils import CurrentCap, helmholtz, largest_spacing
+from mows.records.samples import SampleBlock
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
-from mows.estimate.ringdown import fit_ringdown
-
-from device.spy import SpyDevice
 
 CAP_A = 10.0
 FAST = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.2, repeats=2, tuning_steps=2, settle_s=0.2)

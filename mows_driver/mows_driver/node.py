@@ -20,31 +20,30 @@ import time
 import traceback
 
 from diagnostic_msgs.msg import DiagnosticStatus
-from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel
-from mows_msgs.srv import EmergencyStop, RunCycle
-from rcl_interfaces.msg import SetParametersResult
-from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.exceptions import InvalidParameterValueException
-from rclpy.task import Future
-
-from mows.records import stamps
-from mows.physics.coils import PRESETS, CurrentCap
-from mows.device.cycle import CycleRequest, CycleSettings, Phase
-from mows.device.backends import BagBackend, SerialBackend, SimBackend
-from mows.device.serial_link import DEFAULT_BAUD, SerialLink
-from mows.device.session import DeviceSession, SessionConfig
-from mows.precompile import precompile
-from mows.physics.probe import PAPER_PROBE
-from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
-from mows.sim.simulator import SimulatedDevice
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
 from mows_ros.params import ParamSpec, parameter_values
 from mows_ros.process import run_node
 from mows_ros.qos import EXCITATION_QOS, STREAM_QOS
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.task import Future
 
-from mows_driver.recording import BagRecorder
+from mows.device.backends import BagBackend, SerialBackend, SimBackend
+from mows.device.phases import CycleRequest, CycleSettings, Phase
+from mows.device.serial_link import DEFAULT_BAUD, SerialLink
+from mows.device.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
+from mows.physics.coils import PRESETS, CurrentCap
+from mows.physics.probe import PAPER_PROBE
+from mows.precompile import precompile
+from mows.records import stamps
+from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
+from mows.sim.simulator import SimulatedDevice
+from mows_driver.recording import BagRecorder
+from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel
+from mows_msgs.srv import EmergencyStop, RunCycle
 
 NODE_NAME = "driver"
 RAW_TOPIC = "mows/raw"

@@ -13,18 +13,17 @@ import time
 
 import pytest
 
-from mows.physics.coils import CurrentCap
-from mows.device.cycle import CycleRequest, CycleSettings, Phase
+from device.spy import SpyDevice
 from mows.device.backends import SerialBackend
 from mows.device.emulator import FRAME_S, DeviceEmulator
+from mows.device.framing import Ack, Coils, Samples, Status
 from mows.device.interface import CoilCommand, LinkEvent
+from mows.device.phases import CycleRequest, CycleSettings, Phase
 from mows.device.serial_link import SerialLink
 from mows.device.session import DeviceSession, SessionConfig
-from mows.device.framing import Ack, Coils, Samples, Status
-from mows.sim.scenario import load_scenario
 from mows.estimate.ringdown import fit_ringdown
-
-from device.spy import SpyDevice
+from mows.physics.coils import CurrentCap
+from mows.sim.scenario import load_scenario
 
 WAIT_S = 60.0  # bound for a test that hangs; each wait ends as soon as its condition holds
 WATCHDOG_BOUND_S = 0.2

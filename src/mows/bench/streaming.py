@@ -25,13 +25,13 @@ import subprocess
 import time
 from pathlib import Path
 
-from mows.physics.coils import CurrentCap
-from mows.device.cycle import CycleSettings
 from mows.device.backends import SimBackend
+from mows.device.phases import CycleSettings
 from mows.device.session import DeviceSession, SessionConfig
+from mows.estimate.ringdown import fit_ringdown
+from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
-from mows.estimate.ringdown import fit_ringdown
 
 GOAL_SHARE = 0.10
 BLOCK_S = 0.025  # the driver's default block, and the piece in which it reads the simulator

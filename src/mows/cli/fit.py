@@ -11,13 +11,18 @@ import math
 import sys
 
 from mows.device.bags import read_bag
-from mows.device.cycle import Phase
-from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
-from mows.lab.table import MeasurementTable
-from mows.physics.probe import PAPER_PROBE, Probe
+from mows.device.phases import Phase
 from mows.estimate.ringdown import SETTLE_S, FitOptions
+from mows.estimate.segments import (
+    SegmentAssembler,
+    block_from_message,
+    fit_segment,
+    window_from_message,
+)
+from mows.lab.table import MeasurementTable
+from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
+from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.stamps import NS_PER_S
-from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
 from mows.sweep.decompose import SweepPoint, SweepRecord
 
 

@@ -13,16 +13,31 @@ import time
 import numpy as np
 
 from mows.device import bags
-
-from mows.records import stamps
-from mows.physics.coils import CurrentCap
-from mows.device.cycle import Phase, PhaseEvent
 from mows.device.clock import DeviceClock
-from mows.device.interface import (Backend, CoilCommand, Command, CommandResult, DeviceFault, LinkEvent,
-                                   NotExciting, check_coil_command)
+from mows.device.framing import (
+    Ack,
+    Coils,
+    DeviceInfo,
+    Frame,
+    Orientation,
+    Samples,
+    Status,
+)
+from mows.device.interface import (
+    Backend,
+    CoilCommand,
+    Command,
+    CommandResult,
+    DeviceFault,
+    LinkEvent,
+    NotExciting,
+    check_coil_command,
+)
+from mows.device.phases import Phase, PhaseEvent
 from mows.device.scheduled import ScheduledDevice
 from mows.device.serial_link import SerialLink
-from mows.device.framing import Ack, Coils, DeviceInfo, Frame, Orientation, Samples, Status
+from mows.physics.coils import CurrentCap
+from mows.records import stamps
 from mows.records.samples import SampleBlock
 from mows.sim.simulator import SimulatedBlock, SimulatedDevice
 

@@ -35,11 +35,23 @@ from pathlib import Path
 
 import numpy as np
 
-from mows.physics.coils import CurrentCap
 from mows.device.clock import DeviceClock
+from mows.device.framing import (
+    Ack,
+    Body,
+    Coils,
+    DeviceInfo,
+    Frame,
+    FrameDecoder,
+    Heartbeat,
+    Hello,
+    Orientation,
+    Samples,
+    Status,
+    encode_frame,
+)
 from mows.device.scheduled import OverCap, ScheduledDevice
-from mows.device.framing import (Ack, Body, Coils, DeviceInfo, Frame, FrameDecoder, Heartbeat, Hello, Orientation,
-                          Samples, Status, encode_frame)
+from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 

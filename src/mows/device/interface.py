@@ -10,9 +10,8 @@ from __future__ import annotations
 import abc
 import dataclasses
 
-
-from mows.physics.coils import CurrentCap
 from mows.device.framing import DeviceInfo
+from mows.physics.coils import CurrentCap
 
 
 @dataclasses.dataclass(frozen=True)

@@ -15,11 +15,18 @@ import threading
 import time
 from typing import Callable
 
-from mows.physics.coils import CoilSetup, CurrentCap
-from mows.device.cycle import (CycleOutcome, CycleRequest, CycleSequencer, CycleSettings, PhaseEvent, Step,
-                               TuningFit)
 from mows.device.blocks import BlockAssembler
+from mows.device.cycle import CycleSequencer
 from mows.device.interface import Backend, CommandResult, DeviceFault, LinkEvent
+from mows.device.phases import (
+    CycleOutcome,
+    CycleRequest,
+    CycleSettings,
+    PhaseEvent,
+    Step,
+    TuningFit,
+)
+from mows.physics.coils import CoilSetup, CurrentCap
 from mows.records.samples import SampleBlock
 
 STALL_TIMEOUT_S = 2.0      # a running cycle fails when no samples arrive for this long (host time)
@@ -30,7 +37,7 @@ RATE_WINDOW_S = 5.0        # the achieved sample rate is measured over this much
 class Output:
     """What one step produced, in the order it is to be published."""
 
-    blocks: list[Block] = dataclasses.field(default_factory=list)
+    blocks: list[SampleBlock] = dataclasses.field(default_factory=list)
     events: list[PhaseEvent] = dataclasses.field(default_factory=list)
 
 

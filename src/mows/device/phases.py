@@ -1,0 +1,132 @@
+"""The vocabulary of a measurement cycle (:mod:`mows.device.cycle`): its phases and the events
+that announce them, the settings cycles run with, a request for one cycle and its outcome, the
+step the sequencer returns, and the tuning fit it is handed.
+
+The phase numbers are those of ``mows_msgs/ExcitationState`` PHASE_*.
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from typing import Callable
+
+from mows.records.results import Result
+
+
+class Phase(enum.IntEnum):
+    """The numbers of mows_msgs/ExcitationState PHASE_*."""
+
+    IDLE = 0
+    SETTLING = 1
+    EXCITING = 2
+    RINGDOWN = 3
+    GAP = 4
+    FAULT = 5
+
+
+@dataclasses.dataclass(frozen=True)
+class PhaseEvent:
+    """A phase began at device sample ``sample_index`` (device time ``stamp_ns``)."""
+
+    phase: Phase
+    sample_index: int
+    stamp_ns: int
+    cycle_id: int = 0
+    repeat_index: int = 0
+    repeats: int = 0
+    tuning: bool = False
+    currents_a: tuple = ()            # signed peak current per coil, A (zeros unless EXCITING)
+    frequency_hz: float = 0.0
+    theta0_rad: float = 0.0
+    planned_duration_s: float = 0.0   # 0: open-ended
+    setup: str = ""
+    reason: str = ""                  # why, for FAULT
+
+    @property
+    def coils_on(self) -> bool:
+        return self.phase == Phase.EXCITING
+
+
+@dataclasses.dataclass(frozen=True)
+class CycleSettings:
+    """How cycles run (the driver's parameters of the same names). SI units."""
+
+    excitation_current_a: float = 2.0
+    excite_s: float = 0.5
+    ringdown_s: float = 0.5
+    gap_s: float = 1.0
+    repeats: int = 3
+    tuning_steps: int = 2
+    settle_s: float = 0.5
+    max_duty_cycle: float = 0.5
+    duty_window_s: float = 10.0
+    confirm_timeout_s: float = 0.5    # device time a command may take to be answered
+
+    def __post_init__(self):
+        for name in ("excitation_current_a", "gap_s", "settle_s"):
+            check_setting(name, getattr(self, name), getattr(self, name) >= 0.0, "≥ 0")
+        for name in ("excite_s", "ringdown_s", "duty_window_s", "confirm_timeout_s"):
+            check_setting(name, getattr(self, name), getattr(self, name) > 0.0, "> 0")
+        check_setting("max_duty_cycle", self.max_duty_cycle, 0.0 < self.max_duty_cycle <= 1.0, "in (0, 1]")
+        check_setting("repeats", self.repeats, self.repeats >= 1, "≥ 1")
+        check_setting("tuning_steps", self.tuning_steps, self.tuning_steps >= 0, "≥ 0")
+
+
+def check_setting(name: str, value, ok: bool, allowed: str) -> None:
+    """ValueError naming the setting unless ``ok`` and ``value`` is finite."""
+    if not (ok and math.isfinite(value)):
+        raise ValueError(f"{name} = {value!r} must be {allowed}")
+
+
+# (ring-down samples (n, channels) T, sample rate Hz, θ0 rad, expected frequency Hz,
+#  saturated=(n, channels) flags) → a result with ``frequency_hz``: the estimator's
+# fit_ringdown, handed in by whoever builds the sequencer (the device layer does not fit).
+TuningFit = Callable[..., Result]
+
+
+class TuningStatus(enum.Enum):
+    SAMPLES_LOST = "samples of the tuning ring-down were lost"
+
+
+@dataclasses.dataclass(frozen=True)
+class LostTuning:
+    """A tuning ring-down that was not fitted: some of its samples never arrived."""
+
+    status: TuningStatus = TuningStatus.SAMPLES_LOST
+    ok: bool = False
+    frequency_hz: float = math.nan
+
+    def report(self) -> str:
+        return self.status.value
+
+
+@dataclasses.dataclass(frozen=True)
+class CycleRequest:
+    """One cycle at ``theta0_rad``; None takes the value from the settings."""
+
+    theta0_rad: float
+    repeats: int | None = None
+    tuning_steps: int | None = None
+    gap_s: float | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class CycleOutcome:
+    success: bool
+    message: str
+    cycle_id: int
+    frequency_hz: float               # the excitation frequency after tuning
+    ringdowns_recorded: int
+    tuning_fits: tuple = ()
+
+
+@dataclasses.dataclass
+class Step:
+    """What the caller must do after feeding the sequencer: send ``commands``, publish
+    ``events``, report ``outcome`` (a cycle ended), and switch the coils off now if told."""
+
+    commands: list = dataclasses.field(default_factory=list)
+    events: list = dataclasses.field(default_factory=list)
+    outcome: CycleOutcome | None = None
+    coils_off_now: bool = False

@@ -14,7 +14,7 @@ from mows.lab.table import reference_at
 from mows.lab.synth import fit_cycle
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice, simulate_cycle
-from mows.sweep.decompose import SweepPoint, SweepRecord
+from mows.sweep.record import SweepPoint, SweepRecord
 
 ANGLES_DEG = np.arange(0.0, 360.0, 45.0)
 

@@ -26,7 +26,8 @@ from mows.records import stamps
 from mows.lab import analyse
 from mows.lab.table import from_sweep, reference_at
 from mows.physics.probe import Probe
-from mows.sweep.decompose import MODELS, SweepPoint, SweepRecord
+from mows.sweep.decompose import MODELS
+from mows.sweep.record import SweepPoint, SweepRecord
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
 from mows_ros.params import ParamSpec
@@ -186,7 +187,7 @@ class MapperNode(MowsNode):
         return self._result(decomposition.ok, decomposition.message or self._last, msg)
 
     def _decomposition_msg(self, d, record: SweepRecord, f00: float) -> SweepDecomposition:
-        msg = SweepDecomposition(sweep_id=self._sweeps, model=d.model, status=0 if d.ok else 1, message=d.message)
+        msg = SweepDecomposition(sweep_id=self._sweeps, model=d.model, status=int(d.status), message=d.message)
         msg.header.frame_id = self._param("frame_id")
         latest = max(p.t_s for p in record.points)
         stamps.set_seconds(msg.header.stamp, latest)

@@ -131,7 +131,3 @@ def run(duration_s: float = 10.0) -> dict:
     }
 
 
-if __name__ == "__main__":
-    import json
-
-    print(json.dumps(run(), indent=2))

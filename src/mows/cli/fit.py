@@ -23,7 +23,7 @@ from mows.lab.table import MeasurementTable
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.stamps import NS_PER_S
-from mows.sweep.decompose import SweepPoint, SweepRecord
+from mows.sweep.record import SweepPoint, SweepRecord
 
 
 def add_arguments(parser) -> None:
@@ -77,7 +77,7 @@ def _options(window, pair, probe, paper_model) -> FitOptions:
     return FitOptions() if paper_model else FitOptions.lever_aware(pair, probe, window.theta0_rad)
 
 def write_table(path, fits, probe: Probe) -> None:
-    """The OK fits as a model-lab table (:meth:`mows.sweep.decompose.SweepRecord.table_columns`: each
+    """The OK fits as a model-lab table (:meth:`mows.sweep.record.SweepRecord.table_columns`: each
     ring-down's start swing is the stop amplitude pooled over the fits that measured θmax)."""
     record = SweepRecord([SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz,
                                               window.start_ns / NS_PER_S) for window, fit in fits])

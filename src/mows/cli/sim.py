@@ -13,7 +13,9 @@ import math
 import numpy as np
 import yaml
 
+from mows.lab.synth import fit_cycle
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
+from mows.sim.simulator import SimulatedDevice, simulate_cycle
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,9 +32,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from mows.lab.synth import fit_cycle
-    from mows.sim.simulator import SimulatedDevice, simulate_cycle
-
     scenario = load_scenario(args.scenario)
     if args.seed is not None:
         scenario = scenario.replace(seed=args.seed)

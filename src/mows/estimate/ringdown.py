@@ -39,9 +39,18 @@ import math
 import numpy as np
 
 from mows.estimate.ringdown_model import paper_pickup
-from mows.estimate.ringdown_problem import (AMPLITUDE, NONLINEAR, RingdownProblem, evaluate, fisher_information,
-                                           scaled_inverse, variable_projection)
+from mows.estimate.ringdown_problem import (
+    AMPLITUDE,
+    NONLINEAR,
+    RingdownProblem,
+    evaluate,
+    fisher_information,
+    scaled_inverse,
+    variable_projection,
+)
 from mows.estimate.ringdown_start import start_candidates, white_noise_std
+from mows.physics.fluxgate import pickup_harmonics
+from mows.physics.pose import Pose
 
 TWO_PI = 2.0 * math.pi
 
@@ -105,9 +114,6 @@ class FitOptions:
     def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> "FitOptions":
         """Options with the exact pickup of ``probe``'s magnet swinging on its lever, seen by the
         fluxgate ``pair`` (:class:`mows.physics.fluxgate.FluxgatePair`) with the probe at θ0."""
-        from mows.physics.fluxgate import pickup_harmonics
-        from mows.physics.pose import Pose
-
         pickup = pickup_harmonics(pair, Pose(theta0_rad=theta0_rad), probe.lever_m, probe.moment_am2, combine=channels)
         return cls(channels=channels, pickup=tuple(pickup), **others)
 

@@ -27,7 +27,7 @@ from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
 from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
 from mows.sim.simulator import SimulatedDevice, simulate_cycle
-from mows.sweep.decompose import SweepPoint, SweepRecord
+from mows.sweep.record import SweepPoint, SweepRecord
 
 TRUTH_NODES = 8
 LEVEL = (0.0, 0.0, -STANDARD_GRAVITY_M_PER_S2)
@@ -129,8 +129,8 @@ def simulated_table(scenario, angles_deg, repeats: int, rng: np.random.Generator
     every ring-down is fitted by :func:`mows.estimate.ringdown.fit_ringdown` with the lever's exact
     pickup, as the estimator node does. ``repeats`` full rotation sweeps over ``angles_deg``
     (column ``sweep``; full sweeps rather than repeated ring-downs at each angle, so that a slow
-    drift is not confounded with θ0); each sweep is a :class:`mows.sweep.decompose.SweepRecord` whose
-    :meth:`~mows.sweep.decompose.SweepRecord.table_columns` give the frequencies, damping, fit windows and
+    drift is not confounded with θ0); each sweep is a :class:`mows.sweep.record.SweepRecord` whose
+    :meth:`~mows.sweep.record.SweepRecord.table_columns` give the frequencies, damping, fit windows and
     that sweep's pooled start amplitude. ``t_s`` is the device time of each switch-off (the
     pause between cycles is not simulated), ``temperature_k`` the device's temperature then.
     The reference columns are the scenario's field and gradient at the probe
@@ -178,7 +178,7 @@ def fit_cycle(cycle, scenario, paper_model: bool = False, settle_s: float = SETT
 
 
 def _ringdown_point(scenario, cycle, settle_s):
-    """The estimator's fit of one simulated ring-down as a :class:`mows.sweep.decompose.SweepPoint`
+    """The estimator's fit of one simulated ring-down as a :class:`mows.sweep.record.SweepPoint`
     (None when the fit fails)."""
     fit = fit_cycle(cycle, scenario, settle_s=settle_s)
     if not fit.ok:

@@ -390,10 +390,10 @@ def _reference_columns(reference, stamps, fields, magnet_position_m, path) -> di
 
 
 def from_sweep(record, reference, probe, decomposition=None) -> MeasurementTable:
-    """The table of one rotation sweep (:class:`mows.sweep.decompose.SweepRecord`) in a static
+    """The table of one rotation sweep (:class:`mows.sweep.record.SweepRecord`) in a static
     ``reference`` (anything :func:`reference_at` takes). With a first-principles
     ``decomposition`` of the sweep, each ring-down's start swing is stop − |θs| at its field
-    (:meth:`~mows.sweep.decompose.SweepRecord.start_amplitudes_rad`); else the pooled stop amplitude."""
+    (:meth:`~mows.sweep.record.SweepRecord.start_amplitudes_rad`); else the pooled stop amplitude."""
     starts = (record.start_amplitudes_rad(decomposition, probe)
               if decomposition is not None and decomposition.ok and decomposition.model == "first_principles"
               else None)

@@ -1,5 +1,5 @@
 """Rotation sweeps: (θ0, Δf) points of many orientations decomposed into in-plane field and
-gradient (``decompose``).
+gradient (``decompose``), the ring-downs of one sweep as they arrive (``record``).
 
 May import: ``mows.estimate``, ``mows.physics``, ``mows.records``.
 """

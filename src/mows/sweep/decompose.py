@@ -24,6 +24,7 @@ determined (reported as NaN).
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 
 import numpy as np
@@ -65,12 +66,22 @@ def fit_harmonics(theta0_rad, shift_hz, shift_std_hz, max_order: int = 2) -> Har
     return Harmonics(np.hypot(a, b), np.arctan2(-b, a), a, b, covariance)
 
 
+class DecompositionStatus(enum.IntEnum):
+    """Why a sweep gave no field and gradient; the number is SweepDecomposition's ``status``
+    (0 OK, otherwise see ``message``)."""
+
+    OK = 0
+    INVALID_INPUT = 1          # unequal lengths, non-finite values, σ ≤ 0
+    TOO_FEW_ORIENTATIONS = 2   # fewer distinct θ0 than the model's harmonics need
+    NOT_CONVERGED = 3
+
+
 @dataclasses.dataclass
 class Decomposition:
     """In-plane field and gradient of one sweep, SI units; NaN unless ``ok``."""
 
     model: str
-    ok: bool
+    status: DecompositionStatus
     message: str
     field_t: np.ndarray = dataclasses.field(default_factory=lambda: np.full(2, np.nan))
     field_covariance_t2: np.ndarray = dataclasses.field(default_factory=lambda: np.full((2, 2), np.nan))
@@ -84,9 +95,13 @@ class Decomposition:
     residual_hz: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     parameters: np.ndarray = dataclasses.field(default_factory=lambda: np.full(6, np.nan))  # Bx, By, Gs, Gd, Gxy, Δf00
 
+    @property
+    def ok(self) -> bool:
+        return self.status is DecompositionStatus.OK
+
     def report(self) -> str:
         if not self.ok:
-            return f"sweep decomposition ({self.model}): {self.message}"
+            return f"sweep decomposition ({self.model}): {self.status.name}: {self.message}"
         sb = np.sqrt(np.diag(self.field_covariance_t2))
         sg = np.sqrt(np.diag(self.gradient_covariance))
         bx, by = self.field_t * 1e6
@@ -177,9 +192,9 @@ def decompose(theta0_rad, shift_hz, shift_std_hz, probe: Probe, f00_hz: float, m
     std = np.asarray(shift_std_hz, float)
     if model not in MODELS:
         raise ValueError(f"model = {model!r}; use one of {MODELS}")
-    problem = _check(theta0, shift, std, f00_free)
-    if problem:
-        return Decomposition(model, False, problem, f00_free=f00_free)
+    status, problem = _check(theta0, shift, std, f00_free)
+    if status is not DecompositionStatus.OK:
+        return Decomposition(model, status, problem, f00_free=f00_free)
     harmonics = fit_harmonics(theta0, shift, std, min(MAX_HARMONIC, _distinct_angles(theta0) // 2 - 1 or 1))
     free = np.array([True, True, not f00_free, True, True, f00_free])
     start = _start(harmonics, probe, f00_hz, model) if start is None else np.array(start, float)
@@ -204,18 +219,19 @@ def _distinct_angles(theta0) -> int:
     return np.unique(np.round(np.mod(theta0, 2 * np.pi), 6)).size
 
 
-def _check(theta0, shift, std, f00_free) -> str:
+def _check(theta0, shift, std, f00_free) -> tuple[DecompositionStatus, str]:
     if not (theta0.shape == shift.shape == std.shape and theta0.ndim == 1):
-        return f"theta0, shift and std must be equal-length 1-D arrays, got {theta0.shape}, {shift.shape}, {std.shape}"
+        return DecompositionStatus.INVALID_INPUT, f"theta0, shift and std must be equal-length 1-D arrays, got {theta0.shape}, {shift.shape}, {std.shape}"
     if not (np.all(np.isfinite(theta0)) and np.all(np.isfinite(shift)) and np.all(np.isfinite(std))):
-        return "non-finite angle, shift or uncertainty in the sweep"
+        return DecompositionStatus.INVALID_INPUT, "non-finite angle, shift or uncertainty in the sweep"
     if np.any(std <= 0):
-        return "every shift needs a positive standard uncertainty"
+        return DecompositionStatus.INVALID_INPUT, "every shift needs a positive standard uncertainty"
     needed = 6 if f00_free else 5
     if _distinct_angles(theta0) < needed:
-        return (f"{_distinct_angles(theta0)} distinct orientations cannot separate field (1θ0) from gradient "
-                f"(2θ0){' and f00' if f00_free else ''}: need at least {needed}")
-    return ""
+        return DecompositionStatus.TOO_FEW_ORIENTATIONS, (
+            f"{_distinct_angles(theta0)} distinct orientations cannot separate field (1θ0) from gradient "
+            f"(2θ0){' and f00' if f00_free else ''}: need at least {needed}")
+    return DecompositionStatus.OK, ""
 
 
 def _start(harmonics: Harmonics, probe: Probe, f00_hz: float, model: str) -> np.ndarray:
@@ -247,119 +263,8 @@ def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmon
         g_cov[[0, 2], :] = g_cov[:, [0, 2]] = np.nan
     residual = result.fun * std
     return Decomposition(
-        model=model, ok=bool(result.success), message="" if result.success else result.message,
+        model=model, status=DecompositionStatus.OK if result.success else DecompositionStatus.NOT_CONVERGED,
+        message="" if result.success else result.message,
         field_t=np.array([bx, by]), field_covariance_t2=cov[:2, :2], gradient_t_per_m=gradient,
         gradient_covariance=g_cov, f00_hz=f00_hz + df00, f00_free=f00_free, harmonics=harmonics,
         chi2_dof=chi2_dof, rms_residual_hz=float(np.sqrt(np.mean(residual**2))), residual_hz=residual)
-
-
-@dataclasses.dataclass(frozen=True)
-class SweepPoint:
-    """One successful ring-down of a sweep (SI units; t_s on the device clock)."""
-
-    theta0_rad: float
-    frequency_hz: float
-    frequency_std_hz: float
-    shift_hz: float
-    shift_std_hz: float
-    amplitude_rad: float
-    damping_per_s: float
-    duration_s: float
-    t_s: float
-    amplitude_std_rad: float = math.nan
-
-    @classmethod
-    def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0) -> "SweepPoint":
-        """A successful ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`, or a RingdownFit
-        message: the fields are the same) with its frequency shift; σ of θmax from the fit's
-        covariance (NaN when θmax was held at a bound)."""
-        names = list(fit.parameter_names)
-        covariance = np.asarray(fit.covariance, float).reshape(len(names), len(names))
-        index = names.index("amplitude_rad") if "amplitude_rad" in names else None
-        amplitude_std = math.sqrt(covariance[index, index]) if index is not None else math.nan
-        return cls(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, shift_hz, shift_std_hz, fit.amplitude_rad,
-                   fit.damping_per_s, fit.duration_s, t_s, amplitude_std)
-
-
-@dataclasses.dataclass
-class SweepRecord:
-    """The ring-downs of one rotation sweep, collected as they arrive."""
-
-    points: list = dataclasses.field(default_factory=list)
-    failed: int = 0
-
-    def add(self, point: SweepPoint) -> None:
-        self.points.append(point)
-
-    def _column(self, name: str) -> np.ndarray:
-        return np.array([getattr(p, name) for p in self.points], float)
-
-    def at_angle(self, theta0_rad: float) -> tuple[float, float, int]:
-        """Inverse-variance weighted mean shift at one orientation, its σ, and the count."""
-        chosen = [p for p in self.points if abs(p.theta0_rad - theta0_rad) < 1e-9]
-        if not chosen:
-            return math.nan, math.nan, 0
-        weights = np.array([1.0 / p.shift_std_hz**2 for p in chosen])
-        shifts = np.array([p.shift_hz for p in chosen])
-        return float(weights @ shifts / weights.sum()), float(1.0 / math.sqrt(weights.sum())), len(chosen)
-
-    def stop_amplitude_rad(self, rest_angles_rad=None) -> float:
-        """The swing a ring-down starts with when the probe rests undeflected: the
-        inverse-variance weighted mean of the fits' θmax + |θs| (θs: each point's rest angle,
-        0 when not given).
-
-        Every ring-down starts from the housing stop, and the perpendicular excitation scheme
-        drives every orientation alike; a single fit's θmax, though, is poorly determined near
-        θ0 = 180° (and held at a bound when unidentifiable), so the sweep's pooled value is the
-        better input to the amplitude-dependent springs. The median when no σ is known.
-        """
-        amplitude = self._column("amplitude_rad")
-        if rest_angles_rad is not None:
-            amplitude = amplitude + np.abs(np.asarray(rest_angles_rad, float))
-        std = self._column("amplitude_std_rad")
-        usable = np.isfinite(std) & (std > 0)
-        if not usable.any():
-            return float(np.median(amplitude))
-        weights = 1.0 / std[usable] ** 2
-        return float(weights @ amplitude[usable] / weights.sum())
-
-    def decompose(self, probe: Probe, f00_hz: float, model: str = "first_principles",
-                  f00_free: bool = False) -> Decomposition:
-        """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
-
-        The first-principles model needs the swing each ring-down starts with, stop − |θs|, and
-        θs depends on the field it is fitting: a first pass with θs = 0 gives the field, its rest
-        angles give the pooled stop amplitude, and a second pass fits with both.
-        """
-        theta0 = self._column("theta0_rad")
-        arrays = dict(theta0_rad=theta0, shift_hz=self._column("shift_hz"), shift_std_hz=self._column("shift_std_hz"),
-                      probe=probe, f00_hz=f00_hz, model=model, f00_free=f00_free)
-        if model != "first_principles":
-            return decompose(**arrays)
-
-        def ringdowns(stop):
-            return Ringdowns(stop, self._column("damping_per_s"), self._column("duration_s"))
-
-        first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad()))
-        if not first.ok:
-            return first
-        rest = np.nan_to_num(local_potential(first.parameters, theta0, probe).rest_angle_rad())
-        return decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(rest)), start=first.parameters)
-
-    def start_amplitudes_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
-        """Each ring-down's start swing, stop − |θs|, at the decomposition's field and gradient."""
-        theta0 = self._column("theta0_rad")
-        rest = np.abs(np.nan_to_num(local_potential(decomposition.parameters, theta0, probe).rest_angle_rad()))
-        return self.stop_amplitude_rad(rest) - rest
-
-    def table_columns(self, start_amplitudes_rad=None) -> dict:
-        """Columns of a model-lab measurement table (docs/model_lab.md). ``amplitude_deg`` is each
-        ring-down's start swing: ``start_amplitudes_rad`` (e.g. :meth:`start_amplitudes_rad` of
-        a decomposition), else the pooled :meth:`stop_amplitude_rad`."""
-        t = self._column("t_s")
-        start = (np.full(len(self.points), self.stop_amplitude_rad()) if start_amplitudes_rad is None
-                 else np.asarray(start_amplitudes_rad, float))
-        return {"theta0_deg": np.degrees(self._column("theta0_rad")), "f_hz": self._column("frequency_hz"),
-                "f_std_hz": self._column("frequency_std_hz"), "t_s": t - (t.min() if t.size else 0.0),
-                "amplitude_deg": np.degrees(start),
-                "damping_per_s": self._column("damping_per_s"), "duration_s": self._column("duration_s")}

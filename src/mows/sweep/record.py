@@ -1,0 +1,123 @@
+"""The ring-downs of one rotation sweep as they arrive (:class:`SweepPoint` from each fit) and
+their decomposition as a whole (:meth:`SweepRecord.decompose`), with the lab table they make."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from mows.physics.probe import Probe
+from mows.sweep.decompose import Decomposition, Ringdowns, decompose, local_potential
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepPoint:
+    """One successful ring-down of a sweep (SI units; t_s on the device clock)."""
+
+    theta0_rad: float
+    frequency_hz: float
+    frequency_std_hz: float
+    shift_hz: float
+    shift_std_hz: float
+    amplitude_rad: float
+    damping_per_s: float
+    duration_s: float
+    t_s: float
+    amplitude_std_rad: float = math.nan
+
+    @classmethod
+    def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0) -> "SweepPoint":
+        """A successful ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`, or a RingdownFit
+        message: the fields are the same) with its frequency shift; σ of θmax from the fit's
+        covariance (NaN when θmax was held at a bound)."""
+        names = list(fit.parameter_names)
+        covariance = np.asarray(fit.covariance, float).reshape(len(names), len(names))
+        index = names.index("amplitude_rad") if "amplitude_rad" in names else None
+        amplitude_std = math.sqrt(covariance[index, index]) if index is not None else math.nan
+        return cls(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, shift_hz, shift_std_hz, fit.amplitude_rad,
+                   fit.damping_per_s, fit.duration_s, t_s, amplitude_std)
+
+
+@dataclasses.dataclass
+class SweepRecord:
+    """The ring-downs of one rotation sweep, collected as they arrive."""
+
+    points: list = dataclasses.field(default_factory=list)
+    failed: int = 0
+
+    def add(self, point: SweepPoint) -> None:
+        self.points.append(point)
+
+    def _column(self, name: str) -> np.ndarray:
+        return np.array([getattr(p, name) for p in self.points], float)
+
+    def at_angle(self, theta0_rad: float) -> tuple[float, float, int]:
+        """Inverse-variance weighted mean shift at one orientation, its σ, and the count."""
+        chosen = [p for p in self.points if abs(p.theta0_rad - theta0_rad) < 1e-9]
+        if not chosen:
+            return math.nan, math.nan, 0
+        weights = np.array([1.0 / p.shift_std_hz**2 for p in chosen])
+        shifts = np.array([p.shift_hz for p in chosen])
+        return float(weights @ shifts / weights.sum()), float(1.0 / math.sqrt(weights.sum())), len(chosen)
+
+    def stop_amplitude_rad(self, rest_angles_rad=None) -> float:
+        """The swing a ring-down starts with when the probe rests undeflected: the
+        inverse-variance weighted mean of the fits' θmax + |θs| (θs: each point's rest angle,
+        0 when not given).
+
+        Every ring-down starts from the housing stop, and the perpendicular excitation scheme
+        drives every orientation alike; a single fit's θmax, though, is poorly determined near
+        θ0 = 180° (and held at a bound when unidentifiable), so the sweep's pooled value is the
+        better input to the amplitude-dependent springs. The median when no σ is known.
+        """
+        amplitude = self._column("amplitude_rad")
+        if rest_angles_rad is not None:
+            amplitude = amplitude + np.abs(np.asarray(rest_angles_rad, float))
+        std = self._column("amplitude_std_rad")
+        usable = np.isfinite(std) & (std > 0)
+        if not usable.any():
+            return float(np.median(amplitude))
+        weights = 1.0 / std[usable] ** 2
+        return float(weights @ amplitude[usable] / weights.sum())
+
+    def decompose(self, probe: Probe, f00_hz: float, model: str = "first_principles",
+                  f00_free: bool = False) -> Decomposition:
+        """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
+
+        The first-principles model needs the swing each ring-down starts with, stop − |θs|, and
+        θs depends on the field it is fitting: a first pass with θs = 0 gives the field, its rest
+        angles give the pooled stop amplitude, and a second pass fits with both.
+        """
+        theta0 = self._column("theta0_rad")
+        arrays = dict(theta0_rad=theta0, shift_hz=self._column("shift_hz"), shift_std_hz=self._column("shift_std_hz"),
+                      probe=probe, f00_hz=f00_hz, model=model, f00_free=f00_free)
+        if model != "first_principles":
+            return decompose(**arrays)
+
+        def ringdowns(stop):
+            return Ringdowns(stop, self._column("damping_per_s"), self._column("duration_s"))
+
+        first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad()))
+        if not first.ok:
+            return first
+        rest = np.nan_to_num(local_potential(first.parameters, theta0, probe).rest_angle_rad())
+        return decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(rest)), start=first.parameters)
+
+    def start_amplitudes_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
+        """Each ring-down's start swing, stop − |θs|, at the decomposition's field and gradient."""
+        theta0 = self._column("theta0_rad")
+        rest = np.abs(np.nan_to_num(local_potential(decomposition.parameters, theta0, probe).rest_angle_rad()))
+        return self.stop_amplitude_rad(rest) - rest
+
+    def table_columns(self, start_amplitudes_rad=None) -> dict:
+        """Columns of a model-lab measurement table (docs/model_lab.md). ``amplitude_deg`` is each
+        ring-down's start swing: ``start_amplitudes_rad`` (e.g. :meth:`start_amplitudes_rad` of
+        a decomposition), else the pooled :meth:`stop_amplitude_rad`."""
+        t = self._column("t_s")
+        start = (np.full(len(self.points), self.stop_amplitude_rad()) if start_amplitudes_rad is None
+                 else np.asarray(start_amplitudes_rad, float))
+        return {"theta0_deg": np.degrees(self._column("theta0_rad")), "f_hz": self._column("frequency_hz"),
+                "f_std_hz": self._column("frequency_std_hz"), "t_s": t - (t.min() if t.size else 0.0),
+                "amplitude_deg": np.degrees(start),
+                "damping_per_s": self._column("damping_per_s"), "duration_s": self._column("duration_s")}

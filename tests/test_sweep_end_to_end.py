@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from mows.lab.table import reference_at
+from mows.lab import reference_at
 from mows.lab.synth import fit_cycle
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice, simulate_cycle

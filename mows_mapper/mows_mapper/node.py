@@ -24,7 +24,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 
 from mows.records import stamps
 from mows.lab import analyse
-from mows.lab.table import from_sweep, reference_at
+from mows.lab import from_sweep, reference_at
 from mows.physics.probe import Probe
 from mows.sweep.decompose import MODELS
 from mows.sweep.record import SweepPoint, SweepRecord

@@ -23,8 +23,11 @@ def test_models_compose_with_plus():
     model = FrequencyModel(PAPER_PROBE) + effects["gravity"] + effects["thermal_drift"]
     assert model.parameter_names == ["f00_hz", "gravity.down_x", "gravity.down_y",
                                      "thermal_drift.spring_temp_coeff_per_k"]
-    pair = effects["gravity"] + effects["field_offset"]
+    pair = FrequencyModel() + effects["gravity"] + effects["field_offset"]
     assert pair.effect_names == ["gravity", "field_offset"] and pair.probe is None
+    assert (effects["gravity"] + FrequencyModel(PAPER_PROBE)).effect_names == ["gravity"]
+    assert (FrequencyModel(PAPER_PROBE) + pair).parameter_names == ["f00_hz", "gravity.down_x", "gravity.down_y",
+                                                                   "field_offset.bx_t", "field_offset.by_t"]
     with pytest.raises(ValueError, match="more than once"):
         model + effects["gravity"]
 

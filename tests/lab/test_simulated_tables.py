@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from mows.lab import analyse, synth
-from mows.lab.table import FIELD, GRADIENT, reference_at
+from mows.lab import reference_at
+from mows.lab.table import FIELD, GRADIENT
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
 from mows.sim.scenario import load_scenario
 

@@ -11,7 +11,7 @@ from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
 from mows_msgs.srv import RunCycle
 from rclpy.action import ActionClient
 
-from mows.lab.table import reference_at
+from mows.lab import reference_at
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE

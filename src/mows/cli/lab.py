@@ -18,7 +18,8 @@ import math
 import pathlib
 import sys
 
-from mows.lab.table import TableError, is_bag
+from mows.lab import TableError, analyse, is_bag, load_table, write_report
+from mows.physics.probe import Probe
 
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"
 
@@ -61,9 +62,6 @@ def run(args) -> int:
 
 
 def _run(args) -> int:
-    from mows.lab.analysis import analyse
-    from mows.lab.table import load_table
-
     probe = _probe(args.probe)
     table = load_table(args.table, drop_invalid=args.drop_invalid,
                        **({"reference": args.reference, "magnet_position_m": args.magnet_position}
@@ -72,9 +70,7 @@ def _run(args) -> int:
     report = analyse(table, probe, effects=effects, auto=getattr(args, "auto", False), plugins=args.plugin,
                      rank=args.lab_command != "compare", cross_validate=not args.no_cv)
     if args.lab_command == "report":
-        from mows.lab.report import write_html
-
-        path = write_html(report, args.output)
+        path = write_report(report, args.output)
         print(f"wrote {path}")
     if args.json:
         print(json.dumps(report.to_dict(), indent=2, default=float))
@@ -84,8 +80,6 @@ def _run(args) -> int:
 
 
 def _probe(source):
-    from mows.physics.probe import Probe
-
     path = PAPER_PROBE_FILE if source == "paper" else pathlib.Path(source)
     if not path.is_file():
         raise ValueError(f"probe file {path} does not exist")

@@ -9,25 +9,57 @@ Quick use::
     report = analyse(load_table("sweep.csv"), Probe.from_yaml("probe.yaml"), auto=True)
     print(report.verdict, report.structure)
 
-Building blocks: :func:`load_table` / :class:`MeasurementTable` (CSV and bags),
-:class:`FrequencyModel` (Eq. 6 + effects, ``+`` composes, ``fit``), :func:`catalog` and the
-:func:`effect` decorator for plugins, :func:`diagnose` (candidates, groups, verdict),
-:func:`analyse` (all of it, for the live node) and :func:`write_report` (HTML).
+The modules form a pipeline, table → model and effects → fit → residual structure and
+candidates → search → report, and are layered in that order: each module imports only modules
+above it in this list (and, outside the lab, ``mows.records``, ``mows.physics``, ``mows.sim``,
+``mows.device``, ``mows.estimate`` and ``mows.sweep``), never one below it.
+
+1. ``table``: :class:`MeasurementTable`, its columns, validation and errors. Imports no lab module.
+2. ``reference``: the reference field of a static source (field source, mapping, file or
+   scenario) as table columns. Imports ``table``.
+3. ``readers``: :func:`load_table`: CSV, the project's bags, rotation sweeps. Imports ``table``,
+   ``reference``.
+4. ``synth``: tables from independent physics and from the simulator and estimator (test data).
+   Imports ``table``, ``reference``.
+5. ``physics``: the per-row :class:`~mows.lab.physics.Configuration` and its frequency through
+   the potential. Imports no lab module.
+6. ``effects``: the :class:`Effect` and :class:`Parameter` types. Imports ``table``, ``physics``.
+7. ``plugins``: the :func:`effect` decorator and :func:`load_plugins`. Imports ``effects``.
+8. ``catalog``: the built-in effects, :func:`catalog`, ``resolve``. Imports ``physics``,
+   ``effects``, ``plugins``.
+9. ``model``: :class:`FrequencyModel` (Eq. 6 + effects, ``+`` composes), its fit and
+   :class:`FitResult`. Imports ``physics``, ``effects``.
+10. ``algebra``: projections orthogonal to a fit and score tests. Imports no lab module.
+11. ``structure``: :func:`residual_structure` (harmonics of θ0, covariate trends). Imports ``algebra``.
+12. ``candidates``: each effect tested as the missing one, free and at physics. Imports
+    ``algebra``, ``effects``.
+13. ``whatif``: what-if variants of a table (more angles, half amplitude, …). Imports no lab module.
+14. ``groups``: candidates the table cannot tell apart, and the measurement that would. Imports
+    ``algebra``, ``candidates``, ``whatif``.
+15. ``diagnose``: :func:`diagnose`: structure, candidates, groups, verdict. Imports ``structure``,
+    ``candidates``, ``groups``.
+16. ``search``: stepwise model selection and the error history. Imports ``candidates``, ``diagnose``.
+17. ``analysis``: :func:`analyse` (all of it, for the live node) and :class:`LabReport`. Imports
+    ``readers``, ``catalog``, ``model``, ``candidates``, ``diagnose``, ``search``.
+18. ``report``: :func:`write_report` (HTML with plots). Imports no lab module (it reads a
+    :class:`LabReport`).
+
+This package's ``__init__`` re-exports the public names; the CLI (``mows.cli.lab``), the bench
+and the nodes import from here.
 """
 from mows.lab.analysis import LabReport, analyse
-from mows.lab.diagnose import Diagnosis, diagnose, residual_structure
-from mows.lab.effects import CATALOG, Effect, Parameter, catalog, effect, load_plugins
+from mows.lab.catalog import CATALOG, catalog
+from mows.lab.diagnose import Diagnosis, diagnose
+from mows.lab.effects import Effect, Parameter
 from mows.lab.model import FitResult, FrequencyModel
-from mows.lab.table import MeasurementTable, MissingColumnError, TableError, from_bag, load_table, read_csv
-
-
-def write_report(report, path):
-    """Write ``report`` (a :class:`LabReport`) as a self-contained HTML page."""
-    from mows.lab.report import write_html
-
-    return write_html(report, path)
-
+from mows.lab.plugins import effect, load_plugins
+from mows.lab.readers import from_bag, from_sweep, is_bag, load_table, read_csv
+from mows.lab.reference import reference_at, reference_columns
+from mows.lab.report import write_html as write_report
+from mows.lab.structure import residual_structure
+from mows.lab.table import MeasurementTable, MissingColumnError, TableError
 
 __all__ = ["CATALOG", "Diagnosis", "Effect", "FitResult", "FrequencyModel", "LabReport", "MeasurementTable",
            "MissingColumnError", "Parameter", "TableError", "analyse", "catalog", "diagnose", "effect",
-           "from_bag", "load_plugins", "load_table", "read_csv", "residual_structure", "write_report"]
+           "from_bag", "from_sweep", "is_bag", "load_plugins", "load_table", "read_csv", "reference_at",
+           "reference_columns", "residual_structure", "write_report"]

@@ -24,12 +24,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import weakref
 
 import numpy as np
 import scipy.optimize
 
-from mows.lab import effects as effects_module
+from mows.estimate.ringdown import FitStatus
+from mows.lab.effects import Effect, testable
 from mows.lab.physics import Configuration, frequency_factor
+from mows.physics import ringdown_average
 
 FD_STEP = 1e-2          # × parameter scale
 CV_FOLDS = 10           # interleaved folds when the table has one sweep
@@ -39,7 +42,8 @@ INVALID_RESIDUAL = 1e6  # weighted residual given to rows where the model has no
 class FrequencyModel:
     """The published frequency model plus ``effects`` for ``probe`` (a :class:`mows.physics.probe.Probe`).
 
-    ``model + effect`` and ``effect + effect`` give new models; parameters are named
+    ``model + effect`` and ``effect + model`` give new models (``FrequencyModel() + a + b``
+    one without a probe, to add to others); parameters are named
     ``f00_hz`` and ``<effect>.<parameter>``.
     """
 
@@ -59,7 +63,7 @@ class FrequencyModel:
         for part in parts:
             if isinstance(part, FrequencyModel):
                 found.extend(part.effects)
-            elif isinstance(part, effects_module.Effect):
+            elif isinstance(part, Effect):
                 found.append(part)
             else:
                 raise TypeError(f"cannot add {type(part).__name__} to a frequency model")
@@ -67,6 +71,9 @@ class FrequencyModel:
 
     def __add__(self, other):
         return FrequencyModel.combine(self, other)
+
+    def __radd__(self, other):
+        return FrequencyModel.combine(other, self)
 
     # --- description ----------------------------------------------------------------------
     @property
@@ -111,7 +118,7 @@ class FrequencyModel:
         ordered = sorted(range(len(self.effects)), key=lambda i: self.effects[i].stage)
         for i in ordered:
             self.effects[i].apply(config, table, probe, *(float(v) for v in values[bounds[i]:bounds[i + 1]]))
-        nodes = effects_module.ringdown_nodes(table, config) if config.amplitude else None
+        nodes = ringdown_nodes(table, config) if config.amplitude else None
         return frequency_factor(config, probe, nodes)
 
     def predict(self, table, values) -> np.ndarray:
@@ -125,7 +132,7 @@ class FrequencyModel:
         """Weighted least-squares fit to ``table``; ``start`` = effect parameter values (default 0)."""
         self._require_probe()
         for effect in self.effects:
-            reason = effects_module.testable(effect, table, self.probe)
+            reason = testable(effect, table, self.probe)
             if reason:
                 raise ValueError(f"effect {effect.name} cannot be fitted to this table: {reason}")
         problem = _Problem(self, table)
@@ -140,6 +147,21 @@ class FrequencyModel:
                                                 x_scale="jac", method="trf", xtol=1e-10, ftol=1e-12, gtol=1e-12,
                                                 max_nfev=60)
         return problem.result(solution.x, solution.success, solution.message)
+
+
+# --- ring-down amplitude nodes, cached per table ---------------------------------------------
+_NODES = weakref.WeakKeyDictionary()
+
+
+def ringdown_nodes(table, config: Configuration):
+    """Amplitude nodes of the table's ring-downs, cached per table and ring-down inputs (the
+    inputs also come from the probe where the table has no column: Configuration.base)."""
+    inputs = (config.amplitude_start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s)
+    key = b"".join(np.ascontiguousarray(values, float).tobytes() for values in inputs)
+    cached = _NODES.setdefault(table, {})
+    if key not in cached:
+        cached[key] = ringdown_average.amplitude_nodes(table.theta0_rad, *inputs)
+    return cached[key]
 
 
 class _Problem:
@@ -205,7 +227,12 @@ class _Problem:
 @dataclasses.dataclass(eq=False)
 class FitResult:
     """A fitted :class:`FrequencyModel`. ``values``/``covariance`` are ordered as
-    ``model.parameter_names``; ``jacobian`` is d(weighted residual)/d(values), (n, k)."""
+    ``model.parameter_names``; ``jacobian`` is d(weighted residual)/d(values), (n, k).
+
+    The result protocol shared with the ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`):
+    ``status`` (a :class:`~mows.estimate.ringdown.FitStatus`, compared by name), ``ok`` and
+    ``report()``; ``message`` says why when the status is not OK.
+    """
 
     model: FrequencyModel
     table: object
@@ -218,6 +245,15 @@ class FitResult:
     jacobian: np.ndarray
     success: bool
     message: str
+
+    @property
+    def status(self) -> FitStatus:
+        """OK, or NOT_CONVERGED when the optimiser stopped before its tolerances were met."""
+        return FitStatus.OK if self.success else FitStatus.NOT_CONVERGED
+
+    @property
+    def ok(self) -> bool:
+        return self.status is FitStatus.OK
 
     @property
     def dof(self) -> int:
@@ -289,8 +325,8 @@ class FitResult:
         lines = [f"model {self.model.name}: n = {self.n}, χ²/dof = {self.chi2_dof:.3f}, BIC = {self.bic:.1f}"]
         for name, value, std, unit in self.parameters():
             lines.append(f"  {name:40s} = {value:+.6g} ± {std:.2g} {unit}")
-        if not self.success:
-            lines.append(f"  warning: the fit did not converge ({self.message})")
+        if not self.ok:
+            lines.append(f"  warning: {self.status.name}: the fit did not converge ({self.message})")
         return "\n".join(lines)
 
 

@@ -33,7 +33,7 @@ import math
 import numpy as np
 
 from mows.physics import ringdown_average
-from mows.physics.pose import probe_axes
+from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, probe_axes
 from mows.physics.potential import ArcPotential
 
 NEWTON_STEPS = 40
@@ -173,8 +173,6 @@ def _amplitude_stiffness(probe, field, amplitudes, **local):
 
 def standard_gravity_vector(down_x, down_y) -> np.ndarray:
     """In-plane gravity g·(down_x, down_y, 0), m/s² (the normal component does not act)."""
-    from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
-
     return STANDARD_GRAVITY_M_PER_S2 * np.array([down_x, down_y, 0.0])
 
 

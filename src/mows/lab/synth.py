@@ -17,12 +17,12 @@ when given: a reference that misses a source), optionally with magnetometer nois
 """
 from __future__ import annotations
 
-
 import numpy as np
 
 from mows.physics import ringdown_average
 from mows.physics.field import FieldSource
-from mows.lab.table import FIELD, GRADIENT, MeasurementTable, reference_columns
+from mows.lab.reference import reference_columns
+from mows.lab.table import FIELD, GRADIENT, MeasurementTable
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
 from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
@@ -134,7 +134,7 @@ def simulated_table(scenario, angles_deg, repeats: int, rng: np.random.Generator
     that sweep's pooled start amplitude. ``t_s`` is the device time of each switch-off (the
     pause between cycles is not simulated), ``temperature_k`` the device's temperature then.
     The reference columns are the scenario's field and gradient at the probe
-    (:func:`mows.lab.table.reference_at`). Failed fits are left out and counted in the notes.
+    (:func:`mows.lab.reference.reference_at`). Failed fits are left out and counted in the notes.
     """
     device = SimulatedDevice(scenario, rng)
     sweeps = [_simulated_sweep(device, scenario, angles_deg, settle_s) for _ in range(repeats)]

@@ -1,0 +1,70 @@
+"""The linear algebra of every test: directions projected orthogonally to what the fit absorbs.
+
+Everything is measured against what the current fit can already absorb. With J the Jacobian
+of the weighted residuals r = (f − model)/σ over the current model's free parameters, every
+test direction (a harmonic of θ0, a covariate, a candidate effect's parameters at 0) is first
+projected orthogonally to J: P⊥ = I − Q·Qᵀ, Q an orthonormal basis of J. A
+:class:`Signature` holds such a projected direction set and its score statistic against the
+residual, S = ‖Uᵀr‖² (U an orthonormal basis of the projected columns), ~ χ²(rank) under
+the model.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import scipy.stats
+
+RANK_RTOL = 1e-3  # a projected direction shorter than this (relative) is absorbed by the model
+
+
+def orthonormal_basis(columns, reference_norm=None) -> np.ndarray:
+    """Orthonormal basis (n, r) of the column space, dropping directions below RANK_RTOL of
+    ``reference_norm`` (default: the largest singular value)."""
+    columns = np.asarray(columns, float).reshape(len(columns), -1)
+    if columns.shape[1] == 0:
+        return columns
+    u, s, _ = np.linalg.svd(columns, full_matrices=False)
+    scale = s[0] if reference_norm is None else reference_norm
+    return u[:, s > RANK_RTOL * scale] if scale > 0 else u[:, :0]
+
+
+def project_out(columns, basis) -> np.ndarray:
+    """Columns with their components along the orthonormal ``basis`` removed."""
+    return columns - basis @ (basis.T @ columns)
+
+
+@dataclasses.dataclass
+class Signature:
+    """A test direction set after projection: basis U (n, r), coefficients of the residual."""
+
+    basis: np.ndarray
+    projected: np.ndarray
+    statistic: float
+    rank: int
+
+    @property
+    def p_value(self) -> float:
+        return float(scipy.stats.chi2.sf(self.statistic, self.rank)) if self.rank else 1.0
+
+    @property
+    def fitted_signal(self) -> np.ndarray:
+        return self.basis @ self.coefficients_in_basis
+
+    coefficients_in_basis: np.ndarray = None
+    columns: np.ndarray = None   # before projection
+
+
+def signature(columns, model_basis, residual) -> Signature:
+    """Project ``columns`` orthogonally to the model and score them against ``residual``."""
+    columns = np.asarray(columns, float).reshape(len(residual), -1)
+    projected = project_out(columns, model_basis)
+    norm = np.linalg.norm(columns, axis=0).max() if columns.size else 0.0
+    basis = orthonormal_basis(projected, norm)
+    coefficients = basis.T @ residual
+    return Signature(basis, projected, float(coefficients @ coefficients), basis.shape[1], coefficients, columns)
+
+
+def cosine_within(vector, basis) -> float:
+    norm = np.linalg.norm(vector)
+    return float(np.linalg.norm(basis.T @ vector) / norm) if norm > 0 and basis.shape[1] else 0.0

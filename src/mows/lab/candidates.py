@@ -1,0 +1,226 @@
+"""Candidate effects: each catalog effect tested as the explanation of a fit's residual.
+
+Each testable effect's signature (its Jacobian columns at 0, projected orthogonally to the fit,
+:mod:`mows.lab.algebra`) gives a score test; the effect is then refitted with the model
+(nonlinear least squares): ΔBIC = Δχ² − k·ln n, p-value of the likelihood ratio
+Δχ² ~ χ²(k), parameters ± σ. An effect whose size follows from known constants
+(``Effect.physical``) is also refitted held at that value, with no new parameter (ΔBIC = Δχ²,
+p of two simple hypotheses, :func:`_physics_form`); the candidate stands for the better form,
+and keeps the free fit's parameters as a check.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import scipy.stats
+
+from mows.lab.algebra import Signature, orthonormal_basis, project_out, signature
+from mows.lab.effects import Effect, testable
+
+TIE_DELTA_BIC = 2.0
+STRONG_DELTA_BIC = 10.0
+STRONG_P = 1e-3
+REFIT_P = 0.05
+
+
+# --- candidates -----------------------------------------------------------------------------
+@dataclasses.dataclass
+class Form:
+    """One way of adding an effect to the current fit: its parameters free (ΔBIC = Δχ² − k·ln n,
+    p of the likelihood ratio Δχ² ~ χ²(k)), or held at their physical values (``fixed``: no new
+    parameter, ΔBIC = Δχ², p of the simple-versus-simple likelihood ratio, see
+    :func:`_physics_form`). ``fit`` is the nonlinear refit, None for the one-step estimate."""
+
+    fixed: bool
+    delta_bic: float
+    p_value: float
+    chi2_after: float
+    dof_after: int
+    fit: object = None
+    signal_chi2: float = math.nan  # at physics: Σ(predicted signal/σ)² beyond what f00 absorbs
+
+    @property
+    def chi2_dof_after(self) -> float:
+        return self.chi2_after / max(self.dof_after, 1)
+
+    @property
+    def kept_physics(self) -> bool:
+        """Known physics the data cannot reject: held at physics, its predicted signal would be
+        strong evidence if no free parameter absorbed it, and adding it costs less than the
+        tie margin of BIC (how :mod:`mows.lab.analysis` uses it)."""
+        return self.fixed and self.signal_chi2 > STRONG_DELTA_BIC and self.delta_bic > -TIE_DELTA_BIC
+
+    def to_dict(self) -> dict:
+        return {"delta_bic": _finite(self.delta_bic), "p_value": _finite(self.p_value),
+                "chi2_dof_after": _finite(self.chi2_dof_after)}
+
+
+@dataclasses.dataclass
+class Candidate:
+    """One effect tested against the current fit (fields map onto mows_msgs/CandidateEffect).
+
+    Effects with a physical value are tested in both forms (``free`` and ``physics``); the
+    candidate stands for the better of the two by BIC (:attr:`form`; the fewer parameters on a
+    tie): ``delta_bic``, ``p_value`` and ``chi2_dof_after`` are that form's (:attr:`chosen`).
+    ``parameters`` are always the free fit's, so that a candidate held at physics still shows
+    how far its physical value lies from what the data say alone (:attr:`physics_deviation`).
+    """
+
+    effect: Effect
+    free: Form
+    physics: Form | None
+    score_p_value: float
+    parameters: list          # [(name, value, std, unit)] of the free form
+    within_bounds: bool
+    signature: Signature
+    group: int = 0
+
+    @property
+    def name(self) -> str:
+        return self.effect.name
+
+    @property
+    def chosen(self) -> Form:
+        return self.physics if self.physics is not None and self.physics.delta_bic >= self.free.delta_bic else self.free
+
+    @property
+    def forms(self) -> list:
+        return [self.free] + ([self.physics] if self.physics is not None else [])
+
+    @property
+    def form(self) -> str:
+        return "at physics" if self.chosen.fixed else "free"
+
+    def label_of(self, form: Form) -> str:
+        return self.effect.at_physics().label if form.fixed else self.name
+
+    @property
+    def label(self) -> str:
+        return self.label_of(self.chosen)
+
+    @property
+    def delta_bic(self) -> float:
+        return self.chosen.delta_bic
+
+    @property
+    def p_value(self) -> float:
+        return self.chosen.p_value
+
+    @property
+    def chi2_dof_after(self) -> float:
+        return self.chosen.chi2_dof_after
+
+    @property
+    def physics_deviation(self) -> float:
+        """Largest |free value − physical value|/σ over the parameters (NaN without a physical value)."""
+        return physics_deviation(self.effect, self.parameters)
+
+    @property
+    def strong(self) -> bool:
+        return self.delta_bic > STRONG_DELTA_BIC and self.p_value < STRONG_P
+
+    def to_dict(self) -> dict:
+        return {"effect": self.name, "form": self.form, "label": self.label, "delta_bic": _finite(self.delta_bic),
+                "p_value": _finite(self.p_value), "score_p_value": _finite(self.score_p_value),
+                "chi2_dof_after": _finite(self.chi2_dof_after),
+                "parameters": {name: {"value": v, "std": s, "unit": u} for name, v, s, u in self.parameters},
+                "free": self.free.to_dict(), "at_physics": None if self.physics is None else self.physics.to_dict(),
+                "physics_deviation_sigma": _finite(self.physics_deviation),
+                "within_bounds": self.within_bounds, "group": self.group, "explanation": self.effect.explanation}
+
+
+def physics_deviation(effect, parameters) -> float:
+    """Largest |value − physical value|/σ of an effect's fitted ``parameters`` [(name, value,
+    std, unit)]; NaN when the effect has no physical value."""
+    if effect.physical is None or not parameters:
+        return math.nan
+    return max(abs(v - p) / s if s > 0 else math.inf for (_, v, s, _), p in zip(parameters, effect.physical))
+
+
+def _finite(value):
+    return float(value) if np.isfinite(value) else None
+
+
+
+def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
+    """(candidates best first, {effect: why it cannot be tested}) for the ``effects`` not yet in
+    ``fit``'s model: score test on the projected signature, then each form's refit where
+    ``worth_refit(effect, signature, added)`` (``added``: the free parameters the form adds;
+    default: score p < REFIT_P), else the one-step estimate."""
+    worth_refit = worth_refit or (lambda effect, test, added: test.p_value < REFIT_P)
+    residual = fit.weighted_residual
+    model_basis = orthonormal_basis(fit.jacobian)
+    candidates, untestable = [], {}
+    for effect in effects:
+        if effect.name in fit.model.effect_names:
+            continue
+        reason = testable(effect, fit.table, probe)
+        test = None if reason else signature(fit.extension_columns(effect), model_basis, residual)
+        if test is not None and not test.rank:
+            reason = "no signature in this table that the current model cannot already absorb"
+        if reason:
+            untestable[effect.name] = reason
+            continue
+        candidates.append(_candidate(fit, effect, test, lambda added: worth_refit(effect, test, added)))
+    candidates.sort(key=lambda c: -c.delta_bic)
+    return candidates, untestable
+
+
+def _candidate(fit, effect, test: Signature, refit) -> Candidate:
+    """Refit the model with ``effect`` in each form where ``refit(added free parameters)``, or
+    take the one-step (linearised) refit along the projected signature. A Δχ² above the strong
+    threshold needs a score statistic above it too (the score is the largest Δχ² of the
+    linearised problem), so with the default rule no strong form is left to the one-step
+    estimate."""
+    free, parameters = _free_form(fit, effect, test, refit(len(effect.parameters)))
+    physics = None if effect.physical is None else _physics_form(fit, effect, test, refit(0))
+    inside = all(p.lower + 1e-6 * (p.upper - p.lower) < v < p.upper - 1e-6 * (p.upper - p.lower)
+                 for p, (_, v, _, _) in zip(effect.parameters, parameters))
+    return Candidate(effect, free, physics, test.p_value, parameters, inside, test)
+
+
+def _free_form(fit, effect, test: Signature, refit: bool) -> tuple:
+    """(Form, parameters) of ``effect`` added with its parameters free."""
+    k = len(effect.parameters)
+    if refit:
+        after = (fit.model + effect).fit(fit.table, start=np.concatenate([fit.values[1:], np.zeros(k)]))
+        chi2_after, dof_after, parameters = after.chi2, after.dof, after.effect_parameters(effect.name)
+    else:
+        after = None
+        step = -np.linalg.pinv(test.projected) @ fit.weighted_residual
+        std = np.sqrt(np.clip(np.diag(np.linalg.pinv(test.projected.T @ test.projected)), 0, None))
+        chi2_after, dof_after = fit.chi2 - test.statistic, fit.dof - test.rank
+        parameters = [(p.name, float(v), float(e), p.unit) for p, v, e in zip(effect.parameters, step, std)]
+    gain = fit.chi2 - chi2_after
+    form = Form(False, gain - k * math.log(fit.n), float(scipy.stats.chi2.sf(max(gain, 0.0), test.rank)),
+                chi2_after, dof_after, after)
+    return form, parameters
+
+
+def _physics_form(fit, effect, test: Signature, refit: bool) -> Form:
+    """``effect`` added at its physical values: no new parameter, ΔBIC = Δχ².
+
+    The p-value is that of the likelihood ratio of two simple hypotheses (Neyman–Pearson): the
+    effect adds the known signal s (weighted, after the current model's parameters have
+    absorbed what they can: s = r_after − r, S = ‖s‖), and under the current model
+    Δχ² = −2·r·s − S² is Gaussian with mean −S² and variance 4S², so p = P(Δχ² ≥ observed) =
+    Q((Δχ² + S²)/(2S)). A form whose signal is below the noise cannot reach a small p.
+    ``signal_chi2`` is the predicted signal's size before the model's parameters absorb it
+    (only the constant that f00 takes is removed), linearised.
+    """
+    residual = fit.weighted_residual
+    predicted = test.columns @ np.asarray(effect.physical, float)
+    signal = project_out(predicted[:, None], orthonormal_basis(fit.jacobian[:, :1]))
+    if refit:
+        after = (fit.model + effect.at_physics()).fit(fit.table, start=fit.values[1:])
+        shift, chi2_after, dof_after = after.weighted_residual - residual, after.chi2, after.dof
+    else:
+        after = None
+        shift = test.projected @ np.asarray(effect.physical, float)
+        chi2_after, dof_after = float(np.sum((residual + shift) ** 2)), fit.dof
+    gain = fit.chi2 - chi2_after
+    size = float(np.linalg.norm(shift))
+    p = float(scipy.stats.norm.sf((gain + size**2) / (2 * size))) if size > 0 else 1.0
+    return Form(True, gain, p, chi2_after, dof_after, after, float(np.sum(signal**2)))

@@ -1,0 +1,107 @@
+"""Plugins: effects a user writes, in Python files or installed packages (entry points).
+
+A plugin file defines effects with the :func:`effect` decorator::
+
+    from mows.lab import effect
+
+    @effect(name="coil_heating", parameters={"k_per_a2_nm_per_rad": (0.0, -1e-5, 1e-5, "N·m/rad/A²")},
+            explanation="...", signature="grows with coil current squared")
+    def coil_heating(rows, k_per_a2_nm_per_rad):
+        return {"stiffness_nm_per_rad": k_per_a2_nm_per_rad * rows.coil_current_a ** 2}
+
+A plugin returns ``stiffness_nm_per_rad`` (added to kM: it enters U as ½·Δk·θ², so it goes
+through the same equilibrium and harmonic balance) and/or ``frequency_hz`` (added to f).
+Installed packages register effects under the entry-point group ``mows.lab.effects``.
+"""
+from __future__ import annotations
+
+import importlib.metadata
+import importlib.util
+import inspect
+import pathlib
+from typing import Callable
+
+import numpy as np
+
+from mows.lab.effects import MECHANICS, Effect, Parameter
+
+ENTRY_POINT_GROUP = "mows.lab.effects"
+
+
+def effect(name: str, parameters: dict, explanation: str = "", signature: str = "", equation: str = "",
+           check: str = "") -> Callable:
+    """Decorator turning ``function(rows, **parameters) -> dict`` into an :class:`Effect`.
+
+    ``parameters`` maps each name to ``(off_value, lower, upper, unit)``; the off value must
+    be 0 (the effect is absent at 0) and lie within the bounds. The function receives the
+    table (columns as attributes) and the parameter values, and returns a dict with
+    ``stiffness_nm_per_rad`` and/or ``frequency_hz`` (scalars or per-row arrays).
+    """
+    specs = []
+    for pname, spec in parameters.items():
+        try:
+            off, lower, upper, unit = spec
+        except (TypeError, ValueError):
+            raise ValueError(f"effect {name}: parameter {pname} needs (off_value, lower, upper, unit)") from None
+        if off != 0:
+            raise ValueError(f"effect {name}: parameter {pname} must be off at 0 (got off value {off})")
+        specs.append(Parameter(pname, unit, float(lower), float(upper), (float(upper) - float(lower)) * 1e-3))
+
+    def decorate(function):
+        accepted = list(inspect.signature(function).parameters)[1:]
+        if accepted != [p.name for p in specs]:
+            raise ValueError(f"effect {name}: the function takes {accepted}, the parameters are "
+                             f"{[p.name for p in specs]}")
+
+        def apply(config, rows, probe, *values):
+            result = function(rows, *values)
+            unknown = set(result) - {"stiffness_nm_per_rad", "frequency_hz"}
+            if unknown:
+                raise ValueError(f"effect {name} returned {sorted(unknown)}; allowed: stiffness_nm_per_rad, "
+                                 "frequency_hz")
+            n = len(config.theta0_rad)
+            config.spring_nm_per_rad = config.spring_nm_per_rad + np.broadcast_to(
+                result.get("stiffness_nm_per_rad", 0.0), (n,))
+            config.frequency_hz = config.frequency_hz + np.broadcast_to(result.get("frequency_hz", 0.0), (n,))
+
+        return Effect(name, explanation or function.__doc__ or name, equation, signature, tuple(specs), apply,
+                      MECHANICS, requires=(), priority=200, check=check, origin=function.__module__)
+    return decorate
+
+
+def load_plugins(sources) -> list:
+    """Effects from plugin files (``*.py`` paths) or installed entry points (group
+    ``mows.lab.effects``, by entry-point name). A file contributes every :class:`Effect` it
+    defines at module level."""
+    found = []
+    for source in sources:
+        path = pathlib.Path(source)
+        if path.suffix == ".py" or path.exists():
+            found.extend(_effects_in_file(path))
+            continue
+        points = [p for p in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP) if p.name == source]
+        if not points:
+            raise ValueError(f"plugin '{source}' is neither a .py file nor an entry point in group "
+                             f"{ENTRY_POINT_GROUP}")
+        loaded = points[0].load()
+        found.extend([loaded] if isinstance(loaded, Effect) else _effects_in(vars(loaded), source))
+    return found
+
+
+def _effects_in_file(path: pathlib.Path) -> list:
+    if not path.is_file():
+        raise ValueError(f"plugin file {path} does not exist")
+    spec = importlib.util.spec_from_file_location(f"mows_lab_plugin_{path.stem}", path)
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except Exception as error:  # a broken plugin is the user's error: say where
+        raise ValueError(f"plugin file {path} failed to load: {type(error).__name__}: {error}") from error
+    return _effects_in(vars(module), path)
+
+
+def _effects_in(namespace: dict, source) -> list:
+    effects = [value for value in namespace.values() if isinstance(value, Effect)]
+    if not effects:
+        raise ValueError(f"plugin {source} defines no effect (use the @mows.lab.effect decorator)")
+    return effects

@@ -1,0 +1,196 @@
+"""Reading measurement tables: CSV files, the project's rosbag2 bags and rotation sweeps.
+
+Each reader gathers the columns of :mod:`mows.lab.table` and hands them to
+:func:`mows.lab.table.with_notes`, which validates them and notes what was assumed. Reference
+fields of static sources come from :mod:`mows.lab.reference`.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import pathlib
+from typing import Mapping
+
+import numpy as np
+
+from mows.device import bags
+from mows.estimate.ringdown import FitStatus
+from mows.lab.reference import reference_columns
+from mows.lab.table import FIELD, KNOWN, MeasurementTable, TableError, broken_rules, rows_text, with_notes
+from mows.records import stamps
+
+RINGDOWN_TOPIC = "/mows/ringdown"
+SWEEP_TOPIC = "/mows/sweep"
+
+
+def read_csv(path, drop_invalid: bool = False) -> MeasurementTable:
+    """Read a measurement table from CSV (header row, one row per ring-down).
+
+    Known columns must be numeric in every row; other columns are kept as covariates when all
+    their cells are numbers and ignored (with a note) otherwise. With ``drop_invalid`` rows
+    with empty, non-numeric, NaN or non-positive values in known columns are dropped and listed
+    in ``notes`` instead of raising :class:`TableError`.
+    """
+    path = pathlib.Path(path)
+    try:
+        with open(path, newline="") as handle:
+            rows = list(csv.reader(handle))
+    except OSError as error:
+        raise TableError(f"cannot read {path}: {error.strerror}") from None
+    rows = [row for row in rows if any(cell.strip() for cell in row)]
+    if not rows:
+        raise TableError(f"{path} is empty: expected a header row and data rows")
+    header = [name.strip() for name in rows[0]]
+    duplicated = sorted({name for name in header if header.count(name) > 1})
+    if duplicated:
+        raise TableError(f"{path}: column{'s' if len(duplicated) > 1 else ''} {', '.join(duplicated)} appear twice")
+    body = rows[1:]
+    if not body:
+        raise TableError(f"{path}: the table has no rows (only a header)")
+    short = [i for i, row in enumerate(body) if len(row) != len(header)]
+    if short:
+        raise TableError(f"{path}: {rows_text(short)} do not have {len(header)} cells like the header")
+    columns, notes, invalid = {}, [], {}
+    for j, name in enumerate(header):
+        values = np.array([_number(row[j]) for row in body])
+        if name not in KNOWN:  # a covariate is kept only where every row holds a number
+            unusable = np.flatnonzero(~np.isfinite(values))
+            if unusable.size:
+                notes.append(f"column '{name}' is not a finite number in {rows_text(unusable)}: ignored")
+                continue
+        bad = np.flatnonzero(np.isnan(values) & np.array([row[j].strip().lower() != "nan" for row in body]))
+        if bad.size:
+            if not drop_invalid:
+                raise TableError(f"{path}: column '{name}': {body[bad[0]][j]!r} is not a number "
+                                 f"({rows_text(bad)})")
+            invalid.setdefault(name, set()).update(bad.tolist())
+        columns[name] = values
+    table_source = str(path)
+    if drop_invalid:
+        columns, dropped = _drop_invalid_rows(columns, invalid)
+        if dropped:
+            notes.append(f"dropped {rows_text(dropped)}: empty, non-numeric, NaN or non-positive values")
+    return with_notes(columns, table_source, notes)
+
+
+def _number(cell: str) -> float:
+    try:
+        return float(cell)
+    except ValueError:
+        return math.nan
+
+
+def _drop_invalid_rows(columns, invalid):
+    bad = set().union(*invalid.values()) if invalid else set()
+    for _, _, rows in broken_rules(columns):
+        bad |= set(rows.tolist())
+    keep = np.setdiff1d(np.arange(len(next(iter(columns.values())))), sorted(bad))
+    return {k: v[keep] for k, v in columns.items()}, sorted(bad)
+
+
+def load_table(source, drop_invalid: bool = False, **bag_options) -> MeasurementTable:
+    """A :class:`MeasurementTable` from a CSV file, a rosbag2 bag directory (or .mcap file),
+    or a mapping of column arrays."""
+    if isinstance(source, MeasurementTable):
+        return source
+    if isinstance(source, Mapping):
+        return MeasurementTable({k: np.asarray(v, float) for k, v in source.items()}, "columns")
+    if is_bag(source):
+        return from_bag(pathlib.Path(source), **bag_options)
+    return read_csv(source, drop_invalid=drop_invalid)
+
+
+def is_bag(source) -> bool:
+    """A rosbag2 bag: a directory or an .mcap file."""
+    path = pathlib.Path(source)
+    return path.is_dir() or path.suffix == ".mcap"
+
+
+# --- bags -----------------------------------------------------------------------------------
+def _stamp_s(message, timestamp_ns) -> float:
+    seconds = stamps.seconds(message.header.stamp)
+    return seconds if seconds > 0 else 1e-9 * timestamp_ns
+
+
+def from_bag(path, reference=None, magnet_position_m=(0.0, 0.0, 0.0), ringdown_topic: str = RINGDOWN_TOPIC,
+             sweep_topic: str = SWEEP_TOPIC) -> MeasurementTable:
+    """A table from the project's bags: ``mows_msgs/msg/RingdownFit`` messages on
+    ``ringdown_topic`` (only STATUS_OK fits; the others are counted in ``notes``).
+
+    ``reference`` gives the reference field at the probe:
+
+    - ``None``: no reference columns;
+    - a topic name (``"/reference/magnetic_field"``): ``sensor_msgs/msg/MagneticField``
+      messages, the one nearest in time to each ring-down (header stamps, global frame);
+    - a static source in any form :func:`mows.lab.reference.reference_source` takes (a field
+      source, its mapping or YAML file at ``magnet_position_m``, or a scenario at its magnet
+      position): the exact field and in-plane gradient there.
+
+    Rows are numbered into sweeps by the ``SweepDecomposition`` stamps on ``sweep_topic`` when
+    the bag has them (a sweep's stamp is that of its last ring-down).
+    """
+    path = pathlib.Path(path)
+    if not path.exists():
+        raise TableError(f"no bag at {path}")
+    topics = [ringdown_topic, sweep_topic] + ([reference] if isinstance(reference, str) and
+                                              reference.startswith("/") else [])
+    fits, sweeps, fields, failed = [], [], [], 0
+    for item in bags.read_bag(path, topics=topics):
+        if item.topic == ringdown_topic:
+            if getattr(item.message, "tuning", False):
+                continue
+            if item.message.status == FitStatus.OK:
+                fits.append((_stamp_s(item.message, item.timestamp_ns), item.message))
+            else:
+                failed += 1
+        elif item.topic == sweep_topic:
+            sweeps.append(_stamp_s(item.message, item.timestamp_ns))
+        else:
+            vector = item.message.magnetic_field
+            fields.append((_stamp_s(item.message, item.timestamp_ns), (vector.x, vector.y, vector.z)))
+    if not fits:
+        raise TableError(f"{path}: no successful RingdownFit messages on {ringdown_topic}"
+                         + (f" ({failed} failed fits)" if failed else ""))
+    fits.sort(key=lambda item: item[0])
+    times_s = np.array([stamp for stamp, _ in fits])
+    columns = {
+        "theta0_deg": np.degrees([m.theta0_rad for _, m in fits]),
+        "f_hz": np.array([m.frequency_hz for _, m in fits]),
+        "f_std_hz": np.array([m.frequency_std_hz for _, m in fits]),
+        "t_s": times_s - times_s[0],
+        "amplitude_deg": np.degrees([m.amplitude_rad for _, m in fits]),
+        "damping_per_s": np.array([m.damping_per_s for _, m in fits]),
+        "duration_s": np.array([m.duration_s for _, m in fits]),
+        "snr_db": np.array([m.snr_db for _, m in fits]),
+    }
+    notes = [f"skipped {failed} RingdownFit messages whose status is not OK"] if failed else []
+    if sweeps:
+        columns["sweep"] = np.searchsorted(np.sort(sweeps), times_s - 1e-9).astype(float)
+    columns.update(_reference_columns(reference, times_s, fields, magnet_position_m, path))
+    return with_notes(columns, str(path), notes)
+
+
+def _reference_columns(reference, times_s, fields, magnet_position_m, path) -> dict:
+    if reference is None:
+        return {}
+    if isinstance(reference, str) and reference.startswith("/"):
+        if not fields:
+            raise TableError(f"{path}: no sensor_msgs/msg/MagneticField messages on {reference}")
+        times = np.array([t for t, _ in fields])
+        values = np.array([v for _, v in fields])
+        nearest = np.abs(times_s[:, None] - times[None, :]).argmin(axis=1)
+        return dict(zip(FIELD, values[nearest].T))
+    return reference_columns(reference, len(times_s), magnet_position_m)
+
+
+def from_sweep(record, reference, probe, decomposition=None) -> MeasurementTable:
+    """The table of one rotation sweep (:class:`mows.sweep.record.SweepRecord`) in a static
+    ``reference`` (anything :func:`mows.lab.reference.reference_source` takes). With a first-principles
+    ``decomposition`` of the sweep, each ring-down's start swing is stop − |θs| at its field
+    (:meth:`~mows.sweep.record.SweepRecord.start_amplitudes_rad`); else the pooled stop amplitude."""
+    starts = (record.start_amplitudes_rad(decomposition, probe)
+              if decomposition is not None and decomposition.ok and decomposition.model == "first_principles"
+              else None)
+    columns = record.table_columns(starts)
+    columns.update(reference_columns(reference, len(record.points)))
+    return MeasurementTable(columns, "sweep")

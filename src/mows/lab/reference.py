@@ -1,0 +1,63 @@
+"""The reference field of a static source at the probe, as table columns.
+
+A reference is named in one of four ways, and each is turned into one thing, a
+:class:`mows.physics.field.FieldSource` and the point where the probe sits
+(:func:`reference_source`):
+
+- a field source object, at ``magnet_position_m``;
+- a simulator scenario (:class:`mows.sim.scenario.Scenario`): its environment's sources at its
+  pose's magnet position;
+- a field-source mapping (YAML form, with a ``type`` key), at ``magnet_position_m``;
+- a path or name: a YAML file holding a field-source mapping, else a scenario (a shipped
+  scenario's name or a scenario YAML file).
+"""
+from __future__ import annotations
+
+import os
+import pathlib
+from typing import Mapping
+
+import numpy as np
+import yaml
+
+from mows.lab.table import FIELD, GRADIENT
+from mows.physics.field import FieldSource, source_from_dict
+from mows.sim.scenario import Scenario, load_scenario
+
+
+def reference_columns(reference, n: int, magnet_position_m=(0.0, 0.0, 0.0)) -> dict:
+    """The reference columns (field, in-plane gradient) of ``n`` rows in a static reference
+    (anything :func:`reference_source` takes)."""
+    field, gradient = reference_at(reference, magnet_position_m)
+    columns = {name: np.full(n, value) for name, value in zip(FIELD, field)}
+    columns.update({name: np.full(n, gradient[i, j]) for name, (i, j) in zip(GRADIENT, ((0, 0), (0, 1), (1, 1)))})
+    return columns
+
+
+def reference_at(reference, magnet_position_m=(0.0, 0.0, 0.0)) -> tuple:
+    """Field (3,) and gradient (3, 3) at the probe of a reference (module docstring)."""
+    source, point = reference_source(reference, magnet_position_m)
+    return source.field_t(point), source.gradient_t_per_m(point)
+
+
+def reference_source(reference, magnet_position_m=(0.0, 0.0, 0.0)) -> tuple:
+    """(field source, probe point (3,)) of a reference named in any of the module's four ways."""
+    if isinstance(reference, (str, os.PathLike)):
+        reference = _read(reference)
+    if isinstance(reference, Scenario):
+        return reference.environment.source, np.asarray(reference.pose.magnet_position_m, float)
+    if isinstance(reference, Mapping):
+        reference = source_from_dict(dict(reference))
+    if not isinstance(reference, FieldSource):
+        raise TypeError(f"a reference is a field source, a scenario, a field-source mapping or a file or name "
+                        f"of one; got {type(reference).__name__}")
+    return reference, np.asarray(magnet_position_m, float)
+
+
+def _read(name):
+    """A field-source mapping from a YAML file that holds one, else the scenario so named."""
+    path = pathlib.Path(name)
+    data = yaml.safe_load(path.read_text()) if path.is_file() else None
+    if isinstance(data, Mapping) and "type" in data:
+        return data
+    return load_scenario(str(name))

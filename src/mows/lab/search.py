@@ -1,0 +1,195 @@
+"""Model selection: stepwise by BIC with both forms of every effect (docs/model_lab.md).
+
+:func:`search` grows a fit from its diagnosis and records every step in the error history.
+
+1. **Forward step**: add the best strong candidate (ΔBIC > 10, p < 1e-3; inside a group the
+   tie-break of :mod:`mows.lab.groups` picks) in its better form. An effect whose size
+   follows from known constants (a physical value, e.g. a strength of 1) is tested both held at
+   that value (no new parameter: ΔBIC = Δχ²) and free (ΔBIC = Δχ² − k·ln n). Known physics
+   goes first: a strong candidate whose better form holds it at its physical value is added
+   before free ones, because a free parameter can absorb the signal of a missing effect (a
+   4-parameter curvature soaks up an amplitude and a deflection effect) and a fixed one cannot.
+   With no strong candidate left, an effect is still added at physics when the data cannot
+   reject it although they would see it if nothing absorbed it
+   (:attr:`mows.lab.candidates.Form.kept_physics`: a free tilt absorbs the amplitude's weakening
+   of the pendulum spring, and reads the tilt 1 % low without it).
+2. **Revisit** after every forward step: for each effect of the model, refit without it, rank
+   every effect against that reduced model (the removed one in its other form included), and
+   consider the reduced model, each refitted replacement, and — for a free effect with a
+   physical value — the effect held at physics plus one refitted candidate; what a move adds
+   must itself be positive evidence (ΔBIC > 2 on the model it joins). The best of these that
+   the guard accepts replaces the model; repeat until none does. An effect added early
+   whose free parameter was absorbing another effect (a strength of 0.92 soaking up the
+   amplitude's weakening of the gradient springs) is thus put back at its physical value, or
+   dropped, once the other effect is in.
+
+Guard against over-fitting: the model grows only by forward steps, on strong evidence (or by
+known physics, which adds no parameter and may cost at most ΔBIC 2); every revisit move lowers
+the BIC — a move to fewer free parameters by any amount, to as many by more than 2 (positive
+evidence: degenerate effects keep the tie-break's choice) — and the only move to more free
+parameters is freeing an effect held at physics, on strong evidence. The revisit thus never
+comes back to a model and ends; at most 6 forward steps. Every step is recorded with its
+change, χ²/dof, BIC and the leave-one-sweep-out cross-validated rms error.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from mows.lab.candidates import STRONG_DELTA_BIC, TIE_DELTA_BIC, rank_candidates
+from mows.lab.diagnose import diagnose
+
+MAX_AUTO_STEPS = 6
+MAX_REVISIT_MOVES = 6       # per forward step; each move lowers the BIC, so this is only a bound
+NONLINEAR_MARGIN = 2.0      # a refit may gain up to this × the score statistic (the linearised gain)
+
+
+@dataclasses.dataclass
+class HistoryStep:
+    """One model of the history: ``change`` says how it came from the previous one, ``check``
+    holds the free fit [(name, value, std, unit)] of an effect added at physics."""
+
+    effects: list
+    chi2_dof: float
+    bic: float
+    cv_rms_hz: float
+    fit: object
+    change: str = "base model"
+    check: list = dataclasses.field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {"effects": self.effects, "change": self.change, "chi2_dof": self.chi2_dof, "bic": self.bic,
+                "cv_rms": None if not math.isfinite(self.cv_rms_hz) else self.cv_rms_hz,  # Hz (issue's key)
+                "free_fit": parameters_dict(self.check)}
+
+
+def history_step(fit, cross_validate: bool = True, change: str = "base model", check=()) -> HistoryStep:
+    cv = fit.cross_validate() if cross_validate else math.nan
+    return HistoryStep(fit.model.labels, fit.chi2_dof, fit.bic, cv, fit, change, list(check))
+
+
+
+def parameters_dict(parameters) -> dict:
+    return {name: {"value": v, "std": s, "unit": u} for name, v, s, u in parameters}
+
+
+
+def search(found, pool, probe, history, cross_validate: bool = True, steps: int = MAX_AUTO_STEPS):
+    """The diagnosis of the selected model, starting from ``found`` (the diagnosis of the
+    present fit): up to ``steps`` forward steps, each followed by the revisit, every model
+    appended to ``history`` (module docstring)."""
+    for _ in range(steps):
+        step = _forward_step(found)
+        if step is None:
+            break
+        change, fit, check = step
+        history.append(history_step(fit, cross_validate, change, check))
+        fit = _revisit(fit, pool, probe, history, cross_validate)
+        found = diagnose(fit, pool, probe)
+    return found
+
+
+def _forward_step(found):
+    """(change, fit, check) of the next addition (module docstring), None when there is none.
+
+    The best strong candidate in its better form, known physics first (a candidate held at
+    its physical value has no parameter to absorb other effects with); else the best effect
+    whose predicted signal the model's free parameters absorb but which the data cannot reject
+    (:attr:`mows.lab.candidates.Form.kept_physics`), held at physics.
+    """
+    strong = [c for c in found.candidates if c.strong]
+    best = next((c for c in strong if c.chosen.fixed), strong[0] if strong else None)
+    if best is not None:
+        return f"add {best.label}", best.chosen.fit, best.parameters if best.chosen.fixed else ()
+    for candidate in found.candidates:
+        if candidate.physics is not None and candidate.physics.kept_physics:
+            fit = candidate.physics.fit or (found.fit.model + candidate.effect.at_physics()).fit(
+                found.fit.table, start=found.fit.values[1:])
+            if found.fit.bic - fit.bic > -TIE_DELTA_BIC:  # the one-step estimate may be off
+                return (f"add {candidate.label_of(candidate.physics)}: known physics the data cannot reject "
+                        f"(ΔBIC {found.fit.bic - fit.bic:+.1f}, its predicted signal χ² "
+                        f"{candidate.physics.signal_chi2:.3g} absorbed by free parameters)", fit, candidate.parameters)
+    return None
+
+
+def _revisit(fit, pool, probe, history, cross_validate):
+    """Apply the best swap or removal while one lowers the BIC (module docstring)."""
+    for _ in range(MAX_REVISIT_MOVES):
+        move = _best_move(fit, pool, probe)
+        if move is None:
+            break
+        change, fit = move
+        history.append(history_step(fit, cross_validate, change))
+    return fit
+
+
+def _best_move(fit, pool, probe):
+    """(change, fit) of the best alternative to ``fit`` (:func:`_alternatives`) that the guard
+    accepts (:func:`_accepted`); None when there is none."""
+    best = None
+    for effect in fit.model.effects:
+        for change, new, freed in _alternatives(fit, effect, pool, probe):
+            if _accepted(fit, new, freed) and (best is None or new.bic < best[1].bic):
+                best = (change, new)
+    return best
+
+
+def _accepted(old, new, freed: bool) -> bool:
+    return old.bic - new.bic > _required_gain(old.k, new.k, freed)
+
+
+def _required_gain(old_k: int, new_k: int, freed: bool) -> float:
+    """The revisit's guard: the BIC a move from ``old_k`` to ``new_k`` free parameters must gain.
+    Growth is the forward step's business (known physics first), so the only move that may add
+    free parameters is freeing an effect held at physics (``freed``), and only on strong
+    evidence (as a forward step). A move to as many free parameters needs positive evidence (so
+    that effects the data cannot tell apart keep the tie-break's choice); one to fewer only has
+    to lower the BIC."""
+    if new_k > old_k:
+        return STRONG_DELTA_BIC if freed else math.inf
+    return TIE_DELTA_BIC if new_k == old_k else 0.0
+
+
+def _alternatives(fit, effect, pool, probe) -> list:
+    """[(change, fit, freed)] of the models that differ from ``fit`` in ``effect``:
+
+    - without it;
+    - with it replaced by one candidate in either form (itself in its other form included;
+      ``freed`` marks an effect held at physics set free);
+    - when it is free but has a physical value: held at that value *and* joined by one
+      candidate, the move that undoes an absorption (a free strength of 0.92 standing in for
+      itself at 1 plus a missing effect; neither form alone nor the missing effect alone on
+      top of the free one lowers the BIC).
+    """
+    reduced = fit.model.without(effect).fit(fit.table, start=fit.values_without(effect))
+    found = [(f"remove {effect.label}", reduced, False)]
+    found += [(f"replace {effect.label} by {label}", new, freed)
+              for label, new, freed in _replacements(fit, reduced, pool, probe, effect)]
+    if effect.physical is not None and not effect.fixed:
+        held = (reduced.model + effect.at_physics()).fit(fit.table, start=reduced.values[1:])
+        found += [(f"replace {effect.label} by {held.model.labels[-1]} + {label}", new, freed)
+                  for label, new, freed in _replacements(fit, held, pool, probe, effect)]
+    return found
+
+
+def _replacements(fit, start, pool, probe, replaced) -> list:
+    """[(label, fit, freed)] of ``start`` plus one refitted candidate in either form (``freed``:
+    the candidate is ``replaced``, held at physics in ``fit``, set free) that improves on
+    ``start`` by positive evidence (ΔBIC > 2: a zero-parameter effect of no consequence does
+    not ride along with a move). A form is refitted only if it could pass the guard: its
+    linearised Δχ² is at most the score statistic, and a margin of ×2 covers the
+    nonlinearity."""
+    log_n = math.log(fit.n)
+
+    def could_pass(effect, test, added) -> bool:
+        if effect.name == replaced.name and (added == 0) == replaced.fixed:
+            return False  # the replaced effect back in its own form: ``fit`` itself
+        k = start.k + added
+        needed = _required_gain(fit.k, k, replaced.fixed and effect.name == replaced.name)
+        return start.chi2 - NONLINEAR_MARGIN * test.statistic + k * log_n < fit.bic - needed
+
+    candidates, _ = rank_candidates(start, pool, probe, could_pass)
+    # No passengers: what a move adds must itself be positive evidence on ``start``.
+    return [(c.label_of(form), form.fit, replaced.fixed and c.name == replaced.name) for c in candidates
+            for form in c.forms
+            if form.fit is not None and start.bic - form.fit.bic > TIE_DELTA_BIC]

@@ -140,16 +140,16 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path) -> N
     from mows.lab.table import from_sweep, reference_at
     from mows.physics.probe import PAPER_PROBE
     from mows.sweep.decompose import SweepRecord
-    from mows_mapper.node import sweep_point
+    from mows_mapper.messages import sweep_point
 
     field, gradient = reference_at(scenario)
     truth = {"Bx (µT)": field[0] * 1e6, "By (µT)": field[1] * 1e6, "Gxx (mT/m)": gradient[0, 0] * 1e3,
              "Gxy (mT/m)": gradient[0, 1] * 1e3, "Gyy (mT/m)": gradient[1, 1] * 1e3}
     record = SweepRecord()
     for fit in fits:
-        if fit.status == 0:
+        if fit.status_name == "OK":
             record.add(sweep_point(fit))
-    f00 = float(np.mean([f.frequency_hz - f.frequency_shift_hz for f in fits if f.status == 0]))
+    f00 = float(np.mean([f.frequency_hz - f.frequency_shift_hz for f in fits if f.status_name == "OK"]))
     published = record.decompose(PAPER_PROBE, f00, model="published")
     first_principles = record.decompose(PAPER_PROBE, f00)
     say("")

@@ -1,5 +1,5 @@
 """Rotation sweeps: (θ0, Δf) points of many orientations decomposed into in-plane field and
-gradient (``decompose``).
+gradient (``decompose``), and a sweep run as an I/O-free state machine (``runner``).
 
 May import: ``mows.estimate``, ``mows.physics``, ``mows.records``.
 """

@@ -4,8 +4,9 @@ import math
 import numpy as np
 import pytest
 
-from mows.estimate.calibration import F00Calibration
+from mows.estimate.calibration import CalibrationStatus, F00Calibration
 from mows.physics.probe import PAPER_PROBE as P
+from mows.records.results import Result
 
 
 def field_for_ratio(ratio: float) -> float:
@@ -22,7 +23,8 @@ def offer_all(calibration, frequencies_hz, std_hz):
 def test_a_field_that_quadruples_the_spring_doubles_the_frequency():
     # Eq. 6: f = f00·√(k/kM); k = 4·kM gives f = 2·f00, whatever f00 is.
     outcome = offer_all(F00Calibration(P, field_for_ratio(4.0), 3, 1.0), [200.0, 200.2, 199.8], 0.1)
-    assert outcome.ok and outcome.n_used == 3
+    assert outcome.ok and outcome.status is CalibrationStatus.OK and outcome.n_used == 3
+    assert isinstance(outcome, Result) and "from 3 ring-downs" in outcome.report()
     assert outcome.f00_hz == pytest.approx(100.0, rel=1e-12)
     # σ: the larger of the scatter of the mean (f00 each 100 ± 0.1 Hz: 0.1/√3) and the fits'
     # own σ carried through Eq. 6 (0.1/2 Hz each: 0.05/√3).
@@ -59,7 +61,7 @@ def test_time_up_says_how_many_ringdowns_came_and_nothing_is_taken_after():
     calibration = F00Calibration(P, 0.0, 3, 2.5)
     assert calibration.offer(100.0, 1e-3) is None
     outcome = calibration.time_up()
-    assert not outcome.ok and outcome.n_used == 1 and "only 1 of 3 OK ring-downs in 2.5 s" in outcome.message
+    assert outcome.status is CalibrationStatus.TOO_FEW_RINGDOWNS and not outcome.ok and outcome.n_used == 1 and "only 1 of 3 OK ring-downs in 2.5 s" in outcome.message
     assert math.isnan(outcome.f00_hz)
     assert calibration.offer(100.0, 1e-3) is None and calibration.time_up() is None and calibration.done
 

@@ -6,6 +6,7 @@ frequencies of OK ring-downs (:meth:`F00Calibration.offer`) and the end of its t
 (:meth:`F00Calibration.time_up`), it returns the outcome once it has one.
 """
 import dataclasses
+import enum
 import math
 
 import numpy as np
@@ -13,15 +14,25 @@ import numpy as np
 from mows.physics.probe import Probe
 
 
+class CalibrationStatus(enum.Enum):
+    OK = "ok"
+    TOO_FEW_RINGDOWNS = "too few OK ring-downs before the time limit"
+
+
 @dataclasses.dataclass(frozen=True)
 class F00Outcome:
-    """A finished calibration: f00 ± σ (NaN when not ``ok``) from ``n_used`` ring-downs."""
+    """A finished calibration (a :class:`mows.records.results.Result`): f00 ± σ (NaN unless
+    ``ok``) from ``n_used`` ring-downs."""
 
-    ok: bool
+    status: CalibrationStatus
     message: str
     f00_hz: float = math.nan
     f00_std_hz: float = math.nan
     n_used: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return self.status is CalibrationStatus.OK
 
     def report(self) -> str:
         return self.message
@@ -64,8 +75,9 @@ class F00Calibration:
         """The time limit passed: a failure naming how many ring-downs came (None if done)."""
         if self.done:
             return None
-        self.outcome = F00Outcome(False, f"only {len(self._fits)} of {self.wanted} OK ring-downs in "
-                                         f"{self.timeout_s} s", n_used=len(self._fits))
+        n = len(self._fits)
+        self.outcome = F00Outcome(CalibrationStatus.TOO_FEW_RINGDOWNS,
+                                  f"only {n} of {self.wanted} OK ring-downs in {self.timeout_s} s", n_used=n)
         return self.outcome
 
     def _solve(self) -> F00Outcome:
@@ -78,4 +90,5 @@ class F00Calibration:
         spread = f00_each.std(ddof=1) / math.sqrt(n) if n > 1 else 0.0
         propagated = math.sqrt(np.sum((fits[:, 1] * scale) ** 2)) / n
         f00, std = float(f00_each.mean()), float(max(spread, propagated))
-        return F00Outcome(True, f"f00 = {f00:.6f} ± {std * 1e3:.4f} mHz from {n} ring-downs", f00, std, n)
+        return F00Outcome(CalibrationStatus.OK, f"f00 = {f00:.6f} ± {std * 1e3:.4f} mHz from {n} ring-downs",
+                          f00, std, n)

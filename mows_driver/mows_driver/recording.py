@@ -54,3 +54,16 @@ class BagRecorder:
 
     def close(self) -> None:
         self._writer.close()
+
+
+def open_recorder(path: str, publishers: list) -> BagRecorder | None:
+    """A new bag at ``path`` of what ``publishers`` [(publisher, its QoS)] publish; None for ''."""
+    if not path:
+        return None
+    return BagRecorder(path, {publisher.topic_name: (message_type(publisher.msg_type), qos)
+                              for publisher, qos in publishers})
+
+
+def message_type(cls) -> str:
+    """The interface name of a generated message class, e.g. ``mows_msgs/msg/MagnetometerBlock``."""
+    return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"

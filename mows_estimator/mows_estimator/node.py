@@ -8,13 +8,8 @@ with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
 ``/mows/estimator/calibrate`` (Calibrate) sets f00 from the next ring-downs in a known field.
 The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` and ``mows.estimate.axis``.
 """
-import collections
-import dataclasses
-import math
 import time
 
-import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.msg import ExcitationState, FieldEstimate, MagnetometerBlock, RingdownFit
 from mows_msgs.srv import Calibrate
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -23,78 +18,40 @@ from rclpy.task import Future
 from sensor_msgs.msg import MagneticField
 
 from mows.estimate.axis import estimate_along_axis
-from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
-from mows.physics.frequency import frequency_shift_hz
-from mows.physics.probe import Probe
-from mows.estimate.ringdown import SETTLE_S, FitOptions, FitStatus, failure
-from mows.precompile import precompile
+from mows.estimate.calibration import F00Calibration
+from mows.estimate.ringdown import FitStatus, failure
 from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
+from mows.physics.probe import Probe
+from mows.precompile import precompile
+from mows_estimator.health import FitTally
 from mows_estimator.messages import estimate_to_msg, fit_to_msg, magnetic_field_msg
+from mows_estimator.parameters import PARAMETERS, fit_options
+from mows_ros.awaitables import within
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
-from mows_ros.params import ParamSpec
-from mows_ros.probe import PROBE_FILE, probe_of
+from mows_ros.params import parameter_values
+from mows_ros.probe import probe_of
 from mows_ros.process import run_node
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
 
 NODE_NAME = "estimator"
-LATENCY_WINDOW = 500
-
-PARAMETERS = (
-    PROBE_FILE,
-    ParamSpec("f00_hz", 0.0, "calibrated zero-field frequency f00, Hz; 0: the probe file's f00",
-              range=(0.0, 10_000.0)),
-    ParamSpec("f00_std_hz", 0.0, "standard uncertainty of f00, Hz", range=(0.0, 10.0)),
-    ParamSpec("channels", "difference", "what to fit: the sensor difference, both, or one channel",
-              choices=("difference", "both", "channel1", "channel2")),
-    ParamSpec("sensor_axis_a", 0.0, "sensing axis (a, b) in the rotation plane, Eq. S11 (paper: 0, 1)",
-              range=(-1.0, 1.0)),
-    ParamSpec("sensor_axis_b", 1.0, "see sensor_axis_a", range=(-1.0, 1.0)),
-    ParamSpec("theta0_free", False, "fit θ0 instead of taking the commanded orientation (paper's signal model only)"),
-    ParamSpec("lever_aware", True, "fit the exact pickup of the magnet swinging on its lever "
-              "(mows.physics.fluxgate.pickup_harmonics) instead of Eq. S11's magnet turning in place"),
-    ParamSpec("sensor_distance_m", PAPER_DISTANCE_M, "distance from the probe to the near fluxgate, along the "
-              "rotation plane's x axis, m", range=(0.005, 2.0)),
-    ParamSpec("sensor_spacing_m", PAPER_SPACING_M, "spacing of the two fluxgates, m", range=(0.001, 2.0)),
-    ParamSpec("settle_s", SETTLE_S, "samples right after coil-off that are skipped, s", range=(0.0, 0.1)),
-    ParamSpec("min_periods", 10.0, "shortest usable ring-down, in periods", range=(2.0, 1000.0)),
-    ParamSpec("max_chi2_dof", 25.0, "above this χ²/dof a fit is refused (BAD_FIT)", range=(1.0, 1e6)),
-    ParamSpec("buffer_s", 5.0, "seconds of raw samples kept to assemble ring-downs", range=(0.5, 60.0),
-              read_only=True),
-    ParamSpec("fit_tuning_ringdowns", False, "also fit the driver's frequency-tuning ring-downs"),
-    ParamSpec("probe_frame_id", "mows_probe", "frame of the probe (x' along the moment at rest)"),
-)
-
-
-@dataclasses.dataclass
-class _Calibration:
-    """The OK ring-downs collected for one Calibrate request; ``finished`` completes when
-    ``wanted`` of them are in (True) or the request's time is up (False)."""
-
-    wanted: int
-    fits: list = dataclasses.field(default_factory=list)
-    finished: Future = dataclasses.field(default_factory=Future)
-
-    def time_up(self):
-        if not self.finished.done():
-            self.finished.set_result(False)
 
 
 class EstimatorNode(MowsNode):
-    """One thread for everything (a SingleThreadedExecutor): the calibration service awaits its
-    ring-downs as a coroutine instead of blocking a thread. rclpy 7.1's MultiThreadedExecutor
-    re-submits a callback that has been handed to its pool but not yet started, without
-    waiting, and so holds the GIL from the very thread that should run it: at 40 blocks/s the
-    stream then fell behind for whole runs (fits published 0.2–1.5 s late, blocks lost)."""
+    """One thread for everything (``mows_ros.process``): the calibration service awaits its
+    ring-downs as a coroutine. (With rclpy 7.1's MultiThreadedExecutor the stream fell behind
+    for whole runs at 40 blocks/s: fits published 0.2–1.5 s late, blocks lost.)"""
 
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
-        self._warm_up()
+        # Compile the fit (or load it from numba's cache) now, not on the first real ring-down;
+        # subscriptions and publishers come after, so a node that advertises results can make them.
+        self.get_logger().info(f"fit kernels ready in {precompile(simulator=False):.1f} s")
         self._assembler = SegmentAssembler(self.get_parameter("buffer_s").value)
-        self._latency_ms = collections.deque(maxlen=LATENCY_WINDOW)
-        self._counts = collections.Counter()
+        self._tally = FitTally()
         self._last = "no ring-down yet"
-        self._calibration: _Calibration | None = None
+        self._calibration: F00Calibration | None = None
+        self._calibrated = Future()
         self.create_subscription(MagnetometerBlock, "mows/raw", self._on_block, STREAM_QOS)
         self.create_subscription(ExcitationState, "mows/excitation", self._on_excitation, RESULT_QOS)
         self._fit_pub = self.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
@@ -105,12 +62,6 @@ class EstimatorNode(MowsNode):
         # a mutually exclusive one a second request would wait instead of being refused.
         self.create_service(Calibrate, "mows/estimator/calibrate", self._on_calibrate,
                             callback_group=ReentrantCallbackGroup())
-
-    def _warm_up(self):
-        """Compile the fit (or load it from numba's cache) before listening: that must not happen
-        on the first real ring-down. Subscriptions and publishers come after, so a node that
-        advertises its results is ready to produce them."""
-        self.get_logger().info(f"fit kernels ready in {precompile(simulator=False):.1f} s")
 
     # --- parameters -------------------------------------------------------------------------
     def _param(self, name):
@@ -123,17 +74,6 @@ class EstimatorNode(MowsNode):
         f00 = self._param("f00_hz")
         return (f00 if f00 > 0 else self.probe().f00_hz), self._param("f00_std_hz")
 
-    def _options(self, theta0_rad: float) -> FitOptions:
-        direction = (self._param("sensor_axis_a"), self._param("sensor_axis_b"))
-        channels = self._param("channels")
-        common = dict(sensor_direction=direction, min_periods=self._param("min_periods"),
-                      max_chi2_dof=self._param("max_chi2_dof"))
-        if self._param("lever_aware") and not self._param("theta0_free") and channels != "both":
-            pair = FluxgatePair.paper(distance_m=self._param("sensor_distance_m"),
-                                      spacing_m=self._param("sensor_spacing_m"), axis=(*direction, 0.0))
-            return FitOptions.lever_aware(pair, self.probe(), theta0_rad, channels, **common)
-        return FitOptions(channels=channels, theta0_free=self._param("theta0_free"), **common)
-
     # --- stream -----------------------------------------------------------------------------
     def _on_excitation(self, msg: ExcitationState):
         if msg.phase != ExcitationState.PHASE_RINGDOWN or (msg.tuning and not self._param("fit_tuning_ringdowns")):
@@ -142,7 +82,7 @@ class EstimatorNode(MowsNode):
         try:
             window = window_from_message(msg)
         except ValueError as error:
-            self._counts["malformed_excitation"] += 1
+            self._tally.count("malformed_excitation")
             self.get_logger().warn(f"{error}: ignored")
             return
         for segment in self._assembler.announce(window):
@@ -153,7 +93,7 @@ class EstimatorNode(MowsNode):
         try:
             block = block_from_message(msg)
         except ValueError as error:           # not samples a device could have sent: nothing usable
-            self._counts["malformed_blocks"] += 1
+            self._tally.count("malformed_blocks")
             self.get_logger().warn(f"malformed MagnetometerBlock {msg.sequence}: {error}")
             return
         for segment in self._assembler.add_block(block):
@@ -161,7 +101,7 @@ class EstimatorNode(MowsNode):
 
     def _process(self, segment, arrived: float):
         try:
-            options = self._options(segment.window.theta0_rad)
+            options = fit_options(parameter_values(self, PARAMETERS), self.probe(), segment.window.theta0_rad)
         except ValueError as error:      # e.g. a sensing axis of (0, 0): no model to fit
             fit = failure(FitStatus.BAD_FIT, f"cannot build the signal model: {error}",
                           theta0_rad=segment.window.theta0_rad)
@@ -176,8 +116,7 @@ class EstimatorNode(MowsNode):
             self._field_pub.publish(estimate_to_msg(estimate, fit_msg.header, segment.window))
             self._magnetic_pub.publish(magnetic_field_msg(estimate, fit_msg.header))
             self._offer_to_calibration(fit.frequency_hz, fit.frequency_std_hz)
-        self._latency_ms.append(1e3 * (time.monotonic() - arrived))
-        self._counts[fit.status.name] += 1
+        self._tally.add(fit.status.name, 1e3 * (time.monotonic() - arrived))
         self._last = fit.report()
         if not fit.ok:
             self.get_logger().warn(f"cycle {segment.window.cycle_id} repeat {segment.window.repeat_index}: "
@@ -185,64 +124,41 @@ class EstimatorNode(MowsNode):
 
     # --- calibration ------------------------------------------------------------------------
     def _offer_to_calibration(self, frequency_hz: float, std_hz: float):
-        calibration = self._calibration
-        if calibration is not None and not calibration.finished.done():
-            calibration.fits.append((frequency_hz, std_hz))
-            if len(calibration.fits) >= calibration.wanted:
-                calibration.finished.set_result(True)
+        if self._calibration is not None and self._calibration.offer(frequency_hz, std_hz) is not None:
+            self._calibrated.set_result(True)
 
     async def _on_calibrate(self, request: Calibrate.Request, response: Calibrate.Response):
-        """Eq. 6 solved for f00: f00 = f/√(1 + m·B/kM) for each ring-down, then averaged."""
-        probe = self.probe()
-        ratio = 1.0 + probe.moment_am2 * request.reference_field_t / probe.spring_nm_per_rad
-        if request.n_ringdowns < 1 or not (request.timeout_s > 0) or not ratio > 0:
-            response.success = False
-            response.message = (f"need n_ringdowns ≥ 1, timeout_s > 0 and a reference field above spring "
-                                f"cancellation (−kM/m = {probe.cancellation_field_t * 1e3:.2f} mT)")
+        """f00 from the next ring-downs (:class:`mows.estimate.calibration.F00Calibration`)."""
+        try:
+            calibration = F00Calibration(self.probe(), request.reference_field_t, request.n_ringdowns,
+                                         request.timeout_s)
+        except ValueError as error:
+            response.success, response.message = False, str(error)
             return response
         if self._calibration is not None:
             response.success, response.message = False, "a calibration is already running: try again after it"
             return response
-        calibration = self._calibration = _Calibration(request.n_ringdowns)
-        timeout = self.create_timer(request.timeout_s, calibration.time_up)
+        self._calibration, self._calibrated = calibration, Future()
         try:
-            await calibration.finished
+            if not await within(self, self._calibrated, request.timeout_s):
+                calibration.time_up()
         finally:
-            self.destroy_timer(timeout)
             self._calibration = None
-        fits = np.array(calibration.fits, float).reshape(-1, 2)
-        response.n_used = len(fits)
-        if len(fits) < request.n_ringdowns:
-            response.success = False
-            response.message = f"only {len(fits)} of {request.n_ringdowns} OK ring-downs in {request.timeout_s} s"
-            return response
-        f00_each = fits[:, 0] / math.sqrt(ratio)
-        spread = f00_each.std(ddof=1) / math.sqrt(len(fits)) if len(fits) > 1 else 0.0
-        propagated = math.sqrt(np.sum((fits[:, 1] / math.sqrt(ratio)) ** 2)) / len(fits)
-        response.f00_hz, response.f00_std_hz = float(f00_each.mean()), float(max(spread, propagated))
-        # Out-of-range values (an f00 uncertainty above 10 Hz says the ring-downs were not of one
-        # probe in one field) are refused by the parameters' ranges, with the reason.
-        result = self.set_parameters_atomically([
-            Parameter("f00_hz", Parameter.Type.DOUBLE, response.f00_hz),
-            Parameter("f00_std_hz", Parameter.Type.DOUBLE, response.f00_std_hz)])
-        response.success = result.successful
-        response.message = result.reason or (f"f00 = {response.f00_hz:.6f} ± {response.f00_std_hz * 1e3:.4f} mHz "
-                                             f"from {len(fits)} ring-downs")
+        outcome = calibration.outcome
+        response.n_used, response.success, response.message = outcome.n_used, outcome.ok, outcome.message
+        if outcome.ok:
+            response.f00_hz, response.f00_std_hz = outcome.f00_hz, outcome.f00_std_hz
+            # Out-of-range values (an f00 uncertainty above 10 Hz says the ring-downs were not of
+            # one probe in one field) are refused by the parameters' ranges, with the reason.
+            result = self.set_parameters_atomically([
+                Parameter("f00_hz", Parameter.Type.DOUBLE, outcome.f00_hz),
+                Parameter("f00_std_hz", Parameter.Type.DOUBLE, outcome.f00_std_hz)])
+            response.success, response.message = result.successful, result.reason or outcome.message
         return response
 
-    # --- health -----------------------------------------------------------------------------
+    # --- health ---------------------------------------------------------------------------
     def health(self) -> Health:
-        latency = np.array(self._latency_ms) if self._latency_ms else np.array([math.nan])
-        failed = sum(v for k, v in self._counts.items() if k != "OK")
-        missing = self._assembler.missing_samples
-        level = DiagnosticStatus.OK if not (failed or missing) else DiagnosticStatus.WARN
-        f00, f00_std = self.f00()
-        return Health(level, self._last, {
-            "fits_ok": self._counts["OK"], "fits_failed": failed,
-            **{f"status_{k}": v for k, v in self._counts.items() if k != "OK"},
-            "latency_p50_ms": float(np.percentile(latency, 50)), "latency_p99_ms": float(np.percentile(latency, 99)),
-            "missing_samples": missing, "late_windows": self._assembler.late_windows,
-            "blocks": self._assembler.blocks, "f00_hz": f00, "f00_std_hz": f00_std})
+        return self._tally.health(self._last, self._assembler, *self.f00())
 
 
 def main(args: list[str] | None = None) -> int:

@@ -5,20 +5,20 @@ from typing import Callable
 
 import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 EXIT_BAD_PARAMETER = 2
 
 
-def run_node(make_node: Callable[[], Node], args: list[str] | None = None, threads: int = 1) -> int:
-    """Create the node with ``make_node`` and spin it; return the process exit code.
+def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
+    """Create the node with ``make_node`` and spin it on one thread; return the exit code.
 
-    ``threads`` > 1 spins a MultiThreadedExecutor, for a node whose callbacks run long enough
-    to hold up the others (the mapper's sweep runs the lab). A callback that only waits for
-    data other callbacks deliver is better a coroutine on one thread (the driver's run_cycle,
-    the estimator's calibration): rclpy 7.1.6's MultiThreadedExecutor re-submits a callback
-    its pool has not started yet without waiting, and starves the pool of the GIL.
+    A callback that waits (the driver's run_cycle, the estimator's calibration, the mapper's
+    sweep) is a coroutine that awaits what other callbacks deliver; work of seconds of CPU
+    runs in a worker thread it awaits (``mows_ros.awaitables.in_worker``). Not a
+    MultiThreadedExecutor: rclpy 7.1.6's re-submits a callback its pool has not started yet
+    without waiting, starves the pool of the GIL, and never shuts the pool down.
 
     ``rclpy.init`` installs handlers for SIGINT and SIGTERM that shut the context down, so
     either signal ends ``spin`` with ``ExternalShutdownException`` (or KeyboardInterrupt when
@@ -29,7 +29,7 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, threa
     faulthandler.enable()  # a node aborted because it would not stop says where it hung
     rclpy.init(args=args)
     node = None
-    executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
+    executor = SingleThreadedExecutor()
     try:
         node = make_node()
         executor.add_node(node)
@@ -49,8 +49,4 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, threa
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        if isinstance(executor, MultiThreadedExecutor):
-            # rclpy 7.1.6 never shuts its worker pool down (later releases do, in shutdown()),
-            # and an idle worker once held the interpreter's exit for good.
-            executor._executor.shutdown(wait=False, cancel_futures=True)
     return 0

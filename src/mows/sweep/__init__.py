@@ -1,5 +1,6 @@
 """Rotation sweeps: (θ0, Δf) points of many orientations decomposed into in-plane field and
-gradient (``decompose``), the ring-downs of one sweep as they arrive (``record``).
+gradient (``decompose``), the ring-downs of one sweep as they arrive (``record``), and a sweep
+run as an I/O-free state machine (``runner``).
 
 May import: ``mows.estimate``, ``mows.physics``, ``mows.records``.
 """

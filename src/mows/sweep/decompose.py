@@ -74,6 +74,7 @@ class DecompositionStatus(enum.IntEnum):
     INVALID_INPUT = 1          # unequal lengths, non-finite values, σ ≤ 0
     TOO_FEW_ORIENTATIONS = 2   # fewer distinct θ0 than the model's harmonics need
     NOT_CONVERGED = 3
+    NO_DECOMPOSITION = 4       # the sweep ended before one (cancelled, no usable ring-down)
 
 
 @dataclasses.dataclass

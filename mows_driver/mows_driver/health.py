@@ -1,0 +1,39 @@
+"""What the driver says on /diagnostics: the device session's state, and what went wrong
+since the last report (new gaps, new device faults) or still is wrong."""
+from diagnostic_msgs.msg import DiagnosticStatus
+from mows_ros.diagnostics import Health
+
+RATE_TOLERANCE = 0.02  # warn when the achieved sample rate is further off nominal
+
+
+class StreamHealth:
+    """The level and message of the driver's status, from the session's ``health()`` state."""
+
+    def __init__(self):
+        self._reported_gaps = 0
+        self._reported_faults = 0
+
+    def __call__(self, state: dict, backend: str, stream_errors: int, values: dict) -> Health:
+        nominal, achieved = values["nominal_sample_rate_hz"], values["achieved_sample_rate_hz"]
+        new_gaps, self._reported_gaps = state.get("gaps", 0) - self._reported_gaps, state.get("gaps", 0)
+        new_faults, self._reported_faults = state["device_faults"] - self._reported_faults, state["device_faults"]
+        if state["link"] == "finished":
+            return Health(DiagnosticStatus.OK, "replay finished", values)
+        if not state["link_up"]:
+            return Health(DiagnosticStatus.ERROR, f"no device: {state['link_reason'] or state.get('last_error')}",
+                          values)
+        problems = []
+        if state.get("estop_latched"):
+            problems.append(f"emergency stop latched ({state['estop_reason']})")
+        if new_faults:
+            problems.append(f"device fault: {state['last_device_fault']}")
+        if new_gaps:
+            problems.append(f"{new_gaps} new gaps in the sample stream ({state['missing_samples']} samples "
+                            "missing in all)")
+        if achieved is not None and nominal and abs(achieved / nominal - 1.0) > RATE_TOLERANCE:
+            problems.append(f"sample rate {achieved:.0f} Hz, nominal {nominal:.0f} Hz")
+        if stream_errors:
+            problems.append(f"{stream_errors} streaming errors (see the log)")
+        if problems:
+            return Health(DiagnosticStatus.WARN, "; ".join(problems), values)
+        return Health(DiagnosticStatus.OK, f"streaming ({backend}), phase {state.get('phase')}", values)

@@ -1,0 +1,67 @@
+"""Translation between mows_msgs and the sweep runner's dataclasses (no logic of its own)."""
+
+from mows.records import stamps
+from mows.sweep.decompose import DecompositionStatus
+from mows.sweep.record import SweepPoint
+from mows.sweep.runner import SweepFeedback, SweepFit, SweepMap
+from mows_msgs.action import RotationSweep
+from mows_msgs.msg import CandidateEffect, ModelReport, RingdownFit, SweepDecomposition
+
+
+def sweep_point(fit: RingdownFit) -> SweepPoint:
+    """A successful RingdownFit as a point of the sweep, with σ of θmax from its covariance."""
+    return SweepPoint.from_fit(fit, fit.frequency_shift_hz, fit.frequency_shift_std_hz,
+                               stamps.seconds(fit.header.stamp))
+
+
+def sweep_fit(fit: RingdownFit) -> SweepFit:
+    ok = fit.status_name == "OK"
+    return SweepFit(fit.cycle_id, fit.tuning, sweep_point(fit) if ok else None, fit)
+
+
+def feedback_msg(feedback: SweepFeedback) -> RotationSweep.Feedback:
+    return RotationSweep.Feedback(angle_index=feedback.angle_index, n_angles=feedback.n_angles,
+                                  theta0_rad=float(feedback.theta0_rad), frequency_shift_hz=feedback.shift_hz,
+                                  frequency_shift_std_hz=feedback.shift_std_hz, n_ok=feedback.n_ok,
+                                  fits=list(feedback.fits))
+
+
+def decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
+    d, record = sweep.decomposition, sweep.record
+    msg = SweepDecomposition(sweep_id=sweep.sweep_id, model=d.model, message=d.message,
+                             status=int(d.status))
+    msg.header.frame_id = frame_id
+    stamps.set_seconds(msg.header.stamp, max(p.t_s for p in record.points))
+    msg.field_t = d.field_t.tolist()
+    msg.field_covariance_t2 = d.field_covariance_t2.ravel().tolist()
+    msg.gradient_t_per_m = d.gradient_t_per_m.tolist()
+    msg.gradient_covariance = d.gradient_covariance.ravel().tolist()
+    msg.f00_hz, msg.f00_free = d.f00_hz if d.ok else sweep.f00_hz, d.f00_free
+    if d.harmonics is not None:
+        msg.harmonic_amplitude_hz = d.harmonics.amplitude_hz.tolist()
+        msg.harmonic_phase_rad = d.harmonics.phase_rad.tolist()
+    angles = sorted({p.theta0_rad for p in record.points})
+    summaries = [record.at_angle(a) for a in angles]
+    msg.theta0_rad = angles
+    msg.frequency_shift_hz = [s[0] for s in summaries]
+    msg.frequency_shift_std_hz = [s[1] for s in summaries]
+    msg.chi2_dof, msg.rms_residual_hz, msg.n_points = d.chi2_dof, d.rms_residual_hz, len(record.points)
+    return msg
+
+
+def failed_decomposition_msg(message: str) -> SweepDecomposition:
+    return SweepDecomposition(status=int(DecompositionStatus.NO_DECOMPOSITION), message=message)
+
+
+def model_report_msg(report, header, sweep_id: int) -> ModelReport:
+    return ModelReport(
+        header=header, sweep_id=sweep_id, model=report.model, effects=list(report.effects), n=report.n,
+        chi2_dof=report.chi2_dof, bic=report.bic, cv_rms_hz=report.cv_rms_hz, verdict=report.verdict,
+        structure=report.structure,
+        candidates=[CandidateEffect(effect=c.label, explanation=c.effect.explanation, delta_bic=c.delta_bic,
+                                    p_value=c.p_value, chi2_dof_after=c.chi2_dof_after,
+                                    parameter_names=[p[0] for p in c.parameters],
+                                    parameter_values=[p[1] for p in c.parameters],
+                                    parameter_std=[p[2] for p in c.parameters],
+                                    parameter_units=[p[3] for p in c.parameters], group=c.group)
+                    for c in report.candidates])

@@ -1,0 +1,36 @@
+"""The mapper's parameter table and the sweep settings it gives the core."""
+from mows_ros.params import ParamSpec
+from mows_ros.probe import PROBE_FILE
+
+from mows.lab import reference_at
+from mows.sweep.decompose import MODELS
+from mows.sweep.runner import SweepSettings
+
+
+def reference_problem(name: str) -> str | None:
+    """Why ``reference_scenario`` cannot serve as the lab's reference, or None."""
+    try:
+        if name:
+            reference_at(name)
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        return f"reference_scenario={name!r}: {error}"
+    return None
+
+
+PARAMETERS = (
+    ParamSpec("repeats_per_angle", 5, "ring-downs per orientation when the goal says 0", range=(1, 100)),
+    ParamSpec("angle_step_deg", 30.0, "orientation step when the goal lists no angles, deg", range=(1.0, 180.0)),
+    ParamSpec("model", "first_principles", "decomposition model when the goal names none", choices=MODELS),
+    ParamSpec("f00_free", False, "fit the zero-field frequency in the decomposition (Gs is then undetermined)"),
+    PROBE_FILE,
+    ParamSpec("cycle_timeout_s", 300.0, "longest wait for the driver's cycle, s", range=(1.0, 3600.0)),
+    ParamSpec("fit_timeout_s", 10.0, "longest wait for the fits of a finished cycle, s", range=(0.1, 600.0)),
+    ParamSpec("reference_scenario", "", "scenario whose field at the probe is the lab's reference "
+              "(shipped name or YAML); empty: no model report", check=reference_problem),
+    ParamSpec("lab_auto", True, "let the lab add effects while the evidence is strong"),
+    ParamSpec("frame_id", "mows_rotation_plane", "frame of the sweep: x = e1, y = e2 of the rotation plane"),
+)
+
+
+def sweep_settings(values: dict) -> SweepSettings:
+    return SweepSettings(values["repeats_per_angle"], values["angle_step_deg"], values["model"], values["f00_free"])

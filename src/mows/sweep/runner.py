@@ -1,0 +1,253 @@
+"""A rotation sweep as an I/O-free state machine, in the manner of
+:class:`mows.device.cycle.CycleSequencer`: fed the goal, the driver's answers to cycle requests,
+the ring-down fits and a cancel, it returns steps (run a cycle at θ0, report feedback,
+decompose, publish the map, the finished result). Who runs the cycles, delivers the fits and
+keeps the time is the caller's business (the mapper node does it over ROS).
+
+One sweep: for each orientation one driver cycle of ``repeats`` ring-downs; once the driver
+says how many it recorded, their fits are collected (or the caller says their time is up);
+after the last orientation every OK ring-down is decomposed (:meth:`SweepRecord.decompose`)
+with f00 taken as the mean of the estimator's own (frequency − shift).
+"""
+import dataclasses
+import functools
+import math
+from typing import Callable
+
+import numpy as np
+
+from mows.physics.probe import Probe
+from mows.sweep.decompose import MODELS, Decomposition
+from mows.sweep.record import SweepPoint, SweepRecord
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepSettings:
+    """What a goal leaves unsaid, and how the sweep is decomposed."""
+
+    repeats_per_angle: int = 5
+    angle_step_deg: float = 30.0
+    model: str = "first_principles"
+    f00_free: bool = False
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepGoal:
+    """A sweep as asked: no angles, 0 repeats or no model mean the settings' choice."""
+
+    theta0_rad: tuple = ()
+    repeats_per_angle: int = 0
+    model: str = ""
+
+
+@dataclasses.dataclass(frozen=True)
+class CycleCall:
+    """Ask the driver for one measurement cycle of ``repeats`` ring-downs at θ0."""
+
+    theta0_rad: float
+    repeats: int
+
+
+@dataclasses.dataclass(frozen=True)
+class CycleAnswer:
+    """What came of a :class:`CycleCall`: ``problem`` says why no cycle ran ('' when it did)."""
+
+    cycle_id: int = 0
+    ringdowns_recorded: int = 0
+    problem: str = ""
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepFit:
+    """One ring-down fit as it arrives: ``point`` is None unless the fit is OK. ``source`` (the
+    fit as received) is handed back in the feedback untouched."""
+
+    cycle_id: int
+    tuning: bool
+    point: SweepPoint | None
+    source: object = None
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepFeedback:
+    """One orientation done: its weighted mean shift and the fits of its cycle."""
+
+    angle_index: int
+    n_angles: int
+    theta0_rad: float
+    shift_hz: float
+    shift_std_hz: float
+    n_ok: int
+    fits: tuple
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepMap:
+    """A decomposed sweep to publish: the decomposition, its ring-downs and the f00 used."""
+
+    sweep_id: int
+    decomposition: Decomposition
+    record: SweepRecord
+    f00_hz: float
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepOutcome:
+    """A finished sweep: succeeded (``ok``), cancelled, or failed, with why."""
+
+    ok: bool
+    message: str
+    cancelled: bool = False
+    map: SweepMap | None = None
+
+
+@dataclasses.dataclass
+class SweepStep:
+    """What the caller does next, in this order: report ``feedback``, publish ``publish``, then
+    one of: run ``run_cycle``, call ``decompose`` (CPU-bound, seconds) and feed its result to
+    :meth:`SweepRunner.on_decomposed`, end with ``finished``, or (none of these) wait for fits."""
+
+    feedback: SweepFeedback | None = None
+    publish: SweepMap | None = None
+    run_cycle: CycleCall | None = None
+    decompose: Callable[[], Decomposition] | None = None
+    finished: SweepOutcome | None = None
+
+
+class SweepRunner:
+    """Runs one sweep at a time of ``probe``; ``state`` is idle, sweeping or decomposing."""
+
+    def __init__(self):
+        self.state = "idle"
+        self.sweeps = 0                 # sweeps that came as far as the decomposition
+        self.last = "no sweep yet"      # the last decomposition's report
+        self._angles: list[float] = []
+        self._repeats = 0
+        self._index = 0
+        self._model = ""
+        self._settings = SweepSettings()
+        self._probe: Probe | None = None
+        self._cancelled = False
+        self._fits: dict[int, list[SweepFit]] = {}
+        self._awaited: CycleAnswer | None = None    # the cycle whose fits are being collected
+        self._record = SweepRecord()
+
+    # --- inputs ----------------------------------------------------------------------------
+    def start(self, goal: SweepGoal, settings: SweepSettings, probe: Probe) -> None:
+        """Accept ``goal`` (the sweep begins at :meth:`begin`). ValueError, with the reason, when
+        it is refused: a non-finite angle, an unknown model, or a sweep still running."""
+        angles = [float(a) for a in goal.theta0_rad]
+        problems = []
+        if not all(math.isfinite(a) for a in angles):
+            problems.append(f"angles {angles} are not all finite")
+        if goal.model and goal.model not in MODELS:
+            problems.append(f"model {goal.model!r} is not one of {', '.join(MODELS)}")
+        if self.state != "idle":
+            problems.append(f"another sweep is still running ({self.state})")
+        if problems:
+            raise ValueError("; ".join(problems))
+        self.state, self._settings, self._probe = "sweeping", settings, probe
+        self._angles = angles or list(np.radians(np.arange(0.0, 360.0, settings.angle_step_deg)))
+        self._repeats = goal.repeats_per_angle or settings.repeats_per_angle
+        self._model = goal.model or settings.model
+        self._index, self._cancelled, self._awaited = 0, False, None
+        self._fits.clear()
+        self._record = SweepRecord()
+
+    def begin(self) -> SweepStep:
+        """The accepted sweep's first step."""
+        return self._next_orientation(SweepStep())
+
+    def cancel(self) -> None:
+        """End the sweep before its next orientation."""
+        if self.state == "sweeping":
+            self._cancelled = True
+
+    def on_cycle(self, answer: CycleAnswer) -> SweepStep:
+        if self.state != "sweeping":
+            return SweepStep()
+        if answer.problem:
+            theta0 = self._angles[self._index]
+            return self.abandon(f"orientation {self._index} ({math.degrees(theta0):.1f}°): {answer.problem}")
+        self._awaited = answer
+        return self._collected() or SweepStep()
+
+    def on_fit(self, fit: SweepFit) -> SweepStep | None:
+        """A fit from the stream; a step once the awaited cycle's fits are all in."""
+        # Fits of cycles run by others between sweeps, and tuning ring-downs, are not ours.
+        if self.state != "sweeping" or fit.tuning:
+            return None
+        self._fits.setdefault(fit.cycle_id, []).append(fit)
+        return self._collected()
+
+    def fits_time_up(self) -> SweepStep | None:
+        """The awaited cycle's fits are late: go on with those that came."""
+        if self.state != "sweeping" or self._awaited is None:
+            return None
+        return self._orientation_done()
+
+    def abandon(self, reason: str) -> SweepStep:
+        """End the sweep as failed, with ``reason`` (the caller cannot go on)."""
+        if self.state == "idle":
+            return SweepStep()
+        return self._end(SweepStep(), SweepOutcome(False, reason))
+
+    def on_decomposed(self, decomposition: Decomposition) -> SweepStep:
+        """The result of the step's ``decompose``: the map to publish and the sweep's end."""
+        self.last = decomposition.report()
+        sweep_map = SweepMap(self.sweeps, decomposition, self._record, self._f00_hz())
+        step = SweepStep(publish=sweep_map)
+        outcome = SweepOutcome(decomposition.ok, decomposition.message or self.last, map=sweep_map)
+        return self._end(step, outcome)
+
+    # --- the sweep -------------------------------------------------------------------------
+    def _collected(self) -> SweepStep | None:
+        answer = self._awaited
+        if answer is None or len(self._fits.get(answer.cycle_id, ())) < answer.ringdowns_recorded:
+            return None
+        return self._orientation_done()
+
+    def _orientation_done(self) -> SweepStep:
+        fits = self._fits.pop(self._awaited.cycle_id, [])
+        self._awaited = None
+        theta0 = self._angles[self._index]
+        for fit in fits:
+            if fit.point is None:
+                self._record.failed += 1
+            else:
+                self._record.add(fit.point)
+        shift, std, n_ok = self._record.at_angle(theta0)
+        step = SweepStep(feedback=SweepFeedback(self._index, len(self._angles), theta0, shift, std, n_ok,
+                                                tuple(f.source for f in fits)))
+        self._index += 1
+        return self._next_orientation(step)
+
+    def _next_orientation(self, step: SweepStep) -> SweepStep:
+        if self._index == len(self._angles):
+            return self._measured(step)
+        if self._cancelled:
+            outcome = SweepOutcome(False, f"cancelled after {self._index} of {len(self._angles)} orientations",
+                                   cancelled=True)
+            return self._end(step, outcome)
+        step.run_cycle = CycleCall(self._angles[self._index], self._repeats)
+        return step
+
+    def _measured(self, step: SweepStep) -> SweepStep:
+        self.sweeps += 1
+        if not self._record.points:
+            return self._end(step, SweepOutcome(
+                False, f"no successful ring-down in the sweep ({self._record.failed} failed)"))
+        self.state = "decomposing"
+        step.decompose = functools.partial(self._record.decompose, self._probe, self._f00_hz(), model=self._model,
+                                           f00_free=self._settings.f00_free)
+        return step
+
+    def _f00_hz(self) -> float:
+        """The estimator's calibrated f00, as each OK ring-down carries it (frequency − shift)."""
+        return float(np.mean([p.frequency_hz - p.shift_hz for p in self._record.points]))
+
+    def _end(self, step: SweepStep, outcome: SweepOutcome) -> SweepStep:
+        self.state, self._awaited = "idle", None
+        self._fits.clear()
+        step.finished = outcome
+        return step

@@ -1,0 +1,148 @@
+"""The rotation sweep as a state machine (mows.sweep.runner), driven without ROS: a stand-in
+driver answers its cycle calls with fits whose frequencies come from the full potential of a
+known uniform field; the runner's decomposition must recover that field."""
+import math
+
+import numpy as np
+import pytest
+
+from mows.physics.field import UniformField
+from mows.physics.pose import Pose
+from mows.physics.potential import ArcPotential
+from mows.physics.probe import PAPER_PROBE as P
+from mows.sweep.record import SweepPoint
+from mows.sweep.runner import (
+    CycleAnswer,
+    SweepFit,
+    SweepGoal,
+    SweepRunner,
+    SweepSettings,
+)
+
+FIELD_T = np.array([30e-6, -20e-6, 0.0])
+STD_HZ = 5e-4
+ANGLES = tuple(np.radians(np.arange(0.0, 360.0, 30.0)))
+
+
+class StandIn:
+    """Runs the runner's cycle calls: fits of each cycle (OK, at the exact frequency plus noise)."""
+
+    def __init__(self, seed=0):
+        self.source = UniformField(FIELD_T)
+        self.rng = np.random.default_rng(seed)
+        self.cycle_id = 0
+
+    def fit(self, theta0_rad, ok=True, tuning=False, cycle_id=None):
+        f = float(ArcPotential.from_source(P, self.source, Pose(theta0_rad=theta0_rad)).frequency_hz())
+        f += STD_HZ * self.rng.standard_normal()
+        point = SweepPoint(theta0_rad, f, STD_HZ, f - P.f00_hz, STD_HZ, math.radians(2.0), 1.8, 0.5, 100.0)
+        return SweepFit(cycle_id or self.cycle_id, tuning, point if ok else None, source=f"fit of {theta0_rad:.3f}")
+
+    def run(self, runner, step, fits_first=True, ok=True):
+        """Answer ``step``'s cycle; fits before the answer (as a fast estimator) or after it."""
+        call = step.run_cycle
+        self.cycle_id += 1
+        fits = [self.fit(call.theta0_rad, ok) for _ in range(call.repeats)]
+        answer = CycleAnswer(self.cycle_id, call.repeats)
+        if fits_first:
+            assert all(runner.on_fit(f) is None for f in fits)
+            return runner.on_cycle(answer)
+        assert not runner.on_cycle(answer).run_cycle   # waiting for the fits
+        steps = [runner.on_fit(f) for f in fits]
+        assert steps[:-1] == [None] * (len(fits) - 1)
+        return steps[-1]
+
+
+def started(goal=SweepGoal(ANGLES, 2), settings=SweepSettings()):
+    runner = SweepRunner()
+    runner.start(goal, settings, P)
+    return runner, runner.begin()
+
+
+def test_a_sweep_runs_a_cycle_per_angle_and_recovers_the_field():
+    runner, step = started()
+    driver, feedback = StandIn(), []
+    while step.decompose is None:
+        assert step.run_cycle.theta0_rad == ANGLES[len(feedback)] and step.run_cycle.repeats == 2
+        # Every other cycle its fits come late; other cycles' and tuning fits do not count.
+        assert runner.on_fit(driver.fit(0.0, cycle_id=999)) is None
+        assert runner.on_fit(driver.fit(0.0, tuning=True, cycle_id=driver.cycle_id + 1)) is None
+        step = driver.run(runner, step, fits_first=len(feedback) % 2 == 0)
+        feedback.append(step.feedback)
+    assert [f.angle_index for f in feedback] == list(range(len(ANGLES)))
+    assert all(f.n_ok == 2 and len(f.fits) == 2 and f.n_angles == len(ANGLES) for f in feedback)
+    assert runner.state == "decomposing" and runner.on_fit(driver.fit(0.0)) is None
+    step = runner.on_decomposed(step.decompose())
+    outcome, sweep = step.finished, step.publish
+    assert outcome.ok and sweep is outcome.map and sweep.sweep_id == 1 and runner.state == "idle"
+    d = sweep.decomposition
+    sigma = np.sqrt(np.diag(d.field_covariance_t2))
+    assert np.all(np.abs(d.field_t - FIELD_T[:2]) < 4 * sigma), (d.field_t, sigma)
+    assert len(sweep.record.points) == 2 * len(ANGLES) and sweep.f00_hz == pytest.approx(P.f00_hz)
+
+
+def test_a_goal_without_angles_or_repeats_takes_the_settings():
+    runner, step = started(SweepGoal(), SweepSettings(repeats_per_angle=3, angle_step_deg=90.0))
+    driver, calls = StandIn(), []
+    while step.run_cycle is not None:
+        calls.append(step.run_cycle)
+        step = driver.run(runner, step)
+    assert [c.theta0_rad for c in calls] == pytest.approx(np.radians([0, 90, 180, 270]))
+    assert {c.repeats for c in calls} == {3}
+
+
+def test_late_fits_are_given_up_on_when_their_time_is_up():
+    runner, step = started(SweepGoal(ANGLES[:1], 3))
+    driver = StandIn()
+    assert runner.fits_time_up() is None     # no cycle answered yet: nothing is late
+    driver.cycle_id += 1
+    assert runner.on_fit(driver.fit(0.0)) is None
+    assert not runner.on_cycle(CycleAnswer(driver.cycle_id, 3)).run_cycle
+    step = runner.fits_time_up()
+    assert step.feedback.n_ok == 1 and step.decompose is not None
+
+
+@pytest.mark.parametrize("problem", ["cycle failed: coil current above the cap",
+                                     "the driver's run_cycle service is not available"])
+def test_a_failing_driver_ends_the_sweep_with_its_reason(problem):
+    runner, step = started()
+    step = StandIn().run(runner, step)
+    step = runner.on_cycle(CycleAnswer(problem=problem))
+    assert not step.finished.ok and step.finished.message == f"orientation 1 (30.0°): {problem}"
+    assert step.publish is None and runner.state == "idle" and runner.sweeps == 0
+
+
+def test_a_cancel_ends_the_sweep_before_the_next_orientation():
+    runner, step = started()
+    runner.cancel()
+    step = StandIn().run(runner, step)
+    assert step.feedback.angle_index == 0 and step.run_cycle is None
+    assert step.finished.cancelled and not step.finished.ok
+    assert step.finished.message == f"cancelled after 1 of {len(ANGLES)} orientations"
+    runner.start(SweepGoal(ANGLES), SweepSettings(), P)    # free again
+
+
+def test_a_sweep_without_one_good_ringdown_fails_and_publishes_nothing():
+    runner, step = started(SweepGoal(ANGLES[:2], 2))
+    driver = StandIn()
+    while step.finished is None:
+        step = driver.run(runner, step, ok=False)
+    assert not step.finished.ok and step.finished.message == "no successful ring-down in the sweep (4 failed)"
+    assert step.publish is None and runner.sweeps == 1
+
+
+@pytest.mark.parametrize("goal, reason", [
+    (SweepGoal((0.0, math.nan)), "not all finite"),
+    (SweepGoal((0.0, 1.0), model="paper"), "'paper' is not one of first_principles, published"),
+])
+def test_bad_goals_are_refused_with_the_reason(goal, reason):
+    with pytest.raises(ValueError, match=reason):
+        SweepRunner().start(goal, SweepSettings(), P)
+
+
+def test_one_sweep_at_a_time_and_the_runner_is_freed_when_abandoned():
+    runner, _ = started()
+    with pytest.raises(ValueError, match="another sweep is still running"):
+        runner.start(SweepGoal(ANGLES), SweepSettings(), P)
+    assert not runner.abandon("the node stops").finished.ok and runner.state == "idle"
+    assert runner.abandon("again").finished is None

@@ -1,4 +1,5 @@
 """Scenario YAML: shipped files, round trips, the documented examples and the error messages."""
+import json
 import math
 import pathlib
 import re
@@ -99,3 +100,14 @@ def test_bad_scenarios_are_refused_with_a_message_naming_the_key(data, message):
 def test_unknown_scenario_name_lists_the_shipped_ones():
     with pytest.raises(ValueError, match="paper_largest_spacing"):
         load_scenario("no_such_scenario")
+
+
+SHIPPED_BEFORE_EXTENDS = pathlib.Path(__file__).with_name("data") / "shipped_scenarios.json"
+
+
+@pytest.mark.parametrize("name", sorted(SETUPS))
+def test_shipped_scenarios_load_as_they_did_when_every_file_was_written_out_in_full(name):
+    """data/shipped_scenarios.json is ``to_dict()`` of each shipped scene captured from the
+    files as they were before they shared a base (``extends``); JSON keeps floats exactly."""
+    before = json.loads(SHIPPED_BEFORE_EXTENDS.read_text())[name]
+    assert json.loads(json.dumps(load_scenario(name).to_dict())) == before

@@ -25,10 +25,11 @@ import numpy as np
 import yaml
 
 from mows.physics.coils import CoilSetup, largest_spacing, setup_from_dict
-from mows.physics.field import FieldSource, SumSource, check_keys, source_from_dict, source_to_dict, vector3
+from mows.physics.field import FieldSource, SumSource, source_from_dict, source_to_dict
 from mows.physics.fluxgate import DAQ_SAMPLE_RATE_HZ, FL1_RANGE_T, FL1_RESOLUTION_T, Fluxgate, FluxgatePair, NoiseModel
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.probe import PAPER_PROBE, Probe
+from mows.physics.schema import check_keys, vector3
 
 SCENARIO_DIR = pathlib.Path(__file__).with_name("scenarios")
 DEFAULT_SCENARIO = "paper_largest_spacing"

@@ -121,7 +121,7 @@ class Excitation:
 
 @dataclasses.dataclass(frozen=True)
 class Housing:
-    """The housing stop at ±θstop as a stiff spring–dashpot contact (see :mod:`mows.sim.simulator`).
+    """The housing stop at ±θstop as a stiff spring–dashpot contact (see :mod:`mows.sim.kernel`).
 
     ``stiffness_ratio``: contact stiffness over kM; ``restitution``: coefficient of
     restitution of one impact (sets the contact damping).

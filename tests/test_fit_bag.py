@@ -9,7 +9,8 @@ from mows.device import bags
 
 from mows.cli import main as cli
 from mows.sim.scenario import load_scenario
-from mows.sim.simulator import SimulatedDevice, simulate_cycle
+from mows.sim.cycle import simulate_cycle
+from mows.sim.simulator import SimulatedDevice
 
 STORE = bags.typestore()
 RAW, EXCITATION = "mows_msgs/msg/MagnetometerBlock", "mows_msgs/msg/ExcitationState"

@@ -13,7 +13,8 @@ from scipy import stats
 from mows.lab import reference_at
 from mows.lab.synth import fit_cycle
 from mows.sim.scenario import load_scenario
-from mows.sim.simulator import SimulatedDevice, simulate_cycle
+from mows.sim.cycle import simulate_cycle
+from mows.sim.simulator import SimulatedDevice
 from mows.sweep.record import SweepPoint, SweepRecord
 
 ANGLES_DEG = np.arange(0.0, 360.0, 45.0)

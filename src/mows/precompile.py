@@ -1,7 +1,7 @@
 """Compile the numba kernels (or load them from numba's on-disk cache) before they are needed.
 
 The ring-down fit (:mod:`mows.estimate.ringdown_model`) and the simulator's integrator
-(:mod:`mows.sim.simulator`) are compiled on first use: about ten seconds on a fresh checkout, about
+(:mod:`mows.sim.kernel`) are compiled on first use: about ten seconds on a fresh checkout, about
 a second from the cache. That must not happen in the middle of a measurement (a driver that
 stalls for seconds loses its device link; an estimator that stalls misses ring-downs), so the
 nodes and the test session call :func:`precompile` first. ``python -m mows.precompile`` does it
@@ -12,20 +12,23 @@ import time
 
 import numpy as np
 
+from mows.estimate.ringdown import FitOptions, fit_ringdown
+from mows.physics.fluxgate import FluxgatePair
+from mows.physics.probe import PAPER_PROBE
+
 
 def precompile(simulator: bool = True) -> float:
     """Run one small fit (and, with ``simulator``, a few simulator steps); return the seconds it
     took."""
-    from mows.physics.fluxgate import FluxgatePair
-    from mows.physics.probe import PAPER_PROBE
-    from mows.estimate.ringdown import FitOptions, fit_ringdown
-
     start = time.perf_counter()
     t = np.arange(4000) / 20_000.0
     near = np.sin(0.3 * np.cos(2 * math.pi * 112.0 * t) * np.exp(-1.8 * t))
     pair = np.stack([near, np.zeros_like(near)], axis=1)
     fit_ringdown(pair, 20_000.0, 0.0, 112.0, options=FitOptions.lever_aware(FluxgatePair.paper(), PAPER_PROBE, 0.0))
     if simulator:
+        # Imported only when asked for: the estimator node (simulator=False) never runs the
+        # simulator, and importing it on top of the fit's modules took 7-8 s more (scipy.signal,
+        # the kernels' module; measured at a load average of 13-15 on this 2-core machine).
         from mows.sim.scenario import Scenario
         from mows.sim.simulator import SimulatedDevice
 

@@ -12,7 +12,8 @@ import pytest
 
 from mows.lab.synth import fit_cycle
 from mows.sim.scenario import load_scenario
-from mows.sim.simulator import SimulatedDevice, simulate_cycle
+from mows.sim.cycle import simulate_cycle
+from mows.sim.simulator import SimulatedDevice
 
 
 @pytest.fixture(scope="module")

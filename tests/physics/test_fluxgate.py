@@ -6,7 +6,7 @@ from scipy import signal
 
 from mows.physics.fluxgate import (PAPER_SPACING_M, Fluxgate, FluxgatePair, NoiseModel, digitise, dipole_pickup_t,
                            pink_noise_t)
-from mows.sim.simulator import NoiseStream
+from mows.sim.noise import NoiseStream
 
 M = 0.89e-3   # A·m², the paper's magnet
 R = 0.06      # m, probe to near sensor

@@ -1,4 +1,5 @@
 """Scenario YAML: shipped files, round trips, the documented examples and the error messages."""
+import json
 import math
 import pathlib
 import re
@@ -8,7 +9,7 @@ import pytest
 import yaml
 
 from mows.physics.probe import PAPER_PROBE
-from mows.sim.scenario import Scenario, load_scenario, shipped_scenarios
+from mows.sim.scenario import SCENARIO_DIR, Scenario, load_scenario, shipped_scenarios
 
 DOC = pathlib.Path(__file__).parents[2] / "docs" / "scenario_format.md"
 SETUPS = {"paper_largest_spacing": "largest_spacing", "helmholtz": "helmholtz", "anti_helmholtz": "helmholtz",
@@ -49,6 +50,10 @@ def test_the_documented_examples_are_the_shipped_files():
     assert set(named) == {"paper_largest_spacing", "helmholtz", "anti_helmholtz", "nearby_coil"}
     for name, block in named.items():
         assert Scenario.from_dict(block).to_dict() == load_scenario(name).to_dict(), name
+    base = yaml.safe_load((SCENARIO_DIR / "base.yaml").read_text())
+    assert base in blocks
+    no_hum = Scenario.from_dict(next(b for b in blocks if b.get("name") == "helmholtz_no_hum"))
+    assert no_hum.noise.mains_t == 0.0 and no_hum.setup.name == "helmholtz"
     minimal = Scenario.from_dict(next(b for b in blocks if b.get("name") == "one_millitesla"))
     np.testing.assert_array_equal(minimal.environment.source.field_t(np.zeros(3)), [1e-3, 0.0, 0.0])
 
@@ -99,3 +104,49 @@ def test_bad_scenarios_are_refused_with_a_message_naming_the_key(data, message):
 def test_unknown_scenario_name_lists_the_shipped_ones():
     with pytest.raises(ValueError, match="paper_largest_spacing"):
         load_scenario("no_such_scenario")
+
+
+SHIPPED_BEFORE_EXTENDS = pathlib.Path(__file__).with_name("data") / "shipped_scenarios.json"
+
+
+@pytest.mark.parametrize("name", sorted(SETUPS))
+def test_shipped_scenarios_load_as_they_did_when_every_file_was_written_out_in_full(name):
+    """data/shipped_scenarios.json is ``to_dict()`` of each shipped scene captured from the
+    files as they were before they shared a base (``extends``); JSON keeps floats exactly."""
+    before = json.loads(SHIPPED_BEFORE_EXTENDS.read_text())[name]
+    assert json.loads(json.dumps(load_scenario(name).to_dict())) == before
+
+
+def test_extends_merges_mappings_key_by_key_and_replaces_lists(tmp_path):
+    (tmp_path / "quiet.yaml").write_text("extends: helmholtz\nname: quiet\nnoise: {mains_t: 0.0}\n"
+                                         "environment: {sources: [], temperature_k: 300.0}\n")
+    quiet, helmholtz = load_scenario(tmp_path / "quiet.yaml"), load_scenario("helmholtz")
+    assert quiet.name == "quiet" and quiet.setup.name == "helmholtz"
+    assert quiet.noise.mains_t == 0.0
+    assert quiet.noise.sensor_white_t_per_rthz == helmholtz.noise.sensor_white_t_per_rthz == 1e-11
+    assert quiet.environment.sources == () and quiet.environment.temperature_k == 300.0
+    assert quiet.to_dict()["sensors"] == helmholtz.to_dict()["sensors"]
+
+
+def test_extends_a_file_whose_probe_path_is_relative_to_that_file(tmp_path):
+    (tmp_path / "probes").mkdir()
+    PAPER_PROBE.replace(damping_per_s=0.5).to_yaml(tmp_path / "probes" / "slow.yaml")
+    (tmp_path / "probes" / "slow_scene.yaml").write_text("probe: slow.yaml\nseed: 7\n")
+    (tmp_path / "mine.yaml").write_text("extends: probes/slow_scene.yaml\nname: mine\n")
+    mine = load_scenario(tmp_path / "mine.yaml")
+    assert (mine.name, mine.seed, mine.probe.damping_per_s) == ("mine", 7, 0.5)
+
+
+def test_an_extends_cycle_and_an_unknown_base_are_refused(tmp_path):
+    (tmp_path / "a.yaml").write_text("extends: b.yaml\n")
+    (tmp_path / "b.yaml").write_text("extends: a.yaml\n")
+    with pytest.raises(ValueError, match=r"extends forms a cycle: b.yaml → a.yaml → b.yaml"):
+        load_scenario(tmp_path / "a.yaml")
+    with pytest.raises(ValueError, match=r"extends = 'no_such_base' is neither a YAML file .*'base', 'anti_helmholtz'"):
+        Scenario.from_dict({"extends": "no_such_base"})
+    with pytest.raises(ValueError, match=r"extends = 3 must be a scenario name"):
+        Scenario.from_dict({"extends": 3})
+
+
+def test_the_code_and_the_shipped_scenes_share_one_seed():
+    assert Scenario().seed == Scenario.from_dict({}).seed == load_scenario().seed == 1

@@ -19,7 +19,9 @@ from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.probe import PAPER_PROBE as P
 from mows.estimate.ringdown import fit_ringdown
 from mows.sim.scenario import Environment, Integrator, Scenario, Sensors, load_scenario
-from mows.sim.simulator import NoiseStream, SimulatedDevice, simulate_cycle
+from mows.sim.cycle import simulate_cycle
+from mows.sim.noise import NoiseStream
+from mows.sim.simulator import SimulatedDevice
 
 FS = 20_000.0
 KM, M, J, DELTA, L = P.spring_nm_per_rad, P.moment_am2, P.inertia_kgm2, P.damping_per_s, P.lever_m

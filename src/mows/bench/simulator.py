@@ -21,7 +21,8 @@ from scipy.integrate import solve_ivp
 
 from mows.physics.fluxgate import NoiseModel
 from mows.sim.scenario import load_scenario
-from mows.sim.simulator import SimulatedDevice, simulate_cycle
+from mows.sim.cycle import simulate_cycle
+from mows.sim.simulator import SimulatedDevice
 
 _FIRST_CALL = """
 import time
@@ -60,7 +61,7 @@ def solve_ivp_theta(rhs, state, first_index: int, n_samples: int, sample_rate_hz
 
 def solve_ivp_cycle(device: SimulatedDevice, amplitude_a: float, excite_s: float = 0.5,
                     ringdown_s: float = 0.5) -> np.ndarray:
-    """θ at the samples of :func:`mows.sim.simulator.simulate_cycle` at θ0 = 0 from rest, by DOP853
+    """θ at the samples of :func:`mows.sim.cycle.simulate_cycle` at θ0 = 0 from rest, by DOP853
     on the device's own equation of motion."""
     fs = device.sample_rate_hz
     frequency = device.expected_frequency_hz()

@@ -1,9 +1,9 @@
 """``mows sim``: simulate measurement cycles of a scenario and write the samples to .npz.
 
 For every θ0 and repeat: turn, let the scenario's gap pass, excite, record the ring-down
-(:func:`mows.sim.simulator.simulate_cycle`). With ``--fit`` each ring-down is fitted
+(:func:`mows.sim.cycle.simulate_cycle`). With ``--fit`` each ring-down is fitted
 as the estimator node does (:func:`mows.lab.synth.fit_cycle`: the lever-aware pickup) and compared with the truth from the full potential
-(:meth:`mows.sim.simulator.CycleRecord.ringdown_frequency_hz`).
+(:meth:`mows.sim.cycle.CycleRecord.ringdown_frequency_hz`).
 """
 from __future__ import annotations
 
@@ -14,8 +14,9 @@ import numpy as np
 import yaml
 
 from mows.lab.synth import fit_cycle
+from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
-from mows.sim.simulator import SimulatedDevice, simulate_cycle
+from mows.sim.simulator import SimulatedDevice
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

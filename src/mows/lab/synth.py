@@ -26,7 +26,8 @@ from mows.lab.table import FIELD, GRADIENT, MeasurementTable
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
 from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
-from mows.sim.simulator import SimulatedDevice, simulate_cycle
+from mows.sim.cycle import simulate_cycle
+from mows.sim.simulator import SimulatedDevice
 from mows.sweep.record import SweepPoint, SweepRecord
 
 TRUTH_NODES = 8
@@ -166,7 +167,7 @@ def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
 
 
 def fit_cycle(cycle, scenario, paper_model: bool = False, settle_s: float = SETTLE_S) -> RingdownFit:
-    """Fit the ring-down of a simulated cycle (:class:`mows.sim.simulator.CycleRecord`) as the
+    """Fit the ring-down of a simulated cycle (:class:`mows.sim.cycle.CycleRecord`) as the
     estimator node does: the lever-aware pickup of ``scenario``'s probe seen by its fluxgates at
     the commanded θ0 (``paper_model``: Eq. S11 instead), the expected frequency the one the
     cycle excited at, the probe's damping as the start."""

@@ -29,7 +29,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mows.physics.field import MU0_OVER_4PI, dipole_field_t, unit_vector3, vector3
+from mows.physics.schema import unit_vector3, vector3
+from mows.physics.sources import MU0_OVER_4PI, dipole_field_t
 
 FL1_RANGE_T = 10e-6
 FL1_RESOLUTION_T = 1e-10

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mows.physics.field import MU0_OVER_4PI
+from mows.physics.sources import MU0_OVER_4PI
 
 
 def effective_distance_m(distance_m, spacing_m):

@@ -1,5 +1,6 @@
 """The simulated world: scenario files (``scenario``) and the time-domain simulation of the
-whole measurement, sample by sample like the hardware (``simulator``).
+whole measurement, sample by sample like the hardware: the device (``simulator``), its numba
+dynamics kernels (``kernel``) and noise stream (``noise``), one measurement cycle (``cycle``).
 
 May import: ``mows.physics``, ``mows.records``. Never the estimator: a simulation knows the
 truth and must not borrow the fit's assumptions.

@@ -9,7 +9,9 @@ environment field and no noise, and ``load_scenario()`` is the documented defaul
 
 YAML keys carry SI unit suffixes; degrees appear only in keys ending ``_deg``. Unknown keys,
 missing required keys and out-of-range values raise ValueError naming the section and key.
-Shipped scenarios live in ``src/mows/sim/scenarios/<name>.yaml`` and are loaded by name.
+Shipped scenarios live in ``src/mows/sim/scenarios/<name>.yaml`` and are loaded by name. A
+scenario may ``extends:`` another (a shipped name or a YAML path): its mapping is deep-merged
+over the base's, so the shipped scenes state only how they differ from ``base.yaml``.
 """
 from __future__ import annotations
 
@@ -23,13 +25,15 @@ import numpy as np
 import yaml
 
 from mows.physics.coils import CoilSetup, largest_spacing, setup_from_dict
-from mows.physics.field import FieldSource, SumSource, check_keys, source_from_dict, source_to_dict, vector3
+from mows.physics.field import FieldSource, SumSource, source_from_dict, source_to_dict
 from mows.physics.fluxgate import DAQ_SAMPLE_RATE_HZ, FL1_RANGE_T, FL1_RESOLUTION_T, Fluxgate, FluxgatePair, NoiseModel
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.probe import PAPER_PROBE, Probe
+from mows.physics.schema import check_keys, vector3
 
 SCENARIO_DIR = pathlib.Path(__file__).with_name("scenarios")
 DEFAULT_SCENARIO = "paper_largest_spacing"
+BASE_SCENARIO = "base"     # what the shipped scenes share; not a scene of its own
 PAPER_PROBE_NAME = "paper"
 
 
@@ -117,7 +121,7 @@ class Excitation:
 
 @dataclasses.dataclass(frozen=True)
 class Housing:
-    """The housing stop at ±θstop as a stiff spring–dashpot contact (see :mod:`mows.sim.simulator`).
+    """The housing stop at ±θstop as a stiff spring–dashpot contact (see :mod:`mows.sim.kernel`).
 
     ``stiffness_ratio``: contact stiffness over kM; ``restitution``: coefficient of
     restitution of one impact (sets the contact damping).
@@ -159,7 +163,7 @@ class Scenario:
     housing: Housing = Housing()
     integrator: Integrator = Integrator()
     sample_rate_hz: float = DAQ_SAMPLE_RATE_HZ
-    seed: int = 0
+    seed: int = 1
     name: str = "custom"
     description: str = ""
 
@@ -175,13 +179,10 @@ class Scenario:
     # --- YAML ---------------------------------------------------------------------------
     @classmethod
     def from_dict(cls, data: dict, base_dir=None) -> "Scenario":
-        """Scenario from its YAML mapping; probe file paths are relative to ``base_dir``."""
-        if not isinstance(data, dict):
-            raise ValueError(f"a scenario must be a mapping of sections, got {type(data).__name__}")
+        """Scenario from its YAML mapping; probe file paths and an ``extends:`` file path are
+        relative to ``base_dir`` (in a base file: to that file's folder)."""
+        data = _with_bases(data, base_dir)
         check_keys("scenario", data, _scenario_from_sections)
-        data = dict(data)
-        if isinstance(data.get("probe"), str) and data["probe"] != PAPER_PROBE_NAME:
-            data["probe"] = str(pathlib.Path(base_dir or ".") / data["probe"])
         return _scenario_from_sections(**data)
 
     def to_dict(self) -> dict:
@@ -223,13 +224,52 @@ def load_scenario(name_or_path=DEFAULT_SCENARIO) -> Scenario:
 
 
 def shipped_scenarios() -> list[str]:
-    return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml") if p.stem != BASE_SCENARIO)
+
+
+# --- extends: a scenario as its base's mapping with overrides ---------------------------
+def _with_bases(data, base_dir, chain: tuple = ()) -> dict:
+    """``data`` deep-merged over the scenario it ``extends`` (itself merged over its base …);
+    its probe file path made relative to ``base_dir`` first. ``chain``: the files on the way."""
+    if not isinstance(data, dict):
+        raise ValueError(f"a scenario must be a mapping of sections, got {type(data).__name__}")
+    data = dict(data)
+    if isinstance(data.get("probe"), str) and data["probe"] != PAPER_PROBE_NAME:
+        data["probe"] = str(pathlib.Path(base_dir or ".") / data["probe"])
+    if "extends" not in data:
+        return data
+    path = _base_path(data.pop("extends"), base_dir)
+    if path in chain:
+        raise ValueError("scenario: extends forms a cycle: " + " → ".join(p.name for p in (*chain, path)))
+    base = _with_bases(yaml.safe_load(path.read_text()), path.parent, (*chain, path))
+    return _deep_merge(base, data)
+
+
+def _base_path(name, base_dir) -> pathlib.Path:
+    """The file of ``extends: name``: a YAML path (relative to ``base_dir``) or a shipped name."""
+    if not isinstance(name, str):
+        raise ValueError(f"scenario: extends = {name!r} must be a scenario name or a YAML file path")
+    is_file = pathlib.Path(name).suffix in (".yaml", ".yml")
+    path = pathlib.Path(base_dir or ".") / name if is_file else SCENARIO_DIR / f"{name}.yaml"
+    if not path.is_file():
+        raise ValueError(f"scenario: extends = {name!r} is neither a YAML file (looked for {path}) nor one of "
+                         f"the shipped scenarios {[BASE_SCENARIO, *shipped_scenarios()]}")
+    return path.resolve()
+
+
+def _deep_merge(base: dict, override: dict) -> dict:
+    """``override`` over ``base``: mappings merge key by key, anything else (lists too) replaces."""
+    merged = dict(base)
+    for key, value in override.items():
+        both_maps = isinstance(value, dict) and isinstance(base.get(key), dict)
+        merged[key] = _deep_merge(base[key], value) if both_maps else value
+    return merged
 
 
 # --- section builders: their signatures are the YAML keys --------------------------------
 def _scenario_from_sections(name="custom", description="", probe=PAPER_PROBE_NAME, setup=None, environment=None,
                    pose=None, sensors=None, noise=None, excitation=None, housing=None, integrator=None,
-                   sample_rate_hz=DAQ_SAMPLE_RATE_HZ, seed=0) -> Scenario:
+                   sample_rate_hz=Scenario.sample_rate_hz, seed=Scenario.seed) -> Scenario:
     the_pose = _section("pose", pose, _pose)
     fs = _number("scenario", "sample_rate_hz", sample_rate_hz)
     setup = {"preset": "largest_spacing"} if setup is None else setup
@@ -288,7 +328,8 @@ def _probe(value) -> Probe:
     raise ValueError(f"scenario section 'probe' must be {PAPER_PROBE_NAME!r}, a file path or a mapping, got {value!r}")
 
 
-def _environment(sources=(), temperature_k=PAPER_PROBE.reference_temperature_k, temperature_rate_k_per_s=0.0):
+def _environment(sources=(), temperature_k=Environment.temperature_k,
+                 temperature_rate_k_per_s=Environment.temperature_rate_k_per_s):
     if not isinstance(sources, (list, tuple)):
         raise ValueError(f"scenario section 'environment': sources must be a list of field sources, got {sources!r}")
     return Environment(tuple(source_from_dict(s) for s in sources),

@@ -5,9 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from mows.device import bags
-
 from mows.cli import main as cli
+from mows.device import bags
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice, simulate_cycle
 

@@ -16,9 +16,9 @@ import numpy as np
 def precompile(simulator: bool = True) -> float:
     """Run one small fit (and, with ``simulator``, a few simulator steps); return the seconds it
     took."""
+    from mows.estimate.ringdown import FitOptions, fit_ringdown
     from mows.physics.fluxgate import FluxgatePair
     from mows.physics.probe import PAPER_PROBE
-    from mows.estimate.ringdown import FitOptions, fit_ringdown
 
     start = time.perf_counter()
     t = np.arange(4000) / 20_000.0

@@ -5,13 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from mows.physics import frequency
-from mows.physics.field import UniformField
-from mows.physics import ringdown_average
+from mows.estimate.ringdown import fit_ringdown
 from mows.lab import FrequencyModel, MeasurementTable, catalog
 from mows.lab.synth import true_frequency_hz
+from mows.physics import frequency, ringdown_average
+from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
-from mows.estimate.ringdown import fit_ringdown
 
 
 def random_table(rng, n=40, field_scale=2e-3, gradient_scale=0.05, **extra):

@@ -4,8 +4,18 @@ import pytest
 import scipy.constants
 from scipy import integrate
 
-from mows.physics.field import (CurrentLoop, LinearGradient, PointDipole, SumSource, UniformField, anti_helmholtz_pair,
-                        helmholtz_pair, solenoid, source_from_dict, source_to_dict)
+from mows.physics.field import (
+    CurrentLoop,
+    LinearGradient,
+    PointDipole,
+    SumSource,
+    UniformField,
+    anti_helmholtz_pair,
+    helmholtz_pair,
+    solenoid,
+    source_from_dict,
+    source_to_dict,
+)
 
 MU0 = scipy.constants.mu_0  # T·m/A (CODATA 2022 in scipy 1.17)
 RNG = np.random.default_rng(20240611)

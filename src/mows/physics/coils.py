@@ -39,8 +39,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mows.physics.field import (FieldSource, anti_helmholtz_pair, as_points_m, check_keys, helmholtz_pair, solenoid,
-                        source_from_dict, source_to_dict, vector3)
+from mows.physics.field import (
+    FieldSource,
+    anti_helmholtz_pair,
+    as_points_m,
+    check_keys,
+    helmholtz_pair,
+    solenoid,
+    source_from_dict,
+    source_to_dict,
+    vector3,
+)
 
 LSIP330_RADIUS_M = 0.025
 LSIP330_LENGTH_M = 0.02

@@ -169,12 +169,12 @@ class Scenario:
             raise ValueError(f"scenario: seed = {self.seed!r} must be an integer ≥ 0")
         self.setup.cap.check(self.excitation.amplitude_a)
 
-    def replace(self, **changes) -> "Scenario":
+    def replace(self, **changes) -> Scenario:
         return dataclasses.replace(self, **changes)
 
     # --- YAML ---------------------------------------------------------------------------
     @classmethod
-    def from_dict(cls, data: dict, base_dir=None) -> "Scenario":
+    def from_dict(cls, data: dict, base_dir=None) -> Scenario:
         """Scenario from its YAML mapping; probe file paths are relative to ``base_dir``."""
         if not isinstance(data, dict):
             raise ValueError(f"a scenario must be a mapping of sections, got {type(data).__name__}")
@@ -202,7 +202,7 @@ class Scenario:
         }
 
     @classmethod
-    def from_yaml(cls, path) -> "Scenario":
+    def from_yaml(cls, path) -> Scenario:
         path = pathlib.Path(path)
         data = yaml.safe_load(path.read_text())
         return cls.from_dict(data, base_dir=path.parent)

@@ -30,9 +30,9 @@ def test_the_base_model_is_eq6_exactly_up_to_mT_fields():
     axes = table.probe_axes()
     along = np.einsum("ni,ni->n", axes[:, 0], table.field_t)
     gradient = np.einsum("ni,nij,nj->n", axes[:, 0], table.gradient_t_per_m, axes[:, 0])
-    shift = frequency.frequency_shift_hz(probe.f00_hz, probe.spring_nm_per_rad,
-                                         frequency.field_spring_nm_per_rad(probe.moment_am2, along)
-                                         + frequency.gradient_spring_nm_per_rad(probe.moment_am2, probe.lever_m, gradient))
+    field_spring = (frequency.field_spring_nm_per_rad(probe.moment_am2, along)
+                    + frequency.gradient_spring_nm_per_rad(probe.moment_am2, probe.lever_m, gradient))
+    shift = frequency.frequency_shift_hz(probe.f00_hz, probe.spring_nm_per_rad, field_spring)
     np.testing.assert_allclose(probe.f00_hz * h + c, probe.f00_hz + shift, rtol=1e-12)
 
 

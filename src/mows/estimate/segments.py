@@ -84,7 +84,8 @@ class SegmentAssembler:
     """Buffers about ``buffer_s`` of blocks and assembles announced ring-down windows.
 
     Counters (for diagnostics): ``blocks``, ``missing_samples`` (sequence gaps in the stream),
-    ``rate_changes`` (a new sample rate or number of channels restarts the buffer), ``late_windows`` (announced after their samples left the buffer).
+    ``rate_changes`` (a new sample rate or number of channels restarts the buffer), ``late_windows``
+    (announced after their samples left the buffer).
     """
 
     def __init__(self, buffer_s: float = 5.0):

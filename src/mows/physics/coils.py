@@ -35,6 +35,7 @@ Coil sources are fields per ampere; degrees appear only in the YAML key ``curren
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -118,8 +119,8 @@ class CoilSetup:
     """
 
     name: str
-    coils: tuple
-    phases_rad: tuple
+    coils: Sequence[FieldSource]  # stored as tuples
+    phases_rad: Sequence[float]
     inductance_h: float = LSIP330_INDUCTANCE_H
     cap: CurrentCap = field(default_factory=CurrentCap)
 

@@ -24,6 +24,7 @@ Helmholtz pairs and solenoids are sums of loops, and :func:`source_to_dict` writ
 from __future__ import annotations
 
 import inspect
+from collections.abc import Callable
 
 import numpy as np
 import scipy.constants
@@ -455,7 +456,7 @@ def _sum_of(sources) -> SumSource:
     return SumSource(source_from_dict(s) for s in sources)
 
 
-_BUILDERS = {
+_BUILDERS: dict[str, Callable[..., FieldSource]] = {
     "uniform": UniformField,
     "linear_gradient": LinearGradient,
     "dipole": PointDipole,

@@ -18,6 +18,7 @@ import functools
 import inspect
 import math
 import pathlib
+from typing import Any
 
 import numpy as np
 import yaml
@@ -298,9 +299,9 @@ def _environment(sources=(), temperature_k=PAPER_PROBE.reference_temperature_k, 
 
 def _pose(magnet_position_m=(0.0, 0.0, 0.0), theta0_deg=0.0, plane_e1=(1.0, 0.0, 0.0), plane_e2=(0.0, 1.0, 0.0),
           gravity_m_per_s2=None, tilt_deg=None, tilt_axis_deg=0.0) -> Pose:
-    place = {"magnet_position_m": tuple(_floats(vector3("pose: magnet_position_m", magnet_position_m))),
+    place: dict[str, Any] = {"magnet_position_m": tuple(_floats(vector3("pose: magnet_position_m", magnet_position_m))),
              "theta0_rad": math.radians(_number("pose", "theta0_deg", theta0_deg))}
-    plane = {"plane_e1": tuple(_floats(vector3("pose: plane_e1", plane_e1))),
+    plane: dict[str, Any] = {"plane_e1": tuple(_floats(vector3("pose: plane_e1", plane_e1))),
              "plane_e2": tuple(_floats(vector3("pose: plane_e2", plane_e2)))}
     if tilt_deg is None:
         gravity = (0.0, 0.0, -STANDARD_GRAVITY_M_PER_S2) if gravity_m_per_s2 is None else gravity_m_per_s2
@@ -331,8 +332,8 @@ def _sensors(pose: Pose, positions_m=None, axis=(0.0, 1.0, 0.0), range_t=FL1_RAN
             raise ValueError(f"scenario section 'sensors': positions_m must be two 3-vectors, got {positions_m!r}")
     if not isinstance(null_offsets, bool):
         raise ValueError(f"scenario section 'sensors': null_offsets must be true or false, got {null_offsets!r}")
-    sensors = [Fluxgate(p, axis, _number("sensors", "range_t", range_t),
-                        _number("sensors", "resolution_t", resolution_t)) for p in positions]
+    sensors = tuple(Fluxgate(p, axis, _number("sensors", "range_t", range_t),
+                             _number("sensors", "resolution_t", resolution_t)) for p in positions)
     return Sensors(FluxgatePair(sensors), null_offsets)
 
 

@@ -23,12 +23,11 @@ from rclpy.task import Future
 from sensor_msgs.msg import MagneticField
 
 from mows.estimate.axis import estimate_along_axis
-from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
-from mows.physics.frequency import frequency_shift_hz
-from mows.physics.probe import Probe
 from mows.estimate.ringdown import SETTLE_S, FitOptions, FitStatus, failure
-from mows.precompile import precompile
 from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
+from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
+from mows.physics.probe import Probe
+from mows.precompile import precompile
 from mows_estimator.messages import estimate_to_msg, fit_to_msg, magnetic_field_msg
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode

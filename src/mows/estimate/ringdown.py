@@ -111,7 +111,7 @@ class FitOptions:
                              "theta0_free or channels='both'")
 
     @classmethod
-    def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> "FitOptions":
+    def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> FitOptions:
         """Options with the exact pickup of ``probe``'s magnet swinging on its lever, seen by the
         fluxgate ``pair`` (:class:`mows.physics.fluxgate.FluxgatePair`) with the probe at θ0."""
         pickup = pickup_harmonics(pair, Pose(theta0_rad=theta0_rad), probe.lever_m, probe.moment_am2, combine=channels)

@@ -273,7 +273,7 @@ class SimulatedBlock:
         return len(self.samples)
 
     @staticmethod
-    def concatenate(blocks) -> "SimulatedBlock":
+    def concatenate(blocks) -> SimulatedBlock:
         """One block of consecutive ``blocks``."""
         blocks = list(blocks)
         truth = {f.name: np.concatenate([getattr(b, f.name) for b in blocks])

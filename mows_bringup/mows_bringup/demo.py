@@ -136,8 +136,7 @@ def print_feedback(feedback) -> None:
 
 
 def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path) -> None:
-    from mows.lab import analyse, write_report
-    from mows.lab import from_sweep, reference_at
+    from mows.lab import analyse, from_sweep, reference_at, write_report
     from mows.physics.probe import PAPER_PROBE
     from mows.sweep.record import SweepRecord
     from mows_mapper.node import sweep_point

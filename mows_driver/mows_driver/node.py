@@ -20,11 +20,8 @@ import time
 import traceback
 
 from diagnostic_msgs.msg import DiagnosticStatus
-from mows_ros.diagnostics import Health
-from mows_ros.node import MowsNode
-from mows_ros.params import ParamSpec, parameter_values
-from mows_ros.process import run_node
-from mows_ros.qos import EXCITATION_QOS, STREAM_QOS
+from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel
+from mows_msgs.srv import EmergencyStop, RunCycle
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.exceptions import InvalidParameterValueException
@@ -42,8 +39,11 @@ from mows.records import stamps
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
 from mows.sim.simulator import SimulatedDevice
 from mows_driver.recording import BagRecorder
-from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel
-from mows_msgs.srv import EmergencyStop, RunCycle
+from mows_ros.diagnostics import Health
+from mows_ros.node import MowsNode
+from mows_ros.params import ParamSpec, parameter_values
+from mows_ros.process import run_node
+from mows_ros.qos import EXCITATION_QOS, STREAM_QOS
 
 NODE_NAME = "driver"
 RAW_TOPIC = "mows/raw"

@@ -22,10 +22,9 @@ from mows_msgs.srv import RunCycle
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 
-from mows.records import stamps
-from mows.lab import analyse
-from mows.lab import from_sweep, reference_at
+from mows.lab import analyse, from_sweep, reference_at
 from mows.physics.probe import Probe
+from mows.records import stamps
 from mows.sweep.decompose import MODELS
 from mows.sweep.record import SweepPoint, SweepRecord
 from mows_ros.diagnostics import Health

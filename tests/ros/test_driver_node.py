@@ -10,10 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from mows_bringup.graph import NODES
-from mows_ros.process import EXIT_BAD_PARAMETER
-from mows_ros.qos import EXCITATION_QOS
-from node_processes import log
+from mows_msgs.msg import ExcitationState, MagnetometerBlock
+from mows_msgs.srv import EmergencyStop, RunCycle
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -23,9 +21,11 @@ from mows.device.phases import Phase
 from mows.records import stamps
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
+from mows_bringup.graph import NODES
 from mows_driver import node as driver
-from mows_msgs.msg import ExcitationState, MagnetometerBlock
-from mows_msgs.srv import EmergencyStop, RunCycle
+from mows_ros.process import EXIT_BAD_PARAMETER
+from mows_ros.qos import EXCITATION_QOS
+from node_processes import log
 
 pytestmark = pytest.mark.ros
 

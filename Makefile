@@ -17,6 +17,9 @@ ACTIVATE := source $(VENV)/bin/activate
 ENVIRONMENT := $(ACTIVATE) && source install/setup.bash
 DEMO_ARGS ?=
 PYTEST_ARGS ?=
+# 1: `make lint` also checks the formatting (`ruff format --check`); on once the tree has been
+# formatted with `ruff format .`.
+FORMAT_CHECK ?= 0
 BENCH_ARGS ?=
 
 # Installs a Debian package when it is missing (only the bootstrap of a bare machine needs it).
@@ -29,7 +32,7 @@ PYTHON_PACKAGES := $(patsubst %/setup.py,%,$(wildcard */setup.py))
 ROS_SOURCES := $(shell find $(ROS_PACKAGES) -type f -not -path '*/__pycache__/*' \
 	$(foreach p,$(PYTHON_PACKAGES),-not -path '$(p)/$(p)/*'))
 
-.PHONY: venv build test demo bench clean distclean
+.PHONY: venv build lint test demo bench clean distclean
 
 venv: $(VENV_STAMP) $(CORE_STAMP)
 build: $(BUILD_STAMP) $(CORE_STAMP)
@@ -61,8 +64,18 @@ $(BUILD_STAMP): $(VENV_STAMP) $(ROS_SOURCES)
 		colcon build --symlink-install --cmake-args -DBUILD_TESTING=OFF
 	touch $@
 
-# The whole suite; `make test PYTEST_ARGS='-m "not ros"'` runs only the ROS-free part.
-test: $(BUILD_STAMP) $(CORE_STAMP)
+# Static checks (configured in pyproject.toml): the import contracts of docs/architecture.md
+# (import-linter; in the sourced workspace, as it reads the node packages too), ruff over all
+# Python files, and mypy on the core.
+lint: $(BUILD_STAMP) $(CORE_STAMP)
+	$(ENVIRONMENT) && lint-imports --no-logo
+	$(ACTIVATE) && ruff check --quiet .
+	[ "$(FORMAT_CHECK)" != 1 ] || { $(ACTIVATE) && ruff format --check --quiet .; }
+	$(ACTIVATE) && mypy
+
+# The static checks, then the whole suite; `make test PYTEST_ARGS='-m "not ros"'` runs only the
+# ROS-free part of the suite.
+test: lint $(BUILD_STAMP) $(CORE_STAMP)
 	$(ENVIRONMENT) && python -m pytest $(PYTEST_ARGS)
 
 # The main job: the node graph on the simulated device runs a rotation sweep, decomposes it

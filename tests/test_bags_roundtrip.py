@@ -71,6 +71,7 @@ def test_a_service_definition_needs_its_two_parts():
 )
 def test_rclpy_and_rosbags_read_each_others_cdr(msgtype):
     from rclpy.serialization import deserialize_message, serialize_message
+
     from rclpy_conversion import rclpy_class, to_rclpy
 
     sample = sample_message(msgtype)

@@ -1,5 +1,8 @@
-"""The core library ``mows`` never imports rclpy: not in its source, not when imported."""
-import ast
+"""The core library ``mows`` never loads rclpy when imported, not even through a dependency.
+
+Its source never imports rclpy either: the import contract "mows is free of ROS"
+(pyproject.toml, checked by `make lint`).
+"""
 import json
 import subprocess
 import sys
@@ -11,17 +14,6 @@ SOURCE = Path(mows.__file__).parent
 FORBIDDEN = "rclpy"
 
 
-def imported_modules(path: Path) -> list[str]:
-    """Absolute module names imported anywhere in the Python file at ``path``."""
-    names = []
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            names += [alias.name for alias in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.level == 0:
-            names.append(node.module)
-    return names
-
-
 def mows_modules() -> list[str]:
     """Every module of the package; __main__ is left out, importing it would run it."""
     return sorted(
@@ -31,22 +23,6 @@ def mows_modules() -> list[str]:
         for path in SOURCE.rglob("*.py")
         if path.stem != "__main__"
     )
-
-
-def test_the_scan_sees_an_rclpy_import(tmp_path):
-    module = tmp_path / "m.py"
-    module.write_text("def f():\n    from rclpy.node import Node\n")
-    assert imported_modules(module) == ["rclpy.node"]
-
-
-def test_no_source_file_imports_rclpy():
-    offenders = [
-        f"{path.relative_to(SOURCE)}: {name}"
-        for path in SOURCE.rglob("*.py")
-        for name in imported_modules(path)
-        if name.split(".")[0] == FORBIDDEN
-    ]
-    assert offenders == []
 
 
 def test_importing_every_module_loads_no_rclpy():

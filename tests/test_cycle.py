@@ -5,10 +5,10 @@ import math
 
 import numpy as np
 import pytest
-from device.spy import SpyDevice
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from device.spy import SpyDevice
 from mows.device.backends import SimBackend
 from mows.device.cycle import CycleSequencer
 from mows.device.interface import CoilCommand, CommandResult

@@ -5,11 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from mows.device import bags
-
 from mows.cli import main as cli
-from mows.sim.scenario import load_scenario
+from mows.device import bags
 from mows.sim.cycle import simulate_cycle
+from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
 STORE = bags.typestore()
@@ -47,7 +46,7 @@ def bag(tmp_path_factory):
     """Two simulated cycles streamed as blocks, each ring-down announced at its coil-off sample."""
     scenario = load_scenario()
     device = SimulatedDevice(scenario, np.random.default_rng(9))
-    messages, truths, offset = [], [], 0
+    messages, truths = [], []
     for cycle, deg in enumerate((0.0, 60.0), start=1):
         record = simulate_cycle(device, math.radians(deg), scenario.excitation.amplitude_a)
         fs = record.sample_rate_hz

@@ -9,10 +9,31 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from mows.device.framing import (CRC, HEADER, MAX_PAYLOAD_BYTES, REJECT_CRC, REJECT_LENGTH, REJECT_PAYLOAD,
-                          REJECT_REASONS, REJECT_TRUNCATED, REJECT_TYPE, REJECT_VERSION, SYNC, VERSION, Ack,
-                          Coils, DeviceInfo, Frame, FrameDecoder, Heartbeat, Hello, Orientation, Samples, Status,
-                          encode_frame)
+from mows.device.framing import (
+    CRC,
+    HEADER,
+    MAX_PAYLOAD_BYTES,
+    REJECT_CRC,
+    REJECT_LENGTH,
+    REJECT_PAYLOAD,
+    REJECT_REASONS,
+    REJECT_TRUNCATED,
+    REJECT_TYPE,
+    REJECT_VERSION,
+    SYNC,
+    VERSION,
+    Ack,
+    Coils,
+    DeviceInfo,
+    Frame,
+    FrameDecoder,
+    Heartbeat,
+    Hello,
+    Orientation,
+    Samples,
+    Status,
+    encode_frame,
+)
 
 u8 = st.integers(0, 2**8 - 1)
 u32 = st.integers(0, 2**32 - 1)

@@ -12,8 +12,8 @@ from scipy import stats
 
 from mows.lab import reference_at
 from mows.lab.synth import fit_cycle
-from mows.sim.scenario import load_scenario
 from mows.sim.cycle import simulate_cycle
+from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.record import SweepPoint, SweepRecord
 

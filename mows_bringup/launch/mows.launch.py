@@ -2,10 +2,11 @@
 
 The same nodes and parameter files as ``mows-graph`` (mows_bringup.graph.NODES).
 """
-from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+
+from launch import LaunchDescription
 from mows_bringup.graph import NODES
 
 

@@ -76,12 +76,12 @@ def main(argv=None) -> int:
 
 def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited) -> bool:
     import rclpy
-    from mows_ros.qos import MAP_QOS, RESULT_QOS, STREAM_QOS
+    from mows_msgs.action import RotationSweep
+    from mows_msgs.msg import MagnetometerBlock, ModelReport, RingdownFit
     from rclpy.action import ActionClient
     from rclpy.signals import SignalHandlerOptions
 
-    from mows_msgs.action import RotationSweep
-    from mows_msgs.msg import MagnetometerBlock, ModelReport, RingdownFit
+    from mows_ros.qos import MAP_QOS, RESULT_QOS, STREAM_QOS
 
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("mows_demo")
@@ -136,11 +136,10 @@ def print_feedback(feedback) -> None:
 
 
 def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path) -> None:
-    from mows_mapper.messages import sweep_point
-
     from mows.lab import analyse, from_sweep, reference_at, write_report
     from mows.physics.probe import PAPER_PROBE
     from mows.sweep.record import SweepRecord
+    from mows_mapper.messages import sweep_point
 
     field, gradient = reference_at(scenario)
     truth = {"Bx (µT)": field[0] * 1e6, "By (µT)": field[1] * 1e6, "Gxx (mT/m)": gradient[0, 0] * 1e3,

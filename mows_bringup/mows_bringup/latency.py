@@ -43,10 +43,10 @@ def main(argv=None) -> int:
 
 def measure(cycles: int, repeats: int, exited) -> list:
     import rclpy
-    from mows_ros.qos import RESULT_QOS, STREAM_QOS
-
     from mows_msgs.msg import MagnetometerBlock, RingdownFit
     from mows_msgs.srv import RunCycle
+
+    from mows_ros.qos import RESULT_QOS, STREAM_QOS
 
     rclpy.init()
     node = rclpy.create_node("mows_latency")

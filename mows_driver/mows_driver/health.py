@@ -1,6 +1,7 @@
 """What the driver says on /diagnostics: the device session's state, and what went wrong
 since the last report (new gaps, new device faults) or still is wrong."""
 from diagnostic_msgs.msg import DiagnosticStatus
+
 from mows_ros.diagnostics import Health
 
 RATE_TOLERANCE = 0.02  # warn when the achieved sample rate is further off nominal

@@ -1,11 +1,12 @@
 """Translation of the device session's blocks and phase events into mows_msgs (no logic)."""
 import array
 
+from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel
+from mows_msgs.srv import EmergencyStop, RunCycle
+
 from mows.device.framing import DeviceInfo
 from mows.device.phases import CycleOutcome, CycleRequest, PhaseEvent
 from mows.records import stamps
-from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel
-from mows_msgs.srv import EmergencyStop, RunCycle
 
 
 def block_msg(block, info: DeviceInfo, frame_id: str, sensor_frame_ids: list) -> MagnetometerBlock:

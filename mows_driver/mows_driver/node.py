@@ -17,12 +17,8 @@ import threading
 import time
 import traceback
 
-from mows_ros.awaitables import completer
-from mows_ros.diagnostics import Health
-from mows_ros.node import MowsNode
-from mows_ros.params import parameter_values
-from mows_ros.process import run_node
-from mows_ros.qos import EXCITATION_QOS, STREAM_QOS
+from mows_msgs.msg import ExcitationState, MagnetometerBlock
+from mows_msgs.srv import EmergencyStop, RunCycle
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.exceptions import InvalidParameterValueException
@@ -49,8 +45,12 @@ from mows_driver.parameters import (
     settings_problem,
 )
 from mows_driver.recording import open_recorder
-from mows_msgs.msg import ExcitationState, MagnetometerBlock
-from mows_msgs.srv import EmergencyStop, RunCycle
+from mows_ros.awaitables import completer
+from mows_ros.diagnostics import Health
+from mows_ros.node import MowsNode
+from mows_ros.params import parameter_values
+from mows_ros.process import run_node
+from mows_ros.qos import EXCITATION_QOS, STREAM_QOS
 
 NODE_NAME = "driver"
 RAW_TOPIC = "mows/raw"

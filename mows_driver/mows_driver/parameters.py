@@ -2,8 +2,6 @@
 device backend it makes of them."""
 import math
 
-from mows_ros.params import ParamSpec
-
 from mows.device.backends import BagBackend, SerialBackend, SimBackend
 from mows.device.phases import CycleSettings
 from mows.device.serial_link import DEFAULT_BAUD, SerialLink
@@ -13,6 +11,7 @@ from mows.physics.coils import PRESETS, CurrentCap
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
 from mows.sim.simulator import SimulatedDevice
+from mows_ros.params import ParamSpec
 
 PARAMETERS = (
     ParamSpec("backend", "sim", "where magnetometer blocks come from: sim (the simulator), serial (the device on "

@@ -5,10 +5,10 @@ import numpy as np
 from mows_msgs.msg import FieldEstimate, RingdownFit
 from sensor_msgs.msg import MagneticField
 
-from mows.records import stamps
 from mows.estimate.axis import AxisEstimate
 from mows.estimate.ringdown import RingdownFit as Fit
 from mows.estimate.segments import RingdownWindow
+from mows.records import stamps
 
 
 def fit_to_msg(fit: Fit, window: RingdownWindow, frame_id: str, shift_hz: float, shift_std_hz: float) -> RingdownFit:

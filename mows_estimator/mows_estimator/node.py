@@ -1,9 +1,9 @@
 """The estimator node: fits every ring-down announced by the driver and publishes the result.
 
 Topic and service names are relative, so the graph can run in a namespace; in the root
-namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock, sensor-data QoS) and ``/mows/excitation``
-(ExcitationState). Publishes, per recorded ring-down, ``/mows/ringdown`` (RingdownFit, always,
-with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
+namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock, sensor-data
+QoS) and ``/mows/excitation`` (ExcitationState). Publishes, per recorded ring-down,
+``/mows/ringdown`` (RingdownFit, always, with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
 ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). Service
 ``/mows/estimator/calibrate`` (Calibrate) sets f00 from the next ring-downs in a known field.
 The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` and ``mows.estimate.axis``.

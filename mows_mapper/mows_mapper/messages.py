@@ -1,11 +1,12 @@
 """Translation between mows_msgs and the sweep runner's dataclasses (no logic of its own)."""
 
+from mows_msgs.action import RotationSweep
+from mows_msgs.msg import CandidateEffect, ModelReport, RingdownFit, SweepDecomposition
+
 from mows.records import stamps
 from mows.sweep.decompose import DecompositionStatus
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import SweepFeedback, SweepFit, SweepMap
-from mows_msgs.action import RotationSweep
-from mows_msgs.msg import CandidateEffect, ModelReport, RingdownFit, SweepDecomposition
 
 
 def sweep_point(fit: RingdownFit) -> SweepPoint:

@@ -15,13 +15,9 @@ decomposition and lab (in a worker thread) as a coroutine, so fits, cancels and
 diagnostics are served meanwhile.
 """
 from diagnostic_msgs.msg import DiagnosticStatus
-from mows_ros.awaitables import in_worker, until, within
-from mows_ros.diagnostics import Health
-from mows_ros.node import MowsNode
-from mows_ros.params import parameter_values
-from mows_ros.probe import probe_of
-from mows_ros.process import run_node
-from mows_ros.qos import MAP_QOS, RESULT_QOS
+from mows_msgs.action import RotationSweep
+from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
+from mows_msgs.srv import RunCycle
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.task import Future
@@ -43,9 +39,13 @@ from mows_mapper.messages import (
     sweep_fit,
 )
 from mows_mapper.parameters import PARAMETERS, sweep_settings
-from mows_msgs.action import RotationSweep
-from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
-from mows_msgs.srv import RunCycle
+from mows_ros.awaitables import in_worker, until, within
+from mows_ros.diagnostics import Health
+from mows_ros.node import MowsNode
+from mows_ros.params import parameter_values
+from mows_ros.probe import probe_of
+from mows_ros.process import run_node
+from mows_ros.qos import MAP_QOS, RESULT_QOS
 
 NODE_NAME = "mapper"
 SERVICE_WAIT_S = 5.0   # longest wait for the driver's run_cycle service to appear

@@ -1,10 +1,9 @@
 """The mapper's parameter table and the sweep settings it gives the core."""
-from mows_ros.params import ParamSpec
-from mows_ros.probe import PROBE_FILE
-
 from mows.lab import reference_at
 from mows.sweep.decompose import MODELS
 from mows.sweep.runner import SweepSettings
+from mows_ros.params import ParamSpec
+from mows_ros.probe import PROBE_FILE
 
 
 def reference_problem(name: str) -> str | None:

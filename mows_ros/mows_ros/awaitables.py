@@ -1,11 +1,11 @@
 """What a coroutine callback awaits on a node spun by one thread (``mows_ros.process``): a
 future with a time limit, a condition polled until a deadline, a CPU-bound function run
-in a worker thread, and a result another thread delivers. Each resumes the coroutine at the executor's next turn; none blocks the
-thread that serves the node's other callbacks.
+in a worker thread, and a result another thread delivers. Each resumes the coroutine at the
+executor's next turn; none blocks the thread that serves the node's other callbacks.
 """
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from rclpy.node import Node
 from rclpy.task import Future

@@ -1,7 +1,7 @@
 """A node's state on /diagnostics, once a second, in the diagnostic_msgs form that
 diagnostic aggregators and ``ros2 topic echo /diagnostics`` read."""
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node

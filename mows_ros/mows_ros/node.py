@@ -1,10 +1,10 @@
 """The base of every MOWS node: its parameter table declared, its health on /diagnostics."""
-from typing import Sequence
+from collections.abc import Sequence
 
-import mows
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.node import Node
 
+import mows
 from mows_ros.diagnostics import DiagnosticsPublisher, Health
 from mows_ros.params import ParamSpec, declare_parameters, parameter_values
 

@@ -5,8 +5,8 @@ each row into a ROS parameter with a descriptor (description, range, read-only) 
 ``ros2 param describe`` shows, and rejects bad values with a reason that names the
 parameter, its value and what is allowed.
 """
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 from rcl_interfaces.msg import (
     FloatingPointRange,

@@ -26,5 +26,6 @@ def probe_of(path: str) -> Probe:
     return _READ[path]
 
 
-PROBE_FILE = ParamSpec("probe_file", "", "probe constants YAML (mows.physics.probe.Probe.from_yaml); empty: the paper's "
-                       "probe", check=probe_file_problem)
+PROBE_FILE = ParamSpec("probe_file", "",
+                       "probe constants YAML (mows.physics.probe.Probe.from_yaml); empty: the paper's probe",
+                       check=probe_file_problem)

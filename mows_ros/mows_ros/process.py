@@ -1,7 +1,7 @@
 """Run one node as a process: spin until SIGINT or SIGTERM, then leave cleanly (exit 0)."""
 import faulthandler
 import sys
-from typing import Callable
+from collections.abc import Callable
 
 import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException

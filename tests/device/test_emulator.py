@@ -57,7 +57,8 @@ def link(emulator):
 def session(link):
     backend = SerialBackend(link, CurrentCap(CAP_A))
     settings = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, settle_s=0.1)
-    session = DeviceSession(backend, SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown))
+    config = SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown)
+    session = DeviceSession(backend, config)
     yield session
     session.close()
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from mows.bench.estimator import SAMPLE_RATE_HZ, RingdownCase
 from mows.estimate.axis import estimate_along_axis
-from mows.bench.estimator import RingdownCase, SAMPLE_RATE_HZ
-from mows.physics.probe import PAPER_PROBE
 from mows.estimate.ringdown import FitStatus, fit_ringdown
+from mows.physics.probe import PAPER_PROBE
 from mows.physics.signal import kappa_t
 
 THETA0 = math.radians(30.0)

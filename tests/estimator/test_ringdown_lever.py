@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from mows.lab.synth import fit_cycle
-from mows.sim.scenario import load_scenario
 from mows.sim.cycle import simulate_cycle
+from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
 

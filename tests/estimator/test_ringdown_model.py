@@ -4,14 +4,22 @@ import math
 import numpy as np
 import pytest
 
+from mows.bench.estimator import (
+    AMPLITUDE_RAD,
+    DAMPING_PER_S,
+    FREQUENCY_HZ,
+    KAPPA_T,
+    N_SAMPLES,
+    OFFSET_T,
+    PHASE_RAD,
+    SAMPLE_RATE_HZ,
+)
 from mows.estimate.axis import estimate_along_axis
-from mows.bench.estimator import (AMPLITUDE_RAD, DAMPING_PER_S, FREQUENCY_HZ, KAPPA_T, N_SAMPLES, OFFSET_T,
-                                       PHASE_RAD, SAMPLE_RATE_HZ)
+from mows.estimate.ringdown import FitOptions, fit_ringdown
+from mows.estimate.ringdown_problem import AMPLITUDE_BOUNDS_RAD, cramer_rao_frequency_hz
 from mows.physics.fluxgate import pink_noise_t
 from mows.physics.frequency import frequency_shift_hz
 from mows.physics.probe import PAPER_PROBE
-from mows.estimate.ringdown import FitOptions, fit_ringdown
-from mows.estimate.ringdown_problem import AMPLITUDE_BOUNDS_RAD, cramer_rao_frequency_hz
 from mows.physics.signal import signal_t
 
 T = np.arange(N_SAMPLES) / SAMPLE_RATE_HZ

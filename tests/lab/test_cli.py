@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from mows.cli.main import main
-from mows.physics.field import UniformField
 from mows.lab import synth
+from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
 

@@ -5,13 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from mows.physics import frequency
-from mows.physics.field import UniformField
-from mows.physics import ringdown_average
+from mows.estimate.ringdown import fit_ringdown
 from mows.lab import FrequencyModel, MeasurementTable, catalog
 from mows.lab.synth import true_frequency_hz
+from mows.physics import frequency, ringdown_average
+from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
-from mows.estimate.ringdown import fit_ringdown
 
 
 def random_table(rng, n=40, field_scale=2e-3, gradient_scale=0.05, **extra):
@@ -31,9 +30,9 @@ def test_the_base_model_is_eq6_exactly_up_to_mT_fields():
     axes = table.probe_axes()
     along = np.einsum("ni,ni->n", axes[:, 0], table.field_t)
     gradient = np.einsum("ni,nij,nj->n", axes[:, 0], table.gradient_t_per_m, axes[:, 0])
-    shift = frequency.frequency_shift_hz(probe.f00_hz, probe.spring_nm_per_rad,
-                                         frequency.field_spring_nm_per_rad(probe.moment_am2, along)
-                                         + frequency.gradient_spring_nm_per_rad(probe.moment_am2, probe.lever_m, gradient))
+    field_spring = (frequency.field_spring_nm_per_rad(probe.moment_am2, along)
+                    + frequency.gradient_spring_nm_per_rad(probe.moment_am2, probe.lever_m, gradient))
+    shift = frequency.frequency_shift_hz(probe.f00_hz, probe.spring_nm_per_rad, field_spring)
     np.testing.assert_allclose(probe.f00_hz * h + c, probe.f00_hz + shift, rtol=1e-12)
 
 

@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from mows.physics.field import CurrentLoop, UniformField, anti_helmholtz_pair, helmholtz_pair
 from mows.lab import analyse, synth
+from mows.physics.field import CurrentLoop, UniformField, anti_helmholtz_pair, helmholtz_pair
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
 

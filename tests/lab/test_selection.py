@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from mows.cli.main import main
-from mows.physics.field import UniformField
 from mows.lab import FrequencyModel, analyse, catalog, load_table, synth
+from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
 

@@ -10,8 +10,7 @@ scenario for the whole module (nothing is cached between runs). The seed is fixe
 import numpy as np
 import pytest
 
-from mows.lab import analyse, synth
-from mows.lab import reference_at
+from mows.lab import analyse, reference_at, synth
 from mows.lab.table import FIELD, GRADIENT
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
 from mows.sim.scenario import load_scenario

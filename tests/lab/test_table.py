@@ -54,7 +54,7 @@ def test_invalid_rows_can_be_dropped_and_text_columns_are_ignored(tmp_path):
     assert table.theta0_deg.tolist() == [0.0, 20.0]
     assert any("operator" in note for note in table.notes) and any("row 2" in note for note in table.notes)
     with pytest.raises(MissingColumnError, match="coil_current_a"):
-        table.coil_current_a
+        _ = table.coil_current_a
 
 
 def test_a_covariate_with_nan_cells_is_ignored_not_the_table(tmp_path):

@@ -5,8 +5,19 @@ import scipy.constants
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mows.physics.coils import (LSIP330_LENGTH_M, LSIP330_LOOPS, LSIP330_RADIUS_M, LSIP330_TURNS, PASCO_RADIUS_M,
-                        PASCO_TURNS, CurrentCap, helmholtz, largest_spacing, pasco_pair, setup_from_dict)
+from mows.physics.coils import (
+    LSIP330_LENGTH_M,
+    LSIP330_LOOPS,
+    LSIP330_RADIUS_M,
+    LSIP330_TURNS,
+    PASCO_RADIUS_M,
+    PASCO_TURNS,
+    CurrentCap,
+    helmholtz,
+    largest_spacing,
+    pasco_pair,
+    setup_from_dict,
+)
 
 SETUPS = {"largest_spacing": largest_spacing(), "helmholtz": helmholtz()}
 THETA0 = np.radians(np.arange(0.0, 360.0, 15.0))

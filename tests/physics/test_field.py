@@ -4,8 +4,18 @@ import pytest
 import scipy.constants
 from scipy import integrate
 
-from mows.physics.field import (CurrentLoop, LinearGradient, PointDipole, SumSource, UniformField, anti_helmholtz_pair,
-                        helmholtz_pair, solenoid, source_from_dict, source_to_dict)
+from mows.physics.field import (
+    CurrentLoop,
+    LinearGradient,
+    PointDipole,
+    SumSource,
+    UniformField,
+    anti_helmholtz_pair,
+    helmholtz_pair,
+    solenoid,
+    source_from_dict,
+    source_to_dict,
+)
 
 MU0 = scipy.constants.mu_0  # T·m/A (CODATA 2022 in scipy 1.17)
 RNG = np.random.default_rng(20240611)
@@ -265,9 +275,9 @@ def test_anti_helmholtz_centre_gradient():
 def test_long_solenoid_approaches_a_current_sheet():
     # Centre field of a uniform sheet: μ0·N·I/√(L² + 4R²); the midpoint stack of n loops
     # differs by O((L/n)²/R²) — here (L/n)/R = 1/40.
-    R, L, N, I = 0.01, 0.1, 1000, 0.2
-    coil = solenoid([0, 0, 0], [0, 0, 1], R, L, N, I, n_loops=400)
-    assert coil.field_t([0, 0, 0])[2] == pytest.approx(MU0 * N * I / np.sqrt(L**2 + 4 * R**2), rel=2e-4)
+    R, L, N, current_a = 0.01, 0.1, 1000, 0.2
+    coil = solenoid([0, 0, 0], [0, 0, 1], R, L, N, current_a, n_loops=400)
+    assert coil.field_t([0, 0, 0])[2] == pytest.approx(MU0 * N * current_a / np.sqrt(L**2 + 4 * R**2), rel=2e-4)
 
 
 # ---------------------------------------------------------------- composition and YAML form

@@ -4,8 +4,15 @@ import pytest
 import scipy.constants
 from scipy import signal
 
-from mows.physics.fluxgate import (PAPER_SPACING_M, Fluxgate, FluxgatePair, NoiseModel, digitise, dipole_pickup_t,
-                           pink_noise_t)
+from mows.physics.fluxgate import (
+    PAPER_SPACING_M,
+    Fluxgate,
+    FluxgatePair,
+    NoiseModel,
+    digitise,
+    dipole_pickup_t,
+    pink_noise_t,
+)
 from mows.sim.noise import NoiseStream
 
 M = 0.89e-3   # A·m², the paper's magnet

@@ -35,7 +35,8 @@ def exact_period_s(field_t, amplitude):
     def u(theta):
         return 0.5 * KM * theta**2 - M * field_t * math.cos(theta)
     # θ = A sin s removes the end-point singularity.
-    integrand = lambda s: amplitude * math.cos(s) / math.sqrt(2 * (u(amplitude) - u(amplitude * math.sin(s))) / P.inertia_kgm2)
+    def integrand(s):
+        return amplitude * math.cos(s) / math.sqrt(2 * (u(amplitude) - u(amplitude * math.sin(s))) / P.inertia_kgm2)
     return 4 * integrate.quad(integrand, 0, math.pi / 2, epsabs=0, epsrel=1e-13, limit=200)[0]
 
 

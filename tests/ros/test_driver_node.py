@@ -10,10 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from mows_bringup.graph import NODES
-from mows_ros.process import EXIT_BAD_PARAMETER
-from mows_ros.qos import EXCITATION_QOS
-from node_processes import log
+from mows_msgs.msg import ExcitationState, MagnetometerBlock
+from mows_msgs.srv import EmergencyStop, RunCycle
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -23,9 +21,11 @@ from mows.device.phases import Phase
 from mows.records import stamps
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
+from mows_bringup.graph import NODES
 from mows_driver import node as driver
-from mows_msgs.msg import ExcitationState, MagnetometerBlock
-from mows_msgs.srv import EmergencyStop, RunCycle
+from mows_ros.process import EXIT_BAD_PARAMETER
+from mows_ros.qos import EXCITATION_QOS
+from node_processes import log
 
 pytestmark = pytest.mark.ros
 
@@ -267,14 +267,16 @@ def test_the_bag_backend_replays_gaps_as_gaps(start_driver, listen, tmp_path):
                         "the whole replay")
     blocks = listen.blocks
     assert [b.first_sample_index for b in blocks] == [b.first_sample_index for b in recorded]
-    assert [stamps.nanoseconds(b.header.stamp) for b in blocks] == [stamps.nanoseconds(b.header.stamp) for b in recorded]
+    assert ([stamps.nanoseconds(b.header.stamp) for b in blocks]
+            == [stamps.nanoseconds(b.header.stamp) for b in recorded])
     jumps = np.diff([b.sequence for b in blocks])
     assert list(np.flatnonzero(jumps != 1)) == [14] and jumps[14] == 1 + 3  # 1200 samples: 3 blocks' worth
     for block, original in zip(blocks, recorded):
         np.testing.assert_array_equal(saturated(block), np.stack([c.saturated for c in original.channels], axis=1))
     assert (listen.diagnostics["gaps"], listen.diagnostics["missing_samples"]) == ("1", "1200")
     assert [(Phase(s.phase), s.cycle_id) for s in listen.states] == [(Phase.EXCITING, 7), (Phase.RINGDOWN, 7)]
-    assert [stamps.nanoseconds(s.header.stamp) for s in listen.states] == [1_000_000_000_000 + i * 50_000 for i in (2000, 4000)]
+    assert ([stamps.nanoseconds(s.header.stamp) for s in listen.states]
+            == [1_000_000_000_000 + i * 50_000 for i in (2000, 4000)])
 
 
 def test_a_bag_without_a_sample_rate_stops_the_driver_with_its_reason(tmp_path):

@@ -18,8 +18,8 @@ from mows.bench.estimator import AMPLITUDE_RAD, DAMPING_PER_S, KAPPA_T, PHASE_RA
 from mows.physics.frequency import frequency_shift_hz
 from mows.physics.probe import PAPER_PROBE
 from mows.physics.signal import signal_t
-from mows_bringup.graph import NODES
 from mows.records import stamps
+from mows_bringup.graph import NODES
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
 
 pytestmark = pytest.mark.ros

@@ -41,7 +41,8 @@ class StandInDriver:
             response.success, response.message = False, "coil current above the cap"
             return response
         self.cycle += 1
-        f = float(ArcPotential.from_source(PAPER_PROBE, self.source, Pose(theta0_rad=request.theta0_rad)).frequency_hz())
+        pose = Pose(theta0_rad=request.theta0_rad)
+        f = float(ArcPotential.from_source(PAPER_PROBE, self.source, pose).frequency_hz())
         # With ``tuning`` the estimator also fits the cycle's tuning ring-down, 1 Hz off resonance.
         for repeat, tuning in [(0, True)] * self.tuning + [(r, False) for r in range(request.repeats)]:
             measured = f + STD_HZ * self.rng.standard_normal() + tuning

@@ -4,12 +4,13 @@ import subprocess
 
 import pytest
 import yaml
+from rclpy.parameter import Parameter
+
 from mows_bringup.graph import NODES
 from mows_driver import node as driver
 from mows_estimator import node as estimator
 from mows_mapper import node as mapper
 from mows_ros.process import EXIT_BAD_PARAMETER
-from rclpy.parameter import Parameter
 
 pytestmark = pytest.mark.ros
 
@@ -69,6 +70,7 @@ def test_good_values_are_taken_and_described(ros_context):
 
 def test_a_probe_file_is_read_when_set_and_refused_with_its_reason(ros_context, tmp_path):
     import dataclasses
+
     from mows.physics.probe import PAPER_PROBE
     node = estimator.EstimatorNode()
     path = tmp_path / "probe.yaml"

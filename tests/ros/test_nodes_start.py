@@ -10,8 +10,8 @@ import subprocess
 import pytest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from mows_bringup.graph import NODES, parse_arguments
 
+from mows_bringup.graph import NODES, parse_arguments
 from node_processes import log
 
 pytestmark = pytest.mark.ros

@@ -2,6 +2,7 @@
 from pathlib import Path
 
 import pytest
+
 from mows_driver import node as driver
 from mows_estimator import node as estimator
 from mows_mapper import node as mapper

@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from mows.physics.field import UniformField, anti_helmholtz_pair
 from mows.lab import FrequencyModel, catalog, diagnose, synth
+from mows.physics.field import UniformField, anti_helmholtz_pair
 from mows.physics.probe import PAPER_PROBE
 
 ROWS_PER_SWEEP = 100

@@ -20,8 +20,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from mows.physics.fluxgate import NoiseModel
-from mows.sim.scenario import load_scenario
 from mows.sim.cycle import simulate_cycle
+from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
 _FIRST_CALL = """

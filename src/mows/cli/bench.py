@@ -21,8 +21,8 @@ SUITES = {
     "lab": ("mows.bench.lab", "model lab diagnose on 1000 rows with the whole catalog"),
     "latency": ("mows.bench.latency", "last sample of a ring-down to its published fit, in the node graph"),
 }
-QUICK = {"estimator": {"trials": 60}, "simulator": {"repeats": 5}, "stream": {"duration_s": 3.0},
-         "latency": {"cycles": 1, "repeats": 5}}
+QUICK: dict[str, dict[str, float]] = {"estimator": {"trials": 60}, "simulator": {"repeats": 5},
+                                      "stream": {"duration_s": 3.0}, "latency": {"cycles": 1, "repeats": 5}}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,9 +1,9 @@
 """``mows sim``: simulate measurement cycles of a scenario and write the samples to .npz.
 
 For every θ0 and repeat: turn, let the scenario's gap pass, excite, record the ring-down
-(:func:`mows.sim.cycle.simulate_cycle`). With ``--fit`` each ring-down is fitted
-as the estimator node does (:func:`mows.lab.synth.fit_cycle`: the lever-aware pickup) and compared with the truth from the full potential
-(:meth:`mows.sim.cycle.CycleRecord.ringdown_frequency_hz`).
+(:func:`mows.sim.cycle.simulate_cycle`). With ``--fit`` each ring-down is fitted as the
+estimator node does (:func:`mows.lab.synth.fit_cycle`: the lever-aware pickup) and compared with
+the truth from the full potential (:meth:`mows.sim.cycle.CycleRecord.ringdown_frequency_hz`).
 """
 from __future__ import annotations
 
@@ -52,7 +52,8 @@ def run(args) -> int:
                 fit = fit_cycle(record, scenario)
                 print(f"θ0 = {theta0_deg:7.2f}°: {_compare(fit, record)}")
     if args.out:
-        np.savez_compressed(args.out, **_arrays(records), scenario_yaml=yaml.safe_dump(scenario.to_dict(), sort_keys=False))
+        scenario_yaml = yaml.safe_dump(scenario.to_dict(), sort_keys=False)
+        np.savez_compressed(args.out, **_arrays(records), scenario_yaml=scenario_yaml)
         print(f"wrote {len(records)} cycles to {args.out}")
     return 0
 

@@ -9,8 +9,9 @@ carry their message definitions.
 """
 import functools
 import os
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any, Iterable, Iterator, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -18,7 +19,7 @@ from rosbags.typesys.store import Typestore
 
 PACKAGE = "mows_msgs"
 REPOSITORY_PACKAGE = Path(__file__).resolve().parents[3] / PACKAGE
-BAG_VERSION = 9  # rosbag2's metadata version in Jazzy
+BAG_VERSION: Literal[9] = 9  # rosbag2's metadata version in Jazzy
 
 # The parts of a service or action definition, in the order they appear between `---` lines.
 PARTS = {
@@ -51,7 +52,7 @@ def interface_directory() -> Path:
 
 def split_definition(text: str, kind: str) -> list[str]:
     """The message parts of one .msg, .srv or .action text (split at the `---` lines)."""
-    parts = [[]]
+    parts: list[list[str]] = [[]]
     for line in text.splitlines():
         if line.strip() == "---":
             parts.append([])

@@ -16,7 +16,8 @@ from mows.records.samples import SampleBlock
 
 
 class BlockAssembler:
-    """Sample blocks as the device sent them in, blocks of ``block_samples`` numbered by ``sequence`` out (``block_samples`` may change between blocks)."""
+    """Sample blocks as the device sent them in, blocks of ``block_samples`` numbered by
+    ``sequence`` out (``block_samples`` may change between blocks)."""
 
     def __init__(self, block_samples: int):
         self.block_samples = int(block_samples)

@@ -7,7 +7,7 @@ late each wake-up is. Stamps are integer nanoseconds (20 kS/s is exactly 50 000 
 """
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 
 class DeviceClock:

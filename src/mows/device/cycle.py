@@ -3,7 +3,8 @@
 One cycle at one orientation θ0: turn the probe and let it settle; excite at the current
 resonance estimate with the coil setup's orientation-dependent currents; switch off and
 record the free ring-down; the first ``tuning_steps`` ring-downs are fitted
-(by the fit function the sequencer is handed, the estimator's ring-down fit in the driver) and retune the excitation frequency, the next
+(by the fit function the sequencer is handed, the estimator's ring-down fit in the driver)
+and retune the excitation frequency, the next
 ``repeats`` are the measurements, with a pause of ``gap_s`` between ring-down and excitation.
 
 Time is the device's sample index. Every command is scheduled at a sample, and every phase
@@ -20,7 +21,7 @@ lost link) switches them off at once. The emergency stop latches until released.
 from __future__ import annotations
 
 import dataclasses
-from typing import Generator
+from collections.abc import Generator
 
 import numpy as np
 

@@ -24,7 +24,7 @@ import math
 import struct
 import zlib
 from collections import Counter
-from typing import ClassVar
+from typing import ClassVar, Self
 
 import numpy as np
 
@@ -76,10 +76,10 @@ class FixedBody(Body):
     LAYOUT: ClassVar[struct.Struct]
 
     def encode(self) -> bytes:
-        return self.LAYOUT.pack(*dataclasses.astuple(self))
+        return self.LAYOUT.pack(*dataclasses.astuple(self))  # type: ignore[call-overload]  # subclasses are dataclasses
 
     @classmethod
-    def decode(cls, payload: bytes) -> FixedBody:
+    def decode(cls, payload: bytes) -> Self:
         return cls(*_unpack_exact(cls.LAYOUT, payload, cls.__name__))
 
 
@@ -99,7 +99,7 @@ class DeviceInfo(FixedBody):
     watchdog_timeout_s: float   # coils off when no host frame arrived for this long
 
     @classmethod
-    def decode(cls, payload: bytes) -> DeviceInfo:
+    def decode(cls, payload: bytes) -> Self:
         info = super().decode(payload)
         for name in ("sample_rate_hz", "range_t", "resolution_t"):
             value = getattr(info, name)
@@ -192,7 +192,7 @@ class Status(FixedBody):
     rejected_frames: int        # host frames the device's decoder rejected
 
     @classmethod
-    def decode(cls, payload: bytes) -> Status:
+    def decode(cls, payload: bytes) -> Self:
         status = super().decode(payload)
         if status.coils_on not in (0, 1):
             raise PayloadError(f"Status coils_on byte is {status.coils_on}, expected 0 or 1")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
-from typing import Callable
+from collections.abc import Callable
 
 from mows.records.results import Result
 

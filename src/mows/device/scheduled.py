@@ -15,7 +15,7 @@ import bisect
 import collections
 import functools
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

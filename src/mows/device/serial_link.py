@@ -155,7 +155,7 @@ class SerialLink:
     def _read(self) -> None:
         port = self._serial
         try:
-            data = port.read(max(1, port.in_waiting))
+            data = port.read(max(1, port.in_waiting))  # type: ignore[union-attr]  # None: AttributeError below
         except (serial.SerialException, OSError, TypeError, AttributeError) as error:
             # TypeError/AttributeError: pyserial's read on a port closed under it by close().
             self._drop(f"reading {self.port} failed: {error}")

@@ -13,7 +13,7 @@ import collections
 import dataclasses
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from mows.device.blocks import BlockAssembler
 from mows.device.cycle import CycleSequencer

@@ -10,9 +10,9 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from mows.estimate.ringdown import FitStatus, RingdownFit
 from mows.physics.frequency import field_from_shift_t, gradient_from_shift_t_per_m
 from mows.physics.probe import Probe
-from mows.estimate.ringdown import FitStatus, RingdownFit
 
 ASSUMPTIONS = ("published model, Eq. 6 inverted exactly: field assumes G = 0, gradient (Eq. S24) "
                "assumes B = 0; small-amplitude spring; f00 from calibration")

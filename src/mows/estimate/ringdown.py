@@ -111,7 +111,7 @@ class FitOptions:
                              "theta0_free or channels='both'")
 
     @classmethod
-    def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> "FitOptions":
+    def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> FitOptions:
         """Options with the exact pickup of ``probe``'s magnet swinging on its lever, seen by the
         fluxgate ``pair`` (:class:`mows.physics.fluxgate.FluxgatePair`) with the probe at θ0."""
         pickup = pickup_harmonics(pair, Pose(theta0_rad=theta0_rad), probe.lever_m, probe.moment_am2, combine=channels)
@@ -185,7 +185,7 @@ SETTLE_S = 0.003
 def usable_window(saturated: np.ndarray, settle_samples: int = 0):
     """(start, stop) of the longest run of samples after ``settle_samples`` in which no channel
     is saturated; the coil-on tail and any clipped stretch are thereby excluded."""
-    bad = np.asarray(saturated).reshape(len(saturated), -1).any(axis=1)
+    bad = np.asarray(np.asarray(saturated).reshape(len(saturated), -1).any(axis=1))
     bad[:settle_samples] = True
     good = np.concatenate([[False], ~bad, [False]]).astype(np.int8)
     edges = np.flatnonzero(np.diff(good))
@@ -233,14 +233,17 @@ def fit_ringdown(samples, sample_rate_hz, theta0_rad, expected_frequency_hz, sat
     known = {"theta0_rad": float(theta0_rad), "theta0_free": options.theta0_free}
     fs = _as_float(sample_rate_hz)
     if not (math.isfinite(fs) and fs > 0):
-        return failure(FitStatus.BAD_SAMPLE_RATE, f"sample rate {sample_rate_hz!r} Hz is not a positive number", **known)
+        return failure(FitStatus.BAD_SAMPLE_RATE, f"sample rate {sample_rate_hz!r} Hz is not a positive number",
+                       **known)
     expected_frequency_hz = _as_float(expected_frequency_hz)
     if not (math.isfinite(expected_frequency_hz) and expected_frequency_hz > 0):
-        return failure(FitStatus.BAD_SAMPLE_RATE, f"expected frequency {expected_frequency_hz!r} Hz is not positive", **known)
+        return failure(FitStatus.BAD_SAMPLE_RATE,
+                       f"expected frequency {expected_frequency_hz!r} Hz is not positive", **known)
     if expected_frequency_hz * (1 + options.search_fraction) * 2 * 3 > fs / 2:
         return failure(FitStatus.BAD_SAMPLE_RATE,
                        f"sample rate {fs:g} Hz cannot resolve a ring-down near {expected_frequency_hz:g} Hz "
-                       f"and its harmonics (needs > {12 * expected_frequency_hz * (1 + options.search_fraction):.0f} Hz)",
+                       f"and its harmonics (needs > {12 * expected_frequency_hz * (1 + options.search_fraction):.0f}"
+                       " Hz)",
                        **known)
     data = np.asarray(samples, float)
     if data.ndim not in (1, 2) or data.shape[0] == 0:

@@ -34,7 +34,7 @@ class RingdownProblem:
     pickup: np.ndarray       # C_k of g (complex); with θ0 free, the series at θ0 = 0
     theta0_free: bool
 
-    def subsampled(self, step: int) -> "RingdownProblem":
+    def subsampled(self, step: int) -> RingdownProblem:
         return dataclasses.replace(self, y=np.ascontiguousarray(self.y[:, ::step]), dt=self.dt * step)
 
 

@@ -19,9 +19,9 @@ import math
 
 import numpy as np
 
+from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure, fit_ringdown
 from mows.records import stamps
 from mows.records.samples import SampleBlock
-from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure, fit_ringdown
 
 
 @dataclasses.dataclass(frozen=True)
@@ -38,7 +38,8 @@ class RingdownWindow:
     tuning: bool = False        # a frequency-tuning ring-down, not a measurement
 
     def __post_init__(self):
-        if not (isinstance(self.start_ns, (int, np.integer)) and math.isfinite(self.duration_s) and self.duration_s > 0):
+        if not (isinstance(self.start_ns, (int, np.integer))
+                and math.isfinite(self.duration_s) and self.duration_s > 0):
             raise ValueError(f"ring-down of cycle {self.cycle_id} announced at {self.start_ns!r} ns for "
                              f"{self.duration_s!r} s: not a window")
 
@@ -84,7 +85,8 @@ class SegmentAssembler:
     """Buffers about ``buffer_s`` of blocks and assembles announced ring-down windows.
 
     Counters (for diagnostics): ``blocks``, ``missing_samples`` (sequence gaps in the stream),
-    ``rate_changes`` (a new sample rate or number of channels restarts the buffer), ``late_windows`` (announced after their samples left the buffer).
+    ``rate_changes`` (a new sample rate or number of channels restarts the buffer), ``late_windows``
+    (announced after their samples left the buffer).
     """
 
     def __init__(self, buffer_s: float = 5.0):

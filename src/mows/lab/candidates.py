@@ -11,6 +11,7 @@ and keeps the free fit's parameters as a check.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -163,7 +164,7 @@ def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
         if reason:
             untestable[effect.name] = reason
             continue
-        candidates.append(_candidate(fit, effect, test, lambda added: worth_refit(effect, test, added)))
+        candidates.append(_candidate(fit, effect, test, functools.partial(worth_refit, effect, test)))
     candidates.sort(key=lambda c: -c.delta_bic)
     return candidates, untestable
 

@@ -17,7 +17,7 @@ The built-in effects are in :mod:`mows.lab.catalog`, user plugins are read by
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from collections.abc import Callable
 
 from mows.lab.physics import Configuration
 from mows.lab.table import MissingColumnError
@@ -73,7 +73,7 @@ class Effect:
     check: str = ""
     origin: str = "catalog"
     physical: tuple | None = None
-    free: "Effect | None" = None   # of an effect held at physics: the same effect with its parameters free
+    free: Effect | None = None   # of an effect held at physics: the same effect with its parameters free
 
     @property
     def parameter_names(self) -> tuple:
@@ -89,7 +89,7 @@ class Effect:
         """The name, with the form when the effect is held at physics."""
         return f"{self.name}{AT_PHYSICS}" if self.fixed else self.name
 
-    def at_physics(self) -> "Effect":
+    def at_physics(self) -> Effect:
         """This effect held at its ``physical`` values: same name, no free parameter."""
         if self.fixed:
             return self

@@ -125,7 +125,8 @@ def _separate(members, fit, probe, number) -> Group:
         if len(parts) == len(names):
             break
     together = [part for part in best_parts if len(part) > 1]
-    checks = [f"{name}: {next(c for c in members if c.name == name).effect.check}" for part in together for name in part]
+    checks = [f"{name}: {next(c for c in members if c.name == name).effect.check}"
+              for part in together for name in part]
     if best_variant is None:
         text = ("no variation of angles, amplitude, field or temperature separates them: they act identically "
                 "on the lever; check directly")

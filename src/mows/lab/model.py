@@ -56,7 +56,7 @@ class FrequencyModel:
         self.effects = tuple(effects)
 
     @classmethod
-    def combine(cls, left, right) -> "FrequencyModel":
+    def combine(cls, left, right) -> FrequencyModel:
         parts = [left, right]
         probe = next((p.probe for p in parts if isinstance(p, FrequencyModel) and p.probe is not None), None)
         found = []
@@ -89,7 +89,7 @@ class FrequencyModel:
         """The effects' names with their form (``… (at physics)`` when held at physics)."""
         return [e.label for e in self.effects]
 
-    def without(self, effect) -> "FrequencyModel":
+    def without(self, effect) -> FrequencyModel:
         return FrequencyModel(self.probe, [e for e in self.effects if e is not effect])
 
     @property
@@ -128,7 +128,7 @@ class FrequencyModel:
         return x[0] * h + c
 
     # --- fit ------------------------------------------------------------------------------
-    def fit(self, table, start=None) -> "FitResult":
+    def fit(self, table, start=None) -> FitResult:
         """Weighted least-squares fit to ``table``; ``start`` = effect parameter values (default 0)."""
         self._require_probe()
         for effect in self.effects:
@@ -209,7 +209,7 @@ class _Problem:
             columns.append((self.residual(np.concatenate([[x[0]], p])) - base) / step)
         return np.stack(columns, -1) if columns else np.zeros((len(base), 0))
 
-    def result(self, x, success, message) -> "FitResult":
+    def result(self, x, success, message) -> FitResult:
         h, c = self.factors(x[1:])
         prediction = x[0] * h + c
         residual = self.residual(x)

@@ -77,7 +77,7 @@ class Configuration:
     damping: float = 0.0
 
     @classmethod
-    def base(cls, table, probe) -> "Configuration":
+    def base(cls, table, probe) -> Configuration:
         """Eq. 6 with the table's reference field and gradient."""
         n = len(table)
         amplitude = table.amplitude_rad if table.amplitude_rad is not None else np.full(n, probe.theta_stop_rad)

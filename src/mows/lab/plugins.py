@@ -19,7 +19,7 @@ import importlib.metadata
 import importlib.util
 import inspect
 import pathlib
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

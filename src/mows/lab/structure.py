@@ -75,7 +75,8 @@ def residual_structure(fit) -> Structure:
     theta = fit.table.theta0_rad
     harmonics = []
     for k in HARMONICS:
-        columns = np.column_stack([np.cos(k * theta), np.sin(k * theta)] if k else [np.ones_like(theta)]) * weight[:, None]
+        columns = np.column_stack([np.cos(k * theta), np.sin(k * theta)] if k else [np.ones_like(theta)])
+        columns = columns * weight[:, None]
         harmonics.append(_harmonic(k, signature(columns, model_basis, residual), residual))
     trends = []
     for name, values in fit.table.covariates().items():

@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from mows.physics import ringdown_average
-from mows.physics.field import FieldSource
+from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
 from mows.lab.reference import reference_columns
 from mows.lab.table import FIELD, GRADIENT, MeasurementTable
+from mows.physics import ringdown_average
+from mows.physics.field import FieldSource
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
-from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
 from mows.sim.cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.record import SweepPoint, SweepRecord

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -152,15 +152,15 @@ class MeasurementTable:
         return {name: values for name, values in found.items() if np.ptp(values) > 0}
 
     # --- derived tables ---------------------------------------------------------------------
-    def subset(self, rows) -> "MeasurementTable":
+    def subset(self, rows) -> MeasurementTable:
         """The table restricted to ``rows`` (a boolean mask or indices)."""
         return dataclasses.replace(self, columns={k: v[rows] for k, v in self.columns.items()})
 
-    def with_columns(self, **columns) -> "MeasurementTable":
+    def with_columns(self, **columns) -> MeasurementTable:
         """A copy with columns replaced or added (arrays of length n)."""
         return dataclasses.replace(self, columns={**self.columns, **columns})
 
-    def concatenate(self, other: "MeasurementTable") -> "MeasurementTable":
+    def concatenate(self, other: MeasurementTable) -> MeasurementTable:
         """Rows of both tables; they must have the same columns."""
         if set(self.columns) != set(other.columns):
             raise TableError(f"cannot join tables with columns {sorted(self.columns)} and {sorted(other.columns)}")

@@ -35,12 +35,19 @@ Coil sources are fields per ampere; degrees appear only in the YAML key ``curren
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from mows.physics.field import (FieldSource, anti_helmholtz_pair, helmholtz_pair, solenoid, source_from_dict,
-                                source_to_dict)
+from mows.physics.field import (
+    FieldSource,
+    anti_helmholtz_pair,
+    helmholtz_pair,
+    solenoid,
+    source_from_dict,
+    source_to_dict,
+)
 from mows.physics.schema import as_points_m, check_keys, vector3
 
 LSIP330_RADIUS_M = 0.025
@@ -110,8 +117,8 @@ class CoilSetup:
     """
 
     name: str
-    coils: tuple
-    phases_rad: tuple
+    coils: Sequence[FieldSource]  # stored as tuples
+    phases_rad: Sequence[float]
     inductance_h: float = LSIP330_INDUCTANCE_H
     cap: CurrentCap = field(default_factory=CurrentCap)
 

@@ -19,10 +19,20 @@ Helmholtz pairs and solenoids are sums of loops, and :func:`source_to_dict` writ
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from mows.physics.loops import CurrentLoop, anti_helmholtz_pair, helmholtz_pair, solenoid
 from mows.physics.schema import check_keys, plain
-from mows.physics.sources import (MU0, MU0_OVER_4PI, FieldSource, LinearGradient, PointDipole, SumSource, UniformField,
-                                  dipole_field_t)
+from mows.physics.sources import (
+    MU0,
+    MU0_OVER_4PI,
+    FieldSource,
+    LinearGradient,
+    PointDipole,
+    SumSource,
+    UniformField,
+    dipole_field_t,
+)
 
 __all__ = ["MU0", "MU0_OVER_4PI", "CurrentLoop", "FieldSource", "LinearGradient", "PointDipole", "SumSource",
            "UniformField", "anti_helmholtz_pair", "dipole_field_t", "helmholtz_pair", "solenoid", "source_from_dict",
@@ -35,7 +45,7 @@ def _sum_of(sources) -> SumSource:
     return SumSource(source_from_dict(s) for s in sources)
 
 
-_BUILDERS = {
+_BUILDERS: dict[str, Callable[..., FieldSource]] = {
     "uniform": UniformField,
     "linear_gradient": LinearGradient,
     "dipole": PointDipole,

@@ -54,7 +54,7 @@ class Pose:
         c, s = math.cos(self.theta0_rad), math.sin(self.theta0_rad)
         return c * e1 + s * e2, -s * e1 + c * e2, np.cross(e1, e2)
 
-    def with_theta0(self, theta0_rad: float) -> "Pose":
+    def with_theta0(self, theta0_rad: float) -> Pose:
         return dataclasses.replace(self, theta0_rad=float(theta0_rad))
 
     def pivot_m(self, lever_m: float) -> np.ndarray:
@@ -71,7 +71,7 @@ class Pose:
         return self.pivot_m(lever_m) + lever_m * self.moment_direction_at(theta_rad)
 
     @classmethod
-    def tilted(cls, tilt_rad: float, tilt_axis_rad: float = 0.0, **kwargs) -> "Pose":
+    def tilted(cls, tilt_rad: float, tilt_axis_rad: float = 0.0, **kwargs) -> Pose:
         """A horizontal x–y rotation plane tilted by ``tilt_rad`` about the in-plane axis at
         angle ``tilt_axis_rad`` from x: expressed, in the plane's own frame, as gravity acquiring
         an in-plane component g·sin(tilt) perpendicular to the tilt axis."""

@@ -164,7 +164,7 @@ class ArcPotential:
     # --- builders ---------------------------------------------------------------------------
     @classmethod
     def from_source(cls, probe, source, pose, temperature_k=None, nodes: int = DEFAULT_NODES,
-                    half_width_rad: float = DEFAULT_HALF_WIDTH_RAD) -> "ArcPotential":
+                    half_width_rad: float = DEFAULT_HALF_WIDTH_RAD) -> ArcPotential:
         """The potential of ``probe`` placed at ``pose`` in the field of ``source``."""
         theta = chebyshev_nodes_rad(half_width_rad, nodes)
         energy = arc_energy_j(probe, source, pose, theta)
@@ -175,7 +175,7 @@ class ArcPotential:
     def from_local_field(cls, probe, field_t, gradient_t_per_m=None, hessian_t_per_m2=None,
                          gravity_m_per_s2=None, spring_nm_per_rad=None, lever_m=None,
                          damping_per_s=None, nodes: int = 24,
-                         half_width_rad: float = DEFAULT_HALF_WIDTH_RAD) -> "ArcPotential":
+                         half_width_rad: float = DEFAULT_HALF_WIDTH_RAD) -> ArcPotential:
         """Batch potential from the field's Taylor expansion at the magnet's rest position.
 
         All vectors and tensors are in the **probe frame** (x', y', z'), batch-shaped:

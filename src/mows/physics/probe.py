@@ -105,12 +105,12 @@ class Probe:
         return self.spring_nm_per_rad * (
             1.0 + self.spring_temp_coeff_per_k * (temperature_k - self.reference_temperature_k))
 
-    def replace(self, **changes) -> "Probe":
+    def replace(self, **changes) -> Probe:
         return dataclasses.replace(self, **changes)
 
     @classmethod
     def from_calibration(cls, moment_am2: float, f00_hz: float, beta0_hz_per_t: float,
-                         magnet_mass_kg: float, **others) -> "Probe":
+                         magnet_mass_kg: float, **others) -> Probe:
         """Probe from the paper's calibration: β0 gives kM (Eq. 9) and J (Eq. 10), J and a give l.
 
         J is taken from the damped relation J = kM / ((2π·f00)² + δ²), so that the
@@ -126,7 +126,7 @@ class Probe:
 
     # --- YAML -----------------------------------------------------------------------------
     @classmethod
-    def from_dict(cls, data: dict) -> "Probe":
+    def from_dict(cls, data: dict) -> Probe:
         """Probe from the probe-file keys (see ``to_dict``).
 
         ``f00_hz`` may replace one of ``spring_nm_per_rad`` or ``inertia_kgm2``; when all three
@@ -167,7 +167,7 @@ class Probe:
         return data
 
     @classmethod
-    def from_yaml(cls, path) -> "Probe":
+    def from_yaml(cls, path) -> Probe:
         text = pathlib.Path(path).read_text()
         data = yaml.safe_load(text)
         if not isinstance(data, dict):

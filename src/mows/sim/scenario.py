@@ -20,6 +20,7 @@ import functools
 import inspect
 import math
 import pathlib
+from typing import Any
 
 import numpy as np
 import yaml
@@ -173,12 +174,12 @@ class Scenario:
             raise ValueError(f"scenario: seed = {self.seed!r} must be an integer ≥ 0")
         self.setup.cap.check(self.excitation.amplitude_a)
 
-    def replace(self, **changes) -> "Scenario":
+    def replace(self, **changes) -> Scenario:
         return dataclasses.replace(self, **changes)
 
     # --- YAML ---------------------------------------------------------------------------
     @classmethod
-    def from_dict(cls, data: dict, base_dir=None) -> "Scenario":
+    def from_dict(cls, data: dict, base_dir=None) -> Scenario:
         """Scenario from its YAML mapping; probe file paths and an ``extends:`` file path are
         relative to ``base_dir`` (in a base file: to that file's folder)."""
         data = _with_bases(data, base_dir)
@@ -203,7 +204,7 @@ class Scenario:
         }
 
     @classmethod
-    def from_yaml(cls, path) -> "Scenario":
+    def from_yaml(cls, path) -> Scenario:
         path = pathlib.Path(path)
         data = yaml.safe_load(path.read_text())
         return cls.from_dict(data, base_dir=path.parent)
@@ -339,9 +340,9 @@ def _environment(sources=(), temperature_k=Environment.temperature_k,
 
 def _pose(magnet_position_m=(0.0, 0.0, 0.0), theta0_deg=0.0, plane_e1=(1.0, 0.0, 0.0), plane_e2=(0.0, 1.0, 0.0),
           gravity_m_per_s2=None, tilt_deg=None, tilt_axis_deg=0.0) -> Pose:
-    place = {"magnet_position_m": tuple(_floats(vector3("pose: magnet_position_m", magnet_position_m))),
+    place: dict[str, Any] = {"magnet_position_m": tuple(_floats(vector3("pose: magnet_position_m", magnet_position_m))),
              "theta0_rad": math.radians(_number("pose", "theta0_deg", theta0_deg))}
-    plane = {"plane_e1": tuple(_floats(vector3("pose: plane_e1", plane_e1))),
+    plane: dict[str, Any] = {"plane_e1": tuple(_floats(vector3("pose: plane_e1", plane_e1))),
              "plane_e2": tuple(_floats(vector3("pose: plane_e2", plane_e2)))}
     if tilt_deg is None:
         gravity = (0.0, 0.0, -STANDARD_GRAVITY_M_PER_S2) if gravity_m_per_s2 is None else gravity_m_per_s2
@@ -374,7 +375,7 @@ def _sensors(pose: Pose, positions_m=None, axis=(0.0, 1.0, 0.0), range_t=FL1_RAN
         raise ValueError(f"scenario section 'sensors': null_offsets must be true or false, got {null_offsets!r}")
     sensors = [Fluxgate(p, axis, _number("sensors", "range_t", range_t),
                         _number("sensors", "resolution_t", resolution_t)) for p in positions]
-    return Sensors(FluxgatePair(sensors), null_offsets)
+    return Sensors(FluxgatePair(tuple(sensors)), null_offsets)
 
 
 def _sensors_to_dict(sensors: Sensors) -> dict:

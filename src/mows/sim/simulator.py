@@ -26,8 +26,20 @@ import numpy as np
 from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, ArcPotential
 from mows.records.samples import SampleBlock
 from mows.records.stamps import NS_PER_S
-from mows.sim.kernel import (P_C_STOP, P_INV_INERTIA, P_INV_WIDTH, P_K_STOP, P_SPRING0, P_SPRING_RATE, P_STOP,
-                             P_TWO_DELTA, TWO_PI, acceleration, advance, contact_mode)
+from mows.sim.kernel import (
+    P_C_STOP,
+    P_INV_INERTIA,
+    P_INV_WIDTH,
+    P_K_STOP,
+    P_SPRING0,
+    P_SPRING_RATE,
+    P_STOP,
+    P_TWO_DELTA,
+    TWO_PI,
+    acceleration,
+    advance,
+    contact_mode,
+)
 from mows.sim.noise import NoiseStream
 
 # The Chebyshev interval covers the stop with room for the contact's penetration.
@@ -55,7 +67,7 @@ class SimulatedBlock:
         return len(self.samples)
 
     @staticmethod
-    def concatenate(blocks) -> "SimulatedBlock":
+    def concatenate(blocks) -> SimulatedBlock:
         """One block of consecutive ``blocks``."""
         blocks = list(blocks)
         truth = {f.name: np.concatenate([getattr(b, f.name) for b in blocks])

@@ -222,7 +222,8 @@ def _distinct_angles(theta0) -> int:
 
 def _check(theta0, shift, std, f00_free) -> tuple[DecompositionStatus, str]:
     if not (theta0.shape == shift.shape == std.shape and theta0.ndim == 1):
-        return DecompositionStatus.INVALID_INPUT, f"theta0, shift and std must be equal-length 1-D arrays, got {theta0.shape}, {shift.shape}, {std.shape}"
+        return DecompositionStatus.INVALID_INPUT, ("theta0, shift and std must be equal-length 1-D arrays, got "
+                                                   f"{theta0.shape}, {shift.shape}, {std.shape}")
     if not (np.all(np.isfinite(theta0)) and np.all(np.isfinite(shift)) and np.all(np.isfinite(std))):
         return DecompositionStatus.INVALID_INPUT, "non-finite angle, shift or uncertainty in the sweep"
     if np.any(std <= 0):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +28,7 @@ class SweepPoint:
     amplitude_std_rad: float = math.nan
 
     @classmethod
-    def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0) -> "SweepPoint":
+    def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0) -> SweepPoint:
         """A successful ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`, or a RingdownFit
         message: the fields are the same) with its frequency shift; σ of θmax from the fit's
         covariance (NaN when θmax was held at a bound)."""
@@ -90,8 +91,9 @@ class SweepRecord:
         angles give the pooled stop amplitude, and a second pass fits with both.
         """
         theta0 = self._column("theta0_rad")
-        arrays = dict(theta0_rad=theta0, shift_hz=self._column("shift_hz"), shift_std_hz=self._column("shift_std_hz"),
-                      probe=probe, f00_hz=f00_hz, model=model, f00_free=f00_free)
+        arrays: dict[str, Any] = dict(theta0_rad=theta0, shift_hz=self._column("shift_hz"),
+                                      shift_std_hz=self._column("shift_std_hz"), probe=probe, f00_hz=f00_hz,
+                                      model=model, f00_free=f00_free)
         if model != "first_principles":
             return decompose(**arrays)
 

@@ -12,7 +12,7 @@ with f00 taken as the mean of the estimator's own (frequency − shift).
 import dataclasses
 import functools
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -117,7 +117,7 @@ class SweepStep:
 class SweepRunner:
     """Runs one sweep at a time of ``probe``; ``state`` is idle, sweeping or decomposing."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.state = "idle"
         self.sweeps = 0                 # sweeps that came as far as the decomposition
         self.last = "no sweep yet"      # the last decomposition's report
@@ -208,8 +208,9 @@ class SweepRunner:
         return self._orientation_done()
 
     def _orientation_done(self) -> SweepStep:
-        fits = self._fits.pop(self._awaited.cycle_id, [])
-        self._awaited = None
+        answer, self._awaited = self._awaited, None
+        assert answer is not None  # only called once the awaited cycle has answered
+        fits = self._fits.pop(answer.cycle_id, [])
         theta0 = self._angles[self._index]
         for fit in fits:
             if fit.point is None:

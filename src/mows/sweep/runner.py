@@ -239,6 +239,7 @@ class SweepRunner:
             return self._end(step, SweepOutcome(
                 False, f"no successful ring-down in the sweep ({self._record.failed} failed)"))
         self.state = "decomposing"
+        assert self._probe is not None  # set by start()
         step.decompose = functools.partial(self._record.decompose, self._probe, self._f00_hz(), model=self._model,
                                            f00_free=self._settings.f00_free)
         return step

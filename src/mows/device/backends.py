@@ -18,7 +18,6 @@ from mows.device.framing import (
     Ack,
     Coils,
     DeviceInfo,
-    Frame,
     Orientation,
     Samples,
     Status,
@@ -76,12 +75,16 @@ class SimBackend(Backend):
     def __init__(self, device: SimulatedDevice, cap: CurrentCap, paced: bool = True,
                  clock: DeviceClock | None = None, chunk_s: float = SIM_CHUNK_S):
         self.device = ScheduledDevice(device, cap)
-        self.info = simulated_device_info(self.device)
+        self._info = simulated_device_info(self.device)
         self.clock = clock or DeviceClock(device.sample_rate_hz)
         self.paced = paced
         self._chunk = max(1, round(chunk_s * device.sample_rate_hz))
         self._results: list[CommandResult] = []
         self._lock = threading.Lock()  # the device is shared with the threads that send commands
+
+    @property
+    def info(self) -> DeviceInfo:
+        return self._info
 
     def poll(self, timeout_s: float) -> list:
         if self.paced:
@@ -90,7 +93,8 @@ class SimBackend(Backend):
         else:
             due = self.device.next_index + self._chunk
         with self._lock:
-            items, self._results = self._results, []
+            items: list[CommandResult | SampleBlock] = list(self._results)
+            self._results = []
             if due - self.device.next_index >= self._chunk:
                 items += [stamped(block, self.clock) for block in self.device.read_until(due)]
         return items
@@ -150,7 +154,7 @@ class SerialBackend(Backend):
         return round(self.command_lead_s * self.info.sample_rate_hz) if self.info else 0
 
     def poll(self, timeout_s: float) -> list:
-        items = []
+        items: list[LinkEvent | SampleBlock | CommandResult | DeviceFault] = []
         for item in self.link.poll(timeout_s):
             if isinstance(item, LinkEvent):
                 with self._lock:
@@ -158,7 +162,7 @@ class SerialBackend(Backend):
                 self._up = item.up
                 items.append(item)
             elif isinstance(item.body, Samples):
-                items += self._chunk(item)
+                items += self._chunk(item.body, item.timestamp_ns)
             elif isinstance(item.body, Ack):
                 items += self._result(item.body)
             elif isinstance(item.body, Status):
@@ -173,13 +177,14 @@ class SerialBackend(Backend):
             return []
         return [DeviceFault(f"the device's watchdog switched the coils off (trip {status.watchdog_trips})")]
 
-    def _chunk(self, frame: Frame) -> list[SampleBlock]:
+    def _chunk(self, body: Samples, timestamp_ns: int) -> list[SampleBlock]:
         if not self._up:
             self.samples_before_info += 1
             return []
-        body = frame.body
-        return [SampleBlock(body.first_sample_index, frame.timestamp_ns, self.info.sample_rate_hz,
-                            body.counts * self.info.resolution_t, body.saturated)]
+        info = self.info
+        assert info is not None  # the link came up when the device described itself (SerialLink)
+        return [SampleBlock(body.first_sample_index, timestamp_ns, info.sample_rate_hz,
+                            body.counts * info.resolution_t, body.saturated)]
 
     def _result(self, ack: Ack) -> list[CommandResult]:
         with self._lock:
@@ -192,6 +197,7 @@ class SerialBackend(Backend):
     def send(self, command: Command) -> None:
         if self.info is None:
             raise NotExciting("the device has not described itself yet")
+        body: Coils | Orientation
         if isinstance(command, CoilCommand):
             check_coil_command(command, self.info, self.cap.limit_a)
             body = Coils(0, command.at_sample_index, command.frequency_hz, tuple(command.amplitudes_a))
@@ -243,18 +249,22 @@ class BagBackend(Backend):
         self.skipped: dict[str, int] = {}  # messages that made no sense, by why
         self._monotonic = monotonic
         self._messages = (m for m in bags.read_bag(path) if m.msgtype in (RAW_TYPE, EXCITATION_TYPE))
-        self._ahead = collections.deque()
+        self._ahead: collections.deque[bags.BagMessage] = collections.deque()
         first_raw = self._first_raw()
         block = first_raw.message
         if not (math.isfinite(block.sample_rate_hz) and block.sample_rate_hz > 0 and block.channels):
             raise ValueError(f"the bag {self.path} starts with a block of sample rate {block.sample_rate_hz!r} Hz "
                              f"and {len(block.channels)} channels: nothing to replay")
-        self.info = DeviceInfo(block.sample_rate_hz, len(block.channels), 0, block.range_t, block.resolution_t,
-                               0.0, math.inf)
+        self._info = DeviceInfo(block.sample_rate_hz, len(block.channels), 0, block.range_t, block.resolution_t,
+                                0.0, math.inf)
         # maps device stamps to sample indices
         self._anchor = (block.first_sample_index, stamps.nanoseconds(block.header.stamp))
         self._start: tuple[int, float] | None = None  # (first device stamp, host time): set by the first poll
         self._finished = False
+
+    @property
+    def info(self) -> DeviceInfo:
+        return self._info
 
     def _first_raw(self) -> bags.BagMessage:
         for message in self._messages:
@@ -267,7 +277,7 @@ class BagBackend(Backend):
         deadline = self._monotonic() + timeout_s
         if self._start is None:  # the replay's clock starts with the first poll
             self._start = (stamps.nanoseconds(self._ahead[0].message.header.stamp), self._monotonic())
-        items = []
+        items: list[SampleBlock | PhaseEvent | LinkEvent] = []
         while (message := self._peek()) is not None:
             elapsed_ns = stamps.nanoseconds(message.message.header.stamp) - self._start[0]
             due = self._start[1] + elapsed_ns / 1e9 / self.rate

@@ -42,10 +42,10 @@ from mows.device.phases import (
     PhaseEvent,
     Step,
     TuningFit,
+    TuningResult,
     check_setting,
 )
 from mows.physics.coils import CoilSetup, CurrentCap
-from mows.records.results import Result
 from mows.records.samples import SampleBlock
 
 
@@ -106,6 +106,11 @@ class _Cycle:
     settings: CycleSettings
 
 
+# A running cycle is a generator: it yields what it waits for and is sent, on resuming, the
+# command result it waited for (None after a _Reach).
+_Run = Generator[_Reach | _Answer, CommandResult | None, CycleOutcome]
+
+
 class CycleSequencer:
     """Runs one cycle at a time on a device of ``sample_rate_hz`` with the coils of ``setup``.
 
@@ -129,7 +134,7 @@ class CycleSequencer:
         self._anchor: tuple[int, int] | None = None  # (sample index, stamp ns) of a received sample
         self._next_index = 0
         self._cycle: _Cycle | None = None
-        self._runner: Generator | None = None
+        self._runner: _Run | None = None
         self._wait: _Reach | _Answer | None = None
         self._results: dict[int, CommandResult] = {}
         self._recordings: list[_Recording] = []
@@ -211,6 +216,7 @@ class CycleSequencer:
         if self.latched is not None:
             raise ValueError(f"emergency stop latched ({self.latched}); release it before a cycle")
         if self.busy:
+            assert self._cycle is not None  # set and cleared together with _runner (start, _end)
             raise ValueError(f"cycle {self._cycle.cycle_id} is still running")
         if self._anchor is None:
             raise ValueError("no samples from the device yet")
@@ -228,7 +234,7 @@ class CycleSequencer:
         self._last_cycle_id = cycle.cycle_id
         return cycle
 
-    def _run(self, c: _Cycle) -> Generator:
+    def _run(self, c: _Cycle) -> _Run:
         s = c.settings
         excite, ringdown = self._samples(s.excite_s), self._samples(s.ringdown_s)
         turned = yield from self._answer(self._issue(OrientationCommand, self._next_index + self.lead_samples,
@@ -236,7 +242,8 @@ class CycleSequencer:
         settle = self._samples(s.settle_s)
         yield from self._enter(c, Phase.SETTLING, turned, settle)
         coils_free = turned + settle  # from here on the coils are off and nothing is scheduled
-        fits, recorded = [], 0
+        fits: list[TuningResult] = []
+        recorded = 0
         for k in range(c.tuning_steps + c.repeats):
             tuning = k < c.tuning_steps
             index = k if tuning else k - c.tuning_steps
@@ -270,7 +277,7 @@ class CycleSequencer:
             message += f"; {len(failed)} of {len(fits)} tuning fits failed ({failed[-1].report()})"
         return CycleOutcome(True, message, c.cycle_id, self.frequency_hz, recorded, tuple(fits))
 
-    def _tune(self, c: _Cycle, recording: _Recording) -> Result:
+    def _tune(self, c: _Cycle, recording: _Recording) -> TuningResult:
         """Fit a tuning ring-down; a good fit becomes the excitation frequency."""
         if not recording.complete:
             return LostTuning()
@@ -292,15 +299,16 @@ class CycleSequencer:
         self._step.commands.append(command)
         return command
 
-    def _answer(self, command: Command) -> Generator:
+    def _answer(self, command: Command) -> Generator[_Answer, CommandResult | None, int]:
         deadline = max(command.at_sample_index, self._next_index) + self._samples(self.settings.confirm_timeout_s)
         result = yield _Answer(command, deadline)
+        assert result is not None  # _resume resumes an _Answer only with its command's result
         if not result.accepted:
             raise CycleAborted(f"the device refused {type(command).__name__} {command.command_id}: {result.reason}")
         return result.applied_sample_index
 
     def _enter(self, c: _Cycle, phase: Phase, index: int, duration_samples: int, repeat_index: int = 0,
-               tuning: bool = False, currents: tuple = ()) -> Generator:
+               tuning: bool = False, currents: tuple = ()) -> Generator[_Reach, CommandResult | None, None]:
         yield _Reach(index + 1)
         self._emit(phase, index, cycle=c, duration_samples=duration_samples, repeat_index=repeat_index,
                    tuning=tuning, currents=currents)
@@ -308,10 +316,11 @@ class CycleSequencer:
     def _resume(self) -> None:
         while self._runner is not None:
             wait = self._wait
+            assert wait is not None  # a running cycle always waits: _advance keeps what it yields
             if isinstance(wait, _Reach):
                 if self._next_index < wait.index:
                     return
-                value = None
+                value: CommandResult | None = None
             else:
                 value = self._results.pop(wait.command.command_id, None)
                 if value is None:
@@ -321,7 +330,8 @@ class CycleSequencer:
                     return
             self._advance(value)
 
-    def _advance(self, value) -> None:
+    def _advance(self, value: CommandResult | None) -> None:
+        assert self._runner is not None  # called by start and _resume, with a cycle running
         try:
             self._wait = self._runner.send(value)
         except StopIteration as finished:
@@ -340,6 +350,7 @@ class CycleSequencer:
         self._step.coils_off_now = True
         if self._runner is not None:
             cycle = self._cycle
+            assert cycle is not None  # set and cleared together with _runner (start, _end)
             self._runner.close()
             self._end(CycleOutcome(False, reason, cycle.cycle_id, self.frequency_hz, 0))
         self._announce(Phase.FAULT, reason)
@@ -355,6 +366,9 @@ class CycleSequencer:
     def _emit(self, phase: Phase, index: int, cycle: _Cycle | None = None, duration_samples: int = 0,
               repeat_index: int = 0, tuning: bool = False, currents: tuple = (), reason: str = "") -> None:
         self.phase = phase
+        # Events are stamped once samples have come (_announce holds them back until then);
+        # a cycle's own events come later still, as _plan starts none before the first sample.
+        assert self._anchor is not None
         anchor_index, anchor_ns = self._anchor
         n_coils = len(self.setup.phases_rad)
         self._step.events.append(PhaseEvent(

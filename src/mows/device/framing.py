@@ -307,7 +307,7 @@ class FrameDecoder:
     again, so a corrupted length never swallows the good frames that follow.
     """
 
-    def __init__(self):
+    def __init__(self) -> None:
         self._buffer = bytearray()
         self.rejected: Counter = Counter()  # by REJECT_* reason
         self.discarded_bytes = 0            # bytes that were not part of a returned frame

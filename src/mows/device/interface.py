@@ -80,9 +80,16 @@ class Backend(abc.ABC):
     """
 
     name: str
-    info: DeviceInfo | None
     can_excite: bool
-    command_lead_samples: int = 0
+
+    # Read-only for the driver: a serial device's info and lead follow its link.
+    @property
+    @abc.abstractmethod
+    def info(self) -> DeviceInfo | None: ...
+
+    @property
+    def command_lead_samples(self) -> int:
+        return 0
 
     @abc.abstractmethod
     def poll(self, timeout_s: float) -> list:

@@ -10,6 +10,7 @@ import dataclasses
 import enum
 import math
 from collections.abc import Callable
+from typing import Protocol
 
 from mows.records.results import Result
 
@@ -79,10 +80,17 @@ def check_setting(name: str, value, ok: bool, allowed: str) -> None:
         raise ValueError(f"{name} = {value!r} must be {allowed}")
 
 
+class TuningResult(Result, Protocol):
+    """A tuning fit's result: ``frequency_hz`` is the fitted resonance (used only if ``ok``)."""
+
+    @property
+    def frequency_hz(self) -> float: ...
+
+
 # (ring-down samples (n, channels) T, sample rate Hz, θ0 rad, expected frequency Hz,
 #  saturated=(n, channels) flags) → a result with ``frequency_hz``: the estimator's
 # fit_ringdown, handed in by whoever builds the sequencer (the device layer does not fit).
-TuningFit = Callable[..., Result]
+TuningFit = Callable[..., TuningResult]
 
 
 class TuningStatus(enum.Enum):

@@ -94,11 +94,14 @@ class DeviceSession:
     def _take(self, item, output: Output) -> None:
         if isinstance(item, SampleBlock):
             self._count_arrival(len(item))
+            # Samples come from a known device: its link-up (which builds the assembler) precedes them.
+            assert self.assembler is not None
             output.blocks += self.assembler.add(item)
             if self.sequencer is not None:
                 self._act(self.sequencer.on_samples(item))
         elif isinstance(item, CommandResult):
             self.refused_commands += not item.accepted
+            assert self.sequencer is not None  # results answer commands, and only the sequencer issues them
             self._act(self.sequencer.on_result(item))
         elif isinstance(item, LinkEvent):
             self._link(item)
@@ -123,6 +126,7 @@ class DeviceSession:
 
     def _device_known(self) -> None:
         info = self.backend.info
+        assert info is not None  # called once the device has described itself (at start or on link up)
         self.assembler = BlockAssembler(round(self.config.block_duration_s * info.sample_rate_hz))
         if self.backend.can_excite:
             c = self.config
@@ -148,6 +152,7 @@ class DeviceSession:
             except (ValueError, RuntimeError) as refused:
                 # Refused before it left (the cap, a link that is down): the cycle learns why,
                 # fails, and the rest of its commands are not sent.
+                assert self.sequencer is not None  # the commands came from the sequencer
                 self._act(self.sequencer.on_result(CommandResult(command.command_id, False, reason=str(refused))))
                 break
         self._events += step.events
@@ -185,7 +190,9 @@ class DeviceSession:
         with self._lock:
             self.config = dataclasses.replace(self.config, block_duration_s=block_duration_s)
             if self.assembler is not None:
-                self.assembler.block_samples = round(block_duration_s * self.backend.info.sample_rate_hz)
+                info = self.backend.info
+                assert info is not None  # the assembler is built once the device is known, which it stays
+                self.assembler.block_samples = round(block_duration_s * info.sample_rate_hz)
 
     def set_cycle_settings(self, settings: CycleSettings) -> None:
         """Settings for the next cycle (a running one keeps its own)."""

@@ -70,6 +70,13 @@ def test_broken_plugins_say_what_is_wrong(tmp_path, text, words):
         assert word in str(error.value)
 
 
+def test_an_existing_file_that_is_not_python_is_a_clear_error(tmp_path):
+    path = tmp_path / "effects.txt"   # exists, so taken as a plugin file, but Python cannot import it
+    path.write_text("x = 1\n")
+    with pytest.raises(ValueError, match="not a Python file"):
+        load_plugins([str(path)])
+
+
 def test_unknown_plugins_and_effects_are_named():
     with pytest.raises(ValueError, match="no_such_plugin"):
         load_plugins(["no_such_plugin"])

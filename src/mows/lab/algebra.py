@@ -51,8 +51,8 @@ class Signature:
     def fitted_signal(self) -> np.ndarray:
         return self.basis @ self.coefficients_in_basis
 
-    coefficients_in_basis: np.ndarray = None
-    columns: np.ndarray = None   # before projection
+    coefficients_in_basis: np.ndarray
+    columns: np.ndarray | None = None   # before projection (None for a signature on another table)
 
 
 def signature(columns, model_basis, residual) -> Signature:

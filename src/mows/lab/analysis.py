@@ -23,8 +23,8 @@ import numpy as np
 
 from mows.lab.candidates import physics_deviation
 from mows.lab.catalog import catalog, resolve
-from mows.lab.diagnose import diagnose
-from mows.lab.model import FrequencyModel
+from mows.lab.diagnose import Diagnosis, diagnose
+from mows.lab.model import FitResult, FrequencyModel
 from mows.lab.readers import load_table
 from mows.lab.search import MAX_AUTO_STEPS, history_step, parameters_dict, search
 
@@ -64,9 +64,9 @@ class LabReport:
     history: list
     untestable: dict
     notes: list
-    base: object
-    fit: object
-    diagnosis: object
+    base: FitResult
+    fit: FitResult
+    diagnosis: Diagnosis
     physics_checks: list = dataclasses.field(default_factory=list)
 
     @property

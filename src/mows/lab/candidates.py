@@ -164,6 +164,7 @@ def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
         if reason:
             untestable[effect.name] = reason
             continue
+        assert test is not None  # there was a test unless there was a reason not to test
         candidates.append(_candidate(fit, effect, test, functools.partial(worth_refit, effect, test)))
     candidates.sort(key=lambda c: -c.delta_bic)
     return candidates, untestable
@@ -212,6 +213,7 @@ def _physics_form(fit, effect, test: Signature, refit: bool) -> Form:
     (only the constant that f00 takes is removed), linearised.
     """
     residual = fit.weighted_residual
+    assert test.columns is not None  # rank_candidates' signatures keep their columns
     predicted = test.columns @ np.asarray(effect.physical, float)
     signal = project_out(predicted[:, None], orthonormal_basis(fit.jacobian[:, :1]))
     if refit:

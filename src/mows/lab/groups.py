@@ -60,7 +60,8 @@ def group_candidates(candidates, fit, probe) -> list:
     (``candidates`` is reordered in place) and find what separates each group."""
     cluster_of = {c.name: members for members in _clusters([c for c in candidates if c.p_value < GROUP_SIGNIFICANCE])
                   for c in members}
-    ranked, groups = [], []
+    ranked = []
+    groups: list[Group] = []
     for candidate in candidates:
         members = cluster_of.get(candidate.name)
         if members is None:
@@ -96,7 +97,7 @@ def _partition(signatures: dict) -> list:
         for b in names[i + 1:]:
             if _indistinguishable(signatures[a], signatures[b]):
                 parent[root(b)] = root(a)
-    found = {}
+    found: dict[str, list[str]] = {}  # root → the names in its set
     for name in names:
         found.setdefault(root(name), []).append(name)
     return list(found.values())

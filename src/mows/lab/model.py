@@ -32,6 +32,7 @@ import scipy.optimize
 from mows.estimate.ringdown import FitStatus
 from mows.lab.effects import Effect, testable
 from mows.lab.physics import Configuration, frequency_factor
+from mows.lab.table import MeasurementTable
 from mows.physics import ringdown_average
 
 FD_STEP = 1e-2          # × parameter scale
@@ -150,7 +151,9 @@ class FrequencyModel:
 
 
 # --- ring-down amplitude nodes, cached per table ---------------------------------------------
-_NODES = weakref.WeakKeyDictionary()
+# table → {ring-down inputs' bytes: (amplitudes A_q (n, q), weights c_q (n, q))}
+_NODES: weakref.WeakKeyDictionary[MeasurementTable, dict[bytes, tuple[np.ndarray, np.ndarray]]] = \
+    weakref.WeakKeyDictionary()
 
 
 def ringdown_nodes(table, config: Configuration):
@@ -235,7 +238,7 @@ class FitResult:
     """
 
     model: FrequencyModel
-    table: object
+    table: MeasurementTable
     values: np.ndarray
     covariance: np.ndarray
     chi2: float

@@ -92,6 +92,8 @@ def _effects_in_file(path: pathlib.Path) -> list:
     if not path.is_file():
         raise ValueError(f"plugin file {path} does not exist")
     spec = importlib.util.spec_from_file_location(f"mows_lab_plugin_{path.stem}", path)
+    if spec is None or spec.loader is None:  # a file Python has no loader for (not a .py)
+        raise ValueError(f"plugin file {path} is not a Python file")
     module = importlib.util.module_from_spec(spec)
     try:
         spec.loader.exec_module(module)

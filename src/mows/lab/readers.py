@@ -50,7 +50,9 @@ def read_csv(path, drop_invalid: bool = False) -> MeasurementTable:
     short = [i for i, row in enumerate(body) if len(row) != len(header)]
     if short:
         raise TableError(f"{path}: {rows_text(short)} do not have {len(header)} cells like the header")
-    columns, notes, invalid = {}, [], {}
+    columns: dict[str, np.ndarray] = {}
+    notes: list[str] = []
+    invalid: dict[str, set[int]] = {}  # column → rows that are not numbers
     for j, name in enumerate(header):
         values = np.array([_number(row[j]) for row in body])
         if name not in KNOWN:  # a covariate is kept only where every row holds a number

@@ -13,7 +13,8 @@ from mows.sim.scenario import SCENARIO_DIR, Scenario, load_scenario, shipped_sce
 
 DOC = pathlib.Path(__file__).parents[2] / "docs" / "scenario_format.md"
 SETUPS = {"paper_largest_spacing": "largest_spacing", "helmholtz": "helmholtz", "anti_helmholtz": "helmholtz",
-          "nearby_coil": "largest_spacing", "tilted_plane": "largest_spacing"}
+          "nearby_coil": "largest_spacing", "tilted_plane": "largest_spacing", "calibration": "helmholtz",
+          "calibration_gradient": "helmholtz"}
 
 
 def test_the_shipped_scenarios_are_the_documented_ones():

@@ -28,6 +28,7 @@ from mows.device.interface import (
     Command,
     CommandResult,
     DeviceFault,
+    FieldCurrentCommand,
     LinkEvent,
     NotExciting,
     check_coil_command,
@@ -105,6 +106,8 @@ class SimBackend(Backend):
                 if isinstance(command, CoilCommand):
                     applied = self.device.schedule_coils(command.at_sample_index, command.amplitudes_a,
                                                          command.frequency_hz)
+                elif isinstance(command, FieldCurrentCommand):
+                    applied = self.device.schedule_field_current(command.at_sample_index, command.current_a)
                 else:
                     applied = self.device.schedule_orientation(command.at_sample_index, command.theta0_rad)
                 self._results.append(CommandResult(command.command_id, True, applied))
@@ -115,11 +118,22 @@ class SimBackend(Backend):
         with self._lock:
             self.device.switch_off_at(self.device.next_index)
 
+    def supply_to_zero_now(self) -> None:
+        with self._lock:
+            self.device.supply_to_zero()
+
     def stats(self) -> dict:
-        return {"link": "simulated", "device_coils_on": self.device.coils_on}
+        values = {"link": "simulated", "device_coils_on": self.device.coils_on}
+        if self.device.supply_limits is not None:
+            values.update(supply_current_a=self.device.device.field_current_a,
+                          supply_target_a=self.device.supply_target_a)
+        return values
 
     def close(self) -> None:
+        """Coils off, and the supply ramped to zero: the simulated device runs on until it is."""
         self.coils_off_now()
+        with self._lock:
+            self.device.read_until(self.device.supply_to_zero() + 1)
 
 
 class SerialBackend(Backend):

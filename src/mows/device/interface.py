@@ -38,7 +38,18 @@ class OrientationCommand:
     theta0_rad: float
 
 
-Command = CoilCommand | OrientationCommand
+@dataclasses.dataclass(frozen=True)
+class FieldCurrentCommand:
+    """Ramp the static-field supply (:mod:`mows.physics.supply`) to ``current_a`` from device
+    sample ``at_sample_index`` on, within its slew limit; the result's ``applied_sample_index``
+    is the sample at which the ramp reaches the (resolution-rounded) target."""
+
+    command_id: int
+    at_sample_index: int
+    current_a: float
+
+
+Command = CoilCommand | OrientationCommand | FieldCurrentCommand
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,13 +118,17 @@ class Backend(abc.ABC):
         """Switch the coils off at the device's next sample and cancel every waiting command.
         Never raises: when the link is down the device's watchdog has switched them off."""
 
+    def supply_to_zero_now(self) -> None:
+        """Ramp the static-field supply to zero from the device's next sample, dropping any
+        ramp that waits. Never raises. A device without a supply has nothing to do."""
+
     @abc.abstractmethod
     def stats(self) -> dict:
         """Counters and state for /diagnostics: always ``link`` (a word), more by backend."""
 
     @abc.abstractmethod
     def close(self) -> None:
-        """Coils off, then release the device."""
+        """Coils off and the supply to zero, then release the device."""
 
 
 def check_coil_command(command: CoilCommand, info: DeviceInfo, cap_a: float) -> None:

@@ -7,7 +7,10 @@ starts, exact to the sample. The sim backend and the device emulator both run on
 
 Every coil command is checked against the current cap (the lower of the driver's and the
 scenario's) when it is scheduled, so that nothing above the cap is ever queued, let alone
-applied.
+applied. The static-field supply (:mod:`mows.physics.supply`) likewise: a new supply current is
+checked against its cap, rounded to its resolution and reached by a staircase within its slew
+limit, each step queued at its sample; cancelling the coils' commands leaves a ramp alone, and
+:meth:`ScheduledDevice.supply_to_zero` ramps the supply down from wherever it is.
 """
 from __future__ import annotations
 
@@ -20,6 +23,7 @@ from collections.abc import Callable
 import numpy as np
 
 from mows.physics.coils import CurrentCap
+from mows.physics.supply import SupplyLimits
 from mows.sim.simulator import SimulatedBlock, SimulatedDevice
 
 COIL_LOG_LENGTH = 10000  # coil changes kept (two per excitation)
@@ -32,10 +36,15 @@ class OverCap(ValueError):
 class ScheduledDevice:
     """``device`` with a command queue; ``cap`` is the driver's coil current cap."""
 
-    def __init__(self, device: SimulatedDevice, cap: CurrentCap):
+    def __init__(self, device: SimulatedDevice, cap: CurrentCap, supply_cap_a: float = math.inf):
         self.device = device
         self.cap = CurrentCap(min(cap.limit_a, device.scenario.setup.cap.limit_a))
-        # (sample index, arrival order, kind, action): kind is "turn", "on" or "off"
+        supply = device.scenario.supply
+        self.supply_limits = None if supply is None else SupplyLimits(
+            min(supply_cap_a, supply.limits.cap_a), supply.limits.slew_a_per_s, supply.limits.resolution_a)
+        self.supply_target_a = device.field_current_a
+        self._supply_free_index = 0   # the sample after the last queued supply step
+        # (sample index, arrival order, kind, action): kind is "turn", "on", "off" or "supply"
         self._queue: list[tuple[int, int, str, Callable[[], None]]] = []
         self._arrivals = 0
         self.coils_on = False
@@ -51,8 +60,8 @@ class ScheduledDevice:
 
     @property
     def busy(self) -> bool:
-        """Coils on, or a command waiting."""
-        return bool(self._queue) or self.coils_on
+        """Coils on, or a command of the coils or the stage waiting (a supply ramp is not)."""
+        return any(entry[2] != "supply" for entry in self._queue) or self.coils_on
 
     def check_coils(self, amplitudes_a, frequency_hz: float) -> tuple:
         """The amplitudes as a tuple if the device can take them; OverCap above the cap,
@@ -91,8 +100,36 @@ class ScheduledDevice:
         return self._enqueue(at_index, "turn", functools.partial(self.device.set_orientation, float(theta0_rad)))
 
     def cancel(self) -> None:
-        """Forget every waiting command."""
-        self._queue.clear()
+        """Forget every waiting command of the coils and the stage (a supply ramp goes on: it
+        is never left half-way)."""
+        self._queue[:] = [entry for entry in self._queue if entry[2] == "supply"]
+
+    def schedule_field_current(self, at_index: int, current_a: float) -> int:
+        """Ramp the supply to ``current_a`` from sample ``at_index`` (after any ramp already
+        queued); returns the sample at which it reaches the target. ValueError without a supply,
+        above its cap or for a non-finite current."""
+        if self.supply_limits is None:
+            raise ValueError("the device has no field supply")
+        target = self.supply_limits.check(current_a)
+        start = max(int(at_index), self.next_index, self._supply_free_index)
+        return self._ramp(start, self.supply_target_a, target)
+
+    def supply_to_zero(self) -> int:
+        """Forget queued supply steps and ramp down from the present current from the next
+        sample; returns the sample at which the supply is at zero (never raises)."""
+        if self.supply_limits is None:
+            return self.next_index
+        self._queue[:] = [entry for entry in self._queue if entry[2] != "supply"]
+        return self._ramp(self.next_index, self.device.field_current_a, 0.0)
+
+    def _ramp(self, start: int, from_a: float, to_a: float) -> int:
+        applied = start
+        for offset_s, current in self.supply_limits.ramp(from_a, to_a):
+            applied = self._enqueue(start + round(offset_s * self.device.sample_rate_hz), "supply",
+                                    functools.partial(self.device.set_field_current, current))
+        self.supply_target_a = to_a
+        self._supply_free_index = applied + 1
+        return applied
 
     def switch_off_at(self, at_index: int) -> int:
         """Cancel every waiting command and switch the coils off at ``at_index`` (the next

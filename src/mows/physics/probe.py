@@ -131,9 +131,12 @@ class Probe:
 
         ``f00_hz`` may replace one of ``spring_nm_per_rad`` or ``inertia_kgm2``; when all three
         are given they must agree with Eq. S1 to 1e-4, otherwise the file contradicts itself.
-        ``theta_stop_deg`` is accepted for ``theta_stop_rad``.
+        ``theta_stop_deg`` is accepted for ``theta_stop_rad``. A ``calibration`` mapping (how the
+        constants were measured: :func:`calibration_record`) is not a constant and is skipped.
         """
         data = dict(data)
+        if not isinstance(data.pop("calibration", {}), dict):
+            raise ValueError("the probe file's 'calibration' section must be a mapping")
         allowed = {f.name for f in dataclasses.fields(cls)} | {"f00_hz", "theta_stop_deg"}
         unknown = set(data) - allowed
         if unknown:
@@ -174,8 +177,17 @@ class Probe:
             raise ValueError(f"{path}: a probe file is a mapping of constants, got {type(data).__name__}")
         return cls.from_dict(data)
 
-    def to_yaml(self, path) -> None:
-        pathlib.Path(path).write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
+    def to_yaml(self, path, calibration: dict | None = None) -> None:
+        """The probe file; ``calibration`` (uncertainties, correlations, date, hardware id) is
+        written as its ``calibration`` section."""
+        data = self.to_dict() if calibration is None else {**self.to_dict(), "calibration": calibration}
+        pathlib.Path(path).write_text(yaml.safe_dump(data, sort_keys=False, allow_unicode=True))
+
+
+def calibration_record(path) -> dict | None:
+    """The ``calibration`` section of a probe file (None if the file has none)."""
+    data = yaml.safe_load(pathlib.Path(path).read_text())
+    return data.get("calibration") if isinstance(data, dict) else None
 
 
 def _require(name, value, ok, what):

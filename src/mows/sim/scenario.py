@@ -31,6 +31,7 @@ from mows.physics.fluxgate import DAQ_SAMPLE_RATE_HZ, FL1_RANGE_T, FL1_RESOLUTIO
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.schema import check_keys, vector3
+from mows.physics.supply import FieldSupply, supply_from_dict
 
 SCENARIO_DIR = pathlib.Path(__file__).with_name("scenarios")
 DEFAULT_SCENARIO = "paper_largest_spacing"
@@ -167,6 +168,7 @@ class Scenario:
     seed: int = 1
     name: str = "custom"
     description: str = ""
+    supply: FieldSupply | None = None   # the static-field supply the driver controls (calibration)
 
     def __post_init__(self):
         _check("scenario", "sample_rate_hz", self.sample_rate_hz, 0.0, 1e7, low_open=True)
@@ -201,6 +203,7 @@ class Scenario:
             "housing": dataclasses.asdict(self.housing),
             "integrator": dataclasses.asdict(self.integrator),
             "sample_rate_hz": float(self.sample_rate_hz), "seed": int(self.seed),
+            **({} if self.supply is None else {"supply": self.supply.to_dict()}),
         }
 
     @classmethod
@@ -270,7 +273,7 @@ def _deep_merge(base: dict, override: dict) -> dict:
 # --- section builders: their signatures are the YAML keys --------------------------------
 def _scenario_from_sections(name="custom", description="", probe=PAPER_PROBE_NAME, setup=None, environment=None,
                    pose=None, sensors=None, noise=None, excitation=None, housing=None, integrator=None,
-                   sample_rate_hz=Scenario.sample_rate_hz, seed=Scenario.seed) -> Scenario:
+                   sample_rate_hz=Scenario.sample_rate_hz, seed=Scenario.seed, supply=None) -> Scenario:
     the_pose = _section("pose", pose, _pose)
     fs = _number("scenario", "sample_rate_hz", sample_rate_hz)
     setup = {"preset": "largest_spacing"} if setup is None else setup
@@ -287,7 +290,8 @@ def _scenario_from_sections(name="custom", description="", probe=PAPER_PROBE_NAM
         excitation=_section("excitation", excitation, _excitation),
         housing=_section("housing", housing, _numbers_into(Housing)),
         integrator=_section("integrator", integrator, Integrator),
-        sample_rate_hz=fs, seed=seed, name=str(name), description=str(description))
+        sample_rate_hz=fs, seed=seed, name=str(name), description=str(description),
+        supply=None if supply is None else supply_from_dict(supply))
 
 
 def _require_explicit_geometry(pose: Pose, setup, sensors) -> None:

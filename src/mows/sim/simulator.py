@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from mows.physics.field import SumSource
 from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, ArcPotential
 from mows.records.samples import SampleBlock
 from mows.records.stamps import NS_PER_S
@@ -104,13 +105,17 @@ class SimulatedDevice:
         self.sample_rate_hz = float(scenario.sample_rate_hz)
         self.n_coils = len(scenario.setup.coils)
         self.sample_index = 0
-        self._env_source = scenario.environment.source
+        self._fixed_source = scenario.environment.source
+        self._supply = scenario.supply
+        self.field_current_a = 0.0 if self._supply is None else self._supply.current_a
         self._noise = NoiseStream(scenario.noise, self.sample_rate_hz,
                                   np.random.default_rng(scenario.seed) if rng is None else rng)
         pair = scenario.sensors.pair
-        env_at_sensors = self._env_source.field_t(pair.positions_m)
+        env_at_sensors = self.static_source.field_t(pair.positions_m)
         self._pair = pair.with_offsets_nulled(env_at_sensors) if scenario.sensors.null_offsets else pair
-        self._env_reading_t = self._pair.component_t(env_at_sensors)                       # (2,)
+        self._fixed_reading_t = self._pair.component_t(self._fixed_source.field_t(pair.positions_m))   # (2,)
+        self._supply_reading_t_per_a = (np.zeros(2) if self._supply is None else
+                                        self._pair.component_t(self._supply.source.field_t(pair.positions_m)))
         coil_fields = scenario.setup.coil_field_per_ampere_t(pair.positions_m)             # (2, K, 3)
         self._coil_reading_t_per_a = np.stack(
             [self._pair.component_t(coil_fields[:, k]) for k in range(self.n_coils)])       # (K, 2)
@@ -159,9 +164,38 @@ class SimulatedDevice:
         if not math.isfinite(theta0_rad):
             raise ValueError(f"theta0_rad = {theta0_rad!r} must be finite")
         self._pose = self.scenario.pose.with_theta0(theta0_rad)
-        self._env_series = self._slope_series(self._env_source, self._pose)
+        self._fixed_series = self._slope_series(self._fixed_source, self._pose)
         coil_pose = dataclasses.replace(self._pose, gravity_m_per_s2=(0.0, 0.0, 0.0))
         self._coil_series = [self._slope_series(coil, coil_pose) for coil in self.scenario.setup.coils]
+        self._supply_series = (np.zeros(0) if self._supply is None else
+                               self._slope_series(self._supply.source, coil_pose))
+        self._combine_static()
+
+    def set_field_current(self, current_a: float) -> None:
+        """The supply drives its source at ``current_a`` from this sample on (a step: the
+        slew limit is the caller's staircase, :meth:`mows.physics.supply.SupplyLimits.ramp`).
+        ValueError above the supply's cap or without a supply in the scenario."""
+        if self._supply is None:
+            raise ValueError("set_field_current: the scenario has no field supply (section 'supply')")
+        self.field_current_a = self._supply.limits.check(current_a)
+        self._combine_static()
+
+    @property
+    def static_source(self):
+        """The static field: the environment plus the supply's source at its present current."""
+        if self._supply is None or self.field_current_a == 0.0:
+            return self._fixed_source
+        return SumSource((self._fixed_source, self._supply.source.scaled(self.field_current_a)))
+
+    def _combine_static(self) -> None:
+        """W' of the static field and its reading at the sensors: both are linear in the
+        supply current, so a new current costs one sum, not a new series."""
+        n = max(len(self._fixed_series), len(self._supply_series))
+        series = np.zeros(n)
+        series[: len(self._fixed_series)] += self._fixed_series
+        series[: len(self._supply_series)] += self.field_current_a * self._supply_series
+        self._env_series = series
+        self._env_reading_t = self._fixed_reading_t + self.field_current_a * self._supply_reading_t_per_a
 
     def set_coils(self, amplitudes_a, frequency_hz: float) -> None:
         """Drive coil k with amplitudes_a[k]·sin(2πf·(t − t_on)) from now (t_on = this sample).
@@ -264,7 +298,7 @@ class SimulatedDevice:
 
     def potential(self) -> ArcPotential:
         """U(θ) of the probe in the environment at the current pose and temperature."""
-        return ArcPotential.from_source(self.probe, self._env_source, self._pose, self.temperature_k,
+        return ArcPotential.from_source(self.probe, self.static_source, self._pose, self.temperature_k,
                                         half_width_rad=self._half_width_rad)
 
     def expected_frequency_hz(self, amplitude_rad=0.0):
@@ -280,5 +314,5 @@ class SimulatedDevice:
             theta_rad=float(self._state[0]), theta_dot_rad_per_s=float(self._state[1]),
             rest_angle_rad=float(potential.rest_angle_rad()), temperature_k=self.temperature_k,
             spring_nm_per_rad=float(self.probe.spring_at(self.temperature_k)),
-            field_t=self._env_source.field_t(where), gradient_t_per_m=self._env_source.gradient_t_per_m(where),
+            field_t=self.static_source.field_t(where), gradient_t_per_m=self.static_source.gradient_t_per_m(where),
             potential=potential)

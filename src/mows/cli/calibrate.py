@@ -1,0 +1,197 @@
+"""``mows calibrate``: a new probe's constants from a supply sweep, written as a probe file.
+
+Input (one of):
+
+* ``TABLE`` — a CSV of ring-down fits with the columns ``supply_current_a``, ``theta0_deg``,
+  ``f_hz``, ``f_std_hz``, ``damping_per_s``, ``duration_s``, ``amplitude_deg``,
+  ``start_offset_s`` and ``gradient_wiring`` (0: the homogeneous wiring, 1: the gradient one);
+  ``--table`` writes this format;
+* ``BAG`` — a bag the driver recorded during a calibration (its ExcitationState carries the
+  supply current); the ring-downs are fitted as ``mows fit`` fits them;
+* ``--simulate`` — run the calibration schedule (:mod:`mows.sweep.calibration_schedule`) on the
+  simulated device of ``--scenario`` in simulated device time, and compare with its truth.
+
+The supply's field (and gradient) per ampere at the probe come from the ``supply`` section of
+``--scenario`` (and ``--gradient-scenario``); the magnet's moment, mass and the housing stop from
+``--probe`` (the nominal probe: data sheet and scale). The fit is
+:func:`mows.estimate.probe_calibration.calibrate_probe`.
+"""
+from __future__ import annotations
+
+import datetime
+import math
+import sys
+
+import numpy as np
+
+from mows.estimate.probe_calibration import CalibrationError, CalibrationPoint, KnownConstants, Wiring, calibrate_probe
+from mows.estimate.ringdown import fit_cycle
+from mows.lab.table import MeasurementTable, load_table
+from mows.physics.coils import CurrentCap
+from mows.physics.probe import PAPER_PROBE, Probe
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice, simulate_cycle
+from mows.device.scheduled import ScheduledDevice
+from mows.sweep.calibration_schedule import (PAPER_CURRENTS_A, CalibrationOutcome, CalibrationPlan,
+                                             CalibrationSchedule, RunCycle, SetSupply)
+
+SUPPLY_SETTLE_S = 0.5      # the probe rings after a supply step: wait before the next cycle
+GRADIENT_WIRING = "gradient"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("input", nargs="?", help="a calibration table (CSV) or a bag recorded by the driver")
+    parser.add_argument("-o", "--output", required=True, help="the probe file to write (YAML)")
+    parser.add_argument("--probe", help="nominal probe YAML: moment, magnet mass, housing stop (default: paper's)")
+    parser.add_argument("--scenario", default="calibration", help="scenario whose supply section is the wiring")
+    parser.add_argument("--gradient-scenario", help="scenario of the gradient wiring (anti-Helmholtz)")
+    parser.add_argument("--environment-field-t", type=float, nargs=3, metavar=("BX", "BY", "BZ"),
+                        help="reference magnetometer reading at the probe with the supply at zero, T")
+    parser.add_argument("--hardware-id", default="", help="written to the probe file (default: the scenario)")
+    parser.add_argument("--simulate", action="store_true", help="calibrate the scenario's simulated probe")
+    parser.add_argument("--currents-a", type=float, nargs="+", default=list(PAPER_CURRENTS_A))
+    parser.add_argument("--repeats", type=int, default=1, help="ring-downs per cycle")
+    parser.add_argument("--seed", type=int, help="noise seed of the simulation (default: the scenario's)")
+    parser.add_argument("--table", help="also write the calibration points as a table (CSV)")
+
+
+def run(args) -> int:
+    nominal = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
+    try:
+        scenario = load_scenario(args.scenario)
+        gradient = load_scenario(args.gradient_scenario) if args.gradient_scenario else None
+        wirings = scenario_wirings(scenario, gradient)
+        if args.simulate:
+            points, failed = simulated_points(scenario, gradient, nominal, args)
+        elif args.input:
+            points, failed = read_points(args.input, scenario.supply.name), {}
+        else:
+            raise ValueError("give a TABLE or BAG, or --simulate")
+        known = KnownConstants.of(nominal, args.environment_field_t)
+        calibration = calibrate_probe(points, wirings, known, scenario.supply.name, failed, nominal.lever_m)
+    except (OSError, ValueError) as error:   # CalibrationError is a ValueError
+        print(f"mows calibrate: {error}", file=sys.stderr)
+        return 2
+    if args.table:
+        write_points(args.table, points, scenario.supply.name)
+    date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    calibration.probe().to_yaml(args.output, calibration.record(date, args.hardware_id or scenario.name))
+    print(calibration.report())
+    if args.simulate:
+        print(compare_with_truth(calibration, scenario.probe))
+    print(f"probe file written: {args.output}")
+    return 0
+
+
+def scenario_wirings(scenario, gradient=None) -> dict:
+    """The wirings of the scenarios' supplies at the magnet's rest position."""
+    if scenario.supply is None:
+        raise ValueError(f"scenario {scenario.name!r} has no supply section: the supply's field per ampere is unknown")
+    where = scenario.pose.magnet_position_m
+    wirings = {scenario.supply.name: Wiring.from_source(scenario.supply.name, scenario.supply.source, where)}
+    if gradient is not None:
+        if gradient.supply is None:
+            raise ValueError(f"scenario {gradient.name!r} has no supply section")
+        wirings[GRADIENT_WIRING] = Wiring.from_source(GRADIENT_WIRING, gradient.supply.source, where)
+    return wirings
+
+
+# --- the simulated calibration ------------------------------------------------------------
+def simulated_points(scenario, gradient, nominal: Probe, args) -> tuple[list, dict]:
+    plan = CalibrationPlan(tuple(args.currents_a), repeats=args.repeats, wiring=scenario.supply.name)
+    seed = scenario.seed if args.seed is None else args.seed
+    outcome = simulate_calibration(scenario.replace(seed=seed), plan, nominal)
+    points, failed = list(outcome.points), dict(outcome.failed)
+    if gradient is not None:
+        plan = CalibrationPlan(tuple(args.currents_a), repeats=args.repeats, wiring=GRADIENT_WIRING)
+        more = simulate_calibration(gradient.replace(seed=seed + 1), plan, nominal)
+        points += more.points
+        failed.update(more.failed)
+    return points, failed
+
+
+def simulate_calibration(scenario, plan: CalibrationPlan, nominal: Probe, on_feedback=None) -> CalibrationOutcome:
+    """Run :class:`CalibrationSchedule` on the simulated device of ``scenario`` in device time.
+
+    The supply ramps through :class:`mows.device.scheduled.ScheduledDevice` (cap, slew,
+    resolution); every cycle is :func:`mows.sim.simulator.simulate_cycle` and its ring-down is
+    fitted as the estimator does, with the lever-aware pickup of the **nominal** probe (the true
+    lever is what is being calibrated). ValueError if the schedule does not end at zero current.
+    """
+    device = ScheduledDevice(SimulatedDevice(scenario), CurrentCap())
+    fit_scenario = scenario.replace(probe=nominal)
+    schedule = CalibrationSchedule(plan)
+    pending = [schedule.start()]
+    while pending:
+        step = pending.pop(0)
+        for feedback in step.feedback:
+            if on_feedback:
+                on_feedback(feedback)
+        if step.outcome is not None:
+            if device.device.field_current_a != 0.0:
+                raise ValueError(f"the supply is at {device.device.field_current_a} A after the calibration")
+            return step.outcome
+        for action in step.actions:
+            pending += _perform(action, schedule, device, scenario, fit_scenario)
+    raise RuntimeError("the calibration schedule stopped without an outcome")
+
+
+def _perform(action, schedule, device, scenario, fit_scenario) -> list:
+    if isinstance(action, SetSupply):
+        try:
+            reached = device.schedule_field_current(device.next_index, action.current_a)
+        except ValueError as refused:
+            return [schedule.on_supply(False, str(refused))]
+        device.read_until(reached + 1 + round(SUPPLY_SETTLE_S * device.device.sample_rate_hz))
+        return [schedule.on_supply(True)]
+    steps = []
+    excitation = scenario.excitation
+    for _ in range(action.repeats):
+        cycle = simulate_cycle(device.device, action.theta0_rad, excitation.amplitude_a,
+                               excite_s=excitation.excite_s, ringdown_s=excitation.ringdown_s)
+        steps.append(schedule.on_fit(fit_cycle(cycle, fit_scenario)))
+    return steps + [schedule.on_cycle_done(True)]
+
+
+def compare_with_truth(calibration, truth: Probe) -> str:
+    rows = [("f00_hz", truth.f00_hz), ("beta0_hz_per_t", truth.beta0_hz_per_t),
+            ("spring_nm_per_rad", truth.spring_nm_per_rad), ("inertia_kgm2", truth.inertia_kgm2),
+            ("lever_m", truth.lever_m)]
+    lines = ["calibrated against true constants:"]
+    for name, true in rows:
+        value, std = calibration.value(name), calibration.std(name)
+        lines.append(f"  {name:18s} {value:.6g} ± {std:.2g}  true {true:.6g}  "
+                     f"({(value / true - 1) * 100:+.4f} %, {(value - true) / std:+.2f} σ)")
+    return "\n".join(lines)
+
+
+# --- tables and bags ----------------------------------------------------------------------
+TABLE_COLUMNS = ("supply_current_a", "damping_per_s", "duration_s", "amplitude_deg", "start_offset_s",
+                 "gradient_wiring")
+
+
+def write_points(path, points, field_wiring: str) -> None:
+    columns = {"theta0_deg": np.degrees([p.theta0_rad for p in points]),
+               "f_hz": np.array([p.frequency_hz for p in points]),
+               "f_std_hz": np.array([p.frequency_std_hz for p in points]),
+               "supply_current_a": np.array([p.supply_current_a for p in points]),
+               "damping_per_s": np.array([p.damping_per_s for p in points]),
+               "duration_s": np.array([p.duration_s for p in points]),
+               "amplitude_deg": np.degrees([p.amplitude_rad for p in points]),
+               "start_offset_s": np.array([p.start_offset_s for p in points]),
+               "gradient_wiring": np.array([float(p.wiring != field_wiring) for p in points])}
+    MeasurementTable(columns, str(path)).to_csv(path)
+
+
+def read_points(path, field_wiring: str) -> list:
+    """Calibration points from a table (CSV) or a bag recorded during a calibration."""
+    table = load_table(path)
+    missing = [c for c in TABLE_COLUMNS if c not in table.columns]
+    if missing:
+        raise ValueError(f"{path}: a calibration table needs the columns {list(TABLE_COLUMNS)}; missing {missing}")
+    c = table.columns
+    return [CalibrationPoint(GRADIENT_WIRING if c["gradient_wiring"][i] else field_wiring,
+                             float(c["supply_current_a"][i]), math.radians(c["theta0_deg"][i]), float(c["f_hz"][i]),
+                             float(c["f_std_hz"][i]), math.radians(c["amplitude_deg"][i]), float(c["damping_per_s"][i]),
+                             float(c["duration_s"][i]), float(c["start_offset_s"][i]))
+            for i in range(len(table))]

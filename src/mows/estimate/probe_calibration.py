@@ -1,0 +1,363 @@
+"""Calibrating a new probe from ring-downs at known applied fields (paper Fig. 3, Eqs. 9–10).
+
+The paper steps a Helmholtz pair's current, reads Δf against B, takes the slope β0 and derives
+kM = f00·m/(2β0) (Eq. 9 inverted) and J = m/(8π²·β0·f00) (Eq. 10), and l = √(J/a) from the
+magnet mass a; the same pair anti-parallel gives the gradient response γ. Here the same
+constants come from the **full potential** (:mod:`mows.physics.potential`) rather than Eq. 6:
+
+* every ring-down is modelled as the estimator sees it: the first-harmonic-balance frequency of
+  U(θ) = ½·kM·θ² − m(θ)·B(r(θ)) at the ring-down's decaying amplitude, averaged as a
+  constant-frequency fit averages it (:mod:`mows.physics.ringdown_average`). Eq. 6 ignores the
+  finite amplitude, which shrinks the field spring by 2·J1(A)/A (2.2 % at the paper's 24°) and
+  would bias β0, kM and J by as much;
+* the perpendicular field's static deflection and the lever in a gradient (k gains
+  m·l·(Gx'x' − 2·Gy'y'), twice the paper's kG in an anti-Helmholtz field) are in U as well;
+* J is taken from the damped relation J = kM/((2π·f00)² + δ²) (Eq. S1), δ the ring-downs' mean
+  damping; Eq. 10 neglects δ (6.5e-6 relative for the paper's probe).
+
+Parameters fitted by weighted least squares: f00, β0, the ring-downs' start swing (the housing
+stop decayed to the first fitted sample; a homogeneous sweep cannot tell it from β0, since both
+scale the field spring, so it is held by its prior θstop ± ``theta_stop_std_rad`` and its
+uncertainty enters β0's), the environment field along the supply's axis (unless a reference
+magnetometer gave it) and, with gradient points, the lever l_γ. The
+covariance is (JᵀWJ)⁻¹, scaled by χ²/dof when that exceeds 1; derived constants carry it by
+the delta method, so every constant has an uncertainty and all have correlations.
+
+What the data cannot determine raises :class:`CalibrationError` with the reason: fewer than two
+distinct applied fields (β0), fields of one sign only without a reference (f00 and the
+environment field along the axis are then interchangeable), no usable ring-down at a supply
+current (the fits failed, e.g. saturated sensors). Without gradient points the lever comes from
+J and a alone, and the report says that the lever check could not be made.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from scipy import optimize
+
+from mows.physics import ringdown_average
+from mows.physics.pose import probe_axes
+from mows.physics.potential import ArcPotential
+from mows.physics.probe import TWO_PI, Probe, lever_from_inertia
+
+AMPLITUDE_NODES = 3
+FIELD_UNIT_T = 1e-6       # fit units keep the normal equations well scaled: µT, Hz/mT, mm
+BETA_UNIT_HZ_PER_T = 1e3
+LEVER_UNIT_M = 1e-3
+AMPLITUDE_UNIT_RAD = 1e-3
+DIFF_STEP = 1e-6          # relative step of the numerical Jacobian
+# The start swing of a ring-down driven into the stop scatters about the stop by ~0.1°
+# (penetration into the contact, the phase at switch-off: 23.6°–23.9° measured in the
+# simulator at a 24° stop, the estimator's θmax scattering by degrees).
+THETA_STOP_STD_RAD = math.radians(0.1)
+
+
+class CalibrationError(ValueError):
+    """The data cannot determine a constant; the message says which and why."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Wiring:
+    """How the supply's current becomes a field at the magnet's rest position (global frame):
+    ``field_per_a_t`` (3,) and ``gradient_per_a_t_per_m`` (3, 3), per ampere."""
+
+    name: str
+    field_per_a_t: tuple
+    gradient_per_a_t_per_m: tuple = ((0.0,) * 3,) * 3
+
+    @classmethod
+    def from_source(cls, name: str, source_per_a, position_m=(0.0, 0.0, 0.0)) -> "Wiring":
+        """The wiring of a field source (its field at 1 A) at ``position_m``."""
+        point = np.asarray(position_m, float)
+        return cls(name, tuple(source_per_a.field_t(point).tolist()),
+                   tuple(map(tuple, source_per_a.gradient_t_per_m(point).tolist())))
+
+
+@dataclasses.dataclass(frozen=True)
+class CalibrationPoint:
+    """One fitted ring-down (``mows.estimate.ringdown.RingdownFit``) at a supply current."""
+
+    wiring: str
+    supply_current_a: float
+    theta0_rad: float
+    frequency_hz: float
+    frequency_std_hz: float
+    amplitude_rad: float
+    damping_per_s: float
+    duration_s: float
+    start_offset_s: float = 0.0   # first fitted sample after the switch-off
+
+    @classmethod
+    def from_fit(cls, fit, wiring: str, supply_current_a: float) -> "CalibrationPoint":
+        return cls(wiring, float(supply_current_a), fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz,
+                   fit.amplitude_rad, fit.damping_per_s, fit.duration_s, fit.start_offset_s)
+
+
+@dataclasses.dataclass(frozen=True)
+class KnownConstants:
+    """What the calibration takes as given: the magnet's moment and mass (data sheet, scale),
+    the housing stop, and optionally the environment field at the probe with the supply at
+    zero (a reference magnetometer), global frame."""
+
+    moment_am2: float
+    magnet_mass_kg: float
+    theta_stop_rad: float = math.radians(24.0)
+    environment_field_t: tuple | None = None
+    theta_stop_std_rad: float = THETA_STOP_STD_RAD
+
+    @classmethod
+    def of(cls, probe: Probe, environment_field_t=None) -> "KnownConstants":
+        return cls(probe.moment_am2, probe.magnet_mass_kg, probe.theta_stop_rad,
+                   None if environment_field_t is None else tuple(float(b) for b in environment_field_t))
+
+
+@dataclasses.dataclass(frozen=True)
+class ProbeCalibration:
+    """The calibrated constants (SI), their covariance and what the data could not say."""
+
+    names: tuple
+    values: np.ndarray
+    covariance: np.ndarray
+    chi2_dof: float
+    n_points: int
+    known: KnownConstants
+    notes: tuple = ()
+
+    def value(self, name: str) -> float:
+        return float(self.values[self.names.index(name)])
+
+    def std(self, name: str) -> float:
+        i = self.names.index(name)
+        return float(math.sqrt(self.covariance[i, i]))
+
+    def correlation(self) -> np.ndarray:
+        std = np.sqrt(np.diag(self.covariance))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.covariance / np.outer(std, std)
+
+    def probe(self) -> Probe:
+        """The calibrated probe (lever from J and the magnet mass)."""
+        return Probe(moment_am2=self.known.moment_am2, spring_nm_per_rad=self.value("spring_nm_per_rad"),
+                     inertia_kgm2=self.value("inertia_kgm2"), lever_m=self.value("lever_m"),
+                     magnet_mass_kg=self.known.magnet_mass_kg, damping_per_s=self.value("damping_per_s"),
+                     theta_stop_rad=self.known.theta_stop_rad)
+
+    def record(self, date: str, hardware_id: str) -> dict:
+        """The ``calibration`` section of a probe file: values with uncertainties, correlations."""
+        return {"date": date, "hardware_id": hardware_id, "method": "supply sweep, full potential (mows calibrate)",
+                "points": self.n_points, "chi2_dof": float(self.chi2_dof),
+                "constants": {n: {"value": float(v), "std": self.std(n)} for n, v in zip(self.names, self.values)},
+                "correlation": [[round(float(c), 6) for c in row] for row in self.correlation()],
+                "notes": list(self.notes)}
+
+    def report(self) -> str:
+        lines = [f"{n} = {self.value(n):.6g} ± {self.std(n):.2g}" for n in self.names]
+        return "\n".join(lines + [f"χ²/dof = {self.chi2_dof:.3f} over {self.n_points} ring-downs"]
+                         + [f"note: {n}" for n in self.notes])
+
+
+# --- the model ---------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class _Rows:
+    """The points as arrays; ``field_t`` and ``gradient_t_per_m`` the applied part, global frame."""
+
+    theta0_rad: np.ndarray
+    frequency_hz: np.ndarray
+    frequency_std_hz: np.ndarray
+    field_t: np.ndarray
+    gradient_t_per_m: np.ndarray
+    amplitudes_rad: np.ndarray     # (n, q) amplitude nodes of the fit's averaging
+    weights: np.ndarray            # (n, q)
+
+
+def _rows(points, wirings: dict, known: KnownConstants) -> _Rows:
+    unknown = {p.wiring for p in points} - set(wirings)
+    if unknown:
+        raise CalibrationError(f"points of wirings {sorted(unknown)} but only {sorted(wirings)} are described "
+                               "(a gradient wiring needs its field per ampere: mows calibrate --gradient-scenario)")
+    current = np.array([p.supply_current_a for p in points])
+    field = np.array([wirings[p.wiring].field_per_a_t for p in points]) * current[:, None]
+    gradient = np.array([wirings[p.wiring].gradient_per_a_t_per_m for p in points]) * current[:, None, None]
+    theta0 = np.array([p.theta0_rad for p in points])
+    damping = np.array([p.damping_per_s for p in points])
+    start = known.theta_stop_rad * np.exp(-damping * np.array([p.start_offset_s for p in points]))
+    amplitudes, weights = ringdown_average.amplitude_nodes(
+        theta0, start, damping, np.array([p.duration_s for p in points]), nodes=AMPLITUDE_NODES)
+    return _Rows(theta0, np.array([p.frequency_hz for p in points]), np.array([p.frequency_std_hz for p in points]),
+                 field, gradient, amplitudes, weights)
+
+
+def inertia_from(f00_hz, spring_nm_per_rad, damping_per_s):
+    """J = kM/((2π·f00)² + δ²): Eq. 10 with the damping of Eq. S1 kept."""
+    return spring_nm_per_rad / ((TWO_PI * f00_hz) ** 2 + damping_per_s**2)
+
+
+def _frequencies(rows: _Rows, known: KnownConstants, f00, beta0, environment_t, lever, stop, damping) -> np.ndarray:
+    """Ring-down frequencies of every row for the constants given (module docstring)."""
+    spring = f00 * known.moment_am2 / (2.0 * beta0)
+    try:
+        probe = Probe(known.moment_am2, spring, inertia_from(f00, spring, damping), lever, known.magnet_mass_kg,
+                      damping, known.theta_stop_rad)
+    except ValueError:  # a trial step to unphysical constants: far from every measurement
+        return np.full(len(rows.frequency_hz), 1e9)
+    axes = probe_axes(rows.theta0_rad)
+    field = np.einsum("nij,nj->ni", axes, rows.field_t + environment_t)
+    gradient = np.einsum("nai,nij,nbj->nab", axes, rows.gradient_t_per_m, axes)
+    q = rows.amplitudes_rad.shape[1]
+    potential = ArcPotential.from_local_field(probe, np.repeat(field, q, 0), np.repeat(gradient, q, 0))
+    scale = stop / known.theta_stop_rad   # the nodes scale with the start amplitude
+    per_node = potential.frequency_hz(scale * rows.amplitudes_rad.reshape(-1)).reshape(-1, q)
+    return (rows.weights * per_node).sum(-1)
+
+
+# --- the fit -----------------------------------------------------------------------------------
+def calibrate_probe(points, wirings, known: KnownConstants, field_wiring: str = "helmholtz",
+                    failed: dict | None = None, nominal_lever_m: float = 1.9e-3) -> ProbeCalibration:
+    """Fit the probe's constants to ``points`` (:class:`CalibrationPoint`).
+
+    ``wirings``: :class:`Wiring` by name (or a sequence of them); ``field_wiring`` names the
+    homogeneous one (β0); points of any other wiring are gradient points (lever). ``failed``
+    counts ring-downs whose fit failed, by supply current and reason, for the notes and the
+    saturation check. CalibrationError when the data cannot determine the constants.
+    """
+    wirings = wirings if isinstance(wirings, dict) else {w.name: w for w in wirings}
+    points = [p for p in points if all(map(math.isfinite, (p.frequency_hz, p.frequency_std_hz, p.amplitude_rad,
+                                                           p.damping_per_s, p.duration_s)))]
+    notes = _failure_notes(failed or {}, points)
+    field_points = [p for p in points if p.wiring == field_wiring]
+    gradient_points = [p for p in points if p.wiring != field_wiring]
+    rows = _rows(points, wirings, known)
+    notes += _amplitude_notes(points, known)
+    axis = np.asarray(wirings[field_wiring].field_per_a_t, float) if field_wiring in wirings else None
+    _check_field_points(field_points, axis, known)
+    fit_environment = known.environment_field_t is None
+    fit_lever = any(p.supply_current_a != 0.0 for p in gradient_points)
+    if not fit_lever:
+        notes.append("no gradient points: the lever comes from J and the magnet mass alone, unchecked")
+    damping, damping_var = _mean_damping(points)
+    unit_axis = axis / np.linalg.norm(axis)
+    fixed_environment = np.zeros(3) if fit_environment else np.asarray(known.environment_field_t, float)
+
+    def unpack(x):
+        environment = fixed_environment + (x[3] * FIELD_UNIT_T * unit_axis if fit_environment else 0.0)
+        lever = x[-1] * LEVER_UNIT_M if fit_lever else nominal_lever_m
+        return x[0], x[1] * BETA_UNIT_HZ_PER_T, environment, lever, x[2] * AMPLITUDE_UNIT_RAD
+
+    def residuals(x):
+        model = _frequencies(rows, known, *unpack(x), damping)
+        prior = (x[2] * AMPLITUDE_UNIT_RAD - known.theta_stop_rad) / known.theta_stop_std_rad
+        return np.append((model - rows.frequency_hz) / rows.frequency_std_hz, prior)
+
+    start = _start(field_points, wirings[field_wiring], known)
+    x0 = np.array([start[0], start[1] / BETA_UNIT_HZ_PER_T, known.theta_stop_rad / AMPLITUDE_UNIT_RAD]
+                  + [0.0] * fit_environment + [nominal_lever_m / LEVER_UNIT_M] * fit_lever)
+    result = optimize.least_squares(residuals, x0, method="lm", diff_step=DIFF_STEP, x_scale="jac")
+    if not result.success or not np.all(np.isfinite(result.fun)):
+        raise CalibrationError(f"the fit of the calibration did not converge: {result.message}")
+    dof = len(points) + 1 - len(x0)
+    chi2_dof = float(result.fun @ result.fun / dof) if dof > 0 else math.nan
+    cov_x = np.linalg.inv(result.jac.T @ result.jac) * max(1.0, chi2_dof if dof > 0 else 1.0)
+    return _derive(result.x, cov_x, damping, damping_var, unpack, fit_environment, fit_lever, unit_axis,
+                   wirings, gradient_points, known, chi2_dof, len(points), tuple(notes))
+
+
+def _amplitude_notes(points, known: KnownConstants) -> list:
+    """The model starts every ring-down at the housing stop (a drive into the stop, as the paper's):
+    the field sweep cannot separate the amplitude from β0 (both scale the field spring), and a
+    fitted θmax scatters by degrees. Say so when the fits suggest the stop was not reached."""
+    amplitude = float(np.median([p.amplitude_rad for p in points]))
+    if amplitude < 0.8 * known.theta_stop_rad:
+        return [f"the ring-downs' median θmax {math.degrees(amplitude):.1f}° is well below the housing stop "
+                f"{math.degrees(known.theta_stop_rad):.1f}° that the model assumes: β0 is biased by about "
+                f"{(known.theta_stop_rad**2 - amplitude**2) / 8 * 100:.2f} %; excite harder"]
+    return []
+
+
+def _check_field_points(points, axis, known: KnownConstants) -> None:
+    """CalibrationError when the homogeneous sweep cannot determine β0 and f00."""
+    if axis is None or not np.any(axis):
+        raise CalibrationError("no homogeneous-field wiring with a field at the probe is described: β0 undetermined")
+    along = np.array([p.supply_current_a * (axis[0] * math.cos(p.theta0_rad) + axis[1] * math.sin(p.theta0_rad))
+                      for p in points])
+    distinct = np.unique(np.round(along / np.linalg.norm(axis), 6))
+    if len(distinct) < 2:
+        raise CalibrationError(f"too few supply currents: {len(points)} usable ring-downs at {len(distinct)} distinct "
+                               "field(s) along the probe axis; β0 (hence kM and J) needs at least two")
+    if known.environment_field_t is None and not (along.min() < 0.0 < along.max()):
+        raise CalibrationError("fields of one sign only along the probe axis: f00 and the environment field along "
+                               "the supply's axis cannot be told apart; add θ0 = 180° (or negative currents) or "
+                               "give the environment field from a reference magnetometer")
+
+
+def _failure_notes(failed: dict, points) -> list:
+    """Notes on failed ring-downs; CalibrationError if a supply current has no usable one."""
+    notes, usable = [], {p.supply_current_a for p in points}
+    for (current, reason), count in sorted(failed.items()):
+        notes.append(f"{count} ring-down fit(s) at {current:+.4f} A failed ({reason}) and were left out")
+        if current not in usable:
+            raise CalibrationError(f"no usable ring-down at the supply current {current:+.4f} A: every fit failed "
+                                   f"({reason}); lower the currents (saturation) or repeat that step")
+    return notes
+
+
+def _mean_damping(points) -> tuple:
+    """The ring-downs' mean damping and the variance of that mean (from their scatter)."""
+    values = np.array([p.damping_per_s for p in points])
+    var = float(values.var(ddof=1) / len(values)) if len(values) > 1 else float(values[0] ** 2)
+    return float(values.mean()), var
+
+
+def _start(points, wiring: Wiring, known: KnownConstants) -> tuple:
+    """f00 and β0 from a straight line through f against the applied field along x'."""
+    axis = np.asarray(wiring.field_per_a_t, float)
+    along = np.array([p.supply_current_a * (axis[0] * math.cos(p.theta0_rad) + axis[1] * math.sin(p.theta0_rad))
+                      for p in points])
+    slope, intercept = np.polyfit(along, [p.frequency_hz for p in points], 1)
+    return float(intercept), float(slope) if slope > 0 else 3.68e3
+
+
+def _derive(x, cov_x, damping, damping_var, unpack, fit_environment, fit_lever, unit_axis, wirings,
+            gradient_points, known, chi2_dof, n_points, notes) -> ProbeCalibration:
+    """The reported constants and their covariance by the delta method over (x, δ)."""
+    names = ["f00_hz", "beta0_hz_per_t", "spring_nm_per_rad", "inertia_kgm2", "lever_m", "damping_per_s",
+             "start_swing_rad"]
+    names += ["environment_field_along_supply_t"] * fit_environment
+    gradient_factor = _gradient_factor(wirings, gradient_points) if fit_lever else None
+    names += ["gradient_lever_m", "gamma_hz_m_per_t"] * fit_lever
+
+    def constants(z):
+        f00, beta0, environment, lever, stop = unpack(z[:-1])
+        delta = z[-1]
+        spring = f00 * known.moment_am2 / (2.0 * beta0)
+        inertia = inertia_from(f00, spring, delta)
+        values = [f00, beta0, spring, inertia, lever_from_inertia(inertia, known.magnet_mass_kg), delta, stop]
+        values += [float(environment @ unit_axis)] * fit_environment
+        if fit_lever:
+            values += [lever, beta0 * lever * gradient_factor]
+        return np.array(values)
+
+    z = np.append(x, damping)
+    cov_z = np.zeros((len(z), len(z)))
+    cov_z[:-1, :-1], cov_z[-1, -1] = cov_x, damping_var
+    steps = np.maximum(np.abs(z), 1e-12) * 1e-6
+    jac = np.stack([(constants(z + e) - constants(z - e)) / (2.0 * s) for e, s in zip(np.diag(steps), steps)], -1)
+    values = constants(z)
+    covariance = jac @ cov_z @ jac.T
+    if fit_lever:
+        lever, lever_j = values[names.index("gradient_lever_m")], values[names.index("lever_m")]
+        i, j = names.index("gradient_lever_m"), names.index("lever_m")
+        sigma = math.sqrt(max(covariance[i, i] + covariance[j, j] - 2.0 * covariance[i, j], 0.0))
+        notes = notes + (f"lever check: l from the gradient {lever * 1e3:.4f} mm against l = √(J/a) "
+                         f"{lever_j * 1e3:.4f} mm, {(lever - lever_j) / sigma:+.2f} σ apart",)
+    return ProbeCalibration(tuple(names), values, covariance, chi2_dof, n_points, known, notes)
+
+
+def _gradient_factor(wirings, gradient_points) -> float:
+    """γ/(β0·l) of the gradient wiring at θ0 = 0: 1 − 2·Gy'y'/Gx'x' (PHYSICS.md §4: k gains
+    m·l·(Gx'x' − 2·Gy'y')); 2 for an anti-Helmholtz pair along x."""
+    gradient = np.asarray(wirings[gradient_points[0].wiring].gradient_per_a_t_per_m, float)
+    if gradient[0, 0] == 0.0:
+        raise CalibrationError("the gradient wiring has no Gxx at the probe: γ along x undetermined")
+    return 1.0 - 2.0 * gradient[1, 1] / gradient[0, 0]

@@ -1,0 +1,215 @@
+"""The calibration procedure as a state machine (paper Fig. 3): supply steps × orientations × cycles.
+
+For every supply current of the plan: ramp the supply there and wait until the device says it
+is; at every orientation of the plan (θ0 = 0° and 180° by default: the field term flips sign
+between them, offsets do not) run one measurement cycle and collect its ring-down fits; then
+the next current. Every ending (done, cancelled, a refused command, a failed cycle) first
+ramps the supply back to zero, and only then reports the outcome, which says whether the
+device confirmed zero.
+
+The schedule does no I/O, like :class:`mows.device.cycle.CycleSequencer`: it is fed the
+device's answers (:meth:`on_supply`, :meth:`on_fit`, :meth:`on_cycle_done`, :meth:`fits_timed_out`)
+and the user's :meth:`cancel`, and returns a :class:`Step` of actions (:class:`SetSupply`,
+:class:`RunCycle`), feedback and, at the end, the :class:`CalibrationOutcome` with the
+calibration points for :func:`mows.estimate.probe_calibration.calibrate_probe`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+
+from mows.estimate.probe_calibration import CalibrationPoint
+
+PAPER_CURRENTS_A = (0.0, 0.5, 1.0, 1.5, 2.0, -0.5, -1.0, -1.5, -2.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class CalibrationPlan:
+    """Which supply currents (A), orientations (rad) and ring-downs per cycle; ``wiring`` names
+    how the supply's coils are connected (homogeneous ``helmholtz`` or a gradient wiring)."""
+
+    currents_a: tuple = PAPER_CURRENTS_A
+    theta0_rad: tuple = (0.0, math.pi)
+    repeats: int = 1
+    wiring: str = "helmholtz"
+
+    def __post_init__(self):
+        if not self.currents_a or not all(math.isfinite(i) for i in self.currents_a):
+            raise ValueError(f"currents_a = {self.currents_a!r} must be a non-empty list of finite currents")
+        if not self.theta0_rad or not all(math.isfinite(t) for t in self.theta0_rad):
+            raise ValueError(f"theta0_rad = {self.theta0_rad!r} must be a non-empty list of finite angles")
+        if not (isinstance(self.repeats, int) and self.repeats >= 1):
+            raise ValueError(f"repeats = {self.repeats!r} must be an integer ≥ 1")
+
+    @property
+    def steps(self) -> int:
+        return len(self.currents_a) * len(self.theta0_rad)
+
+
+@dataclasses.dataclass(frozen=True)
+class SetSupply:
+    """Ramp the supply to ``current_a``; answer with :meth:`CalibrationSchedule.on_supply`."""
+
+    current_a: float
+
+
+@dataclasses.dataclass(frozen=True)
+class RunCycle:
+    """Run a measurement cycle of ``repeats`` ring-downs at ``theta0_rad``; pass its fits to
+    :meth:`CalibrationSchedule.on_fit` and its end to :meth:`CalibrationSchedule.on_cycle_done`."""
+
+    theta0_rad: float
+    repeats: int
+
+
+@dataclasses.dataclass(frozen=True)
+class Feedback:
+    step: int                # 1-based index of the cycle in the plan
+    steps: int
+    current_a: float
+    theta0_rad: float
+    ringdowns: int           # usable ring-downs so far
+    message: str
+
+
+@dataclasses.dataclass(frozen=True)
+class CalibrationOutcome:
+    success: bool
+    cancelled: bool
+    supply_at_zero: bool     # the device confirmed the supply at zero after the end
+    message: str
+    points: tuple = ()
+    failed: dict = dataclasses.field(default_factory=dict)   # (current, reason) → count of failed fits
+
+
+@dataclasses.dataclass
+class Step:
+    actions: list = dataclasses.field(default_factory=list)
+    feedback: list = dataclasses.field(default_factory=list)
+    outcome: CalibrationOutcome | None = None
+
+
+class State(enum.Enum):
+    IDLE = "idle"
+    RAMPING = "ramping"
+    CYCLING = "cycling"
+    AWAITING_FITS = "awaiting fits"
+    RETURNING = "returning to zero"
+    DONE = "done"
+
+
+class CalibrationSchedule:
+    """Runs ``plan`` once (module docstring)."""
+
+    def __init__(self, plan: CalibrationPlan):
+        self.plan = plan
+        self.state = State.IDLE
+        self._step = 0                       # index into current × orientation
+        self._fits_seen = 0
+        self._points: list[CalibrationPoint] = []
+        self._failed: dict = {}
+        self._ending: tuple[bool, bool, str] | None = None   # (success, cancelled, message)
+
+    @property
+    def current_a(self) -> float:
+        return self.plan.currents_a[min(self._step, self.plan.steps - 1) // len(self.plan.theta0_rad)]
+
+    @property
+    def theta0_rad(self) -> float:
+        return self.plan.theta0_rad[min(self._step, self.plan.steps - 1) % len(self.plan.theta0_rad)]
+
+    @property
+    def finished(self) -> bool:
+        return self.state == State.DONE
+
+    def start(self) -> Step:
+        if self.state != State.IDLE:
+            raise ValueError("a calibration schedule runs once")
+        self.state = State.RAMPING
+        return Step(actions=[SetSupply(self.current_a)],
+                    feedback=[self._feedback(f"supply to {self.current_a:+.4f} A")])
+
+    # --- the device's answers -----------------------------------------------------------------
+    def on_supply(self, accepted: bool, reason: str = "") -> Step:
+        """The device reached the commanded current (or refused it, with ``reason``)."""
+        if self.state == State.RETURNING:
+            return self._finish(accepted, reason)
+        if self.state != State.RAMPING:
+            return Step()
+        if not accepted:
+            return self._end(False, False, f"the supply refused {self.current_a:+.4f} A: {reason}")
+        self.state = State.CYCLING
+        return Step(actions=[RunCycle(self.theta0_rad, self.plan.repeats)],
+                    feedback=[self._feedback(f"cycle at θ0 = {math.degrees(self.theta0_rad):.1f}°")])
+
+    def on_fit(self, fit) -> Step:
+        """A ring-down fit (``RingdownFit``) of the running cycle (tuning fits are not passed)."""
+        if self.state not in (State.CYCLING, State.AWAITING_FITS):
+            return Step()
+        self._fits_seen += 1
+        if fit.ok:
+            self._points.append(CalibrationPoint.from_fit(fit, self.plan.wiring, self.current_a))
+        else:
+            key = (self.current_a, fit.status.name)
+            self._failed[key] = self._failed.get(key, 0) + 1
+        if self.state == State.AWAITING_FITS and self._fits_seen >= self.plan.repeats:
+            return self._next()
+        return Step()
+
+    def on_cycle_done(self, success: bool, message: str = "") -> Step:
+        if self.state != State.CYCLING:
+            return Step()
+        if not success:
+            return self._end(False, False, f"the cycle at {self.current_a:+.4f} A, θ0 = "
+                                           f"{math.degrees(self.theta0_rad):.1f}° failed: {message}")
+        if self._fits_seen >= self.plan.repeats:
+            return self._next()
+        self.state = State.AWAITING_FITS
+        return Step()
+
+    def fits_timed_out(self) -> Step:
+        """The caller waited long enough for the cycle's fits: go on without the missing ones."""
+        if self.state != State.AWAITING_FITS:
+            return Step()
+        key = (self.current_a, "NO_FIT")
+        self._failed[key] = self._failed.get(key, 0) + self.plan.repeats - self._fits_seen
+        return self._next()
+
+    def cancel(self, reason: str = "cancelled") -> Step:
+        if self.state in (State.RETURNING, State.DONE):
+            return Step()
+        return self._end(False, True, reason)
+
+    # --- sequencing ---------------------------------------------------------------------------
+    def _next(self) -> Step:
+        self._step += 1
+        self._fits_seen = 0
+        if self._step >= self.plan.steps:
+            return self._end(True, False, f"{len(self._points)} ring-downs at {len(self.plan.currents_a)} supply "
+                                          f"currents and {len(self.plan.theta0_rad)} orientations")
+        if self._step % len(self.plan.theta0_rad) == 0:
+            self.state = State.RAMPING
+            return Step(actions=[SetSupply(self.current_a)],
+                        feedback=[self._feedback(f"supply to {self.current_a:+.4f} A")])
+        self.state = State.CYCLING
+        return Step(actions=[RunCycle(self.theta0_rad, self.plan.repeats)],
+                    feedback=[self._feedback(f"cycle at θ0 = {math.degrees(self.theta0_rad):.1f}°")])
+
+    def _end(self, success: bool, cancelled: bool, message: str) -> Step:
+        """Every ending ramps the supply to zero first."""
+        self._ending = (success, cancelled, message)
+        self.state = State.RETURNING
+        return Step(actions=[SetSupply(0.0)], feedback=[self._feedback(f"{message}; supply to zero")])
+
+    def _finish(self, at_zero: bool, reason: str) -> Step:
+        success, cancelled, message = self._ending
+        if not at_zero:
+            message += f"; THE SUPPLY DID NOT CONFIRM ZERO ({reason})"
+        self.state = State.DONE
+        return Step(outcome=CalibrationOutcome(success and at_zero, cancelled, at_zero, message,
+                                               tuple(self._points), dict(self._failed)))
+
+    def _feedback(self, message: str) -> Feedback:
+        return Feedback(min(self._step + 1, self.plan.steps), self.plan.steps, self.current_a, self.theta0_rad,
+                        len(self._points), message)

@@ -47,7 +47,9 @@ FIELD_UNIT_T = 1e-6       # fit units keep the normal equations well scaled: µT
 BETA_UNIT_HZ_PER_T = 1e3
 LEVER_UNIT_M = 1e-3
 AMPLITUDE_UNIT_RAD = 1e-3
-DIFF_STEP = 1e-6          # relative step of the numerical Jacobian
+# Central-difference steps of the Jacobian in those units (f00, β0, swing, environment, lever):
+# large against the model's rounding (~1e-9 Hz), small against its curvature.
+STEPS = {"f00": 1e-4, "beta0": 1e-5, "swing": 1e-2, "environment": 0.1, "lever": 1e-4}
 # The start swing of a ring-down driven into the stop scatters about the stop by ~0.1°
 # (penetration into the contact, the phase at switch-off: 23.6°–23.9° measured in the
 # simulator at a 24° stop, the estimator's θmax scattering by degrees).
@@ -253,14 +255,37 @@ def calibrate_probe(points, wirings, known: KnownConstants, field_wiring: str = 
     start = _start(field_points, wirings[field_wiring], known)
     x0 = np.array([start[0], start[1] / BETA_UNIT_HZ_PER_T, known.theta_stop_rad / AMPLITUDE_UNIT_RAD]
                   + [0.0] * fit_environment + [nominal_lever_m / LEVER_UNIT_M] * fit_lever)
-    result = optimize.least_squares(residuals, x0, method="lm", diff_step=DIFF_STEP, x_scale="jac")
+    steps = np.array([STEPS[k] for k in ["f00", "beta0", "swing"] + ["environment"] * fit_environment
+                      + ["lever"] * fit_lever])
+    result = optimize.least_squares(residuals, x0, jac=lambda x: _jacobian(residuals, x, steps), method="lm",
+                                    x_scale="jac")
     if not result.success or not np.all(np.isfinite(result.fun)):
         raise CalibrationError(f"the fit of the calibration did not converge: {result.message}")
     dof = len(points) + 1 - len(x0)
     chi2_dof = float(result.fun @ result.fun / dof) if dof > 0 else math.nan
-    cov_x = np.linalg.inv(result.jac.T @ result.jac) * max(1.0, chi2_dof if dof > 0 else 1.0)
+    cov_x = _covariance(result.jac, ["f00", "β0", "start swing"] + ["environment field"] * fit_environment
+                        + ["lever"] * fit_lever) * max(1.0, chi2_dof if dof > 0 else 1.0)
     return _derive(result.x, cov_x, damping, damping_var, unpack, fit_environment, fit_lever, unit_axis,
                    wirings, gradient_points, known, chi2_dof, len(points), tuple(notes))
+
+
+def _jacobian(residuals, x, steps) -> np.ndarray:
+    columns = []
+    for k, h in enumerate(steps):
+        e = np.zeros_like(x)
+        e[k] = h
+        columns.append((residuals(x + e) - residuals(x - e)) / (2.0 * h))
+    return np.stack(columns, -1)
+
+
+def _covariance(jac, names) -> np.ndarray:
+    """(JᵀJ)⁻¹; CalibrationError naming the parameters the data leave undetermined."""
+    u, s, vt = np.linalg.svd(jac, full_matrices=False)
+    if s[-1] < 1e-9 * s[0]:
+        weak = [names[i] for i in np.flatnonzero(np.abs(vt[-1]) > 0.3)]
+        raise CalibrationError(f"the data cannot determine {' and '.join(weak)} (separately): "
+                               "add supply currents or orientations")
+    return (vt.T / s**2) @ vt
 
 
 def _amplitude_notes(points, known: KnownConstants) -> list:

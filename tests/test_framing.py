@@ -25,6 +25,7 @@ from mows.device.framing import (
     Ack,
     Coils,
     DeviceInfo,
+    FieldCurrent,
     Frame,
     FrameDecoder,
     Heartbeat,
@@ -62,6 +63,8 @@ bodies = st.one_of(
     st.builds(Coils, st.sampled_from([0, Coils.IMMEDIATE]), u64, f64,
               st.lists(f64, max_size=4).map(tuple)),
     st.builds(Orientation, u64, f64),
+    st.builds(FieldCurrent, st.just(0), u64, f64),
+    st.just(FieldCurrent(FieldCurrent.TO_ZERO_NOW, 0, 0.0)),
 )
 frames = st.builds(Frame, u32, u64, bodies)
 

@@ -211,3 +211,47 @@ def test_unplugging_leads_to_reconnection_with_backoff_and_a_reported_gap(emulat
     assert after.first_sample_index - before.end_index == health["missing_samples"]
     assert after.sequence - before.sequence >= 2
     assert all(b.sequence == a.sequence + 1 for a, b in zip(blocks, blocks[1:]) if (a, b) != (before, after))
+
+
+# --- the static-field supply (issue 12) ----------------------------------------------------------
+@pytest.fixture
+def supplied(tmp_path):
+    """An emulated calibration bench: the Pasco pair on a 2 A supply (2 A/s)."""
+    from mows.sim.simulator import SimulatedDevice
+    with DeviceEmulator(SimulatedDevice(load_scenario("calibration")), tmp_path / "bench", CurrentCap(CAP_A)) as bench:
+        link = SerialLink(str(bench.link_path)).start()
+        yield bench, link
+        link.close()
+
+
+def acks_of(items):
+    return {i.body.command_sequence: i.body for i in items if not isinstance(i, LinkEvent) and isinstance(i.body, Ack)}
+
+
+def test_the_supply_ramps_on_a_framed_command_and_the_device_acks_where_the_ramp_ends(supplied):
+    from mows.device.framing import FieldCurrent
+    bench, link = supplied
+    collect(link, "the stream to run", lambda items: len(samples_of(items)) >= 20)
+    over = link.send(FieldCurrent(0, 0, 2.5))
+    ramp = link.send(FieldCurrent(0, 0, 1.0))
+    answers = acks_of(collect(link, "two acks", lambda items: len(acks_of(items)) == 2))
+    assert answers[over].result == Ack.REFUSED_OVER_CAP
+    assert answers[ramp].accepted
+    # polling sends the heartbeats: without them the watchdog would ramp the supply back down
+    wait_for(lambda: bench.device.device.field_current_a == 1.0, "the ramp to arrive", lambda: link.poll(0.02))
+    assert not bench.watchdog_trips
+    # the ramp's 50 steps of 10 mA every 10 ms: it arrives 0.49 s after it starts, where the ack said
+    assert bench.device.next_index > answers[ramp].applied_sample_index
+
+
+def test_a_driver_lost_mid_calibration_leaves_the_supply_at_zero(supplied):
+    from mows.device.interface import FieldCurrentCommand
+    bench, link = supplied
+    backend = SerialBackend(link, CurrentCap(CAP_A))
+    collect(link, "the stream to run", lambda items: len(samples_of(items)) >= 20)
+    backend.send(FieldCurrentCommand(1, 0, 1.5))
+    wait_for(lambda: bench.device.device.field_current_a >= 0.5, "the supply to ramp up", lambda: link.poll(0.02))
+    link.close()  # the driver is gone mid-ramp: no heartbeat, no frame
+    wait_for(lambda: bench.watchdog_trips, "the watchdog")
+    wait_for(lambda: bench.device.device.field_current_a == 0.0, "the supply to ramp down")
+    assert bench.device.supply_target_a == 0.0

@@ -18,6 +18,7 @@ from mows.device.framing import (
     Ack,
     Coils,
     DeviceInfo,
+    FieldCurrent,
     Orientation,
     Samples,
     Status,
@@ -215,6 +216,8 @@ class SerialBackend(Backend):
         if isinstance(command, CoilCommand):
             check_coil_command(command, self.info, self.cap.limit_a)
             body = Coils(0, command.at_sample_index, command.frequency_hz, tuple(command.amplitudes_a))
+        elif isinstance(command, FieldCurrentCommand):
+            body = FieldCurrent(0, command.at_sample_index, float(command.current_a))
         else:
             body = Orientation(command.at_sample_index, command.theta0_rad)
         with self._lock:
@@ -228,6 +231,14 @@ class SerialBackend(Backend):
         except NotExciting:
             pass  # the link is down: the device's watchdog switches the coils off
 
+    def supply_to_zero_now(self) -> None:
+        if self.info is None:
+            return
+        try:
+            self.link.send(FieldCurrent(FieldCurrent.TO_ZERO_NOW, 0, 0.0))
+        except NotExciting:
+            pass  # the link is down: the device's watchdog ramps the supply to zero
+
     def stats(self) -> dict:
         values = {**self.link.stats(), "samples_frames_before_info": self.samples_before_info}
         if self.device_status is not None:
@@ -238,6 +249,7 @@ class SerialBackend(Backend):
 
     def close(self) -> None:
         self.coils_off_now()
+        self.supply_to_zero_now()
         self.link.close()
 
 

@@ -16,7 +16,10 @@ Like the hardware it:
   Samples frames of ``frame_samples``, a Status frame every STATUS_PERIOD_S of device time;
 * applies coil and orientation commands at their sample (:class:`ScheduledDevice`) and acks
   each with the sample it applies at, refusing currents above its cap;
-* switches the coils off when no host frame has arrived for ``watchdog_timeout_s``: the off
+* ramps its static-field supply (a scenario with a ``supply`` section) on FieldCurrent frames,
+  within the supply's cap and slew limit, and acks each with the sample the ramp ends;
+* switches the coils off and ramps the supply to zero when no host frame has arrived for
+  ``watchdog_timeout_s`` (a host that died mid-calibration leaves no field on): the off
   takes effect exactly at the sample where the deadline falls (a host frame is stamped with
   the sample clock when it is read, at most one loop period, ``frame_samples``, late).
   The device's own coil log (:attr:`ScheduledDevice.coil_log`, from the samples' coil flags)
@@ -41,6 +44,7 @@ from mows.device.framing import (
     Body,
     Coils,
     DeviceInfo,
+    FieldCurrent,
     Frame,
     FrameDecoder,
     Heartbeat,
@@ -184,8 +188,11 @@ class DeviceEmulator:
     def _watchdog(self, end: int) -> None:
         """Coils off at the sample where the host's silence reaches the timeout."""
         deadline = self._last_host_index + self._watchdog_samples
-        if deadline < end and self.device.busy and self._tripped_for != self._last_host_index:
+        supply_on = self.device.supply_limits is not None and (
+            self.device.supply_target_a != 0.0 or self.device.device.field_current_a != 0.0)
+        if deadline < end and (self.device.busy or supply_on) and self._tripped_for != self._last_host_index:
             off = self.device.switch_off_at(deadline)
+            self.device.supply_to_zero()
             self.watchdog_trips.append((self._last_host_index, off))
             self._tripped_for = self._last_host_index
             # Told before the samples in which the coils go off, so the host never takes
@@ -225,15 +232,17 @@ class DeviceEmulator:
         body = frame.body
         if isinstance(body, Hello):
             self._send(self.info, self.clock.stamp_ns(due))
-        elif isinstance(body, (Coils, Orientation)):
+        elif isinstance(body, (Coils, Orientation, FieldCurrent)):
             result, applied = self._command(body)
             self._send(Ack(frame.sequence, result, applied), self.clock.stamp_ns(due))
         elif not isinstance(body, Heartbeat):
             self.misdirected_frames += 1  # a device's frame type, sent to the device
 
-    def _command(self, body: Coils | Orientation) -> tuple[int, int]:
+    def _command(self, body: Coils | Orientation | FieldCurrent) -> tuple[int, int]:
         """(Ack result, applied sample) of a host command."""
         try:
+            if isinstance(body, FieldCurrent):
+                return self._supply(body)
             if isinstance(body, Orientation):
                 return Ack.OK, self.device.schedule_orientation(body.at_sample_index, body.theta0_rad)
             self.device.check_coils(body.amplitudes_a, body.frequency_hz)
@@ -247,6 +256,16 @@ class DeviceEmulator:
             return Ack.REFUSED_INVALID, 0
         except RuntimeError:
             return Ack.REFUSED_BUSY, 0
+
+    def _supply(self, body: FieldCurrent) -> tuple[int, int]:
+        limits = self.device.supply_limits
+        if limits is None:
+            return Ack.REFUSED_INVALID, 0
+        if body.to_zero_now:
+            return Ack.OK, self.device.supply_to_zero()
+        if abs(body.current_a) > limits.cap_a:
+            return Ack.REFUSED_OVER_CAP, 0
+        return Ack.OK, self.device.schedule_field_current(body.at_sample_index, body.current_a)
 
     def _send(self, body: Body, stamp_ns: int) -> None:
         """Frame ``body`` and queue it. Every frame takes a sequence number, also one that is

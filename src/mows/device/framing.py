@@ -154,16 +154,19 @@ class Samples(Body):
 
 @dataclasses.dataclass(frozen=True)
 class Ack(FixedBody):
-    """The device's answer to a host command (Coils, Orientation): accepted or why not, and the
-    device sample index from which the command takes (or took) effect."""
+    """The device's answer to a host command (Coils, Orientation, FieldCurrent): accepted or why
+    not, and the device sample index from which the command takes (or took) effect (for
+    FieldCurrent: the sample at which the supply's ramp reaches the current)."""
 
     TYPE: ClassVar[int] = 0x03
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<IBQ")
     OK: ClassVar[int] = 0
-    REFUSED_OVER_CAP: ClassVar[int] = 1    # a coil amplitude above DeviceInfo.current_cap_a
-    REFUSED_INVALID: ClassVar[int] = 2     # wrong coil count, non-finite value, frequency out of range
+    REFUSED_OVER_CAP: ClassVar[int] = 1    # a coil amplitude above DeviceInfo.current_cap_a, or a
+                                           # supply current above the supply's cap
+    REFUSED_INVALID: ClassVar[int] = 2     # wrong coil count, non-finite value, frequency out of
+                                           # range, no supply
     REFUSED_BUSY: ClassVar[int] = 3        # orientation change while the coils are on
-    REASONS: ClassVar[dict] = {0: "accepted", 1: "coil current above the device's cap",
+    REASONS: ClassVar[dict] = {0: "accepted", 1: "current above the device's cap",
                                2: "invalid command", 3: "coils are on"}
     command_sequence: int       # the sequence number of the host frame answered
     result: int
@@ -275,8 +278,37 @@ class Orientation(FixedBody):
     theta0_rad: float
 
 
+@dataclasses.dataclass(frozen=True)
+class FieldCurrent(FixedBody):
+    """Ramp the static-field supply to ``current_a`` from sample ``at_sample_index`` on, within
+    its slew limit (the device rounds to its resolution and refuses currents above its cap).
+    TO_ZERO_NOW drops any ramp that waits and ramps to zero from the next sample (``current_a``
+    must be 0): the host's cancel, and what the device's watchdog does by itself."""
+
+    TYPE: ClassVar[int] = 0x14
+    LAYOUT: ClassVar[struct.Struct] = struct.Struct("<BQd")
+    TO_ZERO_NOW: ClassVar[int] = 0x01
+    flags: int
+    at_sample_index: int
+    current_a: float
+
+    @classmethod
+    def decode(cls, payload: bytes) -> FieldCurrent:
+        body = super().decode(payload)
+        if body.flags & ~cls.TO_ZERO_NOW:
+            raise PayloadError(f"FieldCurrent flags 0x{body.flags:02x} has unknown bits")
+        if body.to_zero_now and body.current_a != 0.0:
+            raise PayloadError(f"FieldCurrent TO_ZERO_NOW with current_a = {body.current_a!r}, expected 0")
+        return body
+
+    @property
+    def to_zero_now(self) -> bool:
+        return bool(self.flags & self.TO_ZERO_NOW)
+
+
 BODY_TYPES: dict[int, type[Body]] = {cls.TYPE: cls for cls in
-                                     (DeviceInfo, Samples, Ack, Status, Hello, Heartbeat, Coils, Orientation)}
+                                     (DeviceInfo, Samples, Ack, Status, Hello, Heartbeat, Coils, Orientation,
+                                      FieldCurrent)}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -25,8 +25,9 @@ import sys
 import numpy as np
 
 from mows.estimate.probe_calibration import CalibrationError, CalibrationPoint, KnownConstants, Wiring, calibrate_probe
-from mows.estimate.ringdown import fit_cycle
-from mows.lab.table import MeasurementTable, load_table
+from mows.lab.synth import fit_cycle
+from mows.lab.readers import load_table
+from mows.lab.table import MeasurementTable
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sim.scenario import load_scenario

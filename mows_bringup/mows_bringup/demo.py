@@ -1,6 +1,12 @@
 """mows-demo: the main job on the simulated device, end to end.
 
-Starts the node graph (driver on the first-principles simulator, estimator, mapper), runs one
+First calibrates the simulated probe, whose constants are deliberately not the paper's (the
+``calibration`` scenario: kM +12 %, J −10 %): the calibration schedule steps the Helmholtz
+pair's supply at θ0 = 0° and 180° (and the anti-Helmholtz wiring for the lever check) on the
+simulated device in simulated device time, fits the probe's constants with the full potential
+(``mows calibrate --simulate`` does the same), prints them against the truth and writes the
+probe file that the estimator and the mapper then load by ``probe_file``. Then it
+starts the node graph (driver on the first-principles simulator, estimator, mapper), runs one
 rotation sweep through the mapper's action, and prints what the MOWS measured against the
 truth of the simulated scene: the in-plane field and gradient from the first-principles
 decomposition, what the paper's published model would have made of the same ring-downs, and
@@ -31,23 +37,59 @@ def parse_arguments(argv):
     parser.add_argument("--tuning-steps", type=int, default=1, help="frequency-tuning excitations per orientation")
     parser.add_argument("--gap-s", type=float, default=0.2, help="pause between repeats, s (the paper: 10 s)")
     parser.add_argument("--out", default="out", help="directory for the lab report and the node log")
+    parser.add_argument("--probe-scenario", default="calibration",
+                        help="scenario whose (not the paper's) probe is calibrated first and then mapped with")
     args = parser.parse_args(argv)
     if args.angles < 6:
         parser.error("a sweep needs at least 6 orientations to separate field (1θ0) from gradient (2θ0)")
     return args
 
 
-def write_parameters(args, directory: pathlib.Path) -> pathlib.Path:
+def calibrate_probe(args, directory: pathlib.Path):
+    """Calibrate the probe of ``--probe-scenario`` on its simulated bench; the probe file and
+    the scene to map (``--scenario`` with that probe in it), both written to ``directory``."""
+    import datetime
+
+    from mows.cli.calibrate import compare_with_truth, scenario_wirings, simulate_calibration
+    from mows.estimate.probe_calibration import KnownConstants, calibrate_probe as fit_constants
+    from mows.physics.probe import PAPER_PROBE
+    from mows.sim.scenario import load_scenario
+    from mows.sweep.calibration_schedule import CalibrationPlan
+
+    bench = load_scenario(args.probe_scenario)
+    gradient = bench.replace(supply=load_scenario("calibration_gradient").supply, seed=bench.seed + 1)
+    plan = CalibrationPlan(currents_a=(0.0, 1.0, 2.0, -1.0, -2.0))
+    say(f"calibrating the probe of {args.probe_scenario}: supply {list(plan.currents_a)} A at θ0 = 0° and 180°, "
+        "Helmholtz and anti-Helmholtz wiring (simulated device time)")
+    points = list(simulate_calibration(bench, plan, PAPER_PROBE, lambda f: say(f"  {f.step}/{f.steps}: {f.message}"))
+                  .points)
+    gradient_plan = CalibrationPlan(plan.currents_a, wiring="gradient")
+    points += simulate_calibration(gradient, gradient_plan, PAPER_PROBE).points
+    calibration = fit_constants(points, scenario_wirings(bench, gradient), KnownConstants.of(PAPER_PROBE))
+    for line in compare_with_truth(calibration, bench.probe).splitlines() + [f"  {n}" for n in calibration.notes]:
+        say(line)
+    probe_path = directory / "calibrated_probe.yaml"
+    date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    calibration.probe().to_yaml(probe_path, calibration.record(date, bench.name))
+    scene_path = directory / "demo_scene.yaml"
+    load_scenario(args.scenario).replace(probe=bench.probe).to_yaml(scene_path)
+    say(f"probe file: {probe_path}; the scene {args.scenario} with that probe: {scene_path}")
+    return probe_path, scene_path
+
+
+def write_parameters(args, directory: pathlib.Path, probe_path, scene_path) -> pathlib.Path:
     """One parameter file for the whole graph; each node takes its own section. The driver
-    drives the coils of the scene's own set-up."""
+    drives the coils of the scene's own set-up; estimator and mapper load the calibrated probe."""
     from mows.sim.scenario import load_scenario
 
-    setup = load_scenario(args.scenario).setup.name
+    setup = load_scenario(scene_path).setup.name
     path = directory / "demo_parameters.yaml"
     path.write_text(yaml.safe_dump({
-        "/**/driver": {"ros__parameters": {"scenario": args.scenario, "coil_setup": setup, "repeats": args.repeats,
+        "/**/driver": {"ros__parameters": {"scenario": str(scene_path), "coil_setup": setup, "repeats": args.repeats,
                                            "tuning_steps": args.tuning_steps, "gap_s": args.gap_s}},
-        "/**/mapper": {"ros__parameters": {"reference_scenario": args.scenario, "repeats_per_angle": args.repeats}},
+        "/**/estimator": {"ros__parameters": {"probe_file": str(probe_path)}},
+        "/**/mapper": {"ros__parameters": {"reference_scenario": str(scene_path), "repeats_per_angle": args.repeats,
+                                           "probe_file": str(probe_path)}},
     }))
     return path
 
@@ -56,15 +98,16 @@ def main(argv=None) -> int:
     args = parse_arguments(sys.argv[1:] if argv is None else argv)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    probe_path, scene_path = calibrate_probe(args, out)
     log = open(out / "demo_nodes.log", "w")
-    graph = Graph(NODES, ["--params-file", str(write_parameters(args, out))], output=log)
+    graph = Graph(NODES, ["--params-file", str(write_parameters(args, out, probe_path, scene_path))], output=log)
     stopping = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stopping.set())
     say(f"scene: {args.scenario}; node output in {out / 'demo_nodes.log'}")
     graph.start()
     try:
-        ok = run_sweep(args, out, stopping, graph.exited)
+        ok = run_sweep(args, out, stopping, graph.exited, scene_path, probe_path)
     finally:
         codes = graph.stop()
         log.close()
@@ -74,7 +117,7 @@ def main(argv=None) -> int:
     return 0 if ok and not unclean else 1
 
 
-def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited) -> bool:
+def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited, scene_path, probe_path) -> bool:
     import rclpy
     from mows_msgs.action import RotationSweep
     from mows_msgs.msg import MagnetometerBlock, ModelReport, RingdownFit
@@ -120,7 +163,7 @@ def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited) -> boo
             say(f"sweep failed: {outcome.message}")
             return False
         spin_until(lambda: reports, 60.0, "the model report")
-        print_outcome(args.scenario, outcome.decomposition, fits, reports[-1], out)
+        print_outcome(str(scene_path), outcome.decomposition, fits, reports[-1], out, probe_path)
         return True
     except TimeoutError as error:
         say(str(error))
@@ -135,22 +178,23 @@ def print_feedback(feedback) -> None:
         f"{feedback.frequency_shift_std_hz * 1e3:.3f} mHz  ({feedback.n_ok} of {len(feedback.fits)} ring-downs OK)")
 
 
-def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path) -> None:
+def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, probe_path) -> None:
     from mows.lab import analyse, from_sweep, reference_at, write_report
-    from mows.physics.probe import PAPER_PROBE
+    from mows.physics.probe import Probe
     from mows.sweep.record import SweepRecord
     from mows_mapper.messages import sweep_point
 
     field, gradient = reference_at(scenario)
     truth = {"Bx (µT)": field[0] * 1e6, "By (µT)": field[1] * 1e6, "Gxx (mT/m)": gradient[0, 0] * 1e3,
              "Gxy (mT/m)": gradient[0, 1] * 1e3, "Gyy (mT/m)": gradient[1, 1] * 1e3}
+    probe = Probe.from_yaml(probe_path)
     record = SweepRecord()
     for fit in fits:
         if fit.status_name == "OK":
             record.add(sweep_point(fit))
     f00 = float(np.mean([f.frequency_hz - f.frequency_shift_hz for f in fits if f.status_name == "OK"]))
-    published = record.decompose(PAPER_PROBE, f00, model="published")
-    first_principles = record.decompose(PAPER_PROBE, f00)
+    published = record.decompose(probe, f00, model="published")
+    first_principles = record.decompose(probe, f00)
     say("")
     say(f"{'':12s} {'first principles':>22s} {'truth':>10s} {'pull':>7s} {'published model':>17s}")
     for label, value, sigma, pub in zip(truth, *_values(decomposition), _values_of(published)):
@@ -166,11 +210,11 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path) -> N
         say(f"  candidate {candidate.effect:22s} ΔBIC {candidate.delta_bic:10.1f}  χ²/dof after "
             f"{candidate.chi2_dof_after:.2f}  group {candidate.group}")
     say(f"  residual structure: {report.structure}")
-    table = from_sweep(record, scenario, PAPER_PROBE, first_principles)
+    table = from_sweep(record, scenario, probe, first_principles)
     table_path = out / "demo_sweep.csv"
     table.to_csv(table_path)
     say(f"sweep table: {table_path} (try: mows lab diagnose {table_path} --probe <probe.yaml>)")
-    lab = analyse(table, PAPER_PROBE, auto=True)
+    lab = analyse(table, probe, auto=True)
     for step in lab.history:
         say(f"  error history: {' + '.join(['published'] + step.effects):60s} χ²/dof {step.chi2_dof:9.2f}  "
             f"cv rms {step.cv_rms_hz * 1e3:8.3f} mHz")

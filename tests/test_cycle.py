@@ -232,3 +232,46 @@ def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a,
     coil_commands = [c for c in device.commands if isinstance(c, CoilCommand)]
     assert len(coil_commands) == 2 * (repeats + tuning)
     assert all(max(abs(i) for i in c.amplitudes_a) <= cap_a for c in coil_commands)
+
+
+# --- the static-field supply through the session (issue 12) -----------------------------------
+def supplied_session(supply_cap_a=2.0):
+    scenario = load_scenario("calibration")
+    backend = SimBackend(SimulatedDevice(scenario), CurrentCap(CAP_A), paced=False, supply_cap_a=supply_cap_a)
+    return DeviceSession(backend, SessionConfig(0.025, FAST, scenario.setup, CurrentCap(CAP_A), 125.0,
+                                                fit_ringdown)), backend
+
+
+def step_until(session, condition, steps=2000):
+    for _ in range(steps):
+        if condition():
+            return
+        session.step(0.0)
+    raise AssertionError("the condition never held")
+
+
+def test_the_session_answers_a_supply_current_once_the_device_has_reached_it():
+    session, backend = supplied_session()
+    answers = []
+    session.step(0.0)
+    session.set_field_current(1.0, answers.append)
+    step_until(session, lambda: answers)
+    (result,) = answers
+    assert result.accepted and backend.device.device.field_current_a == 1.0
+    assert backend.device.next_index > result.applied_sample_index
+    with pytest.raises(ValueError, match="cap"):
+        session.set_field_current(2.5, answers.append)     # above the driver's supply cap: never sent
+    session.close()
+    assert backend.device.device.field_current_a == 0.0   # closing ramps the supply down first
+
+
+def test_the_driver_s_supply_cap_is_lower_than_the_device_s_and_a_cancel_ramps_down_from_midway():
+    session, backend = supplied_session(supply_cap_a=1.0)
+    with pytest.raises(ValueError, match="cap of 1 A"):
+        session.set_field_current(1.5, print)
+    answers = []
+    session.set_field_current(-1.0, answers.append)
+    step_until(session, lambda: backend.device.device.field_current_a <= -0.3)
+    session.supply_to_zero()
+    step_until(session, lambda: backend.device.device.field_current_a == 0.0 and backend.device.supply_target_a == 0.0)
+    assert not answers or answers[0].accepted

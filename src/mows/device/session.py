@@ -3,7 +3,7 @@ streaming thread, with cycles and the emergency stop requested from other thread
 
 The streaming thread calls :meth:`DeviceSession.step` in a loop and publishes what it
 returns (blocks, phase events) in order. Requests from other threads (a cycle, the emergency
-stop) take the session's lock, act on the device at once (the emergency stop switches the
+stop, a supply current) take the session's lock, act on the device at once (the emergency stop switches the
 coils off before it returns) and leave their phase events for the next ``step`` to publish.
 Nothing here knows about ROS.
 """
@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 from mows.device.blocks import BlockAssembler
 from mows.device.cycle import CycleSequencer
-from mows.device.interface import Backend, CommandResult, DeviceFault, LinkEvent
+from mows.device.interface import Backend, CommandResult, DeviceFault, FieldCurrentCommand, LinkEvent
 from mows.device.phases import (
     CycleOutcome,
     CycleRequest,
@@ -30,6 +30,7 @@ from mows.physics.coils import CoilSetup, CurrentCap
 from mows.records.samples import SampleBlock
 
 STALL_TIMEOUT_S = 2.0      # a running cycle fails when no samples arrive for this long (host time)
+SUPPLY_COMMAND_IDS = 1 << 48   # supply commands are numbered from here: apart from the sequencer's
 RATE_WINDOW_S = 5.0        # the achieved sample rate is measured over this much host time
 
 
@@ -73,6 +74,10 @@ class DeviceSession:
         self._last_samples_s = monotonic()
         self._first_samples_s: float | None = None
         self._arrivals: collections.deque = collections.deque()  # (host time, samples) for the rate
+        self._next_index = 0                  # the sample after the newest received
+        self._supply_commands = SUPPLY_COMMAND_IDS
+        self._supply_waiting: dict[int, Callable[[CommandResult], None]] = {}   # sent, not answered
+        self._supply_ramping: list[tuple[CommandResult, Callable]] = []         # answered, not reached
         if backend.info is not None:
             self._device_known()
 
@@ -96,12 +101,16 @@ class DeviceSession:
             self._count_arrival(len(item))
             # Samples come from a known device: its link-up (which builds the assembler) precedes them.
             assert self.assembler is not None
+            self._next_index = item.first_sample_index + len(item)
+            self._supply_reached()
             output.blocks += self.assembler.add(item)
             if self.sequencer is not None:
                 self._act(self.sequencer.on_samples(item))
+        elif isinstance(item, CommandResult) and item.command_id in self._supply_waiting:
+            self._supply_answered(item)
         elif isinstance(item, CommandResult):
             self.refused_commands += not item.accepted
-            assert self.sequencer is not None  # results answer commands, and only the sequencer issues them
+            assert self.sequencer is not None  # results answer commands: the sequencer's, supply ones apart
             self._act(self.sequencer.on_result(item))
         elif isinstance(item, LinkEvent):
             self._link(item)
@@ -176,6 +185,43 @@ class DeviceSession:
             self._act(step)
             return self.sequencer.last_cycle_id
 
+    def set_field_current(self, current_a: float, on_done: Callable[[CommandResult], None]) -> int:
+        """Ramp the static-field supply to ``current_a``; ``on_done(result)`` is called (from the
+        streaming thread) once the device refused it or its samples have reached the ramp's
+        end. Returns the command id; ValueError if it cannot be sent (no supply, above the cap,
+        no device)."""
+        with self._lock:
+            if not self.backend.can_excite:
+                raise ValueError(f"the {self.backend.name} backend has no supply to set")
+            if not self.link_up:
+                raise ValueError(f"the link to the device is down ({self.last_link_reason})")
+            self._supply_commands += 1
+            command = FieldCurrentCommand(self._supply_commands, self._next_index + self.backend.command_lead_samples,
+                                          float(current_a))
+            self.backend.send(command)
+            self._supply_waiting[command.command_id] = on_done
+            return command.command_id
+
+    def supply_to_zero(self) -> None:
+        """Ramp the supply to zero now, dropping any ramp that waits (a cancelled calibration)."""
+        with self._lock:
+            self.backend.supply_to_zero_now()
+
+    def _supply_answered(self, result: CommandResult) -> None:
+        done = self._supply_waiting.pop(result.command_id)
+        if not result.accepted:
+            self.refused_commands += 1
+            done(result)
+            return
+        self._supply_ramping.append((result, done))
+        self._supply_reached()
+
+    def _supply_reached(self) -> None:
+        reached = [(r, d) for r, d in self._supply_ramping if r.applied_sample_index < self._next_index]
+        self._supply_ramping = [(r, d) for r, d in self._supply_ramping if r.applied_sample_index >= self._next_index]
+        for result, done in reached:
+            done(result)
+
     def emergency_stop(self, engage: bool, reason: str) -> bool:
         """Engage (coils off at once, latch) or release; returns whether it is latched."""
         with self._lock:
@@ -202,7 +248,7 @@ class DeviceSession:
                 self.sequencer.settings = settings
 
     def close(self) -> None:
-        """Coils off and the device released; a running cycle fails."""
+        """Coils off, the supply ramped to zero and the device released; a running cycle fails."""
         with self._lock:
             if self.sequencer is not None and self.sequencer.busy:
                 self._act(self.sequencer.abort("the driver is shutting down"))

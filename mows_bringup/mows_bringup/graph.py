@@ -50,6 +50,7 @@ NODES = (
     GraphNode("driver", "mows_driver", "mows_driver"),
     GraphNode("estimator", "mows_estimator", "mows_estimator"),
     GraphNode("mapper", "mows_mapper", "mows_mapper"),
+    GraphNode("calibrator", "mows_calibrator", "mows_calibrator"),
 )
 
 

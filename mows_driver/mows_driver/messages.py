@@ -2,9 +2,10 @@
 import array
 
 from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel
-from mows_msgs.srv import EmergencyStop, RunCycle
+from mows_msgs.srv import EmergencyStop, RunCycle, SetFieldCurrent
 
 from mows.device.framing import DeviceInfo
+from mows.device.interface import CommandResult
 from mows.device.phases import CycleOutcome, CycleRequest, PhaseEvent
 from mows.records import stamps
 
@@ -56,3 +57,12 @@ def estop_response(latched: bool, request: EmergencyStop.Request, response: Emer
     response.message = ("coils off, latched" if latched else "released") if response.success \
         else f"the {backend} backend has no coils to stop"
     return response
+
+
+def supply_response(result: CommandResult, current_a: float, response: SetFieldCurrent.Response) -> None:
+    """The answer to set_field_current: reached (at which sample) or refused by the device."""
+    response.success = result.accepted
+    response.message = (f"supply at {current_a:+.4f} A from device sample {result.applied_sample_index}"
+                        if result.accepted else f"the device refused the supply current: {result.reason}")
+    response.current_a = round(float(current_a), 4) if result.accepted else float("nan")
+    response.reached_sample_index = max(0, result.applied_sample_index)

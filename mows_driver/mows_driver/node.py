@@ -7,18 +7,20 @@ thread steps the session and publishes what it yields, blocks on ``mows/raw`` an
 runs on one executor thread: ``run_cycle`` awaits its cycle as a coroutine (in a reentrant
 group), so the emergency stop, the parameter services and the diagnostics are served while it
 waits. Topic and service names are relative: in the root namespace they are /mows/raw,
-/mows/excitation, /mows/driver/run_cycle and /mows/driver/emergency_stop (docs/driver.md).
+/mows/excitation, /mows/driver/run_cycle, /mows/driver/emergency_stop and
+/mows/driver/set_field_current (docs/driver.md).
 
 The node never dies on data and never publishes a number it did not measure: what goes
 wrong is in the service responses, on /diagnostics and in the log. The coils are off in
-every phase but EXCITING and when the node stops (SIGINT, SIGTERM).
+every phase but EXCITING and when the node stops (SIGINT, SIGTERM), and the static-field supply
+is ramped to zero when it stops.
 """
 import threading
 import time
 import traceback
 
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
-from mows_msgs.srv import EmergencyStop, RunCycle
+from mows_msgs.srv import EmergencyStop, RunCycle, SetFieldCurrent
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.exceptions import InvalidParameterValueException
@@ -35,6 +37,7 @@ from mows_driver.messages import (
     cycle_response,
     estop_response,
     excitation_msg,
+    supply_response,
 )
 from mows_driver.parameters import (
     PARAMETERS,
@@ -43,6 +46,7 @@ from mows_driver.parameters import (
     make_backend,
     session_config,
     settings_problem,
+    supply_problem,
 )
 from mows_driver.recording import open_recorder
 from mows_ros.awaitables import completer
@@ -57,6 +61,7 @@ RAW_TOPIC = "mows/raw"
 EXCITATION_TOPIC = "mows/excitation"
 RUN_CYCLE_SERVICE = "mows/driver/run_cycle"
 EMERGENCY_STOP_SERVICE = "mows/driver/emergency_stop"
+SET_FIELD_CURRENT_SERVICE = "mows/driver/set_field_current"
 POLL_S = 0.02          # the streaming thread's longest wait for the device
 
 
@@ -88,6 +93,8 @@ class DriverNode(MowsNode):
         group = ReentrantCallbackGroup()
         self.create_service(RunCycle, RUN_CYCLE_SERVICE, self._run_cycle, callback_group=group)
         self.create_service(EmergencyStop, EMERGENCY_STOP_SERVICE, self._emergency_stop, callback_group=group)
+        self.create_service(SetFieldCurrent, SET_FIELD_CURRENT_SERVICE, self._set_field_current,
+                            callback_group=group)
         self._stopping = threading.Event()
         self._streaming = threading.Thread(target=self._stream, name="mows-driver-stream", daemon=True)
         self._streaming.start()
@@ -119,6 +126,21 @@ class DriverNode(MowsNode):
             self.get_logger().info(f"cycle {outcome.cycle_id}: {outcome.message}")
         else:
             self.get_logger().error(f"cycle {outcome.cycle_id}: {outcome.message}")
+        return response
+
+    async def _set_field_current(self, request: SetFieldCurrent.Request,
+                                 response: SetFieldCurrent.Response) -> SetFieldCurrent.Response:
+        reached = Future()
+        try:   # the streaming thread completes it once the samples have reached the ramp's end
+            if (problem := supply_problem(request.current_a, self._values)) is not None:
+                raise ValueError(problem)
+            self.session.set_field_current(request.current_a, completer(self, reached))
+        except ValueError as refused:
+            response.success, response.message = False, f"supply current refused: {refused}"
+            self.get_logger().warning(response.message)
+            return response
+        supply_response(await reached, request.current_a, response)
+        self.get_logger().info(response.message)
         return response
 
     def _emergency_stop(self, request: EmergencyStop.Request,
@@ -173,7 +195,7 @@ class DriverNode(MowsNode):
         return self._health(state, self.session.backend.name, self.stream_errors, values)
 
     def destroy_node(self) -> None:
-        """Stop streaming, coils off, close the bag: on SIGINT, SIGTERM and any other exit."""
+        """Stop streaming, coils off, supply to zero, close the bag: on SIGINT, SIGTERM and any other exit."""
         self._stopping.set()
         if self._streaming.is_alive():
             self._streaming.join()

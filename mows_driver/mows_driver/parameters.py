@@ -39,6 +39,12 @@ PARAMETERS = (
     ParamSpec("probe_frame_id", "mows_probe", "header.frame_id of the excitation states: the probe"),
     ParamSpec("coil_current_cap_a", 10.0, "hard limit on the peak current of any excitation coil, A; commands "
               "above it are refused; fixed at start-up", range=(0.01, 100.0), read_only=True),
+    ParamSpec("supply_current_cap_a", 2.0, "hard limit on the static-field supply's current, A (the paper's "
+              "supply: 2 A); set_field_current above it is refused; fixed at start-up", range=(0.001, 100.0),
+              read_only=True),
+    ParamSpec("supply_slew_a_per_s", 2.0, "backend sim: the supply's current changes no faster than this, A/s "
+              "(a serial device ramps within its own limit); fixed at start-up", range=(0.001, 1000.0),
+              read_only=True),
     ParamSpec("coil_setup", "largest_spacing", "excitation coil setup whose orientation-dependent current scheme "
               "drives the coils; fixed at start-up", choices=tuple(PRESETS), read_only=True),
     ParamSpec("excitation_current_a", 2.0, "base amplitude of the coil current scheme, A (at most "
@@ -86,7 +92,9 @@ def make_backend(values: dict, cap: CurrentCap):
                              f"{values['scenario']!r} ({scenario.setup.name})")
         scenario = scenario.replace(pose=scenario.pose.with_theta0(values["theta0_rad"]))
         # Simulated in pieces of one block: blocks come out evenly, at the least cost per sample.
-        return SimBackend(SimulatedDevice(scenario), cap, chunk_s=values["block_duration_s"])
+        return SimBackend(SimulatedDevice(scenario), cap, chunk_s=values["block_duration_s"],
+                          supply_cap_a=values["supply_current_cap_a"],
+                          supply_slew_a_per_s=values["supply_slew_a_per_s"])
     if backend == "serial":
         if not values["serial_port"]:
             raise ValueError("serial_port='' : backend serial needs the device's port")
@@ -107,3 +115,11 @@ def settings_problem(values: dict) -> str | None:
         except ValueError as error:
             reason = str(error)
     return reason
+
+
+def supply_problem(current_a: float, values: dict) -> str | None:
+    """Why a supply current is refused (not finite, or above the cap), or None."""
+    if math.isfinite(current_a) and abs(current_a) <= values["supply_current_cap_a"]:
+        return None
+    return (f"supply current {current_a!r} A refused: above supply_current_cap_a = "
+            f"{values['supply_current_cap_a']} A (never clipped)")

@@ -75,8 +75,9 @@ class SimBackend(Backend):
     can_excite = True
 
     def __init__(self, device: SimulatedDevice, cap: CurrentCap, paced: bool = True,
-                 clock: DeviceClock | None = None, chunk_s: float = SIM_CHUNK_S, supply_cap_a: float = math.inf):
-        self.device = ScheduledDevice(device, cap, supply_cap_a)
+                 clock: DeviceClock | None = None, chunk_s: float = SIM_CHUNK_S, supply_cap_a: float = math.inf,
+                 supply_slew_a_per_s: float = math.inf):
+        self.device = ScheduledDevice(device, cap, supply_cap_a, supply_slew_a_per_s)
         self._info = simulated_device_info(self.device)
         self.clock = clock or DeviceClock(device.sample_rate_hz)
         self.paced = paced

@@ -36,12 +36,15 @@ class OverCap(ValueError):
 class ScheduledDevice:
     """``device`` with a command queue; ``cap`` is the driver's coil current cap."""
 
-    def __init__(self, device: SimulatedDevice, cap: CurrentCap, supply_cap_a: float = math.inf):
+    def __init__(self, device: SimulatedDevice, cap: CurrentCap, supply_cap_a: float = math.inf,
+                 supply_slew_a_per_s: float = math.inf):
         self.device = device
         self.cap = CurrentCap(min(cap.limit_a, device.scenario.setup.cap.limit_a))
         supply = device.scenario.supply
+        # The lower of the driver's and the supply's own cap and slew limit.
         self.supply_limits = None if supply is None else SupplyLimits(
-            min(supply_cap_a, supply.limits.cap_a), supply.limits.slew_a_per_s, supply.limits.resolution_a)
+            min(supply_cap_a, supply.limits.cap_a), min(supply_slew_a_per_s, supply.limits.slew_a_per_s),
+            supply.limits.resolution_a)
         self.supply_target_a = device.field_current_a
         self._supply_free_index = 0   # the sample after the last queued supply step
         # (sample index, arrival order, kind, action): kind is "turn", "on", "off" or "supply"

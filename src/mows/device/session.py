@@ -223,10 +223,12 @@ class DeviceSession:
             done(result)
 
     def emergency_stop(self, engage: bool, reason: str) -> bool:
-        """Engage (coils off at once, latch) or release; returns whether it is latched."""
+        """Engage (coils off at once, the supply ramped to zero, latch) or release; returns
+        whether it is latched."""
         with self._lock:
             if engage:
                 self.backend.coils_off_now()
+                self.backend.supply_to_zero_now()
             if self.sequencer is None:
                 return False
             self._act(self.sequencer.emergency_stop(reason) if engage else self.sequencer.release())

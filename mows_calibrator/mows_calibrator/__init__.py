@@ -1,0 +1,1 @@
+"""The MOWS calibrator node (issue 12)."""

@@ -312,3 +312,19 @@ def test_docs_list_every_parameter_topic_and_service():
     names += [f"/{driver.RAW_TOPIC}", f"/{driver.EXCITATION_TOPIC}", f"/{driver.RUN_CYCLE_SERVICE}",
               f"/{driver.EMERGENCY_STOP_SERVICE}"]
     assert [name for name in names if f"`{name}`" not in text] == []
+
+
+def test_the_supply_ramps_on_request_is_capped_and_the_emergency_stop_zeroes_it(start_driver, listen):
+    from mows_msgs.srv import SetFieldCurrent
+    start_driver("-p", "scenario:=calibration", "-p", "coil_setup:=helmholtz", "-p", "supply_current_cap_a:=1.5")
+    listen.ros.wait_for(lambda: listen.blocks, "the first block")
+    supply = listen.ros.node.create_client(SetFieldCurrent, "/mows/driver/set_field_current")
+    response = listen.result(listen.call(supply, SetFieldCurrent.Request(current_a=1.0)))
+    assert response.success and response.current_a == 1.0, response.message
+    assert response.reached_sample_index > 0.49 * RATE_HZ       # 1 A at 2 A/s in 10 ms steps: ≥ 0.49 s of ramp
+    listen.ros.wait_for(lambda: listen.diagnostics.get("supply_current_a") == "1.0", "the supply on /diagnostics")
+    refused = listen.result(listen.call(supply, SetFieldCurrent.Request(current_a=1.6)))
+    assert not refused.success and "supply_current_cap_a" in refused.message
+    stop = listen.result(listen.call(listen.estop, EmergencyStop.Request(engage=True, reason="test")))
+    assert stop.success
+    listen.ros.wait_for(lambda: listen.diagnostics.get("supply_current_a") == "0.0", "the supply back at zero")

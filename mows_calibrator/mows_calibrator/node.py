@@ -41,23 +41,29 @@ NODE_NAME = "calibrator"
 ACTION = "mows/calibrator/calibrate_probe"
 
 
-def scenario_problem(name: str) -> str | None:
+def scenario_problem(parameter: str, name: str) -> str | None:
     """Why ``name`` is no scenario with a supply section, or None ('' is allowed: none)."""
     try:
         if name and load_scenario(name).supply is None:
-            return f"scenario {name!r} has no supply section: the supply's field per ampere is unknown"
+            return f"{parameter}={name!r} has no supply section: the supply's field per ampere is unknown"
     except (OSError, ValueError) as error:
-        return f"scenario {name!r}: {error}"
+        return f"{parameter}={name!r}: {error}"
     return None
+
+
+def nominal_probe_problem(path: str) -> str | None:
+    """Why ``nominal_probe_file`` cannot be read, or None ('' is the paper's probe)."""
+    problem = probe_file_problem(path) if path else None
+    return None if problem is None else f"nominal_{problem}"     # probe_file_problem says probe_file=…
 
 
 PARAMETERS = (
     ParamSpec("scenario", "calibration", "scenario whose supply section describes the homogeneous wiring (the "
-              "Helmholtz pair's field per ampere at the probe)", check=lambda v: scenario_problem(v or "?")),
+              "Helmholtz pair's field per ampere at the probe)", check=lambda v: scenario_problem("scenario", v or "?")),
     ParamSpec("gradient_scenario", "calibration_gradient", "scenario whose supply section describes the gradient "
-              "wiring (anti-Helmholtz); '' for none", check=scenario_problem),
+              "wiring (anti-Helmholtz); '' for none", check=lambda v: scenario_problem("gradient_scenario", v)),
     ParamSpec("nominal_probe_file", "", "probe YAML giving the magnet's moment, mass and the housing stop "
-              "('' the paper's)", check=lambda v: probe_file_problem(v) if v else None),
+              "('' the paper's)", check=nominal_probe_problem),
     ParamSpec("probe_file", "calibrated_probe.yaml", "where a goal without probe_file writes the calibrated probe"),
     ParamSpec("hardware_id", "", "written to the probe file ('' the scenario's name)"),
     ParamSpec("currents_a", list(PAPER_CURRENTS_A), "supply currents of a goal that lists none, A"),

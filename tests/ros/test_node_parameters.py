@@ -7,6 +7,7 @@ import yaml
 from rclpy.parameter import Parameter
 
 from mows_bringup.graph import NODES
+from mows_calibrator import node as calibrator
 from mows_driver import node as driver
 from mows_estimator import node as estimator
 from mows_mapper import node as mapper
@@ -14,11 +15,12 @@ from mows_ros.process import EXIT_BAD_PARAMETER
 
 pytestmark = pytest.mark.ros
 
-NODE_MODULES = {"driver": driver, "estimator": estimator, "mapper": mapper}
+NODE_MODULES = {"driver": driver, "estimator": estimator, "mapper": mapper, "calibrator": calibrator}
 NODE_CLASSES = {
     "driver": driver.DriverNode,
     "estimator": estimator.EstimatorNode,
     "mapper": mapper.MapperNode,
+    "calibrator": calibrator.CalibratorNode,
 }
 
 
@@ -44,6 +46,10 @@ def test_the_parameter_file_holds_every_parameter_at_its_default(graph_node):
         ("estimator", "probe_file", "/nonexistent/probe.yaml"),
         ("mapper", "probe_file", "/nonexistent/probe.yaml"),
         ("mapper", "reference_scenario", "no_such_scenario"),
+        ("driver", "supply_current_cap_a", 5.0),  # read-only
+        ("calibrator", "scenario", "paper_largest_spacing"),  # no supply section
+        ("calibrator", "gradient_scenario", "no_such_scenario"),
+        ("calibrator", "nominal_probe_file", "/nonexistent/probe.yaml"),
     ],
 )
 def test_bad_values_are_rejected(ros_context, node_name, name, value):

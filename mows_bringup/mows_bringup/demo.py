@@ -50,11 +50,12 @@ def calibrate_probe(args, directory: pathlib.Path):
     the scene to map (``--scenario`` with that probe in it), both written to ``directory``."""
     import datetime
 
-    from mows.cli.calibrate import compare_with_truth, scenario_wirings, simulate_calibration
-    from mows.estimate.probe_calibration import KnownConstants, calibrate_probe as fit_constants
+    from mows.cli.calibrate import compare_with_truth, simulate_calibration
+    from mows.estimate.probe_calibration import KnownConstants
+    from mows.estimate.probe_calibration import calibrate_probe as fit_constants
     from mows.physics.probe import PAPER_PROBE
     from mows.sim.scenario import load_scenario
-    from mows.sweep.calibration_schedule import CalibrationPlan
+    from mows.sweep.calibration_schedule import CalibrationPlan, scenario_wirings
 
     bench = load_scenario(args.probe_scenario)
     gradient = bench.replace(supply=load_scenario("calibration_gradient").supply, seed=bench.seed + 1)
@@ -69,7 +70,7 @@ def calibrate_probe(args, directory: pathlib.Path):
     for line in compare_with_truth(calibration, bench.probe).splitlines() + [f"  {n}" for n in calibration.notes]:
         say(line)
     probe_path = directory / "calibrated_probe.yaml"
-    date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
     calibration.probe().to_yaml(probe_path, calibration.record(date, bench.name))
     scene_path = directory / "demo_scene.yaml"
     load_scenario(args.scenario).replace(probe=bench.probe).to_yaml(scene_path)

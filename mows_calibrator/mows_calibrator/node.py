@@ -24,12 +24,19 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.task import Future
 
-from mows.cli.calibrate import GRADIENT_WIRING, scenario_wirings
 from mows.estimate.probe_calibration import CalibrationError, KnownConstants, calibrate_probe
-from mows.estimate.ringdown import SETTLE_S, FitStatus, RingdownFit as Fit
+from mows.estimate.ringdown import SETTLE_S, FitStatus
+from mows.estimate.ringdown import RingdownFit as Fit
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sim.scenario import load_scenario
-from mows.sweep.calibration_schedule import PAPER_CURRENTS_A, CalibrationPlan, CalibrationSchedule, RunCycle as Cycle
+from mows.sweep.calibration_schedule import (
+    GRADIENT_WIRING,
+    PAPER_CURRENTS_A,
+    CalibrationPlan,
+    CalibrationSchedule,
+    scenario_wirings,
+)
+from mows.sweep.calibration_schedule import RunCycle as Cycle
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
 from mows_ros.params import ParamSpec
@@ -59,7 +66,8 @@ def nominal_probe_problem(path: str) -> str | None:
 
 PARAMETERS = (
     ParamSpec("scenario", "calibration", "scenario whose supply section describes the homogeneous wiring (the "
-              "Helmholtz pair's field per ampere at the probe)", check=lambda v: scenario_problem("scenario", v or "?")),
+              "Helmholtz pair's field per ampere at the probe)",
+              check=lambda v: scenario_problem("scenario", v or "?")),
     ParamSpec("gradient_scenario", "calibration_gradient", "scenario whose supply section describes the gradient "
               "wiring (anti-Helmholtz); '' for none", check=lambda v: scenario_problem("gradient_scenario", v)),
     ParamSpec("nominal_probe_file", "", "probe YAML giving the magnet's moment, mass and the housing stop "
@@ -243,7 +251,7 @@ class CalibratorNode(MowsNode):
             failed.update(wiring_failed)
         calibration = calibrate_probe(points, scenario_wirings(scenario, gradient), KnownConstants.of(nominal),
                                       scenario.supply.name, failed, nominal.lever_m)
-        date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+        date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
         calibration.probe().to_yaml(path, calibration.record(date, self._param("hardware_id") or scenario.name))
         return calibration, path
 

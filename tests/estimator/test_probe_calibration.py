@@ -15,12 +15,11 @@ import math
 import numpy as np
 import pytest
 
-from mows.cli.calibrate import scenario_wirings, simulate_calibration
-from mows.estimate.probe_calibration import (CalibrationError, CalibrationPoint, KnownConstants, Wiring,
-                                             calibrate_probe)
+from mows.cli.calibrate import simulate_calibration
+from mows.estimate.probe_calibration import CalibrationError, CalibrationPoint, KnownConstants, Wiring, calibrate_probe
 from mows.physics.probe import PAPER_PROBE, Probe, calibration_record
 from mows.sim.scenario import load_scenario
-from mows.sweep.calibration_schedule import CalibrationPlan
+from mows.sweep.calibration_schedule import CalibrationPlan, scenario_wirings
 
 SEEDS = 20
 PLAN = CalibrationPlan(currents_a=(0.0, 1.0, 2.0, -1.0, -2.0))
@@ -36,8 +35,8 @@ def off_paper_probe(rng) -> Probe:
 
 
 def truth(probe: Probe) -> dict:
-    return {"f00_hz": probe.f00_hz, "beta0_hz_per_t": probe.beta0_hz_per_t, "spring_nm_per_rad": probe.spring_nm_per_rad,
-            "inertia_kgm2": probe.inertia_kgm2, "lever_m": probe.lever_m}
+    return {"f00_hz": probe.f00_hz, "beta0_hz_per_t": probe.beta0_hz_per_t,
+            "spring_nm_per_rad": probe.spring_nm_per_rad, "inertia_kgm2": probe.inertia_kgm2, "lever_m": probe.lever_m}
 
 
 def calibrated(scenario, plan=PLAN, gradient=None):

@@ -3,9 +3,9 @@ from pathlib import Path
 
 import pytest
 
+from mows_calibrator import node as calibrator
 from mows_driver import node as driver
 from mows_estimator import node as estimator
-from mows_calibrator import node as calibrator
 from mows_mapper import node as mapper
 
 pytestmark = pytest.mark.ros

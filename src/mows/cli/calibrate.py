@@ -24,20 +24,27 @@ import sys
 
 import numpy as np
 
-from mows.estimate.probe_calibration import CalibrationError, CalibrationPoint, KnownConstants, Wiring, calibrate_probe
-from mows.lab.synth import fit_cycle
+from mows.device.scheduled import ScheduledDevice
+from mows.estimate.probe_calibration import CalibrationPoint, KnownConstants, calibrate_probe
 from mows.lab.readers import load_table
+from mows.lab.synth import fit_cycle
 from mows.lab.table import MeasurementTable
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import PAPER_PROBE, Probe
+from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
-from mows.sim.simulator import SimulatedDevice, simulate_cycle
-from mows.device.scheduled import ScheduledDevice
-from mows.sweep.calibration_schedule import (PAPER_CURRENTS_A, CalibrationOutcome, CalibrationPlan,
-                                             CalibrationSchedule, RunCycle, SetSupply)
+from mows.sim.simulator import SimulatedDevice
+from mows.sweep.calibration_schedule import (
+    GRADIENT_WIRING,
+    PAPER_CURRENTS_A,
+    CalibrationOutcome,
+    CalibrationPlan,
+    CalibrationSchedule,
+    SetSupply,
+    scenario_wirings,
+)
 
 SUPPLY_SETTLE_S = 0.5      # the probe rings after a supply step: wait before the next cycle
-GRADIENT_WIRING = "gradient"
 
 
 def add_arguments(parser) -> None:
@@ -62,20 +69,21 @@ def run(args) -> int:
         scenario = load_scenario(args.scenario)
         gradient = load_scenario(args.gradient_scenario) if args.gradient_scenario else None
         wirings = scenario_wirings(scenario, gradient)
+        field_wiring = next(iter(wirings))   # the scenario's own supply: the homogeneous wiring
         if args.simulate:
-            points, failed = simulated_points(scenario, gradient, nominal, args)
+            points, failed = simulated_points(scenario, gradient, nominal, field_wiring, args)
         elif args.input:
-            points, failed = read_points(args.input, scenario.supply.name), {}
+            points, failed = read_points(args.input, field_wiring), {}
         else:
             raise ValueError("give a TABLE or BAG, or --simulate")
         known = KnownConstants.of(nominal, args.environment_field_t)
-        calibration = calibrate_probe(points, wirings, known, scenario.supply.name, failed, nominal.lever_m)
+        calibration = calibrate_probe(points, wirings, known, field_wiring, failed, nominal.lever_m)
     except (OSError, ValueError) as error:   # CalibrationError is a ValueError
         print(f"mows calibrate: {error}", file=sys.stderr)
         return 2
     if args.table:
-        write_points(args.table, points, scenario.supply.name)
-    date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+        write_points(args.table, points, field_wiring)
+    date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
     calibration.probe().to_yaml(args.output, calibration.record(date, args.hardware_id or scenario.name))
     print(calibration.report())
     if args.simulate:
@@ -84,22 +92,9 @@ def run(args) -> int:
     return 0
 
 
-def scenario_wirings(scenario, gradient=None) -> dict:
-    """The wirings of the scenarios' supplies at the magnet's rest position."""
-    if scenario.supply is None:
-        raise ValueError(f"scenario {scenario.name!r} has no supply section: the supply's field per ampere is unknown")
-    where = scenario.pose.magnet_position_m
-    wirings = {scenario.supply.name: Wiring.from_source(scenario.supply.name, scenario.supply.source, where)}
-    if gradient is not None:
-        if gradient.supply is None:
-            raise ValueError(f"scenario {gradient.name!r} has no supply section")
-        wirings[GRADIENT_WIRING] = Wiring.from_source(GRADIENT_WIRING, gradient.supply.source, where)
-    return wirings
-
-
 # --- the simulated calibration ------------------------------------------------------------
-def simulated_points(scenario, gradient, nominal: Probe, args) -> tuple[list, dict]:
-    plan = CalibrationPlan(tuple(args.currents_a), repeats=args.repeats, wiring=scenario.supply.name)
+def simulated_points(scenario, gradient, nominal: Probe, field_wiring: str, args) -> tuple[list, dict]:
+    plan = CalibrationPlan(tuple(args.currents_a), repeats=args.repeats, wiring=field_wiring)
     seed = scenario.seed if args.seed is None else args.seed
     outcome = simulate_calibration(scenario.replace(seed=seed), plan, nominal)
     points, failed = list(outcome.points), dict(outcome.failed)

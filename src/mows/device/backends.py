@@ -363,6 +363,9 @@ class BagBackend(Backend):
     def coils_off_now(self) -> None:
         """A recording has no coils to switch."""
 
+    def supply_to_zero_now(self) -> None:
+        """A recording has no supply to set."""
+
     def stats(self) -> dict:
         return {"link": "finished" if self._finished else "replaying", "bag_path": self.path,
                 "replayed_messages": self.replayed, "skipped_messages": sum(self.skipped.values()),

@@ -118,9 +118,10 @@ class Backend(abc.ABC):
         """Switch the coils off at the device's next sample and cancel every waiting command.
         Never raises: when the link is down the device's watchdog has switched them off."""
 
+    @abc.abstractmethod
     def supply_to_zero_now(self) -> None:
         """Ramp the static-field supply to zero from the device's next sample, dropping any
-        ramp that waits. Never raises. A device without a supply has nothing to do."""
+        ramp that waits. Never raises: when the link is down the device's watchdog ramps it down."""
 
     @abc.abstractmethod
     def stats(self) -> dict:

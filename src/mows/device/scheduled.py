@@ -126,6 +126,7 @@ class ScheduledDevice:
         return self._ramp(self.next_index, self.device.field_current_a, 0.0)
 
     def _ramp(self, start: int, from_a: float, to_a: float) -> int:
+        assert self.supply_limits is not None   # callers have checked that there is a supply
         applied = start
         for offset_s, current in self.supply_limits.ramp(from_a, to_a):
             applied = self._enqueue(start + round(offset_s * self.device.sample_rate_hz), "supply",

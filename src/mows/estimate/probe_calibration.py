@@ -70,7 +70,7 @@ class Wiring:
     gradient_per_a_t_per_m: tuple = ((0.0,) * 3,) * 3
 
     @classmethod
-    def from_source(cls, name: str, source_per_a, position_m=(0.0, 0.0, 0.0)) -> "Wiring":
+    def from_source(cls, name: str, source_per_a, position_m=(0.0, 0.0, 0.0)) -> Wiring:
         """The wiring of a field source (its field at 1 A) at ``position_m``."""
         point = np.asarray(position_m, float)
         return cls(name, tuple(source_per_a.field_t(point).tolist()),
@@ -92,7 +92,7 @@ class CalibrationPoint:
     start_offset_s: float = 0.0   # first fitted sample after the switch-off
 
     @classmethod
-    def from_fit(cls, fit, wiring: str, supply_current_a: float) -> "CalibrationPoint":
+    def from_fit(cls, fit, wiring: str, supply_current_a: float) -> CalibrationPoint:
         return cls(wiring, float(supply_current_a), fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz,
                    fit.amplitude_rad, fit.damping_per_s, fit.duration_s, fit.start_offset_s)
 
@@ -110,7 +110,7 @@ class KnownConstants:
     theta_stop_std_rad: float = THETA_STOP_STD_RAD
 
     @classmethod
-    def of(cls, probe: Probe, environment_field_t=None) -> "KnownConstants":
+    def of(cls, probe: Probe, environment_field_t=None) -> KnownConstants:
         return cls(probe.moment_am2, probe.magnet_mass_kg, probe.theta_stop_rad,
                    None if environment_field_t is None else tuple(float(b) for b in environment_field_t))
 
@@ -232,7 +232,7 @@ def calibrate_probe(points, wirings, known: KnownConstants, field_wiring: str = 
     gradient_points = [p for p in points if p.wiring != field_wiring]
     rows = _rows(points, wirings, known)
     notes += _amplitude_notes(points, known)
-    axis = np.asarray(wirings[field_wiring].field_per_a_t, float) if field_wiring in wirings else None
+    axis = _field_axis(wirings, field_wiring)
     _check_field_points(field_points, axis, known)
     fit_environment = known.environment_field_t is None
     fit_lever = any(p.supply_current_a != 0.0 for p in gradient_points)
@@ -300,10 +300,17 @@ def _amplitude_notes(points, known: KnownConstants) -> list:
     return []
 
 
-def _check_field_points(points, axis, known: KnownConstants) -> None:
+def _field_axis(wirings: dict, field_wiring: str) -> np.ndarray:
+    """The homogeneous wiring's field per ampere at the probe; CalibrationError without one."""
+    axis = np.asarray(wirings[field_wiring].field_per_a_t, float) if field_wiring in wirings else np.zeros(3)
+    if not np.any(axis):
+        raise CalibrationError(f"no homogeneous-field wiring {field_wiring!r} with a field at the probe is "
+                               "described: β0 undetermined")
+    return axis
+
+
+def _check_field_points(points, axis: np.ndarray, known: KnownConstants) -> None:
     """CalibrationError when the homogeneous sweep cannot determine β0 and f00."""
-    if axis is None or not np.any(axis):
-        raise CalibrationError("no homogeneous-field wiring with a field at the probe is described: β0 undetermined")
     along = np.array([p.supply_current_a * (axis[0] * math.cos(p.theta0_rad) + axis[1] * math.sin(p.theta0_rad))
                       for p in points])
     distinct = np.unique(np.round(along / np.linalg.norm(axis), 6))

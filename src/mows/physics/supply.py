@@ -43,15 +43,16 @@ class SupplyLimits:
         if self.resolution_a > self.cap_a:
             raise ValueError(f"supply: resolution_a = {self.resolution_a} exceeds cap_a = {self.cap_a}")
 
-    def check(self, current_a) -> float:
+    def check(self, current_a: float) -> float:
         """``current_a`` rounded to the resolution; ValueError if not finite or above the cap."""
         if isinstance(current_a, bool) or not isinstance(current_a, (int, float, np.integer, np.floating)) \
                 or not math.isfinite(current_a):
             raise ValueError(f"supply current {current_a!r} must be a finite number of amperes")
-        if abs(current_a) > self.cap_a:
-            raise ValueError(f"supply current {current_a:.6g} A exceeds the cap of {self.cap_a:g} A "
+        value = float(current_a)
+        if abs(value) > self.cap_a:
+            raise ValueError(f"supply current {value:.6g} A exceeds the cap of {self.cap_a:g} A "
                              "(refused, never clipped)")
-        return round(float(current_a) / self.resolution_a) * self.resolution_a
+        return round(value / self.resolution_a) * self.resolution_a
 
     def ramp_s(self, from_a: float, to_a: float) -> float:
         """Time the slew limit needs from ``from_a`` to ``to_a``, s."""

@@ -19,9 +19,10 @@ import dataclasses
 import enum
 import math
 
-from mows.estimate.probe_calibration import CalibrationPoint
+from mows.estimate.probe_calibration import CalibrationPoint, Wiring
 
 PAPER_CURRENTS_A = (0.0, 0.5, 1.0, 1.5, 2.0, -0.5, -1.0, -1.5, -2.0)
+GRADIENT_WIRING = "gradient"   # the supply's coils anti-parallel (the lever check)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -203,6 +204,7 @@ class CalibrationSchedule:
         return Step(actions=[SetSupply(0.0)], feedback=[self._feedback(f"{message}; supply to zero")])
 
     def _finish(self, at_zero: bool, reason: str) -> Step:
+        assert self._ending is not None   # RETURNING is entered by _end only
         success, cancelled, message = self._ending
         if not at_zero:
             message += f"; THE SUPPLY DID NOT CONFIRM ZERO ({reason})"
@@ -213,3 +215,16 @@ class CalibrationSchedule:
     def _feedback(self, message: str) -> Feedback:
         return Feedback(min(self._step + 1, self.plan.steps), self.plan.steps, self.current_a, self.theta0_rad,
                         len(self._points), message)
+
+
+def scenario_wirings(scenario, gradient=None) -> dict:
+    """The wirings of the scenarios' supplies at the magnet's rest position."""
+    if scenario.supply is None:
+        raise ValueError(f"scenario {scenario.name!r} has no supply section: the supply's field per ampere is unknown")
+    where = scenario.pose.magnet_position_m
+    wirings = {scenario.supply.name: Wiring.from_source(scenario.supply.name, scenario.supply.source, where)}
+    if gradient is not None:
+        if gradient.supply is None:
+            raise ValueError(f"scenario {gradient.name!r} has no supply section")
+        wirings[GRADIENT_WIRING] = Wiring.from_source(GRADIENT_WIRING, gradient.supply.source, where)
+    return wirings

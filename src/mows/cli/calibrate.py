@@ -6,8 +6,9 @@ Input (one of):
   ``f_hz``, ``f_std_hz``, ``damping_per_s``, ``duration_s``, ``amplitude_deg``,
   ``start_offset_s`` and ``gradient_wiring`` (0: the homogeneous wiring, 1: the gradient one);
   ``--table`` writes this format;
-* ``BAG`` — a bag the driver recorded during a calibration (its ExcitationState carries the
-  supply current); the ring-downs are fitted as ``mows fit`` fits them;
+* not yet a bag: the driver's recordings do not carry the supply current (ExcitationState has
+  no field for it), so a bag read as a model-lab table lacks ``supply_current_a`` and is refused
+  with the missing columns named;
 * ``--simulate`` — run the calibration schedule (:mod:`mows.sweep.calibration_schedule`) on the
   simulated device of ``--scenario`` in simulated device time, and compare with its truth.
 
@@ -48,7 +49,7 @@ SUPPLY_SETTLE_S = 0.5      # the probe rings after a supply step: wait before th
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("input", nargs="?", help="a calibration table (CSV) or a bag recorded by the driver")
+    parser.add_argument("input", nargs="?", help="a calibration table (CSV; --table writes one)")
     parser.add_argument("-o", "--output", required=True, help="the probe file to write (YAML)")
     parser.add_argument("--probe", help="nominal probe YAML: moment, magnet mass, housing stop (default: paper's)")
     parser.add_argument("--scenario", default="calibration", help="scenario whose supply section is the wiring")
@@ -180,7 +181,7 @@ def write_points(path, points, field_wiring: str) -> None:
 
 
 def read_points(path, field_wiring: str) -> list:
-    """Calibration points from a table (CSV) or a bag recorded during a calibration."""
+    """Calibration points from a calibration table (CSV)."""
     table = load_table(path)
     missing = [c for c in TABLE_COLUMNS if c not in table.columns]
     if missing:

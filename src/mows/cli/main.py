@@ -13,7 +13,7 @@ SUBCOMMANDS = {
     "fit": ("mows.cli.fit", "fit the ring-downs of a recorded bag (--csv: a model-lab table)"),
     "lab": ("mows.cli.lab", "compare the frequency model with measurements, find missing effects"),
     "bench": ("mows.cli.bench", "benchmarks: estimator, simulator, stream, lab (figures, never a failure)"),
-    "calibrate": ("mows.cli.calibrate", "calibrate a new probe from a supply sweep (TABLE, BAG or --simulate)"),
+    "calibrate": ("mows.cli.calibrate", "calibrate a new probe from a supply sweep (TABLE or --simulate)"),
 }
 
 

@@ -213,7 +213,7 @@ class SerialBackend(Backend):
     def send(self, command: Command) -> None:
         if self.info is None:
             raise NotExciting("the device has not described itself yet")
-        body: Coils | Orientation
+        body: Coils | Orientation | FieldCurrent
         if isinstance(command, CoilCommand):
             check_coil_command(command, self.info, self.cap.limit_a)
             body = Coils(0, command.at_sample_index, command.frequency_hz, tuple(command.amplitudes_a))

@@ -80,10 +80,13 @@ class DriverNode(MowsNode):
         self.excitation_publisher = self.create_publisher(ExcitationState, EXCITATION_TOPIC, EXCITATION_QOS)
         try:
             backend = make_backend(values, cap)
+        except (ValueError, OSError) as error:
+            raise InvalidParameterValueException("backend", values["backend"], str(error)) from None
+        try:
             self.recorder = open_recorder(values["record_path"], [(self.raw_publisher, STREAM_QOS),
                                                                   (self.excitation_publisher, EXCITATION_QOS)])
         except (ValueError, OSError) as error:
-            raise InvalidParameterValueException("backend", values["backend"], str(error)) from None
+            raise InvalidParameterValueException("record_path", values["record_path"], str(error)) from None
         self.session = DeviceSession(backend, session_config(values, cap))
         self.blocks_published = 0
         self.stream_errors = 0

@@ -4,10 +4,11 @@ with ``rosbags``, which Jazzy's ``ros2 bag info/play`` read.
 Messages are serialised with ``rclpy.serialization`` (the same CDR as rosbags) and written
 before they are published, so a subscriber never receives a message the bag lacks. Each
 topic is stored with its message definition and the QoS it is published with, so that
-``ros2 bag play`` offers it the same way. The bag is only complete once :meth:`close` has
-written its summary and metadata: the driver closes it on SIGINT and SIGTERM.
+``ros2 bag play`` offers it the same way. The bag is complete once :meth:`close` has written
+its summary and metadata (the driver closes it on SIGINT and SIGTERM); after a SIGKILL all
+but the last chunk survive (:class:`mows.device.bags.Recording`) and ``mows bag repair``
+rebuilds the bag from them.
 """
-from pathlib import Path
 
 from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
@@ -19,7 +20,6 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
-from rosbags.rosbag2 import StoragePlugin, Writer
 
 from mows.device import bags
 
@@ -34,26 +34,24 @@ def bag_qos(profile: QoSProfile) -> Qos:
 
 
 class BagRecorder:
-    """A new bag at ``path`` (which must not exist) for ``topics``: {name: (msgtype, QoS)}.
-    Used from one thread at a time (the driver's streaming thread, then its shutdown)."""
+    """A new bag at ``path`` (which must not exist: :class:`mows.device.bags.BagError`) for
+    ``topics``: {name: (msgtype, QoS)}. Used from one thread at a time (the driver's streaming
+    thread, then its shutdown)."""
 
     def __init__(self, path: str, topics: dict[str, tuple[str, QoSProfile]]):
-        self.path = Path(path)
-        self.messages = 0
-        self._writer = Writer(self.path, version=bags.BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
-        self._writer.open()
-        store = bags.typestore()
-        self._connections = {
-            topic: self._writer.add_connection(topic, msgtype, typestore=store, offered_qos_profiles=[bag_qos(qos)])
-            for topic, (msgtype, qos) in topics.items()
-        }
+        self._recording = bags.Recording(path, {topic: (msgtype, [bag_qos(qos)])
+                                                for topic, (msgtype, qos) in topics.items()})
+        self.path = self._recording.path
+
+    @property
+    def messages(self) -> int:
+        return self._recording.messages
 
     def write(self, topic: str, message, timestamp_ns: int) -> None:
-        self._writer.write(self._connections[topic], timestamp_ns, serialize_message(message))
-        self.messages += 1
+        self._recording.write(topic, serialize_message(message), timestamp_ns)
 
     def close(self) -> None:
-        self._writer.close()
+        self._recording.close()
 
 
 def open_recorder(path: str, publishers: list) -> BagRecorder | None:

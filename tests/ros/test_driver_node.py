@@ -167,6 +167,7 @@ def test_parameters_out_of_range_are_rejected_with_their_reason(ros_context):
     (["-p", "scenario:=no_such_scenario"], "scenario 'no_such_scenario' is neither"),
     (["-p", "backend:=serial"], "backend serial needs the device's port"),
     (["-p", "coil_setup:=helmholtz"], "does not drive the coils of scenario"),
+    (["-p", "record_path:=/"], "/ exists: a recording goes to a new path"),
 ])
 def test_a_bad_configuration_stops_the_driver_with_its_reason(arguments, message):
     run = subprocess.run(NODES[0].command(arguments), capture_output=True, text=True, timeout=120)

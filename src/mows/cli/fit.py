@@ -6,10 +6,13 @@ the estimator node (:mod:`mows.estimate.segments`, :mod:`mows.estimate.ringdown`
 lever-aware signal model of the paper's geometry (``--paper-model`` for Eq. S11). One line per
 ring-down; ``--csv`` writes a model-lab table (theta0_deg, f_hz, f_std_hz, t_s, amplitude_deg,
 damping_per_s, duration_s) of the OK fits, ready for ``mows lab`` (no file when none is OK).
+The CSV is never written into the bag nor over an existing file (unless ``--force``), and
+appears whole or not at all (:mod:`mows.records.files`).
 """
 import math
 import sys
 
+from mows.cli.inputs import input_file, load_probe
 from mows.device.bags import read_bag
 from mows.device.phases import Phase
 from mows.estimate.ringdown import SETTLE_S, FitOptions
@@ -22,6 +25,7 @@ from mows.estimate.segments import (
 from mows.lab.table import MeasurementTable
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import PAPER_PROBE, Probe
+from mows.records.files import check_output, replacing
 from mows.records.stamps import NS_PER_S
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -37,22 +41,25 @@ def add_arguments(parser) -> None:
     parser.add_argument("--sensor-distance-m", type=float, default=PAPER_DISTANCE_M,
                         help="probe to near fluxgate along the plane's x axis, m (as the estimator's parameter)")
     parser.add_argument("--sensor-spacing-m", type=float, default=PAPER_SPACING_M, help="fluxgate spacing, m")
-    parser.add_argument("--csv", help="write the OK fits as a model-lab table")
+    parser.add_argument("--csv", help="write the OK fits as a model-lab table (a new file)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --csv file (never the bag)")
 
 def run(args) -> int:
-    probe = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
-    try:
+    inputs = [args.bag] + ([args.probe] if args.probe else [])
+    if args.csv:
+        check_output(args.csv, inputs, args.force)
+    probe = load_probe(args.probe) if args.probe else PAPER_PROBE
+    with input_file(args.bag):
         fits = list(fit_bag(args.bag, probe, args))
-    except (OSError, ValueError, KeyError) as error:
-        print(f"mows fit: {args.bag}: {error}", file=sys.stderr)
-        return 2
     for window, fit in fits:
         print(f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):7.2f}°: "
               f"{fit.report()}")
     ok = [(w, f) for w, f in fits if f.ok]
     print(f"{len(ok)} of {len(fits)} ring-downs fitted")
     if args.csv and ok:
-        write_table(args.csv, ok, probe)
+        with replacing(args.csv, inputs, args.force) as temporary:
+            write_table(temporary, ok, probe)
+        print(f"wrote {len(ok)} rows to {args.csv}")
     elif args.csv:
         print(f"mows fit: no ring-down fitted: {args.csv} not written", file=sys.stderr)
     return 0 if fits else 1

@@ -8,7 +8,8 @@
 TABLE is a CSV file or a rosbag2 bag (``--reference`` then gives the reference field: a
 MagneticField topic or a field-source YAML). ``--json`` prints the machine-readable result.
 User errors (bad tables, probe files, unknown effects, broken plugins) end with a one-line
-message and exit status 2, never a traceback.
+message and exit status 2, never a traceback (:mod:`mows.cli.inputs`). ``report -o`` writes a
+new file (an existing one only with ``--force``, never an input), whole or not at all.
 """
 from __future__ import annotations
 
@@ -16,10 +17,10 @@ import argparse
 import json
 import math
 import pathlib
-import sys
 
-from mows.lab import TableError, analyse, is_bag, load_table, write_report
-from mows.physics.probe import Probe
+from mows.cli.inputs import input_file, load_probe
+from mows.lab import analyse, is_bag, load_table, write_report
+from mows.records.files import check_output, replacing
 
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"
 
@@ -50,28 +51,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         else:
             command.add_argument("--effects", default="", help="comma-separated effects already in the model")
         if name == "report":
-            command.add_argument("-o", "--output", default="lab_report.html", help="HTML file to write")
+            command.add_argument("-o", "--output", default="lab_report.html", help="HTML file to write (a new file)")
+            command.add_argument("--force", action="store_true", help="replace an existing output file (never an input)")
 
 
 def run(args) -> int:
-    try:
-        return _run(args)
-    except (TableError, ValueError, OSError) as error:
-        print(f"mows lab {args.lab_command}: error: {error}", file=sys.stderr)
-        return 2
-
-
-def _run(args) -> int:
+    inputs = [args.table, args.probe, *args.plugin] + ([args.reference] if args.reference else [])
+    if args.lab_command == "report":
+        check_output(args.output, inputs, args.force)
     probe = _probe(args.probe)
-    table = load_table(args.table, drop_invalid=args.drop_invalid,
-                       **({"reference": args.reference, "magnet_position_m": args.magnet_position}
-                          if is_bag(args.table) else {}))
+    with input_file(args.table):
+        table = load_table(args.table, drop_invalid=args.drop_invalid,
+                           **({"reference": args.reference, "magnet_position_m": args.magnet_position}
+                              if is_bag(args.table) else {}))
     effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
     report = analyse(table, probe, effects=effects, auto=getattr(args, "auto", False), plugins=args.plugin,
                      rank=args.lab_command != "compare", cross_validate=not args.no_cv)
     if args.lab_command == "report":
-        path = write_report(report, args.output)
-        print(f"wrote {path}")
+        with replacing(args.output, inputs, args.force) as temporary:
+            write_report(report, temporary)
+        print(f"wrote {args.output}")
     if args.json:
         print(json.dumps(report.to_dict(), indent=2, default=float))
     elif args.lab_command != "report":
@@ -81,12 +80,7 @@ def _run(args) -> int:
 
 def _probe(source):
     path = PAPER_PROBE_FILE if source == "paper" else pathlib.Path(source)
-    if not path.is_file():
-        raise ValueError(f"probe file {path} does not exist")
-    try:
-        return Probe.from_yaml(path)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"probe file {path}: {error}") from None
+    return load_probe(path)
 
 
 # --- text ------------------------------------------------------------------------------------

@@ -2,15 +2,20 @@
 
 Each subcommand lives in the module of its job and exposes ``add_arguments(parser)`` and
 ``run(args) -> int``; this file only routes. Modules are imported lazily so that
-``mows lab`` does not pay for the simulator's compilation, and the reverse.
+``mows lab`` does not pay for the simulator's compilation, and the reverse. Errors take one
+path (:mod:`mows.cli.inputs`): a bad input is one line and exit status 2, ``--debug`` (before
+or after the subcommand) shows the traceback.
 """
 import argparse
 import importlib
 import sys
 
+from mows.cli.inputs import report_errors
+
 SUBCOMMANDS = {
     "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
     "fit": ("mows.cli.fit", "fit the ring-downs of a recorded bag (--csv: a model-lab table)"),
+    "bag": ("mows.cli.bag", "repair a recording that was never closed (killed): rebuild it from its intact chunks"),
     "lab": ("mows.cli.lab", "compare the frequency model with measurements, find missing effects"),
     "bench": ("mows.cli.bench", "benchmarks: estimator, simulator, stream, lab (figures, never a failure)"),
     "calibrate": ("mows.cli.calibrate", "calibrate a new probe from a supply sweep (TABLE or --simulate)"),
@@ -19,16 +24,27 @@ SUBCOMMANDS = {
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="mows", description=__doc__.splitlines()[0])
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True)
-    requested = (argv if argv is not None else sys.argv[1:])[:1]
+    requested = [word for word in (argv if argv is not None else sys.argv[1:]) if not word.startswith("-")][:1]
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         sp = sub.add_parser(name, help=help_text)
         if name in requested:
             module = importlib.import_module(module_name)
             module.add_arguments(sp)
             sp.set_defaults(_run=module.run)
+        _add_debug(sp)
     args = parser.parse_args(argv)
-    return args._run(args)
+    return report_errors(f"mows {args.command}", lambda: args._run(args), args.debug)
+
+
+def _add_debug(parser: argparse.ArgumentParser) -> None:
+    """``--debug`` also after the subcommand (and after ``mows lab``'s own subcommands)."""
+    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show the traceback of an error")
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for subparser in action.choices.values():
+                _add_debug(subparser)
 
 
 if __name__ == "__main__":

@@ -4,6 +4,8 @@ For every θ0 and repeat: turn, let the scenario's gap pass, excite, record the 
 (:func:`mows.sim.cycle.simulate_cycle`). With ``--fit`` each ring-down is fitted as the
 estimator node does (:func:`mows.lab.synth.fit_cycle`: the lever-aware pickup) and compared with
 the truth from the full potential (:meth:`mows.sim.cycle.CycleRecord.ringdown_frequency_hz`).
+``--out`` writes a new file (an existing one only with ``--force``, never the scenario), whole
+or not at all.
 """
 from __future__ import annotations
 
@@ -13,7 +15,9 @@ import math
 import numpy as np
 import yaml
 
+from mows.cli.inputs import input_file
 from mows.lab.synth import fit_cycle
+from mows.records.files import check_output, replacing
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -28,18 +32,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--amplitude-a", type=float, default=None,
                         help="base coil current amplitude, A (default: the scenario's)")
     parser.add_argument("--seed", type=int, default=None, help="noise seed (default: the scenario's)")
-    parser.add_argument("--out", default=None, help="write the cycles to this .npz file")
+    parser.add_argument("--out", default=None, help="write the cycles to this new .npz file")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
     parser.add_argument("--fit", action="store_true", help="fit each ring-down and print the frequencies")
 
 
 def run(args) -> int:
-    scenario = load_scenario(args.scenario)
-    if args.seed is not None:
-        scenario = scenario.replace(seed=args.seed)
+    if args.out:
+        check_output(args.out, [args.scenario], args.force)
+    with input_file(args.scenario):
+        scenario = load_scenario(args.scenario)
+        if args.seed is not None:
+            scenario = scenario.replace(seed=args.seed)
+        device = SimulatedDevice(scenario)
     excitation = scenario.excitation
     amplitude = excitation.amplitude_a if args.amplitude_a is None else args.amplitude_a
     angles = [math.degrees(scenario.pose.theta0_rad)] if args.theta0_deg is None else args.theta0_deg
-    device = SimulatedDevice(scenario)
     records = []
     for theta0_deg in angles:
         for _ in range(args.repeats):
@@ -53,7 +61,8 @@ def run(args) -> int:
                 print(f"θ0 = {theta0_deg:7.2f}°: {_compare(fit, record)}")
     if args.out:
         scenario_yaml = yaml.safe_dump(scenario.to_dict(), sort_keys=False)
-        np.savez_compressed(args.out, **_arrays(records), scenario_yaml=scenario_yaml)
+        with replacing(args.out, [args.scenario], args.force) as temporary, open(temporary, "wb") as handle:
+            np.savez_compressed(handle, **_arrays(records), scenario_yaml=scenario_yaml)
         print(f"wrote {len(records)} cycles to {args.out}")
     return 0
 

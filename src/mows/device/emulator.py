@@ -8,7 +8,8 @@ the host always opens the same path, also after :meth:`DeviceEmulator.unplug` an
 :meth:`DeviceEmulator.replug` (which close the pty and open a new one, as a USB device that
 is pulled out and plugged in again). Its sample clock keeps running while it is unplugged:
 the samples of that time are lost, and the host sees the jump of the sample index and of the
-frame sequence.
+frame sequence. The link is made only where nothing is (an existing file, link or directory at
+the path is refused, exit status 2) and removed only while it is still the emulator's own.
 
 Like the hardware it:
 
@@ -134,16 +135,25 @@ class DeviceEmulator:
         master, slave = os.openpty()
         tty.setraw(slave)  # a byte pipe: no echo, no line editing, no CR/LF translation
         os.set_blocking(master, False)
-        temporary = self.link_path.with_name(self.link_path.name + ".new")
-        temporary.unlink(missing_ok=True)
-        os.symlink(os.ttyname(slave), temporary)
-        os.replace(temporary, self.link_path)
+        try:  # never over what is there: os.symlink refuses an existing path atomically
+            os.symlink(os.ttyname(slave), self.link_path)
+        except OSError as error:
+            os.close(master)
+            os.close(slave)
+            raise FileExistsError(f"device emulator: {self.link_path} exists ({error.strerror}): it is not "
+                                  "this emulator's link; remove it or choose another --link path") from None
         self._fds = (master, slave)
+
+    def _own_link(self) -> bool:
+        """The link path is still the symbolic link to this emulator's terminal."""
+        return (self._fds is not None and self.link_path.is_symlink()
+                and os.readlink(self.link_path) == os.ttyname(self._fds[1]))
 
     def _unplug(self) -> None:
         if self._fds is None:
             return
-        self.link_path.unlink(missing_ok=True)
+        if self._own_link():  # a file someone put there meanwhile is not ours to delete
+            self.link_path.unlink()
         for fd in self._fds:
             os.close(fd)
         self._fds = None
@@ -299,9 +309,16 @@ def main(argv: list[str] | None = None) -> int:
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
     device = SimulatedDevice(load_scenario(args.scenario))
-    with DeviceEmulator(device, args.link, CurrentCap(args.cap_a), args.watchdog_timeout_s):
+    try:
+        emulator = DeviceEmulator(device, args.link, CurrentCap(args.cap_a), args.watchdog_timeout_s).start()
+    except FileExistsError as error:
+        print(error, file=sys.stderr)
+        return 2
+    try:
         print(f"device emulator on {args.link}", flush=True)
         stop.wait()
+    finally:
+        emulator.stop()
     return 0
 
 

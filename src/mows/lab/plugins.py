@@ -24,6 +24,7 @@ from collections.abc import Callable
 import numpy as np
 
 from mows.lab.effects import MECHANICS, Effect, Parameter
+from mows.lab.table import MissingColumnError
 
 ENTRY_POINT_GROUP = "mows.lab.effects"
 
@@ -53,20 +54,44 @@ def effect(name: str, parameters: dict, explanation: str = "", signature: str = 
             raise ValueError(f"effect {name}: the function takes {accepted}, the parameters are "
                              f"{[p.name for p in specs]}")
 
+        where = f"plugin effect {name} ({function.__code__.co_filename})"
+
         def apply(config, rows, probe, *values):
-            result = function(rows, *values)
+            called = ", ".join(f"{p.name}={v:.6g}" for p, v in zip(specs, values))
+            try:
+                result = function(rows, *values)
+            except MissingColumnError:
+                raise
+            except Exception as error:  # the plugin's bug is the user's input: say whose and where
+                raise ValueError(f"{where} raised {type(error).__name__}: {error} (called with {called})") from error
+            if not isinstance(result, dict):
+                raise ValueError(f"{where} returned {type(result).__name__}, not a dict of stiffness_nm_per_rad "
+                                 "and/or frequency_hz")
             unknown = set(result) - {"stiffness_nm_per_rad", "frequency_hz"}
             if unknown:
                 raise ValueError(f"effect {name} returned {sorted(unknown)}; allowed: stiffness_nm_per_rad, "
                                  "frequency_hz")
             n = len(config.theta0_rad)
-            config.spring_nm_per_rad = config.spring_nm_per_rad + np.broadcast_to(
-                result.get("stiffness_nm_per_rad", 0.0), (n,))
-            config.frequency_hz = config.frequency_hz + np.broadcast_to(result.get("frequency_hz", 0.0), (n,))
+            added = {key: _finite_values(where, key, value, n, called) for key, value in result.items()}
+            config.spring_nm_per_rad = config.spring_nm_per_rad + added.get("stiffness_nm_per_rad", 0.0)
+            config.frequency_hz = config.frequency_hz + added.get("frequency_hz", 0.0)
 
         return Effect(name, explanation or function.__doc__ or name, equation, signature, tuple(specs), apply,
                       MECHANICS, requires=(), priority=200, check=check, origin=function.__module__)
     return decorate
+
+
+def _finite_values(where: str, key: str, value, n: int, called: str) -> np.ndarray:
+    """A plugin's returned ``key`` as n finite numbers, or why not."""
+    try:
+        values = np.broadcast_to(np.asarray(value, dtype=float), (n,))
+    except (TypeError, ValueError):
+        raise ValueError(f"{where} returned {key} = {value!r}: expected a number or {n} numbers, one per row") from None
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        raise ValueError(f"{where} returned NaN or infinite {key} in {bad.size} of {n} rows (first: row {bad[0] + 1}) "
+                         f"with {called}: an effect must return finite numbers")
+    return values
 
 
 def load_plugins(sources) -> list:

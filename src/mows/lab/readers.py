@@ -33,7 +33,7 @@ def read_csv(path, drop_invalid: bool = False) -> MeasurementTable:
     """
     path = pathlib.Path(path)
     try:
-        with open(path, newline="") as handle:
+        with open(path, newline="", encoding="utf-8-sig") as handle:  # -sig: Excel's byte-order mark
             rows = list(csv.reader(handle))
     except OSError as error:
         raise TableError(f"cannot read {path}: {error.strerror}") from None

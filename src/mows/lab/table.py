@@ -213,6 +213,12 @@ def broken_rules(columns: dict):
 
 
 def with_notes(columns, source, notes) -> MeasurementTable:
+    theta = columns.get("theta0_deg", np.zeros(0))
+    wrapped = np.flatnonzero((theta < 0.0) | (theta >= 360.0))
+    if wrapped.size:
+        first = theta[wrapped[0]]
+        notes.append(f"theta0_deg outside [0, 360) in {rows_text(wrapped)}: read as the same orientation modulo "
+                     f"360 (e.g. {first:g}° is {first % 360.0:g}°)")
     if not any(name in columns for name in FIELD):
         notes.append("no reference field: the base model predicts f = f00 at every row")
     elif "ref_bz_t" not in columns and "ref_bx_t" in columns:

@@ -141,6 +141,8 @@ class Probe:
         unknown = set(data) - allowed
         if unknown:
             raise ValueError(f"unknown probe keys {sorted(unknown)}; allowed: {sorted(allowed)}")
+        for key, value in data.items():
+            _given_number(key, value)
         if "theta_stop_deg" in data:
             data["theta_stop_rad"] = math.radians(data.pop("theta_stop_deg"))
         f00 = data.pop("f00_hz", None)
@@ -188,6 +190,22 @@ def calibration_record(path) -> dict | None:
     """The ``calibration`` section of a probe file (None if the file has none)."""
     data = yaml.safe_load(pathlib.Path(path).read_text())
     return data.get("calibration") if isinstance(data, dict) else None
+
+
+def _given_number(key, value) -> None:
+    """A probe-file value must be a finite number, checked before anything is derived from it
+    (so that a NaN f00_hz is blamed on f00_hz, not on the inertia computed from it)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        hint = ""
+        if isinstance(value, str):
+            try:
+                float(value)
+                hint = " (YAML reads a number like 7e-6 as text: write 7.0e-6)"
+            except ValueError:
+                pass
+        raise ValueError(f"{key} = {value!r} is not a number{hint}")
+    if not math.isfinite(value):
+        raise ValueError(f"{key} = {value!r} must be a finite number")
 
 
 def _require(name, value, ok, what):

@@ -47,6 +47,13 @@ from mows.sim.noise import NoiseStream
 INTERVAL_OVER_STOP = 1.5
 # Chebyshev terms below this fraction of kM·w (N·m) are dropped from the kernel's series.
 SERIES_TOLERANCE = 1e-15
+# RK4 is stable for ω·dt below 2.78 on an undamped oscillator; half of that keeps it accurate.
+RK4_MAX_OMEGA_DT = 1.4
+
+
+class SimulationRefused(ValueError):
+    """A scenario the simulator cannot integrate (a field so strong the lever rings faster than
+    the integrator's steps resolve): a bad input, said before the first step."""
 
 
 # --- what the device returns ---------------------------------------------------------------
@@ -120,6 +127,7 @@ class SimulatedDevice:
         self._coil_reading_t_per_a = np.stack(
             [self._pair.component_t(coil_fields[:, k]) for k in range(self.n_coils)])       # (K, 2)
         self._half_width_rad = max(DEFAULT_HALF_WIDTH_RAD, INTERVAL_OVER_STOP * self.probe.theta_stop_rad)
+        self._check_resolvable()
         self._params = self._kernel_parameters()
         self._amplitudes_a = np.zeros(self.n_coils)
         self._drive_hz = 0.0
@@ -131,6 +139,22 @@ class SimulatedDevice:
         self._state[0] = rest if math.isfinite(rest) else 0.0  # beyond spring cancellation: it buckles
 
     # --- set-up --------------------------------------------------------------------------
+    def _check_resolvable(self) -> None:
+        """Refuse a field whose spring m·|B| makes ω = √((kM + m|B|)/J) too fast for the
+        integrator's step 1/(substeps·fs) (Eq. S1 with the field's spring added)."""
+        probe, integrator = self.probe, self.scenario.integrator
+        field_t = float(np.linalg.norm(self._env_source.field_t(np.asarray(self.scenario.pose.magnet_position_m,
+                                                                            float))))
+        omega = math.sqrt((probe.spring_nm_per_rad + probe.moment_am2 * field_t) / probe.inertia_kgm2)
+        omega_dt = omega / (integrator.substeps * self.sample_rate_hz)
+        if not omega_dt < RK4_MAX_OMEGA_DT:
+            needed = math.ceil(omega / (RK4_MAX_OMEGA_DT * self.sample_rate_hz))
+            raise SimulationRefused(
+                f"the field at the probe, |B| = {field_t:.4g} T, makes the lever ring at {omega / TWO_PI:.4g} Hz, "
+                f"faster than integrator substeps = {integrator.substeps} at {self.sample_rate_hz:g} S/s resolve "
+                f"(ω·dt = {omega_dt:.3g}, must stay below {RK4_MAX_OMEGA_DT}): use a weaker field or "
+                f"integrator: substeps ≥ {needed}")
+
     def _kernel_parameters(self) -> np.ndarray:
         probe, env, housing = self.probe, self.scenario.environment, self.scenario.housing
         spring0 = probe.spring_at(env.temperature_k)
@@ -261,7 +285,7 @@ class SimulatedDevice:
                        TWO_PI * self._drive_hz, self._drive_t0_s, theta, theta_dot)
         self.sample_index += done
         if done < n_samples:
-            raise RuntimeError(f"the deflection θ = {self._state[0]:.3f} rad left the interval ±"
+            raise RuntimeError(f"the deflection θ = {self._state[0]:.4g} rad left the interval ±"
                                f"{self._half_width_rad:.3f} rad on which the potential is represented")
         return theta, theta_dot
 

@@ -1,0 +1,87 @@
+"""One error path for every ``mows`` command.
+
+A bad input (a table, a bag, a probe or scenario file, a plugin, an argument) ends the
+command with one line on stderr that names the file, the row or key and what is allowed, and
+exit status 2; ``--debug`` shows the traceback instead. :func:`input_file` blames what goes
+wrong while a file is read on that file, in words (a directory, not UTF-8, not YAML);
+:func:`report_errors` turns the errors into the line and the status. Anything else is a bug:
+exit status 1, one line, and the traceback with ``--debug``.
+"""
+from __future__ import annotations
+
+import contextlib
+import pathlib
+import sys
+from typing import Callable, Iterator
+
+import yaml
+
+from mows.physics.probe import Probe
+
+#: Exceptions that mean "the input is bad". ValueError covers the library's own refusals
+#: (TableError, OutputRefused, a scenario's out-of-range value) and UnicodeDecodeError.
+INPUT_ERRORS = (ValueError, OSError, KeyError, yaml.YAMLError)
+EXIT_BAD_INPUT = 2
+EXIT_BUG = 1
+
+
+class InputError(ValueError):
+    """A bad input whose message already names the file."""
+
+
+def one_line(error: BaseException) -> str:
+    """The error's message on one line (YAML errors and some numpy ones span several)."""
+    if isinstance(error, KeyError) and len(error.args) == 1:
+        return f"missing key {error.args[0]!r}"
+    if isinstance(error, yaml.MarkedYAMLError):
+        mark = error.problem_mark
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+        return f"not valid YAML: {where}{error.problem or error.context}"
+    return " ".join(str(error).split()) or type(error).__name__
+
+
+@contextlib.contextmanager
+def input_file(path, what: str = "") -> Iterator[pathlib.Path]:
+    """Read ``path`` inside the ``with`` block; what goes wrong is reported as this file's fault
+    (:class:`InputError` with ``what`` and the file's name), unless the message already names it."""
+    path = pathlib.Path(path)
+    name = f"{what} {path}" if what else str(path)
+    try:
+        yield path
+    except InputError:
+        raise
+    except IsADirectoryError:
+        raise InputError(f"{name} is a directory, expected a file") from None
+    except FileNotFoundError:
+        raise InputError(f"{name} does not exist") from None
+    except UnicodeDecodeError as error:
+        raise InputError(f"{name} is not UTF-8 text (byte {error.start}: {error.object[error.start:error.start + 1]!r}): "
+                         "save it as UTF-8") from None
+    except OSError as error:
+        raise InputError(f"{name}: {error.strerror or one_line(error)}") from None
+    except (ValueError, KeyError, yaml.YAMLError) as error:
+        message = one_line(error)
+        raise InputError(message if str(path) in message else f"{name}: {message}") from error
+
+
+def load_probe(path):
+    """The probe constants of the YAML file ``path``, or :class:`InputError`."""
+    with input_file(path, "probe file"):
+        return Probe.from_yaml(path)
+
+
+def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> int:
+    """``work()``'s exit status; a bad input → one line and 2, a bug → one line and 1."""
+    try:
+        return work()
+    except INPUT_ERRORS as error:
+        if debug:
+            raise
+        print(f"{prog}: error: {one_line(error)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except Exception as error:  # noqa: BLE001 - the one place a bug is turned into a line
+        if debug:
+            raise
+        print(f"{prog}: internal error: {type(error).__name__}: {one_line(error)} "
+              "(a bug: rerun with --debug for the traceback and report it)", file=sys.stderr)
+        return EXIT_BUG

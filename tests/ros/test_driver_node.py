@@ -15,6 +15,7 @@ from mows_msgs.srv import EmergencyStop, RunCycle
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from mows.cli import main as cli
 from mows.device import bags
 from mows.device.emulator import DeviceEmulator
 from mows.device.phases import Phase
@@ -233,6 +234,33 @@ def test_a_recording_keeps_every_block_published_before_sigterm_and_replays(star
         assert stamps.nanoseconds(block.header.stamp) == stamps.nanoseconds(original.header.stamp)
         np.testing.assert_array_equal(field(block), np.stack([c.field_t for c in original.channels], axis=1))
     listen.ros.wait_for(lambda: replayed.diagnostics.get("link") == "finished", "the end of the replay")
+
+
+def test_a_recording_killed_with_sigkill_is_repaired_and_replays(start_driver, listen, tmp_path, capsys):
+    bag = tmp_path / "recording"
+    mcap = bag / "recording.mcap"
+    recorder = start_driver("-p", f"record_path:={bag}")
+    listen.ros.wait_for(lambda: mcap.is_file() and mcap.stat().st_size > 2.5 * 2**20, "two chunks on disk")
+    recorder.send_signal(signal.SIGKILL)  # no handler runs: whatever is in the driver's memory is lost
+    listen.ros.wait_for(lambda: recorder.poll() is not None, "the driver to die")
+    assert (bag / "metadata.yaml").is_file()  # written at the start
+    with pytest.raises(bags.BagError, match="mows bag repair"):
+        read_blocks(bag)
+    assert cli.main(["bag", "repair", str(bag)]) == 0, capsys.readouterr().err
+    assert "were recovered" in capsys.readouterr().out
+    recorded = read_blocks(bag)
+    assert len(recorded) >= 200  # two chunks of ~9 kB blocks
+    assert_contiguous(recorded)
+    by_sequence = {b.sequence: b for b in recorded}
+    heard = [b for b in listen.blocks if b.sequence <= recorded[-1].sequence]
+    assert heard and all(b.sequence in by_sequence for b in heard)
+    for block in heard:
+        np.testing.assert_array_equal(field(block), field(by_sequence[block.sequence]))
+    replayed = Listener(listen.ros)
+    start_driver("-p", "backend:=bag", "-p", f"bag_path:={bag}", "-p", "bag_rate:=8.0", "-p", "bag_wait_subscribers:=1")
+    last = recorded[-1].first_sample_index
+    listen.ros.wait_for(lambda: replayed.blocks and replayed.blocks[-1].first_sample_index == last, "the replay")
+    assert_contiguous(replayed.blocks)
 
 
 def synthetic_bag(path, gap_after: int, gap_samples: int, rate_hz: float = RATE_HZ):

@@ -26,7 +26,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     log = open("/dev/null", "w")
     graph = Graph(tuple(n for n in NODES if n.name in ("driver", "estimator")),
-                  ["-p", "tuning_steps:=0", "-p", "gap_s:=0.1"], output=log)
+                  ["-p", "driver:tuning_steps:=0", "-p", "driver:gap_s:=0.1"], output=log)
     graph.start()
     try:
         latencies = measure(args.cycles, args.repeats, graph.exited)

@@ -3,8 +3,12 @@
 A node lists its parameters once, as a tuple of ``ParamSpec``; ``declare_parameters`` turns
 each row into a ROS parameter with a descriptor (description, range, read-only) that
 ``ros2 param describe`` shows, and rejects bad values with a reason that names the
-parameter, its value and what is allowed.
+parameter, its value and what is allowed. A parameter given to the node (``-p name:=value``
+or a parameter file) that the table does not have stops it at start-up with the nearest valid
+name (:class:`UnknownParameterError`): rclpy, with ``allow_undeclared_parameters`` off, keeps
+such an override unused and silent, and the node would run on its default.
 """
+import difflib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -18,6 +22,12 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 Value = bool | int | float | str
+# Parameters rclpy declares on every node itself; qos_overrides.* belong to publishers.
+ROS_OWN = ("use_sim_time", "start_type_description_service")
+
+
+class UnknownParameterError(ValueError):
+    """A parameter override the node does not have, with the nearest names it does have."""
 
 
 @dataclass(frozen=True)
@@ -75,6 +85,21 @@ def declare_parameters(node: Node, table: Sequence[ParamSpec]) -> None:
 
     node.add_on_set_parameters_callback(validate)
     node.declare_parameters("", [(spec.name, spec.default, spec.descriptor()) for spec in table])
+    refuse_unknown_overrides(node, table)
+
+
+def refuse_unknown_overrides(node: Node, table: Sequence[ParamSpec]) -> None:
+    """:class:`UnknownParameterError` for the first override of ``node`` that is none of its
+    parameters. The overrides (``-p`` and parameter files, after rcl matched the node's name)
+    are rclpy's ``Node._parameter_overrides``: rclpy has no public accessor for them."""
+    known = [spec.name for spec in table]
+    for name in sorted(node._parameter_overrides):
+        if name in known or name in ROS_OWN or name.startswith("qos_overrides."):
+            continue
+        nearest = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
+        hint = f"did you mean {nearest[0]}?" if nearest else f"this node's parameters: {', '.join(known)}"
+        raise UnknownParameterError(f"{node.get_name()}: unknown parameter {name!r} (from -p or a parameter "
+                                    f"file): {hint}")
 
 
 def parameter_values(node: Node, table: Sequence[ParamSpec]) -> dict[str, Value]:

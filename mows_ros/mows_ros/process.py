@@ -8,6 +8,8 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
+from mows_ros.params import UnknownParameterError
+
 EXIT_BAD_PARAMETER = 2
 
 
@@ -23,7 +25,7 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> in
     ``rclpy.init`` installs handlers for SIGINT and SIGTERM that shut the context down, so
     either signal ends ``spin`` with ``ExternalShutdownException`` (or KeyboardInterrupt when
     it lands outside of spin): both are the normal way for a node to stop. A value from a
-    parameter file or ``-p`` that the node rejects ends it with EXIT_BAD_PARAMETER and the
+    parameter file or ``-p`` that the node rejects, or a parameter it does not have, ends it with EXIT_BAD_PARAMETER and the
     reason, not a traceback: it is a configuration error, not a bug.
     """
     faulthandler.enable()  # a node aborted because it would not stop says where it hung
@@ -42,7 +44,7 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> in
         # binding (RCLError is one too). Either is the normal end, but only if shutdown happened.
         if rclpy.ok():
             raise
-    except (InvalidParameterValueException, InvalidParameterTypeException) as error:
+    except (InvalidParameterValueException, InvalidParameterTypeException, UnknownParameterError) as error:
         sys.stderr.write(f"error: {error}\n")
         return EXIT_BAD_PARAMETER
     finally:

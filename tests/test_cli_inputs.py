@@ -214,3 +214,15 @@ def test_debug_shows_the_traceback(tmp_path):
     path.write_text(SCENARIOS["unknown key"][0])
     with pytest.raises(ValueError, match="bogus"):
         main(["sim", str(path), "--debug"])
+
+
+@pytest.mark.parametrize("angle, same", [(725.0, "5°"), (-30.0, "330°")])
+def test_a_wrapped_angle_gets_a_note(table, tmp_path, capsys, angle, same):
+    lines = table.read_text().splitlines()
+    cells = lines[1].split(",")
+    cells[0] = repr(angle)
+    wrapped = tmp_path / "wrapped.csv"
+    wrapped.write_text("\n".join([lines[0], ",".join(cells)] + lines[2:]) + "\n")
+    assert main(["lab", "compare", str(wrapped), "--no-cv"]) == 0
+    out = capsys.readouterr().out
+    assert "note: theta0_deg outside [0, 360) in row 1 " in out and f"is {same}" in out

@@ -29,8 +29,9 @@ class StreamHealth:
         if new_faults:
             problems.append(f"device fault: {state['last_device_fault']}")
         if new_gaps:
+            restarts = f", {state['device_restarts']} device restarts" if state.get("device_restarts") else ""
             problems.append(f"{new_gaps} new gaps in the sample stream ({state['missing_samples']} samples "
-                            "missing in all)")
+                            f"missing in all{restarts})")
         if achieved is not None and nominal and abs(achieved / nominal - 1.0) > RATE_TOLERANCE:
             problems.append(f"sample rate {achieved:.0f} Hz, nominal {nominal:.0f} Hz")
         if stream_errors:

@@ -172,6 +172,9 @@ class DriverNode(MowsNode):
                 time.sleep(POLL_S)
 
     def _publish_step(self, output) -> None:
+        for link in output.links:  # in every state, not only in a cycle
+            (self.get_logger().info if link.up else self.get_logger().warning)(
+                f"link {'up' if link.up else 'lost'}: {link.reason}")
         for block in output.blocks:
             self._publish(self.raw_publisher, block_msg(block, self.session.backend.info, self._values["frame_id"],
                                                         self._values["sensor_frame_ids"]))

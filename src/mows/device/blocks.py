@@ -22,7 +22,8 @@ class BlockAssembler:
     def __init__(self, block_samples: int):
         self.block_samples = int(block_samples)
         self.gaps = 0               # discontinuities of the sample index
-        self.missing_samples = 0    # samples lost in them (forward jumps)
+        self.missing_samples = 0    # samples lost in them: forward jumps, and a restarted device's
+                                    # samples before the first received (at least that many)
         self.restarts = 0           # jumps backwards: the device's counter started again
         self.samples = 0
         self.saturated_samples = 0  # samples with any channel saturated
@@ -51,10 +52,13 @@ class BlockAssembler:
         return [self._cut(self._pending)] if self._pending else []
 
     def _count_gap(self, jump: int) -> int:
-        """Count a jump of the sample index; the extra sequence steps it takes."""
+        """Count a jump of the sample index; the extra sequence steps it takes. After a restart
+        the device counts from 0 again: the samples it took before the first one received are
+        missing (those its old life took after the last one received cannot be known)."""
         self.gaps += 1
         if jump < 0:
             self.restarts += 1
+            self.missing_samples += self._expected + jump  # the new first index
             return 1
         self.missing_samples += jump
         return max(1, math.ceil(jump / self.block_samples))

@@ -52,7 +52,7 @@ class SerialLink:
         self.info: DeviceInfo | None = None   # the device's description, once it has answered
         self.up = False
         self.decoder = FrameDecoder()
-        self.lost_frames = 0        # frames the device numbered but we never received
+        self.lost_frames = 0        # frames the device numbered after the first connection but we never received
         self.sequence_restarts = 0  # the device's frame counter went back (it rebooted)
         self.connections = 0        # times the link came up
         self.open_failures = 0
@@ -166,7 +166,9 @@ class SerialLink:
             self._drop(f"no device answered on {self.port} within {self.hello_timeout_s:g} s")
 
     def _received(self, frame: Frame) -> None:
-        if self._expected_sequence is not None:
+        # Frames count as lost only once a link was established: what the device numbered
+        # before it first answered Hello (it streams from power-on) was never the link's to lose.
+        if self.connections and self._expected_sequence is not None:
             jump = (frame.sequence - self._expected_sequence) % SEQUENCE_MODULUS
             if jump >= SEQUENCE_MODULUS // 2:
                 self.sequence_restarts += 1
@@ -179,6 +181,7 @@ class SerialLink:
             if not self.up:
                 self.up = True
                 self.connections += 1
+                self.last_error = ""  # the link is back: an old failure is no longer the state
                 self._frames.put(LinkEvent(True, f"device answered on {self.port}"))
         self._frames.put(frame)
 

@@ -40,6 +40,7 @@ class Output:
 
     blocks: list[SampleBlock] = dataclasses.field(default_factory=list)
     events: list[PhaseEvent] = dataclasses.field(default_factory=list)
+    links: list[LinkEvent] = dataclasses.field(default_factory=list)  # for the log, in any state
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,6 +115,7 @@ class DeviceSession:
             self._act(self.sequencer.on_result(item))
         elif isinstance(item, LinkEvent):
             self._link(item)
+            output.links.append(item)
         elif isinstance(item, DeviceFault):
             self.device_faults += 1
             self.last_device_fault = item.reason
@@ -176,7 +178,7 @@ class DeviceSession:
         with self._lock:
             if self.sequencer is None:
                 raise ValueError(f"the {self.backend.name} backend cannot run cycles"
-                                 if not self.backend.can_excite else "the device has not answered yet")
+                                 if not self.backend.can_excite else self._not_answered())
             if not self.link_up:
                 raise ValueError(f"the link to the device is down ({self.last_link_reason})")
             step = self.sequencer.start(request)
@@ -221,6 +223,10 @@ class DeviceSession:
         self._supply_ramping = [(r, d) for r, d in self._supply_ramping if r.applied_sample_index >= self._next_index]
         for result, done in reached:
             done(result)
+    def _not_answered(self) -> str:
+        """Why no cycle can run on a device that has never described itself."""
+        why = self.last_link_reason or self.backend.stats().get("last_error") or "no answer to Hello yet"
+        return f"the device has not answered yet ({why})"
 
     def emergency_stop(self, engage: bool, reason: str) -> bool:
         """Engage (coils off at once, the supply ramped to zero, latch) or release; returns

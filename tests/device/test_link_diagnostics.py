@@ -7,12 +7,14 @@ import pytest
 
 from mows.device.backends import SerialBackend
 from mows.device.blocks import BlockAssembler
-from mows.device.cycle import CycleRequest, CycleSettings
 from mows.device.emulator import DeviceEmulator
-from mows.device.interface import LinkEvent, SampleChunk
+from mows.device.interface import LinkEvent
+from mows.device.phases import CycleRequest, CycleSettings
 from mows.device.serial_link import SerialLink
 from mows.device.session import DeviceSession, SessionConfig
+from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
+from mows.records.samples import SampleBlock
 
 from device.spy import SpyDevice
 from device.test_emulator import CAP_A, SCENARIO, collect, samples_of, wait_for
@@ -22,15 +24,15 @@ SETTINGS = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tun
 
 def session_on(link):
     return DeviceSession(SerialBackend(link, CurrentCap(CAP_A)),
-                         SessionConfig(0.025, SETTINGS, SCENARIO.setup, CurrentCap(CAP_A), 110.0))
+                         SessionConfig(0.025, SETTINGS, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown))
 
 
 def chunk(first, n=100):
-    return SampleChunk(first, first * 50_000, np.zeros((n, 2)), np.zeros((n, 2), bool))
+    return SampleBlock(first, first * 50_000, 20_000.0, np.zeros((n, 2)), np.zeros((n, 2), bool))
 
 
 def test_a_restarted_device_counts_its_samples_before_the_first_received_as_missing():
-    assembler = BlockAssembler(500, 20_000.0)
+    assembler = BlockAssembler(500)
     for first in range(200_000, 201_000, 100):  # 10 s after the device's boot
         assembler.add(chunk(first))
     assembler.add(chunk(140_000))  # it restarted 7 s ago: its index started again at 0

@@ -1,11 +1,20 @@
 """`mows lab compare | diagnose | add | report`: text, JSON schema, HTML, and user errors."""
+import fcntl
 import json
 import math
+import os
+import pty
+import struct
+import subprocess
+import sys
+import termios
 
 import numpy as np
 import pytest
 
+from mows.cli.lab import MAX_ROWS
 from mows.cli.main import main
+from mows.lab import read_csv
 from mows.lab import synth
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
@@ -100,3 +109,39 @@ def test_diagnose_separates_a_group_on_a_table_without_amplitudes(tilted_csv, tm
     assert main(["lab", "diagnose", str(bare), "--json"]) == 0
     groups = json.loads(capsys.readouterr().out)["groups"]
     assert groups and all(group["separation"] for group in groups)
+
+
+def test_a_long_table_is_analysed_on_a_stated_subsample_without_a_progress_bar_in_json(tilted_csv, tmp_path, capsys):
+    table = read_csv(tilted_csv)
+    copies = MAX_ROWS // len(table) + 2
+    long = tmp_path / "long.csv"
+    table.subset(np.tile(np.arange(len(table)), copies)).to_csv(long)
+    assert main(["lab", "compare", str(long), "--json", "--no-cv"]) == 0
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)
+    assert report["base"]["n"] == MAX_ROWS
+    assert any(f"{copies * len(table)} rows: analysed on a random subsample of {MAX_ROWS}" in note
+               for note in report["notes"])
+    assert captured.err == ""  # no progress bar (stderr is no terminal here, and --json)
+    assert main(["lab", "compare", str(long), "--json", "--no-cv", "--all-rows"]) == 0
+    assert json.loads(capsys.readouterr().out)["base"]["n"] == copies * len(table)
+
+
+def test_a_terminal_sees_the_stages_progress(tilted_csv):
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a new pty is 0 columns wide
+    with subprocess.Popen([sys.executable, "-m", "mows.cli.main", "lab", "compare", str(tilted_csv), "--no-cv"],
+                          stdout=subprocess.DEVNULL, stderr=slave) as process:
+        os.close(slave)
+        seen = b""
+        while True:
+            try:
+                data = os.read(master, 4096)
+            except OSError:  # the child closed its end
+                break
+            if not data:
+                break
+            seen += data
+    os.close(master)
+    assert process.returncode == 0
+    assert b"mows lab compare: reading" in seen and b"stages" in seen

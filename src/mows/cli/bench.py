@@ -19,10 +19,12 @@ SUITES = {
     "simulator": ("mows.bench.simulator", "one measurement cycle, against solve_ivp"),
     "stream": ("mows.bench.streaming", "CPU share of one core to stream 20 kS/s × 2 channels"),
     "lab": ("mows.bench.lab", "model lab diagnose on 1000 rows with the whole catalog"),
+    "lab_long": ("mows.bench.lab_long", "mows lab diagnose on a 500 000-row CSV: wall time and peak memory"),
     "latency": ("mows.bench.latency", "last sample of a ring-down to its published fit, in the node graph"),
 }
 QUICK: dict[str, dict[str, float]] = {"estimator": {"trials": 60}, "simulator": {"repeats": 5},
-                                      "stream": {"duration_s": 3.0}, "latency": {"cycles": 1, "repeats": 5}}
+                                      "stream": {"duration_s": 3.0}, "latency": {"cycles": 1, "repeats": 5},
+                                      "lab_long": {"rows": 20_000}}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

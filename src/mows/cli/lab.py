@@ -10,18 +10,30 @@ MagneticField topic or a field-source YAML). ``--json`` prints the machine-reada
 User errors (bad tables, probe files, unknown effects, broken plugins) end with a one-line
 message and exit status 2, never a traceback (:mod:`mows.cli.inputs`). ``report -o`` writes a
 new file (an existing one only with ``--force``, never an input), whole or not at all.
+
+A table of more than MAX_ROWS rows is analysed on a random subsample of MAX_ROWS rows (seed 0,
+every sweep kept), said in a note; ``--all-rows`` uses every row (the lab's cost grows with
+rows × candidate effects: 1000 rows take seconds, 50 000 took over 5 minutes). On a terminal
+the stages show a progress bar on stderr (tqdm), never with ``--json``.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import pathlib
+import sys
+
+import numpy as np
+from tqdm import tqdm
 
 from mows.cli.inputs import input_file, load_probe
 from mows.lab import analyse, is_bag, load_table, write_report
 from mows.records.files import check_output, replacing
 
+MAX_ROWS = 2000
+SUBSAMPLE_SEED = 0
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"
 
 
@@ -45,6 +57,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              help="drop rows with missing or invalid values instead of stopping")
         command.add_argument("--json", action="store_true", help="print JSON instead of text")
         command.add_argument("--no-cv", action="store_true", help="skip the cross-validated errors (faster)")
+        command.add_argument("--all-rows", action="store_true",
+                             help=f"analyse every row of a table longer than {MAX_ROWS} rows (default: a subsample)")
         if name in ("add", "report"):
             command.add_argument("effects", nargs="*", metavar="EFFECT", help="effects to add, in order")
             command.add_argument("--auto", action="store_true", help="add effects forward while the evidence is strong")
@@ -60,22 +74,49 @@ def run(args) -> int:
     if args.lab_command == "report":
         check_output(args.output, inputs, args.force)
     probe = _probe(args.probe)
-    with input_file(args.table):
+    stages = tqdm(total=3 if args.lab_command == "report" else 2, desc=f"mows lab {args.lab_command}: reading",
+                  file=sys.stderr, disable=args.json or not sys.stderr.isatty(), leave=False,
+                  bar_format="{desc} {bar} {n_fmt}/{total_fmt} stages, {elapsed}")
+    with input_file(args.table), stages:
         table = load_table(args.table, drop_invalid=args.drop_invalid,
                            **({"reference": args.reference, "magnet_position_m": args.magnet_position}
                               if is_bag(args.table) else {}))
-    effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
-    report = analyse(table, probe, effects=effects, auto=getattr(args, "auto", False), plugins=args.plugin,
-                     rank=args.lab_command != "compare", cross_validate=not args.no_cv)
+        if len(table) > MAX_ROWS and not args.all_rows:
+            table = subsample(table, MAX_ROWS)
+        stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")
+        stages.update()
+        effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
+        report = analyse(table, probe, effects=effects, auto=getattr(args, "auto", False), plugins=args.plugin,
+                         rank=args.lab_command != "compare", cross_validate=not args.no_cv)
+        stages.update()
+        if args.lab_command == "report":
+            stages.set_description(f"mows lab report: writing {args.output}")
+            with replacing(args.output, inputs, args.force) as temporary:
+                write_report(report, temporary)
+            stages.update()
     if args.lab_command == "report":
-        with replacing(args.output, inputs, args.force) as temporary:
-            write_report(report, temporary)
         print(f"wrote {args.output}")
     if args.json:
         print(json.dumps(report.to_dict(), indent=2, default=float))
     elif args.lab_command != "report":
         print(format_text(report, table, args.lab_command))
     return 0
+
+
+def subsample(table, rows: int):
+    """``rows`` rows of ``table`` drawn at random (seed SUBSAMPLE_SEED) in their order, every
+    sweep kept, with a note saying so."""
+    rng = np.random.default_rng(SUBSAMPLE_SEED)
+    sweeps = table.sweep_ids
+    first_of_each = np.unique(sweeps, return_index=True)[1]
+    rest = np.setdiff1d(np.arange(len(table)), first_of_each)
+    chosen = np.sort(np.concatenate([first_of_each, rng.choice(rest, max(0, rows - len(first_of_each)),
+                                                                    replace=False)]))
+    note = (f"the table has {len(table)} rows: analysed on a random subsample of {len(chosen)} (seed "
+            f"{SUBSAMPLE_SEED}, every sweep kept); a weak effect may be significant only with all rows "
+            "(--all-rows, slower)")
+    subset = table.subset(chosen)
+    return dataclasses.replace(subset, notes=subset.notes + (note,))
 
 
 def _probe(source):

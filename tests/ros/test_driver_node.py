@@ -250,7 +250,8 @@ def test_a_recording_killed_with_sigkill_is_repaired_and_replays(start_driver, l
     assert "were recovered" in capsys.readouterr().out
     recorded = read_blocks(bag)
     assert len(recorded) >= 200  # two chunks of ~9 kB blocks
-    assert_contiguous(recorded)
+    # In publishing order, none twice (a gap the stream itself had under load stays a gap).
+    assert np.all(np.diff([b.sequence for b in recorded]) > 0)
     by_sequence = {b.sequence: b for b in recorded}
     heard = [b for b in listen.blocks if b.sequence <= recorded[-1].sequence]
     assert heard and all(b.sequence in by_sequence for b in heard)
@@ -260,7 +261,8 @@ def test_a_recording_killed_with_sigkill_is_repaired_and_replays(start_driver, l
     start_driver("-p", "backend:=bag", "-p", f"bag_path:={bag}", "-p", "bag_rate:=8.0", "-p", "bag_wait_subscribers:=1")
     last = recorded[-1].first_sample_index
     listen.ros.wait_for(lambda: replayed.blocks and replayed.blocks[-1].first_sample_index == last, "the replay")
-    assert_contiguous(replayed.blocks)
+    replayed_firsts = [b.first_sample_index for b in replayed.blocks]
+    assert replayed_firsts == [b.first_sample_index for b in recorded][-len(replayed_firsts):]
 
 
 def synthetic_bag(path, gap_after: int, gap_samples: int, rate_hz: float = RATE_HZ):

@@ -143,7 +143,7 @@ class SimulatedDevice:
         """Refuse a field whose spring m·|B| makes ω = √((kM + m|B|)/J) too fast for the
         integrator's step 1/(substeps·fs) (Eq. S1 with the field's spring added)."""
         probe, integrator = self.probe, self.scenario.integrator
-        field_t = float(np.linalg.norm(self._env_source.field_t(np.asarray(self.scenario.pose.magnet_position_m,
+        field_t = float(np.linalg.norm(self.static_source.field_t(np.asarray(self.scenario.pose.magnet_position_m,
                                                                             float))))
         omega = math.sqrt((probe.spring_nm_per_rad + probe.moment_am2 * field_t) / probe.inertia_kgm2)
         omega_dt = omega / (integrator.substeps * self.sample_rate_hz)

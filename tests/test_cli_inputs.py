@@ -46,7 +46,8 @@ def snapshot(*paths):
     """The bytes of every file under ``paths``."""
     files = {}
     for path in paths:
-        for root, _, names in os.walk(path) if os.path.isdir(path) else [(os.path.dirname(path), [], [os.path.basename(path)])]:
+        walk = os.walk(path) if os.path.isdir(path) else [(os.path.dirname(path), [], [os.path.basename(path)])]
+        for root, _, names in walk:
             for name in names:
                 full = os.path.join(root, name)
                 with open(full, "rb") as handle:

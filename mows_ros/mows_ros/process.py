@@ -25,8 +25,9 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> in
     ``rclpy.init`` installs handlers for SIGINT and SIGTERM that shut the context down, so
     either signal ends ``spin`` with ``ExternalShutdownException`` (or KeyboardInterrupt when
     it lands outside of spin): both are the normal way for a node to stop. A value from a
-    parameter file or ``-p`` that the node rejects, or a parameter it does not have, ends it with EXIT_BAD_PARAMETER and the
-    reason, not a traceback: it is a configuration error, not a bug.
+    parameter file or ``-p`` that the node rejects, or a parameter it does not have, ends it
+    with EXIT_BAD_PARAMETER and the reason, not a traceback: it is a configuration error, not
+    a bug.
     """
     faulthandler.enable()  # a node aborted because it would not stop says where it hung
     rclpy.init(args=args)

@@ -5,6 +5,8 @@ restarted device's samples are counted as missing from their indices."""
 import numpy as np
 import pytest
 
+from device.spy import SpyDevice
+from device.test_emulator import CAP_A, SCENARIO, collect, samples_of, wait_for
 from mows.device.backends import SerialBackend
 from mows.device.blocks import BlockAssembler
 from mows.device.emulator import DeviceEmulator
@@ -15,9 +17,6 @@ from mows.device.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
 from mows.records.samples import SampleBlock
-
-from device.spy import SpyDevice
-from device.test_emulator import CAP_A, SCENARIO, collect, samples_of, wait_for
 
 SETTINGS = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=0, settle_s=0.1)
 

@@ -14,8 +14,7 @@ import pytest
 
 from mows.cli.lab import MAX_ROWS
 from mows.cli.main import main
-from mows.lab import read_csv
-from mows.lab import synth
+from mows.lab import read_csv, synth
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE

@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import pathlib
 import sys
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 import yaml
 
@@ -55,7 +55,8 @@ def input_file(path, what: str = "") -> Iterator[pathlib.Path]:
     except FileNotFoundError:
         raise InputError(f"{name} does not exist") from None
     except UnicodeDecodeError as error:
-        raise InputError(f"{name} is not UTF-8 text (byte {error.start}: {error.object[error.start:error.start + 1]!r}): "
+        byte = error.object[error.start:error.start + 1]
+        raise InputError(f"{name} is not UTF-8 text (byte {error.start}: {byte!r}): "
                          "save it as UTF-8") from None
     except OSError as error:
         raise InputError(f"{name}: {error.strerror or one_line(error)}") from None

@@ -66,7 +66,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             command.add_argument("--effects", default="", help="comma-separated effects already in the model")
         if name == "report":
             command.add_argument("-o", "--output", default="lab_report.html", help="HTML file to write (a new file)")
-            command.add_argument("--force", action="store_true", help="replace an existing output file (never an input)")
+            command.add_argument("--force", action="store_true",
+                                 help="replace an existing output file (never an input)")
 
 
 def run(args) -> int:

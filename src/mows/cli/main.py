@@ -40,7 +40,8 @@ def main(argv=None) -> int:
 
 def _add_debug(parser: argparse.ArgumentParser) -> None:
     """``--debug`` also after the subcommand (and after ``mows lab``'s own subcommands)."""
-    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show the traceback of an error")
+    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                        help="show the traceback of an error")
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for subparser in action.choices.values():

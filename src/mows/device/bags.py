@@ -15,12 +15,13 @@ import functools
 import os
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal, NamedTuple, cast
 
 import yaml
 from rosbags.interfaces import Qos
 from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer
 from rosbags.rosbag2.metadata import dump_qos_v9
+from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -187,7 +188,7 @@ class Recording:
             topic: self._writer.add_connection(topic, msgtype, typestore=store, offered_qos_profiles=qos)
             for topic, (msgtype, qos) in topics.items()
         }
-        self._storage = self._writer.storage  # rosbags' McapWriter (internals of the pinned 0.11.9)
+        self._storage = cast(McapWriter, self._writer.storage)  # rosbags' internals (the pinned 0.11.9)
         self._topics = topics
         self._storage.close_chunk()
         self._flush()

@@ -37,7 +37,7 @@ class BlockAssembler:
         blocks = []
         if self._expected is not None and chunk.first_sample_index != self._expected:
             blocks += self.flush()
-            self._sequence += self._count_gap(chunk.first_sample_index - self._expected)
+            self._sequence += self._count_gap(chunk.first_sample_index, chunk.first_sample_index - self._expected)
         self._expected = chunk.end_index
         self.samples += len(chunk)
         self.saturated_samples += int(np.count_nonzero(chunk.saturated.any(axis=1)))
@@ -51,14 +51,14 @@ class BlockAssembler:
         """The block being filled, short, if it holds any samples."""
         return [self._cut(self._pending)] if self._pending else []
 
-    def _count_gap(self, jump: int) -> int:
+    def _count_gap(self, first: int, jump: int) -> int:
         """Count a jump of the sample index; the extra sequence steps it takes. After a restart
         the device counts from 0 again: the samples it took before the first one received are
         missing (those its old life took after the last one received cannot be known)."""
         self.gaps += 1
         if jump < 0:
             self.restarts += 1
-            self.missing_samples += self._expected + jump  # the new first index
+            self.missing_samples += first
             return 1
         self.missing_samples += jump
         return max(1, math.ceil(jump / self.block_samples))

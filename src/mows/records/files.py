@@ -12,7 +12,7 @@ import contextlib
 import os
 import pathlib
 import tempfile
-from typing import Iterable, Iterator
+from collections.abc import Iterable, Iterator
 
 
 class OutputRefused(ValueError):

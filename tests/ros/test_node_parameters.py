@@ -103,7 +103,8 @@ def test_a_bad_value_at_start_up_stops_the_node():
 # A misspelling of one parameter of each node, and the name it should suggest.
 MISSPELT = {"driver": ("excitation_curent_a", "excitation_current_a"),
             "estimator": ("settle", "settle_s"),
-            "mapper": ("referance_scenario", "reference_scenario")}
+            "mapper": ("referance_scenario", "reference_scenario"),
+            "calibrator": ("hardware_idd", "hardware_id")}
 
 
 @pytest.mark.parametrize("graph_node", NODES, ids=lambda n: n.name)

@@ -76,7 +76,10 @@ def samples_of(items):
 
 def test_the_device_streams_contiguous_samples_on_its_own_clock(emulator, link):
     items = collect(link, "50 Samples frames", lambda items: len(samples_of(items)) >= 50)
-    assert isinstance(items[0], LinkEvent) and items[0].up
+    # The device streams from power-on, so frames it sent before it answered Hello can come
+    # ahead of the link's up event (on a loaded host the link opens late): one up, no down.
+    events = [item for item in items if isinstance(item, LinkEvent)]
+    assert len(events) == 1 and events[0].up
     assert link.info == emulator.info
     frames = samples_of(items)
     firsts = [f.body.first_sample_index for f in frames]

@@ -24,8 +24,27 @@ from mows.physics.probe import Probe
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"
 
 
+class _IntermixedParser(argparse.ArgumentParser):
+    """A parser that takes options between positionals: ``TABLE --probe P EFFECT…`` as
+    documented. argparse's plain parsing fills ``EFFECT…`` (nargs ``*``) with nothing at the
+    first positional and then rejects the effects after ``--probe P`` as unrecognised;
+    ``parse_known_intermixed_args`` reads all positionals together. It calls
+    ``parse_known_args`` itself, hence the guard."""
+
+    _intermixing = False
+
+    def parse_known_args(self, args=None, namespace=None):
+        if self._intermixing:
+            return super().parse_known_args(args, namespace)
+        self._intermixing = True
+        try:
+            return self.parse_known_intermixed_args(args, namespace)
+        finally:
+            self._intermixing = False
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    sub = parser.add_subparsers(dest="lab_command", required=True)
+    sub = parser.add_subparsers(dest="lab_command", required=True, parser_class=_IntermixedParser)
     helps = {"compare": "how well the model explains the table: χ²/dof, residual structure, verdict",
              "diagnose": "rank the catalog's effects as explanations of the residual",
              "add": "refit with named effects (or --auto) and print the error history",

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from mows.lab import analyse, catalog, diagnose, synth
-from mows.lab.search import prefer_physical
 from mows.lab.physical_aliases import amplitude_scale_error, gravity_field_t
+from mows.lab.search import prefer_physical
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE

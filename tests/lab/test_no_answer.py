@@ -21,4 +21,5 @@ def test_a_hidden_current_times_temperature_term_is_pointed_at():
     assert report.verdict == "unexplained_structure"
     explanation = report.diagnosis.explanation
     assert "The residual follows temperature_k·coil_current_a (correlation +0.9" in explanation
-    assert '@effect(name="my_effect"' in explanation and "(rows.coil_current_a - rows.coil_current_a.mean())" in explanation
+    assert '@effect(name="my_effect"' in explanation
+    assert "(rows.coil_current_a - rows.coil_current_a.mean())" in explanation

@@ -34,7 +34,8 @@ window.addEventListener("load", () => {
   document.body.appendChild(out);
 });
 </script>"""
-BROKEN = '<img src="data:image/png;base64,iVBORw0KGgoAAAAbroken" alt="broken"><script>console.error("deliberate");</script>'
+BROKEN = ('<img src="data:image/png;base64,iVBORw0KGgoAAAAbroken" alt="broken">'
+          '<script>console.error("deliberate");</script>')
 
 
 def _chromium(*args):

@@ -113,8 +113,8 @@ def _thermal_spring(table, probe, values) -> str:
     if abs(correlation) < LINEAR_CORRELATION:
         return ""
     rate_k_per_s = float(np.polyfit(table.t_s, table.temperature_k, 1)[0])
-    text = (f"thermal_drift ≡ spring_drift: the temperature rises linearly in time here ({rate_k_per_s * 3600:.3g} K/h, "
-            f"correlation {correlation:.3f}), so r = α·dT/dt")
+    text = (f"thermal_drift ≡ spring_drift: the temperature rises linearly in time here "
+            f"({rate_k_per_s * 3600:.3g} K/h, correlation {correlation:.3f}), so r = α·dT/dt")
     if "thermal_drift" in values and values["thermal_drift"]:
         alpha = values["thermal_drift"]["spring_temp_coeff_per_k"]
         text += f"; here α = {alpha:.3g}/K ≡ spring_drift r = {alpha * rate_k_per_s:.3g}/s"

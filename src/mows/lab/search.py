@@ -113,7 +113,8 @@ def prefer_physical(found, pool, probe, history, cross_validate: bool = True):
     for generic in [e for e in fit.model.effects if e.generic]:
         best = None
         for form, new in _physical_replacements(fit, generic, pool, probe):
-            if new.bic < fit.bic + TIE_DELTA_BIC and (best is None or (form.fixed, -new.bic) > (best[0].fixed, -best[1].bic)):
+            better = best is None or (form.fixed, -new.bic) > (best[0].fixed, -best[1].bic)
+            if new.bic < fit.bic + TIE_DELTA_BIC and better:
                 best = (form, new)
         if best is None:
             continue

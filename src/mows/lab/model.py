@@ -336,10 +336,12 @@ class FitResult:
             x, range(first, first + len(effect.parameters)))
 
     def prediction_sigmas(self, table) -> float:
-        """Median over ``table``'s rows of this fit's prediction uncertainty there (from the
-        parameter covariance), in units of each row's ``f_std_hz``."""
+        """Median over ``table``'s rows of this fit's prediction uncertainty there, in units of
+        each row's ``f_std_hz``: from the parameter covariance without the Birge inflation, so
+        that it measures what the fitted rows say about these, not how well the model fits."""
         jacobian = self.model_jacobian(table)
-        return float(np.median(np.sqrt(np.einsum("ni,ij,nj->n", jacobian, self.covariance, jacobian))))
+        variance = np.einsum("ni,ij,nj->n", jacobian, self.covariance, jacobian) / max(1.0, self.chi2_dof)
+        return float(np.median(np.sqrt(variance)))
 
     def model_jacobian(self, table) -> np.ndarray:
         """d(weighted residual)/d(values) of this model at the fitted values on another table."""

@@ -155,7 +155,7 @@ def absorbed_groups(fit, effects, candidates, untestable, probe, first_number) -
     without that effect's columns (untested as "no signature … cannot already absorb", or a
     candidate left with almost nothing). With the exact aliases among them, the what-if variant
     after which the model no longer absorbs them, or the direct checks."""
-    absorbing = {}
+    absorbing: dict = {}  # model effect → the effects it absorbs
     held_masks = list(_columns_without_each(fit))
     if not held_masks:
         return []

@@ -111,7 +111,7 @@ def residual_structure(fit) -> Structure:
 def _harmonic(k, test: Signature, residual) -> Harmonic:
     if not test.rank:
         return Harmonic(k, 0.0, 0.0, 0.0, 1.0, True)
-    if test.rank < test.columns.shape[1]:  # e.g. two orientations: cos kθ0 and sin kθ0 not separable
+    if test.rank < test.projected.shape[1]:  # e.g. two orientations: cos kθ0 and sin kθ0 not separable
         return Harmonic(k, math.nan, math.nan, math.nan, test.p_value, False, identifiable=False)
     coefficients, *_ = np.linalg.lstsq(test.projected, residual, rcond=None)
     covariance = np.linalg.pinv(test.projected.T @ test.projected)

@@ -74,8 +74,10 @@ lint: $(BUILD_STAMP) $(CORE_STAMP)
 	$(ACTIVATE) && mypy
 
 # The static checks, then the whole suite; `make test PYTEST_ARGS='-m "not ros"'` runs only the
-# ROS-free part of the suite.
+# ROS-free part of the suite. The lab's report is rendered in headless Chromium
+# (tests/lab/test_report_browser.py): Debian's chromium is installed when missing.
 test: lint $(BUILD_STAMP) $(CORE_STAMP)
+	command -v chromium >/dev/null || $(call apt_install,chromium)
 	$(ENVIRONMENT) && python -m pytest $(PYTEST_ARGS)
 
 # The main job: the node graph on the simulated device runs a rotation sweep, decomposes it

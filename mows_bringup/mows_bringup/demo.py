@@ -218,7 +218,7 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, prob
     lab = analyse(table, probe, auto=True)
     for step in lab.history:
         say(f"  error history: {' + '.join(['published'] + step.effects):60s} χ²/dof {step.chi2_dof:9.2f}  "
-            f"cv rms {step.cv_rms_hz * 1e3:8.3f} mHz")
+            f"cv rms {step.cv_text:>8} mHz")
     path = out / "demo_lab_report.html"
     write_report(lab, path)
     say(f"lab report: {path}")

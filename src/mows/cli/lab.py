@@ -37,8 +37,27 @@ SUBSAMPLE_SEED = 0
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"
 
 
+class _IntermixedParser(argparse.ArgumentParser):
+    """A parser that takes options between positionals: ``TABLE --probe P EFFECT…`` as
+    documented. argparse's plain parsing fills ``EFFECT…`` (nargs ``*``) with nothing at the
+    first positional and then rejects the effects after ``--probe P`` as unrecognised;
+    ``parse_known_intermixed_args`` reads all positionals together. It calls
+    ``parse_known_args`` itself, hence the guard."""
+
+    _intermixing = False
+
+    def parse_known_args(self, args=None, namespace=None):
+        if self._intermixing:
+            return super().parse_known_args(args, namespace)
+        self._intermixing = True
+        try:
+            return self.parse_known_intermixed_args(args, namespace)
+        finally:
+            self._intermixing = False
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    sub = parser.add_subparsers(dest="lab_command", required=True)
+    sub = parser.add_subparsers(dest="lab_command", required=True, parser_class=_IntermixedParser)
     helps = {"compare": "how well the model explains the table: χ²/dof, residual structure, verdict",
              "diagnose": "rank the catalog's effects as explanations of the residual",
              "add": "refit with named effects (or --auto) and print the error history",
@@ -148,7 +167,8 @@ def _structure_text(structure) -> str:
     lines = ["residual structure (after what the model absorbs):",
              "  harmonic   amplitude (mHz)   phase (deg)   p"]
     for h in structure.harmonics:
-        lines.append(f"  {h.k:8d}   absorbed by the model" if h.absorbed else
+        lines.append(f"  {h.k:8d}   {h.text()}" + ("" if h.absorbed else f", p = {h.p_value:.2g}")
+                     if h.absorbed or not h.identifiable else
                      f"  {h.k:8d}   {h.amplitude_hz * 1e3:8.3f} ± {h.std_hz * 1e3:6.3f}   "
                      f"{math.degrees(h.phase_rad):8.1f}   {h.p_value:.2g}")
     if structure.covariates:
@@ -169,8 +189,10 @@ def _candidates_text(report) -> str:
         lines.append(f"  {rank:4d} {c.name:22s}  {c.form:10s} {c.delta_bic:9.1f}   {c.p_value:9.2g}   "
                      f"{c.chi2_dof_after:10.3f}   {c.group or '-':>4}   {values}")
     for group in report.groups:
-        lines.append(f"  group {group.number}: {', '.join(group.members)} cannot be told apart by this data; "
+        lines.append(f"  group {group.number}: {group.separation}" if group.in_model else
+                     f"  group {group.number}: {', '.join(group.members)} cannot be told apart by this data; "
                      f"{group.separation}")
+        lines += [f"    alias: {alias}" for alias in group.aliases]
         lines += [f"    check {check}" for check in group.checks]
     for name, reason in report.untestable.items():
         lines.append(f"  not tested: {name}: {reason}")
@@ -181,8 +203,7 @@ def _history_text(history) -> str:
     lines = ["error history:", "  step  χ²/dof      BIC        CV rms (mHz)  change → model"]
     for i, step in enumerate(history):
         name = " + ".join(["eq6"] + step.effects)
-        cv = f"{step.cv_rms_hz * 1e3:10.4f}" if math.isfinite(step.cv_rms_hz) else "         -"
-        lines.append(f"  {i:4d}  {step.chi2_dof:9.3f}  {step.bic:10.1f}  {cv}    {step.change} → {name}")
+        lines.append(f"  {i:4d}  {step.chi2_dof:9.3f}  {step.bic:10.1f}  {step.cv_text:>10}    {step.change} → {name}")
         lines += [f"          free fit: {name} = {v:.4g} ± {s:.2g} {u}" for name, v, s, u in step.check]
     return "\n".join(lines)
 

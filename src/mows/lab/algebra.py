@@ -16,6 +16,7 @@ import numpy as np
 import scipy.stats
 
 RANK_RTOL = 1e-3  # a projected direction shorter than this (relative) is absorbed by the model
+SPAN_COSINE = 0.999  # cosine of the largest principal angle between two spans that are the same
 
 
 def orthonormal_basis(columns, reference_norm=None) -> np.ndarray:
@@ -68,3 +69,11 @@ def signature(columns, model_basis, residual) -> Signature:
 def cosine_within(vector, basis) -> float:
     norm = np.linalg.norm(vector)
     return float(np.linalg.norm(basis.T @ vector) / norm) if norm > 0 and basis.shape[1] else 0.0
+
+
+def same_span(a, b) -> bool:
+    """True when the orthonormal bases ``a`` and ``b`` span the same space (all principal
+    angles below 2.6°): directions no data on these rows can tell apart, exact aliases."""
+    if a.shape[1] == 0 or a.shape[1] != b.shape[1]:
+        return False
+    return float(np.linalg.svd(a.T @ b, compute_uv=False).min()) >= SPAN_COSINE

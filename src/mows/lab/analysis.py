@@ -25,10 +25,13 @@ from mows.lab.candidates import physics_deviation
 from mows.lab.catalog import catalog, resolve
 from mows.lab.diagnose import Diagnosis, diagnose
 from mows.lab.model import FitResult, FrequencyModel
+from mows.lab.physics import unevaluable_rows
 from mows.lab.readers import load_table
 from mows.lab.search import MAX_AUTO_STEPS, history_step, parameters_dict, search
+from mows.lab.table import TableError
 
 CHECK_SIGMAS = 3.0          # a physical value further than this from its free fit is noted
+INCONSISTENT_SIGMAS = 5.0   # … and further than this makes a statistically adequate model inconsistent
 
 
 @dataclasses.dataclass
@@ -90,7 +93,9 @@ class LabReport:
             "model": self.model,
             "effects": self.effects,
             "final": {"chi2_dof": self.chi2_dof, "bic": self.bic, "cv_rms_hz": _json_number(self.cv_rms_hz),
-                      "parameters": parameters_dict(self.fit.parameters())},
+                      "parameters": parameters_dict(self.fit.parameters()),
+                      "not_identifiable": [name for name, known in zip(self.fit.model.parameter_names,
+                                                                      self.fit.identifiable) if not known]},
             "physics_checks": [c.to_dict() for c in self.physics_checks],
             "candidates": [c.to_dict() for c in self.candidates],
             "groups": [g.to_dict() for g in self.groups],
@@ -122,7 +127,7 @@ def analyse(table, probe, effects=None, auto: bool = False, plugins=(), rank: bo
     rank : test the catalog's candidates (``False``: fit and residual structure only).
     cross_validate : compute the leave-one-sweep-out error of every step.
     """
-    table = load_table(table)
+    table = _evaluable(load_table(table), probe)
     available = catalog(plugins)
     fit = FrequencyModel(probe).fit(table)
     base = fit
@@ -136,10 +141,21 @@ def analyse(table, probe, effects=None, auto: bool = False, plugins=(), rank: bo
     if not rank:
         found.explanation += " (Candidate effects were not tested: run `mows lab diagnose`.)"
     checks = physics_checks(fit)
+    if found.verdict == "adequate":
+        found.verdict, found.explanation = _physics_verdict(fit, checks, found.explanation)
     notes = list(table.notes) + [_check_note(c) for c in checks if c.deviation_sigma > CHECK_SIGMAS]
     return LabReport(fit.model.name, fit.model.labels, fit.n, fit.chi2_dof, fit.bic, history[-1].cv_rms_hz,
                      found.verdict, found.structure.summary, found.candidates, found.groups, history,
                      found.untestable, notes, base, fit, found, checks)
+
+
+def _evaluable(table, probe):
+    """The table without the rows the potential cannot evaluate, each named with the reason in
+    the notes (:func:`mows.lab.physics.unevaluable_rows`); TableError when no row is left."""
+    problems = unevaluable_rows(table, probe)
+    if len(problems) == len(table):
+        raise TableError(f"the model cannot evaluate any row of {table.source}: {next(iter(problems.values()))[0]}")
+    return table.without_rows(problems) if problems else table
 
 
 def physics_checks(fit) -> list:
@@ -157,6 +173,28 @@ def physics_checks(fit) -> list:
         checks.append(PhysicsCheck(effect.name, effect.fixed, parameters,
                                    physics_deviation(effect, parameters)))
     return checks
+
+
+def _physics_verdict(fit, checks, explanation) -> tuple:
+    """(verdict, explanation) of a model whose residuals the statistics call adequate:
+    ``inconsistent_physics`` when an effect's free fit lies more than 5σ from its physical
+    value, else ``needs_generic_term`` when a generic correction is in the model (what it
+    stands for must still be found), else ``adequate``."""
+    inconsistent = [c for c in checks if c.deviation_sigma > INCONSISTENT_SIGMAS]
+    generic = [e for e in fit.model.effects if e.generic]
+    if not inconsistent and not generic:
+        return "adequate", explanation
+    found = [f"{c.effect} ({'held at physics; its free fit gives' if c.held else 'free:'} {_values(c.parameters)}) "
+             f"is {c.deviation_sigma:.1f}σ from its physical value" for c in inconsistent]
+    found += [f"{e.name} ({_values(fit.effect_parameters(e.name))}) is a generic correction with no physical value "
+              f"of its own; to find what it stands for: {e.check}" for e in generic]
+    verdict = "inconsistent_physics" if inconsistent else "needs_generic_term"
+    return verdict, ("The residuals are consistent with noise, but the physics is not: " + "; ".join(found)
+                     + ". " + explanation.removeprefix("The model explains the data: "))
+
+
+def _values(parameters) -> str:
+    return ", ".join(f"{name} = {v:.4g} ± {s:.2g} {u}".rstrip() for name, v, s, u in parameters)
 
 
 def _check_note(check: PhysicsCheck) -> str:

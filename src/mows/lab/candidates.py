@@ -24,6 +24,7 @@ TIE_DELTA_BIC = 2.0
 STRONG_DELTA_BIC = 10.0
 STRONG_P = 1e-3
 REFIT_P = 0.05
+ABSORBED = "no signature in this table that the current model cannot already absorb"
 
 
 # --- candidates -----------------------------------------------------------------------------
@@ -160,7 +161,7 @@ def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
         reason = testable(effect, fit.table, probe)
         test = None if reason else signature(fit.extension_columns(effect), model_basis, residual)
         if test is not None and not test.rank:
-            reason = "no signature in this table that the current model cannot already absorb"
+            reason = ABSORBED
         if reason:
             untestable[effect.name] = reason
             continue

@@ -167,7 +167,7 @@ CATALOG = (
         "kM → kM·(1 + r·t), r free (1/s)",
         "no angle dependence; linear in time t_s",
         (Parameter("rate_per_s", "1/s", -1e-3, 1e-3, 1e-8, "relative change of kM per second"),),
-        _spring_drift, MECHANICS, requires=("t_s",), priority=90,
+        _spring_drift, MECHANICS, requires=("t_s",), priority=90, generic=True,
         check="repeat a fixed-angle reference point at the start and end of each sweep"),
     Effect(
         "angle_offset",
@@ -176,7 +176,7 @@ CATALOG = (
         "x' = (cos(θ0 + δθ), sin(θ0 + δθ))",
         "harmonic 1 in quadrature with the field (∝ B⊥ = By') and harmonic 2 ∝ G; scales with |B|",
         (Parameter("offset_rad", "rad", -0.5, 0.5, 1e-3, "δθ, added to θ0"),),
-        _angle_offset, ORIENTATION, priority=60,
+        _angle_offset, ORIENTATION, priority=60, generic=True,
         check="sweep in a strong known uniform field: the phase of the 1θ0 harmonic is δθ"),
     Effect(
         "damping_shift",
@@ -197,7 +197,7 @@ CATALOG = (
         "harmonic 1 of θ0 with fixed phase, independent of the reference",
         (Parameter("bx_t", "T", -1e-3, 1e-3, 1e-6, "unreferenced field, x"),
          Parameter("by_t", "T", -1e-3, 1e-3, 1e-6, "unreferenced field, y")),
-        _field_offset, SOURCES, priority=70,
+        _field_offset, SOURCES, priority=70, generic=True,
         check="check the reference magnetometer's zero (turn it by 180° in a fixed field)"),
     Effect(
         "plane_tilt",
@@ -216,7 +216,7 @@ CATALOG = (
         "k = kM + (1 + ε)·(m·Bx' + m·l·Gx'x' + …)",
         "proportional to the base model's own shift (harmonics 1 and 2), grows with |B| and G",
         (Parameter("scale_error", "1", -0.5, 0.5, 1e-3, "ε, relative error of m/kM"),),
-        _moment_scale, COMPONENTS, priority=85,
+        _moment_scale, COMPONENTS, priority=85, generic=True,
         check="a field sweep along x' at one amplitude: the slope at B = 0 is β0"),
 )
 

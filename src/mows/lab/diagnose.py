@@ -15,8 +15,8 @@ from __future__ import annotations
 import dataclasses
 
 from mows.lab.candidates import rank_candidates
-from mows.lab.groups import group_candidates
-from mows.lab.structure import GOODNESS_ALPHA, Structure, residual_structure
+from mows.lab.groups import absorbed_groups, group_candidates
+from mows.lab.structure import GOODNESS_ALPHA, Structure, product_trends, residual_structure
 
 EXPLAINED_FRACTION = 0.5
 
@@ -40,8 +40,10 @@ def diagnose(fit, effects, probe=None) -> Diagnosis:
     """Rank ``effects`` (an iterable of :class:`Effect`, those already in the model are skipped)
     as explanations of ``fit``'s residual; group, propose separating measurements, verdict."""
     probe = probe or fit.model.probe
+    effects = list(effects)
     candidates, untestable = rank_candidates(fit, effects, probe)
     groups = group_candidates(candidates, fit, probe)
+    groups += absorbed_groups(fit, effects, candidates, untestable, probe, len(groups) + 1)
     structure = residual_structure(fit)
     verdict, explanation = _verdict(fit, structure, candidates)
     return Diagnosis(fit, structure, candidates, groups, untestable, verdict, explanation)
@@ -66,4 +68,20 @@ def _verdict(fit, structure: Structure, candidates) -> tuple:
         unexplained = "No catalog effect explains the residual." if candidates else ""
     if structure.goodness_p >= GOODNESS_ALPHA and not structure.significant:
         return "adequate", "The model explains the data: " + structure.summary
-    return "unexplained_structure", (unexplained + " " + structure.summary).strip()
+    return "unexplained_structure", (unexplained + " " + structure.summary + " " + _no_answer(fit, structure)).strip()
+
+
+def _no_answer(fit, structure: Structure) -> str:
+    """What the residual follows when no catalog effect explains it (single covariates and
+    products of two), and the plugin a user would write for the strongest (docs/model_lab.md)."""
+    trends = sorted(structure.covariates + product_trends(fit), key=lambda trend: -abs(trend.correlation))
+    if not trends:
+        return ""
+    best = trends[0]
+    factors = best.name.split("·")
+    expression = " * ".join(f"(rows.{name} - rows.{name}.mean())" for name in factors)
+    follows = "; ".join(f"{t.name} (correlation {t.correlation:+.2f}, p = {t.p_value:.1e})" for t in trends[:3])
+    return (f"The residual follows {follows}. A plugin for the strongest, to save as my_effect.py and run with "
+            f"--plugin my_effect.py: `@effect(name=\"my_effect\", parameters={{\"c_hz\": (0.0, -1.0, 1.0, \"Hz\")}}) "
+            f"def my_effect(rows, c_hz): return {{\"frequency_hz\": c_hz * {expression} / "
+            f"({' * '.join(f'rows.{n}.std()' for n in factors)})}}` (better: the physics that makes it).")

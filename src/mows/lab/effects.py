@@ -58,7 +58,9 @@ class Effect:
     the effect directly. ``physical`` holds the parameter values at which the effect is the
     physics as predicted from the probe constants and the table (None when its size is not
     known, e.g. gravity's tilt): the effect can then also be tested *at physics*, with no free
-    parameter (:meth:`at_physics`).
+    parameter (:meth:`at_physics`). ``generic`` marks a free correction that stands for
+    several physical causes and has no value of its own (moment scale, field offset, spring
+    drift, angle offset): a model that needs one is not called adequate.
     """
 
     name: str
@@ -73,7 +75,8 @@ class Effect:
     check: str = ""
     origin: str = "catalog"
     physical: tuple | None = None
-    free: Effect | None = None   # of an effect held at physics: the same effect with its parameters free
+    generic: bool = False          # a free correction with no physical value (a calibration term)
+    free: Effect | None = None     # of an effect held at physics: the same effect with its parameters free
 
     @property
     def parameter_names(self) -> tuple:

@@ -1,9 +1,12 @@
 """Groups of candidates this table cannot tell apart, and the measurement that would.
 
-- **Groups**: two significant candidates (p < 0.01) cannot be told apart by this data when each
-  one's fitted signal, v_A = P_A⊥·r (the residual's projection on A's projected signature),
-  lies within the other's signature space: cos(v_A, span B⊥) ≥ 0.95 both ways. Groups are the
-  connected sets of such pairs.
+- **Groups**: two candidates cannot be told apart by this data when their projected signatures
+  span the same space (exact aliases, significant or not: gravity, an unreferenced field and a
+  tilt of the plane in a field with constant Bz), or when both are significant (p < 0.01) and
+  each one's fitted signal, v_A = P_A⊥·r (the residual's projection on A's projected
+  signature), lies within the other's signature space: cos(v_A, span B⊥) ≥ 0.95 both ways.
+  Groups are the connected sets of such pairs. Effects the model already holds and the effects
+  they absorb are grouped by :mod:`mows.lab.aliases`.
 - **Separating measurements**: the group's signatures and fitted signals (the fitted linear
   coefficients, extended) are evaluated on the table joined with a what-if variant of it
   (:mod:`mows.lab.whatif`); the cheapest variant after which no pair of the group stays
@@ -21,12 +24,15 @@ import dataclasses
 
 import numpy as np
 
-from mows.lab.algebra import Signature, cosine_within, orthonormal_basis, project_out
-from mows.lab.candidates import TIE_DELTA_BIC
+from mows.lab.algebra import Signature, cosine_within, orthonormal_basis, project_out, same_span
+from mows.lab.candidates import ABSORBED, TIE_DELTA_BIC
+from mows.lab.physical_aliases import alias_statements
 from mows.lab.whatif import variants
 
 GROUP_COSINE = 0.95
 GROUP_SIGNIFICANCE = 0.01
+NEAR_ALIAS = 0.05   # an effect whose signature keeps less than this of its norm beside the model is absorbed
+FREED = 0.5         # … by the model effect without which it keeps more than this
 
 
 @dataclasses.dataclass
@@ -38,28 +44,30 @@ class Group:
     separated_by: str | None
     separation: str
     checks: list
+    aliases: list = dataclasses.field(default_factory=list)   # exact physical aliases, in words and numbers
+    in_model: list = dataclasses.field(default_factory=list)  # members the model holds (absorbing the rest)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
 
-def _indistinguishable(a: Signature, b: Signature) -> bool:
-    return (cosine_within(a.fitted_signal, b.basis) >= GROUP_COSINE and
-            cosine_within(b.fitted_signal, a.basis) >= GROUP_COSINE)
+def _indistinguishable(a: Signature, b: Signature, significant: bool) -> bool:
+    return same_span(a.basis, b.basis) or (significant and cosine_within(a.fitted_signal, b.basis) >= GROUP_COSINE
+                                           and cosine_within(b.fitted_signal, a.basis) >= GROUP_COSINE)
 
 
-def _clusters(significant) -> list:
+def _clusters(candidates) -> list:
     """Connected sets (of two or more) of indistinguishable candidates, each in tie-break order."""
-    by_name = {c.name: c for c in significant}
-    parts = _partition({c.name: c.signature for c in significant})
+    by_name = {c.name: c for c in candidates}
+    significant = {c.name for c in candidates if c.p_value < GROUP_SIGNIFICANCE}
+    parts = _partition({c.name: c.signature for c in candidates}, significant)
     return [_tie_break([by_name[name] for name in part]) for part in parts if len(part) > 1]
 
 
 def group_candidates(candidates, fit, probe) -> list:
     """Number the groups by rank, put each group's members together in tie-break order
     (``candidates`` is reordered in place) and find what separates each group."""
-    cluster_of = {c.name: members for members in _clusters([c for c in candidates if c.p_value < GROUP_SIGNIFICANCE])
-                  for c in members}
+    cluster_of = {c.name: members for members in _clusters(candidates) for c in members}
     ranked = []
     groups: list[Group] = []
     for candidate in candidates:
@@ -83,8 +91,9 @@ def _tie_break(members) -> list:
     return sorted(tied, key=lambda c: (not c.within_bounds, c.effect.priority)) + rest
 
 
-def _partition(signatures: dict) -> list:
-    """Connected sets of mutually indistinguishable signatures (names), singletons included."""
+def _partition(signatures: dict, significant: set) -> list:
+    """Connected sets of mutually indistinguishable signatures (names), singletons included;
+    fitted signals are compared only between ``significant`` names."""
     names = list(signatures)
     parent = {name: name for name in names}
 
@@ -95,7 +104,7 @@ def _partition(signatures: dict) -> list:
 
     for i, a in enumerate(names):
         for b in names[i + 1:]:
-            if _indistinguishable(signatures[a], signatures[b]):
+            if _indistinguishable(signatures[a], signatures[b], a in significant and b in significant):
                 parent[root(b)] = root(a)
     found: dict[str, list[str]] = {}  # root → the names in its set
     for name in names:
@@ -120,7 +129,7 @@ def _separate(members, fit, probe, number) -> Group:
             basis = orthonormal_basis(projected, np.linalg.norm(columns, axis=0).max())
             extended[candidate.name] = Signature(basis, projected, 0.0, basis.shape[1],
                                                  basis.T @ (projected @ coefficients[candidate.name]))
-        parts = _partition(extended)
+        parts = _partition(extended, {c.name for c in members if c.p_value < GROUP_SIGNIFICANCE})
         if len(parts) > len(best_parts):
             best_variant, best_parts = variant, parts
         if len(parts) == len(names):
@@ -135,4 +144,67 @@ def _separate(members, fit, probe, number) -> Group:
         text = f"{best_variant.description}: separates " + " | ".join(", ".join(part) for part in best_parts)
         if together:
             text += "; " + "; ".join(", ".join(part) for part in together) + " still act identically: check directly"
-    return Group(number, names, None if best_variant is None else best_variant.name, text, checks)
+    fitted = {c.name: {n: v for n, v, _, _ in c.parameters} for c in members}
+    return Group(number, names, None if best_variant is None else best_variant.name, text, checks,
+                 alias_statements(names, fit, probe, fitted))
+
+
+def absorbed_groups(fit, effects, candidates, untestable, probe, first_number) -> list:
+    """Groups of an effect the model holds with the catalog effects it absorbs: an effect not in
+    the model whose signature lies in the model's span (all but NEAR_ALIAS of its norm) but not
+    without that effect's columns (untested as "no signature … cannot already absorb", or a
+    candidate left with almost nothing). With the exact aliases among them, the what-if variant
+    after which the model no longer absorbs them, or the direct checks."""
+    absorbing: dict = {}  # model effect → the effects it absorbs
+    held_masks = list(_columns_without_each(fit))
+    if not held_masks:
+        return []
+    model_basis = orthonormal_basis(fit.jacobian)
+    known = {c.name: c.signature.columns for c in candidates}
+    for effect in effects:
+        if effect.name in fit.model.effect_names or untestable.get(effect.name, ABSORBED) != ABSORBED:
+            continue
+        columns = known[effect.name] if effect.name in known else fit.extension_columns(effect)
+        if not np.any(columns) or _kept(columns, model_basis) > NEAR_ALIAS:
+            continue
+        for held, keep in held_masks:
+            if _kept(columns, orthonormal_basis(fit.jacobian[:, keep])) > FREED:
+                absorbing.setdefault(held, []).append(effect)
+    return [_absorbed_group(fit, held, absorbed, probe, first_number + i)
+            for i, (held, absorbed) in enumerate(absorbing.items())]
+
+
+def _kept(columns, basis) -> float:
+    """The fraction of the columns' norm outside the span of ``basis``."""
+    size = np.linalg.norm(columns)
+    return float(np.linalg.norm(project_out(columns, basis)) / size) if size > 0 else 0.0
+
+
+def _columns_without_each(fit):
+    """(effect, column mask of ``fit.jacobian`` without that effect's parameters) for each
+    effect of the model with free parameters."""
+    owners = [None] + [e for e in fit.model.effects for _ in e.parameters]
+    for effect in fit.model.effects:
+        if effect.parameters:
+            yield effect, np.array([owner is not effect for owner in owners])
+
+
+def _absorbed_group(fit, held, absorbed, probe, number) -> Group:
+    names = [held.name] + [e.name for e in absorbed]
+    separated, variant_name = [], None
+    for variant in variants(fit.table, probe):
+        model_basis = orthonormal_basis(fit.model_jacobian(variant.table))
+        separated = [e.name for e in absorbed if _kept(fit.extension_columns(e, variant.table), model_basis)
+                     > NEAR_ALIAS]
+        if separated:
+            variant_name, description = variant.name, variant.description
+            break
+    together = [e for e in absorbed if e.name not in separated]
+    text = (f"{held.label} is in the model and absorbs {', '.join(e.name for e in absorbed)}: they act (almost) "
+            "identically on this table")
+    if separated:
+        text += f"; {description}: separates {', '.join(separated)}"
+    if together:
+        text += f"; {', '.join(e.name for e in together)} still act identically: check directly"
+    checks = [f"{e.name}: {e.check}" for e in [held] + together] if together else []
+    return Group(number, names, variant_name, text, checks, alias_statements(names, fit, probe), [held.label])

@@ -32,12 +32,15 @@ import scipy.optimize
 from mows.estimate.ringdown import FitStatus
 from mows.lab.effects import Effect, testable
 from mows.lab.physics import Configuration, frequency_factor
-from mows.lab.table import MeasurementTable
+from mows.lab.table import MeasurementTable, rows_text
 from mows.physics import ringdown_average
 
 FD_STEP = 1e-2          # × parameter scale
 CV_FOLDS = 10           # interleaved folds when the table has one sweep
 INVALID_RESIDUAL = 1e6  # weighted residual given to rows where the model has no real frequency
+DEGENERATE_RTOL = 1e-6  # singular value (normalised Jacobian columns) below which a direction is not determined
+CV_PREDICTION_SIGMAS = 10.0  # a fold predicting its rows less precisely than this says nothing
+DEGENERATE_WEIGHT = 0.1  # a parameter with more than this weight in such a direction is not identifiable
 
 
 class FrequencyModel:
@@ -251,8 +254,32 @@ class FitResult:
 
     @property
     def status(self) -> FitStatus:
-        """OK, or NOT_CONVERGED when the optimiser stopped before its tolerances were met."""
+        """OK; BAD_FIT when the model has no real frequency at some rows (:attr:`invalid_rows`:
+        their residuals are a penalty, not data, so χ² means nothing); NOT_CONVERGED when the
+        optimiser stopped before its tolerances were met."""
+        if self.invalid_rows.size:
+            return FitStatus.BAD_FIT
         return FitStatus.OK if self.success else FitStatus.NOT_CONVERGED
+
+    @property
+    def identifiable(self) -> np.ndarray:
+        """Per parameter (order of ``values``): False when this table cannot determine it: its
+        Jacobian column is zero, or it takes part (weight > 0.1) in a direction the normalised
+        Jacobian does not determine (singular value < 1e-6 of the largest: exact aliases such as
+        gravity and an unreferenced field), or its σ exceeds its whole physical range."""
+        norms = np.linalg.norm(self.jacobian, axis=0)
+        found = norms > 0
+        if found.any():
+            _, s, vt = np.linalg.svd(self.jacobian[:, found] / norms[found], full_matrices=False)
+            undetermined = vt[s < DEGENERATE_RTOL * s[0]]
+            found[found] = np.all(np.abs(undetermined) <= DEGENERATE_WEIGHT, axis=0)
+        ranges = np.array([np.inf] + [p.upper - p.lower for _, p in self.model.parameters])
+        return found & (self.std < ranges)
+
+    @property
+    def invalid_rows(self) -> np.ndarray:
+        """Indices of the rows where the model has no real frequency at the fitted values."""
+        return np.flatnonzero(~np.isfinite(self.prediction_hz))
 
     @property
     def ok(self) -> bool:
@@ -308,27 +335,47 @@ class FitResult:
         return _Problem(extended, self.table if table is None else table).columns(
             x, range(first, first + len(effect.parameters)))
 
+    def prediction_sigmas(self, table) -> float:
+        """Median over ``table``'s rows of this fit's prediction uncertainty there, in units of
+        each row's ``f_std_hz``: from the parameter covariance without the Birge inflation, so
+        that it measures what the fitted rows say about these, not how well the model fits."""
+        jacobian = self.model_jacobian(table)
+        variance = np.einsum("ni,ij,nj->n", jacobian, self.covariance, jacobian) / max(1.0, self.chi2_dof)
+        return float(np.median(np.sqrt(variance)))
+
     def model_jacobian(self, table) -> np.ndarray:
         """d(weighted residual)/d(values) of this model at the fitted values on another table."""
         return _Problem(self.model, table).jacobian(self.values)
 
     def cross_validate(self) -> float:
         """Leave-one-sweep-out rms prediction error, Hz (interleaved 10-fold when the table
-        has a single sweep): refit without the sweep, predict it."""
+        has a single sweep): refit without the sweep, predict it. NaN when it is not
+        identifiable: a left-out sweep held the only information on a parameter (the fit
+        without it cannot determine a parameter the whole table determines, or predicts the
+        left-out rows with a median uncertainty above 10 σ of their measurements)."""
         folds = _folds(self.table)
         errors = np.empty(self.n)
         for rows in folds:
             train = np.ones(self.n, bool)
             train[rows] = False
             part = self.model.fit(self.table.subset(train), start=self.values[1:])
+            if np.any(self.identifiable & ~part.identifiable) or part.prediction_sigmas(
+                    self.table.subset(rows)) > CV_PREDICTION_SIGMAS:
+                return math.nan
             errors[rows] = self.table.f_hz[rows] - self.model.predict(self.table.subset(rows), part.values)
         return float(np.sqrt(np.mean(errors**2)))
 
     def report(self) -> str:
-        lines = [f"model {self.model.name}: n = {self.n}, χ²/dof = {self.chi2_dof:.3f}, BIC = {self.bic:.1f}"]
-        for name, value, std, unit in self.parameters():
-            lines.append(f"  {name:40s} = {value:+.6g} ± {std:.2g} {unit}")
-        if not self.ok:
+        quality = (f"χ²/dof = {self.chi2_dof:.3f}, BIC = {self.bic:.1f}" if self.status is not FitStatus.BAD_FIT
+                   else "χ² not meaningful")
+        lines = [f"model {self.model.name}: n = {self.n}, {quality}"]
+        for (name, value, std, unit), known in zip(self.parameters(), self.identifiable):
+            lines.append(f"  {name:40s} = {value:+.6g} ± {std:.2g} {unit}" if known else
+                         f"  {name:40s}   not identifiable from this table")
+        if self.status is FitStatus.BAD_FIT:
+            lines.append(f"  warning: {self.status.name}: the model has no real frequency at "
+                         f"{rows_text(self.invalid_rows)} (mows.lab.physics.unevaluable_rows says why)")
+        elif not self.ok:
             lines.append(f"  warning: {self.status.name}: the fit did not converge ({self.message})")
         return "\n".join(lines)
 

@@ -171,6 +171,35 @@ def _amplitude_stiffness(probe, field, amplitudes, **local):
     return potential.effective_stiffness_nm_per_rad(amplitudes.reshape(-1)).reshape(n, q)
 
 
+def unevaluable_rows(table, probe) -> dict:
+    """{row index: (reason, detail)} for the rows where the potential cannot give a frequency with the
+    table's reference field and gradient in full (every component, as the physics effects use
+    them) at the row's start amplitude: no stable rest angle, a swing |θc| + A beyond the
+    interval over which the potential is expanded, or no real frequency. Such rows are left
+    out of the fit (:func:`mows.lab.analysis.analyse`), never given a made-up residual."""
+    config = Configuration.base(table, probe)
+    _, field, gradient, _ = config.probe_frame()
+    potential = _potential(probe, field, gradient, None, None, config.spring_nm_per_rad)
+    at_rest = potential.rest_angle_rad()
+    amplitude = config.amplitude_start_rad
+    centre = potential.cycle_centre_rad(amplitude)
+    config.transverse = config.deflection = config.amplitude = 1.0
+    h, _ = frequency_factor(config, probe, ringdown_average.amplitude_nodes(
+        config.theta0_rad, amplitude, config.ringdown_damping_per_s, config.ringdown_duration_s))
+    limit_deg = math.degrees(potential.half_width_rad)
+    found = {}
+    for row in np.flatnonzero(~np.isfinite(at_rest)):
+        found[int(row)] = ("no stable rest angle in the reference field (the field spring cancels the "
+                           "mechanical one)", f"|B| = {np.linalg.norm(field[row]) * 1e3:.3g} mT")
+    for row in np.flatnonzero(np.isfinite(at_rest) & ~np.isfinite(centre)):
+        swing = math.degrees(abs(at_rest[row]) + amplitude[row])
+        found[int(row)] = (f"the swing |θs| + A reaches beyond the ±{limit_deg:.3g}° over which the potential "
+                           "is expanded", f"{swing:.3g}°")
+    for row in np.flatnonzero(~np.isfinite(h)):
+        found.setdefault(int(row), ("the potential gives no real frequency here (k/J ≤ δ²)", ""))
+    return dict(sorted(found.items()))
+
+
 def standard_gravity_vector(down_x, down_y) -> np.ndarray:
     """In-plane gravity g·(down_x, down_y, 0), m/s² (the normal component does not act)."""
     return STANDARD_GRAVITY_M_PER_S2 * np.array([down_x, down_y, 0.0])

@@ -3,8 +3,10 @@
 Plots: model against measurement in the style of the paper's Fig. 3 (Δf against the field
 along the probe axis) and Fig. 4 (polar plot of |Δf(θ0)| with its decomposition into the
 field part, harmonic 1, and the gradient part, harmonic 2); residuals of the base and final
-model against θ0 and against every covariate with ±σ bands; the ranked candidates; the error
-history (χ²/dof and cross-validated rms per step).
+model on separate axes (each on its own scale) and the final model's pulls, against θ0 and
+against every covariate; the ranked candidates with their alias groups (exact physical aliases
+in words and numbers); the error history (χ²/dof and cross-validated rms per step). Legends
+sit outside the data.
 """
 from __future__ import annotations
 
@@ -12,7 +14,6 @@ import base64
 import dataclasses
 import html
 import io
-import math
 import pathlib
 
 import matplotlib
@@ -105,23 +106,40 @@ def figure_polar(report) -> str | None:
     return _png(figure)
 
 
-def _residual_panel(axis, x, fit, label):
-    residual = fit.residual_hz * 1e3
+def _residual_panel(axis, x, fit, label, color):
+    """Residuals f − model (mHz) with their σ, and the data's ±σ band (median σ)."""
     sigma = fit.table.f_std_hz * 1e3
-    axis.errorbar(x, residual, sigma, fmt=".", ms=3, alpha=0.7, label=label)
+    axis.errorbar(x, fit.residual_hz * 1e3, sigma, fmt=".", ms=3, alpha=0.7, color=color, label=label)
+    band = float(np.median(sigma))
+    axis.axhspan(-band, band, color="tab:green", alpha=0.15, label="±σ (median)")
+    axis.axhline(0, color="k", lw=0.5)
+    axis.set_ylabel("f − model (mHz)")
+    axis.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
 
 
 def figure_residuals(report, x, xlabel) -> str:
-    """Residuals of the base and the final model against ``x``, with the ±σ band of the data."""
-    figure, axis = plt.subplots(figsize=(6, 3.2))
-    _residual_panel(axis, x, report.base, "base (Eq. 6)")
+    """Residuals against ``x`` on separate axes, each on its own scale (the base model's are
+    often 50× the final model's): the base model (Eq. 6), the final model, both in mHz with the
+    data's ±σ band, and the final model's pulls (f − model)/σ with ±1 and ±3. Legends sit to
+    the right of the axes, outside the data."""
+    fits = [(report.base, "base (Eq. 6)", "tab:gray")]
     if report.effects:
-        _residual_panel(axis, x, report.fit, report.model)
-    sigma = np.median(report.fit.table.f_std_hz) * 1e3
-    axis.axhspan(-sigma, sigma, color="tab:green", alpha=0.15, label="±σ (median)")
-    axis.axhline(0, color="k", lw=0.5)
-    axis.set(xlabel=xlabel, ylabel="residual f − model (mHz)")
-    axis.legend(fontsize=8)
+        fits.append((report.fit, "final model", "tab:red"))
+    figure, axes = plt.subplots(len(fits) + 1, 1, figsize=(7.5, 2.2 * (len(fits) + 1)), sharex=True,
+                                constrained_layout=True)
+    for axis, (fit, label, color) in zip(axes, fits):
+        _residual_panel(axis, x, fit, label, color)
+    pulls = axes[-1]
+    pulls.plot(x, report.fit.weighted_residual, ".", ms=3, color=fits[-1][2], label=f"pulls, {fits[-1][1]}")
+    axes[0].set_title(f"final model: {report.model}" if report.effects else "", fontsize=8, loc="left")
+    for level, style in ((1, "-"), (3, "--")):
+        pulls.axhline(level, color="tab:green", ls=style, lw=0.8)
+        pulls.axhline(-level, color="tab:green", ls=style, lw=0.8)
+    pulls.axhline(0, color="k", lw=0.5)
+    pulls.set(xlabel=xlabel, ylabel="(f − model)/σ")
+    pulls.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
+    for axis in axes:
+        axis.label_outer()
     return _png(figure)
 
 
@@ -172,12 +190,13 @@ def render_html(report) -> str:
                          c.group or "", "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters))
                         for i, c in enumerate(report.candidates)])
     history = _rows([(i, s.change, " + ".join(["eq6"] + s.effects), f"{s.chi2_dof:.3f}", f"{s.bic:.1f}",
-                      "-" if not math.isfinite(s.cv_rms_hz) else f"{s.cv_rms_hz * 1e3:.4f}")
+                      s.cv_text)
                      for i, s in enumerate(report.history)])
     checks = _rows([(c.effect, "held at physics" if c.held else "free",
                      "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters),
                      f"{c.deviation_sigma:.1f}") for c in report.physics_checks])
     groups = "".join(f"<li>group {g.number}: {html.escape(', '.join(g.members))} — {html.escape(g.separation)}"
+                     + "".join(f"<br>alias: {html.escape(a)}" for a in g.aliases)
                      + "".join(f"<br>check {html.escape(c)}" for c in g.checks) + "</li>" for g in report.groups)
     parameters = _rows([(n, f"{v:.6g}", f"{s:.2g}", u) for n, v, s, u in report.fit.parameters()])
     return f"""<!DOCTYPE html>

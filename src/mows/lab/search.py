@@ -36,8 +36,12 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
+
 from mows.lab.candidates import STRONG_DELTA_BIC, TIE_DELTA_BIC, rank_candidates
 from mows.lab.diagnose import diagnose
+from mows.lab.effects import testable
+from mows.lab.physical_aliases import alias_statements
 
 MAX_AUTO_STEPS = 6
 MAX_REVISIT_MOVES = 6       # per forward step; each move lowers the BIC, so this is only a bound
@@ -56,22 +60,29 @@ class HistoryStep:
     fit: object
     change: str = "base model"
     check: list = dataclasses.field(default_factory=list)
+    cv_identifiable: bool = True   # False: a left-out sweep held the only information on a parameter
+
+    @property
+    def cv_text(self) -> str:
+        """The cross-validated rms in mHz, or why there is none."""
+        if not self.cv_identifiable:
+            return "not identifiable from these sweeps"
+        return f"{self.cv_rms_hz * 1e3:.4f}" if math.isfinite(self.cv_rms_hz) else "-"
 
     def to_dict(self) -> dict:
         return {"effects": self.effects, "change": self.change, "chi2_dof": self.chi2_dof, "bic": self.bic,
                 "cv_rms": None if not math.isfinite(self.cv_rms_hz) else self.cv_rms_hz,  # Hz (issue's key)
-                "free_fit": parameters_dict(self.check)}
+                "cv_identifiable": self.cv_identifiable, "free_fit": parameters_dict(self.check)}
 
 
 def history_step(fit, cross_validate: bool = True, change: str = "base model", check=()) -> HistoryStep:
     cv = fit.cross_validate() if cross_validate else math.nan
-    return HistoryStep(fit.model.labels, fit.chi2_dof, fit.bic, cv, fit, change, list(check))
-
+    return HistoryStep(fit.model.labels, fit.chi2_dof, fit.bic, cv, fit, change, list(check),
+                       cv_identifiable=not (cross_validate and math.isnan(cv)))
 
 
 def parameters_dict(parameters) -> dict:
     return {name: {"value": v, "std": s, "unit": u} for name, v, s, u in parameters}
-
 
 
 def search(found, pool, probe, history, cross_validate: bool = True, steps: int = MAX_AUTO_STEPS):
@@ -86,7 +97,54 @@ def search(found, pool, probe, history, cross_validate: bool = True, steps: int 
         history.append(history_step(fit, cross_validate, change, check))
         fit = _revisit(fit, pool, probe, history, cross_validate)
         found = diagnose(fit, pool, probe)
+    if steps:
+        found = prefer_physical(found, pool, probe, history, cross_validate)
     return found
+
+
+def prefer_physical(found, pool, probe, history, cross_validate: bool = True):
+    """The diagnosis after each generic correction of the model (``Effect.generic``: moment
+    scale, field offset, spring drift, angle offset) is replaced by a physical effect that fits
+    as well (BIC at most 2 worse, no more free parameters, free values inside their bounds),
+    known physics held at its value first: a generic term stands for several causes, the
+    physical alias names one (a moment scale of −0.85 % where a 15° amplitude predicts
+    −0.86 %). Each replacement is a step of ``history`` that says why."""
+    fit = found.fit
+    for generic in [e for e in fit.model.effects if e.generic]:
+        best = None
+        for form, new in _physical_replacements(fit, generic, pool, probe):
+            better = best is None or (form.fixed, -new.bic) > (best[0].fixed, -best[1].bic)
+            if new.bic < fit.bic + TIE_DELTA_BIC and better:
+                best = (form, new)
+        if best is None:
+            continue
+        form, new = best
+        aliases = alias_statements([generic.name, form.name], new, probe,
+                                   {generic.name: {n: v for n, v, _, _ in fit.effect_parameters(generic.name)}})
+        history.append(history_step(new, cross_validate, (
+            f"replace {generic.label} by {form.label}: they fit alike (ΔBIC {fit.bic - new.bic:+.1f}); {form.name} is "
+            f"physics{' of known size' if form.fixed else ''}, {generic.name} a generic correction"
+            + "".join(f" ({alias})" for alias in aliases))))
+        fit = new
+    return found if fit is found.fit else diagnose(fit, pool, probe)
+
+
+def _physical_replacements(fit, generic, pool, probe):
+    """(form, fit) of the model with ``generic`` replaced by each physical effect of ``pool``
+    not in it: held at physics where it has a physical value, else free, with no more free
+    parameters than ``generic`` and every free value inside its bounds."""
+    reduced = fit.model.without(generic)
+    start = fit.values_without(generic)
+    for effect in pool:
+        if effect.generic or effect.name in fit.model.effect_names or testable(effect, fit.table, probe):
+            continue
+        form = effect.at_physics() if effect.physical is not None else effect
+        if len(form.parameters) > len(generic.parameters):
+            continue
+        new = (reduced + form).fit(fit.table, start=np.concatenate([start, np.zeros(len(form.parameters))]))
+        values = [v for _, v, _, _ in new.effect_parameters(form.name)]
+        if new.ok and all(p.lower < v < p.upper for p, v in zip(form.parameters, values)):
+            yield form, new
 
 
 def _forward_step(found):

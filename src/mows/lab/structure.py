@@ -2,7 +2,9 @@
 
 Harmonics k = 0…4 of θ0 (columns cos kθ0/σ, sin kθ0/σ) and each covariate (column c/σ) are
 projected orthogonally to the fit (:mod:`mows.lab.algebra`) and score-tested against the
-residual; amplitudes come from the projected least squares. Significant means p < 0.005 after
+residual; amplitudes come from the projected least squares, where the projected columns have full rank
+(else the angles leave the harmonic's amplitude and phase undetermined: "not identifiable from
+these angles", while its score test still counts). Significant means p < 0.005 after
 Bonferroni over all these tests. ``goodness_p`` is the χ² test of the whole fit.
 """
 from __future__ import annotations
@@ -28,6 +30,20 @@ class Harmonic:
     phase_rad: float
     p_value: float
     absorbed: bool
+    identifiable: bool = True  # False: the angles leave amplitude and phase undetermined (NaN)
+
+    def to_dict(self) -> dict:
+        return {name: (None if isinstance(value, float) and not math.isfinite(value) else value)
+                for name, value in dataclasses.asdict(self).items()}
+
+    def text(self) -> str:
+        """Amplitude ± σ and phase, or why there are none."""
+        if self.absorbed:
+            return "absorbed by the model"
+        if not self.identifiable:
+            return "not identifiable from these angles"
+        return (f"{self.amplitude_hz * 1e3:.3g} ± {self.std_hz * 1e3:.2g} mHz, "
+                f"phase {math.degrees(self.phase_rad):.0f}°")
 
 
 @dataclasses.dataclass
@@ -53,8 +69,7 @@ class Structure:
     @property
     def significant(self) -> list:
         """Descriptions of the significant features."""
-        found = [f"harmonic {h.k} of θ0 ({h.amplitude_hz * 1e3:.3g} ± {h.std_hz * 1e3:.2g} mHz, "
-                 f"phase {math.degrees(h.phase_rad):.0f}°, p = {h.p_value:.1e})"
+        found = [f"harmonic {h.k} of θ0 ({h.text()}, p = {h.p_value:.1e})"
                  for h in self.harmonics if not h.absorbed and h.p_value < self.alpha]
         found += [f"a trend with {c.name} (correlation {c.correlation:+.2f}, p = {c.p_value:.1e})"
                   for c in self.covariates if c.p_value < self.alpha]
@@ -63,7 +78,7 @@ class Structure:
     def to_dict(self) -> dict:
         return {"summary": self.summary, "chi2": self.chi2, "dof": self.dof, "goodness_p": self.goodness_p,
                 "alpha": self.alpha,
-                "harmonics": [dataclasses.asdict(h) for h in self.harmonics],
+                "harmonics": [h.to_dict() for h in self.harmonics],
                 "covariates": [dataclasses.asdict(c) for c in self.covariates]}
 
 
@@ -96,6 +111,8 @@ def residual_structure(fit) -> Structure:
 def _harmonic(k, test: Signature, residual) -> Harmonic:
     if not test.rank:
         return Harmonic(k, 0.0, 0.0, 0.0, 1.0, True)
+    if test.rank < test.projected.shape[1]:  # e.g. two orientations: cos kθ0 and sin kθ0 not separable
+        return Harmonic(k, math.nan, math.nan, math.nan, test.p_value, False, identifiable=False)
     coefficients, *_ = np.linalg.lstsq(test.projected, residual, rcond=None)
     covariance = np.linalg.pinv(test.projected.T @ test.projected)
     c, s = (coefficients[0], coefficients[1]) if k else (coefficients[0], 0.0)
@@ -119,3 +136,26 @@ def _describe(structure: Structure) -> str:
                 f"like white scatter (f_std_hz ≈ ×{math.sqrt(reduced):.2f} too small, or noise the "
                 "model does not describe).")
     return head + ". No significant structure: the residuals look like noise."
+
+
+def product_trends(fit, count: int = 3) -> list:
+    """The ``count`` strongest trends of the residual with products of two covariates (each
+    centred), best first: what a missing effect that no single covariate shows may follow
+    (a drift that grows with the current, a field term that changes with temperature). Not
+    part of the significance tests above; a pointer for the user's own effect."""
+    residual = fit.weighted_residual
+    weight = 1.0 / fit.table.f_std_hz
+    model_basis = orthonormal_basis(fit.jacobian)
+    covariates = {name: values - values.mean() for name, values in fit.table.covariates().items()}
+    names = list(covariates)
+    found = []
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            product = covariates[a] * covariates[b]
+            test = signature((product - product.mean()) * weight, model_basis, residual)
+            if test.rank:
+                direction = test.projected[:, 0]
+                found.append(CovariateTrend(f"{a}·{b}", float(direction @ residual / (
+                    np.linalg.norm(direction) * np.linalg.norm(residual))), float(
+                    direction @ residual / (direction @ direction)), test.p_value))
+    return sorted(found, key=lambda trend: -abs(trend.correlation))[:count]

@@ -156,6 +156,19 @@ class MeasurementTable:
         """The table restricted to ``rows`` (a boolean mask or indices)."""
         return dataclasses.replace(self, columns={k: v[rows] for k, v in self.columns.items()})
 
+    def without_rows(self, reasons: Mapping[int, tuple]) -> MeasurementTable:
+        """The table without the rows ``reasons`` names ({row index: (why, detail)}), with a
+        note per reason that lists its rows and their details."""
+        by_reason: dict = {}
+        for row, (reason, detail) in reasons.items():
+            by_reason.setdefault(reason, []).append((row, detail))
+        notes = tuple(f"left out {rows_text([row for row, _ in rows])}: {reason}"
+                      + (f" ({', '.join(detail for _, detail in rows)})" if any(detail for _, detail in rows) else "")
+                      for reason, rows in by_reason.items())
+        keep = np.ones(len(self), bool)
+        keep[list(reasons)] = False
+        return dataclasses.replace(self.subset(keep), notes=self.notes + notes)
+
     def with_columns(self, **columns) -> MeasurementTable:
         """A copy with columns replaced or added (arrays of length n)."""
         return dataclasses.replace(self, columns={**self.columns, **columns})

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
 from mows_msgs.srv import EmergencyStop, RunCycle
@@ -216,7 +217,8 @@ def test_a_recording_keeps_every_block_published_before_sigterm_and_replays(star
     heard = {b.sequence for b in listen.blocks}
     recorded = read_blocks(bag)
     assert heard <= {b.sequence for b in recorded}
-    assert (bag / "metadata.yaml").is_file()
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["ros_distro"] == "jazzy" and info["message_count"] >= len(recorded)
     by_sequence = {b.sequence: b for b in recorded}
     for block in listen.blocks:
         np.testing.assert_array_equal(field(block), np.stack([c.field_t for c in by_sequence[block.sequence].channels],
@@ -305,6 +307,7 @@ def test_the_bag_backend_replays_gaps_as_gaps(start_driver, listen, tmp_path):
     for block, original in zip(blocks, recorded):
         np.testing.assert_array_equal(saturated(block), np.stack([c.saturated for c in original.channels], axis=1))
     assert (listen.diagnostics["gaps"], listen.diagnostics["missing_samples"]) == ("1", "1200")
+    assert listen.diagnostics["phase"] == "RINGDOWN"   # the recording's, not the absent sequencer's
     assert [(Phase(s.phase), s.cycle_id) for s in listen.states] == [(Phase.EXCITING, 7), (Phase.RINGDOWN, 7)]
     assert ([stamps.nanoseconds(s.header.stamp) for s in listen.states]
             == [1_000_000_000_000 + i * 50_000 for i in (2000, 4000)])

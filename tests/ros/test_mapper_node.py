@@ -54,7 +54,8 @@ class StandInDriver:
                               theta0_rad=request.theta0_rad, frequency_hz=measured, frequency_std_hz=STD_HZ,
                               frequency_shift_hz=measured - PAPER_PROBE.f00_hz, frequency_shift_std_hz=STD_HZ,
                               amplitude_rad=math.radians(2.0), damping_per_s=1.8, duration_s=0.5)
-            msg.header.stamp.sec = 100 + self.cycle
+            # Today's epoch to the nanosecond: float seconds would be ~100 ns off.
+            msg.header.stamp.sec, msg.header.stamp.nanosec = 1_763_000_000 + self.cycle, 123_456_789 + repeat
             self.fits.publish(msg)
         response.success, response.cycle_id, response.ringdowns_recorded = True, self.cycle, request.repeats
         return response
@@ -106,6 +107,8 @@ def test_a_sweep_recovers_the_field_and_reports_on_the_model(ros, mapper):
     assert d.model == "first_principles" and d.n_points == 2 * len(ANGLES) and d.chi2_dof < 2
     ros.wait_for(lambda: maps and reports, "the map and the model report")
     np.testing.assert_array_equal(maps[0].field_t, d.field_t)
+    # The map is stamped with its last ring-down, integer nanoseconds end to end.
+    assert (d.header.stamp.sec, d.header.stamp.nanosec) == (1_763_000_000 + len(ANGLES), 123_456_789 + 1)
     assert reports[0].n == 2 * len(ANGLES) and reports[0].verdict in ("adequate", "effect_missing",
                                                                       "unexplained_structure")
     # A map is latched: a subscriber that comes later still gets it.

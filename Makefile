@@ -14,7 +14,7 @@ VENV_STAMP := $(VENV)/.mows-venv.stamp
 CORE_STAMP := $(VENV)/.mows-core.stamp
 BUILD_STAMP := install/.mows-build.stamp
 ACTIVATE := source $(VENV)/bin/activate
-ENVIRONMENT := $(ACTIVATE) && source install/setup.bash
+ENVIRONMENT := source env.bash
 DEMO_ARGS ?=
 PYTEST_ARGS ?=
 # 1: `make lint` also checks the formatting (`ruff format --check`); on once the tree has been

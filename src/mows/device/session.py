@@ -73,6 +73,7 @@ class DeviceSession:
         self._lock = threading.RLock()
         self._events: list[PhaseEvent] = []
         self._replayed_phase: Phase | None = None
+        self.stage_angle_rad: float | None = None  # where the rotation stage stands, once known
         self._on_done: Callable[[CycleOutcome], None] | None = None
         self._last_samples_s = monotonic()
         self._first_samples_s: float | None = None
@@ -97,6 +98,9 @@ class DeviceSession:
                 self._act(self.sequencer.abort(f"no samples from the device for {STALL_TIMEOUT_S:g} s"))
             output.events += self._events
             self._events = []
+            for event in output.events:
+                if event.cycle_id:  # a cycle's phases begin once the stage has turned to its θ0
+                    self.stage_angle_rad = event.theta0_rad
             return output
 
     def _take(self, item, output: Output) -> None:

@@ -78,6 +78,7 @@ lint: $(BUILD_STAMP) $(CORE_STAMP)
 # (tests/lab/test_report_browser.py): Debian's chromium is installed when missing.
 test: lint $(BUILD_STAMP) $(CORE_STAMP)
 	command -v chromium >/dev/null || $(call apt_install,chromium)
+	command -v ip >/dev/null || $(call apt_install,iproute2)  # the two-host test's network namespaces
 	$(ENVIRONMENT) && python -m pytest $(PYTEST_ARGS)
 
 # The main job: the node graph on the simulated device runs a rotation sweep, decomposes it

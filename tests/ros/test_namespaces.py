@@ -15,7 +15,7 @@ from mows_msgs.action import RotationSweep
 from mows_msgs.msg import MagnetometerBlock, RingdownFit
 from rclpy.action import ActionClient
 
-from mows.lab.table import reference_at
+from mows.lab import reference_at
 from mows.sim.scenario import load_scenario
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
 from node_processes import log

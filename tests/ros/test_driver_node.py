@@ -343,8 +343,8 @@ def test_a_60_s_live_stream_has_no_unexplained_gaps(start_driver, listen):
 def test_docs_list_every_parameter_topic_and_service():
     text = (Path(__file__).parents[2] / "docs" / "driver.md").read_text()
     names = [spec.name for spec in driver.PARAMETERS]
-    names += [f"/{driver.RAW_TOPIC}", f"/{driver.EXCITATION_TOPIC}", f"/{driver.JOINT_STATES_TOPIC}", f"/{driver.RUN_CYCLE_SERVICE}",
-              f"/{driver.EMERGENCY_STOP_SERVICE}"]
+    names += [f"/{driver.RAW_TOPIC}", f"/{driver.EXCITATION_TOPIC}", f"/{driver.JOINT_STATES_TOPIC}",
+              f"/{driver.RUN_CYCLE_SERVICE}", f"/{driver.EMERGENCY_STOP_SERVICE}"]
     assert [name for name in names if f"`{name}`" not in text] == []
 
 

@@ -8,18 +8,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ament_index_python.packages import get_package_share_directory
-from mows_driver import node as driver
-from mows_driver.messages import STAGE_JOINT
-from mows_estimator import parameters as estimator
-from mows_mapper import parameters as mapper
 from mows_msgs.msg import MagnetometerBlock
 from mows_msgs.srv import RunCycle
-from mows_ros.qos import JOINT_QOS, STREAM_QOS
 from sensor_msgs.msg import JointState
 
 from mows.physics.pose import probe_axes
 from mows.records import stamps
 from mows_bringup.graph import NODES
+from mows_driver import node as driver
+from mows_driver.messages import STAGE_JOINT
+from mows_estimator import parameters as estimator
+from mows_mapper import parameters as mapper
+from mows_ros.qos import JOINT_QOS, STREAM_QOS
 
 pytestmark = pytest.mark.ros
 

@@ -87,6 +87,5 @@ def test_two_probes_in_namespaces_sweep_at_once_without_cross_talk(ros, start, t
 
     for graph in graphs.values():
         graph.send_signal(signal.SIGTERM)
-    for namespace, graph in graphs.items():
-        ros.wait_for(lambda: graph.poll() is not None, f"{namespace}'s graph to stop", BOUND_S)
-        assert graph.returncode == 0, log(graph)
+    ros.wait_for(lambda: all(g.poll() is not None for g in graphs.values()), "both graphs to stop", BOUND_S)
+    assert [g.returncode for g in graphs.values()] == [0, 0], [log(g) for g in graphs.values()]

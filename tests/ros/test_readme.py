@@ -14,8 +14,8 @@ pytestmark = pytest.mark.ros
 
 ROOT = Path(__file__).parents[2]
 README = (ROOT / "README.md").read_text()
-INTERFACES = ["/mows/raw", "/mows/excitation", "/mows/joint_states", "/mows/ringdown", "/mows/field", "/mows/magnetic_field",
-              "/mows/sweep", "/mows/model_report", "/diagnostics", "/mows/driver/run_cycle",
+INTERFACES = ["/mows/raw", "/mows/excitation", "/mows/joint_states", "/mows/ringdown", "/mows/field",
+              "/mows/magnetic_field", "/mows/sweep", "/mows/model_report", "/diagnostics", "/mows/driver/run_cycle",
               "/mows/driver/emergency_stop", "/mows/driver/set_field_current", "/mows/estimator/calibrate",
               "/mows/mapper/rotation_sweep", "/mows/calibrator/calibrate_probe"]
 

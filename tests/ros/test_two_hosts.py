@@ -11,8 +11,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from mows_bringup.graph import NODES
 
+from mows_bringup.graph import NODES
 from node_processes import log
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]

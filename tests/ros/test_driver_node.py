@@ -177,6 +177,7 @@ def test_a_bad_configuration_stops_the_driver_with_its_reason(arguments, message
     assert message in run.stderr and "Traceback" not in run.stderr
 
 
+@pytest.mark.xdist_group("realtime")   # the device emulator's real-time threads
 def test_the_serial_driver_streams_from_the_emulator_and_survives_an_unplug(start_driver, listen, tmp_path):
     with DeviceEmulator(SimulatedDevice(load_scenario()), tmp_path / "device") as emulator:
         driver_process = start_driver("-p", "backend:=serial", "-p", f"serial_port:={emulator.link_path}",

@@ -20,7 +20,7 @@ from mows.sim.scenario import load_scenario
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
 from node_processes import log
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]
 
 # Each probe its scene and its orientations (15° apart from the other's, so that a fit that
 # reached the wrong mapper would show).

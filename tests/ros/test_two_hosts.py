@@ -15,7 +15,7 @@ import pytest
 from mows_bringup.graph import NODES
 from node_processes import log
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]
 
 SENSOR, ROBOT = "10.78.0.1", "10.78.0.2"
 PREFIX = "/24"

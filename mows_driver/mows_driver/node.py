@@ -38,8 +38,8 @@ from mows_driver.messages import (
     cycle_response,
     estop_response,
     excitation_msg,
-    supply_response,
     joint_state_msg,
+    supply_response,
 )
 from mows_driver.parameters import (
     PARAMETERS,

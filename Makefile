@@ -14,7 +14,7 @@ VENV_STAMP := $(VENV)/.mows-venv.stamp
 CORE_STAMP := $(VENV)/.mows-core.stamp
 BUILD_STAMP := install/.mows-build.stamp
 ACTIVATE := source $(VENV)/bin/activate
-ENVIRONMENT := $(ACTIVATE) && source install/setup.bash
+ENVIRONMENT := source env.bash
 DEMO_ARGS ?=
 PYTEST_ARGS ?=
 # 1: `make lint` also checks the formatting (`ruff format --check`); on once the tree has been
@@ -78,6 +78,7 @@ lint: $(BUILD_STAMP) $(CORE_STAMP)
 # (tests/lab/test_report_browser.py): Debian's chromium is installed when missing.
 test: lint $(BUILD_STAMP) $(CORE_STAMP)
 	command -v chromium >/dev/null || $(call apt_install,chromium)
+	command -v ip >/dev/null || $(call apt_install,iproute2)  # the two-host test's network namespaces
 	$(ENVIRONMENT) && python -m pytest $(PYTEST_ARGS)
 
 # The main job: the node graph on the simulated device runs a rotation sweep, decomposes it

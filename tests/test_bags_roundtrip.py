@@ -35,7 +35,7 @@ def test_bags_are_rosbag2_mcap_version_9_with_their_definitions(tmp_path):
     bags.write_bag(tmp_path / "bag", [bags.BagMessage("/mows/raw", msgtype, 5, sent)])
     metadata = yaml.safe_load((tmp_path / "bag" / "metadata.yaml").read_text())
     info = metadata["rosbag2_bagfile_information"]
-    assert (info["version"], info["storage_identifier"]) == (9, "mcap")
+    assert (info["version"], info["storage_identifier"], info["ros_distro"]) == (9, "mcap", "jazzy")
     # A reader that has never seen mows_msgs learns the types from the bag itself.
     plain = get_typestore(Stores.ROS2_JAZZY)
     with AnyReader([tmp_path / "bag"], default_typestore=plain) as reader:

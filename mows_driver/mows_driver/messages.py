@@ -3,6 +3,7 @@ import array
 
 from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel
 from mows_msgs.srv import EmergencyStop, RunCycle, SetFieldCurrent
+from sensor_msgs.msg import JointState
 
 from mows.device.framing import DeviceInfo
 from mows.device.interface import CommandResult
@@ -22,6 +23,16 @@ def block_msg(block, info: DeviceInfo, frame_id: str, sensor_frame_ids: list) ->
                             field_t=array.array("d", block.samples_t[:, i].tobytes()),
                             saturated=block.saturated[:, i].tolist())
         for i in range(block.samples_t.shape[1])]
+    return message
+
+
+STAGE_JOINT = "mows_stage"  # the rotation stage's joint in mows_bringup/urdf/mows_probe_mount.urdf
+
+
+def joint_state_msg(stamp_ns: int, stage_angle_rad: float) -> JointState:
+    """The rotation stage at θ0 (rad, from the plane's x towards y) at a device stamp."""
+    message = JointState(name=[STAGE_JOINT], position=[float(stage_angle_rad)])
+    stamps.set_nanoseconds(message.header.stamp, stamp_ns)
     return message
 
 

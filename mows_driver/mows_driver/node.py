@@ -25,6 +25,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.task import Future
+from sensor_msgs.msg import JointState
 
 from mows.device.phases import Phase
 from mows.device.session import DeviceSession
@@ -37,6 +38,7 @@ from mows_driver.messages import (
     cycle_response,
     estop_response,
     excitation_msg,
+    joint_state_msg,
     supply_response,
 )
 from mows_driver.parameters import (
@@ -54,11 +56,12 @@ from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
 from mows_ros.params import parameter_values
 from mows_ros.process import run_node
-from mows_ros.qos import EXCITATION_QOS, STREAM_QOS
+from mows_ros.qos import EXCITATION_QOS, JOINT_QOS, STREAM_QOS
 
 NODE_NAME = "driver"
 RAW_TOPIC = "mows/raw"
 EXCITATION_TOPIC = "mows/excitation"
+JOINT_STATES_TOPIC = "mows/joint_states"
 RUN_CYCLE_SERVICE = "mows/driver/run_cycle"
 EMERGENCY_STOP_SERVICE = "mows/driver/emergency_stop"
 SET_FIELD_CURRENT_SERVICE = "mows/driver/set_field_current"
@@ -78,6 +81,7 @@ class DriverNode(MowsNode):
         self.get_logger().info(f"numba kernels ready in {precompile(simulator=values['backend'] == 'sim'):.1f} s")
         self.raw_publisher = self.create_publisher(MagnetometerBlock, RAW_TOPIC, STREAM_QOS)
         self.excitation_publisher = self.create_publisher(ExcitationState, EXCITATION_TOPIC, EXCITATION_QOS)
+        self.joint_publisher = self.create_publisher(JointState, JOINT_STATES_TOPIC, JOINT_QOS)
         try:
             backend = make_backend(values, cap)
         except (ValueError, OSError) as error:
@@ -88,6 +92,8 @@ class DriverNode(MowsNode):
         except (ValueError, OSError) as error:
             raise InvalidParameterValueException("record_path", values["record_path"], str(error)) from None
         self.session = DeviceSession(backend, session_config(values, cap))
+        if values["backend"] == "sim":   # the simulated stage starts where the parameter puts it
+            self.session.stage_angle_rad = values["theta0_rad"]
         self.blocks_published = 0
         self.stream_errors = 0
         self._health = StreamHealth()
@@ -179,6 +185,8 @@ class DriverNode(MowsNode):
             self._publish(self.raw_publisher, block_msg(block, self.session.backend.info, self._values["frame_id"],
                                                         self._values["sensor_frame_ids"]))
             self.blocks_published += 1
+            if self.session.stage_angle_rad is not None:   # the stage with every block: TF at its stamps
+                self.joint_publisher.publish(joint_state_msg(block.stamp_ns, self.session.stage_angle_rad))
         for event in output.events:
             self._publish(self.excitation_publisher, excitation_msg(event, self._values["probe_frame_id"]))
             if event.phase == Phase.FAULT:

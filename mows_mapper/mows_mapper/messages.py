@@ -11,8 +11,9 @@ from mows.sweep.runner import SweepFeedback, SweepFit, SweepMap
 
 def sweep_point(fit: RingdownFit) -> SweepPoint:
     """A successful RingdownFit as a point of the sweep, with σ of θmax from its covariance."""
-    return SweepPoint.from_fit(fit, fit.frequency_shift_hz, fit.frequency_shift_std_hz,
-                               stamps.seconds(fit.header.stamp))
+    stamp_ns = stamps.nanoseconds(fit.header.stamp)
+    return SweepPoint.from_fit(fit, fit.frequency_shift_hz, fit.frequency_shift_std_hz, stamp_ns / stamps.NS_PER_S,
+                               stamp_ns)
 
 
 def sweep_fit(fit: RingdownFit) -> SweepFit:
@@ -32,7 +33,7 @@ def decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
     msg = SweepDecomposition(sweep_id=sweep.sweep_id, model=d.model, message=d.message,
                              status=int(d.status))
     msg.header.frame_id = frame_id
-    stamps.set_seconds(msg.header.stamp, max(p.t_s for p in record.points))
+    stamps.set_nanoseconds(msg.header.stamp, max(p.stamp_ns for p in record.points))
     msg.field_t = d.field_t.tolist()
     msg.field_covariance_t2 = d.field_covariance_t2.ravel().tolist()
     msg.gradient_t_per_m = d.gradient_t_per_m.tolist()

@@ -97,8 +97,10 @@ class MapperNode(MowsNode):
                     goal_handle.publish_feedback(feedback_msg(step.feedback))
                 step = await self._advance(step)
             outcome = step.finished
-            decomposition = (await self._publish(step.publish) if step.publish is not None
+            decomposition = (decomposition_msg(outcome.map, self._param("frame_id")) if outcome.map is not None
                              else failed_decomposition_msg(outcome.message))
+            if step.publish is not None:
+                await self._publish(step.publish, decomposition)
         finally:   # an exception must not leave the runner busy for good
             self._runner.abandon("the sweep ended unexpectedly (see the log)")
         if outcome.cancelled:
@@ -106,6 +108,7 @@ class MapperNode(MowsNode):
         elif outcome.ok:
             goal_handle.succeed()
         else:
+            self.get_logger().warn(f"sweep aborted: {outcome.message}")
             goal_handle.abort()
         return RotationSweep.Result(success=outcome.ok, message=outcome.message, decomposition=decomposition)
 
@@ -135,8 +138,8 @@ class MapperNode(MowsNode):
         finally:
             self.destroy_timer(timer)
 
-    async def _publish(self, sweep: SweepMap) -> SweepDecomposition:
-        msg = decomposition_msg(sweep, self._param("frame_id"))
+    async def _publish(self, sweep: SweepMap, msg: SweepDecomposition) -> None:
+        """A good decomposition on /mows/sweep, then the model lab's report on it."""
         self._sweep_pub.publish(msg)
         self.get_logger().info(f"sweep {sweep.sweep_id}: {self._runner.last}")
         reference = self._param("reference_scenario")
@@ -149,7 +152,6 @@ class MapperNode(MowsNode):
                 self.get_logger().warn(f"model lab: {error}")
             else:
                 self._report_pub.publish(model_report_msg(report, msg.header, sweep.sweep_id))
-        return msg
 
     def health(self) -> Health:
         return Health(DiagnosticStatus.OK, self._runner.last, {"state": self._runner.state,

@@ -43,3 +43,12 @@ MAP_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
+
+# Joint states (the rotation stage's angle, with every block): reliable and volatile like a
+# robot's /joint_states, so that robot_state_publisher (either reliability) takes them.
+JOINT_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)

@@ -29,6 +29,8 @@ WAIT_S = 60.0  # bound for a test that hangs; each wait ends as soon as its cond
 WATCHDOG_BOUND_S = 0.2
 CAP_A = 10.0
 SCENARIO = load_scenario()
+# Real-time threads: never beside the graph-sized tests (pyproject.toml, addopts).
+pytestmark = pytest.mark.xdist_group("realtime")
 
 
 def wait_for(condition, what, step=lambda: time.sleep(0.01)):

@@ -17,12 +17,12 @@ class RosHarness:
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
 
-    def wait_for(self, condition: Callable[[], object], what: str):
-        """Spin until ``condition()`` is true and return its value; fail after WAIT_S."""
-        deadline = time.monotonic() + WAIT_S
+    def wait_for(self, condition: Callable[[], object], what: str, bound_s: float = WAIT_S):
+        """Spin until ``condition()`` is true and return its value; fail after ``bound_s``."""
+        deadline = time.monotonic() + bound_s
         while not (value := condition()):
             if time.monotonic() > deadline:
-                raise AssertionError(f"gave up after {WAIT_S} s waiting for {what}")
+                raise AssertionError(f"gave up after {bound_s} s waiting for {what}")
             self.executor.spin_once(timeout_sec=0.1)
         return value
 

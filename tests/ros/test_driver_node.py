@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
 from mows_msgs.srv import EmergencyStop, RunCycle
@@ -176,6 +177,7 @@ def test_a_bad_configuration_stops_the_driver_with_its_reason(arguments, message
     assert message in run.stderr and "Traceback" not in run.stderr
 
 
+@pytest.mark.xdist_group("realtime")   # the device emulator's real-time threads
 def test_the_serial_driver_streams_from_the_emulator_and_survives_an_unplug(start_driver, listen, tmp_path):
     with DeviceEmulator(SimulatedDevice(load_scenario()), tmp_path / "device") as emulator:
         driver_process = start_driver("-p", "backend:=serial", "-p", f"serial_port:={emulator.link_path}",
@@ -216,7 +218,8 @@ def test_a_recording_keeps_every_block_published_before_sigterm_and_replays(star
     heard = {b.sequence for b in listen.blocks}
     recorded = read_blocks(bag)
     assert heard <= {b.sequence for b in recorded}
-    assert (bag / "metadata.yaml").is_file()
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["ros_distro"] == "jazzy" and info["message_count"] >= len(recorded)
     by_sequence = {b.sequence: b for b in recorded}
     for block in listen.blocks:
         np.testing.assert_array_equal(field(block), np.stack([c.field_t for c in by_sequence[block.sequence].channels],
@@ -305,6 +308,7 @@ def test_the_bag_backend_replays_gaps_as_gaps(start_driver, listen, tmp_path):
     for block, original in zip(blocks, recorded):
         np.testing.assert_array_equal(saturated(block), np.stack([c.saturated for c in original.channels], axis=1))
     assert (listen.diagnostics["gaps"], listen.diagnostics["missing_samples"]) == ("1", "1200")
+    assert listen.diagnostics["phase"] == "RINGDOWN"   # the recording's, not the absent sequencer's
     assert [(Phase(s.phase), s.cycle_id) for s in listen.states] == [(Phase.EXCITING, 7), (Phase.RINGDOWN, 7)]
     assert ([stamps.nanoseconds(s.header.stamp) for s in listen.states]
             == [1_000_000_000_000 + i * 50_000 for i in (2000, 4000)])
@@ -340,8 +344,8 @@ def test_a_60_s_live_stream_has_no_unexplained_gaps(start_driver, listen):
 def test_docs_list_every_parameter_topic_and_service():
     text = (Path(__file__).parents[2] / "docs" / "driver.md").read_text()
     names = [spec.name for spec in driver.PARAMETERS]
-    names += [f"/{driver.RAW_TOPIC}", f"/{driver.EXCITATION_TOPIC}", f"/{driver.RUN_CYCLE_SERVICE}",
-              f"/{driver.EMERGENCY_STOP_SERVICE}"]
+    names += [f"/{driver.RAW_TOPIC}", f"/{driver.EXCITATION_TOPIC}", f"/{driver.JOINT_STATES_TOPIC}",
+              f"/{driver.RUN_CYCLE_SERVICE}", f"/{driver.EMERGENCY_STOP_SERVICE}"]
     assert [name for name in names if f"`{name}`" not in text] == []
 
 

@@ -16,6 +16,7 @@ from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
+from mows.sweep.decompose import DecompositionStatus
 from mows_bringup.graph import NODES
 from mows_ros.qos import MAP_QOS, RESULT_QOS
 
@@ -29,9 +30,9 @@ ANGLES = np.radians(np.arange(0.0, 360.0, 30.0))
 class StandInDriver:
     """Answers RunCycle: publishes `repeats` fits of the cycle, f from the full potential."""
 
-    def __init__(self, ros, fail=False, tuning=False):
+    def __init__(self, ros, fail=False, tuning=False, bad_fits=False):
         scenario = load_scenario(SCENARIO)
-        self.source, self.fail, self.tuning = scenario.environment.source, fail, tuning
+        self.source, self.fail, self.tuning, self.bad_fits = scenario.environment.source, fail, tuning, bad_fits
         self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
         ros.node.create_service(RunCycle, "mows/driver/run_cycle", self.run_cycle)
         self.cycle, self.rng = 0, np.random.default_rng(0)
@@ -46,12 +47,15 @@ class StandInDriver:
         # With ``tuning`` the estimator also fits the cycle's tuning ring-down, 1 Hz off resonance.
         for repeat, tuning in [(0, True)] * self.tuning + [(r, False) for r in range(request.repeats)]:
             measured = f + STD_HZ * self.rng.standard_normal() + tuning
-            msg = RingdownFit(cycle_id=self.cycle, repeat_index=repeat, tuning=tuning, status=RingdownFit.STATUS_OK,
-                              status_name="OK",
+            status, name = (RingdownFit.STATUS_NOT_CONVERGED, "NOT_CONVERGED") if self.bad_fits \
+                else (RingdownFit.STATUS_OK, "OK")
+            msg = RingdownFit(cycle_id=self.cycle, repeat_index=repeat, tuning=tuning, status=status,
+                              status_name=name,
                               theta0_rad=request.theta0_rad, frequency_hz=measured, frequency_std_hz=STD_HZ,
                               frequency_shift_hz=measured - PAPER_PROBE.f00_hz, frequency_shift_std_hz=STD_HZ,
                               amplitude_rad=math.radians(2.0), damping_per_s=1.8, duration_s=0.5)
-            msg.header.stamp.sec = 100 + self.cycle
+            # Today's epoch to the nanosecond: float seconds would be ~100 ns off.
+            msg.header.stamp.sec, msg.header.stamp.nanosec = 1_763_000_000 + self.cycle, 123_456_789 + repeat
             self.fits.publish(msg)
         response.success, response.cycle_id, response.ringdowns_recorded = True, self.cycle, request.repeats
         return response
@@ -103,6 +107,8 @@ def test_a_sweep_recovers_the_field_and_reports_on_the_model(ros, mapper):
     assert d.model == "first_principles" and d.n_points == 2 * len(ANGLES) and d.chi2_dof < 2
     ros.wait_for(lambda: maps and reports, "the map and the model report")
     np.testing.assert_array_equal(maps[0].field_t, d.field_t)
+    # The map is stamped with its last ring-down, integer nanoseconds end to end.
+    assert (d.header.stamp.sec, d.header.stamp.nanosec) == (1_763_000_000 + len(ANGLES), 123_456_789 + 1)
     assert reports[0].n == 2 * len(ANGLES) and reports[0].verdict in ("adequate", "effect_missing",
                                                                       "unexplained_structure")
     # A map is latched: a subscriber that comes later still gets it.
@@ -115,7 +121,11 @@ def test_bad_goals_are_refused(ros, mapper):
     client, _ = mapper
     handle, _, _ = sweep(ros, client, theta0_rad=[0.0, math.nan])
     assert not handle.accepted
-    handle, _, _ = sweep(ros, client, theta0_rad=[0.0, 1.0], model="paper")
+    handle, _, _ = sweep(ros, client, theta0_rad=ANGLES.tolist(), model="paper")
+    assert not handle.accepted
+    # Four orientations cannot separate field from gradient: refused on arrival, not after
+    # a sweep's worth of cycles (no driver is there to run one).
+    handle, _, _ = sweep(ros, client, theta0_rad=ANGLES[:4].tolist())
     assert not handle.accepted
 
 
@@ -129,6 +139,25 @@ def test_one_sweep_at_a_time(ros, mapper):
     result = next(h for h in handles if h.accepted).get_result_async()
     done = ros.wait_for(lambda: result.done() and result.result(), "the accepted sweep")
     assert done.result.success and done.result.decomposition.n_points == len(ANGLES)
+
+
+def test_a_failed_sweep_publishes_neither_map_nor_model_report(ros, mapper):
+    client, _ = mapper
+    driver = StandInDriver(ros, bad_fits=True)
+    maps, reports = [], []
+    ros.node.create_subscription(SweepDecomposition, "mows/sweep", maps.append, MAP_QOS)
+    ros.node.create_subscription(ModelReport, "mows/model_report", reports.append, MAP_QOS)
+    _, done, _ = sweep(ros, client, theta0_rad=ANGLES[:5].tolist(), repeats_per_angle=1)
+    assert done.status == GoalStatus.STATUS_ABORTED and "no successful ring-down" in done.result.message
+    failed = done.result.decomposition
+    assert DecompositionStatus(failed.status) is not DecompositionStatus.OK and failed.message == done.result.message
+    # Then a good sweep: its map and report are the first the topics carry (reliable, in order).
+    driver.bad_fits = False
+    _, done, _ = sweep(ros, client, theta0_rad=ANGLES.tolist(), repeats_per_angle=1)
+    assert done.result.success, done.result.message
+    ros.wait_for(lambda: maps and reports, "the good sweep's map and report")
+    assert [m.sweep_id for m in maps] == [2] and [r.sweep_id for r in reports] == [2]
+    assert np.all(np.isfinite(maps[0].field_t))
 
 
 def test_a_failing_driver_aborts_the_sweep_with_its_reason(ros, mapper):

@@ -10,6 +10,7 @@ from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
+from mows.sweep.decompose import Decomposition, DecompositionStatus
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import (
     CycleAnswer,
@@ -82,24 +83,24 @@ def test_a_sweep_runs_a_cycle_per_angle_and_recovers_the_field():
 
 
 def test_a_goal_without_angles_or_repeats_takes_the_settings():
-    runner, step = started(SweepGoal(), SweepSettings(repeats_per_angle=3, angle_step_deg=90.0))
+    runner, step = started(SweepGoal(), SweepSettings(repeats_per_angle=3, angle_step_deg=72.0))
     driver, calls = StandIn(), []
     while step.run_cycle is not None:
         calls.append(step.run_cycle)
         step = driver.run(runner, step)
-    assert [c.theta0_rad for c in calls] == pytest.approx(np.radians([0, 90, 180, 270]))
+    assert [c.theta0_rad for c in calls] == pytest.approx(np.radians([0, 72, 144, 216, 288]))
     assert {c.repeats for c in calls} == {3}
 
 
 def test_late_fits_are_given_up_on_when_their_time_is_up():
-    runner, step = started(SweepGoal(ANGLES[:1], 3))
+    runner, step = started(SweepGoal(ANGLES[:5], 3))
     driver = StandIn()
     assert runner.fits_time_up() is None     # no cycle answered yet: nothing is late
     driver.cycle_id += 1
     assert runner.on_fit(driver.fit(0.0)) is None
     assert not runner.on_cycle(CycleAnswer(driver.cycle_id, 3)).run_cycle
     step = runner.fits_time_up()
-    assert step.feedback.n_ok == 1 and step.decompose is not None
+    assert step.feedback.n_ok == 1 and step.run_cycle.theta0_rad == ANGLES[1]
 
 
 @pytest.mark.parametrize("problem", ["cycle failed: coil current above the cap",
@@ -123,21 +124,45 @@ def test_a_cancel_ends_the_sweep_before_the_next_orientation():
 
 
 def test_a_sweep_without_one_good_ringdown_fails_and_publishes_nothing():
-    runner, step = started(SweepGoal(ANGLES[:2], 2))
+    runner, step = started(SweepGoal(ANGLES[:5], 2))
     driver = StandIn()
     while step.finished is None:
         step = driver.run(runner, step, ok=False)
-    assert not step.finished.ok and step.finished.message == "no successful ring-down in the sweep (4 failed)"
+    assert not step.finished.ok and step.finished.message == "no successful ring-down in the sweep (10 failed)"
     assert step.publish is None and runner.sweeps == 1
 
 
-@pytest.mark.parametrize("goal, reason", [
-    (SweepGoal((0.0, math.nan)), "not all finite"),
-    (SweepGoal((0.0, 1.0), model="paper"), "'paper' is not one of first_principles, published"),
+def test_a_failed_decomposition_ends_the_sweep_and_leaves_nothing_to_publish():
+    runner, step = started(SweepGoal(ANGLES[:5], 1))
+    driver = StandIn()
+    while step.decompose is None:
+        step = driver.run(runner, step)
+    failed = Decomposition("first_principles", DecompositionStatus.NOT_CONVERGED, "the fit did not converge")
+    step = runner.on_decomposed(failed)
+    assert step.publish is None and not step.finished.ok and step.finished.message == "the fit did not converge"
+    assert step.finished.map.decomposition is failed and runner.state == "idle"
+
+
+@pytest.mark.parametrize("goal, settings, reason", [
+    (SweepGoal((0.0, math.nan)), SweepSettings(), "not all finite"),
+    (SweepGoal(ANGLES, model="paper"), SweepSettings(), "'paper' is not one of first_principles, published"),
+    # The field is the 1θ0 harmonic and the gradient the 2θ0 one: 4 orientations cannot tell
+    # them from the constant term, 5 cannot when f00 is free too.
+    (SweepGoal(ANGLES[:4]), SweepSettings(), "4 distinct orientations .* need at least 5"),
+    (SweepGoal(ANGLES[:2] * 3), SweepSettings(), "2 distinct orientations"),
+    (SweepGoal(ANGLES[:5]), SweepSettings(f00_free=True), "need at least 6"),
+    (SweepGoal(), SweepSettings(angle_step_deg=90.0), "4 distinct orientations"),
 ])
-def test_bad_goals_are_refused_with_the_reason(goal, reason):
+def test_bad_goals_are_refused_with_the_reason_before_any_cycle(goal, settings, reason):
+    runner = SweepRunner()
     with pytest.raises(ValueError, match=reason):
-        SweepRunner().start(goal, SweepSettings(), P)
+        runner.start(goal, settings, P)
+    assert runner.state == "idle"
+
+
+def test_five_orientations_are_enough():
+    runner, step = started(SweepGoal(ANGLES[:5]))
+    assert step.run_cycle is not None
 
 
 def test_one_sweep_at_a_time_and_the_runner_is_freed_when_abandoned():

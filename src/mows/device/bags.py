@@ -28,6 +28,7 @@ from rosbags.typesys.store import Typestore
 PACKAGE = "mows_msgs"
 REPOSITORY_PACKAGE = Path(__file__).resolve().parents[3] / PACKAGE
 BAG_VERSION: Literal[9] = 9  # rosbag2's metadata version in Jazzy
+ROS_DISTRO = "jazzy"  # what rosbag2 writes as ros_distro; rosbags writes its own name
 
 # The parts of a service or action definition, in the order they appear between `---` lines.
 PARTS = {
@@ -116,6 +117,7 @@ def write_bag(path: str | os.PathLike, messages: Iterable[BagMessage]) -> Path:
             if key not in connections:
                 connections[key] = writer.add_connection(topic, msgtype, typestore=store)
             writer.write(connections[key], timestamp_ns, store.serialize_cdr(message, msgtype))
+    mark_distro(path)
     return Path(path)
 
 
@@ -139,6 +141,12 @@ def check_readable(path: str | os.PathLike) -> Path:
         raise BagError(f"{path} cannot be read ({error}): if the recording was cut off, "
                        f"`mows bag repair {bag}` recovers its intact chunks") from None
     return path
+
+
+def mark_distro(path: str | os.PathLike) -> None:
+    """Say in a closed bag's metadata.yaml that it is a Jazzy bag, as rosbag2 does."""
+    metadata = Path(path) / "metadata.yaml"
+    metadata.write_text(metadata.read_text().replace("ros_distro: rosbags", f"ros_distro: {ROS_DISTRO}"))
 
 
 def read_bag(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
@@ -202,6 +210,7 @@ class Recording:
 
     def close(self) -> None:
         self._writer.close()
+        mark_distro(self.path)
 
     def _flush(self) -> None:
         """The chunks written so far on disk, and the count of messages so far in the metadata."""

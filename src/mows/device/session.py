@@ -22,6 +22,7 @@ from mows.device.phases import (
     CycleOutcome,
     CycleRequest,
     CycleSettings,
+    Phase,
     PhaseEvent,
     Step,
     TuningFit,
@@ -71,6 +72,8 @@ class DeviceSession:
         self._monotonic = monotonic
         self._lock = threading.RLock()
         self._events: list[PhaseEvent] = []
+        self._replayed_phase: Phase | None = None
+        self.stage_angle_rad: float | None = None  # where the rotation stage stands, once known
         self._on_done: Callable[[CycleOutcome], None] | None = None
         self._last_samples_s = monotonic()
         self._first_samples_s: float | None = None
@@ -95,6 +98,9 @@ class DeviceSession:
                 self._act(self.sequencer.abort(f"no samples from the device for {STALL_TIMEOUT_S:g} s"))
             output.events += self._events
             self._events = []
+            for event in output.events:
+                if event.cycle_id:  # a cycle's phases begin once the stage has turned to its θ0
+                    self.stage_angle_rad = event.theta0_rad
             return output
 
     def _take(self, item, output: Output) -> None:
@@ -121,8 +127,9 @@ class DeviceSession:
             self.last_device_fault = item.reason
             if self.sequencer is not None:
                 self._act(self.sequencer.abort(item.reason))
-        else:  # a PhaseEvent replayed from a recording
+        else:  # a PhaseEvent replayed from a recording: the phase the recording is in
             self._events.append(item)
+            self._replayed_phase = item.phase
 
     def _link(self, event: LinkEvent) -> None:
         self.link_up, self.last_link_reason = event.up, event.reason
@@ -284,7 +291,9 @@ class DeviceSession:
             if a is not None:
                 values.update(samples=a.samples, gaps=a.gaps, missing_samples=a.missing_samples,
                               device_restarts=a.restarts, saturated_samples=a.saturated_samples)
-            if s is not None:
+            if s is None:   # a recording: the phase of its last replayed event
+                values.update(phase=self._replayed_phase.name if self._replayed_phase else "none replayed yet")
+            else:
                 values.update(phase=s.phase.name, cycle_running=s.busy, estop_latched=s.latched is not None,
                               estop_reason=s.latched or "", excitation_frequency_hz=s.frequency_hz,
                               duty_cycle=s.duty_fraction())

@@ -220,6 +220,17 @@ def _distinct_angles(theta0) -> int:
     return np.unique(np.round(np.mod(theta0, 2 * np.pi), 6)).size
 
 
+def orientations_problem(theta0_rad, f00_free: bool = False) -> str:
+    """Why a sweep at these orientations cannot be decomposed ('' when it can): the field is the
+    1θ0 harmonic, the gradient the 2θ0 one, plus a constant (and f00 when free)."""
+    distinct = _distinct_angles(np.asarray(theta0_rad, float))
+    needed = 6 if f00_free else 5
+    if distinct < needed:
+        return (f"{distinct} distinct orientations cannot separate field (1θ0) from gradient "
+                f"(2θ0){' and f00' if f00_free else ''}: need at least {needed}")
+    return ""
+
+
 def _check(theta0, shift, std, f00_free) -> tuple[DecompositionStatus, str]:
     if not (theta0.shape == shift.shape == std.shape and theta0.ndim == 1):
         return DecompositionStatus.INVALID_INPUT, ("theta0, shift and std must be equal-length 1-D arrays, got "
@@ -228,11 +239,8 @@ def _check(theta0, shift, std, f00_free) -> tuple[DecompositionStatus, str]:
         return DecompositionStatus.INVALID_INPUT, "non-finite angle, shift or uncertainty in the sweep"
     if np.any(std <= 0):
         return DecompositionStatus.INVALID_INPUT, "every shift needs a positive standard uncertainty"
-    needed = 6 if f00_free else 5
-    if _distinct_angles(theta0) < needed:
-        return DecompositionStatus.TOO_FEW_ORIENTATIONS, (
-            f"{_distinct_angles(theta0)} distinct orientations cannot separate field (1θ0) from gradient "
-            f"(2θ0){' and f00' if f00_free else ''}: need at least {needed}")
+    if problem := orientations_problem(theta0, f00_free):
+        return DecompositionStatus.TOO_FEW_ORIENTATIONS, problem
     return DecompositionStatus.OK, ""
 
 

@@ -26,9 +26,11 @@ class SweepPoint:
     duration_s: float
     t_s: float
     amplitude_std_rad: float = math.nan
+    stamp_ns: int = 0  # the device stamp t_s was taken from, exact (0: none)
 
     @classmethod
-    def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0) -> SweepPoint:
+    def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0,
+                 stamp_ns: int = 0) -> SweepPoint:
         """A successful ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`, or a RingdownFit
         message: the fields are the same) with its frequency shift; σ of θmax from the fit's
         covariance (NaN when θmax was held at a bound)."""
@@ -37,7 +39,7 @@ class SweepPoint:
         index = names.index("amplitude_rad") if "amplitude_rad" in names else None
         amplitude_std = math.sqrt(covariance[index, index]) if index is not None else math.nan
         return cls(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, shift_hz, shift_std_hz, fit.amplitude_rad,
-                   fit.damping_per_s, fit.duration_s, t_s, amplitude_std)
+                   fit.damping_per_s, fit.duration_s, t_s, amplitude_std, int(stamp_ns))
 
 
 @dataclasses.dataclass

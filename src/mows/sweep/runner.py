@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from mows.physics.probe import Probe
-from mows.sweep.decompose import MODELS, Decomposition
+from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
 from mows.sweep.record import SweepPoint, SweepRecord
 
 
@@ -93,7 +93,8 @@ class SweepMap:
 
 @dataclasses.dataclass(frozen=True)
 class SweepOutcome:
-    """A finished sweep: succeeded (``ok``), cancelled, or failed, with why."""
+    """A finished sweep: succeeded (``ok``), cancelled, or failed, with why; ``map`` once it
+    was decomposed (successfully or not)."""
 
     ok: bool
     message: str
@@ -135,19 +136,22 @@ class SweepRunner:
     # --- inputs ----------------------------------------------------------------------------
     def start(self, goal: SweepGoal, settings: SweepSettings, probe: Probe) -> None:
         """Accept ``goal`` (the sweep begins at :meth:`begin`). ValueError, with the reason, when
-        it is refused: a non-finite angle, an unknown model, or a sweep still running."""
-        angles = [float(a) for a in goal.theta0_rad]
+        it is refused: a non-finite angle, too few distinct orientations to decompose, an
+        unknown model, or a sweep still running."""
+        angles = [float(a) for a in goal.theta0_rad] or list(np.radians(np.arange(0.0, 360.0,
+                                                                                  settings.angle_step_deg)))
         problems = []
         if not all(math.isfinite(a) for a in angles):
             problems.append(f"angles {angles} are not all finite")
+        elif problem := orientations_problem(angles, settings.f00_free):
+            problems.append(problem)
         if goal.model and goal.model not in MODELS:
             problems.append(f"model {goal.model!r} is not one of {', '.join(MODELS)}")
         if self.state != "idle":
             problems.append(f"another sweep is still running ({self.state})")
         if problems:
             raise ValueError("; ".join(problems))
-        self.state, self._settings, self._probe = "sweeping", settings, probe
-        self._angles = angles or list(np.radians(np.arange(0.0, 360.0, settings.angle_step_deg)))
+        self.state, self._settings, self._probe, self._angles = "sweeping", settings, probe, angles
         self._repeats = goal.repeats_per_angle or settings.repeats_per_angle
         self._model = goal.model or settings.model
         self._index, self._cancelled, self._awaited = 0, False, None
@@ -193,12 +197,12 @@ class SweepRunner:
         return self._end(SweepStep(), SweepOutcome(False, reason))
 
     def on_decomposed(self, decomposition: Decomposition) -> SweepStep:
-        """The result of the step's ``decompose``: the map to publish and the sweep's end."""
+        """The result of the step's ``decompose`` and the sweep's end; the map is published only
+        when the decomposition succeeded (a failed one has no numbers to show)."""
         self.last = decomposition.report()
         sweep_map = SweepMap(self.sweeps, decomposition, self._record, self._f00_hz())
-        step = SweepStep(publish=sweep_map)
         outcome = SweepOutcome(decomposition.ok, decomposition.message or self.last, map=sweep_map)
-        return self._end(step, outcome)
+        return self._end(SweepStep(publish=sweep_map if decomposition.ok else None), outcome)
 
     # --- the sweep -------------------------------------------------------------------------
     def _collected(self) -> SweepStep | None:

@@ -1,0 +1,50 @@
+"""A session replaying a recording (the bag backend) has no sequencer: the phase it reports is
+the one of the recording's last replayed excitation state."""
+import numpy as np
+
+from mows.device import bags
+from mows.device.backends import BagBackend
+from mows.device.phases import CycleSettings, Phase
+from mows.device.session import DeviceSession, SessionConfig
+from mows.estimate.ringdown import fit_ringdown
+from mows.physics.coils import PRESETS, CurrentCap
+
+RATE_HZ, BLOCK = 20_000.0, 500
+
+
+def recording(path):
+    """Four blocks with EXCITING after the first and RINGDOWN after the second."""
+    store = bags.typestore()
+    Block, Channel = store.types["mows_msgs/msg/MagnetometerBlock"], store.types["mows_msgs/msg/MagnetometerChannel"]
+    State, Header = store.types["mows_msgs/msg/ExcitationState"], store.types["std_msgs/msg/Header"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+
+    def header(index):
+        return Header(Time(*divmod(10**12 + index * 50_000, 10**9)), "m")
+
+    messages = [bags.BagMessage("/mows/raw", "mows_msgs/msg/MagnetometerBlock", 2 * k,
+                                Block(header(k * BLOCK), k, k * BLOCK, RATE_HZ, 1e-5, 1e-10,
+                                      [Channel("c", np.zeros(BLOCK), np.zeros(BLOCK, bool))]))
+                for k in range(4)]
+    for k, phase in [(1, Phase.EXCITING), (2, Phase.RINGDOWN)]:
+        state = State(header(k * BLOCK), int(phase), phase.name, 1, 0, 1, False, phase == Phase.EXCITING,
+                      np.zeros(2), 112.0, 0.0, 0.02, "largest_spacing")
+        messages.append(bags.BagMessage("/mows/excitation", "mows_msgs/msg/ExcitationState", 2 * k + 1, state))
+    bags.write_bag(path, sorted(messages, key=lambda m: m.timestamp_ns))
+
+
+def test_the_replayed_phase_is_the_recordings(tmp_path):
+    recording(tmp_path / "bag")
+    cap = CurrentCap(10.0)
+    config = SessionConfig(0.025, CycleSettings(), PRESETS["largest_spacing"](current_limit_a=cap.limit_a), cap,
+                           110.0, fit_ringdown)
+    session = DeviceSession(BagBackend(tmp_path / "bag", rate=100.0), config)
+    assert session.health()["phase"] == "none replayed yet"
+    phases = []
+    while session.health()["link"] != "finished":
+        output = session.step(0.05)
+        phases += [e.phase for e in output.events]
+        if output.events:
+            assert session.health()["phase"] == output.events[-1].phase.name
+    assert phases == [Phase.EXCITING, Phase.RINGDOWN] and session.health()["phase"] == "RINGDOWN"
+    session.close()

@@ -5,7 +5,7 @@ one (scipy's solve_ivp for the simulator, curve_fit for the estimator, generatin
 without publishing them for the stream). Nothing here fails on a figure: machines are shared
 and noisy, so speed is reported, not asserted. ``--json`` prints the figures as one JSON
 object (the estimator's keys are top level: fit_ms_median, curve_fit_ms_median,
-efficiency_min, bias_max_sigma).
+efficiency_min, bias_max_sigma, and the throughput's paper_s, default_s, adaptive_s, tracking_hz …).
 """
 import argparse
 import importlib
@@ -20,9 +20,15 @@ SUITES = {
     "stream": ("mows.bench.streaming", "CPU share of one core to stream 20 kS/s × 2 channels"),
     "lab": ("mows.bench.lab", "model lab diagnose on 1000 rows with the whole catalog"),
     "latency": ("mows.bench.latency", "last sample of a ring-down to its published fit, in the node graph"),
+    "throughput": ("mows.bench.throughput", "device seconds to σ ≤ 20 nT, 10 µT/m: paper, default, demo and "
+                                            "adaptive sweeps; tracking rate"),
 }
-QUICK: dict[str, dict[str, float]] = {"estimator": {"trials": 60}, "simulator": {"repeats": 5},
-                                      "stream": {"duration_s": 3.0}, "latency": {"cycles": 1, "repeats": 5}}
+# Figures of the throughput suite that --json also carries at the top level.
+THROUGHPUT_KEYS = ("paper_s", "default_s", "demo_s", "adaptive_s", "tracking_hz", "tracking_std_t", "tracking_1ut_hz",
+                   "tracking_1ut_std_t")
+QUICK: dict[str, dict[str, object]] = {"estimator": {"trials": 60}, "simulator": {"repeats": 5},
+                                       "stream": {"duration_s": 3.0}, "latency": {"cycles": 1, "repeats": 5},
+                                       "throughput": {"protocols": ("default",), "tracking_updates": 10}}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -51,6 +57,7 @@ def run(args) -> int:
                 print(f"   {key:40s} {_format(value)}")
     if args.json:
         flat = dict(figures.get("estimator", {}))
+        flat.update({key: value for key, value in figures.get("throughput", {}).items() if key in THROUGHPUT_KEYS})
         flat.update({name: values for name, values in figures.items()})
         print(json.dumps(_finite(flat), indent=1, default=_jsonable, allow_nan=False))
     return 0

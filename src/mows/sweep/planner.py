@@ -43,7 +43,9 @@ STEPS = np.array([1e-7, 1e-7, 1e-5, 1e-5, 1e-5])   # central differences of Δf 
 UNITS = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1.0])
 COMPONENT_UNITS = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3])
 SCALE_LIMITS = (0.5, 4.0)
-MAX_PLANNED_RINGDOWNS = 400   # the plan to the target looks this far ahead at most   # the measured σ over the predicted one is believed within these
+MAX_PLANNED_RINGDOWNS = 400   # the plan to the target looks this far ahead at most
+NEARBY_RAD = math.radians(20.0)   # learnt σ(θ0): ring-downs this close count as the same orientation
+UNKNOWN_STD_HZ = 1e-3          # σ_f of a ring-down before any is measured (learnt model): only its equality matters   # the measured σ over the predicted one is believed within these
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,11 +119,12 @@ class AdaptivePlanner:
 
     ``repeat_s``: device time of one ring-down (excitation, ring-down, gap); ``turn_s``: of a
     turn to a new orientation (the settling included). ``ringdown_std_hz(θ0)``: predicted σ_f
-    of one ring-down. ``candidates_rad``: the orientations to choose from.
+    of one ring-down; None: learnt from the ring-downs measured within ``NEARBY_RAD`` (θ0 and
+    θ0 + 180° alike), else from all of them. ``candidates_rad``: the orientations to choose from.
     """
 
     def __init__(self, probe: Probe, f00_hz: float, goal: PrecisionGoal, repeat_s: float, turn_s: float,
-                 ringdown_std_hz: Callable[[float], float], candidates_rad=None, max_repeats: int = 20,
+                 ringdown_std_hz: Callable[[float], float] | None = None, candidates_rad=None, max_repeats: int = 20,
                  f00_free: bool = False):
         if f00_free and {"gxx", "gyy"} & set(goal.components):
             raise ValueError("with f00 free the decomposition cannot determine Gxx and Gyy (only Gxx − Gyy and Gxy)")
@@ -133,8 +136,8 @@ class AdaptivePlanner:
         self.f00_free = f00_free
         self.candidates = np.radians(np.arange(0.0, 360.0, 15.0)) if candidates_rad is None \
             else np.asarray(candidates_rad, float)
-        self._predicted = np.array([ringdown_std_hz(a) for a in self.candidates])
         self._std_model = ringdown_std_hz
+        self._predicted = None if ringdown_std_hz is None else np.array([ringdown_std_hz(a) for a in self.candidates])
         n = 6 if f00_free else 5
         self._to_components = np.hstack([TO_COMPONENTS, np.zeros((5, n - 5))])
         self._prior = np.diag((PRIOR_STD[:n] / UNITS[:n]) ** -2.0)
@@ -153,12 +156,28 @@ class AdaptivePlanner:
             return PlanEnd(False, f"time budget of {self.goal.budget_s:g} s used ({elapsed_s:.1f} s): {where}")
         information = self._information(record, decomposition)
         rows = self._rows(self.candidates, decomposition)
-        variance = self._predicted**2 * self._scale(record)
+        variance = self._candidate_variance(record)
         plan = self._plan_to_target(information, rows, variance, remaining)
+        fresh = self._unvisited(record)
+        if fresh.size:   # the decomposition needs this many orientations whatever the prediction says
+            planned = [i for i in plan if fresh[i]]
+            if not planned:
+                gains = self._merit(information[None] + rows[:, :, None] * rows[:, None, :] / variance[:, None, None])
+                planned = [int(np.argmin(np.where(fresh, gains, np.inf)))]
+                plan = {planned[0]: 1}
+            plan = {i: plan[i] for i in planned}
         index = max(plan, key=plan.get)   # the orientation with the most ring-downs still to come
         repeats = min(plan[index], self.max_repeats)
         after = information + np.outer(rows[index], rows[index]) * (repeats / variance[index])
         return PlannedCycle(float(self.candidates[index]), repeats, self._component_std(after))
+
+    def _unvisited(self, record: SweepRecord) -> np.ndarray:
+        """Mask of candidates not yet measured while the record has fewer distinct orientations
+        than the decomposition needs (5; 6 with f00 free); empty once it has them."""
+        visited = {round(p.theta0_rad % (2.0 * math.pi), 6) for p in record.points}
+        if len(visited) >= (6 if self.f00_free else 5):
+            return np.zeros(0, bool)
+        return np.array([round(a % (2.0 * math.pi), 6) not in visited for a in self.candidates])
 
     def predicted_std(self, record: SweepRecord, decomposition: Decomposition | None = None) -> np.ndarray:
         """σ of (Bx, By, Gxx, Gxy, Gyy) the linearised decomposition of ``record`` would have
@@ -232,12 +251,24 @@ class AdaptivePlanner:
             information += (rows / std[:, None]**2).T @ rows
         return information
 
-    def _scale(self, record: SweepRecord) -> float:
-        """Measured over predicted variance of a ring-down, from the ring-downs so far."""
+    def _candidate_variance(self, record: SweepRecord) -> np.ndarray:
+        """Predicted σ_f² of one ring-down at each candidate, from the model rescaled by what the
+        ring-downs so far reported, or (no model) from those ring-downs alone."""
+        if self._predicted is not None:
+            if not record.points:
+                return self._predicted**2
+            ratios = [p.shift_std_hz / self._std_model(p.theta0_rad) for p in record.points]
+            return self._predicted**2 * float(np.clip(np.median(ratios), *SCALE_LIMITS)) ** 2
         if not record.points:
-            return 1.0
-        ratios = [p.shift_std_hz / self._std_model(p.theta0_rad) for p in record.points]
-        return float(np.clip(np.median(ratios), *SCALE_LIMITS)) ** 2
+            return np.full(self.candidates.size, UNKNOWN_STD_HZ**2)
+        theta0 = np.array([p.theta0_rad for p in record.points])
+        std = np.array([p.shift_std_hz for p in record.points])
+        variance = np.empty(self.candidates.size)
+        for index, candidate in enumerate(self.candidates):
+            # σ(θ0 + 180°) ≈ σ(θ0): the pick-up turns with the probe's axis.
+            near = np.abs(np.remainder(theta0 - candidate + math.pi / 2, math.pi) - math.pi / 2) <= NEARBY_RAD
+            variance[index] = np.median(std[near] if near.any() else std) ** 2
+        return variance
 
     def _component_std(self, information) -> np.ndarray:
         """σ of (Bx, By, Gxx, Gxy, Gyy), SI, for one information matrix or a stack of them."""

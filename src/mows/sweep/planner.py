@@ -45,6 +45,9 @@ COMPONENT_UNITS = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3])
 SCALE_LIMITS = (0.5, 4.0)
 MAX_PLANNED_RINGDOWNS = 400   # the plan to the target looks this far ahead at most
 NEARBY_RAD = math.radians(20.0)   # learnt σ(θ0): ring-downs this close count as the same orientation
+# Until the decomposition's orientations are all measured, a visit takes at most this many
+# ring-downs: the plan rests on σ and sensitivities not yet measured there.
+FIRST_VISIT_REPEATS = 2
 UNKNOWN_STD_HZ = 1e-3          # σ_f of a ring-down before any is measured (learnt model): only its equality matters   # the measured σ over the predicted one is believed within these
 
 
@@ -165,7 +168,7 @@ class AdaptivePlanner:
                 gains = self._merit(information[None] + rows[:, :, None] * rows[:, None, :] / variance[:, None, None])
                 planned = [int(np.argmin(np.where(fresh, gains, np.inf)))]
                 plan = {planned[0]: 1}
-            plan = {i: plan[i] for i in planned}
+            plan = {i: min(plan[i], FIRST_VISIT_REPEATS) for i in planned}
         index = max(plan, key=plan.get)   # the orientation with the most ring-downs still to come
         repeats = min(plan[index], self.max_repeats)
         after = information + np.outer(rows[index], rows[index]) * (repeats / variance[index])

@@ -12,9 +12,9 @@ import pytest
 from mows.bench.throughput import CAP_A, adaptive_protocol, truth_components
 from mows.device.phases import CycleSettings
 from mows.sim.scenario import load_scenario
-from mows.sweep.record import SweepPoint, SweepRecord
 from mows.sweep.fast_cycle import drive_rate_rad_per_s, excitation_s, tuning_needed
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PlannedCycle, PrecisionGoal
+from mows.sweep.record import SweepPoint, SweepRecord
 
 LOOSE = PrecisionGoal(field_std_t=60e-9, gradient_std_t_per_m=30e-6)
 

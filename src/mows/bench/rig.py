@@ -17,7 +17,7 @@ import numpy as np
 
 from mows.device.cycle import CycleSequencer
 from mows.device.interface import CoilCommand, CommandResult
-from mows.device.phases import CycleRequest, CycleSettings, Phase, PhaseEvent, Step
+from mows.device.phases import CycleOutcome, CycleRequest, CycleSettings, Phase, PhaseEvent, Step
 from mows.device.scheduled import OverCap, ScheduledDevice
 from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
 from mows.estimate.ringdown_start import white_noise_std
@@ -56,7 +56,7 @@ class DeviceTimeRig:
         self._results: list[CommandResult] = []
         self._options: dict[float, FitOptions] = {}
         self._measured: list[MeasuredRingdown] = []
-        self._outcome = None
+        self._outcome: CycleOutcome | None = None
         self._idle_until = 0
         # The sequencer anchors its clock on the first samples; the probe rests, so they show the noise.
         self._quiet = self._read(self._chunk)[0].samples.samples_t

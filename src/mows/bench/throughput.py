@@ -36,9 +36,10 @@ from mows.estimate.axis import estimate_along_axis
 from mows.lab.reference import reference_at
 from mows.records.stamps import NS_PER_S
 from mows.sim.scenario import load_scenario
-from mows.sweep.record import SweepPoint, SweepRecord
+from mows.sweep.decompose import Decomposition
 from mows.sweep.fast_cycle import plan_cycle, plan_tracking, ringdown_std_model
 from mows.sweep.planner import COMPONENTS, AdaptivePlanner, PlanEnd, PrecisionGoal, achieved_std, reached
+from mows.sweep.record import SweepPoint, SweepRecord
 
 SCENARIO = "anti_helmholtz"
 CAP_A = 10.0
@@ -92,7 +93,7 @@ class _Sweep:
     def __init__(self, scenario, goal: PrecisionGoal):
         self.scenario, self.probe, self.goal = scenario, scenario.probe, goal
         self.record = SweepRecord()
-        self.decomposition = None
+        self.decomposition: Decomposition | None = None
         # Only its prediction from measured ring-downs is used: no σ model for unmeasured ones.
         self._predictor = AdaptivePlanner(self.probe, self.probe.f00_hz, goal, 1.0, 0.0, lambda theta0: math.nan)
 
@@ -176,7 +177,7 @@ def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, se
     rig = DeviceTimeRig(scenario, CycleSettings(), CAP_A, seed)
     std = ringdown_std_model(scenario.sensors.pair, probe, scenario.pose, fs, rig.first_block_noise_std_t())
     plan = plan_tracking(probe, scenario.setup, scenario.pose, std, theta0_rad, target_std_t, CAP_A)
-    figures = {"target_t": target_std_t, "feasible": plan.feasible, "bound_t": plan.bound_std_t,
+    figures: dict[str, object] = {"target_t": target_std_t, "feasible": plan.feasible, "bound_t": plan.bound_std_t,
                "ringdown_s": plan.ringdown_s, "kick_s": plan.excite_s, "planned_updates_per_s": plan.updates_per_s}
     if not plan.feasible:
         return figures
@@ -207,8 +208,9 @@ def run(protocols=("paper", "default", "demo"), tracking_updates: int = 40) -> d
     adaptive, plan = adaptive_protocol(goal)
     figures.update(adaptive.figures())
     figures.update({"adaptive_message": adaptive.message, "plan_excite_s": plan.excite_s,
-                    "plan_ringdown_s": plan.ringdown_s, "plan_gap_s": plan.gap_s, "plan_current_a": plan.excitation_current_a,
-                    "plan_tuning_steps": plan.tuning_steps, "plan_ringdown_crb_hz": plan.ringdown_std_hz})
+                    "plan_ringdown_s": plan.ringdown_s, "plan_gap_s": plan.gap_s,
+                    "plan_current_a": plan.excitation_current_a, "plan_tuning_steps": plan.tuning_steps,
+                    "plan_ringdown_crb_hz": plan.ringdown_std_hz})
     for name in protocols:
         result = fixed_protocol(name, goal)
         figures.update(result.figures())

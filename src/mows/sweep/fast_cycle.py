@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -129,7 +129,7 @@ def ringdown_std_model(pair, probe, pose, sample_rate_hz: float, noise_std_t: fl
     """σ_f(θ0, T): the Cramér–Rao bound of one ring-down of length T from the stop at θ0, for
     white noise ``noise_std_t`` per sample of the difference channel (a measured figure)."""
     kappa = kappa_t(pair, pose, probe.moment_am2)
-    pickups: dict[float, tuple] = {}
+    pickups: dict[float, tuple | None] = {}
 
     def std_hz(theta0_rad: float, duration_s: float) -> float:
         key = round(float(theta0_rad) % TWO_PI, 9)

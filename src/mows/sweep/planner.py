@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -42,13 +42,14 @@ STEPS = np.array([1e-7, 1e-7, 1e-5, 1e-5, 1e-5])   # central differences of Δf 
 # The information is kept in µT, mT/m and Hz: in SI its entries span 1e20 and lose precision.
 UNITS = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1.0])
 COMPONENT_UNITS = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3])
-SCALE_LIMITS = (0.5, 4.0)
+SCALE_LIMITS = (0.5, 4.0)   # the measured σ over the predicted one is believed within these
 MAX_PLANNED_RINGDOWNS = 400   # the plan to the target looks this far ahead at most
 NEARBY_RAD = math.radians(20.0)   # learnt σ(θ0): ring-downs this close count as the same orientation
 # Until the decomposition's orientations are all measured, a visit takes at most this many
 # ring-downs: the plan rests on σ and sensitivities not yet measured there.
 FIRST_VISIT_REPEATS = 2
-UNKNOWN_STD_HZ = 1e-3          # σ_f of a ring-down before any is measured (learnt model): only its equality matters   # the measured σ over the predicted one is believed within these
+# σ_f of a ring-down before any is measured (learnt model): only that it is the same everywhere matters.
+UNKNOWN_STD_HZ = 1e-3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,7 +151,7 @@ class AdaptivePlanner:
              ) -> PlannedCycle | PlanEnd:
         """The next cycle, or the end of the sweep. Every cycle turns and settles the probe (the
         driver's cycle does), so its cost is the turn plus its repeats."""
-        if reached(self.goal, decomposition):
+        if decomposition is not None and reached(self.goal, decomposition):
             return PlanEnd(True, "target reached: " + self._describe(achieved_std(decomposition)))
         remaining = self.goal.budget_s - elapsed_s
         if remaining < self.turn_s + self.repeat_s:
@@ -169,7 +170,7 @@ class AdaptivePlanner:
                 planned = [int(np.argmin(np.where(fresh, gains, np.inf)))]
                 plan = {planned[0]: 1}
             plan = {i: min(plan[i], FIRST_VISIT_REPEATS) for i in planned}
-        index = max(plan, key=plan.get)   # the orientation with the most ring-downs still to come
+        index = max(plan, key=lambda i: plan[i])   # the orientation with the most ring-downs still to come
         repeats = min(plan[index], self.max_repeats)
         after = information + np.outer(rows[index], rows[index]) * (repeats / variance[index])
         return PlannedCycle(float(self.candidates[index]), repeats, self._component_std(after))
@@ -257,10 +258,11 @@ class AdaptivePlanner:
     def _candidate_variance(self, record: SweepRecord) -> np.ndarray:
         """Predicted σ_f² of one ring-down at each candidate, from the model rescaled by what the
         ring-downs so far reported, or (no model) from those ring-downs alone."""
-        if self._predicted is not None:
+        model = self._std_model
+        if self._predicted is not None and model is not None:
             if not record.points:
                 return self._predicted**2
-            ratios = [p.shift_std_hz / self._std_model(p.theta0_rad) for p in record.points]
+            ratios = [p.shift_std_hz / model(p.theta0_rad) for p in record.points]
             return self._predicted**2 * float(np.clip(np.median(ratios), *SCALE_LIMITS)) ** 2
         if not record.points:
             return np.full(self.candidates.size, UNKNOWN_STD_HZ**2)

@@ -277,14 +277,16 @@ class SweepRunner:
 
     # --- an adaptive sweep -------------------------------------------------------------------
     def _next_planned(self, step: SweepStep) -> SweepStep:
+        planner = self._planner
+        assert planner is not None and self._probe is not None  # an adaptive sweep, set by start()
         if self._cancelled:
             return self._end(step, SweepOutcome(False, f"cancelled after {self._index} cycles", cancelled=True))
-        if self._decomposition_due():
+        if self._decomposition_due(planner):
             self.state = "decomposing"
             step.decompose = functools.partial(self._record.decompose, self._probe, self._f00_hz(),
                                                model=self._model, f00_free=self._settings.f00_free)
             return step
-        choice = self._planner.next(self._record, self._decomposition, self._elapsed_s())
+        choice = planner.next(self._record, self._decomposition, self._elapsed_s())
         if isinstance(choice, PlanEnd):
             return self._planned_end(step, choice)
         self._angles.append(choice.theta0_rad)
@@ -292,15 +294,15 @@ class SweepRunner:
         step.run_cycle = CycleCall(choice.theta0_rad, choice.repeats)
         return step
 
-    def _decomposition_due(self) -> bool:
+    def _decomposition_due(self, planner: AdaptivePlanner) -> bool:
         """New ring-downs at enough orientations, and a prediction near the target."""
         points = self._record.points
         needed = 6 if self._settings.f00_free else 5
         if len(points) == self._decomposed_points or len({round(p.theta0_rad, 9) for p in points}) < needed:
             return False
-        targets = self._planner.goal.targets()
+        targets = planner.goal.targets()
         asked = np.isfinite(targets)
-        predicted = self._planner.predicted_std(self._record, self._decomposition)
+        predicted = planner.predicted_std(self._record, self._decomposition)
         return self._decomposition is None or bool(np.all(predicted[asked] <= DECOMPOSE_NEAR * targets[asked]))
 
     def _elapsed_s(self) -> float:

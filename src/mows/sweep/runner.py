@@ -13,7 +13,7 @@ An adaptive sweep (a goal with a ``target``) lets :class:`mows.sweep.planner.Ada
 choose each next orientation and its repeats from the ring-downs so far; the sweep is decomposed
 whenever the planner's linearised prediction comes within ``DECOMPOSE_NEAR`` of the target, and
 ends when a decomposition reaches it or the time budget holds no further cycle. Its device time
-is read from the ring-downs' stamps (first to last, plus one turn).
+is read from the ring-downs' stamps (first to last, plus a turn and a ring-down).
 """
 import dataclasses
 import functools
@@ -306,11 +306,13 @@ class SweepRunner:
         return self._decomposition is None or bool(np.all(predicted[asked] <= DECOMPOSE_NEAR * targets[asked]))
 
     def _elapsed_s(self) -> float:
-        """Device time of the sweep so far, from its ring-downs' stamps (plus the first turn)."""
+        """Device time of the sweep so far, from its ring-downs' stamps: first to last, plus the
+        first turn and the last ring-down's whole cost (its kick came before its stamp)."""
         points = self._record.points
         if not points:
             return 0.0
-        return max(p.t_s + p.duration_s for p in points) - min(p.t_s for p in points) + self._settings.turn_s
+        stamps = [p.t_s for p in points]
+        return max(stamps) - min(stamps) + self._settings.turn_s + self._settings.repeat_s
 
     def _planned_end(self, step: SweepStep, end: PlanEnd) -> SweepStep:
         self.sweeps += 1

@@ -275,3 +275,13 @@ def test_the_driver_s_supply_cap_is_lower_than_the_device_s_and_a_cancel_ramps_d
     session.supply_to_zero()
     step_until(session, lambda: backend.device.device.field_current_a == 0.0 and backend.device.supply_target_a == 0.0)
     assert not answers or answers[0].accepted
+
+
+def test_a_cycle_drives_at_the_frequency_it_is_asked_for():
+    session = session_on_simulator(CycleSettings(excite_s=0.1, ringdown_s=0.2, gap_s=0.0, repeats=1, tuning_steps=0,
+                                                 settle_s=0.0))
+    (outcome,), events = run(session, CycleRequest(0.0, frequency_hz=112.9))
+    assert outcome.success, outcome.message
+    assert {e.frequency_hz for e in events if e.phase == Phase.EXCITING} == {112.9}
+    with pytest.raises(ValueError, match="frequency_hz"):
+        session.start_cycle(CycleRequest(0.0, frequency_hz=20000.0), lambda _: None)

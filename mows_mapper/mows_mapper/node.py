@@ -38,7 +38,7 @@ from mows_mapper.messages import (
     model_report_msg,
     sweep_fit,
 )
-from mows_mapper.parameters import PARAMETERS, sweep_settings
+from mows_mapper.parameters import PARAMETERS, sweep_settings, target_of
 from mows_ros.awaitables import in_worker, until, within
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
@@ -77,7 +77,7 @@ class MapperNode(MowsNode):
 
     def _accept(self, goal) -> GoalResponse:
         try:   # one sweep at a time: the runner is busy from here, not from when the sweep starts
-            self._runner.start(SweepGoal(tuple(goal.theta0_rad), goal.repeats_per_angle, goal.model),
+            self._runner.start(SweepGoal(tuple(goal.theta0_rad), goal.repeats_per_angle, goal.model, target_of(goal)),
                                sweep_settings(parameter_values(self, PARAMETERS)), probe_of(self._param("probe_file")))
         except ValueError as refused:
             self.get_logger().warn(f"sweep goal refused: {refused}")

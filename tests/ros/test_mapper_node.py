@@ -167,3 +167,17 @@ def test_a_failing_driver_aborts_the_sweep_with_its_reason(ros, mapper):
     assert done.status == GoalStatus.STATUS_ABORTED
     assert "above the cap" in done.result.message and not done.result.success
     assert process.poll() is None
+
+
+def test_an_adaptive_goal_reaches_its_target(ros, mapper):
+    client, _ = mapper
+    StandInDriver(ros)
+    _, done, feedback = sweep(ros, client, target="B", target_field_std_t=100e-9)
+    assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.success, done.result.message
+    d = done.result.decomposition
+    sigma = np.sqrt(np.diag(np.reshape(d.field_covariance_t2, (2, 2))))
+    truth, _ = reference_at(SCENARIO)
+    assert np.all(sigma <= 100e-9) and np.all(np.abs(np.array(d.field_t) - truth[:2]) < 4 * sigma)
+    assert len({round(f.theta0_rad, 6) for f in feedback}) >= 5   # the orientations it chose
+    handle, _, _ = sweep(ros, client, target="bz")
+    assert not handle.accepted

@@ -228,9 +228,15 @@ class CycleSequencer:
         CycleSettings(**{**dataclasses.asdict(s), "repeats": cycle.repeats, "tuning_steps": cycle.tuning_steps,
                          "gap_s": cycle.gap_s})  # ValueError for a request out of range
         check_setting("theta0_rad", cycle.theta0_rad, True, "finite")
+        if request.frequency_hz is not None:
+            nyquist_hz = self.sample_rate_hz / 2.0
+            check_setting("frequency_hz", request.frequency_hz, 0.0 < request.frequency_hz < nyquist_hz,
+                          f"in (0, {nyquist_hz:g}) Hz")
         self._currents(cycle)  # ValueError above the cap
         self._duty.configure(s.max_duty_cycle, self._samples(s.duty_window_s))
         self._duty.earliest_start(self._next_index, self._samples(s.excite_s))  # ValueError if it never fits
+        if request.frequency_hz is not None:
+            self.frequency_hz = float(request.frequency_hz)
         self._last_cycle_id = cycle.cycle_id
         return cycle
 

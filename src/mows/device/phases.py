@@ -111,12 +111,14 @@ class LostTuning:
 
 @dataclasses.dataclass(frozen=True)
 class CycleRequest:
-    """One cycle at ``theta0_rad``; None takes the value from the settings."""
+    """One cycle at ``theta0_rad``; None takes the value from the settings. ``frequency_hz`` is
+    where to drive (a predicted resonance); None: the sequencer's present estimate."""
 
     theta0_rad: float
     repeats: int | None = None
     tuning_steps: int | None = None
     gap_s: float | None = None
+    frequency_hz: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)

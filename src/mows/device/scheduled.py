@@ -159,6 +159,19 @@ class ScheduledDevice:
             blocks.append(block)
         return blocks
 
+    def idle_until(self, end_index: int) -> int:
+        """Let the probe move on to ``end_index`` (exclusive) without reading the sensors, for
+        stretches nobody records (a gap with the coils off): the motion is integrated sample by
+        sample as in :meth:`read_until`; only the pick-up and the noise are not computed. Stops
+        at the first waiting command, which :meth:`read_until` then applies; returns the sample
+        reached. RuntimeError while the coils are on (their samples are always read)."""
+        if self.coils_on:
+            raise RuntimeError("the coils are on: their samples are read, not skipped")
+        stop = min(int(end_index), self._queue[0][0]) if self._queue else int(end_index)
+        if stop > self.next_index:
+            self.device.integrate(stop - self.next_index)
+        return self.next_index
+
     def _log_coils(self, block: SimulatedBlock) -> None:
         changes = np.flatnonzero(np.diff(block.coils_on.astype(np.int8), prepend=np.int8(self._logged_on)))
         for i in changes:

@@ -8,6 +8,12 @@ One sweep: for each orientation one driver cycle of ``repeats`` ring-downs; once
 says how many it recorded, their fits are collected (or the caller says their time is up);
 after the last orientation every OK ring-down is decomposed (:meth:`SweepRecord.decompose`)
 with f00 taken as the mean of the estimator's own (frequency − shift).
+
+An adaptive sweep (a goal with a ``target``) lets :class:`mows.sweep.planner.AdaptivePlanner`
+choose each next orientation and its repeats from the ring-downs so far; the sweep is decomposed
+whenever the planner's linearised prediction comes within ``DECOMPOSE_NEAR`` of the target, and
+ends when a decomposition reaches it or the time budget holds no further cycle. Its device time
+is read from the ring-downs' stamps (first to last, plus a turn and a ring-down).
 """
 import dataclasses
 import functools
@@ -18,7 +24,10 @@ import numpy as np
 
 from mows.physics.probe import Probe
 from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
+from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal
 from mows.sweep.record import SweepPoint, SweepRecord
+
+DECOMPOSE_NEAR = 1.25   # decompose an adaptive sweep once the prediction is this close to the target
 
 
 @dataclasses.dataclass(frozen=True)
@@ -29,15 +38,19 @@ class SweepSettings:
     angle_step_deg: float = 30.0
     model: str = "first_principles"
     f00_free: bool = False
+    repeat_s: float = 0.82      # adaptive sweeps: device time of one ring-down (kick, ring-down, gap)
+    turn_s: float = 0.5         # adaptive sweeps: device time of a turn and the settling
 
 
 @dataclasses.dataclass(frozen=True)
 class SweepGoal:
-    """A sweep as asked: no angles, 0 repeats or no model mean the settings' choice."""
+    """A sweep as asked: no angles, 0 repeats or no model mean the settings' choice. With a
+    ``target`` the sweep is adaptive: the angles, if any, are the orientations it may choose from."""
 
     theta0_rad: tuple = ()
     repeats_per_angle: int = 0
     model: str = ""
+    target: PrecisionGoal | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -132,14 +145,17 @@ class SweepRunner:
         self._fits: dict[int, list[SweepFit]] = {}
         self._awaited: CycleAnswer | None = None    # the cycle whose fits are being collected
         self._record = SweepRecord()
+        self._planner: AdaptivePlanner | None = None   # an adaptive sweep's
+        self._decomposition: Decomposition | None = None
+        self._decomposed_points = 0
 
     # --- inputs ----------------------------------------------------------------------------
     def start(self, goal: SweepGoal, settings: SweepSettings, probe: Probe) -> None:
         """Accept ``goal`` (the sweep begins at :meth:`begin`). ValueError, with the reason, when
         it is refused: a non-finite angle, too few distinct orientations to decompose, an
         unknown model, or a sweep still running."""
-        angles = [float(a) for a in goal.theta0_rad] or list(np.radians(np.arange(0.0, 360.0,
-                                                                                  settings.angle_step_deg)))
+        given = [float(a) for a in goal.theta0_rad]
+        angles = given or list(np.radians(np.arange(0.0, 360.0, settings.angle_step_deg)))
         problems = []
         if not all(math.isfinite(a) for a in angles):
             problems.append(f"angles {angles} are not all finite")
@@ -149,9 +165,18 @@ class SweepRunner:
             problems.append(f"model {goal.model!r} is not one of {', '.join(MODELS)}")
         if self.state != "idle":
             problems.append(f"another sweep is still running ({self.state})")
+        planner = None
+        if goal.target is not None and not problems:
+            try:
+                planner = AdaptivePlanner(probe, probe.f00_hz, goal.target, settings.repeat_s, settings.turn_s,
+                                          candidates_rad=given or None, f00_free=settings.f00_free)
+            except ValueError as refused:
+                problems.append(str(refused))
         if problems:
             raise ValueError("; ".join(problems))
-        self.state, self._settings, self._probe, self._angles = "sweeping", settings, probe, angles
+        self.state, self._settings, self._probe = "sweeping", settings, probe
+        self._planner, self._decomposition, self._decomposed_points = planner, None, 0
+        self._angles = [] if planner else angles
         self._repeats = goal.repeats_per_angle or settings.repeats_per_angle
         self._model = goal.model or settings.model
         self._index, self._cancelled, self._awaited = 0, False, None
@@ -197,8 +222,13 @@ class SweepRunner:
         return self._end(SweepStep(), SweepOutcome(False, reason))
 
     def on_decomposed(self, decomposition: Decomposition) -> SweepStep:
-        """The result of the step's ``decompose`` and the sweep's end; the map is published only
-        when the decomposition succeeded (a failed one has no numbers to show)."""
+        """The result of the step's ``decompose``: the map to publish (only when the decomposition
+        succeeded: a failed one has no numbers to show) and the sweep's end (an adaptive sweep goes
+        on unless the planner ends it)."""
+        if self._planner is not None:
+            self._decomposition, self._decomposed_points = decomposition, len(self._record.points)
+            self.state = "sweeping"
+            return self._next_planned(SweepStep())
         self.last = decomposition.report()
         sweep_map = SweepMap(self.sweeps, decomposition, self._record, self._f00_hz())
         outcome = SweepOutcome(decomposition.ok, decomposition.message or self.last, map=sweep_map)
@@ -228,6 +258,8 @@ class SweepRunner:
         return self._next_orientation(step)
 
     def _next_orientation(self, step: SweepStep) -> SweepStep:
+        if self._planner is not None:
+            return self._next_planned(step)
         if self._index == len(self._angles):
             return self._measured(step)
         if self._cancelled:
@@ -247,6 +279,54 @@ class SweepRunner:
         step.decompose = functools.partial(self._record.decompose, self._probe, self._f00_hz(), model=self._model,
                                            f00_free=self._settings.f00_free)
         return step
+
+    # --- an adaptive sweep -------------------------------------------------------------------
+    def _next_planned(self, step: SweepStep) -> SweepStep:
+        planner = self._planner
+        assert planner is not None and self._probe is not None  # an adaptive sweep, set by start()
+        if self._cancelled:
+            return self._end(step, SweepOutcome(False, f"cancelled after {self._index} cycles", cancelled=True))
+        if self._decomposition_due(planner):
+            self.state = "decomposing"
+            step.decompose = functools.partial(self._record.decompose, self._probe, self._f00_hz(),
+                                               model=self._model, f00_free=self._settings.f00_free)
+            return step
+        choice = planner.next(self._record, self._decomposition, self._elapsed_s())
+        if isinstance(choice, PlanEnd):
+            return self._planned_end(step, choice)
+        self._angles.append(choice.theta0_rad)
+        self._repeats = choice.repeats
+        step.run_cycle = CycleCall(choice.theta0_rad, choice.repeats)
+        return step
+
+    def _decomposition_due(self, planner: AdaptivePlanner) -> bool:
+        """New ring-downs at enough orientations, and a prediction near the target."""
+        points = self._record.points
+        needed = 6 if self._settings.f00_free else 5
+        if len(points) == self._decomposed_points or len({round(p.theta0_rad, 9) for p in points}) < needed:
+            return False
+        targets = planner.goal.targets()
+        asked = np.isfinite(targets)
+        predicted = planner.predicted_std(self._record, self._decomposition)
+        return self._decomposition is None or bool(np.all(predicted[asked] <= DECOMPOSE_NEAR * targets[asked]))
+
+    def _elapsed_s(self) -> float:
+        """Device time of the sweep so far, from its ring-downs' stamps: first to last, plus the
+        first turn and the last ring-down's whole cost (its kick came before its stamp)."""
+        points = self._record.points
+        if not points:
+            return 0.0
+        stamps = [p.t_s for p in points]
+        return max(stamps) - min(stamps) + self._settings.turn_s + self._settings.repeat_s
+
+    def _planned_end(self, step: SweepStep, end: PlanEnd) -> SweepStep:
+        self.sweeps += 1
+        decomposition = self._decomposition
+        if decomposition is None or not decomposition.ok:
+            return self._end(step, SweepOutcome(False, end.message))
+        self.last = decomposition.report()
+        step.publish = SweepMap(self.sweeps, decomposition, self._record, self._f00_hz())
+        return self._end(step, SweepOutcome(end.reached, end.message, map=step.publish))
 
     def _f00_hz(self) -> float:
         """The estimator's calibrated f00, as each OK ring-down carries it (frequency − shift)."""

@@ -14,6 +14,7 @@ the model lab's verdict on which physics the published model is missing. Writes 
 HTML report. Node output goes to a log file so the terminal shows the measurement.
 """
 import argparse
+import datetime
 import math
 import pathlib
 import signal
@@ -22,9 +23,25 @@ import threading
 import time
 
 import numpy as np
+import rclpy
 import yaml
+from mows_msgs.action import RotationSweep
+from mows_msgs.msg import MagnetometerBlock, ModelReport, RingdownFit
+from rclpy.action import ActionClient
+from rclpy.signals import SignalHandlerOptions
 
+from mows.cli.calibrate import compare_with_truth, simulate_calibration
+from mows.estimate.probe_calibration import KnownConstants
+from mows.estimate.probe_calibration import calibrate_probe as fit_constants
+from mows.lab import analyse, from_sweep, reference_at, write_report
+from mows.physics.probe import PAPER_PROBE, Probe
+from mows.sim.scenario import load_scenario
+from mows.sweep.calibration_schedule import CalibrationPlan, scenario_wirings
+from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
+from mows.sweep.record import SweepRecord
 from mows_bringup.graph import NODES, Graph, say
+from mows_mapper.messages import sweep_point
+from mows_ros.qos import MAP_QOS, RESULT_QOS, STREAM_QOS
 
 DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_SETTLE_S = 10.0, 0.5, 0.5   # the driver's defaults
 
@@ -54,14 +71,7 @@ def parse_arguments(argv):
 def calibrate_probe(args, directory: pathlib.Path):
     """Calibrate the probe of ``--probe-scenario`` on its simulated bench; the probe file and
     the scene to map (``--scenario`` with that probe in it), both written to ``directory``."""
-    import datetime
 
-    from mows.cli.calibrate import compare_with_truth, simulate_calibration
-    from mows.estimate.probe_calibration import KnownConstants
-    from mows.estimate.probe_calibration import calibrate_probe as fit_constants
-    from mows.physics.probe import PAPER_PROBE
-    from mows.sim.scenario import load_scenario
-    from mows.sweep.calibration_schedule import CalibrationPlan, scenario_wirings
 
     bench = load_scenario(args.probe_scenario)
     gradient = bench.replace(supply=load_scenario("calibration_gradient").supply, seed=bench.seed + 1)
@@ -87,7 +97,6 @@ def calibrate_probe(args, directory: pathlib.Path):
 def write_parameters(args, directory: pathlib.Path, probe_path, scene_path) -> pathlib.Path:
     """One parameter file for the whole graph; each node takes its own section. The driver
     drives the coils of the scene's own set-up; estimator and mapper load the calibrated probe."""
-    from mows.sim.scenario import load_scenario
 
     scenario = load_scenario(scene_path)
     driver = {"scenario": str(scene_path), "coil_setup": scenario.setup.name, "repeats": args.repeats,
@@ -108,7 +117,6 @@ def write_parameters(args, directory: pathlib.Path, probe_path, scene_path) -> p
 def fast_plan(scenario):
     """The cycle from physics (:func:`mows.sweep.fast_cycle.plan_cycle`) for the simulated scene,
     at the driver's default cap, for the fluxgates' white noise in the difference channel."""
-    from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
 
     fs = scenario.sample_rate_hz
     noise = math.sqrt(2.0) * scenario.noise.sensor_white_t_per_rthz * math.sqrt(fs / 2.0)
@@ -147,13 +155,7 @@ def main(argv=None) -> int:
 
 
 def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited, scene_path, probe_path) -> bool:
-    import rclpy
-    from mows_msgs.action import RotationSweep
-    from mows_msgs.msg import MagnetometerBlock, ModelReport, RingdownFit
-    from rclpy.action import ActionClient
-    from rclpy.signals import SignalHandlerOptions
 
-    from mows_ros.qos import MAP_QOS, RESULT_QOS, STREAM_QOS
 
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("mows_demo")
@@ -217,10 +219,6 @@ def print_feedback(feedback) -> None:
 
 
 def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, probe_path) -> None:
-    from mows.lab import analyse, from_sweep, reference_at, write_report
-    from mows.physics.probe import Probe
-    from mows.sweep.record import SweepRecord
-    from mows_mapper.messages import sweep_point
 
     field, gradient = reference_at(scenario)
     truth = {"Bx (µT)": field[0] * 1e6, "By (µT)": field[1] * 1e6, "Gxx (mT/m)": gradient[0, 0] * 1e3,

@@ -13,9 +13,13 @@ import sys
 import time
 
 import numpy as np
+import rclpy
+from mows_msgs.msg import MagnetometerBlock, RingdownFit
+from mows_msgs.srv import RunCycle
 
 from mows.records import stamps
 from mows_bringup.graph import NODES, Graph, say
+from mows_ros.qos import RESULT_QOS, STREAM_QOS
 
 
 def main(argv=None) -> int:
@@ -42,11 +46,7 @@ def main(argv=None) -> int:
 
 
 def measure(cycles: int, repeats: int, exited) -> list:
-    import rclpy
-    from mows_msgs.msg import MagnetometerBlock, RingdownFit
-    from mows_msgs.srv import RunCycle
 
-    from mows_ros.qos import RESULT_QOS, STREAM_QOS
 
     rclpy.init()
     node = rclpy.create_node("mows_latency")
@@ -87,7 +87,6 @@ def _last_sample_arrival(arrivals: dict, fit) -> float:
 
 
 def _spin_until(node, condition, exited, timeout_s):
-    import rclpy
 
     deadline = time.monotonic() + timeout_s
     while not condition():

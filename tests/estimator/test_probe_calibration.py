@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from mows.cli.calibrate import simulate_calibration
-from mows.estimate.probe_calibration import CalibrationError, CalibrationPoint, KnownConstants, Wiring, calibrate_probe
+from mows.estimate.calibration_record import CalibrationError, CalibrationPoint, KnownConstants, Wiring
+from mows.estimate.probe_calibration import calibrate_probe
 from mows.physics.probe import PAPER_PROBE, Probe, calibration_record
 from mows.sim.scenario import load_scenario
 from mows.sweep.calibration_schedule import CalibrationPlan, scenario_wirings

@@ -26,7 +26,8 @@ import sys
 import numpy as np
 
 from mows.device.scheduled import ScheduledDevice
-from mows.estimate.probe_calibration import CalibrationPoint, KnownConstants, calibrate_probe
+from mows.estimate.calibration_record import CalibrationPoint, KnownConstants
+from mows.estimate.probe_calibration import calibrate_probe
 from mows.lab.readers import load_table
 from mows.lab.synth import fit_cycle
 from mows.lab.table import MeasurementTable

@@ -1,5 +1,8 @@
 """Calibrating a new probe from ring-downs at known applied fields (paper Fig. 3, Eqs. 9–10).
 
+This module is the fit and the derived constants; what goes in and comes out is
+:mod:`mows.estimate.calibration_record`, the model of one ring-down :mod:`mows.estimate.calibration_model`.
+
 The paper steps a Helmholtz pair's current, reads Δf against B, takes the slope β0 and derives
 kM = f00·m/(2β0) (Eq. 9 inverted) and J = m/(8π²·β0·f00) (Eq. 10), and l = √(J/a) from the
 magnet mass a; the same pair anti-parallel gives the gradient response γ. Here the same
@@ -31,18 +34,15 @@ J and a alone, and the report says that the lever check could not be made.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 from scipy import optimize
 
-from mows.physics import ringdown_average
-from mows.physics.pose import probe_axes
-from mows.physics.potential import ArcPotential
-from mows.physics.probe import TWO_PI, Probe, lever_from_inertia
+from mows.estimate.calibration_model import frequencies, inertia_from, rows_of
+from mows.estimate.calibration_record import CalibrationError, KnownConstants, ProbeCalibration, Wiring
+from mows.physics.probe import lever_from_inertia
 
-AMPLITUDE_NODES = 3
 FIELD_UNIT_T = 1e-6       # fit units keep the normal equations well scaled: µT, Hz/mT, mm
 BETA_UNIT_HZ_PER_T = 1e3
 LEVER_UNIT_M = 1e-3
@@ -50,168 +50,6 @@ AMPLITUDE_UNIT_RAD = 1e-3
 # Central-difference steps of the Jacobian in those units (f00, β0, swing, environment, lever):
 # large against the model's rounding (~1e-9 Hz), small against its curvature.
 STEPS = {"f00": 1e-4, "beta0": 1e-5, "swing": 1e-2, "environment": 0.1, "lever": 1e-4}
-# The start swing of a ring-down driven into the stop scatters about the stop by ~0.1°
-# (penetration into the contact, the phase at switch-off: 23.6°–23.9° measured in the
-# simulator at a 24° stop, the estimator's θmax scattering by degrees).
-THETA_STOP_STD_RAD = math.radians(0.1)
-
-
-class CalibrationError(ValueError):
-    """The data cannot determine a constant; the message says which and why."""
-
-
-@dataclasses.dataclass(frozen=True)
-class Wiring:
-    """How the supply's current becomes a field at the magnet's rest position (global frame):
-    ``field_per_a_t`` (3,) and ``gradient_per_a_t_per_m`` (3, 3), per ampere."""
-
-    name: str
-    field_per_a_t: tuple
-    gradient_per_a_t_per_m: tuple = ((0.0,) * 3,) * 3
-
-    @classmethod
-    def from_source(cls, name: str, source_per_a, position_m=(0.0, 0.0, 0.0)) -> Wiring:
-        """The wiring of a field source (its field at 1 A) at ``position_m``."""
-        point = np.asarray(position_m, float)
-        return cls(name, tuple(source_per_a.field_t(point).tolist()),
-                   tuple(map(tuple, source_per_a.gradient_t_per_m(point).tolist())))
-
-
-@dataclasses.dataclass(frozen=True)
-class CalibrationPoint:
-    """One fitted ring-down (``mows.estimate.ringdown.RingdownFit``) at a supply current."""
-
-    wiring: str
-    supply_current_a: float
-    theta0_rad: float
-    frequency_hz: float
-    frequency_std_hz: float
-    amplitude_rad: float
-    damping_per_s: float
-    duration_s: float
-    start_offset_s: float = 0.0   # first fitted sample after the switch-off
-
-    @classmethod
-    def from_fit(cls, fit, wiring: str, supply_current_a: float) -> CalibrationPoint:
-        return cls(wiring, float(supply_current_a), fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz,
-                   fit.amplitude_rad, fit.damping_per_s, fit.duration_s, fit.start_offset_s)
-
-
-@dataclasses.dataclass(frozen=True)
-class KnownConstants:
-    """What the calibration takes as given: the magnet's moment and mass (data sheet, scale),
-    the housing stop, and optionally the environment field at the probe with the supply at
-    zero (a reference magnetometer), global frame."""
-
-    moment_am2: float
-    magnet_mass_kg: float
-    theta_stop_rad: float = math.radians(24.0)
-    environment_field_t: tuple | None = None
-    theta_stop_std_rad: float = THETA_STOP_STD_RAD
-
-    @classmethod
-    def of(cls, probe: Probe, environment_field_t=None) -> KnownConstants:
-        return cls(probe.moment_am2, probe.magnet_mass_kg, probe.theta_stop_rad,
-                   None if environment_field_t is None else tuple(float(b) for b in environment_field_t))
-
-
-@dataclasses.dataclass(frozen=True)
-class ProbeCalibration:
-    """The calibrated constants (SI), their covariance and what the data could not say."""
-
-    names: tuple
-    values: np.ndarray
-    covariance: np.ndarray
-    chi2_dof: float
-    n_points: int
-    known: KnownConstants
-    notes: tuple = ()
-
-    def value(self, name: str) -> float:
-        return float(self.values[self.names.index(name)])
-
-    def std(self, name: str) -> float:
-        i = self.names.index(name)
-        return float(math.sqrt(self.covariance[i, i]))
-
-    def correlation(self) -> np.ndarray:
-        std = np.sqrt(np.diag(self.covariance))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return self.covariance / np.outer(std, std)
-
-    def probe(self) -> Probe:
-        """The calibrated probe (lever from J and the magnet mass)."""
-        return Probe(moment_am2=self.known.moment_am2, spring_nm_per_rad=self.value("spring_nm_per_rad"),
-                     inertia_kgm2=self.value("inertia_kgm2"), lever_m=self.value("lever_m"),
-                     magnet_mass_kg=self.known.magnet_mass_kg, damping_per_s=self.value("damping_per_s"),
-                     theta_stop_rad=self.known.theta_stop_rad)
-
-    def record(self, date: str, hardware_id: str) -> dict:
-        """The ``calibration`` section of a probe file: values with uncertainties, correlations."""
-        return {"date": date, "hardware_id": hardware_id, "method": "supply sweep, full potential (mows calibrate)",
-                "points": self.n_points, "chi2_dof": float(self.chi2_dof),
-                "constants": {n: {"value": float(v), "std": self.std(n)} for n, v in zip(self.names, self.values)},
-                "correlation": [[round(float(c), 6) for c in row] for row in self.correlation()],
-                "notes": list(self.notes)}
-
-    def report(self) -> str:
-        lines = [f"{n} = {self.value(n):.6g} ± {self.std(n):.2g}" for n in self.names]
-        return "\n".join(lines + [f"χ²/dof = {self.chi2_dof:.3f} over {self.n_points} ring-downs"]
-                         + [f"note: {n}" for n in self.notes])
-
-
-# --- the model ---------------------------------------------------------------------------------
-@dataclasses.dataclass(frozen=True)
-class _Rows:
-    """The points as arrays; ``field_t`` and ``gradient_t_per_m`` the applied part, global frame."""
-
-    theta0_rad: np.ndarray
-    frequency_hz: np.ndarray
-    frequency_std_hz: np.ndarray
-    field_t: np.ndarray
-    gradient_t_per_m: np.ndarray
-    amplitudes_rad: np.ndarray     # (n, q) amplitude nodes of the fit's averaging
-    weights: np.ndarray            # (n, q)
-
-
-def _rows(points, wirings: dict, known: KnownConstants) -> _Rows:
-    unknown = {p.wiring for p in points} - set(wirings)
-    if unknown:
-        raise CalibrationError(f"points of wirings {sorted(unknown)} but only {sorted(wirings)} are described "
-                               "(a gradient wiring needs its field per ampere: mows calibrate --gradient-scenario)")
-    current = np.array([p.supply_current_a for p in points])
-    field = np.array([wirings[p.wiring].field_per_a_t for p in points]) * current[:, None]
-    gradient = np.array([wirings[p.wiring].gradient_per_a_t_per_m for p in points]) * current[:, None, None]
-    theta0 = np.array([p.theta0_rad for p in points])
-    damping = np.array([p.damping_per_s for p in points])
-    start = known.theta_stop_rad * np.exp(-damping * np.array([p.start_offset_s for p in points]))
-    amplitudes, weights = ringdown_average.amplitude_nodes(
-        theta0, start, damping, np.array([p.duration_s for p in points]), nodes=AMPLITUDE_NODES)
-    return _Rows(theta0, np.array([p.frequency_hz for p in points]), np.array([p.frequency_std_hz for p in points]),
-                 field, gradient, amplitudes, weights)
-
-
-def inertia_from(f00_hz, spring_nm_per_rad, damping_per_s):
-    """J = kM/((2π·f00)² + δ²): Eq. 10 with the damping of Eq. S1 kept."""
-    return spring_nm_per_rad / ((TWO_PI * f00_hz) ** 2 + damping_per_s**2)
-
-
-def _frequencies(rows: _Rows, known: KnownConstants, f00, beta0, environment_t, lever, stop, damping) -> np.ndarray:
-    """Ring-down frequencies of every row for the constants given (module docstring)."""
-    spring = f00 * known.moment_am2 / (2.0 * beta0)
-    try:
-        probe = Probe(known.moment_am2, spring, inertia_from(f00, spring, damping), lever, known.magnet_mass_kg,
-                      damping, known.theta_stop_rad)
-    except ValueError:  # a trial step to unphysical constants: far from every measurement
-        return np.full(len(rows.frequency_hz), 1e9)
-    axes = probe_axes(rows.theta0_rad)
-    field = np.einsum("nij,nj->ni", axes, rows.field_t + environment_t)
-    gradient = np.einsum("nai,nij,nbj->nab", axes, rows.gradient_t_per_m, axes)
-    q = rows.amplitudes_rad.shape[1]
-    potential = ArcPotential.from_local_field(probe, np.repeat(field, q, 0), np.repeat(gradient, q, 0))
-    scale = stop / known.theta_stop_rad   # the nodes scale with the start amplitude
-    per_node = potential.frequency_hz(scale * rows.amplitudes_rad.reshape(-1)).reshape(-1, q)
-    return (rows.weights * per_node).sum(-1)
 
 
 # --- the fit -----------------------------------------------------------------------------------
@@ -230,7 +68,7 @@ def calibrate_probe(points, wirings, known: KnownConstants, field_wiring: str = 
     notes = _failure_notes(failed or {}, points)
     field_points = [p for p in points if p.wiring == field_wiring]
     gradient_points = [p for p in points if p.wiring != field_wiring]
-    rows = _rows(points, wirings, known)
+    rows = rows_of(points, wirings, known)
     notes += _amplitude_notes(points, known)
     axis = _field_axis(wirings, field_wiring)
     _check_field_points(field_points, axis, known)
@@ -248,7 +86,7 @@ def calibrate_probe(points, wirings, known: KnownConstants, field_wiring: str = 
         return x[0], x[1] * BETA_UNIT_HZ_PER_T, environment, lever, x[2] * AMPLITUDE_UNIT_RAD
 
     def residuals(x):
-        model = _frequencies(rows, known, *unpack(x), damping)
+        model = frequencies(rows, known, *unpack(x), damping)
         prior = (x[2] * AMPLITUDE_UNIT_RAD - known.theta_stop_rad) / known.theta_stop_std_rad
         return np.append((model - rows.frequency_hz) / rows.frequency_std_hz, prior)
 

@@ -27,25 +27,27 @@ above it in this list (and, outside the lab, ``mows.records``, ``mows.physics``,
 7. ``plugins``: the :func:`effect` decorator and :func:`load_plugins`. Imports ``effects``.
 8. ``catalog``: the built-in effects, :func:`catalog`, ``resolve``. Imports ``physics``,
    ``effects``, ``plugins``.
-9. ``model``: :class:`FrequencyModel` (Eq. 6 + effects, ``+`` composes), its fit and
-   :class:`FitResult`. Imports ``table``, ``physics``, ``effects``.
-10. ``physical_aliases``: exact physical aliases in words and numbers (gravity ≡ field offset …).
+9. ``fitting``: one model's weighted least-squares problem on a table and the fitted
+   :class:`FitResult`. Imports ``table``.
+10. ``model``: :class:`FrequencyModel` (Eq. 6 + effects, ``+`` composes) and its fit. Imports
+    ``table``, ``physics``, ``effects``, ``fitting``.
+11. ``physical_aliases``: exact physical aliases in words and numbers (gravity ≡ field offset …).
     Imports ``physics``.
-11. ``algebra``: projections orthogonal to a fit and score tests. Imports no lab module.
-12. ``structure``: :func:`residual_structure` (harmonics of θ0, covariate trends). Imports ``algebra``.
-13. ``candidates``: each effect tested as the missing one, free and at physics. Imports
+12. ``algebra``: projections orthogonal to a fit and score tests. Imports no lab module.
+13. ``structure``: :func:`residual_structure` (harmonics of θ0, covariate trends). Imports ``algebra``.
+14. ``candidates``: each effect tested as the missing one, free and at physics. Imports
     ``algebra``, ``effects``.
-14. ``whatif``: what-if variants of a table (more angles, half amplitude, …). Imports no lab module.
-15. ``groups``: effects the table cannot tell apart (candidates, and those the model absorbs), and
+15. ``whatif``: what-if variants of a table (more angles, half amplitude, …). Imports no lab module.
+16. ``groups``: effects the table cannot tell apart (candidates, and those the model absorbs), and
     the measurement that would. Imports ``physical_aliases``, ``algebra``, ``candidates``, ``whatif``.
-16. ``diagnose``: :func:`diagnose`: structure, candidates, groups, verdict. Imports ``structure``,
+17. ``diagnose``: :func:`diagnose`: structure, candidates, groups, verdict. Imports ``structure``,
     ``candidates``, ``groups``.
-17. ``search``: stepwise model selection, physics preferred to generic terms, the error history.
+18. ``search``: stepwise model selection, physics preferred to generic terms, the error history.
     Imports ``effects``, ``physical_aliases``, ``candidates``, ``diagnose``.
-18. ``analysis``: :func:`analyse` (all of it, for the live node) and :class:`LabReport`. Imports
+19. ``analysis``: :func:`analyse` (all of it, for the live node) and :class:`LabReport`. Imports
     ``table``, ``readers``, ``physics``, ``catalog``, ``model``, ``candidates``, ``diagnose``,
     ``search``.
-19. ``report``: :func:`write_report` (HTML with plots). Imports no lab module (it reads a
+20. ``report``: :func:`write_report` (HTML with plots). Imports no lab module (it reads a
     :class:`LabReport`).
 
 This package's ``__init__`` re-exports the public names; the CLI (``mows.cli.lab``), the bench

@@ -1,5 +1,8 @@
 """The frequency model: the published model (Eq. 6) plus effects, its fit and cross-validation.
 
+The weighted residuals, their Jacobian and the fitted result (uncertainties, BIC,
+cross-validation) are :mod:`mows.lab.fitting`.
+
 ``FrequencyModel(probe) + catalog()["gravity"] + …`` composes like astropy.modeling; each
 effect brings parameters with units and physical bounds like lmfit. The prediction for row i is
 
@@ -22,25 +25,16 @@ an incomplete model should not claim the precision of a complete one).
 """
 from __future__ import annotations
 
-import dataclasses
-import math
 import weakref
 
 import numpy as np
 import scipy.optimize
 
-from mows.estimate.ringdown import FitStatus
 from mows.lab.effects import Effect, testable
+from mows.lab.fitting import FitResult, Problem
 from mows.lab.physics import Configuration, frequency_factor
-from mows.lab.table import MeasurementTable, rows_text
+from mows.lab.table import MeasurementTable
 from mows.physics import ringdown_average
-
-FD_STEP = 1e-2          # × parameter scale
-CV_FOLDS = 10           # interleaved folds when the table has one sweep
-INVALID_RESIDUAL = 1e6  # weighted residual given to rows where the model has no real frequency
-DEGENERATE_RTOL = 1e-6  # singular value (normalised Jacobian columns) below which a direction is not determined
-CV_PREDICTION_SIGMAS = 10.0  # a fold predicting its rows less precisely than this says nothing
-DEGENERATE_WEIGHT = 0.1  # a parameter with more than this weight in such a direction is not identifiable
 
 
 class FrequencyModel:
@@ -139,7 +133,7 @@ class FrequencyModel:
             reason = testable(effect, table, self.probe)
             if reason:
                 raise ValueError(f"effect {effect.name} cannot be fitted to this table: {reason}")
-        problem = _Problem(self, table)
+        problem = Problem(self, table)
         p0 = np.zeros(len(self.parameters)) if start is None else np.asarray(start, float)
         x0 = np.concatenate([[problem.best_f00(p0)], p0])
         if x0.size == 1:  # f00 alone enters linearly: the closed form is the optimum
@@ -168,222 +162,3 @@ def ringdown_nodes(table, config: Configuration):
     if key not in cached:
         cached[key] = ringdown_average.amplitude_nodes(table.theta0_rad, *inputs)
     return cached[key]
-
-
-class _Problem:
-    """Weighted residuals and their Jacobian for one model and table, with a one-point cache
-    (scipy asks for the Jacobian at the point whose residual it has just computed)."""
-
-    def __init__(self, model: FrequencyModel, table):
-        self.model, self.table = model, table
-        self.weight = 1.0 / table.f_std_hz
-        self.steps = np.array([FD_STEP * p.scale for _, p in model.parameters])
-        self.upper = np.array([p.upper for _, p in model.parameters])
-        self._cache = (None, None)
-
-    def factors(self, p):
-        key = p.tobytes()
-        if self._cache[0] != key:
-            self._cache = (key, self.model.factors(self.table, p))
-        return self._cache[1]
-
-    def best_f00(self, p) -> float:
-        h, c = self.factors(np.asarray(p, float))
-        w2 = self.weight**2
-        good = np.isfinite(h)
-        return float(np.sum((w2 * h * (self.table.f_hz - c))[good]) / np.sum((w2 * h * h)[good]))
-
-    def residual(self, x) -> np.ndarray:
-        h, c = self.factors(x[1:])
-        r = (self.table.f_hz - x[0] * h - c) * self.weight
-        return np.where(np.isfinite(r), r, INVALID_RESIDUAL)
-
-    def jacobian(self, x) -> np.ndarray:
-        h, _ = self.factors(x[1:])
-        f00_column = np.where(np.isfinite(h), -h * self.weight, 0.0)
-        return np.column_stack([f00_column, self.columns(x, range(len(self.steps)))])
-
-    def columns(self, x, indices) -> np.ndarray:
-        """Forward-difference columns d(weighted residual)/d(effect parameter j), j in ``indices``."""
-        base = self.residual(x)
-        columns = []
-        for j in indices:
-            p = x[1:].copy()
-            # Step inwards at an upper bound, so that the model is evaluated where it is defined.
-            step = -self.steps[j] if p[j] + self.steps[j] > self.upper[j] else self.steps[j]
-            p[j] += step
-            columns.append((self.residual(np.concatenate([[x[0]], p])) - base) / step)
-        return np.stack(columns, -1) if columns else np.zeros((len(base), 0))
-
-    def result(self, x, success, message) -> FitResult:
-        h, c = self.factors(x[1:])
-        prediction = x[0] * h + c
-        residual = self.residual(x)
-        jacobian = self.jacobian(x)
-        chi2 = float(residual @ residual)
-        n, k = len(residual), len(x)
-        u, s, vt = np.linalg.svd(jacobian, full_matrices=False)
-        keep = s > s[0] * 1e-10
-        covariance = (vt[keep].T / s[keep] ** 2) @ vt[keep]
-        birge = max(1.0, chi2 / max(n - k, 1))
-        return FitResult(self.model, self.table, np.asarray(x, float), covariance * birge, chi2, n, k,
-                         prediction, jacobian, bool(success), str(message))
-
-
-@dataclasses.dataclass(eq=False)
-class FitResult:
-    """A fitted :class:`FrequencyModel`. ``values``/``covariance`` are ordered as
-    ``model.parameter_names``; ``jacobian`` is d(weighted residual)/d(values), (n, k).
-
-    The result protocol shared with the ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`):
-    ``status`` (a :class:`~mows.estimate.ringdown.FitStatus`, compared by name), ``ok`` and
-    ``report()``; ``message`` says why when the status is not OK.
-    """
-
-    model: FrequencyModel
-    table: MeasurementTable
-    values: np.ndarray
-    covariance: np.ndarray
-    chi2: float
-    n: int
-    k: int
-    prediction_hz: np.ndarray
-    jacobian: np.ndarray
-    success: bool
-    message: str
-
-    @property
-    def status(self) -> FitStatus:
-        """OK; BAD_FIT when the model has no real frequency at some rows (:attr:`invalid_rows`:
-        their residuals are a penalty, not data, so χ² means nothing); NOT_CONVERGED when the
-        optimiser stopped before its tolerances were met."""
-        if self.invalid_rows.size:
-            return FitStatus.BAD_FIT
-        return FitStatus.OK if self.success else FitStatus.NOT_CONVERGED
-
-    @property
-    def identifiable(self) -> np.ndarray:
-        """Per parameter (order of ``values``): False when this table cannot determine it: its
-        Jacobian column is zero, or it takes part (weight > 0.1) in a direction the normalised
-        Jacobian does not determine (singular value < 1e-6 of the largest: exact aliases such as
-        gravity and an unreferenced field), or its σ exceeds its whole physical range."""
-        norms = np.linalg.norm(self.jacobian, axis=0)
-        found = norms > 0
-        if found.any():
-            _, s, vt = np.linalg.svd(self.jacobian[:, found] / norms[found], full_matrices=False)
-            undetermined = vt[s < DEGENERATE_RTOL * s[0]]
-            found[found] = np.all(np.abs(undetermined) <= DEGENERATE_WEIGHT, axis=0)
-        ranges = np.array([np.inf] + [p.upper - p.lower for _, p in self.model.parameters])
-        return found & (self.std < ranges)
-
-    @property
-    def invalid_rows(self) -> np.ndarray:
-        """Indices of the rows where the model has no real frequency at the fitted values."""
-        return np.flatnonzero(~np.isfinite(self.prediction_hz))
-
-    @property
-    def ok(self) -> bool:
-        return self.status is FitStatus.OK
-
-    @property
-    def dof(self) -> int:
-        return self.n - self.k
-
-    @property
-    def chi2_dof(self) -> float:
-        return self.chi2 / self.dof if self.dof > 0 else math.nan
-
-    @property
-    def bic(self) -> float:
-        return self.chi2 + self.k * math.log(self.n)
-
-    @property
-    def std(self) -> np.ndarray:
-        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
-
-    @property
-    def residual_hz(self) -> np.ndarray:
-        return self.table.f_hz - self.prediction_hz
-
-    @property
-    def weighted_residual(self) -> np.ndarray:
-        return self.residual_hz / self.table.f_std_hz
-
-    def parameters(self) -> list:
-        """[(name, value, std, unit)] for f00 and every effect parameter."""
-        units = ["Hz"] + [p.unit for _, p in self.model.parameters]
-        return list(zip(self.model.parameter_names, self.values.tolist(), self.std.tolist(), units))
-
-    def values_without(self, effect) -> np.ndarray:
-        """The fitted effect parameter values (fit order) of the model without ``effect``: a
-        start for fitting ``model.without(effect)``."""
-        keep = [e is not effect for e in self.model.effects for _ in e.parameters]
-        return self.values[1:][np.array(keep, bool)]
-
-    def effect_parameters(self, effect_name: str) -> list:
-        """[(parameter, value, std, unit)] of one effect of the model."""
-        prefix = effect_name + "."
-        return [(name[len(prefix):], v, s, u) for name, v, s, u in self.parameters() if name.startswith(prefix)]
-
-    def extension_columns(self, effect, table=None) -> np.ndarray:
-        """d(weighted residual)/d(parameters of ``effect``) with ``effect`` added to this model at
-        0 (off) and the other parameters at their fitted values: the candidate's signature.
-        On ``table`` (default: the fitted table; e.g. a what-if variant of it)."""
-        extended = self.model + effect
-        x = np.concatenate([self.values, np.zeros(len(effect.parameters))])
-        first = len(self.model.parameters)
-        return _Problem(extended, self.table if table is None else table).columns(
-            x, range(first, first + len(effect.parameters)))
-
-    def prediction_sigmas(self, table) -> float:
-        """Median over ``table``'s rows of this fit's prediction uncertainty there, in units of
-        each row's ``f_std_hz``: from the parameter covariance without the Birge inflation, so
-        that it measures what the fitted rows say about these, not how well the model fits."""
-        jacobian = self.model_jacobian(table)
-        variance = np.einsum("ni,ij,nj->n", jacobian, self.covariance, jacobian) / max(1.0, self.chi2_dof)
-        return float(np.median(np.sqrt(variance)))
-
-    def model_jacobian(self, table) -> np.ndarray:
-        """d(weighted residual)/d(values) of this model at the fitted values on another table."""
-        return _Problem(self.model, table).jacobian(self.values)
-
-    def cross_validate(self) -> float:
-        """Leave-one-sweep-out rms prediction error, Hz (interleaved 10-fold when the table
-        has a single sweep): refit without the sweep, predict it. NaN when it is not
-        identifiable: a left-out sweep held the only information on a parameter (the fit
-        without it cannot determine a parameter the whole table determines, or predicts the
-        left-out rows with a median uncertainty above 10 σ of their measurements)."""
-        folds = _folds(self.table)
-        errors = np.empty(self.n)
-        for rows in folds:
-            train = np.ones(self.n, bool)
-            train[rows] = False
-            part = self.model.fit(self.table.subset(train), start=self.values[1:])
-            if np.any(self.identifiable & ~part.identifiable) or part.prediction_sigmas(
-                    self.table.subset(rows)) > CV_PREDICTION_SIGMAS:
-                return math.nan
-            errors[rows] = self.table.f_hz[rows] - self.model.predict(self.table.subset(rows), part.values)
-        return float(np.sqrt(np.mean(errors**2)))
-
-    def report(self) -> str:
-        quality = (f"χ²/dof = {self.chi2_dof:.3f}, BIC = {self.bic:.1f}" if self.status is not FitStatus.BAD_FIT
-                   else "χ² not meaningful")
-        lines = [f"model {self.model.name}: n = {self.n}, {quality}"]
-        for (name, value, std, unit), known in zip(self.parameters(), self.identifiable):
-            lines.append(f"  {name:40s} = {value:+.6g} ± {std:.2g} {unit}" if known else
-                         f"  {name:40s}   not identifiable from this table")
-        if self.status is FitStatus.BAD_FIT:
-            lines.append(f"  warning: {self.status.name}: the model has no real frequency at "
-                         f"{rows_text(self.invalid_rows)} (mows.lab.physics.unevaluable_rows says why)")
-        elif not self.ok:
-            lines.append(f"  warning: {self.status.name}: the fit did not converge ({self.message})")
-        return "\n".join(lines)
-
-
-def _folds(table) -> list:
-    sweeps = table.sweep_ids
-    unique = np.unique(sweeps)
-    if len(unique) > 1:
-        return [np.flatnonzero(sweeps == s) for s in unique]
-    count = min(CV_FOLDS, len(table))
-    return [np.arange(i, len(table), count) for i in range(count)]

@@ -1,4 +1,5 @@
-"""The simulated world: scenario files (``scenario``) and the time-domain simulation of the
+"""The simulated world: scenario files (``scenario``, its sections
+``sections`` and YAML reading ``scenario_yaml``) and the time-domain simulation of the
 whole measurement, sample by sample like the hardware: the device (``simulator``), its numba
 dynamics kernels (``kernel``) and noise stream (``noise``), one measurement cycle (``cycle``).
 

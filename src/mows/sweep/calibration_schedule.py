@@ -19,7 +19,7 @@ import dataclasses
 import enum
 import math
 
-from mows.estimate.probe_calibration import CalibrationPoint, Wiring
+from mows.estimate.calibration_record import CalibrationPoint, Wiring
 
 PAPER_CURRENTS_A = (0.0, 0.5, 1.0, 1.5, 2.0, -0.5, -1.0, -1.5, -2.0)
 GRADIENT_WIRING = "gradient"   # the supply's coils anti-parallel (the lever check)

@@ -1,0 +1,130 @@
+"""The ring-down fit's vocabulary: its options, its result and the outcome codes.
+
+:func:`mows.estimate.ringdown.fit_ringdown` takes :class:`FitOptions` and returns a
+:class:`RingdownFit` whose :class:`FitStatus` says whether the numbers mean anything; the
+estimator node, the calibration and the lab read these without running a fit.
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+
+import numpy as np
+
+from mows.estimate.ringdown_model import paper_pickup
+from mows.physics.fluxgate import pickup_harmonics
+from mows.physics.pose import Pose
+
+
+class FitStatus(enum.IntEnum):
+    """Outcome of a fit; the numbers match ``mows_msgs/RingdownFit`` STATUS_* constants."""
+
+    OK = 0
+    TOO_SHORT = 1
+    INVALID_SAMPLES = 2
+    SATURATED = 3
+    NO_OSCILLATION = 4
+    BAD_SAMPLE_RATE = 5
+    NEGATIVE_STIFFNESS = 6
+    NOT_CONVERGED = 7
+    DATA_GAP = 8
+    BAD_FIT = 9
+
+
+@dataclasses.dataclass(frozen=True)
+class FitOptions:
+    """How to fit. Frequencies in Hz, times in s, angles in rad.
+
+    channels : 'difference' (channel 1 − channel 2: cancels common-mode noise),
+        'both' (joint fit, a κ and an offset per channel), 'channel1' or 'channel2'.
+    sensor_direction : (a, b) of the sensing axis in the rotation plane (Eq. S11), for the
+        paper's model.
+    pickup : coefficients C_k (complex, k = 0 …) of g for the commanded θ0, from
+        :func:`mows.physics.fluxgate.pickup_harmonics`; replaces the paper's model when given.
+    theta0_free : fit θ0 instead of taking the commanded value (paper's model only: the
+        pickup's dependence on θ0 is not a rotation once the lever moves the magnet).
+    search_fraction : the spectral search covers expected f ± this fraction.
+    min_periods : fewer usable periods than this gives TOO_SHORT.
+    min_frequency_fraction : a peak below this fraction of the expected frequency means the
+        probe has (nearly) no restoring spring: NEGATIVE_STIFFNESS.
+    detection_snr : the spectral peak must exceed the noise floor by this power ratio.
+    max_chi2_dof : above this the model does not describe the data: BAD_FIT.
+    """
+
+    channels: str = "difference"
+    sensor_direction: tuple = (0.0, 1.0)
+    pickup: tuple | None = None
+    theta0_free: bool = False
+    search_fraction: float = 0.3
+    min_periods: float = 10.0
+    min_frequency_fraction: float = 0.2
+    detection_snr: float = 30.0
+    max_chi2_dof: float = 25.0
+    max_iterations: int = 60
+
+    def __post_init__(self):
+        if self.channels not in ("difference", "both", "channel1", "channel2"):
+            raise ValueError(f"channels = {self.channels!r}; use difference, both, channel1 or channel2")
+        if not 0.0 < self.search_fraction < 1.0:
+            raise ValueError(f"search_fraction = {self.search_fraction} must be in (0, 1)")
+        if self.pickup is not None and (self.theta0_free or self.channels == "both"):
+            raise ValueError("a pickup series describes one fixed-θ0 channel: it cannot be combined with "
+                             "theta0_free or channels='both'")
+
+    @classmethod
+    def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> FitOptions:
+        """Options with the exact pickup of ``probe``'s magnet swinging on its lever, seen by the
+        fluxgate ``pair`` (:class:`mows.physics.fluxgate.FluxgatePair`) with the probe at θ0."""
+        pickup = pickup_harmonics(pair, Pose(theta0_rad=theta0_rad), probe.lever_m, probe.moment_am2, combine=channels)
+        return cls(channels=channels, pickup=tuple(pickup), **others)
+
+    def pickup_at(self, theta0_rad: float) -> np.ndarray:
+        """The coefficients C_k of g: the given pickup, or the paper's single term."""
+        if self.pickup is not None:
+            return np.asarray(self.pickup, complex)
+        return paper_pickup(theta0_rad, self.sensor_direction)
+
+
+@dataclasses.dataclass
+class RingdownFit:
+    """Result of :func:`fit_ringdown`. SI units; every number is NaN unless status is OK."""
+
+    status: FitStatus
+    message: str = ""
+    theta0_rad: float = math.nan
+    theta0_free: bool = False
+    frequency_hz: float = math.nan
+    frequency_std_hz: float = math.nan
+    frequency_crb_hz: float = math.nan
+    damping_per_s: float = math.nan
+    amplitude_rad: float = math.nan
+    phase_rad: float = math.nan
+    kappa_t: float = math.nan
+    offset_t: float = math.nan
+    chi2_dof: float = math.nan
+    r_squared: float = math.nan
+    snr_db: float = math.nan
+    noise_std_t: float = math.nan
+    n_samples: int = 0
+    duration_s: float = 0.0
+    start_offset_s: float = 0.0
+    parameter_names: tuple = ()
+    covariance: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
+
+    @property
+    def ok(self) -> bool:
+        return self.status == FitStatus.OK
+
+    def report(self) -> str:
+        if not self.ok:
+            return f"ring-down fit: {self.status.name}: {self.message}"
+        return (f"f = {self.frequency_hz:.6f} ± {self.frequency_std_hz * 1e3:.4f} mHz "
+                f"(CRB {self.frequency_crb_hz * 1e3:.4f} mHz), δ = {self.damping_per_s:.4f} 1/s, "
+                f"θmax = {math.degrees(self.amplitude_rad):.2f}°, θ0 = {math.degrees(self.theta0_rad):.2f}°, "
+                f"χ²/dof = {self.chi2_dof:.3f}, R² = {self.r_squared:.5f}, SNR = {self.snr_db:.1f} dB, "
+                f"{self.n_samples} samples over {self.duration_s:.3f} s")
+
+
+def failure(status: FitStatus, message: str, **known) -> RingdownFit:
+    return RingdownFit(status=status, message=message, **known)

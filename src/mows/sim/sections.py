@@ -1,0 +1,127 @@
+"""The scenario's own sections (those without a dataclass elsewhere in mows.physics): the
+environment, the sensors, the default excitation, the housing stop and the integrator, each
+checking its ranges (ValueError naming the section and key). :class:`mows.sim.scenario.Scenario`
+holds them; :mod:`mows.sim.scenario_yaml` builds them from YAML.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from mows.physics.field import FieldSource, SumSource
+from mows.physics.fluxgate import FluxgatePair
+from mows.physics.probe import PAPER_PROBE
+
+
+def number(section: str, key: str, value) -> float:
+    """``value`` as a float; ValueError naming the section and key if it is not a number."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"scenario section {section!r}: {key} = {value!r} must be a number")
+    return float(value)
+
+
+def check_range(section, key, value, low, high, low_open=False):
+    """ValueError naming the section and key unless low ≤ value ≤ high (low < value if ``low_open``)."""
+    ok = math.isfinite(value) and (low < value if low_open else low <= value) and value <= high
+    if not ok:
+        bracket = "(" if low_open else "["
+        raise ValueError(f"{section}: {key} = {value!r} is out of range {bracket}{low:g}, {high:g}]")
+
+
+def floats(vector) -> list:
+    return [float(v) for v in vector]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Environment:
+    """The static surroundings: field sources (global frame) and the temperature.
+
+    ``temperature_k`` at device time 0 drifts linearly at ``temperature_rate_k_per_s``; the
+    probe's kM follows it (PHYSICS.md §5.6, :meth:`mows.physics.probe.Probe.spring_at`).
+    """
+
+    sources: tuple = ()
+    temperature_k: float = PAPER_PROBE.reference_temperature_k
+    temperature_rate_k_per_s: float = 0.0
+
+    def __post_init__(self):
+        object.__setattr__(self, "sources", tuple(self.sources))
+        if not all(isinstance(s, FieldSource) for s in self.sources):
+            raise ValueError(f"environment sources must be field sources, got {self.sources!r}")
+        check_range("environment", "temperature_k", self.temperature_k, 0.0, math.inf, low_open=True)
+        check_range("environment", "temperature_rate_k_per_s", self.temperature_rate_k_per_s, -1.0, 1.0)
+
+    @property
+    def source(self) -> FieldSource:
+        """All sources superposed (the zero field when there are none)."""
+        return SumSource(self.sources)
+
+    def temperature_at(self, time_s):
+        """T(t) = T0 + rate·t, K."""
+        return self.temperature_k + self.temperature_rate_k_per_s * time_s
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Sensors:
+    """The fluxgate pair; with ``null_offsets`` the device nulls the static environment field
+    at each sensor when it starts, like the instruments' offset compensation."""
+
+    pair: FluxgatePair = dataclasses.field(default_factory=FluxgatePair.paper)
+    null_offsets: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class Excitation:
+    """Default excitation of one cycle.
+
+    ``amplitude_a``: base current amplitude of the setup's current scheme (≤ the cap);
+    ``frequency_hz``: drive frequency, None for the probe's expected frequency (the paper tunes
+    it to the resonance); ``excite_s``, ``ringdown_s``: coil-on and recorded ring-down time;
+    ``gap_s``: pause between repeats (paper: 10 s).
+    """
+
+    amplitude_a: float = 2.0
+    frequency_hz: float | None = None
+    excite_s: float = 0.5
+    ringdown_s: float = 0.5
+    gap_s: float = 10.0
+
+    def __post_init__(self):
+        check_range("excitation", "amplitude_a", self.amplitude_a, 0.0, math.inf)
+        if self.frequency_hz is not None:
+            check_range("excitation", "frequency_hz", self.frequency_hz, 0.0, math.inf, low_open=True)
+        check_range("excitation", "excite_s", self.excite_s, 0.0, 3600.0)
+        check_range("excitation", "ringdown_s", self.ringdown_s, 0.0, 3600.0, low_open=True)
+        check_range("excitation", "gap_s", self.gap_s, 0.0, 3600.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class Housing:
+    """The housing stop at ±θstop as a stiff spring–dashpot contact (see :mod:`mows.sim.kernel`).
+
+    ``stiffness_ratio``: contact stiffness over kM; ``restitution``: coefficient of
+    restitution of one impact (sets the contact damping).
+    """
+
+    stiffness_ratio: float = 1000.0
+    restitution: float = 0.5
+
+    def __post_init__(self):
+        check_range("housing", "stiffness_ratio", self.stiffness_ratio, 10.0, 1e5)
+        check_range("housing", "restitution", self.restitution, 0.0, 1.0, low_open=True)
+
+
+@dataclasses.dataclass(frozen=True)
+class Integrator:
+    """RK4 steps per sample: ``substeps`` in free flight, ``contact_substeps`` near the stop."""
+
+    substeps: int = 2
+    contact_substeps: int = 16
+
+    def __post_init__(self):
+        for name in ("substeps", "contact_substeps"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, np.integer)) and 1 <= value <= 1000):
+                raise ValueError(f"integrator: {name} = {value!r} must be an integer in [1, 1000]")

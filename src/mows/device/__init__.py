@@ -1,5 +1,5 @@
 """The device edge: what a device is to the driver (``interface``), the serial wire format
-(``framing``), its sample clock (``clock``), the simulated device with commands at exact sample
+(``payloads``, ``framing``), its sample clock (``clock``), the simulated device with commands at exact sample
 indices (``scheduled``), the device emulator on a pseudo-terminal (``emulator``), the serial
 client (``serial_link``), the driver's backends over all of them (``backends``), the
 measurement cycle (``cycle``, ``duty``), the block stream (``blocks``, ``session``) and rosbag2

@@ -14,15 +14,6 @@ import numpy as np
 
 from mows.device import bags
 from mows.device.clock import DeviceClock
-from mows.device.framing import (
-    Ack,
-    Coils,
-    DeviceInfo,
-    FieldCurrent,
-    Orientation,
-    Samples,
-    Status,
-)
 from mows.device.interface import (
     Backend,
     CoilCommand,
@@ -34,6 +25,7 @@ from mows.device.interface import (
     NotExciting,
     check_coil_command,
 )
+from mows.device.payloads import Ack, Coils, DeviceInfo, FieldCurrent, Orientation, Samples, Status
 from mows.device.phases import Phase, PhaseEvent
 from mows.device.scheduled import ScheduledDevice
 from mows.device.serial_link import SerialLink

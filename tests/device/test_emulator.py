@@ -14,11 +14,11 @@ import time
 import pytest
 
 from device.spy import SpyDevice
-from mows.device.backends import SerialBackend
 from mows.device.emulator import FRAME_S, DeviceEmulator
 from mows.device.interface import CoilCommand, LinkEvent
 from mows.device.payloads import Ack, Coils, FieldCurrent, Samples, Status
 from mows.device.phases import CycleRequest, CycleSettings, Phase
+from mows.device.serial_backend import SerialBackend
 from mows.device.serial_link import SerialLink
 from mows.device.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown

@@ -22,19 +22,11 @@ from mows.device.framing import (
     REJECT_VERSION,
     SYNC,
     VERSION,
-    Ack,
-    Coils,
-    DeviceInfo,
-    FieldCurrent,
     Frame,
     FrameDecoder,
-    Heartbeat,
-    Hello,
-    Orientation,
-    Samples,
-    Status,
     encode_frame,
 )
+from mows.device.payloads import Ack, Coils, DeviceInfo, FieldCurrent, Heartbeat, Hello, Orientation, Samples, Status
 
 u8 = st.integers(0, 2**8 - 1)
 u32 = st.integers(0, 2**32 - 1)

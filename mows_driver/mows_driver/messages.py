@@ -5,8 +5,8 @@ from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChanne
 from mows_msgs.srv import EmergencyStop, RunCycle, SetFieldCurrent
 from sensor_msgs.msg import JointState
 
-from mows.device.framing import DeviceInfo
 from mows.device.interface import CommandResult
+from mows.device.payloads import DeviceInfo
 from mows.device.phases import CycleOutcome, CycleRequest, PhaseEvent
 from mows.records import stamps
 

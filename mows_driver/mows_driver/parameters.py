@@ -2,10 +2,12 @@
 device backend it makes of them."""
 import math
 
-from mows.device.backends import BagBackend, SerialBackend, SimBackend
+from mows.device.bag_backend import BagBackend
 from mows.device.phases import CycleSettings
+from mows.device.serial_backend import SerialBackend
 from mows.device.serial_link import DEFAULT_BAUD, SerialLink
 from mows.device.session import SessionConfig
+from mows.device.sim_backend import SimBackend
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.physics.probe import PAPER_PROBE

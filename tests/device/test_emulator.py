@@ -14,11 +14,11 @@ import time
 import pytest
 
 from device.spy import SpyDevice
-from mows.device.backends import SerialBackend
 from mows.device.emulator import FRAME_S, DeviceEmulator
-from mows.device.framing import Ack, Coils, Samples, Status
 from mows.device.interface import CoilCommand, LinkEvent
+from mows.device.payloads import Ack, Coils, FieldCurrent, Samples, Status
 from mows.device.phases import CycleRequest, CycleSettings, Phase
+from mows.device.serial_backend import SerialBackend
 from mows.device.serial_link import SerialLink
 from mows.device.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
@@ -234,7 +234,6 @@ def acks_of(items):
 
 
 def test_the_supply_ramps_on_a_framed_command_and_the_device_acks_where_the_ramp_ends(supplied):
-    from mows.device.framing import FieldCurrent
     bench, link = supplied
     collect(link, "the stream to run", lambda items: len(samples_of(items)) >= 20)
     over = link.send(FieldCurrent(0, 0, 2.5))

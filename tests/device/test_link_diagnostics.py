@@ -7,11 +7,11 @@ import pytest
 
 from device.spy import SpyDevice
 from device.test_emulator import CAP_A, SCENARIO, collect, samples_of, wait_for
-from mows.device.backends import SerialBackend
 from mows.device.blocks import BlockAssembler
 from mows.device.emulator import DeviceEmulator
 from mows.device.interface import LinkEvent
 from mows.device.phases import CycleRequest, CycleSettings
+from mows.device.serial_backend import SerialBackend
 from mows.device.serial_link import SerialLink
 from mows.device.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown

@@ -3,7 +3,7 @@ the one of the recording's last replayed excitation state."""
 import numpy as np
 
 from mows.device import bags
-from mows.device.backends import BagBackend
+from mows.device.bag_backend import BagBackend
 from mows.device.phases import CycleSettings, Phase
 from mows.device.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown

@@ -25,9 +25,9 @@ import subprocess
 import time
 from pathlib import Path
 
-from mows.device.backends import SimBackend
 from mows.device.phases import CycleSettings
 from mows.device.session import DeviceSession, SessionConfig
+from mows.device.sim_backend import SimBackend
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario

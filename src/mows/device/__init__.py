@@ -1,9 +1,9 @@
 """The device edge: what a device is to the driver (``interface``), the serial wire format
-(``framing``), its sample clock (``clock``), the simulated device with commands at exact sample
-indices (``scheduled``), the device emulator on a pseudo-terminal (``emulator``), the serial
-client (``serial_link``), the driver's backends over all of them (``backends``), the
-measurement cycle (``cycle``, ``duty``), the block stream (``blocks``, ``session``) and rosbag2
-recordings (``bags``).
+(``payloads``, ``framing``), its sample clock (``clock``), the simulated device with commands
+at exact sample indices (``scheduled``), the device emulator on a pseudo-terminal (``emulator``),
+the serial client (``serial_link``), the driver's backends over all of them (``sim_backend``,
+``serial_backend``, ``bag_backend``), the measurement cycle (``cycle``, ``cycle_waits``,
+``duty``), the block stream (``blocks``, ``session``) and rosbag2 recordings (``bags``).
 
 May import: ``mows.sim``, ``mows.physics``, ``mows.records``. Independent of
 ``mows.estimate``: a cycle that retunes is handed its fit function.

@@ -20,11 +20,9 @@ lost link) switches them off at once. The emergency stop latches until released.
 """
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Generator
 
-import numpy as np
-
+from mows.device.cycle_waits import Answer, CycleAborted, Reach, Recording, Run
 from mows.device.duty import DutyCycleLimit
 from mows.device.interface import (
     CoilCommand,
@@ -35,6 +33,7 @@ from mows.device.interface import (
 )
 from mows.device.phases import (
     CycleOutcome,
+    CyclePlan,
     CycleRequest,
     CycleSettings,
     LostTuning,
@@ -47,68 +46,6 @@ from mows.device.phases import (
 )
 from mows.physics.coils import CoilSetup, CurrentCap, excitation_samples
 from mows.records.samples import SampleBlock
-
-
-class CycleAborted(Exception):
-    """Ends a running cycle: the device refused or did not answer a command."""
-
-
-@dataclasses.dataclass(frozen=True)
-class _Reach:
-    """Resume once every sample before ``index`` has been received."""
-
-    index: int
-
-
-@dataclasses.dataclass(frozen=True)
-class _Answer:
-    """Resume with the result of ``command``; abort after sample ``deadline_index``."""
-
-    command: Command
-    deadline_index: int
-
-
-class _Recording:
-    """The samples [start, end) as they arrive; ``complete`` if none was missing."""
-
-    def __init__(self, start: int, end: int):
-        self.start, self.end = start, end
-        self._parts: list[SampleBlock] = []
-        self._next = start
-
-    def add(self, chunk: SampleBlock) -> None:
-        lo, hi = max(chunk.first_sample_index, self.start), min(chunk.end_index, self.end)
-        # Samples after a gap are not kept: the recording stays incomplete.
-        if lo < hi and lo == self._next:
-            self._parts.append(chunk)
-            self._next = hi
-
-    @property
-    def complete(self) -> bool:
-        return self._next == self.end
-
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        rows = [(max(c.first_sample_index, self.start) - c.first_sample_index,
-                 min(c.end_index, self.end) - c.first_sample_index) for c in self._parts]
-        return (np.concatenate([c.samples_t[a:b] for c, (a, b) in zip(self._parts, rows)]),
-                np.concatenate([c.saturated[a:b] for c, (a, b) in zip(self._parts, rows)]))
-
-
-@dataclasses.dataclass(frozen=True)
-class _Cycle:
-    """A running cycle's fixed choices."""
-
-    cycle_id: int
-    theta0_rad: float
-    repeats: int
-    tuning_steps: int
-    gap_s: float
-    settings: CycleSettings
-
-
-# A running cycle is a generator: it yields what it waits for and is sent, on resuming, the
-# command result it waited for (None after a _Reach).
-_Run = Generator[_Reach | _Answer, CommandResult | None, CycleOutcome]
 
 
 class CycleSequencer:
@@ -133,11 +70,11 @@ class CycleSequencer:
         self._duty = DutyCycleLimit(settings.max_duty_cycle, self._samples(settings.duty_window_s))
         self._anchor: tuple[int, int] | None = None  # (sample index, stamp ns) of a received sample
         self._next_index = 0
-        self._cycle: _Cycle | None = None
-        self._runner: _Run | None = None
-        self._wait: _Reach | _Answer | None = None
+        self._cycle: CyclePlan | None = None
+        self._runner: Run | None = None
+        self._wait: Reach | Answer | None = None
         self._results: dict[int, CommandResult] = {}
-        self._recordings: list[_Recording] = []
+        self._recordings: list[Recording] = []
         self._unstamped: list[tuple[Phase, str]] = []  # events raised before the first sample
         self._last_cycle_id = 0
         self._last_command_id = 0
@@ -212,7 +149,7 @@ class CycleSequencer:
         return self._take_step()
 
     # --- the cycle -------------------------------------------------------------------------
-    def _plan(self, request: CycleRequest) -> _Cycle:
+    def _plan(self, request: CycleRequest) -> CyclePlan:
         if self.latched is not None:
             raise ValueError(f"emergency stop latched ({self.latched}); release it before a cycle")
         if self.busy:
@@ -221,13 +158,7 @@ class CycleSequencer:
         if self._anchor is None:
             raise ValueError("no samples from the device yet")
         s = self.settings
-        cycle = _Cycle(self._last_cycle_id + 1, float(request.theta0_rad),
-                       s.repeats if request.repeats is None else request.repeats,
-                       s.tuning_steps if request.tuning_steps is None else request.tuning_steps,
-                       s.gap_s if request.gap_s is None else request.gap_s, s)
-        CycleSettings(**{**dataclasses.asdict(s), "repeats": cycle.repeats, "tuning_steps": cycle.tuning_steps,
-                         "gap_s": cycle.gap_s})  # ValueError for a request out of range
-        check_setting("theta0_rad", cycle.theta0_rad, True, "finite")
+        cycle = CyclePlan.resolve(self._last_cycle_id + 1, request, s)  # ValueError for a request out of range
         if request.frequency_hz is not None:
             nyquist_hz = self.sample_rate_hz / 2.0
             check_setting("frequency_hz", request.frequency_hz, 0.0 < request.frequency_hz < nyquist_hz,
@@ -240,7 +171,7 @@ class CycleSequencer:
         self._last_cycle_id = cycle.cycle_id
         return cycle
 
-    def _run(self, c: _Cycle) -> _Run:
+    def _run(self, c: CyclePlan) -> Run:
         s = c.settings
         ringdown = self._samples(s.ringdown_s)
         turned = yield from self._answer(self._issue(OrientationCommand, self._next_index + self.lead_samples,
@@ -266,12 +197,12 @@ class CycleSequencer:
             switched_on = yield from self._answer(on)
             switched_off = yield from self._answer(off)
             self._duty.record(switched_on, switched_off)
-            recording = _Recording(switched_off, switched_off + ringdown)
+            recording = Recording(switched_off, switched_off + ringdown)
             self._recordings.append(recording)
             yield from self._enter(c, Phase.EXCITING, switched_on, switched_off - switched_on, index, tuning,
                                    currents)
             yield from self._enter(c, Phase.RINGDOWN, switched_off, ringdown, index, tuning)
-            yield _Reach(recording.end)
+            yield Reach(recording.end)
             self._recordings.remove(recording)
             if tuning:
                 fits.append(self._tune(c, recording))
@@ -285,7 +216,7 @@ class CycleSequencer:
             message += f"; {len(failed)} of {len(fits)} tuning fits failed ({failed[-1].report()})"
         return CycleOutcome(True, message, c.cycle_id, self.frequency_hz, recorded, tuple(fits))
 
-    def _tune(self, c: _Cycle, recording: _Recording) -> TuningResult:
+    def _tune(self, c: CyclePlan, recording: Recording) -> TuningResult:
         """Fit a tuning ring-down; a good fit becomes the excitation frequency."""
         if not recording.complete:
             return LostTuning()
@@ -295,7 +226,7 @@ class CycleSequencer:
             self.frequency_hz = float(fit.frequency_hz)
         return fit
 
-    def _currents(self, c: _Cycle) -> tuple:
+    def _currents(self, c: CyclePlan) -> tuple:
         """The setup's coil currents at θ0, checked against the cap (ValueError above it)."""
         currents = self.setup.currents_a(c.theta0_rad, c.settings.excitation_current_a)
         return tuple(float(i) for i in self.cap.check(currents))
@@ -307,17 +238,17 @@ class CycleSequencer:
         self._step.commands.append(command)
         return command
 
-    def _answer(self, command: Command) -> Generator[_Answer, CommandResult | None, int]:
+    def _answer(self, command: Command) -> Generator[Answer, CommandResult | None, int]:
         deadline = max(command.at_sample_index, self._next_index) + self._samples(self.settings.confirm_timeout_s)
-        result = yield _Answer(command, deadline)
-        assert result is not None  # _resume resumes an _Answer only with its command's result
+        result = yield Answer(command, deadline)
+        assert result is not None  # _resume resumes an Answer only with its command's result
         if not result.accepted:
             raise CycleAborted(f"the device refused {type(command).__name__} {command.command_id}: {result.reason}")
         return result.applied_sample_index
 
-    def _enter(self, c: _Cycle, phase: Phase, index: int, duration_samples: int, repeat_index: int = 0,
-               tuning: bool = False, currents: tuple = ()) -> Generator[_Reach, CommandResult | None, None]:
-        yield _Reach(index + 1)
+    def _enter(self, c: CyclePlan, phase: Phase, index: int, duration_samples: int, repeat_index: int = 0,
+               tuning: bool = False, currents: tuple = ()) -> Generator[Reach, CommandResult | None, None]:
+        yield Reach(index + 1)
         self._emit(phase, index, cycle=c, duration_samples=duration_samples, repeat_index=repeat_index,
                    tuning=tuning, currents=currents)
 
@@ -325,7 +256,7 @@ class CycleSequencer:
         while self._runner is not None:
             wait = self._wait
             assert wait is not None  # a running cycle always waits: _advance keeps what it yields
-            if isinstance(wait, _Reach):
+            if isinstance(wait, Reach):
                 if self._next_index < wait.index:
                     return
                 value: CommandResult | None = None
@@ -371,7 +302,7 @@ class CycleSequencer:
         else:
             self._emit(phase, self._next_index, reason=reason)
 
-    def _emit(self, phase: Phase, index: int, cycle: _Cycle | None = None, duration_samples: int = 0,
+    def _emit(self, phase: Phase, index: int, cycle: CyclePlan | None = None, duration_samples: int = 0,
               repeat_index: int = 0, tuning: bool = False, currents: tuple = (), reason: str = "") -> None:
         self.phase = phase
         # Events are stamped once samples have come (_announce holds them back until then);

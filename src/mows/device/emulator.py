@@ -40,20 +40,18 @@ from pathlib import Path
 import numpy as np
 
 from mows.device.clock import DeviceClock
-from mows.device.framing import (
+from mows.device.framing import Frame, FrameDecoder, encode_frame
+from mows.device.payloads import (
     Ack,
     Body,
     Coils,
     DeviceInfo,
     FieldCurrent,
-    Frame,
-    FrameDecoder,
     Heartbeat,
     Hello,
     Orientation,
     Samples,
     Status,
-    encode_frame,
 )
 from mows.device.scheduled import OverCap, ScheduledDevice
 from mows.physics.coils import CurrentCap

@@ -10,7 +10,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 
-from mows.device.framing import DeviceInfo
+from mows.device.payloads import DeviceInfo
 from mows.physics.coils import CurrentCap
 
 

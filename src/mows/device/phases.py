@@ -1,6 +1,6 @@
 """The vocabulary of a measurement cycle (:mod:`mows.device.cycle`): its phases and the events
-that announce them, the settings cycles run with, a request for one cycle and its outcome, the
-step the sequencer returns, and the tuning fit it is handed.
+that announce them, the settings cycles run with, a request for one cycle, the plan it resolves
+to and its outcome, the step the sequencer returns, and the tuning fit it is handed.
 
 The phase numbers are those of ``mows_msgs/ExcitationState`` PHASE_*.
 """
@@ -119,6 +119,30 @@ class CycleRequest:
     tuning_steps: int | None = None
     gap_s: float | None = None
     frequency_hz: float | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class CyclePlan:
+    """A running cycle's fixed choices: its request resolved against the settings."""
+
+    cycle_id: int
+    theta0_rad: float
+    repeats: int
+    tuning_steps: int
+    gap_s: float
+    settings: CycleSettings
+
+    @classmethod
+    def resolve(cls, cycle_id: int, request: CycleRequest, s: CycleSettings) -> CyclePlan:
+        """The plan of ``request``. ValueError, with the reason, for a request out of range."""
+        cycle = cls(cycle_id, float(request.theta0_rad),
+                    s.repeats if request.repeats is None else request.repeats,
+                    s.tuning_steps if request.tuning_steps is None else request.tuning_steps,
+                    s.gap_s if request.gap_s is None else request.gap_s, s)
+        CycleSettings(**{**dataclasses.asdict(s), "repeats": cycle.repeats, "tuning_steps": cycle.tuning_steps,
+                         "gap_s": cycle.gap_s})  # ValueError for a request out of range
+        check_setting("theta0_rad", cycle.theta0_rad, True, "finite")
+        return cycle
 
 
 @dataclasses.dataclass(frozen=True)

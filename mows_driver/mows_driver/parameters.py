@@ -53,8 +53,7 @@ PARAMETERS = (
               "coil_current_cap_a)", range=(0.0, 100.0)),
     ParamSpec("initial_frequency_hz", round(float(PAPER_PROBE.f00_hz), 1), "first resonance estimate, Hz (each cycle "
               "retunes it)", range=(1.0, 2000.0), read_only=True),
-    ParamSpec("excite_s", 0.5, "coil-on time of one excitation, s (to the drive current peak nearest it)",
-              range=(0.01, 10.0)),
+    ParamSpec("excite_s", 0.5, "coil-on time of one excitation, s", range=(0.01, 10.0)),
     ParamSpec("ringdown_s", 0.5, "recorded free ring-down after each excitation, s", range=(0.05, 10.0)),
     ParamSpec("gap_s", 1.0, "pause between a ring-down and the next excitation, s", range=(0.0, 600.0)),
     ParamSpec("repeats", 3, "recorded ring-downs per cycle", range=(1, 1000)),

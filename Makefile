@@ -19,7 +19,7 @@ DEMO_ARGS ?=
 PYTEST_ARGS ?=
 # 1: `make lint` also checks the formatting (`ruff format --check`); on once the tree has been
 # formatted with `ruff format .`.
-FORMAT_CHECK ?= 0
+FORMAT_CHECK ?= 1
 BENCH_ARGS ?=
 
 # Installs a Debian package when it is missing (only the bootstrap of a bare machine needs it).

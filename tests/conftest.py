@@ -5,6 +5,7 @@ middleware reads its settings once per process (and the nodes that tests start i
 them): traffic stays on this host, in a ROS domain that no other test run on this machine
 uses at the same time.
 """
+
 import fcntl
 import os
 

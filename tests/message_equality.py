@@ -1,5 +1,6 @@
 """Field-by-field comparison of two messages, rclpy or rosbags alike: numbers, strings and
 nested messages must be equal, numeric arrays equal element by element (exactly)."""
+
 import array
 import dataclasses
 

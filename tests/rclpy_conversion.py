@@ -1,5 +1,6 @@
 """rosbags sample messages as rclpy messages: the class of a rosbag2 type name, and a copy
 field by field (needs the built workspace: install/setup.bash)."""
+
 import importlib
 
 import numpy as np

@@ -3,6 +3,7 @@
 Built from the typestore's field definitions (no rclpy), as rosbags message objects; the
 value of a field depends on its position so that two swapped fields do not compare equal.
 """
+
 import numpy as np
 from rosbags.typesys.store import Typestore
 
@@ -20,10 +21,7 @@ ACTIONS = interface_names("action")
 
 # Every type a bag may carry: messages, and the message parts of services and actions.
 BAG_TYPES = [
-    f"mows_msgs/{kind}/{name}{suffix}"
-    for kind in PARTS
-    for name in interface_names(kind)
-    for suffix in PARTS[kind]
+    f"mows_msgs/{kind}/{name}{suffix}" for kind in PARTS for name in interface_names(kind) for suffix in PARTS[kind]
 ]
 
 SEQUENCE_LENGTH = 3

@@ -4,6 +4,7 @@ simulated device run by the driver's own cycle sequencer in device time (mows.be
 Not timing tests: what is checked is where the planner stops, that it keeps its budget, and
 that no coil current or duty-cycle window ever exceeds its limit.
 """
+
 import math
 
 import numpy as np
@@ -59,8 +60,9 @@ def test_a_budget_too_short_for_the_target_ends_the_sweep_within_it():
 def planner(goal, repeat_s=1.2, turn_s=0.5):
     probe = load_scenario("anti_helmholtz").probe
     # A ring-down near 90°/270° is 5× less precise than near 0°/180° (its signal is at 2f).
-    return AdaptivePlanner(probe, probe.f00_hz, goal, repeat_s, turn_s,
-                           lambda theta0: 1.4e-4 * (1.0 + 4.0 * math.sin(theta0) ** 4))
+    return AdaptivePlanner(
+        probe, probe.f00_hz, goal, repeat_s, turn_s, lambda theta0: 1.4e-4 * (1.0 + 4.0 * math.sin(theta0) ** 4)
+    )
 
 
 def test_the_planner_never_plans_past_its_budget():
@@ -90,7 +92,7 @@ def test_the_planner_visits_the_weak_orientations_less():
             record.add(SweepPoint(step.theta0_rad, 112.5, sigma, 0.0, sigma, 0.4, 1.8, 1.1, 0.0))
     angles = np.degrees(np.array([p.theta0_rad for p in record.points])) % 180.0
     near_90 = np.sum(np.abs(angles - 90.0) < 20.0)
-    assert near_90 < len(angles) / 9, angles   # 40° of 180° would be 2/9 if spread evenly
+    assert near_90 < len(angles) / 9, angles  # 40° of 180° would be 2/9 if spread evenly
 
 
 def test_a_goal_for_one_component_is_reached_sooner_than_for_all():
@@ -124,10 +126,10 @@ def test_the_stop_is_reached_in_the_time_the_physics_gives():
 
 
 def test_tuning_is_needed_only_when_the_kick_is_long_against_the_detuning():
-    assert not tuning_needed(1.0, 0.05)       # 10 A reaches the stop in 50 ms: ~270 µT of field unknown
-    assert tuning_needed(1.0, 0.15)           # 2 A needs 0.15 s
+    assert not tuning_needed(1.0, 0.05)  # 10 A reaches the stop in 50 ms: ~270 µT of field unknown
+    assert tuning_needed(1.0, 0.15)  # 2 A needs 0.15 s
 
 
 def test_truth_of_the_scene_is_in_plane():
     truth = truth_components(load_scenario("anti_helmholtz"))
-    assert truth[2] == pytest.approx(-2 * truth[4], rel=1e-3)   # axial symmetry of the pair: Gxx = −2 Gyy
+    assert truth[2] == pytest.approx(-2 * truth[4], rel=1e-3)  # axial symmetry of the pair: Gxx = −2 Gyy

@@ -1,5 +1,6 @@
 """Every mows_msgs type through a rosbag2 MCAP bag (mows.device.bags), and rosbags' CDR against
 rclpy's."""
+
 import pytest
 import yaml
 from rosbags.highlevel import AnyReader
@@ -18,10 +19,7 @@ def test_the_comparison_notices_a_changed_sample(msgtype):
 
 @pytest.mark.parametrize("msgtype", BAG_TYPES)
 def test_every_type_comes_back_equal_from_an_mcap_bag(tmp_path, msgtype):
-    written = [
-        bags.BagMessage("/mows/test", msgtype, 1_000 + i, sample_message(msgtype, offset=i))
-        for i in range(2)
-    ]
+    written = [bags.BagMessage("/mows/test", msgtype, 1_000 + i, sample_message(msgtype, offset=i)) for i in range(2)]
     bags.write_bag(tmp_path / "bag", written)
     read = list(bags.read_bag(tmp_path / "bag"))
     assert [m[:3] for m in read] == [m[:3] for m in written]
@@ -66,9 +64,7 @@ def test_a_service_definition_needs_its_two_parts():
 
 
 @pytest.mark.ros
-@pytest.mark.parametrize(
-    "msgtype", ["mows_msgs/msg/MagnetometerBlock", "mows_msgs/action/RotationSweep_Result"]
-)
+@pytest.mark.parametrize("msgtype", ["mows_msgs/msg/MagnetometerBlock", "mows_msgs/action/RotationSweep_Result"])
 def test_rclpy_and_rosbags_read_each_others_cdr(msgtype):
     from rclpy.serialization import deserialize_message, serialize_message
 

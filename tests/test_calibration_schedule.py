@@ -1,5 +1,6 @@
 """The calibration schedule (I/O-free): supply steps × orientations × cycles, and the supply back
 at zero in every ending: done, cancelled, refused, failed."""
+
 import math
 
 import pytest
@@ -13,8 +14,16 @@ PLAN = CalibrationPlan(currents_a=(0.0, 1.0, -1.0), theta0_rad=(0.0, math.pi), r
 def fit(ok=True, frequency_hz=112.5):
     if not ok:
         return RingdownFit(status=FitStatus.SATURATED, message="clipped")
-    return RingdownFit(status=FitStatus.OK, theta0_rad=0.0, frequency_hz=frequency_hz, frequency_std_hz=3e-4,
-                       damping_per_s=1.8, amplitude_rad=0.41, duration_s=0.5, start_offset_s=0.003)
+    return RingdownFit(
+        status=FitStatus.OK,
+        theta0_rad=0.0,
+        frequency_hz=frequency_hz,
+        frequency_std_hz=3e-4,
+        damping_per_s=1.8,
+        amplitude_rad=0.41,
+        duration_s=0.5,
+        start_offset_s=0.003,
+    )
 
 
 def run_until_end(schedule, step, fits_per_cycle=None, refuse=None):
@@ -45,7 +54,7 @@ def test_the_plan_is_walked_current_by_current_and_ends_at_zero():
     assert supplies == [0.0, 1.0, -1.0, 0.0]
     assert [c.theta0_rad for c in cycles] == [0.0, math.pi] * 3 and all(c.repeats == 2 for c in cycles)
     assert outcome.success and outcome.supply_at_zero and not outcome.cancelled
-    assert len(outcome.points) == 10                              # 12 ring-downs, 2 saturated at −1 A
+    assert len(outcome.points) == 10  # 12 ring-downs, 2 saturated at −1 A
     assert outcome.failed == {(-1.0, "SATURATED"): 2}
     assert {p.supply_current_a for p in outcome.points} == {0.0, 1.0, -1.0}
     assert schedule.finished

@@ -1,5 +1,6 @@
 """Every `mows` command with bad input: exit status 2, one line naming the file and the key or
 row, no traceback, and nothing it read or did not create is touched (issue 15)."""
+
 import os
 import shutil
 import subprocess
@@ -14,7 +15,7 @@ from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
 TABLE = os.path.join(os.path.dirname(__file__), "lab", "data", "demo_sweep.csv")
-PROBE = ("moment_am2: 0.89e-3\nmagnet_mass_kg: 7.2e-6\nspring_nm_per_rad: 1.36e-5\n")
+PROBE = "moment_am2: 0.89e-3\nmagnet_mass_kg: 7.2e-6\nspring_nm_per_rad: 1.36e-5\n"
 
 
 def one_line_error(capsys, status, *words):
@@ -101,8 +102,9 @@ def test_the_emulator_refuses_a_link_path_that_exists(tmp_path):
     with pytest.raises(FileExistsError, match="not this emulator's link"):
         DeviceEmulator(device, path).start()
     assert path.read_bytes() == b"precious" and not path.is_symlink()
-    result = subprocess.run([sys.executable, "-m", "mows.device.emulator", "--link", str(path)],
-                            capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        [sys.executable, "-m", "mows.device.emulator", "--link", str(path)], capture_output=True, text=True, timeout=120
+    )
     assert result.returncode == 2 and "Traceback" not in result.stderr and str(path) in result.stderr
     assert path.read_bytes() == b"precious"
 
@@ -124,8 +126,10 @@ SCENARIOS = {
     "unknown key": ("name: x\nbogus: 1\n", ["bogus", "allowed"]),
     "string value": ("excitation: {amplitude_a: big}\n", ["amplitude_a", "number"]),
     "over the cap": ("excitation: {amplitude_a: 1000}\n", ["1000 A", "cap"]),
-    "not traceless": ("environment:\n  sources: [{type: linear_gradient, gradient_t_per_m: "
-                      "[[1, 0, 0], [0, 1, 0], [0, 0, 1]]}]\n", ["traceless"]),
+    "not traceless": (
+        "environment:\n  sources: [{type: linear_gradient, gradient_t_per_m: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}]\n",
+        ["traceless"],
+    ),
     "1000 T": ("environment:\n  sources: [{type: uniform, field_t: [1000, 0, 0]}]\n", ["1000 T", "substeps"]),
     "not YAML": ("excitation: [1\n", ["YAML", "line"]),
 }
@@ -158,8 +162,10 @@ PROBES = {
     "malformed YAML": ("moment_am2: [1\n", ["probe file", "YAML", "line 2"]),
     "a word for a number": ('f00_hz: "hundred"\n' + PROBE, ["f00_hz", "'hundred'", "not a number"]),
     "NaN": ("f00_hz: .nan\n" + PROBE, ["f00_hz", "nan", "finite"]),
-    "YAML 1.1 exponent": ("moment_am2: 1e-3\nmagnet_mass_kg: 7.2e-6\nf00_hz: 112.0\nspring_nm_per_rad: 1.36e-5\n",
-                          ["moment_am2", "7.0e-6"]),
+    "YAML 1.1 exponent": (
+        "moment_am2: 1e-3\nmagnet_mass_kg: 7.2e-6\nf00_hz: 112.0\nspring_nm_per_rad: 1.36e-5\n",
+        ["moment_am2", "7.0e-6"],
+    ),
 }
 
 
@@ -184,9 +190,11 @@ PLUGINS = {
 def test_a_broken_plugin_effect_is_one_line(table, tmp_path, capsys, case):
     body, words = PLUGINS[case]
     plugin = tmp_path / "plugin.py"
-    plugin.write_text("from mows.lab import effect\n\n"
-                      "@effect(name='boom', parameters={'k': (0.0, -1.0, 1.0, 'Hz')})\n"
-                      "def boom(rows, k):\n" + body)
+    plugin.write_text(
+        "from mows.lab import effect\n\n"
+        "@effect(name='boom', parameters={'k': (0.0, -1.0, 1.0, 'Hz')})\n"
+        "def boom(rows, k):\n" + body
+    )
     one_line_error(capsys, main(["lab", "diagnose", str(table), "--plugin", str(plugin), "--no-cv"]), *words)
 
 

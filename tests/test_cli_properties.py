@@ -1,6 +1,7 @@
 """Property: whatever is wrong with a table, a probe file, a scenario or a plugin's output, the
 command exits 2 with one line and no traceback, and its input files are byte-identical
 afterwards (issue 15). Every generated input is broken on purpose, in one way drawn at random."""
+
 import contextlib
 import io
 import math
@@ -19,8 +20,12 @@ COLUMNS = HEADER.split(",")
 PROBE = {"moment_am2": 0.89e-3, "magnet_mass_kg": 7.2e-6, "spring_nm_per_rad": 1.36e-5, "f00_hz": None}
 SETTINGS = settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
-NOT_A_NUMBER = st.one_of(st.text(min_size=1, max_size=8).filter(lambda t: not _is_number(t)),
-                         st.none(), st.booleans(), st.lists(st.integers(), max_size=3))
+NOT_A_NUMBER = st.one_of(
+    st.text(min_size=1, max_size=8).filter(lambda t: not _is_number(t)),
+    st.none(),
+    st.booleans(),
+    st.lists(st.integers(), max_size=3),
+)
 
 
 def _is_number(text: str) -> bool:
@@ -59,9 +64,18 @@ def broken_tables(draw) -> bytes:
     row, column = draw(st.integers(0, len(rows) - 1)), draw(st.integers(0, 2))  # a required column
     header = list(COLUMNS)
     if how == "cell":
-        rows[row][column] = draw(st.text(min_size=1, max_size=6).filter(
-            lambda t: not _is_number(t) and "," not in t and "\n" not in t and "\r" not in t and '"' not in t
-            and t.strip()))
+        rows[row][column] = draw(
+            st.text(min_size=1, max_size=6).filter(
+                lambda t: (
+                    not _is_number(t)
+                    and "," not in t
+                    and "\n" not in t
+                    and "\r" not in t
+                    and '"' not in t
+                    and t.strip()
+                )
+            )
+        )
     elif how == "column":
         del header[column]
         for cells in rows:
@@ -98,8 +112,14 @@ def broken_probes(draw) -> bytes:
     elif how == "not finite":
         probe[key] = draw(st.sampled_from([math.nan, math.inf, -math.inf]))
     elif how == "unknown key":
-        probe[draw(st.text("abcdefghijklmnopqrstuvwxyz_", min_size=1, max_size=12).filter(
-            lambda k: k not in PROBE and k not in ("damping_per_s", "lever_m", "inertia_kgm2"))) + "_x"] = 1.0
+        probe[
+            draw(
+                st.text("abcdefghijklmnopqrstuvwxyz_", min_size=1, max_size=12).filter(
+                    lambda k: k not in PROBE and k not in ("damping_per_s", "lever_m", "inertia_kgm2")
+                )
+            )
+            + "_x"
+        ] = 1.0
     elif how == "not a mapping":
         return yaml.safe_dump(draw(st.lists(st.floats(allow_nan=False), max_size=3))).encode()
     else:
@@ -110,15 +130,22 @@ def broken_probes(draw) -> bytes:
 @SETTINGS
 @given(broken_probes())
 def test_a_broken_probe_file_is_refused_in_one_line(probe):
-    status, err = run({"table.csv": TABLE, "probe.yaml": probe},
-                      ["lab", "compare", "table.csv", "--probe", "probe.yaml", "--no-cv"])
+    status, err = run(
+        {"table.csv": TABLE, "probe.yaml": probe}, ["lab", "compare", "table.csv", "--probe", "probe.yaml", "--no-cv"]
+    )
     assert_one_line_refusal(status, err)
     assert "probe.yaml" in err
 
 
 # --- scenarios ------------------------------------------------------------------------------
-SCENARIO_NUMBERS = [("excitation", "amplitude_a"), ("excitation", "excite_s"), ("pose", "theta0_deg"),
-                    ("environment", "temperature_k"), ("noise", "sensor_white_t_per_rthz"), (None, "sample_rate_hz")]
+SCENARIO_NUMBERS = [
+    ("excitation", "amplitude_a"),
+    ("excitation", "excite_s"),
+    ("pose", "theta0_deg"),
+    ("environment", "temperature_k"),
+    ("noise", "sensor_white_t_per_rthz"),
+    (None, "sample_rate_hz"),
+]
 
 
 @st.composite
@@ -148,20 +175,38 @@ def test_a_broken_scenario_is_refused_in_one_line(scenario):
 
 # --- plugin outputs -------------------------------------------------------------------------
 PLUGIN_RESULTS = st.one_of(
-    st.sampled_from(["float('nan')", "float('inf')", "'fast'", "None", "[1.0, 2.0]", "{'frequency_hz'}",
-                     "{'frequency_hz': float('nan')}", "{'stiffness_nm_per_rad': 'stiff'}",
-                     "{'frequency_hz': [1.0, 2.0]}", "{'speed_hz': 1.0}", "1 / 0", "rows.no_such_column.sum()",
-                     "{'frequency_hz': rows.f_hz * float('inf')}"]),
-    st.text("abc", min_size=1, max_size=4).map(lambda t: f"{{'frequency_hz': {t!r}}}"))
+    st.sampled_from(
+        [
+            "float('nan')",
+            "float('inf')",
+            "'fast'",
+            "None",
+            "[1.0, 2.0]",
+            "{'frequency_hz'}",
+            "{'frequency_hz': float('nan')}",
+            "{'stiffness_nm_per_rad': 'stiff'}",
+            "{'frequency_hz': [1.0, 2.0]}",
+            "{'speed_hz': 1.0}",
+            "1 / 0",
+            "rows.no_such_column.sum()",
+            "{'frequency_hz': rows.f_hz * float('inf')}",
+        ]
+    ),
+    st.text("abc", min_size=1, max_size=4).map(lambda t: f"{{'frequency_hz': {t!r}}}"),
+)
 
 
 @SETTINGS
 @given(PLUGIN_RESULTS)
 def test_a_plugin_that_returns_garbage_is_refused_in_one_line(result):
-    plugin = ("from mows.lab import effect\n\n"
-              "@effect(name='garbage', parameters={'k': (0.0, -1.0, 1.0, 'Hz')})\n"
-              f"def garbage(rows, k):\n    return {result}\n").encode()
-    status, err = run({"table.csv": TABLE, "plugin.py": plugin},
-                      ["lab", "add", "table.csv", "garbage", "--plugin", "plugin.py", "--no-cv"])
+    plugin = (
+        "from mows.lab import effect\n\n"
+        "@effect(name='garbage', parameters={'k': (0.0, -1.0, 1.0, 'Hz')})\n"
+        f"def garbage(rows, k):\n    return {result}\n"
+    ).encode()
+    status, err = run(
+        {"table.csv": TABLE, "plugin.py": plugin},
+        ["lab", "add", "table.csv", "garbage", "--plugin", "plugin.py", "--no-cv"],
+    )
     assert_one_line_refusal(status, err)
     assert "garbage" in err

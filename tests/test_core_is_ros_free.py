@@ -3,6 +3,7 @@
 Its source never imports rclpy either: the import contract "mows is free of ROS"
 (pyproject.toml, checked by `make lint`).
 """
+
 import json
 import subprocess
 import sys
@@ -17,9 +18,7 @@ FORBIDDEN = "rclpy"
 def mows_modules() -> list[str]:
     """Every module of the package; __main__ is left out, importing it would run it."""
     return sorted(
-        ".".join(("mows", *path.relative_to(SOURCE).with_suffix("").parts)).removesuffix(
-            ".__init__"
-        )
+        ".".join(("mows", *path.relative_to(SOURCE).with_suffix("").parts)).removesuffix(".__init__")
         for path in SOURCE.rglob("*.py")
         if path.stem != "__main__"
     )

@@ -1,6 +1,7 @@
 """The measurement-cycle sequencer on the simulated device (unpaced: as fast as it computes):
 order of phases, tuning to the resonance, ring-down stamps exact to the sample, the
 duty-cycle limit, the emergency-stop latch, and the coil current cap (property tests)."""
+
 import math
 
 import numpy as np
@@ -29,8 +30,9 @@ MAX_STEPS = 100_000  # bound for a cycle that never ends (a bug), not a timing
 def session_on_simulator(cycle_settings=FAST, frequency_hz=110.0, cap_a=CAP_A):
     scenario = load_scenario()
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(cap_a), paced=False)
-    return DeviceSession(backend, SessionConfig(0.025, cycle_settings, scenario.setup, CurrentCap(cap_a),
-                                                frequency_hz, fit_ringdown))
+    return DeviceSession(
+        backend, SessionConfig(0.025, cycle_settings, scenario.setup, CurrentCap(cap_a), frequency_hz, fit_ringdown)
+    )
 
 
 def run(session, request=CycleRequest(0.3), until=None):
@@ -58,10 +60,19 @@ def test_a_cycle_goes_through_its_phases_in_order():
     T, R = True, False
     assert [(e.phase, e.tuning, e.repeat_index) for e in cycle] == [
         (Phase.SETTLING, R, 0),
-        (Phase.EXCITING, T, 0), (Phase.RINGDOWN, T, 0), (Phase.GAP, T, 1),
-        (Phase.EXCITING, T, 1), (Phase.RINGDOWN, T, 1), (Phase.GAP, R, 0),
-        (Phase.EXCITING, R, 0), (Phase.RINGDOWN, R, 0), (Phase.GAP, R, 1),
-        (Phase.EXCITING, R, 1), (Phase.RINGDOWN, R, 1), (Phase.IDLE, R, 0)]
+        (Phase.EXCITING, T, 0),
+        (Phase.RINGDOWN, T, 0),
+        (Phase.GAP, T, 1),
+        (Phase.EXCITING, T, 1),
+        (Phase.RINGDOWN, T, 1),
+        (Phase.GAP, R, 0),
+        (Phase.EXCITING, R, 0),
+        (Phase.RINGDOWN, R, 0),
+        (Phase.GAP, R, 1),
+        (Phase.EXCITING, R, 1),
+        (Phase.RINGDOWN, R, 1),
+        (Phase.IDLE, R, 0),
+    ]
     assert all(e.coils_on == (e.phase == Phase.EXCITING) for e in events)
     assert all(any(e.currents_a) == e.coils_on for e in events)
     assert [e.sample_index for e in cycle] == sorted(e.sample_index for e in cycle)
@@ -96,8 +107,9 @@ def test_ringdown_stamps_are_the_samples_where_the_coils_went_off():
     session = session_on_simulator()
     (outcome,), events = run(session)
     clock = session.backend.clock
-    switches = [(e.sample_index, e.phase == Phase.EXCITING) for e in events
-                if e.phase in (Phase.EXCITING, Phase.RINGDOWN)]
+    switches = [
+        (e.sample_index, e.phase == Phase.EXCITING) for e in events if e.phase in (Phase.EXCITING, Phase.RINGDOWN)
+    ]
     # The device's own record of its coils (from the samples' coil flags) agrees exactly.
     assert switches == coil_log(session)
     assert all(e.stamp_ns == clock.stamp_ns(e.sample_index) for e in events)
@@ -106,8 +118,16 @@ def test_ringdown_stamps_are_the_samples_where_the_coils_went_off():
 
 
 def test_the_duty_cycle_limit_stretches_the_gaps():
-    limited = CycleSettings(excite_s=0.5, ringdown_s=0.2, gap_s=0.0, repeats=3, tuning_steps=0, settle_s=0.2,
-                            max_duty_cycle=0.3, duty_window_s=2.0)
+    limited = CycleSettings(
+        excite_s=0.5,
+        ringdown_s=0.2,
+        gap_s=0.0,
+        repeats=3,
+        tuning_steps=0,
+        settle_s=0.2,
+        max_duty_cycle=0.3,
+        duty_window_s=2.0,
+    )
     session = session_on_simulator(limited)
     (outcome,), events = run(session)
     assert outcome.success, outcome.message
@@ -141,7 +161,8 @@ def test_the_emergency_stop_switches_off_at_once_and_latches():
     # The coils are off from the device's very next sample, and what was scheduled is gone.
     assert coil_log(session)[-1] == (stop_index, False)
     assert [(e.phase, e.reason, e.sample_index) for e in events] == [
-        (Phase.FAULT, "emergency stop: operator", stop_index)]
+        (Phase.FAULT, "emergency stop: operator", stop_index)
+    ]
     assert not done[0].success and "emergency stop" in done[0].message
     with pytest.raises(ValueError, match="emergency stop latched"):
         session.start_cycle(CycleRequest(0.0), print)
@@ -203,19 +224,34 @@ class RecordingDevice:
                 applied = max(command.at_sample_index, next_index)
                 step = sequencer.on_result(CommandResult(command.command_id, True, applied))
             else:
-                step = sequencer.on_samples(SampleBlock(next_index, next_index * 50_000, 20_000.0,
-                                                        np.zeros((200, 2)), np.zeros((200, 2), bool)))
+                step = sequencer.on_samples(
+                    SampleBlock(next_index, next_index * 50_000, 20_000.0, np.zeros((200, 2)), np.zeros((200, 2), bool))
+                )
                 next_index += 200
             pending += step.commands
         raise AssertionError("the cycle did not end")
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.sampled_from([largest_spacing(), helmholtz()]), st.floats(0.1, 20.0), st.floats(0.0, 30.0),
-       st.floats(-100.0, 100.0), st.integers(1, 3), st.integers(0, 2))
+@given(
+    st.sampled_from([largest_spacing(), helmholtz()]),
+    st.floats(0.1, 20.0),
+    st.floats(0.0, 30.0),
+    st.floats(-100.0, 100.0),
+    st.integers(1, 3),
+    st.integers(0, 2),
+)
 def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a, theta0, repeats, tuning):
-    quick = CycleSettings(excitation_current_a=current_a, excite_s=0.01, ringdown_s=0.01, gap_s=0.0,
-                          repeats=repeats, tuning_steps=tuning, settle_s=0.0, max_duty_cycle=1.0)
+    quick = CycleSettings(
+        excitation_current_a=current_a,
+        excite_s=0.01,
+        ringdown_s=0.01,
+        gap_s=0.0,
+        repeats=repeats,
+        tuning_steps=tuning,
+        settle_s=0.0,
+        max_duty_cycle=1.0,
+    )
     sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0, fit=fit_ringdown)
     sequencer.on_samples(SampleBlock(0, 0, 20_000.0, np.zeros((1, 2)), np.zeros((1, 2), bool)))
     device = RecordingDevice()
@@ -238,8 +274,9 @@ def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a,
 def supplied_session(supply_cap_a=2.0):
     scenario = load_scenario("calibration")
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(CAP_A), paced=False, supply_cap_a=supply_cap_a)
-    return DeviceSession(backend, SessionConfig(0.025, FAST, scenario.setup, CurrentCap(CAP_A), 125.0,
-                                                fit_ringdown)), backend
+    return DeviceSession(
+        backend, SessionConfig(0.025, FAST, scenario.setup, CurrentCap(CAP_A), 125.0, fit_ringdown)
+    ), backend
 
 
 def step_until(session, condition, steps=2000):
@@ -260,9 +297,9 @@ def test_the_session_answers_a_supply_current_once_the_device_has_reached_it():
     assert result.accepted and backend.device.device.field_current_a == 1.0
     assert backend.device.next_index > result.applied_sample_index
     with pytest.raises(ValueError, match="cap"):
-        session.set_field_current(2.5, answers.append)     # above the driver's supply cap: never sent
+        session.set_field_current(2.5, answers.append)  # above the driver's supply cap: never sent
     session.close()
-    assert backend.device.device.field_current_a == 0.0   # closing ramps the supply down first
+    assert backend.device.device.field_current_a == 0.0  # closing ramps the supply down first
 
 
 def test_the_driver_s_supply_cap_is_lower_than_the_device_s_and_a_cancel_ramps_down_from_midway():
@@ -278,8 +315,9 @@ def test_the_driver_s_supply_cap_is_lower_than_the_device_s_and_a_cancel_ramps_d
 
 
 def test_a_cycle_drives_at_the_frequency_it_is_asked_for():
-    session = session_on_simulator(CycleSettings(excite_s=0.1, ringdown_s=0.2, gap_s=0.0, repeats=1, tuning_steps=0,
-                                                 settle_s=0.0))
+    session = session_on_simulator(
+        CycleSettings(excite_s=0.1, ringdown_s=0.2, gap_s=0.0, repeats=1, tuning_steps=0, settle_s=0.0)
+    )
     (outcome,), events = run(session, CycleRequest(0.0, frequency_hz=112.9))
     assert outcome.success, outcome.message
     assert {e.frequency_hz for e in events if e.phase == Phase.EXCITING} == {112.9}

@@ -1,4 +1,5 @@
 """`mows fit BAG`: ring-downs recorded in a driver-like MCAP bag, fitted offline."""
+
 import csv
 import math
 
@@ -28,17 +29,41 @@ def header(seconds, frame="mows"):
 
 def block_message(first, fs, samples, saturated):
     Channel = STORE.types["mows_msgs/msg/MagnetometerChannel"]
-    channels = [Channel(frame_id=f"fluxgate_{i}", field_t=np.ascontiguousarray(samples[:, i]),
-                        saturated=np.ascontiguousarray(saturated[:, i])) for i in range(2)]
-    return STORE.types[RAW](header=header(first / fs), sequence=first // BLOCK, first_sample_index=first,
-                            sample_rate_hz=fs, range_t=1e-5, resolution_t=1e-10, channels=channels)
+    channels = [
+        Channel(
+            frame_id=f"fluxgate_{i}",
+            field_t=np.ascontiguousarray(samples[:, i]),
+            saturated=np.ascontiguousarray(saturated[:, i]),
+        )
+        for i in range(2)
+    ]
+    return STORE.types[RAW](
+        header=header(first / fs),
+        sequence=first // BLOCK,
+        first_sample_index=first,
+        sample_rate_hz=fs,
+        range_t=1e-5,
+        resolution_t=1e-10,
+        channels=channels,
+    )
 
 
 def ringdown_message(index, fs, cycle, theta0, frequency):
-    return STORE.types[EXCITATION](header=header(index / fs), phase=3, phase_name="RINGDOWN", cycle_id=cycle,
-                                   repeat_index=0, repeats=1, tuning=False, coils_on=False,
-                                   coil_current_amplitude_a=np.zeros(2), frequency_hz=frequency,
-                                   theta0_rad=theta0, planned_duration_s=0.5, setup="largest_spacing")
+    return STORE.types[EXCITATION](
+        header=header(index / fs),
+        phase=3,
+        phase_name="RINGDOWN",
+        cycle_id=cycle,
+        repeat_index=0,
+        repeats=1,
+        tuning=False,
+        coils_on=False,
+        coil_current_amplitude_a=np.zeros(2),
+        frequency_hz=frequency,
+        theta0_rad=theta0,
+        planned_duration_s=0.5,
+        setup="largest_spacing",
+    )
 
 
 @pytest.fixture(scope="module")
@@ -52,13 +77,26 @@ def bag(tmp_path_factory):
         fs = record.sample_rate_hz
         first = record.block.samples.first_sample_index
         off = first + record.coil_off_index
-        messages.append(bags.BagMessage("/mows/excitation", EXCITATION, int(off / fs * 1e9),
-                                        ringdown_message(off, fs, cycle, record.theta0_rad, record.frequency_hz)))
+        messages.append(
+            bags.BagMessage(
+                "/mows/excitation",
+                EXCITATION,
+                int(off / fs * 1e9),
+                ringdown_message(off, fs, cycle, record.theta0_rad, record.frequency_hz),
+            )
+        )
         for start in range(0, len(record.samples_t), BLOCK):
             index = first + start
-            messages.append(bags.BagMessage("/mows/raw", RAW, int(index / fs * 1e9),
-                                            block_message(index, fs, record.samples_t[start:start + BLOCK],
-                                                          record.saturated[start:start + BLOCK])))
+            messages.append(
+                bags.BagMessage(
+                    "/mows/raw",
+                    RAW,
+                    int(index / fs * 1e9),
+                    block_message(
+                        index, fs, record.samples_t[start : start + BLOCK], record.saturated[start : start + BLOCK]
+                    ),
+                )
+            )
         truths.append(record.ringdown_frequency_hz(0.497))
     messages.sort(key=lambda m: m.timestamp_ns)
     path = bags.write_bag(tmp_path_factory.mktemp("bag") / "recorded", messages)

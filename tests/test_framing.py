@@ -1,6 +1,7 @@
 """The serial frame codec: round trips, and a fuzz of the decoder with random, truncated,
 corrupted and padded streams. The decoder never raises, never returns a frame that was not
 encoded exactly so, and accounts for every byte it throws away."""
+
 import struct
 import zlib
 
@@ -39,10 +40,11 @@ positive = st.floats(min_value=1e-300, max_value=1e300)
 def samples(draw):
     n = draw(st.integers(1, 300))
     channels = draw(st.integers(1, 3))
-    counts = draw(st.lists(st.integers(-2**31, 2**31 - 1), min_size=n * channels, max_size=n * channels))
+    counts = draw(st.lists(st.integers(-(2**31), 2**31 - 1), min_size=n * channels, max_size=n * channels))
     flags = draw(st.lists(st.booleans(), min_size=n * channels, max_size=n * channels))
-    return Samples(draw(u64), np.array(counts, np.int32).reshape(n, channels),
-                   np.array(flags, bool).reshape(n, channels))
+    return Samples(
+        draw(u64), np.array(counts, np.int32).reshape(n, channels), np.array(flags, bool).reshape(n, channels)
+    )
 
 
 bodies = st.one_of(
@@ -52,8 +54,7 @@ bodies = st.one_of(
     st.builds(Status, u64, st.booleans(), u32, u32, u32),
     st.just(Hello()),
     st.just(Heartbeat()),
-    st.builds(Coils, st.sampled_from([0, Coils.IMMEDIATE]), u64, f64,
-              st.lists(f64, max_size=4).map(tuple)),
+    st.builds(Coils, st.sampled_from([0, Coils.IMMEDIATE]), u64, f64, st.lists(f64, max_size=4).map(tuple)),
     st.builds(Orientation, u64, f64),
     st.builds(FieldCurrent, st.just(0), u64, f64),
     st.just(FieldCurrent(FieldCurrent.TO_ZERO_NOW, 0, 0.0)),
@@ -152,18 +153,27 @@ def test_damaged_streams_yield_exactly_the_intact_frames(case, cuts):
     assert decoder.rejected_total >= sync_kept
 
 
-@pytest.mark.parametrize("data, reason", [
-    (raw_frame(0x7F, b""), REJECT_TYPE),
-    (raw_frame(Ack.TYPE, b"\x00" * 5), REJECT_PAYLOAD),
-    (raw_frame(Samples.TYPE, struct.pack("<QHB", 0, 2, 1) + b"\x00" * 8 + b"\x01"), REJECT_PAYLOAD),  # stray flag bit
-    (raw_frame(Coils.TYPE, struct.pack("<BQdB", 0x80, 0, 1.0, 0)), REJECT_PAYLOAD),  # unknown flag
-    (raw_frame(DeviceInfo.TYPE, DeviceInfo.LAYOUT.pack(0.0, 2, 2, 1e-5, 1e-10, 10.0, 0.2)), REJECT_PAYLOAD),  # no rate
-    (raw_frame(DeviceInfo.TYPE, DeviceInfo.LAYOUT.pack(2e4, 0, 2, 1e-5, 1e-10, 10.0, 0.2)), REJECT_PAYLOAD),
-    (raw_frame(Hello.TYPE, b"\x00", version=2), REJECT_VERSION),
-    (raw_frame(Hello.TYPE, b"", length=MAX_PAYLOAD_BYTES + 1), REJECT_LENGTH),
-    (encode_frame(Frame(1, 2, Hello()))[:-1] + b"\x00", REJECT_CRC),
-    (encode_frame(Frame(1, 2, Status(1, True, 0, 0, 0)))[:-3], REJECT_TRUNCATED),
-])
+@pytest.mark.parametrize(
+    "data, reason",
+    [
+        (raw_frame(0x7F, b""), REJECT_TYPE),
+        (raw_frame(Ack.TYPE, b"\x00" * 5), REJECT_PAYLOAD),
+        (
+            raw_frame(Samples.TYPE, struct.pack("<QHB", 0, 2, 1) + b"\x00" * 8 + b"\x01"),
+            REJECT_PAYLOAD,
+        ),  # stray flag bit
+        (raw_frame(Coils.TYPE, struct.pack("<BQdB", 0x80, 0, 1.0, 0)), REJECT_PAYLOAD),  # unknown flag
+        (
+            raw_frame(DeviceInfo.TYPE, DeviceInfo.LAYOUT.pack(0.0, 2, 2, 1e-5, 1e-10, 10.0, 0.2)),
+            REJECT_PAYLOAD,
+        ),  # no rate
+        (raw_frame(DeviceInfo.TYPE, DeviceInfo.LAYOUT.pack(2e4, 0, 2, 1e-5, 1e-10, 10.0, 0.2)), REJECT_PAYLOAD),
+        (raw_frame(Hello.TYPE, b"\x00", version=2), REJECT_VERSION),
+        (raw_frame(Hello.TYPE, b"", length=MAX_PAYLOAD_BYTES + 1), REJECT_LENGTH),
+        (encode_frame(Frame(1, 2, Hello()))[:-1] + b"\x00", REJECT_CRC),
+        (encode_frame(Frame(1, 2, Status(1, True, 0, 0, 0)))[:-3], REJECT_TRUNCATED),
+    ],
+)
 def test_each_reason_of_rejection_is_counted(data, reason):
     good = encode_frame(Frame(5, 6, Heartbeat()))
     found, decoder = decode_in_pieces(good + data, [])

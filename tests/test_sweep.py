@@ -1,4 +1,5 @@
 """Rotation-sweep decomposition against exact fields of real sources."""
+
 import math
 
 import numpy as np
@@ -65,8 +66,9 @@ def test_harmonics_follow_eq12_for_a_uniform_field():
     b = np.array([30e-6, 17e-6])
     d = decompose(THETA0, exact_sweep(UniformField((*b, 0.0)), 5), np.full(THETA0.size, STD_HZ), P, P.f00_hz)
     h = d.harmonics
-    assert h.amplitude_hz[1] == pytest.approx(P.f00_hz * P.moment_am2 * np.hypot(*b) / (2 * P.spring_nm_per_rad),
-                                              rel=0.01)
+    assert h.amplitude_hz[1] == pytest.approx(
+        P.f00_hz * P.moment_am2 * np.hypot(*b) / (2 * P.spring_nm_per_rad), rel=0.01
+    )
     assert h.phase_rad[1] == pytest.approx(-math.atan2(b[1], b[0]), abs=0.01)
     assert abs(h.amplitude_hz[2]) < 5 * STD_HZ / math.sqrt(THETA0.size / 2)
 
@@ -82,11 +84,14 @@ def test_free_f00_absorbs_the_constant_gradient_term(gradient_field):
     assert d.f00_hz - P.f00_hz == pytest.approx(-P.gamma0_hz_m_per_t * gs, rel=0.05)
 
 
-@pytest.mark.parametrize("theta0, shift, std, words", [
-    (THETA0[:4], np.zeros(4), np.full(4, STD_HZ), "distinct orientations"),
-    (THETA0, np.full(THETA0.size, np.nan), np.full(THETA0.size, STD_HZ), "non-finite"),
-    (THETA0, np.zeros(THETA0.size), np.zeros(THETA0.size), "positive"),
-])
+@pytest.mark.parametrize(
+    "theta0, shift, std, words",
+    [
+        (THETA0[:4], np.zeros(4), np.full(4, STD_HZ), "distinct orientations"),
+        (THETA0, np.full(THETA0.size, np.nan), np.full(THETA0.size, STD_HZ), "non-finite"),
+        (THETA0, np.zeros(THETA0.size), np.zeros(THETA0.size), "positive"),
+    ],
+)
 def test_unusable_sweeps_are_refused_with_a_reason(theta0, shift, std, words):
     d = decompose(theta0, shift, std, P, P.f00_hz)
     assert not d.ok and words in d.message

@@ -4,6 +4,7 @@ Every ring-down starts at the housing stop (24°): at that amplitude the cantile
 are not those of small oscillations (first-harmonic balance), and the decomposition must use
 each ring-down's own amplitude to read the anti-Helmholtz gradient right.
 """
+
 import math
 
 import numpy as np

@@ -3,6 +3,7 @@
 Every fit must lie in a stretch with the coils off and no sensor saturated: checked against the
 simulated device's own record of its coils, and against a saturated stretch put into a window.
 """
+
 import math
 
 import numpy as np
@@ -22,11 +23,21 @@ def tracked():
     scenario = load_scenario("anti_helmholtz")
     probe = scenario.probe
     rig = DeviceTimeRig(scenario, CycleSettings(), CAP_A, seed=11)
-    std = ringdown_std_model(scenario.sensors.pair, probe, scenario.pose, scenario.sample_rate_hz,
-                             rig.first_block_noise_std_t())
+    std = ringdown_std_model(
+        scenario.sensors.pair, probe, scenario.pose, scenario.sample_rate_hz, rig.first_block_noise_std_t()
+    )
     plan = plan_tracking(probe, scenario.setup, scenario.pose, std, 0.0, 1e-6, CAP_A)
-    rig.set_settings(CycleSettings(excitation_current_a=CAP_A, excite_s=plan.excite_s, ringdown_s=plan.ringdown_s,
-                                   gap_s=0.0, repeats=8, tuning_steps=0, settle_s=0.5))
+    rig.set_settings(
+        CycleSettings(
+            excitation_current_a=CAP_A,
+            excite_s=plan.excite_s,
+            ringdown_s=plan.ringdown_s,
+            gap_s=0.0,
+            repeats=8,
+            tuning_steps=0,
+            settle_s=0.5,
+        )
+    )
     ok, message, measured = rig.run_cycle(CycleRequest(0.0, frequency_hz=probe.f00_hz))
     assert ok, message
     return rig, plan, measured
@@ -39,9 +50,9 @@ def test_every_tracking_fit_lies_where_the_coils_were_off(tracked):
     assert len(on) == 8
     for m in measured:
         first = round(m.window.start_ns * rig.fs / 1e9 + m.fit.start_offset_s * rig.fs)
-        last = first + m.fit.n_samples           # exclusive
+        last = first + m.fit.n_samples  # exclusive
         assert all(last <= a or first >= b for a, b in on), (first, last, on)
-        assert m.fit.start_offset_s > 0.0        # the coil current's decay and the recovery are left out
+        assert m.fit.start_offset_s > 0.0  # the coil current's decay and the recovery are left out
 
 
 def test_tracking_keeps_the_current_cap_and_the_duty_limit(tracked):
@@ -59,11 +70,12 @@ def test_a_saturated_stretch_inside_a_window_is_never_fitted_across():
     signal = 1e-7 * np.exp(-probe.damping_per_s * t) * np.cos(2 * math.pi * probe.f00_hz * t)
     samples = np.stack([signal, np.zeros_like(signal)], axis=1) + np.random.default_rng(1).normal(0, 1e-9, (t.size, 2))
     saturated = np.zeros(samples.shape, bool)
-    saturated[int(0.1 * fs):int(0.12 * fs), 0] = True   # e.g. a passing disturbance
+    saturated[int(0.1 * fs) : int(0.12 * fs), 0] = True  # e.g. a passing disturbance
     samples[saturated] = 1e-5
     window = RingdownWindow(0, 0.3, theta0_rad=0.0, excitation_frequency_hz=probe.f00_hz)
-    fit = fit_segment(Segment(window, 0, fs, samples, saturated, 0),
-                      FitOptions.lever_aware(scenario.sensors.pair, probe, 0.0))
+    fit = fit_segment(
+        Segment(window, 0, fs, samples, saturated, 0), FitOptions.lever_aware(scenario.sensors.pair, probe, 0.0)
+    )
     assert fit.ok, fit.report()
     first, last = round(fit.start_offset_s * fs), round(fit.start_offset_s * fs) + fit.n_samples
     assert first >= int(0.12 * fs) or last <= int(0.1 * fs)

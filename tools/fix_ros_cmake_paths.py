@@ -6,6 +6,7 @@ and CMake then refuses to generate a message package ("includes non-existent pat
 This rewrites those paths to the running interpreter's. Running it twice changes nothing.
 See ../shared/ROS_WHEELS.md, "Two fix-ups after installing".
 """
+
 import pathlib
 import sys
 import sysconfig

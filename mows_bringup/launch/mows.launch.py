@@ -2,6 +2,7 @@
 
 The same nodes and parameter files as ``mows-graph`` (mows_bringup.graph.NODES).
 """
+
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node

@@ -13,6 +13,7 @@ decomposition, what the paper's published model would have made of the same ring
 the model lab's verdict on which physics the published model is missing. Writes the lab's
 HTML report. Node output goes to a log file so the terminal shows the measurement.
 """
+
 import argparse
 import datetime
 import math
@@ -43,25 +44,35 @@ from mows_bringup.graph import NODES, Graph, say
 from mows_mapper.messages import sweep_point
 from mows_ros.qos import MAP_QOS, RESULT_QOS, STREAM_QOS
 
-DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_SETTLE_S = 10.0, 0.5, 0.5   # the driver's defaults
+DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_SETTLE_S = 10.0, 0.5, 0.5  # the driver's defaults
 
 
 def parse_arguments(argv):
     parser = argparse.ArgumentParser(prog="mows-demo", description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", default="anti_helmholtz",
-                        help="simulated scene (shipped name or YAML; default: the anti-Helmholtz gradient of the "
-                             "paper's Fig. 4c; nearby_coil is Fig. 4d)")
+    parser.add_argument(
+        "--scenario",
+        default="anti_helmholtz",
+        help="simulated scene (shipped name or YAML; default: the anti-Helmholtz gradient of the "
+        "paper's Fig. 4c; nearby_coil is Fig. 4d)",
+    )
     parser.add_argument("--angles", type=int, default=8, help="orientations in the sweep (≥ 6)")
     parser.add_argument("--repeats", type=int, default=2, help="ring-downs per orientation")
     parser.add_argument("--tuning-steps", type=int, default=1, help="frequency-tuning excitations per orientation")
     parser.add_argument("--gap-s", type=float, default=0.2, help="pause between repeats, s (the paper: 10 s)")
-    parser.add_argument("--target", default="", choices=["", "B", "G", "both", "bx", "by", "gxx", "gxy", "gyy"],
-                        help="an adaptive sweep to σ ≤ 20 nT per field and 10 µT/m per gradient component of this "
-                             "quantity, with the cycle from physics (10 A kicks, no tuning); the paper's protocol "
-                             "time on the same device is printed beside it")
+    parser.add_argument(
+        "--target",
+        default="",
+        choices=["", "B", "G", "both", "bx", "by", "gxx", "gxy", "gyy"],
+        help="an adaptive sweep to σ ≤ 20 nT per field and 10 µT/m per gradient component of this "
+        "quantity, with the cycle from physics (10 A kicks, no tuning); the paper's protocol "
+        "time on the same device is printed beside it",
+    )
     parser.add_argument("--out", default="out", help="directory for the lab report and the node log")
-    parser.add_argument("--probe-scenario", default="calibration",
-                        help="scenario whose (not the paper's) probe is calibrated first and then mapped with")
+    parser.add_argument(
+        "--probe-scenario",
+        default="calibration",
+        help="scenario whose (not the paper's) probe is calibrated first and then mapped with",
+    )
     args = parser.parse_args(argv)
     if args.angles < 6:
         parser.error("a sweep needs at least 6 orientations to separate field (1θ0) from gradient (2θ0)")
@@ -72,14 +83,16 @@ def calibrate_probe(args, directory: pathlib.Path):
     """Calibrate the probe of ``--probe-scenario`` on its simulated bench; the probe file and
     the scene to map (``--scenario`` with that probe in it), both written to ``directory``."""
 
-
     bench = load_scenario(args.probe_scenario)
     gradient = bench.replace(supply=load_scenario("calibration_gradient").supply, seed=bench.seed + 1)
     plan = CalibrationPlan(currents_a=(0.0, 1.0, 2.0, -1.0, -2.0))
-    say(f"calibrating the probe of {args.probe_scenario}: supply {list(plan.currents_a)} A at θ0 = 0° and 180°, "
-        "Helmholtz and anti-Helmholtz wiring (simulated device time)")
-    points = list(simulate_calibration(bench, plan, PAPER_PROBE, lambda f: say(f"  {f.step}/{f.steps}: {f.message}"))
-                  .points)
+    say(
+        f"calibrating the probe of {args.probe_scenario}: supply {list(plan.currents_a)} A at θ0 = 0° and 180°, "
+        "Helmholtz and anti-Helmholtz wiring (simulated device time)"
+    )
+    points = list(
+        simulate_calibration(bench, plan, PAPER_PROBE, lambda f: say(f"  {f.step}/{f.steps}: {f.message}")).points
+    )
     gradient_plan = CalibrationPlan(plan.currents_a, wiring="gradient")
     points += simulate_calibration(gradient, gradient_plan, PAPER_PROBE).points
     calibration = fit_constants(points, scenario_wirings(bench, gradient), KnownConstants.of(PAPER_PROBE))
@@ -99,18 +112,34 @@ def write_parameters(args, directory: pathlib.Path, probe_path, scene_path) -> p
     drives the coils of the scene's own set-up; estimator and mapper load the calibrated probe."""
 
     scenario = load_scenario(scene_path)
-    driver = {"scenario": str(scene_path), "coil_setup": scenario.setup.name, "repeats": args.repeats,
-              "tuning_steps": args.tuning_steps, "gap_s": args.gap_s}
+    driver = {
+        "scenario": str(scene_path),
+        "coil_setup": scenario.setup.name,
+        "repeats": args.repeats,
+        "tuning_steps": args.tuning_steps,
+        "gap_s": args.gap_s,
+    }
     mapper = {"reference_scenario": str(scene_path), "repeats_per_angle": args.repeats, "probe_file": str(probe_path)}
     if args.target:
         plan = fast_plan(scenario)
-        driver.update(excitation_current_a=plan.excitation_current_a, excite_s=plan.excite_s,
-                      ringdown_s=plan.ringdown_s, gap_s=plan.gap_s, tuning_steps=plan.tuning_steps)
+        driver.update(
+            excitation_current_a=plan.excitation_current_a,
+            excite_s=plan.excite_s,
+            ringdown_s=plan.ringdown_s,
+            gap_s=plan.gap_s,
+            tuning_steps=plan.tuning_steps,
+        )
         mapper.update(repeat_s=plan.cycle_s, turn_s=DRIVER_SETTLE_S)
     path = directory / "demo_parameters.yaml"
-    path.write_text(yaml.safe_dump({"/**/driver": {"ros__parameters": driver},
-                                    "/**/estimator": {"ros__parameters": {"probe_file": str(probe_path)}},
-                                    "/**/mapper": {"ros__parameters": mapper}}))
+    path.write_text(
+        yaml.safe_dump(
+            {
+                "/**/driver": {"ros__parameters": driver},
+                "/**/estimator": {"ros__parameters": {"probe_file": str(probe_path)}},
+                "/**/mapper": {"ros__parameters": mapper},
+            }
+        )
+    )
     return path
 
 
@@ -156,7 +185,6 @@ def main(argv=None) -> int:
 
 def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited, scene_path, probe_path) -> bool:
 
-
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("mows_demo")
     fits, reports, blocks = [], [], []
@@ -196,9 +224,11 @@ def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited, scene_
         spin_until(result.done, 600.0 if args.target else 60.0 + args.angles * args.repeats * 30.0, "the sweep")
         outcome = result.result().result
         if args.target:
-            say(f"adaptive sweep: {outcome.message}; {time.monotonic() - started:.1f} s (the simulated device runs in "
+            say(
+                f"adaptive sweep: {outcome.message}; {time.monotonic() - started:.1f} s (the simulated device runs in "
                 f"real time); the paper's protocol takes {paper_protocol_s():.0f} s per 12-orientation map on this "
-                "device (mows bench throughput measures it to the same target)")
+                "device (mows bench throughput measures it to the same target)"
+            )
         if not outcome.success:
             say(f"sweep failed: {outcome.message}")
             return False
@@ -214,15 +244,22 @@ def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited, scene_
 
 
 def print_feedback(feedback) -> None:
-    say(f"θ0 = {math.degrees(feedback.theta0_rad):6.1f}°  Δf = {feedback.frequency_shift_hz * 1e3:9.3f} ± "
-        f"{feedback.frequency_shift_std_hz * 1e3:.3f} mHz  ({feedback.n_ok} of {len(feedback.fits)} ring-downs OK)")
+    say(
+        f"θ0 = {math.degrees(feedback.theta0_rad):6.1f}°  Δf = {feedback.frequency_shift_hz * 1e3:9.3f} ± "
+        f"{feedback.frequency_shift_std_hz * 1e3:.3f} mHz  ({feedback.n_ok} of {len(feedback.fits)} ring-downs OK)"
+    )
 
 
 def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, probe_path) -> None:
 
     field, gradient = reference_at(scenario)
-    truth = {"Bx (µT)": field[0] * 1e6, "By (µT)": field[1] * 1e6, "Gxx (mT/m)": gradient[0, 0] * 1e3,
-             "Gxy (mT/m)": gradient[0, 1] * 1e3, "Gyy (mT/m)": gradient[1, 1] * 1e3}
+    truth = {
+        "Bx (µT)": field[0] * 1e6,
+        "By (µT)": field[1] * 1e6,
+        "Gxx (mT/m)": gradient[0, 0] * 1e3,
+        "Gxy (mT/m)": gradient[0, 1] * 1e3,
+        "Gyy (mT/m)": gradient[1, 1] * 1e3,
+    }
     probe = Probe.from_yaml(probe_path)
     record = SweepRecord()
     for fit in fits:
@@ -234,17 +271,28 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, prob
     say("")
     say(f"{'':12s} {'first principles':>22s} {'truth':>10s} {'pull':>7s} {'published model':>17s}")
     for label, value, sigma, pub in zip(truth, *_values(decomposition), _values_of(published)):
-        say(f"{label:12s} {value:13.3f} ± {sigma:6.3f} {truth[label]:10.3f} {(value - truth[label]) / sigma:7.2f} "
-            f"{pub:17.3f}")
-    say(f"χ²/dof: first principles {decomposition.chi2_dof:.2f}, published {published.chi2_dof:.2f}"
-        + ("  (above 1: the field is not linear over the lever; the lab below says what is missing)"
-           if decomposition.chi2_dof > 3 else ""))
+        say(
+            f"{label:12s} {value:13.3f} ± {sigma:6.3f} {truth[label]:10.3f} {(value - truth[label]) / sigma:7.2f} "
+            f"{pub:17.3f}"
+        )
+    say(
+        f"χ²/dof: first principles {decomposition.chi2_dof:.2f}, published {published.chi2_dof:.2f}"
+        + (
+            "  (above 1: the field is not linear over the lever; the lab below says what is missing)"
+            if decomposition.chi2_dof > 3
+            else ""
+        )
+    )
     say("")
-    say(f"model lab, live in the mapper: the published model + {', '.join(report.effects) or 'nothing'}: "
-        f"verdict {report.verdict}, χ²/dof {report.chi2_dof:.2f}")
+    say(
+        f"model lab, live in the mapper: the published model + {', '.join(report.effects) or 'nothing'}: "
+        f"verdict {report.verdict}, χ²/dof {report.chi2_dof:.2f}"
+    )
     for candidate in list(report.candidates)[:4]:
-        say(f"  candidate {candidate.effect:22s} ΔBIC {candidate.delta_bic:10.1f}  χ²/dof after "
-            f"{candidate.chi2_dof_after:.2f}  group {candidate.group}")
+        say(
+            f"  candidate {candidate.effect:22s} ΔBIC {candidate.delta_bic:10.1f}  χ²/dof after "
+            f"{candidate.chi2_dof_after:.2f}  group {candidate.group}"
+        )
     say(f"  residual structure: {report.structure}")
     table = from_sweep(record, scenario, probe, first_principles)
     table_path = out / "demo_sweep.csv"
@@ -252,8 +300,10 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, prob
     say(f"sweep table: {table_path} (try: mows lab diagnose {table_path} --probe <probe.yaml>)")
     lab = analyse(table, probe, auto=True)
     for step in lab.history:
-        say(f"  error history: {' + '.join(['published'] + step.effects):60s} χ²/dof {step.chi2_dof:9.2f}  "
-            f"cv rms {step.cv_text:>8} mHz")
+        say(
+            f"  error history: {' + '.join(['published'] + step.effects):60s} χ²/dof {step.chi2_dof:9.2f}  "
+            f"cv rms {step.cv_text:>8} mHz"
+        )
     path = out / "demo_lab_report.html"
     write_report(lab, path)
     say(f"lab report: {path}")

@@ -8,6 +8,7 @@ forwards SIGINT and SIGTERM to the nodes. Exit status: 0 when the graph was stop
 signal or after --duration) and every node stopped cleanly; 1 when a node exited by itself
 or did not stop cleanly.
 """
+
 import argparse
 import ctypes
 import os
@@ -73,7 +74,7 @@ class Graph:
     def __init__(self, nodes: tuple[GraphNode, ...], ros_args: list[str], output=None):
         self._nodes = nodes
         self._ros_args = ros_args
-        self._output = output or sys.stdout   # where the nodes' prefixed lines go
+        self._output = output or sys.stdout  # where the nodes' prefixed lines go
         self._events: queue.SimpleQueue = queue.SimpleQueue()
         self._processes: dict[str, subprocess.Popen] = {}
         self._pumps: list[threading.Thread] = []

@@ -7,6 +7,7 @@ host's monotonic clock, so transport both ways is included). Prints the figures,
 object with ``--json`` (used by ``mows bench``). A benchmark: it reports, it never fails on a
 figure.
 """
+
 import argparse
 import json
 import sys
@@ -29,8 +30,11 @@ def main(argv=None) -> int:
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     log = open("/dev/null", "w")
-    graph = Graph(tuple(n for n in NODES if n.name in ("driver", "estimator")),
-                  ["-p", "driver:tuning_steps:=0", "-p", "driver:gap_s:=0.1"], output=log)
+    graph = Graph(
+        tuple(n for n in NODES if n.name in ("driver", "estimator")),
+        ["-p", "driver:tuning_steps:=0", "-p", "driver:gap_s:=0.1"],
+        output=log,
+    )
     graph.start()
     try:
         latencies = measure(args.cycles, args.repeats, graph.exited)
@@ -47,20 +51,24 @@ def main(argv=None) -> int:
 
 def measure(cycles: int, repeats: int, exited) -> list:
 
-
     rclpy.init()
     node = rclpy.create_node("mows_latency")
-    block_arrivals = {}          # stop sample index → (receive time, first sample stamp, rate)
+    block_arrivals = {}  # stop sample index → (receive time, first sample stamp, rate)
     fits = []
-    node.create_subscription(MagnetometerBlock, "mows/raw",
-                             lambda b: block_arrivals.__setitem__(_block_key(b), time.monotonic()), STREAM_QOS)
+    node.create_subscription(
+        MagnetometerBlock, "mows/raw", lambda b: block_arrivals.__setitem__(_block_key(b), time.monotonic()), STREAM_QOS
+    )
     node.create_subscription(RingdownFit, "mows/ringdown", lambda f: fits.append((time.monotonic(), f)), RESULT_QOS)
     client = node.create_client(RunCycle, "mows/driver/run_cycle")
     try:
         # The estimator advertises its fits once it listens (after its kernels are compiled):
         # a cycle run before would reach it through the latched excitation states only, late.
-        _spin_until(node, lambda: client.service_is_ready() and block_arrivals
-                    and node.count_publishers("/mows/ringdown") > 0, exited, 120.0)
+        _spin_until(
+            node,
+            lambda: client.service_is_ready() and block_arrivals and node.count_publishers("/mows/ringdown") > 0,
+            exited,
+            120.0,
+        )
         for _ in range(cycles):
             future = client.call_async(RunCycle.Request(theta0_rad=0.0, repeats=repeats, tuning_steps=-1, gap_s=-1.0))
             _spin_until(node, future.done, exited, 120.0)
@@ -99,9 +107,13 @@ def summary(latencies) -> dict:
     values = np.array([v for v in latencies if np.isfinite(v)]) * 1e3
     if values.size == 0:
         return {"ringdowns": 0}
-    return {"ringdowns": int(values.size), "latency_ms_median": float(np.median(values)),
-            "latency_ms_p99": float(np.percentile(values, 99)), "latency_ms_max": float(values.max()),
-            "goal_p99_ms": 20.0}
+    return {
+        "ringdowns": int(values.size),
+        "latency_ms_median": float(np.median(values)),
+        "latency_ms_p99": float(np.percentile(values, 99)),
+        "latency_ms_max": float(values.max()),
+        "goal_p99_ms": 20.0,
+    }
 
 
 if __name__ == "__main__":

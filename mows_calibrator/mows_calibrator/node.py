@@ -12,6 +12,7 @@ that the estimator and the mapper load by ``probe_file``; gradient points of an 
 
 The node translates only; it runs on one thread and awaits the driver's answers as coroutines.
 """
+
 import datetime
 import math
 import time
@@ -61,17 +62,29 @@ def scenario_problem(parameter: str, name: str) -> str | None:
 def nominal_probe_problem(path: str) -> str | None:
     """Why ``nominal_probe_file`` cannot be read, or None ('' is the paper's probe)."""
     problem = probe_file_problem(path) if path else None
-    return None if problem is None else f"nominal_{problem}"     # probe_file_problem says probe_file=…
+    return None if problem is None else f"nominal_{problem}"  # probe_file_problem says probe_file=…
 
 
 PARAMETERS = (
-    ParamSpec("scenario", "calibration", "scenario whose supply section describes the homogeneous wiring (the "
-              "Helmholtz pair's field per ampere at the probe)",
-              check=lambda v: scenario_problem("scenario", v or "?")),
-    ParamSpec("gradient_scenario", "calibration_gradient", "scenario whose supply section describes the gradient "
-              "wiring (anti-Helmholtz); '' for none", check=lambda v: scenario_problem("gradient_scenario", v)),
-    ParamSpec("nominal_probe_file", "", "probe YAML giving the magnet's moment, mass and the housing stop "
-              "('' the paper's)", check=nominal_probe_problem),
+    ParamSpec(
+        "scenario",
+        "calibration",
+        "scenario whose supply section describes the homogeneous wiring (the "
+        "Helmholtz pair's field per ampere at the probe)",
+        check=lambda v: scenario_problem("scenario", v or "?"),
+    ),
+    ParamSpec(
+        "gradient_scenario",
+        "calibration_gradient",
+        "scenario whose supply section describes the gradient wiring (anti-Helmholtz); '' for none",
+        check=lambda v: scenario_problem("gradient_scenario", v),
+    ),
+    ParamSpec(
+        "nominal_probe_file",
+        "",
+        "probe YAML giving the magnet's moment, mass and the housing stop ('' the paper's)",
+        check=nominal_probe_problem,
+    ),
     ParamSpec("probe_file", "calibrated_probe.yaml", "where a goal without probe_file writes the calibrated probe"),
     ParamSpec("hardware_id", "", "written to the probe file ('' the scenario's name)"),
     ParamSpec("currents_a", list(PAPER_CURRENTS_A), "supply currents of a goal that lists none, A"),
@@ -83,9 +96,17 @@ PARAMETERS = (
 
 def fit_of(msg: RingdownFit) -> Fit:
     """The estimator's fit as the core's result (what the schedule and the calibration read)."""
-    return Fit(status=FitStatus(msg.status), message=msg.message, theta0_rad=msg.theta0_rad,
-               frequency_hz=msg.frequency_hz, frequency_std_hz=msg.frequency_std_hz, damping_per_s=msg.damping_per_s,
-               amplitude_rad=msg.amplitude_rad, duration_s=msg.duration_s, start_offset_s=SETTLE_S)
+    return Fit(
+        status=FitStatus(msg.status),
+        message=msg.message,
+        theta0_rad=msg.theta0_rad,
+        frequency_hz=msg.frequency_hz,
+        frequency_std_hz=msg.frequency_std_hz,
+        damping_per_s=msg.damping_per_s,
+        amplitude_rad=msg.amplitude_rad,
+        duration_s=msg.duration_s,
+        start_offset_s=SETTLE_S,
+    )
 
 
 class CalibratorNode(MowsNode):
@@ -93,16 +114,23 @@ class CalibratorNode(MowsNode):
         super().__init__(NODE_NAME, PARAMETERS)
         group = ReentrantCallbackGroup()
         self._fits: dict[int, list] = {}
-        self._waiting: tuple[int, int, Future] | None = None    # (cycle id, fits wanted, resolved when there)
-        self._points: dict[str, tuple] = {}                     # wiring → points of its last complete sweep
+        self._waiting: tuple[int, int, Future] | None = None  # (cycle id, fits wanted, resolved when there)
+        self._points: dict[str, tuple] = {}  # wiring → points of its last complete sweep
         self._busy = False
         self._last = "no calibration yet"
         self._calibrations = 0
         self.create_subscription(RingdownFit, "mows/ringdown", self._on_fit, RESULT_QOS, callback_group=group)
         self._supply = self.create_client(SetFieldCurrent, "mows/driver/set_field_current", callback_group=group)
         self._cycle = self.create_client(RunCycle, "mows/driver/run_cycle", callback_group=group)
-        self._server = ActionServer(self, CalibrateProbe, ACTION, self._execute, goal_callback=self._accept,
-                                    cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=group)
+        self._server = ActionServer(
+            self,
+            CalibrateProbe,
+            ACTION,
+            self._execute,
+            goal_callback=self._accept,
+            cancel_callback=lambda _: CancelResponse.ACCEPT,
+            callback_group=group,
+        )
 
     def _param(self, name):
         return self.get_parameter(name).value
@@ -136,8 +164,12 @@ class CalibratorNode(MowsNode):
         wiring = goal.wiring or load_scenario(self._param("scenario")).supply.name
         if goal.wiring and goal.wiring != GRADIENT_WIRING:
             raise ValueError(f"wiring {goal.wiring!r}: '' (homogeneous) or {GRADIENT_WIRING!r}")
-        return CalibrationPlan(tuple(goal.currents_a) or tuple(self._param("currents_a")),
-                               tuple(goal.theta0_rad) or (0.0, math.pi), int(goal.repeats) or 1, wiring)
+        return CalibrationPlan(
+            tuple(goal.currents_a) or tuple(self._param("currents_a")),
+            tuple(goal.theta0_rad) or (0.0, math.pi),
+            int(goal.repeats) or 1,
+            wiring,
+        )
 
     # --- the calibration --------------------------------------------------------------------
     async def _execute(self, goal_handle):
@@ -148,12 +180,19 @@ class CalibratorNode(MowsNode):
             step = schedule.start()
             while step.outcome is None:
                 for feedback in step.feedback:
-                    goal_handle.publish_feedback(CalibrateProbe.Feedback(
-                        step=feedback.step, steps=feedback.steps, current_a=feedback.current_a,
-                        theta0_rad=feedback.theta0_rad, ringdowns=feedback.ringdowns, message=feedback.message))
+                    goal_handle.publish_feedback(
+                        CalibrateProbe.Feedback(
+                            step=feedback.step,
+                            steps=feedback.steps,
+                            current_a=feedback.current_a,
+                            theta0_rad=feedback.theta0_rad,
+                            ringdowns=feedback.ringdowns,
+                            message=feedback.message,
+                        )
+                    )
                 if goal_handle.is_cancel_requested:
                     cancelled = schedule.cancel("cancelled by the client")
-                    step = cancelled if cancelled.actions else step   # already on its way to zero
+                    step = cancelled if cancelled.actions else step  # already on its way to zero
                 step = await self._act(schedule, step)
             return self._finish(goal_handle, plan, step.outcome)
         finally:
@@ -166,15 +205,17 @@ class CalibratorNode(MowsNode):
         return await self._supply_step(schedule, action.current_a)
 
     async def _supply_step(self, schedule, current_a: float):
-        response = await self._call(self._supply, SetFieldCurrent.Request(current_a=float(current_a)),
-                                    self._param("supply_timeout_s"))
+        response = await self._call(
+            self._supply, SetFieldCurrent.Request(current_a=float(current_a)), self._param("supply_timeout_s")
+        )
         if response is None:
             return schedule.on_supply(False, "no answer from the driver's set_field_current")
         return schedule.on_supply(response.success, response.message)
 
     async def _cycle_step(self, schedule, action: Cycle):
-        request = RunCycle.Request(theta0_rad=float(action.theta0_rad), repeats=int(action.repeats), tuning_steps=-1,
-                                   gap_s=-1.0)
+        request = RunCycle.Request(
+            theta0_rad=float(action.theta0_rad), repeats=int(action.repeats), tuning_steps=-1, gap_s=-1.0
+        )
         response = await self._call(self._cycle, request, self._param("cycle_timeout_s"))
         if response is None or not response.success:
             return schedule.on_cycle_done(False, response.message if response else "no answer from the driver")
@@ -195,7 +236,7 @@ class CalibratorNode(MowsNode):
 
     async def _call(self, client, request, timeout_s: float):
         deadline = time.monotonic() + timeout_s
-        while not client.service_is_ready():      # the driver may not be discovered yet
+        while not client.service_is_ready():  # the driver may not be discovered yet
             if time.monotonic() > deadline:
                 return None
             await self._within(Future(), 0.1)
@@ -241,23 +282,33 @@ class CalibratorNode(MowsNode):
     def _calibrate(self, path: str):
         scenario = load_scenario(self._param("scenario"))
         gradient = load_scenario(self._param("gradient_scenario")) if self._param("gradient_scenario") else None
-        nominal = Probe.from_yaml(self._param("nominal_probe_file")) if self._param("nominal_probe_file") \
-            else PAPER_PROBE
+        nominal = (
+            Probe.from_yaml(self._param("nominal_probe_file")) if self._param("nominal_probe_file") else PAPER_PROBE
+        )
         if scenario.supply.name not in self._points:
             raise ValueError("no sweep of the homogeneous wiring yet: β0 needs one")
         points, failed = [], {}
         for wiring_points, wiring_failed in self._points.values():
             points += wiring_points
             failed.update(wiring_failed)
-        calibration = calibrate_probe(points, scenario_wirings(scenario, gradient), KnownConstants.of(nominal),
-                                      scenario.supply.name, failed, nominal.lever_m)
+        calibration = calibrate_probe(
+            points,
+            scenario_wirings(scenario, gradient),
+            KnownConstants.of(nominal),
+            scenario.supply.name,
+            failed,
+            nominal.lever_m,
+        )
         date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
         calibration.probe().to_yaml(path, calibration.record(date, self._param("hardware_id") or scenario.name))
         return calibration, path
 
     def health(self) -> Health:
-        return Health(DiagnosticStatus.OK, self._last,
-                      {"state": "calibrating" if self._busy else "idle", "calibrations": self._calibrations})
+        return Health(
+            DiagnosticStatus.OK,
+            self._last,
+            {"state": "calibrating" if self._busy else "idle", "calibrations": self._calibrations},
+        )
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,5 +1,6 @@
 """What the driver says on /diagnostics: the device session's state, and what went wrong
 since the last report (new gaps, new device faults) or still is wrong."""
+
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from mows_ros.diagnostics import Health
@@ -21,8 +22,9 @@ class StreamHealth:
         if state["link"] == "finished":
             return Health(DiagnosticStatus.OK, "replay finished", values)
         if not state["link_up"]:
-            return Health(DiagnosticStatus.ERROR, f"no device: {state['link_reason'] or state.get('last_error')}",
-                          values)
+            return Health(
+                DiagnosticStatus.ERROR, f"no device: {state['link_reason'] or state.get('last_error')}", values
+            )
         problems = []
         if state.get("estop_latched"):
             problems.append(f"emergency stop latched ({state['estop_reason']})")
@@ -30,8 +32,10 @@ class StreamHealth:
             problems.append(f"device fault: {state['last_device_fault']}")
         if new_gaps:
             restarts = f", {state['device_restarts']} device restarts" if state.get("device_restarts") else ""
-            problems.append(f"{new_gaps} new gaps in the sample stream ({state['missing_samples']} samples "
-                            f"missing in all{restarts})")
+            problems.append(
+                f"{new_gaps} new gaps in the sample stream ({state['missing_samples']} samples "
+                f"missing in all{restarts})"
+            )
         if achieved is not None and nominal and abs(achieved / nominal - 1.0) > RATE_TOLERANCE:
             problems.append(f"sample rate {achieved:.0f} Hz, nominal {nominal:.0f} Hz")
         if stream_errors:

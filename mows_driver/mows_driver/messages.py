@@ -1,4 +1,5 @@
 """Translation of the device session's blocks and phase events into mows_msgs (no logic)."""
+
 import array
 
 from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel
@@ -13,16 +14,23 @@ from mows.records import stamps
 
 def block_msg(block, info: DeviceInfo, frame_id: str, sensor_frame_ids: list) -> MagnetometerBlock:
     """One block of samples; channel i is in ``sensor_frame_ids[i]`` (``channel_<i+1>`` past them)."""
-    message = MagnetometerBlock(sequence=block.sequence, first_sample_index=block.first_sample_index,
-                                sample_rate_hz=info.sample_rate_hz, range_t=info.range_t,
-                                resolution_t=info.resolution_t)
+    message = MagnetometerBlock(
+        sequence=block.sequence,
+        first_sample_index=block.first_sample_index,
+        sample_rate_hz=info.sample_rate_hz,
+        range_t=info.range_t,
+        resolution_t=info.resolution_t,
+    )
     stamps.set_nanoseconds(message.header.stamp, block.stamp_ns)
     message.header.frame_id = frame_id
     message.channels = [
-        MagnetometerChannel(frame_id=sensor_frame_ids[i] if i < len(sensor_frame_ids) else f"channel_{i + 1}",
-                            field_t=array.array("d", block.samples_t[:, i].tobytes()),
-                            saturated=block.saturated[:, i].tolist())
-        for i in range(block.samples_t.shape[1])]
+        MagnetometerChannel(
+            frame_id=sensor_frame_ids[i] if i < len(sensor_frame_ids) else f"channel_{i + 1}",
+            field_t=array.array("d", block.samples_t[:, i].tobytes()),
+            saturated=block.saturated[:, i].tolist(),
+        )
+        for i in range(block.samples_t.shape[1])
+    ]
     return message
 
 
@@ -37,11 +45,20 @@ def joint_state_msg(stamp_ns: int, stage_angle_rad: float) -> JointState:
 
 
 def excitation_msg(event: PhaseEvent, frame_id: str) -> ExcitationState:
-    message = ExcitationState(phase=int(event.phase), phase_name=event.phase.name, cycle_id=event.cycle_id,
-                              repeat_index=event.repeat_index, repeats=event.repeats, tuning=event.tuning,
-                              coils_on=event.coils_on, coil_current_amplitude_a=list(event.currents_a),
-                              frequency_hz=event.frequency_hz, theta0_rad=event.theta0_rad,
-                              planned_duration_s=event.planned_duration_s, setup=event.setup)
+    message = ExcitationState(
+        phase=int(event.phase),
+        phase_name=event.phase.name,
+        cycle_id=event.cycle_id,
+        repeat_index=event.repeat_index,
+        repeats=event.repeats,
+        tuning=event.tuning,
+        coils_on=event.coils_on,
+        coil_current_amplitude_a=list(event.currents_a),
+        frequency_hz=event.frequency_hz,
+        theta0_rad=event.theta0_rad,
+        planned_duration_s=event.planned_duration_s,
+        setup=event.setup,
+    )
     stamps.set_nanoseconds(message.header.stamp, event.stamp_ns)
     message.header.frame_id = frame_id
     return message
@@ -49,9 +66,12 @@ def excitation_msg(event: PhaseEvent, frame_id: str) -> ExcitationState:
 
 def cycle_request(request: RunCycle.Request) -> CycleRequest:
     """A RunCycle request; a negative repeats, tuning_steps or gap_s takes the parameter."""
-    return CycleRequest(request.theta0_rad, request.repeats if request.repeats >= 0 else None,
-                        request.tuning_steps if request.tuning_steps >= 0 else None,
-                        request.gap_s if request.gap_s >= 0.0 else None)
+    return CycleRequest(
+        request.theta0_rad,
+        request.repeats if request.repeats >= 0 else None,
+        request.tuning_steps if request.tuning_steps >= 0 else None,
+        request.gap_s if request.gap_s >= 0.0 else None,
+    )
 
 
 def cycle_response(outcome: CycleOutcome, response: RunCycle.Response) -> RunCycle.Response:
@@ -61,19 +81,26 @@ def cycle_response(outcome: CycleOutcome, response: RunCycle.Response) -> RunCyc
     return response
 
 
-def estop_response(latched: bool, request: EmergencyStop.Request, response: EmergencyStop.Response,
-                   backend: str) -> EmergencyStop.Response:
+def estop_response(
+    latched: bool, request: EmergencyStop.Request, response: EmergencyStop.Response, backend: str
+) -> EmergencyStop.Response:
     """``latched``: the latch after the request; it failed if that is not what was asked."""
     response.latched, response.success = latched, latched == request.engage
-    response.message = ("coils off, latched" if latched else "released") if response.success \
+    response.message = (
+        ("coils off, latched" if latched else "released")
+        if response.success
         else f"the {backend} backend has no coils to stop"
+    )
     return response
 
 
 def supply_response(result: CommandResult, current_a: float, response: SetFieldCurrent.Response) -> None:
     """The answer to set_field_current: reached (at which sample) or refused by the device."""
     response.success = result.accepted
-    response.message = (f"supply at {current_a:+.4f} A from device sample {result.applied_sample_index}"
-                        if result.accepted else f"the device refused the supply current: {result.reason}")
+    response.message = (
+        f"supply at {current_a:+.4f} A from device sample {result.applied_sample_index}"
+        if result.accepted
+        else f"the device refused the supply current: {result.reason}"
+    )
     response.current_a = round(float(current_a), 4) if result.accepted else float("nan")
     response.reached_sample_index = max(0, result.applied_sample_index)

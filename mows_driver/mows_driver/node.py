@@ -15,6 +15,7 @@ wrong is in the service responses, on /diagnostics and in the log. The coils are
 every phase but EXCITING and when the node stops (SIGINT, SIGTERM), and the static-field supply
 is ramped to zero when it stops.
 """
+
 import threading
 import time
 import traceback
@@ -65,7 +66,7 @@ JOINT_STATES_TOPIC = "mows/joint_states"
 RUN_CYCLE_SERVICE = "mows/driver/run_cycle"
 EMERGENCY_STOP_SERVICE = "mows/driver/emergency_stop"
 SET_FIELD_CURRENT_SERVICE = "mows/driver/set_field_current"
-POLL_S = 0.02          # the streaming thread's longest wait for the device
+POLL_S = 0.02  # the streaming thread's longest wait for the device
 
 
 class DriverNode(MowsNode):
@@ -87,12 +88,13 @@ class DriverNode(MowsNode):
         except (ValueError, OSError) as error:
             raise InvalidParameterValueException("backend", values["backend"], str(error)) from None
         try:
-            self.recorder = open_recorder(values["record_path"], [(self.raw_publisher, STREAM_QOS),
-                                                                  (self.excitation_publisher, EXCITATION_QOS)])
+            self.recorder = open_recorder(
+                values["record_path"], [(self.raw_publisher, STREAM_QOS), (self.excitation_publisher, EXCITATION_QOS)]
+            )
         except (ValueError, OSError) as error:
             raise InvalidParameterValueException("record_path", values["record_path"], str(error)) from None
         self.session = DeviceSession(backend, session_config(values, cap))
-        if values["backend"] == "sim":   # the simulated stage starts where the parameter puts it
+        if values["backend"] == "sim":  # the simulated stage starts where the parameter puts it
             self.session.stage_angle_rad = values["theta0_rad"]
         self.blocks_published = 0
         self.stream_errors = 0
@@ -102,8 +104,7 @@ class DriverNode(MowsNode):
         group = ReentrantCallbackGroup()
         self.create_service(RunCycle, RUN_CYCLE_SERVICE, self._run_cycle, callback_group=group)
         self.create_service(EmergencyStop, EMERGENCY_STOP_SERVICE, self._emergency_stop, callback_group=group)
-        self.create_service(SetFieldCurrent, SET_FIELD_CURRENT_SERVICE, self._set_field_current,
-                            callback_group=group)
+        self.create_service(SetFieldCurrent, SET_FIELD_CURRENT_SERVICE, self._set_field_current, callback_group=group)
         self._stopping = threading.Event()
         self._streaming = threading.Thread(target=self._stream, name="mows-driver-stream", daemon=True)
         self._streaming.start()
@@ -122,7 +123,7 @@ class DriverNode(MowsNode):
     # --- services --------------------------------------------------------------------------
     async def _run_cycle(self, request: RunCycle.Request, response: RunCycle.Response) -> RunCycle.Response:
         finished = Future()
-        try:   # the streaming thread (or the emergency stop) completes it
+        try:  # the streaming thread (or the emergency stop) completes it
             response.cycle_id = self.session.start_cycle(cycle_request(request), completer(self, finished))
         except ValueError as refused:
             response.success, response.message = False, f"cycle refused: {refused}"
@@ -137,10 +138,11 @@ class DriverNode(MowsNode):
             self.get_logger().error(f"cycle {outcome.cycle_id}: {outcome.message}")
         return response
 
-    async def _set_field_current(self, request: SetFieldCurrent.Request,
-                                 response: SetFieldCurrent.Response) -> SetFieldCurrent.Response:
+    async def _set_field_current(
+        self, request: SetFieldCurrent.Request, response: SetFieldCurrent.Response
+    ) -> SetFieldCurrent.Response:
         reached = Future()
-        try:   # the streaming thread completes it once the samples have reached the ramp's end
+        try:  # the streaming thread completes it once the samples have reached the ramp's end
             if (problem := supply_problem(request.current_a, self._values)) is not None:
                 raise ValueError(problem)
             self.session.set_field_current(request.current_a, completer(self, reached))
@@ -152,10 +154,12 @@ class DriverNode(MowsNode):
         self.get_logger().info(response.message)
         return response
 
-    def _emergency_stop(self, request: EmergencyStop.Request,
-                        response: EmergencyStop.Response) -> EmergencyStop.Response:
-        estop_response(self.session.emergency_stop(request.engage, request.reason), request, response,
-                       self.session.backend.name)
+    def _emergency_stop(
+        self, request: EmergencyStop.Request, response: EmergencyStop.Response
+    ) -> EmergencyStop.Response:
+        estop_response(
+            self.session.emergency_stop(request.engage, request.reason), request, response, self.session.backend.name
+        )
         if request.engage:
             self.get_logger().warning(f"emergency stop engaged: {request.reason or 'no reason given'}")
         else:
@@ -180,12 +184,15 @@ class DriverNode(MowsNode):
     def _publish_step(self, output) -> None:
         for link in output.links:  # in every state, not only in a cycle
             (self.get_logger().info if link.up else self.get_logger().warning)(
-                f"link {'up' if link.up else 'lost'}: {link.reason}")
+                f"link {'up' if link.up else 'lost'}: {link.reason}"
+            )
         for block in output.blocks:
-            self._publish(self.raw_publisher, block_msg(block, self.session.backend.info, self._values["frame_id"],
-                                                        self._values["sensor_frame_ids"]))
+            self._publish(
+                self.raw_publisher,
+                block_msg(block, self.session.backend.info, self._values["frame_id"], self._values["sensor_frame_ids"]),
+            )
             self.blocks_published += 1
-            if self.session.stage_angle_rad is not None:   # the stage with every block: TF at its stamps
+            if self.session.stage_angle_rad is not None:  # the stage with every block: TF at its stamps
                 self.joint_publisher.publish(joint_state_msg(block.stamp_ns, self.session.stage_angle_rad))
         for event in output.events:
             self._publish(self.excitation_publisher, excitation_msg(event, self._values["probe_frame_id"]))
@@ -202,10 +209,15 @@ class DriverNode(MowsNode):
     def health(self) -> Health:
         state = self.session.health()
         info = self.session.backend.info
-        values = {**super().health().values, **state, "nominal_sample_rate_hz": info.sample_rate_hz if info else None,
-                  "achieved_sample_rate_hz": self.session.achieved_rate_hz(),
-                  "blocks_published": self.blocks_published, "stream_errors": self.stream_errors,
-                  "recorded_messages": self.recorder.messages if self.recorder else 0}
+        values = {
+            **super().health().values,
+            **state,
+            "nominal_sample_rate_hz": info.sample_rate_hz if info else None,
+            "achieved_sample_rate_hz": self.session.achieved_rate_hz(),
+            "blocks_published": self.blocks_published,
+            "stream_errors": self.stream_errors,
+            "recorded_messages": self.recorder.messages if self.recorder else 0,
+        }
         return self._health(state, self.session.backend.name, self.stream_errors, values)
 
     def destroy_node(self) -> None:

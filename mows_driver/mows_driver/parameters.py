@@ -1,5 +1,6 @@
 """The driver's parameter table, the checks across its parameters, and the cycle settings and
 device backend it makes of them."""
+
 import math
 
 from mows.device.bag_backend import BagBackend
@@ -16,43 +17,104 @@ from mows.sim.simulator import SimulatedDevice
 from mows_ros.params import ParamSpec
 
 PARAMETERS = (
-    ParamSpec("backend", "sim", "where magnetometer blocks come from: sim (the simulator), serial (the device on "
-              "a serial port), bag (a recorded rosbag2 MCAP bag); fixed at start-up",
-              choices=("sim", "serial", "bag"), read_only=True),
-    ParamSpec("scenario", DEFAULT_SCENARIO, "backend sim: simulator scenario, a YAML file or the name of one "
-              "shipped in mows/sim/scenarios; fixed at start-up", read_only=True),
-    ParamSpec("theta0_rad", 0.0, "backend sim: probe orientation at start-up, rad (cycles turn it)",
-              range=(-2.0 * math.pi, 2.0 * math.pi), read_only=True),
-    ParamSpec("serial_port", "", "backend serial: the device's port, e.g. /dev/ttyACM0; fixed at start-up",
-              read_only=True),
-    ParamSpec("baud", DEFAULT_BAUD, "backend serial: baud rate (ignored by USB CDC links), bit/s",
-              range=(9600, 12_000_000), read_only=True),
+    ParamSpec(
+        "backend",
+        "sim",
+        "where magnetometer blocks come from: sim (the simulator), serial (the device on "
+        "a serial port), bag (a recorded rosbag2 MCAP bag); fixed at start-up",
+        choices=("sim", "serial", "bag"),
+        read_only=True,
+    ),
+    ParamSpec(
+        "scenario",
+        DEFAULT_SCENARIO,
+        "backend sim: simulator scenario, a YAML file or the name of one "
+        "shipped in mows/sim/scenarios; fixed at start-up",
+        read_only=True,
+    ),
+    ParamSpec(
+        "theta0_rad",
+        0.0,
+        "backend sim: probe orientation at start-up, rad (cycles turn it)",
+        range=(-2.0 * math.pi, 2.0 * math.pi),
+        read_only=True,
+    ),
+    ParamSpec(
+        "serial_port", "", "backend serial: the device's port, e.g. /dev/ttyACM0; fixed at start-up", read_only=True
+    ),
+    ParamSpec(
+        "baud",
+        DEFAULT_BAUD,
+        "backend serial: baud rate (ignored by USB CDC links), bit/s",
+        range=(9600, 12_000_000),
+        read_only=True,
+    ),
     ParamSpec("bag_path", "", "backend bag: the bag directory to replay; fixed at start-up", read_only=True),
-    ParamSpec("bag_rate", 1.0, "backend bag: replay speed, multiple of real time", range=(0.01, 100.0),
-              read_only=True),
-    ParamSpec("bag_wait_subscribers", 0, "backend bag: start the replay once /mows/raw has this many "
-              "subscribers", range=(0, 100), read_only=True),
-    ParamSpec("record_path", "", "write /mows/raw and /mows/excitation to a new rosbag2 MCAP bag here "
-              "('' records nothing); fixed at start-up", read_only=True),
+    ParamSpec("bag_rate", 1.0, "backend bag: replay speed, multiple of real time", range=(0.01, 100.0), read_only=True),
+    ParamSpec(
+        "bag_wait_subscribers",
+        0,
+        "backend bag: start the replay once /mows/raw has this many subscribers",
+        range=(0, 100),
+        read_only=True,
+    ),
+    ParamSpec(
+        "record_path",
+        "",
+        "write /mows/raw and /mows/excitation to a new rosbag2 MCAP bag here ('' records nothing); fixed at start-up",
+        read_only=True,
+    ),
     ParamSpec("block_duration_s", 0.025, "length of one MagnetometerBlock on /mows/raw, s", range=(0.01, 0.05)),
     ParamSpec("frame_id", "mows_magnetometer", "header.frame_id of the blocks: the magnetometer array"),
-    ParamSpec("sensor_frame_ids", ["fluxgate_near", "fluxgate_far"],
-              "frame of each channel (sensing axis = its x axis), near sensor first"),
+    ParamSpec(
+        "sensor_frame_ids",
+        ["fluxgate_near", "fluxgate_far"],
+        "frame of each channel (sensing axis = its x axis), near sensor first",
+    ),
     ParamSpec("probe_frame_id", "mows_probe", "header.frame_id of the excitation states: the probe"),
-    ParamSpec("coil_current_cap_a", 10.0, "hard limit on the peak current of any excitation coil, A; commands "
-              "above it are refused; fixed at start-up", range=(0.01, 100.0), read_only=True),
-    ParamSpec("supply_current_cap_a", 2.0, "hard limit on the static-field supply's current, A (the paper's "
-              "supply: 2 A); set_field_current above it is refused; fixed at start-up", range=(0.001, 100.0),
-              read_only=True),
-    ParamSpec("supply_slew_a_per_s", 2.0, "backend sim: the supply's current changes no faster than this, A/s "
-              "(a serial device ramps within its own limit); fixed at start-up", range=(0.001, 1000.0),
-              read_only=True),
-    ParamSpec("coil_setup", "largest_spacing", "excitation coil setup whose orientation-dependent current scheme "
-              "drives the coils; fixed at start-up", choices=tuple(PRESETS), read_only=True),
-    ParamSpec("excitation_current_a", 2.0, "base amplitude of the coil current scheme, A (at most "
-              "coil_current_cap_a)", range=(0.0, 100.0)),
-    ParamSpec("initial_frequency_hz", round(float(PAPER_PROBE.f00_hz), 1), "first resonance estimate, Hz (each cycle "
-              "retunes it)", range=(1.0, 2000.0), read_only=True),
+    ParamSpec(
+        "coil_current_cap_a",
+        10.0,
+        "hard limit on the peak current of any excitation coil, A; commands above it are refused; fixed at start-up",
+        range=(0.01, 100.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "supply_current_cap_a",
+        2.0,
+        "hard limit on the static-field supply's current, A (the paper's "
+        "supply: 2 A); set_field_current above it is refused; fixed at start-up",
+        range=(0.001, 100.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "supply_slew_a_per_s",
+        2.0,
+        "backend sim: the supply's current changes no faster than this, A/s "
+        "(a serial device ramps within its own limit); fixed at start-up",
+        range=(0.001, 1000.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "coil_setup",
+        "largest_spacing",
+        "excitation coil setup whose orientation-dependent current scheme drives the coils; fixed at start-up",
+        choices=tuple(PRESETS),
+        read_only=True,
+    ),
+    ParamSpec(
+        "excitation_current_a",
+        2.0,
+        "base amplitude of the coil current scheme, A (at most coil_current_cap_a)",
+        range=(0.0, 100.0),
+    ),
+    ParamSpec(
+        "initial_frequency_hz",
+        round(float(PAPER_PROBE.f00_hz), 1),
+        "first resonance estimate, Hz (each cycle retunes it)",
+        range=(1.0, 2000.0),
+        read_only=True,
+    ),
     ParamSpec("excite_s", 0.5, "coil-on time of one excitation, s", range=(0.01, 10.0)),
     ParamSpec("ringdown_s", 0.5, "recorded free ring-down after each excitation, s", range=(0.05, 10.0)),
     ParamSpec("gap_s", 1.0, "pause between a ring-down and the next excitation, s", range=(0.0, 600.0)),
@@ -62,8 +124,17 @@ PARAMETERS = (
     ParamSpec("max_duty_cycle", 0.5, "largest share of any duty_window_s with the coils on", range=(0.01, 1.0)),
     ParamSpec("duty_window_s", 10.0, "window of the duty-cycle limit, s", range=(1.0, 3600.0)),
 )
-CYCLE_PARAMETERS = ("excitation_current_a", "excite_s", "ringdown_s", "gap_s", "repeats", "tuning_steps",
-                    "settle_s", "max_duty_cycle", "duty_window_s")
+CYCLE_PARAMETERS = (
+    "excitation_current_a",
+    "excite_s",
+    "ringdown_s",
+    "gap_s",
+    "repeats",
+    "tuning_steps",
+    "settle_s",
+    "max_duty_cycle",
+    "duty_window_s",
+)
 
 
 def cycle_settings(values: dict) -> CycleSettings:
@@ -72,16 +143,19 @@ def cycle_settings(values: dict) -> CycleSettings:
 
 def session_config(values: dict, cap: CurrentCap) -> SessionConfig:
     setup = PRESETS[values["coil_setup"]](current_limit_a=cap.limit_a)
-    return SessionConfig(values["block_duration_s"], cycle_settings(values), setup, cap, values["initial_frequency_hz"],
-                         fit_ringdown)
+    return SessionConfig(
+        values["block_duration_s"], cycle_settings(values), setup, cap, values["initial_frequency_hz"], fit_ringdown
+    )
 
 
 def current_problem(values: dict) -> str | None:
     """Why the excitation current is refused (it is above the cap), or None."""
     if values["excitation_current_a"] <= values["coil_current_cap_a"]:
         return None
-    return (f"excitation_current_a={values['excitation_current_a']!r} exceeds "
-            f"coil_current_cap_a={values['coil_current_cap_a']!r}")
+    return (
+        f"excitation_current_a={values['excitation_current_a']!r} exceeds "
+        f"coil_current_cap_a={values['coil_current_cap_a']!r}"
+    )
 
 
 def make_backend(values: dict, cap: CurrentCap):
@@ -90,13 +164,19 @@ def make_backend(values: dict, cap: CurrentCap):
     if backend == "sim":
         scenario = load_scenario(values["scenario"])
         if scenario.setup.name != values["coil_setup"]:
-            raise ValueError(f"coil_setup={values['coil_setup']!r} does not drive the coils of scenario "
-                             f"{values['scenario']!r} ({scenario.setup.name})")
+            raise ValueError(
+                f"coil_setup={values['coil_setup']!r} does not drive the coils of scenario "
+                f"{values['scenario']!r} ({scenario.setup.name})"
+            )
         scenario = scenario.replace(pose=scenario.pose.with_theta0(values["theta0_rad"]))
         # Simulated in pieces of one block: blocks come out evenly, at the least cost per sample.
-        return SimBackend(SimulatedDevice(scenario), cap, chunk_s=values["block_duration_s"],
-                          supply_cap_a=values["supply_current_cap_a"],
-                          supply_slew_a_per_s=values["supply_slew_a_per_s"])
+        return SimBackend(
+            SimulatedDevice(scenario),
+            cap,
+            chunk_s=values["block_duration_s"],
+            supply_cap_a=values["supply_current_cap_a"],
+            supply_slew_a_per_s=values["supply_slew_a_per_s"],
+        )
     if backend == "serial":
         if not values["serial_port"]:
             raise ValueError("serial_port='' : backend serial needs the device's port")
@@ -104,8 +184,6 @@ def make_backend(values: dict, cap: CurrentCap):
     if not values["bag_path"]:
         raise ValueError("bag_path='' : backend bag needs the bag to replay")
     return BagBackend(values["bag_path"], values["bag_rate"])
-
-
 
 
 def settings_problem(values: dict) -> str | None:
@@ -123,5 +201,7 @@ def supply_problem(current_a: float, values: dict) -> str | None:
     """Why a supply current is refused (not finite, or above the cap), or None."""
     if math.isfinite(current_a) and abs(current_a) <= values["supply_current_cap_a"]:
         return None
-    return (f"supply current {current_a!r} A refused: above supply_current_cap_a = "
-            f"{values['supply_current_cap_a']} A (never clipped)")
+    return (
+        f"supply current {current_a!r} A refused: above supply_current_cap_a = "
+        f"{values['supply_current_cap_a']} A (never clipped)"
+    )

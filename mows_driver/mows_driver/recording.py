@@ -28,9 +28,17 @@ UNSET = QosTime(0, 0)  # rosbag2's "default" for deadline, lifespan and lease du
 
 def bag_qos(profile: QoSProfile) -> Qos:
     """The rosbags form of an rclpy QoS profile (both use rmw's enum numbers)."""
-    return Qos(QosHistory(int(profile.history)), profile.depth, QosReliability(int(profile.reliability)),
-               QosDurability(int(profile.durability)), UNSET, UNSET, QosLiveliness(int(profile.liveliness)),
-               UNSET, False)
+    return Qos(
+        QosHistory(int(profile.history)),
+        profile.depth,
+        QosReliability(int(profile.reliability)),
+        QosDurability(int(profile.durability)),
+        UNSET,
+        UNSET,
+        QosLiveliness(int(profile.liveliness)),
+        UNSET,
+        False,
+    )
 
 
 class BagRecorder:
@@ -39,8 +47,9 @@ class BagRecorder:
     thread, then its shutdown)."""
 
     def __init__(self, path: str, topics: dict[str, tuple[str, QoSProfile]]):
-        self._recording = bags.Recording(path, {topic: (msgtype, [bag_qos(qos)])
-                                                for topic, (msgtype, qos) in topics.items()})
+        self._recording = bags.Recording(
+            path, {topic: (msgtype, [bag_qos(qos)]) for topic, (msgtype, qos) in topics.items()}
+        )
         self.path = self._recording.path
 
     @property
@@ -58,8 +67,9 @@ def open_recorder(path: str, publishers: list) -> BagRecorder | None:
     """A new bag at ``path`` of what ``publishers`` [(publisher, its QoS)] publish; None for ''."""
     if not path:
         return None
-    return BagRecorder(path, {publisher.topic_name: (message_type(publisher.msg_type), qos)
-                              for publisher, qos in publishers})
+    return BagRecorder(
+        path, {publisher.topic_name: (message_type(publisher.msg_type), qos) for publisher, qos in publishers}
+    )
 
 
 def message_type(cls) -> str:

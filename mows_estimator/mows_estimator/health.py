@@ -1,4 +1,5 @@
 """What the estimator says on /diagnostics: its fits by status, its latency, the stream's gaps."""
+
 import collections
 import math
 
@@ -8,7 +9,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from mows.estimate.segments import SegmentAssembler
 from mows_ros.diagnostics import Health
 
-LATENCY_WINDOW = 500   # fits over which the latency percentiles are taken
+LATENCY_WINDOW = 500  # fits over which the latency percentiles are taken
 
 
 class FitTally:
@@ -31,9 +32,19 @@ class FitTally:
         failed = sum(v for k, v in self._counts.items() if k != "OK")
         missing = assembler.missing_samples
         level = DiagnosticStatus.OK if not (failed or missing) else DiagnosticStatus.WARN
-        return Health(level, last, {
-            "fits_ok": self._counts["OK"], "fits_failed": failed,
-            **{f"status_{k}": v for k, v in self._counts.items() if k != "OK"},
-            "latency_p50_ms": float(np.percentile(latency, 50)), "latency_p99_ms": float(np.percentile(latency, 99)),
-            "missing_samples": missing, "late_windows": assembler.late_windows,
-            "blocks": assembler.blocks, "f00_hz": f00_hz, "f00_std_hz": f00_std_hz})
+        return Health(
+            level,
+            last,
+            {
+                "fits_ok": self._counts["OK"],
+                "fits_failed": failed,
+                **{f"status_{k}": v for k, v in self._counts.items() if k != "OK"},
+                "latency_p50_ms": float(np.percentile(latency, 50)),
+                "latency_p99_ms": float(np.percentile(latency, 99)),
+                "missing_samples": missing,
+                "late_windows": assembler.late_windows,
+                "blocks": assembler.blocks,
+                "f00_hz": f00_hz,
+                "f00_std_hz": f00_std_hz,
+            },
+        )

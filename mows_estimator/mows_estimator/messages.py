@@ -1,4 +1,5 @@
 """Translation between mows_msgs and the dataclasses of ``mows`` (no logic of its own)."""
+
 import math
 
 import numpy as np
@@ -18,8 +19,20 @@ def fit_to_msg(fit: Fit, window: RingdownWindow, frame_id: str, shift_hz: float,
     msg.cycle_id, msg.repeat_index, msg.tuning = window.cycle_id, window.repeat_index, window.tuning
     msg.status, msg.status_name, msg.message = int(fit.status), fit.status.name, fit.message
     msg.theta0_rad, msg.theta0_free = fit.theta0_rad, fit.theta0_free
-    for name in ("frequency_hz", "frequency_std_hz", "frequency_crb_hz", "damping_per_s", "amplitude_rad",
-                 "phase_rad", "kappa_t", "offset_t", "chi2_dof", "r_squared", "snr_db", "duration_s"):
+    for name in (
+        "frequency_hz",
+        "frequency_std_hz",
+        "frequency_crb_hz",
+        "damping_per_s",
+        "amplitude_rad",
+        "phase_rad",
+        "kappa_t",
+        "offset_t",
+        "chi2_dof",
+        "r_squared",
+        "snr_db",
+        "duration_s",
+    ):
         setattr(msg, name, float(getattr(fit, name)))
     msg.frequency_shift_hz, msg.frequency_shift_std_hz = float(shift_hz), float(shift_std_hz)
     msg.n_samples = int(fit.n_samples)
@@ -31,8 +44,15 @@ def fit_to_msg(fit: Fit, window: RingdownWindow, frame_id: str, shift_hz: float,
 def estimate_to_msg(estimate: AxisEstimate, header, window: RingdownWindow) -> FieldEstimate:
     msg = FieldEstimate(header=header, cycle_id=window.cycle_id, repeat_index=window.repeat_index)
     msg.status, msg.message = int(estimate.status), estimate.message
-    for name in ("theta0_rad", "frequency_shift_hz", "frequency_shift_std_hz", "field_along_axis_t",
-                 "field_along_axis_std_t", "gradient_equivalent_t_per_m", "gradient_equivalent_std_t_per_m"):
+    for name in (
+        "theta0_rad",
+        "frequency_shift_hz",
+        "frequency_shift_std_hz",
+        "field_along_axis_t",
+        "field_along_axis_std_t",
+        "gradient_equivalent_t_per_m",
+        "gradient_equivalent_std_t_per_m",
+    ):
         setattr(msg, name, float(getattr(estimate, name)))
     msg.assumptions = estimate.assumptions
     return msg
@@ -46,6 +66,6 @@ def magnetic_field_msg(estimate: AxisEstimate, header) -> MagneticField:
     msg.magnetic_field.y = math.nan
     msg.magnetic_field.z = math.nan
     covariance = [0.0] * 9
-    covariance[0] = estimate.field_along_axis_std_t ** 2
+    covariance[0] = estimate.field_along_axis_std_t**2
     msg.magnetic_field_covariance = covariance
     return msg

@@ -8,6 +8,7 @@ QoS) and ``/mows/excitation`` (ExcitationState). Publishes, per recorded ring-do
 ``/mows/estimator/calibrate`` (Calibrate) sets f00 from the next ring-downs in a known field.
 The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` and ``mows.estimate.axis``.
 """
+
 import time
 
 from mows_msgs.msg import ExcitationState, FieldEstimate, MagnetometerBlock, RingdownFit
@@ -60,8 +61,9 @@ class EstimatorNode(MowsNode):
         # A group of its own, reentrant: an awaiting calibration holds its group until it
         # returns. In the default group it would stop the stream that brings its ring-downs; in
         # a mutually exclusive one a second request would wait instead of being refused.
-        self.create_service(Calibrate, "mows/estimator/calibrate", self._on_calibrate,
-                            callback_group=ReentrantCallbackGroup())
+        self.create_service(
+            Calibrate, "mows/estimator/calibrate", self._on_calibrate, callback_group=ReentrantCallbackGroup()
+        )
 
     # --- parameters -------------------------------------------------------------------------
     def _param(self, name):
@@ -92,7 +94,7 @@ class EstimatorNode(MowsNode):
         arrived = time.monotonic()
         try:
             block = block_from_message(msg)
-        except ValueError as error:           # not samples a device could have sent: nothing usable
+        except ValueError as error:  # not samples a device could have sent: nothing usable
             self._tally.count("malformed_blocks")
             self.get_logger().warn(f"malformed MagnetometerBlock {msg.sequence}: {error}")
             return
@@ -102,9 +104,10 @@ class EstimatorNode(MowsNode):
     def _process(self, segment, arrived: float):
         try:
             options = fit_options(parameter_values(self, PARAMETERS), self.probe(), segment.window.theta0_rad)
-        except ValueError as error:      # e.g. a sensing axis of (0, 0): no model to fit
-            fit = failure(FitStatus.BAD_FIT, f"cannot build the signal model: {error}",
-                          theta0_rad=segment.window.theta0_rad)
+        except ValueError as error:  # e.g. a sensing axis of (0, 0): no model to fit
+            fit = failure(
+                FitStatus.BAD_FIT, f"cannot build the signal model: {error}", theta0_rad=segment.window.theta0_rad
+            )
         else:
             fit = fit_segment(segment, options, self._param("settle_s"), self.probe().damping_per_s)
         f00, f00_std = self.f00()
@@ -119,8 +122,9 @@ class EstimatorNode(MowsNode):
         self._tally.add(fit.status.name, 1e3 * (time.monotonic() - arrived))
         self._last = fit.report()
         if not fit.ok:
-            self.get_logger().warn(f"cycle {segment.window.cycle_id} repeat {segment.window.repeat_index}: "
-                                   f"{fit.report()}")
+            self.get_logger().warn(
+                f"cycle {segment.window.cycle_id} repeat {segment.window.repeat_index}: {fit.report()}"
+            )
 
     # --- calibration ------------------------------------------------------------------------
     def _offer_to_calibration(self, frequency_hz: float, std_hz: float):
@@ -130,8 +134,9 @@ class EstimatorNode(MowsNode):
     async def _on_calibrate(self, request: Calibrate.Request, response: Calibrate.Response):
         """f00 from the next ring-downs (:class:`mows.estimate.calibration.F00Calibration`)."""
         try:
-            calibration = F00Calibration(self.probe(), request.reference_field_t, request.n_ringdowns,
-                                         request.timeout_s)
+            calibration = F00Calibration(
+                self.probe(), request.reference_field_t, request.n_ringdowns, request.timeout_s
+            )
         except ValueError as error:
             response.success, response.message = False, str(error)
             return response
@@ -150,9 +155,12 @@ class EstimatorNode(MowsNode):
             response.f00_hz, response.f00_std_hz = outcome.f00_hz, outcome.f00_std_hz
             # Out-of-range values (an f00 uncertainty above 10 Hz says the ring-downs were not of
             # one probe in one field) are refused by the parameters' ranges, with the reason.
-            result = self.set_parameters_atomically([
-                Parameter("f00_hz", Parameter.Type.DOUBLE, outcome.f00_hz),
-                Parameter("f00_std_hz", Parameter.Type.DOUBLE, outcome.f00_std_hz)])
+            result = self.set_parameters_atomically(
+                [
+                    Parameter("f00_hz", Parameter.Type.DOUBLE, outcome.f00_hz),
+                    Parameter("f00_std_hz", Parameter.Type.DOUBLE, outcome.f00_std_hz),
+                ]
+            )
             response.success, response.message = result.successful, result.reason or outcome.message
         return response
 

@@ -1,4 +1,5 @@
 """The estimator's parameter table and the fit options it makes of the parameters."""
+
 from mows.estimate.ringdown import SETTLE_S, FitOptions
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import Probe
@@ -7,25 +8,36 @@ from mows_ros.probe import PROBE_FILE
 
 PARAMETERS = (
     PROBE_FILE,
-    ParamSpec("f00_hz", 0.0, "calibrated zero-field frequency f00, Hz; 0: the probe file's f00",
-              range=(0.0, 10_000.0)),
+    ParamSpec("f00_hz", 0.0, "calibrated zero-field frequency f00, Hz; 0: the probe file's f00", range=(0.0, 10_000.0)),
     ParamSpec("f00_std_hz", 0.0, "standard uncertainty of f00, Hz", range=(0.0, 10.0)),
-    ParamSpec("channels", "difference", "what to fit: the sensor difference, both, or one channel",
-              choices=("difference", "both", "channel1", "channel2")),
-    ParamSpec("sensor_axis_a", 0.0, "sensing axis (a, b) in the rotation plane, Eq. S11 (paper: 0, 1)",
-              range=(-1.0, 1.0)),
+    ParamSpec(
+        "channels",
+        "difference",
+        "what to fit: the sensor difference, both, or one channel",
+        choices=("difference", "both", "channel1", "channel2"),
+    ),
+    ParamSpec(
+        "sensor_axis_a", 0.0, "sensing axis (a, b) in the rotation plane, Eq. S11 (paper: 0, 1)", range=(-1.0, 1.0)
+    ),
     ParamSpec("sensor_axis_b", 1.0, "see sensor_axis_a", range=(-1.0, 1.0)),
     ParamSpec("theta0_free", False, "fit θ0 instead of taking the commanded orientation (paper's signal model only)"),
-    ParamSpec("lever_aware", True, "fit the exact pickup of the magnet swinging on its lever "
-              "(mows.physics.fluxgate.pickup_harmonics) instead of Eq. S11's magnet turning in place"),
-    ParamSpec("sensor_distance_m", PAPER_DISTANCE_M, "distance from the probe to the near fluxgate, along the "
-              "rotation plane's x axis, m", range=(0.005, 2.0)),
+    ParamSpec(
+        "lever_aware",
+        True,
+        "fit the exact pickup of the magnet swinging on its lever "
+        "(mows.physics.fluxgate.pickup_harmonics) instead of Eq. S11's magnet turning in place",
+    ),
+    ParamSpec(
+        "sensor_distance_m",
+        PAPER_DISTANCE_M,
+        "distance from the probe to the near fluxgate, along the rotation plane's x axis, m",
+        range=(0.005, 2.0),
+    ),
     ParamSpec("sensor_spacing_m", PAPER_SPACING_M, "spacing of the two fluxgates, m", range=(0.001, 2.0)),
     ParamSpec("settle_s", SETTLE_S, "samples right after coil-off that are skipped, s", range=(0.0, 0.1)),
     ParamSpec("min_periods", 10.0, "shortest usable ring-down, in periods", range=(2.0, 1000.0)),
     ParamSpec("max_chi2_dof", 25.0, "above this χ²/dof a fit is refused (BAD_FIT)", range=(1.0, 1e6)),
-    ParamSpec("buffer_s", 5.0, "seconds of raw samples kept to assemble ring-downs", range=(0.5, 60.0),
-              read_only=True),
+    ParamSpec("buffer_s", 5.0, "seconds of raw samples kept to assemble ring-downs", range=(0.5, 60.0), read_only=True),
     ParamSpec("fit_tuning_ringdowns", False, "also fit the driver's frequency-tuning ring-downs"),
     ParamSpec("probe_frame_id", "mows_probe", "frame of the probe (x' along the moment at rest)"),
 )
@@ -38,7 +50,8 @@ def fit_options(values: dict, probe: Probe, theta0_rad: float) -> FitOptions:
     channels = values["channels"]
     common = dict(sensor_direction=direction, min_periods=values["min_periods"], max_chi2_dof=values["max_chi2_dof"])
     if values["lever_aware"] and not values["theta0_free"] and channels != "both":
-        pair = FluxgatePair.paper(distance_m=values["sensor_distance_m"], spacing_m=values["sensor_spacing_m"],
-                                  axis=(*direction, 0.0))
+        pair = FluxgatePair.paper(
+            distance_m=values["sensor_distance_m"], spacing_m=values["sensor_spacing_m"], axis=(*direction, 0.0)
+        )
         return FitOptions.lever_aware(pair, probe, theta0_rad, channels, **common)
     return FitOptions(channels=channels, theta0_free=values["theta0_free"], **common)

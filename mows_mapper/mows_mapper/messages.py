@@ -12,8 +12,9 @@ from mows.sweep.runner import SweepFeedback, SweepFit, SweepMap
 def sweep_point(fit: RingdownFit) -> SweepPoint:
     """A successful RingdownFit as a point of the sweep, with σ of θmax from its covariance."""
     stamp_ns = stamps.nanoseconds(fit.header.stamp)
-    return SweepPoint.from_fit(fit, fit.frequency_shift_hz, fit.frequency_shift_std_hz, stamp_ns / stamps.NS_PER_S,
-                               stamp_ns)
+    return SweepPoint.from_fit(
+        fit, fit.frequency_shift_hz, fit.frequency_shift_std_hz, stamp_ns / stamps.NS_PER_S, stamp_ns
+    )
 
 
 def sweep_fit(fit: RingdownFit) -> SweepFit:
@@ -22,16 +23,20 @@ def sweep_fit(fit: RingdownFit) -> SweepFit:
 
 
 def feedback_msg(feedback: SweepFeedback) -> RotationSweep.Feedback:
-    return RotationSweep.Feedback(angle_index=feedback.angle_index, n_angles=feedback.n_angles,
-                                  theta0_rad=float(feedback.theta0_rad), frequency_shift_hz=feedback.shift_hz,
-                                  frequency_shift_std_hz=feedback.shift_std_hz, n_ok=feedback.n_ok,
-                                  fits=list(feedback.fits))
+    return RotationSweep.Feedback(
+        angle_index=feedback.angle_index,
+        n_angles=feedback.n_angles,
+        theta0_rad=float(feedback.theta0_rad),
+        frequency_shift_hz=feedback.shift_hz,
+        frequency_shift_std_hz=feedback.shift_std_hz,
+        n_ok=feedback.n_ok,
+        fits=list(feedback.fits),
+    )
 
 
 def decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
     d, record = sweep.decomposition, sweep.record
-    msg = SweepDecomposition(sweep_id=sweep.sweep_id, model=d.model, message=d.message,
-                             status=int(d.status))
+    msg = SweepDecomposition(sweep_id=sweep.sweep_id, model=d.model, message=d.message, status=int(d.status))
     msg.header.frame_id = frame_id
     stamps.set_nanoseconds(msg.header.stamp, max(p.stamp_ns for p in record.points))
     msg.field_t = d.field_t.tolist()
@@ -57,13 +62,29 @@ def failed_decomposition_msg(message: str) -> SweepDecomposition:
 
 def model_report_msg(report, header, sweep_id: int) -> ModelReport:
     return ModelReport(
-        header=header, sweep_id=sweep_id, model=report.model, effects=list(report.effects), n=report.n,
-        chi2_dof=report.chi2_dof, bic=report.bic, cv_rms_hz=report.cv_rms_hz, verdict=report.verdict,
+        header=header,
+        sweep_id=sweep_id,
+        model=report.model,
+        effects=list(report.effects),
+        n=report.n,
+        chi2_dof=report.chi2_dof,
+        bic=report.bic,
+        cv_rms_hz=report.cv_rms_hz,
+        verdict=report.verdict,
         structure=report.structure,
-        candidates=[CandidateEffect(effect=c.label, explanation=c.effect.explanation, delta_bic=c.delta_bic,
-                                    p_value=c.p_value, chi2_dof_after=c.chi2_dof_after,
-                                    parameter_names=[p[0] for p in c.parameters],
-                                    parameter_values=[p[1] for p in c.parameters],
-                                    parameter_std=[p[2] for p in c.parameters],
-                                    parameter_units=[p[3] for p in c.parameters], group=c.group)
-                    for c in report.candidates])
+        candidates=[
+            CandidateEffect(
+                effect=c.label,
+                explanation=c.effect.explanation,
+                delta_bic=c.delta_bic,
+                p_value=c.p_value,
+                chi2_dof_after=c.chi2_dof_after,
+                parameter_names=[p[0] for p in c.parameters],
+                parameter_values=[p[1] for p in c.parameters],
+                parameter_std=[p[2] for p in c.parameters],
+                parameter_units=[p[3] for p in c.parameters],
+                group=c.group,
+            )
+            for c in report.candidates
+        ],
+    )

@@ -14,6 +14,7 @@ Everything runs on one thread: the action awaits the driver, the fits and the CP
 decomposition and lab (in a worker thread) as a coroutine, so fits, cancels and
 diagnostics are served meanwhile.
 """
+
 from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
@@ -48,7 +49,7 @@ from mows_ros.process import run_node
 from mows_ros.qos import MAP_QOS, RESULT_QOS
 
 NODE_NAME = "mapper"
-SERVICE_WAIT_S = 5.0   # longest wait for the driver's run_cycle service to appear
+SERVICE_WAIT_S = 5.0  # longest wait for the driver's run_cycle service to appear
 
 
 class MapperNode(MowsNode):
@@ -61,8 +62,15 @@ class MapperNode(MowsNode):
         self._cycle = self.create_client(RunCycle, "mows/driver/run_cycle", callback_group=group)
         self._sweep_pub = self.create_publisher(SweepDecomposition, "mows/sweep", MAP_QOS)
         self._report_pub = self.create_publisher(ModelReport, "mows/model_report", MAP_QOS)
-        self._server = ActionServer(self, RotationSweep, "mows/mapper/rotation_sweep", self._execute,
-                                    goal_callback=self._accept, cancel_callback=self._cancel, callback_group=group)
+        self._server = ActionServer(
+            self,
+            RotationSweep,
+            "mows/mapper/rotation_sweep",
+            self._execute,
+            goal_callback=self._accept,
+            cancel_callback=self._cancel,
+            callback_group=group,
+        )
 
     def _param(self, name):
         return self.get_parameter(name).value
@@ -76,9 +84,12 @@ class MapperNode(MowsNode):
             self._fits_due.set_result(step)
 
     def _accept(self, goal) -> GoalResponse:
-        try:   # one sweep at a time: the runner is busy from here, not from when the sweep starts
-            self._runner.start(SweepGoal(tuple(goal.theta0_rad), goal.repeats_per_angle, goal.model, target_of(goal)),
-                               sweep_settings(parameter_values(self, PARAMETERS)), probe_of(self._param("probe_file")))
+        try:  # one sweep at a time: the runner is busy from here, not from when the sweep starts
+            self._runner.start(
+                SweepGoal(tuple(goal.theta0_rad), goal.repeats_per_angle, goal.model, target_of(goal)),
+                sweep_settings(parameter_values(self, PARAMETERS)),
+                probe_of(self._param("probe_file")),
+            )
         except ValueError as refused:
             self.get_logger().warn(f"sweep goal refused: {refused}")
             return GoalResponse.REJECT
@@ -97,11 +108,14 @@ class MapperNode(MowsNode):
                     goal_handle.publish_feedback(feedback_msg(step.feedback))
                 step = await self._advance(step)
             outcome = step.finished
-            decomposition = (decomposition_msg(outcome.map, self._param("frame_id")) if outcome.map is not None
-                             else failed_decomposition_msg(outcome.message))
+            decomposition = (
+                decomposition_msg(outcome.map, self._param("frame_id"))
+                if outcome.map is not None
+                else failed_decomposition_msg(outcome.message)
+            )
             if step.publish is not None:
                 await self._publish(step.publish, decomposition)
-        finally:   # an exception must not leave the runner busy for good
+        finally:  # an exception must not leave the runner busy for good
             self._runner.abandon("the sweep ended unexpectedly (see the log)")
         if outcome.cancelled:
             goal_handle.canceled()
@@ -122,8 +136,9 @@ class MapperNode(MowsNode):
     async def _run_cycle(self, call: CycleCall) -> CycleAnswer:
         if not await until(self, self._cycle.service_is_ready, SERVICE_WAIT_S):
             return CycleAnswer(problem="the driver's run_cycle service is not available")
-        future = self._cycle.call_async(RunCycle.Request(theta0_rad=float(call.theta0_rad), repeats=int(call.repeats),
-                                                         tuning_steps=-1, gap_s=-1.0))
+        future = self._cycle.call_async(
+            RunCycle.Request(theta0_rad=float(call.theta0_rad), repeats=int(call.repeats), tuning_steps=-1, gap_s=-1.0)
+        )
         response = future.result() if await within(self, future, self._param("cycle_timeout_s")) else None
         if response is None or not response.success:
             return CycleAnswer(problem=f"cycle failed: {response.message if response else 'no answer from the driver'}")
@@ -148,14 +163,15 @@ class MapperNode(MowsNode):
             try:
                 table = from_sweep(sweep.record, reference, probe, sweep.decomposition)
                 report = await in_worker(self, analyse, table, probe, auto=self._param("lab_auto"))
-            except ValueError as error:     # a table the lab cannot use is reported, not fatal
+            except ValueError as error:  # a table the lab cannot use is reported, not fatal
                 self.get_logger().warn(f"model lab: {error}")
             else:
                 self._report_pub.publish(model_report_msg(report, msg.header, sweep.sweep_id))
 
     def health(self) -> Health:
-        return Health(DiagnosticStatus.OK, self._runner.last, {"state": self._runner.state,
-                                                               "sweeps": self._runner.sweeps})
+        return Health(
+            DiagnosticStatus.OK, self._runner.last, {"state": self._runner.state, "sweeps": self._runner.sweeps}
+        )
 
 
 def main(args: list[str] | None = None) -> int:

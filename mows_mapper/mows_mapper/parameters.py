@@ -1,4 +1,5 @@
 """The mapper's parameter table and the sweep settings it gives the core."""
+
 import math
 
 from mows.lab import reference_at
@@ -27,20 +28,30 @@ PARAMETERS = (
     PROBE_FILE,
     ParamSpec("cycle_timeout_s", 300.0, "longest wait for the driver's cycle, s", range=(1.0, 3600.0)),
     ParamSpec("fit_timeout_s", 10.0, "longest wait for the fits of a finished cycle, s", range=(0.1, 600.0)),
-    ParamSpec("reference_scenario", "", "scenario whose field at the probe is the lab's reference "
-              "(shipped name or YAML); empty: no model report", check=reference_problem),
+    ParamSpec(
+        "reference_scenario",
+        "",
+        "scenario whose field at the probe is the lab's reference (shipped name or YAML); empty: no model report",
+        check=reference_problem,
+    ),
     ParamSpec("lab_auto", True, "let the lab add effects while the evidence is strong"),
     ParamSpec("frame_id", "mows_rotation_plane", "frame of the sweep: x = e1, y = e2 of the rotation plane"),
-    ParamSpec("repeat_s", 0.82, "adaptive sweeps: device time of one ring-down with its kick and gap, s",
-              range=(0.01, 60.0)),
-    ParamSpec("turn_s", 0.5, "adaptive sweeps: device time to turn the probe and let it settle, s",
-              range=(0.0, 60.0)),
+    ParamSpec(
+        "repeat_s", 0.82, "adaptive sweeps: device time of one ring-down with its kick and gap, s", range=(0.01, 60.0)
+    ),
+    ParamSpec("turn_s", 0.5, "adaptive sweeps: device time to turn the probe and let it settle, s", range=(0.0, 60.0)),
 )
 
 
 def sweep_settings(values: dict) -> SweepSettings:
-    return SweepSettings(values["repeats_per_angle"], values["angle_step_deg"], values["model"], values["f00_free"],
-                         values["repeat_s"], values["turn_s"])
+    return SweepSettings(
+        values["repeats_per_angle"],
+        values["angle_step_deg"],
+        values["model"],
+        values["f00_free"],
+        values["repeat_s"],
+        values["turn_s"],
+    )
 
 
 def target_of(goal) -> PrecisionGoal | None:
@@ -49,6 +60,9 @@ def target_of(goal) -> PrecisionGoal | None:
     if not goal.target:
         return None
     defaults = PrecisionGoal()
-    return PrecisionGoal(goal.target, goal.target_field_std_t or defaults.field_std_t,
-                         goal.target_gradient_std_t_per_m or defaults.gradient_std_t_per_m,
-                         goal.budget_s or math.inf)
+    return PrecisionGoal(
+        goal.target,
+        goal.target_field_std_t or defaults.field_std_t,
+        goal.target_gradient_std_t_per_m or defaults.gradient_std_t_per_m,
+        goal.budget_s or math.inf,
+    )

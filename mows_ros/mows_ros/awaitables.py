@@ -3,6 +3,7 @@ future with a time limit, a condition polled until a deadline, a CPU-bound funct
 in a worker thread, and a result another thread delivers. Each resumes the coroutine at the
 executor's next turn; none blocks the thread that serves the node's other callbacks.
 """
+
 import threading
 import time
 from collections.abc import Callable
@@ -10,7 +11,7 @@ from collections.abc import Callable
 from rclpy.node import Node
 from rclpy.task import Future
 
-POLL_S = 0.05   # how often ``until`` looks at its condition
+POLL_S = 0.05  # how often ``until`` looks at its condition
 
 
 def _settle(future: Future, value) -> None:
@@ -62,8 +63,9 @@ def completer(node: Node, future: Future) -> Callable[[object], None]:
             future.set_exception(value)
         else:
             future.set_result(value)
-        if node.context.ok():   # at shutdown nobody is waiting
-            executor.wake()     # the awaiting coroutine resumes at the executor's next turn
+        if node.context.ok():  # at shutdown nobody is waiting
+            executor.wake()  # the awaiting coroutine resumes at the executor's next turn
+
     return complete
 
 
@@ -75,7 +77,7 @@ async def in_worker(node: Node, function: Callable, *args, **kwargs):
     def work() -> None:
         try:
             complete(function(*args, **kwargs))
-        except Exception as error:   # raised again where the result is awaited
+        except Exception as error:  # raised again where the result is awaited
             complete(error)
 
     threading.Thread(target=work, name=f"{node.get_name()}-worker", daemon=True).start()

@@ -1,5 +1,6 @@
 """A node's state on /diagnostics, once a second, in the diagnostic_msgs form that
 diagnostic aggregators and ``ros2 topic echo /diagnostics`` read."""
+
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
@@ -30,9 +31,7 @@ class DiagnosticsPublisher:
     def __init__(self, node: Node, health: Callable[[], Health], period_s: float = 1.0):
         self._node = node
         self._health = health
-        self._publisher = node.create_publisher(
-            DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_DEPTH
-        )
+        self._publisher = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_DEPTH)
         self._timer = node.create_timer(period_s, self.publish)
 
     def publish(self) -> None:

@@ -1,4 +1,5 @@
 """The base of every MOWS node: its parameter table declared, its health on /diagnostics."""
+
 from collections.abc import Sequence
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -21,10 +22,7 @@ class MowsNode(Node):
         self.parameter_table = tuple(table)
         declare_parameters(self, self.parameter_table)
         self.diagnostics = DiagnosticsPublisher(self, self.health)
-        self.get_logger().info(
-            "up: "
-            + ", ".join(f"{k}={v!r}" for k, v in parameter_values(self, table).items())
-        )
+        self.get_logger().info("up: " + ", ".join(f"{k}={v!r}" for k, v in parameter_values(self, table).items()))
 
     def health(self) -> Health:
         return Health(

@@ -8,6 +8,7 @@ or a parameter file) that the table does not have stops it at start-up with the 
 name (:class:`UnknownParameterError`): rclpy, with ``allow_undeclared_parameters`` off, keeps
 such an override unused and silent, and the node would run on its default.
 """
+
 import difflib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -43,9 +44,7 @@ class ParamSpec:
     check: Callable[[Value], str | None] | None = None  # why a value is refused, beyond range and choices
 
     def descriptor(self) -> ParameterDescriptor:
-        descriptor = ParameterDescriptor(
-            name=self.name, description=self.description, read_only=self.read_only
-        )
+        descriptor = ParameterDescriptor(name=self.name, description=self.description, read_only=self.read_only)
         if self.choices:
             descriptor.additional_constraints = "one of: " + ", ".join(self.choices)
         if self.range is not None:
@@ -53,9 +52,7 @@ class ParamSpec:
             if isinstance(self.default, int):
                 descriptor.integer_range = [IntegerRange(from_value=low, to_value=high, step=0)]
             else:
-                descriptor.floating_point_range = [
-                    FloatingPointRange(from_value=low, to_value=high, step=0.0)
-                ]
+                descriptor.floating_point_range = [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
         return descriptor
 
     def problem(self, value: Value) -> str | None:
@@ -78,8 +75,7 @@ def declare_parameters(node: Node, table: Sequence[ParamSpec]) -> None:
         problems = [
             problem
             for parameter in parameters
-            if parameter.name in specs
-            and (problem := specs[parameter.name].problem(parameter.value)) is not None
+            if parameter.name in specs and (problem := specs[parameter.name].problem(parameter.value)) is not None
         ]
         return SetParametersResult(successful=not problems, reason="; ".join(problems))
 
@@ -98,8 +94,9 @@ def refuse_unknown_overrides(node: Node, table: Sequence[ParamSpec]) -> None:
             continue
         nearest = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
         hint = f"did you mean {nearest[0]}?" if nearest else f"this node's parameters: {', '.join(known)}"
-        raise UnknownParameterError(f"{node.get_name()}: unknown parameter {name!r} (from -p or a parameter "
-                                    f"file): {hint}")
+        raise UnknownParameterError(
+            f"{node.get_name()}: unknown parameter {name!r} (from -p or a parameter file): {hint}"
+        )
 
 
 def parameter_values(node: Node, table: Sequence[ParamSpec]) -> dict[str, Value]:

@@ -5,12 +5,13 @@ The file is read when the parameter is set, so that a missing or malformed file 
 with its reason by ``ros2 param set`` (or stops the node at start-up) instead of failing in
 the middle of a fit; setting the same path again reads it again.
 """
+
 import yaml
 
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows_ros.params import ParamSpec
 
-_READ = {"": PAPER_PROBE}   # by path, as last read when the parameter was set
+_READ = {"": PAPER_PROBE}  # by path, as last read when the parameter was set
 
 
 def probe_file_problem(path: str) -> str | None:
@@ -26,6 +27,9 @@ def probe_of(path: str) -> Probe:
     return _READ[path]
 
 
-PROBE_FILE = ParamSpec("probe_file", "",
-                       "probe constants YAML (mows.physics.probe.Probe.from_yaml); empty: the paper's probe",
-                       check=probe_file_problem)
+PROBE_FILE = ParamSpec(
+    "probe_file",
+    "",
+    "probe constants YAML (mows.physics.probe.Probe.from_yaml); empty: the paper's probe",
+    check=probe_file_problem,
+)

@@ -1,4 +1,5 @@
 """Run one node as a process: spin until SIGINT or SIGTERM, then leave cleanly (exit 0)."""
+
 import faulthandler
 import sys
 from collections.abc import Callable

@@ -1,4 +1,5 @@
 """QoS profiles of the MOWS graph, named by the kind of data they carry."""
+
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,

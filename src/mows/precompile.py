@@ -7,6 +7,7 @@ stalls for seconds loses its device link; an estimator that stalls misses ring-d
 nodes and the test session call :func:`precompile` first. ``python -m mows.precompile`` does it
 by hand.
 """
+
 import math
 import time
 

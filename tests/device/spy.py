@@ -1,4 +1,5 @@
 """A simulated device that records every coil drive it is given (what reached the device)."""
+
 import numpy as np
 
 from mows.sim.simulator import SimulatedDevice

@@ -8,6 +8,7 @@ device's own coil log (taken from the samples' coil flags). The emulator reads h
 once per loop, so the arrival stamp may be up to one Samples frame (FRAME_S = 10 ms) late:
 the assertion leaves that tolerance, latency ≤ 200 ms − FRAME_S.
 """
+
 import math
 import time
 
@@ -97,14 +98,18 @@ def test_commands_above_the_cap_never_reach_the_device(emulator, link):
     with pytest.raises(ValueError, match="exceeds the cap"):
         backend.send(CoilCommand(1, 0, (CAP_A * 1.001, 0.0), 110.0))
     # Past the driver's check, straight onto the wire: the device refuses them itself.
-    refused = {link.send(Coils(0, 0, 110.0, (0.0, -CAP_A * 1.5))): Ack.REFUSED_OVER_CAP,
-               link.send(Coils(Coils.IMMEDIATE, 0, 110.0, (math.nan, 1.0))): Ack.REFUSED_INVALID,
-               link.send(Coils(0, 0, 110.0, (1.0, 1.0, 1.0))): Ack.REFUSED_INVALID}
+    refused = {
+        link.send(Coils(0, 0, 110.0, (0.0, -CAP_A * 1.5))): Ack.REFUSED_OVER_CAP,
+        link.send(Coils(Coils.IMMEDIATE, 0, 110.0, (math.nan, 1.0))): Ack.REFUSED_INVALID,
+        link.send(Coils(0, 0, 110.0, (1.0, 1.0, 1.0))): Ack.REFUSED_INVALID,
+    }
     accepted = link.send(Coils(0, 0, 110.0, (CAP_A, -CAP_A)))  # at the cap is allowed
 
     def acks(items):
-        return {i.body.command_sequence: i.body for i in items if not isinstance(i, LinkEvent)
-                and isinstance(i.body, Ack)}
+        return {
+            i.body.command_sequence: i.body for i in items if not isinstance(i, LinkEvent) and isinstance(i.body, Ack)
+        }
+
     answers = acks(collect(link, "four acks", lambda items: len(acks(items)) == 4))
     assert {sequence: answers[sequence].result for sequence in refused} == refused
     assert answers[accepted].accepted
@@ -120,7 +125,7 @@ def test_the_watchdog_switches_the_coils_off_when_the_driver_is_lost(emulator, l
     link.close()  # the driver is gone: no heartbeat, no frame
     wait_for(lambda: emulator.watchdog_trips, "the watchdog")
     wait_for(lambda: not emulator.device.coils_on, "the coils to go off")
-    (last_host_index, off_index), = emulator.watchdog_trips
+    ((last_host_index, off_index),) = emulator.watchdog_trips
     on_log = list(emulator.device.coil_log)
     assert on_log[-1] == (off_index, False) and on_log[-2][1]
     latency_s = (off_index - last_host_index) / emulator.info.sample_rate_hz
@@ -132,8 +137,11 @@ def test_heartbeats_keep_the_coils_on(emulator, link):
     backend = SerialBackend(link, CurrentCap(CAP_A))
     collect(link, "the device to answer", lambda items: link.up)
     backend.send(CoilCommand(1, 0, (1.0, -1.0), 110.0))
-    items = collect(link, "1 s of device time with the coils on",
-                    lambda items: sum(len(f.body.counts) for f in samples_of(items)) >= 20_000)
+    items = collect(
+        link,
+        "1 s of device time with the coils on",
+        lambda items: sum(len(f.body.counts) for f in samples_of(items)) >= 20_000,
+    )
     statuses = [i.body for i in items if not isinstance(i, LinkEvent) and isinstance(i.body, Status)]
     # On a starved machine a heartbeat can be late, and then a trip is right; what must hold is
     # that the device trips only after the host fell silent for the watchdog time (on the
@@ -155,6 +163,7 @@ def step_until(session, condition, what, blocks=None, events=None):
         output = session.step(0.05)
         blocks.extend(output.blocks)
         events.extend(output.events)
+
     wait_for(condition, what, step)
     return blocks, events
 
@@ -170,16 +179,19 @@ def test_a_cycle_over_the_link_stamps_the_ringdown_at_the_device_switch_off(emul
     session.start_cycle(CycleRequest(0.4), done.append)
     _, events = step_until(session, lambda: done, "the cycle to end")
     assert done[0].success, done[0].message
-    switches = [(e.sample_index, e.phase == Phase.EXCITING) for e in events
-                if e.phase in (Phase.EXCITING, Phase.RINGDOWN)]
+    switches = [
+        (e.sample_index, e.phase == Phase.EXCITING) for e in events if e.phase in (Phase.EXCITING, Phase.RINGDOWN)
+    ]
     assert switches == list(emulator.device.coil_log)
     assert all(e.stamp_ns == emulator.clock.stamp_ns(e.sample_index) for e in events)
 
 
 def test_a_watchdog_trip_during_a_cycle_fails_it_instead_of_announcing_a_ringdown(emulator, link):
     settings = CycleSettings(excite_s=2.0, ringdown_s=0.3, repeats=1, tuning_steps=0, settle_s=0.1)
-    session = DeviceSession(SerialBackend(link, CurrentCap(CAP_A)),
-                            SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown))
+    session = DeviceSession(
+        SerialBackend(link, CurrentCap(CAP_A)),
+        SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown),
+    )
     step_until(session, lambda: session.health().get("samples", 0) > 0, "samples")
     done = []
     session.start_cycle(CycleRequest(0.4), done.append)
@@ -189,7 +201,7 @@ def test_a_watchdog_trip_during_a_cycle_fails_it_instead_of_announcing_a_ringdow
     time.sleep(0.5)  # the driver hangs: no heartbeat for longer than the watchdog allows
     step_until(session, lambda: done, "the cycle to end", events=events)
     assert not done[0].success and "watchdog" in done[0].message
-    (_, off_index), = emulator.watchdog_trips
+    ((_, off_index),) = emulator.watchdog_trips
     assert [e.phase for e in events if e.cycle_id == 1] == [Phase.SETTLING, Phase.EXCITING]
     assert events[-1].phase == Phase.FAULT and "watchdog" in events[-1].reason
     assert list(emulator.device.coil_log)[-1] == (off_index, False)
@@ -202,8 +214,12 @@ def test_unplugging_leads_to_reconnection_with_backoff_and_a_reported_gap(emulat
     step_until(session, lambda: not session.link_up, "the link to go down", blocks)
     step_until(session, lambda: len(link.retry_delays_s) >= 5, "five attempts to reopen", blocks)
     emulator.replug()
-    step_until(session, lambda: session.link_up and jumps(blocks) and blocks[-1] is not jumps(blocks)[0][0],
-               "blocks from after the gap", blocks)
+    step_until(
+        session,
+        lambda: session.link_up and jumps(blocks) and blocks[-1] is not jumps(blocks)[0][0],
+        "blocks from after the gap",
+        blocks,
+    )
     # Back-off doubles from 50 ms, starting over once the device is back.
     delays = link.retry_delays_s
     assert delays[:5] == [0.05, 0.1, 0.2, 0.4, 0.8]
@@ -212,7 +228,7 @@ def test_unplugging_leads_to_reconnection_with_backoff_and_a_reported_gap(emulat
     assert (health["connections"], health["link_changes"], health["gaps"]) == (2, 3, 1)
     assert health["lost_frames"] > 0 and health["missing_samples"] > 0
     # The gap is in the blocks: the one before it may be short, the sequence jumps after it.
-    (before, after), = jumps(blocks)
+    ((before, after),) = jumps(blocks)
     assert after.first_sample_index - before.end_index == health["missing_samples"]
     assert after.sequence - before.sequence >= 2
     assert all(b.sequence == a.sequence + 1 for a, b in zip(blocks, blocks[1:]) if (a, b) != (before, after))
@@ -223,6 +239,7 @@ def test_unplugging_leads_to_reconnection_with_backoff_and_a_reported_gap(emulat
 def supplied(tmp_path):
     """An emulated calibration bench: the Pasco pair on a 2 A supply (2 A/s)."""
     from mows.sim.simulator import SimulatedDevice
+
     with DeviceEmulator(SimulatedDevice(load_scenario("calibration")), tmp_path / "bench", CurrentCap(CAP_A)) as bench:
         link = SerialLink(str(bench.link_path)).start()
         yield bench, link
@@ -250,6 +267,7 @@ def test_the_supply_ramps_on_a_framed_command_and_the_device_acks_where_the_ramp
 
 def test_a_driver_lost_mid_calibration_leaves_the_supply_at_zero(supplied):
     from mows.device.interface import FieldCurrentCommand
+
     bench, link = supplied
     backend = SerialBackend(link, CurrentCap(CAP_A))
     collect(link, "the stream to run", lambda items: len(samples_of(items)) >= 20)

@@ -2,6 +2,7 @@
 sent before anyone listened are not lost frames, a failure that is over is not the last error,
 a link lost while idle is reported, a cycle on a port that never opened says why, and a
 restarted device's samples are counted as missing from their indices."""
+
 import numpy as np
 import pytest
 
@@ -22,8 +23,10 @@ SETTINGS = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tun
 
 
 def session_on(link):
-    return DeviceSession(SerialBackend(link, CurrentCap(CAP_A)),
-                         SessionConfig(0.025, SETTINGS, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown))
+    return DeviceSession(
+        SerialBackend(link, CurrentCap(CAP_A)),
+        SessionConfig(0.025, SETTINGS, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown),
+    )
 
 
 def chunk(first, n=100):
@@ -45,8 +48,7 @@ def test_frames_the_device_sent_before_the_first_connection_are_not_lost(tmp_pat
         wait_for(lambda: emulator.dropped_frames > 0, "the device to drop frames")
         link = SerialLink(str(emulator.link_path)).start()
         try:
-            collect(link, "20 Samples frames after the answer",
-                    lambda items: link.up and len(samples_of(items)) >= 20)
+            collect(link, "20 Samples frames after the answer", lambda items: link.up and len(samples_of(items)) >= 20)
             assert link.lost_frames == 0
         finally:
             link.close()
@@ -63,12 +65,10 @@ def test_the_last_error_is_cleared_once_the_link_is_up_and_loss_is_reported_whil
             session.start_cycle(CycleRequest(0.0), lambda outcome: None)
         with DeviceEmulator(SpyDevice(SCENARIO), path, CurrentCap(CAP_A)) as emulator:
             links = []
-            wait_for(lambda: session.link_up, "the link to come up",
-                     lambda: links.extend(session.step(0.05).links))
+            wait_for(lambda: session.link_up, "the link to come up", lambda: links.extend(session.step(0.05).links))
             assert link.stats()["last_error"] == ""  # was the stale "cannot open"
             emulator.unplug()  # no cycle is running: the session is idle
-            wait_for(lambda: not session.link_up, "the link to go down",
-                     lambda: links.extend(session.step(0.05).links))
+            wait_for(lambda: not session.link_up, "the link to go down", lambda: links.extend(session.step(0.05).links))
         assert [event.up for event in links] == [True, False]
         assert all(isinstance(event, LinkEvent) and event.reason for event in links)
     finally:

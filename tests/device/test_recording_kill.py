@@ -1,6 +1,7 @@
 """A recording killed with SIGKILL loses at most its last chunk, and `mows bag repair` rebuilds a
 bag that reads and replays (issue 15). The writer is a real process killed by the kernel, at a
 chunk boundary and in the middle of one."""
+
 import os
 import signal
 import subprocess
@@ -35,8 +36,9 @@ CHILD = textwrap.dedent("""
 
 def killed_recording(path, stop_after):
     """Run the child until it waits, SIGKILL it; the message counts of its flushes."""
-    child = subprocess.Popen([sys.executable, "-c", CHILD, str(path), str(stop_after)], stdout=subprocess.PIPE,
-                             text=True)
+    child = subprocess.Popen(
+        [sys.executable, "-c", CHILD, str(path), str(stop_after)], stdout=subprocess.PIPE, text=True
+    )
     flushed = []
     for line in child.stdout:
         if line.startswith("flushed"):

@@ -1,5 +1,6 @@
 """A session replaying a recording (the bag backend) has no sequencer: the phase it reports is
 the one of the recording's last replayed excitation state."""
+
 import numpy as np
 
 from mows.device import bags
@@ -22,13 +23,39 @@ def recording(path):
     def header(index):
         return Header(Time(*divmod(10**12 + index * 50_000, 10**9)), "m")
 
-    messages = [bags.BagMessage("/mows/raw", "mows_msgs/msg/MagnetometerBlock", 2 * k,
-                                Block(header(k * BLOCK), k, k * BLOCK, RATE_HZ, 1e-5, 1e-10,
-                                      [Channel("c", np.zeros(BLOCK), np.zeros(BLOCK, bool))]))
-                for k in range(4)]
+    messages = [
+        bags.BagMessage(
+            "/mows/raw",
+            "mows_msgs/msg/MagnetometerBlock",
+            2 * k,
+            Block(
+                header(k * BLOCK),
+                k,
+                k * BLOCK,
+                RATE_HZ,
+                1e-5,
+                1e-10,
+                [Channel("c", np.zeros(BLOCK), np.zeros(BLOCK, bool))],
+            ),
+        )
+        for k in range(4)
+    ]
     for k, phase in [(1, Phase.EXCITING), (2, Phase.RINGDOWN)]:
-        state = State(header(k * BLOCK), int(phase), phase.name, 1, 0, 1, False, phase == Phase.EXCITING,
-                      np.zeros(2), 112.0, 0.0, 0.02, "largest_spacing")
+        state = State(
+            header(k * BLOCK),
+            int(phase),
+            phase.name,
+            1,
+            0,
+            1,
+            False,
+            phase == Phase.EXCITING,
+            np.zeros(2),
+            112.0,
+            0.0,
+            0.02,
+            "largest_spacing",
+        )
         messages.append(bags.BagMessage("/mows/excitation", "mows_msgs/msg/ExcitationState", 2 * k + 1, state))
     bags.write_bag(path, sorted(messages, key=lambda m: m.timestamp_ns))
 
@@ -36,8 +63,9 @@ def recording(path):
 def test_the_replayed_phase_is_the_recordings(tmp_path):
     recording(tmp_path / "bag")
     cap = CurrentCap(10.0)
-    config = SessionConfig(0.025, CycleSettings(), PRESETS["largest_spacing"](current_limit_a=cap.limit_a), cap,
-                           110.0, fit_ringdown)
+    config = SessionConfig(
+        0.025, CycleSettings(), PRESETS["largest_spacing"](current_limit_a=cap.limit_a), cap, 110.0, fit_ringdown
+    )
     session = DeviceSession(BagBackend(tmp_path / "bag", rate=100.0), config)
     assert session.health()["phase"] == "none replayed yet"
     phases = []

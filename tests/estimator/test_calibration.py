@@ -1,4 +1,5 @@
 """f00 calibration from ring-downs in a known field (Eq. 6 solved for f00), without ROS."""
+
 import math
 
 import numpy as np
@@ -41,7 +42,7 @@ def test_calibrated_f00_of_the_probe_in_a_field_matches_its_constants_within_sig
     calibration returns the probe's f00 (damping shifts Eq. 6's inverse by < 1e-6 Hz here)."""
     field_t, std_hz, n = 1e-3, 5e-4, 5
     true_f_hz = float(P.frequency_for_spring_hz(P.spring_nm_per_rad + P.moment_am2 * field_t))
-    assert true_f_hz > P.f00_hz + 1.0   # the field matters: inverting Eq. 6 is not a no-op
+    assert true_f_hz > P.f00_hz + 1.0  # the field matters: inverting Eq. 6 is not a no-op
     rng = np.random.default_rng(7)
     estimates, sigmas = [], []
     for _ in range(400):
@@ -67,13 +68,16 @@ def test_time_up_says_how_many_ringdowns_came_and_nothing_is_taken_after():
     assert calibration.offer(100.0, 1e-3) is None and calibration.time_up() is None and calibration.done
 
 
-@pytest.mark.parametrize("field_t, n, timeout_s", [
-    (0.0, 0, 1.0),                          # no ring-down asked for
-    (0.0, 3, 0.0),                          # no time to collect them
-    (0.0, 3, math.nan),
-    (P.cancellation_field_t, 3, 1.0),       # spring cancellation: Eq. 6 has no real root
-    (2 * P.cancellation_field_t, 3, 1.0),
-])
+@pytest.mark.parametrize(
+    "field_t, n, timeout_s",
+    [
+        (0.0, 0, 1.0),  # no ring-down asked for
+        (0.0, 3, 0.0),  # no time to collect them
+        (0.0, 3, math.nan),
+        (P.cancellation_field_t, 3, 1.0),  # spring cancellation: Eq. 6 has no real root
+        (2 * P.cancellation_field_t, 3, 1.0),
+    ],
+)
 def test_requests_that_cannot_be_met_are_refused_with_the_reason(field_t, n, timeout_s):
     with pytest.raises(ValueError, match="spring cancellation"):
         F00Calibration(P, field_t, n, timeout_s)

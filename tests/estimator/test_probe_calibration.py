@@ -10,6 +10,7 @@ Requirement: for probes whose kM and J are off the paper's by 5–20 %, kM and J
 within 3 %, f00 within 2σ, pulls of width ≈ 1 over 20 seeds; the paper's probe at its published
 β0 = 3.68 Hz/mT.
 """
+
 import math
 
 import numpy as np
@@ -31,13 +32,19 @@ def off_paper_probe(rng) -> Probe:
     """kM and J each 5–20 % off the paper's, either way; a point magnet on a light lever."""
     factors = 1.0 + rng.uniform(0.05, 0.20, 2) * rng.choice([-1.0, 1.0], 2)
     spring, inertia = PAPER_PROBE.spring_nm_per_rad * factors[0], PAPER_PROBE.inertia_kgm2 * factors[1]
-    return PAPER_PROBE.replace(spring_nm_per_rad=spring, inertia_kgm2=inertia,
-                               lever_m=math.sqrt(inertia / PAPER_PROBE.magnet_mass_kg))
+    return PAPER_PROBE.replace(
+        spring_nm_per_rad=spring, inertia_kgm2=inertia, lever_m=math.sqrt(inertia / PAPER_PROBE.magnet_mass_kg)
+    )
 
 
 def truth(probe: Probe) -> dict:
-    return {"f00_hz": probe.f00_hz, "beta0_hz_per_t": probe.beta0_hz_per_t,
-            "spring_nm_per_rad": probe.spring_nm_per_rad, "inertia_kgm2": probe.inertia_kgm2, "lever_m": probe.lever_m}
+    return {
+        "f00_hz": probe.f00_hz,
+        "beta0_hz_per_t": probe.beta0_hz_per_t,
+        "spring_nm_per_rad": probe.spring_nm_per_rad,
+        "inertia_kgm2": probe.inertia_kgm2,
+        "lever_m": probe.lever_m,
+    }
 
 
 def calibrated(scenario, plan=PLAN, gradient=None):
@@ -87,7 +94,7 @@ def test_probes_off_the_papers_are_recovered_with_honest_uncertainties_over_20_s
 def test_the_papers_probe_comes_out_at_its_published_beta0(paper):
     _, calibration = paper
     beta0 = calibration.value("beta0_hz_per_t")
-    assert round(beta0 / 1e3, 2) == 3.68                     # Hz/mT, as published
+    assert round(beta0 / 1e3, 2) == 3.68  # Hz/mT, as published
     for name, true in truth(PAPER_PROBE).items():
         assert abs(calibration.value(name) - true) < 2.0 * calibration.std(name), name
 
@@ -109,8 +116,9 @@ def test_without_the_finite_amplitude_beta0_would_be_low_by_the_bessel_factor(pa
     # fit sees A²/8 averaged over roughly 15–20°: 1.0–1.7 %.
     points, calibration = paper
     small = KnownConstants(PAPER_PROBE.moment_am2, PAPER_PROBE.magnet_mass_kg, math.radians(0.5))
-    naive = calibrate_probe([p for p in points if p.wiring == "helmholtz"],
-                            scenario_wirings(load_scenario("calibration")), small)
+    naive = calibrate_probe(
+        [p for p in points if p.wiring == "helmholtz"], scenario_wirings(load_scenario("calibration")), small
+    )
     low = 1.0 - naive.value("beta0_hz_per_t") / calibration.value("beta0_hz_per_t")
     assert 0.008 < low < 0.02, low
 
@@ -129,7 +137,7 @@ def test_the_probe_file_carries_the_constants_with_uncertainties(paper, tmp_path
     assert correlation.shape == (len(calibration.names),) * 2
     assert np.allclose(np.diag(correlation), 1.0)
     kM, J = calibration.names.index("spring_nm_per_rad"), calibration.names.index("inertia_kgm2")
-    assert correlation[kM, J] > 0.9    # both follow f00·m/β0: strongly correlated
+    assert correlation[kM, J] > 0.9  # both follow f00·m/β0: strongly correlated
 
 
 # --- what the data cannot determine ------------------------------------------------------------

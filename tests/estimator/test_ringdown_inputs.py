@@ -1,4 +1,5 @@
 """Bad input never raises, never yields a number, and always says what went wrong."""
+
 import dataclasses
 import math
 
@@ -23,8 +24,11 @@ def good():
 def assert_refused(result, status, *words):
     assert result.status == status, (result.status, result.message)
     assert result.message and all(w in result.message for w in words), result.message
-    numeric = {k: v for k, v in dataclasses.asdict(result).items()
-               if isinstance(v, float) and k not in ("theta0_rad", "duration_s", "start_offset_s")}
+    numeric = {
+        k: v
+        for k, v in dataclasses.asdict(result).items()
+        if isinstance(v, float) and k not in ("theta0_rad", "duration_s", "start_offset_s")
+    }
     assert all(math.isnan(v) for v in numeric.values()), numeric
     assert not estimate_along_axis(result, PAPER_PROBE, 112.48).ok
 
@@ -38,13 +42,16 @@ def test_non_finite_samples(good, bad):
 
 def test_all_saturated(good):
     saturated = np.ones(good.shape, bool)
-    assert_refused(fit_ringdown(np.clip(good, -1e-8, 1e-8), SAMPLE_RATE_HZ, THETA0, 112.0, saturated=saturated),
-                   FitStatus.SATURATED, "saturated")
+    assert_refused(
+        fit_ringdown(np.clip(good, -1e-8, 1e-8), SAMPLE_RATE_HZ, THETA0, 112.0, saturated=saturated),
+        FitStatus.SATURATED,
+        "saturated",
+    )
 
 
 def test_saturated_coil_tail_is_cut_and_the_rest_fitted(good):
     saturated = np.zeros(good.shape, bool)
-    saturated[:400] = True                    # the first 20 ms, as when the coils switch off
+    saturated[:400] = True  # the first 20 ms, as when the coils switch off
     fit = fit_ringdown(good, SAMPLE_RATE_HZ, THETA0, 112.0, saturated=saturated)
     assert fit.ok, fit.message
     assert fit.start_offset_s == pytest.approx(400 / SAMPLE_RATE_HZ)
@@ -95,5 +102,7 @@ def test_a_good_ringdown_passes_the_same_checks(good):
     # The refusals above are specific: the unmodified data fit, with every number finite.
     fit = fit_ringdown(good, SAMPLE_RATE_HZ, THETA0, 112.0)
     assert fit.ok and fit.message == ""
-    assert all(math.isfinite(v) for v in (fit.frequency_hz, fit.frequency_std_hz, fit.frequency_crb_hz,
-                                          fit.chi2_dof, fit.r_squared, fit.snr_db))
+    assert all(
+        math.isfinite(v)
+        for v in (fit.frequency_hz, fit.frequency_std_hz, fit.frequency_crb_hz, fit.chi2_dof, fit.r_squared, fit.snr_db)
+    )

@@ -5,6 +5,7 @@ On the paper's 1.9 mm lever the magnet also moves across the sensor line, which 
 15.2, and near 90° the paper's model no longer describes the data. The lever-aware pickup
 (mows.physics.fluxgate.pickup_harmonics) does, at every orientation.
 """
+
 import math
 
 import numpy as np
@@ -20,8 +21,9 @@ from mows.sim.simulator import SimulatedDevice
 def cycles():
     scenario = load_scenario()
     device = SimulatedDevice(scenario, np.random.default_rng(5))
-    return scenario, {deg: simulate_cycle(device, math.radians(deg), scenario.excitation.amplitude_a)
-                      for deg in (0, 45, 90, 135)}
+    return scenario, {
+        deg: simulate_cycle(device, math.radians(deg), scenario.excitation.amplitude_a) for deg in (0, 45, 90, 135)
+    }
 
 
 def fit(scenario, record, lever_aware):

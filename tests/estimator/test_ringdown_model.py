@@ -1,4 +1,5 @@
 """The fit's model, its Fisher information and its options, against independent computations."""
+
 import math
 
 import numpy as np
@@ -23,13 +24,20 @@ from mows.physics.probe import PAPER_PROBE
 from mows.physics.signal import signal_t
 
 T = np.arange(N_SAMPLES) / SAMPLE_RATE_HZ
-TRUTH = {"frequency_hz": FREQUENCY_HZ, "damping_per_s": DAMPING_PER_S, "amplitude_rad": AMPLITUDE_RAD,
-         "phase_rad": PHASE_RAD, "kappa_t": KAPPA_T, "offset_t": OFFSET_T}
+TRUTH = {
+    "frequency_hz": FREQUENCY_HZ,
+    "damping_per_s": DAMPING_PER_S,
+    "amplitude_rad": AMPLITUDE_RAD,
+    "phase_rad": PHASE_RAD,
+    "kappa_t": KAPPA_T,
+    "offset_t": OFFSET_T,
+}
 
 
 def clean(theta0, a=0.0, b=1.0, kappa=KAPPA_T):
-    return signal_t(T, theta0, AMPLITUDE_RAD, FREQUENCY_HZ, PHASE_RAD, DAMPING_PER_S, kappa, a=a, b=b,
-                    offset_t=OFFSET_T)
+    return signal_t(
+        T, theta0, AMPLITUDE_RAD, FREQUENCY_HZ, PHASE_RAD, DAMPING_PER_S, kappa, a=a, b=b, offset_t=OFFSET_T
+    )
 
 
 @pytest.mark.parametrize("theta0_deg, direction", [(0.0, (0.0, 1.0)), (60.0, (0.0, 1.0)), (40.0, (0.6, 0.8))])
@@ -44,12 +52,27 @@ def test_crb_equals_fisher_of_the_printed_model(theta0_deg, direction):
     def model(p):
         return signal_t(T, theta0, p[2], p[0], p[3], p[1], p[4], a=direction[0], b=direction[1], offset_t=p[5])
 
-    jac = np.stack([(model(base + np.eye(6)[i] * steps[i]) - model(base - np.eye(6)[i] * steps[i])) / (2 * steps[i])
-                    for i in range(6)], axis=1)
+    jac = np.stack(
+        [
+            (model(base + np.eye(6)[i] * steps[i]) - model(base - np.eye(6)[i] * steps[i])) / (2 * steps[i])
+            for i in range(6)
+        ],
+        axis=1,
+    )
     scale = np.sqrt(np.diag(jac.T @ jac))
     numeric = sigma * math.sqrt(np.linalg.inv((jac / scale).T @ (jac / scale))[0, 0]) / scale[0]
-    analytic = cramer_rao_frequency_hz(N_SAMPLES, SAMPLE_RATE_HZ, FREQUENCY_HZ, DAMPING_PER_S, AMPLITUDE_RAD,
-                                       PHASE_RAD, theta0, KAPPA_T, sigma, sensor_direction=direction)
+    analytic = cramer_rao_frequency_hz(
+        N_SAMPLES,
+        SAMPLE_RATE_HZ,
+        FREQUENCY_HZ,
+        DAMPING_PER_S,
+        AMPLITUDE_RAD,
+        PHASE_RAD,
+        theta0,
+        KAPPA_T,
+        sigma,
+        sensor_direction=direction,
+    )
     assert analytic == pytest.approx(numeric, rel=1e-5)
 
 
@@ -61,8 +84,9 @@ def pull(fit, name, truth):
 def test_every_parameter_is_recovered_within_its_uncertainty():
     rng = np.random.default_rng(11)
     sigma = 2e-10
-    fit = fit_ringdown(clean(math.radians(40)) + sigma * rng.standard_normal(N_SAMPLES), SAMPLE_RATE_HZ,
-                       math.radians(40), 112.0)
+    fit = fit_ringdown(
+        clean(math.radians(40)) + sigma * rng.standard_normal(N_SAMPLES), SAMPLE_RATE_HZ, math.radians(40), 112.0
+    )
     assert fit.ok, fit.message
     for name, truth in TRUTH.items():
         assert abs(pull(fit, name, truth)) < 4, name
@@ -94,8 +118,13 @@ def test_general_sensor_direction():
     # Eq. S11 with a ≠ 0: the sensor also sees the 2a·cos θ component.
     rng = np.random.default_rng(12)
     direction = (0.6, 0.8)
-    fit = fit_ringdown(clean(math.radians(50), *direction) + 5e-10 * rng.standard_normal(N_SAMPLES),
-                       SAMPLE_RATE_HZ, math.radians(50), 112.0, options=FitOptions(sensor_direction=direction))
+    fit = fit_ringdown(
+        clean(math.radians(50), *direction) + 5e-10 * rng.standard_normal(N_SAMPLES),
+        SAMPLE_RATE_HZ,
+        math.radians(50),
+        112.0,
+        options=FitOptions(sensor_direction=direction),
+    )
     assert fit.ok and abs(pull(fit, "frequency_hz", FREQUENCY_HZ)) < 4
     assert fit.chi2_dof < 1 + 5 * math.sqrt(2 / N_SAMPLES)
     assert abs(pull(fit, "kappa_t", KAPPA_T)) < 4
@@ -104,8 +133,13 @@ def test_general_sensor_direction():
 def test_free_theta0_is_recovered():
     rng = np.random.default_rng(13)
     theta0 = math.radians(35.0)
-    fit = fit_ringdown(clean(theta0) + 3e-10 * rng.standard_normal(N_SAMPLES), SAMPLE_RATE_HZ,
-                       theta0 + math.radians(4.0), 112.0, options=FitOptions(theta0_free=True))
+    fit = fit_ringdown(
+        clean(theta0) + 3e-10 * rng.standard_normal(N_SAMPLES),
+        SAMPLE_RATE_HZ,
+        theta0 + math.radians(4.0),
+        112.0,
+        options=FitOptions(theta0_free=True),
+    )
     assert fit.ok and fit.theta0_free
     assert abs(pull(fit, "theta0_rad", theta0)) < 4
 
@@ -130,8 +164,13 @@ def test_difference_channel_cancels_common_mode_noise():
 def test_joint_fit_of_both_channels():
     rng = np.random.default_rng(15)
     theta0 = math.radians(25.0)
-    pair = np.stack([clean(theta0, kappa=2 * KAPPA_T) + 4e-10 * rng.standard_normal(N_SAMPLES),
-                     clean(theta0) + 2e-10 * rng.standard_normal(N_SAMPLES)], axis=1)
+    pair = np.stack(
+        [
+            clean(theta0, kappa=2 * KAPPA_T) + 4e-10 * rng.standard_normal(N_SAMPLES),
+            clean(theta0) + 2e-10 * rng.standard_normal(N_SAMPLES),
+        ],
+        axis=1,
+    )
     fit = fit_ringdown(pair, SAMPLE_RATE_HZ, theta0, 112.0, options=FitOptions(channels="both"))
     assert fit.ok and abs(pull(fit, "frequency_hz", FREQUENCY_HZ)) < 4
     assert {"kappa_t_1", "kappa_t_2", "offset_t_1", "offset_t_2"} <= set(fit.parameter_names)
@@ -144,8 +183,12 @@ def test_axis_estimate_inverts_eq6_and_propagates_both_uncertainties():
     field = 37e-6
     f = f00 + frequency_shift_hz(f00, probe.spring_nm_per_rad, probe.moment_am2 * field)
     rng = np.random.default_rng(16)
-    fit = fit_ringdown(signal_t(T, 0.0, AMPLITUDE_RAD, f, PHASE_RAD, DAMPING_PER_S, KAPPA_T)
-                       + 3e-10 * rng.standard_normal(N_SAMPLES), SAMPLE_RATE_HZ, 0.0, 112.0)
+    fit = fit_ringdown(
+        signal_t(T, 0.0, AMPLITUDE_RAD, f, PHASE_RAD, DAMPING_PER_S, KAPPA_T) + 3e-10 * rng.standard_normal(N_SAMPLES),
+        SAMPLE_RATE_HZ,
+        0.0,
+        112.0,
+    )
     estimate = estimate_along_axis(fit, probe, f00, f00_std)
     assert estimate.ok
     assert abs(estimate.field_along_axis_t - field) < 4 * estimate.field_along_axis_std_t
@@ -155,5 +198,4 @@ def test_axis_estimate_inverts_eq6_and_propagates_both_uncertainties():
     b_draws = probe.spring_nm_per_rad / probe.moment_am2 * ((f_draws / f00_draws) ** 2 - 1)
     assert estimate.field_along_axis_std_t == pytest.approx(b_draws.std(), rel=0.02)
     # The gradient reading explains the same shift with l·m·G instead of m·B.
-    assert estimate.gradient_equivalent_t_per_m * probe.lever_m == pytest.approx(estimate.field_along_axis_t,
-                                                                                 rel=1e-12)
+    assert estimate.gradient_equivalent_t_per_m * probe.lever_m == pytest.approx(estimate.field_along_axis_t, rel=1e-12)

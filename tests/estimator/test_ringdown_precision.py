@@ -9,6 +9,7 @@ perfect estimator, so the thresholds below account for that explicitly: the pool
 resolve. A test that would pass a mediocre estimator is worthless: the last test shows that
 a plain spectral-peak estimator fails these thresholds by a wide margin.
 """
+
 import math
 
 import numpy as np
@@ -43,7 +44,7 @@ def test_pooled_error_is_at_the_bound(grid):
     # than three standard errors above an efficient estimator's 1.00.
     z = np.concatenate([c.errors_hz / c.crb_hz for c in bounded(grid)])
     assert math.sqrt(np.mean(z**2)) <= 1.05
-    assert abs(np.mean(z)) < 0.1              # pooled bias (its sampling scatter is ~0.02)
+    assert abs(np.mean(z)) < 0.1  # pooled bias (its sampling scatter is ~0.02)
 
 
 def test_no_single_orientation_falls_behind(grid):

@@ -1,4 +1,5 @@
 """Ring-down windows cut from a block stream: exact, complete, and honest about gaps."""
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -9,8 +10,8 @@ from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.records.samples import SampleBlock
 
 FS = 20_000.0
-EPOCH_NS = 1_700_000_000 * 10**9     # device clock: ns since its epoch
-NS_PER_SAMPLE = 50_000               # at FS
+EPOCH_NS = 1_700_000_000 * 10**9  # device clock: ns since its epoch
+NS_PER_SAMPLE = 50_000  # at FS
 
 
 def stream(n=40_000, seed=0):
@@ -22,8 +23,13 @@ def blocks(samples, saturated, sizes, start_index=1000):
     index = 0
     while index < len(samples):
         size = sizes[index % len(sizes)] if isinstance(sizes, list) else sizes
-        yield SampleBlock(start_index + index, EPOCH_NS + (start_index + index) * NS_PER_SAMPLE, FS,
-                          samples[index:index + size], saturated[index:index + size])
+        yield SampleBlock(
+            start_index + index,
+            EPOCH_NS + (start_index + index) * NS_PER_SAMPLE,
+            FS,
+            samples[index : index + size],
+            saturated[index : index + size],
+        )
         index += size
 
 
@@ -32,8 +38,12 @@ def window_at(index, n, start_index=1000, **kw):
 
 
 @settings(max_examples=60, deadline=None)
-@given(sizes=st.lists(st.integers(200, 1000), min_size=1, max_size=5), start=st.integers(0, 20_000),
-       length=st.integers(1000, 10_000), announce_after=st.integers(0, 40))
+@given(
+    sizes=st.lists(st.integers(200, 1000), min_size=1, max_size=5),
+    start=st.integers(0, 20_000),
+    length=st.integers(1000, 10_000),
+    announce_after=st.integers(0, 40),
+)
 def test_any_block_split_gives_the_exact_window(sizes, start, length, announce_after):
     samples, saturated = stream()
     assembler = SegmentAssembler(buffer_s=2.0)
@@ -45,7 +55,7 @@ def test_any_block_split_gives_the_exact_window(sizes, start, length, announce_a
     assert len(got) == 1
     segment = got[0]
     assert segment.missing_samples == 0
-    np.testing.assert_array_equal(segment.samples_t, samples[start:start + length])
+    np.testing.assert_array_equal(segment.samples_t, samples[start : start + length])
     assert segment.first_sample_index == 1000 + start
 
 
@@ -56,7 +66,7 @@ def test_a_sequence_gap_is_counted_and_refused():
     got = []
     for block in blocks(samples, saturated, 500):
         if block.first_sample_index == 1000 + 5000:
-            continue                               # one block lost on the way
+            continue  # one block lost on the way
         got += assembler.add_block(block)
     assert assembler.missing_samples == 500
     assert got[0].missing_samples == 500

@@ -5,6 +5,7 @@ like a moment-scale error ε = ⟨2·J1(A)/A⟩ − 1 ≈ −A²/8 (−0.86 % at
 ring-down); gravity with in-plane downward part d acts like a field (a·g·l/m)·d, 154 µT·d for
 the paper's probe.
 """
+
 import math
 
 import numpy as np
@@ -23,8 +24,15 @@ def _amplitude_table(seed=0):
     (≈ 0.5 mHz) at 0.1 mHz noise; the static deflection stays below 0.1 mHz."""
     sweep = synth.rotation_sweeps(15.0, 2)
     theta0 = sweep.pop("theta0_deg")
-    return synth.synthesize(PAPER_PROBE, UniformField((20e-6, 0.0, 0.0)), theta0, np.random.default_rng(seed),
-                            f_std_hz=1e-4, amplitude_deg=15.0, **sweep)
+    return synth.synthesize(
+        PAPER_PROBE,
+        UniformField((20e-6, 0.0, 0.0)),
+        theta0,
+        np.random.default_rng(seed),
+        f_std_hz=1e-4,
+        amplitude_deg=15.0,
+        **sweep,
+    )
 
 
 def test_the_probe_constants_give_the_documented_alias_sizes():
@@ -32,7 +40,7 @@ def test_the_probe_constants_give_the_documented_alias_sizes():
     a = math.radians(15.0)
     epsilon, _ = amplitude_scale_error(_amplitude_table(), PAPER_PROBE)
     # Over the ring-down the amplitude decays from 15°: between none and the start's −A²/8.
-    assert -a**2 / 8 < epsilon < 0
+    assert -(a**2) / 8 < epsilon < 0
 
 
 def test_a_generic_term_in_the_model_is_grouped_with_the_physics_it_absorbs_and_replaced_by_it():
@@ -40,12 +48,12 @@ def test_a_generic_term_in_the_model_is_grouped_with_the_physics_it_absorbs_and_
     held = analyse(table, PAPER_PROBE, effects=["moment_scale"], cross_validate=False)
     # finite_amplitude is absorbed by the moment scale …
     group = next(g for g in held.groups if g.in_model == ["moment_scale"])
-    assert "finite_amplitude" in group.members              # … and reported as its alias, with numbers
+    assert "finite_amplitude" in group.members  # … and reported as its alias, with numbers
     alias = next(a for a in group.aliases if a.startswith("finite_amplitude ≡ moment_scale"))
     epsilon, _ = amplitude_scale_error(table, PAPER_PROBE)
     assert f"{epsilon * 100:.3g} %" in alias and "here moment_scale ε" in alias
     value, std = held.effect_parameter("moment_scale.scale_error")
-    assert abs(value - epsilon) < 3 * std                   # the premise: the two are the same number
+    assert abs(value - epsilon) < 3 * std  # the premise: the two are the same number
     # The lab replaces the generic term by the physics of known size that fits as well, and says why.
     found = diagnose(held.fit, catalog().values(), PAPER_PROBE)
     history = []
@@ -64,8 +72,15 @@ def test_gravity_in_the_model_is_grouped_with_the_field_offset_it_absorbs():
     sweep = synth.rotation_sweeps(15.0, 2)
     theta0 = sweep.pop("theta0_deg")
     tilt = math.radians(2.0)
-    table = synth.synthesize(PAPER_PROBE, UniformField((20e-6, -10e-6, -40e-6)), theta0, np.random.default_rng(1),
-                             gravity_m_per_s2=Pose.tilted(tilt).gravity_m_per_s2, amplitude_deg=2.0, **sweep)
+    table = synth.synthesize(
+        PAPER_PROBE,
+        UniformField((20e-6, -10e-6, -40e-6)),
+        theta0,
+        np.random.default_rng(1),
+        gravity_m_per_s2=Pose.tilted(tilt).gravity_m_per_s2,
+        amplitude_deg=2.0,
+        **sweep,
+    )
     report = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
     assert "gravity" in report.effect_names
     group = next(g for g in report.groups if g.in_model == ["gravity"])

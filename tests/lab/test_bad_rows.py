@@ -4,6 +4,7 @@ The potential is expanded over ±0.75 rad (43°) of the lever's swing; a start a
 that, or a field against the probe axis stronger than kM/m (15.3 mT for the paper's probe:
 the field spring cancels the mechanical one), has no frequency in the model.
 """
+
 import numpy as np
 
 from mows.cli.main import main
@@ -11,15 +12,16 @@ from mows.lab import FrequencyModel, analyse, catalog, synth
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
 
-WIDE_ROWS = [2, 5]       # amplitude 50°: beyond the 43° of the expansion
-UNSTABLE_ROW = 9         # 30 mT against the probe axis: k = kM + m·Bx' < 0
+WIDE_ROWS = [2, 5]  # amplitude 50°: beyond the 43° of the expansion
+UNSTABLE_ROW = 9  # 30 mT against the probe axis: k = kM + m·Bx' < 0
 
 
 def _table():
     sweep = synth.rotation_sweeps(30.0, 2)
     theta0 = sweep.pop("theta0_deg")
-    table = synth.synthesize(PAPER_PROBE, UniformField((2e-5, 1e-5, 0.0)), theta0, np.random.default_rng(1),
-                             amplitude_deg=20.0, **sweep)
+    table = synth.synthesize(
+        PAPER_PROBE, UniformField((2e-5, 1e-5, 0.0)), theta0, np.random.default_rng(1), amplitude_deg=20.0, **sweep
+    )
     amplitude = table.amplitude_deg.copy()
     amplitude[WIDE_ROWS] = 50.0
     field = table.ref_bx_t.copy()

@@ -1,4 +1,5 @@
 """`mows lab compare | diagnose | add | report`: text, JSON schema, HTML, and user errors."""
+
 import fcntl
 import json
 import math
@@ -24,9 +25,15 @@ from mows.physics.probe import PAPER_PROBE
 def tilted_csv(tmp_path_factory):
     sweep = synth.rotation_sweeps(15.0, 2)
     theta0 = sweep.pop("theta0_deg")
-    table = synth.synthesize(PAPER_PROBE, UniformField((2e-5, -1e-5, -4e-5)), theta0, np.random.default_rng(0),
-                             gravity_m_per_s2=Pose.tilted(math.radians(1.0)).gravity_m_per_s2, amplitude_deg=2.0,
-                             **sweep)
+    table = synth.synthesize(
+        PAPER_PROBE,
+        UniformField((2e-5, -1e-5, -4e-5)),
+        theta0,
+        np.random.default_rng(0),
+        gravity_m_per_s2=Pose.tilted(math.radians(1.0)).gravity_m_per_s2,
+        amplitude_deg=2.0,
+        **sweep,
+    )
     path = tmp_path_factory.mktemp("lab") / "tilted.csv"
     table.to_csv(path)
     return path
@@ -64,12 +71,15 @@ def test_compare_and_report(tilted_csv, tmp_path, capsys):
     assert text.count("data:image/png;base64,") >= 6 and "gravity" in text
 
 
-@pytest.mark.parametrize("args, words", [
-    (["lab", "compare", "/nonexistent.csv"], ["cannot read"]),
-    (["lab", "add", "TABLE", "no_such_effect"], ["unknown effect", "no_such_effect"]),
-    (["lab", "diagnose", "TABLE", "--probe", "BADPROBE"], ["probe file", "moment_am2"]),
-    (["lab", "diagnose", "TABLE", "--plugin", "nothing_like_this"], ["nothing_like_this"]),
-])
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["lab", "compare", "/nonexistent.csv"], ["cannot read"]),
+        (["lab", "add", "TABLE", "no_such_effect"], ["unknown effect", "no_such_effect"]),
+        (["lab", "diagnose", "TABLE", "--probe", "BADPROBE"], ["probe file", "moment_am2"]),
+        (["lab", "diagnose", "TABLE", "--plugin", "nothing_like_this"], ["nothing_like_this"]),
+    ],
+)
 def test_user_errors_are_one_line_messages(tilted_csv, tmp_path, capsys, args, words):
     bad_probe = tmp_path / "probe.yaml"
     bad_probe.write_text("f00_hz: 112\n")
@@ -84,6 +94,7 @@ def test_user_errors_are_one_line_messages(tilted_csv, tmp_path, capsys, args, w
 def test_report_polar_curve_passes_through_the_model_at_measured_orientations(tilted_csv):
     from mows.lab import FrequencyModel, catalog, read_csv
     from mows.lab.report import sweep_curve
+
     table = read_csv(tilted_csv)
     fit = (FrequencyModel(PAPER_PROBE) + catalog()["gravity"]).fit(table)
     rows = table.sweep_ids == 0
@@ -93,8 +104,10 @@ def test_report_polar_curve_passes_through_the_model_at_measured_orientations(ti
     # midpoints it departs from the mean of its neighbours by the curvature of Δf(θ0).
     angles = np.unique(table.theta0_deg[rows])
     middle = sweep_curve(fit, rows, angles[:-1] + np.diff(angles) / 2)
-    chord = (fit.prediction_hz[rows][np.argsort(table.theta0_deg[rows])][:-1]
-             + fit.prediction_hz[rows][np.argsort(table.theta0_deg[rows])][1:]) / 2
+    chord = (
+        fit.prediction_hz[rows][np.argsort(table.theta0_deg[rows])][:-1]
+        + fit.prediction_hz[rows][np.argsort(table.theta0_deg[rows])][1:]
+    ) / 2
     assert np.max(np.abs(middle - chord)) > 1e-5
 
 
@@ -102,6 +115,7 @@ def test_diagnose_separates_a_group_on_a_table_without_amplitudes(tilted_csv, tm
     """amplitude_deg is optional: the what-if variants (one halves the amplitude) must still
     join the table they extend."""
     from mows.lab import read_csv
+
     table = read_csv(tilted_csv)
     bare = tmp_path / "no_amplitude.csv"
     type(table)({k: v for k, v in table.columns.items() if k != "amplitude_deg"}).to_csv(bare)
@@ -119,8 +133,9 @@ def test_a_long_table_is_analysed_on_a_stated_subsample_without_a_progress_bar_i
     captured = capsys.readouterr()
     report = json.loads(captured.out)
     assert report["base"]["n"] == MAX_ROWS
-    assert any(f"{copies * len(table)} rows: analysed on a random subsample of {MAX_ROWS}" in note
-               for note in report["notes"])
+    assert any(
+        f"{copies * len(table)} rows: analysed on a random subsample of {MAX_ROWS}" in note for note in report["notes"]
+    )
     assert captured.err == ""  # no progress bar (stderr is no terminal here, and --json)
     assert main(["lab", "compare", str(long), "--json", "--no-cv", "--all-rows"]) == 0
     assert json.loads(capsys.readouterr().out)["base"]["n"] == copies * len(table)
@@ -129,8 +144,11 @@ def test_a_long_table_is_analysed_on_a_stated_subsample_without_a_progress_bar_i
 def test_a_terminal_sees_the_stages_progress(tilted_csv):
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a new pty is 0 columns wide
-    with subprocess.Popen([sys.executable, "-m", "mows.cli.main", "lab", "compare", str(tilted_csv), "--no-cv"],
-                          stdout=subprocess.DEVNULL, stderr=slave) as process:
+    with subprocess.Popen(
+        [sys.executable, "-m", "mows.cli.main", "lab", "compare", str(tilted_csv), "--no-cv"],
+        stdout=subprocess.DEVNULL,
+        stderr=slave,
+    ) as process:
         os.close(slave)
         seen = b""
         while True:

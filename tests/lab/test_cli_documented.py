@@ -5,6 +5,7 @@ documented form that the parser rejects fails here; the plugin file is the docum
 The files the commands name (sweep.csv, sweeps.csv, probe.yaml, coil_heating.py, the paper's
 probe path) are made in a scratch directory that the commands run in.
 """
+
 import pathlib
 import re
 import shlex
@@ -52,9 +53,16 @@ def workdir(tmp_path_factory):
     sweep = synth.rotation_sweeps(30.0, 2)
     theta0 = sweep.pop("theta0_deg")
     source = SumSource([UniformField((3e-5, 0.0, 0.0)), anti_helmholtz_pair((0, 0, 0), (1, 0, 0), 0.05, 40, 0.5)])
-    table = synth.synthesize(PAPER_PROBE, source, theta0, np.random.default_rng(3), amplitude_deg=3.0,
-                             temperature_k=296.0 + 0.01 * sweep["t_s"],
-                             coil_current_a=np.tile([0.0, 1.0, 2.0], len(theta0) // 3), **sweep)
+    table = synth.synthesize(
+        PAPER_PROBE,
+        source,
+        theta0,
+        np.random.default_rng(3),
+        amplitude_deg=3.0,
+        temperature_k=296.0 + 0.01 * sweep["t_s"],
+        coil_current_a=np.tile([0.0, 1.0, 2.0], len(theta0) // 3),
+        **sweep,
+    )
     table.to_csv(directory / "sweep.csv")
     table.to_csv(directory / "sweeps.csv")
     shutil.copy(ROOT / PAPER_PROBE_PATH, directory / "probe.yaml")
@@ -85,6 +93,9 @@ def test_a_documented_command_runs_verbatim(command, workdir, monkeypatch, capsy
         return
     assert "verdict:" in out
     if subcommand == "add" and "--auto" not in words:
-        named = [w for w in words[3:] if not w.startswith("-") and w not in ("sweep.csv", "sweeps.csv")
-                 and not w.endswith((".yaml", ".py"))]
+        named = [
+            w
+            for w in words[3:]
+            if not w.startswith("-") and w not in ("sweep.csv", "sweeps.csv") and not w.endswith((".yaml", ".py"))
+        ]
         assert "eq6 + " + " + ".join(named) in out

@@ -1,5 +1,6 @@
 """The lab's physics engine: Eq. 6 exactly with no effect, the exact potential with effects,
 every effect off at 0, and the ring-down averaging checked against the estimator itself."""
+
 import math
 
 import numpy as np
@@ -30,8 +31,9 @@ def test_the_base_model_is_eq6_exactly_up_to_mT_fields():
     axes = table.probe_axes()
     along = np.einsum("ni,ni->n", axes[:, 0], table.field_t)
     gradient = np.einsum("ni,nij,nj->n", axes[:, 0], table.gradient_t_per_m, axes[:, 0])
-    field_spring = (frequency.field_spring_nm_per_rad(probe.moment_am2, along)
-                    + frequency.gradient_spring_nm_per_rad(probe.moment_am2, probe.lever_m, gradient))
+    field_spring = frequency.field_spring_nm_per_rad(probe.moment_am2, along) + frequency.gradient_spring_nm_per_rad(
+        probe.moment_am2, probe.lever_m, gradient
+    )
     shift = frequency.frequency_shift_hz(probe.f00_hz, probe.spring_nm_per_rad, field_spring)
     np.testing.assert_allclose(probe.f00_hz * h + c, probe.f00_hz + shift, rtol=1e-12)
 
@@ -40,9 +42,14 @@ def test_with_all_field_effects_the_engine_is_the_exact_potential_in_a_uniform_f
     field = (1.2e-3, -0.8e-3, 0.3e-3)
     theta0 = np.radians(np.arange(0, 360, 30.0))
     n = len(theta0)
-    table = MeasurementTable({"theta0_deg": np.degrees(theta0), "f_hz": np.full(n, 112.0),
-                              "f_std_hz": np.full(n, 1e-3), **dict(zip(("ref_bx_t", "ref_by_t", "ref_bz_t"),
-                                                                       np.repeat(np.array(field)[:, None], n, 1)))})
+    table = MeasurementTable(
+        {
+            "theta0_deg": np.degrees(theta0),
+            "f_hz": np.full(n, 112.0),
+            "f_std_hz": np.full(n, 1e-3),
+            **dict(zip(("ref_bx_t", "ref_by_t", "ref_bz_t"), np.repeat(np.array(field)[:, None], n, 1))),
+        }
+    )
     effects = catalog()
     model = FrequencyModel(PAPER_PROBE) + effects["static_deflection"] + effects["damping_shift"]
     exact = true_frequency_hz(PAPER_PROBE, UniformField(field), theta0, 1e-12)
@@ -53,16 +60,31 @@ def test_with_all_field_effects_the_engine_is_the_exact_potential_in_a_uniform_f
 @pytest.mark.parametrize("name", list(catalog()))
 def test_every_effect_is_off_at_zero(name):
     rng = np.random.default_rng(2)
-    table = random_table(rng, field_scale=1e-4, gradient_scale=0.01, temperature_k=rng.uniform(290, 300, 40),
-                         t_s=np.arange(40.0), amplitude_deg=np.full(40, 20.0), damping_per_s=np.full(40, 2.5))
+    table = random_table(
+        rng,
+        field_scale=1e-4,
+        gradient_scale=0.01,
+        temperature_k=rng.uniform(290, 300, 40),
+        t_s=np.arange(40.0),
+        amplitude_deg=np.full(40, 20.0),
+        damping_per_s=np.full(40, 2.5),
+    )
     effect = catalog()[name]
     base = FrequencyModel(PAPER_PROBE).predict(table, [112.48])
     with_effect = (FrequencyModel(PAPER_PROBE) + effect).predict(table, [112.48] + [0.0] * len(effect.parameters))
     np.testing.assert_allclose(with_effect, base, rtol=0, atol=1e-12)
 
 
-def chirped_ringdown(theta0, frequency_of_amplitude, amplitude0=math.radians(24.0), damping=1.8, fs=20000.0,
-                     seconds=0.5, noise_t=1e-9, kappa_t=1e-6):
+def chirped_ringdown(
+    theta0,
+    frequency_of_amplitude,
+    amplitude0=math.radians(24.0),
+    damping=1.8,
+    fs=20000.0,
+    seconds=0.5,
+    noise_t=1e-9,
+    kappa_t=1e-6,
+):
     t = np.arange(int(seconds * fs)) / fs
     amplitude = amplitude0 * np.exp(-damping * t)
     phase = 2 * np.pi * np.cumsum(frequency_of_amplitude(amplitude)) / fs + 0.3

@@ -5,6 +5,7 @@ Every table but the strong-field one uses a small ring-down amplitude (2°): at 
 the finite-amplitude readout is itself a hidden effect of a few tenths of a mHz, which biases
 the others' parameters by more than 2σ (the lab finds it at strong fields, see below).
 """
+
 import math
 
 import numpy as np
@@ -70,27 +71,36 @@ def test_thermal_drift_follows_the_temperature():
     t = sweep["t_s"]
     temperature = 293.15 + 1.5 * (1 - np.exp(-t / 300.0)) + 0.3 * np.sin(2 * np.pi * t / 200.0)
     table = rotation_table(EARTH, 3, temperature_k=temperature)
-    assert_named_and_recovered(table, "thermal_drift",
-                               {"spring_temp_coeff_per_k": PAPER_PROBE.spring_temp_coeff_per_k})
+    assert_named_and_recovered(table, "thermal_drift", {"spring_temp_coeff_per_k": PAPER_PROBE.spring_temp_coeff_per_k})
 
 
 def test_finite_amplitude_in_a_strong_field_sweep_along_the_axis():
     # Fig. 3 of the paper: the field of a Helmholtz pair along x', ±5 mT, at θ0 = 0° and 180°,
     # ring-downs started at 24° and at 12° (which separates it from a calibration error of β0).
-    rows = [(b, angle, amplitude) for b in np.linspace(-5e-3, 5e-3, 11) for angle in (0.0, 180.0)
-            for amplitude in (24.0, 12.0)]
+    rows = [
+        (b, angle, amplitude)
+        for b in np.linspace(-5e-3, 5e-3, 11)
+        for angle in (0.0, 180.0)
+        for amplitude in (24.0, 12.0)
+    ]
     field, angle, amplitude = (np.array(column) for column in zip(*rows))
     current = field / (HELMHOLTZ_T_PER_A_TURN * 100)
     sources = [helmholtz_pair((0, 0, 0), (1, 0, 0), 0.105, 100, i) + EARTH for i in current]
-    table = synth.synthesize(PAPER_PROBE, sources, angle, np.random.default_rng(0), amplitude_deg=amplitude,
-                             coil_current_a=current, sweep=np.arange(len(rows)) % 4)
+    table = synth.synthesize(
+        PAPER_PROBE,
+        sources,
+        angle,
+        np.random.default_rng(0),
+        amplitude_deg=amplitude,
+        coil_current_a=current,
+        sweep=np.arange(len(rows)) % 4,
+    )
     assert_named_and_recovered(table, "finite_amplitude", {"strength": 1.0})
 
 
 def test_a_nearby_coil_brings_transverse_gradient_then_curvature():
     loop = CurrentLoop((0.025, 0.01, 0.0), (1, 0, 0), 0.008, 50, 0.3)
-    first, final = assert_named_and_recovered(rotation_table(loop + EARTH, 0), "transverse_gradient",
-                                              {"strength": 1.0})
+    first, final = assert_named_and_recovered(rotation_table(loop + EARTH, 0), "transverse_gradient", {"strength": 1.0})
     assert "field_curvature" in final.effect_names
     hessian = loop.hessian_t_per_m2(np.zeros(3))
     # The curvature's truth is the loop's in-plane Hessian; terms of third order along the arc
@@ -112,8 +122,15 @@ def test_control_without_hidden_effect_is_adequate_and_false_alarms_are_rare(con
     theta0, sweep, truth = control_truth
     verdicts = []
     for seed in range(40):
-        table = synth.synthesize(PAPER_PROBE, EARTH, theta0, np.random.default_rng(100 + seed), truth_hz=truth,
-                                 amplitude_deg=SMALL_AMPLITUDE_DEG, **sweep)
+        table = synth.synthesize(
+            PAPER_PROBE,
+            EARTH,
+            theta0,
+            np.random.default_rng(100 + seed),
+            truth_hz=truth,
+            amplitude_deg=SMALL_AMPLITUDE_DEG,
+            **sweep,
+        )
         verdicts.append(analyse(table, PAPER_PROBE, cross_validate=False).verdict)
     assert verdicts.count("adequate") >= 38, verdicts  # false-alarm rate ≤ 5 %
     auto = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
@@ -123,8 +140,15 @@ def test_control_without_hidden_effect_is_adequate_and_false_alarms_are_rare(con
 def test_structure_no_effect_explains_is_described_not_forced(control_truth):
     theta0, sweep, truth = control_truth
     # A 4θ0 pattern of 2 mHz (e.g. a magnetometer cross-talk) is in no catalog effect.
-    table = synth.synthesize(PAPER_PROBE, EARTH, theta0, np.random.default_rng(7), amplitude_deg=SMALL_AMPLITUDE_DEG,
-                             truth_hz=truth + 2e-3 * np.cos(4 * np.radians(theta0)), **sweep)
+    table = synth.synthesize(
+        PAPER_PROBE,
+        EARTH,
+        theta0,
+        np.random.default_rng(7),
+        amplitude_deg=SMALL_AMPLITUDE_DEG,
+        truth_hz=truth + 2e-3 * np.cos(4 * np.radians(theta0)),
+        **sweep,
+    )
     report = analyse(table, PAPER_PROBE, cross_validate=False)
     assert report.verdict == "unexplained_structure"
     assert "harmonic 4" in report.structure

@@ -5,6 +5,7 @@ tilt of the rotation plane act identically on the lever when the reference's Bz 
 (only their sum is determined); a temperature coefficient is determined only by the sweep in which the
 temperature changed, so leaving that sweep out cannot predict it.
 """
+
 import math
 
 import numpy as np
@@ -32,8 +33,14 @@ def test_harmonics_from_two_orientations_are_not_identifiable(tmp_path, capsys):
 def test_exact_aliases_leave_their_parameters_not_identifiable():
     sweep = synth.rotation_sweeps(15.0, 2)
     theta0 = sweep.pop("theta0_deg")
-    table = synth.synthesize(PAPER_PROBE, UniformField((2e-5, -1e-5, -4e-5)), theta0, np.random.default_rng(0),
-                             gravity_m_per_s2=Pose.tilted(math.radians(1.0)).gravity_m_per_s2, **sweep)
+    table = synth.synthesize(
+        PAPER_PROBE,
+        UniformField((2e-5, -1e-5, -4e-5)),
+        theta0,
+        np.random.default_rng(0),
+        gravity_m_per_s2=Pose.tilted(math.radians(1.0)).gravity_m_per_s2,
+        **sweep,
+    )
     effects = catalog()
     both = (FrequencyModel(PAPER_PROBE) + effects["plane_tilt"] + effects["field_offset"]).fit(table)
     assert both.identifiable.tolist() == [True, False, False, False, False]
@@ -48,8 +55,14 @@ def test_a_cv_error_that_one_sweep_alone_determines_is_not_identifiable(capsys):
     theta0 = sweep.pop("theta0_deg")
     # The temperature changes only in the second sweep: the first alone cannot determine α.
     temperature = np.where(sweep["sweep"] == 0, 296.0, 296.0 + 4.0 * np.linspace(0.0, 1.0, len(theta0)))
-    table = synth.synthesize(PAPER_PROBE, UniformField((3e-5, 0.0, 0.0)), theta0, np.random.default_rng(4),
-                             temperature_k=temperature, **sweep)
+    table = synth.synthesize(
+        PAPER_PROBE,
+        UniformField((3e-5, 0.0, 0.0)),
+        theta0,
+        np.random.default_rng(4),
+        temperature_k=temperature,
+        **sweep,
+    )
     report = analyse(table, PAPER_PROBE, effects=["thermal_drift"], rank=False)
     base, drift = report.history
     assert base.cv_identifiable and math.isfinite(base.cv_rms_hz)
@@ -63,8 +76,14 @@ def test_a_bad_model_on_well_sampled_sweeps_still_has_a_cv_error():
     plane (χ²/dof above 5000, as in the demo) is still cross-validated."""
     sweep = synth.rotation_sweeps(15.0, 2)
     theta0 = sweep.pop("theta0_deg")
-    table = synth.synthesize(PAPER_PROBE, UniformField((2e-5, -1e-5, 0.0)), theta0, np.random.default_rng(5),
-                             gravity_m_per_s2=Pose.tilted(math.radians(20.0)).gravity_m_per_s2, **sweep)
+    table = synth.synthesize(
+        PAPER_PROBE,
+        UniformField((2e-5, -1e-5, 0.0)),
+        theta0,
+        np.random.default_rng(5),
+        gravity_m_per_s2=Pose.tilted(math.radians(20.0)).gravity_m_per_s2,
+        **sweep,
+    )
     base = analyse(table, PAPER_PROBE, rank=False).history[0]
     assert base.chi2_dof > 5000
     assert base.cv_identifiable and math.isfinite(base.cv_rms_hz)

@@ -9,6 +9,7 @@ its log (``--enable-logging=stderr``). The same check on a page with a broken im
 console error must fail, so that it can. Chromium is Debian's ``chromium``, installed by
 ``make test`` when missing.
 """
+
 import json
 import re
 import shutil
@@ -34,8 +35,9 @@ window.addEventListener("load", () => {
   document.body.appendChild(out);
 });
 </script>"""
-BROKEN = ('<img src="data:image/png;base64,iVBORw0KGgoAAAAbroken" alt="broken">'
-          '<script>console.error("deliberate");</script>')
+BROKEN = (
+    '<img src="data:image/png;base64,iVBORw0KGgoAAAAbroken" alt="broken"><script>console.error("deliberate");</script>'
+)
 
 
 def _chromium(*args):
@@ -47,8 +49,7 @@ def render(path) -> tuple:
     """(image check {images, failed}, console messages) of the page at ``path`` in Chromium."""
     checked = path.with_name(path.stem + "_checked.html")
     checked.write_text(path.read_text().replace("</body>", CHECK + "</body>"))
-    done = _chromium("--enable-logging=stderr", "--v=0", "--virtual-time-budget=10000", "--dump-dom",
-                     checked.as_uri())
+    done = _chromium("--enable-logging=stderr", "--v=0", "--virtual-time-budget=10000", "--dump-dom", checked.as_uri())
     found = re.search(r'<pre id="mows-image-check">([^<]*)</pre>', done.stdout)
     assert found, f"the page did not finish loading: {done.stderr[-2000:]}"
     console = [line for line in done.stderr.splitlines() if ":CONSOLE" in line]
@@ -60,8 +61,9 @@ def report_page(tmp_path_factory):
     sweep = synth.rotation_sweeps(30.0, 2)
     theta0 = sweep.pop("theta0_deg")
     source = anti_helmholtz_pair((0, 0, 0), (1, 0, 0), 0.105, 100, 1.0) + UniformField((16e-6, 12e-6, -40e-6))
-    table = synth.synthesize(PAPER_PROBE, source, theta0, np.random.default_rng(0), f_std_hz=3e-4,
-                             amplitude_deg=20.0, **sweep)
+    table = synth.synthesize(
+        PAPER_PROBE, source, theta0, np.random.default_rng(0), f_std_hz=3e-4, amplitude_deg=20.0, **sweep
+    )
     report = analyse(table, PAPER_PROBE, auto=True)
     return write_report(report, tmp_path_factory.mktemp("report") / "lab_report.html"), report
 

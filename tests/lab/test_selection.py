@@ -1,5 +1,6 @@
 """Effects at their physical value, the stepwise selection that revisits its choices, and the
 live demo's anti-Helmholtz sweep on which greedy selection used to diagnose curvature."""
+
 import json
 import math
 import pathlib
@@ -23,8 +24,10 @@ def test_an_effect_at_physics_is_the_free_effect_at_its_physical_value():
     for name in ("transverse_gradient", "static_deflection", "finite_amplitude", "damping_shift"):
         fixed = effects[name].at_physics()
         assert fixed.parameters == () and fixed.label == f"{name} (at physics)" and fixed.free is effects[name]
-        np.testing.assert_array_equal((FrequencyModel(PAPER_PROBE) + fixed).predict(table, [112.48]),
-                                      (FrequencyModel(PAPER_PROBE) + effects[name]).predict(table, [112.48, 1.0]))
+        np.testing.assert_array_equal(
+            (FrequencyModel(PAPER_PROBE) + fixed).predict(table, [112.48]),
+            (FrequencyModel(PAPER_PROBE) + effects[name]).predict(table, [112.48, 1.0]),
+        )
     with pytest.raises(ValueError, match="tilt|known"):
         effects["gravity"].at_physics()
 
@@ -35,8 +38,9 @@ def test_the_demo_sweep_is_known_physics_not_curvature():
     greedy selection with free strengths added transverse_gradient (0.92) and field_curvature."""
     probe = load_scenario("anti_helmholtz").probe
     table = load_table(DEMO)
-    physics = [catalog()[name].at_physics() for name in ("transverse_gradient", "finite_amplitude",
-                                                         "static_deflection")]
+    physics = [
+        catalog()[name].at_physics() for name in ("transverse_gradient", "finite_amplitude", "static_deflection")
+    ]
     assert FrequencyModel(probe, physics).fit(table).chi2_dof < 1.0
     report = analyse(table, probe, auto=True, cross_validate=False)
     assert "field_curvature" not in report.effect_names, report.history
@@ -55,15 +59,23 @@ def strong_field_table(truth_amplitude_deg, seed=0):
     theta0 = sweep.pop("theta0_deg")
     source = UniformField((170e-6, 0.0, 0.0)) + EARTH
     truth = synth.true_frequency_hz(PAPER_PROBE, source, np.radians(theta0), math.radians(truth_amplitude_deg))
-    return synth.synthesize(PAPER_PROBE, source, theta0, np.random.default_rng(seed), f_std_hz=4e-4,
-                            truth_hz=truth, amplitude_deg=24.0, **sweep)
+    return synth.synthesize(
+        PAPER_PROBE,
+        source,
+        theta0,
+        np.random.default_rng(seed),
+        f_std_hz=4e-4,
+        truth_hz=truth,
+        amplitude_deg=24.0,
+        **sweep,
+    )
 
 
 def test_known_physics_is_added_at_physics_when_the_data_have_it():
     report = analyse(strong_field_table(24.0), PAPER_PROBE, auto=True, cross_validate=False)
     assert {"finite_amplitude (at physics)", "static_deflection (at physics)"} <= set(report.effects), report.history
     assert report.verdict == "adequate"
-    value, std = report.effect_parameter("finite_amplitude.strength")   # the free fit, as a check
+    value, std = report.effect_parameter("finite_amplitude.strength")  # the free fit, as a check
     assert abs(value - 1.0) < 3 * std
 
 
@@ -73,9 +85,9 @@ def test_known_physics_the_data_do_not_have_is_rejected():
     assert "finite_amplitude" not in report.effect_names, report.history
     first = analyse(strong_field_table(1.0), PAPER_PROBE, cross_validate=False)
     amplitude = next(c for c in first.candidates if c.name == "finite_amplitude")
-    assert amplitude.physics.signal_chi2 > 100          # it would be seen …
-    assert amplitude.physics.delta_bic < -100 and amplitude.physics.p_value > 1e-3   # … and is not there
-    assert abs(amplitude.parameters[0][1]) < 3 * amplitude.parameters[0][2]     # free: strength ≈ 0
+    assert amplitude.physics.signal_chi2 > 100  # it would be seen …
+    assert amplitude.physics.delta_bic < -100 and amplitude.physics.p_value > 1e-3  # … and is not there
+    assert abs(amplitude.parameters[0][1]) < 3 * amplitude.parameters[0][2]  # free: strength ≈ 0
 
 
 def test_json_and_command_line_carry_the_form(tmp_path, capsys):

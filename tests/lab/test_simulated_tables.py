@@ -7,6 +7,7 @@ orientations × 2 full sweeps per scenario, one simulated table and one ``--auto
 scenario for the whole module (nothing is cached between runs). The seed is fixed; over seeds
 0–9 every assertion below held in 10 of 10.
 """
+
 import numpy as np
 import pytest
 
@@ -18,7 +19,7 @@ from mows.sim.scenario import load_scenario
 ANGLES_DEG = np.arange(0.0, 360.0, 22.5)
 SWEEPS = 2
 SEED = 0
-CHECK_SIGMAS = 3.0   # an effect held at physics: its free fit stays this close to the physical value
+CHECK_SIGMAS = 3.0  # an effect held at physics: its free fit stays this close to the physical value
 
 
 @pytest.fixture(scope="module")
@@ -32,6 +33,7 @@ def lab():
             table = synth.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
             found[name] = scenario, table, analyse(table, scenario.probe, auto=True, cross_validate=False)
         return found[name]
+
     return run
 
 
@@ -53,8 +55,9 @@ def test_the_simulated_table_has_the_estimators_columns_and_the_scenarios_refere
     assert np.all(np.diff(table.t_s) > 0)
     field, gradient = reference_at(scenario)
     np.testing.assert_allclose(table.field_t[0], field)
-    np.testing.assert_allclose([table.columns[name][0] for name in GRADIENT],
-                               [gradient[0, 0], gradient[0, 1], gradient[1, 1]])
+    np.testing.assert_allclose(
+        [table.columns[name][0] for name in GRADIENT], [gradient[0, 0], gradient[0, 1], gradient[1, 1]]
+    )
     assert all(np.ptp(table.columns[name]) == 0 for name in FIELD)
     # One pooled start amplitude per sweep, near the 24° stop.
     for sweep in np.unique(table.sweep):

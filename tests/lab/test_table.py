@@ -1,5 +1,6 @@
 """Measurement tables: CSV validation with errors that name the column and row, probe-frame
 quantities, covariates, and bags of RingdownFit messages with a reference."""
+
 import math
 
 import numpy as np
@@ -18,8 +19,9 @@ def write(tmp_path, text, name="t.csv"):
 
 
 def test_a_table_reads_with_frames_and_covariates(tmp_path):
-    path = write(tmp_path, HEADER + "0,112.5,0.001,1e-5,2e-5,1e-3,2e-3,-4e-3,40\n"
-                                    "90,112.6,0.001,1e-5,2e-5,1e-3,2e-3,-4e-3,41\n")
+    path = write(
+        tmp_path, HEADER + "0,112.5,0.001,1e-5,2e-5,1e-3,2e-3,-4e-3,40\n90,112.6,0.001,1e-5,2e-5,1e-3,2e-3,-4e-3,41\n"
+    )
     table = read_csv(path)
     assert len(table) == 2 and table.humidity.tolist() == [40.0, 41.0]
     np.testing.assert_allclose(table.gradient_t_per_m[0], [[1e-3, 2e-3, 0], [2e-3, -4e-3, 0], [0, 0, 3e-3]])
@@ -32,15 +34,18 @@ def test_a_table_reads_with_frames_and_covariates(tmp_path):
     assert any("ref_bz_t" in note for note in table.notes)
 
 
-@pytest.mark.parametrize("text, words", [
-    ("theta0_deg,f_hz\n0,112\n", ["f_std_hz"]),
-    ("theta0_deg,f_hz,f_std_hz\n0,112,0.001\n10,abc,0.001\n", ["f_hz", "'abc'", "row 2"]),
-    ("theta0_deg,f_hz,f_std_hz\n0,112,0.001\n10,nan,0.001\n", ["f_hz", "NaN", "row 2"]),
-    ("theta0_deg,f_hz,f_std_hz\n0,112,0\n", ["f_std_hz", "> 0", "row 1"]),
-    ("theta0_deg,f_hz,f_std_hz,ref_bx_t\n0,112,0.001,1e-6\n", ["ref_bx_t", "ref_by_t"]),
-    ("theta0_deg,f_hz,f_std_hz\n0,112\n", ["row 1", "3 cells"]),
-    ("theta0_deg,f_hz,f_std_hz\n", ["no rows"]),
-])
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("theta0_deg,f_hz\n0,112\n", ["f_std_hz"]),
+        ("theta0_deg,f_hz,f_std_hz\n0,112,0.001\n10,abc,0.001\n", ["f_hz", "'abc'", "row 2"]),
+        ("theta0_deg,f_hz,f_std_hz\n0,112,0.001\n10,nan,0.001\n", ["f_hz", "NaN", "row 2"]),
+        ("theta0_deg,f_hz,f_std_hz\n0,112,0\n", ["f_std_hz", "> 0", "row 1"]),
+        ("theta0_deg,f_hz,f_std_hz,ref_bx_t\n0,112,0.001,1e-6\n", ["ref_bx_t", "ref_by_t"]),
+        ("theta0_deg,f_hz,f_std_hz\n0,112\n", ["row 1", "3 cells"]),
+        ("theta0_deg,f_hz,f_std_hz\n", ["no rows"]),
+    ],
+)
 def test_bad_tables_name_the_column_and_row(tmp_path, text, words):
     with pytest.raises(TableError) as error:
         read_csv(write(tmp_path, text))
@@ -70,29 +75,54 @@ def test_a_bag_of_ringdown_fits_with_a_magnetometer_or_a_source_reference(tmp_pa
     types = store.types
 
     def header(seconds):
-        return types["std_msgs/msg/Header"](stamp=types["builtin_interfaces/msg/Time"](sec=seconds, nanosec=0),
-                                            frame_id="probe")
+        return types["std_msgs/msg/Header"](
+            stamp=types["builtin_interfaces/msg/Time"](sec=seconds, nanosec=0), frame_id="probe"
+        )
 
     def ringdown(seconds, theta0, status=0):
-        values = {name: 0.0 for name, (kind, detail) in store.fielddefs["mows_msgs/msg/RingdownFit"][1]
-                  if kind.name == "BASE" and detail[0] == "float64"}
-        values.update(theta0_rad=theta0, frequency_hz=112.5 + theta0, frequency_std_hz=1e-3, amplitude_rad=0.4,
-                      damping_per_s=1.8, duration_s=0.5)
+        values = {
+            name: 0.0
+            for name, (kind, detail) in store.fielddefs["mows_msgs/msg/RingdownFit"][1]
+            if kind.name == "BASE" and detail[0] == "float64"
+        }
+        values.update(
+            theta0_rad=theta0,
+            frequency_hz=112.5 + theta0,
+            frequency_std_hz=1e-3,
+            amplitude_rad=0.4,
+            damping_per_s=1.8,
+            duration_s=0.5,
+        )
         return types["mows_msgs/msg/RingdownFit"](
-            header=header(seconds), cycle_id=seconds, repeat_index=0, tuning=False, status=status, status_name="",
+            header=header(seconds),
+            cycle_id=seconds,
+            repeat_index=0,
+            tuning=False,
+            status=status,
+            status_name="",
             message="",
-            theta0_free=False, n_samples=10000, parameter_names=[], covariance=np.zeros(0), **values)
+            theta0_free=False,
+            n_samples=10000,
+            parameter_names=[],
+            covariance=np.zeros(0),
+            **values,
+        )
 
     def field(seconds, bx):
         vector = types["geometry_msgs/msg/Vector3"](x=bx, y=2e-6, z=-4e-5)
-        return types["sensor_msgs/msg/MagneticField"](header=header(seconds), magnetic_field=vector,
-                                                      magnetic_field_covariance=np.zeros(9))
+        return types["sensor_msgs/msg/MagneticField"](
+            header=header(seconds), magnetic_field=vector, magnetic_field_covariance=np.zeros(9)
+        )
 
-    messages = [bags.BagMessage("/mows/ringdown", "mows_msgs/msg/RingdownFit", 10**9 * s, ringdown(s, 0.1 * s))
-                for s in (10, 20, 30)]
+    messages = [
+        bags.BagMessage("/mows/ringdown", "mows_msgs/msg/RingdownFit", 10**9 * s, ringdown(s, 0.1 * s))
+        for s in (10, 20, 30)
+    ]
     messages.append(bags.BagMessage("/mows/ringdown", "mows_msgs/msg/RingdownFit", 35 * 10**9, ringdown(35, 0.0, 3)))
-    messages += [bags.BagMessage("/ref/field", "sensor_msgs/msg/MagneticField", 10**9 * s, field(s, 1e-6 * s))
-                 for s in (9, 21, 40)]
+    messages += [
+        bags.BagMessage("/ref/field", "sensor_msgs/msg/MagneticField", 10**9 * s, field(s, 1e-6 * s))
+        for s in (9, 21, 40)
+    ]
     bags.write_bag(tmp_path / "bag", sorted(messages, key=lambda m: m.timestamp_ns))
 
     table = from_bag(tmp_path / "bag", reference="/ref/field")

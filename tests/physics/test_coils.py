@@ -1,4 +1,5 @@
 """Excitation setups: coil field perpendicular to the moment for every θ0, the current cap."""
+
 import numpy as np
 import pytest
 import scipy.constants
@@ -52,8 +53,8 @@ def test_each_coil_field_at_the_probe_points_along_its_axis(name, directions_deg
 @pytest.mark.parametrize("name", SETUPS)
 def test_coil_field_at_the_probe_is_perpendicular_to_the_moment_for_every_theta0(name):
     setup = SETUPS[name]
-    currents = setup.currents_a(THETA0, 10.0)                  # (24, 2)
-    field = setup.field_t(np.zeros(3), currents)                # (24, 3)
+    currents = setup.currents_a(THETA0, 10.0)  # (24, 2)
+    field = setup.field_t(np.zeros(3), currents)  # (24, 3)
     assert np.all(np.abs(angle_to_moment_deg(field, THETA0) - 90.0) < 1e-9)
     # A·b·(−sin θ0, cos θ0): constant magnitude, turning with the probe.
     b = 10.0 * on_axis_coil_field_per_ampere(0.10)
@@ -99,9 +100,11 @@ def test_current_cap_refuses_and_never_clips():
 
 
 @settings(max_examples=200, deadline=None)
-@given(name=st.sampled_from(sorted(SETUPS)),
-       theta0=st.floats(-20.0, 20.0, allow_nan=False),
-       amplitude=st.floats(0.0, 10.0, allow_nan=False))
+@given(
+    name=st.sampled_from(sorted(SETUPS)),
+    theta0=st.floats(-20.0, 20.0, allow_nan=False),
+    amplitude=st.floats(0.0, 10.0, allow_nan=False),
+)
 def test_no_commanded_current_exceeds_the_cap(name, theta0, amplitude):
     assert np.all(np.abs(SETUPS[name].currents_a(theta0, amplitude)) <= 10.0)
 
@@ -119,11 +122,13 @@ def test_yaml_round_trip_and_presets():
         again = setup_from_dict(setup.to_dict())
         np.testing.assert_allclose(again.currents_a(THETA0, 7.0), setup.currents_a(THETA0, 7.0), rtol=0, atol=1e-12)
         field = setup.coil_field_per_ampere_t(points)
-        np.testing.assert_allclose(again.coil_field_per_ampere_t(points), field,
-                                   rtol=0, atol=1e-13 * np.abs(field).max())
+        np.testing.assert_allclose(
+            again.coil_field_per_ampere_t(points), field, rtol=0, atol=1e-13 * np.abs(field).max()
+        )
     probe = [0.01, 0.02, -0.03]
-    near = setup_from_dict({"preset": "helmholtz", "distance_m": 0.05, "current_limit_a": 2.0,
-                            "probe_position_m": probe})
+    near = setup_from_dict(
+        {"preset": "helmholtz", "distance_m": 0.05, "current_limit_a": 2.0, "probe_position_m": probe}
+    )
     assert near.coil_field_per_ampere_t(probe)[0, 1] == pytest.approx(on_axis_coil_field_per_ampere(0.05), rel=1e-12)
     with pytest.raises(ValueError, match="exceeds the cap of 2 A"):
         near.currents_a(0.0, 3.0)

@@ -1,4 +1,5 @@
 """Field sources against Maxwell's equations, textbook formulas and Biot–Savart quadrature."""
+
 import numpy as np
 import pytest
 import scipy.constants
@@ -58,9 +59,13 @@ def biot_savart(loop, point, order):
             v = d / r**3
         elif order == 1:  # ∂_j (d_i/r³)
             v = eye / r**3 - 3 * np.outer(d, d) / r**5
-        else:             # ∂_j ∂_k (d_i/r³)
-            v = (-3 * (np.einsum("ij,k->ijk", eye, d) + np.einsum("ik,j->ijk", eye, d)
-                       + np.einsum("i,jk->ijk", d, eye)) / r**5 + 15 * np.einsum("i,j,k->ijk", d, d, d) / r**7)
+        else:  # ∂_j ∂_k (d_i/r³)
+            v = (
+                -3
+                * (np.einsum("ij,k->ijk", eye, d) + np.einsum("ik,j->ijk", eye, d) + np.einsum("i,jk->ijk", d, eye))
+                / r**5
+                + 15 * np.einsum("i,j,k->ijk", d, d, d) / r**7
+            )
         return np.cross(dl.reshape((3,) + (1,) * order), v, axis=0).ravel()
 
     value, _ = integrate.quad_vec(kernel, 0, 2 * np.pi, epsabs=0, epsrel=1e-13, limit=1000)
@@ -71,8 +76,9 @@ def biot_savart(loop, point, order):
 
 SOURCES = {
     "uniform": UniformField([1e-5, -2e-5, 4e-5]),
-    "linear_gradient": LinearGradient([[1e-3, 2e-4, 0], [2e-4, -3e-4, 5e-4], [0, 5e-4, -7e-4]],
-                                      [0.01, 0, 0], [0, 1e-6, 0]),
+    "linear_gradient": LinearGradient(
+        [[1e-3, 2e-4, 0], [2e-4, -3e-4, 5e-4], [0, 5e-4, -7e-4]], [0.01, 0, 0], [0, 1e-6, 0]
+    ),
     "dipole": PointDipole([3e-4, -1e-4, 2e-4], [0.2, 0.1, -0.1]),
     "loop": LOOP,
     "helmholtz": helmholtz_pair([0, 0.01, 0], [0, 0, 1], 0.08, 20, 0.5),
@@ -119,8 +125,9 @@ def central_difference(func, points, step_m):
     for j in range(3):
         e = np.zeros(3)
         e[j] = step_m
-        out.append((8 * (func(points + e) - func(points - e)) - (func(points + 2 * e) - func(points - 2 * e)))
-                   / (12 * step_m))
+        out.append(
+            (8 * (func(points + e) - func(points - e)) - (func(points + 2 * e) - func(points - 2 * e))) / (12 * step_m)
+        )
     return np.stack(out, axis=-1)
 
 
@@ -148,6 +155,7 @@ def test_points_shape_is_vectorised_and_checked():
 
 # ---------------------------------------------------------------- dipole and constant gradient
 
+
 def test_dipole_on_axis_and_equator():
     m, r = 2e-3, 0.07
     dipole = PointDipole([0, 0, m], [0, 0, 0])
@@ -173,6 +181,7 @@ def test_linear_gradient_refuses_fields_that_break_maxwell():
 
 # ---------------------------------------------------------------- current loop
 
+
 def test_loop_on_axis_field_and_its_derivatives():
     # B_z(z) = μ0NIR²/(2(R²+z²)^{3/2}); dB_z/dz = −3μ0NIR²z/(2(R²+z²)^{5/2});
     # d²B_z/dz² = 3μ0NIR²(4z² − R²)/(2(R²+z²)^{7/2}).
@@ -186,7 +195,8 @@ def test_loop_on_axis_field_and_its_derivatives():
         local = MU0 * NI / (R**2 + z**2)  # |B|/s scale of the derivative
         assert a @ LOOP.gradient_t_per_m(point) @ a == pytest.approx(dbz, abs=1e-10 * local)
         assert np.einsum("ijk,i,j,k->", LOOP.hessian_t_per_m2(point), a, a, a) == pytest.approx(
-            d2bz, abs=1e-8 * local / R)
+            d2bz, abs=1e-8 * local / R
+        )
     assert np.linalg.norm(LOOP.field_t(LOOP.center_m)) == pytest.approx(MU0 * NI / (2 * R), rel=1e-14)
 
 
@@ -228,10 +238,12 @@ def test_loop_far_field_is_its_dipole():
         error = np.linalg.norm(LOOP.field_t(points) - b_dip, axis=-1) / np.linalg.norm(b_dip, axis=-1)
         assert np.all(error <= bound)
         assert error.max() > 0.5 * bound  # it is the octupole, not noise
-        assert np.linalg.norm(LOOP.gradient_t_per_m(points[:4]) - dipole.gradient_t_per_m(points[:4])) <= \
-            4 * (R / r) ** 2 * np.linalg.norm(dipole.gradient_t_per_m(points[:4]))
-        assert np.linalg.norm(LOOP.hessian_t_per_m2(points[:2]) - dipole.hessian_t_per_m2(points[:2])) <= \
-            6 * (R / r) ** 2 * np.linalg.norm(dipole.hessian_t_per_m2(points[:2]))
+        assert np.linalg.norm(LOOP.gradient_t_per_m(points[:4]) - dipole.gradient_t_per_m(points[:4])) <= 4 * (
+            R / r
+        ) ** 2 * np.linalg.norm(dipole.gradient_t_per_m(points[:4]))
+        assert np.linalg.norm(LOOP.hessian_t_per_m2(points[:2]) - dipole.hessian_t_per_m2(points[:2])) <= 6 * (
+            R / r
+        ) ** 2 * np.linalg.norm(dipole.hessian_t_per_m2(points[:2]))
 
 
 def test_loop_refuses_points_on_the_wire():
@@ -282,6 +294,7 @@ def test_long_solenoid_approaches_a_current_sheet():
 
 # ---------------------------------------------------------------- composition and YAML form
 
+
 def assert_same_field(a, b):
     """Equal to rounding, relative to the largest component."""
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-13 * np.abs(b).max())
@@ -302,8 +315,16 @@ def test_dict_round_trip_gives_the_same_field(name):
 
 
 def test_dict_form_is_si_and_strict():
-    pair = source_from_dict({"type": "helmholtz", "center_m": [0, 0, 0], "axis": [1, 0, 0],
-                             "radius_m": R_PAIR, "turns": N_PAIR, "current_a": I_PAIR})
+    pair = source_from_dict(
+        {
+            "type": "helmholtz",
+            "center_m": [0, 0, 0],
+            "axis": [1, 0, 0],
+            "radius_m": R_PAIR,
+            "turns": N_PAIR,
+            "current_a": I_PAIR,
+        }
+    )
     assert pair.field_t([0, 0, 0])[0] == pytest.approx((4 / 5) ** 1.5 * MU0 * N_PAIR * I_PAIR / R_PAIR, rel=1e-14)
     with pytest.raises(ValueError, match="not one of.*dipole"):
         source_from_dict({"type": "magnet"})

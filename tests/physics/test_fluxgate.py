@@ -1,4 +1,5 @@
 """Fluxgates: exact dipole pick-up against Eqs. S8–S10, digitisation, noise spectra."""
+
 import numpy as np
 import pytest
 import scipy.constants
@@ -15,8 +16,8 @@ from mows.physics.fluxgate import (
 )
 from mows.sim.noise import NoiseStream
 
-M = 0.89e-3   # A·m², the paper's magnet
-R = 0.06      # m, probe to near sensor
+M = 0.89e-3  # A·m², the paper's magnet
+R = 0.06  # m, probe to near sensor
 
 
 def kappa(r_m):
@@ -37,8 +38,9 @@ def test_pickup_on_the_sensor_line_is_eq_s9(axis):
     a, b, _ = axis
     sensor = Fluxgate([R, 0, 0], axis)
     pickup = dipole_pickup_t(sensor, np.zeros((len(THETA), 3)), moments(THETA))
-    np.testing.assert_allclose(pickup, kappa(R) * (2 * a * np.cos(THETA) - b * np.sin(THETA)),
-                               rtol=0, atol=1e-13 * kappa(R))
+    np.testing.assert_allclose(
+        pickup, kappa(R) * (2 * a * np.cos(THETA) - b * np.sin(THETA)), rtol=0, atol=1e-13 * kappa(R)
+    )
 
 
 def test_moving_magnet_on_the_line_sees_its_own_distance():
@@ -53,12 +55,16 @@ def test_moving_magnet_on_the_line_sees_its_own_distance():
 def test_differential_pair_gives_eq_s10_effective_distance():
     pair = FluxgatePair.paper()
     r_eff = (R**-3 - (R + PAPER_SPACING_M) ** -3) ** (-1 / 3)
-    assert r_eff == pytest.approx(0.0675, rel=1e-14)       # the paper's r_eff at r = 6 cm
+    assert r_eff == pytest.approx(0.0675, rel=1e-14)  # the paper's r_eff at r = 6 cm
     assert PAPER_SPACING_M == pytest.approx(0.030, abs=2e-4)
     pickup = pair.pickup_t(np.zeros(3), moments(THETA))
     assert pickup.shape == (len(THETA), 2)
-    np.testing.assert_allclose(pickup[:, 0] - pickup[:, 1], -kappa(r_eff) * np.sin(THETA),   # Eq. S12, b = 1
-                               rtol=0, atol=1e-12 * kappa(r_eff))
+    np.testing.assert_allclose(
+        pickup[:, 0] - pickup[:, 1],
+        -kappa(r_eff) * np.sin(THETA),  # Eq. S12, b = 1
+        rtol=0,
+        atol=1e-12 * kappa(r_eff),
+    )
 
 
 def test_saturation_is_flagged_and_clipped():
@@ -78,7 +84,7 @@ def test_quantisation_rounds_to_the_nearest_step():
     assert not saturated.any()
     assert np.allclose(steps, np.round(steps), rtol=0, atol=1e-6)
     assert np.max(np.abs(readings - values)) <= 0.5e-10 * (1 + 1e-6)
-    assert np.max(np.abs(readings - values)) > 0.49e-10      # it does round, to the resolution
+    assert np.max(np.abs(readings - values)) > 0.49e-10  # it does round, to the resolution
     assert len(np.unique(np.round(steps))) > 9000
 
 
@@ -113,8 +119,9 @@ def test_pink_noise_slope_and_level():
 
 
 def test_white_levels_and_common_mode_cancellation():
-    model = NoiseModel(common_white_t_per_rthz=2e-11, common_pink_t_per_rthz_at_1hz=5e-11,
-                       sensor_white_t_per_rthz=1e-12, mains_t=1e-9)
+    model = NoiseModel(
+        common_white_t_per_rthz=2e-11, common_pink_t_per_rthz_at_1hz=5e-11, sensor_white_t_per_rthz=1e-12, mains_t=1e-9
+    )
     noise = NoiseStream(model, FS, np.random.default_rng(6)).draw(0, 2**18)
     assert noise.shape == (2**18, 2)
     # The difference keeps only the two independent white parts: PSD 2·σ², flat.

@@ -1,4 +1,5 @@
 """The published model (Eqs. 4-12, S24): limits, inverses and the paper's own numbers."""
+
 import math
 
 import numpy as np
@@ -13,8 +14,10 @@ ARGS = (P.f00_hz, P.spring_nm_per_rad, P.moment_am2)
 def test_beta_is_continuous_through_zero_and_matches_eq9():
     # Eq. 9 by L'Hôpital; compare with a symmetric difference quotient of Eq. 6.
     h = 1e-7
-    slope = (F.frequency_shift_hz(P.f00_hz, P.spring_nm_per_rad, P.moment_am2 * h)
-             - F.frequency_shift_hz(P.f00_hz, P.spring_nm_per_rad, -P.moment_am2 * h)) / (2 * h)
+    slope = (
+        F.frequency_shift_hz(P.f00_hz, P.spring_nm_per_rad, P.moment_am2 * h)
+        - F.frequency_shift_hz(P.f00_hz, P.spring_nm_per_rad, -P.moment_am2 * h)
+    ) / (2 * h)
     assert F.field_sensitivity_hz_per_t(0.0, *ARGS) == pytest.approx(slope, rel=1e-9)
     assert F.weak_field_sensitivity_hz_per_t(*ARGS) == pytest.approx(3.68e3, rel=1e-12)
 
@@ -26,7 +29,8 @@ def test_beta_grows_towards_cancellation_and_falls_for_positive_fields():
     beta = F.field_sensitivity_hz_per_t(fields, *ARGS)
     assert np.all(np.diff(beta) < 0)
     assert F.field_sensitivity_hz_per_t(P.cancellation_field_t, *ARGS) == pytest.approx(
-        P.f00_hz * P.moment_am2 / P.spring_nm_per_rad, rel=1e-12)
+        P.f00_hz * P.moment_am2 / P.spring_nm_per_rad, rel=1e-12
+    )
 
 
 def test_shift_at_5_mT_is_about_20_hz_as_in_fig3():
@@ -67,8 +71,9 @@ def test_first_order_sweep_has_the_factor_f00():
     first = F.sweep_shift_hz(theta0, field, gradient, *ARGS, P.lever_m, exact=False)
     np.testing.assert_allclose(first, exact, atol=2e-3 * np.abs(exact).max())
     h = F.sweep_harmonics(field, gradient, *ARGS, P.lever_m)
-    harmonic = (h["P0_hz"] + h["P1_hz"] * np.cos(theta0 + h["phi1_rad"])
-                + h["P2_hz"] * np.cos(2 * theta0 + h["phi2_rad"]))
+    harmonic = (
+        h["P0_hz"] + h["P1_hz"] * np.cos(theta0 + h["phi1_rad"]) + h["P2_hz"] * np.cos(2 * theta0 + h["phi2_rad"])
+    )
     np.testing.assert_allclose(harmonic, first, atol=1e-12)
 
 

@@ -1,4 +1,5 @@
 """The first-principles potential against closed forms and an exact period integral."""
+
 import math
 
 import numpy as np
@@ -32,11 +33,14 @@ def test_finite_amplitude_field_spring_follows_bessel_j1(amplitude_deg, factor):
 
 def exact_period_s(field_t, amplitude):
     """Period of the undamped swing from energy conservation, T = 4∫dθ/θ'."""
+
     def u(theta):
         return 0.5 * KM * theta**2 - M * field_t * math.cos(theta)
+
     # θ = A sin s removes the end-point singularity.
     def integrand(s):
         return amplitude * math.cos(s) / math.sqrt(2 * (u(amplitude) - u(amplitude * math.sin(s))) / P.inertia_kgm2)
+
     return 4 * integrate.quad(integrand, 0, math.pi / 2, epsabs=0, epsrel=1e-13, limit=200)[0]
 
 

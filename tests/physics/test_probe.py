@@ -1,4 +1,5 @@
 """Probe constants and calibration inverses against the paper's reported numbers."""
+
 import math
 
 import pytest
@@ -21,7 +22,7 @@ def test_calibration_inverses_agree_with_eq10_up_to_damping():
     # Eq. 10 neglects damping: J·(2π f00)² = kM exactly.
     assert inertia * (2 * math.pi * 112.48) ** 2 == pytest.approx(spring, rel=1e-12)
     # The damped calibration differs by δ²/(2π f00)² only.
-    assert PAPER_PROBE.inertia_kgm2 / inertia - 1 == pytest.approx(-(1.8 / (2 * math.pi * 112.48)) ** 2, rel=1e-3)
+    assert PAPER_PROBE.inertia_kgm2 / inertia - 1 == pytest.approx(-((1.8 / (2 * math.pi * 112.48)) ** 2), rel=1e-3)
     assert lever_from_inertia(inertia, 7.2e-6) ** 2 * 7.2e-6 == pytest.approx(inertia, rel=1e-12)
 
 

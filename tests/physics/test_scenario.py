@@ -1,4 +1,5 @@
 """Scenario YAML: shipped files, round trips, the documented examples and the error messages."""
+
 import json
 import math
 import pathlib
@@ -12,9 +13,15 @@ from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import SCENARIO_DIR, Scenario, load_scenario, shipped_scenarios
 
 DOC = pathlib.Path(__file__).parents[2] / "docs" / "scenario_format.md"
-SETUPS = {"paper_largest_spacing": "largest_spacing", "helmholtz": "helmholtz", "anti_helmholtz": "helmholtz",
-          "nearby_coil": "largest_spacing", "tilted_plane": "largest_spacing", "calibration": "helmholtz",
-          "calibration_gradient": "helmholtz"}
+SETUPS = {
+    "paper_largest_spacing": "largest_spacing",
+    "helmholtz": "helmholtz",
+    "anti_helmholtz": "helmholtz",
+    "nearby_coil": "largest_spacing",
+    "tilted_plane": "largest_spacing",
+    "calibration": "helmholtz",
+    "calibration_gradient": "helmholtz",
+}
 
 
 def test_the_shipped_scenarios_are_the_documented_ones():
@@ -36,7 +43,7 @@ def test_the_default_is_the_paper_device_in_the_largest_spacing_setup_in_the_ear
     assert scenario.name == "paper_largest_spacing" and scenario.probe == PAPER_PROBE
     earth = scenario.environment.source.field_t(np.zeros(3))
     assert np.linalg.norm(earth) == pytest.approx(48e-6, rel=0.01)
-    assert np.hypot(*earth[:2]) > 10e-6 and earth[2] < -30e-6          # horizontal and vertical parts
+    assert np.hypot(*earth[:2]) > 10e-6 and earth[2] < -30e-6  # horizontal and vertical parts
     assert scenario.sample_rate_hz == 20_000.0 and scenario.sensors.null_offsets
     assert scenario.excitation.frequency_hz is None
 
@@ -80,23 +87,26 @@ def test_probe_forms(tmp_path):
     assert load_scenario(tmp_path / "s.yaml").probe.to_dict() == PAPER_PROBE.to_dict()
 
 
-@pytest.mark.parametrize("data, message", [
-    ({"colour": 1}, r"unknown keys \['colour'\].*allowed keys are \['name'"),
-    ({"noise": {"white": 1e-11}}, r"section 'noise': unknown keys \['white'\].*sensor_white_t_per_rthz"),
-    ({"pose": {"theta0_rad": 1.0}}, r"section 'pose': unknown keys \['theta0_rad'\].*theta0_deg"),
-    ({"pose": {"tilt_deg": 10.0, "gravity_m_per_s2": [0, 0, -9.8]}}, "either tilt_deg"),
-    ({"pose": {"theta0_deg": "north"}}, r"theta0_deg = 'north' must be a number"),
-    ({"excitation": {"amplitude_a": 12.0}}, "exceeds the cap of 10 A"),
-    ({"excitation": {"ringdown_s": 0.0}}, r"ringdown_s = 0.0 is out of range \(0, 3600\]"),
-    ({"sample_rate_hz": -1.0}, r"sample_rate_hz = -1.0 is out of range"),
-    ({"housing": {"restitution": 1.5}}, r"restitution = 1.5 is out of range \(0, 1\]"),
-    ({"integrator": {"substeps": 0}}, r"substeps = 0 must be an integer in \[1, 1000\]"),
-    ({"sensors": {"positions_m": [[0.06, 0, 0]]}}, "positions_m must be two 3-vectors"),
-    ({"probe": "no_such_probe.yaml"}, "neither 'paper' nor a probe file"),
-    ({"environment": {"sources": [{"type": "magnet"}]}}, "field source type 'magnet'"),
-    ({"setup": {"preset": "triangle"}}, "coil preset 'triangle'"),
-    ({"pose": {"plane_e1": [1, 0, 0], "plane_e2": [0, 0, 1]}}, r"not x–y .* setup \(a coil preset\) and sensors"),
-])
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        ({"colour": 1}, r"unknown keys \['colour'\].*allowed keys are \['name'"),
+        ({"noise": {"white": 1e-11}}, r"section 'noise': unknown keys \['white'\].*sensor_white_t_per_rthz"),
+        ({"pose": {"theta0_rad": 1.0}}, r"section 'pose': unknown keys \['theta0_rad'\].*theta0_deg"),
+        ({"pose": {"tilt_deg": 10.0, "gravity_m_per_s2": [0, 0, -9.8]}}, "either tilt_deg"),
+        ({"pose": {"theta0_deg": "north"}}, r"theta0_deg = 'north' must be a number"),
+        ({"excitation": {"amplitude_a": 12.0}}, "exceeds the cap of 10 A"),
+        ({"excitation": {"ringdown_s": 0.0}}, r"ringdown_s = 0.0 is out of range \(0, 3600\]"),
+        ({"sample_rate_hz": -1.0}, r"sample_rate_hz = -1.0 is out of range"),
+        ({"housing": {"restitution": 1.5}}, r"restitution = 1.5 is out of range \(0, 1\]"),
+        ({"integrator": {"substeps": 0}}, r"substeps = 0 must be an integer in \[1, 1000\]"),
+        ({"sensors": {"positions_m": [[0.06, 0, 0]]}}, "positions_m must be two 3-vectors"),
+        ({"probe": "no_such_probe.yaml"}, "neither 'paper' nor a probe file"),
+        ({"environment": {"sources": [{"type": "magnet"}]}}, "field source type 'magnet'"),
+        ({"setup": {"preset": "triangle"}}, "coil preset 'triangle'"),
+        ({"pose": {"plane_e1": [1, 0, 0], "plane_e2": [0, 0, 1]}}, r"not x–y .* setup \(a coil preset\) and sensors"),
+    ],
+)
 def test_bad_scenarios_are_refused_with_a_message_naming_the_key(data, message):
     with pytest.raises(ValueError, match=message):
         Scenario.from_dict(data)
@@ -119,8 +129,9 @@ def test_shipped_scenarios_load_as_they_did_when_every_file_was_written_out_in_f
 
 
 def test_extends_merges_mappings_key_by_key_and_replaces_lists(tmp_path):
-    (tmp_path / "quiet.yaml").write_text("extends: helmholtz\nname: quiet\nnoise: {mains_t: 0.0}\n"
-                                         "environment: {sources: [], temperature_k: 300.0}\n")
+    (tmp_path / "quiet.yaml").write_text(
+        "extends: helmholtz\nname: quiet\nnoise: {mains_t: 0.0}\nenvironment: {sources: [], temperature_k: 300.0}\n"
+    )
     quiet, helmholtz = load_scenario(tmp_path / "quiet.yaml"), load_scenario("helmholtz")
     assert quiet.name == "quiet" and quiet.setup.name == "helmholtz"
     assert quiet.noise.mains_t == 0.0

@@ -5,6 +5,7 @@ interpolation from θ and θ' at the samples, exact to ~1e-11 s), or from the si
 fluxgate data with :func:`mows.estimate.ringdown.fit_ringdown`. No result of the simulator is
 compared with the simulator itself, except where a test says so (stream continuity).
 """
+
 import math
 
 import numpy as np
@@ -38,8 +39,12 @@ def crossing_times_s(theta, theta_dot, reference=0.0):
     d0, d1 = theta_dot[k] / FS, theta_dot[k + 1] / FS
     s = y0 / (y0 - y1)
     for _ in range(6):
-        value = ((2 * s**3 - 3 * s**2 + 1) * y0 + (s**3 - 2 * s**2 + s) * d0 + (3 * s**2 - 2 * s**3) * y1
-                 + (s**3 - s**2) * d1)
+        value = (
+            (2 * s**3 - 3 * s**2 + 1) * y0
+            + (s**3 - 2 * s**2 + s) * d0
+            + (3 * s**2 - 2 * s**3) * y1
+            + (s**3 - s**2) * d1
+        )
         slope = (6 * s**2 - 6 * s) * (y0 - y1) + (3 * s**2 - 4 * s + 1) * d0 + (3 * s**2 - 2 * s) * d1
         s = s - value / slope
     return (k + s) / FS
@@ -72,8 +77,9 @@ def cycle_frequencies(theta, theta_dot):
 
 def bare(field_t=(0.0, 0.0, 0.0), probe=P, theta0_rad=0.0, **changes) -> Scenario:
     """The probe alone in a uniform field (no Earth, no noise), horizontal plane."""
-    return Scenario(probe=probe, environment=Environment((UniformField(field_t),)), pose=Pose(theta0_rad=theta0_rad),
-                    **changes)
+    return Scenario(
+        probe=probe, environment=Environment((UniformField(field_t),)), pose=Pose(theta0_rad=theta0_rad), **changes
+    )
 
 
 def ring(scenario, amplitude_rad, seconds, reference=None):
@@ -109,8 +115,10 @@ def test_a_beta_from_the_stop_follows_the_amplitude_averaged_bessel_factor():
     beta_ratio = (f_up[:n] - f_down[:n]) / (2 * field) / P.beta0_hz_per_t
     amplitude = np.sqrt(a_up[:n] * a_down[:n])
     bessel = 2 * j1(amplitude) / amplitude
-    print(f"\nβ/β0 over 60 periods from 24°: simulated {beta_ratio.mean():.5f}, ⟨2J1(A)/A⟩ {bessel.mean():.5f}, "
-          f"worst cycle {np.abs(beta_ratio - bessel).max():.1e}")
+    print(
+        f"\nβ/β0 over 60 periods from 24°: simulated {beta_ratio.mean():.5f}, ⟨2J1(A)/A⟩ {bessel.mean():.5f}, "
+        f"worst cycle {np.abs(beta_ratio - bessel).max():.1e}"
+    )
     assert math.degrees(amplitude[0]) > 23.0
     assert np.abs(beta_ratio - bessel).max() < 1e-4
     assert beta_ratio.mean() == pytest.approx(0.99, abs=0.003)
@@ -142,8 +150,7 @@ def differential_half_swing_t(probe, theta0_rad, amplitude_rad):
     """Half the peak-to-peak differential signal of the simulated, undamped probe (no noise,
     no quantisation) over 0.1 s at amplitude A."""
     pair = FluxgatePair([Fluxgate(p, (0, 1, 0), resolution_t=1e-18) for p in FluxgatePair.paper().positions_m])
-    device = SimulatedDevice(bare(probe=probe.replace(damping_per_s=0.0), sensors=Sensors(pair),
-                                  theta0_rad=theta0_rad))
+    device = SimulatedDevice(bare(probe=probe.replace(damping_per_s=0.0), sensors=Sensors(pair), theta0_rad=theta0_rad))
     device.pluck(amplitude_rad)
     difference = np.subtract(*device.read(2000).samples.samples_t.T)
     return 0.5 * np.ptp(difference)
@@ -170,8 +177,9 @@ def test_c_zero_to_ninety_degree_amplitude_ratio():
     # A magnet turning in place (l → 0): S = −κ·sin(θ0 + θ) exactly, so the ratio is
     # sin A / ((1 − cos A)/2) = 15.19 (PHYSICS.md §2; the paper's 7.6 is off by 2).
     in_place = P.replace(lever_m=1e-9)
-    ratio = differential_half_swing_t(in_place, 0.0, amplitude) / differential_half_swing_t(in_place, math.pi / 2,
-                                                                                           amplitude)
+    ratio = differential_half_swing_t(in_place, 0.0, amplitude) / differential_half_swing_t(
+        in_place, math.pi / 2, amplitude
+    )
     assert ratio == pytest.approx(math.sin(amplitude) / ((1 - math.cos(amplitude)) / 2), rel=1e-4)
     assert ratio == pytest.approx(15.19, abs=0.01)
     # On the real lever (l = 1.9 mm) the magnet also moves by l·sin θ across the sensor line,
@@ -183,10 +191,14 @@ def test_c_zero_to_ninety_degree_amplitude_ratio():
     d -= r
     lam = 3 * L * (r**-4 - (r + d) ** -4) / (r**-3 - (r + d) ** -3)
     theta = np.linspace(-amplitude, amplitude, 200_001)
-    first_order = [np.ptp(np.sin(t0 + theta) + lam * (np.sin(2 * t0 + 2 * theta) - np.sin(2 * t0 + theta)))
-                   for t0 in (0.0, math.pi / 2)]
-    print(f"\n0°:90° ratio at 15°: in place {ratio:.4f}; lever {L * 1e3:.2f} mm: simulated {lever:.4f}, "
-          f"exact dipole {exact:.4f}, first order in l/r {first_order[0] / first_order[1]:.4f} (λ = {lam:.4f})")
+    first_order = [
+        np.ptp(np.sin(t0 + theta) + lam * (np.sin(2 * t0 + 2 * theta) - np.sin(2 * t0 + theta)))
+        for t0 in (0.0, math.pi / 2)
+    ]
+    print(
+        f"\n0°:90° ratio at 15°: in place {ratio:.4f}; lever {L * 1e3:.2f} mm: simulated {lever:.4f}, "
+        f"exact dipole {exact:.4f}, first order in l/r {first_order[0] / first_order[1]:.4f} (λ = {lam:.4f})"
+    )
     assert lever == pytest.approx(exact, rel=1e-4)
     assert lever == pytest.approx(first_order[0] / first_order[1], rel=0.01)
 
@@ -201,24 +213,28 @@ def test_d_anti_helmholtz_shift_against_the_published_and_first_principles_terms
     with_pair = scenario.replace(pose=pose)
     earth_only = with_pair.replace(environment=Environment((earth,)))
     amplitude = math.radians(2.0)
-    f_pair, f_earth = (mean_frequency_hz(*ring(s, amplitude, 1.0), SimulatedDevice(s).truth.rest_angle_rad)
-                       for s in (with_pair, earth_only))
+    f_pair, f_earth = (
+        mean_frequency_hz(*ring(s, amplitude, 1.0), SimulatedDevice(s).truth.rest_angle_rad)
+        for s in (with_pair, earth_only)
+    )
     simulated = f_pair - f_earth
     x_axis, y_axis, _ = pose.axes()
     gradient = pair.gradient_t_per_m(np.zeros(3))
     g_xx, g_yy = x_axis @ gradient @ x_axis, y_axis @ gradient @ y_axis
     f00 = P.f00_hz
-    published = f00 * L * M * g_xx / (2 * KM)                        # Eqs. 5, 6 (γ0·G)
-    first_principles = f00 * M * L * (g_xx - 2 * g_yy) / (2 * KM)     # PHYSICS.md §4, expanded
+    published = f00 * L * M * g_xx / (2 * KM)  # Eqs. 5, 6 (γ0·G)
+    first_principles = f00 * M * L * (g_xx - 2 * g_yy) / (2 * KM)  # PHYSICS.md §4, expanded
     # The same stiffness through Eq. 6's square root, with the Earth's m·Bx' in both terms:
     # removes the O(Δf²/f00) of the linear form; what is left is O(l²/R²) and O(A²).
     k_earth = M * (x_axis @ earth.field_t(np.zeros(3)))
     k_pair = M * L * (g_xx - 2 * g_yy)
     with_root = f00 * (math.sqrt(1 + (k_earth + k_pair) / KM) - math.sqrt(1 + k_earth / KM))
-    print(f"\nθ0 = {theta0_deg:.0f}°: simulated Δf = {simulated * 1e3:.3f} mHz, published l·m·Gx'x' term "
-          f"{published * 1e3:.3f} mHz (ratio {simulated / published:.4f}), first principles "
-          f"{first_principles * 1e3:.3f} mHz (ratio {simulated / first_principles:.5f}), through Eq. 6 "
-          f"{with_root * 1e3:.3f} mHz")
+    print(
+        f"\nθ0 = {theta0_deg:.0f}°: simulated Δf = {simulated * 1e3:.3f} mHz, published l·m·Gx'x' term "
+        f"{published * 1e3:.3f} mHz (ratio {simulated / published:.4f}), first principles "
+        f"{first_principles * 1e3:.3f} mHz (ratio {simulated / first_principles:.5f}), through Eq. 6 "
+        f"{with_root * 1e3:.3f} mHz"
+    )
     assert simulated / first_principles == pytest.approx(1.0, abs=2e-3)
     assert simulated == pytest.approx(with_root, abs=1e-4)
     assert simulated / published == pytest.approx(expected_ratio, rel=2e-3)
@@ -231,20 +247,24 @@ def test_e_ringdown_follows_first_harmonic_balance_within_0p1_mhz_at_5_mt():
     potential = SimulatedDevice(scenario).potential()
     balance = np.array([potential.frequency_hz(a) for a in amplitudes])
     worst = np.abs(freqs - balance).max()
-    print(f"\n5 mT ring-down {math.degrees(amplitudes[0]):.1f}° → {math.degrees(amplitudes[-1]):.1f}°: "
-          f"worst |f − f_HB(A)| = {worst * 1e3:.4f} mHz over {freqs.size} cycles; amplitude effect "
-          f"{(balance[0] - potential.frequency_hz(0.0)) * 1e3:.1f} mHz")
+    print(
+        f"\n5 mT ring-down {math.degrees(amplitudes[0]):.1f}° → {math.degrees(amplitudes[-1]):.1f}°: "
+        f"worst |f − f_HB(A)| = {worst * 1e3:.4f} mHz over {freqs.size} cycles; amplitude effect "
+        f"{(balance[0] - potential.frequency_hz(0.0)) * 1e3:.1f} mHz"
+    )
     assert worst < 1e-4
 
 
 def exact_period_frequency_hz(field_t, amplitude_rad):
     """1/T of the undamped swing from energy conservation, T = 4∫dθ/θ' (θ = A·sin s)."""
+
     def energy(theta):
         return 0.5 * KM * theta**2 - M * field_t * math.cos(theta)
 
     def integrand(s):
         theta = amplitude_rad * math.sin(s)
         return amplitude_rad * math.cos(s) / math.sqrt(2 * (energy(amplitude_rad) - energy(theta)) / J)
+
     return 1.0 / (4.0 * integrate.quad(integrand, 0, math.pi / 2, epsabs=0, epsrel=1e-12, limit=200)[0])
 
 
@@ -278,6 +298,7 @@ def test_step_error_is_far_below_0p01_mhz():
     def frequency(substeps):
         scenario = bare((50e-6, 0, 0), integrator=Integrator(substeps=substeps, contact_substeps=16))
         return mean_frequency_hz(*ring(scenario, math.radians(10.0), 1.0))
+
     error = abs(frequency(2) - frequency(16))
     print(f"\nfrequency error of 2 RK4 steps per sample: {error * 1e6:.3f} µHz")
     assert error < 1e-6
@@ -307,28 +328,37 @@ def test_stop_limits_the_amplitude_during_excitation(default_cycle):
     assert torque / (2 * J * DELTA * 2 * math.pi * record.frequency_hz) > 3 * STOP
     excitation = np.abs(record.theta_rad[: record.coil_off_index])
     assert STOP < excitation.max() < STOP + math.radians(1.0)
-    first_ringdown_peak = np.abs(record.theta_rad[record.coil_off_index:][:200]).max()
+    first_ringdown_peak = np.abs(record.theta_rad[record.coil_off_index :][:200]).max()
     assert first_ringdown_peak == pytest.approx(STOP, abs=math.radians(1.0))
 
 
 def test_impacts_converge_at_the_integrators_order():
     scenario = load_scenario().replace(noise=NoiseModel())
-    theta = [simulate_cycle(SimulatedDevice(scenario.replace(integrator=Integrator(2, n))), 0.0, 2.0,
-                            P.f00_hz, 0.3, 0.05).theta_rad for n in (16, 128)]
+    theta = [
+        simulate_cycle(
+            SimulatedDevice(scenario.replace(integrator=Integrator(2, n))), 0.0, 2.0, P.f00_hz, 0.3, 0.05
+        ).theta_rad
+        for n in (16, 128)
+    ]
     assert np.abs(theta[0] - theta[1]).max() < 1e-6
 
 
 def test_coil_fields_saturate_the_fluxgates_during_excitation_only(default_cycle):
     _, record = default_cycle
     assert record.saturated[: record.coil_off_index].any(axis=1).mean() > 0.5
-    assert not record.saturated[record.coil_off_index:].any()
+    assert not record.saturated[record.coil_off_index :].any()
 
 
 def test_default_scenario_fit_agrees_with_the_potential_at_the_fitted_mean_amplitude(default_cycle):
     _, record = default_cycle
     ring_down = slice(record.coil_off_index, None)
-    fit = fit_ringdown(record.samples_t[ring_down], record.sample_rate_hz, 0.0, record.frequency_hz,
-                       saturated=record.saturated[ring_down])
+    fit = fit_ringdown(
+        record.samples_t[ring_down],
+        record.sample_rate_hz,
+        0.0,
+        record.frequency_hz,
+        saturated=record.saturated[ring_down],
+    )
     assert fit.ok, fit.report()
     decay = fit.damping_per_s * fit.duration_s
     mean_amplitude = fit.amplitude_rad * (1 - math.exp(-decay)) / decay
@@ -336,8 +366,10 @@ def test_default_scenario_fit_agrees_with_the_potential_at_the_fitted_mean_ampli
     # The fitted θmax is the paper's model's: on the lever it reads ≈ 30° for a true 24° swing
     # (test_c), so compare with the true amplitude's f(A(t)) averaged over the window as well.
     averaged = record.ringdown_frequency_hz(fit.duration_s)
-    print(f"\n{fit.report()}\ntruth at the fitted mean amplitude {math.degrees(mean_amplitude):.1f}°: "
-          f"{truth:.6f} Hz; ⟨f(A(t))⟩ from {math.degrees(record.ringdown_amplitude_rad()):.1f}°: {averaged:.6f} Hz")
+    print(
+        f"\n{fit.report()}\ntruth at the fitted mean amplitude {math.degrees(mean_amplitude):.1f}°: "
+        f"{truth:.6f} Hz; ⟨f(A(t))⟩ from {math.degrees(record.ringdown_amplitude_rad()):.1f}°: {averaged:.6f} Hz"
+    )
     assert abs(fit.frequency_hz - truth) < 3 * fit.frequency_std_hz
     assert abs(fit.frequency_hz - averaged) < 3 * fit.frequency_std_hz
     assert fit.snr_db > 30.0
@@ -356,8 +388,9 @@ def test_one_read_equals_two_reads_noise_included():
 
 
 def test_noise_stream_levels_and_the_difference_cancels_the_common_mode():
-    model = NoiseModel(common_white_t_per_rthz=1e-10, common_pink_t_per_rthz_at_1hz=1e-9,
-                       sensor_white_t_per_rthz=1e-11, mains_t=1e-8)
+    model = NoiseModel(
+        common_white_t_per_rthz=1e-10, common_pink_t_per_rthz_at_1hz=1e-9, sensor_white_t_per_rthz=1e-11, mains_t=1e-8
+    )
     fs = 2000.0
     stream = NoiseStream(model, fs, np.random.default_rng(5))
     stream.draw(0, int(60 * fs))  # lets the 1/f filter reach its steady state below 0.1 Hz
@@ -366,7 +399,7 @@ def test_noise_stream_levels_and_the_difference_cancels_the_common_mode():
     pink = psd - model.common_white_t_per_rthz**2 - model.sensor_white_t_per_rthz**2
     for f_hz in (0.3, 1.0, 3.0):
         band = (f > 0.8 * f_hz) & (f < 1.25 * f_hz)
-        asd = math.sqrt(np.mean(pink[band] * f[band]))           # ASD·√f is flat for 1/f noise
+        asd = math.sqrt(np.mean(pink[band] * f[band]))  # ASD·√f is flat for 1/f noise
         assert asd == pytest.approx(model.common_pink_t_per_rthz_at_1hz, rel=0.15)
     difference = noise[:, 0] - noise[:, 1]
     assert difference.std() == pytest.approx(math.sqrt(2 * fs / 2) * model.sensor_white_t_per_rthz, rel=0.01)
@@ -378,7 +411,7 @@ def test_spring_follows_the_temperature():
     f_warm = mean_frequency_hz(*ring(warm, math.radians(3.0), 1.0))
     f_ref = mean_frequency_hz(*ring(bare(), math.radians(3.0), 1.0))
     assert f_warm == pytest.approx(linear_frequency_hz(KM * (1 + P.spring_temp_coeff_per_k)), abs=1e-6)
-    assert (f_warm - f_ref) * 1e3 == pytest.approx(-14.6, abs=0.1)   # PHYSICS.md §5.6: ≈ −15 mHz/K
+    assert (f_warm - f_ref) * 1e3 == pytest.approx(-14.6, abs=0.1)  # PHYSICS.md §5.6: ≈ −15 mHz/K
 
 
 def test_tilted_plane_turns_the_magnet_into_a_pendulum():

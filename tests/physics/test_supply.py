@@ -1,5 +1,6 @@
 """The static-field supply: cap, resolution and slew (paper, Methods), in the simulator and the
 scheduled device, and the frequency the probe takes in its field."""
+
 import math
 
 import numpy as np
@@ -32,9 +33,9 @@ def test_a_ramp_never_steps_faster_than_the_slew_limit_and_ends_on_the_target():
     limits = SupplyLimits(slew_a_per_s=2.0)
     ramp = limits.ramp(-0.5, 1.5)
     times, currents = np.array(ramp).T
-    assert currents[-1] == 1.5 and times[-1] == pytest.approx(1.0 - 0.01)   # 2 A at 2 A/s in 10 ms steps
+    assert currents[-1] == 1.5 and times[-1] == pytest.approx(1.0 - 0.01)  # 2 A at 2 A/s in 10 ms steps
     steps = np.abs(np.diff(np.concatenate([[-0.5], currents])))
-    assert steps.max() <= 2.0 * 0.01 + 1e-4                                   # slew × step, ± resolution
+    assert steps.max() <= 2.0 * 0.01 + 1e-4  # slew × step, ± resolution
     assert np.all(np.diff(times) == pytest.approx(0.01))
 
 
@@ -70,11 +71,11 @@ def currents_over(device, end_index, every=100):
 def test_the_scheduled_device_ramps_within_the_slew_limit_and_says_when_it_arrives():
     device = scheduled()
     reached = device.schedule_field_current(1000, 1.0)
-    assert reached == 1000 + round(0.49 * 20_000)          # 50 steps of 10 ms, the first at once
+    assert reached == 1000 + round(0.49 * 20_000)  # 50 steps of 10 ms, the first at once
     trace = currents_over(device, reached + 1)
     assert trace[0] == 0.0 and trace[-1] == 1.0
     per_5ms = np.abs(np.diff(trace))
-    assert per_5ms.max() <= 0.02 + 1e-9                     # 2 A/s: at most one 10 mA step per 5 ms read
+    assert per_5ms.max() <= 0.02 + 1e-9  # 2 A/s: at most one 10 mA step per 5 ms read
     with pytest.raises(ValueError, match="cap"):
         device.schedule_field_current(device.next_index, -2.1)
     assert device.supply_target_a == 1.0
@@ -84,7 +85,7 @@ def test_supply_to_zero_ramps_down_from_wherever_a_ramp_was_and_cancelling_the_c
     device = scheduled()
     device.schedule_field_current(0, 2.0)
     device.read_until(round(0.3 * 20_000))
-    device.cancel()                                          # the coils' cancel: the ramp goes on
+    device.cancel()  # the coils' cancel: the ramp goes on
     device.read_until(round(0.5 * 20_000))
     midway = device.device.field_current_a
     assert 0.9 < midway < 1.1

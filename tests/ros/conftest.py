@@ -1,5 +1,6 @@
 """A test node spun on demand: tests wait for conditions, never for a fixed time. The ``start``
 fixture (node_processes.py) runs node processes with their output logged."""
+
 import time
 from collections.abc import Callable
 

@@ -1,5 +1,6 @@
 """Node processes for tests: started with their output in a log file, killed if a test leaves
 them behind."""
+
 import subprocess
 
 import pytest
@@ -13,9 +14,7 @@ def start(tmp_path):
     def start(*command: str) -> subprocess.Popen:
         log_path = tmp_path / f"process-{len(processes)}.log"
         with open(log_path, "w") as log:
-            process = subprocess.Popen(
-                command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT
-            )
+            process = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
         process.log_path = log_path
         processes.append(process)
         return process

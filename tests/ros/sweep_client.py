@@ -3,6 +3,7 @@ for tests that must put the client in another network namespace than pytest's ow
 
     python sweep_client.py THETA0_DEG,... REPEATS BOUND_S
 """
+
 import json
 import math
 import sys
@@ -22,9 +23,12 @@ def main(angles_deg: str, repeats: str, bound_s: str) -> int:
     node = rclpy.create_node("sweep_client")
     blocks, statuses = [], {}
     node.create_subscription(MagnetometerBlock, "/mows/raw", blocks.append, STREAM_QOS)
-    node.create_subscription(DiagnosticArray, "/diagnostics",
-                             lambda a: statuses.update((s.name, {kv.key: kv.value for kv in s.values})
-                                                       for s in a.status), 10)
+    node.create_subscription(
+        DiagnosticArray,
+        "/diagnostics",
+        lambda a: statuses.update((s.name, {kv.key: kv.value for kv in s.values}) for s in a.status),
+        10,
+    )
     client = ActionClient(node, RotationSweep, "/mows/mapper/rotation_sweep")
     deadline = time.monotonic() + float(bound_s)
 
@@ -37,16 +41,27 @@ def main(angles_deg: str, repeats: str, bound_s: str) -> int:
 
     spin_until(lambda: client.server_is_ready() and blocks, "the sweep action and the driver's stream")
     spin_until(lambda: node.count_publishers("/mows/ringdown"), "the estimator")
-    goal = RotationSweep.Goal(theta0_rad=[math.radians(float(a)) for a in angles_deg.split(",")],
-                              repeats_per_angle=int(repeats))
+    goal = RotationSweep.Goal(
+        theta0_rad=[math.radians(float(a)) for a in angles_deg.split(",")], repeats_per_angle=int(repeats)
+    )
     sent = client.send_goal_async(goal)
     handle = spin_until(lambda: sent.done() and sent.result(), "the goal's answer")
     result = handle.get_result_async()
     done = spin_until(lambda: result.done() and result.result(), "the sweep")
     spin_until(lambda: "/estimator" in statuses and "/driver" in statuses, "diagnostics")
-    print(json.dumps({"accepted": handle.accepted, "success": done.result.success, "message": done.result.message,
-                      "n_points": done.result.decomposition.n_points, "blocks_heard": len(blocks),
-                      "estimator": statuses["/estimator"], "driver": statuses["/driver"]}))
+    print(
+        json.dumps(
+            {
+                "accepted": handle.accepted,
+                "success": done.result.success,
+                "message": done.result.message,
+                "n_points": done.result.decomposition.n_points,
+                "blocks_heard": len(blocks),
+                "estimator": statuses["/estimator"],
+                "driver": statuses["/driver"],
+            }
+        )
+    )
     node.destroy_node()
     rclpy.shutdown()
     return 0

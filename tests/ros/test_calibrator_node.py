@@ -1,5 +1,6 @@
 """The calibrator node: the probe calibration action through a stand-in driver whose ring-down
 fits come from the exact field of the calibration bench, and the supply at zero in every ending."""
+
 import math
 import subprocess
 
@@ -46,16 +47,29 @@ class StandInDriver:
 
     def run_cycle(self, request, response):
         self.cycle += 1
-        source = SumSource((BENCH.environment.source, BENCH.supply.source.scaled(self.current))) \
-            if self.current else BENCH.environment.source
+        source = (
+            SumSource((BENCH.environment.source, BENCH.supply.source.scaled(self.current)))
+            if self.current
+            else BENCH.environment.source
+        )
         start = BENCH.probe.theta_stop_rad * math.exp(-BENCH.probe.damping_per_s * SETTLE_S)
         truth = float(true_frequency_hz(BENCH.probe, source, [request.theta0_rad], start, duration_s=0.5)[0])
         for repeat in range(request.repeats):
             f = truth + STD_HZ * self.rng.standard_normal()
-            self.fits.publish(RingdownFit(cycle_id=self.cycle, repeat_index=repeat, status=RingdownFit.STATUS_OK,
-                                          status_name="OK", theta0_rad=request.theta0_rad, frequency_hz=f,
-                                          frequency_std_hz=STD_HZ, amplitude_rad=start, damping_per_s=1.8,
-                                          duration_s=0.5))
+            self.fits.publish(
+                RingdownFit(
+                    cycle_id=self.cycle,
+                    repeat_index=repeat,
+                    status=RingdownFit.STATUS_OK,
+                    status_name="OK",
+                    theta0_rad=request.theta0_rad,
+                    frequency_hz=f,
+                    frequency_std_hz=STD_HZ,
+                    amplitude_rad=start,
+                    damping_per_s=1.8,
+                    duration_s=0.5,
+                )
+            )
         response.success, response.cycle_id, response.ringdowns_recorded = True, self.cycle, request.repeats
         return response
 
@@ -64,9 +78,11 @@ class StandInDriver:
 def calibrator(ros, tmp_path):
     node = next(n for n in NODES if n.name == "calibrator")
     log_path = tmp_path / "calibrator.log"
-    process = subprocess.Popen(node.command(["-p", f"probe_file:={tmp_path / 'probe.yaml'}",
-                                             "-p", "hardware_id:=bench-3"]),
-                               stdout=open(log_path, "w"), stderr=subprocess.STDOUT)
+    process = subprocess.Popen(
+        node.command(["-p", f"probe_file:={tmp_path / 'probe.yaml'}", "-p", "hardware_id:=bench-3"]),
+        stdout=open(log_path, "w"),
+        stderr=subprocess.STDOUT,
+    )
     client = ActionClient(ros.node, CalibrateProbe, "mows/calibrator/calibrate_probe")
     ros.wait_for(lambda: client.server_is_ready(), "the calibration action server")
     yield client, tmp_path / "probe.yaml"

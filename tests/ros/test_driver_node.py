@@ -2,6 +2,7 @@
 flags), the run_cycle service end to end on the simulator, parameters, the emergency stop,
 recording to a bag that survives SIGTERM, the bag backend's replay, and a 60 s live stream
 with no unexplained gaps. Every wait ends as soon as its condition holds."""
+
 import signal
 import subprocess
 import time
@@ -139,8 +140,9 @@ def test_the_emergency_stop_ends_a_running_cycle_and_latches(start_driver, liste
     assert not response.success and "emergency stop: test" in response.message
     listen.ros.wait_for(lambda: listen.phases()[-1] == Phase.FAULT, "the fault phase")
     assert not listen.states[-1].coils_on
-    refused = listen.result(listen.call(listen.run_cycle, RunCycle.Request(theta0_rad=0.0, repeats=-1,
-                                                                           tuning_steps=-1, gap_s=-1.0)))
+    refused = listen.result(
+        listen.call(listen.run_cycle, RunCycle.Request(theta0_rad=0.0, repeats=-1, tuning_steps=-1, gap_s=-1.0))
+    )
     assert not refused.success and "emergency stop latched (test)" in refused.message
     release = listen.result(listen.call(listen.estop, EmergencyStop.Request(engage=False)))
     assert release.success and not release.latched
@@ -151,10 +153,13 @@ def test_the_emergency_stop_ends_a_running_cycle_and_latches(start_driver, liste
 def test_parameters_out_of_range_are_rejected_with_their_reason(ros_context):
     node = driver.DriverNode()
     try:
-        for name, value, why in [("excitation_current_a", 10.5, "exceeds coil_current_cap_a=10.0"),
-                                 ("repeats", 0, "repeats out of range"), ("excite_s", 11.0, "excite_s out of range"),
-                                 ("max_duty_cycle", 0.0, "max_duty_cycle out of range"),
-                                 ("record_path", "/tmp/x", "read-only")]:
+        for name, value, why in [
+            ("excitation_current_a", 10.5, "exceeds coil_current_cap_a=10.0"),
+            ("repeats", 0, "repeats out of range"),
+            ("excite_s", 11.0, "excite_s out of range"),
+            ("max_duty_cycle", 0.0, "max_duty_cycle out of range"),
+            ("record_path", "/tmp/x", "read-only"),
+        ]:
             (result,) = node.set_parameters([Parameter(name, value=value)])
             assert not result.successful and why in result.reason, (name, result.reason)
         (result,) = node.set_parameters([Parameter("excite_s", value=0.2)])
@@ -164,27 +169,32 @@ def test_parameters_out_of_range_are_rejected_with_their_reason(ros_context):
         node.destroy_node()
 
 
-@pytest.mark.parametrize("arguments, message", [
-    (["-p", "excitation_current_a:=12.0"], "excitation_current_a=12.0 exceeds coil_current_cap_a=10.0"),
-    (["-p", "scenario:=no_such_scenario"], "scenario 'no_such_scenario' is neither"),
-    (["-p", "backend:=serial"], "backend serial needs the device's port"),
-    (["-p", "coil_setup:=helmholtz"], "does not drive the coils of scenario"),
-    (["-p", "record_path:=/"], "/ exists: a recording goes to a new path"),
-])
+@pytest.mark.parametrize(
+    "arguments, message",
+    [
+        (["-p", "excitation_current_a:=12.0"], "excitation_current_a=12.0 exceeds coil_current_cap_a=10.0"),
+        (["-p", "scenario:=no_such_scenario"], "scenario 'no_such_scenario' is neither"),
+        (["-p", "backend:=serial"], "backend serial needs the device's port"),
+        (["-p", "coil_setup:=helmholtz"], "does not drive the coils of scenario"),
+        (["-p", "record_path:=/"], "/ exists: a recording goes to a new path"),
+    ],
+)
 def test_a_bad_configuration_stops_the_driver_with_its_reason(arguments, message):
     run = subprocess.run(NODES[0].command(arguments), capture_output=True, text=True, timeout=120)
     assert run.returncode == EXIT_BAD_PARAMETER, run.stderr
     assert message in run.stderr and "Traceback" not in run.stderr
 
 
-@pytest.mark.xdist_group("realtime")   # the device emulator's real-time threads
+@pytest.mark.xdist_group("realtime")  # the device emulator's real-time threads
 def test_the_serial_driver_streams_from_the_emulator_and_survives_an_unplug(start_driver, listen, tmp_path):
     with DeviceEmulator(SimulatedDevice(load_scenario()), tmp_path / "device") as emulator:
-        driver_process = start_driver("-p", "backend:=serial", "-p", f"serial_port:={emulator.link_path}",
-                                      *QUICK_CYCLES)
+        driver_process = start_driver(
+            "-p", "backend:=serial", "-p", f"serial_port:={emulator.link_path}", *QUICK_CYCLES
+        )
         listen.ros.wait_for(lambda: len(listen.blocks) >= 20, "blocks from the emulated device")
-        response = listen.result(listen.call(listen.run_cycle, RunCycle.Request(theta0_rad=1.0, repeats=1,
-                                                                                tuning_steps=0, gap_s=0.0)))
+        response = listen.result(
+            listen.call(listen.run_cycle, RunCycle.Request(theta0_rad=1.0, repeats=1, tuning_steps=0, gap_s=0.0))
+        )
         assert response.success, response.message
         ringdown = next(s for s in listen.states if s.phase == Phase.RINGDOWN)
         off_index = [index for index, on in emulator.device.coil_log if not on][-1]
@@ -199,7 +209,7 @@ def test_the_serial_driver_streams_from_the_emulator_and_survives_an_unplug(star
         assert driver_process.poll() is None
     assert listen.diagnostics["gaps"] == "1" and int(listen.diagnostics["missing_samples"]) > 0
     jump = [(a, b) for a, b in zip(listen.blocks, listen.blocks[1:]) if b.sequence != a.sequence + 1]
-    (before, after), = jump
+    ((before, after),) = jump
     missing = after.first_sample_index - (before.first_sample_index + len(before.channels[0].field_t))
     assert missing == int(listen.diagnostics["missing_samples"])
 
@@ -222,12 +232,12 @@ def test_a_recording_keeps_every_block_published_before_sigterm_and_replays(star
     assert info["ros_distro"] == "jazzy" and info["message_count"] >= len(recorded)
     by_sequence = {b.sequence: b for b in recorded}
     for block in listen.blocks:
-        np.testing.assert_array_equal(field(block), np.stack([c.field_t for c in by_sequence[block.sequence].channels],
-                                                             axis=1))
+        np.testing.assert_array_equal(
+            field(block), np.stack([c.field_t for c in by_sequence[block.sequence].channels], axis=1)
+        )
     # The bag backend replays it through the same path, with the recorded device stamps.
     replayed = Listener(listen.ros)
-    start_driver("-p", "backend:=bag", "-p", f"bag_path:={bag}", "-p", "bag_rate:=4.0",
-                 "-p", "bag_wait_subscribers:=1")
+    start_driver("-p", "backend:=bag", "-p", f"bag_path:={bag}", "-p", "bag_rate:=4.0", "-p", "bag_wait_subscribers:=1")
     last = recorded[-1].first_sample_index
     listen.ros.wait_for(lambda: replayed.blocks and replayed.blocks[-1].first_sample_index == last, "the replay")
     assert_contiguous(replayed.blocks)
@@ -265,7 +275,7 @@ def test_a_recording_killed_with_sigkill_is_repaired_and_replays(start_driver, l
     last = recorded[-1].first_sample_index
     listen.ros.wait_for(lambda: replayed.blocks and replayed.blocks[-1].first_sample_index == last, "the replay")
     replayed_firsts = [b.first_sample_index for b in replayed.blocks]
-    assert replayed_firsts == [b.first_sample_index for b in recorded][-len(replayed_firsts):]
+    assert replayed_firsts == [b.first_sample_index for b in recorded][-len(replayed_firsts) :]
 
 
 def synthetic_bag(path, gap_after: int, gap_samples: int, rate_hz: float = RATE_HZ):
@@ -283,11 +293,30 @@ def synthetic_bag(path, gap_after: int, gap_samples: int, rate_hz: float = RATE_
     for k in range(30):
         index = k * BLOCK + (gap_samples if k > gap_after else 0)
         channels = [Channel(f"c{i}", rng.normal(0, 1e-6, BLOCK), rng.random(BLOCK) < 0.1) for i in range(2)]
-        messages.append(bags.BagMessage("/mows/raw", "mows_msgs/msg/MagnetometerBlock", k,
-                                        Block(header(index), k, index, rate_hz, 1e-5, 1e-10, channels)))
+        messages.append(
+            bags.BagMessage(
+                "/mows/raw",
+                "mows_msgs/msg/MagnetometerBlock",
+                k,
+                Block(header(index), k, index, rate_hz, 1e-5, 1e-10, channels),
+            )
+        )
     for phase, index in [(Phase.EXCITING, 2000), (Phase.RINGDOWN, 4000)]:
-        state = State(header(index), int(phase), phase.name, 7, 0, 1, False, phase == Phase.EXCITING,
-                      np.array([1.0, -1.0]) * (phase == Phase.EXCITING), 112.0, 0.5, 0.2, "largest_spacing")
+        state = State(
+            header(index),
+            int(phase),
+            phase.name,
+            7,
+            0,
+            1,
+            False,
+            phase == Phase.EXCITING,
+            np.array([1.0, -1.0]) * (phase == Phase.EXCITING),
+            112.0,
+            0.5,
+            0.2,
+            "largest_spacing",
+        )
         messages.append(bags.BagMessage("/mows/excitation", "mows_msgs/msg/ExcitationState", 100 + index, state))
     bags.write_bag(path, sorted(messages, key=lambda m: m.timestamp_ns))
     return [m.message for m in messages[:30]]
@@ -295,29 +324,44 @@ def synthetic_bag(path, gap_after: int, gap_samples: int, rate_hz: float = RATE_
 
 def test_the_bag_backend_replays_gaps_as_gaps(start_driver, listen, tmp_path):
     recorded = synthetic_bag(tmp_path / "synthetic", gap_after=14, gap_samples=1200)
-    start_driver("-p", "backend:=bag", "-p", f"bag_path:={tmp_path / 'synthetic'}", "-p", "bag_rate:=2.0",
-                 "-p", "bag_wait_subscribers:=1")
-    listen.ros.wait_for(lambda: listen.diagnostics.get("link") == "finished" and len(listen.blocks) >= 30,
-                        "the whole replay")
+    start_driver(
+        "-p",
+        "backend:=bag",
+        "-p",
+        f"bag_path:={tmp_path / 'synthetic'}",
+        "-p",
+        "bag_rate:=2.0",
+        "-p",
+        "bag_wait_subscribers:=1",
+    )
+    listen.ros.wait_for(
+        lambda: listen.diagnostics.get("link") == "finished" and len(listen.blocks) >= 30, "the whole replay"
+    )
     blocks = listen.blocks
     assert [b.first_sample_index for b in blocks] == [b.first_sample_index for b in recorded]
-    assert ([stamps.nanoseconds(b.header.stamp) for b in blocks]
-            == [stamps.nanoseconds(b.header.stamp) for b in recorded])
+    assert [stamps.nanoseconds(b.header.stamp) for b in blocks] == [
+        stamps.nanoseconds(b.header.stamp) for b in recorded
+    ]
     jumps = np.diff([b.sequence for b in blocks])
     assert list(np.flatnonzero(jumps != 1)) == [14] and jumps[14] == 1 + 3  # 1200 samples: 3 blocks' worth
     for block, original in zip(blocks, recorded):
         np.testing.assert_array_equal(saturated(block), np.stack([c.saturated for c in original.channels], axis=1))
     assert (listen.diagnostics["gaps"], listen.diagnostics["missing_samples"]) == ("1", "1200")
-    assert listen.diagnostics["phase"] == "RINGDOWN"   # the recording's, not the absent sequencer's
+    assert listen.diagnostics["phase"] == "RINGDOWN"  # the recording's, not the absent sequencer's
     assert [(Phase(s.phase), s.cycle_id) for s in listen.states] == [(Phase.EXCITING, 7), (Phase.RINGDOWN, 7)]
-    assert ([stamps.nanoseconds(s.header.stamp) for s in listen.states]
-            == [1_000_000_000_000 + i * 50_000 for i in (2000, 4000)])
+    assert [stamps.nanoseconds(s.header.stamp) for s in listen.states] == [
+        1_000_000_000_000 + i * 50_000 for i in (2000, 4000)
+    ]
 
 
 def test_a_bag_without_a_sample_rate_stops_the_driver_with_its_reason(tmp_path):
     synthetic_bag(tmp_path / "rateless", gap_after=30, gap_samples=0, rate_hz=0.0)
-    run = subprocess.run(NODES[0].command(["-p", "backend:=bag", "-p", f"bag_path:={tmp_path / 'rateless'}"]),
-                         capture_output=True, text=True, timeout=120)
+    run = subprocess.run(
+        NODES[0].command(["-p", "backend:=bag", "-p", f"bag_path:={tmp_path / 'rateless'}"]),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert run.returncode == EXIT_BAD_PARAMETER, run.stderr
     assert "sample rate 0.0 Hz" in run.stderr and "Traceback" not in run.stderr
 
@@ -334,8 +378,10 @@ def test_a_60_s_live_stream_has_no_unexplained_gaps(start_driver, listen):
         listen.ros.executor.spin_once(timeout_sec=0.1)
     listen.ros.wait_for(lambda: listen.diagnostics.get("samples", "0") != "0", "diagnostics")
     blocks = listen.blocks
-    print(f"60 s stream: {len(blocks)} blocks, sequences {blocks[0].sequence}…{blocks[-1].sequence}, "
-          f"driver gaps {listen.diagnostics['gaps']}, achieved rate {listen.diagnostics['achieved_sample_rate_hz']}")
+    print(
+        f"60 s stream: {len(blocks)} blocks, sequences {blocks[0].sequence}…{blocks[-1].sequence}, "
+        f"driver gaps {listen.diagnostics['gaps']}, achieved rate {listen.diagnostics['achieved_sample_rate_hz']}"
+    )
     assert len(blocks) >= 60.0 * RATE_HZ / BLOCK
     assert_contiguous(blocks)
     assert listen.diagnostics["gaps"] == "0" and listen.diagnostics["missing_samples"] == "0"
@@ -344,19 +390,25 @@ def test_a_60_s_live_stream_has_no_unexplained_gaps(start_driver, listen):
 def test_docs_list_every_parameter_topic_and_service():
     text = (Path(__file__).parents[2] / "docs" / "driver.md").read_text()
     names = [spec.name for spec in driver.PARAMETERS]
-    names += [f"/{driver.RAW_TOPIC}", f"/{driver.EXCITATION_TOPIC}", f"/{driver.JOINT_STATES_TOPIC}",
-              f"/{driver.RUN_CYCLE_SERVICE}", f"/{driver.EMERGENCY_STOP_SERVICE}"]
+    names += [
+        f"/{driver.RAW_TOPIC}",
+        f"/{driver.EXCITATION_TOPIC}",
+        f"/{driver.JOINT_STATES_TOPIC}",
+        f"/{driver.RUN_CYCLE_SERVICE}",
+        f"/{driver.EMERGENCY_STOP_SERVICE}",
+    ]
     assert [name for name in names if f"`{name}`" not in text] == []
 
 
 def test_the_supply_ramps_on_request_is_capped_and_the_emergency_stop_zeroes_it(start_driver, listen):
     from mows_msgs.srv import SetFieldCurrent
+
     start_driver("-p", "scenario:=calibration", "-p", "coil_setup:=helmholtz", "-p", "supply_current_cap_a:=1.5")
     listen.ros.wait_for(lambda: listen.blocks, "the first block")
     supply = listen.ros.node.create_client(SetFieldCurrent, "/mows/driver/set_field_current")
     response = listen.result(listen.call(supply, SetFieldCurrent.Request(current_a=1.0)))
     assert response.success and response.current_a == 1.0, response.message
-    assert response.reached_sample_index > 0.49 * RATE_HZ       # 1 A at 2 A/s in 10 ms steps: ≥ 0.49 s of ramp
+    assert response.reached_sample_index > 0.49 * RATE_HZ  # 1 A at 2 A/s in 10 ms steps: ≥ 0.49 s of ramp
     listen.ros.wait_for(lambda: listen.diagnostics.get("supply_current_a") == "1.0", "the supply on /diagnostics")
     refused = listen.result(listen.call(supply, SetFieldCurrent.Request(current_a=1.6)))
     assert not refused.success and "supply_current_cap_a" in refused.message

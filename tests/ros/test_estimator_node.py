@@ -1,6 +1,7 @@
 """The estimator node end to end: device-stamped blocks and ring-down announcements in, a fit
 (with a status) for every ring-down out, field estimates only for good ones, and a node that
 survives bad data. The node runs as its own process, as in the graph."""
+
 import math
 import subprocess
 
@@ -29,8 +30,9 @@ BLOCK = 500
 EPOCH_S = 1_000.0
 THETA0 = math.radians(20.0)
 FIELD_T = 40e-6
-F_TRUE = PAPER_PROBE.f00_hz + float(frequency_shift_hz(PAPER_PROBE.f00_hz, PAPER_PROBE.spring_nm_per_rad,
-                                                       PAPER_PROBE.moment_am2 * FIELD_T))
+F_TRUE = PAPER_PROBE.f00_hz + float(
+    frequency_shift_hz(PAPER_PROBE.f00_hz, PAPER_PROBE.spring_nm_per_rad, PAPER_PROBE.moment_am2 * FIELD_T)
+)
 
 
 class Device:
@@ -57,16 +59,24 @@ class Device:
         if corrupt is not None:
             corrupt(near)
         if announce:
-            self.excitation.publish(ExcitationState(
-                header=self.header(self.index), phase=ExcitationState.PHASE_RINGDOWN, phase_name="RINGDOWN",
-                cycle_id=self.cycle, repeats=1, theta0_rad=THETA0, frequency_hz=F_TRUE * 0.998,
-                planned_duration_s=seconds))
+            self.excitation.publish(
+                ExcitationState(
+                    header=self.header(self.index),
+                    phase=ExcitationState.PHASE_RINGDOWN,
+                    phase_name="RINGDOWN",
+                    cycle_id=self.cycle,
+                    repeats=1,
+                    theta0_rad=THETA0,
+                    frequency_hz=F_TRUE * 0.998,
+                    planned_duration_s=seconds,
+                )
+            )
         for k, start in enumerate(range(0, n, BLOCK)):
             if k != skip_block:
-                self.publish_block(near[start:start + BLOCK], far[start:start + BLOCK])
+                self.publish_block(near[start : start + BLOCK], far[start : start + BLOCK])
             self.index += BLOCK
             self.sequence += 1
-        self.idle(5)            # the stream goes on after the window, as a device's does
+        self.idle(5)  # the stream goes on after the window, as a device's does
 
     def idle(self, blocks):
         for _ in range(blocks):
@@ -84,9 +94,17 @@ class Device:
         """A block of the two channels ``near`` and ``far``, or of ``channels`` as given."""
         if channels is None:
             channels = [channel(data, len(data), i) for i, data in enumerate((near, far))]
-        self.raw.publish(MagnetometerBlock(header=self.header(self.index), sequence=self.sequence,
-                                           first_sample_index=self.index, sample_rate_hz=sample_rate_hz, range_t=1e-5,
-                                           resolution_t=1e-10, channels=channels))
+        self.raw.publish(
+            MagnetometerBlock(
+                header=self.header(self.index),
+                sequence=self.sequence,
+                first_sample_index=self.index,
+                sample_rate_hz=sample_rate_hz,
+                range_t=1e-5,
+                resolution_t=1e-10,
+                channels=channels,
+            )
+        )
         # Give the estimator's best-effort queue time to drain, as a real 25 ms stream would.
         self.ros.executor.spin_once(timeout_sec=0.002)
 
@@ -101,17 +119,23 @@ def estimator(ros, tmp_path):
     node = next(n for n in NODES if n.name == "estimator")
     # The stand-in device streams Eq. S11 data (a magnet turning in place), so the node is
     # told to fit that model rather than the lever-aware pickup of the real probe.
-    process = subprocess.Popen(node.command(["-p", f"f00_hz:={PAPER_PROBE.f00_hz}", "-p", "lever_aware:=false"]),
-                               stdout=log, stderr=subprocess.STDOUT)
+    process = subprocess.Popen(
+        node.command(["-p", f"f00_hz:={PAPER_PROBE.f00_hz}", "-p", "lever_aware:=false"]),
+        stdout=log,
+        stderr=subprocess.STDOUT,
+    )
     heard = {"fits": [], "fields": [], "magnetic": [], "diagnostics": {}}
     ros.node.create_subscription(RingdownFit, "/mows/ringdown", heard["fits"].append, RESULT_QOS)
     ros.node.create_subscription(FieldEstimate, "/mows/field", heard["fields"].append, RESULT_QOS)
     ros.node.create_subscription(MagneticField, "/mows/magnetic_field", heard["magnetic"].append, STREAM_QOS)
-    ros.node.create_subscription(DiagnosticArray, "/diagnostics",
-                                 lambda a: heard["diagnostics"].update((s.name, s) for s in a.status), 10)
+    ros.node.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda a: heard["diagnostics"].update((s.name, s) for s in a.status), 10
+    )
     device = Device(ros)
-    ros.wait_for(lambda: device.raw.get_subscription_count() and device.excitation.get_subscription_count(),
-                 "the estimator to subscribe")
+    ros.wait_for(
+        lambda: device.raw.get_subscription_count() and device.excitation.get_subscription_count(),
+        "the estimator to subscribe",
+    )
 
     def estimator_hears_the_stream():
         # Discovery is not symmetric: until the estimator has matched this publisher, best-effort
@@ -126,7 +150,7 @@ def estimator(ros, tmp_path):
     try:
         code = process.wait(timeout=30)
     except subprocess.TimeoutExpired:
-        process.kill()          # never leave a node behind to talk to the next test
+        process.kill()  # never leave a node behind to talk to the next test
         code = process.wait()
     assert code == 0, (tmp_path / "estimator.log").read_text()
 
@@ -141,23 +165,26 @@ def test_a_ringdown_gives_a_fit_a_field_estimate_and_a_magnetic_field(ros, estim
     assert fit.cycle_id == device.cycle and fit.header.frame_id == "mows_probe"
     assert len(fit.covariance) == len(fit.parameter_names) ** 2
     assert abs(field.field_along_axis_t - FIELD_T) < 4 * field.field_along_axis_std_t
-    assert field.header.stamp == fit.header.stamp            # device clock, not receive time
+    assert field.header.stamp == fit.header.stamp  # device clock, not receive time
     assert magnetic.magnetic_field.x == pytest.approx(field.field_along_axis_t)
     assert math.isnan(magnetic.magnetic_field.y) and math.isnan(magnetic.magnetic_field.z)
-    assert magnetic.magnetic_field_covariance[0] == pytest.approx(field.field_along_axis_std_t ** 2)
+    assert magnetic.magnetic_field_covariance[0] == pytest.approx(field.field_along_axis_std_t**2)
 
 
-@pytest.mark.parametrize("corrupt, skip, status", [
-    (lambda y: y.__setitem__(slice(2000, 2010), np.nan), None, RingdownFit.STATUS_INVALID_SAMPLES),
-    (None, 7, RingdownFit.STATUS_DATA_GAP),
-])
+@pytest.mark.parametrize(
+    "corrupt, skip, status",
+    [
+        (lambda y: y.__setitem__(slice(2000, 2010), np.nan), None, RingdownFit.STATUS_INVALID_SAMPLES),
+        (None, 7, RingdownFit.STATUS_DATA_GAP),
+    ],
+)
 def test_bad_ringdowns_get_a_status_and_no_field(ros, estimator, corrupt, skip, status):
     device, heard, process = estimator
     device.ringdown(corrupt=corrupt, skip_block=skip)
     ros.wait_for(lambda: heard["fits"], "a fit result")
     assert heard["fits"][0].status == status and heard["fits"][0].message
     assert math.isnan(heard["fits"][0].frequency_hz)
-    device.ringdown()                                           # and the node carries on
+    device.ringdown()  # and the node carries on
     ros.wait_for(lambda: len(heard["fits"]) == 2 and heard["fields"], "the next fit and its field")
     assert heard["fits"][1].status == RingdownFit.STATUS_OK
     assert len(heard["fields"]) == 1 and heard["fields"][0].cycle_id == heard["fits"][1].cycle_id
@@ -167,24 +194,38 @@ def test_bad_ringdowns_get_a_status_and_no_field(ros, estimator, corrupt, skip, 
 def test_malformed_messages_do_not_stop_the_node(ros, estimator):
     device, heard, process = estimator
     zeros = np.zeros(BLOCK)
-    malformed = [dict(channels=[channel(zeros, BLOCK), channel(zeros, BLOCK - 1)]),   # flags short in one
-                 dict(channels=[channel(zeros, 0), channel(zeros, 0)]),               # no flags at all
-                 dict(channels=[]),
-                 dict(sample_rate_hz=math.nan),
-                 dict(sample_rate_hz=0.0),
-                 dict(channels=[channel(zeros, BLOCK, i) for i in range(3)])]          # valid, one channel more
+    malformed = [
+        dict(channels=[channel(zeros, BLOCK), channel(zeros, BLOCK - 1)]),  # flags short in one
+        dict(channels=[channel(zeros, 0), channel(zeros, 0)]),  # no flags at all
+        dict(channels=[]),
+        dict(sample_rate_hz=math.nan),
+        dict(sample_rate_hz=0.0),
+        dict(channels=[channel(zeros, BLOCK, i) for i in range(3)]),
+    ]  # valid, one channel more
     for changes in malformed:
         device.publish_block(zeros, zeros, **changes)
-        device.index += BLOCK   # a malformed block is lost to the estimator: a gap before the ring-down
+        device.index += BLOCK  # a malformed block is lost to the estimator: a gap before the ring-down
         device.sequence += 1
-    device.excitation.publish(ExcitationState(header=device.header(device.index), phase=ExcitationState.PHASE_RINGDOWN,
-                                              planned_duration_s=math.nan, frequency_hz=112.0))
+    device.excitation.publish(
+        ExcitationState(
+            header=device.header(device.index),
+            phase=ExcitationState.PHASE_RINGDOWN,
+            planned_duration_s=math.nan,
+            frequency_hz=112.0,
+        )
+    )
     device.ringdown()
     ros.wait_for(lambda: heard["fits"], "a fit after malformed input")
     assert heard["fits"][-1].status == RingdownFit.STATUS_OK and process.poll() is None
     name = "/estimator"
-    ros.wait_for(lambda: name in heard["diagnostics"] and {"status_malformed_excitation", "status_malformed_blocks"}
-                 <= {kv.key for kv in heard["diagnostics"][name].values}, "diagnostics")
+    ros.wait_for(
+        lambda: (
+            name in heard["diagnostics"]
+            and {"status_malformed_excitation", "status_malformed_blocks"}
+            <= {kv.key for kv in heard["diagnostics"][name].values}
+        ),
+        "diagnostics",
+    )
 
 
 def test_calibration_sets_f00_from_ringdowns_in_a_known_field(ros, estimator):
@@ -192,7 +233,7 @@ def test_calibration_sets_f00_from_ringdowns_in_a_known_field(ros, estimator):
     client = ros.node.create_client(Calibrate, "/mows/estimator/calibrate")
     ros.wait_for(client.service_is_ready, "the calibration service")
     request = Calibrate.Request(n_ringdowns=3, reference_field_t=FIELD_T, timeout_s=60.0)
-    futures = [client.call_async(request), client.call_async(request)]   # one too many: refused, not mixed
+    futures = [client.call_async(request), client.call_async(request)]  # one too many: refused, not mixed
     ros.wait_for(lambda: any(f.done() for f in futures), "the second calibration's refusal")
     refused = next(f for f in futures if f.done())
     running = futures[1 - futures.index(refused)]

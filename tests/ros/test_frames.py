@@ -1,6 +1,7 @@
 """Frames a robot can use: the URDF of the probe mount names every frame_id our messages carry,
 its stage joint turns the probe the way θ0 does, its fluxgates sit where the estimator assumes;
 the driver publishes the stage angle as sensor_msgs/JointState with the blocks' device stamps."""
+
 import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -59,15 +60,14 @@ def test_every_frame_we_publish_is_a_link_of_one_tree(mount):
     assert published <= links, published - links
     parents = {j.find("child").get("link"): j.find("parent").get("link") for j in joints.values()}
     roots = links - parents.keys()
-    assert roots == {m["frame_id"]}   # everything hangs from the rotation plane: one joint attaches it
+    assert roots == {m["frame_id"]}  # everything hangs from the rotation plane: one joint attaches it
 
 
 def test_the_stage_joint_turns_the_probe_as_theta0_does(mount):
     _, joints = mount
     stage = joints[STAGE_JOINT]
     assert stage.get("type") in ("continuous", "revolute")
-    assert (stage.find("parent").get("link"), stage.find("child").get("link")) == ("mows_rotation_plane",
-                                                                                   "mows_probe")
+    assert (stage.find("parent").get("link"), stage.find("child").get("link")) == ("mows_rotation_plane", "mows_probe")
     axis = np.array(stage.find("axis").get("xyz").split(), float)
     for theta0 in np.radians([0.0, 30.0, 135.0, -100.0]):
         # The probe's x' in the plane: the joint's rotation of x, against mows.physics.pose.
@@ -86,8 +86,11 @@ def test_the_fluxgates_sit_where_the_estimator_assumes_and_sense_along_their_x(m
 
 
 def test_the_driver_publishes_the_stage_angle_with_every_block(ros, start):
-    start(*NODES[0].command(["-p", "theta0_rad:=0.5", "-p", "excite_s:=0.2", "-p", "ringdown_s:=0.2",
-                             "-p", "settle_s:=0.1"]))
+    start(
+        *NODES[0].command(
+            ["-p", "theta0_rad:=0.5", "-p", "excite_s:=0.2", "-p", "ringdown_s:=0.2", "-p", "settle_s:=0.1"]
+        )
+    )
     joints, blocks = [], []
     ros.node.create_subscription(JointState, "/mows/joint_states", joints.append, JOINT_QOS)
     ros.node.create_subscription(MagnetometerBlock, "/mows/raw", blocks.append, STREAM_QOS)

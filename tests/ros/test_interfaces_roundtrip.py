@@ -1,5 +1,6 @@
 """Every mows_msgs message, service and action through rclpy in one process, with a
 non-default value in every field, compared field by field on arrival."""
+
 import pytest
 from action_msgs.msg import GoalStatus
 from rclpy.action import ActionClient, ActionServer
@@ -50,9 +51,7 @@ def test_service_is_called_and_answered(ros, name):
 @pytest.mark.parametrize("name", ACTIONS)
 def test_action_goal_feedback_and_result(ros, name):
     msgtype = f"mows_msgs/action/{name}"
-    goal, feedback, result = (
-        sample(f"{msgtype}_{part}") for part in ("Goal", "Feedback", "Result")
-    )
+    goal, feedback, result = (sample(f"{msgtype}_{part}") for part in ("Goal", "Feedback", "Result"))
     goals = []
 
     def execute(handle):

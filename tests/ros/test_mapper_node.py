@@ -1,5 +1,6 @@
 """The mapper node: a rotation sweep through a stand-in driver that answers RunCycle with
 ring-down fits computed from the exact field of a scenario, decomposed into B and G."""
+
 import math
 import subprocess
 
@@ -47,13 +48,24 @@ class StandInDriver:
         # With ``tuning`` the estimator also fits the cycle's tuning ring-down, 1 Hz off resonance.
         for repeat, tuning in [(0, True)] * self.tuning + [(r, False) for r in range(request.repeats)]:
             measured = f + STD_HZ * self.rng.standard_normal() + tuning
-            status, name = (RingdownFit.STATUS_NOT_CONVERGED, "NOT_CONVERGED") if self.bad_fits \
-                else (RingdownFit.STATUS_OK, "OK")
-            msg = RingdownFit(cycle_id=self.cycle, repeat_index=repeat, tuning=tuning, status=status,
-                              status_name=name,
-                              theta0_rad=request.theta0_rad, frequency_hz=measured, frequency_std_hz=STD_HZ,
-                              frequency_shift_hz=measured - PAPER_PROBE.f00_hz, frequency_shift_std_hz=STD_HZ,
-                              amplitude_rad=math.radians(2.0), damping_per_s=1.8, duration_s=0.5)
+            status, name = (
+                (RingdownFit.STATUS_NOT_CONVERGED, "NOT_CONVERGED") if self.bad_fits else (RingdownFit.STATUS_OK, "OK")
+            )
+            msg = RingdownFit(
+                cycle_id=self.cycle,
+                repeat_index=repeat,
+                tuning=tuning,
+                status=status,
+                status_name=name,
+                theta0_rad=request.theta0_rad,
+                frequency_hz=measured,
+                frequency_std_hz=STD_HZ,
+                frequency_shift_hz=measured - PAPER_PROBE.f00_hz,
+                frequency_shift_std_hz=STD_HZ,
+                amplitude_rad=math.radians(2.0),
+                damping_per_s=1.8,
+                duration_s=0.5,
+            )
             # Today's epoch to the nanosecond: float seconds would be ~100 ns off.
             msg.header.stamp.sec, msg.header.stamp.nanosec = 1_763_000_000 + self.cycle, 123_456_789 + repeat
             self.fits.publish(msg)
@@ -65,8 +77,11 @@ class StandInDriver:
 def mapper(ros, tmp_path):
     node = next(n for n in NODES if n.name == "mapper")
     log_path = tmp_path / "mapper.log"
-    process = subprocess.Popen(node.command(["-p", f"reference_scenario:={SCENARIO}", "-p", "lab_auto:=false"]),
-                               stdout=open(log_path, "w"), stderr=subprocess.STDOUT)
+    process = subprocess.Popen(
+        node.command(["-p", f"reference_scenario:={SCENARIO}", "-p", "lab_auto:=false"]),
+        stdout=open(log_path, "w"),
+        stderr=subprocess.STDOUT,
+    )
     client = ActionClient(ros.node, RotationSweep, "mows/mapper/rotation_sweep")
     ros.wait_for(lambda: client.server_is_ready(), "the sweep action server")
     yield client, process
@@ -92,7 +107,7 @@ def sweep(ros, client, **goal):
 
 def test_a_sweep_recovers_the_field_and_reports_on_the_model(ros, mapper):
     client, _ = mapper
-    StandInDriver(ros, tuning=True)   # tuning ring-downs are not measurements: the sweep leaves them out
+    StandInDriver(ros, tuning=True)  # tuning ring-downs are not measurements: the sweep leaves them out
     maps, reports = [], []
     ros.node.create_subscription(SweepDecomposition, "mows/sweep", maps.append, MAP_QOS)
     ros.node.create_subscription(ModelReport, "mows/model_report", reports.append, MAP_QOS)
@@ -109,8 +124,11 @@ def test_a_sweep_recovers_the_field_and_reports_on_the_model(ros, mapper):
     np.testing.assert_array_equal(maps[0].field_t, d.field_t)
     # The map is stamped with its last ring-down, integer nanoseconds end to end.
     assert (d.header.stamp.sec, d.header.stamp.nanosec) == (1_763_000_000 + len(ANGLES), 123_456_789 + 1)
-    assert reports[0].n == 2 * len(ANGLES) and reports[0].verdict in ("adequate", "effect_missing",
-                                                                      "unexplained_structure")
+    assert reports[0].n == 2 * len(ANGLES) and reports[0].verdict in (
+        "adequate",
+        "effect_missing",
+        "unexplained_structure",
+    )
     # A map is latched: a subscriber that comes later still gets it.
     late = []
     ros.node.create_subscription(SweepDecomposition, "mows/sweep", late.append, MAP_QOS)
@@ -132,8 +150,9 @@ def test_bad_goals_are_refused(ros, mapper):
 def test_one_sweep_at_a_time(ros, mapper):
     client, _ = mapper
     StandInDriver(ros)
-    goals = [client.send_goal_async(RotationSweep.Goal(theta0_rad=ANGLES.tolist(), repeats_per_angle=1))
-             for _ in range(2)]
+    goals = [
+        client.send_goal_async(RotationSweep.Goal(theta0_rad=ANGLES.tolist(), repeats_per_angle=1)) for _ in range(2)
+    ]
     handles = ros.wait_for(lambda: all(g.done() for g in goals) and [g.result() for g in goals], "both answers")
     assert sorted(h.accepted for h in handles) == [False, True]
     result = next(h for h in handles if h.accepted).get_result_async()
@@ -178,6 +197,6 @@ def test_an_adaptive_goal_reaches_its_target(ros, mapper):
     sigma = np.sqrt(np.diag(np.reshape(d.field_covariance_t2, (2, 2))))
     truth, _ = reference_at(SCENARIO)
     assert np.all(sigma <= 100e-9) and np.all(np.abs(np.array(d.field_t) - truth[:2]) < 4 * sigma)
-    assert len({round(f.theta0_rad, 6) for f in feedback}) >= 5   # the orientations it chose
+    assert len({round(f.theta0_rad, 6) for f in feedback}) >= 5  # the orientations it chose
     handle, _, _ = sweep(ros, client, target="bz")
     assert not handle.accepted

@@ -3,6 +3,7 @@ namespaces /probe_a and /probe_b of one domain, each simulating its own scene, r
 sweeps at the same time. Nothing crosses over: each sweep hears only its own ring-downs
 (their orientations tell them apart) and recovers its own scene's field; /diagnostics names
 all six nodes apart."""
+
 import math
 import signal
 
@@ -24,55 +25,86 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realti
 
 # Each probe its scene and its orientations (15° apart from the other's, so that a fit that
 # reached the wrong mapper would show).
-PROBES = {"/probe_a": ("helmholtz", np.radians(np.arange(0.0, 360.0, 60.0))),
-          "/probe_b": ("anti_helmholtz", np.radians(np.arange(15.0, 375.0, 60.0)))}
+PROBES = {
+    "/probe_a": ("helmholtz", np.radians(np.arange(0.0, 360.0, 60.0))),
+    "/probe_b": ("anti_helmholtz", np.radians(np.arange(15.0, 375.0, 60.0))),
+}
 REPEATS = 2
-BOUND_S = 600.0   # a hang's bound only: two sweeps of 6 orientations on two loaded cores
+BOUND_S = 600.0  # a hang's bound only: two sweeps of 6 orientations on two loaded cores
 
 
 def parameters(path, scenario: str):
     """The probe's scene, and short cycles (one tuning ring-down, short pauses)."""
-    path.write_text(yaml.safe_dump({
-        "/**/driver": {"ros__parameters": {"scenario": scenario, "coil_setup": load_scenario(scenario).setup.name,
-                                           "tuning_steps": 1, "gap_s": 0.2, "settle_s": 0.2}},
-        "/**/mapper": {"ros__parameters": {"repeats_per_angle": REPEATS}}}))
+    path.write_text(
+        yaml.safe_dump(
+            {
+                "/**/driver": {
+                    "ros__parameters": {
+                        "scenario": scenario,
+                        "coil_setup": load_scenario(scenario).setup.name,
+                        "tuning_steps": 1,
+                        "gap_s": 0.2,
+                        "settle_s": 0.2,
+                    }
+                },
+                "/**/mapper": {"ros__parameters": {"repeats_per_angle": REPEATS}},
+            }
+        )
+    )
     return path
 
 
 def test_two_probes_in_namespaces_sweep_at_once_without_cross_talk(ros, start, tmp_path):
     statuses = {}
-    ros.node.create_subscription(DiagnosticArray, "/diagnostics",
-                                 lambda a: statuses.update((s.name, s) for s in a.status), 10)
+    ros.node.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda a: statuses.update((s.name, s) for s in a.status), 10
+    )
     graphs, clients, fits, blocks = {}, {}, {}, {}
     for namespace, (scenario, _) in PROBES.items():
-        graphs[namespace] = start("mows-graph", "--ros-args", "-r", f"__ns:={namespace}", "--params-file",
-                                  str(parameters(tmp_path / f"{namespace[1:]}.yaml", scenario)))
+        graphs[namespace] = start(
+            "mows-graph",
+            "--ros-args",
+            "-r",
+            f"__ns:={namespace}",
+            "--params-file",
+            str(parameters(tmp_path / f"{namespace[1:]}.yaml", scenario)),
+        )
         clients[namespace] = ActionClient(ros.node, RotationSweep, f"{namespace}/mows/mapper/rotation_sweep")
         fits[namespace], blocks[namespace] = [], []
-        ros.node.create_subscription(MagnetometerBlock, f"{namespace}/mows/raw", blocks[namespace].append,
-                                     STREAM_QOS)
+        ros.node.create_subscription(MagnetometerBlock, f"{namespace}/mows/raw", blocks[namespace].append, STREAM_QOS)
         ros.node.create_subscription(RingdownFit, f"{namespace}/mows/ringdown", fits[namespace].append, RESULT_QOS)
     names = {f"{ns}/{node}" for ns in PROBES for node in ("driver", "estimator", "mapper")}
     ros.wait_for(lambda: names <= statuses.keys(), "diagnostics of all six nodes", BOUND_S)
     ros.wait_for(lambda: all(c.server_is_ready() for c in clients.values()), "both sweep actions", BOUND_S)
     ros.wait_for(lambda: all(blocks.values()), "both sample streams", BOUND_S)
-    ros.wait_for(lambda: all(ros.node.count_publishers(f"{ns}/mows/ringdown") for ns in PROBES), "both estimators",
-                 BOUND_S)
+    ros.wait_for(
+        lambda: all(ros.node.count_publishers(f"{ns}/mows/ringdown") for ns in PROBES), "both estimators", BOUND_S
+    )
 
-    sent = {ns: clients[ns].send_goal_async(RotationSweep.Goal(theta0_rad=angles.tolist(), repeats_per_angle=REPEATS))
-            for ns, (_, angles) in PROBES.items()}
-    handles = ros.wait_for(lambda: all(s.done() for s in sent.values()) and {ns: s.result() for ns, s in sent.items()},
-                           "both goals accepted", BOUND_S)
+    sent = {
+        ns: clients[ns].send_goal_async(RotationSweep.Goal(theta0_rad=angles.tolist(), repeats_per_angle=REPEATS))
+        for ns, (_, angles) in PROBES.items()
+    }
+    handles = ros.wait_for(
+        lambda: all(s.done() for s in sent.values()) and {ns: s.result() for ns, s in sent.items()},
+        "both goals accepted",
+        BOUND_S,
+    )
     assert all(h.accepted for h in handles.values())
     results = {ns: h.get_result_async() for ns, h in handles.items()}
-    done = ros.wait_for(lambda: all(r.done() for r in results.values()) and {ns: r.result()
-                                                                            for ns, r in results.items()},
-                        "both sweeps", BOUND_S)
+    done = ros.wait_for(
+        lambda: all(r.done() for r in results.values()) and {ns: r.result() for ns, r in results.items()},
+        "both sweeps",
+        BOUND_S,
+    )
 
     for namespace, (scenario, angles) in PROBES.items():
         outcome = done[namespace]
-        assert outcome.status == GoalStatus.STATUS_SUCCEEDED, (namespace, outcome.result.message,
-                                                               log(graphs[namespace]))
+        assert outcome.status == GoalStatus.STATUS_SUCCEEDED, (
+            namespace,
+            outcome.result.message,
+            log(graphs[namespace]),
+        )
         d = outcome.result.decomposition
         assert d.n_points == REPEATS * len(angles)
         truth, _ = reference_at(scenario)

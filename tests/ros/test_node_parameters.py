@@ -1,5 +1,6 @@
 """The nodes' parameter tables: declared with descriptors, validated on set, and the same
 as the shipped parameter files."""
+
 import subprocess
 
 import pytest
@@ -27,7 +28,7 @@ NODE_CLASSES = {
 @pytest.mark.parametrize("graph_node", NODES, ids=lambda n: n.name)
 def test_the_parameter_file_holds_every_parameter_at_its_default(graph_node):
     with open(graph_node.config_path()) as file:
-        (key, section), = yaml.safe_load(file).items()
+        ((key, section),) = yaml.safe_load(file).items()
     assert key == f"/**/{graph_node.name}"
     table = NODE_MODULES[graph_node.name].PARAMETERS
     assert section["ros__parameters"] == {spec.name: spec.default for spec in table}
@@ -78,6 +79,7 @@ def test_a_probe_file_is_read_when_set_and_refused_with_its_reason(ros_context, 
     import dataclasses
 
     from mows.physics.probe import PAPER_PROBE
+
     node = estimator.EstimatorNode()
     path = tmp_path / "probe.yaml"
     dataclasses.replace(PAPER_PROBE, damping_per_s=2.5).to_yaml(path)
@@ -87,24 +89,24 @@ def test_a_probe_file_is_read_when_set_and_refused_with_its_reason(ros_context, 
     path.write_text("moment_am2: -1\n")
     (result,) = node.set_parameters([Parameter("probe_file", value=str(path))])
     assert not result.successful and "probe_file" in result.reason and "lacks" in result.reason
-    assert node.probe().damping_per_s == 2.5   # the accepted file's probe stays in use
+    assert node.probe().damping_per_s == 2.5  # the accepted file's probe stays in use
     node.destroy_node()
 
 
 def test_a_bad_value_at_start_up_stops_the_node():
-    run = subprocess.run(
-        NODES[0].command(["-p", "backend:=usb"]), capture_output=True, text=True, timeout=120
-    )
+    run = subprocess.run(NODES[0].command(["-p", "backend:=usb"]), capture_output=True, text=True, timeout=120)
     assert run.returncode == EXIT_BAD_PARAMETER, run.stderr
     assert "backend='usb' is not one of sim, serial, bag" in run.stderr
     assert "Traceback" not in run.stderr
 
 
 # A misspelling of one parameter of each node, and the name it should suggest.
-MISSPELT = {"driver": ("excitation_curent_a", "excitation_current_a"),
-            "estimator": ("settle", "settle_s"),
-            "mapper": ("referance_scenario", "reference_scenario"),
-            "calibrator": ("hardware_idd", "hardware_id")}
+MISSPELT = {
+    "driver": ("excitation_curent_a", "excitation_current_a"),
+    "estimator": ("settle", "settle_s"),
+    "mapper": ("referance_scenario", "reference_scenario"),
+    "calibrator": ("hardware_idd", "hardware_id"),
+}
 
 
 @pytest.mark.parametrize("graph_node", NODES, ids=lambda n: n.name)
@@ -127,7 +129,11 @@ def test_an_unknown_parameter_stops_the_node_with_the_nearest_name(graph_node, g
 def test_a_parameter_for_another_node_is_not_refused():
     """`-p driver:repeats:=3` (rcl's node-name prefix, as mows-graph passes it to every node)
     reaches the driver only; the estimator starts with it on its command line."""
-    run = subprocess.run(NODES[1].command(["-p", "driver:repeats:=3", "-p", "estimator:settle:=1.0"]),
-                         capture_output=True, text=True, timeout=120)
+    run = subprocess.run(
+        NODES[1].command(["-p", "driver:repeats:=3", "-p", "estimator:settle:=1.0"]),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert run.returncode == EXIT_BAD_PARAMETER and "did you mean settle_s?" in run.stderr
     assert "repeats" not in run.stderr

@@ -2,6 +2,7 @@
 /diagnostics, and the graph stops cleanly (exit 0) after --duration or on a signal; a node
 that dies makes it fail. A node alone takes a `/**/node` parameter file in a namespace and
 stops cleanly on SIGTERM."""
+
 import os
 import re
 import signal
@@ -30,9 +31,7 @@ def diagnostics(ros):
 
 
 def hear_all(ros, heard: dict, names: set[str], process: subprocess.Popen) -> None:
-    ros.wait_for(
-        lambda: names <= heard.keys() or process.poll() is not None, f"diagnostics of {names}"
-    )
+    ros.wait_for(lambda: names <= heard.keys() or process.poll() is not None, f"diagnostics of {names}")
     assert names <= heard.keys(), f"heard only {sorted(heard)}\n{log(process)}"
     assert all(heard[name].level == DiagnosticStatus.OK for name in names)
 
@@ -65,13 +64,9 @@ def test_graph_fails_when_a_node_dies(ros, diagnostics, start):
     assert "driver exited by itself" in log(graph)
 
 
-def test_a_node_in_a_namespace_takes_its_parameter_file_and_stops_on_sigterm(
-    ros, diagnostics, start, tmp_path
-):
+def test_a_node_in_a_namespace_takes_its_parameter_file_and_stops_on_sigterm(ros, diagnostics, start, tmp_path):
     overrides = tmp_path / "driver.yaml"
-    overrides.write_text(
-        yaml.safe_dump({"/**/driver": {"ros__parameters": {"block_duration_s": 0.04}}})
-    )
+    overrides.write_text(yaml.safe_dump({"/**/driver": {"ros__parameters": {"block_duration_s": 0.04}}}))
     driver = start(*NODES[0].command(["-r", "__ns:=/lab", "--params-file", str(overrides)]))
     hear_all(ros, diagnostics, {"/lab/driver"}, driver)
     values = {kv.key: kv.value for kv in diagnostics["/lab/driver"].values}

@@ -1,4 +1,5 @@
 """The graph's QoS profiles do what their names promise."""
+
 import pytest
 from std_msgs.msg import String
 

@@ -1,4 +1,5 @@
 """The README lists every topic, service, action and parameter of the four nodes."""
+
 import os
 import subprocess
 from pathlib import Path
@@ -14,14 +15,28 @@ pytestmark = pytest.mark.ros
 
 ROOT = Path(__file__).parents[2]
 README = (ROOT / "README.md").read_text()
-INTERFACES = ["/mows/raw", "/mows/excitation", "/mows/joint_states", "/mows/ringdown", "/mows/field",
-              "/mows/magnetic_field", "/mows/sweep", "/mows/model_report", "/diagnostics", "/mows/driver/run_cycle",
-              "/mows/driver/emergency_stop", "/mows/driver/set_field_current", "/mows/estimator/calibrate",
-              "/mows/mapper/rotation_sweep", "/mows/calibrator/calibrate_probe"]
+INTERFACES = [
+    "/mows/raw",
+    "/mows/excitation",
+    "/mows/joint_states",
+    "/mows/ringdown",
+    "/mows/field",
+    "/mows/magnetic_field",
+    "/mows/sweep",
+    "/mows/model_report",
+    "/diagnostics",
+    "/mows/driver/run_cycle",
+    "/mows/driver/emergency_stop",
+    "/mows/driver/set_field_current",
+    "/mows/estimator/calibrate",
+    "/mows/mapper/rotation_sweep",
+    "/mows/calibrator/calibrate_probe",
+]
 
 
-@pytest.mark.parametrize("module", [driver, estimator, mapper, calibrator],
-                         ids=["driver", "estimator", "mapper", "calibrator"])
+@pytest.mark.parametrize(
+    "module", [driver, estimator, mapper, calibrator], ids=["driver", "estimator", "mapper", "calibrator"]
+)
 def test_every_parameter_is_in_the_readme(module):
     assert [spec.name for spec in module.PARAMETERS if f"`{spec.name}`" not in README] == []
 
@@ -35,10 +50,18 @@ def test_the_by_hand_environment_lets_the_ament_index_find_every_interface_packa
     it uses (std_msgs, from the wheels in the venv) in the ament index."""
     assert "`source env.bash`" in README
     clean = {k: v for k, v in os.environ.items() if k not in ("AMENT_PREFIX_PATH", "VIRTUAL_ENV", "PYTHONPATH")}
-    script = ("from ament_index_python import get_resource\n"
-              "for package in ('mows_msgs', 'std_msgs', 'sensor_msgs', 'diagnostic_msgs'):\n"
-              "    print(package, get_resource('rosidl_interfaces', package)[1])")
-    run = subprocess.run(["bash", "-c", f"source env.bash && python -c \"{script}\""], cwd=ROOT, env=clean,
-                         capture_output=True, text=True, timeout=120)
+    script = (
+        "from ament_index_python import get_resource\n"
+        "for package in ('mows_msgs', 'std_msgs', 'sensor_msgs', 'diagnostic_msgs'):\n"
+        "    print(package, get_resource('rosidl_interfaces', package)[1])"
+    )
+    run = subprocess.run(
+        ["bash", "-c", f'source env.bash && python -c "{script}"'],
+        cwd=ROOT,
+        env=clean,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert run.returncode == 0, run.stderr
     assert len(run.stdout.splitlines()) == 4

@@ -1,6 +1,7 @@
 """An adaptive sweep in the sweep runner (a goal with a target), driven without ROS: a stand-in
 driver answers each planned cycle with fits whose frequencies come from the full potential of a
 known uniform field, stamped as a device clock that advances by the turn and the ring-downs."""
+
 import math
 
 import numpy as np
@@ -16,7 +17,7 @@ from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, Swe
 
 FIELD_T = np.array([30e-6, -20e-6, 0.0])
 SETTINGS = SweepSettings(repeat_s=0.8, turn_s=0.5)
-MAX_STEPS = 500   # bound for a sweep that never ends (a bug)
+MAX_STEPS = 500  # bound for a sweep that never ends (a bug)
 
 
 def std_hz(theta0_rad):

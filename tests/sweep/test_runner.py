@@ -1,6 +1,7 @@
 """The rotation sweep as a state machine (mows.sweep.runner), driven without ROS: a stand-in
 driver answers its cycle calls with fits whose frequencies come from the full potential of a
 known uniform field; the runner's decomposition must recover that field."""
+
 import math
 
 import numpy as np
@@ -48,7 +49,7 @@ class StandIn:
         if fits_first:
             assert all(runner.on_fit(f) is None for f in fits)
             return runner.on_cycle(answer)
-        assert not runner.on_cycle(answer).run_cycle   # waiting for the fits
+        assert not runner.on_cycle(answer).run_cycle  # waiting for the fits
         steps = [runner.on_fit(f) for f in fits]
         assert steps[:-1] == [None] * (len(fits) - 1)
         return steps[-1]
@@ -95,7 +96,7 @@ def test_a_goal_without_angles_or_repeats_takes_the_settings():
 def test_late_fits_are_given_up_on_when_their_time_is_up():
     runner, step = started(SweepGoal(ANGLES[:5], 3))
     driver = StandIn()
-    assert runner.fits_time_up() is None     # no cycle answered yet: nothing is late
+    assert runner.fits_time_up() is None  # no cycle answered yet: nothing is late
     driver.cycle_id += 1
     assert runner.on_fit(driver.fit(0.0)) is None
     assert not runner.on_cycle(CycleAnswer(driver.cycle_id, 3)).run_cycle
@@ -103,8 +104,9 @@ def test_late_fits_are_given_up_on_when_their_time_is_up():
     assert step.feedback.n_ok == 1 and step.run_cycle.theta0_rad == ANGLES[1]
 
 
-@pytest.mark.parametrize("problem", ["cycle failed: coil current above the cap",
-                                     "the driver's run_cycle service is not available"])
+@pytest.mark.parametrize(
+    "problem", ["cycle failed: coil current above the cap", "the driver's run_cycle service is not available"]
+)
 def test_a_failing_driver_ends_the_sweep_with_its_reason(problem):
     runner, step = started()
     step = StandIn().run(runner, step)
@@ -120,7 +122,7 @@ def test_a_cancel_ends_the_sweep_before_the_next_orientation():
     assert step.feedback.angle_index == 0 and step.run_cycle is None
     assert step.finished.cancelled and not step.finished.ok
     assert step.finished.message == f"cancelled after 1 of {len(ANGLES)} orientations"
-    runner.start(SweepGoal(ANGLES), SweepSettings(), P)    # free again
+    runner.start(SweepGoal(ANGLES), SweepSettings(), P)  # free again
 
 
 def test_a_sweep_without_one_good_ringdown_fails_and_publishes_nothing():
@@ -143,16 +145,19 @@ def test_a_failed_decomposition_ends_the_sweep_and_leaves_nothing_to_publish():
     assert step.finished.map.decomposition is failed and runner.state == "idle"
 
 
-@pytest.mark.parametrize("goal, settings, reason", [
-    (SweepGoal((0.0, math.nan)), SweepSettings(), "not all finite"),
-    (SweepGoal(ANGLES, model="paper"), SweepSettings(), "'paper' is not one of first_principles, published"),
-    # The field is the 1θ0 harmonic and the gradient the 2θ0 one: 4 orientations cannot tell
-    # them from the constant term, 5 cannot when f00 is free too.
-    (SweepGoal(ANGLES[:4]), SweepSettings(), "4 distinct orientations .* need at least 5"),
-    (SweepGoal(ANGLES[:2] * 3), SweepSettings(), "2 distinct orientations"),
-    (SweepGoal(ANGLES[:5]), SweepSettings(f00_free=True), "need at least 6"),
-    (SweepGoal(), SweepSettings(angle_step_deg=90.0), "4 distinct orientations"),
-])
+@pytest.mark.parametrize(
+    "goal, settings, reason",
+    [
+        (SweepGoal((0.0, math.nan)), SweepSettings(), "not all finite"),
+        (SweepGoal(ANGLES, model="paper"), SweepSettings(), "'paper' is not one of first_principles, published"),
+        # The field is the 1θ0 harmonic and the gradient the 2θ0 one: 4 orientations cannot tell
+        # them from the constant term, 5 cannot when f00 is free too.
+        (SweepGoal(ANGLES[:4]), SweepSettings(), "4 distinct orientations .* need at least 5"),
+        (SweepGoal(ANGLES[:2] * 3), SweepSettings(), "2 distinct orientations"),
+        (SweepGoal(ANGLES[:5]), SweepSettings(f00_free=True), "need at least 6"),
+        (SweepGoal(), SweepSettings(angle_step_deg=90.0), "4 distinct orientations"),
+    ],
+)
 def test_bad_goals_are_refused_with_the_reason_before_any_cycle(goal, settings, reason):
     runner = SweepRunner()
     with pytest.raises(ValueError, match=reason):

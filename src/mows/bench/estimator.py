@@ -10,6 +10,7 @@ the power of the ring-down's first harmonic at θ0 = 0 over the noise power per 
 θ0 = 90° the signal is mostly at 2f and far weaker, so the bound there is much larger at the
 same SNR (Eq. 3 and PHYSICS.md §2).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -23,7 +24,7 @@ from mows.estimate import ringdown, ringdown_problem
 from mows.physics.signal import signal_t
 
 SAMPLE_RATE_HZ = 20_000.0
-N_SAMPLES = 10_000                # 0.5 s, as the paper evaluates
+N_SAMPLES = 10_000  # 0.5 s, as the paper evaluates
 FREQUENCY_HZ = 112.6
 DAMPING_PER_S = 1.8
 AMPLITUDE_RAD = math.radians(20.0)
@@ -43,17 +44,26 @@ class RingdownCase:
 
     def clean_t(self) -> np.ndarray:
         t = np.arange(N_SAMPLES) / SAMPLE_RATE_HZ
-        return signal_t(t, self.theta0_rad, AMPLITUDE_RAD, FREQUENCY_HZ, PHASE_RAD, DAMPING_PER_S, KAPPA_T,
-                        offset_t=OFFSET_T)
+        return signal_t(
+            t, self.theta0_rad, AMPLITUDE_RAD, FREQUENCY_HZ, PHASE_RAD, DAMPING_PER_S, KAPPA_T, offset_t=OFFSET_T
+        )
 
     def draw(self, rng: np.random.Generator, clean=None) -> np.ndarray:
         clean = self.clean_t() if clean is None else clean
         return clean + self.noise_std_t * rng.standard_normal(N_SAMPLES)
 
     def crb_hz(self) -> float:
-        return ringdown_problem.cramer_rao_frequency_hz(N_SAMPLES, SAMPLE_RATE_HZ, FREQUENCY_HZ, DAMPING_PER_S,
-                                                AMPLITUDE_RAD, PHASE_RAD, self.theta0_rad, KAPPA_T,
-                                                self.noise_std_t)
+        return ringdown_problem.cramer_rao_frequency_hz(
+            N_SAMPLES,
+            SAMPLE_RATE_HZ,
+            FREQUENCY_HZ,
+            DAMPING_PER_S,
+            AMPLITUDE_RAD,
+            PHASE_RAD,
+            self.theta0_rad,
+            KAPPA_T,
+            self.noise_std_t,
+        )
 
     def fit(self, samples) -> ringdown.RingdownFit:
         # The driver excites near resonance, so the expected frequency is close but not exact.
@@ -116,8 +126,9 @@ def _curve_fit_once(case: RingdownCase, samples: np.ndarray):
     return p[0]
 
 
-def speed(theta0_deg: float = 30.0, snr_db: float = 40.0, trials: int = 100, baseline_trials: int = 20,
-          rng=None) -> dict:
+def speed(
+    theta0_deg: float = 30.0, snr_db: float = 40.0, trials: int = 100, baseline_trials: int = 20, rng=None
+) -> dict:
     """Median wall time of one fit (0.5 s, 20 kS/s) and of curve_fit on the same data."""
     rng = np.random.default_rng(1) if rng is None else rng
     case = RingdownCase(math.radians(theta0_deg), snr_db)
@@ -150,8 +161,7 @@ def speed(theta0_deg: float = 30.0, snr_db: float = 40.0, trials: int = 100, bas
 
 def precision_grid(snrs_db=(20.0, 40.0, 60.0), step_deg: float = 15.0, trials: int = 200, rng=None):
     rng = np.random.default_rng(2) if rng is None else rng
-    return [precision_cell(theta0, snr, trials, rng)
-            for snr in snrs_db for theta0 in np.arange(0.0, 360.0, step_deg)]
+    return [precision_cell(theta0, snr, trials, rng) for snr in snrs_db for theta0 in np.arange(0.0, 360.0, step_deg)]
 
 
 def run(trials: int = 200) -> dict:
@@ -160,12 +170,16 @@ def run(trials: int = 200) -> dict:
     figures = speed()
     cells = precision_grid(trials=trials)
     bounded = [c for c in cells if c.crb_hz < 5e-3]
-    figures.update({
-        "efficiency_min": min(c.efficiency for c in bounded),
-        "std_over_crb_max": max(c.std_over_crb for c in bounded),
-        "bias_max_sigma": max(abs(c.bias_sigma) for c in bounded),
-        "pull_width_near_90deg": [c.pull_width for c in cells if c.theta0_deg % 180 == 90],
-        "cells": len(cells), "cells_with_crb_below_5mhz": len(bounded), "trials_per_cell": trials,
-        "monte_carlo_std_error_of_std_ratio": 1.0 / math.sqrt(2 * trials),
-    })
+    figures.update(
+        {
+            "efficiency_min": min(c.efficiency for c in bounded),
+            "std_over_crb_max": max(c.std_over_crb for c in bounded),
+            "bias_max_sigma": max(abs(c.bias_sigma) for c in bounded),
+            "pull_width_near_90deg": [c.pull_width for c in cells if c.theta0_deg % 180 == 90],
+            "cells": len(cells),
+            "cells_with_crb_below_5mhz": len(bounded),
+            "trials_per_cell": trials,
+            "monte_carlo_std_error_of_std_ratio": 1.0 / math.sqrt(2 * trials),
+        }
+    )
     return figures

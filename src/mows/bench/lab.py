@@ -7,6 +7,7 @@ effect is testable; truth from exact sources (:mod:`mows.lab.synth`). The timing
 base fit and the diagnosis (candidate signatures, refits, groups, separating measurements,
 verdict), not building the table.
 """
+
 from __future__ import annotations
 
 import time
@@ -27,8 +28,9 @@ def benchmark_table(seed: int = 0):
     theta0 = sweep.pop("theta0_deg")
     temperature = 293.15 + 0.5 * np.sin(2 * np.pi * sweep["t_s"] / 3000.0)
     source = anti_helmholtz_pair((0, 0, 0), (1, 0, 0), 0.105, 100, 1.0) + UniformField((15e-6, -12e-6, -40e-6))
-    return synth.synthesize(PAPER_PROBE, source, theta0, np.random.default_rng(seed), amplitude_deg=20.0,
-                            temperature_k=temperature, **sweep)
+    return synth.synthesize(
+        PAPER_PROBE, source, theta0, np.random.default_rng(seed), amplitude_deg=20.0, temperature_k=temperature, **sweep
+    )
 
 
 def run() -> dict:
@@ -39,9 +41,15 @@ def run() -> dict:
     fit = FrequencyModel(PAPER_PROBE).fit(table)
     result = diagnose(fit, effects)
     seconds = time.perf_counter() - start
-    return {"rows": len(table), "effects": len(effects), "diagnose_s": seconds, "target_s": 5.0,
-            "verdict": result.verdict, "best": result.best.name if result.best else None,
-            "untestable": sorted(result.untestable)}
+    return {
+        "rows": len(table),
+        "effects": len(effects),
+        "diagnose_s": seconds,
+        "target_s": 5.0,
+        "verdict": result.verdict,
+        "best": result.best.name if result.best else None,
+        "untestable": sorted(result.untestable),
+    }
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ cuts the announced ring-downs out of the stream as the estimator node does
 as long as the simulator needs, not as long as the device would. Stretches nobody records (a gap,
 the probe settling) are integrated without reading the sensors.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -25,8 +26,8 @@ from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.physics.coils import CurrentCap
 from mows.sim.simulator import SimulatedDevice
 
-CHUNK_S = 0.025      # samples are read in pieces of this, as the sim backend does
-BUFFER_S = 5.0       # the assembler keeps this much of the stream
+CHUNK_S = 0.025  # samples are read in pieces of this, as the sim backend does
+BUFFER_S = 5.0  # the assembler keeps this much of the stream
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,15 +41,22 @@ class MeasuredRingdown:
 class DeviceTimeRig:
     """``scenario``'s device driven by cycles of ``settings`` with the coils capped at ``cap_a``."""
 
-    def __init__(self, scenario, settings: CycleSettings, cap_a: float = 10.0, seed: int | None = None,
-                 settle_s: float = SETTLE_S):
+    def __init__(
+        self,
+        scenario,
+        settings: CycleSettings,
+        cap_a: float = 10.0,
+        seed: int | None = None,
+        settle_s: float = SETTLE_S,
+    ):
         self.scenario = scenario
         self.probe = scenario.probe
         rng = np.random.default_rng(scenario.seed if seed is None else seed)
         self.device = ScheduledDevice(SimulatedDevice(scenario, rng), CurrentCap(cap_a))
         self.fs = self.device.device.sample_rate_hz
-        self.sequencer = CycleSequencer(settings, scenario.setup, self.device.cap, self.fs, self.probe.f00_hz,
-                                        fit=fit_ringdown)
+        self.sequencer = CycleSequencer(
+            settings, scenario.setup, self.device.cap, self.fs, self.probe.f00_hz, fit=fit_ringdown
+        )
         self.assembler = SegmentAssembler(BUFFER_S)
         self.settle_s = settle_s
         self.peak_current_a = 0.0
@@ -121,8 +129,9 @@ class DeviceTimeRig:
     def _send(self, command) -> None:
         try:
             if isinstance(command, CoilCommand):
-                applied = self.device.schedule_coils(command.at_sample_index, command.amplitudes_a,
-                                                     command.frequency_hz)
+                applied = self.device.schedule_coils(
+                    command.at_sample_index, command.amplitudes_a, command.frequency_hz
+                )
             else:
                 applied = self.device.schedule_orientation(command.at_sample_index, command.theta0_rad)
             self._results.append(CommandResult(command.command_id, True, applied))
@@ -134,8 +143,15 @@ class DeviceTimeRig:
             # Nobody records these samples: the probe moves on without its sensors being read.
             self._idle_until = event.sample_index + round(event.planned_duration_s * self.fs)
         if event.phase == Phase.RINGDOWN:
-            window = RingdownWindow(event.stamp_ns, event.planned_duration_s, event.cycle_id,
-                                    event.repeat_index, event.theta0_rad, event.frequency_hz, event.tuning)
+            window = RingdownWindow(
+                event.stamp_ns,
+                event.planned_duration_s,
+                event.cycle_id,
+                event.repeat_index,
+                event.theta0_rad,
+                event.frequency_hz,
+                event.tuning,
+            )
             for segment in self.assembler.announce(window):
                 self._fit(segment)
 

@@ -6,6 +6,7 @@ without noise, the kernel's share, numba's compilation (fresh cache) and cache-l
 new process, and the same cycle's equation of motion integrated by
 ``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-10) on the same torque function.
 """
+
 from __future__ import annotations
 
 import math
@@ -47,8 +48,14 @@ def first_call_s() -> tuple[float, float]:
     """(import + compile, import + cache load) of the kernel in fresh processes, s."""
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-        runs = [float(subprocess.run([sys.executable, "-c", _FIRST_CALL], env=env, check=True, capture_output=True,
-                                     text=True).stdout) for _ in range(2)]
+        runs = [
+            float(
+                subprocess.run(
+                    [sys.executable, "-c", _FIRST_CALL], env=env, check=True, capture_output=True, text=True
+                ).stdout
+            )
+            for _ in range(2)
+        ]
     return runs[0], runs[1]
 
 
@@ -59,8 +66,9 @@ def solve_ivp_theta(rhs, state, first_index: int, n_samples: int, sample_rate_hz
     return solve_ivp(rhs, (times[0], times[-1]), state, method="DOP853", rtol=1e-10, atol=1e-13, t_eval=times).y
 
 
-def solve_ivp_cycle(device: SimulatedDevice, amplitude_a: float, excite_s: float = 0.5,
-                    ringdown_s: float = 0.5) -> np.ndarray:
+def solve_ivp_cycle(
+    device: SimulatedDevice, amplitude_a: float, excite_s: float = 0.5, ringdown_s: float = 0.5
+) -> np.ndarray:
     """θ at the samples of :func:`mows.sim.cycle.simulate_cycle` at θ0 = 0 from rest, by DOP853
     on the device's own equation of motion."""
     fs = device.sample_rate_hz
@@ -101,8 +109,9 @@ def run(repeats: int = 20) -> dict:
     plucked = SimulatedDevice(silent)
     plucked.pluck(math.radians(23.0))
     theta_rk4, _ = plucked.integrate(int(plucked.sample_rate_hz))
-    theta_free = solve_ivp_theta(plucked.equation_of_motion(), [math.radians(23.0), 0.0], 0, len(theta_rk4) - 1,
-                                 plucked.sample_rate_hz)[0]
+    theta_free = solve_ivp_theta(
+        plucked.equation_of_motion(), [math.radians(23.0), 0.0], 0, len(theta_rk4) - 1, plucked.sample_rate_hz
+    )[0]
     figures["max_theta_difference_free_ringdown_rad"] = float(np.max(np.abs(theta_rk4 - theta_free)))
     return figures
 

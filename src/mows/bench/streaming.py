@@ -16,6 +16,7 @@ pieces of one 25 ms block (what the driver does):
 Reads woken from sleep cost about twice what back-to-back reads do (cold caches), which is
 why the baseline is paced like the stream.
 """
+
 from __future__ import annotations
 
 import os
@@ -60,8 +61,9 @@ def session_share(duration_s: float) -> tuple[float, int]:
     """CPU share of the paced sim backend and session in this process; and the blocks made."""
     scenario = load_scenario()
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(), chunk_s=BLOCK_S)
-    session = DeviceSession(backend, SessionConfig(BLOCK_S, CycleSettings(), scenario.setup, CurrentCap(), 112.5,
-                                                   fit_ringdown))
+    session = DeviceSession(
+        backend, SessionConfig(BLOCK_S, CycleSettings(), scenario.setup, CurrentCap(), 112.5, fit_ringdown)
+    )
     session.step(1.0)  # the compiled kernel's first call
     blocks = 0
     start_cpu, start_wall = _cpu_s(), time.monotonic()
@@ -96,8 +98,9 @@ def node_share(duration_s: float) -> tuple[float | None, str]:
     # A namespace of its own: its blocks must not reach a graph running beside the benchmark.
     namespace = f"/mows_benchmark_{os.getpid()}"
     command = [str(executable), "--ros-args", "-r", f"__ns:={namespace}"]
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                               stdin=subprocess.DEVNULL, env=environment)
+    process = subprocess.Popen(
+        command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=environment
+    )
     try:
         time.sleep(NODE_WARM_UP_S)
         if process.poll() is not None:
@@ -129,5 +132,3 @@ def run(duration_s: float = 10.0) -> dict:
         "goal_share": GOAL_SHARE,
         "meets_goal": None if node is None else node < GOAL_SHARE,
     }
-
-

@@ -23,6 +23,7 @@ truth, and the peak coil current and worst duty-cycle window seen.
 Cramér–Rao bound allows for σ ≤ 0.2 µT and σ ≤ 1 µT; measured: updates per device second and
 the scatter of the estimates.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -44,12 +45,16 @@ from mows.sweep.record import SweepPoint, SweepRecord
 SCENARIO = "anti_helmholtz"
 CAP_A = 10.0
 SETTLE_S = 0.5
-PAPER_RINGDOWN_S = 60.0 / 112.5          # 60 periods
+PAPER_RINGDOWN_S = 60.0 / 112.5  # 60 periods
 MIN_ANGLES = 5
 DECOMPOSE_NEAR = 1.25
 PROTOCOLS = {
-    "paper": (CycleSettings(excite_s=0.5, ringdown_s=PAPER_RINGDOWN_S, gap_s=10.0, repeats=5, tuning_steps=2,
-                            settle_s=SETTLE_S), 12),
+    "paper": (
+        CycleSettings(
+            excite_s=0.5, ringdown_s=PAPER_RINGDOWN_S, gap_s=10.0, repeats=5, tuning_steps=2, settle_s=SETTLE_S
+        ),
+        12,
+    ),
     "default": (CycleSettings(repeats=5, tuning_steps=2, gap_s=1.0, settle_s=SETTLE_S), 12),
     "demo": (CycleSettings(repeats=2, tuning_steps=1, gap_s=0.2, settle_s=SETTLE_S), 8),
 }
@@ -61,8 +66,8 @@ class ProtocolResult:
     device_s: float
     reached: bool
     message: str
-    std: np.ndarray           # σ of (Bx, By, Gxx, Gxy, Gyy), T and T/m
-    pulls: np.ndarray         # (estimate − truth)/σ
+    std: np.ndarray  # σ of (Bx, By, Gxx, Gxy, Gyy), T and T/m
+    pulls: np.ndarray  # (estimate − truth)/σ
     ringdowns: int
     orientations: int
     peak_current_a: float
@@ -72,12 +77,17 @@ class ProtocolResult:
         field_scale, gradient_scale = 1e9, 1e6
         scale = np.array([field_scale] * 2 + [gradient_scale] * 3)
         root_t = math.sqrt(self.device_s)
-        return {f"{self.name}_s": self.device_s, f"{self.name}_reached": self.reached,
-                f"{self.name}_std_nT_uT_per_m": (self.std * scale).tolist(),
-                f"{self.name}_std_sqrt_s": (self.std * scale * root_t).tolist(),
-                f"{self.name}_max_abs_pull": float(np.max(np.abs(self.pulls))) if self.pulls.size else math.nan,
-                f"{self.name}_ringdowns": self.ringdowns, f"{self.name}_orientations": self.orientations,
-                f"{self.name}_peak_current_a": self.peak_current_a, f"{self.name}_max_duty": self.max_duty}
+        return {
+            f"{self.name}_s": self.device_s,
+            f"{self.name}_reached": self.reached,
+            f"{self.name}_std_nT_uT_per_m": (self.std * scale).tolist(),
+            f"{self.name}_std_sqrt_s": (self.std * scale * root_t).tolist(),
+            f"{self.name}_max_abs_pull": float(np.max(np.abs(self.pulls))) if self.pulls.size else math.nan,
+            f"{self.name}_ringdowns": self.ringdowns,
+            f"{self.name}_orientations": self.orientations,
+            f"{self.name}_peak_current_a": self.peak_current_a,
+            f"{self.name}_max_duty": self.max_duty,
+        }
 
 
 def truth_components(scenario) -> np.ndarray:
@@ -101,8 +111,14 @@ class _Sweep:
         for ringdown in measured:
             fit = ringdown.fit
             if fit.ok:
-                self.record.add(SweepPoint.from_fit(fit, fit.frequency_hz - self.probe.f00_hz, fit.frequency_std_hz,
-                                                    ringdown.window.start_ns / NS_PER_S))
+                self.record.add(
+                    SweepPoint.from_fit(
+                        fit,
+                        fit.frequency_hz - self.probe.f00_hz,
+                        fit.frequency_std_hz,
+                        ringdown.window.start_ns / NS_PER_S,
+                    )
+                )
             else:
                 self.record.failed += 1
         if len({round(p.theta0_rad, 9) for p in self.record.points}) < MIN_ANGLES:
@@ -118,14 +134,23 @@ class _Sweep:
         std = achieved_std(d) if d is not None else np.full(5, np.nan)
         estimate = np.concatenate([d.field_t, d.gradient_t_per_m]) if d is not None and d.ok else np.full(5, np.nan)
         window = round(rig.sequencer.settings.duty_window_s * rig.fs)
-        return ProtocolResult(name, rig.time_s, reached(goal, d), message, std,
-                              (estimate - truth_components(self.scenario)) / std, len(self.record.points),
-                              len({round(p.theta0_rad, 9) for p in self.record.points}), rig.peak_current_a,
-                              max_duty_fraction(rig.coil_intervals(), window))
+        return ProtocolResult(
+            name,
+            rig.time_s,
+            reached(goal, d),
+            message,
+            std,
+            (estimate - truth_components(self.scenario)) / std,
+            len(self.record.points),
+            len({round(p.theta0_rad, 9) for p in self.record.points}),
+            rig.peak_current_a,
+            max_duty_fraction(rig.coil_intervals(), window),
+        )
 
 
-def fixed_protocol(name: str, goal: PrecisionGoal = PrecisionGoal(), max_s: float = 4000.0,
-                   seed: int = 1) -> ProtocolResult:
+def fixed_protocol(
+    name: str, goal: PrecisionGoal = PrecisionGoal(), max_s: float = 4000.0, seed: int = 1
+) -> ProtocolResult:
     """A protocol of fixed orientations and repeats, sweep after sweep until the target."""
     scenario = load_scenario(SCENARIO)
     settings, n_angles = PROTOCOLS[name]
@@ -151,19 +176,29 @@ def adaptive_protocol(goal: PrecisionGoal = PrecisionGoal(), seed: int = 1, scen
     noise = rig.first_block_noise_std_t()
     std = ringdown_std_model(scenario.sensors.pair, probe, scenario.pose, fs, noise)
     plan = plan_cycle(probe, scenario.setup, scenario.pose, std, CAP_A, CycleSettings().max_duty_cycle)
-    rig.set_settings(CycleSettings(excitation_current_a=plan.excitation_current_a, excite_s=plan.excite_s,
-                                   ringdown_s=plan.ringdown_s, gap_s=plan.gap_s, repeats=1,
-                                   tuning_steps=plan.tuning_steps, settle_s=SETTLE_S))
-    planner = AdaptivePlanner(probe, probe.f00_hz, goal, plan.cycle_s, SETTLE_S,
-                              lambda theta0: std(theta0, plan.ringdown_s))
+    rig.set_settings(
+        CycleSettings(
+            excitation_current_a=plan.excitation_current_a,
+            excite_s=plan.excite_s,
+            ringdown_s=plan.ringdown_s,
+            gap_s=plan.gap_s,
+            repeats=1,
+            tuning_steps=plan.tuning_steps,
+            settle_s=SETTLE_S,
+        )
+    )
+    planner = AdaptivePlanner(
+        probe, probe.f00_hz, goal, plan.cycle_s, SETTLE_S, lambda theta0: std(theta0, plan.ringdown_s)
+    )
     sweep = _Sweep(scenario, goal)
     while True:
         step = planner.next(sweep.record, sweep.decomposition, rig.time_s)
         if isinstance(step, PlanEnd):
             return sweep.result("adaptive", rig, goal, step.message), plan
         frequency = planner.drive_frequency_hz(sweep.record, sweep.decomposition, step.theta0_rad)
-        ok, message, measured = rig.run_cycle(CycleRequest(step.theta0_rad, repeats=step.repeats,
-                                                           frequency_hz=frequency))
+        ok, message, measured = rig.run_cycle(
+            CycleRequest(step.theta0_rad, repeats=step.repeats, frequency_hz=frequency)
+        )
         if not ok:
             return sweep.result("adaptive", rig, goal, f"cycle failed: {message}"), plan
         sweep.add(measured)
@@ -177,12 +212,25 @@ def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, se
     rig = DeviceTimeRig(scenario, CycleSettings(), CAP_A, seed)
     std = ringdown_std_model(scenario.sensors.pair, probe, scenario.pose, fs, rig.first_block_noise_std_t())
     plan = plan_tracking(probe, scenario.setup, scenario.pose, std, theta0_rad, target_std_t, CAP_A)
-    figures: dict[str, object] = {"target_t": target_std_t, "feasible": plan.feasible, "bound_t": plan.bound_std_t,
-               "ringdown_s": plan.ringdown_s, "kick_s": plan.excite_s, "planned_updates_per_s": plan.updates_per_s}
+    figures: dict[str, object] = {
+        "target_t": target_std_t,
+        "feasible": plan.feasible,
+        "bound_t": plan.bound_std_t,
+        "ringdown_s": plan.ringdown_s,
+        "kick_s": plan.excite_s,
+        "planned_updates_per_s": plan.updates_per_s,
+    }
     if not plan.feasible:
         return figures
-    settings = CycleSettings(excitation_current_a=CAP_A, excite_s=plan.excite_s, ringdown_s=plan.ringdown_s,
-                             gap_s=0.0, repeats=updates, tuning_steps=0, settle_s=SETTLE_S)
+    settings = CycleSettings(
+        excitation_current_a=CAP_A,
+        excite_s=plan.excite_s,
+        ringdown_s=plan.ringdown_s,
+        gap_s=0.0,
+        repeats=updates,
+        tuning_steps=0,
+        settle_s=SETTLE_S,
+    )
     rig.set_settings(settings)
     ok, message, measured = rig.run_cycle(CycleRequest(theta0_rad, frequency_hz=probe.f00_hz))
     good = [m for m in measured if m.fit.ok]
@@ -190,27 +238,47 @@ def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, se
     axis = np.array([e.field_along_axis_t for e in estimates])
     ends = np.array([m.window.start_ns / NS_PER_S + m.window.duration_s for m in good])
     window = round(settings.duty_window_s * rig.fs)
-    figures.update({
-        "cycle_ok": ok, "message": message, "updates": len(good), "failed_fits": len(measured) - len(good),
-        "updates_per_s": (len(good) - 1) / float(ends[-1] - ends[0]) if len(good) > 1 else math.nan,
-        "scatter_t": float(np.std(axis, ddof=1)) if axis.size > 1 else math.nan,
-        "reported_std_t": float(np.mean([e.field_along_axis_std_t for e in estimates])) if good else math.nan,
-        "start_amplitude_deg": float(np.degrees(np.mean([m.fit.amplitude_rad for m in good]))) if good else math.nan,
-        "peak_current_a": rig.peak_current_a, "max_duty": max_duty_fraction(rig.coil_intervals(), window)})
+    figures.update(
+        {
+            "cycle_ok": ok,
+            "message": message,
+            "updates": len(good),
+            "failed_fits": len(measured) - len(good),
+            "updates_per_s": (len(good) - 1) / float(ends[-1] - ends[0]) if len(good) > 1 else math.nan,
+            "scatter_t": float(np.std(axis, ddof=1)) if axis.size > 1 else math.nan,
+            "reported_std_t": float(np.mean([e.field_along_axis_std_t for e in estimates])) if good else math.nan,
+            "start_amplitude_deg": float(np.degrees(np.mean([m.fit.amplitude_rad for m in good])))
+            if good
+            else math.nan,
+            "peak_current_a": rig.peak_current_a,
+            "max_duty": max_duty_fraction(rig.coil_intervals(), window),
+        }
+    )
     return figures
 
 
 def run(protocols=("paper", "default", "demo"), tracking_updates: int = 40) -> dict:
     """Figures for ``mows bench throughput``."""
     goal = PrecisionGoal()
-    figures = {"scenario": SCENARIO, "target_field_t": goal.field_std_t,
-               "target_gradient_t_per_m": goal.gradient_std_t_per_m, "components": list(COMPONENTS)}
+    figures = {
+        "scenario": SCENARIO,
+        "target_field_t": goal.field_std_t,
+        "target_gradient_t_per_m": goal.gradient_std_t_per_m,
+        "components": list(COMPONENTS),
+    }
     adaptive, plan = adaptive_protocol(goal)
     figures.update(adaptive.figures())
-    figures.update({"adaptive_message": adaptive.message, "plan_excite_s": plan.excite_s,
-                    "plan_ringdown_s": plan.ringdown_s, "plan_gap_s": plan.gap_s,
-                    "plan_current_a": plan.excitation_current_a, "plan_tuning_steps": plan.tuning_steps,
-                    "plan_ringdown_crb_hz": plan.ringdown_std_hz})
+    figures.update(
+        {
+            "adaptive_message": adaptive.message,
+            "plan_excite_s": plan.excite_s,
+            "plan_ringdown_s": plan.ringdown_s,
+            "plan_gap_s": plan.gap_s,
+            "plan_current_a": plan.excitation_current_a,
+            "plan_tuning_steps": plan.tuning_steps,
+            "plan_ringdown_crb_hz": plan.ringdown_std_hz,
+        }
+    )
     for name in protocols:
         result = fixed_protocol(name, goal)
         figures.update(result.figures())

@@ -6,6 +6,7 @@ chunk (:mod:`mows.device.bag_repair`), writes a closed MCAP and a complete ``met
 in the bag directory, keeps the damaged file as ``NAME.mcap.damaged`` and prints how many
 messages were recovered and what was lost. A bag that reads already is left alone (exit 2).
 """
+
 import argparse
 
 from mows.device.bag_repair import repair
@@ -13,8 +14,9 @@ from mows.device.bag_repair import repair
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="bag_command", required=True)
-    command = sub.add_parser("repair", help="rebuild a killed recording from its intact chunks",
-                             description=__doc__.splitlines()[0])
+    command = sub.add_parser(
+        "repair", help="rebuild a killed recording from its intact chunks", description=__doc__.splitlines()[0]
+    )
     command.add_argument("bag", help="the bag directory (the driver's record_path)")
 
 

@@ -7,6 +7,7 @@ and noisy, so speed is reported, not asserted. ``--json`` prints the figures as 
 object (the estimator's keys are top level: fit_ms_median, curve_fit_ms_median,
 efficiency_min, bias_max_sigma, and the throughput's paper_s, default_s, adaptive_s, tracking_hz …).
 """
+
 import argparse
 import importlib
 import json
@@ -21,23 +22,41 @@ SUITES = {
     "lab": ("mows.bench.lab", "model lab diagnose on 1000 rows with the whole catalog"),
     "lab_long": ("mows.bench.lab_long", "mows lab diagnose on a 500 000-row CSV: wall time and peak memory"),
     "latency": ("mows.bench.latency", "last sample of a ring-down to its published fit, in the node graph"),
-    "throughput": ("mows.bench.throughput", "device seconds to σ ≤ 20 nT, 10 µT/m: paper, default, demo and "
-                                            "adaptive sweeps; tracking rate"),
+    "throughput": (
+        "mows.bench.throughput",
+        "device seconds to σ ≤ 20 nT, 10 µT/m: paper, default, demo and adaptive sweeps; tracking rate",
+    ),
 }
 # Run when no suite is named: throughput simulates minutes of device time and is asked for by name.
 DEFAULT_SUITES = ("estimator", "simulator", "stream", "lab", "lab_long", "latency")
 # Figures of the throughput suite that --json also carries at the top level.
-THROUGHPUT_KEYS = ("paper_s", "default_s", "demo_s", "adaptive_s", "tracking_hz", "tracking_std_t", "tracking_1ut_hz",
-                   "tracking_1ut_std_t")
-QUICK: dict[str, dict[str, object]] = {"estimator": {"trials": 60}, "simulator": {"repeats": 5},
-                                       "stream": {"duration_s": 3.0}, "latency": {"cycles": 1, "repeats": 5},
-                                       "lab_long": {"rows": 20_000},
-                                       "throughput": {"protocols": ("default",), "tracking_updates": 10}}
+THROUGHPUT_KEYS = (
+    "paper_s",
+    "default_s",
+    "demo_s",
+    "adaptive_s",
+    "tracking_hz",
+    "tracking_std_t",
+    "tracking_1ut_hz",
+    "tracking_1ut_std_t",
+)
+QUICK: dict[str, dict[str, object]] = {
+    "estimator": {"trials": 60},
+    "simulator": {"repeats": 5},
+    "stream": {"duration_s": 3.0},
+    "latency": {"cycles": 1, "repeats": 5},
+    "lab_long": {"rows": 20_000},
+    "throughput": {"protocols": ("default",), "tracking_updates": 10},
+}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("suites", nargs="*", metavar="SUITE",
-                        help=f"which benchmarks (default: {', '.join(DEFAULT_SUITES)}): {', '.join(SUITES)}")
+    parser.add_argument(
+        "suites",
+        nargs="*",
+        metavar="SUITE",
+        help=f"which benchmarks (default: {', '.join(DEFAULT_SUITES)}): {', '.join(SUITES)}",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     parser.add_argument("--quick", action="store_true", help="fewer trials (rough figures, for a smoke run)")
 

@@ -17,6 +17,7 @@ The supply's field (and gradient) per ampere at the probe come from the ``supply
 ``--probe`` (the nominal probe: data sheet and scale). The fit is
 :func:`mows.estimate.probe_calibration.calibrate_probe`.
 """
+
 from __future__ import annotations
 
 import datetime
@@ -46,7 +47,7 @@ from mows.sweep.calibration_schedule import (
     scenario_wirings,
 )
 
-SUPPLY_SETTLE_S = 0.5      # the probe rings after a supply step: wait before the next cycle
+SUPPLY_SETTLE_S = 0.5  # the probe rings after a supply step: wait before the next cycle
 
 
 def add_arguments(parser) -> None:
@@ -55,8 +56,13 @@ def add_arguments(parser) -> None:
     parser.add_argument("--probe", help="nominal probe YAML: moment, magnet mass, housing stop (default: paper's)")
     parser.add_argument("--scenario", default="calibration", help="scenario whose supply section is the wiring")
     parser.add_argument("--gradient-scenario", help="scenario of the gradient wiring (anti-Helmholtz)")
-    parser.add_argument("--environment-field-t", type=float, nargs=3, metavar=("BX", "BY", "BZ"),
-                        help="reference magnetometer reading at the probe with the supply at zero, T")
+    parser.add_argument(
+        "--environment-field-t",
+        type=float,
+        nargs=3,
+        metavar=("BX", "BY", "BZ"),
+        help="reference magnetometer reading at the probe with the supply at zero, T",
+    )
     parser.add_argument("--hardware-id", default="", help="written to the probe file (default: the scenario)")
     parser.add_argument("--simulate", action="store_true", help="calibrate the scenario's simulated probe")
     parser.add_argument("--currents-a", type=float, nargs="+", default=list(PAPER_CURRENTS_A))
@@ -71,7 +77,7 @@ def run(args) -> int:
         scenario = load_scenario(args.scenario)
         gradient = load_scenario(args.gradient_scenario) if args.gradient_scenario else None
         wirings = scenario_wirings(scenario, gradient)
-        field_wiring = next(iter(wirings))   # the scenario's own supply: the homogeneous wiring
+        field_wiring = next(iter(wirings))  # the scenario's own supply: the homogeneous wiring
         if args.simulate:
             points, failed = simulated_points(scenario, gradient, nominal, field_wiring, args)
         elif args.input:
@@ -80,7 +86,7 @@ def run(args) -> int:
             raise ValueError("give a TABLE or BAG, or --simulate")
         known = KnownConstants.of(nominal, args.environment_field_t)
         calibration = calibrate_probe(points, wirings, known, field_wiring, failed, nominal.lever_m)
-    except (OSError, ValueError) as error:   # CalibrationError is a ValueError
+    except (OSError, ValueError) as error:  # CalibrationError is a ValueError
         print(f"mows calibrate: {error}", file=sys.stderr)
         return 2
     if args.table:
@@ -145,39 +151,58 @@ def _perform(action, schedule, device, scenario, fit_scenario) -> list:
     steps = []
     excitation = scenario.excitation
     for _ in range(action.repeats):
-        cycle = simulate_cycle(device.device, action.theta0_rad, excitation.amplitude_a,
-                               excite_s=excitation.excite_s, ringdown_s=excitation.ringdown_s)
+        cycle = simulate_cycle(
+            device.device,
+            action.theta0_rad,
+            excitation.amplitude_a,
+            excite_s=excitation.excite_s,
+            ringdown_s=excitation.ringdown_s,
+        )
         steps.append(schedule.on_fit(fit_cycle(cycle, fit_scenario)))
     return steps + [schedule.on_cycle_done(True)]
 
 
 def compare_with_truth(calibration, truth: Probe) -> str:
-    rows = [("f00_hz", truth.f00_hz), ("beta0_hz_per_t", truth.beta0_hz_per_t),
-            ("spring_nm_per_rad", truth.spring_nm_per_rad), ("inertia_kgm2", truth.inertia_kgm2),
-            ("lever_m", truth.lever_m)]
+    rows = [
+        ("f00_hz", truth.f00_hz),
+        ("beta0_hz_per_t", truth.beta0_hz_per_t),
+        ("spring_nm_per_rad", truth.spring_nm_per_rad),
+        ("inertia_kgm2", truth.inertia_kgm2),
+        ("lever_m", truth.lever_m),
+    ]
     lines = ["calibrated against true constants:"]
     for name, true in rows:
         value, std = calibration.value(name), calibration.std(name)
-        lines.append(f"  {name:18s} {value:.6g} ± {std:.2g}  true {true:.6g}  "
-                     f"({(value / true - 1) * 100:+.4f} %, {(value - true) / std:+.2f} σ)")
+        lines.append(
+            f"  {name:18s} {value:.6g} ± {std:.2g}  true {true:.6g}  "
+            f"({(value / true - 1) * 100:+.4f} %, {(value - true) / std:+.2f} σ)"
+        )
     return "\n".join(lines)
 
 
 # --- tables and bags ----------------------------------------------------------------------
-TABLE_COLUMNS = ("supply_current_a", "damping_per_s", "duration_s", "amplitude_deg", "start_offset_s",
-                 "gradient_wiring")
+TABLE_COLUMNS = (
+    "supply_current_a",
+    "damping_per_s",
+    "duration_s",
+    "amplitude_deg",
+    "start_offset_s",
+    "gradient_wiring",
+)
 
 
 def write_points(path, points, field_wiring: str) -> None:
-    columns = {"theta0_deg": np.degrees([p.theta0_rad for p in points]),
-               "f_hz": np.array([p.frequency_hz for p in points]),
-               "f_std_hz": np.array([p.frequency_std_hz for p in points]),
-               "supply_current_a": np.array([p.supply_current_a for p in points]),
-               "damping_per_s": np.array([p.damping_per_s for p in points]),
-               "duration_s": np.array([p.duration_s for p in points]),
-               "amplitude_deg": np.degrees([p.amplitude_rad for p in points]),
-               "start_offset_s": np.array([p.start_offset_s for p in points]),
-               "gradient_wiring": np.array([float(p.wiring != field_wiring) for p in points])}
+    columns = {
+        "theta0_deg": np.degrees([p.theta0_rad for p in points]),
+        "f_hz": np.array([p.frequency_hz for p in points]),
+        "f_std_hz": np.array([p.frequency_std_hz for p in points]),
+        "supply_current_a": np.array([p.supply_current_a for p in points]),
+        "damping_per_s": np.array([p.damping_per_s for p in points]),
+        "duration_s": np.array([p.duration_s for p in points]),
+        "amplitude_deg": np.degrees([p.amplitude_rad for p in points]),
+        "start_offset_s": np.array([p.start_offset_s for p in points]),
+        "gradient_wiring": np.array([float(p.wiring != field_wiring) for p in points]),
+    }
     MeasurementTable(columns, str(path)).to_csv(path)
 
 
@@ -188,8 +213,17 @@ def read_points(path, field_wiring: str) -> list:
     if missing:
         raise ValueError(f"{path}: a calibration table needs the columns {list(TABLE_COLUMNS)}; missing {missing}")
     c = table.columns
-    return [CalibrationPoint(GRADIENT_WIRING if c["gradient_wiring"][i] else field_wiring,
-                             float(c["supply_current_a"][i]), math.radians(c["theta0_deg"][i]), float(c["f_hz"][i]),
-                             float(c["f_std_hz"][i]), math.radians(c["amplitude_deg"][i]), float(c["damping_per_s"][i]),
-                             float(c["duration_s"][i]), float(c["start_offset_s"][i]))
-            for i in range(len(table))]
+    return [
+        CalibrationPoint(
+            GRADIENT_WIRING if c["gradient_wiring"][i] else field_wiring,
+            float(c["supply_current_a"][i]),
+            math.radians(c["theta0_deg"][i]),
+            float(c["f_hz"][i]),
+            float(c["f_std_hz"][i]),
+            math.radians(c["amplitude_deg"][i]),
+            float(c["damping_per_s"][i]),
+            float(c["duration_s"][i]),
+            float(c["start_offset_s"][i]),
+        )
+        for i in range(len(table))
+    ]

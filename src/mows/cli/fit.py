@@ -9,6 +9,7 @@ damping_per_s, duration_s) of the OK fits, ready for ``mows lab`` (no file when 
 The CSV is never written into the bag nor over an existing file (unless ``--force``), and
 appears whole or not at all (:mod:`mows.records.files`).
 """
+
 import math
 import sys
 
@@ -38,11 +39,16 @@ def add_arguments(parser) -> None:
     parser.add_argument("--paper-model", action="store_true", help="fit Eq. S11 (a magnet turning in place)")
     parser.add_argument("--tuning", action="store_true", help="also fit the tuning ring-downs")
     parser.add_argument("--settle-s", type=float, default=SETTLE_S, help="samples skipped after coil-off, s")
-    parser.add_argument("--sensor-distance-m", type=float, default=PAPER_DISTANCE_M,
-                        help="probe to near fluxgate along the plane's x axis, m (as the estimator's parameter)")
+    parser.add_argument(
+        "--sensor-distance-m",
+        type=float,
+        default=PAPER_DISTANCE_M,
+        help="probe to near fluxgate along the plane's x axis, m (as the estimator's parameter)",
+    )
     parser.add_argument("--sensor-spacing-m", type=float, default=PAPER_SPACING_M, help="fluxgate spacing, m")
     parser.add_argument("--csv", help="write the OK fits as a model-lab table (a new file)")
     parser.add_argument("--force", action="store_true", help="replace an existing --csv file (never the bag)")
+
 
 def run(args) -> int:
     inputs = [args.bag] + ([args.probe] if args.probe else [])
@@ -52,8 +58,10 @@ def run(args) -> int:
     with input_file(args.bag):
         fits = list(fit_bag(args.bag, probe, args))
     for window, fit in fits:
-        print(f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):7.2f}°: "
-              f"{fit.report()}")
+        print(
+            f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):7.2f}°: "
+            f"{fit.report()}"
+        )
     ok = [(w, f) for w, f in fits if f.ok]
     print(f"{len(ok)} of {len(fits)} ring-downs fitted")
     if args.csv and ok:
@@ -63,6 +71,7 @@ def run(args) -> int:
     elif args.csv:
         print(f"mows fit: no ring-down fitted: {args.csv} not written", file=sys.stderr)
     return 0 if fits else 1
+
 
 def fit_bag(path, probe: Probe, args):
     """(window, fit) for every ring-down in the bag, in order."""
@@ -77,15 +86,25 @@ def fit_bag(path, probe: Probe, args):
         else:
             segments = assembler.add_block(block_from_message(message))
         for segment in segments:
-            yield segment.window, fit_segment(segment, _options(segment.window, pair, probe, args.paper_model),
-                                              args.settle_s, probe.damping_per_s)
+            yield (
+                segment.window,
+                fit_segment(
+                    segment, _options(segment.window, pair, probe, args.paper_model), args.settle_s, probe.damping_per_s
+                ),
+            )
+
 
 def _options(window, pair, probe, paper_model) -> FitOptions:
     return FitOptions() if paper_model else FitOptions.lever_aware(pair, probe, window.theta0_rad)
 
+
 def write_table(path, fits, probe: Probe) -> None:
     """The OK fits as a model-lab table (:meth:`mows.sweep.record.SweepRecord.table_columns`: each
     ring-down's start swing is the stop amplitude pooled over the fits that measured θmax)."""
-    record = SweepRecord([SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz,
-                                              window.start_ns / NS_PER_S) for window, fit in fits])
+    record = SweepRecord(
+        [
+            SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz, window.start_ns / NS_PER_S)
+            for window, fit in fits
+        ]
+    )
     MeasurementTable(record.table_columns(), str(path)).to_csv(path)

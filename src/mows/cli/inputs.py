@@ -7,6 +7,7 @@ wrong while a file is read on that file, in words (a directory, not UTF-8, not Y
 :func:`report_errors` turns the errors into the line and the status. Anything else is a bug:
 exit status 1, one line, and the traceback with ``--debug``.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -55,9 +56,8 @@ def input_file(path, what: str = "") -> Iterator[pathlib.Path]:
     except FileNotFoundError:
         raise InputError(f"{name} does not exist") from None
     except UnicodeDecodeError as error:
-        byte = error.object[error.start:error.start + 1]
-        raise InputError(f"{name} is not UTF-8 text (byte {error.start}: {byte!r}): "
-                         "save it as UTF-8") from None
+        byte = error.object[error.start : error.start + 1]
+        raise InputError(f"{name} is not UTF-8 text (byte {error.start}: {byte!r}): save it as UTF-8") from None
     except OSError as error:
         raise InputError(f"{name}: {error.strerror or one_line(error)}") from None
     except (ValueError, KeyError, yaml.YAMLError) as error:
@@ -83,6 +83,9 @@ def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> in
     except Exception as error:  # noqa: BLE001 - the one place a bug is turned into a line
         if debug:
             raise
-        print(f"{prog}: internal error: {type(error).__name__}: {one_line(error)} "
-              "(a bug: rerun with --debug for the traceback and report it)", file=sys.stderr)
+        print(
+            f"{prog}: internal error: {type(error).__name__}: {one_line(error)} "
+            "(a bug: rerun with --debug for the traceback and report it)",
+            file=sys.stderr,
+        )
         return EXIT_BUG

@@ -16,6 +16,7 @@ every sweep kept), said in a note; ``--all-rows`` uses every row (the lab's cost
 rows × candidate effects: 1000 rows take seconds, 50 000 took over 5 minutes). On a terminal
 the stages show a progress bar on stderr (tqdm), never with ``--json``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -58,26 +59,43 @@ class _IntermixedParser(argparse.ArgumentParser):
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="lab_command", required=True, parser_class=_IntermixedParser)
-    helps = {"compare": "how well the model explains the table: χ²/dof, residual structure, verdict",
-             "diagnose": "rank the catalog's effects as explanations of the residual",
-             "add": "refit with named effects (or --auto) and print the error history",
-             "report": "write a self-contained HTML report with plots"}
+    helps = {
+        "compare": "how well the model explains the table: χ²/dof, residual structure, verdict",
+        "diagnose": "rank the catalog's effects as explanations of the residual",
+        "add": "refit with named effects (or --auto) and print the error history",
+        "report": "write a self-contained HTML report with plots",
+    }
     for name, text in helps.items():
         command = sub.add_parser(name, help=text, description=text)
         command.add_argument("table", help="measurement table: CSV file or rosbag2 bag directory")
-        command.add_argument("--probe", default=str(PAPER_PROBE_FILE),
-                             help="probe constants YAML (default: the paper's probe)")
-        command.add_argument("--plugin", action="append", default=[],
-                             help="plugin file (.py) or entry-point name defining extra effects (repeatable)")
+        command.add_argument(
+            "--probe", default=str(PAPER_PROBE_FILE), help="probe constants YAML (default: the paper's probe)"
+        )
+        command.add_argument(
+            "--plugin",
+            action="append",
+            default=[],
+            help="plugin file (.py) or entry-point name defining extra effects (repeatable)",
+        )
         command.add_argument("--reference", help="for bags: a sensor_msgs/MagneticField topic or a field-source YAML")
-        command.add_argument("--magnet-position", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
-                             help="probe position for a field-source reference, m")
-        command.add_argument("--drop-invalid", action="store_true",
-                             help="drop rows with missing or invalid values instead of stopping")
+        command.add_argument(
+            "--magnet-position",
+            type=float,
+            nargs=3,
+            default=(0.0, 0.0, 0.0),
+            metavar=("X", "Y", "Z"),
+            help="probe position for a field-source reference, m",
+        )
+        command.add_argument(
+            "--drop-invalid", action="store_true", help="drop rows with missing or invalid values instead of stopping"
+        )
         command.add_argument("--json", action="store_true", help="print JSON instead of text")
         command.add_argument("--no-cv", action="store_true", help="skip the cross-validated errors (faster)")
-        command.add_argument("--all-rows", action="store_true",
-                             help=f"analyse every row of a table longer than {MAX_ROWS} rows (default: a subsample)")
+        command.add_argument(
+            "--all-rows",
+            action="store_true",
+            help=f"analyse every row of a table longer than {MAX_ROWS} rows (default: a subsample)",
+        )
         if name in ("add", "report"):
             command.add_argument("effects", nargs="*", metavar="EFFECT", help="effects to add, in order")
             command.add_argument("--auto", action="store_true", help="add effects forward while the evidence is strong")
@@ -85,8 +103,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             command.add_argument("--effects", default="", help="comma-separated effects already in the model")
         if name == "report":
             command.add_argument("-o", "--output", default="lab_report.html", help="HTML file to write (a new file)")
-            command.add_argument("--force", action="store_true",
-                                 help="replace an existing output file (never an input)")
+            command.add_argument(
+                "--force", action="store_true", help="replace an existing output file (never an input)"
+            )
 
 
 def run(args) -> int:
@@ -94,20 +113,34 @@ def run(args) -> int:
     if args.lab_command == "report":
         check_output(args.output, inputs, args.force)
     probe = _probe(args.probe)
-    stages = tqdm(total=3 if args.lab_command == "report" else 2, desc=f"mows lab {args.lab_command}: reading",
-                  file=sys.stderr, disable=args.json or not sys.stderr.isatty(), leave=False,
-                  bar_format="{desc} {bar} {n_fmt}/{total_fmt} stages, {elapsed}")
+    stages = tqdm(
+        total=3 if args.lab_command == "report" else 2,
+        desc=f"mows lab {args.lab_command}: reading",
+        file=sys.stderr,
+        disable=args.json or not sys.stderr.isatty(),
+        leave=False,
+        bar_format="{desc} {bar} {n_fmt}/{total_fmt} stages, {elapsed}",
+    )
     with input_file(args.table), stages:
-        table = load_table(args.table, drop_invalid=args.drop_invalid,
-                           **({"reference": args.reference, "magnet_position_m": args.magnet_position}
-                              if is_bag(args.table) else {}))
+        table = load_table(
+            args.table,
+            drop_invalid=args.drop_invalid,
+            **({"reference": args.reference, "magnet_position_m": args.magnet_position} if is_bag(args.table) else {}),
+        )
         if len(table) > MAX_ROWS and not args.all_rows:
             table = subsample(table, MAX_ROWS)
         stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")
         stages.update()
         effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
-        report = analyse(table, probe, effects=effects, auto=getattr(args, "auto", False), plugins=args.plugin,
-                         rank=args.lab_command != "compare", cross_validate=not args.no_cv)
+        report = analyse(
+            table,
+            probe,
+            effects=effects,
+            auto=getattr(args, "auto", False),
+            plugins=args.plugin,
+            rank=args.lab_command != "compare",
+            cross_validate=not args.no_cv,
+        )
         stages.update()
         if args.lab_command == "report":
             stages.set_description(f"mows lab report: writing {args.output}")
@@ -130,11 +163,14 @@ def subsample(table, rows: int):
     sweeps = table.sweep_ids
     first_of_each = np.unique(sweeps, return_index=True)[1]
     rest = np.setdiff1d(np.arange(len(table)), first_of_each)
-    chosen = np.sort(np.concatenate([first_of_each, rng.choice(rest, max(0, rows - len(first_of_each)),
-                                                                    replace=False)]))
-    note = (f"the table has {len(table)} rows: analysed on a random subsample of {len(chosen)} (seed "
-            f"{SUBSAMPLE_SEED}, every sweep kept); a weak effect may be significant only with all rows "
-            "(--all-rows, slower)")
+    chosen = np.sort(
+        np.concatenate([first_of_each, rng.choice(rest, max(0, rows - len(first_of_each)), replace=False)])
+    )
+    note = (
+        f"the table has {len(table)} rows: analysed on a random subsample of {len(chosen)} (seed "
+        f"{SUBSAMPLE_SEED}, every sweep kept); a weak effect may be significant only with all rows "
+        "(--all-rows, slower)"
+    )
     subset = table.subset(chosen)
     return dataclasses.replace(subset, notes=subset.notes + (note,))
 
@@ -164,13 +200,14 @@ def format_text(report, table, command: str) -> str:
 
 
 def _structure_text(structure) -> str:
-    lines = ["residual structure (after what the model absorbs):",
-             "  harmonic   amplitude (mHz)   phase (deg)   p"]
+    lines = ["residual structure (after what the model absorbs):", "  harmonic   amplitude (mHz)   phase (deg)   p"]
     for h in structure.harmonics:
-        lines.append(f"  {h.k:8d}   {h.text()}" + ("" if h.absorbed else f", p = {h.p_value:.2g}")
-                     if h.absorbed or not h.identifiable else
-                     f"  {h.k:8d}   {h.amplitude_hz * 1e3:8.3f} ± {h.std_hz * 1e3:6.3f}   "
-                     f"{math.degrees(h.phase_rad):8.1f}   {h.p_value:.2g}")
+        lines.append(
+            f"  {h.k:8d}   {h.text()}" + ("" if h.absorbed else f", p = {h.p_value:.2g}")
+            if h.absorbed or not h.identifiable
+            else f"  {h.k:8d}   {h.amplitude_hz * 1e3:8.3f} ± {h.std_hz * 1e3:6.3f}   "
+            f"{math.degrees(h.phase_rad):8.1f}   {h.p_value:.2g}"
+        )
     if structure.covariates:
         lines.append("  covariate            correlation   slope            p")
         for c in structure.covariates:
@@ -181,17 +218,24 @@ def _structure_text(structure) -> str:
 
 
 def _candidates_text(report) -> str:
-    lines = ["candidate effects, best first, each in its better form by BIC (ΔBIC > 10 is strong evidence;",
-             "'at physics': held at its physical value, no free parameter; parameters: the free fit):",
-             "  rank effect                  form          ΔBIC        p         χ²/dof after  group  parameters"]
+    lines = [
+        "candidate effects, best first, each in its better form by BIC (ΔBIC > 10 is strong evidence;",
+        "'at physics': held at its physical value, no free parameter; parameters: the free fit):",
+        "  rank effect                  form          ΔBIC        p         χ²/dof after  group  parameters",
+    ]
     for rank, c in enumerate(report.candidates, 1):
         values = ", ".join(f"{name} = {v:.4g} ± {s:.2g} {u}" for name, v, s, u in c.parameters)
-        lines.append(f"  {rank:4d} {c.name:22s}  {c.form:10s} {c.delta_bic:9.1f}   {c.p_value:9.2g}   "
-                     f"{c.chi2_dof_after:10.3f}   {c.group or '-':>4}   {values}")
+        lines.append(
+            f"  {rank:4d} {c.name:22s}  {c.form:10s} {c.delta_bic:9.1f}   {c.p_value:9.2g}   "
+            f"{c.chi2_dof_after:10.3f}   {c.group or '-':>4}   {values}"
+        )
     for group in report.groups:
-        lines.append(f"  group {group.number}: {group.separation}" if group.in_model else
-                     f"  group {group.number}: {', '.join(group.members)} cannot be told apart by this data; "
-                     f"{group.separation}")
+        lines.append(
+            f"  group {group.number}: {group.separation}"
+            if group.in_model
+            else f"  group {group.number}: {', '.join(group.members)} cannot be told apart by this data; "
+            f"{group.separation}"
+        )
         lines += [f"    alias: {alias}" for alias in group.aliases]
         lines += [f"    check {check}" for check in group.checks]
     for name, reason in report.untestable.items():

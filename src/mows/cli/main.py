@@ -6,6 +6,7 @@ Each subcommand lives in the module of its job and exposes ``add_arguments(parse
 path (:mod:`mows.cli.inputs`): a bad input is one line and exit status 2, ``--debug`` (before
 or after the subcommand) shows the traceback.
 """
+
 import argparse
 import importlib
 import sys
@@ -40,8 +41,9 @@ def main(argv=None) -> int:
 
 def _add_debug(parser: argparse.ArgumentParser) -> None:
     """``--debug`` also after the subcommand (and after ``mows lab``'s own subcommands)."""
-    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                        help="show the traceback of an error")
+    parser.add_argument(
+        "--debug", action="store_true", default=argparse.SUPPRESS, help="show the traceback of an error"
+    )
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for subparser in action.choices.values():

@@ -7,6 +7,7 @@ the truth from the full potential (:meth:`mows.sim.cycle.CycleRecord.ringdown_fr
 ``--out`` writes a new file (an existing one only with ``--force``, never the scenario), whole
 or not at all.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,13 +25,20 @@ from mows.sim.simulator import SimulatedDevice
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO,
-                        help=f"scenario name or YAML file (default {DEFAULT_SCENARIO})")
-    parser.add_argument("--theta0-deg", type=float, nargs="+", default=None,
-                        help="probe orientations, degrees (default: the scenario's)")
+    parser.add_argument(
+        "scenario", nargs="?", default=DEFAULT_SCENARIO, help=f"scenario name or YAML file (default {DEFAULT_SCENARIO})"
+    )
+    parser.add_argument(
+        "--theta0-deg",
+        type=float,
+        nargs="+",
+        default=None,
+        help="probe orientations, degrees (default: the scenario's)",
+    )
     parser.add_argument("--repeats", type=int, default=1, help="cycles per orientation (default 1)")
-    parser.add_argument("--amplitude-a", type=float, default=None,
-                        help="base coil current amplitude, A (default: the scenario's)")
+    parser.add_argument(
+        "--amplitude-a", type=float, default=None, help="base coil current amplitude, A (default: the scenario's)"
+    )
     parser.add_argument("--seed", type=int, default=None, help="noise seed (default: the scenario's)")
     parser.add_argument("--out", default=None, help="write the cycles to this new .npz file")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
@@ -53,8 +61,14 @@ def run(args) -> int:
         for _ in range(args.repeats):
             device.set_orientation(math.radians(theta0_deg))
             device.idle(excitation.gap_s)
-            record = simulate_cycle(device, math.radians(theta0_deg), amplitude, excitation.frequency_hz,
-                                    excitation.excite_s, excitation.ringdown_s)
+            record = simulate_cycle(
+                device,
+                math.radians(theta0_deg),
+                amplitude,
+                excitation.frequency_hz,
+                excitation.excite_s,
+                excitation.ringdown_s,
+            )
             records.append(record)
             if args.fit:
                 fit = fit_cycle(record, scenario)
@@ -72,8 +86,10 @@ def _compare(fit, record) -> str:
     if not fit.ok:
         return fit.report()
     truth = record.ringdown_frequency_hz(fit.duration_s)
-    return (f"{fit.report()}; truth {truth:.6f} Hz from {math.degrees(record.ringdown_amplitude_rad()):.1f}° "
-            f"(fit − truth = {(fit.frequency_hz - truth) * 1e3:+.3f} mHz)")
+    return (
+        f"{fit.report()}; truth {truth:.6f} Hz from {math.degrees(record.ringdown_amplitude_rad()):.1f}° "
+        f"(fit − truth = {(fit.frequency_hz - truth) * 1e3:+.3f} mHz)"
+    )
 
 
 def _arrays(records) -> dict:

@@ -1,5 +1,6 @@
 """A recorded bag as the driver's device (:class:`mows.device.interface.Backend` ``bag``): the
 driver's own rosbag2 recordings replayed through the driver's path at a multiple of real time."""
+
 from __future__ import annotations
 
 import collections
@@ -47,10 +48,13 @@ class BagBackend(Backend):
         first_raw = self._first_raw()
         block = first_raw.message
         if not (math.isfinite(block.sample_rate_hz) and block.sample_rate_hz > 0 and block.channels):
-            raise ValueError(f"the bag {self.path} starts with a block of sample rate {block.sample_rate_hz!r} Hz "
-                             f"and {len(block.channels)} channels: nothing to replay")
-        self._info = DeviceInfo(block.sample_rate_hz, len(block.channels), 0, block.range_t, block.resolution_t,
-                                0.0, math.inf)
+            raise ValueError(
+                f"the bag {self.path} starts with a block of sample rate {block.sample_rate_hz!r} Hz "
+                f"and {len(block.channels)} channels: nothing to replay"
+            )
+        self._info = DeviceInfo(
+            block.sample_rate_hz, len(block.channels), 0, block.range_t, block.resolution_t, 0.0, math.inf
+        )
         # maps device stamps to sample indices
         self._anchor = (block.first_sample_index, stamps.nanoseconds(block.header.stamp))
         self._start: tuple[int, float] | None = None  # (first device stamp, host time): set by the first poll
@@ -106,23 +110,41 @@ class BagBackend(Backend):
 
     def _chunk(self, block) -> SampleBlock:
         lengths = {len(c.field_t) for c in block.channels} | {len(c.saturated) for c in block.channels}
-        if len(lengths) != 1 or len(block.channels) != self.info.n_channels or block.sample_rate_hz != \
-                self.info.sample_rate_hz:
+        if (
+            len(lengths) != 1
+            or len(block.channels) != self.info.n_channels
+            or block.sample_rate_hz != self.info.sample_rate_hz
+        ):
             raise ValueError("a block whose channels or rate do not match the recording's")
         stamp = stamps.nanoseconds(block.header.stamp)
         self._anchor = (block.first_sample_index, stamp)
-        return SampleBlock(block.first_sample_index, stamp, self.info.sample_rate_hz,
-                           np.stack([c.field_t for c in block.channels], axis=1),
-                           np.stack([c.saturated for c in block.channels], axis=1).astype(bool))
+        return SampleBlock(
+            block.first_sample_index,
+            stamp,
+            self.info.sample_rate_hz,
+            np.stack([c.field_t for c in block.channels], axis=1),
+            np.stack([c.saturated for c in block.channels], axis=1).astype(bool),
+        )
 
     def _event(self, state) -> PhaseEvent:
         if state.phase not in set(Phase):
             raise ValueError(f"an excitation state with the unknown phase {state.phase}")
         stamp = stamps.nanoseconds(state.header.stamp)
         index = self._anchor[0] + round((stamp - self._anchor[1]) * self.info.sample_rate_hz / 1e9)
-        return PhaseEvent(Phase(state.phase), index, stamp, state.cycle_id, state.repeat_index, state.repeats,
-                          bool(state.tuning), tuple(float(i) for i in state.coil_current_amplitude_a),
-                          state.frequency_hz, state.theta0_rad, state.planned_duration_s, state.setup)
+        return PhaseEvent(
+            Phase(state.phase),
+            index,
+            stamp,
+            state.cycle_id,
+            state.repeat_index,
+            state.repeats,
+            bool(state.tuning),
+            tuple(float(i) for i in state.coil_current_amplitude_a),
+            state.frequency_hz,
+            state.theta0_rad,
+            state.planned_duration_s,
+            state.setup,
+        )
 
     def send(self, command: Command) -> None:
         raise NotExciting("the bag backend replays a recording: it cannot excite")
@@ -134,9 +156,13 @@ class BagBackend(Backend):
         """A recording has no supply to set."""
 
     def stats(self) -> dict:
-        return {"link": "finished" if self._finished else "replaying", "bag_path": self.path,
-                "replayed_messages": self.replayed, "skipped_messages": sum(self.skipped.values()),
-                **{f"skipped: {why}": n for why, n in self.skipped.items()}}
+        return {
+            "link": "finished" if self._finished else "replaying",
+            "bag_path": self.path,
+            "replayed_messages": self.replayed,
+            "skipped_messages": sum(self.skipped.values()),
+            **{f"skipped: {why}": n for why, n in self.skipped.items()},
+        }
 
     def close(self) -> None:
         self._messages.close()

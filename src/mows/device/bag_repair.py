@@ -9,6 +9,7 @@ that is whole (its length inside the file, its checksum right); it stops at the 
 cut short. :func:`repair` writes a new, closed bag from what was salvaged next to the damaged
 file, which it keeps as ``NAME.mcap.damaged``: nothing is deleted.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -46,19 +47,27 @@ class Salvage:
 
     def summary(self) -> str:
         """How many messages were recovered and what was lost, in one sentence."""
-        text = (f"{self.path}: recovered {len(self.messages)} messages on {len(self.channels)} topics "
-                f"from {self.chunks} intact chunks")
+        text = (
+            f"{self.path}: recovered {len(self.messages)} messages on {len(self.channels)} topics "
+            f"from {self.chunks} intact chunks"
+        )
         if self.closed:
             return text + "; the data section is complete"
         lost = self.size - self.intact_bytes
-        cut = (f"{lost} bytes at the end of the file ({self.problem})" if lost else
-               "nothing on disk (the file ends after its last whole chunk)")
+        cut = (
+            f"{lost} bytes at the end of the file ({self.problem})"
+            if lost
+            else "nothing on disk (the file ends after its last whole chunk)"
+        )
         known = ""
         if self.written is not None:
             missing = self.written - len(self.messages)
-            known = (f"; all {self.written} messages on disk at the recorder's last flush were recovered"
-                     if missing <= 0 else f"; {missing} of the {self.written} messages on disk at the recorder's "
-                     "last flush are in a damaged chunk")
+            known = (
+                f"; all {self.written} messages on disk at the recorder's last flush were recovered"
+                if missing <= 0
+                else f"; {missing} of the {self.written} messages on disk at the recorder's "
+                "last flush are in a damaged chunk"
+            )
         return f"{text}; lost: {cut}, and the messages the recorder held in memory (at most its last chunk){known}"
 
 
@@ -67,7 +76,7 @@ def _string(buffer: bytes, offset: int) -> tuple[str, int]:
     end = offset + 4 + length
     if end > len(buffer):
         raise ValueError("a string runs past its record")
-    return buffer[offset + 4:end].decode(), end
+    return buffer[offset + 4 : end].decode(), end
 
 
 def _records(buffer: bytes, start: int, end: int):
@@ -81,7 +90,7 @@ def _records(buffer: bytes, start: int, end: int):
         body_end = offset + RECORD_HEADER.size + length
         if body_end > end:
             raise ValueError(f"a record (opcode 0x{op:02x}, {length} bytes) cut short at byte {offset}")
-        yield op, buffer[offset + RECORD_HEADER.size:body_end], offset
+        yield op, buffer[offset + RECORD_HEADER.size : body_end], offset
         offset = body_end
 
 
@@ -90,7 +99,7 @@ def _chunk_content(body: bytes) -> bytes:
     _, _, uncompressed_size, crc = struct.unpack_from("<QQQI", body, 0)
     compression, offset = _string(body, 28)
     (compressed_size,) = struct.unpack_from("<Q", body, offset)
-    data = body[offset + 8:offset + 8 + compressed_size]
+    data = body[offset + 8 : offset + 8 + compressed_size]
     if len(data) != compressed_size:
         raise ValueError("chunk data shorter than its stated size")
     return decompress(data, compression, uncompressed_size, crc)
@@ -106,13 +115,13 @@ class _Collector:
             name, offset = _string(body, 2)
             encoding, offset = _string(body, offset)
             (length,) = struct.unpack_from("<I", body, offset)
-            self.schemas[key] = (name, encoding, body[offset + 4:offset + 4 + length].decode())
+            self.schemas[key] = (name, encoding, body[offset + 4 : offset + 4 + length].decode())
         elif op == OP_CHANNEL:
             key, schema_id = struct.unpack_from("<HH", body, 0)
             topic, offset = _string(body, 4)
             encoding, offset = _string(body, offset)
             (length,) = struct.unpack_from("<I", body, offset)
-            self.channels[key] = (schema_id, topic, encoding, body[offset + 4:offset + 4 + length])
+            self.channels[key] = (schema_id, topic, encoding, body[offset + 4 : offset + 4 + length])
         elif op == OP_MESSAGE:
             channel_id, _, log_time, _ = struct.unpack_from("<HIQQ", body, 0)
             self.messages.append((channel_id, log_time, body[22:]))
@@ -144,8 +153,9 @@ def salvage(path) -> Salvage:
             intact = offset + RECORD_HEADER.size + len(body)
     except (ValueError, ReaderError, struct.error, UnicodeDecodeError) as error:
         problem = str(error)
-    return Salvage(path, collected.schemas, collected.channels, collected.messages, chunks, intact, len(data),
-                   closed, problem)
+    return Salvage(
+        path, collected.schemas, collected.channels, collected.messages, chunks, intact, len(data), closed, problem
+    )
 
 
 def _metadata(directory: Path) -> dict:
@@ -161,8 +171,9 @@ def _mcap_of(directory: Path, info: dict) -> Path:
     listed = [directory / name for name in info.get("relative_file_paths") or []]
     candidates = [p for p in listed if p.is_file()] or sorted(directory.glob("*.mcap"))
     if len(candidates) != 1:
-        raise bags.BagError(f"{directory}: expected one .mcap file to repair, found "
-                            f"{[p.name for p in candidates] or 'none'}")
+        raise bags.BagError(
+            f"{directory}: expected one .mcap file to repair, found {[p.name for p in candidates] or 'none'}"
+        )
     return candidates[0]
 
 
@@ -196,8 +207,9 @@ def repair(directory) -> Salvage:
         raise bags.BagError(f"{directory} reads as it is: nothing to repair")
     found = dataclasses.replace(salvage(mcap), written=_written(info))
     if not found.channels:
-        raise bags.BagError(f"{mcap}: no intact chunk holds the topics ({found.problem or 'empty'}): "
-                            "nothing can be recovered")
+        raise bags.BagError(
+            f"{mcap}: no intact chunk holds the topics ({found.problem or 'empty'}): nothing can be recovered"
+        )
     staging = _free_name(directory.parent / f".{directory.name}.repairing")
     try:
         rebuilt = _write(found, staging / mcap.stem)
@@ -217,8 +229,9 @@ def _write(found: Salvage, path: Path) -> Path:
             msgtype, _, definition = found.schemas.get(schema_id, ("", "", ""))
             if msgtype not in store.types:  # a type of another package: its definition travels in the file
                 store.register(get_types_from_msg(definition, msgtype))
-            connections[key] = writer.add_connection(topic, msgtype, typestore=store, serialization_format=encoding,
-                                                     offered_qos_profiles=get_qos(metadata))
+            connections[key] = writer.add_connection(
+                topic, msgtype, typestore=store, serialization_format=encoding, offered_qos_profiles=get_qos(metadata)
+            )
         for channel_id, log_time, data in sorted(found.messages, key=lambda m: m[1]):
             if channel_id in connections:
                 writer.write(connections[channel_id], log_time, data)

@@ -11,6 +11,7 @@ is there from the start and every chunk is on disk once it closes, so that
 raises :class:`BagError`, which says what is wrong and, for a recording never closed, how to
 repair it.
 """
+
 import functools
 import os
 from collections.abc import Iterable, Iterator
@@ -62,9 +63,7 @@ def interface_directory() -> Path:
             return candidate
     if (REPOSITORY_PACKAGE / "msg").is_dir():
         return REPOSITORY_PACKAGE
-    raise FileNotFoundError(
-        f"no {PACKAGE} interface definitions under AMENT_PREFIX_PATH nor in {REPOSITORY_PACKAGE}"
-    )
+    raise FileNotFoundError(f"no {PACKAGE} interface definitions under AMENT_PREFIX_PATH nor in {REPOSITORY_PACKAGE}")
 
 
 def split_definition(text: str, kind: str) -> list[str]:
@@ -129,17 +128,23 @@ def check_readable(path: str | os.PathLike) -> Path:
         raise BagError(f"{path} does not exist")
     if path.is_dir() and not (path / "metadata.yaml").is_file():
         if not any(path.glob("*.mcap")):
-            raise BagError(f"{path} is a directory but not a rosbag2 bag (no metadata.yaml, no .mcap file): "
-                           "give a bag directory, an .mcap file or a CSV table")
-        raise BagError(f"{path} has no metadata.yaml: the recording was never closed; "
-                       f"`mows bag repair {path}` recovers its intact chunks")
+            raise BagError(
+                f"{path} is a directory but not a rosbag2 bag (no metadata.yaml, no .mcap file): "
+                "give a bag directory, an .mcap file or a CSV table"
+            )
+        raise BagError(
+            f"{path} has no metadata.yaml: the recording was never closed; "
+            f"`mows bag repair {path}` recovers its intact chunks"
+        )
     try:
         with Reader(path):
             pass
     except ReaderError as error:
         bag = path if path.is_dir() else path.parent
-        raise BagError(f"{path} cannot be read ({error}): if the recording was cut off, "
-                       f"`mows bag repair {bag}` recovers its intact chunks") from None
+        raise BagError(
+            f"{path} cannot be read ({error}): if the recording was cut off, "
+            f"`mows bag repair {bag}` recovers its intact chunks"
+        ) from None
     return path
 
 
@@ -224,19 +229,39 @@ class Recording:
         of messages written so far (what a repair compares its recovered count with)."""
         name = Path(self._storage.path).name
         info = {
-            "version": BAG_VERSION, "storage_identifier": "mcap", "relative_file_paths": [name],
-            "duration": {"nanoseconds": 0}, "starting_time": {"nanoseconds_since_epoch": 0}, "message_count": 0,
+            "version": BAG_VERSION,
+            "storage_identifier": "mcap",
+            "relative_file_paths": [name],
+            "duration": {"nanoseconds": 0},
+            "starting_time": {"nanoseconds_since_epoch": 0},
+            "message_count": 0,
             "topics_with_message_count": [
-                {"topic_metadata": {"name": topic, "type": msgtype, "serialization_format": "cdr",
-                                    "offered_qos_profiles": dump_qos_v9(qos),
-                                    "type_description_hash": self._connections[topic].digest},
-                 "message_count": 0}
-                for topic, (msgtype, qos) in topics.items()],
-            "compression_format": "", "compression_mode": "",
-            "files": [{"path": name, "starting_time": {"nanoseconds_since_epoch": 0}, "duration": {"nanoseconds": 0},
-                       "message_count": 0}],
-            "custom_data": {OPEN_MARK: "open: counts are written at close; after a kill run mows bag repair",
-                            WRITTEN_MARK: str(self.messages)},
+                {
+                    "topic_metadata": {
+                        "name": topic,
+                        "type": msgtype,
+                        "serialization_format": "cdr",
+                        "offered_qos_profiles": dump_qos_v9(qos),
+                        "type_description_hash": self._connections[topic].digest,
+                    },
+                    "message_count": 0,
+                }
+                for topic, (msgtype, qos) in topics.items()
+            ],
+            "compression_format": "",
+            "compression_mode": "",
+            "files": [
+                {
+                    "path": name,
+                    "starting_time": {"nanoseconds_since_epoch": 0},
+                    "duration": {"nanoseconds": 0},
+                    "message_count": 0,
+                }
+            ],
+            "custom_data": {
+                OPEN_MARK: "open: counts are written at close; after a kill run mows bag repair",
+                WRITTEN_MARK: str(self.messages),
+            },
             "ros_distro": "rosbags",
         }
         temporary = self.path / "metadata.yaml.tmp"

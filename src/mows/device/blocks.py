@@ -6,6 +6,7 @@ block's sequence number jumps by one more than the blocks' worth of samples lost
 2), so that a subscriber sees the loss in ``sequence`` as well as in ``first_sample_index``.
 Nothing is interpolated or filled in.
 """
+
 from __future__ import annotations
 
 import math
@@ -21,10 +22,10 @@ class BlockAssembler:
 
     def __init__(self, block_samples: int):
         self.block_samples = int(block_samples)
-        self.gaps = 0               # discontinuities of the sample index
-        self.missing_samples = 0    # samples lost in them: forward jumps, and a restarted device's
-                                    # samples before the first received (at least that many)
-        self.restarts = 0           # jumps backwards: the device's counter started again
+        self.gaps = 0  # discontinuities of the sample index
+        self.missing_samples = 0  # samples lost in them: forward jumps, and a restarted device's
+        # samples before the first received (at least that many)
+        self.restarts = 0  # jumps backwards: the device's counter started again
         self.samples = 0
         self.saturated_samples = 0  # samples with any channel saturated
         self._parts: list[SampleBlock] = []

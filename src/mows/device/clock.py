@@ -5,6 +5,7 @@ whose time has come on the host's monotonic clock since it started. Counting sam
 one start instant, instead of adding up sleeps, keeps the long-run sample rate exact however
 late each wake-up is. Stamps are integer nanoseconds (20 kS/s is exactly 50 000 ns a sample).
 """
+
 import math
 import time
 from collections.abc import Callable
@@ -14,8 +15,9 @@ class DeviceClock:
     """``epoch_ns``: the device time of sample 0, ns (the host's wall clock at start-up by
     default, so that stamps read as dates); ``monotonic``: the host clock that paces it, s."""
 
-    def __init__(self, sample_rate_hz: float, epoch_ns: int | None = None,
-                 monotonic: Callable[[], float] = time.monotonic):
+    def __init__(
+        self, sample_rate_hz: float, epoch_ns: int | None = None, monotonic: Callable[[], float] = time.monotonic
+    ):
         if not (math.isfinite(sample_rate_hz) and sample_rate_hz > 0.0):
             raise ValueError(f"sample_rate_hz = {sample_rate_hz!r} must be a positive rate")
         self.sample_rate_hz = float(sample_rate_hz)

@@ -18,6 +18,7 @@ cycle, and whether the coils must go off at once. The coils are on only in EXCIT
 other phase is coils off, and a fault (emergency stop, a refused or unanswered command, a
 lost link) switches them off at once. The emergency stop latches until released.
 """
+
 from __future__ import annotations
 
 from collections.abc import Generator
@@ -56,8 +57,17 @@ class CycleSequencer:
     driver's coil current cap (no command above it is ever issued).
     """
 
-    def __init__(self, settings: CycleSettings, setup: CoilSetup, cap: CurrentCap, sample_rate_hz: float,
-                 frequency_hz: float, lead_samples: int = 0, *, fit: TuningFit):
+    def __init__(
+        self,
+        settings: CycleSettings,
+        setup: CoilSetup,
+        cap: CurrentCap,
+        sample_rate_hz: float,
+        frequency_hz: float,
+        lead_samples: int = 0,
+        *,
+        fit: TuningFit,
+    ):
         self.settings = settings
         self.setup = setup
         self.cap = cap
@@ -161,8 +171,12 @@ class CycleSequencer:
         cycle = CyclePlan.resolve(self._last_cycle_id + 1, request, s)  # ValueError for a request out of range
         if request.frequency_hz is not None:
             nyquist_hz = self.sample_rate_hz / 2.0
-            check_setting("frequency_hz", request.frequency_hz, 0.0 < request.frequency_hz < nyquist_hz,
-                          f"in (0, {nyquist_hz:g}) Hz")
+            check_setting(
+                "frequency_hz",
+                request.frequency_hz,
+                0.0 < request.frequency_hz < nyquist_hz,
+                f"in (0, {nyquist_hz:g}) Hz",
+            )
         self._currents(cycle)  # ValueError above the cap
         self._duty.configure(s.max_duty_cycle, self._samples(s.duty_window_s))
         self._duty.earliest_start(self._next_index, self._samples(s.excite_s))  # ValueError if it never fits
@@ -174,8 +188,9 @@ class CycleSequencer:
     def _run(self, c: CyclePlan) -> Run:
         s = c.settings
         excite, ringdown = self._samples(s.excite_s), self._samples(s.ringdown_s)
-        turned = yield from self._answer(self._issue(OrientationCommand, self._next_index + self.lead_samples,
-                                                     theta0_rad=c.theta0_rad))
+        turned = yield from self._answer(
+            self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
+        )
         settle = self._samples(s.settle_s)
         yield from self._enter(c, Phase.SETTLING, turned, settle)
         coils_free = turned + settle  # from here on the coils are off and nothing is scheduled
@@ -188,8 +203,9 @@ class CycleSequencer:
             start = self._duty.earliest_start(max(coils_free + gap, self._next_index + self.lead_samples), excite)
             currents = self._currents(c)
             on = self._issue(CoilCommand, start, amplitudes_a=currents, frequency_hz=self.frequency_hz)
-            off = self._issue(CoilCommand, start + excite, amplitudes_a=(0.0,) * len(currents),
-                              frequency_hz=self.frequency_hz)
+            off = self._issue(
+                CoilCommand, start + excite, amplitudes_a=(0.0,) * len(currents), frequency_hz=self.frequency_hz
+            )
             if start > coils_free:
                 yield from self._enter(c, Phase.GAP, coils_free, start - coils_free, index, tuning)
             switched_on = yield from self._answer(on)
@@ -197,8 +213,7 @@ class CycleSequencer:
             self._duty.record(switched_on, switched_off)
             recording = Recording(switched_off, switched_off + ringdown)
             self._recordings.append(recording)
-            yield from self._enter(c, Phase.EXCITING, switched_on, switched_off - switched_on, index, tuning,
-                                   currents)
+            yield from self._enter(c, Phase.EXCITING, switched_on, switched_off - switched_on, index, tuning, currents)
             yield from self._enter(c, Phase.RINGDOWN, switched_off, ringdown, index, tuning)
             yield Reach(recording.end)
             self._recordings.remove(recording)
@@ -244,11 +259,26 @@ class CycleSequencer:
             raise CycleAborted(f"the device refused {type(command).__name__} {command.command_id}: {result.reason}")
         return result.applied_sample_index
 
-    def _enter(self, c: CyclePlan, phase: Phase, index: int, duration_samples: int, repeat_index: int = 0,
-               tuning: bool = False, currents: tuple = ()) -> Generator[Reach, CommandResult | None, None]:
+    def _enter(
+        self,
+        c: CyclePlan,
+        phase: Phase,
+        index: int,
+        duration_samples: int,
+        repeat_index: int = 0,
+        tuning: bool = False,
+        currents: tuple = (),
+    ) -> Generator[Reach, CommandResult | None, None]:
         yield Reach(index + 1)
-        self._emit(phase, index, cycle=c, duration_samples=duration_samples, repeat_index=repeat_index,
-                   tuning=tuning, currents=currents)
+        self._emit(
+            phase,
+            index,
+            cycle=c,
+            duration_samples=duration_samples,
+            repeat_index=repeat_index,
+            tuning=tuning,
+            currents=currents,
+        )
 
     def _resume(self) -> None:
         while self._runner is not None:
@@ -262,8 +292,10 @@ class CycleSequencer:
                 value = self._results.pop(wait.command.command_id, None)
                 if value is None:
                     if self._next_index > wait.deadline_index:
-                        self._fault(f"the device did not answer {type(wait.command).__name__} "
-                                    f"{wait.command.command_id} in {self.settings.confirm_timeout_s:g} s")
+                        self._fault(
+                            f"the device did not answer {type(wait.command).__name__} "
+                            f"{wait.command.command_id} in {self.settings.confirm_timeout_s:g} s"
+                        )
                     return
             self._advance(value)
 
@@ -300,22 +332,40 @@ class CycleSequencer:
         else:
             self._emit(phase, self._next_index, reason=reason)
 
-    def _emit(self, phase: Phase, index: int, cycle: CyclePlan | None = None, duration_samples: int = 0,
-              repeat_index: int = 0, tuning: bool = False, currents: tuple = (), reason: str = "") -> None:
+    def _emit(
+        self,
+        phase: Phase,
+        index: int,
+        cycle: CyclePlan | None = None,
+        duration_samples: int = 0,
+        repeat_index: int = 0,
+        tuning: bool = False,
+        currents: tuple = (),
+        reason: str = "",
+    ) -> None:
         self.phase = phase
         # Events are stamped once samples have come (_announce holds them back until then);
         # a cycle's own events come later still, as _plan starts none before the first sample.
         assert self._anchor is not None
         anchor_index, anchor_ns = self._anchor
         n_coils = len(self.setup.phases_rad)
-        self._step.events.append(PhaseEvent(
-            phase=phase, sample_index=index,
-            stamp_ns=anchor_ns + round((index - anchor_index) * 1e9 / self.sample_rate_hz),
-            cycle_id=cycle.cycle_id if cycle else 0, repeat_index=repeat_index,
-            repeats=cycle.repeats if cycle else 0, tuning=tuning,
-            currents_a=currents or (0.0,) * n_coils, frequency_hz=self.frequency_hz,
-            theta0_rad=cycle.theta0_rad if cycle else 0.0,
-            planned_duration_s=duration_samples / self.sample_rate_hz, setup=self.setup.name, reason=reason))
+        self._step.events.append(
+            PhaseEvent(
+                phase=phase,
+                sample_index=index,
+                stamp_ns=anchor_ns + round((index - anchor_index) * 1e9 / self.sample_rate_hz),
+                cycle_id=cycle.cycle_id if cycle else 0,
+                repeat_index=repeat_index,
+                repeats=cycle.repeats if cycle else 0,
+                tuning=tuning,
+                currents_a=currents or (0.0,) * n_coils,
+                frequency_hz=self.frequency_hz,
+                theta0_rad=cycle.theta0_rad if cycle else 0.0,
+                planned_duration_s=duration_samples / self.sample_rate_hz,
+                setup=self.setup.name,
+                reason=reason,
+            )
+        )
 
     def _take_step(self) -> Step:
         step, self._step = self._step, Step()

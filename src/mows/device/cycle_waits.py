@@ -6,6 +6,7 @@ index) or an :class:`Answer` (the device's result of a command), and raises
 :class:`CycleAborted` when the device refuses or does not answer. A :class:`Recording` keeps a
 ring-down's samples as they arrive, and knows whether any went missing.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -57,10 +58,17 @@ class Recording:
         return self._next == self.end
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        rows = [(max(c.first_sample_index, self.start) - c.first_sample_index,
-                 min(c.end_index, self.end) - c.first_sample_index) for c in self._parts]
-        return (np.concatenate([c.samples_t[a:b] for c, (a, b) in zip(self._parts, rows)]),
-                np.concatenate([c.saturated[a:b] for c, (a, b) in zip(self._parts, rows)]))
+        rows = [
+            (
+                max(c.first_sample_index, self.start) - c.first_sample_index,
+                min(c.end_index, self.end) - c.first_sample_index,
+            )
+            for c in self._parts
+        ]
+        return (
+            np.concatenate([c.samples_t[a:b] for c, (a, b) in zip(self._parts, rows)]),
+            np.concatenate([c.saturated[a:b] for c, (a, b) in zip(self._parts, rows)]),
+        )
 
 
 # A running cycle is a generator: it yields what it waits for and is sent, on resuming, the

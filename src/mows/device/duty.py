@@ -9,6 +9,7 @@ Appending an interval [t, t + d) after all earlier ones, the on-time of a window
 for the window that ends at t + d (later windows lose old time and gain none; earlier ones
 lose old time no faster than they gain new), so only that window is checked.
 """
+
 from __future__ import annotations
 
 import math
@@ -54,8 +55,10 @@ class DutyCycleLimit:
         keep the limit. ValueError if no start ever would."""
         spare = self.budget_samples - duration_samples
         if spare < 0:
-            raise ValueError(f"an excitation of {duration_samples} samples exceeds the duty-cycle limit of "
-                             f"{self.max_fraction:g} × {self.window_samples} samples")
+            raise ValueError(
+                f"an excitation of {duration_samples} samples exceeds the duty-cycle limit of "
+                f"{self.max_fraction:g} × {self.window_samples} samples"
+            )
         # The window of a start t begins at s = t + d − W; find the first s whose old on-time fits.
         low = not_before + duration_samples - self.window_samples
         high = max([low] + [b for _, b in self._intervals])

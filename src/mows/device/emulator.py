@@ -26,6 +26,7 @@ Like the hardware it:
   The device's own coil log (:attr:`ScheduledDevice.coil_log`, from the samples' coil flags)
   and :attr:`watchdog_trips` show it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -58,8 +59,8 @@ from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
-WATCHDOG_TIMEOUT_S = 0.15   # with host heartbeats every 50 ms; the issue's bound is 200 ms
-FRAME_S = 0.01              # samples per Samples frame, in seconds of device time
+WATCHDOG_TIMEOUT_S = 0.15  # with host heartbeats every 50 ms; the issue's bound is 200 ms
+FRAME_S = 0.01  # samples per Samples frame, in seconds of device time
 STATUS_PERIOD_S = 0.1
 OUTPUT_LIMIT_BYTES = 256 * 1024  # frames waiting for a host that does not read (~1.5 s); more are dropped
 READ_BYTES = 65536
@@ -68,8 +69,14 @@ READ_BYTES = 65536
 class DeviceEmulator:
     """``device`` behind a pty whose path is the symbolic link ``link_path``."""
 
-    def __init__(self, device: SimulatedDevice, link_path: str | os.PathLike, cap: CurrentCap = CurrentCap(),
-                 watchdog_timeout_s: float = WATCHDOG_TIMEOUT_S, clock: DeviceClock | None = None):
+    def __init__(
+        self,
+        device: SimulatedDevice,
+        link_path: str | os.PathLike,
+        cap: CurrentCap = CurrentCap(),
+        watchdog_timeout_s: float = WATCHDOG_TIMEOUT_S,
+        clock: DeviceClock | None = None,
+    ):
         self.device = ScheduledDevice(device, cap)
         self.link_path = Path(link_path)
         self.clock = clock or DeviceClock(device.sample_rate_hz)
@@ -78,8 +85,9 @@ class DeviceEmulator:
         self._watchdog_samples = round(watchdog_timeout_s * rate)
         self._status_samples = round(STATUS_PERIOD_S * rate)
         near = device.scenario.sensors.pair.sensors[0]
-        self.info = DeviceInfo(rate, 2, device.n_coils, near.range_t, near.resolution_t, self.device.cap.limit_a,
-                               watchdog_timeout_s)
+        self.info = DeviceInfo(
+            rate, 2, device.n_coils, near.range_t, near.resolution_t, self.device.cap.limit_a, watchdog_timeout_s
+        )
         self.watchdog_trips: list[tuple[int, int]] = []  # (sample of the last host frame, sample of coils off)
         # Host silences of at least the watchdog time: (sample of the last frame, of the next).
         self.long_silences: list[tuple[int, int]] = []
@@ -138,14 +146,19 @@ class DeviceEmulator:
         except OSError as error:
             os.close(master)
             os.close(slave)
-            raise FileExistsError(f"device emulator: {self.link_path} exists ({error.strerror}): it is not "
-                                  "this emulator's link; remove it or choose another --link path") from None
+            raise FileExistsError(
+                f"device emulator: {self.link_path} exists ({error.strerror}): it is not "
+                "this emulator's link; remove it or choose another --link path"
+            ) from None
         self._fds = (master, slave)
 
     def _own_link(self) -> bool:
         """The link path is still the symbolic link to this emulator's terminal."""
-        return (self._fds is not None and self.link_path.is_symlink()
-                and os.readlink(self.link_path) == os.ttyname(self._fds[1]))
+        return (
+            self._fds is not None
+            and self.link_path.is_symlink()
+            and os.readlink(self.link_path) == os.ttyname(self._fds[1])
+        )
 
     def _unplug(self) -> None:
         if self._fds is None:
@@ -187,8 +200,10 @@ class DeviceEmulator:
             blocks = self.device.read_until(end)
             samples = np.concatenate([b.samples.samples_t for b in blocks])
             counts = np.round(samples / self.info.resolution_t).astype(np.int32)
-            self._send(Samples(first, counts, np.concatenate([b.samples.saturated for b in blocks])),
-                       self.clock.stamp_ns(first))
+            self._send(
+                Samples(first, counts, np.concatenate([b.samples.saturated for b in blocks])),
+                self.clock.stamp_ns(first),
+            )
             if end >= self._next_status:
                 self._send(self.status(), self.clock.stamp_ns(end))
                 self._next_status = end + self._status_samples
@@ -197,7 +212,8 @@ class DeviceEmulator:
         """Coils off at the sample where the host's silence reaches the timeout."""
         deadline = self._last_host_index + self._watchdog_samples
         supply_on = self.device.supply_limits is not None and (
-            self.device.supply_target_a != 0.0 or self.device.device.field_current_a != 0.0)
+            self.device.supply_target_a != 0.0 or self.device.device.field_current_a != 0.0
+        )
         if deadline < end and (self.device.busy or supply_on) and self._tripped_for != self._last_host_index:
             off = self.device.switch_off_at(deadline)
             self.device.supply_to_zero()
@@ -214,8 +230,13 @@ class DeviceEmulator:
         return None
 
     def status(self) -> Status:
-        return Status(self.device.next_index, self.device.coils_on, len(self.watchdog_trips), self.dropped_frames,
-                      self.decoder.rejected_total + self.misdirected_frames)
+        return Status(
+            self.device.next_index,
+            self.device.coils_on,
+            len(self.watchdog_trips),
+            self.dropped_frames,
+            self.decoder.rejected_total + self.misdirected_frames,
+        )
 
     # --- frames ----------------------------------------------------------------------------
     def _receive(self, due: int) -> None:
@@ -256,8 +277,9 @@ class DeviceEmulator:
             self.device.check_coils(body.amplitudes_a, body.frequency_hz)
             if body.immediate:
                 self.device.cancel()
-            return Ack.OK, self.device.schedule_coils(0 if body.immediate else body.at_sample_index,
-                                                      body.amplitudes_a, body.frequency_hz)
+            return Ack.OK, self.device.schedule_coils(
+                0 if body.immediate else body.at_sample_index, body.amplitudes_a, body.frequency_hz
+            )
         except OverCap:
             return Ack.REFUSED_OVER_CAP, 0
         except ValueError:

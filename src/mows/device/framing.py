@@ -17,6 +17,7 @@ A frame, little-endian::
 stream, returns only frames whose CRC and payload check out, and counts what it throws away
 (rejected candidates by reason, and discarded bytes), so that nothing disappears unseen.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -35,11 +36,11 @@ MAX_PAYLOAD_BYTES = 16384
 SEQUENCE_MODULUS = 2**32
 
 # Why a candidate frame was rejected (FrameDecoder.rejected keys).
-REJECT_VERSION = "version"      # unknown protocol version
-REJECT_LENGTH = "length"        # payload length above MAX_PAYLOAD_BYTES
-REJECT_CRC = "crc"              # CRC mismatch: corrupted or not a frame at all
-REJECT_TYPE = "type"            # CRC fine, frame type unknown
-REJECT_PAYLOAD = "payload"      # CRC fine, payload does not fit its type
+REJECT_VERSION = "version"  # unknown protocol version
+REJECT_LENGTH = "length"  # payload length above MAX_PAYLOAD_BYTES
+REJECT_CRC = "crc"  # CRC mismatch: corrupted or not a frame at all
+REJECT_TYPE = "type"  # CRC fine, frame type unknown
+REJECT_PAYLOAD = "payload"  # CRC fine, payload does not fit its type
 REJECT_TRUNCATED = "truncated"  # the stream ended (link lost) inside the frame
 REJECT_REASONS = (REJECT_VERSION, REJECT_LENGTH, REJECT_CRC, REJECT_TYPE, REJECT_PAYLOAD, REJECT_TRUNCATED)
 
@@ -58,8 +59,7 @@ def encode_frame(frame: Frame) -> bytes:
     payload = frame.body.encode()
     if len(payload) > MAX_PAYLOAD_BYTES:
         raise ValueError(f"payload of {len(payload)} bytes exceeds MAX_PAYLOAD_BYTES = {MAX_PAYLOAD_BYTES}")
-    header = HEADER.pack(VERSION, frame.body.TYPE, len(payload), frame.sequence % SEQUENCE_MODULUS,
-                         frame.timestamp_ns)
+    header = HEADER.pack(VERSION, frame.body.TYPE, len(payload), frame.sequence % SEQUENCE_MODULUS, frame.timestamp_ns)
     return SYNC + header + payload + CRC.pack(zlib.crc32(payload, zlib.crc32(header)))
 
 
@@ -75,8 +75,8 @@ class FrameDecoder:
     def __init__(self) -> None:
         self._buffer = bytearray()
         self.rejected: Counter = Counter()  # by REJECT_* reason
-        self.discarded_bytes = 0            # bytes that were not part of a returned frame
-        self.frames = 0                     # frames returned
+        self.discarded_bytes = 0  # bytes that were not part of a returned frame
+        self.frames = 0  # frames returned
 
     @property
     def rejected_total(self) -> int:
@@ -135,9 +135,9 @@ class FrameDecoder:
             end = HEADER_BYTES + length + CRC.size
             if len(self._buffer) < end:
                 return None
-            payload = bytes(self._buffer[HEADER_BYTES:HEADER_BYTES + length])
+            payload = bytes(self._buffer[HEADER_BYTES : HEADER_BYTES + length])
             (crc,) = CRC.unpack_from(self._buffer, HEADER_BYTES + length)
-            if crc != zlib.crc32(self._buffer[len(SYNC):HEADER_BYTES + length]):
+            if crc != zlib.crc32(self._buffer[len(SYNC) : HEADER_BYTES + length]):
                 self._reject(REJECT_CRC)
                 continue
             body_type = BODY_TYPES.get(kind)

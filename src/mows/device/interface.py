@@ -5,6 +5,7 @@ The driver sends commands that take effect at a device sample index and learns, 
 for what the device has sent since: :class:`~mows.records.samples.SampleBlock` runs of consecutive samples
 stamped on the device clock, command results, and :class:`LinkEvent` changes of the link.
 """
+
 from __future__ import annotations
 
 import abc

@@ -3,6 +3,7 @@ per type, with its TYPE code, its fields and its exact wire layout (little-endia
 decode that checks the bytes fit), and ``BODY_TYPES``, the table the frame decoder
 (``mows.device.framing``) picks a type's class from.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -60,10 +61,10 @@ class DeviceInfo(FixedBody):
     sample_rate_hz: float
     n_channels: int
     n_coils: int
-    range_t: float              # full scale of every channel, ±range_t
-    resolution_t: float         # one count of a Samples frame, tesla
-    current_cap_a: float        # the device refuses coil amplitudes above this
-    watchdog_timeout_s: float   # coils off when no host frame arrived for this long
+    range_t: float  # full scale of every channel, ±range_t
+    resolution_t: float  # one count of a Samples frame, tesla
+    current_cap_a: float  # the device refuses coil amplitudes above this
+    watchdog_timeout_s: float  # coils off when no host frame arrived for this long
 
     @classmethod
     def decode(cls, payload: bytes) -> Self:
@@ -92,9 +93,11 @@ class Samples(Body):
 
     def encode(self) -> bytes:
         n, channels = self.counts.shape
-        return (self.LAYOUT.pack(self.first_sample_index, n, channels)
-                + self.counts.astype("<i4", copy=False).tobytes()
-                + np.packbits(self.saturated.astype(bool, copy=False)).tobytes())
+        return (
+            self.LAYOUT.pack(self.first_sample_index, n, channels)
+            + self.counts.astype("<i4", copy=False).tobytes()
+            + np.packbits(self.saturated.astype(bool, copy=False)).tobytes()
+        )
 
     @classmethod
     def decode(cls, payload: bytes) -> Samples:
@@ -105,8 +108,10 @@ class Samples(Body):
         flag_bytes = math.ceil(values / 8)
         expected = cls.LAYOUT.size + 4 * values + flag_bytes
         if n == 0 or channels == 0 or len(payload) != expected:
-            raise PayloadError(f"Samples payload of {len(payload)} bytes does not hold {n} samples × "
-                               f"{channels} channels ({expected} bytes)")
+            raise PayloadError(
+                f"Samples payload of {len(payload)} bytes does not hold {n} samples × "
+                f"{channels} channels ({expected} bytes)"
+            )
         counts = np.frombuffer(payload, "<i4", values, cls.LAYOUT.size).reshape(n, channels)
         packed = np.frombuffer(payload, np.uint8, flag_bytes, cls.LAYOUT.size + 4 * values)
         flags = np.unpackbits(packed)
@@ -115,8 +120,12 @@ class Samples(Body):
         return cls(first, counts.astype(np.int32), flags[:values].astype(bool).reshape(n, channels))
 
     def __eq__(self, other) -> bool:
-        return (isinstance(other, Samples) and self.first_sample_index == other.first_sample_index
-                and np.array_equal(self.counts, other.counts) and np.array_equal(self.saturated, other.saturated))
+        return (
+            isinstance(other, Samples)
+            and self.first_sample_index == other.first_sample_index
+            and np.array_equal(self.counts, other.counts)
+            and np.array_equal(self.saturated, other.saturated)
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,16 +137,20 @@ class Ack(FixedBody):
     TYPE: ClassVar[int] = 0x03
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<IBQ")
     OK: ClassVar[int] = 0
-    REFUSED_OVER_CAP: ClassVar[int] = 1    # a coil amplitude above DeviceInfo.current_cap_a, or a
-                                           # supply current above the supply's cap
-    REFUSED_INVALID: ClassVar[int] = 2     # wrong coil count, non-finite value, frequency out of
-                                           # range, no supply
-    REFUSED_BUSY: ClassVar[int] = 3        # orientation change while the coils are on
-    REASONS: ClassVar[dict] = {0: "accepted", 1: "current above the device's cap",
-                               2: "invalid command", 3: "coils are on"}
-    command_sequence: int       # the sequence number of the host frame answered
+    REFUSED_OVER_CAP: ClassVar[int] = 1  # a coil amplitude above DeviceInfo.current_cap_a, or a
+    # supply current above the supply's cap
+    REFUSED_INVALID: ClassVar[int] = 2  # wrong coil count, non-finite value, frequency out of
+    # range, no supply
+    REFUSED_BUSY: ClassVar[int] = 3  # orientation change while the coils are on
+    REASONS: ClassVar[dict] = {
+        0: "accepted",
+        1: "current above the device's cap",
+        2: "invalid command",
+        3: "coils are on",
+    }
+    command_sequence: int  # the sequence number of the host frame answered
     result: int
-    applied_sample_index: int   # meaningful when result is OK
+    applied_sample_index: int  # meaningful when result is OK
 
     @property
     def accepted(self) -> bool:
@@ -155,11 +168,11 @@ class Status(FixedBody):
 
     TYPE: ClassVar[int] = 0x04
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<QBIII")
-    next_sample_index: int      # the next sample the device will take
+    next_sample_index: int  # the next sample the device will take
     coils_on: bool
-    watchdog_trips: int         # times the heartbeat watchdog switched the coils off
-    dropped_frames: int         # frames the device could not send (host not reading)
-    rejected_frames: int        # host frames the device's decoder rejected
+    watchdog_trips: int  # times the heartbeat watchdog switched the coils off
+    dropped_frames: int  # frames the device could not send (host not reading)
+    rejected_frames: int  # host frames the device's decoder rejected
 
     @classmethod
     def decode(cls, payload: bytes) -> Self:
@@ -217,15 +230,16 @@ class Coils(Body):
 
     def encode(self) -> bytes:
         count = len(self.amplitudes_a)
-        return (self.LAYOUT.pack(self.flags, self.at_sample_index, self.frequency_hz, count)
-                + struct.pack(f"<{count}d", *self.amplitudes_a))
+        return self.LAYOUT.pack(self.flags, self.at_sample_index, self.frequency_hz, count) + struct.pack(
+            f"<{count}d", *self.amplitudes_a
+        )
 
     @classmethod
     def decode(cls, payload: bytes) -> Coils:
         if len(payload) < cls.LAYOUT.size:
             raise PayloadError(f"Coils payload of {len(payload)} bytes is shorter than its header")
         flags, at_index, frequency, count = cls.LAYOUT.unpack_from(payload)
-        amplitudes = _unpack_exact(struct.Struct(f"<{count}d"), payload[cls.LAYOUT.size:], "Coils amplitudes")
+        amplitudes = _unpack_exact(struct.Struct(f"<{count}d"), payload[cls.LAYOUT.size :], "Coils amplitudes")
         if flags & ~cls.IMMEDIATE:
             raise PayloadError(f"Coils flags 0x{flags:02x} has unknown bits")
         return cls(flags, at_index, frequency, amplitudes)
@@ -273,7 +287,6 @@ class FieldCurrent(FixedBody):
         return bool(self.flags & self.TO_ZERO_NOW)
 
 
-BODY_TYPES: dict[int, type[Body]] = {cls.TYPE: cls for cls in
-                                     (DeviceInfo, Samples, Ack, Status, Hello, Heartbeat, Coils, Orientation,
-                                      FieldCurrent)}
-
+BODY_TYPES: dict[int, type[Body]] = {
+    cls.TYPE: cls for cls in (DeviceInfo, Samples, Ack, Status, Hello, Heartbeat, Coils, Orientation, FieldCurrent)
+}

@@ -4,6 +4,7 @@ to and its outcome, the step the sequencer returns, and the tuning fit it is han
 
 The phase numbers are those of ``mows_msgs/ExcitationState`` PHASE_*.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -37,12 +38,12 @@ class PhaseEvent:
     repeat_index: int = 0
     repeats: int = 0
     tuning: bool = False
-    currents_a: tuple = ()            # signed peak current per coil, A (zeros unless EXCITING)
+    currents_a: tuple = ()  # signed peak current per coil, A (zeros unless EXCITING)
     frequency_hz: float = 0.0
     theta0_rad: float = 0.0
-    planned_duration_s: float = 0.0   # 0: open-ended
+    planned_duration_s: float = 0.0  # 0: open-ended
     setup: str = ""
-    reason: str = ""                  # why, for FAULT
+    reason: str = ""  # why, for FAULT
 
     @property
     def coils_on(self) -> bool:
@@ -62,7 +63,7 @@ class CycleSettings:
     settle_s: float = 0.5
     max_duty_cycle: float = 0.5
     duty_window_s: float = 10.0
-    confirm_timeout_s: float = 0.5    # device time a command may take to be answered
+    confirm_timeout_s: float = 0.5  # device time a command may take to be answered
 
     def __post_init__(self):
         for name in ("excitation_current_a", "gap_s", "settle_s"):
@@ -135,12 +136,22 @@ class CyclePlan:
     @classmethod
     def resolve(cls, cycle_id: int, request: CycleRequest, s: CycleSettings) -> CyclePlan:
         """The plan of ``request``. ValueError, with the reason, for a request out of range."""
-        cycle = cls(cycle_id, float(request.theta0_rad),
-                    s.repeats if request.repeats is None else request.repeats,
-                    s.tuning_steps if request.tuning_steps is None else request.tuning_steps,
-                    s.gap_s if request.gap_s is None else request.gap_s, s)
-        CycleSettings(**{**dataclasses.asdict(s), "repeats": cycle.repeats, "tuning_steps": cycle.tuning_steps,
-                         "gap_s": cycle.gap_s})  # ValueError for a request out of range
+        cycle = cls(
+            cycle_id,
+            float(request.theta0_rad),
+            s.repeats if request.repeats is None else request.repeats,
+            s.tuning_steps if request.tuning_steps is None else request.tuning_steps,
+            s.gap_s if request.gap_s is None else request.gap_s,
+            s,
+        )
+        CycleSettings(
+            **{
+                **dataclasses.asdict(s),
+                "repeats": cycle.repeats,
+                "tuning_steps": cycle.tuning_steps,
+                "gap_s": cycle.gap_s,
+            }
+        )  # ValueError for a request out of range
         check_setting("theta0_rad", cycle.theta0_rad, True, "finite")
         return cycle
 
@@ -150,7 +161,7 @@ class CycleOutcome:
     success: bool
     message: str
     cycle_id: int
-    frequency_hz: float               # the excitation frequency after tuning
+    frequency_hz: float  # the excitation frequency after tuning
     ringdowns_recorded: int
     tuning_fits: tuple = ()
 

@@ -12,6 +12,7 @@ checked against its cap, rounded to its resolution and reached by a staircase wi
 limit, each step queued at its sample; cancelling the coils' commands leaves a ramp alone, and
 :meth:`ScheduledDevice.supply_to_zero` ramps the supply down from wherever it is.
 """
+
 from __future__ import annotations
 
 import bisect
@@ -36,17 +37,28 @@ class OverCap(ValueError):
 class ScheduledDevice:
     """``device`` with a command queue; ``cap`` is the driver's coil current cap."""
 
-    def __init__(self, device: SimulatedDevice, cap: CurrentCap, supply_cap_a: float = math.inf,
-                 supply_slew_a_per_s: float = math.inf):
+    def __init__(
+        self,
+        device: SimulatedDevice,
+        cap: CurrentCap,
+        supply_cap_a: float = math.inf,
+        supply_slew_a_per_s: float = math.inf,
+    ):
         self.device = device
         self.cap = CurrentCap(min(cap.limit_a, device.scenario.setup.cap.limit_a))
         supply = device.scenario.supply
         # The lower of the driver's and the supply's own cap and slew limit.
-        self.supply_limits = None if supply is None else SupplyLimits(
-            min(supply_cap_a, supply.limits.cap_a), min(supply_slew_a_per_s, supply.limits.slew_a_per_s),
-            supply.limits.resolution_a)
+        self.supply_limits = (
+            None
+            if supply is None
+            else SupplyLimits(
+                min(supply_cap_a, supply.limits.cap_a),
+                min(supply_slew_a_per_s, supply.limits.slew_a_per_s),
+                supply.limits.resolution_a,
+            )
+        )
         self.supply_target_a = device.field_current_a
-        self._supply_free_index = 0   # the sample after the last queued supply step
+        self._supply_free_index = 0  # the sample after the last queued supply step
         # (sample index, arrival order, kind, action): kind is "turn", "on", "off" or "supply"
         self._queue: list[tuple[int, int, str, Callable[[], None]]] = []
         self._arrivals = 0
@@ -126,11 +138,14 @@ class ScheduledDevice:
         return self._ramp(self.next_index, self.device.field_current_a, 0.0)
 
     def _ramp(self, start: int, from_a: float, to_a: float) -> int:
-        assert self.supply_limits is not None   # callers have checked that there is a supply
+        assert self.supply_limits is not None  # callers have checked that there is a supply
         applied = start
         for offset_s, current in self.supply_limits.ramp(from_a, to_a):
-            applied = self._enqueue(start + round(offset_s * self.device.sample_rate_hz), "supply",
-                                    functools.partial(self.device.set_field_current, current))
+            applied = self._enqueue(
+                start + round(offset_s * self.device.sample_rate_hz),
+                "supply",
+                functools.partial(self.device.set_field_current, current),
+            )
         self.supply_target_a = to_a
         self._supply_free_index = applied + 1
         return applied

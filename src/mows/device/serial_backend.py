@@ -1,6 +1,7 @@
 """A device on a serial port as the driver's device (:class:`mows.device.interface.Backend`
 ``serial``): the driver's commands turned into frames for :class:`mows.device.serial_link.SerialLink`
 and its frames turned into sample blocks, command results and device faults."""
+
 from __future__ import annotations
 
 import threading
@@ -21,7 +22,7 @@ from mows.device.serial_link import SerialLink
 from mows.physics.coils import CurrentCap
 from mows.records.samples import SampleBlock
 
-COMMAND_LEAD_S = 0.05   # serial commands are scheduled this far ahead of the newest sample
+COMMAND_LEAD_S = 0.05  # serial commands are scheduled this far ahead of the newest sample
 
 
 class SerialBackend(Backend):
@@ -45,7 +46,7 @@ class SerialBackend(Backend):
         # ones from before Hello was answered) must not reach the driver ahead of it.
         self._up = False
         self._pending: dict[int, int] = {}  # frame sequence → command id, until acked
-        self._lock = threading.Lock()       # sending and registering a command is one step
+        self._lock = threading.Lock()  # sending and registering a command is one step
 
     @property
     def info(self) -> DeviceInfo | None:
@@ -85,16 +86,26 @@ class SerialBackend(Backend):
             return []
         info = self.info
         assert info is not None  # the link came up when the device described itself (SerialLink)
-        return [SampleBlock(body.first_sample_index, timestamp_ns, info.sample_rate_hz,
-                            body.counts * info.resolution_t, body.saturated)]
+        return [
+            SampleBlock(
+                body.first_sample_index,
+                timestamp_ns,
+                info.sample_rate_hz,
+                body.counts * info.resolution_t,
+                body.saturated,
+            )
+        ]
 
     def _result(self, ack: Ack) -> list[CommandResult]:
         with self._lock:
             command_id = self._pending.pop(ack.command_sequence, None)
         if command_id is None:
             return []  # an answer to a command of an earlier connection
-        return [CommandResult(command_id, ack.accepted, ack.applied_sample_index,
-                              "" if ack.accepted else f"device: {ack.reason}")]
+        return [
+            CommandResult(
+                command_id, ack.accepted, ack.applied_sample_index, "" if ack.accepted else f"device: {ack.reason}"
+            )
+        ]
 
     def send(self, command: Command) -> None:
         if self.info is None:
@@ -130,8 +141,12 @@ class SerialBackend(Backend):
         values = {**self.link.stats(), "samples_frames_before_info": self.samples_before_info}
         if self.device_status is not None:
             s = self.device_status
-            values.update(device_coils_on=s.coils_on, device_watchdog_trips=s.watchdog_trips,
-                          device_dropped_frames=s.dropped_frames, device_rejected_frames=s.rejected_frames)
+            values.update(
+                device_coils_on=s.coils_on,
+                device_watchdog_trips=s.watchdog_trips,
+                device_dropped_frames=s.dropped_frames,
+                device_rejected_frames=s.rejected_frames,
+            )
         return values
 
     def close(self) -> None:

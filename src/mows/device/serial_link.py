@@ -11,6 +11,7 @@ Heartbeats are sent from :meth:`SerialLink.poll`, the driver's own loop, not fro
 thread: if the driver stops polling (it hangs), the heartbeats stop and the device's
 watchdog switches the coils off.
 """
+
 from __future__ import annotations
 
 import queue
@@ -23,30 +24,36 @@ from mows.device.framing import SEQUENCE_MODULUS, Frame, FrameDecoder, encode_fr
 from mows.device.interface import LinkEvent, NotExciting
 from mows.device.payloads import Body, DeviceInfo, Heartbeat, Hello
 
-DEFAULT_BAUD = 2_000_000        # 20 kS/s × 2 channels × 4 bytes + framing ≈ 170 kB/s
-HEARTBEAT_PERIOD_S = 0.05       # a third of the device's 150 ms watchdog
+DEFAULT_BAUD = 2_000_000  # 20 kS/s × 2 channels × 4 bytes + framing ≈ 170 kB/s
+HEARTBEAT_PERIOD_S = 0.05  # a third of the device's 150 ms watchdog
 BACKOFF_INITIAL_S = 0.05
 BACKOFF_MAX_S = 2.0
-HELLO_TIMEOUT_S = 1.0           # a port with no device answering Hello is treated as lost
+HELLO_TIMEOUT_S = 1.0  # a port with no device answering Hello is treated as lost
 READ_TIMEOUT_S = 0.05
 
 
 class SerialLink:
     """Frames to and from the device on serial port ``port``."""
 
-    def __init__(self, port: str, baud: int = DEFAULT_BAUD, heartbeat_period_s: float = HEARTBEAT_PERIOD_S,
-                 backoff_initial_s: float = BACKOFF_INITIAL_S, backoff_max_s: float = BACKOFF_MAX_S,
-                 hello_timeout_s: float = HELLO_TIMEOUT_S):
+    def __init__(
+        self,
+        port: str,
+        baud: int = DEFAULT_BAUD,
+        heartbeat_period_s: float = HEARTBEAT_PERIOD_S,
+        backoff_initial_s: float = BACKOFF_INITIAL_S,
+        backoff_max_s: float = BACKOFF_MAX_S,
+        hello_timeout_s: float = HELLO_TIMEOUT_S,
+    ):
         self.port, self.baud = port, baud
         self.heartbeat_period_s = heartbeat_period_s
         self.backoff_initial_s, self.backoff_max_s = backoff_initial_s, backoff_max_s
         self.hello_timeout_s = hello_timeout_s
-        self.info: DeviceInfo | None = None   # the device's description, once it has answered
+        self.info: DeviceInfo | None = None  # the device's description, once it has answered
         self.up = False
         self.decoder = FrameDecoder()
-        self.lost_frames = 0        # frames the device numbered after the first connection but we never received
+        self.lost_frames = 0  # frames the device numbered after the first connection but we never received
         self.sequence_restarts = 0  # the device's frame counter went back (it rebooted)
-        self.connections = 0        # times the link came up
+        self.connections = 0  # times the link came up
         self.open_failures = 0
         self.retry_delays_s: list[float] = []  # the back-off before each new attempt to open
         self.last_error = ""
@@ -108,11 +115,17 @@ class SerialLink:
             return sequence
 
     def stats(self) -> dict:
-        return {"link": "up" if self.up else "down", "port": self.port, "connections": self.connections,
-                "open_failures": self.open_failures, "lost_frames": self.lost_frames,
-                "sequence_restarts": self.sequence_restarts, "rejected_frames": self.decoder.rejected_total,
-                **{f"rejected_{reason}": n for reason, n in sorted(self.decoder.rejected.items())},
-                "last_error": self.last_error}
+        return {
+            "link": "up" if self.up else "down",
+            "port": self.port,
+            "connections": self.connections,
+            "open_failures": self.open_failures,
+            "lost_frames": self.lost_frames,
+            "sequence_restarts": self.sequence_restarts,
+            "rejected_frames": self.decoder.rejected_total,
+            **{f"rejected_{reason}": n for reason, n in sorted(self.decoder.rejected.items())},
+            "last_error": self.last_error,
+        }
 
     # --- the reader thread -----------------------------------------------------------------
     def _run(self) -> None:
@@ -129,8 +142,9 @@ class SerialLink:
 
     def _open(self) -> bool:
         try:
-            port = serial.Serial(self.port, self.baud, timeout=READ_TIMEOUT_S, write_timeout=READ_TIMEOUT_S,
-                                 exclusive=True)
+            port = serial.Serial(
+                self.port, self.baud, timeout=READ_TIMEOUT_S, write_timeout=READ_TIMEOUT_S, exclusive=True
+            )
         except (serial.SerialException, OSError, ValueError) as error:
             self.open_failures += 1
             self.last_error = f"cannot open {self.port}: {error}"

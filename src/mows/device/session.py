@@ -7,6 +7,7 @@ stop, a supply current) take the session's lock, act on the device at once (the 
 coils off before it returns) and leave their phase events for the next ``step`` to publish.
 Nothing here knows about ROS.
 """
+
 from __future__ import annotations
 
 import collections
@@ -30,9 +31,9 @@ from mows.device.phases import (
 from mows.physics.coils import CoilSetup, CurrentCap
 from mows.records.samples import SampleBlock
 
-STALL_TIMEOUT_S = 2.0      # a running cycle fails when no samples arrive for this long (host time)
-SUPPLY_COMMAND_IDS = 1 << 48   # supply commands are numbered from here: apart from the sequencer's
-RATE_WINDOW_S = 5.0        # the achieved sample rate is measured over this much host time
+STALL_TIMEOUT_S = 2.0  # a running cycle fails when no samples arrive for this long (host time)
+SUPPLY_COMMAND_IDS = 1 << 48  # supply commands are numbered from here: apart from the sequencer's
+RATE_WINDOW_S = 5.0  # the achieved sample rate is measured over this much host time
 
 
 @dataclasses.dataclass
@@ -50,8 +51,8 @@ class SessionConfig:
     settings: CycleSettings
     setup: CoilSetup
     cap: CurrentCap
-    frequency_hz: float          # the first resonance estimate
-    fit: TuningFit               # fits the tuning ring-downs (the estimator's fit_ringdown)
+    frequency_hz: float  # the first resonance estimate
+    fit: TuningFit  # fits the tuning ring-downs (the estimator's fit_ringdown)
 
 
 class DeviceSession:
@@ -78,10 +79,10 @@ class DeviceSession:
         self._last_samples_s = monotonic()
         self._first_samples_s: float | None = None
         self._arrivals: collections.deque = collections.deque()  # (host time, samples) for the rate
-        self._next_index = 0                  # the sample after the newest received
+        self._next_index = 0  # the sample after the newest received
         self._supply_commands = SUPPLY_COMMAND_IDS
-        self._supply_waiting: dict[int, Callable[[CommandResult], None]] = {}   # sent, not answered
-        self._supply_ramping: list[tuple[CommandResult, Callable]] = []         # answered, not reached
+        self._supply_waiting: dict[int, Callable[[CommandResult], None]] = {}  # sent, not answered
+        self._supply_ramping: list[tuple[CommandResult, Callable]] = []  # answered, not reached
         if backend.info is not None:
             self._device_known()
 
@@ -93,8 +94,11 @@ class DeviceSession:
             output = Output()
             for item in items:
                 self._take(item, output)
-            if self.sequencer is not None and self.sequencer.busy \
-                    and self._monotonic() - self._last_samples_s > STALL_TIMEOUT_S:
+            if (
+                self.sequencer is not None
+                and self.sequencer.busy
+                and self._monotonic() - self._last_samples_s > STALL_TIMEOUT_S
+            ):
                 self._act(self.sequencer.abort(f"no samples from the device for {STALL_TIMEOUT_S:g} s"))
             output.events += self._events
             self._events = []
@@ -148,8 +152,15 @@ class DeviceSession:
         self.assembler = BlockAssembler(round(self.config.block_duration_s * info.sample_rate_hz))
         if self.backend.can_excite:
             c = self.config
-            self.sequencer = CycleSequencer(c.settings, c.setup, c.cap, info.sample_rate_hz, c.frequency_hz,
-                                            self.backend.command_lead_samples, fit=c.fit)
+            self.sequencer = CycleSequencer(
+                c.settings,
+                c.setup,
+                c.cap,
+                info.sample_rate_hz,
+                c.frequency_hz,
+                self.backend.command_lead_samples,
+                fit=c.fit,
+            )
 
     def _count_arrival(self, n: int) -> None:
         now = self._monotonic()
@@ -184,8 +195,11 @@ class DeviceSession:
         thread that stops it) when it ends. Returns its cycle id; ValueError if it cannot run."""
         with self._lock:
             if self.sequencer is None:
-                raise ValueError(f"the {self.backend.name} backend cannot run cycles"
-                                 if not self.backend.can_excite else self._not_answered())
+                raise ValueError(
+                    f"the {self.backend.name} backend cannot run cycles"
+                    if not self.backend.can_excite
+                    else self._not_answered()
+                )
             if not self.link_up:
                 raise ValueError(f"the link to the device is down ({self.last_link_reason})")
             step = self.sequencer.start(request)
@@ -205,8 +219,9 @@ class DeviceSession:
             if not self.link_up:
                 raise ValueError(f"the link to the device is down ({self.last_link_reason})")
             self._supply_commands += 1
-            command = FieldCurrentCommand(self._supply_commands, self._next_index + self.backend.command_lead_samples,
-                                          float(current_a))
+            command = FieldCurrentCommand(
+                self._supply_commands, self._next_index + self.backend.command_lead_samples, float(current_a)
+            )
             self.backend.send(command)
             self._supply_waiting[command.command_id] = on_done
             return command.command_id
@@ -230,6 +245,7 @@ class DeviceSession:
         self._supply_ramping = [(r, d) for r, d in self._supply_ramping if r.applied_sample_index >= self._next_index]
         for result, done in reached:
             done(result)
+
     def _not_answered(self) -> str:
         """Why no cycle can run on a device that has never described itself."""
         why = self.last_link_reason or self.backend.stats().get("last_error") or "no answer to Hello yet"
@@ -274,8 +290,11 @@ class DeviceSession:
         """Samples received per host second over the last RATE_WINDOW_S; None in the first
         RATE_WINDOW_S of samples, when the stream catches up with the time its start took."""
         with self._lock:
-            if self._first_samples_s is None or self._monotonic() - self._first_samples_s < RATE_WINDOW_S \
-                    or len(self._arrivals) < 2:
+            if (
+                self._first_samples_s is None
+                or self._monotonic() - self._first_samples_s < RATE_WINDOW_S
+                or len(self._arrivals) < 2
+            ):
                 return None
             span = self._arrivals[-1][0] - self._arrivals[0][0]
             return sum(n for _, n in list(self._arrivals)[1:]) / span if span > 0 else None
@@ -283,18 +302,33 @@ class DeviceSession:
     def health(self) -> dict:
         """Everything /diagnostics reports, as plain values."""
         with self._lock:
-            values = {"link_up": self.link_up, "link_changes": self.link_changes,
-                      "link_reason": self.last_link_reason, "refused_commands": self.refused_commands,
-                      "device_faults": self.device_faults, "last_device_fault": self.last_device_fault,
-                      **self.backend.stats()}
+            values = {
+                "link_up": self.link_up,
+                "link_changes": self.link_changes,
+                "link_reason": self.last_link_reason,
+                "refused_commands": self.refused_commands,
+                "device_faults": self.device_faults,
+                "last_device_fault": self.last_device_fault,
+                **self.backend.stats(),
+            }
             a, s = self.assembler, self.sequencer
             if a is not None:
-                values.update(samples=a.samples, gaps=a.gaps, missing_samples=a.missing_samples,
-                              device_restarts=a.restarts, saturated_samples=a.saturated_samples)
-            if s is None:   # a recording: the phase of its last replayed event
+                values.update(
+                    samples=a.samples,
+                    gaps=a.gaps,
+                    missing_samples=a.missing_samples,
+                    device_restarts=a.restarts,
+                    saturated_samples=a.saturated_samples,
+                )
+            if s is None:  # a recording: the phase of its last replayed event
                 values.update(phase=self._replayed_phase.name if self._replayed_phase else "none replayed yet")
             else:
-                values.update(phase=s.phase.name, cycle_running=s.busy, estop_latched=s.latched is not None,
-                              estop_reason=s.latched or "", excitation_frequency_hz=s.frequency_hz,
-                              duty_cycle=s.duty_fraction())
+                values.update(
+                    phase=s.phase.name,
+                    cycle_running=s.busy,
+                    estop_latched=s.latched is not None,
+                    estop_reason=s.latched or "",
+                    excitation_frequency_hz=s.frequency_hz,
+                    duty_cycle=s.duty_fraction(),
+                )
             return values

@@ -1,6 +1,7 @@
 """The simulator as the driver's device (:class:`mows.device.interface.Backend` ``sim``): the
 first-principles simulator in this process, paced in real time or unpaced, with commands applied
 at their exact sample."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -24,8 +25,15 @@ SIM_CHUNK_S = 0.025
 def simulated_device_info(device: ScheduledDevice) -> DeviceInfo:
     """A DeviceInfo for a simulated device (no link, so no watchdog: infinite timeout)."""
     near = device.device.scenario.sensors.pair.sensors[0]
-    return DeviceInfo(device.device.sample_rate_hz, 2, device.device.n_coils, near.range_t, near.resolution_t,
-                      device.cap.limit_a, math.inf)
+    return DeviceInfo(
+        device.device.sample_rate_hz,
+        2,
+        device.device.n_coils,
+        near.range_t,
+        near.resolution_t,
+        device.cap.limit_a,
+        math.inf,
+    )
 
 
 def stamped(block: SimulatedBlock, clock: DeviceClock) -> SampleBlock:
@@ -45,9 +53,16 @@ class SimBackend(Backend):
     name = "sim"
     can_excite = True
 
-    def __init__(self, device: SimulatedDevice, cap: CurrentCap, paced: bool = True,
-                 clock: DeviceClock | None = None, chunk_s: float = SIM_CHUNK_S, supply_cap_a: float = math.inf,
-                 supply_slew_a_per_s: float = math.inf):
+    def __init__(
+        self,
+        device: SimulatedDevice,
+        cap: CurrentCap,
+        paced: bool = True,
+        clock: DeviceClock | None = None,
+        chunk_s: float = SIM_CHUNK_S,
+        supply_cap_a: float = math.inf,
+        supply_slew_a_per_s: float = math.inf,
+    ):
         self.device = ScheduledDevice(device, cap, supply_cap_a, supply_slew_a_per_s)
         self._info = simulated_device_info(self.device)
         self.clock = clock or DeviceClock(device.sample_rate_hz)
@@ -77,8 +92,9 @@ class SimBackend(Backend):
         with self._lock:
             try:
                 if isinstance(command, CoilCommand):
-                    applied = self.device.schedule_coils(command.at_sample_index, command.amplitudes_a,
-                                                         command.frequency_hz)
+                    applied = self.device.schedule_coils(
+                        command.at_sample_index, command.amplitudes_a, command.frequency_hz
+                    )
                 elif isinstance(command, FieldCurrentCommand):
                     applied = self.device.schedule_field_current(command.at_sample_index, command.current_a)
                 else:
@@ -98,8 +114,9 @@ class SimBackend(Backend):
     def stats(self) -> dict:
         values = {"link": "simulated", "device_coils_on": self.device.coils_on}
         if self.device.supply_limits is not None:
-            values.update(supply_current_a=self.device.device.field_current_a,
-                          supply_target_a=self.device.supply_target_a)
+            values.update(
+                supply_current_a=self.device.device.field_current_a, supply_target_a=self.device.supply_target_a
+            )
         return values
 
     def close(self) -> None:

@@ -5,6 +5,7 @@ I/O-free state machine in the manner of :class:`mows.device.cycle.CycleSequencer
 frequencies of OK ring-downs (:meth:`F00Calibration.offer`) and the end of its time
 (:meth:`F00Calibration.time_up`), it returns the outcome once it has one.
 """
+
 import dataclasses
 import enum
 import math
@@ -51,8 +52,10 @@ class F00Calibration:
         # f/f00 = √ratio: the field adds m·B to the spring kM (Eq. 6, kG = 0).
         self._ratio = 1.0 + probe.moment_am2 * reference_field_t / probe.spring_nm_per_rad
         if n_ringdowns < 1 or not timeout_s > 0 or not self._ratio > 0:
-            raise ValueError(f"need n_ringdowns ≥ 1, timeout_s > 0 and a reference field above spring "
-                             f"cancellation (−kM/m = {probe.cancellation_field_t * 1e3:.2f} mT)")
+            raise ValueError(
+                f"need n_ringdowns ≥ 1, timeout_s > 0 and a reference field above spring "
+                f"cancellation (−kM/m = {probe.cancellation_field_t * 1e3:.2f} mT)"
+            )
         self.wanted = int(n_ringdowns)
         self.timeout_s = float(timeout_s)
         self._fits: list[tuple[float, float]] = []
@@ -76,8 +79,11 @@ class F00Calibration:
         if self.done:
             return None
         n = len(self._fits)
-        self.outcome = F00Outcome(CalibrationStatus.TOO_FEW_RINGDOWNS,
-                                  f"only {n} of {self.wanted} OK ring-downs in {self.timeout_s} s", n_used=n)
+        self.outcome = F00Outcome(
+            CalibrationStatus.TOO_FEW_RINGDOWNS,
+            f"only {n} of {self.wanted} OK ring-downs in {self.timeout_s} s",
+            n_used=n,
+        )
         return self.outcome
 
     def _solve(self) -> F00Outcome:
@@ -90,5 +96,6 @@ class F00Calibration:
         spread = f00_each.std(ddof=1) / math.sqrt(n) if n > 1 else 0.0
         propagated = math.sqrt(np.sum((fits[:, 1] * scale) ** 2)) / n
         f00, std = float(f00_each.mean()), float(max(spread, propagated))
-        return F00Outcome(CalibrationStatus.OK, f"f00 = {f00:.6f} ± {std * 1e3:.4f} mHz from {n} ring-downs",
-                          f00, std, n)
+        return F00Outcome(
+            CalibrationStatus.OK, f"f00 = {f00:.6f} ± {std * 1e3:.4f} mHz from {n} ring-downs", f00, std, n
+        )

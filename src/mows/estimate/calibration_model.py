@@ -6,6 +6,7 @@ environment field, at the ring-down's decaying amplitude, averaged over amplitud
 constant-frequency fit averages it (:mod:`mows.physics.ringdown_average`). The fit of the
 constants is :mod:`mows.estimate.probe_calibration`.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -30,15 +31,17 @@ class Rows:
     frequency_std_hz: np.ndarray
     field_t: np.ndarray
     gradient_t_per_m: np.ndarray
-    amplitudes_rad: np.ndarray     # (n, q) amplitude nodes of the fit's averaging
-    weights: np.ndarray            # (n, q)
+    amplitudes_rad: np.ndarray  # (n, q) amplitude nodes of the fit's averaging
+    weights: np.ndarray  # (n, q)
 
 
 def rows_of(points, wirings: dict, known: KnownConstants) -> Rows:
     unknown = {p.wiring for p in points} - set(wirings)
     if unknown:
-        raise CalibrationError(f"points of wirings {sorted(unknown)} but only {sorted(wirings)} are described "
-                               "(a gradient wiring needs its field per ampere: mows calibrate --gradient-scenario)")
+        raise CalibrationError(
+            f"points of wirings {sorted(unknown)} but only {sorted(wirings)} are described "
+            "(a gradient wiring needs its field per ampere: mows calibrate --gradient-scenario)"
+        )
     current = np.array([p.supply_current_a for p in points])
     field = np.array([wirings[p.wiring].field_per_a_t for p in points]) * current[:, None]
     gradient = np.array([wirings[p.wiring].gradient_per_a_t_per_m for p in points]) * current[:, None, None]
@@ -46,9 +49,17 @@ def rows_of(points, wirings: dict, known: KnownConstants) -> Rows:
     damping = np.array([p.damping_per_s for p in points])
     start = known.theta_stop_rad * np.exp(-damping * np.array([p.start_offset_s for p in points]))
     amplitudes, weights = ringdown_average.amplitude_nodes(
-        theta0, start, damping, np.array([p.duration_s for p in points]), nodes=AMPLITUDE_NODES)
-    return Rows(theta0, np.array([p.frequency_hz for p in points]), np.array([p.frequency_std_hz for p in points]),
-                 field, gradient, amplitudes, weights)
+        theta0, start, damping, np.array([p.duration_s for p in points]), nodes=AMPLITUDE_NODES
+    )
+    return Rows(
+        theta0,
+        np.array([p.frequency_hz for p in points]),
+        np.array([p.frequency_std_hz for p in points]),
+        field,
+        gradient,
+        amplitudes,
+        weights,
+    )
 
 
 def inertia_from(f00_hz, spring_nm_per_rad, damping_per_s):
@@ -61,8 +72,15 @@ def frequencies(rows: Rows, known: KnownConstants, f00, beta0, environment_t, le
     :mod:`mows.estimate.probe_calibration`)."""
     spring = f00 * known.moment_am2 / (2.0 * beta0)
     try:
-        probe = Probe(known.moment_am2, spring, inertia_from(f00, spring, damping), lever, known.magnet_mass_kg,
-                      damping, known.theta_stop_rad)
+        probe = Probe(
+            known.moment_am2,
+            spring,
+            inertia_from(f00, spring, damping),
+            lever,
+            known.magnet_mass_kg,
+            damping,
+            known.theta_stop_rad,
+        )
     except ValueError:  # a trial step to unphysical constants: far from every measurement
         return np.full(len(rows.frequency_hz), 1e9)
     axes = probe_axes(rows.theta0_rad)
@@ -70,6 +88,6 @@ def frequencies(rows: Rows, known: KnownConstants, f00, beta0, environment_t, le
     gradient = np.einsum("nai,nij,nbj->nab", axes, rows.gradient_t_per_m, axes)
     q = rows.amplitudes_rad.shape[1]
     potential = ArcPotential.from_local_field(probe, np.repeat(field, q, 0), np.repeat(gradient, q, 0))
-    scale = stop / known.theta_stop_rad   # the nodes scale with the start amplitude
+    scale = stop / known.theta_stop_rad  # the nodes scale with the start amplitude
     per_node = potential.frequency_hz(scale * rows.amplitudes_rad.reshape(-1)).reshape(-1, q)
     return (rows.weights * per_node).sum(-1)

@@ -5,6 +5,7 @@ supply makes a field at the probe (:class:`Wiring`) and what is taken as given
 (:class:`KnownConstants`). Out: the calibrated constants with their covariance
 (:class:`ProbeCalibration`) and the ``calibration`` section of a probe file it writes.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -18,7 +19,6 @@ from mows.physics.probe import Probe
 # (penetration into the contact, the phase at switch-off: 23.6°–23.9° measured in the
 # simulator at a 24° stop, the estimator's θmax scattering by degrees).
 THETA_STOP_STD_RAD = math.radians(0.1)
-
 
 
 class CalibrationError(ValueError):
@@ -38,8 +38,11 @@ class Wiring:
     def from_source(cls, name: str, source_per_a, position_m=(0.0, 0.0, 0.0)) -> Wiring:
         """The wiring of a field source (its field at 1 A) at ``position_m``."""
         point = np.asarray(position_m, float)
-        return cls(name, tuple(source_per_a.field_t(point).tolist()),
-                   tuple(map(tuple, source_per_a.gradient_t_per_m(point).tolist())))
+        return cls(
+            name,
+            tuple(source_per_a.field_t(point).tolist()),
+            tuple(map(tuple, source_per_a.gradient_t_per_m(point).tolist())),
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,12 +57,21 @@ class CalibrationPoint:
     amplitude_rad: float
     damping_per_s: float
     duration_s: float
-    start_offset_s: float = 0.0   # first fitted sample after the switch-off
+    start_offset_s: float = 0.0  # first fitted sample after the switch-off
 
     @classmethod
     def from_fit(cls, fit, wiring: str, supply_current_a: float) -> CalibrationPoint:
-        return cls(wiring, float(supply_current_a), fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz,
-                   fit.amplitude_rad, fit.damping_per_s, fit.duration_s, fit.start_offset_s)
+        return cls(
+            wiring,
+            float(supply_current_a),
+            fit.theta0_rad,
+            fit.frequency_hz,
+            fit.frequency_std_hz,
+            fit.amplitude_rad,
+            fit.damping_per_s,
+            fit.duration_s,
+            fit.start_offset_s,
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,8 +88,12 @@ class KnownConstants:
 
     @classmethod
     def of(cls, probe: Probe, environment_field_t=None) -> KnownConstants:
-        return cls(probe.moment_am2, probe.magnet_mass_kg, probe.theta_stop_rad,
-                   None if environment_field_t is None else tuple(float(b) for b in environment_field_t))
+        return cls(
+            probe.moment_am2,
+            probe.magnet_mass_kg,
+            probe.theta_stop_rad,
+            None if environment_field_t is None else tuple(float(b) for b in environment_field_t),
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,20 +122,33 @@ class ProbeCalibration:
 
     def probe(self) -> Probe:
         """The calibrated probe (lever from J and the magnet mass)."""
-        return Probe(moment_am2=self.known.moment_am2, spring_nm_per_rad=self.value("spring_nm_per_rad"),
-                     inertia_kgm2=self.value("inertia_kgm2"), lever_m=self.value("lever_m"),
-                     magnet_mass_kg=self.known.magnet_mass_kg, damping_per_s=self.value("damping_per_s"),
-                     theta_stop_rad=self.known.theta_stop_rad)
+        return Probe(
+            moment_am2=self.known.moment_am2,
+            spring_nm_per_rad=self.value("spring_nm_per_rad"),
+            inertia_kgm2=self.value("inertia_kgm2"),
+            lever_m=self.value("lever_m"),
+            magnet_mass_kg=self.known.magnet_mass_kg,
+            damping_per_s=self.value("damping_per_s"),
+            theta_stop_rad=self.known.theta_stop_rad,
+        )
 
     def record(self, date: str, hardware_id: str) -> dict:
         """The ``calibration`` section of a probe file: values with uncertainties, correlations."""
-        return {"date": date, "hardware_id": hardware_id, "method": "supply sweep, full potential (mows calibrate)",
-                "points": self.n_points, "chi2_dof": float(self.chi2_dof),
-                "constants": {n: {"value": float(v), "std": self.std(n)} for n, v in zip(self.names, self.values)},
-                "correlation": [[round(float(c), 6) for c in row] for row in self.correlation()],
-                "notes": list(self.notes)}
+        return {
+            "date": date,
+            "hardware_id": hardware_id,
+            "method": "supply sweep, full potential (mows calibrate)",
+            "points": self.n_points,
+            "chi2_dof": float(self.chi2_dof),
+            "constants": {n: {"value": float(v), "std": self.std(n)} for n, v in zip(self.names, self.values)},
+            "correlation": [[round(float(c), 6) for c in row] for row in self.correlation()],
+            "notes": list(self.notes),
+        }
 
     def report(self) -> str:
         lines = [f"{n} = {self.value(n):.6g} ± {self.std(n):.2g}" for n in self.names]
-        return "\n".join(lines + [f"χ²/dof = {self.chi2_dof:.3f} over {self.n_points} ring-downs"]
-                         + [f"note: {n}" for n in self.notes])
+        return "\n".join(
+            lines
+            + [f"χ²/dof = {self.chi2_dof:.3f} over {self.n_points} ring-downs"]
+            + [f"note: {n}" for n in self.notes]
+        )

@@ -32,6 +32,7 @@ environment field along the axis are then interchangeable), no usable ring-down 
 current (the fits failed, e.g. saturated sensors). Without gradient points the lever comes from
 J and a alone, and the report says that the lever check could not be made.
 """
+
 from __future__ import annotations
 
 import math
@@ -43,7 +44,7 @@ from mows.estimate.calibration_model import frequencies, inertia_from, rows_of
 from mows.estimate.calibration_record import CalibrationError, KnownConstants, ProbeCalibration, Wiring
 from mows.physics.probe import lever_from_inertia
 
-FIELD_UNIT_T = 1e-6       # fit units keep the normal equations well scaled: µT, Hz/mT, mm
+FIELD_UNIT_T = 1e-6  # fit units keep the normal equations well scaled: µT, Hz/mT, mm
 BETA_UNIT_HZ_PER_T = 1e3
 LEVER_UNIT_M = 1e-3
 AMPLITUDE_UNIT_RAD = 1e-3
@@ -53,8 +54,14 @@ STEPS = {"f00": 1e-4, "beta0": 1e-5, "swing": 1e-2, "environment": 0.1, "lever":
 
 
 # --- the fit -----------------------------------------------------------------------------------
-def calibrate_probe(points, wirings, known: KnownConstants, field_wiring: str = "helmholtz",
-                    failed: dict | None = None, nominal_lever_m: float = 1.9e-3) -> ProbeCalibration:
+def calibrate_probe(
+    points,
+    wirings,
+    known: KnownConstants,
+    field_wiring: str = "helmholtz",
+    failed: dict | None = None,
+    nominal_lever_m: float = 1.9e-3,
+) -> ProbeCalibration:
     """Fit the probe's constants to ``points`` (:class:`CalibrationPoint`).
 
     ``wirings``: :class:`Wiring` by name (or a sequence of them); ``field_wiring`` names the
@@ -63,8 +70,11 @@ def calibrate_probe(points, wirings, known: KnownConstants, field_wiring: str = 
     saturation check. CalibrationError when the data cannot determine the constants.
     """
     wirings = wirings if isinstance(wirings, dict) else {w.name: w for w in wirings}
-    points = [p for p in points if all(map(math.isfinite, (p.frequency_hz, p.frequency_std_hz, p.amplitude_rad,
-                                                           p.damping_per_s, p.duration_s)))]
+    points = [
+        p
+        for p in points
+        if all(map(math.isfinite, (p.frequency_hz, p.frequency_std_hz, p.amplitude_rad, p.damping_per_s, p.duration_s)))
+    ]
     notes = _failure_notes(failed or {}, points)
     field_points = [p for p in points if p.wiring == field_wiring]
     gradient_points = [p for p in points if p.wiring != field_wiring]
@@ -91,20 +101,40 @@ def calibrate_probe(points, wirings, known: KnownConstants, field_wiring: str = 
         return np.append((model - rows.frequency_hz) / rows.frequency_std_hz, prior)
 
     start = _start(field_points, wirings[field_wiring], known)
-    x0 = np.array([start[0], start[1] / BETA_UNIT_HZ_PER_T, known.theta_stop_rad / AMPLITUDE_UNIT_RAD]
-                  + [0.0] * fit_environment + [nominal_lever_m / LEVER_UNIT_M] * fit_lever)
-    steps = np.array([STEPS[k] for k in ["f00", "beta0", "swing"] + ["environment"] * fit_environment
-                      + ["lever"] * fit_lever])
-    result = optimize.least_squares(residuals, x0, jac=lambda x: _jacobian(residuals, x, steps), method="lm",
-                                    x_scale="jac")
+    x0 = np.array(
+        [start[0], start[1] / BETA_UNIT_HZ_PER_T, known.theta_stop_rad / AMPLITUDE_UNIT_RAD]
+        + [0.0] * fit_environment
+        + [nominal_lever_m / LEVER_UNIT_M] * fit_lever
+    )
+    steps = np.array(
+        [STEPS[k] for k in ["f00", "beta0", "swing"] + ["environment"] * fit_environment + ["lever"] * fit_lever]
+    )
+    result = optimize.least_squares(
+        residuals, x0, jac=lambda x: _jacobian(residuals, x, steps), method="lm", x_scale="jac"
+    )
     if not result.success or not np.all(np.isfinite(result.fun)):
         raise CalibrationError(f"the fit of the calibration did not converge: {result.message}")
     dof = len(points) + 1 - len(x0)
     chi2_dof = float(result.fun @ result.fun / dof) if dof > 0 else math.nan
-    cov_x = _covariance(result.jac, ["f00", "β0", "start swing"] + ["environment field"] * fit_environment
-                        + ["lever"] * fit_lever) * max(1.0, chi2_dof if dof > 0 else 1.0)
-    return _derive(result.x, cov_x, damping, damping_var, unpack, fit_environment, fit_lever, unit_axis,
-                   wirings, gradient_points, known, chi2_dof, len(points), tuple(notes))
+    cov_x = _covariance(
+        result.jac, ["f00", "β0", "start swing"] + ["environment field"] * fit_environment + ["lever"] * fit_lever
+    ) * max(1.0, chi2_dof if dof > 0 else 1.0)
+    return _derive(
+        result.x,
+        cov_x,
+        damping,
+        damping_var,
+        unpack,
+        fit_environment,
+        fit_lever,
+        unit_axis,
+        wirings,
+        gradient_points,
+        known,
+        chi2_dof,
+        len(points),
+        tuple(notes),
+    )
 
 
 def _jacobian(residuals, x, steps) -> np.ndarray:
@@ -121,8 +151,9 @@ def _covariance(jac, names) -> np.ndarray:
     u, s, vt = np.linalg.svd(jac, full_matrices=False)
     if s[-1] < 1e-9 * s[0]:
         weak = [names[i] for i in np.flatnonzero(np.abs(vt[-1]) > 0.3)]
-        raise CalibrationError(f"the data cannot determine {' and '.join(weak)} (separately): "
-                               "add supply currents or orientations")
+        raise CalibrationError(
+            f"the data cannot determine {' and '.join(weak)} (separately): add supply currents or orientations"
+        )
     return (vt.T / s**2) @ vt
 
 
@@ -132,9 +163,11 @@ def _amplitude_notes(points, known: KnownConstants) -> list:
     fitted θmax scatters by degrees. Say so when the fits suggest the stop was not reached."""
     amplitude = float(np.median([p.amplitude_rad for p in points]))
     if amplitude < 0.8 * known.theta_stop_rad:
-        return [f"the ring-downs' median θmax {math.degrees(amplitude):.1f}° is well below the housing stop "
-                f"{math.degrees(known.theta_stop_rad):.1f}° that the model assumes: β0 is biased by about "
-                f"{(known.theta_stop_rad**2 - amplitude**2) / 8 * 100:.2f} %; excite harder"]
+        return [
+            f"the ring-downs' median θmax {math.degrees(amplitude):.1f}° is well below the housing stop "
+            f"{math.degrees(known.theta_stop_rad):.1f}° that the model assumes: β0 is biased by about "
+            f"{(known.theta_stop_rad**2 - amplitude**2) / 8 * 100:.2f} %; excite harder"
+        ]
     return []
 
 
@@ -142,23 +175,29 @@ def _field_axis(wirings: dict, field_wiring: str) -> np.ndarray:
     """The homogeneous wiring's field per ampere at the probe; CalibrationError without one."""
     axis = np.asarray(wirings[field_wiring].field_per_a_t, float) if field_wiring in wirings else np.zeros(3)
     if not np.any(axis):
-        raise CalibrationError(f"no homogeneous-field wiring {field_wiring!r} with a field at the probe is "
-                               "described: β0 undetermined")
+        raise CalibrationError(
+            f"no homogeneous-field wiring {field_wiring!r} with a field at the probe is described: β0 undetermined"
+        )
     return axis
 
 
 def _check_field_points(points, axis: np.ndarray, known: KnownConstants) -> None:
     """CalibrationError when the homogeneous sweep cannot determine β0 and f00."""
-    along = np.array([p.supply_current_a * (axis[0] * math.cos(p.theta0_rad) + axis[1] * math.sin(p.theta0_rad))
-                      for p in points])
+    along = np.array(
+        [p.supply_current_a * (axis[0] * math.cos(p.theta0_rad) + axis[1] * math.sin(p.theta0_rad)) for p in points]
+    )
     distinct = np.unique(np.round(along / np.linalg.norm(axis), 6))
     if len(distinct) < 2:
-        raise CalibrationError(f"too few supply currents: {len(points)} usable ring-downs at {len(distinct)} distinct "
-                               "field(s) along the probe axis; β0 (hence kM and J) needs at least two")
+        raise CalibrationError(
+            f"too few supply currents: {len(points)} usable ring-downs at {len(distinct)} distinct "
+            "field(s) along the probe axis; β0 (hence kM and J) needs at least two"
+        )
     if known.environment_field_t is None and not (along.min() < 0.0 < along.max()):
-        raise CalibrationError("fields of one sign only along the probe axis: f00 and the environment field along "
-                               "the supply's axis cannot be told apart; add θ0 = 180° (or negative currents) or "
-                               "give the environment field from a reference magnetometer")
+        raise CalibrationError(
+            "fields of one sign only along the probe axis: f00 and the environment field along "
+            "the supply's axis cannot be told apart; add θ0 = 180° (or negative currents) or "
+            "give the environment field from a reference magnetometer"
+        )
 
 
 def _failure_notes(failed: dict, points) -> list:
@@ -167,8 +206,10 @@ def _failure_notes(failed: dict, points) -> list:
     for (current, reason), count in sorted(failed.items()):
         notes.append(f"{count} ring-down fit(s) at {current:+.4f} A failed ({reason}) and were left out")
         if current not in usable:
-            raise CalibrationError(f"no usable ring-down at the supply current {current:+.4f} A: every fit failed "
-                                   f"({reason}); lower the currents (saturation) or repeat that step")
+            raise CalibrationError(
+                f"no usable ring-down at the supply current {current:+.4f} A: every fit failed "
+                f"({reason}); lower the currents (saturation) or repeat that step"
+            )
     return notes
 
 
@@ -182,17 +223,39 @@ def _mean_damping(points) -> tuple:
 def _start(points, wiring: Wiring, known: KnownConstants) -> tuple:
     """f00 and β0 from a straight line through f against the applied field along x'."""
     axis = np.asarray(wiring.field_per_a_t, float)
-    along = np.array([p.supply_current_a * (axis[0] * math.cos(p.theta0_rad) + axis[1] * math.sin(p.theta0_rad))
-                      for p in points])
+    along = np.array(
+        [p.supply_current_a * (axis[0] * math.cos(p.theta0_rad) + axis[1] * math.sin(p.theta0_rad)) for p in points]
+    )
     slope, intercept = np.polyfit(along, [p.frequency_hz for p in points], 1)
     return float(intercept), float(slope) if slope > 0 else 3.68e3
 
 
-def _derive(x, cov_x, damping, damping_var, unpack, fit_environment, fit_lever, unit_axis, wirings,
-            gradient_points, known, chi2_dof, n_points, notes) -> ProbeCalibration:
+def _derive(
+    x,
+    cov_x,
+    damping,
+    damping_var,
+    unpack,
+    fit_environment,
+    fit_lever,
+    unit_axis,
+    wirings,
+    gradient_points,
+    known,
+    chi2_dof,
+    n_points,
+    notes,
+) -> ProbeCalibration:
     """The reported constants and their covariance by the delta method over (x, δ)."""
-    names = ["f00_hz", "beta0_hz_per_t", "spring_nm_per_rad", "inertia_kgm2", "lever_m", "damping_per_s",
-             "start_swing_rad"]
+    names = [
+        "f00_hz",
+        "beta0_hz_per_t",
+        "spring_nm_per_rad",
+        "inertia_kgm2",
+        "lever_m",
+        "damping_per_s",
+        "start_swing_rad",
+    ]
     names += ["environment_field_along_supply_t"] * fit_environment
     gradient_factor = _gradient_factor(wirings, gradient_points) if fit_lever else None
     names += ["gradient_lever_m", "gamma_hz_m_per_t"] * fit_lever
@@ -219,8 +282,10 @@ def _derive(x, cov_x, damping, damping_var, unpack, fit_environment, fit_lever, 
         lever, lever_j = values[names.index("gradient_lever_m")], values[names.index("lever_m")]
         i, j = names.index("gradient_lever_m"), names.index("lever_m")
         sigma = math.sqrt(max(covariance[i, i] + covariance[j, j] - 2.0 * covariance[i, j], 0.0))
-        notes = notes + (f"lever check: l from the gradient {lever * 1e3:.4f} mm against l = √(J/a) "
-                         f"{lever_j * 1e3:.4f} mm, {(lever - lever_j) / sigma:+.2f} σ apart",)
+        notes = notes + (
+            f"lever check: l from the gradient {lever * 1e3:.4f} mm against l = √(J/a) "
+            f"{lever_j * 1e3:.4f} mm, {(lever - lever_j) / sigma:+.2f} σ apart",
+        )
     return ProbeCalibration(tuple(names), values, covariance, chi2_dof, n_points, known, notes)
 
 

@@ -32,6 +32,7 @@ variance s²; ``frequency_crb_hz`` from the Fisher information with the white-no
 measured independently of the model (from the third difference of the data). If the model
 misses something, s exceeds the noise level: χ²/dof > 1 and std > CRB.
 """
+
 from __future__ import annotations
 
 import math
@@ -97,9 +98,16 @@ def combine_channels(samples: np.ndarray, mode: str) -> np.ndarray:
 
 
 # --- the fit ----------------------------------------------------------------------------
-def fit_ringdown(samples, sample_rate_hz, theta0_rad, expected_frequency_hz, saturated=None,
-                 options: FitOptions = FitOptions(), damping_guess_per_s: float = 1.8,
-                 settle_s: float = 0.0) -> RingdownFit:
+def fit_ringdown(
+    samples,
+    sample_rate_hz,
+    theta0_rad,
+    expected_frequency_hz,
+    saturated=None,
+    options: FitOptions = FitOptions(),
+    damping_guess_per_s: float = 1.8,
+    settle_s: float = 0.0,
+) -> RingdownFit:
     """Fit one free ring-down.
 
     Parameters
@@ -119,18 +127,22 @@ def fit_ringdown(samples, sample_rate_hz, theta0_rad, expected_frequency_hz, sat
     known = {"theta0_rad": float(theta0_rad), "theta0_free": options.theta0_free}
     fs = _as_float(sample_rate_hz)
     if not (math.isfinite(fs) and fs > 0):
-        return failure(FitStatus.BAD_SAMPLE_RATE, f"sample rate {sample_rate_hz!r} Hz is not a positive number",
-                       **known)
+        return failure(
+            FitStatus.BAD_SAMPLE_RATE, f"sample rate {sample_rate_hz!r} Hz is not a positive number", **known
+        )
     expected_frequency_hz = _as_float(expected_frequency_hz)
     if not (math.isfinite(expected_frequency_hz) and expected_frequency_hz > 0):
-        return failure(FitStatus.BAD_SAMPLE_RATE,
-                       f"expected frequency {expected_frequency_hz!r} Hz is not positive", **known)
+        return failure(
+            FitStatus.BAD_SAMPLE_RATE, f"expected frequency {expected_frequency_hz!r} Hz is not positive", **known
+        )
     if expected_frequency_hz * (1 + options.search_fraction) * 2 * 3 > fs / 2:
-        return failure(FitStatus.BAD_SAMPLE_RATE,
-                       f"sample rate {fs:g} Hz cannot resolve a ring-down near {expected_frequency_hz:g} Hz "
-                       f"and its harmonics (needs > {12 * expected_frequency_hz * (1 + options.search_fraction):.0f}"
-                       " Hz)",
-                       **known)
+        return failure(
+            FitStatus.BAD_SAMPLE_RATE,
+            f"sample rate {fs:g} Hz cannot resolve a ring-down near {expected_frequency_hz:g} Hz "
+            f"and its harmonics (needs > {12 * expected_frequency_hz * (1 + options.search_fraction):.0f}"
+            " Hz)",
+            **known,
+        )
     data = np.asarray(samples, float)
     if data.ndim not in (1, 2) or data.shape[0] == 0:
         return failure(FitStatus.TOO_SHORT, f"no samples (shape {data.shape})", **known)
@@ -142,12 +154,17 @@ def fit_ringdown(samples, sample_rate_hz, theta0_rad, expected_frequency_hz, sat
     min_samples = int(math.ceil(options.min_periods * fs / expected_frequency_hz))
     if stop - start < min_samples:
         why = FitStatus.SATURATED if mask.any() else FitStatus.TOO_SHORT
-        return failure(why, f"{stop - start} usable samples ({(stop - start) / fs * 1e3:.1f} ms) after removing "
-                            f"{int(mask.reshape(len(mask), -1).any(axis=1).sum())} saturated samples; "
-                            f"need {min_samples} ({options.min_periods:g} periods)", **known)
+        return failure(
+            why,
+            f"{stop - start} usable samples ({(stop - start) / fs * 1e3:.1f} ms) after removing "
+            f"{int(mask.reshape(len(mask), -1).any(axis=1).sum())} saturated samples; "
+            f"need {min_samples} ({options.min_periods:g} periods)",
+            **known,
+        )
     y = combine_channels(data[start:stop], options.channels)
-    return _fit_window(y, fs, float(theta0_rad), float(expected_frequency_hz), options,
-                       damping_guess_per_s, start / fs, known)
+    return _fit_window(
+        y, fs, float(theta0_rad), float(expected_frequency_hz), options, damping_guess_per_s, start / fs, known
+    )
 
 
 def _problem(y, fs, theta0, options) -> RingdownProblem:
@@ -161,23 +178,26 @@ def _problem(y, fs, theta0, options) -> RingdownProblem:
 def _coarse_start(problem, fs, expected_hz, options, damping_guess):
     """The subsampled problem and the best spectral start on it, or (coarse, None)."""
     coarse = problem.subsampled(max(1, int(fs // (16.0 * expected_hz))))
-    starts = start_candidates(coarse.y.sum(axis=0), 1.0 / coarse.dt, expected_hz, options,
-                                     damping_guess)
+    starts = start_candidates(coarse.y.sum(axis=0), 1.0 / coarse.dt, expected_hz, options, damping_guess)
     if not starts:
         return coarse, None
     extra = [problem.theta0] if options.theta0_free else []
-    return coarse, min((np.concatenate([s_, extra]) for s_ in starts),
-                       key=lambda q: evaluate(coarse, q, False).cost)
+    return coarse, min((np.concatenate([s_, extra]) for s_ in starts), key=lambda q: evaluate(coarse, q, False).cost)
 
 
-def starting_point(samples, sample_rate_hz, theta0_rad, expected_frequency_hz, options: FitOptions = FitOptions(),
-                   damping_guess_per_s: float = 1.8):
+def starting_point(
+    samples,
+    sample_rate_hz,
+    theta0_rad,
+    expected_frequency_hz,
+    options: FitOptions = FitOptions(),
+    damping_guess_per_s: float = 1.8,
+):
     """The point the fit starts from: (f, δ, θmax, φ, [θ0,] κ, B_DC) of the first channel, from
     the spectral stage, or None if no line is found. For comparisons with other optimisers."""
     y = combine_channels(samples, options.channels)
     problem = _problem(y, float(sample_rate_hz), float(theta0_rad), options)
-    _, q0 = _coarse_start(problem, float(sample_rate_hz), float(expected_frequency_hz), options,
-                          damping_guess_per_s)
+    _, q0 = _coarse_start(problem, float(sample_rate_hz), float(expected_frequency_hz), options, damping_guess_per_s)
     return None if q0 is None else np.concatenate([q0, evaluate(problem, q0, False).coef[0]])
 
 
@@ -193,12 +213,17 @@ def _fit_window(y, fs, theta0, expected_hz, options, damping_guess, start_s, kno
     problem = _problem(y, fs, theta0, options)
     coarse, q0 = _coarse_start(problem, fs, expected_hz, options, damping_guess)
     if q0 is None:
-        return failure(FitStatus.NO_OSCILLATION, f"no spectral line near {expected_hz:.2f} Hz or its double "
-                                                 f"stands above the noise floor (×{options.detection_snr:g})", **known)
+        return failure(
+            FitStatus.NO_OSCILLATION,
+            f"no spectral line near {expected_hz:.2f} Hz or its double "
+            f"stands above the noise floor (×{options.detection_snr:g})",
+            **known,
+        )
     step, _, _, _ = variable_projection(coarse, q0, options.max_iterations, tol_chi2=1e-2)
     # The coarse optimum is within a few σ of the full-rate one: start as Gauss–Newton.
-    step, converged, iters, free = variable_projection(problem, step.q, options.max_iterations, tol_chi2=1e-4,
-                                                        damping=1e-6)
+    step, converged, iters, free = variable_projection(
+        problem, step.q, options.max_iterations, tol_chi2=1e-4, damping=1e-6
+    )
     if not converged:
         return failure(FitStatus.NOT_CONVERGED, f"the fit did not converge in {iters} iterations", **known)
     return _summarise(step, problem, free, 1.0 / problem.weights, options, expected_hz, start_s, known)
@@ -208,10 +233,12 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
     q, y = step.q, problem.y
     n_ch, n = y.shape
     if q[0] < options.min_frequency_fraction * expected_hz:
-        return failure(FitStatus.NEGATIVE_STIFFNESS,
-                       f"fitted frequency {q[0]:.3f} Hz is below {options.min_frequency_fraction:g} × the expected "
-                       f"{expected_hz:.2f} Hz: the restoring spring is (nearly) cancelled (k ≤ 0 beyond B = −kM/m)",
-                       **known)
+        return failure(
+            FitStatus.NEGATIVE_STIFFNESS,
+            f"fitted frequency {q[0]:.3f} Hz is below {options.min_frequency_fraction:g} × the expected "
+            f"{expected_hz:.2f} Hz: the restoring spring is (nearly) cancelled (k ≤ 0 beyond B = −kM/m)",
+            **known,
+        )
     fisher = fisher_information(step, problem.weights)
     fitted = np.concatenate([free, np.ones(2 * n_ch, bool)])
     fisher_inv = np.full(fisher.shape, np.nan)
@@ -219,16 +246,24 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
         fisher_inv[np.ix_(fitted, fitted)] = scaled_inverse(fisher[np.ix_(fitted, fitted)])
     except np.linalg.LinAlgError:
         return failure(FitStatus.NOT_CONVERGED, "singular Fisher information: parameters not identifiable", **known)
-    note = "" if free[AMPLITUDE] else (
-        f"θmax held at its bound {math.degrees(abs(step.q[AMPLITUDE])):.1f}°: at this orientation the data do not "
-        "separate θmax from κ (f is unaffected)")
+    note = (
+        ""
+        if free[AMPLITUDE]
+        else (
+            f"θmax held at its bound {math.degrees(abs(step.q[AMPLITUDE])):.1f}°: at this orientation the data do not "
+            "separate θmax from κ (f is unaffected)"
+        )
+    )
     chi2_dof = step.cost / (step.residual.size - int(fitted.sum()))
     covariance = fisher_inv * chi2_dof
     if not np.all(np.isfinite(covariance[np.ix_(fitted, fitted)])) or covariance[0, 0] <= 0:
         return failure(FitStatus.NOT_CONVERGED, "covariance is not finite", **known)
     if chi2_dof > options.max_chi2_dof:
-        return failure(FitStatus.BAD_FIT, f"χ²/dof = {chi2_dof:.1f} > {options.max_chi2_dof:g}: the ring-down model "
-                                          "does not describe these data", **known)
+        return failure(
+            FitStatus.BAD_FIT,
+            f"χ²/dof = {chi2_dof:.1f} > {options.max_chi2_dof:g}: the ring-down model does not describe these data",
+            **known,
+        )
     kappa = step.coef[:, 0]
     signal_power = float(np.mean(kappa**2) * np.var(step.shape.g))
     resid_power = float(np.sum(step.residual**2))
@@ -238,16 +273,25 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
     if amp < 0:
         amp, phi = -amp, phi + math.pi
     return RingdownFit(
-        status=FitStatus.OK, message=note, theta0_rad=float(q[4] if options.theta0_free else problem.theta0),
-        theta0_free=options.theta0_free, frequency_hz=float(q[0]),
+        status=FitStatus.OK,
+        message=note,
+        theta0_rad=float(q[4] if options.theta0_free else problem.theta0),
+        theta0_free=options.theta0_free,
+        frequency_hz=float(q[0]),
         frequency_std_hz=float(math.sqrt(covariance[0, 0])),
         frequency_crb_hz=float(math.sqrt(fisher_inv[0, 0])),
-        damping_per_s=float(q[1]), amplitude_rad=float(amp),
+        damping_per_s=float(q[1]),
+        amplitude_rad=float(amp),
         phase_rad=float((phi + math.pi) % TWO_PI - math.pi),
-        kappa_t=float(kappa[0]), offset_t=float(step.coef[0, 1]), chi2_dof=chi2_dof,
+        kappa_t=float(kappa[0]),
+        offset_t=float(step.coef[0, 1]),
+        chi2_dof=chi2_dof,
         r_squared=1.0 - resid_power / total if total > 0 else math.nan,
         snr_db=10.0 * math.log10(signal_power / float(np.mean(noise**2))) if signal_power > 0 else -math.inf,
-        noise_std_t=float(noise.mean()), n_samples=n, duration_s=n * problem.dt, start_offset_s=start_s,
-        parameter_names=tuple(_parameter_names(n_ch, options.theta0_free)), covariance=covariance)
-
-
+        noise_std_t=float(noise.mean()),
+        n_samples=n,
+        duration_s=n * problem.dt,
+        start_offset_s=start_s,
+        parameter_names=tuple(_parameter_names(n_ch, options.theta0_free)),
+        covariance=covariance,
+    )

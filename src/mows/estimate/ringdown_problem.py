@@ -3,6 +3,7 @@ Fisher information (PHYSICS.md §7): what :func:`mows.estimate.ringdown.fit_ring
 on and what the Cramér–Rao bound is computed from. The model and its derivatives are the
 compiled kernels of :mod:`mows.estimate.ringdown_model`.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -19,8 +20,8 @@ NONLINEAR = ("frequency_hz", "damping_per_s", "amplitude_rad", "phase_rad")
 class Shape:
     """g(x(t)) and dg/dq at the samples (:mod:`mows.estimate.ringdown_model`)."""
 
-    g: np.ndarray          # (n,)
-    dg_dq: np.ndarray      # (len(q), n)
+    g: np.ndarray  # (n,)
+    dg_dq: np.ndarray  # (len(q), n)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,10 +29,10 @@ class RingdownProblem:
     """Data and fixed settings of one fit: y is (C, n), uniformly sampled every ``dt``."""
 
     y: np.ndarray
-    weights: np.ndarray      # 1/σ per channel
-    dt: float                # sample interval, s (t = 0 at the first sample)
+    weights: np.ndarray  # 1/σ per channel
+    dt: float  # sample interval, s (t = 0 at the first sample)
     theta0: float
-    pickup: np.ndarray       # C_k of g (complex); with θ0 free, the series at θ0 = 0
+    pickup: np.ndarray  # C_k of g (complex); with θ0 free, the series at θ0 = 0
     theta0_free: bool
 
     def subsampled(self, step: int) -> RingdownProblem:
@@ -46,8 +47,8 @@ class Step:
     q: np.ndarray
     shape: Shape
     coef: np.ndarray
-    residual: np.ndarray       # (C, n), unweighted
-    cost: float                # Σ_c (w_c·|r_c|)²
+    residual: np.ndarray  # (C, n), unweighted
+    cost: float  # Σ_c (w_c·|r_c|)²
 
 
 def evaluate(problem: RingdownProblem, q: np.ndarray, derivatives: bool = True) -> Step:
@@ -60,8 +61,22 @@ def evaluate(problem: RingdownProblem, q: np.ndarray, derivatives: bool = True) 
     g, m = np.empty(n), np.empty((p if derivatives else 0, n))
     residual, coef = np.empty((n_ch, n)), np.empty((n_ch, 2))
     jtj, jtr = np.zeros((p, p)), np.zeros(p)
-    cost = evaluate_model(np.asarray(q, float), problem.dt, cr, ci, problem.theta0_free, problem.y, problem.weights,
-                          derivatives, g, m, residual, coef, jtj, jtr)
+    cost = evaluate_model(
+        np.asarray(q, float),
+        problem.dt,
+        cr,
+        ci,
+        problem.theta0_free,
+        problem.y,
+        problem.weights,
+        derivatives,
+        g,
+        m,
+        residual,
+        coef,
+        jtj,
+        jtr,
+    )
     return Step(q, Shape(g, m), coef, residual, float(cost))
 
 
@@ -84,7 +99,7 @@ def fisher_information(step: Step, weights) -> np.ndarray:
     those rows without forming the n × P Jacobian."""
     m, g = step.shape.dg_dq, step.shape.g
     p, n_ch = m.shape[0], step.coef.shape[0]
-    gram = np.empty((p + 2, p + 2))                          # Gram matrix of the rows M, g, 1
+    gram = np.empty((p + 2, p + 2))  # Gram matrix of the rows M, g, 1
     gram[:p, :p] = m @ m.T
     gram[:p, p] = gram[p, :p] = m @ g
     gram[:p, p + 1] = gram[p + 1, :p] = m.sum(axis=1)
@@ -123,24 +138,55 @@ def variable_projection(problem: RingdownProblem, q, iterations, tol_chi2, dampi
     """
     cr, ci = split_pickup(problem.pickup)
     q, converged, used, free, cost, g, m, residual, coef, _, _ = levenberg_marquardt(
-        np.asarray(q, float).copy(), problem.dt, cr, ci, problem.theta0_free, problem.y, problem.weights,
-        iterations, tol_chi2, damping, *AMPLITUDE_BOUNDS_RAD, AMPLITUDE)
+        np.asarray(q, float).copy(),
+        problem.dt,
+        cr,
+        ci,
+        problem.theta0_free,
+        problem.y,
+        problem.weights,
+        iterations,
+        tol_chi2,
+        damping,
+        *AMPLITUDE_BOUNDS_RAD,
+        AMPLITUDE,
+    )
     return Step(q, Shape(g, m), coef, residual, float(cost)), bool(converged), int(used), free
 
 
 # --- the bound itself -------------------------------------------------------------------
-def cramer_rao_frequency_hz(n_samples, sample_rate_hz, frequency_hz, damping_per_s, amplitude_rad, phase_rad,
-                            theta0_rad, kappa_t, noise_std_t, sensor_direction=(0.0, 1.0),
-                            theta0_free=False, pickup=None) -> float:
+def cramer_rao_frequency_hz(
+    n_samples,
+    sample_rate_hz,
+    frequency_hz,
+    damping_per_s,
+    amplitude_rad,
+    phase_rad,
+    theta0_rad,
+    kappa_t,
+    noise_std_t,
+    sensor_direction=(0.0, 1.0),
+    theta0_free=False,
+    pickup=None,
+) -> float:
     """Cramér–Rao bound of f for one channel of ``n_samples`` in white noise σ:
     √[(JᵀJ/σ²)⁻¹]_ff (PHYSICS.md §7), J the Jacobian of the full model over all its
     parameters (f, δ, θmax, φ, [θ0], κ, B_DC) at the given values. t = 0 at the first sample.
     """
     q = np.array([frequency_hz, damping_per_s, amplitude_rad, phase_rad] + ([theta0_rad] if theta0_free else []))
-    coefficients = (paper_pickup(0.0 if theta0_free else theta0_rad, sensor_direction) if pickup is None
-                    else np.asarray(pickup, complex))
-    problem = RingdownProblem(np.zeros((1, int(n_samples))), np.array([1.0 / noise_std_t]), 1.0 / sample_rate_hz,
-                       theta0_rad, coefficients, theta0_free)
+    coefficients = (
+        paper_pickup(0.0 if theta0_free else theta0_rad, sensor_direction)
+        if pickup is None
+        else np.asarray(pickup, complex)
+    )
+    problem = RingdownProblem(
+        np.zeros((1, int(n_samples))),
+        np.array([1.0 / noise_std_t]),
+        1.0 / sample_rate_hz,
+        theta0_rad,
+        coefficients,
+        theta0_free,
+    )
     shape = evaluate(problem, q).shape
     step = Step(q, shape, np.array([[kappa_t, 0.0]]), np.empty((1, 0)), math.nan)
     return float(math.sqrt(scaled_inverse(fisher_information(step, problem.weights))[0, 0]))

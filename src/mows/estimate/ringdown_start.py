@@ -1,6 +1,7 @@
 """Where a ring-down fit starts: the white-noise level from the data alone, and starting points
 (f, δ, θmax, φ) from the zero-padded spectrum (the lines at f and 2f; near θ0 = 90° the
 signal is mostly at 2f)."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -40,7 +41,7 @@ def _spectral_peak(spectrum, power, freqs, low_hz, high_hz, bin_hz):
         return None
     k = band[np.argmax(power[band])]
     k = min(max(k, 1), power.size - 2)
-    lp = np.log(power[k - 1:k + 2] + 1e-300)
+    lp = np.log(power[k - 1 : k + 2] + 1e-300)
     denom = lp[0] - 2 * lp[1] + lp[2]
     shift = 0.5 * (lp[0] - lp[2]) / denom if denom < 0 else 0.0
     return _Peak(freqs[k] + shift * bin_hz, power[k], float(np.angle(spectrum[k])))
@@ -64,8 +65,8 @@ def start_candidates(y, fs, expected_hz, options, damping_guess):
     if p1 is not None and p1 in found:
         starts += [np.array([p1.frequency_hz, damping_guess, 0.3, p1.phase_rad + k * math.pi]) for k in (0, 1)]
     if p2 is not None and p2 in found:
-        starts += [np.array([p2.frequency_hz / 2.0, damping_guess, 0.3, p2.phase_rad / 2.0 + k * math.pi / 2])
-                   for k in range(4)]
+        starts += [
+            np.array([p2.frequency_hz / 2.0, damping_guess, 0.3, p2.phase_rad / 2.0 + k * math.pi / 2])
+            for k in range(4)
+        ]
     return starts
-
-

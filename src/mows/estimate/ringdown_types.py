@@ -4,6 +4,7 @@
 :class:`RingdownFit` whose :class:`FitStatus` says whether the numbers mean anything; the
 estimator node, the calibration and the lab read these without running a fit.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -69,8 +70,10 @@ class FitOptions:
         if not 0.0 < self.search_fraction < 1.0:
             raise ValueError(f"search_fraction = {self.search_fraction} must be in (0, 1)")
         if self.pickup is not None and (self.theta0_free or self.channels == "both"):
-            raise ValueError("a pickup series describes one fixed-θ0 channel: it cannot be combined with "
-                             "theta0_free or channels='both'")
+            raise ValueError(
+                "a pickup series describes one fixed-θ0 channel: it cannot be combined with "
+                "theta0_free or channels='both'"
+            )
 
     @classmethod
     def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> FitOptions:
@@ -119,11 +122,13 @@ class RingdownFit:
     def report(self) -> str:
         if not self.ok:
             return f"ring-down fit: {self.status.name}: {self.message}"
-        return (f"f = {self.frequency_hz:.6f} ± {self.frequency_std_hz * 1e3:.4f} mHz "
-                f"(CRB {self.frequency_crb_hz * 1e3:.4f} mHz), δ = {self.damping_per_s:.4f} 1/s, "
-                f"θmax = {math.degrees(self.amplitude_rad):.2f}°, θ0 = {math.degrees(self.theta0_rad):.2f}°, "
-                f"χ²/dof = {self.chi2_dof:.3f}, R² = {self.r_squared:.5f}, SNR = {self.snr_db:.1f} dB, "
-                f"{self.n_samples} samples over {self.duration_s:.3f} s")
+        return (
+            f"f = {self.frequency_hz:.6f} ± {self.frequency_std_hz * 1e3:.4f} mHz "
+            f"(CRB {self.frequency_crb_hz * 1e3:.4f} mHz), δ = {self.damping_per_s:.4f} 1/s, "
+            f"θmax = {math.degrees(self.amplitude_rad):.2f}°, θ0 = {math.degrees(self.theta0_rad):.2f}°, "
+            f"χ²/dof = {self.chi2_dof:.3f}, R² = {self.r_squared:.5f}, SNR = {self.snr_db:.1f} dB, "
+            f"{self.n_samples} samples over {self.duration_s:.3f} s"
+        )
 
 
 def failure(status: FitStatus, message: str, **known) -> RingdownFit:

@@ -11,6 +11,7 @@ Device time and sample index are tied by t = t0 + (index − first_index)/fs wit
 announcement's time is converted to an index with the newest block's mapping, so the start
 is exact to one sample as long as both come from the same clock.
 """
+
 from __future__ import annotations
 
 import collections
@@ -35,13 +36,16 @@ class RingdownWindow:
     repeat_index: int = 0
     theta0_rad: float = 0.0
     excitation_frequency_hz: float = math.nan
-    tuning: bool = False        # a frequency-tuning ring-down, not a measurement
+    tuning: bool = False  # a frequency-tuning ring-down, not a measurement
 
     def __post_init__(self):
-        if not (isinstance(self.start_ns, (int, np.integer))
-                and math.isfinite(self.duration_s) and self.duration_s > 0):
-            raise ValueError(f"ring-down of cycle {self.cycle_id} announced at {self.start_ns!r} ns for "
-                             f"{self.duration_s!r} s: not a window")
+        if not (
+            isinstance(self.start_ns, (int, np.integer)) and math.isfinite(self.duration_s) and self.duration_s > 0
+        ):
+            raise ValueError(
+                f"ring-down of cycle {self.cycle_id} announced at {self.start_ns!r} ns for "
+                f"{self.duration_s!r} s: not a window"
+            )
 
 
 def block_from_message(message) -> SampleBlock:
@@ -51,15 +55,27 @@ def block_from_message(message) -> SampleBlock:
         raise ValueError("a block without channels")
     samples = np.stack([np.asarray(c.field_t, np.float64) for c in message.channels], axis=1)
     saturated = np.stack([np.asarray(c.saturated, bool) for c in message.channels], axis=1)
-    return SampleBlock(int(message.first_sample_index), stamps.nanoseconds(message.header.stamp),
-                       float(message.sample_rate_hz), samples, saturated, int(message.sequence))
+    return SampleBlock(
+        int(message.first_sample_index),
+        stamps.nanoseconds(message.header.stamp),
+        float(message.sample_rate_hz),
+        samples,
+        saturated,
+        int(message.sequence),
+    )
 
 
 def window_from_message(message) -> RingdownWindow:
     """A ``mows_msgs/ExcitationState`` of phase RINGDOWN as a :class:`RingdownWindow`."""
-    return RingdownWindow(stamps.nanoseconds(message.header.stamp), float(message.planned_duration_s),
-                          int(message.cycle_id), int(message.repeat_index), float(message.theta0_rad),
-                          float(message.frequency_hz), bool(message.tuning))
+    return RingdownWindow(
+        stamps.nanoseconds(message.header.stamp),
+        float(message.planned_duration_s),
+        int(message.cycle_id),
+        int(message.repeat_index),
+        float(message.theta0_rad),
+        float(message.frequency_hz),
+        bool(message.tuning),
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,14 +120,15 @@ class SegmentAssembler:
     def add_block(self, block: SampleBlock) -> list[Segment]:
         """Take a block; return the segments it completes."""
         newest = self._blocks[-1] if self._blocks else None
-        if newest is not None and (block.sample_rate_hz != newest.sample_rate_hz
-                                   or block.samples_t.shape[1] != newest.samples_t.shape[1]):
+        if newest is not None and (
+            block.sample_rate_hz != newest.sample_rate_hz or block.samples_t.shape[1] != newest.samples_t.shape[1]
+        ):
             self.rate_changes += 1
             self._blocks.clear()
         elif newest is not None and block.first_sample_index > newest.end_index:
             self.missing_samples += block.first_sample_index - newest.end_index
         elif newest is not None and block.first_sample_index < newest.end_index:
-            return []   # a repeat or an out-of-order block: the samples are already here or gone
+            return []  # a repeat or an out-of-order block: the samples are already here or gone
         self._blocks.append(block)
         self.blocks += 1
         self._prune()
@@ -129,7 +146,7 @@ class SegmentAssembler:
     @staticmethod
     def _index_range(window: RingdownWindow, reference: SampleBlock | None):
         if reference is None:
-            return -1, -1   # resolved when the first block arrives
+            return -1, -1  # resolved when the first block arrives
         start = reference.index_at(window.start_ns)
         return start, start + max(1, round(window.duration_s * reference.sample_rate_hz))
 
@@ -158,15 +175,23 @@ class SegmentAssembler:
             lo = max(block.first_sample_index, pending.start_index)
             hi = min(block.end_index, pending.stop_index)
             if lo < hi:
-                samples[lo - pending.start_index:hi - pending.start_index] = \
-                    block.samples_t[lo - block.first_sample_index:hi - block.first_sample_index]
-                saturated[lo - pending.start_index:hi - pending.start_index] = \
-                    block.saturated[lo - block.first_sample_index:hi - block.first_sample_index]
-                filled[lo - pending.start_index:hi - pending.start_index] = True
+                samples[lo - pending.start_index : hi - pending.start_index] = block.samples_t[
+                    lo - block.first_sample_index : hi - block.first_sample_index
+                ]
+                saturated[lo - pending.start_index : hi - pending.start_index] = block.saturated[
+                    lo - block.first_sample_index : hi - block.first_sample_index
+                ]
+                filled[lo - pending.start_index : hi - pending.start_index] = True
         if pending.start_index < first.first_sample_index:
             self.late_windows += 1
-        return Segment(pending.window, pending.start_index, first.sample_rate_hz, samples, saturated,
-                       int(np.count_nonzero(~filled)))
+        return Segment(
+            pending.window,
+            pending.start_index,
+            first.sample_rate_hz,
+            samples,
+            saturated,
+            int(np.count_nonzero(~filled)),
+        )
 
     def _prune(self) -> None:
         """Memory stays bounded: a window older than the buffer completes with missing samples."""
@@ -176,14 +201,26 @@ class SegmentAssembler:
             self._blocks.popleft()
 
 
-def fit_segment(segment: Segment, options: FitOptions = FitOptions(), settle_s: float = 0.0,
-                damping_guess_per_s: float = 1.8) -> RingdownFit:
+def fit_segment(
+    segment: Segment, options: FitOptions = FitOptions(), settle_s: float = 0.0, damping_guess_per_s: float = 1.8
+) -> RingdownFit:
     """Fit one assembled ring-down; a segment with missing samples is refused, not patched."""
     window = segment.window
     if segment.missing_samples:
-        return failure(FitStatus.DATA_GAP,
-                       f"{segment.missing_samples} of {len(segment.samples_t)} samples of the ring-down never "
-                       "arrived (sequence gap or late announcement); not fitted across a gap",
-                       theta0_rad=window.theta0_rad, theta0_free=options.theta0_free)
-    return fit_ringdown(segment.samples_t, segment.sample_rate_hz, window.theta0_rad,
-                        window.excitation_frequency_hz, segment.saturated, options, damping_guess_per_s, settle_s)
+        return failure(
+            FitStatus.DATA_GAP,
+            f"{segment.missing_samples} of {len(segment.samples_t)} samples of the ring-down never "
+            "arrived (sequence gap or late announcement); not fitted across a gap",
+            theta0_rad=window.theta0_rad,
+            theta0_free=options.theta0_free,
+        )
+    return fit_ringdown(
+        segment.samples_t,
+        segment.sample_rate_hz,
+        window.theta0_rad,
+        window.excitation_frequency_hz,
+        segment.saturated,
+        options,
+        damping_guess_per_s,
+        settle_s,
+    )

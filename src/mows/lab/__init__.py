@@ -53,6 +53,7 @@ above it in this list (and, outside the lab, ``mows.records``, ``mows.physics``,
 This package's ``__init__`` re-exports the public names; the CLI (``mows.cli.lab``), the bench
 and the nodes import from here.
 """
+
 from mows.lab.analysis import LabReport, analyse
 from mows.lab.catalog import CATALOG, catalog
 from mows.lab.diagnose import Diagnosis, diagnose
@@ -65,7 +66,29 @@ from mows.lab.report import write_html as write_report
 from mows.lab.structure import residual_structure
 from mows.lab.table import MeasurementTable, MissingColumnError, TableError
 
-__all__ = ["CATALOG", "Diagnosis", "Effect", "FitResult", "FrequencyModel", "LabReport", "MeasurementTable",
-           "MissingColumnError", "Parameter", "TableError", "analyse", "catalog", "diagnose", "effect",
-           "from_bag", "from_sweep", "is_bag", "load_plugins", "load_table", "read_csv", "reference_at",
-           "reference_columns", "residual_structure", "write_report"]
+__all__ = [
+    "CATALOG",
+    "Diagnosis",
+    "Effect",
+    "FitResult",
+    "FrequencyModel",
+    "LabReport",
+    "MeasurementTable",
+    "MissingColumnError",
+    "Parameter",
+    "TableError",
+    "analyse",
+    "catalog",
+    "diagnose",
+    "effect",
+    "from_bag",
+    "from_sweep",
+    "is_bag",
+    "load_plugins",
+    "load_table",
+    "read_csv",
+    "reference_at",
+    "reference_columns",
+    "residual_structure",
+    "write_report",
+]

@@ -8,6 +8,7 @@ projected orthogonally to J: P⊥ = I − Q·Qᵀ, Q an orthonormal basis of J. 
 residual, S = ‖Uᵀr‖² (U an orthonormal basis of the projected columns), ~ χ²(rank) under
 the model.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -53,7 +54,7 @@ class Signature:
         return self.basis @ self.coefficients_in_basis
 
     coefficients_in_basis: np.ndarray
-    columns: np.ndarray | None = None   # before projection (None for a signature on another table)
+    columns: np.ndarray | None = None  # before projection (None for a signature on another table)
 
 
 def signature(columns, model_basis, residual) -> Signature:

@@ -14,6 +14,7 @@ Every effect of the final model with a physical value gets a consistency check: 
 with the rest of the model (value ± σ; for one held at physics, a refit with it set free); a
 physical value more than 3σ from it is reported in the notes.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -30,8 +31,8 @@ from mows.lab.readers import load_table
 from mows.lab.search import MAX_AUTO_STEPS, history_step, parameters_dict, search
 from mows.lab.table import TableError
 
-CHECK_SIGMAS = 3.0          # a physical value further than this from its free fit is noted
-INCONSISTENT_SIGMAS = 5.0   # … and further than this makes a statistically adequate model inconsistent
+CHECK_SIGMAS = 3.0  # a physical value further than this from its free fit is noted
+INCONSISTENT_SIGMAS = 5.0  # … and further than this makes a statistically adequate model inconsistent
 
 
 @dataclasses.dataclass
@@ -40,13 +41,17 @@ class PhysicsCheck:
     rest (for an effect held at physics, a refit with it set free)."""
 
     effect: str
-    held: bool                # held at physics in the final model
-    parameters: list          # [(name, value, std, unit)] of the free fit
-    deviation_sigma: float    # largest |value − physical|/σ
+    held: bool  # held at physics in the final model
+    parameters: list  # [(name, value, std, unit)] of the free fit
+    deviation_sigma: float  # largest |value − physical|/σ
 
     def to_dict(self) -> dict:
-        return {"effect": self.effect, "held_at_physics": self.held, "parameters": parameters_dict(self.parameters),
-                "deviation_sigma": _json_number(self.deviation_sigma)}
+        return {
+            "effect": self.effect,
+            "held_at_physics": self.held,
+            "parameters": parameters_dict(self.parameters),
+            "deviation_sigma": _json_number(self.deviation_sigma),
+        }
 
 
 @dataclasses.dataclass
@@ -92,10 +97,15 @@ class LabReport:
             "base": {"chi2_dof": self.base.chi2_dof, "n": self.base.n, "bic": self.base.bic},
             "model": self.model,
             "effects": self.effects,
-            "final": {"chi2_dof": self.chi2_dof, "bic": self.bic, "cv_rms_hz": _json_number(self.cv_rms_hz),
-                      "parameters": parameters_dict(self.fit.parameters()),
-                      "not_identifiable": [name for name, known in zip(self.fit.model.parameter_names,
-                                                                      self.fit.identifiable) if not known]},
+            "final": {
+                "chi2_dof": self.chi2_dof,
+                "bic": self.bic,
+                "cv_rms_hz": _json_number(self.cv_rms_hz),
+                "parameters": parameters_dict(self.fit.parameters()),
+                "not_identifiable": [
+                    name for name, known in zip(self.fit.model.parameter_names, self.fit.identifiable) if not known
+                ],
+            },
             "physics_checks": [c.to_dict() for c in self.physics_checks],
             "candidates": [c.to_dict() for c in self.candidates],
             "groups": [g.to_dict() for g in self.groups],
@@ -112,8 +122,9 @@ def _json_number(value):
     return value if math.isfinite(value) else None
 
 
-def analyse(table, probe, effects=None, auto: bool = False, plugins=(), rank: bool = True,
-            cross_validate: bool = True) -> LabReport:
+def analyse(
+    table, probe, effects=None, auto: bool = False, plugins=(), rank: bool = True, cross_validate: bool = True
+) -> LabReport:
     """Fit the published model plus ``effects`` (names) to ``table`` and diagnose what is missing.
 
     Parameters
@@ -144,9 +155,25 @@ def analyse(table, probe, effects=None, auto: bool = False, plugins=(), rank: bo
     if found.verdict == "adequate":
         found.verdict, found.explanation = _physics_verdict(fit, checks, found.explanation)
     notes = list(table.notes) + [_check_note(c) for c in checks if c.deviation_sigma > CHECK_SIGMAS]
-    return LabReport(fit.model.name, fit.model.labels, fit.n, fit.chi2_dof, fit.bic, history[-1].cv_rms_hz,
-                     found.verdict, found.structure.summary, found.candidates, found.groups, history,
-                     found.untestable, notes, base, fit, found, checks)
+    return LabReport(
+        fit.model.name,
+        fit.model.labels,
+        fit.n,
+        fit.chi2_dof,
+        fit.bic,
+        history[-1].cv_rms_hz,
+        found.verdict,
+        found.structure.summary,
+        found.candidates,
+        found.groups,
+        history,
+        found.untestable,
+        notes,
+        base,
+        fit,
+        found,
+        checks,
+    )
 
 
 def _evaluable(table, probe):
@@ -170,8 +197,7 @@ def physics_checks(fit) -> list:
             freed = fit.model.without(effect) + effect.free
             free = freed.fit(fit.table, start=np.concatenate([fit.values_without(effect), effect.physical]))
         parameters = free.effect_parameters(effect.name)
-        checks.append(PhysicsCheck(effect.name, effect.fixed, parameters,
-                                   physics_deviation(effect, parameters)))
+        checks.append(PhysicsCheck(effect.name, effect.fixed, parameters, physics_deviation(effect, parameters)))
     return checks
 
 
@@ -184,13 +210,23 @@ def _physics_verdict(fit, checks, explanation) -> tuple:
     generic = [e for e in fit.model.effects if e.generic]
     if not inconsistent and not generic:
         return "adequate", explanation
-    found = [f"{c.effect} ({'held at physics; its free fit gives' if c.held else 'free:'} {_values(c.parameters)}) "
-             f"is {c.deviation_sigma:.1f}σ from its physical value" for c in inconsistent]
-    found += [f"{e.name} ({_values(fit.effect_parameters(e.name))}) is a generic correction with no physical value "
-              f"of its own; to find what it stands for: {e.check}" for e in generic]
+    found = [
+        f"{c.effect} ({'held at physics; its free fit gives' if c.held else 'free:'} {_values(c.parameters)}) "
+        f"is {c.deviation_sigma:.1f}σ from its physical value"
+        for c in inconsistent
+    ]
+    found += [
+        f"{e.name} ({_values(fit.effect_parameters(e.name))}) is a generic correction with no physical value "
+        f"of its own; to find what it stands for: {e.check}"
+        for e in generic
+    ]
     verdict = "inconsistent_physics" if inconsistent else "needs_generic_term"
-    return verdict, ("The residuals are consistent with noise, but the physics is not: " + "; ".join(found)
-                     + ". " + explanation.removeprefix("The model explains the data: "))
+    return verdict, (
+        "The residuals are consistent with noise, but the physics is not: "
+        + "; ".join(found)
+        + ". "
+        + explanation.removeprefix("The model explains the data: ")
+    )
 
 
 def _values(parameters) -> str:
@@ -200,5 +236,7 @@ def _values(parameters) -> str:
 def _check_note(check: PhysicsCheck) -> str:
     values = ", ".join(f"{name} = {v:.4g} ± {s:.2g}" for name, v, s, _ in check.parameters)
     state = "is held at its physical value, but its free fit gives" if check.held else "is fitted free at"
-    return (f"{check.effect} {state} {values}, {check.deviation_sigma:.1f}σ from its physical value: the "
-            "physics as predicted misses something here, or the parameter absorbs another effect")
+    return (
+        f"{check.effect} {state} {values}, {check.deviation_sigma:.1f}σ from its physical value: the "
+        "physics as predicted misses something here, or the parameter absorbs another effect"
+    )

@@ -8,6 +8,7 @@ Each testable effect's signature (its Jacobian columns at 0, projected orthogona
 p of two simple hypotheses, :func:`_physics_form`); the candidate stands for the better form,
 and keeps the free fit's parameters as a check.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -55,8 +56,11 @@ class Form:
         return self.fixed and self.signal_chi2 > STRONG_DELTA_BIC and self.delta_bic > -TIE_DELTA_BIC
 
     def to_dict(self) -> dict:
-        return {"delta_bic": _finite(self.delta_bic), "p_value": _finite(self.p_value),
-                "chi2_dof_after": _finite(self.chi2_dof_after)}
+        return {
+            "delta_bic": _finite(self.delta_bic),
+            "p_value": _finite(self.p_value),
+            "chi2_dof_after": _finite(self.chi2_dof_after),
+        }
 
 
 @dataclasses.dataclass
@@ -74,7 +78,7 @@ class Candidate:
     free: Form
     physics: Form | None
     score_p_value: float
-    parameters: list          # [(name, value, std, unit)] of the free form
+    parameters: list  # [(name, value, std, unit)] of the free form
     within_bounds: bool
     signature: Signature
     group: int = 0
@@ -124,13 +128,22 @@ class Candidate:
         return self.delta_bic > STRONG_DELTA_BIC and self.p_value < STRONG_P
 
     def to_dict(self) -> dict:
-        return {"effect": self.name, "form": self.form, "label": self.label, "delta_bic": _finite(self.delta_bic),
-                "p_value": _finite(self.p_value), "score_p_value": _finite(self.score_p_value),
-                "chi2_dof_after": _finite(self.chi2_dof_after),
-                "parameters": {name: {"value": v, "std": s, "unit": u} for name, v, s, u in self.parameters},
-                "free": self.free.to_dict(), "at_physics": None if self.physics is None else self.physics.to_dict(),
-                "physics_deviation_sigma": _finite(self.physics_deviation),
-                "within_bounds": self.within_bounds, "group": self.group, "explanation": self.effect.explanation}
+        return {
+            "effect": self.name,
+            "form": self.form,
+            "label": self.label,
+            "delta_bic": _finite(self.delta_bic),
+            "p_value": _finite(self.p_value),
+            "score_p_value": _finite(self.score_p_value),
+            "chi2_dof_after": _finite(self.chi2_dof_after),
+            "parameters": {name: {"value": v, "std": s, "unit": u} for name, v, s, u in self.parameters},
+            "free": self.free.to_dict(),
+            "at_physics": None if self.physics is None else self.physics.to_dict(),
+            "physics_deviation_sigma": _finite(self.physics_deviation),
+            "within_bounds": self.within_bounds,
+            "group": self.group,
+            "explanation": self.effect.explanation,
+        }
 
 
 def physics_deviation(effect, parameters) -> float:
@@ -143,7 +156,6 @@ def physics_deviation(effect, parameters) -> float:
 
 def _finite(value):
     return float(value) if np.isfinite(value) else None
-
 
 
 def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
@@ -179,8 +191,10 @@ def _candidate(fit, effect, test: Signature, refit) -> Candidate:
     estimate."""
     free, parameters = _free_form(fit, effect, test, refit(len(effect.parameters)))
     physics = None if effect.physical is None else _physics_form(fit, effect, test, refit(0))
-    inside = all(p.lower + 1e-6 * (p.upper - p.lower) < v < p.upper - 1e-6 * (p.upper - p.lower)
-                 for p, (_, v, _, _) in zip(effect.parameters, parameters))
+    inside = all(
+        p.lower + 1e-6 * (p.upper - p.lower) < v < p.upper - 1e-6 * (p.upper - p.lower)
+        for p, (_, v, _, _) in zip(effect.parameters, parameters)
+    )
     return Candidate(effect, free, physics, test.p_value, parameters, inside, test)
 
 
@@ -197,8 +211,14 @@ def _free_form(fit, effect, test: Signature, refit: bool) -> tuple:
         chi2_after, dof_after = fit.chi2 - test.statistic, fit.dof - test.rank
         parameters = [(p.name, float(v), float(e), p.unit) for p, v, e in zip(effect.parameters, step, std)]
     gain = fit.chi2 - chi2_after
-    form = Form(False, gain - k * math.log(fit.n), float(scipy.stats.chi2.sf(max(gain, 0.0), test.rank)),
-                chi2_after, dof_after, after)
+    form = Form(
+        False,
+        gain - k * math.log(fit.n),
+        float(scipy.stats.chi2.sf(max(gain, 0.0), test.rank)),
+        chi2_after,
+        dof_after,
+        after,
+    )
     return form, parameters
 
 

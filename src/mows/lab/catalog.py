@@ -6,6 +6,7 @@ them. The functions ``_name(config, rows, probe, *values)`` are the effects' edi
 :class:`mows.lab.physics.Configuration`. :func:`catalog` joins the plugins' effects
 (:mod:`mows.lab.plugins`) to the built-in ones, :func:`resolve` finds effects by name or label.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -16,7 +17,7 @@ from mows.lab.effects import AT_PHYSICS, COMPONENTS, MECHANICS, ORIENTATION, REA
 from mows.lab.physics import rotation_matrix, standard_gravity_vector
 from mows.lab.plugins import load_plugins
 
-PHYSICAL_STRENGTH = (1.0,)    # a strength of 1 is the physics as predicted
+PHYSICAL_STRENGTH = (1.0,)  # a strength of 1 is the physics as predicted
 
 
 def _angle_offset(config, rows, probe, offset_rad):
@@ -68,7 +69,8 @@ def _gravity(config, rows, probe, down_x, down_y):
 
 def _thermal_drift(config, rows, probe, spring_temp_coeff_per_k):
     config.spring_nm_per_rad = config.spring_nm_per_rad * (
-        1.0 + spring_temp_coeff_per_k * (rows.temperature_k - probe.reference_temperature_k))
+        1.0 + spring_temp_coeff_per_k * (rows.temperature_k - probe.reference_temperature_k)
+    )
 
 
 def _spring_drift(config, rows, probe, rate_per_s):
@@ -99,9 +101,13 @@ CATALOG = (
         "k = kM + m·Bx' + m·l·(Gx'x' − 2·s·Gy'y') + …, s = strength (1 = measured gradient)",
         "harmonics 0 and 2 of θ0, proportional to the gradient G; absent without gradient",
         _strength("weight of the gradient components other than Gx'x' (1 = Maxwell, as measured)"),
-        _transverse_gradient, COMPONENTS, priority=30, physical=PHYSICAL_STRENGTH,
+        _transverse_gradient,
+        COMPONENTS,
+        priority=30,
+        physical=PHYSICAL_STRENGTH,
         check="rotate in a known anti-Helmholtz gradient G along x: the 2θ0 amplitude of Δf is "
-              "(9/4)·m·l·G/kM·f00/2 with this effect, a third of that without"),
+        "(9/4)·m·l·G/kM·f00/2 with this effect, a third of that without",
+    ),
     Effect(
         "field_curvature",
         "Near a source the field is not linear over the lever's arc: the second derivatives "
@@ -109,13 +115,17 @@ CATALOG = (
         "in-plane components of the (fully symmetric) Hessian act on the lever.",
         "U(θ) ∋ −m·u(θ)·½·H:δr δr, δr = l·(cos θ − 1, sin θ); k ∋ −m·l²·H_x'y'y' + …",
         "harmonics 1 and 3 of θ0, independent of the reference field; grows near sources",
-        (Parameter("hxxx_t_per_m2", "T/m²", -1e3, 1e3, 1.0, "∂²Bx/∂x²"),
-         Parameter("hxxy_t_per_m2", "T/m²", -1e3, 1e3, 1.0, "∂²Bx/∂x∂y"),
-         Parameter("hxyy_t_per_m2", "T/m²", -1e3, 1e3, 1.0, "∂²Bx/∂y²"),
-         Parameter("hyyy_t_per_m2", "T/m²", -1e3, 1e3, 1.0, "∂²By/∂y²")),
-        _field_curvature, SOURCES, priority=50,
-        check="map the field at two more points (±5 mm) with the reference: the curvature is their "
-              "second difference"),
+        (
+            Parameter("hxxx_t_per_m2", "T/m²", -1e3, 1e3, 1.0, "∂²Bx/∂x²"),
+            Parameter("hxxy_t_per_m2", "T/m²", -1e3, 1e3, 1.0, "∂²Bx/∂x∂y"),
+            Parameter("hxyy_t_per_m2", "T/m²", -1e3, 1e3, 1.0, "∂²Bx/∂y²"),
+            Parameter("hyyy_t_per_m2", "T/m²", -1e3, 1e3, 1.0, "∂²By/∂y²"),
+        ),
+        _field_curvature,
+        SOURCES,
+        priority=50,
+        check="map the field at two more points (±5 mm) with the reference: the curvature is their second difference",
+    ),
     Effect(
         "static_deflection",
         "A field across the probe axis, By', turns the lever to a new rest angle θs ≈ m·By'/k, "
@@ -124,8 +134,12 @@ CATALOG = (
         "k = U''(θs), U'(θs) = 0; k ≈ kM + m·Bx' + (m·By')²/kM, blended by the strength λ",
         "harmonics 0 and 2 of θ0, growing as |B|² (B⊥²); absent in a field along x'",
         _strength("blend between Eq. 6 (0) and the exact rest angle (1)"),
-        _static_deflection, COMPONENTS, priority=10, physical=PHYSICAL_STRENGTH,
-        check="repeat the sweep at twice the field: this effect grows 4×, field terms 2×"),
+        _static_deflection,
+        COMPONENTS,
+        priority=10,
+        physical=PHYSICAL_STRENGTH,
+        check="repeat the sweep at twice the field: this effect grows 4×, field terms 2×",
+    ),
     Effect(
         "finite_amplitude",
         "−m·B·cos θ is not a linear spring: at amplitude A the first-harmonic stiffness of the "
@@ -136,8 +150,12 @@ CATALOG = (
         "k(A) = (1/πA)·∫U'(θc + A·cos φ)·cos φ dφ;  f = f(0) + s·(Σ c_q·f(A_q) − f(0))",
         "harmonic 1 of θ0 (∝ Bx'·A²), scales with the excitation amplitude squared and with |B|",
         _strength("blend between the small-amplitude (0) and the ring-down-averaged frequency (1)"),
-        _finite_amplitude, READOUT, priority=20, physical=PHYSICAL_STRENGTH,
-        check="repeat at half the excitation amplitude: this effect falls 4×"),
+        _finite_amplitude,
+        READOUT,
+        priority=20,
+        physical=PHYSICAL_STRENGTH,
+        check="repeat at half the excitation amplitude: this effect falls 4×",
+    ),
     Effect(
         "gravity",
         "When the rotation plane is not level the magnet is a pendulum: gravity pulls the mass "
@@ -146,11 +164,16 @@ CATALOG = (
         "along d, independent of any current. The size a·g·l is known; d is free.",
         "U(θ) ∋ −a·l·g·(d·u(θ)); k ∋ a·g·l·(d_x·cos θ0 + d_y·sin θ0)",
         "harmonic 1 of θ0 with fixed phase, independent of |B|, current and time",
-        (Parameter("down_x", "1", -1.0, 1.0, 1e-2, "in-plane x component of the unit downward vector"),
-         Parameter("down_y", "1", -1.0, 1.0, 1e-2, "in-plane y component of the unit downward vector")),
-        _gravity, MECHANICS, priority=15,
+        (
+            Parameter("down_x", "1", -1.0, 1.0, 1e-2, "in-plane x component of the unit downward vector"),
+            Parameter("down_y", "1", -1.0, 1.0, 1e-2, "in-plane y component of the unit downward vector"),
+        ),
+        _gravity,
+        MECHANICS,
+        priority=15,
         check="level the rotation plane with an inclinometer (or tilt it by a known angle): "
-              "only gravity's share changes"),
+        "only gravity's share changes",
+    ),
     Effect(
         "thermal_drift",
         "The spring steel softens as it warms: kM(T) = kM·(1 + α·(T − T_ref)) with α ≈ −2.6e-4/K "
@@ -158,8 +181,12 @@ CATALOG = (
         "kM → kM·(1 + α·(T − T_ref)), α free (1/K)",
         "no angle dependence; follows temperature_k (and so time)",
         (Parameter("spring_temp_coeff_per_k", "1/K", -1e-2, 1e-2, 1e-5, "relative change of kM per kelvin"),),
-        _thermal_drift, MECHANICS, requires=("temperature_k",), priority=40,
-        check="change the temperature by a few kelvin at a fixed angle"),
+        _thermal_drift,
+        MECHANICS,
+        requires=("temperature_k",),
+        priority=40,
+        check="change the temperature by a few kelvin at a fixed angle",
+    ),
     Effect(
         "spring_drift",
         "The spring changes slowly with wear or creep: kM(t) = kM·(1 + r·t). Without a "
@@ -167,8 +194,13 @@ CATALOG = (
         "kM → kM·(1 + r·t), r free (1/s)",
         "no angle dependence; linear in time t_s",
         (Parameter("rate_per_s", "1/s", -1e-3, 1e-3, 1e-8, "relative change of kM per second"),),
-        _spring_drift, MECHANICS, requires=("t_s",), priority=90, generic=True,
-        check="repeat a fixed-angle reference point at the start and end of each sweep"),
+        _spring_drift,
+        MECHANICS,
+        requires=("t_s",),
+        priority=90,
+        generic=True,
+        check="repeat a fixed-angle reference point at the start and end of each sweep",
+    ),
     Effect(
         "angle_offset",
         "The probe axis is not where the stage says: θ0,true = θ0 + δθ (mounting or encoder "
@@ -176,8 +208,12 @@ CATALOG = (
         "x' = (cos(θ0 + δθ), sin(θ0 + δθ))",
         "harmonic 1 in quadrature with the field (∝ B⊥ = By') and harmonic 2 ∝ G; scales with |B|",
         (Parameter("offset_rad", "rad", -0.5, 0.5, 1e-3, "δθ, added to θ0"),),
-        _angle_offset, ORIENTATION, priority=60, generic=True,
-        check="sweep in a strong known uniform field: the phase of the 1θ0 harmonic is δθ"),
+        _angle_offset,
+        ORIENTATION,
+        priority=60,
+        generic=True,
+        check="sweep in a strong known uniform field: the phase of the 1θ0 harmonic is δθ",
+    ),
     Effect(
         "damping_shift",
         "The ring-down frequency is the damped one, ω = √(k/J − δ²) (Eq. S1), and δ can change "
@@ -186,8 +222,12 @@ CATALOG = (
         "f = f00·√((k/J − δ_row²)/(kM/J − δ0²)) (blended by the strength)",
         "follows damping_per_s; otherwise ∝ δ0²·(k − kM) (tiny, only at mT fields)",
         _strength("blend between Eq. 6 (0) and the damped form of Eq. S1 (1)", bound=100.0),
-        _damping_shift, READOUT, priority=25, physical=PHYSICAL_STRENGTH,
-        check="compare ring-downs of equal frequency but different damping"),
+        _damping_shift,
+        READOUT,
+        priority=25,
+        physical=PHYSICAL_STRENGTH,
+        check="compare ring-downs of equal frequency but different damping",
+    ),
     Effect(
         "field_offset",
         "A uniform in-plane field the reference does not see: an offset or gain error of the "
@@ -195,20 +235,32 @@ CATALOG = (
         "rotation data it is indistinguishable from gravity (both act as −vector·u(θ)).",
         "B → B_ref + (b_x, b_y, 0)",
         "harmonic 1 of θ0 with fixed phase, independent of the reference",
-        (Parameter("bx_t", "T", -1e-3, 1e-3, 1e-6, "unreferenced field, x"),
-         Parameter("by_t", "T", -1e-3, 1e-3, 1e-6, "unreferenced field, y")),
-        _field_offset, SOURCES, priority=70, generic=True,
-        check="check the reference magnetometer's zero (turn it by 180° in a fixed field)"),
+        (
+            Parameter("bx_t", "T", -1e-3, 1e-3, 1e-6, "unreferenced field, x"),
+            Parameter("by_t", "T", -1e-3, 1e-3, 1e-6, "unreferenced field, y"),
+        ),
+        _field_offset,
+        SOURCES,
+        priority=70,
+        generic=True,
+        check="check the reference magnetometer's zero (turn it by 180° in a fixed field)",
+    ),
     Effect(
         "plane_tilt",
         "The rotation plane is tilted against the reference's frame by small rotations about x "
         "and y, so that part of the reference's Bz lies in the plane of the swing.",
         "B_plane = R(t_x, t_y)·B_ref, G_plane = R·G·Rᵀ",
         "harmonic 1 of θ0 proportional to the reference's Bz",
-        (Parameter("tilt_x_rad", "rad", -0.5, 0.5, 1e-3, "rotation about x"),
-         Parameter("tilt_y_rad", "rad", -0.5, 0.5, 1e-3, "rotation about y")),
-        _plane_tilt, ORIENTATION, requires=("ref_bz_t",), priority=80,
-        check="reverse Bz alone (a z coil): this effect changes sign, the others do not"),
+        (
+            Parameter("tilt_x_rad", "rad", -0.5, 0.5, 1e-3, "rotation about x"),
+            Parameter("tilt_y_rad", "rad", -0.5, 0.5, 1e-3, "rotation about y"),
+        ),
+        _plane_tilt,
+        ORIENTATION,
+        requires=("ref_bz_t",),
+        priority=80,
+        check="reverse Bz alone (a z coil): this effect changes sign, the others do not",
+    ),
     Effect(
         "moment_scale",
         "The calibration constant β0 = f00·m/(2kM) is off: the magnetic springs are all scaled "
@@ -216,8 +268,12 @@ CATALOG = (
         "k = kM + (1 + ε)·(m·Bx' + m·l·Gx'x' + …)",
         "proportional to the base model's own shift (harmonics 1 and 2), grows with |B| and G",
         (Parameter("scale_error", "1", -0.5, 0.5, 1e-3, "ε, relative error of m/kM"),),
-        _moment_scale, COMPONENTS, priority=85, generic=True,
-        check="a field sweep along x' at one amplitude: the slope at B = 0 is β0"),
+        _moment_scale,
+        COMPONENTS,
+        priority=85,
+        generic=True,
+        check="a field sweep along x' at one amplitude: the slope at B = 0 is β0",
+    ),
 )
 
 
@@ -238,7 +294,9 @@ def resolve(names, effects: dict) -> list:
     bare = [name.removesuffix(AT_PHYSICS) for name in names]
     unknown = [name for name, plain in zip(names, bare) if plain not in effects]
     if unknown:
-        raise ValueError(f"unknown effect{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
-                         f"known: {', '.join(effects)}")
-    return [effects[plain].at_physics() if name.endswith(AT_PHYSICS) else effects[plain]
-            for name, plain in zip(names, bare)]
+        raise ValueError(
+            f"unknown effect{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; known: {', '.join(effects)}"
+        )
+    return [
+        effects[plain].at_physics() if name.endswith(AT_PHYSICS) else effects[plain] for name, plain in zip(names, bare)
+    ]

@@ -10,6 +10,7 @@ the candidates (:mod:`mows.lab.candidates`), their groups and separating measure
   significant;
 - else ``unexplained_structure``.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -56,14 +57,21 @@ def _verdict(fit, structure: Structure, candidates) -> tuple:
     if best is not None and best.strong:
         gain = fit.chi2 - best.chosen.chi2_after
         if gain >= EXPLAINED_FRACTION * excess:
-            group = f" (group {best.group}: the data cannot tell it from " \
-                    f"{', '.join(c.name for c in candidates if c.group == best.group and c is not best)})" \
-                if best.group else ""
-            return "effect_missing", (f"{best.label} is missing{group}: ΔBIC = {best.delta_bic:.1f}, "
-                                      f"p = {best.p_value:.1e}, "
-                                      f"χ²/dof {fit.chi2_dof:.3g} → {best.chi2_dof_after:.3g}.")
-        unexplained = (f"The best candidate, {best.label} (ΔBIC = {best.delta_bic:.1f}), accounts for only "
-                       f"{100 * gain / excess:.0f}% of the excess χ². ")
+            group = (
+                f" (group {best.group}: the data cannot tell it from "
+                f"{', '.join(c.name for c in candidates if c.group == best.group and c is not best)})"
+                if best.group
+                else ""
+            )
+            return "effect_missing", (
+                f"{best.label} is missing{group}: ΔBIC = {best.delta_bic:.1f}, "
+                f"p = {best.p_value:.1e}, "
+                f"χ²/dof {fit.chi2_dof:.3g} → {best.chi2_dof_after:.3g}."
+            )
+        unexplained = (
+            f"The best candidate, {best.label} (ΔBIC = {best.delta_bic:.1f}), accounts for only "
+            f"{100 * gain / excess:.0f}% of the excess χ². "
+        )
     else:
         unexplained = "No catalog effect explains the residual." if candidates else ""
     if structure.goodness_p >= GOODNESS_ALPHA and not structure.significant:
@@ -81,7 +89,9 @@ def _no_answer(fit, structure: Structure) -> str:
     factors = best.name.split("·")
     expression = " * ".join(f"(rows.{name} - rows.{name}.mean())" for name in factors)
     follows = "; ".join(f"{t.name} (correlation {t.correlation:+.2f}, p = {t.p_value:.1e})" for t in trends[:3])
-    return (f"The residual follows {follows}. A plugin for the strongest, to save as my_effect.py and run with "
-            f"--plugin my_effect.py: `@effect(name=\"my_effect\", parameters={{\"c_hz\": (0.0, -1.0, 1.0, \"Hz\")}}) "
-            f"def my_effect(rows, c_hz): return {{\"frequency_hz\": c_hz * {expression} / "
-            f"({' * '.join(f'rows.{n}.std()' for n in factors)})}}` (better: the physics that makes it).")
+    return (
+        f"The residual follows {follows}. A plugin for the strongest, to save as my_effect.py and run with "
+        f'--plugin my_effect.py: `@effect(name="my_effect", parameters={{"c_hz": (0.0, -1.0, 1.0, "Hz")}}) '
+        f'def my_effect(rows, c_hz): return {{"frequency_hz": c_hz * {expression} / '
+        f"({' * '.join(f'rows.{n}.std()' for n in factors)})}}` (better: the physics that makes it)."
+    )

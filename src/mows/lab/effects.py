@@ -14,6 +14,7 @@ The built-in effects are in :mod:`mows.lab.catalog`, user plugins are read by
 :mod:`mows.lab.plugins`; effects join a model with ``FrequencyModel(probe) + effect``
 (:mod:`mows.lab.model`).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -43,8 +44,10 @@ class Parameter:
 
     def __post_init__(self):
         if not (self.lower <= 0.0 <= self.upper and self.lower < self.upper and self.scale > 0):
-            raise ValueError(f"parameter {self.name}: needs lower ≤ 0 ≤ upper, lower < upper and scale > 0 "
-                             f"(got {self.lower}, {self.upper}, {self.scale})")
+            raise ValueError(
+                f"parameter {self.name}: needs lower ≤ 0 ≤ upper, lower < upper and scale > 0 "
+                f"(got {self.lower}, {self.upper}, {self.scale})"
+            )
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -75,8 +78,8 @@ class Effect:
     check: str = ""
     origin: str = "catalog"
     physical: tuple | None = None
-    generic: bool = False          # a free correction with no physical value (a calibration term)
-    free: Effect | None = None     # of an effect held at physics: the same effect with its parameters free
+    generic: bool = False  # a free correction with no physical value (a calibration term)
+    free: Effect | None = None  # of an effect held at physics: the same effect with its parameters free
 
     @property
     def parameter_names(self) -> tuple:
@@ -99,8 +102,9 @@ class Effect:
         if self.physical is None:
             raise ValueError(f"effect {self.name} has no physical value: its size is not known in advance")
         apply, values = self.apply, self.physical
-        return dataclasses.replace(self, parameters=(), free=self,
-                                   apply=lambda config, rows, probe: apply(config, rows, probe, *values))
+        return dataclasses.replace(
+            self, parameters=(), free=self, apply=lambda config, rows, probe: apply(config, rows, probe, *values)
+        )
 
     def missing_columns(self, table) -> tuple:
         return tuple(name for name in self.requires if not table.has(name))

@@ -6,6 +6,7 @@ effect parameters' by forward differences); :class:`FitResult` is what
 identifiability, cross-validation and the report. The model and the method are described in
 :mod:`mows.lab.model`.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -17,8 +18,8 @@ import numpy as np
 from mows.estimate.ringdown import FitStatus
 from mows.lab.table import MeasurementTable, rows_text
 
-FD_STEP = 1e-2          # × parameter scale
-CV_FOLDS = 10           # interleaved folds when the table has one sweep
+FD_STEP = 1e-2  # × parameter scale
+CV_FOLDS = 10  # interleaved folds when the table has one sweep
 INVALID_RESIDUAL = 1e6  # weighted residual given to rows where the model has no real frequency
 DEGENERATE_RTOL = 1e-6  # singular value (normalised Jacobian columns) below which a direction is not determined
 CV_PREDICTION_SIGMAS = 10.0  # a fold predicting its rows less precisely than this says nothing
@@ -81,8 +82,19 @@ class Problem:
         keep = s > s[0] * 1e-10
         covariance = (vt[keep].T / s[keep] ** 2) @ vt[keep]
         birge = max(1.0, chi2 / max(n - k, 1))
-        return FitResult(self.model, self.table, np.asarray(x, float), covariance * birge, chi2, n, k,
-                         prediction, jacobian, bool(success), str(message))
+        return FitResult(
+            self.model,
+            self.table,
+            np.asarray(x, float),
+            covariance * birge,
+            chi2,
+            n,
+            k,
+            prediction,
+            jacobian,
+            bool(success),
+            str(message),
+        )
 
 
 @dataclasses.dataclass(eq=False)
@@ -178,7 +190,7 @@ class FitResult:
     def effect_parameters(self, effect_name: str) -> list:
         """[(parameter, value, std, unit)] of one effect of the model."""
         prefix = effect_name + "."
-        return [(name[len(prefix):], v, s, u) for name, v, s, u in self.parameters() if name.startswith(prefix)]
+        return [(name[len(prefix) :], v, s, u) for name, v, s, u in self.parameters() if name.startswith(prefix)]
 
     def extension_columns(self, effect, table=None) -> np.ndarray:
         """d(weighted residual)/d(parameters of ``effect``) with ``effect`` added to this model at
@@ -188,7 +200,8 @@ class FitResult:
         x = np.concatenate([self.values, np.zeros(len(effect.parameters))])
         first = len(self.model.parameters)
         return Problem(extended, self.table if table is None else table).columns(
-            x, range(first, first + len(effect.parameters)))
+            x, range(first, first + len(effect.parameters))
+        )
 
     def prediction_sigmas(self, table) -> float:
         """Median over ``table``'s rows of this fit's prediction uncertainty there, in units of
@@ -214,22 +227,32 @@ class FitResult:
             train = np.ones(self.n, bool)
             train[rows] = False
             part = self.model.fit(self.table.subset(train), start=self.values[1:])
-            if np.any(self.identifiable & ~part.identifiable) or part.prediction_sigmas(
-                    self.table.subset(rows)) > CV_PREDICTION_SIGMAS:
+            if (
+                np.any(self.identifiable & ~part.identifiable)
+                or part.prediction_sigmas(self.table.subset(rows)) > CV_PREDICTION_SIGMAS
+            ):
                 return math.nan
             errors[rows] = self.table.f_hz[rows] - self.model.predict(self.table.subset(rows), part.values)
         return float(np.sqrt(np.mean(errors**2)))
 
     def report(self) -> str:
-        quality = (f"χ²/dof = {self.chi2_dof:.3f}, BIC = {self.bic:.1f}" if self.status is not FitStatus.BAD_FIT
-                   else "χ² not meaningful")
+        quality = (
+            f"χ²/dof = {self.chi2_dof:.3f}, BIC = {self.bic:.1f}"
+            if self.status is not FitStatus.BAD_FIT
+            else "χ² not meaningful"
+        )
         lines = [f"model {self.model.name}: n = {self.n}, {quality}"]
         for (name, value, std, unit), known in zip(self.parameters(), self.identifiable):
-            lines.append(f"  {name:40s} = {value:+.6g} ± {std:.2g} {unit}" if known else
-                         f"  {name:40s}   not identifiable from this table")
+            lines.append(
+                f"  {name:40s} = {value:+.6g} ± {std:.2g} {unit}"
+                if known
+                else f"  {name:40s}   not identifiable from this table"
+            )
         if self.status is FitStatus.BAD_FIT:
-            lines.append(f"  warning: {self.status.name}: the model has no real frequency at "
-                         f"{rows_text(self.invalid_rows)} (mows.lab.physics.unevaluable_rows says why)")
+            lines.append(
+                f"  warning: {self.status.name}: the model has no real frequency at "
+                f"{rows_text(self.invalid_rows)} (mows.lab.physics.unevaluable_rows says why)"
+            )
         elif not self.ok:
             lines.append(f"  warning: {self.status.name}: the fit did not converge ({self.message})")
         return "\n".join(lines)

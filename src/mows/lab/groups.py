@@ -18,6 +18,7 @@
   size is fixed by known constants (static deflection, gravity, finite amplitude, damping,
   transverse gradient) before free calibration errors (field offset, plane tilt, moment scale).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -31,8 +32,8 @@ from mows.lab.whatif import variants
 
 GROUP_COSINE = 0.95
 GROUP_SIGNIFICANCE = 0.01
-NEAR_ALIAS = 0.05   # an effect whose signature keeps less than this of its norm beside the model is absorbed
-FREED = 0.5         # … by the model effect without which it keeps more than this
+NEAR_ALIAS = 0.05  # an effect whose signature keeps less than this of its norm beside the model is absorbed
+FREED = 0.5  # … by the model effect without which it keeps more than this
 
 
 @dataclasses.dataclass
@@ -44,7 +45,7 @@ class Group:
     separated_by: str | None
     separation: str
     checks: list
-    aliases: list = dataclasses.field(default_factory=list)   # exact physical aliases, in words and numbers
+    aliases: list = dataclasses.field(default_factory=list)  # exact physical aliases, in words and numbers
     in_model: list = dataclasses.field(default_factory=list)  # members the model holds (absorbing the rest)
 
     def to_dict(self) -> dict:
@@ -52,8 +53,11 @@ class Group:
 
 
 def _indistinguishable(a: Signature, b: Signature, significant: bool) -> bool:
-    return same_span(a.basis, b.basis) or (significant and cosine_within(a.fitted_signal, b.basis) >= GROUP_COSINE
-                                           and cosine_within(b.fitted_signal, a.basis) >= GROUP_COSINE)
+    return same_span(a.basis, b.basis) or (
+        significant
+        and cosine_within(a.fitted_signal, b.basis) >= GROUP_COSINE
+        and cosine_within(b.fitted_signal, a.basis) >= GROUP_COSINE
+    )
 
 
 def _clusters(candidates) -> list:
@@ -103,7 +107,7 @@ def _partition(signatures: dict, significant: set) -> list:
         return name
 
     for i, a in enumerate(names):
-        for b in names[i + 1:]:
+        for b in names[i + 1 :]:
             if _indistinguishable(signatures[a], signatures[b], a in significant and b in significant):
                 parent[root(b)] = root(a)
     found: dict[str, list[str]] = {}  # root → the names in its set
@@ -117,8 +121,9 @@ def _separate(members, fit, probe, number) -> Group:
     names = [c.name for c in members]
     best_variant, best_parts = None, [names]
     # The fitted signal extended to new rows: the same linear coefficients on the joined rows.
-    coefficients = {c.name: np.linalg.lstsq(c.signature.projected, c.signature.fitted_signal, rcond=None)[0]
-                    for c in members}
+    coefficients = {
+        c.name: np.linalg.lstsq(c.signature.projected, c.signature.fitted_signal, rcond=None)[0] for c in members
+    }
     for variant in variants(fit.table, probe):
         joined = variant.table
         model_basis = orthonormal_basis(fit.model_jacobian(joined))
@@ -127,26 +132,36 @@ def _separate(members, fit, probe, number) -> Group:
             columns = np.asarray(fit.extension_columns(candidate.effect, joined))
             projected = project_out(columns, model_basis)
             basis = orthonormal_basis(projected, np.linalg.norm(columns, axis=0).max())
-            extended[candidate.name] = Signature(basis, projected, 0.0, basis.shape[1],
-                                                 basis.T @ (projected @ coefficients[candidate.name]))
+            extended[candidate.name] = Signature(
+                basis, projected, 0.0, basis.shape[1], basis.T @ (projected @ coefficients[candidate.name])
+            )
         parts = _partition(extended, {c.name for c in members if c.p_value < GROUP_SIGNIFICANCE})
         if len(parts) > len(best_parts):
             best_variant, best_parts = variant, parts
         if len(parts) == len(names):
             break
     together = [part for part in best_parts if len(part) > 1]
-    checks = [f"{name}: {next(c for c in members if c.name == name).effect.check}"
-              for part in together for name in part]
+    checks = [
+        f"{name}: {next(c for c in members if c.name == name).effect.check}" for part in together for name in part
+    ]
     if best_variant is None:
-        text = ("no variation of angles, amplitude, field or temperature separates them: they act identically "
-                "on the lever; check directly")
+        text = (
+            "no variation of angles, amplitude, field or temperature separates them: they act identically "
+            "on the lever; check directly"
+        )
     else:
         text = f"{best_variant.description}: separates " + " | ".join(", ".join(part) for part in best_parts)
         if together:
             text += "; " + "; ".join(", ".join(part) for part in together) + " still act identically: check directly"
     fitted = {c.name: {n: v for n, v, _, _ in c.parameters} for c in members}
-    return Group(number, names, None if best_variant is None else best_variant.name, text, checks,
-                 alias_statements(names, fit, probe, fitted))
+    return Group(
+        number,
+        names,
+        None if best_variant is None else best_variant.name,
+        text,
+        checks,
+        alias_statements(names, fit, probe, fitted),
+    )
 
 
 def absorbed_groups(fit, effects, candidates, untestable, probe, first_number) -> list:
@@ -170,8 +185,10 @@ def absorbed_groups(fit, effects, candidates, untestable, probe, first_number) -
         for held, keep in held_masks:
             if _kept(columns, orthonormal_basis(fit.jacobian[:, keep])) > FREED:
                 absorbing.setdefault(held, []).append(effect)
-    return [_absorbed_group(fit, held, absorbed, probe, first_number + i)
-            for i, (held, absorbed) in enumerate(absorbing.items())]
+    return [
+        _absorbed_group(fit, held, absorbed, probe, first_number + i)
+        for i, (held, absorbed) in enumerate(absorbing.items())
+    ]
 
 
 def _kept(columns, basis) -> float:
@@ -194,14 +211,17 @@ def _absorbed_group(fit, held, absorbed, probe, number) -> Group:
     separated, variant_name = [], None
     for variant in variants(fit.table, probe):
         model_basis = orthonormal_basis(fit.model_jacobian(variant.table))
-        separated = [e.name for e in absorbed if _kept(fit.extension_columns(e, variant.table), model_basis)
-                     > NEAR_ALIAS]
+        separated = [
+            e.name for e in absorbed if _kept(fit.extension_columns(e, variant.table), model_basis) > NEAR_ALIAS
+        ]
         if separated:
             variant_name, description = variant.name, variant.description
             break
     together = [e for e in absorbed if e.name not in separated]
-    text = (f"{held.label} is in the model and absorbs {', '.join(e.name for e in absorbed)}: they act (almost) "
-            "identically on this table")
+    text = (
+        f"{held.label} is in the model and absorbs {', '.join(e.name for e in absorbed)}: they act (almost) "
+        "identically on this table"
+    )
     if separated:
         text += f"; {description}: separates {', '.join(separated)}"
     if together:

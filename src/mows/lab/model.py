@@ -23,6 +23,7 @@ BIC = χ² + k·ln n (the Gaussian likelihood with known σ, k free parameters i
 Uncertainties come from (JᵀJ)⁻¹ and are inflated by √(χ²/dof) when that exceeds 1 (Birge ratio:
 an incomplete model should not claim the precision of a complete one).
 """
+
 from __future__ import annotations
 
 import weakref
@@ -115,7 +116,7 @@ class FrequencyModel:
         bounds = np.cumsum([0] + [len(e.parameters) for e in self.effects])
         ordered = sorted(range(len(self.effects)), key=lambda i: self.effects[i].stage)
         for i in ordered:
-            self.effects[i].apply(config, table, probe, *(float(v) for v in values[bounds[i]:bounds[i + 1]]))
+            self.effects[i].apply(config, table, probe, *(float(v) for v in values[bounds[i] : bounds[i + 1]]))
         nodes = ringdown_nodes(table, config) if config.amplitude else None
         return frequency_factor(config, probe, nodes)
 
@@ -141,16 +142,26 @@ class FrequencyModel:
         lower = np.array([0.0] + [p.lower for _, p in self.parameters])
         upper = np.array([np.inf] + [p.upper for _, p in self.parameters])
         x0 = np.clip(x0, lower, upper)
-        solution = scipy.optimize.least_squares(problem.residual, x0, jac=problem.jacobian, bounds=(lower, upper),
-                                                x_scale="jac", method="trf", xtol=1e-10, ftol=1e-12, gtol=1e-12,
-                                                max_nfev=60)
+        solution = scipy.optimize.least_squares(
+            problem.residual,
+            x0,
+            jac=problem.jacobian,
+            bounds=(lower, upper),
+            x_scale="jac",
+            method="trf",
+            xtol=1e-10,
+            ftol=1e-12,
+            gtol=1e-12,
+            max_nfev=60,
+        )
         return problem.result(solution.x, solution.success, solution.message)
 
 
 # --- ring-down amplitude nodes, cached per table ---------------------------------------------
 # table → {ring-down inputs' bytes: (amplitudes A_q (n, q), weights c_q (n, q))}
-_NODES: weakref.WeakKeyDictionary[MeasurementTable, dict[bytes, tuple[np.ndarray, np.ndarray]]] = \
+_NODES: weakref.WeakKeyDictionary[MeasurementTable, dict[bytes, tuple[np.ndarray, np.ndarray]]] = (
     weakref.WeakKeyDictionary()
+)
 
 
 def ringdown_nodes(table, config: Configuration):

@@ -16,6 +16,7 @@ value means as the other:
 - **thermal_drift ≡ spring_drift** while the temperature changes linearly in time:
   kM·(1 + α·(T − T_ref)) = kM·(1 + r·t) + const with r = α·dT/dt.
 """
+
 from __future__ import annotations
 
 import math
@@ -27,8 +28,8 @@ from mows.lab.physics import Configuration
 from mows.physics import ringdown_average
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
 
-LINEAR_CORRELATION = 0.99   # temperature this correlated with time drifts linearly
-CONSTANT_SPREAD = 0.05      # relative spread below which a column counts as constant
+LINEAR_CORRELATION = 0.99  # temperature this correlated with time drifts linearly
+CONSTANT_SPREAD = 0.05  # relative spread below which a column counts as constant
 
 
 def alias_statements(names, fit, probe, fitted=None) -> list:
@@ -38,10 +39,12 @@ def alias_statements(names, fit, probe, fitted=None) -> list:
     values = {e.name: {n: v for n, v, _, _ in fit.effect_parameters(e.name)} for e in fit.model.effects}
     values.update(fitted or {})
     found = []
-    for pair, statement in ((("gravity", "field_offset"), _gravity_field),
-                            (("plane_tilt", "field_offset"), _tilt_field),
-                            (("finite_amplitude", "moment_scale"), _amplitude_scale),
-                            (("thermal_drift", "spring_drift"), _thermal_spring)):
+    for pair, statement in (
+        (("gravity", "field_offset"), _gravity_field),
+        (("plane_tilt", "field_offset"), _tilt_field),
+        (("finite_amplitude", "moment_scale"), _amplitude_scale),
+        (("thermal_drift", "spring_drift"), _thermal_spring),
+    ):
         if set(pair) <= set(names):
             text = statement(fit.table, probe, values)
             if text:
@@ -56,19 +59,28 @@ def gravity_field_t(probe) -> float:
 
 def _gravity_field(table, probe, values) -> str:
     scale = gravity_field_t(probe)
-    text = (f"gravity ≡ field_offset: a plane tilted so that the unit downward vector has the in-plane part d "
-            f"acts like an unreferenced field (a·g·l/m)·d, a·g·l/m = {scale * 1e6:.0f} µT")
+    text = (
+        f"gravity ≡ field_offset: a plane tilted so that the unit downward vector has the in-plane part d "
+        f"acts like an unreferenced field (a·g·l/m)·d, a·g·l/m = {scale * 1e6:.0f} µT"
+    )
     if "gravity" in values and values["gravity"]:
         dx, dy = values["gravity"]["down_x"], values["gravity"]["down_y"]
-        text += (f"; here gravity down = ({dx:.4g}, {dy:.4g}) ≡ field_offset ({scale * dx * 1e6:.3g}, "
-                 f"{scale * dy * 1e6:.3g}) µT")
+        text += (
+            f"; here gravity down = ({dx:.4g}, {dy:.4g}) ≡ field_offset ({scale * dx * 1e6:.3g}, "
+            f"{scale * dy * 1e6:.3g}) µT"
+        )
     elif "field_offset" in values and values["field_offset"]:
         bx, by = values["field_offset"]["bx_t"], values["field_offset"]["by_t"]
         size = math.hypot(bx, by) / scale
-        text += (f"; here field_offset ({bx * 1e6:.3g}, {by * 1e6:.3g}) µT ≡ gravity with down = "
-                 f"({bx / scale:.4g}, {by / scale:.4g})")
-        text += (f", a tilt of {math.degrees(math.asin(size)):.3g}°" if size <= 1 else
-                 f": |d| = {size:.3g} > 1, more than any tilt gives, so not gravity alone")
+        text += (
+            f"; here field_offset ({bx * 1e6:.3g}, {by * 1e6:.3g}) µT ≡ gravity with down = "
+            f"({bx / scale:.4g}, {by / scale:.4g})"
+        )
+        text += (
+            f", a tilt of {math.degrees(math.asin(size)):.3g}°"
+            if size <= 1
+            else f": |d| = {size:.3g} > 1, more than any tilt gives, so not gravity alone"
+        )
     return text
 
 
@@ -76,8 +88,10 @@ def _tilt_field(table, probe, values) -> str:
     if not table.has("ref_bz_t") or _spread(table.ref_bz_t) > CONSTANT_SPREAD:
         return ""
     bz = float(np.mean(table.ref_bz_t))
-    text = (f"plane_tilt ≡ field_offset while the reference's Bz is constant ({bz * 1e6:.3g} µT): a tilt "
-            "(t_x, t_y) brings the in-plane field (t_y·Bz, −t_x·Bz)")
+    text = (
+        f"plane_tilt ≡ field_offset while the reference's Bz is constant ({bz * 1e6:.3g} µT): a tilt "
+        "(t_x, t_y) brings the in-plane field (t_y·Bz, −t_x·Bz)"
+    )
     if "plane_tilt" in values and values["plane_tilt"]:
         tx, ty = values["plane_tilt"]["tilt_x_rad"], values["plane_tilt"]["tilt_y_rad"]
         text += f"; here tilt ({tx:.4g}, {ty:.4g}) rad ≡ field_offset ({ty * bz * 1e6:.3g}, {-tx * bz * 1e6:.3g}) µT"
@@ -88,8 +102,9 @@ def amplitude_scale_error(table, probe) -> tuple:
     """(ε, spread) with ε = ⟨2·J1(A)/A⟩ − 1 over the rows' ring-down amplitude nodes (the
     moment scale the finite amplitude looks like), spread its range over the rows."""
     config = Configuration.base(table, probe)
-    amplitudes, weights = ringdown_average.amplitude_nodes(config.theta0_rad, config.amplitude_start_rad,
-                                                           config.ringdown_damping_per_s, config.ringdown_duration_s)
+    amplitudes, weights = ringdown_average.amplitude_nodes(
+        config.theta0_rad, config.amplitude_start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s
+    )
     per_row = (weights * 2.0 * scipy.special.j1(amplitudes) / amplitudes).sum(-1) - 1.0
     return float(np.mean(per_row)), float(np.ptp(per_row))
 
@@ -97,8 +112,10 @@ def amplitude_scale_error(table, probe) -> tuple:
 def _amplitude_scale(table, probe, values) -> str:
     epsilon, spread = amplitude_scale_error(table, probe)
     start = np.degrees(Configuration.base(table, probe).amplitude_start_rad)
-    text = (f"finite_amplitude ≡ moment_scale: the amplitude scales the field spring by ⟨2·J1(A)/A⟩ − 1 ≈ −⟨A²⟩/8 "
-            f"= {epsilon * 100:.3g} % over these ring-downs (start {np.median(start):.3g}°)")
+    text = (
+        f"finite_amplitude ≡ moment_scale: the amplitude scales the field spring by ⟨2·J1(A)/A⟩ − 1 ≈ −⟨A²⟩/8 "
+        f"= {epsilon * 100:.3g} % over these ring-downs (start {np.median(start):.3g}°)"
+    )
     if spread > CONSTANT_SPREAD * abs(epsilon):
         text += f", varying by {spread * 100:.2g} % between rows (an approximate alias)"
     if "moment_scale" in values and values["moment_scale"]:
@@ -113,8 +130,10 @@ def _thermal_spring(table, probe, values) -> str:
     if abs(correlation) < LINEAR_CORRELATION:
         return ""
     rate_k_per_s = float(np.polyfit(table.t_s, table.temperature_k, 1)[0])
-    text = (f"thermal_drift ≡ spring_drift: the temperature rises linearly in time here "
-            f"({rate_k_per_s * 3600:.3g} K/h, correlation {correlation:.3f}), so r = α·dT/dt")
+    text = (
+        f"thermal_drift ≡ spring_drift: the temperature rises linearly in time here "
+        f"({rate_k_per_s * 3600:.3g} K/h, correlation {correlation:.3f}), so r = α·dT/dt"
+    )
     if "thermal_drift" in values and values["thermal_drift"]:
         alpha = values["thermal_drift"]["spring_temp_coeff_per_k"]
         text += f"; here α = {alpha:.3g}/K ≡ spring_drift r = {alpha * rate_k_per_s:.3g}/s"

@@ -25,6 +25,7 @@ the finite amplitude adds ∝ A²); they are applied as strengths that blend the
 and without them, k = k_off + λ·(k_on − k_off), so that they are linear in λ near 0 (score tests)
 while λ = 1 is the exact physics, interactions included.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -83,18 +84,28 @@ class Configuration:
         amplitude = table.amplitude_rad if table.amplitude_rad is not None else np.full(n, probe.theta_stop_rad)
         ringdown_damping = table.columns.get("damping_per_s", np.full(n, probe.damping_per_s))
         duration = table.columns.get("duration_s", ringdown_average.default_duration_s(table.f_hz))
-        return cls(theta0_rad=table.theta0_rad.copy(), field_t=table.field_t, gradient_t_per_m=table.gradient_t_per_m,
-                   spring_nm_per_rad=np.full(n, probe.spring_nm_per_rad), amplitude_start_rad=amplitude,
-                   ringdown_damping_per_s=ringdown_damping, ringdown_duration_s=duration,
-                   damping_per_s=np.full(n, probe.damping_per_s), frequency_hz=np.zeros(n))
+        return cls(
+            theta0_rad=table.theta0_rad.copy(),
+            field_t=table.field_t,
+            gradient_t_per_m=table.gradient_t_per_m,
+            spring_nm_per_rad=np.full(n, probe.spring_nm_per_rad),
+            amplitude_start_rad=amplitude,
+            ringdown_damping_per_s=ringdown_damping,
+            ringdown_duration_s=duration,
+            damping_per_s=np.full(n, probe.damping_per_s),
+            frequency_hz=np.zeros(n),
+        )
 
     def probe_frame(self):
         """(axes, field', gradient', Hessian') with axes (n, 3, 3) holding rows x', y', z'."""
         axes = probe_axes(self.theta0_rad)
         field = np.einsum("nij,nj->ni", axes, self.field_t)
         gradient = np.einsum("nai,nij,nbj->nab", axes, self.gradient_t_per_m, axes)
-        hessian = None if self.hessian_t_per_m2 is None else np.einsum(
-            "nai,nbj,nck,nijk->nabc", axes, axes, axes, self.hessian_t_per_m2, optimize=True)
+        hessian = (
+            None
+            if self.hessian_t_per_m2 is None
+            else np.einsum("nai,nbj,nck,nijk->nabc", axes, axes, axes, self.hessian_t_per_m2, optimize=True)
+        )
         return axes, field, gradient, hessian
 
 
@@ -112,9 +123,12 @@ def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
     active_gradient[:, 0, 0] = gradient[:, 0, 0]
     variants = [along] + ([field] if config.deflection else [])
     gravity = None if config.gravity_m_per_s2 is None else np.einsum("nij,nj->ni", axes, config.gravity_m_per_s2)
-    local = dict(gradient_t_per_m=factor * active_gradient,
-                 hessian_t_per_m2=None if hessian is None else factor * hessian,
-                 gravity_m_per_s2=gravity, spring_nm_per_rad=config.spring_nm_per_rad)
+    local = dict(
+        gradient_t_per_m=factor * active_gradient,
+        hessian_t_per_m2=None if hessian is None else factor * hessian,
+        gravity_m_per_s2=gravity,
+        spring_nm_per_rad=config.spring_nm_per_rad,
+    )
     stiffness = [_rest_stiffness(probe, factor * b, **local) for b in variants]
     h = _readout(config, probe, _blend(stiffness, config.deflection))
     if config.amplitude:
@@ -143,10 +157,18 @@ def _readout(config, probe, stiffness):
 
 def _potential(probe, field, gradient_t_per_m, hessian_t_per_m2, gravity_m_per_s2, spring_nm_per_rad, repeat=None):
     """ArcPotential.from_local_field for the rows, optionally each repeated ``repeat`` times."""
+
     def expand(a):
         return a if a is None or repeat is None else np.repeat(a, repeat, axis=0)
-    return ArcPotential.from_local_field(probe, expand(field), expand(gradient_t_per_m), expand(hessian_t_per_m2),
-                                         expand(gravity_m_per_s2), spring_nm_per_rad=expand(spring_nm_per_rad))
+
+    return ArcPotential.from_local_field(
+        probe,
+        expand(field),
+        expand(gradient_t_per_m),
+        expand(hessian_t_per_m2),
+        expand(gravity_m_per_s2),
+        spring_nm_per_rad=expand(spring_nm_per_rad),
+    )
 
 
 def _rest_stiffness(probe, field, **local):
@@ -184,17 +206,26 @@ def unevaluable_rows(table, probe) -> dict:
     amplitude = config.amplitude_start_rad
     centre = potential.cycle_centre_rad(amplitude)
     config.transverse = config.deflection = config.amplitude = 1.0
-    h, _ = frequency_factor(config, probe, ringdown_average.amplitude_nodes(
-        config.theta0_rad, amplitude, config.ringdown_damping_per_s, config.ringdown_duration_s))
+    h, _ = frequency_factor(
+        config,
+        probe,
+        ringdown_average.amplitude_nodes(
+            config.theta0_rad, amplitude, config.ringdown_damping_per_s, config.ringdown_duration_s
+        ),
+    )
     limit_deg = math.degrees(potential.half_width_rad)
     found = {}
     for row in np.flatnonzero(~np.isfinite(at_rest)):
-        found[int(row)] = ("no stable rest angle in the reference field (the field spring cancels the "
-                           "mechanical one)", f"|B| = {np.linalg.norm(field[row]) * 1e3:.3g} mT")
+        found[int(row)] = (
+            "no stable rest angle in the reference field (the field spring cancels the mechanical one)",
+            f"|B| = {np.linalg.norm(field[row]) * 1e3:.3g} mT",
+        )
     for row in np.flatnonzero(np.isfinite(at_rest) & ~np.isfinite(centre)):
         swing = math.degrees(abs(at_rest[row]) + amplitude[row])
-        found[int(row)] = (f"the swing |θs| + A reaches beyond the ±{limit_deg:.3g}° over which the potential "
-                           "is expanded", f"{swing:.3g}°")
+        found[int(row)] = (
+            f"the swing |θs| + A reaches beyond the ±{limit_deg:.3g}° over which the potential is expanded",
+            f"{swing:.3g}°",
+        )
     for row in np.flatnonzero(~np.isfinite(h)):
         found.setdefault(int(row), ("the potential gives no real frequency here (k/J ≤ δ²)", ""))
     return dict(sorted(found.items()))

@@ -13,6 +13,7 @@ A plugin returns ``stiffness_nm_per_rad`` (added to kM: it enters U as ½·Δk·
 through the same equilibrium and harmonic balance) and/or ``frequency_hz`` (added to f).
 Installed packages register effects under the entry-point group ``mows.lab.effects``.
 """
+
 from __future__ import annotations
 
 import importlib.metadata
@@ -29,8 +30,9 @@ from mows.lab.table import MissingColumnError
 ENTRY_POINT_GROUP = "mows.lab.effects"
 
 
-def effect(name: str, parameters: dict, explanation: str = "", signature: str = "", equation: str = "",
-           check: str = "") -> Callable:
+def effect(
+    name: str, parameters: dict, explanation: str = "", signature: str = "", equation: str = "", check: str = ""
+) -> Callable:
     """Decorator turning ``function(rows, **parameters) -> dict`` into an :class:`Effect`.
 
     ``parameters`` maps each name to ``(off_value, lower, upper, unit)``; the off value must
@@ -51,8 +53,9 @@ def effect(name: str, parameters: dict, explanation: str = "", signature: str = 
     def decorate(function):
         accepted = list(inspect.signature(function).parameters)[1:]
         if accepted != [p.name for p in specs]:
-            raise ValueError(f"effect {name}: the function takes {accepted}, the parameters are "
-                             f"{[p.name for p in specs]}")
+            raise ValueError(
+                f"effect {name}: the function takes {accepted}, the parameters are {[p.name for p in specs]}"
+            )
 
         where = f"plugin effect {name} ({function.__code__.co_filename})"
 
@@ -65,19 +68,33 @@ def effect(name: str, parameters: dict, explanation: str = "", signature: str = 
             except Exception as error:  # the plugin's bug is the user's input: say whose and where
                 raise ValueError(f"{where} raised {type(error).__name__}: {error} (called with {called})") from error
             if not isinstance(result, dict):
-                raise ValueError(f"{where} returned {type(result).__name__}, not a dict of stiffness_nm_per_rad "
-                                 "and/or frequency_hz")
+                raise ValueError(
+                    f"{where} returned {type(result).__name__}, not a dict of stiffness_nm_per_rad and/or frequency_hz"
+                )
             unknown = set(result) - {"stiffness_nm_per_rad", "frequency_hz"}
             if unknown:
-                raise ValueError(f"effect {name} returned {sorted(unknown)}; allowed: stiffness_nm_per_rad, "
-                                 "frequency_hz")
+                raise ValueError(
+                    f"effect {name} returned {sorted(unknown)}; allowed: stiffness_nm_per_rad, frequency_hz"
+                )
             n = len(config.theta0_rad)
             added = {key: _finite_values(where, key, value, n, called) for key, value in result.items()}
             config.spring_nm_per_rad = config.spring_nm_per_rad + added.get("stiffness_nm_per_rad", 0.0)
             config.frequency_hz = config.frequency_hz + added.get("frequency_hz", 0.0)
 
-        return Effect(name, explanation or function.__doc__ or name, equation, signature, tuple(specs), apply,
-                      MECHANICS, requires=(), priority=200, check=check, origin=function.__module__)
+        return Effect(
+            name,
+            explanation or function.__doc__ or name,
+            equation,
+            signature,
+            tuple(specs),
+            apply,
+            MECHANICS,
+            requires=(),
+            priority=200,
+            check=check,
+            origin=function.__module__,
+        )
+
     return decorate
 
 
@@ -89,8 +106,10 @@ def _finite_values(where: str, key: str, value, n: int, called: str) -> np.ndarr
         raise ValueError(f"{where} returned {key} = {value!r}: expected a number or {n} numbers, one per row") from None
     bad = np.flatnonzero(~np.isfinite(values))
     if bad.size:
-        raise ValueError(f"{where} returned NaN or infinite {key} in {bad.size} of {n} rows (first: row {bad[0] + 1}) "
-                         f"with {called}: an effect must return finite numbers")
+        raise ValueError(
+            f"{where} returned NaN or infinite {key} in {bad.size} of {n} rows (first: row {bad[0] + 1}) "
+            f"with {called}: an effect must return finite numbers"
+        )
     return values
 
 
@@ -106,8 +125,7 @@ def load_plugins(sources) -> list:
             continue
         points = [p for p in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP) if p.name == source]
         if not points:
-            raise ValueError(f"plugin '{source}' is neither a .py file nor an entry point in group "
-                             f"{ENTRY_POINT_GROUP}")
+            raise ValueError(f"plugin '{source}' is neither a .py file nor an entry point in group {ENTRY_POINT_GROUP}")
         loaded = points[0].load()
         found.extend([loaded] if isinstance(loaded, Effect) else _effects_in(vars(loaded), source))
     return found

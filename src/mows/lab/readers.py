@@ -4,6 +4,7 @@ Each reader gathers the columns of :mod:`mows.lab.table` and hands them to
 :func:`mows.lab.table.with_notes`, which validates them and notes what was assumed. Reference
 fields of static sources come from :mod:`mows.lab.reference`.
 """
+
 from __future__ import annotations
 
 import csv
@@ -63,8 +64,7 @@ def read_csv(path, drop_invalid: bool = False) -> MeasurementTable:
         bad = np.flatnonzero(np.isnan(values) & np.array([row[j].strip().lower() != "nan" for row in body]))
         if bad.size:
             if not drop_invalid:
-                raise TableError(f"{path}: column '{name}': {body[bad[0]][j]!r} is not a number "
-                                 f"({rows_text(bad)})")
+                raise TableError(f"{path}: column '{name}': {body[bad[0]][j]!r} is not a number ({rows_text(bad)})")
             invalid.setdefault(name, set()).update(bad.tolist())
         columns[name] = values
     table_source = str(path)
@@ -114,8 +114,13 @@ def _stamp_s(message, timestamp_ns) -> float:
     return seconds if seconds > 0 else 1e-9 * timestamp_ns
 
 
-def from_bag(path, reference=None, magnet_position_m=(0.0, 0.0, 0.0), ringdown_topic: str = RINGDOWN_TOPIC,
-             sweep_topic: str = SWEEP_TOPIC) -> MeasurementTable:
+def from_bag(
+    path,
+    reference=None,
+    magnet_position_m=(0.0, 0.0, 0.0),
+    ringdown_topic: str = RINGDOWN_TOPIC,
+    sweep_topic: str = SWEEP_TOPIC,
+) -> MeasurementTable:
     """A table from the project's bags: ``mows_msgs/msg/RingdownFit`` messages on
     ``ringdown_topic`` (only STATUS_OK fits; the others are counted in ``notes``).
 
@@ -134,8 +139,9 @@ def from_bag(path, reference=None, magnet_position_m=(0.0, 0.0, 0.0), ringdown_t
     path = pathlib.Path(path)
     if not path.exists():
         raise TableError(f"no bag at {path}")
-    topics = [ringdown_topic, sweep_topic] + ([reference] if isinstance(reference, str) and
-                                              reference.startswith("/") else [])
+    topics = [ringdown_topic, sweep_topic] + (
+        [reference] if isinstance(reference, str) and reference.startswith("/") else []
+    )
     fits, sweeps, fields, failed = [], [], [], 0
     for item in bags.read_bag(path, topics=topics):
         if item.topic == ringdown_topic:
@@ -151,8 +157,10 @@ def from_bag(path, reference=None, magnet_position_m=(0.0, 0.0, 0.0), ringdown_t
             vector = item.message.magnetic_field
             fields.append((_stamp_s(item.message, item.timestamp_ns), (vector.x, vector.y, vector.z)))
     if not fits:
-        raise TableError(f"{path}: no successful RingdownFit messages on {ringdown_topic}"
-                         + (f" ({failed} failed fits)" if failed else ""))
+        raise TableError(
+            f"{path}: no successful RingdownFit messages on {ringdown_topic}"
+            + (f" ({failed} failed fits)" if failed else "")
+        )
     fits.sort(key=lambda item: item[0])
     times_s = np.array([stamp for stamp, _ in fits])
     columns = {
@@ -190,9 +198,11 @@ def from_sweep(record, reference, probe, decomposition=None) -> MeasurementTable
     ``reference`` (anything :func:`mows.lab.reference.reference_source` takes). With a first-principles
     ``decomposition`` of the sweep, each ring-down's start swing is stop − |θs| at its field
     (:meth:`~mows.sweep.record.SweepRecord.start_amplitudes_rad`); else the pooled stop amplitude."""
-    starts = (record.start_amplitudes_rad(decomposition, probe)
-              if decomposition is not None and decomposition.ok and decomposition.model == "first_principles"
-              else None)
+    starts = (
+        record.start_amplitudes_rad(decomposition, probe)
+        if decomposition is not None and decomposition.ok and decomposition.model == "first_principles"
+        else None
+    )
     columns = record.table_columns(starts)
     columns.update(reference_columns(reference, len(record.points)))
     return MeasurementTable(columns, "sweep")

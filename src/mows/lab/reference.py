@@ -11,6 +11,7 @@ A reference is named in one of four ways, and each is turned into one thing, a
 - a path or name: a YAML file holding a field-source mapping, else a scenario (a shipped
   scenario's name or a scenario YAML file).
 """
+
 from __future__ import annotations
 
 import os
@@ -49,8 +50,10 @@ def reference_source(reference, magnet_position_m=(0.0, 0.0, 0.0)) -> tuple:
     if isinstance(reference, Mapping):
         reference = source_from_dict(dict(reference))
     if not isinstance(reference, FieldSource):
-        raise TypeError(f"a reference is a field source, a scenario, a field-source mapping or a file or name "
-                        f"of one; got {type(reference).__name__}")
+        raise TypeError(
+            f"a reference is a field source, a scenario, a field-source mapping or a file or name "
+            f"of one; got {type(reference).__name__}"
+        )
     return reference, np.asarray(magnet_position_m, float)
 
 

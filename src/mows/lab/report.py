@@ -8,6 +8,7 @@ against every covariate; the ranked candidates with their alias groups (exact ph
 in words and numbers); the error history (χ²/dof and cross-validated rms per step). Legends
 sit outside the data.
 """
+
 from __future__ import annotations
 
 import base64
@@ -51,8 +52,11 @@ def figure_field_response(report) -> str:
     axis.errorbar(along_ut, measured * 1e3, table.f_std_hz * 1e3, fmt=".", color="k", label="measured")
     axis.plot(along_ut, base_model * 1e3, "x", color="tab:gray", label="Eq. 6 (base)")
     axis.plot(along_ut, model * 1e3, "o", mfc="none", color="tab:red", label=report.model)
-    axis.set(xlabel="Bx' reference field along the probe axis (µT)", ylabel="Δf = f − f00 (mHz)",
-             title="Frequency shift against field (cf. paper Fig. 3)")
+    axis.set(
+        xlabel="Bx' reference field along the probe axis (µT)",
+        ylabel="Δf = f − f00 (mHz)",
+        title="Frequency shift against field (cf. paper Fig. 3)",
+    )
     axis.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3, fontsize=8)
     return _png(figure)
 
@@ -74,8 +78,10 @@ def sweep_curve(fit, rows, theta0_deg) -> np.ndarray:
     angles, inverse = np.unique(np.mod(sweep.theta0_deg, 360.0), return_inverse=True)
     counts = np.bincount(inverse)
     grid = np.asarray(theta0_deg, float)
-    columns = {name: np.interp(np.mod(grid, 360.0), angles, np.bincount(inverse, values) / counts, period=360.0)
-               for name, values in sweep.columns.items()}
+    columns = {
+        name: np.interp(np.mod(grid, 360.0), angles, np.bincount(inverse, values) / counts, period=360.0)
+        for name, values in sweep.columns.items()
+    }
     columns["theta0_deg"] = grid
     return fit.model.predict(dataclasses.replace(sweep, columns=columns), fit.values)
 
@@ -125,8 +131,9 @@ def figure_residuals(report, x, xlabel) -> str:
     fits = [(report.base, "base (Eq. 6)", "tab:gray")]
     if report.effects:
         fits.append((report.fit, "final model", "tab:red"))
-    figure, axes = plt.subplots(len(fits) + 1, 1, figsize=(7.5, 2.2 * (len(fits) + 1)), sharex=True,
-                                constrained_layout=True)
+    figure, axes = plt.subplots(
+        len(fits) + 1, 1, figsize=(7.5, 2.2 * (len(fits) + 1)), sharex=True, constrained_layout=True
+    )
     for axis, (fit, label, color) in zip(axes, fits):
         _residual_panel(axis, x, fit, label, color)
     pulls = axes[-1]
@@ -184,20 +191,47 @@ def render_html(report) -> str:
     table = report.fit.table
     covariates = table.covariates()
     residual_plots = [_img(figure_residuals(report, np.degrees(table.theta0_rad), "θ0 (deg)"), "residual vs θ0")]
-    residual_plots += [_img(figure_residuals(report, values, name), f"residual vs {name}")
-                       for name, values in covariates.items()]
-    candidates = _rows([(i + 1, c.label, f"{c.delta_bic:.1f}", f"{c.p_value:.2g}", f"{c.chi2_dof_after:.3f}",
-                         c.group or "", "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters))
-                        for i, c in enumerate(report.candidates)])
-    history = _rows([(i, s.change, " + ".join(["eq6"] + s.effects), f"{s.chi2_dof:.3f}", f"{s.bic:.1f}",
-                      s.cv_text)
-                     for i, s in enumerate(report.history)])
-    checks = _rows([(c.effect, "held at physics" if c.held else "free",
-                     "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters),
-                     f"{c.deviation_sigma:.1f}") for c in report.physics_checks])
-    groups = "".join(f"<li>group {g.number}: {html.escape(', '.join(g.members))} — {html.escape(g.separation)}"
-                     + "".join(f"<br>alias: {html.escape(a)}" for a in g.aliases)
-                     + "".join(f"<br>check {html.escape(c)}" for c in g.checks) + "</li>" for g in report.groups)
+    residual_plots += [
+        _img(figure_residuals(report, values, name), f"residual vs {name}") for name, values in covariates.items()
+    ]
+    candidates = _rows(
+        [
+            (
+                i + 1,
+                c.label,
+                f"{c.delta_bic:.1f}",
+                f"{c.p_value:.2g}",
+                f"{c.chi2_dof_after:.3f}",
+                c.group or "",
+                "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters),
+            )
+            for i, c in enumerate(report.candidates)
+        ]
+    )
+    history = _rows(
+        [
+            (i, s.change, " + ".join(["eq6"] + s.effects), f"{s.chi2_dof:.3f}", f"{s.bic:.1f}", s.cv_text)
+            for i, s in enumerate(report.history)
+        ]
+    )
+    checks = _rows(
+        [
+            (
+                c.effect,
+                "held at physics" if c.held else "free",
+                "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters),
+                f"{c.deviation_sigma:.1f}",
+            )
+            for c in report.physics_checks
+        ]
+    )
+    groups = "".join(
+        f"<li>group {g.number}: {html.escape(', '.join(g.members))} — {html.escape(g.separation)}"
+        + "".join(f"<br>alias: {html.escape(a)}" for a in g.aliases)
+        + "".join(f"<br>check {html.escape(c)}" for c in g.checks)
+        + "</li>"
+        for g in report.groups
+    )
     parameters = _rows([(n, f"{v:.6g}", f"{s:.2g}", u) for n, v, s, u in report.fit.parameters()])
     return f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>MOWS model lab: {html.escape(table.source)}</title>
@@ -213,14 +247,14 @@ table{{border-collapse:collapse}} tr:nth-child(even){{background:#f2f2f2}} img{{
 <p>Effects with a physical value: their free fit with the rest of the model against it:</p>
 <table><tr><th>effect</th><th>in the model</th><th>free fit</th><th>physical value off by (σ)</th></tr>
 {checks}</table>
-<h2>Residuals</h2><p>{html.escape(report.structure)}</p>{''.join(residual_plots)}
+<h2>Residuals</h2><p>{html.escape(report.structure)}</p>{"".join(residual_plots)}
 <h2>Candidate effects</h2>{_img(figure_candidates(report), "candidates")}
 <table><tr><th>rank</th><th>effect</th><th>ΔBIC</th><th>p</th><th>χ²/dof after</th><th>group</th>
 <th>parameters (free fit)</th></tr>{candidates}</table><ul>{groups}</ul>
 <h2>Error history</h2>{_img(figure_history(report), "history")}
 <table><tr><th>step</th><th>change</th><th>model</th><th>χ²/dof</th><th>BIC</th><th>CV rms (mHz)</th></tr>
 {history}</table>
-<p>Notes: {html.escape('; '.join(report.notes) or 'none')}</p></body></html>"""
+<p>Notes: {html.escape("; ".join(report.notes) or "none")}</p></body></html>"""
 
 
 def write_html(report, path) -> pathlib.Path:

@@ -31,6 +31,7 @@ parameters is freeing an effect held at physics, on strong evidence. The revisit
 comes back to a model and ends; at most 6 forward steps. Every step is recorded with its
 change, χ²/dof, BIC and the leave-one-sweep-out cross-validated rms error.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -44,8 +45,8 @@ from mows.lab.effects import testable
 from mows.lab.physical_aliases import alias_statements
 
 MAX_AUTO_STEPS = 6
-MAX_REVISIT_MOVES = 6       # per forward step; each move lowers the BIC, so this is only a bound
-NONLINEAR_MARGIN = 2.0      # a refit may gain up to this × the score statistic (the linearised gain)
+MAX_REVISIT_MOVES = 6  # per forward step; each move lowers the BIC, so this is only a bound
+NONLINEAR_MARGIN = 2.0  # a refit may gain up to this × the score statistic (the linearised gain)
 
 
 @dataclasses.dataclass
@@ -60,7 +61,7 @@ class HistoryStep:
     fit: object
     change: str = "base model"
     check: list = dataclasses.field(default_factory=list)
-    cv_identifiable: bool = True   # False: a left-out sweep held the only information on a parameter
+    cv_identifiable: bool = True  # False: a left-out sweep held the only information on a parameter
 
     @property
     def cv_text(self) -> str:
@@ -70,15 +71,29 @@ class HistoryStep:
         return f"{self.cv_rms_hz * 1e3:.4f}" if math.isfinite(self.cv_rms_hz) else "-"
 
     def to_dict(self) -> dict:
-        return {"effects": self.effects, "change": self.change, "chi2_dof": self.chi2_dof, "bic": self.bic,
-                "cv_rms": None if not math.isfinite(self.cv_rms_hz) else self.cv_rms_hz,  # Hz (issue's key)
-                "cv_identifiable": self.cv_identifiable, "free_fit": parameters_dict(self.check)}
+        return {
+            "effects": self.effects,
+            "change": self.change,
+            "chi2_dof": self.chi2_dof,
+            "bic": self.bic,
+            "cv_rms": None if not math.isfinite(self.cv_rms_hz) else self.cv_rms_hz,  # Hz (issue's key)
+            "cv_identifiable": self.cv_identifiable,
+            "free_fit": parameters_dict(self.check),
+        }
 
 
 def history_step(fit, cross_validate: bool = True, change: str = "base model", check=()) -> HistoryStep:
     cv = fit.cross_validate() if cross_validate else math.nan
-    return HistoryStep(fit.model.labels, fit.chi2_dof, fit.bic, cv, fit, change, list(check),
-                       cv_identifiable=not (cross_validate and math.isnan(cv)))
+    return HistoryStep(
+        fit.model.labels,
+        fit.chi2_dof,
+        fit.bic,
+        cv,
+        fit,
+        change,
+        list(check),
+        cv_identifiable=not (cross_validate and math.isnan(cv)),
+    )
 
 
 def parameters_dict(parameters) -> dict:
@@ -119,12 +134,23 @@ def prefer_physical(found, pool, probe, history, cross_validate: bool = True):
         if best is None:
             continue
         form, new = best
-        aliases = alias_statements([generic.name, form.name], new, probe,
-                                   {generic.name: {n: v for n, v, _, _ in fit.effect_parameters(generic.name)}})
-        history.append(history_step(new, cross_validate, (
-            f"replace {generic.label} by {form.label}: they fit alike (ΔBIC {fit.bic - new.bic:+.1f}); {form.name} is "
-            f"physics{' of known size' if form.fixed else ''}, {generic.name} a generic correction"
-            + "".join(f" ({alias})" for alias in aliases))))
+        aliases = alias_statements(
+            [generic.name, form.name],
+            new,
+            probe,
+            {generic.name: {n: v for n, v, _, _ in fit.effect_parameters(generic.name)}},
+        )
+        history.append(
+            history_step(
+                new,
+                cross_validate,
+                (
+                    f"replace {generic.label} by {form.label}: they fit alike (ΔBIC {fit.bic - new.bic:+.1f}); "
+                    f"{form.name} is physics{' of known size' if form.fixed else ''}, "
+                    f"{generic.name} a generic correction" + "".join(f" ({alias})" for alias in aliases)
+                ),
+            )
+        )
         fit = new
     return found if fit is found.fit else diagnose(fit, pool, probe)
 
@@ -162,11 +188,16 @@ def _forward_step(found):
     for candidate in found.candidates:
         if candidate.physics is not None and candidate.physics.kept_physics:
             fit = candidate.physics.fit or (found.fit.model + candidate.effect.at_physics()).fit(
-                found.fit.table, start=found.fit.values[1:])
+                found.fit.table, start=found.fit.values[1:]
+            )
             if found.fit.bic - fit.bic > -TIE_DELTA_BIC:  # the one-step estimate may be off
-                return (f"add {candidate.label_of(candidate.physics)}: known physics the data cannot reject "
-                        f"(ΔBIC {found.fit.bic - fit.bic:+.1f}, its predicted signal χ² "
-                        f"{candidate.physics.signal_chi2:.3g} absorbed by free parameters)", fit, candidate.parameters)
+                return (
+                    f"add {candidate.label_of(candidate.physics)}: known physics the data cannot reject "
+                    f"(ΔBIC {found.fit.bic - fit.bic:+.1f}, its predicted signal χ² "
+                    f"{candidate.physics.signal_chi2:.3g} absorbed by free parameters)",
+                    fit,
+                    candidate.parameters,
+                )
     return None
 
 
@@ -221,12 +252,16 @@ def _alternatives(fit, effect, pool, probe) -> list:
     """
     reduced = fit.model.without(effect).fit(fit.table, start=fit.values_without(effect))
     found = [(f"remove {effect.label}", reduced, False)]
-    found += [(f"replace {effect.label} by {label}", new, freed)
-              for label, new, freed in _replacements(fit, reduced, pool, probe, effect)]
+    found += [
+        (f"replace {effect.label} by {label}", new, freed)
+        for label, new, freed in _replacements(fit, reduced, pool, probe, effect)
+    ]
     if effect.physical is not None and not effect.fixed:
         held = (reduced.model + effect.at_physics()).fit(fit.table, start=reduced.values[1:])
-        found += [(f"replace {effect.label} by {held.model.labels[-1]} + {label}", new, freed)
-                  for label, new, freed in _replacements(fit, held, pool, probe, effect)]
+        found += [
+            (f"replace {effect.label} by {held.model.labels[-1]} + {label}", new, freed)
+            for label, new, freed in _replacements(fit, held, pool, probe, effect)
+        ]
     return found
 
 
@@ -248,6 +283,9 @@ def _replacements(fit, start, pool, probe, replaced) -> list:
 
     candidates, _ = rank_candidates(start, pool, probe, could_pass)
     # No passengers: what a move adds must itself be positive evidence on ``start``.
-    return [(c.label_of(form), form.fit, replaced.fixed and c.name == replaced.name) for c in candidates
-            for form in c.forms
-            if form.fit is not None and start.bic - form.fit.bic > TIE_DELTA_BIC]
+    return [
+        (c.label_of(form), form.fit, replaced.fixed and c.name == replaced.name)
+        for c in candidates
+        for form in c.forms
+        if form.fit is not None and start.bic - form.fit.bic > TIE_DELTA_BIC
+    ]

@@ -7,6 +7,7 @@ residual; amplitudes come from the projected least squares, where the projected 
 these angles", while its score test still counts). Significant means p < 0.005 after
 Bonferroni over all these tests. ``goodness_p`` is the χ² test of the whole fit.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -33,8 +34,10 @@ class Harmonic:
     identifiable: bool = True  # False: the angles leave amplitude and phase undetermined (NaN)
 
     def to_dict(self) -> dict:
-        return {name: (None if isinstance(value, float) and not math.isfinite(value) else value)
-                for name, value in dataclasses.asdict(self).items()}
+        return {
+            name: (None if isinstance(value, float) and not math.isfinite(value) else value)
+            for name, value in dataclasses.asdict(self).items()
+        }
 
     def text(self) -> str:
         """Amplitude ± σ and phase, or why there are none."""
@@ -42,8 +45,7 @@ class Harmonic:
             return "absorbed by the model"
         if not self.identifiable:
             return "not identifiable from these angles"
-        return (f"{self.amplitude_hz * 1e3:.3g} ± {self.std_hz * 1e3:.2g} mHz, "
-                f"phase {math.degrees(self.phase_rad):.0f}°")
+        return f"{self.amplitude_hz * 1e3:.3g} ± {self.std_hz * 1e3:.2g} mHz, phase {math.degrees(self.phase_rad):.0f}°"
 
 
 @dataclasses.dataclass
@@ -69,17 +71,28 @@ class Structure:
     @property
     def significant(self) -> list:
         """Descriptions of the significant features."""
-        found = [f"harmonic {h.k} of θ0 ({h.text()}, p = {h.p_value:.1e})"
-                 for h in self.harmonics if not h.absorbed and h.p_value < self.alpha]
-        found += [f"a trend with {c.name} (correlation {c.correlation:+.2f}, p = {c.p_value:.1e})"
-                  for c in self.covariates if c.p_value < self.alpha]
+        found = [
+            f"harmonic {h.k} of θ0 ({h.text()}, p = {h.p_value:.1e})"
+            for h in self.harmonics
+            if not h.absorbed and h.p_value < self.alpha
+        ]
+        found += [
+            f"a trend with {c.name} (correlation {c.correlation:+.2f}, p = {c.p_value:.1e})"
+            for c in self.covariates
+            if c.p_value < self.alpha
+        ]
         return found
 
     def to_dict(self) -> dict:
-        return {"summary": self.summary, "chi2": self.chi2, "dof": self.dof, "goodness_p": self.goodness_p,
-                "alpha": self.alpha,
-                "harmonics": [h.to_dict() for h in self.harmonics],
-                "covariates": [dataclasses.asdict(c) for c in self.covariates]}
+        return {
+            "summary": self.summary,
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "goodness_p": self.goodness_p,
+            "alpha": self.alpha,
+            "harmonics": [h.to_dict() for h in self.harmonics],
+            "covariates": [dataclasses.asdict(c) for c in self.covariates],
+        }
 
 
 def residual_structure(fit) -> Structure:
@@ -98,12 +111,23 @@ def residual_structure(fit) -> Structure:
         test = signature((values - values.mean()) * weight, model_basis, residual)
         if test.rank:
             direction = test.projected[:, 0]
-            trends.append(CovariateTrend(name, float(direction @ residual / (np.linalg.norm(direction) *
-                                                                              np.linalg.norm(residual))),
-                                         float(direction @ residual / (direction @ direction)), test.p_value))
+            trends.append(
+                CovariateTrend(
+                    name,
+                    float(direction @ residual / (np.linalg.norm(direction) * np.linalg.norm(residual))),
+                    float(direction @ residual / (direction @ direction)),
+                    test.p_value,
+                )
+            )
     tests = sum(not h.absorbed for h in harmonics) + len(trends)
-    structure = Structure(fit.chi2, fit.dof, float(scipy.stats.chi2.sf(fit.chi2, max(fit.dof, 1))), harmonics,
-                          trends, STRUCTURE_ALPHA / max(tests, 1))
+    structure = Structure(
+        fit.chi2,
+        fit.dof,
+        float(scipy.stats.chi2.sf(fit.chi2, max(fit.dof, 1))),
+        harmonics,
+        trends,
+        STRUCTURE_ALPHA / max(tests, 1),
+    )
     structure.summary = _describe(structure)
     return structure
 
@@ -124,17 +148,20 @@ def _harmonic(k, test: Signature, residual) -> Harmonic:
 
 def _describe(structure: Structure) -> str:
     reduced = structure.chi2 / max(structure.dof, 1)
-    head = (f"χ²/dof = {reduced:.3g} over {structure.dof} degrees of freedom "
-            f"(p = {structure.goodness_p:.2g}): "
-            + ("consistent with the stated uncertainties" if structure.goodness_p >= GOODNESS_ALPHA
-               else "the residuals exceed the stated uncertainties"))
+    head = f"χ²/dof = {reduced:.3g} over {structure.dof} degrees of freedom (p = {structure.goodness_p:.2g}): " + (
+        "consistent with the stated uncertainties"
+        if structure.goodness_p >= GOODNESS_ALPHA
+        else "the residuals exceed the stated uncertainties"
+    )
     found = structure.significant
     if found:
         return head + ". Significant structure: " + "; ".join(found) + "."
     if structure.goodness_p < GOODNESS_ALPHA:
-        return (head + ". No harmonic of θ0 up to 4 and no covariate trend stands out: the excess looks "
-                f"like white scatter (f_std_hz ≈ ×{math.sqrt(reduced):.2f} too small, or noise the "
-                "model does not describe).")
+        return (
+            head + ". No harmonic of θ0 up to 4 and no covariate trend stands out: the excess looks "
+            f"like white scatter (f_std_hz ≈ ×{math.sqrt(reduced):.2f} too small, or noise the "
+            "model does not describe)."
+        )
     return head + ". No significant structure: the residuals look like noise."
 
 
@@ -150,12 +177,17 @@ def product_trends(fit, count: int = 3) -> list:
     names = list(covariates)
     found = []
     for i, a in enumerate(names):
-        for b in names[i + 1:]:
+        for b in names[i + 1 :]:
             product = covariates[a] * covariates[b]
             test = signature((product - product.mean()) * weight, model_basis, residual)
             if test.rank:
                 direction = test.projected[:, 0]
-                found.append(CovariateTrend(f"{a}·{b}", float(direction @ residual / (
-                    np.linalg.norm(direction) * np.linalg.norm(residual))), float(
-                    direction @ residual / (direction @ direction)), test.p_value))
+                found.append(
+                    CovariateTrend(
+                        f"{a}·{b}",
+                        float(direction @ residual / (np.linalg.norm(direction) * np.linalg.norm(residual))),
+                        float(direction @ residual / (direction @ direction)),
+                        test.p_value,
+                    )
+                )
     return sorted(found, key=lambda trend: -abs(trend.correlation))[:count]

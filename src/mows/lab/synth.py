@@ -15,6 +15,7 @@ The truth never comes from the lab's own model. For every row:
 The reference columns are the true field and in-plane gradient at the probe (of ``reference``
 when given: a reference that misses a source), optionally with magnetometer noise.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -43,8 +44,16 @@ def _per_row(sources, n) -> list:
     return sources
 
 
-def true_frequency_hz(probe, sources, theta0_rad, amplitude_start_rad, temperature_k=None, gravity_m_per_s2=LEVEL,
-                      magnet_position_m=(0.0, 0.0, 0.0), duration_s=None) -> np.ndarray:
+def true_frequency_hz(
+    probe,
+    sources,
+    theta0_rad,
+    amplitude_start_rad,
+    temperature_k=None,
+    gravity_m_per_s2=LEVEL,
+    magnet_position_m=(0.0, 0.0, 0.0),
+    duration_s=None,
+) -> np.ndarray:
     """Noise-free ring-down frequencies (n,), Hz, from the exact sources (module docstring).
 
     ``sources``: one :class:`~mows.physics.field.FieldSource` or one per row. Per-row arguments broadcast
@@ -54,23 +63,55 @@ def true_frequency_hz(probe, sources, theta0_rad, amplitude_start_rad, temperatu
     n = len(theta0)
     rows = _per_row(sources, n)
     nodes = chebyshev_nodes_rad()
-    energy = np.stack([arc_energy_j(probe, source, Pose(magnet_position_m=tuple(magnet_position_m),
-                                                        theta0_rad=float(t), gravity_m_per_s2=tuple(gravity_m_per_s2)),
-                                    nodes) for source, t in zip(rows, theta0)])
-    spring = probe.spring_nm_per_rad if temperature_k is None else probe.spring_at(
-        np.broadcast_to(np.asarray(temperature_k, float), (n,)))
+    energy = np.stack(
+        [
+            arc_energy_j(
+                probe,
+                source,
+                Pose(
+                    magnet_position_m=tuple(magnet_position_m),
+                    theta0_rad=float(t),
+                    gravity_m_per_s2=tuple(gravity_m_per_s2),
+                ),
+                nodes,
+            )
+            for source, t in zip(rows, theta0)
+        ]
+    )
+    spring = (
+        probe.spring_nm_per_rad
+        if temperature_k is None
+        else probe.spring_at(np.broadcast_to(np.asarray(temperature_k, float), (n,)))
+    )
     small = ArcPotential(spring, probe.inertia_kgm2, probe.damping_per_s, energy).frequency_hz(0.0)
     duration = ringdown_average.default_duration_s(small) if duration_s is None else duration_s
-    amplitudes, weights = ringdown_average.amplitude_nodes(theta0, amplitude_start_rad, probe.damping_per_s,
-                                                           duration, nodes=TRUTH_NODES)
-    batch = ArcPotential(np.repeat(np.broadcast_to(spring, (n,)), TRUTH_NODES), probe.inertia_kgm2,
-                         probe.damping_per_s, np.repeat(energy, TRUTH_NODES, axis=0))
+    amplitudes, weights = ringdown_average.amplitude_nodes(
+        theta0, amplitude_start_rad, probe.damping_per_s, duration, nodes=TRUTH_NODES
+    )
+    batch = ArcPotential(
+        np.repeat(np.broadcast_to(spring, (n,)), TRUTH_NODES),
+        probe.inertia_kgm2,
+        probe.damping_per_s,
+        np.repeat(energy, TRUTH_NODES, axis=0),
+    )
     return (weights * batch.frequency_hz(amplitudes.reshape(-1)).reshape(n, TRUTH_NODES)).sum(-1)
 
 
-def synthesize(probe, sources, theta0_deg, rng: np.random.Generator, f_std_hz=1e-3, amplitude_deg=None,
-               temperature_k=None, gravity_m_per_s2=LEVEL, magnet_position_m=(0.0, 0.0, 0.0), reference=None,
-               reference_noise_t=0.0, truth_hz=None, **columns) -> MeasurementTable:
+def synthesize(
+    probe,
+    sources,
+    theta0_deg,
+    rng: np.random.Generator,
+    f_std_hz=1e-3,
+    amplitude_deg=None,
+    temperature_k=None,
+    gravity_m_per_s2=LEVEL,
+    magnet_position_m=(0.0, 0.0, 0.0),
+    reference=None,
+    reference_noise_t=0.0,
+    truth_hz=None,
+    **columns,
+) -> MeasurementTable:
     """A measurement table: true frequencies plus noise, and reference columns.
 
     Parameters
@@ -93,11 +134,16 @@ def synthesize(probe, sources, theta0_deg, rng: np.random.Generator, f_std_hz=1e
     n = len(theta0)
     amplitude = np.broadcast_to(probe.theta_stop_rad if amplitude_deg is None else np.radians(amplitude_deg), (n,))
     if truth_hz is None:
-        truth_hz = true_frequency_hz(probe, sources, theta0, amplitude, temperature_k, gravity_m_per_s2,
-                                     magnet_position_m)
+        truth_hz = true_frequency_hz(
+            probe, sources, theta0, amplitude, temperature_k, gravity_m_per_s2, magnet_position_m
+        )
     std = np.broadcast_to(np.asarray(f_std_hz, float), (n,))
-    table = {"theta0_deg": np.degrees(theta0), "f_hz": truth_hz + rng.normal(0.0, 1.0, n) * std,
-             "f_std_hz": std.copy(), "amplitude_deg": np.degrees(amplitude)}
+    table = {
+        "theta0_deg": np.degrees(theta0),
+        "f_hz": truth_hz + rng.normal(0.0, 1.0, n) * std,
+        "f_std_hz": std.copy(),
+        "amplitude_deg": np.degrees(amplitude),
+    }
     point = np.asarray(magnet_position_m, float)
     seen = _per_row(sources if reference is None else reference, n)
     field = np.array([s.field_t(point) for s in seen]) + rng.normal(0.0, 1.0, (n, 3)) * reference_noise_t
@@ -114,15 +160,23 @@ def rotation_sweeps(step_deg: float = 10.0, sweeps: int = 2, seconds_per_row: fl
     """θ0 (deg), sweep number and time (s) of ``sweeps`` full rotations in steps of ``step_deg``."""
     angles = np.arange(0.0, 360.0, step_deg)
     theta0 = np.tile(angles, sweeps)
-    return {"theta0_deg": theta0, "sweep": np.repeat(np.arange(sweeps), len(angles)).astype(float),
-            "t_s": np.arange(len(theta0)) * seconds_per_row}
+    return {
+        "theta0_deg": theta0,
+        "sweep": np.repeat(np.arange(sweeps), len(angles)).astype(float),
+        "t_s": np.arange(len(theta0)) * seconds_per_row,
+    }
 
 
 # --- the slow path: the time-domain simulator and the estimator ---------------------------------
 
 
-def simulated_table(scenario, angles_deg, repeats: int, rng: np.random.Generator, settle_s: float = SETTLE_S,
-                    ) -> MeasurementTable:
+def simulated_table(
+    scenario,
+    angles_deg,
+    repeats: int,
+    rng: np.random.Generator,
+    settle_s: float = SETTLE_S,
+) -> MeasurementTable:
     """A measurement table from the time-domain simulator and the lever-aware estimator.
 
     Independent of the lab's physics: :mod:`mows.sim.simulator` integrates the equation of motion in
@@ -153,8 +207,13 @@ def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
     device time of each switch-off and the device's temperature then."""
     record, temperatures, failed = SweepRecord(), [], 0
     for theta0 in np.radians(np.asarray(angles_deg, float)):
-        cycle = simulate_cycle(device, theta0, scenario.excitation.amplitude_a,
-                               excite_s=scenario.excitation.excite_s, ringdown_s=scenario.excitation.ringdown_s)
+        cycle = simulate_cycle(
+            device,
+            theta0,
+            scenario.excitation.amplitude_a,
+            excite_s=scenario.excitation.excite_s,
+            ringdown_s=scenario.excitation.ringdown_s,
+        )
         point = _ringdown_point(scenario, cycle, settle_s)
         if point is None:
             failed += 1
@@ -171,11 +230,20 @@ def fit_cycle(cycle, scenario, paper_model: bool = False, settle_s: float = SETT
     estimator node does: the lever-aware pickup of ``scenario``'s probe seen by its fluxgates at
     the commanded θ0 (``paper_model``: Eq. S11 instead), the expected frequency the one the
     cycle excited at, the probe's damping as the start."""
-    options = (FitOptions() if paper_model
-               else FitOptions.lever_aware(scenario.sensors.pair, scenario.probe, cycle.theta0_rad))
+    options = (
+        FitOptions() if paper_model else FitOptions.lever_aware(scenario.sensors.pair, scenario.probe, cycle.theta0_rad)
+    )
     start = cycle.coil_off_index
-    return fit_ringdown(cycle.samples_t[start:], cycle.sample_rate_hz, cycle.theta0_rad, cycle.frequency_hz,
-                        cycle.saturated[start:], options, scenario.probe.damping_per_s, settle_s)
+    return fit_ringdown(
+        cycle.samples_t[start:],
+        cycle.sample_rate_hz,
+        cycle.theta0_rad,
+        cycle.frequency_hz,
+        cycle.saturated[start:],
+        options,
+        scenario.probe.damping_per_s,
+        settle_s,
+    )
 
 
 def _ringdown_point(scenario, cycle, settle_s):
@@ -184,5 +252,9 @@ def _ringdown_point(scenario, cycle, settle_s):
     fit = fit_cycle(cycle, scenario, settle_s=settle_s)
     if not fit.ok:
         return None
-    return SweepPoint.from_fit(fit, fit.frequency_hz - scenario.probe.f00_hz, fit.frequency_std_hz,
-                               (cycle.block.samples.first_sample_index + cycle.coil_off_index) / cycle.sample_rate_hz)
+    return SweepPoint.from_fit(
+        fit,
+        fit.frequency_hz - scenario.probe.f00_hz,
+        fit.frequency_std_hz,
+        (cycle.block.samples.first_sample_index + cycle.coil_off_index) / cycle.sample_rate_hz,
+    )

@@ -25,6 +25,7 @@ The unmeasured gradient components are completed by Maxwell's equations for a fi
 static and source-free at the probe: Gxz = Gyz = 0 (unknown, taken as zero: they do not act
 on a lever that swings in the plane) and Gzz = −(Gxx + Gyy) (∇·B = 0).
 """
+
 from __future__ import annotations
 
 import csv
@@ -38,8 +39,13 @@ from mows.physics.pose import probe_axes
 REQUIRED = ("theta0_deg", "f_hz", "f_std_hz")
 FIELD = ("ref_bx_t", "ref_by_t", "ref_bz_t")
 GRADIENT = ("ref_gxx_t_per_m", "ref_gxy_t_per_m", "ref_gyy_t_per_m")
-KNOWN = REQUIRED + ("t_s", "sweep") + FIELD + GRADIENT + (
-    "coil_current_a", "amplitude_deg", "temperature_k", "damping_per_s", "duration_s")
+KNOWN = (
+    REQUIRED
+    + ("t_s", "sweep")
+    + FIELD
+    + GRADIENT
+    + ("coil_current_a", "amplitude_deg", "temperature_k", "damping_per_s", "duration_s")
+)
 
 POSITIVE = ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k")
 NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t"}
@@ -162,9 +168,11 @@ class MeasurementTable:
         by_reason: dict = {}
         for row, (reason, detail) in reasons.items():
             by_reason.setdefault(reason, []).append((row, detail))
-        notes = tuple(f"left out {rows_text([row for row, _ in rows])}: {reason}"
-                      + (f" ({', '.join(detail for _, detail in rows)})" if any(detail for _, detail in rows) else "")
-                      for reason, rows in by_reason.items())
+        notes = tuple(
+            f"left out {rows_text([row for row, _ in rows])}: {reason}"
+            + (f" ({', '.join(detail for _, detail in rows)})" if any(detail for _, detail in rows) else "")
+            for reason, rows in by_reason.items()
+        )
         keep = np.ones(len(self), bool)
         keep[list(reasons)] = False
         return dataclasses.replace(self.subset(keep), notes=self.notes + notes)
@@ -177,8 +185,9 @@ class MeasurementTable:
         """Rows of both tables; they must have the same columns."""
         if set(self.columns) != set(other.columns):
             raise TableError(f"cannot join tables with columns {sorted(self.columns)} and {sorted(other.columns)}")
-        return dataclasses.replace(self, columns={k: np.concatenate([v, other.columns[k]])
-                                                  for k, v in self.columns.items()})
+        return dataclasses.replace(
+            self, columns={k: np.concatenate([v, other.columns[k]]) for k, v in self.columns.items()}
+        )
 
     def to_csv(self, path) -> None:
         names = list(self.columns)
@@ -192,8 +201,10 @@ class MeasurementTable:
 def _validate(columns: dict) -> None:
     missing = [name for name in REQUIRED if name not in columns]
     if missing:
-        raise TableError(f"missing required column{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
-                         f"(required: {', '.join(REQUIRED)})")
+        raise TableError(
+            f"missing required column{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
+            f"(required: {', '.join(REQUIRED)})"
+        )
     lengths = {name: len(values) for name, values in columns.items()}
     if len(set(lengths.values())) > 1:
         raise TableError(f"columns have different lengths: {lengths}")
@@ -204,11 +215,15 @@ def _validate(columns: dict) -> None:
     for group in (FIELD[:2], GRADIENT):
         given = [name for name in group if name in columns]
         if given and len(given) != len(group):
-            raise TableError(f"column{'s' if len(given) > 1 else ''} {', '.join(given)} given without "
-                             f"{', '.join(sorted(set(group) - set(given)))}: give all of {', '.join(group)}")
+            raise TableError(
+                f"column{'s' if len(given) > 1 else ''} {', '.join(given)} given without "
+                f"{', '.join(sorted(set(group) - set(given)))}: give all of {', '.join(group)}"
+            )
     if "sweep" in columns and np.any(columns["sweep"] != np.round(columns["sweep"])):
-        raise TableError(f"column 'sweep' must hold integers: not so in "
-                         f"{rows_text(np.flatnonzero(columns['sweep'] != np.round(columns['sweep'])))}")
+        raise TableError(
+            f"column 'sweep' must hold integers: not so in "
+            f"{rows_text(np.flatnonzero(columns['sweep'] != np.round(columns['sweep'])))}"
+        )
 
 
 def broken_rules(columns: dict):
@@ -230,8 +245,10 @@ def with_notes(columns, source, notes) -> MeasurementTable:
     wrapped = np.flatnonzero((theta < 0.0) | (theta >= 360.0))
     if wrapped.size:
         first = theta[wrapped[0]]
-        notes.append(f"theta0_deg outside [0, 360) in {rows_text(wrapped)}: read as the same orientation modulo "
-                     f"360 (e.g. {first:g}° is {first % 360.0:g}°)")
+        notes.append(
+            f"theta0_deg outside [0, 360) in {rows_text(wrapped)}: read as the same orientation modulo "
+            f"360 (e.g. {first:g}° is {first % 360.0:g}°)"
+        )
     if not any(name in columns for name in FIELD):
         notes.append("no reference field: the base model predicts f = f00 at every row")
     elif "ref_bz_t" not in columns and "ref_bx_t" in columns:
@@ -239,4 +256,3 @@ def with_notes(columns, source, notes) -> MeasurementTable:
     if not any(name in columns for name in GRADIENT):
         notes.append("no reference gradient: taken as 0")
     return MeasurementTable(columns, source, tuple(notes))
-

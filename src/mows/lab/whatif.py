@@ -5,6 +5,7 @@ the excitation amplitude, the applied field reversed, the applied field doubled,
 temperature step when the table has temperatures. :mod:`mows.lab.groups` evaluates a group's
 signatures on them to find the measurement that would tell its members apart.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -29,17 +30,32 @@ def variants(table, probe) -> list:
     found = []
     angles = np.unique(np.mod(table.columns["theta0_deg"], 360.0))
     step = float(np.median(np.diff(angles))) if len(angles) > 1 else 90.0
-    found.append(Variant("more_angles", f"measure also half-way between the present orientations "
-                                        f"(θ0 + {step / 2:g}°)",
-                         table.with_columns(theta0_deg=table.columns["theta0_deg"] + step / 2)))
-    found.append(Variant("amplitude_halved", "repeat the sweep at half the excitation amplitude",
-                         table.with_columns(amplitude_deg=table.amplitude_deg / 2)))
-    for name, factor, text in (("field_reversed", -1.0, "repeat with the applied field reversed (coil currents "
-                                                        "reversed)"),
-                               ("field_doubled", 2.0, "repeat with twice the applied field")):
+    found.append(
+        Variant(
+            "more_angles",
+            f"measure also half-way between the present orientations (θ0 + {step / 2:g}°)",
+            table.with_columns(theta0_deg=table.columns["theta0_deg"] + step / 2),
+        )
+    )
+    found.append(
+        Variant(
+            "amplitude_halved",
+            "repeat the sweep at half the excitation amplitude",
+            table.with_columns(amplitude_deg=table.amplitude_deg / 2),
+        )
+    )
+    for name, factor, text in (
+        ("field_reversed", -1.0, "repeat with the applied field reversed (coil currents reversed)"),
+        ("field_doubled", 2.0, "repeat with twice the applied field"),
+    ):
         scaled = {k: v * factor for k, v in table.columns.items() if k.startswith("ref_") or k == "coil_current_a"}
         found.append(Variant(name, text, table.with_columns(**scaled)))
     if table.has("temperature_k"):
-        found.append(Variant("temperature_step", "repeat 5 K warmer (or colder)",
-                             table.with_columns(temperature_k=table.temperature_k + 5.0)))
+        found.append(
+            Variant(
+                "temperature_step",
+                "repeat 5 K warmer (or colder)",
+                table.with_columns(temperature_k=table.temperature_k + 5.0),
+            )
+        )
     return [dataclasses.replace(variant, table=table.concatenate(variant.table)) for variant in found]

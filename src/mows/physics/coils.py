@@ -33,6 +33,7 @@ YAML form (:func:`setup_from_dict`, :meth:`CoilSetup.to_dict`)::
 
 Coil sources are fields per ampere; degrees appear only in the YAML key ``current_phases_deg``.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -57,7 +58,7 @@ LSIP330_INDUCTANCE_H = 3.3e-3
 LSIP330_LOOPS = 8  # loops in the solenoid model
 
 PASCO_RADIUS_M = 0.105  # Methods: radius = spacing = 10.5 cm
-PASCO_TURNS = 200       # EM-6723A data sheet value (not in the paper)
+PASCO_TURNS = 200  # EM-6723A data sheet value (not in the paper)
 
 DEFAULT_DISTANCE_M = 0.10
 DEFAULT_CURRENT_LIMIT_A = 10.0
@@ -80,8 +81,10 @@ class CurrentCap:
             raise ValueError(f"coil currents must be finite, got {currents_a!r}")
         worst = float(np.max(np.abs(currents), initial=0.0))
         if worst > self.limit_a:
-            raise ValueError(f"coil current amplitude {worst:.6g} A exceeds the cap of {self.limit_a:g} A "
-                             "(currents are refused, never clipped)")
+            raise ValueError(
+                f"coil current amplitude {worst:.6g} A exceeds the cap of {self.limit_a:g} A "
+                "(currents are refused, never clipped)"
+            )
         return currents
 
 
@@ -126,8 +129,9 @@ class CoilSetup:
         object.__setattr__(self, "coils", tuple(self.coils))
         object.__setattr__(self, "phases_rad", tuple(float(p) for p in self.phases_rad))
         if len(self.coils) != len(self.phases_rad) or not all(isinstance(c, FieldSource) for c in self.coils):
-            raise ValueError(f"coils ({len(self.coils)}) must be field sources, one per phase "
-                             f"({len(self.phases_rad)} phases)")
+            raise ValueError(
+                f"coils ({len(self.coils)}) must be field sources, one per phase ({len(self.phases_rad)} phases)"
+            )
 
     def currents_a(self, theta0_rad, amplitude_a: float) -> np.ndarray:
         """Signed current amplitude of each coil, A, shape ``theta0_rad.shape + (n_coils,)``.
@@ -136,7 +140,7 @@ class CoilSetup:
         """
         if not (np.isfinite(amplitude_a) and amplitude_a >= 0.0):
             raise ValueError(f"amplitude_a must be a finite current ≥ 0 A, got {amplitude_a!r}")
-        self.cap.check(amplitude_a)   # |amplitude·sin| ≤ amplitude: every coil's current is within the cap
+        self.cap.check(amplitude_a)  # |amplitude·sin| ≤ amplitude: every coil's current is within the cap
         theta0 = np.asarray(theta0_rad, dtype=float)
         return amplitude_a * np.sin(theta0[..., None] + np.array(self.phases_rad))
 
@@ -151,33 +155,46 @@ class CoilSetup:
 
     def to_dict(self) -> dict:
         """Full YAML form (coils written out as field sources per ampere)."""
-        return {"name": self.name, "coils": [source_to_dict(c) for c in self.coils],
-                "current_phases_deg": [float(np.degrees(p)) for p in self.phases_rad],
-                "inductance_h": float(self.inductance_h), "current_limit_a": float(self.cap.limit_a)}
+        return {
+            "name": self.name,
+            "coils": [source_to_dict(c) for c in self.coils],
+            "current_phases_deg": [float(np.degrees(p)) for p in self.phases_rad],
+            "inductance_h": float(self.inductance_h),
+            "current_limit_a": float(self.cap.limit_a),
+        }
 
 
 def _two_coil_setup(name, distance_m, placements, current_limit_a, probe_position_m) -> CoilSetup:
     """Coils in the x–y plane through the probe, ``distance_m`` from it; ``placements`` are
     (position angle, field direction at the probe, current phase) in degrees."""
     probe = vector3("probe_position_m", probe_position_m)
-    coils = [lsip330(probe + distance_m * _in_plane(np.radians(where)), _in_plane(np.radians(along)))
-             for where, along, _ in placements]
-    return CoilSetup(name, coils, [np.radians(phase) for _, _, phase in placements],
-                     cap=CurrentCap(current_limit_a))
+    coils = [
+        lsip330(probe + distance_m * _in_plane(np.radians(where)), _in_plane(np.radians(along)))
+        for where, along, _ in placements
+    ]
+    return CoilSetup(name, coils, [np.radians(phase) for _, _, phase in placements], cap=CurrentCap(current_limit_a))
 
 
-def largest_spacing(distance_m: float = DEFAULT_DISTANCE_M, current_limit_a: float = DEFAULT_CURRENT_LIMIT_A,
-                    probe_position_m=(0.0, 0.0, 0.0)) -> CoilSetup:
+def largest_spacing(
+    distance_m: float = DEFAULT_DISTANCE_M,
+    current_limit_a: float = DEFAULT_CURRENT_LIMIT_A,
+    probe_position_m=(0.0, 0.0, 0.0),
+) -> CoilSetup:
     """Largest-spacing setup (Methods, Fig. 2a): coil 1 ∝ sin(θ0 + 135°), coil 2 ∝ sin(θ0 + 45°)."""
-    return _two_coil_setup("largest_spacing", distance_m, [(225.0, 45.0, 135.0), (315.0, 135.0, 45.0)],
-                           current_limit_a, probe_position_m)
+    return _two_coil_setup(
+        "largest_spacing", distance_m, [(225.0, 45.0, 135.0), (315.0, 135.0, 45.0)], current_limit_a, probe_position_m
+    )
 
 
-def helmholtz(distance_m: float = DEFAULT_DISTANCE_M, current_limit_a: float = DEFAULT_CURRENT_LIMIT_A,
-              probe_position_m=(0.0, 0.0, 0.0)) -> CoilSetup:
+def helmholtz(
+    distance_m: float = DEFAULT_DISTANCE_M,
+    current_limit_a: float = DEFAULT_CURRENT_LIMIT_A,
+    probe_position_m=(0.0, 0.0, 0.0),
+) -> CoilSetup:
     """Helmholtz setup (Methods): coil 1 at −y ∝ sin(θ0 + 90°), coil 2 at −x ∝ sin(θ0)."""
-    return _two_coil_setup("helmholtz", distance_m, [(270.0, 90.0, 90.0), (180.0, 180.0, 0.0)], current_limit_a,
-                           probe_position_m)
+    return _two_coil_setup(
+        "helmholtz", distance_m, [(270.0, 90.0, 90.0), (180.0, 180.0, 0.0)], current_limit_a, probe_position_m
+    )
 
 
 PRESETS = {"largest_spacing": largest_spacing, "helmholtz": helmholtz}
@@ -198,9 +215,15 @@ def setup_from_dict(d: dict) -> CoilSetup:
     return _custom_setup(**d)
 
 
-def _custom_setup(coils, current_phases_deg, name="custom", inductance_h=LSIP330_INDUCTANCE_H,
-                  current_limit_a=DEFAULT_CURRENT_LIMIT_A) -> CoilSetup:
+def _custom_setup(
+    coils, current_phases_deg, name="custom", inductance_h=LSIP330_INDUCTANCE_H, current_limit_a=DEFAULT_CURRENT_LIMIT_A
+) -> CoilSetup:
     if not isinstance(coils, (list, tuple)) or not isinstance(current_phases_deg, (list, tuple)):
         raise ValueError("coils and current_phases_deg must be lists")
-    return CoilSetup(name, [source_from_dict(c) for c in coils], [np.radians(float(p)) for p in current_phases_deg],
-                     float(inductance_h), CurrentCap(float(current_limit_a)))
+    return CoilSetup(
+        name,
+        [source_from_dict(c) for c in coils],
+        [np.radians(float(p)) for p in current_phases_deg],
+        float(inductance_h),
+        CurrentCap(float(current_limit_a)),
+    )

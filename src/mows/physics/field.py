@@ -17,6 +17,7 @@ Sources: :class:`UniformField`, :class:`LinearGradient`, :class:`PointDipole`
 
 Helmholtz pairs and solenoids are sums of loops, and :func:`source_to_dict` writes them so.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -34,9 +35,22 @@ from mows.physics.sources import (
     dipole_field_t,
 )
 
-__all__ = ["MU0", "MU0_OVER_4PI", "CurrentLoop", "FieldSource", "LinearGradient", "PointDipole", "SumSource",
-           "UniformField", "anti_helmholtz_pair", "dipole_field_t", "helmholtz_pair", "solenoid", "source_from_dict",
-           "source_to_dict"]
+__all__ = [
+    "MU0",
+    "MU0_OVER_4PI",
+    "CurrentLoop",
+    "FieldSource",
+    "LinearGradient",
+    "PointDipole",
+    "SumSource",
+    "UniformField",
+    "anti_helmholtz_pair",
+    "dipole_field_t",
+    "helmholtz_pair",
+    "solenoid",
+    "source_from_dict",
+    "source_to_dict",
+]
 
 
 def _sum_of(sources) -> SumSource:

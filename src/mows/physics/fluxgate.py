@@ -23,6 +23,7 @@ Noise (:class:`NoiseModel`). Common-mode noise, identical on both sensors: white
 amplitude spectral densities in T/√Hz (the pink level is its ASD at 1 Hz); the difference
 of the two channels removes the common part exactly.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -118,8 +119,14 @@ class FluxgatePair:
             raise ValueError(f"sensors must be two Fluxgate objects, got {self.sensors!r}")
 
     @classmethod
-    def paper(cls, probe_position_m=(0.0, 0.0, 0.0), distance_m: float = PAPER_DISTANCE_M,
-              spacing_m: float = PAPER_SPACING_M, direction=(1.0, 0.0, 0.0), axis=(0.0, 1.0, 0.0)) -> FluxgatePair:
+    def paper(
+        cls,
+        probe_position_m=(0.0, 0.0, 0.0),
+        distance_m: float = PAPER_DISTANCE_M,
+        spacing_m: float = PAPER_SPACING_M,
+        direction=(1.0, 0.0, 0.0),
+        axis=(0.0, 1.0, 0.0),
+    ) -> FluxgatePair:
         """The paper's pair: sensors at r and r + d from the probe along ``direction``, reading
         along ``axis`` (global y: b = 1 in Eq. S9)."""
         probe = vector3("probe_position_m", probe_position_m)
@@ -154,8 +161,15 @@ class FluxgatePair:
 PICKUP_COMBINATIONS = {"difference": (1.0, -1.0), "channel1": (1.0, 0.0), "channel2": (0.0, 1.0)}
 
 
-def pickup_harmonics(pair: FluxgatePair, pose, lever_m: float, moment_am2: float, combine: str = "difference",
-                     order: int = 6, points: int = 64) -> np.ndarray:
+def pickup_harmonics(
+    pair: FluxgatePair,
+    pose,
+    lever_m: float,
+    moment_am2: float,
+    combine: str = "difference",
+    order: int = 6,
+    points: int = 64,
+) -> np.ndarray:
     """The sensor signal as a Fourier series in the deflection: S(θt) = Σ_k Re(C_k·e^(ikθt)).
 
     The magnet swings on its lever, so its position moves with its moment: the exact dipole

@@ -11,6 +11,7 @@ functions accept numpy arrays and broadcast.
 Numerics: ``√(1+u) − 1`` is evaluated as ``u / (√(1+u) + 1)``, which keeps full relative
 precision at the sub-nanotesla shifts the probe resolves (u ~ 1e-8).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -52,8 +53,10 @@ def field_sensitivity_hz_per_t(field_t, f00_hz, spring_nm_per_rad, moment_am2):
 
 def gradient_sensitivity_hz_m_per_t(gradient_t_per_m, f00_hz, spring_nm_per_rad, moment_am2, lever_m):
     """γ = Δf_0,G / G, Hz·m/T (Eq. 8); γ → β0·l as G → 0."""
-    return np.multiply(lever_m, field_sensitivity_hz_per_t(
-        np.multiply(lever_m, gradient_t_per_m), f00_hz, spring_nm_per_rad, moment_am2))
+    return np.multiply(
+        lever_m,
+        field_sensitivity_hz_per_t(np.multiply(lever_m, gradient_t_per_m), f00_hz, spring_nm_per_rad, moment_am2),
+    )
 
 
 def weak_field_sensitivity_hz_per_t(f00_hz, spring_nm_per_rad, moment_am2):
@@ -75,8 +78,9 @@ class Inversion:
     std: np.ndarray
 
 
-def field_from_shift_t(frequency_shift_hz_, f00_hz, spring_nm_per_rad, moment_am2,
-                       frequency_shift_std_hz=0.0) -> Inversion:
+def field_from_shift_t(
+    frequency_shift_hz_, f00_hz, spring_nm_per_rad, moment_am2, frequency_shift_std_hz=0.0
+) -> Inversion:
     """Field along the probe axis from Δf assuming G = 0: B = (kM/m)·((1 + Δf/f00)² − 1).
 
     Exact inverse of Eq. 6 with kG = 0. The uncertainty is propagated to first order,
@@ -84,19 +88,23 @@ def field_from_shift_t(frequency_shift_hz_, f00_hz, spring_nm_per_rad, moment_am
     neglected term is (σ_Δf/f00)² relative, below 1e-10 for any usable ring-down.
     Returns NaN for Δf ≤ −f00 (no oscillation).
     """
-    return _invert(frequency_shift_hz_, f00_hz, np.divide(spring_nm_per_rad, moment_am2),
-                   frequency_shift_std_hz)
+    return _invert(frequency_shift_hz_, f00_hz, np.divide(spring_nm_per_rad, moment_am2), frequency_shift_std_hz)
 
 
-def gradient_from_shift_t_per_m(frequency_shift_hz_, f00_hz, spring_nm_per_rad, moment_am2, lever_m,
-                                frequency_shift_std_hz=0.0) -> Inversion:
+def gradient_from_shift_t_per_m(
+    frequency_shift_hz_, f00_hz, spring_nm_per_rad, moment_am2, lever_m, frequency_shift_std_hz=0.0
+) -> Inversion:
     """Gradient Gx'x' from Δf assuming B = 0: G = (kM/(l·m))·((1 + Δf/f00)² − 1) (Eq. S24).
 
     Eq. S24 writes G = (4π²(f00 + Δf)²·J − kM)/(l·m); with J = kM/(2π·f00)² (Eq. 10)
     that is this expression. Same error propagation as :func:`field_from_shift_t`.
     """
-    return _invert(frequency_shift_hz_, f00_hz,
-                   np.divide(spring_nm_per_rad, np.multiply(moment_am2, lever_m)), frequency_shift_std_hz)
+    return _invert(
+        frequency_shift_hz_,
+        f00_hz,
+        np.divide(spring_nm_per_rad, np.multiply(moment_am2, lever_m)),
+        frequency_shift_std_hz,
+    )
 
 
 def _invert(shift_hz, f00_hz, scale, shift_std_hz) -> Inversion:
@@ -108,8 +116,9 @@ def _invert(shift_hz, f00_hz, scale, shift_std_hz) -> Inversion:
     return Inversion(value=value, std=std)
 
 
-def sweep_shift_hz(theta0_rad, field_xy_t, gradient_xy_t_per_m, f00_hz, spring_nm_per_rad,
-                   moment_am2, lever_m, exact=True):
+def sweep_shift_hz(
+    theta0_rad, field_xy_t, gradient_xy_t_per_m, f00_hz, spring_nm_per_rad, moment_am2, lever_m, exact=True
+):
     """Published rotation-sweep model Δf(θ0) for an in-plane field and gradient (Eqs. 6, 11, S18).
 
     The probe axis is x' = (cos θ0, sin θ0); kB = m·Bx', kG = l·m·Gx'x' with
@@ -129,7 +138,8 @@ def sweep_shift_hz(theta0_rad, field_xy_t, gradient_xy_t_per_m, f00_hz, spring_n
     field_along = bx * c + by * s
     gradient_along = gxx * c * c + 2.0 * gxy * c * s + gyy * s * s
     k_mag = field_spring_nm_per_rad(moment_am2, field_along) + gradient_spring_nm_per_rad(
-        moment_am2, lever_m, gradient_along)
+        moment_am2, lever_m, gradient_along
+    )
     if exact:
         return frequency_shift_hz(f00_hz, spring_nm_per_rad, k_mag)
     return np.multiply(f00_hz, k_mag) / (2.0 * spring_nm_per_rad)

@@ -1,6 +1,7 @@
 """Current loops: the exact field of a circular filament and the coils built from loops
 (:func:`helmholtz_pair`, :func:`anti_helmholtz_pair`, :func:`solenoid`, all :class:`SumSource`).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -20,7 +21,7 @@ WIRE_CLEARANCE = 1e-9
 _FD_OFFSETS = np.array([-3.0, -2.0, -1.0, 1.0, 2.0, 3.0])
 _FD_WEIGHTS = np.array([-1.0, 9.0, -45.0, 45.0, -9.0, 1.0]) / 60.0
 GRADIENT_STEP = 5e-3  # × s
-HESSIAN_STEP = 1e-2   # × s
+HESSIAN_STEP = 1e-2  # × s
 
 
 def _central_jacobian(func, points: np.ndarray, step_m: np.ndarray) -> np.ndarray:
@@ -29,10 +30,10 @@ def _central_jacobian(func, points: np.ndarray, step_m: np.ndarray) -> np.ndarra
     ``func`` maps (..., 3) → (..., *out); the result has shape (..., *out, 3).
     """
     lead = points.ndim - 1
-    shifts = _FD_OFFSETS[:, None, None] * np.eye(3)                       # (s, j, 3)
+    shifts = _FD_OFFSETS[:, None, None] * np.eye(3)  # (s, j, 3)
     stencil = points[..., None, None, :] + step_m[..., None, None, None] * shifts
-    values = func(stencil)                                                # (..., s, j, *out)
-    values = np.moveaxis(values, (lead, lead + 1), (-2, -1))              # (..., *out, s, j)
+    values = func(stencil)  # (..., s, j, *out)
+    values = np.moveaxis(values, (lead, lead + 1), (-2, -1))  # (..., *out, s, j)
     derivative = np.einsum("...sj,s->...j", values, _FD_WEIGHTS)
     return derivative / step_m.reshape(step_m.shape + (1,) * (derivative.ndim - step_m.ndim))
 
@@ -82,7 +83,8 @@ class CurrentLoop(FieldSource):
         if np.any(alpha2 < (WIRE_CLEARANCE * self.radius_m) ** 2):
             raise ValueError(
                 f"field point within {WIRE_CLEARANCE:g}·R of the loop's wire (R = {self.radius_m} m): "
-                "the filament field diverges there")
+                "the filament field diverges there"
+            )
         return rho_vec, rho, z, alpha2
 
     def field_t(self, points_m):
@@ -114,8 +116,13 @@ class CurrentLoop(FieldSource):
         return _central_jacobian(self.gradient_t_per_m, points, self._step_m(points, HESSIAN_STEP))
 
     def _params(self):
-        return {"center_m": self.center_m, "axis": self.axis, "radius_m": self.radius_m,
-                "turns": self.turns, "current_a": self.current_a}
+        return {
+            "center_m": self.center_m,
+            "axis": self.axis,
+            "radius_m": self.radius_m,
+            "turns": self.turns,
+            "current_a": self.current_a,
+        }
 
 
 def _coaxial_pair(center_m, axis, radius_m, turns, current_a, sign):
@@ -123,8 +130,12 @@ def _coaxial_pair(center_m, axis, radius_m, turns, current_a, sign):
     axis = unit_vector3("axis", axis)
     center = vector3("center_m", center_m)
     half = 0.5 * positive("radius_m", radius_m) * axis
-    return SumSource((CurrentLoop(center + half, axis, radius_m, turns, current_a),
-                      CurrentLoop(center - half, axis, radius_m, turns, sign * current_a)))
+    return SumSource(
+        (
+            CurrentLoop(center + half, axis, radius_m, turns, current_a),
+            CurrentLoop(center - half, axis, radius_m, turns, sign * current_a),
+        )
+    )
 
 
 def helmholtz_pair(center_m, axis, radius_m, turns, current_a) -> SumSource:
@@ -160,6 +171,6 @@ def solenoid(center_m, axis, radius_m, length_m, turns, current_a, n_loops=8) ->
     n_loops = int(n_loops) if length > 0.0 else 1
     positions = ((np.arange(n_loops) + 0.5) / n_loops - 0.5) * length
     center = vector3("center_m", center_m)
-    return SumSource(CurrentLoop(center + z * axis, axis, radius_m, positive("turns", turns) / n_loops, current_a)
-                     for z in positions)
-
+    return SumSource(
+        CurrentLoop(center + z * axis, axis, radius_m, positive("turns", turns) / n_loops, current_a) for z in positions
+    )

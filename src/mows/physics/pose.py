@@ -10,6 +10,7 @@ The stage turns the probe about an axis through the magnet's rest position, so
 "the field at the probe" is the field at ``magnet_position_m`` for every θ0, and the pivot
 is at magnet_position − l·x'.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -43,8 +44,10 @@ class Pose:
     def __post_init__(self):
         e1, e2 = np.asarray(self.plane_e1, float), np.asarray(self.plane_e2, float)
         if abs(np.linalg.norm(e1) - 1) > 1e-9 or abs(np.linalg.norm(e2) - 1) > 1e-9 or abs(e1 @ e2) > 1e-9:
-            raise ValueError(f"plane_e1 = {self.plane_e1} and plane_e2 = {self.plane_e2} must be "
-                             "orthonormal (unit length, perpendicular)")
+            raise ValueError(
+                f"plane_e1 = {self.plane_e1} and plane_e2 = {self.plane_e2} must be "
+                "orthonormal (unit length, perpendicular)"
+            )
         if not math.isfinite(self.theta0_rad):
             raise ValueError(f"theta0_rad = {self.theta0_rad} must be finite")
 

@@ -22,6 +22,7 @@ Finite amplitude. The cantilever does not swing in a parabola: for an oscillatio
 k(A) = (1/(πA))·∫ U'(θc + A·cos φ)·cos φ dφ, with the cycle centre θc from the DC balance
 ∫ U'(θc + A·cos φ) dφ = 0 (PHYSICS.md §5.4: for −m·B·cos θ this is m·B·2·J1(A)/A).
 """
+
 from __future__ import annotations
 
 import math
@@ -79,8 +80,14 @@ class ArcPotential:
     energy_samples_j : W at :func:`chebyshev_nodes_rad` (``half_width_rad``, n), shape B + (n,).
     """
 
-    def __init__(self, spring_nm_per_rad, inertia_kgm2, damping_per_s, energy_samples_j,
-                 half_width_rad: float = DEFAULT_HALF_WIDTH_RAD):
+    def __init__(
+        self,
+        spring_nm_per_rad,
+        inertia_kgm2,
+        damping_per_s,
+        energy_samples_j,
+        half_width_rad: float = DEFAULT_HALF_WIDTH_RAD,
+    ):
         samples = np.asarray(energy_samples_j, dtype=float)
         self.half_width_rad = float(half_width_rad)
         self.batch_shape = samples.shape[:-1]
@@ -163,8 +170,15 @@ class ArcPotential:
 
     # --- builders ---------------------------------------------------------------------------
     @classmethod
-    def from_source(cls, probe, source, pose, temperature_k=None, nodes: int = DEFAULT_NODES,
-                    half_width_rad: float = DEFAULT_HALF_WIDTH_RAD) -> ArcPotential:
+    def from_source(
+        cls,
+        probe,
+        source,
+        pose,
+        temperature_k=None,
+        nodes: int = DEFAULT_NODES,
+        half_width_rad: float = DEFAULT_HALF_WIDTH_RAD,
+    ) -> ArcPotential:
         """The potential of ``probe`` placed at ``pose`` in the field of ``source``."""
         theta = chebyshev_nodes_rad(half_width_rad, nodes)
         energy = arc_energy_j(probe, source, pose, theta)
@@ -172,10 +186,19 @@ class ArcPotential:
         return cls(spring, probe.inertia_kgm2, probe.damping_per_s, energy, half_width_rad)
 
     @classmethod
-    def from_local_field(cls, probe, field_t, gradient_t_per_m=None, hessian_t_per_m2=None,
-                         gravity_m_per_s2=None, spring_nm_per_rad=None, lever_m=None,
-                         damping_per_s=None, nodes: int = 24,
-                         half_width_rad: float = DEFAULT_HALF_WIDTH_RAD) -> ArcPotential:
+    def from_local_field(
+        cls,
+        probe,
+        field_t,
+        gradient_t_per_m=None,
+        hessian_t_per_m2=None,
+        gravity_m_per_s2=None,
+        spring_nm_per_rad=None,
+        lever_m=None,
+        damping_per_s=None,
+        nodes: int = 24,
+        half_width_rad: float = DEFAULT_HALF_WIDTH_RAD,
+    ) -> ArcPotential:
         """Batch potential from the field's Taylor expansion at the magnet's rest position.
 
         All vectors and tensors are in the **probe frame** (x', y', z'), batch-shaped:
@@ -188,7 +211,7 @@ class ArcPotential:
         theta = chebyshev_nodes_rad(half_width_rad, nodes)
         lever = probe.lever_m if lever_m is None else np.asarray(lever_m, float)
         field = np.asarray(field_t, float)
-        u = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], -1)      # (n, 3)
+        u = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], -1)  # (n, 3)
         dr = np.stack([np.cos(theta) - 1.0, np.sin(theta), np.zeros_like(theta)], -1)
         dr = np.multiply.outer(np.asarray(lever), dr) if np.ndim(lever) else lever * dr
         b_along_arc = np.broadcast_to(field[..., None, :], np.broadcast_shapes(field[..., None, :].shape, dr.shape))

@@ -4,6 +4,7 @@ The probe is a torsional oscillator: a magnet of moment ``m`` and mass ``a`` at 
 lever ``l`` on a spring ``kM``, with inertia ``J`` and damping ``δ`` (paper, Fig. S1).
 Equation numbers refer to Fischer, Jeong & Qiu (see ``../shared/seed``).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -63,17 +64,28 @@ class Probe:
     reference_temperature_k: float = 293.15
 
     def __post_init__(self):
-        for name in ("moment_am2", "spring_nm_per_rad", "inertia_kgm2", "lever_m",
-                     "magnet_mass_kg", "reference_temperature_k"):
+        for name in (
+            "moment_am2",
+            "spring_nm_per_rad",
+            "inertia_kgm2",
+            "lever_m",
+            "magnet_mass_kg",
+            "reference_temperature_k",
+        ):
             _require(name, getattr(self, name), lambda v: v > 0, "> 0")
         _require("damping_per_s", self.damping_per_s, lambda v: v >= 0, ">= 0")
         _require("theta_stop_rad", self.theta_stop_rad, lambda v: 0 < v < math.pi / 2, "in (0, pi/2)")
-        _require("spring_temp_coeff_per_k", self.spring_temp_coeff_per_k,
-                 lambda v: abs(v) < 1e-2, "with |value| < 1e-2 per K")
+        _require(
+            "spring_temp_coeff_per_k",
+            self.spring_temp_coeff_per_k,
+            lambda v: abs(v) < 1e-2,
+            "with |value| < 1e-2 per K",
+        )
         if self.damping_per_s**2 >= self.spring_nm_per_rad / self.inertia_kgm2:
             raise ValueError(
                 f"damping_per_s = {self.damping_per_s} makes the probe overdamped "
-                f"(needs δ² < kM/J = {self.spring_nm_per_rad / self.inertia_kgm2:.4g} s⁻²)")
+                f"(needs δ² < kM/J = {self.spring_nm_per_rad / self.inertia_kgm2:.4g} s⁻²)"
+            )
 
     @property
     def f00_hz(self) -> float:
@@ -103,14 +115,16 @@ class Probe:
     def spring_at(self, temperature_k):
         """kM at ``temperature_k``: kM·(1 + α·(T − T_ref)), N·m/rad (PHYSICS.md §5.6)."""
         return self.spring_nm_per_rad * (
-            1.0 + self.spring_temp_coeff_per_k * (temperature_k - self.reference_temperature_k))
+            1.0 + self.spring_temp_coeff_per_k * (temperature_k - self.reference_temperature_k)
+        )
 
     def replace(self, **changes) -> Probe:
         return dataclasses.replace(self, **changes)
 
     @classmethod
-    def from_calibration(cls, moment_am2: float, f00_hz: float, beta0_hz_per_t: float,
-                         magnet_mass_kg: float, **others) -> Probe:
+    def from_calibration(
+        cls, moment_am2: float, f00_hz: float, beta0_hz_per_t: float, magnet_mass_kg: float, **others
+    ) -> Probe:
         """Probe from the paper's calibration: β0 gives kM (Eq. 9) and J (Eq. 10), J and a give l.
 
         J is taken from the damped relation J = kM / ((2π·f00)² + δ²), so that the
@@ -121,8 +135,14 @@ class Probe:
         damping = others.get("damping_per_s", cls.damping_per_s)
         inertia = spring / ((TWO_PI * f00_hz) ** 2 + damping**2)
         lever = others.pop("lever_m", None) or lever_from_inertia(inertia, magnet_mass_kg)
-        return cls(moment_am2=moment_am2, spring_nm_per_rad=spring, inertia_kgm2=inertia,
-                   lever_m=lever, magnet_mass_kg=magnet_mass_kg, **others)
+        return cls(
+            moment_am2=moment_am2,
+            spring_nm_per_rad=spring,
+            inertia_kgm2=inertia,
+            lever_m=lever,
+            magnet_mass_kg=magnet_mass_kg,
+            **others,
+        )
 
     # --- YAML -----------------------------------------------------------------------------
     @classmethod
@@ -154,16 +174,17 @@ class Probe:
             data["inertia_kgm2"] = data["spring_nm_per_rad"] / omega2
         if "lever_m" not in data and "inertia_kgm2" in data and "magnet_mass_kg" in data:
             data["lever_m"] = lever_from_inertia(data["inertia_kgm2"], data["magnet_mass_kg"])
-        missing = {"moment_am2", "spring_nm_per_rad", "inertia_kgm2", "lever_m",
-                   "magnet_mass_kg"} - set(data)
+        missing = {"moment_am2", "spring_nm_per_rad", "inertia_kgm2", "lever_m", "magnet_mass_kg"} - set(data)
         if missing:
-            raise ValueError(f"probe file lacks {sorted(missing)} (f00_hz can stand in for "
-                             "spring_nm_per_rad or inertia_kgm2)")
+            raise ValueError(
+                f"probe file lacks {sorted(missing)} (f00_hz can stand in for spring_nm_per_rad or inertia_kgm2)"
+            )
         probe = cls(**{k: float(v) for k, v in data.items()})
         if f00 is not None and abs(probe.f00_hz / f00 - 1.0) > 1e-4:
             raise ValueError(
                 f"f00_hz = {f00} contradicts spring_nm_per_rad, inertia_kgm2 and damping_per_s, "
-                f"which give √(kM/J − δ²)/2π = {probe.f00_hz:.6f} Hz (Eq. S1)")
+                f"which give √(kM/J − δ²)/2π = {probe.f00_hz:.6f} Hz (Eq. S1)"
+            )
         return probe
 
     def to_dict(self) -> dict:
@@ -216,5 +237,10 @@ def _require(name, value, ok, what):
 #: The paper's device (PHYSICS.md §6): m = 0.89 mA·m², f00 = 112.48 Hz, β0 = 3.68 Hz/mT,
 #: a = 7.2 mg, δ = 1.8 1/s. Gives kM = 1.360e-5 N·m, J = 2.723e-11 kg·m², l = 1.945 mm.
 PAPER_PROBE = Probe.from_calibration(
-    moment_am2=0.89e-3, f00_hz=112.48, beta0_hz_per_t=3.68e3, magnet_mass_kg=7.2e-6,
-    damping_per_s=1.8, theta_stop_rad=math.radians(24.0))
+    moment_am2=0.89e-3,
+    f00_hz=112.48,
+    beta0_hz_per_t=3.68e3,
+    magnet_mass_kg=7.2e-6,
+    damping_per_s=1.8,
+    theta_stop_rad=math.radians(24.0),
+)

@@ -27,14 +27,15 @@ The ring-down's start amplitude is the estimator's θmax at the first fitted sam
 (``RingdownFit.amplitude_rad``, the CSV column ``amplitude_deg``); by default the fit window is
 the paper's 60 periods.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-DEFAULT_PERIODS = 60.0   # the paper evaluates 60 periods per ring-down
-GRID_POINTS = 128        # midpoint grid over the ring-down for K(t)
-PHASE_POINTS = 16        # samples of the cycle average ⟨…⟩_Φ (exact for the low harmonics involved)
-DEFAULT_NODES = 3        # Gauss nodes: exact for f(A(t)) polynomial of degree 5 in t
+DEFAULT_PERIODS = 60.0  # the paper evaluates 60 periods per ring-down
+GRID_POINTS = 128  # midpoint grid over the ring-down for K(t)
+PHASE_POINTS = 16  # samples of the cycle average ⟨…⟩_Φ (exact for the low harmonics involved)
+DEFAULT_NODES = 3  # Gauss nodes: exact for f(A(t)) polynomial of degree 5 in t
 PAPER_SENSOR = (0.0, 1.0)
 
 
@@ -51,15 +52,14 @@ def phase_weight(theta0_rad, amplitude_rad, sensor_direction=PAPER_SENSOR) -> np
     return (amplitude**2 * (slope * np.sin(phi)) ** 2).mean(-1)
 
 
-def averaging_kernel(theta0_rad, amplitude_start_rad, damping_per_s, duration_s,
-                     sensor_direction=PAPER_SENSOR):
+def averaging_kernel(theta0_rad, amplitude_start_rad, damping_per_s, duration_s, sensor_direction=PAPER_SENSOR):
     """Times t (n, M) over the fit window and the kernel masses K(t)·dt (n, M), summing to 1.
 
     Arguments broadcast to a batch shape (n,). See the module docstring for K.
     """
     theta0, amp0, damping, duration = np.broadcast_arrays(
-        *(np.atleast_1d(np.asarray(v, float)) for v in (theta0_rad, amplitude_start_rad, damping_per_s,
-                                                        duration_s)))
+        *(np.atleast_1d(np.asarray(v, float)) for v in (theta0_rad, amplitude_start_rad, damping_per_s, duration_s))
+    )
     step = duration / GRID_POINTS
     t = (np.arange(GRID_POINTS) + 0.5) * step[:, None]
     weight = phase_weight(theta0[:, None], amp0[:, None] * np.exp(-damping[:, None] * t), sensor_direction)
@@ -71,8 +71,14 @@ def averaging_kernel(theta0_rad, amplitude_start_rad, damping_per_s, duration_s,
     return t, mass / mass.sum(-1, keepdims=True)
 
 
-def amplitude_nodes(theta0_rad, amplitude_start_rad, damping_per_s, duration_s, nodes: int = DEFAULT_NODES,
-                    sensor_direction=PAPER_SENSOR):
+def amplitude_nodes(
+    theta0_rad,
+    amplitude_start_rad,
+    damping_per_s,
+    duration_s,
+    nodes: int = DEFAULT_NODES,
+    sensor_direction=PAPER_SENSOR,
+):
     """Amplitudes A_q (n, q) and weights c_q (n, q) with f_fit = Σ_q c_q·f(A_q).
 
     Gauss quadrature for the measure K(t)·dt (Stieltjes recurrence on the grid, then the
@@ -80,7 +86,7 @@ def amplitude_nodes(theta0_rad, amplitude_start_rad, damping_per_s, duration_s, 
     """
     t, mass = averaging_kernel(theta0_rad, amplitude_start_rad, damping_per_s, duration_s, sensor_direction)
     span = t[:, -1:] + t[:, :1]
-    x = 2.0 * t / span - 1.0                    # the window mapped to [−1, 1] for conditioning
+    x = 2.0 * t / span - 1.0  # the window mapped to [−1, 1] for conditioning
     alpha, beta = [], []
     previous, current = np.zeros_like(x), np.ones_like(x)
     norm_previous = np.ones(len(x))
@@ -96,7 +102,7 @@ def amplitude_nodes(theta0_rad, amplitude_start_rad, damping_per_s, duration_s, 
     off = np.sqrt(np.stack(beta[1:], -1)) if nodes > 1 else np.zeros((len(x), 0))
     jacobi[:, idx[:-1], idx[1:]] = off
     jacobi[:, idx[1:], idx[:-1]] = off
-    bad = ~np.all(np.isfinite(jacobi), axis=(1, 2))   # NaN inputs give NaN nodes, not an error
+    bad = ~np.all(np.isfinite(jacobi), axis=(1, 2))  # NaN inputs give NaN nodes, not an error
     eigenvalues, vectors = np.linalg.eigh(np.where(bad[:, None, None], 0.0, jacobi))
     eigenvalues[bad] = np.nan
     times = (eigenvalues + 1.0) * span / 2.0

@@ -3,6 +3,7 @@
 Shared by the field sources, the coil setups, the fluxgates and the simulator scenarios: each
 helper raises ValueError naming the offending key, so a bad file says what is wrong.
 """
+
 from __future__ import annotations
 
 import inspect
@@ -38,7 +39,6 @@ def unit_vector3(name: str, value) -> np.ndarray:
     return unit
 
 
-
 def positive(name: str, value) -> float:
     """``value`` as a finite float > 0."""
     value = float(value)
@@ -60,5 +60,4 @@ def check_keys(what: str, given: dict, builder) -> None:
     unknown = sorted(set(given) - set(parameters))
     missing = [k for k, p in parameters.items() if p.default is inspect.Parameter.empty and k not in given]
     if unknown or missing:
-        raise ValueError(f"{what}: unknown keys {unknown}, missing keys {missing}; "
-                         f"allowed keys are {list(parameters)}")
+        raise ValueError(f"{what}: unknown keys {unknown}, missing keys {missing}; allowed keys are {list(parameters)}")

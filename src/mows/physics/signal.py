@@ -6,6 +6,7 @@ S = κ·(2a·cos θ − b·sin θ) + B_DC (Eq. S11); the paper's sensors have b 
 The exact field of the moving magnet at a real sensor is in :mod:`mows.physics.fluxgate`; this
 module is the fit model.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -30,8 +31,7 @@ def ringdown_angle_rad(t_s, amplitude_rad, frequency_hz, phase_rad, damping_per_
     return amplitude_rad * np.cos(2.0 * np.pi * frequency_hz * t + phase_rad) * np.exp(-damping_per_s * t)
 
 
-def signal_t(t_s, theta0_rad, amplitude_rad, frequency_hz, phase_rad, damping_per_s, kappa,
-             a=0.0, b=1.0, offset_t=0.0):
+def signal_t(t_s, theta0_rad, amplitude_rad, frequency_hz, phase_rad, damping_per_s, kappa, a=0.0, b=1.0, offset_t=0.0):
     """Sensor reading S = 2a·κ·cos θ − b·κ·sin θ + B_DC, tesla (Eq. S11; Eq. S12 for a=0, b=1)."""
     theta = theta0_rad + ringdown_angle_rad(t_s, amplitude_rad, frequency_hz, phase_rad, damping_per_s)
     return kappa * (2.0 * a * np.cos(theta) - b * np.sin(theta)) + offset_t

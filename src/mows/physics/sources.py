@@ -9,6 +9,7 @@ superposes sources, ``source.scaled(k)`` multiplies one by k (a coil's field per
 its current). Current loops are in :mod:`mows.physics.loops`; :mod:`mows.physics.field`
 gathers all sources and gives their YAML form.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -150,11 +151,13 @@ class LinearGradient(FieldSource):
         if antisymmetric > MAXWELL_RTOL * norm:
             raise ValueError(
                 f"gradient_t_per_m is not symmetric (antisymmetric part {antisymmetric:.3g} T/m, "
-                f"norm {norm:.3g} T/m): ∇×B would not vanish in free space")
+                f"norm {norm:.3g} T/m): ∇×B would not vanish in free space"
+            )
         if abs(np.trace(g)) > MAXWELL_RTOL * norm:
             raise ValueError(
                 f"gradient_t_per_m is not traceless (trace {np.trace(g):.3g} T/m, norm {norm:.3g} T/m): "
-                "∇·B would not vanish")
+                "∇·B would not vanish"
+            )
         g.setflags(write=False)
         self.tensor_t_per_m = g
         self.origin_m = vector3("origin_m", origin_m)
@@ -170,8 +173,11 @@ class LinearGradient(FieldSource):
         return np.zeros(as_points_m(points_m).shape + (3, 3))
 
     def _params(self):
-        return {"gradient_t_per_m": self.tensor_t_per_m, "origin_m": self.origin_m,
-                "field_at_origin_t": self.field_at_origin_t}
+        return {
+            "gradient_t_per_m": self.tensor_t_per_m,
+            "origin_m": self.origin_m,
+            "field_at_origin_t": self.field_at_origin_t,
+        }
 
 
 def _dipole_offset(moment_am2, offset_m):
@@ -192,7 +198,7 @@ def dipole_field_t(moment_am2, offset_m) -> np.ndarray:
     far-field reduction).
     """
     m, r, r2, mr = _dipole_offset(moment_am2, offset_m)
-    inv_r3 = r2 ** -1.5
+    inv_r3 = r2**-1.5
     return MU0_OVER_4PI * (3.0 * (mr * inv_r3 / r2)[..., None] * r - inv_r3[..., None] * m)
 
 
@@ -218,8 +224,12 @@ class PointDipole(FieldSource):
         # G_ij = 3μ0/(4π r⁵)·[m_i r_j + m_j r_i + (m·r)δ_ij − 5(m·r) r_i r_j / r²]
         m, r, r2, mr = _dipole_offset(self.moment_am2, as_points_m(points_m) - self.position_m)
         outer = m[..., :, None] * r[..., None, :]
-        bracket = (outer + np.swapaxes(outer, -1, -2) + mr[..., None, None] * np.eye(3)
-                   - 5.0 * (mr / r2)[..., None, None] * r[..., :, None] * r[..., None, :])
+        bracket = (
+            outer
+            + np.swapaxes(outer, -1, -2)
+            + mr[..., None, None] * np.eye(3)
+            - 5.0 * (mr / r2)[..., None, None] * r[..., :, None] * r[..., None, :]
+        )
         return 3.0 * MU0_OVER_4PI * r2[..., None, None] ** -2.5 * bracket
 
     def hessian_t_per_m2(self, points_m):
@@ -229,13 +239,17 @@ class PointDipole(FieldSource):
         eye = np.eye(3)
         rr = r[..., :, None] * r[..., None, :]
         m_delta = _symmetrised(m[..., :, None, None] * eye)
-        mixed = _symmetrised(m[..., :, None, None] * rr[..., None, :, :]
-                             + mr[..., None, None, None] * r[..., :, None, None] * eye)
+        mixed = _symmetrised(
+            m[..., :, None, None] * rr[..., None, :, :] + mr[..., None, None, None] * r[..., :, None, None] * eye
+        )
         rrr = r[..., :, None, None] * rr[..., None, :, :]
         inv_r2 = (1.0 / r2)[..., None, None, None]
-        return (3.0 * MU0_OVER_4PI * r2[..., None, None, None] ** -2.5
-                * (m_delta - 5.0 * inv_r2 * mixed + 35.0 * inv_r2**2 * mr[..., None, None, None] * rrr))
+        return (
+            3.0
+            * MU0_OVER_4PI
+            * r2[..., None, None, None] ** -2.5
+            * (m_delta - 5.0 * inv_r2 * mixed + 35.0 * inv_r2**2 * mr[..., None, None, None] * rrr)
+        )
 
     def _params(self):
         return {"moment_am2": self.moment_am2, "position_m": self.position_m}
-

@@ -11,6 +11,7 @@ that the device walks from one current to the next.
 :class:`FieldSupply` is the supply in a scenario: the field source it drives per ampere and its
 limits (YAML: the scenario section ``supply``, docs/scenario_format.md).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -21,10 +22,10 @@ import numpy as np
 from mows.physics.field import FieldSource, source_from_dict, source_to_dict
 from mows.physics.schema import check_keys
 
-PAPER_CAP_A = 2.0            # Methods: the supply's maximum
-PAPER_RESOLUTION_A = 1e-4    # Methods: 0.1 mA
-DEFAULT_SLEW_A_PER_S = 2.0   # assumed: full scale in one second
-RAMP_STEP_S = 0.01           # the staircase of a ramp changes the current every 10 ms
+PAPER_CAP_A = 2.0  # Methods: the supply's maximum
+PAPER_RESOLUTION_A = 1e-4  # Methods: 0.1 mA
+DEFAULT_SLEW_A_PER_S = 2.0  # assumed: full scale in one second
+RAMP_STEP_S = 0.01  # the staircase of a ramp changes the current every 10 ms
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,13 +46,17 @@ class SupplyLimits:
 
     def check(self, current_a: float) -> float:
         """``current_a`` rounded to the resolution; ValueError if not finite or above the cap."""
-        if isinstance(current_a, bool) or not isinstance(current_a, (int, float, np.integer, np.floating)) \
-                or not math.isfinite(current_a):
+        if (
+            isinstance(current_a, bool)
+            or not isinstance(current_a, (int, float, np.integer, np.floating))
+            or not math.isfinite(current_a)
+        ):
             raise ValueError(f"supply current {current_a!r} must be a finite number of amperes")
         value = float(current_a)
         if abs(value) > self.cap_a:
-            raise ValueError(f"supply current {value:.6g} A exceeds the cap of {self.cap_a:g} A "
-                             "(refused, never clipped)")
+            raise ValueError(
+                f"supply current {value:.6g} A exceeds the cap of {self.cap_a:g} A (refused, never clipped)"
+            )
         return round(value / self.resolution_a) * self.resolution_a
 
     def ramp_s(self, from_a: float, to_a: float) -> float:
@@ -82,8 +87,12 @@ class FieldSupply:
         self.limits.check(self.current_a)
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "source": source_to_dict(self.source), "current_a": float(self.current_a),
-                **{k: float(v) for k, v in dataclasses.asdict(self.limits).items()}}
+        return {
+            "name": self.name,
+            "source": source_to_dict(self.source),
+            "current_a": float(self.current_a),
+            **{k: float(v) for k, v in dataclasses.asdict(self.limits).items()},
+        }
 
 
 def supply_from_dict(data: dict) -> FieldSupply:
@@ -95,7 +104,13 @@ def supply_from_dict(data: dict) -> FieldSupply:
     return _supply(**data)
 
 
-def _supply(source, name="helmholtz", current_a=0.0, cap_a=PAPER_CAP_A, slew_a_per_s=DEFAULT_SLEW_A_PER_S,
-            resolution_a=PAPER_RESOLUTION_A) -> FieldSupply:
+def _supply(
+    source,
+    name="helmholtz",
+    current_a=0.0,
+    cap_a=PAPER_CAP_A,
+    slew_a_per_s=DEFAULT_SLEW_A_PER_S,
+    resolution_a=PAPER_RESOLUTION_A,
+) -> FieldSupply:
     limits = SupplyLimits(float(cap_a), float(slew_a_per_s), float(resolution_a))
     return FieldSupply(source_from_dict(source), limits, float(current_a), str(name))

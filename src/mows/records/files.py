@@ -6,6 +6,7 @@ there unless told to (``force``), and never half-written.
 temporary file in the same directory and renames it into place only once the writer has
 finished, so a crash or an error leaves the old file (or none) and never a torn one.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -35,8 +36,7 @@ def check_output(path, inputs: Iterable = (), force: bool = False) -> pathlib.Pa
     for source in inputs:
         source_path = pathlib.Path(source).resolve()
         if _inside(resolved, source_path) or (source_path.is_file() and resolved == source_path):
-            raise OutputRefused(f"output {path} is an input of this command ({source}): "
-                                "choose another output path")
+            raise OutputRefused(f"output {path} is an input of this command ({source}): choose another output path")
     if path.is_dir():
         raise OutputRefused(f"output {path} is a directory: give a file path")
     if (path.exists() or path.is_symlink()) and not force:
@@ -53,8 +53,9 @@ def replacing(path, inputs: Iterable = (), force: bool = False) -> Iterator[path
     :func:`check_output` first. The temporary file keeps ``path``'s suffix (numpy, for one,
     appends ``.npz`` to names without it)."""
     path = check_output(path, inputs, force)
-    descriptor, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".partial{path.suffix}",
-                                        dir=path.resolve().parent)
+    descriptor, name = tempfile.mkstemp(
+        prefix=f".{path.name}.", suffix=f".partial{path.suffix}", dir=path.resolve().parent
+    )
     os.close(descriptor)
     temporary = pathlib.Path(name)
     try:

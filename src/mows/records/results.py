@@ -8,6 +8,7 @@ stage's own status enum (compare it by name, ``result.status is FitStatus.OK``, 
 bare number); ``report()`` is one human-readable line or block with the values and their
 uncertainties.
 """
+
 from __future__ import annotations
 
 import enum

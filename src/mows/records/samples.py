@@ -7,6 +7,7 @@ nanoseconds, REP-145: the stamp is the time of the first sample) and is device s
 flags samples clipped at the sensor's range (their value is not a measurement). ``sequence``
 numbers published blocks (0 until a block assembler numbers them).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -59,15 +60,22 @@ class SampleBlock:
 
     def rows(self, start: int, stop: int) -> SampleBlock:
         """Rows [start, stop) as a block of their own, restamped."""
-        return dataclasses.replace(self, first_sample_index=self.first_sample_index + start,
-                                   stamp_ns=self.stamp_of(self.first_sample_index + start),
-                                   samples_t=self.samples_t[start:stop], saturated=self.saturated[start:stop])
+        return dataclasses.replace(
+            self,
+            first_sample_index=self.first_sample_index + start,
+            stamp_ns=self.stamp_of(self.first_sample_index + start),
+            samples_t=self.samples_t[start:stop],
+            saturated=self.saturated[start:stop],
+        )
 
     @staticmethod
     def concatenate(blocks: Iterable[SampleBlock], sequence: int | None = None) -> SampleBlock:
         """One block of consecutive ``blocks`` (the first one's index, stamp and rate)."""
         blocks = list(blocks)
         first = blocks[0]
-        return dataclasses.replace(first, samples_t=np.concatenate([b.samples_t for b in blocks]),
-                                   saturated=np.concatenate([b.saturated for b in blocks]),
-                                   sequence=first.sequence if sequence is None else sequence)
+        return dataclasses.replace(
+            first,
+            samples_t=np.concatenate([b.samples_t for b in blocks]),
+            saturated=np.concatenate([b.saturated for b in blocks]),
+            sequence=first.sequence if sequence is None else sequence,
+        )

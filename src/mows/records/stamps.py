@@ -5,6 +5,7 @@ rosbags' decoded ones alike) to and from integer nanoseconds or float seconds. T
 works in integer nanoseconds (20 kS/s is exactly 50 000 ns a sample); float seconds are for
 arithmetic on the samples, where 0.1 µs at today's epoch is far below a sample.
 """
+
 from __future__ import annotations
 
 import math

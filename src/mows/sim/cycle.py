@@ -1,5 +1,6 @@
 """One simulated measurement cycle: turn, excite, switch off, record the ring-down (:func:`simulate_cycle`),
 and its record with the truth to compare a fit with (:class:`CycleRecord`)."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -46,7 +47,7 @@ class CycleRecord:
     def ringdown_amplitude_rad(self) -> float:
         """The first swing after switch-off: max |θ − θs| over the first period of the ring-down."""
         period = int(math.ceil(self.sample_rate_hz / self.frequency_hz))
-        theta = self.theta_rad[self.coil_off_index:self.coil_off_index + period]
+        theta = self.theta_rad[self.coil_off_index : self.coil_off_index + period]
         return float(np.max(np.abs(theta - self.potential.rest_angle_rad())))
 
     def ringdown_frequency_hz(self, duration_s: float, points: int = 32) -> float:
@@ -58,8 +59,14 @@ class CycleRecord:
         return float(np.mean([self.potential.frequency_hz(a) for a in amplitudes]))
 
 
-def simulate_cycle(device: SimulatedDevice, theta0_rad: float, amplitude_a: float, frequency_hz=None,
-                   excite_s: float = 0.5, ringdown_s: float = 0.5) -> CycleRecord:
+def simulate_cycle(
+    device: SimulatedDevice,
+    theta0_rad: float,
+    amplitude_a: float,
+    frequency_hz=None,
+    excite_s: float = 0.5,
+    ringdown_s: float = 0.5,
+) -> CycleRecord:
     """Turn to θ0, drive the coils with the setup's current scheme for ``excite_s`` (base
     amplitude ``amplitude_a``; ``frequency_hz`` None: the expected small-amplitude frequency,
     as after the paper's tuning), switch them off and record ``ringdown_s`` of ring-down."""
@@ -71,5 +78,11 @@ def simulate_cycle(device: SimulatedDevice, theta0_rad: float, amplitude_a: floa
     device.coils_off()
     potential = device.potential()
     ringdown = device.read(int(round(ringdown_s * device.sample_rate_hz)))
-    return CycleRecord(float(theta0_rad), currents, frequency, SimulatedBlock.concatenate([excitation, ringdown]),
-                       len(excitation), potential)
+    return CycleRecord(
+        float(theta0_rad),
+        currents,
+        frequency,
+        SimulatedBlock.concatenate([excitation, ringdown]),
+        len(excitation),
+        potential,
+    )

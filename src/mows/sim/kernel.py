@@ -33,6 +33,7 @@ estimator resolves; its energy error, (ωh)⁶/144 per step, acts like a damping
 machine (``cache=True``, ≈ 1 s); later processes load it from the cache.
 
 """
+
 from __future__ import annotations
 
 import math
@@ -116,8 +117,7 @@ def _rk4_step(theta, omega, t, h, mode, params, env, drive, drive_omega, drive_t
     a3 = acceleration(theta + 0.5 * h * o2, o3, t + 0.5 * h, mode, params, env, drive, drive_omega, drive_t0)
     o4 = omega + h * a3
     a4 = acceleration(theta + h * o3, o4, t + h, mode, params, env, drive, drive_omega, drive_t0)
-    return (theta + h / 6.0 * (omega + 2.0 * o2 + 2.0 * o3 + o4),
-            omega + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4))
+    return (theta + h / 6.0 * (omega + 2.0 * o2 + 2.0 * o3 + o4), omega + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4))
 
 
 @njit(cache=True)
@@ -149,8 +149,20 @@ def _step(theta, omega, mode, t, h, params, env, drive, drive_omega, drive_t0):
 
 
 @njit(cache=True)
-def advance(state, first_index, sample_rate_hz, substeps, contact_substeps, params, env, drive, drive_omega,
-            drive_t0, theta_out, omega_out):
+def advance(
+    state,
+    first_index,
+    sample_rate_hz,
+    substeps,
+    contact_substeps,
+    params,
+    env,
+    drive,
+    drive_omega,
+    drive_t0,
+    theta_out,
+    omega_out,
+):
     """Record (θ, θ') at samples first_index … first_index + n − 1 and integrate to the next.
 
     ``state`` = [θ, θ', contact mode] is updated in place. Returns the number of samples done;
@@ -173,4 +185,3 @@ def advance(state, first_index, sample_rate_hz, substeps, contact_substeps, para
             theta, omega, mode = _step(theta, omega, mode, t + k * h, h, params, env, drive, drive_omega, drive_t0)
     state[0], state[1], state[2] = theta, omega, mode
     return theta_out.shape[0]
-

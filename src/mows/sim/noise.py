@@ -1,4 +1,5 @@
 """Fluxgate noise as a continuous stream across blocks (:class:`NoiseStream`) for the simulated device."""
+
 from __future__ import annotations
 
 import math
@@ -39,16 +40,20 @@ class NoiseStream:
     def draw(self, first_index: int, n: int) -> np.ndarray:
         """Noise of samples first_index … first_index + n − 1 of both channels, tesla, (n, 2)."""
         m = self.model
-        silent = not (m.common_white_t_per_rthz or m.common_pink_t_per_rthz_at_1hz or m.sensor_white_t_per_rthz
-                      or m.mains_t)
+        silent = not (
+            m.common_white_t_per_rthz or m.common_pink_t_per_rthz_at_1hz or m.sensor_white_t_per_rthz or m.mains_t
+        )
         if silent or n == 0:
             return np.zeros((n, 2))  # nothing to draw
         normals = self.rng.standard_normal((n, 4))
         white_scale = math.sqrt(self.sample_rate_hz / 2.0)  # per-sample σ of a one-sided ASD of 1
         pink, self._state = sp_signal.sosfilt(self._sos, normals[:, 1], zi=self._state)
         t = (first_index + np.arange(n)) / self.sample_rate_hz
-        common = (m.common_white_t_per_rthz * white_scale * normals[:, 0] + self._pink_gain * pink
-                  + m.mains_t * np.sin(TWO_PI * m.mains_hz * t + self._mains_phase))
+        common = (
+            m.common_white_t_per_rthz * white_scale * normals[:, 0]
+            + self._pink_gain * pink
+            + m.mains_t * np.sin(TWO_PI * m.mains_hz * t + self._mains_phase)
+        )
         return common[:, None] + m.sensor_white_t_per_rthz * white_scale * normals[:, 2:]
 
 
@@ -58,8 +63,9 @@ def pink_filter(sample_rate_hz: float, asd_at_1hz_t_per_rthz: float):
     n_pairs = int(math.ceil(math.log10(sample_rate_hz / 2.0 / PINK_LOW_HZ) * PINK_POLES_PER_DECADE))
     poles_hz = PINK_LOW_HZ * spacing ** np.arange(n_pairs)
     zeros_hz = poles_hz * math.sqrt(spacing)
-    sos = sp_signal.zpk2sos(np.exp(-TWO_PI * zeros_hz / sample_rate_hz), np.exp(-TWO_PI * poles_hz / sample_rate_hz),
-                            1.0)
+    sos = sp_signal.zpk2sos(
+        np.exp(-TWO_PI * zeros_hz / sample_rate_hz), np.exp(-TWO_PI * poles_hz / sample_rate_hz), 1.0
+    )
     _, response = sp_signal.sosfreqz(sos, worN=[1.0], fs=sample_rate_hz)
     # Unit white noise has one-sided PSD 2/fs; the gain makes the output's PSD asd² at 1 Hz.
     return sos, asd_at_1hz_t_per_rthz * math.sqrt(sample_rate_hz / 2.0) / abs(response[0])

@@ -16,6 +16,7 @@ over the base's, so the shipped scenes state only how they differ from ``base.ya
 The sections' dataclasses are :mod:`mows.sim.sections`, the YAML reading (``extends:``, the
 section builders) :mod:`mows.sim.scenario_yaml`; this module assembles them into a Scenario.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -71,7 +72,7 @@ class Scenario:
     seed: int = 1
     name: str = "custom"
     description: str = ""
-    supply: FieldSupply | None = None   # the static-field supply the driver controls (calibration)
+    supply: FieldSupply | None = None  # the static-field supply the driver controls (calibration)
 
     def __post_init__(self):
         check_range("scenario", "sample_rate_hz", self.sample_rate_hz, 0.0, 1e7, low_open=True)
@@ -94,18 +95,23 @@ class Scenario:
     def to_dict(self) -> dict:
         """The full YAML mapping (presets and the paper probe written out in full)."""
         return {
-            "name": self.name, "description": self.description,
-            "probe": self.probe.to_dict(), "setup": self.setup.to_dict(),
-            "environment": {"sources": [source_to_dict(s) for s in self.environment.sources],
-                            "temperature_k": float(self.environment.temperature_k),
-                            "temperature_rate_k_per_s": float(self.environment.temperature_rate_k_per_s)},
+            "name": self.name,
+            "description": self.description,
+            "probe": self.probe.to_dict(),
+            "setup": self.setup.to_dict(),
+            "environment": {
+                "sources": [source_to_dict(s) for s in self.environment.sources],
+                "temperature_k": float(self.environment.temperature_k),
+                "temperature_rate_k_per_s": float(self.environment.temperature_rate_k_per_s),
+            },
             "pose": pose_to_dict(self.pose),
             "sensors": sensors_to_dict(self.sensors),
             "noise": {k: float(v) for k, v in dataclasses.asdict(self.noise).items()},
             "excitation": dataclasses.asdict(self.excitation),
             "housing": dataclasses.asdict(self.housing),
             "integrator": dataclasses.asdict(self.integrator),
-            "sample_rate_hz": float(self.sample_rate_hz), "seed": int(self.seed),
+            "sample_rate_hz": float(self.sample_rate_hz),
+            "seed": int(self.seed),
             **({} if self.supply is None else {"supply": self.supply.to_dict()}),
         }
 
@@ -125,20 +131,35 @@ def load_scenario(name_or_path=DEFAULT_SCENARIO) -> Scenario:
     if path.suffix not in (".yaml", ".yml"):
         path = SCENARIO_DIR / f"{name_or_path}.yaml"
         if not path.is_file():
-            raise ValueError(f"scenario {name_or_path!r} is neither a YAML file nor one of the shipped "
-                             f"scenarios {shipped_scenarios()}")
+            raise ValueError(
+                f"scenario {name_or_path!r} is neither a YAML file nor one of the shipped "
+                f"scenarios {shipped_scenarios()}"
+            )
     return Scenario.from_yaml(path)
 
 
 # --- the whole mapping: the signature is the scenario's top-level YAML keys ------------------
-def _scenario_from_sections(name="custom", description="", probe=PAPER_PROBE_NAME, setup=None, environment=None,
-                   pose=None, sensors=None, noise=None, excitation=None, housing=None, integrator=None,
-                   sample_rate_hz=Scenario.sample_rate_hz, seed=Scenario.seed, supply=None) -> Scenario:
+def _scenario_from_sections(
+    name="custom",
+    description="",
+    probe=PAPER_PROBE_NAME,
+    setup=None,
+    environment=None,
+    pose=None,
+    sensors=None,
+    noise=None,
+    excitation=None,
+    housing=None,
+    integrator=None,
+    sample_rate_hz=Scenario.sample_rate_hz,
+    seed=Scenario.seed,
+    supply=None,
+) -> Scenario:
     the_pose = section("pose", pose, pose_from)
     fs = number("scenario", "sample_rate_hz", sample_rate_hz)
     setup = {"preset": "largest_spacing"} if setup is None else setup
     require_explicit_geometry(the_pose, setup, sensors)
-    if isinstance(setup, dict) and "preset" in setup:   # the preset's coils sit around the probe
+    if isinstance(setup, dict) and "preset" in setup:  # the preset's coils sit around the probe
         setup = {"probe_position_m": list(the_pose.magnet_position_m), **setup}
     return Scenario(
         probe=probe_from(probe),
@@ -150,5 +171,9 @@ def _scenario_from_sections(name="custom", description="", probe=PAPER_PROBE_NAM
         excitation=section("excitation", excitation, excitation_from),
         housing=section("housing", housing, numbers_into(Housing)),
         integrator=section("integrator", integrator, Integrator),
-        sample_rate_hz=fs, seed=seed, name=str(name), description=str(description),
-        supply=None if supply is None else supply_from_dict(supply))
+        sample_rate_hz=fs,
+        seed=seed,
+        name=str(name),
+        description=str(description),
+        supply=None if supply is None else supply_from_dict(supply),
+    )

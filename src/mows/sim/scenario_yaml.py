@@ -5,6 +5,7 @@ itself possibly extending another). Each section is built by a function whose si
 the section's YAML keys (checked by :func:`mows.physics.schema.check_keys`), and the inverse
 for the sections written back to YAML. :mod:`mows.sim.scenario` assembles the sections.
 """
+
 from __future__ import annotations
 
 import inspect
@@ -23,7 +24,7 @@ from mows.physics.schema import check_keys, vector3
 from mows.sim.sections import Environment, Excitation, Sensors, floats, number
 
 SCENARIO_DIR = pathlib.Path(__file__).with_name("scenarios")
-BASE_SCENARIO = "base"     # what the shipped scenes share; not a scene of its own
+BASE_SCENARIO = "base"  # what the shipped scenes share; not a scene of its own
 PAPER_PROBE_NAME = "paper"
 
 
@@ -56,8 +57,10 @@ def _base_path(name, base_dir) -> pathlib.Path:
     is_file = pathlib.Path(name).suffix in (".yaml", ".yml")
     path = pathlib.Path(base_dir or ".") / name if is_file else SCENARIO_DIR / f"{name}.yaml"
     if not path.is_file():
-        raise ValueError(f"scenario: extends = {name!r} is neither a YAML file (looked for {path}) nor one of "
-                         f"the shipped scenarios {[BASE_SCENARIO, *shipped_scenarios()]}")
+        raise ValueError(
+            f"scenario: extends = {name!r} is neither a YAML file (looked for {path}) nor one of "
+            f"the shipped scenarios {[BASE_SCENARIO, *shipped_scenarios()]}"
+        )
     return path.resolve()
 
 
@@ -76,14 +79,20 @@ def require_explicit_geometry(pose: Pose, setup, sensors) -> None:
     bench); a rotation plane other than x–y must say where its coils and sensors are."""
     if (pose.plane_e1, pose.plane_e2) == ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)):
         return
-    defaults = [what for what, default in (("setup (a coil preset)", isinstance(setup, dict) and "preset" in setup),
-                                           ("sensors (default positions)",
-                                            not isinstance(sensors, dict) or "positions_m" not in sensors))
-                if default]
+    defaults = [
+        what
+        for what, default in (
+            ("setup (a coil preset)", isinstance(setup, dict) and "preset" in setup),
+            ("sensors (default positions)", not isinstance(sensors, dict) or "positions_m" not in sensors),
+        )
+        if default
+    ]
     if defaults:
-        raise ValueError(f"scenario: the rotation plane is not x–y (plane_e1 = {pose.plane_e1}, plane_e2 = "
-                         f"{pose.plane_e2}) but {' and '.join(defaults)} lie in x–y: give the coils "
-                         f"(setup: coils …) and the sensors (sensors: positions_m, axis) for this plane")
+        raise ValueError(
+            f"scenario: the rotation plane is not x–y (plane_e1 = {pose.plane_e1}, plane_e2 = "
+            f"{pose.plane_e2}) but {' and '.join(defaults)} lie in x–y: give the coils "
+            f"(setup: coils …) and the sensors (sensors: positions_m, axis) for this plane"
+        )
 
 
 def section(name, data, builder):
@@ -104,33 +113,51 @@ def probe_from(value) -> Probe:
     if isinstance(value, str):
         path = pathlib.Path(value)
         if not path.is_file():
-            raise ValueError(f"scenario section 'probe': {value!r} is neither {PAPER_PROBE_NAME!r} nor a probe "
-                             f"file (looked for {path})")
+            raise ValueError(
+                f"scenario section 'probe': {value!r} is neither {PAPER_PROBE_NAME!r} nor a probe "
+                f"file (looked for {path})"
+            )
         return Probe.from_yaml(path)
     raise ValueError(f"scenario section 'probe' must be {PAPER_PROBE_NAME!r}, a file path or a mapping, got {value!r}")
 
 
-def environment_from(sources=(), temperature_k=Environment.temperature_k,
-                 temperature_rate_k_per_s=Environment.temperature_rate_k_per_s):
+def environment_from(
+    sources=(), temperature_k=Environment.temperature_k, temperature_rate_k_per_s=Environment.temperature_rate_k_per_s
+):
     if not isinstance(sources, (list, tuple)):
         raise ValueError(f"scenario section 'environment': sources must be a list of field sources, got {sources!r}")
-    return Environment(tuple(source_from_dict(s) for s in sources),
-                       number("environment", "temperature_k", temperature_k),
-                       number("environment", "temperature_rate_k_per_s", temperature_rate_k_per_s))
+    return Environment(
+        tuple(source_from_dict(s) for s in sources),
+        number("environment", "temperature_k", temperature_k),
+        number("environment", "temperature_rate_k_per_s", temperature_rate_k_per_s),
+    )
 
 
-def pose_from(magnet_position_m=(0.0, 0.0, 0.0), theta0_deg=0.0, plane_e1=(1.0, 0.0, 0.0), plane_e2=(0.0, 1.0, 0.0),
-          gravity_m_per_s2=None, tilt_deg=None, tilt_axis_deg=0.0) -> Pose:
-    place: dict[str, Any] = {"magnet_position_m": tuple(floats(vector3("pose: magnet_position_m", magnet_position_m))),
-             "theta0_rad": math.radians(number("pose", "theta0_deg", theta0_deg))}
-    plane: dict[str, Any] = {"plane_e1": tuple(floats(vector3("pose: plane_e1", plane_e1))),
-             "plane_e2": tuple(floats(vector3("pose: plane_e2", plane_e2)))}
+def pose_from(
+    magnet_position_m=(0.0, 0.0, 0.0),
+    theta0_deg=0.0,
+    plane_e1=(1.0, 0.0, 0.0),
+    plane_e2=(0.0, 1.0, 0.0),
+    gravity_m_per_s2=None,
+    tilt_deg=None,
+    tilt_axis_deg=0.0,
+) -> Pose:
+    place: dict[str, Any] = {
+        "magnet_position_m": tuple(floats(vector3("pose: magnet_position_m", magnet_position_m))),
+        "theta0_rad": math.radians(number("pose", "theta0_deg", theta0_deg)),
+    }
+    plane: dict[str, Any] = {
+        "plane_e1": tuple(floats(vector3("pose: plane_e1", plane_e1))),
+        "plane_e2": tuple(floats(vector3("pose: plane_e2", plane_e2))),
+    }
     if tilt_deg is None:
         gravity = (0.0, 0.0, -STANDARD_GRAVITY_M_PER_S2) if gravity_m_per_s2 is None else gravity_m_per_s2
         return Pose(gravity_m_per_s2=tuple(floats(vector3("pose: gravity_m_per_s2", gravity))), **place, **plane)
     if gravity_m_per_s2 is not None or plane != {"plane_e1": (1.0, 0.0, 0.0), "plane_e2": (0.0, 1.0, 0.0)}:
-        raise ValueError("scenario section 'pose': tilt_deg describes the x–y plane tilted under gravity; "
-                         "give either tilt_deg (and tilt_axis_deg) or gravity_m_per_s2 with plane_e1/plane_e2")
+        raise ValueError(
+            "scenario section 'pose': tilt_deg describes the x–y plane tilted under gravity; "
+            "give either tilt_deg (and tilt_axis_deg) or gravity_m_per_s2 with plane_e1/plane_e2"
+        )
     tilt = number("pose", "tilt_deg", tilt_deg)
     if not -90.0 <= tilt <= 90.0:
         raise ValueError(f"scenario section 'pose': tilt_deg = {tilt} must be in [-90, 90]")
@@ -138,13 +165,23 @@ def pose_from(magnet_position_m=(0.0, 0.0, 0.0), theta0_deg=0.0, plane_e1=(1.0, 
 
 
 def pose_to_dict(pose: Pose) -> dict:
-    return {"magnet_position_m": floats(pose.magnet_position_m), "theta0_deg": math.degrees(pose.theta0_rad),
-            "plane_e1": floats(pose.plane_e1), "plane_e2": floats(pose.plane_e2),
-            "gravity_m_per_s2": floats(pose.gravity_m_per_s2)}
+    return {
+        "magnet_position_m": floats(pose.magnet_position_m),
+        "theta0_deg": math.degrees(pose.theta0_rad),
+        "plane_e1": floats(pose.plane_e1),
+        "plane_e2": floats(pose.plane_e2),
+        "gravity_m_per_s2": floats(pose.gravity_m_per_s2),
+    }
 
 
-def sensors_from(pose: Pose, positions_m=None, axis=(0.0, 1.0, 0.0), range_t=FL1_RANGE_T,
-             resolution_t=FL1_RESOLUTION_T, null_offsets=True) -> Sensors:
+def sensors_from(
+    pose: Pose,
+    positions_m=None,
+    axis=(0.0, 1.0, 0.0),
+    range_t=FL1_RANGE_T,
+    resolution_t=FL1_RESOLUTION_T,
+    null_offsets=True,
+) -> Sensors:
     """Two parallel sensors; by default at the paper's places relative to the magnet's rest position."""
     if positions_m is None:
         positions = FluxgatePair.paper(pose.magnet_position_m).positions_m
@@ -154,22 +191,30 @@ def sensors_from(pose: Pose, positions_m=None, axis=(0.0, 1.0, 0.0), range_t=FL1
             raise ValueError(f"scenario section 'sensors': positions_m must be two 3-vectors, got {positions_m!r}")
     if not isinstance(null_offsets, bool):
         raise ValueError(f"scenario section 'sensors': null_offsets must be true or false, got {null_offsets!r}")
-    sensors = [Fluxgate(p, axis, number("sensors", "range_t", range_t),
-                        number("sensors", "resolution_t", resolution_t)) for p in positions]
+    sensors = [
+        Fluxgate(p, axis, number("sensors", "range_t", range_t), number("sensors", "resolution_t", resolution_t))
+        for p in positions
+    ]
     return Sensors(FluxgatePair(tuple(sensors)), null_offsets)
 
 
 def sensors_to_dict(sensors: Sensors) -> dict:
     near = sensors.pair.sensors[0]
-    return {"positions_m": sensors.pair.positions_m.tolist(), "axis": floats(near.axis),
-            "range_t": float(near.range_t), "resolution_t": float(near.resolution_t),
-            "null_offsets": sensors.null_offsets}
+    return {
+        "positions_m": sensors.pair.positions_m.tolist(),
+        "axis": floats(near.axis),
+        "range_t": float(near.range_t),
+        "resolution_t": float(near.resolution_t),
+        "null_offsets": sensors.null_offsets,
+    }
 
 
 def numbers_into(cls):
     """A builder that converts every value to float before calling ``cls`` (same keys)."""
+
     def build(**values):
         return cls(**{k: number(cls.__name__.lower(), k, v) for k, v in values.items()})
+
     build.__signature__ = inspect.signature(cls)
     return build
 
@@ -177,9 +222,16 @@ def numbers_into(cls):
 noise_from = numbers_into(NoiseModel)
 
 
-def excitation_from(amplitude_a=Excitation.amplitude_a, frequency_hz=None, excite_s=Excitation.excite_s,
-                ringdown_s=Excitation.ringdown_s, gap_s=Excitation.gap_s) -> Excitation:
-    values = {k: number("excitation", k, v) for k, v in
-              dict(amplitude_a=amplitude_a, excite_s=excite_s, ringdown_s=ringdown_s, gap_s=gap_s).items()}
+def excitation_from(
+    amplitude_a=Excitation.amplitude_a,
+    frequency_hz=None,
+    excite_s=Excitation.excite_s,
+    ringdown_s=Excitation.ringdown_s,
+    gap_s=Excitation.gap_s,
+) -> Excitation:
+    values = {
+        k: number("excitation", k, v)
+        for k, v in dict(amplitude_a=amplitude_a, excite_s=excite_s, ringdown_s=ringdown_s, gap_s=gap_s).items()
+    }
     frequency = None if frequency_hz is None else number("excitation", "frequency_hz", frequency_hz)
     return Excitation(frequency_hz=frequency, **values)

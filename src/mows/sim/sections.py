@@ -3,6 +3,7 @@ environment, the sensors, the default excitation, the housing stop and the integ
 checking its ranges (ValueError naming the section and key). :class:`mows.sim.scenario.Scenario`
 holds them; :mod:`mows.sim.scenario_yaml` builds them from YAML.
 """
+
 from __future__ import annotations
 
 import dataclasses

@@ -16,6 +16,7 @@ Device clock. Sample i is taken at t = i/fs; :meth:`SimulatedDevice.read` return
 samples and leaves the probe moving, so consecutive reads form one continuous stream
 (noise included) and a read of 2n equals two reads of n.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -78,8 +79,11 @@ class SimulatedBlock:
     def concatenate(blocks) -> SimulatedBlock:
         """One block of consecutive ``blocks``."""
         blocks = list(blocks)
-        truth = {f.name: np.concatenate([getattr(b, f.name) for b in blocks])
-                 for f in dataclasses.fields(SimulatedBlock) if f.name != "samples"}
+        truth = {
+            f.name: np.concatenate([getattr(b, f.name) for b in blocks])
+            for f in dataclasses.fields(SimulatedBlock)
+            if f.name != "samples"
+        }
         return SimulatedBlock(SampleBlock.concatenate(b.samples for b in blocks), **truth)
 
 
@@ -94,9 +98,9 @@ class DeviceTruth:
     rest_angle_rad: float
     temperature_k: float
     spring_nm_per_rad: float
-    field_t: np.ndarray            # environment field at the magnet's rest position, global frame
-    gradient_t_per_m: np.ndarray   # G[i, j] = ∂B_i/∂x_j there
-    potential: ArcPotential        # U(θ) at this pose and temperature
+    field_t: np.ndarray  # environment field at the magnet's rest position, global frame
+    gradient_t_per_m: np.ndarray  # G[i, j] = ∂B_i/∂x_j there
+    potential: ArcPotential  # U(θ) at this pose and temperature
 
 
 class SimulatedDevice:
@@ -115,17 +119,22 @@ class SimulatedDevice:
         self._fixed_source = scenario.environment.source
         self._supply = scenario.supply
         self.field_current_a = 0.0 if self._supply is None else self._supply.current_a
-        self._noise = NoiseStream(scenario.noise, self.sample_rate_hz,
-                                  np.random.default_rng(scenario.seed) if rng is None else rng)
+        self._noise = NoiseStream(
+            scenario.noise, self.sample_rate_hz, np.random.default_rng(scenario.seed) if rng is None else rng
+        )
         pair = scenario.sensors.pair
         env_at_sensors = self.static_source.field_t(pair.positions_m)
         self._pair = pair.with_offsets_nulled(env_at_sensors) if scenario.sensors.null_offsets else pair
-        self._fixed_reading_t = self._pair.component_t(self._fixed_source.field_t(pair.positions_m))   # (2,)
-        self._supply_reading_t_per_a = (np.zeros(2) if self._supply is None else
-                                        self._pair.component_t(self._supply.source.field_t(pair.positions_m)))
-        coil_fields = scenario.setup.coil_field_per_ampere_t(pair.positions_m)             # (2, K, 3)
+        self._fixed_reading_t = self._pair.component_t(self._fixed_source.field_t(pair.positions_m))  # (2,)
+        self._supply_reading_t_per_a = (
+            np.zeros(2)
+            if self._supply is None
+            else self._pair.component_t(self._supply.source.field_t(pair.positions_m))
+        )
+        coil_fields = scenario.setup.coil_field_per_ampere_t(pair.positions_m)  # (2, K, 3)
         self._coil_reading_t_per_a = np.stack(
-            [self._pair.component_t(coil_fields[:, k]) for k in range(self.n_coils)])       # (K, 2)
+            [self._pair.component_t(coil_fields[:, k]) for k in range(self.n_coils)]
+        )  # (K, 2)
         self._half_width_rad = max(DEFAULT_HALF_WIDTH_RAD, INTERVAL_OVER_STOP * self.probe.theta_stop_rad)
         self._check_resolvable()
         self._params = self._kernel_parameters()
@@ -143,8 +152,9 @@ class SimulatedDevice:
         """Refuse a field whose spring m·|B| makes ω = √((kM + m|B|)/J) too fast for the
         integrator's step 1/(substeps·fs) (Eq. S1 with the field's spring added)."""
         probe, integrator = self.probe, self.scenario.integrator
-        field_t = float(np.linalg.norm(self.static_source.field_t(np.asarray(self.scenario.pose.magnet_position_m,
-                                                                            float))))
+        field_t = float(
+            np.linalg.norm(self.static_source.field_t(np.asarray(self.scenario.pose.magnet_position_m, float)))
+        )
         omega = math.sqrt((probe.spring_nm_per_rad + probe.moment_am2 * field_t) / probe.inertia_kgm2)
         omega_dt = omega / (integrator.substeps * self.sample_rate_hz)
         if not omega_dt < RK4_MAX_OMEGA_DT:
@@ -153,7 +163,8 @@ class SimulatedDevice:
                 f"the field at the probe, |B| = {field_t:.4g} T, makes the lever ring at {omega / TWO_PI:.4g} Hz, "
                 f"faster than integrator substeps = {integrator.substeps} at {self.sample_rate_hz:g} S/s resolve "
                 f"(ω·dt = {omega_dt:.3g}, must stay below {RK4_MAX_OMEGA_DT}): use a weaker field or "
-                f"integrator: substeps ≥ {needed}")
+                f"integrator: substeps ≥ {needed}"
+            )
 
     def _kernel_parameters(self) -> np.ndarray:
         probe, env, housing = self.probe, self.scenario.environment, self.scenario.housing
@@ -165,15 +176,23 @@ class SimulatedDevice:
         c_stop = 2.0 * zeta * math.sqrt(k_stop * probe.inertia_kgm2)
         params = np.zeros(8)
         params[[P_INV_INERTIA, P_TWO_DELTA, P_SPRING0, P_SPRING_RATE, P_INV_WIDTH, P_STOP, P_K_STOP, P_C_STOP]] = (
-            1.0 / probe.inertia_kgm2, 2.0 * probe.damping_per_s, spring0, spring_rate, 1.0 / self._half_width_rad,
-            probe.theta_stop_rad, k_stop, c_stop)
+            1.0 / probe.inertia_kgm2,
+            2.0 * probe.damping_per_s,
+            spring0,
+            spring_rate,
+            1.0 / self._half_width_rad,
+            probe.theta_stop_rad,
+            k_stop,
+            c_stop,
+        )
         return params
 
     def _slope_series(self, source, pose) -> np.ndarray:
         """Chebyshev coefficients of W'(θ) for ``source`` at ``pose``, negligible tail dropped."""
         coeffs = ArcPotential.from_source(self.probe, source, pose, half_width_rad=self._half_width_rad).d1
-        significant = np.flatnonzero(np.abs(coeffs) > SERIES_TOLERANCE * self.probe.spring_nm_per_rad
-                                     * self._half_width_rad)
+        significant = np.flatnonzero(
+            np.abs(coeffs) > SERIES_TOLERANCE * self.probe.spring_nm_per_rad * self._half_width_rad
+        )
         return np.ascontiguousarray(coeffs[: max(2, significant[-1] + 1 if significant.size else 2)])
 
     @property
@@ -191,8 +210,9 @@ class SimulatedDevice:
         self._fixed_series = self._slope_series(self._fixed_source, self._pose)
         coil_pose = dataclasses.replace(self._pose, gravity_m_per_s2=(0.0, 0.0, 0.0))
         self._coil_series = [self._slope_series(coil, coil_pose) for coil in self.scenario.setup.coils]
-        self._supply_series = (np.zeros(0) if self._supply is None else
-                               self._slope_series(self._supply.source, coil_pose))
+        self._supply_series = (
+            np.zeros(0) if self._supply is None else self._slope_series(self._supply.source, coil_pose)
+        )
         self._combine_static()
 
     def set_field_current(self, current_a: float) -> None:
@@ -244,8 +264,10 @@ class SimulatedDevice:
     def pluck(self, theta_rad: float, theta_dot_rad_per_s: float = 0.0) -> None:
         """Set the deflection state directly (simulation only: a plucked cantilever)."""
         if not abs(theta_rad) < self._half_width_rad or not math.isfinite(theta_dot_rad_per_s):
-            raise ValueError(f"theta_rad = {theta_rad!r} must be within ±{self._half_width_rad:.3f} rad "
-                             f"and theta_dot_rad_per_s = {theta_dot_rad_per_s!r} finite")
+            raise ValueError(
+                f"theta_rad = {theta_rad!r} must be within ±{self._half_width_rad:.3f} rad "
+                f"and theta_dot_rad_per_s = {theta_dot_rad_per_s!r} finite"
+            )
         self._state[:] = theta_rad, theta_dot_rad_per_s, contact_mode(theta_rad, theta_dot_rad_per_s, self._params)
 
     # --- running -------------------------------------------------------------------------
@@ -270,6 +292,7 @@ class SimulatedDevice:
         def rhs(t, y):
             mode = contact_mode(y[0], y[1], params)
             return [y[1], acceleration(y[0], y[1], t, mode, params, env, drive, drive_omega, drive_t0_s)]
+
         return rhs
 
     def integrate(self, n_samples: int):
@@ -279,14 +302,26 @@ class SimulatedDevice:
         theta = np.empty(n_samples)
         theta_dot = np.empty(n_samples)
         integrator = self.scenario.integrator
-        done = advance(self._state, self.sample_index, self.sample_rate_hz, integrator.substeps,
-                       integrator.contact_substeps, self._params, self._env_series,
-                       self._drive_series(self._amplitudes_a),
-                       TWO_PI * self._drive_hz, self._drive_t0_s, theta, theta_dot)
+        done = advance(
+            self._state,
+            self.sample_index,
+            self.sample_rate_hz,
+            integrator.substeps,
+            integrator.contact_substeps,
+            self._params,
+            self._env_series,
+            self._drive_series(self._amplitudes_a),
+            TWO_PI * self._drive_hz,
+            self._drive_t0_s,
+            theta,
+            theta_dot,
+        )
         self.sample_index += done
         if done < n_samples:
-            raise RuntimeError(f"the deflection θ = {self._state[0]:.4g} rad left the interval ±"
-                               f"{self._half_width_rad:.3f} rad on which the potential is represented")
+            raise RuntimeError(
+                f"the deflection θ = {self._state[0]:.4g} rad left the interval ±"
+                f"{self._half_width_rad:.3f} rad on which the potential is represented"
+            )
         return theta, theta_dot
 
     def idle(self, duration_s: float, chunk_samples: int = 20_000) -> None:
@@ -308,11 +343,16 @@ class SimulatedDevice:
         theta, theta_dot = self.integrate(n_samples)
         positions = self._pose.magnet_position_at(theta, self.probe.lever_m)
         moments = self.probe.moment_am2 * self._pose.moment_direction_at(theta)
-        field = (self._pair.pickup_t(positions, moments) + self._env_reading_t
-                 + currents @ self._coil_reading_t_per_a + self._noise.draw(first, n_samples))
+        field = (
+            self._pair.pickup_t(positions, moments)
+            + self._env_reading_t
+            + currents @ self._coil_reading_t_per_a
+            + self._noise.draw(first, n_samples)
+        )
         readings, saturated = self._pair.digitise(field)
-        samples = SampleBlock(first, round(first * NS_PER_S / self.sample_rate_hz), self.sample_rate_hz,
-                              readings, saturated)
+        samples = SampleBlock(
+            first, round(first * NS_PER_S / self.sample_rate_hz), self.sample_rate_hz, readings, saturated
+        )
         return SimulatedBlock(samples, np.full(n_samples, self._coils_on), theta, theta_dot, currents)
 
     # --- truth ---------------------------------------------------------------------------
@@ -322,8 +362,9 @@ class SimulatedDevice:
 
     def potential(self) -> ArcPotential:
         """U(θ) of the probe in the environment at the current pose and temperature."""
-        return ArcPotential.from_source(self.probe, self.static_source, self._pose, self.temperature_k,
-                                        half_width_rad=self._half_width_rad)
+        return ArcPotential.from_source(
+            self.probe, self.static_source, self._pose, self.temperature_k, half_width_rad=self._half_width_rad
+        )
 
     def expected_frequency_hz(self, amplitude_rad=0.0):
         """Ring-down frequency from the full potential at amplitude A (harmonic balance, Eq. S1)."""
@@ -334,9 +375,14 @@ class SimulatedDevice:
         potential = self.potential()
         where = np.asarray(self._pose.magnet_position_m, float)
         return DeviceTruth(
-            time_s=self.sample_index / self.sample_rate_hz, theta0_rad=self._pose.theta0_rad,
-            theta_rad=float(self._state[0]), theta_dot_rad_per_s=float(self._state[1]),
-            rest_angle_rad=float(potential.rest_angle_rad()), temperature_k=self.temperature_k,
+            time_s=self.sample_index / self.sample_rate_hz,
+            theta0_rad=self._pose.theta0_rad,
+            theta_rad=float(self._state[0]),
+            theta_dot_rad_per_s=float(self._state[1]),
+            rest_angle_rad=float(potential.rest_angle_rad()),
+            temperature_k=self.temperature_k,
             spring_nm_per_rad=float(self.probe.spring_at(self.temperature_k)),
-            field_t=self.static_source.field_t(where), gradient_t_per_m=self.static_source.gradient_t_per_m(where),
-            potential=potential)
+            field_t=self.static_source.field_t(where),
+            gradient_t_per_m=self.static_source.gradient_t_per_m(where),
+            potential=potential,
+        )

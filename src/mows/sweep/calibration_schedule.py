@@ -13,6 +13,7 @@ and the user's :meth:`cancel`, and returns a :class:`Step` of actions (:class:`S
 :class:`RunCycle`), feedback and, at the end, the :class:`CalibrationOutcome` with the
 calibration points for :func:`mows.estimate.probe_calibration.calibrate_probe`.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -22,7 +23,7 @@ import math
 from mows.estimate.calibration_record import CalibrationPoint, Wiring
 
 PAPER_CURRENTS_A = (0.0, 0.5, 1.0, 1.5, 2.0, -0.5, -1.0, -1.5, -2.0)
-GRADIENT_WIRING = "gradient"   # the supply's coils anti-parallel (the lever check)
+GRADIENT_WIRING = "gradient"  # the supply's coils anti-parallel (the lever check)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,11 +67,11 @@ class RunCycle:
 
 @dataclasses.dataclass(frozen=True)
 class Feedback:
-    step: int                # 1-based index of the cycle in the plan
+    step: int  # 1-based index of the cycle in the plan
     steps: int
     current_a: float
     theta0_rad: float
-    ringdowns: int           # usable ring-downs so far
+    ringdowns: int  # usable ring-downs so far
     message: str
 
 
@@ -78,10 +79,10 @@ class Feedback:
 class CalibrationOutcome:
     success: bool
     cancelled: bool
-    supply_at_zero: bool     # the device confirmed the supply at zero after the end
+    supply_at_zero: bool  # the device confirmed the supply at zero after the end
     message: str
     points: tuple = ()
-    failed: dict = dataclasses.field(default_factory=dict)   # (current, reason) → count of failed fits
+    failed: dict = dataclasses.field(default_factory=dict)  # (current, reason) → count of failed fits
 
 
 @dataclasses.dataclass
@@ -106,11 +107,11 @@ class CalibrationSchedule:
     def __init__(self, plan: CalibrationPlan):
         self.plan = plan
         self.state = State.IDLE
-        self._step = 0                       # index into current × orientation
+        self._step = 0  # index into current × orientation
         self._fits_seen = 0
         self._points: list[CalibrationPoint] = []
         self._failed: dict = {}
-        self._ending: tuple[bool, bool, str] | None = None   # (success, cancelled, message)
+        self._ending: tuple[bool, bool, str] | None = None  # (success, cancelled, message)
 
     @property
     def current_a(self) -> float:
@@ -128,8 +129,9 @@ class CalibrationSchedule:
         if self.state != State.IDLE:
             raise ValueError("a calibration schedule runs once")
         self.state = State.RAMPING
-        return Step(actions=[SetSupply(self.current_a)],
-                    feedback=[self._feedback(f"supply to {self.current_a:+.4f} A")])
+        return Step(
+            actions=[SetSupply(self.current_a)], feedback=[self._feedback(f"supply to {self.current_a:+.4f} A")]
+        )
 
     # --- the device's answers -----------------------------------------------------------------
     def on_supply(self, accepted: bool, reason: str = "") -> Step:
@@ -141,8 +143,10 @@ class CalibrationSchedule:
         if not accepted:
             return self._end(False, False, f"the supply refused {self.current_a:+.4f} A: {reason}")
         self.state = State.CYCLING
-        return Step(actions=[RunCycle(self.theta0_rad, self.plan.repeats)],
-                    feedback=[self._feedback(f"cycle at θ0 = {math.degrees(self.theta0_rad):.1f}°")])
+        return Step(
+            actions=[RunCycle(self.theta0_rad, self.plan.repeats)],
+            feedback=[self._feedback(f"cycle at θ0 = {math.degrees(self.theta0_rad):.1f}°")],
+        )
 
     def on_fit(self, fit) -> Step:
         """A ring-down fit (``RingdownFit``) of the running cycle (tuning fits are not passed)."""
@@ -162,8 +166,11 @@ class CalibrationSchedule:
         if self.state != State.CYCLING:
             return Step()
         if not success:
-            return self._end(False, False, f"the cycle at {self.current_a:+.4f} A, θ0 = "
-                                           f"{math.degrees(self.theta0_rad):.1f}° failed: {message}")
+            return self._end(
+                False,
+                False,
+                f"the cycle at {self.current_a:+.4f} A, θ0 = {math.degrees(self.theta0_rad):.1f}° failed: {message}",
+            )
         if self._fits_seen >= self.plan.repeats:
             return self._next()
         self.state = State.AWAITING_FITS
@@ -187,15 +194,22 @@ class CalibrationSchedule:
         self._step += 1
         self._fits_seen = 0
         if self._step >= self.plan.steps:
-            return self._end(True, False, f"{len(self._points)} ring-downs at {len(self.plan.currents_a)} supply "
-                                          f"currents and {len(self.plan.theta0_rad)} orientations")
+            return self._end(
+                True,
+                False,
+                f"{len(self._points)} ring-downs at {len(self.plan.currents_a)} supply "
+                f"currents and {len(self.plan.theta0_rad)} orientations",
+            )
         if self._step % len(self.plan.theta0_rad) == 0:
             self.state = State.RAMPING
-            return Step(actions=[SetSupply(self.current_a)],
-                        feedback=[self._feedback(f"supply to {self.current_a:+.4f} A")])
+            return Step(
+                actions=[SetSupply(self.current_a)], feedback=[self._feedback(f"supply to {self.current_a:+.4f} A")]
+            )
         self.state = State.CYCLING
-        return Step(actions=[RunCycle(self.theta0_rad, self.plan.repeats)],
-                    feedback=[self._feedback(f"cycle at θ0 = {math.degrees(self.theta0_rad):.1f}°")])
+        return Step(
+            actions=[RunCycle(self.theta0_rad, self.plan.repeats)],
+            feedback=[self._feedback(f"cycle at θ0 = {math.degrees(self.theta0_rad):.1f}°")],
+        )
 
     def _end(self, success: bool, cancelled: bool, message: str) -> Step:
         """Every ending ramps the supply to zero first."""
@@ -204,17 +218,26 @@ class CalibrationSchedule:
         return Step(actions=[SetSupply(0.0)], feedback=[self._feedback(f"{message}; supply to zero")])
 
     def _finish(self, at_zero: bool, reason: str) -> Step:
-        assert self._ending is not None   # RETURNING is entered by _end only
+        assert self._ending is not None  # RETURNING is entered by _end only
         success, cancelled, message = self._ending
         if not at_zero:
             message += f"; THE SUPPLY DID NOT CONFIRM ZERO ({reason})"
         self.state = State.DONE
-        return Step(outcome=CalibrationOutcome(success and at_zero, cancelled, at_zero, message,
-                                               tuple(self._points), dict(self._failed)))
+        return Step(
+            outcome=CalibrationOutcome(
+                success and at_zero, cancelled, at_zero, message, tuple(self._points), dict(self._failed)
+            )
+        )
 
     def _feedback(self, message: str) -> Feedback:
-        return Feedback(min(self._step + 1, self.plan.steps), self.plan.steps, self.current_a, self.theta0_rad,
-                        len(self._points), message)
+        return Feedback(
+            min(self._step + 1, self.plan.steps),
+            self.plan.steps,
+            self.current_a,
+            self.theta0_rad,
+            len(self._points),
+            message,
+        )
 
 
 def scenario_wirings(scenario, gradient=None) -> dict:

@@ -21,6 +21,7 @@ Both report f = f00·√(k/kM). A calibrated f00 separates the constant gradient
 the zero-field frequency; with ``f00_free`` the constant term is absorbed and Gs is not
 determined (reported as NaN).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -46,9 +47,9 @@ class Harmonics:
 
     amplitude_hz: np.ndarray
     phase_rad: np.ndarray
-    cosine_hz: np.ndarray        # a_k of Σ a_k cos kθ0 + b_k sin kθ0
-    sine_hz: np.ndarray          # b_k
-    covariance: np.ndarray       # of (a_0, a_1, b_1, …)
+    cosine_hz: np.ndarray  # a_k of Σ a_k cos kθ0 + b_k sin kθ0
+    sine_hz: np.ndarray  # b_k
+    covariance: np.ndarray  # of (a_0, a_1, b_1, …)
 
 
 def fit_harmonics(theta0_rad, shift_hz, shift_std_hz, max_order: int = 2) -> Harmonics:
@@ -71,10 +72,10 @@ class DecompositionStatus(enum.IntEnum):
     (0 OK, otherwise see ``message``)."""
 
     OK = 0
-    INVALID_INPUT = 1          # unequal lengths, non-finite values, σ ≤ 0
-    TOO_FEW_ORIENTATIONS = 2   # fewer distinct θ0 than the model's harmonics need
+    INVALID_INPUT = 1  # unequal lengths, non-finite values, σ ≤ 0
+    TOO_FEW_ORIENTATIONS = 2  # fewer distinct θ0 than the model's harmonics need
     NOT_CONVERGED = 3
-    NO_DECOMPOSITION = 4       # the sweep ended before one (cancelled, no usable ring-down)
+    NO_DECOMPOSITION = 4  # the sweep ended before one (cancelled, no usable ring-down)
 
 
 @dataclasses.dataclass
@@ -107,11 +108,13 @@ class Decomposition:
         sg = np.sqrt(np.diag(self.gradient_covariance))
         bx, by = self.field_t * 1e6
         gxx, gxy, gyy = self.gradient_t_per_m * 1e3
-        return (f"{self.model}: B = ({bx:.3f} ± {sb[0] * 1e6:.3f}, {by:.3f} ± {sb[1] * 1e6:.3f}) µT, "
-                f"|B| = {math.hypot(bx, by):.3f} µT at {math.degrees(math.atan2(by, bx)):.1f}°; "
-                f"G = (xx {gxx:.3f} ± {sg[0] * 1e3:.3f}, xy {gxy:.3f} ± {sg[1] * 1e3:.3f}, "
-                f"yy {gyy:.3f} ± {sg[2] * 1e3:.3f}) mT/m; χ²/dof = {self.chi2_dof:.2f}, "
-                f"rms residual {self.rms_residual_hz * 1e3:.3f} mHz")
+        return (
+            f"{self.model}: B = ({bx:.3f} ± {sb[0] * 1e6:.3f}, {by:.3f} ± {sb[1] * 1e6:.3f}) µT, "
+            f"|B| = {math.hypot(bx, by):.3f} µT at {math.degrees(math.atan2(by, bx)):.1f}°; "
+            f"G = (xx {gxx:.3f} ± {sg[0] * 1e3:.3f}, xy {gxy:.3f} ± {sg[1] * 1e3:.3f}, "
+            f"yy {gyy:.3f} ± {sg[2] * 1e3:.3f}) mT/m; χ²/dof = {self.chi2_dof:.2f}, "
+            f"rms residual {self.rms_residual_hz * 1e3:.3f} mHz"
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -155,8 +158,9 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
     theta0 = np.asarray(theta0_rad, float)
     f00 = f00_hz + df00
     if model == "published":
-        shift = sweep_shift_hz(theta0, (bx, by), (gs + gd, gxy, gs - gd), f00, probe.spring_nm_per_rad,
-                               probe.moment_am2, probe.lever_m)
+        shift = sweep_shift_hz(
+            theta0, (bx, by), (gs + gd, gxy, gs - gd), f00, probe.spring_nm_per_rad, probe.moment_am2, probe.lever_m
+        )
         return f00 + shift - f00_hz
     potential = local_potential(params, theta0, probe)
     if ringdowns is None:
@@ -167,8 +171,17 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
     return f00 * np.sum(weights * np.sqrt(ratios / probe.spring_nm_per_rad), axis=-1) - f00_hz
 
 
-def decompose(theta0_rad, shift_hz, shift_std_hz, probe: Probe, f00_hz: float, model: str = "first_principles",
-              f00_free: bool = False, ringdowns: Ringdowns | None = None, start=None) -> Decomposition:
+def decompose(
+    theta0_rad,
+    shift_hz,
+    shift_std_hz,
+    probe: Probe,
+    f00_hz: float,
+    model: str = "first_principles",
+    f00_free: bool = False,
+    ringdowns: Ringdowns | None = None,
+    start=None,
+) -> Decomposition:
     """Field and gradient from a rotation sweep by weighted nonlinear least squares.
 
     Parameters
@@ -200,7 +213,7 @@ def decompose(theta0_rad, shift_hz, shift_std_hz, probe: Probe, f00_hz: float, m
     free = np.array([True, True, not f00_free, True, True, f00_free])
     start = _start(harmonics, probe, f00_hz, model) if start is None else np.array(start, float)
     if f00_free:
-        start[2] = 0.0        # Gs is absorbed by f00 and stays out of the fit
+        start[2] = 0.0  # Gs is absorbed by f00 and stays out of the fit
 
     def residual(x):
         params = start.copy()
@@ -226,15 +239,18 @@ def orientations_problem(theta0_rad, f00_free: bool = False) -> str:
     distinct = _distinct_angles(np.asarray(theta0_rad, float))
     needed = 6 if f00_free else 5
     if distinct < needed:
-        return (f"{distinct} distinct orientations cannot separate field (1θ0) from gradient "
-                f"(2θ0){' and f00' if f00_free else ''}: need at least {needed}")
+        return (
+            f"{distinct} distinct orientations cannot separate field (1θ0) from gradient "
+            f"(2θ0){' and f00' if f00_free else ''}: need at least {needed}"
+        )
     return ""
 
 
 def _check(theta0, shift, std, f00_free) -> tuple[DecompositionStatus, str]:
     if not (theta0.shape == shift.shape == std.shape and theta0.ndim == 1):
-        return DecompositionStatus.INVALID_INPUT, ("theta0, shift and std must be equal-length 1-D arrays, got "
-                                                   f"{theta0.shape}, {shift.shape}, {std.shape}")
+        return DecompositionStatus.INVALID_INPUT, (
+            f"theta0, shift and std must be equal-length 1-D arrays, got {theta0.shape}, {shift.shape}, {std.shape}"
+        )
     if not (np.all(np.isfinite(theta0)) and np.all(np.isfinite(shift)) and np.all(np.isfinite(std))):
         return DecompositionStatus.INVALID_INPUT, "non-finite angle, shift or uncertainty in the sweep"
     if np.any(std <= 0):
@@ -252,8 +268,9 @@ def _start(harmonics: Harmonics, probe: Probe, f00_hz: float, model: str) -> np.
     second = 3.0 if model == "first_principles" else 1.0
     constant = -1.0 if model == "first_principles" else 1.0
     a2, b2 = (a[2], b[2]) if a.size > 2 else (0.0, 0.0)
-    return np.array([a[1] / beta0, b[1] / beta0, constant * a[0] / gamma0, a2 / (second * gamma0),
-                     b2 / (second * gamma0), 0.0])
+    return np.array(
+        [a[1] / beta0, b[1] / beta0, constant * a[0] / gamma0, a2 / (second * gamma0), b2 / (second * gamma0), 0.0]
+    )
 
 
 def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics) -> Decomposition:
@@ -266,15 +283,24 @@ def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmon
     bx, by, gs, gd, gxy, df00 = params
     # (Gxx, Gxy, Gyy) = (Gs + Gd, Gxy, Gs − Gd): a linear map of (Gs, Gd, Gxy).
     to_xy = np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, -1.0, 0.0]])
-    g_cov = to_xy @ np.nan_to_num(cov[2:5, 2:5]) @ to_xy.T      # a parameter held fixed has no variance
+    g_cov = to_xy @ np.nan_to_num(cov[2:5, 2:5]) @ to_xy.T  # a parameter held fixed has no variance
     gradient = np.array([gs + gd, gxy, gs - gd])
     if f00_free:  # only (Gxx − Gyy)/2 and Gxy are determined; Gxx and Gyy alone are not
         gradient[[0, 2]] = np.nan
         g_cov[[0, 2], :] = g_cov[:, [0, 2]] = np.nan
     residual = result.fun * std
     return Decomposition(
-        model=model, status=DecompositionStatus.OK if result.success else DecompositionStatus.NOT_CONVERGED,
+        model=model,
+        status=DecompositionStatus.OK if result.success else DecompositionStatus.NOT_CONVERGED,
         message="" if result.success else result.message,
-        field_t=np.array([bx, by]), field_covariance_t2=cov[:2, :2], gradient_t_per_m=gradient,
-        gradient_covariance=g_cov, f00_hz=f00_hz + df00, f00_free=f00_free, harmonics=harmonics,
-        chi2_dof=chi2_dof, rms_residual_hz=float(np.sqrt(np.mean(residual**2))), residual_hz=residual)
+        field_t=np.array([bx, by]),
+        field_covariance_t2=cov[:2, :2],
+        gradient_t_per_m=gradient,
+        gradient_covariance=g_cov,
+        f00_hz=f00_hz + df00,
+        f00_free=f00_free,
+        harmonics=harmonics,
+        chi2_dof=chi2_dof,
+        rms_residual_hz=float(np.sqrt(np.mean(residual**2))),
+        residual_hz=residual,
+    )

@@ -39,6 +39,7 @@ recovery (``recovery_s``) at the start of each ring-down. The coils' duty-cycle 
 only gap: the excitation's share of a cycle must stay within it (the sequencer enforces the limit
 in every window as well, by delaying an excitation).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -53,17 +54,17 @@ from mows.physics.field import MU0_OVER_4PI
 from mows.physics.fluxgate import PICKUP_COMBINATIONS
 
 TWO_PI = 2.0 * math.pi
-TUNING_PHASE_SLIP = 0.1        # Δf·t_k above which a detuned kick loses > 1.6 % of its drive
-EXCITATION_MARGIN = 1.25       # drive this much longer than the worst case needs to reach the stop
-LOCK_PERIODS = 6               # drive periods against the stop that lock the motion to the drive
-SWITCH_OFF_PHASE = 0.25        # the drive is switched off this fraction of a period past a whole one
-MAX_DECAY = 1.3                # ring-downs end by the time δ·T reaches this (the swing at 27 %)
+TUNING_PHASE_SLIP = 0.1  # Δf·t_k above which a detuned kick loses > 1.6 % of its drive
+EXCITATION_MARGIN = 1.25  # drive this much longer than the worst case needs to reach the stop
+LOCK_PERIODS = 6  # drive periods against the stop that lock the motion to the drive
+SWITCH_OFF_PHASE = 0.25  # the drive is switched off this fraction of a period past a whole one
+MAX_DECAY = 1.3  # ring-downs end by the time δ·T reaches this (the swing at 27 %)
 # Kicks switched off on reaching the stop start from swings that scatter by 0.64°, which moves
 # f by ~0.4 mHz (the gradient spring's amplitude dependence), i.e. ~0.1 µT along the axis:
 # tracking targets five times above that need no locking periods.
 UNLOCKED_KICK_STD_T = 0.1e-6
-MIN_RINGDOWN_PERIODS = 12      # the fit takes ten periods at least, after the recovery
-SWEEP_ANGLES_RAD = np.radians(np.arange(0.0, 180.0, 45.0))   # σ_f(θ0 + 180°) ≈ σ_f(θ0)
+MIN_RINGDOWN_PERIODS = 12  # the fit takes ten periods at least, after the recovery
+SWEEP_ANGLES_RAD = np.radians(np.arange(0.0, 180.0, 45.0))  # σ_f(θ0 + 180°) ≈ σ_f(θ0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,9 +76,9 @@ class CyclePlan:
     ringdown_s: float
     gap_s: float
     tuning_steps: int
-    drive_rate_rad_per_s: float       # growth of the swing under the drive at that current
-    ringdown_std_hz: float            # Cramér–Rao σ_f of one ring-down at θ0 = 0
-    information_per_s: float          # mean over the sweep's orientations of 1/(σ_f²·cycle time), 1/(Hz²·s)
+    drive_rate_rad_per_s: float  # growth of the swing under the drive at that current
+    ringdown_std_hz: float  # Cramér–Rao σ_f of one ring-down at θ0 = 0
+    information_per_s: float  # mean over the sweep's orientations of 1/(σ_f²·cycle time), 1/(Hz²·s)
 
     @property
     def cycle_s(self) -> float:
@@ -96,8 +97,9 @@ def drive_rate_rad_per_s(probe, setup, pose, current_a: float, frequency_hz: flo
     return probe.moment_am2 * weakest / (2.0 * probe.inertia_kgm2 * TWO_PI * frequency_hz)
 
 
-def excitation_s(rate_rad_per_s: float, stop_rad: float, residual_rad: float, frequency_hz: float,
-                 lock_periods: int = LOCK_PERIODS) -> float:
+def excitation_s(
+    rate_rad_per_s: float, stop_rad: float, residual_rad: float, frequency_hz: float, lock_periods: int = LOCK_PERIODS
+) -> float:
     """Drive time that reaches the stop from a left-over swing ``residual_rad`` in any phase,
     then locks the motion to the drive for ``lock_periods`` and ends at the same drive phase
     (module docstring)."""
@@ -124,8 +126,9 @@ def kappa_t(pair, pose, moment_am2: float, combine: str = "difference") -> float
     return float(MU0_OVER_4PI * moment_am2 * (distances**-3.0 @ np.array(PICKUP_COMBINATIONS[combine])))
 
 
-def ringdown_std_model(pair, probe, pose, sample_rate_hz: float, noise_std_t: float,
-                       recovery_s: float = SETTLE_S) -> Callable[[float, float], float]:
+def ringdown_std_model(
+    pair, probe, pose, sample_rate_hz: float, noise_std_t: float, recovery_s: float = SETTLE_S
+) -> Callable[[float, float], float]:
     """σ_f(θ0, T): the Cramér–Rao bound of one ring-down of length T from the stop at θ0, for
     white noise ``noise_std_t`` per sample of the difference channel (a measured figure)."""
     kappa = kappa_t(pair, pose, probe.moment_am2)
@@ -136,13 +139,31 @@ def ringdown_std_model(pair, probe, pose, sample_rate_hz: float, noise_std_t: fl
         if key not in pickups:
             pickups[key] = FitOptions.lever_aware(pair, probe, key).pickup
         n = int(round((duration_s - recovery_s) * sample_rate_hz))
-        return cramer_rao_frequency_hz(n, sample_rate_hz, probe.f00_hz, probe.damping_per_s, probe.theta_stop_rad,
-                                       0.0, key, kappa, noise_std_t, pickup=pickups[key])
+        return cramer_rao_frequency_hz(
+            n,
+            sample_rate_hz,
+            probe.f00_hz,
+            probe.damping_per_s,
+            probe.theta_stop_rad,
+            0.0,
+            key,
+            kappa,
+            noise_std_t,
+            pickup=pickups[key],
+        )
+
     return std_hz
 
 
-def plan_cycle(probe, setup, pose, std_hz: Callable[[float, float], float], current_cap_a: float,
-               max_duty_cycle: float, frequency_uncertainty_hz: float = 1.0) -> CyclePlan:
+def plan_cycle(
+    probe,
+    setup,
+    pose,
+    std_hz: Callable[[float, float], float],
+    current_cap_a: float,
+    max_duty_cycle: float,
+    frequency_uncertainty_hz: float = 1.0,
+) -> CyclePlan:
     """The cycle that gives the most information per second at the largest current the cap allows.
 
     ``std_hz(θ0, T)`` is σ_f of one ring-down (:func:`ringdown_std_model`). The information per
@@ -175,12 +196,18 @@ def plan_cycle(probe, setup, pose, std_hz: Callable[[float, float], float], curr
             value_b = cycle(math.exp(b))[0]
     duration = math.exp((low + high) / 2.0)
     information, excite, gap = cycle(duration)
-    return CyclePlan(excitation_current_a=float(current_cap_a), excite_s=float(excite), ringdown_s=float(duration),
-                     gap_s=float(gap),
-                     tuning_steps=int(tuning_needed(frequency_uncertainty_hz,
-                                                    reach_s(rate, probe.theta_stop_rad, residual(duration)))),
-                     drive_rate_rad_per_s=float(rate), ringdown_std_hz=float(std_hz(0.0, duration)),
-                     information_per_s=information)
+    return CyclePlan(
+        excitation_current_a=float(current_cap_a),
+        excite_s=float(excite),
+        ringdown_s=float(duration),
+        gap_s=float(gap),
+        tuning_steps=int(
+            tuning_needed(frequency_uncertainty_hz, reach_s(rate, probe.theta_stop_rad, residual(duration)))
+        ),
+        drive_rate_rad_per_s=float(rate),
+        ringdown_std_hz=float(std_hz(0.0, duration)),
+        information_per_s=information,
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -201,8 +228,15 @@ class TrackingPlan:
         return 1.0 / (self.excite_s + self.ringdown_s)
 
 
-def plan_tracking(probe, setup, pose, std_hz: Callable[[float, float], float], theta0_rad: float,
-                  target_std_t: float, current_cap_a: float) -> TrackingPlan:
+def plan_tracking(
+    probe,
+    setup,
+    pose,
+    std_hz: Callable[[float, float], float],
+    theta0_rad: float,
+    target_std_t: float,
+    current_cap_a: float,
+) -> TrackingPlan:
     """The fastest updates of B along the axis at θ0 that the bound allows for ``target_std_t``.
     σ_B = σ_f/β0 (Eq. 9); the ring-down length is found by bisection in log T to 0.1 %. Kicks
     lock onto the drive only for targets below 5 × ``UNLOCKED_KICK_STD_T``."""
@@ -212,8 +246,14 @@ def plan_tracking(probe, setup, pose, std_hz: Callable[[float, float], float], t
     lock = 0 if target_std_t >= 5.0 * UNLOCKED_KICK_STD_T else LOCK_PERIODS
 
     def kick(duration):
-        return excitation_s(rate, probe.theta_stop_rad,
-                            probe.theta_stop_rad * math.exp(-probe.damping_per_s * duration), probe.f00_hz, lock)
+        return excitation_s(
+            rate,
+            probe.theta_stop_rad,
+            probe.theta_stop_rad * math.exp(-probe.damping_per_s * duration),
+            probe.f00_hz,
+            lock,
+        )
+
     if std_hz(theta0_rad, high) / beta > target_std_t:
         return TrackingPlan(target_std_t, False, kick(high), high, std_hz(theta0_rad, high) / beta)
     if std_hz(theta0_rad, low) / beta > target_std_t:
@@ -221,5 +261,5 @@ def plan_tracking(probe, setup, pose, std_hz: Callable[[float, float], float], t
             middle = math.sqrt(low * high)
             low, high = (low, middle) if std_hz(theta0_rad, middle) / beta <= target_std_t else (middle, high)
     else:
-        high = low   # the shortest ring-down the fit takes already meets it
+        high = low  # the shortest ring-down the fit takes already meets it
     return TrackingPlan(target_std_t, True, kick(high), high, std_hz(theta0_rad, high) / beta)

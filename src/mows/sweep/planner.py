@@ -17,6 +17,7 @@ it returns the next cycle or the end. The predicted σ(θ0) of a ring-down (e.g.
 bound of :func:`mows.sweep.fast_cycle.ringdown_std_model`) is rescaled by what the measured
 ring-downs reported.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -30,21 +31,19 @@ from mows.sweep.decompose import Decomposition, model_shift_hz
 from mows.sweep.record import SweepRecord
 
 COMPONENTS = ("bx", "by", "gxx", "gxy", "gyy")
-QUANTITIES = {"B": COMPONENTS[:2], "G": COMPONENTS[2:], "both": COMPONENTS,
-              **{name: (name,) for name in COMPONENTS}}
+QUANTITIES = {"B": COMPONENTS[:2], "G": COMPONENTS[2:], "both": COMPONENTS, **{name: (name,) for name in COMPONENTS}}
 # (Bx, By, Gxx, Gxy, Gyy) from the decomposition's parameters (Bx, By, Gs, Gd, Gxy[, Δf00]).
-TO_COMPONENTS = np.array([[1, 0, 0, 0, 0], [0, 1, 0, 0, 0], [0, 0, 1, 1, 0], [0, 0, 0, 0, 1], [0, 0, 1, -1, 0]],
-                         float)
+TO_COMPONENTS = np.array([[1, 0, 0, 0, 0], [0, 1, 0, 0, 0], [0, 0, 1, 1, 0], [0, 0, 0, 0, 1], [0, 0, 1, -1, 0]], float)
 # A weak prior keeps the information invertible before five orientations are measured: far
 # wider than any field (T) or gradient (T/m) the probe can measure, and than an f00 error (Hz).
 PRIOR_STD = np.array([1e-3, 1e-3, 1.0, 1.0, 1.0, 10.0])
-STEPS = np.array([1e-7, 1e-7, 1e-5, 1e-5, 1e-5])   # central differences of Δf over p
+STEPS = np.array([1e-7, 1e-7, 1e-5, 1e-5, 1e-5])  # central differences of Δf over p
 # The information is kept in µT, mT/m and Hz: in SI its entries span 1e20 and lose precision.
 UNITS = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1.0])
 COMPONENT_UNITS = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3])
-SCALE_LIMITS = (0.5, 4.0)   # the measured σ over the predicted one is believed within these
-MAX_PLANNED_RINGDOWNS = 400   # the plan to the target looks this far ahead at most
-NEARBY_RAD = math.radians(20.0)   # learnt σ(θ0): ring-downs this close count as the same orientation
+SCALE_LIMITS = (0.5, 4.0)  # the measured σ over the predicted one is believed within these
+MAX_PLANNED_RINGDOWNS = 400  # the plan to the target looks this far ahead at most
+NEARBY_RAD = math.radians(20.0)  # learnt σ(θ0): ring-downs this close count as the same orientation
 # Until the decomposition's orientations are all measured, a visit takes at most this many
 # ring-downs: the plan rests on σ and sensitivities not yet measured there.
 FIRST_VISIT_REPEATS = 2
@@ -127,19 +126,30 @@ class AdaptivePlanner:
     θ0 + 180° alike), else from all of them. ``candidates_rad``: the orientations to choose from.
     """
 
-    def __init__(self, probe: Probe, f00_hz: float, goal: PrecisionGoal, repeat_s: float, turn_s: float,
-                 ringdown_std_hz: Callable[[float], float] | None = None, candidates_rad=None, max_repeats: int = 20,
-                 f00_free: bool = False):
+    def __init__(
+        self,
+        probe: Probe,
+        f00_hz: float,
+        goal: PrecisionGoal,
+        repeat_s: float,
+        turn_s: float,
+        ringdown_std_hz: Callable[[float], float] | None = None,
+        candidates_rad=None,
+        max_repeats: int = 20,
+        f00_free: bool = False,
+    ):
         if f00_free and {"gxx", "gyy"} & set(goal.components):
             raise ValueError("with f00 free the decomposition cannot determine Gxx and Gyy (only Gxx − Gyy and Gxy)")
         if not (repeat_s > 0 and turn_s >= 0 and max_repeats >= 1):
-            raise ValueError(f"repeat_s = {repeat_s!r} must be > 0, turn_s = {turn_s!r} ≥ 0, "
-                             f"max_repeats = {max_repeats!r} ≥ 1")
+            raise ValueError(
+                f"repeat_s = {repeat_s!r} must be > 0, turn_s = {turn_s!r} ≥ 0, max_repeats = {max_repeats!r} ≥ 1"
+            )
         self.probe, self.f00_hz, self.goal = probe, float(f00_hz), goal
         self.repeat_s, self.turn_s, self.max_repeats = float(repeat_s), float(turn_s), int(max_repeats)
         self.f00_free = f00_free
-        self.candidates = np.radians(np.arange(0.0, 360.0, 15.0)) if candidates_rad is None \
-            else np.asarray(candidates_rad, float)
+        self.candidates = (
+            np.radians(np.arange(0.0, 360.0, 15.0)) if candidates_rad is None else np.asarray(candidates_rad, float)
+        )
         self._std_model = ringdown_std_hz
         self._predicted = None if ringdown_std_hz is None else np.array([ringdown_std_hz(a) for a in self.candidates])
         n = 6 if f00_free else 5
@@ -147,30 +157,34 @@ class AdaptivePlanner:
         self._prior = np.diag((PRIOR_STD[:n] / UNITS[:n]) ** -2.0)
 
     # --- the choice ---------------------------------------------------------------------------
-    def next(self, record: SweepRecord, decomposition: Decomposition | None, elapsed_s: float
-             ) -> PlannedCycle | PlanEnd:
+    def next(
+        self, record: SweepRecord, decomposition: Decomposition | None, elapsed_s: float
+    ) -> PlannedCycle | PlanEnd:
         """The next cycle, or the end of the sweep. Every cycle turns and settles the probe (the
         driver's cycle does), so its cost is the turn plus its repeats."""
         if decomposition is not None and reached(self.goal, decomposition):
             return PlanEnd(True, "target reached: " + self._describe(achieved_std(decomposition)))
         remaining = self.goal.budget_s - elapsed_s
         if remaining < self.turn_s + self.repeat_s:
-            where = self._describe(achieved_std(decomposition)) if decomposition is not None and decomposition.ok \
+            where = (
+                self._describe(achieved_std(decomposition))
+                if decomposition is not None and decomposition.ok
                 else "no decomposition yet"
+            )
             return PlanEnd(False, f"time budget of {self.goal.budget_s:g} s used ({elapsed_s:.1f} s): {where}")
         information = self._information(record, decomposition)
         rows = self._rows(self.candidates, decomposition)
         variance = self._candidate_variance(record)
         plan = self._plan_to_target(information, rows, variance, remaining)
         fresh = self._unvisited(record)
-        if fresh.size:   # the decomposition needs this many orientations whatever the prediction says
+        if fresh.size:  # the decomposition needs this many orientations whatever the prediction says
             planned = [i for i in plan if fresh[i]]
             if not planned:
                 gains = self._merit(information[None] + rows[:, :, None] * rows[:, None, :] / variance[:, None, None])
                 planned = [int(np.argmin(np.where(fresh, gains, np.inf)))]
                 plan = {planned[0]: 1}
             plan = {i: min(plan[i], FIRST_VISIT_REPEATS) for i in planned}
-        index = max(plan, key=lambda i: plan[i])   # the orientation with the most ring-downs still to come
+        index = max(plan, key=lambda i: plan[i])  # the orientation with the most ring-downs still to come
         repeats = min(plan[index], self.max_repeats)
         after = information + np.outer(rows[index], rows[index]) * (repeats / variance[index])
         return PlannedCycle(float(self.candidates[index]), repeats, self._component_std(after))
@@ -197,7 +211,7 @@ class AdaptivePlanner:
         plan: dict[int, int] = {}
         spent = 0.0
         merit = self._merit(information)
-        added = rows[:, :, None] * rows[:, None, :] / variance[:, None, None]   # one ring-down at each candidate
+        added = rows[:, :, None] * rows[:, None, :] / variance[:, None, None]  # one ring-down at each candidate
         for _ in range(MAX_PLANNED_RINGDOWNS):
             if plan and np.all(self._component_std(information)[asked] <= targets[asked]):
                 break
@@ -216,8 +230,9 @@ class AdaptivePlanner:
         """Where to drive at θ0: the decomposition's prediction, else the nearest measured
         orientation's frequency, else f00 (a short kick needs no better, :mod:`mows.sweep.fast_cycle`)."""
         if decomposition is not None and decomposition.ok:
-            shift = model_shift_hz(self._parameters(decomposition), np.array([theta0_rad]), self.probe, self.f00_hz,
-                                   "first_principles")
+            shift = model_shift_hz(
+                self._parameters(decomposition), np.array([theta0_rad]), self.probe, self.f00_hz, "first_principles"
+            )
             return float(self.f00_hz + shift[0])
         if record.points:
             nearest = min(record.points, key=lambda p: abs(math.remainder(p.theta0_rad - theta0_rad, 2.0 * math.pi)))
@@ -238,12 +253,16 @@ class AdaptivePlanner:
         for k, step in enumerate(STEPS):
             delta = np.zeros(6)
             delta[k] = step
-            columns.append((model_shift_hz(params + delta, theta0, self.probe, self.f00_hz, "first_principles")
-                            - model_shift_hz(params - delta, theta0, self.probe, self.f00_hz, "first_principles"))
-                           / (2.0 * step))
-        if self.f00_free:   # Δf = f00·√(k/kM) − f00_cal: ∂/∂Δf00 ≈ 1
+            columns.append(
+                (
+                    model_shift_hz(params + delta, theta0, self.probe, self.f00_hz, "first_principles")
+                    - model_shift_hz(params - delta, theta0, self.probe, self.f00_hz, "first_principles")
+                )
+                / (2.0 * step)
+            )
+        if self.f00_free:  # Δf = f00·√(k/kM) − f00_cal: ∂/∂Δf00 ≈ 1
             columns.append(np.ones_like(theta0))
-        return np.stack(columns, axis=-1) * UNITS[:len(columns)]
+        return np.stack(columns, axis=-1) * UNITS[: len(columns)]
 
     def _information(self, record: SweepRecord, decomposition) -> np.ndarray:
         information = self._prior.copy()
@@ -252,7 +271,7 @@ class AdaptivePlanner:
             std = np.array([p.shift_std_hz for p in record.points])
             angles, which = np.unique(np.round(np.mod(theta0, 2.0 * math.pi), 9), return_inverse=True)
             rows = self._rows(angles, decomposition)[which]
-            information += (rows / std[:, None]**2).T @ rows
+            information += (rows / std[:, None] ** 2).T @ rows
         return information
 
     def _candidate_variance(self, record: SweepRecord) -> np.ndarray:
@@ -289,5 +308,7 @@ class AdaptivePlanner:
 
     @staticmethod
     def _describe(std: np.ndarray) -> str:
-        return (f"σ(Bx, By) = {std[0] * 1e9:.1f}, {std[1] * 1e9:.1f} nT; "
-                f"σ(Gxx, Gxy, Gyy) = {std[2] * 1e6:.1f}, {std[3] * 1e6:.1f}, {std[4] * 1e6:.1f} µT/m")
+        return (
+            f"σ(Bx, By) = {std[0] * 1e9:.1f}, {std[1] * 1e9:.1f} nT; "
+            f"σ(Gxx, Gxy, Gyy) = {std[2] * 1e6:.1f}, {std[3] * 1e6:.1f}, {std[4] * 1e6:.1f} µT/m"
+        )

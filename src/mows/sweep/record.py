@@ -1,5 +1,6 @@
 """The ring-downs of one rotation sweep as they arrive (:class:`SweepPoint` from each fit) and
 their decomposition as a whole (:meth:`SweepRecord.decompose`), with the lab table they make."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -29,8 +30,7 @@ class SweepPoint:
     stamp_ns: int = 0  # the device stamp t_s was taken from, exact (0: none)
 
     @classmethod
-    def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0,
-                 stamp_ns: int = 0) -> SweepPoint:
+    def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0, stamp_ns: int = 0) -> SweepPoint:
         """A successful ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`, or a RingdownFit
         message: the fields are the same) with its frequency shift; σ of θmax from the fit's
         covariance (NaN when θmax was held at a bound)."""
@@ -38,8 +38,19 @@ class SweepPoint:
         covariance = np.asarray(fit.covariance, float).reshape(len(names), len(names))
         index = names.index("amplitude_rad") if "amplitude_rad" in names else None
         amplitude_std = math.sqrt(covariance[index, index]) if index is not None else math.nan
-        return cls(fit.theta0_rad, fit.frequency_hz, fit.frequency_std_hz, shift_hz, shift_std_hz, fit.amplitude_rad,
-                   fit.damping_per_s, fit.duration_s, t_s, amplitude_std, int(stamp_ns))
+        return cls(
+            fit.theta0_rad,
+            fit.frequency_hz,
+            fit.frequency_std_hz,
+            shift_hz,
+            shift_std_hz,
+            fit.amplitude_rad,
+            fit.damping_per_s,
+            fit.duration_s,
+            t_s,
+            amplitude_std,
+            int(stamp_ns),
+        )
 
 
 @dataclasses.dataclass
@@ -84,8 +95,9 @@ class SweepRecord:
         weights = 1.0 / std[usable] ** 2
         return float(weights @ amplitude[usable] / weights.sum())
 
-    def decompose(self, probe: Probe, f00_hz: float, model: str = "first_principles",
-                  f00_free: bool = False) -> Decomposition:
+    def decompose(
+        self, probe: Probe, f00_hz: float, model: str = "first_principles", f00_free: bool = False
+    ) -> Decomposition:
         """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
 
         The first-principles model needs the swing each ring-down starts with, stop − |θs|, and
@@ -93,9 +105,15 @@ class SweepRecord:
         angles give the pooled stop amplitude, and a second pass fits with both.
         """
         theta0 = self._column("theta0_rad")
-        arrays: dict[str, Any] = dict(theta0_rad=theta0, shift_hz=self._column("shift_hz"),
-                                      shift_std_hz=self._column("shift_std_hz"), probe=probe, f00_hz=f00_hz,
-                                      model=model, f00_free=f00_free)
+        arrays: dict[str, Any] = dict(
+            theta0_rad=theta0,
+            shift_hz=self._column("shift_hz"),
+            shift_std_hz=self._column("shift_std_hz"),
+            probe=probe,
+            f00_hz=f00_hz,
+            model=model,
+            f00_free=f00_free,
+        )
         if model != "first_principles":
             return decompose(**arrays)
 
@@ -119,9 +137,17 @@ class SweepRecord:
         ring-down's start swing: ``start_amplitudes_rad`` (e.g. :meth:`start_amplitudes_rad` of
         a decomposition), else the pooled :meth:`stop_amplitude_rad`."""
         t = self._column("t_s")
-        start = (np.full(len(self.points), self.stop_amplitude_rad()) if start_amplitudes_rad is None
-                 else np.asarray(start_amplitudes_rad, float))
-        return {"theta0_deg": np.degrees(self._column("theta0_rad")), "f_hz": self._column("frequency_hz"),
-                "f_std_hz": self._column("frequency_std_hz"), "t_s": t - (t.min() if t.size else 0.0),
-                "amplitude_deg": np.degrees(start),
-                "damping_per_s": self._column("damping_per_s"), "duration_s": self._column("duration_s")}
+        start = (
+            np.full(len(self.points), self.stop_amplitude_rad())
+            if start_amplitudes_rad is None
+            else np.asarray(start_amplitudes_rad, float)
+        )
+        return {
+            "theta0_deg": np.degrees(self._column("theta0_rad")),
+            "f_hz": self._column("frequency_hz"),
+            "f_std_hz": self._column("frequency_std_hz"),
+            "t_s": t - (t.min() if t.size else 0.0),
+            "amplitude_deg": np.degrees(start),
+            "damping_per_s": self._column("damping_per_s"),
+            "duration_s": self._column("duration_s"),
+        }

@@ -15,6 +15,7 @@ whenever the planner's linearised prediction comes within ``DECOMPOSE_NEAR`` of 
 ends when a decomposition reaches it or the time budget holds no further cycle. Its device time
 is read from the ring-downs' stamps (first to last, plus a turn and a ring-down).
 """
+
 import dataclasses
 import functools
 import math
@@ -27,7 +28,7 @@ from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal
 from mows.sweep.record import SweepPoint, SweepRecord
 
-DECOMPOSE_NEAR = 1.25   # decompose an adaptive sweep once the prediction is this close to the target
+DECOMPOSE_NEAR = 1.25  # decompose an adaptive sweep once the prediction is this close to the target
 
 
 @dataclasses.dataclass(frozen=True)
@@ -38,8 +39,8 @@ class SweepSettings:
     angle_step_deg: float = 30.0
     model: str = "first_principles"
     f00_free: bool = False
-    repeat_s: float = 0.82      # adaptive sweeps: device time of one ring-down (kick, ring-down, gap)
-    turn_s: float = 0.5         # adaptive sweeps: device time of a turn and the settling
+    repeat_s: float = 0.82  # adaptive sweeps: device time of one ring-down (kick, ring-down, gap)
+    turn_s: float = 0.5  # adaptive sweeps: device time of a turn and the settling
 
 
 @dataclasses.dataclass(frozen=True)
@@ -133,8 +134,8 @@ class SweepRunner:
 
     def __init__(self) -> None:
         self.state = "idle"
-        self.sweeps = 0                 # sweeps that came as far as the decomposition
-        self.last = "no sweep yet"      # the last decomposition's report
+        self.sweeps = 0  # sweeps that came as far as the decomposition
+        self.last = "no sweep yet"  # the last decomposition's report
         self._angles: list[float] = []
         self._repeats = 0
         self._index = 0
@@ -143,9 +144,9 @@ class SweepRunner:
         self._probe: Probe | None = None
         self._cancelled = False
         self._fits: dict[int, list[SweepFit]] = {}
-        self._awaited: CycleAnswer | None = None    # the cycle whose fits are being collected
+        self._awaited: CycleAnswer | None = None  # the cycle whose fits are being collected
         self._record = SweepRecord()
-        self._planner: AdaptivePlanner | None = None   # an adaptive sweep's
+        self._planner: AdaptivePlanner | None = None  # an adaptive sweep's
         self._decomposition: Decomposition | None = None
         self._decomposed_points = 0
 
@@ -168,8 +169,15 @@ class SweepRunner:
         planner = None
         if goal.target is not None and not problems:
             try:
-                planner = AdaptivePlanner(probe, probe.f00_hz, goal.target, settings.repeat_s, settings.turn_s,
-                                          candidates_rad=given or None, f00_free=settings.f00_free)
+                planner = AdaptivePlanner(
+                    probe,
+                    probe.f00_hz,
+                    goal.target,
+                    settings.repeat_s,
+                    settings.turn_s,
+                    candidates_rad=given or None,
+                    f00_free=settings.f00_free,
+                )
             except ValueError as refused:
                 problems.append(str(refused))
         if problems:
@@ -252,8 +260,11 @@ class SweepRunner:
             else:
                 self._record.add(fit.point)
         shift, std, n_ok = self._record.at_angle(theta0)
-        step = SweepStep(feedback=SweepFeedback(self._index, len(self._angles), theta0, shift, std, n_ok,
-                                                tuple(f.source for f in fits)))
+        step = SweepStep(
+            feedback=SweepFeedback(
+                self._index, len(self._angles), theta0, shift, std, n_ok, tuple(f.source for f in fits)
+            )
+        )
         self._index += 1
         return self._next_orientation(step)
 
@@ -263,8 +274,9 @@ class SweepRunner:
         if self._index == len(self._angles):
             return self._measured(step)
         if self._cancelled:
-            outcome = SweepOutcome(False, f"cancelled after {self._index} of {len(self._angles)} orientations",
-                                   cancelled=True)
+            outcome = SweepOutcome(
+                False, f"cancelled after {self._index} of {len(self._angles)} orientations", cancelled=True
+            )
             return self._end(step, outcome)
         step.run_cycle = CycleCall(self._angles[self._index], self._repeats)
         return step
@@ -272,12 +284,14 @@ class SweepRunner:
     def _measured(self, step: SweepStep) -> SweepStep:
         self.sweeps += 1
         if not self._record.points:
-            return self._end(step, SweepOutcome(
-                False, f"no successful ring-down in the sweep ({self._record.failed} failed)"))
+            return self._end(
+                step, SweepOutcome(False, f"no successful ring-down in the sweep ({self._record.failed} failed)")
+            )
         self.state = "decomposing"
         assert self._probe is not None  # set by start()
-        step.decompose = functools.partial(self._record.decompose, self._probe, self._f00_hz(), model=self._model,
-                                           f00_free=self._settings.f00_free)
+        step.decompose = functools.partial(
+            self._record.decompose, self._probe, self._f00_hz(), model=self._model, f00_free=self._settings.f00_free
+        )
         return step
 
     # --- an adaptive sweep -------------------------------------------------------------------
@@ -288,8 +302,9 @@ class SweepRunner:
             return self._end(step, SweepOutcome(False, f"cancelled after {self._index} cycles", cancelled=True))
         if self._decomposition_due(planner):
             self.state = "decomposing"
-            step.decompose = functools.partial(self._record.decompose, self._probe, self._f00_hz(),
-                                               model=self._model, f00_free=self._settings.f00_free)
+            step.decompose = functools.partial(
+                self._record.decompose, self._probe, self._f00_hz(), model=self._model, f00_free=self._settings.f00_free
+            )
             return step
         choice = planner.next(self._record, self._decomposition, self._elapsed_s())
         if isinstance(choice, PlanEnd):

@@ -4,63 +4,139 @@ Every fit must lie in a stretch with the coils off and no sensor saturated: chec
 simulated device's own record of its coils, and against a saturated stretch put into a window.
 """
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from mows.bench.rig import DeviceTimeRig
+from mows.bench.rig import DeviceTimeRig, max_duty_fraction
 from mows.bench.throughput import CAP_A
-from mows.device.phases import CycleRequest, CycleSettings
+from mows.device.phases import CycleOutcome, CycleRequest, CycleSettings, Phase
+from mows.device.tracking import TrackingLoop, TrackingSettings
 from mows.estimate.ringdown import FitOptions
 from mows.estimate.segments import RingdownWindow, Segment, fit_segment
 from mows.sim.scenario import load_scenario
-from mows.sweep.fast_cycle import plan_tracking, ringdown_std_model
+from mows.sweep.fast_cycle import plan_tracking, ringdown_std_model, tracking_plan
+from test_cycle import session_on_simulator
+
+DUTY = CycleSettings(max_duty_cycle=0.2, duty_window_s=2.0, settle_s=0.2)  # tighter than the kicks want
+CLIPPING_RANGE_T = 0.2e-6  # a near sensor this narrow clips the first swings of a ring-down from the stop
+
+
+def run_tracking(scenario, settings: CycleSettings, ringdowns: int):
+    """The driver's tracking mode (its plan and loop) on the simulated device, in device time."""
+    rig = DeviceTimeRig(scenario, settings, CAP_A, seed=11)
+    plan = tracking_plan(scenario, 0.0, 1e-6, CAP_A, rig.first_block_noise_std_t())
+    loop = TrackingLoop()
+    loop.start(TrackingSettings(0.0, CAP_A, plan.excite_s, plan.ringdown_s))
+    return rig, plan, loop, rig.run_tracking(loop, ringdowns)
+
+
+def fitted(m, fs: float) -> tuple[int, int]:
+    """[first, last) of the samples a fit used, counted from its window's start."""
+    first = round(m.fit.start_offset_s * fs)
+    return first, first + m.fit.n_samples
 
 
 @pytest.fixture(scope="module")
 def tracked():
+    """Under a duty-cycle limit tighter than the kicks would keep by themselves."""
+    return run_tracking(load_scenario("anti_helmholtz"), DUTY, 30)
+
+
+@pytest.fixture(scope="module")
+def clipped():
+    """With a near sensor that saturates during the first swings of every ring-down."""
     scenario = load_scenario("anti_helmholtz")
-    probe = scenario.probe
-    rig = DeviceTimeRig(scenario, CycleSettings(), CAP_A, seed=11)
-    std = ringdown_std_model(
-        scenario.sensors.pair, probe, scenario.pose, scenario.sample_rate_hz, rig.first_block_noise_std_t()
-    )
-    plan = plan_tracking(probe, scenario.setup, scenario.pose, std, 0.0, 1e-6, CAP_A)
-    rig.set_settings(
-        CycleSettings(
-            excitation_current_a=CAP_A,
-            excite_s=plan.excite_s,
-            ringdown_s=plan.ringdown_s,
-            gap_s=0.0,
-            repeats=8,
-            tuning_steps=0,
-            settle_s=0.5,
-        )
-    )
-    ok, message, measured = rig.run_cycle(CycleRequest(0.0, frequency_hz=probe.f00_hz))
-    assert ok, message
-    return rig, plan, measured
+    pair = scenario.sensors.pair
+    near = dataclasses.replace(pair.sensors[0], range_t=CLIPPING_RANGE_T)
+    sensors = dataclasses.replace(scenario.sensors, pair=dataclasses.replace(pair, sensors=(near, pair.sensors[1])))
+    return run_tracking(scenario.replace(sensors=sensors), CycleSettings(settle_s=0.2), 12)
 
 
 def test_every_tracking_fit_lies_where_the_coils_were_off(tracked):
-    rig, _, measured = tracked
-    assert len(measured) == 8 and all(m.fit.ok for m in measured), [m.fit.report() for m in measured]
+    rig, _, loop, measured = tracked
+    assert loop.on and loop.cycles >= 2  # chained cycles, not one long one
+    assert len(measured) >= 30 and all(m.fit.ok for m in measured), [m.fit.report() for m in measured]
     on = rig.coil_intervals()
-    assert len(on) == 8
+    assert len(on) == len(measured)
     for m in measured:
-        first = round(m.window.start_ns * rig.fs / 1e9 + m.fit.start_offset_s * rig.fs)
-        last = first + m.fit.n_samples  # exclusive
-        assert all(last <= a or first >= b for a, b in on), (first, last, on)
-        assert m.fit.start_offset_s > 0.0  # the coil current's decay and the recovery are left out
+        start = round(m.window.start_ns * rig.fs / 1e9)
+        first, last = fitted(m, rig.fs)
+        assert all(start + last <= a or start + first >= b for a, b in on), (start, first, last, on)
+        assert first > 0  # the coil current's decay and the recovery are left out
+
+
+def test_tracking_never_fits_across_a_saturated_stretch(clipped):
+    rig, _, _, measured = clipped
+    assert all(m.saturated.any() for m in measured)  # every window starts clipped
+    fits = [m for m in measured if m.fit.ok]
+    assert fits, [m.fit.report() for m in measured]
+    for m in fits:
+        first, last = fitted(m, rig.fs)
+        assert not m.saturated[first:last].any()
+        assert m.saturated[:first].any()  # it starts after the clipped swings
+    # A window whose unclipped stretch is too short is refused, never fitted across the clipping.
+    assert all(m.fit.status.name == "SATURATED" for m in measured if not m.fit.ok)
 
 
 def test_tracking_keeps_the_current_cap_and_the_duty_limit(tracked):
-    rig, plan, _ = tracked
+    rig, plan, _, _ = tracked
     assert rig.peak_current_a <= CAP_A
     kicks = np.array([b - a for a, b in rig.coil_intervals()]) / rig.fs
     assert np.allclose(kicks, plan.excite_s, atol=2.0 / rig.fs)
-    assert rig.sequencer.duty_fraction() <= CycleSettings().max_duty_cycle
+    # Unlimited, the kicks would take excite/(excite + ring-down) of the time; the limit holds instead.
+    assert plan.excite_s / (plan.excite_s + plan.ringdown_s) > DUTY.max_duty_cycle
+    assert max_duty_fraction(rig.coil_intervals(), round(DUTY.duty_window_s * rig.fs)) <= DUTY.max_duty_cycle
+
+
+def test_tracking_is_off_until_started_and_a_failed_cycle_ends_it():
+    loop = TrackingLoop()
+    assert not loop.on and loop.next_request(CycleSettings()) is None
+    loop.start(TrackingSettings(0.3, CAP_A, 0.05, 0.2))
+    first = loop.next_request(CycleSettings())
+    assert first.theta0_rad == 0.3 and first.settings.settle_s == CycleSettings().settle_s  # turns and settles
+    assert first.settings.tuning_steps == 0 and first.settings.gap_s == 0.0
+    loop.on_outcome(CycleOutcome(True, "", 1, 110.0, first.settings.repeats))
+    assert loop.next_request(CycleSettings()).settings.settle_s == 0.0  # the stage has not moved
+    loop.on_outcome(CycleOutcome(False, "emergency stop: test", 2, 110.0, 0))
+    assert not loop.on and "emergency stop" in loop.stopped_reason
+    assert loop.next_request(CycleSettings()) is None
+
+
+def tracking_session(current_a=CAP_A):
+    session = session_on_simulator(CycleSettings(settle_s=0.0))
+    session.set_tracking(TrackingSettings(0.0, current_a, 0.05, 0.2))
+    return session
+
+
+def test_the_session_chains_tracking_cycles_refuses_other_cycles_and_stops_on_the_emergency_stop():
+    session = tracking_session()
+    events = []
+    for _ in range(20_000):
+        events += session.step(0.0).events
+        if session.tracking.cycles >= 2:
+            break
+    assert session.tracking.cycles >= 2 and session.tracking.on
+    assert len({e.cycle_id for e in events if e.phase == Phase.RINGDOWN}) >= 2
+    with pytest.raises(ValueError, match="tracking"):
+        session.start_cycle(CycleRequest(0.0), lambda _: None)
+    session.emergency_stop(True, "test")
+    assert not session.tracking.on and "emergency stop" in session.tracking.stopped_reason
+    assert not session.backend.device.coils_on
+    session.emergency_stop(False, "")
+    for _ in range(200):
+        session.step(0.0)
+    assert not session.sequencer.busy  # released, tracking stays off until it is started again
+
+
+def test_a_kick_above_the_cap_is_never_sent_and_ends_tracking():
+    session = tracking_session(current_a=2.0 * CAP_A)
+    for _ in range(200):
+        session.step(0.0)
+    assert not session.tracking.on and "cap" in session.tracking.stopped_reason
+    assert not session.backend.device.coil_log
 
 
 def test_a_saturated_stretch_inside_a_window_is_never_fitted_across():

@@ -50,6 +50,8 @@ from mows_driver.parameters import (
     session_config,
     settings_problem,
     supply_problem,
+    tracking_changed,
+    tracking_settings,
 )
 from mows_driver.recording import open_recorder
 from mows_ros.awaitables import completer
@@ -96,6 +98,10 @@ class DriverNode(MowsNode):
         self.session = DeviceSession(backend, session_config(values, cap))
         if values["backend"] == "sim":  # the simulated stage starts where the parameter puts it
             self.session.stage_angle_rad = values["theta0_rad"]
+        try:
+            self.session.set_tracking(tracking_settings(values))
+        except ValueError as error:
+            raise InvalidParameterValueException("tracking", values["tracking"], str(error)) from None
         self.blocks_published = 0
         self.stream_errors = 0
         self._health = StreamHealth()
@@ -119,6 +125,8 @@ class DriverNode(MowsNode):
         self._values = {**self._values, **{p.name: p.value for p in parameters}}
         self.session.set_block_duration(self._values["block_duration_s"])
         self.session.set_cycle_settings(cycle_settings(self._values))
+        if tracking_changed(p.name for p in parameters):  # an emergency stop's end of tracking holds till then
+            self.session.set_tracking(tracking_settings(self._values))
 
     # --- services --------------------------------------------------------------------------
     async def _run_cycle(self, request: RunCycle.Request, response: RunCycle.Response) -> RunCycle.Response:

@@ -9,11 +9,13 @@ from mows.device.serial_backend import SerialBackend
 from mows.device.serial_link import DEFAULT_BAUD, SerialLink
 from mows.device.session import SessionConfig
 from mows.device.sim_backend import SimBackend
+from mows.device.tracking import TrackingSettings
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
 from mows.sim.simulator import SimulatedDevice
+from mows.sweep.fast_cycle import tracking_plan
 from mows_ros.params import ParamSpec
 
 PARAMETERS = (
@@ -123,6 +125,27 @@ PARAMETERS = (
     ParamSpec("settle_s", 0.5, "wait after turning the probe, s", range=(0.0, 60.0)),
     ParamSpec("max_duty_cycle", 0.5, "largest share of any duty_window_s with the coils on", range=(0.01, 1.0)),
     ParamSpec("duty_window_s", 10.0, "window of the duty-cycle limit, s", range=(1.0, 3600.0)),
+    ParamSpec(
+        "tracking",
+        False,
+        "tracking mode: short kicks and ring-downs at tracking_theta0_rad back to back, lengths from the "
+        "probe's physics for tracking_target_std_t, so that the estimator publishes B along the axis "
+        "continuously; run_cycle is refused while it is on; an emergency stop or a failed cycle ends it",
+    ),
+    ParamSpec("tracking_theta0_rad", 0.0, "tracking mode: the orientation, rad", range=(-2.0 * math.pi, 2.0 * math.pi)),
+    ParamSpec(
+        "tracking_target_std_t",
+        0.2e-6,
+        "tracking mode: σ of each update of B along the axis, T (sets the ring-down length)",
+        range=(1e-9, 1e-3),
+    ),
+    ParamSpec(
+        "tracking_noise_std_t",
+        0.0,
+        "tracking mode: white noise σ per sample of the sensors' difference channel, T, a measured figure; "
+        "0: the scenario's noise model",
+        range=(0.0, 1e-6),
+    ),
 )
 CYCLE_PARAMETERS = (
     "excitation_current_a",
@@ -186,12 +209,43 @@ def make_backend(values: dict, cap: CurrentCap):
     return BagBackend(values["bag_path"], values["bag_rate"])
 
 
+def tracking_changed(names) -> bool:
+    """Whether any of the parameters ``names`` is one of tracking's."""
+    return any(name.startswith("tracking") for name in names)
+
+
+def tracking_settings(values: dict) -> TrackingSettings | None:
+    """Tracking's kicks and ring-downs from the physics of the scenario's device
+    (:func:`mows.sweep.fast_cycle.tracking_plan`) at the largest current the cap allows (the
+    shortest kick); None when tracking is off. ValueError when the target is out of the
+    physics' reach (the bound is in the message)."""
+    if not values["tracking"]:
+        return None
+    current_a = values["coil_current_cap_a"]
+    setup = PRESETS[values["coil_setup"]](current_limit_a=values["coil_current_cap_a"])
+    plan = tracking_plan(
+        load_scenario(values["scenario"]),
+        values["tracking_theta0_rad"],
+        values["tracking_target_std_t"],
+        current_a,
+        values["tracking_noise_std_t"] or None,
+        setup,
+    )
+    if not plan.feasible:
+        raise ValueError(
+            f"tracking_target_std_t={values['tracking_target_std_t']!r}: below the Cramér–Rao bound of "
+            f"the longest ring-down ({plan.bound_std_t:.3g} T in {plan.ringdown_s:.2f} s)"
+        )
+    return TrackingSettings(values["tracking_theta0_rad"], current_a, plan.excite_s, plan.ringdown_s)
+
+
 def settings_problem(values: dict) -> str | None:
     """Why ``values`` cannot drive the coils (the checks across parameters), or None."""
     reason = current_problem(values)
     if reason is None:
         try:
             cycle_settings(values)
+            tracking_settings(values)
         except ValueError as error:
             reason = str(error)
     return reason

@@ -20,6 +20,7 @@ from mows.device.cycle import CycleSequencer
 from mows.device.interface import CoilCommand, CommandResult
 from mows.device.phases import CycleOutcome, CycleRequest, CycleSettings, Phase, PhaseEvent, Step
 from mows.device.scheduled import OverCap, ScheduledDevice
+from mows.device.tracking import TrackingLoop
 from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
 from mows.estimate.ringdown_start import white_noise_std
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
@@ -32,10 +33,12 @@ BUFFER_S = 5.0  # the assembler keeps this much of the stream
 
 @dataclasses.dataclass(frozen=True)
 class MeasuredRingdown:
-    """A measurement ring-down (not a tuning one): its window and its fit."""
+    """A measurement ring-down (not a tuning one): its window, its fit and which of its samples
+    the device flagged saturated."""
 
     window: RingdownWindow
     fit: RingdownFit
+    saturated: np.ndarray
 
 
 class DeviceTimeRig:
@@ -92,6 +95,16 @@ class DeviceTimeRig:
             self._read(self._chunk)
         # The last ring-down's segment completes with the block that reaches its end.
         return self._outcome.success, self._outcome.message, self._measured
+
+    def run_tracking(self, loop: TrackingLoop, ringdowns: int) -> list[MeasuredRingdown]:
+        """Tracking cycles as the driver's session chains them (:mod:`mows.device.tracking`),
+        over the rig's settings, until ``ringdowns`` are measured or the loop stops."""
+        measured: list[MeasuredRingdown] = []
+        while len(measured) < ringdowns and (request := loop.next_request(self.sequencer.settings)) is not None:
+            measured += self.run_cycle(request)[2]
+            assert self._outcome is not None  # run_cycle returns once its cycle has ended
+            loop.on_outcome(self._outcome)
+        return measured
 
     def coil_intervals(self) -> list[tuple[int, int]]:
         """[on, off) sample indices of every excitation, from the device's own coil record."""
@@ -163,7 +176,7 @@ class DeviceTimeRig:
         if key not in self._options:
             self._options[key] = FitOptions.lever_aware(self.scenario.sensors.pair, self.probe, window.theta0_rad)
         fit = fit_segment(segment, self._options[key], self.settle_s, self.probe.damping_per_s)
-        self._measured.append(MeasuredRingdown(window, fit))
+        self._measured.append(MeasuredRingdown(window, fit, segment.saturated))
 
 
 def max_duty_fraction(intervals, window_samples: int) -> float:

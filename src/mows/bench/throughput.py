@@ -33,12 +33,13 @@ import numpy as np
 
 from mows.bench.rig import DeviceTimeRig, max_duty_fraction
 from mows.device.phases import CycleRequest, CycleSettings
+from mows.device.tracking import TrackingLoop, TrackingSettings
 from mows.estimate.axis import estimate_along_axis
 from mows.lab.reference import reference_at
 from mows.records.stamps import NS_PER_S
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import Decomposition
-from mows.sweep.fast_cycle import plan_cycle, plan_tracking, ringdown_std_model
+from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model, tracking_plan
 from mows.sweep.planner import COMPONENTS, AdaptivePlanner, PlanEnd, PrecisionGoal, achieved_std, reached
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -205,13 +206,13 @@ def adaptive_protocol(goal: PrecisionGoal = PrecisionGoal(), seed: int = 1, scen
 
 
 def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, seed: int = 2) -> dict:
-    """Tracking at θ0 for σ ≤ ``target_std_t`` of B along the axis: the plan and what it measured
-    (updates per device second between consecutive fitted ring-downs, their scatter)."""
+    """The driver's tracking mode at θ0 for σ ≤ ``target_std_t`` of B along the axis: its plan
+    and loop (:mod:`mows.device.tracking`) fed the noise measured in the first samples, and what
+    it measured (updates per device second between consecutive fitted ring-downs, their scatter)."""
     scenario = load_scenario(SCENARIO)
-    probe, fs = scenario.probe, scenario.sample_rate_hz
-    rig = DeviceTimeRig(scenario, CycleSettings(), CAP_A, seed)
-    std = ringdown_std_model(scenario.sensors.pair, probe, scenario.pose, fs, rig.first_block_noise_std_t())
-    plan = plan_tracking(probe, scenario.setup, scenario.pose, std, theta0_rad, target_std_t, CAP_A)
+    probe = scenario.probe
+    rig = DeviceTimeRig(scenario, CycleSettings(settle_s=SETTLE_S), CAP_A, seed)
+    plan = tracking_plan(scenario, theta0_rad, target_std_t, CAP_A, rig.first_block_noise_std_t())
     figures: dict[str, object] = {
         "target_t": target_std_t,
         "feasible": plan.feasible,
@@ -222,26 +223,18 @@ def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, se
     }
     if not plan.feasible:
         return figures
-    settings = CycleSettings(
-        excitation_current_a=CAP_A,
-        excite_s=plan.excite_s,
-        ringdown_s=plan.ringdown_s,
-        gap_s=0.0,
-        repeats=updates,
-        tuning_steps=0,
-        settle_s=SETTLE_S,
-    )
-    rig.set_settings(settings)
-    ok, message, measured = rig.run_cycle(CycleRequest(theta0_rad, frequency_hz=probe.f00_hz))
+    loop = TrackingLoop()
+    loop.start(TrackingSettings(theta0_rad, CAP_A, plan.excite_s, plan.ringdown_s))
+    measured = rig.run_tracking(loop, updates)
     good = [m for m in measured if m.fit.ok]
     estimates = [estimate_along_axis(m.fit, probe, probe.f00_hz) for m in good]
     axis = np.array([e.field_along_axis_t for e in estimates])
     ends = np.array([m.window.start_ns / NS_PER_S + m.window.duration_s for m in good])
-    window = round(settings.duty_window_s * rig.fs)
+    window = round(rig.sequencer.settings.duty_window_s * rig.fs)
     figures.update(
         {
-            "cycle_ok": ok,
-            "message": message,
+            "tracking_on": loop.on,
+            "message": loop.stopped_reason,
             "updates": len(good),
             "failed_fits": len(measured) - len(good),
             "updates_per_s": (len(good) - 1) / float(ends[-1] - ends[0]) if len(good) > 1 else math.nan,

@@ -167,7 +167,7 @@ class CycleSequencer:
             raise ValueError(f"cycle {self._cycle.cycle_id} is still running")
         if self._anchor is None:
             raise ValueError("no samples from the device yet")
-        s = self.settings
+        s = self.settings if request.settings is None else request.settings
         cycle = CyclePlan.resolve(self._last_cycle_id + 1, request, s)  # ValueError for a request out of range
         if request.frequency_hz is not None:
             nyquist_hz = self.sample_rate_hz / 2.0

@@ -113,13 +113,15 @@ class LostTuning:
 @dataclasses.dataclass(frozen=True)
 class CycleRequest:
     """One cycle at ``theta0_rad``; None takes the value from the settings. ``frequency_hz`` is
-    where to drive (a predicted resonance); None: the sequencer's present estimate."""
+    where to drive (a predicted resonance); None: the sequencer's present estimate.
+    ``settings``: this cycle's own settings (tracking's kicks); None: the sequencer's."""
 
     theta0_rad: float
     repeats: int | None = None
     tuning_steps: int | None = None
     gap_s: float | None = None
     frequency_hz: float | None = None
+    settings: CycleSettings | None = None
 
 
 @dataclasses.dataclass(frozen=True)

@@ -28,6 +28,7 @@ from mows.device.phases import (
     Step,
     TuningFit,
 )
+from mows.device.tracking import TrackingLoop, TrackingSettings
 from mows.physics.coils import CoilSetup, CurrentCap
 from mows.records.samples import SampleBlock
 
@@ -76,6 +77,7 @@ class DeviceSession:
         self._replayed_phase: Phase | None = None
         self.stage_angle_rad: float | None = None  # where the rotation stage stands, once known
         self._on_done: Callable[[CycleOutcome], None] | None = None
+        self.tracking = TrackingLoop()
         self._last_samples_s = monotonic()
         self._first_samples_s: float | None = None
         self._arrivals: collections.deque = collections.deque()  # (host time, samples) for the rate
@@ -100,6 +102,7 @@ class DeviceSession:
                 and self._monotonic() - self._last_samples_s > STALL_TIMEOUT_S
             ):
                 self._act(self.sequencer.abort(f"no samples from the device for {STALL_TIMEOUT_S:g} s"))
+            self._track()
             output.events += self._events
             self._events = []
             for event in output.events:
@@ -189,6 +192,22 @@ class DeviceSession:
             done, self._on_done = self._on_done, None
             done(step.outcome)
 
+    def _track(self) -> None:
+        """Start the next tracking cycle once the sequencer is idle (:mod:`mows.device.tracking`)."""
+        s = self.sequencer
+        if s is None or s.busy or not self.tracking.on or not self.link_up or s.next_index == 0:
+            return
+        request = self.tracking.next_request(self.config.settings)
+        assert request is not None  # tracking is on
+        try:
+            step = s.start(request)
+        except ValueError as refused:  # a latched stop, a kick over the cap or beyond the duty limit
+            self.tracking.stop(f"tracking stopped: {refused}")
+            return
+        self._on_done = self.tracking.on_outcome
+        self._last_samples_s = self._monotonic()
+        self._act(step)
+
     # --- requests from other threads -------------------------------------------------------
     def start_cycle(self, request: CycleRequest, on_done: Callable[[CycleOutcome], None]) -> int:
         """Start a cycle; ``on_done(outcome)`` is called (from the streaming thread, or from the
@@ -202,11 +221,21 @@ class DeviceSession:
                 )
             if not self.link_up:
                 raise ValueError(f"the link to the device is down ({self.last_link_reason})")
+            if self.tracking.on:
+                raise ValueError("tracking mode is on: switch it off (parameter tracking) before a cycle")
             step = self.sequencer.start(request)
             self._on_done = on_done
             self._last_samples_s = self._monotonic()
             self._act(step)
             return self.sequencer.last_cycle_id
+
+    def set_tracking(self, settings: TrackingSettings | None) -> None:
+        """Track with ``settings`` from the next idle moment on; None: no tracking cycle after the running one."""
+        with self._lock:
+            if settings is None:
+                self.tracking.stop("tracking is off")
+            else:
+                self.tracking.start(settings)
 
     def set_field_current(self, current_a: float, on_done: Callable[[CommandResult], None]) -> int:
         """Ramp the static-field supply to ``current_a``; ``on_done(result)`` is called (from the
@@ -256,6 +285,7 @@ class DeviceSession:
         whether it is latched."""
         with self._lock:
             if engage:
+                self.tracking.stop(f"tracking stopped by the emergency stop: {reason or 'no reason given'}")
                 self.backend.coils_off_now()
                 self.backend.supply_to_zero_now()
             if self.sequencer is None:
@@ -281,6 +311,7 @@ class DeviceSession:
     def close(self) -> None:
         """Coils off, the supply ramped to zero and the device released; a running cycle fails."""
         with self._lock:
+            self.tracking.stop("the driver is shutting down")
             if self.sequencer is not None and self.sequencer.busy:
                 self._act(self.sequencer.abort("the driver is shutting down"))
             self.backend.close()
@@ -309,6 +340,7 @@ class DeviceSession:
                 "refused_commands": self.refused_commands,
                 "device_faults": self.device_faults,
                 "last_device_fault": self.last_device_fault,
+                **self.tracking.state(),
                 **self.backend.stats(),
             }
             a, s = self.assembler, self.sequencer

@@ -26,6 +26,7 @@ of the two channels removes the common part exactly.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -220,6 +221,12 @@ class NoiseModel:
         for name, value in vars(self).items():
             if not (np.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be finite and ≥ 0, got {value!r}")
+
+    def difference_white_std_t(self, sample_rate_hz: float) -> float:
+        """σ per sample of the pair's difference channel from the sensors' own white noise, T:
+        the common-mode noise cancels; each sensor's one-sided ASD over the band fs/2 gives
+        asd·√(fs/2), and the difference of two independent ones √2 times that."""
+        return float(self.sensor_white_t_per_rthz * math.sqrt(sample_rate_hz))
 
 
 def pink_noise_t(n: int, sample_rate_hz: float, asd_at_1hz_t_per_rthz: float, rng: np.random.Generator) -> np.ndarray:

@@ -263,3 +263,20 @@ def plan_tracking(
     else:
         high = low  # the shortest ring-down the fit takes already meets it
     return TrackingPlan(target_std_t, True, kick(high), high, std_hz(theta0_rad, high) / beta)
+
+
+def tracking_plan(
+    scenario, theta0_rad: float, target_std_t: float, current_cap_a: float, noise_std_t: float | None = None, setup=None
+) -> TrackingPlan:
+    """:func:`plan_tracking` for the device ``scenario`` describes (probe, pose, sensors, coils,
+    sample rate; ``setup`` replaces its coils). ``noise_std_t``: white σ per sample of the
+    difference channel (a measured figure); None: the scenario's noise model's white floor
+    (:meth:`mows.physics.fluxgate.NoiseModel.difference_white_std_t`)."""
+    fs = scenario.sample_rate_hz
+    noise = scenario.noise.difference_white_std_t(fs) if noise_std_t is None else noise_std_t
+    if not (noise > 0 and math.isfinite(noise)):
+        raise ValueError(f"noise σ {noise!r} T per sample: the bound needs a positive noise figure")
+    std = ringdown_std_model(scenario.sensors.pair, scenario.probe, scenario.pose, fs, noise)
+    return plan_tracking(
+        scenario.probe, setup or scenario.setup, scenario.pose, std, theta0_rad, target_std_t, current_cap_a
+    )

@@ -1,7 +1,8 @@
 """mows-latency: how long after the last sample of a ring-down its fit is published, in the graph.
 
 Starts the driver (simulated device) and the estimator, asks the driver for measurement
-cycles, and, for every RingdownFit, takes the time at which this process received it minus
+cycles (or, with ``--tracking``, switches on the driver's tracking mode and takes its
+ring-downs as they come), and, for every RingdownFit, takes the time at which this process received it minus
 the time at which it received the raw block holding the ring-down's last sample (both on this
 host's monotonic clock, so transport both ways is included). Prints the figures, or one JSON
 object with ``--json`` (used by ``mows bench``). A benchmark: it reports, it never fails on a
@@ -27,20 +28,24 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="mows-latency", description=__doc__.splitlines()[0])
     parser.add_argument("--cycles", type=int, default=4, help="measurement cycles (each with --repeats ring-downs)")
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument(
+        "--tracking", action="store_true", help="the driver's tracking mode: cycles × repeats of its ring-downs"
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     log = open("/dev/null", "w")
-    graph = Graph(
-        tuple(n for n in NODES if n.name in ("driver", "estimator")),
-        ["-p", "driver:tuning_steps:=0", "-p", "driver:gap_s:=0.1"],
-        output=log,
+    mode = (
+        ["-p", "driver:tracking:=true"]
+        if args.tracking
+        else ["-p", "driver:tuning_steps:=0", "-p", "driver:gap_s:=0.1"]
     )
+    graph = Graph(tuple(n for n in NODES if n.name in ("driver", "estimator")), mode, output=log)
     graph.start()
     try:
-        latencies = measure(args.cycles, args.repeats, graph.exited)
+        latencies = measure(args.cycles, args.repeats, graph.exited, args.tracking)
     finally:
         graph.stop()
-    figures = summary(latencies)
+    figures = {"mode": "tracking" if args.tracking else "cycles", **summary(latencies)}
     if args.json:
         print(json.dumps(figures))
     else:
@@ -49,7 +54,7 @@ def main(argv=None) -> int:
     return 0 if latencies else 1
 
 
-def measure(cycles: int, repeats: int, exited) -> list:
+def measure(cycles: int, repeats: int, exited, tracking: bool = False) -> list:
 
     rclpy.init()
     node = rclpy.create_node("mows_latency")
@@ -69,10 +74,10 @@ def measure(cycles: int, repeats: int, exited) -> list:
             exited,
             120.0,
         )
-        for _ in range(cycles):
+        for _ in range(0 if tracking else cycles):
             future = client.call_async(RunCycle.Request(theta0_rad=0.0, repeats=repeats, tuning_steps=-1, gap_s=-1.0))
             _spin_until(node, future.done, exited, 120.0)
-        _spin_until(node, lambda: len(fits) >= cycles * repeats, exited, 30.0)
+        _spin_until(node, lambda: len(fits) >= cycles * repeats, exited, 120.0 if tracking else 30.0)
     except TimeoutError as error:
         say(str(error))
     finally:

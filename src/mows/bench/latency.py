@@ -10,12 +10,13 @@ import shutil
 import subprocess
 
 
-def run(cycles: int = 4, repeats: int = 5) -> dict:
+def run(cycles: int = 4, repeats: int = 5, tracking: bool = False) -> dict:
+    """``mows-latency``'s figures; ``tracking``: of the driver's tracking mode (cycles × repeats ring-downs)."""
     tool = shutil.which("mows-latency")
     if tool is None:
         return {"skipped": "mows-latency not on PATH: source install/setup.bash (make bench does)"}
     done = subprocess.run(
-        [tool, "--json", "--cycles", str(cycles), "--repeats", str(repeats)],
+        [tool, "--json", "--cycles", str(cycles), "--repeats", str(repeats), *(["--tracking"] if tracking else [])],
         capture_output=True,
         text=True,
         timeout=600,

@@ -22,12 +22,14 @@ SUITES = {
     "lab": ("mows.bench.lab", "model lab diagnose on 1000 rows with the whole catalog"),
     "lab_long": ("mows.bench.lab_long", "mows lab diagnose on a 500 000-row CSV: wall time and peak memory"),
     "latency": ("mows.bench.latency", "last sample of a ring-down to its published fit, in the node graph"),
+    "latency_tracking": ("mows.bench.latency_tracking", "the same in the driver's tracking mode"),
     "throughput": (
         "mows.bench.throughput",
         "device seconds to σ ≤ 20 nT, 10 µT/m: paper, default, demo and adaptive sweeps; tracking rate",
     ),
 }
-# Run when no suite is named: throughput simulates minutes of device time and is asked for by name.
+# Run when no suite is named: throughput simulates minutes of device time and is asked for by
+# name, and so is latency_tracking (a second graph run).
 DEFAULT_SUITES = ("estimator", "simulator", "stream", "lab", "lab_long", "latency")
 # Figures of the throughput suite that --json also carries at the top level.
 THROUGHPUT_KEYS = (
@@ -45,6 +47,7 @@ QUICK: dict[str, dict[str, object]] = {
     "simulator": {"repeats": 5},
     "stream": {"duration_s": 3.0},
     "latency": {"cycles": 1, "repeats": 5},
+    "latency_tracking": {"cycles": 2, "repeats": 5},
     "lab_long": {"rows": 20_000},
     "throughput": {"protocols": ("default",), "tracking_updates": 10},
 }

@@ -3,7 +3,8 @@
 at exact sample indices (``scheduled``), the device emulator on a pseudo-terminal (``emulator``),
 the serial client (``serial_link``), the driver's backends over all of them (``sim_backend``,
 ``serial_backend``, ``bag_backend``), the measurement cycle (``cycle``, ``cycle_waits``,
-``duty``), tracking mode's chain of cycles (``tracking``), the block stream (``blocks``, ``session``) and rosbag2 recordings (``bags``).
+``duty``), tracking mode's chain of cycles (``tracking``), the block stream (``blocks``,
+``session``) and rosbag2 recordings (``bags``).
 
 May import: ``mows.sim``, ``mows.physics``, ``mows.records``. Independent of
 ``mows.estimate``: a cycle that retunes is handed its fit function.

@@ -67,7 +67,7 @@ class TrackingLoop:
     """Which tracking cycle comes next, if any. ``start`` switches tracking on, ``stop`` off;
     :meth:`next_request` is asked whenever no cycle runs, :meth:`on_outcome` told how each ended."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.settings: TrackingSettings | None = None
         self.stopped_reason = "tracking is off"
         self.cycles = 0

@@ -106,9 +106,5 @@ class TrackingLoop:
 
     def state(self) -> dict:
         """What /diagnostics reports."""
-        return {
-            "tracking": self.on,
-            "tracking_cycles": self.cycles,
-            "tracking_ringdowns": self.ringdowns,
-            "tracking_stopped_reason": self.stopped_reason,
-        }
+        values = (self.on, self.cycles, self.ringdowns, self.stopped_reason)
+        return dict(zip(("tracking", "tracking_cycles", "tracking_ringdowns", "tracking_stopped_reason"), values))

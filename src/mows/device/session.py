@@ -5,7 +5,8 @@ The streaming thread calls :meth:`DeviceSession.step` in a loop and publishes wh
 returns (blocks, phase events) in order. Requests from other threads (a cycle, the emergency
 stop, a supply current) take the session's lock, act on the device at once (the emergency stop switches the
 coils off before it returns) and leave their phase events for the next ``step`` to publish.
-Nothing here knows about ROS.
+In tracking mode (:mod:`mows.device.tracking`) ``step`` starts the next tracking cycle whenever
+none runs. Nothing here knows about ROS.
 """
 
 from __future__ import annotations

@@ -19,9 +19,9 @@ a real one needs time, and that is the driver's default). f00 is the probe's cal
 Figures: device seconds to target, σ reached, σ·√T (nT·√s, µT/m·√s), pulls against the scene's
 truth, and the peak coil current and worst duty-cycle window seen.
 
-``tracking``: B along the probe axis at θ0 = 0°, short kicks and ring-downs as short as the
-Cramér–Rao bound allows for σ ≤ 0.2 µT and σ ≤ 1 µT; measured: updates per device second and
-the scatter of the estimates.
+``tracking``: the driver's tracking mode (its plan and its loop of cycles,
+:mod:`mows.device.tracking`) at θ0 = 0°, ring-downs as short as the Cramér–Rao bound allows for
+σ ≤ 0.2 µT and σ ≤ 1 µT; measured: updates per device second and the scatter of the estimates.
 """
 
 from __future__ import annotations

@@ -78,3 +78,18 @@ def test_an_adaptive_goal_the_decomposition_cannot_meet_is_refused():
     with pytest.raises(ValueError, match="Gxx"):
         runner.start(SweepGoal(target=PrecisionGoal("gxx")), SweepSettings(f00_free=True), P)
     assert runner.state == "idle"
+
+
+def test_a_goal_as_a_client_words_it():
+    """RotationSweep's fields: no target quantity is no adaptive sweep; a zero σ takes the
+    default target, a zero budget means none."""
+    assert SweepGoal.asked((0.1, 0.2), 3, "paper") == SweepGoal((0.1, 0.2), 3, "paper", None)
+    defaults = PrecisionGoal()
+    goal = SweepGoal.asked(target="B", field_std_t=5e-9)
+    assert goal.target == PrecisionGoal("B", 5e-9, defaults.gradient_std_t_per_m, math.inf)
+    goal = SweepGoal.asked(target="both", gradient_std_t_per_m=2e-6, budget_s=30.0)
+    assert goal.target == PrecisionGoal("both", defaults.field_std_t, 2e-6, 30.0)
+    with pytest.raises(ValueError, match="quantity"):
+        SweepGoal.asked(target="bz")
+    with pytest.raises(ValueError, match="budget_s"):
+        SweepGoal.asked(target="B", budget_s=-1.0)

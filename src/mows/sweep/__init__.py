@@ -1,7 +1,8 @@
 """Rotation sweeps: (θ0, Δf) points of many orientations decomposed into in-plane field and
 gradient (``decompose``), the ring-downs of one sweep as they arrive (``record``), a sweep run as
 an I/O-free state machine (``runner``), the supply sweep that calibrates a probe
-(``calibration_schedule``), the measurement cycle from the probe's physics and tracking plans
+(``calibration_schedule``) and the calibrator's goals around it (``calibration_run``), the
+measurement cycle from the probe's physics and tracking plans
 (``fast_cycle``), and the adaptive choice of orientations and repeats for a target precision
 (``planner``).
 

@@ -53,6 +53,31 @@ class SweepGoal:
     model: str = ""
     target: PrecisionGoal | None = None
 
+    @classmethod
+    def asked(
+        cls,
+        theta0_rad=(),
+        repeats_per_angle: int = 0,
+        model: str = "",
+        target: str = "",
+        field_std_t: float = 0.0,
+        gradient_std_t_per_m: float = 0.0,
+        budget_s: float = 0.0,
+    ) -> "SweepGoal":
+        """The goal as a client words it (a RotationSweep goal): no ``target`` quantity is a
+        sweep over the angles; zero target σ take :class:`PrecisionGoal`'s defaults and a zero
+        budget means none. ValueError, with the reason, for a target that cannot be met."""
+        precision = None
+        if target:
+            defaults = PrecisionGoal()
+            precision = PrecisionGoal(
+                target,
+                field_std_t or defaults.field_std_t,
+                gradient_std_t_per_m or defaults.gradient_std_t_per_m,
+                budget_s or math.inf,
+            )
+        return cls(tuple(theta0_rad), repeats_per_angle, model, precision)
+
 
 @dataclasses.dataclass(frozen=True)
 class CycleCall:

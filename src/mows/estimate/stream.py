@@ -1,0 +1,99 @@
+"""The estimator's flow without its I/O: raw sample blocks and ring-down announcements in (as
+the messages carry them), and per recorded ring-down its fit (:mod:`mows.estimate.ringdown`),
+the field and gradient along the probe axis (:mod:`mows.estimate.axis`) and, while an f00
+calibration runs (:mod:`mows.estimate.calibration`), the OK fits offered to it.
+
+The estimator node feeds it its subscriptions and publishes what it returns. What the node's
+parameters say (probe, fit options, settling, f00) comes with each ring-down as a
+:class:`FitSettings`, read when the ring-down is complete, so a parameter change applies to
+the next fit.
+"""
+
+import dataclasses
+from collections.abc import Callable
+
+from mows.estimate.axis import AxisEstimate, estimate_along_axis
+from mows.estimate.calibration import F00Calibration
+from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure
+from mows.estimate.segments import (
+    RingdownWindow,
+    Segment,
+    SegmentAssembler,
+    block_from_message,
+    fit_segment,
+    window_from_message,
+)
+from mows.physics.probe import Probe
+
+
+@dataclasses.dataclass(frozen=True)
+class FitSettings:
+    """What fitting and inverting one ring-down take."""
+
+    probe: Probe
+    options: Callable[[float], FitOptions]  # θ0 → the fit's options; ValueError when no model can be built
+    settle_s: float
+    f00_hz: float
+    f00_std_hz: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Estimated:
+    """One recorded ring-down: its window, fit and estimate along the axis; ``calibrated`` when
+    its fit completed the running f00 calibration."""
+
+    window: RingdownWindow
+    fit: RingdownFit
+    estimate: AxisEstimate
+    calibrated: bool = False
+
+
+class RingdownEstimator:
+    """Assembles ring-downs from the stream (keeping ``buffer_s`` of samples) and estimates each."""
+
+    def __init__(self, buffer_s: float):
+        self.assembler = SegmentAssembler(buffer_s)
+        self.calibration: F00Calibration | None = None
+        self.last = "no ring-down yet"  # the last fit's report
+
+    def add_block(self, message) -> list[Segment]:
+        """A ``MagnetometerBlock``; the ring-downs it completes. ValueError for samples no device
+        could have sent (nothing of them is kept)."""
+        return self.assembler.add_block(block_from_message(message))
+
+    def announce(self, message) -> list[Segment]:
+        """An ``ExcitationState`` of a ring-down; the ring-downs complete by now. ValueError for an
+        announcement that is no window."""
+        return self.assembler.announce(window_from_message(message))
+
+    def estimate(self, segment: Segment, settings: FitSettings) -> Estimated:
+        """Fit ``segment``, invert the fit, and offer an OK one to the running calibration."""
+        window = segment.window
+        try:
+            options = settings.options(window.theta0_rad)
+        except ValueError as error:  # e.g. a sensing axis of (0, 0): no model to fit
+            fit = failure(FitStatus.BAD_FIT, f"cannot build the signal model: {error}", theta0_rad=window.theta0_rad)
+        else:
+            fit = fit_segment(segment, options, settings.settle_s, settings.probe.damping_per_s)
+        estimate = estimate_along_axis(fit, settings.probe, settings.f00_hz, settings.f00_std_hz)
+        self.last = fit.report()
+        calibrated = (
+            estimate.ok
+            and self.calibration is not None
+            and self.calibration.offer(fit.frequency_hz, fit.frequency_std_hz) is not None
+        )
+        return Estimated(window, fit, estimate, calibrated)
+
+    def begin_calibration(
+        self, probe: Probe, reference_field_t: float, n_ringdowns: int, timeout_s: float
+    ) -> F00Calibration:
+        """A calibration of f00 from the next OK ring-downs (:class:`F00Calibration`); ValueError,
+        with the reason, for a request it cannot meet or while another one runs."""
+        calibration = F00Calibration(probe, reference_field_t, n_ringdowns, timeout_s)
+        if self.calibration is not None:
+            raise ValueError("a calibration is already running: try again after it")
+        self.calibration = calibration
+        return calibration
+
+    def end_calibration(self) -> None:
+        self.calibration = None

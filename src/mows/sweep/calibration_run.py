@@ -1,0 +1,139 @@
+"""The calibrator's goals as I/O-free classes around :class:`CalibrationSchedule` (paper Fig. 3),
+in the manner of :class:`mows.device.cycle.CycleSequencer`: fed the driver's answers, the
+ring-down fits of the stream and the client's cancel, they return the schedule's steps.
+
+:class:`CalibrationRun` runs one goal: it routes each fit to the cycle that made it (by cycle
+id), waits until a finished cycle's fits are in (or the caller says their time is up), and only
+then hands them to the schedule. :class:`ProbeCalibrator` takes one goal at a time, keeps each
+wiring's last complete sweep across goals (a gradient sweep of an earlier goal adds the lever
+check to a later homogeneous one) and fits the probe's constants from them
+(:func:`mows.estimate.probe_calibration.calibrate_probe`). Reading scenarios and writing the
+probe file are the caller's business.
+"""
+
+import math
+
+from mows.estimate.calibration_record import KnownConstants, ProbeCalibration
+from mows.estimate.probe_calibration import calibrate_probe
+from mows.physics.probe import Probe
+from mows.sweep.calibration_schedule import (
+    GRADIENT_WIRING,
+    CalibrationOutcome,
+    CalibrationPlan,
+    CalibrationSchedule,
+    Step,
+)
+from mows.sweep.runner import CycleAnswer
+
+
+def goal_plan(goal, homogeneous: str, default_currents_a) -> CalibrationPlan:
+    """The plan a goal (``currents_a``, ``theta0_rad``, ``repeats``, ``wiring``: a CalibrateProbe
+    goal) asks for: no currents take ``default_currents_a``, no angles 0° and 180°, 0 repeats
+    one; wiring '' is the ``homogeneous`` one. ValueError for any other wiring than those two,
+    or a plan :class:`CalibrationPlan` refuses."""
+    if goal.wiring and goal.wiring != GRADIENT_WIRING:
+        raise ValueError(f"wiring {goal.wiring!r}: '' (homogeneous) or {GRADIENT_WIRING!r}")
+    return CalibrationPlan(
+        tuple(goal.currents_a) or tuple(default_currents_a),
+        tuple(goal.theta0_rad) or (0.0, math.pi),
+        int(goal.repeats) or 1,
+        goal.wiring or homogeneous,
+    )
+
+
+class CalibrationRun:
+    """One goal's schedule (module docstring): pass :meth:`start`'s step on, then answer each
+    step's action with :meth:`on_supply` or :meth:`on_cycle`; a None from :meth:`on_cycle` or
+    :meth:`on_fit` means the cycle's fits are still due."""
+
+    def __init__(self, plan: CalibrationPlan):
+        self.plan = plan
+        self.schedule = CalibrationSchedule(plan)
+        self._fits: dict[int, list] = {}  # cycle id → its fits so far
+        self._awaited: CycleAnswer | None = None  # the finished cycle whose fits are due
+
+    def start(self) -> Step:
+        return self.schedule.start()
+
+    def on_supply(self, accepted: bool, reason: str = "") -> Step:
+        return self.schedule.on_supply(accepted, reason)
+
+    def on_cycle(self, answer: CycleAnswer) -> Step | None:
+        """The driver's answer to the step's ``RunCycle``; None while that cycle's fits are due."""
+        if answer.problem:
+            return self.schedule.on_cycle_done(False, answer.problem)
+        self._awaited = answer
+        return self._collected(late=False)
+
+    def on_fit(self, cycle_id: int, fit) -> Step | None:
+        """A fit of the stream (``RingdownFit``; tuning fits are not passed); a step once the
+        awaited cycle's fits are all in. Fits may come before the driver's answer."""
+        self._fits.setdefault(cycle_id, []).append(fit)
+        return self._collected(late=False)
+
+    def fits_time_up(self) -> Step | None:
+        """The awaited cycle's fits are late: go on with those that came."""
+        return self._collected(late=True)
+
+    def cancel(self, reason: str) -> Step | None:
+        """The supply's way to zero; None when the schedule is on it already (its step stands)."""
+        step = self.schedule.cancel(reason)
+        return step if step.actions else None
+
+    def _collected(self, late: bool) -> Step | None:
+        answer = self._awaited
+        if answer is None or (not late and len(self._fits.get(answer.cycle_id, ())) < answer.ringdowns_recorded):
+            return None
+        self._awaited = None
+        for fit in self._fits.pop(answer.cycle_id, [])[: self.plan.repeats]:
+            self.schedule.on_fit(fit)
+        step = self.schedule.on_cycle_done(True)
+        return step if step.actions or step.outcome else self.schedule.fits_timed_out()
+
+
+class ProbeCalibrator:
+    """One goal at a time (``run`` while it lasts), the sweeps by wiring, the calibrations made."""
+
+    def __init__(self) -> None:
+        self.run: CalibrationRun | None = None
+        self.calibrations = 0
+        self.last = "no calibration yet"
+        self._sweeps: dict[str, tuple] = {}  # wiring → (points, failed) of its last complete sweep
+
+    @property
+    def state(self) -> str:
+        return "idle" if self.run is None else "calibrating"
+
+    def accept(self, plan: CalibrationPlan) -> CalibrationRun:
+        """The goal's run; ValueError while another one runs."""
+        if self.run is not None:
+            raise ValueError("a calibration is running")
+        self.run = CalibrationRun(plan)
+        return self.run
+
+    def release(self) -> None:
+        """The goal ended (however it did): the next one may come."""
+        self.run = None
+
+    def keep(self, outcome: CalibrationOutcome) -> None:
+        """A successful outcome's points: its wiring's latest sweep."""
+        assert self.run is not None and outcome.success  # only a running goal's successful end
+        self._sweeps[self.run.plan.wiring] = (outcome.points, outcome.failed)
+
+    def calibrate(self, wirings: dict, homogeneous: str, nominal: Probe) -> ProbeCalibration:
+        """The constants from every wiring's latest sweep (``wirings``: :class:`Wiring` by name,
+        ``homogeneous`` the one that gives β0). ValueError or CalibrationError, with the reason,
+        when the sweeps cannot determine them."""
+        if homogeneous not in self._sweeps:
+            raise ValueError("no sweep of the homogeneous wiring yet: β0 needs one")
+        points, failed = [], {}
+        for wiring_points, wiring_failed in self._sweeps.values():
+            points += wiring_points
+            failed.update(wiring_failed)
+        return calibrate_probe(points, wirings, KnownConstants.of(nominal), homogeneous, failed, nominal.lever_m)
+
+    def calibrated(self, calibration: ProbeCalibration, path: str) -> str:
+        """Counts a calibration written to ``path``; the line that reports it."""
+        self.calibrations += 1
+        self.last = f"calibration {self.calibrations}: {calibration.report().splitlines()[0]} → {path}"
+        return self.last

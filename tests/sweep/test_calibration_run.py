@@ -1,0 +1,141 @@
+"""The calibrator's goals without ROS (mows.sweep.calibration_run): a goal's plan, fits routed to
+the cycle that made them, the supply back at zero in every ending, and a whole calibration
+through a stand-in driver whose ring-downs come from the exact field of the calibration bench."""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from mows.estimate.ringdown import SETTLE_S, FitStatus, RingdownFit
+from mows.physics.probe import PAPER_PROBE
+from mows.sweep.calibration_run import CalibrationRun, ProbeCalibrator, goal_plan
+from mows.sweep.calibration_schedule import CalibrationPlan, RunCycle, SetSupply, scenario_wirings
+from mows.sweep.runner import CycleAnswer
+from sweep.calibration_bench import BENCH, STD_HZ, bench_fits
+
+
+def goal(currents_a=(), theta0_rad=(), repeats=0, wiring=""):
+    """A CalibrateProbe goal as the node gets it."""
+    return SimpleNamespace(currents_a=currents_a, theta0_rad=theta0_rad, repeats=repeats, wiring=wiring)
+
+
+def ok_fit(**fields):
+    """An OK fit: a ring-down at 112.5 Hz and θ0 = 0 unless ``fields`` say otherwise."""
+    typical = dict(theta0_rad=0.0, frequency_hz=112.5, frequency_std_hz=STD_HZ, amplitude_rad=0.41, duration_s=0.5)
+    return RingdownFit(FitStatus.OK, start_offset_s=SETTLE_S, **(typical | dict(damping_per_s=1.8) | fields))
+
+
+class StandInDriver:
+    """Answers SetSupply and RunCycle as the driver would, with the bench's ring-downs."""
+
+    def __init__(self):
+        self.current_a, self.cycle_id, self.currents = 0.0, 0, []
+        self.rng = np.random.default_rng(3)
+
+    def supply(self, action: SetSupply) -> None:
+        self.current_a = action.current_a
+        self.currents.append(action.current_a)
+
+    def cycle(self, action: RunCycle) -> tuple[CycleAnswer, list]:
+        self.cycle_id += 1
+        fits = [ok_fit(**f) for f in bench_fits(self.current_a, action.theta0_rad, action.repeats, self.rng)]
+        return CycleAnswer(self.cycle_id, action.repeats), fits
+
+
+def run_through(run: CalibrationRun, driver: StandInDriver, fits_first=False, cancel_at=None):
+    """Walks the run to its outcome, the fits delivered before or after the driver's answer."""
+    step, steps = run.start(), 0
+    while step.outcome is None:
+        steps += 1
+        if steps == cancel_at:
+            step = run.cancel("cancelled by the client") or step
+        (action,) = step.actions
+        if isinstance(action, SetSupply):
+            driver.supply(action)
+            step = run.on_supply(True)
+            continue
+        answer, fits = driver.cycle(action)
+        delivered = [run.on_fit(answer.cycle_id, fit) for fit in fits] if fits_first else []
+        answered = run.on_cycle(answer)
+        if not fits_first:
+            delivered = [run.on_fit(answer.cycle_id, fit) for fit in fits]
+        (step,) = [s for s in [*delivered, answered] if s is not None]  # exactly one step: when all are in
+    return step.outcome
+
+
+def test_a_goal_leaves_to_the_defaults_what_it_does_not_say():
+    plan = goal_plan(goal(), "helmholtz", (0.0, 1.0))
+    assert plan == CalibrationPlan((0.0, 1.0), (0.0, math.pi), 1, "helmholtz")
+    plan = goal_plan(goal([2.0], [0.5], 3, "gradient"), "helmholtz", (0.0, 1.0))
+    assert plan == CalibrationPlan((2.0,), (0.5,), 3, "gradient")
+    with pytest.raises(ValueError, match="sideways"):
+        goal_plan(goal(wiring="sideways"), "helmholtz", (0.0,))
+    with pytest.raises(ValueError, match="finite"):
+        goal_plan(goal(currents_a=[math.nan]), "helmholtz", (0.0,))
+
+
+@pytest.mark.parametrize("fits_first", [False, True])
+def test_a_calibration_recovers_the_bench_probe(fits_first):
+    calibrator, driver = ProbeCalibrator(), StandInDriver()
+    currents = (0.0, 1.0, 2.0, -1.0, -2.0)
+    run = calibrator.accept(goal_plan(goal(currents), BENCH.supply.name, ()))
+    outcome = run_through(run, driver, fits_first)
+    assert outcome.success and outcome.supply_at_zero, outcome.message
+    assert driver.currents == [*currents, 0.0]
+    assert len(outcome.points) == 2 * len(currents) and not outcome.failed
+    calibrator.keep(outcome)
+    # The nominal probe gives only what a calibration takes as known: the moment, the magnet's
+    # mass and the housing stop.
+    calibration = calibrator.calibrate(scenario_wirings(BENCH), BENCH.supply.name, PAPER_PROBE)
+    probe = calibration.probe()
+    assert probe.spring_nm_per_rad == pytest.approx(BENCH.probe.spring_nm_per_rad, rel=0.01)
+    assert probe.inertia_kgm2 == pytest.approx(BENCH.probe.inertia_kgm2, rel=0.01)
+    assert calibrator.calibrated(calibration, "probe.yaml").startswith("calibration 1: ")
+    assert calibrator.calibrations == 1
+
+
+def test_fits_of_other_cycles_and_late_fits_are_told_apart():
+    run = CalibrationRun(CalibrationPlan((0.0,), (0.0,), repeats=2))
+    assert isinstance(run.start().actions[0], SetSupply)
+    (cycle,) = run.on_supply(True).actions
+    assert isinstance(cycle, RunCycle) and cycle.repeats == 2
+    assert run.on_fit(6, ok_fit()) is None  # another client's cycle
+    assert run.on_cycle(CycleAnswer(7, 2)) is None  # its fits are due
+    assert run.on_fit(6, ok_fit()) is None
+    assert run.on_fit(7, ok_fit()) is None  # one of two
+    step = run.fits_time_up()  # the second never comes
+    assert step.actions == [SetSupply(0.0)]
+    outcome = run.on_supply(True).outcome
+    assert outcome.success and len(outcome.points) == 1 and outcome.failed == {(0.0, "NO_FIT"): 1}
+
+
+def test_a_failed_cycle_and_a_cancel_end_with_the_supply_at_zero():
+    run = CalibrationRun(CalibrationPlan((1.0,), (0.0,)))
+    run.start()
+    run.on_supply(True)
+    step = run.on_cycle(CycleAnswer(problem="coil current above the cap"))
+    assert step.actions == [SetSupply(0.0)]
+    assert run.cancel("too late") is None  # already on its way to zero: its step stands
+    outcome = run.on_supply(True).outcome
+    assert not outcome.success and not outcome.cancelled and "coil current above the cap" in outcome.message
+
+    driver = StandInDriver()
+    outcome = run_through(CalibrationRun(CalibrationPlan((0.0, 1.0, 2.0))), driver, cancel_at=3)
+    assert outcome.cancelled and outcome.supply_at_zero and driver.currents == [0.0, 0.0]
+
+
+def test_one_goal_at_a_time_and_no_constants_without_a_homogeneous_sweep():
+    calibrator = ProbeCalibrator()
+    assert calibrator.state == "idle"
+    run = calibrator.accept(CalibrationPlan((0.0, 1.0), wiring="gradient"))
+    assert calibrator.state == "calibrating"
+    with pytest.raises(ValueError, match="running"):
+        calibrator.accept(CalibrationPlan())
+    outcome = run_through(run, StandInDriver())
+    calibrator.keep(outcome)
+    calibrator.release()
+    with pytest.raises(ValueError, match="homogeneous"):
+        calibrator.calibrate(scenario_wirings(BENCH), BENCH.supply.name, PAPER_PROBE)
+    assert calibrator.accept(CalibrationPlan()) is calibrator.run

@@ -44,20 +44,25 @@ def joint_state_msg(stamp_ns: int, stage_angle_rad: float) -> JointState:
     return message
 
 
+EVENT_FIELDS = (
+    "cycle_id",
+    "repeat_index",
+    "repeats",
+    "tuning",
+    "coils_on",
+    "frequency_hz",
+    "theta0_rad",
+    "planned_duration_s",
+    "setup",
+)  # a PhaseEvent's fields that ExcitationState carries under the same name
+
+
 def excitation_msg(event: PhaseEvent, frame_id: str) -> ExcitationState:
     message = ExcitationState(
         phase=int(event.phase),
         phase_name=event.phase.name,
-        cycle_id=event.cycle_id,
-        repeat_index=event.repeat_index,
-        repeats=event.repeats,
-        tuning=event.tuning,
-        coils_on=event.coils_on,
         coil_current_amplitude_a=list(event.currents_a),
-        frequency_hz=event.frequency_hz,
-        theta0_rad=event.theta0_rad,
-        planned_duration_s=event.planned_duration_s,
-        setup=event.setup,
+        **{name: getattr(event, name) for name in EVENT_FIELDS},
     )
     stamps.set_nanoseconds(message.header.stamp, event.stamp_ns)
     message.header.frame_id = frame_id

@@ -8,48 +8,28 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 
+
+def _keep_last(depth: int, reliability, durability) -> QoSProfile:
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=reliability, durability=durability)
+
+
 # Raw blocks: the sensor-data pattern (best effort, volatile: a late sample is worth less
 # than the next one), with a deeper history than qos_profile_sensor_data's 5. At 40 blocks/s
 # five blocks are 125 ms, and with shared-memory delivery the writer's history is the buffer:
 # a consumer busy fitting on a loaded machine would lose blocks that were never late.
-STREAM_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=64,
-    reliability=qos_profile_sensor_data.reliability,
-    durability=qos_profile_sensor_data.durability,
-)
+STREAM_QOS = _keep_last(64, qos_profile_sensor_data.reliability, qos_profile_sensor_data.durability)
 
 # Excitation phase changes: every one matters, and a subscriber that joins late learns the
 # present one (a RESULT_QOS subscriber, volatile, is compatible with it).
-EXCITATION_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=100,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
+EXCITATION_QOS = _keep_last(100, ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)
 
 # Per-event results (excitation states, ring-down fits, field estimates): low rate, and a
 # consumer that counts them (the mapper waits for every repeat) must not lose one.
-RESULT_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=100,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+RESULT_QOS = _keep_last(100, ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE)
 
 # Maps (sweep decompositions): a subscriber that joins later still gets the latest one.
-MAP_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
+MAP_QOS = _keep_last(1, ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)
 
 # Joint states (the rotation stage's angle, with every block): reliable and volatile like a
 # robot's /joint_states, so that robot_state_publisher (either reliability) takes them.
-JOINT_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=10,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+JOINT_QOS = _keep_last(10, ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE)

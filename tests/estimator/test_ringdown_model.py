@@ -14,10 +14,11 @@ from mows.bench.estimator import (
     OFFSET_T,
     PHASE_RAD,
     SAMPLE_RATE_HZ,
+    reference_crb_hz,
 )
 from mows.estimate.axis import estimate_along_axis
 from mows.estimate.ringdown import FitOptions, fit_ringdown
-from mows.estimate.ringdown_problem import AMPLITUDE_BOUNDS_RAD, cramer_rao_frequency_hz
+from mows.estimate.ringdown_problem import AMPLITUDE_BOUNDS_RAD
 from mows.physics.fluxgate import pink_noise_t
 from mows.physics.frequency import frequency_shift_hz
 from mows.physics.probe import PAPER_PROBE
@@ -61,18 +62,7 @@ def test_crb_equals_fisher_of_the_printed_model(theta0_deg, direction):
     )
     scale = np.sqrt(np.diag(jac.T @ jac))
     numeric = sigma * math.sqrt(np.linalg.inv((jac / scale).T @ (jac / scale))[0, 0]) / scale[0]
-    analytic = cramer_rao_frequency_hz(
-        N_SAMPLES,
-        SAMPLE_RATE_HZ,
-        FREQUENCY_HZ,
-        DAMPING_PER_S,
-        AMPLITUDE_RAD,
-        PHASE_RAD,
-        theta0,
-        KAPPA_T,
-        sigma,
-        sensor_direction=direction,
-    )
+    analytic = reference_crb_hz(theta0, sigma, sensor_direction=direction)
     assert analytic == pytest.approx(numeric, rel=1e-5)
 
 

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from lab.tables import tilted_table
 from mows.cli.main import main
 from mows.lab import FrequencyModel, analyse, catalog, synth
 from mows.physics.field import UniformField
@@ -31,16 +32,7 @@ def test_harmonics_from_two_orientations_are_not_identifiable(tmp_path, capsys):
 
 
 def test_exact_aliases_leave_their_parameters_not_identifiable():
-    sweep = synth.rotation_sweeps(15.0, 2)
-    theta0 = sweep.pop("theta0_deg")
-    table = synth.synthesize(
-        PAPER_PROBE,
-        UniformField((2e-5, -1e-5, -4e-5)),
-        theta0,
-        np.random.default_rng(0),
-        gravity_m_per_s2=Pose.tilted(math.radians(1.0)).gravity_m_per_s2,
-        **sweep,
-    )
+    table = tilted_table()
     effects = catalog()
     both = (FrequencyModel(PAPER_PROBE) + effects["plane_tilt"] + effects["field_offset"]).fit(table)
     assert both.identifiable.tolist() == [True, False, False, False, False]

@@ -4,11 +4,8 @@ Statistically adequate residuals are not enough: an effect whose free fit lies m
 from its physical value, or a generic correction in the model, is reported as what it is.
 """
 
-import math
-
-import numpy as np
-
-from mows.lab import analyse, synth
+from lab.tables import rotation_table
+from mows.lab import analyse
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
 
@@ -16,18 +13,7 @@ FIELD = UniformField((40e-6, 0.0, 0.0))  # 40 µT in the plane: the static defle
 
 
 def _table(truth_amplitude_deg, table_amplitude_deg, seed=0):
-    sweep = synth.rotation_sweeps(15.0, 2)
-    theta0 = sweep.pop("theta0_deg")
-    truth = synth.true_frequency_hz(PAPER_PROBE, FIELD, np.radians(theta0), math.radians(truth_amplitude_deg))
-    return synth.synthesize(
-        PAPER_PROBE,
-        FIELD,
-        theta0,
-        np.random.default_rng(seed),
-        truth_hz=truth,
-        amplitude_deg=table_amplitude_deg,
-        **sweep,
-    )
+    return rotation_table(FIELD, seed, truth_amplitude_deg, amplitude_deg=table_amplitude_deg)
 
 
 def test_a_free_physical_strength_far_from_its_value_is_inconsistent_physics():

@@ -2,14 +2,14 @@
 live demo's anti-Helmholtz sweep on which greedy selection used to diagnose curvature."""
 
 import json
-import math
 import pathlib
 
 import numpy as np
 import pytest
 
+from lab.tables import rotation_table
 from mows.cli.main import main
-from mows.lab import FrequencyModel, analyse, catalog, load_table, synth
+from mows.lab import FrequencyModel, analyse, catalog, load_table
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
@@ -55,20 +55,8 @@ def test_the_demo_sweep_is_known_physics_not_curvature():
 def strong_field_table(truth_amplitude_deg, seed=0):
     """A 170 µT field along x (Helmholtz-like) plus Earth's, ring-downs at 24° according to the
     table; the truth has the amplitude ``truth_amplitude_deg``."""
-    sweep = synth.rotation_sweeps(15.0, 2)
-    theta0 = sweep.pop("theta0_deg")
     source = UniformField((170e-6, 0.0, 0.0)) + EARTH
-    truth = synth.true_frequency_hz(PAPER_PROBE, source, np.radians(theta0), math.radians(truth_amplitude_deg))
-    return synth.synthesize(
-        PAPER_PROBE,
-        source,
-        theta0,
-        np.random.default_rng(seed),
-        f_std_hz=4e-4,
-        truth_hz=truth,
-        amplitude_deg=24.0,
-        **sweep,
-    )
+    return rotation_table(source, seed, truth_amplitude_deg, f_std_hz=4e-4, amplitude_deg=24.0)
 
 
 def test_known_physics_is_added_at_physics_when_the_data_have_it():

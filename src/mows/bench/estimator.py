@@ -33,6 +33,23 @@ KAPPA_T = 1.2e-7
 OFFSET_T = 3e-9
 
 
+def reference_crb_hz(theta0_rad: float, noise_std_t: float, **options) -> float:
+    """The Cramér–Rao bound of f for the ring-down of the constants above at θ0 in white noise σ
+    (``options``: those of :func:`mows.estimate.ringdown_problem.cramer_rao_frequency_hz`)."""
+    return ringdown_problem.cramer_rao_frequency_hz(
+        N_SAMPLES,
+        SAMPLE_RATE_HZ,
+        FREQUENCY_HZ,
+        DAMPING_PER_S,
+        AMPLITUDE_RAD,
+        PHASE_RAD,
+        theta0_rad,
+        KAPPA_T,
+        noise_std_t,
+        **options,
+    )
+
+
 @dataclasses.dataclass(frozen=True)
 class RingdownCase:
     theta0_rad: float
@@ -53,17 +70,7 @@ class RingdownCase:
         return clean + self.noise_std_t * rng.standard_normal(N_SAMPLES)
 
     def crb_hz(self) -> float:
-        return ringdown_problem.cramer_rao_frequency_hz(
-            N_SAMPLES,
-            SAMPLE_RATE_HZ,
-            FREQUENCY_HZ,
-            DAMPING_PER_S,
-            AMPLITUDE_RAD,
-            PHASE_RAD,
-            self.theta0_rad,
-            KAPPA_T,
-            self.noise_std_t,
-        )
+        return reference_crb_hz(self.theta0_rad, self.noise_std_t)
 
     def fit(self, samples) -> ringdown.RingdownFit:
         # The driver excites near resonance, so the expected frequency is close but not exact.

@@ -35,7 +35,9 @@ J and a alone, and the report says that the lever check could not be made.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 from scipy import optimize
@@ -119,22 +121,8 @@ def calibrate_probe(
     cov_x = _covariance(
         result.jac, ["f00", "β0", "start swing"] + ["environment field"] * fit_environment + ["lever"] * fit_lever
     ) * max(1.0, chi2_dof if dof > 0 else 1.0)
-    return _derive(
-        result.x,
-        cov_x,
-        damping,
-        damping_var,
-        unpack,
-        fit_environment,
-        fit_lever,
-        unit_axis,
-        wirings,
-        gradient_points,
-        known,
-        chi2_dof,
-        len(points),
-        tuple(notes),
-    )
+    fitted = _Fitted(result.x, cov_x, unpack, damping, damping_var, unit_axis, fit_environment, fit_lever)
+    return _derive(fitted, wirings, gradient_points, known, chi2_dof, len(points), tuple(notes))
 
 
 def _jacobian(residuals, x, steps) -> np.ndarray:
@@ -230,23 +218,25 @@ def _start(points, wiring: Wiring, known: KnownConstants) -> tuple:
     return float(intercept), float(slope) if slope > 0 else 3.68e3
 
 
-def _derive(
-    x,
-    cov_x,
-    damping,
-    damping_var,
-    unpack,
-    fit_environment,
-    fit_lever,
-    unit_axis,
-    wirings,
-    gradient_points,
-    known,
-    chi2_dof,
-    n_points,
-    notes,
-) -> ProbeCalibration:
+@dataclasses.dataclass(frozen=True)
+class _Fitted:
+    """The fit's parameters x (fit units) with their covariance, how they unpack into (f00, β0,
+    environment field, lever, start swing), and the ring-downs' mean damping δ with its variance."""
+
+    x: np.ndarray
+    cov_x: np.ndarray
+    unpack: Callable[[np.ndarray], tuple]
+    damping: float
+    damping_var: float
+    unit_axis: np.ndarray  # the homogeneous supply's field direction
+    fit_environment: bool
+    fit_lever: bool
+
+
+def _derive(fitted: _Fitted, wirings, gradient_points, known, chi2_dof, n_points, notes) -> ProbeCalibration:
     """The reported constants and their covariance by the delta method over (x, δ)."""
+    x, cov_x, unpack, unit_axis = fitted.x, fitted.cov_x, fitted.unpack, fitted.unit_axis
+    fit_environment, fit_lever = fitted.fit_environment, fitted.fit_lever
     names = [
         "f00_hz",
         "beta0_hz_per_t",
@@ -271,9 +261,9 @@ def _derive(
             values += [lever, beta0 * lever * gradient_factor]
         return np.array(values)
 
-    z = np.append(x, damping)
+    z = np.append(x, fitted.damping)
     cov_z = np.zeros((len(z), len(z)))
-    cov_z[:-1, :-1], cov_z[-1, -1] = cov_x, damping_var
+    cov_z[:-1, :-1], cov_z[-1, -1] = cov_x, fitted.damping_var
     steps = np.maximum(np.abs(z), 1e-12) * 1e-6
     jac = np.stack([(constants(z + e) - constants(z - e)) / (2.0 * s) for e, s in zip(np.diag(steps), steps)], -1)
     values = constants(z)

@@ -35,6 +35,12 @@ class RingdownProblem:
     pickup: np.ndarray  # C_k of g (complex); with θ0 free, the series at θ0 = 0
     theta0_free: bool
 
+    def kernel_data(self) -> tuple[float, np.ndarray, np.ndarray, bool, np.ndarray, np.ndarray]:
+        """The data and settings as the compiled kernels take them: (dt, Re C_k, Im C_k, θ0 free,
+        y, weights)."""
+        cr, ci = split_pickup(self.pickup)
+        return self.dt, cr, ci, self.theta0_free, self.y, self.weights
+
     def subsampled(self, step: int) -> RingdownProblem:
         return dataclasses.replace(self, y=np.ascontiguousarray(self.y[:, ::step]), dt=self.dt * step)
 
@@ -57,26 +63,10 @@ def evaluate(problem: RingdownProblem, q: np.ndarray, derivatives: bool = True) 
     (:func:`mows.estimate.ringdown_model.normal_equations`, where the numerics are explained)."""
     n_ch, n = problem.y.shape
     p = q.size
-    cr, ci = split_pickup(problem.pickup)
     g, m = np.empty(n), np.empty((p if derivatives else 0, n))
     residual, coef = np.empty((n_ch, n)), np.empty((n_ch, 2))
     jtj, jtr = np.zeros((p, p)), np.zeros(p)
-    cost = evaluate_model(
-        np.asarray(q, float),
-        problem.dt,
-        cr,
-        ci,
-        problem.theta0_free,
-        problem.y,
-        problem.weights,
-        derivatives,
-        g,
-        m,
-        residual,
-        coef,
-        jtj,
-        jtr,
-    )
+    cost = evaluate_model(np.asarray(q, float), *problem.kernel_data(), derivatives, g, m, residual, coef, jtj, jtr)
     return Step(q, Shape(g, m), coef, residual, float(cost))
 
 
@@ -136,15 +126,9 @@ def variable_projection(problem: RingdownProblem, q, iterations, tol_chi2, dampi
 
     Returns (the step at the last accepted q, converged, iterations, free-parameter mask).
     """
-    cr, ci = split_pickup(problem.pickup)
     q, converged, used, free, cost, g, m, residual, coef, _, _ = levenberg_marquardt(
         np.asarray(q, float).copy(),
-        problem.dt,
-        cr,
-        ci,
-        problem.theta0_free,
-        problem.y,
-        problem.weights,
+        *problem.kernel_data(),
         iterations,
         tol_chi2,
         damping,

@@ -91,6 +91,12 @@ def _strength(description, bound=5.0):
     return (Parameter("strength", "1", -bound, bound, 1.0, description),)
 
 
+def _in_plane(x: str, y: str, unit: str, bound: float, step: float, description: str) -> tuple:
+    """The parameters of an in-plane vector's x and y components; ``description`` names the
+    component at ``{}``."""
+    return tuple(Parameter(name, unit, -bound, bound, step, description.format(c)) for name, c in ((x, "x"), (y, "y")))
+
+
 CATALOG = (
     Effect(
         "transverse_gradient",
@@ -164,10 +170,7 @@ CATALOG = (
         "along d, independent of any current. The size a·g·l is known; d is free.",
         "U(θ) ∋ −a·l·g·(d·u(θ)); k ∋ a·g·l·(d_x·cos θ0 + d_y·sin θ0)",
         "harmonic 1 of θ0 with fixed phase, independent of |B|, current and time",
-        (
-            Parameter("down_x", "1", -1.0, 1.0, 1e-2, "in-plane x component of the unit downward vector"),
-            Parameter("down_y", "1", -1.0, 1.0, 1e-2, "in-plane y component of the unit downward vector"),
-        ),
+        _in_plane("down_x", "down_y", "1", 1.0, 1e-2, "in-plane {} component of the unit downward vector"),
         _gravity,
         MECHANICS,
         priority=15,
@@ -235,10 +238,7 @@ CATALOG = (
         "rotation data it is indistinguishable from gravity (both act as −vector·u(θ)).",
         "B → B_ref + (b_x, b_y, 0)",
         "harmonic 1 of θ0 with fixed phase, independent of the reference",
-        (
-            Parameter("bx_t", "T", -1e-3, 1e-3, 1e-6, "unreferenced field, x"),
-            Parameter("by_t", "T", -1e-3, 1e-3, 1e-6, "unreferenced field, y"),
-        ),
+        _in_plane("bx_t", "by_t", "T", 1e-3, 1e-6, "unreferenced field, {}"),
         _field_offset,
         SOURCES,
         priority=70,
@@ -251,10 +251,7 @@ CATALOG = (
         "and y, so that part of the reference's Bz lies in the plane of the swing.",
         "B_plane = R(t_x, t_y)·B_ref, G_plane = R·G·Rᵀ",
         "harmonic 1 of θ0 proportional to the reference's Bz",
-        (
-            Parameter("tilt_x_rad", "rad", -0.5, 0.5, 1e-3, "rotation about x"),
-            Parameter("tilt_y_rad", "rad", -0.5, 0.5, 1e-3, "rotation about y"),
-        ),
+        _in_plane("tilt_x_rad", "tilt_y_rad", "rad", 0.5, 1e-3, "rotation about {}"),
         _plane_tilt,
         ORIENTATION,
         requires=("ref_bz_t",),

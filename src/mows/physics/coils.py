@@ -36,6 +36,7 @@ Coil sources are fields per ampere; degrees appear only in the YAML key ``curren
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -164,9 +165,25 @@ class CoilSetup:
         }
 
 
-def _two_coil_setup(name, distance_m, placements, current_limit_a, probe_position_m) -> CoilSetup:
-    """Coils in the x–y plane through the probe, ``distance_m`` from it; ``placements`` are
-    (position angle, field direction at the probe, current phase) in degrees."""
+# The two-coil setups of the paper (Methods): for each coil (position angle, field direction at
+# the probe, current phase), in degrees.
+PLACEMENTS_DEG = {
+    # Largest spacing (Fig. 2a): coil 1 ∝ sin(θ0 + 135°), coil 2 ∝ sin(θ0 + 45°).
+    "largest_spacing": ((225.0, 45.0, 135.0), (315.0, 135.0, 45.0)),
+    # Helmholtz: coil 1 at −y ∝ sin(θ0 + 90°), coil 2 at −x ∝ sin(θ0).
+    "helmholtz": ((270.0, 90.0, 90.0), (180.0, 180.0, 0.0)),
+}
+
+
+def two_coil_setup(
+    name: str,
+    distance_m: float = DEFAULT_DISTANCE_M,
+    current_limit_a: float = DEFAULT_CURRENT_LIMIT_A,
+    probe_position_m=(0.0, 0.0, 0.0),
+) -> CoilSetup:
+    """The setup ``name`` of PLACEMENTS_DEG: coils in the x–y plane through the probe,
+    ``distance_m`` from it."""
+    placements = PLACEMENTS_DEG[name]
     probe = vector3("probe_position_m", probe_position_m)
     coils = [
         lsip330(probe + distance_m * _in_plane(np.radians(where)), _in_plane(np.radians(along)))
@@ -175,28 +192,8 @@ def _two_coil_setup(name, distance_m, placements, current_limit_a, probe_positio
     return CoilSetup(name, coils, [np.radians(phase) for _, _, phase in placements], cap=CurrentCap(current_limit_a))
 
 
-def largest_spacing(
-    distance_m: float = DEFAULT_DISTANCE_M,
-    current_limit_a: float = DEFAULT_CURRENT_LIMIT_A,
-    probe_position_m=(0.0, 0.0, 0.0),
-) -> CoilSetup:
-    """Largest-spacing setup (Methods, Fig. 2a): coil 1 ∝ sin(θ0 + 135°), coil 2 ∝ sin(θ0 + 45°)."""
-    return _two_coil_setup(
-        "largest_spacing", distance_m, [(225.0, 45.0, 135.0), (315.0, 135.0, 45.0)], current_limit_a, probe_position_m
-    )
-
-
-def helmholtz(
-    distance_m: float = DEFAULT_DISTANCE_M,
-    current_limit_a: float = DEFAULT_CURRENT_LIMIT_A,
-    probe_position_m=(0.0, 0.0, 0.0),
-) -> CoilSetup:
-    """Helmholtz setup (Methods): coil 1 at −y ∝ sin(θ0 + 90°), coil 2 at −x ∝ sin(θ0)."""
-    return _two_coil_setup(
-        "helmholtz", distance_m, [(270.0, 90.0, 90.0), (180.0, 180.0, 0.0)], current_limit_a, probe_position_m
-    )
-
-
+largest_spacing = functools.partial(two_coil_setup, "largest_spacing")
+helmholtz = functools.partial(two_coil_setup, "helmholtz")
 PRESETS = {"largest_spacing": largest_spacing, "helmholtz": helmholtz}
 
 

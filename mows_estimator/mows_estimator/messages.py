@@ -7,12 +7,14 @@ from mows_msgs.msg import FieldEstimate, RingdownFit
 from sensor_msgs.msg import MagneticField
 
 from mows.estimate.axis import AxisEstimate
-from mows.estimate.ringdown import RingdownFit as Fit
 from mows.estimate.segments import RingdownWindow
+from mows.estimate.stream import Estimated
 from mows.records import stamps
 
 
-def fit_to_msg(fit: Fit, window: RingdownWindow, frame_id: str, shift_hz: float, shift_std_hz: float) -> RingdownFit:
+def fit_to_msg(estimated: Estimated, frame_id: str) -> RingdownFit:
+    """The fit of a ring-down, with the frequency shift of its estimate."""
+    fit, window = estimated.fit, estimated.window
     msg = RingdownFit()
     stamps.set_nanoseconds(msg.header.stamp, window.start_ns + round(fit.start_offset_s * stamps.NS_PER_S))
     msg.header.frame_id = frame_id
@@ -34,7 +36,11 @@ def fit_to_msg(fit: Fit, window: RingdownWindow, frame_id: str, shift_hz: float,
         "duration_s",
     ):
         setattr(msg, name, float(getattr(fit, name)))
-    msg.frequency_shift_hz, msg.frequency_shift_std_hz = float(shift_hz), float(shift_std_hz)
+    shift = estimated.estimate
+    msg.frequency_shift_hz, msg.frequency_shift_std_hz = (
+        float(shift.frequency_shift_hz),
+        float(shift.frequency_shift_std_hz),
+    )
     msg.n_samples = int(fit.n_samples)
     msg.parameter_names = list(fit.parameter_names)
     msg.covariance = np.asarray(fit.covariance, dtype=float).ravel().tolist()

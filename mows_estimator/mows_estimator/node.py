@@ -18,15 +18,12 @@ from rclpy.parameter import Parameter
 from rclpy.task import Future
 from sensor_msgs.msg import MagneticField
 
-from mows.estimate.axis import estimate_along_axis
-from mows.estimate.calibration import F00Calibration
-from mows.estimate.ringdown import FitStatus, failure
-from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
+from mows.estimate.stream import Estimated, FitSettings, RingdownEstimator
 from mows.physics.probe import Probe
 from mows.precompile import precompile
 from mows_estimator.health import FitTally
 from mows_estimator.messages import estimate_to_msg, fit_to_msg, magnetic_field_msg
-from mows_estimator.parameters import PARAMETERS, fit_options
+from mows_estimator.parameters import PARAMETERS, fit_settings
 from mows_ros.awaitables import within
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
@@ -48,10 +45,8 @@ class EstimatorNode(MowsNode):
         # Compile the fit (or load it from numba's cache) now, not on the first real ring-down;
         # subscriptions and publishers come after, so a node that advertises results can make them.
         self.get_logger().info(f"fit kernels ready in {precompile(simulator=False):.1f} s")
-        self._assembler = SegmentAssembler(self.get_parameter("buffer_s").value)
+        self._estimator = RingdownEstimator(self.get_parameter("buffer_s").value)
         self._tally = FitTally()
-        self._last = "no ring-down yet"
-        self._calibration: F00Calibration | None = None
         self._calibrated = Future()
         self.create_subscription(MagnetometerBlock, "mows/raw", self._on_block, STREAM_QOS)
         self.create_subscription(ExcitationState, "mows/excitation", self._on_excitation, RESULT_QOS)
@@ -65,90 +60,63 @@ class EstimatorNode(MowsNode):
             Calibrate, "mows/estimator/calibrate", self._on_calibrate, callback_group=ReentrantCallbackGroup()
         )
 
-    # --- parameters -------------------------------------------------------------------------
-    def _param(self, name):
-        return self.get_parameter(name).value
-
     def probe(self) -> Probe:
-        return probe_of(self._param("probe_file"))
+        return probe_of(self.get_parameter("probe_file").value)
 
-    def f00(self) -> tuple[float, float]:
-        f00 = self._param("f00_hz")
-        return (f00 if f00 > 0 else self.probe().f00_hz), self._param("f00_std_hz")
+    def _settings(self) -> FitSettings:
+        return fit_settings(parameter_values(self, PARAMETERS), self.probe())
 
     # --- stream -----------------------------------------------------------------------------
     def _on_excitation(self, msg: ExcitationState):
-        if msg.phase != ExcitationState.PHASE_RINGDOWN or (msg.tuning and not self._param("fit_tuning_ringdowns")):
-            return
-        arrived = time.monotonic()
-        try:
-            window = window_from_message(msg)
-        except ValueError as error:
-            self._tally.count("malformed_excitation")
-            self.get_logger().warn(f"{error}: ignored")
-            return
-        for segment in self._assembler.announce(window):
-            self._process(segment, arrived)
+        tuning_ignored = msg.tuning and not self.get_parameter("fit_tuning_ringdowns").value
+        if msg.phase == ExcitationState.PHASE_RINGDOWN and not tuning_ignored:
+            self._take(self._estimator.announce, msg, "malformed_excitation", "{error}: ignored")
 
     def _on_block(self, msg: MagnetometerBlock):
+        warning = f"malformed MagnetometerBlock {msg.sequence}: {{error}}"  # not samples a device could send
+        self._take(self._estimator.add_block, msg, "malformed_blocks", warning)
+
+    def _take(self, feed, msg, malformed: str, warning: str):
+        """Feed ``msg`` to the estimator and publish the ring-downs it completes."""
         arrived = time.monotonic()
         try:
-            block = block_from_message(msg)
-        except ValueError as error:  # not samples a device could have sent: nothing usable
-            self._tally.count("malformed_blocks")
-            self.get_logger().warn(f"malformed MagnetometerBlock {msg.sequence}: {error}")
+            segments = feed(msg)
+        except ValueError as error:
+            self._tally.count(malformed)
+            self.get_logger().warn(warning.format(error=error))
             return
-        for segment in self._assembler.add_block(block):
-            self._process(segment, arrived)
+        for segment in segments:
+            self._publish(self._estimator.estimate(segment, self._settings()), arrived)
 
-    def _process(self, segment, arrived: float):
-        try:
-            options = fit_options(parameter_values(self, PARAMETERS), self.probe(), segment.window.theta0_rad)
-        except ValueError as error:  # e.g. a sensing axis of (0, 0): no model to fit
-            fit = failure(
-                FitStatus.BAD_FIT, f"cannot build the signal model: {error}", theta0_rad=segment.window.theta0_rad
-            )
-        else:
-            fit = fit_segment(segment, options, self._param("settle_s"), self.probe().damping_per_s)
-        f00, f00_std = self.f00()
-        estimate = estimate_along_axis(fit, self.probe(), f00, f00_std)
-        frame = self._param("probe_frame_id")
-        fit_msg = fit_to_msg(fit, segment.window, frame, estimate.frequency_shift_hz, estimate.frequency_shift_std_hz)
+    def _publish(self, estimated: Estimated, arrived: float):
+        fit_msg = fit_to_msg(estimated, self.get_parameter("probe_frame_id").value)
         self._fit_pub.publish(fit_msg)
-        if estimate.ok:
-            self._field_pub.publish(estimate_to_msg(estimate, fit_msg.header, segment.window))
-            self._magnetic_pub.publish(magnetic_field_msg(estimate, fit_msg.header))
-            self._offer_to_calibration(fit.frequency_hz, fit.frequency_std_hz)
+        if estimated.estimate.ok:
+            self._field_pub.publish(estimate_to_msg(estimated.estimate, fit_msg.header, estimated.window))
+            self._magnetic_pub.publish(magnetic_field_msg(estimated.estimate, fit_msg.header))
+        if estimated.calibrated:
+            self._calibrated.set_result(True)
+        fit, window = estimated.fit, estimated.window
         self._tally.add(fit.status.name, 1e3 * (time.monotonic() - arrived))
-        self._last = fit.report()
         if not fit.ok:
-            self.get_logger().warn(
-                f"cycle {segment.window.cycle_id} repeat {segment.window.repeat_index}: {fit.report()}"
-            )
+            self.get_logger().warn(f"cycle {window.cycle_id} repeat {window.repeat_index}: {fit.report()}")
 
     # --- calibration ------------------------------------------------------------------------
-    def _offer_to_calibration(self, frequency_hz: float, std_hz: float):
-        if self._calibration is not None and self._calibration.offer(frequency_hz, std_hz) is not None:
-            self._calibrated.set_result(True)
-
     async def _on_calibrate(self, request: Calibrate.Request, response: Calibrate.Response):
         """f00 from the next ring-downs (:class:`mows.estimate.calibration.F00Calibration`)."""
         try:
-            calibration = F00Calibration(
+            calibration = self._estimator.begin_calibration(
                 self.probe(), request.reference_field_t, request.n_ringdowns, request.timeout_s
             )
         except ValueError as error:
             response.success, response.message = False, str(error)
             return response
-        if self._calibration is not None:
-            response.success, response.message = False, "a calibration is already running: try again after it"
-            return response
-        self._calibration, self._calibrated = calibration, Future()
+        self._calibrated = Future()
         try:
             if not await within(self, self._calibrated, request.timeout_s):
                 calibration.time_up()
         finally:
-            self._calibration = None
+            self._estimator.end_calibration()
         outcome = calibration.outcome
         response.n_used, response.success, response.message = outcome.n_used, outcome.ok, outcome.message
         if outcome.ok:
@@ -166,7 +134,8 @@ class EstimatorNode(MowsNode):
 
     # --- health ---------------------------------------------------------------------------
     def health(self) -> Health:
-        return self._tally.health(self._last, self._assembler, *self.f00())
+        settings = self._settings()
+        return self._tally.health(self._estimator.last, self._estimator.assembler, settings.f00_hz, settings.f00_std_hz)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,6 +1,9 @@
-"""The estimator's parameter table and the fit options it makes of the parameters."""
+"""The estimator's parameter table and the fit settings it makes of the parameters."""
+
+import functools
 
 from mows.estimate.ringdown import SETTLE_S, FitOptions
+from mows.estimate.stream import FitSettings
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import Probe
 from mows_ros.params import ParamSpec
@@ -55,3 +58,11 @@ def fit_options(values: dict, probe: Probe, theta0_rad: float) -> FitOptions:
         )
         return FitOptions.lever_aware(pair, probe, theta0_rad, channels, **common)
     return FitOptions(channels=channels, theta0_free=values["theta0_free"], **common)
+
+
+def fit_settings(values: dict, probe: Probe) -> FitSettings:
+    """What the parameters ask of each ring-down's fit and inversion; f00 = 0 is the probe's."""
+    f00_hz = values["f00_hz"] if values["f00_hz"] > 0 else probe.f00_hz
+    return FitSettings(
+        probe, functools.partial(fit_options, values, probe), values["settle_s"], f00_hz, values["f00_std_hz"]
+    )

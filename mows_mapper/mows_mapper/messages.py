@@ -6,7 +6,20 @@ from mows_msgs.msg import CandidateEffect, ModelReport, RingdownFit, SweepDecomp
 from mows.records import stamps
 from mows.sweep.decompose import DecompositionStatus
 from mows.sweep.record import SweepPoint
-from mows.sweep.runner import SweepFeedback, SweepFit, SweepMap
+from mows.sweep.runner import SweepFeedback, SweepFit, SweepGoal, SweepMap, SweepOutcome
+
+
+def sweep_goal(goal: RotationSweep.Goal) -> SweepGoal:
+    """ValueError for a target the goal cannot have (:meth:`SweepGoal.asked`)."""
+    return SweepGoal.asked(
+        goal.theta0_rad,
+        goal.repeats_per_angle,
+        goal.model,
+        goal.target,
+        goal.target_field_std_t,
+        goal.target_gradient_std_t_per_m,
+        goal.budget_s,
+    )
 
 
 def sweep_point(fit: RingdownFit) -> SweepPoint:
@@ -56,8 +69,11 @@ def decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
     return msg
 
 
-def failed_decomposition_msg(message: str) -> SweepDecomposition:
-    return SweepDecomposition(status=int(DecompositionStatus.NO_DECOMPOSITION), message=message)
+def outcome_decomposition_msg(outcome: SweepOutcome, frame_id: str) -> SweepDecomposition:
+    """The decomposition of a finished sweep; NO_DECOMPOSITION, with why, if it had none."""
+    if outcome.map is None:
+        return SweepDecomposition(status=int(DecompositionStatus.NO_DECOMPOSITION), message=outcome.message)
+    return decomposition_msg(outcome.map, frame_id)
 
 
 def model_report_msg(report, header, sweep_id: int) -> ModelReport:

@@ -15,38 +15,26 @@ decomposition and lab (in a worker thread) as a coroutine, so fits, cancels and
 diagnostics are served meanwhile.
 """
 
+import dataclasses
+
 from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
-from mows_msgs.srv import RunCycle
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.task import Future
 
 from mows.lab import analyse, from_sweep
-from mows.sweep.runner import (
-    CycleAnswer,
-    CycleCall,
-    SweepGoal,
-    SweepMap,
-    SweepRunner,
-    SweepStep,
-)
-from mows_mapper.messages import (
-    decomposition_msg,
-    failed_decomposition_msg,
-    feedback_msg,
-    model_report_msg,
-    sweep_fit,
-)
-from mows_mapper.parameters import PARAMETERS, sweep_settings, target_of
-from mows_ros.awaitables import in_worker, until, within
+from mows.sweep.runner import CycleAnswer, CycleCall, SweepMap, SweepRunner, SweepStep
+from mows_mapper.messages import feedback_msg, model_report_msg, outcome_decomposition_msg, sweep_fit, sweep_goal
+from mows_mapper.parameters import PARAMETERS, sweep_settings
+from mows_ros.awaitables import in_worker, until
+from mows_ros.cycles import DriverCycles
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
 from mows_ros.params import parameter_values
 from mows_ros.probe import probe_of
 from mows_ros.process import run_node
-from mows_ros.qos import MAP_QOS, RESULT_QOS
+from mows_ros.qos import MAP_QOS
 
 NODE_NAME = "mapper"
 SERVICE_WAIT_S = 5.0  # longest wait for the driver's run_cycle service to appear
@@ -57,9 +45,7 @@ class MapperNode(MowsNode):
         super().__init__(NODE_NAME, PARAMETERS)
         group = ReentrantCallbackGroup()
         self._runner = SweepRunner()
-        self._fits_due = Future()
-        self.create_subscription(RingdownFit, "mows/ringdown", self._on_fit, RESULT_QOS, callback_group=group)
-        self._cycle = self.create_client(RunCycle, "mows/driver/run_cycle", callback_group=group)
+        self._driver = DriverCycles(self, self._on_fit, group)
         self._sweep_pub = self.create_publisher(SweepDecomposition, "mows/sweep", MAP_QOS)
         self._report_pub = self.create_publisher(ModelReport, "mows/model_report", MAP_QOS)
         self._server = ActionServer(
@@ -76,20 +62,13 @@ class MapperNode(MowsNode):
         return self.get_parameter(name).value
 
     # --- inputs ---------------------------------------------------------------------------
-    def _on_fit(self, msg: RingdownFit):
-        self._deliver(self._runner.on_fit(sweep_fit(msg)))
-
-    def _deliver(self, step: SweepStep | None):
-        if step is not None and not self._fits_due.done():
-            self._fits_due.set_result(step)
+    def _on_fit(self, msg: RingdownFit) -> SweepStep | None:
+        return self._runner.on_fit(sweep_fit(msg))
 
     def _accept(self, goal) -> GoalResponse:
         try:  # one sweep at a time: the runner is busy from here, not from when the sweep starts
-            self._runner.start(
-                SweepGoal(tuple(goal.theta0_rad), goal.repeats_per_angle, goal.model, target_of(goal)),
-                sweep_settings(parameter_values(self, PARAMETERS)),
-                probe_of(self._param("probe_file")),
-            )
+            settings = sweep_settings(parameter_values(self, PARAMETERS))
+            self._runner.start(sweep_goal(goal), settings, probe_of(self._param("probe_file")))
         except ValueError as refused:
             self.get_logger().warn(f"sweep goal refused: {refused}")
             return GoalResponse.REJECT
@@ -108,11 +87,7 @@ class MapperNode(MowsNode):
                     goal_handle.publish_feedback(feedback_msg(step.feedback))
                 step = await self._advance(step)
             outcome = step.finished
-            decomposition = (
-                decomposition_msg(outcome.map, self._param("frame_id"))
-                if outcome.map is not None
-                else failed_decomposition_msg(outcome.message)
-            )
+            decomposition = outcome_decomposition_msg(outcome, self._param("frame_id"))
             if step.publish is not None:
                 await self._publish(step.publish, decomposition)
         finally:  # an exception must not leave the runner busy for good
@@ -131,27 +106,14 @@ class MapperNode(MowsNode):
             return self._runner.on_cycle(await self._run_cycle(step.run_cycle))
         if step.decompose is not None:
             return self._runner.on_decomposed(await in_worker(self, step.decompose))
-        return await self._fits()
+        # The cycle's fits are due: the step once they are in, or at fit_timeout_s.
+        return await self._driver.fits(self._param("fit_timeout_s"), self._runner.fits_time_up)
 
-    async def _run_cycle(self, call: CycleCall) -> CycleAnswer:
-        if not await until(self, self._cycle.service_is_ready, SERVICE_WAIT_S):
+    async def _run_cycle(self, cycle: CycleCall) -> CycleAnswer:
+        if not await until(self, self._driver.ready, SERVICE_WAIT_S):
             return CycleAnswer(problem="the driver's run_cycle service is not available")
-        future = self._cycle.call_async(
-            RunCycle.Request(theta0_rad=float(call.theta0_rad), repeats=int(call.repeats), tuning_steps=-1, gap_s=-1.0)
-        )
-        response = future.result() if await within(self, future, self._param("cycle_timeout_s")) else None
-        if response is None or not response.success:
-            return CycleAnswer(problem=f"cycle failed: {response.message if response else 'no answer from the driver'}")
-        return CycleAnswer(response.cycle_id, response.ringdowns_recorded)
-
-    async def _fits(self) -> SweepStep:
-        """The next step once the cycle's fits are in, or at ``fit_timeout_s``."""
-        self._fits_due = Future()
-        timer = self.create_timer(self._param("fit_timeout_s"), lambda: self._deliver(self._runner.fits_time_up()))
-        try:
-            return await self._fits_due
-        finally:
-            self.destroy_timer(timer)
+        answer = await self._driver.run(cycle, self._param("cycle_timeout_s"))
+        return dataclasses.replace(answer, problem=f"cycle failed: {answer.problem}") if answer.problem else answer
 
     async def _publish(self, sweep: SweepMap, msg: SweepDecomposition) -> None:
         """A good decomposition on /mows/sweep, then the model lab's report on it."""

@@ -1,10 +1,7 @@
 """The mapper's parameter table and the sweep settings it gives the core."""
 
-import math
-
 from mows.lab import reference_at
 from mows.sweep.decompose import MODELS
-from mows.sweep.planner import PrecisionGoal
 from mows.sweep.runner import SweepSettings
 from mows_ros.params import ParamSpec
 from mows_ros.probe import PROBE_FILE
@@ -51,18 +48,4 @@ def sweep_settings(values: dict) -> SweepSettings:
         values["f00_free"],
         values["repeat_s"],
         values["turn_s"],
-    )
-
-
-def target_of(goal) -> PrecisionGoal | None:
-    """The precision a RotationSweep goal asks for (None: not adaptive); ValueError if malformed.
-    Zero targets take the defaults, a zero budget means none."""
-    if not goal.target:
-        return None
-    defaults = PrecisionGoal()
-    return PrecisionGoal(
-        goal.target,
-        goal.target_field_std_t or defaults.field_std_t,
-        goal.target_gradient_std_t_per_m or defaults.gradient_std_t_per_m,
-        goal.budget_s or math.inf,
     )

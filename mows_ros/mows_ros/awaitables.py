@@ -1,6 +1,7 @@
 """What a coroutine callback awaits on a node spun by one thread (``mows_ros.process``): a
-future with a time limit, a condition polled until a deadline, a CPU-bound function run
-in a worker thread, and a result another thread delivers. Each resumes the coroutine at the
+future with a time limit, a condition polled until a deadline, a service's answer, a value
+another callback delivers (or a fallback at a time limit), a CPU-bound function run in a
+worker thread, and a result another thread delivers. Each resumes the coroutine at the
 executor's next turn; none blocks the thread that serves the node's other callbacks.
 """
 
@@ -8,6 +9,7 @@ import threading
 import time
 from collections.abc import Callable
 
+from rclpy.client import Client
 from rclpy.node import Node
 from rclpy.task import Future
 
@@ -52,6 +54,39 @@ async def until(node: Node, condition: Callable[[], bool], timeout_s: float) -> 
         return await answer
     finally:
         node.destroy_timer(timer)
+
+
+async def call(node: Node, client: Client, request, timeout_s: float):
+    """``client``'s response to ``request``, or None: the service did not appear (it may not be
+    discovered yet) or did not answer, each within ``timeout_s``."""
+    if not await until(node, client.service_is_ready, timeout_s):
+        return None
+    future = client.call_async(request)
+    return future.result() if await within(node, future, timeout_s) else None
+
+
+class Delivery:
+    """A value one callback delivers (:meth:`deliver`) to the coroutine that awaits it
+    (:meth:`wait`), or what ``fallback()`` gives once the wait's time is up."""
+
+    def __init__(self, node: Node):
+        self._node = node
+        self._due = Future()
+        self._due.set_result(None)  # nobody waits yet: deliveries are dropped
+
+    def deliver(self, value) -> None:
+        """Resume the waiting coroutine with ``value`` (None, or nobody waiting: nothing)."""
+        if value is not None:
+            _settle(self._due, value)
+
+    async def wait(self, timeout_s: float, fallback: Callable[[], object]):
+        """The next value delivered, or ``fallback()``'s (when not None) after ``timeout_s``."""
+        self._due = Future()
+        timer = self._node.create_timer(timeout_s, lambda: self.deliver(fallback()))
+        try:
+            return await self._due
+        finally:
+            self._node.destroy_timer(timer)
 
 
 def completer(node: Node, future: Future) -> Callable[[object], None]:

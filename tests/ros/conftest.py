@@ -1,5 +1,6 @@
 """A test node spun on demand: tests wait for conditions, never for a fixed time. The ``start``
-fixture (node_processes.py) runs node processes with their output logged."""
+fixture (node_processes.py) runs node processes with their output logged, ``action_server`` a
+node of the graph as an action server."""
 
 import time
 from collections.abc import Callable
@@ -39,4 +40,4 @@ def ros(ros_context):
     harness.close()
 
 
-from node_processes import start  # noqa: E402,F401 (the fixture, shared by the node tests)
+from node_processes import action_server, start  # noqa: E402,F401 (the fixtures, shared by the node tests)

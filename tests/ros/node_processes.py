@@ -1,9 +1,12 @@
 """Node processes for tests: started with their output in a log file, killed if a test leaves
-them behind."""
+them behind; and a node of the graph started as an action server, with its goals sent."""
 
 import subprocess
 
 import pytest
+from rclpy.action import ActionClient
+
+from mows_bringup.graph import NODES
 
 
 @pytest.fixture
@@ -28,3 +31,43 @@ def start(tmp_path):
 
 def log(process: subprocess.Popen) -> str:
     return process.log_path.read_text()
+
+
+@pytest.fixture
+def action_server(ros, start):
+    """Starts the graph's node ``name`` with ``-p`` parameters and returns (a client of its
+    action once the server is ready, the process); at the end the node must exit cleanly."""
+    started = []
+
+    def action_server(name: str, action_type, action: str, *parameters: str):
+        node = next(n for n in NODES if n.name == name)
+        process = start(*node.command([arg for parameter in parameters for arg in ("-p", parameter)]))
+        started.append(process)
+        client = ActionClient(ros.node, action_type, action)
+        ros.wait_for(lambda: client.server_is_ready(), f"the {action} action server")
+        return client, process
+
+    yield action_server
+    for process in started:
+        process.terminate()
+        try:
+            code = process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            code = process.wait()
+        assert code == 0, log(process)
+
+
+def send_goal(ros, client, goal, cancel_after_feedback=None):
+    """Sends ``goal``: (its handle, its result or None if refused, the feedback that came), the
+    goal cancelled after ``cancel_after_feedback`` feedback messages if that is given."""
+    feedback = []
+    sent = client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback))
+    handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")
+    if not handle.accepted:
+        return handle, None, feedback
+    if cancel_after_feedback is not None:
+        ros.wait_for(lambda: len(feedback) >= cancel_after_feedback, "feedback")
+        handle.cancel_goal_async()
+    result = handle.get_result_async()
+    return handle, ros.wait_for(lambda: result.done() and result.result(), "the goal's result"), feedback

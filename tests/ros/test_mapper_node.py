@@ -2,7 +2,6 @@
 ring-down fits computed from the exact field of a scenario, decomposed into B and G."""
 
 import math
-import subprocess
 
 import numpy as np
 import pytest
@@ -10,7 +9,6 @@ from action_msgs.msg import GoalStatus
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
 from mows_msgs.srv import RunCycle
-from rclpy.action import ActionClient
 
 from mows.lab import reference_at
 from mows.physics.pose import Pose
@@ -18,8 +16,8 @@ from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import DecompositionStatus
-from mows_bringup.graph import NODES
 from mows_ros.qos import MAP_QOS, RESULT_QOS
+from node_processes import send_goal
 
 pytestmark = pytest.mark.ros
 
@@ -74,35 +72,14 @@ class StandInDriver:
 
 
 @pytest.fixture
-def mapper(ros, tmp_path):
-    node = next(n for n in NODES if n.name == "mapper")
-    log_path = tmp_path / "mapper.log"
-    process = subprocess.Popen(
-        node.command(["-p", f"reference_scenario:={SCENARIO}", "-p", "lab_auto:=false"]),
-        stdout=open(log_path, "w"),
-        stderr=subprocess.STDOUT,
+def mapper(action_server):
+    return action_server(
+        "mapper", RotationSweep, "mows/mapper/rotation_sweep", f"reference_scenario:={SCENARIO}", "lab_auto:=false"
     )
-    client = ActionClient(ros.node, RotationSweep, "mows/mapper/rotation_sweep")
-    ros.wait_for(lambda: client.server_is_ready(), "the sweep action server")
-    yield client, process
-    process.terminate()
-    try:
-        code = process.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        code = process.wait()
-    assert code == 0, log_path.read_text()
 
 
 def sweep(ros, client, **goal):
-    feedback = []
-    sent = client.send_goal_async(RotationSweep.Goal(**goal), feedback_callback=lambda f: feedback.append(f.feedback))
-    handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")
-    if not handle.accepted:
-        return handle, None, feedback
-    result = handle.get_result_async()
-    done = ros.wait_for(lambda: result.done() and result.result(), "the sweep result")
-    return handle, done, feedback
+    return send_goal(ros, client, RotationSweep.Goal(**goal))
 
 
 def test_a_sweep_recovers_the_field_and_reports_on_the_model(ros, mapper):

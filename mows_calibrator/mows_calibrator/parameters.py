@@ -1,0 +1,74 @@
+"""The calibrator's parameter table, with the checks that its scenarios and nominal probe exist,
+and the bench they describe."""
+
+import dataclasses
+
+from mows.physics.probe import PAPER_PROBE, Probe
+from mows.sim.scenario import load_scenario
+from mows.sweep.calibration_schedule import PAPER_CURRENTS_A, scenario_wirings
+from mows_ros.params import ParamSpec
+from mows_ros.probe import probe_file_problem
+
+
+def scenario_problem(parameter: str, name: str) -> str | None:
+    """Why ``name`` is no scenario with a supply section, or None ('' is allowed: none)."""
+    try:
+        if name and load_scenario(name).supply is None:
+            return f"{parameter}={name!r} has no supply section: the supply's field per ampere is unknown"
+    except (OSError, ValueError) as error:
+        return f"{parameter}={name!r}: {error}"
+    return None
+
+
+def nominal_probe_problem(path: str) -> str | None:
+    """Why ``nominal_probe_file`` cannot be read, or None ('' is the paper's probe)."""
+    problem = probe_file_problem(path) if path else None
+    return None if problem is None else f"nominal_{problem}"  # probe_file_problem says probe_file=…
+
+
+PARAMETERS = (
+    ParamSpec(
+        "scenario",
+        "calibration",
+        "scenario whose supply section describes the homogeneous wiring (the "
+        "Helmholtz pair's field per ampere at the probe)",
+        check=lambda v: scenario_problem("scenario", v or "?"),
+    ),
+    ParamSpec(
+        "gradient_scenario",
+        "calibration_gradient",
+        "scenario whose supply section describes the gradient wiring (anti-Helmholtz); '' for none",
+        check=lambda v: scenario_problem("gradient_scenario", v),
+    ),
+    ParamSpec(
+        "nominal_probe_file",
+        "",
+        "probe YAML giving the magnet's moment, mass and the housing stop ('' the paper's)",
+        check=nominal_probe_problem,
+    ),
+    ParamSpec("probe_file", "calibrated_probe.yaml", "where a goal without probe_file writes the calibrated probe"),
+    ParamSpec("hardware_id", "", "written to the probe file ('' the scenario's name)"),
+    ParamSpec("currents_a", list(PAPER_CURRENTS_A), "supply currents of a goal that lists none, A"),
+    ParamSpec("cycle_timeout_s", 300.0, "longest wait for the driver's cycle, s", range=(1.0, 3600.0)),
+    ParamSpec("supply_timeout_s", 60.0, "longest wait for the supply to reach a current, s", range=(1.0, 3600.0)),
+    ParamSpec("fit_timeout_s", 10.0, "longest wait for the fits of a finished cycle, s", range=(0.1, 600.0)),
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class Bench:
+    """The calibration bench the parameters describe: the supply's wirings by name (the
+    homogeneous one's name), the nominal probe and the hardware id for the probe file."""
+
+    wirings: dict
+    homogeneous: str
+    nominal: Probe
+    hardware_id: str
+
+
+def bench_of(values: dict) -> Bench:
+    scenario = load_scenario(values["scenario"])
+    gradient = load_scenario(values["gradient_scenario"]) if values["gradient_scenario"] else None
+    nominal = Probe.from_yaml(values["nominal_probe_file"]) if values["nominal_probe_file"] else PAPER_PROBE
+    wirings = scenario_wirings(scenario, gradient)
+    return Bench(wirings, scenario.supply.name, nominal, values["hardware_id"] or scenario.name)

@@ -20,7 +20,6 @@ from mows_msgs.action import CalibrateProbe
 from mows_msgs.msg import RingdownFit
 from mows_msgs.srv import SetFieldCurrent
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.callback_groups import ReentrantCallbackGroup
 
 from mows.estimate.probe_calibration import CalibrationError
 from mows.sim.scenario import load_scenario
@@ -42,9 +41,9 @@ ACTION = "mows/calibrator/calibrate_probe"
 class CalibratorNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
-        group = ReentrantCallbackGroup()
         self._calibrator = ProbeCalibrator()
-        self._driver = DriverCycles(self, self._on_fit, group)
+        self._driver = DriverCycles(self, self._on_fit)
+        group = self._driver.group
         self._supply = self.create_client(SetFieldCurrent, "mows/driver/set_field_current", callback_group=group)
         self._server = ActionServer(
             self,

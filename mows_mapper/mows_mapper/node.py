@@ -21,7 +21,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.callback_groups import ReentrantCallbackGroup
 
 from mows.lab import analyse, from_sweep
 from mows.sweep.runner import CycleAnswer, CycleCall, SweepMap, SweepRunner, SweepStep
@@ -43,9 +42,8 @@ SERVICE_WAIT_S = 5.0  # longest wait for the driver's run_cycle service to appea
 class MapperNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
-        group = ReentrantCallbackGroup()
         self._runner = SweepRunner()
-        self._driver = DriverCycles(self, self._on_fit, group)
+        self._driver = DriverCycles(self, self._on_fit)
         self._sweep_pub = self.create_publisher(SweepDecomposition, "mows/sweep", MAP_QOS)
         self._report_pub = self.create_publisher(ModelReport, "mows/model_report", MAP_QOS)
         self._server = ActionServer(
@@ -55,7 +53,7 @@ class MapperNode(MowsNode):
             self._execute,
             goal_callback=self._accept,
             cancel_callback=self._cancel,
-            callback_group=group,
+            callback_group=self._driver.group,
         )
 
     def _param(self, name):

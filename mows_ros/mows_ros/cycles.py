@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 from mows_msgs.msg import RingdownFit
 from mows_msgs.srv import RunCycle
-from rclpy.callback_groups import CallbackGroup
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
 from mows.sweep.runner import CycleAnswer
@@ -33,12 +33,14 @@ def cycle_answer(response: RunCycle.Response | None) -> CycleAnswer:
 
 
 class DriverCycles:
-    """``node``'s RunCycle client and ``/mows/ringdown`` subscription (both in ``group``); every
-    fit goes to ``on_fit``."""
+    """``node``'s RunCycle client and ``/mows/ringdown`` subscription; every fit goes to
+    ``on_fit``. Both are in ``group``, reentrant, which the node's action server shares: a goal
+    that awaits its cycle holds its group, and the fits and the driver's answer must still come."""
 
-    def __init__(self, node: Node, on_fit: Callable[[RingdownFit], object], group: CallbackGroup):
+    def __init__(self, node: Node, on_fit: Callable[[RingdownFit], object]):
         self._node = node
         self._fits_in = Delivery(node)
+        self.group = group = ReentrantCallbackGroup()
         self._client = node.create_client(RunCycle, "mows/driver/run_cycle", callback_group=group)
         deliver = self._fits_in.deliver
         node.create_subscription(

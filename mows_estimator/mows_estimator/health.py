@@ -41,6 +41,7 @@ class FitTally:
                 **{f"status_{k}": v for k, v in self._counts.items() if k != "OK"},
                 "latency_p50_ms": float(np.percentile(latency, 50)),
                 "latency_p99_ms": float(np.percentile(latency, 99)),
+                "gaps": assembler.gaps,
                 "missing_samples": missing,
                 "late_windows": assembler.late_windows,
                 "blocks": assembler.blocks,

@@ -74,6 +74,17 @@ def test_a_sequence_gap_is_counted_and_refused():
     assert fit.status == FitStatus.DATA_GAP and "500" in fit.message
 
 
+def test_each_run_of_lost_blocks_is_one_gap():
+    samples, saturated = stream()
+    assembler = SegmentAssembler()
+    lost = {1000 + 5000, 1000 + 20_000, 1000 + 20_500}  # one block, then a run of two
+    for block in blocks(samples, saturated, 500):
+        if block.first_sample_index not in lost:
+            assembler.add_block(block)
+    assert assembler.gaps == 2 and assembler.missing_samples == 1500
+    assert assembler.blocks == 40_000 // 500 - 3
+
+
 def test_a_window_announced_after_its_samples_left_the_buffer():
     samples, saturated = stream()
     assembler = SegmentAssembler(buffer_s=0.2)

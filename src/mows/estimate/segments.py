@@ -100,7 +100,8 @@ class _Pending:
 class SegmentAssembler:
     """Buffers about ``buffer_s`` of blocks and assembles announced ring-down windows.
 
-    Counters (for diagnostics): ``blocks``, ``missing_samples`` (sequence gaps in the stream),
+    Counters (for diagnostics): ``blocks``, ``gaps`` (blocks that did not follow on from the one
+    before: lost blocks, one gap per run of them), ``missing_samples`` (the samples in those gaps),
     ``rate_changes`` (a new sample rate or number of channels restarts the buffer), ``late_windows``
     (announced after their samples left the buffer).
     """
@@ -112,6 +113,7 @@ class SegmentAssembler:
         self._blocks: collections.deque[SampleBlock] = collections.deque()
         self._pending: list[_Pending] = []
         self.blocks = 0
+        self.gaps = 0
         self.missing_samples = 0
         self.rate_changes = 0
         self.late_windows = 0
@@ -126,6 +128,7 @@ class SegmentAssembler:
             self.rate_changes += 1
             self._blocks.clear()
         elif newest is not None and block.first_sample_index > newest.end_index:
+            self.gaps += 1
             self.missing_samples += block.first_sample_index - newest.end_index
         elif newest is not None and block.first_sample_index < newest.end_index:
             return []  # a repeat or an out-of-order block: the samples are already here or gone

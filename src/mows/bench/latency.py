@@ -2,7 +2,10 @@
 
 It needs ROS, which this library never imports: the measurement is ``mows-latency`` of the
 mows_bringup package (the driver on the simulated device and the estimator, as processes),
-run here as a subprocess in the sourced workspace (``source install/setup.bash``).
+run here as a subprocess in the sourced workspace (``source install/setup.bash``). With
+``load`` it is ``mows-latency --load``: a ``load_duration_s`` stream of cycles beside two CPU
+burners and a 1 kHz JointState loop, with the gaps counted and the load as run reported, and
+the same stream without the load as the baseline.
 """
 
 import json
@@ -10,16 +13,27 @@ import shutil
 import subprocess
 
 
-def run(cycles: int = 4, repeats: int = 5, tracking: bool = False) -> dict:
-    """``mows-latency``'s figures; ``tracking``: of the driver's tracking mode (cycles × repeats ring-downs)."""
+def run(
+    cycles: int = 4, repeats: int = 5, tracking: bool = False, load: bool = False, load_duration_s: float = 60.0
+) -> dict:
+    """``mows-latency``'s figures; ``tracking``: of the driver's tracking mode (cycles × repeats
+    ring-downs); ``load``: under load, with as ``baseline`` the same stream without the load, run
+    just before (the machine is shared: its own load is in both)."""
     tool = shutil.which("mows-latency")
     if tool is None:
         return {"skipped": "mows-latency not on PATH: source install/setup.bash (make bench does)"}
+    if not load:
+        return _measure(tool, repeats, ["--cycles", str(cycles), *(["--tracking"] if tracking else [])])
+    baseline = _measure(tool, repeats, ["--duration", str(load_duration_s)])
+    return {**_measure(tool, repeats, ["--load", "--duration", str(load_duration_s)]), "baseline": baseline}
+
+
+def _measure(tool: str, repeats: int, how: list[str]) -> dict:
     done = subprocess.run(
-        [tool, "--json", "--cycles", str(cycles), "--repeats", str(repeats), *(["--tracking"] if tracking else [])],
+        [tool, "--json", "--repeats", str(repeats), *how],
         capture_output=True,
         text=True,
-        timeout=600,
+        timeout=900,
     )
     lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
     if done.returncode != 0 or not lines:

@@ -46,7 +46,7 @@ QUICK: dict[str, dict[str, object]] = {
     "estimator": {"trials": 60},
     "simulator": {"repeats": 5},
     "stream": {"duration_s": 3.0},
-    "latency": {"cycles": 1, "repeats": 5},
+    "latency": {"cycles": 1, "repeats": 5, "load_duration_s": 10.0},
     "latency_tracking": {"cycles": 2, "repeats": 5},
     "lab_long": {"rows": 20_000},
     "throughput": {"protocols": ("default",), "tracking_updates": 10},
@@ -62,6 +62,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     parser.add_argument("--quick", action="store_true", help="fewer trials (rough figures, for a smoke run)")
+    parser.add_argument(
+        "--load",
+        action="store_true",
+        help="latency: a 60 s stream beside two CPU burners and a 1 kHz JointState loop (a robot's control loop)",
+    )
 
 
 def run(args) -> int:
@@ -75,7 +80,10 @@ def run(args) -> int:
         if not args.json:
             print(f"== {name}: {what}", flush=True)
         start = time.perf_counter()
-        result = importlib.import_module(module_name).run(**(QUICK.get(name, {}) if args.quick else {}))
+        options = dict(QUICK.get(name, {}) if args.quick else {})
+        if args.load and name == "latency":
+            options["load"] = True
+        result = importlib.import_module(module_name).run(**options)
         result["wall_s"] = time.perf_counter() - start
         figures[name] = result
         if not args.json:

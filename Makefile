@@ -79,6 +79,8 @@ lint: $(BUILD_STAMP) $(CORE_STAMP)
 test: lint $(BUILD_STAMP) $(CORE_STAMP)
 	command -v chromium >/dev/null || $(call apt_install,chromium)
 	command -v ip >/dev/null || $(call apt_install,iproute2)  # the two-host test's network namespaces
+	command -v nft >/dev/null || $(call apt_install,nftables)  # its packet loss and delay (kernels without
+	command -v iptables >/dev/null || $(call apt_install,iptables)  # sch_netem: tests/ros/test_two_hosts.py)
 	$(ENVIRONMENT) && python -m pytest $(PYTEST_ARGS)
 
 # The main job: the node graph on the simulated device runs a rotation sweep, decomposes it

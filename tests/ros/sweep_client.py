@@ -1,9 +1,12 @@
 """Runs one rotation sweep through the graph it finds and prints the outcome as JSON (one line):
-for tests that must put the client in another network namespace than pytest's own.
+for tests that must put the client in another network namespace than pytest's own. With the
+outcome: the ring-down fits it heard, by status, and the last diagnostics of the driver and the
+estimator (once the estimator's counts take in every fit heard here).
 
     python sweep_client.py THETA0_DEG,... REPEATS BOUND_S
 """
 
+import collections
 import json
 import math
 import sys
@@ -12,21 +15,24 @@ import time
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from mows_msgs.action import RotationSweep
-from mows_msgs.msg import MagnetometerBlock
+from mows_msgs.msg import MagnetometerBlock, RingdownFit
 from rclpy.action import ActionClient
 
-from mows_ros.qos import STREAM_QOS
+from mows_ros.qos import RESULT_QOS, STREAM_QOS
 
 
 def main(angles_deg: str, repeats: str, bound_s: str) -> int:
     rclpy.init()
     node = rclpy.create_node("sweep_client")
-    blocks, statuses = [], {}
+    blocks, statuses, fits = [], {}, []
     node.create_subscription(MagnetometerBlock, "/mows/raw", blocks.append, STREAM_QOS)
+    node.create_subscription(RingdownFit, "/mows/ringdown", fits.append, RESULT_QOS)
     node.create_subscription(
         DiagnosticArray,
         "/diagnostics",
-        lambda a: statuses.update((s.name, {kv.key: kv.value for kv in s.values}) for s in a.status),
+        lambda a: statuses.update(
+            (s.name, {"level": ord(s.level), **{kv.key: kv.value for kv in s.values}}) for s in a.status
+        ),
         10,
     )
     client = ActionClient(node, RotationSweep, "/mows/mapper/rotation_sweep")
@@ -48,7 +54,7 @@ def main(angles_deg: str, repeats: str, bound_s: str) -> int:
     handle = spin_until(lambda: sent.done() and sent.result(), "the goal's answer")
     result = handle.get_result_async()
     done = spin_until(lambda: result.done() and result.result(), "the sweep")
-    spin_until(lambda: "/estimator" in statuses and "/driver" in statuses, "diagnostics")
+    spin_until(lambda: "/driver" in statuses and _fits_counted(statuses.get("/estimator")) == len(fits), "diagnostics")
     print(
         json.dumps(
             {
@@ -57,6 +63,10 @@ def main(angles_deg: str, repeats: str, bound_s: str) -> int:
                 "message": done.result.message,
                 "n_points": done.result.decomposition.n_points,
                 "blocks_heard": len(blocks),
+                "fits": collections.Counter(f.status_name for f in fits),
+                "failed_fits_with_numbers": sum(
+                    f.status != RingdownFit.STATUS_OK and math.isfinite(f.frequency_hz) for f in fits
+                ),
                 "estimator": statuses["/estimator"],
                 "driver": statuses["/driver"],
             }
@@ -65,6 +75,11 @@ def main(angles_deg: str, repeats: str, bound_s: str) -> int:
     node.destroy_node()
     rclpy.shutdown()
     return 0
+
+
+def _fits_counted(status) -> int | None:
+    """How many fits the estimator says it published (measurement ring-downs: tuning ones are not fitted)."""
+    return None if status is None else int(status["fits_ok"]) + int(status["fits_failed"])
 
 
 if __name__ == "__main__":

@@ -31,7 +31,9 @@ def session_on_simulator(cycle_settings=FAST, frequency_hz=110.0, cap_a=CAP_A):
     scenario = load_scenario()
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(cap_a), paced=False)
     return DeviceSession(
-        backend, SessionConfig(0.025, cycle_settings, scenario.setup, CurrentCap(cap_a), frequency_hz, fit_ringdown)
+        backend,
+        SessionConfig(0.025, cycle_settings, scenario.setup, CurrentCap(cap_a), frequency_hz, fit_ringdown),
+        armed=True,
     )
 
 
@@ -268,7 +270,7 @@ def supplied_session(supply_cap_a=2.0):
     scenario = load_scenario("calibration")
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(CAP_A), paced=False, supply_cap_a=supply_cap_a)
     return DeviceSession(
-        backend, SessionConfig(0.025, FAST, scenario.setup, CurrentCap(CAP_A), 125.0, fit_ringdown)
+        backend, SessionConfig(0.025, FAST, scenario.setup, CurrentCap(CAP_A), 125.0, fit_ringdown), armed=True
     ), backend
 
 

@@ -61,7 +61,7 @@ def session(link):
     backend = SerialBackend(link, CurrentCap(CAP_A))
     settings = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, settle_s=0.1)
     config = SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown)
-    session = DeviceSession(backend, config)
+    session = DeviceSession(backend, config, armed=True)
     yield session
     session.close()
 
@@ -191,6 +191,7 @@ def test_a_watchdog_trip_during_a_cycle_fails_it_instead_of_announcing_a_ringdow
     session = DeviceSession(
         SerialBackend(link, CurrentCap(CAP_A)),
         SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown),
+        armed=True,
     )
     step_until(session, lambda: session.health().get("samples", 0) > 0, "samples")
     done = []

@@ -6,7 +6,14 @@ returns (blocks, phase events) in order. Requests from other threads (a cycle, t
 stop, a supply current) take the session's lock, act on the device at once (the emergency stop switches the
 coils off before it returns) and leave their phase events for the next ``step`` to publish.
 In tracking mode (:mod:`mows.device.tracking`) ``step`` starts the next tracking cycle whenever
-none runs. Nothing here knows about ROS.
+none runs.
+
+The session is *armed* (:meth:`DeviceSession.arm`) only while the driver may energise a coil
+(its lifecycle state ``active``): disarmed, it refuses cycles and supply currents, starts no
+tracking cycle, and the one place that sends commands to the device (``_act``) refuses to send
+any that would drive a coil, so no bug upstream can switch one on. :meth:`DeviceSession.disarm`
+switches the coils off at the device's next sample, fails a running cycle and ramps the supply
+to zero. Nothing here knows about ROS.
 """
 
 from __future__ import annotations
@@ -19,7 +26,15 @@ from collections.abc import Callable
 
 from mows.device.blocks import BlockAssembler
 from mows.device.cycle import CycleSequencer
-from mows.device.interface import Backend, CommandResult, DeviceFault, FieldCurrentCommand, LinkEvent
+from mows.device.interface import (
+    Backend,
+    CoilCommand,
+    Command,
+    CommandResult,
+    DeviceFault,
+    FieldCurrentCommand,
+    LinkEvent,
+)
 from mows.device.phases import (
     CycleOutcome,
     CycleRequest,
@@ -61,8 +76,17 @@ class DeviceSession:
     """``backend`` streamed into blocks; cycles run by a :class:`CycleSequencer` built once the
     device is known (a serial device describes itself when it answers)."""
 
-    def __init__(self, backend: Backend, config: SessionConfig, monotonic: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        backend: Backend,
+        config: SessionConfig,
+        monotonic: Callable[[], float] = time.monotonic,
+        *,
+        armed: bool = False,
+    ):
         self.backend = backend
+        self.armed = armed  # whether a coil may be energised (the driver is active)
+        self.disarmed_reason = "" if armed else "the session is not armed"
         self.config = config
         self.sequencer: CycleSequencer | None = None
         self.assembler: BlockAssembler | None = None
@@ -181,6 +205,7 @@ class DeviceSession:
             self.backend.coils_off_now()
         for command in step.commands:
             try:
+                self._check_armed(command)
                 self.backend.send(command)
             except (ValueError, RuntimeError) as refused:
                 # Refused before it left (the cap, a link that is down): the cycle learns why,
@@ -196,7 +221,7 @@ class DeviceSession:
     def _track(self) -> None:
         """Start the next tracking cycle once the sequencer is idle (:mod:`mows.device.tracking`)."""
         s = self.sequencer
-        if s is None or s.busy or not self.tracking.on or not self.link_up or s.next_index == 0:
+        if s is None or s.busy or not self.tracking.on or not self.armed or not self.link_up or s.next_index == 0:
             return
         request = self.tracking.next_request(self.config.settings)
         assert request is not None  # tracking is on
@@ -209,7 +234,30 @@ class DeviceSession:
         self._last_samples_s = self._monotonic()
         self._act(step)
 
+    def _check_armed(self, command: Command) -> None:
+        """ValueError for a command that would energise a coil while the session is disarmed."""
+        energises = (isinstance(command, CoilCommand) and not command.off) or (
+            isinstance(command, FieldCurrentCommand) and command.current_a != 0.0
+        )
+        if energises and not self.armed:
+            raise ValueError(f"coils may not be energised: {self.disarmed_reason}")
+
     # --- requests from other threads -------------------------------------------------------
+    def arm(self) -> None:
+        """Allow cycles and supply currents (the driver became active)."""
+        with self._lock:
+            self.armed, self.disarmed_reason = True, ""
+
+    def disarm(self, reason: str) -> None:
+        """Refuse cycles and supply currents from now on, for ``reason``: the coils go off at the
+        device's next sample, a running cycle fails and the supply ramps to zero."""
+        with self._lock:
+            self.armed, self.disarmed_reason = False, reason
+            if self.sequencer is not None and self.sequencer.busy:
+                self._act(self.sequencer.abort(reason))
+            self.backend.coils_off_now()
+            self.backend.supply_to_zero_now()
+
     def start_cycle(self, request: CycleRequest, on_done: Callable[[CycleOutcome], None]) -> int:
         """Start a cycle; ``on_done(outcome)`` is called (from the streaming thread, or from the
         thread that stops it) when it ends. Returns its cycle id; ValueError if it cannot run."""
@@ -220,6 +268,8 @@ class DeviceSession:
                     if not self.backend.can_excite
                     else self._not_answered()
                 )
+            if not self.armed:
+                raise ValueError(self.disarmed_reason)
             if not self.link_up:
                 raise ValueError(f"the link to the device is down ({self.last_link_reason})")
             if self.tracking.on:
@@ -252,6 +302,7 @@ class DeviceSession:
             command = FieldCurrentCommand(
                 self._supply_commands, self._next_index + self.backend.command_lead_samples, float(current_a)
             )
+            self._check_armed(command)
             self.backend.send(command)
             self._supply_waiting[command.command_id] = on_done
             return command.command_id
@@ -335,6 +386,7 @@ class DeviceSession:
         """Everything /diagnostics reports, as plain values."""
         with self._lock:
             values = {
+                "armed": self.armed,
                 "link_up": self.link_up,
                 "link_changes": self.link_changes,
                 "link_reason": self.last_link_reason,

@@ -173,7 +173,10 @@ def main(argv=None) -> int:
     say(f"scene: {args.scenario}; node output in {out / 'demo_nodes.log'}")
     graph.start()
     try:
-        ok = run_sweep(args, out, stopping, graph.exited, scene_path, probe_path)
+        problem = graph.bring_up(stopping.is_set)
+        if problem is not None:
+            say(f"bring-up failed: {problem}; see {out / 'demo_nodes.log'}")
+        ok = problem is None and run_sweep(args, out, stopping, graph.exited, scene_path, probe_path)
     finally:
         codes = graph.stop()
         log.close()

@@ -1,12 +1,15 @@
 """mows-graph: run the MOWS node graph without ``ros2 launch`` (not installed here).
 
-    mows-graph [--duration S] [--ros-args ARGS...]
+    mows-graph [--duration S] [--unconfigured] [--ros-args ARGS...]
 
 Starts every node's console script with its parameter file (share/<package>/config/<node>.yaml)
 and any ``--ros-args`` given here, prefixes each line a node writes with ``[node]``, and
-forwards SIGINT and SIGTERM to the nodes. Exit status: 0 when the graph was stopped (by a
-signal or after --duration) and every node stopped cleanly; 1 when a node exited by itself
-or did not stop cleanly.
+forwards SIGINT and SIGTERM to the nodes. The nodes are managed (lifecycle) nodes: mows-graph
+configures them all, then activates them in data-flow order (driver, estimator, mapper,
+calibrator) through their lifecycle services; ``--unconfigured`` leaves them unconfigured for
+a supervisor. Exit status: 0 when the graph was stopped (by a signal or after --duration) and
+every node stopped cleanly; 1 when a node refused a transition, exited by itself or did not
+stop cleanly.
 """
 
 import argparse
@@ -18,10 +21,13 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
+
+from mows_bringup.lifecycle import BringUpError, bring_up
 
 STOP_TIMEOUT_S = 10.0  # a node still running this long after SIGINT is aborted
 ABORT_TIMEOUT_S = 5.0  # and killed if it outlives the abort
@@ -41,13 +47,16 @@ class GraphNode:
         share = Path(get_package_share_directory(self.package))
         return str(share / "config" / f"{self.name}.yaml")
 
-    def command(self, ros_args: list[str]) -> list[str]:
+    def command(self, ros_args: list[str], autostart: bool = True) -> list[str]:
+        """The node alone, active once it has configured itself (``--autostart``); with
+        ``autostart=False`` unconfigured, for a supervisor to bring up."""
         # Where ros2 run and launch_ros look for an ament_python console script.
         script = Path(get_package_prefix(self.package)) / "lib" / self.package / self.executable
-        return [str(script), "--ros-args", "--params-file", self.config_path(), *ros_args]
+        own = ["--autostart"] if autostart else []
+        return [str(script), *own, "--ros-args", "--params-file", self.config_path(), *ros_args]
 
 
-NODES = (
+NODES = (  # in data-flow order: the order of activation
     GraphNode("driver", "mows_driver", "mows_driver"),
     GraphNode("estimator", "mows_estimator", "mows_estimator"),
     GraphNode("mapper", "mows_mapper", "mows_mapper"),
@@ -78,15 +87,17 @@ class Graph:
         self._events: queue.SimpleQueue = queue.SimpleQueue()
         self._processes: dict[str, subprocess.Popen] = {}
         self._pumps: list[threading.Thread] = []
+        self._stop_requested = threading.Event()
 
     def on_signal(self, signum: int, _frame) -> None:
+        self._stop_requested.set()
         self._events.put(("signal", signal.Signals(signum).name))
 
     def start(self) -> None:
         environment = {**os.environ, "PYTHONUNBUFFERED": "1"}
         for node in self._nodes:
             process = subprocess.Popen(
-                node.command(self._ros_args),
+                node.command(self._ros_args, autostart=False),
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
@@ -103,6 +114,26 @@ class Graph:
             pump = threading.Thread(target=self._pump, args=(name, process), daemon=True)
             pump.start()
             self._pumps.append(pump)
+
+    def bring_up(self, stopping: Callable[[], bool] | None = None) -> str | None:
+        """Configure every node, then activate them in data-flow order; why that failed, or
+        None. A stop asked for meanwhile (a signal, or ``stopping()``) ends it early with None:
+        the caller stops the graph as it would anyway."""
+        stopping = stopping or self._stop_requested.is_set
+
+        def give_up() -> str | None:
+            if stopping():
+                return "a stop was asked for"
+            gone = self.exited()
+            return f"{', '.join(gone)} exited by itself" if gone else None
+
+        say("configuring every node, then activating them in data-flow order")
+        try:
+            bring_up([node.name for node in self._nodes], self._ros_args, give_up, say)
+        except BringUpError as error:
+            return None if stopping() else str(error)
+        say("every node is active")
+        return None
 
     def exited(self) -> list[str]:
         """Names of the nodes that have ended (for a caller that waits on something else)."""
@@ -182,6 +213,11 @@ def parse_arguments(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
         metavar="S",
         help="stop after S seconds of every node running (default: run until SIGINT/SIGTERM)",
     )
+    parser.add_argument(
+        "--unconfigured",
+        action="store_true",
+        help="leave the nodes unconfigured, for a supervisor to bring up (lifecycle services)",
+    )
     args = parser.parse_args(own)
     if args.duration is not None and args.duration <= 0:
         parser.error(f"--duration must be positive, got {args.duration}")
@@ -194,12 +230,19 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, graph.on_signal)
     signal.signal(signal.SIGTERM, graph.on_signal)
     graph.start()
-    died = graph.wait(args.duration)
+    problem = None
+    if args.unconfigured:
+        say("nodes left unconfigured: configure and activate them through their lifecycle services")
+    else:
+        problem = graph.bring_up()
+    if problem is not None:
+        say(f"bring-up failed: {problem}")
+    died = graph.wait(args.duration) if problem is None else None
     codes = graph.stop()
     unclean = {name: code for name, code in codes.items() if code != 0}
     if unclean:
         say("not stopped cleanly: " + ", ".join(f"{n} (code {c})" for n, c in unclean.items()))
-    return 1 if died is not None or unclean else 0
+    return 1 if problem is not None or died is not None or unclean else 0
 
 
 if __name__ == "__main__":

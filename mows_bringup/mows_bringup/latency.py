@@ -62,6 +62,10 @@ def main(argv=None) -> int:
     if load is not None:
         load.start()
     try:
+        problem = graph.bring_up()
+        if problem is not None:
+            say(f"bring-up failed: {problem}")
+            return 1
         stream = measure(args.cycles, args.repeats, duration_s, graph.exited, args.tracking)
     finally:
         load_as_run = load.stop() if load is not None else None

@@ -72,6 +72,9 @@ class CalibratorNode(MowsNode):
         return run.on_fit(msg.cycle_id, fit)
 
     def _accept(self, goal) -> GoalResponse:
+        if (inactive := self.inactive_reason()) is not None:
+            self.get_logger().warning(f"calibration goal refused: {inactive}")
+            return GoalResponse.REJECT
         try:
             homogeneous = load_scenario(self._param("scenario")).supply.name
             self._calibrator.accept(goal_plan(goal, homogeneous, self._param("currents_a")))

@@ -10,10 +10,18 @@ waits. Topic and service names are relative: in the root namespace they are /mow
 /mows/excitation, /mows/driver/run_cycle, /mows/driver/emergency_stop and
 /mows/driver/set_field_current (docs/driver.md).
 
+A managed node (``mows_ros.node``): ``configure`` checks the parameters and opens the device
+link (and the bag) and reads the device from then on; ``activate`` publishes the stream and
+arms the session, the only state in which a coil may be energised; ``deactivate`` switches the
+coils off at the device's next sample, fails a running cycle, ramps the supply to zero, stops
+publishing the stream (``mows/excitation`` still says what the coils do) and refuses cycles
+with the reason; ``cleanup`` closes the link. The rule is the core's
+(:class:`mows.device.session.DeviceSession` refuses to energise unless armed).
+
 The node never dies on data and never publishes a number it did not measure: what goes
 wrong is in the service responses, on /diagnostics and in the log. The coils are off in
-every phase but EXCITING and when the node stops (SIGINT, SIGTERM), and the static-field supply
-is ramped to zero when it stops.
+every phase but EXCITING, in every lifecycle state but active, and when the node stops (SIGINT,
+SIGTERM), and the static-field supply is ramped to zero when it stops.
 """
 
 import threading
@@ -24,7 +32,6 @@ from mows_msgs.msg import ExcitationState, MagnetometerBlock
 from mows_msgs.srv import EmergencyStop, RunCycle, SetFieldCurrent
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.exceptions import InvalidParameterValueException
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
@@ -69,42 +76,21 @@ RUN_CYCLE_SERVICE = "mows/driver/run_cycle"
 EMERGENCY_STOP_SERVICE = "mows/driver/emergency_stop"
 SET_FIELD_CURRENT_SERVICE = "mows/driver/set_field_current"
 POLL_S = 0.02  # the streaming thread's longest wait for the device
+INACTIVE = "the driver is not active (lifecycle): coils off, no cycles, no supply current"
 
 
 class DriverNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
-        values = parameter_values(self, PARAMETERS)
-        self._values = values
-        if (problem := current_problem(values)) is not None:
-            raise InvalidParameterValueException("excitation_current_a", values["excitation_current_a"], problem)
-        cap = CurrentCap(values["coil_current_cap_a"])
-        # The cycle fits its tuning ring-downs and the sim backend integrates: compile both (or
-        # load them from numba's cache) now, not while the device streams.
-        self.get_logger().info(f"numba kernels ready in {precompile(simulator=values['backend'] == 'sim'):.1f} s")
-        self.raw_publisher = self.create_publisher(MagnetometerBlock, RAW_TOPIC, STREAM_QOS)
-        self.excitation_publisher = self.create_publisher(ExcitationState, EXCITATION_TOPIC, EXCITATION_QOS)
-        self.joint_publisher = self.create_publisher(JointState, JOINT_STATES_TOPIC, JOINT_QOS)
-        try:
-            backend = make_backend(values, cap)
-        except (ValueError, OSError) as error:
-            raise InvalidParameterValueException("backend", values["backend"], str(error)) from None
-        try:
-            self.recorder = open_recorder(
-                values["record_path"], [(self.raw_publisher, STREAM_QOS), (self.excitation_publisher, EXCITATION_QOS)]
-            )
-        except (ValueError, OSError) as error:
-            raise InvalidParameterValueException("record_path", values["record_path"], str(error)) from None
-        self.session = DeviceSession(backend, session_config(values, cap))
-        if values["backend"] == "sim":  # the simulated stage starts where the parameter puts it
-            self.session.stage_angle_rad = values["theta0_rad"]
-        try:
-            self.session.set_tracking(tracking_settings(values))
-        except ValueError as error:
-            raise InvalidParameterValueException("tracking", values["tracking"], str(error)) from None
+        self._values = parameter_values(self, PARAMETERS)
+        self.session: DeviceSession | None = None  # from configure to cleanup: the device link
+        self.recorder = None
         self.blocks_published = 0
         self.stream_errors = 0
         self._health = StreamHealth()
+        self.raw_publisher = self.create_publisher(MagnetometerBlock, RAW_TOPIC, STREAM_QOS)
+        self.excitation_publisher = self.create_publisher(ExcitationState, EXCITATION_TOPIC, EXCITATION_QOS)
+        self.joint_publisher = self.create_publisher(JointState, JOINT_STATES_TOPIC, JOINT_QOS)
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
         group = ReentrantCallbackGroup()
@@ -112,8 +98,58 @@ class DriverNode(MowsNode):
         self.create_service(EmergencyStop, EMERGENCY_STOP_SERVICE, self._emergency_stop, callback_group=group)
         self.create_service(SetFieldCurrent, SET_FIELD_CURRENT_SERVICE, self._set_field_current, callback_group=group)
         self._stopping = threading.Event()
+        self._streaming: threading.Thread | None = None
+
+    # --- the lifecycle ---------------------------------------------------------------------
+    def configure(self) -> None:
+        """Check the parameters together, open the device link and the bag, and stream from the
+        device (published only while active), disarmed."""
+        values = self._values
+        if (problem := current_problem(values)) is not None:
+            raise ValueError(problem)
+        cap = CurrentCap(values["coil_current_cap_a"])
+        # The cycle fits its tuning ring-downs and the sim backend integrates: compile both (or
+        # load them from numba's cache) now, not while the device streams.
+        self.get_logger().info(f"numba kernels ready in {precompile(simulator=values['backend'] == 'sim'):.1f} s")
+        backend = make_backend(values, cap)  # a ValueError or OSError refuses, with its reason
+        try:
+            self.recorder = open_recorder(
+                values["record_path"], [(self.raw_publisher, STREAM_QOS), (self.excitation_publisher, EXCITATION_QOS)]
+            )
+        except BaseException:
+            backend.close()
+            raise
+        self.session = DeviceSession(backend, session_config(values, cap))
+        self.session.disarm(INACTIVE)
+        if values["backend"] == "sim":  # the simulated stage starts where the parameter puts it
+            self.session.stage_angle_rad = values["theta0_rad"]
+        self.session.set_tracking(tracking_settings(values))  # a ValueError refuses, with its reason
+        self._stopping.clear()
         self._streaming = threading.Thread(target=self._stream, name="mows-driver-stream", daemon=True)
         self._streaming.start()
+
+    def activate(self) -> None:
+        assert self.session is not None  # activate comes after configure
+        self.session.arm()
+
+    def deactivate(self) -> None:
+        """Coils off at the device's next sample, a running cycle failed, the supply ramped to
+        zero; the stream is no longer published."""
+        assert self.session is not None  # deactivate comes after activate
+        self.session.disarm(INACTIVE)
+
+    def cleanup(self) -> None:
+        """Stop streaming, coils off, supply to zero, device released, bag closed."""
+        self._stopping.set()
+        if self._streaming is not None and self._streaming.is_alive():
+            self._streaming.join()
+        self._streaming = None
+        if self.session is not None:
+            self.session.close()
+            self.session = None
+        if self.recorder is not None:
+            self.recorder.close()
+            self.recorder = None
 
     # --- parameters ------------------------------------------------------------------------
     def _validate(self, parameters) -> SetParametersResult:
@@ -123,16 +159,17 @@ class DriverNode(MowsNode):
 
     def _apply(self, parameters) -> None:
         self._values = {**self._values, **{p.name: p.value for p in parameters}}
-        self.session.set_block_duration(self._values["block_duration_s"])
-        self.session.set_cycle_settings(cycle_settings(self._values))
-        if tracking_changed(p.name for p in parameters):  # an emergency stop's end of tracking holds till then
-            self.session.set_tracking(tracking_settings(self._values))
+        if self.session is not None:  # else configure reads them
+            self.session.set_block_duration(self._values["block_duration_s"])
+            self.session.set_cycle_settings(cycle_settings(self._values))
+            if tracking_changed(p.name for p in parameters):  # an emergency stop's end of tracking holds till then
+                self.session.set_tracking(tracking_settings(self._values))
 
     # --- services --------------------------------------------------------------------------
     async def _run_cycle(self, request: RunCycle.Request, response: RunCycle.Response) -> RunCycle.Response:
         finished = Future()
         try:  # the streaming thread (or the emergency stop) completes it
-            response.cycle_id = self.session.start_cycle(cycle_request(request), completer(self, finished))
+            response.cycle_id = self._linked().start_cycle(cycle_request(request), completer(self, finished))
         except ValueError as refused:
             response.success, response.message = False, f"cycle refused: {refused}"
             self.get_logger().warning(response.message)
@@ -153,7 +190,7 @@ class DriverNode(MowsNode):
         try:  # the streaming thread completes it once the samples have reached the ramp's end
             if (problem := supply_problem(request.current_a, self._values)) is not None:
                 raise ValueError(problem)
-            self.session.set_field_current(request.current_a, completer(self, reached))
+            self._linked().set_field_current(request.current_a, completer(self, reached))
         except ValueError as refused:
             response.success, response.message = False, f"supply current refused: {refused}"
             self.get_logger().warning(response.message)
@@ -165,6 +202,10 @@ class DriverNode(MowsNode):
     def _emergency_stop(
         self, request: EmergencyStop.Request, response: EmergencyStop.Response
     ) -> EmergencyStop.Response:
+        if self.session is None:
+            response.success, response.latched = False, False
+            response.message = f"the driver is {self.lifecycle_state}: no device link, nothing it drives is on"
+            return response
         estop_response(
             self.session.emergency_stop(request.engage, request.reason), request, response, self.session.backend.name
         )
@@ -174,14 +215,29 @@ class DriverNode(MowsNode):
             self.get_logger().info("emergency stop released")
         return response
 
+    def _linked(self) -> DeviceSession:
+        """The device session; ValueError, with the reason, while there is none."""
+        if self.session is None:
+            raise ValueError(f"the driver is {self.lifecycle_state}: no device link")
+        return self.session
+
     # --- streaming -------------------------------------------------------------------------
     def _stream(self) -> None:
-        wanted = self._values["bag_wait_subscribers"] if self.session.backend.name == "bag" else 0
-        while self.raw_publisher.get_subscription_count() < wanted and not self._stopping.wait(POLL_S):
+        """From configure to cleanup: the device is read (a live one keeps streaming whatever we
+        do), and what it sends is published while the driver is active. A recording replays
+        once, so it waits for an active driver with its subscribers."""
+        session = self._linked()
+        replay = session.backend.name == "bag"
+        wanted = self._values["bag_wait_subscribers"] if replay else 0
+
+        def ready() -> bool:
+            return not replay or (self.active and self.raw_publisher.get_subscription_count() >= wanted)
+
+        while not ready() and not self._stopping.wait(POLL_S):
             pass
         while not self._stopping.is_set():
             try:
-                self._publish_step(self.session.step(POLL_S))
+                self._publish_step(session.step(POLL_S))
             except Exception:  # a bug must not stop the stream; it is logged and counted
                 if not self.context.ok():
                     return
@@ -194,7 +250,9 @@ class DriverNode(MowsNode):
             (self.get_logger().info if link.up else self.get_logger().warning)(
                 f"link {'up' if link.up else 'lost'}: {link.reason}"
             )
-        for block in output.blocks:
+        # Published only while armed (active): disarming flips it under the session's lock, so
+        # no block with a sample read after the deactivation is published.
+        for block in output.blocks if self._linked().armed else ():
             self._publish(
                 self.raw_publisher,
                 block_msg(block, self.session.backend.info, self._values["frame_id"], self._values["sensor_frame_ids"]),
@@ -215,6 +273,8 @@ class DriverNode(MowsNode):
 
     # --- health and shutdown ---------------------------------------------------------------
     def health(self) -> Health:
+        if self.session is None:
+            return super().health()
         state = self.session.health()
         info = self.session.backend.info
         values = {
@@ -227,16 +287,6 @@ class DriverNode(MowsNode):
             "recorded_messages": self.recorder.messages if self.recorder else 0,
         }
         return self._health(state, self.session.backend.name, self.stream_errors, values)
-
-    def destroy_node(self) -> None:
-        """Stop streaming, coils off, supply to zero, close the bag: on SIGINT, SIGTERM and any other exit."""
-        self._stopping.set()
-        if self._streaming.is_alive():
-            self._streaming.join()
-        self.session.close()
-        if self.recorder is not None:
-            self.recorder.close()
-        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

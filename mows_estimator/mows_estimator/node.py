@@ -42,14 +42,11 @@ class EstimatorNode(MowsNode):
 
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
-        # Compile the fit (or load it from numba's cache) now, not on the first real ring-down;
-        # subscriptions and publishers come after, so a node that advertises results can make them.
-        self.get_logger().info(f"fit kernels ready in {precompile(simulator=False):.1f} s")
         self._estimator = RingdownEstimator(self.get_parameter("buffer_s").value)
         self._tally = FitTally()
         self._calibrated = Future()
-        self.create_subscription(MagnetometerBlock, "mows/raw", self._on_block, STREAM_QOS)
-        self.create_subscription(ExcitationState, "mows/excitation", self._on_excitation, RESULT_QOS)
+        self.create_subscription(MagnetometerBlock, "mows/raw", self.when_active(self._on_block), STREAM_QOS)
+        self.create_subscription(ExcitationState, "mows/excitation", self.when_active(self._on_excitation), RESULT_QOS)
         self._fit_pub = self.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
         self._field_pub = self.create_publisher(FieldEstimate, "mows/field", RESULT_QOS)
         self._magnetic_pub = self.create_publisher(MagneticField, "mows/magnetic_field", STREAM_QOS)
@@ -59,6 +56,10 @@ class EstimatorNode(MowsNode):
         self.create_service(
             Calibrate, "mows/estimator/calibrate", self._on_calibrate, callback_group=ReentrantCallbackGroup()
         )
+
+    def configure(self) -> None:
+        # Compile the fit (or load it from numba's cache) now, not on the first real ring-down.
+        self.get_logger().info(f"fit kernels ready in {precompile(simulator=False):.1f} s")
 
     def probe(self) -> Probe:
         return probe_of(self.get_parameter("probe_file").value)
@@ -104,6 +105,9 @@ class EstimatorNode(MowsNode):
     # --- calibration ------------------------------------------------------------------------
     async def _on_calibrate(self, request: Calibrate.Request, response: Calibrate.Response):
         """f00 from the next ring-downs (:class:`mows.estimate.calibration.F00Calibration`)."""
+        if (inactive := self.inactive_reason()) is not None:
+            response.success, response.message = False, inactive
+            return response
         try:
             calibration = self._estimator.begin_calibration(
                 self.probe(), request.reference_field_t, request.n_ringdowns, request.timeout_s

@@ -64,6 +64,9 @@ class MapperNode(MowsNode):
         return self._runner.on_fit(sweep_fit(msg))
 
     def _accept(self, goal) -> GoalResponse:
+        if (inactive := self.inactive_reason()) is not None:
+            self.get_logger().warn(f"sweep goal refused: {inactive}")
+            return GoalResponse.REJECT
         try:  # one sweep at a time: the runner is busy from here, not from when the sweep starts
             settings = sweep_settings(parameter_values(self, PARAMETERS))
             self._runner.start(sweep_goal(goal), settings, probe_of(self._param("probe_file")))

@@ -1,5 +1,12 @@
-"""Run one node as a process: spin until SIGINT or SIGTERM, then leave cleanly (exit 0)."""
+"""Run one node as a process: spin until SIGINT or SIGTERM, then leave cleanly (exit 0).
 
+    <node executable> [--autostart] [--ros-args ...]
+
+A node starts unconfigured, for a supervisor (mows-graph, ``ros2 lifecycle``) to bring up;
+``--autostart`` configures and activates it at once, as a node run alone needs.
+"""
+
+import argparse
 import faulthandler
 import sys
 from collections.abc import Callable
@@ -7,14 +14,23 @@ from collections.abc import Callable
 import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.node import Node
+from rclpy.utilities import remove_ros_args
 
+from mows_ros.node import MowsNode
 from mows_ros.params import UnknownParameterError
 
 EXIT_BAD_PARAMETER = 2
+AUTOSTART = "--autostart"
 
 
-def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
+def autostart_asked(args: list[str] | None) -> bool:
+    """Whether the arguments outside of ``--ros-args`` ask for ``--autostart``."""
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument(AUTOSTART, action="store_true", help="configure and activate the node at start-up")
+    return parser.parse_args(remove_ros_args(sys.argv if args is None else args)[1:]).autostart
+
+
+def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -> int:
     """Create the node with ``make_node`` and spin it on one thread; return the exit code.
 
     A callback that waits (the driver's run_cycle, the estimator's calibration, the mapper's
@@ -28,14 +44,18 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> in
     it lands outside of spin): both are the normal way for a node to stop. A value from a
     parameter file or ``-p`` that the node rejects, or a parameter it does not have, ends it
     with EXIT_BAD_PARAMETER and the reason, not a traceback: it is a configuration error, not
-    a bug.
+    a bug. So does a configure or activate refused with ``--autostart``.
     """
     faulthandler.enable()  # a node aborted because it would not stop says where it hung
+    autostart = autostart_asked(args)
     rclpy.init(args=args)
     node = None
     executor = SingleThreadedExecutor()
     try:
         node = make_node()
+        if autostart and (problem := node.start_active()) is not None:
+            sys.stderr.write(f"error: {problem}\n")
+            return EXIT_BAD_PARAMETER
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

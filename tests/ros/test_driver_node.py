@@ -14,6 +14,7 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
 from mows_msgs.srv import EmergencyStop, RunCycle
+from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -153,6 +154,7 @@ def test_the_emergency_stop_ends_a_running_cycle_and_latches(start_driver, liste
 def test_parameters_out_of_range_are_rejected_with_their_reason(ros_context):
     node = driver.DriverNode()
     try:
+        assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS, node.lifecycle_problem
         for name, value, why in [
             ("excitation_current_a", 10.5, "exceeds coil_current_cap_a=10.0"),
             ("repeats", 0, "repeats out of range"),

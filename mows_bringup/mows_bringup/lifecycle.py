@@ -1,0 +1,127 @@
+"""Managed nodes brought up through their ``lifecycle_msgs`` services, as a supervisor does:
+``configure`` every node at once (each loads its files and compiles in its own process), then
+``activate`` them one by one in data-flow order, each once the one before it is active.
+
+The client has a ROS context of its own, so that a program with its own (mows-demo) is not
+disturbed, and takes the graph's ROS arguments: a namespace given to the nodes
+(``-r __ns:=/probe_a``) applies to the names it calls (``driver/change_state``).
+"""
+
+import time
+from collections.abc import Callable, Sequence
+
+import rclpy
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
+
+# A bound for a hang only; each wait ends as soon as its answer comes. A node's start-up and its
+# configure (which compiles the numba kernels) take minutes on a cold cache on a loaded machine.
+BOUND_S = 600.0
+RESEND_S = 2.0  # how often a node's state is asked again while a transition's answer is awaited
+
+
+class BringUpError(RuntimeError):
+    """A node refused or did not answer a transition, or the bring-up was given up."""
+
+
+class LifecycleClient:
+    """Asks nodes, by name, for lifecycle transitions and their state; ``give_up()`` says why
+    to stop waiting (a node that exited, a signal) or None.
+
+    An answer can be lost: a service is ready once its server has matched our requests, which
+    can be before it has matched the reader of its answers (seen under load, with a node just
+    started). So a transition counts as done when its answer comes or when the node's state,
+    asked again every RESEND_S, is the transition's goal.
+    """
+
+    def __init__(self, ros_args: Sequence[str], give_up: Callable[[], str | None]):
+        self._context = Context()
+        rclpy.init(
+            args=["mows-graph", "--ros-args", *ros_args],
+            context=self._context,
+            signal_handler_options=SignalHandlerOptions.NO,
+        )
+        self.node = rclpy.create_node("mows_graph", context=self._context)
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(self.node)
+        self._give_up = give_up
+        self._clients: dict = {}
+
+    def request(self, name: str, transition_id: int) -> Future:
+        """Ask ``name`` for a transition (lifecycle_msgs/Transition id); the future of its answer."""
+        client = self._client(ChangeState, f"{name}/change_state")
+        self._wait(client.service_is_ready, BOUND_S, f"the lifecycle services of {name}")
+        return client.call_async(ChangeState.Request(transition=Transition(id=transition_id)))
+
+    def settle(self, name: str, answer: Future, goal: str) -> bool:
+        """Wait until ``answer`` comes or ``name`` is in state ``goal``; whether it succeeded."""
+        state = self._state_poll(name)
+        self._wait(lambda: answer.done() or state() == goal, BOUND_S, f"{name} to become {goal}")
+        return answer.result().success if answer.done() else True
+
+    def transition(self, name: str, transition_id: int, goal: str) -> bool:
+        """Take ``name`` through a transition to state ``goal``; whether it succeeded."""
+        return self.settle(name, self.request(name, transition_id), goal)
+
+    def state(self, name: str) -> str:
+        """The state of ``name`` (its label: unconfigured, inactive, active, finalized, …)."""
+        state = self._state_poll(name)
+        return self._wait(state, BOUND_S, f"the state of {name}")
+
+    def _state_poll(self, name: str) -> Callable[[], str | None]:
+        """A function giving the state of ``name`` in the newest answer to GetState calls it
+        sends (again every RESEND_S), or None before the first answer."""
+        client = self._client(GetState, f"{name}/get_state")
+        calls: list[tuple[float, Future]] = []
+
+        def poll() -> str | None:
+            if client.service_is_ready() and (not calls or time.monotonic() - calls[-1][0] > RESEND_S):
+                calls.append((time.monotonic(), client.call_async(GetState.Request())))
+            answered = [call.result() for _, call in calls if call.done()]
+            return answered[-1].current_state.label if answered else None
+
+        return poll
+
+    def _client(self, kind, service: str):
+        if service not in self._clients:
+            self._clients[service] = self.node.create_client(kind, service)
+        return self._clients[service]
+
+    def _wait(self, condition: Callable[[], object], bound_s: float, what: str):
+        deadline = time.monotonic() + bound_s
+        while not (value := condition()):
+            if (why := self._give_up()) is not None:
+                raise BringUpError(f"{why} while waiting for {what}")
+            if time.monotonic() > deadline:
+                raise BringUpError(f"gave up after {bound_s:g} s waiting for {what}")
+            self._executor.spin_once(timeout_sec=0.1)
+        return value
+
+    def close(self) -> None:
+        self._executor.shutdown()
+        self.node.destroy_node()
+        self._context.try_shutdown()
+
+
+def bring_up(
+    names: Sequence[str], ros_args: Sequence[str], give_up: Callable[[], str | None], report: Callable[[str], None]
+) -> None:
+    """Configure every node of ``names`` at once, then activate them in their order; ``report``
+    is told each step done."""
+    client = LifecycleClient(ros_args, give_up)
+    try:
+        configuring = {name: client.request(name, Transition.TRANSITION_CONFIGURE) for name in names}
+        for name, answer in configuring.items():
+            if not client.settle(name, answer, "inactive"):
+                raise BringUpError(f"{name} refused to configure (its log and /diagnostics say why)")
+        report(f"configured: {', '.join(names)}")
+        for name in names:
+            if not client.transition(name, Transition.TRANSITION_ACTIVATE, "active"):
+                raise BringUpError(f"{name} refused to activate (its log and /diagnostics say why)")
+            report(f"{name} active")
+    finally:
+        client.close()

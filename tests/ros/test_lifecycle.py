@@ -9,8 +9,10 @@ import time
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
+from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
-from mows_msgs.srv import RunCycle
+from mows_msgs.srv import Calibrate, RunCycle
+from rclpy.action import ActionClient
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -226,10 +228,19 @@ def test_a_refused_configure_leaves_the_node_unconfigured_with_the_reason(ros_co
         node.destroy_node()
 
 
-def test_mows_graph_leaves_the_nodes_unconfigured_for_a_supervisor(lifecycle, start):
+def test_mows_graph_leaves_the_nodes_unconfigured_for_a_supervisor(ros, supervisor, lifecycle, start):
     graph = start("mows-graph", "--unconfigured")
     assert {lifecycle.state(node.name) for node in NODES} == {"unconfigured"}, log(graph)
     assert "nodes left unconfigured" in log(graph)
+    # Unconfigured nodes refuse their work with a message that names the state.
+    calibrate = ros.node.create_client(Calibrate, "/mows/estimator/calibrate")
+    answer = supervisor.result(supervisor.call(calibrate, Calibrate.Request(n_ringdowns=3, timeout_s=1.0)))
+    assert not answer.success and "the estimator node is unconfigured" in answer.message
+    sweeps = ActionClient(ros.node, RotationSweep, "/mows/mapper/rotation_sweep")
+    ros.wait_for(sweeps.server_is_ready, "the sweep action")
+    sent = sweeps.send_goal_async(RotationSweep.Goal(theta0_rad=[0.0, 1.0, 2.0, 3.0, 4.0], repeats_per_angle=1))
+    assert not ros.wait_for(lambda: sent.done() and sent.result(), "the goal's answer").accepted
+    ros.wait_for(lambda: "sweep goal refused: the mapper node is unconfigured" in log(graph), "the mapper's reason")
 
 
 def test_mows_graph_configures_all_then_activates_in_data_flow_order(ros, lifecycle, start):

@@ -53,6 +53,13 @@ class FieldCurrentCommand:
 Command = CoilCommand | OrientationCommand | FieldCurrentCommand
 
 
+def energises(command: Command) -> bool:
+    """Whether ``command`` puts current through a coil: a coil drive, or a supply current other than zero."""
+    if isinstance(command, CoilCommand):
+        return not command.off
+    return isinstance(command, FieldCurrentCommand) and command.current_a != 0.0
+
+
 @dataclasses.dataclass(frozen=True)
 class CommandResult:
     """The device's answer to command ``command_id``: the sample it applies at, or why not."""

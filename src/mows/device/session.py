@@ -28,12 +28,12 @@ from mows.device.blocks import BlockAssembler
 from mows.device.cycle import CycleSequencer
 from mows.device.interface import (
     Backend,
-    CoilCommand,
     Command,
     CommandResult,
     DeviceFault,
     FieldCurrentCommand,
     LinkEvent,
+    energises,
 )
 from mows.device.phases import (
     CycleOutcome,
@@ -236,10 +236,7 @@ class DeviceSession:
 
     def _check_armed(self, command: Command) -> None:
         """ValueError for a command that would energise a coil while the session is disarmed."""
-        energises = (isinstance(command, CoilCommand) and not command.off) or (
-            isinstance(command, FieldCurrentCommand) and command.current_a != 0.0
-        )
-        if energises and not self.armed:
+        if energises(command) and not self.armed:
             raise ValueError(f"coils may not be energised: {self.disarmed_reason}")
 
     # --- requests from other threads -------------------------------------------------------

@@ -7,6 +7,7 @@ disturbed, and takes the graph's ROS arguments: a namespace given to the nodes
 (``-r __ns:=/probe_a``) applies to the names it calls (``driver/change_state``).
 """
 
+import math
 import time
 from collections.abc import Callable, Sequence
 
@@ -22,6 +23,7 @@ from rclpy.task import Future
 # configure (which compiles the numba kernels) take minutes on a cold cache on a loaded machine.
 BOUND_S = 600.0
 RESEND_S = 2.0  # how often a node's state is asked again while a transition's answer is awaited
+TRANSITION_STATES = {"configuring", "cleaningup", "shuttingdown", "activating", "deactivating", "errorprocessing"}
 
 
 class BringUpError(RuntimeError):
@@ -32,10 +34,12 @@ class LifecycleClient:
     """Asks nodes, by name, for lifecycle transitions and their state; ``give_up()`` says why
     to stop waiting (a node that exited, a signal) or None.
 
-    An answer can be lost: a service is ready once its server has matched our requests, which
-    can be before it has matched the reader of its answers (seen under load, with a node just
-    started). So a transition counts as done when its answer comes or when the node's state,
-    asked again every RESEND_S, is the transition's goal.
+    A request or its answer can be lost to a node that has just started (seen under load: a
+    driver that never received its configure). So the node's state is asked every RESEND_S
+    while a transition is awaited: the transition is done when an answer says so or the state
+    is its goal, refused when every request was answered no and the state, asked after them,
+    is not the goal; and the request is sent again when the node, RESEND_S after it, still
+    answers from a state that is neither the goal nor a transition.
     """
 
     def __init__(self, ros_args: Sequence[str], give_up: Callable[[], str | None]):
@@ -57,32 +61,45 @@ class LifecycleClient:
         self._wait(client.service_is_ready, BOUND_S, f"the lifecycle services of {name}")
         return client.call_async(ChangeState.Request(transition=Transition(id=transition_id)))
 
-    def settle(self, name: str, answer: Future, goal: str) -> bool:
-        """Wait until ``answer`` comes or ``name`` is in state ``goal``; whether it succeeded."""
+    def settle(self, name: str, transition_id: int, goal: str, sent: Future | None = None) -> bool:
+        """Take ``name`` through ``transition_id`` to state ``goal`` (``sent``: its request,
+        if sent already); whether it succeeded."""
+        requests = [(time.monotonic(), sent or self.request(name, transition_id))]
         state = self._state_poll(name)
-        self._wait(lambda: answer.done() or state() == goal, BOUND_S, f"{name} to become {goal}")
-        return answer.result().success if answer.done() else True
+
+        def decided() -> tuple[bool] | None:
+            asked_s, label = state()
+            if label == goal or any(r.done() and r.result().success for _, r in requests):
+                return (True,)
+            last_s = requests[-1][0]
+            if all(r.done() for _, r in requests):
+                return (False,) if asked_s > last_s else None  # a refusal, once the state confirms it
+            if asked_s > last_s + RESEND_S and label not in TRANSITION_STATES and not requests[-1][1].done():
+                requests.append((time.monotonic(), self.request(name, transition_id)))  # lost: again
+            return None
+
+        return self._wait(decided, BOUND_S, f"{name} to become {goal}")[0]
 
     def transition(self, name: str, transition_id: int, goal: str) -> bool:
         """Take ``name`` through a transition to state ``goal``; whether it succeeded."""
-        return self.settle(name, self.request(name, transition_id), goal)
+        return self.settle(name, transition_id, goal)
 
     def state(self, name: str) -> str:
         """The state of ``name`` (its label: unconfigured, inactive, active, finalized, …)."""
         state = self._state_poll(name)
-        return self._wait(state, BOUND_S, f"the state of {name}")
+        return self._wait(lambda: state()[1], BOUND_S, f"the state of {name}")
 
-    def _state_poll(self, name: str) -> Callable[[], str | None]:
-        """A function giving the state of ``name`` in the newest answer to GetState calls it
-        sends (again every RESEND_S), or None before the first answer."""
+    def _state_poll(self, name: str) -> Callable[[], tuple[float, str]]:
+        """A function giving (when asked, state) of ``name`` from the newest answered of the
+        GetState calls it sends (again every RESEND_S); (−inf, '') before the first answer."""
         client = self._client(GetState, f"{name}/get_state")
         calls: list[tuple[float, Future]] = []
 
-        def poll() -> str | None:
+        def poll() -> tuple[float, str]:
             if client.service_is_ready() and (not calls or time.monotonic() - calls[-1][0] > RESEND_S):
                 calls.append((time.monotonic(), client.call_async(GetState.Request())))
-            answered = [call.result() for _, call in calls if call.done()]
-            return answered[-1].current_state.label if answered else None
+            answered = [(asked_s, call.result()) for asked_s, call in calls if call.done()]
+            return (answered[-1][0], answered[-1][1].current_state.label) if answered else (-math.inf, "")
 
         return poll
 
@@ -114,9 +131,10 @@ def bring_up(
     is told each step done."""
     client = LifecycleClient(ros_args, give_up)
     try:
-        configuring = {name: client.request(name, Transition.TRANSITION_CONFIGURE) for name in names}
-        for name, answer in configuring.items():
-            if not client.settle(name, answer, "inactive"):
+        configure = Transition.TRANSITION_CONFIGURE
+        configuring = {name: client.request(name, configure) for name in names}
+        for name, sent in configuring.items():
+            if not client.settle(name, configure, "inactive", sent):
                 raise BringUpError(f"{name} refused to configure (its log and /diagnostics say why)")
         report(f"configured: {', '.join(names)}")
         for name in names:

@@ -11,7 +11,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
-from mows_msgs.srv import Calibrate, RunCycle
+from mows_msgs.srv import Calibrate, EmergencyStop, RunCycle
 from rclpy.action import ActionClient
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -67,6 +67,7 @@ class Supervisor:
         node.create_subscription(ExcitationState, "/mows/excitation", self.states.append, EXCITATION_QOS)
         node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 10)
         self.run_cycle = node.create_client(RunCycle, "/mows/driver/run_cycle")
+        self.estop = node.create_client(EmergencyStop, "/mows/driver/emergency_stop")
 
     def _diagnostics(self, array: DiagnosticArray) -> None:
         for status in array.status:
@@ -129,6 +130,8 @@ def test_the_driver_energises_coils_only_while_active_through_every_transition(s
     assert "unconfigured" in report["message"] and "samples" not in report
     refused = sup.result(sup.cycle(theta0_rad=0.0))
     assert not refused.success and "unconfigured" in refused.message
+    stop = sup.result(sup.call(sup.estop, EmergencyStop.Request(engage=True, reason="test")))
+    assert not stop.success and not stop.latched and "unconfigured: no device link" in stop.message
     # configure: the device link is open and read, the stream not published, cycles refused
     assert sup.transition(Transition.TRANSITION_CONFIGURE) and sup.state() == "inactive"
     report = sup.ros.wait_for(

@@ -59,10 +59,11 @@ def test_the_simulated_table_has_the_estimators_columns_and_the_scenarios_refere
         [table.columns[name][0] for name in GRADIENT], [gradient[0, 0], gradient[0, 1], gradient[1, 1]]
     )
     assert all(np.ptp(table.columns[name]) == 0 for name in FIELD)
-    # One pooled start amplitude per sweep, near the 24° stop.
+    # One pooled start amplitude per sweep, near the 24° stop, less the rest offsets the fits
+    # determined (< 0.1° here: an anti-Helmholtz pair has no field at its centre).
     for sweep in np.unique(table.sweep):
         amplitude = table.amplitude_deg[table.sweep == sweep]
-        assert np.ptp(amplitude) == 0 and abs(amplitude[0] - np.degrees(scenario.probe.theta_stop_rad)) < 1.0
+        assert np.ptp(amplitude) < 0.3 and np.all(abs(amplitude - np.degrees(scenario.probe.theta_stop_rad)) < 1.0)
 
 
 def test_anti_helmholtz_is_the_transverse_gradient_and_the_finite_amplitude_not_curvature(lab):

@@ -86,6 +86,10 @@ class ChirpDiagnosis:
     explanation: str
 
 
+# ChirpDiagnosis's fields that the tests on the pieces fill, in order.
+TEST_FIELDS = tuple(f.name for f in dataclasses.fields(ChirpDiagnosis))[3:-2]
+
+
 class ChirpError(ValueError):
     """A ring-down whose chirp cannot be measured (failed fit, too short, no amplitude)."""
 
@@ -156,14 +160,12 @@ def _predicted_hz(probe, field_t, theta0_rad, amplitude_rad, damping_per_s, dura
     return float(weights[0] @ potential.frequency_hz(nodes[0]))
 
 
-def _weighted_line(x, y, std):
-    """(slope, σ_slope, χ² of the line) of y = a + b·x with weights 1/σ²."""
+def _weighted_line(x, y, std) -> tuple[float, float]:
+    """(slope, σ_slope) of y = a + b·x with weights 1/σ²."""
     w = 1.0 / np.asarray(std) ** 2
     xm = (w @ x) / w.sum()
     sxx = w @ (x - xm) ** 2
-    slope = (w @ ((x - xm) * y)) / sxx
-    residual = y - (w @ y) / w.sum() - slope * (x - xm)
-    return float(slope), float(1.0 / math.sqrt(sxx)), float(w @ residual**2)
+    return float((w @ ((x - xm) * y)) / sxx), float(1.0 / math.sqrt(sxx))
 
 
 def _diagnosis(fit, pieces, field) -> ChirpDiagnosis:
@@ -175,45 +177,26 @@ def _diagnosis(fit, pieces, field) -> ChirpDiagnosis:
     constant_chi2 = float(w @ (f - (w @ f) / w.sum()) ** 2)
     dof = len(pieces) - 1
     constant_p = float(stats.chi2.sf(constant_chi2, dof))
-    ratio, ratio_std, _ = _weighted_line(predicted, f, std) if np.ptp(predicted) > 0 else (math.nan, math.inf, 0.0)
-    slope, slope_std, _ = _weighted_line(amplitude2, f, std)
-    predicted_slope, _, _ = _weighted_line(amplitude2, predicted, std)
+    ratio, ratio_std = _weighted_line(predicted, f, std) if np.ptp(predicted) > 0 else (math.nan, math.inf)
+    slope, slope_std = _weighted_line(amplitude2, f, std)
+    predicted_slope, _ = _weighted_line(amplitude2, predicted, std)
     damping_std = np.array([p.damping_std_per_s for p in pieces])
-    damping_slope, damping_slope_std, _ = _weighted_line(
+    damping_slope, damping_slope_std = _weighted_line(
         np.sqrt(amplitude2), np.array([p.damping_per_s for p in pieces]), damping_std
     )
-    verdict, explanation = _verdict(
-        constant_p,
-        ratio,
-        ratio_std,
-        slope,
-        slope_std,
-        predicted_slope,
-        damping_slope,
-        damping_slope_std,
-        std,
-        predicted,
-    )
-    return ChirpDiagnosis(
-        fit,
-        pieces,
-        field,
-        constant_chi2 / dof,
-        constant_p,
-        ratio,
-        ratio_std,
-        slope,
-        slope_std,
-        predicted_slope,
-        damping_slope,
-        damping_slope_std,
-        verdict,
-        explanation,
-    )
+    values = (constant_chi2 / dof, constant_p, ratio, ratio_std, slope, slope_std, predicted_slope)
+    numbers = dict(zip(TEST_FIELDS, values + (damping_slope, damping_slope_std)))
+    verdict, explanation = _verdict(numbers, std, predicted)
+    return ChirpDiagnosis(fit, pieces, field, **numbers, verdict=verdict, explanation=explanation)
 
 
-def _verdict(constant_p, ratio, ratio_std, slope, slope_std, predicted_slope, damping, damping_std, std, predicted):
-    chirp = constant_p < ALPHA or abs(slope) > SIGMAS * slope_std
+def _verdict(numbers: dict, std, predicted) -> tuple[str, str]:
+    """(verdict, explanation) from the tests' numbers (module docstring)."""
+    slope, slope_std = numbers["slope_hz_per_rad2"], numbers["slope_std_hz_per_rad2"]
+    ratio, ratio_std = numbers["chirp_ratio"], numbers["chirp_ratio_std"]
+    damping, damping_std = numbers["damping_slope_per_s_per_rad"], numbers["damping_slope_std_per_s_per_rad"]
+    predicted_slope = numbers["predicted_slope_hz_per_rad2"]
+    chirp = numbers["constant_p_value"] < ALPHA or abs(slope) > SIGMAS * slope_std
     sizes = (
         f"measured df/d(A²) = {slope * 1e3:.3g} ± {slope_std * 1e3:.2g} mHz/rad², the finite amplitude predicts "
         f"{predicted_slope * 1e3:.3g} mHz/rad² (λ = {ratio:.3g} ± {ratio_std:.2g})"

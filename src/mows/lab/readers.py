@@ -190,9 +190,11 @@ def start_amplitudes_rad(fits, sweep_ids) -> np.ndarray:
     """Each ring-down's start swing from RingdownFit messages (or fits), pooled per sweep: the
     sweep's stop amplitude (:meth:`mows.sweep.record.SweepRecord.stop_amplitude_rad`, the
     inverse-variance mean of θmax + |rest offset| over the fits that determined θmax) less the
-    row's own |rest offset|. A single fit's θmax scatters by degrees near θ0 = 180° or is not
-    determined at all; every ring-down of a sweep starts from the same housing stop. Sweeps
-    without a determined θmax take the pool of all rows (NaN when there is none)."""
+    row's own |rest offset| where its fit determined it
+    (:meth:`~mows.sweep.record.SweepRecord.rest_offsets_rad`). A single fit's θmax scatters by
+    degrees near θ0 = 180° or is not determined at all; every ring-down of a sweep starts from
+    the same housing stop. Sweeps without a determined θmax take the pool of all rows (NaN when
+    there is none)."""
     record = SweepRecord([SweepPoint.from_fit(fit, math.nan, math.nan) for fit in fits])
     rest = record.rest_offsets_rad()
     everywhere = record.stop_amplitude_rad()

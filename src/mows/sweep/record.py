@@ -13,6 +13,9 @@ from mows.estimate.ringdown_types import parameter_std
 from mows.physics.probe import Probe
 from mows.sweep.decompose import Decomposition, Ringdowns, decompose, local_potential
 
+REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its σ is below this…
+REST_OFFSET_SIGMAS = 4.0  # …and it is this many σ from 0
+
 
 @dataclasses.dataclass(frozen=True)
 class SweepPoint:
@@ -30,6 +33,7 @@ class SweepPoint:
     amplitude_std_rad: float = math.nan
     stamp_ns: int = 0  # the device stamp t_s was taken from, exact (0: none)
     rest_offset_rad: float = math.nan  # the fit's rest-angle offset θs − θ0 (NaN: not fitted)
+    rest_offset_std_rad: float = math.nan
 
     @classmethod
     def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0, stamp_ns: int = 0) -> SweepPoint:
@@ -50,6 +54,7 @@ class SweepPoint:
             amplitude_std,
             int(stamp_ns),
             float(getattr(fit, "rest_offset_rad", math.nan)),
+            parameter_std(fit.parameter_names, fit.covariance, "rest_offset_rad"),
         )
 
 
@@ -76,8 +81,14 @@ class SweepRecord:
         return float(weights @ shifts / weights.sum()), float(1.0 / math.sqrt(weights.sum())), len(chosen)
 
     def rest_offsets_rad(self) -> np.ndarray:
-        """|θs − θ0| of each point as its fit measured it (0 where the fit had no offset)."""
-        return np.abs(np.nan_to_num(self._column("rest_offset_rad")))
+        """|θs − θ0| of each point as its fit measured it, where the fit determined it (σ below
+        REST_OFFSET_STD_RAD and the offset REST_OFFSET_SIGMAS σ from 0); 0 elsewhere. In a mT
+        field a few fits sit in a wrong minimum (−10 ± 3° where the truth is 3.4°), and |ε| of an
+        offset that is noise would shorten the swing by ~0.8σ: neither is used."""
+        offset = np.abs(self._column("rest_offset_rad"))
+        std = self._column("rest_offset_std_rad")
+        determined = (std <= REST_OFFSET_STD_RAD) & (offset > REST_OFFSET_SIGMAS * std)
+        return np.where(determined & np.isfinite(offset), offset, 0.0)
 
     def stop_amplitude_rad(self, rest_angles_rad=None) -> float:
         """The swing a ring-down starts with when the probe rests undeflected: the

@@ -79,6 +79,7 @@ def test_anti_helmholtz_is_the_transverse_gradient_and_the_finite_amplitude_not_
         if name in report.effects:  # free: its strength is the physics
             value, std = report.effect_parameter(f"{name}.strength")
             assert abs(value - 1.0) <= 2 * std, (name, value, std)
+    assert report.chi2_dof <= 1.5, report.history
     assert_physics_consistent(report)
 
 
@@ -90,6 +91,7 @@ def test_helmholtz_is_static_deflection_and_finite_amplitude_not_a_tilt(lab):
     _, _, report = lab("helmholtz")
     assert {"static_deflection", "finite_amplitude"} & set(report.effect_names), report.history
     assert not {"gravity", "field_offset"} & set(report.effect_names), report.history
+    assert report.chi2_dof <= 1.5, report.history
     assert_physics_consistent(report)
 
 
@@ -99,6 +101,7 @@ def test_a_tilted_plane_is_gravity_with_its_tilt(lab):
     comes out right only with the amplitude effect at physics in the model."""
     scenario, _, report = lab("tilted_plane")
     assert "gravity" in report.effect_names, report.history
+    assert report.chi2_dof <= 1.5, report.history
     truth = np.asarray(scenario.pose.gravity_m_per_s2) / STANDARD_GRAVITY_M_PER_S2
     for name, down in (("down_x", truth[0]), ("down_y", truth[1])):
         value, std = report.effect_parameter(f"gravity.{name}")

@@ -27,6 +27,7 @@ def fit_to_msg(estimated: Estimated, frame_id: str) -> RingdownFit:
         "frequency_crb_hz",
         "damping_per_s",
         "amplitude_rad",
+        "rest_offset_rad",
         "phase_rad",
         "kappa_t",
         "offset_t",

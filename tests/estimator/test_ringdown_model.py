@@ -18,7 +18,6 @@ from mows.bench.estimator import (
 )
 from mows.estimate.axis import estimate_along_axis
 from mows.estimate.ringdown import FitOptions, fit_ringdown
-from mows.estimate.ringdown_problem import AMPLITUDE_BOUNDS_RAD
 from mows.physics.fluxgate import pink_noise_t
 from mows.physics.frequency import frequency_shift_hz
 from mows.physics.probe import PAPER_PROBE
@@ -32,6 +31,7 @@ TRUTH = {
     "phase_rad": PHASE_RAD,
     "kappa_t": KAPPA_T,
     "offset_t": OFFSET_T,
+    "rest_offset_rad": 0.0,
 }
 
 
@@ -43,20 +43,21 @@ def clean(theta0, a=0.0, b=1.0, kappa=KAPPA_T):
 
 @pytest.mark.parametrize("theta0_deg, direction", [(0.0, (0.0, 1.0)), (60.0, (0.0, 1.0)), (40.0, (0.6, 0.8))])
 def test_crb_equals_fisher_of_the_printed_model(theta0_deg, direction):
-    # Differentiate Eq. S11 (mows.physics.signal.signal_t) numerically over all seven parameters and
-    # invert the Fisher matrix: the analytic Jacobian of the fit must give the same bound.
+    # Differentiate Eq. S11 (mows.physics.signal.signal_t) numerically over all seven parameters
+    # (the rest offset ε turns θ0) and invert the Fisher matrix: the analytic Jacobian of the fit
+    # must give the same bound.
     theta0, sigma = math.radians(theta0_deg), 1e-9
-    names = ["frequency_hz", "damping_per_s", "amplitude_rad", "phase_rad", "kappa_t", "offset_t"]
+    names = ["frequency_hz", "damping_per_s", "amplitude_rad", "phase_rad", "kappa_t", "offset_t", "rest_offset_rad"]
     base = np.array([TRUTH[k] for k in names])
-    steps = np.array([1e-6, 1e-6, 1e-7, 1e-7, 1e-13, 1e-13])
+    steps = np.array([1e-6, 1e-6, 1e-7, 1e-7, 1e-13, 1e-13, 1e-7])
 
     def model(p):
-        return signal_t(T, theta0, p[2], p[0], p[3], p[1], p[4], a=direction[0], b=direction[1], offset_t=p[5])
+        return signal_t(T, theta0 + p[6], p[2], p[0], p[3], p[1], p[4], a=direction[0], b=direction[1], offset_t=p[5])
 
     jac = np.stack(
         [
-            (model(base + np.eye(6)[i] * steps[i]) - model(base - np.eye(6)[i] * steps[i])) / (2 * steps[i])
-            for i in range(6)
+            (model(base + np.eye(7)[i] * steps[i]) - model(base - np.eye(7)[i] * steps[i])) / (2 * steps[i])
+            for i in range(7)
         ],
         axis=1,
     )
@@ -87,21 +88,25 @@ def test_every_parameter_is_recovered_within_its_uncertainty():
     assert "mHz" in fit.report() and "χ²/dof" in fit.report()
 
 
-def test_theta_max_is_held_only_at_a_bound():
+def test_theta_max_is_recovered_or_reported_as_not_determined():
     """Near 90° the start's θmax is often far off and a first step overshoots a bound; a
-    rejected step must not freeze θmax where it was (it used to, at the spectral start)."""
+    rejected step must not freeze θmax where it was (it used to, at the spectral start). Where
+    the data cannot separate θmax from κ the fit runs to a bound: then θmax is NaN and said to be
+    not determined, never the bound passed off as a measurement."""
     rng = np.random.default_rng(5)
-    held = []
+    undetermined = 0
     for _ in range(60):
         theta0, amplitude = np.radians(rng.uniform(80, 100)), np.radians(rng.uniform(5, 25))
         y = signal_t(T, theta0, amplitude, FREQUENCY_HZ, PHASE_RAD, DAMPING_PER_S, KAPPA_T, offset_t=OFFSET_T)
         fit = fit_ringdown(y + 2e-10 * rng.standard_normal(N_SAMPLES), SAMPLE_RATE_HZ, theta0, 112.0)
         assert fit.ok, fit.message
-        if "held" in fit.message:
-            held.append(abs(fit.amplitude_rad))
+        if "θmax not determined" in fit.message:
+            undetermined += 1
+            assert math.isnan(fit.amplitude_rad) and math.isnan(fit.amplitude_std_rad)
+            assert abs(pull(fit, "frequency_hz", FREQUENCY_HZ)) < 5
         else:
-            assert abs(pull(fit, "amplitude_rad", amplitude)) < 5
-    assert all(min(abs(a - bound) for bound in AMPLITUDE_BOUNDS_RAD) < 1e-12 for a in held), np.degrees(held)
+            assert abs(fit.amplitude_rad - amplitude) < 5 * fit.amplitude_std_rad
+    assert undetermined < 30  # most of these swings are determined
 
 
 def test_general_sensor_direction():

@@ -3,7 +3,7 @@
 The command lines are read from the documents themselves (fenced blocks and inline code), so a
 documented form that the parser rejects fails here; the plugin file is the documented one too.
 The files the commands name (sweep.csv, sweeps.csv, probe.yaml, coil_heating.py, the paper's
-probe path) are made in a scratch directory that the commands run in.
+probe path, the recorded bag ``recording``) are made in a scratch directory that the commands run in.
 """
 
 import pathlib
@@ -18,6 +18,9 @@ from mows.cli.main import main
 from mows.lab import synth
 from mows.physics.field import SumSource, UniformField, anti_helmholtz_pair
 from mows.physics.probe import PAPER_PROBE
+from mows.sim.scenario import load_scenario
+from mows.sim.sections import Environment
+from recorded_bags import record_cycles
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 DOCUMENTS = (ROOT / "README.md", ROOT / "docs" / "model_lab.md")
@@ -69,12 +72,15 @@ def workdir(tmp_path_factory):
     (directory / PAPER_PROBE_PATH).parent.mkdir(parents=True)
     shutil.copy(ROOT / PAPER_PROBE_PATH, directory / PAPER_PROBE_PATH)
     (directory / "coil_heating.py").write_text(documented_plugin())
+    # `mows lab ringdown recording`: a driver-like bag of one simulated ring-down in 1.5 mT along the axis.
+    strong = load_scenario().replace(environment=Environment(sources=(UniformField((1.5e-3, 0.0, -4e-5)),)))
+    record_cycles(directory / "recording", strong, (0.0,), 3)
     return directory
 
 
 def test_the_documents_show_the_forms_this_file_must_cover():
     commands = documented_commands()
-    assert {shlex.split(c)[2] for c in commands} == {"compare", "diagnose", "add", "report"}
+    assert {shlex.split(c)[2] for c in commands} == {"compare", "diagnose", "add", "report", "ringdown"}
     assert "mows lab add      sweep.csv --probe probe.yaml gravity thermal_drift" in commands
     assert any("transverse_gradient" in c for c in commands)
 

@@ -59,10 +59,11 @@ def test_the_simulated_table_has_the_estimators_columns_and_the_scenarios_refere
         [table.columns[name][0] for name in GRADIENT], [gradient[0, 0], gradient[0, 1], gradient[1, 1]]
     )
     assert all(np.ptp(table.columns[name]) == 0 for name in FIELD)
-    # One pooled start amplitude per sweep, near the 24° stop.
+    # One pooled start amplitude per sweep, near the 24° stop, less the rest offsets the fits
+    # determined (< 0.1° here: an anti-Helmholtz pair has no field at its centre).
     for sweep in np.unique(table.sweep):
         amplitude = table.amplitude_deg[table.sweep == sweep]
-        assert np.ptp(amplitude) == 0 and abs(amplitude[0] - np.degrees(scenario.probe.theta_stop_rad)) < 1.0
+        assert np.ptp(amplitude) < 0.3 and np.all(abs(amplitude - np.degrees(scenario.probe.theta_stop_rad)) < 1.0)
 
 
 def test_anti_helmholtz_is_the_transverse_gradient_and_the_finite_amplitude_not_curvature(lab):
@@ -78,6 +79,7 @@ def test_anti_helmholtz_is_the_transverse_gradient_and_the_finite_amplitude_not_
         if name in report.effects:  # free: its strength is the physics
             value, std = report.effect_parameter(f"{name}.strength")
             assert abs(value - 1.0) <= 2 * std, (name, value, std)
+    assert report.chi2_dof <= 1.5, report.history
     assert_physics_consistent(report)
 
 
@@ -89,6 +91,7 @@ def test_helmholtz_is_static_deflection_and_finite_amplitude_not_a_tilt(lab):
     _, _, report = lab("helmholtz")
     assert {"static_deflection", "finite_amplitude"} & set(report.effect_names), report.history
     assert not {"gravity", "field_offset"} & set(report.effect_names), report.history
+    assert report.chi2_dof <= 1.5, report.history
     assert_physics_consistent(report)
 
 
@@ -98,6 +101,7 @@ def test_a_tilted_plane_is_gravity_with_its_tilt(lab):
     comes out right only with the amplitude effect at physics in the model."""
     scenario, _, report = lab("tilted_plane")
     assert "gravity" in report.effect_names, report.history
+    assert report.chi2_dof <= 1.5, report.history
     truth = np.asarray(scenario.pose.gravity_m_per_s2) / STANDARD_GRAVITY_M_PER_S2
     for name, down in (("down_x", truth[0]), ("down_y", truth[1])):
         value, std = report.effect_parameter(f"gravity.{name}")

@@ -121,13 +121,14 @@ def precision_cell(theta0_deg: float, snr_db: float, trials: int, rng: np.random
 
 
 def _curve_fit_once(case: RingdownCase, samples: np.ndarray):
-    """The same data fitted with scipy.optimize.curve_fit on the full-rate model, from the
-    same start our estimator's spectral stage finds (so only the optimiser differs)."""
+    """The same data fitted with scipy.optimize.curve_fit on the full-rate model (the rest
+    offset ε included), from the same start our estimator's spectral stage finds (so only the
+    optimiser differs)."""
     t = np.arange(N_SAMPLES) / SAMPLE_RATE_HZ
     start = ringdown.starting_point(samples, SAMPLE_RATE_HZ, case.theta0_rad, FREQUENCY_HZ * 0.995)
 
-    def model(tt, f, delta, amp, phi, kappa, offset):
-        return signal_t(tt, case.theta0_rad, amp, f, phi, delta, kappa, offset_t=offset)
+    def model(tt, f, delta, amp, phi, rest_offset, kappa, offset):
+        return signal_t(tt, case.theta0_rad + rest_offset, amp, f, phi, delta, kappa, offset_t=offset)
 
     p, _ = curve_fit(model, t, samples, p0=start, method="lm", xtol=1e-12, ftol=1e-12, maxfev=20_000)
     return p[0]

@@ -199,11 +199,20 @@ def write_points(path, points, field_wiring: str) -> None:
         "supply_current_a": np.array([p.supply_current_a for p in points]),
         "damping_per_s": np.array([p.damping_per_s for p in points]),
         "duration_s": np.array([p.duration_s for p in points]),
-        "amplitude_deg": np.degrees([p.amplitude_rad for p in points]),
+        "amplitude_deg": np.degrees(_pooled_amplitudes_rad(points)),
         "start_offset_s": np.array([p.start_offset_s for p in points]),
         "gradient_wiring": np.array([float(p.wiring != field_wiring) for p in points]),
     }
     MeasurementTable(columns, str(path)).to_csv(path)
+
+
+def _pooled_amplitudes_rad(points) -> np.ndarray:
+    """Each point's θmax; one the fit did not determine (NaN) takes the median of the others:
+    every ring-down starts from the same stop, and the model assumes the stop anyway."""
+    amplitude = np.array([p.amplitude_rad for p in points], float)
+    if not np.isfinite(amplitude).any():
+        raise ValueError("no ring-down of the calibration determined θmax: the table cannot be written")
+    return np.where(np.isfinite(amplitude), amplitude, np.nanmedian(amplitude))
 
 
 def read_points(path, field_wiring: str) -> list:

@@ -14,15 +14,9 @@ import math
 import sys
 
 from mows.cli.inputs import input_file, load_probe
-from mows.device.bags import read_bag
-from mows.device.phases import Phase
 from mows.estimate.ringdown import SETTLE_S, FitOptions
-from mows.estimate.segments import (
-    SegmentAssembler,
-    block_from_message,
-    fit_segment,
-    window_from_message,
-)
+from mows.estimate.segments import fit_segment
+from mows.lab.chirp import recorded_segments
 from mows.lab.table import MeasurementTable
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import PAPER_PROBE, Probe
@@ -33,6 +27,13 @@ from mows.sweep.record import SweepPoint, SweepRecord
 
 def add_arguments(parser) -> None:
     parser.add_argument("bag", help="a rosbag2 directory (or .mcap) recorded by the driver (record_path)")
+    add_bag_arguments(parser)
+    parser.add_argument("--csv", help="write the OK fits as a model-lab table (a new file)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --csv file (never the bag)")
+
+
+def add_bag_arguments(parser) -> None:
+    """How a recorded bag's ring-downs are found and fitted (also ``mows lab ringdown``)."""
     parser.add_argument("--probe", help="probe constants YAML (default: the paper's probe)")
     parser.add_argument("--raw-topic", default="/mows/raw")
     parser.add_argument("--excitation-topic", default="/mows/excitation")
@@ -46,8 +47,6 @@ def add_arguments(parser) -> None:
         help="probe to near fluxgate along the plane's x axis, m (as the estimator's parameter)",
     )
     parser.add_argument("--sensor-spacing-m", type=float, default=PAPER_SPACING_M, help="fluxgate spacing, m")
-    parser.add_argument("--csv", help="write the OK fits as a model-lab table (a new file)")
-    parser.add_argument("--force", action="store_true", help="replace an existing --csv file (never the bag)")
 
 
 def run(args) -> int:
@@ -75,27 +74,17 @@ def run(args) -> int:
 
 def fit_bag(path, probe: Probe, args):
     """(window, fit) for every ring-down in the bag, in order."""
-    assembler = SegmentAssembler(buffer_s=60.0)
+    for segment, options in recorded_ringdowns(path, probe, args):
+        yield segment.window, fit_segment(segment, options, args.settle_s, probe.damping_per_s)
+
+
+def recorded_ringdowns(path, probe: Probe, args):
+    """(segment, fit options) of every ring-down in the bag as the bag arguments ask: the
+    estimator node's lever-aware pickup at the window's θ0, or Eq. S11 (``--paper-model``)."""
     pair = FluxgatePair.paper(distance_m=args.sensor_distance_m, spacing_m=args.sensor_spacing_m)
-    for item in read_bag(path, topics=[args.raw_topic, args.excitation_topic]):
-        message = item.message
-        if item.topic == args.excitation_topic:
-            if message.phase != Phase.RINGDOWN or (message.tuning and not args.tuning):
-                continue
-            segments = assembler.announce(window_from_message(message))
-        else:
-            segments = assembler.add_block(block_from_message(message))
-        for segment in segments:
-            yield (
-                segment.window,
-                fit_segment(
-                    segment, _options(segment.window, pair, probe, args.paper_model), args.settle_s, probe.damping_per_s
-                ),
-            )
-
-
-def _options(window, pair, probe, paper_model) -> FitOptions:
-    return FitOptions() if paper_model else FitOptions.lever_aware(pair, probe, window.theta0_rad)
+    for segment in recorded_segments(path, args.raw_topic, args.excitation_topic, args.tuning):
+        theta0 = segment.window.theta0_rad
+        yield segment, FitOptions() if args.paper_model else FitOptions.lever_aware(pair, probe, theta0)
 
 
 def write_table(path, fits, probe: Probe) -> None:

@@ -4,6 +4,8 @@
     mows lab diagnose TABLE [--probe P]              + ranked candidate effects, groups
     mows lab add      TABLE [--probe P] EFFECT… | --auto   refit with effects, error history
     mows lab report   TABLE [--probe P] [-o page.html] [--auto] [EFFECT…]
+    mows lab ringdown BAG   [--probe P] [--f00-hz F] [--cycle N]   inside each recorded ring-down:
+                                                     chirp, damping, the effect that explains them
 
 TABLE is a CSV file or a rosbag2 bag (``--reference`` then gives the reference field: a
 MagneticField topic or a field-source YAML). ``--json`` prints the machine-readable result.
@@ -29,8 +31,11 @@ import sys
 import numpy as np
 from tqdm import tqdm
 
+from mows.cli.fit import add_bag_arguments
 from mows.cli.inputs import input_file, load_probe
+from mows.cli.lab_ringdown import run_ringdown
 from mows.lab import analyse, is_bag, load_table, write_report
+from mows.lab.chirp import PIECE_PERIODS
 from mows.records.files import check_output, replacing
 
 MAX_ROWS = 2000
@@ -106,9 +111,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             command.add_argument(
                 "--force", action="store_true", help="replace an existing output file (never an input)"
             )
+    _add_ringdown_arguments(sub)
+
+
+def _add_ringdown_arguments(sub) -> None:
+    text = "inside each recorded ring-down: where a constant-frequency fit fails and which effect explains it"
+    command = sub.add_parser("ringdown", help=text, description=text)
+    command.add_argument("bag", help="a rosbag2 bag the driver recorded (raw blocks and excitation phases)")
+    add_bag_arguments(command)
+    command.add_argument("--f00-hz", type=float, help="calibrated zero-field frequency, Hz (default: the probe's)")
+    command.add_argument("--cycle", type=int, help="only this cycle id")
+    command.add_argument("--piece-periods", type=float, default=PIECE_PERIODS, help="periods per piece")
+    command.add_argument("--json", action="store_true", help="print JSON instead of text")
 
 
 def run(args) -> int:
+    if args.lab_command == "ringdown":
+        return run_ringdown(args)
     inputs = [args.table, args.probe, *args.plugin] + ([args.reference] if args.reference else [])
     if args.lab_command == "report":
         check_output(args.output, inputs, args.force)

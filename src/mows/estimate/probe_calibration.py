@@ -75,7 +75,8 @@ def calibrate_probe(
     points = [
         p
         for p in points
-        if all(map(math.isfinite, (p.frequency_hz, p.frequency_std_hz, p.amplitude_rad, p.damping_per_s, p.duration_s)))
+        # θmax may be NaN ("not determined"): the model starts every ring-down at the stop.
+        if all(map(math.isfinite, (p.frequency_hz, p.frequency_std_hz, p.damping_per_s, p.duration_s)))
     ]
     notes = _failure_notes(failed or {}, points)
     field_points = [p for p in points if p.wiring == field_wiring]
@@ -149,7 +150,8 @@ def _amplitude_notes(points, known: KnownConstants) -> list:
     """The model starts every ring-down at the housing stop (a drive into the stop, as the paper's):
     the field sweep cannot separate the amplitude from β0 (both scale the field spring), and a
     fitted θmax scatters by degrees. Say so when the fits suggest the stop was not reached."""
-    amplitude = float(np.median([p.amplitude_rad for p in points]))
+    measured = [p.amplitude_rad for p in points if math.isfinite(p.amplitude_rad)]
+    amplitude = float(np.median(measured)) if measured else math.nan
     if amplitude < 0.8 * known.theta_stop_rad:
         return [
             f"the ring-downs' median θmax {math.degrees(amplitude):.1f}° is well below the housing stop "

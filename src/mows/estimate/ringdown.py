@@ -4,8 +4,14 @@ Its options and result types are :mod:`mows.estimate.ringdown_types` (imported h
 
 Model of one channel:
 
-    S(t) = κ·g(x(t)) + B_DC,   x(t) = θmax·e^(−δt)·cos(2πft + φ)   (Eq. S2, t = 0 at the first
-    fitted sample),   g(x) = Σ_k Re(C_k·e^(ikx)).
+    S(t) = κ·g(ε + x(t)) + B_DC,   x(t) = θmax·e^(−δt)·cos(2πft + φ)   (Eq. S2, t = 0 at the
+    first fitted sample),   g(x) = Σ_k Re(C_k·e^(ikx)).
+
+ε is the rest-angle offset θs − θ0 (``FitOptions.rest_offset_free``, on by default): a field across
+the probe, gravity in the plane or a gradient deflects the rest angle, and the probe swings about
+θs, not θ0. Without ε, κ and θmax trade off against it (θmax 3.5°–74° for a true 11°–21° in a
+strong perpendicular field); f is nearly orthogonal to it (the bound grows by < 1 %, the fit's
+time by 0–12 %).
 
 g is the sensor's signal as a function of the deflection, normalised by κ. The paper's model
 (Eq. S11, a sensor along (a, b) and a magnet turning in place) is the single term
@@ -35,11 +41,11 @@ misses something, s exceeds the noise level: χ²/dof > 1 and std > CRB.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
-from mows.estimate.ringdown_model import paper_pickup
 from mows.estimate.ringdown_problem import (
     AMPLITUDE,
     NONLINEAR,
@@ -55,8 +61,9 @@ from mows.estimate.ringdown_types import FitOptions, FitStatus, RingdownFit, fai
 TWO_PI = 2.0 * math.pi
 
 
-def _parameter_names(n_channels, theta0_free):
-    names = list(NONLINEAR) + (["theta0_rad"] if theta0_free else [])
+def _parameter_names(n_channels, options: FitOptions):
+    offset = ["theta0_rad"] if options.theta0_free else ["rest_offset_rad"] if options.rest_offset_free else []
+    names = list(NONLINEAR) + offset
     for c in range(n_channels):
         suffix = "" if n_channels == 1 else f"_{c + 1}"
         names += [f"kappa_t{suffix}", f"offset_t{suffix}"]
@@ -171,8 +178,9 @@ def _problem(y, fs, theta0, options) -> RingdownProblem:
     noise = np.array([white_noise_std(ch) for ch in y])
     if np.any(noise <= 0):  # noiseless, or quantised to a constant: weight channels equally
         noise = np.full(y.shape[0], max(float(np.ptp(y)) * 1e-9, 1e-30))
-    pickup = paper_pickup(0.0, options.sensor_direction) if options.theta0_free else options.pickup_at(theta0)
-    return RingdownProblem(np.ascontiguousarray(y, float), 1.0 / noise, 1.0 / fs, theta0, pickup, options.theta0_free)
+    return RingdownProblem(
+        np.ascontiguousarray(y, float), 1.0 / noise, 1.0 / fs, theta0, options.pickup_at(theta0), options.offset_free
+    )
 
 
 def _coarse_start(problem, fs, expected_hz, options, damping_guess):
@@ -181,7 +189,7 @@ def _coarse_start(problem, fs, expected_hz, options, damping_guess):
     starts = start_candidates(coarse.y.sum(axis=0), 1.0 / coarse.dt, expected_hz, options, damping_guess)
     if not starts:
         return coarse, None
-    extra = [problem.theta0] if options.theta0_free else []
+    extra = [0.0] if options.offset_free else []  # the rest offset (or θ0's error) starts at 0
     return coarse, min((np.concatenate([s_, extra]) for s_ in starts), key=lambda q: evaluate(coarse, q, False).cost)
 
 
@@ -193,12 +201,18 @@ def starting_point(
     options: FitOptions = FitOptions(),
     damping_guess_per_s: float = 1.8,
 ):
-    """The point the fit starts from: (f, δ, θmax, φ, [θ0,] κ, B_DC) of the first channel, from
-    the spectral stage, or None if no line is found. For comparisons with other optimisers."""
+    """The point the fit starts from: (f, δ, θmax, φ, [ε,] κ, B_DC) of the first channel, from
+    the spectral stage, or None if no line is found (ε: the rest offset, or θ0's error, when
+    ``options`` fit one). For comparisons with other optimisers."""
     y = combine_channels(samples, options.channels)
     problem = _problem(y, float(sample_rate_hz), float(theta0_rad), options)
     _, q0 = _coarse_start(problem, float(sample_rate_hz), float(expected_frequency_hz), options, damping_guess_per_s)
     return None if q0 is None else np.concatenate([q0, evaluate(problem, q0, False).coef[0]])
+
+
+def _wrapped(angle_rad) -> float:
+    """The angle in (−π, π]."""
+    return float(-((math.pi - angle_rad) % TWO_PI - math.pi)) + 0.0  # + 0.0: no −0.0
 
 
 def _as_float(value) -> float:
@@ -221,12 +235,22 @@ def _fit_window(y, fs, theta0, expected_hz, options, damping_guess, start_s, kno
         )
     step, _, _, _ = variable_projection(coarse, q0, options.max_iterations, tol_chi2=1e-2)
     # The coarse optimum is within a few σ of the full-rate one: start as Gauss–Newton.
-    step, converged, iters, free = variable_projection(
-        problem, step.q, options.max_iterations, tol_chi2=1e-4, damping=1e-6
-    )
-    if not converged:
-        return failure(FitStatus.NOT_CONVERGED, f"the fit did not converge in {iters} iterations", **known)
-    return _summarise(step, problem, free, 1.0 / problem.weights, options, expected_hz, start_s, known)
+    start = step.q
+    step, converged, iters, free = variable_projection(problem, start, options.max_iterations, 1e-4, damping=1e-6)
+    if not converged:  # a weakly determined θmax or rest offset can crawl: the cautious Marquardt λ
+        step, converged, iters, free = variable_projection(problem, start, options.max_iterations, 1e-4, damping=1e-3)
+    if converged:
+        fit = _summarise(step, problem, free, 1.0 / problem.weights, options, expected_hz, start_s, known)
+    else:
+        fit = failure(FitStatus.NOT_CONVERGED, f"the fit did not converge in {iters} iterations", **known)
+    if fit.status == FitStatus.NOT_CONVERGED and options.rest_offset_free and not options.theta0_free:
+        # The offset has no handle (near 90° the signal is even in it, at a small θmax it is
+        # lost in κ): the swing about θ0, as the paper's model has it, and the reason said.
+        fallback = dataclasses.replace(options, rest_offset_free=False)
+        fit = _fit_window(y, fs, theta0, expected_hz, fallback, damping_guess, start_s, known)
+        note = "rest offset not determined: fitted without it"
+        return dataclasses.replace(fit, message="; ".join(filter(None, [note, fit.message]))) if fit.ok else fit
+    return fit
 
 
 def _summarise(step, problem, free, noise, options, expected_hz, start_s, known):
@@ -250,8 +274,8 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
         ""
         if free[AMPLITUDE]
         else (
-            f"θmax held at its bound {math.degrees(abs(step.q[AMPLITUDE])):.1f}°: at this orientation the data do not "
-            "separate θmax from κ (f is unaffected)"
+            f"θmax not determined (the fit ran to its bound {math.degrees(abs(step.q[AMPLITUDE])):.1f}°): at this "
+            "orientation the data do not separate θmax from κ; f is unaffected"
         )
     )
     chi2_dof = step.cost / (step.residual.size - int(fitted.sum()))
@@ -272,17 +296,20 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
     amp, phi = q[2], q[3]
     if amp < 0:
         amp, phi = -amp, phi + math.pi
+    if not free[AMPLITUDE]:  # held at a bound: a number the data did not give
+        amp = math.nan
     return RingdownFit(
         status=FitStatus.OK,
         message=note,
-        theta0_rad=float(q[4] if options.theta0_free else problem.theta0),
+        theta0_rad=float(problem.theta0 + q[4] if options.theta0_free else problem.theta0),
         theta0_free=options.theta0_free,
+        rest_offset_rad=_wrapped(q[4]) if options.rest_offset_free and not options.theta0_free else math.nan,
         frequency_hz=float(q[0]),
         frequency_std_hz=float(math.sqrt(covariance[0, 0])),
         frequency_crb_hz=float(math.sqrt(fisher_inv[0, 0])),
         damping_per_s=float(q[1]),
         amplitude_rad=float(amp),
-        phase_rad=float((phi + math.pi) % TWO_PI - math.pi),
+        phase_rad=_wrapped(phi),
         kappa_t=float(kappa[0]),
         offset_t=float(step.coef[0, 1]),
         chi2_dof=chi2_dof,
@@ -292,6 +319,6 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
         n_samples=n,
         duration_s=n * problem.dt,
         start_offset_s=start_s,
-        parameter_names=tuple(_parameter_names(n_ch, options.theta0_free)),
+        parameter_names=tuple(_parameter_names(n_ch, options)),
         covariance=covariance,
     )

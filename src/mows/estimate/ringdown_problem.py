@@ -32,14 +32,14 @@ class RingdownProblem:
     weights: np.ndarray  # 1/σ per channel
     dt: float  # sample interval, s (t = 0 at the first sample)
     theta0: float
-    pickup: np.ndarray  # C_k of g (complex); with θ0 free, the series at θ0 = 0
-    theta0_free: bool
+    pickup: np.ndarray  # C_k of g (complex) at the commanded θ0
+    offset_free: bool  # q[4] = ε turns the pickup, g(ε + x): the rest offset (or θ0's error)
 
     def kernel_data(self) -> tuple[float, np.ndarray, np.ndarray, bool, np.ndarray, np.ndarray]:
-        """The data and settings as the compiled kernels take them: (dt, Re C_k, Im C_k, θ0 free,
-        y, weights)."""
+        """The data and settings as the compiled kernels take them: (dt, Re C_k, Im C_k, offset
+        free, y, weights)."""
         cr, ci = split_pickup(self.pickup)
-        return self.dt, cr, ci, self.theta0_free, self.y, self.weights
+        return self.dt, cr, ci, self.offset_free, self.y, self.weights
 
     def subsampled(self, step: int) -> RingdownProblem:
         return dataclasses.replace(self, y=np.ascontiguousarray(self.y[:, ::step]), dt=self.dt * step)
@@ -150,26 +150,25 @@ def cramer_rao_frequency_hz(
     kappa_t,
     noise_std_t,
     sensor_direction=(0.0, 1.0),
-    theta0_free=False,
+    offset_free=True,
     pickup=None,
+    rest_offset_rad=0.0,
 ) -> float:
     """Cramér–Rao bound of f for one channel of ``n_samples`` in white noise σ:
     √[(JᵀJ/σ²)⁻¹]_ff (PHYSICS.md §7), J the Jacobian of the full model over all its
-    parameters (f, δ, θmax, φ, [θ0], κ, B_DC) at the given values. t = 0 at the first sample.
+    parameters (f, δ, θmax, φ, [ε], κ, B_DC) at the given values, ε the rest offset (or θ0's
+    error) that ``FitOptions.rest_offset_free`` (``theta0_free``) fits: ``offset_free`` as the
+    fit had it. t = 0 at the first sample; ``pickup`` is the series at the commanded θ0.
     """
-    q = np.array([frequency_hz, damping_per_s, amplitude_rad, phase_rad] + ([theta0_rad] if theta0_free else []))
-    coefficients = (
-        paper_pickup(0.0 if theta0_free else theta0_rad, sensor_direction)
-        if pickup is None
-        else np.asarray(pickup, complex)
-    )
+    q = np.array([frequency_hz, damping_per_s, amplitude_rad, phase_rad] + ([rest_offset_rad] if offset_free else []))
+    coefficients = paper_pickup(theta0_rad, sensor_direction) if pickup is None else np.asarray(pickup, complex)
     problem = RingdownProblem(
         np.zeros((1, int(n_samples))),
         np.array([1.0 / noise_std_t]),
         1.0 / sample_rate_hz,
         theta0_rad,
         coefficients,
-        theta0_free,
+        offset_free,
     )
     shape = evaluate(problem, q).shape
     step = Step(q, shape, np.array([[kappa_t, 0.0]]), np.empty((1, 0)), math.nan)

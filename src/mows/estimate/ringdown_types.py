@@ -45,6 +45,12 @@ class FitOptions:
         :func:`mows.physics.fluxgate.pickup_harmonics`; replaces the paper's model when given.
     theta0_free : fit θ0 instead of taking the commanded value (paper's model only: the
         pickup's dependence on θ0 is not a rotation once the lever moves the magnet).
+    rest_offset_free : fit the rest-angle offset ε = θs − θ0 (the static deflection by a
+        perpendicular field, gravity or a gradient). The lever turns by ε about its pivot, so
+        the signal is g(ε + x): the pickup turned by ε, exact for any pickup. Without it the
+        model swings about θ0, and κ and θmax trade off against the missing offset (θmax
+        off by up to 50° near θ0 = 180° in a strong perpendicular field); f barely moves.
+        With ``theta0_free`` the same parameter is reported as θ0 instead.
     search_fraction : the spectral search covers expected f ± this fraction.
     min_periods : fewer usable periods than this gives TOO_SHORT.
     min_frequency_fraction : a peak below this fraction of the expected frequency means the
@@ -57,6 +63,7 @@ class FitOptions:
     sensor_direction: tuple = (0.0, 1.0)
     pickup: tuple | None = None
     theta0_free: bool = False
+    rest_offset_free: bool = True
     search_fraction: float = 0.3
     min_periods: float = 10.0
     min_frequency_fraction: float = 0.2
@@ -82,6 +89,11 @@ class FitOptions:
         pickup = pickup_harmonics(pair, Pose(theta0_rad=theta0_rad), probe.lever_m, probe.moment_am2, combine=channels)
         return cls(channels=channels, pickup=tuple(pickup), **others)
 
+    @property
+    def offset_free(self) -> bool:
+        """The fit has a fifth nonlinear parameter that turns the pickup: θ0 or the rest offset."""
+        return self.theta0_free or self.rest_offset_free
+
     def pickup_at(self, theta0_rad: float) -> np.ndarray:
         """The coefficients C_k of g: the given pickup, or the paper's single term."""
         if self.pickup is not None:
@@ -91,7 +103,14 @@ class FitOptions:
 
 @dataclasses.dataclass
 class RingdownFit:
-    """Result of :func:`fit_ringdown`. SI units; every number is NaN unless status is OK."""
+    """Result of :func:`fit_ringdown`. SI units; every number is NaN unless status is OK.
+
+    ``amplitude_rad`` is θmax, the swing at the first fitted sample about the rest angle
+    θ0 + ``rest_offset_rad`` (the offset NaN when not fitted); NaN, with a note in ``message``,
+    when the data do not determine it (the fit ran to its bound); its σ is
+    :attr:`amplitude_std_rad`. The sign of the offset is fixed only through κ > 0 (its sign is
+    free near θ0 = 90°, where the signal is even in the deflection): use |offset|.
+    """
 
     status: FitStatus
     message: str = ""
@@ -102,6 +121,7 @@ class RingdownFit:
     frequency_crb_hz: float = math.nan
     damping_per_s: float = math.nan
     amplitude_rad: float = math.nan
+    rest_offset_rad: float = math.nan
     phase_rad: float = math.nan
     kappa_t: float = math.nan
     offset_t: float = math.nan
@@ -119,16 +139,40 @@ class RingdownFit:
     def ok(self) -> bool:
         return self.status == FitStatus.OK
 
+    @property
+    def amplitude_std_rad(self) -> float:
+        """σ of θmax from the covariance; NaN when θmax was not determined (``amplitude_rad`` NaN)."""
+        return parameter_std(self.parameter_names, self.covariance, "amplitude_rad")
+
+    def _amplitude_text(self) -> str:
+        if not math.isfinite(self.amplitude_rad):
+            return "not determined"
+        text = f"{math.degrees(self.amplitude_rad):.2f} ± {math.degrees(self.amplitude_std_rad):.2f}°"
+        if math.isfinite(self.rest_offset_rad):
+            text += f" about a rest offset {math.degrees(self.rest_offset_rad):+.2f}°"
+        return text
+
     def report(self) -> str:
         if not self.ok:
             return f"ring-down fit: {self.status.name}: {self.message}"
         return (
             f"f = {self.frequency_hz:.6f} ± {self.frequency_std_hz * 1e3:.4f} mHz "
             f"(CRB {self.frequency_crb_hz * 1e3:.4f} mHz), δ = {self.damping_per_s:.4f} 1/s, "
-            f"θmax = {math.degrees(self.amplitude_rad):.2f}°, θ0 = {math.degrees(self.theta0_rad):.2f}°, "
+            f"θmax = {self._amplitude_text()}, θ0 = {math.degrees(self.theta0_rad):.2f}°, "
             f"χ²/dof = {self.chi2_dof:.3f}, R² = {self.r_squared:.5f}, SNR = {self.snr_db:.1f} dB, "
             f"{self.n_samples} samples over {self.duration_s:.3f} s"
         )
+
+
+def parameter_std(names, covariance, name: str) -> float:
+    """σ of parameter ``name`` from a fit's row-major ``covariance`` over ``names`` (a RingdownFit
+    or its message); NaN when the fit has no such parameter or did not determine it."""
+    names = list(names)
+    if name not in names:
+        return math.nan
+    index = names.index(name)
+    variance = float(np.asarray(covariance, float).reshape(len(names), len(names))[index, index])
+    return math.sqrt(variance) if variance > 0 else math.nan
 
 
 def failure(status: FitStatus, message: str, **known) -> RingdownFit:

@@ -49,6 +49,8 @@ above it in this list (and, outside the lab, ``mows.records``, ``mows.physics``,
     ``search``.
 20. ``report``: :func:`write_report` (HTML with plots). Imports no lab module (it reads a
     :class:`LabReport`).
+21. ``chirp``: inside one recorded ring-down, the chirp and the effect that explains it
+    (``mows lab ringdown``). Imports no lab module.
 
 This package's ``__init__`` re-exports the public names; the CLI (``mows.cli.lab``), the bench
 and the nodes import from here.

@@ -19,6 +19,7 @@ from mows.estimate.ringdown import FitStatus
 from mows.lab.reference import reference_columns
 from mows.lab.table import FIELD, KNOWN, MeasurementTable, TableError, broken_rules, rows_text, with_notes
 from mows.records import stamps
+from mows.sweep.record import SweepPoint, SweepRecord
 
 RINGDOWN_TOPIC = "/mows/ringdown"
 SWEEP_TOPIC = "/mows/sweep"
@@ -168,16 +169,41 @@ def from_bag(
         "f_hz": np.array([m.frequency_hz for _, m in fits]),
         "f_std_hz": np.array([m.frequency_std_hz for _, m in fits]),
         "t_s": times_s - times_s[0],
-        "amplitude_deg": np.degrees([m.amplitude_rad for _, m in fits]),
         "damping_per_s": np.array([m.damping_per_s for _, m in fits]),
         "duration_s": np.array([m.duration_s for _, m in fits]),
         "snr_db": np.array([m.snr_db for _, m in fits]),
     }
     notes = [f"skipped {failed} RingdownFit messages whose status is not OK"] if failed else []
+    sweep_ids = np.searchsorted(np.sort(sweeps), times_s - 1e-9).astype(float) if sweeps else np.zeros(len(fits))
     if sweeps:
-        columns["sweep"] = np.searchsorted(np.sort(sweeps), times_s - 1e-9).astype(float)
+        columns["sweep"] = sweep_ids
+    start = start_amplitudes_rad([m for _, m in fits], sweep_ids)
+    if np.all(np.isfinite(start)):
+        columns["amplitude_deg"] = np.degrees(start)
+    else:
+        notes.append("no fit determined θmax: the start amplitude is taken as the probe's stop")
     columns.update(_reference_columns(reference, times_s, fields, magnet_position_m, path))
     return with_notes(columns, str(path), notes)
+
+
+def start_amplitudes_rad(fits, sweep_ids) -> np.ndarray:
+    """Each ring-down's start swing from RingdownFit messages (or fits), pooled per sweep: the
+    sweep's stop amplitude (:meth:`mows.sweep.record.SweepRecord.stop_amplitude_rad`, the
+    inverse-variance mean of θmax + |rest offset| over the fits that determined θmax) less the
+    row's own |rest offset| where its fit determined it
+    (:meth:`~mows.sweep.record.SweepRecord.rest_offsets_rad`). A single fit's θmax scatters by
+    degrees near θ0 = 180° or is not determined at all; every ring-down of a sweep starts from
+    the same housing stop. Sweeps without a determined θmax take the pool of all rows (NaN when
+    there is none)."""
+    record = SweepRecord([SweepPoint.from_fit(fit, math.nan, math.nan) for fit in fits])
+    rest = record.rest_offsets_rad()
+    everywhere = record.stop_amplitude_rad()
+    start = np.empty(len(fits))
+    for sweep in np.unique(sweep_ids):
+        rows = np.flatnonzero(sweep_ids == sweep)
+        stop = SweepRecord([record.points[i] for i in rows]).stop_amplitude_rad()
+        start[rows] = (stop if math.isfinite(stop) else everywhere) - rest[rows]
+    return start
 
 
 def _reference_columns(reference, times_s, fields, magnet_position_m, path) -> dict:

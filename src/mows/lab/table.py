@@ -16,8 +16,9 @@ Columns (CSV header names, SI units but for the ``*_deg`` columns):
 ``ref_gxx_t_per_m``, ``ref_gxy_t_per_m``,  optional   in-plane reference gradient G_ij = ∂B_i/∂x_j
 ``ref_gyy_t_per_m``
 ``coil_current_a``, ``amplitude_deg``,  optional   covariates used by effects (``amplitude_deg`` is the
-``temperature_k``, ``damping_per_s``,              fitted θmax at the start of the ring-down; the
-``duration_s``                                     last two as in ``RingdownFit``)
+``temperature_k``, ``damping_per_s``,              swing at the first fitted sample about the rest
+``duration_s``                                     angle, docs/model_lab.md; the last two as in
+                                                   ``RingdownFit``)
 any other numeric column                optional   kept as a covariate for the diagnostics
 =====================================  =========  ===================================================
 

@@ -9,8 +9,12 @@ from typing import Any
 
 import numpy as np
 
+from mows.estimate.ringdown_types import parameter_std
 from mows.physics.probe import Probe
 from mows.sweep.decompose import Decomposition, Ringdowns, decompose, local_potential
+
+REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its σ is below this…
+REST_OFFSET_SIGMAS = 4.0  # …and it is this many σ from 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,16 +32,15 @@ class SweepPoint:
     t_s: float
     amplitude_std_rad: float = math.nan
     stamp_ns: int = 0  # the device stamp t_s was taken from, exact (0: none)
+    rest_offset_rad: float = math.nan  # the fit's rest-angle offset θs − θ0 (NaN: not fitted)
+    rest_offset_std_rad: float = math.nan
 
     @classmethod
     def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0, stamp_ns: int = 0) -> SweepPoint:
         """A successful ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`, or a RingdownFit
         message: the fields are the same) with its frequency shift; σ of θmax from the fit's
-        covariance (NaN when θmax was held at a bound)."""
-        names = list(fit.parameter_names)
-        covariance = np.asarray(fit.covariance, float).reshape(len(names), len(names))
-        index = names.index("amplitude_rad") if "amplitude_rad" in names else None
-        amplitude_std = math.sqrt(covariance[index, index]) if index is not None else math.nan
+        covariance (NaN when θmax was not determined)."""
+        amplitude_std = parameter_std(fit.parameter_names, fit.covariance, "amplitude_rad")
         return cls(
             fit.theta0_rad,
             fit.frequency_hz,
@@ -50,6 +53,8 @@ class SweepPoint:
             t_s,
             amplitude_std,
             int(stamp_ns),
+            float(getattr(fit, "rest_offset_rad", math.nan)),
+            parameter_std(fit.parameter_names, fit.covariance, "rest_offset_rad"),
         )
 
 
@@ -75,23 +80,32 @@ class SweepRecord:
         shifts = np.array([p.shift_hz for p in chosen])
         return float(weights @ shifts / weights.sum()), float(1.0 / math.sqrt(weights.sum())), len(chosen)
 
+    def rest_offsets_rad(self) -> np.ndarray:
+        """|θs − θ0| of each point as its fit measured it, where the fit determined it (σ below
+        REST_OFFSET_STD_RAD and the offset REST_OFFSET_SIGMAS σ from 0); 0 elsewhere. In a mT
+        field a few fits sit in a wrong minimum (−10 ± 3° where the truth is 3.4°), and |ε| of an
+        offset that is noise would shorten the swing by ~0.8σ: neither is used."""
+        offset = np.abs(self._column("rest_offset_rad"))
+        std = self._column("rest_offset_std_rad")
+        determined = (std <= REST_OFFSET_STD_RAD) & (offset > REST_OFFSET_SIGMAS * std)
+        return np.where(determined & np.isfinite(offset), offset, 0.0)
+
     def stop_amplitude_rad(self, rest_angles_rad=None) -> float:
         """The swing a ring-down starts with when the probe rests undeflected: the
         inverse-variance weighted mean of the fits' θmax + |θs| (θs: each point's rest angle,
-        0 when not given).
+        by default the fit's own rest offset, 0 where it has none).
 
         Every ring-down starts from the housing stop, and the perpendicular excitation scheme
         drives every orientation alike; a single fit's θmax, though, is poorly determined near
-        θ0 = 180° (and held at a bound when unidentifiable), so the sweep's pooled value is the
-        better input to the amplitude-dependent springs. The median when no σ is known.
+        θ0 = 180° (NaN when not determined at all), so the sweep's pooled value is the better
+        input to the amplitude-dependent springs. The median when no σ is known.
         """
-        amplitude = self._column("amplitude_rad")
-        if rest_angles_rad is not None:
-            amplitude = amplitude + np.abs(np.asarray(rest_angles_rad, float))
+        rest = self.rest_offsets_rad() if rest_angles_rad is None else np.abs(np.asarray(rest_angles_rad, float))
+        amplitude = self._column("amplitude_rad") + rest
         std = self._column("amplitude_std_rad")
-        usable = np.isfinite(std) & (std > 0)
+        usable = np.isfinite(std) & (std > 0) & np.isfinite(amplitude)
         if not usable.any():
-            return float(np.median(amplitude))
+            return float(np.nanmedian(amplitude)) if np.isfinite(amplitude).any() else math.nan
         weights = 1.0 / std[usable] ** 2
         return float(weights @ amplitude[usable] / weights.sum())
 
@@ -135,10 +149,11 @@ class SweepRecord:
     def table_columns(self, start_amplitudes_rad=None) -> dict:
         """Columns of a model-lab measurement table (docs/model_lab.md). ``amplitude_deg`` is each
         ring-down's start swing: ``start_amplitudes_rad`` (e.g. :meth:`start_amplitudes_rad` of
-        a decomposition), else the pooled :meth:`stop_amplitude_rad`."""
+        a decomposition), else the pooled :meth:`stop_amplitude_rad` less the fit's own rest
+        offset |θs − θ0| (the swing about a deflected rest angle ends at the nearer stop)."""
         t = self._column("t_s")
         start = (
-            np.full(len(self.points), self.stop_amplitude_rad())
+            self.stop_amplitude_rad() - self.rest_offsets_rad()
             if start_amplitudes_rad is None
             else np.asarray(start_amplitudes_rad, float)
         )

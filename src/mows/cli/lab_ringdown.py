@@ -1,0 +1,92 @@
+"""``mows lab ringdown BAG``: inside each recorded ring-down, where a constant-frequency fit fails
+and which effect explains it (:mod:`mows.lab.chirp`; docs/model_lab.md, "Inside one ring-down").
+
+Each RINGDOWN phase of the bag is cut out of the raw blocks and fitted as ``mows fit`` does; the
+window is then fitted piece by piece. One block of text per ring-down (or ``--json``). A bag
+that cannot be read, or holds no ring-down that can be diagnosed, ends with one line and exit
+status 2; a ring-down that cannot be diagnosed (failed fit, θmax not determined, too short) is
+said in its block.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+from mows.cli.fit import recorded_ringdowns
+from mows.cli.inputs import InputError, input_file, load_probe
+from mows.lab.chirp import ChirpError, diagnose_ringdown
+from mows.physics.probe import PAPER_PROBE
+
+
+def run_ringdown(args) -> int:
+    probe = load_probe(args.probe) if args.probe else PAPER_PROBE
+    results: list[tuple] = []
+    with input_file(args.bag):
+        for segment, options in recorded_ringdowns(args.bag, probe, args):
+            window = segment.window
+            if args.cycle is not None and window.cycle_id != args.cycle:
+                continue
+            try:
+                diagnosis = diagnose_ringdown(
+                    segment.samples_t,
+                    segment.sample_rate_hz,
+                    window.theta0_rad,
+                    window.excitation_frequency_hz,
+                    probe,
+                    options,
+                    args.f00_hz,
+                    segment.saturated,
+                    args.settle_s,
+                    args.piece_periods,
+                )
+            except ChirpError as error:
+                results.append((window, None, str(error)))
+                continue
+            results.append((window, diagnosis, ""))
+    if not any(diagnosis for _, diagnosis, _ in results):
+        what = f"cycle {args.cycle}" if args.cycle is not None else "any recorded ring-down"
+        reasons = "; ".join(sorted({reason for _, _, reason in results})) or "no RINGDOWN phase with its raw samples"
+        raise InputError(f"{args.bag}: cannot diagnose {what}: {reasons}")
+    if args.json:
+        print(json.dumps([_as_dict(w, d, r) for w, d, r in results], indent=2, default=float))
+    else:
+        print("\n\n".join(_text(w, d, r) for w, d, r in results))
+    return 0
+
+
+def _heading(window) -> str:
+    return f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):.2f}°"
+
+
+def _text(window, diagnosis, reason) -> str:
+    if diagnosis is None:
+        return f"{_heading(window)}: not diagnosed: {reason}"
+    fit = diagnosis.fit
+    lines = [
+        f"{_heading(window)}: constant-frequency fit: {fit.report()}",
+        f"  field along the axis from this frequency (Eq. 6, finite amplitude removed): "
+        f"{diagnosis.field_along_axis_t * 1e6:.4g} µT",
+        "  piece  t (ms)   A (deg)   f − f_fit (mHz)        predicted (mHz)   δ (1/s)",
+    ]
+    for i, piece in enumerate(diagnosis.pieces):
+        lines.append(
+            f"  {i:5d}  {piece.t_s * 1e3:6.1f}   {math.degrees(piece.amplitude_rad):7.2f}   "
+            f"{(piece.frequency_hz - fit.frequency_hz) * 1e3:+8.3f} ± {piece.frequency_std_hz * 1e3:6.3f}   "
+            f"{(piece.predicted_hz - fit.frequency_hz) * 1e3:+8.3f}          {piece.damping_per_s:.3f}"
+        )
+    lines.append(
+        f"  constant frequency over the pieces: χ²/dof = {diagnosis.constant_chi2_dof:.3g} "
+        f"(p = {diagnosis.constant_p_value:.2g})"
+    )
+    lines.append(f"  verdict: {diagnosis.verdict}: {diagnosis.explanation}")
+    return "\n".join(lines)
+
+
+def _as_dict(window, diagnosis, reason) -> dict:
+    head = {"cycle_id": window.cycle_id, "repeat_index": window.repeat_index, "theta0_rad": window.theta0_rad}
+    if diagnosis is None:
+        return head | {"verdict": None, "reason": reason}
+    found = {k: v for k, v in dataclasses.asdict(diagnosis).items() if k not in ("fit", "pieces")}
+    return head | found | {"pieces": [dataclasses.asdict(p) for p in diagnosis.pieces]}

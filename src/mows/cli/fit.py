@@ -34,10 +34,17 @@ from mows.sweep.record import SweepPoint, SweepRecord
 def add_arguments(parser) -> None:
     parser.add_argument("bag", help="a rosbag2 directory (or .mcap) recorded by the driver (record_path)")
     parser.add_argument("--probe", help="probe constants YAML (default: the paper's probe)")
+    parser.add_argument("--tuning", action="store_true", help="also fit the tuning ring-downs")
+    add_fit_arguments(parser)
+    parser.add_argument("--csv", help="write the OK fits as a model-lab table (a new file)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --csv file (never the bag)")
+
+
+def add_fit_arguments(parser) -> None:
+    """How a bag's ring-downs are fitted (the estimator node's parameters of the same names)."""
     parser.add_argument("--raw-topic", default="/mows/raw")
     parser.add_argument("--excitation-topic", default="/mows/excitation")
     parser.add_argument("--paper-model", action="store_true", help="fit Eq. S11 (a magnet turning in place)")
-    parser.add_argument("--tuning", action="store_true", help="also fit the tuning ring-downs")
     parser.add_argument("--settle-s", type=float, default=SETTLE_S, help="samples skipped after coil-off, s")
     parser.add_argument(
         "--sensor-distance-m",
@@ -46,8 +53,6 @@ def add_arguments(parser) -> None:
         help="probe to near fluxgate along the plane's x axis, m (as the estimator's parameter)",
     )
     parser.add_argument("--sensor-spacing-m", type=float, default=PAPER_SPACING_M, help="fluxgate spacing, m")
-    parser.add_argument("--csv", help="write the OK fits as a model-lab table (a new file)")
-    parser.add_argument("--force", action="store_true", help="replace an existing --csv file (never the bag)")
 
 
 def run(args) -> int:
@@ -74,7 +79,7 @@ def run(args) -> int:
 
 
 def fit_bag(path, probe: Probe, args):
-    """(window, fit) for every ring-down in the bag, in order."""
+    """(window, fit) for every ring-down in the bag, in order (tuning ones with ``args.tuning``)."""
     assembler = SegmentAssembler(buffer_s=60.0)
     pair = FluxgatePair.paper(distance_m=args.sensor_distance_m, spacing_m=args.sensor_spacing_m)
     for item in read_bag(path, topics=[args.raw_topic, args.excitation_topic]):

@@ -64,7 +64,9 @@ def bag_points(path, nominal, wiring: str, args) -> tuple[list, dict, int]:
     """The bag's ring-downs as calibration points of ``wiring``, fitted with the ``nominal``
     probe's pickup: (points, failed fits by (current, status), ring-downs at no steady current)."""
     timeline = SupplyTimeline.of_bag(path, args.supply_topic)
-    points, failed, unknown = [], {}, 0
+    points: list[CalibrationPoint] = []
+    failed: dict[tuple[float, str], int] = {}
+    unknown = 0
     for window, fit in fit_bag(path, nominal, args):
         end_ns = window.start_ns + round(window.duration_s * NS_PER_S)
         current = timeline.steady_current_a(window.start_ns, end_ns)

@@ -138,3 +138,5 @@ def test_a_ring_down_has_a_supply_current_only_if_the_supply_held_steady_over_it
     assert timeline.steady_current_a(50, 90) is None  # still ramping
     assert timeline.steady_current_a(150, 250) is None  # a ramp began within it
     assert timeline.steady_current_a(-10, 0) is None  # before the supply was set
+    # a "ramp" to the present current starts and ends at one sample: the later state holds
+    assert SupplyTimeline((0, 0), (0.0, 0.0), (True, False)).steady_current_a(10, 20) == 0.0

@@ -36,10 +36,15 @@ class SupplyTimeline:
     @classmethod
     def of_bag(cls, path, topic: str = SUPPLY_TOPIC) -> SupplyTimeline:
         """The states on ``topic``; BagError for a bag that has none."""
+        # In device time; states of one stamp in the order the driver published them (a ramp that
+        # is no ramp, to the present current, starts and ends at one sample: steady comes last).
         states = sorted(
-            (stamps.nanoseconds(m.message.header.stamp), float(m.message.current_a), bool(m.message.ramping))
-            for m in read_bag(path, topics=[topic])
-            if m.msgtype == SUPPLY_TYPE
+            (
+                (stamps.nanoseconds(m.message.header.stamp), float(m.message.current_a), bool(m.message.ramping))
+                for m in read_bag(path, topics=[topic])
+                if m.msgtype == SUPPLY_TYPE
+            ),
+            key=lambda state: state[0],
         )
         if not states:
             raise BagError(

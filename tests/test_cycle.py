@@ -309,6 +309,30 @@ def test_the_driver_s_supply_cap_is_lower_than_the_device_s_and_a_cancel_ramps_d
     assert not answers or answers[0].accepted
 
 
+def test_the_session_announces_each_ramp_and_where_the_device_reached_it():
+    # What mows calibrate BAG reads back: the supply is steady at a current from the sample at
+    # which the device reached it (the stamp of that sample), ramping before.
+    session, backend = supplied_session()
+    events, answers = [], []
+    session.step(0.0)
+    session.set_field_current(0.5, answers.append)
+    for _ in range(2000):
+        events += session.step(0.0).supply
+        if answers:
+            break
+    start, steady = events
+    assert (start.current_a, start.ramping, steady.current_a, steady.ramping) == (0.5, True, 0.5, False)
+    assert steady.sample_index == answers[0].applied_sample_index
+    # 0.5 A at 2 A/s in 10 ms steps: the ramp takes 0.25 s (± a step) of device time
+    assert (steady.stamp_ns - start.stamp_ns) / 1e9 == pytest.approx(0.25, abs=0.011)
+    assert (steady.stamp_ns - start.stamp_ns) * 20_000 == (steady.sample_index - start.sample_index) * 1e9
+    session.emergency_stop(True, "test")
+    (dropped,) = session.step(0.0).supply
+    assert (dropped.current_a, dropped.ramping) == (0.0, True) and "emergency stop: test" in dropped.reason
+    assert session.health()["supply_state_a"] == 0.0 and session.health()["supply_ramping"]
+    session.close()
+
+
 def test_a_cycle_drives_at_the_frequency_it_is_asked_for():
     session = session_on_simulator(
         CycleSettings(excite_s=0.1, ringdown_s=0.2, gap_s=0.0, repeats=1, tuning_steps=0, settle_s=0.0)

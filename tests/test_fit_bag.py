@@ -5,6 +5,7 @@ import csv
 import pytest
 
 from mows.cli import main as cli
+from mows.cli.calibrate_bag import SupplyTimeline
 from mows.sim.scenario import load_scenario
 from recorded_bags import record_cycles
 
@@ -31,3 +32,24 @@ def test_every_recorded_ringdown_is_fitted_and_tabled(bag, tmp_path, capsys):
 def test_a_missing_bag_is_a_clear_error(tmp_path, capsys):
     assert cli.main(["fit", str(tmp_path / "nothing")]) == 2
     assert "nothing" in capsys.readouterr().err
+
+
+def test_calibrating_a_bag_without_the_supply_current_is_refused_in_one_line(bag, tmp_path, capsys):
+    # Recorded before the driver published mows/supply: no ring-down's applied field is known.
+    path, _ = bag
+    probe = tmp_path / "probe.yaml"
+    assert cli.main(["calibrate", str(path), "-o", str(probe)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and "no supply current" in error and "mows_msgs/msg/SupplyState" in error
+    assert not probe.exists()
+
+
+def test_a_ring_down_has_a_supply_current_only_if_the_supply_held_steady_over_it():
+    timeline = SupplyTimeline((0, 100, 200, 400), (1.0, 1.0, 2.0, 2.0), (True, False, True, False))
+    assert timeline.steady_current_a(100, 150) == 1.0
+    assert timeline.steady_current_a(500, 900) == 2.0
+    assert timeline.steady_current_a(50, 90) is None  # still ramping
+    assert timeline.steady_current_a(150, 250) is None  # a ramp began within it
+    assert timeline.steady_current_a(-10, 0) is None  # before the supply was set
+    # a "ramp" to the present current starts and ends at one sample: the later state holds
+    assert SupplyTimeline((0, 0), (0.0, 0.0), (True, False)).steady_current_a(10, 20) == 0.0

@@ -2,13 +2,13 @@
 
 import array
 
-from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel
+from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChannel, SupplyState
 from mows_msgs.srv import EmergencyStop, RunCycle, SetFieldCurrent
 from sensor_msgs.msg import JointState
 
 from mows.device.interface import CommandResult
 from mows.device.payloads import DeviceInfo
-from mows.device.phases import CycleOutcome, CycleRequest, PhaseEvent
+from mows.device.phases import CycleOutcome, CycleRequest, PhaseEvent, SupplyEvent
 from mows.records import stamps
 
 
@@ -63,6 +63,15 @@ def excitation_msg(event: PhaseEvent, frame_id: str) -> ExcitationState:
         phase_name=event.phase.name,
         coil_current_amplitude_a=list(event.currents_a),
         **{name: getattr(event, name) for name in EVENT_FIELDS},
+    )
+    stamps.set_nanoseconds(message.header.stamp, event.stamp_ns)
+    message.header.frame_id = frame_id
+    return message
+
+
+def supply_msg(event: SupplyEvent, frame_id: str) -> SupplyState:
+    message = SupplyState(
+        current_a=float(event.current_a), ramping=event.ramping, sample_index=event.sample_index, reason=event.reason
     )
     stamps.set_nanoseconds(message.header.stamp, event.stamp_ns)
     message.header.frame_id = frame_id

@@ -8,7 +8,7 @@ runs on one executor thread: ``run_cycle`` awaits its cycle as a coroutine (in a
 group), so the emergency stop, the parameter services and the diagnostics are served while it
 waits. Topic and service names are relative: in the root namespace they are /mows/raw,
 /mows/excitation, /mows/driver/run_cycle, /mows/driver/emergency_stop and
-/mows/driver/set_field_current (docs/driver.md).
+/mows/driver/set_field_current (docs/driver.md); the supply's ramps go out (and are recorded) on /mows/supply.
 
 A managed node (``mows_ros.node``): ``configure`` checks the parameters and opens the device
 link (and the bag) and reads the device from then on; ``activate`` publishes the stream and
@@ -28,7 +28,7 @@ import threading
 import time
 import traceback
 
-from mows_msgs.msg import ExcitationState, MagnetometerBlock
+from mows_msgs.msg import ExcitationState, MagnetometerBlock, SupplyState
 from mows_msgs.srv import EmergencyStop, RunCycle, SetFieldCurrent
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -47,6 +47,7 @@ from mows_driver.messages import (
     estop_response,
     excitation_msg,
     joint_state_msg,
+    supply_msg,
     supply_response,
 )
 from mows_driver.parameters import (
@@ -71,6 +72,7 @@ from mows_ros.qos import EXCITATION_QOS, JOINT_QOS, STREAM_QOS
 NODE_NAME = "driver"
 RAW_TOPIC = "mows/raw"
 EXCITATION_TOPIC = "mows/excitation"
+SUPPLY_TOPIC = "mows/supply"
 JOINT_STATES_TOPIC = "mows/joint_states"
 RUN_CYCLE_SERVICE = "mows/driver/run_cycle"
 EMERGENCY_STOP_SERVICE = "mows/driver/emergency_stop"
@@ -90,6 +92,7 @@ class DriverNode(MowsNode):
         self._health = StreamHealth()
         self.raw_publisher = self.create_publisher(MagnetometerBlock, RAW_TOPIC, STREAM_QOS)
         self.excitation_publisher = self.create_publisher(ExcitationState, EXCITATION_TOPIC, EXCITATION_QOS)
+        self.supply_publisher = self.create_publisher(SupplyState, SUPPLY_TOPIC, EXCITATION_QOS)
         self.joint_publisher = self.create_publisher(JointState, JOINT_STATES_TOPIC, JOINT_QOS)
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
@@ -114,7 +117,12 @@ class DriverNode(MowsNode):
         backend = make_backend(values, cap)  # a ValueError or OSError refuses, with its reason
         try:
             self.recorder = open_recorder(
-                values["record_path"], [(self.raw_publisher, STREAM_QOS), (self.excitation_publisher, EXCITATION_QOS)]
+                values["record_path"],
+                [
+                    (self.raw_publisher, STREAM_QOS),
+                    (self.excitation_publisher, EXCITATION_QOS),
+                    (self.supply_publisher, EXCITATION_QOS),
+                ],
             )
         except BaseException:
             backend.close()
@@ -264,6 +272,8 @@ class DriverNode(MowsNode):
             self._publish(self.excitation_publisher, excitation_msg(event, self._values["probe_frame_id"]))
             if event.phase == Phase.FAULT:
                 self.get_logger().error(f"coils forced off: {event.reason}")
+        for supply in output.supply:
+            self._publish(self.supply_publisher, supply_msg(supply, self._values["probe_frame_id"]))
 
     def _publish(self, publisher, message) -> None:
         """Record (first: a subscriber never has a message the bag lacks), then publish."""

@@ -267,6 +267,11 @@ def test_the_supply_ramps_on_a_framed_command_and_the_device_acks_where_the_ramp
 
 
 def test_a_driver_lost_mid_calibration_leaves_the_supply_at_zero(supplied):
+    """A killed driver (SIGKILL) runs no code of its own: only the device can bring its supply
+    down, so this is a test of the device's watchdog, the link cut mid-ramp. The simulated
+    device lives inside the driver's process and dies with it, leaving no supply to be at zero;
+    the sim path's graceful endings (close on SIGINT/SIGTERM, the emergency stop, a cancel) are
+    tested on the session (tests/test_cycle.py)."""
     from mows.device.interface import FieldCurrentCommand
 
     bench, link = supplied

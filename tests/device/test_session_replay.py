@@ -1,5 +1,6 @@
 """A session replaying a recording (the bag backend) has no sequencer: the phase it reports is
-the one of the recording's last replayed excitation state."""
+the one of the recording's last replayed excitation state; the supply's recorded states come
+back as they were recorded."""
 
 import numpy as np
 
@@ -57,6 +58,10 @@ def recording(path):
             "largest_spacing",
         )
         messages.append(bags.BagMessage("/mows/excitation", "mows_msgs/msg/ExcitationState", 2 * k + 1, state))
+    Supply = store.types["mows_msgs/msg/SupplyState"]
+    for k, ramping in [(1, True), (3, False)]:
+        supply = Supply(header(k * BLOCK + 7), 1.5, ramping, k * BLOCK + 7, "")
+        messages.append(bags.BagMessage("/mows/supply", "mows_msgs/msg/SupplyState", 2 * k + 1, supply))
     bags.write_bag(path, sorted(messages, key=lambda m: m.timestamp_ns))
 
 
@@ -68,11 +73,15 @@ def test_the_replayed_phase_is_the_recordings(tmp_path):
     )
     session = DeviceSession(BagBackend(tmp_path / "bag", rate=100.0), config)
     assert session.health()["phase"] == "none replayed yet"
-    phases = []
+    phases, supply = [], []
     while session.health()["link"] != "finished":
         output = session.step(0.05)
         phases += [e.phase for e in output.events]
+        supply += output.supply
         if output.events:
             assert session.health()["phase"] == output.events[-1].phase.name
     assert phases == [Phase.EXCITING, Phase.RINGDOWN] and session.health()["phase"] == "RINGDOWN"
+    # the supply's ramp and its end come back as recorded: what a replaying driver republishes
+    assert [(e.sample_index, e.current_a, e.ramping) for e in supply] == [(507, 1.5, True), (1507, 1.5, False)]
+    assert supply[1].stamp_ns == 10**12 + 1507 * 50_000 and session.health()["supply_state_a"] == 1.5
     session.close()

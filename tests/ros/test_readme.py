@@ -18,6 +18,7 @@ README = (ROOT / "README.md").read_text()
 INTERFACES = [
     "/mows/raw",
     "/mows/excitation",
+    "/mows/supply",
     "/mows/joint_states",
     "/mows/ringdown",
     "/mows/field",

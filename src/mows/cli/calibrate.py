@@ -6,9 +6,11 @@ Input (one of):
   ``f_hz``, ``f_std_hz``, ``damping_per_s``, ``duration_s``, ``amplitude_deg``,
   ``start_offset_s`` and ``gradient_wiring`` (0: the homogeneous wiring, 1: the gradient one);
   ``--table`` writes this format;
-* not yet a bag: the driver's recordings do not carry the supply current (ExcitationState has
-  no field for it), so a bag read as a model-lab table lacks ``supply_current_a`` and is refused
-  with the missing columns named;
+* ``BAG`` — a bag the driver recorded (``record_path``) while the calibration action ran: its
+  ring-downs fitted as the estimator fits them, each at the supply current the driver's
+  ``/mows/supply`` states say held steady over it (:mod:`mows.cli.calibrate_bag`), all of the
+  homogeneous wiring; the same points, hence the same constants, as the action's. A bag
+  without supply states (recorded before the driver published them) is refused, exit status 2;
 * ``--simulate`` — run the calibration schedule (:mod:`mows.sweep.calibration_schedule`) on the
   simulated device of ``--scenario`` in simulated device time, and compare with its truth.
 
@@ -26,10 +28,12 @@ import sys
 
 import numpy as np
 
+from mows.cli.calibrate_bag import SUPPLY_TOPIC, bag_points
+from mows.cli.fit import add_fit_arguments
 from mows.device.scheduled import ScheduledDevice
 from mows.estimate.calibration_record import CalibrationPoint, KnownConstants
 from mows.estimate.probe_calibration import calibrate_probe
-from mows.lab.readers import load_table
+from mows.lab.readers import is_bag, load_table
 from mows.lab.synth import fit_cycle
 from mows.lab.table import MeasurementTable
 from mows.physics.coils import CurrentCap
@@ -51,7 +55,7 @@ SUPPLY_SETTLE_S = 0.5  # the probe rings after a supply step: wait before the ne
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("input", nargs="?", help="a calibration table (CSV; --table writes one)")
+    parser.add_argument("input", nargs="?", help="a calibration table (CSV; --table writes one) or a driver's bag")
     parser.add_argument("-o", "--output", required=True, help="the probe file to write (YAML)")
     parser.add_argument("--probe", help="nominal probe YAML: moment, magnet mass, housing stop (default: paper's)")
     parser.add_argument("--scenario", default="calibration", help="scenario whose supply section is the wiring")
@@ -69,6 +73,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--repeats", type=int, default=1, help="ring-downs per cycle")
     parser.add_argument("--seed", type=int, help="noise seed of the simulation (default: the scenario's)")
     parser.add_argument("--table", help="also write the calibration points as a table (CSV)")
+    parser.add_argument("--supply-topic", default=SUPPLY_TOPIC, help="BAG: the driver's supply states")
+    add_fit_arguments(parser)  # BAG: how its ring-downs are fitted (as the estimator's parameters)
+    parser.set_defaults(tuning=False)
 
 
 def run(args) -> int:
@@ -80,6 +87,10 @@ def run(args) -> int:
         field_wiring = next(iter(wirings))  # the scenario's own supply: the homogeneous wiring
         if args.simulate:
             points, failed = simulated_points(scenario, gradient, nominal, field_wiring, args)
+        elif args.input and is_bag(args.input):
+            points, failed, unknown = bag_points(args.input, nominal, field_wiring, args)
+            if unknown:
+                print(f"{unknown} ring-down(s) at no steady supply current (ramping, or before it was set) left out")
         elif args.input:
             points, failed = read_points(args.input, field_wiring), {}
         else:

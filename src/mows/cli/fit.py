@@ -35,10 +35,15 @@ def add_arguments(parser) -> None:
 def add_bag_arguments(parser) -> None:
     """How a recorded bag's ring-downs are found and fitted (also ``mows lab ringdown``)."""
     parser.add_argument("--probe", help="probe constants YAML (default: the paper's probe)")
+    parser.add_argument("--tuning", action="store_true", help="also fit the tuning ring-downs")
+    add_fit_arguments(parser)
+
+
+def add_fit_arguments(parser) -> None:
+    """How a bag's ring-downs are fitted (the estimator node's parameters of the same names)."""
     parser.add_argument("--raw-topic", default="/mows/raw")
     parser.add_argument("--excitation-topic", default="/mows/excitation")
     parser.add_argument("--paper-model", action="store_true", help="fit Eq. S11 (a magnet turning in place)")
-    parser.add_argument("--tuning", action="store_true", help="also fit the tuning ring-downs")
     parser.add_argument("--settle-s", type=float, default=SETTLE_S, help="samples skipped after coil-off, s")
     parser.add_argument(
         "--sensor-distance-m",
@@ -73,7 +78,7 @@ def run(args) -> int:
 
 
 def fit_bag(path, probe: Probe, args):
-    """(window, fit) for every ring-down in the bag, in order."""
+    """(window, fit) for every ring-down in the bag, in order (tuning ones with ``args.tuning``)."""
     for segment, options in recorded_ringdowns(path, probe, args):
         yield segment.window, fit_segment(segment, options, args.settle_s, probe.damping_per_s)
 

@@ -19,7 +19,7 @@ SUBCOMMANDS = {
     "bag": ("mows.cli.bag", "repair a recording that was never closed (killed): rebuild it from its intact chunks"),
     "lab": ("mows.cli.lab", "compare the frequency model with measurements, find missing effects"),
     "bench": ("mows.cli.bench", "benchmarks: estimator, simulator, stream, lab (figures, never a failure)"),
-    "calibrate": ("mows.cli.calibrate", "calibrate a new probe from a supply sweep (TABLE or --simulate)"),
+    "calibrate": ("mows.cli.calibrate", "calibrate a new probe from a supply sweep (BAG, TABLE or --simulate)"),
 }
 
 

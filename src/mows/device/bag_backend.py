@@ -14,17 +14,18 @@ import numpy as np
 from mows.device import bags
 from mows.device.interface import Backend, Command, LinkEvent, NotExciting
 from mows.device.payloads import DeviceInfo
-from mows.device.phases import Phase, PhaseEvent
+from mows.device.phases import Phase, PhaseEvent, SupplyEvent
 from mows.records import stamps
 from mows.records.samples import SampleBlock
 
 RAW_TYPE = "mows_msgs/msg/MagnetometerBlock"
 EXCITATION_TYPE = "mows_msgs/msg/ExcitationState"
+SUPPLY_TYPE = "mows_msgs/msg/SupplyState"  # recorded since the driver publishes mows/supply (older bags lack it)
 
 
 class BagBackend(Backend):
-    """A recorded rosbag2 bag (the driver's own recordings: MagnetometerBlock and
-    ExcitationState messages, on whatever topics) replayed through the driver's path.
+    """A recorded rosbag2 bag (the driver's own recordings: MagnetometerBlock, ExcitationState
+    and SupplyState messages, on whatever topics) replayed through the driver's path.
 
     Messages come out in bag order, each when its device stamp is due at ``rate`` × real
     time from the first (counted from the first poll); their stamps stay the recorded device
@@ -43,7 +44,7 @@ class BagBackend(Backend):
         self.replayed = 0
         self.skipped: dict[str, int] = {}  # messages that made no sense, by why
         self._monotonic = monotonic
-        self._messages = (m for m in bags.read_bag(path) if m.msgtype in (RAW_TYPE, EXCITATION_TYPE))
+        self._messages = (m for m in bags.read_bag(path) if m.msgtype in (RAW_TYPE, EXCITATION_TYPE, SUPPLY_TYPE))
         self._ahead: collections.deque[bags.BagMessage] = collections.deque()
         first_raw = self._first_raw()
         block = first_raw.message
@@ -75,7 +76,7 @@ class BagBackend(Backend):
         deadline = self._monotonic() + timeout_s
         if self._start is None:  # the replay's clock starts with the first poll
             self._start = (stamps.nanoseconds(self._ahead[0].message.header.stamp), self._monotonic())
-        items: list[SampleBlock | PhaseEvent | LinkEvent] = []
+        items: list[SampleBlock | PhaseEvent | SupplyEvent | LinkEvent] = []
         while (message := self._peek()) is not None:
             elapsed_ns = stamps.nanoseconds(message.message.header.stamp) - self._start[0]
             due = self._start[1] + elapsed_ns / 1e9 / self.rate
@@ -99,8 +100,9 @@ class BagBackend(Backend):
         return self._ahead[0] if self._ahead else None
 
     def _replay(self, message: bags.BagMessage) -> list:
+        replay = {RAW_TYPE: self._chunk, EXCITATION_TYPE: self._event, SUPPLY_TYPE: supply_event}[message.msgtype]
         try:
-            item = self._chunk(message.message) if message.msgtype == RAW_TYPE else self._event(message.message)
+            item = replay(message.message)
         except ValueError as nonsense:
             reason = str(nonsense)
             self.skipped[reason] = self.skipped.get(reason, 0) + 1
@@ -166,3 +168,12 @@ class BagBackend(Backend):
 
     def close(self) -> None:
         self._messages.close()
+
+
+def supply_event(state) -> SupplyEvent:
+    """A recorded ``mows_msgs/SupplyState`` as the session's event."""
+    if not math.isfinite(state.current_a):
+        raise ValueError(f"a supply state with the current {state.current_a!r} A")
+    return SupplyEvent(
+        state.sample_index, stamps.nanoseconds(state.header.stamp), state.current_a, bool(state.ramping), state.reason
+    )

@@ -1,6 +1,7 @@
 """The vocabulary of a measurement cycle (:mod:`mows.device.cycle`): its phases and the events
-that announce them, the settings cycles run with, a request for one cycle, the plan it resolves
-to and its outcome, the step the sequencer returns, and the tuning fit it is handed.
+that announce them (and the static-field supply's, :class:`SupplyEvent`), the settings cycles
+run with, a request for one cycle, the plan it resolves to and its outcome, the step the
+sequencer returns, and the tuning fit it is handed.
 
 The phase numbers are those of ``mows_msgs/ExcitationState`` PHASE_*.
 """
@@ -48,6 +49,20 @@ class PhaseEvent:
     @property
     def coils_on(self) -> bool:
         return self.phase == Phase.EXCITING
+
+
+@dataclasses.dataclass(frozen=True)
+class SupplyEvent:
+    """The static-field supply's state from device sample ``sample_index`` (device time
+    ``stamp_ns``) on: ramping towards ``current_a`` (the field is changing) or steady at it.
+    ``reason`` says why when the driver ramped it itself (an emergency stop), '' when commanded.
+    Published as ``mows_msgs/SupplyState``."""
+
+    sample_index: int
+    stamp_ns: int
+    current_a: float
+    ramping: bool
+    reason: str = ""
 
 
 @dataclasses.dataclass(frozen=True)

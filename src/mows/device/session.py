@@ -42,6 +42,7 @@ from mows.device.phases import (
     Phase,
     PhaseEvent,
     Step,
+    SupplyEvent,
     TuningFit,
 )
 from mows.device.tracking import TrackingLoop, TrackingSettings
@@ -59,6 +60,7 @@ class Output:
 
     blocks: list[SampleBlock] = dataclasses.field(default_factory=list)
     events: list[PhaseEvent] = dataclasses.field(default_factory=list)
+    supply: list[SupplyEvent] = dataclasses.field(default_factory=list)  # the supply's ramps, in order
     links: list[LinkEvent] = dataclasses.field(default_factory=list)  # for the log, in any state
 
 
@@ -108,8 +110,12 @@ class DeviceSession:
         self._arrivals: collections.deque = collections.deque()  # (host time, samples) for the rate
         self._next_index = 0  # the sample after the newest received
         self._supply_commands = SUPPLY_COMMAND_IDS
-        self._supply_waiting: dict[int, Callable[[CommandResult], None]] = {}  # sent, not answered
-        self._supply_ramping: list[tuple[CommandResult, Callable]] = []  # answered, not reached
+        self._supply_waiting: dict[int, tuple[Callable[[CommandResult], None], FieldCurrentCommand]] = {}  # sent
+        self._supply_ramping: list[tuple[CommandResult, Callable, float]] = []  # answered, not reached
+        self._supply_latest: int | None = None  # the ramp that sets the supply (none after a ramp to zero)
+        self._supply_events: list[SupplyEvent] = []  # not yet handed to the streaming thread
+        self.supply_state: SupplyEvent | None = None  # the last one, for /diagnostics
+        self._anchor: tuple[int, int, float] | None = None  # (sample index, stamp ns, rate) of the newest block
         if backend.info is not None:
             self._device_known()
 
@@ -129,7 +135,8 @@ class DeviceSession:
                 self._act(self.sequencer.abort(f"no samples from the device for {STALL_TIMEOUT_S:g} s"))
             self._track()
             output.events += self._events
-            self._events = []
+            output.supply += self._supply_events
+            self._events, self._supply_events = [], []
             for event in output.events:
                 if event.cycle_id:  # a cycle's phases begin once the stage has turned to its θ0
                     self.stage_angle_rad = event.theta0_rad
@@ -141,6 +148,7 @@ class DeviceSession:
             # Samples come from a known device: its link-up (which builds the assembler) precedes them.
             assert self.assembler is not None
             self._next_index = item.first_sample_index + len(item)
+            self._anchor = (item.first_sample_index, item.stamp_ns, item.sample_rate_hz)
             self._supply_reached()
             output.blocks += self.assembler.add(item)
             if self.sequencer is not None:
@@ -154,6 +162,8 @@ class DeviceSession:
         elif isinstance(item, LinkEvent):
             self._link(item)
             output.links.append(item)
+        elif isinstance(item, SupplyEvent):  # replayed from a recording
+            self._supply_event(item)
         elif isinstance(item, DeviceFault):
             self.device_faults += 1
             self.last_device_fault = item.reason
@@ -301,28 +311,54 @@ class DeviceSession:
             )
             self._check_armed(command)
             self.backend.send(command)
-            self._supply_waiting[command.command_id] = on_done
+            self._supply_waiting[command.command_id] = (on_done, command)
             return command.command_id
 
-    def supply_to_zero(self) -> None:
+    def supply_to_zero(self, reason: str = "supply to zero") -> None:
         """Ramp the supply to zero now, dropping any ramp that waits (a cancelled calibration)."""
         with self._lock:
             self.backend.supply_to_zero_now()
+            self._supply_dropped(reason)
+
+    def _supply_dropped(self, reason: str) -> None:
+        """The driver ramped the supply to zero itself: no ramp that waits sets it any more, and
+        when it is back at zero is not known (a ramp, not a steady state)."""
+        self._supply_latest = None
+        self._supply_event(SupplyEvent(self._next_index, self._stamp_ns(self._next_index), 0.0, True, reason))
 
     def _supply_answered(self, result: CommandResult) -> None:
-        done = self._supply_waiting.pop(result.command_id)
+        done, command = self._supply_waiting.pop(result.command_id)
         if not result.accepted:
             self.refused_commands += 1
             done(result)
             return
-        self._supply_ramping.append((result, done))
+        self._supply_latest = command.command_id
+        start = command.at_sample_index
+        self._supply_event(SupplyEvent(start, self._stamp_ns(start), command.current_a, True))
+        self._supply_ramping.append((result, done, command.current_a))
         self._supply_reached()
 
     def _supply_reached(self) -> None:
-        reached = [(r, d) for r, d in self._supply_ramping if r.applied_sample_index < self._next_index]
-        self._supply_ramping = [(r, d) for r, d in self._supply_ramping if r.applied_sample_index >= self._next_index]
-        for result, done in reached:
+        reached = [ramp for ramp in self._supply_ramping if ramp[0].applied_sample_index < self._next_index]
+        self._supply_ramping = [
+            ramp for ramp in self._supply_ramping if ramp[0].applied_sample_index >= self._next_index
+        ]
+        for result, done, current_a in reached:
+            if result.command_id == self._supply_latest:  # not overtaken by a later ramp or a ramp to zero
+                end = result.applied_sample_index
+                self._supply_event(SupplyEvent(end, self._stamp_ns(end), current_a, False))
             done(result)
+
+    def _supply_event(self, event: SupplyEvent) -> None:
+        self._supply_events.append(event)
+        self.supply_state = event
+
+    def _stamp_ns(self, sample_index: int) -> int:
+        """The device stamp of a sample, from the newest block (0 before any block came)."""
+        if self._anchor is None:
+            return 0
+        index, stamp_ns, rate_hz = self._anchor
+        return stamp_ns + round((sample_index - index) * 1e9 / rate_hz)
 
     def _not_answered(self) -> str:
         """Why no cycle can run on a device that has never described itself."""
@@ -337,6 +373,7 @@ class DeviceSession:
                 self.tracking.stop(f"tracking stopped by the emergency stop: {reason or 'no reason given'}")
                 self.backend.coils_off_now()
                 self.backend.supply_to_zero_now()
+                self._supply_dropped(f"emergency stop: {reason or 'no reason given'}")
             if self.sequencer is None:
                 return False
             self._act(self.sequencer.emergency_stop(reason) if engage else self.sequencer.release())
@@ -393,6 +430,8 @@ class DeviceSession:
                 **self.tracking.state(),
                 **self.backend.stats(),
             }
+            if (supply := self.supply_state) is not None:
+                values.update(supply_state_a=supply.current_a, supply_ramping=supply.ramping)
             a, s = self.assembler, self.sequencer
             if a is not None:
                 values.update(

@@ -15,11 +15,6 @@ import numpy as np
 
 from mows.physics.probe import Probe
 
-# The start swing of a ring-down driven into the stop scatters about the stop by ~0.1°
-# (penetration into the contact, the phase at switch-off: 23.6°–23.9° measured in the
-# simulator at a 24° stop, the estimator's θmax scattering by degrees).
-THETA_STOP_STD_RAD = math.radians(0.1)
-
 
 class CalibrationError(ValueError):
     """The data cannot determine a constant; the message says which and why."""
@@ -78,13 +73,15 @@ class CalibrationPoint:
 class KnownConstants:
     """What the calibration takes as given: the magnet's moment and mass (data sheet, scale),
     the housing stop, and optionally the environment field at the probe with the supply at
-    zero (a reference magnetometer), global frame."""
+    zero (a reference magnetometer), global frame, and the ring-downs' start swing at the
+    switch-off with its uncertainty when it was measured apart (None: from the fits' θmax)."""
 
     moment_am2: float
     magnet_mass_kg: float
     theta_stop_rad: float = math.radians(24.0)
     environment_field_t: tuple | None = None
-    theta_stop_std_rad: float = THETA_STOP_STD_RAD
+    start_swing_rad: float | None = None
+    start_swing_std_rad: float = 0.0
 
     @classmethod
     def of(cls, probe: Probe, environment_field_t=None) -> KnownConstants:

@@ -18,13 +18,17 @@ constants come from the **full potential** (:mod:`mows.physics.potential`) rathe
 * J is taken from the damped relation J = kM/((2π·f00)² + δ²) (Eq. S1), δ the ring-downs' mean
   damping; Eq. 10 neglects δ (6.5e-6 relative for the paper's probe).
 
-Parameters fitted by weighted least squares: f00, β0, the ring-downs' start swing (the housing
-stop decayed to the first fitted sample; a homogeneous sweep cannot tell it from β0, since both
-scale the field spring, so it is held by its prior θstop ± ``theta_stop_std_rad`` and its
-uncertainty enters β0's), the environment field along the supply's axis (unless a reference
-magnetometer gave it) and, with gradient points, the lever l_γ. The
-covariance is (JᵀWJ)⁻¹, scaled by χ²/dof when that exceeds 1; derived constants carry it by
-the delta method, so every constant has an uncertainty and all have correlations.
+Parameters fitted by weighted least squares: f00, β0, the ring-downs' start swing at the
+switch-off, the environment field along the supply's axis (unless a reference magnetometer gave
+it) and, with gradient points, the lever l_γ. A homogeneous sweep cannot tell the start swing
+from β0 (both scale the field spring), so the swing is held by a measurement: the median of
+the fits' own θmax (or a value given in :class:`KnownConstants`); its uncertainty enters β0's. Each
+ring-down's own swing also scatters about that mean (by ~0.12° in the simulator, where the
+drive leaves the probe at a random phase of its bounce off the stop): a per-ring-down error of
+∂f/∂A·s that grows with the field, its size s estimated from the frequencies' excess scatter
+(a variance component) and weighted in, not shared by all ring-downs. The covariance is
+(JᵀWJ)⁻¹, the frequencies' part widened by χ²/dof when that still exceeds 1; derived constants
+carry it by the delta method, so every constant has an uncertainty and all have correlations.
 
 What the data cannot determine raises :class:`CalibrationError` with the reason: fewer than two
 distinct applied fields (β0), fields of one sign only without a reference (f00 and the
@@ -36,6 +40,7 @@ J and a alone, and the report says that the lever check could not be made.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable
 
@@ -53,6 +58,11 @@ AMPLITUDE_UNIT_RAD = 1e-3
 # Central-difference steps of the Jacobian in those units (f00, β0, swing, environment, lever):
 # large against the model's rounding (~1e-9 Hz), small against its curvature.
 STEPS = {"f00": 1e-4, "beta0": 1e-5, "swing": 1e-2, "environment": 0.1, "lever": 1e-4}
+SCATTER_ITERATIONS = 2  # weights from the scatter, the scatter from the fit: twice settles it
+MAX_SCATTER_RAD = math.radians(1.0)  # a start swing scattering more is no drive into the stop
+MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
+MEDIAN_EFFICIENCY = 1.2533  # √(π/2): the median's standard error over the mean's, normal samples
+SWING_FLOOR_RAD = 1e-6  # fits that agree exactly (synthetic data) still leave a finite weight
 
 
 # --- the fit -----------------------------------------------------------------------------------
@@ -82,7 +92,6 @@ def calibrate_probe(
     field_points = [p for p in points if p.wiring == field_wiring]
     gradient_points = [p for p in points if p.wiring != field_wiring]
     rows = rows_of(points, wirings, known)
-    notes += _amplitude_notes(points, known)
     axis = _field_axis(wirings, field_wiring)
     _check_field_points(field_points, axis, known)
     fit_environment = known.environment_field_t is None
@@ -90,6 +99,7 @@ def calibrate_probe(
     if not fit_lever:
         notes.append("no gradient points: the lever comes from J and the magnet mass alone, unchecked")
     damping, damping_var = _mean_damping(points)
+    swing, swing_std = _start_swing(points, known)
     unit_axis = axis / np.linalg.norm(axis)
     fixed_environment = np.zeros(3) if fit_environment else np.asarray(known.environment_field_t, float)
 
@@ -98,10 +108,12 @@ def calibrate_probe(
         lever = x[-1] * LEVER_UNIT_M if fit_lever else nominal_lever_m
         return x[0], x[1] * BETA_UNIT_HZ_PER_T, environment, lever, x[2] * AMPLITUDE_UNIT_RAD
 
-    def residuals(x):
-        model = frequencies(rows, known, *unpack(x), damping)
-        prior = (x[2] * AMPLITUDE_UNIT_RAD - known.theta_stop_rad) / known.theta_stop_std_rad
-        return np.append((model - rows.frequency_hz) / rows.frequency_std_hz, prior)
+    def model(x):
+        return frequencies(rows, known, *unpack(x), damping)
+
+    def residuals(x, sigma_hz):
+        prior = (x[2] * AMPLITUDE_UNIT_RAD - swing) / swing_std
+        return np.append((model(x) - rows.frequency_hz) / sigma_hz, prior)
 
     start = _start(field_points, wirings[field_wiring], known)
     x0 = np.array(
@@ -112,18 +124,82 @@ def calibrate_probe(
     steps = np.array(
         [STEPS[k] for k in ["f00", "beta0", "swing"] + ["environment"] * fit_environment + ["lever"] * fit_lever]
     )
+    dof = len(points) + 1 - len(x0)
+    result = _least_squares(lambda x: residuals(x, rows.frequency_std_hz), x0, steps)
+    scatter_rad = 0.0
+    for _ in range(SCATTER_ITERATIONS):
+        slope = _swing_slope_hz_per_rad(model, result.x)
+        scatter_rad = _swing_scatter_rad(model(result.x) - rows.frequency_hz, rows.frequency_std_hz, slope, dof)
+        sigma_hz = np.hypot(rows.frequency_std_hz, slope * scatter_rad)
+        result = _least_squares(functools.partial(residuals, sigma_hz=sigma_hz), result.x, steps)
+    if scatter_rad > 0.0:
+        notes.append(
+            f"the ring-downs' start swings scatter by {math.degrees(scatter_rad):.3f}° about their mean "
+            "(from the frequencies' scatter beyond the fits' uncertainty): weighted in"
+        )
+    chi2_dof = float(result.fun @ result.fun / dof) if dof > 0 else math.nan
+    # A χ²/dof above 1 widens what the frequencies say, never the start swing's measurement.
+    jac = result.jac.copy()
+    jac[:-1] /= math.sqrt(max(1.0, chi2_dof if dof > 0 else 1.0))
+    cov_x = _covariance(
+        jac, ["f00", "β0", "start swing"] + ["environment field"] * fit_environment + ["lever"] * fit_lever
+    )
+    fitted = _Fitted(result.x, cov_x, unpack, damping, damping_var, unit_axis, fit_environment, fit_lever)
+    return _derive(fitted, wirings, gradient_points, known, chi2_dof, len(points), tuple(notes))
+
+
+def _least_squares(residuals, x0, steps):
     result = optimize.least_squares(
         residuals, x0, jac=lambda x: _jacobian(residuals, x, steps), method="lm", x_scale="jac"
     )
     if not result.success or not np.all(np.isfinite(result.fun)):
         raise CalibrationError(f"the fit of the calibration did not converge: {result.message}")
-    dof = len(points) + 1 - len(x0)
-    chi2_dof = float(result.fun @ result.fun / dof) if dof > 0 else math.nan
-    cov_x = _covariance(
-        result.jac, ["f00", "β0", "start swing"] + ["environment field"] * fit_environment + ["lever"] * fit_lever
-    ) * max(1.0, chi2_dof if dof > 0 else 1.0)
-    fitted = _Fitted(result.x, cov_x, unpack, damping, damping_var, unit_axis, fit_environment, fit_lever)
-    return _derive(fitted, wirings, gradient_points, known, chi2_dof, len(points), tuple(notes))
+    return result
+
+
+def _start_swing(points, known: KnownConstants) -> tuple:
+    """The ring-downs' start swing at the switch-off and its standard uncertainty: as given
+    (``known.start_swing_rad``), else measured by the fits, θmax at the first fitted sample
+    grown back by e^(δ·t) to the switch-off. A single fit's θmax scatters by degrees and runs
+    high in strong opposing fields (up to +5° at −3.4 mT in the simulator), so the median, with
+    its standard error from the median absolute deviation. A homogeneous sweep cannot tell the
+    swing from β0: this measurement is what holds it, no assumption of where the drive left the
+    probe (the old prior, the stop ± 0.1°, sat 0.2° above the simulator's mean swing of 23.78°)."""
+    if known.start_swing_rad is not None:
+        return known.start_swing_rad, known.start_swing_std_rad
+    # a fit whose θmax is not determined (NaN) says nothing about the swing
+    swings = np.array([p.amplitude_rad * math.exp(p.damping_per_s * p.start_offset_s) for p in points])
+    swings = swings[np.isfinite(swings)]
+    if swings.size == 0:
+        raise CalibrationError("no ring-down determined its amplitude θmax: the start swing is unknown")
+    median = float(np.median(swings))
+    spread = MAD_TO_SD * float(np.median(np.abs(swings - median)))
+    std = MEDIAN_EFFICIENCY * spread / math.sqrt(len(swings)) if len(swings) > 1 else math.inf
+    return median, max(std, SWING_FLOOR_RAD)
+
+
+def _swing_slope_hz_per_rad(model, x) -> np.ndarray:
+    """∂f/∂(start swing) of every ring-down: each depends on its own swing alone."""
+    e = np.zeros_like(x)
+    e[2] = STEPS["swing"]
+    return (model(x + e) - model(x - e)) / (2.0 * STEPS["swing"] * AMPLITUDE_UNIT_RAD)
+
+
+def _swing_scatter_rad(residual_hz, std_hz, slope_hz_per_rad, dof: int) -> float:
+    """The scatter s of the ring-downs' own start swings about their mean: the s ≥ 0 that makes
+    Σ r²/(σ² + (∂f/∂A·s)²) = dof (a variance component: the scatter shows in the frequencies
+    in proportion to the field term, not at zero field). 0 when the fits' σ explain the
+    residuals; at most MAX_SCATTER_RAD (beyond it the excess is not the swing's, and χ²/dof
+    widens the uncertainties instead)."""
+
+    def excess(s2):
+        return float(np.sum(residual_hz**2 / (std_hz**2 + slope_hz_per_rad**2 * s2))) - dof
+
+    if dof <= 0 or excess(0.0) <= 0.0:
+        return 0.0
+    if excess(MAX_SCATTER_RAD**2) >= 0.0:
+        return MAX_SCATTER_RAD
+    return math.sqrt(optimize.brentq(excess, 0.0, MAX_SCATTER_RAD**2, xtol=1e-14, rtol=1e-6))
 
 
 def _jacobian(residuals, x, steps) -> np.ndarray:
@@ -144,21 +220,6 @@ def _covariance(jac, names) -> np.ndarray:
             f"the data cannot determine {' and '.join(weak)} (separately): add supply currents or orientations"
         )
     return (vt.T / s**2) @ vt
-
-
-def _amplitude_notes(points, known: KnownConstants) -> list:
-    """The model starts every ring-down at the housing stop (a drive into the stop, as the paper's):
-    the field sweep cannot separate the amplitude from β0 (both scale the field spring), and a
-    fitted θmax scatters by degrees. Say so when the fits suggest the stop was not reached."""
-    measured = [p.amplitude_rad for p in points if math.isfinite(p.amplitude_rad)]
-    amplitude = float(np.median(measured)) if measured else math.nan
-    if amplitude < 0.8 * known.theta_stop_rad:
-        return [
-            f"the ring-downs' median θmax {math.degrees(amplitude):.1f}° is well below the housing stop "
-            f"{math.degrees(known.theta_stop_rad):.1f}° that the model assumes: β0 is biased by about "
-            f"{(known.theta_stop_rad**2 - amplitude**2) / 8 * 100:.2f} %; excite harder"
-        ]
-    return []
 
 
 def _field_axis(wirings: dict, field_wiring: str) -> np.ndarray:

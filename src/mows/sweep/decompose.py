@@ -39,6 +39,7 @@ from mows.physics.ringdown_average import amplitude_nodes
 
 MODELS = ("first_principles", "published")
 MAX_HARMONIC = 4
+F00_STEP_HZ = 1e-4  # the calibrated f00's step for its Jacobian column (the model is smooth in f00)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -181,6 +182,7 @@ def decompose(
     f00_free: bool = False,
     ringdowns: Ringdowns | None = None,
     start=None,
+    f00_std_hz: float = 0.0,
 ) -> Decomposition:
     """Field and gradient from a rotation sweep by weighted nonlinear least squares.
 
@@ -197,6 +199,10 @@ def decompose(
         field spring is ~1 % and the lever's gradient springs ~4 % weaker than at small
         amplitude (first-harmonic balance). None: small amplitude.
     start : parameters to start from (Bx, By, Gs, Gd, Gxy, Δf00); default: from the harmonics.
+    f00_std_hz : standard uncertainty of the calibrated f00. One error shared by every ring-down
+        (``shift_std_hz`` must then be the fits' own σ, without it): it moves the parameters by
+        ∂p/∂f00·δ, added to their covariance as σ²·(∂p/∂f00)(∂p/∂f00)ᵀ (mostly Gs: the constant
+        term). Not with ``f00_free``, where f00 is fitted.
 
     The covariance is scaled by χ²/dof when that exceeds 1, as lmfit does: a model that does
     not fit does not get to claim the measurement errors' precision.
@@ -215,16 +221,24 @@ def decompose(
     if f00_free:
         start[2] = 0.0  # Gs is absorbed by f00 and stays out of the fit
 
+    def residual_of(params):
+        return (model_shift_hz(params, theta0, probe, f00_hz, model, ringdowns) - shift) / std
+
     def residual(x):
         params = start.copy()
         params[free] = x
-        return (model_shift_hz(params, theta0, probe, f00_hz, model, ringdowns) - shift) / std
+        return residual_of(params)
 
     scale = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1e-3])[free]
     result = least_squares(residual, start[free], x_scale=scale, method="lm", xtol=1e-12, ftol=1e-12)
     params = start.copy()
     params[free] = result.x
-    decomposition = _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics)
+    # A calibrated f00 off by δ moves every residual as the Δf00 parameter does (model_shift_hz):
+    # its column of the Jacobian, held fixed in the fit, carries f00's σ into the parameters.
+    step = np.eye(6)[5] * F00_STEP_HZ
+    f00_column = (residual_of(params + step) - residual_of(params - step)) / (2.0 * F00_STEP_HZ)
+    f00_effect = None if f00_free or not f00_std_hz > 0.0 else (f00_column, float(f00_std_hz))
+    decomposition = _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics, f00_effect)
     decomposition.parameters = params
     return decomposition
 
@@ -273,11 +287,16 @@ def _start(harmonics: Harmonics, probe: Probe, f00_hz: float, model: str) -> np.
     )
 
 
-def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics) -> Decomposition:
+def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics, f00_effect) -> Decomposition:
     dof = shift.size - int(free.sum())
     chi2_dof = float(result.fun @ result.fun) / dof if dof > 0 else math.nan
     jac = result.jac
-    cov_free = np.linalg.pinv(jac.T @ jac) * max(1.0, chi2_dof if math.isfinite(chi2_dof) else 1.0)
+    normal_inverse = np.linalg.pinv(jac.T @ jac)
+    cov_free = normal_inverse * max(1.0, chi2_dof if math.isfinite(chi2_dof) else 1.0)
+    if f00_effect is not None:
+        column, f00_std_hz = f00_effect
+        sensitivity = -normal_inverse @ jac.T @ column  # ∂(free parameters)/∂f00
+        cov_free = cov_free + f00_std_hz**2 * np.outer(sensitivity, sensitivity)
     cov = np.full((6, 6), np.nan)
     cov[np.ix_(free, free)] = cov_free
     bx, by, gs, gd, gxy, df00 = params

@@ -114,6 +114,10 @@ class SweepRecord:
     ) -> Decomposition:
         """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
 
+        Each ring-down is weighted by its fit's own σ; the calibrated f00's σ, which the estimator
+        folded into every shift's σ (σ_shift² = σ_f² + σ_f00²), is one error shared by all of
+        them and enters the covariance as such (:func:`decompose`'s ``f00_std_hz``).
+
         The first-principles model needs the swing each ring-down starts with, stop − |θs|, and
         θs depends on the field it is fitting: a first pass with θs = 0 gives the field, its rest
         angles give the pooled stop amplitude, and a second pass fits with both.
@@ -122,11 +126,12 @@ class SweepRecord:
         arrays: dict[str, Any] = dict(
             theta0_rad=theta0,
             shift_hz=self._column("shift_hz"),
-            shift_std_hz=self._column("shift_std_hz"),
+            shift_std_hz=self._column("frequency_std_hz"),
             probe=probe,
             f00_hz=f00_hz,
             model=model,
             f00_free=f00_free,
+            f00_std_hz=self.f00_std_hz(),
         )
         if model != "first_principles":
             return decompose(**arrays)
@@ -139,6 +144,11 @@ class SweepRecord:
             return first
         rest = np.nan_to_num(local_potential(first.parameters, theta0, probe).rest_angle_rad())
         return decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(rest)), start=first.parameters)
+
+    def f00_std_hz(self) -> float:
+        """The calibrated f00's σ the shifts carry: √(σ_shift² − σ_f²), the largest over the ring-downs."""
+        excess = self._column("shift_std_hz") ** 2 - self._column("frequency_std_hz") ** 2
+        return float(np.sqrt(np.max(excess, initial=0.0)))
 
     def start_amplitudes_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
         """Each ring-down's start swing, stop − |θs|, at the decomposition's field and gradient."""

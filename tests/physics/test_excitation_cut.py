@@ -5,6 +5,7 @@ mid-swing, the ring-down misses the drive's work of the rest of the swing (≈ m
 1.4 % for the calibration probe at 2 A). The decompositions and the calibration take every
 ring-down's start from the stop, so the cut must land on a turning point whatever f·excite_s.
 """
+
 import math
 
 import numpy as np
@@ -23,9 +24,14 @@ def test_ringdowns_start_at_the_stop_wherever_the_requested_excitation_ends():
     stop_deg = math.degrees(scenario.probe.theta_stop_rad)
     # Four requested lengths an eighth of a drive period apart: the phase of a cut after a
     # fixed time would step through 45°, 90°, 135° of the swing.
-    swings_deg = [math.degrees(simulate_cycle(device, 0.0, scenario.excitation.amplitude_a,
-                                              excite_s=0.5 + k / (8.0 * frequency)).ringdown_amplitude_rad())
-                  for k in range(4)]
+    swings_deg = [
+        math.degrees(
+            simulate_cycle(
+                device, 0.0, scenario.excitation.amplitude_a, excite_s=0.5 + k / (8.0 * frequency)
+            ).ringdown_amplitude_rad()
+        )
+        for k in range(4)
+    ]
     assert np.ptp(swings_deg) < 0.1, swings_deg
     assert all(stop_deg - 0.1 < s < stop_deg + 0.1 for s in swings_deg), swings_deg
 

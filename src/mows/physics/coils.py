@@ -105,8 +105,10 @@ def excitation_samples(duration_s: float, frequency_hz: float, sample_rate_hz: f
     decomposition, f00 held, turned into a trace Gxx + Gyy 0.9 % low.
     """
     if not (duration_s >= 0.0 and frequency_hz > 0.0 and sample_rate_hz > 0.0):
-        raise ValueError(f"duration_s = {duration_s!r} must be >= 0, frequency_hz = {frequency_hz!r} and "
-                         f"sample_rate_hz = {sample_rate_hz!r} > 0")
+        raise ValueError(
+            f"duration_s = {duration_s!r} must be >= 0, frequency_hz = {frequency_hz!r} and "
+            f"sample_rate_hz = {sample_rate_hz!r} > 0"
+        )
     if duration_s == 0.0:
         return 0
     half_periods = max(0, round(2.0 * frequency_hz * duration_s - 0.5)) + 0.5

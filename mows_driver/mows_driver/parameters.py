@@ -118,7 +118,12 @@ PARAMETERS = (
         range=(1.0, 2000.0),
         read_only=True,
     ),
-    ParamSpec("excite_s", 0.5, "coil-on time of one excitation, s", range=(0.01, 10.0)),
+    ParamSpec(
+        "excite_s",
+        0.5,
+        "coil-on time of one excitation, s (to the drive current peak nearest it)",
+        range=(0.01, 10.0),
+    ),
     ParamSpec("ringdown_s", 0.5, "recorded free ring-down after each excitation, s", range=(0.05, 10.0)),
     ParamSpec("gap_s", 1.0, "pause between a ring-down and the next excitation, s", range=(0.0, 600.0)),
     ParamSpec("repeats", 3, "recorded ring-downs per cycle", range=(1, 1000)),

@@ -31,3 +31,28 @@ def test_a_hidden_current_times_temperature_term_is_pointed_at():
     assert "The residual follows temperature_k·coil_current_a (correlation +0.9" in explanation
     assert '@effect(name="my_effect"' in explanation
     assert "(rows.coil_current_a - rows.coil_current_a.mean())" in explanation
+
+
+def test_an_angle_pattern_that_changes_in_time_is_not_a_pile_of_catalog_effects():
+    """A 3θ0 pattern whose sign flips over the run, 50 mHz·cos 3θ0·(t − t̄)/T, in a table with no
+    catalog effect (2° ring-downs: no finite-amplitude readout): no catalog effect has it (the
+    curvature's 3θ0 term is constant), the residual stays ≈ 100× its noise, and a raw-χ² BIC
+    rewards parameters that shave a little off it (measured: gravity, then field curvature, BIC
+    10225 → 10082 while χ²/dof rose 108 → 113). Judged against the residual's own scatter,
+    nothing is added; the lab says so, points at the product and sketches the plugin (issue 11,
+    Deliver 5)."""
+    sweep = synth.rotation_sweeps(15.0, 4)
+    theta0 = sweep.pop("theta0_deg")
+    t = sweep["t_s"]
+    table = synth.synthesize(
+        PAPER_PROBE, UniformField((2e-5, 5e-6, 0.0)), theta0, np.random.default_rng(1), amplitude_deg=2.0, **sweep
+    )
+    hidden = 0.05 * np.cos(3 * np.radians(theta0)) * (t - t.mean()) / np.ptp(t)
+    report = analyse(table.with_columns(f_hz=table.f_hz + hidden), PAPER_PROBE, auto=True, cross_validate=False)
+    assert report.base.chi2_dof > 50, report.base.chi2_dof
+    assert report.effects == [], report.history
+    assert report.verdict == "unexplained_structure"
+    explanation = report.diagnosis.explanation
+    assert "No catalog effect explains the residual" in explanation, explanation
+    assert "The residual follows cos(3θ0)·t_s (correlation +1.00" in explanation, explanation
+    assert "np.cos(3 * rows.theta0_rad) * (rows.t_s - rows.t_s.mean()) / rows.t_s.std()" in explanation

@@ -4,8 +4,9 @@ Independent physics: the simulator integrates the full potential in each scenari
 source fields, drives every cycle to the 24° housing stop, and the lever-aware estimator fits
 each ring-down; the lab only sees the reference field and gradient at the probe. 16
 orientations × 2 full sweeps per scenario, one simulated table and one ``--auto`` analysis per
-scenario for the whole module (nothing is cached between runs). The seed is fixed; over seeds
-0–9 every assertion below held in 10 of 10.
+scenario for the whole module (nothing is cached between runs). The seed is fixed; with the
+excitation cut at a mid-swing time, over seeds 0–9 every assertion below held in 10 of 10; with
+the cut at a drive-current peak the nearby-coil assertions held on seeds 0–3 (not run further).
 """
 
 import numpy as np
@@ -108,16 +109,29 @@ def test_a_tilted_plane_is_gravity_with_its_tilt(lab):
         assert abs(value - down) <= 2 * std, (name, value, std, down)
 
 
-def test_a_nearby_coil_is_transverse_gradient_and_curvature(lab):
-    """A coil 5 cm away: 250 µT, −11.5 mT/m and a curvature of ≈ 0.7 T/m². Ambiguous beyond
-    that: the transverse field turns the rest angle by up to 0.9°, so a ring-down's swing
-    between the stops is up to 1° smaller than the sweep's pooled start amplitude, and the
-    estimator's θmax is biased near 90°; the lab absorbs the ~1 mHz this leaves with small
-    calibration effects (angle offset, moment scale) and the curvature's values move with them,
-    so only the effects and the fit quality are asserted."""
-    _, _, report = lab("nearby_coil")
-    assert {"transverse_gradient", "field_curvature"} <= set(report.effect_names), report.history
-    assert report.chi2_dof <= 1.5, report.history
+def repeatability(table) -> float:
+    """χ² per orientation of the two sweeps' frequencies at the same θ0 against their stated σ:
+    scatter that no model of the orientation can fit (1 when f_std_hz is right)."""
+    first, second = (table.sweep == 0), (table.sweep == 1)
+    assert np.array_equal(table.theta0_deg[first], table.theta0_deg[second])
+    difference = table.f_hz[first] - table.f_hz[second]
+    return float(np.mean(difference**2 / (table.f_std_hz[first] ** 2 + table.f_std_hz[second] ** 2)))
+
+
+def test_a_nearby_coil_is_transverse_gradient_amplitude_deflection_and_curvature(lab):
+    """A coil 5 cm away: 250 µT, −11.5 mT/m and a curvature of ≈ 0.7 T/m². The physics is the
+    transverse gradient, the finite amplitude and the static deflection (all of known size) and
+    a free curvature, nothing else: once the transverse gradient was set free while the
+    curvature was missing, free strengths, a 17° plane tilt and a moment scale soaked the
+    curvature up (static deflection 24σ from its physics, χ²/dof 1.60). The fit is as good as
+    the table's repeatability allows: in this seed's table the two sweeps differ at the same θ0
+    by 2.0× their stated variance (p = 0.009; seeds 1–3: 0.5–1.4), so the right model ends at
+    χ²/dof 1.76 (seeds 1–3: 1.01, 1.05, 1.77)."""
+    _, table, report = lab("nearby_coil")
+    expected = {"transverse_gradient", "finite_amplitude", "static_deflection", "field_curvature"}
+    assert set(report.effect_names) == expected, report.history
+    assert report.chi2_dof <= 1.5 * max(1.0, repeatability(table)), (repeatability(table), report.history)
+    assert_physics_consistent(report)
 
 
 def test_earths_field_alone_shows_the_finite_amplitude_when_the_physics_says_it_is_detectable(lab):

@@ -45,7 +45,7 @@ from mows.device.phases import (
     TuningResult,
     check_setting,
 )
-from mows.physics.coils import CoilSetup, CurrentCap
+from mows.physics.coils import CoilSetup, CurrentCap, excitation_samples
 from mows.records.samples import SampleBlock
 
 
@@ -187,7 +187,7 @@ class CycleSequencer:
 
     def _run(self, c: CyclePlan) -> Run:
         s = c.settings
-        excite, ringdown = self._samples(s.excite_s), self._samples(s.ringdown_s)
+        ringdown = self._samples(s.ringdown_s)
         turned = yield from self._answer(
             self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
         )
@@ -200,6 +200,8 @@ class CycleSequencer:
             tuning = k < c.tuning_steps
             index = k if tuning else k - c.tuning_steps
             gap = self._samples(c.gap_s) if k else 0
+            # Cut at the drive's turning point, whatever the tuned frequency (excitation_samples).
+            excite = excitation_samples(s.excite_s, self.frequency_hz, self.sample_rate_hz)
             start = self._duty.earliest_start(max(coils_free + gap, self._next_index + self.lead_samples), excite)
             currents = self._currents(c)
             on = self._issue(CoilCommand, start, amplitudes_a=currents, frequency_hz=self.frequency_hz)

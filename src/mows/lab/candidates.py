@@ -2,11 +2,13 @@
 
 Each testable effect's signature (its Jacobian columns at 0, projected orthogonally to the fit,
 :mod:`mows.lab.algebra`) gives a score test; the effect is then refitted with the model
-(nonlinear least squares): ΔBIC = Δχ² − k·ln n, p-value of the likelihood ratio
-Δχ² ~ χ²(k), parameters ± σ. An effect whose size follows from known constants
-(``Effect.physical``) is also refitted held at that value, with no new parameter (ΔBIC = Δχ²,
-p of two simple hypotheses, :func:`_physics_form`); the candidate stands for the better form,
-and keeps the free fit's parameters as a check.
+(nonlinear least squares): ΔBIC = Δχ²/φ − k·ln n, p-value of the likelihood ratio
+Δχ²/φ ~ χ²(k), parameters ± σ, where φ = max(1, χ²/dof with the candidate, or without it if
+smaller) is the residual's own scatter (quasi-likelihood, :func:`dispersion`; φ = 1 once the
+residual is noise). An effect whose size follows from known constants (``Effect.physical``) is
+also refitted held at that value, with no new parameter (ΔBIC = Δχ²/φ, p of two simple
+hypotheses, :func:`_physics_form`); the candidate stands for the better form, and keeps the
+free fit's parameters as a check.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ class Form:
     dof_after: int
     fit: object = None
     signal_chi2: float = math.nan  # at physics: Σ(predicted signal/σ)² beyond what f00 absorbs
+    dispersion: float = 1.0  # φ the evidence was scaled by (:func:`dispersion`)
 
     @property
     def chi2_dof_after(self) -> float:
@@ -51,9 +54,9 @@ class Form:
     @property
     def kept_physics(self) -> bool:
         """Known physics the data cannot reject: held at physics, its predicted signal would be
-        strong evidence if no free parameter absorbed it, and adding it costs less than the
-        tie margin of BIC (how :mod:`mows.lab.analysis` uses it)."""
-        return self.fixed and self.signal_chi2 > STRONG_DELTA_BIC and self.delta_bic > -TIE_DELTA_BIC
+        strong evidence if no free parameter absorbed it (against the residual's scatter, φ),
+        and adding it costs less than the tie margin of BIC (how :mod:`mows.lab.analysis` uses it)."""
+        return self.fixed and self.signal_chi2 / self.dispersion > STRONG_DELTA_BIC and self.delta_bic > -TIE_DELTA_BIC
 
     def to_dict(self) -> dict:
         return {
@@ -154,6 +157,16 @@ def physics_deviation(effect, parameters) -> float:
     return max(abs(v - p) / s if s > 0 else math.inf for (_, v, s, _), p in zip(parameters, effect.physical))
 
 
+def dispersion(fit, chi2_after: float, dof_after: int) -> float:
+    """φ = max(1, χ²/dof) of the better of ``fit`` and the model with the candidate: the
+    residual's own scatter in units of the stated uncertainties (quasi-likelihood). While the
+    residual stays far above noise, a raw-χ² BIC rewards any parameter that shaves a little off a
+    huge χ²; judged against the scatter that the candidate leaves, Δχ²/φ, only an effect that
+    explains the structure (and so leaves φ ≈ 1) gains real evidence; a candidate that makes the
+    fit worse is judged against the present scatter, not its own. φ = 1 once the residual is noise."""
+    return max(1.0, min(fit.chi2_dof, chi2_after / max(dof_after, 1)))
+
+
 def _finite(value):
     return float(value) if np.isfinite(value) else None
 
@@ -210,7 +223,8 @@ def _free_form(fit, effect, test: Signature, refit: bool) -> tuple:
         std = np.sqrt(np.clip(np.diag(np.linalg.pinv(test.projected.T @ test.projected)), 0, None))
         chi2_after, dof_after = fit.chi2 - test.statistic, fit.dof - test.rank
         parameters = [(p.name, float(v), float(e), p.unit) for p, v, e in zip(effect.parameters, step, std)]
-    gain = fit.chi2 - chi2_after
+    phi = dispersion(fit, chi2_after, dof_after)
+    gain = (fit.chi2 - chi2_after) / phi
     form = Form(
         False,
         gain - k * math.log(fit.n),
@@ -218,6 +232,7 @@ def _free_form(fit, effect, test: Signature, refit: bool) -> tuple:
         chi2_after,
         dof_after,
         after,
+        dispersion=phi,
     )
     return form, parameters
 
@@ -244,7 +259,8 @@ def _physics_form(fit, effect, test: Signature, refit: bool) -> Form:
         after = None
         shift = test.projected @ np.asarray(effect.physical, float)
         chi2_after, dof_after = float(np.sum((residual + shift) ** 2)), fit.dof
-    gain = fit.chi2 - chi2_after
-    size = float(np.linalg.norm(shift))
+    phi = dispersion(fit, chi2_after, dof_after)  # in units of the residual's scatter: Δχ²/φ, S/√φ
+    gain = (fit.chi2 - chi2_after) / phi
+    size = float(np.linalg.norm(shift)) / math.sqrt(phi)
     p = float(scipy.stats.norm.sf((gain + size**2) / (2 * size))) if size > 0 else 1.0
-    return Form(True, gain, p, chi2_after, dof_after, after, float(np.sum(signal**2)))
+    return Form(True, gain, p, chi2_after, dof_after, after, float(np.sum(signal**2)), phi)

@@ -17,7 +17,7 @@ import dataclasses
 
 from mows.lab.candidates import rank_candidates
 from mows.lab.groups import absorbed_groups, group_candidates
-from mows.lab.structure import GOODNESS_ALPHA, Structure, product_trends, residual_structure
+from mows.lab.structure import GOODNESS_ALPHA, Structure, plugin_expression, product_trends, residual_structure
 
 EXPLAINED_FRACTION = 0.5
 
@@ -72,8 +72,14 @@ def _verdict(fit, structure: Structure, candidates) -> tuple:
             f"The best candidate, {best.label} (ΔBIC = {best.delta_bic:.1f}), accounts for only "
             f"{100 * gain / excess:.0f}% of the excess χ². "
         )
+    elif best is not None:
+        unexplained = (
+            f"No catalog effect explains the residual: judged against the residual's own scatter (Δχ² "
+            f"scaled by the χ²/dof each candidate leaves), the best, {best.label}, reaches ΔBIC "
+            f"{best.delta_bic:.1f} (χ²/dof {fit.chi2_dof:.3g} → {best.chi2_dof_after:.3g})."
+        )
     else:
-        unexplained = "No catalog effect explains the residual." if candidates else ""
+        unexplained = ""
     if structure.goodness_p >= GOODNESS_ALPHA and not structure.significant:
         return "adequate", "The model explains the data: " + structure.summary
     return "unexplained_structure", (unexplained + " " + structure.summary + " " + _no_answer(fit, structure)).strip()
@@ -81,17 +87,16 @@ def _verdict(fit, structure: Structure, candidates) -> tuple:
 
 def _no_answer(fit, structure: Structure) -> str:
     """What the residual follows when no catalog effect explains it (single covariates and
-    products of two), and the plugin a user would write for the strongest (docs/model_lab.md)."""
+    products of two, angle harmonics included), and the plugin a user would write for the
+    strongest (docs/model_lab.md)."""
     trends = sorted(structure.covariates + product_trends(fit), key=lambda trend: -abs(trend.correlation))
     if not trends:
         return ""
-    best = trends[0]
-    factors = best.name.split("·")
-    expression = " * ".join(f"(rows.{name} - rows.{name}.mean())" for name in factors)
+    expression = " * ".join(plugin_expression(factor) for factor in trends[0].name.split("·"))
     follows = "; ".join(f"{t.name} (correlation {t.correlation:+.2f}, p = {t.p_value:.1e})" for t in trends[:3])
     return (
         f"The residual follows {follows}. A plugin for the strongest, to save as my_effect.py and run with "
-        f'--plugin my_effect.py: `@effect(name="my_effect", parameters={{"c_hz": (0.0, -1.0, 1.0, "Hz")}}) '
-        f'def my_effect(rows, c_hz): return {{"frequency_hz": c_hz * {expression} / '
-        f"({' * '.join(f'rows.{n}.std()' for n in factors)})}}` (better: the physics that makes it)."
+        f'--plugin my_effect.py: `import numpy as np; from mows.lab import effect; @effect(name="my_effect", '
+        f'parameters={{"c_hz": (0.0, -1.0, 1.0, "Hz")}}) def my_effect(rows, c_hz): return {{"frequency_hz": '
+        f"c_hz * {expression}}}` (better: the physics that makes it)."
     )

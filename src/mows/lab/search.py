@@ -107,10 +107,15 @@ def search(found, pool, probe, history, cross_validate: bool = True, steps: int 
     for _ in range(steps):
         step = _forward_step(found)
         if step is None:
-            break
-        change, fit, check = step
-        history.append(history_step(fit, cross_validate, change, check))
-        fit = _revisit(fit, pool, probe, history, cross_validate)
+            # Only now may an effect held at physics be set free: nothing in the catalog is left
+            # to explain the residual with the physics held.
+            fit = _revisit(found.fit, pool, probe, history, cross_validate, freeing=True)
+            if fit is found.fit:
+                break
+        else:
+            change, fit, check = step
+            history.append(history_step(fit, cross_validate, change, check))
+            fit = _revisit(fit, pool, probe, history, cross_validate, freeing=False)
         found = diagnose(fit, pool, probe)
     if steps:
         found = prefer_physical(found, pool, probe, history, cross_validate)
@@ -201,10 +206,11 @@ def _forward_step(found):
     return None
 
 
-def _revisit(fit, pool, probe, history, cross_validate):
-    """Apply the best swap or removal while one lowers the BIC (module docstring)."""
+def _revisit(fit, pool, probe, history, cross_validate, freeing: bool):
+    """Apply the best swap or removal while one lowers the BIC (module docstring); ``freeing``:
+    setting an effect held at physics free is one of the moves."""
     for _ in range(MAX_REVISIT_MOVES):
-        move = _best_move(fit, pool, probe)
+        move = _best_move(fit, pool, probe, freeing)
         if move is None:
             break
         change, fit = move
@@ -212,13 +218,14 @@ def _revisit(fit, pool, probe, history, cross_validate):
     return fit
 
 
-def _best_move(fit, pool, probe):
+def _best_move(fit, pool, probe, freeing: bool):
     """(change, fit) of the best alternative to ``fit`` (:func:`_alternatives`) that the guard
-    accepts (:func:`_accepted`); None when there is none."""
+    accepts (:func:`_accepted`; a move that sets free an effect held at physics only when
+    ``freeing``); None when there is none."""
     best = None
     for effect in fit.model.effects:
         for change, new, freed in _alternatives(fit, effect, pool, probe):
-            if _accepted(fit, new, freed) and (best is None or new.bic < best[1].bic):
+            if (freeing or not freed) and _accepted(fit, new, freed) and (best is None or new.bic < best[1].bic):
                 best = (change, new)
     return best
 

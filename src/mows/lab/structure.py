@@ -166,28 +166,41 @@ def _describe(structure: Structure) -> str:
 
 
 def product_trends(fit, count: int = 3) -> list:
-    """The ``count`` strongest trends of the residual with products of two covariates (each
+    """The ``count`` strongest trends of the residual with products of two factors (each
     centred), best first: what a missing effect that no single covariate shows may follow
-    (a drift that grows with the current, a field term that changes with temperature). Not
-    part of the significance tests above; a pointer for the user's own effect."""
+    (a drift that grows with the current, a field term that changes with temperature, an
+    angle pattern cos kθ0 or sin kθ0, k = 1…4, that changes with time). Not part of the
+    significance tests above; a pointer for the user's own effect (:func:`plugin_expression`)."""
     residual = fit.weighted_residual
     weight = 1.0 / fit.table.f_std_hz
     model_basis = orthonormal_basis(fit.jacobian)
     covariates = {name: values - values.mean() for name, values in fit.table.covariates().items()}
+    theta0 = fit.table.theta0_rad
+    angles = {f"{trig}({k}θ0)": getattr(np, trig)(k * theta0) for k in HARMONICS[1:] for trig in ("cos", "sin")}
     names = list(covariates)
+    pairs = [(a, covariates[a], b, covariates[b]) for i, a in enumerate(names) for b in names[i + 1 :]]
+    pairs += [(a, angle, b, covariates[b]) for a, angle in angles.items() for b in names]
     found = []
-    for i, a in enumerate(names):
-        for b in names[i + 1 :]:
-            product = covariates[a] * covariates[b]
-            test = signature((product - product.mean()) * weight, model_basis, residual)
-            if test.rank:
-                direction = test.projected[:, 0]
-                found.append(
-                    CovariateTrend(
-                        f"{a}·{b}",
-                        float(direction @ residual / (np.linalg.norm(direction) * np.linalg.norm(residual))),
-                        float(direction @ residual / (direction @ direction)),
-                        test.p_value,
-                    )
+    for a, first, b, second in pairs:
+        product = first * second
+        test = signature((product - product.mean()) * weight, model_basis, residual)
+        if test.rank:
+            direction = test.projected[:, 0]
+            found.append(
+                CovariateTrend(
+                    f"{a}·{b}",
+                    float(direction @ residual / (np.linalg.norm(direction) * np.linalg.norm(residual))),
+                    float(direction @ residual / (direction @ direction)),
+                    test.p_value,
                 )
+            )
     return sorted(found, key=lambda trend: -abs(trend.correlation))[:count]
+
+
+def plugin_expression(factor: str) -> str:
+    """A plugin's numpy expression (over ``rows``) for one factor of a trend's name: an angle
+    harmonic ``cos(3θ0)`` or a centred, scaled covariate."""
+    if factor.endswith("θ0)"):
+        trig, k = factor.split("(")
+        return f"np.{trig}({k.removesuffix('θ0)')} * rows.theta0_rad)"
+    return f"(rows.{factor} - rows.{factor}.mean()) / rows.{factor}.std()"

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from mows.physics.coils import excitation_samples
 from mows.physics.potential import ArcPotential
 from mows.sim.simulator import SimulatedBlock, SimulatedDevice
 
@@ -69,12 +70,14 @@ def simulate_cycle(
 ) -> CycleRecord:
     """Turn to θ0, drive the coils with the setup's current scheme for ``excite_s`` (base
     amplitude ``amplitude_a``; ``frequency_hz`` None: the expected small-amplitude frequency,
-    as after the paper's tuning), switch them off and record ``ringdown_s`` of ring-down."""
+    as after the paper's tuning), switch them off at the drive current's peak nearest
+    ``excite_s`` (:func:`mows.physics.coils.excitation_samples`) and record ``ringdown_s`` of
+    ring-down."""
     device.set_orientation(theta0_rad)
     frequency = device.expected_frequency_hz() if frequency_hz is None else float(frequency_hz)
     currents = device.scenario.setup.currents_a(theta0_rad, amplitude_a)
     device.set_coils(currents, frequency)
-    excitation = device.read(int(round(excite_s * device.sample_rate_hz)))
+    excitation = device.read(excitation_samples(excite_s, frequency, device.sample_rate_hz))
     device.coils_off()
     potential = device.potential()
     ringdown = device.read(int(round(ringdown_s * device.sample_rate_hz)))

@@ -141,11 +141,11 @@ def test_a_long_table_is_analysed_on_a_stated_subsample_without_a_progress_bar_i
     assert json.loads(capsys.readouterr().out)["base"]["n"] == copies * len(table)
 
 
-def test_a_terminal_sees_the_stages_progress(tilted_csv):
+def test_a_terminal_sees_the_stages_progress_and_the_work_inside_diagnose(tilted_csv):
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a new pty is 0 columns wide
     with subprocess.Popen(
-        [sys.executable, "-m", "mows.cli.main", "lab", "compare", str(tilted_csv), "--no-cv"],
+        [sys.executable, "-m", "mows.cli.main", "lab", "diagnose", str(tilted_csv)],
         stdout=subprocess.DEVNULL,
         stderr=slave,
     ) as process:
@@ -161,4 +161,7 @@ def test_a_terminal_sees_the_stages_progress(tilted_csv):
             seen += data
     os.close(master)
     assert process.returncode == 0
-    assert b"mows lab compare: reading" in seen and b"stages" in seen
+    assert b"mows lab diagnose: reading" in seen and b"stages" in seen
+    # Inside the analysis: the cross-validation's folds, each candidate effect, the evaluations.
+    assert b"cross-validation (folds)" in seen and b"ranking candidate effects" in seen
+    assert b"model evaluations" in seen

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import math
 import pathlib
+import warnings
 from collections.abc import Mapping
 
 import numpy as np
@@ -52,7 +53,9 @@ def _read_numeric(path: pathlib.Path) -> dict | None:
             header = [name.strip() for name in next(csv.reader([handle.readline()]), [])]
             if not all(header) or len(set(header)) != len(header):
                 return None
-            values = np.loadtxt(handle, delimiter=",", comments=None, quotechar='"', ndmin=2)
+            with warnings.catch_warnings():  # a header without rows: said by _read_cells
+                warnings.simplefilter("ignore", UserWarning)
+                values = np.loadtxt(handle, delimiter=",", comments=None, quotechar='"', ndmin=2)
     except (OSError, ValueError):  # ValueError: a cell that is no number, a short row, not UTF-8
         return None
     if values.shape != (len(values), len(header)) or not len(values) or not np.isfinite(values).all():

@@ -47,6 +47,7 @@ KNOWN = (
     + ("coil_current_a", "amplitude_deg", "temperature_k", "damping_per_s", "duration_s")
 )
 
+MIN_SWEEPS = 10  # a subsample keeps at least this many sweeps (or all): folds for the cross-validation
 POSITIVE = ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k")
 NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t"}
 
@@ -279,17 +280,17 @@ def stratified_rows(sweep_ids: np.ndarray, rows: int, seed: int = 0) -> np.ndarr
 
     Whole sweeps first, so that each keeps its orientations and the leave-one-sweep-out
     cross-validation its folds: the sweeps, in order of first appearance, are cut into as many
-    strata of consecutive sweeps as there is room for average sweeps, and one sweep is drawn
-    from each (the drift over the table is sampled end to end). When even that leaves more
-    than ``rows`` rows (few long sweeps), each kept sweep gives rows in proportion to its
-    length, drawn evenly along it: one at random from each run of consecutive rows.
+    strata of consecutive sweeps as there is room for average sweeps (at least MIN_SWEEPS), and
+    one sweep is drawn from each (the drift over the table is sampled end to end). When that
+    leaves more than ``rows`` rows (long sweeps), each kept sweep gives rows in proportion to
+    its length, drawn evenly along it: one at random from each run of consecutive rows.
     """
     rng = np.random.default_rng(seed)
     if len(sweep_ids) <= rows:
         return np.arange(len(sweep_ids))
     unique, first, inverse, counts = np.unique(sweep_ids, return_index=True, return_inverse=True, return_counts=True)
     order = np.argsort(first)  # sweeps in table order
-    strata = max(1, min(len(unique), round(rows / counts.mean())))
+    strata = min(len(unique), max(MIN_SWEEPS, round(rows / counts.mean())))
     bounds = np.linspace(0, len(unique), strata + 1).astype(int)
     picked = order[[rng.integers(low, high) for low, high in zip(bounds[:-1], bounds[1:])]]
     members = _members(inverse, picked)

@@ -2,7 +2,6 @@
 
 import fcntl
 import json
-import math
 import os
 import pty
 import struct
@@ -15,27 +14,15 @@ import pytest
 
 from mows.cli.lab import MAX_ROWS
 from mows.cli.main import main
-from mows.lab import read_csv, synth
-from mows.physics.field import UniformField
-from mows.physics.pose import Pose
+from mows.lab import read_csv
 from mows.physics.probe import PAPER_PROBE
+from tilted_tables import tilted_table
 
 
 @pytest.fixture(scope="module")
 def tilted_csv(tmp_path_factory):
-    sweep = synth.rotation_sweeps(15.0, 2)
-    theta0 = sweep.pop("theta0_deg")
-    table = synth.synthesize(
-        PAPER_PROBE,
-        UniformField((2e-5, -1e-5, -4e-5)),
-        theta0,
-        np.random.default_rng(0),
-        gravity_m_per_s2=Pose.tilted(math.radians(1.0)).gravity_m_per_s2,
-        amplitude_deg=2.0,
-        **sweep,
-    )
     path = tmp_path_factory.mktemp("lab") / "tilted.csv"
-    table.to_csv(path)
+    tilted_table(2).to_csv(path)
     return path
 
 

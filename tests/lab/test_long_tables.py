@@ -1,33 +1,20 @@
 """Long tables: the numeric fast path of the CSV reader, the stratified subsample, and that the
 subsample makes the same choices as every row (docs/model_lab.md, issue 15)."""
 
-import math
-
 import numpy as np
 import pytest
 
-from mows.lab import analyse, read_csv, synth
+from mows.lab import analyse, read_csv
 from mows.lab.readers import _read_cells
 from mows.lab.table import stratified_rows
-from mows.physics.field import UniformField
-from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
+from tilted_tables import tilted_table
 
 
 @pytest.fixture(scope="module")
 def tilted():
     """60 sweeps of 24 orientations, the probe's rotation plane tilted by 1° (gravity missing)."""
-    sweep = synth.rotation_sweeps(15.0, 60)
-    theta0 = sweep.pop("theta0_deg")
-    return synth.synthesize(
-        PAPER_PROBE,
-        UniformField((2e-5, -1e-5, -4e-5)),
-        theta0,
-        np.random.default_rng(0),
-        gravity_m_per_s2=Pose.tilted(math.radians(1.0)).gravity_m_per_s2,
-        amplitude_deg=2.0,
-        **sweep,
-    )
+    return tilted_table(60)
 
 
 def test_the_numeric_reader_gives_what_the_cell_reader_gives(tilted, tmp_path):
@@ -38,14 +25,13 @@ def test_the_numeric_reader_gives_what_the_cell_reader_gives(tilted, tmp_path):
     assert all(np.array_equal(fast.columns[name], cells.columns[name]) for name in cells.columns)
 
 
-def test_a_cell_that_is_no_number_is_still_named_and_a_bad_covariate_still_ignored(tilted, tmp_path):
-    text = (tmp_path / "t.csv").open("w")
-    tilted.subset(np.arange(5)).to_csv(text.name)
-    lines = open(text.name).read().splitlines()
-    lines[0] += ",comment"
-    lines[1:] = [line + ",fine" if i == 2 else line + ",1" for i, line in enumerate(lines[1:])]
-    open(text.name, "w").write("\n".join(lines) + "\n")
-    table = read_csv(text.name)
+def test_a_column_that_is_not_all_numbers_still_goes_through_the_cell_reader(tilted, tmp_path):
+    path = tmp_path / "t.csv"
+    tilted.subset(np.arange(5)).to_csv(path)
+    lines = path.read_text().splitlines()
+    lines = [lines[0] + ",comment"] + [line + (",fine" if i == 2 else ",1") for i, line in enumerate(lines[1:])]
+    path.write_text("\n".join(lines) + "\n")
+    table = read_csv(path)
     assert not table.has("comment") and any("'comment' is not a finite number in row 3" in n for n in table.notes)
 
 

@@ -10,11 +10,11 @@ from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
 
 
-def rotation_table(source, seed: int = 0, truth_amplitude_deg: float | None = None, **options):
-    """Two rotation sweeps every 15° of the paper's probe in ``source``; with
+def rotation_table(source, seed: int = 0, truth_amplitude_deg: float | None = None, sweeps: int = 2, **options):
+    """``sweeps`` rotation sweeps every 15° of the paper's probe in ``source``; with
     ``truth_amplitude_deg`` the true frequencies are those of ring-downs of that amplitude
     (whatever amplitude the table states). ``options`` go to :func:`synth.synthesize`."""
-    sweep = synth.rotation_sweeps(15.0, 2)
+    sweep = synth.rotation_sweeps(15.0, sweeps)
     theta0 = sweep.pop("theta0_deg")
     if truth_amplitude_deg is not None:
         amplitude_rad = math.radians(truth_amplitude_deg)
@@ -22,7 +22,7 @@ def rotation_table(source, seed: int = 0, truth_amplitude_deg: float | None = No
     return synth.synthesize(PAPER_PROBE, source, theta0, np.random.default_rng(seed), **options, **sweep)
 
 
-def tilted_table(**options):
-    """A uniform field with the rotation plane tilted by 1° (gravity enters)."""
+def tilted_table(sweeps: int = 2, **options):
+    """A uniform field with the rotation plane tilted by 1°, so that gravity is the missing effect."""
     gravity = Pose.tilted(math.radians(1.0)).gravity_m_per_s2
-    return rotation_table(UniformField((2e-5, -1e-5, -4e-5)), gravity_m_per_s2=gravity, **options)
+    return rotation_table(UniformField((2e-5, -1e-5, -4e-5)), gravity_m_per_s2=gravity, sweeps=sweeps, **options)

@@ -21,9 +21,8 @@ from mows.physics.probe import PAPER_PROBE
 
 @pytest.fixture(scope="module")
 def tilted_csv(tmp_path_factory):
-    table = tilted_table(amplitude_deg=2.0)
     path = tmp_path_factory.mktemp("lab") / "tilted.csv"
-    table.to_csv(path)
+    tilted_table(amplitude_deg=2.0).to_csv(path)
     return path
 
 
@@ -129,11 +128,11 @@ def test_a_long_table_is_analysed_on_a_stated_subsample_without_a_progress_bar_i
     assert json.loads(capsys.readouterr().out)["base"]["n"] == copies * len(table)
 
 
-def test_a_terminal_sees_the_stages_progress(tilted_csv):
+def test_a_terminal_sees_the_stages_progress_and_the_work_inside_diagnose(tilted_csv):
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a new pty is 0 columns wide
     with subprocess.Popen(
-        [sys.executable, "-m", "mows.cli.main", "lab", "compare", str(tilted_csv), "--no-cv"],
+        [sys.executable, "-m", "mows.cli.main", "lab", "diagnose", str(tilted_csv)],
         stdout=subprocess.DEVNULL,
         stderr=slave,
     ) as process:
@@ -149,4 +148,7 @@ def test_a_terminal_sees_the_stages_progress(tilted_csv):
             seen += data
     os.close(master)
     assert process.returncode == 0
-    assert b"mows lab compare: reading" in seen and b"stages" in seen
+    assert b"mows lab diagnose: reading" in seen and b"stages" in seen
+    # Inside the analysis: the cross-validation's folds, each candidate effect, the evaluations.
+    assert b"cross-validation (folds)" in seen and b"ranking candidate effects" in seen
+    assert b"model evaluations" in seen

@@ -13,8 +13,9 @@ User errors (bad tables, probe files, unknown effects, broken plugins) end with 
 message and exit status 2, never a traceback (:mod:`mows.cli.inputs`). ``report -o`` writes a
 new file (an existing one only with ``--force``, never an input), whole or not at all.
 
-A table of more than MAX_ROWS rows is analysed on a random subsample of MAX_ROWS rows (seed 0,
-every sweep kept), said in a note; ``--all-rows`` uses every row (the lab's cost grows with
+A table of more than MAX_ROWS rows is analysed on a stratified random subsample of at most
+MAX_ROWS rows (seed 0; whole sweeps spread over the table, :meth:`MeasurementTable.subsample`),
+said in a note; ``--all-rows`` uses every row (the lab's cost grows with
 rows × candidate effects: 1000 rows take seconds, 50 000 took over 5 minutes). On a terminal
 the stages show a progress bar on stderr (tqdm), never with ``--json``.
 """
@@ -22,24 +23,24 @@ the stages show a progress bar on stderr (tqdm), never with ``--json``.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import pathlib
 import sys
+import time
 
-import numpy as np
 from tqdm import tqdm
 
 from mows.cli.fit import add_bag_arguments
 from mows.cli.inputs import input_file, load_probe
 from mows.cli.lab_ringdown import run_ringdown
-from mows.lab import analyse, is_bag, load_table, write_report
+from mows.lab import analyse, is_bag, load_table, progress, write_report
 from mows.lab.chirp import PIECE_PERIODS
 from mows.records.files import check_output, replacing
 
 MAX_ROWS = 2000
 SUBSAMPLE_SEED = 0
+REDRAW_S = 0.2  # the work bar's least interval between redraws
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"
 
 
@@ -132,22 +133,23 @@ def run(args) -> int:
     if args.lab_command == "report":
         check_output(args.output, inputs, args.force)
     probe = _probe(args.probe)
+    quiet = args.json or not sys.stderr.isatty()
     stages = tqdm(
         total=3 if args.lab_command == "report" else 2,
         desc=f"mows lab {args.lab_command}: reading",
         file=sys.stderr,
-        disable=args.json or not sys.stderr.isatty(),
+        disable=quiet,
         leave=False,
         bar_format="{desc} {bar} {n_fmt}/{total_fmt} stages, {elapsed}",
     )
-    with input_file(args.table), stages:
+    with input_file(args.table), stages, WorkBar(quiet) as work, progress.listening(work):
         table = load_table(
             args.table,
             drop_invalid=args.drop_invalid,
             **({"reference": args.reference, "magnet_position_m": args.magnet_position} if is_bag(args.table) else {}),
         )
         if len(table) > MAX_ROWS and not args.all_rows:
-            table = subsample(table, MAX_ROWS)
+            table = table.subsample(MAX_ROWS, SUBSAMPLE_SEED)
         stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")
         stages.update()
         effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
@@ -175,23 +177,51 @@ def run(args) -> int:
     return 0
 
 
-def subsample(table, rows: int):
-    """``rows`` rows of ``table`` drawn at random (seed SUBSAMPLE_SEED) in their order, every
-    sweep kept, with a note saying so."""
-    rng = np.random.default_rng(SUBSAMPLE_SEED)
-    sweeps = table.sweep_ids
-    first_of_each = np.unique(sweeps, return_index=True)[1]
-    rest = np.setdiff1d(np.arange(len(table)), first_of_each)
-    chosen = np.sort(
-        np.concatenate([first_of_each, rng.choice(rest, max(0, rows - len(first_of_each)), replace=False)])
-    )
-    note = (
-        f"the table has {len(table)} rows: analysed on a random subsample of {len(chosen)} (seed "
-        f"{SUBSAMPLE_SEED}, every sweep kept); a weak effect may be significant only with all rows "
-        "(--all-rows, slower)"
-    )
-    subset = table.subset(chosen)
-    return dataclasses.replace(subset, notes=subset.notes + (note,))
+class WorkBar:
+    """The lab's progress inside an analysis (:mod:`mows.lab.progress`) as a second bar under the
+    stages: the task, how many of its items are done, and the model evaluations so far (they move
+    within a long task). Redrawn at each new task, else at most every REDRAW_S; nothing at all
+    when ``disable``."""
+
+    def __init__(self, disable: bool):
+        self.bar = tqdm(
+            total=1,
+            desc="fitting",
+            file=sys.stderr,
+            disable=disable,
+            leave=False,
+            position=1,
+            bar_format="  {desc} {bar} {n_fmt}/{total_fmt}, {postfix}",
+        )
+        self.task: str | None = None
+        self.evaluations = 0
+        self.shown_s = 0.0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *_):
+        self.bar.close()
+
+    def stage(self, task: str, done: int, total: int) -> None:
+        new = task != self.task or done < self.bar.n
+        if new:
+            self.task = task
+            self.bar.reset(total=total)
+            self.bar.set_description_str(task, refresh=False)
+        self.bar.n = done
+        self._redraw(new)
+
+    def evaluated(self) -> None:
+        self.evaluations += 1
+        self._redraw()
+
+    def _redraw(self, now: bool = False) -> None:
+        now_s = time.monotonic()
+        if now or now_s - self.shown_s >= REDRAW_S:
+            self.shown_s = now_s
+            self.bar.set_postfix_str(f"{self.evaluations} model evaluations", refresh=False)
+            self.bar.refresh()
 
 
 def _probe(source):

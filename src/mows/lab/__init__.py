@@ -52,10 +52,14 @@ above it in this list (and, outside the lab, ``mows.records``, ``mows.physics``,
 21. ``chirp``: inside one recorded ring-down, the chirp and the effect that explains it
     (``mows lab ringdown``). Imports no lab module.
 
+Below them all, ``progress`` (what the long loops are doing, for a front end's progress bar:
+:func:`mows.lab.progress.stage`) imports no lab module; any module may import it.
+
 This package's ``__init__`` re-exports the public names; the CLI (``mows.cli.lab``), the bench
 and the nodes import from here.
 """
 
+from mows.lab import progress
 from mows.lab.analysis import LabReport, analyse
 from mows.lab.catalog import CATALOG, catalog
 from mows.lab.diagnose import Diagnosis, diagnose
@@ -88,6 +92,7 @@ __all__ = [
     "is_bag",
     "load_plugins",
     "load_table",
+    "progress",
     "read_csv",
     "reference_at",
     "reference_columns",

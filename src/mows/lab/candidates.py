@@ -20,6 +20,7 @@ import math
 import numpy as np
 import scipy.stats
 
+from mows.lab import progress
 from mows.lab.algebra import Signature, orthonormal_basis, project_out, signature
 from mows.lab.effects import Effect, testable
 
@@ -180,7 +181,9 @@ def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
     residual = fit.weighted_residual
     model_basis = orthonormal_basis(fit.jacobian)
     candidates, untestable = [], {}
-    for effect in effects:
+    effects = list(effects)
+    for done, effect in enumerate(effects):
+        progress.stage("ranking candidate effects", done, len(effects))
         if effect.name in fit.model.effect_names:
             continue
         reason = testable(effect, fit.table, probe)

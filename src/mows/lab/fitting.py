@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from mows.estimate.ringdown import FitStatus
+from mows.lab import progress
 from mows.lab.table import MeasurementTable, rows_text
 
 FD_STEP = 1e-2  # × parameter scale
@@ -41,6 +42,7 @@ class Problem:
         key = p.tobytes()
         if self._cache[0] != key:
             self._cache = (key, self.model.factors(self.table, p))
+            progress.evaluated()
         return self._cache[1]
 
     def best_f00(self, p) -> float:
@@ -223,7 +225,8 @@ class FitResult:
         left-out rows with a median uncertainty above 10 σ of their measurements)."""
         folds = _folds(self.table)
         errors = np.empty(self.n)
-        for rows in folds:
+        for done, rows in enumerate(folds):
+            progress.stage("cross-validation (folds)", done, len(folds))
             train = np.ones(self.n, bool)
             train[rows] = False
             part = self.model.fit(self.table.subset(train), start=self.values[1:])

@@ -25,6 +25,7 @@ import dataclasses
 
 import numpy as np
 
+from mows.lab import progress
 from mows.lab.algebra import Signature, cosine_within, orthonormal_basis, project_out, same_span
 from mows.lab.candidates import ABSORBED, TIE_DELTA_BIC
 from mows.lab.physical_aliases import alias_statements
@@ -124,7 +125,9 @@ def _separate(members, fit, probe, number) -> Group:
     coefficients = {
         c.name: np.linalg.lstsq(c.signature.projected, c.signature.fitted_signal, rcond=None)[0] for c in members
     }
-    for variant in variants(fit.table, probe):
+    what_ifs = variants(fit.table, probe)
+    for done, variant in enumerate(what_ifs):
+        progress.stage(f"separating group {number} (what-if tables)", done, len(what_ifs))
         joined = variant.table
         model_basis = orthonormal_basis(fit.model_jacobian(joined))
         extended = {}

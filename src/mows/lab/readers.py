@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import math
 import pathlib
+import warnings
 from collections.abc import Mapping
 
 import numpy as np
@@ -34,6 +35,37 @@ def read_csv(path, drop_invalid: bool = False) -> MeasurementTable:
     in ``notes`` instead of raising :class:`TableError`.
     """
     path = pathlib.Path(path)
+    numeric = _read_numeric(path)
+    if numeric is not None:
+        columns, notes = numeric, []
+        if drop_invalid:  # every cell is a finite number: only non-positive values can be invalid
+            columns, dropped = _drop_invalid_rows(columns, {})
+            notes = [f"dropped {rows_text(dropped)}: non-positive values"] if dropped else []
+        return with_notes(columns, str(path), notes)
+    return _read_cells(path, drop_invalid)
+
+
+def _read_numeric(path: pathlib.Path) -> dict | None:
+    """The columns of a CSV whose every data cell is a finite number, parsed by numpy's C
+    reader (a 500 000-row table in seconds, its values only in memory); None for any other
+    file, which :func:`_read_cells` then reads cell by cell to name what is wrong."""
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as handle:
+            header = [name.strip() for name in next(csv.reader([handle.readline()]), [])]
+            if not all(header) or len(set(header)) != len(header):
+                return None
+            with warnings.catch_warnings():  # a header without rows: said by _read_cells
+                warnings.simplefilter("ignore", UserWarning)
+                values = np.loadtxt(handle, delimiter=",", comments=None, quotechar='"', ndmin=2)
+    except (OSError, ValueError):  # ValueError: a cell that is no number, a short row, not UTF-8
+        return None
+    if values.shape != (len(values), len(header)) or not len(values) or not np.isfinite(values).all():
+        return None
+    return {name: np.ascontiguousarray(column) for name, column in zip(header, values.T)}
+
+
+def _read_cells(path: pathlib.Path, drop_invalid: bool) -> MeasurementTable:
+    """:func:`read_csv` cell by cell: every problem named by column and row."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:  # -sig: Excel's byte-order mark
             rows = list(csv.reader(handle))

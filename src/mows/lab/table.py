@@ -48,6 +48,7 @@ KNOWN = (
     + ("coil_current_a", "amplitude_deg", "temperature_k", "damping_per_s", "duration_s")
 )
 
+MIN_SWEEPS = 10  # a subsample keeps at least this many sweeps (or all): folds for the cross-validation
 POSITIVE = ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k")
 NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t"}
 
@@ -163,6 +164,22 @@ class MeasurementTable:
         """The table restricted to ``rows`` (a boolean mask or indices)."""
         return dataclasses.replace(self, columns={k: v[rows] for k, v in self.columns.items()})
 
+    def subsample(self, rows: int, seed: int = 0) -> MeasurementTable:
+        """At most ``rows`` rows, stratified (:func:`stratified_rows`), with a note that says so."""
+        chosen = stratified_rows(self.sweep_ids, rows, seed)
+        if len(chosen) == len(self):
+            return self
+        sweeps = len(np.unique(self.sweep_ids))
+        kept = len(np.unique(self.sweep_ids[chosen]))
+        whole = "whole sweeps" if kept < sweeps else "rows from every sweep"
+        note = (
+            f"the table has {len(self)} rows: analysed on a random subsample of {len(chosen)} ({whole}: "
+            f"{kept} of its {sweeps} sweep{'s' if sweeps > 1 else ''}, spread evenly over the table, seed {seed}); "
+            "a weak effect may be significant only with all rows (--all-rows, slower)"
+        )
+        subset = self.subset(chosen)
+        return dataclasses.replace(subset, notes=subset.notes + (note,))
+
     def without_rows(self, reasons: Mapping[int, tuple]) -> MeasurementTable:
         """The table without the rows ``reasons`` names ({row index: (why, detail)}), with a
         note per reason that lists its rows and their details."""
@@ -257,3 +274,46 @@ def with_notes(columns, source, notes) -> MeasurementTable:
     if not any(name in columns for name in GRADIENT):
         notes.append("no reference gradient: taken as 0")
     return MeasurementTable(columns, source, tuple(notes))
+
+
+def stratified_rows(sweep_ids: np.ndarray, rows: int, seed: int = 0) -> np.ndarray:
+    """Indices (ascending) of at most ``rows`` rows that stand for the whole table.
+
+    Whole sweeps first, so that each keeps its orientations and the leave-one-sweep-out
+    cross-validation its folds: the sweeps, in order of first appearance, are cut into as many
+    strata of consecutive sweeps as there is room for average sweeps (at least MIN_SWEEPS), and
+    one sweep is drawn from each (the drift over the table is sampled end to end). When that
+    leaves more than ``rows`` rows (long sweeps), each kept sweep gives rows in proportion to
+    its length, drawn evenly along it: one at random from each run of consecutive rows.
+    """
+    rng = np.random.default_rng(seed)
+    if len(sweep_ids) <= rows:
+        return np.arange(len(sweep_ids))
+    unique, first, inverse, counts = np.unique(sweep_ids, return_index=True, return_inverse=True, return_counts=True)
+    order = np.argsort(first)  # sweeps in table order
+    strata = min(len(unique), max(MIN_SWEEPS, round(rows / counts.mean())))
+    bounds = np.linspace(0, len(unique), strata + 1).astype(int)
+    picked = order[[rng.integers(low, high) for low, high in zip(bounds[:-1], bounds[1:])]]
+    members = _members(inverse, picked)
+    sizes = np.array([len(m) for m in members])
+    if sizes.sum() <= rows:
+        return np.sort(np.concatenate(members))
+    share = rows * sizes / sizes.sum()
+    quotas = np.floor(share).astype(int)
+    quotas[np.argsort(quotas - share)[: rows - quotas.sum()]] += 1  # largest remainders: ``rows`` in all
+    return np.sort(np.concatenate([_evenly(m, quota, rng) for m, quota in zip(members, quotas)]))
+
+
+def _members(inverse: np.ndarray, picked: np.ndarray) -> list:
+    """Rows of each sweep in ``picked`` (by its index into the unique sweeps), in one pass."""
+    rows = np.flatnonzero(np.isin(inverse, picked))
+    by_sweep = np.argsort(inverse[rows], kind="stable")
+    rows = rows[by_sweep]
+    starts = np.searchsorted(inverse[rows], np.sort(picked))
+    return np.split(rows, starts[1:])
+
+
+def _evenly(rows: np.ndarray, count: int, rng) -> np.ndarray:
+    """``count`` of ``rows``: one drawn at random from each of ``count`` runs of consecutive rows."""
+    bounds = np.linspace(0, len(rows), count + 1).astype(int)
+    return rows[bounds[:-1] + (rng.random(count) * (bounds[1:] - bounds[:-1])).astype(int)]

@@ -3,12 +3,12 @@
 Each testable effect's signature (its Jacobian columns at 0, projected orthogonally to the fit,
 :mod:`mows.lab.algebra`) gives a score test; the effect is then refitted with the model
 (nonlinear least squares): ΔBIC = Δχ²/φ − k·ln n, p-value of the likelihood ratio
-Δχ²/φ ~ χ²(k), parameters ± σ, where φ = max(1, χ²/dof with the candidate, or without it if
-smaller) is the residual's own scatter (quasi-likelihood, :func:`dispersion`; φ = 1 once the
-residual is noise). An effect whose size follows from known constants (``Effect.physical``) is
-also refitted held at that value, with no new parameter (ΔBIC = Δχ²/φ, p of two simple
-hypotheses, :func:`_physics_form`); the candidate stands for the better form, and keeps the
-free fit's parameters as a check.
+Δχ²/φ ~ χ²(k), parameters ± σ, where φ = max(1, the smallest χ²/dof the step reaches, with
+or without any one candidate) is the residual's own scatter, one for every candidate of the step
+(quasi-likelihood, :func:`dispersion`; φ = 1 once the residual is noise). An effect whose size
+follows from known constants (``Effect.physical``) is also refitted held at that value, with no
+new parameter (ΔBIC = Δχ²/φ, p of two simple hypotheses, :func:`_physics_form`); the candidate
+stands for the better form, and keeps the free fit's parameters as a check.
 """
 
 from __future__ import annotations
@@ -47,6 +47,21 @@ class Form:
     fit: object = None
     signal_chi2: float = math.nan  # at physics: Σ(predicted signal/σ)² beyond what f00 absorbs
     dispersion: float = 1.0  # φ the evidence was scaled by (:func:`dispersion`)
+    gain_chi2: float = math.nan  # Δχ² before the scaling by φ
+    added: int = 0  # free parameters the form adds (k)
+    rank: int = 0  # of the effect's projected signature
+    shift_norm: float = 0.0  # at physics: ‖weighted shift of the residual‖ before the scaling
+
+    def at_dispersion(self, phi: float, n: int) -> Form:
+        """This form judged against the scatter φ: ΔBIC = Δχ²/φ − k·ln n and its p-value (free:
+        Δχ²/φ ~ χ²(rank); at physics: the simple-versus-simple test of :func:`_physics_form`)."""
+        gain = self.gain_chi2 / phi
+        if self.fixed:
+            size = self.shift_norm / math.sqrt(phi)
+            p = float(scipy.stats.norm.sf((gain + size**2) / (2 * size))) if size > 0 else 1.0
+            return dataclasses.replace(self, delta_bic=gain, p_value=p, dispersion=phi)
+        p = float(scipy.stats.chi2.sf(max(gain, 0.0), self.rank))
+        return dataclasses.replace(self, delta_bic=gain - self.added * math.log(n), p_value=p, dispersion=phi)
 
     @property
     def chi2_dof_after(self) -> float:
@@ -98,6 +113,11 @@ class Candidate:
     @property
     def forms(self) -> list:
         return [self.free] + ([self.physics] if self.physics is not None else [])
+
+    def at_dispersion(self, phi: float, n: int) -> Candidate:
+        """Both forms judged against the step's scatter φ (:func:`dispersion`)."""
+        physics = None if self.physics is None else self.physics.at_dispersion(phi, n)
+        return dataclasses.replace(self, free=self.free.at_dispersion(phi, n), physics=physics)
 
     @property
     def form(self) -> str:
@@ -158,14 +178,17 @@ def physics_deviation(effect, parameters) -> float:
     return max(abs(v - p) / s if s > 0 else math.inf for (_, v, s, _), p in zip(parameters, effect.physical))
 
 
-def dispersion(fit, chi2_after: float, dof_after: int) -> float:
-    """φ = max(1, χ²/dof) of the better of ``fit`` and the model with the candidate: the
-    residual's own scatter in units of the stated uncertainties (quasi-likelihood). While the
-    residual stays far above noise, a raw-χ² BIC rewards any parameter that shaves a little off a
-    huge χ²; judged against the scatter that the candidate leaves, Δχ²/φ, only an effect that
-    explains the structure (and so leaves φ ≈ 1) gains real evidence; a candidate that makes the
-    fit worse is judged against the present scatter, not its own. φ = 1 once the residual is noise."""
-    return max(1.0, min(fit.chi2_dof, chi2_after / max(dof_after, 1)))
+def dispersion(fit, candidates) -> float:
+    """φ = max(1, χ²/dof) of the best model this step can reach (``fit`` or ``fit`` with any one
+    candidate form): the residual's own scatter in units of the stated uncertainties
+    (quasi-likelihood, as QAIC takes φ from the fullest model). While the residual stays far
+    above noise, a raw-χ² BIC rewards any parameter that shaves a little off a huge χ²; judged
+    against the scatter that no candidate removes, Δχ²/φ, only an effect that explains the
+    structure (and so brings φ to ≈ 1) gains real evidence. One φ for every candidate of a step,
+    so that candidates are ranked by their Δχ², not by their own scatter. φ = 1 once the
+    residual is noise."""
+    after = [f.chi2_after / max(f.dof_after, 1) for c in candidates for f in c.forms]
+    return max(1.0, min([fit.chi2_dof, *after]))
 
 
 def _finite(value):
@@ -195,6 +218,8 @@ def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
             continue
         assert test is not None  # there was a test unless there was a reason not to test
         candidates.append(_candidate(fit, effect, test, functools.partial(worth_refit, effect, test)))
+    phi = dispersion(fit, candidates)
+    candidates = [c.at_dispersion(phi, fit.n) for c in candidates]
     candidates.sort(key=lambda c: -c.delta_bic)
     return candidates, untestable
 
@@ -226,18 +251,8 @@ def _free_form(fit, effect, test: Signature, refit: bool) -> tuple:
         std = np.sqrt(np.clip(np.diag(np.linalg.pinv(test.projected.T @ test.projected)), 0, None))
         chi2_after, dof_after = fit.chi2 - test.statistic, fit.dof - test.rank
         parameters = [(p.name, float(v), float(e), p.unit) for p, v, e in zip(effect.parameters, step, std)]
-    phi = dispersion(fit, chi2_after, dof_after)
-    gain = (fit.chi2 - chi2_after) / phi
-    form = Form(
-        False,
-        gain - k * math.log(fit.n),
-        float(scipy.stats.chi2.sf(max(gain, 0.0), test.rank)),
-        chi2_after,
-        dof_after,
-        after,
-        dispersion=phi,
-    )
-    return form, parameters
+    raw = Form(False, math.nan, math.nan, chi2_after, dof_after, after, gain_chi2=fit.chi2 - chi2_after, added=k)
+    return dataclasses.replace(raw, rank=test.rank).at_dispersion(1.0, fit.n), parameters
 
 
 def _physics_form(fit, effect, test: Signature, refit: bool) -> Form:
@@ -262,8 +277,6 @@ def _physics_form(fit, effect, test: Signature, refit: bool) -> Form:
         after = None
         shift = test.projected @ np.asarray(effect.physical, float)
         chi2_after, dof_after = float(np.sum((residual + shift) ** 2)), fit.dof
-    phi = dispersion(fit, chi2_after, dof_after)  # in units of the residual's scatter: Δχ²/φ, S/√φ
-    gain = (fit.chi2 - chi2_after) / phi
-    size = float(np.linalg.norm(shift)) / math.sqrt(phi)
-    p = float(scipy.stats.norm.sf((gain + size**2) / (2 * size))) if size > 0 else 1.0
-    return Form(True, gain, p, chi2_after, dof_after, after, float(np.sum(signal**2)), phi)
+    raw = Form(True, math.nan, math.nan, chi2_after, dof_after, after, float(np.sum(signal**2)))
+    raw = dataclasses.replace(raw, gain_chi2=fit.chi2 - chi2_after, shift_norm=float(np.linalg.norm(shift)))
+    return raw.at_dispersion(1.0, fit.n)

@@ -289,10 +289,12 @@ def _replacements(fit, start, pool, probe, replaced) -> list:
         return start.chi2 - NONLINEAR_MARGIN * test.statistic + k * log_n < fit.bic - needed
 
     candidates, _ = rank_candidates(start, pool, probe, could_pass)
-    # No passengers: what a move adds must itself be positive evidence on ``start``.
+    # No passengers: what a move adds must itself be positive evidence on ``start``; and a free
+    # form pinned at a parameter bound is no minimum, only a fudge (a free damping blend of 100
+    # ± 109, bound 100, once bought a nearby-coil table 3 in BIC).
     return [
         (c.label_of(form), form.fit, replaced.fixed and c.name == replaced.name)
         for c in candidates
         for form in c.forms
-        if form.fit is not None and start.bic - form.fit.bic > TIE_DELTA_BIC
+        if form.fit is not None and start.bic - form.fit.bic > TIE_DELTA_BIC and (form.fixed or c.within_bounds)
     ]

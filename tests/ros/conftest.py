@@ -29,8 +29,11 @@ class RosHarness:
         return value
 
     def close(self):
-        self.executor.shutdown()
+        # The node leaves the executor before it is destroyed: destroying a node an executor
+        # still holds crashed a worker once (a segfault in destroy_node, rclpy jazzy).
+        self.executor.remove_node(self.node)
         self.node.destroy_node()
+        self.executor.shutdown()
 
 
 @pytest.fixture

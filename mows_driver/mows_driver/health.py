@@ -3,6 +3,7 @@ since the last report (new gaps, new device faults) or still is wrong."""
 
 from diagnostic_msgs.msg import DiagnosticStatus
 
+from mows.device.session import DeviceSession
 from mows_ros.diagnostics import Health
 
 RATE_TOLERANCE = 0.02  # warn when the achieved sample rate is further off nominal
@@ -14,6 +15,22 @@ class StreamHealth:
     def __init__(self):
         self._reported_gaps = 0
         self._reported_faults = 0
+
+    def report(self, session: DeviceSession, node_values: dict, stream_errors: int, counts: dict) -> Health:
+        """The driver's status: ``node_values`` (the node's own), the session's state and rates,
+        ``stream_errors`` and ``counts`` (published, recorded)."""
+        state = session.health()
+        info = session.backend.info
+        values = {
+            **node_values,
+            **state,
+            "nominal_sample_rate_hz": info.sample_rate_hz if info else None,
+            "achieved_sample_rate_hz": session.achieved_rate_hz(),
+            "blocks_published": counts["blocks_published"],
+            "stream_errors": stream_errors,
+            "recorded_messages": counts["recorded_messages"],
+        }
+        return self(state, session.backend.name, stream_errors, values)
 
     def __call__(self, state: dict, backend: str, stream_errors: int, values: dict) -> Health:
         nominal, achieved = values["nominal_sample_rate_hz"], values["achieved_sample_rate_hz"]

@@ -285,18 +285,9 @@ class DriverNode(MowsNode):
     def health(self) -> Health:
         if self.session is None:
             return super().health()
-        state = self.session.health()
-        info = self.session.backend.info
-        values = {
-            **super().health().values,
-            **state,
-            "nominal_sample_rate_hz": info.sample_rate_hz if info else None,
-            "achieved_sample_rate_hz": self.session.achieved_rate_hz(),
-            "blocks_published": self.blocks_published,
-            "stream_errors": self.stream_errors,
-            "recorded_messages": self.recorder.messages if self.recorder else 0,
-        }
-        return self._health(state, self.session.backend.name, self.stream_errors, values)
+        recorded = self.recorder.messages if self.recorder else 0
+        counts = {"blocks_published": self.blocks_published, "recorded_messages": recorded}
+        return self._health.report(self.session, super().health().values, self.stream_errors, counts)
 
 
 def main(args: list[str] | None = None) -> int:

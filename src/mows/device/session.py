@@ -18,7 +18,6 @@ to zero. Nothing here knows about ROS.
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import threading
 import time
@@ -31,7 +30,6 @@ from mows.device.interface import (
     Command,
     CommandResult,
     DeviceFault,
-    FieldCurrentCommand,
     LinkEvent,
     energises,
 )
@@ -45,13 +43,13 @@ from mows.device.phases import (
     SupplyEvent,
     TuningFit,
 )
+from mows.device.rate import RateMeter
+from mows.device.supply import SupplyRamps
 from mows.device.tracking import TrackingLoop, TrackingSettings
 from mows.physics.coils import CoilSetup, CurrentCap
 from mows.records.samples import SampleBlock
 
 STALL_TIMEOUT_S = 2.0  # a running cycle fails when no samples arrive for this long (host time)
-SUPPLY_COMMAND_IDS = 1 << 48  # supply commands are numbered from here: apart from the sequencer's
-RATE_WINDOW_S = 5.0  # the achieved sample rate is measured over this much host time
 
 
 @dataclasses.dataclass
@@ -106,15 +104,9 @@ class DeviceSession:
         self._on_done: Callable[[CycleOutcome], None] | None = None
         self.tracking = TrackingLoop()
         self._last_samples_s = monotonic()
-        self._first_samples_s: float | None = None
-        self._arrivals: collections.deque = collections.deque()  # (host time, samples) for the rate
+        self._rate = RateMeter()  # the achieved sample rate
         self._next_index = 0  # the sample after the newest received
-        self._supply_commands = SUPPLY_COMMAND_IDS
-        self._supply_waiting: dict[int, tuple[Callable[[CommandResult], None], FieldCurrentCommand]] = {}  # sent
-        self._supply_ramping: list[tuple[CommandResult, Callable, float]] = []  # answered, not reached
-        self._supply_latest: int | None = None  # the ramp that sets the supply (none after a ramp to zero)
-        self._supply_events: list[SupplyEvent] = []  # not yet handed to the streaming thread
-        self.supply_state: SupplyEvent | None = None  # the last one, for /diagnostics
+        self.supply = SupplyRamps(self._stamp_ns)  # the static-field supply's ramps (mows.device.supply)
         self._anchor: tuple[int, int, float] | None = None  # (sample index, stamp ns, rate) of the newest block
         if backend.info is not None:
             self._device_known()
@@ -135,8 +127,8 @@ class DeviceSession:
                 self._act(self.sequencer.abort(f"no samples from the device for {STALL_TIMEOUT_S:g} s"))
             self._track()
             output.events += self._events
-            output.supply += self._supply_events
-            self._events, self._supply_events = [], []
+            output.supply += self.supply.take_events()
+            self._events = []
             for event in output.events:
                 if event.cycle_id:  # a cycle's phases begin once the stage has turned to its θ0
                     self.stage_angle_rad = event.theta0_rad
@@ -149,12 +141,13 @@ class DeviceSession:
             assert self.assembler is not None
             self._next_index = item.first_sample_index + len(item)
             self._anchor = (item.first_sample_index, item.stamp_ns, item.sample_rate_hz)
-            self._supply_reached()
+            self.supply.reached(self._next_index)
             output.blocks += self.assembler.add(item)
             if self.sequencer is not None:
                 self._act(self.sequencer.on_samples(item))
-        elif isinstance(item, CommandResult) and item.command_id in self._supply_waiting:
-            self._supply_answered(item)
+        elif isinstance(item, CommandResult) and self.supply.answers(item):
+            self.refused_commands += not item.accepted
+            self.supply.answered(item, self._next_index)
         elif isinstance(item, CommandResult):
             self.refused_commands += not item.accepted
             assert self.sequencer is not None  # results answer commands: the sequencer's, supply ones apart
@@ -163,7 +156,7 @@ class DeviceSession:
             self._link(item)
             output.links.append(item)
         elif isinstance(item, SupplyEvent):  # replayed from a recording
-            self._supply_event(item)
+            self.supply.event(item)
         elif isinstance(item, DeviceFault):
             self.device_faults += 1
             self.last_device_fault = item.reason
@@ -201,13 +194,8 @@ class DeviceSession:
             )
 
     def _count_arrival(self, n: int) -> None:
-        now = self._monotonic()
-        self._last_samples_s = now
-        if self._first_samples_s is None:
-            self._first_samples_s = now
-        self._arrivals.append((now, n))
-        while now - self._arrivals[0][0] > RATE_WINDOW_S:
-            self._arrivals.popleft()
+        self._last_samples_s = self._monotonic()
+        self._rate.add(self._last_samples_s, n)
 
     def _act(self, step: Step) -> None:
         """Carry out what the sequencer asked for."""
@@ -305,53 +293,17 @@ class DeviceSession:
                 raise ValueError(f"the {self.backend.name} backend has no supply to set")
             if not self.link_up:
                 raise ValueError(f"the link to the device is down ({self.last_link_reason})")
-            self._supply_commands += 1
-            command = FieldCurrentCommand(
-                self._supply_commands, self._next_index + self.backend.command_lead_samples, float(current_a)
-            )
+            command = self.supply.command(self._next_index + self.backend.command_lead_samples, current_a)
             self._check_armed(command)
             self.backend.send(command)
-            self._supply_waiting[command.command_id] = (on_done, command)
+            self.supply.sent(command, on_done)
             return command.command_id
 
     def supply_to_zero(self, reason: str = "supply to zero") -> None:
         """Ramp the supply to zero now, dropping any ramp that waits (a cancelled calibration)."""
         with self._lock:
             self.backend.supply_to_zero_now()
-            self._supply_dropped(reason)
-
-    def _supply_dropped(self, reason: str) -> None:
-        """The driver ramped the supply to zero itself: no ramp that waits sets it any more, and
-        when it is back at zero is not known (a ramp, not a steady state)."""
-        self._supply_latest = None
-        self._supply_event(SupplyEvent(self._next_index, self._stamp_ns(self._next_index), 0.0, True, reason))
-
-    def _supply_answered(self, result: CommandResult) -> None:
-        done, command = self._supply_waiting.pop(result.command_id)
-        if not result.accepted:
-            self.refused_commands += 1
-            done(result)
-            return
-        self._supply_latest = command.command_id
-        start = command.at_sample_index
-        self._supply_event(SupplyEvent(start, self._stamp_ns(start), command.current_a, True))
-        self._supply_ramping.append((result, done, command.current_a))
-        self._supply_reached()
-
-    def _supply_reached(self) -> None:
-        reached = [ramp for ramp in self._supply_ramping if ramp[0].applied_sample_index < self._next_index]
-        self._supply_ramping = [
-            ramp for ramp in self._supply_ramping if ramp[0].applied_sample_index >= self._next_index
-        ]
-        for result, done, current_a in reached:
-            if result.command_id == self._supply_latest:  # not overtaken by a later ramp or a ramp to zero
-                end = result.applied_sample_index
-                self._supply_event(SupplyEvent(end, self._stamp_ns(end), current_a, False))
-            done(result)
-
-    def _supply_event(self, event: SupplyEvent) -> None:
-        self._supply_events.append(event)
-        self.supply_state = event
+            self.supply.dropped(self._next_index, reason)
 
     def _stamp_ns(self, sample_index: int) -> int:
         """The device stamp of a sample, from the newest block (0 before any block came)."""
@@ -373,7 +325,7 @@ class DeviceSession:
                 self.tracking.stop(f"tracking stopped by the emergency stop: {reason or 'no reason given'}")
                 self.backend.coils_off_now()
                 self.backend.supply_to_zero_now()
-                self._supply_dropped(f"emergency stop: {reason or 'no reason given'}")
+                self.supply.dropped(self._next_index, f"emergency stop: {reason or 'no reason given'}")
             if self.sequencer is None:
                 return False
             self._act(self.sequencer.emergency_stop(reason) if engage else self.sequencer.release())
@@ -404,17 +356,9 @@ class DeviceSession:
 
     # --- state -----------------------------------------------------------------------------
     def achieved_rate_hz(self) -> float | None:
-        """Samples received per host second over the last RATE_WINDOW_S; None in the first
-        RATE_WINDOW_S of samples, when the stream catches up with the time its start took."""
+        """The achieved sample rate (:class:`mows.device.rate.RateMeter`); None while not yet known."""
         with self._lock:
-            if (
-                self._first_samples_s is None
-                or self._monotonic() - self._first_samples_s < RATE_WINDOW_S
-                or len(self._arrivals) < 2
-            ):
-                return None
-            span = self._arrivals[-1][0] - self._arrivals[0][0]
-            return sum(n for _, n in list(self._arrivals)[1:]) / span if span > 0 else None
+            return self._rate.rate_hz(self._monotonic())
 
     def health(self) -> dict:
         """Everything /diagnostics reports, as plain values."""
@@ -430,7 +374,7 @@ class DeviceSession:
                 **self.tracking.state(),
                 **self.backend.stats(),
             }
-            if (supply := self.supply_state) is not None:
+            if (supply := self.supply.state) is not None:
                 values.update(supply_state_a=supply.current_a, supply_ramping=supply.ramping)
             a, s = self.assembler, self.sequencer
             if a is not None:

@@ -47,10 +47,16 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--duration", type=float, help="run cycles back to back for this many seconds instead")
     parser.add_argument("--load", action="store_true", help="beside two CPU burners and a 1 kHz JointState loop")
+    parser.add_argument(
+        "--burner-nice",
+        type=int,
+        default=0,
+        help="the burners' niceness (0: the graph's priority; 19: a smoke run that leaves other work its cores)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     duration_s = args.duration if args.duration is not None else (LOAD_DURATION_S if args.load else None)
-    load = Load() if args.load else None
+    load = Load(burner_nice=args.burner_nice) if args.load else None
     log = open("/dev/null", "w")
     mode = (
         ["-p", "driver:tracking:=true"]

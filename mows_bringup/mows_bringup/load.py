@@ -21,8 +21,10 @@ JOINT_NAMES = tuple(f"joint_{i}" for i in range(1, 7))  # a six-axis arm
 JOINT_DEPTH = 10  # reliable, volatile: robot_state_publisher's and ros2_control's default
 
 
-def burn(stop) -> None:
-    """Spin until told to stop: one core's worth of load (less when the cores are shared)."""
+def burn(stop, nice: int) -> None:
+    """Spin until told to stop: one core's worth of load (less when the cores are shared), at
+    niceness ``nice`` (0: the graph's own priority, as a robot stack's busy processes)."""
+    os.nice(nice)
     while not stop.is_set():
         for _ in range(100_000):
             pass
@@ -71,12 +73,14 @@ class Load:
     """``burners`` spinning processes and a JointState loop at ``joint_rate_hz``, from
     :meth:`start` to :meth:`stop`, which returns what was achieved."""
 
-    def __init__(self, burners: int = 2, joint_rate_hz: float = 1000.0):
+    def __init__(self, burners: int = 2, joint_rate_hz: float = 1000.0, burner_nice: int = 0):
         context = multiprocessing.get_context("spawn")
         self._stop = context.Event()
         self._report = context.Queue()
-        self.burners, self.joint_rate_hz = burners, joint_rate_hz
-        self._processes = [context.Process(target=burn, args=(self._stop,), daemon=True) for _ in range(burners)]
+        self.burners, self.joint_rate_hz, self.burner_nice = burners, joint_rate_hz, burner_nice
+        self._processes = [
+            context.Process(target=burn, args=(self._stop, burner_nice), daemon=True) for _ in range(burners)
+        ]
         self._processes += [
             context.Process(target=listen_joint_states, args=(self._stop, self._report), daemon=True),
             context.Process(target=publish_joint_states, args=(joint_rate_hz, self._stop, self._report), daemon=True),
@@ -106,6 +110,7 @@ class Load:
                 process.kill()
         return {
             "cpu_burners": self.burners,
+            "burner_nice": self.burner_nice,
             "joint_state_asked_hz": self.joint_rate_hz,
             "joint_state_published_hz": achieved.get("joint_state_published_hz", float("nan")),
             "joint_state_received_hz": achieved.get("joint_state_received_hz", float("nan")),

@@ -14,18 +14,27 @@ import subprocess
 
 
 def run(
-    cycles: int = 4, repeats: int = 5, tracking: bool = False, load: bool = False, load_duration_s: float = 60.0
+    cycles: int = 4,
+    repeats: int = 5,
+    tracking: bool = False,
+    load: bool = False,
+    load_duration_s: float = 60.0,
+    burner_nice: int = 0,
 ) -> dict:
     """``mows-latency``'s figures; ``tracking``: of the driver's tracking mode (cycles × repeats
     ring-downs); ``load``: under load, with as ``baseline`` the same stream without the load, run
-    just before (the machine is shared: its own load is in both)."""
+    just before (the machine is shared: its own load is in both); ``burner_nice``: the burners'
+    niceness (19 in a quick smoke run, so that it does not starve the tests beside it)."""
     tool = shutil.which("mows-latency")
     if tool is None:
         return {"skipped": "mows-latency not on PATH: source install/setup.bash (make bench does)"}
     if not load:
         return _measure(tool, repeats, ["--cycles", str(cycles), *(["--tracking"] if tracking else [])])
     baseline = _measure(tool, repeats, ["--duration", str(load_duration_s)])
-    return {**_measure(tool, repeats, ["--load", "--duration", str(load_duration_s)]), "baseline": baseline}
+    under_load = _measure(
+        tool, repeats, ["--load", "--duration", str(load_duration_s), "--burner-nice", str(burner_nice)]
+    )
+    return {**under_load, "baseline": baseline}
 
 
 def _measure(tool: str, repeats: int, how: list[str]) -> dict:

@@ -72,5 +72,16 @@ def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -
     finally:
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        _shutdown()
     return 0
+
+
+def _shutdown() -> None:
+    """Shut the context down unless the signal handler has: try_shutdown checks, then shuts down,
+    and a SIGINT between the two made the mapper exit 1 at the end of a demo (RCLError: rcl_shutdown
+    already called)."""
+    try:
+        rclpy.try_shutdown()
+    except RuntimeError:
+        if rclpy.ok():
+            raise

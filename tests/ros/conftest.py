@@ -29,9 +29,12 @@ class RosHarness:
         return value
 
     def close(self):
-        # The node leaves the executor before it is destroyed: destroying a node an executor
-        # still holds crashed a worker once (a segfault in destroy_node, rclpy jazzy).
+        # Everything is destroyed in order, children first: the node leaves the executor, and
+        # the action clients tests made (waitables, which destroy_node leaves alone) go before
+        # the node. A worker crashed in destroy_node twice (a segfault, rclpy jazzy).
         self.executor.remove_node(self.node)
+        for waitable in list(self.node.waitables):
+            waitable.destroy()
         self.node.destroy_node()
         self.executor.shutdown()
 

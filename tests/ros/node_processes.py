@@ -11,13 +11,22 @@ from mows_bringup.graph import NODES
 
 @pytest.fixture
 def start(tmp_path):
-    """Starts a command with its output in a log file; kills what is left at the end."""
+    """Starts a command with its output in a log file; kills what is left at the end.
+
+    The command is killed with the test's worker too (setpriv --pdeathsig): a worker that
+    crashed once left its nodes running in its ROS domain, which the replacement worker took
+    over, and the suite hung on them."""
     processes = []
 
     def start(*command: str) -> subprocess.Popen:
         log_path = tmp_path / f"process-{len(processes)}.log"
         with open(log_path, "w") as log:
-            process = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
+            process = subprocess.Popen(
+                ["setpriv", "--pdeathsig", "KILL", *command],
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+            )
         process.log_path = log_path
         processes.append(process)
         return process

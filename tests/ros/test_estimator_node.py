@@ -114,16 +114,11 @@ def channel(data, flags, index=0):
 
 
 @pytest.fixture
-def estimator(ros, tmp_path):
-    log = open(tmp_path / "estimator.log", "w")
+def estimator(ros, start):
     node = next(n for n in NODES if n.name == "estimator")
     # The stand-in device streams Eq. S11 data (a magnet turning in place), so the node is
     # told to fit that model rather than the lever-aware pickup of the real probe.
-    process = subprocess.Popen(
-        node.command(["-p", f"f00_hz:={PAPER_PROBE.f00_hz}", "-p", "lever_aware:=false"]),
-        stdout=log,
-        stderr=subprocess.STDOUT,
-    )
+    process = start(*node.command(["-p", f"f00_hz:={PAPER_PROBE.f00_hz}", "-p", "lever_aware:=false"]))
     heard = {"fits": [], "fields": [], "magnetic": [], "diagnostics": {}}
     ros.node.create_subscription(RingdownFit, "/mows/ringdown", heard["fits"].append, RESULT_QOS)
     ros.node.create_subscription(FieldEstimate, "/mows/field", heard["fields"].append, RESULT_QOS)
@@ -152,7 +147,7 @@ def estimator(ros, tmp_path):
     except subprocess.TimeoutExpired:
         process.kill()  # never leave a node behind to talk to the next test
         code = process.wait()
-    assert code == 0, (tmp_path / "estimator.log").read_text()
+    assert code == 0, process.log_path.read_text()
 
 
 def test_a_ringdown_gives_a_fit_a_field_estimate_and_a_magnetic_field(ros, estimator):

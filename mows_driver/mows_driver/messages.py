@@ -108,6 +108,13 @@ def estop_response(
     return response
 
 
+def estop_unlinked_response(lifecycle_state: str, response: EmergencyStop.Response) -> EmergencyStop.Response:
+    """The answer to an emergency stop while there is no device link: nothing is on to stop."""
+    response.success, response.latched = False, False
+    response.message = f"the driver is {lifecycle_state}: no device link, nothing it drives is on"
+    return response
+
+
 def supply_response(result: CommandResult, current_a: float, response: SetFieldCurrent.Response) -> None:
     """The answer to set_field_current: reached (at which sample) or refused by the device."""
     response.success = result.accepted

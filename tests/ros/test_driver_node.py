@@ -27,6 +27,7 @@ from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 from mows_bringup.graph import NODES
 from mows_driver import node as driver
+from mows_driver import outputs, services
 from mows_ros.process import EXIT_BAD_PARAMETER
 from mows_ros.qos import EXCITATION_QOS
 from node_processes import log
@@ -393,11 +394,11 @@ def test_docs_list_every_parameter_topic_and_service():
     text = (Path(__file__).parents[2] / "docs" / "driver.md").read_text()
     names = [spec.name for spec in driver.PARAMETERS]
     names += [
-        f"/{driver.RAW_TOPIC}",
-        f"/{driver.EXCITATION_TOPIC}",
-        f"/{driver.JOINT_STATES_TOPIC}",
-        f"/{driver.RUN_CYCLE_SERVICE}",
-        f"/{driver.EMERGENCY_STOP_SERVICE}",
+        f"/{outputs.RAW_TOPIC}",
+        f"/{outputs.EXCITATION_TOPIC}",
+        f"/{outputs.JOINT_STATES_TOPIC}",
+        f"/{services.RUN_CYCLE_SERVICE}",
+        f"/{services.EMERGENCY_STOP_SERVICE}",
     ]
     assert [name for name in names if f"`{name}`" not in text] == []
 

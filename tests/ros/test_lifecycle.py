@@ -221,7 +221,7 @@ def test_a_failing_deactivate_takes_the_error_path_and_leaves_the_coils_off(ros_
 def test_a_refused_configure_leaves_the_node_unconfigured_with_the_reason(ros_context):
     node = driver.DriverNode()
     try:
-        node._values = {**node._values, "backend": "serial", "serial_port": ""}
+        node.values = {**node.values, "backend": "serial", "serial_port": ""}
         assert node.trigger_configure() == TransitionCallbackReturn.FAILURE
         assert node.lifecycle_state == "unconfigured" and node.session is None
         assert node.lifecycle_problem.startswith("configure refused: ")

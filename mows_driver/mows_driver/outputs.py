@@ -1,0 +1,81 @@
+"""The driver's topics, and the bag they are recorded into: what one step of the device
+session yields, published in order.
+
+Blocks go out on ``mows/raw`` only while the session is armed (the node active), each with the
+stage's angle on ``mows/joint_states`` when the stage is known; phase events on
+``mows/excitation`` and supply ramps on ``mows/supply`` in every state. Each message is written
+to the bag (when recording) before it is published, so that a subscriber never has a message
+the bag lacks. Link changes and forced coil cuts are logged as they happen.
+"""
+
+import time
+
+from mows_msgs.msg import ExcitationState, MagnetometerBlock, SupplyState
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from mows.device.phases import Phase
+from mows.device.session import DeviceSession, Output
+from mows_driver.messages import block_msg, excitation_msg, joint_state_msg, supply_msg
+from mows_driver.recording import open_recorder
+from mows_ros.qos import EXCITATION_QOS, JOINT_QOS, STREAM_QOS
+
+RAW_TOPIC = "mows/raw"
+EXCITATION_TOPIC = "mows/excitation"
+SUPPLY_TOPIC = "mows/supply"
+JOINT_STATES_TOPIC = "mows/joint_states"
+
+
+class DriverOutputs:
+    """The driver's publishers on ``node``, its bag while one is open, and what they have sent."""
+
+    def __init__(self, node: Node):
+        self._logger = node.get_logger()
+        self.raw = node.create_publisher(MagnetometerBlock, RAW_TOPIC, STREAM_QOS)
+        self.excitation = node.create_publisher(ExcitationState, EXCITATION_TOPIC, EXCITATION_QOS)
+        self.supply = node.create_publisher(SupplyState, SUPPLY_TOPIC, EXCITATION_QOS)
+        self.joints = node.create_publisher(JointState, JOINT_STATES_TOPIC, JOINT_QOS)
+        self.recorder = None
+        self.blocks_published = 0
+
+    def record(self, path: str) -> None:
+        """Record what is published into a new bag at ``path`` ('' records nothing)."""
+        recorded = [(self.raw, STREAM_QOS), (self.excitation, EXCITATION_QOS), (self.supply, EXCITATION_QOS)]
+        self.recorder = open_recorder(path, recorded)
+
+    def close(self) -> None:
+        """Closes the bag: complete, with its summary and metadata."""
+        if self.recorder is not None:
+            self.recorder.close()
+            self.recorder = None
+
+    def counts(self) -> dict:
+        return {
+            "blocks_published": self.blocks_published,
+            "recorded_messages": self.recorder.messages if self.recorder else 0,
+        }
+
+    def publish(self, output: Output, session: DeviceSession, values: dict) -> None:
+        """What one step of ``session`` yielded, with the node's parameter ``values`` (frames)."""
+        for link in output.links:  # in every state, not only in a cycle
+            (self._logger.info if link.up else self._logger.warning)(
+                f"link {'up' if link.up else 'lost'}: {link.reason}"
+            )
+        # Published only while armed (active): disarming flips it under the session's lock, so
+        # no block with a sample read after the deactivation is published.
+        for block in output.blocks if session.armed else ():
+            self._send(self.raw, block_msg(block, session.backend.info, values["frame_id"], values["sensor_frame_ids"]))
+            self.blocks_published += 1
+            if session.stage_angle_rad is not None:  # the stage with every block: TF at its stamps
+                self.joints.publish(joint_state_msg(block.stamp_ns, session.stage_angle_rad))
+        for event in output.events:
+            self._send(self.excitation, excitation_msg(event, values["probe_frame_id"]))
+            if event.phase == Phase.FAULT:
+                self._logger.error(f"coils forced off: {event.reason}")
+        for supply in output.supply:
+            self._send(self.supply, supply_msg(supply, values["probe_frame_id"]))
+
+    def _send(self, publisher, message) -> None:
+        if self.recorder is not None:
+            self.recorder.write(publisher.topic_name, message, time.time_ns())
+        publisher.publish(message)

@@ -1,13 +1,18 @@
 """mows-graph: run the MOWS node graph without ``ros2 launch`` (not installed here).
 
-    mows-graph [--duration S] [--unconfigured] [--ros-args ARGS...]
+    mows-graph [--duration S] [--unconfigured] [--realtime-priority N] [--ros-args ARGS...]
 
 Starts every node's console script with its parameter file (share/<package>/config/<node>.yaml)
 and any ``--ros-args`` given here, prefixes each line a node writes with ``[node]``, and
 forwards SIGINT and SIGTERM to the nodes. The nodes are managed (lifecycle) nodes: mows-graph
 configures them all, then activates them in data-flow order (driver, estimator, mapper,
 calibrator) through their lifecycle services; ``--unconfigured`` leaves them unconfigured for
-a supervisor. Exit status: 0 when the graph was stopped (by a signal or after --duration) and
+a supervisor. ``--realtime-priority N`` runs the nodes on the ring-down path (driver and
+estimator) under SCHED_FIFO at priority N, so that busy processes beside them (a robot stack's
+planners, compilers) delay neither the stream nor the fits; a robot's own control loop, at a
+higher priority, still preempts them. It needs root or an RLIMIT_RTPRIO of at least N.
+
+Exit status: 0 when the graph was stopped (by a signal or after --duration) and
 every node stopped cleanly; 1 when a node refused a transition, exited by itself or did not
 stop cleanly.
 """
@@ -16,6 +21,7 @@ import argparse
 import ctypes
 import os
 import queue
+import resource
 import signal
 import subprocess
 import sys
@@ -42,6 +48,7 @@ class GraphNode:
     name: str
     package: str
     executable: str
+    realtime: bool = False  # on the ring-down path: --realtime-priority applies to it
 
     def config_path(self) -> str:
         share = Path(get_package_share_directory(self.package))
@@ -57,8 +64,8 @@ class GraphNode:
 
 
 NODES = (  # in data-flow order: the order of activation
-    GraphNode("driver", "mows_driver", "mows_driver"),
-    GraphNode("estimator", "mows_estimator", "mows_estimator"),
+    GraphNode("driver", "mows_driver", "mows_driver", realtime=True),
+    GraphNode("estimator", "mows_estimator", "mows_estimator", realtime=True),
     GraphNode("mapper", "mows_mapper", "mows_mapper"),
     GraphNode("calibrator", "mows_calibrator", "mows_calibrator"),
 )
@@ -69,10 +76,28 @@ def say(text: str) -> None:
     sys.stdout.flush()
 
 
-def _die_with_parent() -> None:
-    # Runs in the child between fork and exec: if mows-graph itself is killed, the kernel
-    # sends the node SIGTERM, which it handles like a normal stop, instead of orphaning it.
-    _prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+def _child_setup(fifo_priority: int) -> Callable[[], None]:
+    """What runs in a node's process between fork and exec."""
+
+    def setup() -> None:
+        # If mows-graph itself is killed, the kernel sends the node SIGTERM, which it handles
+        # like a normal stop, instead of orphaning it.
+        _prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+        if fifo_priority:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(fifo_priority))
+
+    return setup
+
+
+def realtime_problem(priority: int) -> str | None:
+    """Why this process cannot start nodes at SCHED_FIFO ``priority`` (1–99), or None."""
+    low, high = os.sched_get_priority_min(os.SCHED_FIFO), os.sched_get_priority_max(os.SCHED_FIFO)
+    if not low <= priority <= high:
+        return f"--realtime-priority must be {low}–{high}, got {priority}"
+    limit = resource.getrlimit(resource.RLIMIT_RTPRIO)[0]
+    if os.geteuid() != 0 and limit != resource.RLIM_INFINITY and limit < priority:
+        return f"--realtime-priority {priority} needs root or an RLIMIT_RTPRIO of at least {priority} (now {limit})"
+    return None
 
 
 class Graph:
@@ -80,9 +105,10 @@ class Graph:
     ``up`` (first line of output), ``exit`` and ``signal``. A SimpleQueue, because it is the
     queue that a signal handler may put into."""
 
-    def __init__(self, nodes: tuple[GraphNode, ...], ros_args: list[str], output=None):
+    def __init__(self, nodes: tuple[GraphNode, ...], ros_args: list[str], output=None, realtime_priority: int = 0):
         self._nodes = nodes
         self._ros_args = ros_args
+        self._realtime_priority = realtime_priority  # 0: every node at the default policy
         self._output = output or sys.stdout  # where the nodes' prefixed lines go
         self._events: queue.SimpleQueue = queue.SimpleQueue()
         self._processes: dict[str, subprocess.Popen] = {}
@@ -105,10 +131,11 @@ class Graph:
                 errors="replace",
                 env=environment,
                 start_new_session=True,  # a terminal's Ctrl-C reaches the nodes only through us
-                preexec_fn=_die_with_parent,
+                preexec_fn=_child_setup(self._realtime_priority if node.realtime else 0),
             )
             self._processes[node.name] = process
-            say(f"started {node.name} (pid {process.pid})")
+            fifo = f", SCHED_FIFO {self._realtime_priority}" if node.realtime and self._realtime_priority else ""
+            say(f"started {node.name} (pid {process.pid}{fifo})")
         # Threads only after every fork: preexec_fn is not safe while other threads run.
         for name, process in self._processes.items():
             pump = threading.Thread(target=self._pump, args=(name, process), daemon=True)
@@ -198,6 +225,16 @@ class Graph:
         return {name: process.returncode for name, process in self._processes.items()}
 
 
+def add_realtime_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--realtime-priority",
+        type=int,
+        default=0,
+        metavar="N",
+        help="run the driver and the estimator under SCHED_FIFO at priority N (1-99; default: not)",
+    )
+
+
 def parse_arguments(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     """Split ``argv`` into the runner's own options and the ROS arguments for every node."""
     own, ros_args = argv, []
@@ -218,15 +255,18 @@ def parse_arguments(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
         action="store_true",
         help="leave the nodes unconfigured, for a supervisor to bring up (lifecycle services)",
     )
+    add_realtime_option(parser)
     args = parser.parse_args(own)
     if args.duration is not None and args.duration <= 0:
         parser.error(f"--duration must be positive, got {args.duration}")
+    if args.realtime_priority and (problem := realtime_problem(args.realtime_priority)):
+        parser.error(problem)
     return args, ros_args
 
 
 def main(argv: list[str] | None = None) -> int:
     args, ros_args = parse_arguments(sys.argv[1:] if argv is None else argv)
-    graph = Graph(NODES, ros_args)
+    graph = Graph(NODES, ros_args, realtime_priority=args.realtime_priority)
     signal.signal(signal.SIGINT, graph.on_signal)
     signal.signal(signal.SIGTERM, graph.on_signal)
     graph.start()

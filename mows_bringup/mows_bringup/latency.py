@@ -29,7 +29,7 @@ from mows_msgs.msg import MagnetometerBlock, RingdownFit
 from mows_msgs.srv import RunCycle
 
 from mows.records import stamps
-from mows_bringup.graph import NODES, Graph, say
+from mows_bringup.graph import NODES, Graph, add_realtime_option, realtime_problem, say
 from mows_bringup.load import Load
 from mows_ros.diagnostics import DIAGNOSTICS_DEPTH, DIAGNOSTICS_TOPIC
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
@@ -53,8 +53,11 @@ def main(argv=None) -> int:
         default=0,
         help="the burners' niceness (0: the graph's priority; 19: a smoke run that leaves other work its cores)",
     )
+    add_realtime_option(parser)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
+    if args.realtime_priority and (problem := realtime_problem(args.realtime_priority)):
+        parser.error(problem)
     duration_s = args.duration if args.duration is not None else (LOAD_DURATION_S if args.load else None)
     load = Load(burner_nice=args.burner_nice) if args.load else None
     log = open("/dev/null", "w")
@@ -63,7 +66,8 @@ def main(argv=None) -> int:
         if args.tracking
         else ["-p", "driver:tuning_steps:=0", "-p", "driver:gap_s:=0.1"]
     )
-    graph = Graph(tuple(n for n in NODES if n.name in ("driver", "estimator")), mode, output=log)
+    path = tuple(n for n in NODES if n.name in ("driver", "estimator"))
+    graph = Graph(path, mode, output=log, realtime_priority=args.realtime_priority)
     graph.start()
     if load is not None:
         load.start()
@@ -76,7 +80,8 @@ def main(argv=None) -> int:
     finally:
         load_as_run = load.stop() if load is not None else None
         graph.stop()
-    figures = {"mode": "tracking" if args.tracking else "cycles", **summary(stream.latencies())}
+    figures = {"mode": "tracking" if args.tracking else "cycles", "realtime_priority": args.realtime_priority}
+    figures.update(summary(stream.latencies()))
     figures.update(stream.counts())
     if load_as_run is not None:
         figures["load"] = load_as_run

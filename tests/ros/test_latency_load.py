@@ -31,6 +31,7 @@ def test_the_latency_bench_runs_under_load_and_reports_it(capsys):
     load = figures["load"]
     assert load["cpu_burners"] == 2 and load["joint_state_asked_hz"] == 1000.0
     assert load["burner_nice"] == 19  # a smoke run: the burners leave the tests beside it their cores
+    assert figures["realtime_priority"] == 0 and "default_priority" not in figures  # the graph as it is
     # Deadlines are absolute and a missed tick is skipped: never faster than asked.
     assert 0 < load["joint_state_published_hz"] <= 1000.0 * 1.001
     assert load["joint_state_received_hz"] > 0

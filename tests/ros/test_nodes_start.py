@@ -48,8 +48,14 @@ def test_graph_runs_for_its_duration_and_stops_cleanly(ros, diagnostics, start):
 
 
 def test_graph_passes_ros_arguments_and_forwards_sigterm(ros, diagnostics, start):
-    graph = start("mows-graph", "--ros-args", "-r", "__ns:=/lab")
+    graph = start("mows-graph", "--realtime-priority", "10", "--ros-args", "-r", "__ns:=/lab")
     hear_all(ros, diagnostics, {f"/lab{name}" for name in NODE_NAMES}, graph)
+    # The ring-down path runs under SCHED_FIFO at the asked priority, the rest as before.
+    for node in NODES:
+        pid = int(re.search(rf"started {node.name} \(pid (\d+)", log(graph)).group(1))
+        policy, priority = os.sched_getscheduler(pid), os.sched_getparam(pid).sched_priority
+        assert (policy, priority) == ((os.SCHED_FIFO, 10) if node.realtime else (os.SCHED_OTHER, 0)), node
+    assert {node.name for node in NODES if node.realtime} == {"driver", "estimator"}
     graph.send_signal(signal.SIGTERM)
     assert exit_code(ros, graph) == 0, log(graph)
     assert "SIGTERM received" in log(graph)
@@ -73,6 +79,14 @@ def test_a_node_in_a_namespace_takes_its_parameter_file_and_stops_on_sigterm(ros
     assert values["block_duration_s"] == "0.04"
     driver.send_signal(signal.SIGTERM)
     assert exit_code(ros, driver) == 0, log(driver)
+
+
+@pytest.mark.parametrize("priority", ["0.5", "100", "-1"])
+def test_a_realtime_priority_out_of_range_is_refused_in_one_line(priority, capsys):
+    with pytest.raises(SystemExit) as stopped:
+        parse_arguments(["--realtime-priority", priority])
+    assert stopped.value.code == 2
+    assert "--realtime-priority" in capsys.readouterr().err
 
 
 def test_graph_arguments_split_at_ros_args():

@@ -5,12 +5,18 @@ mows_bringup package (the driver on the simulated device and the estimator, as p
 run here as a subprocess in the sourced workspace (``source install/setup.bash``). With
 ``load`` it is ``mows-latency --load``: a ``load_duration_s`` stream of cycles beside two CPU
 burners and a 1 kHz JointState loop, with the gaps counted and the load as run reported, and
-the same stream without the load as the baseline.
+the same stream without the load as the baseline. Under load the driver and the estimator run
+under SCHED_FIFO (``--realtime-priority``, as a robot computer would run them); the same loaded
+stream at the default priority is reported beside it (``default_priority``).
 """
 
 import json
 import shutil
 import subprocess
+
+# SCHED_FIFO priority of the ring-down path under load: above everything best-effort, below a
+# robot's own control loop (commonly 80–98 on a PREEMPT_RT computer).
+REALTIME_PRIORITY = 40
 
 
 def run(
@@ -20,21 +26,28 @@ def run(
     load: bool = False,
     load_duration_s: float = 60.0,
     burner_nice: int = 0,
+    realtime_priority: int = REALTIME_PRIORITY,
 ) -> dict:
     """``mows-latency``'s figures; ``tracking``: of the driver's tracking mode (cycles × repeats
     ring-downs); ``load``: under load, with as ``baseline`` the same stream without the load, run
     just before (the machine is shared: its own load is in both); ``burner_nice``: the burners'
-    niceness (19 in a quick smoke run, so that it does not starve the tests beside it)."""
+    niceness (19 in a quick smoke run, so that it does not starve the tests beside it);
+    ``realtime_priority``: the ring-down path's SCHED_FIFO priority under load (0: the default
+    policy, and no second loaded stream)."""
     tool = shutil.which("mows-latency")
     if tool is None:
         return {"skipped": "mows-latency not on PATH: source install/setup.bash (make bench does)"}
     if not load:
         return _measure(tool, repeats, ["--cycles", str(cycles), *(["--tracking"] if tracking else [])])
     baseline = _measure(tool, repeats, ["--duration", str(load_duration_s)])
-    under_load = _measure(
-        tool, repeats, ["--load", "--duration", str(load_duration_s), "--burner-nice", str(burner_nice)]
-    )
-    return {**under_load, "baseline": baseline}
+    loaded = ["--load", "--duration", str(load_duration_s), "--burner-nice", str(burner_nice)]
+    figures = {
+        **_measure(tool, repeats, [*loaded, "--realtime-priority", str(realtime_priority)]),
+        "baseline": baseline,
+    }
+    if realtime_priority:
+        figures["default_priority"] = _measure(tool, repeats, loaded)
+    return figures
 
 
 def _measure(tool: str, repeats: int, how: list[str]) -> dict:

@@ -47,7 +47,8 @@ QUICK: dict[str, dict[str, object]] = {
     "simulator": {"repeats": 5},
     "stream": {"duration_s": 3.0},
     # a quick --load is a smoke run beside other work (make test): its burners yield (nice 19)
-    "latency": {"cycles": 1, "repeats": 5, "load_duration_s": 10.0, "burner_nice": 19},
+    # and the graph keeps the default policy (one loaded stream, not two)
+    "latency": {"cycles": 1, "repeats": 5, "load_duration_s": 10.0, "burner_nice": 19, "realtime_priority": 0},
     "latency_tracking": {"cycles": 2, "repeats": 5},
     "lab_long": {"rows": 20_000},
     "throughput": {"protocols": ("default",), "tracking_updates": 10},

@@ -185,26 +185,34 @@ def simulated_table(
     pickup, as the estimator node does. ``repeats`` full rotation sweeps over ``angles_deg``
     (column ``sweep``; full sweeps rather than repeated ring-downs at each angle, so that a slow
     drift is not confounded with θ0); each sweep is a :class:`mows.sweep.record.SweepRecord` whose
-    :meth:`~mows.sweep.record.SweepRecord.table_columns` give the frequencies, damping, fit windows and
-    that sweep's pooled start amplitude. ``t_s`` is the device time of each switch-off (the
+    :meth:`~mows.sweep.record.SweepRecord.table_columns` give the frequencies, damping and fit
+    windows; ``amplitude_deg`` is each ring-down's start swing, stop − |θs| at the rest angle θs
+    of its sweep's own first-principles decomposition (as the mapper's tables have it), with the
+    stop pooled over the whole table. ``t_s`` is the device time of each switch-off (the
     pause between cycles is not simulated), ``temperature_k`` the device's temperature then.
     The reference columns are the scenario's field and gradient at the probe
     (:func:`mows.lab.reference.reference_at`). Failed fits are left out and counted in the notes.
     """
     device = SimulatedDevice(scenario, rng)
     sweeps = [_simulated_sweep(device, scenario, angles_deg, settle_s) for _ in range(repeats)]
-    columns = {name: np.concatenate([sweep[name] for sweep, _ in sweeps]) for name in sweeps[0][0]}
-    columns["sweep"] = np.concatenate([np.full(len(sweep["f_hz"]), float(i)) for i, (sweep, _) in enumerate(sweeps)])
+    starts = _start_amplitudes_rad([record for record, _, _ in sweeps], scenario.probe)
+    parts = [
+        {**record.table_columns(start), "temperature_k": np.array(temperatures), "sweep": np.full(len(start), float(i))}
+        for i, ((record, temperatures, _), start) in enumerate(zip(sweeps, starts))
+    ]
+    columns = {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
+    # The records' t_s count from each sweep's start: the device time of each switch-off instead.
+    columns["t_s"] = np.concatenate([[p.t_s for p in record.points] for record, _, _ in sweeps])
     columns["t_s"] = columns["t_s"] - columns["t_s"].min()
     columns.update(reference_columns(scenario, len(columns["f_hz"])))
-    failed = sum(count for _, count in sweeps)
+    failed = sum(count for _, _, count in sweeps)
     notes = (f"{failed} ring-down fits failed and were left out",) if failed else ()
     return MeasurementTable(columns, f"simulated {scenario.name}", notes)
 
 
 def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
-    """(table columns, failed fits) of one rotation sweep: the record's columns with the
-    device time of each switch-off and the device's temperature then."""
+    """(its SweepRecord, the device's temperature at each switch-off, failed fits) of one
+    rotation sweep."""
     record, temperatures, failed = SweepRecord(), [], 0
     for theta0 in np.radians(np.asarray(angles_deg, float)):
         cycle = simulate_cycle(
@@ -220,9 +228,23 @@ def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
             continue
         record.add(point)
         temperatures.append(device.temperature_k)
-    columns = record.table_columns()  # its t_s counts from the sweep's start: the device time instead
-    columns.update(t_s=np.array([p.t_s for p in record.points]), temperature_k=np.array(temperatures))
-    return columns, failed
+    return record, temperatures, failed
+
+
+def _start_amplitudes_rad(records: list, probe) -> list:
+    """Each ring-down's start swing, stop − |θs|: θs the rest angle at its sweep's own
+    first-principles decomposition (0 where that fails), the stop pooled over every ring-down
+    of every sweep (:meth:`mows.sweep.record.SweepRecord.stop_amplitude_rad`). Every ring-down
+    starts at the same housing stop, and one sweep's 16 fits pin it only to ~0.3° (two sweeps
+    of one 1 mT table pooled 23.34° and 24.16°), which through the amplitude springs is mHz."""
+    rests = []
+    for record in records:
+        decomposition = record.decompose(probe, probe.f00_hz) if len(record.points) >= 5 else None
+        ok = decomposition is not None and decomposition.ok
+        rests.append(record.rest_angles_rad(decomposition, probe) if ok else np.zeros(len(record.points)))
+    every = SweepRecord([point for record in records for point in record.points])
+    stop = every.stop_amplitude_rad(np.concatenate(rests)) if every.points else np.nan
+    return [stop - rest for rest in rests]
 
 
 def fit_cycle(cycle, scenario, paper_model: bool = False, settle_s: float = SETTLE_S) -> RingdownFit:

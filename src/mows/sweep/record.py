@@ -150,10 +150,14 @@ class SweepRecord:
         excess = self._column("shift_std_hz") ** 2 - self._column("frequency_std_hz") ** 2
         return float(np.sqrt(np.max(excess, initial=0.0)))
 
+    def rest_angles_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
+        """|θs| of each ring-down at the decomposition's field and gradient (0 where undefined)."""
+        theta0 = self._column("theta0_rad")
+        return np.abs(np.nan_to_num(local_potential(decomposition.parameters, theta0, probe).rest_angle_rad()))
+
     def start_amplitudes_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
         """Each ring-down's start swing, stop − |θs|, at the decomposition's field and gradient."""
-        theta0 = self._column("theta0_rad")
-        rest = np.abs(np.nan_to_num(local_potential(decomposition.parameters, theta0, probe).rest_angle_rad()))
+        rest = self.rest_angles_rad(decomposition, probe)
         return self.stop_amplitude_rad(rest) - rest
 
     def table_columns(self, start_amplitudes_rad=None) -> dict:

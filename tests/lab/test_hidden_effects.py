@@ -119,8 +119,11 @@ def control_truth():
 
 
 def test_control_without_hidden_effect_is_adequate_and_false_alarms_are_rare(control_truth):
+    """The issue's bound: at most 1 false alarm in 40 seeds, and --auto adds nothing to any
+    control. Measured: seed 126 ends `unexplained_structure` (1 in 40); --auto added no effect
+    to any of the 40."""
     theta0, sweep, truth = control_truth
-    verdicts = []
+    verdicts, added = [], []
     for seed in range(40):
         table = synth.synthesize(
             PAPER_PROBE,
@@ -132,9 +135,9 @@ def test_control_without_hidden_effect_is_adequate_and_false_alarms_are_rare(con
             **sweep,
         )
         verdicts.append(analyse(table, PAPER_PROBE, cross_validate=False).verdict)
-    assert verdicts.count("adequate") >= 38, verdicts  # false-alarm rate ≤ 5 %
-    auto = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
-    assert auto.effects == [] or auto.verdict != "adequate"
+        added += analyse(table, PAPER_PROBE, auto=True, cross_validate=False).effect_names
+    assert verdicts.count("adequate") >= 39, verdicts
+    assert added == [], added
 
 
 def test_structure_no_effect_explains_is_described_not_forced(control_truth):

@@ -332,6 +332,21 @@ def test_stop_limits_the_amplitude_during_excitation(default_cycle):
     assert first_ringdown_peak == pytest.approx(STOP, abs=math.radians(1.0))
 
 
+def test_the_stop_never_holds_the_probe():
+    """The stop pushes and never pulls: a contact whose push has turned negative ends at once.
+
+    The state is the one the paper's protocol reached at θ0 = 60° (mows bench throughput): in
+    contact with the −θstop side, 0.024° short of it, at rest. The contact's event had been
+    located just past its instant, so its sign no longer said "in contact"; the integrator kept
+    the contact, whose spring then pulled, and the probe stayed glued to the stop through the
+    excitation and every ring-down after it (fits: NO_OSCILLATION). Released, it swings free."""
+    device = SimulatedDevice(bare())
+    device._state[:] = -(STOP - math.radians(0.024)), 0.0, -1.0  # contact mode −1, not penetrating
+    theta, _ = device.integrate(round(0.05 * device.sample_rate_hz))
+    assert device._state[2] == 0.0
+    assert theta.max() > STOP - math.radians(1.0)  # half a period later: at the other side
+
+
 def test_impacts_converge_at_the_integrators_order():
     scenario = load_scenario().replace(noise=NoiseModel())
     theta = [

@@ -129,6 +129,11 @@ def _step(theta, omega, mode, t, h, params, env, drive, drive_omega, drive_t0):
     step is taken up to it, the mode switches, and the rest of the step follows.
     """
     for _ in range(MAX_EVENTS_PER_STEP):
+        if _event(theta, omega, mode, params) < 0.0:
+            # The mode no longer holds (an event located just past its instant, e.g. a grazing
+            # contact whose push turns negative at once): take the mode the state lies in.
+            # Without this a contact could go on pulling, gluing the probe to the stop.
+            mode = contact_mode(theta, omega, params)
         theta1, omega1 = _rk4_step(theta, omega, t, h, mode, params, env, drive, drive_omega, drive_t0)
         g0 = _event(theta, omega, mode, params)
         g1 = _event(theta1, omega1, mode, params)

@@ -130,7 +130,8 @@ def test_a_nearby_coil_is_transverse_gradient_amplitude_deflection_and_curvature
     curvature up (static deflection 24σ from its physics, χ²/dof 1.60). The fit is as good as
     the table's repeatability allows: in this seed's table the two sweeps differ at the same θ0
     by 2.0× their stated variance (p = 0.009; seeds 1–3: 0.5–1.4), so the right model ends at
-    χ²/dof 1.76 (seeds 1–3: 1.01, 1.05, 1.77)."""
+    χ²/dof 1.72 (seeds 1–3: 0.90, 0.73, 1.36; 1.76, 1.01, 1.05, 1.77 before the table pooled
+    the stop over both sweeps)."""
     _, table, report = lab("nearby_coil")
     expected = {"transverse_gradient", "finite_amplitude", "static_deflection", "field_curvature"}
     assert set(report.effect_names) == expected, report.history

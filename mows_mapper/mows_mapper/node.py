@@ -73,6 +73,7 @@ class MapperNode(MowsNode):
         except ValueError as refused:
             self.get_logger().warn(f"sweep goal refused: {refused}")
             return GoalResponse.REJECT
+        self.get_logger().info("sweep goal accepted")
         return GoalResponse.ACCEPT
 
     def _cancel(self, _) -> CancelResponse:

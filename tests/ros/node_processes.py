@@ -67,12 +67,29 @@ def action_server(ros, start):
         assert code == 0, log(process)
 
 
+# A goal is answered in milliseconds. Once in six fresh-clone suites a goal sent as soon as
+# the server was ready (the client had discovered it) was never answered, not even refused,
+# and the mapper logged no goal: the request or its answer was lost between the two
+# participants. Such a goal is sent again, as a new goal, a bounded number of times.
+GOAL_ANSWER_S = 15.0
+GOAL_SENDS = 3
+
+
 def send_goal(ros, client, goal, cancel_after_feedback=None):
     """Sends ``goal``: (its handle, its result or None if refused, the feedback that came), the
     goal cancelled after ``cancel_after_feedback`` feedback messages if that is given."""
     feedback = []
-    sent = client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback))
-    handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")
+    for send in range(1, GOAL_SENDS + 1):
+        sent = client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback))
+        try:
+            handle = ros.wait_for(
+                lambda sent=sent: sent.done() and sent.result(), "the goal to be answered", GOAL_ANSWER_S
+            )
+            break
+        except AssertionError:
+            if send == GOAL_SENDS:
+                raise
+            print(f"goal not answered in {GOAL_ANSWER_S} s (send {send} of {GOAL_SENDS}): sending it again")
     if not handle.accepted:
         return handle, None, feedback
     if cancel_after_feedback is not None:

@@ -89,15 +89,22 @@ def _child_setup(fifo_priority: int) -> Callable[[], None]:
     return setup
 
 
-def realtime_problem(priority: int) -> str | None:
-    """Why this process cannot start nodes at SCHED_FIFO ``priority`` (1–99), or None."""
+def realtime_priority(text: str) -> int:
+    """``--realtime-priority``'s value: 0 (off) or a SCHED_FIFO priority this process may give
+    its nodes; argparse.ArgumentTypeError, with the reason, otherwise."""
+    try:
+        priority = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
     low, high = os.sched_get_priority_min(os.SCHED_FIFO), os.sched_get_priority_max(os.SCHED_FIFO)
-    if not low <= priority <= high:
-        return f"--realtime-priority must be {low}–{high}, got {priority}"
+    if priority and not low <= priority <= high:
+        raise argparse.ArgumentTypeError(f"must be {low}–{high} (or 0: off), got {priority}")
     limit = resource.getrlimit(resource.RLIMIT_RTPRIO)[0]
-    if os.geteuid() != 0 and limit != resource.RLIM_INFINITY and limit < priority:
-        return f"--realtime-priority {priority} needs root or an RLIMIT_RTPRIO of at least {priority} (now {limit})"
-    return None
+    if priority and os.geteuid() != 0 and limit != resource.RLIM_INFINITY and limit < priority:
+        raise argparse.ArgumentTypeError(
+            f"{priority} needs root or an RLIMIT_RTPRIO of at least {priority} (now {limit})"
+        )
+    return priority
 
 
 class Graph:
@@ -122,6 +129,7 @@ class Graph:
     def start(self) -> None:
         environment = {**os.environ, "PYTHONUNBUFFERED": "1"}
         for node in self._nodes:
+            fifo_priority = self._realtime_priority if node.realtime else 0
             process = subprocess.Popen(
                 node.command(self._ros_args, autostart=False),
                 stdin=subprocess.DEVNULL,
@@ -131,11 +139,10 @@ class Graph:
                 errors="replace",
                 env=environment,
                 start_new_session=True,  # a terminal's Ctrl-C reaches the nodes only through us
-                preexec_fn=_child_setup(self._realtime_priority if node.realtime else 0),
+                preexec_fn=_child_setup(fifo_priority),
             )
             self._processes[node.name] = process
-            fifo = f", SCHED_FIFO {self._realtime_priority}" if node.realtime and self._realtime_priority else ""
-            say(f"started {node.name} (pid {process.pid}{fifo})")
+            say(f"started {node.name} (pid {process.pid}{f', SCHED_FIFO {fifo_priority}' if fifo_priority else ''})")
         # Threads only after every fork: preexec_fn is not safe while other threads run.
         for name, process in self._processes.items():
             pump = threading.Thread(target=self._pump, args=(name, process), daemon=True)
@@ -228,7 +235,7 @@ class Graph:
 def add_realtime_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--realtime-priority",
-        type=int,
+        type=realtime_priority,
         default=0,
         metavar="N",
         help="run the driver and the estimator under SCHED_FIFO at priority N (1-99; default: not)",
@@ -259,8 +266,6 @@ def parse_arguments(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     args = parser.parse_args(own)
     if args.duration is not None and args.duration <= 0:
         parser.error(f"--duration must be positive, got {args.duration}")
-    if args.realtime_priority and (problem := realtime_problem(args.realtime_priority)):
-        parser.error(problem)
     return args, ros_args
 
 

@@ -29,7 +29,7 @@ from mows_msgs.msg import MagnetometerBlock, RingdownFit
 from mows_msgs.srv import RunCycle
 
 from mows.records import stamps
-from mows_bringup.graph import NODES, Graph, add_realtime_option, realtime_problem, say
+from mows_bringup.graph import NODES, Graph, add_realtime_option, say
 from mows_bringup.load import Load
 from mows_ros.diagnostics import DIAGNOSTICS_DEPTH, DIAGNOSTICS_TOPIC
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
@@ -56,8 +56,6 @@ def main(argv=None) -> int:
     add_realtime_option(parser)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
-    if args.realtime_priority and (problem := realtime_problem(args.realtime_priority)):
-        parser.error(problem)
     duration_s = args.duration if args.duration is not None else (LOAD_DURATION_S if args.load else None)
     load = Load(burner_nice=args.burner_nice) if args.load else None
     log = open("/dev/null", "w")

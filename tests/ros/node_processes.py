@@ -58,13 +58,19 @@ def action_server(ros, start):
 
     yield action_server
     for process in started:
-        process.terminate()
-        try:
-            code = process.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            code = process.wait()
-        assert code == 0, log(process)
+        assert_stops_cleanly(process)
+
+
+def assert_stops_cleanly(process: subprocess.Popen) -> None:
+    """SIGTERM; the node must exit 0 within 30 s (killed after that, never left behind to
+    talk to the next test)."""
+    process.terminate()
+    try:
+        code = process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        code = process.wait()
+    assert code == 0, log(process)
 
 
 # A goal is answered in milliseconds. Once in six fresh-clone suites a goal sent as soon as

@@ -3,7 +3,6 @@
 survives bad data. The node runs as its own process, as in the graph."""
 
 import math
-import subprocess
 
 import numpy as np
 import pytest
@@ -22,6 +21,7 @@ from mows.physics.signal import signal_t
 from mows.records import stamps
 from mows_bringup.graph import NODES
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
+from node_processes import assert_stops_cleanly
 
 pytestmark = pytest.mark.ros
 
@@ -141,13 +141,7 @@ def estimator(ros, start):
 
     ros.wait_for(estimator_hears_the_stream, "the estimator to receive blocks")
     yield device, heard, process
-    process.terminate()
-    try:
-        code = process.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        process.kill()  # never leave a node behind to talk to the next test
-        code = process.wait()
-    assert code == 0, process.log_path.read_text()
+    assert_stops_cleanly(process)
 
 
 def test_a_ringdown_gives_a_fit_a_field_estimate_and_a_magnetic_field(ros, estimator):

@@ -169,8 +169,8 @@ def test_a_strong_field_perpendicular_to_the_probe_is_static_deflection_and_fini
     the lab's own rule for an adequate model (within 5σ), not this module's 3σ."""
     base = load_scenario("paper_largest_spacing")
     strong = UniformField([0.0, 1e-3, 0.0])
-    scenario = dataclasses.replace(
-        base, environment=dataclasses.replace(base.environment, sources=(*base.environment.sources, strong))
+    scenario = base.replace(
+        environment=dataclasses.replace(base.environment, sources=(*base.environment.sources, strong))
     )
     table = synth.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
     report = analyse(table, scenario.probe, auto=True, cross_validate=False)
@@ -191,8 +191,9 @@ def test_a_temperature_drift_is_thermal_drift_at_its_physical_coefficient():
     base = load_scenario("paper_largest_spacing")
     reports = {}
     for rate_k_per_s in (0.0, 5e-3):
-        environment = dataclasses.replace(base.environment, temperature_rate_k_per_s=rate_k_per_s)
-        scenario = dataclasses.replace(base, environment=environment)
+        scenario = base.replace(
+            environment=dataclasses.replace(base.environment, temperature_rate_k_per_s=rate_k_per_s)
+        )
         table = synth.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
         reports[rate_k_per_s] = analyse(table, scenario.probe, auto=True, cross_validate=False)
     control, drifting = reports[0.0], reports[5e-3]

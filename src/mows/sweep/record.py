@@ -142,8 +142,8 @@ class SweepRecord:
         first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad()))
         if not first.ok:
             return first
-        rest = np.nan_to_num(local_potential(first.parameters, theta0, probe).rest_angle_rad())
-        return decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(rest)), start=first.parameters)
+        stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe))
+        return decompose(**arrays, ringdowns=ringdowns(stop), start=first.parameters)
 
     def f00_std_hz(self) -> float:
         """The calibrated f00's σ the shifts carry: √(σ_shift² − σ_f²), the largest over the ring-downs."""

@@ -80,6 +80,9 @@ def test_two_probes_in_namespaces_sweep_at_once_without_cross_talk(ros, start, t
     ros.wait_for(
         lambda: all(ros.node.count_publishers(f"{ns}/mows/ringdown") for ns in PROBES), "both estimators", BOUND_S
     )
+    # The nodes are up (and report) before mows-graph activates them; a goal sent to a mapper
+    # not yet active is refused, rightly.
+    ros.wait_for(lambda: all("every node is active" in log(g) for g in graphs.values()), "both bring-ups", BOUND_S)
 
     sent = {
         ns: clients[ns].send_goal_async(RotationSweep.Goal(theta0_rad=angles.tolist(), repeats_per_angle=REPEATS))
@@ -90,7 +93,7 @@ def test_two_probes_in_namespaces_sweep_at_once_without_cross_talk(ros, start, t
         "both goals accepted",
         BOUND_S,
     )
-    assert all(h.accepted for h in handles.values())
+    assert all(h.accepted for h in handles.values()), [log(g) for g in graphs.values()]
     results = {ns: h.get_result_async() for ns, h in handles.items()}
     done = ros.wait_for(
         lambda: all(r.done() for r in results.values()) and {ns: r.result() for ns, r in results.items()},

@@ -17,6 +17,10 @@ from mows.sweep.fast_cycle import drive_rate_rad_per_s, excitation_s, tuning_nee
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PlannedCycle, PrecisionGoal
 from mows.sweep.record import SweepPoint, SweepRecord
 
+# One worker runs the whole module, so that its module fixture is computed once, not once per
+# xdist worker.
+pytestmark = pytest.mark.xdist_group("adaptive_sweep")
+
 LOOSE = PrecisionGoal(field_std_t=60e-9, gradient_std_t_per_m=30e-6)
 
 

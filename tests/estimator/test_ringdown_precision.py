@@ -18,6 +18,10 @@ from scipy import stats
 
 from mows.bench.estimator import FREQUENCY_HZ, RingdownCase, precision_cell
 
+# One worker runs the whole module, so that its module fixture is computed once, not once per
+# xdist worker.
+pytestmark = pytest.mark.xdist_group("ringdown_precision")
+
 TRIALS = 40
 SNRS_DB = (20.0, 40.0, 60.0)
 ANGLES_DEG = np.arange(0.0, 360.0, 15.0)

@@ -22,6 +22,10 @@ from mows.lab import analyse, synth, write_report
 from mows.physics.field import UniformField, anti_helmholtz_pair
 from mows.physics.probe import PAPER_PROBE
 
+# One worker runs the whole module, so that its module fixture is computed once, not once per
+# xdist worker.
+pytestmark = pytest.mark.xdist_group("report_browser")
+
 CHROMIUM = ("chromium", "--headless", "--no-sandbox", "--disable-gpu")
 TIMEOUT_S = 180
 CHECK = """<script>

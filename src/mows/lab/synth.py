@@ -239,9 +239,8 @@ def _start_amplitudes_rad(records: list, probe) -> list:
     of one 1 mT table pooled 23.34° and 24.16°), which through the amplitude springs is mHz."""
     rests = []
     for record in records:
-        decomposition = record.decompose(probe, probe.f00_hz) if len(record.points) >= 5 else None
-        ok = decomposition is not None and decomposition.ok
-        rests.append(record.rest_angles_rad(decomposition, probe) if ok else np.zeros(len(record.points)))
+        decomposition = record.decompose(probe, probe.f00_hz)  # not ok with too few orientations
+        rests.append(record.rest_angles_rad(decomposition, probe) if decomposition.ok else np.zeros(len(record.points)))
     every = SweepRecord([point for record in records for point in record.points])
     stop = every.stop_amplitude_rad(np.concatenate(rests)) if every.points else np.nan
     return [stop - rest for rest in rests]

@@ -9,6 +9,7 @@ once per loop, so the arrival stamp may be up to one Samples frame (FRAME_S = 10
 the assertion leaves that tolerance, latency ≤ 200 ms − FRAME_S.
 """
 
+import contextlib
 import math
 import time
 
@@ -186,7 +187,21 @@ def test_a_cycle_over_the_link_stamps_the_ringdown_at_the_device_switch_off(emul
     assert all(e.stamp_ns == emulator.clock.stamp_ns(e.sample_index) for e in events)
 
 
-def test_a_watchdog_trip_during_a_cycle_fails_it_instead_of_announcing_a_ringdown(emulator, link):
+ATTEMPTS = 5  # fresh devices for the watchdog-mid-cycle test; see cycle_with_coils_on
+
+
+def cycle_with_coils_on(tmp_path, attempt, stack):
+    """(emulator, session, done, events) with a cycle whose coils the device has switched on.
+
+    On a starved machine the cycle can fail before that (this thread stalls past the watchdog
+    while settling, or a command reaches the device after its sample): the cycle then ends,
+    correctly, before the test can hang the driver mid-excitation. Such an attempt yields None
+    with its reason, and the caller starts over on a fresh device."""
+    emulator = stack.enter_context(
+        DeviceEmulator(SpyDevice(SCENARIO), tmp_path / f"mows-device-{attempt}", CurrentCap(CAP_A))
+    )
+    link = SerialLink(str(emulator.link_path)).start()
+    stack.callback(link.close)
     settings = CycleSettings(excite_s=2.0, ringdown_s=0.3, repeats=1, tuning_steps=0, settle_s=0.1)
     session = DeviceSession(
         SerialBackend(link, CurrentCap(CAP_A)),
@@ -198,15 +213,31 @@ def test_a_watchdog_trip_during_a_cycle_fails_it_instead_of_announcing_a_ringdow
     session.start_cycle(CycleRequest(0.4), done.append)
     # From the device's coil log, not its present state: on a loaded machine this thread can
     # stall past the watchdog on its own, and the coils are off again before the next look.
-    _, events = step_until(session, lambda: any(on for _, on in emulator.device.coil_log), "the coils to go on")
-    time.sleep(0.5)  # the driver hangs: no heartbeat for longer than the watchdog allows
-    step_until(session, lambda: done, "the cycle to end", events=events)
-    assert not done[0].success and "watchdog" in done[0].message
-    ((_, off_index),) = emulator.watchdog_trips
-    assert [e.phase for e in events if e.cycle_id == 1] == [Phase.SETTLING, Phase.EXCITING]
-    assert events[-1].phase == Phase.FAULT and "watchdog" in events[-1].reason
-    assert list(emulator.device.coil_log)[-1] == (off_index, False)
-    assert session.health()["device_faults"] == 1
+    coils_on = lambda: any(on for _, on in emulator.device.coil_log)  # noqa: E731
+    _, events = step_until(session, lambda: coils_on() or done, "the coils to go on or the cycle to end")
+    if not coils_on():
+        return None, done[0].message
+    return (emulator, session, done, events), ""
+
+
+def test_a_watchdog_trip_during_a_cycle_fails_it_instead_of_announcing_a_ringdown(tmp_path):
+    early_failures = []
+    with contextlib.ExitStack() as stack:
+        for attempt in range(ATTEMPTS):
+            started, reason = cycle_with_coils_on(tmp_path, attempt, stack)
+            if started is not None:
+                break
+            early_failures.append(reason)
+        assert started is not None, f"every cycle failed before its coils went on: {early_failures}"
+        emulator, session, done, events = started
+        time.sleep(0.5)  # the driver hangs: no heartbeat for longer than the watchdog allows
+        step_until(session, lambda: done, "the cycle to end", events=events)
+        assert not done[0].success and "watchdog" in done[0].message
+        ((_, off_index),) = emulator.watchdog_trips
+        assert [e.phase for e in events if e.cycle_id == 1] == [Phase.SETTLING, Phase.EXCITING]
+        assert events[-1].phase == Phase.FAULT and "watchdog" in events[-1].reason
+        assert list(emulator.device.coil_log)[-1] == (off_index, False)
+        assert session.health()["device_faults"] == 1
 
 
 def test_unplugging_leads_to_reconnection_with_backoff_and_a_reported_gap(emulator, link, session):

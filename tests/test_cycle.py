@@ -184,6 +184,25 @@ SCENARIO = load_scenario()
 currents = st.floats(-50.0, 50.0, allow_nan=False)
 
 
+def test_the_probe_turns_while_only_a_switch_off_waits_and_never_while_the_coils_are_on_or_commanded():
+    # The host switches the coils off whenever its link comes up; a cycle's first turn can reach
+    # the device before that switch-off applied (a CI run was refused "coils are on" so).
+    device = ScheduledDevice(SpyDevice(SCENARIO), CurrentCap(CAP_A))
+    device.schedule_coils(0, (0.0, 0.0), 110.0)  # the off a link-up sends, not applied yet
+    assert device.schedule_orientation(10, 0.5) == 10
+    device.read_until(20)
+    device.schedule_coils(30, (1.0, -1.0), 110.0)
+    with pytest.raises(RuntimeError, match="cannot turn"):  # a switch-on waits
+        device.schedule_orientation(40, 0.0)
+    device.read_until(35)
+    device.schedule_coils(50, (0.0, 0.0), 110.0)
+    with pytest.raises(RuntimeError, match="cannot turn"):  # on, with its switch-off waiting
+        device.schedule_orientation(60, 0.0)
+    device.read_until(55)
+    assert device.schedule_orientation(60, 0.0) == 60
+    assert list(device.coil_log) == [(30, True), (50, False)]
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.floats(0.1, 20.0), st.lists(st.tuples(st.integers(0, 400), currents, currents), min_size=1, max_size=6))
 def test_no_coil_drive_above_the_cap_reaches_the_simulated_device(cap_a, commands):

@@ -75,8 +75,11 @@ class ScheduledDevice:
 
     @property
     def busy(self) -> bool:
-        """Coils on, or a command of the coils or the stage waiting (a supply ramp is not)."""
-        return any(entry[2] != "supply" for entry in self._queue) or self.coils_on
+        """Coils on, or a switch-on or a turn of the stage waiting. A waiting switch-off is not:
+        with the coils off it changes nothing (the host sends one whenever the link comes up,
+        and a turn that reaches the device in the same read must not be refused for it); with
+        them on, ``coils_on`` already says busy. Nor is a supply ramp."""
+        return self.coils_on or any(entry[2] in ("on", "turn") for entry in self._queue)
 
     def check_coils(self, amplitudes_a, frequency_hz: float) -> tuple:
         """The amplitudes as a tuple if the device can take them; OverCap above the cap,
@@ -107,7 +110,7 @@ class ScheduledDevice:
 
     def schedule_orientation(self, at_index: int, theta0_rad: float) -> int:
         """Turn the probe at sample ``at_index``; returns the sample it applies at.
-        ValueError for a non-finite angle; RuntimeError while the coils are on or commanded."""
+        ValueError for a non-finite angle; RuntimeError while the coils are on or a switch-on or a turn waits."""
         if not math.isfinite(theta0_rad):
             raise ValueError(f"theta0_rad = {theta0_rad!r} must be finite")
         if self.busy:

@@ -45,6 +45,8 @@ def fit_to_msg(estimated: Estimated, frame_id: str) -> RingdownFit:
     msg.n_samples = int(fit.n_samples)
     msg.parameter_names = list(fit.parameter_names)
     msg.covariance = np.asarray(fit.covariance, dtype=float).ravel().tolist()
+    pickup = np.asarray(fit.pickup, complex)
+    msg.pickup_real, msg.pickup_imag = pickup.real.tolist(), pickup.imag.tolist()
     return msg
 
 

@@ -105,6 +105,8 @@ def test_a_bag_of_ringdown_fits_with_a_magnetometer_or_a_source_reference(tmp_pa
             n_samples=10000,
             parameter_names=[],
             covariance=np.zeros(0),
+            pickup_real=np.zeros(0),
+            pickup_imag=np.zeros(0),
             **values,
         )
 

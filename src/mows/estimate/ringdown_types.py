@@ -134,6 +134,7 @@ class RingdownFit:
     start_offset_s: float = 0.0
     parameter_names: tuple = ()
     covariance: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
+    pickup: tuple = ()  # the fitted model's C_k (complex) over the swing about the rest angle
 
     @property
     def ok(self) -> bool:

@@ -131,7 +131,7 @@ def diagnose_ringdown(
             continue
         t = (i * length) / sample_rate_hz
         amplitude = fit.amplitude_rad * math.exp(-fit.damping_per_s * t)
-        predicted = _predicted_hz(probe, field, theta0_rad, amplitude, fit.damping_per_s, length / sample_rate_hz)
+        predicted = _predicted_hz(probe, field, fit, amplitude, length / sample_rate_hz)
         damping_std = math.sqrt(piece.covariance[1, 1])
         pieces.append(
             Piece(t, amplitude, piece.frequency_hz, piece.frequency_std_hz, piece.damping_per_s, damping_std, predicted)
@@ -145,17 +145,20 @@ def _field_along_axis(fit, probe, f00_hz) -> float:
     """Bx' that makes the potential's window-averaged frequency at the fitted amplitude equal the
     fitted f: Eq. 6 inverted, then one correction for the finite amplitude's own shift."""
     field = estimate_along_axis(fit, probe, f00_hz).field_along_axis_t
-    small = _predicted_hz(probe, field, fit.theta0_rad, 0.0, fit.damping_per_s, fit.duration_s) - f00_hz
-    averaged = _predicted_hz(probe, field, fit.theta0_rad, fit.amplitude_rad, fit.damping_per_s, fit.duration_s)
+    small = _predicted_hz(probe, field, fit, 0.0, fit.duration_s) - f00_hz
+    averaged = _predicted_hz(probe, field, fit, fit.amplitude_rad, fit.duration_s)
     return field * small / (averaged - f00_hz) if averaged != f00_hz else field
 
 
-def _predicted_hz(probe, field_t, theta0_rad, amplitude_rad, damping_per_s, duration_s) -> float:
-    """The frequency a constant-frequency fit reads over a window starting at ``amplitude_rad``."""
+def _predicted_hz(probe, field_t, fit: RingdownFit, amplitude_rad, duration_s) -> float:
+    """The frequency a constant-frequency fit with ``fit``'s signal model and damping reads over
+    a window starting at ``amplitude_rad``."""
     if amplitude_rad == 0.0:
         nodes, weights = np.zeros((1, 1)), np.ones((1, 1))
     else:
-        nodes, weights = ringdown_average.amplitude_nodes(theta0_rad, amplitude_rad, damping_per_s, duration_s)
+        nodes, weights = ringdown_average.amplitude_nodes(
+            fit.theta0_rad, amplitude_rad, fit.damping_per_s, duration_s, pickup=np.asarray(fit.pickup)
+        )
     potential = ArcPotential.from_local_field(probe, np.tile([field_t, 0.0, 0.0], (nodes.shape[1], 1)))
     return float(weights[0] @ potential.frequency_hz(nodes[0]))
 

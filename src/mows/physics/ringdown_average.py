@@ -39,30 +39,46 @@ DEFAULT_NODES = 3  # Gauss nodes: exact for f(A(t)) polynomial of degree 5 in t
 PAPER_SENSOR = (0.0, 1.0)
 
 
-def phase_weight(theta0_rad, amplitude_rad, sensor_direction=PAPER_SENSOR) -> np.ndarray:
-    """w = A²·⟨g'(θ0 + A·cos Φ)²·sin²Φ⟩_Φ, the phase information per unit time (arbitrary units).
+def phase_weight(theta0_rad, amplitude_rad, sensor_direction=PAPER_SENSOR, pickup=None) -> np.ndarray:
+    """w = A²·⟨S'(A·cos Φ)²·sin²Φ⟩_Φ, the phase information per unit time (arbitrary units).
 
-    ``theta0_rad`` and ``amplitude_rad`` broadcast; g'(θ) = −2a·sin θ − b·cos θ.
+    S(x) = Σ_k Re(C_k·e^(ikx)) is the signal as a function of the deflection x: ``pickup``, the
+    C_k the ring-down was fitted with (:func:`mows.physics.fluxgate.pickup_harmonics`, shape
+    ``amplitude_rad.shape + (K + 1,)`` or broadcasting to it), or, when None, Eq. S11 with
+    ``sensor_direction``: C_1 = (2a + ib)·e^(iθ0), so that S' = g'(θ0 + x). The magnet's
+    swing on its lever gives the exact pickup harmonics beyond the first: at θ0 = 90°, where
+    the far-field signal is even in x, they carry a first harmonic of the swing that the
+    far-field weight leaves out. ``theta0_rad`` and ``amplitude_rad`` broadcast.
     """
-    a, b = sensor_direction
+    amplitude = np.asarray(amplitude_rad, float)
+    if pickup is None:
+        a, b = sensor_direction
+        theta0 = np.asarray(theta0_rad, float)
+        pickup = np.stack([np.zeros_like(theta0 + 0j), complex(2.0 * a, b) * np.exp(1j * theta0)], axis=-1)
+    coefficients = np.asarray(pickup, complex)
+    k = np.arange(coefficients.shape[-1])
     phi = 2.0 * np.pi * (np.arange(PHASE_POINTS) + 0.5) / PHASE_POINTS
-    amplitude = np.asarray(amplitude_rad, float)[..., None]
-    theta = np.asarray(theta0_rad, float)[..., None] + amplitude * np.cos(phi)
-    slope = -2.0 * a * np.sin(theta) - b * np.cos(theta)
-    return (amplitude**2 * (slope * np.sin(phi)) ** 2).mean(-1)
+    x = amplitude[..., None] * np.cos(phi)  # (..., Φ)
+    # S'(x) = Σ_k Re(ik·C_k·e^(ikx)), summed over k (the last axis).
+    slope = np.real(1j * k * coefficients[..., None, :] * np.exp(1j * k * x[..., None])).sum(-1)
+    return (amplitude[..., None] ** 2 * (slope * np.sin(phi)) ** 2).mean(-1)
 
 
-def averaging_kernel(theta0_rad, amplitude_start_rad, damping_per_s, duration_s, sensor_direction=PAPER_SENSOR):
+def averaging_kernel(
+    theta0_rad, amplitude_start_rad, damping_per_s, duration_s, sensor_direction=PAPER_SENSOR, pickup=None
+):
     """Times t (n, M) over the fit window and the kernel masses K(t)·dt (n, M), summing to 1.
 
-    Arguments broadcast to a batch shape (n,). See the module docstring for K.
+    Arguments broadcast to a batch shape (n,); ``pickup`` (n, K + 1) or (K + 1,) as in
+    :func:`phase_weight`. See the module docstring for K.
     """
     theta0, amp0, damping, duration = np.broadcast_arrays(
         *(np.atleast_1d(np.asarray(v, float)) for v in (theta0_rad, amplitude_start_rad, damping_per_s, duration_s))
     )
     step = duration / GRID_POINTS
     t = (np.arange(GRID_POINTS) + 0.5) * step[:, None]
-    weight = phase_weight(theta0[:, None], amp0[:, None] * np.exp(-damping[:, None] * t), sensor_direction)
+    per_point = None if pickup is None else np.atleast_2d(np.asarray(pickup, complex))[:, None, :]
+    weight = phase_weight(theta0[:, None], amp0[:, None] * np.exp(-damping[:, None] * t), sensor_direction, per_point)
     centre = (weight * t).sum(-1, keepdims=True) / weight.sum(-1, keepdims=True)
     lever = weight * (t - centre)
     # ∫_t^T w·(s − t̄) ds on the grid: everything after the cell plus half of the cell itself.
@@ -78,13 +94,14 @@ def amplitude_nodes(
     duration_s,
     nodes: int = DEFAULT_NODES,
     sensor_direction=PAPER_SENSOR,
+    pickup=None,
 ):
     """Amplitudes A_q (n, q) and weights c_q (n, q) with f_fit = Σ_q c_q·f(A_q).
 
     Gauss quadrature for the measure K(t)·dt (Stieltjes recurrence on the grid, then the
     eigen-decomposition of the Jacobi matrix), mapped to amplitudes by A = A0·e^(−δt).
     """
-    t, mass = averaging_kernel(theta0_rad, amplitude_start_rad, damping_per_s, duration_s, sensor_direction)
+    t, mass = averaging_kernel(theta0_rad, amplitude_start_rad, damping_per_s, duration_s, sensor_direction, pickup)
     span = t[:, -1:] + t[:, :1]
     x = 2.0 * t / span - 1.0  # the window mapped to [−1, 1] for conditioning
     alpha, beta = [], []

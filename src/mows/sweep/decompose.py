@@ -126,12 +126,17 @@ class Ringdowns:
     undeflected position, so its swing about the rest angle θs (turned by the perpendicular
     field, PHYSICS.md §5.3) is stop − |θs|, which the model computes from its own potential.
     ``damping_per_s`` and ``duration_s`` (per point) give the averaging of a constant-frequency
-    fit over the decaying swing (:mod:`mows.physics.ringdown_average`).
+    fit over the decaying swing (:mod:`mows.physics.ringdown_average`), weighted by where in
+    the swing the signal carries phase: ``pickup`` (n, K + 1) are the series C_k each fit used
+    (:attr:`mows.estimate.ringdown.RingdownFit.pickup`); None assumes Eq. S11 with the paper's
+    sensing axis. With the magnet on its lever, the far-field weight misses a first harmonic at
+    θ0 = 90° and misplaces that fit's average by 4 % of its amplitude correction.
     """
 
     stop_amplitude_rad: float
     damping_per_s: np.ndarray
     duration_s: np.ndarray
+    pickup: np.ndarray | None = None
 
 
 def local_potential(params, theta0_rad, probe: Probe) -> ArcPotential:
@@ -167,7 +172,9 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
     if ringdowns is None:
         return f00 * np.sqrt(potential.stiffness_nm_per_rad() / probe.spring_nm_per_rad) - f00_hz
     start = ringdowns.stop_amplitude_rad - np.abs(np.nan_to_num(potential.rest_angle_rad()))
-    amplitudes, weights = amplitude_nodes(theta0, start, ringdowns.damping_per_s, ringdowns.duration_s)
+    amplitudes, weights = amplitude_nodes(
+        theta0, start, ringdowns.damping_per_s, ringdowns.duration_s, pickup=ringdowns.pickup
+    )
     ratios = np.stack([potential.effective_stiffness_nm_per_rad(a) for a in amplitudes.T], axis=-1)
     return f00 * np.sum(weights * np.sqrt(ratios / probe.spring_nm_per_rad), axis=-1) - f00_hz
 

@@ -17,6 +17,14 @@ REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its
 REST_OFFSET_SIGMAS = 4.0  # …and it is this many σ from 0
 
 
+def fitted_pickup(fit) -> tuple:
+    """The pickup series a fit used: ``pickup`` of a RingdownFit, ``pickup_real``/``pickup_imag``
+    of a RingdownFit message; () when it does not say (an older recording)."""
+    if hasattr(fit, "pickup_real"):
+        return tuple(complex(re, im) for re, im in zip(fit.pickup_real, fit.pickup_imag, strict=True))
+    return tuple(getattr(fit, "pickup", ()))
+
+
 @dataclasses.dataclass(frozen=True)
 class SweepPoint:
     """One successful ring-down of a sweep (SI units; t_s on the device clock)."""
@@ -34,6 +42,7 @@ class SweepPoint:
     stamp_ns: int = 0  # the device stamp t_s was taken from, exact (0: none)
     rest_offset_rad: float = math.nan  # the fit's rest-angle offset θs − θ0 (NaN: not fitted)
     rest_offset_std_rad: float = math.nan
+    pickup: tuple = ()  # the fit's pickup series C_k (complex); empty: unknown, Eq. S11 assumed
 
     @classmethod
     def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0, stamp_ns: int = 0) -> SweepPoint:
@@ -55,6 +64,7 @@ class SweepPoint:
             int(stamp_ns),
             float(getattr(fit, "rest_offset_rad", math.nan)),
             parameter_std(fit.parameter_names, fit.covariance, "rest_offset_rad"),
+            fitted_pickup(fit),
         )
 
 
@@ -137,13 +147,24 @@ class SweepRecord:
             return decompose(**arrays)
 
         def ringdowns(stop):
-            return Ringdowns(stop, self._column("damping_per_s"), self._column("duration_s"))
+            return Ringdowns(stop, self._column("damping_per_s"), self._column("duration_s"), self.pickups())
 
         first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad()))
         if not first.ok:
             return first
         stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe))
         return decompose(**arrays, ringdowns=ringdowns(stop), start=first.parameters)
+
+    def pickups(self) -> np.ndarray | None:
+        """Every ring-down's pickup series C_k (n, K + 1), zero-padded to the longest; None when
+        any fit did not say which it used (the averaging then assumes Eq. S11's sensing axis)."""
+        series = [p.pickup for p in self.points]
+        if not series or not all(series):
+            return None
+        table = np.zeros((len(series), max(map(len, series))), complex)
+        for row, coefficients in zip(table, series):
+            row[: len(coefficients)] = coefficients
+        return table
 
     def f00_std_hz(self) -> float:
         """The calibrated f00's σ the shifts carry: √(σ_shift² − σ_f²), the largest over the ring-downs."""

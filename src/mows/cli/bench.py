@@ -47,8 +47,10 @@ QUICK: dict[str, dict[str, object]] = {
     "simulator": {"repeats": 5},
     "stream": {"duration_s": 3.0},
     # a quick --load is a smoke run beside other work (make test): its burners yield (nice 19)
-    # and the graph keeps the default policy (one loaded stream, not two)
-    "latency": {"cycles": 1, "repeats": 5, "load_duration_s": 10.0, "burner_nice": 19, "realtime_priority": 0},
+    # and the graph keeps the default policy (one loaded stream, not two). 20 s holds two or
+    # more cycles of 5 ring-downs: beside a busy test worker a 10 s stream held one, and that
+    # cycle fitted 3 of 5 (2 DATA_GAP), so one load spike could leave the run with no fit.
+    "latency": {"cycles": 1, "repeats": 5, "load_duration_s": 20.0, "burner_nice": 19, "realtime_priority": 0},
     "latency_tracking": {"cycles": 2, "repeats": 5},
     "lab_long": {"rows": 20_000},
     "throughput": {"protocols": ("default",), "tracking_updates": 10},

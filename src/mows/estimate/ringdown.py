@@ -298,17 +298,12 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
         amp, phi = -amp, phi + math.pi
     if not free[AMPLITUDE]:  # held at a bound: a number the data did not give
         amp = math.nan
-    theta0 = float(problem.theta0 + q[4] if options.theta0_free else problem.theta0)
-    rest_offset = _wrapped(q[4]) if options.rest_offset_free and not options.theta0_free else math.nan
-    # The model swings about the rest angle: g(ε + x) = Σ_k Re(C_k·e^(ikε)·e^(ikx)).
-    coefficients = options.pickup_at(theta0)
-    pickup = coefficients * np.exp(1j * np.arange(coefficients.size) * np.nan_to_num(rest_offset))
     return RingdownFit(
         status=FitStatus.OK,
         message=note,
-        theta0_rad=theta0,
+        theta0_rad=float(problem.theta0 + q[4] if options.theta0_free else problem.theta0),
         theta0_free=options.theta0_free,
-        rest_offset_rad=rest_offset,
+        rest_offset_rad=_wrapped(q[4]) if options.rest_offset_free and not options.theta0_free else math.nan,
         frequency_hz=float(q[0]),
         frequency_std_hz=float(math.sqrt(covariance[0, 0])),
         frequency_crb_hz=float(math.sqrt(fisher_inv[0, 0])),
@@ -326,5 +321,5 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
         start_offset_s=start_s,
         parameter_names=tuple(_parameter_names(n_ch, options)),
         covariance=covariance,
-        pickup=tuple(complex(c) for c in pickup),
+        pickup=tuple(complex(c) for c in problem.fitted_pickup(q)),
     )

@@ -41,6 +41,13 @@ class RingdownProblem:
         cr, ci = split_pickup(self.pickup)
         return self.dt, cr, ci, self.offset_free, self.y, self.weights
 
+    def fitted_pickup(self, q) -> np.ndarray:
+        """The C_k of the model at q: turned by ε = q[4] when it is free, g(ε + x), as
+        :func:`mows.estimate.ringdown_model.evaluate_model` turns them."""
+        if not self.offset_free:
+            return self.pickup
+        return self.pickup * np.exp(1j * np.arange(self.pickup.size) * q[4])
+
     def subsampled(self, step: int) -> RingdownProblem:
         return dataclasses.replace(self, y=np.ascontiguousarray(self.y[:, ::step]), dt=self.dt * step)
 

@@ -146,8 +146,10 @@ class SweepRecord:
         if model != "first_principles":
             return decompose(**arrays)
 
+        damping, duration, pickups = self._column("damping_per_s"), self._column("duration_s"), self.pickups()
+
         def ringdowns(stop):
-            return Ringdowns(stop, self._column("damping_per_s"), self._column("duration_s"), self.pickups())
+            return Ringdowns(stop, damping, duration, pickups)
 
         first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad()))
         if not first.ok:

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 DEFAULT_NODES = 32
 DEFAULT_HALF_WIDTH_RAD = 0.75
@@ -51,23 +52,50 @@ def _coefficient_matrix(n: int) -> np.ndarray:
 
 def _derivative(coeffs: np.ndarray, scale: float) -> np.ndarray:
     """Coefficients of d/dθ of a Chebyshev series in x = θ/w (``scale`` = 1/w), last axis."""
-    n = coeffs.shape[-1]
-    out = np.zeros_like(coeffs)
-    for j in range(n - 1, 0, -1):
-        out[..., j - 1] = 2.0 * j * coeffs[..., j] + (out[..., j + 1] if j + 1 < n else 0.0)
-    out[..., 0] *= 0.5
-    return out * scale
+    rows = np.ascontiguousarray(coeffs, float).reshape(-1, np.shape(coeffs)[-1])
+    return _derivative_rows(rows, scale).reshape(np.shape(coeffs))
 
 
 def _clenshaw(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Σ c_j T_j(x) with coefficients on the last axis of ``coeffs`` (batch shape B) and
     x of shape B + (m,); returns B + (m,)."""
-    c = coeffs[..., None, :]
-    b1 = np.zeros(np.broadcast_shapes(c.shape[:-1], x.shape))
-    b2 = np.zeros_like(b1)
-    for j in range(coeffs.shape[-1] - 1, 0, -1):
-        b1, b2 = 2.0 * x * b1 - b2 + c[..., j], b1
-    return x * b1 - b2 + c[..., 0]
+    coeffs, x = np.asarray(coeffs, float), np.asarray(x, float)
+    if coeffs.ndim == x.ndim == 2 and len(coeffs) == len(x) and coeffs.flags.c_contiguous and x.flags.c_contiguous:
+        return _clenshaw_rows(coeffs, x)  # the common case, without the broadcasting's overhead
+    shape = np.broadcast_shapes(coeffs.shape[:-1] + (1,), x.shape)
+    rows = np.broadcast_to(coeffs, shape[:-1] + coeffs.shape[-1:]).reshape(-1, coeffs.shape[-1])
+    points = np.broadcast_to(x, shape).reshape(-1, shape[-1])
+    return _clenshaw_rows(np.ascontiguousarray(rows), np.ascontiguousarray(points)).reshape(shape)
+
+
+# Compiled (numba): the lab evaluates small batches tens of thousands of times per analysis, where
+# a loop over the 32 coefficients in numpy spent its time in per-operation overhead. Same
+# arithmetic, in the same order, as the recurrences written out in numpy.
+@njit(cache=True)
+def _derivative_rows(coeffs, scale):
+    out = np.zeros_like(coeffs)
+    n = coeffs.shape[1]
+    for r in range(coeffs.shape[0]):
+        for j in range(n - 1, 0, -1):
+            out[r, j - 1] = 2.0 * j * coeffs[r, j] + (out[r, j + 1] if j + 1 < n else 0.0)
+        out[r, 0] *= 0.5
+    return out * scale
+
+
+@njit(cache=True)
+def _clenshaw_rows(coeffs, x):
+    out = np.empty_like(x)
+    b1, b2 = np.empty(x.shape[1]), np.empty(x.shape[1])
+    for r in range(x.shape[0]):
+        b1[:] = 0.0
+        b2[:] = 0.0
+        # Points innermost, so that the recurrence runs over them in vector registers.
+        for j in range(coeffs.shape[1] - 1, 0, -1):
+            for i in range(x.shape[1]):
+                b1[i], b2[i] = 2.0 * x[r, i] * b1[i] - b2[i] + coeffs[r, j], b1[i]
+        for i in range(x.shape[1]):
+            out[r, i] = x[r, i] * b1[i] - b2[i] + coeffs[r, 0]
+    return out
 
 
 class ArcPotential:

@@ -55,13 +55,16 @@ def phase_weight(theta0_rad, amplitude_rad, sensor_direction=PAPER_SENSOR, picku
         a, b = sensor_direction
         theta0 = np.asarray(theta0_rad, float)
         pickup = np.stack([np.zeros_like(theta0 + 0j), complex(2.0 * a, b) * np.exp(1j * theta0)], axis=-1)
-    coefficients = np.asarray(pickup, complex)
-    k = np.arange(coefficients.shape[-1])
-    phi = 2.0 * np.pi * (np.arange(PHASE_POINTS) + 0.5) / PHASE_POINTS
-    x = amplitude[..., None] * np.cos(phi)  # (..., Φ)
-    # S'(x) = Σ_k Re(ik·C_k·e^(ikx)), summed over k (the last axis).
-    slope = np.real(1j * k * coefficients[..., None, :] * np.exp(1j * k * x[..., None])).sum(-1)
-    return (amplitude[..., None] ** 2 * (slope * np.sin(phi)) ** 2).mean(-1)
+    derivative = 1j * np.arange(np.shape(pickup)[-1]) * np.asarray(pickup, complex)  # ik·C_k
+    # Half a cycle suffices: Φ and 2π − Φ share cos Φ and sin²Φ.
+    half = PHASE_POINTS // 2
+    phi = np.pi * (np.arange(half) + 0.5) / half
+    swing = np.exp(1j * amplitude[..., None] * np.cos(phi))  # e^(ix), (..., Φ)
+    # S'(x) = Re Σ_k ik·C_k·e^(ikx): Horner's rule in e^(ix), one exponential instead of K + 1.
+    slope = derivative[..., -1:]
+    for k in range(derivative.shape[-1] - 2, -1, -1):
+        slope = slope * swing + derivative[..., k : k + 1]
+    return (amplitude[..., None] ** 2 * (slope.real * np.sin(phi)) ** 2).mean(-1)
 
 
 def averaging_kernel(

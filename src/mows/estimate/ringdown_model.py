@@ -264,9 +264,3 @@ def levenberg_marquardt(
                 used = it + 1
                 break
     return q, converged, used, free, cost, g, m, residual, coef, jtj, jtr
-
-
-def paper_pickup(theta0_rad: float, direction=(0.0, 1.0)) -> np.ndarray:
-    """Eq. S11 as a pickup series: 2a·cos θ − b·sin θ = Re((2a + ib)·e^(iθ)), θ = θ0 + x."""
-    a, b = direction
-    return np.array([0.0, complex(2.0 * a, b) * complex(math.cos(theta0_rad), math.sin(theta0_rad))])

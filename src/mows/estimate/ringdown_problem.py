@@ -11,7 +11,8 @@ import math
 
 import numpy as np
 
-from mows.estimate.ringdown_model import evaluate_model, levenberg_marquardt, paper_pickup, split_pickup
+from mows.estimate.ringdown_model import evaluate_model, levenberg_marquardt, split_pickup
+from mows.physics.fluxgate import paper_pickup
 
 NONLINEAR = ("frequency_hz", "damping_per_s", "amplitude_rad", "phase_rad")
 

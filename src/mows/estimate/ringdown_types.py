@@ -13,8 +13,7 @@ import math
 
 import numpy as np
 
-from mows.estimate.ringdown_model import paper_pickup
-from mows.physics.fluxgate import pickup_harmonics
+from mows.physics.fluxgate import paper_pickup, pickup_harmonics
 from mows.physics.pose import Pose
 
 

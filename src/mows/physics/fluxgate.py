@@ -162,6 +162,15 @@ class FluxgatePair:
 PICKUP_COMBINATIONS = {"difference": (1.0, -1.0), "channel1": (1.0, 0.0), "channel2": (0.0, 1.0)}
 
 
+def paper_pickup(theta0_rad, direction=(0.0, 1.0)) -> np.ndarray:
+    """Eq. S11 as a pickup series, C_0 = 0 and C_1 = (2a + ib)·e^(iθ0): the signal
+    2a·cos θ − b·sin θ = Re(C_1·e^(ix)) at θ = θ0 + x, (a, b) the sensing direction (the
+    paper's is (0, 1)). Shape ``np.shape(theta0_rad) + (2,)``."""
+    a, b = direction
+    first = complex(2.0 * a, b) * np.exp(1j * np.asarray(theta0_rad, float))
+    return np.stack([np.zeros_like(first), first], axis=-1)
+
+
 def pickup_harmonics(
     pair: FluxgatePair,
     pose,

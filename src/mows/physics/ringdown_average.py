@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from mows.physics.fluxgate import paper_pickup
+
 DEFAULT_PERIODS = 60.0  # the paper evaluates 60 periods per ring-down
 GRID_POINTS = 128  # midpoint grid over the ring-down for K(t)
 PHASE_POINTS = 16  # samples of the cycle average ⟨…⟩_Φ (exact for the low harmonics involved)
@@ -52,9 +54,7 @@ def phase_weight(theta0_rad, amplitude_rad, sensor_direction=PAPER_SENSOR, picku
     """
     amplitude = np.asarray(amplitude_rad, float)
     if pickup is None:
-        a, b = sensor_direction
-        theta0 = np.asarray(theta0_rad, float)
-        pickup = np.stack([np.zeros_like(theta0 + 0j), complex(2.0 * a, b) * np.exp(1j * theta0)], axis=-1)
+        pickup = paper_pickup(theta0_rad, sensor_direction)
     derivative = 1j * np.arange(np.shape(pickup)[-1]) * np.asarray(pickup, complex)  # ik·C_k
     # Half a cycle suffices: Φ and 2π − Φ share cos Φ and sin²Φ.
     half = PHASE_POINTS // 2

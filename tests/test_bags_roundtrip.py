@@ -3,11 +3,13 @@ rclpy's."""
 
 import pytest
 import yaml
+from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 from message_equality import assert_same
 from mows.device import bags
+from rclpy_conversion import rclpy_class, to_rclpy
 from samples import BAG_TYPES, sample_message
 
 
@@ -66,10 +68,6 @@ def test_a_service_definition_needs_its_two_parts():
 @pytest.mark.ros
 @pytest.mark.parametrize("msgtype", ["mows_msgs/msg/MagnetometerBlock", "mows_msgs/action/RotationSweep_Result"])
 def test_rclpy_and_rosbags_read_each_others_cdr(msgtype):
-    from rclpy.serialization import deserialize_message, serialize_message
-
-    from rclpy_conversion import rclpy_class, to_rclpy
-
     sample = sample_message(msgtype)
     cls = rclpy_class(msgtype)
     as_rclpy = to_rclpy(sample, cls)

@@ -17,7 +17,7 @@ import pytest
 
 from device.spy import SpyDevice
 from mows.device.emulator import FRAME_S, DeviceEmulator
-from mows.device.interface import CoilCommand, LinkEvent
+from mows.device.interface import CoilCommand, FieldCurrentCommand, LinkEvent
 from mows.device.payloads import Ack, Coils, FieldCurrent, Samples, Status
 from mows.device.phases import CycleRequest, CycleSettings, Phase
 from mows.device.serial_backend import SerialBackend
@@ -26,6 +26,7 @@ from mows.device.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice
 
 WAIT_S = 60.0  # bound for a test that hangs; each wait ends as soon as its condition holds
 WATCHDOG_BOUND_S = 0.2
@@ -270,8 +271,6 @@ def test_unplugging_leads_to_reconnection_with_backoff_and_a_reported_gap(emulat
 @pytest.fixture
 def supplied(tmp_path):
     """An emulated calibration bench: the Pasco pair on a 2 A supply (2 A/s)."""
-    from mows.sim.simulator import SimulatedDevice
-
     with DeviceEmulator(SimulatedDevice(load_scenario("calibration")), tmp_path / "bench", CurrentCap(CAP_A)) as bench:
         link = SerialLink(str(bench.link_path)).start()
         yield bench, link
@@ -303,8 +302,6 @@ def test_a_driver_lost_mid_calibration_leaves_the_supply_at_zero(supplied):
     device lives inside the driver's process and dies with it, leaving no supply to be at zero;
     the sim path's graceful endings (close on SIGINT/SIGTERM, the emergency stop, a cancel) are
     tested on the session (tests/test_cycle.py)."""
-    from mows.device.interface import FieldCurrentCommand
-
     bench, link = supplied
     backend = SerialBackend(link, CurrentCap(CAP_A))
     collect(link, "the stream to run", lambda items: len(samples_of(items)) >= 20)

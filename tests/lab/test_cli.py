@@ -15,7 +15,8 @@ import pytest
 from lab.tables import tilted_table
 from mows.cli.lab import MAX_ROWS
 from mows.cli.main import main
-from mows.lab import read_csv
+from mows.lab import FrequencyModel, catalog, read_csv
+from mows.lab.report import sweep_curve
 from mows.physics.probe import PAPER_PROBE
 
 
@@ -79,9 +80,6 @@ def test_user_errors_are_one_line_messages(tilted_csv, tmp_path, capsys, args, w
 
 
 def test_report_polar_curve_passes_through_the_model_at_measured_orientations(tilted_csv):
-    from mows.lab import FrequencyModel, catalog, read_csv
-    from mows.lab.report import sweep_curve
-
     table = read_csv(tilted_csv)
     fit = (FrequencyModel(PAPER_PROBE) + catalog()["gravity"]).fit(table)
     rows = table.sweep_ids == 0
@@ -101,8 +99,6 @@ def test_report_polar_curve_passes_through_the_model_at_measured_orientations(ti
 def test_diagnose_separates_a_group_on_a_table_without_amplitudes(tilted_csv, tmp_path, capsys):
     """amplitude_deg is optional: the what-if variants (one halves the amplitude) must still
     join the table they extend."""
-    from mows.lab import read_csv
-
     table = read_csv(tilted_csv)
     bare = tmp_path / "no_amplitude.csv"
     type(table)({k: v for k, v in table.columns.items() if k != "amplitude_deg"}).to_csv(bare)

@@ -1,5 +1,7 @@
 """Composition, plugins (files and their errors) and the fit's bookkeeping."""
 
+import dataclasses
+import math
 import textwrap
 
 import numpy as np
@@ -120,9 +122,6 @@ def test_unknown_plugins_and_effects_are_named():
 def test_the_same_table_under_two_probes_gives_each_probes_own_prediction():
     """A table without amplitude or damping columns takes them from the probe, so a cached
     ring-down average must not carry one probe's stop over to the other."""
-    import dataclasses
-    import math
-
     table = synth.synthesize(
         PAPER_PROBE, UniformField((2e-4, 1e-4, 0.0)), np.arange(0.0, 360.0, 60.0), np.random.default_rng(1)
     )

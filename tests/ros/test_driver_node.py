@@ -13,7 +13,7 @@ import pytest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
-from mows_msgs.srv import EmergencyStop, RunCycle
+from mows_msgs.srv import EmergencyStop, RunCycle, SetFieldCurrent
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -404,8 +404,6 @@ def test_docs_list_every_parameter_topic_and_service():
 
 
 def test_the_supply_ramps_on_request_is_capped_and_the_emergency_stop_zeroes_it(start_driver, listen):
-    from mows_msgs.srv import SetFieldCurrent
-
     start_driver("-p", "scenario:=calibration", "-p", "coil_setup:=helmholtz", "-p", "supply_current_cap_a:=1.5")
     listen.ros.wait_for(lambda: listen.blocks, "the first block")
     supply = listen.ros.node.create_client(SetFieldCurrent, "/mows/driver/set_field_current")

@@ -1,12 +1,14 @@
 """The nodes' parameter tables: declared with descriptors, validated on set, and the same
 as the shipped parameter files."""
 
+import dataclasses
 import subprocess
 
 import pytest
 import yaml
 from rclpy.parameter import Parameter
 
+from mows.physics.probe import PAPER_PROBE
 from mows_bringup.graph import NODES
 from mows_calibrator import node as calibrator
 from mows_driver import node as driver
@@ -76,10 +78,6 @@ def test_good_values_are_taken_and_described(ros_context):
 
 
 def test_a_probe_file_is_read_when_set_and_refused_with_its_reason(ros_context, tmp_path):
-    import dataclasses
-
-    from mows.physics.probe import PAPER_PROBE
-
     node = estimator.EstimatorNode()
     path = tmp_path / "probe.yaml"
     dataclasses.replace(PAPER_PROBE, damping_per_s=2.5).to_yaml(path)

@@ -2,11 +2,10 @@
 
 The ring-down fit (:mod:`mows.estimate.ringdown_model`), the potential's Chebyshev series
 (:mod:`mows.physics.potential`) and the simulator's integrator (:mod:`mows.sim.kernel`) are
-compiled on first use: about ten seconds on a fresh checkout, about
-a second from the cache. That must not happen in the middle of a measurement (a driver that
-stalls for seconds loses its device link; an estimator that stalls misses ring-downs), so the
-nodes and the test session call :func:`precompile` first. ``python -m mows.precompile`` does it
-by hand.
+compiled on first use: about ten seconds on a fresh checkout, about a second from the cache.
+That must not happen in the middle of a measurement (a driver that stalls for seconds loses its
+device link; an estimator that stalls misses ring-downs), so the nodes and the test session call
+:func:`precompile` first. ``python -m mows.precompile`` does it by hand.
 """
 
 import math

@@ -55,7 +55,8 @@ def phase_weight(theta0_rad, amplitude_rad, sensor_direction=PAPER_SENSOR, picku
     amplitude = np.asarray(amplitude_rad, float)
     if pickup is None:
         pickup = paper_pickup(theta0_rad, sensor_direction)
-    derivative = 1j * np.arange(np.shape(pickup)[-1]) * np.asarray(pickup, complex)  # ik·C_k
+    coefficients = np.asarray(pickup, complex)
+    derivative = 1j * np.arange(coefficients.shape[-1]) * coefficients  # ik·C_k
     # Half a cycle suffices: Φ and 2π − Φ share cos Φ and sin²Φ.
     half = PHASE_POINTS // 2
     phi = np.pi * (np.arange(half) + 0.5) / half

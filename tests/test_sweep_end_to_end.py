@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from mows.estimate.recorded_cycle import fit_cycle
 from mows.lab import reference_at
-from mows.lab.synth import fit_cycle
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice

@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
+from mows.estimate.recorded_cycle import fit_cycle
 from mows.estimate.ringdown import SETTLE_S, FitOptions, fit_ringdown
-from mows.lab.synth import fit_cycle
 from mows.physics.field import UniformField
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario

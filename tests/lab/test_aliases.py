@@ -1,6 +1,6 @@
 """Alias groups over the whole catalog, exact aliases in words and numbers, physics preferred.
 
-Truth from exact physics (mows.lab.synth). A constant finite amplitude A scales the field spring
+Truth from exact physics (mows.lab.data.synthetic). A constant finite amplitude A scales the field spring
 like a moment-scale error ε = ⟨2·J1(A)/A⟩ − 1 ≈ −A²/8 (−0.86 % at 15°; less over a decaying
 ring-down); gravity with in-plane downward part d acts like a field (a·g·l/m)·d, 154 µT·d for
 the paper's probe.
@@ -11,9 +11,10 @@ import math
 import numpy as np
 import pytest
 
-from mows.lab import analyse, catalog, diagnose, synth
-from mows.lab.physical_aliases import amplitude_scale_error, gravity_field_t
-from mows.lab.search import prefer_physical
+from mows.lab import analyse, catalog, diagnose
+from mows.lab.data import synthetic
+from mows.lab.diagnosis.physical_aliases import amplitude_scale_error, gravity_field_t
+from mows.lab.selection.stepwise import prefer_physical
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
@@ -22,9 +23,9 @@ from mows.physics.probe import PAPER_PROBE
 def _amplitude_table(seed=0):
     """20 µT in the plane, ring-downs from 15°: the amplitude's weakening of the field spring
     (≈ 0.5 mHz) at 0.1 mHz noise; the static deflection stays below 0.1 mHz."""
-    sweep = synth.rotation_sweeps(15.0, 2)
+    sweep = synthetic.rotation_sweeps(15.0, 2)
     theta0 = sweep.pop("theta0_deg")
-    return synth.synthesize(
+    return synthetic.synthesize(
         PAPER_PROBE,
         UniformField((20e-6, 0.0, 0.0)),
         theta0,
@@ -69,10 +70,10 @@ def test_a_generic_term_in_the_model_is_grouped_with_the_physics_it_absorbs_and_
 
 
 def test_gravity_in_the_model_is_grouped_with_the_field_offset_it_absorbs():
-    sweep = synth.rotation_sweeps(15.0, 2)
+    sweep = synthetic.rotation_sweeps(15.0, 2)
     theta0 = sweep.pop("theta0_deg")
     tilt = math.radians(2.0)
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE,
         UniformField((20e-6, -10e-6, -40e-6)),
         theta0,

@@ -8,7 +8,8 @@ the field spring cancels the mechanical one), has no frequency in the model.
 import numpy as np
 
 from mows.cli.main import main
-from mows.lab import FrequencyModel, analyse, catalog, synth
+from mows.lab import FrequencyModel, analyse, catalog
+from mows.lab.data import synthetic
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
 
@@ -17,9 +18,9 @@ UNSTABLE_ROW = 9  # 30 mT against the probe axis: k = kM + m·Bx' < 0
 
 
 def _table():
-    sweep = synth.rotation_sweeps(30.0, 2)
+    sweep = synthetic.rotation_sweeps(30.0, 2)
     theta0 = sweep.pop("theta0_deg")
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE, UniformField((2e-5, 1e-5, 0.0)), theta0, np.random.default_rng(1), amplitude_deg=20.0, **sweep
     )
     amplitude = table.amplitude_deg.copy()

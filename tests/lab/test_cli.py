@@ -16,7 +16,7 @@ from lab.tables import tilted_table
 from mows.cli.lab import MAX_ROWS
 from mows.cli.main import main
 from mows.lab import FrequencyModel, catalog, read_csv
-from mows.lab.report import sweep_curve
+from mows.lab.report.html_report import sweep_curve
 from mows.physics.probe import PAPER_PROBE
 
 

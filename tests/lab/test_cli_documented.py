@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from mows.cli.main import main
-from mows.lab import synth
+from mows.lab.data import synthetic
 from mows.physics.field import SumSource, UniformField, anti_helmholtz_pair
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
@@ -53,10 +53,10 @@ def workdir(tmp_path_factory):
     """A table with all that the documented commands use: a gradient (transverse_gradient), a
     temperature log (thermal_drift), coil currents (the plugin) and two sweeps."""
     directory = tmp_path_factory.mktemp("documented")
-    sweep = synth.rotation_sweeps(30.0, 2)
+    sweep = synthetic.rotation_sweeps(30.0, 2)
     theta0 = sweep.pop("theta0_deg")
     source = SumSource([UniformField((3e-5, 0.0, 0.0)), anti_helmholtz_pair((0, 0, 0), (1, 0, 0), 0.05, 40, 0.5)])
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE,
         source,
         theta0,

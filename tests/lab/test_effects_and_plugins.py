@@ -7,7 +7,8 @@ import textwrap
 import numpy as np
 import pytest
 
-from mows.lab import FrequencyModel, analyse, catalog, load_plugins, synth
+from mows.lab import FrequencyModel, analyse, catalog, load_plugins
+from mows.lab.data import synthetic
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
 
@@ -51,11 +52,11 @@ def test_a_plugin_file_defines_an_effect_that_the_lab_finds(tmp_path):
     assert plugin.name == "coil_heating"
     # Truth from exact physics with a spring that really follows I² (the probe's kM per row).
     rng = np.random.default_rng(0)
-    sweep = synth.rotation_sweeps(15.0, 4)
+    sweep = synthetic.rotation_sweeps(15.0, 4)
     current = np.repeat([0.0, 2.0, 4.0, 6.0], 24)
     truth = np.array(
         [
-            synth.true_frequency_hz(
+            synthetic.true_frequency_hz(
                 PAPER_PROBE.replace(spring_nm_per_rad=PAPER_PROBE.spring_nm_per_rad + 3e-10 * i**2),
                 UniformField((2e-5, 1e-5, 0)),
                 [np.radians(t)],
@@ -65,7 +66,7 @@ def test_a_plugin_file_defines_an_effect_that_the_lab_finds(tmp_path):
         ]
     )
     theta0 = sweep.pop("theta0_deg")
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE,
         UniformField((2e-5, 1e-5, 0)),
         theta0,
@@ -122,7 +123,7 @@ def test_unknown_plugins_and_effects_are_named():
 def test_the_same_table_under_two_probes_gives_each_probes_own_prediction():
     """A table without amplitude or damping columns takes them from the probe, so a cached
     ring-down average must not carry one probe's stop over to the other."""
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE, UniformField((2e-4, 1e-4, 0.0)), np.arange(0.0, 360.0, 60.0), np.random.default_rng(1)
     )
     bare = type(table)(

@@ -8,7 +8,7 @@ import pytest
 
 from mows.estimate.ringdown import fit_ringdown
 from mows.lab import FrequencyModel, MeasurementTable, catalog
-from mows.lab.synth import true_frequency_hz
+from mows.lab.data.synthetic import true_frequency_hz
 from mows.physics import frequency, ringdown_average
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE

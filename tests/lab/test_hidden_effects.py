@@ -1,5 +1,5 @@
 """Tables with one hidden physical effect, from independent physics (exact sources through
-mows.physics.potential, see mows.lab.synth): the lab must name the effect, add it, and recover it.
+mows.physics.potential, see mows.lab.data.synthetic): the lab must name the effect, add it, and recover it.
 
 Every table but the strong-field one uses a small ring-down amplitude (2°): at the usual 24°
 the finite-amplitude readout is itself a hidden effect of a few tenths of a mHz, which biases
@@ -11,7 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from mows.lab import analyse, synth
+from mows.lab import analyse
+from mows.lab.data import synthetic
 from mows.physics.field import CurrentLoop, UniformField, anti_helmholtz_pair, helmholtz_pair
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
@@ -22,10 +23,10 @@ HELMHOLTZ_T_PER_A_TURN = 8.562e-6  # centre field of the paper's pair (R = spaci
 
 
 def rotation_table(source, seed, **options):
-    sweep = synth.rotation_sweeps(10.0, 2)
+    sweep = synthetic.rotation_sweeps(10.0, 2)
     theta0 = sweep.pop("theta0_deg")
     options.setdefault("amplitude_deg", SMALL_AMPLITUDE_DEG)
-    return synth.synthesize(PAPER_PROBE, source, theta0, np.random.default_rng(seed), **sweep, **options)
+    return synthetic.synthesize(PAPER_PROBE, source, theta0, np.random.default_rng(seed), **sweep, **options)
 
 
 def value_and_std(report, name):
@@ -67,7 +68,7 @@ def test_transverse_gradient_of_an_anti_helmholtz_pair():
 
 
 def test_thermal_drift_follows_the_temperature():
-    sweep = synth.rotation_sweeps(10.0, 2)
+    sweep = synthetic.rotation_sweeps(10.0, 2)
     t = sweep["t_s"]
     temperature = 293.15 + 1.5 * (1 - np.exp(-t / 300.0)) + 0.3 * np.sin(2 * np.pi * t / 200.0)
     table = rotation_table(EARTH, 3, temperature_k=temperature)
@@ -86,7 +87,7 @@ def test_finite_amplitude_in_a_strong_field_sweep_along_the_axis():
     field, angle, amplitude = (np.array(column) for column in zip(*rows))
     current = field / (HELMHOLTZ_T_PER_A_TURN * 100)
     sources = [helmholtz_pair((0, 0, 0), (1, 0, 0), 0.105, 100, i) + EARTH for i in current]
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE,
         sources,
         angle,
@@ -112,9 +113,9 @@ def test_a_nearby_coil_brings_transverse_gradient_then_curvature():
 
 @pytest.fixture(scope="module")
 def control_truth():
-    sweep = synth.rotation_sweeps(10.0, 2)
+    sweep = synthetic.rotation_sweeps(10.0, 2)
     theta0 = sweep.pop("theta0_deg")
-    truth = synth.true_frequency_hz(PAPER_PROBE, EARTH, np.radians(theta0), math.radians(SMALL_AMPLITUDE_DEG))
+    truth = synthetic.true_frequency_hz(PAPER_PROBE, EARTH, np.radians(theta0), math.radians(SMALL_AMPLITUDE_DEG))
     return theta0, sweep, truth
 
 
@@ -125,7 +126,7 @@ def test_control_without_hidden_effect_is_adequate_and_false_alarms_are_rare(con
     theta0, sweep, truth = control_truth
     verdicts, added = [], []
     for seed in range(40):
-        table = synth.synthesize(
+        table = synthetic.synthesize(
             PAPER_PROBE,
             EARTH,
             theta0,
@@ -143,7 +144,7 @@ def test_control_without_hidden_effect_is_adequate_and_false_alarms_are_rare(con
 def test_structure_no_effect_explains_is_described_not_forced(control_truth):
     theta0, sweep, truth = control_truth
     # A 4θ0 pattern of 2 mHz (e.g. a magnetometer cross-talk) is in no catalog effect.
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE,
         EARTH,
         theta0,

@@ -12,7 +12,8 @@ import numpy as np
 
 from lab.tables import tilted_table
 from mows.cli.main import main
-from mows.lab import FrequencyModel, analyse, catalog, synth
+from mows.lab import FrequencyModel, analyse, catalog
+from mows.lab.data import synthetic
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
@@ -20,7 +21,7 @@ from mows.physics.probe import PAPER_PROBE
 
 def test_harmonics_from_two_orientations_are_not_identifiable(tmp_path, capsys):
     theta0 = np.tile([0.0, 45.0], 20)
-    table = synth.synthesize(PAPER_PROBE, UniformField((3e-5, 1e-5, 0.0)), theta0, np.random.default_rng(2))
+    table = synthetic.synthesize(PAPER_PROBE, UniformField((3e-5, 1e-5, 0.0)), theta0, np.random.default_rng(2))
     path = tmp_path / "two_angles.csv"
     table.to_csv(path)
     assert main(["lab", "compare", str(path)]) == 0
@@ -43,11 +44,11 @@ def test_exact_aliases_leave_their_parameters_not_identifiable():
 
 
 def test_a_cv_error_that_one_sweep_alone_determines_is_not_identifiable(capsys):
-    sweep = synth.rotation_sweeps(30.0, 2, seconds_per_row=60.0)
+    sweep = synthetic.rotation_sweeps(30.0, 2, seconds_per_row=60.0)
     theta0 = sweep.pop("theta0_deg")
     # The temperature changes only in the second sweep: the first alone cannot determine α.
     temperature = np.where(sweep["sweep"] == 0, 296.0, 296.0 + 4.0 * np.linspace(0.0, 1.0, len(theta0)))
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE,
         UniformField((3e-5, 0.0, 0.0)),
         theta0,
@@ -66,9 +67,9 @@ def test_a_cv_error_that_one_sweep_alone_determines_is_not_identifiable(capsys):
 def test_a_bad_model_on_well_sampled_sweeps_still_has_a_cv_error():
     """The misfit (Birge-inflated σ) is not missing information: the base model of a tilted
     plane (χ²/dof above 5000, as in the demo) is still cross-validated."""
-    sweep = synth.rotation_sweeps(15.0, 2)
+    sweep = synthetic.rotation_sweeps(15.0, 2)
     theta0 = sweep.pop("theta0_deg")
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE,
         UniformField((2e-5, -1e-5, 0.0)),
         theta0,

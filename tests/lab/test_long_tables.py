@@ -6,8 +6,8 @@ import pytest
 
 from lab.tables import tilted_table
 from mows.lab import analyse, read_csv
-from mows.lab.readers import _read_cells
-from mows.lab.table import stratified_rows
+from mows.lab.data.readers import _read_cells
+from mows.lab.data.table import stratified_rows
 from mows.physics.probe import PAPER_PROBE
 
 

@@ -3,18 +3,19 @@
 
 import numpy as np
 
-from mows.lab import analyse, synth
+from mows.lab import analyse
+from mows.lab.data import synthetic
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
 
 
 def test_a_hidden_current_times_temperature_term_is_pointed_at():
-    sweep = synth.rotation_sweeps(15.0, 4)
+    sweep = synthetic.rotation_sweeps(15.0, 4)
     theta0 = sweep.pop("theta0_deg")
     rng = np.random.default_rng(0)
     current = np.repeat([0.0, 1.0, 2.0, 3.0], 24)
     temperature = 296.0 + rng.uniform(-1.0, 1.0, len(theta0))  # not a drift in time: uncorrelated with t_s
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE,
         UniformField((2e-5, 0.0, 0.0)),
         theta0,
@@ -41,10 +42,10 @@ def test_an_angle_pattern_that_changes_in_time_is_not_a_pile_of_catalog_effects(
     10225 → 10082 while χ²/dof rose 108 → 113). Judged against the residual's own scatter,
     nothing is added; the lab says so, points at the product and sketches the plugin (issue 11,
     Deliver 5)."""
-    sweep = synth.rotation_sweeps(15.0, 4)
+    sweep = synthetic.rotation_sweeps(15.0, 4)
     theta0 = sweep.pop("theta0_deg")
     t = sweep["t_s"]
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE, UniformField((2e-5, 5e-6, 0.0)), theta0, np.random.default_rng(1), amplitude_deg=2.0, **sweep
     )
     hidden = 0.05 * np.cos(3 * np.radians(theta0)) * (t - t.mean()) / np.ptp(t)

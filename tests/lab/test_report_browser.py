@@ -18,7 +18,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from mows.lab import analyse, synth, write_report
+from mows.lab import analyse, write_report
+from mows.lab.data import synthetic
 from mows.physics.field import UniformField, anti_helmholtz_pair
 from mows.physics.probe import PAPER_PROBE
 
@@ -62,10 +63,10 @@ def render(path) -> tuple:
 
 @pytest.fixture(scope="module")
 def report_page(tmp_path_factory):
-    sweep = synth.rotation_sweeps(30.0, 2)
+    sweep = synthetic.rotation_sweeps(30.0, 2)
     theta0 = sweep.pop("theta0_deg")
     source = anti_helmholtz_pair((0, 0, 0), (1, 0, 0), 0.105, 100, 1.0) + UniformField((16e-6, 12e-6, -40e-6))
-    table = synth.synthesize(
+    table = synthetic.synthesize(
         PAPER_PROBE, source, theta0, np.random.default_rng(0), f_std_hz=3e-4, amplitude_deg=20.0, **sweep
     )
     report = analyse(table, PAPER_PROBE, auto=True)

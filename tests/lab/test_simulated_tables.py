@@ -1,4 +1,4 @@
-"""The lab on tables from the time-domain simulator (mows.lab.synth.simulated_table).
+"""The lab on tables from the time-domain simulator (mows.lab.data.synthetic.simulated_table).
 
 Independent physics: the simulator integrates the full potential in each scenario's actual
 source fields, drives every cycle to the 24° housing stop, and the lever-aware estimator fits
@@ -14,9 +14,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mows.lab import analyse, reference_at, synth
-from mows.lab.analysis import INCONSISTENT_SIGMAS
-from mows.lab.table import FIELD, GRADIENT
+from mows.lab import analyse, reference_at
+from mows.lab.data import synthetic
+from mows.lab.data.table import FIELD, GRADIENT
+from mows.lab.report.lab_report import INCONSISTENT_SIGMAS
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
 from mows.physics.sources import UniformField
 from mows.sim.scenario import load_scenario
@@ -35,7 +36,7 @@ def lab():
     def run(name):
         if name not in found:
             scenario = load_scenario(name)
-            table = synth.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
+            table = synthetic.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
             found[name] = scenario, table, analyse(table, scenario.probe, auto=True, cross_validate=False)
         return found[name]
 
@@ -172,7 +173,7 @@ def test_a_strong_field_perpendicular_to_the_probe_is_static_deflection_and_fini
     scenario = base.replace(
         environment=dataclasses.replace(base.environment, sources=(*base.environment.sources, strong))
     )
-    table = synth.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
+    table = synthetic.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
     report = analyse(table, scenario.probe, auto=True, cross_validate=False)
     assert set(report.effect_names) == {"static_deflection", "finite_amplitude"}, report.history
     assert report.chi2_dof <= 1.5 * max(1.0, repeatability(table)), (repeatability(table), report.history)
@@ -194,7 +195,7 @@ def test_a_temperature_drift_is_thermal_drift_at_its_physical_coefficient():
         scenario = base.replace(
             environment=dataclasses.replace(base.environment, temperature_rate_k_per_s=rate_k_per_s)
         )
-        table = synth.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
+        table = synthetic.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
         reports[rate_k_per_s] = analyse(table, scenario.probe, auto=True, cross_validate=False)
     control, drifting = reports[0.0], reports[5e-3]
     assert "thermal_drift" not in control.effect_names, control.history

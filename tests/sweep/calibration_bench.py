@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from mows.estimate.ringdown import SETTLE_S
-from mows.lab.synth import true_frequency_hz
+from mows.lab.data.synthetic import true_frequency_hz
 from mows.physics.field import SumSource
 from mows.sim.scenario import load_scenario
 

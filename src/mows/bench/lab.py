@@ -3,7 +3,7 @@ one core).
 
 The table: 10 rotation sweeps of 100 orientations in an anti-Helmholtz gradient (≈ 10 mT/m)
 plus an Earth-like field, with temperature, time and amplitude columns so that every catalog
-effect is testable; truth from exact sources (:mod:`mows.lab.synth`). The timing covers the
+effect is testable; truth from exact sources (:mod:`mows.lab.data.synthetic`). The timing covers the
 base fit and the diagnosis (candidate signatures, refits, groups, separating measurements,
 verdict), not building the table.
 """
@@ -14,7 +14,8 @@ import time
 
 import numpy as np
 
-from mows.lab import FrequencyModel, catalog, diagnose, synth
+from mows.lab import FrequencyModel, catalog, diagnose
+from mows.lab.data import synthetic
 from mows.physics.field import UniformField, anti_helmholtz_pair
 from mows.physics.probe import PAPER_PROBE
 
@@ -24,11 +25,11 @@ SWEEPS = 10
 
 def benchmark_table(seed: int = 0):
     """The 1000-row table described in the module docstring."""
-    sweep = synth.rotation_sweeps(360.0 / ROWS_PER_SWEEP, SWEEPS, seconds_per_row=10.0)
+    sweep = synthetic.rotation_sweeps(360.0 / ROWS_PER_SWEEP, SWEEPS, seconds_per_row=10.0)
     theta0 = sweep.pop("theta0_deg")
     temperature = 293.15 + 0.5 * np.sin(2 * np.pi * sweep["t_s"] / 3000.0)
     source = anti_helmholtz_pair((0, 0, 0), (1, 0, 0), 0.105, 100, 1.0) + UniformField((15e-6, -12e-6, -40e-6))
-    return synth.synthesize(
+    return synthetic.synthesize(
         PAPER_PROBE, source, theta0, np.random.default_rng(seed), amplitude_deg=20.0, temperature_k=temperature, **sweep
     )
 

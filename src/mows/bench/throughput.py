@@ -35,7 +35,7 @@ from mows.bench.rig import DeviceTimeRig, max_duty_fraction
 from mows.device.phases import CycleRequest, CycleSettings
 from mows.device.tracking import TrackingLoop, TrackingSettings
 from mows.estimate.axis import estimate_along_axis
-from mows.lab.reference import reference_at
+from mows.lab.data.reference import reference_at
 from mows.records.stamps import NS_PER_S
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import Decomposition

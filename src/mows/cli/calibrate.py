@@ -33,9 +33,9 @@ from mows.cli.fit import add_fit_arguments
 from mows.device.scheduled import ScheduledDevice
 from mows.estimate.calibration_record import CalibrationPoint, KnownConstants
 from mows.estimate.probe_calibration import calibrate_probe
-from mows.lab.readers import is_bag, load_table
-from mows.lab.synth import fit_cycle
-from mows.lab.table import MeasurementTable
+from mows.estimate.recorded_cycle import fit_cycle
+from mows.lab.data.readers import is_bag, load_table
+from mows.lab.data.table import MeasurementTable
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sim.cycle import simulate_cycle

@@ -17,7 +17,7 @@ from mows.cli.inputs import input_file, load_probe
 from mows.estimate.ringdown import SETTLE_S, FitOptions
 from mows.estimate.segments import fit_segment
 from mows.lab.chirp import recorded_segments
-from mows.lab.table import MeasurementTable
+from mows.lab.data.table import MeasurementTable
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import check_output, replacing

@@ -2,7 +2,7 @@
 
 For every θ0 and repeat: turn, let the scenario's gap pass, excite, record the ring-down
 (:func:`mows.sim.cycle.simulate_cycle`). With ``--fit`` each ring-down is fitted as the
-estimator node does (:func:`mows.lab.synth.fit_cycle`: the lever-aware pickup) and compared with
+estimator node does (:func:`mows.estimate.recorded_cycle.fit_cycle`: the lever-aware pickup) and compared with
 the truth from the full potential (:meth:`mows.sim.cycle.CycleRecord.ringdown_frequency_hz`).
 ``--out`` writes a new file (an existing one only with ``--force``, never the scenario), whole
 or not at all.
@@ -17,7 +17,7 @@ import numpy as np
 import yaml
 
 from mows.cli.inputs import input_file
-from mows.lab.synth import fit_cycle
+from mows.estimate.recorded_cycle import fit_cycle
 from mows.records.files import check_output, replacing
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario

@@ -2,9 +2,9 @@
 
 :class:`Problem` gives the weighted residuals and their Jacobian (f00's column exact, the
 effect parameters' by forward differences); :class:`FitResult` is what
-:meth:`mows.lab.model.FrequencyModel.fit` returns: values, covariance (Birge-inflated), χ², BIC,
+:meth:`mows.lab.model.frequency_model.FrequencyModel.fit` returns: values, covariance (Birge-inflated), χ², BIC,
 identifiability, cross-validation and the report. The model and the method are described in
-:mod:`mows.lab.model`.
+:mod:`mows.lab.model.frequency_model`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 
 from mows.estimate.ringdown import FitStatus
 from mows.lab import progress
-from mows.lab.table import MeasurementTable, rows_text
+from mows.lab.data.table import MeasurementTable, rows_text
 
 FD_STEP = 1e-2  # × parameter scale
 CV_FOLDS = 10  # interleaved folds when the table has one sweep
@@ -101,7 +101,7 @@ class Problem:
 
 @dataclasses.dataclass(eq=False)
 class FitResult:
-    """A fitted :class:`mows.lab.model.FrequencyModel`. ``values``/``covariance`` are ordered as
+    """A fitted :class:`mows.lab.model.frequency_model.FrequencyModel`. ``values``/``covariance`` are ordered as
     ``model.parameter_names``; ``jacobian`` is d(weighted residual)/d(values), (n, k).
 
     The result protocol shared with the ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`):
@@ -109,7 +109,7 @@ class FitResult:
     ``report()``; ``message`` says why when the status is not OK.
     """
 
-    model: Any  # the FrequencyModel fitted (mows.lab.model, which imports this module)
+    model: Any  # the FrequencyModel fitted (mows.lab.model.frequency_model, which imports this module)
     table: MeasurementTable
     values: np.ndarray
     covariance: np.ndarray
@@ -254,7 +254,7 @@ class FitResult:
         if self.status is FitStatus.BAD_FIT:
             lines.append(
                 f"  warning: {self.status.name}: the model has no real frequency at "
-                f"{rows_text(self.invalid_rows)} (mows.lab.physics.unevaluable_rows says why)"
+                f"{rows_text(self.invalid_rows)} (mows.lab.model.configuration.unevaluable_rows says why)"
             )
         elif not self.ok:
             lines.append(f"  warning: {self.status.name}: the fit did not converge ({self.message})")

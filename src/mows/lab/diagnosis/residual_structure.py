@@ -1,7 +1,7 @@
 """Residual structure of a fit: harmonics of θ0 and covariate trends the model does not absorb.
 
 Harmonics k = 0…4 of θ0 (columns cos kθ0/σ, sin kθ0/σ) and each covariate (column c/σ) are
-projected orthogonally to the fit (:mod:`mows.lab.algebra`) and score-tested against the
+projected orthogonally to the fit (:mod:`mows.lab.diagnosis.projections`) and score-tested against the
 residual; amplitudes come from the projected least squares, where the projected columns have full rank
 (else the angles leave the harmonic's amplitude and phase undetermined: "not identifiable from
 these angles", while its score test still counts). Significant means p < 0.005 after
@@ -16,7 +16,7 @@ import math
 import numpy as np
 import scipy.stats
 
-from mows.lab.algebra import Signature, orthonormal_basis, signature
+from mows.lab.diagnosis.projections import Signature, orthonormal_basis, signature
 
 HARMONICS = range(5)
 STRUCTURE_ALPHA = 0.005  # family-wise, Bonferroni over harmonics and covariates

@@ -2,7 +2,7 @@
 
 The variants, cheapest first: more angles (half-way between the present orientations), half
 the excitation amplitude, the applied field reversed, the applied field doubled, and a
-temperature step when the table has temperatures. :mod:`mows.lab.groups` evaluates a group's
+temperature step when the table has temperatures. :mod:`mows.lab.diagnosis.indistinguishable` evaluates a group's
 signatures on them to find the measurement that would tell its members apart.
 """
 

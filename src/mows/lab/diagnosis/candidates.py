@@ -1,7 +1,7 @@
 """Candidate effects: each catalog effect tested as the explanation of a fit's residual.
 
 Each testable effect's signature (its Jacobian columns at 0, projected orthogonally to the fit,
-:mod:`mows.lab.algebra`) gives a score test; the effect is then refitted with the model
+:mod:`mows.lab.diagnosis.projections`) gives a score test; the effect is then refitted with the model
 (nonlinear least squares): ΔBIC = Δχ²/φ − k·ln n, p-value of the likelihood ratio
 Δχ²/φ ~ χ²(k), parameters ± σ, where φ = max(1, the smallest χ²/dof the step reaches, with
 or without any one candidate) is the residual's own scatter, one for every candidate of the step
@@ -21,8 +21,8 @@ import numpy as np
 import scipy.stats
 
 from mows.lab import progress
-from mows.lab.algebra import Signature, orthonormal_basis, project_out, signature
-from mows.lab.effects import Effect, testable
+from mows.lab.diagnosis.projections import Signature, orthonormal_basis, project_out, signature
+from mows.lab.model.effects import Effect, testable
 
 TIE_DELTA_BIC = 2.0
 STRONG_DELTA_BIC = 10.0
@@ -71,7 +71,7 @@ class Form:
     def kept_physics(self) -> bool:
         """Known physics the data cannot reject: held at physics, its predicted signal would be
         strong evidence if no free parameter absorbed it (against the residual's scatter, φ),
-        and adding it costs less than the tie margin of BIC (how :mod:`mows.lab.analysis` uses it)."""
+        and adding it costs less than the tie margin of BIC (how :mod:`mows.lab.report.lab_report` uses it)."""
         return self.fixed and self.signal_chi2 / self.dispersion > STRONG_DELTA_BIC and self.delta_bic > -TIE_DELTA_BIC
 
     def to_dict(self) -> dict:

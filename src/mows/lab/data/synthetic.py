@@ -20,9 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
-from mows.lab.reference import reference_columns
-from mows.lab.table import FIELD, GRADIENT, MeasurementTable
+from mows.estimate.recorded_cycle import fit_cycle
+from mows.estimate.ringdown import SETTLE_S
+from mows.lab.data.reference import reference_columns
+from mows.lab.data.table import FIELD, GRADIENT, MeasurementTable
 from mows.physics import ringdown_average
 from mows.physics.field import FieldSource
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
@@ -191,7 +192,7 @@ def simulated_table(
     stop pooled over the whole table. ``t_s`` is the device time of each switch-off (the
     pause between cycles is not simulated), ``temperature_k`` the device's temperature then.
     The reference columns are the scenario's field and gradient at the probe
-    (:func:`mows.lab.reference.reference_at`). Failed fits are left out and counted in the notes.
+    (:func:`mows.lab.data.reference.reference_at`). Failed fits are left out and counted in the notes.
     """
     device = SimulatedDevice(scenario, rng)
     sweeps = [_simulated_sweep(device, scenario, angles_deg, settle_s) for _ in range(repeats)]
@@ -244,27 +245,6 @@ def _start_amplitudes_rad(records: list, probe) -> list:
     every = SweepRecord([point for record in records for point in record.points])
     stop = every.stop_amplitude_rad(np.concatenate(rests)) if every.points else np.nan
     return [stop - rest for rest in rests]
-
-
-def fit_cycle(cycle, scenario, paper_model: bool = False, settle_s: float = SETTLE_S) -> RingdownFit:
-    """Fit the ring-down of a simulated cycle (:class:`mows.sim.cycle.CycleRecord`) as the
-    estimator node does: the lever-aware pickup of ``scenario``'s probe seen by its fluxgates at
-    the commanded θ0 (``paper_model``: Eq. S11 instead), the expected frequency the one the
-    cycle excited at, the probe's damping as the start."""
-    options = (
-        FitOptions() if paper_model else FitOptions.lever_aware(scenario.sensors.pair, scenario.probe, cycle.theta0_rad)
-    )
-    start = cycle.coil_off_index
-    return fit_ringdown(
-        cycle.samples_t[start:],
-        cycle.sample_rate_hz,
-        cycle.theta0_rad,
-        cycle.frequency_hz,
-        cycle.saturated[start:],
-        options,
-        scenario.probe.damping_per_s,
-        settle_s,
-    )
 
 
 def _ringdown_point(scenario, cycle, settle_s):

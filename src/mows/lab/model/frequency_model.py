@@ -1,14 +1,14 @@
 """The frequency model: the published model (Eq. 6) plus effects, its fit and cross-validation.
 
 The weighted residuals, their Jacobian and the fitted result (uncertainties, BIC,
-cross-validation) are :mod:`mows.lab.fitting`.
+cross-validation) are :mod:`mows.lab.model.least_squares`.
 
 ``FrequencyModel(probe) + catalog()["gravity"] + …`` composes like astropy.modeling; each
 effect brings parameters with units and physical bounds like lmfit. The prediction for row i is
 
     f_i = f00·h_i(p) + c_i(p),
 
-with h from the potential (:func:`mows.lab.physics.frequency_factor`), p the effect parameters
+with h from the potential (:func:`mows.lab.model.configuration.frequency_factor`), p the effect parameters
 and c the additive frequency contributions of plugins. The base model has no effect: h is
 Eq. 6, √(1 + (m·Bx' + l·m·Gx'x')/kM), with the table's reference field and gradient.
 
@@ -31,10 +31,10 @@ import weakref
 import numpy as np
 import scipy.optimize
 
-from mows.lab.effects import Effect, testable
-from mows.lab.fitting import FitResult, Problem
-from mows.lab.physics import Configuration, frequency_factor
-from mows.lab.table import MeasurementTable
+from mows.lab.data.table import MeasurementTable
+from mows.lab.model.configuration import Configuration, frequency_factor
+from mows.lab.model.effects import Effect, testable
+from mows.lab.model.least_squares import FitResult, Problem
 from mows.physics import ringdown_average
 
 

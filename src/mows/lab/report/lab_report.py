@@ -2,12 +2,12 @@
 
 :func:`analyse` is what the mapper node calls after every sweep; :class:`LabReport` maps onto
 ``mows_msgs/ModelReport`` (model, effects, n, chi2_dof, bic, cv_rms_hz, verdict, structure,
-candidates) and each :class:`mows.lab.candidates.Candidate` onto ``CandidateEffect``.
+candidates) and each :class:`mows.lab.diagnosis.candidates.Candidate` onto ``CandidateEffect``.
 
-The steps, in the lab's pipeline order: the table (:mod:`mows.lab.readers`), the base model
-and the named effects (:mod:`mows.lab.catalog`, :mod:`mows.lab.model`), the fit, its
-diagnosis (:mod:`mows.lab.diagnose`), with ``auto`` the stepwise selection
-(:mod:`mows.lab.search`), then the physics checks below.
+The steps, in the lab's pipeline order: the table (:mod:`mows.lab.data.readers`), the base model
+and the named effects (:mod:`mows.lab.model.catalog`, :mod:`mows.lab.model.frequency_model`), the fit, its
+diagnosis (:mod:`mows.lab.diagnosis.verdict`), with ``auto`` the stepwise selection
+(:mod:`mows.lab.selection.stepwise`), then the physics checks below.
 
 
 Every effect of the final model with a physical value gets a consistency check: its free fit
@@ -22,14 +22,14 @@ import math
 
 import numpy as np
 
-from mows.lab.candidates import physics_deviation
-from mows.lab.catalog import catalog, resolve
-from mows.lab.diagnose import Diagnosis, diagnose
-from mows.lab.model import FitResult, FrequencyModel
-from mows.lab.physics import unevaluable_rows
-from mows.lab.readers import load_table
-from mows.lab.search import MAX_AUTO_STEPS, history_step, parameters_dict, search
-from mows.lab.table import TableError
+from mows.lab.data.readers import load_table
+from mows.lab.data.table import TableError
+from mows.lab.diagnosis.candidates import physics_deviation
+from mows.lab.diagnosis.verdict import Diagnosis, diagnose
+from mows.lab.model.catalog import catalog, resolve
+from mows.lab.model.configuration import unevaluable_rows
+from mows.lab.model.frequency_model import FitResult, FrequencyModel
+from mows.lab.selection.stepwise import MAX_AUTO_STEPS, history_step, parameters_dict, search
 
 CHECK_SIGMAS = 3.0  # a physical value further than this from its free fit is noted
 INCONSISTENT_SIGMAS = 5.0  # … and further than this makes a statistically adequate model inconsistent
@@ -178,7 +178,7 @@ def analyse(
 
 def _evaluable(table, probe):
     """The table without the rows the potential cannot evaluate, each named with the reason in
-    the notes (:func:`mows.lab.physics.unevaluable_rows`); TableError when no row is left."""
+    the notes (:func:`mows.lab.model.configuration.unevaluable_rows`); TableError when no row is left."""
     problems = unevaluable_rows(table, probe)
     if len(problems) == len(table):
         raise TableError(f"the model cannot evaluate any row of {table.source}: {next(iter(problems.values()))[0]}")

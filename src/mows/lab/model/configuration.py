@@ -198,7 +198,7 @@ def unevaluable_rows(table, probe) -> dict:
     table's reference field and gradient in full (every component, as the physics effects use
     them) at the row's start amplitude: no stable rest angle, a swing |θc| + A beyond the
     interval over which the potential is expanded, or no real frequency. Such rows are left
-    out of the fit (:func:`mows.lab.analysis.analyse`), never given a made-up residual."""
+    out of the fit (:func:`mows.lab.report.lab_report.analyse`), never given a made-up residual."""
     config = Configuration.base(table, probe)
     _, field, gradient, _ = config.probe_frame()
     potential = _potential(probe, field, gradient, None, None, config.spring_nm_per_rad)

@@ -1,8 +1,8 @@
 """Reading measurement tables: CSV files, the project's rosbag2 bags and rotation sweeps.
 
-Each reader gathers the columns of :mod:`mows.lab.table` and hands them to
-:func:`mows.lab.table.with_notes`, which validates them and notes what was assumed. Reference
-fields of static sources come from :mod:`mows.lab.reference`.
+Each reader gathers the columns of :mod:`mows.lab.data.table` and hands them to
+:func:`mows.lab.data.table.with_notes`, which validates them and notes what was assumed. Reference
+fields of static sources come from :mod:`mows.lab.data.reference`.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ import numpy as np
 
 from mows.device import bags
 from mows.estimate.ringdown import FitStatus
-from mows.lab.reference import reference_columns
-from mows.lab.table import FIELD, KNOWN, MeasurementTable, TableError, broken_rules, rows_text, with_notes
+from mows.lab.data.reference import reference_columns
+from mows.lab.data.table import FIELD, KNOWN, MeasurementTable, TableError, broken_rules, rows_text, with_notes
 from mows.records import stamps
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -162,7 +162,7 @@ def from_bag(
     - ``None``: no reference columns;
     - a topic name (``"/reference/magnetic_field"``): ``sensor_msgs/msg/MagneticField``
       messages, the one nearest in time to each ring-down (header stamps, global frame);
-    - a static source in any form :func:`mows.lab.reference.reference_source` takes (a field
+    - a static source in any form :func:`mows.lab.data.reference.reference_source` takes (a field
       source, its mapping or YAML file at ``magnet_position_m``, or a scenario at its magnet
       position): the exact field and in-plane gradient there.
 
@@ -253,7 +253,7 @@ def _reference_columns(reference, times_s, fields, magnet_position_m, path) -> d
 
 def from_sweep(record, reference, probe, decomposition=None) -> MeasurementTable:
     """The table of one rotation sweep (:class:`mows.sweep.record.SweepRecord`) in a static
-    ``reference`` (anything :func:`mows.lab.reference.reference_source` takes). With a first-principles
+    ``reference`` (anything :func:`mows.lab.data.reference.reference_source` takes). With a first-principles
     ``decomposition`` of the sweep, each ring-down's start swing is stop − |θs| at its field
     (:meth:`~mows.sweep.record.SweepRecord.start_amplitudes_rad`); else the pooled stop amplitude."""
     starts = (

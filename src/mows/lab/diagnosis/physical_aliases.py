@@ -24,7 +24,7 @@ import math
 import numpy as np
 import scipy.special
 
-from mows.lab.physics import Configuration
+from mows.lab.model.configuration import Configuration
 from mows.physics import ringdown_average
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
 

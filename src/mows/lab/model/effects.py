@@ -1,6 +1,6 @@
 """The Effect type: a physical effect the published model leaves out, as an edit of the physics.
 
-Every effect edits the per-row :class:`mows.lab.physics.Configuration` (field, gradient,
+Every effect edits the per-row :class:`mows.lab.model.configuration.Configuration` (field, gradient,
 Hessian, gravity, spring, readout), and the frequency follows from the potential U(θ) of
 PHYSICS.md §4 with the exact rest angle and first-harmonic balance, so effects compose and stay
 right at mT fields. Every effect is *off* when all its parameters are 0 and is smooth there
@@ -10,9 +10,9 @@ geometry or a dimensionless strength with 1 = the physics as predicted; an effec
 known entirely (``physical``) can also be held at it, with no free parameter
 (:meth:`Effect.at_physics`, labelled ``name (at physics)``).
 
-The built-in effects are in :mod:`mows.lab.catalog`, user plugins are read by
-:mod:`mows.lab.plugins`; effects join a model with ``FrequencyModel(probe) + effect``
-(:mod:`mows.lab.model`).
+The built-in effects are in :mod:`mows.lab.model.catalog`, user plugins are read by
+:mod:`mows.lab.model.plugins`; effects join a model with ``FrequencyModel(probe) + effect``
+(:mod:`mows.lab.model.frequency_model`).
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 
-from mows.lab.physics import Configuration
-from mows.lab.table import MissingColumnError
+from mows.lab.data.table import MissingColumnError
+from mows.lab.model.configuration import Configuration
 
 AT_PHYSICS = " (at physics)"  # label suffix of an effect held at its physical values
 

@@ -1,7 +1,7 @@
 """The measurement table: one row per ring-down result, its columns and their validation.
 
-Readers (CSV, bags, sweeps) are in :mod:`mows.lab.readers`; reference fields of static
-sources in :mod:`mows.lab.reference`.
+Readers (CSV, bags, sweeps) are in :mod:`mows.lab.data.readers`; reference fields of static
+sources in :mod:`mows.lab.data.reference`.
 
 Frame (the lab's contract with the user): the rotation plane is the global x–y plane, θ0 is
 counted from +x towards +y, z completes a right-handed frame. The probe frame of a row is

@@ -9,7 +9,7 @@
   they absorb are grouped by :mod:`mows.lab.aliases`.
 - **Separating measurements**: the group's signatures and fitted signals (the fitted linear
   coefficients, extended) are evaluated on the table joined with a what-if variant of it
-  (:mod:`mows.lab.whatif`); the cheapest variant after which no pair of the group stays
+  (:mod:`mows.lab.diagnosis.what_if`); the cheapest variant after which no pair of the group stays
   indistinguishable is proposed. If none does, each member's independent check is reported
   (e.g. gravity and an unreferenced field act identically on the lever in every rotation: only
   levelling the plane or checking the reference's zero tells them apart).
@@ -26,10 +26,10 @@ import dataclasses
 import numpy as np
 
 from mows.lab import progress
-from mows.lab.algebra import Signature, cosine_within, orthonormal_basis, project_out, same_span
-from mows.lab.candidates import ABSORBED, TIE_DELTA_BIC
-from mows.lab.physical_aliases import alias_statements
-from mows.lab.whatif import variants
+from mows.lab.diagnosis.candidates import ABSORBED, TIE_DELTA_BIC
+from mows.lab.diagnosis.physical_aliases import alias_statements
+from mows.lab.diagnosis.projections import Signature, cosine_within, orthonormal_basis, project_out, same_span
+from mows.lab.diagnosis.what_if import variants
 
 GROUP_COSINE = 0.95
 GROUP_SIGNIFICANCE = 0.01

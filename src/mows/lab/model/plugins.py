@@ -24,8 +24,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mows.lab.effects import MECHANICS, Effect, Parameter
-from mows.lab.table import MissingColumnError
+from mows.lab.data.table import MissingColumnError
+from mows.lab.model.effects import MECHANICS, Effect, Parameter
 
 ENTRY_POINT_GROUP = "mows.lab.effects"
 

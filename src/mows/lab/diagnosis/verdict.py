@@ -1,8 +1,8 @@
 """Where the model fails and which effect is missing: the diagnosis of one fit, and its verdict.
 
-:func:`diagnose` runs the steps in order: the residual structure (:mod:`mows.lab.structure`),
-the candidates (:mod:`mows.lab.candidates`), their groups and separating measurements
-(:mod:`mows.lab.groups`), then the verdict:
+:func:`diagnose` runs the steps in order: the residual structure (:mod:`mows.lab.diagnosis.residual_structure`),
+the candidates (:mod:`mows.lab.diagnosis.candidates`), their groups and separating measurements
+(:mod:`mows.lab.diagnosis.indistinguishable`), then the verdict:
 
 - ``effect_missing`` when the best candidate has ΔBIC > 10, p < 1e-3 and accounts for at least
   half of the excess χ² − dof;
@@ -15,9 +15,15 @@ from __future__ import annotations
 
 import dataclasses
 
-from mows.lab.candidates import rank_candidates
-from mows.lab.groups import absorbed_groups, group_candidates
-from mows.lab.structure import GOODNESS_ALPHA, Structure, plugin_expression, product_trends, residual_structure
+from mows.lab.diagnosis.candidates import rank_candidates
+from mows.lab.diagnosis.indistinguishable import absorbed_groups, group_candidates
+from mows.lab.diagnosis.residual_structure import (
+    GOODNESS_ALPHA,
+    Structure,
+    plugin_expression,
+    product_trends,
+    residual_structure,
+)
 
 EXPLAINED_FRACTION = 0.5
 

@@ -3,7 +3,7 @@
 :func:`search` grows a fit from its diagnosis and records every step in the error history.
 
 1. **Forward step**: add the best strong candidate (ΔBIC > 10, p < 1e-3; inside a group the
-   tie-break of :mod:`mows.lab.groups` picks) in its better form. An effect whose size
+   tie-break of :mod:`mows.lab.diagnosis.indistinguishable` picks) in its better form. An effect whose size
    follows from known constants (a physical value, e.g. a strength of 1) is tested both held at
    that value (no new parameter: ΔBIC = Δχ²) and free (ΔBIC = Δχ² − k·ln n). Known physics
    goes first: a strong candidate whose better form holds it at its physical value is added
@@ -11,7 +11,7 @@
    4-parameter curvature soaks up an amplitude and a deflection effect) and a fixed one cannot.
    With no strong candidate left, an effect is still added at physics when the data cannot
    reject it although they would see it if nothing absorbed it
-   (:attr:`mows.lab.candidates.Form.kept_physics`: a free tilt absorbs the amplitude's weakening
+   (:attr:`mows.lab.diagnosis.candidates.Form.kept_physics`: a free tilt absorbs the amplitude's weakening
    of the pendulum spring, and reads the tilt 1 % low without it).
 2. **Revisit** after every forward step: for each effect of the model, refit without it, rank
    every effect against that reduced model (the removed one in its other form included), and
@@ -39,10 +39,10 @@ import math
 
 import numpy as np
 
-from mows.lab.candidates import STRONG_DELTA_BIC, TIE_DELTA_BIC, rank_candidates
-from mows.lab.diagnose import diagnose
-from mows.lab.effects import testable
-from mows.lab.physical_aliases import alias_statements
+from mows.lab.diagnosis.candidates import STRONG_DELTA_BIC, TIE_DELTA_BIC, rank_candidates
+from mows.lab.diagnosis.physical_aliases import alias_statements
+from mows.lab.diagnosis.verdict import diagnose
+from mows.lab.model.effects import testable
 
 MAX_AUTO_STEPS = 6
 MAX_REVISIT_MOVES = 6  # per forward step; each move lowers the BIC, so this is only a bound
@@ -184,7 +184,7 @@ def _forward_step(found):
     The best strong candidate in its better form, known physics first (a candidate held at
     its physical value has no parameter to absorb other effects with); else the best effect
     whose predicted signal the model's free parameters absorb but which the data cannot reject
-    (:attr:`mows.lab.candidates.Form.kept_physics`), held at physics.
+    (:attr:`mows.lab.diagnosis.candidates.Form.kept_physics`), held at physics.
     """
     strong = [c for c in found.candidates if c.strong]
     best = next((c for c in strong if c.chosen.fixed), strong[0] if strong else None)

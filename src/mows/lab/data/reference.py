@@ -21,7 +21,7 @@ from collections.abc import Mapping
 import numpy as np
 import yaml
 
-from mows.lab.table import FIELD, GRADIENT
+from mows.lab.data.table import FIELD, GRADIENT
 from mows.physics.field import FieldSource, source_from_dict
 from mows.sim.scenario import Scenario, load_scenario
 

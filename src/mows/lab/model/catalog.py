@@ -3,8 +3,8 @@
 Each entry says what the effect is (``explanation``), its equation, its residual signature and
 the independent measurement that tests it directly (``check``); docs/model_lab.md documents
 them. The functions ``_name(config, rows, probe, *values)`` are the effects' edits of the
-:class:`mows.lab.physics.Configuration`. :func:`catalog` joins the plugins' effects
-(:mod:`mows.lab.plugins`) to the built-in ones, :func:`resolve` finds effects by name or label.
+:class:`mows.lab.model.configuration.Configuration`. :func:`catalog` joins the plugins' effects
+(:mod:`mows.lab.model.plugins`) to the built-in ones, :func:`resolve` finds effects by name or label.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ import itertools
 
 import numpy as np
 
-from mows.lab.effects import AT_PHYSICS, COMPONENTS, MECHANICS, ORIENTATION, READOUT, SOURCES, Effect, Parameter
-from mows.lab.physics import rotation_matrix, standard_gravity_vector
-from mows.lab.plugins import load_plugins
+from mows.lab.model.configuration import rotation_matrix, standard_gravity_vector
+from mows.lab.model.effects import AT_PHYSICS, COMPONENTS, MECHANICS, ORIENTATION, READOUT, SOURCES, Effect, Parameter
+from mows.lab.model.plugins import load_plugins
 
 PHYSICAL_STRENGTH = (1.0,)  # a strength of 1 is the physics as predicted
 

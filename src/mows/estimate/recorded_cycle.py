@@ -1,0 +1,31 @@
+"""The ring-down of one recorded cycle, fitted as the estimator node fits it.
+
+A recorded cycle is any object with the cycle's samples (``samples_t``, ``saturated``), its
+``sample_rate_hz``, commanded ``theta0_rad``, excitation ``frequency_hz`` and the sample index
+of the coil switch-off (``coil_off_index``), such as :class:`mows.sim.cycle.CycleRecord`; the
+scene only lends its probe and fluxgate pair (``scene.probe``, ``scene.sensors.pair``). The
+simulator, the calibration command and ``mows sim`` fit their cycles here, so that all of them
+fit exactly as the node does.
+"""
+
+from __future__ import annotations
+
+from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
+
+
+def fit_cycle(cycle, scene, paper_model: bool = False, settle_s: float = SETTLE_S) -> RingdownFit:
+    """Fit the ring-down of a recorded cycle: the lever-aware pickup of ``scene``'s probe seen by
+    its fluxgates at the commanded θ0 (``paper_model``: Eq. S11 instead), the expected frequency
+    the one the cycle excited at, the probe's damping as the start."""
+    options = FitOptions() if paper_model else FitOptions.lever_aware(scene.sensors.pair, scene.probe, cycle.theta0_rad)
+    start = cycle.coil_off_index
+    return fit_ringdown(
+        cycle.samples_t[start:],
+        cycle.sample_rate_hz,
+        cycle.theta0_rad,
+        cycle.frequency_hz,
+        cycle.saturated[start:],
+        options,
+        scene.probe.damping_per_s,
+        settle_s,
+    )

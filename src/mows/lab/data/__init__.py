@@ -1,0 +1,10 @@
+"""The lab's input: measurement tables and where they come from.
+
+``table`` (:class:`MeasurementTable`, its columns, validation and errors), ``reference`` (the
+reference field of a static source as table columns), ``readers`` (:func:`load_table`: CSV, the
+project's bags, rotation sweeps) and ``synthetic`` (tables from independent physics and from the
+simulator and estimator, the lab's test data).
+
+May import: ``mows.lab.progress`` and the core below the lab (``mows.sweep``, ``mows.estimate``,
+``mows.device``, ``mows.sim``, ``mows.physics``, ``mows.records``); no other lab package.
+"""

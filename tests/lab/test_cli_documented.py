@@ -1,4 +1,4 @@
-"""Every `mows lab` command line the docs show runs verbatim (README.md, docs/model_lab.md).
+"""Every `mows lab` command line the docs show runs verbatim (docs/command_line.md, docs/model_lab.md).
 
 The command lines are read from the documents themselves (fenced blocks and inline code), so a
 documented form that the parser rejects fails here; the plugin file is the documented one too.
@@ -23,7 +23,7 @@ from mows.sim.sections import Environment
 from recorded_bags import record_cycles
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
-DOCUMENTS = (ROOT / "README.md", ROOT / "docs" / "model_lab.md")
+DOCUMENTS = (ROOT / "docs" / "command_line.md", ROOT / "docs" / "model_lab.md")
 PAPER_PROBE_PATH = pathlib.Path("src/mows/physics/probes/paper.yaml")
 
 
@@ -44,7 +44,7 @@ def documented_commands() -> list:
 
 def documented_plugin() -> str:
     """The plugin file the docs tell the user to save as coil_heating.py."""
-    text = (ROOT / "README.md").read_text()
+    text = (ROOT / "docs" / "model_lab.md").read_text()
     return next(block for language, block in _fenced_blocks(text) if language == "python" and "coil_heating" in block)
 
 

@@ -1,5 +1,5 @@
 """Every `mows` command with bad input: exit status 2, one line naming the file and the key or
-row, no traceback, and nothing it read or did not create is touched (issue 15)."""
+row, no traceback, and nothing it read or did not create is touched."""
 
 import os
 import shutil
@@ -148,7 +148,7 @@ def test_a_thousand_tesla_is_refused_before_a_step(capsys, tmp_path):
     path = tmp_path / "strong.yaml"
     path.write_text(SCENARIOS["1000 T"][0])
     err = one_line_error(capsys, main(["sim", str(path)]))
-    assert len(err) < 400  # was θ as a 180-digit number
+    assert len(err) < 400  # one line that names the value, not θ printed as a 180-digit number
 
 
 def test_fit_of_a_truncated_mcap_or_a_csv_is_one_line(bag, table, capsys):
@@ -175,7 +175,7 @@ def test_a_bad_probe_file_is_one_line_naming_the_key(table, tmp_path, capsys, ca
     probe = tmp_path / "probe.yaml"
     probe.write_text(text)
     err = one_line_error(capsys, main(["lab", "compare", str(table), "--probe", str(probe), "--no-cv"]), *words)
-    assert "inertia_kgm2" not in err  # NaN was blamed on the inertia derived from it
+    assert "inertia_kgm2" not in err  # not blamed on the inertia derived from the NaN
 
 
 PLUGINS = {

@@ -1,6 +1,6 @@
 """Property: whatever is wrong with a table, a probe file, a scenario or a plugin's output, the
 command exits 2 with one line and no traceback, and its input files are byte-identical
-afterwards (issue 15). Every generated input is broken on purpose, in one way drawn at random."""
+afterwards. Every generated input is broken on purpose, in one way drawn at random."""
 
 import contextlib
 import io

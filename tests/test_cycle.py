@@ -186,7 +186,7 @@ currents = st.floats(-50.0, 50.0, allow_nan=False)
 
 def test_the_probe_turns_while_only_a_switch_off_waits_and_never_while_the_coils_are_on_or_commanded():
     # The host switches the coils off whenever its link comes up; a cycle's first turn can reach
-    # the device before that switch-off applied (a CI run was refused "coils are on" so).
+    # the device before that switch-off applies, and must not be refused as "coils are on".
     device = ScheduledDevice(SpyDevice(SCENARIO), CurrentCap(CAP_A))
     device.schedule_coils(0, (0.0, 0.0), 110.0)  # the off a link-up sends, not applied yet
     assert device.schedule_orientation(10, 0.5) == 10
@@ -284,7 +284,7 @@ def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a,
     assert all(max(abs(i) for i in c.amplitudes_a) <= cap_a for c in coil_commands)
 
 
-# --- the static-field supply through the session (issue 12) -----------------------------------
+# --- the static-field supply through the session ------------------------------------------------
 def supplied_session(supply_cap_a=2.0):
     scenario = load_scenario("calibration")
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(CAP_A), paced=False, supply_cap_a=supply_cap_a)

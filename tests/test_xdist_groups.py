@@ -3,7 +3,8 @@
 The real-time tests share the group "realtime" so that no two of them run side by side
 (pyproject.toml). pytest-xdist 3.8.0 tells its scheduler a test's group by appending "@group"
 to the test's node id on the worker. From pytest 9.2 on that change no longer takes effect,
-and every group is silently spread over the workers (pytest-xdist issue 1386). That is why
+and every group is silently spread over the workers
+(https://github.com/pytest-dev/pytest-xdist/issues/1386). That is why
 pytest is pinned to 9.1.1; this test fails if an upgrade loses the grouping again."""
 
 import re

@@ -1,1 +1,1 @@
-"""The MOWS calibrator node (issue 12)."""
+"""The MOWS calibrator node: a new probe's constants from supply sweeps (docs/calibration.md)."""

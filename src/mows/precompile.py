@@ -30,8 +30,8 @@ def precompile(simulator: bool = True) -> float:
     fit_ringdown(pair, 20_000.0, 0.0, 112.0, options=FitOptions.lever_aware(FluxgatePair.paper(), PAPER_PROBE, 0.0))
     if simulator:
         # Imported only when asked for: the estimator node (simulator=False) never runs the
-        # simulator, and importing it on top of the fit's modules took 7-8 s more (scipy.signal,
-        # the kernels' module; measured at a load average of 13-15 on this 2-core machine).
+        # simulator, and importing it (scipy.signal, the kernels' module) would add seconds to
+        # the node's start on top of the fit's modules.
         from mows.sim.scenario import Scenario
         from mows.sim.simulator import SimulatedDevice
 

@@ -267,7 +267,7 @@ def test_unplugging_leads_to_reconnection_with_backoff_and_a_reported_gap(emulat
     assert all(b.sequence == a.sequence + 1 for a, b in zip(blocks, blocks[1:]) if (a, b) != (before, after))
 
 
-# --- the static-field supply (issue 12) ----------------------------------------------------------
+# --- the static-field supply ---------------------------------------------------------------------
 @pytest.fixture
 def supplied(tmp_path):
     """An emulated calibration bench: the Pasco pair on a 2 A supply (2 A/s)."""

@@ -1,4 +1,4 @@
-"""What the serial link and the session say about outages is true (issue 15): frames the device
+"""What the serial link and the session say about outages is true: frames the device
 sent before anyone listened are not lost frames, a failure that is over is not the last error,
 a link lost while idle is reported, a cycle on a port that never opened says why, and a
 restarted device's samples are counted as missing from their indices."""
@@ -39,7 +39,7 @@ def test_a_restarted_device_counts_its_samples_before_the_first_received_as_miss
         assembler.add(chunk(first))
     assembler.add(chunk(140_000))  # it restarted 7 s ago: its index started again at 0
     assert (assembler.gaps, assembler.restarts) == (1, 1)
-    assert assembler.missing_samples == 140_000  # was 0: "0 samples missing" after a 7 s outage
+    assert assembler.missing_samples == 140_000  # not "0 samples missing" after a 7 s outage
 
 
 def test_frames_the_device_sent_before_the_first_connection_are_not_lost(tmp_path):
@@ -66,7 +66,7 @@ def test_the_last_error_is_cleared_once_the_link_is_up_and_loss_is_reported_whil
         with DeviceEmulator(SpyDevice(SCENARIO), path, CurrentCap(CAP_A)) as emulator:
             links = []
             wait_for(lambda: session.link_up, "the link to come up", lambda: links.extend(session.step(0.05).links))
-            assert link.stats()["last_error"] == ""  # was the stale "cannot open"
+            assert link.stats()["last_error"] == ""  # not the stale "cannot open"
             emulator.unplug()  # no cycle is running: the session is idle
             wait_for(lambda: not session.link_up, "the link to go down", lambda: links.extend(session.step(0.05).links))
         assert [event.up for event in links] == [True, False]

@@ -1,5 +1,5 @@
 """A recording killed with SIGKILL loses at most its last chunk, and `mows bag repair` rebuilds a
-bag that reads and replays (issue 15). The writer is a real process killed by the kernel, at a
+bag that reads and replays. The writer is a real process killed by the kernel, at a
 chunk boundary and in the middle of one."""
 
 import os

@@ -1,4 +1,4 @@
-"""Calibrating a new probe from simulated supply sweeps (issue 12, paper Fig. 3, Eqs. 9–10).
+"""Calibrating a new probe from simulated supply sweeps (paper Fig. 3, Eqs. 9–10).
 
 The data are independent of the calibration's model: the time-domain simulator integrates the
 equation of motion in the Pasco pair's exact field (driven into the housing stop, sensor

@@ -1,5 +1,5 @@
 """Long tables: the numeric fast path of the CSV reader, the stratified subsample, and that the
-subsample makes the same choices as every row (docs/model_lab.md, issue 15)."""
+subsample makes the same choices as every row (docs/model_lab.md)."""
 
 import numpy as np
 import pytest

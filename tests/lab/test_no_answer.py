@@ -1,5 +1,5 @@
 """When no catalog effect explains the residual, the lab says so, shows what the residual follows
-(covariates and products of two) and sketches the plugin (issue 11, Deliver 5, in part)."""
+(covariates and products of two) and sketches the plugin."""
 
 import numpy as np
 
@@ -40,8 +40,7 @@ def test_an_angle_pattern_that_changes_in_time_is_not_a_pile_of_catalog_effects(
     curvature's 3θ0 term is constant), the residual stays ≈ 100× its noise, and a raw-χ² BIC
     rewards parameters that shave a little off it (measured: gravity, then field curvature, BIC
     10225 → 10082 while χ²/dof rose 108 → 113). Judged against the residual's own scatter,
-    nothing is added; the lab says so, points at the product and sketches the plugin (issue 11,
-    Deliver 5)."""
+    nothing is added; the lab says so, points at the product and sketches the plugin."""
     sweep = synthetic.rotation_sweeps(15.0, 4)
     theta0 = sweep.pop("theta0_deg")
     t = sweep["t_s"]

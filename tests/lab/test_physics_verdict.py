@@ -1,4 +1,4 @@
-"""A model is `adequate` only when its physics is consistent too (issue 11, Deliver 3).
+"""A model is `adequate` only when its physics is consistent too.
 
 Statistically adequate residuals are not enough: an effect whose free fit lies more than 5σ
 from its physical value, or a generic correction in the model, is reported as what it is.

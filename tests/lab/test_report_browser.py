@@ -1,5 +1,5 @@
 """The lab's HTML report in a real browser: headless Chromium renders it, every image decodes,
-no console error, and a screenshot is saved (issue 11, Deliver 8).
+no console error, and a screenshot is saved.
 
 The report is that of a table like the demo's (the anti-Helmholtz scene: a gradient whose
 transverse components and the ring-down amplitude the published model leaves out), with the

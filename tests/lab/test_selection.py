@@ -1,5 +1,5 @@
 """Effects at their physical value, the stepwise selection that revisits its choices, and the
-live demo's anti-Helmholtz sweep on which greedy selection used to diagnose curvature."""
+live demo's anti-Helmholtz sweep, on which greedy forward selection diagnoses curvature."""
 
 import json
 import pathlib
@@ -35,7 +35,7 @@ def test_an_effect_at_physics_is_the_free_effect_at_its_physical_value():
 def test_the_demo_sweep_is_known_physics_not_curvature():
     """8 orientations × 2 ring-downs in the anti-Helmholtz scenario, from the 24° stop. The full
     physics at the reference (everything at strength 1, only f00 free) fits with χ²/dof 0.82;
-    greedy selection with free strengths added transverse_gradient (0.92) and field_curvature."""
+    greedy selection with free strengths adds transverse_gradient (0.92) and field_curvature."""
     probe = load_scenario("anti_helmholtz").probe
     table = load_table(DEMO)
     physics = [

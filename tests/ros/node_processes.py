@@ -73,10 +73,10 @@ def assert_stops_cleanly(process: subprocess.Popen) -> None:
     assert code == 0, log(process)
 
 
-# A goal is answered in milliseconds. Once in six fresh-clone suites a goal sent as soon as
-# the server was ready (the client had discovered it) was never answered, not even refused,
-# and the mapper logged no goal: the request or its answer was lost between the two
-# participants. Such a goal is sent again, as a new goal, a bounded number of times.
+# A goal is answered in milliseconds. Rarely (about once in six full suites) a goal sent as soon
+# as the server is ready (the client has discovered it) is never answered, not even refused, and
+# the mapper logs no goal: the request or its answer is lost between the two participants. Such
+# a goal is sent again, as a new goal, a bounded number of times.
 GOAL_ANSWER_S = 15.0
 GOAL_SENDS = 3
 

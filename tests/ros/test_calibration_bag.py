@@ -1,5 +1,5 @@
 """A calibration run on the simulated driver, recorded, gives the same constants offline
-(``mows calibrate BAG``) as the calibration action gave online (issue 12).
+(``mows calibrate BAG``) as the calibration action gave online.
 
 The graph is the real one: the driver (sim backend, the calibration bench's probe, recording),
 the estimator fitting its ring-downs and the calibrator stepping the supply. Offline, the bag's

@@ -1,4 +1,4 @@
-"""The calibrated f00's uncertainty in the map (issue 12): one error shared by every ring-down.
+"""The calibrated f00's uncertainty in the map: one error shared by every ring-down.
 
 A calibrated f00 off by δ shifts every measured Δf = f − f00 by −δ at once. The decomposition
 must carry that as one common error (mostly into Gs, the constant term), not as independent

@@ -164,7 +164,8 @@ def _start_swing(points, known: KnownConstants) -> tuple:
     high in strong opposing fields (up to +5° at −3.4 mT in the simulator), so the median, with
     its standard error from the median absolute deviation. A homogeneous sweep cannot tell the
     swing from β0: this measurement is what holds it, no assumption of where the drive left the
-    probe (the old prior, the stop ± 0.1°, sat 0.2° above the simulator's mean swing of 23.78°)."""
+    probe (a prior at the stop, 24° ± 0.1°, would sit 0.2° above the simulator's mean swing of
+    23.78° and bias β0)."""
     if known.start_swing_rad is not None:
         return known.start_swing_rad, known.start_swing_std_rad
     # a fit whose θmax is not determined (NaN) says nothing about the swing

@@ -1,4 +1,4 @@
-"""The measurement cycle from the physics of the probe rather than from habit (issue 14).
+"""The measurement cycle from the physics of the probe rather than from habit.
 
 Excitation. The coils' field b⊥·I, perpendicular to the moment, drives the magnet with the
 torque m·b⊥·I·sin(2πft). At resonance the swing grows linearly, θ = r·t·cos(2πft) with

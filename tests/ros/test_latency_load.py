@@ -3,7 +3,7 @@ its figures are reported, never asserted, since the machine is shared).
 
 The checks are what must hold whatever the machine's speed: the stream ran for the asked
 duration beside the load, the JointState loop published at most at its asked rate and was heard
-in another process, and every figure the README quotes is there."""
+in another process, and every figure docs/performance.md quotes is there."""
 
 import json
 

@@ -1,0 +1,74 @@
+"""The README shows what `make demo` prints today: its demo block has the lines and the format of
+a fresh demo's output, not its numbers (they move from run to run).
+
+The demo runs once, as `make demo` runs it (`mows-demo`), with a shorter sweep (6 orientations ×
+1 ring-down) that prints the same lines. The results table (header, the five components, the
+χ²/dof line) must match line for line in its words and in each row's width, so that its columns
+line up as they do; every other line the README shows must be a kind of line the demo prints."""
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]
+
+ROOT = Path(__file__).parents[2]
+NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+TABLE_HEADER = "first principles"
+TABLE_END = "χ²/dof: first principles"
+
+
+def readme_demo_lines() -> list[str]:
+    """The README's fenced block that holds the demo's results table."""
+    blocks = re.findall(r"```\n(.*?)```", (ROOT / "README.md").read_text(), flags=re.S)
+    return next(block for block in blocks if TABLE_END in block).splitlines()
+
+
+def table(lines: list[str]) -> list[str]:
+    start = next(i for i, line in enumerate(lines) if TABLE_HEADER in line and "published model" in line)
+    end = next(i for i, line in enumerate(lines) if TABLE_END in line)
+    return lines[start : end + 1]
+
+
+def words(line: str) -> str:
+    """A line with every number replaced by '#' and runs of blanks by one."""
+    return " ".join(NUMBER.sub("#", line).split())
+
+
+def kind(line: str) -> str:
+    """What a line is about: its indentation and first word after the ``[graph]`` prefix."""
+    match = re.match(r"(\[graph\]\s*)(\S*)", line)
+    return match.group(1) + NUMBER.sub("#", match.group(2).split(":")[0]) if match else line
+
+
+@pytest.fixture(scope="module")
+def demo_lines(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    run = subprocess.run(
+        [sys.executable, "-m", "mows_bringup.demo", "--angles", "6", "--repeats", "1", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=480,
+    )
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    return (run.stdout + run.stderr).splitlines()
+
+
+def test_the_readme_shows_a_demo_block_with_its_results_table():
+    shown = table(readme_demo_lines())
+    assert len(shown) == 7  # header, Bx, By, Gxx, Gxy, Gyy, χ²/dof
+
+
+def test_the_readme_results_table_has_the_demo_s_lines_and_format(demo_lines):
+    shown, fresh = table(readme_demo_lines()), table(demo_lines)
+    assert [words(line) for line in shown] == [words(line) for line in fresh]
+    # The header and the five rows are fixed-width columns: the same width means they line up.
+    assert [len(line) for line in shown[:-1]] == [len(line) for line in fresh[:-1]]
+
+
+def test_every_line_the_readme_shows_is_a_line_the_demo_prints(demo_lines):
+    printed = {kind(line) for line in demo_lines}
+    assert [line for line in readme_demo_lines() if kind(line) not in printed] == []

@@ -20,8 +20,8 @@ def test_the_simulated_bench_passes_every_check(capsys):
     assert lines[0].startswith("card Dev1 (paper_pcie6363), supply Rohde&Schwarz,NGM202")
     assert [line.split(":")[0] for line in lines[1:]] == [
         "ok      fluxgates at rest",
-        "ok      coil 1 at 0.1 A, 112.5 Hz, 0.2 s",
-        "ok      coil 2 at 0.1 A, 112.5 Hz, 0.2 s",
+        "ok      coil 1 at 0.02 A, 300 Hz, 0.2 s",
+        "ok      coil 2 at 0.02 A, 300 Hz, 0.2 s",
         "ok      field supply",
     ]
     assert "set 0.1000 A, read back 0.1000 A" in lines[-1] and lines[-1].endswith("set 0 A, read back 0.0000 A")

@@ -37,8 +37,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--supply-file", default=str(PAPER_SUPPLY_FILE), help="the supply's YAML (commands, limits)")
     parser.add_argument("--supply-resource", default="", help="the supply's VISA address ('' : no supply check)")
     parser.add_argument("--visa-library", default="@py", help="PyVISA backend (@py: pyvisa-py, no vendor VISA)")
-    parser.add_argument("--coil-current-a", type=float, default=0.1, help="the safe current of each coil's pulse, A")
-    parser.add_argument("--frequency-hz", type=float, default=112.5, help="the pulses' frequency, Hz")
+    parser.add_argument("--coil-current-a", type=float, default=0.02, help="the safe current of each coil's pulse, A")
+    parser.add_argument(
+        "--frequency-hz", type=float, default=300.0, help="the pulses' frequency, Hz (away from the resonance)"
+    )
     parser.add_argument("--supply-step-a", type=float, default=0.1, help="the supply's test current, A")
     parser.add_argument("--simulate", action="store_true", help="check the simulated bench instead")
 

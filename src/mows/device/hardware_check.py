@@ -56,8 +56,8 @@ class HardwareCheck:
     def __init__(
         self,
         backend,
-        coil_current_a=0.1,
-        frequency_hz=112.5,
+        coil_current_a=0.02,
+        frequency_hz=300.0,
         pulse_s=0.2,
         supply_step_a=0.1,
         supply_resolution_a=1e-4,
@@ -104,9 +104,13 @@ class HardwareCheck:
         samples = self._read_span(on.applied_sample_index, off.applied_sample_index)
         seen = lock_in_t(samples, self.frequency_hz, self.info.sample_rate_hz)
         floor = lock_in_noise_t(noise_t, len(samples))
+        clipped = np.sum(np.abs(samples) >= self.info.range_t, axis=0)
         self._read(0.5)  # the probe's ring-down fades before the next check
         saw = ", ".join(
-            f"{name} {1e9 * s:.4g} nT (noise {1e9 * f:.2g} nT)" for name, s, f in zip(self.names, seen, floor)
+            f"{name} {1e9 * s:.4g} nT (noise {1e9 * f:.2g} nT"
+            + (f"; {c} samples saturated: clipped, lower the current" if c else "")
+            + ")"
+            for name, s, f, c in zip(self.names, seen, floor, clipped)
         )
         return CheckLine(
             f"coil {k + 1} at {self.coil_current_a:g} A, {self.frequency_hz:g} Hz, {self.pulse_s:g} s",

@@ -22,13 +22,16 @@ class BenchRig:
     session: object
     scenario: object  # lends the probe and the fluxgate pair to the fits
     turn: Callable[[float], None] = lambda theta0_rad: None
+    manual: bool = False  # the sweep asks the operator to turn the stage (orientation: manual)
 
     def __post_init__(self):
         self.assembler = SegmentAssembler(5.0)
 
-    def cycle(self, theta0_rad: float, repeats: int) -> tuple[CycleAnswer, list]:
-        """One cycle's answer and its measurement fits (RingdownFit), as the estimator makes them."""
-        self.turn(theta0_rad)
+    def cycle(self, theta0_rad: float, repeats: int, turned: bool = False) -> tuple[CycleAnswer, list]:
+        """One cycle's answer and its measurement fits (RingdownFit), as the estimator makes them;
+        the operator turns the stage first unless it is ``turned``."""
+        if not turned:
+            self.turn(theta0_rad)
         done, fits = [], []
         self.session.start_cycle(CycleRequest(theta0_rad, repeats=repeats), done.append)
         for _ in range(MAX_STEPS):
@@ -70,14 +73,18 @@ class BenchRig:
         """A rotation sweep through the core's runner; its outcome (with the decomposition)."""
         runner = SweepRunner()
         probe = self.scenario.probe
-        runner.start(SweepGoal(tuple(angles_rad), repeats), SweepSettings(), probe)
+        runner.start(SweepGoal(tuple(angles_rad), repeats), SweepSettings(manual_orientation=self.manual), probe)
         step = runner.begin()
         while step.finished is None:
+            if step.turn is not None:
+                self.turn(step.turn)
+                step = runner.on_turned()
+                continue
             if step.decompose is not None:
                 step = runner.on_decomposed(step.decompose())
                 continue
             assert step.run_cycle is not None, "the runner waits for fits that the cycle said it made"
-            answer, fits = self.cycle(step.run_cycle.theta0_rad, step.run_cycle.repeats)
+            answer, fits = self.cycle(step.run_cycle.theta0_rad, step.run_cycle.repeats, turned=self.manual)
             for fit in fits:
                 point = (
                     SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz) if fit.ok else None

@@ -50,7 +50,7 @@ def daqmx_rig(scenario):
         supply_current_a=lambda: properties["current"].get_value() * properties["output"].get_value(),
     )
     backend = open_daqmx(load_daq_device(), CAP, supply, daqmx=bench.module())
-    return BenchRig(session(backend, scenario), scenario, bench.turn_probe), bench.device
+    return BenchRig(session(backend, scenario), scenario, bench.turn_probe, manual=True), bench.device
 
 
 def session(backend, scenario):

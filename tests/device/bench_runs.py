@@ -10,7 +10,7 @@ from collections.abc import Callable
 from mows.device.phases import CycleRequest, Phase
 from mows.estimate.ringdown import SETTLE_S, FitOptions
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
-from mows.sweep.calibration_run import CalibrationRun
+from mows.sweep.calibration_run import CalibrationRun, Turn
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, SweepSettings
 
@@ -95,7 +95,7 @@ class BenchRig:
 
     def calibrate(self, plan):
         """A calibration schedule through :class:`CalibrationRun`; its outcome."""
-        run = CalibrationRun(plan)
+        run = CalibrationRun(plan, manual_orientation=self.manual)
         pending = [run.start()]
         while pending:
             step = pending.pop(0)
@@ -104,11 +104,14 @@ class BenchRig:
             if step.outcome is not None:
                 return step.outcome
             for action in step.actions:
-                if hasattr(action, "current_a"):
+                if isinstance(action, Turn):
+                    self.turn(action.theta0_rad)
+                    pending.append(run.on_turned())
+                elif hasattr(action, "current_a"):
                     result = self.supply(action.current_a)
                     pending.append(run.on_supply(result.accepted, result.reason))
                 else:
-                    answer, fits = self.cycle(action.theta0_rad, action.repeats)
+                    answer, fits = self.cycle(action.theta0_rad, action.repeats, turned=self.manual)
                     pending += [run.on_fit(answer.cycle_id, fit) for fit in fits]
                     pending.append(run.on_cycle(answer))
         raise AssertionError("the calibration ended without an outcome")

@@ -8,7 +8,9 @@ back in tesla, saturated at the input range's end; the supply is set, ramped wit
 limit and read back, its refusals reported; a missing runtime or card is one clear line.
 """
 
+import dataclasses
 import math
+import time
 
 import numpy as np
 import pytest
@@ -36,6 +38,8 @@ from mows.sim.simulator import SimulatedDevice
 
 FAST = CycleSettings(excite_s=0.5, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, settle_s=0.1)
 MAX_POLLS = 10_000  # bound for a cycle that never ends (a bug), not a timing
+# The tests fit tuning ring-downs between reads on a busy machine: the watchdog is for a host that hung.
+WATCHDOG_S = 30.0
 
 
 def simulated_supply():
@@ -48,11 +52,12 @@ def supply_state(supply) -> tuple[float, int]:
     return properties["current"].get_value(), properties["output"].get_value()
 
 
-def on_bench(scenario="paper_largest_spacing", supply=None, device=None):
+def on_bench(scenario="paper_largest_spacing", supply=None, watchdog_s=WATCHDOG_S):
     bench = SimulatedBench(SimulatedDevice(load_scenario(scenario)))
     if supply is not None:
         bench.supply_current_a = lambda: supply_state(supply)[0] * supply_state(supply)[1]
-    backend = open_daqmx(device or load_daq_device(), CurrentCap(10.0), supply, daqmx=bench.module())
+    device = dataclasses.replace(load_daq_device(), watchdog_s=watchdog_s)
+    backend = open_daqmx(device, CurrentCap(10.0), supply, daqmx=bench.module())
     return bench, backend
 
 
@@ -297,3 +302,22 @@ def test_without_a_supply_a_field_current_is_refused_with_the_reason():
     (result,) = backend.poll(0.0)[:1]
     assert not result.accepted and "no field supply" in result.reason
     backend.close()
+
+
+def test_a_host_that_stops_reading_has_the_coils_and_the_supply_switched_off():
+    supply = simulated_supply()
+    bench, backend = on_bench("calibration", supply, watchdog_s=0.2)
+    ao = bench.tasks[1]
+    backend.send(FieldCurrentCommand(1, 0, 0.3))
+    while backend.supply_schedule.ramping:
+        backend.poll(0.0)
+    assert supply_state(supply)[0] == pytest.approx(0.3)
+    deadline = time.monotonic() + 30.0  # a bound for a watchdog that never trips, not a timing
+    while supply_state(supply)[0] != 0.0 and time.monotonic() < deadline:
+        time.sleep(0.05)  # the host is silent: no poll
+    assert supply_state(supply)[0] == 0.0 and not ao.running
+    (link,) = backend.poll(0.0)
+    assert not link.up and link.reason.startswith("watchdog: no read for")
+    assert backend.poll(0.0) == []  # told once
+    backend.close()
+    assert supply_state(supply) == (0.0, 0)

@@ -9,6 +9,7 @@ the Helmholtz setup with the Pasco pair anti-parallel on the supply at 0.5 A (Gx
 the Earth's field); six orientations, two ring-downs each.
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -49,7 +50,9 @@ def daqmx_rig(scenario):
         SimulatedDevice(scenario),
         supply_current_a=lambda: properties["current"].get_value() * properties["output"].get_value(),
     )
-    backend = open_daqmx(load_daq_device(), CAP, supply, daqmx=bench.module())
+    # The rig decomposes between reads (the driver's stream never waits for the mapper): no watchdog.
+    device = dataclasses.replace(load_daq_device(), watchdog_s=3600.0)
+    backend = open_daqmx(device, CAP, supply, daqmx=bench.module())
     return BenchRig(session(backend, scenario), scenario, bench.turn_probe, manual=True), bench.device
 
 

@@ -79,6 +79,7 @@ class DaqDevice:
     output_lead_s: float = 0.1  # the outputs are written this far ahead of the newest input sample
     read_timeout_s: float = 1.0  # a read that waits longer than this is a fault of the card
     current_cap_a: float = 10.0  # the amplifiers' limit (Methods: up to 10 A)
+    watchdog_s: float = 1.0  # a host that stops reading this long: coils and supply off
     name: str = "daq"
 
     def __post_init__(self):
@@ -87,7 +88,7 @@ class DaqDevice:
                 f"{self.name}: the bench has 2 fluxgate inputs and 2 coil outputs, "
                 f"got {len(self.inputs)} and {len(self.outputs)}"
             )
-        for name in ("amplifier_v_per_a", "sample_rate_hz", "block_s", "output_lead_s", "read_timeout_s"):
+        for name in ("amplifier_v_per_a", "sample_rate_hz", "block_s", "output_lead_s", "read_timeout_s", "watchdog_s"):
             positive(f"{self.name}: {name}", getattr(self, name))
         CurrentCap(self.current_cap_a)
         if self.output_lead_s <= self.block_s:
@@ -169,6 +170,7 @@ def _device(
     output_lead_s=0.1,
     read_timeout_s=1.0,
     current_cap_a=10.0,
+    watchdog_s=1.0,
     name="daq",
 ) -> DaqDevice:
     if not isinstance(inputs, list) or not isinstance(outputs, list):
@@ -187,6 +189,7 @@ def _device(
         float(output_lead_s),
         float(read_timeout_s),
         float(current_cap_a),
+        float(watchdog_s),
         str(name),
     )
 

@@ -10,6 +10,10 @@ command for a sample beyond what is written applies exactly there. The stage is 
 (``orientation: manual``): an orientation command is the operator's turn, confirmed before the
 cycle was asked for, and is accepted at once.
 
+A watchdog thread stands in for the serial device's: a host that stops reading for
+``watchdog_s`` (a hung driver) has the outputs stopped (they idle at 0 V: the coils go off) and
+the supply ramped to zero within its slew limit; the next read reports the link down.
+
 ``nidaqmx`` is imported when a backend is made, not before: without NI's runtime, the package or
 the card, :func:`open_daqmx` says so in one line (:class:`DeviceUnavailable`).
 """
@@ -19,6 +23,7 @@ from __future__ import annotations
 import importlib
 import math
 import threading
+import time
 
 import numpy as np
 
@@ -36,6 +41,7 @@ from mows.device.interface import (
 from mows.device.payloads import DeviceInfo
 from mows.device.scpi import ScpiSupply, SupplyError, SupplySchedule
 from mows.physics.coils import CurrentCap
+from mows.physics.supply import RAMP_STEP_S
 from mows.records.samples import SampleBlock
 
 INPUT_BUFFER_S = 10.0  # the card's input buffer: a host late by less than this loses nothing
@@ -85,6 +91,7 @@ class DaqmxBackend(Backend):
         self.next_index = 0  # the sample after the newest read
         self.stage_theta0_rad = math.nan  # where the operator turned the probe
         self.fault = ""  # why the card stopped, once it did
+        self._fault_told = False  # the LinkEvent that says so has been handed out
         self.supply_readback_a = math.nan
         self._results: list[CommandResult] = []
         self._lock = threading.Lock()
@@ -95,6 +102,10 @@ class DaqmxBackend(Backend):
         self._write_ahead()  # the outputs start with data, before their trigger
         self._ao.start()
         self._ai.start()
+        self._last_poll_s = time.monotonic()
+        self._stop = threading.Event()
+        self._watchdog = threading.Thread(target=self._watch, name="mows-daqmx-watchdog", daemon=True)
+        self._watchdog.start()
 
     def _tasks(self):
         constants, device = self.daqmx.constants, self.device
@@ -143,10 +154,11 @@ class DaqmxBackend(Backend):
 
     def poll(self, timeout_s: float) -> list:
         with self._lock:
+            self._last_poll_s = time.monotonic()
             items: list = list(self._results)
             self._results = []
             if self.fault:
-                return items
+                return items + self._fault_event()
             try:
                 self._write_ahead()
                 self._reader.read_many_sample(
@@ -156,7 +168,7 @@ class DaqmxBackend(Backend):
                 )
             except self.daqmx.errors.DaqError as error:
                 self.fault = f"the card stopped: {_first_line(error)}"
-                return items + [LinkEvent(False, self.fault)]
+                return items + self._fault_event()
             first = self.next_index
             self.next_index += self.device.block_samples
             field, saturated = self.device.field_t(self._buffer)
@@ -177,8 +189,37 @@ class DaqmxBackend(Backend):
         except SupplyError as error:
             self.fault = f"the supply failed: {error}"
             self.waveforms.off_now()
-            return [LinkEvent(False, self.fault)]
+            return self._fault_event()
         return []
+
+    def _fault_event(self) -> list[LinkEvent]:
+        """The link down, once: the driver fails a running cycle on it."""
+        told, self._fault_told = self._fault_told, True
+        return [] if told else [LinkEvent(False, self.fault)]
+
+    def _watch(self) -> None:
+        while not self._stop.wait(RAMP_STEP_S):
+            with self._lock:
+                silent_s = time.monotonic() - self._last_poll_s
+                if not self.fault and silent_s > self.device.watchdog_s:
+                    self._trip(f"watchdog: no read for {silent_s:.1f} s: coils off, supply ramped to zero")
+
+    def _trip(self, reason: str) -> None:
+        """Outputs stopped (they idle at 0 V), the supply ramped down in host time."""
+        self.fault = reason
+        try:
+            self._ao.stop()
+        except self.daqmx.errors.DaqError:
+            pass  # a card that stopped by itself has its outputs idle already
+        if self.supply is None or self.supply_schedule is None:
+            return
+        try:
+            for _, current_a in self.supply.config.limits.ramp(self.supply_schedule.current_a, 0.0):
+                self.supply.set_current_a(current_a)
+                self.supply_schedule.current_a = current_a
+                time.sleep(RAMP_STEP_S)
+        except SupplyError as error:
+            self.fault += f"; THE SUPPLY DID NOT RAMP TO ZERO: {error}"
 
     def send(self, command: Command) -> None:
         with self._lock:
@@ -229,6 +270,8 @@ class DaqmxBackend(Backend):
     def close(self) -> None:
         """Coils off, the supply ramped to zero while the card streams on, then the tasks and the
         supply released."""
+        self._stop.set()
+        self._watchdog.join()
         self.coils_off_now()
         self.supply_to_zero_now()
         while self.supply_schedule is not None and self.supply_schedule.ramping and not self.fault:

@@ -6,6 +6,7 @@ import dataclasses
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sim.scenario import load_scenario
 from mows.sweep.calibration_schedule import PAPER_CURRENTS_A, scenario_wirings
+from mows_ros import operator
 from mows_ros.params import ParamSpec
 from mows_ros.probe import probe_file_problem
 
@@ -52,16 +53,7 @@ PARAMETERS = (
     ParamSpec("cycle_timeout_s", 300.0, "longest wait for the driver's cycle, s", range=(1.0, 3600.0)),
     ParamSpec("supply_timeout_s", 60.0, "longest wait for the supply to reach a current, s", range=(1.0, 3600.0)),
     ParamSpec("fit_timeout_s", 10.0, "longest wait for the fits of a finished cycle, s", range=(0.1, 600.0)),
-    ParamSpec(
-        "orientation",
-        "stage",
-        "how the probe is turned: stage (the driver's stage turns it) or manual (a stage without a motor: "
-        "the action's feedback asks the operator to turn it, ~/confirm_orientation continues)",
-        choices=("stage", "manual"),
-    ),
-    ParamSpec(
-        "confirm_timeout_s", 600.0, "orientation manual: longest wait for the operator's turn, s", range=(1.0, 86400.0)
-    ),
+    *operator.PARAMETERS,
 )
 
 

@@ -3,6 +3,7 @@
 from mows.lab import reference_at
 from mows.sweep.decompose import MODELS
 from mows.sweep.runner import SweepSettings
+from mows_ros import operator
 from mows_ros.params import ParamSpec
 from mows_ros.probe import PROBE_FILE
 
@@ -37,16 +38,7 @@ PARAMETERS = (
         "repeat_s", 0.82, "adaptive sweeps: device time of one ring-down with its kick and gap, s", range=(0.01, 60.0)
     ),
     ParamSpec("turn_s", 0.5, "adaptive sweeps: device time to turn the probe and let it settle, s", range=(0.0, 60.0)),
-    ParamSpec(
-        "orientation",
-        "stage",
-        "how the probe is turned: stage (the driver's stage turns it) or manual (a stage without a motor: "
-        "the action's feedback asks the operator to turn it, ~/confirm_orientation continues)",
-        choices=("stage", "manual"),
-    ),
-    ParamSpec(
-        "confirm_timeout_s", 600.0, "orientation manual: longest wait for the operator's turn, s", range=(1.0, 86400.0)
-    ),
+    *operator.PARAMETERS,
 )
 
 

@@ -8,6 +8,20 @@ from collections.abc import Callable
 from std_srvs.srv import Trigger
 
 from mows_ros.awaitables import until
+from mows_ros.params import ParamSpec
+
+PARAMETERS = (  # of every node whose goals turn the probe
+    ParamSpec(
+        "orientation",
+        "stage",
+        "how the probe is turned: stage (the driver's stage turns it) or manual (a stage without a motor: "
+        "the action's feedback asks the operator to turn it, ~/confirm_orientation continues)",
+        choices=("stage", "manual"),
+    ),
+    ParamSpec(
+        "confirm_timeout_s", 600.0, "orientation manual: longest wait for the operator's turn, s", range=(1.0, 86400.0)
+    ),
+)
 
 
 class OperatorTurns:

@@ -26,10 +26,9 @@ import math
 import pathlib
 
 import numpy as np
-import yaml
 
 from mows.physics.coils import CurrentCap
-from mows.physics.schema import check_keys, positive
+from mows.physics.schema import build_from_yaml, check_keys, positive
 
 HARDWARE_DIR = pathlib.Path(__file__).parent / "hardware"
 PAPER_DEVICE_FILE = HARDWARE_DIR / "ni_pcie6363.yaml"
@@ -150,15 +149,7 @@ def _lsb_v(range_v: float) -> float:
 
 def load_daq_device(path=PAPER_DEVICE_FILE) -> DaqDevice:
     """The device YAML at ``path`` (docs/hardware.md); ValueError naming the file and the key."""
-    path = pathlib.Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-        if not isinstance(data, dict):
-            raise ValueError(f"expected a mapping, got {data!r}")
-        check_keys("device", data, _device)
-        return _device(**data)
-    except (OSError, yaml.YAMLError, ValueError, TypeError) as error:
-        raise ValueError(f"{path}: {error}") from None
+    return build_from_yaml(path, "device", _device)
 
 
 def _device(

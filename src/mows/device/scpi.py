@@ -13,14 +13,11 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import math
-import pathlib
 
-import yaml
-
-from mows.physics.schema import check_keys
+from mows.device.daq import HARDWARE_DIR
+from mows.physics.schema import build_from_yaml, check_keys
 from mows.physics.supply import SupplyLimits
 
-HARDWARE_DIR = pathlib.Path(__file__).parent / "hardware"
 PAPER_SUPPLY_FILE = HARDWARE_DIR / "rs_ngm202.yaml"
 SIMULATED_SUPPLY_FILE = HARDWARE_DIR / "ngm202_pyvisa_sim.yaml"  # the pyvisa-sim instrument
 SIMULATED_RESOURCE = "TCPIP0::192.168.0.20::inst0::INSTR"  # its address in that file
@@ -61,15 +58,7 @@ class ScpiSupplyConfig:
 
 def load_supply_file(path=PAPER_SUPPLY_FILE) -> ScpiSupplyConfig:
     """The supply YAML at ``path``; ValueError naming the file and the key."""
-    path = pathlib.Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-        if not isinstance(data, dict):
-            raise ValueError(f"expected a mapping, got {data!r}")
-        check_keys("supply", data, _supply_config)
-        return _supply_config(**data)
-    except (OSError, yaml.YAMLError, ValueError, TypeError) as error:
-        raise ValueError(f"{path}: {error}") from None
+    return build_from_yaml(path, "supply", _supply_config)
 
 
 def _supply_config(

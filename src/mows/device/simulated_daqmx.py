@@ -65,7 +65,8 @@ class SimulatedBench:
         self.tasks: list[Task] = []
         self.drives: list[tuple[int, tuple, float]] = []  # (on sample, amplitudes A, Hz): what the coils got
         self.offs: list[int] = []  # the samples the coils went off at
-        self._ao = np.zeros((len(self.outputs), 0))  # every output sample written, by sample index
+        self._ao = np.zeros((len(self.outputs), 0))  # the output samples written and not yet generated
+        self._ao_first = 0  # the sample index of self._ao's first column
         self._drive: tuple[int, np.ndarray, float] | None = None  # the present drive (on, volts amplitudes, ω)
 
     def module(self) -> types.SimpleNamespace:
@@ -86,11 +87,18 @@ class SimulatedBench:
 
     # --- the outputs -------------------------------------------------------------------------
     def write(self, volts: np.ndarray) -> None:
-        self._ao = np.concatenate([self._ao, volts], axis=1)
+        # Only what the device has not generated is kept (the drive is read back from it).
+        keep = max(0, self.device.sample_index - 1 - self._ao_first)
+        self._ao = np.concatenate([self._ao[:, keep:], volts], axis=1)
+        self._ao_first += keep
 
     @property
     def written(self) -> int:
-        return self._ao.shape[1]
+        return self._ao_first + self._ao.shape[1]
+
+    def _volts(self, start: int, end: int) -> np.ndarray:
+        """Output samples [start, end) by sample index."""
+        return self._ao[:, start - self._ao_first : end - self._ao_first]
 
     def _changes(self, start: int, end: int) -> list[tuple[int, tuple | None, float]]:
         """The coils' changes in samples [start, end): (sample, amplitudes in A or None for off, Hz)."""
@@ -98,7 +106,7 @@ class SimulatedBench:
         i = start
         while i < end:
             if self._drive is None:
-                nonzero = np.flatnonzero(np.any(self._ao[:, i + 1 : end + 1] != 0.0, axis=0))
+                nonzero = np.flatnonzero(np.any(self._volts(i + 1, end + 1) != 0.0, axis=0))
                 if not nonzero.size:
                     return changes
                 on = i + int(nonzero[0])  # sin(0) = 0 at the switch-on sample, not zero at the next
@@ -108,7 +116,7 @@ class SimulatedBench:
                 on, amplitude_v, omega = self._drive
                 k = np.arange(i, end)
                 expected = np.outer(amplitude_v, np.sin(omega * (k - on)))
-                actual = self._ao[:, i:end]
+                actual = self._volts(i, end)
                 off = np.flatnonzero(np.all(actual == 0.0, axis=0) & np.any(expected != 0.0, axis=0))
                 stop = i + int(off[0]) if off.size else end
                 if np.max(np.abs(actual[:, : stop - i] - expected[:, : stop - i]), initial=0.0) > DRIVE_TOLERANCE_V:
@@ -121,7 +129,7 @@ class SimulatedBench:
         return changes
 
     def _start_drive(self, on: int) -> tuple[int, tuple, float]:
-        first, second = self._ao[:, on + 1], self._ao[:, on + 2]
+        first, second = self._volts(on + 1, on + 2)[:, 0], self._volts(on + 2, on + 3)[:, 0]
         k = int(np.argmax(np.abs(first)))
         omega = math.acos(float(np.clip(second[k] / (2.0 * first[k]), -1.0, 1.0)))
         amplitude_v = first / math.sin(omega)

@@ -140,6 +140,7 @@ def test_a_card_that_is_not_there_is_one_line_naming_it():
         open_daqmx(load_daq_device(), CurrentCap(10.0), daqmx=bench.module())
     assert str(error.value).startswith("backend nidaqmx: card 'Dev1': Device identifier is invalid")
     assert "\n" not in str(error.value)
+    assert all(task.closed for task in bench.tasks)  # nothing is left open on the card
 
 
 def test_the_tasks_are_made_as_the_api_requires():

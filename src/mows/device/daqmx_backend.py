@@ -108,9 +108,19 @@ class DaqmxBackend(Backend):
         self._watchdog.start()
 
     def _tasks(self):
-        constants, device = self.daqmx.constants, self.device
+        """The input and output tasks, configured (both closed again if the card refuses either)."""
         ai = self.daqmx.Task("mows_fluxgates")
         ao = self.daqmx.Task("mows_coils")
+        try:
+            self._configure(ai, ao)
+        except BaseException:
+            ai.close()
+            ao.close()
+            raise
+        return ai, ao
+
+    def _configure(self, ai, ao) -> None:
+        constants, device = self.daqmx.constants, self.device
         for channel in device.inputs:
             ai.ai_channels.add_ai_voltage_chan(
                 channel.physical_channel,
@@ -123,10 +133,8 @@ class DaqmxBackend(Backend):
             sample_mode=constants.AcquisitionType.CONTINUOUS,
             samps_per_chan=round(INPUT_BUFFER_S * device.sample_rate_hz),
         )
-        for channel in device.outputs:
-            ao.ao_channels.add_ao_voltage_chan(
-                channel.physical_channel, min_val=-channel.range_v, max_val=channel.range_v
-            )
+        for output in device.outputs:
+            ao.ao_channels.add_ao_voltage_chan(output.physical_channel, min_val=-output.range_v, max_val=output.range_v)
         # When the host stops writing the card underflows and stops: the coils go to zero, not stay on.
         ao.ao_channels.all.ao_idle_output_behavior = constants.AOIdleOutputBehavior.ZERO_VOLTS
         ao.timing.cfg_samp_clk_timing(
@@ -136,7 +144,6 @@ class DaqmxBackend(Backend):
         )
         ao.triggers.start_trigger.cfg_dig_edge_start_trig(device.start_trigger)
         ao.out_stream.regen_mode = constants.RegenerationMode.DONT_ALLOW_REGENERATION
-        return ai, ao
 
     @property
     def info(self) -> DeviceInfo:

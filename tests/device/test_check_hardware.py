@@ -52,3 +52,23 @@ def test_the_lock_in_reads_a_sinusoid_and_ignores_others():
     assert seen[1] < 5e-9 / (np.pi * 62.5 * 0.195)
     with pytest.raises(ValueError, match="no whole period"):
         lock_in_t(x[:100], 112.5, 20_000.0)
+
+
+def test_without_the_card_the_supply_is_switched_off_again(monkeypatch, capsys):
+    closed = []
+    real_open = open_scpi_supply
+
+    def opened(*args):
+        supply = real_open(SIMULATED_RESOURCE, load_supply_file(), f"{SIMULATED_SUPPLY_FILE}@sim")
+        closed.append(supply)
+        return supply
+
+    def no_card(*args):
+        raise OSError("no card")
+
+    monkeypatch.setattr("mows.cli.check_hardware.open_scpi_supply", opened)
+    monkeypatch.setattr("mows.cli.check_hardware.open_daqmx", no_card)
+    assert main(["check-hardware", "--supply-resource", "TCPIP0::1.2.3.4::inst0::INSTR"]) == 2
+    assert "mows check-hardware: error: no card" in capsys.readouterr().err
+    properties = closed[0].resource.visalib.devices[SIMULATED_RESOURCE]._properties
+    assert (properties["current"].get_value(), properties["output"].get_value()) == (0.0, 0)

@@ -58,7 +58,12 @@ def run(args) -> int:
         daqmx = simulated_bench(device, supply).module()
     else:
         supply = open_scpi_supply(args.supply_resource, config, args.visa_library) if args.supply_resource else None
-    backend = open_daqmx(device, cap, supply, daqmx)
+    try:
+        backend = open_daqmx(device, cap, supply, daqmx)
+    except BaseException:
+        if supply is not None:  # opened and switched on: off again before the error is told
+            supply.close()
+        raise
     try:
         print(f"card {device.device_name} ({device.name}), supply {supply.identity if supply else 'none'}")
         check = HardwareCheck(

@@ -8,12 +8,15 @@ orientation at each current (``/mows/driver/run_cycle``), collects that cycle's 
 supply back to zero before the result is returned. With the homogeneous wiring's points it fits
 the constants (:class:`mows.sweep.calibration_run.ProbeCalibrator`) and writes the probe file
 that the estimator and the mapper load by ``probe_file``; gradient points of an earlier goal
-(``wiring: gradient``) add the lever check.
+(``wiring: gradient``) add the lever check. With ``orientation`` manual (a stage without a
+motor) a cycle at a new orientation waits for the operator: the feedback's message says where to
+turn the probe, ``~/confirm_orientation`` (std_srvs/Trigger) says it is done.
 
 The node translates only; it runs on one thread and awaits the driver's answers as coroutines.
 """
 
 import datetime
+import math
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import CalibrateProbe
@@ -23,7 +26,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 
 from mows.estimate.probe_calibration import CalibrationError
 from mows.sim.scenario import load_scenario
-from mows.sweep.calibration_run import CalibrationRun, ProbeCalibrator, goal_plan
+from mows.sweep.calibration_run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
 from mows.sweep.calibration_schedule import RunCycle as Cycle
 from mows_calibrator.messages import calibrated, feedback_msg, fit_of, result_msg, supply_answer
 from mows_calibrator.parameters import PARAMETERS, bench_of
@@ -31,6 +34,7 @@ from mows_ros.awaitables import call
 from mows_ros.cycles import DriverCycles
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
+from mows_ros.operator import OperatorTurns
 from mows_ros.params import parameter_values
 from mows_ros.process import run_node
 
@@ -53,6 +57,11 @@ class CalibratorNode(MowsNode):
             goal_callback=self._accept,
             cancel_callback=lambda _: CancelResponse.ACCEPT,
             callback_group=group,
+        )
+        self._operator = OperatorTurns(
+            self,
+            "mows/calibrator/confirm_orientation",
+            lambda: self._calibrator.run and self._calibrator.run.turn_awaited,
         )
 
     def _param(self, name):
@@ -77,7 +86,8 @@ class CalibratorNode(MowsNode):
             return GoalResponse.REJECT
         try:
             homogeneous = load_scenario(self._param("scenario")).supply.name
-            self._calibrator.accept(goal_plan(goal, homogeneous, self._param("currents_a")))
+            plan = goal_plan(goal, homogeneous, self._param("currents_a"))
+            self._calibrator.accept(plan, self._param("orientation") == "manual")
         except ValueError as error:
             self.get_logger().warning(f"calibration goal refused: {error}")
             return GoalResponse.REJECT
@@ -93,13 +103,18 @@ class CalibratorNode(MowsNode):
                     goal_handle.publish_feedback(feedback_msg(feedback))
                 if goal_handle.is_cancel_requested:
                     step = run.cancel("cancelled by the client") or step
-                step = await self._act(run, step)
+                step = await self._act(run, step, lambda: goal_handle.is_cancel_requested)
             return self._finish(goal_handle, step.outcome)
         finally:
             self._calibrator.release()
 
-    async def _act(self, run: CalibrationRun, step):
+    async def _act(self, run: CalibrationRun, step, cancelled):
         (action,) = step.actions
+        if isinstance(action, Turn):
+            timeout_s = self._param("confirm_timeout_s")
+            if await self._operator.confirmed(timeout_s, cancelled):
+                return step if cancelled() else run.on_turned()  # a cancel is taken at the loop's top
+            return run.cancel(f"no confirmation of θ0 = {math.degrees(action.theta0_rad):g}° within {timeout_s:g} s")
         if isinstance(action, Cycle):
             answered = run.on_cycle(await self._driver.run(action, self._param("cycle_timeout_s")))
             return answered or await self._driver.fits(self._param("fit_timeout_s"), run.fits_time_up)

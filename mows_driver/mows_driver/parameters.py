@@ -1,10 +1,14 @@
 """The driver's parameter table, the checks across its parameters, and the cycle settings and
 device backend it makes of them."""
 
+import dataclasses
 import math
 
 from mows.device.bag_backend import BagBackend
+from mows.device.daq import PAPER_DEVICE_FILE, load_daq_device
+from mows.device.daqmx_backend import open_daqmx
 from mows.device.phases import CycleSettings
+from mows.device.scpi import PAPER_SUPPLY_FILE, load_supply_file, open_scpi_supply
 from mows.device.serial_backend import SerialBackend
 from mows.device.serial_link import DEFAULT_BAUD, SerialLink
 from mows.device.session import SessionConfig
@@ -23,8 +27,9 @@ PARAMETERS = (
         "backend",
         "sim",
         "where magnetometer blocks come from: sim (the simulator), serial (the device on "
-        "a serial port), bag (a recorded rosbag2 MCAP bag); fixed at start-up",
-        choices=("sim", "serial", "bag"),
+        "a serial port), bag (a recorded rosbag2 MCAP bag), nidaqmx (the paper's bench on an NI card, "
+        "docs/hardware.md); fixed at start-up",
+        choices=("sim", "serial", "bag", "nidaqmx"),
         read_only=True,
     ),
     ParamSpec(
@@ -58,6 +63,39 @@ PARAMETERS = (
         0,
         "backend bag: start the replay once /mows/raw has this many subscribers",
         range=(0, 100),
+        read_only=True,
+    ),
+    ParamSpec(
+        "daq_device_file",
+        "",
+        "backend nidaqmx: the card's device YAML (channels, ranges, gains); '' the paper's PCIe-6363 wiring; "
+        "fixed at start-up",
+        read_only=True,
+    ),
+    ParamSpec(
+        "supply",
+        "device",
+        "the static-field supply: device (the backend's own: sim, serial), scpi (a SCPI supply through PyVISA, "
+        "with backend nidaqmx), none; fixed at start-up",
+        choices=("device", "scpi", "none"),
+        read_only=True,
+    ),
+    ParamSpec(
+        "supply_file",
+        "",
+        "supply scpi: the supply's YAML (commands, cap, slew, resolution); '' the paper's NGM202; fixed at start-up",
+        read_only=True,
+    ),
+    ParamSpec(
+        "supply_resource",
+        "",
+        "supply scpi: its VISA address, e.g. TCPIP0::192.168.0.20::inst0::INSTR; fixed at start-up",
+        read_only=True,
+    ),
+    ParamSpec(
+        "visa_library",
+        "@py",
+        "supply scpi: the PyVISA backend (@py: pyvisa-py, no vendor VISA); fixed at start-up",
         read_only=True,
     ),
     ParamSpec(
@@ -190,6 +228,8 @@ def current_problem(values: dict) -> str | None:
 def make_backend(values: dict, cap: CurrentCap):
     """The backend the parameters choose. ValueError (naming the parameter) when it cannot be made."""
     backend = values["backend"]
+    if values["supply"] == "scpi" and backend != "nidaqmx":
+        raise ValueError(f"supply='scpi' goes with backend nidaqmx, not {backend!r} (its supply is the device's)")
     if backend == "sim":
         scenario = load_scenario(values["scenario"])
         if scenario.setup.name != values["coil_setup"]:
@@ -210,9 +250,35 @@ def make_backend(values: dict, cap: CurrentCap):
         if not values["serial_port"]:
             raise ValueError("serial_port='' : backend serial needs the device's port")
         return SerialBackend(SerialLink(values["serial_port"], values["baud"]).start(), cap)
+    if backend == "nidaqmx":
+        return bench_backend(values, cap)
     if not values["bag_path"]:
         raise ValueError("bag_path='' : backend bag needs the bag to replay")
     return BagBackend(values["bag_path"], values["bag_rate"])
+
+
+def bench_backend(values: dict, cap: CurrentCap):
+    """The paper's bench: the NI card of ``daq_device_file`` and, with ``supply`` scpi, the supply
+    of ``supply_file`` at ``supply_resource``. ValueError or OSError (one line) when it cannot be made."""
+    if values["supply"] == "device":
+        raise ValueError("supply='device' : the NI card has no supply of its own; use scpi or none")
+    device = load_daq_device(values["daq_device_file"] or PAPER_DEVICE_FILE)
+    supply = None
+    if values["supply"] == "scpi":
+        if not values["supply_resource"]:
+            raise ValueError("supply_resource='' : supply scpi needs the supply's VISA address")
+        config = load_supply_file(values["supply_file"] or PAPER_SUPPLY_FILE)
+        config = dataclasses.replace(
+            config,
+            limits=dataclasses.replace(config.limits, cap_a=min(config.limits.cap_a, values["supply_current_cap_a"])),
+        )
+        supply = open_scpi_supply(values["supply_resource"], config, values["visa_library"])
+    try:
+        return open_daqmx(device, cap, supply)
+    except BaseException:
+        if supply is not None:
+            supply.close()
+        raise
 
 
 def tracking_changed(names) -> bool:

@@ -6,7 +6,7 @@ from mows_msgs.msg import CandidateEffect, ModelReport, RingdownFit, SweepDecomp
 from mows.records import stamps
 from mows.sweep.decompose import DecompositionStatus
 from mows.sweep.record import SweepPoint
-from mows.sweep.runner import SweepFeedback, SweepFit, SweepGoal, SweepMap, SweepOutcome
+from mows.sweep.runner import SweepFeedback, SweepFit, SweepGoal, SweepMap, SweepOutcome, turn_prompt
 
 
 def sweep_goal(goal: RotationSweep.Goal) -> SweepGoal:
@@ -44,6 +44,17 @@ def feedback_msg(feedback: SweepFeedback) -> RotationSweep.Feedback:
         frequency_shift_std_hz=feedback.shift_std_hz,
         n_ok=feedback.n_ok,
         fits=list(feedback.fits),
+    )
+
+
+def turn_feedback_msg(theta0_rad: float) -> RotationSweep.Feedback:
+    """The operator's prompt before the cycle at ``theta0_rad`` (no shift measured yet: NaN)."""
+    nan = float("nan")
+    return RotationSweep.Feedback(
+        theta0_rad=float(theta0_rad),
+        frequency_shift_hz=nan,
+        frequency_shift_std_hz=nan,
+        operator_prompt=turn_prompt(theta0_rad),
     )
 
 

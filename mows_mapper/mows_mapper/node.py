@@ -9,6 +9,10 @@ published on ``/mows/sweep`` (SweepDecomposition, reliable and transient-local: 
 reference (``reference_scenario``) the model lab (``mows.lab.analyse``) compares the
 frequency model with the sweep and publishes ``/mows/model_report`` (ModelReport).
 
+With ``orientation`` manual (a stage without a motor) each cycle waits for the operator: the
+feedback's ``operator_prompt`` says where to turn the probe, ``~/confirm_orientation``
+(std_srvs/Trigger) says it is done.
+
 The sweep itself is :class:`mows.sweep.runner.SweepRunner`; this node translates its steps.
 Everything runs on one thread: the action awaits the driver, the fits and the CPU-bound
 decomposition and lab (in a worker thread) as a coroutine, so fits, cancels and
@@ -16,6 +20,7 @@ diagnostics are served meanwhile.
 """
 
 import dataclasses
+import math
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import RotationSweep
@@ -24,12 +29,20 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 
 from mows.lab import analyse, from_sweep
 from mows.sweep.runner import CycleAnswer, CycleCall, SweepMap, SweepRunner, SweepStep
-from mows_mapper.messages import feedback_msg, model_report_msg, outcome_decomposition_msg, sweep_fit, sweep_goal
+from mows_mapper.messages import (
+    feedback_msg,
+    model_report_msg,
+    outcome_decomposition_msg,
+    sweep_fit,
+    sweep_goal,
+    turn_feedback_msg,
+)
 from mows_mapper.parameters import PARAMETERS, sweep_settings
 from mows_ros.awaitables import in_worker, until
 from mows_ros.cycles import DriverCycles
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
+from mows_ros.operator import OperatorTurns
 from mows_ros.params import parameter_values
 from mows_ros.probe import probe_of
 from mows_ros.process import run_node
@@ -55,6 +68,7 @@ class MapperNode(MowsNode):
             cancel_callback=self._cancel,
             callback_group=self._driver.group,
         )
+        self._operator = OperatorTurns(self, "mows/mapper/confirm_orientation", lambda: self._runner.turn_awaited)
 
     def _param(self, name):
         return self.get_parameter(name).value
@@ -87,6 +101,8 @@ class MapperNode(MowsNode):
             while step.finished is None:
                 if step.feedback is not None:
                     goal_handle.publish_feedback(feedback_msg(step.feedback))
+                if step.turn is not None:
+                    goal_handle.publish_feedback(turn_feedback_msg(step.turn))
                 step = await self._advance(step)
             outcome = step.finished
             decomposition = outcome_decomposition_msg(outcome, self._param("frame_id"))
@@ -104,12 +120,21 @@ class MapperNode(MowsNode):
         return RotationSweep.Result(success=outcome.ok, message=outcome.message, decomposition=decomposition)
 
     async def _advance(self, step: SweepStep) -> SweepStep:
+        if step.turn is not None:
+            return await self._turned(step.turn)
         if step.run_cycle is not None:
             return self._runner.on_cycle(await self._run_cycle(step.run_cycle))
         if step.decompose is not None:
             return self._runner.on_decomposed(await in_worker(self, step.decompose))
         # The cycle's fits are due: the step once they are in, or at fit_timeout_s.
         return await self._driver.fits(self._param("fit_timeout_s"), self._runner.fits_time_up)
+
+    async def _turned(self, theta0_rad: float) -> SweepStep:
+        """The operator's confirmation (or a cancel) goes on with the sweep; silence ends it."""
+        timeout_s = self._param("confirm_timeout_s")
+        if await self._operator.confirmed(timeout_s, self._runner.cancelled):
+            return self._runner.on_turned()
+        return self._runner.abandon(f"no confirmation of θ0 = {math.degrees(theta0_rad):g}° within {timeout_s:g} s")
 
     async def _run_cycle(self, cycle: CycleCall) -> CycleAnswer:
         if not await until(self, self._driver.ready, SERVICE_WAIT_S):

@@ -3,6 +3,7 @@
 from mows.lab import reference_at
 from mows.sweep.decompose import MODELS
 from mows.sweep.runner import SweepSettings
+from mows_ros import operator
 from mows_ros.params import ParamSpec
 from mows_ros.probe import PROBE_FILE
 
@@ -37,6 +38,7 @@ PARAMETERS = (
         "repeat_s", 0.82, "adaptive sweeps: device time of one ring-down with its kick and gap, s", range=(0.01, 60.0)
     ),
     ParamSpec("turn_s", 0.5, "adaptive sweeps: device time to turn the probe and let it settle, s", range=(0.0, 60.0)),
+    *operator.PARAMETERS,
 )
 
 
@@ -48,4 +50,5 @@ def sweep_settings(values: dict) -> SweepSettings:
         values["f00_free"],
         values["repeat_s"],
         values["turn_s"],
+        values["orientation"] == "manual",
     )

@@ -7,6 +7,7 @@ from action_msgs.msg import GoalStatus
 from mows_msgs.action import CalibrateProbe
 from mows_msgs.msg import RingdownFit
 from mows_msgs.srv import RunCycle, SetFieldCurrent
+from std_srvs.srv import Trigger
 
 from mows.physics.probe import Probe, calibration_record
 from mows_ros.qos import RESULT_QOS
@@ -86,3 +87,36 @@ def test_a_goal_with_a_bad_wiring_is_refused(ros, calibrator):
     sent = client.send_goal_async(CalibrateProbe.Goal(wiring="sideways"))
     handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")
     assert not handle.accepted
+
+
+def test_a_manual_stage_waits_for_the_operator_before_each_turn(ros, action_server, tmp_path):
+    client, _ = action_server(
+        "calibrator",
+        CalibrateProbe,
+        "mows/calibrator/calibrate_probe",
+        f"probe_file:={tmp_path / 'p.yaml'}",
+        "orientation:=manual",
+    )
+    driver = StandInDriver(ros)
+    confirm = ros.node.create_client(Trigger, "mows/calibrator/confirm_orientation")
+    ros.wait_for(lambda: confirm.service_is_ready(), "the confirm_orientation service")
+    feedback = []
+    sent = client.send_goal_async(
+        CalibrateProbe.Goal(currents_a=CURRENTS), feedback_callback=lambda f: feedback.append(f.feedback)
+    )
+    handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal's answer")
+    result = handle.get_result_async()
+
+    def prompt(k):
+        prompts = [f for f in feedback if f.message.startswith("turn the probe")]
+        return len(prompts) > k and prompts[k]
+
+    for k in range(2 * len(CURRENTS)):  # 0° then 180° at each current
+        asked = ros.wait_for(lambda k=k: prompt(k), f"the prompt for cycle {k}")
+        assert asked.message == f"turn the probe to θ0 = {180 * (k % 2)}° and confirm"
+        assert driver.cycle == k  # the cycle waits for the operator
+        future = confirm.call_async(Trigger.Request())
+        assert ros.wait_for(lambda f=future: f.done() and f.result(), "the confirmation").success
+    done = ros.wait_for(lambda: result.done() and result.result(), "the calibration's result")
+    assert done.result.success, done.result.message
+    assert driver.cycle == 2 * len(CURRENTS) and done.result.supply_at_zero

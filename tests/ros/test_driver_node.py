@@ -180,6 +180,9 @@ def test_parameters_out_of_range_are_rejected_with_their_reason(ros_context):
         (["-p", "backend:=serial"], "backend serial needs the device's port"),
         (["-p", "coil_setup:=helmholtz"], "does not drive the coils of scenario"),
         (["-p", "record_path:=/"], "/ exists: a recording goes to a new path"),
+        (["-p", "backend:=nidaqmx", "-p", "supply:=none"], "backend nidaqmx: NI-DAQmx (NI's driver runtime) is not"),
+        (["-p", "backend:=nidaqmx", "-p", "supply:=scpi"], "supply scpi needs the supply's VISA address"),
+        (["-p", "supply:=scpi"], "supply='scpi' goes with backend nidaqmx, not 'sim'"),
     ],
 )
 def test_a_bad_configuration_stops_the_driver_with_its_reason(arguments, message):

@@ -9,6 +9,7 @@ from action_msgs.msg import GoalStatus
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
 from mows_msgs.srv import RunCycle
+from std_srvs.srv import Trigger
 
 from mows.lab import reference_at
 from mows.physics.pose import Pose
@@ -177,3 +178,39 @@ def test_an_adaptive_goal_reaches_its_target(ros, mapper):
     assert len({round(f.theta0_rad, 6) for f in feedback}) >= 5  # the orientations it chose
     handle, _, _ = sweep(ros, client, target="bz")
     assert not handle.accepted
+
+
+def test_a_manual_stage_waits_for_the_operator_at_each_orientation(ros, action_server):
+    client, _ = action_server("mapper", RotationSweep, "mows/mapper/rotation_sweep", "orientation:=manual")
+    driver = StandInDriver(ros)
+    confirm = ros.node.create_client(Trigger, "mows/mapper/confirm_orientation")
+    ros.wait_for(lambda: confirm.service_is_ready(), "the confirm_orientation service")
+
+    def call_confirm():
+        future = confirm.call_async(Trigger.Request())
+        return ros.wait_for(lambda: future.done() and future.result(), "the confirmation's answer")
+
+    assert not call_confirm().success  # no sweep: nothing to confirm
+    angles = ANGLES[::2].tolist()
+    feedback = []
+    sent = client.send_goal_async(
+        RotationSweep.Goal(theta0_rad=angles, repeats_per_angle=1),
+        feedback_callback=lambda f: feedback.append(f.feedback),
+    )
+    handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal's answer")
+    result = handle.get_result_async()
+
+    def prompt(k):
+        prompts = [f for f in feedback if f.operator_prompt]
+        return len(prompts) > k and prompts[k]
+
+    for k, theta0 in enumerate(angles):
+        asked = ros.wait_for(lambda k=k: prompt(k), f"the prompt for orientation {k}")
+        assert asked.operator_prompt == f"turn the probe to θ0 = {math.degrees(theta0):g}° and confirm"
+        assert asked.theta0_rad == theta0 and math.isnan(asked.frequency_shift_hz)
+        assert driver.cycle == k  # the cycle waits for the operator
+        answer = call_confirm()
+        assert answer.success and answer.message == f"θ0 = {math.degrees(theta0):g}° confirmed"
+    done = ros.wait_for(lambda: result.done() and result.result(), "the sweep's result")
+    assert done.result.success, done.result.message
+    assert driver.cycle == len(angles)

@@ -94,7 +94,7 @@ def test_a_probe_file_is_read_when_set_and_refused_with_its_reason(ros_context, 
 def test_a_bad_value_at_start_up_stops_the_node():
     run = subprocess.run(NODES[0].command(["-p", "backend:=usb"]), capture_output=True, text=True, timeout=120)
     assert run.returncode == EXIT_BAD_PARAMETER, run.stderr
-    assert "backend='usb' is not one of sim, serial, bag" in run.stderr
+    assert "backend='usb' is not one of sim, serial, bag, nidaqmx" in run.stderr
     assert "Traceback" not in run.stderr
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from mows.estimate.ringdown import SETTLE_S, FitStatus, RingdownFit
 from mows.physics.probe import PAPER_PROBE
-from mows.sweep.calibration_run import CalibrationRun, ProbeCalibrator, goal_plan
+from mows.sweep.calibration_run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
 from mows.sweep.calibration_schedule import CalibrationPlan, RunCycle, SetSupply, scenario_wirings
 from mows.sweep.runner import CycleAnswer
 from sweep.calibration_bench import BENCH, STD_HZ, bench_fits
@@ -139,3 +139,38 @@ def test_one_goal_at_a_time_and_no_constants_without_a_homogeneous_sweep():
     with pytest.raises(ValueError, match="homogeneous"):
         calibrator.calibrate(scenario_wirings(BENCH), BENCH.supply.name, PAPER_PROBE)
     assert calibrator.accept(CalibrationPlan()) is calibrator.run
+
+
+def test_a_manual_stage_is_turned_before_each_change_of_orientation():
+    plan = CalibrationPlan((0.0, 1.0), (0.0, math.pi), 1)
+    run = CalibrationRun(plan, manual_orientation=True)
+    driver, turns, prompts = StandInDriver(), [], []
+    step = run.start()
+    while step.outcome is None:
+        prompts += [f.message for f in step.feedback if f.message.startswith("turn")]
+        (action,) = step.actions
+        if isinstance(action, SetSupply):
+            driver.supply(action)
+            step = run.on_supply(True)
+        elif isinstance(action, Turn):
+            assert run.turn_awaited == action.theta0_rad
+            turns.append(action.theta0_rad)
+            step = run.on_turned()
+            assert run.turn_awaited is None and step.actions == [RunCycle(action.theta0_rad, 1)]
+        else:
+            answer, fits = driver.cycle(action)
+            assert [run.on_fit(answer.cycle_id, fit) for fit in fits] == [None]
+            step = run.on_cycle(answer)
+    assert step.outcome.success and len(step.outcome.points) == plan.steps
+    # At each current 0° then 180°: every cycle is at another orientation than the one before.
+    assert turns == [0.0, math.pi, 0.0, math.pi]
+    assert prompts == ["turn the probe to θ0 = 0° and confirm", "turn the probe to θ0 = 180° and confirm"] * 2
+
+
+def test_a_cancel_while_the_operator_turns_ramps_the_supply_down():
+    run = CalibrationRun(CalibrationPlan((1.0,), (0.5,), 1), manual_orientation=True)
+    run.start()
+    (turn,) = run.on_supply(True).actions
+    assert turn == Turn(0.5)
+    (action,) = run.cancel("cancelled by the client").actions
+    assert action == SetSupply(0.0) and run.turn_awaited is None and run.on_turned().actions == []

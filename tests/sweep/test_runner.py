@@ -19,6 +19,7 @@ from mows.sweep.runner import (
     SweepGoal,
     SweepRunner,
     SweepSettings,
+    turn_prompt,
 )
 
 FIELD_T = np.array([30e-6, -20e-6, 0.0])
@@ -176,3 +177,26 @@ def test_one_sweep_at_a_time_and_the_runner_is_freed_when_abandoned():
         runner.start(SweepGoal(ANGLES), SweepSettings(), P)
     assert not runner.abandon("the node stops").finished.ok and runner.state == "idle"
     assert runner.abandon("again").finished is None
+
+
+def test_a_manual_stage_asks_the_operator_before_each_cycle():
+    runner, step = started(settings=SweepSettings(manual_orientation=True))
+    driver, turns = StandIn(), []
+    while step.decompose is None:
+        assert step.run_cycle is None and step.turn == runner.turn_awaited
+        turns.append(step.turn)
+        assert runner.on_fit(driver.fit(step.turn)) is None  # a fit before the turn is no cycle's
+        step = runner.on_turned()
+        assert runner.turn_awaited is None and step.run_cycle.theta0_rad == turns[-1]
+        step = driver.run(runner, step)
+    assert turns == list(ANGLES)
+    assert turn_prompt(math.radians(45.0)) == "turn the probe to θ0 = 45° and confirm"
+    assert runner.on_decomposed(step.decompose()).finished.ok
+
+
+def test_a_sweep_cancelled_while_the_operator_turns_ends_there():
+    runner, step = started(settings=SweepSettings(manual_orientation=True))
+    runner.cancel()
+    end = runner.on_turned()
+    assert end.finished.cancelled and end.run_cycle is None and runner.state == "idle"
+    assert runner.on_turned() == type(end)()  # a late confirmation changes nothing

@@ -2,7 +2,8 @@
 (``payloads``, ``framing``), its sample clock (``clock``), the simulated device with commands
 at exact sample indices (``scheduled``), the device emulator on a pseudo-terminal (``emulator``),
 the serial client (``serial_link``), the driver's backends over all of them (``sim_backend``,
-``serial_backend``, ``bag_backend``), the measurement cycle (``cycle``, ``cycle_waits``,
+``serial_backend``, ``bag_backend``, and the paper's bench: ``daq``, ``daqmx_backend``, ``scpi``,
+``simulated_daqmx``), the measurement cycle (``cycle``, ``cycle_waits``,
 ``duty``), tracking mode's chain of cycles (``tracking``), the block stream (``blocks``,
 ``session``) and rosbag2 recordings (``bags``).
 

@@ -7,8 +7,10 @@ helper raises ValueError naming the offending key, so a bad file says what is wr
 from __future__ import annotations
 
 import inspect
+import pathlib
 
 import numpy as np
+import yaml
 
 
 def as_points_m(points_m) -> np.ndarray:
@@ -61,3 +63,17 @@ def check_keys(what: str, given: dict, builder) -> None:
     missing = [k for k, p in parameters.items() if p.default is inspect.Parameter.empty and k not in given]
     if unknown or missing:
         raise ValueError(f"{what}: unknown keys {unknown}, missing keys {missing}; allowed keys are {list(parameters)}")
+
+
+def build_from_yaml(path, what: str, builder):
+    """``builder(**mapping)`` of the YAML mapping in the file at ``path``, its keys checked
+    (:func:`check_keys`); ValueError naming the file and what is wrong."""
+    path = pathlib.Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        if not isinstance(data, dict):
+            raise ValueError(f"expected a mapping, got {data!r}")
+        check_keys(what, data, builder)
+        return builder(**data)
+    except (OSError, yaml.YAMLError, ValueError, TypeError) as error:
+        raise ValueError(f"{path}: {error}") from None

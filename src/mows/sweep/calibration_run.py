@@ -11,6 +11,7 @@ check to a later homogeneous one) and fits the probe's constants from them
 probe file are the caller's business.
 """
 
+import dataclasses
 import math
 
 from mows.estimate.calibration_record import KnownConstants, ProbeCalibration
@@ -21,9 +22,18 @@ from mows.sweep.calibration_schedule import (
     CalibrationOutcome,
     CalibrationPlan,
     CalibrationSchedule,
+    RunCycle,
     Step,
 )
-from mows.sweep.runner import CycleAnswer
+from mows.sweep.runner import CycleAnswer, turn_prompt
+
+
+@dataclasses.dataclass(frozen=True)
+class Turn:
+    """Ask the operator to turn the stage to ``theta0_rad`` (a stage without a motor); answer with
+    :meth:`CalibrationRun.on_turned` once they confirm."""
+
+    theta0_rad: float
 
 
 def goal_plan(goal, homogeneous: str, default_currents_a) -> CalibrationPlan:
@@ -43,20 +53,49 @@ def goal_plan(goal, homogeneous: str, default_currents_a) -> CalibrationPlan:
 
 class CalibrationRun:
     """One goal's schedule (module docstring): pass :meth:`start`'s step on, then answer each
-    step's action with :meth:`on_supply` or :meth:`on_cycle`; a None from :meth:`on_cycle` or
-    :meth:`on_fit` means the cycle's fits are still due."""
+    step's action with :meth:`on_supply`, :meth:`on_cycle` or (``manual_orientation``: a stage the
+    operator turns) :meth:`on_turned`; a None from :meth:`on_cycle` or :meth:`on_fit` means the
+    cycle's fits are still due."""
 
-    def __init__(self, plan: CalibrationPlan):
+    def __init__(self, plan: CalibrationPlan, manual_orientation: bool = False):
         self.plan = plan
         self.schedule = CalibrationSchedule(plan)
+        self.manual_orientation = manual_orientation
         self._fits: dict[int, list] = {}  # cycle id → its fits so far
         self._awaited: CycleAnswer | None = None  # the finished cycle whose fits are due
+        self._stage_rad = math.nan  # where the operator last confirmed the stage
+        self._turning: Step | None = None  # the cycle's step that waits for the operator's turn
+
+    @property
+    def turn_awaited(self) -> float | None:
+        """The orientation (rad) the operator has been asked to turn the stage to, if any."""
+        return None if self._turning is None else self._turning.actions[0].theta0_rad
 
     def start(self) -> Step:
         return self.schedule.start()
 
     def on_supply(self, accepted: bool, reason: str = "") -> Step:
-        return self.schedule.on_supply(accepted, reason)
+        return self._gate(self.schedule.on_supply(accepted, reason))
+
+    def on_turned(self) -> Step:
+        """The operator confirmed the turn: the cycle that waited for it."""
+        step, self._turning = self._turning, None
+        if step is None:
+            return Step()
+        self._stage_rad = step.actions[0].theta0_rad
+        return Step(actions=step.actions)
+
+    def _gate(self, step: Step) -> Step:
+        """With a manual stage, a cycle at another orientation than the stage's waits for a turn."""
+        if not self.manual_orientation:
+            return step
+        cycles = [a for a in step.actions if isinstance(a, RunCycle)]
+        if not cycles or cycles[0].theta0_rad == self._stage_rad:
+            return step
+        self._turning = step
+        # The schedule words every cycle's step (its feedback); the prompt is that, reworded.
+        prompt = dataclasses.replace(step.feedback[-1], message=turn_prompt(cycles[0].theta0_rad))
+        return Step(actions=[Turn(cycles[0].theta0_rad)], feedback=[*step.feedback, prompt])
 
     def on_cycle(self, answer: CycleAnswer) -> Step | None:
         """The driver's answer to the step's ``RunCycle``; None while that cycle's fits are due."""
@@ -77,6 +116,7 @@ class CalibrationRun:
 
     def cancel(self, reason: str) -> Step | None:
         """The supply's way to zero; None when the schedule is on it already (its step stands)."""
+        self._turning = None
         step = self.schedule.cancel(reason)
         return step if step.actions else None
 
@@ -88,7 +128,7 @@ class CalibrationRun:
         for fit in self._fits.pop(answer.cycle_id, [])[: self.plan.repeats]:
             self.schedule.on_fit(fit)
         step = self.schedule.on_cycle_done(True)
-        return step if step.actions or step.outcome else self.schedule.fits_timed_out()
+        return self._gate(step if step.actions or step.outcome else self.schedule.fits_timed_out())
 
 
 class ProbeCalibrator:
@@ -104,11 +144,12 @@ class ProbeCalibrator:
     def state(self) -> str:
         return "idle" if self.run is None else "calibrating"
 
-    def accept(self, plan: CalibrationPlan) -> CalibrationRun:
-        """The goal's run; ValueError while another one runs."""
+    def accept(self, plan: CalibrationPlan, manual_orientation: bool = False) -> CalibrationRun:
+        """The goal's run (on a stage the operator turns with ``manual_orientation``); ValueError
+        while another one runs."""
         if self.run is not None:
             raise ValueError("a calibration is running")
-        self.run = CalibrationRun(plan)
+        self.run = CalibrationRun(plan, manual_orientation)
         return self.run
 
     def release(self) -> None:

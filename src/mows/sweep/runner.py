@@ -41,6 +41,12 @@ class SweepSettings:
     f00_free: bool = False
     repeat_s: float = 0.82  # adaptive sweeps: device time of one ring-down (kick, ring-down, gap)
     turn_s: float = 0.5  # adaptive sweeps: device time of a turn and the settling
+    manual_orientation: bool = False  # no motor: the operator turns the stage and confirms each orientation
+
+
+def turn_prompt(theta0_rad: float) -> str:
+    """What the operator of a stage without a motor is asked before a cycle at ``theta0_rad``."""
+    return f"turn the probe to θ0 = {math.degrees(theta0_rad):g}° and confirm"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -144,11 +150,14 @@ class SweepOutcome:
 @dataclasses.dataclass
 class SweepStep:
     """What the caller does next, in this order: report ``feedback``, publish ``publish``, then
-    one of: run ``run_cycle``, call ``decompose`` (CPU-bound, seconds) and feed its result to
-    :meth:`SweepRunner.on_decomposed`, end with ``finished``, or (none of these) wait for fits."""
+    one of: ask the operator to turn the stage to ``turn`` (rad, :func:`turn_prompt`) and call
+    :meth:`SweepRunner.on_turned` once confirmed, run ``run_cycle``, call ``decompose``
+    (CPU-bound, seconds) and feed its result to :meth:`SweepRunner.on_decomposed`, end with
+    ``finished``, or (none of these) wait for fits."""
 
     feedback: SweepFeedback | None = None
     publish: SweepMap | None = None
+    turn: float | None = None
     run_cycle: CycleCall | None = None
     decompose: Callable[[], Decomposition] | None = None
     finished: SweepOutcome | None = None
@@ -174,6 +183,7 @@ class SweepRunner:
         self._planner: AdaptivePlanner | None = None  # an adaptive sweep's
         self._decomposition: Decomposition | None = None
         self._decomposed_points = 0
+        self._turning: CycleCall | None = None  # the cycle that waits for the operator's turn
 
     # --- inputs ----------------------------------------------------------------------------
     def start(self, goal: SweepGoal, settings: SweepSettings, probe: Probe) -> None:
@@ -212,7 +222,7 @@ class SweepRunner:
         self._angles = [] if planner else angles
         self._repeats = goal.repeats_per_angle or settings.repeats_per_angle
         self._model = goal.model or settings.model
-        self._index, self._cancelled, self._awaited = 0, False, None
+        self._index, self._cancelled, self._awaited, self._turning = 0, False, None, None
         self._fits.clear()
         self._record = SweepRecord()
 
@@ -224,6 +234,35 @@ class SweepRunner:
         """End the sweep before its next orientation."""
         if self.state == "sweeping":
             self._cancelled = True
+
+    def cancelled(self) -> bool:
+        """Whether a cancel came for the running sweep."""
+        return self._cancelled
+
+    @property
+    def turn_awaited(self) -> float | None:
+        """The orientation (rad) the operator has been asked to turn the stage to, if any."""
+        return None if self._turning is None else self._turning.theta0_rad
+
+    def on_turned(self) -> SweepStep:
+        """The operator confirmed the turn the last step asked for: its cycle (or the end, if
+        the sweep was cancelled meanwhile)."""
+        call, self._turning = self._turning, None
+        if self.state != "sweeping" or call is None:
+            return SweepStep()
+        if self._cancelled:
+            return self._end(
+                SweepStep(), SweepOutcome(False, f"cancelled before orientation {self._index}", cancelled=True)
+            )
+        return SweepStep(run_cycle=call)
+
+    def _cycle(self, step: SweepStep, call: CycleCall) -> SweepStep:
+        """Run ``call`` next, after the operator's turn when the stage has no motor."""
+        if self._settings.manual_orientation:
+            self._turning, step.turn = call, call.theta0_rad
+        else:
+            step.run_cycle = call
+        return step
 
     def on_cycle(self, answer: CycleAnswer) -> SweepStep:
         if self.state != "sweeping":
@@ -303,8 +342,7 @@ class SweepRunner:
                 False, f"cancelled after {self._index} of {len(self._angles)} orientations", cancelled=True
             )
             return self._end(step, outcome)
-        step.run_cycle = CycleCall(self._angles[self._index], self._repeats)
-        return step
+        return self._cycle(step, CycleCall(self._angles[self._index], self._repeats))
 
     def _measured(self, step: SweepStep) -> SweepStep:
         self.sweeps += 1
@@ -336,8 +374,7 @@ class SweepRunner:
             return self._planned_end(step, choice)
         self._angles.append(choice.theta0_rad)
         self._repeats = choice.repeats
-        step.run_cycle = CycleCall(choice.theta0_rad, choice.repeats)
-        return step
+        return self._cycle(step, CycleCall(choice.theta0_rad, choice.repeats))
 
     def _decomposition_due(self, planner: AdaptivePlanner) -> bool:
         """New ring-downs at enough orientations, and a prediction near the target."""
@@ -373,7 +410,7 @@ class SweepRunner:
         return float(np.mean([p.frequency_hz - p.shift_hz for p in self._record.points]))
 
     def _end(self, step: SweepStep, outcome: SweepOutcome) -> SweepStep:
-        self.state, self._awaited = "idle", None
+        self.state, self._awaited, self._turning = "idle", None, None
         self._fits.clear()
         step.finished = outcome
         return step

@@ -1,0 +1,101 @@
+"""``mows check-hardware``: check the paper's bench step by step before measuring on it.
+
+Opens the NI card of ``--device`` (default: the paper's PCIe-6363 wiring) and the SCPI field
+supply of ``--supply-file`` at ``--supply-resource``, then (:class:`mows.device.hardware_check.HardwareCheck`)
+reads both fluxgates at rest, pulses each coil on its own at a safe current and says what each
+fluxgate saw of it, steps the supply and reads it back, and reports every check. ``--simulate``
+runs the same check on the simulated bench: the ``nidaqmx`` Task API stand-in
+(:mod:`mows.device.simulated_daqmx`) over the paper's largest-spacing scene with the Pasco pair
+on its supply, the NGM202 on pyvisa-sim.
+Exit status 0 when every check passed, 3 when one found a problem (each line says which).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from mows.device.daq import PAPER_DEVICE_FILE, load_daq_device
+from mows.device.daqmx_backend import open_daqmx
+from mows.device.hardware_check import HardwareCheck
+from mows.device.scpi import (
+    PAPER_SUPPLY_FILE,
+    SIMULATED_RESOURCE,
+    SIMULATED_SUPPLY_FILE,
+    ScpiSupply,
+    load_supply_file,
+    open_scpi_supply,
+)
+from mows.physics.coils import CurrentCap
+
+PROBLEM_EXIT = 3
+SIMULATED_SCENARIO = "paper_largest_spacing"  # the coils both seen at the fluxgates (Fig. 2a)
+SIMULATED_SUPPLY_SCENARIO = "calibration"  # lends its supply: the Pasco pair on the NGM202
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--device", default=str(PAPER_DEVICE_FILE), help="the card's device YAML")
+    parser.add_argument("--supply-file", default=str(PAPER_SUPPLY_FILE), help="the supply's YAML (commands, limits)")
+    parser.add_argument("--supply-resource", default="", help="the supply's VISA address ('' : no supply check)")
+    parser.add_argument("--visa-library", default="@py", help="PyVISA backend (@py: pyvisa-py, no vendor VISA)")
+    parser.add_argument("--coil-current-a", type=float, default=0.02, help="the safe current of each coil's pulse, A")
+    parser.add_argument(
+        "--frequency-hz", type=float, default=300.0, help="the pulses' frequency, Hz (away from the resonance)"
+    )
+    parser.add_argument("--supply-step-a", type=float, default=0.1, help="the supply's test current, A")
+    parser.add_argument("--simulate", action="store_true", help="check the simulated bench instead")
+
+
+def run(args) -> int:
+    device = load_daq_device(args.device)
+    config = load_supply_file(args.supply_file)
+    cap = CurrentCap(device.current_cap_a)
+    cap.check(args.coil_current_a)
+    config.limits.check(args.supply_step_a)
+    daqmx = None
+    supply: ScpiSupply | None
+    if args.simulate:
+        supply = open_scpi_supply(SIMULATED_RESOURCE, config, f"{SIMULATED_SUPPLY_FILE}@sim")
+        daqmx = simulated_bench(device, supply).module()
+    else:
+        supply = open_scpi_supply(args.supply_resource, config, args.visa_library) if args.supply_resource else None
+    try:
+        backend = open_daqmx(device, cap, supply, daqmx)
+    except BaseException:
+        if supply is not None:  # opened and switched on: off again before the error is told
+            supply.close()
+        raise
+    try:
+        print(f"card {device.device_name} ({device.name}), supply {supply.identity if supply else 'none'}")
+        check = HardwareCheck(
+            backend,
+            args.coil_current_a,
+            args.frequency_hz,
+            supply_step_a=args.supply_step_a,
+            supply_resolution_a=config.limits.resolution_a,
+            names=tuple(f"fluxgate {k + 1} ({i.physical_channel})" for k, i in enumerate(device.inputs)),
+        )
+        lines = check.run() if supply else check.run()[:-1]
+    finally:
+        backend.close()
+    for line in lines:
+        print(line)
+    return 0 if all(line.ok for line in lines) else PROBLEM_EXIT
+
+
+def simulated_bench(device, supply):
+    """The simulated bench wired as ``device`` says, its field supply the pyvisa-sim NGM202."""
+    from mows.device.simulated_daqmx import SimulatedBench
+    from mows.sim.scenario import load_scenario
+    from mows.sim.simulator import SimulatedDevice
+
+    properties = supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties
+    return SimulatedBench(
+        SimulatedDevice(
+            load_scenario(SIMULATED_SCENARIO).replace(supply=load_scenario(SIMULATED_SUPPLY_SCENARIO).supply)
+        ),
+        tuple(i.physical_channel for i in device.inputs),
+        tuple(o.physical_channel for o in device.outputs),
+        device.amplifier_v_per_a,
+        device.inputs[0].sensitivity_v_per_t,
+        supply_current_a=lambda: properties["current"].get_value() * properties["output"].get_value(),
+    )

@@ -1,0 +1,324 @@
+"""The paper's bench backends: the NI card through the ``nidaqmx`` Task API (on the simulated
+bench, :mod:`mows.device.simulated_daqmx`, which holds the calls to what the real API requires)
+and the NGM202 field supply through PyVISA against pyvisa-sim.
+
+Requirement: a coil drive reaches the amplifiers as V_k = I_k·gain·sin(2πf(i − i_on)/fs) with
+the setup's orientation-dependent I_k, on and off at the commanded samples; the fluxgates come
+back in tesla, saturated at the input range's end; the supply is set, ramped within its slew
+limit and read back, its refusals reported; a missing runtime or card is one clear line.
+"""
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+import pytest
+
+from mows.device.daq import CoilWaveforms, load_daq_device
+from mows.device.daqmx_backend import DeviceUnavailable, open_daqmx
+from mows.device.interface import CoilCommand, FieldCurrentCommand, LinkEvent
+from mows.device.phases import CycleRequest, CycleSettings, Phase
+from mows.device.scpi import (
+    SIMULATED_RESOURCE,
+    SIMULATED_SUPPLY_FILE,
+    SupplyError,
+    SupplySchedule,
+    load_supply_file,
+    open_scpi_supply,
+)
+from mows.device.session import DeviceSession, SessionConfig
+from mows.device.simulated_daqmx import DaqError, SimulatedBench
+from mows.estimate.ringdown import fit_ringdown
+from mows.physics.coils import CurrentCap, largest_spacing
+from mows.physics.supply import SupplyLimits
+from mows.records.samples import SampleBlock
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice
+
+FAST = CycleSettings(excite_s=0.5, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, settle_s=0.1)
+MAX_POLLS = 10_000  # bound for a cycle that never ends (a bug), not a timing
+# The tests fit tuning ring-downs between reads on a busy machine: the watchdog is for a host that hung.
+WATCHDOG_S = 30.0
+
+
+def simulated_supply():
+    return open_scpi_supply(SIMULATED_RESOURCE, load_supply_file(), f"{SIMULATED_SUPPLY_FILE}@sim")
+
+
+def supply_state(supply) -> tuple[float, int]:
+    """The pyvisa-sim instrument's own current and output state (not through the backend)."""
+    properties = supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties
+    return properties["current"].get_value(), properties["output"].get_value()
+
+
+def on_bench(scenario="paper_largest_spacing", supply=None, watchdog_s=WATCHDOG_S):
+    bench = SimulatedBench(SimulatedDevice(load_scenario(scenario)))
+    if supply is not None:
+        bench.supply_current_a = lambda: supply_state(supply)[0] * supply_state(supply)[1]
+    device = dataclasses.replace(load_daq_device(), watchdog_s=watchdog_s)
+    backend = open_daqmx(device, CurrentCap(10.0), supply, daqmx=bench.module())
+    return bench, backend
+
+
+def run_cycle(session, theta0_rad):
+    done, events = [], []
+    events += session.step(0.0).events
+    session.start_cycle(CycleRequest(theta0_rad), done.append)
+    for _ in range(MAX_POLLS):
+        if done:
+            return done[0], events
+        events += session.step(0.0).events
+    raise AssertionError("the cycle did not end")
+
+
+# --- the waveforms and the inputs, without a card ------------------------------------------------
+@pytest.mark.parametrize("theta0_deg", [0.0, 45.0, 100.0, 225.0])
+def test_the_outputs_carry_the_orientation_dependent_amplitudes(theta0_deg):
+    theta0 = math.radians(theta0_deg)
+    amplitudes = largest_spacing().currents_a(theta0, 2.0)
+    waves = CoilWaveforms(2, 20_000.0, 0.8)
+    assert waves.schedule(100, amplitudes, 112.5) == 100
+    volts = waves.synthesise(100 + 20_000)
+    # Independent of the scheme's code: coil 1 ∝ sin(θ0 + 135°), coil 2 ∝ sin(θ0 + 45°) (Methods).
+    expected_peak = 0.8 * 2.0 * np.abs(np.sin(theta0 + np.radians([135.0, 45.0])))
+    np.testing.assert_allclose(np.max(np.abs(volts), axis=1), expected_peak, atol=1e-6)
+    signs = np.sign(volts[:, 101] / math.sin(2 * math.pi * 112.5 / 20_000.0))
+    np.testing.assert_array_equal(
+        signs[expected_peak > 1e-9], np.sign(np.sin(theta0 + np.radians([135.0, 45.0])))[expected_peak > 1e-9]
+    )
+    assert not volts[:, :101].any()
+
+
+def test_a_drive_for_a_written_sample_applies_at_the_first_unwritten_one():
+    waves = CoilWaveforms(2, 20_000.0, 1.0)
+    waves.synthesise(500)
+    assert waves.schedule(200, (1.0, -1.0), 100.0) == 500
+    assert waves.schedule(900, (0.0, 0.0), 0.0) == 900
+    volts = waves.synthesise(1000)
+    assert volts[:, 1:400].any() and not volts[:, 400:].any()
+    assert waves.off_now() == 1000 and not waves.coils_on
+
+
+def test_inputs_at_the_range_end_are_saturated_and_scaled_to_tesla():
+    device = load_daq_device()
+    volts = np.array([[0.5, 10.0, -10.0, 9.9], [-0.25, 0.0, 1e-3, -9.99999]])
+    field, saturated = device.field_t(volts)
+    np.testing.assert_allclose(field[:, 0], [0.5e-6, 10e-6, -10e-6, 9.9e-6])
+    np.testing.assert_array_equal(saturated[:, 0], [False, True, True, False])
+    np.testing.assert_array_equal(saturated[:, 1], [False, False, False, True])  # within half a code of −10 V
+
+
+def test_a_device_file_whose_cap_the_outputs_cannot_reach_is_refused(tmp_path):
+    text = load_daq_device.__defaults__[0].read_text().replace("amplifier_v_per_a: 1.0", "amplifier_v_per_a: 2.0")
+    path = tmp_path / "card.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=r"card.yaml: .*current_cap_a × amplifier_v_per_a = 20 V exceeds Dev1/ao0"):
+        load_daq_device(path)
+    path.write_text(text.replace("amplifier_v_per_a: 2.0", "amplifier_v_per_a: 1.0\nspeed: 3"))
+    with pytest.raises(ValueError, match=r"unknown keys \['speed'\]"):
+        load_daq_device(path)
+
+
+# --- the nidaqmx backend on the simulated bench ---------------------------------------------------
+def test_without_nis_runtime_the_backend_says_so_in_one_line():
+    nidaqmx = pytest.importorskip("nidaqmx")
+    try:
+        nidaqmx.Task().close()
+    except nidaqmx.errors.DaqNotFoundError:
+        pass
+    else:
+        pytest.skip("NI-DAQmx is installed on this machine")
+    with pytest.raises(DeviceUnavailable) as error:
+        open_daqmx(load_daq_device(), CurrentCap(10.0))
+    assert "NI-DAQmx" in str(error.value) and "\n" not in str(error.value)
+
+
+def test_a_card_that_is_not_there_is_one_line_naming_it():
+    bench = SimulatedBench(SimulatedDevice(load_scenario()), inputs=("Dev2/ai0", "Dev2/ai1"))
+    with pytest.raises(DeviceUnavailable) as error:
+        open_daqmx(load_daq_device(), CurrentCap(10.0), daqmx=bench.module())
+    assert str(error.value).startswith("backend nidaqmx: card 'Dev1': Device identifier is invalid")
+    assert "\n" not in str(error.value)
+    assert all(task.closed for task in bench.tasks)  # nothing is left open on the card
+
+
+def test_the_tasks_are_made_as_the_api_requires():
+    bench, backend = on_bench()
+    ai, ao = bench.tasks
+    assert [c for c, _ in ai.channels] == ["Dev1/ai0", "Dev1/ai1"] and [c for c, _ in ao.channels] == [
+        "Dev1/ao0",
+        "Dev1/ao1",
+    ]
+    assert ao.trigger == "/Dev1/ai/StartTrigger" and ai.rate_hz == ao.rate_hz == 20_000.0
+    assert ai.running and ao.running
+    backend.close()
+    assert ai.closed and ao.closed
+
+
+def test_the_simulated_card_refuses_what_the_real_one_refuses():
+    bench = SimulatedBench(SimulatedDevice(load_scenario()))
+    daqmx = bench.module()
+    ao = daqmx.Task("ao")
+    ao.ao_channels.add_ao_voltage_chan("Dev1/ao0")
+    ao.timing.cfg_samp_clk_timing(20_000.0, sample_mode=daqmx.constants.AcquisitionType.CONTINUOUS)
+    ao.out_stream.regen_mode = daqmx.constants.RegenerationMode.DONT_ALLOW_REGENERATION
+    ao.ao_channels.all.ao_idle_output_behavior = daqmx.constants.AOIdleOutputBehavior.ZERO_VOLTS
+    ao.triggers.start_trigger.cfg_dig_edge_start_trig("/Dev1/ai/StartTrigger")
+    with pytest.raises(DaqError, match="output buffer is empty"):
+        ao.start()
+    writer = daqmx.stream_writers.AnalogMultiChannelWriter(ao.out_stream)
+    with pytest.raises(DaqError, match="out of range"):
+        writer.write_many_sample(np.full((1, 10), 11.0))
+    with pytest.raises(DaqError, match="larger than the space"):
+        writer.write_many_sample(np.zeros((1, 1001)))
+
+
+def test_a_cycle_switches_the_coils_at_the_commanded_samples():
+    bench, backend = on_bench()
+    session = DeviceSession(
+        backend,
+        SessionConfig(0.025, FAST, bench.device.scenario.setup, CurrentCap(10.0), 112.0, fit_ringdown),
+        armed=True,
+    )
+    theta0 = 2.2
+    bench.turn_probe(theta0)
+    outcome, events = run_cycle(session, theta0)
+    assert outcome.success, outcome.message
+    on = [e for e in events if e.phase == Phase.EXCITING]
+    off = [e for e in events if e.phase == Phase.RINGDOWN]
+    # What the coils got, read back from the output volts, is what the sequencer commanded.
+    assert [d[0] for d in bench.drives] == [e.sample_index for e in on]
+    assert bench.offs == [e.sample_index for e in off]
+    expected = largest_spacing().currents_a(theta0, FAST.excitation_current_a)
+    for (_, amplitudes, frequency_hz), event in zip(bench.drives, on):
+        np.testing.assert_allclose(amplitudes, expected, rtol=1e-9)
+        assert frequency_hz == pytest.approx(event.frequency_hz, rel=1e-9)
+    # The tuned frequency is the probe's resonance at the bench's field (10 mHz, as the sim backend).
+    assert outcome.frequency_hz == pytest.approx(bench.device.expected_frequency_hz(), abs=0.01)
+    backend.close()
+
+
+def test_commands_above_the_cap_are_refused_and_never_written():
+    bench, backend = on_bench()
+    with pytest.raises(ValueError, match="exceeds the cap"):
+        backend.send(CoilCommand(1, 5000, (10.5, 0.0), 112.0))
+    for _ in range(20):
+        backend.poll(0.0)
+    assert not bench.drives
+    backend.close()
+
+
+def test_a_host_that_stops_writing_underflows_the_card_and_is_told_so():
+    bench, backend = on_bench()
+    backend.poll(0.0)
+    backend._write_ahead = lambda: None  # the host falls behind: no more output samples
+    items = []
+    for _ in range(20):
+        items += backend.poll(0.0)
+    links = [i for i in items if isinstance(i, LinkEvent)]
+    assert len(links) == 1 and not links[0].up and "underflow" in links[0].reason
+    assert backend.stats()["link"] == "down"
+    assert sum(isinstance(i, SampleBlock) for i in items) == 3  # the samples the card had, then none
+
+
+# --- the SCPI supply against pyvisa-sim -----------------------------------------------------------
+def test_the_supply_is_set_read_back_and_switched():
+    supply = simulated_supply()
+    assert supply.identity.startswith("Rohde&Schwarz,NGM202")
+    assert supply_state(supply) == (0.0, 1)  # prepared: zero current, output on
+    supply.set_current_a(0.12345)
+    assert supply.read_current_a() == pytest.approx(0.1234)  # rounded to the 0.1 mA resolution, not clipped
+    with pytest.raises(ValueError, match="exceeds the cap of 2 A"):
+        supply.set_current_a(2.5)
+    assert supply_state(supply)[0] == pytest.approx(0.1234)
+    supply.close()
+    assert supply_state(supply) == (0.0, 0)
+
+
+def test_a_command_the_supply_refuses_is_an_error_naming_it(tmp_path):
+    config = load_supply_file()
+    text = SIMULATED_SUPPLY_FILE.read_text().replace('q: "CURR {:.4f}"', 'q: "SOUR:CURR {:.4f}"')
+    path = tmp_path / "other.yaml"
+    path.write_text(text)
+    with pytest.raises(SupplyError, match=r"ngm202: 'CURR 0.0000' refused: -100"):
+        open_scpi_supply(SIMULATED_RESOURCE, config, f"{path}@sim")
+
+
+def test_another_supply_is_a_file(tmp_path):
+    supply_text = (
+        load_supply_file.__defaults__[0]
+        .read_text()
+        .replace('set_current: "CURR {:.4f}"', 'set_current: "SOUR:CURR {:.4f}"')
+    )
+    (tmp_path / "supply.yaml").write_text(supply_text)
+    sim_text = SIMULATED_SUPPLY_FILE.read_text().replace('q: "CURR {:.4f}"', 'q: "SOUR:CURR {:.4f}"')
+    (tmp_path / "sim.yaml").write_text(sim_text)
+    supply = open_scpi_supply(
+        SIMULATED_RESOURCE, load_supply_file(tmp_path / "supply.yaml"), f"{tmp_path / 'sim.yaml'}@sim"
+    )
+    supply.set_current_a(1.5)
+    assert supply.read_current_a() == 1.5
+    supply.close()
+
+
+def test_a_ramp_steps_within_the_slew_limit_on_the_sample_clock():
+    limits = SupplyLimits(2.0, 2.0, 1e-4)
+    schedule = SupplySchedule(limits, 20_000.0)
+    end = schedule.ramp(100, 50, 1.0)
+    assert end == 100 + round(0.49 * 20_000.0)  # 0.5 s at 2 A/s: 50 steps of 10 ms, the first at once
+    steps = schedule.due(end + 1)
+    assert len(steps) == 50 and steps[-1] == 1.0
+    assert np.max(np.abs(np.diff([0.0, *steps]))) <= 2.0 * 0.01 + 1e-12
+    schedule.ramp(0, end + 1, 0.5)
+    schedule.due(end + 200)
+    back = schedule.to_zero(end + 200)
+    assert schedule.due(back + 1)[-1] == 0.0 and not schedule.ramping
+
+
+def test_the_backend_ramps_the_supply_and_zeroes_it_on_close():
+    supply = simulated_supply()
+    bench, backend = on_bench("calibration", supply)
+    backend.send(FieldCurrentCommand(1, 0, 0.5))
+    (result,) = backend.poll(0.0)[:1]
+    assert result.accepted and result.applied_sample_index == round(0.24 * 20_000.0)
+    seen = []
+    while backend.supply_schedule.ramping:
+        backend.poll(0.0)
+        seen.append(bench.device.field_current_a)
+    backend.poll(0.0)
+    assert backend.supply_readback_a == 0.5 and bench.device.field_current_a == 0.5
+    # The steps are written as the blocks come: the current changes by at most the slew limit over
+    # a block and a step (the average rate is the limit; no step is skipped).
+    assert np.max(np.diff(seen)) <= 2.0 * (0.025 + 0.01) + 1e-9 and len(set(seen)) > 5
+    with pytest.raises(ValueError, match="exceeds the cap"):
+        backend.send(FieldCurrentCommand(2, 0, 2.5))
+    backend.close()
+    assert supply_state(supply) == (0.0, 0)
+
+
+def test_without_a_supply_a_field_current_is_refused_with_the_reason():
+    _, backend = on_bench()
+    backend.send(FieldCurrentCommand(7, 0, 0.5))
+    (result,) = backend.poll(0.0)[:1]
+    assert not result.accepted and "no field supply" in result.reason
+    backend.close()
+
+
+def test_a_host_that_stops_reading_has_the_coils_and_the_supply_switched_off():
+    supply = simulated_supply()
+    bench, backend = on_bench("calibration", supply, watchdog_s=0.2)
+    ao = bench.tasks[1]
+    backend.send(FieldCurrentCommand(1, 0, 0.3))
+    while backend.supply_schedule.ramping:
+        backend.poll(0.0)
+    assert supply_state(supply)[0] == pytest.approx(0.3)
+    deadline = time.monotonic() + 30.0  # a bound for a watchdog that never trips, not a timing
+    while supply_state(supply)[0] != 0.0 and time.monotonic() < deadline:
+        time.sleep(0.05)  # the host is silent: no poll
+    assert supply_state(supply)[0] == 0.0 and not ao.running
+    (link,) = backend.poll(0.0)
+    assert not link.up and link.reason.startswith("watchdog: no read for")
+    assert backend.poll(0.0) == []  # told once
+    backend.close()
+    assert supply_state(supply) == (0.0, 0)

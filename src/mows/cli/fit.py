@@ -20,7 +20,7 @@ from mows.lab.chirp import recorded_segments
 from mows.lab.data.table import MeasurementTable
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import PAPER_PROBE, Probe
-from mows.records.files import check_output, replacing
+from mows.records.files import check_output, writing
 from mows.records.stamps import NS_PER_S
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -69,9 +69,9 @@ def run(args) -> int:
     ok = [(w, f) for w, f in fits if f.ok]
     print(f"{len(ok)} of {len(fits)} ring-downs fitted")
     if args.csv and ok:
-        with replacing(args.csv, inputs, args.force) as temporary:
-            write_table(temporary, ok, probe)
-        print(f"wrote {len(ok)} rows to {args.csv}")
+        with writing([args.csv], inputs, args.force) as outputs:
+            write_table(outputs.temporaries[0], ok, probe)
+        print(f"{outputs.report()}: {len(ok)} rows")
     elif args.csv:
         print(f"mows fit: no ring-down fitted: {args.csv} not written", file=sys.stderr)
     return 0 if fits else 1

@@ -10,11 +10,13 @@ exit status 1, one line, and the traceback with ``--debug``.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import pathlib
 import sys
 from collections.abc import Callable, Iterator
 
+import numpy as np
 import yaml
 
 from mows.physics.probe import Probe
@@ -22,8 +24,14 @@ from mows.physics.probe import Probe
 #: Exceptions that mean "the input is bad". ValueError covers the library's own refusals
 #: (TableError, OutputRefused, a scenario's out-of-range value) and UnicodeDecodeError.
 INPUT_ERRORS = (ValueError, OSError, KeyError, yaml.YAMLError)
-EXIT_BAD_INPUT = 2
+#: The exit statuses of every ``mows`` command (docs/cli.md).
+EXIT_OK = 0
 EXIT_BUG = 1
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command ended by Ctrl-C
+#: Ring-down frequencies this far (a factor) from the probe's f00 are no ring-downs of it: a
+#: unit error (kHz) or another probe. The strongest fields of the paper move f by a factor ~2.
+FREQUENCY_FACTOR = 10.0
 
 
 class InputError(ValueError):
@@ -71,10 +79,42 @@ def load_probe(path):
         return Probe.from_yaml(path)
 
 
+def positive_int(text: str) -> int:
+    """An argparse type: an integer ≥ 1 (a count of repeats, cycles, ring-downs)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} must be at least 1")
+    return value
+
+
+def check_frequencies(f_hz, probe: Probe, what: str = "f_hz") -> None:
+    """ValueError when ring-down frequencies are not finite or their median lies more than
+    FREQUENCY_FACTOR from the probe's f00 (in kHz, or of another probe)."""
+    f_hz = np.asarray(f_hz, float)
+    bad = np.flatnonzero(~np.isfinite(f_hz))
+    if bad.size:
+        raise ValueError(f"{what} = {f_hz[bad[0]]} (ring-down {bad[0] + 1}) is not a finite frequency")
+    median = float(np.median(f_hz)) if f_hz.size else probe.f00_hz
+    if not probe.f00_hz / FREQUENCY_FACTOR <= median <= probe.f00_hz * FREQUENCY_FACTOR:
+        raise ValueError(
+            f"{what}: the median ring-down frequency {median:.6g} Hz is far from the probe's "
+            f"f00 = {probe.f00_hz:.4g} Hz (more than a factor {FREQUENCY_FACTOR:g}): a column in kHz, or another probe?"
+        )
+
+
 def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> int:
-    """``work()``'s exit status; a bad input → one line and 2, a bug → one line and 1."""
+    """``work()``'s exit status; a bad input → one line and 2, a bug → one line and 1, Ctrl-C
+    → one line and 130 (outputs are only renamed into place once complete, so none is left)."""
     try:
         return work()
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except INPUT_ERRORS as error:
         if debug:
             raise

@@ -36,7 +36,7 @@ from mows.cli.inputs import input_file, load_probe
 from mows.cli.lab_ringdown import run_ringdown
 from mows.lab import analyse, is_bag, load_table, progress, write_report
 from mows.lab.chirp import PIECE_PERIODS
-from mows.records.files import check_output, replacing
+from mows.records.files import check_output, writing
 
 MAX_ROWS = 2000
 SUBSAMPLE_SEED = 0
@@ -165,11 +165,11 @@ def run(args) -> int:
         stages.update()
         if args.lab_command == "report":
             stages.set_description(f"mows lab report: writing {args.output}")
-            with replacing(args.output, inputs, args.force) as temporary:
-                write_report(report, temporary)
+            with writing([args.output], inputs, args.force) as outputs:
+                write_report(report, outputs.temporaries[0])
             stages.update()
-    if args.lab_command == "report":
-        print(f"wrote {args.output}")
+    if args.lab_command == "report":  # on stderr beside JSON, which stdout must carry alone
+        print(outputs.report(), file=sys.stderr if args.json else sys.stdout)
     if args.json:
         print(json.dumps(report.to_dict(), indent=2, default=float))
     elif args.lab_command != "report":

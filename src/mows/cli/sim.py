@@ -18,7 +18,7 @@ import yaml
 
 from mows.cli.inputs import input_file
 from mows.estimate.recorded_cycle import fit_cycle
-from mows.records.files import check_output, replacing
+from mows.records.files import check_output, writing
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -75,9 +75,10 @@ def run(args) -> int:
                 print(f"θ0 = {theta0_deg:7.2f}°: {_compare(fit, record)}")
     if args.out:
         scenario_yaml = yaml.safe_dump(scenario.to_dict(), sort_keys=False)
-        with replacing(args.out, [args.scenario], args.force) as temporary, open(temporary, "wb") as handle:
-            np.savez_compressed(handle, **_arrays(records), scenario_yaml=scenario_yaml)
-        print(f"wrote {len(records)} cycles to {args.out}")
+        with writing([args.out], [args.scenario], args.force) as outputs:
+            with open(outputs.temporaries[0], "wb") as handle:
+                np.savez_compressed(handle, **_arrays(records), scenario_yaml=scenario_yaml)
+        print(f"{outputs.report()}: {len(records)} cycles")
     return 0
 
 

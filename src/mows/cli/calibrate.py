@@ -37,7 +37,7 @@ from mows.estimate.calibration_record import CalibrationPoint, KnownConstants
 from mows.estimate.probe_calibration import calibrate_probe
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.lab.data.readers import is_bag, load_table
-from mows.lab.data.table import MeasurementTable, TableError
+from mows.lab.data.table import MeasurementTable, rows_text
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import check_outputs, writing
@@ -280,17 +280,21 @@ def _pooled_amplitudes_rad(points) -> np.ndarray:
 
 
 def _table_columns(path) -> Mapping:
-    """The table's columns; a θmax the fits did not determine (NaN in ``amplitude_deg``) is
-    read as :func:`write_points` writes it, the median of the others."""
-    try:
+    """The table's columns, every calibration column a finite number in every row; a θmax the
+    fits did not determine (NaN in ``amplitude_deg``) is read as :func:`write_points` writes
+    it, the median of the others. A file that is no plain CSV of numbers is read by the lab's
+    reader, which says what is wrong with it."""
+    columns = _numeric_columns(path)
+    if columns is None:
         return load_table(path).columns
-    except TableError:
-        columns = _numeric_columns(path) or {}
-        amplitude = columns.get("amplitude_deg")
-        if amplitude is None or not np.isfinite(amplitude).any():
-            raise
+    amplitude = columns.get("amplitude_deg")
+    if amplitude is not None and np.isfinite(amplitude).any():
         columns["amplitude_deg"] = np.where(np.isfinite(amplitude), amplitude, np.nanmedian(amplitude))
-        return load_table(columns).columns
+    for name in ("theta0_deg", "f_hz", "f_std_hz", *TABLE_COLUMNS):
+        bad = np.flatnonzero(~np.isfinite(columns[name])) if name in columns else ()
+        if len(bad):
+            raise ValueError(f"column '{name}' is not a finite number in {rows_text(bad)}")
+    return load_table(columns).columns
 
 
 def _numeric_columns(path) -> dict | None:

@@ -79,6 +79,48 @@ def load_probe(path):
         return Probe.from_yaml(path)
 
 
+#: Sensor geometry beyond this is no bench of a millimetre magnet (its field at a metre is
+#: ~1e-13 T): a unit error (mm for m) or a typo.
+MAX_SENSOR_M = 1.0
+
+
+def finite_float(text: str) -> float:
+    """An argparse type: a finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text} must be a finite number")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """An argparse type: a finite number ≥ 0 (a duration)."""
+    value = finite_float(text)
+    if value < 0.0:
+        raise argparse.ArgumentTypeError(f"{value:g} must be ≥ 0")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a finite number > 0 (a frequency, a count of periods)."""
+    value = finite_float(text)
+    if value <= 0.0:
+        raise argparse.ArgumentTypeError(f"{value:g} must be > 0")
+    return value
+
+
+def sensor_length_m(text: str) -> float:
+    """An argparse type: a length of the sensor geometry, in (0, MAX_SENSOR_M] metres."""
+    value = finite_float(text)
+    if not 0.0 < value <= MAX_SENSOR_M:
+        raise argparse.ArgumentTypeError(
+            f"{value:g} m is out of range: a sensor length is > 0 and at most {MAX_SENSOR_M:g} m (mm given as m?)"
+        )
+    return value
+
+
 def positive_int(text: str) -> int:
     """An argparse type: an integer ≥ 1 (a count of repeats, cycles, ring-downs)."""
     try:

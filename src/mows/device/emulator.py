@@ -334,15 +334,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cap-a", type=float, default=CurrentCap().limit_a, help="coil current cap, A")
     parser.add_argument("--watchdog-timeout-s", type=float, default=WATCHDOG_TIMEOUT_S)
     args = parser.parse_args(argv)
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
     try:  # a bad argument, scenario or link path: one line and exit status 2, as every mows command
         device = SimulatedDevice(load_scenario(args.scenario))
         emulator = DeviceEmulator(device, args.link, CurrentCap(args.cap_a), args.watchdog_timeout_s).start()
     except (ValueError, OSError) as error:
         print(f"{parser.prog}: error: {' '.join(str(error).split())}", file=sys.stderr)
         return 2
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
     try:
         print(f"device emulator on {args.link}", flush=True)
         stop.wait()

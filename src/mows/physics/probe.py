@@ -210,11 +210,13 @@ class Probe:
             raise ValueError(f"{path}: a probe file is a mapping of constants, got {type(data).__name__}")
         return cls.from_dict(data)
 
-    def to_yaml(self, path, calibration: dict | None = None, inputs=(), force: bool = False) -> None:
+    def to_yaml(self, path, calibration: dict | None = None, inputs=(), force: bool = False) -> str:
         """Write the probe file (:func:`yaml_text`) as a new file, never over ``inputs`` nor, unless
-        ``force``, over an existing one (:func:`mows.records.files.writing`)."""
+        ``force``, over an existing one (:func:`mows.records.files.writing`); "wrote PATH" or
+        "replaced PATH"."""
         with writing([path], inputs, force) as outputs:
             outputs.temporaries[0].write_text(self.yaml_text(calibration))
+        return outputs.report()
 
     def yaml_text(self, calibration: dict | None = None) -> str:
         """The probe file's text; ``calibration`` (uncertainties, correlations, date, hardware id)

@@ -79,6 +79,22 @@ def load_probe(path):
         return Probe.from_yaml(path)
 
 
+class UsageError(ValueError):
+    """A command line the parser of ``prog`` refused: an unknown option, a value out of range."""
+
+    def __init__(self, prog: str, message: str):
+        super().__init__(message)
+        self.prog = prog
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose refusal is :class:`UsageError` (one line, exit status 2, by
+    :func:`report_errors`), not argparse's usage block and ``SystemExit``."""
+
+    def error(self, message):
+        raise UsageError(self.prog, f"{message} (see {self.prog} --help)")
+
+
 #: Sensor geometry beyond this is no bench of a millimetre magnet (its field at a metre is
 #: ~1e-13 T): a unit error (mm for m) or a typo.
 MAX_SENSOR_M = 1.0

@@ -32,7 +32,7 @@ import time
 from tqdm import tqdm
 
 from mows.cli.fit import add_bag_arguments
-from mows.cli.inputs import check_frequencies, input_file, load_probe, positive_float
+from mows.cli.inputs import OneLineParser, check_frequencies, input_file, load_probe, positive_float
 from mows.cli.lab_ringdown import run_ringdown
 from mows.lab import analyse, is_bag, load_table, progress, write_report
 from mows.lab.chirp import PIECE_PERIODS
@@ -44,7 +44,7 @@ REDRAW_S = 0.2  # the work bar's least interval between redraws
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"
 
 
-class _IntermixedParser(argparse.ArgumentParser):
+class _IntermixedParser(OneLineParser):
     """A parser that takes options between positionals: ``TABLE --probe P EFFECT…`` as
     documented. argparse's plain parsing fills ``EFFECT…`` (nargs ``*``) with nothing at the
     first positional and then rejects the effects after ``--probe P`` as unrecognised;

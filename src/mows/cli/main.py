@@ -8,10 +8,11 @@ or after the subcommand) shows the traceback.
 """
 
 import argparse
+import functools
 import importlib
 import sys
 
-from mows.cli.inputs import EXIT_INTERRUPTED, report_errors
+from mows.cli.inputs import EXIT_INTERRUPTED, OneLineParser, UsageError, report_errors
 
 SUBCOMMANDS = {
     "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
@@ -40,7 +41,7 @@ def main(argv=None) -> int:
 
 
 def _main(argv: list) -> int:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="mows",
         description=__doc__.splitlines()[0],
         epilog=EPILOG,
@@ -56,8 +57,15 @@ def _main(argv: list) -> int:
             module.add_arguments(sp)
             sp.set_defaults(_run=module.run)
         _add_debug(sp)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as error:  # the one line and the status of every bad input
+        return report_errors(error.prog, functools.partial(_refuse, error), "--debug" in argv)
     return report_errors(f"mows {args.command}", lambda: args._run(args), args.debug)
+
+
+def _refuse(error: UsageError) -> int:
+    raise error
 
 
 def _add_debug(parser: argparse.ArgumentParser) -> None:

@@ -223,6 +223,11 @@ def _dropped_notes(points, usable) -> list:
 
 
 def _least_squares(residuals, x0, steps):
+    if not np.all(np.isfinite(residuals(x0))):  # scipy would say "Residuals are not finite in the initial point"
+        raise CalibrationError(
+            "the model gives no finite frequency for the data's starting constants: "
+            "check the table's units (f_hz in Hz, currents in A) and the supply's field per ampere"
+        )
     result = optimize.least_squares(
         residuals, x0, jac=lambda x: _jacobian(residuals, x, steps), method="lm", x_scale="jac"
     )

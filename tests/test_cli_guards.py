@@ -8,6 +8,7 @@ file in the working directory byte for byte as before (no partial output, no tem
 
 import csv
 import hashlib
+import json
 import os
 import pathlib
 import shutil
@@ -133,6 +134,7 @@ CASES = [
     ("calibrate-one-row", ["calibrate", "{d}/one_row.csv", "-o", "{d}/p.yaml"], 2, ["too few"]),
     ("calibrate-repeats-0", ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--repeats", "0"], 2, ["--repeats"]),
     ("calibrate-bad-polarity", [*CAL, "-o", "{d}/p.yaml", "--polarity", "gradient=2"], 2, ["--polarity"]),
+    ("calibrate-nan-environment", [*CAL, "-o", "{d}/p.yaml", "--environment-field-t", "nan", "0", "0"], 2, ["nan"]),
     ("calibrate-nothing", ["calibrate", "-o", "{d}/p.yaml"], 2, ["TABLE"]),
     # sim
     ("sim-repeats-0", ["sim", "--repeats", "0"], 2, ["--repeats"]),
@@ -238,6 +240,7 @@ def test_ctrl_c_in_a_simulation_is_one_line_and_130(tmp_path, capsys, monkeypatc
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow  # a fresh interpreter loads the simulator and the fit: ~20 s on a loaded machine
 def test_sigint_to_a_running_command_ends_it_with_130_and_no_output(tmp_path):
     """The real signal: the command is interrupted once it has printed its first fit."""
     out = tmp_path / "x.npz"
@@ -264,3 +267,12 @@ def test_force_replaces_a_regular_file_and_says_so(tmp_path, capsys):
         assert cycles["samples_t"].shape[0] == 2 and len(set(cycles["n_samples"])) == 2
         for samples, n in zip(cycles["samples_t"], cycles["n_samples"]):
             assert np.isfinite(samples[:n]).all() and np.isnan(samples[n:]).all()
+
+
+@pytest.mark.slow  # the lab's whole report: ~7 s of CPU
+def test_lab_report_json_keeps_stdout_for_the_json(tmp_path, capsys):
+    page = tmp_path / "report.html"
+    assert main(["lab", "report", str(SWEEP_TABLE), "-o", str(page), "--json", "--no-cv"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["base"]["n"] > 0
+    assert captured.err.splitlines()[-1] == f"wrote {page}"

@@ -31,7 +31,7 @@ import numpy as np
 
 from mows.cli.calibrate_bag import SUPPLY_TOPIC, bag_points
 from mows.cli.fit import add_fit_arguments
-from mows.cli.inputs import check_frequencies, input_file, load_probe, positive_int
+from mows.cli.inputs import check_frequencies, finite_float, input_file, load_probe, positive_int
 from mows.device.scheduled import ScheduledDevice
 from mows.estimate.calibration_record import CalibrationPoint, KnownConstants
 from mows.estimate.probe_calibration import calibrate_probe
@@ -65,14 +65,14 @@ def add_arguments(parser) -> None:
     parser.add_argument("--gradient-scenario", help="scenario of the gradient wiring (anti-Helmholtz)")
     parser.add_argument(
         "--environment-field-t",
-        type=float,
+        type=finite_float,
         nargs=3,
         metavar=("BX", "BY", "BZ"),
         help="reference magnetometer reading at the probe with the supply at zero, T",
     )
     parser.add_argument("--hardware-id", default="", help="written to the probe file (default: the scenario)")
     parser.add_argument("--simulate", action="store_true", help="calibrate the scenario's simulated probe")
-    parser.add_argument("--currents-a", type=float, nargs="+", default=list(PAPER_CURRENTS_A))
+    parser.add_argument("--currents-a", type=finite_float, nargs="+", default=list(PAPER_CURRENTS_A))
     parser.add_argument("--repeats", type=positive_int, default=1, help="ring-downs per cycle")
     parser.add_argument("--seed", type=int, help="noise seed of the simulation (default: the scenario's)")
     parser.add_argument("--table", help="also write the calibration points as a table (CSV)")

@@ -17,7 +17,13 @@ Input (one of):
 The supply's field (and gradient) per ampere at the probe come from the ``supply`` section of
 ``--scenario`` (and ``--gradient-scenario``); the magnet's moment, mass and the housing stop from
 ``--probe`` (the nominal probe: data sheet and scale). The fit is
-:func:`mows.estimate.probe_calibration.calibrate_probe`.
+:func:`mows.estimate.probe_calibration.calibrate_probe`; it finds each pair's polarity from the
+data (``--polarity`` states it instead) and refuses implausible constants by name.
+
+Supply currents beyond the supply's cap and frequencies far from the nominal probe's f00 are
+refused before any fit (a table in mA or kHz). ``-o`` and ``--table`` are written together or
+not at all, never over an input, over an existing file only with ``--force``
+(:func:`mows.records.files.writing`; docs/cli.md).
 """
 
 from __future__ import annotations

@@ -2,8 +2,10 @@
 
 A bad input (a table, a bag, a probe or scenario file, a plugin, an argument) ends the
 command with one line on stderr that names the file, the row or key and what is allowed, and
-exit status 2; ``--debug`` shows the traceback instead. :func:`input_file` blames what goes
-wrong while a file is read on that file, in words (a directory, not UTF-8, not YAML);
+exit status 2 (a command line the parser refuses too: :class:`OneLineParser`); ``--debug``
+shows the traceback instead. Ctrl-C is one line and exit status 130 (docs/cli.md).
+:func:`input_file` blames what goes wrong while a file is read on that file, in words (a
+directory, not UTF-8, not YAML);
 :func:`report_errors` turns the errors into the line and the status. Anything else is a bug:
 exit status 1, one line, and the traceback with ``--debug``.
 """

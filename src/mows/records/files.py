@@ -128,13 +128,6 @@ def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iter
             temporary.unlink(missing_ok=True)
 
 
-@contextlib.contextmanager
-def replacing(path, inputs: Iterable = (), force: bool = False) -> Iterator[pathlib.Path]:
-    """:func:`writing` of one output: the temporary path to write it to."""
-    with writing([path], inputs, force) as outputs:
-        yield outputs.temporaries[0]
-
-
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)

@@ -188,8 +188,8 @@ def test_a_bad_input_is_one_line_with_its_status_and_changes_nothing(work, capsy
 
 EMULATOR_CASES = [
     ("scenario-nosuch", ["--scenario", "nosuch"], ["nosuch"]),
-    ("cap-negative", ["--cap-a", "-1"], ["-1"]),
-    ("cap-nan", ["--cap-a", "nan"], ["nan"]),
+    ("cap-negative", ["--cap-a", "-1"], ["--cap-a -1.0"]),
+    ("cap-nan", ["--cap-a", "nan"], ["--cap-a nan"]),
     ("watchdog-0-s", ["--watchdog-timeout-s", "0"], ["watchdog"]),
 ]
 

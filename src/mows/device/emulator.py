@@ -335,6 +335,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--watchdog-timeout-s", type=float, default=WATCHDOG_TIMEOUT_S)
     args = parser.parse_args(argv)
     try:  # a bad argument, scenario or link path: one line and exit status 2, as every mows command
+        if not (math.isfinite(args.cap_a) and args.cap_a > 0.0):
+            raise ValueError(f"--cap-a {args.cap_a} is out of range: a finite coil current > 0 A")
         device = SimulatedDevice(load_scenario(args.scenario))
         emulator = DeviceEmulator(device, args.link, CurrentCap(args.cap_a), args.watchdog_timeout_s).start()
     except (ValueError, OSError) as error:

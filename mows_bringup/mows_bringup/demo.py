@@ -100,7 +100,8 @@ def calibrate_probe(args, directory: pathlib.Path):
         say(line)
     probe_path = directory / "calibrated_probe.yaml"
     date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-    calibration.probe().to_yaml(probe_path, calibration.record(date, bench.name))
+    # The demo's own working file, made again by every run into --out.
+    calibration.probe().to_yaml(probe_path, calibration.record(date, bench.name), force=True)
     scene_path = directory / "demo_scene.yaml"
     load_scenario(args.scenario).replace(probe=bench.probe).to_yaml(scene_path)
     say(f"probe file: {probe_path}; the scene {args.scenario} with that probe: {scene_path}")

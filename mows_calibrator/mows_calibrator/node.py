@@ -146,7 +146,12 @@ class CalibratorNode(MowsNode):
         bench = bench_of(parameter_values(self, PARAMETERS))
         calibration = self._calibrator.calibrate(bench.wirings, bench.homogeneous, bench.nominal)
         date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-        calibration.probe().to_yaml(path, calibration.record(date, bench.hardware_id))
+        # A goal replaces the probe file of an earlier one (force), never a device, a FIFO or
+        # the nominal probe the calibration reads.
+        nominal_file = parameter_values(self, PARAMETERS)["nominal_probe_file"]
+        record = calibration.record(date, bench.hardware_id)
+        written = calibration.probe().to_yaml(path, record, inputs=[nominal_file] if nominal_file else [], force=True)
+        self.get_logger().info(f"probe file: {written}")
         return calibration
 
     def health(self) -> Health:

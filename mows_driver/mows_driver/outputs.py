@@ -58,9 +58,11 @@ class DriverOutputs:
     def publish(self, output: Output, session: DeviceSession, values: dict) -> None:
         """What one step of ``session`` yielded, with the node's parameter ``values`` (frames)."""
         for link in output.links:  # in every state, not only in a cycle
-            (self._logger.info if link.up else self._logger.warning)(
-                f"link {'up' if link.up else 'lost'}: {link.reason}"
-            )
+            # One call site per severity: rclpy refuses to change a call site's severity.
+            if link.up:
+                self._logger.info(f"link up: {link.reason}")
+            else:
+                self._logger.warning(f"link lost: {link.reason}")
         # Published only while armed (active): disarming flips it under the session's lock, so
         # no block with a sample read after the deactivation is published.
         for block in output.blocks if session.armed else ():

@@ -17,27 +17,36 @@ Input (one of):
 The supply's field (and gradient) per ampere at the probe come from the ``supply`` section of
 ``--scenario`` (and ``--gradient-scenario``); the magnet's moment, mass and the housing stop from
 ``--probe`` (the nominal probe: data sheet and scale). The fit is
-:func:`mows.estimate.probe_calibration.calibrate_probe`.
+:func:`mows.estimate.probe_calibration.calibrate_probe`; it finds each pair's polarity from the
+data (``--polarity`` states it instead) and refuses implausible constants by name.
+
+Supply currents beyond the supply's cap and frequencies far from the nominal probe's f00 are
+refused before any fit (a table in mA or kHz). ``-o`` and ``--table`` are written together or
+not at all, never over an input, over an existing file only with ``--force``
+(:func:`mows.records.files.writing`; docs/cli.md).
 """
 
 from __future__ import annotations
 
 import datetime
 import math
-import sys
+import warnings
+from collections.abc import Mapping
 
 import numpy as np
 
 from mows.cli.calibrate_bag import SUPPLY_TOPIC, bag_points
 from mows.cli.fit import add_fit_arguments
+from mows.cli.inputs import check_frequencies, finite_float, input_file, load_probe, positive_int
 from mows.device.scheduled import ScheduledDevice
 from mows.estimate.calibration_record import CalibrationPoint, KnownConstants
 from mows.estimate.probe_calibration import calibrate_probe
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.lab.data.readers import is_bag, load_table
-from mows.lab.data.table import MeasurementTable
+from mows.lab.data.table import MeasurementTable, rows_text
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import PAPER_PROBE, Probe
+from mows.records.files import check_outputs, writing
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -62,67 +71,117 @@ def add_arguments(parser) -> None:
     parser.add_argument("--gradient-scenario", help="scenario of the gradient wiring (anti-Helmholtz)")
     parser.add_argument(
         "--environment-field-t",
-        type=float,
+        type=finite_float,
         nargs=3,
         metavar=("BX", "BY", "BZ"),
         help="reference magnetometer reading at the probe with the supply at zero, T",
     )
     parser.add_argument("--hardware-id", default="", help="written to the probe file (default: the scenario)")
     parser.add_argument("--simulate", action="store_true", help="calibrate the scenario's simulated probe")
-    parser.add_argument("--currents-a", type=float, nargs="+", default=list(PAPER_CURRENTS_A))
-    parser.add_argument("--repeats", type=int, default=1, help="ring-downs per cycle")
+    parser.add_argument("--currents-a", type=finite_float, nargs="+", default=list(PAPER_CURRENTS_A))
+    parser.add_argument("--repeats", type=positive_int, default=1, help="ring-downs per cycle")
     parser.add_argument("--seed", type=int, help="noise seed of the simulation (default: the scenario's)")
     parser.add_argument("--table", help="also write the calibration points as a table (CSV)")
+    parser.add_argument("--force", action="store_true", help="replace existing output files (never an input)")
+    parser.add_argument(
+        "--polarity",
+        nargs="+",
+        metavar="PAIR=SIGN",
+        help="the sign of a pair's current as wired: field=-1, gradient=-1 (default: found from the data)",
+    )
     parser.add_argument("--supply-topic", default=SUPPLY_TOPIC, help="BAG: the driver's supply states")
     add_fit_arguments(parser)  # BAG: how its ring-downs are fitted (as the estimator's parameters)
     parser.set_defaults(tuning=False)
 
 
 def run(args) -> int:
-    nominal = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
-    try:
-        scenario = load_scenario(args.scenario)
-        gradient = load_scenario(args.gradient_scenario) if args.gradient_scenario else None
-        wirings = scenario_wirings(scenario, gradient)
-        field_wiring = next(iter(wirings))  # the scenario's own supply: the homogeneous wiring
-        if args.simulate:
-            points, failed = simulated_points(scenario, gradient, nominal, field_wiring, args)
-        elif args.input and is_bag(args.input):
+    inputs = [path for path in (args.input, args.probe, args.scenario, args.gradient_scenario) if path]
+    outputs = [args.output] + ([args.table] if args.table else [])
+    check_outputs(outputs, inputs, args.force)
+    nominal = load_probe(args.probe) if args.probe else PAPER_PROBE
+    scenario = _scenario(args.scenario)
+    gradient = _scenario(args.gradient_scenario) if args.gradient_scenario else None
+    wirings = scenario_wirings(scenario, gradient)
+    field_wiring = next(iter(wirings))  # the scenario's own supply: the homogeneous wiring
+    limits = scenario.supply.limits
+    if args.simulate:
+        _check_currents(args.currents_a, limits, "--currents-a")
+        points, failed = simulated_points(scenario, gradient, nominal, field_wiring, args)
+    elif args.input and is_bag(args.input):
+        with input_file(args.input, "bag"):
             points, failed, unknown = bag_points(args.input, nominal, field_wiring, args)
-            if unknown:
-                print(f"{unknown} ring-down(s) at no steady supply current (ramping, or before it was set) left out")
-        elif args.input:
+        if unknown:
+            print(f"{unknown} ring-down(s) at no steady supply current (ramping, or before it was set) left out")
+    elif args.input:
+        with input_file(args.input, "calibration table"):
             points, failed = read_points(args.input, field_wiring), {}
-        else:
-            raise ValueError("give a TABLE or BAG, or --simulate")
-        known = KnownConstants.of(nominal, args.environment_field_t)
-        calibration = calibrate_probe(points, wirings, known, field_wiring, failed, nominal.lever_m)
-    except (OSError, ValueError) as error:  # CalibrationError is a ValueError
-        print(f"mows calibrate: {error}", file=sys.stderr)
-        return 2
-    if args.table:
-        write_points(args.table, points, field_wiring)
+            _check_currents([p.supply_current_a for p in points], limits, "supply_current_a")
+            check_frequencies([p.frequency_hz for p in points], nominal, "f_hz")
+    else:
+        raise ValueError("give a TABLE or BAG, or --simulate")
+    known = KnownConstants.of(nominal, args.environment_field_t)
+    polarity = _polarity(args.polarity, field_wiring)
+    calibration = calibrate_probe(points, wirings, known, field_wiring, failed, nominal.lever_m, polarity)
     date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-    calibration.probe().to_yaml(args.output, calibration.record(date, args.hardware_id or scenario.name))
+    record = calibration.record(date, args.hardware_id or scenario.name)
+    with writing(outputs, inputs, args.force) as written:
+        written.temporaries[0].write_text(calibration.probe().yaml_text(record))
+        if args.table:
+            write_points(written.temporaries[1], points, field_wiring)
     print(calibration.report())
     if args.simulate:
         print(compare_with_truth(calibration, scenario.probe))
-    print(f"probe file written: {args.output}")
+    print(written.report())
     return 0
+
+
+def _scenario(name):
+    with input_file(name, "scenario"):
+        return load_scenario(name)
+
+
+def _check_currents(currents_a, limits, what: str) -> None:
+    """ValueError naming the first current beyond the supply's cap (a table in mA, a typo)."""
+    for i, current in enumerate(currents_a):
+        if not (math.isfinite(current) and abs(current) <= limits.cap_a):
+            where = f" (ring-down {i + 1})" if what == "supply_current_a" else ""
+            raise ValueError(
+                f"{what} = {current:g} A{where} is outside the supply's cap of ±{limits.cap_a:g} A "
+                "(currents in mA? the cap is the scenario's supply cap_a)"
+            )
+
+
+def _polarity(given, field_wiring: str) -> dict:
+    """``--polarity field=-1 gradient=+1`` as wiring name → sign."""
+    names = {"field": field_wiring, "gradient": GRADIENT_WIRING}
+    polarity = {}
+    for item in given or ():
+        pair, _, sign = item.partition("=")
+        if pair not in names or sign not in ("+1", "1", "-1"):
+            raise ValueError(f"--polarity {item!r}: expected field=+1, field=-1, gradient=+1 or gradient=-1")
+        polarity[names[pair]] = -1 if sign == "-1" else 1
+    return polarity
 
 
 # --- the simulated calibration ------------------------------------------------------------
 def simulated_points(scenario, gradient, nominal: Probe, field_wiring: str, args) -> tuple[list, dict]:
     plan = CalibrationPlan(tuple(args.currents_a), repeats=args.repeats, wiring=field_wiring)
     seed = scenario.seed if args.seed is None else args.seed
-    outcome = simulate_calibration(scenario.replace(seed=seed), plan, nominal)
+    outcome = _succeeded(simulate_calibration(scenario.replace(seed=seed), plan, nominal))
     points, failed = list(outcome.points), dict(outcome.failed)
     if gradient is not None:
         plan = CalibrationPlan(tuple(args.currents_a), repeats=args.repeats, wiring=GRADIENT_WIRING)
-        more = simulate_calibration(gradient.replace(seed=seed + 1), plan, nominal)
+        more = _succeeded(simulate_calibration(gradient.replace(seed=seed + 1), plan, nominal))
         points += more.points
         failed.update(more.failed)
     return points, failed
+
+
+def _succeeded(outcome: CalibrationOutcome) -> CalibrationOutcome:
+    """The outcome of a schedule that ran to its end; ValueError with its reason otherwise."""
+    if not outcome.success:
+        raise ValueError(f"the simulated calibration stopped: {outcome.message}")
+    return outcome
 
 
 def simulate_calibration(scenario, plan: CalibrationPlan, nominal: Probe, on_feedback=None) -> CalibrationOutcome:
@@ -226,13 +285,42 @@ def _pooled_amplitudes_rad(points) -> np.ndarray:
     return np.where(np.isfinite(amplitude), amplitude, np.nanmedian(amplitude))
 
 
+def _table_columns(path) -> Mapping:
+    """The table's columns, every calibration column a finite number in every row; a θmax the
+    fits did not determine (NaN in ``amplitude_deg``) is read as :func:`write_points` writes
+    it, the median of the others. A file that is no plain CSV of numbers is read by the lab's
+    reader, which says what is wrong with it."""
+    columns = _numeric_columns(path)
+    if columns is None:
+        return load_table(path).columns
+    amplitude = columns.get("amplitude_deg")
+    if amplitude is not None and np.isfinite(amplitude).any():
+        columns["amplitude_deg"] = np.where(np.isfinite(amplitude), amplitude, np.nanmedian(amplitude))
+    for name in ("theta0_deg", "f_hz", "f_std_hz", *TABLE_COLUMNS):
+        bad = np.flatnonzero(~np.isfinite(columns[name])) if name in columns else ()
+        if len(bad):
+            raise ValueError(f"column '{name}' is not a finite number in {rows_text(bad)}")
+    return load_table(columns).columns
+
+
+def _numeric_columns(path) -> dict | None:
+    """Every column of a CSV of numbers (NaN allowed), or None for any other file."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            values = np.genfromtxt(path, delimiter=",", names=True, encoding="utf-8-sig", invalid_raise=True)
+        except ValueError:
+            return None
+    names = values.dtype.names or ()
+    return {name: np.atleast_1d(values[name]).astype(float) for name in names} or None
+
+
 def read_points(path, field_wiring: str) -> list:
     """Calibration points from a calibration table (CSV)."""
-    table = load_table(path)
-    missing = [c for c in TABLE_COLUMNS if c not in table.columns]
+    c = _table_columns(path)
+    missing = [name for name in TABLE_COLUMNS if name not in c]
     if missing:
         raise ValueError(f"{path}: a calibration table needs the columns {list(TABLE_COLUMNS)}; missing {missing}")
-    c = table.columns
     return [
         CalibrationPoint(
             GRADIENT_WIRING if c["gradient_wiring"][i] else field_wiring,
@@ -245,5 +333,5 @@ def read_points(path, field_wiring: str) -> list:
             float(c["duration_s"][i]),
             float(c["start_offset_s"][i]),
         )
-        for i in range(len(table))
+        for i in range(len(c["f_hz"]))
     ]

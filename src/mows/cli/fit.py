@@ -11,16 +11,18 @@ appears whole or not at all (:mod:`mows.records.files`).
 """
 
 import math
+import os
 import sys
 
-from mows.cli.inputs import input_file, load_probe
+from mows.cli.inputs import input_file, load_probe, non_negative_float, sensor_length_m
 from mows.estimate.ringdown import SETTLE_S, FitOptions
 from mows.estimate.segments import fit_segment
 from mows.lab.chirp import recorded_segments
+from mows.lab.data.readers import is_bag
 from mows.lab.data.table import MeasurementTable
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import PAPER_PROBE, Probe
-from mows.records.files import check_output, replacing
+from mows.records.files import check_output, writing
 from mows.records.stamps import NS_PER_S
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -44,23 +46,31 @@ def add_fit_arguments(parser) -> None:
     parser.add_argument("--raw-topic", default="/mows/raw")
     parser.add_argument("--excitation-topic", default="/mows/excitation")
     parser.add_argument("--paper-model", action="store_true", help="fit Eq. S11 (a magnet turning in place)")
-    parser.add_argument("--settle-s", type=float, default=SETTLE_S, help="samples skipped after coil-off, s")
+    parser.add_argument(
+        "--settle-s", type=non_negative_float, default=SETTLE_S, help="samples skipped after coil-off, s"
+    )
     parser.add_argument(
         "--sensor-distance-m",
-        type=float,
+        type=sensor_length_m,
         default=PAPER_DISTANCE_M,
         help="probe to near fluxgate along the plane's x axis, m (as the estimator's parameter)",
     )
-    parser.add_argument("--sensor-spacing-m", type=float, default=PAPER_SPACING_M, help="fluxgate spacing, m")
+    parser.add_argument("--sensor-spacing-m", type=sensor_length_m, default=PAPER_SPACING_M, help="fluxgate spacing, m")
 
 
 def run(args) -> int:
     inputs = [args.bag] + ([args.probe] if args.probe else [])
+    if os.path.isfile(args.bag) and not is_bag(args.bag):
+        raise ValueError(
+            f"{args.bag} is not a bag (a bag is a directory or an .mcap file): "
+            "a table of fits is read by mows lab compare / report"
+        )
     if args.csv:
         check_output(args.csv, inputs, args.force)
     probe = load_probe(args.probe) if args.probe else PAPER_PROBE
     with input_file(args.bag):
         fits = list(fit_bag(args.bag, probe, args))
+        check_ringdowns(args.bag, [window for window, _ in fits], args)
     for window, fit in fits:
         print(
             f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):7.2f}°: "
@@ -69,12 +79,24 @@ def run(args) -> int:
     ok = [(w, f) for w, f in fits if f.ok]
     print(f"{len(ok)} of {len(fits)} ring-downs fitted")
     if args.csv and ok:
-        with replacing(args.csv, inputs, args.force) as temporary:
-            write_table(temporary, ok, probe)
-        print(f"wrote {len(ok)} rows to {args.csv}")
+        with writing([args.csv], inputs, args.force) as outputs:
+            write_table(outputs.temporaries[0], ok, probe)
+        print(f"{outputs.report()}: {len(ok)} rows")
     elif args.csv:
         print(f"mows fit: no ring-down fitted: {args.csv} not written", file=sys.stderr)
-    return 0 if fits else 1
+    return 0
+
+
+def check_ringdowns(path, windows, args) -> None:
+    """ValueError when the bag holds no ring-down to fit, or ``--settle-s`` skips all of each."""
+    if not windows:
+        raise ValueError(
+            f"{path} holds no ring-down: no RINGDOWN phase on {args.excitation_topic} with samples on "
+            f"{args.raw_topic}{'' if args.tuning else ' (tuning ones skipped: --tuning)'}"
+        )
+    longest = max(window.duration_s for window in windows)
+    if args.settle_s >= longest:
+        raise ValueError(f"--settle-s {args.settle_s:g} s skips the whole of every ring-down (longest {longest:g} s)")
 
 
 def fit_bag(path, probe: Probe, args):

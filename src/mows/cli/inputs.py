@@ -2,19 +2,23 @@
 
 A bad input (a table, a bag, a probe or scenario file, a plugin, an argument) ends the
 command with one line on stderr that names the file, the row or key and what is allowed, and
-exit status 2; ``--debug`` shows the traceback instead. :func:`input_file` blames what goes
-wrong while a file is read on that file, in words (a directory, not UTF-8, not YAML);
+exit status 2 (a command line the parser refuses too: :class:`OneLineParser`); ``--debug``
+shows the traceback instead. Ctrl-C is one line and exit status 130 (docs/cli.md).
+:func:`input_file` blames what goes wrong while a file is read on that file, in words (a
+directory, not UTF-8, not YAML);
 :func:`report_errors` turns the errors into the line and the status. Anything else is a bug:
 exit status 1, one line, and the traceback with ``--debug``.
 """
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import pathlib
 import sys
 from collections.abc import Callable, Iterator
 
+import numpy as np
 import yaml
 
 from mows.physics.probe import Probe
@@ -22,8 +26,14 @@ from mows.physics.probe import Probe
 #: Exceptions that mean "the input is bad". ValueError covers the library's own refusals
 #: (TableError, OutputRefused, a scenario's out-of-range value) and UnicodeDecodeError.
 INPUT_ERRORS = (ValueError, OSError, KeyError, yaml.YAMLError)
-EXIT_BAD_INPUT = 2
+#: The exit statuses of every ``mows`` command (docs/cli.md).
+EXIT_OK = 0
 EXIT_BUG = 1
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command ended by Ctrl-C
+#: Ring-down frequencies this far (a factor) from the probe's f00 are no ring-downs of it: a
+#: unit error (kHz) or another probe. The strongest fields of the paper move f by a factor ~2.
+FREQUENCY_FACTOR = 10.0
 
 
 class InputError(ValueError):
@@ -71,10 +81,100 @@ def load_probe(path):
         return Probe.from_yaml(path)
 
 
+class UsageError(ValueError):
+    """A command line the parser of ``prog`` refused: an unknown option, a value out of range."""
+
+    def __init__(self, prog: str, message: str):
+        super().__init__(message)
+        self.prog = prog
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose refusal is :class:`UsageError` (one line, exit status 2, by
+    :func:`report_errors`), not argparse's usage block and ``SystemExit``."""
+
+    def error(self, message):
+        raise UsageError(self.prog, f"{message} (see {self.prog} --help)")
+
+
+#: Sensor geometry beyond this is no bench of a millimetre magnet (its field at a metre is
+#: ~1e-13 T): a unit error (mm for m) or a typo.
+MAX_SENSOR_M = 1.0
+
+
+def finite_float(text: str) -> float:
+    """An argparse type: a finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text} must be a finite number")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """An argparse type: a finite number ≥ 0 (a duration)."""
+    value = finite_float(text)
+    if value < 0.0:
+        raise argparse.ArgumentTypeError(f"{value:g} must be ≥ 0")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a finite number > 0 (a frequency, a count of periods)."""
+    value = finite_float(text)
+    if value <= 0.0:
+        raise argparse.ArgumentTypeError(f"{value:g} must be > 0")
+    return value
+
+
+def sensor_length_m(text: str) -> float:
+    """An argparse type: a length of the sensor geometry, in (0, MAX_SENSOR_M] metres."""
+    value = finite_float(text)
+    if not 0.0 < value <= MAX_SENSOR_M:
+        raise argparse.ArgumentTypeError(
+            f"{value:g} m is out of range: a sensor length is > 0 and at most {MAX_SENSOR_M:g} m (mm given as m?)"
+        )
+    return value
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer ≥ 1 (a count of repeats, cycles, ring-downs)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} must be at least 1")
+    return value
+
+
+def check_frequencies(f_hz, probe: Probe, what: str = "f_hz") -> None:
+    """ValueError when ring-down frequencies are not finite or their median lies more than
+    FREQUENCY_FACTOR from the probe's f00 (in kHz, or of another probe)."""
+    f_hz = np.asarray(f_hz, float)
+    bad = np.flatnonzero(~np.isfinite(f_hz))
+    if bad.size:
+        raise ValueError(f"{what} = {f_hz[bad[0]]} (ring-down {bad[0] + 1}) is not a finite frequency")
+    median = float(np.median(f_hz)) if f_hz.size else probe.f00_hz
+    if not probe.f00_hz / FREQUENCY_FACTOR <= median <= probe.f00_hz * FREQUENCY_FACTOR:
+        raise ValueError(
+            f"{what}: the median ring-down frequency {median:.6g} Hz is far from the probe's "
+            f"f00 = {probe.f00_hz:.4g} Hz (more than a factor {FREQUENCY_FACTOR:g}): a column in kHz, or another probe?"
+        )
+
+
 def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> int:
-    """``work()``'s exit status; a bad input → one line and 2, a bug → one line and 1."""
+    """``work()``'s exit status; a bad input → one line and 2, a bug → one line and 1, Ctrl-C
+    → one line and 130 (outputs are only renamed into place once complete, so none is left)."""
     try:
         return work()
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except INPUT_ERRORS as error:
         if debug:
             raise

@@ -32,11 +32,11 @@ import time
 from tqdm import tqdm
 
 from mows.cli.fit import add_bag_arguments
-from mows.cli.inputs import input_file, load_probe
+from mows.cli.inputs import OneLineParser, check_frequencies, input_file, load_probe, positive_float
 from mows.cli.lab_ringdown import run_ringdown
 from mows.lab import analyse, is_bag, load_table, progress, write_report
 from mows.lab.chirp import PIECE_PERIODS
-from mows.records.files import check_output, replacing
+from mows.records.files import check_output, writing
 
 MAX_ROWS = 2000
 SUBSAMPLE_SEED = 0
@@ -44,7 +44,7 @@ REDRAW_S = 0.2  # the work bar's least interval between redraws
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"
 
 
-class _IntermixedParser(argparse.ArgumentParser):
+class _IntermixedParser(OneLineParser):
     """A parser that takes options between positionals: ``TABLE --probe P EFFECT…`` as
     documented. argparse's plain parsing fills ``EFFECT…`` (nargs ``*``) with nothing at the
     first positional and then rejects the effects after ``--probe P`` as unrecognised;
@@ -120,9 +120,11 @@ def _add_ringdown_arguments(sub) -> None:
     command = sub.add_parser("ringdown", help=text, description=text)
     command.add_argument("bag", help="a rosbag2 bag the driver recorded (raw blocks and excitation phases)")
     add_bag_arguments(command)
-    command.add_argument("--f00-hz", type=float, help="calibrated zero-field frequency, Hz (default: the probe's)")
+    command.add_argument(
+        "--f00-hz", type=positive_float, help="calibrated zero-field frequency, Hz (default: the probe's)"
+    )
     command.add_argument("--cycle", type=int, help="only this cycle id")
-    command.add_argument("--piece-periods", type=float, default=PIECE_PERIODS, help="periods per piece")
+    command.add_argument("--piece-periods", type=positive_float, default=PIECE_PERIODS, help="periods per piece")
     command.add_argument("--json", action="store_true", help="print JSON instead of text")
 
 
@@ -130,6 +132,7 @@ def run(args) -> int:
     if args.lab_command == "ringdown":
         return run_ringdown(args)
     inputs = [args.table, args.probe, *args.plugin] + ([args.reference] if args.reference else [])
+    _check_bag_options(args)
     if args.lab_command == "report":
         check_output(args.output, inputs, args.force)
     probe = _probe(args.probe)
@@ -148,6 +151,7 @@ def run(args) -> int:
             drop_invalid=args.drop_invalid,
             **({"reference": args.reference, "magnet_position_m": args.magnet_position} if is_bag(args.table) else {}),
         )
+        check_frequencies(table.columns["f_hz"], probe, "f_hz")
         if len(table) > MAX_ROWS and not args.all_rows:
             table = table.subsample(MAX_ROWS, SUBSAMPLE_SEED)
         stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")
@@ -163,18 +167,44 @@ def run(args) -> int:
             cross_validate=not args.no_cv,
         )
         stages.update()
+        if report.base.dof <= 0:
+            raise ValueError(
+                f"{len(table)} row(s) for the base model's {report.base.k} parameters leave {report.base.dof} "
+                "degrees of freedom: nothing would test the model; measure more orientations"
+            )
         if args.lab_command == "report":
             stages.set_description(f"mows lab report: writing {args.output}")
-            with replacing(args.output, inputs, args.force) as temporary:
-                write_report(report, temporary)
+            with writing([args.output], inputs, args.force) as outputs:
+                write_report(report, outputs.temporaries[0])
             stages.update()
-    if args.lab_command == "report":
-        print(f"wrote {args.output}")
+    if args.lab_command == "report":  # on stderr beside JSON, which stdout must carry alone
+        print(outputs.report(), file=sys.stderr if args.json else sys.stdout)
     if args.json:
         print(json.dumps(report.to_dict(), indent=2, default=float))
     elif args.lab_command != "report":
         print(format_text(report, table, args.lab_command))
     return 0
+
+
+def _check_bag_options(args) -> None:
+    """ValueError naming the bag-only options given for a table that is no bag (they would be
+    silently ignored)."""
+    if is_bag(args.table):
+        return
+    given = [
+        option
+        for option, used in (
+            ("--reference", args.reference is not None),
+            ("--magnet-position", tuple(args.magnet_position) != (0.0, 0.0, 0.0)),
+        )
+        if used
+    ]
+    if given:
+        options = " and ".join(given)
+        raise ValueError(
+            f"{options} {'apply' if len(given) > 1 else 'applies'} to bags only: a CSV table gives its "
+            f"reference field in its ref_* columns ({args.table} is no bag); leave {options} out"
+        )
 
 
 class WorkBar:

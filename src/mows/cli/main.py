@@ -8,10 +8,11 @@ or after the subcommand) shows the traceback.
 """
 
 import argparse
+import functools
 import importlib
 import sys
 
-from mows.cli.inputs import report_errors
+from mows.cli.inputs import EXIT_INTERRUPTED, OneLineParser, UsageError, report_errors
 
 SUBCOMMANDS = {
     "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
@@ -24,11 +25,32 @@ SUBCOMMANDS = {
 }
 
 
+EPILOG = """exit status: 0 done; 1 a bug (one line; --debug for the traceback); 2 a bad input or
+usage (one line naming the file, key or option); 130 interrupted (Ctrl-C). Outputs appear whole
+or not at all, never over an input, over an existing file only with --force (docs/cli.md)."""
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="mows", description=__doc__.splitlines()[0])
+    words = sys.argv[1:] if argv is None else list(argv)
+    try:
+        return _main(words)
+    except KeyboardInterrupt:  # while the subcommand's modules load; within it, report_errors says it
+        if "--debug" in words:
+            raise
+        print("mows: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _main(argv: list) -> int:
+    parser = OneLineParser(
+        prog="mows",
+        description=__doc__.splitlines()[0],
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True)
-    requested = [word for word in (argv if argv is not None else sys.argv[1:]) if not word.startswith("-")][:1]
+    requested = [word for word in argv if not word.startswith("-")][:1]
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         sp = sub.add_parser(name, help=help_text)
         if name in requested:
@@ -36,8 +58,15 @@ def main(argv=None) -> int:
             module.add_arguments(sp)
             sp.set_defaults(_run=module.run)
         _add_debug(sp)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as error:  # the one line and the status of every bad input
+        return report_errors(error.prog, functools.partial(_refuse, error), "--debug" in argv)
     return report_errors(f"mows {args.command}", lambda: args._run(args), args.debug)
+
+
+def _refuse(error: UsageError) -> int:
+    raise error
 
 
 def _add_debug(parser: argparse.ArgumentParser) -> None:

@@ -16,9 +16,9 @@ import math
 import numpy as np
 import yaml
 
-from mows.cli.inputs import input_file
+from mows.cli.inputs import finite_float, input_file, positive_int
 from mows.estimate.recorded_cycle import fit_cycle
-from mows.records.files import check_output, replacing
+from mows.records.files import check_output, writing
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -30,14 +30,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--theta0-deg",
-        type=float,
+        type=finite_float,
         nargs="+",
         default=None,
         help="probe orientations, degrees (default: the scenario's)",
     )
-    parser.add_argument("--repeats", type=int, default=1, help="cycles per orientation (default 1)")
+    parser.add_argument("--repeats", type=positive_int, default=1, help="cycles per orientation (default 1)")
     parser.add_argument(
-        "--amplitude-a", type=float, default=None, help="base coil current amplitude, A (default: the scenario's)"
+        "--amplitude-a",
+        type=finite_float,
+        default=None,
+        help="base coil current amplitude, A (default: the scenario's)",
     )
     parser.add_argument("--seed", type=int, default=None, help="noise seed (default: the scenario's)")
     parser.add_argument("--out", default=None, help="write the cycles to this new .npz file")
@@ -75,9 +78,10 @@ def run(args) -> int:
                 print(f"θ0 = {theta0_deg:7.2f}°: {_compare(fit, record)}")
     if args.out:
         scenario_yaml = yaml.safe_dump(scenario.to_dict(), sort_keys=False)
-        with replacing(args.out, [args.scenario], args.force) as temporary, open(temporary, "wb") as handle:
-            np.savez_compressed(handle, **_arrays(records), scenario_yaml=scenario_yaml)
-        print(f"wrote {len(records)} cycles to {args.out}")
+        with writing([args.out], [args.scenario], args.force) as outputs:
+            with open(outputs.temporaries[0], "wb") as handle:
+                np.savez_compressed(handle, **_arrays(records), scenario_yaml=scenario_yaml)
+        print(f"{outputs.report()}: {len(records)} cycles")
     return 0
 
 
@@ -100,8 +104,20 @@ def _arrays(records) -> dict:
         "currents_a": np.stack([r.currents_a for r in records]),
         "first_sample_index": np.array([r.block.samples.first_sample_index for r in records]),
         "coil_off_index": np.array([r.coil_off_index for r in records]),
-        "samples_t": np.stack([r.samples_t for r in records]),
-        "saturated": np.stack([r.saturated for r in records]),
-        "theta_rad": np.stack([r.theta_rad for r in records]),
+        # Cycles differ in length (the excitation ends at a peak of its drive): padded to the
+        # longest, NaN (not saturated) after each cycle's n_samples.
+        "n_samples": np.array([len(r.samples_t) for r in records]),
+        "samples_t": _padded([r.samples_t for r in records], np.nan),
+        "saturated": _padded([r.saturated for r in records], False),
+        "theta_rad": _padded([r.theta_rad for r in records], np.nan),
         "expected_frequency_hz": np.array([float(r.expected_frequency_hz()) for r in records]),
     }
+
+
+def _padded(arrays, fill) -> np.ndarray:
+    """The arrays stacked, each padded at the end with ``fill`` to the longest one's length."""
+    longest = max(len(a) for a in arrays)
+    out = np.full((len(arrays), longest, *arrays[0].shape[1:]), fill, dtype=arrays[0].dtype)
+    for row, array in zip(out, arrays):
+        row[: len(array)] = array
+    return out

@@ -317,22 +317,24 @@ class CycleSequencer:
         self._results.clear()
 
     def _fault(self, reason: str) -> None:
-        """Coils off now; the running cycle (if any) fails with ``reason``."""
+        """Coils off now; the running cycle (if any) fails with ``reason``, and its phases end
+        with this FAULT (it carries the cycle's id: a record of the cycle ends with its fault)."""
         self._step.coils_off_now = True
+        cycle = self._cycle
         if self._runner is not None:
-            cycle = self._cycle
             assert cycle is not None  # set and cleared together with _runner (start, _end)
             self._runner.close()
             self._end(CycleOutcome(False, reason, cycle.cycle_id, self.frequency_hz, 0))
-        self._announce(Phase.FAULT, reason)
+        self._announce(Phase.FAULT, reason, cycle)
 
     # --- events ----------------------------------------------------------------------------
-    def _announce(self, phase: Phase, reason: str) -> None:
-        """A phase that begins at the device's next sample (known only once samples arrive)."""
+    def _announce(self, phase: Phase, reason: str, cycle: CyclePlan | None = None) -> None:
+        """A phase that begins at the device's next sample (known only once samples arrive;
+        a cycle runs only once they have)."""
         if self._anchor is None:
             self._unstamped.append((phase, reason))
         else:
-            self._emit(phase, self._next_index, reason=reason)
+            self._emit(phase, self._next_index, cycle, reason=reason)
 
     def _emit(
         self,

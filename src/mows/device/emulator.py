@@ -30,6 +30,7 @@ Like the hardware it:
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import select
 import signal
@@ -64,6 +65,7 @@ FRAME_S = 0.01  # samples per Samples frame, in seconds of device time
 STATUS_PERIOD_S = 0.1
 OUTPUT_LIMIT_BYTES = 256 * 1024  # frames waiting for a host that does not read (~1.5 s); more are dropped
 READ_BYTES = 65536
+MIN_WATCHDOG_S = FRAME_S
 
 
 class DeviceEmulator:
@@ -77,6 +79,11 @@ class DeviceEmulator:
         watchdog_timeout_s: float = WATCHDOG_TIMEOUT_S,
         clock: DeviceClock | None = None,
     ):
+        if not (math.isfinite(watchdog_timeout_s) and watchdog_timeout_s >= MIN_WATCHDOG_S):
+            raise ValueError(
+                f"watchdog timeout {watchdog_timeout_s!r} s is out of range: at least {MIN_WATCHDOG_S:g} s "
+                "(one frame of the device loop), or the coils would switch off between any two host frames"
+            )
         self.device = ScheduledDevice(device, cap)
         self.link_path = Path(link_path)
         self.clock = clock or DeviceClock(device.sample_rate_hz)
@@ -146,10 +153,12 @@ class DeviceEmulator:
         except OSError as error:
             os.close(master)
             os.close(slave)
-            raise FileExistsError(
-                f"device emulator: {self.link_path} exists ({error.strerror}): it is not "
-                "this emulator's link; remove it or choose another --link path"
-            ) from None
+            if isinstance(error, FileExistsError):
+                raise FileExistsError(
+                    f"device emulator: {self.link_path} exists: it is not this emulator's link; "
+                    "remove it or choose another --link path"
+                ) from None
+            raise OSError(f"device emulator: cannot make the link {self.link_path}: {error.strerror}") from None
         self._fds = (master, slave)
 
     def _own_link(self) -> bool:
@@ -325,15 +334,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cap-a", type=float, default=CurrentCap().limit_a, help="coil current cap, A")
     parser.add_argument("--watchdog-timeout-s", type=float, default=WATCHDOG_TIMEOUT_S)
     args = parser.parse_args(argv)
+    try:  # a bad argument, scenario or link path: one line and exit status 2, as every mows command
+        if not (math.isfinite(args.cap_a) and args.cap_a > 0.0):
+            raise ValueError(f"--cap-a {args.cap_a} is out of range: a finite coil current > 0 A")
+        device = SimulatedDevice(load_scenario(args.scenario))
+        emulator = DeviceEmulator(device, args.link, CurrentCap(args.cap_a), args.watchdog_timeout_s).start()
+    except (ValueError, OSError) as error:
+        print(f"{parser.prog}: error: {' '.join(str(error).split())}", file=sys.stderr)
+        return 2
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
-    device = SimulatedDevice(load_scenario(args.scenario))
-    try:
-        emulator = DeviceEmulator(device, args.link, CurrentCap(args.cap_a), args.watchdog_timeout_s).start()
-    except FileExistsError as error:
-        print(error, file=sys.stderr)
-        return 2
     try:
         print(f"device emulator on {args.link}", flush=True)
         stop.wait()

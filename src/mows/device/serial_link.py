@@ -147,7 +147,7 @@ class SerialLink:
             )
         except (serial.SerialException, OSError, ValueError) as error:
             self.open_failures += 1
-            self.last_error = f"cannot open {self.port}: {error}"
+            self._never_connected(f"cannot open {self.port}: {error}")
             return False
         with self._write_lock:
             self._serial = port
@@ -198,6 +198,7 @@ class SerialLink:
         if port is None:
             return
         port.close()
+        self._never_connected(reason)
         self.last_error = reason
         for frame in self.decoder.finish():
             self._received(frame)
@@ -205,3 +206,11 @@ class SerialLink:
         if self.up:
             self.up = False
             self._frames.put(LinkEvent(False, reason))
+
+    def _never_connected(self, reason: str) -> None:
+        """Until a device first answers, each new reason it does not is reported as the link
+        down (a port that does not exist, a file that is no terminal, a silent device): the
+        driver says why it streams nothing, once per reason, not once per retry."""
+        if self.connections == 0 and reason != self.last_error:
+            self._frames.put(LinkEvent(False, reason))
+        self.last_error = reason

@@ -104,6 +104,7 @@ class ProbeCalibration:
     n_points: int
     known: KnownConstants
     notes: tuple = ()
+    polarity: dict = dataclasses.field(default_factory=dict)  # wiring → +1 as written, −1 reversed
 
     def value(self, name: str) -> float:
         return float(self.values[self.names.index(name)])
@@ -140,6 +141,7 @@ class ProbeCalibration:
             "constants": {n: {"value": float(v), "std": self.std(n)} for n, v in zip(self.names, self.values)},
             "correlation": [[round(float(c), 6) for c in row] for row in self.correlation()],
             "notes": list(self.notes),
+            "polarity": {name: int(sign) for name, sign in self.polarity.items()},
         }
 
     def report(self) -> str:
@@ -147,5 +149,9 @@ class ProbeCalibration:
         return "\n".join(
             lines
             + [f"χ²/dof = {self.chi2_dof:.3f} over {self.n_points} ring-downs"]
+            + [
+                f"polarity of the {name!r} wiring: {'as written' if sign > 0 else 'reversed'}"
+                for name, sign in self.polarity.items()
+            ]
             + [f"note: {n}" for n in self.notes]
         )

@@ -63,6 +63,7 @@ MAX_SCATTER_RAD = math.radians(1.0)  # a start swing scattering more is no drive
 MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
 MEDIAN_EFFICIENCY = 1.2533  # √(π/2): the median's standard error over the mean's, normal samples
 SWING_FLOOR_RAD = 1e-6  # fits that agree exactly (synthetic data) still leave a finite weight
+NOMINAL_BETA0_HZ_PER_T = 3.68e3  # the paper's probe: only the sign of a model shift is used
 
 
 # --- the fit -----------------------------------------------------------------------------------
@@ -73,22 +74,29 @@ def calibrate_probe(
     field_wiring: str = "helmholtz",
     failed: dict | None = None,
     nominal_lever_m: float = 1.9e-3,
+    polarity: dict | None = None,
 ) -> ProbeCalibration:
     """Fit the probe's constants to ``points`` (:class:`CalibrationPoint`).
 
     ``wirings``: :class:`Wiring` by name (or a sequence of them); ``field_wiring`` names the
     homogeneous one (β0); points of any other wiring are gradient points (lever). ``failed``
     counts ring-downs whose fit failed, by supply current and reason, for the notes and the
-    saturation check. CalibrationError when the data cannot determine the constants.
+    saturation check. ``polarity``: +1 or −1 by wiring name, the sign of its current as
+    wired; a wiring not given is found from the data (:func:`wiring_polarities`), and a reversed
+    one is said in the notes. CalibrationError when the data cannot determine the constants or
+    give implausible ones (a unit error).
     """
     wirings = wirings if isinstance(wirings, dict) else {w.name: w for w in wirings}
-    points = [
+    usable = [
         p
         for p in points
         # θmax may be NaN ("not determined"): the model starts every ring-down at the stop.
         if all(map(math.isfinite, (p.frequency_hz, p.frequency_std_hz, p.damping_per_s, p.duration_s)))
     ]
-    notes = _failure_notes(failed or {}, points)
+    notes = _dropped_notes(points, usable) + _failure_notes(failed or {}, usable)
+    polarity = {**wiring_polarities(usable, wirings, known, nominal_lever_m), **(polarity or {})}
+    notes += [_polarity_note(name, sign) for name, sign in polarity.items() if sign < 0]
+    points = [dataclasses.replace(p, supply_current_a=p.supply_current_a * polarity.get(p.wiring, 1)) for p in usable]
     field_points = [p for p in points if p.wiring == field_wiring]
     gradient_points = [p for p in points if p.wiring != field_wiring]
     rows = rows_of(points, wirings, known)
@@ -125,6 +133,11 @@ def calibrate_probe(
         [STEPS[k] for k in ["f00", "beta0", "swing"] + ["environment"] * fit_environment + ["lever"] * fit_lever]
     )
     dof = len(points) + 1 - len(x0)
+    if dof <= 0:
+        raise CalibrationError(
+            f"{len(points)} usable ring-down(s) for {len(x0) - 1} constants leave {dof} degrees of freedom: "
+            "nothing would test the fit; add supply currents or orientations"
+        )
     result = _least_squares(lambda x: residuals(x, rows.frequency_std_hz), x0, steps)
     scatter_rad = 0.0
     for _ in range(SCATTER_ITERATIONS):
@@ -145,10 +158,76 @@ def calibrate_probe(
         jac, ["f00", "β0", "start swing"] + ["environment field"] * fit_environment + ["lever"] * fit_lever
     )
     fitted = _Fitted(result.x, cov_x, unpack, damping, damping_var, unit_axis, fit_environment, fit_lever)
-    return _derive(fitted, wirings, gradient_points, known, chi2_dof, len(points), tuple(notes))
+    calibration = _derive(fitted, wirings, gradient_points, known, chi2_dof, len(points), tuple(notes))
+    implausible = calibration.probe().implausible()
+    if implausible:
+        raise CalibrationError(
+            f"implausible constants, probably a unit error (currents in mA? f_hz in kHz?): {'; '.join(implausible)}"
+        )
+    return dataclasses.replace(calibration, polarity=polarity)
+
+
+# --- the wiring's polarity -------------------------------------------------------------------
+POLARITY_SIGMAS = 3.0  # a slope this many standard errors from zero tells the sign
+
+
+def wiring_polarities(points, wirings: dict, known: KnownConstants, nominal_lever_m: float) -> dict:
+    """+1 or −1 for each wiring whose points tell: the sign of the slope of the measured
+    frequencies against the model's frequency shifts of the paper-like constants, within each
+    orientation (which removes the environment field's offset). −1: the frequencies move
+    against the model, so the wiring's current has the other sign than the table says (a pair
+    connected the other way round). A wiring whose slope is within POLARITY_SIGMAS standard
+    errors of zero is left out (taken as wired)."""
+    if not points:
+        return {}
+    rows = rows_of(points, wirings, known)
+    damping = float(np.mean([p.damping_per_s for p in points]))
+    constants = (float(np.median(rows.frequency_hz)), NOMINAL_BETA0_HZ_PER_T)
+    idle = dataclasses.replace(rows, field_t=0.0 * rows.field_t, gradient_t_per_m=0.0 * rows.gradient_t_per_m)
+    shift = [
+        frequencies(r, known, *constants, np.zeros(3), nominal_lever_m, known.theta_stop_rad, damping)
+        for r in (rows, idle)
+    ]
+    model_shift_hz = shift[0] - shift[1]
+    weight = 1.0 / rows.frequency_std_hz**2
+    wiring = np.array([p.wiring for p in points])
+    group = np.round(np.mod(rows.theta0_rad, 2.0 * math.pi), 6)
+    polarity = {}
+    for name in np.unique(wiring):
+        sxy = sxx = 0.0
+        for theta0 in np.unique(group[wiring == name]):
+            rows_in = (wiring == name) & (group == theta0)
+            w, x, y = weight[rows_in], model_shift_hz[rows_in], rows.frequency_hz[rows_in]
+            dx, dy = x - np.average(x, weights=w), y - np.average(y, weights=w)
+            sxy, sxx = sxy + float(np.sum(w * dx * dy)), sxx + float(np.sum(w * dx * dx))
+        if sxx > 0.0 and abs(sxy) / math.sqrt(sxx) >= POLARITY_SIGMAS:
+            polarity[str(name)] = 1 if sxy > 0.0 else -1
+    return polarity
+
+
+def _polarity_note(wiring: str, sign: int) -> str:
+    return (
+        f"the {wiring!r} wiring is reversed: its frequencies move against its current as written "
+        "(the pair is connected the other way round); calibrated with the current's sign flipped"
+    )
+
+
+def _dropped_notes(points, usable) -> list:
+    """One note per ring-down left out for a value that is not a finite number."""
+    return [
+        f"ring-down {i + 1} ({p.supply_current_a:+.4f} A, θ0 {math.degrees(p.theta0_rad):.1f}°) left out: "
+        "its frequency, uncertainty, damping or duration is not a finite number"
+        for i, p in enumerate(points)
+        if p not in usable
+    ]
 
 
 def _least_squares(residuals, x0, steps):
+    if not np.all(np.isfinite(residuals(x0))):  # scipy would say "Residuals are not finite in the initial point"
+        raise CalibrationError(
+            "the model gives no finite frequency for the data's starting constants: "
+            "check the table's units (f_hz in Hz, currents in A) and the supply's field per ampere"
+        )
     result = optimize.least_squares(
         residuals, x0, jac=lambda x: _jacobian(residuals, x, steps), method="lm", x_scale="jac"
     )

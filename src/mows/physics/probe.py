@@ -14,7 +14,12 @@ import pathlib
 import numpy as np
 import yaml
 
+from mows.records.files import writing
+
 TWO_PI = 2.0 * math.pi
+#: How far a probe's constants may lie from the paper's before they are called implausible:
+#: wide for a new cantilever, narrow against a unit error (a factor of 1000).
+PLAUSIBLE_FACTOR = 100.0
 
 
 def spring_from_beta0(f00_hz: float, moment_am2: float, beta0_hz_per_t: float) -> float:
@@ -163,6 +168,8 @@ class Probe:
             raise ValueError(f"unknown probe keys {sorted(unknown)}; allowed: {sorted(allowed)}")
         for key, value in data.items():
             _given_number(key, value)
+        if "theta_stop_deg" in data and "theta_stop_rad" in data:
+            raise ValueError("theta_stop_deg and theta_stop_rad are both given: give one of them")
         if "theta_stop_deg" in data:
             data["theta_stop_rad"] = math.radians(data.pop("theta_stop_deg"))
         f00 = data.pop("f00_hz", None)
@@ -185,6 +192,9 @@ class Probe:
                 f"f00_hz = {f00} contradicts spring_nm_per_rad, inertia_kgm2 and damping_per_s, "
                 f"which give √(kM/J − δ²)/2π = {probe.f00_hz:.6f} Hz (Eq. S1)"
             )
+        implausible = probe.implausible()
+        if implausible:
+            raise ValueError(f"implausible probe constants, probably a unit error: {'; '.join(implausible)}")
         return probe
 
     def to_dict(self) -> dict:
@@ -200,11 +210,32 @@ class Probe:
             raise ValueError(f"{path}: a probe file is a mapping of constants, got {type(data).__name__}")
         return cls.from_dict(data)
 
-    def to_yaml(self, path, calibration: dict | None = None) -> None:
-        """The probe file; ``calibration`` (uncertainties, correlations, date, hardware id) is
-        written as its ``calibration`` section."""
+    def to_yaml(self, path, calibration: dict | None = None, inputs=(), force: bool = False) -> str:
+        """Write the probe file (:func:`yaml_text`) as a new file, never over ``inputs`` nor, unless
+        ``force``, over an existing one (:func:`mows.records.files.writing`); "wrote PATH" or
+        "replaced PATH"."""
+        with writing([path], inputs, force) as outputs:
+            outputs.temporaries[0].write_text(self.yaml_text(calibration))
+        return outputs.report()
+
+    def yaml_text(self, calibration: dict | None = None) -> str:
+        """The probe file's text; ``calibration`` (uncertainties, correlations, date, hardware id)
+        is its ``calibration`` section."""
         data = self.to_dict() if calibration is None else {**self.to_dict(), "calibration": calibration}
-        pathlib.Path(path).write_text(yaml.safe_dump(data, sort_keys=False, allow_unicode=True))
+        return yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
+
+    def implausible(self) -> list[str]:
+        """The constants more than PLAUSIBLE_FACTOR away from the paper's probe, each with its
+        value and band: a millimetre cantilever does not reach them, a unit error does (mA read
+        as A, kHz as Hz, mm as m)."""
+        return [
+            f"{name} = {value:.4g} (plausible {reference / PLAUSIBLE_FACTOR:.3g} to {reference * PLAUSIBLE_FACTOR:.3g})"
+            for name, value, reference in (
+                (name, getattr(self, name), getattr(PAPER_PROBE, name))
+                for name in ("moment_am2", "spring_nm_per_rad", "inertia_kgm2", "lever_m", "beta0_hz_per_t")
+            )
+            if not reference / PLAUSIBLE_FACTOR <= value <= reference * PLAUSIBLE_FACTOR
+        ]
 
 
 def calibration_record(path) -> dict | None:

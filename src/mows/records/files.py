@@ -1,19 +1,22 @@
 """Files a command writes: never over one of its inputs, never over a file that is already
-there unless told to (``force``), and never half-written.
+there unless told to (``force``, and then only over a regular file), and never half-written.
 
 :func:`check_output` says before any work starts whether an output path may be written
-(so that a long analysis does not end in a refusal); :func:`replacing` writes through a
-temporary file in the same directory and renames it into place only once the writer has
-finished, so a crash or an error leaves the old file (or none) and never a torn one.
+(so that a long analysis does not end in a refusal); :func:`writing` writes one or several
+outputs through temporary files in their directories and renames them into place only once
+every writer has finished, so a crash, an error or Ctrl-C leaves the old files (or none) and
+never a torn one, nor one output written and another not.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import pathlib
+import stat
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 
 
 class OutputRefused(ValueError):
@@ -24,12 +27,26 @@ def _inside(path: pathlib.Path, directory: pathlib.Path) -> bool:
     return directory == path or directory in path.parents
 
 
+def _kind(mode: int) -> str:
+    """What a file that is not a regular one is, in words."""
+    kinds = [
+        (stat.S_ISLNK, "a symbolic link"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISDIR, "a directory"),
+    ]
+    return next((name for test, name in kinds if test(mode)), "not a regular file")
+
+
 def check_output(path, inputs: Iterable = (), force: bool = False) -> pathlib.Path:
     """``path`` if a command reading ``inputs`` may write it, else :class:`OutputRefused`.
 
     An input, or any path inside an input directory (a bag's ``metadata.yaml``), is refused
     even with ``force``: the command would destroy what it reads. An existing file is refused
-    unless ``force``; a directory always.
+    unless ``force``; anything but a regular file (a directory, a device, a FIFO, a link)
+    always: ``force`` replaces files, never what a path stands for.
     """
     path = pathlib.Path(path)
     resolved = path.resolve()
@@ -37,35 +54,78 @@ def check_output(path, inputs: Iterable = (), force: bool = False) -> pathlib.Pa
         source_path = pathlib.Path(source).resolve()
         if _inside(resolved, source_path) or (source_path.is_file() and resolved == source_path):
             raise OutputRefused(f"output {path} is an input of this command ({source}): choose another output path")
-    if path.is_dir():
-        raise OutputRefused(f"output {path} is a directory: give a file path")
-    if (path.exists() or path.is_symlink()) and not force:
+    try:
+        mode = path.lstat().st_mode
+    except FileNotFoundError:
+        mode = None
+    if mode is not None and not stat.S_ISREG(mode):
+        raise OutputRefused(f"output {path} is {_kind(mode)}, not a regular file: give a new file path")
+    if mode is not None and not force:
         raise OutputRefused(f"output {path} exists: choose another path or pass --force to replace it")
     if not resolved.parent.is_dir():
         raise OutputRefused(f"output {path}: directory {path.parent} does not exist")
+    if not os.access(resolved.parent, os.W_OK):
+        raise OutputRefused(f"output {path}: directory {path.parent} is not writable")
     return path
 
 
+def check_outputs(paths: Sequence, inputs: Iterable = (), force: bool = False) -> list[pathlib.Path]:
+    """:func:`check_output` of each of a command's outputs; two that are one file are refused
+    (one would overwrite the other)."""
+    checked = [check_output(path, inputs, force) for path in paths]
+    resolved = [path.resolve() for path in checked]
+    for i, path in enumerate(resolved):
+        if path in resolved[:i]:
+            raise OutputRefused(
+                f"outputs {checked[resolved.index(path)]} and {checked[i]} are one file: give two paths"
+            )
+    return checked
+
+
+@dataclasses.dataclass
+class Outputs:
+    """The outputs of one :func:`writing` block: the temporary path to write each to, and, once
+    the block has ended, which of them replaced an existing file."""
+
+    paths: list[pathlib.Path]
+    temporaries: list[pathlib.Path]
+    replaced: list[bool] = dataclasses.field(default_factory=list)
+
+    def report(self) -> str:
+        """ "wrote A" / "replaced A" for each output, one per line."""
+        return "\n".join(
+            f"{'replaced' if replaced else 'wrote'} {path}" for path, replaced in zip(self.paths, self.replaced)
+        )
+
+
 @contextlib.contextmanager
-def replacing(path, inputs: Iterable = (), force: bool = False) -> Iterator[pathlib.Path]:
-    """A temporary path next to ``path`` to write the output to; renamed onto ``path`` when
-    the ``with`` block ends without an error, removed otherwise. ``path`` is checked with
-    :func:`check_output` first. The temporary file keeps ``path``'s suffix (numpy, for one,
+def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iterator[Outputs]:
+    """Temporary paths next to each of ``paths`` to write the outputs to; all renamed into place
+    when the ``with`` block ends without an error (or interrupt), all removed otherwise. The
+    paths are checked with :func:`check_outputs` first, and again just before the renames (a file
+    may have appeared meanwhile). Each temporary keeps its target's suffix (numpy, for one,
     appends ``.npz`` to names without it)."""
-    path = check_output(path, inputs, force)
-    descriptor, name = tempfile.mkstemp(
-        prefix=f".{path.name}.", suffix=f".partial{path.suffix}", dir=path.resolve().parent
-    )
-    os.close(descriptor)
-    temporary = pathlib.Path(name)
+    targets = check_outputs(paths, inputs, force)
+    outputs = Outputs(targets, [])
     try:
-        yield temporary
-        with open(temporary, "rb+") as handle:  # on disk before the rename makes it the output
-            os.fsync(handle.fileno())
-        os.chmod(temporary, 0o666 & ~_umask())
-        os.replace(temporary, path)
+        for path in targets:
+            descriptor, name = tempfile.mkstemp(
+                prefix=f".{path.name}.", suffix=f".partial{path.suffix}", dir=path.resolve().parent
+            )
+            os.close(descriptor)
+            outputs.temporaries.append(pathlib.Path(name))
+        yield outputs
+        check_outputs(paths, inputs, force)
+        for temporary in outputs.temporaries:
+            with open(temporary, "rb+") as handle:  # on disk before the rename makes it the output
+                os.fsync(handle.fileno())
+            os.chmod(temporary, 0o666 & ~_umask())
+        outputs.replaced = [os.path.lexists(path) for path in targets]
+        for temporary, path in zip(outputs.temporaries, targets):
+            os.replace(temporary, path)
     finally:
-        temporary.unlink(missing_ok=True)
+        for temporary in outputs.temporaries:
+            temporary.unlink(missing_ok=True)
 
 
 def _umask() -> int:

@@ -1,0 +1,278 @@
+"""Nothing destroys data, nothing crashes, nothing implausible passes.
+
+Requirement: every bad input, misplaced output or interrupt ends a ``mows`` command (and the
+device emulator) with exactly one line on stderr, no traceback, the exit status of the
+convention (0 done, 1 a bug, 2 bad input or usage, 130 interrupted; docs/cli.md), and every
+file in the working directory byte for byte as before (no partial output, no temporary left).
+"""
+
+import csv
+import hashlib
+import json
+import os
+import pathlib
+import shutil
+import signal
+import stat
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from mows.cli import calibrate as calibrate_cli
+from mows.cli import sim as sim_cli
+from mows.cli.main import main
+from mows.device import emulator
+from mows.physics.probe import PAPER_PROBE
+from mows.sim.scenario import load_scenario
+from recorded_bags import record_cycles
+
+HERE = pathlib.Path(__file__).parent
+CALIBRATION_TABLE = HERE / "estimator" / "data" / "calibration_36.csv"
+SWEEP_TABLE = HERE / "lab" / "data" / "demo_sweep.csv"
+
+
+def rewrite(source, target, change) -> None:
+    """``source``'s CSV rows, each passed through ``change(index, row)``, written to ``target``."""
+    with open(source, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    for i, row in enumerate(rows):
+        change(i, row)
+    with open(target, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows[:1] if target.name == "one_row.csv" else rows)
+
+
+def scale(column, factor):
+    return lambda i, row: row.update({column: repr(float(row[column]) * factor)})
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory):
+    """A directory of inputs, good and bad, and of things an output must never replace."""
+    d = tmp_path_factory.mktemp("guards")
+    shutil.copy(CALIBRATION_TABLE, d / "cal.csv")
+    shutil.copy(SWEEP_TABLE, d / "sweep.csv")
+    rewrite(CALIBRATION_TABLE, d / "cal_ma.csv", scale("supply_current_a", 1e3))
+    rewrite(CALIBRATION_TABLE, d / "cal_ka.csv", scale("supply_current_a", 1e-3))
+    rewrite(CALIBRATION_TABLE, d / "cal_khz.csv", scale("f_hz", 1e-3))
+    rewrite(CALIBRATION_TABLE, d / "cal_huge_f.csv", lambda i, row: row.update(f_hz="1e300"))
+    rewrite(CALIBRATION_TABLE, d / "cal_nan_current.csv", lambda i, row: i == 2 and row.update(supply_current_a="nan"))
+    rewrite(CALIBRATION_TABLE, d / "one_row.csv", lambda i, row: None)
+    rewrite(SWEEP_TABLE, d / "sweep_khz.csv", scale("f_hz", 1e-3))
+    PAPER_PROBE.to_yaml(d / "probe.yaml")
+    text = (d / "probe.yaml").read_text()
+    (d / "probe_1000x.yaml").write_text(text.replace("moment_am2: 0.00089", "moment_am2: 0.89"))
+    (d / "probe_two_stops.yaml").write_text(text + "theta_stop_deg: 24.0\n")
+    record_cycles(d / "bag", load_scenario(), (0.0,), 3)
+    (d / "existing.yaml").write_text("kept\n")
+    os.mkfifo(d / "fifo")
+    if os.geteuid() == 0:  # only root makes device files: the test of one needs it
+        os.mknod(d / "null", 0o666 | stat.S_IFCHR, os.makedev(1, 3))
+    return d
+
+
+def snapshot(directory: pathlib.Path) -> dict:
+    """Every path under ``directory``: a regular file's hash, anything else its type."""
+    state = {}
+    for path in sorted(directory.rglob("*")):
+        mode = path.lstat().st_mode
+        if stat.S_ISREG(mode):
+            state[path] = hashlib.sha256(path.read_bytes()).hexdigest()
+        else:
+            state[path] = stat.S_IFMT(mode)
+    return state
+
+
+CAL = ["calibrate", "{d}/cal.csv", "--gradient-scenario", "calibration_gradient"]
+#: (id, arguments, exit status, words the one line must hold); "{d}" is the work directory.
+CASES = [
+    # outputs: never over an input, an existing file, a device or a FIFO; several all or none
+    ("calibrate-over-its-table", [*CAL, "-o", "{d}/cal.csv", "--force"], 2, ["input"]),
+    (
+        "calibrate-over-its-probe",
+        ["calibrate", "--simulate", "--probe", "{d}/probe.yaml", "-o", "{d}/probe.yaml"],
+        2,
+        ["input"],
+    ),
+    ("calibrate-two-outputs-one-file", [*CAL, "-o", "{d}/x.yaml", "--table", "{d}/x.yaml"], 2, ["one file"]),
+    (
+        "calibrate-output-fails-no-table",
+        [*CAL, "-o", "{d}/nodir/p.yaml", "--table", "{d}/t.csv"],
+        2,
+        ["does not exist"],
+    ),
+    ("calibrate-existing", [*CAL, "-o", "{d}/existing.yaml"], 2, ["exists", "--force"]),
+    ("calibrate-force-device", [*CAL, "-o", "{d}/null", "--force"], 2, ["character device"]),
+    ("fit-force-fifo", ["fit", "{d}/bag", "--csv", "{d}/fifo", "--force"], 2, ["FIFO"]),
+    ("sim-force-fifo", ["sim", "--out", "{d}/fifo", "--force"], 2, ["FIFO"]),
+    ("lab-report-force-fifo", ["lab", "report", "{d}/sweep.csv", "-o", "{d}/fifo", "--force"], 2, ["FIFO"]),
+    # calibration: currents beyond the cap, units, non-finite values, too little data
+    (
+        "calibrate-500-a",
+        ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--currents-a", "0", "1", "500"],
+        2,
+        ["500", "cap"],
+    ),
+    ("calibrate-table-in-ma", ["calibrate", "{d}/cal_ma.csv", "-o", "{d}/p.yaml"], 2, ["cap", "mA"]),
+    (
+        "calibrate-table-in-ka",
+        [*CAL[:1], "{d}/cal_ka.csv", *CAL[2:], "-o", "{d}/p.yaml"],
+        2,
+        ["implausible", "spring_nm_per_rad"],
+    ),
+    ("calibrate-f-in-khz", ["calibrate", "{d}/cal_khz.csv", "-o", "{d}/p.yaml"], 2, ["f00", "kHz"]),
+    ("calibrate-f-1e300", ["calibrate", "{d}/cal_huge_f.csv", "-o", "{d}/p.yaml"], 2, ["f00"]),
+    (
+        "calibrate-nan-current",
+        ["calibrate", "{d}/cal_nan_current.csv", "-o", "{d}/p.yaml"],
+        2,
+        ["supply_current_a", "row 3"],
+    ),
+    ("calibrate-one-row", ["calibrate", "{d}/one_row.csv", "-o", "{d}/p.yaml"], 2, ["too few"]),
+    ("calibrate-repeats-0", ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--repeats", "0"], 2, ["--repeats"]),
+    ("calibrate-bad-polarity", [*CAL, "-o", "{d}/p.yaml", "--polarity", "gradient=2"], 2, ["--polarity"]),
+    ("calibrate-nan-environment", [*CAL, "-o", "{d}/p.yaml", "--environment-field-t", "nan", "0", "0"], 2, ["nan"]),
+    ("calibrate-nothing", ["calibrate", "-o", "{d}/p.yaml"], 2, ["TABLE"]),
+    # sim
+    ("sim-repeats-0", ["sim", "--repeats", "0"], 2, ["--repeats"]),
+    ("sim-repeats-negative", ["sim", "--repeats", "-2"], 2, ["--repeats"]),
+    ("sim-theta-nan", ["sim", "--theta0-deg", "nan"], 2, ["--theta0-deg"]),
+    # fit: durations, geometry, a bag without ring-downs, a table given as a bag
+    ("fit-settle-negative", ["fit", "{d}/bag", "--settle-s", "-1"], 2, ["--settle-s"]),
+    ("fit-settle-longer-than-ringdown", ["fit", "{d}/bag", "--settle-s", "100"], 2, ["--settle-s", "every ring-down"]),
+    ("fit-negative-spacing", ["fit", "{d}/bag", "--sensor-spacing-m", "-0.01"], 2, ["--sensor-spacing-m"]),
+    ("fit-60-m-distance", ["fit", "{d}/bag", "--sensor-distance-m", "60"], 2, ["--sensor-distance-m", "1 m"]),
+    ("fit-no-such-topic", ["fit", "{d}/bag", "--raw-topic", "/nope"], 2, ["no ring-down", "/nope"]),
+    ("fit-a-csv", ["fit", "{d}/sweep.csv"], 2, ["not a bag", "mows lab"]),
+    # lab
+    (
+        "lab-reference-for-a-csv",
+        ["lab", "compare", "{d}/sweep.csv", "--reference", "{d}/nothere.yaml"],
+        2,
+        ["--reference", "bags"],
+    ),
+    ("lab-f-in-khz", ["lab", "compare", "{d}/sweep_khz.csv"], 2, ["f00", "kHz"]),
+    ("lab-ringdown-negative-f00", ["lab", "ringdown", "{d}/bag", "--f00-hz", "-3"], 2, ["--f00-hz"]),
+    # probe files
+    (
+        "probe-1000x-moment",
+        ["lab", "compare", "{d}/sweep.csv", "--probe", "{d}/probe_1000x.yaml"],
+        2,
+        ["implausible", "moment_am2"],
+    ),
+    (
+        "probe-two-stops",
+        ["lab", "compare", "{d}/sweep.csv", "--probe", "{d}/probe_two_stops.yaml"],
+        2,
+        ["theta_stop_deg", "theta_stop_rad"],
+    ),
+]
+
+
+@pytest.mark.parametrize("argv, status, words", [case[1:] for case in CASES], ids=[case[0] for case in CASES])
+def test_a_bad_input_is_one_line_with_its_status_and_changes_nothing(work, capsys, argv, status, words):
+    if "{d}/null" in argv and not (work / "null").exists():
+        pytest.skip("making a device file needs root")
+    before = snapshot(work)
+    got = main([word.format(d=work) for word in argv])
+    err = capsys.readouterr().err
+    assert got == status, err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for word in words:
+        assert word in err, err
+    assert snapshot(work) == before
+
+
+EMULATOR_CASES = [
+    ("scenario-nosuch", ["--scenario", "nosuch"], ["nosuch"]),
+    ("cap-negative", ["--cap-a", "-1"], ["--cap-a -1.0"]),
+    ("cap-nan", ["--cap-a", "nan"], ["--cap-a nan"]),
+    ("watchdog-0-s", ["--watchdog-timeout-s", "0"], ["watchdog"]),
+]
+
+
+@pytest.mark.parametrize("argv, words", [c[1:] for c in EMULATOR_CASES], ids=[c[0] for c in EMULATOR_CASES])
+def test_the_emulator_refuses_bad_arguments_in_one_line(work, capsys, argv, words):
+    before = snapshot(work)
+    assert emulator.main(["--link", str(work / "device"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and all(word in err for word in words), err
+    assert snapshot(work) == before
+
+
+def test_the_emulator_names_a_missing_directory_not_an_existing_file(work, capsys):
+    assert emulator.main(["--link", str(work / "nodir" / "dev")]) == 2
+    err = capsys.readouterr().err
+    assert "exists" not in err and "No such file or directory" in err, err
+
+
+# --- interrupts ------------------------------------------------------------------------------
+def interrupt(*_args, **_kwargs):
+    raise KeyboardInterrupt
+
+
+def test_ctrl_c_while_writing_two_outputs_leaves_neither(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(calibrate_cli, "write_points", interrupt)  # the second output, after the first
+    status = main(
+        [
+            "calibrate",
+            str(CALIBRATION_TABLE),
+            "--gradient-scenario",
+            "calibration_gradient",
+            "-o",
+            str(tmp_path / "p.yaml"),
+            "--table",
+            str(tmp_path / "t.csv"),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert status == 130 and err == "mows calibrate: interrupted\n", err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_in_a_simulation_is_one_line_and_130(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(sim_cli, "simulate_cycle", interrupt)
+    assert main(["sim", "--out", str(tmp_path / "x.npz")]) == 130
+    assert capsys.readouterr().err == "mows sim: interrupted\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow  # a fresh interpreter loads the simulator and the fit: ~20 s on a loaded machine
+def test_sigint_to_a_running_command_ends_it_with_130_and_no_output(tmp_path):
+    """The real signal: the command is interrupted once it has printed its first fit."""
+    out = tmp_path / "x.npz"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "mows.cli.main", "sim", "--fit", "--repeats", "200", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert process.stdout.readline().startswith("θ0")
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130 and err == "mows sim: interrupted\n", err
+    assert list(tmp_path.iterdir()) == []
+
+
+# --- what works ---------------------------------------------------------------------------------
+def test_force_replaces_a_regular_file_and_says_so(tmp_path, capsys):
+    out = tmp_path / "x.npz"
+    out.write_text("old")
+    assert main(["sim", "--theta0-deg", "0", "90", "--out", str(out), "--force"]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == f"replaced {out}: 2 cycles"
+    with np.load(out) as cycles:  # the documented form with two orientations: cycles of two lengths
+        assert cycles["samples_t"].shape[0] == 2 and len(set(cycles["n_samples"])) == 2
+        for samples, n in zip(cycles["samples_t"], cycles["n_samples"]):
+            assert np.isfinite(samples[:n]).all() and np.isnan(samples[n:]).all()
+
+
+@pytest.mark.slow  # the lab's whole report: ~7 s of CPU
+def test_lab_report_json_keeps_stdout_for_the_json(tmp_path, capsys):
+    page = tmp_path / "report.html"
+    assert main(["lab", "report", str(SWEEP_TABLE), "-o", str(page), "--json", "--no-cv"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["base"]["n"] > 0
+    assert captured.err.splitlines()[-1] == f"wrote {page}"

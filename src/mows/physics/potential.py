@@ -162,7 +162,9 @@ class ArcPotential:
         interval or where the balance is unstable (⟨U''⟩ ≤ 0, beyond spring cancellation).
         """
         amplitude = np.broadcast_to(np.asarray(amplitude_rad, float), self.batch_shape)
-        cos_phi = np.cos(2.0 * np.pi * np.arange(BALANCE_POINTS) / BALANCE_POINTS)
+        # At rest the balance is U'(θc) = 0 itself: one point instead of the cycle's.
+        points = BALANCE_POINTS if np.any(amplitude) else 1
+        cos_phi = np.cos(2.0 * np.pi * np.arange(points) / points)
         offsets = amplitude[..., None] * cos_phi
         centre = np.zeros(self.batch_shape)
         for _ in range(NEWTON_STEPS):

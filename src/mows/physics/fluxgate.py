@@ -21,7 +21,8 @@ remains.
 Noise (:class:`NoiseModel`). Common-mode noise, identical on both sensors: white, 1/f
 ("pink") and optionally mains hum; independent white noise per sensor. Levels are one-sided
 amplitude spectral densities in T/√Hz (the pink level is its ASD at 1 Hz); the difference
-of the two channels removes the common part exactly.
+of the two channels removes the common part exactly. The simulator draws it
+(:class:`mows.sim.noise.NoiseStream`).
 """
 
 from __future__ import annotations
@@ -236,16 +237,3 @@ class NoiseModel:
         the common-mode noise cancels; each sensor's one-sided ASD over the band fs/2 gives
         asd·√(fs/2), and the difference of two independent ones √2 times that."""
         return float(self.sensor_white_t_per_rthz * math.sqrt(sample_rate_hz))
-
-
-def pink_noise_t(n: int, sample_rate_hz: float, asd_at_1hz_t_per_rthz: float, rng: np.random.Generator) -> np.ndarray:
-    """1/f noise of one-sided ASD ``asd_at_1hz``·(f/1 Hz)^(−1/2), by shaping white noise in
-    the frequency domain; no power at 0 Hz, so the record is zero-mean and periodic in n."""
-    if asd_at_1hz_t_per_rthz == 0.0 or n == 0:
-        return np.zeros(n)
-    spectrum = np.fft.rfft(rng.standard_normal(n))
-    f = np.fft.rfftfreq(n, 1.0 / sample_rate_hz)
-    gain = np.zeros_like(f)
-    # Unit white noise has one-sided PSD 2/fs; this gain turns it into asd²/f.
-    gain[1:] = asd_at_1hz_t_per_rthz * np.sqrt(sample_rate_hz / (2.0 * f[1:]))
-    return np.fft.irfft(spectrum * gain, n)

@@ -19,6 +19,7 @@ import time
 import traceback
 
 from mows.cli.inputs import EXIT_BUG
+from mows.records.json_numbers import finite_or_none
 
 SUITES = {
     "estimator": ("mows.bench.estimator", "ring-down fit: speed against curve_fit, precision against the CRB"),
@@ -118,7 +119,7 @@ def run(args) -> int:
         flat = dict(figures.get("estimator", {}))
         flat.update({key: value for key, value in figures.get("throughput", {}).items() if key in THROUGHPUT_KEYS})
         flat.update({name: values for name, values in figures.items()})
-        print(json.dumps(_finite(flat), indent=1, default=_jsonable, allow_nan=False))
+        print(json.dumps(finite_or_none(flat), indent=1, default=_jsonable, allow_nan=False))
     if failed:
         print(f"mows bench: {', '.join(failed)} failed (tracebacks above)", file=sys.stderr)
         return EXIT_BUG
@@ -133,20 +134,9 @@ def _format(value) -> str:
     return str(value)
 
 
-def _finite(value):
-    """JSON has no NaN or infinity: such figures become null."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    return value
-
-
 def _jsonable(value):
     if hasattr(value, "tolist"):
-        return _finite(value.tolist())
+        return finite_or_none(value.tolist())
     return str(value)
 
 

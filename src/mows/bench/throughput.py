@@ -1,4 +1,4 @@
-"""``mows bench throughput``: device-seconds to a target precision, protocol by protocol (issue 14).
+"""``mows bench throughput``: device-seconds to a target precision, protocol by protocol.
 
 Every protocol runs on the simulated device in device time (:class:`mows.bench.rig.DeviceTimeRig`:
 the driver's cycle sequencer, the estimator's segmentation and fit, no ROS) in the

@@ -18,7 +18,7 @@ import sys
 import time
 import traceback
 
-from mows.cli.inputs import EXIT_BUG
+from mows.cli.inputs import EXIT_BAD_INPUT, EXIT_BUG
 from mows.records.json_numbers import finite_or_none
 
 SUITES = {
@@ -93,7 +93,7 @@ def run(args) -> int:
     unknown = [name for name in args.suites if name not in SUITES]
     if unknown:
         print(f"mows bench: unknown suite(s) {', '.join(unknown)}; choose from {', '.join(SUITES)}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     figures, failed = {}, []
     for name in args.suites or list(DEFAULT_SUITES):
         module_name, what = SUITES[name]

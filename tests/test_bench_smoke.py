@@ -95,6 +95,12 @@ def test_a_suite_that_raises_is_a_bug_with_its_traceback(monkeypatch, capsys):
     assert "internal error in the simulator suite" in error
 
 
+def test_a_suite_that_measured_nothing_fails_the_run(monkeypatch, capsys):
+    monkeypatch.setattr(simulator, "run", lambda **options: {"failed": "[graph] bring-up failed:\n driver refused"})
+    assert main(["bench", "simulator", "--quick"]) == EXIT_BUG
+    assert "the simulator suite measured nothing: [graph] bring-up failed: driver refused" in capsys.readouterr().err
+
+
 def test_an_unknown_suite_is_a_bad_input(capsys):
     assert main(["bench", "simulatr"]) == 2
     assert "unknown suite(s) simulatr" in capsys.readouterr().err

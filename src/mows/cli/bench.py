@@ -7,7 +7,8 @@ and noisy, so speed is reported, not asserted. ``--json`` prints the figures as 
 object (the estimator's keys are top level: fit_ms_median, curve_fit_ms_median,
 efficiency_min, bias_max_sigma, and the throughput's paper_s, default_s, adaptive_s, tracking_hz …).
 A suite that raises is a bug, not a bad input: its traceback goes to stderr, the other suites
-still run, and the exit status is 1 (2 is kept for an unknown suite's name).
+still run, and the exit status is 1 (2 is kept for an unknown suite's name). So is a suite that
+ran but measured nothing (a ``failed`` figure: the node graph did not come up).
 """
 
 import argparse
@@ -112,6 +113,10 @@ def run(args) -> int:
             continue
         result["wall_s"] = time.perf_counter() - start
         figures[name] = result
+        if "failed" in result:  # a suite that ran but measured nothing (its graph did not come up)
+            reason = " ".join(str(result["failed"]).split())
+            print(f"mows bench: the {name} suite measured nothing: {reason}", file=sys.stderr)
+            failed.append(name)
         if not args.json:
             for key, value in result.items():
                 print(f"   {key:40s} {_format(value)}")
@@ -121,7 +126,7 @@ def run(args) -> int:
         flat.update({name: values for name, values in figures.items()})
         print(json.dumps(finite_or_none(flat), indent=1, default=_jsonable, allow_nan=False))
     if failed:
-        print(f"mows bench: {', '.join(failed)} failed (tracebacks above)", file=sys.stderr)
+        print(f"mows bench: {', '.join(failed)} failed (see above)", file=sys.stderr)
         return EXIT_BUG
     return 0
 

@@ -10,7 +10,7 @@ from mows.physics.frequency import sweep_shift_hz
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
-from mows.sweep.decompose import decompose, fit_harmonics
+from mows.sweep.decompose import DecompositionStatus, decompose, fit_harmonics, unknown_count
 
 THETA0 = np.radians(np.arange(0.0, 360.0, 15.0))
 STD_HZ = 3e-4
@@ -108,3 +108,28 @@ def test_fit_harmonics_reproduces_a_known_series():
     h = fit_harmonics(THETA0, shift, np.full(THETA0.size, 1e-4))
     np.testing.assert_allclose(h.amplitude_hz, [1e-3, 2e-3, 5e-4], atol=1e-12)
     np.testing.assert_allclose(h.phase_rad[1:], [0.3, -1.0], atol=1e-9)
+
+
+@pytest.mark.parametrize("f00_free", [False, True])
+def test_a_sweep_needs_one_distinct_orientation_per_unknown(f00_free):
+    # Eq. 12 up to 2θ0 has five coefficients (constant, cos θ0, sin θ0, cos 2θ0, sin 2θ0): at
+    # fewer distinct orientations than that its design matrix loses rank; f00 free adds one.
+    def rank(angles):
+        return np.linalg.matrix_rank(
+            np.column_stack([np.cos(k * angles) for k in (0, 1, 2)] + [np.sin(k * angles) for k in (1, 2)])
+        )
+
+    needed = unknown_count(f00_free)
+    angles = np.radians(10.0 + 360.0 / needed * np.arange(needed))
+    assert rank(angles[:5]) == 5 and rank(angles[:4]) == 4
+    field, gradient = (35e-6, -8e-6), (2e-3, 1.5e-3, -4e-3)
+    shift = sweep_shift_hz(angles, field, gradient, P.f00_hz, P.spring_nm_per_rad, P.moment_am2, P.lever_m)
+    std = np.full(needed, STD_HZ)
+    enough = decompose(angles, shift, std, P, P.f00_hz, model="published", f00_free=f00_free)
+    assert enough.ok
+    # With f00 free the constant gradient term is read as an f00 offset, which rescales the
+    # field's harmonic by that offset over f00 (~1e-4 here).
+    np.testing.assert_allclose(enough.field_t, field, rtol=1e-3 if f00_free else 1e-6)
+    short = decompose(angles[1:], shift[1:], std[1:], P, P.f00_hz, model="published", f00_free=f00_free)
+    assert short.status is DecompositionStatus.TOO_FEW_ORIENTATIONS
+    assert f"need at least {needed}" in short.message

@@ -18,10 +18,11 @@ from mows.bench.estimator import (
 )
 from mows.estimate.axis import estimate_along_axis
 from mows.estimate.ringdown import FitOptions, fit_ringdown
-from mows.physics.fluxgate import pink_noise_t
+from mows.physics.fluxgate import NoiseModel
 from mows.physics.frequency import frequency_shift_hz
 from mows.physics.probe import PAPER_PROBE
 from mows.physics.signal import signal_t
+from mows.sim.noise import NoiseStream
 
 T = np.arange(N_SAMPLES) / SAMPLE_RATE_HZ
 TRUTH = {
@@ -144,7 +145,7 @@ def test_difference_channel_cancels_common_mode_noise():
     # difference (Eq. S10) removes it. One channel alone is dominated by it.
     rng = np.random.default_rng(14)
     theta0 = math.radians(20.0)
-    common = pink_noise_t(N_SAMPLES, SAMPLE_RATE_HZ, 3e-9, rng)
+    common = NoiseStream(NoiseModel(common_pink_t_per_rthz_at_1hz=3e-9), SAMPLE_RATE_HZ, rng).draw(0, N_SAMPLES)[:, 0]
     near = clean(theta0, kappa=2 * KAPPA_T) + common + 3e-10 * rng.standard_normal(N_SAMPLES)
     far = clean(theta0, kappa=KAPPA_T) + common + 3e-10 * rng.standard_normal(N_SAMPLES)
     pair = np.stack([near, far], axis=1)

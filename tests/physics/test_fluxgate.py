@@ -12,7 +12,6 @@ from mows.physics.fluxgate import (
     NoiseModel,
     digitise,
     dipole_pickup_t,
-    pink_noise_t,
 )
 from mows.sim.noise import NoiseStream
 
@@ -111,7 +110,8 @@ def psd(x, nperseg=2**14):
 def test_pink_noise_slope_and_level():
     # One-sided ASD = A·f^(−1/2): PSD·f = A² and log PSD has slope −1.
     asd = 3e-11
-    f, p = psd(pink_noise_t(2**20, FS, asd, np.random.default_rng(5)))
+    pink = NoiseStream(NoiseModel(common_pink_t_per_rthz_at_1hz=asd), FS, np.random.default_rng(5)).draw(0, 2**20)
+    f, p = psd(pink[:, 0])
     band = (f >= 0.5) & (f <= 50)
     slope = np.polyfit(np.log(f[band]), np.log(p[band]), 1)[0]
     assert slope == pytest.approx(-1.0, abs=0.03)

@@ -66,6 +66,23 @@ def test_perpendicular_field_turns_the_rest_angle_and_stiffens_the_spring():
     assert (potential.frequency_hz() - P.f00_hz) * 1e3 == pytest.approx(7.0, abs=0.1)
 
 
+def test_the_rest_angle_is_the_cycle_centre_of_a_vanishing_swing_and_nan_where_unstable():
+    # One Newton solves both: at rest the balance is U'(θs) = 0 on one point, in a swing it is
+    # averaged over the cycle. Rows: perpendicular fields (θs from brentq as above), and an
+    # axial field beyond spring cancellation (no stable rest angle).
+    b_perp = np.array([170e-6, -2e-3, 0.0])
+    fields = np.array([[0.0, b, 0.0] for b in b_perp] + [[1.01 * P.cancellation_field_t, 0.0, 0.0]])
+    potential = ArcPotential.from_local_field(P, fields)
+    rest = potential.rest_angle_rad()
+    for b, theta in zip(b_perp, rest):
+        expected = optimize.brentq(lambda t, b=b: KM * t - M * b * math.cos(t), -0.5, 0.5, xtol=1e-16)
+        assert theta == pytest.approx(expected, rel=1e-10, abs=1e-15)
+    assert np.isnan(rest[-1])
+    tiny_swing = potential.cycle_centre_rad(np.full(len(fields), 1e-6))
+    np.testing.assert_allclose(tiny_swing[:-1], rest[:-1], rtol=1e-9, atol=1e-15)
+    assert np.isnan(tiny_swing[-1])
+
+
 def test_spring_cancellation_drives_the_frequency_to_zero():
     b_cancel = P.cancellation_field_t
     freqs = [along(b_cancel * (1 - eps)).frequency_hz() for eps in (1e-2, 1e-4)]

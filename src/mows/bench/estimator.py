@@ -172,11 +172,12 @@ def precision_grid(snrs_db=(20.0, 40.0, 60.0), step_deg: float = 15.0, trials: i
     return [precision_cell(theta0, snr, trials, rng) for snr in snrs_db for theta0 in np.arange(0.0, 360.0, step_deg)]
 
 
-def run(trials: int = 200) -> dict:
-    """Figures for `mows bench`: speed against curve_fit, and precision over the θ0 × SNR grid
-    in cells where the bound is below 5 mHz (the issue's scope)."""
-    figures = speed()
-    cells = precision_grid(trials=trials)
+def run(trials: int = 200, step_deg: float = 15.0, speed_trials: int = 100, baseline_trials: int = 20) -> dict:
+    """Figures for `mows bench`: speed against curve_fit (``speed_trials`` fits, ``baseline_trials``
+    of curve_fit), and precision over the θ0 × SNR grid (θ0 every ``step_deg``, ``trials`` per
+    cell) in cells where the bound is below 5 mHz."""
+    figures = speed(trials=speed_trials, baseline_trials=baseline_trials)
+    cells = precision_grid(step_deg=step_deg, trials=trials)
     bounded = [c for c in cells if c.crb_hz < 5e-3]
     figures.update(
         {

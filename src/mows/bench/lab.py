@@ -23,9 +23,9 @@ ROWS_PER_SWEEP = 100
 SWEEPS = 10
 
 
-def benchmark_table(seed: int = 0):
-    """The 1000-row table described in the module docstring."""
-    sweep = synthetic.rotation_sweeps(360.0 / ROWS_PER_SWEEP, SWEEPS, seconds_per_row=10.0)
+def benchmark_table(seed: int = 0, sweeps: int = SWEEPS):
+    """The table described in the module docstring (``sweeps`` × 100 rows)."""
+    sweep = synthetic.rotation_sweeps(360.0 / ROWS_PER_SWEEP, sweeps, seconds_per_row=10.0)
     theta0 = sweep.pop("theta0_deg")
     temperature = 293.15 + 0.5 * np.sin(2 * np.pi * sweep["t_s"] / 3000.0)
     source = anti_helmholtz_pair((0, 0, 0), (1, 0, 0), 0.105, 100, 1.0) + UniformField((15e-6, -12e-6, -40e-6))
@@ -34,9 +34,10 @@ def benchmark_table(seed: int = 0):
     )
 
 
-def run() -> dict:
-    """Seconds for one ``diagnose`` with the whole catalog on the 1000-row table, and what it found."""
-    table = benchmark_table()
+def run(sweeps: int = SWEEPS) -> dict:
+    """Seconds for one ``diagnose`` with the whole catalog on the table of ``sweeps`` sweeps
+    (1000 rows by default), and what it found."""
+    table = benchmark_table(sweeps=sweeps)
     effects = list(catalog().values())
     start = time.perf_counter()
     fit = FrequencyModel(PAPER_PROBE).fit(table)

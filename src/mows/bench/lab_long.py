@@ -2,8 +2,8 @@
 500 000-row CSV run as a user runs them, each in a process of its own (reading and validating
 every row, the stratified subsample of at most ``mows.cli.lab.MAX_ROWS`` rows, the analysis
 with cross-validation): wall time, CPU time and peak resident memory of each, against the
-issue's bounds (a minute, 1 GiB). The CPU time says what the work costs on a machine shared
-with others, where the wall time also counts the waiting for a core.
+bounds it must meet (a minute, 1 GiB). The CPU time says what the work costs on a machine
+shared with others, where the wall time also counts the waiting for a core.
 
 The table is the 1000-row benchmark table of :mod:`mows.bench.lab` repeated, each copy its own
 sweeps and with fresh noise on f_hz, written to a temporary CSV (not timed).

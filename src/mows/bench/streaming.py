@@ -1,5 +1,5 @@
 """Streaming benchmark: the share of one CPU core the driver uses to stream 20 kS/s × 2 channels
-from the simulator (the issue's goal: below 10 %).
+from the simulator (the goal: below 10 %).
 
 Timed in the same run, each as CPU seconds per second of stream, with the simulator read in
 pieces of one 25 ms block (what the driver does):

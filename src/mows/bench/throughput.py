@@ -4,7 +4,8 @@ Every protocol runs on the simulated device in device time (:class:`mows.bench.r
 the driver's cycle sequencer, the estimator's segmentation and fit, no ROS) in the
 ``anti_helmholtz`` scene, until the first-principles decomposition of its ring-downs reaches the
 target (default σ ≤ 20 nT per in-plane field component and ≤ 10 µT/m per gradient component) or
-a time limit. The fixed protocols are checked after every orientation once five are measured:
+a time limit. The fixed protocols are checked after every orientation once enough are measured
+to decompose (:func:`mows.sweep.decompose.orientations_problem`):
 
 * ``paper``: the paper's protocol, 12 orientations, two tuning excitations and five ring-downs
   of 60 periods each, 10 s gaps (2 A, 0.5 s excitations);
@@ -38,7 +39,7 @@ from mows.estimate.axis import estimate_along_axis
 from mows.lab.data.reference import reference_at
 from mows.records.stamps import NS_PER_S
 from mows.sim.scenario import load_scenario
-from mows.sweep.decompose import Decomposition
+from mows.sweep.decompose import Decomposition, orientations_problem
 from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model, tracking_plan
 from mows.sweep.planner import COMPONENTS, AdaptivePlanner, PlanEnd, PrecisionGoal, achieved_std, reached
 from mows.sweep.record import SweepPoint, SweepRecord
@@ -47,7 +48,6 @@ SCENARIO = "anti_helmholtz"
 CAP_A = 10.0
 SETTLE_S = 0.5
 PAPER_RINGDOWN_S = 60.0 / 112.5  # 60 periods
-MIN_ANGLES = 5
 DECOMPOSE_NEAR = 1.25
 PROTOCOLS = {
     "paper": (
@@ -122,7 +122,7 @@ class _Sweep:
                 )
             else:
                 self.record.failed += 1
-        if len({round(p.theta0_rad, 9) for p in self.record.points}) < MIN_ANGLES:
+        if orientations_problem([p.theta0_rad for p in self.record.points]):
             return
         targets = self.goal.targets()
         asked = np.isfinite(targets)
@@ -250,9 +250,15 @@ def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, se
     return figures
 
 
-def run(protocols=("paper", "default", "demo"), tracking_updates: int = 40) -> dict:
-    """Figures for ``mows bench throughput``."""
-    goal = PrecisionGoal()
+def run(
+    protocols=("paper", "default", "demo"),
+    tracking_updates: int = 40,
+    field_std_t: float = PrecisionGoal.field_std_t,
+    gradient_std_t_per_m: float = PrecisionGoal.gradient_std_t_per_m,
+) -> dict:
+    """Figures for ``mows bench throughput``: the sweeps to σ ≤ ``field_std_t`` per field and
+    ``gradient_std_t_per_m`` per gradient component, and ``tracking_updates`` tracking updates."""
+    goal = PrecisionGoal(field_std_t=field_std_t, gradient_std_t_per_m=gradient_std_t_per_m)
     figures = {
         "scenario": SCENARIO,
         "target_field_t": goal.field_std_t,

@@ -6,6 +6,9 @@ without publishing them for the stream). Nothing here fails on a figure: machine
 and noisy, so speed is reported, not asserted. ``--json`` prints the figures as one JSON
 object (the estimator's keys are top level: fit_ms_median, curve_fit_ms_median,
 efficiency_min, bias_max_sigma, and the throughput's paper_s, default_s, adaptive_s, tracking_hz …).
+A suite that raises is a bug, not a bad input: its traceback goes to stderr, the other suites
+still run, and the exit status is 1 (2 is kept for an unknown suite's name). So is a suite that
+ran but measured nothing (a ``failed`` figure: the node graph did not come up).
 """
 
 import argparse
@@ -14,6 +17,10 @@ import json
 import math
 import sys
 import time
+import traceback
+
+from mows.cli.inputs import EXIT_BAD_INPUT, EXIT_BUG
+from mows.records.json_numbers import finite_or_none
 
 SUITES = {
     "estimator": ("mows.bench.estimator", "ring-down fit: speed against curve_fit, precision against the CRB"),
@@ -42,9 +49,12 @@ THROUGHPUT_KEYS = (
     "tracking_1ut_hz",
     "tracking_1ut_std_t",
 )
+# --quick: a smoke run of every suite (tests/test_bench_smoke.py runs them all in make test, a
+# few seconds of CPU each): every code path of a suite, on less data, so its figures are rough.
 QUICK: dict[str, dict[str, object]] = {
-    "estimator": {"trials": 60},
-    "simulator": {"repeats": 5},
+    "estimator": {"trials": 10, "step_deg": 45.0, "speed_trials": 10, "baseline_trials": 3},
+    "simulator": {"repeats": 3, "first_call": False},
+    "lab": {"sweeps": 2},
     "stream": {"duration_s": 3.0},
     # a quick --load is a smoke run beside other work (make test): its burners yield (nice 19)
     # and the graph keeps the default policy (one loaded stream, not two). 20 s holds two or
@@ -52,8 +62,15 @@ QUICK: dict[str, dict[str, object]] = {
     # cycle fitted 3 of 5 (2 DATA_GAP), so one load spike could leave the run with no fit.
     "latency": {"cycles": 1, "repeats": 5, "load_duration_s": 20.0, "burner_nice": 19, "realtime_priority": 0},
     "latency_tracking": {"cycles": 2, "repeats": 5},
-    "lab_long": {"rows": 20_000},
-    "throughput": {"protocols": ("default",), "tracking_updates": 10},
+    # above the lab's subsample of mows.cli.lab.MAX_ROWS rows, so that the subsampling runs
+    "lab_long": {"rows": 5_000, "commands": ("compare",)},
+    # a goal 5× looser than the default: 25× less device time
+    "throughput": {
+        "protocols": ("demo",),
+        "tracking_updates": 5,
+        "field_std_t": 100e-9,
+        "gradient_std_t_per_m": 50e-6,
+    },
 }
 
 
@@ -77,8 +94,8 @@ def run(args) -> int:
     unknown = [name for name in args.suites if name not in SUITES]
     if unknown:
         print(f"mows bench: unknown suite(s) {', '.join(unknown)}; choose from {', '.join(SUITES)}", file=sys.stderr)
-        return 2
-    figures = {}
+        return EXIT_BAD_INPUT
+    figures, failed = {}, []
     for name in args.suites or list(DEFAULT_SUITES):
         module_name, what = SUITES[name]
         if not args.json:
@@ -87,9 +104,19 @@ def run(args) -> int:
         options = dict(QUICK.get(name, {}) if args.quick else {})
         if args.load and name == "latency":
             options["load"] = True
-        result = importlib.import_module(module_name).run(**options)
+        try:
+            result = importlib.import_module(module_name).run(**options)
+        except Exception:  # noqa: BLE001 - a benchmark has no user input: whatever it raises is a bug
+            print(f"mows bench: internal error in the {name} suite (a bug, please report it):", file=sys.stderr)
+            traceback.print_exc()
+            failed.append(name)
+            continue
         result["wall_s"] = time.perf_counter() - start
         figures[name] = result
+        if "failed" in result:  # a suite that ran but measured nothing (its graph did not come up)
+            reason = " ".join(str(result["failed"]).split())
+            print(f"mows bench: the {name} suite measured nothing: {reason}", file=sys.stderr)
+            failed.append(name)
         if not args.json:
             for key, value in result.items():
                 print(f"   {key:40s} {_format(value)}")
@@ -97,7 +124,10 @@ def run(args) -> int:
         flat = dict(figures.get("estimator", {}))
         flat.update({key: value for key, value in figures.get("throughput", {}).items() if key in THROUGHPUT_KEYS})
         flat.update({name: values for name, values in figures.items()})
-        print(json.dumps(_finite(flat), indent=1, default=_jsonable, allow_nan=False))
+        print(json.dumps(finite_or_none(flat), indent=1, default=_jsonable, allow_nan=False))
+    if failed:
+        print(f"mows bench: {', '.join(failed)} failed (see above)", file=sys.stderr)
+        return EXIT_BUG
     return 0
 
 
@@ -109,20 +139,9 @@ def _format(value) -> str:
     return str(value)
 
 
-def _finite(value):
-    """JSON has no NaN or infinity: such figures become null."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    return value
-
-
 def _jsonable(value):
     if hasattr(value, "tolist"):
-        return _finite(value.tolist())
+        return finite_or_none(value.tolist())
     return str(value)
 
 

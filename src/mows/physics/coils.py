@@ -41,6 +41,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mows.physics.field import (
     FieldSource,
@@ -71,11 +72,11 @@ class CurrentCap:
 
     limit_a: float = DEFAULT_CURRENT_LIMIT_A
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (np.isfinite(self.limit_a) and self.limit_a > 0.0):
             raise ValueError(f"limit_a must be a finite current > 0 A, got {self.limit_a!r}")
 
-    def check(self, currents_a) -> np.ndarray:
+    def check(self, currents_a: ArrayLike) -> np.ndarray:
         """``currents_a`` as an array if every |I| ≤ ``limit_a``; ValueError otherwise."""
         currents = np.asarray(currents_a, dtype=float)
         if not np.all(np.isfinite(currents)):
@@ -116,12 +117,14 @@ def excitation_samples(duration_s: float, frequency_hz: float, sample_rate_hz: f
     return int(round(half_periods / (2.0 * frequency_hz) * sample_rate_hz))
 
 
-def lsip330(center_m, axis) -> FieldSource:
+def lsip330(center_m: ArrayLike, axis: ArrayLike) -> FieldSource:
     """One LSIP-330 excitation coil, field per ampere."""
     return solenoid(center_m, axis, LSIP330_RADIUS_M, LSIP330_LENGTH_M, LSIP330_TURNS, 1.0, LSIP330_LOOPS)
 
 
-def pasco_pair(current_a: float, anti: bool = False, center_m=(0.0, 0.0, 0.0), axis=(1.0, 0.0, 0.0)) -> FieldSource:
+def pasco_pair(
+    current_a: float, anti: bool = False, center_m: ArrayLike = (0.0, 0.0, 0.0), axis: ArrayLike = (1.0, 0.0, 0.0)
+) -> FieldSource:
     """The Helmholtz setup's static-field pair (Methods: Pasco EM-6723A along x).
 
     Parallel (Helmholtz, ``anti`` False): uniform field; anti-parallel: gradient, B ≈ 0.
@@ -153,7 +156,7 @@ class CoilSetup:
     inductance_h: float = LSIP330_INDUCTANCE_H
     cap: CurrentCap = field(default_factory=CurrentCap)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, "coils", tuple(self.coils))
         object.__setattr__(self, "phases_rad", tuple(float(p) for p in self.phases_rad))
         if len(self.coils) != len(self.phases_rad) or not all(isinstance(c, FieldSource) for c in self.coils):
@@ -161,7 +164,7 @@ class CoilSetup:
                 f"coils ({len(self.coils)}) must be field sources, one per phase ({len(self.phases_rad)} phases)"
             )
 
-    def currents_a(self, theta0_rad, amplitude_a: float) -> np.ndarray:
+    def currents_a(self, theta0_rad: ArrayLike, amplitude_a: float) -> np.ndarray:
         """Signed current amplitude of each coil, A, shape ``theta0_rad.shape + (n_coils,)``.
 
         ValueError if ``amplitude_a`` is negative or above the cap.
@@ -172,12 +175,12 @@ class CoilSetup:
         theta0 = np.asarray(theta0_rad, dtype=float)
         return amplitude_a * np.sin(theta0[..., None] + np.array(self.phases_rad))
 
-    def coil_field_per_ampere_t(self, points_m) -> np.ndarray:
+    def coil_field_per_ampere_t(self, points_m: ArrayLike) -> np.ndarray:
         """Field of each coil per ampere at ``points_m`` (..., 3): shape (..., n_coils, 3), T/A."""
         points = as_points_m(points_m)
         return np.stack([coil.field_t(points) for coil in self.coils], axis=-2)
 
-    def field_t(self, points_m, currents_a) -> np.ndarray:
+    def field_t(self, points_m: ArrayLike, currents_a: ArrayLike) -> np.ndarray:
         """Total coil field, T, for per-coil ``currents_a`` (..., n_coils) at ``points_m`` (..., 3)."""
         return np.einsum("...k,...ki->...i", np.asarray(currents_a, float), self.coil_field_per_ampere_t(points_m))
 
@@ -206,7 +209,7 @@ def two_coil_setup(
     name: str,
     distance_m: float = DEFAULT_DISTANCE_M,
     current_limit_a: float = DEFAULT_CURRENT_LIMIT_A,
-    probe_position_m=(0.0, 0.0, 0.0),
+    probe_position_m: ArrayLike = (0.0, 0.0, 0.0),
 ) -> CoilSetup:
     """The setup ``name`` of PLACEMENTS_DEG: coils in the x–y plane through the probe,
     ``distance_m`` from it."""
@@ -240,7 +243,11 @@ def setup_from_dict(d: dict) -> CoilSetup:
 
 
 def _custom_setup(
-    coils, current_phases_deg, name="custom", inductance_h=LSIP330_INDUCTANCE_H, current_limit_a=DEFAULT_CURRENT_LIMIT_A
+    coils: object,
+    current_phases_deg: object,
+    name: str = "custom",
+    inductance_h: float = LSIP330_INDUCTANCE_H,
+    current_limit_a: float = DEFAULT_CURRENT_LIMIT_A,
 ) -> CoilSetup:
     if not isinstance(coils, (list, tuple)) or not isinstance(current_phases_deg, (list, tuple)):
         raise ValueError("coils and current_phases_deg must be lists")

@@ -53,7 +53,7 @@ __all__ = [
 ]
 
 
-def _sum_of(sources) -> SumSource:
+def _sum_of(sources: object) -> SumSource:
     if not isinstance(sources, (list, tuple)):
         raise ValueError(f"sources of a sum must be a list of source mappings, got {sources!r}")
     return SumSource(source_from_dict(s) for s in sources)

@@ -21,7 +21,8 @@ remains.
 Noise (:class:`NoiseModel`). Common-mode noise, identical on both sensors: white, 1/f
 ("pink") and optionally mains hum; independent white noise per sensor. Levels are one-sided
 amplitude spectral densities in T/√Hz (the pink level is its ASD at 1 Hz); the difference
-of the two channels removes the common part exactly.
+of the two channels removes the common part exactly. The simulator draws it
+(:class:`mows.sim.noise.NoiseStream`).
 """
 
 from __future__ import annotations
@@ -30,8 +31,10 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from mows.physics.schema import unit_vector3, vector3
+from mows.physics.pose import Pose
+from mows.physics.schema import Vector, unit_vector3, vector3
 from mows.physics.sources import MU0_OVER_4PI, dipole_field_t
 
 FL1_RANGE_T = 10e-6
@@ -66,7 +69,7 @@ class Fluxgate:
     resolution_t: float = FL1_RESOLUTION_T
     offset_t: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, "position_m", vector3("position_m", self.position_m))
         object.__setattr__(self, "axis", unit_vector3("axis", self.axis))
         for name in ("range_t", "resolution_t"):
@@ -76,16 +79,16 @@ class Fluxgate:
         if not np.isfinite(self.offset_t):
             raise ValueError(f"offset_t must be finite, got {self.offset_t!r}")
 
-    def component_t(self, field_t) -> np.ndarray:
+    def component_t(self, field_t: ArrayLike) -> np.ndarray:
         """The component along the sensor axis of fields ``field_t`` (..., 3), tesla."""
         return np.asarray(field_t, dtype=float) @ self.axis
 
-    def with_offset_nulled(self, static_field_t) -> Fluxgate:
+    def with_offset_nulled(self, static_field_t: ArrayLike) -> Fluxgate:
         """This sensor with its offset set so that the static field ``static_field_t`` (3,) reads 0."""
         return replace(self, offset_t=float(self.component_t(static_field_t)))
 
 
-def dipole_pickup_t(sensor: Fluxgate, magnet_positions_m, moments_am2) -> np.ndarray:
+def dipole_pickup_t(sensor: Fluxgate, magnet_positions_m: ArrayLike, moments_am2: ArrayLike) -> np.ndarray:
     """Exact dipole field along ``sensor.axis``, tesla, one value per time sample.
 
     ``magnet_positions_m`` and ``moments_am2`` are (n, 3) (or broadcastable): the magnet's
@@ -95,7 +98,7 @@ def dipole_pickup_t(sensor: Fluxgate, magnet_positions_m, moments_am2) -> np.nda
     return dipole_field_t(moments_am2, offsets) @ sensor.axis
 
 
-def digitise(values_t, sensor: Fluxgate):
+def digitise(values_t: ArrayLike, sensor: Fluxgate) -> tuple[np.ndarray, np.ndarray]:
     """The sensor's digital reading of the field component ``values_t`` (tesla).
 
     Returns (readings_t, saturated): readings are values − offset, clipped to ±range and
@@ -114,7 +117,7 @@ class FluxgatePair:
 
     sensors: tuple
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, "sensors", tuple(self.sensors))
         if len(self.sensors) != 2 or not all(isinstance(s, Fluxgate) for s in self.sensors):
             raise ValueError(f"sensors must be two Fluxgate objects, got {self.sensors!r}")
@@ -122,37 +125,39 @@ class FluxgatePair:
     @classmethod
     def paper(
         cls,
-        probe_position_m=(0.0, 0.0, 0.0),
+        probe_position_m: ArrayLike = (0.0, 0.0, 0.0),
         distance_m: float = PAPER_DISTANCE_M,
         spacing_m: float = PAPER_SPACING_M,
-        direction=(1.0, 0.0, 0.0),
-        axis=(0.0, 1.0, 0.0),
+        direction: ArrayLike = (1.0, 0.0, 0.0),
+        axis: ArrayLike = (0.0, 1.0, 0.0),
     ) -> FluxgatePair:
         """The paper's pair: sensors at r and r + d from the probe along ``direction``, reading
         along ``axis`` (global y: b = 1 in Eq. S9)."""
         probe = vector3("probe_position_m", probe_position_m)
-        line = unit_vector3("direction", direction)
-        return cls((Fluxgate(probe + distance_m * line, axis), Fluxgate(probe + (distance_m + spacing_m) * line, axis)))
+        line, reading = unit_vector3("direction", direction), unit_vector3("axis", axis)
+        return cls(
+            (Fluxgate(probe + distance_m * line, reading), Fluxgate(probe + (distance_m + spacing_m) * line, reading))
+        )
 
     @property
     def positions_m(self) -> np.ndarray:
         """Sensor positions, shape (2, 3)."""
         return np.stack([s.position_m for s in self.sensors])
 
-    def pickup_t(self, magnet_positions_m, moments_am2) -> np.ndarray:
+    def pickup_t(self, magnet_positions_m: ArrayLike, moments_am2: ArrayLike) -> np.ndarray:
         """:func:`dipole_pickup_t` of both sensors, shape (n, 2)."""
         return np.stack([dipole_pickup_t(s, magnet_positions_m, moments_am2) for s in self.sensors], axis=-1)
 
-    def component_t(self, fields_t) -> np.ndarray:
+    def component_t(self, fields_t: ArrayLike) -> np.ndarray:
         """Axis components of fields (..., 2, 3) at the two sensors: shape (..., 2)."""
         return np.stack([s.component_t(np.asarray(fields_t)[..., i, :]) for i, s in enumerate(self.sensors)], axis=-1)
 
-    def with_offsets_nulled(self, static_fields_t) -> FluxgatePair:
+    def with_offsets_nulled(self, static_fields_t: ArrayLike) -> FluxgatePair:
         """Both offsets set to null the static fields (2, 3) at the two sensors."""
         fields = np.asarray(static_fields_t, dtype=float)
         return replace(self, sensors=tuple(s.with_offset_nulled(f) for s, f in zip(self.sensors, fields)))
 
-    def digitise(self, values_t):
+    def digitise(self, values_t: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """:func:`digitise` of columns (n, 2); returns (readings_t, saturated), both (n, 2)."""
         values = np.asarray(values_t, dtype=float)
         columns = [digitise(values[..., i], s) for i, s in enumerate(self.sensors)]
@@ -162,7 +167,7 @@ class FluxgatePair:
 PICKUP_COMBINATIONS = {"difference": (1.0, -1.0), "channel1": (1.0, 0.0), "channel2": (0.0, 1.0)}
 
 
-def paper_pickup(theta0_rad, direction=(0.0, 1.0)) -> np.ndarray:
+def paper_pickup(theta0_rad: ArrayLike, direction: Vector = (0.0, 1.0)) -> np.ndarray:
     """Eq. S11 as a pickup series, C_0 = 0 and C_1 = (2a + ib)·e^(iθ0): the signal
     2a·cos θ − b·sin θ = Re(C_1·e^(ix)) at θ = θ0 + x, (a, b) the sensing direction (the
     paper's is (0, 1)). Shape ``np.shape(theta0_rad) + (2,)``."""
@@ -173,7 +178,7 @@ def paper_pickup(theta0_rad, direction=(0.0, 1.0)) -> np.ndarray:
 
 def pickup_harmonics(
     pair: FluxgatePair,
-    pose,
+    pose: Pose,
     lever_m: float,
     moment_am2: float,
     combine: str = "difference",
@@ -226,7 +231,7 @@ class NoiseModel:
     mains_t: float = 0.0
     mains_hz: float = 50.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name, value in vars(self).items():
             if not (np.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be finite and ≥ 0, got {value!r}")
@@ -236,16 +241,3 @@ class NoiseModel:
         the common-mode noise cancels; each sensor's one-sided ASD over the band fs/2 gives
         asd·√(fs/2), and the difference of two independent ones √2 times that."""
         return float(self.sensor_white_t_per_rthz * math.sqrt(sample_rate_hz))
-
-
-def pink_noise_t(n: int, sample_rate_hz: float, asd_at_1hz_t_per_rthz: float, rng: np.random.Generator) -> np.ndarray:
-    """1/f noise of one-sided ASD ``asd_at_1hz``·(f/1 Hz)^(−1/2), by shaping white noise in
-    the frequency domain; no power at 0 Hz, so the record is zero-mean and periodic in n."""
-    if asd_at_1hz_t_per_rthz == 0.0 or n == 0:
-        return np.zeros(n)
-    spectrum = np.fft.rfft(rng.standard_normal(n))
-    f = np.fft.rfftfreq(n, 1.0 / sample_rate_hz)
-    gain = np.zeros_like(f)
-    # Unit white noise has one-sided PSD 2/fs; this gain turns it into asd²/f.
-    gain[1:] = asd_at_1hz_t_per_rthz * np.sqrt(sample_rate_hz / (2.0 * f[1:]))
-    return np.fft.irfft(spectrum * gain, n)

@@ -18,30 +18,38 @@ import dataclasses
 
 import numpy as np
 
+from mows.physics.schema import FloatOrArray, Vector
 
-def field_spring_nm_per_rad(moment_am2, field_t):
+
+def field_spring_nm_per_rad(moment_am2: FloatOrArray, field_t: FloatOrArray) -> FloatOrArray:
     """Magnetic field spring kB = m·Bx', N·m/rad (Eq. 4, small deflection)."""
     return np.multiply(moment_am2, field_t)
 
 
-def gradient_spring_nm_per_rad(moment_am2, lever_m, gradient_t_per_m):
+def gradient_spring_nm_per_rad(
+    moment_am2: FloatOrArray, lever_m: FloatOrArray, gradient_t_per_m: FloatOrArray
+) -> FloatOrArray:
     """Gradient spring kG = l·m·Gx'x', N·m/rad (Eq. 5, small deflection)."""
     return np.multiply(np.multiply(lever_m, moment_am2), gradient_t_per_m)
 
 
-def _sqrt1p_minus_1(u):
+def _sqrt1p_minus_1(u: FloatOrArray) -> np.ndarray:
     """√(1+u) − 1 without cancellation; NaN where 1 + u < 0 (no real frequency)."""
     u = np.asarray(u, dtype=float)
     root = np.sqrt(np.where(u >= -1.0, 1.0 + u, np.nan))
     return u / (root + 1.0)
 
 
-def frequency_shift_hz(f00_hz, spring_nm_per_rad, magnetic_spring_nm_per_rad):
+def frequency_shift_hz(
+    f00_hz: FloatOrArray, spring_nm_per_rad: FloatOrArray, magnetic_spring_nm_per_rad: FloatOrArray
+) -> FloatOrArray:
     """Δf = f00·(√(1 + (kB + kG)/kM) − 1), Hz (Eq. 6); NaN beyond spring cancellation."""
     return np.multiply(f00_hz, _sqrt1p_minus_1(np.divide(magnetic_spring_nm_per_rad, spring_nm_per_rad)))
 
 
-def field_sensitivity_hz_per_t(field_t, f00_hz, spring_nm_per_rad, moment_am2):
+def field_sensitivity_hz_per_t(
+    field_t: FloatOrArray, f00_hz: FloatOrArray, spring_nm_per_rad: FloatOrArray, moment_am2: FloatOrArray
+) -> FloatOrArray:
     """β = Δf_B,0 / B, Hz/T (Eq. 7), exact and continuous through B = 0.
 
     β = f00·(m/kM) / (√(1 + m·B/kM) + 1), whose B → 0 limit is Eq. 9, f00·m/(2kM).
@@ -51,7 +59,13 @@ def field_sensitivity_hz_per_t(field_t, f00_hz, spring_nm_per_rad, moment_am2):
     return np.multiply(f00_hz, ratio) / (root + 1.0)
 
 
-def gradient_sensitivity_hz_m_per_t(gradient_t_per_m, f00_hz, spring_nm_per_rad, moment_am2, lever_m):
+def gradient_sensitivity_hz_m_per_t(
+    gradient_t_per_m: FloatOrArray,
+    f00_hz: FloatOrArray,
+    spring_nm_per_rad: FloatOrArray,
+    moment_am2: FloatOrArray,
+    lever_m: FloatOrArray,
+) -> FloatOrArray:
     """γ = Δf_0,G / G, Hz·m/T (Eq. 8); γ → β0·l as G → 0."""
     return np.multiply(
         lever_m,
@@ -59,12 +73,14 @@ def gradient_sensitivity_hz_m_per_t(gradient_t_per_m, f00_hz, spring_nm_per_rad,
     )
 
 
-def weak_field_sensitivity_hz_per_t(f00_hz, spring_nm_per_rad, moment_am2):
+def weak_field_sensitivity_hz_per_t(
+    f00_hz: FloatOrArray, spring_nm_per_rad: FloatOrArray, moment_am2: FloatOrArray
+) -> FloatOrArray:
     """β0 = lim_{B→0} β = f00·m/(2kM), Hz/T (Eq. 9)."""
     return np.multiply(f00_hz, moment_am2) / (2.0 * np.asarray(spring_nm_per_rad))
 
 
-def spring_ratio_from_shift(frequency_shift_hz_, f00_hz):
+def spring_ratio_from_shift(frequency_shift_hz_: FloatOrArray, f00_hz: FloatOrArray) -> FloatOrArray:
     """(k − kM)/kM = (1 + Δf/f00)² − 1 = r·(2 + r), r = Δf/f00: Eq. 6 solved exactly."""
     r = np.divide(frequency_shift_hz_, f00_hz)
     return r * (2.0 + r)
@@ -79,7 +95,11 @@ class Inversion:
 
 
 def field_from_shift_t(
-    frequency_shift_hz_, f00_hz, spring_nm_per_rad, moment_am2, frequency_shift_std_hz=0.0
+    frequency_shift_hz_: FloatOrArray,
+    f00_hz: FloatOrArray,
+    spring_nm_per_rad: FloatOrArray,
+    moment_am2: FloatOrArray,
+    frequency_shift_std_hz: FloatOrArray = 0.0,
 ) -> Inversion:
     """Field along the probe axis from Δf assuming G = 0: B = (kM/m)·((1 + Δf/f00)² − 1).
 
@@ -92,7 +112,12 @@ def field_from_shift_t(
 
 
 def gradient_from_shift_t_per_m(
-    frequency_shift_hz_, f00_hz, spring_nm_per_rad, moment_am2, lever_m, frequency_shift_std_hz=0.0
+    frequency_shift_hz_: FloatOrArray,
+    f00_hz: FloatOrArray,
+    spring_nm_per_rad: FloatOrArray,
+    moment_am2: FloatOrArray,
+    lever_m: FloatOrArray,
+    frequency_shift_std_hz: FloatOrArray = 0.0,
 ) -> Inversion:
     """Gradient Gx'x' from Δf assuming B = 0: G = (kM/(l·m))·((1 + Δf/f00)² − 1) (Eq. S24).
 
@@ -107,7 +132,7 @@ def gradient_from_shift_t_per_m(
     )
 
 
-def _invert(shift_hz, f00_hz, scale, shift_std_hz) -> Inversion:
+def _invert(shift_hz: FloatOrArray, f00_hz: FloatOrArray, scale: FloatOrArray, shift_std_hz: FloatOrArray) -> Inversion:
     shift_hz = np.asarray(shift_hz, dtype=float)
     valid = shift_hz > -np.asarray(f00_hz)
     value = np.where(valid, scale * spring_ratio_from_shift(shift_hz, f00_hz), np.nan)
@@ -117,8 +142,15 @@ def _invert(shift_hz, f00_hz, scale, shift_std_hz) -> Inversion:
 
 
 def sweep_shift_hz(
-    theta0_rad, field_xy_t, gradient_xy_t_per_m, f00_hz, spring_nm_per_rad, moment_am2, lever_m, exact=True
-):
+    theta0_rad: FloatOrArray,
+    field_xy_t: Vector,
+    gradient_xy_t_per_m: Vector,
+    f00_hz: float,
+    spring_nm_per_rad: float,
+    moment_am2: float,
+    lever_m: float,
+    exact: bool = True,
+) -> FloatOrArray:
     """Published rotation-sweep model Δf(θ0) for an in-plane field and gradient (Eqs. 6, 11, S18).
 
     The probe axis is x' = (cos θ0, sin θ0); kB = m·Bx', kG = l·m·Gx'x' with
@@ -145,7 +177,14 @@ def sweep_shift_hz(
     return np.multiply(f00_hz, k_mag) / (2.0 * spring_nm_per_rad)
 
 
-def sweep_harmonics(field_xy_t, gradient_xy_t_per_m, f00_hz, spring_nm_per_rad, moment_am2, lever_m):
+def sweep_harmonics(
+    field_xy_t: Vector,
+    gradient_xy_t_per_m: Vector,
+    f00_hz: float,
+    spring_nm_per_rad: float,
+    moment_am2: float,
+    lever_m: float,
+) -> dict[str, float]:
     """Prefactors of Eq. 12, Δf ≈ P0 + P1·cos(θ0 + φ1) + P2·cos(2θ0 + φ2), first order.
 
     P1 = f00·m·|B|/(2kM), φ1 = −atan2(By, Bx); the gradient gives the constant

@@ -4,7 +4,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.special import ellipe, ellipkm1, hyp2f1
 
 from mows.physics.schema import as_points_m, positive, unit_vector3, vector3
@@ -24,7 +27,7 @@ GRADIENT_STEP = 5e-3  # × s
 HESSIAN_STEP = 1e-2  # × s
 
 
-def _central_jacobian(func, points: np.ndarray, step_m: np.ndarray) -> np.ndarray:
+def _central_jacobian(func: Callable[[np.ndarray], np.ndarray], points: np.ndarray, step_m: np.ndarray) -> np.ndarray:
     """∂func/∂x_j by a 6th-order central difference with per-point step ``step_m`` (...).
 
     ``func`` maps (..., 3) → (..., *out); the result has shape (..., *out, 3).
@@ -64,7 +67,7 @@ class CurrentLoop(FieldSource):
     type_name = "loop"
     _linear = ("current_a",)
 
-    def __init__(self, center_m, axis, radius_m, turns, current_a):
+    def __init__(self, center_m: ArrayLike, axis: ArrayLike, radius_m: float, turns: float, current_a: float) -> None:
         self.center_m = vector3("center_m", center_m)
         self.axis = unit_vector3("axis", axis)
         self.radius_m = positive("radius_m", radius_m)
@@ -73,7 +76,7 @@ class CurrentLoop(FieldSource):
         if not np.isfinite(self.current_a):
             raise ValueError(f"current_a must be finite, got {current_a!r}")
 
-    def _cylindrical(self, points):
+    def _cylindrical(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(ρ_vec, ρ, z, α²) of ``points`` in the loop's frame; ValueError on the wire."""
         relative = points - self.center_m
         z = relative @ self.axis
@@ -87,7 +90,7 @@ class CurrentLoop(FieldSource):
             )
         return rho_vec, rho, z, alpha2
 
-    def field_t(self, points_m):
+    def field_t(self, points_m: ArrayLike) -> np.ndarray:
         rho_vec, rho, z, alpha2 = self._cylindrical(as_points_m(points_m))
         big_r = self.radius_m
         beta2 = (big_r + rho) ** 2 + z**2
@@ -104,18 +107,18 @@ class CurrentLoop(FieldSource):
         b_rho_over_rho = 4.0 * ni * big_r**2 * z * j / (np.pi * beta2**2 * beta)
         return b_rho_over_rho[..., None] * rho_vec + b_z[..., None] * self.axis
 
-    def _step_m(self, points, fraction):
+    def _step_m(self, points: np.ndarray, fraction: float) -> np.ndarray:
         return fraction * np.sqrt(self._cylindrical(points)[3])
 
-    def gradient_t_per_m(self, points_m):
+    def gradient_t_per_m(self, points_m: ArrayLike) -> np.ndarray:
         points = as_points_m(points_m)
         return _central_jacobian(self.field_t, points, self._step_m(points, GRADIENT_STEP))
 
-    def hessian_t_per_m2(self, points_m):
+    def hessian_t_per_m2(self, points_m: ArrayLike) -> np.ndarray:
         points = as_points_m(points_m)
         return _central_jacobian(self.gradient_t_per_m, points, self._step_m(points, HESSIAN_STEP))
 
-    def _params(self):
+    def _params(self) -> dict:
         return {
             "center_m": self.center_m,
             "axis": self.axis,
@@ -125,7 +128,9 @@ class CurrentLoop(FieldSource):
         }
 
 
-def _coaxial_pair(center_m, axis, radius_m, turns, current_a, sign):
+def _coaxial_pair(
+    center_m: ArrayLike, axis: ArrayLike, radius_m: float, turns: float, current_a: float, sign: float
+) -> SumSource:
     """Loops at center ± (R/2)·axis, currents I (at +) and sign·I (at −)."""
     axis = unit_vector3("axis", axis)
     center = vector3("center_m", center_m)
@@ -138,7 +143,7 @@ def _coaxial_pair(center_m, axis, radius_m, turns, current_a, sign):
     )
 
 
-def helmholtz_pair(center_m, axis, radius_m, turns, current_a) -> SumSource:
+def helmholtz_pair(center_m: ArrayLike, axis: ArrayLike, radius_m: float, turns: float, current_a: float) -> SumSource:
     """Helmholtz pair: coaxial loops of radius R at ±R/2 along ``axis``, same current.
 
     The centre field is (4/5)^(3/2)·μ0·N·I/R along ``axis``, flat to fourth order:
@@ -147,7 +152,9 @@ def helmholtz_pair(center_m, axis, radius_m, turns, current_a) -> SumSource:
     return _coaxial_pair(center_m, axis, radius_m, turns, current_a, +1.0)
 
 
-def anti_helmholtz_pair(center_m, axis, radius_m, turns, current_a) -> SumSource:
+def anti_helmholtz_pair(
+    center_m: ArrayLike, axis: ArrayLike, radius_m: float, turns: float, current_a: float
+) -> SumSource:
     """Anti-Helmholtz pair: as :func:`helmholtz_pair` but the loop at −R/2 carries −I.
 
     B = 0 at the centre, where ∂B_z/∂z = 3μ0NI·R²·d / (2(R² + d²/4)^(5/2)) with d = R,
@@ -156,7 +163,15 @@ def anti_helmholtz_pair(center_m, axis, radius_m, turns, current_a) -> SumSource
     return _coaxial_pair(center_m, axis, radius_m, turns, current_a, -1.0)
 
 
-def solenoid(center_m, axis, radius_m, length_m, turns, current_a, n_loops=8) -> SumSource:
+def solenoid(
+    center_m: ArrayLike,
+    axis: ArrayLike,
+    radius_m: float,
+    length_m: float,
+    turns: float,
+    current_a: float,
+    n_loops: int = 8,
+) -> SumSource:
     """A short coil as ``n_loops`` coaxial loops at the midpoints of equal slices of ``length_m``.
 
     Each loop carries ``turns``/``n_loops`` turns (a layered winding of one radius). With

@@ -15,13 +15,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 STANDARD_GRAVITY_M_PER_S2 = 9.80665
 
 
-def probe_axes(theta0_rad) -> np.ndarray:
+def probe_axes(theta0_rad: ArrayLike) -> np.ndarray:
     """Rows x', y', z' of the probe frame in a rotation plane that is the global x–y plane, shape
     θ0.shape + (3, 3): ``axes @ v`` is v in the probe frame."""
     theta = np.asarray(theta0_rad, float)
@@ -41,7 +43,7 @@ class Pose:
     plane_e2: tuple = (0.0, 1.0, 0.0)
     gravity_m_per_s2: tuple = (0.0, 0.0, -STANDARD_GRAVITY_M_PER_S2)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         e1, e2 = np.asarray(self.plane_e1, float), np.asarray(self.plane_e2, float)
         if abs(np.linalg.norm(e1) - 1) > 1e-9 or abs(np.linalg.norm(e2) - 1) > 1e-9 or abs(e1 @ e2) > 1e-9:
             raise ValueError(
@@ -51,7 +53,7 @@ class Pose:
         if not math.isfinite(self.theta0_rad):
             raise ValueError(f"theta0_rad = {self.theta0_rad} must be finite")
 
-    def axes(self):
+    def axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Probe axes (x', y', z') as three global unit vectors."""
         e1, e2 = np.asarray(self.plane_e1, float), np.asarray(self.plane_e2, float)
         c, s = math.cos(self.theta0_rad), math.sin(self.theta0_rad)
@@ -63,18 +65,18 @@ class Pose:
     def pivot_m(self, lever_m: float) -> np.ndarray:
         return np.asarray(self.magnet_position_m, float) - lever_m * self.axes()[0]
 
-    def moment_direction_at(self, theta_rad) -> np.ndarray:
+    def moment_direction_at(self, theta_rad: ArrayLike) -> np.ndarray:
         """Unit moment direction at deflection θ, shape θ.shape + (3,)."""
         x_axis, y_axis, _ = self.axes()
         theta = np.asarray(theta_rad, float)[..., None]
         return np.cos(theta) * x_axis + np.sin(theta) * y_axis
 
-    def magnet_position_at(self, theta_rad, lever_m: float) -> np.ndarray:
+    def magnet_position_at(self, theta_rad: ArrayLike, lever_m: float) -> np.ndarray:
         """Magnet position at deflection θ, shape θ.shape + (3,)."""
         return self.pivot_m(lever_m) + lever_m * self.moment_direction_at(theta_rad)
 
     @classmethod
-    def tilted(cls, tilt_rad: float, tilt_axis_rad: float = 0.0, **kwargs) -> Pose:
+    def tilted(cls, tilt_rad: float, tilt_axis_rad: float = 0.0, **kwargs: Any) -> Pose:
         """A horizontal x–y rotation plane tilted by ``tilt_rad`` about the in-plane axis at
         angle ``tilt_axis_rad`` from x: expressed, in the plane's own frame, as gravity acquiring
         an in-plane component g·sin(tilt) perpendicular to the tilt axis."""

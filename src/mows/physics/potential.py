@@ -29,6 +29,11 @@ import math
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
+
+from mows.physics.pose import Pose
+from mows.physics.probe import Probe
+from mows.physics.sources import FieldSource
 
 DEFAULT_NODES = 32
 DEFAULT_HALF_WIDTH_RAD = 0.75
@@ -72,7 +77,7 @@ def _clenshaw(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
 # a loop over the 32 coefficients in numpy spent its time in per-operation overhead. Same
 # arithmetic, in the same order, as the recurrences written out in numpy.
 @njit(cache=True)
-def _derivative_rows(coeffs, scale):
+def _derivative_rows(coeffs: np.ndarray, scale: float) -> np.ndarray:
     out = np.zeros_like(coeffs)
     n = coeffs.shape[1]
     for r in range(coeffs.shape[0]):
@@ -83,7 +88,7 @@ def _derivative_rows(coeffs, scale):
 
 
 @njit(cache=True)
-def _clenshaw_rows(coeffs, x):
+def _clenshaw_rows(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
     out = np.empty_like(x)
     b1, b2 = np.empty(x.shape[1]), np.empty(x.shape[1])
     for r in range(x.shape[0]):
@@ -110,12 +115,12 @@ class ArcPotential:
 
     def __init__(
         self,
-        spring_nm_per_rad,
-        inertia_kgm2,
-        damping_per_s,
-        energy_samples_j,
+        spring_nm_per_rad: ArrayLike,
+        inertia_kgm2: ArrayLike,
+        damping_per_s: ArrayLike,
+        energy_samples_j: ArrayLike,
         half_width_rad: float = DEFAULT_HALF_WIDTH_RAD,
-    ):
+    ) -> None:
         samples = np.asarray(energy_samples_j, dtype=float)
         self.half_width_rad = float(half_width_rad)
         self.batch_shape = samples.shape[:-1]
@@ -127,25 +132,25 @@ class ArcPotential:
         self.d2 = _derivative(self.d1, 1.0 / self.half_width_rad)
 
     # --- U and its derivatives, θ of shape B + (m,) or B -----------------------------------
-    def _eval(self, coeffs, theta_rad):
+    def _eval(self, coeffs: np.ndarray, theta_rad: ArrayLike) -> np.ndarray:
         theta = np.asarray(theta_rad, dtype=float)
         per_row = theta.shape == self.batch_shape
         t = theta[..., None] if per_row else theta
         value = _clenshaw(coeffs, t / self.half_width_rad)
         return value[..., 0] if per_row else value
 
-    def _spring(self, theta):
+    def _spring(self, theta: ArrayLike) -> np.ndarray:
         kM = self.spring_nm_per_rad
         return kM if np.ndim(theta) == len(self.batch_shape) else kM[..., None]
 
-    def energy_j(self, theta_rad):
+    def energy_j(self, theta_rad: ArrayLike) -> np.ndarray:
         return 0.5 * self._spring(theta_rad) * np.square(theta_rad) + self._eval(self.coeffs, theta_rad)
 
-    def torque_nm(self, theta_rad):
+    def torque_nm(self, theta_rad: ArrayLike) -> np.ndarray:
         """Restoring torque −dU/dθ, N·m."""
         return -(self._spring(theta_rad) * theta_rad + self._eval(self.d1, theta_rad))
 
-    def stiffness_nm_per_rad(self, theta_rad=None):
+    def stiffness_nm_per_rad(self, theta_rad: ArrayLike | None = None) -> np.ndarray:
         """U''(θ), N·m/rad; at the exact rest angle by default."""
         theta = self.rest_angle_rad() if theta_rad is None else theta_rad
         return self._spring(theta) + self._eval(self.d2, theta)
@@ -155,14 +160,16 @@ class ArcPotential:
         """Exact rest angle θs (U'(θs) = 0, U''(θs) > 0) nearest 0; NaN where none is stable."""
         return self.cycle_centre_rad(np.zeros(self.batch_shape))
 
-    def cycle_centre_rad(self, amplitude_rad) -> np.ndarray:
+    def cycle_centre_rad(self, amplitude_rad: ArrayLike) -> np.ndarray:
         """Centre θc of an oscillation of amplitude A from the DC balance ⟨U'(θc + A·cos φ)⟩ = 0.
 
         Solved by Newton's method from θ = 0; NaN where it does not converge inside the
         interval or where the balance is unstable (⟨U''⟩ ≤ 0, beyond spring cancellation).
         """
         amplitude = np.broadcast_to(np.asarray(amplitude_rad, float), self.batch_shape)
-        cos_phi = np.cos(2.0 * np.pi * np.arange(BALANCE_POINTS) / BALANCE_POINTS)
+        # At rest the balance is U'(θc) = 0 itself: one point instead of the cycle's.
+        points = BALANCE_POINTS if np.any(amplitude) else 1
+        cos_phi = np.cos(2.0 * np.pi * np.arange(points) / points)
         offsets = amplitude[..., None] * cos_phi
         centre = np.zeros(self.batch_shape)
         for _ in range(NEWTON_STEPS):
@@ -179,7 +186,7 @@ class ArcPotential:
         inside = np.abs(centre) + amplitude < self.half_width_rad
         return np.where(stable & converged & inside, centre, np.nan)
 
-    def effective_stiffness_nm_per_rad(self, amplitude_rad=0.0) -> np.ndarray:
+    def effective_stiffness_nm_per_rad(self, amplitude_rad: ArrayLike = 0.0) -> np.ndarray:
         """First-harmonic-balance stiffness k(A) (module docstring); U''(θs) at A = 0."""
         amplitude = np.broadcast_to(np.asarray(amplitude_rad, float), self.batch_shape)
         centre = self.cycle_centre_rad(amplitude)
@@ -191,7 +198,7 @@ class ArcPotential:
         at_rest = self.stiffness_nm_per_rad(np.nan_to_num(centre))
         return np.where(np.isnan(centre), np.nan, np.where(small, at_rest, harmonic))
 
-    def frequency_hz(self, amplitude_rad=0.0) -> np.ndarray:
+    def frequency_hz(self, amplitude_rad: ArrayLike = 0.0) -> np.ndarray:
         """Ring-down frequency √(k(A)/J − δ²)/2π, Hz (Eq. S1 with the exact k); NaN if unstable."""
         omega2 = self.effective_stiffness_nm_per_rad(amplitude_rad) / self.inertia_kgm2 - self.damping_per_s**2
         return np.sqrt(np.where(omega2 > 0, omega2, np.nan)) / (2.0 * math.pi)
@@ -200,10 +207,10 @@ class ArcPotential:
     @classmethod
     def from_source(
         cls,
-        probe,
-        source,
-        pose,
-        temperature_k=None,
+        probe: Probe,
+        source: FieldSource,
+        pose: Pose,
+        temperature_k: float | None = None,
         nodes: int = DEFAULT_NODES,
         half_width_rad: float = DEFAULT_HALF_WIDTH_RAD,
     ) -> ArcPotential:
@@ -216,14 +223,14 @@ class ArcPotential:
     @classmethod
     def from_local_field(
         cls,
-        probe,
-        field_t,
-        gradient_t_per_m=None,
-        hessian_t_per_m2=None,
-        gravity_m_per_s2=None,
-        spring_nm_per_rad=None,
-        lever_m=None,
-        damping_per_s=None,
+        probe: Probe,
+        field_t: ArrayLike,
+        gradient_t_per_m: ArrayLike | None = None,
+        hessian_t_per_m2: ArrayLike | None = None,
+        gravity_m_per_s2: ArrayLike | None = None,
+        spring_nm_per_rad: ArrayLike | None = None,
+        lever_m: ArrayLike | None = None,
+        damping_per_s: ArrayLike | None = None,
         nodes: int = 24,
         half_width_rad: float = DEFAULT_HALF_WIDTH_RAD,
     ) -> ArcPotential:
@@ -259,7 +266,7 @@ class ArcPotential:
         return cls(spring, probe.inertia_kgm2, damping, energy, half_width_rad)
 
 
-def arc_energy_j(probe, source, pose, theta_rad) -> np.ndarray:
+def arc_energy_j(probe: Probe, source: FieldSource, pose: Pose, theta_rad: ArrayLike) -> np.ndarray:
     """W(θ) = −m(θ)·B(r(θ)) − a·g·(r(θ) − pivot), J, at deflections ``theta_rad`` (PHYSICS §4)."""
     direction = pose.moment_direction_at(theta_rad)
     position = pose.magnet_position_at(theta_rad, probe.lever_m)

@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import pathlib
+from collections.abc import Callable, Iterable
 
 import numpy as np
 import yaml
 
+from mows.physics.schema import FloatOrArray
 from mows.records.files import writing
 
 TWO_PI = 2.0 * math.pi
@@ -68,7 +71,7 @@ class Probe:
     spring_temp_coeff_per_k: float = -2.6e-4
     reference_temperature_k: float = 293.15
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in (
             "moment_am2",
             "spring_nm_per_rad",
@@ -95,9 +98,9 @@ class Probe:
     @property
     def f00_hz(self) -> float:
         """Zero-field ring-down frequency f00 = √(kM/J − δ²)/2π, Hz (Eq. S1 at B = G = 0)."""
-        return self.frequency_for_spring_hz(self.spring_nm_per_rad)
+        return float(self.frequency_for_spring_hz(self.spring_nm_per_rad))
 
-    def frequency_for_spring_hz(self, spring_nm_per_rad):
+    def frequency_for_spring_hz(self, spring_nm_per_rad: FloatOrArray) -> FloatOrArray:
         """Damped frequency √(k/J − δ²)/2π for a total stiffness k (Eq. S1); NaN where k/J ≤ δ²."""
         omega2 = np.asarray(spring_nm_per_rad, dtype=float) / self.inertia_kgm2 - self.damping_per_s**2
         return np.sqrt(np.where(omega2 > 0, omega2, np.nan)) / TWO_PI
@@ -117,18 +120,18 @@ class Probe:
         """Field along the probe axis at which f → 0: B = −kM/m, tesla (main text after Eq. 8)."""
         return -self.spring_nm_per_rad / self.moment_am2
 
-    def spring_at(self, temperature_k):
+    def spring_at(self, temperature_k: FloatOrArray) -> FloatOrArray:
         """kM at ``temperature_k``: kM·(1 + α·(T − T_ref)), N·m/rad (PHYSICS.md §5.6)."""
         return self.spring_nm_per_rad * (
             1.0 + self.spring_temp_coeff_per_k * (temperature_k - self.reference_temperature_k)
         )
 
-    def replace(self, **changes) -> Probe:
+    def replace(self, **changes: float) -> Probe:
         return dataclasses.replace(self, **changes)
 
     @classmethod
     def from_calibration(
-        cls, moment_am2: float, f00_hz: float, beta0_hz_per_t: float, magnet_mass_kg: float, **others
+        cls, moment_am2: float, f00_hz: float, beta0_hz_per_t: float, magnet_mass_kg: float, **others: float
     ) -> Probe:
         """Probe from the paper's calibration: β0 gives kM (Eq. 9) and J (Eq. 10), J and a give l.
 
@@ -203,14 +206,20 @@ class Probe:
         return data
 
     @classmethod
-    def from_yaml(cls, path) -> Probe:
+    def from_yaml(cls, path: str | os.PathLike[str]) -> Probe:
         text = pathlib.Path(path).read_text()
         data = yaml.safe_load(text)
         if not isinstance(data, dict):
             raise ValueError(f"{path}: a probe file is a mapping of constants, got {type(data).__name__}")
         return cls.from_dict(data)
 
-    def to_yaml(self, path, calibration: dict | None = None, inputs=(), force: bool = False) -> str:
+    def to_yaml(
+        self,
+        path: str | os.PathLike[str],
+        calibration: dict | None = None,
+        inputs: Iterable[str | os.PathLike[str]] = (),
+        force: bool = False,
+    ) -> str:
         """Write the probe file (:func:`yaml_text`) as a new file, never over ``inputs`` nor, unless
         ``force``, over an existing one (:func:`mows.records.files.writing`); "wrote PATH" or
         "replaced PATH"."""
@@ -238,13 +247,13 @@ class Probe:
         ]
 
 
-def calibration_record(path) -> dict | None:
+def calibration_record(path: str | os.PathLike[str]) -> dict | None:
     """The ``calibration`` section of a probe file (None if the file has none)."""
     data = yaml.safe_load(pathlib.Path(path).read_text())
     return data.get("calibration") if isinstance(data, dict) else None
 
 
-def _given_number(key, value) -> None:
+def _given_number(key: str, value: object) -> None:
     """A probe-file value must be a finite number, checked before anything is derived from it
     (so that a NaN f00_hz is blamed on f00_hz, not on the inertia computed from it)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -260,7 +269,7 @@ def _given_number(key, value) -> None:
         raise ValueError(f"{key} = {value!r} must be a finite number")
 
 
-def _require(name, value, ok, what):
+def _require(name: str, value: object, ok: Callable[[float], bool], what: str) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and ok(value)):
         raise ValueError(f"{name} = {value!r} is out of range: must be finite and {what}")
 

@@ -31,8 +31,10 @@ the paper's 60 periods.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mows.physics.fluxgate import paper_pickup
+from mows.physics.schema import Vector
 
 DEFAULT_PERIODS = 60.0  # the paper evaluates 60 periods per ring-down
 GRID_POINTS = 128  # midpoint grid over the ring-down for K(t)
@@ -41,7 +43,12 @@ DEFAULT_NODES = 3  # Gauss nodes: exact for f(A(t)) polynomial of degree 5 in t
 PAPER_SENSOR = (0.0, 1.0)
 
 
-def phase_weight(theta0_rad, amplitude_rad, sensor_direction=PAPER_SENSOR, pickup=None) -> np.ndarray:
+def phase_weight(
+    theta0_rad: ArrayLike,
+    amplitude_rad: ArrayLike,
+    sensor_direction: Vector = PAPER_SENSOR,
+    pickup: ArrayLike | None = None,
+) -> np.ndarray:
     """w = A²·⟨S'(A·cos Φ)²·sin²Φ⟩_Φ, the phase information per unit time (arbitrary units).
 
     S(x) = Σ_k Re(C_k·e^(ikx)) is the signal as a function of the deflection x: ``pickup``, the
@@ -69,8 +76,13 @@ def phase_weight(theta0_rad, amplitude_rad, sensor_direction=PAPER_SENSOR, picku
 
 
 def averaging_kernel(
-    theta0_rad, amplitude_start_rad, damping_per_s, duration_s, sensor_direction=PAPER_SENSOR, pickup=None
-):
+    theta0_rad: ArrayLike,
+    amplitude_start_rad: ArrayLike,
+    damping_per_s: ArrayLike,
+    duration_s: ArrayLike,
+    sensor_direction: Vector = PAPER_SENSOR,
+    pickup: ArrayLike | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Times t (n, M) over the fit window and the kernel masses K(t)·dt (n, M), summing to 1.
 
     Arguments broadcast to a batch shape (n,); ``pickup`` (n, K + 1) or (K + 1,) as in
@@ -92,14 +104,14 @@ def averaging_kernel(
 
 
 def amplitude_nodes(
-    theta0_rad,
-    amplitude_start_rad,
-    damping_per_s,
-    duration_s,
+    theta0_rad: ArrayLike,
+    amplitude_start_rad: ArrayLike,
+    damping_per_s: ArrayLike,
+    duration_s: ArrayLike,
     nodes: int = DEFAULT_NODES,
-    sensor_direction=PAPER_SENSOR,
-    pickup=None,
-):
+    sensor_direction: Vector = PAPER_SENSOR,
+    pickup: ArrayLike | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Amplitudes A_q (n, q) and weights c_q (n, q) with f_fit = Σ_q c_q·f(A_q).
 
     Gauss quadrature for the measure K(t)·dt (Stieltjes recurrence on the grid, then the
@@ -132,6 +144,6 @@ def amplitude_nodes(
     return amp0[:, None] * np.exp(-damping[:, None] * times), vectors[:, 0, :] ** 2
 
 
-def default_duration_s(f_hz) -> np.ndarray:
+def default_duration_s(f_hz: ArrayLike) -> np.ndarray:
     """The paper's fit window, 60 periods, s."""
     return DEFAULT_PERIODS / np.asarray(f_hz, float)

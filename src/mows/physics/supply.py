@@ -36,7 +36,7 @@ class SupplyLimits:
     slew_a_per_s: float = DEFAULT_SLEW_A_PER_S
     resolution_a: float = PAPER_RESOLUTION_A
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("cap_a", "slew_a_per_s", "resolution_a"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
@@ -81,7 +81,7 @@ class FieldSupply:
     current_a: float = 0.0
     name: str = "helmholtz"
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not isinstance(self.source, FieldSource):
             raise ValueError(f"supply: source must be a field source, got {self.source!r}")
         self.limits.check(self.current_a)
@@ -105,12 +105,12 @@ def supply_from_dict(data: dict) -> FieldSupply:
 
 
 def _supply(
-    source,
-    name="helmholtz",
-    current_a=0.0,
-    cap_a=PAPER_CAP_A,
-    slew_a_per_s=DEFAULT_SLEW_A_PER_S,
-    resolution_a=PAPER_RESOLUTION_A,
+    source: dict,
+    name: str = "helmholtz",
+    current_a: float = 0.0,
+    cap_a: float = PAPER_CAP_A,
+    slew_a_per_s: float = DEFAULT_SLEW_A_PER_S,
+    resolution_a: float = PAPER_RESOLUTION_A,
 ) -> FieldSupply:
     limits = SupplyLimits(float(cap_a), float(slew_a_per_s), float(resolution_a))
     return FieldSupply(source_from_dict(source), limits, float(current_a), str(name))

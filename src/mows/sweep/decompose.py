@@ -254,11 +254,18 @@ def _distinct_angles(theta0) -> int:
     return np.unique(np.round(np.mod(theta0, 2 * np.pi), 6)).size
 
 
+def unknown_count(f00_free: bool = False) -> int:
+    """The decomposition's unknowns (Bx, By, Gs, Gd, Gxy, and Δf00 when f00 is free): the
+    field's 1θ0 pair, the gradient's 2θ0 pair and the constant, 5; 6 with f00 free. A sweep
+    needs as many distinct orientations."""
+    return 6 if f00_free else 5
+
+
 def orientations_problem(theta0_rad, f00_free: bool = False) -> str:
     """Why a sweep at these orientations cannot be decomposed ('' when it can): the field is the
     1θ0 harmonic, the gradient the 2θ0 one, plus a constant (and f00 when free)."""
     distinct = _distinct_angles(np.asarray(theta0_rad, float))
-    needed = 6 if f00_free else 5
+    needed = unknown_count(f00_free)
     if distinct < needed:
         return (
             f"{distinct} distinct orientations cannot separate field (1θ0) from gradient "

@@ -27,7 +27,7 @@ from collections.abc import Callable
 import numpy as np
 
 from mows.physics.probe import Probe
-from mows.sweep.decompose import Decomposition, model_shift_hz
+from mows.sweep.decompose import Decomposition, model_shift_hz, unknown_count
 from mows.sweep.record import SweepRecord
 
 COMPONENTS = ("bx", "by", "gxx", "gxy", "gyy")
@@ -152,7 +152,7 @@ class AdaptivePlanner:
         )
         self._std_model = ringdown_std_hz
         self._predicted = None if ringdown_std_hz is None else np.array([ringdown_std_hz(a) for a in self.candidates])
-        n = 6 if f00_free else 5
+        n = unknown_count(f00_free)
         self._to_components = np.hstack([TO_COMPONENTS, np.zeros((5, n - 5))])
         self._prior = np.diag((PRIOR_STD[:n] / UNITS[:n]) ** -2.0)
 
@@ -193,7 +193,7 @@ class AdaptivePlanner:
         """Mask of candidates not yet measured while the record has fewer distinct orientations
         than the decomposition needs (5; 6 with f00 free); empty once it has them."""
         visited = {round(p.theta0_rad % (2.0 * math.pi), 6) for p in record.points}
-        if len(visited) >= (6 if self.f00_free else 5):
+        if len(visited) >= unknown_count(self.f00_free):
             return np.zeros(0, bool)
         return np.array([round(a % (2.0 * math.pi), 6) not in visited for a in self.candidates])
 

@@ -379,8 +379,9 @@ class SweepRunner:
     def _decomposition_due(self, planner: AdaptivePlanner) -> bool:
         """New ring-downs at enough orientations, and a prediction near the target."""
         points = self._record.points
-        needed = 6 if self._settings.f00_free else 5
-        if len(points) == self._decomposed_points or len({round(p.theta0_rad, 9) for p in points}) < needed:
+        if len(points) == self._decomposed_points or orientations_problem(
+            [p.theta0_rad for p in points], self._settings.f00_free
+        ):
             return False
         targets = planner.goal.targets()
         asked = np.isfinite(targets)

@@ -23,6 +23,7 @@ import scipy.stats
 from mows.lab import progress
 from mows.lab.diagnosis.projections import Signature, orthonormal_basis, project_out, signature
 from mows.lab.model.effects import Effect, testable
+from mows.records.json_numbers import finite_or_none
 
 TIE_DELTA_BIC = 2.0
 STRONG_DELTA_BIC = 10.0
@@ -76,9 +77,9 @@ class Form:
 
     def to_dict(self) -> dict:
         return {
-            "delta_bic": _finite(self.delta_bic),
-            "p_value": _finite(self.p_value),
-            "chi2_dof_after": _finite(self.chi2_dof_after),
+            "delta_bic": finite_or_none(self.delta_bic),
+            "p_value": finite_or_none(self.p_value),
+            "chi2_dof_after": finite_or_none(self.chi2_dof_after),
         }
 
 
@@ -156,14 +157,14 @@ class Candidate:
             "effect": self.name,
             "form": self.form,
             "label": self.label,
-            "delta_bic": _finite(self.delta_bic),
-            "p_value": _finite(self.p_value),
-            "score_p_value": _finite(self.score_p_value),
-            "chi2_dof_after": _finite(self.chi2_dof_after),
+            "delta_bic": finite_or_none(self.delta_bic),
+            "p_value": finite_or_none(self.p_value),
+            "score_p_value": finite_or_none(self.score_p_value),
+            "chi2_dof_after": finite_or_none(self.chi2_dof_after),
             "parameters": {name: {"value": v, "std": s, "unit": u} for name, v, s, u in self.parameters},
             "free": self.free.to_dict(),
             "at_physics": None if self.physics is None else self.physics.to_dict(),
-            "physics_deviation_sigma": _finite(self.physics_deviation),
+            "physics_deviation_sigma": finite_or_none(self.physics_deviation),
             "within_bounds": self.within_bounds,
             "group": self.group,
             "explanation": self.effect.explanation,
@@ -189,10 +190,6 @@ def dispersion(fit, candidates) -> float:
     residual is noise."""
     after = [f.chi2_after / max(f.dof_after, 1) for c in candidates for f in c.forms]
     return max(1.0, min([fit.chi2_dof, *after]))
-
-
-def _finite(value):
-    return float(value) if np.isfinite(value) else None
 
 
 def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:

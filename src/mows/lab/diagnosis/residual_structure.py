@@ -17,6 +17,7 @@ import numpy as np
 import scipy.stats
 
 from mows.lab.diagnosis.projections import Signature, orthonormal_basis, signature
+from mows.records.json_numbers import finite_or_none
 
 HARMONICS = range(5)
 STRUCTURE_ALPHA = 0.005  # family-wise, Bonferroni over harmonics and covariates
@@ -34,10 +35,7 @@ class Harmonic:
     identifiable: bool = True  # False: the angles leave amplitude and phase undetermined (NaN)
 
     def to_dict(self) -> dict:
-        return {
-            name: (None if isinstance(value, float) and not math.isfinite(value) else value)
-            for name, value in dataclasses.asdict(self).items()
-        }
+        return finite_or_none(dataclasses.asdict(self))
 
     def text(self) -> str:
         """Amplitude ± σ and phase, or why there are none."""

@@ -37,9 +37,6 @@ from mows.physics import ringdown_average
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, probe_axes
 from mows.physics.potential import ArcPotential
 
-NEWTON_STEPS = 40
-NEWTON_TOLERANCE_RAD = 1e-14
-
 
 @dataclasses.dataclass
 class Configuration:
@@ -172,18 +169,10 @@ def _potential(probe, field, gradient_t_per_m, hessian_t_per_m2, gravity_m_per_s
 
 
 def _rest_stiffness(probe, field, **local):
-    """U''(θs) at the exact rest angle (Newton on U'(θ) = 0 from θ = 0); NaN where unstable."""
+    """U''(θs) at the exact rest angle (:meth:`ArcPotential.rest_angle_rad`); NaN where unstable."""
     potential = _potential(probe, field, **local)
-    theta = np.zeros(len(field))
-    for _ in range(NEWTON_STEPS):
-        curvature = potential.stiffness_nm_per_rad(theta)
-        step = -potential.torque_nm(theta) / curvature
-        theta = theta - step
-        if np.all(np.abs(step) < NEWTON_TOLERANCE_RAD):
-            break
-    curvature = potential.stiffness_nm_per_rad(theta)
-    good = (curvature > 0) & (np.abs(theta) < potential.half_width_rad) & (np.abs(step) < 1e-9)
-    return np.where(good, curvature, np.nan)
+    theta = potential.rest_angle_rad()
+    return np.where(np.isfinite(theta), potential.stiffness_nm_per_rad(np.nan_to_num(theta)), np.nan)
 
 
 def _amplitude_stiffness(probe, field, amplitudes, **local):

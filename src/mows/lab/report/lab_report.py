@@ -18,7 +18,6 @@ physical value more than 3σ from it is reported in the notes.
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
@@ -30,6 +29,7 @@ from mows.lab.model.catalog import catalog, resolve
 from mows.lab.model.configuration import unevaluable_rows
 from mows.lab.model.frequency_model import FitResult, FrequencyModel
 from mows.lab.selection.stepwise import MAX_AUTO_STEPS, history_step, parameters_dict, search
+from mows.records.json_numbers import finite_or_none
 
 CHECK_SIGMAS = 3.0  # a physical value further than this from its free fit is noted
 INCONSISTENT_SIGMAS = 5.0  # … and further than this makes a statistically adequate model inconsistent
@@ -50,7 +50,7 @@ class PhysicsCheck:
             "effect": self.effect,
             "held_at_physics": self.held,
             "parameters": parameters_dict(self.parameters),
-            "deviation_sigma": _json_number(self.deviation_sigma),
+            "deviation_sigma": finite_or_none(self.deviation_sigma),
         }
 
 
@@ -100,7 +100,7 @@ class LabReport:
             "final": {
                 "chi2_dof": self.chi2_dof,
                 "bic": self.bic,
-                "cv_rms_hz": _json_number(self.cv_rms_hz),
+                "cv_rms_hz": finite_or_none(self.cv_rms_hz),
                 "parameters": parameters_dict(self.fit.parameters()),
                 "not_identifiable": [
                     name for name, known in zip(self.fit.model.parameter_names, self.fit.identifiable) if not known
@@ -116,10 +116,6 @@ class LabReport:
             "untestable": self.untestable,
             "notes": self.notes,
         }
-
-
-def _json_number(value):
-    return value if math.isfinite(value) else None
 
 
 def analyse(

@@ -43,6 +43,7 @@ from mows.lab.diagnosis.candidates import STRONG_DELTA_BIC, TIE_DELTA_BIC, rank_
 from mows.lab.diagnosis.physical_aliases import alias_statements
 from mows.lab.diagnosis.verdict import diagnose
 from mows.lab.model.effects import testable
+from mows.records.json_numbers import finite_or_none
 
 MAX_AUTO_STEPS = 6
 MAX_REVISIT_MOVES = 6  # per forward step; each move lowers the BIC, so this is only a bound
@@ -76,7 +77,7 @@ class HistoryStep:
             "change": self.change,
             "chi2_dof": self.chi2_dof,
             "bic": self.bic,
-            "cv_rms": None if not math.isfinite(self.cv_rms_hz) else self.cv_rms_hz,  # Hz (issue's key)
+            "cv_rms": finite_or_none(self.cv_rms_hz),  # Hz
             "cv_identifiable": self.cv_identifiable,
             "free_fit": parameters_dict(self.check),
         }

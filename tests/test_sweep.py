@@ -108,3 +108,12 @@ def test_fit_harmonics_reproduces_a_known_series():
     h = fit_harmonics(THETA0, shift, np.full(THETA0.size, 1e-4))
     np.testing.assert_allclose(h.amplitude_hz, [1e-3, 2e-3, 5e-4], atol=1e-12)
     np.testing.assert_allclose(h.phase_rad[1:], [0.3, -1.0], atol=1e-9)
+
+
+def test_a_sweep_with_as_many_orientations_as_coefficients_says_it_has_no_degrees_of_freedom():
+    theta0 = np.radians(np.arange(0.0, 360.0, 72.0))  # 5 orientations, 5 free coefficients
+    source = UniformField((20e-6, 5e-6, 0.0))
+    f = np.array([ArcPotential.from_source(P, source, Pose(theta0_rad=t)).frequency_hz() for t in theta0])
+    d = decompose(theta0, f - P.f00_hz, np.full(theta0.size, STD_HZ), P, P.f00_hz)
+    assert d.ok and math.isnan(d.chi2_dof)
+    assert "χ²/dof not determined (0 degrees of freedom" in d.report() and "nan" not in d.report()

@@ -201,7 +201,7 @@ def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited, scene_
     node.create_subscription(RingdownFit, "mows/ringdown", fits.append, RESULT_QOS)
     node.create_subscription(ModelReport, "mows/model_report", reports.append, MAP_QOS)
     node.create_subscription(MagnetometerBlock, "mows/raw", lambda b: blocks.append(b.sequence), STREAM_QOS)
-    client = ActionClient(node, RotationSweep, "mows/mapper/rotation_sweep")
+    client = ActionClient(node, RotationSweep, "mapper/rotation_sweep")
 
     def spin_until(condition, timeout_s, what):
         deadline = time.monotonic() + timeout_s

@@ -10,6 +10,7 @@ such an override unused and silent, and the node would run on its default.
 """
 
 import difflib
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -55,6 +56,17 @@ class ParamSpec:
             else:
                 descriptor.floating_point_range = [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
         return descriptor
+
+    def request_problem(self, value: Value, field: str) -> str | None:
+        """Why ``value``, asked for in a request's ``field``, is outside this parameter's limits
+        (not finite, or out of its range), or None: a request obeys the limits of the node's
+        parameters, as ``ros2 param set`` does."""
+        if isinstance(value, float) and not math.isfinite(value):
+            return f"{field}={value!r} is not finite"
+        if self.range is not None and not self.range[0] <= value <= self.range[1]:
+            low, high = self.range
+            return f"{field}={value!r} is outside [{low:g}, {high:g}] (the limits of the parameter {self.name})"
+        return None
 
     def problem(self, value: Value) -> str | None:
         """Why ``value`` is not allowed for this parameter, or None if it is. (rclpy has
@@ -160,6 +172,11 @@ def prefixed_overrides(node_name: str, argv: Sequence[str], graph_names: Sequenc
         except (TypeError, ValueError, yaml.YAMLError) as error:
             raise UnknownParameterError(f"-p {rule}: the value is no ROS parameter value ({error})") from None
     return overrides
+
+
+def spec_named(table: Sequence[ParamSpec], name: str) -> ParamSpec:
+    """The row of ``table`` for the parameter ``name``."""
+    return next(spec for spec in table if spec.name == name)
 
 
 def parameter_values(node: Node, table: Sequence[ParamSpec]) -> dict[str, Value]:

@@ -45,7 +45,7 @@ def test_a_recorded_calibration_gives_the_actions_constants_offline(ros, start, 
     driver = start(*NODE["driver"].command([*DRIVER, "-p", f"record_path:={bag}"]))
     estimator = start(*NODE["estimator"].command([]))
     calibrator = start(*NODE["calibrator"].command(["-p", f"probe_file:={online}"]))
-    client = ActionClient(ros.node, CalibrateProbe, "mows/calibrator/calibrate_probe")
+    client = ActionClient(ros.node, CalibrateProbe, "calibrator/calibrate_probe")
     ros.wait_for(client.server_is_ready, "the calibration action server")
     sent = client.send_goal_async(CalibrateProbe.Goal(currents_a=CURRENTS))
     handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")

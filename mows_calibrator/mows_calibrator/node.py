@@ -23,7 +23,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import CalibrateProbe
 from mows_msgs.msg import RingdownFit
 from mows_msgs.srv import SetFieldCurrent
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import CancelResponse
 
 from mows.estimate.probe_calibration import CalibrationError
 from mows.sim.scenario import load_scenario
@@ -34,6 +34,7 @@ from mows_calibrator.parameters import PARAMETERS, bench_of
 from mows_ros.awaitables import call
 from mows_ros.cycles import DriverCycles
 from mows_ros.diagnostics import Health
+from mows_ros.goals import action_servers
 from mows_ros.node import MowsNode
 from mows_ros.params import parameter_values
 from mows_ros.process import run_node
@@ -50,18 +51,7 @@ class CalibratorNode(MowsNode):
         self._driver = DriverCycles(self, self._on_fit)
         group = self._driver.group
         self._supply = self.create_client(SetFieldCurrent, SUPPLY_SERVICE, callback_group=group)
-        self._servers = [
-            ActionServer(
-                self,
-                CalibrateProbe,
-                name,
-                self._execute,
-                goal_callback=lambda _: GoalResponse.ACCEPT,  # a refusal is an abort with its reason
-                cancel_callback=self._cancel,
-                callback_group=group,
-            )
-            for name in ACTIONS
-        ]
+        self._servers = action_servers(self, CalibrateProbe, ACTIONS, self._execute, self._cancel, group)
 
     def _param(self, name):
         return self.get_parameter(name).value

@@ -19,7 +19,7 @@ from collections.abc import Callable
 
 from mows_msgs.action import MeasurementCycle
 from mows_msgs.srv import EmergencyStop, RunCycle, SetFieldCurrent
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import CancelResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.task import Future
 
@@ -34,6 +34,7 @@ from mows_driver.messages import (
 from mows_driver.parameters import cycle_request_problem, supply_problem
 from mows_driver.requesters import RequesterWatch
 from mows_ros.awaitables import completer
+from mows_ros.goals import action_servers
 from mows_ros.wall import steady_timer
 
 RUN_CYCLE_SERVICE = "~/run_cycle"
@@ -61,14 +62,8 @@ class DriverServices:
         ):
             node.create_service(kind, name, callback, callback_group=group)
             node.create_service(kind, ALIASES[name], callback, callback_group=group)
-        self._action = ActionServer(
-            node,
-            MeasurementCycle,
-            MEASUREMENT_CYCLE_ACTION,
-            self._execute_cycle,
-            goal_callback=lambda _: GoalResponse.ACCEPT,  # a refusal is an abort with its reason
-            cancel_callback=self._cancel_cycle,
-            callback_group=group,
+        self._actions = action_servers(
+            node, MeasurementCycle, [MEASUREMENT_CYCLE_ACTION], self._execute_cycle, self._cancel_cycle, group
         )
         self._goal_cycles: dict[bytes, int] = {}  # the cycle of each running goal, by goal id
         self._watched: dict[int, RequesterWatch] = {}  # the running cycles' requesters

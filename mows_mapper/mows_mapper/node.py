@@ -21,7 +21,7 @@ import dataclasses
 from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import CancelResponse
 
 from mows.lab import analyse, from_sweep
 from mows.sweep.runner import CycleAnswer, CycleCall, SweepMap, SweepRunner, SweepStep
@@ -37,6 +37,7 @@ from mows_mapper.parameters import PARAMETERS, sweep_settings
 from mows_ros.awaitables import in_worker, until
 from mows_ros.cycles import DriverCycles
 from mows_ros.diagnostics import Health
+from mows_ros.goals import action_servers
 from mows_ros.node import MowsNode
 from mows_ros.params import parameter_values, spec_named
 from mows_ros.probe import probe_of
@@ -56,18 +57,7 @@ class MapperNode(MowsNode):
         self._sweep_pub = self.create_publisher(SweepDecomposition, "mows/sweep", MAP_QOS)
         self._report_pub = self.create_publisher(ModelReport, "mows/model_report", MAP_QOS)
         self._failure = ""  # why the last sweep failed ('' once one succeeds)
-        self._servers = [
-            ActionServer(
-                self,
-                RotationSweep,
-                name,
-                self._execute,
-                goal_callback=lambda _: GoalResponse.ACCEPT,  # a refusal is an abort with its reason
-                cancel_callback=self._cancel,
-                callback_group=self._driver.group,
-            )
-            for name in ACTIONS
-        ]
+        self._servers = action_servers(self, RotationSweep, ACTIONS, self._execute, self._cancel, self._driver.group)
 
     def _param(self, name):
         return self.get_parameter(name).value

@@ -397,8 +397,15 @@ def test_docs_list_every_parameter_topic_and_service():
         f"/{outputs.RAW_TOPIC}",
         f"/{outputs.EXCITATION_TOPIC}",
         f"/{outputs.JOINT_STATES_TOPIC}",
-        f"/{services.RUN_CYCLE_SERVICE}",
-        f"/{services.EMERGENCY_STOP_SERVICE}",
+    ]
+    names += [  # node-private: /driver/… in the root namespace
+        name.replace("~", f"/{driver.NODE_NAME}")
+        for name in (
+            services.MEASUREMENT_CYCLE_ACTION,
+            services.RUN_CYCLE_SERVICE,
+            services.EMERGENCY_STOP_SERVICE,
+            services.SET_FIELD_CURRENT_SERVICE,
+        )
     ]
     assert [name for name in names if f"`{name}`" not in text] == []
 

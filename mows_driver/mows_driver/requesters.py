@@ -16,19 +16,23 @@ from rclpy.node import Node, NodeNameNonExistentError
 Requester = tuple[str, str]  # (node name, namespace)
 
 
+def holds_client(node: Node, requester: Requester, service_name: str) -> bool:
+    """Whether the node ``requester`` is in the graph with a client of ``service_name``."""
+    try:
+        services = node.get_client_names_and_types_by_node(*requester)
+    except NodeNameNonExistentError:  # it has left
+        return False
+    return any(service == service_name for service, _ in services)
+
+
 def client_holders(node: Node, service_name: str) -> frozenset[Requester]:
     """The nodes of the graph (``node`` excepted) that hold a client of ``service_name``."""
-    holders = set()
-    for name, namespace in node.get_node_names_and_namespaces():
-        if (name, namespace) == (node.get_name(), node.get_namespace()):
-            continue
-        try:
-            services = node.get_client_names_and_types_by_node(name, namespace)
-        except NodeNameNonExistentError:  # it left meanwhile
-            continue
-        if any(service == service_name for service, _ in services):
-            holders.add((name, namespace))
-    return frozenset(holders)
+    own = (node.get_name(), node.get_namespace())
+    return frozenset(
+        requester
+        for requester in node.get_node_names_and_namespaces()
+        if requester != own and holds_client(node, requester, service_name)
+    )
 
 
 class RequesterWatch:
@@ -45,4 +49,4 @@ class RequesterWatch:
         if not self.requesters:
             self.requesters = client_holders(self._node, self.service_name)
             return False
-        return not (self.requesters & client_holders(self._node, self.service_name))
+        return not any(holds_client(self._node, r, self.service_name) for r in self.requesters)

@@ -14,6 +14,7 @@ from mows_calibrator import node as calibrator
 from mows_driver import node as driver
 from mows_estimator import node as estimator
 from mows_mapper import node as mapper
+from mows_ros.node import GRAPH_NODE_NAMES
 from mows_ros.process import EXIT_BAD_PARAMETER
 
 pytestmark = pytest.mark.ros
@@ -185,3 +186,9 @@ def test_node_arguments_it_cannot_take_end_it_in_one_line(graph_node, arguments,
 def test_the_graph_s_commands_refuse_bad_arguments_in_one_line_before_starting_a_node(command, reason):
     line = one_line_refusal(subprocess.run(command, capture_output=True, text=True, timeout=120))
     assert reason in line, line
+
+
+def test_the_graph_s_node_names_are_the_ones_every_node_knows():
+    """A node takes ``-p NAME:…`` for another node of the graph silently, and refuses any other
+    prefix: the names it knows must be the graph's."""
+    assert tuple(node.name for node in NODES) == GRAPH_NODE_NAMES

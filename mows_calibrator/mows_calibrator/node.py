@@ -120,7 +120,8 @@ class CalibratorNode(MowsNode):
 
     def _finish(self, goal_handle, outcome) -> CalibrateProbe.Result:
         result = result_msg(outcome)
-        if outcome.cancelled:
+        # A cancel that cut the running cycle short ends the run as that cycle's failure.
+        if outcome.cancelled or goal_handle.is_cancel_requested:
             goal_handle.canceled()
             return result
         if not outcome.success:

@@ -388,6 +388,13 @@ def test_the_session_announces_each_ramp_and_where_the_device_reached_it():
     session.close()
 
 
+def test_a_stop_on_a_supply_never_set_raises_no_ramping_flag():
+    session, _ = supplied_session()
+    session.step(0.0)
+    session.emergency_stop(True, "test")
+    assert session.step(0.0).supply == [] and "supply_ramping" not in session.health()
+
+
 def test_a_cycle_drives_at_the_frequency_it_is_asked_for():
     session = session_on_simulator(
         CycleSettings(excite_s=0.1, ringdown_s=0.2, gap_s=0.0, repeats=1, tuning_steps=0, settle_s=0.0)

@@ -38,7 +38,7 @@ from mows_bringup.graph import NODES
 from mows_ros.qos import EXCITATION_QOS
 from node_processes import RosHarness, assert_stops_cleanly, launch, log, send_goal
 
-pytestmark = [pytest.mark.ros, pytest.mark.xdist_group("realtime")]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]  # one start-up of three nodes
 
 QUICK = ["-p", "excite_s:=0.3", "-p", "ringdown_s:=0.3", "-p", "settle_s:=0.1", "-p", "gap_s:=0.2"]
 COILS_OFF_S = 1.0  # the requirement: coils off this soon after the requester left

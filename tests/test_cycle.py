@@ -170,6 +170,42 @@ def test_the_emergency_stop_switches_off_at_once_and_latches():
     assert outcome.success
 
 
+def test_a_cancel_or_a_disarm_switches_off_at_once_and_is_no_fault():
+    """Nobody waits for the cycle any more (its client left, the driver was deactivated): the
+    coils go off at the next sample, the cycle fails as cancelled, and the sequencer is IDLE,
+    with no fault reported; the next cycle runs."""
+    for end in ("cancel", "disarm"):
+        session = session_on_simulator()
+        done, _ = run(session, until=lambda events: any(e.phase == Phase.EXCITING for e in events))
+        stop_index = session.backend.device.next_index
+        if end == "cancel":
+            assert not session.cancel_cycle(session.sequencer.last_cycle_id + 1, "not this one")
+            assert session.cancel_cycle(session.sequencer.last_cycle_id, "the client left")
+        else:
+            session.disarm("deactivated")
+        events = session.step(0.0).events
+        assert coil_log(session)[-1] == (stop_index, False)
+        reason = "the client left" if end == "cancel" else "deactivated"
+        assert [(e.phase, e.reason) for e in events] == [(Phase.IDLE, f"cancelled: {reason}")]
+        assert not done[0].success and done[0].message == f"cancelled: {reason}"
+        state = session.health()
+        assert (state["phase"], state["fault"], state["cycle_running"]) == ("IDLE", "", False)
+        session.arm()
+        (outcome,), _ = run(session)
+        assert outcome.success, outcome.message
+
+
+def test_a_fault_is_reported_apart_from_the_phase_until_the_next_cycle():
+    session = session_on_simulator()
+    run(session, until=lambda events: any(e.phase == Phase.EXCITING for e in events))
+    session.emergency_stop(True, "operator")
+    session.step(0.0)
+    state = session.health()
+    assert (state["phase"], state["fault"]) == ("IDLE", "emergency stop: operator")
+    session.emergency_stop(False, "")
+    assert session.health()["fault"] == ""
+
+
 def test_a_request_out_of_range_is_refused_with_its_reason():
     session = session_on_simulator()
     session.step(0.0)
@@ -350,6 +386,13 @@ def test_the_session_announces_each_ramp_and_where_the_device_reached_it():
     assert (dropped.current_a, dropped.ramping) == (0.0, True) and "emergency stop: test" in dropped.reason
     assert session.health()["supply_state_a"] == 0.0 and session.health()["supply_ramping"]
     session.close()
+
+
+def test_a_stop_on_a_supply_never_set_raises_no_ramping_flag():
+    session, _ = supplied_session()
+    session.step(0.0)
+    session.emergency_stop(True, "test")
+    assert session.step(0.0).supply == [] and "supply_ramping" not in session.health()
 
 
 def test_a_cycle_drives_at_the_frequency_it_is_asked_for():

@@ -133,3 +133,12 @@ def test_a_sweep_needs_one_distinct_orientation_per_unknown(f00_free):
     short = decompose(angles[1:], shift[1:], std[1:], P, P.f00_hz, model="published", f00_free=f00_free)
     assert short.status is DecompositionStatus.TOO_FEW_ORIENTATIONS
     assert f"need at least {needed}" in short.message
+
+
+def test_a_sweep_with_as_many_orientations_as_coefficients_says_it_has_no_degrees_of_freedom():
+    theta0 = np.radians(np.arange(0.0, 360.0, 72.0))  # 5 orientations, 5 free coefficients
+    source = UniformField((20e-6, 5e-6, 0.0))
+    f = np.array([ArcPotential.from_source(P, source, Pose(theta0_rad=t)).frequency_hz() for t in theta0])
+    d = decompose(theta0, f - P.f00_hz, np.full(theta0.size, STD_HZ), P, P.f00_hz)
+    assert d.ok and math.isnan(d.chi2_dof)
+    assert "χ²/dof not determined (0 degrees of freedom" in d.report() and "nan" not in d.report()

@@ -42,6 +42,7 @@ from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
 from mows.sweep.record import SweepRecord
 from mows_bringup.graph import NODES, Graph, say
 from mows_mapper.messages import sweep_point
+from mows_ros.process import EXIT_BAD_PARAMETER
 from mows_ros.qos import MAP_QOS, RESULT_QOS, STREAM_QOS
 
 DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_SETTLE_S = 10.0, 0.5, 0.5  # the driver's defaults
@@ -76,6 +77,12 @@ def parse_arguments(argv):
     args = parser.parse_args(argv)
     if args.angles < 6:
         parser.error("a sweep needs at least 6 orientations to separate field (1θ0) from gradient (2θ0)")
+    for option, name in (("--scenario", args.scenario), ("--probe-scenario", args.probe_scenario)):
+        try:
+            load_scenario(name)
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            sys.stderr.write(f"mows-demo: error: {option} {name}: {error}\n")
+            raise SystemExit(EXIT_BAD_PARAMETER) from None
     return args
 
 
@@ -195,7 +202,7 @@ def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited, scene_
     node.create_subscription(RingdownFit, "mows/ringdown", fits.append, RESULT_QOS)
     node.create_subscription(ModelReport, "mows/model_report", reports.append, MAP_QOS)
     node.create_subscription(MagnetometerBlock, "mows/raw", lambda b: blocks.append(b.sequence), STREAM_QOS)
-    client = ActionClient(node, RotationSweep, "mows/mapper/rotation_sweep")
+    client = ActionClient(node, RotationSweep, "mapper/rotation_sweep")
 
     def spin_until(condition, timeout_s, what):
         deadline = time.monotonic() + timeout_s

@@ -13,12 +13,14 @@ planners, compilers) delay neither the stream nor the fits; a robot's own contro
 higher priority, still preempts them. It needs root or an RLIMIT_RTPRIO of at least N.
 
 Exit status: 0 when the graph was stopped (by a signal or after --duration) and
-every node stopped cleanly; 1 when a node refused a transition, exited by itself or did not
-stop cleanly.
+every node stopped cleanly; 2 when the ROS arguments are refused before any node starts (a
+parameter without a node's prefix, a prefix or a name no node has, a parameter file that
+is none); 1 when a node refused a transition, exited by itself or did not stop cleanly.
 """
 
 import argparse
 import ctypes
+import importlib
 import os
 import queue
 import resource
@@ -34,6 +36,8 @@ from pathlib import Path
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
 from mows_bringup.lifecycle import BringUpError, bring_up
+from mows_ros.params import nearest_hint, ros_argument_values
+from mows_ros.process import EXIT_BAD_PARAMETER, arguments_problem
 
 STOP_TIMEOUT_S = 10.0  # a node still running this long after SIGINT is aborted
 ABORT_TIMEOUT_S = 5.0  # and killed if it outlives the abort
@@ -69,6 +73,41 @@ NODES = (  # in data-flow order: the order of activation
     GraphNode("mapper", "mows_mapper", "mows_mapper"),
     GraphNode("calibrator", "mows_calibrator", "mows_calibrator"),
 )
+
+
+def parameter_rule_problem(rule: str) -> str | None:
+    """Why ``-p rule``, given to every node, is refused: without a node's prefix every node but
+    one would stop on it, a prefix or a name no node has reaches none. None when it is fine."""
+    target = rule.partition(":=")[0]
+    prefix, colon, name = target.rpartition(":")
+    names = [node.name for node in NODES]
+    if "/" in prefix:
+        return None  # a fully qualified node name: rcl matches it, the node checks the name
+    tables = {node.name: importlib.import_module(f"{node.package}.parameters").PARAMETERS for node in NODES}
+    if not colon:
+        owners = [n for n, table in tables.items() if any(spec.name == name for spec in table)]
+        if not owners:
+            everyone = sorted({spec.name for table in tables.values() for spec in table})
+            return (
+                f"-p {rule}: no node has a parameter {name!r}: {nearest_hint(name, everyone, 'see mows-graph --help')}"
+            )
+        forms = " or ".join(f"-p {owner}:{rule}" for owner in owners)
+        return f"-p {rule} names no node, and every node would get it: give it as {forms}"
+    if prefix not in names:
+        return f"-p {rule}: no node is called {prefix!r}: {nearest_hint(prefix, names, 'the nodes')}"
+    known = [spec.name for spec in tables[prefix]]
+    if name not in known:
+        return f"-p {rule}: the {prefix} has no parameter {name!r}: {nearest_hint(name, known)}"
+    return None
+
+
+def ros_arguments_problem(ros_args: list[str]) -> str | None:
+    """Why the ROS arguments for every node are refused, or None (``parameter_rule_problem``)."""
+    argv = ["mows-graph", "--ros-args", *ros_args]
+    if (problem := arguments_problem(argv)) is not None:
+        return problem
+    rules = ros_argument_values(argv, ("-p", "--param"))
+    return next((problem for rule in rules if (problem := parameter_rule_problem(rule)) is not None), None)
 
 
 def say(text: str) -> None:
@@ -271,6 +310,9 @@ def parse_arguments(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
 
 def main(argv: list[str] | None = None) -> int:
     args, ros_args = parse_arguments(sys.argv[1:] if argv is None else argv)
+    if (problem := ros_arguments_problem(ros_args)) is not None:
+        sys.stderr.write(f"mows-graph: error: {problem}\n")
+        return EXIT_BAD_PARAMETER
     graph = Graph(NODES, ros_args, realtime_priority=args.realtime_priority)
     signal.signal(signal.SIGINT, graph.on_signal)
     signal.signal(signal.SIGTERM, graph.on_signal)

@@ -166,7 +166,7 @@ def measure(cycles: int, repeats: int, duration_s: float | None, exited, trackin
     node.create_subscription(MagnetometerBlock, "mows/raw", stream.on_block, STREAM_QOS)
     node.create_subscription(RingdownFit, "mows/ringdown", stream.on_fit, RESULT_QOS)
     node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, stream.on_diagnostics, DIAGNOSTICS_DEPTH)
-    client = node.create_client(RunCycle, "mows/driver/run_cycle")
+    client = node.create_client(RunCycle, "driver/run_cycle")
     try:
         # The estimator advertises its fits once it listens (after its kernels are compiled):
         # a cycle run before would reach it through the latched excitation states only, late.

@@ -1,14 +1,18 @@
 """The calibrator node: the paper's probe calibration (Fig. 3) as an action, writing a probe file.
 
-Names are relative (here as in the root namespace). Action ``/mows/calibrator/calibrate_probe``
-(CalibrateProbe) runs :class:`mows.sweep.calibration_run.CalibrationRun`: it steps the
-driver's static-field supply (``/mows/driver/set_field_current``), runs one driver cycle per
-orientation at each current (``/mows/driver/run_cycle``), collects that cycle's ring-down fits
+Names are relative (here as in the root namespace). Action ``/calibrator/calibrate_probe``
+(CalibrateProbe; ``/mows/calibrator/calibrate_probe``, the previous release's name, is served
+too for one release) runs :class:`mows.sweep.calibration_run.CalibrationRun`: it steps the
+driver's static-field supply (``/driver/set_field_current``), runs one driver cycle per
+orientation at each current (the action ``/driver/measurement_cycle``, cancelled with the goal),
+collects that cycle's ring-down fits
 (``/mows/ringdown``) and sends feedback per cycle. Every ending, cancelled or failed, ramps the
 supply back to zero before the result is returned. With the homogeneous wiring's points it fits
 the constants (:class:`mows.sweep.calibration_run.ProbeCalibrator`) and writes the probe file
 that the estimator and the mapper load by ``probe_file``; gradient points of an earlier goal
-(``wiring: gradient``) add the lever check. With ``orientation`` manual (a stage without a
+(``wiring: gradient``) add the lever check. A goal the node cannot run (inactive, a plan it
+refuses, a driver without a supply, found by setting the supply to zero first) is accepted and
+aborted at once, with the reason in the result. With ``orientation`` manual (a stage without a
 motor) a cycle at a new orientation waits for the operator: the feedback's message says where to
 turn the probe, ``~/confirm_orientation`` (std_srvs/Trigger) says it is done.
 
@@ -22,7 +26,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import CalibrateProbe
 from mows_msgs.msg import RingdownFit
 from mows_msgs.srv import SetFieldCurrent
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import CancelResponse
 
 from mows.estimate.probe_calibration import CalibrationError
 from mows.sim.scenario import load_scenario
@@ -33,13 +37,15 @@ from mows_calibrator.parameters import PARAMETERS, bench_of
 from mows_ros.awaitables import call
 from mows_ros.cycles import DriverCycles
 from mows_ros.diagnostics import Health
+from mows_ros.goals import action_servers
 from mows_ros.node import MowsNode
 from mows_ros.operator import OperatorTurns
 from mows_ros.params import parameter_values
 from mows_ros.process import run_node
 
 NODE_NAME = "calibrator"
-ACTION = "mows/calibrator/calibrate_probe"
+ACTIONS = ("~/calibrate_probe", "mows/calibrator/calibrate_probe")  # the node's own, the previous release's
+SUPPLY_SERVICE = "driver/set_field_current"  # the driver's, in this node's namespace
 
 
 class CalibratorNode(MowsNode):
@@ -48,19 +54,11 @@ class CalibratorNode(MowsNode):
         self._calibrator = ProbeCalibrator()
         self._driver = DriverCycles(self, self._on_fit)
         group = self._driver.group
-        self._supply = self.create_client(SetFieldCurrent, "mows/driver/set_field_current", callback_group=group)
-        self._server = ActionServer(
-            self,
-            CalibrateProbe,
-            ACTION,
-            self._execute,
-            goal_callback=self._accept,
-            cancel_callback=lambda _: CancelResponse.ACCEPT,
-            callback_group=group,
-        )
+        self._supply = self.create_client(SetFieldCurrent, SUPPLY_SERVICE, callback_group=group)
+        self._servers = action_servers(self, CalibrateProbe, ACTIONS, self._execute, self._cancel, group)
         self._operator = OperatorTurns(
             self,
-            "mows/calibrator/confirm_orientation",
+            "~/confirm_orientation",
             lambda: self._calibrator.run and self._calibrator.run.turn_awaited,
         )
 
@@ -80,21 +78,35 @@ class CalibratorNode(MowsNode):
             return None
         return run.on_fit(msg.cycle_id, fit)
 
-    def _accept(self, goal) -> GoalResponse:
+    async def _refusal(self, goal) -> str | None:
+        """Why ``goal`` is refused, or None when its run is accepted (the calibrator is busy
+        from here). A driver that cannot set its supply to zero has none to calibrate with."""
         if (inactive := self.inactive_reason()) is not None:
-            self.get_logger().warning(f"calibration goal refused: {inactive}")
-            return GoalResponse.REJECT
+            return inactive
         try:
             homogeneous = load_scenario(self._param("scenario")).supply.name
             plan = goal_plan(goal, homogeneous, self._param("currents_a"))
             self._calibrator.accept(plan, self._param("orientation") == "manual")
         except ValueError as error:
-            self.get_logger().warning(f"calibration goal refused: {error}")
-            return GoalResponse.REJECT
-        return GoalResponse.ACCEPT
+            return str(error)
+        request = SetFieldCurrent.Request(current_a=0.0)
+        ok, message = supply_answer(await call(self, self._supply, request, self._param("supply_timeout_s")))
+        if not ok:
+            self._calibrator.release()
+            return f"the driver's supply cannot be set: {message}"
+        return None
+
+    def _cancel(self, _) -> CancelResponse:
+        self._driver.cancel()
+        return CancelResponse.ACCEPT
 
     # --- the calibration --------------------------------------------------------------------
     async def _execute(self, goal_handle):
+        if (refusal := await self._refusal(goal_handle.request)) is not None:
+            message = f"calibration goal refused: {refusal}"
+            self.get_logger().warning(message)
+            goal_handle.abort()
+            return CalibrateProbe.Result(success=False, message=message, supply_at_zero=False)
         run = self._calibrator.run
         try:
             step = run.start()
@@ -123,7 +135,8 @@ class CalibratorNode(MowsNode):
 
     def _finish(self, goal_handle, outcome) -> CalibrateProbe.Result:
         result = result_msg(outcome)
-        if outcome.cancelled:
+        # A cancel that cut the running cycle short ends the run as that cycle's failure.
+        if outcome.cancelled or goal_handle.is_cancel_requested:
             goal_handle.canceled()
             return result
         if not outcome.success:

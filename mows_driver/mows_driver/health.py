@@ -45,6 +45,8 @@ class StreamHealth:
         problems = []
         if state.get("estop_latched"):
             problems.append(f"emergency stop latched ({state['estop_reason']})")
+        if state.get("fault"):  # until the next cycle starts (an emergency stop: until released)
+            problems.append(f"the last cycle failed: {state['fault']}")
         if new_faults:
             problems.append(f"device fault: {state['last_device_fault']}")
         if new_gaps:

@@ -88,8 +88,9 @@ def cycle_request(request: RunCycle.Request) -> CycleRequest:
     )
 
 
-def cycle_response(outcome: CycleOutcome, response: RunCycle.Response) -> RunCycle.Response:
-    response.success, response.message = outcome.success, outcome.message
+def cycle_response(outcome: CycleOutcome, response):
+    """A RunCycle response or MeasurementCycle result (the same fields) of ``outcome``."""
+    response.success, response.message, response.cycle_id = outcome.success, outcome.message, outcome.cycle_id
     response.excitation_frequency_hz = outcome.frequency_hz
     response.ringdowns_recorded = outcome.ringdowns_recorded
     return response

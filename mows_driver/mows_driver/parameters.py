@@ -20,7 +20,7 @@ from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.fast_cycle import tracking_plan
-from mows_ros.params import ParamSpec
+from mows_ros.params import ParamSpec, spec_named
 
 PARAMETERS = (
     ParamSpec(
@@ -138,9 +138,10 @@ PARAMETERS = (
     ),
     ParamSpec(
         "coil_setup",
-        "largest_spacing",
-        "excitation coil setup whose orientation-dependent current scheme drives the coils; fixed at start-up",
-        choices=tuple(PRESETS),
+        "",
+        "excitation coil setup whose orientation-dependent current scheme drives the coils ('': the "
+        "scenario's); fixed at start-up",
+        choices=("", *PRESETS),
         read_only=True,
     ),
     ParamSpec(
@@ -208,8 +209,13 @@ def cycle_settings(values: dict) -> CycleSettings:
     return CycleSettings(**{name: values[name] for name in CYCLE_PARAMETERS})
 
 
+def coil_setup(values: dict) -> str:
+    """The coil setup that drives the coils: ``coil_setup``, or when it is '' the scenario's."""
+    return values["coil_setup"] or load_scenario(values["scenario"]).setup.name
+
+
 def session_config(values: dict, cap: CurrentCap) -> SessionConfig:
-    setup = PRESETS[values["coil_setup"]](current_limit_a=cap.limit_a)
+    setup = PRESETS[coil_setup(values)](current_limit_a=cap.limit_a)
     return SessionConfig(
         values["block_duration_s"], cycle_settings(values), setup, cap, values["initial_frequency_hz"], fit_ringdown
     )
@@ -232,7 +238,7 @@ def make_backend(values: dict, cap: CurrentCap):
         raise ValueError(f"supply='scpi' goes with backend nidaqmx, not {backend!r} (its supply is the device's)")
     if backend == "sim":
         scenario = load_scenario(values["scenario"])
-        if scenario.setup.name != values["coil_setup"]:
+        if scenario.setup.name != coil_setup(values):
             raise ValueError(
                 f"coil_setup={values['coil_setup']!r} does not drive the coils of scenario "
                 f"{values['scenario']!r} ({scenario.setup.name})"
@@ -294,7 +300,7 @@ def tracking_settings(values: dict) -> TrackingSettings | None:
     if not values["tracking"]:
         return None
     current_a = values["coil_current_cap_a"]
-    setup = PRESETS[values["coil_setup"]](current_limit_a=values["coil_current_cap_a"])
+    setup = PRESETS[coil_setup(values)](current_limit_a=values["coil_current_cap_a"])
     plan = tracking_plan(
         load_scenario(values["scenario"]),
         values["tracking_theta0_rad"],
@@ -325,9 +331,28 @@ def settings_problem(values: dict) -> str | None:
 
 def supply_problem(current_a: float, values: dict) -> str | None:
     """Why a supply current is refused (not finite, or above the cap), or None."""
-    if math.isfinite(current_a) and abs(current_a) <= values["supply_current_cap_a"]:
+    if not math.isfinite(current_a):
+        return f"supply current {current_a!r} A refused: not finite"
+    if abs(current_a) <= values["supply_current_cap_a"]:
         return None
     return (
         f"supply current {current_a!r} A refused: above supply_current_cap_a = "
         f"{values['supply_current_cap_a']} A (never clipped)"
     )
+
+
+# A cycle request's fields, each obeying the limits of the parameter of its name; a negative
+# value of the last three takes the parameter itself.
+CYCLE_REQUEST_FIELDS = ("theta0_rad", "repeats", "tuning_steps", "gap_s")
+
+
+def cycle_request_problem(request) -> str | None:
+    """Why a cycle request (RunCycle or a MeasurementCycle goal) is refused: a field outside the
+    limits of the driver's parameter of that name, or not finite. None when it may run."""
+    for field in CYCLE_REQUEST_FIELDS:
+        value = getattr(request, field)
+        if field != "theta0_rad" and value < 0 and math.isfinite(value):
+            continue  # the driver's parameter
+        if (problem := spec_named(PARAMETERS, field).request_problem(value, field)) is not None:
+            return problem
+    return None

@@ -5,7 +5,8 @@ namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock,
 QoS) and ``/mows/excitation`` (ExcitationState). Publishes, per recorded ring-down,
 ``/mows/ringdown`` (RingdownFit, always, with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
 ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). Service
-``/mows/estimator/calibrate`` (Calibrate) sets f00 from the next ring-downs in a known field.
+``/estimator/calibrate`` (Calibrate; ``/mows/estimator/calibrate``, the previous release's name,
+is served too for one release) sets f00 from the next ring-downs in a known field.
 The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` and ``mows.estimate.axis``.
 """
 
@@ -33,6 +34,7 @@ from mows_ros.process import run_node
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
 
 NODE_NAME = "estimator"
+CALIBRATE_SERVICES = ("~/calibrate", "mows/estimator/calibrate")  # the node's own, the previous release's
 
 
 class EstimatorNode(MowsNode):
@@ -53,9 +55,9 @@ class EstimatorNode(MowsNode):
         # A group of its own, reentrant: an awaiting calibration holds its group until it
         # returns. In the default group it would stop the stream that brings its ring-downs; in
         # a mutually exclusive one a second request would wait instead of being refused.
-        self.create_service(
-            Calibrate, "mows/estimator/calibrate", self._on_calibrate, callback_group=ReentrantCallbackGroup()
-        )
+        group = ReentrantCallbackGroup()
+        for name in CALIBRATE_SERVICES:
+            self.create_service(Calibrate, name, self._on_calibrate, callback_group=group)
 
     def configure(self) -> None:
         # Compile the fit (or load it from numba's cache) now, not on the first real ring-down.

@@ -80,10 +80,15 @@ def decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
     return msg
 
 
+def no_decomposition_msg(message: str) -> SweepDecomposition:
+    """A sweep that came to no decomposition, with why."""
+    return SweepDecomposition(status=int(DecompositionStatus.NO_DECOMPOSITION), message=message)
+
+
 def outcome_decomposition_msg(outcome: SweepOutcome, frame_id: str) -> SweepDecomposition:
     """The decomposition of a finished sweep; NO_DECOMPOSITION, with why, if it had none."""
     if outcome.map is None:
-        return SweepDecomposition(status=int(DecompositionStatus.NO_DECOMPOSITION), message=outcome.message)
+        return no_decomposition_msg(outcome.message)
     return decomposition_msg(outcome.map, frame_id)
 
 

@@ -1,8 +1,9 @@
 """The mapper node: rotation sweeps, their field/gradient decomposition, and the model lab.
 
-Names are relative (here as in the root namespace). Action ``/mows/mapper/rotation_sweep``
-(RotationSweep): for each orientation it asks the
-driver for one measurement cycle (``/mows/driver/run_cycle``), collects that cycle's
+Names are relative (here as in the root namespace). Action ``/mapper/rotation_sweep``
+(RotationSweep; ``/mows/mapper/rotation_sweep``, the previous release's name, is served too for
+one release): for each orientation it asks the driver for one measurement cycle (its action
+``/driver/measurement_cycle``, cancelled when the sweep ends without it), collects that cycle's
 ring-down fits from the estimator (``/mows/ringdown``), reports them as feedback, and at the
 end decomposes the sweep (``mows.sweep.decompose``) into in-plane field and gradient. The result is
 published on ``/mows/sweep`` (SweepDecomposition, reliable and transient-local: a map). With a
@@ -25,13 +26,14 @@ import math
 from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import CancelResponse
 
 from mows.lab import analyse, from_sweep
 from mows.sweep.runner import CycleAnswer, CycleCall, SweepMap, SweepRunner, SweepStep
 from mows_mapper.messages import (
     feedback_msg,
     model_report_msg,
+    no_decomposition_msg,
     outcome_decomposition_msg,
     sweep_fit,
     sweep_goal,
@@ -41,15 +43,17 @@ from mows_mapper.parameters import PARAMETERS, sweep_settings
 from mows_ros.awaitables import in_worker, until
 from mows_ros.cycles import DriverCycles
 from mows_ros.diagnostics import Health
+from mows_ros.goals import action_servers
 from mows_ros.node import MowsNode
 from mows_ros.operator import OperatorTurns
-from mows_ros.params import parameter_values
+from mows_ros.params import parameter_values, spec_named
 from mows_ros.probe import probe_of
 from mows_ros.process import run_node
 from mows_ros.qos import MAP_QOS
 
 NODE_NAME = "mapper"
-SERVICE_WAIT_S = 5.0  # longest wait for the driver's run_cycle service to appear
+SERVICE_WAIT_S = 5.0  # longest wait for the driver's measurement-cycle action to appear
+ACTIONS = ("~/rotation_sweep", "mows/mapper/rotation_sweep")  # the node's own, the previous release's
 
 
 class MapperNode(MowsNode):
@@ -59,16 +63,9 @@ class MapperNode(MowsNode):
         self._driver = DriverCycles(self, self._on_fit)
         self._sweep_pub = self.create_publisher(SweepDecomposition, "mows/sweep", MAP_QOS)
         self._report_pub = self.create_publisher(ModelReport, "mows/model_report", MAP_QOS)
-        self._server = ActionServer(
-            self,
-            RotationSweep,
-            "mows/mapper/rotation_sweep",
-            self._execute,
-            goal_callback=self._accept,
-            cancel_callback=self._cancel,
-            callback_group=self._driver.group,
-        )
-        self._operator = OperatorTurns(self, "mows/mapper/confirm_orientation", lambda: self._runner.turn_awaited)
+        self._failure = ""  # why the last sweep failed ('' once one succeeds)
+        self._servers = action_servers(self, RotationSweep, ACTIONS, self._execute, self._cancel, self._driver.group)
+        self._operator = OperatorTurns(self, "~/confirm_orientation", lambda: self._runner.turn_awaited)
 
     def _param(self, name):
         return self.get_parameter(name).value
@@ -77,25 +74,36 @@ class MapperNode(MowsNode):
     def _on_fit(self, msg: RingdownFit) -> SweepStep | None:
         return self._runner.on_fit(sweep_fit(msg))
 
-    def _accept(self, goal) -> GoalResponse:
+    def _refusal(self, goal: RotationSweep.Goal) -> str | None:
+        """Why ``goal`` is refused, or None when the sweep starts (the runner is busy from here)."""
         if (inactive := self.inactive_reason()) is not None:
-            self.get_logger().warn(f"sweep goal refused: {inactive}")
-            return GoalResponse.REJECT
-        try:  # one sweep at a time: the runner is busy from here, not from when the sweep starts
+            return inactive
+        if goal.repeats_per_angle and (
+            problem := spec_named(PARAMETERS, "repeats_per_angle").request_problem(
+                goal.repeats_per_angle, "repeats_per_angle"
+            )
+        ):
+            return problem
+        try:
             settings = sweep_settings(parameter_values(self, PARAMETERS))
             self._runner.start(sweep_goal(goal), settings, probe_of(self._param("probe_file")))
         except ValueError as refused:
-            self.get_logger().warn(f"sweep goal refused: {refused}")
-            return GoalResponse.REJECT
-        self.get_logger().info("sweep goal accepted")
-        return GoalResponse.ACCEPT
+            return str(refused)
+        return None
 
     def _cancel(self, _) -> CancelResponse:
         self._runner.cancel()
+        self._driver.cancel()
         return CancelResponse.ACCEPT
 
     # --- the sweep ------------------------------------------------------------------------
     async def _execute(self, goal_handle):
+        if (refusal := self._refusal(goal_handle.request)) is not None:
+            message = f"sweep goal refused: {refusal}"
+            self.get_logger().warn(message)
+            goal_handle.abort()
+            return RotationSweep.Result(success=False, message=message, decomposition=no_decomposition_msg(message))
+        self.get_logger().info("sweep goal accepted")
         try:
             step = self._runner.begin()
             while step.finished is None:
@@ -113,8 +121,10 @@ class MapperNode(MowsNode):
         if outcome.cancelled:
             goal_handle.canceled()
         elif outcome.ok:
+            self._failure = ""
             goal_handle.succeed()
         else:
+            self._failure = outcome.message
             self.get_logger().warn(f"sweep aborted: {outcome.message}")
             goal_handle.abort()
         return RotationSweep.Result(success=outcome.ok, message=outcome.message, decomposition=decomposition)
@@ -138,7 +148,7 @@ class MapperNode(MowsNode):
 
     async def _run_cycle(self, cycle: CycleCall) -> CycleAnswer:
         if not await until(self, self._driver.ready, SERVICE_WAIT_S):
-            return CycleAnswer(problem="the driver's run_cycle service is not available")
+            return CycleAnswer(problem="the driver's measurement_cycle action is not available")
         answer = await self._driver.run(cycle, self._param("cycle_timeout_s"))
         return dataclasses.replace(answer, problem=f"cycle failed: {answer.problem}") if answer.problem else answer
 
@@ -158,9 +168,10 @@ class MapperNode(MowsNode):
                 self._report_pub.publish(model_report_msg(report, msg.header, sweep.sweep_id))
 
     def health(self) -> Health:
-        return Health(
-            DiagnosticStatus.OK, self._runner.last, {"state": self._runner.state, "sweeps": self._runner.sweeps}
-        )
+        values = {"state": self._runner.state, "sweeps": self._runner.sweeps, "last_failure": self._failure}
+        if self._failure:
+            return Health(DiagnosticStatus.WARN, f"the last sweep failed: {self._failure}", values)
+        return Health(DiagnosticStatus.OK, self._runner.last, values)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -2,7 +2,8 @@
 future with a time limit, a condition polled until a deadline, a service's answer, a value
 another callback delivers (or a fallback at a time limit), a CPU-bound function run in a
 worker thread, and a result another thread delivers. Each resumes the coroutine at the
-executor's next turn; none blocks the thread that serves the node's other callbacks.
+executor's next turn; none blocks the thread that serves the node's other callbacks. Time
+limits are real time (``mows_ros.wall``), also under ``use_sim_time``.
 """
 
 import threading
@@ -12,6 +13,8 @@ from collections.abc import Callable
 from rclpy.client import Client
 from rclpy.node import Node
 from rclpy.task import Future
+
+from mows_ros.wall import steady_timer
 
 POLL_S = 0.05  # how often ``until`` looks at its condition
 
@@ -26,7 +29,7 @@ async def within(node: Node, future: Future, timeout_s: float) -> bool:
     cancelled)."""
     either = Future()
     future.add_done_callback(lambda _: _settle(either, True))
-    timer = node.create_timer(timeout_s, lambda: _settle(either, False))
+    timer = steady_timer(node, timeout_s, lambda: _settle(either, False))
     try:
         completed = await either
     finally:
@@ -49,7 +52,7 @@ async def until(node: Node, condition: Callable[[], bool], timeout_s: float) -> 
         elif time.monotonic() > deadline:
             _settle(answer, False)
 
-    timer = node.create_timer(POLL_S, look)
+    timer = steady_timer(node, POLL_S, look)
     try:
         return await answer
     finally:
@@ -82,7 +85,7 @@ class Delivery:
     async def wait(self, timeout_s: float, fallback: Callable[[], object]):
         """The next value delivered, or ``fallback()``'s (when not None) after ``timeout_s``."""
         self._due = Future()
-        timer = self._node.create_timer(timeout_s, lambda: self.deliver(fallback()))
+        timer = steady_timer(self._node, timeout_s, lambda: self.deliver(fallback()))
         try:
             return await self._due
         finally:

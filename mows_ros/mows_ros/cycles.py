@@ -1,39 +1,42 @@
 """A node's way to the driver's measurement cycles, shared by the mapper and the calibrator:
-RunCycle calls answered as the core's :class:`mows.sweep.runner.CycleAnswer`, and the ring-down
-fits of ``/mows/ringdown`` handed to the node, whose answer to each (the core's next step, or
-None) resumes the coroutine that waits for a cycle's fits."""
+goals of the driver's MeasurementCycle action answered as the core's
+:class:`mows.sweep.runner.CycleAnswer`, a running cycle cancelled when the caller gives up on
+it, and the ring-down fits of ``/mows/ringdown`` handed to the node, whose answer to each (the
+core's next step, or None) resumes the coroutine that waits for a cycle's fits."""
 
 from collections.abc import Callable
 
+from mows_msgs.action import MeasurementCycle
 from mows_msgs.msg import RingdownFit
-from mows_msgs.srv import RunCycle
+from rclpy.action import ActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
 from mows.sweep.runner import CycleAnswer
-from mows_ros.awaitables import Delivery, call
+from mows_ros.awaitables import Delivery, until, within
 from mows_ros.qos import RESULT_QOS
 
+CYCLE_ACTION = "driver/measurement_cycle"  # the driver's, in the caller's namespace
+GOAL_ANSWER_S = 10.0  # longest wait for the driver to accept a goal (it answers in milliseconds)
 
-def run_cycle_request(action) -> RunCycle.Request:
+
+def cycle_goal(action) -> MeasurementCycle.Goal:
     """A cycle of ``action.repeats`` ring-downs at ``action.theta0_rad``; tuning steps and gap
     are the driver's parameters (−1)."""
-    return RunCycle.Request(
+    return MeasurementCycle.Goal(
         theta0_rad=float(action.theta0_rad), repeats=int(action.repeats), tuning_steps=-1, gap_s=-1.0
     )
 
 
-def cycle_answer(response: RunCycle.Response | None) -> CycleAnswer:
-    """A RunCycle response (None: none came); ``problem`` is the driver's reason when it ran none."""
-    if response is None:
-        return CycleAnswer(problem="no answer from the driver")
-    if not response.success:
-        return CycleAnswer(problem=response.message or "the driver ran no cycle (no reason given)")
-    return CycleAnswer(response.cycle_id, response.ringdowns_recorded)
+def cycle_answer(result: MeasurementCycle.Result) -> CycleAnswer:
+    """A MeasurementCycle result; ``problem`` is the driver's reason when the cycle failed."""
+    if not result.success:
+        return CycleAnswer(problem=result.message or "the driver ran no cycle (no reason given)")
+    return CycleAnswer(result.cycle_id, result.ringdowns_recorded)
 
 
 class DriverCycles:
-    """``node``'s RunCycle client and ``/mows/ringdown`` subscription; every fit goes to
+    """``node``'s MeasurementCycle client and ``/mows/ringdown`` subscription; every fit goes to
     ``on_fit``. Both are in ``group``, reentrant, which the node's action server shares: a goal
     that awaits its cycle holds its group, and the fits and the driver's answer must still come."""
 
@@ -41,20 +44,41 @@ class DriverCycles:
         self._node = node
         self._fits_in = Delivery(node)
         self.group = group = ReentrantCallbackGroup()
-        self._client = node.create_client(RunCycle, "mows/driver/run_cycle", callback_group=group)
+        self._client = ActionClient(node, MeasurementCycle, CYCLE_ACTION, callback_group=group)
+        self._running = None  # the goal handle of the cycle awaited now
         deliver = self._fits_in.deliver
         node.create_subscription(
             RingdownFit, "mows/ringdown", lambda msg: deliver(on_fit(msg)), RESULT_QOS, callback_group=group
         )
 
     def ready(self) -> bool:
-        """Whether the driver's run_cycle service is there."""
-        return self._client.service_is_ready()
+        """Whether the driver's measurement-cycle action is there."""
+        return self._client.server_is_ready()
 
     async def run(self, action, timeout_s: float) -> CycleAnswer:
-        """The driver's answer to a cycle of ``action`` (waiting up to ``timeout_s`` for the
-        service to appear and again for its answer)."""
-        return cycle_answer(await call(self._node, self._client, run_cycle_request(action), timeout_s))
+        """The driver's answer to a cycle of ``action``: waiting up to ``timeout_s`` for the
+        action to appear and again for the cycle, which is cancelled when it takes longer."""
+        if not await until(self._node, self.ready, timeout_s):
+            return CycleAnswer(problem=f"the driver's {CYCLE_ACTION} action did not appear within {timeout_s:g} s")
+        sent = self._client.send_goal_async(cycle_goal(action))
+        if not await within(self._node, sent, GOAL_ANSWER_S):
+            return CycleAnswer(problem=f"the driver did not answer the cycle goal within {GOAL_ANSWER_S:g} s")
+        self._running = handle = sent.result()
+        if not handle.accepted:
+            return CycleAnswer(problem="the driver rejected the cycle goal")
+        try:
+            result = handle.get_result_async()
+            if not await within(self._node, result, timeout_s):
+                handle.cancel_goal_async()
+                return CycleAnswer(problem=f"the cycle took longer than cycle_timeout_s = {timeout_s:g} s: cancelled")
+            return cycle_answer(result.result().result)
+        finally:
+            self._running = None
+
+    def cancel(self) -> None:
+        """Cancel the cycle awaited now, if any (its answer then says it was cancelled)."""
+        if self._running is not None:
+            self._running.cancel_goal_async()
 
     async def fits(self, timeout_s: float, time_up: Callable[[], object]):
         """The first non-None answer of ``on_fit`` from now, or ``time_up()``'s after ``timeout_s``."""

@@ -1,11 +1,14 @@
 """A node's state on /diagnostics, once a second, in the diagnostic_msgs form that
-diagnostic aggregators and ``ros2 topic echo /diagnostics`` read."""
+diagnostic aggregators and ``ros2 topic echo /diagnostics`` read.
+They run on wall time (``mows_ros.wall``): under ``use_sim_time`` too, once a second of real time."""
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
+
+from mows_ros.wall import steady_timer, wall_stamp
 
 DIAGNOSTICS_TOPIC = "/diagnostics"
 DIAGNOSTICS_DEPTH = 10  # reliable, volatile: the defaults of diagnostic_updater
@@ -32,12 +35,12 @@ class DiagnosticsPublisher:
         self._node = node
         self._health = health
         self._publisher = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_DEPTH)
-        self._timer = node.create_timer(period_s, self.publish)
+        self._timer = steady_timer(node, period_s, self.publish)
 
     def publish(self) -> None:
         health = self._health()
         array = DiagnosticArray()
-        array.header.stamp = self._node.get_clock().now().to_msg()
+        array.header.stamp = wall_stamp()
         array.status = [
             DiagnosticStatus(
                 level=health.level,

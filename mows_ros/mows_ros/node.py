@@ -19,19 +19,22 @@ with a ``configure`` that stopped half way), the node is unconfigured again and
 (:meth:`MowsNode.when_active`, :meth:`MowsNode.inactive_reason`).
 """
 
+import sys
 import traceback
 from collections.abc import Callable, Sequence
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from lifecycle_msgs.srv import ChangeState
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 import mows
 from mows_ros.diagnostics import DiagnosticsPublisher, Health
-from mows_ros.params import ParamSpec, declare_parameters, parameter_values
+from mows_ros.params import ParamSpec, declare_parameters, parameter_values, prefixed_overrides, unknown_parameter
 
 UNCONFIGURED, INACTIVE, ACTIVE, FINALIZED = "unconfigured", "inactive", "active", "finalized"
 REFUSALS = (ValueError, OSError)  # what configure and activate refuse with: a FAILURE, not an error
+GRAPH_NODE_NAMES = ("driver", "estimator", "mapper", "calibrator")  # mows_bringup.graph.NODES, in order
 
 
 class MowsNode(LifecycleNode):
@@ -45,6 +48,8 @@ class MowsNode(LifecycleNode):
     def __init__(self, name: str, table: Sequence[ParamSpec]):
         super().__init__(name)
         self.parameter_table = tuple(table)
+        # ``-p driver:name:=value`` in a namespace, which rcl drops (the process's own command line)
+        self._parameter_overrides.update(prefixed_overrides(self.get_name(), sys.argv, GRAPH_NODE_NAMES))
         declare_parameters(self, self.parameter_table)
         self.lifecycle_state = UNCONFIGURED
         self.lifecycle_problem = ""  # why the last transition failed; '' once one succeeds
@@ -65,6 +70,16 @@ class MowsNode(LifecycleNode):
 
     def cleanup(self) -> None:
         """Release what ``configure`` took, whatever state it left (also the error path)."""
+
+    def set_parameters_atomically(self, parameter_list) -> SetParametersResult:
+        """rclpy's, with a name the node does not have refused with the nearest it has
+        (``ros2 param set``), instead of rclpy's bare "undeclared parameter(s)"."""
+        for parameter in parameter_list:
+            if not self.has_parameter(parameter.name):
+                return SetParametersResult(
+                    successful=False, reason=unknown_parameter(self, parameter.name, self.parameter_table)
+                )
+        return super().set_parameters_atomically(parameter_list)
 
     # --- what a node asks of its state -------------------------------------------------------
     @property

@@ -10,9 +10,11 @@ such an override unused and silent, and the node would run on its default.
 """
 
 import difflib
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import yaml
 from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
@@ -55,6 +57,17 @@ class ParamSpec:
                 descriptor.floating_point_range = [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
         return descriptor
 
+    def request_problem(self, value: Value, field: str) -> str | None:
+        """Why ``value``, asked for in a request's ``field``, is outside this parameter's limits
+        (not finite, or out of its range), or None: a request obeys the limits of the node's
+        parameters, as ``ros2 param set`` does."""
+        if isinstance(value, float) and not math.isfinite(value):
+            return f"{field}={value!r} is not finite"
+        if self.range is not None and not self.range[0] <= value <= self.range[1]:
+            low, high = self.range
+            return f"{field}={value!r} is outside [{low:g}, {high:g}] (the limits of the parameter {self.name})"
+        return None
+
     def problem(self, value: Value) -> str | None:
         """Why ``value`` is not allowed for this parameter, or None if it is. (rclpy has
         already refused values outside the descriptor's range, NaN included.)"""
@@ -84,6 +97,17 @@ def declare_parameters(node: Node, table: Sequence[ParamSpec]) -> None:
     refuse_unknown_overrides(node, table)
 
 
+def nearest_hint(name: str, known: Sequence[str], what: str = "this node's parameters") -> str:
+    """'did you mean X?' for the known name closest to ``name``, else the list of them."""
+    nearest = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
+    return f"did you mean {nearest[0]}?" if nearest else f"{what}: {', '.join(known)}"
+
+
+def unknown_parameter(node: Node, name: str, table: Sequence[ParamSpec]) -> str:
+    """The refusal of a parameter ``name`` that ``node`` does not have, with the nearest it has."""
+    return f"{node.get_name()}: unknown parameter {name!r}: {nearest_hint(name, [spec.name for spec in table])}"
+
+
 def refuse_unknown_overrides(node: Node, table: Sequence[ParamSpec]) -> None:
     """:class:`UnknownParameterError` for the first override of ``node`` that is none of its
     parameters. The overrides (``-p`` and parameter files, after rcl matched the node's name)
@@ -92,11 +116,67 @@ def refuse_unknown_overrides(node: Node, table: Sequence[ParamSpec]) -> None:
     for name in sorted(node._parameter_overrides):
         if name in known or name in ROS_OWN or name.startswith("qos_overrides."):
             continue
-        nearest = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
-        hint = f"did you mean {nearest[0]}?" if nearest else f"this node's parameters: {', '.join(known)}"
-        raise UnknownParameterError(
-            f"{node.get_name()}: unknown parameter {name!r} (from -p or a parameter file): {hint}"
-        )
+        raise UnknownParameterError(f"{unknown_parameter(node, name, table)} (from -p or a parameter file)")
+
+
+def ros_argument_values(argv: Sequence[str], flags: Sequence[str]) -> list[str]:
+    """The values that follow any of ``flags`` among the ROS arguments of ``argv`` (``-p``:
+    the ``[node:]name:=value`` rules, ``--params-file``: the files)."""
+    values, in_ros_args, taking = [], False, False
+    for arg in argv:
+        if arg == "--ros-args":
+            in_ros_args = True
+        elif arg == "--":
+            in_ros_args = False
+        elif in_ros_args and taking:
+            values.append(arg)
+        taking = in_ros_args and arg in flags
+    return values
+
+
+def params_file_problem(path: str) -> str | None:
+    """Why ``path`` is not a ROS parameter file (rcl takes a YAML file of any other shape and
+    applies nothing from it), or None."""
+    try:
+        content = yaml.safe_load(open(path, encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
+        return f"--params-file {path}: {error}"
+    nodes_ok = isinstance(content, dict) and content
+    if nodes_ok and all(isinstance(v, dict) and isinstance(v.get("ros__parameters"), dict) for v in content.values()):
+        return None
+    return f"--params-file {path}: not a ROS parameter file (expected NODE: {{ros__parameters: {{name: value}}}})"
+
+
+def prefixed_overrides(node_name: str, argv: Sequence[str], graph_names: Sequence[str]) -> dict[str, Parameter]:
+    """The overrides ``-p NODE:name:=value`` of ``argv`` whose NODE is ``node_name``, by name.
+
+    rcl matches NODE against the node's fully qualified name, so inside a namespace
+    (``/probe_a/driver``) it drops ``driver:name:=value`` without a word; the name alone is
+    what ``mows-graph`` documents. The value is YAML, as rcl reads it. A NODE that is neither
+    this node nor another of ``graph_names`` is refused with the nearest name
+    (:class:`UnknownParameterError`): its override would reach no node."""
+    overrides = {}
+    for rule in ros_argument_values(argv, ("-p", "--param")):
+        target, _, text = rule.partition(":=")
+        prefix, colon, name = target.rpartition(":")
+        if not colon or "/" in prefix:
+            continue  # unprefixed, or a fully qualified name that rcl matches itself
+        if prefix != node_name:
+            if prefix not in graph_names:
+                raise UnknownParameterError(
+                    f"-p {rule}: no node is called {prefix!r}: {nearest_hint(prefix, graph_names, 'the nodes')}"
+                )
+            continue
+        try:
+            overrides[name] = Parameter(name, value=yaml.safe_load(text))
+        except (TypeError, ValueError, yaml.YAMLError) as error:
+            raise UnknownParameterError(f"-p {rule}: the value is no ROS parameter value ({error})") from None
+    return overrides
+
+
+def spec_named(table: Sequence[ParamSpec], name: str) -> ParamSpec:
+    """The row of ``table`` for the parameter ``name``."""
+    return next(spec for spec in table if spec.name == name)
 
 
 def parameter_values(node: Node, table: Sequence[ParamSpec]) -> dict[str, Value]:

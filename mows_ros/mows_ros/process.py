@@ -8,19 +8,42 @@ A node starts unconfigured, for a supervisor (mows-graph, ``ros2 lifecycle``) to
 
 import argparse
 import faulthandler
+import re
 import sys
 from collections.abc import Callable
 
 import rclpy
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterUninitializedException,
+)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.utilities import remove_ros_args
 
 from mows_ros.node import MowsNode
-from mows_ros.params import UnknownParameterError
+from mows_ros.params import UnknownParameterError, params_file_problem, ros_argument_values
 
 EXIT_BAD_PARAMETER = 2
+RCLInvalidROSArgsError = rclpy_implementation.RCLInvalidROSArgsError
 AUTOSTART = "--autostart"
+
+
+def arguments_problem(argv: list[str]) -> str | None:
+    """Why the command line cannot start a node (rcl's refusal of the ROS arguments, in one
+    line; a parameter file that is none), or None."""
+    try:
+        remove_ros_args(argv)
+    except RCLInvalidROSArgsError as error:  # rcl's text names the argument, then its source lines
+        text = re.sub(r", at \S+:\d+", "", str(error)).removeprefix("Failed to parse ROS arguments: ")
+        if "parameter override rule" in text:
+            text += " (the form is -p [node:]name:=value; an empty string is '')"
+        return text
+    for path in ros_argument_values(argv, ("--params-file",)):
+        if (problem := params_file_problem(path)) is not None:
+            return problem
+    return None
 
 
 def autostart_asked(args: list[str] | None) -> bool:
@@ -47,6 +70,9 @@ def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -
     a bug. So does a configure or activate refused with ``--autostart``.
     """
     faulthandler.enable()  # a node aborted because it would not stop says where it hung
+    if (problem := arguments_problem(sys.argv if args is None else args)) is not None:
+        sys.stderr.write(f"error: {problem}\n")
+        return EXIT_BAD_PARAMETER
     autostart = autostart_asked(args)
     rclpy.init(args=args)
     node = None
@@ -68,6 +94,9 @@ def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -
             raise
     except (InvalidParameterValueException, InvalidParameterTypeException, UnknownParameterError) as error:
         sys.stderr.write(f"error: {error}\n")
+        return EXIT_BAD_PARAMETER
+    except ParameterUninitializedException as error:  # an override of no type: [] or ~
+        sys.stderr.write(f"error: {error}: give it a value (an empty list has no type in ROS)\n")
         return EXIT_BAD_PARAMETER
     finally:
         if node is not None:

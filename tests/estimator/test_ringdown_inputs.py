@@ -9,7 +9,7 @@ from scipy.integrate import solve_ivp
 
 from mows.bench.estimator import SAMPLE_RATE_HZ, RingdownCase
 from mows.estimate.axis import estimate_along_axis
-from mows.estimate.ringdown import FitStatus, fit_ringdown
+from mows.estimate.ringdown import FitStatus, RingdownFit, fit_ringdown
 from mows.physics.probe import PAPER_PROBE
 from mows.physics.signal import kappa_t
 
@@ -106,3 +106,20 @@ def test_a_good_ringdown_passes_the_same_checks(good):
         math.isfinite(v)
         for v in (fit.frequency_hz, fit.frequency_std_hz, fit.frequency_crb_hz, fit.chi2_dof, fit.r_squared, fit.snr_db)
     )
+
+
+def test_a_report_says_a_spread_is_not_determined_instead_of_printing_nan():
+    fit = RingdownFit(
+        status=FitStatus.OK,
+        frequency_hz=110.0,
+        frequency_std_hz=1e-4,
+        frequency_crb_hz=1e-4,
+        damping_per_s=1.8,
+        amplitude_rad=math.radians(0.65),
+        theta0_rad=0.0,
+        chi2_dof=1.0,
+        r_squared=0.99,
+        snr_db=40.0,
+    )
+    assert math.isnan(fit.amplitude_std_rad)  # no covariance: the data did not determine it
+    assert "θmax = 0.65° (its σ not determined)" in fit.report() and "nan" not in fit.report()

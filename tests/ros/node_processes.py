@@ -1,12 +1,47 @@
 """Node processes for tests: started with their output in a log file, killed if a test leaves
 them behind; and a node of the graph started as an action server, with its goals sent."""
 
+import os
 import subprocess
+import time
+from collections.abc import Callable
 
 import pytest
-from rclpy.action import ActionClient
+import rclpy
+from mows_msgs.action import MeasurementCycle
+from rclpy.action import ActionClient, ActionServer
+from rclpy.executors import SingleThreadedExecutor
 
 from mows_bringup.graph import NODES
+
+# Only a bound for a test that hangs; a test passes as soon as its condition holds.
+WAIT_S = float(os.environ.get("MOWS_TEST_WAIT_S", 60.0))
+
+
+class RosHarness:
+    def __init__(self):
+        self.node = rclpy.create_node("mows_test")
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+
+    def wait_for(self, condition: Callable[[], object], what: str, bound_s: float = WAIT_S):
+        """Spin until ``condition()`` is true and return its value; fail after ``bound_s``."""
+        deadline = time.monotonic() + bound_s
+        while not (value := condition()):
+            if time.monotonic() > deadline:
+                raise AssertionError(f"gave up after {bound_s} s waiting for {what}")
+            self.executor.spin_once(timeout_sec=0.1)
+        return value
+
+    def close(self):
+        # Everything is destroyed in order, children first: the node leaves the executor, and
+        # the action clients tests made (waitables, which destroy_node leaves alone) go before
+        # the node. A worker crashed in destroy_node twice (a segfault, rclpy jazzy).
+        self.executor.remove_node(self.node)
+        for waitable in list(self.node.waitables):
+            waitable.destroy()
+        self.node.destroy_node()
+        self.executor.shutdown()
 
 
 @pytest.fixture
@@ -19,23 +54,24 @@ def start(tmp_path):
     processes = []
 
     def start(*command: str) -> subprocess.Popen:
-        log_path = tmp_path / f"process-{len(processes)}.log"
-        with open(log_path, "w") as log:
-            process = subprocess.Popen(
-                ["setpriv", "--pdeathsig", "KILL", *command],
-                stdin=subprocess.DEVNULL,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-            )
-        process.log_path = log_path
-        processes.append(process)
-        return process
+        processes.append(launch(command, tmp_path / f"process-{len(processes)}.log"))
+        return processes[-1]
 
     yield start
     for process in processes:
         if process.poll() is None:
             process.kill()
             process.wait()
+
+
+def launch(command, log_path) -> subprocess.Popen:
+    """``command`` with its output in ``log_path``, killed with the test's worker."""
+    with open(log_path, "w") as log:
+        process = subprocess.Popen(
+            ["setpriv", "--pdeathsig", "KILL", *command], stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT
+        )
+    process.log_path = log_path
+    return process
 
 
 def log(process: subprocess.Popen) -> str:
@@ -103,3 +139,15 @@ def send_goal(ros, client, goal, cancel_after_feedback=None):
         handle.cancel_goal_async()
     result = handle.get_result_async()
     return handle, ros.wait_for(lambda: result.done() and result.result(), "the goal's result"), feedback
+
+
+def serve_cycles(ros, run_cycle) -> ActionServer:
+    """A stand-in for the driver's measurement-cycle action on the test node: each goal is
+    answered by ``run_cycle(goal, result)`` (RunCycle's fields, as the driver's service has)."""
+
+    def execute(goal_handle):
+        result = run_cycle(goal_handle.request, MeasurementCycle.Result())
+        goal_handle.succeed() if result.success else goal_handle.abort()
+        return result
+
+    return ActionServer(ros.node, MeasurementCycle, "driver/measurement_cycle", execute)

@@ -35,7 +35,7 @@ def main(angles_deg: str, repeats: str, bound_s: str) -> int:
         ),
         10,
     )
-    client = ActionClient(node, RotationSweep, "/mows/mapper/rotation_sweep")
+    client = ActionClient(node, RotationSweep, "/mapper/rotation_sweep")
     deadline = time.monotonic() + float(bound_s)
 
     def spin_until(condition, what):

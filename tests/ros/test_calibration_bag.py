@@ -45,7 +45,7 @@ def test_a_recorded_calibration_gives_the_actions_constants_offline(ros, start, 
     driver = start(*NODE["driver"].command([*DRIVER, "-p", f"record_path:={bag}"]))
     estimator = start(*NODE["estimator"].command([]))
     calibrator = start(*NODE["calibrator"].command(["-p", f"probe_file:={online}"]))
-    client = ActionClient(ros.node, CalibrateProbe, "mows/calibrator/calibrate_probe")
+    client = ActionClient(ros.node, CalibrateProbe, "calibrator/calibrate_probe")
     ros.wait_for(client.server_is_ready, "the calibration action server")
     sent = client.send_goal_async(CalibrateProbe.Goal(currents_a=CURRENTS))
     handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")
@@ -57,9 +57,10 @@ def test_a_recorded_calibration_gives_the_actions_constants_offline(ros, start, 
     for process in (calibrator, estimator, driver):
         stop(process)
 
-    # What the driver recorded of the supply: every commanded current, steady once reached.
+    # What the driver recorded of the supply: zero as the goal arrived (the calibrator's check
+    # that there is a supply), every commanded current, steady once reached, and zero at the end.
     states = [m.message for m in bags.read_bag(bag, topics=["/mows/supply"])]
-    assert [s.current_a for s in states if not s.ramping] == CURRENTS + [0.0]
+    assert [s.current_a for s in states if not s.ramping] == [0.0, *CURRENTS, 0.0]
     assert cli.main(["calibrate", str(bag), "-o", str(offline), "--scenario", "calibration"]) == 0
     printed = capsys.readouterr().out
     action = dict(zip(done.result.names, zip(done.result.values, done.result.stds)))

@@ -6,12 +6,12 @@ import pytest
 from action_msgs.msg import GoalStatus
 from mows_msgs.action import CalibrateProbe
 from mows_msgs.msg import RingdownFit
-from mows_msgs.srv import RunCycle, SetFieldCurrent
+from mows_msgs.srv import SetFieldCurrent
 from std_srvs.srv import Trigger
 
 from mows.physics.probe import Probe, calibration_record
 from mows_ros.qos import RESULT_QOS
-from node_processes import send_goal
+from node_processes import send_goal, serve_cycles
 from sweep.calibration_bench import BENCH, bench_fits
 
 pytestmark = pytest.mark.ros
@@ -23,15 +23,18 @@ class StandInDriver:
     """Answers set_field_current (recording every current) and run_cycle (publishing fits of the
     bench's probe in the environment plus the supply's field at the present current)."""
 
-    def __init__(self, ros, slow_cycles=False):
-        self.ros, self.slow = ros, slow_cycles
+    def __init__(self, ros, slow_cycles=False, supply=True):
+        self.ros, self.slow, self.supply = ros, slow_cycles, supply
         self.currents, self.current, self.cycle = [], 0.0, 0
         self.rng = np.random.default_rng(3)
         self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
-        ros.node.create_service(SetFieldCurrent, "mows/driver/set_field_current", self.set_current)
-        ros.node.create_service(RunCycle, "mows/driver/run_cycle", self.run_cycle)
+        ros.node.create_service(SetFieldCurrent, "driver/set_field_current", self.set_current)
+        self.server = serve_cycles(ros, self.run_cycle)
 
     def set_current(self, request, response):
+        if not self.supply:  # the driver's answer on the bag backend
+            response.success, response.message = False, "supply current refused: the bag backend has no supply to set"
+            return response
         self.currents.append(request.current_a)
         self.current = request.current_a
         response.success, response.current_a, response.message = True, request.current_a, "ok"
@@ -50,7 +53,7 @@ class StandInDriver:
 def calibrator(action_server, tmp_path):
     path = tmp_path / "probe.yaml"
     client, _ = action_server(
-        "calibrator", CalibrateProbe, "mows/calibrator/calibrate_probe", f"probe_file:={path}", "hardware_id:=bench-3"
+        "calibrator", CalibrateProbe, "calibrator/calibrate_probe", f"probe_file:={path}", "hardware_id:=bench-3"
     )
     return client, path
 
@@ -60,7 +63,8 @@ def test_a_calibration_recovers_the_bench_probe_and_writes_its_file(ros, calibra
     driver = StandInDriver(ros)
     _, done, feedback = send_goal(ros, client, CalibrateProbe.Goal(currents_a=CURRENTS))
     assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.success, done.result.message
-    assert driver.currents == CURRENTS + [0.0] and done.result.supply_at_zero
+    # The supply is set to zero on arrival (is there one?), then stepped, then back to zero.
+    assert driver.currents == [0.0] + CURRENTS + [0.0] and done.result.supply_at_zero
     assert feedback[-1].steps == 2 * len(CURRENTS) and feedback[-1].ringdowns == 2 * len(CURRENTS)
     probe = Probe.from_yaml(done.result.probe_file)
     assert done.result.probe_file == str(path)
@@ -78,15 +82,24 @@ def test_cancelling_mid_calibration_ramps_the_supply_to_zero_before_the_result(r
     driver = StandInDriver(ros)
     _, done, _ = send_goal(ros, client, CalibrateProbe.Goal(currents_a=CURRENTS), cancel_after_feedback=4)
     assert done.status == GoalStatus.STATUS_CANCELED and not done.result.success
-    assert done.result.supply_at_zero and driver.currents[-1] == 0.0 and len(driver.currents) < len(CURRENTS) + 1
+    assert done.result.supply_at_zero and driver.currents[-1] == 0.0 and len(driver.currents) < len(CURRENTS) + 2
     assert not path.exists()
 
 
-def test_a_goal_with_a_bad_wiring_is_refused(ros, calibrator):
-    client, _ = calibrator
-    sent = client.send_goal_async(CalibrateProbe.Goal(wiring="sideways"))
-    handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")
-    assert not handle.accepted
+def test_goals_it_cannot_run_are_refused_with_the_reason_in_the_result(ros, calibrator):
+    client, path = calibrator
+    _, done, _ = send_goal(ros, client, CalibrateProbe.Goal(wiring="sideways"))
+    assert done.status == GoalStatus.STATUS_ABORTED and "sideways" in done.result.message
+    # A driver without a supply (a recording, a device with none) refuses set_field_current:
+    # the goal ends at once with its reason, before any cycle.
+    driver = StandInDriver(ros, supply=False)
+    _, done, feedback = send_goal(ros, client, CalibrateProbe.Goal(currents_a=CURRENTS))
+    assert done.status == GoalStatus.STATUS_ABORTED and not feedback and driver.cycle == 0
+    assert done.result.message == (
+        "calibration goal refused: the driver's supply cannot be set: supply current refused: the bag backend "
+        "has no supply to set"
+    )
+    assert not path.exists()
 
 
 def test_a_manual_stage_waits_for_the_operator_before_each_turn(ros, action_server, tmp_path):
@@ -98,7 +111,7 @@ def test_a_manual_stage_waits_for_the_operator_before_each_turn(ros, action_serv
         "orientation:=manual",
     )
     driver = StandInDriver(ros)
-    confirm = ros.node.create_client(Trigger, "mows/calibrator/confirm_orientation")
+    confirm = ros.node.create_client(Trigger, "calibrator/confirm_orientation")
     ros.wait_for(lambda: confirm.service_is_ready(), "the confirm_orientation service")
     feedback = []
     sent = client.send_goal_async(

@@ -58,8 +58,8 @@ class Listener:
         ros.node.create_subscription(MagnetometerBlock, "/mows/raw", self.blocks.append, RAW_QOS)
         ros.node.create_subscription(ExcitationState, "/mows/excitation", self.states.append, EXCITATION_QOS)
         ros.node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 10)
-        self.run_cycle = ros.node.create_client(RunCycle, "/mows/driver/run_cycle")
-        self.estop = ros.node.create_client(EmergencyStop, "/mows/driver/emergency_stop")
+        self.run_cycle = ros.node.create_client(RunCycle, "/driver/run_cycle")
+        self.estop = ros.node.create_client(EmergencyStop, "/driver/emergency_stop")
 
     def _diagnostics(self, array: DiagnosticArray) -> None:
         for status in array.status:
@@ -400,8 +400,15 @@ def test_docs_list_every_parameter_topic_and_service():
         f"/{outputs.RAW_TOPIC}",
         f"/{outputs.EXCITATION_TOPIC}",
         f"/{outputs.JOINT_STATES_TOPIC}",
-        f"/{services.RUN_CYCLE_SERVICE}",
-        f"/{services.EMERGENCY_STOP_SERVICE}",
+    ]
+    names += [  # node-private: /driver/… in the root namespace
+        name.replace("~", f"/{driver.NODE_NAME}")
+        for name in (
+            services.MEASUREMENT_CYCLE_ACTION,
+            services.RUN_CYCLE_SERVICE,
+            services.EMERGENCY_STOP_SERVICE,
+            services.SET_FIELD_CURRENT_SERVICE,
+        )
     ]
     assert [name for name in names if f"`{name}`" not in text] == []
 
@@ -409,7 +416,7 @@ def test_docs_list_every_parameter_topic_and_service():
 def test_the_supply_ramps_on_request_is_capped_and_the_emergency_stop_zeroes_it(start_driver, listen):
     start_driver("-p", "scenario:=calibration", "-p", "coil_setup:=helmholtz", "-p", "supply_current_cap_a:=1.5")
     listen.ros.wait_for(lambda: listen.blocks, "the first block")
-    supply = listen.ros.node.create_client(SetFieldCurrent, "/mows/driver/set_field_current")
+    supply = listen.ros.node.create_client(SetFieldCurrent, "/driver/set_field_current")
     response = listen.result(listen.call(supply, SetFieldCurrent.Request(current_a=1.0)))
     assert response.success and response.current_a == 1.0, response.message
     assert response.reached_sample_index > 0.49 * RATE_HZ  # 1 A at 2 A/s in 10 ms steps: ≥ 0.49 s of ramp

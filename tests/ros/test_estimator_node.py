@@ -219,7 +219,7 @@ def test_malformed_messages_do_not_stop_the_node(ros, estimator):
 
 def test_calibration_sets_f00_from_ringdowns_in_a_known_field(ros, estimator):
     device, heard, _ = estimator
-    client = ros.node.create_client(Calibrate, "/mows/estimator/calibrate")
+    client = ros.node.create_client(Calibrate, "/estimator/calibrate")
     ros.wait_for(client.service_is_ready, "the calibration service")
     request = Calibrate.Request(n_ringdowns=3, reference_field_t=FIELD_T, timeout_s=60.0)
     futures = [client.call_async(request), client.call_async(request)]  # one too many: refused, not mixed
@@ -237,7 +237,7 @@ def test_calibration_sets_f00_from_ringdowns_in_a_known_field(ros, estimator):
 
 def test_a_calibration_without_enough_ringdowns_ends_at_its_timeout_and_frees_the_service(ros, estimator):
     device, _, _ = estimator
-    client = ros.node.create_client(Calibrate, "/mows/estimator/calibrate")
+    client = ros.node.create_client(Calibrate, "/estimator/calibrate")
     ros.wait_for(client.service_is_ready, "the calibration service")
     starved = client.call_async(Calibrate.Request(n_ringdowns=2, reference_field_t=FIELD_T, timeout_s=0.5))
     response = ros.wait_for(lambda: starved.done() and starved.result(), "the timeout")

@@ -1,4 +1,4 @@
-"""The mapper node: a rotation sweep through a stand-in driver that answers RunCycle with
+"""The mapper node: a rotation sweep through a stand-in driver that answers its measurement-cycle goals with
 ring-down fits computed from the exact field of a scenario, decomposed into B and G."""
 
 import math
@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 from action_msgs.msg import GoalStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
-from mows_msgs.srv import RunCycle
 from std_srvs.srv import Trigger
 
 from mows.lab import reference_at
@@ -18,7 +18,7 @@ from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import DecompositionStatus
 from mows_ros.qos import MAP_QOS, RESULT_QOS
-from node_processes import send_goal
+from node_processes import send_goal, serve_cycles
 
 pytestmark = pytest.mark.ros
 
@@ -28,13 +28,13 @@ ANGLES = np.radians(np.arange(0.0, 360.0, 30.0))
 
 
 class StandInDriver:
-    """Answers RunCycle: publishes `repeats` fits of the cycle, f from the full potential."""
+    """Answers measurement-cycle goals: publishes `repeats` fits of the cycle, f from the full potential."""
 
     def __init__(self, ros, fail=False, tuning=False, bad_fits=False):
         scenario = load_scenario(SCENARIO)
         self.source, self.fail, self.tuning, self.bad_fits = scenario.environment.source, fail, tuning, bad_fits
         self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
-        ros.node.create_service(RunCycle, "mows/driver/run_cycle", self.run_cycle)
+        self.server = serve_cycles(ros, self.run_cycle)
         self.cycle, self.rng = 0, np.random.default_rng(0)
 
     def run_cycle(self, request, response):
@@ -75,7 +75,7 @@ class StandInDriver:
 @pytest.fixture
 def mapper(action_server):
     return action_server(
-        "mapper", RotationSweep, "mows/mapper/rotation_sweep", f"reference_scenario:={SCENARIO}", "lab_auto:=false"
+        "mapper", RotationSweep, "mapper/rotation_sweep", f"reference_scenario:={SCENARIO}", "lab_auto:=false"
     )
 
 
@@ -113,16 +113,26 @@ def test_a_sweep_recovers_the_field_and_reports_on_the_model(ros, mapper):
     ros.wait_for(lambda: late, "the latched map")
 
 
-def test_bad_goals_are_refused(ros, mapper):
+def refused(done, why: str) -> bool:
+    """Whether a goal was accepted, then aborted at once with ``why`` in its result's message:
+    what a client sees of a refusal (a rejected goal would only say "Goal was rejected")."""
+    message = done.result.message
+    return done.status == GoalStatus.STATUS_ABORTED and message.startswith("sweep goal refused") and why in message
+
+
+def test_bad_goals_are_refused_with_the_reason_in_the_result(ros, mapper):
     client, _ = mapper
-    handle, _, _ = sweep(ros, client, theta0_rad=[0.0, math.nan])
-    assert not handle.accepted
-    handle, _, _ = sweep(ros, client, theta0_rad=ANGLES.tolist(), model="paper")
-    assert not handle.accepted
+    _, done, _ = sweep(ros, client, theta0_rad=[0.0, math.nan])
+    assert refused(done, "not all finite"), done.result.message
+    _, done, _ = sweep(ros, client, theta0_rad=ANGLES.tolist(), model="paper")
+    assert refused(done, "'paper' is not one of"), done.result.message
+    # The parameter's own limits (repeats_per_angle: 1-100) hold for a goal too.
+    _, done, _ = sweep(ros, client, theta0_rad=ANGLES.tolist(), repeats_per_angle=100000)
+    assert refused(done, "repeats_per_angle=100000 is outside [1, 100]"), done.result.message
     # Four orientations cannot separate field from gradient: refused on arrival, not after
     # a sweep's worth of cycles (no driver is there to run one).
-    handle, _, _ = sweep(ros, client, theta0_rad=ANGLES[:4].tolist())
-    assert not handle.accepted
+    _, done, _ = sweep(ros, client, theta0_rad=ANGLES[:4].tolist())
+    assert refused(done, "orientations"), done.result.message
 
 
 def test_one_sweep_at_a_time(ros, mapper):
@@ -132,15 +142,20 @@ def test_one_sweep_at_a_time(ros, mapper):
         client.send_goal_async(RotationSweep.Goal(theta0_rad=ANGLES.tolist(), repeats_per_angle=1)) for _ in range(2)
     ]
     handles = ros.wait_for(lambda: all(g.done() for g in goals) and [g.result() for g in goals], "both answers")
-    assert sorted(h.accepted for h in handles) == [False, True]
-    result = next(h for h in handles if h.accepted).get_result_async()
-    done = ros.wait_for(lambda: result.done() and result.result(), "the accepted sweep")
-    assert done.result.success and done.result.decomposition.n_points == len(ANGLES)
+    results = [h.get_result_async() for h in handles]
+    done = ros.wait_for(lambda: all(r.done() for r in results) and [r.result() for r in results], "both results")
+    assert sum(d.result.success for d in done) == 1
+    assert any(refused(d, "another sweep is still running") for d in done)
+    assert next(d for d in done if d.result.success).result.decomposition.n_points == len(ANGLES)
 
 
-def test_a_failed_sweep_publishes_neither_map_nor_model_report(ros, mapper):
+def test_a_failed_sweep_publishes_neither_map_nor_model_report_and_warns(ros, mapper):
     client, _ = mapper
     driver = StandInDriver(ros, bad_fits=True)
+    mapper_status: dict = {}
+    ros.node.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda a: mapper_status.update((s.name, s) for s in a.status), 10
+    )
     maps, reports = [], []
     ros.node.create_subscription(SweepDecomposition, "mows/sweep", maps.append, MAP_QOS)
     ros.node.create_subscription(ModelReport, "mows/model_report", reports.append, MAP_QOS)
@@ -148,6 +163,11 @@ def test_a_failed_sweep_publishes_neither_map_nor_model_report(ros, mapper):
     assert done.status == GoalStatus.STATUS_ABORTED and "no successful ring-down" in done.result.message
     failed = done.result.decomposition
     assert DecompositionStatus(failed.status) is not DecompositionStatus.OK and failed.message == done.result.message
+    warned = ros.wait_for(
+        lambda: (s := mapper_status.get("/mapper")) is not None and s.level == DiagnosticStatus.WARN and s,
+        "the mapper's warning",
+    )
+    assert "the last sweep failed: " in warned.message and "no successful ring-down" in warned.message
     # Then a good sweep: its map and report are the first the topics carry (reliable, in order).
     driver.bad_fits = False
     _, done, _ = sweep(ros, client, theta0_rad=ANGLES.tolist(), repeats_per_angle=1)
@@ -155,6 +175,7 @@ def test_a_failed_sweep_publishes_neither_map_nor_model_report(ros, mapper):
     ros.wait_for(lambda: maps and reports, "the good sweep's map and report")
     assert [m.sweep_id for m in maps] == [2] and [r.sweep_id for r in reports] == [2]
     assert np.all(np.isfinite(maps[0].field_t))
+    ros.wait_for(lambda: mapper_status["/mapper"].level == DiagnosticStatus.OK, "the warning to clear")
 
 
 def test_a_failing_driver_aborts_the_sweep_with_its_reason(ros, mapper):
@@ -176,14 +197,14 @@ def test_an_adaptive_goal_reaches_its_target(ros, mapper):
     truth, _ = reference_at(SCENARIO)
     assert np.all(sigma <= 100e-9) and np.all(np.abs(np.array(d.field_t) - truth[:2]) < 4 * sigma)
     assert len({round(f.theta0_rad, 6) for f in feedback}) >= 5  # the orientations it chose
-    handle, _, _ = sweep(ros, client, target="bz")
-    assert not handle.accepted
+    _, done, _ = sweep(ros, client, target="bz")
+    assert refused(done, "bz"), done.result.message
 
 
 def test_a_manual_stage_waits_for_the_operator_at_each_orientation(ros, action_server):
     client, _ = action_server("mapper", RotationSweep, "mows/mapper/rotation_sweep", "orientation:=manual")
     driver = StandInDriver(ros)
-    confirm = ros.node.create_client(Trigger, "mows/mapper/confirm_orientation")
+    confirm = ros.node.create_client(Trigger, "mapper/confirm_orientation")
     ros.wait_for(lambda: confirm.service_is_ready(), "the confirm_orientation service")
 
     def call_confirm():

@@ -69,7 +69,7 @@ def test_two_probes_in_namespaces_sweep_at_once_without_cross_talk(ros, start, t
             "--params-file",
             str(parameters(tmp_path / f"{namespace[1:]}.yaml", scenario)),
         )
-        clients[namespace] = ActionClient(ros.node, RotationSweep, f"{namespace}/mows/mapper/rotation_sweep")
+        clients[namespace] = ActionClient(ros.node, RotationSweep, f"{namespace}/mapper/rotation_sweep")
         fits[namespace], blocks[namespace] = [], []
         ros.node.create_subscription(MagnetometerBlock, f"{namespace}/mows/raw", blocks[namespace].append, STREAM_QOS)
         ros.node.create_subscription(RingdownFit, f"{namespace}/mows/ringdown", fits[namespace].append, RESULT_QOS)

@@ -14,6 +14,7 @@ from mows_calibrator import node as calibrator
 from mows_driver import node as driver
 from mows_estimator import node as estimator
 from mows_mapper import node as mapper
+from mows_ros.node import GRAPH_NODE_NAMES
 from mows_ros.process import EXIT_BAD_PARAMETER
 
 pytestmark = pytest.mark.ros
@@ -135,3 +136,59 @@ def test_a_parameter_for_another_node_is_not_refused():
     )
     assert run.returncode == EXIT_BAD_PARAMETER and "did you mean settle_s?" in run.stderr
     assert "repeats" not in run.stderr
+
+
+def one_line_refusal(run: subprocess.CompletedProcess) -> str:
+    """The one line a refused command wrote (its ROS log lines aside): exit status 2, no traceback."""
+    assert run.returncode == EXIT_BAD_PARAMETER, run.stderr
+    assert "Traceback" not in run.stderr
+    (line,) = [line for line in run.stderr.splitlines() if line and not line.startswith("[")]
+    return line
+
+
+NOT_ROS_PARAMETERS = "probe settings\n"  # YAML, but no node: rcl applies nothing from it
+
+
+@pytest.mark.parametrize(
+    "graph_node, arguments, reason",
+    [
+        (NODES[0], ["--params-file", "/nonexistent/params.yaml"], "Couldn't parse params file"),
+        (NODES[0], ["--params-file", "{malformed}"], "Couldn't parse params file"),
+        (NODES[0], ["--params-file", "{not_ros}"], "not a ROS parameter file"),
+        (NODES[0], ["-p", "repeats"], "the form is -p [node:]name:=value"),
+        (NODES[0], ["-p", "serial_port:="], "an empty string is ''"),
+        (NODES[3], ["-p", "currents_a:=[]"], "'currents_a' is not initialized: currents_a: give it a value"),
+        (NODES[0], ["-p", "drvier:repeats:=3"], "no node is called 'drvier': did you mean driver?"),
+        # the node-prefixed form inside a namespace, which rcl alone would drop
+        (NODES[1], ["-r", "__ns:=/probe_a", "-p", "estimator:settle:=1.0"], "did you mean settle_s?"),
+    ],
+    ids=["missing-file", "malformed-file", "not-parameters", "no-value", "empty-value", "empty-list", "prefix", "ns"],
+)
+def test_node_arguments_it_cannot_take_end_it_in_one_line(graph_node, arguments, reason, tmp_path):
+    files = {"{malformed}": "driver: [\n", "{not_ros}": NOT_ROS_PARAMETERS}
+    for placeholder, text in files.items():
+        (tmp_path / placeholder).write_text(text)
+    arguments = [str(tmp_path / a) if a in files else a for a in arguments]
+    run = subprocess.run(graph_node.command(arguments), capture_output=True, text=True, timeout=120)
+    line = one_line_refusal(run)
+    assert line.startswith("error: ") and reason in line, line
+
+
+@pytest.mark.parametrize(
+    "command, reason",
+    [
+        (["mows-graph", "--ros-args", "-p", "repeats:=5"], "give it as -p driver:repeats:=5"),
+        (["mows-graph", "--ros-args", "-p", "driver:scenaro:=helmholtz"], "did you mean scenario?"),
+        (["mows-demo", "--scenario", "nosuch"], "--scenario nosuch: scenario 'nosuch' is neither"),
+    ],
+    ids=["graph-unprefixed", "graph-misspelt", "demo-scenario"],
+)
+def test_the_graph_s_commands_refuse_bad_arguments_in_one_line_before_starting_a_node(command, reason):
+    line = one_line_refusal(subprocess.run(command, capture_output=True, text=True, timeout=120))
+    assert reason in line, line
+
+
+def test_the_graph_s_node_names_are_the_ones_every_node_knows():
+    """A node takes ``-p NAME:…`` for another node of the graph silently, and refuses any other
+    prefix: the names it knows must be the graph's."""
+    assert tuple(node.name for node in NODES) == GRAPH_NODE_NAMES

@@ -76,6 +76,7 @@ class CycleSequencer:
         self.lead_samples = int(lead_samples)
         self.latched: str | None = None  # the reason of a latched emergency stop
         self.phase = Phase.IDLE
+        self.fault = ""  # why the last cycle failed, until the next one starts or a stop is released
         self._fit = fit
         self._duty = DutyCycleLimit(settings.max_duty_cycle, self._samples(settings.duty_window_s))
         self._anchor: tuple[int, int] | None = None  # (sample index, stamp ns) of a received sample
@@ -113,6 +114,7 @@ class CycleSequencer:
         """Begin a cycle. ValueError, with the reason, if it cannot run."""
         cycle = self._plan(request)
         self._step = Step()
+        self.fault = ""
         self._cycle = cycle
         self._runner = self._run(cycle)
         self._advance(None)
@@ -146,6 +148,14 @@ class CycleSequencer:
             self._fault(reason)
         return self._take_step()
 
+    def cancel(self, reason: str) -> Step:
+        """End the running cycle because nobody wants it any more (coils off at once): it
+        fails with ``reason``, and the sequencer is IDLE, not in FAULT."""
+        if self.busy:
+            self._stop(f"cancelled: {reason}")
+            self._announce(Phase.IDLE, f"cancelled: {reason}")
+        return self._take_step()
+
     def emergency_stop(self, reason: str) -> Step:
         """Coils off at once, the running cycle failed, and no cycle until :meth:`release`."""
         self.latched = reason or "no reason given"
@@ -154,7 +164,7 @@ class CycleSequencer:
 
     def release(self) -> Step:
         if self.latched is not None:
-            self.latched = None
+            self.latched, self.fault = None, ""
             self._announce(Phase.IDLE, "emergency stop released")
         return self._take_step()
 
@@ -317,15 +327,21 @@ class CycleSequencer:
         self._results.clear()
 
     def _fault(self, reason: str) -> None:
-        """Coils off now; the running cycle (if any) fails with ``reason``, and its phases end
+        """Coils off now; the running cycle (if any) fails with ``reason``, a fault. Its phases end
         with this FAULT (it carries the cycle's id: a record of the cycle ends with its fault)."""
-        self._step.coils_off_now = True
         cycle = self._cycle
+        self._stop(reason)
+        self.fault = reason
+        self._announce(Phase.FAULT, reason, cycle)
+
+    def _stop(self, reason: str) -> None:
+        """Coils off now; the running cycle (if any) fails with ``reason``."""
+        self._step.coils_off_now = True
         if self._runner is not None:
+            cycle = self._cycle
             assert cycle is not None  # set and cleared together with _runner (start, _end)
             self._runner.close()
             self._end(CycleOutcome(False, reason, cycle.cycle_id, self.frequency_hz, 0))
-        self._announce(Phase.FAULT, reason, cycle)
 
     # --- events ----------------------------------------------------------------------------
     def _announce(self, phase: Phase, reason: str, cycle: CyclePlan | None = None) -> None:

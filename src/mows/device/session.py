@@ -248,8 +248,8 @@ class DeviceSession:
         device's next sample, a running cycle fails and the supply ramps to zero."""
         with self._lock:
             self.armed, self.disarmed_reason = False, reason
-            if self.sequencer is not None and self.sequencer.busy:
-                self._act(self.sequencer.abort(reason))
+            if self.sequencer is not None:  # a deactivation is no fault of the cycle's
+                self._act(self.sequencer.cancel(reason))
             self.backend.coils_off_now()
             self.backend.supply_to_zero_now()
 
@@ -275,11 +275,22 @@ class DeviceSession:
             self._act(step)
             return self.sequencer.last_cycle_id
 
+    def cancel_cycle(self, cycle_id: int, reason: str) -> bool:
+        """End cycle ``cycle_id`` if it is the one running (coils off at the device's next
+        sample; its ``on_done`` hears it failed, cancelled for ``reason``); whether it was."""
+        with self._lock:
+            s = self.sequencer
+            if s is None or not s.busy or s.last_cycle_id != cycle_id:
+                return False
+            self._act(s.cancel(reason))
+            return True
+
     def set_tracking(self, settings: TrackingSettings | None) -> None:
         """Track with ``settings`` from the next idle moment on; None: no tracking cycle after the running one."""
         with self._lock:
             if settings is None:
-                self.tracking.stop("tracking is off")
+                if self.tracking.on:
+                    self.tracking.stop("tracking is off")
             else:
                 self.tracking.start(settings)
 
@@ -389,7 +400,8 @@ class DeviceSession:
                 values.update(phase=self._replayed_phase.name if self._replayed_phase else "none replayed yet")
             else:
                 values.update(
-                    phase=s.phase.name,
+                    phase=s.phase.name if s.busy or s.phase != Phase.FAULT else Phase.IDLE.name,
+                    fault=s.fault,
                     cycle_running=s.busy,
                     estop_latched=s.latched is not None,
                     estop_reason=s.latched or "",

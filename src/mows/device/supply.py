@@ -69,8 +69,12 @@ class SupplyRamps:
 
     def dropped(self, next_index: int, reason: str) -> None:
         """The driver ramped the supply to zero itself: no ramp that waits sets it any more, and
-        when it is back at zero is not known (a ramp, not a steady state)."""
+        when it is back at zero is not known (a ramp, not a steady state). A supply that is steady
+        at zero, or was never set, stays so: nothing ramps, and no flag is raised."""
         self._latest = None
+        at_zero = self.state is None or (self.state.current_a == 0.0 and not self.state.ramping)
+        if at_zero and not self._waiting and not self._ramping:
+            return
         self.event(SupplyEvent(next_index, self._stamp_ns(next_index), 0.0, True, reason))
 
     def event(self, event: SupplyEvent) -> None:

@@ -69,7 +69,7 @@ class TrackingLoop:
 
     def __init__(self) -> None:
         self.settings: TrackingSettings | None = None
-        self.stopped_reason = "tracking is off"
+        self.stopped_reason = ""  # why tracking stopped, once it ran
         self.cycles = 0
         self.ringdowns = 0
         self._settled = False  # the probe stands at θ0 since the last tracking cycle

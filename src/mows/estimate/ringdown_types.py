@@ -147,7 +147,11 @@ class RingdownFit:
     def _amplitude_text(self) -> str:
         if not math.isfinite(self.amplitude_rad):
             return "not determined"
-        text = f"{math.degrees(self.amplitude_rad):.2f} ± {math.degrees(self.amplitude_std_rad):.2f}°"
+        degrees, std_rad = math.degrees(self.amplitude_rad), self.amplitude_std_rad
+        if math.isfinite(std_rad):
+            text = f"{degrees:.2f} ± {math.degrees(std_rad):.2f}°"
+        else:
+            text = f"{degrees:.2f}° (its σ not determined)"
         if math.isfinite(self.rest_offset_rad):
             text += f" about a rest offset {math.degrees(self.rest_offset_rad):+.2f}°"
         return text

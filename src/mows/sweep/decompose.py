@@ -102,6 +102,12 @@ class Decomposition:
     def ok(self) -> bool:
         return self.status is DecompositionStatus.OK
 
+    def _chi2_text(self) -> str:
+        """χ²/dof, or why there is none: as many free coefficients as orientations fit exactly."""
+        if math.isfinite(self.chi2_dof):
+            return f"χ²/dof = {self.chi2_dof:.2f}"
+        return "χ²/dof not determined (0 degrees of freedom: as many orientations as free coefficients)"
+
     def report(self) -> str:
         if not self.ok:
             return f"sweep decomposition ({self.model}): {self.status.name}: {self.message}"
@@ -113,7 +119,7 @@ class Decomposition:
             f"{self.model}: B = ({bx:.3f} ± {sb[0] * 1e6:.3f}, {by:.3f} ± {sb[1] * 1e6:.3f}) µT, "
             f"|B| = {math.hypot(bx, by):.3f} µT at {math.degrees(math.atan2(by, bx)):.1f}°; "
             f"G = (xx {gxx:.3f} ± {sg[0] * 1e3:.3f}, xy {gxy:.3f} ± {sg[1] * 1e3:.3f}, "
-            f"yy {gyy:.3f} ± {sg[2] * 1e3:.3f}) mT/m; χ²/dof = {self.chi2_dof:.2f}, "
+            f"yy {gyy:.3f} ± {sg[2] * 1e3:.3f}) mT/m; {self._chi2_text()}, "
             f"rms residual {self.rms_residual_hz * 1e3:.3f} mHz"
         )
 

@@ -1,0 +1,36 @@
+"""Action servers whose refusals reach the client.
+
+A goal rejected in rclpy's goal callback reaches an action client as "Goal was rejected." and
+nothing more. So every MOWS action server accepts each goal, and its execute callback aborts a
+goal it cannot run at once, before anything moves, with the reason in the result's message.
+"""
+
+from collections.abc import Callable, Sequence
+
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import CallbackGroup
+from rclpy.node import Node
+
+
+def action_servers(
+    node: Node,
+    action_type,
+    names: Sequence[str],
+    execute: Callable,
+    cancel: Callable[[object], CancelResponse],
+    group: CallbackGroup,
+) -> list[ActionServer]:
+    """One server of ``action_type`` under each of ``names`` (a node's own name, then the
+    previous release's alias), all with the same callbacks; every goal is accepted."""
+    return [
+        ActionServer(
+            node,
+            action_type,
+            name,
+            execute,
+            goal_callback=lambda _: GoalResponse.ACCEPT,
+            cancel_callback=cancel,
+            callback_group=group,
+        )
+        for name in names
+    ]

@@ -17,7 +17,7 @@ from mows.cli.inputs import input_file, load_probe
 from mows.estimate.ringdown import SETTLE_S, FitOptions
 from mows.estimate.segments import fit_segment
 from mows.lab.chirp import recorded_segments
-from mows.lab.data.table import MeasurementTable
+from mows.lab.data.table import tool_table
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import check_output, replacing
@@ -94,11 +94,12 @@ def recorded_ringdowns(path, probe: Probe, args):
 
 def write_table(path, fits, probe: Probe) -> None:
     """The OK fits as a model-lab table (:meth:`mows.sweep.record.SweepRecord.table_columns`: each
-    ring-down's start swing is the stop amplitude pooled over the fits that measured θmax)."""
+    ring-down's start swing is the stop amplitude pooled over the fits that measured θmax),
+    marked as the project's own (:func:`mows.lab.data.table.tool_table`)."""
     record = SweepRecord(
         [
             SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz, window.start_ns / NS_PER_S)
             for window, fit in fits
         ]
     )
-    MeasurementTable(record.table_columns(), str(path)).to_csv(path)
+    tool_table(record.table_columns(), str(path)).to_csv(path)

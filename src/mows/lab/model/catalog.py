@@ -81,6 +81,10 @@ def _finite_amplitude(config, rows, probe, strength):
     config.amplitude = strength
 
 
+def _housing_stop(config, rows, probe, stop_error_rad):
+    config.stop_rad = config.stop_rad + stop_error_rad
+
+
 def _damping_shift(config, rows, probe, strength):
     config.damping = strength
     if rows.has("damping_per_s"):
@@ -161,6 +165,19 @@ CATALOG = (
         priority=20,
         physical=PHYSICAL_STRENGTH,
         check="repeat at half the excitation amplitude: this effect falls 4×",
+    ),
+    Effect(
+        "housing_stop",
+        "Every ring-down starts at the housing stop, so its swing about the rest angle is the stop "
+        "less the deflection, A0 = θstop − |θs|; the finite amplitude is read from there. The "
+        "probe's theta_stop_rad is the stop as calibrated; this moves it, one angle for the table.",
+        "A0 = θstop + δ − |θs|, θs the exact rest angle in the row's field",
+        "only through the finite amplitude: ∝ Bx'·A0·δ, harmonic 1 of θ0",
+        (Parameter("stop_error_rad", "rad", -0.2, 0.2, 1e-3, "δ, added to the probe's theta_stop_rad"),),
+        _housing_stop,
+        READOUT,
+        priority=22,
+        check="film the lever at the stop (or fit θmax of ring-downs in zero field, where θs = 0)",
     ),
     Effect(
         "gravity",

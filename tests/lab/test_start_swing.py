@@ -70,7 +70,8 @@ def test_our_table_is_read_with_its_impossible_rows_named_and_fits_from_the_stop
     tool_table(values, "mows fit").to_csv(path)
     table = load_table(path)
     assert len(table) == len(values["f_hz"])  # nothing lost: the stop gives the bad rows their swing
-    assert any("rows 4, 18" in note and "housing stop" in note for note in table.notes), table.notes
+    assert any("rows 4, 18" in note and "amplitude_deg" in note for note in table.notes), table.notes
+    assert any("stop less the deflection" in note for note in table.notes), table.notes
     fit = physics_model().fit(table)
     assert fit.chi2_dof <= 1.5, fit.chi2_dof
 

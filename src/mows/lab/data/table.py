@@ -25,11 +25,11 @@ any other numeric column                optional   kept as a covariate for the d
 
 Tables the project's tools write (``mows fit --csv``, :func:`tool_table`) carry the column
 ``mows_table_format`` = 1 in every row. Their ``amplitude_deg`` is an estimate pooled from single
-fits (evidence, not a measurement: docs/model_lab.md, "Start swing"), and a row may hold a fit that
-did not determine it. Such a table is never refused for its values: a row whose
-``amplitude_deg`` is NaN or ≤ 0 keeps NaN there (its start swing then comes from the stop), a row
-with a NaN, infinite or impossible value in another column is left out, and the notes name
-those rows. A table without the marker (external) with such values is refused, naming the rows.
+fits, which the lab does not use (the start swing is the stop less the deflection:
+docs/model_lab.md, "Start swing"), and a row may hold a fit that did not determine it. Such a
+table is never refused for its values: a row whose ``amplitude_deg`` is NaN or ≤ 0 keeps NaN
+there, a row with a NaN, infinite or impossible value in another column is left out, and the
+notes name those rows. A table without the marker (external) with such values is refused, naming the rows.
 
 The unmeasured gradient components are completed by Maxwell's equations for a field that is
 static and source-free at the probe: Gxz = Gyz = 0 (unknown, taken as zero: they do not act
@@ -188,7 +188,11 @@ class MeasurementTable:
         """Every quantity a residual may follow, by name: the table's numeric columns (time,
         current, amplitude, temperature, reference z, extras) and the reference's |B|, B⊥ = By',
         Bx' and G = Gx'x'. Constant ones are left out (a constant is absorbed by f00)."""
-        found = {name: values for name, values in self.columns.items() if name not in NOT_COVARIATES}
+        found = {
+            name: values
+            for name, values in self.columns.items()
+            if name not in NOT_COVARIATES and np.isfinite(values).all()  # our amplitude_deg may hold NaN
+        }
         derived = self.derived_columns()
         found.update({name: derived[name] for name in COVARIATE_DERIVED if name in derived})
         return {name: values for name, values in found.items() if np.ptp(values) > 0}
@@ -294,18 +298,18 @@ def _mend_own(columns: dict) -> tuple:
     """(columns, notes) of one of our own tables made valid: impossible start swings set to NaN,
     rows with any other impossible value left out; the notes name the rows. Columns that
     :func:`_validate` would refuse for their names or lengths are left to it."""
-    notes: list[str] = []
     if any(name not in columns for name in REQUIRED) or len({len(v) for v in columns.values()}) > 1:
         return columns, ()
+    notes = []
     if "amplitude_deg" in columns:
+        notes.append(
+            "amplitude_deg (pooled from single fits) is not used: the start swing is the stop less the deflection"
+        )
         amplitude = columns["amplitude_deg"]
-        bad = np.flatnonzero(~(amplitude > 0) | ~np.isfinite(amplitude))
+        bad = np.flatnonzero(~(amplitude > 0))
         if bad.size:
-            columns = {**columns, "amplitude_deg": np.where(np.isin(np.arange(len(amplitude)), bad), np.nan, amplitude)}
-            notes.append(
-                f"amplitude_deg is NaN or ≤ 0 in {rows_text(bad)} (a fit that did not determine it): "
-                "their start swing is the housing stop less the deflection"
-            )
+            columns = {**columns, "amplitude_deg": np.where(amplitude > 0, amplitude, np.nan)}
+            notes.append(f"amplitude_deg is NaN or ≤ 0 in {rows_text(bad)} (a fit that did not determine it)")
     checked = {name: values for name, values in columns.items() if name != "amplitude_deg"}
     broken = {name: rows for name, _, rows in broken_rules(checked)}
     if broken:

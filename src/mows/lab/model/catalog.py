@@ -155,8 +155,8 @@ CATALOG = (
         "−m·B·cos θ is not a linear spring: at amplitude A the first-harmonic stiffness of the "
         "field term is m·Bx'·2·J1(A)/A (0.991 at 15°, 0.978 at 24°), and the frequency drifts "
         "as the ring-down decays. The fit reports an average over the ring-down (weights of "
-        "mows.physics.ringdown_average) from the start amplitude (column amplitude_deg, else the "
-        "housing stop).",
+        "mows.physics.ringdown_average) from the start swing: the housing stop less the deflection "
+        "|θs| (an external table's amplitude_deg where it gives one).",
         "k(A) = (1/πA)·∫U'(θc + A·cos φ)·cos φ dφ;  f = f(0) + s·(Σ c_q·f(A_q) − f(0))",
         "harmonic 1 of θ0 (∝ Bx'·A²), scales with the excitation amplitude squared and with |B|",
         _strength("blend between the small-amplitude (0) and the ring-down-averaged frequency (1)"),

@@ -14,6 +14,7 @@ A reference is named in one of four ways, and each is turned into one thing, a
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pathlib
 from collections.abc import Mapping
@@ -21,7 +22,7 @@ from collections.abc import Mapping
 import numpy as np
 import yaml
 
-from mows.lab.data.table import FIELD, GRADIENT, TableError
+from mows.lab.data.table import FIELD, GRADIENT, NO_BZ, NO_FIELD, NO_GRADIENT, TableError
 from mows.physics.field import FieldSource, source_from_dict
 from mows.sim.scenario import Scenario, load_scenario
 
@@ -41,7 +42,9 @@ def with_reference(table, reference, magnet_position_m=(0.0, 0.0, 0.0)):
     own = [name for name in (*FIELD, *GRADIENT) if table.has(name)]
     if own:
         raise TableError(f"{table.source} already has reference columns ({', '.join(own)}): give no --reference")
-    return table.with_columns(**reference_columns(reference, len(table), magnet_position_m))
+    joined = table.with_columns(**reference_columns(reference, len(table), magnet_position_m))
+    notes = tuple(note for note in table.notes if note not in (NO_FIELD, NO_BZ, NO_GRADIENT))
+    return dataclasses.replace(joined, notes=notes + (f"reference: {reference} (static, at the probe)",))
 
 
 def reference_at(reference, magnet_position_m=(0.0, 0.0, 0.0)) -> tuple:

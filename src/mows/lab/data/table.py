@@ -66,6 +66,12 @@ COVARIATE_DERIVED = ("b_abs_t", "b_perp_t", "b_along_t", "g_t_per_m")  # what th
 NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t", WRITER_COLUMN}
 
 
+# What a reader notes of the reference (with_notes); joining one (reference.with_reference) drops them.
+NO_FIELD = "no reference field: the base model predicts f = f00 at every row"
+NO_BZ = "no ref_bz_t: the reference z component is taken as 0 (plane_tilt cannot be tested)"
+NO_GRADIENT = "no reference gradient: taken as 0"
+
+
 class TableError(ValueError):
     """A measurement table that cannot be used, with the column and rows at fault."""
 
@@ -347,11 +353,11 @@ def with_notes(columns, source, notes) -> MeasurementTable:
             f"360 (e.g. {first:g}° is {first % 360.0:g}°)"
         )
     if not any(name in columns for name in FIELD):
-        notes.append("no reference field: the base model predicts f = f00 at every row")
+        notes.append(NO_FIELD)
     elif "ref_bz_t" not in columns and "ref_bx_t" in columns:
-        notes.append("no ref_bz_t: the reference z component is taken as 0 (plane_tilt cannot be tested)")
+        notes.append(NO_BZ)
     if not any(name in columns for name in GRADIENT):
-        notes.append("no reference gradient: taken as 0")
+        notes.append(NO_GRADIENT)
     return MeasurementTable(columns, source, tuple(notes))
 
 

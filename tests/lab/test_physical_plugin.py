@@ -36,6 +36,8 @@ def moment_temperature(rows, c_per_k):
 """
 PHYSICAL_KEEP = {"static_deflection", "finite_amplitude", "damping_shift"}  # what the truth holds
 
+pytestmark = pytest.mark.slow  # two --auto selections on 96 rows
+
 
 @pytest.fixture(scope="module")
 def table():

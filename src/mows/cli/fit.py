@@ -5,7 +5,8 @@ the estimator node (:mod:`mows.estimate.segments`, :mod:`mows.estimate.ringdown`
 (tuning ones skipped unless ``--tuning``) is cut out by its device stamps and fitted with the
 lever-aware signal model of the paper's geometry (``--paper-model`` for Eq. S11). One line per
 ring-down; ``--csv`` writes a model-lab table (theta0_deg, f_hz, f_std_hz, t_s, amplitude_deg,
-damping_per_s, duration_s) of the OK fits, ready for ``mows lab`` (no file when none is OK).
+damping_per_s, duration_s, and the marker mows_table_format of the project's own tables) of the
+OK fits, ready for ``mows lab`` with ``--reference`` (no file when none is OK).
 The CSV is never written into the bag nor over an existing file (unless ``--force``), and
 appears whole or not at all (:mod:`mows.records.files`).
 """

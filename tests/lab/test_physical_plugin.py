@@ -16,7 +16,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mows.lab import analyse
+from mows.lab import FrequencyModel, analyse, catalog
 from mows.lab.data import synthetic
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
@@ -35,8 +35,6 @@ def moment_temperature(rows, c_per_k):
     return {{"moment_scale": c_per_k * (rows.temperature_k - {REFERENCE_K})}}
 """
 PHYSICAL_KEEP = {"static_deflection", "finite_amplitude", "damping_shift"}  # what the truth holds
-
-pytestmark = pytest.mark.slow  # two --auto selections on 96 rows
 
 
 @pytest.fixture(scope="module")
@@ -73,6 +71,7 @@ def table():
     )
 
 
+@pytest.mark.slow  # an --auto selection on 96 rows
 def test_the_catalog_alone_adds_only_what_is_there_and_points_at_the_moment(table):
     report = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
     assert report.base.chi2_dof > 20.0, report.base.chi2_dof  # the hidden effect is far above noise
@@ -83,6 +82,7 @@ def test_the_catalog_alone_adds_only_what_is_there_and_points_at_the_moment(tabl
     assert '"moment_scale": c * (rows.temperature_k - rows.temperature_k.mean())' in explanation, explanation
 
 
+@pytest.mark.slow  # an --auto selection on 96 rows
 def test_the_users_physical_plugin_explains_the_table_and_reads_the_coefficient(table, tmp_path):
     path = tmp_path / "moment_temperature.py"
     path.write_text(PLUGIN)
@@ -92,3 +92,34 @@ def test_the_users_physical_plugin_explains_the_table_and_reads_the_coefficient(
     value, std = report.effect_parameter("moment_temperature.c_per_k")
     assert abs(value - MOMENT_PER_K) < 3 * std + 2e-5, (value, std)
     assert set(report.effect_names) - {"moment_temperature"} <= PHYSICAL_KEEP, report.history
+
+
+FIELD_PLUGIN = """
+from mows.lab import effect
+
+
+@effect(name="unseen_field", parameters={"by_t": (0.0, -1e-3, 1e-3, "T")})
+def unseen_field(rows, by_t):
+    return {"field_offset_t": (0.0, by_t)}
+"""
+
+
+def test_a_plugins_field_goes_through_the_potential(tmp_path):
+    """A 60 µT field along y that the reference does not see, at 24° ring-downs: the plugin's
+    in-plane field offset, through the full potential (deflection and amplitude springs at
+    physics), explains the table and reads the field back. The truth is the exact arc energy
+    in the whole field; the table's reference is the seen part."""
+    sweep = synthetic.rotation_sweeps(15.0, 2)
+    theta0 = sweep.pop("theta0_deg")
+    seen = UniformField(FIELD_T)
+    whole = UniformField((FIELD_T[0], FIELD_T[1] + 6e-5, FIELD_T[2]))
+    table = synthetic.synthesize(PAPER_PROBE, whole, theta0, np.random.default_rng(5), reference=seen, **sweep)
+    path = tmp_path / "unseen_field.py"
+    path.write_text(FIELD_PLUGIN)
+    effects = catalog([str(path)])
+    model = FrequencyModel(PAPER_PROBE) + effects["static_deflection"].at_physics()
+    model = model + effects["finite_amplitude"].at_physics() + effects["unseen_field"]
+    fit = model.fit(table)
+    assert fit.chi2_dof <= 1.5, fit.chi2_dof
+    ((_, value, std, _),) = fit.effect_parameters("unseen_field")
+    assert abs(value - 6e-5) < 3 * std, (value, std)

@@ -148,3 +148,19 @@ def test_a_terminal_sees_the_stages_progress_and_the_work_inside_diagnose(tilted
     # Inside the analysis: the cross-validation's folds, each candidate effect, the evaluations.
     assert b"cross-validation (folds)" in seen and b"ranking candidate effects" in seen
     assert b"model evaluations" in seen
+
+
+def test_a_reference_for_a_table_with_its_own_is_refused_in_one_line(tilted_csv, capsys):
+    assert main(["lab", "compare", str(tilted_csv), "--reference", "helmholtz", "--no-cv"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and "already has reference columns" in error, error
+
+
+def test_a_static_reference_joins_a_table_without_one(tilted_csv, tmp_path, capsys):
+    """As for `mows fit --csv`'s tables: the reference columns come from the named scene."""
+    table = read_csv(tilted_csv)
+    bare = tmp_path / "bare.csv"
+    type(table)({k: v for k, v in table.columns.items() if not k.startswith("ref_")}).to_csv(bare)
+    assert main(["lab", "compare", str(bare), "--reference", "helmholtz", "--no-cv", "--json"]) == 0
+    notes = json.loads(capsys.readouterr().out)["notes"]
+    assert any("reference: helmholtz" in note for note in notes) and not any("no reference" in n for n in notes)

@@ -5,7 +5,8 @@ the estimator node (:mod:`mows.estimate.segments`, :mod:`mows.estimate.ringdown`
 (tuning ones skipped unless ``--tuning``) is cut out by its device stamps and fitted with the
 lever-aware signal model of the paper's geometry (``--paper-model`` for Eq. S11). One line per
 ring-down; ``--csv`` writes a model-lab table (theta0_deg, f_hz, f_std_hz, t_s, amplitude_deg,
-damping_per_s, duration_s) of the OK fits, ready for ``mows lab`` (no file when none is OK).
+damping_per_s, duration_s, and the marker mows_table_format of the project's own tables) of the
+OK fits, ready for ``mows lab`` with ``--reference`` (no file when none is OK).
 The CSV is never written into the bag nor over an existing file (unless ``--force``), and
 appears whole or not at all (:mod:`mows.records.files`).
 """
@@ -19,7 +20,7 @@ from mows.estimate.ringdown import SETTLE_S, FitOptions
 from mows.estimate.segments import fit_segment
 from mows.lab.chirp import recorded_segments
 from mows.lab.data.readers import is_bag
-from mows.lab.data.table import MeasurementTable
+from mows.lab.data.table import tool_table
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import check_output, writing
@@ -116,11 +117,12 @@ def recorded_ringdowns(path, probe: Probe, args):
 
 def write_table(path, fits, probe: Probe) -> None:
     """The OK fits as a model-lab table (:meth:`mows.sweep.record.SweepRecord.table_columns`: each
-    ring-down's start swing is the stop amplitude pooled over the fits that measured θmax)."""
+    ring-down's start swing is the stop amplitude pooled over the fits that measured θmax),
+    marked as the project's own (:func:`mows.lab.data.table.tool_table`)."""
     record = SweepRecord(
         [
             SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz, window.start_ns / NS_PER_S)
             for window, fit in fits
         ]
     )
-    MeasurementTable(record.table_columns(), str(path)).to_csv(path)
+    tool_table(record.table_columns(), str(path)).to_csv(path)

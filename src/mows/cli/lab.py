@@ -7,8 +7,9 @@
     mows lab ringdown BAG   [--probe P] [--f00-hz F] [--cycle N]   inside each recorded ring-down:
                                                      chirp, damping, the effect that explains them
 
-TABLE is a CSV file or a rosbag2 bag (``--reference`` then gives the reference field: a
-MagneticField topic or a field-source YAML). ``--json`` prints the machine-readable result.
+TABLE is a CSV file or a rosbag2 bag. ``--reference`` gives the reference field: for a bag a
+MagneticField topic, for a bag or a CSV without reference columns (``mows fit --csv``) a static
+field-source YAML or scenario. ``--json`` prints the machine-readable result.
 User errors (bad tables, probe files, unknown effects, broken plugins) end with a one-line
 message and exit status 2, never a traceback (:mod:`mows.cli.inputs`). ``report -o`` writes a
 new file (an existing one only with ``--force``, never an input), whole or not at all.
@@ -34,7 +35,7 @@ from tqdm import tqdm
 from mows.cli.fit import add_bag_arguments
 from mows.cli.inputs import OneLineParser, check_frequencies, input_file, load_probe, positive_float
 from mows.cli.lab_ringdown import run_ringdown
-from mows.lab import analyse, is_bag, load_table, progress, write_report
+from mows.lab import analyse, is_bag, load_table, progress, with_reference, write_report
 from mows.lab.chirp import PIECE_PERIODS
 from mows.records.files import check_output, writing
 
@@ -83,7 +84,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             default=[],
             help="plugin file (.py) or entry-point name defining extra effects (repeatable)",
         )
-        command.add_argument("--reference", help="for bags: a sensor_msgs/MagneticField topic or a field-source YAML")
+        command.add_argument(
+            "--reference",
+            help="the reference field: for bags a sensor_msgs/MagneticField topic, for bags and CSV tables "
+            "without reference columns a static field-source YAML or scenario",
+        )
         command.add_argument(
             "--magnet-position",
             type=float,
@@ -152,6 +157,8 @@ def run(args) -> int:
             **({"reference": args.reference, "magnet_position_m": args.magnet_position} if is_bag(args.table) else {}),
         )
         check_frequencies(table.columns["f_hz"], probe, "f_hz")
+        if args.reference and not is_bag(args.table):
+            table = with_reference(table, args.reference, args.magnet_position)
         if len(table) > MAX_ROWS and not args.all_rows:
             table = table.subsample(MAX_ROWS, SUBSAMPLE_SEED)
         stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")

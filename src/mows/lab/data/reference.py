@@ -14,6 +14,7 @@ A reference is named in one of four ways, and each is turned into one thing, a
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pathlib
 from collections.abc import Mapping
@@ -21,7 +22,7 @@ from collections.abc import Mapping
 import numpy as np
 import yaml
 
-from mows.lab.data.table import FIELD, GRADIENT
+from mows.lab.data.table import FIELD, GRADIENT, NO_BZ, NO_FIELD, NO_GRADIENT, TableError
 from mows.physics.field import FieldSource, source_from_dict
 from mows.sim.scenario import Scenario, load_scenario
 
@@ -33,6 +34,17 @@ def reference_columns(reference, n: int, magnet_position_m=(0.0, 0.0, 0.0)) -> d
     columns = {name: np.full(n, value) for name, value in zip(FIELD, field)}
     columns.update({name: np.full(n, gradient[i, j]) for name, (i, j) in zip(GRADIENT, ((0, 0), (0, 1), (1, 1)))})
     return columns
+
+
+def with_reference(table, reference, magnet_position_m=(0.0, 0.0, 0.0)):
+    """``table`` with the reference columns of a static ``reference`` (a CSV that ``mows fit``
+    wrote has none); TableError when the table already has reference columns of its own."""
+    own = [name for name in (*FIELD, *GRADIENT) if table.has(name)]
+    if own:
+        raise TableError(f"{table.source} already has reference columns ({', '.join(own)}): give no --reference")
+    joined = table.with_columns(**reference_columns(reference, len(table), magnet_position_m))
+    notes = tuple(note for note in table.notes if note not in (NO_FIELD, NO_BZ, NO_GRADIENT))
+    return dataclasses.replace(joined, notes=notes + (f"reference: {reference} (static, at the probe)",))
 
 
 def reference_at(reference, magnet_position_m=(0.0, 0.0, 0.0)) -> tuple:

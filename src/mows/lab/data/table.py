@@ -19,8 +19,17 @@ Columns (CSV header names, SI units but for the ``*_deg`` columns):
 ``temperature_k``, ``damping_per_s``,              swing at the first fitted sample about the rest
 ``duration_s``                                     angle, docs/model_lab.md; the last two as in
                                                    ``RingdownFit``)
+``mows_table_format``                   optional   the marker of a table the project's own tools wrote
 any other numeric column                optional   kept as a covariate for the diagnostics
 =====================================  =========  ===================================================
+
+Tables the project's tools write (``mows fit --csv``, :func:`tool_table`) carry the column
+``mows_table_format`` = 1 in every row. Their ``amplitude_deg`` is an estimate pooled from single
+fits, which the lab does not use (the start swing is the stop less the deflection:
+docs/model_lab.md, "Start swing"), and a row may hold a fit that did not determine it. Such a
+table is never refused for its values: a row whose ``amplitude_deg`` is NaN or ≤ 0 keeps NaN
+there, a row with a NaN, infinite or impossible value in another column is left out, and the
+notes name those rows. A table without the marker (external) with such values is refused, naming the rows.
 
 The unmeasured gradient components are completed by Maxwell's equations for a field that is
 static and source-free at the probe: Gxz = Gyz = 0 (unknown, taken as zero: they do not act
@@ -50,7 +59,17 @@ KNOWN = (
 
 MIN_SWEEPS = 10  # a subsample keeps at least this many sweeps (or all): folds for the cross-validation
 POSITIVE = ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k")
-NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t"}
+WRITER_COLUMN = "mows_table_format"  # the marker of the project's own tables (module docstring)
+TABLE_FORMAT = 1.0
+DERIVED = ("b_abs_t", "b_along_t", "b_perp_t", "b_normal_t", "g_t_per_m", "g_xy_t_per_m", "g_yy_t_per_m")
+COVARIATE_DERIVED = ("b_abs_t", "b_perp_t", "b_along_t", "g_t_per_m")  # what the diagnostics test
+NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t", WRITER_COLUMN}
+
+
+# What a reader notes of the reference (with_notes); joining one (reference.with_reference) drops them.
+NO_FIELD = "no reference field: the base model predicts f = f00 at every row"
+NO_BZ = "no ref_bz_t: the reference z component is taken as 0 (plane_tilt cannot be tested)"
+NO_GRADIENT = "no reference gradient: taken as 0"
 
 
 class TableError(ValueError):
@@ -91,11 +110,20 @@ class MeasurementTable:
         object.__setattr__(self, "columns", columns)
         _validate(columns)
 
+    @property
+    def written_by_mows(self) -> bool:
+        """True for a table the project's own tools wrote (module docstring)."""
+        return self.has(WRITER_COLUMN)
+
     # --- plain columns --------------------------------------------------------------------
     def __getattr__(self, name):
         columns = self.__dict__.get("columns", {})
         if name in columns:
             return columns[name]
+        if name in DERIVED and "columns" in self.__dict__:
+            derived = self.derived_columns()
+            if name in derived:
+                return derived[name]
         raise MissingColumnError(name)
 
     def has(self, name: str) -> bool:
@@ -146,17 +174,33 @@ class MeasurementTable:
         return np.einsum("nij,nj->ni", self.probe_axes(), self.field_t)
 
     # --- diagnostics --------------------------------------------------------------------------
+    def derived_columns(self) -> dict:
+        """The reference in the probe frame, by name (also attributes, ``rows.b_along_t``, for
+        plugins): |B| ``b_abs_t``, Bx' ``b_along_t``, By' = B⊥ ``b_perp_t``, Bz ``b_normal_t``;
+        G = Gx'x' ``g_t_per_m``, Gx'y' ``g_xy_t_per_m``, Gy'y' ``g_yy_t_per_m``. Only those of
+        the reference the table has."""
+        found: dict[str, np.ndarray] = {}
+        if any(self.has(name) for name in FIELD):
+            field = self.probe_field_t
+            found.update(b_abs_t=np.linalg.norm(self.field_t, axis=-1), b_perp_t=field[:, 1], b_along_t=field[:, 0])
+            found["b_normal_t"] = field[:, 2]
+        if any(self.has(name) for name in GRADIENT):
+            axes = self.probe_axes()
+            gradient = np.einsum("nai,nij,nbj->nab", axes, self.gradient_t_per_m, axes)
+            found.update(g_t_per_m=gradient[:, 0, 0], g_xy_t_per_m=gradient[:, 0, 1], g_yy_t_per_m=gradient[:, 1, 1])
+        return found
+
     def covariates(self) -> dict:
         """Every quantity a residual may follow, by name: the table's numeric columns (time,
         current, amplitude, temperature, reference z, extras) and the reference's |B|, B⊥ = By',
         Bx' and G = Gx'x'. Constant ones are left out (a constant is absorbed by f00)."""
-        found = {name: values for name, values in self.columns.items() if name not in NOT_COVARIATES}
-        if any(self.has(name) for name in FIELD):
-            field = self.probe_field_t
-            found.update(b_abs_t=np.linalg.norm(self.field_t, axis=-1), b_perp_t=field[:, 1], b_along_t=field[:, 0])
-        if any(self.has(name) for name in GRADIENT):
-            axes = self.probe_axes()
-            found["g_t_per_m"] = np.einsum("ni,nij,nj->n", axes[:, 0], self.gradient_t_per_m, axes[:, 0])
+        found = {
+            name: values
+            for name, values in self.columns.items()
+            if name not in NOT_COVARIATES and np.isfinite(values).all()  # our amplitude_deg may hold NaN
+        }
+        derived = self.derived_columns()
+        found.update({name: derived[name] for name in COVARIATE_DERIVED if name in derived})
         return {name: values for name, values in found.items() if np.ptp(values) > 0}
 
     # --- derived tables ---------------------------------------------------------------------
@@ -228,7 +272,10 @@ def _validate(columns: dict) -> None:
         raise TableError(f"columns have different lengths: {lengths}")
     if lengths["f_hz"] == 0:
         raise TableError("the table has no rows")
+    own = WRITER_COLUMN in columns  # our own start swings may be NaN (module docstring)
     for name, rule, rows in broken_rules(columns):
+        if own and name == "amplitude_deg" and not np.any(columns[name][rows] <= 0):
+            continue
         raise TableError(f"column '{name}' {rule} in {rows_text(rows)}")
     for group in (FIELD[:2], GRADIENT):
         given = [name for name in group if name in columns]
@@ -242,6 +289,41 @@ def _validate(columns: dict) -> None:
             f"column 'sweep' must hold integers: not so in "
             f"{rows_text(np.flatnonzero(columns['sweep'] != np.round(columns['sweep'])))}"
         )
+
+
+def tool_table(columns: Mapping, source: str) -> MeasurementTable:
+    """The table of ``columns`` as the project's tools write it: marked with
+    ``mows_table_format`` (module docstring), so that the lab reads its ``amplitude_deg`` as
+    evidence and mends rather than refuses its rows."""
+    n = len(next(iter(columns.values())))
+    mended, notes = _mend_own({**columns, WRITER_COLUMN: np.full(n, TABLE_FORMAT)})
+    return MeasurementTable(mended, source, notes)
+
+
+def _mend_own(columns: dict) -> tuple:
+    """(columns, notes) of one of our own tables made valid: impossible start swings set to NaN,
+    rows with any other impossible value left out; the notes name the rows. Columns that
+    :func:`_validate` would refuse for their names or lengths are left to it."""
+    if any(name not in columns for name in REQUIRED) or len({len(v) for v in columns.values()}) > 1:
+        return columns, ()
+    notes = []
+    if "amplitude_deg" in columns:
+        notes.append(
+            "amplitude_deg (pooled from single fits) is not used: the start swing is the stop less the deflection"
+        )
+        amplitude = columns["amplitude_deg"]
+        bad = np.flatnonzero(~(amplitude > 0))
+        if bad.size:
+            columns = {**columns, "amplitude_deg": np.where(amplitude > 0, amplitude, np.nan)}
+            notes.append(f"amplitude_deg is NaN or ≤ 0 in {rows_text(bad)} (a fit that did not determine it)")
+    checked = {name: values for name, values in columns.items() if name != "amplitude_deg"}
+    broken = {name: rows for name, _, rows in broken_rules(checked)}
+    if broken:
+        rows = np.unique(np.concatenate(list(broken.values())))
+        keep = ~np.isin(np.arange(len(columns["f_hz"])), rows)
+        columns = {name: values[keep] for name, values in columns.items()}
+        notes.append(f"left out {rows_text(rows)}: NaN, infinite or impossible values in {', '.join(sorted(broken))}")
+    return columns, tuple(notes)
 
 
 def broken_rules(columns: dict):
@@ -259,6 +341,9 @@ def broken_rules(columns: dict):
 
 
 def with_notes(columns, source, notes) -> MeasurementTable:
+    if WRITER_COLUMN in columns:
+        columns, mended = _mend_own({name: np.asarray(values, float) for name, values in columns.items()})
+        notes = list(notes) + list(mended)
     theta = columns.get("theta0_deg", np.zeros(0))
     wrapped = np.flatnonzero((theta < 0.0) | (theta >= 360.0))
     if wrapped.size:
@@ -268,11 +353,11 @@ def with_notes(columns, source, notes) -> MeasurementTable:
             f"360 (e.g. {first:g}° is {first % 360.0:g}°)"
         )
     if not any(name in columns for name in FIELD):
-        notes.append("no reference field: the base model predicts f = f00 at every row")
+        notes.append(NO_FIELD)
     elif "ref_bz_t" not in columns and "ref_bx_t" in columns:
-        notes.append("no ref_bz_t: the reference z component is taken as 0 (plane_tilt cannot be tested)")
+        notes.append(NO_BZ)
     if not any(name in columns for name in GRADIENT):
-        notes.append("no reference gradient: taken as 0")
+        notes.append(NO_GRADIENT)
     return MeasurementTable(columns, source, tuple(notes))
 
 

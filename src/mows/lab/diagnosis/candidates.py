@@ -192,6 +192,15 @@ def dispersion(fit, candidates) -> float:
     return max(1.0, min([fit.chi2_dof, *after]))
 
 
+def quasi_gain(old, new) -> float:
+    """The evidence for ``new`` over ``old`` (two fits of one table) as the candidates judge it:
+    Δχ²/φ − Δk·ln n, with φ = max(1, the smaller χ²/dof of the two) the scatter the better one
+    leaves (:func:`dispersion`). With the residual at noise this is the BIC difference; far
+    above it, a move that shaves a little off a huge χ² gains nothing."""
+    phi = max(1.0, min(old.chi2_dof, new.chi2_dof))
+    return (old.chi2 - new.chi2) / phi - (new.k - old.k) * math.log(new.n)
+
+
 def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
     """(candidates best first, {effect: why it cannot be tested}) for the ``effects`` not yet in
     ``fit``'s model: score test on the projected signature, then each form's refit where

@@ -24,8 +24,7 @@ import math
 import numpy as np
 import scipy.special
 
-from mows.lab.model.configuration import Configuration
-from mows.physics import ringdown_average
+from mows.lab.model.configuration import Configuration, base_start_swing_rad, ringdown_nodes
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
 
 LINEAR_CORRELATION = 0.99  # temperature this correlated with time drifts linearly
@@ -101,17 +100,14 @@ def _tilt_field(table, probe, values) -> str:
 def amplitude_scale_error(table, probe) -> tuple:
     """(ε, spread) with ε = ⟨2·J1(A)/A⟩ − 1 over the rows' ring-down amplitude nodes (the
     moment scale the finite amplitude looks like), spread its range over the rows."""
-    config = Configuration.base(table, probe)
-    amplitudes, weights = ringdown_average.amplitude_nodes(
-        config.theta0_rad, config.amplitude_start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s
-    )
+    amplitudes, weights = ringdown_nodes(Configuration.base(table, probe), base_start_swing_rad(table, probe))
     per_row = (weights * 2.0 * scipy.special.j1(amplitudes) / amplitudes).sum(-1) - 1.0
     return float(np.mean(per_row)), float(np.ptp(per_row))
 
 
 def _amplitude_scale(table, probe, values) -> str:
     epsilon, spread = amplitude_scale_error(table, probe)
-    start = np.degrees(Configuration.base(table, probe).amplitude_start_rad)
+    start = np.degrees(base_start_swing_rad(table, probe))
     text = (
         f"finite_amplitude ≡ moment_scale: the amplitude scales the field spring by ⟨2·J1(A)/A⟩ − 1 ≈ −⟨A²⟩/8 "
         f"= {epsilon * 100:.3g} % over these ring-downs (start {np.median(start):.3g}°)"

@@ -26,6 +26,8 @@ from mows.lab.diagnosis.residual_structure import (
 )
 
 EXPLAINED_FRACTION = 0.5
+FIELD_SPRINGS = ("b_along_t", "g_t_per_m")  # covariates that are the model's own magnetic springs
+SLOW_COVARIATES = ("temperature_k", "t_s")  # what a spring drifts with
 
 
 @dataclasses.dataclass
@@ -98,11 +100,35 @@ def _no_answer(fit, structure: Structure) -> str:
     trends = sorted(structure.covariates + product_trends(fit), key=lambda trend: -abs(trend.correlation))
     if not trends:
         return ""
-    expression = " * ".join(plugin_expression(factor) for factor in trends[0].name.split("·"))
     follows = "; ".join(f"{t.name} (correlation {t.correlation:+.2f}, p = {t.p_value:.1e})" for t in trends[:3])
     return (
         f"The residual follows {follows}. A plugin for the strongest, to save as my_effect.py and run with "
-        f'--plugin my_effect.py: `import numpy as np; from mows.lab import effect; @effect(name="my_effect", '
-        f'parameters={{"c_hz": (0.0, -1.0, 1.0, "Hz")}}) def my_effect(rows, c_hz): return {{"frequency_hz": '
-        f"c_hz * {expression}}}` (better: the physics that makes it)."
+        "--plugin my_effect.py: `{}` ({}).".format(*plugin_sketch(trends[0].name))
+    )
+
+
+def plugin_sketch(trend: str) -> tuple:
+    """(plugin source on one line, why that form) for a residual that follows ``trend`` (a covariate or a
+    product ``a·b``): the physical change where one fits (a field spring that changes with a
+    covariate is the moment changing with it; a drift of one covariate alone is the spring
+    changing with it), else an additive frequency term."""
+    factors = trend.split("·")
+    others = [f for f in factors if f not in FIELD_SPRINGS]
+    if len(factors) == 2 and len(others) == 1 and not others[0].endswith("θ0)"):
+        output, parameter, unit, bound = "moment_scale", "c", "1", 1.0
+        expression = f"(rows.{others[0]} - rows.{others[0]}.mean())"
+        why = "the field's spring m·Bx' changes with it: the moment does"
+    elif len(factors) == 1 and factors[0] in SLOW_COVARIATES:
+        output, parameter, unit, bound = "stiffness_nm_per_rad", "c_nm_per_rad", "N·m/rad", 1e-6
+        expression = f"(rows.{factors[0]} - rows.{factors[0]}.mean())"
+        why = "the spring drifts with it"
+    else:
+        output, parameter, unit, bound = "frequency_hz", "c_hz", "Hz", 1.0
+        expression = " * ".join(plugin_expression(factor) for factor in factors)
+        why = "better: the physics that makes it"
+    return (
+        f'import numpy as np; from mows.lab import effect; @effect(name="my_effect", '
+        f'parameters={{"{parameter}": (0.0, -{bound:g}, {bound:g}, "{unit}")}}) def my_effect(rows, {parameter}): '
+        f'return {{"{output}": {parameter} * {expression}}}',
+        why,
     )

@@ -9,9 +9,11 @@ signatures on them to find the measurement that would tell its members apart.
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
+
+from mows.lab.data.table import WRITER_COLUMN
+from mows.lab.model.configuration import base_start_swing_rad
 
 
 @dataclasses.dataclass
@@ -25,8 +27,12 @@ class Variant:
 
 def variants(table, probe) -> list:
     """What-if variants of ``table``, cheapest first (module docstring)."""
-    if not table.has("amplitude_deg"):  # a missing amplitude is the stop's (Configuration.base)
-        table = table.with_columns(amplitude_deg=np.full(len(table), math.degrees(probe.theta_stop_rad)))
+    # The variants state their excitation: each row's start swing as the model takes it, as a
+    # column of a table the user measured (so that halving it is heard).
+    start = np.degrees(base_start_swing_rad(table, probe))
+    table = dataclasses.replace(
+        table, columns={**{k: v for k, v in table.columns.items() if k != WRITER_COLUMN}, "amplitude_deg": start}
+    )
     found = []
     angles = np.unique(np.mod(table.columns["theta0_deg"], 360.0))
     step = float(np.median(np.diff(angles))) if len(angles) > 1 else 90.0

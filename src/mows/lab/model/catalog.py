@@ -81,6 +81,10 @@ def _finite_amplitude(config, rows, probe, strength):
     config.amplitude = strength
 
 
+def _housing_stop(config, rows, probe, stop_error_rad):
+    config.stop_rad = config.stop_rad + stop_error_rad
+
+
 def _damping_shift(config, rows, probe, strength):
     config.damping = strength
     if rows.has("damping_per_s"):
@@ -151,8 +155,8 @@ CATALOG = (
         "−m·B·cos θ is not a linear spring: at amplitude A the first-harmonic stiffness of the "
         "field term is m·Bx'·2·J1(A)/A (0.991 at 15°, 0.978 at 24°), and the frequency drifts "
         "as the ring-down decays. The fit reports an average over the ring-down (weights of "
-        "mows.physics.ringdown_average) from the start amplitude (column amplitude_deg, else the "
-        "housing stop).",
+        "mows.physics.ringdown_average) from the start swing: the housing stop less the deflection "
+        "|θs| (an external table's amplitude_deg where it gives one).",
         "k(A) = (1/πA)·∫U'(θc + A·cos φ)·cos φ dφ;  f = f(0) + s·(Σ c_q·f(A_q) − f(0))",
         "harmonic 1 of θ0 (∝ Bx'·A²), scales with the excitation amplitude squared and with |B|",
         _strength("blend between the small-amplitude (0) and the ring-down-averaged frequency (1)"),
@@ -161,6 +165,19 @@ CATALOG = (
         priority=20,
         physical=PHYSICAL_STRENGTH,
         check="repeat at half the excitation amplitude: this effect falls 4×",
+    ),
+    Effect(
+        "housing_stop",
+        "Every ring-down starts at the housing stop, so its swing about the rest angle is the stop "
+        "less the deflection, A0 = θstop − |θs|; the finite amplitude is read from there. The "
+        "probe's theta_stop_rad is the stop as calibrated; this moves it, one angle for the table.",
+        "A0 = θstop + δ − |θs|, θs the exact rest angle in the row's field",
+        "only through the finite amplitude: ∝ Bx'·A0·δ, harmonic 1 of θ0",
+        (Parameter("stop_error_rad", "rad", -0.2, 0.2, 1e-3, "δ, added to the probe's theta_stop_rad"),),
+        _housing_stop,
+        READOUT,
+        priority=22,
+        check="film the lever at the stop (or fit θmax of ring-downs in zero field, where θs = 0)",
     ),
     Effect(
         "gravity",

@@ -20,6 +20,13 @@ amplitude nodes (:mod:`mows.physics.ringdown_average`). It returns h and c with
 
 so that the fitted f00 enters linearly (c holds additive frequency contributions of plugins).
 
+The start swing of each ring-down (what the finite-amplitude readout averages from) is physics,
+not a per-fit number: every ring-down starts at the housing stop, so its swing about the rest
+angle is A0 = θstop − |θs| with θs the rest angle that the configuration's own field (in full:
+the lever deflects by By' whatever else the model holds) gives the potential. The stop is one
+number for the table (the probe's ``theta_stop_rad``, moved by the ``housing_stop`` effect). A
+table's ``amplitude_deg`` is evidence used where it is trusted (:func:`amplitude_evidence_rad`).
+
 Two effects are quadratic in their natural size (the static deflection adds ≈ (m·By')²/k;
 the finite amplitude adds ∝ A²); they are applied as strengths that blend the exact result with
 and without them, k = k_off + λ·(k_on − k_off), so that they are linear in λ near 0 (score tests)
@@ -29,7 +36,9 @@ while λ = 1 is the exact physics, interactions included.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import weakref
 
 import numpy as np
 
@@ -46,13 +55,15 @@ class Configuration:
     ----------
     theta0_rad : (n,) orientation of the probe axis x'.
     field_t, gradient_t_per_m, hessian_t_per_m2 : (n, 3), (n, 3, 3), (n, 3, 3, 3) or None.
-    moment_factor : m_effective / m (calibration error of m/kM).
+    moment_factor : m_effective / m, one or (n,) per row (calibration error of m/kM, plugins).
     transverse : weight of the gradient components other than Gx'x' (0 in Eq. 6, 1 in full).
     deflection : blend weight of By' (the static deflection), 0 off, 1 exact.
     gravity_m_per_s2 : (n, 3) or None; only its in-plane part acts.
     spring_nm_per_rad : (n,) kM per row (temperature, drift, plugin stiffness).
     amplitude : blend weight of the finite-amplitude readout, 0 off, 1 exact.
-    amplitude_start_rad, ringdown_damping_per_s, ringdown_duration_s : (n,) the ring-down.
+    start_evidence_rad : (n,) start swings the table gives and the lab uses, NaN where the stop decides.
+    stop_rad : the housing stop every ring-down starts from (one for the table).
+    ringdown_damping_per_s, ringdown_duration_s : (n,) the ring-down.
     damping : blend weight of the damped form of Eq. S1 with ``damping_per_s`` per row.
     frequency_hz : (n,) additive frequency contributions.
     """
@@ -61,14 +72,15 @@ class Configuration:
     field_t: np.ndarray
     gradient_t_per_m: np.ndarray
     spring_nm_per_rad: np.ndarray
-    amplitude_start_rad: np.ndarray
+    start_evidence_rad: np.ndarray
+    stop_rad: float
     ringdown_damping_per_s: np.ndarray
     ringdown_duration_s: np.ndarray
     damping_per_s: np.ndarray
     frequency_hz: np.ndarray
     hessian_t_per_m2: np.ndarray | None = None
     gravity_m_per_s2: np.ndarray | None = None
-    moment_factor: float = 1.0
+    moment_factor: float | np.ndarray = 1.0
     transverse: float = 0.0
     deflection: float = 0.0
     amplitude: float = 0.0
@@ -78,7 +90,6 @@ class Configuration:
     def base(cls, table, probe) -> Configuration:
         """Eq. 6 with the table's reference field and gradient."""
         n = len(table)
-        amplitude = table.amplitude_rad if table.amplitude_rad is not None else np.full(n, probe.theta_stop_rad)
         ringdown_damping = table.columns.get("damping_per_s", np.full(n, probe.damping_per_s))
         duration = table.columns.get("duration_s", ringdown_average.default_duration_s(table.f_hz))
         return cls(
@@ -86,12 +97,18 @@ class Configuration:
             field_t=table.field_t,
             gradient_t_per_m=table.gradient_t_per_m,
             spring_nm_per_rad=np.full(n, probe.spring_nm_per_rad),
-            amplitude_start_rad=amplitude,
+            start_evidence_rad=amplitude_evidence_rad(table, probe),
+            stop_rad=probe.theta_stop_rad,
             ringdown_damping_per_s=ringdown_damping,
             ringdown_duration_s=duration,
             damping_per_s=np.full(n, probe.damping_per_s),
             frequency_hz=np.zeros(n),
         )
+
+    def start_swing_rad(self, rest_rad) -> np.ndarray:
+        """Each ring-down's start swing about its rest angle ``rest_rad``: the evidence where the
+        lab uses it, else the stop less the deflection, θstop − |θs| (module docstring)."""
+        return np.where(np.isfinite(self.start_evidence_rad), self.start_evidence_rad, self.stop_rad - np.abs(rest_rad))
 
     def probe_frame(self):
         """(axes, field', gradient', Hessian') with axes (n, 3, 3) holding rows x', y', z'."""
@@ -109,11 +126,12 @@ class Configuration:
 def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
     """(h, c) with f = f00·h + c for every row (module docstring).
 
-    ``amplitude_nodes`` is (A_q (n, q), c_q (n, q)) from
-    :func:`mows.physics.ringdown_average.amplitude_nodes`; needed when ``config.amplitude`` ≠ 0.
+    ``amplitude_nodes(start_rad)`` gives (A_q (n, q), c_q (n, q)) of ring-downs that start at
+    ``start_rad`` (default: :func:`ringdown_nodes`, uncached); used when ``config.amplitude`` ≠ 0.
     """
     axes, field, gradient, hessian = config.probe_frame()
-    factor = config.moment_factor
+    factor = np.asarray(config.moment_factor, float)
+    factor = factor.reshape(factor.shape + (1,))  # broadcasts over a row's vector components
     along = np.zeros_like(field)
     along[:, 0] = field[:, 0]
     active_gradient = config.transverse * gradient
@@ -121,19 +139,62 @@ def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
     variants = [along] + ([field] if config.deflection else [])
     gravity = None if config.gravity_m_per_s2 is None else np.einsum("nij,nj->ni", axes, config.gravity_m_per_s2)
     local = dict(
-        gradient_t_per_m=factor * active_gradient,
-        hessian_t_per_m2=None if hessian is None else factor * hessian,
+        gradient_t_per_m=factor[..., None] * active_gradient,
+        hessian_t_per_m2=None if hessian is None else factor[..., None, None] * hessian,
         gravity_m_per_s2=gravity,
         spring_nm_per_rad=config.spring_nm_per_rad,
     )
     stiffness = [_rest_stiffness(probe, factor * b, **local) for b in variants]
     h = _readout(config, probe, _blend(stiffness, config.deflection))
     if config.amplitude:
-        amplitudes, weights = amplitude_nodes
+        rest = _potential(probe, factor * field, **local).rest_angle_rad()
+        start = config.start_swing_rad(rest)
+        amplitudes, weights = (amplitude_nodes or functools.partial(ringdown_nodes, config))(start)
         at_amplitude = [_amplitude_stiffness(probe, factor * b, amplitudes, **local) for b in variants]
         averaged = (weights * _readout(config, probe, _blend(at_amplitude, config.deflection))).sum(-1)
         h = h + config.amplitude * (averaged - h)
     return h, config.frequency_hz
+
+
+def ringdown_nodes(config: Configuration, start_rad) -> tuple:
+    """Amplitude nodes (A_q, c_q) of the configuration's ring-downs from ``start_rad``
+    (:func:`mows.physics.ringdown_average.amplitude_nodes`)."""
+    return ringdown_average.amplitude_nodes(
+        config.theta0_rad, start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s
+    )
+
+
+# table → {probe: start swings the lab takes from the table's amplitude_deg}
+_EVIDENCE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def amplitude_evidence_rad(table, probe) -> np.ndarray:
+    """The start swings (n,) the lab takes from the table, NaN where the stop decides.
+
+    An external table's ``amplitude_deg`` is the user's statement of how the ring-downs were
+    excited (a sweep at half the stop, say): used as given. Our own tables' column is an
+    estimate pooled from single fits (:func:`mows.lab.data.table.tool_table`): where it is right
+    it equals the stop less the deflection, and where it is not (strong fields) 0.4° of it moves
+    a 3.4 mT row by 3 mHz, ten times its σ; so the stop decides every row of our tables, and
+    the column stays a covariate. Without the column the stop decides every row."""
+    cached = _EVIDENCE.setdefault(table, {})
+    if probe not in cached:
+        given = table.amplitude_rad if table.amplitude_rad is not None and not table.written_by_mows else None
+        cached[probe] = np.full(len(table), np.nan) if given is None else given
+    return cached[probe]
+
+
+def reference_rest_angle_rad(table, probe) -> np.ndarray:
+    """The rest angle θs (n,) in the table's reference field and gradient in full; NaN where unstable."""
+    axes = table.probe_axes()
+    gradient = np.einsum("nai,nij,nbj->nab", axes, table.gradient_t_per_m, axes)
+    spring = np.full(len(table), probe.spring_nm_per_rad)
+    return _potential(probe, table.probe_field_t, gradient, None, None, spring).rest_angle_rad()
+
+
+def base_start_swing_rad(table, probe) -> np.ndarray:
+    """Each row's start swing at the table's reference field and the probe's stop."""
+    return Configuration.base(table, probe).start_swing_rad(reference_rest_angle_rad(table, probe))
 
 
 def _blend(values, weight):
@@ -192,16 +253,10 @@ def unevaluable_rows(table, probe) -> dict:
     _, field, gradient, _ = config.probe_frame()
     potential = _potential(probe, field, gradient, None, None, config.spring_nm_per_rad)
     at_rest = potential.rest_angle_rad()
-    amplitude = config.amplitude_start_rad
+    amplitude = config.start_swing_rad(at_rest)
     centre = potential.cycle_centre_rad(amplitude)
     config.transverse = config.deflection = config.amplitude = 1.0
-    h, _ = frequency_factor(
-        config,
-        probe,
-        ringdown_average.amplitude_nodes(
-            config.theta0_rad, amplitude, config.ringdown_damping_per_s, config.ringdown_duration_s
-        ),
-    )
+    h, _ = frequency_factor(config, probe)
     limit_deg = math.degrees(potential.half_width_rad)
     found = {}
     for row in np.flatnonzero(~np.isfinite(at_rest)):

@@ -32,10 +32,9 @@ import numpy as np
 import scipy.optimize
 
 from mows.lab.data.table import MeasurementTable
-from mows.lab.model.configuration import Configuration, frequency_factor
+from mows.lab.model.configuration import Configuration, frequency_factor, ringdown_nodes
 from mows.lab.model.effects import Effect, testable
 from mows.lab.model.least_squares import FitResult, Problem
-from mows.physics import ringdown_average
 
 
 class FrequencyModel:
@@ -117,8 +116,7 @@ class FrequencyModel:
         ordered = sorted(range(len(self.effects)), key=lambda i: self.effects[i].stage)
         for i in ordered:
             self.effects[i].apply(config, table, probe, *(float(v) for v in values[bounds[i] : bounds[i + 1]]))
-        nodes = ringdown_nodes(table, config) if config.amplitude else None
-        return frequency_factor(config, probe, nodes)
+        return frequency_factor(config, probe, lambda start_rad: cached_nodes(table, config, start_rad))
 
     def predict(self, table, values) -> np.ndarray:
         """f (Hz) for ``values`` = [f00, effect parameters…] (or a :class:`FitResult`)."""
@@ -164,12 +162,13 @@ _NODES: weakref.WeakKeyDictionary[MeasurementTable, dict[bytes, tuple[np.ndarray
 )
 
 
-def ringdown_nodes(table, config: Configuration):
-    """Amplitude nodes of the table's ring-downs, cached per table and ring-down inputs (the
-    inputs also come from the probe where the table has no column: Configuration.base)."""
-    inputs = (config.amplitude_start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s)
+def cached_nodes(table, config: Configuration, start_rad):
+    """Amplitude nodes of the table's ring-downs from ``start_rad``, cached per table and
+    ring-down inputs (the inputs also come from the probe where the table has no column:
+    Configuration.base; the start swings from the model's own rest angles)."""
+    inputs = (start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s)
     key = b"".join(np.ascontiguousarray(values, float).tobytes() for values in inputs)
     cached = _NODES.setdefault(table, {})
     if key not in cached:
-        cached[key] = ringdown_average.amplitude_nodes(table.theta0_rad, *inputs)
+        cached[key] = ringdown_nodes(config, start_rad)
     return cached[key]

@@ -9,8 +9,24 @@ A plugin file defines effects with the :func:`effect` decorator::
     def coil_heating(rows, k_per_a2_nm_per_rad):
         return {"stiffness_nm_per_rad": k_per_a2_nm_per_rad * rows.coil_current_a ** 2}
 
-A plugin returns ``stiffness_nm_per_rad`` (added to kM: it enters U as ½·Δk·θ², so it goes
-through the same equilibrium and harmonic balance) and/or ``frequency_hz`` (added to f).
+A plugin returns a dict of per-row changes (each a number or one per row). The physical ones go
+through the full potential U(θ) (PHYSICS.md §4: exact rest angle, start swing and harmonic
+balance), so they compose with every other effect at any field:
+
+====================================  =======================================================
+``moment_scale``                      relative change of the moment m: m → m·(1 + value)
+``stiffness_nm_per_rad``              added to kM: U gains ½·Δk·θ²
+``field_offset_t``                    in-plane field (bx, by) or (bx, by, bz), global frame, T,
+                                      added to the reference field
+``tilt_rad``                          small rotations (about x, about y) of the reference field
+                                      and gradient into the plane, rad
+``frequency_hz``                      added to f after the potential (a readout term, no physics)
+====================================  =======================================================
+
+Rows expose the table's columns and the reference in the probe frame
+(:meth:`mows.lab.data.table.MeasurementTable.derived_columns`: ``rows.b_along_t``, ``rows.b_perp_t``,
+``rows.g_t_per_m`` …), every covariate the lab names in its hints. A moment that falls with
+temperature is ``{"moment_scale": c_per_k * (rows.temperature_k - t_ref_k)}`` (docs/model_lab.md).
 Installed packages register effects under the entry-point group ``mows.lab.effects``.
 """
 
@@ -25,9 +41,12 @@ from collections.abc import Callable
 import numpy as np
 
 from mows.lab.data.table import MissingColumnError
+from mows.lab.model.configuration import rotation_matrix
 from mows.lab.model.effects import MECHANICS, Effect, Parameter
 
 ENTRY_POINT_GROUP = "mows.lab.effects"
+# What a plugin may return: name → the trailing shape of one row's value.
+OUTPUTS = {"moment_scale": (), "stiffness_nm_per_rad": (), "field_offset_t": (3,), "tilt_rad": (2,), "frequency_hz": ()}
 
 
 def effect(
@@ -37,8 +56,8 @@ def effect(
 
     ``parameters`` maps each name to ``(off_value, lower, upper, unit)``; the off value must
     be 0 (the effect is absent at 0) and lie within the bounds. The function receives the
-    table (columns as attributes) and the parameter values, and returns a dict with
-    ``stiffness_nm_per_rad`` and/or ``frequency_hz`` (scalars or per-row arrays).
+    table (columns as attributes) and the parameter values, and returns a dict of the
+    changes in the module docstring's table (scalars or per-row arrays).
     """
     specs = []
     for pname, spec in parameters.items():
@@ -68,18 +87,12 @@ def effect(
             except Exception as error:  # the plugin's bug is the user's input: say whose and where
                 raise ValueError(f"{where} raised {type(error).__name__}: {error} (called with {called})") from error
             if not isinstance(result, dict):
-                raise ValueError(
-                    f"{where} returned {type(result).__name__}, not a dict of stiffness_nm_per_rad and/or frequency_hz"
-                )
-            unknown = set(result) - {"stiffness_nm_per_rad", "frequency_hz"}
+                raise ValueError(f"{where} returned {type(result).__name__}, not a dict of {', '.join(OUTPUTS)}")
+            unknown = set(result) - set(OUTPUTS)
             if unknown:
-                raise ValueError(
-                    f"effect {name} returned {sorted(unknown)}; allowed: stiffness_nm_per_rad, frequency_hz"
-                )
+                raise ValueError(f"effect {name} returned {sorted(unknown)}; allowed: {', '.join(OUTPUTS)}")
             n = len(config.theta0_rad)
-            added = {key: _finite_values(where, key, value, n, called) for key, value in result.items()}
-            config.spring_nm_per_rad = config.spring_nm_per_rad + added.get("stiffness_nm_per_rad", 0.0)
-            config.frequency_hz = config.frequency_hz + added.get("frequency_hz", 0.0)
+            _apply_outputs(config, {key: _finite_values(where, key, value, n, called) for key, value in result.items()})
 
         return Effect(
             name,
@@ -98,13 +111,33 @@ def effect(
     return decorate
 
 
+def _apply_outputs(config, changes: dict) -> None:
+    """Edit the configuration by a plugin's per-row ``changes`` (module docstring)."""
+    if "tilt_rad" in changes:
+        rotations = np.array([rotation_matrix((tx, ty, 0.0)) for tx, ty in changes["tilt_rad"]])
+        config.field_t = np.einsum("nij,nj->ni", rotations, config.field_t)
+        config.gradient_t_per_m = np.einsum("nai,nij,nbj->nab", rotations, config.gradient_t_per_m, rotations)
+    if "field_offset_t" in changes:
+        config.field_t = config.field_t + changes["field_offset_t"]
+    if "moment_scale" in changes:
+        config.moment_factor = config.moment_factor * (1.0 + changes["moment_scale"])
+    config.spring_nm_per_rad = config.spring_nm_per_rad + changes.get("stiffness_nm_per_rad", 0.0)
+    config.frequency_hz = config.frequency_hz + changes.get("frequency_hz", 0.0)
+
+
 def _finite_values(where: str, key: str, value, n: int, called: str) -> np.ndarray:
-    """A plugin's returned ``key`` as n finite numbers, or why not."""
+    """A plugin's returned ``key`` as n finite values of its shape (OUTPUTS), or why not; an
+    in-plane field offset (bx, by) gains bz = 0."""
+    shape = OUTPUTS[key]
     try:
-        values = np.broadcast_to(np.asarray(value, dtype=float), (n,))
+        values = np.asarray(value, dtype=float)
+        if key == "field_offset_t" and values.shape[-1:] == (2,):
+            values = np.concatenate([values, np.zeros(values.shape[:-1] + (1,))], axis=-1)
+        values = np.broadcast_to(values, (n, *shape))
     except (TypeError, ValueError):
-        raise ValueError(f"{where} returned {key} = {value!r}: expected a number or {n} numbers, one per row") from None
-    bad = np.flatnonzero(~np.isfinite(values))
+        per_row = f"{shape[0]} numbers" if shape else "a number"
+        raise ValueError(f"{where} returned {key} = {value!r}: expected {per_row} or one such per row ({n})") from None
+    bad = np.flatnonzero(~np.isfinite(values).reshape(n, -1).all(-1))
     if bad.size:
         raise ValueError(
             f"{where} returned NaN or infinite {key} in {bad.size} of {n} rows (first: row {bad[0] + 1}) "

@@ -23,6 +23,11 @@
    amplitude's weakening of the gradient springs) is thus put back at its physical value, or
    dropped, once the other effect is in.
 
+Every comparison of two models is the candidates' quasi-likelihood judgement (the verdict's):
+Δχ²/φ − Δk·ln n with φ the scatter the better model leaves
+(:func:`mows.lab.diagnosis.candidates.quasi_gain`); at noise it is the BIC difference. While the
+residual stays far above noise no move that shaves a little off a huge χ² passes.
+
 Guard against over-fitting: the model grows only by forward steps, on strong evidence (or by
 known physics, which adds no parameter and may cost at most ΔBIC 2); every revisit move lowers
 the BIC — a move to fewer free parameters by any amount, to as many by more than 2 (positive
@@ -39,7 +44,7 @@ import math
 
 import numpy as np
 
-from mows.lab.diagnosis.candidates import STRONG_DELTA_BIC, TIE_DELTA_BIC, rank_candidates
+from mows.lab.diagnosis.candidates import STRONG_DELTA_BIC, TIE_DELTA_BIC, quasi_gain, rank_candidates
 from mows.lab.diagnosis.physical_aliases import alias_statements
 from mows.lab.diagnosis.verdict import diagnose
 from mows.lab.model.effects import testable
@@ -135,7 +140,7 @@ def prefer_physical(found, pool, probe, history, cross_validate: bool = True):
         best = None
         for form, new in _physical_replacements(fit, generic, pool, probe):
             better = best is None or (form.fixed, -new.bic) > (best[0].fixed, -best[1].bic)
-            if new.bic < fit.bic + TIE_DELTA_BIC and better:
+            if quasi_gain(fit, new) > -TIE_DELTA_BIC and better:
                 best = (form, new)
         if best is None:
             continue
@@ -196,7 +201,7 @@ def _forward_step(found):
             fit = candidate.physics.fit or (found.fit.model + candidate.effect.at_physics()).fit(
                 found.fit.table, start=found.fit.values[1:]
             )
-            if found.fit.bic - fit.bic > -TIE_DELTA_BIC:  # the one-step estimate may be off
+            if quasi_gain(found.fit, fit) > -TIE_DELTA_BIC:  # the one-step estimate may be off
                 return (
                     f"add {candidate.label_of(candidate.physics)}: known physics the data cannot reject "
                     f"(ΔBIC {found.fit.bic - fit.bic:+.1f}, its predicted signal χ² "
@@ -232,7 +237,7 @@ def _best_move(fit, pool, probe, freeing: bool):
 
 
 def _accepted(old, new, freed: bool) -> bool:
-    return old.bic - new.bic > _required_gain(old.k, new.k, freed)
+    return quasi_gain(old, new) > _required_gain(old.k, new.k, freed)
 
 
 def _required_gain(old_k: int, new_k: int, freed: bool) -> float:
@@ -297,5 +302,5 @@ def _replacements(fit, start, pool, probe, replaced) -> list:
         (c.label_of(form), form.fit, replaced.fixed and c.name == replaced.name)
         for c in candidates
         for form in c.forms
-        if form.fit is not None and start.bic - form.fit.bic > TIE_DELTA_BIC and (form.fixed or c.within_bounds)
+        if form.fit is not None and quasi_gain(start, form.fit) > TIE_DELTA_BIC and (form.fixed or c.within_bounds)
     ]

@@ -149,10 +149,10 @@ CASES = [
     ("fit-a-csv", ["fit", "{d}/sweep.csv"], 2, ["not a bag", "mows lab"]),
     # lab
     (
-        "lab-reference-for-a-csv",
+        "lab-reference-for-a-csv-with-its-own",
         ["lab", "compare", "{d}/sweep.csv", "--reference", "{d}/nothere.yaml"],
         2,
-        ["--reference", "bags"],
+        ["already has reference columns", "give no --reference"],
     ),
     ("lab-f-in-khz", ["lab", "compare", "{d}/sweep_khz.csv"], 2, ["f00", "kHz"]),
     ("lab-ringdown-negative-f00", ["lab", "ringdown", "{d}/bag", "--f00-hz", "-3"], 2, ["--f00-hz"]),

@@ -137,7 +137,6 @@ def run(args) -> int:
     if args.lab_command == "ringdown":
         return run_ringdown(args)
     inputs = [args.table, args.probe, *args.plugin] + ([args.reference] if args.reference else [])
-    _check_bag_options(args)
     if args.lab_command == "report":
         check_output(args.output, inputs, args.force)
     probe = _probe(args.probe)
@@ -191,27 +190,6 @@ def run(args) -> int:
     elif args.lab_command != "report":
         print(format_text(report, table, args.lab_command))
     return 0
-
-
-def _check_bag_options(args) -> None:
-    """ValueError naming the bag-only options given for a table that is no bag (they would be
-    silently ignored)."""
-    if is_bag(args.table):
-        return
-    given = [
-        option
-        for option, used in (
-            ("--reference", args.reference is not None),
-            ("--magnet-position", tuple(args.magnet_position) != (0.0, 0.0, 0.0)),
-        )
-        if used
-    ]
-    if given:
-        options = " and ".join(given)
-        raise ValueError(
-            f"{options} {'apply' if len(given) > 1 else 'applies'} to bags only: a CSV table gives its "
-            f"reference field in its ref_* columns ({args.table} is no bag); leave {options} out"
-        )
 
 
 class WorkBar:

@@ -63,9 +63,9 @@ MAX_SCATTER_RAD = math.radians(1.0)  # a start swing scattering more is no drive
 MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
 MEDIAN_EFFICIENCY = 1.2533  # √(π/2): the median's standard error over the mean's, normal samples
 # Where no fit pins the stop: the drive, switched off at a current peak, leaves every ring-down
-# at the housing stop (the simulator's first swing + |θs|: 24.03 ± 0.01° over 30 ring-downs at
-# 0 to ±2 A for a 24° stop).
-STOP_PRIOR_STD_RAD = math.radians(0.03)
+# at the housing stop, scattered by sd 0.01° (the simulator's first swing + |θs| over 30
+# ring-downs at 0 to ±2 A for a 24° stop: 24.03 ± 0.01°, mean ± sd).
+STOP_PRIOR_STD_RAD = math.radians(0.01)
 MIN_STOP_FITS = 5
 SWING_FLOOR_RAD = 1e-6  # fits that agree exactly (synthetic data) still leave a finite weight
 

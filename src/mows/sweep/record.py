@@ -193,15 +193,19 @@ class SweepRecord:
 
     def fitted_start_amplitudes_rad(self, stop_rad: float = math.nan) -> tuple[np.ndarray, list[str]]:
         """Each ring-down's start swing from its fit alone, and notes of what was assumed: the
-        fit's θmax where it determined it, else stop − |θs − θ0| with the fit's rest offset
+        fit's θmax where it determined it within the stop, else stop − |θs − θ0| with the fit's rest offset
         (the stop pooled, ``stop_rad`` where no fit gives it); where a fit determined neither,
         the probe is taken as undeflected."""
         rest = self.rest_offsets_rad()
-        amplitude = self._column("amplitude_rad")
         stop = self.stop_amplitude_rad(fallback_rad=stop_rad)
+        amplitude = self._column("amplitude_rad")
+        beyond = amplitude > stop  # no swing about the rest angle is wider than the stop
+        amplitude[beyond] = np.nan
         start = np.where(np.isfinite(amplitude), amplitude, start_swing_rad(stop, np.nan_to_num(rest)))
         unknown = np.count_nonzero(~np.isfinite(rest) & ~np.isfinite(amplitude))
         notes = []
+        if beyond.any():
+            notes.append(f"{np.count_nonzero(beyond)} fits' θmax beyond the stop {math.degrees(stop):.2f}°: not used")
         if not np.isfinite(self.stop_amplitude_rad()) and math.isfinite(stop_rad):
             notes.append(
                 f"no fit determined θmax and the rest offset: the stop is the probe's {math.degrees(stop_rad):.2f}°"

@@ -38,6 +38,7 @@ from mows.lab.data.readers import is_bag, load_table
 from mows.lab.data.table import MeasurementTable
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import PAPER_PROBE, Probe
+from mows.physics.ringdown_average import start_swing_rad
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -101,7 +102,7 @@ def run(args) -> int:
         print(f"mows calibrate: {error}", file=sys.stderr)
         return 2
     if args.table:
-        write_points(args.table, points, field_wiring)
+        write_points(args.table, points, field_wiring, nominal.theta_stop_rad)
     date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
     calibration.probe().to_yaml(args.output, calibration.record(date, args.hardware_id or scenario.name))
     print(calibration.report())
@@ -202,7 +203,11 @@ TABLE_COLUMNS = (
 )
 
 
-def write_points(path, points, field_wiring: str) -> None:
+def write_points(path, points, field_wiring: str, stop_rad: float) -> None:
+    """The calibration's points as a table. ``amplitude_deg`` is each fit's θmax, or where the
+    fit did not determine it the stop less its rest offset (the start swing's rule), flagged 0
+    in ``amplitude_fitted`` so that :func:`read_points` reads it back as not measured."""
+    fitted = np.array([math.isfinite(p.amplitude_rad) for p in points])
     columns = {
         "theta0_deg": np.degrees([p.theta0_rad for p in points]),
         "f_hz": np.array([p.frequency_hz for p in points]),
@@ -210,20 +215,20 @@ def write_points(path, points, field_wiring: str) -> None:
         "supply_current_a": np.array([p.supply_current_a for p in points]),
         "damping_per_s": np.array([p.damping_per_s for p in points]),
         "duration_s": np.array([p.duration_s for p in points]),
-        "amplitude_deg": np.degrees(_pooled_amplitudes_rad(points)),
+        "amplitude_deg": np.degrees(_start_amplitudes_rad(points, stop_rad)),
+        "amplitude_fitted": fitted.astype(float),
         "start_offset_s": np.array([p.start_offset_s for p in points]),
         "gradient_wiring": np.array([float(p.wiring != field_wiring) for p in points]),
     }
     MeasurementTable(columns, str(path)).to_csv(path)
 
 
-def _pooled_amplitudes_rad(points) -> np.ndarray:
-    """Each point's θmax; one the fit did not determine (NaN) takes the median of the others:
-    every ring-down starts from the same stop, and the model assumes the stop anyway."""
+def _start_amplitudes_rad(points, stop_rad: float) -> np.ndarray:
+    """Each point's θmax, or where its fit did not determine it the stop less the fit's rest
+    offset (0 where that is not determined either): a swing the physics allows, never NaN."""
     amplitude = np.array([p.amplitude_rad for p in points], float)
-    if not np.isfinite(amplitude).any():
-        raise ValueError("no ring-down of the calibration determined θmax: the table cannot be written")
-    return np.where(np.isfinite(amplitude), amplitude, np.nanmedian(amplitude))
+    rest = np.nan_to_num(np.array([p.rest_offset_rad for p in points], float))
+    return np.where(np.isfinite(amplitude), amplitude, np.nan_to_num(start_swing_rad(stop_rad, rest)))
 
 
 def read_points(path, field_wiring: str) -> list:
@@ -240,7 +245,7 @@ def read_points(path, field_wiring: str) -> list:
             math.radians(c["theta0_deg"][i]),
             float(c["f_hz"][i]),
             float(c["f_std_hz"][i]),
-            math.radians(c["amplitude_deg"][i]),
+            math.radians(c["amplitude_deg"][i]) if c.get("amplitude_fitted", np.ones(len(table)))[i] else math.nan,
             float(c["damping_per_s"][i]),
             float(c["duration_s"][i]),
             float(c["start_offset_s"][i]),

@@ -255,11 +255,13 @@ def from_sweep(record, reference, probe, decomposition=None) -> MeasurementTable
     """The table of one rotation sweep (:class:`mows.sweep.record.SweepRecord`) in a static
     ``reference`` (anything :func:`mows.lab.data.reference.reference_source` takes). With a first-principles
     ``decomposition`` of the sweep, each ring-down's start swing is stop − |θs| at its field
-    (:meth:`~mows.sweep.record.SweepRecord.start_amplitudes_rad`); else the pooled stop amplitude."""
+    (:meth:`~mows.sweep.record.SweepRecord.start_amplitudes_rad`); else each fit's own
+    (:meth:`~mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`, the probe's stop where
+    no fit gives it)."""
     starts = (
         record.start_amplitudes_rad(decomposition, probe)
         if decomposition is not None and decomposition.ok and decomposition.model == "first_principles"
-        else None
+        else record.fitted_start_amplitudes_rad(probe.theta_stop_rad)[0]
     )
     columns = record.table_columns(starts)
     columns.update(reference_columns(reference, len(record.points)))

@@ -17,6 +17,7 @@ FIT_FIELDS = (
     "frequency_std_hz",
     "damping_per_s",
     "amplitude_rad",
+    "rest_offset_rad",
     "duration_s",
 )  # what the schedule and the calibration read of a fit
 

@@ -1,6 +1,7 @@
 """What a calibration leaves out or fills in, it says: a θmax the fits did not determine is
-read from a table as ``mows calibrate --table`` writes it (the median of the others), and a
-ring-down without a finite frequency is left out by number and reason."""
+read from a table as not measured, as ``mows calibrate --table`` flags it (the calibration then
+takes the start swing from the stop), and a ring-down without a finite frequency is left out
+by number and reason."""
 
 import dataclasses
 import math
@@ -9,7 +10,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from mows.cli.calibrate import read_points
+from mows.cli.calibrate import read_points, write_points
 from mows.estimate.calibration_record import KnownConstants
 from mows.estimate.probe_calibration import calibrate_probe
 from mows.physics.probe import PAPER_PROBE
@@ -37,13 +38,18 @@ def with_amplitudes(path, tmp_path, name, value):
     return out
 
 
-def test_a_nan_theta_max_is_read_as_the_median_of_the_others(tmp_path):
+def test_a_nan_theta_max_is_read_as_not_measured_like_a_flagged_one(tmp_path, wirings):
     undetermined = read_points(with_amplitudes(TABLE, tmp_path, "nan.csv", "nan"), "helmholtz")
-    others = [
-        math.degrees(p.amplitude_rad) for i, p in enumerate(read_points(TABLE, "helmholtz")) if i not in UNDETERMINED
-    ]
-    filled = read_points(with_amplitudes(TABLE, tmp_path, "median.csv", repr(float(np.median(others)))), "helmholtz")
-    assert [p.amplitude_rad for p in undetermined] == pytest.approx([p.amplitude_rad for p in filled], rel=1e-12)
+    assert [i for i, p in enumerate(undetermined) if math.isnan(p.amplitude_rad)] == list(UNDETERMINED)
+    known = KnownConstants.of(PAPER_PROBE)
+    calibration = calibrate_probe(undetermined, wirings, known, "helmholtz")
+    written = tmp_path / "written.csv"
+    write_points(written, undetermined, "helmholtz", PAPER_PROBE.theta_stop_rad)
+    again = read_points(written, "helmholtz")
+    assert [math.isnan(p.amplitude_rad) for p in again] == [math.isnan(p.amplitude_rad) for p in undetermined]
+    np.testing.assert_allclose(
+        calibrate_probe(again, wirings, known, "helmholtz").values, calibration.values, rtol=1e-12
+    )
 
 
 def test_a_ring_down_without_a_finite_frequency_is_left_out_by_number(wirings):

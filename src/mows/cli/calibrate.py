@@ -46,6 +46,7 @@ from mows.lab.data.readers import is_bag, load_table
 from mows.lab.data.table import MeasurementTable, rows_text
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import PAPER_PROBE, Probe
+from mows.physics.ringdown_average import start_swing_rad
 from mows.records.files import check_outputs, writing
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
@@ -127,7 +128,7 @@ def run(args) -> int:
     with writing(outputs, inputs, args.force) as written:
         written.temporaries[0].write_text(calibration.probe().yaml_text(record))
         if args.table:
-            write_points(written.temporaries[1], points, field_wiring)
+            write_points(written.temporaries[1], points, field_wiring, nominal.theta_stop_rad)
     print(calibration.report())
     if args.simulate:
         print(compare_with_truth(calibration, scenario.probe))
@@ -261,7 +262,11 @@ TABLE_COLUMNS = (
 )
 
 
-def write_points(path, points, field_wiring: str) -> None:
+def write_points(path, points, field_wiring: str, stop_rad: float) -> None:
+    """The calibration's points as a table. ``amplitude_deg`` is each fit's θmax, or where the
+    fit did not determine it the stop less its rest offset (the start swing's rule), flagged 0
+    in ``amplitude_fitted`` so that :func:`read_points` reads it back as not measured."""
+    fitted = np.array([math.isfinite(p.amplitude_rad) for p in points])
     columns = {
         "theta0_deg": np.degrees([p.theta0_rad for p in points]),
         "f_hz": np.array([p.frequency_hz for p in points]),
@@ -269,33 +274,35 @@ def write_points(path, points, field_wiring: str) -> None:
         "supply_current_a": np.array([p.supply_current_a for p in points]),
         "damping_per_s": np.array([p.damping_per_s for p in points]),
         "duration_s": np.array([p.duration_s for p in points]),
-        "amplitude_deg": np.degrees(_pooled_amplitudes_rad(points)),
+        "amplitude_deg": np.degrees(_start_amplitudes_rad(points, stop_rad)),
+        "amplitude_fitted": fitted.astype(float),
         "start_offset_s": np.array([p.start_offset_s for p in points]),
         "gradient_wiring": np.array([float(p.wiring != field_wiring) for p in points]),
     }
     MeasurementTable(columns, str(path)).to_csv(path)
 
 
-def _pooled_amplitudes_rad(points) -> np.ndarray:
-    """Each point's θmax; one the fit did not determine (NaN) takes the median of the others:
-    every ring-down starts from the same stop, and the model assumes the stop anyway."""
+def _start_amplitudes_rad(points, stop_rad: float) -> np.ndarray:
+    """Each point's θmax, or where its fit did not determine it the stop less the fit's rest
+    offset (0 where that is not determined either): a swing the physics allows, never NaN."""
     amplitude = np.array([p.amplitude_rad for p in points], float)
-    if not np.isfinite(amplitude).any():
-        raise ValueError("no ring-down of the calibration determined θmax: the table cannot be written")
-    return np.where(np.isfinite(amplitude), amplitude, np.nanmedian(amplitude))
+    rest = np.nan_to_num(np.array([p.rest_offset_rad for p in points], float))
+    return np.where(np.isfinite(amplitude), amplitude, np.nan_to_num(start_swing_rad(stop_rad, rest)))
 
 
 def _table_columns(path) -> Mapping:
     """The table's columns, every calibration column a finite number in every row; a θmax the
-    fits did not determine (NaN in ``amplitude_deg``) is read as :func:`write_points` writes
-    it, the median of the others. A file that is no plain CSV of numbers is read by the lab's
-    reader, which says what is wrong with it."""
+    fits did not determine (NaN in ``amplitude_deg``) is read as not measured, as
+    :func:`write_points` flags it (``amplitude_fitted`` 0). A file that is no plain CSV of numbers
+    is read by the lab's reader, which says what is wrong with it."""
     columns = _numeric_columns(path)
     if columns is None:
         return load_table(path).columns
     amplitude = columns.get("amplitude_deg")
-    if amplitude is not None and np.isfinite(amplitude).any():
-        columns["amplitude_deg"] = np.where(np.isfinite(amplitude), amplitude, np.nanmedian(amplitude))
+    if amplitude is not None:
+        flagged = columns.get("amplitude_fitted", np.ones(amplitude.shape))
+        columns["amplitude_fitted"] = (np.isfinite(amplitude) & (flagged != 0)).astype(float)
+        columns["amplitude_deg"] = np.where(np.isfinite(amplitude), amplitude, 0.0)
     for name in ("theta0_deg", "f_hz", "f_std_hz", *TABLE_COLUMNS):
         bad = np.flatnonzero(~np.isfinite(columns[name])) if name in columns else ()
         if len(bad):
@@ -328,7 +335,7 @@ def read_points(path, field_wiring: str) -> list:
             math.radians(c["theta0_deg"][i]),
             float(c["f_hz"][i]),
             float(c["f_std_hz"][i]),
-            math.radians(c["amplitude_deg"][i]),
+            math.radians(c["amplitude_deg"][i]) if c.get("amplitude_fitted", np.ones(len(c["f_hz"])))[i] else math.nan,
             float(c["damping_per_s"][i]),
             float(c["duration_s"][i]),
             float(c["start_offset_s"][i]),

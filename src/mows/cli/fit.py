@@ -27,6 +27,9 @@ from mows.records.files import check_output, writing
 from mows.records.stamps import NS_PER_S
 from mows.sweep.record import SweepPoint, SweepRecord
 
+# Fits that one static field describes this well are one sweep: its field gives each rest angle.
+MAX_SWEEP_CHI2_DOF = 10.0
+
 
 def add_arguments(parser) -> None:
     parser.add_argument("bag", help="a rosbag2 directory (or .mcap) recorded by the driver (record_path)")
@@ -81,8 +84,10 @@ def run(args) -> int:
     print(f"{len(ok)} of {len(fits)} ring-downs fitted")
     if args.csv and ok:
         with writing([args.csv], inputs, args.force) as outputs:
-            write_table(outputs.temporaries[0], ok, probe)
+            notes = write_table(outputs.temporaries[0], ok, probe)
         print(f"{outputs.report()}: {len(ok)} rows")
+        for note in notes:
+            print(f"note: {note}")
     elif args.csv:
         print(f"mows fit: no ring-down fitted: {args.csv} not written", file=sys.stderr)
     return 0
@@ -115,14 +120,28 @@ def recorded_ringdowns(path, probe: Probe, args):
         yield segment, FitOptions() if args.paper_model else FitOptions.lever_aware(pair, probe, theta0)
 
 
-def write_table(path, fits, probe: Probe) -> None:
-    """The OK fits as a model-lab table (:meth:`mows.sweep.record.SweepRecord.table_columns`: each
-    ring-down's start swing is the stop amplitude pooled over the fits that measured θmax),
-    marked as the project's own (:func:`mows.lab.data.table.tool_table`)."""
+def write_table(path, fits, probe: Probe) -> list[str]:
+    """The OK fits as a model-lab table; returns notes of how the start swings were found.
+
+    Every ring-down starts at the housing stop, so its swing is stop − |θs|
+    (:func:`mows.physics.ringdown_average.start_swing_rad`). θs comes from the first-principles
+    decomposition of all the fits as one sweep in one static field
+    (:meth:`mows.sweep.record.SweepRecord.start_amplitudes_rad`) where that describes them
+    (χ²/dof ≤ MAX_SWEEP_CHI2_DOF), else from each fit's own rest offset
+    (:meth:`~mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`); the stop is pooled
+    over the fits that determined θmax, else the probe's. The table is marked as the project's
+    own (:func:`mows.lab.data.table.tool_table`)."""
     record = SweepRecord(
         [
             SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz, window.start_ns / NS_PER_S)
             for window, fit in fits
         ]
     )
-    tool_table(record.table_columns(), str(path)).to_csv(path)
+    decomposition = record.decompose(probe, probe.f00_hz)
+    if decomposition.ok and decomposition.chi2_dof <= MAX_SWEEP_CHI2_DOF:
+        start = record.start_amplitudes_rad(decomposition, probe)
+        notes = [f"start swings: the stop less the rest angle in the sweep's field ({decomposition.report()})"]
+    else:
+        start, notes = record.fitted_start_amplitudes_rad(probe.theta_stop_rad)
+    tool_table(record.table_columns(start), str(path)).to_csv(path)
+    return notes

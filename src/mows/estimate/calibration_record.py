@@ -53,6 +53,7 @@ class CalibrationPoint:
     damping_per_s: float
     duration_s: float
     start_offset_s: float = 0.0  # first fitted sample after the switch-off
+    rest_offset_rad: float = math.nan  # the fit's rest offset θs − θ0 (NaN: not determined)
 
     @classmethod
     def from_fit(cls, fit, wiring: str, supply_current_a: float) -> CalibrationPoint:
@@ -66,6 +67,7 @@ class CalibrationPoint:
             fit.damping_per_s,
             fit.duration_s,
             fit.start_offset_s,
+            float(getattr(fit, "rest_offset_rad", math.nan)),
         )
 
 

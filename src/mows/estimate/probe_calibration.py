@@ -62,6 +62,11 @@ SCATTER_ITERATIONS = 2  # weights from the scatter, the scatter from the fit: tw
 MAX_SCATTER_RAD = math.radians(1.0)  # a start swing scattering more is no drive into the stop
 MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
 MEDIAN_EFFICIENCY = 1.2533  # √(π/2): the median's standard error over the mean's, normal samples
+# Where no fit pins the stop: the drive, switched off at a current peak, leaves every ring-down
+# at the housing stop, scattered by sd 0.01° (the simulator's first swing + |θs| over 30
+# ring-downs at 0 to ±2 A for a 24° stop: 24.03 ± 0.01°, mean ± sd).
+STOP_PRIOR_STD_RAD = math.radians(0.01)
+MIN_STOP_FITS = 5
 SWING_FLOOR_RAD = 1e-6  # fits that agree exactly (synthetic data) still leave a finite weight
 NOMINAL_BETA0_HZ_PER_T = 3.68e3  # the paper's probe: only the sign of a model shift is used
 
@@ -237,24 +242,24 @@ def _least_squares(residuals, x0, steps):
 
 
 def _start_swing(points, known: KnownConstants) -> tuple:
-    """The ring-downs' start swing at the switch-off and its standard uncertainty: as given
-    (``known.start_swing_rad``), else measured by the fits, θmax at the first fitted sample
-    grown back by e^(δ·t) to the switch-off. A single fit's θmax scatters by degrees and runs
-    high in strong opposing fields (up to +5° at −3.4 mT in the simulator), so the median, with
-    its standard error from the median absolute deviation. A homogeneous sweep cannot tell the
-    swing from β0: this measurement is what holds it, no assumption of where the drive left the
-    probe (a prior at the stop, 24° ± 0.1°, would sit 0.2° above the simulator's mean swing of
-    23.78° and bias β0)."""
+    """The housing stop every ring-down starts from, and its standard uncertainty: as given
+    (``known.start_swing_rad``), else measured by the fits that determined both θmax and the
+    rest offset, θmax grown back by e^(δ·t) to the switch-off plus |θs − θ0|
+    (:func:`mows.physics.ringdown_average.start_swing_rad` inverted), their median with its
+    standard error from the median absolute deviation; with fewer than MIN_STOP_FITS of them
+    the probe's stop ± STOP_PRIOR_STD_RAD.
+    A homogeneous sweep cannot tell the stop from β0: this is what holds it."""
     if known.start_swing_rad is not None:
         return known.start_swing_rad, known.start_swing_std_rad
-    # a fit whose θmax is not determined (NaN) says nothing about the swing
-    swings = np.array([p.amplitude_rad * math.exp(p.damping_per_s * p.start_offset_s) for p in points])
-    swings = swings[np.isfinite(swings)]
-    if swings.size == 0:
-        raise CalibrationError("no ring-down determined its amplitude θmax: the start swing is unknown")
-    median = float(np.median(swings))
-    spread = MAD_TO_SD * float(np.median(np.abs(swings - median)))
-    std = MEDIAN_EFFICIENCY * spread / math.sqrt(len(swings)) if len(swings) > 1 else math.inf
+    stops = np.array(
+        [p.amplitude_rad * math.exp(p.damping_per_s * p.start_offset_s) + abs(p.rest_offset_rad) for p in points]
+    )
+    stops = stops[np.isfinite(stops)]
+    if stops.size < MIN_STOP_FITS:  # a spread from fewer is no standard error
+        return known.theta_stop_rad, STOP_PRIOR_STD_RAD
+    median = float(np.median(stops))
+    spread = MAD_TO_SD * float(np.median(np.abs(stops - median)))
+    std = MEDIAN_EFFICIENCY * spread / math.sqrt(len(stops))
     return median, max(std, SWING_FLOOR_RAD)
 
 

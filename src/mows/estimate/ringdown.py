@@ -29,9 +29,20 @@ fit runs in three stages so that this costs about a millisecond:
    mostly at 2f), the phase of the complex demodulate, and the envelope decay for δ;
 2. Levenberg–Marquardt on every D-th sample. Subsampling keeps white noise white and the
    model's harmonics below the new Nyquist frequency, so this stage lands within a few
-   standard deviations of the optimum at 1/D of the cost;
+   standard deviations of the optimum at 1/D of the cost. In a strong field the cost over
+   (θmax, ε) has several minima (near θ0 = 90° the signal is nearly even in the deflection,
+   and κ trades off against θmax): this stage is also started from every minimum of a grid
+   search over the whole range (:mod:`mows.estimate.ringdown_offset`), and from the best
+   one's mirror images, with κ > 0;
 3. Gauss–Newton steps on all samples until the step is < 1e-3 σ in every parameter. The
    Jacobian of the last step gives the covariance and the Fisher information.
+
+What the data do not determine is not reported. θmax and ε are NaN, named in
+``RingdownFit.undetermined`` and the reason in its message, where another minimum that differs
+by more than half their tolerance (``FitOptions``: 1° and 0.5°) fits within Δχ² = 25, or where
+their σ exceeds a third of it. In fields up to 5 mT and gradients up to 50 mT/m the reported
+ones are within the tolerance (tests/estimator/test_ringdown_rest_offset.py); a 0.25–0.5 s
+ring-down there determines ε in a few percent of the fits and θmax (σ ≥ 0.35°) in none.
 
 Uncertainties. ``frequency_std_hz`` comes from the covariance (JᵀJ)⁻¹·s² with the residual
 variance s²; ``frequency_crb_hz`` from the Fisher information with the white-noise level
@@ -43,9 +54,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 
+from mows.estimate.ringdown_offset import offset_starts
 from mows.estimate.ringdown_problem import (
     AMPLITUDE,
     NONLINEAR,
@@ -56,9 +69,14 @@ from mows.estimate.ringdown_problem import (
     variable_projection,
 )
 from mows.estimate.ringdown_start import start_candidates, white_noise_std
-from mows.estimate.ringdown_types import FitOptions, FitStatus, RingdownFit, failure
+from mows.estimate.ringdown_types import FitOptions, FitStatus, RingdownFit, failure, parameter_std
 
 TWO_PI = 2.0 * math.pi
+# Another minimum of the cost closer than this (Δχ², in units of χ²/dof) is a rival: noise
+# reverses the order of two minima 25 apart less than once in 150 (Δχ²'s σ is 2·√Δχ²).
+RIVAL_CHI2 = 25.0
+# A number is reported where its tolerance is this many σ: beyond it lies 1 fit in 370.
+DETERMINED_SIGMAS = 3.0
 
 
 def _parameter_names(n_channels, options: FitOptions):
@@ -234,6 +252,9 @@ def _fit_window(y, fs, theta0, expected_hz, options, damping_guess, start_s, kno
             **known,
         )
     step, _, _, _ = variable_projection(coarse, q0, options.max_iterations, tol_chi2=1e-2)
+    others = []
+    if options.rest_offset_free and not options.theta0_free:
+        step, *others = _offset_minima(coarse, step, options)
     # The coarse optimum is within a few σ of the full-rate one: start as Gauss–Newton.
     start = step.q
     step, converged, iters, free = variable_projection(problem, start, options.max_iterations, 1e-4, damping=1e-6)
@@ -241,6 +262,7 @@ def _fit_window(y, fs, theta0, expected_hz, options, damping_guess, start_s, kno
         step, converged, iters, free = variable_projection(problem, start, options.max_iterations, 1e-4, damping=1e-3)
     if converged:
         fit = _summarise(step, problem, free, 1.0 / problem.weights, options, expected_hz, start_s, known)
+        fit = _undetermined_removed(fit, problem, step.cost, others, options) if fit.ok else fit
     else:
         fit = failure(FitStatus.NOT_CONVERGED, f"the fit did not converge in {iters} iterations", **known)
     if fit.status == FitStatus.NOT_CONVERGED and options.rest_offset_free and not options.theta0_free:
@@ -248,9 +270,101 @@ def _fit_window(y, fs, theta0, expected_hz, options, damping_guess, start_s, kno
         # lost in κ): the swing about θ0, as the paper's model has it, and the reason said.
         fallback = dataclasses.replace(options, rest_offset_free=False)
         fit = _fit_window(y, fs, theta0, expected_hz, fallback, damping_guess, start_s, known)
-        note = "rest offset not determined: fitted without it"
-        return dataclasses.replace(fit, message="; ".join(filter(None, [note, fit.message]))) if fit.ok else fit
+        if not fit.ok:
+            return fit
+        # θmax about θ0 is not the swing about a rest angle the data did not give.
+        note = "rest offset and θmax not determined: fitted without the offset"
+        return dataclasses.replace(
+            fit,
+            amplitude_rad=math.nan,
+            message="; ".join(filter(None, [note, fit.message])),
+            undetermined=tuple(dict.fromkeys(("rest_offset_rad", "amplitude_rad", *fit.undetermined))),
+        )
     return fit
+
+
+def _offset_minima(coarse, step, options):
+    """The distinct coarse optima reached from every minimum of the cost over the rest offset
+    (:func:`mows.estimate.ringdown_offset.offset_starts`), from the local ``step`` and from the
+    best one's mirror images, lowest cost first. κ < 0 turns g into −g, the same waveform as a
+    pickup turned by another offset: such optima are left out unless there is no other."""
+    solutions = [step]
+
+    def refine(starts):
+        solutions.extend(
+            variable_projection(coarse, start, options.max_iterations, tol_chi2=1e-2)[0] for start in starts
+        )
+
+    def distinct():
+        physical = [s for s in solutions if np.all(s.coef[:, 0] > 0)] or solutions
+        kept: list = []
+        for solution in sorted(physical, key=lambda s: s.cost):
+            if not any(_agree(solution.q, other.q, options) for other in kept):
+                kept.append(solution)
+        return kept
+
+    refine(offset_starts(coarse, step.q, options.theta_stop_rad, 2.0 * options.theta_stop_rad))
+    # The mirror images, closer than the search's grid resolves: near 0° the sign of a small
+    # offset is carried by the weak line at 2f, near 90° it goes with the swing's.
+    best = distinct()[0].q
+    refine(best * np.array([1, 1, sign, 1, -1]) for sign in (1, -1))
+    return distinct()
+
+
+def _offset_apart(q, other, options) -> bool:
+    return abs(_wrapped(q[4] - other[4])) > options.rest_offset_tolerance_rad / 2
+
+
+def _amplitude_apart(q, other, options) -> bool:
+    return abs(abs(q[AMPLITUDE]) - abs(other[AMPLITUDE])) > options.amplitude_tolerance_rad / 2
+
+
+def _agree(q, other, options) -> bool:
+    return not (_offset_apart(q, other, options) or _amplitude_apart(q, other, options))
+
+
+def _undetermined_removed(fit: RingdownFit, problem, cost, others, options) -> RingdownFit:
+    """``fit`` with θmax and the rest offset NaN, the reason said, where the data do not pin
+    them within ``options``' tolerances: another minimum of the cost (``others``, coarse
+    optima) fits within Δχ² = RIVAL_CHI2 (in units of the fit's χ²/dof) and differs by more
+    than half the tolerance, or the tolerance is less than DETERMINED_SIGMAS of the parameter's σ."""
+    q = np.array([fit.frequency_hz, fit.damping_per_s, fit.amplitude_rad, fit.phase_rad, fit.rest_offset_rad])
+    rivals = [o.q for o in others if evaluate(problem, o.q, False).cost - cost < RIVAL_CHI2 * fit.chi2_dof]
+    changes: dict[str, Any] = {}
+    reasons: list[str] = []
+    if not math.isfinite(fit.amplitude_rad) and math.isfinite(fit.rest_offset_rad):
+        # θmax at its bound, κ unbounded: the offset then only sets the ratio of the lines at f and 2f.
+        changes["rest_offset_rad"] = math.nan
+        reasons.append("rest offset not determined where θmax is not")
+    for name, tolerance, apart in (
+        ("amplitude_rad", options.amplitude_tolerance_rad, _amplitude_apart),
+        ("rest_offset_rad", options.rest_offset_tolerance_rad, _offset_apart),
+    ):
+        value, std = getattr(fit, name), parameter_std(fit.parameter_names, fit.covariance, name)
+        if not math.isfinite(value) or name in changes:
+            continue
+        rival = next((r for r in rivals if apart(q, r, options)), None)
+        what = "θmax" if name == "amplitude_rad" else "rest offset"
+        if rival is not None:
+            other = abs(rival[AMPLITUDE]) if name == "amplitude_rad" else _wrapped(rival[4])
+            reasons.append(
+                f"{what} not determined: {math.degrees(value):.1f}° and {math.degrees(other):.1f}° fit "
+                f"within Δχ² < {RIVAL_CHI2:g}"
+            )
+        elif not std <= tolerance / DETERMINED_SIGMAS:
+            limit = math.degrees(tolerance) / DETERMINED_SIGMAS
+            reasons.append(f"{what} not determined: σ {math.degrees(std):.2f}° > {limit:.2f}°")
+        else:
+            continue
+        changes[name] = math.nan
+    if not changes:
+        return fit
+    return dataclasses.replace(
+        fit,
+        message="; ".join(filter(None, [fit.message, *reasons])),
+        undetermined=fit.undetermined + tuple(changes),
+        **changes,
+    )
 
 
 def _summarise(step, problem, free, noise, options, expected_hz, start_s, known):
@@ -322,4 +436,5 @@ def _summarise(step, problem, free, noise, options, expected_hz, start_s, known)
         parameter_names=tuple(_parameter_names(n_ch, options)),
         covariance=covariance,
         pickup=tuple(complex(c) for c in problem.fitted_pickup(q)),
+        undetermined=() if free[AMPLITUDE] else ("amplitude_rad",),
     )

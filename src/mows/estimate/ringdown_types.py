@@ -56,6 +56,12 @@ class FitOptions:
         probe has (nearly) no restoring spring: NEGATIVE_STIFFNESS.
     detection_snr : the spectral peak must exceed the noise floor by this power ratio.
     max_chi2_dof : above this the model does not describe the data: BAD_FIT.
+    theta_stop_rad : the housing stop: the rest offset is searched within ±stop (a probe
+        deflected beyond it rests on the stop) and θmax within 2·stop.
+    amplitude_tolerance_rad, rest_offset_tolerance_rad : θmax and the rest offset are reported
+        only where the data pin them within these: no other minimum of the cost that differs
+        by more than half of it fits nearly as well, and their σ is below a third of it.
+        Elsewhere they are NaN, named in ``RingdownFit.undetermined``, the reason in the message.
     """
 
     channels: str = "difference"
@@ -69,6 +75,9 @@ class FitOptions:
     detection_snr: float = 30.0
     max_chi2_dof: float = 25.0
     max_iterations: int = 60
+    theta_stop_rad: float = math.radians(45.0)
+    amplitude_tolerance_rad: float = math.radians(1.0)
+    rest_offset_tolerance_rad: float = math.radians(0.5)
 
     def __post_init__(self):
         if self.channels not in ("difference", "both", "channel1", "channel2"):
@@ -84,9 +93,10 @@ class FitOptions:
     @classmethod
     def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> FitOptions:
         """Options with the exact pickup of ``probe``'s magnet swinging on its lever, seen by the
-        fluxgate ``pair`` (:class:`mows.physics.fluxgate.FluxgatePair`) with the probe at θ0."""
+        fluxgate ``pair`` (:class:`mows.physics.fluxgate.FluxgatePair`) with the probe at θ0, the
+        rest offset searched within ``probe``'s housing stop."""
         pickup = pickup_harmonics(pair, Pose(theta0_rad=theta0_rad), probe.lever_m, probe.moment_am2, combine=channels)
-        return cls(channels=channels, pickup=tuple(pickup), **others)
+        return cls(channels=channels, pickup=tuple(pickup), theta_stop_rad=probe.theta_stop_rad, **others)
 
     @property
     def offset_free(self) -> bool:
@@ -105,10 +115,12 @@ class RingdownFit:
     """Result of :func:`fit_ringdown`. SI units; every number is NaN unless status is OK.
 
     ``amplitude_rad`` is θmax, the swing at the first fitted sample about the rest angle
-    θ0 + ``rest_offset_rad`` (the offset NaN when not fitted); NaN, with a note in ``message``,
-    when the data do not determine it (the fit ran to its bound); its σ is
-    :attr:`amplitude_std_rad`. The sign of the offset is fixed only through κ > 0 (its sign is
-    free near θ0 = 90°, where the signal is even in the deflection): use |offset|.
+    θ0 + ``rest_offset_rad``; its σ is :attr:`amplitude_std_rad`. Each is NaN, named in
+    ``undetermined`` with the reason in ``message``, where the data do not pin it within
+    ``FitOptions.amplitude_tolerance_rad`` / ``rest_offset_tolerance_rad`` (another minimum of
+    the cost fits nearly as well, or its σ is too large, or θmax ran to its bound). The offset's
+    sign is fixed through κ > 0; where its mirror image fits as well (near θ0 = 90° the signal
+    is even in the deflection) the offset is not reported.
     """
 
     status: FitStatus
@@ -134,6 +146,7 @@ class RingdownFit:
     parameter_names: tuple = ()
     covariance: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
     pickup: tuple = ()  # the fitted model's C_k (complex) over the swing about the rest angle
+    undetermined: tuple = ()  # names of the numbers the data did not pin (NaN; why: ``message``)
 
     @property
     def ok(self) -> bool:
@@ -142,6 +155,8 @@ class RingdownFit:
     @property
     def amplitude_std_rad(self) -> float:
         """σ of θmax from the covariance; NaN when θmax was not determined (``amplitude_rad`` NaN)."""
+        if not math.isfinite(self.amplitude_rad):
+            return math.nan
         return parameter_std(self.parameter_names, self.covariance, "amplitude_rad")
 
     def _amplitude_text(self) -> str:

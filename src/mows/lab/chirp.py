@@ -9,8 +9,9 @@ decays: a chirp.
 
 Method. The fitted window is cut into consecutive pieces of ``piece_periods`` periods, each fitted
 with the same signal model (f_i ± σ_i, δ_i). Piece i starts at the amplitude
-A_i = θmax·e^(−δ·t_i) of the whole-window fit, and the potential predicts its frequency as the
-estimator would read it, Σ_q c_q·f(A_q) over the piece's amplitude nodes
+A_i = A_0·e^(−δ·t_i), A_0 the whole-window fit's θmax where it determined it, else the stop
+less its rest offset (:func:`mows.physics.ringdown_average.start_swing_rad`), and the
+potential predicts its frequency as the estimator would read it, Σ_q c_q·f(A_q) over the piece's amplitude nodes
 (:func:`mows.physics.ringdown_average.amplitude_nodes`). The potential is that of the paper's
 Eq. 6 field along the axis Bx', taken from the ring-down's own frequency: Eq. 6 inverted
 (:func:`mows.estimate.axis.estimate_along_axis`), then corrected once so that the potential's
@@ -113,14 +114,15 @@ def diagnose_ringdown(
     fit = fit_ringdown(samples, sample_rate_hz, theta0_rad, expected_hz, mask, options, probe.damping_per_s, settle_s)
     if not fit.ok:
         raise ChirpError(f"the whole-window fit failed: {fit.report()}")
-    if not math.isfinite(fit.amplitude_rad):
-        raise ChirpError("θmax is not determined at this orientation: the chirp cannot be put against amplitude")
+    start_amplitude = _start_amplitude_rad(fit, probe)
+    if not math.isfinite(start_amplitude):
+        raise ChirpError("the rest offset lies beyond the stop: the chirp cannot be put against amplitude")
     start, stop = usable_window(mask, int(round(settle_s * sample_rate_hz)))
     length = int(round(piece_periods * sample_rate_hz / fit.frequency_hz))
     count = (stop - start) // length
     if count < 3:
         raise ChirpError(f"{fit.duration_s:.3f} s hold {count} pieces of {piece_periods:g} periods; need 3")
-    field = _field_along_axis(fit, probe, probe.f00_hz if f00_hz is None else f00_hz)
+    field = _field_along_axis(fit, probe, probe.f00_hz if f00_hz is None else f00_hz, start_amplitude)
     piece_options = dataclasses.replace(options, min_periods=0.8 * piece_periods)  # f may sit above the whole f
     pieces, failures = [], []
     for i in range(count):
@@ -130,7 +132,7 @@ def diagnose_ringdown(
             failures.append(piece.message)
             continue
         t = (i * length) / sample_rate_hz
-        amplitude = fit.amplitude_rad * math.exp(-fit.damping_per_s * t)
+        amplitude = start_amplitude * math.exp(-fit.damping_per_s * t)
         predicted = _predicted_hz(probe, field, fit, amplitude, length / sample_rate_hz)
         damping_std = math.sqrt(piece.covariance[1, 1])
         pieces.append(
@@ -141,12 +143,23 @@ def diagnose_ringdown(
     return _diagnosis(fit, tuple(pieces), field)
 
 
-def _field_along_axis(fit, probe, f00_hz) -> float:
-    """Bx' that makes the potential's window-averaged frequency at the fitted amplitude equal the
+def _start_amplitude_rad(fit: RingdownFit, probe) -> float:
+    """The swing at the first fitted sample: the fit's θmax where it determined it, else the
+    probe's stop less the fit's rest offset (0 where not determined: the model here has the
+    field along the axis only), decayed from the switch-off
+    (:func:`mows.physics.ringdown_average.start_swing_rad`); NaN where the offset passes the stop."""
+    if math.isfinite(fit.amplitude_rad):
+        return fit.amplitude_rad
+    swing = float(ringdown_average.start_swing_rad(probe.theta_stop_rad, np.nan_to_num(fit.rest_offset_rad)))
+    return swing * math.exp(-fit.damping_per_s * fit.start_offset_s)
+
+
+def _field_along_axis(fit, probe, f00_hz, amplitude_rad) -> float:
+    """Bx' that makes the potential's window-averaged frequency at the start amplitude equal the
     fitted f: Eq. 6 inverted, then one correction for the finite amplitude's own shift."""
     field = estimate_along_axis(fit, probe, f00_hz).field_along_axis_t
     small = _predicted_hz(probe, field, fit, 0.0, fit.duration_s) - f00_hz
-    averaged = _predicted_hz(probe, field, fit, fit.amplitude_rad, fit.duration_s)
+    averaged = _predicted_hz(probe, field, fit, amplitude_rad, fit.duration_s)
     return field * small / (averaged - f00_hz) if averaged != f00_hz else field
 
 

@@ -23,8 +23,8 @@ times the weight. :func:`amplitude_nodes` turns K into a Gauss quadrature of a f
 nodes, so that f_fit = Σ_q c_q·f(A_q) costs a few harmonic-balance evaluations. The
 derivation is checked against the estimator itself on chirped ring-downs (tests/lab).
 
-The ring-down's start amplitude is the estimator's θmax at the first fitted sample
-(``RingdownFit.amplitude_rad``, the CSV column ``amplitude_deg``); by default the fit window is
+The ring-down's start amplitude is the swing about the rest angle at the first fitted sample
+(:func:`start_swing_rad` at the switch-off; the CSV column ``amplitude_deg``); by default the fit window is
 the paper's 60 periods.
 """
 
@@ -34,7 +34,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mows.physics.fluxgate import paper_pickup
-from mows.physics.schema import Vector
+from mows.physics.schema import FloatOrArray, Vector
+
+
+def start_swing_rad(stop_rad: FloatOrArray, rest_angle_rad: FloatOrArray) -> np.ndarray:
+    """The swing a ring-down starts with about its rest angle: every ring-down starts at the
+    housing stop, so the swing is the stop less the rest deflection |θs − θ0| (NaN where the
+    stop lies inside the deflection: no free swing)."""
+    swing = np.asarray(stop_rad, float) - np.abs(np.asarray(rest_angle_rad, float))
+    return np.where(swing > 0, swing, np.nan)
+
 
 DEFAULT_PERIODS = 60.0  # the paper evaluates 60 periods per ring-down
 GRID_POINTS = 128  # midpoint grid over the ring-down for K(t)

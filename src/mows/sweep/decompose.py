@@ -35,7 +35,7 @@ from mows.physics.frequency import sweep_shift_hz, weak_field_sensitivity_hz_per
 from mows.physics.pose import probe_axes
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import Probe
-from mows.physics.ringdown_average import amplitude_nodes
+from mows.physics.ringdown_average import amplitude_nodes, start_swing_rad
 
 MODELS = ("first_principles", "published")
 MAX_HARMONIC = 4
@@ -177,7 +177,8 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
     potential = local_potential(params, theta0, probe)
     if ringdowns is None:
         return f00 * np.sqrt(potential.stiffness_nm_per_rad() / probe.spring_nm_per_rad) - f00_hz
-    start = ringdowns.stop_amplitude_rad - np.abs(np.nan_to_num(potential.rest_angle_rad()))
+    # 0 where the stop lies inside the deflection (a trial point the data rule out)
+    start = np.nan_to_num(start_swing_rad(ringdowns.stop_amplitude_rad, np.nan_to_num(potential.rest_angle_rad())))
     amplitudes, weights = amplitude_nodes(
         theta0, start, ringdowns.damping_per_s, ringdowns.duration_s, pickup=ringdowns.pickup
     )

@@ -11,10 +11,25 @@ import numpy as np
 
 from mows.estimate.ringdown_types import parameter_std
 from mows.physics.probe import Probe
+from mows.physics.ringdown_average import start_swing_rad
 from mows.sweep.decompose import Decomposition, Ringdowns, decompose, local_potential
 
 REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its σ is below this…
 REST_OFFSET_SIGMAS = 4.0  # …and it is this many σ from 0
+OUTLIER_SIGMAS = 3.0  # a pooled value this many robust σ from the median is left out
+MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
+
+
+def robust_median(values, fallback: float = math.nan) -> float:
+    """The median of ``values`` after leaving out those more than OUTLIER_SIGMAS robust σ
+    (from the median absolute deviation) from the first median; ``fallback`` when empty."""
+    values = np.asarray(values, float)
+    if values.size == 0:
+        return float(fallback)
+    median = float(np.median(values))
+    spread = MAD_TO_SD * float(np.median(np.abs(values - median)))
+    kept = values[np.abs(values - median) <= OUTLIER_SIGMAS * spread] if spread > 0 else values
+    return float(np.median(kept))
 
 
 def fitted_pickup(fit) -> tuple:
@@ -92,32 +107,23 @@ class SweepRecord:
 
     def rest_offsets_rad(self) -> np.ndarray:
         """|θs − θ0| of each point as its fit measured it, where the fit determined it (σ below
-        REST_OFFSET_STD_RAD and the offset REST_OFFSET_SIGMAS σ from 0); 0 elsewhere. In a mT
-        field a few fits sit in a wrong minimum (−10 ± 3° where the truth is 3.4°), and |ε| of an
-        offset that is noise would shorten the swing by ~0.8σ: neither is used."""
+        REST_OFFSET_STD_RAD and the offset REST_OFFSET_SIGMAS σ from 0); NaN elsewhere (an
+        offset that is noise would shorten the swing by ~0.8σ)."""
         offset = np.abs(self._column("rest_offset_rad"))
         std = self._column("rest_offset_std_rad")
         determined = (std <= REST_OFFSET_STD_RAD) & (offset > REST_OFFSET_SIGMAS * std)
-        return np.where(determined & np.isfinite(offset), offset, 0.0)
+        return np.where(determined, offset, np.nan)
 
-    def stop_amplitude_rad(self, rest_angles_rad=None) -> float:
-        """The swing a ring-down starts with when the probe rests undeflected: the
-        inverse-variance weighted mean of the fits' θmax + |θs| (θs: each point's rest angle,
-        by default the fit's own rest offset, 0 where it has none).
-
-        Every ring-down starts from the housing stop, and the perpendicular excitation scheme
-        drives every orientation alike; a single fit's θmax, though, is poorly determined near
-        θ0 = 180° (NaN when not determined at all), so the sweep's pooled value is the better
-        input to the amplitude-dependent springs. The median when no σ is known.
-        """
+    def stop_amplitude_rad(self, rest_angles_rad=None, fallback_rad: float = math.nan) -> float:
+        """The housing stop every ring-down starts from, as far from the lever's undeflected
+        position: the median of θmax + |θs| over the points whose fit determined θmax (θs each
+        point's rest angle, by default the fit's own rest offset where it determined it), after
+        leaving out those more than OUTLIER_SIGMAS robust σ from it; ``fallback_rad`` (the
+        probe's stop) where no point gives it. The median, because a few fits in a strong field
+        sit in a wrong minimum with a small σ, and one such fit would lead an inverse-variance mean."""
         rest = self.rest_offsets_rad() if rest_angles_rad is None else np.abs(np.asarray(rest_angles_rad, float))
-        amplitude = self._column("amplitude_rad") + rest
-        std = self._column("amplitude_std_rad")
-        usable = np.isfinite(std) & (std > 0) & np.isfinite(amplitude)
-        if not usable.any():
-            return float(np.nanmedian(amplitude)) if np.isfinite(amplitude).any() else math.nan
-        weights = 1.0 / std[usable] ** 2
-        return float(weights @ amplitude[usable] / weights.sum())
+        stops = (self._column("amplitude_rad") + rest) if self.points else np.zeros(0)
+        return robust_median(stops[np.isfinite(stops)], fallback_rad)
 
     def decompose(
         self, probe: Probe, f00_hz: float, model: str = "first_principles", f00_free: bool = False
@@ -129,8 +135,9 @@ class SweepRecord:
         them and enters the covariance as such (:func:`decompose`'s ``f00_std_hz``).
 
         The first-principles model needs the swing each ring-down starts with, stop − |θs|, and
-        θs depends on the field it is fitting: a first pass with θs = 0 gives the field, its rest
-        angles give the pooled stop amplitude, and a second pass fits with both.
+        θs depends on the field it is fitting: a first pass with the fits' own rest offsets gives
+        the field, its rest angles give the pooled stop (the probe's where no fit determined
+        θmax), and a second pass fits with both.
         """
         theta0 = self._column("theta0_rad")
         arrays: dict[str, Any] = dict(
@@ -151,10 +158,10 @@ class SweepRecord:
         def ringdowns(stop):
             return Ringdowns(stop, damping, duration, pickups)
 
-        first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad()))
+        first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(fallback_rad=probe.theta_stop_rad)))
         if not first.ok:
             return first
-        stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe))
+        stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe), probe.theta_stop_rad)
         return decompose(**arrays, ringdowns=ringdowns(stop), start=first.parameters)
 
     def pickups(self) -> np.ndarray | None:
@@ -179,9 +186,38 @@ class SweepRecord:
         return np.abs(np.nan_to_num(local_potential(decomposition.parameters, theta0, probe).rest_angle_rad()))
 
     def start_amplitudes_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
-        """Each ring-down's start swing, stop − |θs|, at the decomposition's field and gradient."""
+        """Each ring-down's start swing, stop − |θs| (:func:`mows.physics.ringdown_average.start_swing_rad`),
+        θs at the decomposition's field and gradient, the stop pooled (the probe's where no fit gives it)."""
         rest = self.rest_angles_rad(decomposition, probe)
-        return self.stop_amplitude_rad(rest) - rest
+        return start_swing_rad(self.stop_amplitude_rad(rest, probe.theta_stop_rad), rest)
+
+    def fitted_start_amplitudes_rad(self, stop_rad: float = math.nan) -> tuple[np.ndarray, list[str]]:
+        """Each ring-down's start swing from its fit alone, and notes of what was assumed: the
+        fit's θmax where it determined it within the stop, else stop − |θs − θ0| with the fit's rest offset
+        (the stop pooled, ``stop_rad`` where no fit gives it); where a fit determined neither,
+        the probe is taken as undeflected."""
+        rest = self.rest_offsets_rad()
+        stop = self.stop_amplitude_rad(fallback_rad=stop_rad)
+        amplitude = self._column("amplitude_rad")
+        beyond = amplitude > stop  # no swing about the rest angle is wider than the stop
+        amplitude[beyond] = np.nan
+        start = np.where(np.isfinite(amplitude), amplitude, start_swing_rad(stop, np.nan_to_num(rest)))
+        unknown = np.count_nonzero(~np.isfinite(rest) & ~np.isfinite(amplitude))
+        notes = []
+        if beyond.any():
+            notes.append(f"{np.count_nonzero(beyond)} fits' θmax beyond the stop {math.degrees(stop):.2f}°: not used")
+        if not np.isfinite(self.stop_amplitude_rad()) and math.isfinite(stop_rad):
+            notes.append(
+                f"no fit determined θmax and the rest offset: the stop is the probe's {math.degrees(stop_rad):.2f}°"
+            )
+        if unknown:
+            notes.append(
+                f"{unknown} of {len(rest)} ring-downs determined neither θmax nor their rest offset: "
+                "their start swing is the stop, as if undeflected"
+            )
+        if not np.isfinite(start).all():
+            notes.append(f"{np.count_nonzero(~np.isfinite(start))} start swings unknown: no stop from fits or probe")
+        return start, notes
 
     def table_columns(self, start_amplitudes_rad=None) -> dict:
         """Columns of a model-lab measurement table (docs/model_lab.md). ``amplitude_deg`` is each
@@ -190,7 +226,7 @@ class SweepRecord:
         offset |θs − θ0| (the swing about a deflected rest angle ends at the nearer stop)."""
         t = self._column("t_s")
         start = (
-            self.stop_amplitude_rad() - self.rest_offsets_rad()
+            self.fitted_start_amplitudes_rad()[0]
             if start_amplitudes_rad is None
             else np.asarray(start_amplitudes_rad, float)
         )

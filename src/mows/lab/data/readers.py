@@ -19,6 +19,7 @@ from mows.device import bags
 from mows.estimate.ringdown import FitStatus
 from mows.lab.data.reference import reference_columns
 from mows.lab.data.table import FIELD, KNOWN, MeasurementTable, TableError, broken_rules, rows_text, with_notes
+from mows.physics.probe import PAPER_PROBE
 from mows.records import stamps
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -153,6 +154,7 @@ def from_bag(
     magnet_position_m=(0.0, 0.0, 0.0),
     ringdown_topic: str = RINGDOWN_TOPIC,
     sweep_topic: str = SWEEP_TOPIC,
+    theta_stop_rad: float = PAPER_PROBE.theta_stop_rad,
 ) -> MeasurementTable:
     """A table from the project's bags: ``mows_msgs/msg/RingdownFit`` messages on
     ``ringdown_topic`` (only STATUS_OK fits; the others are counted in ``notes``).
@@ -167,7 +169,8 @@ def from_bag(
       position): the exact field and in-plane gradient there.
 
     Rows are numbered into sweeps by the ``SweepDecomposition`` stamps on ``sweep_topic`` when
-    the bag has them (a sweep's stamp is that of its last ring-down).
+    the bag has them (a sweep's stamp is that of its last ring-down). Each row's start swing
+    is :func:`start_amplitudes_rad`, with the probe's ``theta_stop_rad`` where no fit gives the stop.
     """
     path = pathlib.Path(path)
     if not path.exists():
@@ -209,33 +212,30 @@ def from_bag(
     sweep_ids = np.searchsorted(np.sort(sweeps), times_s - 1e-9).astype(float) if sweeps else np.zeros(len(fits))
     if sweeps:
         columns["sweep"] = sweep_ids
-    start = start_amplitudes_rad([m for _, m in fits], sweep_ids)
-    if np.all(np.isfinite(start)):
-        columns["amplitude_deg"] = np.degrees(start)
-    else:
-        notes.append("no fit determined θmax: the start amplitude is taken as the probe's stop")
+    start, said = start_amplitudes_rad([m for _, m in fits], sweep_ids, theta_stop_rad)
+    columns["amplitude_deg"] = np.degrees(start)
+    notes += said
     columns.update(_reference_columns(reference, times_s, fields, magnet_position_m, path))
     return with_notes(columns, str(path), notes)
 
 
-def start_amplitudes_rad(fits, sweep_ids) -> np.ndarray:
-    """Each ring-down's start swing from RingdownFit messages (or fits), pooled per sweep: the
-    sweep's stop amplitude (:meth:`mows.sweep.record.SweepRecord.stop_amplitude_rad`, the
-    inverse-variance mean of θmax + |rest offset| over the fits that determined θmax) less the
-    row's own |rest offset| where its fit determined it
-    (:meth:`~mows.sweep.record.SweepRecord.rest_offsets_rad`). A single fit's θmax scatters by
-    degrees near θ0 = 180° or is not determined at all; every ring-down of a sweep starts from
-    the same housing stop. Sweeps without a determined θmax take the pool of all rows (NaN when
-    there is none)."""
+def start_amplitudes_rad(fits, sweep_ids, stop_rad: float = math.nan) -> tuple[np.ndarray, list[str]]:
+    """Each ring-down's start swing from RingdownFit messages (or fits), and notes of what was
+    assumed or left out: the stop less the row's own |rest offset| where its fit determined it
+    (:meth:`mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`, the rule of
+    :func:`mows.physics.ringdown_average.start_swing_rad`). The stop is pooled per sweep by a
+    median with outliers left out (every ring-down of a sweep starts from the same housing
+    stop, and a single fit's θmax is rarely determined), else over all rows, else ``stop_rad``
+    (the probe's). NaN where nothing gives a stop, never a swing ≤ 0."""
     record = SweepRecord([SweepPoint.from_fit(fit, math.nan, math.nan) for fit in fits])
-    rest = record.rest_offsets_rad()
-    everywhere = record.stop_amplitude_rad()
+    everywhere = record.stop_amplitude_rad(fallback_rad=stop_rad)
     start = np.empty(len(fits))
+    notes: list[str] = []
     for sweep in np.unique(sweep_ids):
         rows = np.flatnonzero(sweep_ids == sweep)
-        stop = SweepRecord([record.points[i] for i in rows]).stop_amplitude_rad()
-        start[rows] = (stop if math.isfinite(stop) else everywhere) - rest[rows]
-    return start
+        start[rows], said = SweepRecord([record.points[i] for i in rows]).fitted_start_amplitudes_rad(everywhere)
+        notes += [f"sweep {sweep:g}: {note}" for note in said] if len(np.unique(sweep_ids)) > 1 else said
+    return start, notes
 
 
 def _reference_columns(reference, times_s, fields, magnet_position_m, path) -> dict:
@@ -255,11 +255,13 @@ def from_sweep(record, reference, probe, decomposition=None) -> MeasurementTable
     """The table of one rotation sweep (:class:`mows.sweep.record.SweepRecord`) in a static
     ``reference`` (anything :func:`mows.lab.data.reference.reference_source` takes). With a first-principles
     ``decomposition`` of the sweep, each ring-down's start swing is stop − |θs| at its field
-    (:meth:`~mows.sweep.record.SweepRecord.start_amplitudes_rad`); else the pooled stop amplitude."""
+    (:meth:`~mows.sweep.record.SweepRecord.start_amplitudes_rad`); else each fit's own
+    (:meth:`~mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`, the probe's stop where
+    no fit gives it)."""
     starts = (
         record.start_amplitudes_rad(decomposition, probe)
         if decomposition is not None and decomposition.ok and decomposition.model == "first_principles"
-        else None
+        else record.fitted_start_amplitudes_rad(probe.theta_stop_rad)[0]
     )
     columns = record.table_columns(starts)
     columns.update(reference_columns(reference, len(record.points)))

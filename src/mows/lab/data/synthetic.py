@@ -235,7 +235,8 @@ def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
 def _start_amplitudes_rad(records: list, probe) -> list:
     """Each ring-down's start swing, stop − |θs|: θs the rest angle at its sweep's own
     first-principles decomposition (0 where that fails), the stop pooled over every ring-down
-    of every sweep (:meth:`mows.sweep.record.SweepRecord.stop_amplitude_rad`). Every ring-down
+    of every sweep (:meth:`mows.sweep.record.SweepRecord.stop_amplitude_rad`; the probe's where
+    no fit determined θmax). Every ring-down
     starts at the same housing stop, and one sweep's 16 fits pin it only to ~0.3° (two sweeps
     of one 1 mT table pooled 23.34° and 24.16°), which through the amplitude springs is mHz."""
     rests = []
@@ -243,8 +244,8 @@ def _start_amplitudes_rad(records: list, probe) -> list:
         decomposition = record.decompose(probe, probe.f00_hz)  # not ok with too few orientations
         rests.append(record.rest_angles_rad(decomposition, probe) if decomposition.ok else np.zeros(len(record.points)))
     every = SweepRecord([point for record in records for point in record.points])
-    stop = every.stop_amplitude_rad(np.concatenate(rests)) if every.points else np.nan
-    return [stop - rest for rest in rests]
+    stop = every.stop_amplitude_rad(np.concatenate(rests), probe.theta_stop_rad) if every.points else np.nan
+    return [ringdown_average.start_swing_rad(stop, rest) for rest in rests]
 
 
 def _ringdown_point(scenario, cycle, settle_s):

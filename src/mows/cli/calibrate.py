@@ -298,16 +298,21 @@ def _table_columns(path) -> Mapping:
     columns = _numeric_columns(path)
     if columns is None:
         return load_table(path).columns
-    amplitude = columns.get("amplitude_deg")
+    amplitude = columns.pop("amplitude_deg", None)  # checked here: NaN is a θmax not measured
     if amplitude is not None:
         flagged = columns.get("amplitude_fitted", np.ones(amplitude.shape))
         columns["amplitude_fitted"] = (np.isfinite(amplitude) & (flagged != 0)).astype(float)
-        columns["amplitude_deg"] = np.where(np.isfinite(amplitude), amplitude, 0.0)
+        bad = np.flatnonzero(np.isfinite(amplitude) & (amplitude <= 0))
+        if len(bad):
+            raise ValueError(f"column 'amplitude_deg' must be > 0: not so in {rows_text(bad)}")
     for name in ("theta0_deg", "f_hz", "f_std_hz", *TABLE_COLUMNS):
         bad = np.flatnonzero(~np.isfinite(columns[name])) if name in columns else ()
         if len(bad):
             raise ValueError(f"column '{name}' is not a finite number in {rows_text(bad)}")
-    return load_table(columns).columns
+    checked = dict(load_table(columns).columns)
+    if amplitude is not None:
+        checked["amplitude_deg"] = amplitude
+    return checked
 
 
 def _numeric_columns(path) -> dict | None:

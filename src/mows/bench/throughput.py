@@ -240,9 +240,8 @@ def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, se
             "updates_per_s": (len(good) - 1) / float(ends[-1] - ends[0]) if len(good) > 1 else math.nan,
             "scatter_t": float(np.std(axis, ddof=1)) if axis.size > 1 else math.nan,
             "reported_std_t": float(np.mean([e.field_along_axis_std_t for e in estimates])) if good else math.nan,
-            "start_amplitude_deg": float(np.degrees(np.nanmean([m.fit.amplitude_rad for m in good])))
-            if good
-            else math.nan,
+            # θmax is reported only where a fit pins it; the start swing is the stop's (readers)
+            "amplitudes_determined": sum(math.isfinite(m.fit.amplitude_rad) for m in good),
             "peak_current_a": rig.peak_current_a,
             "max_duty": max_duty_fraction(rig.coil_intervals(), window),
         }

@@ -10,6 +10,7 @@ import textwrap
 
 import pytest
 
+from mcap_records import assert_jazzy
 from mows.cli.main import main
 from mows.device import bag_repair, bags
 
@@ -68,6 +69,7 @@ def test_a_killed_recording_is_repaired_from_its_intact_chunks(tmp_path, capsys,
     assert f"all {flushed[-1]} messages on disk at the recorder's last flush were recovered" in out
     # Every message up to the last flushed chunk, in order, none made up; at most one chunk lost.
     assert numbers(bag) == list(range(flushed[-1]))
+    assert_jazzy(bag)
     assert stop_after - flushed[-1] <= flushed[-1] - flushed[-2]
     assert sorted(p.name for p in bag.iterdir()) == ["metadata.yaml", "recording.mcap", "recording.mcap.damaged"]
     assert main(["bag", "repair", str(bag)]) == 2  # a bag that reads is left alone

@@ -14,8 +14,8 @@ from mows.physics.coils import PRESETS, CurrentCap
 RATE_HZ, BLOCK = 20_000.0, 500
 
 
-def recording(path):
-    """Four blocks with EXCITING after the first and RINGDOWN after the second."""
+def recording(path, phases=((1, Phase.EXCITING), (2, Phase.RINGDOWN))):
+    """Four blocks, with an excitation state for each (block number, phase) of ``phases``."""
     store = bags.typestore()
     Block, Channel = store.types["mows_msgs/msg/MagnetometerBlock"], store.types["mows_msgs/msg/MagnetometerChannel"]
     State, Header = store.types["mows_msgs/msg/ExcitationState"], store.types["std_msgs/msg/Header"]
@@ -41,7 +41,7 @@ def recording(path):
         )
         for k in range(4)
     ]
-    for k, phase in [(1, Phase.EXCITING), (2, Phase.RINGDOWN)]:
+    for k, phase in phases:
         state = State(
             header(k * BLOCK),
             int(phase),
@@ -65,13 +65,17 @@ def recording(path):
     bags.write_bag(path, sorted(messages, key=lambda m: m.timestamp_ns))
 
 
-def test_the_replayed_phase_is_the_recordings(tmp_path):
-    recording(tmp_path / "bag")
+def replaying(path) -> DeviceSession:
     cap = CurrentCap(10.0)
     config = SessionConfig(
         0.025, CycleSettings(), PRESETS["largest_spacing"](current_limit_a=cap.limit_a), cap, 110.0, fit_ringdown
     )
-    session = DeviceSession(BagBackend(tmp_path / "bag", rate=100.0), config)
+    return DeviceSession(BagBackend(path, rate=100.0), config)
+
+
+def test_the_replayed_phase_is_the_recordings(tmp_path):
+    recording(tmp_path / "bag")
+    session = replaying(tmp_path / "bag")
     assert session.health()["phase"] == "none replayed yet"
     phases, supply = [], []
     while session.health()["link"] != "finished":
@@ -84,4 +88,17 @@ def test_the_replayed_phase_is_the_recordings(tmp_path):
     # the supply's ramp and its end come back as recorded: what a replaying driver republishes
     assert [(e.sample_index, e.current_a, e.ramping) for e in supply] == [(507, 1.5, True), (1507, 1.5, False)]
     assert supply[1].stamp_ns == 10**12 + 1507 * 50_000 and session.health()["supply_state_a"] == 1.5
+    session.close()
+
+
+def test_a_recording_that_ends_idle_reports_idle(tmp_path):
+    """A driver's recording opens with the IDLE of its start and returns to IDLE after every
+    cycle; IDLE is phase number 0, and the replay still reports it as the recording's phase."""
+    recording(tmp_path / "bag", [(0, Phase.IDLE), (1, Phase.EXCITING), (2, Phase.RINGDOWN), (3, Phase.IDLE)])
+    session = replaying(tmp_path / "bag")
+    phases = []
+    while session.health()["link"] != "finished":
+        phases += [e.phase for e in session.step(0.05).events]
+    assert phases == [Phase.IDLE, Phase.EXCITING, Phase.RINGDOWN, Phase.IDLE]
+    assert session.health()["phase"] == "IDLE"
     session.close()

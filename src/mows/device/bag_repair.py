@@ -18,14 +18,12 @@ import struct
 from pathlib import Path
 
 import yaml
-from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import decompress, get_qos
 from rosbags.typesys import get_types_from_msg
 
 from mows.device import bags
 
-MAGIC = b"\x89MCAP0\r\n"
 OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_DATA_END = 0x03, 0x04, 0x05, 0x06, 0x0F
 RECORD_HEADER = struct.Struct("<BQ")  # opcode, content length
 
@@ -131,11 +129,11 @@ def salvage(path) -> Salvage:
     """Every schema, channel and message in the whole chunks of the MCAP file ``path``."""
     path = Path(path)
     data = path.read_bytes()
-    if not data.startswith(MAGIC):
+    if not data.startswith(bags.MCAP_MAGIC):
         raise bags.BagError(f"{path} is not an MCAP file (its first bytes are not the MCAP magic)")
-    collected, chunks, intact, closed, problem = _Collector(), 0, len(MAGIC), False, ""
+    collected, chunks, intact, closed, problem = _Collector(), 0, len(bags.MCAP_MAGIC), False, ""
     try:
-        for op, body, offset in _records(data, len(MAGIC), len(data)):
+        for op, body, offset in _records(data, len(bags.MCAP_MAGIC), len(data)):
             if op == OP_DATA_END:
                 closed = True
                 break
@@ -224,7 +222,7 @@ def repair(directory) -> Salvage:
 def _write(found: Salvage, path: Path) -> Path:
     store = bags.typestore()
     connections = {}
-    with Writer(path, version=bags.BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as writer:
+    with bags.JazzyWriter(path) as writer:
         for key, (schema_id, topic, encoding, metadata) in sorted(found.channels.items()):
             msgtype, _, definition = found.schemas.get(schema_id, ("", "", ""))
             if msgtype not in store.types:  # a type of another package: its definition travels in the file

@@ -5,24 +5,29 @@ workspace (``share/mows_msgs`` under AMENT_PREFIX_PATH) or else in the repositor
 ``mows_msgs/`` package. Services and actions are split into their message parts the way
 rosbag2 names them: ``mows_msgs/srv/RunCycle_Request``, ``mows_msgs/action/RotationSweep_Goal``.
 Bags are written in the layout of Jazzy's ``ros2 bag`` (metadata version 9, MCAP storage) and
-carry their message definitions. A :class:`Recording` survives a kill: its ``metadata.yaml``
-is there from the start and every chunk is on disk once it closes, so that
-:mod:`mows.device.bag_repair` rebuilds all but the last chunk. A bag that cannot be read
-raises :class:`BagError`, which says what is wrong and, for a recording never closed, how to
-repair it.
+carry their message definitions. Where rosbags writes its own name, they say Jazzy, as rosbag2
+does (:class:`JazzyWriter`): ``ros_distro`` in ``metadata.yaml`` and in the MCAP file's
+``rosbag2`` metadata record, and the MCAP Header's library string. A :class:`Recording`
+survives a kill: its ``metadata.yaml`` is there from the start and every chunk is on disk
+once it closes, so that :mod:`mows.device.bag_repair` rebuilds all but the last chunk. A bag
+that cannot be read raises :class:`BagError`, which says what is wrong and, for a recording
+never closed, how to repair it.
 """
 
 import functools
+import importlib.metadata
 import os
 from collections.abc import Iterable, Iterator
+from io import BytesIO
 from pathlib import Path
 from typing import Any, Literal, NamedTuple, cast
 
 import yaml
 from rosbags.interfaces import Qos
 from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionMode
 from rosbags.rosbag2.metadata import dump_qos_v9
-from rosbags.rosbag2.storage_mcap import McapWriter
+from rosbags.rosbag2.storage_mcap import McapWriter, write_record, write_string
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -30,6 +35,13 @@ PACKAGE = "mows_msgs"
 REPOSITORY_PACKAGE = Path(__file__).resolve().parents[3] / PACKAGE
 BAG_VERSION: Literal[9] = 9  # rosbag2's metadata version in Jazzy
 ROS_DISTRO = "jazzy"  # what rosbag2 writes as ros_distro; rosbags writes its own name
+MCAP_MAGIC = b"\x89MCAP0\r\n"  # the first and last bytes of an MCAP file (MCAP specification)
+MCAP_HEADER = 0x01  # the opcode of the Header record, which follows the opening magic
+MCAP_PROFILE = "ros2"  # the Header's profile: the rosbag2 conventions
+# The Header's library is free text naming the writer. rosbag2 leaves libmcap's default there
+# ("libmcap 1.x.y"); ours is not libmcap, so it names the layout and distribution it follows,
+# then what wrote it.
+MCAP_LIBRARY = f"rosbag2.{ROS_DISTRO} (mows, rosbags-{importlib.metadata.version('rosbags')})"
 
 # The parts of a service or action definition, in the order they appear between `---` lines.
 PARTS = {
@@ -110,13 +122,12 @@ def write_bag(path: str | os.PathLike, messages: Iterable[BagMessage]) -> Path:
     """
     store = typestore()
     connections = {}
-    with Writer(Path(path), version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as writer:
+    with JazzyWriter(path) as writer:
         for topic, msgtype, timestamp_ns, message in messages:
             key = (topic, msgtype)
             if key not in connections:
                 connections[key] = writer.add_connection(topic, msgtype, typestore=store)
             writer.write(connections[key], timestamp_ns, store.serialize_cdr(message, msgtype))
-    mark_distro(path)
     return Path(path)
 
 
@@ -148,10 +159,43 @@ def check_readable(path: str | os.PathLike) -> Path:
     return path
 
 
-def mark_distro(path: str | os.PathLike) -> None:
-    """Say in a closed bag's metadata.yaml that it is a Jazzy bag, as rosbag2 does."""
-    metadata = Path(path) / "metadata.yaml"
-    metadata.write_text(metadata.read_text().replace("ros_distro: rosbags", f"ros_distro: {ROS_DISTRO}"))
+def as_jazzy(metadata_yaml: str) -> str:
+    """rosbags' serialised bag metadata with rosbag2's ``ros_distro`` in place of rosbags' name."""
+    return metadata_yaml.replace("ros_distro: rosbags", f"ros_distro: {ROS_DISTRO}")
+
+
+class JazzyMcapWriter(McapWriter):
+    """rosbags' MCAP storage, saying Jazzy where rosbags says rosbags: the Header's library
+    (:data:`MCAP_LIBRARY`) and the ``ros_distro`` of the ``serialized_metadata`` in the
+    ``rosbag2`` Metadata record, which is where rosbag2 on Jazzy keeps it."""
+
+    def __init__(self, path: Path, compression: CompressionMode) -> None:
+        super().__init__(path, compression)
+        # rosbags has written the magic and its Header, and nothing else yet (the schemas and
+        # channels wait in the first chunk): the Header is rewritten in place.
+        self.bio.seek(len(MCAP_MAGIC))
+        self.bio.truncate()
+        header = BytesIO()
+        write_string(header, MCAP_PROFILE)
+        write_string(header, MCAP_LIBRARY)
+        write_record(self.bio, MCAP_HEADER, header)
+
+    def close(self, version: int, metadata: str) -> None:
+        super().close(version, as_jazzy(metadata))
+
+
+class JazzyWriter(Writer):
+    """A rosbags writer of a new bag at ``path`` in Jazzy's layout (metadata version 9, MCAP
+    storage) that says Jazzy in its ``metadata.yaml`` and its MCAP file, as rosbag2 does."""
+
+    STORAGE_PLUGINS = {**Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: JazzyMcapWriter}
+
+    def __init__(self, path: str | os.PathLike):
+        super().__init__(Path(path), version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
+
+    def close(self) -> None:
+        super().close()
+        self.metapath.write_text(as_jazzy(self.metapath.read_text()))
 
 
 def read_bag(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
@@ -185,7 +229,7 @@ class Recording:
     1 MiB; the schemas and channels go into the first chunk. Here that first chunk is closed
     before any message (the topics are on disk at once), every later chunk is flushed and
     fsynced as soon as rosbags writes it, and a ``metadata.yaml`` marking the recording as
-    open is written at the start (replaced by rosbags' full one at :meth:`close`). A SIGKILL
+    open is written at the start (replaced by the writer's full one at :meth:`close`). A SIGKILL
     thus loses at most the chunk in memory (≤ 1 MiB, ~3 s of the 20 kS/s stream).
     """
 
@@ -194,7 +238,7 @@ class Recording:
         if self.path.exists() or self.path.is_symlink():
             raise BagError(f"{self.path} exists: a recording goes to a new path (nothing is overwritten)")
         self.messages = 0
-        self._writer = Writer(self.path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
+        self._writer = JazzyWriter(self.path)
         self._writer.open()
         store = typestore()
         self._connections = {
@@ -215,7 +259,6 @@ class Recording:
 
     def close(self) -> None:
         self._writer.close()
-        mark_distro(self.path)
 
     def _flush(self) -> None:
         """The chunks written so far on disk, and the count of messages so far in the metadata."""
@@ -262,7 +305,7 @@ class Recording:
                 OPEN_MARK: "open: counts are written at close; after a kill run mows bag repair",
                 WRITTEN_MARK: str(self.messages),
             },
-            "ros_distro": "rosbags",
+            "ros_distro": ROS_DISTRO,
         }
         temporary = self.path / "metadata.yaml.tmp"
         temporary.write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False))

@@ -397,7 +397,8 @@ class DeviceSession:
                     saturated_samples=a.saturated_samples,
                 )
             if s is None:  # a recording: the phase of its last replayed event
-                values.update(phase=self._replayed_phase.name if self._replayed_phase else "none replayed yet")
+                replayed = self._replayed_phase  # IDLE is 0: a phase is there when it is not None
+                values.update(phase="none replayed yet" if replayed is None else replayed.name)
             else:
                 values.update(
                     phase=s.phase.name if s.busy or s.phase != Phase.FAULT else Phase.IDLE.name,

@@ -31,6 +31,8 @@ DEGENERATE_RTOL = 1e-6  # singular value (normalised Jacobian columns) below whi
 CV_PREDICTION_SIGMAS = 10.0  # a fold predicting its rows less precisely than this says nothing
 DEGENERATE_WEIGHT = 0.1  # a parameter with more than this weight in such a direction is not identifiable
 
+FittedParameter = tuple[str, float, float, str]  # (name, value, std, unit) of one fitted parameter
+
 
 class Problem:
     """Weighted residuals and their Jacobian for one model and table, with a one-point cache
@@ -183,7 +185,7 @@ class FitResult:
     def weighted_residual(self) -> np.ndarray:
         return self.residual_hz / self.table.f_std_hz
 
-    def parameters(self) -> list[tuple[str, float, float, str]]:
+    def parameters(self) -> list[FittedParameter]:
         """[(name, value, std, unit)] for f00 and every effect parameter."""
         units = ["Hz"] + [p.unit for _, p in self.model.parameters]
         return list(zip(self.model.parameter_names, self.values.tolist(), self.std.tolist(), units))
@@ -194,7 +196,7 @@ class FitResult:
         keep = [e is not effect for e in self.model.effects for _ in e.parameters]
         return self.values[1:][np.array(keep, bool)]
 
-    def effect_parameters(self, effect_name: str) -> list[tuple[str, float, float, str]]:
+    def effect_parameters(self, effect_name: str) -> list[FittedParameter]:
         """[(parameter, value, std, unit)] of one effect of the model."""
         prefix = effect_name + "."
         return [(name[len(prefix) :], v, s, u) for name, v, s, u in self.parameters() if name.startswith(prefix)]

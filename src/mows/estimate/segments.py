@@ -107,7 +107,7 @@ class SegmentAssembler:
     (announced after their samples left the buffer).
     """
 
-    def __init__(self, buffer_s: float = 5.0):
+    def __init__(self, buffer_s: float = 5.0) -> None:
         if not (math.isfinite(buffer_s) and buffer_s > 0):
             raise ValueError(f"buffer_s = {buffer_s!r} must be a positive number of seconds")
         self.buffer_s = buffer_s

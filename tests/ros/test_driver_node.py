@@ -399,7 +399,7 @@ def test_a_60_s_live_stream_has_no_unexplained_gaps(start_driver, listen):
 
 
 def test_docs_list_every_parameter_topic_and_service():
-    text = (Path(__file__).parents[2] / "docs" / "driver.md").read_text()
+    text = (Path(__file__).parents[2] / "docs" / "nodes.md").read_text()
     names = [spec.name for spec in driver.PARAMETERS]
     names += [
         f"/{outputs.RAW_TOPIC}",

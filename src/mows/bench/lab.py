@@ -30,7 +30,14 @@ def benchmark_table(seed: int = 0, sweeps: int = SWEEPS):
     temperature = 293.15 + 0.5 * np.sin(2 * np.pi * sweep["t_s"] / 3000.0)
     source = anti_helmholtz_pair((0, 0, 0), (1, 0, 0), 0.105, 100, 1.0) + UniformField((15e-6, -12e-6, -40e-6))
     return synthetic.synthesize(
-        PAPER_PROBE, source, theta0, np.random.default_rng(seed), amplitude_deg=20.0, temperature_k=temperature, **sweep
+        PAPER_PROBE,
+        source,
+        theta0,
+        np.random.default_rng(seed),
+        amplitude_deg=20.0,
+        temperature_k=temperature,
+        t_s=sweep["t_s"],
+        sweep=sweep["sweep"],
     )
 
 

@@ -302,9 +302,9 @@ def _table_columns(path) -> Mapping:
     if amplitude is not None:
         flagged = columns.get("amplitude_fitted", np.ones(amplitude.shape))
         columns["amplitude_fitted"] = (np.isfinite(amplitude) & (flagged != 0)).astype(float)
-        bad = np.flatnonzero(np.isfinite(amplitude) & (amplitude <= 0))
-        if len(bad):
-            raise ValueError(f"column 'amplitude_deg' must be > 0: not so in {rows_text(bad)}")
+        non_positive = np.flatnonzero(np.isfinite(amplitude) & (amplitude <= 0))
+        if len(non_positive):
+            raise ValueError(f"column 'amplitude_deg' must be > 0: not so in {rows_text(non_positive)}")
     for name in ("theta0_deg", "f_hz", "f_std_hz", *TABLE_COLUMNS):
         bad = np.flatnonzero(~np.isfinite(columns[name])) if name in columns else ()
         if len(bad):

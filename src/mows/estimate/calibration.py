@@ -48,7 +48,7 @@ class F00Calibration:
     the probe has no restoring torque and Eq. 6 no real root.
     """
 
-    def __init__(self, probe: Probe, reference_field_t: float, n_ringdowns: int, timeout_s: float):
+    def __init__(self, probe: Probe, reference_field_t: float, n_ringdowns: int, timeout_s: float) -> None:
         # f/f00 = √ratio: the field adds m·B to the spring kM (Eq. 6, kG = 0).
         self._ratio = 1.0 + probe.moment_am2 * reference_field_t / probe.spring_nm_per_rad
         if n_ringdowns < 1 or not timeout_s > 0 or not self._ratio > 0:

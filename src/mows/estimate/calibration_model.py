@@ -10,10 +10,11 @@ constants is :mod:`mows.estimate.probe_calibration`.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from mows.estimate.calibration_record import CalibrationError, KnownConstants
+from mows.estimate.calibration_record import CalibrationError, CalibrationPoint, KnownConstants, Wiring
 from mows.physics import ringdown_average
 from mows.physics.pose import probe_axes
 from mows.physics.potential import ArcPotential
@@ -35,7 +36,7 @@ class Rows:
     weights: np.ndarray  # (n, q)
 
 
-def rows_of(points, wirings: dict, known: KnownConstants) -> Rows:
+def rows_of(points: Sequence[CalibrationPoint], wirings: Mapping[str, Wiring], known: KnownConstants) -> Rows:
     unknown = {p.wiring for p in points} - set(wirings)
     if unknown:
         raise CalibrationError(
@@ -62,12 +63,21 @@ def rows_of(points, wirings: dict, known: KnownConstants) -> Rows:
     )
 
 
-def inertia_from(f00_hz, spring_nm_per_rad, damping_per_s):
+def inertia_from(f00_hz: float, spring_nm_per_rad: float, damping_per_s: float) -> float:
     """J = kM/((2π·f00)² + δ²): Eq. 10 with the damping of Eq. S1 kept."""
     return spring_nm_per_rad / ((TWO_PI * f00_hz) ** 2 + damping_per_s**2)
 
 
-def frequencies(rows: Rows, known: KnownConstants, f00, beta0, environment_t, lever, stop, damping) -> np.ndarray:
+def frequencies(
+    rows: Rows,
+    known: KnownConstants,
+    f00: float,
+    beta0: float,
+    environment_t: np.ndarray,
+    lever: float,
+    stop: float,
+    damping: float,
+) -> np.ndarray:
     """Ring-down frequencies of every row for the constants given (module docstring of
     :mod:`mows.estimate.probe_calibration`)."""
     spring = f00 * known.moment_am2 / (2.0 * beta0)

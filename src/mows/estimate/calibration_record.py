@@ -13,7 +13,10 @@ import math
 
 import numpy as np
 
+from mows.estimate.ringdown_types import RingdownFit
+from mows.physics.field import FieldSource
 from mows.physics.probe import Probe
+from mows.physics.schema import Vector
 
 
 class CalibrationError(ValueError):
@@ -26,11 +29,11 @@ class Wiring:
     ``field_per_a_t`` (3,) and ``gradient_per_a_t_per_m`` (3, 3), per ampere."""
 
     name: str
-    field_per_a_t: tuple
-    gradient_per_a_t_per_m: tuple = ((0.0,) * 3,) * 3
+    field_per_a_t: tuple[float, ...]
+    gradient_per_a_t_per_m: tuple[tuple[float, ...], ...] = ((0.0,) * 3,) * 3
 
     @classmethod
-    def from_source(cls, name: str, source_per_a, position_m=(0.0, 0.0, 0.0)) -> Wiring:
+    def from_source(cls, name: str, source_per_a: FieldSource, position_m: Vector = (0.0, 0.0, 0.0)) -> Wiring:
         """The wiring of a field source (its field at 1 A) at ``position_m``."""
         point = np.asarray(position_m, float)
         return cls(
@@ -56,7 +59,7 @@ class CalibrationPoint:
     rest_offset_rad: float = math.nan  # the fit's rest offset θs − θ0 (NaN: not determined)
 
     @classmethod
-    def from_fit(cls, fit, wiring: str, supply_current_a: float) -> CalibrationPoint:
+    def from_fit(cls, fit: RingdownFit, wiring: str, supply_current_a: float) -> CalibrationPoint:
         return cls(
             wiring,
             float(supply_current_a),
@@ -81,12 +84,12 @@ class KnownConstants:
     moment_am2: float
     magnet_mass_kg: float
     theta_stop_rad: float = math.radians(24.0)
-    environment_field_t: tuple | None = None
+    environment_field_t: tuple[float, ...] | None = None
     start_swing_rad: float | None = None
     start_swing_std_rad: float = 0.0
 
     @classmethod
-    def of(cls, probe: Probe, environment_field_t=None) -> KnownConstants:
+    def of(cls, probe: Probe, environment_field_t: Vector | None = None) -> KnownConstants:
         return cls(
             probe.moment_am2,
             probe.magnet_mass_kg,
@@ -99,14 +102,14 @@ class KnownConstants:
 class ProbeCalibration:
     """The calibrated constants (SI), their covariance and what the data could not say."""
 
-    names: tuple
+    names: tuple[str, ...]
     values: np.ndarray
     covariance: np.ndarray
     chi2_dof: float
     n_points: int
     known: KnownConstants
-    notes: tuple = ()
-    polarity: dict = dataclasses.field(default_factory=dict)  # wiring → +1 as written, −1 reversed
+    notes: tuple[str, ...] = ()
+    polarity: dict[str, int] = dataclasses.field(default_factory=dict)  # wiring → +1 as written, −1 reversed
 
     def value(self, name: str) -> float:
         return float(self.values[self.names.index(name)])

@@ -42,13 +42,19 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from scipy import optimize
 
 from mows.estimate.calibration_model import frequencies, inertia_from, rows_of
-from mows.estimate.calibration_record import CalibrationError, KnownConstants, ProbeCalibration, Wiring
+from mows.estimate.calibration_record import (
+    CalibrationError,
+    CalibrationPoint,
+    KnownConstants,
+    ProbeCalibration,
+    Wiring,
+)
 from mows.physics.probe import lever_from_inertia
 
 FIELD_UNIT_T = 1e-6  # fit units keep the normal equations well scaled: µT, Hz/mT, mm
@@ -71,15 +77,20 @@ SWING_FLOOR_RAD = 1e-6  # fits that agree exactly (synthetic data) still leave a
 NOMINAL_BETA0_HZ_PER_T = 3.68e3  # the paper's probe: only the sign of a model shift is used
 
 
+Residuals = Callable[[np.ndarray], np.ndarray]
+# (f00 Hz, β0 Hz/T, environment field (3,) T, lever m, start swing rad) of the fit's parameters x
+Unpacked = tuple[float, float, np.ndarray, float, float]
+
+
 # --- the fit -----------------------------------------------------------------------------------
 def calibrate_probe(
-    points,
-    wirings,
+    points: Sequence[CalibrationPoint],
+    wirings: dict[str, Wiring] | Sequence[Wiring],
     known: KnownConstants,
     field_wiring: str = "helmholtz",
-    failed: dict | None = None,
+    failed: dict[tuple[float, str], int] | None = None,
     nominal_lever_m: float = 1.9e-3,
-    polarity: dict | None = None,
+    polarity: dict[str, int] | None = None,
 ) -> ProbeCalibration:
     """Fit the probe's constants to ``points`` (:class:`CalibrationPoint`).
 
@@ -116,15 +127,15 @@ def calibrate_probe(
     unit_axis = axis / np.linalg.norm(axis)
     fixed_environment = np.zeros(3) if fit_environment else np.asarray(known.environment_field_t, float)
 
-    def unpack(x):
+    def unpack(x: np.ndarray) -> Unpacked:
         environment = fixed_environment + (x[3] * FIELD_UNIT_T * unit_axis if fit_environment else 0.0)
         lever = x[-1] * LEVER_UNIT_M if fit_lever else nominal_lever_m
         return x[0], x[1] * BETA_UNIT_HZ_PER_T, environment, lever, x[2] * AMPLITUDE_UNIT_RAD
 
-    def model(x):
+    def model(x: np.ndarray) -> np.ndarray:
         return frequencies(rows, known, *unpack(x), damping)
 
-    def residuals(x, sigma_hz):
+    def residuals(x: np.ndarray, sigma_hz: np.ndarray) -> np.ndarray:
         prior = (x[2] * AMPLITUDE_UNIT_RAD - swing) / swing_std
         return np.append((model(x) - rows.frequency_hz) / sigma_hz, prior)
 
@@ -176,7 +187,9 @@ def calibrate_probe(
 POLARITY_SIGMAS = 3.0  # a slope this many standard errors from zero tells the sign
 
 
-def wiring_polarities(points, wirings: dict, known: KnownConstants, nominal_lever_m: float) -> dict:
+def wiring_polarities(
+    points: Sequence[CalibrationPoint], wirings: Mapping[str, Wiring], known: KnownConstants, nominal_lever_m: float
+) -> dict[str, int]:
     """+1 or −1 for each wiring whose points tell: the sign of the slope of the measured
     frequencies against the model's frequency shifts of the paper-like constants, within each
     orientation (which removes the environment field's offset). −1: the frequencies move
@@ -197,7 +210,7 @@ def wiring_polarities(points, wirings: dict, known: KnownConstants, nominal_leve
     weight = 1.0 / rows.frequency_std_hz**2
     wiring = np.array([p.wiring for p in points])
     group = np.round(np.mod(rows.theta0_rad, 2.0 * math.pi), 6)
-    polarity = {}
+    polarity: dict[str, int] = {}
     for name in np.unique(wiring):
         sxy = sxx = 0.0
         for theta0 in np.unique(group[wiring == name]):
@@ -217,7 +230,7 @@ def _polarity_note(wiring: str, sign: int) -> str:
     )
 
 
-def _dropped_notes(points, usable) -> list:
+def _dropped_notes(points: Sequence[CalibrationPoint], usable: Sequence[CalibrationPoint]) -> list[str]:
     """One note per ring-down left out for a value that is not a finite number."""
     return [
         f"ring-down {i + 1} ({p.supply_current_a:+.4f} A, θ0 {math.degrees(p.theta0_rad):.1f}°) left out: "
@@ -227,7 +240,7 @@ def _dropped_notes(points, usable) -> list:
     ]
 
 
-def _least_squares(residuals, x0, steps):
+def _least_squares(residuals: Residuals, x0: np.ndarray, steps: np.ndarray) -> optimize.OptimizeResult:
     if not np.all(np.isfinite(residuals(x0))):  # scipy would say "Residuals are not finite in the initial point"
         raise CalibrationError(
             "the model gives no finite frequency for the data's starting constants: "
@@ -241,7 +254,7 @@ def _least_squares(residuals, x0, steps):
     return result
 
 
-def _start_swing(points, known: KnownConstants) -> tuple:
+def _start_swing(points: Sequence[CalibrationPoint], known: KnownConstants) -> tuple[float, float]:
     """The housing stop every ring-down starts from, and its standard uncertainty: as given
     (``known.start_swing_rad``), else measured by the fits that determined both θmax and the
     rest offset, θmax grown back by e^(δ·t) to the switch-off plus |θs − θ0|
@@ -263,21 +276,21 @@ def _start_swing(points, known: KnownConstants) -> tuple:
     return median, max(std, SWING_FLOOR_RAD)
 
 
-def _swing_slope_hz_per_rad(model, x) -> np.ndarray:
+def _swing_slope_hz_per_rad(model: Residuals, x: np.ndarray) -> np.ndarray:
     """∂f/∂(start swing) of every ring-down: each depends on its own swing alone."""
     e = np.zeros_like(x)
     e[2] = STEPS["swing"]
     return (model(x + e) - model(x - e)) / (2.0 * STEPS["swing"] * AMPLITUDE_UNIT_RAD)
 
 
-def _swing_scatter_rad(residual_hz, std_hz, slope_hz_per_rad, dof: int) -> float:
+def _swing_scatter_rad(residual_hz: np.ndarray, std_hz: np.ndarray, slope_hz_per_rad: np.ndarray, dof: int) -> float:
     """The scatter s of the ring-downs' own start swings about their mean: the s ≥ 0 that makes
     Σ r²/(σ² + (∂f/∂A·s)²) = dof (a variance component: the scatter shows in the frequencies
     in proportion to the field term, not at zero field). 0 when the fits' σ explain the
     residuals; at most MAX_SCATTER_RAD (beyond it the excess is not the swing's, and χ²/dof
     widens the uncertainties instead)."""
 
-    def excess(s2):
+    def excess(s2: float) -> float:
         return float(np.sum(residual_hz**2 / (std_hz**2 + slope_hz_per_rad**2 * s2))) - dof
 
     if dof <= 0 or excess(0.0) <= 0.0:
@@ -287,7 +300,7 @@ def _swing_scatter_rad(residual_hz, std_hz, slope_hz_per_rad, dof: int) -> float
     return math.sqrt(optimize.brentq(excess, 0.0, MAX_SCATTER_RAD**2, xtol=1e-14, rtol=1e-6))
 
 
-def _jacobian(residuals, x, steps) -> np.ndarray:
+def _jacobian(residuals: Residuals, x: np.ndarray, steps: np.ndarray) -> np.ndarray:
     columns = []
     for k, h in enumerate(steps):
         e = np.zeros_like(x)
@@ -296,7 +309,7 @@ def _jacobian(residuals, x, steps) -> np.ndarray:
     return np.stack(columns, -1)
 
 
-def _covariance(jac, names) -> np.ndarray:
+def _covariance(jac: np.ndarray, names: list[str]) -> np.ndarray:
     """(JᵀJ)⁻¹; CalibrationError naming the parameters the data leave undetermined."""
     u, s, vt = np.linalg.svd(jac, full_matrices=False)
     if s[-1] < 1e-9 * s[0]:
@@ -307,7 +320,7 @@ def _covariance(jac, names) -> np.ndarray:
     return (vt.T / s**2) @ vt
 
 
-def _field_axis(wirings: dict, field_wiring: str) -> np.ndarray:
+def _field_axis(wirings: Mapping[str, Wiring], field_wiring: str) -> np.ndarray:
     """The homogeneous wiring's field per ampere at the probe; CalibrationError without one."""
     axis = np.asarray(wirings[field_wiring].field_per_a_t, float) if field_wiring in wirings else np.zeros(3)
     if not np.any(axis):
@@ -317,7 +330,7 @@ def _field_axis(wirings: dict, field_wiring: str) -> np.ndarray:
     return axis
 
 
-def _check_field_points(points, axis: np.ndarray, known: KnownConstants) -> None:
+def _check_field_points(points: Sequence[CalibrationPoint], axis: np.ndarray, known: KnownConstants) -> None:
     """CalibrationError when the homogeneous sweep cannot determine β0 and f00."""
     along = np.array(
         [p.supply_current_a * (axis[0] * math.cos(p.theta0_rad) + axis[1] * math.sin(p.theta0_rad)) for p in points]
@@ -336,7 +349,7 @@ def _check_field_points(points, axis: np.ndarray, known: KnownConstants) -> None
         )
 
 
-def _failure_notes(failed: dict, points) -> list:
+def _failure_notes(failed: dict[tuple[float, str], int], points: Sequence[CalibrationPoint]) -> list[str]:
     """Notes on failed ring-downs; CalibrationError if a supply current has no usable one."""
     notes, usable = [], {p.supply_current_a for p in points}
     for (current, reason), count in sorted(failed.items()):
@@ -349,14 +362,14 @@ def _failure_notes(failed: dict, points) -> list:
     return notes
 
 
-def _mean_damping(points) -> tuple:
+def _mean_damping(points: Sequence[CalibrationPoint]) -> tuple[float, float]:
     """The ring-downs' mean damping and the variance of that mean (from their scatter)."""
     values = np.array([p.damping_per_s for p in points])
     var = float(values.var(ddof=1) / len(values)) if len(values) > 1 else float(values[0] ** 2)
     return float(values.mean()), var
 
 
-def _start(points, wiring: Wiring, known: KnownConstants) -> tuple:
+def _start(points: Sequence[CalibrationPoint], wiring: Wiring, known: KnownConstants) -> tuple[float, float]:
     """f00 and β0 from a straight line through f against the applied field along x'."""
     axis = np.asarray(wiring.field_per_a_t, float)
     along = np.array(
@@ -373,7 +386,7 @@ class _Fitted:
 
     x: np.ndarray
     cov_x: np.ndarray
-    unpack: Callable[[np.ndarray], tuple]
+    unpack: Callable[[np.ndarray], Unpacked]
     damping: float
     damping_var: float
     unit_axis: np.ndarray  # the homogeneous supply's field direction
@@ -381,7 +394,15 @@ class _Fitted:
     fit_lever: bool
 
 
-def _derive(fitted: _Fitted, wirings, gradient_points, known, chi2_dof, n_points, notes) -> ProbeCalibration:
+def _derive(
+    fitted: _Fitted,
+    wirings: Mapping[str, Wiring],
+    gradient_points: Sequence[CalibrationPoint],
+    known: KnownConstants,
+    chi2_dof: float,
+    n_points: int,
+    notes: tuple[str, ...],
+) -> ProbeCalibration:
     """The reported constants and their covariance by the delta method over (x, δ)."""
     x, cov_x, unpack, unit_axis = fitted.x, fitted.cov_x, fitted.unpack, fitted.unit_axis
     fit_environment, fit_lever = fitted.fit_environment, fitted.fit_lever
@@ -398,7 +419,7 @@ def _derive(fitted: _Fitted, wirings, gradient_points, known, chi2_dof, n_points
     gradient_factor = _gradient_factor(wirings, gradient_points) if fit_lever else None
     names += ["gradient_lever_m", "gamma_hz_m_per_t"] * fit_lever
 
-    def constants(z):
+    def constants(z: np.ndarray) -> np.ndarray:
         f00, beta0, environment, lever, stop = unpack(z[:-1])
         delta = z[-1]
         spring = f00 * known.moment_am2 / (2.0 * beta0)
@@ -406,6 +427,7 @@ def _derive(fitted: _Fitted, wirings, gradient_points, known, chi2_dof, n_points
         values = [f00, beta0, spring, inertia, lever_from_inertia(inertia, known.magnet_mass_kg), delta, stop]
         values += [float(environment @ unit_axis)] * fit_environment
         if fit_lever:
+            assert gradient_factor is not None  # computed whenever the lever is fitted
             values += [lever, beta0 * lever * gradient_factor]
         return np.array(values)
 
@@ -427,7 +449,7 @@ def _derive(fitted: _Fitted, wirings, gradient_points, known, chi2_dof, n_points
     return ProbeCalibration(tuple(names), values, covariance, chi2_dof, n_points, known, notes)
 
 
-def _gradient_factor(wirings, gradient_points) -> float:
+def _gradient_factor(wirings: Mapping[str, Wiring], gradient_points: Sequence[CalibrationPoint]) -> float:
     """γ/(β0·l) of the gradient wiring at θ0 = 0: 1 − 2·Gy'y'/Gx'x' (PHYSICS.md §4: k gains
     m·l·(Gx'x' − 2·Gy'y')); 2 for an anti-Helmholtz pair along x."""
     gradient = np.asarray(wirings[gradient_points[0].wiring].gradient_per_a_t_per_m, float)

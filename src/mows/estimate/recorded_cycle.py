@@ -10,10 +10,47 @@ fit exactly as the node does.
 
 from __future__ import annotations
 
+from typing import Protocol
+
+import numpy as np
+
 from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
+from mows.physics.fluxgate import FluxgatePair
+from mows.physics.probe import Probe
 
 
-def fit_cycle(cycle, scene, paper_model: bool = False, settle_s: float = SETTLE_S) -> RingdownFit:
+class RecordedCycle(Protocol):
+    """What :func:`fit_cycle` reads of a recorded cycle (module docstring)."""
+
+    @property
+    def samples_t(self) -> np.ndarray: ...
+    @property
+    def saturated(self) -> np.ndarray: ...
+    @property
+    def sample_rate_hz(self) -> float: ...
+    @property
+    def theta0_rad(self) -> float: ...
+    @property
+    def frequency_hz(self) -> float: ...
+    @property
+    def coil_off_index(self) -> int: ...
+
+
+class _Sensors(Protocol):
+    @property
+    def pair(self) -> FluxgatePair: ...
+
+
+class Scene(Protocol):
+    """What :func:`fit_cycle` reads of a scene: its probe and fluxgate pair."""
+
+    @property
+    def probe(self) -> Probe: ...
+    @property
+    def sensors(self) -> _Sensors: ...
+
+
+def fit_cycle(cycle: RecordedCycle, scene: Scene, paper_model: bool = False, settle_s: float = SETTLE_S) -> RingdownFit:
     """Fit the ring-down of a recorded cycle: the lever-aware pickup of ``scene``'s probe seen by
     its fluxgates at the commanded θ0 (``paper_model``: Eq. S11 instead), the expected frequency
     the one the cycle excited at, the probe's damping as the start."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +39,7 @@ class RingdownWindow:
     excitation_frequency_hz: float = math.nan
     tuning: bool = False  # a frequency-tuning ring-down, not a measurement
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (
             isinstance(self.start_ns, (int, np.integer)) and math.isfinite(self.duration_s) and self.duration_s > 0
         ):
@@ -48,7 +49,7 @@ class RingdownWindow:
             )
 
 
-def block_from_message(message) -> SampleBlock:
+def block_from_message(message: Any) -> SampleBlock:
     """A ``mows_msgs/MagnetometerBlock`` (rclpy's or rosbags') as a :class:`Block`; ValueError
     when it does not describe one (channels of unequal length, no channels, a bad rate)."""
     if not message.channels:
@@ -65,7 +66,7 @@ def block_from_message(message) -> SampleBlock:
     )
 
 
-def window_from_message(message) -> RingdownWindow:
+def window_from_message(message: Any) -> RingdownWindow:
     """A ``mows_msgs/ExcitationState`` of phase RINGDOWN as a :class:`RingdownWindow`."""
     return RingdownWindow(
         stamps.nanoseconds(message.header.stamp),
@@ -106,7 +107,7 @@ class SegmentAssembler:
     (announced after their samples left the buffer).
     """
 
-    def __init__(self, buffer_s: float = 5.0):
+    def __init__(self, buffer_s: float = 5.0) -> None:
         if not (math.isfinite(buffer_s) and buffer_s > 0):
             raise ValueError(f"buffer_s = {buffer_s!r} must be a positive number of seconds")
         self.buffer_s = buffer_s
@@ -147,7 +148,7 @@ class SegmentAssembler:
 
     # --- assembly -----------------------------------------------------------------------
     @staticmethod
-    def _index_range(window: RingdownWindow, reference: SampleBlock | None):
+    def _index_range(window: RingdownWindow, reference: SampleBlock | None) -> tuple[int, int]:
         if reference is None:
             return -1, -1  # resolved when the first block arrives
         start = reference.index_at(window.start_ns)

@@ -11,6 +11,7 @@ the next fit.
 
 import dataclasses
 from collections.abc import Callable
+from typing import Any
 
 from mows.estimate.axis import AxisEstimate, estimate_along_axis
 from mows.estimate.calibration import F00Calibration
@@ -51,17 +52,17 @@ class Estimated:
 class RingdownEstimator:
     """Assembles ring-downs from the stream (keeping ``buffer_s`` of samples) and estimates each."""
 
-    def __init__(self, buffer_s: float):
+    def __init__(self, buffer_s: float) -> None:
         self.assembler = SegmentAssembler(buffer_s)
         self.calibration: F00Calibration | None = None
         self.last = "no ring-down yet"  # the last fit's report
 
-    def add_block(self, message) -> list[Segment]:
+    def add_block(self, message: Any) -> list[Segment]:
         """A ``MagnetometerBlock``; the ring-downs it completes. ValueError for samples no device
         could have sent (nothing of them is kept)."""
         return self.assembler.add_block(block_from_message(message))
 
-    def announce(self, message) -> list[Segment]:
+    def announce(self, message: Any) -> list[Segment]:
         """An ``ExcitationState`` of a ring-down; the ring-downs complete by now. ValueError for an
         announcement that is no window."""
         return self.assembler.announce(window_from_message(message))

@@ -36,6 +36,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+from collections.abc import Iterator
 
 import numpy as np
 from scipy import stats
@@ -44,9 +46,10 @@ from mows.device.bags import read_bag
 from mows.device.phases import Phase
 from mows.estimate.axis import estimate_along_axis
 from mows.estimate.ringdown import FitOptions, RingdownFit, fit_ringdown, usable_window
-from mows.estimate.segments import SegmentAssembler, block_from_message, window_from_message
+from mows.estimate.segments import Segment, SegmentAssembler, block_from_message, window_from_message
 from mows.physics import ringdown_average
 from mows.physics.potential import ArcPotential
+from mows.physics.probe import Probe
 
 ALPHA = 1e-3  # significance level of each test
 SIGMAS = 3.0  # a slope or λ this many σ from a value is "different"
@@ -72,7 +75,7 @@ class ChirpDiagnosis:
     """Where a constant-frequency fit fails inside one ring-down and what explains it."""
 
     fit: RingdownFit
-    pieces: tuple
+    pieces: tuple[Piece, ...]
     field_along_axis_t: float
     constant_chi2_dof: float
     constant_p_value: float
@@ -96,14 +99,14 @@ class ChirpError(ValueError):
 
 
 def diagnose_ringdown(
-    samples,
-    sample_rate_hz,
-    theta0_rad,
-    expected_hz,
-    probe,
+    samples: np.ndarray,
+    sample_rate_hz: float,
+    theta0_rad: float,
+    expected_hz: float,
+    probe: Probe,
     options: FitOptions,
-    f00_hz=None,
-    saturated=None,
+    f00_hz: float | None = None,
+    saturated: np.ndarray | None = None,
     settle_s: float = 0.0,
     piece_periods: float = PIECE_PERIODS,
 ) -> ChirpDiagnosis:
@@ -124,7 +127,8 @@ def diagnose_ringdown(
         raise ChirpError(f"{fit.duration_s:.3f} s hold {count} pieces of {piece_periods:g} periods; need 3")
     field = _field_along_axis(fit, probe, probe.f00_hz if f00_hz is None else f00_hz, start_amplitude)
     piece_options = dataclasses.replace(options, min_periods=0.8 * piece_periods)  # f may sit above the whole f
-    pieces, failures = [], []
+    pieces: list[Piece] = []
+    failures: list[str] = []
     for i in range(count):
         part = slice(start + i * length, start + (i + 1) * length)
         piece = fit_ringdown(samples[part], sample_rate_hz, theta0_rad, fit.frequency_hz, None, piece_options)
@@ -143,7 +147,7 @@ def diagnose_ringdown(
     return _diagnosis(fit, tuple(pieces), field)
 
 
-def _start_amplitude_rad(fit: RingdownFit, probe) -> float:
+def _start_amplitude_rad(fit: RingdownFit, probe: Probe) -> float:
     """The swing at the first fitted sample: the fit's θmax where it determined it, else the
     probe's stop less the fit's rest offset (0 where not determined: the model here has the
     field along the axis only), decayed from the switch-off
@@ -154,7 +158,7 @@ def _start_amplitude_rad(fit: RingdownFit, probe) -> float:
     return swing * math.exp(-fit.damping_per_s * fit.start_offset_s)
 
 
-def _field_along_axis(fit, probe, f00_hz, amplitude_rad) -> float:
+def _field_along_axis(fit: RingdownFit, probe: Probe, f00_hz: float, amplitude_rad: float) -> float:
     """Bx' that makes the potential's window-averaged frequency at the start amplitude equal the
     fitted f: Eq. 6 inverted, then one correction for the finite amplitude's own shift."""
     field = estimate_along_axis(fit, probe, f00_hz).field_along_axis_t
@@ -163,7 +167,7 @@ def _field_along_axis(fit, probe, f00_hz, amplitude_rad) -> float:
     return field * small / (averaged - f00_hz) if averaged != f00_hz else field
 
 
-def _predicted_hz(probe, field_t, fit: RingdownFit, amplitude_rad, duration_s) -> float:
+def _predicted_hz(probe: Probe, field_t: float, fit: RingdownFit, amplitude_rad: float, duration_s: float) -> float:
     """The frequency a constant-frequency fit with ``fit``'s signal model and damping reads over
     a window starting at ``amplitude_rad``."""
     if amplitude_rad == 0.0:
@@ -176,7 +180,7 @@ def _predicted_hz(probe, field_t, fit: RingdownFit, amplitude_rad, duration_s) -
     return float(weights[0] @ potential.frequency_hz(nodes[0]))
 
 
-def _weighted_line(x, y, std) -> tuple[float, float]:
+def _weighted_line(x: np.ndarray, y: np.ndarray, std: np.ndarray) -> tuple[float, float]:
     """(slope, σ_slope) of y = a + b·x with weights 1/σ²."""
     w = 1.0 / np.asarray(std) ** 2
     xm = (w @ x) / w.sum()
@@ -184,7 +188,7 @@ def _weighted_line(x, y, std) -> tuple[float, float]:
     return float((w @ ((x - xm) * y)) / sxx), float(1.0 / math.sqrt(sxx))
 
 
-def _diagnosis(fit, pieces, field) -> ChirpDiagnosis:
+def _diagnosis(fit: RingdownFit, pieces: tuple[Piece, ...], field: float) -> ChirpDiagnosis:
     f = np.array([p.frequency_hz for p in pieces])
     std = np.array([p.frequency_std_hz for p in pieces])
     amplitude2 = np.array([p.amplitude_rad for p in pieces]) ** 2
@@ -206,7 +210,7 @@ def _diagnosis(fit, pieces, field) -> ChirpDiagnosis:
     return ChirpDiagnosis(fit, pieces, field, **numbers, verdict=verdict, explanation=explanation)
 
 
-def _verdict(numbers: dict, std, predicted) -> tuple[str, str]:
+def _verdict(numbers: dict[str, float], std: np.ndarray, predicted: np.ndarray) -> tuple[str, str]:
     """(verdict, explanation) from the tests' numbers (module docstring)."""
     slope, slope_std = numbers["slope_hz_per_rad2"], numbers["slope_std_hz_per_rad2"]
     ratio, ratio_std = numbers["chirp_ratio"], numbers["chirp_ratio_std"]
@@ -241,7 +245,12 @@ def _verdict(numbers: dict, std, predicted) -> tuple[str, str]:
     )
 
 
-def recorded_segments(path, raw_topic="/mows/raw", excitation_topic="/mows/excitation", tuning=False):
+def recorded_segments(
+    path: str | os.PathLike[str],
+    raw_topic: str = "/mows/raw",
+    excitation_topic: str = "/mows/excitation",
+    tuning: bool = False,
+) -> Iterator[Segment]:
     """Every ring-down the driver recorded in the bag at ``path``: its announced RINGDOWN window
     (tuning ones only with ``tuning``) cut out of the raw blocks by device stamps, as
     :class:`mows.estimate.segments.Segment`, in order (as the estimator node assembles them)."""

@@ -9,25 +9,29 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 import pathlib
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from mows.device import bags
 from mows.estimate.ringdown import FitStatus
-from mows.lab.data.reference import reference_columns
+from mows.lab.data.reference import Reference, reference_columns
 from mows.lab.data.table import FIELD, KNOWN, MeasurementTable, TableError, broken_rules, rows_text, with_notes
-from mows.physics.probe import PAPER_PROBE
+from mows.physics.probe import PAPER_PROBE, Probe
+from mows.physics.schema import Vector
 from mows.records import stamps
+from mows.sweep.decompose import Decomposition
 from mows.sweep.record import SweepPoint, SweepRecord
 
 RINGDOWN_TOPIC = "/mows/ringdown"
 SWEEP_TOPIC = "/mows/sweep"
 
 
-def read_csv(path, drop_invalid: bool = False) -> MeasurementTable:
+def read_csv(path: str | os.PathLike[str], drop_invalid: bool = False) -> MeasurementTable:
     """Read a measurement table from CSV (header row, one row per ring-down).
 
     Known columns must be numeric in every row; other columns are kept as covariates when all
@@ -46,7 +50,7 @@ def read_csv(path, drop_invalid: bool = False) -> MeasurementTable:
     return _read_cells(path, drop_invalid)
 
 
-def _read_numeric(path: pathlib.Path) -> dict | None:
+def _read_numeric(path: pathlib.Path) -> dict[str, np.ndarray] | None:
     """The columns of a CSV whose every data cell is a finite number, parsed by numpy's C
     reader (a 500 000-row table in seconds, its values only in memory); None for any other
     file, which :func:`_read_cells` then reads cell by cell to name what is wrong."""
@@ -116,15 +120,21 @@ def _number(cell: str) -> float:
         return math.nan
 
 
-def _drop_invalid_rows(columns, invalid):
-    bad = set().union(*invalid.values()) if invalid else set()
+def _drop_invalid_rows(
+    columns: dict[str, np.ndarray], invalid: Mapping[str, set[int]]
+) -> tuple[dict[str, np.ndarray], list[int]]:
+    bad: set[int] = set().union(*invalid.values()) if invalid else set()
     for _, _, rows in broken_rules(columns):
         bad |= set(rows.tolist())
     keep = np.setdiff1d(np.arange(len(next(iter(columns.values())))), sorted(bad))
     return {k: v[keep] for k, v in columns.items()}, sorted(bad)
 
 
-def load_table(source, drop_invalid: bool = False, **bag_options) -> MeasurementTable:
+def load_table(
+    source: MeasurementTable | Mapping[str, Any] | str | os.PathLike[str],
+    drop_invalid: bool = False,
+    **bag_options: Any,
+) -> MeasurementTable:
     """A :class:`MeasurementTable` from a CSV file, a rosbag2 bag directory (or .mcap file),
     or a mapping of column arrays."""
     if isinstance(source, MeasurementTable):
@@ -136,22 +146,22 @@ def load_table(source, drop_invalid: bool = False, **bag_options) -> Measurement
     return read_csv(source, drop_invalid=drop_invalid)
 
 
-def is_bag(source) -> bool:
+def is_bag(source: str | os.PathLike[str]) -> bool:
     """A rosbag2 bag: a directory or an .mcap file."""
     path = pathlib.Path(source)
     return path.is_dir() or path.suffix == ".mcap"
 
 
 # --- bags -----------------------------------------------------------------------------------
-def _stamp_s(message, timestamp_ns) -> float:
+def _stamp_s(message: Any, timestamp_ns: int) -> float:
     seconds = stamps.seconds(message.header.stamp)
     return seconds if seconds > 0 else 1e-9 * timestamp_ns
 
 
 def from_bag(
-    path,
-    reference=None,
-    magnet_position_m=(0.0, 0.0, 0.0),
+    path: str | os.PathLike[str],
+    reference: Reference | None = None,
+    magnet_position_m: Vector = (0.0, 0.0, 0.0),
     ringdown_topic: str = RINGDOWN_TOPIC,
     sweep_topic: str = SWEEP_TOPIC,
     theta_stop_rad: float = PAPER_PROBE.theta_stop_rad,
@@ -178,7 +188,10 @@ def from_bag(
     topics = [ringdown_topic, sweep_topic] + (
         [reference] if isinstance(reference, str) and reference.startswith("/") else []
     )
-    fits, sweeps, fields, failed = [], [], [], 0
+    fits: list[tuple[float, Any]] = []  # (stamp, RingdownFit message)
+    sweeps: list[float] = []
+    fields: list[tuple[float, tuple[float, float, float]]] = []
+    failed = 0
     for item in bags.read_bag(path, topics=topics):
         if item.topic == ringdown_topic:
             if getattr(item.message, "tuning", False):
@@ -219,7 +232,9 @@ def from_bag(
     return with_notes(columns, str(path), notes)
 
 
-def start_amplitudes_rad(fits, sweep_ids, stop_rad: float = math.nan) -> tuple[np.ndarray, list[str]]:
+def start_amplitudes_rad(
+    fits: Sequence[Any], sweep_ids: np.ndarray, stop_rad: float = math.nan
+) -> tuple[np.ndarray, list[str]]:
     """Each ring-down's start swing from RingdownFit messages (or fits), and notes of what was
     assumed or left out: the stop less the row's own |rest offset| where its fit determined it
     (:meth:`mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`, the rule of
@@ -238,7 +253,13 @@ def start_amplitudes_rad(fits, sweep_ids, stop_rad: float = math.nan) -> tuple[n
     return start, notes
 
 
-def _reference_columns(reference, times_s, fields, magnet_position_m, path) -> dict:
+def _reference_columns(
+    reference: Reference | None,
+    times_s: np.ndarray,
+    fields: Sequence[tuple[float, tuple[float, float, float]]],
+    magnet_position_m: Vector,
+    path: pathlib.Path,
+) -> dict[str, np.ndarray]:
     if reference is None:
         return {}
     if isinstance(reference, str) and reference.startswith("/"):
@@ -251,7 +272,9 @@ def _reference_columns(reference, times_s, fields, magnet_position_m, path) -> d
     return reference_columns(reference, len(times_s), magnet_position_m)
 
 
-def from_sweep(record, reference, probe, decomposition=None) -> MeasurementTable:
+def from_sweep(
+    record: SweepRecord, reference: Reference, probe: Probe, decomposition: Decomposition | None = None
+) -> MeasurementTable:
     """The table of one rotation sweep (:class:`mows.sweep.record.SweepRecord`) in a static
     ``reference`` (anything :func:`mows.lab.data.reference.reference_source` takes). With a first-principles
     ``decomposition`` of the sweep, each ring-down's start swing is stop − |θs| at its field

@@ -18,16 +18,23 @@ import dataclasses
 import os
 import pathlib
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import yaml
 
-from mows.lab.data.table import FIELD, GRADIENT, NO_BZ, NO_FIELD, NO_GRADIENT, TableError
+from mows.lab.data.table import FIELD, GRADIENT, NO_BZ, NO_FIELD, NO_GRADIENT, MeasurementTable, TableError
 from mows.physics.field import FieldSource, source_from_dict
+from mows.physics.schema import Vector
 from mows.sim.scenario import Scenario, load_scenario
 
+# The four ways of naming a reference (module docstring).
+Reference = FieldSource | Scenario | Mapping[str, Any] | str | os.PathLike[str]
 
-def reference_columns(reference, n: int, magnet_position_m=(0.0, 0.0, 0.0)) -> dict:
+
+def reference_columns(
+    reference: Reference, n: int, magnet_position_m: Vector = (0.0, 0.0, 0.0)
+) -> dict[str, np.ndarray]:
     """The reference columns (field, in-plane gradient) of ``n`` rows in a static reference
     (anything :func:`reference_source` takes)."""
     field, gradient = reference_at(reference, magnet_position_m)
@@ -36,7 +43,9 @@ def reference_columns(reference, n: int, magnet_position_m=(0.0, 0.0, 0.0)) -> d
     return columns
 
 
-def with_reference(table, reference, magnet_position_m=(0.0, 0.0, 0.0)):
+def with_reference(
+    table: MeasurementTable, reference: Reference, magnet_position_m: Vector = (0.0, 0.0, 0.0)
+) -> MeasurementTable:
     """``table`` with the reference columns of a static ``reference`` (a CSV that ``mows fit``
     wrote has none); TableError when the table already has reference columns of its own."""
     own = [name for name in (*FIELD, *GRADIENT) if table.has(name)]
@@ -47,13 +56,15 @@ def with_reference(table, reference, magnet_position_m=(0.0, 0.0, 0.0)):
     return dataclasses.replace(joined, notes=notes + (f"reference: {reference} (static, at the probe)",))
 
 
-def reference_at(reference, magnet_position_m=(0.0, 0.0, 0.0)) -> tuple:
+def reference_at(reference: Reference, magnet_position_m: Vector = (0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
     """Field (3,) and gradient (3, 3) at the probe of a reference (module docstring)."""
     source, point = reference_source(reference, magnet_position_m)
     return source.field_t(point), source.gradient_t_per_m(point)
 
 
-def reference_source(reference, magnet_position_m=(0.0, 0.0, 0.0)) -> tuple:
+def reference_source(
+    reference: Reference, magnet_position_m: Vector = (0.0, 0.0, 0.0)
+) -> tuple[FieldSource, np.ndarray]:
     """(field source, probe point (3,)) of a reference named in any of the module's four ways."""
     if isinstance(reference, (str, os.PathLike)):
         reference = _read(reference)
@@ -69,7 +80,7 @@ def reference_source(reference, magnet_position_m=(0.0, 0.0, 0.0)) -> tuple:
     return reference, np.asarray(magnet_position_m, float)
 
 
-def _read(name):
+def _read(name: str | os.PathLike[str]) -> Mapping[str, Any] | Scenario:
     """A field-source mapping from a YAML file that holds one, else the scenario so named."""
     path = pathlib.Path(name)
     data = yaml.safe_load(path.read_text()) if path.is_file() else None

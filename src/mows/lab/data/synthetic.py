@@ -18,6 +18,8 @@ when given: a reference that misses a source), optionally with magnetometer nois
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 from mows.estimate.recorded_cycle import fit_cycle
@@ -28,7 +30,10 @@ from mows.physics import ringdown_average
 from mows.physics.field import FieldSource
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
-from mows.sim.cycle import simulate_cycle
+from mows.physics.probe import Probe
+from mows.physics.schema import FloatOrArray, Vector
+from mows.sim.cycle import CycleRecord, simulate_cycle
+from mows.sim.scenario import Scenario
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -36,7 +41,7 @@ TRUTH_NODES = 8
 LEVEL = (0.0, 0.0, -STANDARD_GRAVITY_M_PER_S2)
 
 
-def _per_row(sources, n) -> list:
+def _per_row(sources: FieldSource | Iterable[FieldSource], n: int) -> list[FieldSource]:
     if isinstance(sources, FieldSource):
         return [sources] * n
     sources = list(sources)
@@ -46,14 +51,14 @@ def _per_row(sources, n) -> list:
 
 
 def true_frequency_hz(
-    probe,
-    sources,
-    theta0_rad,
-    amplitude_start_rad,
-    temperature_k=None,
-    gravity_m_per_s2=LEVEL,
-    magnet_position_m=(0.0, 0.0, 0.0),
-    duration_s=None,
+    probe: Probe,
+    sources: FieldSource | Iterable[FieldSource],
+    theta0_rad: FloatOrArray,
+    amplitude_start_rad: FloatOrArray,
+    temperature_k: FloatOrArray | None = None,
+    gravity_m_per_s2: Vector = LEVEL,
+    magnet_position_m: Vector = (0.0, 0.0, 0.0),
+    duration_s: FloatOrArray | None = None,
 ) -> np.ndarray:
     """Noise-free ring-down frequencies (n,), Hz, from the exact sources (module docstring).
 
@@ -99,19 +104,19 @@ def true_frequency_hz(
 
 
 def synthesize(
-    probe,
-    sources,
-    theta0_deg,
+    probe: Probe,
+    sources: FieldSource | Iterable[FieldSource],
+    theta0_deg: FloatOrArray,
     rng: np.random.Generator,
-    f_std_hz=1e-3,
-    amplitude_deg=None,
-    temperature_k=None,
-    gravity_m_per_s2=LEVEL,
-    magnet_position_m=(0.0, 0.0, 0.0),
-    reference=None,
-    reference_noise_t=0.0,
-    truth_hz=None,
-    **columns,
+    f_std_hz: FloatOrArray = 1e-3,
+    amplitude_deg: FloatOrArray | None = None,
+    temperature_k: FloatOrArray | None = None,
+    gravity_m_per_s2: Vector = LEVEL,
+    magnet_position_m: Vector = (0.0, 0.0, 0.0),
+    reference: FieldSource | Iterable[FieldSource] | None = None,
+    reference_noise_t: float = 0.0,
+    truth_hz: np.ndarray | None = None,
+    **columns: FloatOrArray,
 ) -> MeasurementTable:
     """A measurement table: true frequencies plus noise, and reference columns.
 
@@ -157,7 +162,7 @@ def synthesize(
     return MeasurementTable(table, "synthetic")
 
 
-def rotation_sweeps(step_deg: float = 10.0, sweeps: int = 2, seconds_per_row: float = 10.0) -> dict:
+def rotation_sweeps(step_deg: float = 10.0, sweeps: int = 2, seconds_per_row: float = 10.0) -> dict[str, np.ndarray]:
     """θ0 (deg), sweep number and time (s) of ``sweeps`` full rotations in steps of ``step_deg``."""
     angles = np.arange(0.0, 360.0, step_deg)
     theta0 = np.tile(angles, sweeps)
@@ -172,8 +177,8 @@ def rotation_sweeps(step_deg: float = 10.0, sweeps: int = 2, seconds_per_row: fl
 
 
 def simulated_table(
-    scenario,
-    angles_deg,
+    scenario: Scenario,
+    angles_deg: Vector,
     repeats: int,
     rng: np.random.Generator,
     settle_s: float = SETTLE_S,
@@ -211,7 +216,9 @@ def simulated_table(
     return MeasurementTable(columns, f"simulated {scenario.name}", notes)
 
 
-def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
+def _simulated_sweep(
+    device: SimulatedDevice, scenario: Scenario, angles_deg: Vector, settle_s: float
+) -> tuple[SweepRecord, list[float], int]:
     """(its SweepRecord, the device's temperature at each switch-off, failed fits) of one
     rotation sweep."""
     record, temperatures, failed = SweepRecord(), [], 0
@@ -232,7 +239,7 @@ def _simulated_sweep(device, scenario, angles_deg, settle_s) -> tuple:
     return record, temperatures, failed
 
 
-def _start_amplitudes_rad(records: list, probe) -> list:
+def _start_amplitudes_rad(records: list[SweepRecord], probe: Probe) -> list[np.ndarray]:
     """Each ring-down's start swing, stop − |θs|: θs the rest angle at its sweep's own
     first-principles decomposition (0 where that fails), the stop pooled over every ring-down
     of every sweep (:meth:`mows.sweep.record.SweepRecord.stop_amplitude_rad`; the probe's where
@@ -248,7 +255,7 @@ def _start_amplitudes_rad(records: list, probe) -> list:
     return [ringdown_average.start_swing_rad(stop, rest) for rest in rests]
 
 
-def _ringdown_point(scenario, cycle, settle_s):
+def _ringdown_point(scenario: Scenario, cycle: CycleRecord, settle_s: float) -> SweepPoint | None:
     """The estimator's fit of one simulated ring-down as a :class:`mows.sweep.record.SweepPoint`
     (None when the fit fails)."""
     fit = fit_cycle(cycle, scenario, settle_s=settle_s)

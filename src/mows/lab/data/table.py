@@ -40,7 +40,8 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-from collections.abc import Mapping
+import os
+from collections.abc import Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -79,15 +80,15 @@ class TableError(ValueError):
 class MissingColumnError(AttributeError, KeyError):
     """An effect or plugin asked for a column the table does not have."""
 
-    def __init__(self, column: str):
+    def __init__(self, column: str) -> None:
         super().__init__(column)
         self.column = column
 
-    def __str__(self):
+    def __str__(self) -> str:
         return f"the table has no column '{self.column}'"
 
 
-def rows_text(rows) -> str:
+def rows_text(rows: Iterable[int | np.integer]) -> str:
     rows = [int(r) + 1 for r in rows]
     shown = ", ".join(str(r) for r in rows[:8])
     return f"row{'s' if len(rows) > 1 else ''} {shown}{' …' if len(rows) > 8 else ''} (data rows, 1-based)"
@@ -103,9 +104,9 @@ class MeasurementTable:
 
     columns: Mapping[str, np.ndarray]
     source: str = "table"
-    notes: tuple = ()
+    notes: tuple[str, ...] = ()
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         columns = {name: np.asarray(values, float) for name, values in self.columns.items()}
         object.__setattr__(self, "columns", columns)
         _validate(columns)
@@ -116,7 +117,7 @@ class MeasurementTable:
         return self.has(WRITER_COLUMN)
 
     # --- plain columns --------------------------------------------------------------------
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> np.ndarray:
         columns = self.__dict__.get("columns", {})
         if name in columns:
             return columns[name]
@@ -146,7 +147,7 @@ class MeasurementTable:
         return self.columns["sweep"].astype(int) if self.has("sweep") else np.zeros(len(self), int)
 
     @property
-    def amplitude_rad(self):
+    def amplitude_rad(self) -> np.ndarray | None:
         return np.radians(self.columns["amplitude_deg"]) if self.has("amplitude_deg") else None
 
     # --- reference field in the global frame ------------------------------------------------
@@ -174,7 +175,7 @@ class MeasurementTable:
         return np.einsum("nij,nj->ni", self.probe_axes(), self.field_t)
 
     # --- diagnostics --------------------------------------------------------------------------
-    def derived_columns(self) -> dict:
+    def derived_columns(self) -> dict[str, np.ndarray]:
         """The reference in the probe frame, by name (also attributes, ``rows.b_along_t``, for
         plugins): |B| ``b_abs_t``, Bx' ``b_along_t``, By' = B⊥ ``b_perp_t``, Bz ``b_normal_t``;
         G = Gx'x' ``g_t_per_m``, Gx'y' ``g_xy_t_per_m``, Gy'y' ``g_yy_t_per_m``. Only those of
@@ -190,7 +191,7 @@ class MeasurementTable:
             found.update(g_t_per_m=gradient[:, 0, 0], g_xy_t_per_m=gradient[:, 0, 1], g_yy_t_per_m=gradient[:, 1, 1])
         return found
 
-    def covariates(self) -> dict:
+    def covariates(self) -> dict[str, np.ndarray]:
         """Every quantity a residual may follow, by name: the table's numeric columns (time,
         current, amplitude, temperature, reference z, extras) and the reference's |B|, B⊥ = By',
         Bx' and G = Gx'x'. Constant ones are left out (a constant is absorbed by f00)."""
@@ -204,7 +205,7 @@ class MeasurementTable:
         return {name: values for name, values in found.items() if np.ptp(values) > 0}
 
     # --- derived tables ---------------------------------------------------------------------
-    def subset(self, rows) -> MeasurementTable:
+    def subset(self, rows: np.ndarray) -> MeasurementTable:
         """The table restricted to ``rows`` (a boolean mask or indices)."""
         return dataclasses.replace(self, columns={k: v[rows] for k, v in self.columns.items()})
 
@@ -224,10 +225,10 @@ class MeasurementTable:
         subset = self.subset(chosen)
         return dataclasses.replace(subset, notes=subset.notes + (note,))
 
-    def without_rows(self, reasons: Mapping[int, tuple]) -> MeasurementTable:
+    def without_rows(self, reasons: Mapping[int, tuple[str, str]]) -> MeasurementTable:
         """The table without the rows ``reasons`` names ({row index: (why, detail)}), with a
         note per reason that lists its rows and their details."""
-        by_reason: dict = {}
+        by_reason: dict[str, list[tuple[int, str]]] = {}
         for row, (reason, detail) in reasons.items():
             by_reason.setdefault(reason, []).append((row, detail))
         notes = tuple(
@@ -239,7 +240,7 @@ class MeasurementTable:
         keep[list(reasons)] = False
         return dataclasses.replace(self.subset(keep), notes=self.notes + notes)
 
-    def with_columns(self, **columns) -> MeasurementTable:
+    def with_columns(self, **columns: np.ndarray) -> MeasurementTable:
         """A copy with columns replaced or added (arrays of length n)."""
         return dataclasses.replace(self, columns={**self.columns, **columns})
 
@@ -251,7 +252,7 @@ class MeasurementTable:
             self, columns={k: np.concatenate([v, other.columns[k]]) for k, v in self.columns.items()}
         )
 
-    def to_csv(self, path) -> None:
+    def to_csv(self, path: str | os.PathLike[str]) -> None:
         names = list(self.columns)
         with open(path, "w", newline="") as handle:
             writer = csv.writer(handle)
@@ -260,7 +261,7 @@ class MeasurementTable:
                 writer.writerow([repr(float(v)) for v in row])
 
 
-def _validate(columns: dict) -> None:
+def _validate(columns: dict[str, np.ndarray]) -> None:
     missing = [name for name in REQUIRED if name not in columns]
     if missing:
         raise TableError(
@@ -291,7 +292,7 @@ def _validate(columns: dict) -> None:
         )
 
 
-def tool_table(columns: Mapping, source: str) -> MeasurementTable:
+def tool_table(columns: Mapping[str, np.ndarray], source: str) -> MeasurementTable:
     """The table of ``columns`` as the project's tools write it: marked with
     ``mows_table_format`` (module docstring), so that the lab reads its ``amplitude_deg`` as
     evidence and mends rather than refuses its rows."""
@@ -300,7 +301,7 @@ def tool_table(columns: Mapping, source: str) -> MeasurementTable:
     return MeasurementTable(mended, source, notes)
 
 
-def _mend_own(columns: dict) -> tuple:
+def _mend_own(columns: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], tuple[str, ...]]:
     """(columns, notes) of one of our own tables made valid: impossible start swings set to NaN,
     rows with any other impossible value left out; the notes name the rows. Columns that
     :func:`_validate` would refuse for their names or lengths are left to it."""
@@ -326,7 +327,7 @@ def _mend_own(columns: dict) -> tuple:
     return columns, tuple(notes)
 
 
-def broken_rules(columns: dict):
+def broken_rules(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, str, np.ndarray]]:
     """(column, rule, rows) for the values no column may hold: NaN or ±inf anywhere, and
     values ≤ 0 in the columns that are positive by nature."""
     for name, values in columns.items():
@@ -340,7 +341,7 @@ def broken_rules(columns: dict):
                 yield name, "must be > 0: not so", bad
 
 
-def with_notes(columns, source, notes) -> MeasurementTable:
+def with_notes(columns: Mapping[str, np.ndarray], source: str, notes: list[str]) -> MeasurementTable:
     if WRITER_COLUMN in columns:
         columns, mended = _mend_own({name: np.asarray(values, float) for name, values in columns.items()})
         notes = list(notes) + list(mended)
@@ -389,7 +390,7 @@ def stratified_rows(sweep_ids: np.ndarray, rows: int, seed: int = 0) -> np.ndarr
     return np.sort(np.concatenate([_evenly(m, quota, rng) for m, quota in zip(members, quotas)]))
 
 
-def _members(inverse: np.ndarray, picked: np.ndarray) -> list:
+def _members(inverse: np.ndarray, picked: np.ndarray) -> list[np.ndarray]:
     """Rows of each sweep in ``picked`` (by its index into the unique sweeps), in one pass."""
     rows = np.flatnonzero(np.isin(inverse, picked))
     by_sweep = np.argsort(inverse[rows], kind="stable")
@@ -398,7 +399,7 @@ def _members(inverse: np.ndarray, picked: np.ndarray) -> list:
     return np.split(rows, starts[1:])
 
 
-def _evenly(rows: np.ndarray, count: int, rng) -> np.ndarray:
+def _evenly(rows: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
     """``count`` of ``rows``: one drawn at random from each of ``count`` runs of consecutive rows."""
     bounds = np.linspace(0, len(rows), count + 1).astype(int)
     return rows[bounds[:-1] + (rng.random(count) * (bounds[1:] - bounds[:-1])).astype(int)]

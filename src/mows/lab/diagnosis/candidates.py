@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Callable, Iterable
 
 import numpy as np
 import scipy.stats
@@ -23,6 +24,8 @@ import scipy.stats
 from mows.lab import progress
 from mows.lab.diagnosis.projections import Signature, orthonormal_basis, project_out, signature
 from mows.lab.model.effects import Effect, testable
+from mows.lab.model.least_squares import FitResult, FittedParameter
+from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
 TIE_DELTA_BIC = 2.0
@@ -30,6 +33,9 @@ STRONG_DELTA_BIC = 10.0
 STRONG_P = 1e-3
 REFIT_P = 0.05
 ABSORBED = "no signature in this table that the current model cannot already absorb"
+
+# worth_refit(effect, signature, free parameters the form adds): refit rather than take the one-step estimate
+WorthRefit = Callable[[Effect, Signature, int], bool]
 
 
 # --- candidates -----------------------------------------------------------------------------
@@ -45,7 +51,7 @@ class Form:
     p_value: float
     chi2_after: float
     dof_after: int
-    fit: object = None
+    fit: FitResult | None = None
     signal_chi2: float = math.nan  # at physics: Σ(predicted signal/σ)² beyond what f00 absorbs
     dispersion: float = 1.0  # φ the evidence was scaled by (:func:`dispersion`)
     gain_chi2: float = math.nan  # Δχ² before the scaling by φ
@@ -98,7 +104,7 @@ class Candidate:
     free: Form
     physics: Form | None
     score_p_value: float
-    parameters: list  # [(name, value, std, unit)] of the free form
+    parameters: list[FittedParameter]  # of the free form
     within_bounds: bool
     signature: Signature
     group: int = 0
@@ -112,7 +118,7 @@ class Candidate:
         return self.physics if self.physics is not None and self.physics.delta_bic >= self.free.delta_bic else self.free
 
     @property
-    def forms(self) -> list:
+    def forms(self) -> list[Form]:
         return [self.free] + ([self.physics] if self.physics is not None else [])
 
     def at_dispersion(self, phi: float, n: int) -> Candidate:
@@ -171,7 +177,7 @@ class Candidate:
         }
 
 
-def physics_deviation(effect, parameters) -> float:
+def physics_deviation(effect: Effect, parameters: list[FittedParameter]) -> float:
     """Largest |value − physical value|/σ of an effect's fitted ``parameters`` [(name, value,
     std, unit)]; NaN when the effect has no physical value."""
     if effect.physical is None or not parameters:
@@ -179,7 +185,7 @@ def physics_deviation(effect, parameters) -> float:
     return max(abs(v - p) / s if s > 0 else math.inf for (_, v, s, _), p in zip(parameters, effect.physical))
 
 
-def dispersion(fit, candidates) -> float:
+def dispersion(fit: FitResult, candidates: Iterable[Candidate]) -> float:
     """φ = max(1, χ²/dof) of the best model this step can reach (``fit`` or ``fit`` with any one
     candidate form): the residual's own scatter in units of the stated uncertainties
     (quasi-likelihood, as QAIC takes φ from the fullest model). While the residual stays far
@@ -192,7 +198,7 @@ def dispersion(fit, candidates) -> float:
     return max(1.0, min([fit.chi2_dof, *after]))
 
 
-def quasi_gain(old, new) -> float:
+def quasi_gain(old: FitResult, new: FitResult) -> float:
     """The evidence for ``new`` over ``old`` (two fits of one table) as the candidates judge it:
     Δχ²/φ − Δk·ln n, with φ = max(1, the smaller χ²/dof of the two) the scatter the better one
     leaves (:func:`dispersion`). With the residual at noise this is the BIC difference; far
@@ -201,7 +207,9 @@ def quasi_gain(old, new) -> float:
     return (old.chi2 - new.chi2) / phi - (new.k - old.k) * math.log(new.n)
 
 
-def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
+def rank_candidates(
+    fit: FitResult, effects: Iterable[Effect], probe: Probe, worth_refit: WorthRefit | None = None
+) -> tuple[list[Candidate], dict[str, str]]:
     """(candidates best first, {effect: why it cannot be tested}) for the ``effects`` not yet in
     ``fit``'s model: score test on the projected signature, then each form's refit where
     ``worth_refit(effect, signature, added)`` (``added``: the free parameters the form adds;
@@ -209,7 +217,8 @@ def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
     worth_refit = worth_refit or (lambda effect, test, added: test.p_value < REFIT_P)
     residual = fit.weighted_residual
     model_basis = orthonormal_basis(fit.jacobian)
-    candidates, untestable = [], {}
+    candidates: list[Candidate] = []
+    untestable: dict[str, str] = {}
     effects = list(effects)
     for done, effect in enumerate(effects):
         progress.stage("ranking candidate effects", done, len(effects))
@@ -230,7 +239,7 @@ def rank_candidates(fit, effects, probe, worth_refit=None) -> tuple:
     return candidates, untestable
 
 
-def _candidate(fit, effect, test: Signature, refit) -> Candidate:
+def _candidate(fit: FitResult, effect: Effect, test: Signature, refit: Callable[[int], bool]) -> Candidate:
     """Refit the model with ``effect`` in each form where ``refit(added free parameters)``, or
     take the one-step (linearised) refit along the projected signature. A Δχ² above the strong
     threshold needs a score statistic above it too (the score is the largest Δχ² of the
@@ -245,7 +254,7 @@ def _candidate(fit, effect, test: Signature, refit) -> Candidate:
     return Candidate(effect, free, physics, test.p_value, parameters, inside, test)
 
 
-def _free_form(fit, effect, test: Signature, refit: bool) -> tuple:
+def _free_form(fit: FitResult, effect: Effect, test: Signature, refit: bool) -> tuple[Form, list[FittedParameter]]:
     """(Form, parameters) of ``effect`` added with its parameters free."""
     k = len(effect.parameters)
     if refit:
@@ -261,7 +270,7 @@ def _free_form(fit, effect, test: Signature, refit: bool) -> tuple:
     return dataclasses.replace(raw, rank=test.rank).at_dispersion(1.0, fit.n), parameters
 
 
-def _physics_form(fit, effect, test: Signature, refit: bool) -> Form:
+def _physics_form(fit: FitResult, effect: Effect, test: Signature, refit: bool) -> Form:
     """``effect`` added at its physical values: no new parameter, ΔBIC = Δχ².
 
     The p-value is that of the likelihood ratio of two simple hypotheses (Neyman–Pearson): the

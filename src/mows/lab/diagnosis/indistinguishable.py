@@ -22,14 +22,18 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterable, Iterator
 
 import numpy as np
 
 from mows.lab import progress
-from mows.lab.diagnosis.candidates import ABSORBED, TIE_DELTA_BIC
+from mows.lab.diagnosis.candidates import ABSORBED, TIE_DELTA_BIC, Candidate
 from mows.lab.diagnosis.physical_aliases import alias_statements
 from mows.lab.diagnosis.projections import Signature, cosine_within, orthonormal_basis, project_out, same_span
-from mows.lab.diagnosis.what_if import variants
+from mows.lab.diagnosis.what_if import Variant, variants
+from mows.lab.model.effects import Effect
+from mows.lab.model.least_squares import FitResult
+from mows.physics.probe import Probe
 
 GROUP_COSINE = 0.95
 GROUP_SIGNIFICANCE = 0.01
@@ -42,12 +46,12 @@ class Group:
     """Candidates this data cannot tell apart, the measurement that would, and direct checks."""
 
     number: int
-    members: list
+    members: list[str]
     separated_by: str | None
     separation: str
-    checks: list
-    aliases: list = dataclasses.field(default_factory=list)  # exact physical aliases, in words and numbers
-    in_model: list = dataclasses.field(default_factory=list)  # members the model holds (absorbing the rest)
+    checks: list[str]
+    aliases: list[str] = dataclasses.field(default_factory=list)  # exact physical aliases, in words and numbers
+    in_model: list[str] = dataclasses.field(default_factory=list)  # members the model holds (absorbing the rest)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -61,7 +65,7 @@ def _indistinguishable(a: Signature, b: Signature, significant: bool) -> bool:
     )
 
 
-def _clusters(candidates) -> list:
+def _clusters(candidates: list[Candidate]) -> list[list[Candidate]]:
     """Connected sets (of two or more) of indistinguishable candidates, each in tie-break order."""
     by_name = {c.name: c for c in candidates}
     significant = {c.name for c in candidates if c.p_value < GROUP_SIGNIFICANCE}
@@ -69,11 +73,11 @@ def _clusters(candidates) -> list:
     return [_tie_break([by_name[name] for name in part]) for part in parts if len(part) > 1]
 
 
-def group_candidates(candidates, fit, probe) -> list:
+def group_candidates(candidates: list[Candidate], fit: FitResult, probe: Probe) -> list[Group]:
     """Number the groups by rank, put each group's members together in tie-break order
     (``candidates`` is reordered in place) and find what separates each group."""
     cluster_of = {c.name: members for members in _clusters(candidates) for c in members}
-    ranked = []
+    ranked: list[Candidate] = []
     groups: list[Group] = []
     for candidate in candidates:
         members = cluster_of.get(candidate.name)
@@ -88,7 +92,7 @@ def group_candidates(candidates, fit, probe) -> list:
     return groups
 
 
-def _tie_break(members) -> list:
+def _tie_break(members: list[Candidate]) -> list[Candidate]:
     members = sorted(members, key=lambda c: -c.delta_bic)
     best = members[0].delta_bic
     tied = [c for c in members if c.delta_bic >= best - TIE_DELTA_BIC]
@@ -96,13 +100,13 @@ def _tie_break(members) -> list:
     return sorted(tied, key=lambda c: (not c.within_bounds, c.effect.priority)) + rest
 
 
-def _partition(signatures: dict, significant: set) -> list:
+def _partition(signatures: dict[str, Signature], significant: set[str]) -> list[list[str]]:
     """Connected sets of mutually indistinguishable signatures (names), singletons included;
     fitted signals are compared only between ``significant`` names."""
     names = list(signatures)
     parent = {name: name for name in names}
 
-    def root(name):
+    def root(name: str) -> str:
         while parent[name] != name:
             name = parent[name]
         return name
@@ -117,10 +121,11 @@ def _partition(signatures: dict, significant: set) -> list:
     return list(found.values())
 
 
-def _separate(members, fit, probe, number) -> Group:
+def _separate(members: list[Candidate], fit: FitResult, probe: Probe, number: int) -> Group:
     """The cheapest what-if variant that splits the group most; checks for what stays together."""
     names = [c.name for c in members]
-    best_variant, best_parts = None, [names]
+    best_variant: Variant | None = None
+    best_parts = [names]
     # The fitted signal extended to new rows: the same linear coefficients on the joined rows.
     coefficients = {
         c.name: np.linalg.lstsq(c.signature.projected, c.signature.fitted_signal, rcond=None)[0] for c in members
@@ -167,18 +172,26 @@ def _separate(members, fit, probe, number) -> Group:
     )
 
 
-def absorbed_groups(fit, effects, candidates, untestable, probe, first_number) -> list:
+def absorbed_groups(
+    fit: FitResult,
+    effects: Iterable[Effect],
+    candidates: list[Candidate],
+    untestable: dict[str, str],
+    probe: Probe,
+    first_number: int,
+) -> list[Group]:
     """Groups of an effect the model holds with the catalog effects it absorbs: an effect not in
     the model whose signature lies in the model's span (all but NEAR_ALIAS of its norm) but not
     without that effect's columns (untested as "no signature … cannot already absorb", or a
     candidate left with almost nothing). With the exact aliases among them, the what-if variant
     after which the model no longer absorbs them, or the direct checks."""
-    absorbing: dict = {}  # model effect → the effects it absorbs
+    absorbing: dict[Effect, list[Effect]] = {}  # model effect → the effects it absorbs
     held_masks = list(_columns_without_each(fit))
     if not held_masks:
         return []
     model_basis = orthonormal_basis(fit.jacobian)
-    known = {c.name: c.signature.columns for c in candidates}
+    # rank_candidates' signatures keep their columns
+    known = {c.name: c.signature.columns for c in candidates if c.signature.columns is not None}
     for effect in effects:
         if effect.name in fit.model.effect_names or untestable.get(effect.name, ABSORBED) != ABSORBED:
             continue
@@ -194,13 +207,13 @@ def absorbed_groups(fit, effects, candidates, untestable, probe, first_number) -
     ]
 
 
-def _kept(columns, basis) -> float:
+def _kept(columns: np.ndarray, basis: np.ndarray) -> float:
     """The fraction of the columns' norm outside the span of ``basis``."""
     size = np.linalg.norm(columns)
     return float(np.linalg.norm(project_out(columns, basis)) / size) if size > 0 else 0.0
 
 
-def _columns_without_each(fit):
+def _columns_without_each(fit: FitResult) -> Iterator[tuple[Effect, np.ndarray]]:
     """(effect, column mask of ``fit.jacobian`` without that effect's parameters) for each
     effect of the model with free parameters."""
     owners = [None] + [e for e in fit.model.effects for _ in e.parameters]
@@ -209,9 +222,10 @@ def _columns_without_each(fit):
             yield effect, np.array([owner is not effect for owner in owners])
 
 
-def _absorbed_group(fit, held, absorbed, probe, number) -> Group:
+def _absorbed_group(fit: FitResult, held: Effect, absorbed: list[Effect], probe: Probe, number: int) -> Group:
     names = [held.name] + [e.name for e in absorbed]
-    separated, variant_name = [], None
+    separated: list[str] = []
+    variant_name: str | None = None
     for variant in variants(fit.table, probe):
         model_basis = orthonormal_basis(fit.model_jacobian(variant.table))
         separated = [

@@ -20,18 +20,26 @@ value means as the other:
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 import scipy.special
 
+from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import Configuration, base_start_swing_rad, ringdown_nodes
+from mows.lab.model.least_squares import FitResult
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
+from mows.physics.probe import Probe
 
 LINEAR_CORRELATION = 0.99  # temperature this correlated with time drifts linearly
 CONSTANT_SPREAD = 0.05  # relative spread below which a column counts as constant
 
+FittedValues = dict[str, dict[str, float]]  # effect name → {parameter: fitted value}
 
-def alias_statements(names, fit, probe, fitted=None) -> list:
+
+def alias_statements(
+    names: Iterable[str], fit: FitResult, probe: Probe, fitted: FittedValues | None = None
+) -> list[str]:
     """The exact aliases among ``names`` (effect names) in words and numbers. ``fitted`` maps an
     effect name to {parameter: value} where a member's fitted value is known (default: the
     effects of ``fit``'s model)."""
@@ -51,12 +59,12 @@ def alias_statements(names, fit, probe, fitted=None) -> list:
     return found
 
 
-def gravity_field_t(probe) -> float:
+def gravity_field_t(probe: Probe) -> float:
     """a·g·l/m, T: the in-plane field that acts like gravity with |d| = 1."""
     return probe.magnet_mass_kg * STANDARD_GRAVITY_M_PER_S2 * probe.lever_m / probe.moment_am2
 
 
-def _gravity_field(table, probe, values) -> str:
+def _gravity_field(table: MeasurementTable, probe: Probe, values: FittedValues) -> str:
     scale = gravity_field_t(probe)
     text = (
         f"gravity ≡ field_offset: a plane tilted so that the unit downward vector has the in-plane part d "
@@ -83,7 +91,7 @@ def _gravity_field(table, probe, values) -> str:
     return text
 
 
-def _tilt_field(table, probe, values) -> str:
+def _tilt_field(table: MeasurementTable, probe: Probe, values: FittedValues) -> str:
     if not table.has("ref_bz_t") or _spread(table.ref_bz_t) > CONSTANT_SPREAD:
         return ""
     bz = float(np.mean(table.ref_bz_t))
@@ -97,7 +105,7 @@ def _tilt_field(table, probe, values) -> str:
     return text
 
 
-def amplitude_scale_error(table, probe) -> tuple:
+def amplitude_scale_error(table: MeasurementTable, probe: Probe) -> tuple[float, float]:
     """(ε, spread) with ε = ⟨2·J1(A)/A⟩ − 1 over the rows' ring-down amplitude nodes (the
     moment scale the finite amplitude looks like), spread its range over the rows."""
     amplitudes, weights = ringdown_nodes(Configuration.base(table, probe), base_start_swing_rad(table, probe))
@@ -105,7 +113,7 @@ def amplitude_scale_error(table, probe) -> tuple:
     return float(np.mean(per_row)), float(np.ptp(per_row))
 
 
-def _amplitude_scale(table, probe, values) -> str:
+def _amplitude_scale(table: MeasurementTable, probe: Probe, values: FittedValues) -> str:
     epsilon, spread = amplitude_scale_error(table, probe)
     start = np.degrees(base_start_swing_rad(table, probe))
     text = (
@@ -119,7 +127,7 @@ def _amplitude_scale(table, probe, values) -> str:
     return text
 
 
-def _thermal_spring(table, probe, values) -> str:
+def _thermal_spring(table: MeasurementTable, probe: Probe, values: FittedValues) -> str:
     if not (table.has("temperature_k") and table.has("t_s")) or np.ptp(table.temperature_k) == 0:
         return ""
     correlation = float(np.corrcoef(table.t_s, table.temperature_k)[0, 1])
@@ -139,6 +147,6 @@ def _thermal_spring(table, probe, values) -> str:
     return text
 
 
-def _spread(values) -> float:
+def _spread(values: np.ndarray) -> float:
     scale = float(np.max(np.abs(values)))
     return float(np.ptp(values)) / scale if scale > 0 else 0.0

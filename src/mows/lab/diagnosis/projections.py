@@ -20,7 +20,7 @@ RANK_RTOL = 1e-3  # a projected direction shorter than this (relative) is absorb
 SPAN_COSINE = 0.999  # cosine of the largest principal angle between two spans that are the same
 
 
-def orthonormal_basis(columns, reference_norm=None) -> np.ndarray:
+def orthonormal_basis(columns: np.ndarray, reference_norm: float | None = None) -> np.ndarray:
     """Orthonormal basis (n, r) of the column space, dropping directions below RANK_RTOL of
     ``reference_norm`` (default: the largest singular value)."""
     columns = np.asarray(columns, float).reshape(len(columns), -1)
@@ -31,7 +31,7 @@ def orthonormal_basis(columns, reference_norm=None) -> np.ndarray:
     return u[:, s > RANK_RTOL * scale] if scale > 0 else u[:, :0]
 
 
-def project_out(columns, basis) -> np.ndarray:
+def project_out(columns: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """Columns with their components along the orthonormal ``basis`` removed."""
     return columns - basis @ (basis.T @ columns)
 
@@ -57,7 +57,7 @@ class Signature:
     columns: np.ndarray | None = None  # before projection (None for a signature on another table)
 
 
-def signature(columns, model_basis, residual) -> Signature:
+def signature(columns: np.ndarray, model_basis: np.ndarray, residual: np.ndarray) -> Signature:
     """Project ``columns`` orthogonally to the model and score them against ``residual``."""
     columns = np.asarray(columns, float).reshape(len(residual), -1)
     projected = project_out(columns, model_basis)
@@ -67,12 +67,12 @@ def signature(columns, model_basis, residual) -> Signature:
     return Signature(basis, projected, float(coefficients @ coefficients), basis.shape[1], coefficients, columns)
 
 
-def cosine_within(vector, basis) -> float:
+def cosine_within(vector: np.ndarray, basis: np.ndarray) -> float:
     norm = np.linalg.norm(vector)
     return float(np.linalg.norm(basis.T @ vector) / norm) if norm > 0 and basis.shape[1] else 0.0
 
 
-def same_span(a, b) -> bool:
+def same_span(a: np.ndarray, b: np.ndarray) -> bool:
     """True when the orthonormal bases ``a`` and ``b`` span the same space (all principal
     angles below 2.6°): directions no data on these rows can tell apart, exact aliases."""
     if a.shape[1] == 0 or a.shape[1] != b.shape[1]:

@@ -17,6 +17,7 @@ import numpy as np
 import scipy.stats
 
 from mows.lab.diagnosis.projections import Signature, orthonormal_basis, signature
+from mows.lab.model.least_squares import FitResult
 from mows.records.json_numbers import finite_or_none
 
 HARMONICS = range(5)
@@ -61,13 +62,13 @@ class Structure:
     chi2: float
     dof: int
     goodness_p: float
-    harmonics: list
-    covariates: list
+    harmonics: list[Harmonic]
+    covariates: list[CovariateTrend]
     alpha: float
     summary: str = ""
 
     @property
-    def significant(self) -> list:
+    def significant(self) -> list[str]:
         """Descriptions of the significant features."""
         found = [
             f"harmonic {h.k} of θ0 ({h.text()}, p = {h.p_value:.1e})"
@@ -93,7 +94,7 @@ class Structure:
         }
 
 
-def residual_structure(fit) -> Structure:
+def residual_structure(fit: FitResult) -> Structure:
     """Harmonics 0–4 and covariate trends of the fit's residual (module docstring)."""
     residual = fit.weighted_residual
     weight = 1.0 / fit.table.f_std_hz
@@ -130,7 +131,7 @@ def residual_structure(fit) -> Structure:
     return structure
 
 
-def _harmonic(k, test: Signature, residual) -> Harmonic:
+def _harmonic(k: int, test: Signature, residual: np.ndarray) -> Harmonic:
     if not test.rank:
         return Harmonic(k, 0.0, 0.0, 0.0, 1.0, True)
     if test.rank < test.projected.shape[1]:  # e.g. two orientations: cos kθ0 and sin kθ0 not separable
@@ -163,7 +164,7 @@ def _describe(structure: Structure) -> str:
     return head + ". No significant structure: the residuals look like noise."
 
 
-def product_trends(fit, count: int = 3) -> list:
+def product_trends(fit: FitResult, count: int = 3) -> list[CovariateTrend]:
     """The ``count`` strongest trends of the residual with products of two factors (each
     centred), best first: what a missing effect that no single covariate shows may follow
     (a drift that grows with the current, a field term that changes with temperature, an

@@ -14,9 +14,10 @@ the candidates (:mod:`mows.lab.diagnosis.candidates`), their groups and separati
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterable
 
-from mows.lab.diagnosis.candidates import rank_candidates
-from mows.lab.diagnosis.indistinguishable import absorbed_groups, group_candidates
+from mows.lab.diagnosis.candidates import Candidate, rank_candidates
+from mows.lab.diagnosis.indistinguishable import Group, absorbed_groups, group_candidates
 from mows.lab.diagnosis.residual_structure import (
     GOODNESS_ALPHA,
     Structure,
@@ -24,6 +25,9 @@ from mows.lab.diagnosis.residual_structure import (
     product_trends,
     residual_structure,
 )
+from mows.lab.model.effects import Effect
+from mows.lab.model.least_squares import FitResult
+from mows.physics.probe import Probe
 
 EXPLAINED_FRACTION = 0.5
 FIELD_SPRINGS = ("b_along_t", "g_t_per_m")  # covariates that are the model's own magnetic springs
@@ -32,23 +36,24 @@ SLOW_COVARIATES = ("temperature_k", "t_s")  # what a spring drifts with
 
 @dataclasses.dataclass
 class Diagnosis:
-    fit: object
+    fit: FitResult
     structure: Structure
-    candidates: list
-    groups: list
-    untestable: dict
+    candidates: list[Candidate]
+    groups: list[Group]
+    untestable: dict[str, str]  # effect name → why it cannot be tested
     verdict: str
     explanation: str
 
     @property
-    def best(self):
+    def best(self) -> Candidate | None:
         return self.candidates[0] if self.candidates else None
 
 
-def diagnose(fit, effects, probe=None) -> Diagnosis:
+def diagnose(fit: FitResult, effects: Iterable[Effect], probe: Probe | None = None) -> Diagnosis:
     """Rank ``effects`` (an iterable of :class:`Effect`, those already in the model are skipped)
     as explanations of ``fit``'s residual; group, propose separating measurements, verdict."""
     probe = probe or fit.model.probe
+    assert probe is not None  # a model that was fitted has its probe
     effects = list(effects)
     candidates, untestable = rank_candidates(fit, effects, probe)
     groups = group_candidates(candidates, fit, probe)
@@ -59,7 +64,7 @@ def diagnose(fit, effects, probe=None) -> Diagnosis:
 
 
 # --- verdict ------------------------------------------------------------------------------------
-def _verdict(fit, structure: Structure, candidates) -> tuple:
+def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate]) -> tuple[str, str]:
     best = candidates[0] if candidates else None
     excess = fit.chi2 - fit.dof
     if best is not None and best.strong:
@@ -93,7 +98,7 @@ def _verdict(fit, structure: Structure, candidates) -> tuple:
     return "unexplained_structure", (unexplained + " " + structure.summary + " " + _no_answer(fit, structure)).strip()
 
 
-def _no_answer(fit, structure: Structure) -> str:
+def _no_answer(fit: FitResult, structure: Structure) -> str:
     """What the residual follows when no catalog effect explains it (single covariates and
     products of two, angle harmonics included), and the plugin a user would write for the
     strongest (docs/model_lab.md)."""
@@ -107,7 +112,7 @@ def _no_answer(fit, structure: Structure) -> str:
     )
 
 
-def plugin_sketch(trend: str) -> tuple:
+def plugin_sketch(trend: str) -> tuple[str, str]:
     """(plugin source on one line, why that form) for a residual that follows ``trend`` (a covariate or a
     product ``a·b``): the physical change where one fits (a field spring that changes with a
     covariate is the moment changing with it; a drift of one covariate alone is the spring

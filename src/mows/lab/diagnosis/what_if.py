@@ -12,8 +12,9 @@ import dataclasses
 
 import numpy as np
 
-from mows.lab.data.table import WRITER_COLUMN
+from mows.lab.data.table import WRITER_COLUMN, MeasurementTable
 from mows.lab.model.configuration import base_start_swing_rad
+from mows.physics.probe import Probe
 
 
 @dataclasses.dataclass
@@ -22,10 +23,10 @@ class Variant:
 
     name: str
     description: str
-    table: object
+    table: MeasurementTable
 
 
-def variants(table, probe) -> list:
+def variants(table: MeasurementTable, probe: Probe) -> list[Variant]:
     """What-if variants of ``table``, cheapest first (module docstring)."""
     # The variants state their excitation: each row's start swing as the model takes it, as a
     # column of a table the user measured (so that halving it is heard).

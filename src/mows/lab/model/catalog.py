@@ -10,31 +10,37 @@ them. The functions ``_name(config, rows, probe, *values)`` are the effects' edi
 from __future__ import annotations
 
 import itertools
+import pathlib
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from mows.lab.model.configuration import rotation_matrix, standard_gravity_vector
+from mows.lab.data.table import MeasurementTable
+from mows.lab.model.configuration import Configuration, rotation_matrix, standard_gravity_vector
 from mows.lab.model.effects import AT_PHYSICS, COMPONENTS, MECHANICS, ORIENTATION, READOUT, SOURCES, Effect, Parameter
 from mows.lab.model.plugins import load_plugins
+from mows.physics.probe import Probe
 
 PHYSICAL_STRENGTH = (1.0,)  # a strength of 1 is the physics as predicted
 
 
-def _angle_offset(config, rows, probe, offset_rad):
+def _angle_offset(config: Configuration, rows: MeasurementTable, probe: Probe, offset_rad: float) -> None:
     config.theta0_rad = config.theta0_rad + offset_rad
 
 
-def _plane_tilt(config, rows, probe, tilt_x_rad, tilt_y_rad):
+def _plane_tilt(
+    config: Configuration, rows: MeasurementTable, probe: Probe, tilt_x_rad: float, tilt_y_rad: float
+) -> None:
     rotation = rotation_matrix((tilt_x_rad, tilt_y_rad, 0.0))
     config.field_t = config.field_t @ rotation.T
     config.gradient_t_per_m = rotation @ config.gradient_t_per_m @ rotation.T
 
 
-def _field_offset(config, rows, probe, bx_t, by_t):
+def _field_offset(config: Configuration, rows: MeasurementTable, probe: Probe, bx_t: float, by_t: float) -> None:
     config.field_t = config.field_t + np.array([bx_t, by_t, 0.0])
 
 
-def in_plane_hessian(hxxx, hxxy, hxyy, hyyy) -> np.ndarray:
+def in_plane_hessian(hxxx: float, hxxy: float, hxyy: float, hyyy: float) -> np.ndarray:
     """The fully symmetric H[i, j, k] = ∂²B_i/∂x_j∂x_k with in-plane indices only (3, 3, 3).
 
     Symmetry makes each component depend only on how many of its indices are y."""
@@ -45,57 +51,59 @@ def in_plane_hessian(hxxx, hxxy, hxyy, hyyy) -> np.ndarray:
     return hessian
 
 
-def _field_curvature(config, rows, probe, hxxx, hxxy, hxyy, hyyy):
+def _field_curvature(
+    config: Configuration, rows: MeasurementTable, probe: Probe, hxxx: float, hxxy: float, hxyy: float, hyyy: float
+) -> None:
     hessian = in_plane_hessian(hxxx, hxxy, hxyy, hyyy)
     config.hessian_t_per_m2 = hessian[None] if config.hessian_t_per_m2 is None else config.hessian_t_per_m2 + hessian
     config.hessian_t_per_m2 = np.broadcast_to(config.hessian_t_per_m2, (len(config.theta0_rad), 3, 3, 3))
 
 
-def _moment_scale(config, rows, probe, scale_error):
+def _moment_scale(config: Configuration, rows: MeasurementTable, probe: Probe, scale_error: float) -> None:
     config.moment_factor = config.moment_factor * (1.0 + scale_error)
 
 
-def _transverse_gradient(config, rows, probe, strength):
+def _transverse_gradient(config: Configuration, rows: MeasurementTable, probe: Probe, strength: float) -> None:
     config.transverse = strength
 
 
-def _static_deflection(config, rows, probe, strength):
+def _static_deflection(config: Configuration, rows: MeasurementTable, probe: Probe, strength: float) -> None:
     config.deflection = strength
 
 
-def _gravity(config, rows, probe, down_x, down_y):
+def _gravity(config: Configuration, rows: MeasurementTable, probe: Probe, down_x: float, down_y: float) -> None:
     config.gravity_m_per_s2 = np.broadcast_to(standard_gravity_vector(down_x, down_y), config.field_t.shape)
 
 
-def _thermal_drift(config, rows, probe, spring_temp_coeff_per_k):
+def _thermal_drift(config: Configuration, rows: MeasurementTable, probe: Probe, spring_temp_coeff_per_k: float) -> None:
     config.spring_nm_per_rad = config.spring_nm_per_rad * (
         1.0 + spring_temp_coeff_per_k * (rows.temperature_k - probe.reference_temperature_k)
     )
 
 
-def _spring_drift(config, rows, probe, rate_per_s):
+def _spring_drift(config: Configuration, rows: MeasurementTable, probe: Probe, rate_per_s: float) -> None:
     config.spring_nm_per_rad = config.spring_nm_per_rad * (1.0 + rate_per_s * rows.t_s)
 
 
-def _finite_amplitude(config, rows, probe, strength):
+def _finite_amplitude(config: Configuration, rows: MeasurementTable, probe: Probe, strength: float) -> None:
     config.amplitude = strength
 
 
-def _housing_stop(config, rows, probe, stop_error_rad):
+def _housing_stop(config: Configuration, rows: MeasurementTable, probe: Probe, stop_error_rad: float) -> None:
     config.stop_rad = config.stop_rad + stop_error_rad
 
 
-def _damping_shift(config, rows, probe, strength):
+def _damping_shift(config: Configuration, rows: MeasurementTable, probe: Probe, strength: float) -> None:
     config.damping = strength
     if rows.has("damping_per_s"):
         config.damping_per_s = rows.damping_per_s
 
 
-def _strength(description, bound=5.0):
+def _strength(description: str, bound: float = 5.0) -> tuple[Parameter, ...]:
     return (Parameter("strength", "1", -bound, bound, 1.0, description),)
 
 
-def _in_plane(x: str, y: str, unit: str, bound: float, step: float, description: str) -> tuple:
+def _in_plane(x: str, y: str, unit: str, bound: float, step: float, description: str) -> tuple[Parameter, ...]:
     """The parameters of an in-plane vector's x and y components; ``description`` names the
     component at ``{}``."""
     return tuple(Parameter(name, unit, -bound, bound, step, description.format(c)) for name, c in ((x, "x"), (y, "y")))
@@ -291,7 +299,7 @@ CATALOG = (
 )
 
 
-def catalog(plugins=()) -> dict:
+def catalog(plugins: Iterable[str | pathlib.Path] = ()) -> dict[str, Effect]:
     """Name → :class:`Effect` for the built-in effects and the effects of ``plugins``
     (file paths or entry-point names, see :func:`load_plugins`)."""
     effects = {e.name: e for e in CATALOG}
@@ -302,7 +310,7 @@ def catalog(plugins=()) -> dict:
     return effects
 
 
-def resolve(names, effects: dict) -> list:
+def resolve(names: Sequence[str], effects: dict[str, Effect]) -> list[Effect]:
     """The effects called ``names`` (a name, or its label ``name (at physics)`` for the effect
     held at its physical values); ValueError naming the unknown ones."""
     bare = [name.removesuffix(AT_PHYSICS) for name in names]

@@ -39,12 +39,21 @@ import dataclasses
 import functools
 import math
 import weakref
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from mows.physics import ringdown_average
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, probe_axes
 from mows.physics.potential import ArcPotential
+from mows.physics.probe import Probe
+from mows.physics.schema import FloatOrArray, Vector
+
+if TYPE_CHECKING:
+    from mows.lab.data.table import MeasurementTable
+
+AmplitudeNodes = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 @dataclasses.dataclass
@@ -87,7 +96,7 @@ class Configuration:
     damping: float = 0.0
 
     @classmethod
-    def base(cls, table, probe) -> Configuration:
+    def base(cls, table: MeasurementTable, probe: Probe) -> Configuration:
         """Eq. 6 with the table's reference field and gradient."""
         n = len(table)
         ringdown_damping = table.columns.get("damping_per_s", np.full(n, probe.damping_per_s))
@@ -105,12 +114,12 @@ class Configuration:
             frequency_hz=np.zeros(n),
         )
 
-    def start_swing_rad(self, rest_rad) -> np.ndarray:
+    def start_swing_rad(self, rest_rad: np.ndarray) -> np.ndarray:
         """Each ring-down's start swing about its rest angle ``rest_rad``: the evidence where the
         lab uses it, else the stop less the deflection, θstop − |θs| (module docstring)."""
         return np.where(np.isfinite(self.start_evidence_rad), self.start_evidence_rad, self.stop_rad - np.abs(rest_rad))
 
-    def probe_frame(self):
+    def probe_frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """(axes, field', gradient', Hessian') with axes (n, 3, 3) holding rows x', y', z'."""
         axes = probe_axes(self.theta0_rad)
         field = np.einsum("nij,nj->ni", axes, self.field_t)
@@ -123,7 +132,9 @@ class Configuration:
         return axes, field, gradient, hessian
 
 
-def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
+def frequency_factor(
+    config: Configuration, probe: Probe, amplitude_nodes: AmplitudeNodes | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """(h, c) with f = f00·h + c for every row (module docstring).
 
     ``amplitude_nodes(start_rad)`` gives (A_q (n, q), c_q (n, q)) of ring-downs that start at
@@ -138,7 +149,7 @@ def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
     active_gradient[:, 0, 0] = gradient[:, 0, 0]
     variants = [along] + ([field] if config.deflection else [])
     gravity = None if config.gravity_m_per_s2 is None else np.einsum("nij,nj->ni", axes, config.gravity_m_per_s2)
-    local = dict(
+    local: dict[str, Any] = dict(
         gradient_t_per_m=factor[..., None] * active_gradient,
         hessian_t_per_m2=None if hessian is None else factor[..., None, None] * hessian,
         gravity_m_per_s2=gravity,
@@ -156,7 +167,7 @@ def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
     return h, config.frequency_hz
 
 
-def ringdown_nodes(config: Configuration, start_rad) -> tuple:
+def ringdown_nodes(config: Configuration, start_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Amplitude nodes (A_q, c_q) of the configuration's ring-downs from ``start_rad``
     (:func:`mows.physics.ringdown_average.amplitude_nodes`)."""
     return ringdown_average.amplitude_nodes(
@@ -165,10 +176,10 @@ def ringdown_nodes(config: Configuration, start_rad) -> tuple:
 
 
 # table → {probe: start swings the lab takes from the table's amplitude_deg}
-_EVIDENCE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_EVIDENCE: weakref.WeakKeyDictionary[MeasurementTable, dict[Probe, np.ndarray]] = weakref.WeakKeyDictionary()
 
 
-def amplitude_evidence_rad(table, probe) -> np.ndarray:
+def amplitude_evidence_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
     """The start swings (n,) the lab takes from the table, NaN where the stop decides.
 
     An external table's ``amplitude_deg`` is the user's statement of how the ring-downs were
@@ -184,7 +195,7 @@ def amplitude_evidence_rad(table, probe) -> np.ndarray:
     return cached[probe]
 
 
-def reference_rest_angle_rad(table, probe) -> np.ndarray:
+def reference_rest_angle_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
     """The rest angle θs (n,) in the table's reference field and gradient in full; NaN where unstable."""
     axes = table.probe_axes()
     gradient = np.einsum("nai,nij,nbj->nab", axes, table.gradient_t_per_m, axes)
@@ -192,16 +203,16 @@ def reference_rest_angle_rad(table, probe) -> np.ndarray:
     return _potential(probe, table.probe_field_t, gradient, None, None, spring).rest_angle_rad()
 
 
-def base_start_swing_rad(table, probe) -> np.ndarray:
+def base_start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
     """Each row's start swing at the table's reference field and the probe's stop."""
     return Configuration.base(table, probe).start_swing_rad(reference_rest_angle_rad(table, probe))
 
 
-def _blend(values, weight):
+def _blend(values: list[np.ndarray], weight: float) -> np.ndarray:
     return values[0] if len(values) == 1 else values[0] + weight * (values[1] - values[0])
 
 
-def _readout(config, probe, stiffness):
+def _readout(config: Configuration, probe: Probe, stiffness: np.ndarray) -> np.ndarray:
     """h = f/f00 for stiffness k: √(k/kM) (Eq. 6), blended towards the damped form of Eq. S1,
     √((k/J − δ²)/(kM/J − δ0²)) with δ per row."""
     spring, inertia, damping0 = probe.spring_nm_per_rad, probe.inertia_kgm2, probe.damping_per_s
@@ -213,10 +224,18 @@ def _readout(config, probe, stiffness):
     return np.sqrt(np.where(squared > 0, squared, np.nan))
 
 
-def _potential(probe, field, gradient_t_per_m, hessian_t_per_m2, gravity_m_per_s2, spring_nm_per_rad, repeat=None):
+def _potential(
+    probe: Probe,
+    field: np.ndarray,
+    gradient_t_per_m: np.ndarray,
+    hessian_t_per_m2: np.ndarray | None,
+    gravity_m_per_s2: np.ndarray | None,
+    spring_nm_per_rad: np.ndarray,
+    repeat: int | None = None,
+) -> ArcPotential:
     """ArcPotential.from_local_field for the rows, optionally each repeated ``repeat`` times."""
 
-    def expand(a):
+    def expand(a: np.ndarray | None) -> Any:
         return a if a is None or repeat is None else np.repeat(a, repeat, axis=0)
 
     return ArcPotential.from_local_field(
@@ -229,21 +248,21 @@ def _potential(probe, field, gradient_t_per_m, hessian_t_per_m2, gravity_m_per_s
     )
 
 
-def _rest_stiffness(probe, field, **local):
+def _rest_stiffness(probe: Probe, field: np.ndarray, **local: Any) -> np.ndarray:
     """U''(θs) at the exact rest angle (:meth:`ArcPotential.rest_angle_rad`); NaN where unstable."""
     potential = _potential(probe, field, **local)
     theta = potential.rest_angle_rad()
     return np.where(np.isfinite(theta), potential.stiffness_nm_per_rad(np.nan_to_num(theta)), np.nan)
 
 
-def _amplitude_stiffness(probe, field, amplitudes, **local):
+def _amplitude_stiffness(probe: Probe, field: np.ndarray, amplitudes: np.ndarray, **local: Any) -> np.ndarray:
     """First-harmonic-balance stiffness k(A) (n, q) at the amplitude nodes."""
     n, q = amplitudes.shape
     potential = _potential(probe, field, repeat=q, **local)
     return potential.effective_stiffness_nm_per_rad(amplitudes.reshape(-1)).reshape(n, q)
 
 
-def unevaluable_rows(table, probe) -> dict:
+def unevaluable_rows(table: MeasurementTable, probe: Probe) -> dict[int, tuple[str, str]]:
     """{row index: (reason, detail)} for the rows where the potential cannot give a frequency with the
     table's reference field and gradient in full (every component, as the physics effects use
     them) at the row's start amplitude: no stable rest angle, a swing |θc| + A beyond the
@@ -275,12 +294,12 @@ def unevaluable_rows(table, probe) -> dict:
     return dict(sorted(found.items()))
 
 
-def standard_gravity_vector(down_x, down_y) -> np.ndarray:
+def standard_gravity_vector(down_x: FloatOrArray, down_y: FloatOrArray) -> np.ndarray:
     """In-plane gravity g·(down_x, down_y, 0), m/s² (the normal component does not act)."""
     return STANDARD_GRAVITY_M_PER_S2 * np.array([down_x, down_y, 0.0])
 
 
-def rotation_matrix(rotation_vector) -> np.ndarray:
+def rotation_matrix(rotation_vector: Vector) -> np.ndarray:
     """Rodrigues' rotation matrix of a rotation vector (axis × angle, rad)."""
     vector = np.asarray(rotation_vector, float)
     angle = math.sqrt(float(vector @ vector))

@@ -19,9 +19,14 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from mows.lab.data.table import MissingColumnError
 from mows.lab.model.configuration import Configuration
+from mows.physics.probe import Probe
+
+if TYPE_CHECKING:
+    from mows.lab.data.table import MeasurementTable
 
 AT_PHYSICS = " (at physics)"  # label suffix of an effect held at its physical values
 
@@ -42,7 +47,7 @@ class Parameter:
     scale: float
     description: str = ""
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (self.lower <= 0.0 <= self.upper and self.lower < self.upper and self.scale > 0):
             raise ValueError(
                 f"parameter {self.name}: needs lower ≤ 0 ≤ upper, lower < upper and scale > 0 "
@@ -70,19 +75,19 @@ class Effect:
     explanation: str
     equation: str
     signature: str
-    parameters: tuple
-    apply: Callable
+    parameters: tuple[Parameter, ...]
+    apply: Callable[..., None]
     stage: int = MECHANICS
-    requires: tuple = ()
+    requires: tuple[str, ...] = ()
     priority: int = 100
     check: str = ""
     origin: str = "catalog"
-    physical: tuple | None = None
+    physical: tuple[float, ...] | None = None
     generic: bool = False  # a free correction with no physical value (a calibration term)
     free: Effect | None = None  # of an effect held at physics: the same effect with its parameters free
 
     @property
-    def parameter_names(self) -> tuple:
+    def parameter_names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.parameters)
 
     @property
@@ -106,14 +111,14 @@ class Effect:
             self, parameters=(), free=self, apply=lambda config, rows, probe: apply(config, rows, probe, *values)
         )
 
-    def missing_columns(self, table) -> tuple:
+    def missing_columns(self, table: MeasurementTable) -> tuple[str, ...]:
         return tuple(name for name in self.requires if not table.has(name))
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"Effect({self.name!r}, parameters={list(self.parameter_names)})"
 
 
-def testable(effect_: Effect, table, probe) -> str | None:
+def testable(effect_: Effect, table: MeasurementTable, probe: Probe) -> str | None:
     """None when the effect can be evaluated on ``table``, else the reason in words."""
     missing = effect_.missing_columns(table)
     if missing:

@@ -27,14 +27,16 @@ an incomplete model should not claim the precision of a complete one).
 from __future__ import annotations
 
 import weakref
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.optimize
 
 from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import Configuration, frequency_factor, ringdown_nodes
-from mows.lab.model.effects import Effect, testable
+from mows.lab.model.effects import Effect, Parameter, testable
 from mows.lab.model.least_squares import FitResult, Problem
+from mows.physics.probe import Probe
 
 
 class FrequencyModel:
@@ -45,7 +47,7 @@ class FrequencyModel:
     ``f00_hz`` and ``<effect>.<parameter>``.
     """
 
-    def __init__(self, probe=None, effects=()):
+    def __init__(self, probe: Probe | None = None, effects: Sequence[Effect] = ()) -> None:
         self.probe = probe
         names = [e.name for e in effects]
         repeated = sorted({n for n in names if names.count(n) > 1})
@@ -54,10 +56,10 @@ class FrequencyModel:
         self.effects = tuple(effects)
 
     @classmethod
-    def combine(cls, left, right) -> FrequencyModel:
+    def combine(cls, left: FrequencyModel | Effect, right: FrequencyModel | Effect) -> FrequencyModel:
         parts = [left, right]
         probe = next((p.probe for p in parts if isinstance(p, FrequencyModel) and p.probe is not None), None)
-        found = []
+        found: list[Effect] = []
         for part in parts:
             if isinstance(part, FrequencyModel):
                 found.extend(part.effects)
@@ -67,10 +69,10 @@ class FrequencyModel:
                 raise TypeError(f"cannot add {type(part).__name__} to a frequency model")
         return cls(probe, found)
 
-    def __add__(self, other):
+    def __add__(self, other: FrequencyModel | Effect) -> FrequencyModel:
         return FrequencyModel.combine(self, other)
 
-    def __radd__(self, other):
+    def __radd__(self, other: FrequencyModel | Effect) -> FrequencyModel:
         return FrequencyModel.combine(other, self)
 
     # --- description ----------------------------------------------------------------------
@@ -79,36 +81,36 @@ class FrequencyModel:
         return " + ".join(["eq6"] + self.labels)
 
     @property
-    def effect_names(self) -> list:
+    def effect_names(self) -> list[str]:
         return [e.name for e in self.effects]
 
     @property
-    def labels(self) -> list:
+    def labels(self) -> list[str]:
         """The effects' names with their form (``… (at physics)`` when held at physics)."""
         return [e.label for e in self.effects]
 
-    def without(self, effect) -> FrequencyModel:
+    def without(self, effect: Effect) -> FrequencyModel:
         return FrequencyModel(self.probe, [e for e in self.effects if e is not effect])
 
     @property
-    def parameters(self) -> list:
+    def parameters(self) -> list[tuple[str, Parameter]]:
         """(qualified name, Parameter) for the effect parameters, in fit order."""
         return [(f"{e.name}.{p.name}", p) for e in self.effects for p in e.parameters]
 
     @property
-    def parameter_names(self) -> list:
+    def parameter_names(self) -> list[str]:
         return ["f00_hz"] + [name for name, _ in self.parameters]
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"FrequencyModel({self.name})"
 
     # --- evaluation -------------------------------------------------------------------------
-    def _require_probe(self):
+    def _require_probe(self) -> Probe:
         if self.probe is None:
             raise ValueError("this model has no probe: build it as FrequencyModel(probe) + effects")
         return self.probe
 
-    def factors(self, table, values) -> tuple:
+    def factors(self, table: MeasurementTable, values: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(h, c) of f = f00·h + c at effect parameter values ``values`` (fit order)."""
         probe = self._require_probe()
         config = Configuration.base(table, probe)
@@ -118,18 +120,18 @@ class FrequencyModel:
             self.effects[i].apply(config, table, probe, *(float(v) for v in values[bounds[i] : bounds[i + 1]]))
         return frequency_factor(config, probe, lambda start_rad: cached_nodes(table, config, start_rad))
 
-    def predict(self, table, values) -> np.ndarray:
+    def predict(self, table: MeasurementTable, values: FitResult | Sequence[float] | np.ndarray) -> np.ndarray:
         """f (Hz) for ``values`` = [f00, effect parameters…] (or a :class:`FitResult`)."""
         x = values.values if isinstance(values, FitResult) else np.asarray(values, float)
         h, c = self.factors(table, x[1:])
         return x[0] * h + c
 
     # --- fit ------------------------------------------------------------------------------
-    def fit(self, table, start=None) -> FitResult:
+    def fit(self, table: MeasurementTable, start: Sequence[float] | np.ndarray | None = None) -> FitResult:
         """Weighted least-squares fit to ``table``; ``start`` = effect parameter values (default 0)."""
-        self._require_probe()
+        probe = self._require_probe()
         for effect in self.effects:
-            reason = testable(effect, table, self.probe)
+            reason = testable(effect, table, probe)
             if reason:
                 raise ValueError(f"effect {effect.name} cannot be fitted to this table: {reason}")
         problem = Problem(self, table)
@@ -162,7 +164,9 @@ _NODES: weakref.WeakKeyDictionary[MeasurementTable, dict[bytes, tuple[np.ndarray
 )
 
 
-def cached_nodes(table, config: Configuration, start_rad):
+def cached_nodes(
+    table: MeasurementTable, config: Configuration, start_rad: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Amplitude nodes of the table's ring-downs from ``start_rad``, cached per table and
     ring-down inputs (the inputs also come from the probe where the table has no column:
     Configuration.base; the start swings from the model's own rest angles)."""

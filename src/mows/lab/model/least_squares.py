@@ -11,13 +11,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from mows.estimate.ringdown import FitStatus
 from mows.lab import progress
 from mows.lab.data.table import MeasurementTable, rows_text
+from mows.lab.model.effects import Effect
+
+if TYPE_CHECKING:  # frequency_model imports this module
+    from mows.lab.model.frequency_model import FrequencyModel
 
 FD_STEP = 1e-2  # × parameter scale
 CV_FOLDS = 10  # interleaved folds when the table has one sweep
@@ -26,42 +31,44 @@ DEGENERATE_RTOL = 1e-6  # singular value (normalised Jacobian columns) below whi
 CV_PREDICTION_SIGMAS = 10.0  # a fold predicting its rows less precisely than this says nothing
 DEGENERATE_WEIGHT = 0.1  # a parameter with more than this weight in such a direction is not identifiable
 
+FittedParameter = tuple[str, float, float, str]  # (name, value, std, unit) of one fitted parameter
+
 
 class Problem:
     """Weighted residuals and their Jacobian for one model and table, with a one-point cache
     (scipy asks for the Jacobian at the point whose residual it has just computed)."""
 
-    def __init__(self, model, table):
+    def __init__(self, model: FrequencyModel, table: MeasurementTable) -> None:
         self.model, self.table = model, table
         self.weight = 1.0 / table.f_std_hz
         self.steps = np.array([FD_STEP * p.scale for _, p in model.parameters])
         self.upper = np.array([p.upper for _, p in model.parameters])
-        self._cache = (None, None)
+        self._cache: tuple[bytes | None, Any] = (None, None)
 
-    def factors(self, p):
+    def factors(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         key = p.tobytes()
         if self._cache[0] != key:
             self._cache = (key, self.model.factors(self.table, p))
             progress.evaluated()
         return self._cache[1]
 
-    def best_f00(self, p) -> float:
+    def best_f00(self, p: np.ndarray) -> float:
         h, c = self.factors(np.asarray(p, float))
         w2 = self.weight**2
         good = np.isfinite(h)
         return float(np.sum((w2 * h * (self.table.f_hz - c))[good]) / np.sum((w2 * h * h)[good]))
 
-    def residual(self, x) -> np.ndarray:
+    def residual(self, x: np.ndarray) -> np.ndarray:
         h, c = self.factors(x[1:])
         r = (self.table.f_hz - x[0] * h - c) * self.weight
         return np.where(np.isfinite(r), r, INVALID_RESIDUAL)
 
-    def jacobian(self, x) -> np.ndarray:
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
         h, _ = self.factors(x[1:])
         f00_column = np.where(np.isfinite(h), -h * self.weight, 0.0)
         return np.column_stack([f00_column, self.columns(x, range(len(self.steps)))])
 
-    def columns(self, x, indices) -> np.ndarray:
+    def columns(self, x: np.ndarray, indices: Iterable[int]) -> np.ndarray:
         """Forward-difference columns d(weighted residual)/d(effect parameter j), j in ``indices``."""
         base = self.residual(x)
         columns = []
@@ -73,7 +80,7 @@ class Problem:
             columns.append((self.residual(np.concatenate([[x[0]], p])) - base) / step)
         return np.stack(columns, -1) if columns else np.zeros((len(base), 0))
 
-    def result(self, x, success, message) -> FitResult:
+    def result(self, x: np.ndarray, success: bool, message: str) -> FitResult:
         h, c = self.factors(x[1:])
         prediction = x[0] * h + c
         residual = self.residual(x)
@@ -109,7 +116,7 @@ class FitResult:
     ``report()``; ``message`` says why when the status is not OK.
     """
 
-    model: Any  # the FrequencyModel fitted (mows.lab.model.frequency_model, which imports this module)
+    model: FrequencyModel
     table: MeasurementTable
     values: np.ndarray
     covariance: np.ndarray
@@ -178,23 +185,23 @@ class FitResult:
     def weighted_residual(self) -> np.ndarray:
         return self.residual_hz / self.table.f_std_hz
 
-    def parameters(self) -> list:
+    def parameters(self) -> list[FittedParameter]:
         """[(name, value, std, unit)] for f00 and every effect parameter."""
         units = ["Hz"] + [p.unit for _, p in self.model.parameters]
         return list(zip(self.model.parameter_names, self.values.tolist(), self.std.tolist(), units))
 
-    def values_without(self, effect) -> np.ndarray:
+    def values_without(self, effect: Effect) -> np.ndarray:
         """The fitted effect parameter values (fit order) of the model without ``effect``: a
         start for fitting ``model.without(effect)``."""
         keep = [e is not effect for e in self.model.effects for _ in e.parameters]
         return self.values[1:][np.array(keep, bool)]
 
-    def effect_parameters(self, effect_name: str) -> list:
+    def effect_parameters(self, effect_name: str) -> list[FittedParameter]:
         """[(parameter, value, std, unit)] of one effect of the model."""
         prefix = effect_name + "."
         return [(name[len(prefix) :], v, s, u) for name, v, s, u in self.parameters() if name.startswith(prefix)]
 
-    def extension_columns(self, effect, table=None) -> np.ndarray:
+    def extension_columns(self, effect: Effect, table: MeasurementTable | None = None) -> np.ndarray:
         """d(weighted residual)/d(parameters of ``effect``) with ``effect`` added to this model at
         0 (off) and the other parameters at their fitted values: the candidate's signature.
         On ``table`` (default: the fitted table; e.g. a what-if variant of it)."""
@@ -205,7 +212,7 @@ class FitResult:
             x, range(first, first + len(effect.parameters))
         )
 
-    def prediction_sigmas(self, table) -> float:
+    def prediction_sigmas(self, table: MeasurementTable) -> float:
         """Median over ``table``'s rows of this fit's prediction uncertainty there, in units of
         each row's ``f_std_hz``: from the parameter covariance without the Birge inflation, so
         that it measures what the fitted rows say about these, not how well the model fits."""
@@ -213,7 +220,7 @@ class FitResult:
         variance = np.einsum("ni,ij,nj->n", jacobian, self.covariance, jacobian) / max(1.0, self.chi2_dof)
         return float(np.median(np.sqrt(variance)))
 
-    def model_jacobian(self, table) -> np.ndarray:
+    def model_jacobian(self, table: MeasurementTable) -> np.ndarray:
         """d(weighted residual)/d(values) of this model at the fitted values on another table."""
         return Problem(self.model, table).jacobian(self.values)
 
@@ -261,7 +268,7 @@ class FitResult:
         return "\n".join(lines)
 
 
-def _folds(table) -> list:
+def _folds(table: MeasurementTable) -> list[np.ndarray]:
     sweeps = table.sweep_ids
     unique = np.unique(sweeps)
     if len(unique) > 1:

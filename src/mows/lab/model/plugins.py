@@ -36,13 +36,15 @@ import importlib.metadata
 import importlib.util
 import inspect
 import pathlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from typing import Any
 
 import numpy as np
 
-from mows.lab.data.table import MissingColumnError
-from mows.lab.model.configuration import rotation_matrix
+from mows.lab.data.table import MeasurementTable, MissingColumnError
+from mows.lab.model.configuration import Configuration, rotation_matrix
 from mows.lab.model.effects import MECHANICS, Effect, Parameter
+from mows.physics.probe import Probe
 
 ENTRY_POINT_GROUP = "mows.lab.effects"
 # What a plugin may return: name → the trailing shape of one row's value.
@@ -50,8 +52,13 @@ OUTPUTS = {"moment_scale": (), "stiffness_nm_per_rad": (), "field_offset_t": (3,
 
 
 def effect(
-    name: str, parameters: dict, explanation: str = "", signature: str = "", equation: str = "", check: str = ""
-) -> Callable:
+    name: str,
+    parameters: dict[str, tuple[float, float, float, str]],
+    explanation: str = "",
+    signature: str = "",
+    equation: str = "",
+    check: str = "",
+) -> Callable[[Callable[..., dict[str, Any]]], Effect]:
     """Decorator turning ``function(rows, **parameters) -> dict`` into an :class:`Effect`.
 
     ``parameters`` maps each name to ``(off_value, lower, upper, unit)``; the off value must
@@ -69,7 +76,7 @@ def effect(
             raise ValueError(f"effect {name}: parameter {pname} must be off at 0 (got off value {off})")
         specs.append(Parameter(pname, unit, float(lower), float(upper), (float(upper) - float(lower)) * 1e-3))
 
-    def decorate(function):
+    def decorate(function: Callable[..., dict[str, Any]]) -> Effect:
         accepted = list(inspect.signature(function).parameters)[1:]
         if accepted != [p.name for p in specs]:
             raise ValueError(
@@ -78,7 +85,7 @@ def effect(
 
         where = f"plugin effect {name} ({function.__code__.co_filename})"
 
-        def apply(config, rows, probe, *values):
+        def apply(config: Configuration, rows: MeasurementTable, probe: Probe, *values: float) -> None:
             called = ", ".join(f"{p.name}={v:.6g}" for p, v in zip(specs, values))
             try:
                 result = function(rows, *values)
@@ -111,7 +118,7 @@ def effect(
     return decorate
 
 
-def _apply_outputs(config, changes: dict) -> None:
+def _apply_outputs(config: Configuration, changes: dict[str, np.ndarray]) -> None:
     """Edit the configuration by a plugin's per-row ``changes`` (module docstring)."""
     if "tilt_rad" in changes:
         rotations = np.array([rotation_matrix((tx, ty, 0.0)) for tx, ty in changes["tilt_rad"]])
@@ -125,7 +132,7 @@ def _apply_outputs(config, changes: dict) -> None:
     config.frequency_hz = config.frequency_hz + changes.get("frequency_hz", 0.0)
 
 
-def _finite_values(where: str, key: str, value, n: int, called: str) -> np.ndarray:
+def _finite_values(where: str, key: str, value: object, n: int, called: str) -> np.ndarray:
     """A plugin's returned ``key`` as n finite values of its shape (OUTPUTS), or why not; an
     in-plane field offset (bx, by) gains bz = 0."""
     shape = OUTPUTS[key]
@@ -146,7 +153,7 @@ def _finite_values(where: str, key: str, value, n: int, called: str) -> np.ndarr
     return values
 
 
-def load_plugins(sources) -> list:
+def load_plugins(sources: Iterable[str | pathlib.Path]) -> list[Effect]:
     """Effects from plugin files (``*.py`` paths) or installed entry points (group
     ``mows.lab.effects``, by entry-point name). A file contributes every :class:`Effect` it
     defines at module level."""
@@ -164,7 +171,7 @@ def load_plugins(sources) -> list:
     return found
 
 
-def _effects_in_file(path: pathlib.Path) -> list:
+def _effects_in_file(path: pathlib.Path) -> list[Effect]:
     if not path.is_file():
         raise ValueError(f"plugin file {path} does not exist")
     spec = importlib.util.spec_from_file_location(f"mows_lab_plugin_{path.stem}", path)
@@ -178,7 +185,7 @@ def _effects_in_file(path: pathlib.Path) -> list:
     return _effects_in(vars(module), path)
 
 
-def _effects_in(namespace: dict, source) -> list:
+def _effects_in(namespace: dict[str, object], source: str | pathlib.Path) -> list[Effect]:
     effects = [value for value in namespace.values() if isinstance(value, Effect)]
     if not effects:
         raise ValueError(f"plugin {source} defines no effect (use the @mows.lab.effect decorator)")

@@ -15,7 +15,10 @@ import base64
 import dataclasses
 import html
 import io
+import os
 import pathlib
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -23,21 +26,30 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 import numpy as np  # noqa: E402
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
-def _png(figure) -> str:
+    from mows.lab.data.table import MeasurementTable
+    from mows.lab.model.least_squares import FitResult
+    from mows.lab.report.lab_report import LabReport
+    from mows.physics.schema import FloatOrArray
+
+
+def _png(figure: Figure) -> str:
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=90, bbox_inches="tight")
     plt.close(figure)
     return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode()
 
 
-def _shift_hz(fit):
+def _shift_hz(fit: FitResult) -> tuple[np.ndarray, np.ndarray]:
     """Measured and model Δf = f − f00 (fitted f00), Hz."""
     f00 = fit.values[0]
     return fit.table.f_hz - f00, fit.prediction_hz - f00
 
 
-def figure_field_response(report) -> str:
+def figure_field_response(report: LabReport) -> str:
     """Fig. 3 style: Δf against Bx' (reference field along the probe axis).
 
     The models are drawn as markers at the measured rows, not as lines: Δf also follows B⊥ and
@@ -61,13 +73,13 @@ def figure_field_response(report) -> str:
     return _png(figure)
 
 
-def _largest_sweep(table) -> np.ndarray:
+def _largest_sweep(table: MeasurementTable) -> np.ndarray:
     """Rows of the sweep with the most rows: one sweep is one reference field and gradient."""
     ids, counts = np.unique(table.sweep_ids, return_counts=True)
     return table.sweep_ids == ids[np.argmax(counts)]
 
 
-def sweep_curve(fit, rows, theta0_deg) -> np.ndarray:
+def sweep_curve(fit: FitResult, rows: np.ndarray, theta0_deg: FloatOrArray) -> np.ndarray:
     """The fitted model's f (Hz) at orientations ``theta0_deg`` of the sweep ``rows``.
 
     Every other column (reference field, start amplitude, time, temperature…) is interpolated
@@ -86,7 +98,7 @@ def sweep_curve(fit, rows, theta0_deg) -> np.ndarray:
     return fit.model.predict(dataclasses.replace(sweep, columns=columns), fit.values)
 
 
-def figure_polar(report) -> str | None:
+def figure_polar(report: LabReport) -> str | None:
     """Fig. 4 style: |Δf(θ0)| measured and model over one sweep, with the model's field part
     (harmonic 1 in θ0) and gradient part (harmonic 2), from the model on a 1° grid."""
     fit = report.fit
@@ -112,7 +124,7 @@ def figure_polar(report) -> str | None:
     return _png(figure)
 
 
-def _residual_panel(axis, x, fit, label, color):
+def _residual_panel(axis: Axes, x: np.ndarray, fit: FitResult, label: str, color: str) -> None:
     """Residuals f − model (mHz) with their σ, and the data's ±σ band (median σ)."""
     sigma = fit.table.f_std_hz * 1e3
     axis.errorbar(x, fit.residual_hz * 1e3, sigma, fmt=".", ms=3, alpha=0.7, color=color, label=label)
@@ -123,7 +135,7 @@ def _residual_panel(axis, x, fit, label, color):
     axis.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
 
 
-def figure_residuals(report, x, xlabel) -> str:
+def figure_residuals(report: LabReport, x: np.ndarray, xlabel: str) -> str:
     """Residuals against ``x`` on separate axes, each on its own scale (the base model's are
     often 50× the final model's): the base model (Eq. 6), the final model, both in mHz with the
     data's ±σ band, and the final model's pulls (f − model)/σ with ±1 and ±3. Legends sit to
@@ -150,7 +162,7 @@ def figure_residuals(report, x, xlabel) -> str:
     return _png(figure)
 
 
-def figure_candidates(report) -> str | None:
+def figure_candidates(report: LabReport) -> str | None:
     candidates = report.candidates
     if not candidates:
         return None
@@ -165,7 +177,7 @@ def figure_candidates(report) -> str | None:
     return _png(figure)
 
 
-def figure_history(report) -> str:
+def figure_history(report: LabReport) -> str:
     steps = report.history
     labels = [str(i) for i in range(len(steps))]  # the steps' changes are in the table below
     figure, (left, right) = plt.subplots(1, 2, figsize=(8, 3))
@@ -178,15 +190,15 @@ def figure_history(report) -> str:
     return _png(figure)
 
 
-def _img(source, alt) -> str:
+def _img(source: str | None, alt: str) -> str:
     return f'<img src="{source}" alt="{html.escape(alt)}">' if source else ""
 
 
-def _rows(cells_list) -> str:
+def _rows(cells_list: Iterable[Sequence[object]]) -> str:
     return "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells) + "</tr>" for cells in cells_list)
 
 
-def render_html(report) -> str:
+def render_html(report: LabReport) -> str:
     """The report page as a string."""
     table = report.fit.table
     covariates = table.covariates()
@@ -257,7 +269,7 @@ table{{border-collapse:collapse}} tr:nth-child(even){{background:#f2f2f2}} img{{
 <p>Notes: {html.escape("; ".join(report.notes) or "none")}</p></body></html>"""
 
 
-def write_html(report, path) -> pathlib.Path:
+def write_html(report: LabReport, path: str | os.PathLike[str]) -> pathlib.Path:
     """Write the report page to ``path``."""
     path = pathlib.Path(path)
     path.write_text(render_html(report))

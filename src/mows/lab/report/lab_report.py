@@ -18,17 +18,23 @@ physical value more than 3σ from it is reported in the notes.
 from __future__ import annotations
 
 import dataclasses
+import os
+import pathlib
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
 from mows.lab.data.readers import load_table
-from mows.lab.data.table import TableError
-from mows.lab.diagnosis.candidates import physics_deviation
+from mows.lab.data.table import MeasurementTable, TableError
+from mows.lab.diagnosis.candidates import Candidate, physics_deviation
+from mows.lab.diagnosis.indistinguishable import Group
 from mows.lab.diagnosis.verdict import Diagnosis, diagnose
 from mows.lab.model.catalog import catalog, resolve
 from mows.lab.model.configuration import unevaluable_rows
 from mows.lab.model.frequency_model import FitResult, FrequencyModel
-from mows.lab.selection.stepwise import MAX_AUTO_STEPS, history_step, parameters_dict, search
+from mows.lab.model.least_squares import FittedParameter
+from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, parameters_dict, search
+from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
 CHECK_SIGMAS = 3.0  # a physical value further than this from its free fit is noted
@@ -42,7 +48,7 @@ class PhysicsCheck:
 
     effect: str
     held: bool  # held at physics in the final model
-    parameters: list  # [(name, value, std, unit)] of the free fit
+    parameters: list[FittedParameter]  # of the free fit
     deviation_sigma: float  # largest |value − physical|/σ
 
     def to_dict(self) -> dict:
@@ -60,29 +66,29 @@ class LabReport:
     labels: ``name (at physics)`` for an effect held at its physical value."""
 
     model: str
-    effects: list
+    effects: list[str]
     n: int
     chi2_dof: float
     bic: float
     cv_rms_hz: float
     verdict: str
     structure: str
-    candidates: list
-    groups: list
-    history: list
-    untestable: dict
-    notes: list
+    candidates: list[Candidate]
+    groups: list[Group]
+    history: list[HistoryStep]
+    untestable: dict[str, str]
+    notes: list[str]
     base: FitResult
     fit: FitResult
     diagnosis: Diagnosis
-    physics_checks: list = dataclasses.field(default_factory=list)
+    physics_checks: list[PhysicsCheck] = dataclasses.field(default_factory=list)
 
     @property
-    def effect_names(self) -> list:
+    def effect_names(self) -> list[str]:
         """The final model's effects by name, whatever their form."""
         return self.fit.model.effect_names
 
-    def effect_parameter(self, name: str) -> tuple:
+    def effect_parameter(self, name: str) -> tuple[float, float]:
         """(value, σ) of ``effect.parameter`` in the final fit, or, for an effect held at
         physics, in its free fit (the consistency check)."""
         fitted = {n: (v, s) for n, v, s, _ in self.fit.parameters()}
@@ -119,7 +125,13 @@ class LabReport:
 
 
 def analyse(
-    table, probe, effects=None, auto: bool = False, plugins=(), rank: bool = True, cross_validate: bool = True
+    table: MeasurementTable | str | os.PathLike[str],
+    probe: Probe,
+    effects: Iterable[str] | None = None,
+    auto: bool = False,
+    plugins: Iterable[str | pathlib.Path] = (),
+    rank: bool = True,
+    cross_validate: bool = True,
 ) -> LabReport:
     """Fit the published model plus ``effects`` (names) to ``table`` and diagnose what is missing.
 
@@ -172,7 +184,7 @@ def analyse(
     )
 
 
-def _evaluable(table, probe):
+def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:
     """The table without the rows the potential cannot evaluate, each named with the reason in
     the notes (:func:`mows.lab.model.configuration.unevaluable_rows`); TableError when no row is left."""
     problems = unevaluable_rows(table, probe)
@@ -181,7 +193,7 @@ def _evaluable(table, probe):
     return table.without_rows(problems) if problems else table
 
 
-def physics_checks(fit) -> list:
+def physics_checks(fit: FitResult) -> list[PhysicsCheck]:
     """For every effect of ``fit`` with a physical value: its free fit with the rest of the
     model (a refit for one held at physics), and how far the physical value lies from it."""
     checks = []
@@ -189,7 +201,7 @@ def physics_checks(fit) -> list:
         if effect.physical is None:
             continue
         free = fit
-        if effect.fixed:
+        if effect.free is not None:  # held at physics (Effect.fixed)
             freed = fit.model.without(effect) + effect.free
             free = freed.fit(fit.table, start=np.concatenate([fit.values_without(effect), effect.physical]))
         parameters = free.effect_parameters(effect.name)
@@ -197,7 +209,7 @@ def physics_checks(fit) -> list:
     return checks
 
 
-def _physics_verdict(fit, checks, explanation) -> tuple:
+def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation: str) -> tuple[str, str]:
     """(verdict, explanation) of a model whose residuals the statistics call adequate:
     ``inconsistent_physics`` when an effect's free fit lies more than 5σ from its physical
     value, else ``needs_generic_term`` when a generic correction is in the model (what it
@@ -225,7 +237,7 @@ def _physics_verdict(fit, checks, explanation) -> tuple:
     )
 
 
-def _values(parameters) -> str:
+def _values(parameters: Iterable[FittedParameter]) -> str:
     return ", ".join(f"{name} = {v:.4g} ± {s:.2g} {u}".rstrip() for name, v, s, u in parameters)
 
 

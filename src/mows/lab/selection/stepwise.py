@@ -41,13 +41,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
 from mows.lab.diagnosis.candidates import STRONG_DELTA_BIC, TIE_DELTA_BIC, quasi_gain, rank_candidates
 from mows.lab.diagnosis.physical_aliases import alias_statements
-from mows.lab.diagnosis.verdict import diagnose
-from mows.lab.model.effects import testable
+from mows.lab.diagnosis.projections import Signature
+from mows.lab.diagnosis.verdict import Diagnosis, diagnose
+from mows.lab.model.effects import Effect, testable
+from mows.lab.model.least_squares import FitResult, FittedParameter
+from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
 MAX_AUTO_STEPS = 6
@@ -60,13 +64,13 @@ class HistoryStep:
     """One model of the history: ``change`` says how it came from the previous one, ``check``
     holds the free fit [(name, value, std, unit)] of an effect added at physics."""
 
-    effects: list
+    effects: list[str]  # the model's labels
     chi2_dof: float
     bic: float
     cv_rms_hz: float
-    fit: object
+    fit: FitResult
     change: str = "base model"
-    check: list = dataclasses.field(default_factory=list)
+    check: list[FittedParameter] = dataclasses.field(default_factory=list)
     cv_identifiable: bool = True  # False: a left-out sweep held the only information on a parameter
 
     @property
@@ -88,7 +92,9 @@ class HistoryStep:
         }
 
 
-def history_step(fit, cross_validate: bool = True, change: str = "base model", check=()) -> HistoryStep:
+def history_step(
+    fit: FitResult, cross_validate: bool = True, change: str = "base model", check: Iterable[FittedParameter] = ()
+) -> HistoryStep:
     cv = fit.cross_validate() if cross_validate else math.nan
     return HistoryStep(
         fit.model.labels,
@@ -102,11 +108,18 @@ def history_step(fit, cross_validate: bool = True, change: str = "base model", c
     )
 
 
-def parameters_dict(parameters) -> dict:
+def parameters_dict(parameters: Iterable[FittedParameter]) -> dict[str, dict[str, float | str]]:
     return {name: {"value": v, "std": s, "unit": u} for name, v, s, u in parameters}
 
 
-def search(found, pool, probe, history, cross_validate: bool = True, steps: int = MAX_AUTO_STEPS):
+def search(
+    found: Diagnosis,
+    pool: Sequence[Effect],
+    probe: Probe,
+    history: list[HistoryStep],
+    cross_validate: bool = True,
+    steps: int = MAX_AUTO_STEPS,
+) -> Diagnosis:
     """The diagnosis of the selected model, starting from ``found`` (the diagnosis of the
     present fit): up to ``steps`` forward steps, each followed by the revisit, every model
     appended to ``history`` (module docstring)."""
@@ -128,7 +141,9 @@ def search(found, pool, probe, history, cross_validate: bool = True, steps: int 
     return found
 
 
-def prefer_physical(found, pool, probe, history, cross_validate: bool = True):
+def prefer_physical(
+    found: Diagnosis, pool: Sequence[Effect], probe: Probe, history: list[HistoryStep], cross_validate: bool = True
+) -> Diagnosis:
     """The diagnosis after each generic correction of the model (``Effect.generic``: moment
     scale, field offset, spring drift, angle offset) is replaced by a physical effect that fits
     as well (BIC at most 2 worse, no more free parameters, free values inside their bounds),
@@ -137,7 +152,7 @@ def prefer_physical(found, pool, probe, history, cross_validate: bool = True):
     −0.86 %). Each replacement is a step of ``history`` that says why."""
     fit = found.fit
     for generic in [e for e in fit.model.effects if e.generic]:
-        best = None
+        best: tuple[Effect, FitResult] | None = None
         for form, new in _physical_replacements(fit, generic, pool, probe):
             better = best is None or (form.fixed, -new.bic) > (best[0].fixed, -best[1].bic)
             if quasi_gain(fit, new) > -TIE_DELTA_BIC and better:
@@ -166,7 +181,9 @@ def prefer_physical(found, pool, probe, history, cross_validate: bool = True):
     return found if fit is found.fit else diagnose(fit, pool, probe)
 
 
-def _physical_replacements(fit, generic, pool, probe):
+def _physical_replacements(
+    fit: FitResult, generic: Effect, pool: Sequence[Effect], probe: Probe
+) -> Iterator[tuple[Effect, FitResult]]:
     """(form, fit) of the model with ``generic`` replaced by each physical effect of ``pool``
     not in it: held at physics where it has a physical value, else free, with no more free
     parameters than ``generic`` and every free value inside its bounds."""
@@ -184,7 +201,7 @@ def _physical_replacements(fit, generic, pool, probe):
             yield form, new
 
 
-def _forward_step(found):
+def _forward_step(found: Diagnosis) -> tuple[str, FitResult, Sequence[FittedParameter]] | None:
     """(change, fit, check) of the next addition (module docstring), None when there is none.
 
     The best strong candidate in its better form, known physics first (a candidate held at
@@ -195,6 +212,7 @@ def _forward_step(found):
     strong = [c for c in found.candidates if c.strong]
     best = next((c for c in strong if c.chosen.fixed), strong[0] if strong else None)
     if best is not None:
+        assert best.chosen.fit is not None  # a strong form is always refitted (candidates._candidate)
         return f"add {best.label}", best.chosen.fit, best.parameters if best.chosen.fixed else ()
     for candidate in found.candidates:
         if candidate.physics is not None and candidate.physics.kept_physics:
@@ -212,7 +230,14 @@ def _forward_step(found):
     return None
 
 
-def _revisit(fit, pool, probe, history, cross_validate, freeing: bool):
+def _revisit(
+    fit: FitResult,
+    pool: Sequence[Effect],
+    probe: Probe,
+    history: list[HistoryStep],
+    cross_validate: bool,
+    freeing: bool,
+) -> FitResult:
     """Apply the best swap or removal while one lowers the BIC (module docstring); ``freeing``:
     setting an effect held at physics free is one of the moves."""
     for _ in range(MAX_REVISIT_MOVES):
@@ -224,11 +249,11 @@ def _revisit(fit, pool, probe, history, cross_validate, freeing: bool):
     return fit
 
 
-def _best_move(fit, pool, probe, freeing: bool):
+def _best_move(fit: FitResult, pool: Sequence[Effect], probe: Probe, freeing: bool) -> tuple[str, FitResult] | None:
     """(change, fit) of the best alternative to ``fit`` (:func:`_alternatives`) that the guard
     accepts (:func:`_accepted`; a move that sets free an effect held at physics only when
     ``freeing``); None when there is none."""
-    best = None
+    best: tuple[str, FitResult] | None = None
     for effect in fit.model.effects:
         for change, new, freed in _alternatives(fit, effect, pool, probe):
             if (freeing or not freed) and _accepted(fit, new, freed) and (best is None or new.bic < best[1].bic):
@@ -236,7 +261,7 @@ def _best_move(fit, pool, probe, freeing: bool):
     return best
 
 
-def _accepted(old, new, freed: bool) -> bool:
+def _accepted(old: FitResult, new: FitResult, freed: bool) -> bool:
     return quasi_gain(old, new) > _required_gain(old.k, new.k, freed)
 
 
@@ -252,7 +277,9 @@ def _required_gain(old_k: int, new_k: int, freed: bool) -> float:
     return TIE_DELTA_BIC if new_k == old_k else 0.0
 
 
-def _alternatives(fit, effect, pool, probe) -> list:
+def _alternatives(
+    fit: FitResult, effect: Effect, pool: Sequence[Effect], probe: Probe
+) -> list[tuple[str, FitResult, bool]]:
     """[(change, fit, freed)] of the models that differ from ``fit`` in ``effect``:
 
     - without it;
@@ -278,7 +305,9 @@ def _alternatives(fit, effect, pool, probe) -> list:
     return found
 
 
-def _replacements(fit, start, pool, probe, replaced) -> list:
+def _replacements(
+    fit: FitResult, start: FitResult, pool: Sequence[Effect], probe: Probe, replaced: Effect
+) -> list[tuple[str, FitResult, bool]]:
     """[(label, fit, freed)] of ``start`` plus one refitted candidate in either form (``freed``:
     the candidate is ``replaced``, held at physics in ``fit``, set free) that improves on
     ``start`` by positive evidence (ΔBIC > 2: a zero-parameter effect of no consequence does
@@ -287,7 +316,7 @@ def _replacements(fit, start, pool, probe, replaced) -> list:
     nonlinearity."""
     log_n = math.log(fit.n)
 
-    def could_pass(effect, test, added) -> bool:
+    def could_pass(effect: Effect, test: Signature, added: int) -> bool:
         if effect.name == replaced.name and (added == 0) == replaced.fixed:
             return False  # the replaced effect back in its own form: ``fit`` itself
         k = start.k + added

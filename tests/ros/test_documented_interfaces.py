@@ -28,12 +28,16 @@ INTERFACES = [
     "/mows/sweep",
     "/mows/model_report",
     "/diagnostics",
-    "/mows/driver/run_cycle",
-    "/mows/driver/emergency_stop",
-    "/mows/driver/set_field_current",
-    "/mows/estimator/calibrate",
-    "/mows/mapper/rotation_sweep",
-    "/mows/calibrator/calibrate_probe",
+    # services and actions are node-private: their names in the root namespace
+    "/driver/measurement_cycle",
+    "/driver/run_cycle",
+    "/driver/emergency_stop",
+    "/driver/set_field_current",
+    "/estimator/calibrate",
+    "/mapper/rotation_sweep",
+    "/mapper/confirm_orientation",
+    "/calibrator/calibrate_probe",
+    "/calibrator/confirm_orientation",
 ]
 
 

@@ -42,7 +42,7 @@ def rewrite(source, target, change) -> None:
     with open(target, "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
-        writer.writerows(rows[:1] if target.name == "one_row.csv" else rows)
+        writer.writerows(rows[:1] if target.name.endswith("one_row.csv") else rows)
 
 
 def scale(column, factor):
@@ -62,6 +62,8 @@ def work(tmp_path_factory):
     rewrite(CALIBRATION_TABLE, d / "cal_nan_current.csv", lambda i, row: i == 2 and row.update(supply_current_a="nan"))
     rewrite(CALIBRATION_TABLE, d / "one_row.csv", lambda i, row: None)
     rewrite(SWEEP_TABLE, d / "sweep_khz.csv", scale("f_hz", 1e-3))
+    (d / "sweep_semicolons.csv").write_text(SWEEP_TABLE.read_text().replace(",", ";"))
+    rewrite(SWEEP_TABLE, d / "sweep_one_row.csv", lambda i, row: None)
     PAPER_PROBE.to_yaml(d / "probe.yaml")
     text = (d / "probe.yaml").read_text()
     (d / "probe_1000x.yaml").write_text(text.replace("moment_am2: 0.00089", "moment_am2: 0.89"))
@@ -155,6 +157,8 @@ CASES = [
         ["already has reference columns", "give no --reference"],
     ),
     ("lab-f-in-khz", ["lab", "compare", "{d}/sweep_khz.csv"], 2, ["f00", "kHz"]),
+    ("lab-semicolons", ["lab", "compare", "{d}/sweep_semicolons.csv"], 2, ["separated by ';'", "comma"]),
+    ("lab-one-row", ["lab", "compare", "{d}/sweep_one_row.csv"], 2, ["1 row", "degrees of freedom"]),
     ("lab-ringdown-negative-f00", ["lab", "ringdown", "{d}/bag", "--f00-hz", "-3"], 2, ["--f00-hz"]),
     # probe files
     (

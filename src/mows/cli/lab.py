@@ -162,6 +162,11 @@ def run(args) -> int:
             table = table.subsample(MAX_ROWS, SUBSAMPLE_SEED)
         stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")
         stages.update()
+        if len(table) < 2:  # no model is tested by one row, and its cross-validation has no fold
+            raise ValueError(
+                f"{len(table)} row leaves no degrees of freedom for any model: nothing would test it; "
+                "measure more orientations"
+            )
         effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
         report = analyse(
             table,

@@ -80,6 +80,11 @@ def _read_cells(path: pathlib.Path, drop_invalid: bool) -> MeasurementTable:
     if not rows:
         raise TableError(f"{path} is empty: expected a header row and data rows")
     header = [name.strip() for name in rows[0]]
+    if len(header) == 1 and (separator := next((c for c in ";\t|" if c in header[0]), None)):
+        raise TableError(
+            f"{path}: the header is one cell, {header[0]!r}: columns are separated by commas, and this "
+            f"file looks separated by {separator!r} (save it as comma-separated CSV)"
+        )
     duplicated = sorted({name for name in header if header.count(name) > 1})
     if duplicated:
         raise TableError(f"{path}: column{'s' if len(duplicated) > 1 else ''} {', '.join(duplicated)} appear twice")

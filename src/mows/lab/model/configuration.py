@@ -36,7 +36,6 @@ while λ = 1 is the exact physics, interactions included.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import weakref
 
@@ -105,6 +104,20 @@ class Configuration:
             frequency_hz=np.zeros(n),
         )
 
+    def per_row(self) -> dict:
+        """{field name: its per-row array} (``moment_factor`` only when it is one per row)."""
+        n = len(self.theta0_rad)
+        found = {}
+        for field in dataclasses.fields(self):
+            values = getattr(self, field.name)
+            if isinstance(values, np.ndarray) and values.ndim and len(values) == n:
+                found[field.name] = values
+        return found
+
+    def rows(self, index) -> Configuration:
+        """The configuration of the rows ``index`` (indices or a boolean mask)."""
+        return dataclasses.replace(self, **{name: values[index] for name, values in self.per_row().items()})
+
     def start_swing_rad(self, rest_rad) -> np.ndarray:
         """Each ring-down's start swing about its rest angle ``rest_rad``: the evidence where the
         lab uses it, else the stop less the deflection, θstop − |θs| (module docstring)."""
@@ -126,9 +139,45 @@ class Configuration:
 def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
     """(h, c) with f = f00·h + c for every row (module docstring).
 
-    ``amplitude_nodes(start_rad)`` gives (A_q (n, q), c_q (n, q)) of ring-downs that start at
-    ``start_rad`` (default: :func:`ringdown_nodes`, uncached); used when ``config.amplitude`` ≠ 0.
+    Rows whose every per-row input is identical have the same h whatever the parameters, so h
+    is evaluated once per distinct configuration (:func:`distinct_rows`) and given to each of
+    its rows: the cost and the memory of the potential and the amplitude nodes grow with the
+    distinct configurations, not with the rows. ``amplitude_nodes(config, start_rad)`` gives
+    (A_q (n, q), c_q (n, q)) of the configuration's ring-downs that start at ``start_rad``
+    (default: :func:`ringdown_nodes`, uncached); used when ``config.amplitude`` ≠ 0.
     """
+    first, inverse = distinct_rows(config)
+    if len(first) == len(config.theta0_rad):
+        return _frequency_factor(config, probe, amplitude_nodes or ringdown_nodes), config.frequency_hz
+    h = _frequency_factor(config.rows(first), probe, amplitude_nodes or ringdown_nodes)
+    return h[inverse], config.frequency_hz
+
+
+def distinct_rows(config: Configuration) -> tuple:
+    """(first, inverse): a row of each distinct configuration and, for every row, the index of its
+    configuration in ``first``. Rows are the same configuration when every per-row input that h
+    reads is bitwise equal: not the additive ``frequency_hz``, the ring-down's start and window
+    only with the finite-amplitude readout on, its damping only with the damped readout on."""
+    n = len(config.theta0_rad)
+    unread = {"frequency_hz"}
+    if not config.amplitude:
+        unread |= {"start_evidence_rad", "ringdown_damping_per_s", "ringdown_duration_s"}
+    if not config.damping:
+        unread.add("damping_per_s")
+    inputs = [
+        np.asarray(values, float).reshape(n, -1) for name, values in config.per_row().items() if name not in unread
+    ]
+    keys = np.ascontiguousarray(np.concatenate(inputs, axis=1))
+    _, first, inverse = np.unique(
+        keys.view(np.dtype((np.void, keys.dtype.itemsize * keys.shape[1]))).ravel(),
+        return_index=True,
+        return_inverse=True,
+    )
+    return first, inverse.ravel()
+
+
+def _frequency_factor(config: Configuration, probe, amplitude_nodes) -> np.ndarray:
+    """h for every row of ``config`` (:func:`frequency_factor`, without the grouping)."""
     axes, field, gradient, hessian = config.probe_frame()
     factor = np.asarray(config.moment_factor, float)
     factor = factor.reshape(factor.shape + (1,))  # broadcasts over a row's vector components
@@ -148,12 +197,11 @@ def frequency_factor(config: Configuration, probe, amplitude_nodes=None):
     h = _readout(config, probe, _blend(stiffness, config.deflection))
     if config.amplitude:
         rest = _potential(probe, factor * field, **local).rest_angle_rad()
-        start = config.start_swing_rad(rest)
-        amplitudes, weights = (amplitude_nodes or functools.partial(ringdown_nodes, config))(start)
+        amplitudes, weights = amplitude_nodes(config, config.start_swing_rad(rest))
         at_amplitude = [_amplitude_stiffness(probe, factor * b, amplitudes, **local) for b in variants]
         averaged = (weights * _readout(config, probe, _blend(at_amplitude, config.deflection))).sum(-1)
         h = h + config.amplitude * (averaged - h)
-    return h, config.frequency_hz
+    return h
 
 
 def ringdown_nodes(config: Configuration, start_rad) -> tuple:

@@ -116,7 +116,7 @@ class FrequencyModel:
         ordered = sorted(range(len(self.effects)), key=lambda i: self.effects[i].stage)
         for i in ordered:
             self.effects[i].apply(config, table, probe, *(float(v) for v in values[bounds[i] : bounds[i + 1]]))
-        return frequency_factor(config, probe, lambda start_rad: cached_nodes(table, config, start_rad))
+        return frequency_factor(config, probe, lambda rows, start_rad: cached_nodes(table, rows, start_rad))
 
     def predict(self, table, values) -> np.ndarray:
         """f (Hz) for ``values`` = [f00, effect parameters…] (or a :class:`FitResult`)."""
@@ -166,7 +166,7 @@ def cached_nodes(table, config: Configuration, start_rad):
     """Amplitude nodes of the table's ring-downs from ``start_rad``, cached per table and
     ring-down inputs (the inputs also come from the probe where the table has no column:
     Configuration.base; the start swings from the model's own rest angles)."""
-    inputs = (start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s)
+    inputs = (config.theta0_rad, start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s)
     key = b"".join(np.ascontiguousarray(values, float).tobytes() for values in inputs)
     cached = _NODES.setdefault(table, {})
     if key not in cached:

@@ -132,7 +132,7 @@ def analyse(
     auto : then select effects stepwise (module docstring).
     plugins : plugin files or entry-point names whose effects join the catalog.
     rank : test the catalog's candidates (``False``: fit and residual structure only).
-    cross_validate : compute the leave-one-sweep-out error of every step.
+    cross_validate : compute the cross-validated error (whole sweeps held out) of every step.
     """
     table = _evaluable(load_table(table), probe)
     available = catalog(plugins)

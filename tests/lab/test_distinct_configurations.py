@@ -15,7 +15,7 @@ import pytest
 
 from mows.lab import FrequencyModel, catalog, diagnose
 from mows.lab.data import synthetic
-from mows.lab.model import configuration
+from mows.lab.model import configuration, frequency_model
 from mows.physics.field import UniformField, anti_helmholtz_pair
 from mows.physics.probe import PAPER_PROBE
 
@@ -35,19 +35,21 @@ def table():
     copies = -(-ROWS // len(one))
     columns = {name: np.tile(values, copies)[:ROWS] for name, values in one.columns.items()}
     columns["sweep"] = np.repeat(np.arange(copies), len(one))[:ROWS].astype(float)
-    columns["t_s"] = np.arange(ROWS) * 10.0
+    columns.pop("t_s")
     columns["f_hz"] = columns["f_hz"] + np.random.default_rng(8).normal(0.0, 1.0, ROWS) * columns["f_std_hz"]
     return dataclasses.replace(one, columns=columns)
 
 
-def _each_row_its_own(config):
-    rows = np.arange(len(config.theta0_rad))
+def _each_row_its_own(keys):
+    rows = np.arange(len(keys))
     return rows, rows
 
 
 def _fits(table, monkeypatch, grouped: bool):
     if not grouped:
-        monkeypatch.setattr(configuration, "distinct_rows", _each_row_its_own)
+        monkeypatch.setattr(configuration, "distinct_rows_of", _each_row_its_own)
+        monkeypatch.setattr(frequency_model, "distinct_rows_of", _each_row_its_own)
+        table = dataclasses.replace(table)  # a table of its own: nothing grouped is cached for it
     pool = [catalog()[name] for name in EFFECTS]
     base = FrequencyModel(PAPER_PROBE).fit(table)
     extended = (FrequencyModel(PAPER_PROBE) + pool[0] + pool[2]).fit(table)
@@ -55,12 +57,16 @@ def _fits(table, monkeypatch, grouped: bool):
 
 
 def test_the_table_has_twelve_configurations(table):
-    first, inverse = configuration.distinct_rows(configuration.Configuration.base(table, PAPER_PROBE))
-    assert len(table) == ROWS and len(first) == 12
-    assert np.array_equal(table.theta0_deg, table.theta0_deg[first][inverse])
+    distinct, inverse = frequency_model.distinct_table(table)
+    assert len(table) == ROWS and len(distinct) == 12
+    assert np.array_equal(table.theta0_deg, distinct.theta0_deg[inverse])
+    # A time column makes every row of the table distinct, but not the base model's configurations.
+    timed = dataclasses.replace(table, columns={**table.columns, "t_s": np.arange(ROWS) * 10.0})
+    assert len(frequency_model.distinct_table(timed)[0]) == ROWS
+    first, inverse = configuration.distinct_rows(configuration.Configuration.base(timed, PAPER_PROBE))
+    assert len(first) == 12 and np.array_equal(table.theta0_deg, table.theta0_deg[first][inverse])
 
 
-@pytest.mark.slow  # the ungrouped reference evaluates the potential on every row
 def test_grouped_and_ungrouped_give_the_same_fits_and_verdict(table, monkeypatch):
     grouped = _fits(table, monkeypatch, grouped=True)
     ungrouped = _fits(table, monkeypatch, grouped=False)

@@ -178,22 +178,40 @@ def default_window_s(table) -> np.ndarray:
     window is then one per configuration, as the physics has it, rather than following each
     row's noise (1e-5 of the window at σ = 1 mHz and 100 Hz, far below what moves the averaged
     frequency), and the rows of a configuration share their amplitude nodes."""
-    names = ["theta0_deg", *FIELD, *GRADIENT, "amplitude_deg", "damping_per_s"]
-    _, inverse = distinct_rows_of(np.stack([table.columns[name] for name in names if table.has(name)], -1))
-    mean_hz = np.bincount(inverse, table.f_hz) / np.bincount(inverse)
-    return ringdown_average.default_duration_s(mean_hz[inverse])
+    if table not in _WINDOW:
+        names = ["theta0_deg", *FIELD, *GRADIENT, "amplitude_deg", "damping_per_s"]
+        _, inverse = distinct_rows_of(np.stack([table.columns[name] for name in names if table.has(name)], -1))
+        mean_hz = np.bincount(inverse, table.f_hz) / np.bincount(inverse)
+        _WINDOW[table] = ringdown_average.default_duration_s(mean_hz[inverse])
+    return _WINDOW[table]
+
+
+# table → its default ring-down windows (s)
+_WINDOW: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def distinct_rows_of(keys) -> tuple:
     """(first, inverse): a row of each bitwise-distinct row of ``keys`` (n, m) and, for every
     row, the index of its kind in ``first``."""
-    keys = np.ascontiguousarray(keys, float)
+    words = np.ascontiguousarray(keys, float).view(np.uint64)
+    # A hash of each row's bits groups fast; the groups are then checked bit for bit, and only
+    # a collision (rows of one hash that differ) falls back to sorting the rows themselves.
+    with np.errstate(over="ignore"):
+        hashed = words @ _HASH_MULTIPLIERS[: words.shape[1]] if words.shape[1] <= len(_HASH_MULTIPLIERS) else None
+    if hashed is not None:
+        _, first, inverse = np.unique(hashed, return_index=True, return_inverse=True)
+        if np.array_equal(words, words[first][inverse]):
+            return first, inverse.ravel()
     _, first, inverse = np.unique(
-        keys.view(np.dtype((np.void, keys.dtype.itemsize * keys.shape[1]))).ravel(),
+        words.view(np.dtype((np.void, words.dtype.itemsize * words.shape[1]))).ravel(),
         return_index=True,
         return_inverse=True,
     )
     return first, inverse.ravel()
+
+
+# Odd 64-bit multipliers of the row hash (fixed: the grouping is the same in every run).
+_HASH_MULTIPLIERS = np.random.default_rng(0).integers(1, 2**63, 64, dtype=np.uint64) * np.uint64(2) + np.uint64(1)
 
 
 def _frequency_factor(config: Configuration, probe, amplitude_nodes) -> np.ndarray:

@@ -27,7 +27,7 @@ from mows.lab.diagnosis.candidates import physics_deviation
 from mows.lab.diagnosis.verdict import Diagnosis, diagnose
 from mows.lab.model.catalog import catalog, resolve
 from mows.lab.model.configuration import unevaluable_rows
-from mows.lab.model.frequency_model import FitResult, FrequencyModel
+from mows.lab.model.frequency_model import FitResult, FrequencyModel, distinct_table
 from mows.lab.selection.stepwise import MAX_AUTO_STEPS, history_step, parameters_dict, search
 from mows.records.json_numbers import finite_or_none
 
@@ -175,7 +175,9 @@ def analyse(
 def _evaluable(table, probe):
     """The table without the rows the potential cannot evaluate, each named with the reason in
     the notes (:func:`mows.lab.model.configuration.unevaluable_rows`); TableError when no row is left."""
-    problems = unevaluable_rows(table, probe)
+    distinct, inverse = distinct_table(table)
+    found = unevaluable_rows(distinct, probe)  # a reason holds for every row of its configuration
+    problems = {int(row): found[int(inverse[row])] for row in np.flatnonzero(np.isin(inverse, list(found)))}
     if len(problems) == len(table):
         raise TableError(f"the model cannot evaluate any row of {table.source}: {next(iter(problems.values()))[0]}")
     return table.without_rows(problems) if problems else table

@@ -16,8 +16,8 @@ new file (an existing one only with ``--force``, never an input), whole or not a
 
 Every row is analysed up to MAX_ROWS rows: the model is evaluated once per distinct
 configuration, so the cost beyond that grows with the rows only through residuals and
-Jacobians (docs/model_lab.md, "Long tables": 250 000 rows of 1000 configurations took 34 s
-and 980 MiB on two cores, hence the margin). A longer table is analysed on a stratified random subsample of
+Jacobians (docs/model_lab.md, "Long tables": at 200 000 rows ``add`` peaked at 1105 MiB,
+hence the lower limit). A longer table is analysed on a stratified random subsample of
 MAX_ROWS rows (seed 0; whole sweeps spread over the table, :meth:`MeasurementTable.subsample`),
 said in a note; ``--all-rows`` uses every row. On a terminal
 the stages show a progress bar on stderr (tqdm), never with ``--json``.
@@ -41,7 +41,7 @@ from mows.lab import analyse, is_bag, load_table, progress, with_reference, writ
 from mows.lab.chirp import PIECE_PERIODS
 from mows.records.files import check_output, writing
 
-MAX_ROWS = 200_000
+MAX_ROWS = 150_000
 SUBSAMPLE_SEED = 0
 REDRAW_S = 0.2  # the work bar's least interval between redraws
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"

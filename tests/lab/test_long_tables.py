@@ -7,7 +7,8 @@ import pytest
 from lab.tables import tilted_table
 from mows.lab import analyse, read_csv
 from mows.lab.data.readers import _read_cells
-from mows.lab.data.table import stratified_rows
+from mows.lab.data.table import MeasurementTable, stratified_rows
+from mows.lab.model.least_squares import _folds
 from mows.physics.probe import PAPER_PROBE
 
 
@@ -63,3 +64,26 @@ def test_the_subsample_makes_the_choices_every_row_makes(tilted):
         assert part.verdict == full.verdict == ("adequate" if auto else "effect_missing")
         if not auto:
             assert part.candidates[0].name == full.candidates[0].name
+
+
+def test_cross_validation_holds_out_whole_sweeps_in_ten_folds_spread_over_time():
+    sweeps = np.repeat(np.arange(1000)[::-1], 12)  # 1000 sweeps of 12 rows, numbered backwards in time
+    folds = _folds(_sweeps_table(sweeps))
+    assert len(folds) == 10
+    assert np.array_equal(np.sort(np.concatenate(folds)), np.arange(len(sweeps)))
+    held = [set(sweeps[rows]) for rows in folds]
+    assert all(len(h) == 100 for h in held) and not set.intersection(*held)
+    # The k-th sweep in time goes to fold k mod 10: each fold spans the table from start to end.
+    assert all(rows[0] < 120 and rows[-1] >= len(sweeps) - 120 for rows in folds)
+    assert all(np.all(np.diff(rows[::12]) == 120) for rows in folds)
+
+
+def test_a_table_of_at_most_ten_sweeps_leaves_one_sweep_out():
+    sweeps = np.repeat([3, 1, 2], 4)
+    folds = _folds(_sweeps_table(sweeps))
+    assert [list(rows) for rows in folds] == [[0, 1, 2, 3], [4, 5, 6, 7], [8, 9, 10, 11]]
+
+
+def _sweeps_table(sweeps):
+    ones = np.ones(len(sweeps))
+    return MeasurementTable({"theta0_deg": ones, "f_hz": ones, "f_std_hz": ones, "sweep": sweeps})

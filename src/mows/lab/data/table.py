@@ -11,7 +11,7 @@ Columns (CSV header names, SI units but for the ``*_deg`` columns):
 
 =====================================  =========  ===================================================
 ``theta0_deg``, ``f_hz``, ``f_std_hz``  required   orientation, ring-down frequency and its std. uncertainty
-``t_s``, ``sweep``                      optional   time; sweep number (leave-one-sweep-out CV)
+``t_s``, ``sweep``                      optional   time; sweep number (CV holds out whole sweeps)
 ``ref_bx_t``, ``ref_by_t``, ``ref_bz_t``  optional   reference field at the probe, global frame
 ``ref_gxx_t_per_m``, ``ref_gxy_t_per_m``,  optional   in-plane reference gradient G_ij = ∂B_i/∂x_j
 ``ref_gyy_t_per_m``
@@ -365,8 +365,8 @@ def with_notes(columns: Mapping[str, np.ndarray], source: str, notes: list[str])
 def stratified_rows(sweep_ids: np.ndarray, rows: int, seed: int = 0) -> np.ndarray:
     """Indices (ascending) of at most ``rows`` rows that stand for the whole table.
 
-    Whole sweeps first, so that each keeps its orientations and the leave-one-sweep-out
-    cross-validation its folds: the sweeps, in order of first appearance, are cut into as many
+    Whole sweeps first, so that each keeps its orientations and the cross-validation
+    its whole-sweep folds: the sweeps, in order of first appearance, are cut into as many
     strata of consecutive sweeps as there is room for average sweeps (at least MIN_SWEEPS), and
     one sweep is drawn from each (the drift over the table is sampled end to end). When that
     leaves more than ``rows`` rows (long sweeps), each kept sweep gives rows in proportion to

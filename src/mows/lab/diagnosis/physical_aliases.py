@@ -27,6 +27,7 @@ import scipy.special
 
 from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import Configuration, base_start_swing_rad, ringdown_nodes
+from mows.lab.model.frequency_model import distinct_table
 from mows.lab.model.least_squares import FitResult
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
 from mows.physics.probe import Probe
@@ -108,8 +109,9 @@ def _tilt_field(table: MeasurementTable, probe: Probe, values: FittedValues) -> 
 def amplitude_scale_error(table: MeasurementTable, probe: Probe) -> tuple[float, float]:
     """(ε, spread) with ε = ⟨2·J1(A)/A⟩ − 1 over the rows' ring-down amplitude nodes (the
     moment scale the finite amplitude looks like), spread its range over the rows."""
-    amplitudes, weights = ringdown_nodes(Configuration.base(table, probe), base_start_swing_rad(table, probe))
-    per_row = (weights * 2.0 * scipy.special.j1(amplitudes) / amplitudes).sum(-1) - 1.0
+    distinct, inverse = distinct_table(table)
+    amplitudes, weights = ringdown_nodes(Configuration.base(distinct, probe), base_start_swing_rad(distinct, probe))
+    per_row = ((weights * 2.0 * scipy.special.j1(amplitudes) / amplitudes).sum(-1) - 1.0)[inverse]
     return float(np.mean(per_row)), float(np.ptp(per_row))
 
 

@@ -36,7 +36,6 @@ while λ = 1 is the exact physics, interactions included.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import weakref
 from collections.abc import Callable
@@ -44,6 +43,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mows.lab.data.table import FIELD, GRADIENT
 from mows.physics import ringdown_average
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, probe_axes
 from mows.physics.potential import ArcPotential
@@ -53,7 +53,7 @@ from mows.physics.schema import FloatOrArray, Vector
 if TYPE_CHECKING:
     from mows.lab.data.table import MeasurementTable
 
-AmplitudeNodes = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+AmplitudeNodes = Callable[["Configuration", np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 @dataclasses.dataclass
@@ -100,7 +100,7 @@ class Configuration:
         """Eq. 6 with the table's reference field and gradient."""
         n = len(table)
         ringdown_damping = table.columns.get("damping_per_s", np.full(n, probe.damping_per_s))
-        duration = table.columns.get("duration_s", ringdown_average.default_duration_s(table.f_hz))
+        duration = table.columns.get("duration_s", default_window_s(table))
         return cls(
             theta0_rad=table.theta0_rad.copy(),
             field_t=table.field_t,
@@ -113,6 +113,20 @@ class Configuration:
             damping_per_s=np.full(n, probe.damping_per_s),
             frequency_hz=np.zeros(n),
         )
+
+    def per_row(self) -> dict[str, np.ndarray]:
+        """{field name: its per-row array} (``moment_factor`` only when it is one per row)."""
+        n = len(self.theta0_rad)
+        found = {}
+        for field in dataclasses.fields(self):
+            values = getattr(self, field.name)
+            if isinstance(values, np.ndarray) and values.ndim and len(values) == n:
+                found[field.name] = values
+        return found
+
+    def rows(self, index: np.ndarray) -> Configuration:
+        """The configuration of the rows ``index`` (indices or a boolean mask)."""
+        return dataclasses.replace(self, **{name: values[index] for name, values in self.per_row().items()})
 
     def start_swing_rad(self, rest_rad: np.ndarray) -> np.ndarray:
         """Each ring-down's start swing about its rest angle ``rest_rad``: the evidence where the
@@ -137,9 +151,82 @@ def frequency_factor(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(h, c) with f = f00·h + c for every row (module docstring).
 
-    ``amplitude_nodes(start_rad)`` gives (A_q (n, q), c_q (n, q)) of ring-downs that start at
-    ``start_rad`` (default: :func:`ringdown_nodes`, uncached); used when ``config.amplitude`` ≠ 0.
+    Rows whose every per-row input is identical have the same h whatever the parameters, so h
+    is evaluated once per distinct configuration (:func:`distinct_rows`) and given to each of
+    its rows: the cost and the memory of the potential and the amplitude nodes grow with the
+    distinct configurations, not with the rows. ``amplitude_nodes(config, start_rad)`` gives
+    (A_q (n, q), c_q (n, q)) of the configuration's ring-downs that start at ``start_rad``
+    (default: :func:`ringdown_nodes`, uncached); used when ``config.amplitude`` ≠ 0.
     """
+    first, inverse = distinct_rows(config)
+    if len(first) == len(config.theta0_rad):
+        return _frequency_factor(config, probe, amplitude_nodes or ringdown_nodes), config.frequency_hz
+    h = _frequency_factor(config.rows(first), probe, amplitude_nodes or ringdown_nodes)
+    return h[inverse], config.frequency_hz
+
+
+def distinct_rows(config: Configuration) -> tuple[np.ndarray, np.ndarray]:
+    """(first, inverse): a row of each distinct configuration and, for every row, the index of its
+    configuration in ``first``. Rows are the same configuration when every per-row input that h
+    reads is bitwise equal: not the additive ``frequency_hz``, the ring-down's start and window
+    only with the finite-amplitude readout on, its damping only with the damped readout on."""
+    n = len(config.theta0_rad)
+    unread = {"frequency_hz"}
+    if not config.amplitude:
+        unread |= {"start_evidence_rad", "ringdown_damping_per_s", "ringdown_duration_s"}
+    if not config.damping:
+        unread.add("damping_per_s")
+    inputs = [
+        np.asarray(values, float).reshape(n, -1) for name, values in config.per_row().items() if name not in unread
+    ]
+    return distinct_rows_of(np.concatenate(inputs, axis=1))
+
+
+def default_window_s(table: MeasurementTable) -> np.ndarray:
+    """The ring-down's fit window where the table has no ``duration_s``: the paper's 60 periods,
+    of the mean measured frequency of the rows that ring down alike (equal θ0, reference field
+    and gradient, and ``amplitude_deg`` and ``damping_per_s`` where the table has them). The
+    window is then one per configuration, as the physics has it, rather than following each
+    row's noise (1e-5 of the window at σ = 1 mHz and 100 Hz, far below what moves the averaged
+    frequency), and the rows of a configuration share their amplitude nodes."""
+    if table not in _WINDOW:
+        names = ["theta0_deg", *FIELD, *GRADIENT, "amplitude_deg", "damping_per_s"]
+        _, inverse = distinct_rows_of(np.stack([table.columns[name] for name in names if table.has(name)], -1))
+        mean_hz = np.bincount(inverse, table.f_hz) / np.bincount(inverse)
+        _WINDOW[table] = ringdown_average.default_duration_s(mean_hz[inverse])
+    return _WINDOW[table]
+
+
+# table → its default ring-down windows (s)
+_WINDOW: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def distinct_rows_of(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(first, inverse): a row of each bitwise-distinct row of ``keys`` (n, m) and, for every
+    row, the index of its kind in ``first``."""
+    words = np.ascontiguousarray(keys, float).view(np.uint64)
+    # A hash of each row's bits groups fast; the groups are then checked bit for bit, and only
+    # a collision (rows of one hash that differ) falls back to sorting the rows themselves.
+    with np.errstate(over="ignore"):
+        hashed = words @ _HASH_MULTIPLIERS[: words.shape[1]] if words.shape[1] <= len(_HASH_MULTIPLIERS) else None
+    if hashed is not None:
+        _, first, inverse = np.unique(hashed, return_index=True, return_inverse=True)
+        if np.array_equal(words, words[first][inverse]):
+            return first, inverse.ravel()
+    _, first, inverse = np.unique(
+        words.view(np.dtype((np.void, words.dtype.itemsize * words.shape[1]))).ravel(),
+        return_index=True,
+        return_inverse=True,
+    )
+    return first, inverse.ravel()
+
+
+# Odd 64-bit multipliers of the row hash (fixed: the grouping is the same in every run).
+_HASH_MULTIPLIERS = np.random.default_rng(0).integers(1, 2**63, 64, dtype=np.uint64) * np.uint64(2) + np.uint64(1)
+
+
+def _frequency_factor(config: Configuration, probe: Probe, amplitude_nodes: AmplitudeNodes) -> np.ndarray:
+    """h for every row of ``config`` (:func:`frequency_factor`, without the grouping)."""
     axes, field, gradient, hessian = config.probe_frame()
     factor = np.asarray(config.moment_factor, float)
     factor = factor.reshape(factor.shape + (1,))  # broadcasts over a row's vector components
@@ -159,12 +246,11 @@ def frequency_factor(
     h = _readout(config, probe, _blend(stiffness, config.deflection))
     if config.amplitude:
         rest = _potential(probe, factor * field, **local).rest_angle_rad()
-        start = config.start_swing_rad(rest)
-        amplitudes, weights = (amplitude_nodes or functools.partial(ringdown_nodes, config))(start)
+        amplitudes, weights = amplitude_nodes(config, config.start_swing_rad(rest))
         at_amplitude = [_amplitude_stiffness(probe, factor * b, amplitudes, **local) for b in variants]
         averaged = (weights * _readout(config, probe, _blend(at_amplitude, config.deflection))).sum(-1)
         h = h + config.amplitude * (averaged - h)
-    return h, config.frequency_hz
+    return h
 
 
 def ringdown_nodes(config: Configuration, start_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,7 @@ an incomplete model should not claim the precision of a complete one).
 
 from __future__ import annotations
 
+import dataclasses
 import weakref
 from collections.abc import Sequence
 
@@ -33,7 +34,13 @@ import numpy as np
 import scipy.optimize
 
 from mows.lab.data.table import MeasurementTable
-from mows.lab.model.configuration import Configuration, frequency_factor, ringdown_nodes
+from mows.lab.model.configuration import (
+    Configuration,
+    default_window_s,
+    distinct_rows_of,
+    frequency_factor,
+    ringdown_nodes,
+)
 from mows.lab.model.effects import Effect, Parameter, testable
 from mows.lab.model.least_squares import FitResult, Problem
 from mows.physics.probe import Probe
@@ -113,12 +120,14 @@ class FrequencyModel:
     def factors(self, table: MeasurementTable, values: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(h, c) of f = f00·h + c at effect parameter values ``values`` (fit order)."""
         probe = self._require_probe()
-        config = Configuration.base(table, probe)
+        distinct, inverse = distinct_table(table)
+        config = Configuration.base(distinct, probe)
         bounds = np.cumsum([0] + [len(e.parameters) for e in self.effects])
         ordered = sorted(range(len(self.effects)), key=lambda i: self.effects[i].stage)
         for i in ordered:
-            self.effects[i].apply(config, table, probe, *(float(v) for v in values[bounds[i] : bounds[i + 1]]))
-        return frequency_factor(config, probe, lambda start_rad: cached_nodes(table, config, start_rad))
+            self.effects[i].apply(config, distinct, probe, *(float(v) for v in values[bounds[i] : bounds[i + 1]]))
+        h, c = frequency_factor(config, probe, lambda rows, start_rad: cached_nodes(distinct, rows, start_rad))
+        return h[inverse], c[inverse]
 
     def predict(self, table: MeasurementTable, values: FitResult | Sequence[float] | np.ndarray) -> np.ndarray:
         """f (Hz) for ``values`` = [f00, effect parameters…] (or a :class:`FitResult`)."""
@@ -157,6 +166,30 @@ class FrequencyModel:
         return problem.result(solution.x, solution.success, solution.message)
 
 
+# --- the table's distinct configurations, and ring-down amplitude nodes, cached per table ----
+# Columns that are measurements of a row, not inputs of its model.
+MEASURED = ("f_hz", "f_std_hz", "sweep")
+# table → (one row of each distinct configuration as a table, each row's index into it)
+_DISTINCT: weakref.WeakKeyDictionary[MeasurementTable, tuple[MeasurementTable, np.ndarray]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def distinct_table(table: MeasurementTable) -> tuple[MeasurementTable, np.ndarray]:
+    """(distinct, inverse): a table of one row per distinct configuration and, for each row of
+    ``table``, its row in ``distinct``. Rows are the same configuration when every column but the
+    measured ones (``MEASURED``) is bitwise equal: effects compute a row's configuration from
+    that row's columns (docs/model_lab.md), so such rows have the same model frequency for any
+    parameters. The ring-down window comes from the whole table (``default_window_s``)."""
+    if table not in _DISTINCT:
+        names = [name for name in table.columns if name not in MEASURED]
+        first, inverse = distinct_rows_of(np.stack([table.columns[name] for name in names], -1))
+        columns = {name: values[first] for name, values in table.columns.items()}
+        columns["duration_s"] = table.columns.get("duration_s", default_window_s(table))[first]
+        _DISTINCT[table] = (dataclasses.replace(table, columns=columns), inverse)
+    return _DISTINCT[table]
+
+
 # --- ring-down amplitude nodes, cached per table ---------------------------------------------
 # table → {ring-down inputs' bytes: (amplitudes A_q (n, q), weights c_q (n, q))}
 _NODES: weakref.WeakKeyDictionary[MeasurementTable, dict[bytes, tuple[np.ndarray, np.ndarray]]] = (
@@ -170,7 +203,7 @@ def cached_nodes(
     """Amplitude nodes of the table's ring-downs from ``start_rad``, cached per table and
     ring-down inputs (the inputs also come from the probe where the table has no column:
     Configuration.base; the start swings from the model's own rest angles)."""
-    inputs = (start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s)
+    inputs = (config.theta0_rad, start_rad, config.ringdown_damping_per_s, config.ringdown_duration_s)
     key = b"".join(np.ascontiguousarray(values, float).tobytes() for values in inputs)
     cached = _NODES.setdefault(table, {})
     if key not in cached:

@@ -184,7 +184,7 @@ def figure_history(report: LabReport) -> str:
     left.plot(labels, [s.chi2_dof for s in steps], "o-")
     left.set(yscale="log", ylabel="χ²/dof", title="fit")
     right.plot(labels, [s.cv_rms_hz * 1e3 for s in steps], "o-", color="tab:orange")
-    right.set(ylabel="CV rms (mHz)", title="leave-one-sweep-out")
+    right.set(ylabel="CV rms (mHz)", title="sweeps held out")
     for axis in (left, right):
         axis.set(xlabel="step")
     return _png(figure)

@@ -34,7 +34,7 @@ the BIC — a move to fewer free parameters by any amount, to as many by more th
 evidence: degenerate effects keep the tie-break's choice) — and the only move to more free
 parameters is freeing an effect held at physics, on strong evidence. The revisit thus never
 comes back to a model and ends; at most 6 forward steps. Every step is recorded with its
-change, χ²/dof, BIC and the leave-one-sweep-out cross-validated rms error.
+change, χ²/dof, BIC and the cross-validated rms error (whole sweeps held out).
 """
 
 from __future__ import annotations

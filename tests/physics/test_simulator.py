@@ -364,7 +364,7 @@ def test_coil_fields_saturate_the_fluxgates_during_excitation_only(default_cycle
     assert not record.saturated[record.coil_off_index :].any()
 
 
-def test_default_scenario_fit_agrees_with_the_potential_at_the_fitted_mean_amplitude(default_cycle):
+def test_default_scenario_fit_agrees_with_the_potential_averaged_over_the_ring_down(default_cycle):
     _, record = default_cycle
     ring_down = slice(record.coil_off_index, None)
     fit = fit_ringdown(
@@ -375,18 +375,13 @@ def test_default_scenario_fit_agrees_with_the_potential_at_the_fitted_mean_ampli
         saturated=record.saturated[ring_down],
     )
     assert fit.ok, fit.report()
-    decay = fit.damping_per_s * fit.duration_s
-    mean_amplitude = fit.amplitude_rad * (1 - math.exp(-decay)) / decay
-    truth = record.expected_frequency_hz(mean_amplitude)
-    # The fitted θmax is the paper's model's: on the lever it reads ≈ 30° for a true 24° swing
-    # (test_c), so compare with the true amplitude's f(A(t)) averaged over the window as well.
+    # The truth is f(A(t)) of the true first swing, averaged over the fitted window; the fit's own
+    # θmax (the paper's pickup model here) is reported only where the data pin it, and is not
+    # needed for the truth.
     averaged = record.ringdown_frequency_hz(fit.duration_s)
-    print(
-        f"\n{fit.report()}\ntruth at the fitted mean amplitude {math.degrees(mean_amplitude):.1f}°: "
-        f"{truth:.6f} Hz; ⟨f(A(t))⟩ from {math.degrees(record.ringdown_amplitude_rad()):.1f}°: {averaged:.6f} Hz"
-    )
-    assert abs(fit.frequency_hz - truth) < 3 * fit.frequency_std_hz
+    print(f"\n{fit.report()}\n⟨f(A(t))⟩ from {math.degrees(record.ringdown_amplitude_rad()):.1f}°: {averaged:.6f} Hz")
     assert abs(fit.frequency_hz - averaged) < 3 * fit.frequency_std_hz
+    assert math.isnan(fit.amplitude_rad) == ("amplitude_rad" in fit.undetermined)
     assert fit.snr_db > 30.0
     assert fit.damping_per_s == pytest.approx(DELTA, rel=0.02)
 

@@ -289,7 +289,7 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, prob
     say(
         f"χ²/dof: first principles {decomposition.chi2_dof:.2f}, published {published.chi2_dof:.2f}"
         + (
-            "  (above 1: the field is not linear over the lever; the lab below says what is missing)"
+            "  (well above 1: the field is not linear over the lever; the lab below says what is missing)"
             if decomposition.chi2_dof > 3
             else ""
         )

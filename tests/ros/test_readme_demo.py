@@ -62,9 +62,15 @@ def test_the_readme_shows_a_demo_block_with_its_results_table():
     assert len(shown) == 7  # header, Bx, By, Gxx, Gxy, Gyy, χ²/dof
 
 
+def without_note(line: str) -> str:
+    """The χ²/dof line without the note the demo adds when first principles is far above 1 (a
+    6-orientation sweep has few degrees of freedom, so that varies from run to run)."""
+    return re.sub(r"\s+\(.*\)$", "", line)
+
+
 def test_the_readme_results_table_has_the_demo_s_lines_and_format(demo_lines):
     shown, fresh = table(readme_demo_lines()), table(demo_lines)
-    assert [words(line) for line in shown] == [words(line) for line in fresh]
+    assert [words(without_note(line)) for line in shown] == [words(without_note(line)) for line in fresh]
     # The header and the five rows are fixed-width columns: the same width means they line up.
     assert [len(line) for line in shown[:-1]] == [len(line) for line in fresh[:-1]]
 

@@ -6,8 +6,10 @@ them): traffic stays on this host, in a ROS domain that no other test run on thi
 uses at the same time.
 """
 
+import faulthandler
 import fcntl
 import os
+import sys
 
 import pytest
 
@@ -51,6 +53,34 @@ def pytest_collection_modifyitems(items: list) -> None:
     live stream (mostly waiting on the real-time device) runs while the other worker goes
     through the rest, instead of alone at the end."""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
+# pytest-timeout fails a test after 600 s (pyproject.toml) by a signal, which Python hears only
+# when the main thread runs bytecode again: a call blocked inside C (a DDS wait, a lock taken in
+# an extension) never lets it. This watchdog runs in a C thread of its own: it writes every
+# thread's stack to stderr and ends the worker, so that the run reports a crashed worker and
+# stops, with the stack that hung, instead of waiting until CI kills it.
+HUNG_TEST_S = 720.0
+HUNG_EXIT_S = 120.0  # after the last test: threads or children that keep a worker from exiting
+
+
+_stderr = None  # the process's own stderr, which pytest's capture does not redirect
+
+
+def pytest_configure(config) -> None:
+    global _stderr
+    _stderr = os.fdopen(os.dup(sys.stderr.fileno()), "w")
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    faulthandler.dump_traceback_later(HUNG_TEST_S, exit=True, file=_stderr)
+    yield
+    faulthandler.cancel_dump_traceback_later()
+
+
+def pytest_unconfigure(config) -> None:
+    faulthandler.dump_traceback_later(HUNG_EXIT_S, exit=True, file=_stderr)
 
 
 def pytest_report_header() -> str:

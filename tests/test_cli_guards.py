@@ -244,6 +244,13 @@ def test_ctrl_c_in_a_simulation_is_one_line_and_130(tmp_path, capsys, monkeypatc
     assert list(tmp_path.iterdir()) == []
 
 
+def _sigint_as_in_a_terminal() -> None:
+    """A shell starts its background jobs with SIGINT ignored, and Python keeps an ignored
+    SIGINT, so a suite run from such a job would test nothing: the command gets the default
+    disposition, as a command the user runs from a terminal has."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.slow  # a fresh interpreter loads the simulator and the fit: ~20 s on a loaded machine
 def test_sigint_to_a_running_command_ends_it_with_130_and_no_output(tmp_path):
     """The real signal: the command is interrupted once it has printed its first fit."""
@@ -253,6 +260,7 @@ def test_sigint_to_a_running_command_ends_it_with_130_and_no_output(tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_sigint_as_in_a_terminal,
     )
     assert process.stdout.readline().startswith("θ0")
     process.send_signal(signal.SIGINT)

@@ -32,8 +32,8 @@ from mows.lab.diagnosis.verdict import Diagnosis, diagnose
 from mows.lab.model.catalog import catalog, resolve
 from mows.lab.model.configuration import unevaluable_rows
 from mows.lab.model.frequency_model import FitResult, FrequencyModel, distinct_table
-from mows.lab.model.least_squares import FittedParameter
-from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, parameters_dict, search
+from mows.lab.model.least_squares import FittedParameter, parameters_dict
+from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, search
 from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
@@ -91,8 +91,8 @@ class LabReport:
     def effect_parameter(self, name: str) -> tuple[float, float]:
         """(value, σ) of ``effect.parameter`` in the final fit, or, for an effect held at
         physics, in its free fit (the consistency check)."""
-        fitted = {n: (v, s) for n, v, s, _ in self.fit.parameters()}
-        fitted.update({f"{c.effect}.{n}": (v, s) for c in self.physics_checks for n, v, s, _ in c.parameters})
+        fitted = {p.name: (p.value, p.std) for p in self.fit.parameters()}
+        fitted.update({f"{c.effect}.{p.name}": (p.value, p.std) for c in self.physics_checks for p in c.parameters})
         if name not in fitted:
             raise KeyError(f"no parameter {name} in the final model {self.model}")
         return fitted[name]
@@ -240,11 +240,11 @@ def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation
 
 
 def _values(parameters: Iterable[FittedParameter]) -> str:
-    return ", ".join(f"{name} = {v:.4g} ± {s:.2g} {u}".rstrip() for name, v, s, u in parameters)
+    return ", ".join(p.text() for p in parameters)
 
 
 def _check_note(check: PhysicsCheck) -> str:
-    values = ", ".join(f"{name} = {v:.4g} ± {s:.2g}" for name, v, s, _ in check.parameters)
+    values = ", ".join(f"{p.name} = {p.value:.4g} ± {p.std:.2g}" for p in check.parameters)
     state = "is held at its physical value, but its free fit gives" if check.held else "is fitted free at"
     return (
         f"{check.effect} {state} {values}, {check.deviation_sigma:.1f}σ from its physical value: the "

@@ -12,6 +12,7 @@ probe file are the caller's business.
 """
 
 import dataclasses
+import enum
 import math
 
 from mows.estimate.calibration_record import KnownConstants, ProbeCalibration
@@ -131,6 +132,13 @@ class CalibrationRun:
         return self._gate(step if step.actions or step.outcome else self.schedule.fits_timed_out())
 
 
+class CalibratorState(enum.StrEnum):
+    """Whether :class:`ProbeCalibrator` runs a goal; the values are what /diagnostics shows."""
+
+    IDLE = "idle"
+    CALIBRATING = "calibrating"
+
+
 class ProbeCalibrator:
     """One goal at a time (``run`` while it lasts), the sweeps by wiring, the calibrations made."""
 
@@ -141,8 +149,8 @@ class ProbeCalibrator:
         self._sweeps: dict[str, tuple] = {}  # wiring → (points, failed) of its last complete sweep
 
     @property
-    def state(self) -> str:
-        return "idle" if self.run is None else "calibrating"
+    def state(self) -> CalibratorState:
+        return CalibratorState.IDLE if self.run is None else CalibratorState.CALIBRATING
 
     def accept(self, plan: CalibrationPlan, manual_orientation: bool = False) -> CalibrationRun:
         """The goal's run (on a stage the operator turns with ``manual_orientation``); ValueError

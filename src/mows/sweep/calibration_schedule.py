@@ -92,7 +92,9 @@ class Step:
     outcome: CalibrationOutcome | None = None
 
 
-class State(enum.Enum):
+class State(enum.StrEnum):
+    """Where the schedule is; the values are what the logs show."""
+
     IDLE = "idle"
     RAMPING = "ramping"
     CYCLING = "cycling"

@@ -28,7 +28,7 @@ from mows.lab.data.readers import load_table
 from mows.lab.data.table import MeasurementTable, TableError
 from mows.lab.diagnosis.candidates import Candidate, physics_deviation
 from mows.lab.diagnosis.indistinguishable import Group
-from mows.lab.diagnosis.verdict import Diagnosis, diagnose
+from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import catalog, resolve
 from mows.lab.model.configuration import unevaluable_rows
 from mows.lab.model.frequency_model import FitResult, FrequencyModel, distinct_table
@@ -71,7 +71,7 @@ class LabReport:
     chi2_dof: float
     bic: float
     cv_rms_hz: float
-    verdict: str
+    verdict: Verdict
     structure: str
     candidates: list[Candidate]
     groups: list[Group]
@@ -160,7 +160,7 @@ def analyse(
     if not rank:
         found.explanation += " (Candidate effects were not tested: run `mows lab diagnose`.)"
     checks = physics_checks(fit)
-    if found.verdict == "adequate":
+    if found.verdict == Verdict.ADEQUATE:
         found.verdict, found.explanation = _physics_verdict(fit, checks, found.explanation)
     notes = list(table.notes) + [_check_note(c) for c in checks if c.deviation_sigma > CHECK_SIGMAS]
     return LabReport(
@@ -211,7 +211,7 @@ def physics_checks(fit: FitResult) -> list[PhysicsCheck]:
     return checks
 
 
-def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation: str) -> tuple[str, str]:
+def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation: str) -> tuple[Verdict, str]:
     """(verdict, explanation) of a model whose residuals the statistics call adequate:
     ``inconsistent_physics`` when an effect's free fit lies more than 5σ from its physical
     value, else ``needs_generic_term`` when a generic correction is in the model (what it
@@ -219,7 +219,7 @@ def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation
     inconsistent = [c for c in checks if c.deviation_sigma > INCONSISTENT_SIGMAS]
     generic = [e for e in fit.model.effects if e.generic]
     if not inconsistent and not generic:
-        return "adequate", explanation
+        return Verdict.ADEQUATE, explanation
     found = [
         f"{c.effect} ({'held at physics; its free fit gives' if c.held else 'free:'} {_values(c.parameters)}) "
         f"is {c.deviation_sigma:.1f}σ from its physical value"
@@ -230,7 +230,7 @@ def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation
         f"of its own; to find what it stands for: {e.check}"
         for e in generic
     ]
-    verdict = "inconsistent_physics" if inconsistent else "needs_generic_term"
+    verdict = Verdict.INCONSISTENT_PHYSICS if inconsistent else Verdict.NEEDS_GENERIC_TERM
     return verdict, (
         "The residuals are consistent with noise, but the physics is not: "
         + "; ".join(found)

@@ -62,26 +62,68 @@ class PhysicsCheck:
 
 @dataclasses.dataclass
 class LabReport:
-    """The lab's answer for one table (fields map onto mows_msgs/ModelReport). ``effects`` are
-    labels: ``name (at physics)`` for an effect held at its physical value."""
+    """The lab's answer for one table: the diagnosis of the final model, with how it was reached
+    (``history`` from ``base``) and its physics checks. The properties map onto
+    mows_msgs/ModelReport."""
 
-    model: str
-    effects: list[str]
-    n: int
-    chi2_dof: float
-    bic: float
-    cv_rms_hz: float
-    verdict: Verdict
-    structure: str
-    candidates: list[Candidate]
-    groups: list[Group]
-    history: list[HistoryStep]
-    untestable: dict[str, str]
-    notes: list[str]
+    diagnosis: Diagnosis  # of the final model: its fit, candidates, groups and verdict
     base: FitResult
-    fit: FitResult
-    diagnosis: Diagnosis
+    history: list[HistoryStep]
+    notes: list[str]
     physics_checks: list[PhysicsCheck] = dataclasses.field(default_factory=list)
+
+    @property
+    def fit(self) -> FitResult:
+        """The final model's fit."""
+        return self.diagnosis.fit
+
+    @property
+    def model(self) -> str:
+        return self.fit.model.name
+
+    @property
+    def effects(self) -> list[str]:
+        """The final model's effects as labels: ``name (at physics)`` for one held at its physical value."""
+        return self.fit.model.labels
+
+    @property
+    def n(self) -> int:
+        return self.fit.n
+
+    @property
+    def chi2_dof(self) -> float:
+        return self.fit.chi2_dof
+
+    @property
+    def bic(self) -> float:
+        return self.fit.bic
+
+    @property
+    def cv_rms_hz(self) -> float:
+        """The final step's cross-validated rms prediction error (NaN where not computed)."""
+        return self.history[-1].cv_rms_hz
+
+    @property
+    def verdict(self) -> Verdict:
+        return self.diagnosis.verdict
+
+    @property
+    def structure(self) -> str:
+        """The residual structure in words."""
+        return self.diagnosis.structure.summary
+
+    @property
+    def candidates(self) -> list[Candidate]:
+        return self.diagnosis.candidates
+
+    @property
+    def groups(self) -> list[Group]:
+        return self.diagnosis.groups
+
+    @property
+    def untestable(self) -> dict[str, str]:
+        """Effect name → why it cannot be tested."""
+        return self.diagnosis.untestable
 
     @property
     def effect_names(self) -> list[str]:
@@ -163,25 +205,7 @@ def analyse(
     if found.verdict == Verdict.ADEQUATE:
         found.verdict, found.explanation = _physics_verdict(fit, checks, found.explanation)
     notes = list(table.notes) + [_check_note(c) for c in checks if c.deviation_sigma > CHECK_SIGMAS]
-    return LabReport(
-        fit.model.name,
-        fit.model.labels,
-        fit.n,
-        fit.chi2_dof,
-        fit.bic,
-        history[-1].cv_rms_hz,
-        found.verdict,
-        found.structure.summary,
-        found.candidates,
-        found.groups,
-        history,
-        found.untestable,
-        notes,
-        base,
-        fit,
-        found,
-        checks,
-    )
+    return LabReport(found, base, history, notes, checks)
 
 
 def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:

@@ -7,7 +7,7 @@ id), waits until a finished cycle's fits are in (or the caller says their time i
 then hands them to the schedule. :class:`ProbeCalibrator` takes one goal at a time, keeps each
 wiring's last complete sweep across goals (a gradient sweep of an earlier goal adds the lever
 check to a later homogeneous one) and fits the probe's constants from them
-(:func:`mows.estimate.probe_calibration.calibrate_probe`). Reading scenarios and writing the
+(:func:`mows.estimate.calibration.fit.calibrate_probe`). Reading scenarios and writing the
 probe file are the caller's business.
 """
 
@@ -15,10 +15,10 @@ import dataclasses
 import enum
 import math
 
-from mows.estimate.calibration_record import KnownConstants, ProbeCalibration
-from mows.estimate.probe_calibration import calibrate_probe
+from mows.estimate.calibration.constants import KnownConstants, ProbeCalibration
+from mows.estimate.calibration.fit import calibrate_probe
 from mows.physics.probe import Probe
-from mows.sweep.calibration_schedule import (
+from mows.sweep.calibration.schedule import (
     GRADIENT_WIRING,
     CalibrationOutcome,
     CalibrationPlan,

@@ -6,7 +6,7 @@ import math
 import pytest
 
 from mows.estimate.ringdown import FitStatus, RingdownFit
-from mows.sweep.calibration_schedule import CalibrationPlan, CalibrationSchedule, RunCycle, SetSupply, State
+from mows.sweep.calibration.schedule import CalibrationPlan, CalibrationSchedule, RunCycle, SetSupply, State
 
 PLAN = CalibrationPlan(currents_a=(0.0, 1.0, -1.0), theta0_rad=(0.0, math.pi), repeats=2)
 

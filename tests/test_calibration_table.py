@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from mows.cli.calibrate import read_points, write_points
-from mows.estimate.calibration_record import CalibrationPoint
+from mows.estimate.calibration.constants import CalibrationPoint
 
 
 def test_a_swing_no_fit_measured_is_written_by_the_stop_rule_and_read_back_as_unknown(tmp_path):

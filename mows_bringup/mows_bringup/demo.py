@@ -32,12 +32,12 @@ from rclpy.action import ActionClient
 from rclpy.signals import SignalHandlerOptions
 
 from mows.cli.calibrate import compare_with_truth, simulate_calibration
-from mows.estimate.probe_calibration import KnownConstants
-from mows.estimate.probe_calibration import calibrate_probe as fit_constants
+from mows.estimate.calibration.fit import KnownConstants
+from mows.estimate.calibration.fit import calibrate_probe as fit_constants
 from mows.lab import analyse, from_sweep, reference_at, write_report
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sim.scenario import load_scenario
-from mows.sweep.calibration_schedule import CalibrationPlan, scenario_wirings
+from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
 from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
 from mows.sweep.record import SweepRecord
 from mows_bringup.graph import NODES, Graph, say

@@ -5,10 +5,10 @@ import dataclasses
 from mows_msgs.action import CalibrateProbe
 from mows_msgs.msg import RingdownFit
 
-from mows.estimate.calibration_record import ProbeCalibration
+from mows.estimate.calibration.constants import ProbeCalibration
 from mows.estimate.ringdown import SETTLE_S, FitStatus
 from mows.estimate.ringdown import RingdownFit as Fit
-from mows.sweep.calibration_schedule import CalibrationOutcome, Feedback
+from mows.sweep.calibration.schedule import CalibrationOutcome, Feedback
 
 FIT_FIELDS = (
     "message",

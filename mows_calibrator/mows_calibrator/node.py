@@ -2,13 +2,13 @@
 
 Names are relative (here as in the root namespace). Action ``/calibrator/calibrate_probe``
 (CalibrateProbe; ``/mows/calibrator/calibrate_probe``, the previous release's name, is served
-too for one release) runs :class:`mows.sweep.calibration_run.CalibrationRun`: it steps the
+too for one release) runs :class:`mows.sweep.calibration.run.CalibrationRun`: it steps the
 driver's static-field supply (``/driver/set_field_current``), runs one driver cycle per
 orientation at each current (the action ``/driver/measurement_cycle``, cancelled with the goal),
 collects that cycle's ring-down fits
 (``/mows/ringdown``) and sends feedback per cycle. Every ending, cancelled or failed, ramps the
 supply back to zero before the result is returned. With the homogeneous wiring's points it fits
-the constants (:class:`mows.sweep.calibration_run.ProbeCalibrator`) and writes the probe file
+the constants (:class:`mows.sweep.calibration.run.ProbeCalibrator`) and writes the probe file
 that the estimator and the mapper load by ``probe_file``; gradient points of an earlier goal
 (``wiring: gradient``) add the lever check. A goal the node cannot run (inactive, a plan it
 refuses, a driver without a supply, found by setting the supply to zero first) is accepted and
@@ -28,10 +28,10 @@ from mows_msgs.msg import RingdownFit
 from mows_msgs.srv import SetFieldCurrent
 from rclpy.action import CancelResponse
 
-from mows.estimate.probe_calibration import CalibrationError
+from mows.estimate.calibration.fit import CalibrationError
 from mows.sim.scenario import load_scenario
-from mows.sweep.calibration_run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
-from mows.sweep.calibration_schedule import RunCycle as Cycle
+from mows.sweep.calibration.run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
+from mows.sweep.calibration.schedule import RunCycle as Cycle
 from mows_calibrator.messages import calibrated, feedback_msg, fit_of, result_msg, supply_answer
 from mows_calibrator.parameters import PARAMETERS, bench_of
 from mows_ros.awaitables import call

@@ -5,7 +5,7 @@ import dataclasses
 
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sim.scenario import load_scenario
-from mows.sweep.calibration_schedule import PAPER_CURRENTS_A, scenario_wirings
+from mows.sweep.calibration.schedule import PAPER_CURRENTS_A, scenario_wirings
 from mows_ros import operator
 from mows_ros.params import ParamSpec
 from mows_ros.probe import probe_file_problem

@@ -106,7 +106,7 @@ class EstimatorNode(MowsNode):
 
     # --- calibration ------------------------------------------------------------------------
     async def _on_calibrate(self, request: Calibrate.Request, response: Calibrate.Response):
-        """f00 from the next ring-downs (:class:`mows.estimate.calibration.F00Calibration`)."""
+        """f00 from the next ring-downs (:class:`mows.estimate.calibration.f00.F00Calibration`)."""
         if (inactive := self.inactive_reason()) is not None:
             response.success, response.message = False, inactive
             return response

@@ -111,10 +111,10 @@ def model_report_msg(report, header, sweep_id: int) -> ModelReport:
                 delta_bic=c.delta_bic,
                 p_value=c.p_value,
                 chi2_dof_after=c.chi2_dof_after,
-                parameter_names=[p[0] for p in c.parameters],
-                parameter_values=[p[1] for p in c.parameters],
-                parameter_std=[p[2] for p in c.parameters],
-                parameter_units=[p[3] for p in c.parameters],
+                parameter_names=[p.name for p in c.parameters],
+                parameter_values=[p.value for p in c.parameters],
+                parameter_std=[p.std for p in c.parameters],
+                parameter_units=[p.unit for p in c.parameters],
                 group=c.group,
             )
             for c in report.candidates

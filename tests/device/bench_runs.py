@@ -1,5 +1,5 @@
 """Sweeps and calibrations on a driver session without ROS: the core's I/O-free state machines
-(:class:`mows.sweep.runner.SweepRunner`, :class:`mows.sweep.calibration_run.CalibrationRun`) fed
+(:class:`mows.sweep.runner.SweepRunner`, :class:`mows.sweep.calibration.run.CalibrationRun`) fed
 as the mapper and the calibrator feed them, the ring-downs cut from the stream and fitted as the
 estimator does. ``turn`` is the operator: on a bench without a motor it turns the stage before a
 cycle is asked for (the sim backend's stage turns itself, ``turn`` does nothing)."""
@@ -10,7 +10,7 @@ from collections.abc import Callable
 from mows.device.phases import CycleRequest, Phase
 from mows.estimate.ringdown import SETTLE_S, FitOptions
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
-from mows.sweep.calibration_run import CalibrationRun, Turn
+from mows.sweep.calibration.run import CalibrationRun, Turn
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, SweepSettings
 

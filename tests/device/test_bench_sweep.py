@@ -23,14 +23,14 @@ from mows.device.scpi import SIMULATED_RESOURCE, SIMULATED_SUPPLY_FILE, load_sup
 from mows.device.session import DeviceSession, SessionConfig
 from mows.device.sim_backend import SimBackend
 from mows.device.simulated_daqmx import SimulatedBench
-from mows.estimate.calibration_record import KnownConstants
-from mows.estimate.probe_calibration import calibrate_probe
+from mows.estimate.calibration.constants import KnownConstants
+from mows.estimate.calibration.fit import calibrate_probe
 from mows.estimate.ringdown import fit_ringdown
 from mows.lab import reference_at
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
-from mows.sweep.calibration_schedule import CalibrationPlan, scenario_wirings
+from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
 
 SETTINGS = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.2, repeats=2, tuning_steps=1, settle_s=0.5)
 ANGLES_RAD = tuple(np.radians(np.arange(0.0, 360.0, 60.0)))

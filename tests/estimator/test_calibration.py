@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from mows.estimate.calibration import CalibrationStatus, F00Calibration
+from mows.estimate.calibration.f00 import CalibrationStatus, F00Calibration
 from mows.physics.probe import PAPER_PROBE as P
 from mows.records.results import Result
 

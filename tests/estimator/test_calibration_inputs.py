@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from mows.cli.calibrate import read_points, write_points
-from mows.estimate.calibration_record import KnownConstants
-from mows.estimate.probe_calibration import calibrate_probe
+from mows.estimate.calibration.constants import KnownConstants
+from mows.estimate.calibration.fit import calibrate_probe
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
-from mows.sweep.calibration_schedule import scenario_wirings
+from mows.sweep.calibration.schedule import scenario_wirings
 
 TABLE = pathlib.Path(__file__).parent / "data" / "calibration_36.csv"
 UNDETERMINED = (3, 7)  # rows whose θmax the fit did not determine

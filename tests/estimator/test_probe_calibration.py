@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 from mows.cli.calibrate import simulate_calibration
-from mows.estimate.calibration_record import CalibrationError, CalibrationPoint, KnownConstants, Wiring
-from mows.estimate.probe_calibration import calibrate_probe
+from mows.estimate.calibration.constants import CalibrationError, CalibrationPoint, KnownConstants, Wiring
+from mows.estimate.calibration.fit import calibrate_probe
 from mows.physics.probe import PAPER_PROBE, Probe, calibration_record
 from mows.sim.scenario import load_scenario
-from mows.sweep.calibration_schedule import CalibrationPlan, scenario_wirings
+from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
 
 SEEDS = 20
 PLAN = CalibrationPlan(currents_a=(0.0, 1.0, 2.0, -1.0, -2.0))

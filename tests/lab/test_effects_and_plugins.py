@@ -79,7 +79,7 @@ def test_a_plugin_file_defines_an_effect_that_the_lab_finds(tmp_path):
     report = analyse(table, PAPER_PROBE, auto=True, plugins=[str(path)], cross_validate=False)
     assert report.verdict == "adequate"
     assert "coil_heating" in report.effects
-    value = dict((n, (v, s)) for n, v, s, _ in report.fit.parameters())["coil_heating.k_per_a2_nm_per_rad"]
+    value = {p.name: (p.value, p.std) for p in report.fit.parameters()}["coil_heating.k_per_a2_nm_per_rad"]
     assert abs(value[0] - 3e-10) < 2 * value[1]
 
 

@@ -75,7 +75,7 @@ def test_known_physics_the_data_do_not_have_is_rejected():
     amplitude = next(c for c in first.candidates if c.name == "finite_amplitude")
     assert amplitude.physics.signal_chi2 > 100  # it would be seen …
     assert amplitude.physics.delta_bic < -100 and amplitude.physics.p_value > 1e-3  # … and is not there
-    assert abs(amplitude.parameters[0][1]) < 3 * amplitude.parameters[0][2]  # free: strength ≈ 0
+    assert abs(amplitude.parameters[0].value) < 3 * amplitude.parameters[0].std  # free: strength ≈ 0
 
 
 def test_json_and_command_line_carry_the_form(tmp_path, capsys):

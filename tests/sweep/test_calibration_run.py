@@ -1,4 +1,4 @@
-"""The calibrator's goals without ROS (mows.sweep.calibration_run): a goal's plan, fits routed to
+"""The calibrator's goals without ROS (mows.sweep.calibration.run): a goal's plan, fits routed to
 the cycle that made them, the supply back at zero in every ending, and a whole calibration
 through a stand-in driver whose ring-downs come from the exact field of the calibration bench."""
 
@@ -10,8 +10,8 @@ import pytest
 
 from mows.estimate.ringdown import SETTLE_S, FitStatus, RingdownFit
 from mows.physics.probe import PAPER_PROBE
-from mows.sweep.calibration_run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
-from mows.sweep.calibration_schedule import CalibrationPlan, RunCycle, SetSupply, scenario_wirings
+from mows.sweep.calibration.run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
+from mows.sweep.calibration.schedule import CalibrationPlan, RunCycle, SetSupply, scenario_wirings
 from mows.sweep.runner import CycleAnswer
 from sweep.calibration_bench import BENCH, STD_HZ, bench_fits
 

@@ -11,13 +11,13 @@ Input (one of):
   ``/mows/supply`` states say held steady over it (:mod:`mows.cli.calibrate_bag`), all of the
   homogeneous wiring; the same points, hence the same constants, as the action's. A bag
   without supply states (recorded before the driver published them) is refused, exit status 2;
-* ``--simulate`` — run the calibration schedule (:mod:`mows.sweep.calibration_schedule`) on the
+* ``--simulate`` — run the calibration schedule (:mod:`mows.sweep.calibration.schedule`) on the
   simulated device of ``--scenario`` in simulated device time, and compare with its truth.
 
 The supply's field (and gradient) per ampere at the probe come from the ``supply`` section of
 ``--scenario`` (and ``--gradient-scenario``); the magnet's moment, mass and the housing stop from
 ``--probe`` (the nominal probe: data sheet and scale). The fit is
-:func:`mows.estimate.probe_calibration.calibrate_probe`; it finds each pair's polarity from the
+:func:`mows.estimate.calibration.fit.calibrate_probe`; it finds each pair's polarity from the
 data (``--polarity`` states it instead) and refuses implausible constants by name.
 
 Supply currents beyond the supply's cap and frequencies far from the nominal probe's f00 are
@@ -39,8 +39,8 @@ from mows.cli.calibrate_bag import SUPPLY_TOPIC, bag_points
 from mows.cli.fit import add_fit_arguments
 from mows.cli.inputs import check_frequencies, finite_float, input_file, load_probe, positive_int
 from mows.device.scheduled import ScheduledDevice
-from mows.estimate.calibration_record import CalibrationPoint, KnownConstants
-from mows.estimate.probe_calibration import calibrate_probe
+from mows.estimate.calibration.constants import CalibrationPoint, KnownConstants
+from mows.estimate.calibration.fit import calibrate_probe
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.lab.data.readers import is_bag, load_table
 from mows.lab.data.table import MeasurementTable, rows_text
@@ -51,7 +51,7 @@ from mows.records.files import check_outputs, writing
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
-from mows.sweep.calibration_schedule import (
+from mows.sweep.calibration.schedule import (
     GRADIENT_WIRING,
     PAPER_CURRENTS_A,
     CalibrationOutcome,

@@ -18,7 +18,7 @@ import dataclasses
 from mows.cli.fit import fit_bag
 from mows.device.bag_backend import SUPPLY_TYPE
 from mows.device.bags import BagError, read_bag
-from mows.estimate.calibration_record import CalibrationPoint
+from mows.estimate.calibration.constants import CalibrationPoint
 from mows.records import stamps
 from mows.records.stamps import NS_PER_S
 

@@ -295,7 +295,7 @@ def _candidates_text(report) -> str:
         "  rank effect                  form          ΔBIC        p         χ²/dof after  group  parameters",
     ]
     for rank, c in enumerate(report.candidates, 1):
-        values = ", ".join(f"{name} = {v:.4g} ± {s:.2g} {u}" for name, v, s, u in c.parameters)
+        values = ", ".join(p.text() for p in c.parameters)
         lines.append(
             f"  {rank:4d} {c.name:22s}  {c.form:10s} {c.delta_bic:9.1f}   {c.p_value:9.2g}   "
             f"{c.chi2_dof_after:10.3f}   {c.group or '-':>4}   {values}"
@@ -319,14 +319,14 @@ def _history_text(history) -> str:
     for i, step in enumerate(history):
         name = " + ".join(["eq6"] + step.effects)
         lines.append(f"  {i:4d}  {step.chi2_dof:9.3f}  {step.bic:10.1f}  {step.cv_text:>10}    {step.change} → {name}")
-        lines += [f"          free fit: {name} = {v:.4g} ± {s:.2g} {u}" for name, v, s, u in step.check]
+        lines += [f"          free fit: {p.text()}" for p in step.check]
     return "\n".join(lines)
 
 
 def _checks_text(checks) -> str:
     lines = ["effects with a physical value, their free fit with the rest of the model against it:"]
     for check in checks:
-        values = ", ".join(f"{name} = {v:.4g} ± {s:.2g} {u}" for name, v, s, u in check.parameters)
+        values = ", ".join(p.text() for p in check.parameters)
         form = "held at physics" if check.held else "free"
         lines.append(f"  {check.effect} ({form}): {values} (physical value {check.deviation_sigma:.1f}σ away)")
     return "\n".join(lines)

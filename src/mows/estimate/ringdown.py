@@ -54,15 +54,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from collections.abc import Iterable
+from typing import Any, SupportsFloat
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from mows.estimate.ringdown_offset import offset_starts
 from mows.estimate.ringdown_problem import (
     AMPLITUDE,
     NONLINEAR,
     RingdownProblem,
+    Step,
     evaluate,
     fisher_information,
     scaled_inverse,
@@ -79,7 +82,7 @@ RIVAL_CHI2 = 25.0
 DETERMINED_SIGMAS = 3.0
 
 
-def _parameter_names(n_channels, options: FitOptions):
+def _parameter_names(n_channels: int, options: FitOptions) -> list[str]:
     offset = ["theta0_rad"] if options.theta0_free else ["rest_offset_rad"] if options.rest_offset_free else []
     names = list(NONLINEAR) + offset
     for c in range(n_channels):
@@ -94,7 +97,7 @@ def _parameter_names(n_channels, options: FitOptions):
 SETTLE_S = 0.003
 
 
-def usable_window(saturated: np.ndarray, settle_samples: int = 0):
+def usable_window(saturated: NDArray[np.bool_], settle_samples: int = 0) -> tuple[int, int]:
     """(start, stop) of the longest run of samples after ``settle_samples`` in which no channel
     is saturated; the coil-on tail and any clipped stretch are thereby excluded."""
     bad = np.asarray(np.asarray(saturated).reshape(len(saturated), -1).any(axis=1))
@@ -108,7 +111,7 @@ def usable_window(saturated: np.ndarray, settle_samples: int = 0):
     return int(starts[longest]), int(stops[longest])
 
 
-def combine_channels(samples: np.ndarray, mode: str) -> np.ndarray:
+def combine_channels(samples: ArrayLike, mode: str) -> NDArray[np.float64]:
     """(C, n) data for the fit: the difference of the pair, one channel, or both."""
     samples = np.asarray(samples, float)
     if samples.ndim == 1:
@@ -124,11 +127,11 @@ def combine_channels(samples: np.ndarray, mode: str) -> np.ndarray:
 
 # --- the fit ----------------------------------------------------------------------------
 def fit_ringdown(
-    samples,
-    sample_rate_hz,
-    theta0_rad,
-    expected_frequency_hz,
-    saturated=None,
+    samples: ArrayLike,
+    sample_rate_hz: float,
+    theta0_rad: float,
+    expected_frequency_hz: float,
+    saturated: ArrayLike | None = None,
     options: FitOptions = FitOptions(),
     damping_guess_per_s: float = 1.8,
     settle_s: float = 0.0,
@@ -192,7 +195,7 @@ def fit_ringdown(
     )
 
 
-def _problem(y, fs, theta0, options) -> RingdownProblem:
+def _problem(y: NDArray[np.float64], fs: float, theta0: float, options: FitOptions) -> RingdownProblem:
     noise = np.array([white_noise_std(ch) for ch in y])
     if np.any(noise <= 0):  # noiseless, or quantised to a constant: weight channels equally
         noise = np.full(y.shape[0], max(float(np.ptp(y)) * 1e-9, 1e-30))
@@ -201,7 +204,9 @@ def _problem(y, fs, theta0, options) -> RingdownProblem:
     )
 
 
-def _coarse_start(problem, fs, expected_hz, options, damping_guess):
+def _coarse_start(
+    problem: RingdownProblem, fs: float, expected_hz: float, options: FitOptions, damping_guess: float
+) -> tuple[RingdownProblem, NDArray[np.float64] | None]:
     """The subsampled problem and the best spectral start on it, or (coarse, None)."""
     coarse = problem.subsampled(max(1, int(fs // (16.0 * expected_hz))))
     starts = start_candidates(coarse.y.sum(axis=0), 1.0 / coarse.dt, expected_hz, options, damping_guess)
@@ -212,13 +217,13 @@ def _coarse_start(problem, fs, expected_hz, options, damping_guess):
 
 
 def starting_point(
-    samples,
-    sample_rate_hz,
-    theta0_rad,
-    expected_frequency_hz,
+    samples: ArrayLike,
+    sample_rate_hz: float,
+    theta0_rad: float,
+    expected_frequency_hz: float,
     options: FitOptions = FitOptions(),
     damping_guess_per_s: float = 1.8,
-):
+) -> NDArray[np.float64] | None:
     """The point the fit starts from: (f, δ, θmax, φ, [ε,] κ, B_DC) of the first channel, from
     the spectral stage, or None if no line is found (ε: the rest offset, or θ0's error, when
     ``options`` fit one). For comparisons with other optimisers."""
@@ -228,12 +233,12 @@ def starting_point(
     return None if q0 is None else np.concatenate([q0, evaluate(problem, q0, False).coef[0]])
 
 
-def _wrapped(angle_rad) -> float:
+def _wrapped(angle_rad: float) -> float:
     """The angle in (−π, π]."""
     return float(-((math.pi - angle_rad) % TWO_PI - math.pi)) + 0.0  # + 0.0: no −0.0
 
 
-def _as_float(value) -> float:
+def _as_float(value: SupportsFloat | str) -> float:
     """A number from a parameter that may be missing or malformed; NaN when it is not one."""
     try:
         return float(value)
@@ -241,7 +246,16 @@ def _as_float(value) -> float:
         return math.nan
 
 
-def _fit_window(y, fs, theta0, expected_hz, options, damping_guess, start_s, known):
+def _fit_window(
+    y: NDArray[np.float64],
+    fs: float,
+    theta0: float,
+    expected_hz: float,
+    options: FitOptions,
+    damping_guess: float,
+    start_s: float,
+    known: dict[str, Any],
+) -> RingdownFit:
     problem = _problem(y, fs, theta0, options)
     coarse, q0 = _coarse_start(problem, fs, expected_hz, options, damping_guess)
     if q0 is None:
@@ -283,21 +297,21 @@ def _fit_window(y, fs, theta0, expected_hz, options, damping_guess, start_s, kno
     return fit
 
 
-def _offset_minima(coarse, step, options):
+def _offset_minima(coarse: RingdownProblem, step: Step, options: FitOptions) -> list[Step]:
     """The distinct coarse optima reached from every minimum of the cost over the rest offset
     (:func:`mows.estimate.ringdown_offset.offset_starts`), from the local ``step`` and from the
     best one's mirror images, lowest cost first. κ < 0 turns g into −g, the same waveform as a
     pickup turned by another offset: such optima are left out unless there is no other."""
     solutions = [step]
 
-    def refine(starts):
+    def refine(starts: Iterable[NDArray[np.float64]]) -> None:
         solutions.extend(
             variable_projection(coarse, start, options.max_iterations, tol_chi2=1e-2)[0] for start in starts
         )
 
-    def distinct():
+    def distinct() -> list[Step]:
         physical = [s for s in solutions if np.all(s.coef[:, 0] > 0)] or solutions
-        kept: list = []
+        kept: list[Step] = []
         for solution in sorted(physical, key=lambda s: s.cost):
             if not any(_agree(solution.q, other.q, options) for other in kept):
                 kept.append(solution)
@@ -311,19 +325,21 @@ def _offset_minima(coarse, step, options):
     return distinct()
 
 
-def _offset_apart(q, other, options) -> bool:
+def _offset_apart(q: NDArray[np.float64], other: NDArray[np.float64], options: FitOptions) -> bool:
     return abs(_wrapped(q[4] - other[4])) > options.rest_offset_tolerance_rad / 2
 
 
-def _amplitude_apart(q, other, options) -> bool:
+def _amplitude_apart(q: NDArray[np.float64], other: NDArray[np.float64], options: FitOptions) -> bool:
     return abs(abs(q[AMPLITUDE]) - abs(other[AMPLITUDE])) > options.amplitude_tolerance_rad / 2
 
 
-def _agree(q, other, options) -> bool:
+def _agree(q: NDArray[np.float64], other: NDArray[np.float64], options: FitOptions) -> bool:
     return not (_offset_apart(q, other, options) or _amplitude_apart(q, other, options))
 
 
-def _undetermined_removed(fit: RingdownFit, problem, cost, others, options) -> RingdownFit:
+def _undetermined_removed(
+    fit: RingdownFit, problem: RingdownProblem, cost: float, others: list[Step], options: FitOptions
+) -> RingdownFit:
     """``fit`` with θmax and the rest offset NaN, the reason said, where the data do not pin
     them within ``options``' tolerances: another minimum of the cost (``others``, coarse
     optima) fits within Δχ² = RIVAL_CHI2 (in units of the fit's χ²/dof) and differs by more
@@ -367,7 +383,16 @@ def _undetermined_removed(fit: RingdownFit, problem, cost, others, options) -> R
     )
 
 
-def _summarise(step, problem, free, noise, options, expected_hz, start_s, known):
+def _summarise(
+    step: Step,
+    problem: RingdownProblem,
+    free: NDArray[np.bool_],
+    noise: NDArray[np.float64],
+    options: FitOptions,
+    expected_hz: float,
+    start_s: float,
+    known: dict[str, Any],
+) -> RingdownFit:
     q, y = step.q, problem.y
     n_ch, n = y.shape
     if q[0] < options.min_frequency_fraction * expected_hz:

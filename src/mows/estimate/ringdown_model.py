@@ -28,16 +28,31 @@ import math
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike, NDArray
 
 TWO_PI = 2.0 * math.pi
 # Taylor coefficients of sin x / x and cos x in x², to x²³ and x²⁴: for |x| ≤ π/2 (the bound
 # on θmax) the first neglected term is below 1e-20, so the polynomials are exact to rounding.
 _SIN = np.array([(-1.0) ** k / math.factorial(2 * k + 1) for k in range(12)])
 _COS = np.array([(-1.0) ** k / math.factorial(2 * k) for k in range(13)])
+# (q, converged, iterations, free, cost, g, m, residual, coef, jtj, jtr): levenberg_marquardt's answer.
+LevenbergMarquardtResult = tuple[
+    NDArray[np.float64],
+    bool,
+    int,
+    NDArray[np.bool_],
+    float,
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+]
 
 
 @njit(cache=True, fastmath=True)
-def _small_angle_sincos(x, cos_x, sin_x):
+def _small_angle_sincos(x: NDArray[np.float64], cos_x: NDArray[np.float64], sin_x: NDArray[np.float64]) -> None:
     """cos and sin of |x| ≤ π/2 by Horner polynomials: no library calls, so the loop
     vectorises (the deflection is bounded, unlike θ0 + x)."""
     for i in range(x.size):
@@ -53,7 +68,7 @@ def _small_angle_sincos(x, cos_x, sin_x):
 
 
 @njit(cache=True)
-def _series(cr, ci, cos_x, sin_x):
+def _series(cr: NDArray[np.float64], ci: NDArray[np.float64], cos_x: float, sin_x: float) -> tuple[float, float]:
     """Σ Re(C_k e^(ikx)) and its x-derivative −Σ k·Im(C_k e^(ikx)) at one sample."""
     g = cr[0]
     dg = 0.0
@@ -66,7 +81,21 @@ def _series(cr, ci, cos_x, sin_x):
 
 
 @njit(cache=True)
-def normal_equations(q, dt, cr, ci, y, w, derivatives, g, m, residual, coef, jtj, jtr):
+def normal_equations(
+    q: NDArray[np.float64],
+    dt: float,
+    cr: NDArray[np.float64],
+    ci: NDArray[np.float64],
+    y: NDArray[np.float64],
+    w: NDArray[np.float64],
+    derivatives: bool,
+    g: NDArray[np.float64],
+    m: NDArray[np.float64],
+    residual: NDArray[np.float64],
+    coef: NDArray[np.float64],
+    jtj: NDArray[np.float64],
+    jtr: NDArray[np.float64],
+) -> float:
     """Fill g (n), m = ∂g/∂q (P, n), residual (C, n), coef (C, 2) = (κ, B_DC), and, with
     ``derivatives``, jtj (P, P) and jtr (P); return the weighted cost Σ_c (w_c·|r_c|)².
     ``cr``, ``ci``: the pickup coefficients C_k, already rotated by θ0 when θ0 is free."""
@@ -130,7 +159,18 @@ def normal_equations(q, dt, cr, ci, y, w, derivatives, g, m, residual, coef, jtj
 
 
 @njit(cache=True)
-def _projected_normal_equations(g, g_mean, norm2, m, m_mean, residual, coef, w, jtj, jtr):
+def _projected_normal_equations(
+    g: NDArray[np.float64],
+    g_mean: float,
+    norm2: float,
+    m: NDArray[np.float64],
+    m_mean: NDArray[np.float64],
+    residual: NDArray[np.float64],
+    coef: NDArray[np.float64],
+    w: NDArray[np.float64],
+    jtj: NDArray[np.float64],
+    jtr: NDArray[np.float64],
+) -> None:
     n, p, n_ch = g.size, m.shape[0], coef.shape[0]
     scale = np.empty(n_ch)
     kk = 0.0
@@ -159,14 +199,29 @@ def _projected_normal_equations(g, g_mean, norm2, m, m_mean, residual, coef, w, 
             jtj[j, k] = value
 
 
-def split_pickup(pickup) -> tuple[np.ndarray, np.ndarray]:
+def split_pickup(pickup: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Real and imaginary parts of the pickup coefficients C_k, as the kernels take them."""
     coefficients = np.asarray(pickup, complex)
     return np.ascontiguousarray(coefficients.real), np.ascontiguousarray(coefficients.imag)
 
 
 @njit(cache=True)
-def evaluate_model(q, dt, cr0, ci0, offset_free, y, w, derivatives, g, m, residual, coef, jtj, jtr):
+def evaluate_model(
+    q: NDArray[np.float64],
+    dt: float,
+    cr0: NDArray[np.float64],
+    ci0: NDArray[np.float64],
+    offset_free: bool,
+    y: NDArray[np.float64],
+    w: NDArray[np.float64],
+    derivatives: bool,
+    g: NDArray[np.float64],
+    m: NDArray[np.float64],
+    residual: NDArray[np.float64],
+    coef: NDArray[np.float64],
+    jtj: NDArray[np.float64],
+    jtr: NDArray[np.float64],
+) -> float:
     """normal_equations with the pickup turned by the rest offset ε = q[4] when it is free."""
     if offset_free:
         cr, ci = np.empty(cr0.size), np.empty(ci0.size)
@@ -178,7 +233,9 @@ def evaluate_model(q, dt, cr0, ci0, offset_free, y, w, derivatives, g, m, residu
 
 
 @njit(cache=True)
-def _marquardt_step(jtj, jtr, damping, free):
+def _marquardt_step(
+    jtj: NDArray[np.float64], jtr: NDArray[np.float64], damping: float, free: NDArray[np.bool_]
+) -> tuple[NDArray[np.float64], bool | np.bool_]:
     """(JᵀJ + λ·diag(JᵀJ))⁻¹·Jᵀr over the free parameters, equilibrated first: the parameters
     differ by ~1e20 in scale (Hz against tesla). ok is False for a singular system."""
     idx = np.flatnonzero(free)
@@ -206,8 +263,20 @@ def _marquardt_step(jtj, jtr, damping, free):
 
 @njit(cache=True)
 def levenberg_marquardt(
-    q, dt, cr, ci, offset_free, y, w, iterations, tol_chi2, damping, amplitude_low, amplitude_high, amplitude_index
-):
+    q: NDArray[np.float64],
+    dt: float,
+    cr: NDArray[np.float64],
+    ci: NDArray[np.float64],
+    offset_free: bool,
+    y: NDArray[np.float64],
+    w: NDArray[np.float64],
+    iterations: int,
+    tol_chi2: float,
+    damping: float,
+    amplitude_low: float,
+    amplitude_high: float,
+    amplitude_index: int,
+) -> LevenbergMarquardtResult:
     """Levenberg–Marquardt with variable projection (docstring of mows.estimate.ringdown's fit).
 
     Converged when the Gauss–Newton step would lower χ² by less than ``tol_chi2``. θmax stays

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from mows.estimate.ringdown_problem import RingdownProblem
 
@@ -32,7 +33,9 @@ OFFSET_STEP_RAD = math.radians(1.0)
 AMPLITUDE_STEP_RAD = math.radians(1.0)
 
 
-def _shape_columns(problem: RingdownProblem, q, amplitudes_rad) -> np.ndarray:
+def _shape_columns(
+    problem: RingdownProblem, q: NDArray[np.float64], amplitudes_rad: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """cos(kx), sin(kx) for k = 1 … K at every sample: (A, 2K, n) for each θmax."""
     t = np.arange(problem.y.shape[1]) * problem.dt
     base = np.exp(-q[1] * t) * np.cos(TWO_PI * q[0] * t + q[3])
@@ -47,14 +50,16 @@ def _shape_columns(problem: RingdownProblem, q, amplitudes_rad) -> np.ndarray:
     return columns
 
 
-def _weights(pickup: np.ndarray, offsets_rad) -> np.ndarray:
+def _weights(pickup: NDArray[np.complex128], offsets_rad: ArrayLike) -> NDArray[np.float64]:
     """The columns' coefficients for each ε: (E, 2K), Re and −Im of C_k·e^(ikε), k ≥ 1."""
     k = np.arange(1, pickup.size)
     turned = pickup[None, 1:] * np.exp(1j * k[None, :] * np.asarray(offsets_rad)[:, None])
     return np.concatenate([turned.real, -turned.imag], axis=1)
 
 
-def cost_map(problem: RingdownProblem, q, magnitudes_rad, offsets_rad) -> np.ndarray:
+def cost_map(
+    problem: RingdownProblem, q: NDArray[np.float64], magnitudes_rad: ArrayLike, offsets_rad: ArrayLike
+) -> NDArray[np.float64]:
     """The variable-projection cost Σ_c w_c²·‖r_c‖² at (θmax, ε) on the grid, f, δ and φ from
     ``q``, for θmax = −magnitudes (reversed) then +magnitudes (θmax < 0 is the same swing half
     a period later): (2M, E). Where the best κ of a channel would be negative, that channel's
@@ -78,7 +83,9 @@ def cost_map(problem: RingdownProblem, q, magnitudes_rad, offsets_rad) -> np.nda
     return float(w2 @ np.sum(y**2, axis=1)) - np.einsum("c,ace->ae", w2, explained)
 
 
-def offset_starts(problem: RingdownProblem, q, bound_rad: float, amplitude_bound_rad: float, count: int = 3):
+def offset_starts(
+    problem: RingdownProblem, q: NDArray[np.float64], bound_rad: float, amplitude_bound_rad: float, count: int = 3
+) -> list[NDArray[np.float64]]:
     """Starting points (f, δ, θmax, φ, ε) at the ``count`` lowest distinct minima of the cost
     over ε ∈ [−bound, bound] (each at its best θmax ∈ [−bound, bound] on the grid), lowest
     first. f, δ and φ come from ``q``."""

@@ -10,9 +10,11 @@ import dataclasses
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from mows.estimate.ringdown_model import evaluate_model, levenberg_marquardt, split_pickup
 from mows.physics.fluxgate import paper_pickup
+from mows.physics.schema import Vector
 
 NONLINEAR = ("frequency_hz", "damping_per_s", "amplitude_rad", "phase_rad")
 
@@ -42,7 +44,7 @@ class RingdownProblem:
         cr, ci = split_pickup(self.pickup)
         return self.dt, cr, ci, self.offset_free, self.y, self.weights
 
-    def fitted_pickup(self, q) -> np.ndarray:
+    def fitted_pickup(self, q: NDArray[np.float64]) -> NDArray[np.complex128]:
         """The C_k of the model at q: turned by ε = q[4] when it is free, g(ε + x), as
         :func:`mows.estimate.ringdown_model.evaluate_model` turns them."""
         if not self.offset_free:
@@ -65,7 +67,7 @@ class Step:
     cost: float  # Σ_c (w_c·|r_c|)²
 
 
-def evaluate(problem: RingdownProblem, q: np.ndarray, derivatives: bool = True) -> Step:
+def evaluate(problem: RingdownProblem, q: NDArray[np.float64], derivatives: bool = True) -> Step:
     """Variable projection at q (Golub–Pereyra, with Kaufman's Jacobian): κ and B_DC by linear
     least squares, the residual and the projected normal equations of q
     (:func:`mows.estimate.ringdown_model.normal_equations`, where the numerics are explained)."""
@@ -78,20 +80,20 @@ def evaluate(problem: RingdownProblem, q: np.ndarray, derivatives: bool = True) 
     return Step(q, Shape(g, m), coef, residual, float(cost))
 
 
-def _column_scale(jtj):
+def _column_scale(jtj: NDArray[np.float64]) -> NDArray[np.float64]:
     """Parameters differ by ~1e20 in scale (Hz against tesla); equilibrate before solving."""
     scale = np.sqrt(np.diag(jtj))
     scale[scale == 0] = 1.0
     return scale
 
 
-def scaled_inverse(jtj):
+def scaled_inverse(jtj: NDArray[np.float64]) -> NDArray[np.float64]:
     """(JᵀJ)⁻¹ computed on the equilibrated matrix; raises LinAlgError if singular."""
     scale = _column_scale(jtj)
     return np.linalg.inv(jtj / np.outer(scale, scale)) / np.outer(scale, scale)
 
 
-def fisher_information(step: Step, weights) -> np.ndarray:
+def fisher_information(step: Step, weights: NDArray[np.float64]) -> NDArray[np.float64]:
     """Fisher information (JᵀJ with weights) over all parameters: q, then κ and B_DC of each
     channel. J's columns are κ_c·∂g/∂q, g and 1, so JᵀJ is assembled from Gram sums of
     those rows without forming the n × P Jacobian."""
@@ -115,7 +117,9 @@ AMPLITUDE_BOUNDS_RAD = (math.radians(0.5), math.radians(90.0))
 AMPLITUDE = NONLINEAR.index("amplitude_rad")
 
 
-def variable_projection(problem: RingdownProblem, q, iterations, tol_chi2, damping=1e-3):
+def variable_projection(
+    problem: RingdownProblem, q: ArrayLike, iterations: int, tol_chi2: float, damping: float = 1e-3
+) -> tuple[Step, bool, int, NDArray[np.bool_]]:
     """Levenberg–Marquardt on the nonlinear parameters with κ and B_DC solved exactly at every
     step (Golub–Pereyra variable projection). Eliminating the linear parameters removes the
     curved θmax–κ valley (only κ·θmax is well determined at θ0 = 0°, κ·θmax² at 90°), in
@@ -148,19 +152,19 @@ def variable_projection(problem: RingdownProblem, q, iterations, tol_chi2, dampi
 
 # --- the bound itself -------------------------------------------------------------------
 def cramer_rao_frequency_hz(
-    n_samples,
-    sample_rate_hz,
-    frequency_hz,
-    damping_per_s,
-    amplitude_rad,
-    phase_rad,
-    theta0_rad,
-    kappa_t,
-    noise_std_t,
-    sensor_direction=(0.0, 1.0),
-    offset_free=True,
-    pickup=None,
-    rest_offset_rad=0.0,
+    n_samples: int,
+    sample_rate_hz: float,
+    frequency_hz: float,
+    damping_per_s: float,
+    amplitude_rad: float,
+    phase_rad: float,
+    theta0_rad: float,
+    kappa_t: float,
+    noise_std_t: float,
+    sensor_direction: Vector = (0.0, 1.0),
+    offset_free: bool = True,
+    pickup: ArrayLike | None = None,
+    rest_offset_rad: float = 0.0,
 ) -> float:
     """Cramér–Rao bound of f for one channel of ``n_samples`` in white noise σ:
     √[(JᵀJ/σ²)⁻¹]_ff (PHYSICS.md §7), J the Jacobian of the full model over all its

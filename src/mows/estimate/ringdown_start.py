@@ -8,9 +8,12 @@ import dataclasses
 import math
 
 import numpy as np
+from numpy.typing import NDArray
+
+from mows.estimate.ringdown_types import FitOptions
 
 
-def white_noise_std(y: np.ndarray) -> float:
+def white_noise_std(y: NDArray[np.float64]) -> float:
     """White-noise σ per sample from the third difference, robust to outliers.
 
     The third difference multiplies a tone at f by (2·sin(πf/fs))³ ≈ 4e-5 for the probe at
@@ -29,12 +32,21 @@ class _Peak:
     phase_rad: float
 
 
-def _windowed_spectrum(y, fs, pad):
+def _windowed_spectrum(
+    y: NDArray[np.float64], fs: float, pad: int
+) -> tuple[NDArray[np.complex128], NDArray[np.floating]]:
     spectrum = np.fft.rfft((y - y.mean()) * np.hanning(y.size), pad)
     return spectrum, np.fft.rfftfreq(pad, 1.0 / fs)
 
 
-def _spectral_peak(spectrum, power, freqs, low_hz, high_hz, bin_hz):
+def _spectral_peak(
+    spectrum: NDArray[np.complex128],
+    power: NDArray[np.float64],
+    freqs: NDArray[np.floating],
+    low_hz: float,
+    high_hz: float,
+    bin_hz: float,
+) -> _Peak | None:
     """Strongest line in [low, high], refined by Gaussian (log-parabolic) interpolation."""
     band = np.flatnonzero((freqs >= low_hz) & (freqs <= high_hz))
     if band.size < 3:
@@ -47,7 +59,9 @@ def _spectral_peak(spectrum, power, freqs, low_hz, high_hz, bin_hz):
     return _Peak(freqs[k] + shift * bin_hz, power[k], float(np.angle(spectrum[k])))
 
 
-def start_candidates(y, fs, expected_hz, options, damping_guess):
+def start_candidates(
+    y: NDArray[np.float64], fs: float, expected_hz: float, options: FitOptions, damping_guess: float
+) -> list[NDArray[np.float64]]:
     """Starting points (f, δ, θmax, φ) from the spectrum; the best of them is refined."""
     pad = 1 << int(math.ceil(math.log2(4 * y.size)))
     lo, hi = expected_hz * (1 - options.search_fraction), expected_hz * (1 + options.search_fraction)

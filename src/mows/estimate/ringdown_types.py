@@ -10,11 +10,15 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
-from mows.physics.fluxgate import paper_pickup, pickup_harmonics
+from mows.physics.fluxgate import FluxgatePair, paper_pickup, pickup_harmonics
 from mows.physics.pose import Pose
+from mows.physics.probe import Probe
 
 
 class FitStatus(enum.IntEnum):
@@ -79,7 +83,7 @@ class FitOptions:
     amplitude_tolerance_rad: float = math.radians(1.0)
     rest_offset_tolerance_rad: float = math.radians(0.5)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.channels not in ("difference", "both", "channel1", "channel2"):
             raise ValueError(f"channels = {self.channels!r}; use difference, both, channel1 or channel2")
         if not 0.0 < self.search_fraction < 1.0:
@@ -91,7 +95,9 @@ class FitOptions:
             )
 
     @classmethod
-    def lever_aware(cls, pair, probe, theta0_rad: float, channels: str = "difference", **others) -> FitOptions:
+    def lever_aware(
+        cls, pair: FluxgatePair, probe: Probe, theta0_rad: float, channels: str = "difference", **others: Any
+    ) -> FitOptions:
         """Options with the exact pickup of ``probe``'s magnet swinging on its lever, seen by the
         fluxgate ``pair`` (:class:`mows.physics.fluxgate.FluxgatePair`) with the probe at θ0, the
         rest offset searched within ``probe``'s housing stop."""
@@ -103,7 +109,7 @@ class FitOptions:
         """The fit has a fifth nonlinear parameter that turns the pickup: θ0 or the rest offset."""
         return self.theta0_free or self.rest_offset_free
 
-    def pickup_at(self, theta0_rad: float) -> np.ndarray:
+    def pickup_at(self, theta0_rad: float) -> NDArray[np.complex128]:
         """The coefficients C_k of g: the given pickup, or the paper's single term."""
         if self.pickup is not None:
             return np.asarray(self.pickup, complex)
@@ -183,7 +189,7 @@ class RingdownFit:
         )
 
 
-def parameter_std(names, covariance, name: str) -> float:
+def parameter_std(names: Iterable[str], covariance: ArrayLike, name: str) -> float:
     """σ of parameter ``name`` from a fit's row-major ``covariance`` over ``names`` (a RingdownFit
     or its message); NaN when the fit has no such parameter or did not determine it."""
     names = list(names)
@@ -194,5 +200,5 @@ def parameter_std(names, covariance, name: str) -> float:
     return math.sqrt(variance) if variance > 0 else math.nan
 
 
-def failure(status: FitStatus, message: str, **known) -> RingdownFit:
+def failure(status: FitStatus, message: str, **known: Any) -> RingdownFit:
     return RingdownFit(status=status, message=message, **known)

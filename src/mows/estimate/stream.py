@@ -1,7 +1,7 @@
 """The estimator's flow without its I/O: raw sample blocks and ring-down announcements in (as
 the messages carry them), and per recorded ring-down its fit (:mod:`mows.estimate.ringdown`),
 the field and gradient along the probe axis (:mod:`mows.estimate.axis`) and, while an f00
-calibration runs (:mod:`mows.estimate.calibration`), the OK fits offered to it.
+calibration runs (:mod:`mows.estimate.calibration.f00`), the OK fits offered to it.
 
 The estimator node feeds it its subscriptions and publishes what it returns. What the node's
 parameters say (probe, fit options, settling, f00) comes with each ring-down as a
@@ -14,7 +14,7 @@ from collections.abc import Callable
 from typing import Any
 
 from mows.estimate.axis import AxisEstimate, estimate_along_axis
-from mows.estimate.calibration import F00Calibration
+from mows.estimate.calibration.f00 import F00Calibration
 from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure
 from mows.estimate.segments import (
     RingdownWindow,

@@ -35,7 +35,7 @@ from mows.lab.data.readers import from_bag, from_sweep, is_bag, load_table, read
 from mows.lab.data.reference import reference_at, reference_columns, with_reference
 from mows.lab.data.table import MeasurementTable, MissingColumnError, TableError
 from mows.lab.diagnosis.residual_structure import residual_structure
-from mows.lab.diagnosis.verdict import Diagnosis, diagnose
+from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import CATALOG, catalog
 from mows.lab.model.effects import Effect, Parameter
 from mows.lab.model.frequency_model import FitResult, FrequencyModel
@@ -54,6 +54,7 @@ __all__ = [
     "MissingColumnError",
     "Parameter",
     "TableError",
+    "Verdict",
     "analyse",
     "catalog",
     "diagnose",

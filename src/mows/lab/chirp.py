@@ -35,6 +35,7 @@ when it is detected and λ is not; ``amplitude_dependent_damping`` when only the
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 import os
 from collections.abc import Iterator
@@ -54,6 +55,15 @@ from mows.physics.probe import Probe
 ALPHA = 1e-3  # significance level of each test
 SIGMAS = 3.0  # a slope or λ this many σ from a value is "different"
 PIECE_PERIODS = 10.0
+
+
+class ChirpVerdict(enum.StrEnum):
+    """What the tests on the pieces found (module docstring)."""
+
+    FINITE_AMPLITUDE = "finite_amplitude"
+    UNEXPLAINED_CHIRP = "unexplained_chirp"
+    AMPLITUDE_DEPENDENT_DAMPING = "amplitude_dependent_damping"
+    CONSTANT = "constant"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,7 +96,7 @@ class ChirpDiagnosis:
     predicted_slope_hz_per_rad2: float
     damping_slope_per_s_per_rad: float
     damping_slope_std_per_s_per_rad: float
-    verdict: str
+    verdict: ChirpVerdict
     explanation: str
 
 
@@ -210,7 +220,7 @@ def _diagnosis(fit: RingdownFit, pieces: tuple[Piece, ...], field: float) -> Chi
     return ChirpDiagnosis(fit, pieces, field, **numbers, verdict=verdict, explanation=explanation)
 
 
-def _verdict(numbers: dict[str, float], std: np.ndarray, predicted: np.ndarray) -> tuple[str, str]:
+def _verdict(numbers: dict[str, float], std: np.ndarray, predicted: np.ndarray) -> tuple[ChirpVerdict, str]:
     """(verdict, explanation) from the tests' numbers (module docstring)."""
     slope, slope_std = numbers["slope_hz_per_rad2"], numbers["slope_std_hz_per_rad2"]
     ratio, ratio_std = numbers["chirp_ratio"], numbers["chirp_ratio_std"]
@@ -222,24 +232,24 @@ def _verdict(numbers: dict[str, float], std: np.ndarray, predicted: np.ndarray) 
         f"{predicted_slope * 1e3:.3g} mHz/rad² (λ = {ratio:.3g} ± {ratio_std:.2g})"
     )
     if chirp and abs(ratio - 1.0) <= SIGMAS * ratio_std:
-        return "finite_amplitude", (
+        return ChirpVerdict.FINITE_AMPLITUDE, (
             f"the frequency chirps with the decaying amplitude as the potential predicts: {sizes}; a constant-"
             "frequency fit reports the kernel-weighted average (mows.physics.ringdown_average), which the lab's "
             "finite_amplitude effect models"
         )
     if chirp:
-        return "unexplained_chirp", (
+        return ChirpVerdict.UNEXPLAINED_CHIRP, (
             f"the frequency chirps, but not by the size the finite amplitude predicts: {sizes}; another "
             "amplitude-dependent spring (a gradient along the lever, gravity in the plane, field curvature, a "
             "nonlinear spring) or a wrong θmax"
         )
     if abs(damping) > SIGMAS * damping_std:
-        return "amplitude_dependent_damping", (
+        return ChirpVerdict.AMPLITUDE_DEPENDENT_DAMPING, (
             f"the damping changes with amplitude: dδ/dA = {damping:.3g} ± {damping_std:.2g} 1/(s·rad) (air drag ∝ "
             f"velocity² or stop contact); the frequency does not chirp ({sizes})"
         )
     span = float(np.ptp(predicted))
-    return "constant", (
+    return ChirpVerdict.CONSTANT, (
         f"a constant frequency describes every piece (no chirp detected: {sizes}); the finite amplitude's chirp over "
         f"the window, {span * 1e3:.3g} mHz, is {span / float(np.median(std)):.2g} × a piece's σ"
     )

@@ -1,10 +1,9 @@
 """Rotation sweeps: (θ0, Δf) points of many orientations decomposed into in-plane field and
 gradient (``decompose``), the ring-downs of one sweep as they arrive (``record``), a sweep run as
-an I/O-free state machine (``runner``), the supply sweep that calibrates a probe
-(``calibration_schedule``) and the calibrator's goals around it (``calibration_run``), the
-measurement cycle from the probe's physics and tracking plans
-(``fast_cycle``), and the adaptive choice of orientations and repeats for a target precision
-(``planner``).
+an I/O-free state machine (``runner``), the supply sweep that calibrates a probe and the
+calibrator's goals around it (``calibration``), the measurement cycle from the probe's physics
+and tracking plans (``fast_cycle``), and the adaptive choice of orientations and repeats for a
+target precision (``planner``).
 
 May import: ``mows.estimate``, ``mows.physics``, ``mows.records``.
 """

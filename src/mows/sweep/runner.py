@@ -17,6 +17,7 @@ is read from the ring-downs' stamps (first to last, plus a turn and a ring-down)
 """
 
 import dataclasses
+import enum
 import functools
 import math
 from collections.abc import Callable
@@ -29,6 +30,14 @@ from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal
 from mows.sweep.record import SweepPoint, SweepRecord
 
 DECOMPOSE_NEAR = 1.25  # decompose an adaptive sweep once the prediction is this close to the target
+
+
+class SweepState(enum.StrEnum):
+    """What :class:`SweepRunner` is doing; the values are what /diagnostics and the logs show."""
+
+    IDLE = "idle"
+    SWEEPING = "sweeping"
+    DECOMPOSING = "decomposing"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -164,10 +173,10 @@ class SweepStep:
 
 
 class SweepRunner:
-    """Runs one sweep at a time of ``probe``; ``state`` is idle, sweeping or decomposing."""
+    """Runs one sweep at a time of ``probe``; ``state`` is a :class:`SweepState`."""
 
     def __init__(self) -> None:
-        self.state = "idle"
+        self.state = SweepState.IDLE
         self.sweeps = 0  # sweeps that came as far as the decomposition
         self.last = "no sweep yet"  # the last decomposition's report
         self._angles: list[float] = []
@@ -199,7 +208,7 @@ class SweepRunner:
             problems.append(problem)
         if goal.model and goal.model not in MODELS:
             problems.append(f"model {goal.model!r} is not one of {', '.join(MODELS)}")
-        if self.state != "idle":
+        if self.state != SweepState.IDLE:
             problems.append(f"another sweep is still running ({self.state})")
         planner = None
         if goal.target is not None and not problems:
@@ -217,7 +226,7 @@ class SweepRunner:
                 problems.append(str(refused))
         if problems:
             raise ValueError("; ".join(problems))
-        self.state, self._settings, self._probe = "sweeping", settings, probe
+        self.state, self._settings, self._probe = SweepState.SWEEPING, settings, probe
         self._planner, self._decomposition, self._decomposed_points = planner, None, 0
         self._angles = [] if planner else angles
         self._repeats = goal.repeats_per_angle or settings.repeats_per_angle
@@ -232,7 +241,7 @@ class SweepRunner:
 
     def cancel(self) -> None:
         """End the sweep before its next orientation."""
-        if self.state == "sweeping":
+        if self.state == SweepState.SWEEPING:
             self._cancelled = True
 
     def cancelled(self) -> bool:
@@ -248,7 +257,7 @@ class SweepRunner:
         """The operator confirmed the turn the last step asked for: its cycle (or the end, if
         the sweep was cancelled meanwhile)."""
         call, self._turning = self._turning, None
-        if self.state != "sweeping" or call is None:
+        if self.state != SweepState.SWEEPING or call is None:
             return SweepStep()
         if self._cancelled:
             return self._end(
@@ -265,7 +274,7 @@ class SweepRunner:
         return step
 
     def on_cycle(self, answer: CycleAnswer) -> SweepStep:
-        if self.state != "sweeping":
+        if self.state != SweepState.SWEEPING:
             return SweepStep()
         if answer.problem:
             theta0 = self._angles[self._index]
@@ -276,20 +285,20 @@ class SweepRunner:
     def on_fit(self, fit: SweepFit) -> SweepStep | None:
         """A fit from the stream; a step once the awaited cycle's fits are all in."""
         # Fits of cycles run by others between sweeps, and tuning ring-downs, are not ours.
-        if self.state != "sweeping" or fit.tuning:
+        if self.state != SweepState.SWEEPING or fit.tuning:
             return None
         self._fits.setdefault(fit.cycle_id, []).append(fit)
         return self._collected()
 
     def fits_time_up(self) -> SweepStep | None:
         """The awaited cycle's fits are late: go on with those that came."""
-        if self.state != "sweeping" or self._awaited is None:
+        if self.state != SweepState.SWEEPING or self._awaited is None:
             return None
         return self._orientation_done()
 
     def abandon(self, reason: str) -> SweepStep:
         """End the sweep as failed, with ``reason`` (the caller cannot go on)."""
-        if self.state == "idle":
+        if self.state == SweepState.IDLE:
             return SweepStep()
         return self._end(SweepStep(), SweepOutcome(False, reason))
 
@@ -299,7 +308,7 @@ class SweepRunner:
         on unless the planner ends it)."""
         if self._planner is not None:
             self._decomposition, self._decomposed_points = decomposition, len(self._record.points)
-            self.state = "sweeping"
+            self.state = SweepState.SWEEPING
             return self._next_planned(SweepStep())
         self.last = decomposition.report()
         sweep_map = SweepMap(self.sweeps, decomposition, self._record, self._f00_hz())
@@ -350,7 +359,7 @@ class SweepRunner:
             return self._end(
                 step, SweepOutcome(False, f"no successful ring-down in the sweep ({self._record.failed} failed)")
             )
-        self.state = "decomposing"
+        self.state = SweepState.DECOMPOSING
         assert self._probe is not None  # set by start()
         step.decompose = functools.partial(
             self._record.decompose, self._probe, self._f00_hz(), model=self._model, f00_free=self._settings.f00_free
@@ -364,7 +373,7 @@ class SweepRunner:
         if self._cancelled:
             return self._end(step, SweepOutcome(False, f"cancelled after {self._index} cycles", cancelled=True))
         if self._decomposition_due(planner):
-            self.state = "decomposing"
+            self.state = SweepState.DECOMPOSING
             step.decompose = functools.partial(
                 self._record.decompose, self._probe, self._f00_hz(), model=self._model, f00_free=self._settings.f00_free
             )
@@ -411,7 +420,7 @@ class SweepRunner:
         return float(np.mean([p.frequency_hz - p.shift_hz for p in self._record.points]))
 
     def _end(self, step: SweepStep, outcome: SweepOutcome) -> SweepStep:
-        self.state, self._awaited, self._turning = "idle", None, None
+        self.state, self._awaited, self._turning = SweepState.IDLE, None, None
         self._fits.clear()
         step.finished = outcome
         return step

@@ -24,7 +24,7 @@ import scipy.stats
 from mows.lab import progress
 from mows.lab.diagnosis.projections import Signature, orthonormal_basis, project_out, signature
 from mows.lab.model.effects import Effect, testable
-from mows.lab.model.least_squares import FitResult, FittedParameter
+from mows.lab.model.least_squares import FitResult, FittedParameter, parameters_dict
 from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
@@ -167,7 +167,7 @@ class Candidate:
             "p_value": finite_or_none(self.p_value),
             "score_p_value": finite_or_none(self.score_p_value),
             "chi2_dof_after": finite_or_none(self.chi2_dof_after),
-            "parameters": {name: {"value": v, "std": s, "unit": u} for name, v, s, u in self.parameters},
+            "parameters": parameters_dict(self.parameters),
             "free": self.free.to_dict(),
             "at_physics": None if self.physics is None else self.physics.to_dict(),
             "physics_deviation_sigma": finite_or_none(self.physics_deviation),
@@ -178,11 +178,13 @@ class Candidate:
 
 
 def physics_deviation(effect: Effect, parameters: list[FittedParameter]) -> float:
-    """Largest |value − physical value|/σ of an effect's fitted ``parameters`` [(name, value,
-    std, unit)]; NaN when the effect has no physical value."""
+    """Largest |value − physical value|/σ of an effect's fitted ``parameters``; NaN when the
+    effect has no physical value."""
     if effect.physical is None or not parameters:
         return math.nan
-    return max(abs(v - p) / s if s > 0 else math.inf for (_, v, s, _), p in zip(parameters, effect.physical))
+    return max(
+        abs(p.value - physical) / p.std if p.std > 0 else math.inf for p, physical in zip(parameters, effect.physical)
+    )
 
 
 def dispersion(fit: FitResult, candidates: Iterable[Candidate]) -> float:
@@ -248,8 +250,8 @@ def _candidate(fit: FitResult, effect: Effect, test: Signature, refit: Callable[
     free, parameters = _free_form(fit, effect, test, refit(len(effect.parameters)))
     physics = None if effect.physical is None else _physics_form(fit, effect, test, refit(0))
     inside = all(
-        p.lower + 1e-6 * (p.upper - p.lower) < v < p.upper - 1e-6 * (p.upper - p.lower)
-        for p, (_, v, _, _) in zip(effect.parameters, parameters)
+        p.lower + 1e-6 * (p.upper - p.lower) < fitted.value < p.upper - 1e-6 * (p.upper - p.lower)
+        for p, fitted in zip(effect.parameters, parameters)
     )
     return Candidate(effect, free, physics, test.p_value, parameters, inside, test)
 
@@ -265,7 +267,9 @@ def _free_form(fit: FitResult, effect: Effect, test: Signature, refit: bool) -> 
         step = -np.linalg.pinv(test.projected) @ fit.weighted_residual
         std = np.sqrt(np.clip(np.diag(np.linalg.pinv(test.projected.T @ test.projected)), 0, None))
         chi2_after, dof_after = fit.chi2 - test.statistic, fit.dof - test.rank
-        parameters = [(p.name, float(v), float(e), p.unit) for p, v, e in zip(effect.parameters, step, std)]
+        parameters = [
+            FittedParameter(p.name, float(v), float(e), p.unit) for p, v, e in zip(effect.parameters, step, std)
+        ]
     raw = Form(False, math.nan, math.nan, chi2_after, dof_after, after, gain_chi2=fit.chi2 - chi2_after, added=k)
     return dataclasses.replace(raw, rank=test.rank).at_dispersion(1.0, fit.n), parameters
 

@@ -32,7 +32,7 @@ from mows.lab.diagnosis.physical_aliases import alias_statements
 from mows.lab.diagnosis.projections import Signature, cosine_within, orthonormal_basis, project_out, same_span
 from mows.lab.diagnosis.what_if import Variant, variants
 from mows.lab.model.effects import Effect
-from mows.lab.model.least_squares import FitResult
+from mows.lab.model.least_squares import FitResult, parameter_values
 from mows.physics.probe import Probe
 
 GROUP_COSINE = 0.95
@@ -161,7 +161,7 @@ def _separate(members: list[Candidate], fit: FitResult, probe: Probe, number: in
         text = f"{best_variant.description}: separates " + " | ".join(", ".join(part) for part in best_parts)
         if together:
             text += "; " + "; ".join(", ".join(part) for part in together) + " still act identically: check directly"
-    fitted = {c.name: {n: v for n, v, _, _ in c.parameters} for c in members}
+    fitted = {c.name: parameter_values(c.parameters) for c in members}
     return Group(
         number,
         names,

@@ -28,7 +28,7 @@ import scipy.special
 from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import Configuration, base_start_swing_rad, ringdown_nodes
 from mows.lab.model.frequency_model import distinct_table
-from mows.lab.model.least_squares import FitResult
+from mows.lab.model.least_squares import FitResult, parameter_values
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
 from mows.physics.probe import Probe
 
@@ -44,7 +44,7 @@ def alias_statements(
     """The exact aliases among ``names`` (effect names) in words and numbers. ``fitted`` maps an
     effect name to {parameter: value} where a member's fitted value is known (default: the
     effects of ``fit``'s model)."""
-    values = {e.name: {n: v for n, v, _, _ in fit.effect_parameters(e.name)} for e in fit.model.effects}
+    values = {e.name: parameter_values(fit.effect_parameters(e.name)) for e in fit.model.effects}
     values.update(fitted or {})
     found = []
     for pair, statement in (

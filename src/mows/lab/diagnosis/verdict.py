@@ -9,11 +9,15 @@ the candidates (:mod:`mows.lab.diagnosis.candidates`), their groups and separati
 - else ``adequate`` when χ² is consistent with its dof (p ≥ 0.005) and no structure is
   significant;
 - else ``unexplained_structure``.
+
+:func:`mows.lab.report.lab_report.analyse` turns ``adequate`` into ``inconsistent_physics`` or
+``needs_generic_term`` when the physics checks say so.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import enum
 from collections.abc import Iterable
 
 from mows.lab.diagnosis.candidates import Candidate, rank_candidates
@@ -34,6 +38,17 @@ FIELD_SPRINGS = ("b_along_t", "g_t_per_m")  # covariates that are the model's ow
 SLOW_COVARIATES = ("temperature_k", "t_s")  # what a spring drifts with
 
 
+class Verdict(enum.StrEnum):
+    """The lab's answer on a model (module docstring); printed, in JSON and in
+    mows_msgs/ModelReport as its value."""
+
+    EFFECT_MISSING = "effect_missing"
+    ADEQUATE = "adequate"
+    UNEXPLAINED_STRUCTURE = "unexplained_structure"
+    INCONSISTENT_PHYSICS = "inconsistent_physics"
+    NEEDS_GENERIC_TERM = "needs_generic_term"
+
+
 @dataclasses.dataclass
 class Diagnosis:
     fit: FitResult
@@ -41,7 +56,7 @@ class Diagnosis:
     candidates: list[Candidate]
     groups: list[Group]
     untestable: dict[str, str]  # effect name → why it cannot be tested
-    verdict: str
+    verdict: Verdict
     explanation: str
 
     @property
@@ -64,7 +79,7 @@ def diagnose(fit: FitResult, effects: Iterable[Effect], probe: Probe | None = No
 
 
 # --- verdict ------------------------------------------------------------------------------------
-def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate]) -> tuple[str, str]:
+def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate]) -> tuple[Verdict, str]:
     best = candidates[0] if candidates else None
     excess = fit.chi2 - fit.dof
     if best is not None and best.strong:
@@ -76,7 +91,7 @@ def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate]) 
                 if best.group
                 else ""
             )
-            return "effect_missing", (
+            return Verdict.EFFECT_MISSING, (
                 f"{best.label} is missing{group}: ΔBIC = {best.delta_bic:.1f}, "
                 f"p = {best.p_value:.1e}, "
                 f"χ²/dof {fit.chi2_dof:.3g} → {best.chi2_dof_after:.3g}."
@@ -94,8 +109,9 @@ def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate]) 
     else:
         unexplained = ""
     if structure.goodness_p >= GOODNESS_ALPHA and not structure.significant:
-        return "adequate", "The model explains the data: " + structure.summary
-    return "unexplained_structure", (unexplained + " " + structure.summary + " " + _no_answer(fit, structure)).strip()
+        return Verdict.ADEQUATE, "The model explains the data: " + structure.summary
+    found = unexplained + " " + structure.summary + " " + _no_answer(fit, structure)
+    return Verdict.UNEXPLAINED_STRUCTURE, found.strip()
 
 
 def _no_answer(fit: FitResult, structure: Structure) -> str:

@@ -31,7 +31,34 @@ DEGENERATE_RTOL = 1e-6  # singular value (normalised Jacobian columns) below whi
 CV_PREDICTION_SIGMAS = 10.0  # a fold predicting its rows less precisely than this says nothing
 DEGENERATE_WEIGHT = 0.1  # a parameter with more than this weight in such a direction is not identifiable
 
-FittedParameter = tuple[str, float, float, str]  # (name, value, std, unit) of one fitted parameter
+
+@dataclasses.dataclass(frozen=True)
+class FittedParameter:
+    """One fitted parameter, like lmfit's ``Parameter``: its value and standard error σ in
+    ``unit``. (:class:`mows.lab.model.effects.Parameter` declares a parameter's bounds before
+    any fit; this is what a fit found.)"""
+
+    name: str
+    value: float
+    std: float
+    unit: str
+
+    def text(self) -> str:
+        """``name = value ± σ unit``, as the reports print it."""
+        return f"{self.name} = {self.value:.4g} ± {self.std:.2g} {self.unit}".rstrip()
+
+    def to_dict(self) -> dict[str, float | str]:
+        return {"value": self.value, "std": self.std, "unit": self.unit}
+
+
+def parameters_dict(parameters: Iterable[FittedParameter]) -> dict[str, dict[str, float | str]]:
+    """The JSON form of fitted parameters: {name: {value, std, unit}}."""
+    return {p.name: p.to_dict() for p in parameters}
+
+
+def parameter_values(parameters: Iterable[FittedParameter]) -> dict[str, float]:
+    """{name: value} of fitted parameters."""
+    return {p.name: p.value for p in parameters}
 
 
 class Problem:
@@ -186,9 +213,10 @@ class FitResult:
         return self.residual_hz / self.table.f_std_hz
 
     def parameters(self) -> list[FittedParameter]:
-        """[(name, value, std, unit)] for f00 and every effect parameter."""
+        """f00 and every effect parameter, named ``effect.parameter``, in fit order."""
         units = ["Hz"] + [p.unit for _, p in self.model.parameters]
-        return list(zip(self.model.parameter_names, self.values.tolist(), self.std.tolist(), units))
+        columns = zip(self.model.parameter_names, self.values.tolist(), self.std.tolist(), units)
+        return [FittedParameter(*column) for column in columns]
 
     def values_without(self, effect: Effect) -> np.ndarray:
         """The fitted effect parameter values (fit order) of the model without ``effect``: a
@@ -197,9 +225,13 @@ class FitResult:
         return self.values[1:][np.array(keep, bool)]
 
     def effect_parameters(self, effect_name: str) -> list[FittedParameter]:
-        """[(parameter, value, std, unit)] of one effect of the model."""
+        """The parameters of one effect of the model, named without the effect's prefix."""
         prefix = effect_name + "."
-        return [(name[len(prefix) :], v, s, u) for name, v, s, u in self.parameters() if name.startswith(prefix)]
+        return [
+            dataclasses.replace(p, name=p.name.removeprefix(prefix))
+            for p in self.parameters()
+            if p.name.startswith(prefix)
+        ]
 
     def extension_columns(self, effect: Effect, table: MeasurementTable | None = None) -> np.ndarray:
         """d(weighted residual)/d(parameters of ``effect``) with ``effect`` added to this model at
@@ -253,11 +285,11 @@ class FitResult:
             else "χ² not meaningful"
         )
         lines = [f"model {self.model.name}: n = {self.n}, {quality}"]
-        for (name, value, std, unit), known in zip(self.parameters(), self.identifiable):
+        for p, known in zip(self.parameters(), self.identifiable):
             lines.append(
-                f"  {name:40s} = {value:+.6g} ± {std:.2g} {unit}"
+                f"  {p.name:40s} = {p.value:+.6g} ± {p.std:.2g} {p.unit}"
                 if known
-                else f"  {name:40s}   not identifiable from this table"
+                else f"  {p.name:40s}   not identifiable from this table"
             )
         if self.status is FitStatus.BAD_FIT:
             lines.append(

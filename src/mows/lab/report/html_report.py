@@ -215,7 +215,7 @@ def render_html(report: LabReport) -> str:
                 f"{c.p_value:.2g}",
                 f"{c.chi2_dof_after:.3f}",
                 c.group or "",
-                "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters),
+                "; ".join(p.text() for p in c.parameters),
             )
             for i, c in enumerate(report.candidates)
         ]
@@ -231,7 +231,7 @@ def render_html(report: LabReport) -> str:
             (
                 c.effect,
                 "held at physics" if c.held else "free",
-                "; ".join(f"{n} = {v:.4g} ± {s:.2g} {u}" for n, v, s, u in c.parameters),
+                "; ".join(p.text() for p in c.parameters),
                 f"{c.deviation_sigma:.1f}",
             )
             for c in report.physics_checks
@@ -244,7 +244,7 @@ def render_html(report: LabReport) -> str:
         + "</li>"
         for g in report.groups
     )
-    parameters = _rows([(n, f"{v:.6g}", f"{s:.2g}", u) for n, v, s, u in report.fit.parameters()])
+    parameters = _rows([(p.name, f"{p.value:.6g}", f"{p.std:.2g}", p.unit) for p in report.fit.parameters()])
     return f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>MOWS model lab: {html.escape(table.source)}</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:auto}} td{{padding:2px 8px}}

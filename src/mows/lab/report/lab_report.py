@@ -28,12 +28,12 @@ from mows.lab.data.readers import load_table
 from mows.lab.data.table import MeasurementTable, TableError
 from mows.lab.diagnosis.candidates import Candidate, physics_deviation
 from mows.lab.diagnosis.indistinguishable import Group
-from mows.lab.diagnosis.verdict import Diagnosis, diagnose
+from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import catalog, resolve
 from mows.lab.model.configuration import unevaluable_rows
 from mows.lab.model.frequency_model import FitResult, FrequencyModel, distinct_table
-from mows.lab.model.least_squares import FittedParameter
-from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, parameters_dict, search
+from mows.lab.model.least_squares import FittedParameter, parameters_dict
+from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, search
 from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
@@ -62,26 +62,68 @@ class PhysicsCheck:
 
 @dataclasses.dataclass
 class LabReport:
-    """The lab's answer for one table (fields map onto mows_msgs/ModelReport). ``effects`` are
-    labels: ``name (at physics)`` for an effect held at its physical value."""
+    """The lab's answer for one table: the diagnosis of the final model, with how it was reached
+    (``history`` from ``base``) and its physics checks. The properties map onto
+    mows_msgs/ModelReport."""
 
-    model: str
-    effects: list[str]
-    n: int
-    chi2_dof: float
-    bic: float
-    cv_rms_hz: float
-    verdict: str
-    structure: str
-    candidates: list[Candidate]
-    groups: list[Group]
-    history: list[HistoryStep]
-    untestable: dict[str, str]
-    notes: list[str]
+    diagnosis: Diagnosis  # of the final model: its fit, candidates, groups and verdict
     base: FitResult
-    fit: FitResult
-    diagnosis: Diagnosis
+    history: list[HistoryStep]
+    notes: list[str]
     physics_checks: list[PhysicsCheck] = dataclasses.field(default_factory=list)
+
+    @property
+    def fit(self) -> FitResult:
+        """The final model's fit."""
+        return self.diagnosis.fit
+
+    @property
+    def model(self) -> str:
+        return self.fit.model.name
+
+    @property
+    def effects(self) -> list[str]:
+        """The final model's effects as labels: ``name (at physics)`` for one held at its physical value."""
+        return self.fit.model.labels
+
+    @property
+    def n(self) -> int:
+        return self.fit.n
+
+    @property
+    def chi2_dof(self) -> float:
+        return self.fit.chi2_dof
+
+    @property
+    def bic(self) -> float:
+        return self.fit.bic
+
+    @property
+    def cv_rms_hz(self) -> float:
+        """The final step's cross-validated rms prediction error (NaN where not computed)."""
+        return self.history[-1].cv_rms_hz
+
+    @property
+    def verdict(self) -> Verdict:
+        return self.diagnosis.verdict
+
+    @property
+    def structure(self) -> str:
+        """The residual structure in words."""
+        return self.diagnosis.structure.summary
+
+    @property
+    def candidates(self) -> list[Candidate]:
+        return self.diagnosis.candidates
+
+    @property
+    def groups(self) -> list[Group]:
+        return self.diagnosis.groups
+
+    @property
+    def untestable(self) -> dict[str, str]:
+        """Effect name → why it cannot be tested."""
+        return self.diagnosis.untestable
 
     @property
     def effect_names(self) -> list[str]:
@@ -91,8 +133,8 @@ class LabReport:
     def effect_parameter(self, name: str) -> tuple[float, float]:
         """(value, σ) of ``effect.parameter`` in the final fit, or, for an effect held at
         physics, in its free fit (the consistency check)."""
-        fitted = {n: (v, s) for n, v, s, _ in self.fit.parameters()}
-        fitted.update({f"{c.effect}.{n}": (v, s) for c in self.physics_checks for n, v, s, _ in c.parameters})
+        fitted = {p.name: (p.value, p.std) for p in self.fit.parameters()}
+        fitted.update({f"{c.effect}.{p.name}": (p.value, p.std) for c in self.physics_checks for p in c.parameters})
         if name not in fitted:
             raise KeyError(f"no parameter {name} in the final model {self.model}")
         return fitted[name]
@@ -160,28 +202,10 @@ def analyse(
     if not rank:
         found.explanation += " (Candidate effects were not tested: run `mows lab diagnose`.)"
     checks = physics_checks(fit)
-    if found.verdict == "adequate":
+    if found.verdict == Verdict.ADEQUATE:
         found.verdict, found.explanation = _physics_verdict(fit, checks, found.explanation)
     notes = list(table.notes) + [_check_note(c) for c in checks if c.deviation_sigma > CHECK_SIGMAS]
-    return LabReport(
-        fit.model.name,
-        fit.model.labels,
-        fit.n,
-        fit.chi2_dof,
-        fit.bic,
-        history[-1].cv_rms_hz,
-        found.verdict,
-        found.structure.summary,
-        found.candidates,
-        found.groups,
-        history,
-        found.untestable,
-        notes,
-        base,
-        fit,
-        found,
-        checks,
-    )
+    return LabReport(found, base, history, notes, checks)
 
 
 def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:
@@ -211,7 +235,7 @@ def physics_checks(fit: FitResult) -> list[PhysicsCheck]:
     return checks
 
 
-def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation: str) -> tuple[str, str]:
+def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation: str) -> tuple[Verdict, str]:
     """(verdict, explanation) of a model whose residuals the statistics call adequate:
     ``inconsistent_physics`` when an effect's free fit lies more than 5σ from its physical
     value, else ``needs_generic_term`` when a generic correction is in the model (what it
@@ -219,7 +243,7 @@ def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation
     inconsistent = [c for c in checks if c.deviation_sigma > INCONSISTENT_SIGMAS]
     generic = [e for e in fit.model.effects if e.generic]
     if not inconsistent and not generic:
-        return "adequate", explanation
+        return Verdict.ADEQUATE, explanation
     found = [
         f"{c.effect} ({'held at physics; its free fit gives' if c.held else 'free:'} {_values(c.parameters)}) "
         f"is {c.deviation_sigma:.1f}σ from its physical value"
@@ -230,7 +254,7 @@ def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation
         f"of its own; to find what it stands for: {e.check}"
         for e in generic
     ]
-    verdict = "inconsistent_physics" if inconsistent else "needs_generic_term"
+    verdict = Verdict.INCONSISTENT_PHYSICS if inconsistent else Verdict.NEEDS_GENERIC_TERM
     return verdict, (
         "The residuals are consistent with noise, but the physics is not: "
         + "; ".join(found)
@@ -240,11 +264,11 @@ def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation
 
 
 def _values(parameters: Iterable[FittedParameter]) -> str:
-    return ", ".join(f"{name} = {v:.4g} ± {s:.2g} {u}".rstrip() for name, v, s, u in parameters)
+    return ", ".join(p.text() for p in parameters)
 
 
 def _check_note(check: PhysicsCheck) -> str:
-    values = ", ".join(f"{name} = {v:.4g} ± {s:.2g}" for name, v, s, _ in check.parameters)
+    values = ", ".join(f"{p.name} = {p.value:.4g} ± {p.std:.2g}" for p in check.parameters)
     state = "is held at its physical value, but its free fit gives" if check.held else "is fitted free at"
     return (
         f"{check.effect} {state} {values}, {check.deviation_sigma:.1f}σ from its physical value: the "

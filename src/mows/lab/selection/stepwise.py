@@ -50,7 +50,7 @@ from mows.lab.diagnosis.physical_aliases import alias_statements
 from mows.lab.diagnosis.projections import Signature
 from mows.lab.diagnosis.verdict import Diagnosis, diagnose
 from mows.lab.model.effects import Effect, testable
-from mows.lab.model.least_squares import FitResult, FittedParameter
+from mows.lab.model.least_squares import FitResult, FittedParameter, parameter_values, parameters_dict
 from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
@@ -62,7 +62,7 @@ NONLINEAR_MARGIN = 2.0  # a refit may gain up to this × the score statistic (th
 @dataclasses.dataclass
 class HistoryStep:
     """One model of the history: ``change`` says how it came from the previous one, ``check``
-    holds the free fit [(name, value, std, unit)] of an effect added at physics."""
+    holds the free fit of an effect added at physics."""
 
     effects: list[str]  # the model's labels
     chi2_dof: float
@@ -106,10 +106,6 @@ def history_step(
         list(check),
         cv_identifiable=not (cross_validate and math.isnan(cv)),
     )
-
-
-def parameters_dict(parameters: Iterable[FittedParameter]) -> dict[str, dict[str, float | str]]:
-    return {name: {"value": v, "std": s, "unit": u} for name, v, s, u in parameters}
 
 
 def search(
@@ -164,7 +160,7 @@ def prefer_physical(
             [generic.name, form.name],
             new,
             probe,
-            {generic.name: {n: v for n, v, _, _ in fit.effect_parameters(generic.name)}},
+            {generic.name: parameter_values(fit.effect_parameters(generic.name))},
         )
         history.append(
             history_step(
@@ -196,7 +192,7 @@ def _physical_replacements(
         if len(form.parameters) > len(generic.parameters):
             continue
         new = (reduced + form).fit(fit.table, start=np.concatenate([start, np.zeros(len(form.parameters))]))
-        values = [v for _, v, _, _ in new.effect_parameters(form.name)]
+        values = [p.value for p in new.effect_parameters(form.name)]
         if new.ok and all(p.lower < v < p.upper for p, v in zip(form.parameters, values)):
             yield form, new
 

@@ -4,7 +4,7 @@ Every ring-down is the first-harmonic-balance frequency of the full potential
 (:class:`mows.physics.potential.ArcPotential`) in the applied field and gradient plus the
 environment field, at the ring-down's decaying amplitude, averaged over amplitude nodes as a
 constant-frequency fit averages it (:mod:`mows.physics.ringdown_average`). The fit of the
-constants is :mod:`mows.estimate.probe_calibration`.
+constants is :mod:`mows.estimate.calibration.fit`.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from mows.estimate.calibration_record import CalibrationError, CalibrationPoint, KnownConstants, Wiring
+from mows.estimate.calibration.constants import CalibrationError, CalibrationPoint, KnownConstants, Wiring
 from mows.physics import ringdown_average
 from mows.physics.pose import probe_axes
 from mows.physics.potential import ArcPotential
@@ -79,7 +79,7 @@ def frequencies(
     damping: float,
 ) -> np.ndarray:
     """Ring-down frequencies of every row for the constants given (module docstring of
-    :mod:`mows.estimate.probe_calibration`)."""
+    :mod:`mows.estimate.calibration.fit`)."""
     spring = f00 * known.moment_am2 / (2.0 * beta0)
     try:
         probe = Probe(

@@ -7,17 +7,18 @@ id), waits until a finished cycle's fits are in (or the caller says their time i
 then hands them to the schedule. :class:`ProbeCalibrator` takes one goal at a time, keeps each
 wiring's last complete sweep across goals (a gradient sweep of an earlier goal adds the lever
 check to a later homogeneous one) and fits the probe's constants from them
-(:func:`mows.estimate.probe_calibration.calibrate_probe`). Reading scenarios and writing the
+(:func:`mows.estimate.calibration.fit.calibrate_probe`). Reading scenarios and writing the
 probe file are the caller's business.
 """
 
 import dataclasses
+import enum
 import math
 
-from mows.estimate.calibration_record import KnownConstants, ProbeCalibration
-from mows.estimate.probe_calibration import calibrate_probe
+from mows.estimate.calibration.constants import KnownConstants, ProbeCalibration
+from mows.estimate.calibration.fit import calibrate_probe
 from mows.physics.probe import Probe
-from mows.sweep.calibration_schedule import (
+from mows.sweep.calibration.schedule import (
     GRADIENT_WIRING,
     CalibrationOutcome,
     CalibrationPlan,
@@ -131,6 +132,13 @@ class CalibrationRun:
         return self._gate(step if step.actions or step.outcome else self.schedule.fits_timed_out())
 
 
+class CalibratorState(enum.StrEnum):
+    """Whether :class:`ProbeCalibrator` runs a goal; the values are what /diagnostics shows."""
+
+    IDLE = "idle"
+    CALIBRATING = "calibrating"
+
+
 class ProbeCalibrator:
     """One goal at a time (``run`` while it lasts), the sweeps by wiring, the calibrations made."""
 
@@ -141,8 +149,8 @@ class ProbeCalibrator:
         self._sweeps: dict[str, tuple] = {}  # wiring → (points, failed) of its last complete sweep
 
     @property
-    def state(self) -> str:
-        return "idle" if self.run is None else "calibrating"
+    def state(self) -> CalibratorState:
+        return CalibratorState.IDLE if self.run is None else CalibratorState.CALIBRATING
 
     def accept(self, plan: CalibrationPlan, manual_orientation: bool = False) -> CalibrationRun:
         """The goal's run (on a stage the operator turns with ``manual_orientation``); ValueError

@@ -11,7 +11,7 @@ The schedule does no I/O, like :class:`mows.device.cycle.CycleSequencer`: it is 
 device's answers (:meth:`on_supply`, :meth:`on_fit`, :meth:`on_cycle_done`, :meth:`fits_timed_out`)
 and the user's :meth:`cancel`, and returns a :class:`Step` of actions (:class:`SetSupply`,
 :class:`RunCycle`), feedback and, at the end, the :class:`CalibrationOutcome` with the
-calibration points for :func:`mows.estimate.probe_calibration.calibrate_probe`.
+calibration points for :func:`mows.estimate.calibration.fit.calibrate_probe`.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import dataclasses
 import enum
 import math
 
-from mows.estimate.calibration_record import CalibrationPoint, Wiring
+from mows.estimate.calibration.constants import CalibrationPoint, Wiring
 
 PAPER_CURRENTS_A = (0.0, 0.5, 1.0, 1.5, 2.0, -0.5, -1.0, -1.5, -2.0)
 GRADIENT_WIRING = "gradient"  # the supply's coils anti-parallel (the lever check)
@@ -92,7 +92,9 @@ class Step:
     outcome: CalibrationOutcome | None = None
 
 
-class State(enum.Enum):
+class State(enum.StrEnum):
+    """Where the schedule is; the values are what the logs show."""
+
     IDLE = "idle"
     RAMPING = "ramping"
     CYCLING = "cycling"

@@ -126,3 +126,18 @@ def test_bad_data_give_failed_fits_per_probe_and_a_bad_list_an_error():
         fit_ringdowns(samples, SAMPLE_RATE_HZ, [lines[0], lines[0]])
     with pytest.raises(ValueError, match="probe 3: expected frequency -5.0 Hz is not positive"):
         fit_ringdowns(samples, SAMPLE_RATE_HZ, [ProbeLine(3, 0.0, -5.0)])
+
+
+def test_a_weak_line_whose_amplitude_runs_to_its_bound_still_gives_its_frequency():
+    # At θ0 = 0 only κ·θmax is well determined: a line 1/20 of its neighbour's, 3 Hz away, can
+    # send θmax to its bound with κ growing to match. θmax is then held there and not reported.
+    case = PairCase(3.0, 0.05)
+    samples = case.clean_t() + case.noise_std_t * np.random.default_rng(4).standard_normal(N_SAMPLES)
+    fits = fit_ringdowns(samples, SAMPLE_RATE_HZ, case.lines())
+    assert all(fit.ok for fit in fits)
+    weak = fits[1]
+    assert math.isnan(weak.amplitude_rad) and weak.undetermined == ("amplitude_rad",)
+    assert "ran to its bound 0.5°" in weak.message
+    for fit, truth, crb in zip(fits, case.truth(), case.crb_hz()):
+        assert abs(fit.frequency_hz - truth[0]) < 4 * crb
+        assert 0.8 < fit.frequency_std_hz / crb < 1.25  # the bound without the held θmax

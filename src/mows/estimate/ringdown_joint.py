@@ -9,8 +9,8 @@ single term) and its own κ_k; the sensor sees their sum:
 
 Estimator. Variable projection (Golub–Pereyra, Kaufman's Jacobian), as for one probe: for any
 nonlinear parameters q = (f_k, δ_k, θmax,k, φ_k) of all probes, the κ_k and B_DC of each
-channel follow by linear least squares on {g_1 … g_K, 1}, and Levenberg–Marquardt
-(scipy's MINPACK) moves q on the projected residual. Least squares is the maximum-likelihood
+channel follow by linear least squares on {g_1 … g_K, 1}, and Levenberg–Marquardt moves q on
+the projected residual, first on every D-th sample, then on all of them. Least squares is the maximum-likelihood
 estimator for white Gaussian noise, so the joint fit reaches the bound of the joint model; a fit
 of one probe on the mixed signal does not (its model has no room for the neighbour, whose line
 leaks into its frequency: tests/estimator/test_ringdown_joint.py).
@@ -24,8 +24,8 @@ it, whichever fits better; θmax,k at 0.3 rad, δ_k at the guess.
 
 The swing is about the commanded θ0 (no rest offset, as the paper's model has it): the rest
 offset's several minima (:mod:`mows.estimate.ringdown_offset`) are not searched here. θmax is
-reported only where its σ is below a third of the single-probe fit's tolerance (1°); elsewhere
-NaN, named in ``undetermined``.
+kept within the one-probe fit's bounds and reported only where its σ is below a third of that
+fit's tolerance (1°); elsewhere (or at a bound) NaN, named in ``undetermined``.
 
 Uncertainties. Per probe, ``frequency_std_hz`` from the joint covariance (JᵀJ)⁻¹·s², and
 ``frequency_crb_hz`` from the joint Fisher information with the white-noise level measured from
@@ -40,10 +40,16 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy import optimize
 
 from mows.estimate.ringdown import combine_channels, usable_window, wrapped_rad
-from mows.estimate.ringdown_problem import NONLINEAR, RingdownProblem, evaluate, scaled_inverse
+from mows.estimate.ringdown_problem import (
+    AMPLITUDE,
+    AMPLITUDE_BOUNDS_RAD,
+    NONLINEAR,
+    RingdownProblem,
+    evaluate,
+    scaled_inverse,
+)
 from mows.estimate.ringdown_start import white_noise_std
 from mows.estimate.ringdown_types import FitOptions, FitStatus, RingdownFit, failure
 from mows.physics.fluxgate import paper_pickup
@@ -82,14 +88,14 @@ class JointOptions:
     """How to fit: the channel combination (as :class:`FitOptions`), the spectral band searched
     around each expected frequency (a fraction of it), the line's height over the noise floor
     (power ratio), the fewest periods of the slowest probe, the χ²/dof above which the model is
-    rejected, and the Levenberg–Marquardt evaluation budget."""
+    rejected, and the Levenberg–Marquardt iteration budget of each stage."""
 
     channels: str = "difference"
     search_fraction: float = 0.3
     detection_snr: float = 30.0
     min_periods: float = 10.0
     max_chi2_dof: float = 25.0
-    max_evaluations: int = 400
+    max_iterations: int = 100
 
     def __post_init__(self) -> None:
         FitOptions(channels=self.channels, search_fraction=self.search_fraction)  # the same checks
@@ -332,8 +338,8 @@ def fit_ringdowns(
     # Every D-th sample first (white noise stays white, the harmonics stay below the new
     # Nyquist frequency), then the full rate from within a few σ of the optimum.
     coarse = problem.subsampled(max(1, int(fs // (16.0 * highest))))
-    step = _solve(coarse, _starting_q(coarse, starts, lines), options)
-    step = None if step is None else _solve(problem, step.q, options)
+    step = _solve(coarse, _starting_q(coarse, starts, lines), options, tol_chi2=1e-2)
+    step = None if step is None else _solve(problem, step.q, options, tol_chi2=1e-4)
     if step is None:
         return failed(FitStatus.NOT_CONVERGED, "the joint fit did not converge")
     return _summarise(problem, step, lines, options, noise, start / fs)
@@ -352,41 +358,71 @@ def _check_lines(lines: Sequence[ProbeLine]) -> None:
             )
 
 
-def _solve(problem: JointProblem, q0: np.ndarray, options: JointOptions) -> JointStep | None:
-    cache: dict[bytes, JointStep] = {}
+def _solve(problem: JointProblem, q0: np.ndarray, options: JointOptions, tol_chi2: float) -> JointStep | None:
+    """Levenberg–Marquardt on q with the linear parameters projected out; None if it does not
+    converge. Converged when the Gauss–Newton step would lower χ² by less than ``tol_chi2``.
 
-    def step_at(q: np.ndarray) -> JointStep:
-        key = q.tobytes()
-        if key not in cache:
-            cache.clear()
-            cache[key] = project(problem, q)
-        return cache[key]
+    θmax is kept within the one-probe fit's bounds (at θ0 = 0 only κ·θmax is well determined,
+    and a weak line's θmax could otherwise run to 0 with its κ to infinity): a θmax at a bound
+    that the descent pushes outwards is held there for the step (an active set).
+    """
+    low, high = np.full(q0.size, -np.inf), np.full(q0.size, np.inf)
+    low[AMPLITUDE::P], high[AMPLITUDE::P] = AMPLITUDE_BOUNDS_RAD
+    step = project(problem, np.clip(q0, low, high))
+    damping = 1e-3
+    for _ in range(options.max_iterations):
+        jacobian = _projected_jacobian(problem, step)
+        gradient = jacobian.T @ (problem.weights[:, None] * step.residual).ravel()
+        normal = jacobian.T @ jacobian
+        held = ((step.q <= low) & (gradient > 0)) | ((step.q >= high) & (gradient < 0))
+        free = np.flatnonzero(~held)
+        scale = np.sqrt(np.diag(normal)[free])
+        scale[scale == 0] = 1.0
+        scaled = normal[np.ix_(free, free)] / np.outer(scale, scale)
+        scaled_gradient = gradient[free] / scale
+        try:
+            predicted = float(scaled_gradient @ np.linalg.solve(scaled, scaled_gradient))
+            delta = -np.linalg.solve(scaled + damping * np.eye(free.size), scaled_gradient) / scale
+        except np.linalg.LinAlgError:
+            return None
+        if predicted < tol_chi2:
+            return step
+        q = step.q.copy()
+        q[free] += delta
+        trial = project(problem, np.clip(q, low, high))
+        if trial.cost < step.cost:
+            step, damping = trial, max(damping / 10.0, 1e-9)
+        else:
+            damping *= 10.0
+            if damping > 1e9:
+                return None
+    return None
 
-    def residual(q: np.ndarray) -> np.ndarray:
-        return (problem.weights[:, None] * step_at(q).residual).ravel()
 
-    result = optimize.least_squares(
-        residual,
-        q0,
-        jac=lambda q: _projected_jacobian(problem, step_at(q)),
-        method="lm",
-        x_scale="jac",
-        xtol=1e-12,
-        ftol=1e-12,
-        max_nfev=options.max_evaluations,
+def held_at_bound(q: np.ndarray) -> np.ndarray:
+    """Mask over all parameters (q, then the linear ones) of the θmax held at a bound: a number
+    the data did not give, left out of the Fisher information as the one-probe fit's active set."""
+    amplitude = np.abs(q[AMPLITUDE::P])
+    held = np.zeros(q.size, bool)
+    held[AMPLITUDE::P] = np.isclose(amplitude, AMPLITUDE_BOUNDS_RAD[0], rtol=1e-6) | np.isclose(
+        amplitude, AMPLITUDE_BOUNDS_RAD[1], rtol=1e-6
     )
-    return project(problem, result.x) if result.status > 0 else None
+    return held
 
 
 def _summarise(problem, step, lines, options, noise, start_s) -> list[RingdownFit]:
     n = problem.y.shape[1]
     fisher = fisher_information(problem, step)
+    fitted = ~np.concatenate([held_at_bound(step.q), np.zeros(fisher.shape[0] - step.q.size, bool)])
+    fisher_inv = np.full(fisher.shape, np.nan)
     try:
-        fisher_inv = scaled_inverse(fisher)
+        fisher_inv[np.ix_(fitted, fitted)] = scaled_inverse(fisher[np.ix_(fitted, fitted)])
     except np.linalg.LinAlgError:
+        fisher_inv[:] = np.nan
+    if not np.all(np.diag(fisher_inv)[fitted] > 0):  # NaN too
         message = "singular Fisher information: the lines are not separable"
         return [failure(FitStatus.NOT_CONVERGED, message, theta0_rad=x.theta0_rad, probe_id=x.probe_id) for x in lines]
-    chi2_dof = step.cost / (step.residual.size - fisher.shape[0])
+    chi2_dof = step.cost / (step.residual.size - int(fitted.sum()))
     if chi2_dof > options.max_chi2_dof:
         message = f"χ²/dof = {chi2_dof:.1f} > {options.max_chi2_dof:g}: the joint model does not describe these data"
         return [
@@ -409,15 +445,15 @@ def _probe_fit(k, line, step, covariance, fisher_inv, chi2_dof, r_squared, noise
         idx += [k_p + n_lin * c + k, k_p + n_lin * c + problem.probes]
     own = covariance[np.ix_(idx, idx)]
     f, damping, amplitude, phase = step.q[P * k : P * (k + 1)]
-    if amplitude < 0:  # θmax > 0: flipping θmax and φ by π leaves x(t) unchanged
-        amplitude, phase = -amplitude, phase + math.pi
-    amplitude_std = math.sqrt(own[2, 2]) if own[2, 2] > 0 else math.nan
+    amplitude_std = math.sqrt(own[AMPLITUDE, AMPLITUDE]) if own[AMPLITUDE, AMPLITUDE] > 0 else math.nan
     undetermined = () if amplitude_std <= AMPLITUDE_LIMIT_RAD else ("amplitude_rad",)
-    message = (
-        f"θmax not determined: σ {math.degrees(amplitude_std):.2f}° > {math.degrees(AMPLITUDE_LIMIT_RAD):.2f}°"
-        if undetermined
-        else ""
-    )
+    if math.isnan(amplitude_std):
+        message = f"θmax not determined: the fit ran to its bound {math.degrees(amplitude):.1f}°; f is unaffected"
+    elif undetermined:
+        limit = math.degrees(AMPLITUDE_LIMIT_RAD)
+        message = f"θmax not determined: σ {math.degrees(amplitude_std):.2f}° > {limit:.2f}°"
+    else:
+        message = ""
     kappa = step.coef[:, k]
     signal_power = float(np.mean(kappa**2) * np.var(step.g[k]))
     names = list(NONLINEAR)

@@ -89,7 +89,7 @@ def magnets_at(placed: Sequence[PlacedProbe], rest_angle_rad: np.ndarray) -> tup
     return moments, positions
 
 
-def _check_apart(placed: Sequence[PlacedProbe]) -> None:
+def check_apart(placed: Sequence[PlacedProbe]) -> None:
     """Refuse magnets closer than twice the sum of their levers: their swings would bring them
     within a few magnet sizes of each other, where a point dipole no longer describes them."""
     positions = [np.asarray(p.pose.magnet_position_m, float) for p in placed]
@@ -110,7 +110,7 @@ def coupled_rest(placed: Sequence[PlacedProbe], scene: FieldSource, temperature_
     angle or the iteration does not converge, and for magnets too close to pass each other."""
     if len(placed) == 0:
         raise ValueError("a scene needs at least one probe")
-    _check_apart(placed)
+    check_apart(placed)
     angles = np.zeros(len(placed))
     for iteration in range(1, MAX_ITERATIONS + 1):
         state = CoupledRest(angles, *magnets_at(placed, angles), iteration)

@@ -50,7 +50,7 @@ from mows.estimate.ringdown_problem import (
     evaluate,
     scaled_inverse,
 )
-from mows.estimate.ringdown_start import white_noise_std
+from mows.estimate.ringdown_start import spectral_peak, white_noise_std, windowed_spectrum
 from mows.estimate.ringdown_types import FitOptions, FitStatus, RingdownFit, failure
 from mows.physics.fluxgate import paper_pickup
 
@@ -90,11 +90,11 @@ class JointOptions:
     (power ratio), the fewest periods of the slowest probe, the χ²/dof above which the model is
     rejected, and the Levenberg–Marquardt iteration budget of each stage."""
 
-    channels: str = "difference"
-    search_fraction: float = 0.3
-    detection_snr: float = 30.0
-    min_periods: float = 10.0
-    max_chi2_dof: float = 25.0
+    channels: str = FitOptions.channels
+    search_fraction: float = FitOptions.search_fraction
+    detection_snr: float = FitOptions.detection_snr
+    min_periods: float = FitOptions.min_periods
+    max_chi2_dof: float = FitOptions.max_chi2_dof
     max_iterations: int = 100
 
     def __post_init__(self) -> None:
@@ -210,41 +210,28 @@ def joint_cramer_rao_hz(
 
 
 # --- the start -------------------------------------------------------------------------------
-def _strongest_line(y: np.ndarray, fs: float, lines: Sequence[ProbeLine], options: JointOptions, damping_per_s: float):
-    """(f, complex amplitude of the damped line, peak power, noise floor) of the strongest line
-    within the probes' bands of the zero-padded Hann spectrum."""
-    pad = 1 << int(math.ceil(math.log2(4 * y.size)))
-    spectrum = np.fft.rfft((y - y.mean()) * np.hanning(y.size), pad)
-    freqs = np.fft.rfftfreq(pad, 1.0 / fs)
-    power = np.abs(spectrum) ** 2
-    band = np.zeros(freqs.shape, bool)
-    for line in lines:
-        band |= np.abs(freqs - line.expected_frequency_hz) <= options.search_fraction * line.expected_frequency_hz
-    inside = np.flatnonzero(band)
-    k = int(np.clip(inside[np.argmax(power[inside])], 1, power.size - 2))
-    lp = np.log(power[k - 1 : k + 2] + 1e-300)
-    curvature = lp[0] - 2 * lp[1] + lp[2]
-    f = freqs[k] + (0.5 * (lp[0] - lp[2]) / curvature if curvature < 0 else 0.0) * fs / pad
-    t = np.arange(y.size) / fs
-    carrier = np.exp((-damping_per_s + 1j * TWO_PI * f) * t)
-    a, b = np.linalg.lstsq(np.column_stack([carrier.real, carrier.imag]), y - y.mean(), rcond=None)[0]
-    return f, complex(a, -b), power[k], float(np.median(power[1:]))
-
-
 def start_lines(y: np.ndarray, fs: float, lines: Sequence[ProbeLine], options: JointOptions) -> list[tuple]:
     """(f, φ) to start each probe from, in the order of ``lines`` (module docstring)."""
     residual = np.asarray(y, float).copy()
     guess = float(np.mean([line.damping_guess_per_s for line in lines]))
     t = np.arange(residual.size) / fs
+    pad = 1 << int(math.ceil(math.log2(4 * residual.size)))
     found: list[tuple[float, float]] = []
     floor = math.nan
     for _ in lines:
-        f, amplitude, power, median = _strongest_line(residual, fs, lines, options, guess)
-        floor = median if not found else floor  # the floor of the data, before any line is taken out
-        if not power > options.detection_snr * floor:
+        spectrum, freqs = windowed_spectrum(residual, fs, pad)
+        power = np.abs(spectrum) ** 2
+        floor = float(np.median(power[1:])) if not found else floor  # the data's, before any line is taken out
+        bands = [line.expected_frequency_hz * (1 + options.search_fraction * np.array([-1, 1])) for line in lines]
+        peaks = [spectral_peak(spectrum, power, freqs, low, high, fs / pad) for low, high in bands]
+        peak = max((p for p in peaks if p is not None), key=lambda p: p.power, default=None)
+        if peak is None or not peak.power > options.detection_snr * floor:
             break
-        found.append((f, float(np.angle(amplitude))))
-        residual -= (amplitude * np.exp((-guess + 1j * TWO_PI * f) * t)).real
+        # The line's damped sinusoid, fitted and taken out, so that the next is found beside it.
+        carrier = np.exp((-guess + 1j * TWO_PI * peak.frequency_hz) * t)
+        a, b = np.linalg.lstsq(np.column_stack([carrier.real, carrier.imag]), residual - residual.mean(), rcond=None)[0]
+        found.append((peak.frequency_hz, float(np.angle(complex(a, -b)))))
+        residual -= (complex(a, -b) * carrier).real
     return _assigned(found, lines)
 
 

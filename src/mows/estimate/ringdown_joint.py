@@ -10,10 +10,10 @@ single term) and its own κ_k; the sensor sees their sum:
 Estimator. Variable projection (Golub–Pereyra, Kaufman's Jacobian), as for one probe: for any
 nonlinear parameters q = (f_k, δ_k, θmax,k, φ_k) of all probes, the κ_k and B_DC of each
 channel follow by linear least squares on {g_1 … g_K, 1}, and Levenberg–Marquardt moves q on
-the projected residual, first on every D-th sample, then on all of them. Least squares is the maximum-likelihood
-estimator for white Gaussian noise, so the joint fit reaches the bound of the joint model; a fit
-of one probe on the mixed signal does not (its model has no room for the neighbour, whose line
-leaks into its frequency: tests/estimator/test_ringdown_joint.py).
+the projected residual, first on every D-th sample, then on all of them. Least squares is the
+maximum-likelihood estimator for white Gaussian noise, so the joint fit reaches the bound of the
+joint model; a fit of one probe on the mixed signal does not (its model has no room for the
+neighbour, whose line leaks into its frequency: tests/estimator/test_ringdown_joint.py).
 
 Start. The lines at f are found one at a time: the strongest peak of the zero-padded spectrum
 of what is left in the probes' bands, refined by Gaussian interpolation, its damped sinusoid
@@ -254,20 +254,18 @@ def _assigned(found: list[tuple[float, float]], lines: Sequence[ProbeLine]) -> l
 
 def _starting_q(problem: JointProblem, starts: list[tuple], lines: Sequence[ProbeLine]) -> np.ndarray:
     """The start of every probe, with each φ at the line's phase or a half-turn from it: every
-    combination is tried (2^K ≤ 16 projections) and the cheapest kept."""
-    best, best_cost = None, math.inf
-    for flips in range(1 << len(lines)):
-        q = np.concatenate(
+    combination is tried (2^K projections: 16 for four probes) and the cheapest kept."""
+    candidates = [
+        np.concatenate(
             [
                 [f, line.damping_guess_per_s, START_AMPLITUDE_RAD, phase + math.pi * ((flips >> k) & 1)]
                 for k, ((f, phase), line) in enumerate(zip(starts, lines))
             ]
         )
-        cost = project(problem, q, derivatives=False).cost
-        if cost < best_cost:
-            best, best_cost = q, cost
-    assert best is not None
-    return best
+        for flips in range(1 << len(lines))
+    ]
+    costs = np.array([project(problem, q, derivatives=False).cost for q in candidates])
+    return candidates[int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))]
 
 
 # --- the fit ---------------------------------------------------------------------------------

@@ -49,6 +49,13 @@ FIGURES = {
     "stream": ("baseline_generation_share", "session_share", "session_overhead_share", "session_blocks"),
     "lab": ("rows", "effects", "diagnose_s"),
     "lab_long": ("rows", "compare_s", "compare_cpu_s", "compare_peak_rss_mib", "compare_analysed_rows"),
+    "multiprobe": (
+        "fit_ms_median",
+        "joint_over_single",
+        "failures",
+        "worst_std_over_crb_10hz",
+        "sep_2hz_ratio_1_probe1_crb_over_alone",
+    ),
     "latency": LATENCY,
     "latency_tracking": LATENCY,
     "throughput": ("adaptive_s", "adaptive_ringdowns", "demo_s", "plan_ringdown_s", "tracking_hz", "tracking_std_t"),

@@ -30,13 +30,14 @@ SUITES = {
     "lab_long": ("mows.bench.lab_long", "mows lab diagnose on a 500 000-row CSV: wall time and peak memory"),
     "latency": ("mows.bench.latency", "last sample of a ring-down to its published fit, in the node graph"),
     "latency_tracking": ("mows.bench.latency_tracking", "the same in the driver's tracking mode"),
+    "multiprobe": ("mows.bench.multiprobe", "two probes in one ring-down: joint fit against the bound, 2–20 Hz apart"),
     "throughput": (
         "mows.bench.throughput",
         "device seconds to σ ≤ 20 nT, 10 µT/m: paper, default, demo and adaptive sweeps; tracking rate",
     ),
 }
 # Run when no suite is named: throughput simulates minutes of device time and is asked for by
-# name, and so is latency_tracking (a second graph run).
+# name, and so are latency_tracking (a second graph run) and multiprobe (a thousand joint fits).
 DEFAULT_SUITES = ("estimator", "simulator", "stream", "lab", "lab_long", "latency")
 # Figures of the throughput suite that --json also carries at the top level.
 THROUGHPUT_KEYS = (
@@ -62,6 +63,7 @@ QUICK: dict[str, dict[str, object]] = {
     # cycle fitted 3 of 5 (2 DATA_GAP), so one load spike could leave the run with no fit.
     "latency": {"cycles": 1, "repeats": 5, "load_duration_s": 20.0, "burner_nice": 19, "realtime_priority": 0},
     "latency_tracking": {"cycles": 2, "repeats": 5},
+    "multiprobe": {"trials": 4, "separations_hz": (2.0, 10.0), "ratios": (1.0,)},
     # above the lab's subsample of mows.cli.lab.MAX_ROWS rows, so that the subsampling runs
     "lab_long": {"rows": 5_000, "commands": ("compare",)},
     # a goal 5× looser than the default: 25× less device time

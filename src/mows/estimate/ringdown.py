@@ -233,7 +233,7 @@ def starting_point(
     return None if q0 is None else np.concatenate([q0, evaluate(problem, q0, False).coef[0]])
 
 
-def _wrapped(angle_rad: float) -> float:
+def wrapped_rad(angle_rad: float) -> float:
     """The angle in (−π, π]."""
     return float(-((math.pi - angle_rad) % TWO_PI - math.pi)) + 0.0  # + 0.0: no −0.0
 
@@ -326,7 +326,7 @@ def _offset_minima(coarse: RingdownProblem, step: Step, options: FitOptions) -> 
 
 
 def _offset_apart(q: NDArray[np.float64], other: NDArray[np.float64], options: FitOptions) -> bool:
-    return abs(_wrapped(q[4] - other[4])) > options.rest_offset_tolerance_rad / 2
+    return abs(wrapped_rad(q[4] - other[4])) > options.rest_offset_tolerance_rad / 2
 
 
 def _amplitude_apart(q: NDArray[np.float64], other: NDArray[np.float64], options: FitOptions) -> bool:
@@ -362,7 +362,7 @@ def _undetermined_removed(
         rival = next((r for r in rivals if apart(q, r, options)), None)
         what = "θmax" if name == "amplitude_rad" else "rest offset"
         if rival is not None:
-            other = abs(rival[AMPLITUDE]) if name == "amplitude_rad" else _wrapped(rival[4])
+            other = abs(rival[AMPLITUDE]) if name == "amplitude_rad" else wrapped_rad(rival[4])
             reasons.append(
                 f"{what} not determined: {math.degrees(value):.1f}° and {math.degrees(other):.1f}° fit "
                 f"within Δχ² < {RIVAL_CHI2:g}"
@@ -442,13 +442,13 @@ def _summarise(
         message=note,
         theta0_rad=float(problem.theta0 + q[4] if options.theta0_free else problem.theta0),
         theta0_free=options.theta0_free,
-        rest_offset_rad=_wrapped(q[4]) if options.rest_offset_free and not options.theta0_free else math.nan,
+        rest_offset_rad=wrapped_rad(q[4]) if options.rest_offset_free and not options.theta0_free else math.nan,
         frequency_hz=float(q[0]),
         frequency_std_hz=float(math.sqrt(covariance[0, 0])),
         frequency_crb_hz=float(math.sqrt(fisher_inv[0, 0])),
         damping_per_s=float(q[1]),
         amplitude_rad=float(amp),
-        phase_rad=_wrapped(phi),
+        phase_rad=wrapped_rad(phi),
         kappa_t=float(kappa[0]),
         offset_t=float(step.coef[0, 1]),
         chi2_dof=chi2_dof,

@@ -26,27 +26,27 @@ def white_noise_std(y: NDArray[np.float64]) -> float:
 
 
 @dataclasses.dataclass
-class _Peak:
+class Peak:
     frequency_hz: float
     power: float
     phase_rad: float
 
 
-def _windowed_spectrum(
+def windowed_spectrum(
     y: NDArray[np.float64], fs: float, pad: int
 ) -> tuple[NDArray[np.complex128], NDArray[np.floating]]:
     spectrum = np.fft.rfft((y - y.mean()) * np.hanning(y.size), pad)
     return spectrum, np.fft.rfftfreq(pad, 1.0 / fs)
 
 
-def _spectral_peak(
+def spectral_peak(
     spectrum: NDArray[np.complex128],
     power: NDArray[np.float64],
     freqs: NDArray[np.floating],
     low_hz: float,
     high_hz: float,
     bin_hz: float,
-) -> _Peak | None:
+) -> Peak | None:
     """Strongest line in [low, high], refined by Gaussian (log-parabolic) interpolation."""
     band = np.flatnonzero((freqs >= low_hz) & (freqs <= high_hz))
     if band.size < 3:
@@ -56,7 +56,7 @@ def _spectral_peak(
     lp = np.log(power[k - 1 : k + 2] + 1e-300)
     denom = lp[0] - 2 * lp[1] + lp[2]
     shift = 0.5 * (lp[0] - lp[2]) / denom if denom < 0 else 0.0
-    return _Peak(freqs[k] + shift * bin_hz, power[k], float(np.angle(spectrum[k])))
+    return Peak(freqs[k] + shift * bin_hz, power[k], float(np.angle(spectrum[k])))
 
 
 def start_candidates(
@@ -65,10 +65,10 @@ def start_candidates(
     """Starting points (f, δ, θmax, φ) from the spectrum; the best of them is refined."""
     pad = 1 << int(math.ceil(math.log2(4 * y.size)))
     lo, hi = expected_hz * (1 - options.search_fraction), expected_hz * (1 + options.search_fraction)
-    spectrum, freqs = _windowed_spectrum(y, fs, pad)
+    spectrum, freqs = windowed_spectrum(y, fs, pad)
     power = np.abs(spectrum) ** 2
-    p1 = _spectral_peak(spectrum, power, freqs, lo, hi, fs / pad)
-    p2 = _spectral_peak(spectrum, power, freqs, 2 * lo, 2 * hi, fs / pad)
+    p1 = spectral_peak(spectrum, power, freqs, lo, hi, fs / pad)
+    p2 = spectral_peak(spectrum, power, freqs, 2 * lo, 2 * hi, fs / pad)
     floor = np.median(power[1:])
     found = [p for p in (p1, p2) if p is not None and p.power > options.detection_snr * floor]
     if not found:

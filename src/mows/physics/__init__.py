@@ -5,8 +5,8 @@ current ``loops``, with their YAML form), where the probe sits
 (``pose``), the full potential U(θ) of the magnet on its lever (``potential``), the published
 frequency model and its inverses (``frequency``, Eqs. 1, 4–8, S13–S24), the amplitude a decaying
 ring-down's frequency belongs to (``ringdown_average``), the magnetometer signal (``signal``,
-``fluxgate``) and the excitation coils (``coils``); ``schema`` checks YAML mappings and
-arguments into arrays for all of them.
+``fluxgate``), the excitation coils (``coils``) and what probes sharing a scene do to each other
+(``coupling``); ``schema`` checks YAML mappings and arguments into arrays for all of them.
 
 May import: ``mows.records``, numpy, scipy, numba, pyyaml. Nothing here simulates, does I/O
 beyond reading YAML, or fits data.

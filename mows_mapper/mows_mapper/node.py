@@ -29,7 +29,7 @@ from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
 from rclpy.action import CancelResponse
 
 from mows.lab import analyse, from_sweep
-from mows.sweep.runner import CycleAnswer, CycleCall, SweepMap, SweepRunner, SweepStep
+from mows.sweep.runner import CycleAnswer, CycleRequest, SweepMap, SweepRunner, SweepStep
 from mows_mapper.messages import (
     feedback_msg,
     model_report_msg,
@@ -146,7 +146,7 @@ class MapperNode(MowsNode):
             return self._runner.on_turned()
         return self._runner.abandon(f"no confirmation of θ0 = {math.degrees(theta0_rad):g}° within {timeout_s:g} s")
 
-    async def _run_cycle(self, cycle: CycleCall) -> CycleAnswer:
+    async def _run_cycle(self, cycle: CycleRequest) -> CycleAnswer:
         if not await until(self, self._driver.ready, SERVICE_WAIT_S):
             return CycleAnswer(problem="the driver's measurement_cycle action is not available")
         answer = await self._driver.run(cycle, self._param("cycle_timeout_s"))

@@ -14,6 +14,7 @@ probe file are the caller's business.
 import dataclasses
 import math
 
+from mows.device.phases import CycleRequest
 from mows.estimate.calibration_record import KnownConstants, ProbeCalibration
 from mows.estimate.probe_calibration import calibrate_probe
 from mows.physics.probe import Probe
@@ -22,7 +23,6 @@ from mows.sweep.calibration_schedule import (
     CalibrationOutcome,
     CalibrationPlan,
     CalibrationSchedule,
-    RunCycle,
     Step,
 )
 from mows.sweep.runner import CycleAnswer, turn_prompt
@@ -89,7 +89,7 @@ class CalibrationRun:
         """With a manual stage, a cycle at another orientation than the stage's waits for a turn."""
         if not self.manual_orientation:
             return step
-        cycles = [a for a in step.actions if isinstance(a, RunCycle)]
+        cycles = [a for a in step.actions if isinstance(a, CycleRequest)]
         if not cycles or cycles[0].theta0_rad == self._stage_rad:
             return step
         self._turning = step
@@ -98,7 +98,7 @@ class CalibrationRun:
         return Step(actions=[Turn(cycles[0].theta0_rad)], feedback=[*step.feedback, prompt])
 
     def on_cycle(self, answer: CycleAnswer) -> Step | None:
-        """The driver's answer to the step's ``RunCycle``; None while that cycle's fits are due."""
+        """The driver's answer to the step's ``CycleRequest``; None while that cycle's fits are due."""
         if answer.problem:
             return self.schedule.on_cycle_done(False, answer.problem)
         self._awaited = answer

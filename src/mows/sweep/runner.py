@@ -23,6 +23,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from mows.device.phases import CycleRequest
 from mows.physics.probe import Probe
 from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal
@@ -86,16 +87,9 @@ class SweepGoal:
 
 
 @dataclasses.dataclass(frozen=True)
-class CycleCall:
-    """Ask the driver for one measurement cycle of ``repeats`` ring-downs at θ0."""
-
-    theta0_rad: float
-    repeats: int
-
-
-@dataclasses.dataclass(frozen=True)
 class CycleAnswer:
-    """What came of a :class:`CycleCall`: ``problem`` says why no cycle ran ('' when it did)."""
+    """The answer to a :class:`~mows.device.phases.CycleRequest`: the cycle that ran and how many
+    ring-downs it recorded, or ``problem``, why no cycle ran ('' when it did)."""
 
     cycle_id: int = 0
     ringdowns_recorded: int = 0
@@ -158,7 +152,7 @@ class SweepStep:
     feedback: SweepFeedback | None = None
     publish: SweepMap | None = None
     turn: float | None = None
-    run_cycle: CycleCall | None = None
+    run_cycle: CycleRequest | None = None
     decompose: Callable[[], Decomposition] | None = None
     finished: SweepOutcome | None = None
 
@@ -183,7 +177,7 @@ class SweepRunner:
         self._planner: AdaptivePlanner | None = None  # an adaptive sweep's
         self._decomposition: Decomposition | None = None
         self._decomposed_points = 0
-        self._turning: CycleCall | None = None  # the cycle that waits for the operator's turn
+        self._turning: CycleRequest | None = None  # the cycle that waits for the operator's turn
 
     # --- inputs ----------------------------------------------------------------------------
     def start(self, goal: SweepGoal, settings: SweepSettings, probe: Probe) -> None:
@@ -256,7 +250,7 @@ class SweepRunner:
             )
         return SweepStep(run_cycle=call)
 
-    def _cycle(self, step: SweepStep, call: CycleCall) -> SweepStep:
+    def _cycle(self, step: SweepStep, call: CycleRequest) -> SweepStep:
         """Run ``call`` next, after the operator's turn when the stage has no motor."""
         if self._settings.manual_orientation:
             self._turning, step.turn = call, call.theta0_rad
@@ -342,7 +336,7 @@ class SweepRunner:
                 False, f"cancelled after {self._index} of {len(self._angles)} orientations", cancelled=True
             )
             return self._end(step, outcome)
-        return self._cycle(step, CycleCall(self._angles[self._index], self._repeats))
+        return self._cycle(step, CycleRequest(self._angles[self._index], self._repeats))
 
     def _measured(self, step: SweepStep) -> SweepStep:
         self.sweeps += 1
@@ -374,7 +368,7 @@ class SweepRunner:
             return self._planned_end(step, choice)
         self._angles.append(choice.theta0_rad)
         self._repeats = choice.repeats
-        return self._cycle(step, CycleCall(choice.theta0_rad, choice.repeats))
+        return self._cycle(step, CycleRequest(choice.theta0_rad, choice.repeats))
 
     def _decomposition_due(self, planner: AdaptivePlanner) -> bool:
         """New ring-downs at enough orientations, and a prediction near the target."""

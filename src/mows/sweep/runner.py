@@ -30,6 +30,7 @@ from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal
 from mows.sweep.record import SweepPoint, SweepRecord
 
 DECOMPOSE_NEAR = 1.25  # decompose an adaptive sweep once the prediction is this close to the target
+REPEATS_PER_ANGLE_RANGE = (1, 100)  # ring-downs per orientation a goal or the settings may ask for
 
 
 @dataclasses.dataclass(frozen=True)
@@ -164,6 +165,7 @@ class SweepRunner:
         self.state = "idle"
         self.sweeps = 0  # sweeps that came as far as the decomposition
         self.last = "no sweep yet"  # the last decomposition's report
+        self.last_failure = ""  # why the last sweep failed ('' once one succeeds; a cancel leaves it)
         self._angles: list[float] = []
         self._repeats = 0
         self._index = 0
@@ -182,11 +184,14 @@ class SweepRunner:
     # --- inputs ----------------------------------------------------------------------------
     def start(self, goal: SweepGoal, settings: SweepSettings, probe: Probe) -> None:
         """Accept ``goal`` (the sweep begins at :meth:`begin`). ValueError, with the reason, when
-        it is refused: a non-finite angle, too few distinct orientations to decompose, an
-        unknown model, or a sweep still running."""
+        it is refused: a non-finite angle, too few distinct orientations to decompose, repeats
+        outside :data:`REPEATS_PER_ANGLE_RANGE`, an unknown model, or a sweep still running."""
         given = [float(a) for a in goal.theta0_rad]
         angles = given or list(np.radians(np.arange(0.0, 360.0, settings.angle_step_deg)))
         problems = []
+        low, high = REPEATS_PER_ANGLE_RANGE
+        if goal.repeats_per_angle and not low <= goal.repeats_per_angle <= high:
+            problems.append(f"repeats_per_angle={goal.repeats_per_angle!r} is outside [{low}, {high}]")
         if not all(math.isfinite(a) for a in angles):
             problems.append(f"angles {angles} are not all finite")
         elif problem := orientations_problem(angles, settings.f00_free):
@@ -237,6 +242,13 @@ class SweepRunner:
     def turn_awaited(self) -> float | None:
         """The orientation (rad) the operator has been asked to turn the stage to, if any."""
         return None if self._turning is None else self._turning.theta0_rad
+
+    def turn_timed_out(self, timeout_s: float) -> SweepStep:
+        """No confirmation of the awaited turn came within ``timeout_s``: the sweep ends, failed."""
+        if self._turning is None:
+            return SweepStep()
+        theta0_deg = math.degrees(self._turning.theta0_rad)
+        return self.abandon(f"no confirmation of θ0 = {theta0_deg:g}° within {timeout_s:g} s")
 
     def on_turned(self) -> SweepStep:
         """The operator confirmed the turn the last step asked for: its cycle (or the end, if
@@ -406,6 +418,8 @@ class SweepRunner:
 
     def _end(self, step: SweepStep, outcome: SweepOutcome) -> SweepStep:
         self.state, self._awaited, self._turning = "idle", None, None
+        if not outcome.cancelled:
+            self.last_failure = "" if outcome.ok else outcome.message
         self._fits.clear()
         step.finished = outcome
         return step

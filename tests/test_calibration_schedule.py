@@ -5,8 +5,9 @@ import math
 
 import pytest
 
+from mows.device.phases import CycleRequest
 from mows.estimate.ringdown import FitStatus, RingdownFit
-from mows.sweep.calibration.schedule import CalibrationPlan, CalibrationSchedule, RunCycle, SetSupply, State
+from mows.sweep.calibration.schedule import CalibrationPlan, CalibrationSchedule, SetSupply, State
 
 PLAN = CalibrationPlan(currents_a=(0.0, 1.0, -1.0), theta0_rad=(0.0, math.pi), repeats=2)
 
@@ -50,7 +51,7 @@ def test_the_plan_is_walked_current_by_current_and_ends_at_zero():
     schedule = CalibrationSchedule(PLAN)
     seen, outcome = run_until_end(schedule, schedule.start())
     supplies = [a.current_a for a in seen if isinstance(a, SetSupply)]
-    cycles = [a for a in seen if isinstance(a, RunCycle)]
+    cycles = [a for a in seen if isinstance(a, CycleRequest)]
     assert supplies == [0.0, 1.0, -1.0, 0.0]
     assert [c.theta0_rad for c in cycles] == [0.0, math.pi] * 3 and all(c.repeats == 2 for c in cycles)
     assert outcome.success and outcome.supply_at_zero and not outcome.cancelled
@@ -70,7 +71,7 @@ def test_feedback_counts_the_steps_and_the_ring_downs():
     schedule.on_fit(fit())
     schedule.on_fit(fit())
     step = schedule.on_cycle_done(True)
-    assert step.actions == [RunCycle(math.pi, 2)]
+    assert step.actions == [CycleRequest(math.pi, 2)]
     assert step.feedback[0].step == 2 and step.feedback[0].ringdowns == 2
 
 

@@ -143,8 +143,13 @@ CASES = [
     ("sim-repeats-negative", ["sim", "--repeats", "-2"], 2, ["--repeats"]),
     ("sim-theta-nan", ["sim", "--theta0-deg", "nan"], 2, ["--theta0-deg"]),
     # fit: durations, geometry, a bag without ring-downs, a table given as a bag
-    ("fit-settle-negative", ["fit", "{d}/bag", "--settle-s", "-1"], 2, ["--settle-s"]),
-    ("fit-settle-longer-than-ringdown", ["fit", "{d}/bag", "--settle-s", "100"], 2, ["--settle-s", "every ring-down"]),
+    ("fit-settle-negative", ["fit", "{d}/bag", "--coil-off-skip-s", "-1"], 2, ["--coil-off-skip-s"]),
+    (
+        "fit-settle-longer-than-ringdown",
+        ["fit", "{d}/bag", "--coil-off-skip-s", "100"],
+        2,
+        ["--coil-off-skip-s", "every ring-down"],
+    ),
     ("fit-negative-spacing", ["fit", "{d}/bag", "--sensor-spacing-m", "-0.01"], 2, ["--sensor-spacing-m"]),
     ("fit-60-m-distance", ["fit", "{d}/bag", "--sensor-distance-m", "60"], 2, ["--sensor-distance-m", "1 m"]),
     ("fit-no-such-topic", ["fit", "{d}/bag", "--raw-topic", "/nope"], 2, ["no ring-down", "/nope"]),

@@ -23,7 +23,7 @@ from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
 CAP_A = 10.0
-FAST = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.2, repeats=2, tuning_steps=2, settle_s=0.2)
+FAST = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.2, repeats=2, tuning_steps=2, turn_settle_s=0.2)
 MAX_STEPS = 100_000  # bound for a cycle that never ends (a bug), not a timing
 
 
@@ -119,7 +119,7 @@ def test_the_duty_cycle_limit_stretches_the_gaps():
         gap_s=0.0,
         repeats=3,
         tuning_steps=0,
-        settle_s=0.2,
+        turn_settle_s=0.2,
         max_duty_cycle=0.3,
         duty_window_s=2.0,
     )
@@ -299,7 +299,7 @@ def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a,
         gap_s=0.0,
         repeats=repeats,
         tuning_steps=tuning,
-        settle_s=0.0,
+        turn_settle_s=0.0,
         max_duty_cycle=1.0,
     )
     sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0, fit=fit_ringdown)
@@ -397,7 +397,7 @@ def test_a_stop_on_a_supply_never_set_raises_no_ramping_flag():
 
 def test_a_cycle_drives_at_the_frequency_it_is_asked_for():
     session = session_on_simulator(
-        CycleSettings(excite_s=0.1, ringdown_s=0.2, gap_s=0.0, repeats=1, tuning_steps=0, settle_s=0.0)
+        CycleSettings(excite_s=0.1, ringdown_s=0.2, gap_s=0.0, repeats=1, tuning_steps=0, turn_settle_s=0.0)
     )
     (outcome,), events = run(session, CycleRequest(0.0, frequency_hz=112.9))
     assert outcome.success, outcome.message

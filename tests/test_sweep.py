@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mows.physics.field import UniformField, anti_helmholtz_pair
-from mows.physics.frequency import sweep_shift_hz
+from mows.physics.frequency import PublishedSweep
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
@@ -56,7 +56,7 @@ def test_published_model_overstates_an_axial_gradient_two_and_fivefold(gradient_
 
 def test_published_model_inverts_its_own_sweep():
     field, gradient = (35e-6, -8e-6), (2e-3, 1.5e-3, -4e-3)
-    shift = sweep_shift_hz(THETA0, field, gradient, P.f00_hz, P.spring_nm_per_rad, P.moment_am2, P.lever_m)
+    shift = PublishedSweep(field, gradient, P.f00_hz, P.spring_nm_per_rad, P.moment_am2, P.lever_m).shift_hz(THETA0)
     d = decompose(THETA0, shift, np.full(THETA0.size, STD_HZ), P, P.f00_hz, model="published")
     np.testing.assert_allclose(d.field_t, field, rtol=1e-6)
     np.testing.assert_allclose(d.gradient_t_per_m, gradient, rtol=1e-5, atol=1e-9)
@@ -123,7 +123,7 @@ def test_a_sweep_needs_one_distinct_orientation_per_unknown(f00_free):
     angles = np.radians(10.0 + 360.0 / needed * np.arange(needed))
     assert rank(angles[:5]) == 5 and rank(angles[:4]) == 4
     field, gradient = (35e-6, -8e-6), (2e-3, 1.5e-3, -4e-3)
-    shift = sweep_shift_hz(angles, field, gradient, P.f00_hz, P.spring_nm_per_rad, P.moment_am2, P.lever_m)
+    shift = PublishedSweep(field, gradient, P.f00_hz, P.spring_nm_per_rad, P.moment_am2, P.lever_m).shift_hz(angles)
     std = np.full(needed, STD_HZ)
     enough = decompose(angles, shift, std, P, P.f00_hz, model="published", f00_free=f00_free)
     assert enough.ok

@@ -20,7 +20,7 @@ from mows.sim.scenario import load_scenario
 from mows.sweep.fast_cycle import plan_tracking, ringdown_std_model, tracking_plan
 from test_cycle import session_on_simulator
 
-DUTY = CycleSettings(max_duty_cycle=0.2, duty_window_s=2.0, settle_s=0.2)  # tighter than the kicks want
+DUTY = CycleSettings(max_duty_cycle=0.2, duty_window_s=2.0, turn_settle_s=0.2)  # tighter than the kicks want
 CLIPPING_RANGE_T = 0.2e-6  # a near sensor this narrow clips the first swings of a ring-down from the stop
 
 
@@ -52,7 +52,7 @@ def clipped():
     pair = scenario.sensors.pair
     near = dataclasses.replace(pair.sensors[0], range_t=CLIPPING_RANGE_T)
     sensors = dataclasses.replace(scenario.sensors, pair=dataclasses.replace(pair, sensors=(near, pair.sensors[1])))
-    return run_tracking(scenario.replace(sensors=sensors), CycleSettings(settle_s=0.2), 12)
+    return run_tracking(scenario.replace(sensors=sensors), CycleSettings(turn_settle_s=0.2), 12)
 
 
 def test_every_tracking_fit_lies_where_the_coils_were_off(tracked):
@@ -96,17 +96,19 @@ def test_tracking_is_off_until_started_and_a_failed_cycle_ends_it():
     assert not loop.on and loop.next_request(CycleSettings()) is None
     loop.start(TrackingSettings(0.3, CAP_A, 0.05, 0.2))
     first = loop.next_request(CycleSettings())
-    assert first.theta0_rad == 0.3 and first.settings.settle_s == CycleSettings().settle_s  # turns and settles
+    assert (
+        first.theta0_rad == 0.3 and first.settings.turn_settle_s == CycleSettings().turn_settle_s
+    )  # turns and settles
     assert first.settings.tuning_steps == 0 and first.settings.gap_s == 0.0
     loop.on_outcome(CycleOutcome(True, "", 1, 110.0, first.settings.repeats))
-    assert loop.next_request(CycleSettings()).settings.settle_s == 0.0  # the stage has not moved
+    assert loop.next_request(CycleSettings()).settings.turn_settle_s == 0.0  # the stage has not moved
     loop.on_outcome(CycleOutcome(False, "emergency stop: test", 2, 110.0, 0))
     assert not loop.on and "emergency stop" in loop.stopped_reason
     assert loop.next_request(CycleSettings()) is None
 
 
 def tracking_session(current_a=CAP_A):
-    session = session_on_simulator(CycleSettings(settle_s=0.0))
+    session = session_on_simulator(CycleSettings(turn_settle_s=0.0))
     session.set_tracking(TrackingSettings(0.0, current_a, 0.05, 0.2))
     return session
 

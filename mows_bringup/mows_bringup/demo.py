@@ -45,7 +45,7 @@ from mows_mapper.messages import sweep_point
 from mows_ros.process import EXIT_BAD_PARAMETER
 from mows_ros.qos import MAP_QOS, RESULT_QOS, STREAM_QOS
 
-DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_SETTLE_S = 10.0, 0.5, 0.5  # the driver's defaults
+DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_TURN_SETTLE_S = 10.0, 0.5, 0.5  # the driver's defaults
 
 
 def parse_arguments(argv):
@@ -137,7 +137,7 @@ def write_parameters(args, directory: pathlib.Path, probe_path, scene_path) -> p
             gap_s=plan.gap_s,
             tuning_steps=plan.tuning_steps,
         )
-        mapper.update(repeat_s=plan.cycle_s, turn_s=DRIVER_SETTLE_S)
+        mapper.update(repeat_s=plan.cycle_s, turn_s=DRIVER_TURN_SETTLE_S)
     path = directory / "demo_parameters.yaml"
     path.write_text(
         yaml.safe_dump(
@@ -165,7 +165,7 @@ def paper_protocol_s(orientations: int = 12) -> float:
     """Device time of one map by the paper's protocol on this device: per orientation the
     driver's 0.5 s settling, two tuning excitations and five ring-downs (0.5 s drive, 60
     periods of ring-down each) with 10 s gaps between them."""
-    return orientations * (DRIVER_SETTLE_S + 7 * (0.5 + 60.0 / 112.5) + 6 * 10.0)
+    return orientations * (DRIVER_TURN_SETTLE_S + 7 * (0.5 + 60.0 / 112.5) + 6 * 10.0)
 
 
 def main(argv=None) -> int:

@@ -36,7 +36,7 @@ from pathlib import Path
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
 from mows_bringup.lifecycle import BringUpError, bring_up
-from mows_ros.params import nearest_hint, ros_argument_values
+from mows_ros.params import nearest_hint, renamed_to, ros_argument_values, unknown_name_hint
 from mows_ros.process import EXIT_BAD_PARAMETER, arguments_problem
 
 STOP_TIMEOUT_S = 10.0  # a node still running this long after SIGINT is aborted
@@ -85,20 +85,27 @@ def parameter_rule_problem(rule: str) -> str | None:
         return None  # a fully qualified node name: rcl matches it, the node checks the name
     tables = {node.name: importlib.import_module(f"{node.package}.parameters").PARAMETERS for node in NODES}
     if not colon:
-        owners = [n for n, table in tables.items() if any(spec.name == name for spec in table)]
-        if not owners:
-            everyone = sorted({spec.name for table in tables.values() for spec in table})
-            return (
-                f"-p {rule}: no node has a parameter {name!r}: {nearest_hint(name, everyone, 'see mows-graph --help')}"
-            )
-        forms = " or ".join(f"-p {owner}:{rule}" for owner in owners)
-        return f"-p {rule} names no node, and every node would get it: give it as {forms}"
+        return unprefixed_rule_problem(rule, name, tables)
     if prefix not in names:
         return f"-p {rule}: no node is called {prefix!r}: {nearest_hint(prefix, names, 'the nodes')}"
-    known = [spec.name for spec in tables[prefix]]
-    if name not in known:
-        return f"-p {rule}: the {prefix} has no parameter {name!r}: {nearest_hint(name, known)}"
+    if not any(spec.name == name for spec in tables[prefix]):
+        return f"-p {rule}: the {prefix} has no parameter {name!r}: {unknown_name_hint(name, tables[prefix])}"
     return None
+
+
+def unprefixed_rule_problem(rule: str, name: str, tables: dict) -> str:
+    """Why ``-p rule`` without a node's prefix is refused: the rules to give instead (the new
+    names of a renamed parameter), or the nearest name of any node's."""
+    value = rule.partition(":=")[2]
+    owners = [f"{n}:{name}" for n, table in tables.items() if any(spec.name == name for spec in table)]
+    if owners:
+        forms = " or ".join(f"-p {owner}:={value}" for owner in owners)
+        return f"-p {rule} names no node, and every node would get it: give it as {forms}"
+    renamed = [f"{n}:{spec.name}" for n, table in tables.items() if (spec := renamed_to(name, table)) is not None]
+    if renamed:
+        return f"-p {rule}: {name} was renamed: give it as " + " or ".join(f"-p {r}:={value}" for r in renamed)
+    everyone = sorted({spec.name for table in tables.values() for spec in table})
+    return f"-p {rule}: no node has a parameter {name!r}: {nearest_hint(name, everyone, 'see mows-graph --help')}"
 
 
 def ros_arguments_problem(ros_args: list[str]) -> str | None:

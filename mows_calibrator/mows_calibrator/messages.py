@@ -6,7 +6,7 @@ from mows_msgs.action import CalibrateProbe
 from mows_msgs.msg import RingdownFit
 
 from mows.estimate.calibration.constants import ProbeCalibration
-from mows.estimate.ringdown import SETTLE_S, FitStatus
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitStatus
 from mows.estimate.ringdown import RingdownFit as Fit
 from mows.sweep.calibration.schedule import CalibrationOutcome, Feedback
 
@@ -24,7 +24,7 @@ FIT_FIELDS = (
 
 def fit_of(msg: RingdownFit) -> Fit:
     """The estimator's fit as the core's result; ValueError for a status the core does not know."""
-    return Fit(status=FitStatus(msg.status), start_offset_s=SETTLE_S, **{n: getattr(msg, n) for n in FIT_FIELDS})
+    return Fit(status=FitStatus(msg.status), start_offset_s=COIL_OFF_SKIP_S, **{n: getattr(msg, n) for n in FIT_FIELDS})
 
 
 def feedback_msg(feedback: Feedback) -> CalibrateProbe.Feedback:

@@ -28,10 +28,10 @@ from mows_msgs.msg import RingdownFit
 from mows_msgs.srv import SetFieldCurrent
 from rclpy.action import CancelResponse
 
+from mows.device.phases import CycleRequest
 from mows.estimate.calibration.fit import CalibrationError
 from mows.sim.scenario import load_scenario
 from mows.sweep.calibration.run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
-from mows.sweep.calibration.schedule import RunCycle as Cycle
 from mows_calibrator.messages import calibrated, feedback_msg, fit_of, result_msg, supply_answer
 from mows_calibrator.parameters import PARAMETERS, bench_of
 from mows_ros.awaitables import call
@@ -127,7 +127,7 @@ class CalibratorNode(MowsNode):
             if await self._operator.confirmed(timeout_s, cancelled):
                 return step if cancelled() else run.on_turned()  # a cancel is taken at the loop's top
             return run.cancel(f"no confirmation of θ0 = {math.degrees(action.theta0_rad):g}° within {timeout_s:g} s")
-        if isinstance(action, Cycle):
+        if isinstance(action, CycleRequest):
             answered = run.on_cycle(await self._driver.run(action, self._param("cycle_timeout_s")))
             return answered or await self._driver.fits(self._param("fit_timeout_s"), run.fits_time_up)
         request = SetFieldCurrent.Request(current_a=float(action.current_a))
@@ -143,7 +143,7 @@ class CalibratorNode(MowsNode):
             goal_handle.abort()
             return result
         self._calibrator.keep(outcome)
-        path = goal_handle.request.probe_file or self._param("probe_file")
+        path = goal_handle.request.probe_output_file or self._param("probe_output_file")
         try:
             calibration = self._calibrate(path)
         except (CalibrationError, ValueError, OSError) as error:

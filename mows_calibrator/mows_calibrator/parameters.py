@@ -47,7 +47,12 @@ PARAMETERS = (
         "probe YAML giving the magnet's moment, mass and the housing stop ('' the paper's)",
         check=nominal_probe_problem,
     ),
-    ParamSpec("probe_file", "calibrated_probe.yaml", "where a goal without probe_file writes the calibrated probe"),
+    ParamSpec(
+        "probe_output_file",
+        "calibrated_probe.yaml",
+        "where a goal without probe_output_file writes the calibrated probe",
+        formerly=("probe_file",),
+    ),
     ParamSpec("hardware_id", "", "written to the probe file ('' the scenario's name)"),
     ParamSpec("currents_a", list(PAPER_CURRENTS_A), "supply currents of a goal that lists none, A"),
     ParamSpec("cycle_timeout_s", 300.0, "longest wait for the driver's cycle, s", range=(1.0, 3600.0)),

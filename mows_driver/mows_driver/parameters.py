@@ -167,7 +167,7 @@ PARAMETERS = (
     ParamSpec("gap_s", 1.0, "pause between a ring-down and the next excitation, s", range=(0.0, 600.0)),
     ParamSpec("repeats", 3, "recorded ring-downs per cycle", range=(1, 1000)),
     ParamSpec("tuning_steps", 2, "frequency-tuning excitations before the recorded ones", range=(0, 10)),
-    ParamSpec("settle_s", 0.5, "wait after turning the probe, s", range=(0.0, 60.0)),
+    ParamSpec("turn_settle_s", 0.5, "wait after turning the probe, s", range=(0.0, 60.0), formerly=("settle_s",)),
     ParamSpec("max_duty_cycle", 0.5, "largest share of any duty_window_s with the coils on", range=(0.01, 1.0)),
     ParamSpec("duty_window_s", 10.0, "window of the duty-cycle limit, s", range=(1.0, 3600.0)),
     ParamSpec(
@@ -199,7 +199,7 @@ CYCLE_PARAMETERS = (
     "gap_s",
     "repeats",
     "tuning_steps",
-    "settle_s",
+    "turn_settle_s",
     "max_duty_cycle",
     "duty_window_s",
 )

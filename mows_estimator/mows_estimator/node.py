@@ -5,7 +5,7 @@ namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock,
 QoS) and ``/mows/excitation`` (ExcitationState). Publishes, per recorded ring-down,
 ``/mows/ringdown`` (RingdownFit, always, with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
 ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). Service
-``/estimator/calibrate`` (Calibrate; ``/mows/estimator/calibrate``, the previous release's name,
+``/estimator/calibrate`` (CalibrateF00; ``/mows/estimator/calibrate``, the previous release's name,
 is served too for one release) sets f00 from the next ring-downs in a known field.
 The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` and ``mows.estimate.axis``.
 """
@@ -13,7 +13,7 @@ The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` 
 import time
 
 from mows_msgs.msg import ExcitationState, FieldEstimate, MagnetometerBlock, RingdownFit
-from mows_msgs.srv import Calibrate
+from mows_msgs.srv import CalibrateF00
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.parameter import Parameter
 from rclpy.task import Future
@@ -57,7 +57,7 @@ class EstimatorNode(MowsNode):
         # a mutually exclusive one a second request would wait instead of being refused.
         group = ReentrantCallbackGroup()
         for name in CALIBRATE_SERVICES:
-            self.create_service(Calibrate, name, self._on_calibrate, callback_group=group)
+            self.create_service(CalibrateF00, name, self._on_calibrate, callback_group=group)
 
     def configure(self) -> None:
         # Compile the fit (or load it from numba's cache) now, not on the first real ring-down.
@@ -105,7 +105,7 @@ class EstimatorNode(MowsNode):
             self.get_logger().warn(f"cycle {window.cycle_id} repeat {window.repeat_index}: {fit.report()}")
 
     # --- calibration ------------------------------------------------------------------------
-    async def _on_calibrate(self, request: Calibrate.Request, response: Calibrate.Response):
+    async def _on_calibrate(self, request: CalibrateF00.Request, response: CalibrateF00.Response):
         """f00 from the next ring-downs (:class:`mows.estimate.calibration.f00.F00Calibration`)."""
         if (inactive := self.inactive_reason()) is not None:
             response.success, response.message = False, inactive

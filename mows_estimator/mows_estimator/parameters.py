@@ -2,7 +2,7 @@
 
 import functools
 
-from mows.estimate.ringdown import SETTLE_S, FitOptions
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.stream import FitSettings
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import Probe
@@ -37,7 +37,13 @@ PARAMETERS = (
         range=(0.005, 2.0),
     ),
     ParamSpec("sensor_spacing_m", PAPER_SPACING_M, "spacing of the two fluxgates, m", range=(0.001, 2.0)),
-    ParamSpec("settle_s", SETTLE_S, "samples right after coil-off that are skipped, s", range=(0.0, 0.1)),
+    ParamSpec(
+        "coil_off_skip_s",
+        COIL_OFF_SKIP_S,
+        "samples right after coil-off that are skipped, s",
+        range=(0.0, 0.1),
+        formerly=("settle_s",),
+    ),
     ParamSpec("min_periods", 10.0, "shortest usable ring-down, in periods", range=(2.0, 1000.0)),
     ParamSpec("max_chi2_dof", 25.0, "above this χ²/dof a fit is refused (BAD_FIT)", range=(1.0, 1e6)),
     ParamSpec("buffer_s", 5.0, "seconds of raw samples kept to assemble ring-downs", range=(0.5, 60.0), read_only=True),
@@ -64,5 +70,5 @@ def fit_settings(values: dict, probe: Probe) -> FitSettings:
     """What the parameters ask of each ring-down's fit and inversion; f00 = 0 is the probe's."""
     f00_hz = values["f00_hz"] if values["f00_hz"] > 0 else probe.f00_hz
     return FitSettings(
-        probe, functools.partial(fit_options, values, probe), values["settle_s"], f00_hz, values["f00_std_hz"]
+        probe, functools.partial(fit_options, values, probe), values["coil_off_skip_s"], f00_hz, values["f00_std_hz"]
     )

@@ -21,7 +21,6 @@ diagnostics are served meanwhile.
 """
 
 import dataclasses
-import math
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import RotationSweep
@@ -29,7 +28,7 @@ from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
 from rclpy.action import CancelResponse
 
 from mows.lab import analyse, from_sweep
-from mows.sweep.runner import CycleAnswer, CycleCall, SweepMap, SweepRunner, SweepStep
+from mows.sweep.runner import CycleAnswer, CycleRequest, SweepMap, SweepRunner, SweepStep
 from mows_mapper.messages import (
     feedback_msg,
     model_report_msg,
@@ -46,7 +45,7 @@ from mows_ros.diagnostics import Health
 from mows_ros.goals import action_servers
 from mows_ros.node import MowsNode
 from mows_ros.operator import OperatorTurns
-from mows_ros.params import parameter_values, spec_named
+from mows_ros.params import parameter_values
 from mows_ros.probe import probe_of
 from mows_ros.process import run_node
 from mows_ros.qos import MAP_QOS
@@ -63,7 +62,6 @@ class MapperNode(MowsNode):
         self._driver = DriverCycles(self, self._on_fit)
         self._sweep_pub = self.create_publisher(SweepDecomposition, "mows/sweep", MAP_QOS)
         self._report_pub = self.create_publisher(ModelReport, "mows/model_report", MAP_QOS)
-        self._failure = ""  # why the last sweep failed ('' once one succeeds)
         self._servers = action_servers(self, RotationSweep, ACTIONS, self._execute, self._cancel, self._driver.group)
         self._operator = OperatorTurns(self, "~/confirm_orientation", lambda: self._runner.turn_awaited)
 
@@ -78,12 +76,6 @@ class MapperNode(MowsNode):
         """Why ``goal`` is refused, or None when the sweep starts (the runner is busy from here)."""
         if (inactive := self.inactive_reason()) is not None:
             return inactive
-        if goal.repeats_per_angle and (
-            problem := spec_named(PARAMETERS, "repeats_per_angle").request_problem(
-                goal.repeats_per_angle, "repeats_per_angle"
-            )
-        ):
-            return problem
         try:
             settings = sweep_settings(parameter_values(self, PARAMETERS))
             self._runner.start(sweep_goal(goal), settings, probe_of(self._param("probe_file")))
@@ -121,17 +113,15 @@ class MapperNode(MowsNode):
         if outcome.cancelled:
             goal_handle.canceled()
         elif outcome.ok:
-            self._failure = ""
             goal_handle.succeed()
         else:
-            self._failure = outcome.message
             self.get_logger().warn(f"sweep aborted: {outcome.message}")
             goal_handle.abort()
         return RotationSweep.Result(success=outcome.ok, message=outcome.message, decomposition=decomposition)
 
     async def _advance(self, step: SweepStep) -> SweepStep:
         if step.turn is not None:
-            return await self._turned(step.turn)
+            return await self._turned()
         if step.run_cycle is not None:
             return self._runner.on_cycle(await self._run_cycle(step.run_cycle))
         if step.decompose is not None:
@@ -139,14 +129,14 @@ class MapperNode(MowsNode):
         # The cycle's fits are due: the step once they are in, or at fit_timeout_s.
         return await self._driver.fits(self._param("fit_timeout_s"), self._runner.fits_time_up)
 
-    async def _turned(self, theta0_rad: float) -> SweepStep:
+    async def _turned(self) -> SweepStep:
         """The operator's confirmation (or a cancel) goes on with the sweep; silence ends it."""
         timeout_s = self._param("confirm_timeout_s")
         if await self._operator.confirmed(timeout_s, self._runner.cancelled):
             return self._runner.on_turned()
-        return self._runner.abandon(f"no confirmation of θ0 = {math.degrees(theta0_rad):g}° within {timeout_s:g} s")
+        return self._runner.turn_timed_out(timeout_s)
 
-    async def _run_cycle(self, cycle: CycleCall) -> CycleAnswer:
+    async def _run_cycle(self, cycle: CycleRequest) -> CycleAnswer:
         if not await until(self, self._driver.ready, SERVICE_WAIT_S):
             return CycleAnswer(problem="the driver's measurement_cycle action is not available")
         answer = await self._driver.run(cycle, self._param("cycle_timeout_s"))
@@ -168,9 +158,10 @@ class MapperNode(MowsNode):
                 self._report_pub.publish(model_report_msg(report, msg.header, sweep.sweep_id))
 
     def health(self) -> Health:
-        values = {"state": self._runner.state, "sweeps": self._runner.sweeps, "last_failure": self._failure}
-        if self._failure:
-            return Health(DiagnosticStatus.WARN, f"the last sweep failed: {self._failure}", values)
+        failure = self._runner.last_failure
+        values = {"state": self._runner.state, "sweeps": self._runner.sweeps, "last_failure": failure}
+        if failure:
+            return Health(DiagnosticStatus.WARN, f"the last sweep failed: {failure}", values)
         return Health(DiagnosticStatus.OK, self._runner.last, values)
 
 

@@ -2,7 +2,7 @@
 
 from mows.lab import reference_at
 from mows.sweep.decompose import MODELS
-from mows.sweep.runner import SweepSettings
+from mows.sweep.runner import REPEATS_PER_ANGLE_RANGE, SweepSettings
 from mows_ros import operator
 from mows_ros.params import ParamSpec
 from mows_ros.probe import PROBE_FILE
@@ -19,7 +19,7 @@ def reference_problem(name: str) -> str | None:
 
 
 PARAMETERS = (
-    ParamSpec("repeats_per_angle", 5, "ring-downs per orientation when the goal says 0", range=(1, 100)),
+    ParamSpec("repeats_per_angle", 5, "ring-downs per orientation when the goal says 0", range=REPEATS_PER_ANGLE_RANGE),
     ParamSpec("angle_step_deg", 30.0, "orientation step when the goal lists no angles, deg", range=(1.0, 180.0)),
     ParamSpec("model", "first_principles", "decomposition model when the goal names none", choices=MODELS),
     ParamSpec("f00_free", False, "fit the zero-field frequency in the decomposition (Gs is then undetermined)"),

@@ -1,8 +1,9 @@
 """A node's way to the driver's measurement cycles, shared by the mapper and the calibrator:
-goals of the driver's MeasurementCycle action answered as the core's
-:class:`mows.sweep.runner.CycleAnswer`, a running cycle cancelled when the caller gives up on
-it, and the ring-down fits of ``/mows/ringdown`` handed to the node, whose answer to each (the
-core's next step, or None) resumes the coroutine that waits for a cycle's fits."""
+the core's :class:`mows.device.phases.CycleRequest` as a goal of the driver's MeasurementCycle
+action, answered as the core's :class:`mows.sweep.runner.CycleAnswer`; a running cycle
+cancelled when the caller gives up on it; and the ring-down fits of ``/mows/ringdown`` handed
+to the node, whose answer to each (the core's next step, or None) resumes the coroutine that
+waits for a cycle's fits."""
 
 from collections.abc import Callable
 
@@ -12,6 +13,7 @@ from rclpy.action import ActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 
+from mows.device.phases import CycleRequest
 from mows.sweep.runner import CycleAnswer
 from mows_ros.awaitables import Delivery, until, within
 from mows_ros.qos import RESULT_QOS
@@ -20,12 +22,11 @@ CYCLE_ACTION = "driver/measurement_cycle"  # the driver's, in the caller's names
 GOAL_ANSWER_S = 10.0  # longest wait for the driver to accept a goal (it answers in milliseconds)
 
 
-def cycle_goal(action) -> MeasurementCycle.Goal:
-    """A cycle of ``action.repeats`` ring-downs at ``action.theta0_rad``; tuning steps and gap
-    are the driver's parameters (−1)."""
-    return MeasurementCycle.Goal(
-        theta0_rad=float(action.theta0_rad), repeats=int(action.repeats), tuning_steps=-1, gap_s=-1.0
-    )
+def cycle_goal(request: CycleRequest) -> MeasurementCycle.Goal:
+    """A cycle of ``request.repeats`` ring-downs at ``request.theta0_rad``; tuning steps, gap
+    and repeats the request leaves open (None) are the driver's parameters (−1)."""
+    repeats = -1 if request.repeats is None else int(request.repeats)
+    return MeasurementCycle.Goal(theta0_rad=float(request.theta0_rad), repeats=repeats, tuning_steps=-1, gap_s=-1.0)
 
 
 def cycle_answer(result: MeasurementCycle.Result) -> CycleAnswer:
@@ -55,12 +56,12 @@ class DriverCycles:
         """Whether the driver's measurement-cycle action is there."""
         return self._client.server_is_ready()
 
-    async def run(self, action, timeout_s: float) -> CycleAnswer:
-        """The driver's answer to a cycle of ``action``: waiting up to ``timeout_s`` for the
+    async def run(self, request: CycleRequest, timeout_s: float) -> CycleAnswer:
+        """The driver's answer to ``request``: waiting up to ``timeout_s`` for the
         action to appear and again for the cycle, which is cancelled when it takes longer."""
         if not await until(self._node, self.ready, timeout_s):
             return CycleAnswer(problem=f"the driver's {CYCLE_ACTION} action did not appear within {timeout_s:g} s")
-        sent = self._client.send_goal_async(cycle_goal(action))
+        sent = self._client.send_goal_async(cycle_goal(request))
         if not await within(self._node, sent, GOAL_ANSWER_S):
             return CycleAnswer(problem=f"the driver did not answer the cycle goal within {GOAL_ANSWER_S:g} s")
         self._running = handle = sent.result()

@@ -7,6 +7,10 @@ parameter, its value and what is allowed. A parameter given to the node (``-p na
 or a parameter file) that the table does not have stops it at start-up with the nearest valid
 name (:class:`UnknownParameterError`): rclpy, with ``allow_undeclared_parameters`` off, keeps
 such an override unused and silent, and the node would run on its default.
+
+A renamed parameter keeps its old name for one release in its row (``ParamSpec.formerly``):
+the old name is refused wherever it is set (``-p``, a parameter file, ``ros2 param set``,
+mows-graph) with the new name in the reason (:func:`unknown_name_hint`), never taken silently.
 """
 
 import difflib
@@ -44,6 +48,7 @@ class ParamSpec:
     choices: tuple[str, ...] = ()  # allowed values of a string parameter
     read_only: bool = False
     check: Callable[[Value], str | None] | None = None  # why a value is refused, beyond range and choices
+    formerly: tuple[str, ...] = ()  # its names of the previous release: refused, with this name as the hint
 
     def descriptor(self) -> ParameterDescriptor:
         descriptor = ParameterDescriptor(name=self.name, description=self.description, read_only=self.read_only)
@@ -103,9 +108,22 @@ def nearest_hint(name: str, known: Sequence[str], what: str = "this node's param
     return f"did you mean {nearest[0]}?" if nearest else f"{what}: {', '.join(known)}"
 
 
+def renamed_to(name: str, table: Sequence[ParamSpec]) -> ParamSpec | None:
+    """The row of ``table`` that was called ``name`` in the previous release, if any."""
+    return next((spec for spec in table if name in spec.formerly), None)
+
+
+def unknown_name_hint(name: str, table: Sequence[ParamSpec]) -> str:
+    """What to set instead of ``name``, which ``table`` does not have: its new name when it was
+    renamed, else the nearest name (:func:`nearest_hint`)."""
+    if (spec := renamed_to(name, table)) is not None:
+        return f"renamed {spec.name} ({spec.description}): set {spec.name}"
+    return nearest_hint(name, [spec.name for spec in table])
+
+
 def unknown_parameter(node: Node, name: str, table: Sequence[ParamSpec]) -> str:
-    """The refusal of a parameter ``name`` that ``node`` does not have, with the nearest it has."""
-    return f"{node.get_name()}: unknown parameter {name!r}: {nearest_hint(name, [spec.name for spec in table])}"
+    """The refusal of a parameter ``name`` that ``node`` does not have, with what to set instead."""
+    return f"{node.get_name()}: unknown parameter {name!r}: {unknown_name_hint(name, table)}"
 
 
 def refuse_unknown_overrides(node: Node, table: Sequence[ParamSpec]) -> None:

@@ -8,7 +8,7 @@ import dataclasses
 from collections.abc import Callable
 
 from mows.device.phases import CycleRequest, Phase
-from mows.estimate.ringdown import SETTLE_S, FitOptions
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.sweep.calibration.run import CalibrationRun, Turn
 from mows.sweep.record import SweepPoint
@@ -55,7 +55,9 @@ class BenchRig:
                 segments += self.assembler.announce(window)
         probe, pair = self.scenario.probe, self.scenario.sensors.pair
         return [
-            fit_segment(s, FitOptions.lever_aware(pair, probe, s.window.theta0_rad), SETTLE_S, probe.damping_per_s)
+            fit_segment(
+                s, FitOptions.lever_aware(pair, probe, s.window.theta0_rad), COIL_OFF_SKIP_S, probe.damping_per_s
+            )
             for s in segments
         ]
 

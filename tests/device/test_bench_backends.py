@@ -36,7 +36,7 @@ from mows.records.samples import SampleBlock
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
-FAST = CycleSettings(excite_s=0.5, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, settle_s=0.1)
+FAST = CycleSettings(excite_s=0.5, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, turn_settle_s=0.1)
 MAX_POLLS = 10_000  # bound for a cycle that never ends (a bug), not a timing
 # The tests fit tuning ring-downs between reads on a busy machine: the watchdog is for a host that hung.
 WATCHDOG_S = 30.0

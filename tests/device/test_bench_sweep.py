@@ -32,7 +32,7 @@ from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
 
-SETTINGS = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.2, repeats=2, tuning_steps=1, settle_s=0.5)
+SETTINGS = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.2, repeats=2, tuning_steps=1, turn_settle_s=0.5)
 ANGLES_RAD = tuple(np.radians(np.arange(0.0, 360.0, 60.0)))
 SUPPLY_A = 0.5
 CAP = CurrentCap(10.0)

@@ -61,7 +61,7 @@ def link(emulator):
 @pytest.fixture
 def session(link):
     backend = SerialBackend(link, CurrentCap(CAP_A))
-    settings = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, settle_s=0.1)
+    settings = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, turn_settle_s=0.1)
     config = SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown)
     session = DeviceSession(backend, config, armed=True)
     yield session
@@ -203,7 +203,7 @@ def cycle_with_coils_on(tmp_path, attempt, stack):
     )
     link = SerialLink(str(emulator.link_path)).start()
     stack.callback(link.close)
-    settings = CycleSettings(excite_s=2.0, ringdown_s=0.3, repeats=1, tuning_steps=0, settle_s=0.1)
+    settings = CycleSettings(excite_s=2.0, ringdown_s=0.3, repeats=1, tuning_steps=0, turn_settle_s=0.1)
     session = DeviceSession(
         SerialBackend(link, CurrentCap(CAP_A)),
         SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown),

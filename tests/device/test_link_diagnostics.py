@@ -19,7 +19,7 @@ from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
 from mows.records.samples import SampleBlock
 
-SETTINGS = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=0, settle_s=0.1)
+SETTINGS = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=0, turn_settle_s=0.1)
 
 
 def session_on(link):

@@ -14,7 +14,7 @@ from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
 CAP_A = 10.0
-QUICK = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=0, settle_s=0.1)
+QUICK = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=0, turn_settle_s=0.1)
 MAX_STEPS = 100_000  # bound for a loop that never ends (a bug), not a timing
 INACTIVE = "the driver is inactive"
 

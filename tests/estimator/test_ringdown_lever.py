@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from mows.estimate.recorded_cycle import fit_cycle
-from mows.estimate.ringdown import SETTLE_S, FitOptions, fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, fit_ringdown
 from mows.physics.field import UniformField
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
@@ -65,7 +65,7 @@ def test_eq_s11_does_not_describe_the_lever_at_90_degrees(cycles):
         record.saturated[start:],
         FitOptions(rest_offset_free=False),
         scenario.probe.damping_per_s,
-        SETTLE_S,
+        COIL_OFF_SKIP_S,
     )
     exact = fit(scenario, record, lever_aware=True)
     assert paper.chi2_dof > 3 * exact.chi2_dof

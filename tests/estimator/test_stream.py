@@ -54,7 +54,7 @@ def ringdown_msg(cycle_id: int, first: int = 0, duration_s: float = N_SAMPLES / 
 
 
 def settings(options=lambda theta0_rad: FitOptions(), f00_hz=F00_HZ):
-    return FitSettings(PAPER_PROBE, options, settle_s=0.0, f00_hz=f00_hz, f00_std_hz=0.0)
+    return FitSettings(PAPER_PROBE, options, coil_off_skip_s=0.0, f00_hz=f00_hz, f00_std_hz=0.0)
 
 
 def ringdown(estimator, k, options=lambda theta0_rad: FitOptions()):

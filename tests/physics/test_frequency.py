@@ -67,10 +67,11 @@ def test_first_order_sweep_has_the_factor_f00():
     # model at weak fields, which the printed form misses by a factor f00 ≈ 112.
     theta0 = np.radians(np.arange(0, 360, 15))
     field, gradient = (30e-6, -20e-6), (4e-3, 1e-3, -2e-3)
-    exact = F.sweep_shift_hz(theta0, field, gradient, *ARGS, P.lever_m)
-    first = F.sweep_shift_hz(theta0, field, gradient, *ARGS, P.lever_m, exact=False)
+    sweep = F.PublishedSweep(field, gradient, *ARGS, P.lever_m)
+    exact = sweep.shift_hz(theta0)
+    first = sweep.shift_hz(theta0, exact=False)
     np.testing.assert_allclose(first, exact, atol=2e-3 * np.abs(exact).max())
-    h = F.sweep_harmonics(field, gradient, *ARGS, P.lever_m)
+    h = sweep.harmonics()
     harmonic = (
         h["P0_hz"] + h["P1_hz"] * np.cos(theta0 + h["phi1_rad"]) + h["P2_hz"] * np.cos(2 * theta0 + h["phi2_rad"])
     )

@@ -30,7 +30,7 @@ DRIVER = [
     "-p", "initial_frequency_hz:=125.5",
     "-p", "tuning_steps:=1",
     "-p", "gap_s:=0.3",
-    "-p", "settle_s:=0.3",
+    "-p", "turn_settle_s:=0.3",
 ]  # fmt: skip
 
 
@@ -44,7 +44,7 @@ def test_a_recorded_calibration_gives_the_actions_constants_offline(ros, start, 
     bag, online, offline = tmp_path / "run", tmp_path / "online.yaml", tmp_path / "offline.yaml"
     driver = start(*NODE["driver"].command([*DRIVER, "-p", f"record_path:={bag}"]))
     estimator = start(*NODE["estimator"].command([]))
-    calibrator = start(*NODE["calibrator"].command(["-p", f"probe_file:={online}"]))
+    calibrator = start(*NODE["calibrator"].command(["-p", f"probe_output_file:={online}"]))
     client = ActionClient(ros.node, CalibrateProbe, "calibrator/calibrate_probe")
     ros.wait_for(client.server_is_ready, "the calibration action server")
     sent = client.send_goal_async(CalibrateProbe.Goal(currents_a=CURRENTS))

@@ -53,7 +53,7 @@ class StandInDriver:
 def calibrator(action_server, tmp_path):
     path = tmp_path / "probe.yaml"
     client, _ = action_server(
-        "calibrator", CalibrateProbe, "calibrator/calibrate_probe", f"probe_file:={path}", "hardware_id:=bench-3"
+        "calibrator", CalibrateProbe, "calibrator/calibrate_probe", f"probe_output_file:={path}", "hardware_id:=bench-3"
     )
     return client, path
 
@@ -107,7 +107,7 @@ def test_a_manual_stage_waits_for_the_operator_before_each_turn(ros, action_serv
         "calibrator",
         CalibrateProbe,
         "mows/calibrator/calibrate_probe",
-        f"probe_file:={tmp_path / 'p.yaml'}",
+        f"probe_output_file:={tmp_path / 'p.yaml'}",
         "orientation:=manual",
     )
     driver = StandInDriver(ros)

@@ -39,7 +39,7 @@ RATE_HZ = 20_000.0
 BLOCK = 500  # samples of a 25 ms block
 # A subscriber that keeps up with bursts: best effort (what the sensor-data publisher offers).
 RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
-QUICK_CYCLES = ["-p", "excite_s:=0.3", "-p", "ringdown_s:=0.3", "-p", "settle_s:=0.1"]
+QUICK_CYCLES = ["-p", "excite_s:=0.3", "-p", "ringdown_s:=0.3", "-p", "turn_settle_s:=0.1"]
 
 
 @pytest.fixture

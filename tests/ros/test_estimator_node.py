@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from mows_msgs.msg import ExcitationState, FieldEstimate, MagnetometerBlock, MagnetometerChannel, RingdownFit
-from mows_msgs.srv import Calibrate
+from mows_msgs.srv import CalibrateF00
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
@@ -219,9 +219,9 @@ def test_malformed_messages_do_not_stop_the_node(ros, estimator):
 
 def test_calibration_sets_f00_from_ringdowns_in_a_known_field(ros, estimator):
     device, heard, _ = estimator
-    client = ros.node.create_client(Calibrate, "/estimator/calibrate")
+    client = ros.node.create_client(CalibrateF00, "/estimator/calibrate")
     ros.wait_for(client.service_is_ready, "the calibration service")
-    request = Calibrate.Request(n_ringdowns=3, reference_field_t=FIELD_T, timeout_s=60.0)
+    request = CalibrateF00.Request(n_ringdowns=3, reference_field_t=FIELD_T, timeout_s=60.0)
     futures = [client.call_async(request), client.call_async(request)]  # one too many: refused, not mixed
     ros.wait_for(lambda: any(f.done() for f in futures), "the second calibration's refusal")
     refused = next(f for f in futures if f.done())
@@ -237,12 +237,12 @@ def test_calibration_sets_f00_from_ringdowns_in_a_known_field(ros, estimator):
 
 def test_a_calibration_without_enough_ringdowns_ends_at_its_timeout_and_frees_the_service(ros, estimator):
     device, _, _ = estimator
-    client = ros.node.create_client(Calibrate, "/estimator/calibrate")
+    client = ros.node.create_client(CalibrateF00, "/estimator/calibrate")
     ros.wait_for(client.service_is_ready, "the calibration service")
-    starved = client.call_async(Calibrate.Request(n_ringdowns=2, reference_field_t=FIELD_T, timeout_s=0.5))
+    starved = client.call_async(CalibrateF00.Request(n_ringdowns=2, reference_field_t=FIELD_T, timeout_s=0.5))
     response = ros.wait_for(lambda: starved.done() and starved.result(), "the timeout")
     assert not response.success and response.n_used == 0 and "only 0 of 2" in response.message
-    again = client.call_async(Calibrate.Request(n_ringdowns=1, reference_field_t=FIELD_T, timeout_s=60.0))
+    again = client.call_async(CalibrateF00.Request(n_ringdowns=1, reference_field_t=FIELD_T, timeout_s=60.0))
     device.ringdown()
     response = ros.wait_for(lambda: again.done() and again.result(), "the next calibration")
     assert response.success and response.n_used == 1, response.message
@@ -251,7 +251,9 @@ def test_a_calibration_without_enough_ringdowns_ends_at_its_timeout_and_frees_th
 def test_out_of_range_parameters_are_refused(ros, estimator):
     client = ros.node.create_client(SetParameters, "/estimator/set_parameters")
     ros.wait_for(client.service_is_ready, "the parameter service")
-    bad = ParameterMsg(name="settle_s", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=5.0))
+    bad = ParameterMsg(
+        name="coil_off_skip_s", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=5.0)
+    )
     future = client.call_async(SetParameters.Request(parameters=[bad]))
     result = ros.wait_for(lambda: future.done() and future.result(), "set_parameters")
-    assert not result.results[0].successful and "settle_s" in result.results[0].reason
+    assert not result.results[0].successful and "coil_off_skip_s" in result.results[0].reason

@@ -88,7 +88,7 @@ def test_the_fluxgates_sit_where_the_estimator_assumes_and_sense_along_their_x(m
 def test_the_driver_publishes_the_stage_angle_with_every_block(ros, start):
     start(
         *NODES[0].command(
-            ["-p", "theta0_rad:=0.5", "-p", "excite_s:=0.2", "-p", "ringdown_s:=0.2", "-p", "settle_s:=0.1"]
+            ["-p", "theta0_rad:=0.5", "-p", "excite_s:=0.2", "-p", "ringdown_s:=0.2", "-p", "turn_settle_s:=0.1"]
         )
     )
     joints, blocks = [], []

@@ -40,7 +40,7 @@ from node_processes import RosHarness, assert_stops_cleanly, launch, log, send_g
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]  # one start-up of three nodes
 
-QUICK = ["-p", "excite_s:=0.3", "-p", "ringdown_s:=0.3", "-p", "settle_s:=0.1", "-p", "gap_s:=0.2"]
+QUICK = ["-p", "excite_s:=0.3", "-p", "ringdown_s:=0.3", "-p", "turn_settle_s:=0.1", "-p", "gap_s:=0.2"]
 COILS_OFF_S = 1.0  # the requirement: coils off this soon after the requester left
 # A requester in a process of its own, as `ros2 service call` is: it asks for the longest cycle
 # the limits allow and waits for the answer until it is stopped.

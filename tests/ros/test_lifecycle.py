@@ -12,7 +12,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
-from mows_msgs.srv import Calibrate, EmergencyStop, RunCycle
+from mows_msgs.srv import CalibrateF00, EmergencyStop, RunCycle
 from rclpy.action import ActionClient
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -32,7 +32,7 @@ RATE_HZ = 20_000.0
 BLOCK = 500  # samples of a 25 ms block
 SECOND = round(RATE_HZ)  # a second of device samples: how long a stopped stream is watched
 RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
-QUICK_CYCLES = ["-p", "excite_s:=0.6", "-p", "ringdown_s:=0.3", "-p", "settle_s:=0.1"]
+QUICK_CYCLES = ["-p", "excite_s:=0.6", "-p", "ringdown_s:=0.3", "-p", "turn_settle_s:=0.1"]
 NOT_ACTIVE = "the driver is not active"
 GOALS = {  # the state each transition leads to
     Transition.TRANSITION_CONFIGURE: "inactive",
@@ -238,8 +238,8 @@ def test_mows_graph_leaves_the_nodes_unconfigured_for_a_supervisor(ros, supervis
     assert "nodes left unconfigured" in log(graph)
     # Unconfigured nodes refuse their work with a message that names the state (asked by the
     # previous release's names, which are served as aliases).
-    calibrate = ros.node.create_client(Calibrate, "/mows/estimator/calibrate")
-    answer = supervisor.result(supervisor.call(calibrate, Calibrate.Request(n_ringdowns=3, timeout_s=1.0)))
+    calibrate = ros.node.create_client(CalibrateF00, "/mows/estimator/calibrate")
+    answer = supervisor.result(supervisor.call(calibrate, CalibrateF00.Request(n_ringdowns=3, timeout_s=1.0)))
     assert not answer.success and "the estimator node is unconfigured" in answer.message
     sweeps = ActionClient(ros.node, RotationSweep, "/mows/mapper/rotation_sweep")
     ros.wait_for(sweeps.server_is_ready, "the sweep action")

@@ -44,7 +44,7 @@ def parameters(path, scenario: str):
                         "coil_setup": load_scenario(scenario).setup.name,
                         "tuning_steps": 1,
                         "gap_s": 0.2,
-                        "settle_s": 0.2,
+                        "turn_settle_s": 0.2,
                     }
                 },
                 "/**/mapper": {"ros__parameters": {"repeats_per_angle": REPEATS}},

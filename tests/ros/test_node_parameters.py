@@ -102,7 +102,7 @@ def test_a_bad_value_at_start_up_stops_the_node():
 # A misspelling of one parameter of each node, and the name it should suggest.
 MISSPELT = {
     "driver": ("excitation_curent_a", "excitation_current_a"),
-    "estimator": ("settle", "settle_s"),
+    "estimator": ("coil_off_skip", "coil_off_skip_s"),
     "mapper": ("referance_scenario", "reference_scenario"),
     "calibrator": ("hardware_idd", "hardware_id"),
 }
@@ -129,12 +129,12 @@ def test_a_parameter_for_another_node_is_not_refused():
     """`-p driver:repeats:=3` (rcl's node-name prefix, as mows-graph passes it to every node)
     reaches the driver only; the estimator starts with it on its command line."""
     run = subprocess.run(
-        NODES[1].command(["-p", "driver:repeats:=3", "-p", "estimator:settle:=1.0"]),
+        NODES[1].command(["-p", "driver:repeats:=3", "-p", "estimator:coil_off_skip:=1.0"]),
         capture_output=True,
         text=True,
         timeout=120,
     )
-    assert run.returncode == EXIT_BAD_PARAMETER and "did you mean settle_s?" in run.stderr
+    assert run.returncode == EXIT_BAD_PARAMETER and "did you mean coil_off_skip_s?" in run.stderr
     assert "repeats" not in run.stderr
 
 
@@ -160,7 +160,7 @@ NOT_ROS_PARAMETERS = "probe settings\n"  # YAML, but no node: rcl applies nothin
         (NODES[3], ["-p", "currents_a:=[]"], "'currents_a' is not initialized: currents_a: give it a value"),
         (NODES[0], ["-p", "drvier:repeats:=3"], "no node is called 'drvier': did you mean driver?"),
         # the node-prefixed form inside a namespace, which rcl alone would drop
-        (NODES[1], ["-r", "__ns:=/probe_a", "-p", "estimator:settle:=1.0"], "did you mean settle_s?"),
+        (NODES[1], ["-r", "__ns:=/probe_a", "-p", "estimator:coil_off_skip:=1.0"], "did you mean coil_off_skip_s?"),
     ],
     ids=["missing-file", "malformed-file", "not-parameters", "no-value", "empty-value", "empty-list", "prefix", "ns"],
 )
@@ -179,9 +179,14 @@ def test_node_arguments_it_cannot_take_end_it_in_one_line(graph_node, arguments,
     [
         (["mows-graph", "--ros-args", "-p", "repeats:=5"], "give it as -p driver:repeats:=5"),
         (["mows-graph", "--ros-args", "-p", "driver:scenaro:=helmholtz"], "did you mean scenario?"),
+        (
+            ["mows-graph", "--ros-args", "-p", "settle_s:=0.2"],
+            "settle_s was renamed: give it as -p driver:turn_settle_s:=0.2 or -p estimator:coil_off_skip_s:=0.2",
+        ),
+        (["mows-graph", "--ros-args", "-p", "calibrator:probe_file:=p.yaml"], "renamed probe_output_file"),
         (["mows-demo", "--scenario", "nosuch"], "--scenario nosuch: scenario 'nosuch' is neither"),
     ],
-    ids=["graph-unprefixed", "graph-misspelt", "demo-scenario"],
+    ids=["graph-unprefixed", "graph-misspelt", "graph-renamed", "graph-renamed-prefixed", "demo-scenario"],
 )
 def test_the_graph_s_commands_refuse_bad_arguments_in_one_line_before_starting_a_node(command, reason):
     line = one_line_refusal(subprocess.run(command, capture_output=True, text=True, timeout=120))
@@ -192,3 +197,34 @@ def test_the_graph_s_node_names_are_the_ones_every_node_knows():
     """A node takes ``-p NAME:…`` for another node of the graph silently, and refuses any other
     prefix: the names it knows must be the graph's."""
     assert tuple(node.name for node in NODES) == GRAPH_NODE_NAMES
+
+
+# Parameters that meant two things, by their previous release's name: each is refused wherever it
+# is set, with the new name, and nothing is taken under the old one.
+RENAMED = [
+    ("driver", "settle_s", "turn_settle_s", 0.2, "-p"),
+    ("estimator", "settle_s", "coil_off_skip_s", 0.002, "parameter file"),
+    ("calibrator", "probe_file", "probe_output_file", "p.yaml", "-p"),
+]
+
+
+@pytest.mark.parametrize("node_name, old, new, value, given_by", RENAMED, ids=[r[0] for r in RENAMED])
+def test_a_renamed_parameter_is_refused_wherever_it_is_set_with_its_new_name(
+    ros_context, node_name, old, new, value, given_by, tmp_path
+):
+    node = NODE_CLASSES[node_name]()
+    before = node.get_parameter(new).value
+    result = node.set_parameters_atomically([Parameter(old, value=value)])  # as ros2 param set's service does
+    assert not result.successful and f"unknown parameter '{old}': renamed {new}" in result.reason, result.reason
+    assert result.reason.endswith(f"set {new}") and node.get_parameter(new).value == before
+    assert not node.has_parameter(old)
+    node.destroy_node()
+    if given_by == "-p":
+        arguments = ["-p", f"{old}:={value}"]
+    else:
+        path = tmp_path / "params.yaml"
+        path.write_text(yaml.safe_dump({f"/**/{node_name}": {"ros__parameters": {old: value}}}))
+        arguments = ["--params-file", str(path)]
+    graph_node = next(n for n in NODES if n.name == node_name)
+    line = one_line_refusal(subprocess.run(graph_node.command(arguments), capture_output=True, text=True, timeout=120))
+    assert f"unknown parameter '{old}': renamed {new}" in line and f"set {new}" in line, line

@@ -35,7 +35,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realti
 SENSOR, ROBOT = "10.78.0.1", "10.78.0.2"
 PREFIX = "/24"
 BOUND_S = 600.0  # a hang's bound only
-QUICK = ["-p", "tuning_steps:=1", "-p", "gap_s:=0.2", "-p", "settle_s:=0.2"]
+QUICK = ["-p", "tuning_steps:=1", "-p", "gap_s:=0.2", "-p", "turn_settle_s:=0.2"]
 LOSS_PERCENT = 5
 DELAY_MS = 20
 # Over the lossy link a 0.5 s ring-down (20 blocks) misses one with probability 1 − 0.95^20 = 64 %;

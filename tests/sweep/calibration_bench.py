@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from mows.estimate.ringdown import SETTLE_S
+from mows.estimate.ringdown import COIL_OFF_SKIP_S
 from mows.lab.data.synthetic import true_frequency_hz
 from mows.physics.field import SumSource
 from mows.sim.scenario import load_scenario
@@ -21,7 +21,7 @@ def bench_fits(current_a: float, theta0_rad: float, repeats: int, rng: np.random
     source = BENCH.environment.source
     if current_a:
         source = SumSource((source, BENCH.supply.source.scaled(current_a)))
-    start = BENCH.probe.theta_stop_rad * math.exp(-BENCH.probe.damping_per_s * SETTLE_S)
+    start = BENCH.probe.theta_stop_rad * math.exp(-BENCH.probe.damping_per_s * COIL_OFF_SKIP_S)
     truth = float(true_frequency_hz(BENCH.probe, source, [theta0_rad], start, duration_s=0.5)[0])
     common = dict(
         theta0_rad=theta0_rad, frequency_std_hz=STD_HZ, amplitude_rad=start, damping_per_s=1.8, duration_s=0.5

@@ -8,10 +8,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mows.estimate.ringdown import SETTLE_S, FitStatus, RingdownFit
+from mows.device.phases import CycleRequest
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitStatus, RingdownFit
 from mows.physics.probe import PAPER_PROBE
 from mows.sweep.calibration.run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
-from mows.sweep.calibration.schedule import CalibrationPlan, RunCycle, SetSupply, scenario_wirings
+from mows.sweep.calibration.schedule import CalibrationPlan, SetSupply, scenario_wirings
 from mows.sweep.runner import CycleAnswer
 from sweep.calibration_bench import BENCH, STD_HZ, bench_fits
 
@@ -24,11 +25,11 @@ def goal(currents_a=(), theta0_rad=(), repeats=0, wiring=""):
 def ok_fit(**fields):
     """An OK fit: a ring-down at 112.5 Hz and θ0 = 0 unless ``fields`` say otherwise."""
     typical = dict(theta0_rad=0.0, frequency_hz=112.5, frequency_std_hz=STD_HZ, amplitude_rad=0.41, duration_s=0.5)
-    return RingdownFit(FitStatus.OK, start_offset_s=SETTLE_S, **(typical | dict(damping_per_s=1.8) | fields))
+    return RingdownFit(FitStatus.OK, start_offset_s=COIL_OFF_SKIP_S, **(typical | dict(damping_per_s=1.8) | fields))
 
 
 class StandInDriver:
-    """Answers SetSupply and RunCycle as the driver would, with the bench's ring-downs."""
+    """Answers SetSupply and CycleRequest as the driver would, with the bench's ring-downs."""
 
     def __init__(self):
         self.current_a, self.cycle_id, self.currents = 0.0, 0, []
@@ -38,7 +39,7 @@ class StandInDriver:
         self.current_a = action.current_a
         self.currents.append(action.current_a)
 
-    def cycle(self, action: RunCycle) -> tuple[CycleAnswer, list]:
+    def cycle(self, action: CycleRequest) -> tuple[CycleAnswer, list]:
         self.cycle_id += 1
         fits = [ok_fit(**f) for f in bench_fits(self.current_a, action.theta0_rad, action.repeats, self.rng)]
         return CycleAnswer(self.cycle_id, action.repeats), fits
@@ -100,7 +101,7 @@ def test_fits_of_other_cycles_and_late_fits_are_told_apart():
     run = CalibrationRun(CalibrationPlan((0.0,), (0.0,), repeats=2))
     assert isinstance(run.start().actions[0], SetSupply)
     (cycle,) = run.on_supply(True).actions
-    assert isinstance(cycle, RunCycle) and cycle.repeats == 2
+    assert isinstance(cycle, CycleRequest) and cycle.repeats == 2
     assert run.on_fit(6, ok_fit()) is None  # another client's cycle
     assert run.on_cycle(CycleAnswer(7, 2)) is None  # its fits are due
     assert run.on_fit(6, ok_fit()) is None
@@ -156,7 +157,7 @@ def test_a_manual_stage_is_turned_before_each_change_of_orientation():
             assert run.turn_awaited == action.theta0_rad
             turns.append(action.theta0_rad)
             step = run.on_turned()
-            assert run.turn_awaited is None and step.actions == [RunCycle(action.theta0_rad, 1)]
+            assert run.turn_awaited is None and step.actions == [CycleRequest(action.theta0_rad, 1)]
         else:
             answer, fits = driver.cycle(action)
             assert [run.on_fit(answer.cycle_id, fit) for fit in fits] == [None]

@@ -157,6 +157,7 @@ def test_a_failed_decomposition_ends_the_sweep_and_leaves_nothing_to_publish():
         (SweepGoal(ANGLES[:2] * 3), SweepSettings(), "2 distinct orientations"),
         (SweepGoal(ANGLES[:5]), SweepSettings(f00_free=True), "need at least 6"),
         (SweepGoal(), SweepSettings(angle_step_deg=90.0), "4 distinct orientations"),
+        (SweepGoal(ANGLES, 101), SweepSettings(), r"repeats_per_angle=101 is outside \[1, 100\]"),
     ],
 )
 def test_bad_goals_are_refused_with_the_reason_before_any_cycle(goal, settings, reason):
@@ -200,3 +201,30 @@ def test_a_sweep_cancelled_while_the_operator_turns_ends_there():
     end = runner.on_turned()
     assert end.finished.cancelled and end.run_cycle is None and runner.state == "idle"
     assert runner.on_turned() == type(end)()  # a late confirmation changes nothing
+
+
+def test_a_turn_not_confirmed_in_time_fails_the_sweep_naming_the_orientation():
+    runner, step = started(settings=SweepSettings(manual_orientation=True))
+    assert step.turn == ANGLES[0]
+    end = runner.turn_timed_out(30.0)
+    assert not end.finished.ok and not end.finished.cancelled and runner.state == "idle"
+    assert end.finished.message == "no confirmation of θ0 = 0° within 30 s"
+    assert runner.turn_timed_out(30.0) == type(end)()  # no turn awaited: nothing ends
+
+
+def test_the_last_failure_stays_until_a_sweep_succeeds_and_a_cancel_leaves_it():
+    runner, goal = SweepRunner(), SweepGoal(ANGLES[:5], 1)
+    assert runner.last_failure == ""
+    runner.start(goal, SweepSettings(), P)
+    runner.begin()
+    runner.abandon("the driver left")
+    assert runner.last_failure == "the driver left"
+    runner.start(goal, SweepSettings(), P)
+    step = runner.begin()
+    runner.cancel()
+    assert StandIn().run(runner, step).finished.cancelled and runner.last_failure == "the driver left"
+    runner.start(goal, SweepSettings(), P)
+    step, driver = runner.begin(), StandIn()
+    while step.decompose is None:
+        step = driver.run(runner, step)
+    assert runner.on_decomposed(step.decompose()).finished.ok and runner.last_failure == ""

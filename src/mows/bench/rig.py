@@ -21,7 +21,7 @@ from mows.device.interface import CoilCommand, CommandResult
 from mows.device.phases import CycleOutcome, CycleRequest, CycleSettings, Phase, PhaseEvent, Step
 from mows.device.scheduled import OverCap, ScheduledDevice
 from mows.device.tracking import TrackingLoop
-from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit, fit_ringdown
 from mows.estimate.ringdown_start import white_noise_std
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.physics.coils import CurrentCap
@@ -50,7 +50,7 @@ class DeviceTimeRig:
         settings: CycleSettings,
         cap_a: float = 10.0,
         seed: int | None = None,
-        settle_s: float = SETTLE_S,
+        coil_off_skip_s: float = COIL_OFF_SKIP_S,
     ):
         self.scenario = scenario
         self.probe = scenario.probe
@@ -61,7 +61,7 @@ class DeviceTimeRig:
             settings, scenario.setup, self.device.cap, self.fs, self.probe.f00_hz, fit=fit_ringdown
         )
         self.assembler = SegmentAssembler(BUFFER_S)
-        self.settle_s = settle_s
+        self.coil_off_skip_s = coil_off_skip_s
         self.peak_current_a = 0.0
         self._chunk = max(1, round(CHUNK_S * self.fs))
         self._results: list[CommandResult] = []
@@ -175,7 +175,7 @@ class DeviceTimeRig:
         key = round(window.theta0_rad, 12)
         if key not in self._options:
             self._options[key] = FitOptions.lever_aware(self.scenario.sensors.pair, self.probe, window.theta0_rad)
-        fit = fit_segment(segment, self._options[key], self.settle_s, self.probe.damping_per_s)
+        fit = fit_segment(segment, self._options[key], self.coil_off_skip_s, self.probe.damping_per_s)
         self._measured.append(MeasuredRingdown(window, fit, segment.saturated))
 
 

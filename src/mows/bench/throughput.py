@@ -46,18 +46,23 @@ from mows.sweep.record import SweepPoint, SweepRecord
 
 SCENARIO = "anti_helmholtz"
 CAP_A = 10.0
-SETTLE_S = 0.5
+TURN_SETTLE_S = 0.5
 PAPER_RINGDOWN_S = 60.0 / 112.5  # 60 periods
 DECOMPOSE_NEAR = 1.25
 PROTOCOLS = {
     "paper": (
         CycleSettings(
-            excite_s=0.5, ringdown_s=PAPER_RINGDOWN_S, gap_s=10.0, repeats=5, tuning_steps=2, settle_s=SETTLE_S
+            excite_s=0.5,
+            ringdown_s=PAPER_RINGDOWN_S,
+            gap_s=10.0,
+            repeats=5,
+            tuning_steps=2,
+            turn_settle_s=TURN_SETTLE_S,
         ),
         12,
     ),
-    "default": (CycleSettings(repeats=5, tuning_steps=2, gap_s=1.0, settle_s=SETTLE_S), 12),
-    "demo": (CycleSettings(repeats=2, tuning_steps=1, gap_s=0.2, settle_s=SETTLE_S), 8),
+    "default": (CycleSettings(repeats=5, tuning_steps=2, gap_s=1.0, turn_settle_s=TURN_SETTLE_S), 12),
+    "demo": (CycleSettings(repeats=2, tuning_steps=1, gap_s=0.2, turn_settle_s=TURN_SETTLE_S), 8),
 }
 
 
@@ -185,11 +190,11 @@ def adaptive_protocol(goal: PrecisionGoal = PrecisionGoal(), seed: int = 1, scen
             gap_s=plan.gap_s,
             repeats=1,
             tuning_steps=plan.tuning_steps,
-            settle_s=SETTLE_S,
+            turn_settle_s=TURN_SETTLE_S,
         )
     )
     planner = AdaptivePlanner(
-        probe, probe.f00_hz, goal, plan.cycle_s, SETTLE_S, lambda theta0: std(theta0, plan.ringdown_s)
+        probe, probe.f00_hz, goal, plan.cycle_s, TURN_SETTLE_S, lambda theta0: std(theta0, plan.ringdown_s)
     )
     sweep = _Sweep(scenario, goal)
     while True:
@@ -211,7 +216,7 @@ def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, se
     it measured (updates per device second between consecutive fitted ring-downs, their scatter)."""
     scenario = load_scenario(SCENARIO)
     probe = scenario.probe
-    rig = DeviceTimeRig(scenario, CycleSettings(settle_s=SETTLE_S), CAP_A, seed)
+    rig = DeviceTimeRig(scenario, CycleSettings(turn_settle_s=TURN_SETTLE_S), CAP_A, seed)
     plan = tracking_plan(scenario, theta0_rad, target_std_t, CAP_A, rig.first_block_noise_std_t())
     figures: dict[str, object] = {
         "target_t": target_std_t,

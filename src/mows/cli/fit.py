@@ -16,7 +16,7 @@ import os
 import sys
 
 from mows.cli.inputs import input_file, load_probe, non_negative_float, sensor_length_m
-from mows.estimate.ringdown import SETTLE_S, FitOptions
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import fit_segment
 from mows.lab.chirp import recorded_segments
 from mows.lab.data.readers import is_bag
@@ -51,7 +51,7 @@ def add_fit_arguments(parser) -> None:
     parser.add_argument("--excitation-topic", default="/mows/excitation")
     parser.add_argument("--paper-model", action="store_true", help="fit Eq. S11 (a magnet turning in place)")
     parser.add_argument(
-        "--settle-s", type=non_negative_float, default=SETTLE_S, help="samples skipped after coil-off, s"
+        "--coil-off-skip-s", type=non_negative_float, default=COIL_OFF_SKIP_S, help="samples skipped after coil-off, s"
     )
     parser.add_argument(
         "--sensor-distance-m",
@@ -94,21 +94,23 @@ def run(args) -> int:
 
 
 def check_ringdowns(path, windows, args) -> None:
-    """ValueError when the bag holds no ring-down to fit, or ``--settle-s`` skips all of each."""
+    """ValueError when the bag holds no ring-down to fit, or ``--coil-off-skip-s`` skips all of each."""
     if not windows:
         raise ValueError(
             f"{path} holds no ring-down: no RINGDOWN phase on {args.excitation_topic} with samples on "
             f"{args.raw_topic}{'' if args.tuning else ' (tuning ones skipped: --tuning)'}"
         )
     longest = max(window.duration_s for window in windows)
-    if args.settle_s >= longest:
-        raise ValueError(f"--settle-s {args.settle_s:g} s skips the whole of every ring-down (longest {longest:g} s)")
+    if args.coil_off_skip_s >= longest:
+        raise ValueError(
+            f"--coil-off-skip-s {args.coil_off_skip_s:g} s skips the whole of every ring-down (longest {longest:g} s)"
+        )
 
 
 def fit_bag(path, probe: Probe, args):
     """(window, fit) for every ring-down in the bag, in order (tuning ones with ``args.tuning``)."""
     for segment, options in recorded_ringdowns(path, probe, args):
-        yield segment.window, fit_segment(segment, options, args.settle_s, probe.damping_per_s)
+        yield segment.window, fit_segment(segment, options, args.coil_off_skip_s, probe.damping_per_s)
 
 
 def recorded_ringdowns(path, probe: Probe, args):

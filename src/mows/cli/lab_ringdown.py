@@ -38,7 +38,7 @@ def run_ringdown(args) -> int:
                     options,
                     args.f00_hz,
                     segment.saturated,
-                    args.settle_s,
+                    args.coil_off_skip_s,
                     args.piece_periods,
                 )
             except ChirpError as error:

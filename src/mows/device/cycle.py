@@ -201,7 +201,7 @@ class CycleSequencer:
         turned = yield from self._answer(
             self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
         )
-        settle = self._samples(s.settle_s)
+        settle = self._samples(s.turn_settle_s)
         yield from self._enter(c, Phase.SETTLING, turned, settle)
         coils_free = turned + settle  # from here on the coils are off and nothing is scheduled
         fits: list[TuningResult] = []

@@ -24,11 +24,13 @@ import bisect
 import dataclasses
 import math
 import pathlib
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from mows.physics.coils import CurrentCap
-from mows.physics.schema import build_from_yaml, check_keys, positive
+from mows.physics.schema import build_from_yaml, positive, typed
 
 HARDWARE_DIR = pathlib.Path(__file__).parent / "hardware"
 PAPER_DEVICE_FILE = HARDWARE_DIR / "ni_pcie6363.yaml"
@@ -149,40 +151,20 @@ def _lsb_v(range_v: float) -> float:
 
 def load_daq_device(path=PAPER_DEVICE_FILE) -> DaqDevice:
     """The device YAML at ``path`` (docs/hardware.md); ValueError naming the file and the key."""
-    return build_from_yaml(path, "device", _device)
-
-
-def _device(
-    inputs,
-    outputs,
-    amplifier_v_per_a,
-    sample_rate_hz=20_000.0,
-    block_s=0.025,
-    output_lead_s=0.1,
-    read_timeout_s=1.0,
-    current_cap_a=10.0,
-    watchdog_s=1.0,
-    name="daq",
-) -> DaqDevice:
-    if not isinstance(inputs, list) or not isinstance(outputs, list):
-        raise ValueError("inputs and outputs must be lists")
-    for what, items, builder in (("input", inputs, AnalogInput), ("output", outputs, AnalogOutput)):
-        for item in items:
-            if not isinstance(item, dict):
-                raise ValueError(f"an {what} must be a mapping, got {item!r}")
-            check_keys(what, item, builder)
-    return DaqDevice(
-        tuple(AnalogInput(**i) for i in inputs),
-        tuple(AnalogOutput(**o) for o in outputs),
-        float(amplifier_v_per_a),
-        float(sample_rate_hz),
-        float(block_s),
-        float(output_lead_s),
-        float(read_timeout_s),
-        float(current_cap_a),
-        float(watchdog_s),
-        str(name),
+    return build_from_yaml(
+        path, "device", DaqDevice, inputs=_channels("input", AnalogInput), outputs=_channels("output", AnalogOutput)
     )
+
+
+def _channels(what: str, cls: type) -> Callable[[Any], tuple]:
+    """The YAML list of ``what`` channels as a tuple of ``cls``."""
+
+    def channels(items: Any) -> tuple:
+        if not isinstance(items, list):
+            raise ValueError(f"{what}s must be a list, got {items!r}")
+        return tuple(typed(cls, f"an {what}", item) for item in items)
+
+    return channels
 
 
 @dataclasses.dataclass(frozen=True)

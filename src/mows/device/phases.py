@@ -75,13 +75,13 @@ class CycleSettings:
     gap_s: float = 1.0
     repeats: int = 3
     tuning_steps: int = 2
-    settle_s: float = 0.5
+    turn_settle_s: float = 0.5
     max_duty_cycle: float = 0.5
     duty_window_s: float = 10.0
     confirm_timeout_s: float = 0.5  # device time a command may take to be answered
 
     def __post_init__(self):
-        for name in ("excitation_current_a", "gap_s", "settle_s"):
+        for name in ("excitation_current_a", "gap_s", "turn_settle_s"):
             check_setting(name, getattr(self, name), getattr(self, name) >= 0.0, "≥ 0")
         for name in ("excite_s", "ringdown_s", "duty_window_s", "confirm_timeout_s"):
             check_setting(name, getattr(self, name), getattr(self, name) > 0.0, "> 0")

@@ -15,7 +15,7 @@ import importlib
 import math
 
 from mows.device.daq import HARDWARE_DIR
-from mows.physics.schema import build_from_yaml, check_keys
+from mows.physics.schema import build_from_yaml, typed
 from mows.physics.supply import SupplyLimits
 
 PAPER_SUPPLY_FILE = HARDWARE_DIR / "rs_ngm202.yaml"
@@ -43,10 +43,13 @@ class ScpiCommands:
 
 @dataclasses.dataclass(frozen=True)
 class ScpiSupplyConfig:
-    """The supply file (docs/hardware.md): its limits, the channel the pair is on, the voltage
-    limit (the pair's resistance × the largest current, with margin) and its commands."""
+    """The supply file (docs/hardware.md): its limits (cap, slew and resolution), the channel the
+    pair is on, the voltage limit (the pair's resistance × the largest current, with margin) and
+    its commands."""
 
-    limits: SupplyLimits
+    cap_a: float
+    slew_a_per_s: float
+    resolution_a: float
     commands: ScpiCommands = ScpiCommands()
     channel: int = 1
     voltage_limit_v: float = 10.0
@@ -54,38 +57,16 @@ class ScpiSupplyConfig:
     read_termination: str = "\n"
     timeout_s: float = 2.0
     name: str = "scpi"
+    limits: SupplyLimits = dataclasses.field(init=False, repr=False)  # of cap, slew and resolution
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "limits", SupplyLimits(self.cap_a, self.slew_a_per_s, self.resolution_a))
 
 
 def load_supply_file(path=PAPER_SUPPLY_FILE) -> ScpiSupplyConfig:
     """The supply YAML at ``path``; ValueError naming the file and the key."""
-    return build_from_yaml(path, "supply", _supply_config)
-
-
-def _supply_config(
-    cap_a,
-    slew_a_per_s,
-    resolution_a,
-    commands=None,
-    channel=1,
-    voltage_limit_v=10.0,
-    write_termination="\n",
-    read_termination="\n",
-    timeout_s=2.0,
-    name="scpi",
-) -> ScpiSupplyConfig:
-    commands = commands or {}
-    if not isinstance(commands, dict):
-        raise ValueError(f"commands must be a mapping, got {commands!r}")
-    check_keys("commands", commands, ScpiCommands)
-    return ScpiSupplyConfig(
-        SupplyLimits(float(cap_a), float(slew_a_per_s), float(resolution_a)),
-        ScpiCommands(**{k: str(v) for k, v in commands.items()}),
-        int(channel),
-        float(voltage_limit_v),
-        str(write_termination),
-        str(read_termination),
-        float(timeout_s),
-        str(name),
+    return build_from_yaml(
+        path, "supply", ScpiSupplyConfig, commands=lambda given: typed(ScpiCommands, "commands", given or {})
     )
 
 

@@ -59,7 +59,7 @@ class TrackingSettings:
             gap_s=0.0,
             repeats=self.repeats,
             tuning_steps=0,
-            settle_s=base.settle_s if settle else 0.0,
+            turn_settle_s=base.turn_settle_s if settle else 0.0,
         )
 
 

@@ -14,7 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
-from mows.estimate.ringdown import SETTLE_S, FitOptions, RingdownFit, fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit, fit_ringdown
 from mows.physics.fluxgate import FluxgatePair
 from mows.physics.probe import Probe
 
@@ -50,7 +50,9 @@ class Scene(Protocol):
     def sensors(self) -> _Sensors: ...
 
 
-def fit_cycle(cycle: RecordedCycle, scene: Scene, paper_model: bool = False, settle_s: float = SETTLE_S) -> RingdownFit:
+def fit_cycle(
+    cycle: RecordedCycle, scene: Scene, paper_model: bool = False, coil_off_skip_s: float = COIL_OFF_SKIP_S
+) -> RingdownFit:
     """Fit the ring-down of a recorded cycle: the lever-aware pickup of ``scene``'s probe seen by
     its fluxgates at the commanded θ0 (``paper_model``: Eq. S11 instead), the expected frequency
     the one the cycle excited at, the probe's damping as the start."""
@@ -64,5 +66,5 @@ def fit_cycle(cycle: RecordedCycle, scene: Scene, paper_model: bool = False, set
         cycle.saturated[start:],
         options,
         scene.probe.damping_per_s,
-        settle_s,
+        coil_off_skip_s,
     )

@@ -93,15 +93,15 @@ def _parameter_names(n_channels: int, options: FitOptions) -> list[str]:
 
 # --- the usable window -----------------------------------------------------------------------
 # The coil current's decay after switch-off: what the estimator node, `mows fit` and the lab leave
-# out of a ring-down (fit_ringdown's ``settle_s``; 0 there, for data that start clean).
-SETTLE_S = 0.003
+# out of a ring-down (fit_ringdown's ``coil_off_skip_s``; 0 there, for data that start clean).
+COIL_OFF_SKIP_S = 0.003
 
 
-def usable_window(saturated: NDArray[np.bool_], settle_samples: int = 0) -> tuple[int, int]:
-    """(start, stop) of the longest run of samples after ``settle_samples`` in which no channel
+def usable_window(saturated: NDArray[np.bool_], skip_samples: int = 0) -> tuple[int, int]:
+    """(start, stop) of the longest run of samples after ``skip_samples`` in which no channel
     is saturated; the coil-on tail and any clipped stretch are thereby excluded."""
     bad = np.asarray(np.asarray(saturated).reshape(len(saturated), -1).any(axis=1))
-    bad[:settle_samples] = True
+    bad[:skip_samples] = True
     good = np.concatenate([[False], ~bad, [False]]).astype(np.int8)
     edges = np.flatnonzero(np.diff(good))
     starts, stops = edges[0::2], edges[1::2]
@@ -134,7 +134,7 @@ def fit_ringdown(
     saturated: ArrayLike | None = None,
     options: FitOptions = FitOptions(),
     damping_guess_per_s: float = 1.8,
-    settle_s: float = 0.0,
+    coil_off_skip_s: float = 0.0,
 ) -> RingdownFit:
     """Fit one free ring-down.
 
@@ -145,7 +145,7 @@ def fit_ringdown(
     theta0_rad : commanded probe orientation (start value when ``options.theta0_free``).
     expected_frequency_hz : where to look, e.g. the excitation frequency.
     saturated : optional boolean mask like ``samples``.
-    settle_s : samples before this time are not used (coil current decay, sensor recovery).
+    coil_off_skip_s : samples before this time are not used (coil current decay, sensor recovery).
 
     Returns
     -------
@@ -178,7 +178,7 @@ def fit_ringdown(
         bad = int(np.count_nonzero(~np.isfinite(data)))
         return failure(FitStatus.INVALID_SAMPLES, f"{bad} NaN or infinite samples in the ring-down", **known)
     mask = np.zeros(data.shape, bool) if saturated is None else np.asarray(saturated, bool)
-    start, stop = usable_window(mask, int(round(settle_s * fs)))
+    start, stop = usable_window(mask, int(round(coil_off_skip_s * fs)))
     min_samples = int(math.ceil(options.min_periods * fs / expected_frequency_hz))
     if stop - start < min_samples:
         why = FitStatus.SATURATED if mask.any() else FitStatus.TOO_SHORT

@@ -276,7 +276,7 @@ def fit_ringdowns(
     lines: Sequence[ProbeLine],
     saturated: np.typing.ArrayLike | None = None,
     options: JointOptions = JointOptions(),
-    settle_s: float = 0.0,
+    coil_off_skip_s: float = 0.0,
 ) -> list[RingdownFit]:
     """Fit the ring-downs of all probes in ``lines`` jointly; one :class:`RingdownFit` per probe,
     in the order of ``lines``, each carrying its ``probe_id``.
@@ -303,7 +303,7 @@ def fit_ringdowns(
     if not np.all(np.isfinite(data)):
         return failed(FitStatus.INVALID_SAMPLES, f"{int(np.count_nonzero(~np.isfinite(data)))} NaN or infinite samples")
     mask = np.zeros(data.shape, bool) if saturated is None else np.asarray(saturated, bool)
-    start, stop = usable_window(mask, int(round(settle_s * fs)))
+    start, stop = usable_window(mask, int(round(coil_off_skip_s * fs)))
     lowest = min(line.expected_frequency_hz for line in lines)
     needed = int(math.ceil(options.min_periods * fs / lowest))
     if stop - start < needed:

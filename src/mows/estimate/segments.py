@@ -206,7 +206,7 @@ class SegmentAssembler:
 
 
 def fit_segment(
-    segment: Segment, options: FitOptions = FitOptions(), settle_s: float = 0.0, damping_guess_per_s: float = 1.8
+    segment: Segment, options: FitOptions = FitOptions(), coil_off_skip_s: float = 0.0, damping_guess_per_s: float = 1.8
 ) -> RingdownFit:
     """Fit one assembled ring-down; a segment with missing samples is refused, not patched."""
     window = segment.window
@@ -226,5 +226,5 @@ def fit_segment(
         segment.saturated,
         options,
         damping_guess_per_s,
-        settle_s,
+        coil_off_skip_s,
     )

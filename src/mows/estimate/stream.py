@@ -33,7 +33,7 @@ class FitSettings:
 
     probe: Probe
     options: Callable[[float], FitOptions]  # θ0 → the fit's options; ValueError when no model can be built
-    settle_s: float
+    coil_off_skip_s: float
     f00_hz: float
     f00_std_hz: float
 
@@ -75,7 +75,7 @@ class RingdownEstimator:
         except ValueError as error:  # e.g. a sensing axis of (0, 0): no model to fit
             fit = failure(FitStatus.BAD_FIT, f"cannot build the signal model: {error}", theta0_rad=window.theta0_rad)
         else:
-            fit = fit_segment(segment, options, settings.settle_s, settings.probe.damping_per_s)
+            fit = fit_segment(segment, options, settings.coil_off_skip_s, settings.probe.damping_per_s)
         estimate = estimate_along_axis(fit, settings.probe, settings.f00_hz, settings.f00_std_hz)
         self.last = fit.report()
         calibrated = (

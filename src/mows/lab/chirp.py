@@ -117,20 +117,22 @@ def diagnose_ringdown(
     options: FitOptions,
     f00_hz: float | None = None,
     saturated: np.ndarray | None = None,
-    settle_s: float = 0.0,
+    coil_off_skip_s: float = 0.0,
     piece_periods: float = PIECE_PERIODS,
 ) -> ChirpDiagnosis:
     """The chirp diagnosis of one ring-down (module docstring); :class:`ChirpError` when the
     whole-window fit fails or gives fewer than three pieces or no amplitude."""
     samples = np.asarray(samples, float)
     mask = np.zeros(samples.shape, bool) if saturated is None else np.asarray(saturated, bool)
-    fit = fit_ringdown(samples, sample_rate_hz, theta0_rad, expected_hz, mask, options, probe.damping_per_s, settle_s)
+    fit = fit_ringdown(
+        samples, sample_rate_hz, theta0_rad, expected_hz, mask, options, probe.damping_per_s, coil_off_skip_s
+    )
     if not fit.ok:
         raise ChirpError(f"the whole-window fit failed: {fit.report()}")
     start_amplitude = _start_amplitude_rad(fit, probe)
     if not math.isfinite(start_amplitude):
         raise ChirpError("the rest offset lies beyond the stop: the chirp cannot be put against amplitude")
-    start, stop = usable_window(mask, int(round(settle_s * sample_rate_hz)))
+    start, stop = usable_window(mask, int(round(coil_off_skip_s * sample_rate_hz)))
     length = int(round(piece_periods * sample_rate_hz / fit.frequency_hz))
     count = (stop - start) // length
     if count < 3:

@@ -141,64 +141,53 @@ def _invert(shift_hz: FloatOrArray, f00_hz: FloatOrArray, scale: FloatOrArray, s
     return Inversion(value=value, std=std)
 
 
-def sweep_shift_hz(
-    theta0_rad: FloatOrArray,
-    field_xy_t: Vector,
-    gradient_xy_t_per_m: Vector,
-    f00_hz: float,
-    spring_nm_per_rad: float,
-    moment_am2: float,
-    lever_m: float,
-    exact: bool = True,
-) -> FloatOrArray:
-    """Published rotation-sweep model Δf(θ0) for an in-plane field and gradient (Eqs. 6, 11, S18).
+@dataclasses.dataclass(frozen=True)
+class PublishedSweep:
+    """The published rotation-sweep model of an in-plane field (Bx, By), T, and gradient
+    (Gxx, Gxy, Gyy), T/m (G_ij = ∂B_i/∂x_j, symmetric), for a probe of f00, kM, m and l."""
 
-    The probe axis is x' = (cos θ0, sin θ0); kB = m·Bx', kG = l·m·Gx'x' with
-    Gx'x' = x'ᵀ·G·x'. With ``exact`` the √ of Eq. 6 is kept; otherwise the first-order
-    form Δf = f00·(kB + kG)/(2kM) of Eq. 11, corrected by the factor f00 (PHYSICS.md §3).
+    field_xy_t: Vector
+    gradient_xy_t_per_m: Vector
+    f00_hz: float
+    spring_nm_per_rad: float
+    moment_am2: float
+    lever_m: float
 
-    Parameters
-    ----------
-    theta0_rad : orientations, rad.
-    field_xy_t : (Bx, By), tesla.
-    gradient_xy_t_per_m : (Gxx, Gxy, Gyy), T/m (G_ij = ∂B_i/∂x_j, symmetric).
-    """
-    theta0 = np.asarray(theta0_rad, dtype=float)
-    c, s = np.cos(theta0), np.sin(theta0)
-    bx, by = field_xy_t
-    gxx, gxy, gyy = gradient_xy_t_per_m
-    field_along = bx * c + by * s
-    gradient_along = gxx * c * c + 2.0 * gxy * c * s + gyy * s * s
-    k_mag = field_spring_nm_per_rad(moment_am2, field_along) + gradient_spring_nm_per_rad(
-        moment_am2, lever_m, gradient_along
-    )
-    if exact:
-        return frequency_shift_hz(f00_hz, spring_nm_per_rad, k_mag)
-    return np.multiply(f00_hz, k_mag) / (2.0 * spring_nm_per_rad)
+    def shift_hz(self, theta0_rad: FloatOrArray, exact: bool = True) -> FloatOrArray:
+        """Δf(θ0) at the orientations ``theta0_rad`` (Eqs. 6, 11, S18).
 
+        The probe axis is x' = (cos θ0, sin θ0); kB = m·Bx', kG = l·m·Gx'x' with
+        Gx'x' = x'ᵀ·G·x'. With ``exact`` the √ of Eq. 6 is kept; otherwise the first-order
+        form Δf = f00·(kB + kG)/(2kM) of Eq. 11, corrected by the factor f00 (PHYSICS.md §3).
+        """
+        theta0 = np.asarray(theta0_rad, dtype=float)
+        c, s = np.cos(theta0), np.sin(theta0)
+        bx, by = self.field_xy_t
+        gxx, gxy, gyy = self.gradient_xy_t_per_m
+        field_along = bx * c + by * s
+        gradient_along = gxx * c * c + 2.0 * gxy * c * s + gyy * s * s
+        k_mag = field_spring_nm_per_rad(self.moment_am2, field_along) + gradient_spring_nm_per_rad(
+            self.moment_am2, self.lever_m, gradient_along
+        )
+        if exact:
+            return frequency_shift_hz(self.f00_hz, self.spring_nm_per_rad, k_mag)
+        return np.multiply(self.f00_hz, k_mag) / (2.0 * self.spring_nm_per_rad)
 
-def sweep_harmonics(
-    field_xy_t: Vector,
-    gradient_xy_t_per_m: Vector,
-    f00_hz: float,
-    spring_nm_per_rad: float,
-    moment_am2: float,
-    lever_m: float,
-) -> dict[str, float]:
-    """Prefactors of Eq. 12, Δf ≈ P0 + P1·cos(θ0 + φ1) + P2·cos(2θ0 + φ2), first order.
+    def harmonics(self) -> dict[str, float]:
+        """Prefactors of Eq. 12, Δf ≈ P0 + P1·cos(θ0 + φ1) + P2·cos(2θ0 + φ2), first order.
 
-    P1 = f00·m·|B|/(2kM), φ1 = −atan2(By, Bx); the gradient gives the constant
-    P0 = f00·l·m·(Gxx + Gyy)/(4kM) and P2 = f00·l·m·|((Gxx − Gyy)/2, Gxy)|/(2kM),
-    φ2 = −atan2(Gxy, (Gxx − Gyy)/2). Returns a dict with P0_hz, P1_hz, phi1_rad, P2_hz, phi2_rad.
-    """
-    bx, by = field_xy_t
-    gxx, gxy, gyy = gradient_xy_t_per_m
-    scale = f00_hz * moment_am2 / (2.0 * spring_nm_per_rad)
-    half_diff = 0.5 * (gxx - gyy)
-    return {
-        "P0_hz": scale * lever_m * 0.5 * (gxx + gyy),
-        "P1_hz": scale * np.hypot(bx, by),
-        "phi1_rad": -np.arctan2(by, bx),
-        "P2_hz": scale * lever_m * np.hypot(half_diff, gxy),
-        "phi2_rad": -np.arctan2(gxy, half_diff),
-    }
+        P1 = f00·m·|B|/(2kM), φ1 = −atan2(By, Bx); the gradient gives the constant
+        P0 = f00·l·m·(Gxx + Gyy)/(4kM) and P2 = f00·l·m·|((Gxx − Gyy)/2, Gxy)|/(2kM),
+        φ2 = −atan2(Gxy, (Gxx − Gyy)/2). Returns a dict with P0_hz, P1_hz, phi1_rad, P2_hz, phi2_rad.
+        """
+        bx, by = self.field_xy_t
+        gxx, gxy, gyy = self.gradient_xy_t_per_m
+        scale = self.f00_hz * self.moment_am2 / (2.0 * self.spring_nm_per_rad)
+        half_diff = 0.5 * (gxx - gyy)
+        return {
+            "P0_hz": scale * self.lever_m * 0.5 * (gxx + gyy),
+            "P1_hz": scale * np.hypot(bx, by),
+            "phi1_rad": -np.arctan2(by, bx),
+            "P2_hz": scale * self.lever_m * np.hypot(half_diff, gxy),
+            "phi2_rad": -np.arctan2(gxy, half_diff),
+        }

@@ -9,8 +9,9 @@ from __future__ import annotations
 import inspect
 import os
 import pathlib
+import typing
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import yaml
@@ -20,6 +21,7 @@ from numpy.typing import ArrayLike
 FloatOrArray = float | np.ndarray
 #: A short vector of numbers, as a tuple or an array.
 Vector = Sequence[float] | np.ndarray
+T = TypeVar("T")
 
 
 def as_points_m(points_m: ArrayLike) -> np.ndarray:
@@ -74,15 +76,34 @@ def check_keys(what: str, given: dict, builder: Callable[..., Any]) -> None:
         raise ValueError(f"{what}: unknown keys {unknown}, missing keys {missing}; allowed keys are {list(parameters)}")
 
 
-def build_from_yaml(path: str | os.PathLike[str], what: str, builder: Callable[..., Any]) -> Any:
-    """``builder(**mapping)`` of the YAML mapping in the file at ``path``, its keys checked
-    (:func:`check_keys`); ValueError naming the file and what is wrong."""
+def build_from_yaml(path: str | os.PathLike[str], what: str, cls: type[T], **convert: Callable[[Any], Any]) -> T:
+    """The dataclass ``cls`` of the YAML mapping in the file at ``path`` (:func:`typed`);
+    ValueError naming the file and what is wrong."""
     path = pathlib.Path(path)
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-        if not isinstance(data, dict):
-            raise ValueError(f"expected a mapping, got {data!r}")
-        check_keys(what, data, builder)
-        return builder(**data)
+        return typed(cls, what, yaml.safe_load(path.read_text(encoding="utf-8")), **convert)
     except (OSError, yaml.YAMLError, ValueError, TypeError) as error:
         raise ValueError(f"{path}: {error}") from None
+
+
+def typed(cls: type[T], what: str, given: Any, **convert: Callable[[Any], Any]) -> T:
+    """The dataclass ``cls`` of the mapping ``given`` (a YAML section called ``what``), its keys
+    checked (:func:`check_keys`): each value through ``convert[key]`` where there is one, else
+    made the float, int or str its field is declared as (YAML reads ``1`` as an int, ``1e-4``
+    as a str). ValueError naming ``what`` for anything else than a mapping."""
+    if not isinstance(given, dict):
+        raise ValueError(f"{what} must be a mapping, got {given!r}")
+    check_keys(what, given, cls)
+    declared = typing.get_type_hints(cls)
+    return cls(**{key: _as_declared(key, declared[key], value, convert.get(key)) for key, value in given.items()})
+
+
+def _as_declared(key: str, declared: Any, value: Any, convert: Callable[[Any], Any] | None) -> Any:
+    if convert is not None:
+        return convert(value)
+    if declared not in (float, int, str):
+        return value
+    try:
+        return declared(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{key} = {value!r} is not a {declared.__name__}") from None

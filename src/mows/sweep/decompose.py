@@ -31,7 +31,7 @@ import math
 import numpy as np
 from scipy.optimize import least_squares
 
-from mows.physics.frequency import sweep_shift_hz, weak_field_sensitivity_hz_per_t
+from mows.physics.frequency import PublishedSweep, weak_field_sensitivity_hz_per_t
 from mows.physics.pose import probe_axes
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import Probe
@@ -170,9 +170,10 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
     theta0 = np.asarray(theta0_rad, float)
     f00 = f00_hz + df00
     if model == "published":
-        shift = sweep_shift_hz(
-            theta0, (bx, by), (gs + gd, gxy, gs - gd), f00, probe.spring_nm_per_rad, probe.moment_am2, probe.lever_m
+        sweep = PublishedSweep(
+            (bx, by), (gs + gd, gxy, gs - gd), f00, probe.spring_nm_per_rad, probe.moment_am2, probe.lever_m
         )
+        shift = sweep.shift_hz(theta0)
         return f00 + shift - f00_hz
     potential = local_potential(params, theta0, probe)
     if ringdowns is None:

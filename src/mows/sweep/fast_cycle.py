@@ -48,7 +48,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mows.estimate.ringdown import SETTLE_S, FitOptions
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.ringdown_problem import cramer_rao_frequency_hz
 from mows.physics.field import MU0_OVER_4PI
 from mows.physics.fluxgate import PICKUP_COMBINATIONS
@@ -127,7 +127,7 @@ def kappa_t(pair, pose, moment_am2: float, combine: str = "difference") -> float
 
 
 def ringdown_std_model(
-    pair, probe, pose, sample_rate_hz: float, noise_std_t: float, recovery_s: float = SETTLE_S
+    pair, probe, pose, sample_rate_hz: float, noise_std_t: float, recovery_s: float = COIL_OFF_SKIP_S
 ) -> Callable[[float, float], float]:
     """σ_f(θ0, T): the Cramér–Rao bound of one ring-down of length T from the stop at θ0, for
     white noise ``noise_std_t`` per sample of the difference channel (a measured figure)."""

@@ -24,12 +24,14 @@ from collections.abc import Callable
 
 import numpy as np
 
+from mows.device.phases import CycleRequest
 from mows.physics.probe import Probe
 from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal
 from mows.sweep.record import SweepPoint, SweepRecord
 
 DECOMPOSE_NEAR = 1.25  # decompose an adaptive sweep once the prediction is this close to the target
+REPEATS_PER_ANGLE_RANGE = (1, 100)  # ring-downs per orientation a goal or the settings may ask for
 
 
 class SweepState(enum.StrEnum):
@@ -95,16 +97,9 @@ class SweepGoal:
 
 
 @dataclasses.dataclass(frozen=True)
-class CycleCall:
-    """Ask the driver for one measurement cycle of ``repeats`` ring-downs at θ0."""
-
-    theta0_rad: float
-    repeats: int
-
-
-@dataclasses.dataclass(frozen=True)
 class CycleAnswer:
-    """What came of a :class:`CycleCall`: ``problem`` says why no cycle ran ('' when it did)."""
+    """The answer to a :class:`~mows.device.phases.CycleRequest`: the cycle that ran and how many
+    ring-downs it recorded, or ``problem``, why no cycle ran ('' when it did)."""
 
     cycle_id: int = 0
     ringdowns_recorded: int = 0
@@ -167,7 +162,7 @@ class SweepStep:
     feedback: SweepFeedback | None = None
     publish: SweepMap | None = None
     turn: float | None = None
-    run_cycle: CycleCall | None = None
+    run_cycle: CycleRequest | None = None
     decompose: Callable[[], Decomposition] | None = None
     finished: SweepOutcome | None = None
 
@@ -179,6 +174,7 @@ class SweepRunner:
         self.state = SweepState.IDLE
         self.sweeps = 0  # sweeps that came as far as the decomposition
         self.last = "no sweep yet"  # the last decomposition's report
+        self.last_failure = ""  # why the last sweep failed ('' once one succeeds; a cancel leaves it)
         self._angles: list[float] = []
         self._repeats = 0
         self._index = 0
@@ -192,16 +188,19 @@ class SweepRunner:
         self._planner: AdaptivePlanner | None = None  # an adaptive sweep's
         self._decomposition: Decomposition | None = None
         self._decomposed_points = 0
-        self._turning: CycleCall | None = None  # the cycle that waits for the operator's turn
+        self._turning: CycleRequest | None = None  # the cycle that waits for the operator's turn
 
     # --- inputs ----------------------------------------------------------------------------
     def start(self, goal: SweepGoal, settings: SweepSettings, probe: Probe) -> None:
         """Accept ``goal`` (the sweep begins at :meth:`begin`). ValueError, with the reason, when
-        it is refused: a non-finite angle, too few distinct orientations to decompose, an
-        unknown model, or a sweep still running."""
+        it is refused: a non-finite angle, too few distinct orientations to decompose, repeats
+        outside :data:`REPEATS_PER_ANGLE_RANGE`, an unknown model, or a sweep still running."""
         given = [float(a) for a in goal.theta0_rad]
         angles = given or list(np.radians(np.arange(0.0, 360.0, settings.angle_step_deg)))
         problems = []
+        low, high = REPEATS_PER_ANGLE_RANGE
+        if goal.repeats_per_angle and not low <= goal.repeats_per_angle <= high:
+            problems.append(f"repeats_per_angle={goal.repeats_per_angle!r} is outside [{low}, {high}]")
         if not all(math.isfinite(a) for a in angles):
             problems.append(f"angles {angles} are not all finite")
         elif problem := orientations_problem(angles, settings.f00_free):
@@ -253,6 +252,13 @@ class SweepRunner:
         """The orientation (rad) the operator has been asked to turn the stage to, if any."""
         return None if self._turning is None else self._turning.theta0_rad
 
+    def turn_timed_out(self, timeout_s: float) -> SweepStep:
+        """No confirmation of the awaited turn came within ``timeout_s``: the sweep ends, failed."""
+        if self._turning is None:
+            return SweepStep()
+        theta0_deg = math.degrees(self._turning.theta0_rad)
+        return self.abandon(f"no confirmation of θ0 = {theta0_deg:g}° within {timeout_s:g} s")
+
     def on_turned(self) -> SweepStep:
         """The operator confirmed the turn the last step asked for: its cycle (or the end, if
         the sweep was cancelled meanwhile)."""
@@ -265,7 +271,7 @@ class SweepRunner:
             )
         return SweepStep(run_cycle=call)
 
-    def _cycle(self, step: SweepStep, call: CycleCall) -> SweepStep:
+    def _cycle(self, step: SweepStep, call: CycleRequest) -> SweepStep:
         """Run ``call`` next, after the operator's turn when the stage has no motor."""
         if self._settings.manual_orientation:
             self._turning, step.turn = call, call.theta0_rad
@@ -351,7 +357,7 @@ class SweepRunner:
                 False, f"cancelled after {self._index} of {len(self._angles)} orientations", cancelled=True
             )
             return self._end(step, outcome)
-        return self._cycle(step, CycleCall(self._angles[self._index], self._repeats))
+        return self._cycle(step, CycleRequest(self._angles[self._index], self._repeats))
 
     def _measured(self, step: SweepStep) -> SweepStep:
         self.sweeps += 1
@@ -383,7 +389,7 @@ class SweepRunner:
             return self._planned_end(step, choice)
         self._angles.append(choice.theta0_rad)
         self._repeats = choice.repeats
-        return self._cycle(step, CycleCall(choice.theta0_rad, choice.repeats))
+        return self._cycle(step, CycleRequest(choice.theta0_rad, choice.repeats))
 
     def _decomposition_due(self, planner: AdaptivePlanner) -> bool:
         """New ring-downs at enough orientations, and a prediction near the target."""
@@ -421,6 +427,8 @@ class SweepRunner:
 
     def _end(self, step: SweepStep, outcome: SweepOutcome) -> SweepStep:
         self.state, self._awaited, self._turning = SweepState.IDLE, None, None
+        if not outcome.cancelled:
+            self.last_failure = "" if outcome.ok else outcome.message
         self._fits.clear()
         step.finished = outcome
         return step

@@ -23,7 +23,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from mows.estimate.recorded_cycle import fit_cycle
-from mows.estimate.ringdown import SETTLE_S
+from mows.estimate.ringdown import COIL_OFF_SKIP_S
 from mows.lab.data.reference import reference_columns
 from mows.lab.data.table import FIELD, GRADIENT, MeasurementTable
 from mows.physics import ringdown_average
@@ -181,7 +181,7 @@ def simulated_table(
     angles_deg: Vector,
     repeats: int,
     rng: np.random.Generator,
-    settle_s: float = SETTLE_S,
+    coil_off_skip_s: float = COIL_OFF_SKIP_S,
 ) -> MeasurementTable:
     """A measurement table from the time-domain simulator and the lever-aware estimator.
 
@@ -200,7 +200,7 @@ def simulated_table(
     (:func:`mows.lab.data.reference.reference_at`). Failed fits are left out and counted in the notes.
     """
     device = SimulatedDevice(scenario, rng)
-    sweeps = [_simulated_sweep(device, scenario, angles_deg, settle_s) for _ in range(repeats)]
+    sweeps = [_simulated_sweep(device, scenario, angles_deg, coil_off_skip_s) for _ in range(repeats)]
     starts = _start_amplitudes_rad([record for record, _, _ in sweeps], scenario.probe)
     parts = [
         {**record.table_columns(start), "temperature_k": np.array(temperatures), "sweep": np.full(len(start), float(i))}
@@ -217,7 +217,7 @@ def simulated_table(
 
 
 def _simulated_sweep(
-    device: SimulatedDevice, scenario: Scenario, angles_deg: Vector, settle_s: float
+    device: SimulatedDevice, scenario: Scenario, angles_deg: Vector, coil_off_skip_s: float
 ) -> tuple[SweepRecord, list[float], int]:
     """(its SweepRecord, the device's temperature at each switch-off, failed fits) of one
     rotation sweep."""
@@ -230,7 +230,7 @@ def _simulated_sweep(
             excite_s=scenario.excitation.excite_s,
             ringdown_s=scenario.excitation.ringdown_s,
         )
-        point = _ringdown_point(scenario, cycle, settle_s)
+        point = _ringdown_point(scenario, cycle, coil_off_skip_s)
         if point is None:
             failed += 1
             continue
@@ -255,10 +255,10 @@ def _start_amplitudes_rad(records: list[SweepRecord], probe: Probe) -> list[np.n
     return [ringdown_average.start_swing_rad(stop, rest) for rest in rests]
 
 
-def _ringdown_point(scenario: Scenario, cycle: CycleRecord, settle_s: float) -> SweepPoint | None:
+def _ringdown_point(scenario: Scenario, cycle: CycleRecord, coil_off_skip_s: float) -> SweepPoint | None:
     """The estimator's fit of one simulated ring-down as a :class:`mows.sweep.record.SweepPoint`
     (None when the fit fails)."""
-    fit = fit_cycle(cycle, scenario, settle_s=settle_s)
+    fit = fit_cycle(cycle, scenario, coil_off_skip_s=coil_off_skip_s)
     if not fit.ok:
         return None
     return SweepPoint.from_fit(

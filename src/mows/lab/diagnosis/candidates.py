@@ -23,7 +23,7 @@ import scipy.stats
 
 from mows.lab import progress
 from mows.lab.diagnosis.projections import Signature, orthonormal_basis, project_out, signature
-from mows.lab.model.effects import Effect, testable
+from mows.lab.model.effects import Effect, untestable_reason
 from mows.lab.model.least_squares import FitResult, FittedParameter, parameters_dict
 from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
@@ -226,7 +226,7 @@ def rank_candidates(
         progress.stage("ranking candidate effects", done, len(effects))
         if effect.name in fit.model.effect_names:
             continue
-        reason = testable(effect, fit.table, probe)
+        reason = untestable_reason(effect, fit.table, probe)
         test = None if reason else signature(fit.extension_columns(effect), model_basis, residual)
         if test is not None and not test.rank:
             reason = ABSORBED

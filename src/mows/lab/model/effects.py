@@ -118,8 +118,8 @@ class Effect:
         return f"Effect({self.name!r}, parameters={list(self.parameter_names)})"
 
 
-def testable(effect_: Effect, table: MeasurementTable, probe: Probe) -> str | None:
-    """None when the effect can be evaluated on ``table``, else the reason in words."""
+def untestable_reason(effect_: Effect, table: MeasurementTable, probe: Probe) -> str | None:
+    """Why the effect cannot be evaluated on ``table``, in words; None when it can."""
     missing = effect_.missing_columns(table)
     if missing:
         return f"needs column{'s' if len(missing) > 1 else ''} {', '.join(missing)}"

@@ -41,7 +41,7 @@ from mows.lab.model.configuration import (
     frequency_factor,
     ringdown_nodes,
 )
-from mows.lab.model.effects import Effect, Parameter, testable
+from mows.lab.model.effects import Effect, Parameter, untestable_reason
 from mows.lab.model.least_squares import FitResult, Problem
 from mows.physics.probe import Probe
 
@@ -140,7 +140,7 @@ class FrequencyModel:
         """Weighted least-squares fit to ``table``; ``start`` = effect parameter values (default 0)."""
         probe = self._require_probe()
         for effect in self.effects:
-            reason = testable(effect, table, probe)
+            reason = untestable_reason(effect, table, probe)
             if reason:
                 raise ValueError(f"effect {effect.name} cannot be fitted to this table: {reason}")
         problem = Problem(self, table)

@@ -49,7 +49,7 @@ from mows.lab.diagnosis.candidates import STRONG_DELTA_BIC, TIE_DELTA_BIC, quasi
 from mows.lab.diagnosis.physical_aliases import alias_statements
 from mows.lab.diagnosis.projections import Signature
 from mows.lab.diagnosis.verdict import Diagnosis, diagnose
-from mows.lab.model.effects import Effect, testable
+from mows.lab.model.effects import Effect, untestable_reason
 from mows.lab.model.least_squares import FitResult, FittedParameter, parameter_values, parameters_dict
 from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
@@ -186,7 +186,7 @@ def _physical_replacements(
     reduced = fit.model.without(generic)
     start = fit.values_without(generic)
     for effect in pool:
-        if effect.generic or effect.name in fit.model.effect_names or testable(effect, fit.table, probe):
+        if effect.generic or effect.name in fit.model.effect_names or untestable_reason(effect, fit.table, probe):
             continue
         form = effect.at_physics() if effect.physical is not None else effect
         if len(form.parameters) > len(generic.parameters):

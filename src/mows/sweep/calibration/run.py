@@ -15,6 +15,7 @@ import dataclasses
 import enum
 import math
 
+from mows.device.phases import CycleRequest
 from mows.estimate.calibration.constants import KnownConstants, ProbeCalibration
 from mows.estimate.calibration.fit import calibrate_probe
 from mows.physics.probe import Probe
@@ -23,7 +24,6 @@ from mows.sweep.calibration.schedule import (
     CalibrationOutcome,
     CalibrationPlan,
     CalibrationSchedule,
-    RunCycle,
     Step,
 )
 from mows.sweep.runner import CycleAnswer, turn_prompt
@@ -90,7 +90,7 @@ class CalibrationRun:
         """With a manual stage, a cycle at another orientation than the stage's waits for a turn."""
         if not self.manual_orientation:
             return step
-        cycles = [a for a in step.actions if isinstance(a, RunCycle)]
+        cycles = [a for a in step.actions if isinstance(a, CycleRequest)]
         if not cycles or cycles[0].theta0_rad == self._stage_rad:
             return step
         self._turning = step
@@ -99,7 +99,7 @@ class CalibrationRun:
         return Step(actions=[Turn(cycles[0].theta0_rad)], feedback=[*step.feedback, prompt])
 
     def on_cycle(self, answer: CycleAnswer) -> Step | None:
-        """The driver's answer to the step's ``RunCycle``; None while that cycle's fits are due."""
+        """The driver's answer to the step's ``CycleRequest``; None while that cycle's fits are due."""
         if answer.problem:
             return self.schedule.on_cycle_done(False, answer.problem)
         self._awaited = answer

@@ -9,8 +9,9 @@ device confirmed zero.
 
 The schedule does no I/O, like :class:`mows.device.cycle.CycleSequencer`: it is fed the
 device's answers (:meth:`on_supply`, :meth:`on_fit`, :meth:`on_cycle_done`, :meth:`fits_timed_out`)
-and the user's :meth:`cancel`, and returns a :class:`Step` of actions (:class:`SetSupply`,
-:class:`RunCycle`), feedback and, at the end, the :class:`CalibrationOutcome` with the
+and the user's :meth:`cancel`, and returns a :class:`Step` of actions (:class:`SetSupply`, a
+:class:`~mows.device.phases.CycleRequest` whose fits go to :meth:`on_fit` and whose end to
+:meth:`on_cycle_done`), feedback and, at the end, the :class:`CalibrationOutcome` with the
 calibration points for :func:`mows.estimate.calibration.fit.calibrate_probe`.
 """
 
@@ -20,6 +21,7 @@ import dataclasses
 import enum
 import math
 
+from mows.device.phases import CycleRequest
 from mows.estimate.calibration.constants import CalibrationPoint, Wiring
 
 PAPER_CURRENTS_A = (0.0, 0.5, 1.0, 1.5, 2.0, -0.5, -1.0, -1.5, -2.0)
@@ -54,15 +56,6 @@ class SetSupply:
     """Ramp the supply to ``current_a``; answer with :meth:`CalibrationSchedule.on_supply`."""
 
     current_a: float
-
-
-@dataclasses.dataclass(frozen=True)
-class RunCycle:
-    """Run a measurement cycle of ``repeats`` ring-downs at ``theta0_rad``; pass its fits to
-    :meth:`CalibrationSchedule.on_fit` and its end to :meth:`CalibrationSchedule.on_cycle_done`."""
-
-    theta0_rad: float
-    repeats: int
 
 
 @dataclasses.dataclass(frozen=True)
@@ -146,7 +139,7 @@ class CalibrationSchedule:
             return self._end(False, False, f"the supply refused {self.current_a:+.4f} A: {reason}")
         self.state = State.CYCLING
         return Step(
-            actions=[RunCycle(self.theta0_rad, self.plan.repeats)],
+            actions=[CycleRequest(self.theta0_rad, self.plan.repeats)],
             feedback=[self._feedback(f"cycle at θ0 = {math.degrees(self.theta0_rad):.1f}°")],
         )
 
@@ -209,7 +202,7 @@ class CalibrationSchedule:
             )
         self.state = State.CYCLING
         return Step(
-            actions=[RunCycle(self.theta0_rad, self.plan.repeats)],
+            actions=[CycleRequest(self.theta0_rad, self.plan.repeats)],
             feedback=[self._feedback(f"cycle at θ0 = {math.degrees(self.theta0_rad):.1f}°")],
         )
 

@@ -144,6 +144,7 @@ CASES = [
     ("sim-theta-nan", ["sim", "--theta0-deg", "nan"], 2, ["--theta0-deg"]),
     # fit: durations, geometry, a bag without ring-downs, a table given as a bag
     ("fit-settle-negative", ["fit", "{d}/bag", "--coil-off-skip-s", "-1"], 2, ["--coil-off-skip-s"]),
+    ("fit-settle-renamed", ["fit", "{d}/bag", "--settle-s", "0.01"], 2, ["--settle-s is renamed --coil-off-skip-s"]),
     (
         "fit-settle-longer-than-ringdown",
         ["fit", "{d}/bag", "--coil-off-skip-s", "100"],

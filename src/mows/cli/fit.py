@@ -15,7 +15,7 @@ import math
 import os
 import sys
 
-from mows.cli.inputs import input_file, load_probe, non_negative_float, sensor_length_m
+from mows.cli.inputs import input_file, load_probe, non_negative_float, renamed_option, sensor_length_m
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import fit_segment
 from mows.lab.chirp import recorded_segments
@@ -53,6 +53,7 @@ def add_fit_arguments(parser) -> None:
     parser.add_argument(
         "--coil-off-skip-s", type=non_negative_float, default=COIL_OFF_SKIP_S, help="samples skipped after coil-off, s"
     )
+    renamed_option(parser, "--settle-s", "--coil-off-skip-s")
     parser.add_argument(
         "--sensor-distance-m",
         type=sensor_length_m,

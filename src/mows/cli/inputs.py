@@ -97,6 +97,16 @@ class OneLineParser(argparse.ArgumentParser):
         raise UsageError(self.prog, f"{message} (see {self.prog} --help)")
 
 
+def renamed_option(parser: argparse.ArgumentParser, old: str, new: str) -> None:
+    """``old`` stays known for one release only to be refused with the name that replaced it."""
+
+    class Renamed(argparse.Action):
+        def __call__(self, parser, namespace, values, option_string=None):
+            parser.error(f"{old} is renamed {new}: give {new}")
+
+    parser.add_argument(old, action=Renamed, help=argparse.SUPPRESS)
+
+
 #: Sensor geometry beyond this is no bench of a millimetre magnet (its field at a metre is
 #: ~1e-13 T): a unit error (mm for m) or a typo.
 MAX_SENSOR_M = 1.0

@@ -58,7 +58,8 @@ def weak_gradient_table(rows: int = 500_000, hidden_sigmas: float = HIDDEN_SIGMA
 
     What it misses is the rms residual of the published model (Eq. 6, f00 fitted) on the
     noise-free truth: 99.96 % of its χ² is the transverse gradient (``+ transverse_gradient``
-    leaves 4e-4 of it; the finite amplitude and the static deflection are below 1/20 of it)."""
+    leaves 4e-4 of it; the finite amplitude and the static deflection move the rows by less
+    than 1/20 of its rms)."""
     theta0_deg = np.arange(ORIENTATIONS) * (360.0 / ORIENTATIONS)
     truth_hz = synthetic.true_frequency_hz(PAPER_PROBE, SOURCE, np.radians(theta0_deg), PAPER_PROBE.theta_stop_rad)
     sweep = synthetic.synthesize(

@@ -14,11 +14,11 @@ User errors (bad tables, probe files, unknown effects, broken plugins) end with 
 message and exit status 2, never a traceback (:mod:`mows.cli.inputs`). ``report -o`` writes a
 new file (an existing one only with ``--force``, never an input), whole or not at all.
 
-Every row is analysed up to MAX_ROWS rows: the model is evaluated once per distinct
-configuration, so the cost beyond that grows with the rows only through residuals and
-Jacobians (docs/model_lab.md, "Long tables": at 200 000 rows ``add`` peaked at 1105 MiB,
-hence the lower limit). A longer table is analysed on a stratified random subsample of
-MAX_ROWS rows (seed 0; whole sweeps spread over the table, :meth:`MeasurementTable.subsample`),
+Every row is analysed up to MAX_ROWS rows: the model is evaluated once per configuration
+group and fitted on the groups' sufficient statistics, so the rows cost only the per-row
+vectors of the diagnosis (docs/model_lab.md, "Long tables": 500 000 rows of 12 orientations
+peaked at 860 MiB in ``diagnose`` and ``add``). A longer table is analysed on a stratified
+random subsample of MAX_ROWS rows (seed 0; whole sweeps spread over the table, :meth:`MeasurementTable.subsample`),
 said in a note; ``--all-rows`` uses every row. On a terminal
 the stages show a progress bar on stderr (tqdm), never with ``--json``.
 """
@@ -41,7 +41,7 @@ from mows.lab import analyse, is_bag, load_table, progress, with_reference, writ
 from mows.lab.chirp import PIECE_PERIODS
 from mows.records.files import check_output, writing
 
-MAX_ROWS = 150_000
+MAX_ROWS = 500_000
 SUBSAMPLE_SEED = 0
 REDRAW_S = 0.2  # the work bar's least interval between redraws
 PAPER_PROBE_FILE = pathlib.Path(__file__).resolve().parents[1] / "physics" / "probes" / "paper.yaml"

@@ -27,6 +27,7 @@ from collections.abc import Iterable, Iterator
 import numpy as np
 
 from mows.lab import progress
+from mows.lab.data.table import MeasurementTable
 from mows.lab.diagnosis.candidates import ABSORBED, TIE_DELTA_BIC, Candidate
 from mows.lab.diagnosis.physical_aliases import alias_statements
 from mows.lab.diagnosis.projections import Signature, cosine_within, orthonormal_basis, project_out, same_span
@@ -121,6 +122,23 @@ def _partition(signatures: dict[str, Signature], significant: set[str]) -> list[
     return list(found.values())
 
 
+def _extended(
+    fit: FitResult, members: list[Candidate], joined: MeasurementTable, coefficients: dict[str, np.ndarray]
+) -> dict[str, Signature]:
+    """The members' signatures on the ``joined`` what-if table, with their fitted signals
+    extended by the same linear ``coefficients``."""
+    model_basis = orthonormal_basis(fit.model_jacobian(joined))
+    extended = {}
+    for candidate in members:
+        columns = np.asarray(fit.extension_columns(candidate.effect, joined))
+        projected = project_out(columns, model_basis)
+        basis = orthonormal_basis(projected, np.linalg.norm(columns, axis=0).max())
+        extended[candidate.name] = Signature(
+            basis, projected, 0.0, basis.shape[1], basis.T @ (projected @ coefficients[candidate.name])
+        )
+    return extended
+
+
 def _separate(members: list[Candidate], fit: FitResult, probe: Probe, number: int) -> Group:
     """The cheapest what-if variant that splits the group most; checks for what stays together."""
     names = [c.name for c in members]
@@ -133,17 +151,10 @@ def _separate(members: list[Candidate], fit: FitResult, probe: Probe, number: in
     what_ifs = variants(fit.table, probe)
     for done, variant in enumerate(what_ifs):
         progress.stage(f"separating group {number} (what-if tables)", done, len(what_ifs))
-        joined = variant.table
-        model_basis = orthonormal_basis(fit.model_jacobian(joined))
-        extended = {}
-        for candidate in members:
-            columns = np.asarray(fit.extension_columns(candidate.effect, joined))
-            projected = project_out(columns, model_basis)
-            basis = orthonormal_basis(projected, np.linalg.norm(columns, axis=0).max())
-            extended[candidate.name] = Signature(
-                basis, projected, 0.0, basis.shape[1], basis.T @ (projected @ coefficients[candidate.name])
-            )
-        parts = _partition(extended, {c.name for c in members if c.p_value < GROUP_SIGNIFICANCE})
+        parts = _partition(
+            _extended(fit, members, variant.table, coefficients),
+            {c.name for c in members if c.p_value < GROUP_SIGNIFICANCE},
+        )
         if len(parts) > len(best_parts):
             best_variant, best_parts = variant, parts
         if len(parts) == len(names):
@@ -227,10 +238,9 @@ def _absorbed_group(fit: FitResult, held: Effect, absorbed: list[Effect], probe:
     separated: list[str] = []
     variant_name: str | None = None
     for variant in variants(fit.table, probe):
-        model_basis = orthonormal_basis(fit.model_jacobian(variant.table))
-        separated = [
-            e.name for e in absorbed if _kept(fit.extension_columns(e, variant.table), model_basis) > NEAR_ALIAS
-        ]
+        joined = variant.table
+        model_basis = orthonormal_basis(fit.model_jacobian(joined))
+        separated = [e.name for e in absorbed if _kept(fit.extension_columns(e, joined), model_basis) > NEAR_ALIAS]
         if separated:
             variant_name, description = variant.name, variant.description
             break

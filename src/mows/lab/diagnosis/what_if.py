@@ -13,24 +13,32 @@ import dataclasses
 import numpy as np
 
 from mows.lab.data.table import WRITER_COLUMN, MeasurementTable
-from mows.lab.model.configuration import base_start_swing_rad
+from mows.lab.model.frequency_model import start_swing_rad
 from mows.physics.probe import Probe
 
 
 @dataclasses.dataclass
 class Variant:
-    """A what-if measurement: ``table`` holds the present rows followed by the extra ones."""
+    """A what-if measurement: the ``extra`` rows measured after the ``present`` ones."""
 
     name: str
     description: str
-    table: MeasurementTable
+    extra: MeasurementTable
+    present: MeasurementTable | None = None
+
+    @property
+    def table(self) -> MeasurementTable:
+        """The present rows followed by the extra ones, joined on each call (a long table's
+        variants are not all held at once)."""
+        assert self.present is not None  # variants() gives every variant its present rows
+        return self.present.concatenate(self.extra)
 
 
 def variants(table: MeasurementTable, probe: Probe) -> list[Variant]:
     """What-if variants of ``table``, cheapest first (module docstring)."""
     # The variants state their excitation: each row's start swing as the model takes it, as a
     # column of a table the user measured (so that halving it is heard).
-    start = np.degrees(base_start_swing_rad(table, probe))
+    start = np.degrees(start_swing_rad(table, probe))
     table = dataclasses.replace(
         table, columns={**{k: v for k, v in table.columns.items() if k != WRITER_COLUMN}, "amplitude_deg": start}
     )
@@ -65,4 +73,4 @@ def variants(table: MeasurementTable, probe: Probe) -> list[Variant]:
                 table.with_columns(temperature_k=table.temperature_k + 5.0),
             )
         )
-    return [dataclasses.replace(variant, table=table.concatenate(variant.table)) for variant in found]
+    return [dataclasses.replace(variant, present=table) for variant in found]

@@ -38,7 +38,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -53,6 +53,7 @@ from mows.physics.schema import FloatOrArray, Vector
 if TYPE_CHECKING:
     from mows.lab.data.table import MeasurementTable
 
+SLICE_ROWS = 20_000  # configurations the potential evaluates at once
 AmplitudeNodes = Callable[["Configuration", np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
@@ -159,9 +160,14 @@ def frequency_factor(
     (default: :func:`ringdown_nodes`, uncached); used when ``config.amplitude`` ≠ 0.
     """
     first, inverse = distinct_rows(config)
-    if len(first) == len(config.theta0_rad):
-        return _frequency_factor(config, probe, amplitude_nodes or ringdown_nodes), config.frequency_hz
-    h = _frequency_factor(config.rows(first), probe, amplitude_nodes or ringdown_nodes)
+    nodes = amplitude_nodes or ringdown_nodes
+    # In slices, so that the potential's work arrays stay bounded where every row differs.
+    h = np.concatenate(
+        [
+            _frequency_factor(config.rows(first[start : start + SLICE_ROWS]), probe, nodes)
+            for start in range(0, len(first), SLICE_ROWS)
+        ]
+    )
     return h[inverse], config.frequency_hz
 
 
@@ -179,7 +185,7 @@ def distinct_rows(config: Configuration) -> tuple[np.ndarray, np.ndarray]:
     inputs = [
         np.asarray(values, float).reshape(n, -1) for name, values in config.per_row().items() if name not in unread
     ]
-    return distinct_rows_of(np.concatenate(inputs, axis=1))
+    return distinct_rows_of(inputs)
 
 
 def default_window_s(table: MeasurementTable) -> np.ndarray:
@@ -191,7 +197,7 @@ def default_window_s(table: MeasurementTable) -> np.ndarray:
     frequency), and the rows of a configuration share their amplitude nodes."""
     if table not in _WINDOW:
         names = ["theta0_deg", *FIELD, *GRADIENT, "amplitude_deg", "damping_per_s"]
-        _, inverse = distinct_rows_of(np.stack([table.columns[name] for name in names if table.has(name)], -1))
+        _, inverse = distinct_rows_of([table.columns[name] for name in names if table.has(name)])
         mean_hz = np.bincount(inverse, table.f_hz) / np.bincount(inverse)
         _WINDOW[table] = ringdown_average.default_duration_s(mean_hz[inverse])
     return _WINDOW[table]
@@ -201,20 +207,30 @@ def default_window_s(table: MeasurementTable) -> np.ndarray:
 _WINDOW: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def distinct_rows_of(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(first, inverse): a row of each bitwise-distinct row of ``keys`` (n, m) and, for every
-    row, the index of its kind in ``first``."""
-    words = np.ascontiguousarray(keys, float).view(np.uint64)
-    # A hash of each row's bits groups fast; the groups are then checked bit for bit, and only
-    # a collision (rows of one hash that differ) falls back to sorting the rows themselves.
-    with np.errstate(over="ignore"):
-        hashed = words @ _HASH_MULTIPLIERS[: words.shape[1]] if words.shape[1] <= len(_HASH_MULTIPLIERS) else None
-    if hashed is not None:
+def distinct_rows_of(keys: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(first, inverse): a row of each kind and, for every row, the index of its kind in
+    ``first``; rows are of one kind when they are bitwise equal in every array of ``keys``
+    (each (n,) or (n, …))."""
+    n = len(keys[0])
+    words = [np.ascontiguousarray(np.asarray(key, float).reshape(n, -1)).view(np.uint64) for key in keys]
+    columns = [column for block in words for column in block.T]
+    # A hash of each row's bits groups fast; the groups are then checked bit for bit, column by
+    # column (a long table is never copied whole), and only a collision (rows of one hash that
+    # differ) falls back to sorting the rows themselves.
+    if len(columns) <= len(_HASH_MULTIPLIERS):
+        hashed = np.zeros(n, np.uint64)
+        with np.errstate(over="ignore"):
+            for column, multiplier in zip(columns, _HASH_MULTIPLIERS):
+                # Folding the high half in first: a sign flip in two columns (a field reversed)
+                # would otherwise add 2^63·(odd + odd) ≡ 0 and collide.
+                hashed += (column ^ (column >> np.uint64(32))) * multiplier
         _, first, inverse = np.unique(hashed, return_index=True, return_inverse=True)
-        if np.array_equal(words, words[first][inverse]):
-            return first, inverse.ravel()
+        inverse = inverse.ravel()
+        if all(np.array_equal(column, column[first][inverse]) for column in columns):
+            return first, inverse
+    rows = np.ascontiguousarray(np.stack(columns, -1))
     _, first, inverse = np.unique(
-        words.view(np.dtype((np.void, words.dtype.itemsize * words.shape[1]))).ravel(),
+        rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel(),
         return_index=True,
         return_inverse=True,
     )

@@ -21,6 +21,8 @@ import dataclasses
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from mows.lab.data.table import MissingColumnError
 from mows.lab.model.configuration import Configuration
 from mows.physics.probe import Probe
@@ -123,8 +125,9 @@ def untestable_reason(effect_: Effect, table: MeasurementTable, probe: Probe) ->
     missing = effect_.missing_columns(table)
     if missing:
         return f"needs column{'s' if len(missing) > 1 else ''} {', '.join(missing)}"
+    row = table.subset(np.arange(1))  # effects read a row's own columns: one row says it
     try:
-        effect_.apply(Configuration.base(table, probe), table, probe, *[0.0] * len(effect_.parameters))
+        effect_.apply(Configuration.base(row, probe), row, probe, *[0.0] * len(effect_.parameters))
     except MissingColumnError as error:
         return f"needs column {error.column}"
     return None

@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import dataclasses
 import weakref
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import scipy.optimize
@@ -36,6 +37,7 @@ import scipy.optimize
 from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import (
     Configuration,
+    base_start_swing_rad,
     default_window_s,
     distinct_rows_of,
     frequency_factor,
@@ -117,16 +119,43 @@ class FrequencyModel:
             raise ValueError("this model has no probe: build it as FrequencyModel(probe) + effects")
         return self.probe
 
-    def factors(self, table: MeasurementTable, values: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(h, c) of f = f00·h + c at effect parameter values ``values`` (fit order)."""
+    def groups(self, table: MeasurementTable) -> tuple[MeasurementTable, np.ndarray]:
+        """(distinct, inverse): one row of each configuration group of ``table`` for this model,
+        and each row's group (:func:`distinct_table` over :meth:`read_columns`)."""
+        return distinct_table(table, self.read_columns(table))
+
+    def read_columns(self, table: MeasurementTable) -> frozenset[str]:
+        """The columns of ``table`` this model's frequency depends on: those that building its
+        configuration reads (:meth:`Configuration.base` and every effect's ``apply``, recorded on
+        the table's first row), but the measured ones (``MEASURED``)."""
+        row = table.subset(np.arange(1))
+        recorder = _RecordingColumns(row.columns)
+        object.__setattr__(row, "columns", recorder)
+        self._configuration(row, np.zeros(len(self.parameters)))
+        return frozenset(name for name in recorder.read if table.has(name) and name not in MEASURED)
+
+    def group_factors(
+        self, distinct: MeasurementTable, values: Sequence[float] | np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(h, c) of f = f00·h + c of each row of a :meth:`groups` table at effect parameter
+        values ``values`` (fit order)."""
         probe = self._require_probe()
-        distinct, inverse = distinct_table(table)
-        config = Configuration.base(distinct, probe)
+        config = self._configuration(distinct, values)
+        return frequency_factor(config, probe, lambda rows, start_rad: cached_nodes(distinct, rows, start_rad))
+
+    def _configuration(self, table: MeasurementTable, values: Sequence[float] | np.ndarray) -> Configuration:
+        probe = self._require_probe()
+        config = Configuration.base(table, probe)
         bounds = np.cumsum([0] + [len(e.parameters) for e in self.effects])
         ordered = sorted(range(len(self.effects)), key=lambda i: self.effects[i].stage)
         for i in ordered:
-            self.effects[i].apply(config, distinct, probe, *(float(v) for v in values[bounds[i] : bounds[i + 1]]))
-        h, c = frequency_factor(config, probe, lambda rows, start_rad: cached_nodes(distinct, rows, start_rad))
+            self.effects[i].apply(config, table, probe, *(float(v) for v in values[bounds[i] : bounds[i + 1]]))
+        return config
+
+    def factors(self, table: MeasurementTable, values: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(h, c) of f = f00·h + c of every row at effect parameter values ``values`` (fit order)."""
+        distinct, inverse = self.groups(table)
+        h, c = self.group_factors(distinct, values)
         return h[inverse], c[inverse]
 
     def predict(self, table: MeasurementTable, values: FitResult | Sequence[float] | np.ndarray) -> np.ndarray:
@@ -136,14 +165,20 @@ class FrequencyModel:
         return x[0] * h + c
 
     # --- fit ------------------------------------------------------------------------------
-    def fit(self, table: MeasurementTable, start: Sequence[float] | np.ndarray | None = None) -> FitResult:
-        """Weighted least-squares fit to ``table``; ``start`` = effect parameter values (default 0)."""
+    def fit(
+        self,
+        table: MeasurementTable,
+        start: Sequence[float] | np.ndarray | None = None,
+        rows: np.ndarray | None = None,
+    ) -> FitResult:
+        """Weighted least-squares fit to ``table`` (to its ``rows``, indices, when given: a
+        cross-validation fold); ``start`` = effect parameter values (default 0)."""
         probe = self._require_probe()
         for effect in self.effects:
             reason = untestable_reason(effect, table, probe)
             if reason:
                 raise ValueError(f"effect {effect.name} cannot be fitted to this table: {reason}")
-        problem = Problem(self, table)
+        problem = Problem(self, table, rows)
         p0 = np.zeros(len(self.parameters)) if start is None else np.asarray(start, float)
         x0 = np.concatenate([[problem.best_f00(p0)], p0])
         if x0.size == 1:  # f00 alone enters linearly: the closed form is the optimum
@@ -166,28 +201,72 @@ class FrequencyModel:
         return problem.result(solution.x, solution.success, solution.message)
 
 
-# --- the table's distinct configurations, and ring-down amplitude nodes, cached per table ----
+def start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
+    """Each row's start swing at the table's reference field and the probe's stop
+    (:func:`mows.lab.model.configuration.base_start_swing_rad`), evaluated once per
+    configuration group of the published model."""
+    distinct, inverse = FrequencyModel(probe).groups(table)
+    return base_start_swing_rad(distinct, probe)[inverse]
+
+
+# --- the table's configuration groups, and ring-down amplitude nodes, cached per table ------
 # Columns that are measurements of a row, not inputs of its model.
 MEASURED = ("f_hz", "f_std_hz", "sweep")
-# table → (one row of each distinct configuration as a table, each row's index into it)
-_DISTINCT: weakref.WeakKeyDictionary[MeasurementTable, tuple[MeasurementTable, np.ndarray]] = (
+# table → {key columns: (one row of each group as a table, each row's index into it)}
+_DISTINCT: weakref.WeakKeyDictionary[MeasurementTable, dict[frozenset[str], tuple[MeasurementTable, np.ndarray]]] = (
     weakref.WeakKeyDictionary()
 )
 
 
-def distinct_table(table: MeasurementTable) -> tuple[MeasurementTable, np.ndarray]:
-    """(distinct, inverse): a table of one row per distinct configuration and, for each row of
-    ``table``, its row in ``distinct``. Rows are the same configuration when every column but the
-    measured ones (``MEASURED``) is bitwise equal: effects compute a row's configuration from
-    that row's columns (docs/model_lab.md), so such rows have the same model frequency for any
-    parameters. The ring-down window comes from the whole table (``default_window_s``)."""
-    if table not in _DISTINCT:
-        names = [name for name in table.columns if name not in MEASURED]
-        first, inverse = distinct_rows_of(np.stack([table.columns[name] for name in names], -1))
-        columns = {name: values[first] for name, values in table.columns.items()}
+def distinct_table(table: MeasurementTable, names: frozenset[str]) -> tuple[MeasurementTable, np.ndarray]:
+    """(distinct, inverse): a table of one row per group of ``table`` and, for each row, its
+    row in ``distinct``. Rows are in one group when the columns ``names`` are bitwise equal:
+    effects compute a row's configuration from that row's columns (docs/model_lab.md), so rows
+    equal in every column a model reads have the same model frequency for any parameters. The
+    other columns of ``distinct`` hold the first row's values. The ring-down window comes from
+    the whole table (``default_window_s``)."""
+    cached = _DISTINCT.setdefault(table, {})
+    if names not in cached:
+        first, inverse = distinct_rows_of([table.columns[name] for name in sorted(names)] or [np.zeros(len(table))])
+        if len(first) == len(table):
+            # Every row its own group (a column such as time that an effect reads): the table's
+            # own columns serve, not a copy of them.
+            first = inverse = np.arange(len(table))
+            columns = dict(table.columns)
+        else:
+            columns = {name: values[first] for name, values in table.columns.items()}
         columns["duration_s"] = table.columns.get("duration_s", default_window_s(table))[first]
-        _DISTINCT[table] = (dataclasses.replace(table, columns=columns), inverse)
-    return _DISTINCT[table]
+        cached[names] = (dataclasses.replace(table, columns=columns), inverse)
+    return cached[names]
+
+
+class _RecordingColumns(dict):
+    """A table's columns that note which of them are read (:meth:`FrequencyModel.read_columns`);
+    reading them all at once (iterating) notes all."""
+
+    def __init__(self, columns: Mapping[str, np.ndarray]) -> None:
+        super().__init__(columns)
+        self.read: set[str] = set()
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        self.read.add(name)
+        return super().__getitem__(name)
+
+    def get(self, name: str, default: Any = None) -> Any:
+        self.read.add(name)
+        return super().get(name, default)
+
+    def __iter__(self) -> Iterator[str]:
+        self.read.update(self.keys())
+        return super().__iter__()
+
+    def items(self) -> Any:
+        self.read.update(self.keys())
+        return super().items()
+
+    def values(self) -> Any:
+        self.read.update(self.keys())
+        return super().values()
 
 
 # --- ring-down amplitude nodes, cached per table ---------------------------------------------

@@ -62,71 +62,115 @@ def parameter_values(parameters: Iterable[FittedParameter]) -> dict[str, float]:
 
 
 class Problem:
-    """Weighted residuals and their Jacobian for one model and table, with a one-point cache
-    (scipy asks for the Jacobian at the point whose residual it has just computed)."""
+    """Weighted residuals and their Jacobian for one model on the ``rows`` of one table (default:
+    every row), with a one-point cache (scipy asks for the Jacobian at the point whose residual
+    it has just computed).
 
-    def __init__(self, model: FrequencyModel, table: MeasurementTable) -> None:
+    The model gives every row of a configuration group (:meth:`FrequencyModel.groups`) the same
+    frequency m_g, so the fit works on the groups' exact sufficient statistics: the weight
+    W_g = Σ 1/σ_i², the weighted mean f̄_g = Σ f_i/σ_i² / W_g and the within-group
+    χ²_w = Σ ((f_i − f̄_g)/σ_i)². Since Σ ((f_i − m_g)/σ_i)² = W_g·(f̄_g − m_g)² + that group's
+    share of χ²_w, the residuals r_g = √W_g·(f̄_g − m_g) give χ² = Σ r_g² + χ²_w, and their
+    Jacobian −√W_g·∂m_g/∂x gives JᵀJ, of every row: the same parameters, σ and BIC, at a
+    cost that grows with the groups. Where an effect reads a column that differs on every row
+    (time, temperature), each row is its own group and this is the row-by-row problem.
+    """
+
+    def __init__(self, model: FrequencyModel, table: MeasurementTable, rows: np.ndarray | None = None) -> None:
         self.model, self.table = model, table
-        self.weight = 1.0 / table.f_std_hz
+        self.distinct, inverse = model.groups(table)
+        self.rows = rows
+        self.inverse = inverse if rows is None else inverse[rows]
+        f_hz, w2, groups = self.of_rows(table.f_hz), self.row_weight**2, len(self.distinct)
+        self.count = np.bincount(self.inverse, minlength=groups)
+        weight = np.bincount(self.inverse, w2, groups)
+        self.root_weight = np.sqrt(weight)
+        self.mean_hz = np.bincount(self.inverse, w2 * f_hz, groups) / np.where(self.count > 0, weight, 1.0)
+        self.within_chi2 = float(np.sum(w2 * (f_hz - self.mean_hz[self.inverse]) ** 2))
         self.steps = np.array([FD_STEP * p.scale for _, p in model.parameters])
         self.upper = np.array([p.upper for _, p in model.parameters])
         self._cache: tuple[bytes | None, Any] = (None, None)
 
+    def of_rows(self, values: np.ndarray) -> np.ndarray:
+        return values if self.rows is None else values[self.rows]
+
+    @property
+    def n(self) -> int:
+        return len(self.inverse)
+
+    @property
+    def row_weight(self) -> np.ndarray:
+        """1/σ of each row (computed when asked: every fit keeps its problem)."""
+        return 1.0 / self.of_rows(self.table.f_std_hz)
+
     def factors(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(h, c) of each group at effect parameter values ``p``."""
         key = p.tobytes()
         if self._cache[0] != key:
-            self._cache = (key, self.model.factors(self.table, p))
+            self._cache = (key, self.model.group_factors(self.distinct, p))
             progress.evaluated()
         return self._cache[1]
 
     def best_f00(self, p: np.ndarray) -> float:
         h, c = self.factors(np.asarray(p, float))
-        w2 = self.weight**2
+        w2 = self.root_weight**2
         good = np.isfinite(h)
-        return float(np.sum((w2 * h * (self.table.f_hz - c))[good]) / np.sum((w2 * h * h)[good]))
+        return float(np.sum((w2 * h * (self.mean_hz - c))[good]) / np.sum((w2 * h * h)[good]))
+
+    def model_hz(self, x: np.ndarray) -> np.ndarray:
+        """m_g of each group at ``x`` = [f00, effect parameters…] (NaN where it has no real frequency)."""
+        h, c = self.factors(x[1:])
+        return x[0] * h + c
 
     def residual(self, x: np.ndarray) -> np.ndarray:
-        h, c = self.factors(x[1:])
-        r = (self.table.f_hz - x[0] * h - c) * self.weight
-        return np.where(np.isfinite(r), r, INVALID_RESIDUAL)
+        """r_g = √W_g·(f̄_g − m_g); a group without a real frequency gets INVALID_RESIDUAL per row."""
+        r = self.root_weight * (self.mean_hz - self.model_hz(x))
+        return np.where(np.isfinite(r), r, INVALID_RESIDUAL * np.sqrt(self.count))
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
-        h, _ = self.factors(x[1:])
-        f00_column = np.where(np.isfinite(h), -h * self.weight, 0.0)
-        return np.column_stack([f00_column, self.columns(x, range(len(self.steps)))])
+        """d(r_g)/d(x), (groups, k)."""
+        return -self.root_weight[:, None] * self.derivative(x, range(len(x)))
 
-    def columns(self, x: np.ndarray, indices: Iterable[int]) -> np.ndarray:
-        """Forward-difference columns d(weighted residual)/d(effect parameter j), j in ``indices``."""
-        base = self.residual(x)
+    def derivative(self, x: np.ndarray, indices: Iterable[int]) -> np.ndarray:
+        """dm_g/dx_j for j in ``indices`` (0: f00, exact; effect parameters: forward differences),
+        (groups, len(indices)); 0 where the model has no real frequency."""
+        h, _ = self.factors(x[1:])
+        base = self.model_hz(x)
         columns = []
         for j in indices:
+            if j == 0:
+                columns.append(h)
+                continue
             p = x[1:].copy()
             # Step inwards at an upper bound, so that the model is evaluated where it is defined.
-            step = -self.steps[j] if p[j] + self.steps[j] > self.upper[j] else self.steps[j]
-            p[j] += step
-            columns.append((self.residual(np.concatenate([[x[0]], p])) - base) / step)
-        return np.stack(columns, -1) if columns else np.zeros((len(base), 0))
+            step = -self.steps[j - 1] if p[j - 1] + self.steps[j - 1] > self.upper[j - 1] else self.steps[j - 1]
+            p[j - 1] += step
+            columns.append((self.model_hz(np.concatenate([[x[0]], p])) - base) / step)
+        found = np.stack(columns, -1) if columns else np.zeros((len(base), 0))
+        return np.where(np.isfinite(found), found, 0.0)
+
+    def columns(self, x: np.ndarray, indices: Iterable[int]) -> np.ndarray:
+        """d(weighted residual of each row)/d(x_j), j in ``indices``: (rows, len(indices))."""
+        return -self.row_weight[:, None] * self.derivative(x, indices)[self.inverse]
 
     def result(self, x: np.ndarray, success: bool, message: str) -> FitResult:
-        h, c = self.factors(x[1:])
-        prediction = x[0] * h + c
         residual = self.residual(x)
         jacobian = self.jacobian(x)
-        chi2 = float(residual @ residual)
-        n, k = len(residual), len(x)
+        chi2 = float(residual @ residual) + self.within_chi2
+        n, k = self.n, len(x)
         u, s, vt = np.linalg.svd(jacobian, full_matrices=False)
         keep = s > s[0] * 1e-10
         covariance = (vt[keep].T / s[keep] ** 2) @ vt[keep]
         birge = max(1.0, chi2 / max(n - k, 1))
         return FitResult(
             self.model,
-            self.table,
+            self,
             np.asarray(x, float),
             covariance * birge,
             chi2,
             n,
             k,
-            prediction,
+            self.model_hz(x),
             jacobian,
             bool(success),
             str(message),
@@ -136,7 +180,10 @@ class Problem:
 @dataclasses.dataclass(eq=False)
 class FitResult:
     """A fitted :class:`mows.lab.model.frequency_model.FrequencyModel`. ``values``/``covariance`` are ordered as
-    ``model.parameter_names``; ``jacobian`` is d(weighted residual)/d(values), (n, k).
+    ``model.parameter_names``. ``group_model_hz`` and ``group_jacobian`` are the model's
+    frequency and the Jacobian of the fit's residuals per configuration group (:class:`Problem`);
+    the per-row ``prediction_hz``, ``weighted_residual`` and ``jacobian`` (d(weighted
+    residual)/d(values), (n, k)) follow from them on the fitted rows.
 
     The result protocol shared with the ring-down fit (:class:`mows.estimate.ringdown.RingdownFit`):
     ``status`` (a :class:`~mows.estimate.ringdown.FitStatus`, compared by name), ``ok`` and
@@ -144,16 +191,34 @@ class FitResult:
     """
 
     model: FrequencyModel
-    table: MeasurementTable
+    problem: Problem
     values: np.ndarray
     covariance: np.ndarray
     chi2: float
     n: int
     k: int
-    prediction_hz: np.ndarray
-    jacobian: np.ndarray
+    group_model_hz: np.ndarray
+    group_jacobian: np.ndarray
     success: bool
     message: str
+
+    @property
+    def table(self) -> MeasurementTable:
+        return self.problem.table
+
+    @property
+    def prediction_hz(self) -> np.ndarray:
+        """The model's frequency at each fitted row (NaN where it has none)."""
+        return self.group_model_hz[self.problem.inverse]
+
+    @property
+    def jacobian(self) -> np.ndarray:
+        """d(weighted residual of each fitted row)/d(values), (n, k)."""
+        root_weight = self.problem.root_weight[:, None]
+        per_weight = np.divide(
+            self.group_jacobian, root_weight, out=np.zeros_like(self.group_jacobian), where=root_weight > 0
+        )
+        return self.problem.row_weight[:, None] * per_weight[self.problem.inverse]
 
     @property
     def status(self) -> FitStatus:
@@ -170,10 +235,11 @@ class FitResult:
         Jacobian column is zero, or it takes part (weight > 0.1) in a direction the normalised
         Jacobian does not determine (singular value < 1e-6 of the largest: exact aliases such as
         gravity and an unreferenced field), or its σ exceeds its whole physical range."""
-        norms = np.linalg.norm(self.jacobian, axis=0)
+        jacobian = self.group_jacobian  # the rows' Jacobian has the same JᵀJ (Problem)
+        norms = np.linalg.norm(jacobian, axis=0)
         found = norms > 0
         if found.any():
-            _, s, vt = np.linalg.svd(self.jacobian[:, found] / norms[found], full_matrices=False)
+            _, s, vt = np.linalg.svd(jacobian[:, found] / norms[found], full_matrices=False)
             undetermined = vt[s < DEGENERATE_RTOL * s[0]]
             found[found] = np.all(np.abs(undetermined) <= DEGENERATE_WEIGHT, axis=0)
         ranges = np.array([np.inf] + [p.upper - p.lower for _, p in self.model.parameters])
@@ -206,11 +272,11 @@ class FitResult:
 
     @property
     def residual_hz(self) -> np.ndarray:
-        return self.table.f_hz - self.prediction_hz
+        return self.problem.of_rows(self.table.f_hz) - self.prediction_hz
 
     @property
     def weighted_residual(self) -> np.ndarray:
-        return self.residual_hz / self.table.f_std_hz
+        return self.residual_hz * self.problem.row_weight
 
     def parameters(self) -> list[FittedParameter]:
         """f00 and every effect parameter, named ``effect.parameter``, in fit order."""
@@ -239,22 +305,24 @@ class FitResult:
         On ``table`` (default: the fitted table; e.g. a what-if variant of it)."""
         extended = self.model + effect
         x = np.concatenate([self.values, np.zeros(len(effect.parameters))])
-        first = len(self.model.parameters)
+        first = len(self.model.parameters) + 1
         return Problem(extended, self.table if table is None else table).columns(
             x, range(first, first + len(effect.parameters))
         )
 
-    def prediction_sigmas(self, table: MeasurementTable) -> float:
-        """Median over ``table``'s rows of this fit's prediction uncertainty there, in units of
-        each row's ``f_std_hz``: from the parameter covariance without the Birge inflation, so
-        that it measures what the fitted rows say about these, not how well the model fits."""
-        jacobian = self.model_jacobian(table)
+    def prediction_sigmas(self, table: MeasurementTable, rows: np.ndarray | None = None) -> float:
+        """Median over ``table``'s ``rows`` (default: all) of this fit's prediction uncertainty
+        there, in units of each row's ``f_std_hz``: from the parameter covariance without the
+        Birge inflation, so that it measures what the fitted rows say about these, not how well
+        the model fits."""
+        jacobian = self.model_jacobian(table, rows)
         variance = np.einsum("ni,ij,nj->n", jacobian, self.covariance, jacobian) / max(1.0, self.chi2_dof)
         return float(np.median(np.sqrt(variance)))
 
-    def model_jacobian(self, table: MeasurementTable) -> np.ndarray:
-        """d(weighted residual)/d(values) of this model at the fitted values on another table."""
-        return Problem(self.model, table).jacobian(self.values)
+    def model_jacobian(self, table: MeasurementTable, rows: np.ndarray | None = None) -> np.ndarray:
+        """d(weighted residual)/d(values) of this model at the fitted values on ``table``'s
+        ``rows`` (default: all), (rows, k)."""
+        return Problem(self.model, table, rows).columns(self.values, range(self.k))
 
     def cross_validate(self) -> float:
         """Cross-validated rms prediction error, Hz: K-fold over whole sweeps (K = 10, sweeps
@@ -269,13 +337,13 @@ class FitResult:
             progress.stage("cross-validation (folds)", done, len(folds))
             train = np.ones(self.n, bool)
             train[rows] = False
-            part = self.model.fit(self.table.subset(train), start=self.values[1:])
+            part = self.model.fit(self.table, start=self.values[1:], rows=np.flatnonzero(train))
             if (
                 np.any(self.identifiable & ~part.identifiable)
-                or part.prediction_sigmas(self.table.subset(rows)) > CV_PREDICTION_SIGMAS
+                or part.prediction_sigmas(self.table, rows) > CV_PREDICTION_SIGMAS
             ):
                 return math.nan
-            errors[rows] = self.table.f_hz[rows] - self.model.predict(self.table.subset(rows), part.values)
+            errors[rows] = self.table.f_hz[rows] - part.problem.model_hz(part.values)[self.problem.inverse[rows]]
         return float(np.sqrt(np.mean(errors**2)))
 
     def report(self) -> str:

@@ -31,7 +31,7 @@ from mows.lab.diagnosis.indistinguishable import Group
 from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import catalog, resolve
 from mows.lab.model.configuration import unevaluable_rows
-from mows.lab.model.frequency_model import FitResult, FrequencyModel, distinct_table
+from mows.lab.model.frequency_model import FitResult, FrequencyModel
 from mows.lab.model.least_squares import FittedParameter, parameters_dict
 from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, search
 from mows.physics.probe import Probe
@@ -211,7 +211,7 @@ def analyse(
 def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:
     """The table without the rows the potential cannot evaluate, each named with the reason in
     the notes (:func:`mows.lab.model.configuration.unevaluable_rows`); TableError when no row is left."""
-    distinct, inverse = distinct_table(table)
+    distinct, inverse = FrequencyModel(probe).groups(table)
     found = unevaluable_rows(distinct, probe)  # a reason holds for every row of its configuration
     problems = {int(row): found[int(inverse[row])] for row in np.flatnonzero(np.isin(inverse, list(found)))}
     if len(problems) == len(table):

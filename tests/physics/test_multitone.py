@@ -118,6 +118,18 @@ def test_overlapping_tones_are_refused_and_a_sum_above_the_cap_is_split():
     assert plan.groups == () and "cap" in plan.refused[0][1]
 
 
+def test_bad_input_is_refused_with_the_value():
+    with pytest.raises(ValueError, match="frequency_hz = -1"):
+        tone(0, -1.0)
+    with pytest.raises(ValueError, match="duration_s = 0"):
+        plan_excitation(SETUP, [tone(0, 112.0)], 0.0)
+    with pytest.raises(ValueError, match="distinct"):
+        plan_excitation(SETUP, [tone(0, 112.0), tone(0, 125.0)], 0.5)
+    tilted = PlacedProbe(P, Pose(plane_e1=(1.0, 0.0, 0.0), plane_e2=(0.0, 0.0, 1.0)))
+    with pytest.raises(ValueError, match="x–y plane"):
+        Tone.of(0, tilted, 112.0, 2.0)
+
+
 def forced_state(force, omega_drive, omega0, delta, t):
     """(x, x') of x'' + 2δx' + ω0²x = F·sin(ωt) from rest, the exact solution written out."""
     response = force / (omega0**2 - omega_drive**2 + 2j * delta * omega_drive)

@@ -159,6 +159,8 @@ def plan_excitation(
     accepted tone (cross-talk above ``max_crosstalk``, module docstring): exciting either
     would ring both. The others join the first group whose summed peak stays within the cap,
     or open a new group, excited after the ones before."""
+    if not (math.isfinite(duration_s) and duration_s > 0.0):
+        raise ValueError(f"duration_s = {duration_s!r} must be finite and > 0")
     if not (math.isfinite(max_crosstalk) and 0.0 < max_crosstalk < 1.0):
         raise ValueError(f"max_crosstalk = {max_crosstalk!r} must be in (0, 1)")
     ids = [t.probe_id for t in tones]
@@ -182,10 +184,10 @@ def plan_excitation(
                 break
         else:
             if groups:
-                peak = peak_current_a(setup, [*groups[-1], tone], duration_s).max()
+                peak = min(peak_current_a(setup, [*g, tone], duration_s).max() for g in groups)
                 reasons.append(
-                    f"probe {tone.probe_id} with group {len(groups)} would peak at {peak:.4g} A "
-                    f"> the {limit_a:g} A cap: excited after it"
+                    f"probe {tone.probe_id} with any group before would peak at ≥ {peak:.4g} A "
+                    f"> the {limit_a:g} A cap: excited after them"
                 )
             else:
                 reasons.append(f"probe {tone.probe_id} first")

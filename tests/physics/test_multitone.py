@@ -100,6 +100,20 @@ def test_a_planned_group_never_exceeds_the_cap(draws, duration_s):
         assert np.all(currents <= peak_current_a(SETUP, group, duration_s) + 1e-12)  # an upper bound
 
 
+def test_the_cap_holds_the_true_peak_not_each_tone_nor_the_sum_of_amplitudes():
+    # Each 5 A tone alone passes the single-probe check, but the three summed exceed the cap.
+    strong = [tone(k, f, 0.3, 5.0) for k, f in enumerate((100.0, 112.0, 125.0))]
+    assert all(np.abs(SETUP.currents_a(t.theta0_rad, t.amplitude_a)).max() <= 10.0 for t in strong)
+    times = np.arange(0.0, 0.5, 1e-5)
+    assert np.abs(drive_currents_a(SETUP, strong, times)).max() > SETUP.cap.limit_a
+    # Tones on a 12.5 Hz comb repeat every 80 ms, so their phases never line up: 4 A at these
+    # orientations sum to 11.5 A of amplitude on coil 2, yet the current never passes 8.6 A.
+    comb = [tone(0, 100.0, 0.3, 4.0), tone(1, 112.5, 0.8, 4.0), tone(2, 125.0, -2.4, 4.0)]
+    assert np.abs(coil_amplitudes_a(SETUP, comb)).sum(axis=0).max() > 11.5
+    assert np.abs(drive_currents_a(SETUP, comb, np.arange(0.0, 0.08, 1e-6))).max() < 8.6
+    assert plan_excitation(SETUP, comb, 0.5).groups == ((0, 1, 2),)
+
+
 def test_overlapping_tones_are_refused_and_a_sum_above_the_cap_is_split():
     # 4 Hz apart in a 0.5 s excitation: less than the 6.8 Hz the paper's probe needs for ρ ≤ 0.1.
     assert required_separation_hz(DELTA, 0.5, 0.1) == pytest.approx(6.784, abs=1e-3)

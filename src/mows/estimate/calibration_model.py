@@ -1,6 +1,6 @@
 """The model of a calibration's ring-downs: the frequency each would show for trial constants.
 
-Every ring-down is the first-harmonic-balance frequency of the full potential
+Every ring-down is the harmonic-balance frequency of the full potential
 (:class:`mows.physics.potential.ArcPotential`) in the applied field and gradient plus the
 environment field, at the ring-down's decaying amplitude, averaged over amplitude nodes as a
 constant-frequency fit averages it (:mod:`mows.physics.ringdown_average`). The fit of the

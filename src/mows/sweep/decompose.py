@@ -211,7 +211,7 @@ def decompose(
     ringdowns : how the ring-downs were recorded (:class:`Ringdowns`), for the first-principles
         model. The cantilever is not a linear spring: at the 24° a ring-down starts from, the
         field spring is ~1 % and the lever's gradient springs ~4 % weaker than at small
-        amplitude (first-harmonic balance). None: small amplitude.
+        amplitude (harmonic balance). None: small amplitude.
     start : parameters to start from (Bx, By, Gs, Gd, Gxy, Δf00); default: from the harmonics.
     f00_std_hz : standard uncertainty of the calibrated f00. One error shared by every ring-down
         (``shift_std_hz`` must then be the fits' own σ, without it): it moves the parameters by

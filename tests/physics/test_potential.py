@@ -166,3 +166,17 @@ def test_a_deflected_swing_has_the_frequency_and_first_harmonic_of_the_integrate
     first_only_nm_per_rad = -2.0 * np.mean(potential.torque_nm(theta[None])[0] * np.cos(phi)) / amplitude
     first_only_hz = math.sqrt(first_only_nm_per_rad / P.inertia_kgm2) / (2.0 * math.pi)
     assert exact_hz - first_only_hz > 1e-3
+
+
+def test_a_ring_down_released_at_the_nearer_stop_starts_with_its_first_harmonic():
+    """The rest angle turns towards one stop (θs < 0 here); the swing released there (24° from
+    θ0) is what a fit's θmax measures; a stop inside the deflection leaves no free swing."""
+    undamped = P.replace(damping_per_s=0.0)
+    across = math.radians(-30.0)
+    potential = ArcPotential.from_local_field(undamped, 3.4e-3 * np.array([-math.cos(across), math.sin(across), 0.0]))
+    rest = float(potential.rest_angle_rad())
+    assert rest < 0.0
+    stop = math.radians(24.0)
+    _, amplitude = free_swing(potential, -stop)
+    assert math.degrees(abs(float(potential.start_swing_rad(stop)) - abs(amplitude))) < 0.01
+    assert math.isnan(float(potential.start_swing_rad(0.5 * abs(rest))))

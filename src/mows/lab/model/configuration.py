@@ -25,7 +25,7 @@ not a per-fit number: every ring-down starts at the housing stop, so its swing t
 θstop − |θs| from the rest angle θs that the configuration's own field (in full: the lever
 deflects by By' whatever else the model holds) gives the potential. The fit reports the swing's
 first harmonic, which a lopsided potential puts up to 1 % (0.16° at 3.4 mT) beyond that distance
-(:meth:`mows.physics.potential.ArcPotential.first_harmonic_rad`). The stop is one
+(:meth:`mows.physics.potential.ArcPotential.start_swing_rad`). The stop is one
 number for the table (the probe's ``theta_stop_rad``, moved by the ``housing_stop`` effect). A
 table's ``amplitude_deg`` is evidence used where it is trusted (:func:`amplitude_evidence_rad`).
 
@@ -132,11 +132,9 @@ class Configuration:
 
     def start_swing_rad(self, potential: ArcPotential) -> np.ndarray:
         """Each ring-down's start swing in ``potential``: the evidence where the lab uses it, else
-        the first harmonic of the swing that turns at the stop, θstop − |θs| from the rest angle
-        θs on its side (module docstring)."""
-        rest = potential.rest_angle_rad()
-        turning = np.sign(rest) * (self.stop_rad - np.abs(rest))
-        from_stop = potential.first_harmonic_rad(np.where(rest == 0.0, self.stop_rad, turning))
+        θmax of a swing released at the stop (:meth:`ArcPotential.start_swing_rad`, module
+        docstring)."""
+        from_stop = np.nan_to_num(potential.start_swing_rad(self.stop_rad))  # 0: on the stop
         return np.where(np.isfinite(self.start_evidence_rad), self.start_evidence_rad, from_stop)
 
     def probe_frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:

@@ -2,9 +2,11 @@
 
 Requirement: a scientist records a rotation sweep, fits it with our estimator and hands our
 own table to the lab with the static reference; the lab must name the physics the signals
-carry (or report an alias group holding it) at χ²/dof ≤ 1.5 and add nothing to a control
-(two seeds here; the 40-seed false-alarm bound is tests/lab/test_hidden_effects.py's, on
-tables from exact physics). Not met at 3.4 mT: see the strong-field test.
+carry (or report an alias group holding it) at χ²/dof ≤ 1.5 and add nothing to a control,
+with false alarms ≤ 1 in 40 seeds. Two control seeds run here (a run costs 20–50 s); over
+seeds 0–39 this path measured no false alarm (40 of 40 adequate, nothing added beyond the
+finite amplitude at physics; docs/model_lab.md), and tests/lab/test_hidden_effects.py holds
+the 40-seed bound on tables from exact physics.
 Nothing here is the lab's physics: the simulator integrates the equation of motion in each
 scene's actual sources (every ring-down driven to the housing stop, sensor noise), the bag
 holds its raw fluxgate blocks (tests/recorded_bags.py), and the estimator's table carries
@@ -140,15 +142,17 @@ def test_the_control_adds_nothing_but_known_physics(path, seed):
 
 def test_a_strong_uniform_field_is_the_deflection_and_the_amplitude_from_the_stop(path):
     """3.4 mT along x: at θ0 = 90° the rest angle turns by ~12°, so the swing starts ~12° from rest
-    where the stop is 24°; the estimator's single fits put θmax at "not determined" there and ε
-    at +4° where the truth is −10°. The lab names exactly the deflection and the amplitude, both
-    at physics, the start swing from the stop. Not met: χ²/dof ≤ 1.5. The model ends at 4.1
-    (1.7 mT: 2.4), a systematic ±3 mHz (≈ 4σ at θ0 near 180°, where the field softens the
-    spring most) that the two sweeps repeat to ±0.5 mHz and that no catalog effect, and no
-    other stop, removes (24° is the best; 23.6° or 24.4° give ≈ 30): the bound here is the
-    one the lab reaches, so that a regression is caught."""
+    where the stop is 24°; the estimator's single fits leave θmax undetermined there. The lab
+    names the deflection and the finite amplitude, the start swing from the stop, and ends
+    adequate at χ²/dof 0.87 (seed 1: 0.69). Both need the lopsided potential's second harmonic:
+    in the frequency (first-harmonic balance alone is 3–5 mHz low at θ0 = 90°, 150°, 210°) and
+    in the start swing (the first harmonic of a swing that turns at the stop lies 0.08°–0.13°
+    beyond the stop's distance from rest); without them the model ended at 4.1. The amplitude's
+    free strength ends at 0.993 ± 0.0014, not 1: the fit starts 3 ms after the switch-off
+    (A² 1.1 % smaller) and the probe turns 0.05° into the compliant stop, neither in the table."""
     _, report, _ = path("strong_field")
-    assert_named(report, {"static_deflection", "finite_amplitude"}, chi2_dof=5.0)
+    assert_named(report, {"static_deflection", "finite_amplitude"})
+    assert report["verdict"] == "adequate", report["verdict_explanation"]
 
 
 def test_an_anti_helmholtz_gradient_is_the_transverse_gradient(path):

@@ -1,11 +1,12 @@
 """The start swing from physics, and our own tables with impossible per-fit amplitudes.
 
-Requirement: every ring-down starts at the housing stop, so its swing about the rest angle is
-θstop − |θs|; in a strong field the lab must model the finite amplitude from there, not from
-an ``amplitude_deg`` that single fits got wrong, and it must read (not refuse) the table that
-``mows fit --csv`` wrote with such values. The truth's rest angle comes from minimising the
-exact arc energy (:func:`mows.physics.potential.arc_energy_j`) with scipy, independently of the
-lab's Newton iteration on its Chebyshev potential.
+Requirement: every ring-down starts at the housing stop, so its swing turns θstop − |θs| from
+the rest angle (its first harmonic, what a fit reports, lies up to 1 % beyond); in a strong
+field the lab must model the finite amplitude from there, not from an ``amplitude_deg`` that
+single fits got wrong, and it must read (not refuse) the table that ``mows fit --csv`` wrote
+with such values. The truth's rest angle comes from minimising the exact arc energy
+(:func:`mows.physics.potential.arc_energy_j`) with scipy, independently of the lab's Newton
+iteration on its Chebyshev potential.
 """
 
 import math
@@ -19,7 +20,7 @@ from mows.lab.data import synthetic
 from mows.lab.data.table import tool_table
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
-from mows.physics.potential import arc_energy_j
+from mows.physics.potential import ArcPotential, arc_energy_j
 from mows.physics.probe import PAPER_PROBE
 
 FIELD_T = (3.4e-3, 0.0, 0.0)  # the issue's ±2 A calibration supply along x
@@ -38,12 +39,21 @@ def rest_angle_rad(theta0_rad: float) -> float:
     return scipy.optimize.minimize_scalar(energy, bounds=(-0.7, 0.7), method="bounded", options={"xatol": 1e-10}).x
 
 
+def first_harmonic_from_stop_rad(theta0_rad: float) -> float:
+    """The first harmonic of the swing that turns at the stop on the side of θs (the fit's θmax),
+    in the exact potential of the source (checked against an integrated swing in
+    tests/physics/test_potential.py)."""
+    rest = rest_angle_rad(theta0_rad)
+    potential = ArcPotential.from_source(PAPER_PROBE, UniformField(FIELD_T), Pose(theta0_rad=theta0_rad))
+    return float(potential.first_harmonic_rad(math.copysign(PAPER_PROBE.theta_stop_rad - abs(rest), rest)))
+
+
 @pytest.fixture(scope="module")
 def columns():
     """Two sweeps every 15° in 3.4 mT: true ring-downs from the stop, the column as pooled fits had it."""
     sweep = synthetic.rotation_sweeps(15.0, 2)
     theta0 = np.radians(sweep["theta0_deg"])
-    start = PAPER_PROBE.theta_stop_rad - np.abs([rest_angle_rad(t) for t in theta0])
+    start = np.array([first_harmonic_from_stop_rad(t) for t in theta0])
     truth = synthetic.true_frequency_hz(PAPER_PROBE, UniformField(FIELD_T), theta0, start)
     table = synthetic.synthesize(
         PAPER_PROBE, UniformField(FIELD_T), sweep.pop("theta0_deg"), np.random.default_rng(3), NOISE_HZ, truth_hz=truth

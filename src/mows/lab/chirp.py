@@ -2,7 +2,7 @@
 
 The estimator (:func:`mows.estimate.ringdown.fit_ringdown`) fits one constant f to a ring-down
 whose amplitude decays from θmax to θmax·e^(−δT). The probe is not a linear oscillator: its
-frequency depends on the amplitude (first-harmonic balance of the full potential,
+frequency depends on the amplitude (harmonic balance of the full potential,
 :meth:`mows.physics.potential.ArcPotential.frequency_hz`; the field spring m·Bx' is weakened to
 m·Bx'·2J1(A)/A ≈ m·Bx'·(1 − A²/8)), so the instantaneous frequency drifts as the amplitude
 decays: a chirp.

@@ -17,10 +17,21 @@ source (:meth:`ArcPotential.from_source`), a batch of measurements described by 
 expansions (:meth:`ArcPotential.from_local_field`, used by the model lab), and the
 simulator's torque tables.
 
-Finite amplitude. The cantilever does not swing in a parabola: for an oscillation
-θ(t) = θc + A·cos φ, first-harmonic balance gives the effective stiffness
-k(A) = (1/(πA))·∫ U'(θc + A·cos φ)·cos φ dφ, with the cycle centre θc from the DC balance
-∫ U'(θc + A·cos φ) dφ = 0 (PHYSICS.md §5.4: for −m·B·cos θ this is m·B·2·J1(A)/A).
+Finite amplitude. The cantilever does not swing in a parabola. For an oscillation
+θ(t) = θc + A·cos φ + A2·cos 2φ (φ = ωt), the balance of the equation of motion
+J·θ'' + U'(θ) = 0 in its mean, cos φ and cos 2φ parts,
+
+    ⟨U'⟩ = 0,   J·ω²·A = 2·⟨U'·cos φ⟩,   4·J·ω²·A2 = 2·⟨U'·cos 2φ⟩,
+
+gives the effective stiffness k(A) = J·ω² = 2·⟨U'·cos φ⟩/A, A the swing's first harmonic
+(the θmax a ring-down fit reports). For a potential symmetric about its rest angle A2 = 0 and
+this is first-harmonic balance (PHYSICS.md §5.4: for −m·B·cos θ, k = kM + m·B·2·J1(A)/A).
+Where the rest angle is deflected (a field across the probe, gravity, a gradient) the
+potential is lopsided about it and the cycle's second harmonic matters: for
+U' = k·x + α·x² + β·x³ about the rest angle it gives ω² = (k + (3β/4 − 5α²/(6k))·A²)/J, the
+Lindstedt result (Landau & Lifshitz, Mechanics §28), where first-harmonic balance alone has
+−α²/k in place of −5α²/(6k): 3–5 mHz too low for a 12°–16° swing at 3.4 mT with the rest
+angle turned by 8°–12°. The harmonics beyond the second enter at O(A⁴).
 """
 
 from __future__ import annotations
@@ -31,6 +42,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike
 
+from mows.physics import ringdown_average
 from mows.physics.pose import Pose
 from mows.physics.probe import Probe
 from mows.physics.sources import FieldSource
@@ -39,6 +51,7 @@ DEFAULT_NODES = 32
 DEFAULT_HALF_WIDTH_RAD = 0.75
 BALANCE_POINTS = 48
 NEWTON_STEPS = 30
+TURNING_STEPS = 2  # fixed-point steps of first_harmonic_rad: each shrinks the error by ~(θc − θs + A2)/A ≲ 2 %
 
 
 def chebyshev_nodes_rad(half_width_rad: float = DEFAULT_HALF_WIDTH_RAD, n: int = DEFAULT_NODES) -> np.ndarray:
@@ -187,16 +200,63 @@ class ArcPotential:
         return np.where(stable & converged & inside, centre, np.nan)
 
     def effective_stiffness_nm_per_rad(self, amplitude_rad: ArrayLike = 0.0) -> np.ndarray:
-        """First-harmonic-balance stiffness k(A) (module docstring); U''(θs) at A = 0."""
+        """Harmonic-balance stiffness k(A) with the cycle's second harmonic (module docstring);
+        U''(θs) at A = 0; NaN where the balance is unstable or the swing leaves the interval."""
+        return self._balance(amplitude_rad)[0]
+
+    def first_harmonic_rad(self, turning_rad: ArrayLike) -> np.ndarray:
+        """The first harmonic A of the free swing that turns at θs + ``turning_rad`` (signed).
+
+        A ring-down released at the housing stop turns there; the fit reports the swing's first
+        harmonic, which in a lopsided potential differs from the turning point's distance to the
+        rest angle by the cycle's mean and second harmonic: at φ = 0 or π the swing is at
+        θc + A2 ± A, so A = |turning| − s·(θc − θs + A2) on the side s of the turning point.
+        """
+        turning = np.broadcast_to(np.asarray(turning_rad, float), self.batch_shape)
+        side, distance = np.sign(turning), np.abs(turning)
+        rest = self.rest_angle_rad()
+        amplitude = distance
+        for _ in range(TURNING_STEPS):
+            _, mean, second = self._balance(amplitude)
+            amplitude = distance - side * (mean - rest + second)
+        return amplitude
+
+    def start_swing_rad(self, stop_rad: ArrayLike) -> np.ndarray:
+        """θmax of a ring-down released at the housing stop: the first harmonic of the swing that
+        turns at the nearer stop, θstop − |θs| from the rest angle θs on the side θs turns to
+        (:func:`mows.physics.ringdown_average.start_swing_rad`); NaN where the stop lies inside
+        the deflection (no free swing) or the potential has no stable rest angle."""
+        rest = self.rest_angle_rad()
+        distance = ringdown_average.start_swing_rad(np.asarray(stop_rad, float), rest)
+        return self.first_harmonic_rad(np.where(rest < 0.0, -distance, distance))
+
+    def _balance(self, amplitude_rad: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(k(A), θc, A2) of the harmonic balance with the second harmonic (module docstring)."""
         amplitude = np.broadcast_to(np.asarray(amplitude_rad, float), self.batch_shape)
         centre = self.cycle_centre_rad(amplitude)
         phi = 2.0 * np.pi * np.arange(BALANCE_POINTS) / BALANCE_POINTS
-        theta = np.nan_to_num(centre)[..., None] + amplitude[..., None] * np.cos(phi)
-        slope = self._spring(theta) * theta + self._eval(self.d1, theta)
+        first, second_wave = np.cos(phi), np.cos(2.0 * phi)
         small = amplitude < 1e-9
-        harmonic = 2.0 * (slope * np.cos(phi)).mean(-1) / np.where(small, 1.0, amplitude)
+        divisor = np.where(small, 1.0, amplitude)
+        swing = amplitude[..., None] * first
+        mean, second = np.nan_to_num(centre), np.zeros(self.batch_shape)
+        for _ in range(NEWTON_STEPS):
+            theta = mean[..., None] + swing + second[..., None] * second_wave
+            slope = self._spring(theta) * theta + self._eval(self.d1, theta)
+            curvature = (self._spring(theta) + self._eval(self.d2, theta)).mean(-1)
+            harmonic = 2.0 * (slope * first).mean(-1) / divisor
+            # Newton on (θc, A2) with the Jacobian's diagonal: its other terms are O(A) smaller.
+            mean_step = slope.mean(-1) / curvature
+            second_residual = 2.0 * (slope * second_wave).mean(-1) - 4.0 * harmonic * second
+            second_step = second_residual / (curvature - 4.0 * harmonic)
+            mean, second = mean - mean_step, second - second_step
+            # A NaN row (unstable, outside the interval) stays NaN: it does not hold the others back.
+            if np.all(~(np.abs(mean_step) + np.abs(second_step) >= 1e-15 + 1e-12 * amplitude)):
+                break
+        valid = np.isfinite(centre) & (np.abs(mean) + amplitude + np.abs(second) < self.half_width_rad)
         at_rest = self.stiffness_nm_per_rad(np.nan_to_num(centre))
-        return np.where(np.isnan(centre), np.nan, np.where(small, at_rest, harmonic))
+        stiffness = np.where(small, at_rest, harmonic)
+        return np.where(valid, stiffness, np.nan), np.where(valid, mean, np.nan), np.where(valid, second, np.nan)
 
     def frequency_hz(self, amplitude_rad: ArrayLike = 0.0) -> np.ndarray:
         """Ring-down frequency √(k(A)/J − δ²)/2π, Hz (Eq. S1 with the exact k); NaN if unstable."""

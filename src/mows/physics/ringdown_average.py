@@ -1,6 +1,6 @@
 """Which amplitude a ring-down's frequency belongs to: the averaging of a constant-frequency fit.
 
-The probe is not a linear oscillator: its frequency depends on the amplitude A (first-harmonic
+The probe is not a linear oscillator: its frequency depends on the amplitude A (harmonic
 balance, :meth:`mows.physics.potential.ArcPotential.frequency_hz`). During one ring-down the
 amplitude decays, A(t) = A0·e^(−δt), so the instantaneous frequency f(A(t)) drifts, while the
 estimator (:func:`mows.estimate.ringdown.fit_ringdown`) fits one constant f. What does it report?

@@ -35,7 +35,7 @@ from mows.physics.frequency import PublishedSweep, weak_field_sensitivity_hz_per
 from mows.physics.pose import probe_axes
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import Probe
-from mows.physics.ringdown_average import amplitude_nodes, start_swing_rad
+from mows.physics.ringdown_average import amplitude_nodes
 
 MODELS = ("first_principles", "published")
 MAX_HARMONIC = 4
@@ -163,7 +163,8 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
 
     With ``ringdowns`` the first-principles model reports what the fit of each decaying
     ring-down reports: the weighted average of the harmonic-balance frequency over its swing
-    (:func:`mows.physics.ringdown_average.amplitude_nodes`), from stop − |θs|. Without, the
+    (:func:`mows.physics.ringdown_average.amplitude_nodes`), from the stop
+    (:meth:`mows.physics.potential.ArcPotential.start_swing_rad`). Without, the
     small-amplitude stiffness. The published model has no amplitude.
     """
     bx, by, gs, gd, gxy, df00 = params
@@ -179,7 +180,7 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
     if ringdowns is None:
         return f00 * np.sqrt(potential.stiffness_nm_per_rad() / probe.spring_nm_per_rad) - f00_hz
     # 0 where the stop lies inside the deflection (a trial point the data rule out)
-    start = np.nan_to_num(start_swing_rad(ringdowns.stop_amplitude_rad, np.nan_to_num(potential.rest_angle_rad())))
+    start = np.nan_to_num(potential.start_swing_rad(ringdowns.stop_amplitude_rad))
     amplitudes, weights = amplitude_nodes(
         theta0, start, ringdowns.damping_per_s, ringdowns.duration_s, pickup=ringdowns.pickup
     )
@@ -212,7 +213,7 @@ def decompose(
     ringdowns : how the ring-downs were recorded (:class:`Ringdowns`), for the first-principles
         model. The cantilever is not a linear spring: at the 24° a ring-down starts from, the
         field spring is ~1 % and the lever's gradient springs ~4 % weaker than at small
-        amplitude (first-harmonic balance). None: small amplitude.
+        amplitude (harmonic balance). None: small amplitude.
     start : parameters to start from (Bx, By, Gs, Gd, Gxy, Δf00); default: from the harmonics.
     f00_std_hz : standard uncertainty of the calibrated f00. One error shared by every ring-down
         (``shift_std_hz`` must then be the fits' own σ, without it): it moves the parameters by

@@ -8,7 +8,7 @@ kM = f00·m/(2β0) (Eq. 9 inverted) and J = m/(8π²·β0·f00) (Eq. 10), and l 
 magnet mass a; the same pair anti-parallel gives the gradient response γ. Here the same
 constants come from the **full potential** (:mod:`mows.physics.potential`) rather than Eq. 6:
 
-* every ring-down is modelled as the estimator sees it: the first-harmonic-balance frequency of
+* every ring-down is modelled as the estimator sees it: the harmonic-balance frequency of
   U(θ) = ½·kM·θ² − m(θ)·B(r(θ)) at the ring-down's decaying amplitude, averaged as a
   constant-frequency fit averages it (:mod:`mows.physics.ringdown_average`). Eq. 6 ignores the
   finite amplitude, which shrinks the field spring by 2·J1(A)/A (2.2 % at the paper's 24°) and

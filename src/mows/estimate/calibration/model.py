@@ -1,6 +1,6 @@
 """The model of a calibration's ring-downs: the frequency each would show for trial constants.
 
-Every ring-down is the first-harmonic-balance frequency of the full potential
+Every ring-down is the harmonic-balance frequency of the full potential
 (:class:`mows.physics.potential.ArcPotential`) in the applied field and gradient plus the
 environment field, at the ring-down's decaying amplitude, averaged over amplitude nodes as a
 constant-frequency fit averages it (:mod:`mows.physics.ringdown_average`). The fit of the
@@ -98,9 +98,9 @@ def frequencies(
     gradient = np.einsum("nai,nij,nbj->nab", axes, rows.gradient_t_per_m, axes)
     q = rows.amplitudes_rad.shape[1]
     potential = ArcPotential.from_local_field(probe, np.repeat(field, q, 0), np.repeat(gradient, q, 0))
-    rest = potential.rest_angle_rad().reshape(-1, q)[:, :1]
-    # The nodes scale with the start swing: the stop less each row's own rest deflection.
-    swing = np.nan_to_num(ringdown_average.start_swing_rad(stop, np.nan_to_num(rest)))  # 0: on the stop
-    scale = swing / known.theta_stop_rad
+    # The nodes scale with the start swing: θmax of a ring-down released at the stop in the row's
+    # own potential (0: on the stop).
+    swing = np.nan_to_num(ArcPotential.from_local_field(probe, field, gradient).start_swing_rad(stop))
+    scale = swing[:, None] / known.theta_stop_rad
     per_node = potential.frequency_hz((scale * rows.amplitudes_rad).reshape(-1)).reshape(-1, q)
     return (rows.weights * per_node).sum(-1)

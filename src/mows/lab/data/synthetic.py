@@ -7,7 +7,7 @@ The truth never comes from the lab's own model. For every row:
    arc, with the actual pose (θ0, gravity of a tilted plane) and the spring at the row's
    temperature: W(θ) of :func:`mows.physics.potential.arc_energy_j`, as
    :meth:`mows.physics.potential.ArcPotential.from_source` does, batched over the rows;
-2. the ring-down frequency is the damped first-harmonic-balance frequency √(k(A)/J − δ²)/2π
+2. the ring-down frequency is the damped harmonic-balance frequency √(k(A)/J − δ²)/2π
    averaged over the decaying ring-down as the constant-frequency estimator sees it
    (:mod:`mows.physics.ringdown_average`, here with 8 Gauss nodes where the lab uses 3);
 3. Gaussian noise of ``f_std_hz`` is added with the caller's generator.

@@ -13,7 +13,7 @@ so U'(0) = 0 and U''(0) = kM + m·Bx' + l·m·Gx'x' exactly: Eq. 6, f = f00·√
 :func:`frequency_factor` evaluates a configuration with
 :meth:`mows.physics.potential.ArcPotential.from_local_field` (the field's quadratic expansion along the
 lever's arc, exact for the quadratic field the lab describes): exact rest angle (Newton on
-U'(θ) = 0 from θ = 0), stiffness U''(θs), and first-harmonic balance at the ring-down's
+U'(θ) = 0 from θ = 0), stiffness U''(θs), and harmonic balance at the ring-down's
 amplitude nodes (:mod:`mows.physics.ringdown_average`). It returns h and c with
 
     f = f00·h + c,
@@ -21,9 +21,11 @@ amplitude nodes (:mod:`mows.physics.ringdown_average`). It returns h and c with
 so that the fitted f00 enters linearly (c holds additive frequency contributions of plugins).
 
 The start swing of each ring-down (what the finite-amplitude readout averages from) is physics,
-not a per-fit number: every ring-down starts at the housing stop, so its swing about the rest
-angle is A0 = θstop − |θs| with θs the rest angle that the configuration's own field (in full:
-the lever deflects by By' whatever else the model holds) gives the potential. The stop is one
+not a per-fit number: every ring-down starts at the housing stop, so its swing turns at
+θstop − |θs| from the rest angle θs that the configuration's own field (in full: the lever
+deflects by By' whatever else the model holds) gives the potential. The fit reports the swing's
+first harmonic, which a lopsided potential puts up to 1 % (0.16° at 3.4 mT) beyond that distance
+(:meth:`mows.physics.potential.ArcPotential.start_swing_rad`). The stop is one
 number for the table (the probe's ``theta_stop_rad``, moved by the ``housing_stop`` effect). A
 table's ``amplitude_deg`` is evidence used where it is trusted (:func:`amplitude_evidence_rad`).
 
@@ -129,10 +131,12 @@ class Configuration:
         """The configuration of the rows ``index`` (indices or a boolean mask)."""
         return dataclasses.replace(self, **{name: values[index] for name, values in self.per_row().items()})
 
-    def start_swing_rad(self, rest_rad: np.ndarray) -> np.ndarray:
-        """Each ring-down's start swing about its rest angle ``rest_rad``: the evidence where the
-        lab uses it, else the stop less the deflection, θstop − |θs| (module docstring)."""
-        return np.where(np.isfinite(self.start_evidence_rad), self.start_evidence_rad, self.stop_rad - np.abs(rest_rad))
+    def start_swing_rad(self, potential: ArcPotential) -> np.ndarray:
+        """Each ring-down's start swing in ``potential``: the evidence where the lab uses it, else
+        θmax of a swing released at the stop (:meth:`ArcPotential.start_swing_rad`, module
+        docstring)."""
+        from_stop = np.nan_to_num(potential.start_swing_rad(self.stop_rad))  # 0: on the stop
+        return np.where(np.isfinite(self.start_evidence_rad), self.start_evidence_rad, from_stop)
 
     def probe_frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """(axes, field', gradient', Hessian') with axes (n, 3, 3) holding rows x', y', z'."""
@@ -261,8 +265,8 @@ def _frequency_factor(config: Configuration, probe: Probe, amplitude_nodes: Ampl
     stiffness = [_rest_stiffness(probe, factor * b, **local) for b in variants]
     h = _readout(config, probe, _blend(stiffness, config.deflection))
     if config.amplitude:
-        rest = _potential(probe, factor * field, **local).rest_angle_rad()
-        amplitudes, weights = amplitude_nodes(config, config.start_swing_rad(rest))
+        start = config.start_swing_rad(_potential(probe, factor * field, **local))
+        amplitudes, weights = amplitude_nodes(config, start)
         at_amplitude = [_amplitude_stiffness(probe, factor * b, amplitudes, **local) for b in variants]
         averaged = (weights * _readout(config, probe, _blend(at_amplitude, config.deflection))).sum(-1)
         h = h + config.amplitude * (averaged - h)
@@ -297,17 +301,11 @@ def amplitude_evidence_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
     return cached[probe]
 
 
-def reference_rest_angle_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
-    """The rest angle θs (n,) in the table's reference field and gradient in full; NaN where unstable."""
-    axes = table.probe_axes()
-    gradient = np.einsum("nai,nij,nbj->nab", axes, table.gradient_t_per_m, axes)
-    spring = np.full(len(table), probe.spring_nm_per_rad)
-    return _potential(probe, table.probe_field_t, gradient, None, None, spring).rest_angle_rad()
-
-
 def base_start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
-    """Each row's start swing at the table's reference field and the probe's stop."""
-    return Configuration.base(table, probe).start_swing_rad(reference_rest_angle_rad(table, probe))
+    """Each row's start swing at the table's reference field and gradient in full and the probe's stop."""
+    config = Configuration.base(table, probe)
+    _, field, gradient, _ = config.probe_frame()
+    return config.start_swing_rad(_potential(probe, field, gradient, None, None, config.spring_nm_per_rad))
 
 
 def _blend(values: list[np.ndarray], weight: float) -> np.ndarray:
@@ -358,7 +356,7 @@ def _rest_stiffness(probe: Probe, field: np.ndarray, **local: Any) -> np.ndarray
 
 
 def _amplitude_stiffness(probe: Probe, field: np.ndarray, amplitudes: np.ndarray, **local: Any) -> np.ndarray:
-    """First-harmonic-balance stiffness k(A) (n, q) at the amplitude nodes."""
+    """Harmonic-balance stiffness k(A) (n, q) at the amplitude nodes."""
     n, q = amplitudes.shape
     potential = _potential(probe, field, repeat=q, **local)
     return potential.effective_stiffness_nm_per_rad(amplitudes.reshape(-1)).reshape(n, q)
@@ -374,7 +372,7 @@ def unevaluable_rows(table: MeasurementTable, probe: Probe) -> dict[int, tuple[s
     _, field, gradient, _ = config.probe_frame()
     potential = _potential(probe, field, gradient, None, None, config.spring_nm_per_rad)
     at_rest = potential.rest_angle_rad()
-    amplitude = config.start_swing_rad(at_rest)
+    amplitude = config.start_swing_rad(potential)
     centre = potential.cycle_centre_rad(amplitude)
     config.transverse = config.deflection = config.amplitude = 1.0
     h, _ = frequency_factor(config, probe)

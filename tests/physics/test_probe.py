@@ -56,3 +56,20 @@ def test_contradictory_or_unphysical_probe_files_are_refused():
         PAPER_PROBE.replace(spring_nm_per_rad=-1.0)
     with pytest.raises(ValueError, match="overdamped"):
         PAPER_PROBE.replace(damping_per_s=1e4)
+
+
+def test_the_moment_follows_its_temperature_coefficient_from_the_probe_file(tmp_path):
+    """m(T) = m·(1 + α·(T − T_ref)); the default α = 0 leaves the probe as it is."""
+    assert PAPER_PROBE.moment_temp_coeff_per_k == 0.0
+    assert PAPER_PROBE.at_temperature(350.0) is PAPER_PROBE
+    path = tmp_path / "probe.yaml"
+    assert "moment_temp_coeff_per_k" not in PAPER_PROBE.yaml_text()
+    path.write_text(PAPER_PROBE.yaml_text() + "moment_temp_coeff_per_k: -1.2e-3\n")
+    probe = Probe.from_yaml(path)
+    probe.to_yaml(tmp_path / "again.yaml")
+    assert Probe.from_yaml(tmp_path / "again.yaml") == probe
+    warm = probe.at_temperature(probe.reference_temperature_k + 10.0)
+    assert warm.moment_am2 == pytest.approx(0.988 * PAPER_PROBE.moment_am2, rel=1e-12)
+    assert (warm.spring_nm_per_rad, warm.magnet_mass_kg) == (probe.spring_nm_per_rad, probe.magnet_mass_kg)
+    with pytest.raises(ValueError, match=r"moment_temp_coeff_per_k = 0\.05 is out of range"):
+        PAPER_PROBE.replace(moment_temp_coeff_per_k=0.05)

@@ -445,3 +445,29 @@ def test_commands_are_checked():
     device.set_coils([1.0, -1.0], 112.0)
     with pytest.raises(RuntimeError, match="switch the coils off"):
         device.set_orientation(1.0)
+
+
+def test_the_field_shift_follows_the_moment_at_the_temperature():
+    """A magnet whose moment falls with temperature (NdFeB, α = −1.2e-3/K; the spring held
+    fixed to isolate it) in a uniform 0.5 mT field along its axis, at T_ref ∓ 20 K. The field
+    term of the frequency scales with the moment (Eq. 6 with β0 = f00·m/(2kM), Eq. 9); exactly,
+    for a small swing, ω² − ω0² = m(T)·B/J (U = ½kM·θ² − m·B·cos θ, Eq. S1), so the shifts of
+    f² at the two temperatures stand as m(T1)/m(T2). The fluxgate pickup of the magnet swinging
+    the same way (no noise, no field) stands in the same ratio, to the readings' resolution."""
+    coefficient, field, delta_k = -1.2e-3, 5e-4, 20.0
+    probe = P.replace(moment_temp_coeff_per_k=coefficient, spring_temp_coeff_per_k=0.0)
+    f2_shift, pickup = [], []
+    for temperature in (P.reference_temperature_k - delta_k, P.reference_temperature_k + delta_k):
+        alone = bare(probe=probe).replace(environment=Environment((), temperature_k=temperature))
+        in_field = alone.replace(environment=Environment((UniformField((field, 0.0, 0.0)),), temperature_k=temperature))
+        f, f0 = (mean_frequency_hz(*ring(scene, math.radians(0.5), 1.0)) for scene in (in_field, alone))
+        f2_shift.append(f**2 - f0**2)
+        device = SimulatedDevice(alone)
+        device.pluck(math.radians(10.0))  # with no field, the swing does not depend on the moment
+        pickup.append(device.read(1).samples.samples_t[0])
+    expected = (1.0 - coefficient * delta_k) / (1.0 + coefficient * delta_k)  # m(T1)/m(T2) = 1.049
+    print(f"\nm(T1)/m(T2) = {expected:.6f}; f² shifts {f2_shift[0] / f2_shift[1]:.6f}")
+    assert f2_shift[0] / f2_shift[1] == pytest.approx(expected, rel=1e-4)
+    resolution = np.array([sensor.resolution_t for sensor in bare().sensors.pair.sensors])
+    miss_t = np.abs(pickup[0] - expected * pickup[1])
+    assert np.all(miss_t <= 1.1 * resolution), (pickup, miss_t, resolution)

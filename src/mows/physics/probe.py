@@ -58,7 +58,8 @@ class Probe:
     damping_per_s : amplitude decay rate δ of Eq. S2, 1/s.
     theta_stop_rad : housing stop θmax, rad (calibrated 24° in the paper).
     spring_temp_coeff_per_k : relative change of kM per kelvin (spring steel ≈ −2.6e-4).
-    reference_temperature_k : temperature at which kM is given, K.
+    reference_temperature_k : temperature at which kM and m are given, K.
+    moment_temp_coeff_per_k : relative change of m per kelvin (NdFeB ≈ −1.2e-3; 0 keeps m fixed).
     """
 
     moment_am2: float
@@ -70,6 +71,7 @@ class Probe:
     theta_stop_rad: float = math.radians(24.0)
     spring_temp_coeff_per_k: float = -2.6e-4
     reference_temperature_k: float = 293.15
+    moment_temp_coeff_per_k: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -83,12 +85,8 @@ class Probe:
             _require(name, getattr(self, name), lambda v: v > 0, "> 0")
         _require("damping_per_s", self.damping_per_s, lambda v: v >= 0, ">= 0")
         _require("theta_stop_rad", self.theta_stop_rad, lambda v: 0 < v < math.pi / 2, "in (0, pi/2)")
-        _require(
-            "spring_temp_coeff_per_k",
-            self.spring_temp_coeff_per_k,
-            lambda v: abs(v) < 1e-2,
-            "with |value| < 1e-2 per K",
-        )
+        for name in ("spring_temp_coeff_per_k", "moment_temp_coeff_per_k"):
+            _require(name, getattr(self, name), lambda v: abs(v) < 1e-2, "with |value| < 1e-2 per K")
         if self.damping_per_s**2 >= self.spring_nm_per_rad / self.inertia_kgm2:
             raise ValueError(
                 f"damping_per_s = {self.damping_per_s} makes the probe overdamped "
@@ -124,6 +122,20 @@ class Probe:
         """kM at ``temperature_k``: kM·(1 + α·(T − T_ref)), N·m/rad (PHYSICS.md §5.6)."""
         return self.spring_nm_per_rad * (
             1.0 + self.spring_temp_coeff_per_k * (temperature_k - self.reference_temperature_k)
+        )
+
+    def at_temperature(self, temperature_k: float) -> Probe:
+        """This probe with its magnet's moment at ``temperature_k``: m·(1 + α·(T − T_ref)).
+
+        Only the moment changes: kM keeps its own coefficient (:meth:`spring_at`), and the mass
+        and lever, hence gravity's torque, do not depend on temperature. ValueError where the
+        moment would not stay positive.
+        """
+        if self.moment_temp_coeff_per_k == 0.0:
+            return self
+        return self.replace(
+            moment_am2=self.moment_am2
+            * (1.0 + self.moment_temp_coeff_per_k * (temperature_k - self.reference_temperature_k))
         )
 
     def replace(self, **changes: float) -> Probe:
@@ -201,7 +213,11 @@ class Probe:
         return probe
 
     def to_dict(self) -> dict:
+        """The probe-file keys; ``moment_temp_coeff_per_k`` only where it is set, so that the
+        files of probes without it read as they always did."""
         data = {f.name: float(getattr(self, f.name)) for f in dataclasses.fields(self)}
+        if self.moment_temp_coeff_per_k == 0.0:
+            del data["moment_temp_coeff_per_k"]
         data["f00_hz"] = float(self.f00_hz)
         return data
 

@@ -6,7 +6,8 @@ fluxgates with the noise of :mod:`mows.sim.noise`; :mod:`mows.sim.cycle` runs on
 cycle on it.
 
 Fluxgates. At every sample: the exact dipole field of the magnet at its actual position with
-its actual moment (:meth:`mows.physics.fluxgate.FluxgatePair.pickup_t`), plus the environment field,
+its actual moment (:meth:`mows.physics.fluxgate.FluxgatePair.pickup_t`; the moment at the
+cycle's temperature, :meth:`mows.physics.probe.Probe.at_temperature`), plus the environment field,
 plus each coil's field × its current (they saturate the sensors during excitation, as in the
 paper), noise (:class:`mows.sim.noise.NoiseStream`), then offset compensation, ±range clipping and
 quantisation (:meth:`mows.physics.fluxgate.FluxgatePair.digitise`). The magnet is a point dipole: a
@@ -189,7 +190,7 @@ class SimulatedDevice:
 
     def _slope_series(self, source, pose) -> np.ndarray:
         """Chebyshev coefficients of W'(θ) for ``source`` at ``pose``, negligible tail dropped."""
-        coeffs = ArcPotential.from_source(self.probe, source, pose, half_width_rad=self._half_width_rad).d1
+        coeffs = ArcPotential.from_source(self._magnet, source, pose, half_width_rad=self._half_width_rad).d1
         significant = np.flatnonzero(
             np.abs(coeffs) > SERIES_TOLERANCE * self.probe.spring_nm_per_rad * self._half_width_rad
         )
@@ -207,6 +208,11 @@ class SimulatedDevice:
         if not math.isfinite(theta0_rad):
             raise ValueError(f"theta0_rad = {theta0_rad!r} must be finite")
         self._pose = self.scenario.pose.with_theta0(theta0_rad)
+        self._magnet = self._magnet_now()
+        self._build_series()
+
+    def _build_series(self) -> None:
+        """W' of every source at the present pose, for the magnet's present moment."""
         self._fixed_series = self._slope_series(self._fixed_source, self._pose)
         coil_pose = dataclasses.replace(self._pose, gravity_m_per_s2=(0.0, 0.0, 0.0))
         self._coil_series = [self._slope_series(coil, coil_pose) for coil in self.scenario.setup.coils]
@@ -252,10 +258,24 @@ class SimulatedDevice:
             raise ValueError(f"amplitudes_a has {amplitudes.size} values; the setup has {self.n_coils} coils")
         if not (math.isfinite(frequency_hz) and 0.0 < frequency_hz < self.sample_rate_hz / 2.0):
             raise ValueError(f"frequency_hz = {frequency_hz!r} must be in (0, {self.sample_rate_hz / 2.0:g}) Hz")
+        magnet = self._magnet_now()
+        if magnet != self._magnet:
+            self._magnet = magnet
+            self._build_series()
         self._amplitudes_a = amplitudes
         self._drive_hz = float(frequency_hz)
         self._drive_t0_s = self.sample_index / self.sample_rate_hz
         self._coils_on = True
+
+    def _magnet_now(self):
+        """The probe with its magnet's moment at the present temperature, m(T) (Probe.at_temperature).
+
+        It is taken when a cycle starts (the probe turned, the coils switched on) and held for
+        the cycle, in the potential, the coils' torque and the fluxgates' pickup: within a
+        cycle of ~1 s the temperature moves by its rate × 1 s, a few mK in a warming lab, a
+        relative change of the moment ~1e-6, far below what one ring-down resolves. The
+        spring, whose drift the kernel follows continuously, is not scaled by it."""
+        return self.probe.at_temperature(self.temperature_k)
 
     def coils_off(self) -> None:
         self._coils_on = False
@@ -342,7 +362,7 @@ class SimulatedDevice:
         currents = self.currents_at(first + np.arange(n_samples))
         theta, theta_dot = self.integrate(n_samples)
         positions = self._pose.magnet_position_at(theta, self.probe.lever_m)
-        moments = self.probe.moment_am2 * self._pose.moment_direction_at(theta)
+        moments = self._magnet.moment_am2 * self._pose.moment_direction_at(theta)
         field = (
             self._pair.pickup_t(positions, moments)
             + self._env_reading_t
@@ -363,7 +383,7 @@ class SimulatedDevice:
     def potential(self) -> ArcPotential:
         """U(θ) of the probe in the environment at the current pose and temperature."""
         return ArcPotential.from_source(
-            self.probe, self.static_source, self._pose, self.temperature_k, half_width_rad=self._half_width_rad
+            self._magnet, self.static_source, self._pose, self.temperature_k, half_width_rad=self._half_width_rad
         )
 
     def expected_frequency_hz(self, amplitude_rad=0.0):

@@ -7,7 +7,7 @@ cycle on it.
 
 Fluxgates. At every sample: the exact dipole field of the magnet at its actual position with
 its actual moment (:meth:`mows.physics.fluxgate.FluxgatePair.pickup_t`; the moment at the
-cycle's temperature, :meth:`mows.physics.probe.Probe.at_temperature`), plus the environment field,
+temperature of the cycle's phase, :meth:`mows.physics.probe.Probe.at_temperature`), plus the environment field,
 plus each coil's field × its current (they saturate the sensors during excitation, as in the
 paper), noise (:class:`mows.sim.noise.NoiseStream`), then offset compensation, ±range clipping and
 quantisation (:meth:`mows.physics.fluxgate.FluxgatePair.digitise`). The magnet is a point dipole: a
@@ -258,26 +258,30 @@ class SimulatedDevice:
             raise ValueError(f"amplitudes_a has {amplitudes.size} values; the setup has {self.n_coils} coils")
         if not (math.isfinite(frequency_hz) and 0.0 < frequency_hz < self.sample_rate_hz / 2.0):
             raise ValueError(f"frequency_hz = {frequency_hz!r} must be in (0, {self.sample_rate_hz / 2.0:g}) Hz")
-        magnet = self._magnet_now()
-        if magnet != self._magnet:
-            self._magnet = magnet
-            self._build_series()
+        self._hold_moment()
         self._amplitudes_a = amplitudes
         self._drive_hz = float(frequency_hz)
         self._drive_t0_s = self.sample_index / self.sample_rate_hz
         self._coils_on = True
 
     def _magnet_now(self):
-        """The probe with its magnet's moment at the present temperature, m(T) (Probe.at_temperature).
-
-        It is taken when a cycle starts (the probe turned, the coils switched on) and held for
-        the cycle, in the potential, the coils' torque and the fluxgates' pickup: within a
-        cycle of ~1 s the temperature moves by its rate × 1 s, a few mK in a warming lab, a
-        relative change of the moment ~1e-6, far below what one ring-down resolves. The
-        spring, whose drift the kernel follows continuously, is not scaled by it."""
+        """The probe with its magnet's moment at the present temperature, m(T) (Probe.at_temperature)."""
         return self.probe.at_temperature(self.temperature_k)
 
+    def _hold_moment(self) -> None:
+        """Take the moment at the present temperature and hold it until the cycle's next phase
+        (the probe turned, the coils on, the coils off), in the potential, the coils' torque
+        and the fluxgates' pickup. A phase lasts ~0.5 s: the temperature moves by its rate ×
+        0.5 s, a few mK in a warming lab, a relative change of the moment ~1e-6, below what
+        one ring-down resolves; taken at the switch-off, the ring-down sees the moment of its
+        own start. The spring, whose drift the kernel follows continuously, is not scaled."""
+        magnet = self._magnet_now()
+        if magnet != self._magnet:
+            self._magnet = magnet
+            self._build_series()
+
     def coils_off(self) -> None:
+        self._hold_moment()
         self._coils_on = False
         self._amplitudes_a = np.zeros(self.n_coils)
 

@@ -60,6 +60,16 @@ def test_definitions_fall_back_to_the_repository(monkeypatch):
     assert sorted(bags.interface_types(bags.REPOSITORY_PACKAGE)) == sorted(BAG_TYPES)
 
 
+def test_a_stale_link_in_a_symlink_install_is_not_an_interface(tmp_path):
+    """A colcon --symlink-install keeps its links to definitions renamed since; they define nothing."""
+    for kind in ("msg", "srv", "action"):
+        (tmp_path / kind).mkdir()
+        for source in sorted((bags.REPOSITORY_PACKAGE / kind).glob(f"*.{kind}")):
+            (tmp_path / kind / source.name).symlink_to(source)
+    (tmp_path / "srv" / "Renamed.srv").symlink_to(tmp_path / "gone.srv")
+    assert sorted(bags.interface_types(tmp_path)) == sorted(BAG_TYPES)
+
+
 def test_a_service_definition_needs_its_two_parts():
     with pytest.raises(ValueError, match="2 parts, found 3"):
         bags.split_definition("int32 a\n---\nint32 b\n---\nint32 c\n", "srv")

@@ -96,6 +96,8 @@ def interface_types(directory: Path) -> dict[str, Any]:
     types: dict[str, Any] = {}
     for kind, suffixes in PARTS.items():
         for path in sorted((directory / kind).glob(f"*.{kind}")):
+            if not path.exists():  # a symlink-install's link to a definition since renamed or removed
+                continue
             parts = split_definition(path.read_text(), kind)
             for suffix, text in zip(suffixes, parts):
                 name = f"{PACKAGE}/{kind}/{path.stem}{suffix}"

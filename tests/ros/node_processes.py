@@ -65,10 +65,17 @@ def start(tmp_path):
 
 
 def launch(command, log_path) -> subprocess.Popen:
-    """``command`` with its output in ``log_path``, killed with the test's worker."""
+    """``command`` with its output in ``log_path``, killed with the test's worker.
+
+    Its SIGINT is the default, as for a command run from a terminal: a suite started as a
+    shell's background job inherits SIGINT ignored, and a Ctrl-C sent to the command would
+    then be lost (GNU env's --default-signal)."""
     with open(log_path, "w") as log:
         process = subprocess.Popen(
-            ["setpriv", "--pdeathsig", "KILL", *command], stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT
+            ["setpriv", "--pdeathsig", "KILL", "env", "--default-signal=INT", *command],
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=subprocess.STDOUT,
         )
     process.log_path = log_path
     return process

@@ -44,12 +44,9 @@ class RequesterWatch:
         self.requesters = client_holders(node, service_name)
 
     def gone(self) -> bool:
-        """Whether every node that may wait for the cycle has left.
-
-        While none was seen, the graph may not yet know which node holds the client whose
-        request came (DDS discovers endpoints before it learns their node), and that node may
-        leave before it is known: then no client of the service left at all means the same."""
+        """Whether every node that may wait for the cycle has left (False while none was seen:
+        the graph may not yet know the client whose request came)."""
         if not self.requesters:
             self.requesters = client_holders(self._node, self.service_name)
-            return not self.requesters and self._node.count_clients(self.service_name) == 0
+            return False
         return not any(holds_client(self._node, r, self.service_name) for r in self.requesters)

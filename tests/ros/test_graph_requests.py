@@ -43,8 +43,10 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realti
 QUICK = ["-p", "excite_s:=0.3", "-p", "ringdown_s:=0.3", "-p", "turn_settle_s:=0.1", "-p", "gap_s:=0.2"]
 COILS_OFF_S = 1.0  # the requirement: coils off this soon after the requester left
 # A requester in a process of its own, as `ros2 service call` is: it asks for the longest cycle
-# the limits allow and waits for the answer until it is stopped.
+# the limits allow and waits for the answer until it is stopped ("wait"), or leaves 0.2 s after
+# asking ("leave"), before the graph may have learnt its node.
 REQUESTER = """
+import sys
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from mows_msgs.srv import RunCycle
@@ -55,7 +57,7 @@ client.wait_for_service()
 future = client.call_async(RunCycle.Request(theta0_rad=0.0, repeats=1000, tuning_steps=0, gap_s=0.0))
 print("asked", flush=True)
 try:
-    rclpy.spin_until_future_complete(node, future)
+    rclpy.spin_until_future_complete(node, future, timeout_sec=0.2 if sys.argv[1] == "leave" else None)
 except (KeyboardInterrupt, ExternalShutdownException):
     pass
 node.destroy_node()
@@ -177,7 +179,7 @@ def test_the_cycle_action_runs_and_is_cancelled_with_the_coils_off(graph):
 
 def test_a_cycle_whose_requester_disappears_has_its_coils_off_within_a_second(graph, tmp_path):
     states = graph.heard.states[""]
-    requester = launch([sys.executable, "-c", REQUESTER], tmp_path / "requester.log")
+    requester = launch([sys.executable, "-c", REQUESTER, "wait"], tmp_path / "requester.log")
     graph.ros.wait_for(lambda: "asked" in log(requester), "the request")
     graph.ros.wait_for(lambda: graph.coils_on(), "the coils on in the requested cycle")
     cycle_id, heard = states[-1].cycle_id, len(states)
@@ -194,6 +196,25 @@ def test_a_cycle_whose_requester_disappears_has_its_coils_off_within_a_second(gr
     print(f"coils off {off_after_s:.3f} s after the requester's Ctrl-C")
     assert off_after_s < COILS_OFF_S, off_after_s
     assert not ended.coils_on and ended.cycle_id == 0
+    reason = "every node that asked for it through /driver/run_cycle has left"
+    graph.ros.wait_for(lambda: f"cycle {cycle_id} cancelled, coils off: {reason}" in log(graph.driver), "the log line")
+
+
+def test_a_requester_that_leaves_right_after_asking_is_not_waited_for(graph, tmp_path):
+    states = graph.heard.states[""]
+    heard = len(states)
+    requester = launch([sys.executable, "-c", REQUESTER, "leave"], tmp_path / "requester.log")
+    assert requester.wait(timeout=120) == 0, log(requester)
+    left_s = time.monotonic()
+    started = graph.ros.wait_for(
+        lambda: next((heard + i for i, s in enumerate(states[heard:]) if s.cycle_id != 0), None), "the requested cycle"
+    )
+    cycle_id = states[started].cycle_id
+    graph.ros.wait_for(lambda: any(s.phase == Phase.IDLE for s in states[started:]), "the cycle's end")
+    off_after_s = time.monotonic() - left_s
+    print(f"coils off {off_after_s:.3f} s after the requester left")
+    assert off_after_s < COILS_OFF_S, off_after_s
+    assert not graph.coils_on()
     reason = "every node that asked for it through /driver/run_cycle has left"
     graph.ros.wait_for(lambda: f"cycle {cycle_id} cancelled, coils off: {reason}" in log(graph.driver), "the log line")
 

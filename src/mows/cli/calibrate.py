@@ -252,6 +252,8 @@ def compare_with_truth(calibration, truth: Probe) -> str:
 
 
 # --- tables and bags ----------------------------------------------------------------------
+#: A cantilever's swing is a fraction of a turn: a θmax of half a turn or more is no angle in degrees.
+MAX_AMPLITUDE_DEG = 180.0
 TABLE_COLUMNS = (
     "supply_current_a",
     "damping_per_s",
@@ -305,6 +307,18 @@ def _table_columns(path) -> Mapping:
         non_positive = np.flatnonzero(np.isfinite(amplitude) & (amplitude <= 0))
         if len(non_positive):
             raise ValueError(f"column 'amplitude_deg' must be > 0: not so in {rows_text(non_positive)}")
+        beyond = np.flatnonzero(np.isfinite(amplitude) & (amplitude >= MAX_AMPLITUDE_DEG))
+        if len(beyond):
+            raise ValueError(
+                f"column 'amplitude_deg' must be below {MAX_AMPLITUDE_DEG:g}° (a swing in degrees): "
+                f"not so in {rows_text(beyond)}"
+            )
+    wiring = columns.get("gradient_wiring", np.zeros(0))
+    flags = np.flatnonzero(np.isfinite(wiring) & (wiring != 0) & (wiring != 1))
+    if len(flags):
+        raise ValueError(
+            f"column 'gradient_wiring' is 0 (field pair) or 1 (gradient pair): not so in {rows_text(flags)}"
+        )
     for name in ("theta0_deg", "f_hz", "f_std_hz", *TABLE_COLUMNS):
         bad = np.flatnonzero(~np.isfinite(columns[name])) if name in columns else ()
         if len(bad):
@@ -321,7 +335,7 @@ def _numeric_columns(path) -> dict | None:
         warnings.simplefilter("ignore")
         try:
             values = np.genfromtxt(path, delimiter=",", names=True, encoding="utf-8-sig", invalid_raise=True)
-        except ValueError:
+        except (ValueError, IndexError):  # IndexError: an empty file, which numpy does not name
             return None
     names = values.dtype.names or ()
     return {name: np.atleast_1d(values[name]).astype(float) for name in names} or None

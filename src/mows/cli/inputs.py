@@ -175,6 +175,18 @@ def check_frequencies(f_hz, probe: Probe, what: str = "f_hz") -> None:
         )
 
 
+def caused_by_interrupt(error: BaseException | None) -> bool:
+    """Whether Ctrl-C is behind ``error``: an extension module interrupted while it loads (scipy's,
+    on a slow start) turns the KeyboardInterrupt into ``ImportError: initialization failed``."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return False
+
+
 def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> int:
     """``work()``'s exit status; a bad input → one line and 2, a bug → one line and 1, Ctrl-C
     → one line and 130 (outputs are only renamed into place once complete, so none is left)."""
@@ -193,6 +205,9 @@ def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> in
     except Exception as error:  # noqa: BLE001 - the one place a bug is turned into a line
         if debug:
             raise
+        if caused_by_interrupt(error):
+            print(f"{prog}: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
         print(
             f"{prog}: internal error: {type(error).__name__}: {one_line(error)} "
             "(a bug: rerun with --debug for the traceback and report it)",

@@ -12,7 +12,7 @@ import functools
 import importlib
 import sys
 
-from mows.cli.inputs import EXIT_INTERRUPTED, OneLineParser, UsageError, report_errors
+from mows.cli.inputs import EXIT_INTERRUPTED, OneLineParser, UsageError, caused_by_interrupt, report_errors
 
 SUBCOMMANDS = {
     "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
@@ -34,8 +34,9 @@ def main(argv=None) -> int:
     words = sys.argv[1:] if argv is None else list(argv)
     try:
         return _main(words)
-    except KeyboardInterrupt:  # while the subcommand's modules load; within it, report_errors says it
-        if "--debug" in words:
+    # Ctrl-C while the subcommand's modules load (within it, report_errors says it)
+    except (KeyboardInterrupt, ImportError) as error:
+        if "--debug" in words or not caused_by_interrupt(error):
             raise
         print("mows: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

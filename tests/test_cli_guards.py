@@ -166,6 +166,18 @@ CASES = [
         2,
         ["amplitude_deg", "180°", "row 5"],
     ),
+    (
+        "calibrate-table-and-simulate",
+        ["calibrate", "{d}/cal.csv", "--simulate", "-o", "{d}/p.yaml"],
+        2,
+        ["two sources"],
+    ),
+    (
+        "calibrate-simulation-option-unused",
+        [*CAL, "-o", "{d}/p.yaml", "--repeats", "3", "--seed", "1"],
+        2,
+        ["--repeats, --seed shape only --simulate"],
+    ),
     ("calibrate-repeats-0", ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--repeats", "0"], 2, ["--repeats"]),
     ("calibrate-bad-polarity", [*CAL, "-o", "{d}/p.yaml", "--polarity", "gradient=2"], 2, ["--polarity"]),
     ("calibrate-nan-environment", [*CAL, "-o", "{d}/p.yaml", "--environment-field-t", "nan", "0", "0"], 2, ["nan"]),

@@ -79,9 +79,14 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--hardware-id", default="", help="written to the probe file (default: the scenario)")
     parser.add_argument("--simulate", action="store_true", help="calibrate the scenario's simulated probe")
-    parser.add_argument("--currents-a", type=finite_float, nargs="+", default=list(PAPER_CURRENTS_A))
-    parser.add_argument("--repeats", type=positive_int, default=1, help="ring-downs per cycle")
-    parser.add_argument("--seed", type=int, help="noise seed of the simulation (default: the scenario's)")
+    parser.add_argument(
+        "--currents-a",
+        type=finite_float,
+        nargs="+",
+        help=f"--simulate: the supply currents, A (default: {' '.join(f'{c:g}' for c in PAPER_CURRENTS_A)})",
+    )
+    parser.add_argument("--repeats", type=positive_int, help="--simulate: ring-downs per cycle (default: 1)")
+    parser.add_argument("--seed", type=int, help="--simulate: noise seed (default: the scenario's)")
     parser.add_argument("--table", help="also write the calibration points as a table (CSV)")
     parser.add_argument("--force", action="store_true", help="replace existing output files (never an input)")
     parser.add_argument(
@@ -99,6 +104,7 @@ def run(args) -> int:
     inputs = [path for path in (args.input, args.probe, args.scenario, args.gradient_scenario) if path]
     outputs = [args.output] + ([args.table] if args.table else [])
     check_outputs(outputs, inputs, args.force)
+    _simulation_options(args)
     nominal = load_probe(args.probe) if args.probe else PAPER_PROBE
     scenario = _scenario(args.scenario)
     gradient = _scenario(args.gradient_scenario) if args.gradient_scenario else None
@@ -165,6 +171,24 @@ def _polarity(given, field_wiring: str) -> dict:
 
 
 # --- the simulated calibration ------------------------------------------------------------
+#: The options that shape --simulate's calibration alone (by argparse name), and their defaults.
+SIMULATION_OPTIONS = {"currents_a": list(PAPER_CURRENTS_A), "repeats": 1, "seed": None}
+
+
+def _simulation_options(args) -> None:
+    """An input with --simulate, or an option of --simulate without it, is refused by name (it
+    would be ignored); with --simulate, the options not given take their defaults."""
+    if args.simulate and args.input:
+        raise ValueError(f"{args.input} and --simulate are two sources: give a TABLE or BAG, or --simulate")
+    given = [f"--{name.replace('_', '-')}" for name in SIMULATION_OPTIONS if getattr(args, name) is not None]
+    if given and not args.simulate:
+        verb = "shape" if len(given) > 1 else "shapes"
+        raise ValueError(f"{', '.join(given)} {verb} only --simulate's calibration: drop it or add --simulate")
+    for name, default in SIMULATION_OPTIONS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, default)
+
+
 def simulated_points(scenario, gradient, nominal: Probe, field_wiring: str, args) -> tuple[list, dict]:
     plan = CalibrationPlan(tuple(args.currents_a), repeats=args.repeats, wiring=field_wiring)
     seed = scenario.seed if args.seed is None else args.seed

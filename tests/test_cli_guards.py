@@ -75,6 +75,7 @@ def work(tmp_path_factory):
     (d / "probe_1000x.yaml").write_text(text.replace("moment_am2: 0.00089", "moment_am2: 0.89"))
     (d / "probe_two_stops.yaml").write_text(text + "theta_stop_deg: 24.0\n")
     record_cycles(d / "bag", load_scenario(), (0.0,), 3)
+    record_cycles(d / "empty_bag", load_scenario(), (), 3)
     (d / "existing.yaml").write_text("kept\n")
     os.mkfifo(d / "fifo")
     if os.geteuid() == 0:  # only root makes device files: the test of one needs it
@@ -198,6 +199,7 @@ CASES = [
     ("fit-negative-spacing", ["fit", "{d}/bag", "--sensor-spacing-m", "-0.01"], 2, ["--sensor-spacing-m"]),
     ("fit-60-m-distance", ["fit", "{d}/bag", "--sensor-distance-m", "60"], 2, ["--sensor-distance-m", "1 m"]),
     ("fit-no-such-topic", ["fit", "{d}/bag", "--raw-topic", "/nope"], 2, ["no ring-down", "/nope"]),
+    ("fit-empty-bag", ["fit", "{d}/empty_bag"], 2, ["empty_bag holds no ring-down"]),
     ("fit-a-csv", ["fit", "{d}/sweep.csv"], 2, ["not a bag", "mows lab"]),
     # lab
     (
@@ -370,6 +372,14 @@ def test_ctrl_c_while_a_module_loads_is_one_line_and_130(tmp_path, capsys, monke
     assert main(["sim", "--out", str(tmp_path / "x.npz")]) == 130
     assert capsys.readouterr().err == f"{prog}: interrupted\n"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_entry_point_imports_nothing_slow_before_ctrl_c_is_caught():
+    """The console script imports mows.cli.main outside any handler: numpy there (~0.5 s on a
+    loaded machine) would make Ctrl-C at the start a traceback."""
+    probe = "import sys, mows.cli.main; print(sorted({'numpy', 'scipy', 'yaml'} & set(sys.modules)))"
+    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True)
+    assert run.stdout.strip() == "[]", run.stdout
 
 
 def test_ctrl_c_in_a_simulation_is_one_line_and_130(tmp_path, capsys, monkeypatch):

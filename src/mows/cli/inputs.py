@@ -21,16 +21,12 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import yaml
 
+from mows.cli.status import EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED, caused_by_interrupt
 from mows.physics.probe import Probe
 
 #: Exceptions that mean "the input is bad". ValueError covers the library's own refusals
 #: (TableError, OutputRefused, a scenario's out-of-range value) and UnicodeDecodeError.
 INPUT_ERRORS = (ValueError, OSError, KeyError, yaml.YAMLError)
-#: The exit statuses of every ``mows`` command (docs/cli.md).
-EXIT_OK = 0
-EXIT_BUG = 1
-EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command ended by Ctrl-C
 #: Ring-down frequencies this far (a factor) from the probe's f00 are no ring-downs of it: a
 #: unit error (kHz) or another probe. The strongest fields of the paper move f by a factor ~2.
 FREQUENCY_FACTOR = 10.0
@@ -173,18 +169,6 @@ def check_frequencies(f_hz, probe: Probe, what: str = "f_hz") -> None:
             f"{what}: the median ring-down frequency {median:.6g} Hz is far from the probe's "
             f"f00 = {probe.f00_hz:.4g} Hz (more than a factor {FREQUENCY_FACTOR:g}): a column in kHz, or another probe?"
         )
-
-
-def caused_by_interrupt(error: BaseException | None) -> bool:
-    """Whether Ctrl-C is behind ``error``: an extension module interrupted while it loads (scipy's,
-    on a slow start) turns the KeyboardInterrupt into ``ImportError: initialization failed``."""
-    seen = set()
-    while error is not None and id(error) not in seen:
-        if isinstance(error, KeyboardInterrupt):
-            return True
-        seen.add(id(error))
-        error = error.__cause__ or error.__context__
-    return False
 
 
 def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> int:

@@ -67,6 +67,7 @@ def work(tmp_path_factory):
     rewrite(CALIBRATION_TABLE, d / "cal_huge_swing.csv", lambda i, row: i == 4 and row.update(amplitude_deg="1e6"))
     (d / "empty.csv").write_text("")
     rewrite(SWEEP_TABLE, d / "sweep_khz.csv", scale("f_hz", 1e-3))
+    rewrite(SWEEP_TABLE, d / "sweep_field_in_ut.csv", scale("ref_bx_t", 1e6))
     (d / "sweep_semicolons.csv").write_text(SWEEP_TABLE.read_text().replace(",", ";"))
     rewrite(SWEEP_TABLE, d / "sweep_one_row.csv", lambda i, row: None)
     rewrite(SWEEP_TABLE, d / "sweep_no_reference.csv", lambda i, row: [row.pop(k) for k in list(row) if "ref_" in k])
@@ -219,6 +220,12 @@ CASES = [
         ["lab", "compare", "{d}/sweep.csv", "--plugin", "{d}/nothere.py"],
         2,
         ["error: plugin file {d}/nothere.py does not exist"],
+    ),
+    (
+        "lab-reference-field-in-ut",
+        ["lab", "compare", "{d}/sweep_field_in_ut.csv"],
+        2,
+        ["reference field 16 T", "factor 10 from f00", "µT"],
     ),
     ("lab-f-in-khz", ["lab", "compare", "{d}/sweep_khz.csv"], 2, ["f00", "kHz"]),
     ("lab-semicolons", ["lab", "compare", "{d}/sweep_semicolons.csv"], 2, ["separated by ';'", "comma"]),

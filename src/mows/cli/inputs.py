@@ -22,6 +22,7 @@ import numpy as np
 import yaml
 
 from mows.cli.status import EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED, caused_by_interrupt
+from mows.lab.data.table import FIELD, GRADIENT, MeasurementTable, rows_text
 from mows.physics.probe import Probe
 
 #: Exceptions that mean "the input is bad". ValueError covers the library's own refusals
@@ -169,6 +170,29 @@ def check_frequencies(f_hz, probe: Probe, what: str = "f_hz") -> None:
             f"{what}: the median ring-down frequency {median:.6g} Hz is far from the probe's "
             f"f00 = {probe.f00_hz:.4g} Hz (more than a factor {FREQUENCY_FACTOR:g}): a column in kHz, or another probe?"
         )
+
+
+def check_reference(table: MeasurementTable, probe: Probe) -> None:
+    """ValueError when a row's reference field or gradient is one no ring-down of ``probe`` could
+    be measured in: its spring alone, kB = m·|B| or kG = l·m·|G| (Eq. 6), would move f by more
+    than FREQUENCY_FACTOR from f00 (k/kM > FREQUENCY_FACTOR²), where check_frequencies has
+    found the measured ones. A column in mT or µT given as T, or another bench's reference."""
+    springs = {
+        "field": (FIELD, probe.moment_am2, "T"),
+        "gradient": (GRADIENT, probe.lever_m * probe.moment_am2, "T/m"),
+    }
+    for what, (names, per_unit, unit) in springs.items():
+        given = [table.columns[name] for name in names if table.has(name)]
+        if not given:
+            continue
+        size = np.max(np.abs(given), axis=0)
+        bad = np.flatnonzero(per_unit * size / probe.spring_nm_per_rad > FREQUENCY_FACTOR**2 - 1.0)
+        if bad.size:
+            raise ValueError(
+                f"{table.source}: the reference {what} {size[bad[0]]:.4g} {unit} ({rows_text(bad)}) would by "
+                f"itself move the frequency more than a factor {FREQUENCY_FACTOR:g} from f00 (Eq. 6): "
+                f"a column in m{unit} or µ{unit} given in {unit}?"
+            )
 
 
 def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> int:

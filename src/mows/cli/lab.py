@@ -35,7 +35,14 @@ import time
 from tqdm import tqdm
 
 from mows.cli.fit import add_bag_arguments
-from mows.cli.inputs import OneLineParser, check_frequencies, input_file, load_probe, positive_float
+from mows.cli.inputs import (
+    OneLineParser,
+    check_frequencies,
+    check_reference,
+    input_file,
+    load_probe,
+    positive_float,
+)
 from mows.cli.lab_ringdown import run_ringdown
 from mows.lab import analyse, is_bag, load_table, progress, with_reference, write_report
 from mows.lab.chirp import PIECE_PERIODS
@@ -251,6 +258,7 @@ def _table(args, probe):
     if args.reference and not is_bag(args.table):
         with input_file(args.reference, "reference"):
             table = with_reference(table, args.reference, args.magnet_position)
+    check_reference(table, probe)
     return table
 
 

@@ -13,8 +13,8 @@ import pytest
 
 from mows.bench import simulator
 from mows.cli.bench import SUITES
-from mows.cli.inputs import EXIT_BUG
 from mows.cli.main import main
+from mows.cli.status import EXIT_BUG
 
 LATENCY = (
     "latency_ms_median",

@@ -25,6 +25,7 @@ from mows.cli import sim as sim_cli
 from mows.cli.main import main
 from mows.device import emulator
 from mows.physics.probe import PAPER_PROBE
+from mows.records.files import OutputRefused, writing
 from mows.sim.scenario import load_scenario
 from recorded_bags import record_cycles
 
@@ -61,14 +62,21 @@ def work(tmp_path_factory):
     rewrite(CALIBRATION_TABLE, d / "cal_huge_f.csv", lambda i, row: row.update(f_hz="1e300"))
     rewrite(CALIBRATION_TABLE, d / "cal_nan_current.csv", lambda i, row: i == 2 and row.update(supply_current_a="nan"))
     rewrite(CALIBRATION_TABLE, d / "one_row.csv", lambda i, row: None)
+    rewrite(CALIBRATION_TABLE, d / "cal_growing.csv", lambda i, row: i == 4 and row.update(damping_per_s="-2"))
+    rewrite(CALIBRATION_TABLE, d / "cal_wiring_2.csv", lambda i, row: i == 4 and row.update(gradient_wiring="2"))
+    rewrite(CALIBRATION_TABLE, d / "cal_huge_swing.csv", lambda i, row: i == 4 and row.update(amplitude_deg="1e6"))
+    (d / "empty.csv").write_text("")
     rewrite(SWEEP_TABLE, d / "sweep_khz.csv", scale("f_hz", 1e-3))
+    rewrite(SWEEP_TABLE, d / "sweep_field_in_ut.csv", scale("ref_bx_t", 1e6))
     (d / "sweep_semicolons.csv").write_text(SWEEP_TABLE.read_text().replace(",", ";"))
     rewrite(SWEEP_TABLE, d / "sweep_one_row.csv", lambda i, row: None)
+    rewrite(SWEEP_TABLE, d / "sweep_no_reference.csv", lambda i, row: [row.pop(k) for k in list(row) if "ref_" in k])
     PAPER_PROBE.to_yaml(d / "probe.yaml")
     text = (d / "probe.yaml").read_text()
     (d / "probe_1000x.yaml").write_text(text.replace("moment_am2: 0.00089", "moment_am2: 0.89"))
     (d / "probe_two_stops.yaml").write_text(text + "theta_stop_deg: 24.0\n")
     record_cycles(d / "bag", load_scenario(), (0.0,), 3)
+    record_cycles(d / "empty_bag", load_scenario(), (), 3)
     (d / "existing.yaml").write_text("kept\n")
     os.mkfifo(d / "fifo")
     if os.geteuid() == 0:  # only root makes device files: the test of one needs it
@@ -108,6 +116,13 @@ CASES = [
     ),
     ("calibrate-existing", [*CAL, "-o", "{d}/existing.yaml"], 2, ["exists", "--force"]),
     ("calibrate-force-device", [*CAL, "-o", "{d}/null", "--force"], 2, ["character device"]),
+    ("sim-output-under-a-file", ["sim", "--out", "{d}/existing.yaml/x.npz"], 2, ["{d}/existing.yaml is a file"]),
+    (
+        "lab-report-output-under-a-file",
+        ["lab", "report", "{d}/sweep.csv", "-o", "{d}/existing.yaml/r.html"],
+        2,
+        ["output {d}/existing.yaml/r.html: directory {d}/existing.yaml is a file"],
+    ),
     ("fit-force-fifo", ["fit", "{d}/bag", "--csv", "{d}/fifo", "--force"], 2, ["FIFO"]),
     ("sim-force-fifo", ["sim", "--out", "{d}/fifo", "--force"], 2, ["FIFO"]),
     ("lab-report-force-fifo", ["lab", "report", "{d}/sweep.csv", "-o", "{d}/fifo", "--force"], 2, ["FIFO"]),
@@ -134,6 +149,37 @@ CASES = [
         ["supply_current_a", "row 3"],
     ),
     ("calibrate-one-row", ["calibrate", "{d}/one_row.csv", "-o", "{d}/p.yaml"], 2, ["too few"]),
+    ("calibrate-empty-table", ["calibrate", "{d}/empty.csv", "-o", "{d}/p.yaml"], 2, ["empty.csv is empty"]),
+    (
+        "calibrate-growing-ring-down",
+        [*CAL[:1], "{d}/cal_growing.csv", *CAL[2:], "-o", "{d}/p.yaml"],
+        2,
+        ["damping_per_s", "≥ 0", "row 5"],
+    ),
+    (
+        "calibrate-wiring-2",
+        [*CAL[:1], "{d}/cal_wiring_2.csv", *CAL[2:], "-o", "{d}/p.yaml"],
+        2,
+        ["gradient_wiring", "row 5"],
+    ),
+    (
+        "calibrate-swing-1e6-deg",
+        [*CAL[:1], "{d}/cal_huge_swing.csv", *CAL[2:], "-o", "{d}/p.yaml"],
+        2,
+        ["amplitude_deg", "180°", "row 5"],
+    ),
+    (
+        "calibrate-table-and-simulate",
+        ["calibrate", "{d}/cal.csv", "--simulate", "-o", "{d}/p.yaml"],
+        2,
+        ["two sources"],
+    ),
+    (
+        "calibrate-simulation-option-unused",
+        [*CAL, "-o", "{d}/p.yaml", "--repeats", "3", "--seed", "1"],
+        2,
+        ["--repeats, --seed shape only --simulate"],
+    ),
     ("calibrate-repeats-0", ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--repeats", "0"], 2, ["--repeats"]),
     ("calibrate-bad-polarity", [*CAL, "-o", "{d}/p.yaml", "--polarity", "gradient=2"], 2, ["--polarity"]),
     ("calibrate-nan-environment", [*CAL, "-o", "{d}/p.yaml", "--environment-field-t", "nan", "0", "0"], 2, ["nan"]),
@@ -154,6 +200,7 @@ CASES = [
     ("fit-negative-spacing", ["fit", "{d}/bag", "--sensor-spacing-m", "-0.01"], 2, ["--sensor-spacing-m"]),
     ("fit-60-m-distance", ["fit", "{d}/bag", "--sensor-distance-m", "60"], 2, ["--sensor-distance-m", "1 m"]),
     ("fit-no-such-topic", ["fit", "{d}/bag", "--raw-topic", "/nope"], 2, ["no ring-down", "/nope"]),
+    ("fit-empty-bag", ["fit", "{d}/empty_bag"], 2, ["empty_bag holds no ring-down"]),
     ("fit-a-csv", ["fit", "{d}/sweep.csv"], 2, ["not a bag", "mows lab"]),
     # lab
     (
@@ -161,6 +208,24 @@ CASES = [
         ["lab", "compare", "{d}/sweep.csv", "--reference", "{d}/nothere.yaml"],
         2,
         ["already has reference columns", "give no --reference"],
+    ),
+    (
+        "lab-missing-reference-is-blamed-not-the-table",
+        ["lab", "compare", "{d}/sweep_no_reference.csv", "--reference", "{d}/nothere.yaml"],
+        2,
+        ["error: reference {d}/nothere.yaml does not exist"],
+    ),
+    (
+        "lab-missing-plugin-is-blamed-not-the-table",
+        ["lab", "compare", "{d}/sweep.csv", "--plugin", "{d}/nothere.py"],
+        2,
+        ["error: plugin file {d}/nothere.py does not exist"],
+    ),
+    (
+        "lab-reference-field-in-ut",
+        ["lab", "compare", "{d}/sweep_field_in_ut.csv"],
+        2,
+        ["reference field 16 T", "factor 10 from f00", "µT"],
     ),
     ("lab-f-in-khz", ["lab", "compare", "{d}/sweep_khz.csv"], 2, ["f00", "kHz"]),
     ("lab-semicolons", ["lab", "compare", "{d}/sweep_semicolons.csv"], 2, ["separated by ';'", "comma"]),
@@ -192,7 +257,7 @@ def test_a_bad_input_is_one_line_with_its_status_and_changes_nothing(work, capsy
     assert got == status, err
     assert len(err.splitlines()) == 1 and "Traceback" not in err, err
     for word in words:
-        assert word in err, err
+        assert word.format(d=work) in err, err
     assert snapshot(work) == before
 
 
@@ -219,6 +284,58 @@ def test_the_emulator_names_a_missing_directory_not_an_existing_file(work, capsy
     assert "exists" not in err and "No such file or directory" in err, err
 
 
+# --- a directory that cannot be written -------------------------------------------------------
+def lock(directory: pathlib.Path) -> None:
+    """Make ``directory`` unwritable for this user: its mode bits, or for root (whom they do not
+    stop) the immutable attribute; skip where the filesystem has none."""
+    if os.geteuid() != 0:
+        directory.chmod(0o555)
+    elif shutil.which("chattr") is None or subprocess.run(["chattr", "+i", str(directory)]).returncode != 0:
+        pytest.skip("root cannot be kept from a directory here: no immutable attribute")
+
+
+def unlock(directory: pathlib.Path) -> None:
+    if os.geteuid() == 0:
+        subprocess.run(["chattr", "-i", str(directory)], check=True)
+    directory.chmod(0o755)
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["sim", "--out", "{o}/x.npz"],
+        ["lab", "report", str(SWEEP_TABLE), "-o", "{o}/r.html"],
+        ["calibrate", str(CALIBRATION_TABLE), "-o", "{o}/p.yaml"],
+    ],
+    ids=["sim", "lab-report", "calibrate"],
+)
+def test_an_unwritable_output_directory_is_named_not_an_input(tmp_path, capsys, argv):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    lock(locked)
+    try:
+        status = main([word.format(o=locked) for word in argv])
+    finally:
+        unlock(locked)
+    err = capsys.readouterr().err
+    assert status == 2 and len(err.splitlines()) == 1, err
+    assert f"error: output {locked}/" in err and f"directory {locked} is not writable" in err, err
+    assert list(locked.iterdir()) == []
+
+
+def test_a_directory_locked_while_its_output_is_written_is_named(tmp_path):
+    """The outputs' directory locked between the first check and the rename: the refusal names
+    it, and the old file is left as it was."""
+    target = tmp_path / "x.txt"
+    target.write_text("old")
+    with pytest.raises(OutputRefused, match=f"directory {tmp_path} is not writable"):
+        with writing([target], force=True) as outputs:
+            outputs.temporaries[0].write_text("new")
+            lock(tmp_path)
+    unlock(tmp_path)
+    assert target.read_text() == "old"
+
+
 # --- interrupts ------------------------------------------------------------------------------
 def interrupt(*_args, **_kwargs):
     raise KeyboardInterrupt
@@ -241,6 +358,35 @@ def test_ctrl_c_while_writing_two_outputs_leaves_neither(tmp_path, capsys, monke
     err = capsys.readouterr().err
     assert status == 130 and err == "mows calibrate: interrupted\n", err
     assert list(tmp_path.iterdir()) == []
+
+
+def interrupted_import(*_args, **_kwargs):
+    """What Ctrl-C in an extension module's initialisation raises (scipy's, on a slow start)."""
+    try:
+        raise KeyboardInterrupt
+    except KeyboardInterrupt as error:
+        raise ImportError("initialization failed") from error
+
+
+@pytest.mark.parametrize("where", ["loading the subcommand", "running it"])
+def test_ctrl_c_while_a_module_loads_is_one_line_and_130(tmp_path, capsys, monkeypatch, where):
+    if where == "loading the subcommand":
+        monkeypatch.setattr("mows.cli.main.importlib.import_module", interrupted_import)
+        prog = "mows"
+    else:
+        monkeypatch.setattr(sim_cli, "simulate_cycle", interrupted_import)
+        prog = "mows sim"
+    assert main(["sim", "--out", str(tmp_path / "x.npz")]) == 130
+    assert capsys.readouterr().err == f"{prog}: interrupted\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_entry_point_imports_nothing_slow_before_ctrl_c_is_caught():
+    """The console script imports mows.cli.main outside any handler: numpy there (~0.5 s on a
+    loaded machine) would make Ctrl-C at the start a traceback."""
+    probe = "import sys, mows.cli.main; print(sorted({'numpy', 'scipy', 'yaml'} & set(sys.modules)))"
+    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True)
+    assert run.stdout.strip() == "[]", run.stdout
 
 
 def test_ctrl_c_in_a_simulation_is_one_line_and_130(tmp_path, capsys, monkeypatch):

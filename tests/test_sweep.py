@@ -142,3 +142,14 @@ def test_a_sweep_with_as_many_orientations_as_coefficients_says_it_has_no_degree
     d = decompose(theta0, f - P.f00_hz, np.full(theta0.size, STD_HZ), P, P.f00_hz)
     assert d.ok and math.isnan(d.chi2_dof)
     assert "χ²/dof not determined (0 degrees of freedom" in d.report() and "nan" not in d.report()
+
+
+def test_a_sweep_no_field_describes_is_refused_in_the_decomposition_s_words():
+    """±50 Hz in cos θ0 about f00 = 112.5 Hz: the field spring adds to the mechanical one as
+    f² ∝ k ± m·B, so f(0°)² + f(180°)² would be 2·f00² for any field along the probe; here it is
+    20 % more. The linear start (Eq. 11) then lies beyond the potential's stable range: the
+    decomposition says so (not scipy's "Residuals are not finite in the initial point")."""
+    shift = 50.0 * np.cos(THETA0)
+    d = decompose(THETA0, shift, np.full(THETA0.size, STD_HZ), P, P.f00_hz)
+    assert d.status is DecompositionStatus.INVALID_INPUT
+    assert "no finite frequency shift" in d.message

@@ -25,9 +25,10 @@ def _table():
     )
     amplitude = table.amplitude_deg.copy()
     amplitude[WIDE_ROWS] = 50.0
-    field = table.ref_bx_t.copy()
-    field[UNSTABLE_ROW] = -0.03 / np.cos(np.radians(table.theta0_deg[UNSTABLE_ROW]))
-    return table.with_columns(amplitude_deg=amplitude, ref_bx_t=field)
+    bx, by = table.ref_bx_t.copy(), table.ref_by_t.copy()
+    axis_rad = np.radians(table.theta0_deg[UNSTABLE_ROW])
+    bx[UNSTABLE_ROW], by[UNSTABLE_ROW] = -0.03 * np.cos(axis_rad), -0.03 * np.sin(axis_rad)
+    return table.with_columns(amplitude_deg=amplitude, ref_bx_t=bx, ref_by_t=by)
 
 
 def test_analyse_names_the_rows_it_leaves_out_and_fits_the_rest():

@@ -19,7 +19,7 @@ import sys
 import time
 import traceback
 
-from mows.cli.inputs import EXIT_BAD_INPUT, EXIT_BUG
+from mows.cli.status import EXIT_BAD_INPUT, EXIT_BUG
 from mows.records.json_numbers import finite_or_none
 
 SUITES = {

@@ -79,9 +79,14 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--hardware-id", default="", help="written to the probe file (default: the scenario)")
     parser.add_argument("--simulate", action="store_true", help="calibrate the scenario's simulated probe")
-    parser.add_argument("--currents-a", type=finite_float, nargs="+", default=list(PAPER_CURRENTS_A))
-    parser.add_argument("--repeats", type=positive_int, default=1, help="ring-downs per cycle")
-    parser.add_argument("--seed", type=int, help="noise seed of the simulation (default: the scenario's)")
+    parser.add_argument(
+        "--currents-a",
+        type=finite_float,
+        nargs="+",
+        help=f"--simulate: the supply currents, A (default: {' '.join(f'{c:g}' for c in PAPER_CURRENTS_A)})",
+    )
+    parser.add_argument("--repeats", type=positive_int, help="--simulate: ring-downs per cycle (default: 1)")
+    parser.add_argument("--seed", type=int, help="--simulate: noise seed (default: the scenario's)")
     parser.add_argument("--table", help="also write the calibration points as a table (CSV)")
     parser.add_argument("--force", action="store_true", help="replace existing output files (never an input)")
     parser.add_argument(
@@ -99,6 +104,7 @@ def run(args) -> int:
     inputs = [path for path in (args.input, args.probe, args.scenario, args.gradient_scenario) if path]
     outputs = [args.output] + ([args.table] if args.table else [])
     check_outputs(outputs, inputs, args.force)
+    _simulation_options(args)
     nominal = load_probe(args.probe) if args.probe else PAPER_PROBE
     scenario = _scenario(args.scenario)
     gradient = _scenario(args.gradient_scenario) if args.gradient_scenario else None
@@ -165,6 +171,24 @@ def _polarity(given, field_wiring: str) -> dict:
 
 
 # --- the simulated calibration ------------------------------------------------------------
+#: The options that shape --simulate's calibration alone (by argparse name), and their defaults.
+SIMULATION_OPTIONS = {"currents_a": list(PAPER_CURRENTS_A), "repeats": 1, "seed": None}
+
+
+def _simulation_options(args) -> None:
+    """An input with --simulate, or an option of --simulate without it, is refused by name (it
+    would be ignored); with --simulate, the options not given take their defaults."""
+    if args.simulate and args.input:
+        raise ValueError(f"{args.input} and --simulate are two sources: give a TABLE or BAG, or --simulate")
+    given = [f"--{name.replace('_', '-')}" for name in SIMULATION_OPTIONS if getattr(args, name) is not None]
+    if given and not args.simulate:
+        verb = "shape" if len(given) > 1 else "shapes"
+        raise ValueError(f"{', '.join(given)} {verb} only --simulate's calibration: drop it or add --simulate")
+    for name, default in SIMULATION_OPTIONS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, default)
+
+
 def simulated_points(scenario, gradient, nominal: Probe, field_wiring: str, args) -> tuple[list, dict]:
     plan = CalibrationPlan(tuple(args.currents_a), repeats=args.repeats, wiring=field_wiring)
     seed = scenario.seed if args.seed is None else args.seed
@@ -252,6 +276,8 @@ def compare_with_truth(calibration, truth: Probe) -> str:
 
 
 # --- tables and bags ----------------------------------------------------------------------
+#: A cantilever's swing is a fraction of a turn: a θmax of half a turn or more is no angle in degrees.
+MAX_AMPLITUDE_DEG = 180.0
 TABLE_COLUMNS = (
     "supply_current_a",
     "damping_per_s",
@@ -305,6 +331,18 @@ def _table_columns(path) -> Mapping:
         non_positive = np.flatnonzero(np.isfinite(amplitude) & (amplitude <= 0))
         if len(non_positive):
             raise ValueError(f"column 'amplitude_deg' must be > 0: not so in {rows_text(non_positive)}")
+        beyond = np.flatnonzero(np.isfinite(amplitude) & (amplitude >= MAX_AMPLITUDE_DEG))
+        if len(beyond):
+            raise ValueError(
+                f"column 'amplitude_deg' must be below {MAX_AMPLITUDE_DEG:g}° (a swing in degrees): "
+                f"not so in {rows_text(beyond)}"
+            )
+    wiring = columns.get("gradient_wiring", np.zeros(0))
+    flags = np.flatnonzero(np.isfinite(wiring) & (wiring != 0) & (wiring != 1))
+    if len(flags):
+        raise ValueError(
+            f"column 'gradient_wiring' is 0 (field pair) or 1 (gradient pair): not so in {rows_text(flags)}"
+        )
     for name in ("theta0_deg", "f_hz", "f_std_hz", *TABLE_COLUMNS):
         bad = np.flatnonzero(~np.isfinite(columns[name])) if name in columns else ()
         if len(bad):
@@ -321,7 +359,7 @@ def _numeric_columns(path) -> dict | None:
         warnings.simplefilter("ignore")
         try:
             values = np.genfromtxt(path, delimiter=",", names=True, encoding="utf-8-sig", invalid_raise=True)
-        except ValueError:
+        except (ValueError, IndexError):  # IndexError: an empty file, which numpy does not name
             return None
     names = values.dtype.names or ()
     return {name: np.atleast_1d(values[name]).astype(float) for name in names} or None

@@ -21,16 +21,13 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import yaml
 
+from mows.cli.status import EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED, caused_by_interrupt
+from mows.lab.data.table import FIELD, GRADIENT, MeasurementTable, rows_text
 from mows.physics.probe import Probe
 
 #: Exceptions that mean "the input is bad". ValueError covers the library's own refusals
 #: (TableError, OutputRefused, a scenario's out-of-range value) and UnicodeDecodeError.
 INPUT_ERRORS = (ValueError, OSError, KeyError, yaml.YAMLError)
-#: The exit statuses of every ``mows`` command (docs/cli.md).
-EXIT_OK = 0
-EXIT_BUG = 1
-EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command ended by Ctrl-C
 #: Ring-down frequencies this far (a factor) from the probe's f00 are no ring-downs of it: a
 #: unit error (kHz) or another probe. The strongest fields of the paper move f by a factor ~2.
 FREQUENCY_FACTOR = 10.0
@@ -175,6 +172,29 @@ def check_frequencies(f_hz, probe: Probe, what: str = "f_hz") -> None:
         )
 
 
+def check_reference(table: MeasurementTable, probe: Probe) -> None:
+    """ValueError when a row's reference field or gradient is one no ring-down of ``probe`` could
+    be measured in: its spring alone, kB = m·|B| or kG = l·m·|G| (Eq. 6), would move f by more
+    than FREQUENCY_FACTOR from f00 (k/kM > FREQUENCY_FACTOR²), where check_frequencies has
+    found the measured ones. A column in mT or µT given as T, or another bench's reference."""
+    springs = {
+        "field": (FIELD, probe.moment_am2, "T"),
+        "gradient": (GRADIENT, probe.lever_m * probe.moment_am2, "T/m"),
+    }
+    for what, (names, per_unit, unit) in springs.items():
+        given = [table.columns[name] for name in names if table.has(name)]
+        if not given:
+            continue
+        size = np.max(np.abs(given), axis=0)
+        bad = np.flatnonzero(per_unit * size / probe.spring_nm_per_rad > FREQUENCY_FACTOR**2 - 1.0)
+        if bad.size:
+            raise ValueError(
+                f"{table.source}: the reference {what} {size[bad[0]]:.4g} {unit} ({rows_text(bad)}) would by "
+                f"itself move the frequency more than a factor {FREQUENCY_FACTOR:g} from f00 (Eq. 6): "
+                f"a column in m{unit} or µ{unit} given in {unit}?"
+            )
+
+
 def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> int:
     """``work()``'s exit status; a bad input → one line and 2, a bug → one line and 1, Ctrl-C
     → one line and 130 (outputs are only renamed into place once complete, so none is left)."""
@@ -193,6 +213,9 @@ def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> in
     except Exception as error:  # noqa: BLE001 - the one place a bug is turned into a line
         if debug:
             raise
+        if caused_by_interrupt(error):
+            print(f"{prog}: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
         print(
             f"{prog}: internal error: {type(error).__name__}: {one_line(error)} "
             "(a bug: rerun with --debug for the traceback and report it)",

@@ -35,7 +35,14 @@ import time
 from tqdm import tqdm
 
 from mows.cli.fit import add_bag_arguments
-from mows.cli.inputs import OneLineParser, check_frequencies, input_file, load_probe, positive_float
+from mows.cli.inputs import (
+    OneLineParser,
+    check_frequencies,
+    check_reference,
+    input_file,
+    load_probe,
+    positive_float,
+)
 from mows.cli.lab_ringdown import run_ringdown
 from mows.lab import analyse, is_bag, load_table, progress, with_reference, write_report
 from mows.lab.chirp import PIECE_PERIODS
@@ -151,22 +158,15 @@ def run(args) -> int:
         leave=False,
         bar_format="{desc} {bar} {n_fmt}/{total_fmt} stages, {elapsed}",
     )
-    with input_file(args.table), stages, WorkBar(quiet) as work, progress.listening(work):
-        table = load_table(
-            args.table,
-            drop_invalid=args.drop_invalid,
-            **({"reference": args.reference, "magnet_position_m": args.magnet_position} if is_bag(args.table) else {}),
-        )
-        check_frequencies(table.columns["f_hz"], probe, "f_hz")
-        if args.reference and not is_bag(args.table):
-            table = with_reference(table, args.reference, args.magnet_position)
+    with stages, WorkBar(quiet) as work, progress.listening(work):
+        table = _table(args, probe)
         if len(table) > MAX_ROWS and not args.all_rows:
             table = table.subsample(MAX_ROWS, SUBSAMPLE_SEED)
         stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")
         stages.update()
         if len(table) < 2:  # no model is tested by one row, and its cross-validation has no fold
             raise ValueError(
-                f"{len(table)} row leaves no degrees of freedom for any model: nothing would test it; "
+                f"{table.source}: {len(table)} row leaves no degrees of freedom for any model: nothing would test it; "
                 "measure more orientations"
             )
         effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
@@ -182,8 +182,8 @@ def run(args) -> int:
         stages.update()
         if report.base.dof <= 0:
             raise ValueError(
-                f"{len(table)} row(s) for the base model's {report.base.k} parameters leave {report.base.dof} "
-                "degrees of freedom: nothing would test the model; measure more orientations"
+                f"{table.source}: {len(table)} row(s) for the base model's {report.base.k} parameters leave "
+                f"{report.base.dof} degrees of freedom: nothing would test the model; measure more orientations"
             )
         if args.lab_command == "report":
             stages.set_description(f"mows lab report: writing {args.output}")
@@ -244,6 +244,22 @@ class WorkBar:
             self.shown_s = now_s
             self.bar.set_postfix_str(f"{self.evaluations} model evaluations", refresh=False)
             self.bar.refresh()
+
+
+def _table(args, probe):
+    """The table to analyse, with its reference; what is wrong with a file is blamed on that file."""
+    with input_file(args.table):
+        table = load_table(
+            args.table,
+            drop_invalid=args.drop_invalid,
+            **({"reference": args.reference, "magnet_position_m": args.magnet_position} if is_bag(args.table) else {}),
+        )
+        check_frequencies(table.columns["f_hz"], probe, "f_hz")
+    if args.reference and not is_bag(args.table):
+        with input_file(args.reference, "reference"):
+            table = with_reference(table, args.reference, args.magnet_position)
+    check_reference(table, probe)
+    return table
 
 
 def _probe(source):

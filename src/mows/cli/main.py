@@ -4,7 +4,9 @@ Each subcommand lives in the module of its job and exposes ``add_arguments(parse
 ``run(args) -> int``; this file only routes. Modules are imported lazily so that
 ``mows lab`` does not pay for the simulator's compilation, and the reverse. Errors take one
 path (:mod:`mows.cli.inputs`): a bad input is one line and exit status 2, ``--debug`` (before
-or after the subcommand) shows the traceback.
+or after the subcommand) shows the traceback. At import this file loads the standard library
+alone (and :mod:`mows.cli.status`): Ctrl-C while numpy or scipy load is then inside
+:func:`main`, one line and status 130.
 """
 
 import argparse
@@ -12,7 +14,7 @@ import functools
 import importlib
 import sys
 
-from mows.cli.inputs import EXIT_INTERRUPTED, OneLineParser, UsageError, report_errors
+from mows.cli.status import EXIT_INTERRUPTED, caused_by_interrupt
 
 SUBCOMMANDS = {
     "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
@@ -34,14 +36,17 @@ def main(argv=None) -> int:
     words = sys.argv[1:] if argv is None else list(argv)
     try:
         return _main(words)
-    except KeyboardInterrupt:  # while the subcommand's modules load; within it, report_errors says it
-        if "--debug" in words:
+    # Ctrl-C while the subcommand's modules load (within it, report_errors says it)
+    except (KeyboardInterrupt, ImportError) as error:
+        if "--debug" in words or not caused_by_interrupt(error):
             raise
         print("mows: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
 
 
 def _main(argv: list) -> int:
+    from mows.cli.inputs import OneLineParser, UsageError, report_errors  # numpy: within main's Ctrl-C
+
     parser = OneLineParser(
         prog="mows",
         description=__doc__.splitlines()[0],
@@ -65,7 +70,7 @@ def _main(argv: list) -> int:
     return report_errors(f"mows {args.command}", lambda: args._run(args), args.debug)
 
 
-def _refuse(error: UsageError) -> int:
+def _refuse(error: ValueError) -> int:
     raise error
 
 

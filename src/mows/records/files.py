@@ -54,6 +54,9 @@ def check_output(path, inputs: Iterable = (), force: bool = False) -> pathlib.Pa
         source_path = pathlib.Path(source).resolve()
         if _inside(resolved, source_path) or (source_path.is_file() and resolved == source_path):
             raise OutputRefused(f"output {path} is an input of this command ({source}): choose another output path")
+    if not resolved.parent.is_dir():
+        what = "is a file, not a directory" if resolved.parent.exists() else "does not exist"
+        raise OutputRefused(f"output {path}: directory {path.parent} {what}")
     try:
         mode = path.lstat().st_mode
     except FileNotFoundError:
@@ -62,11 +65,15 @@ def check_output(path, inputs: Iterable = (), force: bool = False) -> pathlib.Pa
         raise OutputRefused(f"output {path} is {_kind(mode)}, not a regular file: give a new file path")
     if mode is not None and not force:
         raise OutputRefused(f"output {path} exists: choose another path or pass --force to replace it")
-    if not resolved.parent.is_dir():
-        raise OutputRefused(f"output {path}: directory {path.parent} does not exist")
+    # access() also sees what the mode bits do not: a read-only mount, an immutable directory
     if not os.access(resolved.parent, os.W_OK):
         raise OutputRefused(f"output {path}: directory {path.parent} is not writable")
     return path
+
+
+def _unwritable(path: pathlib.Path, error: OSError) -> OutputRefused:
+    """The output's directory, not an input, is what failed (checked writable a moment before)."""
+    return OutputRefused(f"output {path}: cannot write in directory {path.parent}: {error.strerror or error}")
 
 
 def check_outputs(paths: Sequence, inputs: Iterable = (), force: bool = False) -> list[pathlib.Path]:
@@ -109,9 +116,12 @@ def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iter
     outputs = Outputs(targets, [])
     try:
         for path in targets:
-            descriptor, name = tempfile.mkstemp(
-                prefix=f".{path.name}.", suffix=f".partial{path.suffix}", dir=path.resolve().parent
-            )
+            try:
+                descriptor, name = tempfile.mkstemp(
+                    prefix=f".{path.name}.", suffix=f".partial{path.suffix}", dir=path.resolve().parent
+                )
+            except OSError as error:
+                raise _unwritable(path, error) from error
             os.close(descriptor)
             outputs.temporaries.append(pathlib.Path(name))
         yield outputs
@@ -122,10 +132,15 @@ def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iter
             os.chmod(temporary, 0o666 & ~_umask())
         outputs.replaced = [os.path.lexists(path) for path in targets]
         for temporary, path in zip(outputs.temporaries, targets):
-            os.replace(temporary, path)
+            try:
+                os.replace(temporary, path)
+            except OSError as error:
+                raise _unwritable(path, error) from error
     finally:
         for temporary in outputs.temporaries:
-            temporary.unlink(missing_ok=True)
+            # a directory that turned read-only keeps its temporary: the error that says so matters more
+            with contextlib.suppress(OSError):
+                temporary.unlink(missing_ok=True)
 
 
 def _umask() -> int:

@@ -245,6 +245,14 @@ def decompose(
         params[free] = x
         return residual_of(params)
 
+    if not np.all(np.isfinite(residual(start[free]))):  # scipy's own words would be its, not the sweep's
+        return Decomposition(
+            model,
+            DecompositionStatus.INVALID_INPUT,
+            "the model gives no finite frequency shift at the sweep's starting field and gradient "
+            "(a field beyond what the probe's potential describes?)",
+            f00_free=f00_free,
+        )
     scale = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1e-3])[free]
     result = least_squares(residual, start[free], x_scale=scale, method="lm", xtol=1e-12, ftol=1e-12)
     params = start.copy()
@@ -334,7 +342,7 @@ def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmon
     return Decomposition(
         model=model,
         status=DecompositionStatus.OK if result.success else DecompositionStatus.NOT_CONVERGED,
-        message="" if result.success else result.message,
+        message="" if result.success else f"the fit did not converge in {result.nfev} model evaluations",
         field_t=np.array([bx, by]),
         field_covariance_t2=cov[:2, :2],
         gradient_t_per_m=gradient,

@@ -250,7 +250,11 @@ def _least_squares(residuals: Residuals, x0: np.ndarray, steps: np.ndarray) -> o
         residuals, x0, jac=lambda x: _jacobian(residuals, x, steps), method="lm", x_scale="jac"
     )
     if not result.success or not np.all(np.isfinite(result.fun)):
-        raise CalibrationError(f"the fit of the calibration did not converge: {result.message}")
+        raise CalibrationError(
+            f"the fit of the calibration did not converge in {result.nfev} model evaluations: these ring-downs "
+            "do not pin the constants down; measure at two orientations 180° apart with supply currents of "
+            "both signs on each pair"
+        )
     return result
 
 

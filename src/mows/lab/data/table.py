@@ -60,6 +60,8 @@ KNOWN = (
 
 MIN_SWEEPS = 10  # a subsample keeps at least this many sweeps (or all): folds for the cross-validation
 POSITIVE = ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k")
+# A ring-down decays (δ ≥ 0) and its fit starts at or after the switch-off.
+NON_NEGATIVE = ("damping_per_s", "start_offset_s")
 WRITER_COLUMN = "mows_table_format"  # the marker of the project's own tables (module docstring)
 TABLE_FORMAT = 1.0
 DERIVED = ("b_abs_t", "b_along_t", "b_perp_t", "b_normal_t", "g_t_per_m", "g_xy_t_per_m", "g_yy_t_per_m")
@@ -328,8 +330,8 @@ def _mend_own(columns: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], tu
 
 
 def broken_rules(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, str, np.ndarray]]:
-    """(column, rule, rows) for the values no column may hold: NaN or ±inf anywhere, and
-    values ≤ 0 in the columns that are positive by nature."""
+    """(column, rule, rows) for the values no column may hold: NaN or ±inf anywhere, values
+    ≤ 0 in the columns that are positive by nature and < 0 in those that are not negative."""
     for name, values in columns.items():
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
@@ -339,6 +341,11 @@ def broken_rules(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, str, 
             bad = np.flatnonzero(columns[name] <= 0)
             if bad.size:
                 yield name, "must be > 0: not so", bad
+    for name in NON_NEGATIVE:
+        if name in columns:
+            bad = np.flatnonzero(columns[name] < 0)
+            if bad.size:
+                yield name, "must be ≥ 0: not so", bad
 
 
 def with_notes(columns: Mapping[str, np.ndarray], source: str, notes: list[str]) -> MeasurementTable:

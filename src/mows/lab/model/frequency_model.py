@@ -198,7 +198,14 @@ class FrequencyModel:
             gtol=1e-12,
             max_nfev=60,
         )
-        return problem.result(solution.x, solution.success, solution.message)
+        return problem.result(solution.x, solution.success, _in_words(solution))
+
+
+def _in_words(solution: scipy.optimize.OptimizeResult) -> str:
+    """How the fit ended, in the lab's words (scipy's name its own internals)."""
+    if solution.success:
+        return f"converged in {solution.nfev} model evaluations"
+    return f"stopped at the limit of {solution.nfev} model evaluations before the tolerances were met"
 
 
 def start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:

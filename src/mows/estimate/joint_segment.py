@@ -16,7 +16,7 @@ from collections.abc import Sequence
 
 from mows.estimate.ringdown_joint import JointOptions, ProbeLine, fit_ringdowns
 from mows.estimate.ringdown_types import FitStatus, RingdownFit, failure
-from mows.estimate.segments import Segment
+from mows.estimate.segments import Segment, gap_message
 from mows.physics.coupling import PlacedProbe
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
 
@@ -50,10 +50,7 @@ def fit_joint_segment(
 ) -> list[RingdownFit]:
     """The joint fit of one assembled window, one :class:`RingdownFit` per line (in order)."""
     if segment.missing_samples:
-        message = (
-            f"{segment.missing_samples} of {len(segment.samples_t)} samples of the ring-down never "
-            "arrived (sequence gap or late announcement); not fitted across a gap"
-        )
+        message = gap_message(segment)
         return [
             failure(FitStatus.DATA_GAP, message, theta0_rad=line.theta0_rad, probe_id=line.probe_id) for line in lines
         ]

@@ -8,6 +8,7 @@ by scipy's DOP853; its fluxgates read the sum of every magnet's dipole field.
 """
 
 import numpy as np
+import pytest
 from scipy import integrate
 
 from mows.physics.fluxgate import NoiseModel
@@ -48,6 +49,7 @@ def direct_rhs(device, tones, t_on_s):
     return rhs
 
 
+@pytest.mark.slow  # DOP853 on loop fields: 30–45 s on a loaded machine
 def test_the_driven_probes_follow_the_equation_of_motion_written_from_the_fields():
     device = MultiProbeDevice(QUIET)
     device.set_orientations(device.theta0_rad + 0.3)

@@ -10,7 +10,9 @@ Measured over seeds 1–4 (the same sweep): with the coupling, 13 of the 15 comp
 (2.8, 3.7) and (2.3, 2.7)σ high, about +0.2 µT. That part of the requirement is not met (the
 strict xfail below says so and will flag the fix); its cause is not found. A noise-free sweep
 of exact static physics decomposes probe 0's field within 0.04 µT, so it is not the coupling's
-static model. Without the coupling, probe 0's gradient is off by 10–14σ.
+static model; pickups turned to the true rest angles move the pulls by < 0.1σ, so it is not the
+joint fit's missing rest offset (docs/multi_probe.md). Without the coupling, probe 0's gradient
+is off by 10–14σ.
 """
 
 import numpy as np

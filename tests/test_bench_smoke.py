@@ -58,7 +58,17 @@ FIGURES = {
     ),
     "latency": LATENCY,
     "latency_tracking": LATENCY,
-    "throughput": ("adaptive_s", "adaptive_ringdowns", "demo_s", "plan_ringdown_s", "tracking_hz", "tracking_std_t"),
+    "throughput": (
+        "adaptive_s",
+        "adaptive_ringdowns",
+        "demo_s",
+        "plan_ringdown_s",
+        "tracking_hz",
+        "tracking_std_t",
+        "points_per_minute_1_probe",
+        "points_per_minute_3_probes",
+        "points_per_minute_ratio",
+    ),
 }
 NEEDS_ROS = {"stream", "latency", "latency_tracking"}
 SLOW = {"lab_long", "throughput"}  # ~10 s of CPU each, more beside other work

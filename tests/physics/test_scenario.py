@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
+from mows.physics.coupling import PlacedProbe
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import SCENARIO_DIR, Scenario, load_scenario, shipped_scenarios
 
@@ -21,6 +22,7 @@ SETUPS = {
     "tilted_plane": "largest_spacing",
     "calibration": "helmholtz",
     "calibration_gradient": "helmholtz",
+    "three_probes": "helmholtz",
 }
 
 
@@ -46,6 +48,43 @@ def test_the_default_is_the_paper_device_in_the_largest_spacing_setup_in_the_ear
     assert np.hypot(*earth[:2]) > 10e-6 and earth[2] < -30e-6  # horizontal and vertical parts
     assert scenario.sample_rate_hz == 20_000.0 and scenario.sensors.null_offsets
     assert scenario.excitation.frequency_hz is None
+
+
+def test_a_scene_of_three_probes_places_each_with_its_own_constants():
+    scenario = load_scenario("three_probes")
+    placed = scenario.placed_probes()
+    assert [round(p.probe.f00_hz, 9) for p in placed] == [100.0, 112.5, 125.0]
+    positions = np.array([p.pose.magnet_position_m for p in placed])
+    distances = [np.linalg.norm(positions[i] - positions[j]) for i, j in ((0, 1), (0, 2), (1, 2))]
+    assert all(0.04 <= d <= 0.06 for d in distances)
+    assert {p.stage for p in scenario.probes} == {"shared"}
+    # The first probe is the scene's probe: the coil preset and the sensors sit around it.
+    assert scenario.probe == placed[0].probe and scenario.pose == placed[0].pose
+    turned = scenario.placed_probes([0.1, 0.2, 0.3])
+    assert [p.pose.theta0_rad for p in turned] == [0.1, 0.2, 0.3]
+    assert turned[2].pose.magnet_position_m == placed[2].pose.magnet_position_m
+
+
+def test_a_single_probe_scene_is_one_placed_probe():
+    scenario = load_scenario("anti_helmholtz")
+    assert scenario.probes == () and "probes" not in scenario.to_dict()
+    assert scenario.placed_probes() == [PlacedProbe(scenario.probe, scenario.pose)]
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"pose": {"theta0_deg": 10.0}}, "either probe and pose"),
+        ({"probes": []}, "list of 1 to 4 probes"),
+        ({"probes": [{"pose": {"magnet_position_m": [0.0, 0.0, 0.0]}}] * 2}, "mm apart"),
+        ({"probes": [{"stage": "turntable"}]}, "stage = 'turntable'"),
+        ({"probes": [{"colour": "red"}]}, "colour"),
+    ],
+)
+def test_bad_probe_lists_are_refused_by_name(change, message):
+    scene = {"name": "x", "probes": [{"pose": {"magnet_position_m": [0.0, 0.0, 0.0]}}], **change}
+    with pytest.raises(ValueError, match=re.escape(message)):
+        Scenario.from_dict(scene)
 
 
 def yaml_blocks(text):
@@ -120,7 +159,7 @@ def test_unknown_scenario_name_lists_the_shipped_ones():
 SHIPPED_BEFORE_EXTENDS = pathlib.Path(__file__).with_name("data") / "shipped_scenarios.json"
 
 
-@pytest.mark.parametrize("name", sorted(SETUPS))
+@pytest.mark.parametrize("name", sorted(set(SETUPS) - {"three_probes"}))
 def test_shipped_scenarios_load_as_they_did_when_every_file_was_written_out_in_full(name):
     """data/shipped_scenarios.json is ``to_dict()`` of each shipped scene captured from the
     files as they were before they shared a base (``extends``); JSON keeps floats exactly."""

@@ -20,6 +20,11 @@ a real one needs time, and that is the driver's default). f00 is the probe's cal
 Figures: device seconds to target, σ reached, σ·√T (nT·√s, µT/m·√s), pulls against the scene's
 truth, and the peak coil current and worst duty-cycle window seen.
 
+``points_per_minute``: map points (one probe's B and G to a target σ) per minute of device
+time with one probe and with the three probes of the ``three_probes`` scene excited together
+(:mod:`mows.bench.multiprobe_throughput`), at the same target for both (default σ ≤ 200 nT per
+field and ≤ 100 µT/m per gradient component, a few sweeps of the multi-probe cycle).
+
 ``tracking``: the driver's tracking mode (its plan and its loop of cycles,
 :mod:`mows.device.tracking`) at θ0 = 0°, ring-downs as short as the Cramér–Rao bound allows for
 σ ≤ 0.2 µT and σ ≤ 1 µT; measured: updates per device second and the scatter of the estimates.
@@ -32,6 +37,7 @@ import math
 
 import numpy as np
 
+from mows.bench import multiprobe_throughput
 from mows.bench.rig import DeviceTimeRig, max_duty_fraction
 from mows.device.phases import CycleRequest, CycleSettings
 from mows.device.tracking import TrackingLoop, TrackingSettings
@@ -259,9 +265,16 @@ def run(
     tracking_updates: int = 40,
     field_std_t: float = PrecisionGoal.field_std_t,
     gradient_std_t_per_m: float = PrecisionGoal.gradient_std_t_per_m,
+    multiprobe_field_std_t: float = 200e-9,
+    multiprobe_gradient_std_t_per_m: float = 100e-6,
+    multiprobe_points: int = 8,
+    multiprobe_sweeps: int = 6,
 ) -> dict:
     """Figures for ``mows bench throughput``: the sweeps to σ ≤ ``field_std_t`` per field and
-    ``gradient_std_t_per_m`` per gradient component, and ``tracking_updates`` tracking updates."""
+    ``gradient_std_t_per_m`` per gradient component, ``tracking_updates`` tracking updates, and
+    the map points per minute of one and of three probes to σ ≤ ``multiprobe_field_std_t`` and
+    ``multiprobe_gradient_std_t_per_m`` (sweeps of
+    ``multiprobe_points`` orientations, at most ``multiprobe_sweeps``)."""
     goal = PrecisionGoal(field_std_t=field_std_t, gradient_std_t_per_m=gradient_std_t_per_m)
     figures = {
         "scenario": SCENARIO,
@@ -294,4 +307,15 @@ def run(
     figures["tracking_1ut_std_t"] = fast.get("scatter_t", math.nan)
     figures["tracking_0.2ut"] = precise
     figures["tracking_1ut"] = fast
+    several_goal = PrecisionGoal(
+        field_std_t=multiprobe_field_std_t, gradient_std_t_per_m=multiprobe_gradient_std_t_per_m
+    )
+    several = multiprobe_throughput.run(several_goal, multiprobe_points, multiprobe_sweeps)
+    rates = {"1_probe": several["one"]["points_per_minute"], "3_probes": several["all"]["points_per_minute"]}
+    figures["points_per_minute"] = rates
+    figures.update({f"points_per_minute_{k}": v for k, v in rates.items()})
+    figures["points_per_minute_ratio"] = several["ratio"]
+    figures["points_per_minute_target_field_t"] = several_goal.field_std_t
+    figures["points_per_minute_target_gradient_t_per_m"] = several_goal.gradient_std_t_per_m
+    figures["points_per_minute_runs"] = several
     return figures

@@ -49,6 +49,8 @@ THROUGHPUT_KEYS = (
     "tracking_std_t",
     "tracking_1ut_hz",
     "tracking_1ut_std_t",
+    "points_per_minute",
+    "points_per_minute_ratio",
 )
 # --quick: a smoke run of every suite (tests/test_bench_smoke.py runs them all in make test, a
 # few seconds of CPU each): every code path of a suite, on less data, so its figures are rough.
@@ -72,6 +74,10 @@ QUICK: dict[str, dict[str, object]] = {
         "tracking_updates": 5,
         "field_std_t": 100e-9,
         "gradient_std_t_per_m": 50e-6,
+        "multiprobe_field_std_t": 1e-6,
+        "multiprobe_gradient_std_t_per_m": 1e-3,
+        "multiprobe_points": 5,
+        "multiprobe_sweeps": 1,
     },
 }
 

@@ -205,6 +205,14 @@ class SegmentAssembler:
             self._blocks.popleft()
 
 
+def gap_message(segment: Segment) -> str:
+    """Why a segment with missing samples is not fitted."""
+    return (
+        f"{segment.missing_samples} of {len(segment.samples_t)} samples of the ring-down never "
+        "arrived (sequence gap or late announcement); not fitted across a gap"
+    )
+
+
 def fit_segment(
     segment: Segment, options: FitOptions = FitOptions(), coil_off_skip_s: float = 0.0, damping_guess_per_s: float = 1.8
 ) -> RingdownFit:
@@ -213,8 +221,7 @@ def fit_segment(
     if segment.missing_samples:
         return failure(
             FitStatus.DATA_GAP,
-            f"{segment.missing_samples} of {len(segment.samples_t)} samples of the ring-down never "
-            "arrived (sequence gap or late announcement); not fitted across a gap",
+            gap_message(segment),
             theta0_rad=window.theta0_rad,
             theta0_free=options.theta0_free,
         )

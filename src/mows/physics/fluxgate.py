@@ -207,9 +207,18 @@ def pickup_harmonics(
     # rfft refers phases to θ = −π: multiply by (−1)^k to refer them to θt = 0.
     coefficients = np.fft.rfft(signal)[: order + 1] / points * (-1.0) ** np.arange(order + 1)
     coefficients[1:] *= 2.0
-    distances = np.linalg.norm(pair.positions_m - np.asarray(pose.magnet_position_m, float), axis=1)
-    kappa = MU0_OVER_4PI * moment_am2 * (distances**-3.0 @ weights)
-    return coefficients / kappa
+    return coefficients / pickup_scale_t(pair, pose.magnet_position_m, moment_am2, combine)
+
+
+def pickup_scale_t(
+    pair: FluxgatePair, magnet_position_m: ArrayLike, moment_am2: float, combine: str = "difference"
+) -> float:
+    """The κ of Eq. S11 for the combination ``combine`` (μ0·m/4π over r³ or r_eff³, Eq. S10),
+    T: what :func:`pickup_harmonics` is normalised by, so that κ times its series is the
+    sensors' signal in tesla."""
+    weights = np.array(PICKUP_COMBINATIONS[combine])
+    distances = np.linalg.norm(pair.positions_m - np.asarray(magnet_position_m, float), axis=1)
+    return float(MU0_OVER_4PI * moment_am2 * (distances**-3.0 @ weights))
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike
 
 from mows.physics.coils import CoilSetup
 from mows.physics.coupling import PlacedProbe
+from mows.physics.potential import arc_energy_j
 
 #: Default largest cross-talk ρ of equal torques between the tones of one drive.
 DEFAULT_MAX_CROSSTALK = 0.1
@@ -84,6 +85,31 @@ class Tone:
                 "drives probes in the global x–y plane only"
             )
         return cls(probe_id, float(frequency_hz), pose.theta0_rad, float(amplitude_a), placed.probe.damping_per_s)
+
+
+def tone_for_swing(
+    probe_id: int, placed: PlacedProbe, setup: CoilSetup, frequency_hz: float, swing_rad: float, duration_s: float
+) -> Tone:
+    """The tone that rings ``placed`` up to about ``swing_rad`` at the end of an excitation of
+    ``duration_s`` on resonance: a driven oscillator J·θ'' + 2Jδ·θ' + k·θ = τ·sin ωt swings
+    τ·(1 − e^(−δT))/(2J·ω·δ), τ the scheme's torque per ampere of the base amplitude at rest
+    (the coils' fields on the magnet's arc, exact). Capped at the setup's limit; ValueError
+    if the coils cannot turn this probe (no torque)."""
+    probe, pose = placed.probe, dataclasses.replace(placed.pose, gravity_m_per_s2=(0.0, 0.0, 0.0))
+    step_rad = 1e-4
+    torques = np.array(
+        [
+            -np.diff(arc_energy_j(probe, coil, pose, np.array([-step_rad, step_rad])))[0] / (2 * step_rad)
+            for coil in setup.coils
+        ]
+    )
+    torque_per_a = abs(float(setup.currents_a(pose.theta0_rad, 1.0) @ torques))
+    omega, delta = 2.0 * math.pi * frequency_hz, probe.damping_per_s
+    gain = (1.0 - math.exp(-delta * duration_s)) / (2.0 * probe.inertia_kgm2 * omega * delta)
+    if not torque_per_a * gain > 0.0:
+        raise ValueError(f"probe {probe_id}: the coils put no torque on it at θ0 = {pose.theta0_rad:.4g} rad")
+    amplitude = min(swing_rad / (torque_per_a * gain), setup.cap.limit_a)
+    return Tone(probe_id, float(frequency_hz), pose.theta0_rad, amplitude, delta)
 
 
 def coil_amplitudes_a(setup: CoilSetup, tones: Sequence[Tone]) -> np.ndarray:

@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from mows.physics.coils import CoilSetup, largest_spacing, setup_from_dict
+from mows.physics.coupling import PlacedProbe, check_apart
 from mows.physics.field import source_to_dict
 from mows.physics.fluxgate import DAQ_SAMPLE_RATE_HZ, NoiseModel
 from mows.physics.pose import Pose
@@ -43,6 +44,7 @@ from mows.sim.scenario_yaml import (
     pose_from,
     pose_to_dict,
     probe_from,
+    probes_from,
     require_explicit_geometry,
     section,
     sensors_from,
@@ -50,7 +52,7 @@ from mows.sim.scenario_yaml import (
     shipped_scenarios,
     with_bases,
 )
-from mows.sim.sections import Environment, Excitation, Housing, Integrator, Sensors, check_range, number
+from mows.sim.sections import Environment, Excitation, Housing, Integrator, SceneProbe, Sensors, check_range, number
 
 DEFAULT_SCENARIO = "paper_largest_spacing"
 
@@ -73,12 +75,26 @@ class Scenario:
     name: str = "custom"
     description: str = ""
     supply: FieldSupply | None = None  # the static-field supply the driver controls (calibration)
+    # A scene with several probes (docs/multi_probe.md); empty for one. With probes, ``probe``
+    # and ``pose`` are the first one's, so that the coil preset and the sensors sit around it.
+    probes: tuple[SceneProbe, ...] = ()
 
     def __post_init__(self):
+        if self.probes:
+            check_apart(self.placed_probes())
         check_range("scenario", "sample_rate_hz", self.sample_rate_hz, 0.0, 1e7, low_open=True)
         if not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise ValueError(f"scenario: seed = {self.seed!r} must be an integer ≥ 0")
         self.setup.cap.check(self.excitation.amplitude_a)
+
+    def placed_probes(self, theta0_rad=None) -> list[PlacedProbe]:
+        """Every probe of the scene at its pose (one for a single-probe scene), turned to
+        ``theta0_rad`` (one θ0 per probe; default: their home orientations)."""
+        scene = self.probes or (SceneProbe(self.probe, self.pose),)
+        angles = [None] * len(scene) if theta0_rad is None else list(theta0_rad)
+        if len(angles) != len(scene):
+            raise ValueError(f"theta0_rad = {theta0_rad!r} must give one angle for each of the {len(scene)} probes")
+        return [p.placed(a) for p, a in zip(scene, angles)]
 
     def replace(self, **changes) -> Scenario:
         return dataclasses.replace(self, **changes)
@@ -94,17 +110,17 @@ class Scenario:
 
     def to_dict(self) -> dict:
         """The full YAML mapping (presets and the paper probe written out in full)."""
+        one_probe = {} if self.probes else {"probe": self.probe.to_dict(), "pose": pose_to_dict(self.pose)}
         return {
             "name": self.name,
             "description": self.description,
-            "probe": self.probe.to_dict(),
+            **one_probe,
             "setup": self.setup.to_dict(),
             "environment": {
                 "sources": [source_to_dict(s) for s in self.environment.sources],
                 "temperature_k": float(self.environment.temperature_k),
                 "temperature_rate_k_per_s": float(self.environment.temperature_rate_k_per_s),
             },
-            "pose": pose_to_dict(self.pose),
             "sensors": sensors_to_dict(self.sensors),
             "noise": {k: float(v) for k, v in dataclasses.asdict(self.noise).items()},
             "excitation": dataclasses.asdict(self.excitation),
@@ -113,6 +129,7 @@ class Scenario:
             "sample_rate_hz": float(self.sample_rate_hz),
             "seed": int(self.seed),
             **({} if self.supply is None else {"supply": self.supply.to_dict()}),
+            **({} if not self.probes else {"probes": [_probe_entry(p) for p in self.probes]}),
         }
 
     @classmethod
@@ -138,6 +155,10 @@ def load_scenario(name_or_path=DEFAULT_SCENARIO) -> Scenario:
     return Scenario.from_yaml(path)
 
 
+def _probe_entry(scene_probe: SceneProbe) -> dict:
+    return {"probe": scene_probe.probe.to_dict(), "pose": pose_to_dict(scene_probe.pose), "stage": scene_probe.stage}
+
+
 # --- the whole mapping: the signature is the scenario's top-level YAML keys ------------------
 def _scenario_from_sections(
     name="custom",
@@ -154,15 +175,19 @@ def _scenario_from_sections(
     sample_rate_hz=Scenario.sample_rate_hz,
     seed=Scenario.seed,
     supply=None,
+    probes=None,
 ) -> Scenario:
-    the_pose = section("pose", pose, pose_from)
+    scene_probes = () if probes is None else probes_from(probes)
+    if scene_probes and (pose is not None or probe != PAPER_PROBE_NAME):
+        raise ValueError("scenario: give either probe and pose (one probe) or probes (several), not both")
+    the_pose = scene_probes[0].pose if scene_probes else section("pose", pose, pose_from)
     fs = number("scenario", "sample_rate_hz", sample_rate_hz)
     setup = {"preset": "largest_spacing"} if setup is None else setup
     require_explicit_geometry(the_pose, setup, sensors)
     if isinstance(setup, dict) and "preset" in setup:  # the preset's coils sit around the probe
         setup = {"probe_position_m": list(the_pose.magnet_position_m), **setup}
     return Scenario(
-        probe=probe_from(probe),
+        probe=scene_probes[0].probe if scene_probes else probe_from(probe),
         setup=setup_from_dict(setup),
         environment=section("environment", environment, environment_from),
         pose=the_pose,
@@ -176,4 +201,5 @@ def _scenario_from_sections(
         name=str(name),
         description=str(description),
         supply=None if supply is None else supply_from_dict(supply),
+        probes=scene_probes,
     )

@@ -21,7 +21,7 @@ from mows.physics.fluxgate import FL1_RANGE_T, FL1_RESOLUTION_T, Fluxgate, Fluxg
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.schema import check_keys, vector3
-from mows.sim.sections import Environment, Excitation, Sensors, floats, number
+from mows.sim.sections import MAX_PROBES, Environment, Excitation, SceneProbe, Sensors, floats, number
 
 SCENARIO_DIR = pathlib.Path(__file__).with_name("scenarios")
 BASE_SCENARIO = "base"  # what the shipped scenes share; not a scene of its own
@@ -39,8 +39,16 @@ def with_bases(data, base_dir, chain: tuple = ()) -> dict:
     if not isinstance(data, dict):
         raise ValueError(f"a scenario must be a mapping of sections, got {type(data).__name__}")
     data = dict(data)
-    if isinstance(data.get("probe"), str) and data["probe"] != PAPER_PROBE_NAME:
-        data["probe"] = str(pathlib.Path(base_dir or ".") / data["probe"])
+    data["probe"] = _relative_probe_file(data.get("probe"), base_dir)
+    if isinstance(data.get("probes"), list):
+        data["probes"] = [
+            {**entry, "probe": _relative_probe_file(entry["probe"], base_dir)}
+            if isinstance(entry, dict) and "probe" in entry
+            else entry
+            for entry in data["probes"]
+        ]
+    if data["probe"] is None:
+        del data["probe"]
     if "extends" not in data:
         return data
     path = _base_path(data.pop("extends"), base_dir)
@@ -48,6 +56,13 @@ def with_bases(data, base_dir, chain: tuple = ()) -> dict:
         raise ValueError("scenario: extends forms a cycle: " + " → ".join(p.name for p in (*chain, path)))
     base = with_bases(yaml.safe_load(path.read_text()), path.parent, (*chain, path))
     return _deep_merge(base, data)
+
+
+def _relative_probe_file(value, base_dir):
+    """A probe file path made relative to ``base_dir``; any other probe value as it is."""
+    if isinstance(value, str) and value != PAPER_PROBE_NAME:
+        return str(pathlib.Path(base_dir or ".") / value)
+    return value
 
 
 def _base_path(name, base_dir) -> pathlib.Path:
@@ -119,6 +134,18 @@ def probe_from(value) -> Probe:
             )
         return Probe.from_yaml(path)
     raise ValueError(f"scenario section 'probe' must be {PAPER_PROBE_NAME!r}, a file path or a mapping, got {value!r}")
+
+
+def probes_from(entries) -> tuple[SceneProbe, ...]:
+    """The ``probes:`` list of a scene with several probes: each entry a mapping of ``probe``
+    (as the ``probe`` section), ``pose`` (as the ``pose`` section) and ``stage`` (own | shared)."""
+    if not isinstance(entries, list) or not 1 <= len(entries) <= MAX_PROBES:
+        raise ValueError(f"scenario: probes must be a list of 1 to {MAX_PROBES} probes, got {entries!r}")
+    return tuple(section(f"probes[{k}]", entry, _scene_probe) for k, entry in enumerate(entries))
+
+
+def _scene_probe(probe=PAPER_PROBE_NAME, pose=None, stage="own") -> SceneProbe:
+    return SceneProbe(probe_from(probe), section("pose", pose, pose_from), str(stage))
 
 
 def environment_from(

@@ -11,9 +11,16 @@ import math
 
 import numpy as np
 
+from mows.physics.coupling import PlacedProbe
 from mows.physics.field import FieldSource, SumSource
 from mows.physics.fluxgate import FluxgatePair
-from mows.physics.probe import PAPER_PROBE
+from mows.physics.pose import Pose
+from mows.physics.probe import PAPER_PROBE, Probe
+
+#: How a probe of a scene with several is turned: by a stage of its own, or by the one stage
+#: all "shared" probes sit on (each keeps its own θ0 on it, turned by the same angle).
+STAGES = ("own", "shared")
+MAX_PROBES = 4
 
 
 def number(section: str, key: str, value) -> float:
@@ -96,6 +103,25 @@ class Excitation:
         check_range("excitation", "excite_s", self.excite_s, 0.0, 3600.0)
         check_range("excitation", "ringdown_s", self.ringdown_s, 0.0, 3600.0, low_open=True)
         check_range("excitation", "gap_s", self.gap_s, 0.0, 3600.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneProbe:
+    """One probe of a scene with several: its constants, its pose (where its magnet rests, its
+    rotation plane and its home orientation θ0) and the stage that turns it (``STAGES``)."""
+
+    probe: Probe
+    pose: Pose
+    stage: str = "own"
+
+    def __post_init__(self):
+        if self.stage not in STAGES:
+            raise ValueError(f"probes: stage = {self.stage!r} must be one of {STAGES}")
+
+    def placed(self, theta0_rad: float | None = None) -> PlacedProbe:
+        """The probe at its pose, turned to ``theta0_rad`` (default: its home orientation)."""
+        pose = self.pose if theta0_rad is None else self.pose.with_theta0(theta0_rad)
+        return PlacedProbe(self.probe, pose)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -143,29 +143,59 @@ class Ringdowns:
     damping_per_s: np.ndarray
     duration_s: np.ndarray
     pickup: np.ndarray | None = None
+    # The swing about the rest angle at each window's start, measured (n,): for ring-downs that
+    # do not start from the stop (a multi-tone excitation's); the stop is then not used.
+    start_swing_rad: np.ndarray | None = None
 
 
-def local_potential(params, theta0_rad, probe: Probe) -> ArcPotential:
+@dataclasses.dataclass(frozen=True)
+class NeighbourFields:
+    """What other probes' magnets add at this probe's magnet (its rest position), per point of
+    the sweep, global frame: field (n, 3), T; gradient (n, 3, 3), T/m; Hessian (n, 3, 3, 3),
+    T/m² (:mod:`mows.sweep.multiprobe`). Known terms of the model, not fitted."""
+
+    field_t: np.ndarray
+    gradient_t_per_m: np.ndarray
+    hessian_t_per_m2: np.ndarray
+
+
+def local_potential(params, theta0_rad, probe: Probe, neighbours: NeighbourFields | None = None) -> ArcPotential:
     """The potential of each point for params (Bx, By, Gs, Gd, Gxy, …): the field and gradient
-    turned into the probe frame (Gzz = −(Gxx + Gyy) by ∇·B = 0)."""
+    turned into the probe frame (Gzz = −(Gxx + Gyy) by ∇·B = 0), plus the ``neighbours``'
+    fields when given."""
     bx, by, gs, gd, gxy = params[:5]
     theta0 = np.asarray(theta0_rad, float)
     rotation = probe_axes(theta0)
-    field = rotation @ np.array([bx, by, 0.0])
     gxx, gyy = gs + gd, gs - gd
+    global_field = np.array([bx, by, 0.0])
     global_gradient = np.array([[gxx, gxy, 0.0], [gxy, gyy, 0.0], [0.0, 0.0, -(gxx + gyy)]])
-    gradient = rotation @ global_gradient @ np.swapaxes(rotation, -1, -2)
-    return ArcPotential.from_local_field(probe, field, gradient)
+    if neighbours is None:
+        field = rotation @ global_field
+        gradient = rotation @ global_gradient @ np.swapaxes(rotation, -1, -2)
+        return ArcPotential.from_local_field(probe, field, gradient)
+    field = np.einsum("nij,nj->ni", rotation, global_field + neighbours.field_t)
+    gradient = rotation @ (global_gradient + neighbours.gradient_t_per_m) @ np.swapaxes(rotation, -1, -2)
+    hessian = np.einsum("nia,nabc,njb,nkc->nijk", rotation, neighbours.hessian_t_per_m2, rotation, rotation)
+    return ArcPotential.from_local_field(probe, field, gradient, hessian)
 
 
-def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, ringdowns: Ringdowns | None = None):
+def model_shift_hz(
+    params,
+    theta0_rad,
+    probe: Probe,
+    f00_hz: float,
+    model: str,
+    ringdowns: Ringdowns | None = None,
+    neighbours: NeighbourFields | None = None,
+):
     """Δf(θ0) for params (Bx, By, Gs, Gd, Gxy, f00 − f00_calibrated), Hz.
 
     With ``ringdowns`` the first-principles model reports what the fit of each decaying
     ring-down reports: the weighted average of the harmonic-balance frequency over its swing
     (:func:`mows.physics.ringdown_average.amplitude_nodes`), from the stop
     (:meth:`mows.physics.potential.ArcPotential.start_swing_rad`). Without, the
-    small-amplitude stiffness. The published model has no amplitude.
+    small-amplitude stiffness. The published model has no amplitude (nor ``neighbours``: the
+    other probes' fields, first-principles only).
     """
     bx, by, gs, gd, gxy, df00 = params
     theta0 = np.asarray(theta0_rad, float)
@@ -176,11 +206,13 @@ def model_shift_hz(params, theta0_rad, probe: Probe, f00_hz: float, model: str, 
         )
         shift = sweep.shift_hz(theta0)
         return f00 + shift - f00_hz
-    potential = local_potential(params, theta0, probe)
+    potential = local_potential(params, theta0, probe, neighbours)
     if ringdowns is None:
         return f00 * np.sqrt(potential.stiffness_nm_per_rad() / probe.spring_nm_per_rad) - f00_hz
-    # 0 where the stop lies inside the deflection (a trial point the data rule out)
-    start = np.nan_to_num(potential.start_swing_rad(ringdowns.stop_amplitude_rad))
+    if ringdowns.start_swing_rad is not None:
+        start = np.asarray(ringdowns.start_swing_rad, float)
+    else:  # 0 where the stop lies inside the deflection (a trial point the data rule out)
+        start = np.nan_to_num(potential.start_swing_rad(ringdowns.stop_amplitude_rad))
     amplitudes, weights = amplitude_nodes(
         theta0, start, ringdowns.damping_per_s, ringdowns.duration_s, pickup=ringdowns.pickup
     )
@@ -199,6 +231,7 @@ def decompose(
     ringdowns: Ringdowns | None = None,
     start=None,
     f00_std_hz: float = 0.0,
+    neighbours: NeighbourFields | None = None,
 ) -> Decomposition:
     """Field and gradient from a rotation sweep by weighted nonlinear least squares.
 
@@ -219,6 +252,9 @@ def decompose(
         (``shift_std_hz`` must then be the fits' own σ, without it): it moves the parameters by
         ∂p/∂f00·δ, added to their covariance as σ²·(∂p/∂f00)(∂p/∂f00)ᵀ (mostly Gs: the constant
         term). Not with ``f00_free``, where f00 is fitted.
+    neighbours : the other probes' fields at this probe in a sweep of several
+        (:class:`NeighbourFields`), part of the first-principles model; the field and gradient
+        returned are then the external ones, without them.
 
     The covariance is scaled by χ²/dof when that exceeds 1, as lmfit does: a model that does
     not fit does not get to claim the measurement errors' precision.
@@ -238,7 +274,7 @@ def decompose(
         start[2] = 0.0  # Gs is absorbed by f00 and stays out of the fit
 
     def residual_of(params):
-        return (model_shift_hz(params, theta0, probe, f00_hz, model, ringdowns) - shift) / std
+        return (model_shift_hz(params, theta0, probe, f00_hz, model, ringdowns, neighbours) - shift) / std
 
     def residual(x):
         params = start.copy()

@@ -1,0 +1,198 @@
+"""Each probe's external field and gradient from a sweep of several probes, the coupling in the model.
+
+In a sweep of several probes every point turns them all (their stages) and measures each one's
+frequency shift (:mod:`mows.estimate.joint_segment`). Probe k feels the external field and
+gradient at its magnet and its neighbours' dipole fields (:mod:`mows.physics.coupling`):
+
+    B_k(r) = B_ext,k + G_ext,k·(r − r_k) + Σ_{l≠k} B_dipole(m_l(θ0_l, θs_l), r_l(θ0_l, θs_l); r),
+
+and each neighbour's moment turns with its orientation θ0_l at that point and its rest angle
+θs_l, which its own external field and its neighbours set. So the neighbours' terms change from
+point to point; they are known once the external fields are, and they are about 1.4 µT at 5 cm
+for the paper's moment, far above a sweep's precision: a decomposition that leaves them out
+reports them as part of the external field, biased (tests/sweep/test_multiprobe_sweep.py).
+
+:func:`decompose_probes` first decomposes each probe alone, then, for ``passes`` rounds, holds
+the neighbours' fields at those the present estimates give and decomposes each probe again
+with them as known terms of the first-principles model
+(:class:`mows.sweep.decompose.NeighbourFields`: exact dipole field, gradient and Hessian at the
+magnet, so the field along the whole arc). The neighbours' fields depend on the estimates only
+through their rest angles (a few degrees move them by a few percent), so the rounds converge
+at once; the rest angles at each point are the coupled ones, iterated to a fixed point.
+
+The probes rotate in the global x–y plane (the decomposition's frame).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.optimize import brentq
+
+from mows.estimate.ringdown_joint import JointOptions
+from mows.estimate.ringdown_types import RingdownFit
+from mows.physics.coupling import PlacedProbe
+from mows.physics.fluxgate import FluxgatePair, pickup_scale_t
+from mows.physics.sources import PointDipole
+from mows.sweep.decompose import Decomposition, NeighbourFields, Ringdowns, decompose, local_potential
+
+SWING_BRACKET_RAD = (1e-4, 0.7)  # within the potential's interval
+REST_ITERATIONS = 4  # the rest angles' fixed point contracts by ~1e-4 a step at centimetres
+DEFAULT_PASSES = 2
+
+
+@dataclasses.dataclass(frozen=True)
+class ProbeSweep:
+    """One probe's share of a sweep of several: the probe (constants, its magnet's position),
+    its calibrated f00, and per point its θ0, measured shift f − f00 and σ, and how its ring-down
+    was recorded (:class:`mows.sweep.decompose.Ringdowns`, or None: small amplitude)."""
+
+    placed: PlacedProbe
+    f00_hz: float
+    theta0_rad: np.ndarray
+    shift_hz: np.ndarray
+    shift_std_hz: np.ndarray
+    ringdowns: Ringdowns | None = None
+
+
+def sweeps_of(
+    placed: Sequence[PlacedProbe],
+    points: Sequence[Sequence[RingdownFit]],
+    pair: FluxgatePair,
+    channels: str = JointOptions.channels,
+) -> list[ProbeSweep]:
+    """Each probe's :class:`ProbeSweep` from the fits of every point (one fit per probe, by
+    ``probe_id`` = the index in ``placed``; the fits' channel combination ``channels`` of the
+    fluxgate ``pair``), shifts against each probe's f00. Points where a
+    probe's fit is not OK are left out of every probe's sweep (the neighbours' orientations at
+    a point are part of each probe's model, so the points stay common)."""
+    usable = [fits for fits in points if all(f.ok for f in fits) and len(fits) == len(placed)]
+    sweeps = []
+    for k, p in enumerate(placed):
+        fits = [next(f for f in point if f.probe_id == k) for point in usable]
+        scale_t = pickup_scale_t(pair, p.pose.magnet_position_m, p.probe.moment_am2, channels)
+        ringdowns = Ringdowns(
+            math.nan,
+            np.array([f.damping_per_s for f in fits]),
+            np.array([f.duration_s for f in fits]),
+            np.array([f.pickup for f in fits]),
+            np.array([start_swing_rad(f, scale_t) for f in fits]),
+        )
+        sweeps.append(
+            ProbeSweep(
+                p,
+                p.probe.f00_hz,
+                np.array([f.theta0_rad for f in fits]),
+                np.array([f.frequency_hz - p.probe.f00_hz for f in fits]),
+                np.array([f.frequency_std_hz for f in fits]),
+                ringdowns,
+            )
+        )
+    return sweeps
+
+
+def start_swing_rad(fit: RingdownFit, scale_t: float) -> float:
+    """The swing θmax at the start of a fit's window, from the power of its fitted signal.
+
+    ``scale_t`` times the fit's pickup series (:func:`mows.physics.fluxgate.pickup_scale_t`) is
+    the sensors' absolute signal of the swinging magnet in tesla, so the fitted signal's power, ``noise_std_t``² ×
+    10^(``snr_db``/10), fixes the swing: the A0 whose ring-down A0·e^(−δt)·cos(2πft) through
+    the pickup has that variance over the window. A joint fit may leave θmax itself
+    undetermined (its shape barely depends on it), but not its signal's size. NaN if the
+    fit's numbers do not fix it."""
+    power = fit.noise_std_t**2 * 10.0 ** (fit.snr_db / 10.0)
+    if not (math.isfinite(power) and power > 0 and fit.pickup):
+        return math.nan
+    pickup = scale_t * np.asarray(fit.pickup, complex)
+    t = np.linspace(0.0, fit.duration_s, fit.n_samples, endpoint=False)
+    carrier = np.exp(-fit.damping_per_s * t) * np.cos(2.0 * math.pi * fit.frequency_hz * t)
+    orders = np.arange(pickup.size)
+
+    def excess(swing: float) -> float:
+        signal = np.real(np.exp(1j * np.multiply.outer(swing * carrier, orders)) @ pickup)
+        return float(np.var(signal)) - power
+
+    low, high = SWING_BRACKET_RAD
+    if not excess(low) < 0.0 < excess(high):
+        return math.nan
+    return float(brentq(excess, low, high, xtol=1e-7))
+
+
+def decompose_probes(
+    sweeps: Sequence[ProbeSweep], coupling: bool = True, passes: int = DEFAULT_PASSES
+) -> list[Decomposition]:
+    """Each probe's external in-plane field and gradient (module docstring); with ``coupling``
+    False each probe is decomposed alone, as if it had no neighbours. ValueError unless every
+    probe has the same number of points (the sweep's)."""
+    counts = {len(s.theta0_rad) for s in sweeps}
+    if len(counts) != 1:
+        raise ValueError(f"every probe of a sweep needs one measurement per point; got {sorted(counts)} points")
+    results = [_decompose(s, None) for s in sweeps]
+    if not coupling or len(sweeps) == 1:
+        return results
+    for _ in range(passes):
+        if not all(r.ok for r in results):
+            return results
+        fields = neighbour_fields(sweeps, [r.parameters for r in results])
+        results = [_decompose(s, f) for s, f in zip(sweeps, fields)]
+    return results
+
+
+def _decompose(sweep: ProbeSweep, neighbours: NeighbourFields | None) -> Decomposition:
+    return decompose(
+        sweep.theta0_rad,
+        sweep.shift_hz,
+        sweep.shift_std_hz,
+        sweep.placed.probe,
+        sweep.f00_hz,
+        ringdowns=sweep.ringdowns,
+        neighbours=neighbours,
+    )
+
+
+def neighbour_fields(sweeps: Sequence[ProbeSweep], parameters: Sequence[np.ndarray]) -> list[NeighbourFields]:
+    """For each probe, its neighbours' dipole fields at its magnet at every point, with each
+    probe's external field and gradient ``parameters`` (Bx, By, Gs, Gd, Gxy, …) setting the
+    rest angles."""
+    count, points = len(sweeps), len(sweeps[0].theta0_rad)
+    where = np.array([s.placed.pose.magnet_position_m for s in sweeps], float)
+    rest = np.zeros((count, points))
+    empty = [NeighbourFields(np.zeros((points, 3)), np.zeros((points, 3, 3)), np.zeros((points, 3, 3, 3)))] * count
+    fields = empty
+    for _ in range(REST_ITERATIONS):
+        rest = np.array(
+            [
+                local_potential(p, s.theta0_rad, s.placed.probe, f).rest_angle_rad()
+                for s, p, f in zip(sweeps, parameters, fields)
+            ]
+        )
+        fields = _dipole_fields(sweeps, rest, where)
+    return fields
+
+
+def _dipole_fields(sweeps: Sequence[ProbeSweep], rest: np.ndarray, where: np.ndarray) -> list[NeighbourFields]:
+    """The neighbours' field, gradient and Hessian at each magnet, with the magnets at ``rest``."""
+    count, points = rest.shape
+    moments = np.empty((count, points, 3))
+    positions = np.empty((count, points, 3))
+    for k, s in enumerate(sweeps):
+        for j, theta0 in enumerate(s.theta0_rad):
+            pose = s.placed.pose.with_theta0(float(theta0))
+            moments[k, j] = s.placed.probe.moment_am2 * pose.moment_direction_at(rest[k, j])
+            positions[k, j] = pose.magnet_position_at(rest[k, j], s.placed.probe.lever_m)
+    fields = []
+    for k in range(count):
+        field, gradient, hessian = np.zeros((points, 3)), np.zeros((points, 3, 3)), np.zeros((points, 3, 3, 3))
+        for other in range(count):
+            if other == k:
+                continue
+            for j in range(points):
+                dipole = PointDipole(moments[other, j], positions[other, j])
+                field[j] += dipole.field_t(where[k])
+                gradient[j] += dipole.gradient_t_per_m(where[k])
+                hessian[j] += dipole.hessian_t_per_m2(where[k])
+        fields.append(NeighbourFields(field, gradient, hessian))
+    return fields

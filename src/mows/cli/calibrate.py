@@ -53,11 +53,11 @@ from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.calibration.schedule import (
     GRADIENT_WIRING,
-    PAPER_CURRENTS_A,
     CalibrationOutcome,
     CalibrationPlan,
     CalibrationSchedule,
     SetSupply,
+    default_currents_a,
     scenario_wirings,
 )
 
@@ -79,7 +79,13 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--hardware-id", default="", help="written to the probe file (default: the scenario)")
     parser.add_argument("--simulate", action="store_true", help="calibrate the scenario's simulated probe")
-    parser.add_argument("--currents-a", type=finite_float, nargs="+", default=list(PAPER_CURRENTS_A))
+    parser.add_argument(
+        "--currents-a",
+        type=finite_float,
+        nargs="+",
+        help="--simulate: the supply currents, A (default: 0, ±0.5 … ±2; on a unipolar supply 0 … 2, "
+        "the field's other sign from θ0 = 180°)",
+    )
     parser.add_argument("--repeats", type=positive_int, default=1, help="ring-downs per cycle")
     parser.add_argument("--seed", type=int, help="noise seed of the simulation (default: the scenario's)")
     parser.add_argument("--table", help="also write the calibration points as a table (CSV)")
@@ -106,7 +112,10 @@ def run(args) -> int:
     field_wiring = next(iter(wirings))  # the scenario's own supply: the homogeneous wiring
     limits = scenario.supply.limits
     if args.simulate:
+        args.currents_a = args.currents_a or list(default_currents_a(limits))
         _check_currents(args.currents_a, limits, "--currents-a")
+        for supply in [scenario.supply] + ([gradient.supply] if gradient else []):
+            CalibrationPlan(tuple(args.currents_a)).check_supply(supply.limits.min_current_a, supply.limits.cap_a)
         points, failed = simulated_points(scenario, gradient, nominal, field_wiring, args)
     elif args.input and is_bag(args.input):
         with input_file(args.input, "bag"):

@@ -425,6 +425,7 @@ def test_the_supply_ramps_on_request_is_capped_and_the_emergency_stop_zeroes_it(
     response = listen.result(listen.call(supply, SetFieldCurrent.Request(current_a=1.0)))
     assert response.success and response.current_a == 1.0, response.message
     assert response.reached_sample_index > 0.49 * RATE_HZ  # 1 A at 2 A/s in 10 ms steps: ≥ 0.49 s of ramp
+    assert (response.min_current_a, response.max_current_a) == (-1.5, 1.5)  # the scenario's supply is bipolar
     listen.ros.wait_for(lambda: listen.diagnostics.get("supply_current_a") == "1.0", "the supply on /diagnostics")
     refused = listen.result(listen.call(supply, SetFieldCurrent.Request(current_a=1.6)))
     assert not refused.success and "supply_current_cap_a" in refused.message

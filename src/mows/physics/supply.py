@@ -59,6 +59,11 @@ class SupplyLimits:
         """The lowest current the supply sources: −cap, or 0 for a unipolar one."""
         return 0.0 if self.polarity == "unipolar" else -self.cap_a
 
+    def range_a(self, cap_a: float = math.inf) -> tuple[float, float]:
+        """(lowest, highest) current it sources under the lower of its cap and ``cap_a``."""
+        high = min(self.cap_a, cap_a)
+        return (0.0 if self.polarity == "unipolar" else -high), high
+
     @property
     def range_text(self) -> str:
         """The currents it sources, for messages: ``0 … 2 A (unipolar)``, ``−2 … +2 A (bipolar)``."""

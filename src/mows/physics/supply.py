@@ -54,21 +54,21 @@ class SupplyLimits:
         if self.polarity not in POLARITIES:
             raise ValueError(f"supply: polarity = {self.polarity!r} must be one of {', '.join(POLARITIES)}")
 
-    @property
-    def min_current_a(self) -> float:
-        """The lowest current the supply sources: −cap, or 0 for a unipolar one."""
-        return 0.0 if self.polarity == "unipolar" else -self.cap_a
-
     def range_a(self, cap_a: float = math.inf) -> tuple[float, float]:
-        """(lowest, highest) current it sources under the lower of its cap and ``cap_a``."""
+        """(lowest, highest) current it sources under the lower of its cap and ``cap_a``:
+        the lowest is 0 for a unipolar supply."""
         high = min(self.cap_a, cap_a)
         return (0.0 if self.polarity == "unipolar" else -high), high
 
     @property
+    def min_current_a(self) -> float:
+        return self.range_a()[0]
+
+    @property
     def range_text(self) -> str:
-        """The currents it sources, for messages: ``0 … 2 A (unipolar)``, ``−2 … +2 A (bipolar)``."""
-        low = "0" if self.polarity == "unipolar" else f"-{self.cap_a:g}"
-        return f"{low} … +{self.cap_a:g} A ({self.polarity})"
+        """The currents it sources, for messages: ``0 … +2 A (unipolar)``, ``-2 … +2 A (bipolar)``."""
+        low, high = self.range_a()
+        return f"{low:g} … {high:+g} A ({self.polarity})"
 
     def check(self, current_a: float) -> float:
         """``current_a`` rounded to the resolution; ValueError if not finite, above the cap or

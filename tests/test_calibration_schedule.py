@@ -7,7 +7,15 @@ import pytest
 
 from mows.device.phases import CycleRequest
 from mows.estimate.ringdown import FitStatus, RingdownFit
-from mows.sweep.calibration.schedule import CalibrationPlan, CalibrationSchedule, SetSupply, State
+from mows.physics.supply import SupplyLimits
+from mows.sweep.calibration.schedule import (
+    PAPER_CURRENTS_A,
+    CalibrationPlan,
+    CalibrationSchedule,
+    SetSupply,
+    State,
+    default_currents_a,
+)
 
 PLAN = CalibrationPlan(currents_a=(0.0, 1.0, -1.0), theta0_rad=(0.0, math.pi), repeats=2)
 
@@ -131,3 +139,16 @@ def test_a_plan_without_currents_or_with_bad_values_is_refused():
     for bad in (dict(currents_a=()), dict(currents_a=(math.nan,)), dict(theta0_rad=()), dict(repeats=0)):
         with pytest.raises(ValueError):
             CalibrationPlan(**bad)
+
+
+def test_a_unipolar_supply_gets_the_non_negative_plan_and_refuses_the_paper_plan_up_front():
+    unipolar, bipolar = SupplyLimits(polarity="unipolar"), SupplyLimits()
+    assert default_currents_a(bipolar) == PAPER_CURRENTS_A
+    assert default_currents_a(unipolar) == (0.0, 0.5, 1.0, 1.5, 2.0)
+    CalibrationPlan(default_currents_a(unipolar)).check_supply(unipolar.min_current_a, unipolar.cap_a)
+    CalibrationPlan(PAPER_CURRENTS_A).check_supply(bipolar.min_current_a, bipolar.cap_a)
+    CalibrationPlan(PAPER_CURRENTS_A).check_supply(math.nan, math.nan)  # a range not known: the device decides
+    with pytest.raises(ValueError, match=r"-0\.5 A of the plan is outside the supply's range 0 … \+2 A"):
+        CalibrationPlan(PAPER_CURRENTS_A).check_supply(unipolar.min_current_a, unipolar.cap_a)
+    with pytest.raises(ValueError, match=r"\+2 A of the plan is outside the supply's range -1 … \+1 A$"):
+        CalibrationPlan((0.0, 2.0)).check_supply(-1.0, 1.0)

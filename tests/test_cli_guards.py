@@ -26,7 +26,7 @@ from mows.cli.main import main
 from mows.device import emulator
 from mows.physics.probe import PAPER_PROBE
 from mows.records.files import OutputRefused, writing
-from mows.sim.scenario import load_scenario
+from mows.sim.scenario import SCENARIO_DIR, load_scenario
 from recorded_bags import record_cycles
 
 HERE = pathlib.Path(__file__).parent
@@ -72,6 +72,10 @@ def work(tmp_path_factory):
     rewrite(SWEEP_TABLE, d / "sweep_one_row.csv", lambda i, row: None)
     rewrite(SWEEP_TABLE, d / "sweep_no_reference.csv", lambda i, row: [row.pop(k) for k in list(row) if "ref_" in k])
     PAPER_PROBE.to_yaml(d / "probe.yaml")
+    calibration = (SCENARIO_DIR / "calibration.yaml").read_text()
+    (d / "unipolar.yaml").write_text(
+        calibration.replace("  resolution_a: 1.0e-4", "  resolution_a: 1.0e-4\n  polarity: unipolar")
+    )
     text = (d / "probe.yaml").read_text()
     (d / "probe_1000x.yaml").write_text(text.replace("moment_am2: 0.00089", "moment_am2: 0.89"))
     (d / "probe_two_stops.yaml").write_text(text + "theta_stop_deg: 24.0\n")
@@ -132,6 +136,18 @@ CASES = [
         ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--currents-a", "0", "1", "500"],
         2,
         ["500", "cap"],
+    ),
+    (
+        "calibrate-negative-on-a-unipolar-supply",
+        ["calibrate", "--simulate", "--scenario", "{d}/unipolar.yaml", "-o", "{d}/p.yaml", "--currents-a", "1", "-1"],
+        2,
+        ["-1 A", "0 … +2 A", "θ0 + 180°"],
+    ),
+    (
+        "check-hardware-negative-step-on-the-ngm202",
+        ["check-hardware", "--simulate", "--supply-step-a", "-0.1"],
+        2,
+        ["-0.1 A", "0 … +2 A (unipolar)"],
     ),
     ("calibrate-table-in-ma", ["calibrate", "{d}/cal_ma.csv", "-o", "{d}/p.yaml"], 2, ["cap", "mA"]),
     (

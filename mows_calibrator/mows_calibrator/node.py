@@ -11,8 +11,10 @@ supply back to zero before the result is returned. With the homogeneous wiring's
 the constants (:class:`mows.sweep.calibration.run.ProbeCalibrator`) and writes the probe file
 that the estimator and the mapper load by ``probe_file``; gradient points of an earlier goal
 (``wiring: gradient``) add the lever check. A goal the node cannot run (inactive, a plan it
-refuses, a driver without a supply, found by setting the supply to zero first) is accepted and
-aborted at once, with the reason in the result. With ``orientation`` manual (a stage without a
+refuses, a driver without a supply, found by setting the supply to zero first, a plan outside
+the supply's range that the driver's answer states: a negative current on a unipolar supply) is
+accepted and aborted at once, with the reason in the result, before the supply is set to any
+other current. With ``orientation`` manual (a stage without a
 motor) a cycle at a new orientation waits for the operator: the feedback's message says where to
 turn the probe, ``~/confirm_orientation`` (std_srvs/Trigger) says it is done.
 
@@ -90,10 +92,15 @@ class CalibratorNode(MowsNode):
         except ValueError as error:
             return str(error)
         request = SetFieldCurrent.Request(current_a=0.0)
-        ok, message = supply_answer(await call(self, self._supply, request, self._param("supply_timeout_s")))
-        if not ok:
+        response = await call(self, self._supply, request, self._param("supply_timeout_s"))
+        ok, message = supply_answer(response)
+        try:
+            if not ok:
+                raise ValueError(f"the driver's supply cannot be set: {message}")
+            plan.check_supply(response.min_current_a, response.max_current_a)
+        except ValueError as error:
             self._calibrator.release()
-            return f"the driver's supply cannot be set: {message}"
+            return str(error)
         return None
 
     def _cancel(self, _) -> CancelResponse:

@@ -5,7 +5,7 @@ import dataclasses
 
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sim.scenario import load_scenario
-from mows.sweep.calibration.schedule import PAPER_CURRENTS_A, scenario_wirings
+from mows.sweep.calibration.schedule import UNIPOLAR_CURRENTS_A, scenario_wirings
 from mows_ros import operator
 from mows_ros.params import ParamSpec
 from mows_ros.probe import probe_file_problem
@@ -54,7 +54,12 @@ PARAMETERS = (
         formerly=("probe_file",),
     ),
     ParamSpec("hardware_id", "", "written to the probe file ('' the scenario's name)"),
-    ParamSpec("currents_a", list(PAPER_CURRENTS_A), "supply currents of a goal that lists none, A"),
+    ParamSpec(
+        "currents_a",
+        list(UNIPOLAR_CURRENTS_A),
+        "supply currents of a goal that lists none, A (the default runs on a unipolar supply too: "
+        "θ0 = 180° gives the field's other sign)",
+    ),
     ParamSpec("cycle_timeout_s", 300.0, "longest wait for the driver's cycle, s", range=(1.0, 3600.0)),
     ParamSpec("supply_timeout_s", 60.0, "longest wait for the supply to reach a current, s", range=(1.0, 3600.0)),
     ParamSpec("fit_timeout_s", 10.0, "longest wait for the fits of a finished cycle, s", range=(0.1, 600.0)),

@@ -126,3 +126,10 @@ def supply_response(result: CommandResult, current_a: float, response: SetFieldC
     )
     response.current_a = round(float(current_a), 4) if result.accepted else float("nan")
     response.reached_sample_index = max(0, result.applied_sample_index)
+
+
+def supply_range(limits, cap_a: float, response: SetFieldCurrent.Response) -> None:
+    """The supply's range in ``response`` under the driver's ``cap_a`` (``limits``:
+    SupplyLimits); NaN for a supply the backend does not know."""
+    nan = float("nan")
+    response.min_current_a, response.max_current_a = (nan, nan) if limits is None else limits.range_a(cap_a)

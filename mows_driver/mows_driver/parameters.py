@@ -83,7 +83,8 @@ PARAMETERS = (
     ParamSpec(
         "supply_file",
         "",
-        "supply scpi: the supply's YAML (commands, cap, slew, resolution); '' the paper's NGM202; fixed at start-up",
+        "supply scpi: the supply's YAML (commands, cap, slew, resolution, polarity); '' the paper's NGM202 "
+        "(unipolar); fixed at start-up",
         read_only=True,
     ),
     ParamSpec(

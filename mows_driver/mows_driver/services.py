@@ -29,6 +29,7 @@ from mows_driver.messages import (
     cycle_response,
     estop_response,
     estop_unlinked_response,
+    supply_range,
     supply_response,
 )
 from mows_driver.parameters import cycle_request_problem, supply_problem
@@ -138,6 +139,8 @@ class DriverServices:
         self, request: SetFieldCurrent.Request, response: SetFieldCurrent.Response
     ) -> SetFieldCurrent.Response:
         reached = Future()
+        session = self._node.session
+        supply_range(session and session.backend.supply_limits, self._node.values["supply_current_cap_a"], response)
         try:  # the streaming thread completes it once the samples have reached the ramp's end
             if (problem := supply_problem(request.current_a, self._node.values)) is not None:
                 raise ValueError(problem)

@@ -236,6 +236,22 @@ def test_the_supply_is_set_read_back_and_switched():
     assert supply_state(supply) == (0.0, 0)
 
 
+def test_the_ngm202_is_unipolar_and_a_negative_current_is_never_sent():
+    supply = simulated_supply()
+    assert supply.config.limits.polarity == "unipolar" and supply.config.limits.range_a() == (0.0, 2.0)
+    supply.set_current_a(0.5)
+    writes = supply.writes
+    with pytest.raises(
+        ValueError, match=r"^supply current -0\.1 A is outside the supply's range 0 … \+2 A \(unipolar\)"
+    ):
+        supply.set_current_a(-0.1)
+    assert supply.writes == writes and supply_state(supply) == (0.5, 1)
+    # The stand-in refuses it as the NGM202 does, had it been sent.
+    supply.resource.write("CURR -0.1000")
+    assert supply.resource.query("SYST:ERR?").startswith("-100") and supply_state(supply) == (0.5, 1)
+    supply.close()
+
+
 def test_a_command_the_supply_refuses_is_an_error_naming_it(tmp_path):
     config = load_supply_file()
     text = SIMULATED_SUPPLY_FILE.read_text().replace('q: "CURR {:.4f}"', 'q: "SOUR:CURR {:.4f}"')

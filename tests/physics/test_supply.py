@@ -11,7 +11,7 @@ from mows.device.scheduled import ScheduledDevice
 from mows.physics.coils import CurrentCap
 from mows.physics.field import helmholtz_pair
 from mows.physics.probe import PAPER_PROBE
-from mows.physics.supply import FieldSupply, SupplyLimits
+from mows.physics.supply import FieldSupply, SupplyLimits, supply_from_dict
 from mows.sim.scenario import Scenario, load_scenario
 from mows.sim.simulator import SimulatedDevice
 
@@ -27,6 +27,33 @@ def test_currents_above_the_cap_are_refused_and_settings_rounded_to_a_tenth_of_a
     for bad in (2.0001, -2.5, math.nan, math.inf, True, "1"):
         with pytest.raises(ValueError):
             limits.check(bad)
+
+
+def test_a_unipolar_supply_refuses_a_negative_current_naming_it_and_its_range():
+    limits = SupplyLimits(polarity="unipolar")
+    assert limits.min_current_a == 0.0 and SupplyLimits().min_current_a == -2.0  # bipolar unless said
+    assert limits.check(0.0) == 0.0 and limits.check(2.0) == 2.0 and limits.check(-0.0) == 0.0
+    with pytest.raises(
+        ValueError, match=r"^supply current -0\.5 A is outside the supply's range 0 … \+2 A \(unipolar\)"
+    ):
+        limits.check(-0.5)
+    with pytest.raises(ValueError, match="unipolar"):
+        limits.ramp(1.0, -1.0)
+    with pytest.raises(ValueError, match="polarity = 'both'"):
+        SupplyLimits(polarity="both")
+
+
+def test_a_scenario_supply_says_its_polarity_and_the_scheduled_device_keeps_to_it():
+    scenario = load_scenario("calibration")
+    assert scenario.supply.limits.polarity == "bipolar"  # the simulated supply stays bipolar
+    data = scenario.supply.to_dict() | {"polarity": "unipolar"}
+    unipolar = scenario.replace(supply=supply_from_dict(data))
+    assert supply_from_dict(unipolar.supply.to_dict()).limits.polarity == "unipolar"
+    device = ScheduledDevice(SimulatedDevice(unipolar), CurrentCap(), supply_cap_a=1.0)
+    assert device.supply_limits.range_text == "0 … +1 A (unipolar)"  # the driver's cap, the supply's sign
+    with pytest.raises(ValueError, match="-0.5 A is outside"):
+        device.schedule_field_current(0, -0.5)
+    assert device.supply_target_a == 0.0
 
 
 def test_a_ramp_never_steps_faster_than_the_slew_limit_and_ends_on_the_target():

@@ -23,8 +23,8 @@ class StandInDriver:
     """Answers set_field_current (recording every current) and run_cycle (publishing fits of the
     bench's probe in the environment plus the supply's field at the present current)."""
 
-    def __init__(self, ros, slow_cycles=False, supply=True):
-        self.ros, self.slow, self.supply = ros, slow_cycles, supply
+    def __init__(self, ros, slow_cycles=False, supply=True, range_a=(-2.0, 2.0)):
+        self.ros, self.slow, self.supply, self.range_a = ros, slow_cycles, supply, range_a
         self.currents, self.current, self.cycle = [], 0.0, 0
         self.rng = np.random.default_rng(3)
         self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
@@ -34,7 +34,9 @@ class StandInDriver:
     def set_current(self, request, response):
         if not self.supply:  # the driver's answer on the bag backend
             response.success, response.message = False, "supply current refused: the bag backend has no supply to set"
+            response.min_current_a = response.max_current_a = float("nan")
             return response
+        response.min_current_a, response.max_current_a = self.range_a
         self.currents.append(request.current_a)
         self.current = request.current_a
         response.success, response.current_a, response.message = True, request.current_a, "ok"
@@ -99,6 +101,20 @@ def test_goals_it_cannot_run_are_refused_with_the_reason_in_the_result(ros, cali
         "calibration goal refused: the driver's supply cannot be set: supply current refused: the bag backend "
         "has no supply to set"
     )
+    assert not path.exists()
+
+
+def test_a_plan_a_unipolar_supply_cannot_give_is_refused_before_any_current_is_set(ros, calibrator):
+    """The driver's answer to the first set-point (zero) states its supply's range, 0 … 2 A."""
+    client, path = calibrator
+    driver = StandInDriver(ros, range_a=(0.0, 2.0))
+    _, done, feedback = send_goal(ros, client, CalibrateProbe.Goal(currents_a=CURRENTS))
+    assert done.status == GoalStatus.STATUS_ABORTED and not feedback and driver.cycle == 0
+    assert driver.currents == [0.0]
+    assert done.result.message.startswith(
+        "calibration goal refused: supply current -1 A of the plan is outside the supply's range 0 … +2 A; "
+        "a unipolar supply gets the field's other sign from θ0 + 180°"
+    ), done.result.message
     assert not path.exists()
 
 

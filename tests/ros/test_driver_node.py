@@ -418,6 +418,22 @@ def test_docs_list_every_parameter_topic_and_service():
     assert [name for name in names if f"`{name}`" not in text] == []
 
 
+def test_a_negative_current_on_a_unipolar_supply_is_refused_naming_it_and_the_range(start_driver, listen, tmp_path):
+    scenario = tmp_path / "unipolar.yaml"
+    scenario.write_text("extends: calibration\nsupply: {polarity: unipolar}\n")
+    start_driver("-p", f"scenario:={scenario}", "-p", "coil_setup:=helmholtz")
+    listen.ros.wait_for(lambda: listen.blocks, "the first block")
+    supply = listen.ros.node.create_client(SetFieldCurrent, "/driver/set_field_current")
+    refused = listen.result(listen.call(supply, SetFieldCurrent.Request(current_a=-0.5)))
+    assert not refused.success and (refused.min_current_a, refused.max_current_a) == (0.0, 2.0)
+    assert refused.message == (
+        "supply current refused: supply current -0.5 A is outside the supply's range 0 … +2 A (unipolar) "
+        "(refused, never sent)"
+    )
+    listen.ros.wait_for(lambda: "supply_current_a" in listen.diagnostics, "the supply on /diagnostics")
+    assert listen.diagnostics["supply_current_a"] == "0.0"  # never ramped
+
+
 def test_the_supply_ramps_on_request_is_capped_and_the_emergency_stop_zeroes_it(start_driver, listen):
     start_driver("-p", "scenario:=calibration", "-p", "coil_setup:=helmholtz", "-p", "supply_current_cap_a:=1.5")
     listen.ros.wait_for(lambda: listen.blocks, "the first block")
@@ -425,6 +441,7 @@ def test_the_supply_ramps_on_request_is_capped_and_the_emergency_stop_zeroes_it(
     response = listen.result(listen.call(supply, SetFieldCurrent.Request(current_a=1.0)))
     assert response.success and response.current_a == 1.0, response.message
     assert response.reached_sample_index > 0.49 * RATE_HZ  # 1 A at 2 A/s in 10 ms steps: ≥ 0.49 s of ramp
+    assert (response.min_current_a, response.max_current_a) == (-1.5, 1.5)  # the scenario's supply is bipolar
     listen.ros.wait_for(lambda: listen.diagnostics.get("supply_current_a") == "1.0", "the supply on /diagnostics")
     refused = listen.result(listen.call(supply, SetFieldCurrent.Request(current_a=1.6)))
     assert not refused.success and "supply_current_cap_a" in refused.message

@@ -53,11 +53,11 @@ from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.calibration.schedule import (
     GRADIENT_WIRING,
-    PAPER_CURRENTS_A,
     CalibrationOutcome,
     CalibrationPlan,
     CalibrationSchedule,
     SetSupply,
+    default_currents_a,
     scenario_wirings,
 )
 
@@ -83,7 +83,8 @@ def add_arguments(parser) -> None:
         "--currents-a",
         type=finite_float,
         nargs="+",
-        help=f"--simulate: the supply currents, A (default: {' '.join(f'{c:g}' for c in PAPER_CURRENTS_A)})",
+        help="--simulate: the supply currents, A (default: 0, ±0.5 … ±2; on a unipolar supply 0 … 2, "
+        "the field's other sign from θ0 = 180°)",
     )
     parser.add_argument("--repeats", type=positive_int, help="--simulate: ring-downs per cycle (default: 1)")
     parser.add_argument("--seed", type=int, help="--simulate: noise seed (default: the scenario's)")
@@ -112,7 +113,10 @@ def run(args) -> int:
     field_wiring = next(iter(wirings))  # the scenario's own supply: the homogeneous wiring
     limits = scenario.supply.limits
     if args.simulate:
+        args.currents_a = args.currents_a or list(default_currents_a(limits))
         _check_currents(args.currents_a, limits, "--currents-a")
+        for supply in [scenario.supply] + ([gradient.supply] if gradient else []):
+            CalibrationPlan(tuple(args.currents_a)).check_supply(supply.limits.min_current_a, supply.limits.cap_a)
         points, failed = simulated_points(scenario, gradient, nominal, field_wiring, args)
     elif args.input and is_bag(args.input):
         with input_file(args.input, "bag"):
@@ -171,8 +175,9 @@ def _polarity(given, field_wiring: str) -> dict:
 
 
 # --- the simulated calibration ------------------------------------------------------------
-#: The options that shape --simulate's calibration alone (by argparse name), and their defaults.
-SIMULATION_OPTIONS = {"currents_a": list(PAPER_CURRENTS_A), "repeats": 1, "seed": None}
+#: The options that shape --simulate's calibration alone (by argparse name), and their defaults
+#: (the currents' default follows the supply's polarity: ``default_currents_a``).
+SIMULATION_OPTIONS = {"currents_a": None, "repeats": 1, "seed": None}
 
 
 def _simulation_options(args) -> None:

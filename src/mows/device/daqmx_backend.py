@@ -77,6 +77,7 @@ class DaqmxBackend(Backend):
         self.cap = CurrentCap(min(cap.limit_a, device.current_cap_a))
         self.supply = supply
         self.supply_schedule = SupplySchedule(supply.config.limits, device.sample_rate_hz) if supply else None
+        self.supply_limits = supply.config.limits if supply else None
         self.clock = DeviceClock(device.sample_rate_hz)
         self.waveforms = CoilWaveforms(len(device.outputs), device.sample_rate_hz, device.amplifier_v_per_a)
         self._info = DeviceInfo(

@@ -13,6 +13,7 @@ import dataclasses
 
 from mows.device.payloads import DeviceInfo
 from mows.physics.coils import CurrentCap
+from mows.physics.supply import SupplyLimits
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,6 +93,8 @@ class NotExciting(RuntimeError):
 class Backend(abc.ABC):
     """Where the driver's samples come from and its commands go to.
 
+    ``supply_limits`` is the static-field supply's cap, slew, resolution and polarity when the
+    backend drives one it knows (None: no supply, or a device's own that does not say).
     ``info`` describes the device once it is known (None before a serial device answers);
     ``command_lead_samples`` is how far ahead of the newest received sample a command must
     be scheduled to reach the device in time (a late one applies at the device's next sample,
@@ -100,6 +103,7 @@ class Backend(abc.ABC):
 
     name: str
     can_excite: bool
+    supply_limits: SupplyLimits | None = None  # the field supply's range and limits, if known
 
     # Read-only for the driver: a serial device's info and lead follow its link.
     @property

@@ -55,6 +55,7 @@ class ScheduledDevice:
                 min(supply_cap_a, supply.limits.cap_a),
                 min(supply_slew_a_per_s, supply.limits.slew_a_per_s),
                 supply.limits.resolution_a,
+                supply.limits.polarity,
             )
         )
         self.supply_target_a = device.field_current_a

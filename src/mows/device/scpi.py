@@ -3,7 +3,8 @@ set (YAML, so that another supply is a file, not code), the ramp within the slew
 device's sample clock, and the thin PyVISA edge.
 
 The paper's supply is a Rohde & Schwarz NGM202 (0.1 mA resolution, 2 A; Methods), the default
-command set (``hardware/rs_ngm202.yaml``). A supply is not on the card's sample clock: the
+command set (``hardware/rs_ngm202.yaml``): a unipolar source (0 … +cap), so a negative current
+is refused before it is sent. A supply is not on the card's sample clock: the
 backend writes each step of a ramp when the input stream reaches its sample, so a step lands
 within one input block of it, and reads the current back after the last one.
 """
@@ -43,13 +44,15 @@ class ScpiCommands:
 
 @dataclasses.dataclass(frozen=True)
 class ScpiSupplyConfig:
-    """The supply file (docs/hardware.md): its limits (cap, slew and resolution), the channel the
-    pair is on, the voltage limit (the pair's resistance × the largest current, with margin) and
-    its commands."""
+    """The supply file (docs/hardware.md): its limits (cap, slew, resolution and polarity:
+    ``unipolar``, 0 … cap, unless the file says ``bipolar``), the channel the pair is on, the
+    voltage limit (the pair's resistance × the largest current, with margin) and its commands."""
 
     cap_a: float
     slew_a_per_s: float
     resolution_a: float
+    # A laboratory supply sources one sign; a file that does not say so is not trusted with the other.
+    polarity: str = "unipolar"
     commands: ScpiCommands = ScpiCommands()
     channel: int = 1
     voltage_limit_v: float = 10.0
@@ -57,10 +60,12 @@ class ScpiSupplyConfig:
     read_termination: str = "\n"
     timeout_s: float = 2.0
     name: str = "scpi"
-    limits: SupplyLimits = dataclasses.field(init=False, repr=False)  # of cap, slew and resolution
+    limits: SupplyLimits = dataclasses.field(init=False, repr=False)  # of cap, slew, resolution and polarity
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "limits", SupplyLimits(self.cap_a, self.slew_a_per_s, self.resolution_a))
+        object.__setattr__(
+            self, "limits", SupplyLimits(self.cap_a, self.slew_a_per_s, self.resolution_a, self.polarity)
+        )
 
 
 def load_supply_file(path=PAPER_SUPPLY_FILE) -> ScpiSupplyConfig:
@@ -135,7 +140,8 @@ class ScpiSupply:
         return self.identity
 
     def set_current_a(self, current_a: float) -> None:
-        """Set the current (checked against the cap and rounded); SupplyError if refused."""
+        """Set the current (checked against the cap and the polarity, and rounded; ValueError
+        before anything is sent); SupplyError if the supply refuses it."""
         value = self.config.limits.check(current_a)
         self._write(self.config.commands.set_current.format(value))
 

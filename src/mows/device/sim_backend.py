@@ -64,6 +64,7 @@ class SimBackend(Backend):
         supply_slew_a_per_s: float = math.inf,
     ):
         self.device = ScheduledDevice(device, cap, supply_cap_a, supply_slew_a_per_s)
+        self.supply_limits = self.device.supply_limits
         self._info = simulated_device_info(self.device)
         self.clock = clock or DeviceClock(device.sample_rate_hz)
         self.paced = paced

@@ -3,7 +3,11 @@
 For every supply current of the plan: ramp the supply there and wait until the device says it
 is; at every orientation of the plan (θ0 = 0° and 180° by default: the field term flips sign
 between them, offsets do not) run one measurement cycle and collect its ring-down fits; then
-the next current. Every ending (done, cancelled, a refused command, a failed cycle) first
+the next current. On a unipolar supply (0 … +cap, the paper's NGM202) the plan's currents are
+non-negative and the field's other sign comes from θ0 + 180° alone: the applied fields along
+the probe are the same −cap … +cap as the paper's plan gives, at half the cycles
+(:data:`UNIPOLAR_CURRENTS_A`); :meth:`CalibrationPlan.check_supply` refuses a plan the supply
+cannot give before anything is set. Every ending (done, cancelled, a refused command, a failed cycle) first
 ramps the supply back to zero, and only then reports the outcome, which says whether the
 device confirmed zero.
 
@@ -25,6 +29,7 @@ from mows.device.phases import CycleRequest
 from mows.estimate.calibration.constants import CalibrationPoint, Wiring
 
 PAPER_CURRENTS_A = (0.0, 0.5, 1.0, 1.5, 2.0, -0.5, -1.0, -1.5, -2.0)
+UNIPOLAR_CURRENTS_A = tuple(i for i in PAPER_CURRENTS_A if i >= 0.0)  # θ0 + 180° gives the other sign
 GRADIENT_WIRING = "gradient"  # the supply's coils anti-parallel (the lever check)
 
 
@@ -49,6 +54,31 @@ class CalibrationPlan:
     @property
     def steps(self) -> int:
         return len(self.currents_a) * len(self.theta0_rad)
+
+    def check_supply(self, min_current_a: float, max_current_a: float) -> None:
+        """ValueError naming the first current outside the supply's range (``min_current_a`` 0:
+        a unipolar supply), before any is set: never half-way through the plan. A range not
+        known (NaN) checks nothing here: the device still refuses what it cannot give."""
+        if not (math.isfinite(min_current_a) and math.isfinite(max_current_a)):
+            return
+        for current in self.currents_a:
+            if not min_current_a <= current <= max_current_a:
+                hint = (
+                    "; a unipolar supply gets the field's other sign from θ0 + 180°, not from a negative "
+                    f"current: plan currents ≥ 0, e.g. {' '.join(f'{i:g}' for i in UNIPOLAR_CURRENTS_A)}"
+                    if min_current_a == 0.0 and current < 0.0
+                    else ""
+                )
+                raise ValueError(
+                    f"supply current {current:+g} A of the plan is outside the supply's range "
+                    f"{min_current_a:g} … {max_current_a:+g} A{hint}"
+                )
+
+
+def default_currents_a(limits) -> tuple:
+    """The plan's currents for a supply of ``limits`` (:class:`mows.physics.supply.SupplyLimits`):
+    the paper's 0 … ±2 A on a bipolar supply, their non-negative half on a unipolar one."""
+    return UNIPOLAR_CURRENTS_A if limits.min_current_a >= 0.0 else PAPER_CURRENTS_A
 
 
 @dataclasses.dataclass(frozen=True)

@@ -78,6 +78,9 @@ class Configuration:
     ringdown_damping_per_s, ringdown_duration_s : (n,) the ring-down.
     damping : blend weight of the damped form of Eq. S1 with ``damping_per_s`` per row.
     frequency_hz : (n,) additive frequency contributions.
+    neighbour_field_t, neighbour_gradient_t_per_m : (n, 3), (n, 3, 3) or None: the other probes'
+        magnets' field and gradient, which act in full whatever ``transverse`` and ``deflection``
+        say of the reference (their Hessian is in ``hessian_t_per_m2``).
     """
 
     theta0_rad: np.ndarray
@@ -97,6 +100,8 @@ class Configuration:
     deflection: float = 0.0
     amplitude: float = 0.0
     damping: float = 0.0
+    neighbour_field_t: np.ndarray | None = None
+    neighbour_gradient_t_per_m: np.ndarray | None = None
 
     @classmethod
     def base(cls, table: MeasurementTable, probe: Probe) -> Configuration:
@@ -254,6 +259,10 @@ def _frequency_factor(config: Configuration, probe: Probe, amplitude_nodes: Ampl
     along[:, 0] = field[:, 0]
     active_gradient = config.transverse * gradient
     active_gradient[:, 0, 0] = gradient[:, 0, 0]
+    if config.neighbour_field_t is not None and config.neighbour_gradient_t_per_m is not None:
+        neighbour = np.einsum("nij,nj->ni", axes, config.neighbour_field_t)
+        along, field = along + neighbour, field + neighbour
+        active_gradient = active_gradient + np.einsum("nai,nij,nbj->nab", axes, config.neighbour_gradient_t_per_m, axes)
     variants = [along] + ([field] if config.deflection else [])
     gravity = None if config.gravity_m_per_s2 is None else np.einsum("nij,nj->ni", axes, config.gravity_m_per_s2)
     local: dict[str, Any] = dict(

@@ -20,6 +20,9 @@ Columns (CSV header names, SI units but for the ``*_deg`` columns):
 ``duration_s``                                     angle, docs/model_lab.md; the last two as in
                                                    ``RingdownFit``)
 ``mows_table_format``                   optional   the marker of a table the project's own tools wrote
+``probe``, ``step``, ``magnet_x_m``,     optional   a table of several probes: each row's probe id, its
+``magnet_y_m``, ``magnet_z_m``                     sweep step and its magnet's position
+                                                   (:mod:`mows.lab.data.probes`)
 any other numeric column                optional   kept as a covariate for the diagnostics
 =====================================  =========  ===================================================
 

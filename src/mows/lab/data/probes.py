@@ -165,7 +165,7 @@ def _magnets_at_rest(table: MeasurementTable, probes: ProbeSet) -> tuple[np.ndar
     """Each row's magnet as a neighbour sees it: moment (n, 3), A·m², and position (n, 3), m,
     at the rest angle in the row's reference field and gradient (module docstring)."""
     axes = table.probe_axes()
-    field = np.einsum("nij,nj->ni", axes, table.field_t)
+    field = table.probe_field_t
     gradient = np.einsum("nai,nij,nbj->nab", axes, table.gradient_t_per_m, axes)
     moments, positions = np.zeros((len(table), 3)), np.zeros((len(table), 3))
     index = probes.index(table)

@@ -165,7 +165,7 @@ class FrequencyModel:
         for rows, probe in probe_parts(distinct, self._require_probe()):
             part = distinct if rows is None else distinct.subset(rows)
             config = self._configuration(part, values, probe)
-            found = frequency_factor(config, probe, lambda rows, start_rad: cached_nodes(distinct, rows, start_rad))
+            found = frequency_factor(config, probe, lambda part, start_rad: cached_nodes(distinct, part, start_rad))
             if rows is None:
                 return found
             h[rows], c[rows] = found

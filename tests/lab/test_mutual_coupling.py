@@ -20,6 +20,7 @@ from lab.tables import rotation_table
 from mows.cli.main import main
 from mows.lab import FrequencyModel, MeasurementTable, ProbeSet, analyse, catalog, with_probes
 from mows.lab.data import synthetic
+from mows.lab.report.html_report import sweep_curve
 from mows.physics.coupling import PlacedProbe
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
@@ -183,3 +184,15 @@ def test_probe_options_that_do_not_fit_the_table_are_one_line_errors(
     assert main(["lab", "compare", str(path), "--no-cv", *options]) == 2
     err = capsys.readouterr().err.strip()
     assert words in err and "\n" not in err, err
+
+
+def test_the_report_draws_one_probe_of_a_table_of_several(coupled_table):
+    """The HTML report's θ0 curve follows one probe's rows of one sweep, between the measured
+    orientations too, and at them it is the fitted model there."""
+    table, probes = with_probes(coupled_table, ProbeSet.of(PROBES))
+    fit = (FrequencyModel(probes) + catalog()["mutual_coupling"].at_physics()).fit(table)
+    rows = (table.sweep_ids == 0) & (table.probe == 1)
+    measured = table.theta0_deg[rows]
+    curve = sweep_curve(fit, rows, np.concatenate([measured, measured + 7.5]))
+    assert np.all(np.isfinite(curve))
+    np.testing.assert_allclose(curve[: len(measured)], fit.prediction_hz[rows], rtol=0, atol=1e-9)

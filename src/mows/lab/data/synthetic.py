@@ -211,7 +211,7 @@ def coupled_probes_table(
             synthesize(
                 p.probe,
                 sources[i],
-                np.degrees(p.pose.theta0_rad) + steps,
+                np.mod(np.degrees(p.pose.theta0_rad) + steps, 360.0),
                 rng,
                 f_std_hz,
                 amplitude_deg,

@@ -74,6 +74,7 @@ NEIGHBOUR_HESSIAN = (
     "neighbour_hyyy_t_per_m2",
 )
 NEIGHBOUR = NEIGHBOUR_FIELD + NEIGHBOUR_GRADIENT + NEIGHBOUR_HESSIAN
+LABELS = ("sweep", PROBE, STEP)  # integer labels of rows, not quantities
 
 MIN_SWEEPS = 10  # a subsample keeps at least this many sweeps (or all): folds for the cross-validation
 POSITIVE = ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k")
@@ -307,7 +308,7 @@ def _validate(columns: dict[str, np.ndarray]) -> None:
                 f"column{'s' if len(given) > 1 else ''} {', '.join(given)} given without "
                 f"{', '.join(sorted(set(group) - set(given)))}: give all of {', '.join(group)}"
             )
-    for name in ("sweep", PROBE, STEP):
+    for name in LABELS:
         if name in columns and np.any(columns[name] != np.round(columns[name])):
             raise TableError(
                 f"column '{name}' must hold integers: not so in "

@@ -26,7 +26,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 import numpy as np  # noqa: E402
 
-from mows.lab.data.table import PROBE  # noqa: E402
+from mows.lab.data.table import LABELS, PROBE  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -88,7 +88,8 @@ def sweep_curve(fit: FitResult, rows: np.ndarray, theta0_deg: FloatOrArray) -> n
 
     Every other column (reference field, start amplitude, time, temperature…) is interpolated
     periodically in θ0 between the sweep's measured orientations (repeats averaged), so the
-    curve passes through the model's value at every measured orientation.
+    curve passes through the model's value at every measured orientation. The labels (sweep,
+    probe, step) keep the sweep's first row's.
     """
     sweep = fit.table.subset(rows)
     angles, inverse = np.unique(np.mod(sweep.theta0_deg, 360.0), return_inverse=True)
@@ -98,6 +99,7 @@ def sweep_curve(fit: FitResult, rows: np.ndarray, theta0_deg: FloatOrArray) -> n
         name: np.interp(np.mod(grid, 360.0), angles, np.bincount(inverse, values) / counts, period=360.0)
         for name, values in sweep.columns.items()
     }
+    columns.update({name: np.full(len(grid), sweep.columns[name][0]) for name in LABELS if sweep.has(name)})
     columns["theta0_deg"] = grid
     return fit.model.predict(dataclasses.replace(sweep, columns=columns), fit.values)
 

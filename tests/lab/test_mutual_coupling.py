@@ -18,7 +18,7 @@ import pytest
 
 from lab.tables import rotation_table
 from mows.cli.main import main
-from mows.lab import FrequencyModel, MeasurementTable, ProbeSet, analyse, catalog, with_probes
+from mows.lab import FrequencyModel, MeasurementTable, ProbeSet, TableError, analyse, catalog, with_probes
 from mows.lab.data import synthetic
 from mows.lab.report.html_report import sweep_curve
 from mows.physics.coupling import PlacedProbe
@@ -196,3 +196,15 @@ def test_the_report_draws_one_probe_of_a_table_of_several(coupled_table):
     curve = sweep_curve(fit, rows, np.concatenate([measured, measured + 7.5]))
     assert np.all(np.isfinite(curve))
     np.testing.assert_allclose(curve[: len(measured)], fit.prediction_hz[rows], rtol=0, atol=1e-9)
+
+
+def test_a_step_without_one_probe_is_left_out_and_a_repeated_probe_is_refused(coupled_table):
+    probes = ProbeSet.of(PROBES)
+    missing = np.flatnonzero((coupled_table.probe == 2) & (coupled_table.step == 5) & (coupled_table.sweep == 1))
+    table, _ = with_probes(coupled_table.subset(np.setdiff1d(np.arange(len(coupled_table)), missing)), probes)
+    assert len(table) == len(coupled_table) - 3  # the other two probes' rows of that step go too
+    assert any("a neighbour has no row in their sweep step" in note for note in table.notes)
+    assert np.all(np.isfinite(table.neighbour_bx_t))
+    repeated = coupled_table.concatenate(coupled_table.subset(missing))
+    with pytest.raises(TableError, match="probe 2 has more than one row in one sweep step"):
+        with_probes(repeated, probes)

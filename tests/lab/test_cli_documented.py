@@ -3,7 +3,8 @@
 The command lines are read from the documents themselves (fenced blocks and inline code), so a
 documented form that the parser rejects fails here; the plugin file is the documented one too.
 The files the commands name (sweep.csv, sweeps.csv, probe.yaml, coil_heating.py, the paper's
-probe path, the recorded bag ``recording``) are made in a scratch directory that the commands run in.
+probe path, the recorded bag ``recording``, a table of three probes with their files) are made in
+a scratch directory that the commands run in.
 """
 
 import pathlib
@@ -16,7 +17,9 @@ import pytest
 
 from mows.cli.main import main
 from mows.lab.data import synthetic
+from mows.physics.coupling import PlacedProbe
 from mows.physics.field import SumSource, UniformField, anti_helmholtz_pair
+from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
 from mows.sim.sections import Environment
@@ -72,6 +75,14 @@ def workdir(tmp_path_factory):
     (directory / PAPER_PROBE_PATH).parent.mkdir(parents=True)
     shutil.copy(ROOT / PAPER_PROBE_PATH, directory / PAPER_PROBE_PATH)
     (directory / "coil_heating.py").write_text(documented_plugin())
+    # `mows lab add probes.csv --probe 0=a.yaml …`: three paper probes 5 cm apart on one stage.
+    placed = [PlacedProbe(PAPER_PROBE, Pose(magnet_position_m=(0.05 * i, 0.0, 0.0))) for i in range(3)]
+    rng = np.random.default_rng(4)
+    synthetic.coupled_probes_table(placed, UniformField((3e-5, 0.0, 0.0)), np.arange(0.0, 360.0, 30.0), 2, rng).to_csv(
+        directory / "probes.csv"
+    )
+    for name in ("a", "b", "c"):
+        shutil.copy(ROOT / PAPER_PROBE_PATH, directory / f"{name}.yaml")
     # `mows lab ringdown recording`: a driver-like bag of one simulated ring-down in 1.5 mT along the axis.
     strong = load_scenario().replace(environment=Environment(sources=(UniformField((1.5e-3, 0.0, -4e-5)),)))
     record_cycles(directory / "recording", strong, (0.0,), 3)

@@ -9,6 +9,7 @@ import pytest
 from mows.estimate.ringdown import fit_ringdown
 from mows.lab import FrequencyModel, MeasurementTable, catalog
 from mows.lab.data.synthetic import true_frequency_hz
+from mows.lab.data.table import NEIGHBOUR
 from mows.physics import frequency, ringdown_average
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
@@ -68,6 +69,7 @@ def test_every_effect_is_off_at_zero(name):
         t_s=np.arange(40.0),
         amplitude_deg=np.full(40, 20.0),
         damping_per_s=np.full(40, 2.5),
+        **dict(zip(NEIGHBOUR, np.full((len(NEIGHBOUR), 40), 1e-5))),  # what mutual_coupling reads
     )
     effect = catalog()[name]
     base = FrequencyModel(PAPER_PROBE).predict(table, [112.48])

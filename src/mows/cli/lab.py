@@ -44,8 +44,9 @@ from mows.cli.inputs import (
     positive_float,
 )
 from mows.cli.lab_ringdown import run_ringdown
-from mows.lab import analyse, is_bag, load_table, progress, with_reference, write_report
+from mows.lab import ProbeSet, analyse, is_bag, load_table, progress, with_reference, write_report
 from mows.lab.chirp import PIECE_PERIODS
+from mows.lab.data.table import PROBE
 from mows.records.files import check_output, writing
 
 MAX_ROWS = 500_000
@@ -85,7 +86,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         command = sub.add_parser(name, help=text, description=text)
         command.add_argument("table", help="measurement table: CSV file or rosbag2 bag directory")
         command.add_argument(
-            "--probe", default=str(PAPER_PROBE_FILE), help="probe constants YAML (default: the paper's probe)"
+            "--probe",
+            action="append",
+            default=[],
+            metavar="[ID=]FILE",
+            help="probe constants YAML (default: the paper's probe); for a table with a probe column, "
+            "ID=FILE gives probe ID's constants and a bare FILE those of the probes not named (repeatable)",
         )
         command.add_argument(
             "--plugin",
@@ -145,10 +151,11 @@ def _add_ringdown_arguments(sub) -> None:
 def run(args) -> int:
     if args.lab_command == "ringdown":
         return run_ringdown(args)
-    inputs = [args.table, args.probe, *args.plugin] + ([args.reference] if args.reference else [])
+    default, named = probe_options(args.probe)
+    inputs = [args.table, default, *named.values(), *args.plugin] + ([args.reference] if args.reference else [])
     if args.lab_command == "report":
         check_output(args.output, inputs, args.force)
-    probe = _probe(args.probe)
+    probe = _probe(default)
     quiet = args.json or not sys.stderr.isatty()
     stages = tqdm(
         total=3 if args.lab_command == "report" else 2,
@@ -159,7 +166,7 @@ def run(args) -> int:
         bar_format="{desc} {bar} {n_fmt}/{total_fmt} stages, {elapsed}",
     )
     with stages, WorkBar(quiet) as work, progress.listening(work):
-        table = _table(args, probe)
+        table, probe = _table(args, probe, {i: _probe(path) for i, path in named.items()})
         if len(table) > MAX_ROWS and not args.all_rows:
             table = table.subsample(MAX_ROWS, SUBSAMPLE_SEED)
         stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")
@@ -246,20 +253,60 @@ class WorkBar:
             self.bar.refresh()
 
 
-def _table(args, probe):
-    """The table to analyse, with its reference; what is wrong with a file is blamed on that file."""
+def _table(args, default, named):
+    """The table to analyse, with its reference, and the probe of its rows (``table_probes``);
+    what is wrong with a file is blamed on that file."""
     with input_file(args.table):
         table = load_table(
             args.table,
             drop_invalid=args.drop_invalid,
             **({"reference": args.reference, "magnet_position_m": args.magnet_position} if is_bag(args.table) else {}),
         )
-        check_frequencies(table.columns["f_hz"], probe, "f_hz")
+        probe = table_probes(table, default, named)
     if args.reference and not is_bag(args.table):
         with input_file(args.reference, "reference"):
             table = with_reference(table, args.reference, args.magnet_position)
     check_reference(table, probe)
-    return table
+    return table, probe
+
+
+def probe_options(values: list[str]) -> tuple[str, dict[int, str]]:
+    """(the default probe file, {probe id: file}) of the ``--probe`` options: ``ID=FILE`` names
+    one probe's file (ID an integer), a bare ``FILE`` is the default (at most one)."""
+    named: dict[int, str] = {}
+    bare = []
+    for value in values:
+        key, sep, path = value.partition("=")
+        if sep and key.strip().lstrip("-").isdigit():
+            if int(key) in named:
+                raise ValueError(f"--probe {value}: probe {int(key)} already has {named[int(key)]}")
+            named[int(key)] = path
+        else:
+            bare.append(value)
+    if len(bare) > 1:
+        raise ValueError(
+            f"--probe: {len(bare)} files without a probe id ({', '.join(bare)}): give at most one, "
+            "and ID=FILE for the others"
+        )
+    return (bare[0] if bare else str(PAPER_PROBE_FILE)), named
+
+
+def table_probes(table, default, named):
+    """The probe of every row: ``default`` for a table without a probe column (and no file named
+    by id), else a ProbeSet; each probe's frequencies checked against its f00."""
+    if not table.has(PROBE):
+        if named:
+            raise ValueError(
+                f"--probe ID=FILE given for probe {', '.join(map(str, named))}, but the table has no "
+                f"column '{PROBE}' saying which row is which probe"
+            )
+        check_frequencies(table.columns["f_hz"], default, "f_hz")
+        return default
+    probes = ProbeSet.for_table(table, default, named)
+    index = probes.index(table)
+    for k, (i, member) in enumerate(probes.members):
+        check_frequencies(table.columns["f_hz"][index == k], member, f"f_hz of probe {i}")
+    return probes
 
 
 def _probe(source):

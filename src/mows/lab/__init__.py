@@ -13,8 +13,9 @@ The sub-packages form a pipeline and are layered in that order: each imports onl
 before it (and, outside the lab, ``mows.sweep``, ``mows.estimate``, ``mows.device``, ``mows.sim``,
 ``mows.physics`` and ``mows.records``), never one after it. Each one's docstring lists its modules.
 
-1. ``data``: the measurement table, its readers (CSV, bags, sweeps), reference fields and
-   synthetic tables from independent physics.
+1. ``data``: the measurement table, its readers (CSV, bags, sweeps), reference fields, the
+   probes of a table of several and their neighbours' field, and synthetic tables from
+   independent physics.
 2. ``model``: the per-row configuration through the full potential, effects, plugins, the
    catalog, and the frequency model's weighted least-squares fit.
 3. ``diagnosis``: residual structure, each effect as the missing one, exact aliases, effects
@@ -31,6 +32,7 @@ and the nodes import from here.
 """
 
 from mows.lab import progress
+from mows.lab.data.probes import ProbeSet, with_probes
 from mows.lab.data.readers import from_bag, from_sweep, is_bag, load_table, read_csv
 from mows.lab.data.reference import reference_at, reference_columns, with_reference
 from mows.lab.data.table import MeasurementTable, MissingColumnError, TableError
@@ -53,6 +55,7 @@ __all__ = [
     "MeasurementTable",
     "MissingColumnError",
     "Parameter",
+    "ProbeSet",
     "TableError",
     "Verdict",
     "analyse",
@@ -69,6 +72,7 @@ __all__ = [
     "reference_at",
     "reference_columns",
     "residual_structure",
+    "with_probes",
     "with_reference",
     "write_report",
 ]

@@ -18,15 +18,17 @@ when given: a reference that misses a source), optionally with magnetometer nois
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import dataclasses
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.estimate.ringdown import COIL_OFF_SKIP_S
 from mows.lab.data.reference import reference_columns
-from mows.lab.data.table import FIELD, GRADIENT, MeasurementTable
+from mows.lab.data.table import FIELD, GRADIENT, MAGNET, PROBE, MeasurementTable
 from mows.physics import ringdown_average
+from mows.physics.coupling import PlacedProbe, coupled_rest, external_source
 from mows.physics.field import FieldSource
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
@@ -171,6 +173,60 @@ def rotation_sweeps(step_deg: float = 10.0, sweeps: int = 2, seconds_per_row: fl
         "sweep": np.repeat(np.arange(sweeps), len(angles)).astype(float),
         "t_s": np.arange(len(theta0)) * seconds_per_row,
     }
+
+
+def coupled_probes_table(
+    placed: Sequence[PlacedProbe],
+    scene: FieldSource,
+    stage_deg: Vector,
+    sweeps: int,
+    rng: np.random.Generator,
+    f_std_hz: float = 3.3e-4,
+    amplitude_deg: float = 2.0,
+    coupled: bool = True,
+) -> MeasurementTable:
+    """A table of several probes on one stage in ``scene``, from the coupled first-principles
+    model (:mod:`mows.physics.coupling`).
+
+    ``placed`` gives each probe's constants, its magnet's position and its orientation at stage
+    angle 0 (``pose.theta0_rad``). Each sweep turns the stage through ``stage_deg``. At every
+    step, every probe rings down in the scene plus its neighbours' exact dipoles at their
+    self-consistent rest (:func:`mows.physics.coupling.coupled_rest`), or in the scene alone when
+    ``coupled`` is False. The frequencies are :func:`true_frequency_hz` of ring-downs from
+    ``amplitude_deg`` plus noise of ``f_std_hz``. The reference is the scene alone, and the
+    columns ``probe`` (its index in ``placed``), ``step``, ``sweep``, ``t_s`` and the magnet's
+    position say where and when each row was measured (:mod:`mows.lab.data.probes`).
+    """
+    steps = np.tile(np.asarray(stage_deg, float), sweeps)
+    sources: list[list[FieldSource]] = [[] for _ in placed]
+    for stage_rad in np.radians(steps):
+        turned = [dataclasses.replace(p, pose=p.pose.with_theta0(p.pose.theta0_rad + stage_rad)) for p in placed]
+        state = coupled_rest(turned, scene) if coupled else None
+        for i, found in enumerate(sources):
+            found.append(scene if state is None else external_source(state, scene, i))
+    parts = []
+    for i, p in enumerate(placed):
+        magnet = np.asarray(p.pose.magnet_position_m, float)
+        parts.append(
+            synthesize(
+                p.probe,
+                sources[i],
+                np.mod(np.degrees(p.pose.theta0_rad) + steps, 360.0),
+                rng,
+                f_std_hz,
+                amplitude_deg,
+                magnet_position_m=magnet,
+                reference=scene,
+                step=np.arange(len(steps)) % len(stage_deg),
+                sweep=np.arange(len(steps)) // len(stage_deg),
+                t_s=np.arange(len(steps)) * 10.0,
+                **dict(zip(MAGNET, magnet)),
+            ).with_columns(**{PROBE: np.full(len(steps), float(i))})
+        )
+    table = parts[0]
+    for part in parts[1:]:
+        table = table.concatenate(part)
+    return table
 
 
 # --- the slow path: the time-domain simulator and the estimator ---------------------------------

@@ -20,6 +20,9 @@ Columns (CSV header names, SI units but for the ``*_deg`` columns):
 ``duration_s``                                     angle, docs/model_lab.md; the last two as in
                                                    ``RingdownFit``)
 ``mows_table_format``                   optional   the marker of a table the project's own tools wrote
+``probe``, ``step``, ``magnet_x_m``,     optional   a table of several probes: each row's probe id, its
+``magnet_y_m``, ``magnet_z_m``                     sweep step and its magnet's position
+                                                   (:mod:`mows.lab.data.probes`)
 any other numeric column                optional   kept as a covariate for the diagnostics
 =====================================  =========  ===================================================
 
@@ -58,6 +61,21 @@ KNOWN = (
     + ("coil_current_a", "amplitude_deg", "temperature_k", "damping_per_s", "duration_s")
 )
 
+# Columns of a table of several probes (mows.lab.data.probes).
+PROBE = "probe"
+STEP = "step"
+MAGNET = ("magnet_x_m", "magnet_y_m", "magnet_z_m")
+NEIGHBOUR_FIELD = ("neighbour_bx_t", "neighbour_by_t", "neighbour_bz_t")
+NEIGHBOUR_GRADIENT = ("neighbour_gxx_t_per_m", "neighbour_gxy_t_per_m", "neighbour_gyy_t_per_m")
+NEIGHBOUR_HESSIAN = (
+    "neighbour_hxxx_t_per_m2",
+    "neighbour_hxxy_t_per_m2",
+    "neighbour_hxyy_t_per_m2",
+    "neighbour_hyyy_t_per_m2",
+)
+NEIGHBOUR = NEIGHBOUR_FIELD + NEIGHBOUR_GRADIENT + NEIGHBOUR_HESSIAN
+LABELS = ("sweep", PROBE, STEP)  # integer labels of rows, not quantities
+
 MIN_SWEEPS = 10  # a subsample keeps at least this many sweeps (or all): folds for the cross-validation
 POSITIVE = ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k")
 # A ring-down decays (δ ≥ 0) and its fit starts at or after the switch-off.
@@ -66,7 +84,8 @@ WRITER_COLUMN = "mows_table_format"  # the marker of the project's own tables (m
 TABLE_FORMAT = 1.0
 DERIVED = ("b_abs_t", "b_along_t", "b_perp_t", "b_normal_t", "g_t_per_m", "g_xy_t_per_m", "g_yy_t_per_m")
 COVARIATE_DERIVED = ("b_abs_t", "b_perp_t", "b_along_t", "g_t_per_m")  # what the diagnostics test
-NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t", WRITER_COLUMN}
+NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t", WRITER_COLUMN, PROBE, STEP}
+NOT_COVARIATES |= set(MAGNET + NEIGHBOUR)  # where a probe is and what its neighbours make: the model's inputs
 
 
 # What a reader notes of the reference (with_notes); joining one (reference.with_reference) drops them.
@@ -161,11 +180,7 @@ class MeasurementTable:
     @property
     def gradient_t_per_m(self) -> np.ndarray:
         """Reference gradient tensor (n, 3, 3), completed by Maxwell (module docstring)."""
-        gxx, gxy, gyy = (self.columns.get(name, np.zeros(len(self))) for name in GRADIENT)
-        g = np.zeros((len(self), 3, 3))
-        g[:, 0, 0], g[:, 0, 1], g[:, 1, 0], g[:, 1, 1] = gxx, gxy, gxy, gyy
-        g[:, 2, 2] = -(gxx + gyy)
-        return g
+        return in_plane_gradient(*(self.columns.get(name, np.zeros(len(self))) for name in GRADIENT))
 
     def probe_axes(self) -> np.ndarray:
         """Rows x', y', z' of each measurement as (n, 3, 3): ``axes @ v`` is v in the probe frame."""
@@ -263,6 +278,14 @@ class MeasurementTable:
                 writer.writerow([repr(float(v)) for v in row])
 
 
+def in_plane_gradient(gxx: np.ndarray, gxy: np.ndarray, gyy: np.ndarray) -> np.ndarray:
+    """The gradient tensors (n, 3, 3) of in-plane components (n,), completed by Maxwell (module docstring)."""
+    g = np.zeros((len(gxx), 3, 3))
+    g[:, 0, 0], g[:, 0, 1], g[:, 1, 0], g[:, 1, 1] = gxx, gxy, gxy, gyy
+    g[:, 2, 2] = -(gxx + gyy)
+    return g
+
+
 def _validate(columns: dict[str, np.ndarray]) -> None:
     missing = [name for name in REQUIRED if name not in columns]
     if missing:
@@ -287,11 +310,12 @@ def _validate(columns: dict[str, np.ndarray]) -> None:
                 f"column{'s' if len(given) > 1 else ''} {', '.join(given)} given without "
                 f"{', '.join(sorted(set(group) - set(given)))}: give all of {', '.join(group)}"
             )
-    if "sweep" in columns and np.any(columns["sweep"] != np.round(columns["sweep"])):
-        raise TableError(
-            f"column 'sweep' must hold integers: not so in "
-            f"{rows_text(np.flatnonzero(columns['sweep'] != np.round(columns['sweep'])))}"
-        )
+    for name in LABELS:
+        if name in columns and np.any(columns[name] != np.round(columns[name])):
+            raise TableError(
+                f"column '{name}' must hold integers: not so in "
+                f"{rows_text(np.flatnonzero(columns[name] != np.round(columns[name])))}"
+            )
 
 
 def tool_table(columns: Mapping[str, np.ndarray], source: str) -> MeasurementTable:

@@ -260,7 +260,7 @@ def _free_form(fit: FitResult, effect: Effect, test: Signature, refit: bool) -> 
     """(Form, parameters) of ``effect`` added with its parameters free."""
     k = len(effect.parameters)
     if refit:
-        after = (fit.model + effect).fit(fit.table, start=np.concatenate([fit.values[1:], np.zeros(k)]))
+        after = (fit.model + effect).fit(fit.table, start=np.concatenate([fit.effect_values, np.zeros(k)]))
         chi2_after, dof_after, parameters = after.chi2, after.dof, after.effect_parameters(effect.name)
     else:
         after = None
@@ -290,7 +290,7 @@ def _physics_form(fit: FitResult, effect: Effect, test: Signature, refit: bool) 
     predicted = test.columns @ np.asarray(effect.physical, float)
     signal = project_out(predicted[:, None], orthonormal_basis(fit.jacobian[:, :1]))
     if refit:
-        after = (fit.model + effect.at_physics()).fit(fit.table, start=fit.values[1:])
+        after = (fit.model + effect.at_physics()).fit(fit.table, start=fit.effect_values)
         shift, chi2_after, dof_after = after.weighted_residual - residual, after.chi2, after.dof
     else:
         after = None

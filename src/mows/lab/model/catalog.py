@@ -15,11 +15,19 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from mows.lab.data.table import MeasurementTable
+from mows.lab.data.table import (
+    NEIGHBOUR,
+    NEIGHBOUR_FIELD,
+    NEIGHBOUR_GRADIENT,
+    NEIGHBOUR_HESSIAN,
+    MeasurementTable,
+    in_plane_gradient,
+)
 from mows.lab.model.configuration import Configuration, rotation_matrix, standard_gravity_vector
 from mows.lab.model.effects import AT_PHYSICS, COMPONENTS, MECHANICS, ORIENTATION, READOUT, SOURCES, Effect, Parameter
 from mows.lab.model.plugins import load_plugins
 from mows.physics.probe import Probe
+from mows.physics.schema import FloatOrArray
 
 PHYSICAL_STRENGTH = (1.0,)  # a strength of 1 is the physics as predicted
 
@@ -40,14 +48,15 @@ def _field_offset(config: Configuration, rows: MeasurementTable, probe: Probe, b
     config.field_t = config.field_t + np.array([bx_t, by_t, 0.0])
 
 
-def in_plane_hessian(hxxx: float, hxxy: float, hxyy: float, hyyy: float) -> np.ndarray:
-    """The fully symmetric H[i, j, k] = ∂²B_i/∂x_j∂x_k with in-plane indices only (3, 3, 3).
+def in_plane_hessian(hxxx: FloatOrArray, hxxy: FloatOrArray, hxyy: FloatOrArray, hyyy: FloatOrArray) -> np.ndarray:
+    """The fully symmetric H[..., i, j, k] = ∂²B_i/∂x_j∂x_k with in-plane indices only
+    (shape of the values + (3, 3, 3)).
 
     Symmetry makes each component depend only on how many of its indices are y."""
-    values = (hxxx, hxxy, hxyy, hyyy)
-    hessian = np.zeros((3, 3, 3))
+    values = np.broadcast_arrays(hxxx, hxxy, hxyy, hyyy)
+    hessian = np.zeros(values[0].shape + (3, 3, 3))
     for index in itertools.product((0, 1), repeat=3):
-        hessian[index] = values[sum(index)]
+        hessian[(...,) + index] = values[sum(index)]
     return hessian
 
 
@@ -57,6 +66,17 @@ def _field_curvature(
     hessian = in_plane_hessian(hxxx, hxxy, hxyy, hyyy)
     config.hessian_t_per_m2 = hessian[None] if config.hessian_t_per_m2 is None else config.hessian_t_per_m2 + hessian
     config.hessian_t_per_m2 = np.broadcast_to(config.hessian_t_per_m2, (len(config.theta0_rad), 3, 3, 3))
+
+
+def _mutual_coupling(config: Configuration, rows: MeasurementTable, probe: Probe, moment_scale: float) -> None:
+    field = np.stack([getattr(rows, name) for name in NEIGHBOUR_FIELD], -1)
+    gradient = in_plane_gradient(*(getattr(rows, name) for name in NEIGHBOUR_GRADIENT))
+    hessian = in_plane_hessian(*(getattr(rows, name) for name in NEIGHBOUR_HESSIAN))
+    config.neighbour_field_t = moment_scale * field
+    config.neighbour_gradient_t_per_m = moment_scale * gradient
+    config.hessian_t_per_m2 = moment_scale * hessian + (
+        0.0 if config.hessian_t_per_m2 is None else config.hessian_t_per_m2
+    )
 
 
 def _moment_scale(config: Configuration, rows: MeasurementTable, probe: Probe, scale_error: float) -> None:
@@ -295,6 +315,28 @@ CATALOG = (
         priority=85,
         generic=True,
         check="a field sweep along x' at one amplitude: the slope at B = 0 is β0",
+    ),
+    Effect(
+        "mutual_coupling",
+        "Probes that share a scene feel each other's magnets: each neighbour is a dipole whose "
+        "moment turns with its own orientation, 1.4 µT at 5 cm on the axis of the paper's "
+        "moment, about 5 mHz, fifteen times a probe's precision. The neighbours' exact dipole "
+        "field, gradient and Hessian at each magnet, from their orientations in the same sweep "
+        "step, join the reference field in the full potential; the strength scales the "
+        "neighbours' moments (1 = their probe files' moments).",
+        "B → B_ref + s·Σ_j B_dipole,j(r), G and H likewise (Eq. S8 before its far-field reduction)",
+        "harmonics 0 and 2 of θ0 with a phase that differs from probe to probe (their bearings), "
+        "harmonics 1 and 3 through the lever; absent on a one-probe table",
+        (Parameter("moment_scale", "1", -5.0, 5.0, 1.0, "s, the neighbours' moments over their probe files'"),),
+        _mutual_coupling,
+        SOURCES,
+        requires=NEIGHBOUR,
+        priority=35,
+        physical=PHYSICAL_STRENGTH,
+        needs="needs two or more probes in one table, with their sweep steps and magnet positions "
+        "(columns probe, step, magnet_x_m, magnet_y_m, magnet_z_m): a single probe has no neighbour",
+        check="take one probe out of the scene: its neighbours' shifts vanish, or turn it by 180° at a "
+        "fixed stage angle: they change sign",
     ),
 )
 

@@ -78,6 +78,9 @@ class Configuration:
     ringdown_damping_per_s, ringdown_duration_s : (n,) the ring-down.
     damping : blend weight of the damped form of Eq. S1 with ``damping_per_s`` per row.
     frequency_hz : (n,) additive frequency contributions.
+    neighbour_field_t, neighbour_gradient_t_per_m : (n, 3), (n, 3, 3) or None: the other probes'
+        magnets' field and gradient, which act in full whatever ``transverse`` and ``deflection``
+        say of the reference (their Hessian is in ``hessian_t_per_m2``).
     """
 
     theta0_rad: np.ndarray
@@ -97,6 +100,8 @@ class Configuration:
     deflection: float = 0.0
     amplitude: float = 0.0
     damping: float = 0.0
+    neighbour_field_t: np.ndarray | None = None
+    neighbour_gradient_t_per_m: np.ndarray | None = None
 
     @classmethod
     def base(cls, table: MeasurementTable, probe: Probe) -> Configuration:
@@ -141,14 +146,20 @@ class Configuration:
     def probe_frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """(axes, field', gradient', Hessian') with axes (n, 3, 3) holding rows x', y', z'."""
         axes = probe_axes(self.theta0_rad)
-        field = np.einsum("nij,nj->ni", axes, self.field_t)
-        gradient = np.einsum("nai,nij,nbj->nab", axes, self.gradient_t_per_m, axes)
+        field, gradient = in_probe_frame(axes, self.field_t, self.gradient_t_per_m)
         hessian = (
             None
             if self.hessian_t_per_m2 is None
             else np.einsum("nai,nbj,nck,nijk->nabc", axes, axes, axes, self.hessian_t_per_m2, optimize=True)
         )
         return axes, field, gradient, hessian
+
+
+def in_probe_frame(
+    axes: np.ndarray, field_t: np.ndarray, gradient_t_per_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Global-frame fields (n, 3) and gradients (n, 3, 3) in the probe frames ``axes`` (n, 3, 3)."""
+    return np.einsum("nij,nj->ni", axes, field_t), np.einsum("nai,nij,nbj->nab", axes, gradient_t_per_m, axes)
 
 
 def frequency_factor(
@@ -254,6 +265,12 @@ def _frequency_factor(config: Configuration, probe: Probe, amplitude_nodes: Ampl
     along[:, 0] = field[:, 0]
     active_gradient = config.transverse * gradient
     active_gradient[:, 0, 0] = gradient[:, 0, 0]
+    if config.neighbour_field_t is not None and config.neighbour_gradient_t_per_m is not None:
+        neighbour, neighbour_gradient = in_probe_frame(
+            axes, config.neighbour_field_t, config.neighbour_gradient_t_per_m
+        )
+        along, field = along + neighbour, field + neighbour
+        active_gradient = active_gradient + neighbour_gradient
     variants = [along] + ([field] if config.deflection else [])
     gravity = None if config.gravity_m_per_s2 is None else np.einsum("nij,nj->ni", axes, config.gravity_m_per_s2)
     local: dict[str, Any] = dict(

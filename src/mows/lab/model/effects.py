@@ -86,6 +86,7 @@ class Effect:
     origin: str = "catalog"
     physical: tuple[float, ...] | None = None
     generic: bool = False  # a free correction with no physical value (a calibration term)
+    needs: str = ""  # why a table without the ``requires`` columns cannot test it, in words (default: the columns)
     free: Effect | None = None  # of an effect held at physics: the same effect with its parameters free
 
     @property
@@ -123,6 +124,8 @@ class Effect:
 def untestable_reason(effect_: Effect, table: MeasurementTable, probe: Probe) -> str | None:
     """Why the effect cannot be evaluated on ``table``, in words; None when it can."""
     missing = effect_.missing_columns(table)
+    if missing and effect_.needs:
+        return effect_.needs
     if missing:
         return f"needs column{'s' if len(missing) > 1 else ''} {', '.join(missing)}"
     row = table.subset(np.arange(1))  # effects read a row's own columns: one row says it

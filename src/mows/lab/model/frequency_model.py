@@ -13,7 +13,9 @@ and c the additive frequency contributions of plugins. The base model has no eff
 Eq. 6, √(1 + (m·Bx' + l·m·Gx'x')/kM), with the table's reference field and gradient.
 
 Nuisance parameter: f00 is always fitted (the zero-field frequency drifts with wear, and the
-calibration is never perfect). Nothing else in the base model is free.
+calibration is never perfect), one per probe for a table of several probes
+(:class:`mows.lab.data.probes.ProbeSet`, whose rows are each evaluated with their own probe's
+constants). Nothing else in the base model is free.
 
 Fit: weighted least squares (σ = ``f_std_hz``) by scipy's trust-region reflective method within
 the parameters' bounds, f00 started from its closed-form optimum. The Jacobian column of f00
@@ -34,7 +36,8 @@ from typing import Any
 import numpy as np
 import scipy.optimize
 
-from mows.lab.data.table import MeasurementTable
+from mows.lab.data.probes import ProbeSet, probe_parts
+from mows.lab.data.table import PROBE, MeasurementTable
 from mows.lab.model.configuration import (
     Configuration,
     base_start_swing_rad,
@@ -107,8 +110,25 @@ class FrequencyModel:
         return [(f"{e.name}.{p.name}", p) for e in self.effects for p in e.parameters]
 
     @property
+    def f00_names(self) -> list[str]:
+        """The nuisance parameters: ``f00_hz``, or one ``probe_<id>.f00_hz`` per probe of a :class:`ProbeSet`."""
+        if isinstance(self.probe, ProbeSet):
+            return [f"probe_{i}.f00_hz" for i in self.probe.ids]
+        return ["f00_hz"]
+
+    @property
+    def f00_count(self) -> int:
+        return len(self.f00_names)
+
+    @property
     def parameter_names(self) -> list[str]:
-        return ["f00_hz"] + [name for name, _ in self.parameters]
+        return self.f00_names + [name for name, _ in self.parameters]
+
+    def probe_index(self, table: MeasurementTable) -> np.ndarray:
+        """Each row's f00 (its position in :attr:`f00_names`), (n,)."""
+        if isinstance(self.probe, ProbeSet):
+            return self.probe.index(table)
+        return np.zeros(len(table), int)
 
     def __repr__(self) -> str:
         return f"FrequencyModel({self.name})"
@@ -131,7 +151,9 @@ class FrequencyModel:
         row = table.subset(np.arange(1))
         recorder = _RecordingColumns(row.columns)
         object.__setattr__(row, "columns", recorder)
-        self._configuration(row, np.zeros(len(self.parameters)))
+        self._configuration(row, np.zeros(len(self.parameters)), self._require_probe())
+        if isinstance(self.probe, ProbeSet):  # each probe's rows are evaluated with its own constants
+            recorder.read.add(PROBE)
         return frozenset(name for name in recorder.read if table.has(name) and name not in MEASURED)
 
     def group_factors(
@@ -139,12 +161,19 @@ class FrequencyModel:
     ) -> tuple[np.ndarray, np.ndarray]:
         """(h, c) of f = f00·h + c of each row of a :meth:`groups` table at effect parameter
         values ``values`` (fit order)."""
-        probe = self._require_probe()
-        config = self._configuration(distinct, values)
-        return frequency_factor(config, probe, lambda rows, start_rad: cached_nodes(distinct, rows, start_rad))
+        h, c = np.empty(len(distinct)), np.empty(len(distinct))
+        for rows, probe in probe_parts(distinct, self._require_probe()):
+            part = distinct if rows is None else distinct.subset(rows)
+            config = self._configuration(part, values, probe)
+            found = frequency_factor(config, probe, lambda part, start_rad: cached_nodes(distinct, part, start_rad))
+            if rows is None:
+                return found
+            h[rows], c[rows] = found
+        return h, c
 
-    def _configuration(self, table: MeasurementTable, values: Sequence[float] | np.ndarray) -> Configuration:
-        probe = self._require_probe()
+    def _configuration(
+        self, table: MeasurementTable, values: Sequence[float] | np.ndarray, probe: Probe
+    ) -> Configuration:
         config = Configuration.base(table, probe)
         bounds = np.cumsum([0] + [len(e.parameters) for e in self.effects])
         ordered = sorted(range(len(self.effects)), key=lambda i: self.effects[i].stage)
@@ -159,10 +188,10 @@ class FrequencyModel:
         return h[inverse], c[inverse]
 
     def predict(self, table: MeasurementTable, values: FitResult | Sequence[float] | np.ndarray) -> np.ndarray:
-        """f (Hz) for ``values`` = [f00, effect parameters…] (or a :class:`FitResult`)."""
+        """f (Hz) for ``values`` = [f00 (one per probe), effect parameters…] (or a :class:`FitResult`)."""
         x = values.values if isinstance(values, FitResult) else np.asarray(values, float)
-        h, c = self.factors(table, x[1:])
-        return x[0] * h + c
+        h, c = self.factors(table, x[self.f00_count :])
+        return x[: self.f00_count][self.probe_index(table)] * h + c
 
     # --- fit ------------------------------------------------------------------------------
     def fit(
@@ -180,11 +209,11 @@ class FrequencyModel:
                 raise ValueError(f"effect {effect.name} cannot be fitted to this table: {reason}")
         problem = Problem(self, table, rows)
         p0 = np.zeros(len(self.parameters)) if start is None else np.asarray(start, float)
-        x0 = np.concatenate([[problem.best_f00(p0)], p0])
-        if x0.size == 1:  # f00 alone enters linearly: the closed form is the optimum
+        x0 = np.concatenate([problem.best_f00(p0), p0])
+        if x0.size == self.f00_count:  # f00 alone enters linearly: the closed form is the optimum
             return problem.result(x0, True, "f00 in closed form")
-        lower = np.array([0.0] + [p.lower for _, p in self.parameters])
-        upper = np.array([np.inf] + [p.upper for _, p in self.parameters])
+        lower = np.array([0.0] * self.f00_count + [p.lower for _, p in self.parameters])
+        upper = np.array([np.inf] * self.f00_count + [p.upper for _, p in self.parameters])
         x0 = np.clip(x0, lower, upper)
         solution = scipy.optimize.least_squares(
             problem.residual,
@@ -213,7 +242,12 @@ def start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
     (:func:`mows.lab.model.configuration.base_start_swing_rad`), evaluated once per
     configuration group of the published model."""
     distinct, inverse = FrequencyModel(probe).groups(table)
-    return base_start_swing_rad(distinct, probe)[inverse]
+    found = np.empty(len(distinct))
+    for rows, member in probe_parts(distinct, probe):
+        if rows is None:
+            return base_start_swing_rad(distinct, probe)[inverse]
+        found[rows] = base_start_swing_rad(distinct.subset(rows), member)
+    return found[inverse]
 
 
 # --- the table's configuration groups, and ring-down amplitude nodes, cached per table ------

@@ -81,6 +81,7 @@ class Problem:
         self.distinct, inverse = model.groups(table)
         self.rows = rows
         self.inverse = inverse if rows is None else inverse[rows]
+        self.group_f00 = model.probe_index(self.distinct)  # each group's f00 (one per probe)
         f_hz, w2, groups = self.of_rows(table.f_hz), self.row_weight**2, len(self.distinct)
         self.count = np.bincount(self.inverse, minlength=groups)
         weight = np.bincount(self.inverse, w2, groups)
@@ -111,16 +112,27 @@ class Problem:
             progress.evaluated()
         return self._cache[1]
 
-    def best_f00(self, p: np.ndarray) -> float:
+    @property
+    def f00_count(self) -> int:
+        return self.model.f00_count
+
+    def best_f00(self, p: np.ndarray) -> np.ndarray:
+        """Each probe's f00 in closed form at effect parameters ``p`` (f00 enters linearly)."""
         h, c = self.factors(np.asarray(p, float))
         w2 = self.root_weight**2
         good = np.isfinite(h)
-        return float(np.sum((w2 * h * (self.mean_hz - c))[good]) / np.sum((w2 * h * h)[good]))
+        return np.array(
+            [
+                np.sum((w2 * h * (self.mean_hz - c))[own]) / np.sum((w2 * h * h)[own])
+                for own in (good & (self.group_f00 == k) for k in range(self.f00_count))
+            ]
+        )
 
     def model_hz(self, x: np.ndarray) -> np.ndarray:
-        """m_g of each group at ``x`` = [f00, effect parameters…] (NaN where it has no real frequency)."""
-        h, c = self.factors(x[1:])
-        return x[0] * h + c
+        """m_g of each group at ``x`` = [f00 (one per probe), effect parameters…] (NaN where it
+        has no real frequency)."""
+        h, c = self.factors(x[self.f00_count :])
+        return x[: self.f00_count][self.group_f00] * h + c
 
     def residual(self, x: np.ndarray) -> np.ndarray:
         """r_g = √W_g·(f̄_g − m_g); a group without a real frequency gets INVALID_RESIDUAL per row."""
@@ -132,20 +144,22 @@ class Problem:
         return -self.root_weight[:, None] * self.derivative(x, range(len(x)))
 
     def derivative(self, x: np.ndarray, indices: Iterable[int]) -> np.ndarray:
-        """dm_g/dx_j for j in ``indices`` (0: f00, exact; effect parameters: forward differences),
+        """dm_g/dx_j for j in ``indices`` (f00s: exact; effect parameters: forward differences),
         (groups, len(indices)); 0 where the model has no real frequency."""
-        h, _ = self.factors(x[1:])
+        first = self.f00_count
+        h, _ = self.factors(x[first:])
         base = self.model_hz(x)
         columns = []
         for j in indices:
-            if j == 0:
-                columns.append(h)
+            if j < first:
+                columns.append(h * (self.group_f00 == j))
                 continue
-            p = x[1:].copy()
+            p = x[first:].copy()
+            i = j - first
             # Step inwards at an upper bound, so that the model is evaluated where it is defined.
-            step = -self.steps[j - 1] if p[j - 1] + self.steps[j - 1] > self.upper[j - 1] else self.steps[j - 1]
-            p[j - 1] += step
-            columns.append((self.model_hz(np.concatenate([[x[0]], p])) - base) / step)
+            step = -self.steps[i] if p[i] + self.steps[i] > self.upper[i] else self.steps[i]
+            p[i] += step
+            columns.append((self.model_hz(np.concatenate([x[:first], p])) - base) / step)
         found = np.stack(columns, -1) if columns else np.zeros((len(base), 0))
         return np.where(np.isfinite(found), found, 0.0)
 
@@ -242,7 +256,7 @@ class FitResult:
             _, s, vt = np.linalg.svd(jacobian[:, found] / norms[found], full_matrices=False)
             undetermined = vt[s < DEGENERATE_RTOL * s[0]]
             found[found] = np.all(np.abs(undetermined) <= DEGENERATE_WEIGHT, axis=0)
-        ranges = np.array([np.inf] + [p.upper - p.lower for _, p in self.model.parameters])
+        ranges = np.array([np.inf] * self.model.f00_count + [p.upper - p.lower for _, p in self.model.parameters])
         return found & (self.std < ranges)
 
     @property
@@ -278,9 +292,19 @@ class FitResult:
     def weighted_residual(self) -> np.ndarray:
         return self.residual_hz * self.problem.row_weight
 
+    @property
+    def effect_values(self) -> np.ndarray:
+        """The fitted effect parameters, without the f00s (fit order)."""
+        return self.values[self.model.f00_count :]
+
+    @property
+    def row_f00_hz(self) -> np.ndarray:
+        """The fitted f00 of each row's probe, over the whole table, Hz."""
+        return self.values[: self.model.f00_count][self.model.probe_index(self.table)]
+
     def parameters(self) -> list[FittedParameter]:
-        """f00 and every effect parameter, named ``effect.parameter``, in fit order."""
-        units = ["Hz"] + [p.unit for _, p in self.model.parameters]
+        """The f00s and every effect parameter, named ``effect.parameter``, in fit order."""
+        units = ["Hz"] * self.model.f00_count + [p.unit for _, p in self.model.parameters]
         columns = zip(self.model.parameter_names, self.values.tolist(), self.std.tolist(), units)
         return [FittedParameter(*column) for column in columns]
 
@@ -288,7 +312,7 @@ class FitResult:
         """The fitted effect parameter values (fit order) of the model without ``effect``: a
         start for fitting ``model.without(effect)``."""
         keep = [e is not effect for e in self.model.effects for _ in e.parameters]
-        return self.values[1:][np.array(keep, bool)]
+        return self.effect_values[np.array(keep, bool)]
 
     def effect_parameters(self, effect_name: str) -> list[FittedParameter]:
         """The parameters of one effect of the model, named without the effect's prefix."""
@@ -305,7 +329,7 @@ class FitResult:
         On ``table`` (default: the fitted table; e.g. a what-if variant of it)."""
         extended = self.model + effect
         x = np.concatenate([self.values, np.zeros(len(effect.parameters))])
-        first = len(self.model.parameters) + 1
+        first = len(self.model.parameters) + self.model.f00_count
         return Problem(extended, self.table if table is None else table).columns(
             x, range(first, first + len(effect.parameters))
         )
@@ -337,7 +361,7 @@ class FitResult:
             progress.stage("cross-validation (folds)", done, len(folds))
             train = np.ones(self.n, bool)
             train[rows] = False
-            part = self.model.fit(self.table, start=self.values[1:], rows=np.flatnonzero(train))
+            part = self.model.fit(self.table, start=self.effect_values, rows=np.flatnonzero(train))
             if (
                 np.any(self.identifiable & ~part.identifiable)
                 or part.prediction_sigmas(self.table, rows) > CV_PREDICTION_SIGMAS

@@ -26,6 +26,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 import numpy as np  # noqa: E402
 
+from mows.lab.data.table import LABELS, PROBE  # noqa: E402
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -44,8 +46,8 @@ def _png(figure: Figure) -> str:
 
 
 def _shift_hz(fit: FitResult) -> tuple[np.ndarray, np.ndarray]:
-    """Measured and model Δf = f − f00 (fitted f00), Hz."""
-    f00 = fit.values[0]
+    """Measured and model Δf = f − f00 (each row's probe's fitted f00), Hz."""
+    f00 = fit.row_f00_hz
     return fit.table.f_hz - f00, fit.prediction_hz - f00
 
 
@@ -74,9 +76,11 @@ def figure_field_response(report: LabReport) -> str:
 
 
 def _largest_sweep(table: MeasurementTable) -> np.ndarray:
-    """Rows of the sweep with the most rows: one sweep is one reference field and gradient."""
+    """Rows of the sweep with the most rows: one sweep is one reference field and gradient; of a
+    table of several probes, the first probe's rows of it."""
     ids, counts = np.unique(table.sweep_ids, return_counts=True)
-    return table.sweep_ids == ids[np.argmax(counts)]
+    rows = table.sweep_ids == ids[np.argmax(counts)]
+    return rows & (table.probe == np.min(table.probe)) if table.has(PROBE) else rows
 
 
 def sweep_curve(fit: FitResult, rows: np.ndarray, theta0_deg: FloatOrArray) -> np.ndarray:
@@ -84,7 +88,8 @@ def sweep_curve(fit: FitResult, rows: np.ndarray, theta0_deg: FloatOrArray) -> n
 
     Every other column (reference field, start amplitude, time, temperature…) is interpolated
     periodically in θ0 between the sweep's measured orientations (repeats averaged), so the
-    curve passes through the model's value at every measured orientation.
+    curve passes through the model's value at every measured orientation. The labels (sweep,
+    probe, step) keep the sweep's first row's.
     """
     sweep = fit.table.subset(rows)
     angles, inverse = np.unique(np.mod(sweep.theta0_deg, 360.0), return_inverse=True)
@@ -94,6 +99,7 @@ def sweep_curve(fit: FitResult, rows: np.ndarray, theta0_deg: FloatOrArray) -> n
         name: np.interp(np.mod(grid, 360.0), angles, np.bincount(inverse, values) / counts, period=360.0)
         for name, values in sweep.columns.items()
     }
+    columns.update({name: np.full(len(grid), sweep.columns[name][0]) for name in LABELS if sweep.has(name)})
     columns["theta0_deg"] = grid
     return fit.model.predict(dataclasses.replace(sweep, columns=columns), fit.values)
 
@@ -106,7 +112,7 @@ def figure_polar(report: LabReport) -> str | None:
     theta = fit.table.theta0_rad[rows]
     if len(np.unique(np.round(np.mod(theta, 2 * np.pi), 6))) < 5:
         return None
-    f00 = fit.values[0]
+    f00 = fit.row_f00_hz[rows][0]
     grid_deg = np.arange(0.0, 361.0)
     curve = sweep_curve(fit, rows, grid_deg) - f00
     spectrum = np.fft.rfft(curve[:-1]) / 360.0

@@ -24,6 +24,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from mows.lab.data.probes import probe_parts, with_probes
 from mows.lab.data.readers import load_table
 from mows.lab.data.table import MeasurementTable, TableError
 from mows.lab.diagnosis.candidates import Candidate, physics_deviation
@@ -180,7 +181,8 @@ def analyse(
     Parameters
     ----------
     table : a :class:`MeasurementTable`, a CSV path or a bag (see :func:`load_table`).
-    probe : :class:`mows.physics.probe.Probe`.
+    probe : :class:`mows.physics.probe.Probe`: of every row; for a table with a ``probe`` column
+        a :class:`mows.lab.data.probes.ProbeSet`, or one Probe for all its probes.
     effects : effect names added one by one to the base model (each a step of the history);
         ``name (at physics)`` adds the effect held at its physical value.
     auto : then select effects stepwise (module docstring).
@@ -188,13 +190,16 @@ def analyse(
     rank : test the catalog's candidates (``False``: fit and residual structure only).
     cross_validate : compute the cross-validated error (whole sweeps held out) of every step.
     """
-    table = _evaluable(load_table(table), probe)
+    table, probe = with_probes(load_table(table), probe)
+    table = _evaluable(table, probe)
     available = catalog(plugins)
     fit = FrequencyModel(probe).fit(table)
     base = fit
     history = [history_step(fit, cross_validate)]
     for effect in resolve(list(effects or ()), available):
-        fit = (fit.model + effect).fit(table, start=np.concatenate([fit.values[1:], np.zeros(len(effect.parameters))]))
+        fit = (fit.model + effect).fit(
+            table, start=np.concatenate([fit.effect_values, np.zeros(len(effect.parameters))])
+        )
         history.append(history_step(fit, cross_validate, f"add {effect.label}"))
     pool = list(available.values()) if rank else []
     found = search(diagnose(fit, pool, probe), pool, probe, history, cross_validate, MAX_AUTO_STEPS if auto else 0)
@@ -212,7 +217,10 @@ def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:
     """The table without the rows the potential cannot evaluate, each named with the reason in
     the notes (:func:`mows.lab.model.configuration.unevaluable_rows`); TableError when no row is left."""
     distinct, inverse = FrequencyModel(probe).groups(table)
-    found = unevaluable_rows(distinct, probe)  # a reason holds for every row of its configuration
+    found = {}  # a reason holds for every row of its configuration
+    for rows, member in probe_parts(distinct, probe):
+        reasons = unevaluable_rows(distinct if rows is None else distinct.subset(rows), member)
+        found.update(reasons if rows is None else {int(rows[row]): reason for row, reason in reasons.items()})
     problems = {int(row): found[int(inverse[row])] for row in np.flatnonzero(np.isin(inverse, list(found)))}
     if len(problems) == len(table):
         raise TableError(f"the model cannot evaluate any row of {table.source}: {next(iter(problems.values()))[0]}")

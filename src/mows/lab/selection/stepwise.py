@@ -213,7 +213,7 @@ def _forward_step(found: Diagnosis) -> tuple[str, FitResult, Sequence[FittedPara
     for candidate in found.candidates:
         if candidate.physics is not None and candidate.physics.kept_physics:
             fit = candidate.physics.fit or (found.fit.model + candidate.effect.at_physics()).fit(
-                found.fit.table, start=found.fit.values[1:]
+                found.fit.table, start=found.fit.effect_values
             )
             if quasi_gain(found.fit, fit) > -TIE_DELTA_BIC:  # the one-step estimate may be off
                 return (
@@ -293,7 +293,7 @@ def _alternatives(
         for label, new, freed in _replacements(fit, reduced, pool, probe, effect)
     ]
     if effect.physical is not None and not effect.fixed:
-        held = (reduced.model + effect.at_physics()).fit(fit.table, start=reduced.values[1:])
+        held = (reduced.model + effect.at_physics()).fit(fit.table, start=reduced.effect_values)
         found += [
             (f"replace {effect.label} by {held.model.labels[-1]} + {label}", new, freed)
             for label, new, freed in _replacements(fit, held, pool, probe, effect)

@@ -1,0 +1,180 @@
+"""Tables of several probes: each probe's constants, and its neighbours' field at each row.
+
+A table may hold several probes that share a scene (docs/multi_probe.md). The column ``probe``
+names each row's probe by an integer id; ``step`` numbers the steps of a sweep, so that rows
+with equal ``sweep`` and ``step`` were measured together; ``magnet_x_m``, ``magnet_y_m`` and
+``magnet_z_m`` give where the row's magnet sits undeflected (global frame, as
+``--magnet-position`` does for one probe). :class:`ProbeSet` holds each probe's constants.
+
+:func:`with_neighbour_field` gives every row its neighbours' field at its magnet: the exact
+point-dipole field (Eq. S8 before its far-field reduction), with its in-plane gradient and
+Hessian, of every other probe's magnet in the same sweep step. Each neighbour's moment points
+along its row's orientation turned by its rest angle in that row's reference field, and its
+magnet sits at the end of its lever turned likewise (:class:`mows.physics.pose.Pose`). The
+``mutual_coupling`` effect adds these columns to the reference (:mod:`mows.lab.model.catalog`).
+Because they are columns, each row's model stays a function of that row's own columns.
+
+What the columns leave out: the neighbours' rest angles are taken in the reference field alone,
+not in each other's fields, which changes the coupling by about m·B_neighbour/(kM·θ) ≈ 1e-4 at
+centimetres (:mod:`mows.physics.coupling`). A ringing neighbour's field at its own frequency is
+off this probe's resonance and is left out too (docs/multi_probe.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+
+import numpy as np
+
+from mows.lab.data.table import MAGNET, NEIGHBOUR, PROBE, STEP, MeasurementTable, TableError, rows_text
+from mows.physics.pose import Pose
+from mows.physics.potential import ArcPotential
+from mows.physics.probe import Probe
+from mows.physics.sources import PointDipole
+
+
+@dataclasses.dataclass(frozen=True)
+class ProbeSet(Probe):
+    """The constants of every probe of a table, by id (``members``: (id, Probe) in id order).
+
+    As a :class:`~mows.physics.probe.Probe` it carries its first member's constants. Only the
+    diagnosis's explanatory texts use them. The frequency model evaluates each probe's rows with
+    that probe's own constants and fits one f00 per probe
+    (:mod:`mows.lab.model.frequency_model`).
+    """
+
+    members: tuple[tuple[int, Probe], ...] = ()
+
+    @classmethod
+    def of(cls, probes: Mapping[int, Probe]) -> ProbeSet:
+        """The set of ``probes`` ({id: constants}); ValueError when it is empty."""
+        ordered = tuple(sorted(probes.items()))
+        if not ordered:
+            raise ValueError("a probe set needs at least one probe")
+        first = ordered[0][1]
+        return cls(**{f.name: getattr(first, f.name) for f in dataclasses.fields(Probe)}, members=ordered)
+
+    @classmethod
+    def for_table(cls, table: MeasurementTable, default: Probe, named: Mapping[int, Probe]) -> ProbeSet:
+        """The constants of every probe of ``table``: ``named`` by id, ``default`` for the others."""
+        ids = np.unique(table.columns[PROBE]).astype(int)
+        unknown = sorted(set(named) - set(ids.tolist()))
+        if unknown:
+            raise TableError(
+                f"probe file(s) given for probe {', '.join(map(str, unknown))}, which the table does not hold"
+            )
+        return cls.of({int(i): named.get(int(i), default) for i in ids})
+
+    @property
+    def ids(self) -> tuple[int, ...]:
+        return tuple(i for i, _ in self.members)
+
+    def index(self, table: MeasurementTable) -> np.ndarray:
+        """Each row's position in ``members`` (n,); TableError naming a probe without constants."""
+        ids = np.asarray(self.ids)
+        found = np.searchsorted(ids, table.columns[PROBE].astype(int))
+        known = (found < len(ids)) & (ids[np.minimum(found, len(ids) - 1)] == table.columns[PROBE])
+        if not known.all():
+            rows = np.flatnonzero(~known)
+            raise TableError(
+                f"probe {int(table.columns[PROBE][rows[0]])} in {rows_text(rows)} has no constants "
+                f"(give --probe ID=FILE; known: {', '.join(map(str, self.ids))})"
+            )
+        return found
+
+
+def probe_parts(table: MeasurementTable, probe: Probe) -> list[tuple[np.ndarray | None, Probe]]:
+    """(rows, constants) of each probe of ``table``: rows None (all) for one probe; for a
+    :class:`ProbeSet` the indices of each member's rows, for the members the table holds."""
+    if not isinstance(probe, ProbeSet):
+        return [(None, probe)]
+    index = probe.index(table)
+    return [(np.flatnonzero(index == k), member) for k, (_, member) in enumerate(probe.members) if np.any(index == k)]
+
+
+def with_probes(table: MeasurementTable, probe: Probe) -> tuple[MeasurementTable, Probe]:
+    """(table, probe) ready for the lab: for a table with a ``probe`` column, a :class:`ProbeSet`
+    (``probe`` for every id when it is one Probe) and the neighbours' field
+    (:func:`with_neighbour_field`); any other table as it is. TableError for a ProbeSet given
+    with a table that does not say which row is which probe."""
+    if not table.has(PROBE):
+        if isinstance(probe, ProbeSet):
+            raise TableError(
+                f"constants of probes {', '.join(map(str, probe.ids))} given, but the table has no column "
+                f"'{PROBE}' saying which row is which probe"
+            )
+        return table, probe
+    probes = probe if isinstance(probe, ProbeSet) else ProbeSet.for_table(table, probe, {})
+    return with_neighbour_field(table, probes), probes
+
+
+def with_neighbour_field(table: MeasurementTable, probes: ProbeSet) -> MeasurementTable:
+    """``table`` with the NEIGHBOUR columns (module docstring) where it holds two or more
+    probes and says where they are and which rows were measured together; otherwise ``table``.
+    Rows whose step lacks a neighbour's row are left out with a note (that neighbour's
+    orientation, and so its field, is unknown there); TableError where a probe has two rows in
+    one step."""
+    index = probes.index(table)
+    if len(np.unique(index)) < 2 or not all(table.has(name) for name in (STEP, *MAGNET)):
+        return table
+    _, step = np.unique(np.stack([table.sweep_ids, table.columns[STEP]], -1), axis=0, return_inverse=True)
+    step = step.ravel()
+    slot = np.full((step.max() + 1, len(probes.members)), -1)
+    count = np.zeros_like(slot)
+    np.add.at(count, (step, index), 1)
+    repeated = np.flatnonzero(count[step, index] > 1)
+    if repeated.size:
+        raise TableError(
+            f"probe {int(table.columns[PROBE][repeated[0]])} has more than one row in one sweep step: "
+            f"{rows_text(repeated)} (columns sweep, step)"
+        )
+    slot[step, index] = np.arange(len(table))
+    present = np.unique(index)
+    lacking = np.flatnonzero(np.any(slot[step][:, present] < 0, axis=1))
+    if lacking.size:
+        kept = table.subset(np.setdiff1d(np.arange(len(table)), lacking))
+        note = (
+            f"left out {rows_text(lacking)}: a neighbour has no row in their sweep step, so its "
+            "orientation there, and its field, are unknown"
+        )
+        table = dataclasses.replace(kept, notes=kept.notes + (note,))
+        return with_neighbour_field(table, probes) if len(np.unique(probes.index(table))) > 1 else table
+    return table.with_columns(**_neighbour_columns(table, probes, slot[step]))
+
+
+def _neighbour_columns(table: MeasurementTable, probes: ProbeSet, partner: np.ndarray) -> dict[str, np.ndarray]:
+    """The NEIGHBOUR columns; ``partner[r, k]`` is the row of member k in row r's step."""
+    moments, positions = _magnets_at_rest(table, probes)
+    points = np.stack([table.columns[name] for name in MAGNET], -1)
+    n = len(table)
+    field, gradient, hessian = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3, 3))
+    for row in range(n):
+        for source in partner[row]:
+            if source != row:
+                dipole = PointDipole(moments[source], positions[source])
+                field[row] += dipole.field_t(points[row])
+                gradient[row] += dipole.gradient_t_per_m(points[row])
+                hessian[row] += dipole.hessian_t_per_m2(points[row])
+    values = [field[:, 0], field[:, 1], field[:, 2], gradient[:, 0, 0], gradient[:, 0, 1], gradient[:, 1, 1]]
+    values += [hessian[:, 0, 0, 0], hessian[:, 0, 0, 1], hessian[:, 0, 1, 1], hessian[:, 1, 1, 1]]
+    return dict(zip(NEIGHBOUR, values))
+
+
+def _magnets_at_rest(table: MeasurementTable, probes: ProbeSet) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's magnet as a neighbour sees it: moment (n, 3), A·m², and position (n, 3), m,
+    at the rest angle in the row's reference field and gradient (module docstring)."""
+    axes = table.probe_axes()
+    field = table.probe_field_t
+    gradient = np.einsum("nai,nij,nbj->nab", axes, table.gradient_t_per_m, axes)
+    moments, positions = np.zeros((len(table), 3)), np.zeros((len(table), 3))
+    index = probes.index(table)
+    for k, (_, probe) in enumerate(probes.members):
+        rows = np.flatnonzero(index == k)
+        rest = ArcPotential.from_local_field(probe, field[rows], gradient[rows]).rest_angle_rad()
+        for row, angle in zip(rows, rest):
+            magnet = tuple(float(table.columns[name][row]) for name in MAGNET)
+            pose = Pose(magnet_position_m=magnet, theta0_rad=float(table.theta0_rad[row]))
+            moments[row] = probe.moment_am2 * pose.moment_direction_at(angle)
+            positions[row] = pose.magnet_position_at(angle, probe.lever_m)
+    return moments, positions

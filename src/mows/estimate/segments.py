@@ -17,11 +17,13 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure, fit_ringdown
+from mows.estimate.ringdown_joint import JointOptions, ProbeLine, fit_ringdowns
 from mows.records import stamps
 from mows.records.samples import SampleBlock
 
@@ -211,13 +213,7 @@ def fit_segment(
     """Fit one assembled ring-down; a segment with missing samples is refused, not patched."""
     window = segment.window
     if segment.missing_samples:
-        return failure(
-            FitStatus.DATA_GAP,
-            f"{segment.missing_samples} of {len(segment.samples_t)} samples of the ring-down never "
-            "arrived (sequence gap or late announcement); not fitted across a gap",
-            theta0_rad=window.theta0_rad,
-            theta0_free=options.theta0_free,
-        )
+        return failure(FitStatus.DATA_GAP, _gap(segment), theta0_rad=window.theta0_rad, theta0_free=options.theta0_free)
     return fit_ringdown(
         segment.samples_t,
         segment.sample_rate_hz,
@@ -227,4 +223,22 @@ def fit_segment(
         options,
         damping_guess_per_s,
         coil_off_skip_s,
+    )
+
+
+def fit_segment_jointly(
+    segment: Segment, lines: Sequence[ProbeLine], options: JointOptions, coil_off_skip_s: float = 0.0
+) -> list[RingdownFit]:
+    """Fit the probes of ``lines`` jointly in one assembled ring-down, one fit per probe; a
+    segment with missing samples is refused for every probe, not patched."""
+    if segment.missing_samples:
+        theta0_rad = segment.window.theta0_rad
+        return [failure(FitStatus.DATA_GAP, _gap(segment), theta0_rad=theta0_rad, probe_id=x.probe_id) for x in lines]
+    return fit_ringdowns(segment.samples_t, segment.sample_rate_hz, lines, segment.saturated, options, coil_off_skip_s)
+
+
+def _gap(segment: Segment) -> str:
+    return (
+        f"{segment.missing_samples} of {len(segment.samples_t)} samples of the ring-down never "
+        "arrived (sequence gap or late announcement); not fitted across a gap"
     )

@@ -12,8 +12,9 @@ A probe given by its f00 alone is the estimator's own probe (``probe_file``) wit
 that gives it that f00 (:func:`with_f00`), its lever, moment, inertia and damping kept; its
 f00 is then also the zero-field frequency its shifts are counted from. ``position_m`` is the probe's
 magnet at rest relative to the single probe's place before the fluxgates, in the rotation
-plane's frame (x = e1 towards the sensors' side, y = e2); every probe turns with the one stage
-whose θ0 the driver announces. An empty text is one probe: the single-probe estimator.
+plane's frame (x = e1 towards the sensors' side, y = e2); every probe is turned about its own
+magnet to the one θ0 the driver announces (stages turned together; a probe orbiting a shared
+axis is not modelled). An empty text is one probe: the single-probe estimator.
 
 At most :data:`MAX_PROBES` probes, each line at least :data:`MIN_SEPARATION_HZ` from the
 others: closer lines are not told apart in a window of a second or less (docs/multi_probe.md).

@@ -18,14 +18,18 @@ class FitTally:
     def __init__(self):
         self._latency_ms = collections.deque(maxlen=LATENCY_WINDOW)
         self._counts = collections.Counter()
+        self._per_probe = collections.Counter()  # probe_<id>_fits_ok, probe_<id>_fits_failed
 
     def count(self, what: str) -> None:
         self._counts[what] += 1
 
-    def add(self, status_name: str, latency_ms: float) -> None:
-        """A fit published ``latency_ms`` after the message that completed its ring-down."""
+    def add(self, status_name: str, latency_ms: float, probe_id: int | None = None) -> None:
+        """A fit published ``latency_ms`` after the message that completed its ring-down; of
+        probe ``probe_id`` when several probes share the windows."""
         self._counts[status_name] += 1
         self._latency_ms.append(latency_ms)
+        if probe_id is not None:
+            self._per_probe[f"probe_{probe_id}_fits_{'ok' if status_name == 'OK' else 'failed'}"] += 1
 
     def health(self, last: str, assembler: SegmentAssembler, f00_hz: float, f00_std_hz: float) -> Health:
         latency = np.array(self._latency_ms) if self._latency_ms else np.array([math.nan])
@@ -47,5 +51,6 @@ class FitTally:
                 "blocks": assembler.blocks,
                 "f00_hz": f00_hz,
                 "f00_std_hz": f00_std_hz,
+                **self._per_probe,
             },
         )

@@ -20,6 +20,7 @@ def fit_to_msg(estimated: Estimated, frame_id: str) -> RingdownFit:
     msg.header.frame_id = frame_id
     msg.cycle_id, msg.repeat_index, msg.tuning = window.cycle_id, window.repeat_index, window.tuning
     msg.status, msg.status_name, msg.message = int(fit.status), fit.status.name, fit.message
+    msg.probe_id = fit.probe_id
     msg.theta0_rad, msg.theta0_free = fit.theta0_rad, fit.theta0_free
     for name in (
         "frequency_hz",

@@ -4,7 +4,9 @@ Topic and service names are relative, so the graph can run in a namespace; in th
 namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock, sensor-data
 QoS) and ``/mows/excitation`` (ExcitationState). Publishes, per recorded ring-down,
 ``/mows/ringdown`` (RingdownFit, always, with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
-``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). Service
+``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). With ``probes`` listing several
+probes, each window is fitted jointly and gives one RingdownFit per probe (its ``probe_id``,
+frame ``<probe_frame_id>_<id>``), and /diagnostics counts each probe's fits. Service
 ``/estimator/calibrate`` (CalibrateF00; ``/mows/estimator/calibrate``, the previous release's name,
 is served too for one release) sets f00 from the next ring-downs in a known field.
 The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` and ``mows.estimate.axis``.
@@ -19,6 +21,7 @@ from rclpy.parameter import Parameter
 from rclpy.task import Future
 from sensor_msgs.msg import MagneticField
 
+from mows.estimate.probe_set import probe_frame_id
 from mows.estimate.stream import Estimated, FitSettings, RingdownEstimator
 from mows.physics.probe import Probe
 from mows.precompile import precompile
@@ -89,10 +92,13 @@ class EstimatorNode(MowsNode):
             self.get_logger().warn(warning.format(error=error))
             return
         for segment in segments:
-            self._publish(self._estimator.estimate(segment, self._settings()), arrived)
+            settings = self._settings()
+            for estimated in self._estimator.estimate_all(segment, settings):
+                self._publish(estimated, arrived, settings.joint is not None)
 
-    def _publish(self, estimated: Estimated, arrived: float):
-        fit_msg = fit_to_msg(estimated, self.get_parameter("probe_frame_id").value)
+    def _publish(self, estimated: Estimated, arrived: float, several: bool):
+        frame_id = self.get_parameter("probe_frame_id").value
+        fit_msg = fit_to_msg(estimated, probe_frame_id(frame_id, estimated.fit.probe_id) if several else frame_id)
         self._fit_pub.publish(fit_msg)
         if estimated.estimate.ok:
             self._field_pub.publish(estimate_to_msg(estimated.estimate, fit_msg.header, estimated.window))
@@ -100,9 +106,10 @@ class EstimatorNode(MowsNode):
         if estimated.calibrated:
             self._calibrated.set_result(True)
         fit, window = estimated.fit, estimated.window
-        self._tally.add(fit.status.name, 1e3 * (time.monotonic() - arrived))
+        self._tally.add(fit.status.name, 1e3 * (time.monotonic() - arrived), fit.probe_id if several else None)
         if not fit.ok:
-            self.get_logger().warn(f"cycle {window.cycle_id} repeat {window.repeat_index}: {fit.report()}")
+            probe = f" probe {fit.probe_id}" if several else ""
+            self.get_logger().warn(f"cycle {window.cycle_id} repeat {window.repeat_index}{probe}: {fit.report()}")
 
     # --- calibration ------------------------------------------------------------------------
     async def _on_calibrate(self, request: CalibrateF00.Request, response: CalibrateF00.Response):
@@ -111,8 +118,13 @@ class EstimatorNode(MowsNode):
             response.success, response.message = False, inactive
             return response
         try:
+            joint = self._settings().joint
             calibration = self._estimator.begin_calibration(
-                self.probe(), request.reference_field_t, request.n_ringdowns, request.timeout_s
+                self.probe(),
+                request.reference_field_t,
+                request.n_ringdowns,
+                request.timeout_s,
+                1 if joint is None else len(joint.probes),
             )
         except ValueError as error:
             response.success, response.message = False, str(error)

@@ -2,12 +2,14 @@
 
 import functools
 
+from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
-from mows.estimate.stream import FitSettings
+from mows.estimate.ringdown_joint import JointOptions, ProbeLine
+from mows.estimate.stream import FitSettings, JointSettings
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import Probe
 from mows_ros.params import ParamSpec
-from mows_ros.probe import PROBE_FILE
+from mows_ros.probe import PROBE_FILE, PROBES, probe_set
 
 PARAMETERS = (
     PROBE_FILE,
@@ -49,6 +51,7 @@ PARAMETERS = (
     ParamSpec("buffer_s", 5.0, "seconds of raw samples kept to assemble ring-downs", range=(0.5, 60.0), read_only=True),
     ParamSpec("fit_tuning_ringdowns", False, "also fit the driver's frequency-tuning ring-downs"),
     ParamSpec("probe_frame_id", "mows_probe", "frame of the probe (x' along the moment at rest)"),
+    PROBES,
 )
 
 
@@ -66,9 +69,37 @@ def fit_options(values: dict, probe: Probe, theta0_rad: float) -> FitOptions:
     return FitOptions(channels=channels, theta0_free=values["theta0_free"], **common)
 
 
+def joint_lines(values: dict, probes: tuple[ProbeEntry, ...], theta0_rad: float) -> list[ProbeLine]:
+    """The probes' lines at θ0 for the joint fit the parameters ask for; ValueError for what it
+    cannot do (a fitted θ0)."""
+    if values["theta0_free"]:
+        raise ValueError("theta0_free: the joint fit of several probes takes θ0 from the excitation")
+    pair = None
+    if values["lever_aware"] and values["channels"] != "both":
+        axis = (values["sensor_axis_a"], values["sensor_axis_b"], 0.0)
+        pair = FluxgatePair.paper(
+            distance_m=values["sensor_distance_m"], spacing_m=values["sensor_spacing_m"], axis=axis
+        )
+    return [entry.line(theta0_rad, pair, values["channels"]) for entry in probes]
+
+
+def joint_settings(values: dict, probe: Probe) -> JointSettings | None:
+    """The joint fit of the listed probes; None when ``probes`` is empty (one probe)."""
+    probes = probe_set(values["probes"], probe)
+    if not probes:
+        return None
+    options = JointOptions(values["channels"], min_periods=values["min_periods"], max_chi2_dof=values["max_chi2_dof"])
+    return JointSettings(probes, functools.partial(joint_lines, values, probes), options)
+
+
 def fit_settings(values: dict, probe: Probe) -> FitSettings:
     """What the parameters ask of each ring-down's fit and inversion; f00 = 0 is the probe's."""
     f00_hz = values["f00_hz"] if values["f00_hz"] > 0 else probe.f00_hz
     return FitSettings(
-        probe, functools.partial(fit_options, values, probe), values["coil_off_skip_s"], f00_hz, values["f00_std_hz"]
+        probe,
+        functools.partial(fit_options, values, probe),
+        values["coil_off_skip_s"],
+        f00_hz,
+        values["f00_std_hz"],
+        joint_settings(values, probe),
     )

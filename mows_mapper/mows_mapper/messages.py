@@ -1,12 +1,26 @@
 """Translation between mows_msgs and the sweep runner's dataclasses (no logic of its own)."""
 
 from mows_msgs.action import RotationSweep
-from mows_msgs.msg import CandidateEffect, ModelReport, RingdownFit, SweepDecomposition
+from mows_msgs.msg import CandidateEffect, FieldMap, ModelReport, ProbeField, RingdownFit, SweepDecomposition
 
+from mows.estimate.probe_set import ProbeEntry, probe_frame_id
 from mows.records import stamps
 from mows.sweep.decompose import DecompositionStatus
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import SweepFeedback, SweepFit, SweepGoal, SweepMap, SweepOutcome, turn_prompt
+
+# What a probe's point of the field map takes from its SweepDecomposition, as it is there.
+PROBE_FIELD_FROM_SWEEP = (
+    "probe_id",
+    "sweep_id",
+    "status",
+    "message",
+    "model",
+    "field_t",
+    "field_covariance_t2",
+    "gradient_t_per_m",
+    "gradient_covariance",
+)
 
 
 def sweep_goal(goal: RotationSweep.Goal) -> SweepGoal:
@@ -32,7 +46,7 @@ def sweep_point(fit: RingdownFit) -> SweepPoint:
 
 def sweep_fit(fit: RingdownFit) -> SweepFit:
     ok = fit.status_name == "OK"
-    return SweepFit(fit.cycle_id, fit.tuning, sweep_point(fit) if ok else None, fit)
+    return SweepFit(fit.cycle_id, fit.tuning, sweep_point(fit) if ok else None, fit, fit.probe_id)
 
 
 def feedback_msg(feedback: SweepFeedback) -> RotationSweep.Feedback:
@@ -61,8 +75,10 @@ def turn_feedback_msg(theta0_rad: float) -> RotationSweep.Feedback:
 def decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
     d, record = sweep.decomposition, sweep.record
     msg = SweepDecomposition(sweep_id=sweep.sweep_id, model=d.model, message=d.message, status=int(d.status))
+    msg.probe_id = sweep.probe_id
     msg.header.frame_id = frame_id
-    stamps.set_nanoseconds(msg.header.stamp, max(p.stamp_ns for p in record.points))
+    # A probe of a multi-probe sweep may have no ring-down at all: its stamp is then unknown (0).
+    stamps.set_nanoseconds(msg.header.stamp, max((p.stamp_ns for p in record.points), default=0))
     msg.field_t = d.field_t.tolist()
     msg.field_covariance_t2 = d.field_covariance_t2.ravel().tolist()
     msg.gradient_t_per_m = d.gradient_t_per_m.tolist()
@@ -80,15 +96,37 @@ def decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
     return msg
 
 
+def probe_decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
+    """One probe's decomposition of a multi-probe sweep, in its own rotation-plane frame."""
+    return decomposition_msg(sweep, probe_frame_id(frame_id, sweep.probe_id))
+
+
+def field_map_msg(decompositions: list[SweepDecomposition], probes: tuple[ProbeEntry, ...], frame_id: str) -> FieldMap:
+    """The field map of a multi-probe sweep: each probe's decomposition at its position in the
+    stage's rotation-plane frame ``frame_id``; stamped with the latest ring-down."""
+    msg = FieldMap()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = max(decompositions, key=lambda d: stamps.nanoseconds(d.header.stamp)).header.stamp
+    for d, entry in zip(decompositions, probes):
+        point = ProbeField(frame_id=d.header.frame_id, position_m=[float(x) for x in entry.position_m])
+        for name in PROBE_FIELD_FROM_SWEEP:
+            setattr(point, name, getattr(d, name))
+        msg.probes.append(point)
+    return msg
+
+
 def no_decomposition_msg(message: str) -> SweepDecomposition:
     """A sweep that came to no decomposition, with why."""
     return SweepDecomposition(status=int(DecompositionStatus.NO_DECOMPOSITION), message=message)
 
 
 def outcome_decomposition_msg(outcome: SweepOutcome, frame_id: str) -> SweepDecomposition:
-    """The decomposition of a finished sweep; NO_DECOMPOSITION, with why, if it had none."""
+    """The decomposition of a finished sweep (the first listed probe's, with several);
+    NO_DECOMPOSITION, with why, if it had none."""
     if outcome.map is None:
         return no_decomposition_msg(outcome.message)
+    if outcome.maps:
+        return probe_decomposition_msg(outcome.map, frame_id)
     return decomposition_msg(outcome.map, frame_id)
 
 

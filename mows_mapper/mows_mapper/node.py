@@ -10,6 +10,12 @@ published on ``/mows/sweep`` (SweepDecomposition, reliable and transient-local: 
 reference (``reference_scenario``) the model lab (``mows.lab.analyse``) compares the
 frequency model with the sweep and publishes ``/mows/model_report`` (ModelReport).
 
+With ``probes`` listing several probes (the estimator's list), each ring-down brings one fit per
+probe; each probe's sweep is decomposed on its own and published on ``/mows/sweep`` with its
+``probe_id`` (frame ``<frame_id>_<probe_id>``), failed or not (the topic keeps one per probe),
+and all of them together on ``/mows/field_map`` (FieldMap, reliable and transient-local), each
+at its ``position_m`` in ``frame_id``. The model lab reads one probe's sweep: it is not run then.
+
 With ``orientation`` manual (a stage without a motor) each cycle waits for the operator: the
 feedback's ``operator_prompt`` says where to turn the probe, ``~/confirm_orientation``
 (std_srvs/Trigger) says it is done.
@@ -24,16 +30,18 @@ import dataclasses
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import RotationSweep
-from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
+from mows_msgs.msg import FieldMap, ModelReport, RingdownFit, SweepDecomposition
 from rclpy.action import CancelResponse
 
 from mows.lab import analyse, from_sweep
-from mows.sweep.runner import CycleAnswer, CycleRequest, SweepMap, SweepRunner, SweepStep
+from mows.sweep.runner import CycleAnswer, CycleRequest, SweepMap, SweepRunner, SweepSettings, SweepStep
 from mows_mapper.messages import (
     feedback_msg,
+    field_map_msg,
     model_report_msg,
     no_decomposition_msg,
     outcome_decomposition_msg,
+    probe_decomposition_msg,
     sweep_fit,
     sweep_goal,
     turn_feedback_msg,
@@ -46,9 +54,9 @@ from mows_ros.goals import action_servers
 from mows_ros.node import MowsNode
 from mows_ros.operator import OperatorTurns
 from mows_ros.params import parameter_values
-from mows_ros.probe import probe_of
+from mows_ros.probe import probe_of, probe_set
 from mows_ros.process import run_node
-from mows_ros.qos import MAP_QOS
+from mows_ros.qos import MAP_QOS, maps_qos
 
 NODE_NAME = "mapper"
 SERVICE_WAIT_S = 5.0  # longest wait for the driver's measurement-cycle action to appear
@@ -59,9 +67,12 @@ class MapperNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
         self._runner = SweepRunner()
+        self._settings = SweepSettings()  # the running sweep's
         self._driver = DriverCycles(self, self._on_fit)
-        self._sweep_pub = self.create_publisher(SweepDecomposition, "mows/sweep", MAP_QOS)
+        probes = probe_set(self._param("probes"), probe_of(self._param("probe_file")))
+        self._sweep_pub = self.create_publisher(SweepDecomposition, "mows/sweep", maps_qos(max(1, len(probes))))
         self._report_pub = self.create_publisher(ModelReport, "mows/model_report", MAP_QOS)
+        self._field_map_pub = self.create_publisher(FieldMap, "mows/field_map", MAP_QOS)
         self._servers = action_servers(self, RotationSweep, ACTIONS, self._execute, self._cancel, self._driver.group)
         self._operator = OperatorTurns(self, "~/confirm_orientation", lambda: self._runner.turn_awaited)
 
@@ -77,8 +88,9 @@ class MapperNode(MowsNode):
         if (inactive := self.inactive_reason()) is not None:
             return inactive
         try:
-            settings = sweep_settings(parameter_values(self, PARAMETERS))
-            self._runner.start(sweep_goal(goal), settings, probe_of(self._param("probe_file")))
+            probe = probe_of(self._param("probe_file"))
+            self._settings = sweep_settings(parameter_values(self, PARAMETERS), probe)
+            self._runner.start(sweep_goal(goal), self._settings, probe)
         except ValueError as refused:
             return str(refused)
         return None
@@ -108,6 +120,8 @@ class MapperNode(MowsNode):
             decomposition = outcome_decomposition_msg(outcome, self._param("frame_id"))
             if step.publish is not None:
                 await self._publish(step.publish, decomposition)
+            if step.publish_probes:
+                self._publish_probes(step)
         finally:  # an exception must not leave the runner busy for good
             self._runner.abandon("the sweep ended unexpectedly (see the log)")
         if outcome.cancelled:
@@ -156,6 +170,15 @@ class MapperNode(MowsNode):
                 self.get_logger().warn(f"model lab: {error}")
             else:
                 self._report_pub.publish(model_report_msg(report, msg.header, sweep.sweep_id))
+
+    def _publish_probes(self, step: SweepStep) -> None:
+        """Each probe's decomposition on /mows/sweep, then the field map of them all."""
+        frame_id = self._param("frame_id")
+        messages = [probe_decomposition_msg(sweep, frame_id) for sweep in step.publish_probes]
+        for msg in messages:
+            self._sweep_pub.publish(msg)
+        self._field_map_pub.publish(field_map_msg(messages, self._settings.probes, frame_id))
+        self.get_logger().info(f"sweep of {len(messages)} probes: {self._runner.last}")
 
     def health(self) -> Health:
         failure = self._runner.last_failure

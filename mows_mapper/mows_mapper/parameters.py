@@ -1,11 +1,14 @@
 """The mapper's parameter table and the sweep settings it gives the core."""
 
+import dataclasses
+
 from mows.lab import reference_at
+from mows.physics.probe import Probe
 from mows.sweep.decompose import MODELS
 from mows.sweep.runner import REPEATS_PER_ANGLE_RANGE, SweepSettings
 from mows_ros import operator
 from mows_ros.params import ParamSpec
-from mows_ros.probe import PROBE_FILE
+from mows_ros.probe import PROBE_FILE, PROBES, probe_set
 
 
 def reference_problem(name: str) -> str | None:
@@ -24,6 +27,8 @@ PARAMETERS = (
     ParamSpec("model", "first_principles", "decomposition model when the goal names none", choices=MODELS),
     ParamSpec("f00_free", False, "fit the zero-field frequency in the decomposition (Gs is then undetermined)"),
     PROBE_FILE,
+    # Read-only: /mows/sweep keeps one decomposition per probe for late subscribers.
+    dataclasses.replace(PROBES, read_only=True),
     ParamSpec("cycle_timeout_s", 300.0, "longest wait for the driver's cycle, s", range=(1.0, 3600.0)),
     ParamSpec("fit_timeout_s", 10.0, "longest wait for the fits of a finished cycle, s", range=(0.1, 600.0)),
     ParamSpec(
@@ -42,7 +47,8 @@ PARAMETERS = (
 )
 
 
-def sweep_settings(values: dict) -> SweepSettings:
+def sweep_settings(values: dict, probe: Probe) -> SweepSettings:
+    """The settings of the next sweep; ``probe`` is ``probe_file``'s, for probes given by f00 alone."""
     return SweepSettings(
         values["repeats_per_angle"],
         values["angle_step_deg"],
@@ -51,4 +57,5 @@ def sweep_settings(values: dict) -> SweepSettings:
         values["repeat_s"],
         values["turn_s"],
         values["orientation"] == "manual",
+        probe_set(values["probes"], probe),
     )

@@ -1,13 +1,17 @@
 """The ``probe_file`` parameter of the estimator and the mapper: a probe constants YAML
-(:meth:`mows.physics.probe.Probe.from_yaml`), or empty for the paper's probe.
+(:meth:`mows.physics.probe.Probe.from_yaml`), or empty for the paper's probe; and their
+``probes`` parameter, the probes sharing each ring-down window (:mod:`mows.estimate.probe_set`).
 
 The file is read when the parameter is set, so that a missing or malformed file is refused
 with its reason by ``ros2 param set`` (or stops the node at start-up) instead of failing in
 the middle of a fit; setting the same path again reads it again.
 """
 
+import functools
+
 import yaml
 
+from mows.estimate.probe_set import ProbeEntry, read_probe_set
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows_ros.params import ParamSpec
 
@@ -32,4 +36,29 @@ PROBE_FILE = ParamSpec(
     "",
     "probe constants YAML (mows.physics.probe.Probe.from_yaml); empty: the paper's probe",
     check=probe_file_problem,
+)
+
+
+@functools.lru_cache(maxsize=8)
+def probe_set(text: str, own_probe: Probe) -> tuple[ProbeEntry, ...]:
+    """The probes of a ``probes`` value, with ``own_probe`` (the ``probe_file``'s) for those given
+    by their f00 alone; read once per value and probe, not per fit."""
+    return read_probe_set(text, own_probe, Probe.from_yaml)
+
+
+def probes_problem(text: str) -> str | None:
+    """Why ``probes`` cannot be read, or None (its bare f00s checked with the paper's probe)."""
+    try:
+        probe_set(text, PAPER_PROBE)
+    except (OSError, ValueError, TypeError, yaml.YAMLError) as error:
+        return f"probes={text!r}: {error}"
+    return None
+
+
+PROBES = ParamSpec(
+    "probes",
+    "",
+    "several probes in each ring-down window: YAML mapping of probe id to f00 (Hz), a probe file, "
+    "or {f00_hz, f00_std_hz, probe_file, position_m} (mows.estimate.probe_set); empty: one probe",
+    check=probes_problem,
 )

@@ -27,8 +27,15 @@ EXCITATION_QOS = _keep_last(100, ReliabilityPolicy.RELIABLE, DurabilityPolicy.TR
 # consumer that counts them (the mapper waits for every repeat) must not lose one.
 RESULT_QOS = _keep_last(100, ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE)
 
-# Maps (sweep decompositions): a subscriber that joins later still gets the latest one.
-MAP_QOS = _keep_last(1, ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)
+
+def maps_qos(maps: int) -> QoSProfile:
+    """Maps that a subscriber joining later still gets: the latest ``maps`` of them (a sweep of
+    several probes publishes one decomposition per probe)."""
+    return _keep_last(maps, ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+# Maps (sweep decompositions, model reports, field maps): the latest one.
+MAP_QOS = maps_qos(1)
 
 # Joint states (the rotation stage's angle, with every block): reliable and volatile like a
 # robot's /joint_states, so that robot_state_publisher (either reliability) takes them.

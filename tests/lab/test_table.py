@@ -101,6 +101,7 @@ def test_a_bag_of_ringdown_fits_with_a_magnetometer_or_a_source_reference(tmp_pa
             status=status,
             status_name="",
             message="",
+            probe_id=0,
             theta0_free=False,
             n_samples=10000,
             parameter_names=[],

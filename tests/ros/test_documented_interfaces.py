@@ -26,6 +26,7 @@ INTERFACES = [
     "/mows/field",
     "/mows/magnetic_field",
     "/mows/sweep",
+    "/mows/field_map",
     "/mows/model_report",
     "/diagnostics",
     # services and actions are node-private: their names in the root namespace

@@ -126,6 +126,13 @@ def estimator(ros, start):
     ros.node.create_subscription(
         DiagnosticArray, "/diagnostics", lambda a: heard["diagnostics"].update((s.name, s) for s in a.status), 10
     )
+    yield heard_device(ros, heard), heard, process
+    assert_stops_cleanly(process)
+
+
+def heard_device(ros, heard) -> Device:
+    """A stand-in device the estimator has subscribed to and hears (``heard["diagnostics"]``
+    is updated from /diagnostics)."""
     device = Device(ros)
     ros.wait_for(
         lambda: device.raw.get_subscription_count() and device.excitation.get_subscription_count(),
@@ -140,8 +147,7 @@ def estimator(ros, start):
         return status and any(kv.key == "blocks" and int(kv.value) > 0 for kv in status.values)
 
     ros.wait_for(estimator_hears_the_stream, "the estimator to receive blocks")
-    yield device, heard, process
-    assert_stops_cleanly(process)
+    return device
 
 
 def test_a_ringdown_gives_a_fit_a_field_estimate_and_a_magnetic_field(ros, estimator):

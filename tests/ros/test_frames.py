@@ -13,13 +13,16 @@ from mows_msgs.msg import MagnetometerBlock
 from mows_msgs.srv import RunCycle
 from sensor_msgs.msg import JointState
 
-from mows.physics.pose import probe_axes
+from mows.physics.pose import Pose, probe_axes
+from mows.physics.probe import PAPER_PROBE
 from mows.records import stamps
 from mows_bringup.graph import NODES
+from mows_bringup.mount import probes_mount
 from mows_driver import node as driver
 from mows_driver.messages import STAGE_JOINT
 from mows_estimator import parameters as estimator
 from mows_mapper import parameters as mapper
+from mows_ros.probe import probe_set
 from mows_ros.qos import JOINT_QOS, STREAM_QOS
 
 pytestmark = pytest.mark.ros
@@ -72,6 +75,33 @@ def test_the_stage_joint_turns_the_probe_as_theta0_does(mount):
     for theta0 in np.radians([0.0, 30.0, 135.0, -100.0]):
         # The probe's x' in the plane: the joint's rotation of x, against mows.physics.pose.
         np.testing.assert_allclose(rotation(axis, theta0) @ [1, 0, 0], probe_axes(theta0)[0], atol=1e-12)
+
+
+def test_a_mount_of_several_probes_frames_each_at_its_place_turning_with_the_stage():
+    probes = probe_set(
+        "{0: 112.48, 1: {f00_hz: 125.0, position_m: [0.0, 0.05, 0.0]},"
+        " 2: {f00_hz: 101.0, position_m: [0.01, -0.05, 0.002]}}",
+        PAPER_PROBE,
+    )
+    robot = ET.fromstring(probes_mount(probes))
+    links = {link.get("name") for link in robot.findall("link")}
+    joints = {joint.get("name"): joint for joint in robot.findall("joint")}
+    parents = {j.find("child").get("link"): j.find("parent").get("link") for j in joints.values()}
+    assert links - parents.keys() == {"mows_rotation_plane"}  # still one tree
+    for entry in probes:
+        k = entry.probe_id
+        plane, probe = f"mows_rotation_plane_{k}", f"mows_probe_{k}"  # the nodes' per-probe frames
+        assert {plane, probe} <= links and parents[probe] == plane and parents[plane] == "mows_rotation_plane"
+        at, turn = origin(joints[f"{plane}_mount"])
+        stage = joints[f"mows_stage_{k}"]
+        assert stage.find("mimic").get("joint") == "mows_stage" and stage.get("type") == "continuous"
+        axis = np.array(stage.find("axis").get("xyz").split(), float)
+        for theta0 in np.radians([0.0, 30.0, -100.0]):
+            # The probe frame's origin is the magnet's rest position the estimator fits with, and
+            # its x' is the probe's at θ0: each probe turns about its own magnet.
+            pose = Pose(theta0_rad=theta0, magnet_position_m=entry.position_m)
+            np.testing.assert_allclose(at, pose.magnet_position_m, atol=1e-15)
+            np.testing.assert_allclose(turn @ rotation(axis, theta0) @ [1, 0, 0], pose.axes()[0], atol=1e-12)
 
 
 def test_the_fluxgates_sit_where_the_estimator_assumes_and_sense_along_their_x(mount):

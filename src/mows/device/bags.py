@@ -17,13 +17,14 @@ never closed, how to repair it.
 import functools
 import importlib.metadata
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from io import BytesIO
 from pathlib import Path
 from typing import Any, Literal, NamedTuple, cast
 
+import numpy as np
 import yaml
-from rosbags.interfaces import Qos
+from rosbags.interfaces import Connection, MessageDefinitionFormat, Nodetype, Qos
 from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionMode
 from rosbags.rosbag2.metadata import dump_qos_v9
@@ -116,13 +117,14 @@ def typestore() -> Typestore:
     return store
 
 
-def write_bag(path: str | os.PathLike, messages: Iterable[BagMessage]) -> Path:
-    """Write ``messages`` to a new rosbag2 bag directory at ``path`` (MCAP storage).
+def write_bag(path: str | os.PathLike, messages: Iterable[BagMessage], store: Typestore | None = None) -> Path:
+    """Write ``messages`` to a new rosbag2 bag directory at ``path`` (MCAP storage), with the
+    definitions of ``store`` (default :func:`typestore`).
 
     A connection is opened for each (topic, msgtype) on its first message. ``path`` must
     not exist yet.
     """
-    store = typestore()
+    store = typestore() if store is None else store
     connections = {}
     with JazzyWriter(path) as writer:
         for topic, msgtype, timestamp_ns, message in messages:
@@ -214,13 +216,77 @@ def read_bag(path: str | os.PathLike, topics: Iterable[str] | None = None) -> It
         connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
         if not connections:  # rosbags reads every connection when given none
             return
+        decoders = {c.id: decoder(c, store) for c in connections}
         for connection, timestamp_ns, raw in reader.messages(connections=connections):
-            yield BagMessage(
-                connection.topic,
-                connection.msgtype,
-                timestamp_ns,
-                store.deserialize_cdr(raw, connection.msgtype),
-            )
+            yield BagMessage(connection.topic, connection.msgtype, timestamp_ns, decoders[connection.id](raw))
+
+
+def decoder(connection: Connection, store: Typestore) -> Callable[[bytes], Any]:
+    """CDR bytes of ``connection`` → a message of ``store``'s definition of its type.
+
+    A bag recorded with an earlier mows_msgs carries that earlier definition (rosbag2 stores
+    each topic's). Its messages are decoded with it and then given the fields it lacked at
+    their zero value, which every added field of mows_msgs keeps meaning what the earlier
+    messages meant (a new ``probe_id`` is 0: the one probe there was).
+    """
+    msgtype = connection.msgtype
+    recorded = recorded_types(connection)
+    if not recorded or all(
+        store.fielddefs.get(name, (None, None))[1] == fields for name, (_, fields) in recorded.items()
+    ):
+        return functools.partial(store.deserialize_cdr, typename=msgtype)
+    earlier = get_typestore(Stores.ROS2_JAZZY)
+    earlier.register(recorded)
+    return lambda raw: upgraded(earlier.deserialize_cdr(raw, msgtype), msgtype, store)
+
+
+def recorded_types(connection: Connection) -> dict[str, Any]:
+    """The types of the definition a bag stores for ``connection`` (empty when it has none)."""
+    if connection.msgdef.format != MessageDefinitionFormat.MSG or not connection.msgdef.data:
+        return {}
+    msgtype = connection.msgtype
+    types = dict(get_types_from_msg(connection.msgdef.data, msgtype))
+    if msgtype not in types:  # rosbags files pkg/srv/Name under pkg/srv/msg/Name (interface_types)
+        package, name = msgtype.split("/")[0], msgtype.rsplit("/", 1)[1]
+        (filed,) = [key for key in types if key.startswith(f"{package}/") and key.endswith(f"/{name}")]
+        types[msgtype] = types.pop(filed)
+    return types
+
+
+def upgraded(message: Any, msgtype: str, store: Typestore) -> Any:
+    """``message``, decoded with an earlier definition of ``msgtype``, as ``store``'s: the fields
+    it has are kept (nested messages upgraded too), those it lacks are zero."""
+    values = {}
+    detail: Any
+    for name, (kind, detail) in store.fielddefs[msgtype][1]:
+        if not hasattr(message, name):
+            values[name] = zero(kind, detail, store)
+        elif kind == Nodetype.NAME:
+            values[name] = upgraded(getattr(message, name), detail, store)
+        elif kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) and detail[0][0] == Nodetype.NAME:
+            values[name] = [upgraded(item, detail[0][1], store) for item in getattr(message, name)]
+        else:
+            values[name] = getattr(message, name)
+    return store.types[msgtype](**values)
+
+
+def zero(kind: Nodetype, detail: Any, store: Typestore) -> Any:
+    """The zero value of a field of ``store``'s types: 0, 0.0, False, "", an empty sequence,
+    an array of zeros, a message of zeros."""
+    if kind == Nodetype.NAME:
+        return store.types[detail](**{n: zero(k, d, store) for n, (k, d) in store.fielddefs[detail][1]})
+    if kind == Nodetype.SEQUENCE:
+        element_kind, element = detail[0]
+        return np.zeros(0, element[0]) if element_kind == Nodetype.BASE and element[0] != "string" else []
+    if kind == Nodetype.ARRAY:
+        (element_kind, element), length = detail
+        return (
+            [zero(element_kind, element, store) for _ in range(length)]
+            if element_kind == Nodetype.NAME
+            else (np.zeros(length, element[0]) if element[0] != "string" else [""] * length)
+        )
+    base = detail[0]
+    return "" if base == "string" else False if base == "bool" else 0.0 if base.startswith("float") else 0
 
 
 class Recording:

@@ -3,6 +3,10 @@ the messages carry them), and per recorded ring-down its fit (:mod:`mows.estimat
 the field and gradient along the probe axis (:mod:`mows.estimate.axis`) and, while an f00
 calibration runs (:mod:`mows.estimate.calibration.f00`), the OK fits offered to it.
 
+With several probes listed (:mod:`mows.estimate.probe_set`) each window is fitted jointly
+(:func:`mows.estimate.ringdown_joint.fit_ringdowns`) and gives one estimate per probe, each
+counted from that probe's f00; the f00 calibration is then refused (it is of one probe).
+
 The estimator node feeds it its subscriptions and publishes what it returns. What the node's
 parameters say (probe, fit options, settling, f00) comes with each ring-down as a
 :class:`FitSettings`, read when the ring-down is complete, so a parameter change applies to
@@ -15,7 +19,10 @@ from typing import Any
 
 from mows.estimate.axis import AxisEstimate, estimate_along_axis
 from mows.estimate.calibration.f00 import F00Calibration
+from mows.estimate.joint_segment import fit_joint_segment
+from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure
+from mows.estimate.ringdown_joint import JointOptions, ProbeLine
 from mows.estimate.segments import (
     RingdownWindow,
     Segment,
@@ -28,6 +35,16 @@ from mows.physics.probe import Probe
 
 
 @dataclasses.dataclass(frozen=True)
+class JointSettings:
+    """What the joint fit of several probes takes: the probes, their lines at θ0 (ValueError
+    when no model can be built) and the fit's options."""
+
+    probes: tuple[ProbeEntry, ...]
+    lines: Callable[[float], list[ProbeLine]]
+    options: JointOptions
+
+
+@dataclasses.dataclass(frozen=True)
 class FitSettings:
     """What fitting and inverting one ring-down take."""
 
@@ -36,6 +53,7 @@ class FitSettings:
     coil_off_skip_s: float
     f00_hz: float
     f00_std_hz: float
+    joint: JointSettings | None = None  # several probes: their joint fit; None: one probe
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,6 +85,31 @@ class RingdownEstimator:
         announcement that is no window."""
         return self.assembler.announce(window_from_message(message))
 
+    def estimate_all(self, segment: Segment, settings: FitSettings) -> list[Estimated]:
+        """The estimate of each probe in ``segment``: one, or one per listed probe in id order."""
+        if settings.joint is None:
+            return [self.estimate(segment, settings)]
+        joint, window = settings.joint, segment.window
+        try:
+            lines = joint.lines(window.theta0_rad)
+        except ValueError as error:
+            fits = [
+                failure(
+                    FitStatus.BAD_FIT,
+                    f"cannot build the signal model: {error}",
+                    theta0_rad=window.theta0_rad,
+                    probe_id=entry.probe_id,
+                )
+                for entry in joint.probes
+            ]
+        else:
+            fits = fit_joint_segment(segment, lines, settings.coil_off_skip_s, joint.options)
+        self.last = "; ".join(f"probe {fit.probe_id}: {fit.report()}" for fit in fits)
+        return [
+            Estimated(window, fit, estimate_along_axis(fit, entry.probe, entry.f00_hz, entry.f00_std_hz))
+            for fit, entry in zip(fits, joint.probes)
+        ]
+
     def estimate(self, segment: Segment, settings: FitSettings) -> Estimated:
         """Fit ``segment``, invert the fit, and offer an OK one to the running calibration."""
         window = segment.window
@@ -86,10 +129,16 @@ class RingdownEstimator:
         return Estimated(window, fit, estimate, calibrated)
 
     def begin_calibration(
-        self, probe: Probe, reference_field_t: float, n_ringdowns: int, timeout_s: float
+        self, probe: Probe, reference_field_t: float, n_ringdowns: int, timeout_s: float, probes: int = 1
     ) -> F00Calibration:
         """A calibration of f00 from the next OK ring-downs (:class:`F00Calibration`); ValueError,
-        with the reason, for a request it cannot meet or while another one runs."""
+        with the reason, for a request it cannot meet, while another one runs, or when
+        ``probes`` (the probes listed) share the windows."""
+        if probes > 1:
+            raise ValueError(
+                f"the f00 calibration is of one probe and {probes} probes are listed: "
+                "give each its f00 in the probes parameter, or calibrate each alone"
+            )
         calibration = F00Calibration(probe, reference_field_t, n_ringdowns, timeout_s)
         if self.calibration is not None:
             raise ValueError("a calibration is already running: try again after it")

@@ -14,6 +14,11 @@ choose each next orientation and its repeats from the ring-downs so far; the swe
 whenever the planner's linearised prediction comes within ``DECOMPOSE_NEAR`` of the target, and
 ends when a decomposition reaches it or the time budget holds no further cycle. Its device time
 is read from the ring-downs' stamps (first to last, plus a turn and a ring-down).
+
+A sweep of several probes (``SweepSettings.probes``, the estimator's list) collects one fit per
+probe and ring-down, keeps each probe's fits in a record of its own and decomposes each
+(:mod:`mows.sweep.probes`); its feedback's shift is the first listed probe's, its fits are all.
+Adaptive sweeps are of one probe.
 """
 
 import dataclasses
@@ -25,9 +30,11 @@ from collections.abc import Callable
 import numpy as np
 
 from mows.device.phases import CycleRequest
+from mows.estimate.probe_set import ProbeEntry
 from mows.physics.probe import Probe
 from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal
+from mows.sweep.probes import ProbeDecompositions, decompose_probes, f00_of
 from mows.sweep.record import SweepPoint, SweepRecord
 
 DECOMPOSE_NEAR = 1.25  # decompose an adaptive sweep once the prediction is this close to the target
@@ -53,6 +60,7 @@ class SweepSettings:
     repeat_s: float = 0.82  # adaptive sweeps: device time of one ring-down (kick, ring-down, gap)
     turn_s: float = 0.5  # adaptive sweeps: device time of a turn and the settling
     manual_orientation: bool = False  # no motor: the operator turns the stage and confirms each orientation
+    probes: tuple[ProbeEntry, ...] = ()  # several probes in each window; (): one
 
 
 def turn_prompt(theta0_rad: float) -> str:
@@ -115,6 +123,7 @@ class SweepFit:
     tuning: bool
     point: SweepPoint | None
     source: object = None
+    probe_id: int = 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,6 +147,7 @@ class SweepMap:
     decomposition: Decomposition
     record: SweepRecord
     f00_hz: float
+    probe_id: int = 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -148,12 +158,14 @@ class SweepOutcome:
     ok: bool
     message: str
     cancelled: bool = False
-    map: SweepMap | None = None
+    map: SweepMap | None = None  # the first listed probe's, with several
+    maps: tuple[SweepMap, ...] = ()  # with several probes: each probe's, in id order
 
 
 @dataclasses.dataclass
 class SweepStep:
-    """What the caller does next, in this order: report ``feedback``, publish ``publish``, then
+    """What the caller does next, in this order: report ``feedback``, publish ``publish`` (with
+    several probes: each of ``publish_probes``, which holds failed decompositions too), then
     one of: ask the operator to turn the stage to ``turn`` (rad, :func:`turn_prompt`) and call
     :meth:`SweepRunner.on_turned` once confirmed, run ``run_cycle``, call ``decompose``
     (CPU-bound, seconds) and feed its result to :meth:`SweepRunner.on_decomposed`, end with
@@ -161,9 +173,10 @@ class SweepStep:
 
     feedback: SweepFeedback | None = None
     publish: SweepMap | None = None
+    publish_probes: tuple[SweepMap, ...] = ()
     turn: float | None = None
     run_cycle: CycleRequest | None = None
-    decompose: Callable[[], Decomposition] | None = None
+    decompose: Callable[[], Decomposition | ProbeDecompositions] | None = None
     finished: SweepOutcome | None = None
 
 
@@ -184,7 +197,8 @@ class SweepRunner:
         self._cancelled = False
         self._fits: dict[int, list[SweepFit]] = {}
         self._awaited: CycleAnswer | None = None  # the cycle whose fits are being collected
-        self._record = SweepRecord()
+        self._record = SweepRecord()  # the first listed probe's, with several
+        self._records: dict[int, SweepRecord] = {}  # with several probes: each one's, by id
         self._planner: AdaptivePlanner | None = None  # an adaptive sweep's
         self._decomposition: Decomposition | None = None
         self._decomposed_points = 0
@@ -209,6 +223,8 @@ class SweepRunner:
             problems.append(f"model {goal.model!r} is not one of {', '.join(MODELS)}")
         if self.state != SweepState.IDLE:
             problems.append(f"another sweep is still running ({self.state})")
+        if goal.target is not None and settings.probes:
+            problems.append(f"an adaptive sweep is of one probe; {len(settings.probes)} are listed")
         planner = None
         if goal.target is not None and not problems:
             try:
@@ -232,7 +248,8 @@ class SweepRunner:
         self._model = goal.model or settings.model
         self._index, self._cancelled, self._awaited, self._turning = 0, False, None, None
         self._fits.clear()
-        self._record = SweepRecord()
+        self._records = {entry.probe_id: SweepRecord() for entry in settings.probes}
+        self._record = self._records[settings.probes[0].probe_id] if settings.probes else SweepRecord()
 
     def begin(self) -> SweepStep:
         """The accepted sweep's first step."""
@@ -308,10 +325,12 @@ class SweepRunner:
             return SweepStep()
         return self._end(SweepStep(), SweepOutcome(False, reason))
 
-    def on_decomposed(self, decomposition: Decomposition) -> SweepStep:
+    def on_decomposed(self, decomposition: Decomposition | ProbeDecompositions) -> SweepStep:
         """The result of the step's ``decompose``: the map to publish (only when the decomposition
         succeeded: a failed one has no numbers to show) and the sweep's end (an adaptive sweep goes
         on unless the planner ends it)."""
+        if isinstance(decomposition, ProbeDecompositions):
+            return self._probes_decomposed(decomposition)
         if self._planner is not None:
             self._decomposition, self._decomposed_points = decomposition, len(self._record.points)
             self.state = SweepState.SWEEPING
@@ -321,10 +340,20 @@ class SweepRunner:
         outcome = SweepOutcome(decomposition.ok, decomposition.message or self.last, map=sweep_map)
         return self._end(SweepStep(publish=sweep_map if decomposition.ok else None), outcome)
 
+    def _probes_decomposed(self, decompositions: ProbeDecompositions) -> SweepStep:
+        """Every probe's map, published failed or not (a field map shows each probe's status)."""
+        self.last = decompositions.report()
+        maps = tuple(
+            SweepMap(self.sweeps, d.decomposition, d.record, d.f00_hz, d.probe_id) for d in decompositions.probes
+        )
+        outcome = SweepOutcome(decompositions.ok, decompositions.message or self.last, map=maps[0], maps=maps)
+        return self._end(SweepStep(publish_probes=maps), outcome)
+
     # --- the sweep -------------------------------------------------------------------------
     def _collected(self) -> SweepStep | None:
         answer = self._awaited
-        if answer is None or len(self._fits.get(answer.cycle_id, ())) < answer.ringdowns_recorded:
+        expected = answer.ringdowns_recorded * max(1, len(self._settings.probes)) if answer else 0
+        if answer is None or len(self._fits.get(answer.cycle_id, ())) < expected:
             return None
         return self._orientation_done()
 
@@ -334,10 +363,14 @@ class SweepRunner:
         fits = self._fits.pop(answer.cycle_id, [])
         theta0 = self._angles[self._index]
         for fit in fits:
+            # With several probes, each fit goes to its probe's record; a probe not listed is not ours.
+            record = self._records.get(fit.probe_id) if self._settings.probes else self._record
+            if record is None:
+                continue
             if fit.point is None:
-                self._record.failed += 1
+                record.failed += 1
             else:
-                self._record.add(fit.point)
+                record.add(fit.point)
         shift, std, n_ok = self._record.at_angle(theta0)
         step = SweepStep(
             feedback=SweepFeedback(
@@ -361,12 +394,17 @@ class SweepRunner:
 
     def _measured(self, step: SweepStep) -> SweepStep:
         self.sweeps += 1
-        if not self._record.points:
-            return self._end(
-                step, SweepOutcome(False, f"no successful ring-down in the sweep ({self._record.failed} failed)")
-            )
+        records = list(self._records.values()) if self._settings.probes else [self._record]
+        if not any(r.points for r in records):
+            failed = sum(r.failed for r in records)
+            return self._end(step, SweepOutcome(False, f"no successful ring-down in the sweep ({failed} failed)"))
         self.state = SweepState.DECOMPOSING
         assert self._probe is not None  # set by start()
+        if self._settings.probes:
+            step.decompose = functools.partial(
+                decompose_probes, self._settings.probes, dict(self._records), self._model, self._settings.f00_free
+            )
+            return step
         step.decompose = functools.partial(
             self._record.decompose, self._probe, self._f00_hz(), model=self._model, f00_free=self._settings.f00_free
         )
@@ -422,8 +460,7 @@ class SweepRunner:
         return self._end(step, SweepOutcome(end.reached, end.message, map=step.publish))
 
     def _f00_hz(self) -> float:
-        """The estimator's calibrated f00, as each OK ring-down carries it (frequency − shift)."""
-        return float(np.mean([p.frequency_hz - p.shift_hz for p in self._record.points]))
+        return f00_of(self._record)
 
     def _end(self, step: SweepStep, outcome: SweepOutcome) -> SweepStep:
         self.state, self._awaited, self._turning = SweepState.IDLE, None, None

@@ -1,0 +1,134 @@
+"""The probes one estimator tells apart in each ring-down window: the ``probes`` text of the
+estimator's parameters read into each probe's id, constants, f00 and place, and made into the
+joint fit's lines (:mod:`mows.estimate.ringdown_joint`).
+
+The text is a YAML mapping from probe id (0–255) to the probe, given as its f00 in Hz, as a
+probe constants file (:meth:`mows.physics.probe.Probe.from_yaml`, whose f00 it takes), or as a
+mapping with any of ``f00_hz``, ``f00_std_hz``, ``probe_file`` and ``position_m``::
+
+    {0: 112.48, 1: probes/b.yaml, 2: {f00_hz: 100.2, position_m: [0.0, 0.05, 0.0]}}
+
+A probe given by its f00 alone is the estimator's own probe (``probe_file``) with the spring
+that gives it that f00 (:func:`with_f00`), its lever, moment, inertia and damping kept; its
+f00 is then also the zero-field frequency its shifts are counted from. ``position_m`` is the probe's
+magnet at rest relative to the single probe's place before the fluxgates, in the rotation
+plane's frame (x = e1 towards the sensors' side, y = e2); every probe is turned about its own
+magnet to the one θ0 the driver announces (stages turned together; a probe orbiting a shared
+axis is not modelled). An empty text is one probe: the single-probe estimator.
+
+At most :data:`MAX_PROBES` probes, each line at least :data:`MIN_SEPARATION_HZ` from the
+others: closer lines are not told apart in a window of a second or less (docs/multi_probe.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import yaml
+
+from mows.estimate.ringdown_joint import ProbeLine
+from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
+from mows.physics.pose import Pose
+from mows.physics.probe import Probe
+
+MAX_PROBES = 4
+MIN_SEPARATION_HZ = 1.0
+KEYS = ("f00_hz", "f00_std_hz", "probe_file", "position_m")
+
+
+@dataclasses.dataclass(frozen=True)
+class ProbeEntry:
+    """One probe of the set: its id, constants, the f00 its shift is counted from (± σ), and
+    its place relative to the single probe's (m)."""
+
+    probe_id: int
+    probe: Probe
+    f00_hz: float
+    f00_std_hz: float = 0.0
+    position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def line(self, theta0_rad: float, pair: FluxgatePair | None, channels: str) -> ProbeLine:
+        """Its line in the joint fit at θ0: the exact pickup of its magnet swinging on its lever
+        before ``pair`` (the fitted channel combination), or the paper's single term (None)."""
+        pickup = None
+        if pair is not None:
+            pose = Pose(theta0_rad=theta0_rad, magnet_position_m=self.position_m)
+            pickup = tuple(pickup_harmonics(pair, pose, self.probe.lever_m, self.probe.moment_am2, combine=channels))
+        return ProbeLine(self.probe_id, theta0_rad, self.f00_hz, pickup, self.probe.damping_per_s)
+
+
+def read_probe_set(text: str, own_probe: Probe, read_probe: Callable[[str], Probe]) -> tuple[ProbeEntry, ...]:
+    """The probes of ``text`` (module docstring) in order of id; () for an empty text.
+    ValueError naming the entry and what is wrong; ``read_probe`` reads a probe file (its
+    errors pass through)."""
+    if not text.strip():
+        return ()
+    try:
+        given = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        raise ValueError(f"probes={text!r} is not YAML: {' '.join(str(error).split())}") from None
+    if not isinstance(given, dict) or not given:
+        raise ValueError(f"probes={text!r} is not a mapping of probe id to f00 (Hz) or probe file")
+    if len(given) > MAX_PROBES:
+        raise ValueError(f"probes lists {len(given)} probes; at most {MAX_PROBES} share a window")
+    entries = tuple(_entry(key, value, own_probe, read_probe) for key, value in sorted(given.items(), key=str))
+    entries = tuple(sorted(entries, key=lambda e: e.probe_id))
+    f00s = sorted((e.f00_hz, e.probe_id) for e in entries)
+    for (low, a), (high, b) in zip(f00s, f00s[1:]):
+        if high - low < MIN_SEPARATION_HZ:
+            raise ValueError(
+                f"probes {a} and {b}: f00 {low:g} and {high:g} Hz are closer than {MIN_SEPARATION_HZ:g} Hz "
+                "(docs/multi_probe.md: keep lines at least 5/T apart)"
+            )
+    return entries
+
+
+def _entry(key: object, value: object, own_probe: Probe, read_probe: Callable[[str], Probe]) -> ProbeEntry:
+    if isinstance(key, bool) or not isinstance(key, int) or not 0 <= key <= 255:
+        raise ValueError(f"probe id {key!r} is not an integer in 0–255")
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = {"f00_hz": value}
+    elif isinstance(value, str):
+        value = {"probe_file": value}
+    if not isinstance(value, dict) or set(value) - set(KEYS):
+        raise ValueError(f"probe {key}: {value!r} is not an f00 in Hz, a probe file or a mapping of {', '.join(KEYS)}")
+    probe = read_probe(value["probe_file"]) if "probe_file" in value else own_probe
+    f00_hz = _number(key, "f00_hz", value.get("f00_hz", probe.f00_hz), 0.0, 10_000.0)
+    if "probe_file" not in value:
+        probe = with_f00(probe, f00_hz)
+    f00_std_hz = _number(key, "f00_std_hz", value.get("f00_std_hz", 0.0), 0.0, 10.0)
+    position = np.asarray(value.get("position_m", (0.0, 0.0, 0.0)), dtype=object)
+    if position.shape != (3,) or not all(_is_number(x) and math.isfinite(x) for x in position):
+        raise ValueError(f"probe {key}: position_m {value.get('position_m')!r} is not three finite numbers (m)")
+    x, y, z = (float(v) for v in position)
+    return ProbeEntry(key, probe, f00_hz, f00_std_hz, (x, y, z))
+
+
+def with_f00(probe: Probe, f00_hz: float) -> Probe:
+    """``probe`` with the spring that gives it ``f00_hz`` (Eq. S1 at B = G = 0: kM = J·((2π·f00)² + δ²)),
+    its other constants kept: hand-made probes differ most in their cantilevers' stiffness."""
+    spring = probe.inertia_kgm2 * ((2.0 * math.pi * f00_hz) ** 2 + probe.damping_per_s**2)
+    return dataclasses.replace(probe, spring_nm_per_rad=spring)
+
+
+def _is_number(x: object) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _number(probe_id: int, name: str, value: Any, low: float, high: float) -> float:
+    """``value`` as a float in [low, high] (f00 above ``low``), else ValueError naming it."""
+    positive = name != "f00_hz" or value > low if _is_number(value) else False
+    if not (_is_number(value) and math.isfinite(value) and low <= value <= high and positive):
+        bounds = f"({low:g}, {high:g}]" if name == "f00_hz" else f"[{low:g}, {high:g}]"
+        raise ValueError(f"probe {probe_id}: {name} = {value!r} is outside {bounds}")
+    return float(value)
+
+
+def probe_frame_id(base: str, probe_id: int) -> str:
+    """The frame of probe ``probe_id`` when several are listed: the single probe's frame name
+    with the id appended (``mows_probe`` → ``mows_probe_2``)."""
+    return f"{base}_{probe_id}"

@@ -1,0 +1,98 @@
+"""The estimator's ``probes`` text: each form read into its probe, every bad entry refused in
+one line naming it, and an empty text leaving the single-probe estimator as it is."""
+
+import numpy as np
+import pytest
+
+from mows.estimate.probe_set import MAX_PROBES, read_probe_set
+from mows.estimate.ringdown import FitOptions
+from mows.estimate.ringdown_joint import JointOptions
+from mows.estimate.segments import RingdownWindow, Segment
+from mows.estimate.stream import FitSettings, JointSettings, RingdownEstimator
+from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
+from mows.physics.pose import Pose
+from mows.physics.probe import PAPER_PROBE
+from mows.physics.signal import signal_t
+
+OTHER = PAPER_PROBE.replace(spring_nm_per_rad=PAPER_PROBE.spring_nm_per_rad * 1.2)
+
+
+def read(text):
+    return read_probe_set(text, PAPER_PROBE, lambda path: {"b.yaml": OTHER}[path])
+
+
+def test_each_form_gives_its_probe_in_order_of_id():
+    entries = read("{2: {f00_hz: 100.5, f00_std_hz: 0.001, position_m: [0, 0.05, 0]}, 0: 112.5, 1: b.yaml}")
+    assert [e.probe_id for e in entries] == [0, 1, 2]
+    assert entries[0].f00_hz == 112.5 and entries[0].probe.f00_hz == pytest.approx(112.5, abs=1e-9)
+    assert entries[0].probe.replace(spring_nm_per_rad=PAPER_PROBE.spring_nm_per_rad) == PAPER_PROBE
+    assert entries[1].probe is OTHER and entries[1].f00_hz == OTHER.f00_hz
+    assert entries[2].f00_std_hz == 0.001 and entries[2].position_m == (0.0, 0.05, 0.0)
+    assert read("") == () and read("  ") == ()
+
+
+@pytest.mark.parametrize(
+    "text, named",
+    [
+        ("[112.5, 125]", "not a mapping"),
+        ("{0: 112.5, 0.5: 125}", "probe id 0.5"),
+        ("{0: 112.5, 256: 125}", "probe id 256"),
+        ("{0: 112.5, 1: 112.9}", "probes 0 and 1"),
+        ("{0: -3}", "f00_hz = -3"),
+        ("{0: .nan}", "f00_hz = nan"),
+        ("{0: {f00_hz: 112.5, lever: 2}}", "probe 0"),
+        ("{0: {f00_hz: 112.5, position_m: [0, 1]}}", "position_m [0, 1]"),
+        ("{0: {f00_hz: 112.5, f00_std_hz: 20}}", "f00_std_hz = 20"),
+        ("{" + ", ".join(f"{k}: {100 + 5 * k}" for k in range(MAX_PROBES + 1)) + "}", f"at most {MAX_PROBES}"),
+        ("{0: [", "not YAML"),
+    ],
+)
+def test_a_bad_entry_is_refused_in_one_line_naming_it(text, named):
+    with pytest.raises(ValueError) as refused:
+        read(text)
+    assert named in str(refused.value) and "\n" not in str(refused.value)
+
+
+def test_a_probes_line_is_its_lever_aware_pickup_where_it_sits():
+    (entry,) = read("{3: {f00_hz: 125.0, position_m: [0, 0.04, 0]}}")
+    pair = FluxgatePair.paper()
+    line = entry.line(0.3, pair, "difference")
+    pose = Pose(theta0_rad=0.3, magnet_position_m=(0, 0.04, 0))
+    expected = pickup_harmonics(pair, pose, PAPER_PROBE.lever_m, PAPER_PROBE.moment_am2)
+    at_the_single_place = pickup_harmonics(pair, Pose(theta0_rad=0.3), PAPER_PROBE.lever_m, PAPER_PROBE.moment_am2)
+    assert line.probe_id == 3 and line.expected_frequency_hz == 125.0 and line.theta0_rad == 0.3
+    assert np.allclose(line.pickup, expected) and not np.allclose(line.pickup, at_the_single_place)
+    assert entry.line(0.3, None, "difference").pickup is None  # the paper's single term
+
+
+def segment(samples):
+    window = RingdownWindow(0, 0.5, 1, 0, 0.0, 112.5)
+    return Segment(window, 0, 20_000.0, samples, np.zeros(samples.shape, bool), 0)
+
+
+def test_without_probes_the_estimate_is_the_single_probe_one():
+    t = np.arange(10_000) / 20_000.0
+    clean = signal_t(t, 0.0, 0.3, 112.5, 0.4, 1.8, 2e-7)
+    data = np.column_stack([2 * clean, clean]) + 1e-10 * np.random.default_rng(1).standard_normal((10_000, 2))
+    settings = FitSettings(PAPER_PROBE, lambda theta0: FitOptions(), 0.0, 112.48, 0.0)
+    (alone,) = RingdownEstimator(5.0).estimate_all(segment(data), settings)
+    single = RingdownEstimator(5.0).estimate(segment(data), settings)
+    assert alone.fit.probe_id == 0 and alone.fit.frequency_hz == single.fit.frequency_hz
+    assert alone.estimate == single.estimate
+
+
+def test_with_probes_each_gets_its_estimate_from_its_own_f00():
+    t = np.arange(10_000) / 20_000.0
+    one = signal_t(t, 0.0, 0.3, 112.6, 0.4, 1.8, 2e-7) + signal_t(t, 0.0, 0.3, 125.1, 1.0, 1.8, 1e-7)
+    data = np.column_stack([2 * one, one]) + 1e-10 * np.random.default_rng(2).standard_normal((10_000, 2))
+    entries = read("{0: 112.5, 1: 125.0}")
+    joint = JointSettings(entries, lambda theta0: [e.line(theta0, None, "difference") for e in entries], JointOptions())
+    settings = FitSettings(PAPER_PROBE, lambda theta0: FitOptions(), 0.0, 112.48, 0.0, joint)
+    estimated = RingdownEstimator(5.0).estimate_all(segment(data), settings)
+    assert [e.fit.probe_id for e in estimated] == [0, 1]
+    for e, f_true, f00 in zip(estimated, (112.6, 125.1), (112.5, 125.0)):
+        assert e.fit.ok, e.fit.message
+        assert abs(e.fit.frequency_hz - f_true) < 4 * e.fit.frequency_std_hz
+        assert e.estimate.frequency_shift_hz == pytest.approx(e.fit.frequency_hz - f00)
+    with pytest.raises(ValueError, match="2 probes are listed"):
+        RingdownEstimator(5.0).begin_calibration(PAPER_PROBE, 1e-5, 2, 10.0, probes=2)

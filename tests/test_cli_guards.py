@@ -336,6 +336,28 @@ def test_a_directory_locked_while_its_output_is_written_is_named(tmp_path):
     assert target.read_text() == "old"
 
 
+def test_a_second_output_that_cannot_be_replaced_leaves_the_first_as_it_was(tmp_path):
+    """Two outputs, the second an immutable file that its rename cannot replace (after every check
+    has passed): the first, already renamed into place, is put back, old content or none."""
+    if os.geteuid() != 0 or shutil.which("chattr") is None:
+        pytest.skip("only root sets the immutable attribute that makes a rename fail after the checks")
+    first, new, second = tmp_path / "a" / "p.yaml", tmp_path / "a" / "new.txt", tmp_path / "b" / "t.csv"
+    for path, text in ((first, "old probe"), (second, "old table")):
+        path.parent.mkdir(exist_ok=True)
+        path.write_text(text)
+    if subprocess.run(["chattr", "+i", str(second)]).returncode != 0:
+        pytest.skip("this filesystem has no immutable attribute")
+    before = snapshot(tmp_path)
+    try:
+        with pytest.raises(OutputRefused, match=f"output {second}"):
+            with writing([first, new, second], force=True) as outputs:
+                for temporary in outputs.temporaries:
+                    temporary.write_text("new")
+    finally:
+        subprocess.run(["chattr", "-i", str(second)], check=True)
+    assert snapshot(tmp_path) == before
+
+
 # --- interrupts ------------------------------------------------------------------------------
 def interrupt(*_args, **_kwargs):
     raise KeyboardInterrupt

@@ -231,6 +231,20 @@ CASES = [
     ("lab-semicolons", ["lab", "compare", "{d}/sweep_semicolons.csv"], 2, ["separated by ';'", "comma"]),
     ("lab-one-row", ["lab", "compare", "{d}/sweep_one_row.csv"], 2, ["1 row", "degrees of freedom"]),
     ("lab-ringdown-negative-f00", ["lab", "ringdown", "{d}/bag", "--f00-hz", "-3"], 2, ["--f00-hz"]),
+    # usage: the (sub)command that refuses names itself and its --help
+    (
+        "fit-unknown-option",
+        ["fit", "{d}/bag", "--x"],
+        2,
+        ["mows fit: error: unrecognized arguments: --x (see mows fit --help)"],
+    ),
+    (
+        "lab-report-unknown-option",
+        ["lab", "report", "{d}/sweep.csv", "--x"],
+        2,
+        ["mows lab report: error: unrecognized arguments: --x (see mows lab report --help)"],
+    ),
+    ("bench-unknown-suite", ["bench", "nosuch"], 2, ["mows bench: error: ", "'nosuch'", "(see mows bench --help)"]),
     # probe files
     (
         "probe-1000x-moment",

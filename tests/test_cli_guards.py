@@ -180,6 +180,18 @@ CASES = [
         2,
         ["--repeats, --seed shape only --simulate"],
     ),
+    (
+        "calibrate-bag-options-with-a-table",
+        [*CAL, "-o", "{d}/p.yaml", "--supply-topic", "/s", "--coil-off-skip-s", "0.01"],
+        2,
+        ["--supply-topic, --coil-off-skip-s shape only a BAG's calibration", "give a BAG"],
+    ),
+    (
+        "calibrate-bag-option-with-simulate",
+        ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--paper-model"],
+        2,
+        ["--paper-model shapes only a BAG's calibration"],
+    ),
     ("calibrate-repeats-0", ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--repeats", "0"], 2, ["--repeats"]),
     ("calibrate-bad-polarity", [*CAL, "-o", "{d}/p.yaml", "--polarity", "gradient=2"], 2, ["--polarity"]),
     ("calibrate-nan-environment", [*CAL, "-o", "{d}/p.yaml", "--environment-field-t", "nan", "0", "0"], 2, ["nan"]),

@@ -139,10 +139,11 @@ def test_a_parameter_for_another_node_is_not_refused():
 
 
 def one_line_refusal(run: subprocess.CompletedProcess) -> str:
-    """The one line a refused command wrote (its ROS log lines aside): exit status 2, no traceback."""
+    """The one line a refused command wrote (its ROS log lines aside; a blank line counts): exit
+    status 2, no traceback."""
     assert run.returncode == EXIT_BAD_PARAMETER, run.stderr
     assert "Traceback" not in run.stderr
-    (line,) = [line for line in run.stderr.splitlines() if line and not line.startswith("[")]
+    (line,) = [line for line in run.stderr.splitlines() if not line.startswith("[")]
     return line
 
 
@@ -156,7 +157,7 @@ NOT_ROS_PARAMETERS = "probe settings\n"  # YAML, but no node: rcl applies nothin
         (NODES[0], ["--params-file", "{malformed}"], "Couldn't parse params file"),
         (NODES[0], ["--params-file", "{not_ros}"], "not a ROS parameter file"),
         (NODES[0], ["-p", "repeats"], "the form is -p [node:]name:=value"),
-        (NODES[0], ["-p", "serial_port:="], "an empty string is ''"),
+        (NODES[0], ["-p", "serial_port:="], "rule: '-p serial_port:=' (the form is -p [node:]name:=value"),
         (NODES[3], ["-p", "currents_a:=[]"], "'currents_a' is not initialized: currents_a: give it a value"),
         (NODES[0], ["-p", "drvier:repeats:=3"], "no node is called 'drvier': did you mean driver?"),
         # the node-prefixed form inside a namespace, which rcl alone would drop

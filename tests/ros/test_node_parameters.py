@@ -2,6 +2,8 @@
 as the shipped parameter files."""
 
 import dataclasses
+import hashlib
+import shutil
 import subprocess
 
 import pytest
@@ -9,6 +11,7 @@ import yaml
 from rclpy.parameter import Parameter
 
 from mows.physics.probe import PAPER_PROBE
+from mows.sim.scenario import scenario_file
 from mows_bringup.graph import NODES
 from mows_calibrator import node as calibrator
 from mows_driver import node as driver
@@ -192,6 +195,24 @@ def test_node_arguments_it_cannot_take_end_it_in_one_line(graph_node, arguments,
 def test_the_graph_s_commands_refuse_bad_arguments_in_one_line_before_starting_a_node(command, reason):
     line = one_line_refusal(subprocess.run(command, capture_output=True, text=True, timeout=120))
     assert reason in line, line
+
+
+@pytest.mark.parametrize(
+    "option, scenario, name",
+    [("--scenario", "anti_helmholtz", "demo_scene.yaml"), ("--probe-scenario", "calibration", "calibrated_probe.yaml")],
+    ids=["scene", "probe-scene"],
+)
+def test_the_demo_refuses_an_out_that_holds_a_scenario_it_reads(tmp_path, option, scenario, name):
+    """A scenario the demo reads, where it would write its own file of that name: refused before
+    any work, in one line, the scenario byte for byte as it was and nothing else written."""
+    given = tmp_path / name
+    shutil.copy(scenario_file(scenario), given)
+    digest = hashlib.sha256(given.read_bytes()).hexdigest()
+    command = ["mows-demo", option, str(given), "--out", str(tmp_path)]
+    line = one_line_refusal(subprocess.run(command, capture_output=True, text=True, timeout=120))
+    assert f"output {given} is an input" in line, line
+    assert hashlib.sha256(given.read_bytes()).hexdigest() == digest
+    assert list(tmp_path.iterdir()) == [given]
 
 
 def test_the_graph_s_node_names_are_the_ones_every_node_knows():

@@ -120,4 +120,4 @@ def test_a_suite_that_measured_nothing_fails_the_run(monkeypatch, capsys):
 
 def test_an_unknown_suite_is_a_bad_input(capsys):
     assert main(["bench", "simulatr"]) == 2
-    assert "unknown suite(s) simulatr" in capsys.readouterr().err
+    assert "error: argument SUITE: unknown suite 'simulatr'" in capsys.readouterr().err

@@ -196,6 +196,18 @@ CASES = [
         2,
         ["--repeats, --seed shape only --simulate"],
     ),
+    (
+        "calibrate-bag-options-with-a-table",
+        [*CAL, "-o", "{d}/p.yaml", "--supply-topic", "/s", "--coil-off-skip-s", "0.01"],
+        2,
+        ["--supply-topic, --coil-off-skip-s shape only a BAG's calibration", "give a BAG"],
+    ),
+    (
+        "calibrate-bag-option-with-simulate",
+        ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--paper-model"],
+        2,
+        ["--paper-model shapes only a BAG's calibration"],
+    ),
     ("calibrate-repeats-0", ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--repeats", "0"], 2, ["--repeats"]),
     ("calibrate-bad-polarity", [*CAL, "-o", "{d}/p.yaml", "--polarity", "gradient=2"], 2, ["--polarity"]),
     ("calibrate-nan-environment", [*CAL, "-o", "{d}/p.yaml", "--environment-field-t", "nan", "0", "0"], 2, ["nan"]),
@@ -247,6 +259,20 @@ CASES = [
     ("lab-semicolons", ["lab", "compare", "{d}/sweep_semicolons.csv"], 2, ["separated by ';'", "comma"]),
     ("lab-one-row", ["lab", "compare", "{d}/sweep_one_row.csv"], 2, ["1 row", "degrees of freedom"]),
     ("lab-ringdown-negative-f00", ["lab", "ringdown", "{d}/bag", "--f00-hz", "-3"], 2, ["--f00-hz"]),
+    # usage: the (sub)command that refuses names itself and its --help
+    (
+        "fit-unknown-option",
+        ["fit", "{d}/bag", "--x"],
+        2,
+        ["mows fit: error: unrecognized arguments: --x (see mows fit --help)"],
+    ),
+    (
+        "lab-report-unknown-option",
+        ["lab", "report", "{d}/sweep.csv", "--x"],
+        2,
+        ["mows lab report: error: unrecognized arguments: --x (see mows lab report --help)"],
+    ),
+    ("bench-unknown-suite", ["bench", "nosuch"], 2, ["mows bench: error: ", "'nosuch'", "(see mows bench --help)"]),
     # probe files
     (
         "probe-1000x-moment",
@@ -350,6 +376,28 @@ def test_a_directory_locked_while_its_output_is_written_is_named(tmp_path):
             lock(tmp_path)
     unlock(tmp_path)
     assert target.read_text() == "old"
+
+
+def test_a_second_output_that_cannot_be_replaced_leaves_the_first_as_it_was(tmp_path):
+    """Two outputs, the second an immutable file that its rename cannot replace (after every check
+    has passed): the first, already renamed into place, is put back, old content or none."""
+    if os.geteuid() != 0 or shutil.which("chattr") is None:
+        pytest.skip("only root sets the immutable attribute that makes a rename fail after the checks")
+    first, new, second = tmp_path / "a" / "p.yaml", tmp_path / "a" / "new.txt", tmp_path / "b" / "t.csv"
+    for path, text in ((first, "old probe"), (second, "old table")):
+        path.parent.mkdir(exist_ok=True)
+        path.write_text(text)
+    if subprocess.run(["chattr", "+i", str(second)]).returncode != 0:
+        pytest.skip("this filesystem has no immutable attribute")
+    before = snapshot(tmp_path)
+    try:
+        with pytest.raises(OutputRefused, match=f"output {second}"):
+            with writing([first, new, second], force=True) as outputs:
+                for temporary in outputs.temporaries:
+                    temporary.write_text("new")
+    finally:
+        subprocess.run(["chattr", "-i", str(second)], check=True)
+    assert snapshot(tmp_path) == before
 
 
 # --- interrupts ------------------------------------------------------------------------------

@@ -12,6 +12,10 @@ truth of the simulated scene: the in-plane field and gradient from the first-pri
 decomposition, what the paper's published model would have made of the same ring-downs, and
 the model lab's verdict on which physics the published model is missing. Writes the lab's
 HTML report. Node output goes to a log file so the terminal shows the measurement.
+
+Every file goes into ``--out`` through the guarded writer (:mod:`mows.records.files`): a run
+replaces the files of an earlier run there, never one of its scenario files, and refuses at once,
+before any work, an ``--out`` that holds one of them.
 """
 
 import argparse
@@ -36,7 +40,8 @@ from mows.estimate.calibration.fit import KnownConstants
 from mows.estimate.calibration.fit import calibrate_probe as fit_constants
 from mows.lab import analyse, from_sweep, reference_at, write_report
 from mows.physics.probe import PAPER_PROBE, Probe
-from mows.sim.scenario import load_scenario
+from mows.records.files import OutputRefused, check_output, check_outputs, writing
+from mows.sim.scenario import load_scenario, scenario_file
 from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
 from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
 from mows.sweep.record import SweepRecord
@@ -46,6 +51,10 @@ from mows_ros.process import EXIT_BAD_PARAMETER
 from mows_ros.qos import MAP_QOS, RESULT_QOS, STREAM_QOS
 
 DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_TURN_SETTLE_S = 10.0, 0.5, 0.5  # the driver's defaults
+PROBE_FILE, SCENE_FILE, PARAMETERS_FILE = "calibrated_probe.yaml", "demo_scene.yaml", "demo_parameters.yaml"
+LOG_FILE, TABLE_FILE, REPORT_FILE = "demo_nodes.log", "demo_sweep.csv", "demo_lab_report.html"
+#: What a run writes into --out; each replaces the one an earlier run wrote.
+OUTPUT_FILES = (PROBE_FILE, SCENE_FILE, PARAMETERS_FILE, LOG_FILE, TABLE_FILE, REPORT_FILE)
 
 
 def parse_arguments(argv):
@@ -86,6 +95,24 @@ def parse_arguments(argv):
     return args
 
 
+def inputs_of(args) -> tuple[pathlib.Path, pathlib.Path]:
+    """The scenario files the demo reads: no output may replace them."""
+    return scenario_file(args.scenario), scenario_file(args.probe_scenario)
+
+
+def check_out(args) -> pathlib.Path:
+    """``--out``, made if missing, if the demo may write its files there; else one line and exit
+    status 2 (an --out that holds a scenario the demo reads, a file, an unwritable directory)."""
+    out = pathlib.Path(args.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        check_outputs([out / name for name in OUTPUT_FILES], inputs_of(args), force=True)
+    except (OSError, OutputRefused) as error:
+        sys.stderr.write(f"mows-demo: error: --out {args.out}: {error}\n")
+        raise SystemExit(EXIT_BAD_PARAMETER) from None
+    return out
+
+
 def calibrate_probe(args, directory: pathlib.Path):
     """Calibrate the probe of ``--probe-scenario`` on its simulated bench; the probe file and
     the scene to map (``--scenario`` with that probe in it), both written to ``directory``."""
@@ -105,12 +132,11 @@ def calibrate_probe(args, directory: pathlib.Path):
     calibration = fit_constants(points, scenario_wirings(bench, gradient), KnownConstants.of(PAPER_PROBE))
     for line in compare_with_truth(calibration, bench.probe).splitlines() + [f"  {n}" for n in calibration.notes]:
         say(line)
-    probe_path = directory / "calibrated_probe.yaml"
+    probe_path = directory / PROBE_FILE
     date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-    # The demo's own working file, made again by every run into --out.
-    calibration.probe().to_yaml(probe_path, calibration.record(date, bench.name), force=True)
-    scene_path = directory / "demo_scene.yaml"
-    load_scenario(args.scenario).replace(probe=bench.probe).to_yaml(scene_path)
+    calibration.probe().to_yaml(probe_path, calibration.record(date, bench.name), inputs_of(args), force=True)
+    scene_path = directory / SCENE_FILE
+    load_scenario(args.scenario).replace(probe=bench.probe).to_yaml(scene_path, inputs_of(args), force=True)
     say(f"probe file: {probe_path}; the scene {args.scenario} with that probe: {scene_path}")
     return probe_path, scene_path
 
@@ -138,16 +164,14 @@ def write_parameters(args, directory: pathlib.Path, probe_path, scene_path) -> p
             tuning_steps=plan.tuning_steps,
         )
         mapper.update(repeat_s=plan.cycle_s, turn_s=DRIVER_TURN_SETTLE_S)
-    path = directory / "demo_parameters.yaml"
-    path.write_text(
-        yaml.safe_dump(
-            {
-                "/**/driver": {"ros__parameters": driver},
-                "/**/estimator": {"ros__parameters": {"probe_file": str(probe_path)}},
-                "/**/mapper": {"ros__parameters": mapper},
-            }
-        )
-    )
+    path = directory / PARAMETERS_FILE
+    sections = {
+        "/**/driver": {"ros__parameters": driver},
+        "/**/estimator": {"ros__parameters": {"probe_file": str(probe_path)}},
+        "/**/mapper": {"ros__parameters": mapper},
+    }
+    with writing([path], inputs_of(args), force=True) as outputs:
+        outputs.temporaries[0].write_text(yaml.safe_dump(sections))
     return path
 
 
@@ -170,20 +194,21 @@ def paper_protocol_s(orientations: int = 12) -> float:
 
 def main(argv=None) -> int:
     args = parse_arguments(sys.argv[1:] if argv is None else argv)
-    out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_out(args)
     probe_path, scene_path = calibrate_probe(args, out)
-    log = open(out / "demo_nodes.log", "w")
+    # The nodes write into the log while they run, so it cannot be renamed into place whole:
+    # it is opened in place, under the same checks as every other output.
+    log = open(check_output(out / LOG_FILE, inputs_of(args), force=True), "w")
     graph = Graph(NODES, ["--params-file", str(write_parameters(args, out, probe_path, scene_path))], output=log)
     stopping = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stopping.set())
-    say(f"scene: {args.scenario}; node output in {out / 'demo_nodes.log'}")
+    say(f"scene: {args.scenario}; node output in {out / LOG_FILE}")
     graph.start()
     try:
         problem = graph.bring_up(stopping.is_set)
         if problem is not None:
-            say(f"bring-up failed: {problem}; see {out / 'demo_nodes.log'}")
+            say(f"bring-up failed: {problem}; see {out / LOG_FILE}")
         ok = problem is None and run_sweep(args, out, stopping, graph.exited, scene_path, probe_path)
     finally:
         codes = graph.stop()
@@ -244,7 +269,7 @@ def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited, scene_
             say(f"sweep failed: {outcome.message}")
             return False
         spin_until(lambda: reports, 60.0, "the model report")
-        print_outcome(str(scene_path), outcome.decomposition, fits, reports[-1], out, probe_path)
+        print_outcome(str(scene_path), outcome.decomposition, fits, reports[-1], out, probe_path, inputs_of(args))
         return True
     except TimeoutError as error:
         say(str(error))
@@ -261,7 +286,7 @@ def print_feedback(feedback) -> None:
     )
 
 
-def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, probe_path) -> None:
+def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, probe_path, inputs) -> None:
 
     field, gradient = reference_at(scenario)
     truth = {
@@ -306,8 +331,9 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, prob
         )
     say(f"  residual structure: {report.structure}")
     table = from_sweep(record, scenario, probe, first_principles)
-    table_path = out / "demo_sweep.csv"
-    table.to_csv(table_path)
+    table_path = out / TABLE_FILE
+    with writing([table_path], inputs, force=True) as outputs:
+        table.to_csv(outputs.temporaries[0])
     say(f"sweep table: {table_path} (try: mows lab diagnose {table_path} --probe <probe.yaml>)")
     lab = analyse(table, probe, auto=True)
     for step in lab.history:
@@ -315,8 +341,9 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, prob
             f"  error history: {' + '.join(['published'] + step.effects):60s} χ²/dof {step.chi2_dof:9.2f}  "
             f"cv rms {step.cv_text:>8} mHz"
         )
-    path = out / "demo_lab_report.html"
-    write_report(lab, path)
+    path = out / REPORT_FILE
+    with writing([path], inputs, force=True) as outputs:
+        write_report(lab, outputs.temporaries[0])
     say(f"lab report: {path}")
 
 

@@ -35,15 +35,23 @@ def arguments_problem(argv: list[str]) -> str | None:
     line; a parameter file that is none), or None."""
     try:
         remove_ros_args(argv)
-    except RCLInvalidROSArgsError as error:  # rcl's text names the argument, then its source lines
-        text = re.sub(r", at \S+:\d+", "", str(error)).removeprefix("Failed to parse ROS arguments: ")
-        if "parameter override rule" in text:
-            text += " (the form is -p [node:]name:=value; an empty string is '')"
-        return text
+    except RCLInvalidROSArgsError as error:
+        return _rcl_refusal(str(error))
     for path in ros_argument_values(argv, ("--params-file",)):
         if (problem := params_file_problem(path)) is not None:
             return problem
     return None
+
+
+def _rcl_refusal(text: str) -> str:
+    """rcl's refusal of a ROS argument in one line: the argument and the parser's reason, without
+    rcl's source locations and trailing newline. For an override rule its reason is the lexer's
+    state (or "error not set" for an empty value): the rule's form says more."""
+    text = re.sub(r", at \S+:\d+", "", text).removeprefix("Failed to parse ROS arguments: ")
+    text = " ".join(text.split())
+    if "parameter override rule" in text:
+        return text.partition(". Error: ")[0] + " (the form is -p [node:]name:=value; an empty string is '')"
+    return text
 
 
 def autostart_asked(args: list[str] | None) -> bool:

@@ -2,6 +2,8 @@
 as the shipped parameter files."""
 
 import dataclasses
+import hashlib
+import shutil
 import subprocess
 
 import pytest
@@ -9,6 +11,7 @@ import yaml
 from rclpy.parameter import Parameter
 
 from mows.physics.probe import PAPER_PROBE
+from mows.sim.scenario import scenario_file
 from mows_bringup.graph import NODES
 from mows_calibrator import node as calibrator
 from mows_driver import node as driver
@@ -139,10 +142,11 @@ def test_a_parameter_for_another_node_is_not_refused():
 
 
 def one_line_refusal(run: subprocess.CompletedProcess) -> str:
-    """The one line a refused command wrote (its ROS log lines aside): exit status 2, no traceback."""
+    """The one line a refused command wrote (its ROS log lines aside; a blank line counts): exit
+    status 2, no traceback."""
     assert run.returncode == EXIT_BAD_PARAMETER, run.stderr
     assert "Traceback" not in run.stderr
-    (line,) = [line for line in run.stderr.splitlines() if line and not line.startswith("[")]
+    (line,) = [line for line in run.stderr.splitlines() if not line.startswith("[")]
     return line
 
 
@@ -156,7 +160,7 @@ NOT_ROS_PARAMETERS = "probe settings\n"  # YAML, but no node: rcl applies nothin
         (NODES[0], ["--params-file", "{malformed}"], "Couldn't parse params file"),
         (NODES[0], ["--params-file", "{not_ros}"], "not a ROS parameter file"),
         (NODES[0], ["-p", "repeats"], "the form is -p [node:]name:=value"),
-        (NODES[0], ["-p", "serial_port:="], "an empty string is ''"),
+        (NODES[0], ["-p", "serial_port:="], "rule: '-p serial_port:=' (the form is -p [node:]name:=value"),
         (NODES[3], ["-p", "currents_a:=[]"], "'currents_a' is not initialized: currents_a: give it a value"),
         (NODES[0], ["-p", "drvier:repeats:=3"], "no node is called 'drvier': did you mean driver?"),
         # the node-prefixed form inside a namespace, which rcl alone would drop
@@ -191,6 +195,24 @@ def test_node_arguments_it_cannot_take_end_it_in_one_line(graph_node, arguments,
 def test_the_graph_s_commands_refuse_bad_arguments_in_one_line_before_starting_a_node(command, reason):
     line = one_line_refusal(subprocess.run(command, capture_output=True, text=True, timeout=120))
     assert reason in line, line
+
+
+@pytest.mark.parametrize(
+    "option, scenario, name",
+    [("--scenario", "anti_helmholtz", "demo_scene.yaml"), ("--probe-scenario", "calibration", "calibrated_probe.yaml")],
+    ids=["scene", "probe-scene"],
+)
+def test_the_demo_refuses_an_out_that_holds_a_scenario_it_reads(tmp_path, option, scenario, name):
+    """A scenario the demo reads, where it would write its own file of that name: refused before
+    any work, in one line, the scenario byte for byte as it was and nothing else written."""
+    given = tmp_path / name
+    shutil.copy(scenario_file(scenario), given)
+    digest = hashlib.sha256(given.read_bytes()).hexdigest()
+    command = ["mows-demo", option, str(given), "--out", str(tmp_path)]
+    line = one_line_refusal(subprocess.run(command, capture_output=True, text=True, timeout=120))
+    assert f"output {given} is an input" in line, line
+    assert hashlib.sha256(given.read_bytes()).hexdigest() == digest
+    assert list(tmp_path.iterdir()) == [given]
 
 
 def test_the_graph_s_node_names_are_the_ones_every_node_knows():

@@ -19,7 +19,7 @@ import sys
 import time
 import traceback
 
-from mows.cli.status import EXIT_BAD_INPUT, EXIT_BUG
+from mows.cli.status import EXIT_BUG
 from mows.records.json_numbers import finite_or_none
 
 SUITES = {
@@ -87,6 +87,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "suites",
         nargs="*",
         metavar="SUITE",
+        type=suite,
         help=f"which benchmarks (default: {', '.join(DEFAULT_SUITES)}): {', '.join(SUITES)}",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -98,11 +99,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def suite(name: str) -> str:
+    """A benchmark suite's name, or argparse's refusal naming the ones there are."""
+    if name not in SUITES:
+        raise argparse.ArgumentTypeError(f"unknown suite {name!r}: choose from {', '.join(SUITES)}")
+    return name
+
+
 def run(args) -> int:
-    unknown = [name for name in args.suites if name not in SUITES]
-    if unknown:
-        print(f"mows bench: unknown suite(s) {', '.join(unknown)}; choose from {', '.join(SUITES)}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     figures, failed = {}, []
     for name in args.suites or list(DEFAULT_SUITES):
         module_name, what = SUITES[name]

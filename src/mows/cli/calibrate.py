@@ -63,6 +63,20 @@ from mows.sweep.calibration.schedule import (
 
 SUPPLY_SETTLE_S = 0.5  # the probe rings after a supply step: wait before the next cycle
 
+#: The options that shape --simulate's calibration alone (by argparse name), and their defaults
+#: (the currents' default follows the supply's polarity: ``default_currents_a``).
+SIMULATION_OPTIONS = {"currents_a": None, "repeats": 1, "seed": None}
+#: The options that shape a BAG's calibration alone (their defaults are the parser's).
+BAG_OPTIONS = (
+    "supply_topic",
+    "raw_topic",
+    "excitation_topic",
+    "paper_model",
+    "coil_off_skip_s",
+    "sensor_distance_m",
+    "sensor_spacing_m",
+)
+
 
 def add_arguments(parser) -> None:
     parser.add_argument("input", nargs="?", help="a calibration table (CSV; --table writes one) or a driver's bag")
@@ -98,14 +112,16 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--supply-topic", default=SUPPLY_TOPIC, help="BAG: the driver's supply states")
     add_fit_arguments(parser)  # BAG: how its ring-downs are fitted (as the estimator's parameters)
-    parser.set_defaults(tuning=False)
+    # None marks an option not given (refused by name without a BAG); its default comes in later
+    bag_defaults = {name: parser.get_default(name) for name in BAG_OPTIONS}
+    parser.set_defaults(tuning=False, bag_defaults=bag_defaults, **dict.fromkeys(BAG_OPTIONS))
 
 
 def run(args) -> int:
     inputs = [path for path in (args.input, args.probe, args.scenario, args.gradient_scenario) if path]
     outputs = [args.output] + ([args.table] if args.table else [])
     check_outputs(outputs, inputs, args.force)
-    _simulation_options(args)
+    _source_options(args)
     nominal = load_probe(args.probe) if args.probe else PAPER_PROBE
     scenario = _scenario(args.scenario)
     gradient = _scenario(args.gradient_scenario) if args.gradient_scenario else None
@@ -174,26 +190,28 @@ def _polarity(given, field_wiring: str) -> dict:
     return polarity
 
 
-# --- the simulated calibration ------------------------------------------------------------
-#: The options that shape --simulate's calibration alone (by argparse name), and their defaults
-#: (the currents' default follows the supply's polarity: ``default_currents_a``).
-SIMULATION_OPTIONS = {"currents_a": None, "repeats": 1, "seed": None}
-
-
-def _simulation_options(args) -> None:
-    """An input with --simulate, or an option of --simulate without it, is refused by name (it
-    would be ignored); with --simulate, the options not given take their defaults."""
+def _source_options(args) -> None:
+    """An input with --simulate, or an option of a source not in use (--simulate, a BAG), is
+    refused by name (it would be ignored); the options of the source in use that were not
+    given take their defaults."""
     if args.simulate and args.input:
         raise ValueError(f"{args.input} and --simulate are two sources: give a TABLE or BAG, or --simulate")
-    given = [f"--{name.replace('_', '-')}" for name in SIMULATION_OPTIONS if getattr(args, name) is not None]
-    if given and not args.simulate:
-        verb = "shape" if len(given) > 1 else "shapes"
-        raise ValueError(f"{', '.join(given)} {verb} only --simulate's calibration: drop it or add --simulate")
-    for name, default in SIMULATION_OPTIONS.items():
-        if getattr(args, name) is None:
-            setattr(args, name, default)
+    bag = bool(args.input) and is_bag(args.input)
+    sources = (
+        ("--simulate's", "add --simulate", args.simulate, SIMULATION_OPTIONS),
+        ("a BAG's", "give a BAG", bag, args.bag_defaults),
+    )
+    for source, remedy, used, options in sources:
+        given = [f"--{name.replace('_', '-')}" for name in options if getattr(args, name) is not None]
+        if given and not used:
+            verb, them = ("shape", "them") if len(given) > 1 else ("shapes", "it")
+            raise ValueError(f"{', '.join(given)} {verb} only {source} calibration: drop {them} or {remedy}")
+        for name, default in options.items():
+            if getattr(args, name) is None:
+                setattr(args, name, default)
 
 
+# --- the simulated calibration ------------------------------------------------------------
 def simulated_points(scenario, gradient, nominal: Probe, field_wiring: str, args) -> tuple[list, dict]:
     plan = CalibrationPlan(tuple(args.currents_a), repeats=args.repeats, wiring=field_wiring)
     seed = scenario.seed if args.seed is None else args.seed

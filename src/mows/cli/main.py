@@ -64,10 +64,20 @@ def _main(argv: list) -> int:
             sp.set_defaults(_run=module.run)
         _add_debug(sp)
     try:
-        args = parser.parse_args(argv)
+        args, unknown = parser.parse_known_args(argv)
+        if unknown:  # the subcommand's parser says it, with its own name and --help
+            _chosen(parser, args).error(f"unrecognized arguments: {' '.join(unknown)}")
     except UsageError as error:  # the one line and the status of every bad input
         return report_errors(error.prog, functools.partial(_refuse, error), "--debug" in argv)
     return report_errors(f"mows {args.command}", lambda: args._run(args), args.debug)
+
+
+def _chosen(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
+    """The innermost (sub)command parser that ``args`` went through: ``mows lab report``'s."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction) and getattr(args, action.dest, None) in action.choices:
+            return _chosen(action.choices[getattr(args, action.dest)], args)
+    return parser
 
 
 def _refuse(error: ValueError) -> int:

@@ -5,7 +5,8 @@ there unless told to (``force``, and then only over a regular file), and never h
 (so that a long analysis does not end in a refusal); :func:`writing` writes one or several
 outputs through temporary files in their directories and renames them into place only once
 every writer has finished, so a crash, an error or Ctrl-C leaves the old files (or none) and
-never a torn one, nor one output written and another not.
+never a torn one, nor one output written and another not: a rename that fails puts back what
+the renames before it replaced.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import contextlib
 import dataclasses
 import os
 import pathlib
+import shutil
 import stat
 import tempfile
 from collections.abc import Iterable, Iterator, Sequence
@@ -131,16 +133,64 @@ def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iter
                 os.fsync(handle.fileno())
             os.chmod(temporary, 0o666 & ~_umask())
         outputs.replaced = [os.path.lexists(path) for path in targets]
-        for temporary, path in zip(outputs.temporaries, targets):
-            try:
-                os.replace(temporary, path)
-            except OSError as error:
-                raise _unwritable(path, error) from error
+        _replace_all(outputs.temporaries, targets)
     finally:
         for temporary in outputs.temporaries:
             # a directory that turned read-only keeps its temporary: the error that says so matters more
             with contextlib.suppress(OSError):
                 temporary.unlink(missing_ok=True)
+
+
+def _replace_all(temporaries: Sequence[pathlib.Path], targets: Sequence[pathlib.Path]) -> None:
+    """Rename each temporary onto its target, all or none: a rename that fails (or Ctrl-C between
+    two) puts back the files the earlier ones replaced, kept aside until every rename is done,
+    and removes the ones they created."""
+    placed: list[tuple[pathlib.Path, pathlib.Path | None]] = []
+    try:
+        for temporary, path in zip(temporaries, targets):
+            aside = _set_aside(path)
+            try:
+                os.replace(temporary, path)
+            except OSError as error:
+                _discard(aside)
+                raise _unwritable(path, error) from error
+            placed.append((path, aside))
+    except BaseException:
+        for path, aside in reversed(placed):
+            _put_back(path, aside)
+        raise
+    for _, aside in placed:
+        _discard(aside)
+
+
+def _set_aside(path: pathlib.Path) -> pathlib.Path | None:
+    """A copy of the file at ``path`` beside it (None where there is none yet). A copy, not a
+    rename, so the output never goes missing; not a hard link, which an immutable file refuses."""
+    if not os.path.lexists(path):
+        return None
+    try:
+        descriptor, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".replaced", dir=path.resolve().parent)
+        os.close(descriptor)
+        shutil.copy2(path, name)
+    except OSError as error:
+        raise _unwritable(path, error) from error
+    return pathlib.Path(name)
+
+
+def _put_back(path: pathlib.Path, aside: pathlib.Path | None) -> None:
+    """``path`` as it was before :func:`_replace_all`; where that fails, the copy stays beside it
+    (named ``.NAME.*.replaced``) rather than be lost."""
+    with contextlib.suppress(OSError):
+        if aside is None:
+            path.unlink(missing_ok=True)
+        else:
+            os.replace(aside, path)
+
+
+def _discard(aside: pathlib.Path | None) -> None:
+    if aside is not None:
+        with contextlib.suppress(OSError):
+            aside.unlink(missing_ok=True)
 
 
 def _umask() -> int:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import pathlib
+from collections.abc import Iterable
 
 import numpy as np
 import yaml
@@ -34,6 +35,7 @@ from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.schema import check_keys
 from mows.physics.supply import FieldSupply, supply_from_dict
+from mows.records.files import writing
 from mows.sim.scenario_yaml import (
     PAPER_PROBE_NAME,
     SCENARIO_DIR,
@@ -138,12 +140,21 @@ class Scenario:
         data = yaml.safe_load(path.read_text())
         return cls.from_dict(data, base_dir=path.parent)
 
-    def to_yaml(self, path) -> None:
-        pathlib.Path(path).write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
+    def to_yaml(self, path, inputs: Iterable = (), force: bool = False) -> str:
+        """Write the scenario as a new file, never over ``inputs`` nor, unless ``force``, over an
+        existing one (:func:`mows.records.files.writing`); "wrote PATH" or "replaced PATH"."""
+        with writing([path], inputs, force) as outputs:
+            outputs.temporaries[0].write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
+        return outputs.report()
 
 
 def load_scenario(name_or_path=DEFAULT_SCENARIO) -> Scenario:
     """A shipped scenario by name (``src/mows/sim/scenarios/<name>.yaml``) or a YAML file by path."""
+    return Scenario.from_yaml(scenario_file(name_or_path))
+
+
+def scenario_file(name_or_path=DEFAULT_SCENARIO) -> pathlib.Path:
+    """The file a scenario's name or path stands for (a name is no path in the working directory)."""
     path = pathlib.Path(name_or_path)
     if path.suffix not in (".yaml", ".yml"):
         path = SCENARIO_DIR / f"{name_or_path}.yaml"
@@ -152,7 +163,7 @@ def load_scenario(name_or_path=DEFAULT_SCENARIO) -> Scenario:
                 f"scenario {name_or_path!r} is neither a YAML file nor one of the shipped "
                 f"scenarios {shipped_scenarios()}"
             )
-    return Scenario.from_yaml(path)
+    return path
 
 
 def _probe_entry(scene_probe: SceneProbe) -> dict:

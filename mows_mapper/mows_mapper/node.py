@@ -11,7 +11,9 @@ reference (``reference_scenario``) the model lab (``mows.lab.analyse``) compares
 frequency model with the sweep and publishes ``/mows/model_report`` (ModelReport).
 
 With ``probes`` listing several probes (the estimator's list), each ring-down brings one fit per
-probe; each probe's sweep is decomposed on its own and published on ``/mows/sweep`` with its
+probe; each probe's sweep is decomposed with its neighbours' fields in the model
+(:mod:`mows.sweep.probes`: each probe's external field and gradient) and published on
+``/mows/sweep`` with its
 ``probe_id`` (frame ``<frame_id>_<probe_id>``), failed or not (the topic keeps one per probe),
 and all of them together on ``/mows/field_map`` (FieldMap, reliable and transient-local), each
 at its ``position_m`` in ``frame_id``. The model lab reads one probe's sweep: it is not run then.

@@ -1,9 +1,11 @@
 """The mapper node with three probes: a rotation sweep through a stand-in driver whose every
-ring-down brings one fit per probe (each probe in its own uniform field, the frequency from the
-full potential), decomposed per probe, published per probe on /mows/sweep and together as a
-latched field map.
+ring-down brings one fit per probe (the probes 5 cm apart in one linear field, each frequency
+that of the full potential with the neighbours' dipole fields at their coupled rest),
+decomposed per probe with the coupling in the model, published per probe on /mows/sweep and
+together as a latched field map.
 
-Requirement: each probe's field comes back within 4σ of its own, in its own frame; the field
+Requirement: each probe's external field and gradient come back within 4σ of the scene's at
+its place, in its own frame; the field
 map holds every probe at its listed position in the stage's frame; a probe whose fits all fail
 is in the map with its status and NaN, never a number.
 """
@@ -16,10 +18,10 @@ from action_msgs.msg import GoalStatus
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import FieldMap, RingdownFit, SweepDecomposition
 
-from mows.physics.field import UniformField
+from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
 from mows.physics.pose import Pose
-from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
+from mows.physics.sources import LinearGradient
 from mows_ros.qos import MAP_QOS, RESULT_QOS, maps_qos
 from node_processes import send_goal, serve_cycles
 
@@ -29,7 +31,11 @@ STD_HZ = 5e-4
 ANGLES = np.radians(np.arange(0.0, 360.0, 45.0))
 F00_HZ = (P.f00_hz, 125.0, 101.0)
 POSITIONS_M = ((0.0, 0.0, 0.0), (0.0, 0.05, 0.0), (0.0, -0.05, 0.0))
-FIELDS_T = ((30e-6, -20e-6, 0.0), (-10e-6, 25e-6, 0.0), (5e-6, 40e-6, 0.0))
+SCENE = LinearGradient(
+    np.array([[2e-3, 1e-3, 0.0], [1e-3, -3e-3, 0.0], [0.0, 0.0, 1e-3]]), field_at_origin_t=(30e-6, -20e-6, 40e-6)
+)
+FIELDS_T = [SCENE.field_t(np.array(r)) for r in POSITIONS_M]  # 150 µT apart: each probe's own
+GRADIENT_T_PER_M = np.array([2e-3, 1e-3, -3e-3])  # Gxx, Gxy, Gyy
 # A probe given by its f00 alone is the mapper's own (the paper's) with the spring of that f00.
 PROBE = [P.replace(spring_nm_per_rad=P.inertia_kgm2 * ((2 * math.pi * f) ** 2 + P.damping_per_s**2)) for f in F00_HZ]
 PROBES = (
@@ -46,15 +52,14 @@ class ThreeProbeDriver:
         self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
         self.server = serve_cycles(ros, self.run_cycle)
         self.failing, self.cycle, self.rng = failing, 0, np.random.default_rng(4)
-        self.sources = [UniformField(np.array(f)) for f in FIELDS_T]
 
     def run_cycle(self, request, response):
         self.cycle += 1
-        pose = Pose(theta0_rad=request.theta0_rad)
+        placed = [PlacedProbe(p, Pose(r, request.theta0_rad)) for p, r in zip(PROBE, POSITIONS_M)]
+        frequencies = coupled_frequencies_hz(placed, SCENE)
         for repeat in range(request.repeats):
-            for k, source in enumerate(self.sources):
-                measured = float(ArcPotential.from_source(PROBE[k], source, pose).frequency_hz())
-                measured += STD_HZ * self.rng.standard_normal()
+            for k, frequency in enumerate(frequencies):
+                measured = float(frequency) + STD_HZ * self.rng.standard_normal()
                 ok = k not in self.failing
                 msg = RingdownFit(
                     cycle_id=self.cycle,
@@ -96,6 +101,9 @@ def test_each_probe_is_mapped_in_its_frame_and_at_its_place(ros, mapper):
         assert s.status == 0 and s.header.frame_id == f"mows_rotation_plane_{s.probe_id}" and s.n_points == 16
         sigma = np.sqrt(np.diag(np.reshape(s.field_covariance_t2, (2, 2))))
         assert np.all(np.abs(np.array(s.field_t) - field[:2]) < 4 * sigma), (s.probe_id, s.field_t, field)
+        sigma = np.sqrt(np.diag(np.reshape(s.gradient_covariance, (3, 3))))
+        gradient = np.array(s.gradient_t_per_m)
+        assert np.all(np.abs(gradient - GRADIENT_T_PER_M) < 4 * sigma), (s.probe_id, gradient)
     assert done.result.decomposition.probe_id == 0
     # /mows/sweep keeps every probe's decomposition for a subscriber that comes later.
     late = []

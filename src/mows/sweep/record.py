@@ -12,7 +12,7 @@ import numpy as np
 from mows.estimate.ringdown_types import parameter_std
 from mows.physics.probe import Probe
 from mows.physics.ringdown_average import start_swing_rad
-from mows.sweep.decompose import Decomposition, Ringdowns, decompose, local_potential
+from mows.sweep.decompose import Decomposition, NeighbourFields, Ringdowns, decompose, local_potential
 
 REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its σ is below this…
 REST_OFFSET_SIGMAS = 4.0  # …and it is this many σ from 0
@@ -126,7 +126,12 @@ class SweepRecord:
         return robust_median(stops[np.isfinite(stops)], fallback_rad)
 
     def decompose(
-        self, probe: Probe, f00_hz: float, model: str = "first_principles", f00_free: bool = False
+        self,
+        probe: Probe,
+        f00_hz: float,
+        model: str = "first_principles",
+        f00_free: bool = False,
+        neighbours: NeighbourFields | None = None,
     ) -> Decomposition:
         """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
 
@@ -137,7 +142,8 @@ class SweepRecord:
         The first-principles model needs the swing each ring-down starts with, stop − |θs|, and
         θs depends on the field it is fitting: a first pass with the fits' own rest offsets gives
         the field, its rest angles give the pooled stop (the probe's where no fit determined
-        θmax), and a second pass fits with both.
+        θmax), and a second pass fits with both. ``neighbours``: other probes' fields at each
+        ring-down, known terms of the first-principles model (:mod:`mows.sweep.probes`).
         """
         theta0 = self._column("theta0_rad")
         arrays: dict[str, Any] = dict(
@@ -152,6 +158,7 @@ class SweepRecord:
         )
         if model != "first_principles":
             return decompose(**arrays)
+        arrays["neighbours"] = neighbours
 
         damping, duration, pickups = self._column("damping_per_s"), self._column("duration_s"), self.pickups()
 
@@ -161,7 +168,7 @@ class SweepRecord:
         first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(fallback_rad=probe.theta_stop_rad)))
         if not first.ok:
             return first
-        stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe), probe.theta_stop_rad)
+        stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe, neighbours), probe.theta_stop_rad)
         return decompose(**arrays, ringdowns=ringdowns(stop), start=first.parameters)
 
     def pickups(self) -> np.ndarray | None:
@@ -180,10 +187,14 @@ class SweepRecord:
         excess = self._column("shift_std_hz") ** 2 - self._column("frequency_std_hz") ** 2
         return float(np.sqrt(np.max(excess, initial=0.0)))
 
-    def rest_angles_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
-        """|θs| of each ring-down at the decomposition's field and gradient (0 where undefined)."""
+    def rest_angles_rad(
+        self, decomposition: Decomposition, probe: Probe, neighbours: NeighbourFields | None = None
+    ) -> np.ndarray:
+        """|θs| of each ring-down at the decomposition's field and gradient, and the
+        ``neighbours``' fields when given (0 where undefined)."""
         theta0 = self._column("theta0_rad")
-        return np.abs(np.nan_to_num(local_potential(decomposition.parameters, theta0, probe).rest_angle_rad()))
+        potential = local_potential(decomposition.parameters, theta0, probe, neighbours)
+        return np.abs(np.nan_to_num(potential.rest_angle_rad()))
 
     def start_amplitudes_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
         """Each ring-down's start swing, stop − |θs| (:func:`mows.physics.ringdown_average.start_swing_rad`),

@@ -195,19 +195,16 @@ def local_potential(params, theta0_rad, probe: Probe, neighbours: NeighbourField
     global_field = np.array([bx, by, 0.0])
     global_gradient = np.array([[gxx, gxy, 0.0], [gxy, gyy, 0.0], [0.0, 0.0, -(gxx + gyy)]])
     global_hessian = curvature_hessian_t_per_m2(*params[6:8]) if len(params) > 6 and np.any(params[6:8]) else None
-    if neighbours is None:
-        field = rotation @ global_field
-        gradient = rotation @ global_gradient @ np.swapaxes(rotation, -1, -2)
-        if global_hessian is None:
-            return ArcPotential.from_local_field(probe, field, gradient)
-        hessian = np.einsum("nia,abc,njb,nkc->nijk", rotation, global_hessian, rotation, rotation)
-        return ArcPotential.from_local_field(probe, field, gradient, hessian)
-    field = np.einsum("nij,nj->ni", rotation, global_field + neighbours.field_t)
-    gradient = rotation @ (global_gradient + neighbours.gradient_t_per_m) @ np.swapaxes(rotation, -1, -2)
-    total_hessian = (
-        neighbours.hessian_t_per_m2 if global_hessian is None else neighbours.hessian_t_per_m2 + global_hessian
-    )
-    hessian = np.einsum("nia,nabc,njb,nkc->nijk", rotation, total_hessian, rotation, rotation)
+    if neighbours is not None:
+        global_field = global_field + neighbours.field_t
+        global_gradient = global_gradient + neighbours.gradient_t_per_m
+        known = neighbours.hessian_t_per_m2
+        global_hessian = known if global_hessian is None else known + global_hessian
+    field = np.einsum("...ij,...j->...i", rotation, global_field)
+    gradient = rotation @ global_gradient @ np.swapaxes(rotation, -1, -2)
+    if global_hessian is None:
+        return ArcPotential.from_local_field(probe, field, gradient)
+    hessian = np.einsum("...ia,...abc,...jb,...kc->...ijk", rotation, global_hessian, rotation, rotation)
     return ArcPotential.from_local_field(probe, field, gradient, hessian)
 
 

@@ -3,12 +3,15 @@
 A map point is one probe's in-plane field and gradient decomposed to the target σ (the same
 target per component for every probe). Both cases run the same cycle in device time
 (:class:`mows.bench.multiprobe_rig.MultiProbeRig`: turn, settle, multi-tone excitation, joint
-fit) in the ``three_probes`` scene, sweep after sweep of ``points`` orientations on the shared
+fit) in the ``three_probes`` scene, round after round of ``points`` orientations on the shared
 stage, and decompose every probe with the coupling in the model
-(:func:`mows.sweep.multiprobe.decompose_probes`) after each sweep, until every probe reaches the
-target or ``max_sweeps`` have run. One probe is the scene with only ``single`` of its probes (by
-default the paper's 112.5 Hz one); several are all of them. Points per minute =
-probes × 60 / device seconds, NaN when the target was not reached (the reason is reported).
+(:func:`mows.sweep.multiprobe.decompose_probes`) after every point from the one that gives the
+sweep the orientations its model needs (7 for the field's 3θ0 curvature, or all ``points`` when
+fewer), until every probe reaches the target or ``max_sweeps`` rounds have run. Probes that
+reached the target are measured on with the others: their points cost nothing extra. One
+probe is the scene with only ``single`` of its probes (by default the paper's 112.5 Hz one);
+several are all of them. Points per minute = probes × 60 / device seconds, NaN when the target
+was not reached (the reason is reported).
 
 Several probes cost no more excitation time than one (their tones sum in one group), so the
 ratio of several to one is the number of probes, times how much longer the slowest probe of the
@@ -23,6 +26,7 @@ import numpy as np
 
 from mows.bench.multiprobe_rig import MultiProbeRig
 from mows.sim.scenario import load_scenario
+from mows.sweep.decompose import unknown_count
 from mows.sweep.multiprobe import decompose_probes, sweeps_of
 from mows.sweep.planner import PrecisionGoal, achieved_std, reached
 
@@ -34,20 +38,23 @@ def time_to_target(scenario, goal: PrecisionGoal, points: int, max_sweeps: int, 
     """Sweeps of ``scenario``'s probes until every probe reaches ``goal``: the figures."""
     rig = MultiProbeRig(scenario, seed=seed)
     placed = scenario.placed_probes()
-    fits = []
-    for _ in range(max_sweeps):
-        for j in range(points):
-            fits.append(rig.run_cycle(rig.home_orientations_rad() + 2.0 * np.pi * j / points).fits)
+    first_check = min(points, unknown_count(curvature=True))
+    fits: list = []
+    decompositions: list = []
+    for j in range(points * max_sweeps):
+        fits.append(rig.run_cycle(rig.home_orientations_rad() + 2.0 * np.pi * j / points).fits)
+        if len(fits) < first_check:
+            continue
         decompositions = decompose_probes(sweeps_of(placed, fits, scenario.sensors.pair))
         if all(reached(goal, d) for d in decompositions):
             break
-    done = all(reached(goal, d) for d in decompositions)
+    done = bool(decompositions) and all(reached(goal, d) for d in decompositions)
     return {
         "probes": len(placed),
         "device_s": rig.time_s,
-        "sweeps": len(fits) // points,
+        "points": len(fits),
         "reached": done,
-        "message": "target reached" if done else f"not reached in {max_sweeps} sweeps of {points} points",
+        "message": "target reached" if done else f"not reached in {max_sweeps} rounds of {points} points",
         "points_per_minute": len(placed) * 60.0 / rig.time_s if done else math.nan,
         "std_per_probe": [achieved_std(d).tolist() for d in decompositions],
     }

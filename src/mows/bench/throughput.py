@@ -23,7 +23,8 @@ truth, and the peak coil current and worst duty-cycle window seen.
 ``points_per_minute``: map points (one probe's B and G to a target σ) per minute of device
 time with one probe and with the three probes of the ``three_probes`` scene excited together
 (:mod:`mows.bench.multiprobe_throughput`), at the same target for both (default σ ≤ 200 nT per
-field and ≤ 100 µT/m per gradient component, a few sweeps of the multi-probe cycle).
+field and ≤ 100 µT/m per gradient component; rounds of the multi-probe cycle, the target
+checked after every point).
 
 ``tracking``: the driver's tracking mode (its plan and its loop of cycles,
 :mod:`mows.device.tracking`) at θ0 = 0°, ring-downs as short as the Cramér–Rao bound allows for

@@ -20,12 +20,24 @@ Two models are offered:
 Both report f = f00·√(k/kM). A calibrated f00 separates the constant gradient term Gs from
 the zero-field frequency; with ``f00_free`` the constant term is absorbed and Gs is not
 determined (reported as NaN).
+
+**The field's curvature over the arc.** The stage turns the probe about its magnet's rest
+position, and B and G are the field and gradient there. A ring-down swings the magnet along an
+arc of the lever, δr ≈ l·(−θ²/2, θ, 0), so the field's second derivatives H_ijk = ∂²B_i/∂x_j∂x_k
+add −m·l²·∂²Bx'/∂y'² to the stiffness. Over θ0 that term has two parts. The in-plane harmonic
+part of H (H_xxx = −H_xyy = Hc, H_xxy = −H_yyy = Hs: the potential (Hc·Re + Hs·Im)(x + iy)³/6)
+gives a 3θ0 harmonic, which ``curvature`` fits: 7 distinct orientations determine it. The trace
+part, (H_xxx + H_xyy, H_yxx + H_yyy) = −∂²(Bx, By)/∂z², gives a 1θ0 harmonic that no sweep
+tells apart from the field: the B reported is B + (l²/4)·∂²(Bx, By)/∂z² at the magnet's rest
+position (docs/multi_probe.md gives its size). Without ``curvature`` the 3θ0 term is left in
+the residual, where unequal σ over the sweep leak it into B.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import enum
+import itertools
 import math
 
 import numpy as np
@@ -39,6 +51,7 @@ from mows.physics.ringdown_average import amplitude_nodes
 
 MODELS = ("first_principles", "published")
 MAX_HARMONIC = 4
+PARAMETER_COUNT = 8  # Bx, By, Gs, Gd, Gxy, Δf00, Hc, Hs
 F00_STEP_HZ = 1e-4  # the calibrated f00's step for its Jacobian column (the model is smooth in f00)
 
 
@@ -96,7 +109,8 @@ class Decomposition:
     chi2_dof: float = math.nan
     rms_residual_hz: float = math.nan
     residual_hz: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
-    parameters: np.ndarray = dataclasses.field(default_factory=lambda: np.full(6, np.nan))  # Bx, By, Gs, Gd, Gxy, Δf00
+    # Bx, By, Gs, Gd, Gxy, Δf00, Hc, Hs (the field's in-plane 3θ0 curvature, T/m², 0 unless fitted)
+    parameters: np.ndarray = dataclasses.field(default_factory=lambda: np.full(PARAMETER_COUNT, np.nan))
 
     @property
     def ok(self) -> bool:
@@ -159,23 +173,38 @@ class NeighbourFields:
     hessian_t_per_m2: np.ndarray
 
 
+def curvature_hessian_t_per_m2(hc_t_per_m2: float, hs_t_per_m2: float) -> np.ndarray:
+    """H_ijk = ∂²B_i/∂x_j∂x_k (3, 3, 3) of the potential (Hc·Re + Hs·Im)(x + iy)³/6: the in-plane
+    harmonic part of a field's curvature (module docstring), harmonic in 3D, no z components."""
+    hessian = np.zeros((3, 3, 3))
+    for indices, value in (((0, 0, 0), hc_t_per_m2), ((0, 1, 1), -hc_t_per_m2), ((0, 0, 1), hs_t_per_m2)):
+        for permuted in itertools.permutations(indices):
+            hessian[permuted] = value
+    hessian[1, 1, 1] = -hs_t_per_m2
+    return hessian
+
+
 def local_potential(params, theta0_rad, probe: Probe, neighbours: NeighbourFields | None = None) -> ArcPotential:
-    """The potential of each point for params (Bx, By, Gs, Gd, Gxy, …): the field and gradient
-    turned into the probe frame (Gzz = −(Gxx + Gyy) by ∇·B = 0), plus the ``neighbours``'
-    fields when given."""
+    """The potential of each point for params (Bx, By, Gs, Gd, Gxy, Δf00[, Hc, Hs]): the field,
+    gradient and in-plane curvature turned into the probe frame (Gzz = −(Gxx + Gyy) by ∇·B = 0),
+    plus the ``neighbours``' fields when given."""
     bx, by, gs, gd, gxy = params[:5]
     theta0 = np.asarray(theta0_rad, float)
     rotation = probe_axes(theta0)
     gxx, gyy = gs + gd, gs - gd
     global_field = np.array([bx, by, 0.0])
     global_gradient = np.array([[gxx, gxy, 0.0], [gxy, gyy, 0.0], [0.0, 0.0, -(gxx + gyy)]])
-    if neighbours is None:
-        field = rotation @ global_field
-        gradient = rotation @ global_gradient @ np.swapaxes(rotation, -1, -2)
+    global_hessian = curvature_hessian_t_per_m2(*params[6:8]) if len(params) > 6 and np.any(params[6:8]) else None
+    if neighbours is not None:
+        global_field = global_field + neighbours.field_t
+        global_gradient = global_gradient + neighbours.gradient_t_per_m
+        known = neighbours.hessian_t_per_m2
+        global_hessian = known if global_hessian is None else known + global_hessian
+    field = np.einsum("...ij,...j->...i", rotation, global_field)
+    gradient = rotation @ global_gradient @ np.swapaxes(rotation, -1, -2)
+    if global_hessian is None:
         return ArcPotential.from_local_field(probe, field, gradient)
-    field = np.einsum("nij,nj->ni", rotation, global_field + neighbours.field_t)
-    gradient = rotation @ (global_gradient + neighbours.gradient_t_per_m) @ np.swapaxes(rotation, -1, -2)
-    hessian = np.einsum("nia,nabc,njb,nkc->nijk", rotation, neighbours.hessian_t_per_m2, rotation, rotation)
+    hessian = np.einsum("...ia,...abc,...jb,...kc->...ijk", rotation, global_hessian, rotation, rotation)
     return ArcPotential.from_local_field(probe, field, gradient, hessian)
 
 
@@ -188,7 +217,7 @@ def model_shift_hz(
     ringdowns: Ringdowns | None = None,
     neighbours: NeighbourFields | None = None,
 ):
-    """Δf(θ0) for params (Bx, By, Gs, Gd, Gxy, f00 − f00_calibrated), Hz.
+    """Δf(θ0) for params (Bx, By, Gs, Gd, Gxy, f00 − f00_calibrated[, Hc, Hs]), Hz.
 
     With ``ringdowns`` the first-principles model reports what the fit of each decaying
     ring-down reports: the weighted average of the harmonic-balance frequency over its swing
@@ -197,7 +226,7 @@ def model_shift_hz(
     small-amplitude stiffness. The published model has no amplitude (nor ``neighbours``: the
     other probes' fields, first-principles only).
     """
-    bx, by, gs, gd, gxy, df00 = params
+    bx, by, gs, gd, gxy, df00 = params[:6]
     theta0 = np.asarray(theta0_rad, float)
     f00 = f00_hz + df00
     if model == "published":
@@ -232,6 +261,7 @@ def decompose(
     start=None,
     f00_std_hz: float = 0.0,
     neighbours: NeighbourFields | None = None,
+    curvature: bool = False,
 ) -> Decomposition:
     """Field and gradient from a rotation sweep by weighted nonlinear least squares.
 
@@ -255,6 +285,8 @@ def decompose(
     neighbours : the other probes' fields at this probe in a sweep of several
         (:class:`NeighbourFields`), part of the first-principles model; the field and gradient
         returned are then the external ones, without them.
+    curvature : fit the field's in-plane 3θ0 curvature (Hc, Hs; module docstring), first-principles
+        model only; needs 7 distinct orientations.
 
     The covariance is scaled by χ²/dof when that exceeds 1, as lmfit does: a model that does
     not fit does not get to claim the measurement errors' precision.
@@ -264,12 +296,15 @@ def decompose(
     std = np.asarray(shift_std_hz, float)
     if model not in MODELS:
         raise ValueError(f"model = {model!r}; use one of {MODELS}")
-    status, problem = _check(theta0, shift, std, f00_free)
+    if curvature and model != "first_principles":
+        raise ValueError(f"curvature needs the first_principles model, not {model!r}")
+    status, problem = _check(theta0, shift, std, f00_free, curvature)
     if status is not DecompositionStatus.OK:
         return Decomposition(model, status, problem, f00_free=f00_free)
     harmonics = fit_harmonics(theta0, shift, std, min(MAX_HARMONIC, _distinct_angles(theta0) // 2 - 1 or 1))
-    free = np.array([True, True, not f00_free, True, True, f00_free])
+    free = np.array([True, True, not f00_free, True, True, f00_free, curvature, curvature])
     start = _start(harmonics, probe, f00_hz, model) if start is None else np.array(start, float)
+    start = np.r_[start, np.zeros(PARAMETER_COUNT - start.size)]
     if f00_free:
         start[2] = 0.0  # Gs is absorbed by f00 and stays out of the fit
 
@@ -289,13 +324,13 @@ def decompose(
             "(a field beyond what the probe's potential describes?)",
             f00_free=f00_free,
         )
-    scale = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1e-3])[free]
+    scale = np.array([1e-6, 1e-6, 1e-3, 1e-3, 1e-3, 1e-3, 1.0, 1.0])[free]
     result = least_squares(residual, start[free], x_scale=scale, method="lm", xtol=1e-12, ftol=1e-12)
     params = start.copy()
     params[free] = result.x
     # A calibrated f00 off by δ moves every residual as the Δf00 parameter does (model_shift_hz):
     # its column of the Jacobian, held fixed in the fit, carries f00's σ into the parameters.
-    step = np.eye(6)[5] * F00_STEP_HZ
+    step = np.eye(PARAMETER_COUNT)[5] * F00_STEP_HZ
     f00_column = (residual_of(params + step) - residual_of(params - step)) / (2.0 * F00_STEP_HZ)
     f00_effect = None if f00_free or not f00_std_hz > 0.0 else (f00_column, float(f00_std_hz))
     decomposition = _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics, f00_effect)
@@ -307,27 +342,30 @@ def _distinct_angles(theta0) -> int:
     return np.unique(np.round(np.mod(theta0, 2 * np.pi), 6)).size
 
 
-def unknown_count(f00_free: bool = False) -> int:
-    """The decomposition's unknowns (Bx, By, Gs, Gd, Gxy, and Δf00 when f00 is free): the
-    field's 1θ0 pair, the gradient's 2θ0 pair and the constant, 5; 6 with f00 free. A sweep
-    needs as many distinct orientations."""
-    return 6 if f00_free else 5
+def unknown_count(f00_free: bool = False, curvature: bool = False) -> int:
+    """The decomposition's unknowns (Bx, By, Gs, Gd, Gxy, Δf00 when f00 is free, Hc and Hs with
+    the curvature): the field's 1θ0 pair, the gradient's 2θ0 pair and the constant, 5; one more
+    with f00 free, two more for the curvature's 3θ0 pair. A sweep needs as many distinct
+    orientations."""
+    return 5 + int(f00_free) + 2 * int(curvature)
 
 
-def orientations_problem(theta0_rad, f00_free: bool = False) -> str:
+def orientations_problem(theta0_rad, f00_free: bool = False, curvature: bool = False) -> str:
     """Why a sweep at these orientations cannot be decomposed ('' when it can): the field is the
-    1θ0 harmonic, the gradient the 2θ0 one, plus a constant (and f00 when free)."""
+    1θ0 harmonic, the gradient the 2θ0 one, plus a constant (and f00 when free, and the
+    curvature's 3θ0 harmonic when fitted)."""
     distinct = _distinct_angles(np.asarray(theta0_rad, float))
-    needed = unknown_count(f00_free)
+    needed = unknown_count(f00_free, curvature)
     if distinct < needed:
+        extra = (" and f00" if f00_free else "") + (" and the curvature (3θ0)" if curvature else "")
         return (
             f"{distinct} distinct orientations cannot separate field (1θ0) from gradient "
-            f"(2θ0){' and f00' if f00_free else ''}: need at least {needed}"
+            f"(2θ0){extra}: need at least {needed}"
         )
     return ""
 
 
-def _check(theta0, shift, std, f00_free) -> tuple[DecompositionStatus, str]:
+def _check(theta0, shift, std, f00_free, curvature) -> tuple[DecompositionStatus, str]:
     if not (theta0.shape == shift.shape == std.shape and theta0.ndim == 1):
         return DecompositionStatus.INVALID_INPUT, (
             f"theta0, shift and std must be equal-length 1-D arrays, got {theta0.shape}, {shift.shape}, {std.shape}"
@@ -336,7 +374,7 @@ def _check(theta0, shift, std, f00_free) -> tuple[DecompositionStatus, str]:
         return DecompositionStatus.INVALID_INPUT, "non-finite angle, shift or uncertainty in the sweep"
     if np.any(std <= 0):
         return DecompositionStatus.INVALID_INPUT, "every shift needs a positive standard uncertainty"
-    if problem := orientations_problem(theta0, f00_free):
+    if problem := orientations_problem(theta0, f00_free, curvature):
         return DecompositionStatus.TOO_FEW_ORIENTATIONS, problem
     return DecompositionStatus.OK, ""
 
@@ -364,9 +402,9 @@ def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmon
         column, f00_std_hz = f00_effect
         sensitivity = -normal_inverse @ jac.T @ column  # ∂(free parameters)/∂f00
         cov_free = cov_free + f00_std_hz**2 * np.outer(sensitivity, sensitivity)
-    cov = np.full((6, 6), np.nan)
+    cov = np.full((PARAMETER_COUNT, PARAMETER_COUNT), np.nan)
     cov[np.ix_(free, free)] = cov_free
-    bx, by, gs, gd, gxy, df00 = params
+    bx, by, gs, gd, gxy, df00 = params[:6]
     # (Gxx, Gxy, Gyy) = (Gs + Gd, Gxy, Gs − Gd): a linear map of (Gs, Gd, Gxy).
     to_xy = np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, -1.0, 0.0]])
     g_cov = to_xy @ np.nan_to_num(cov[2:5, 2:5]) @ to_xy.T  # a parameter held fixed has no variance

@@ -20,6 +20,12 @@ magnet, so the field along the whole arc). The neighbours' fields depend on the 
 through their rest angles (a few degrees move them by a few percent), so the rounds converge
 at once; the rest angles at each point are the coupled ones, iterated to a fixed point.
 
+Each probe's decomposition also fits the external field's in-plane 3θ0 curvature over its
+lever's arc when the sweep has the 7 orientations it needs
+(:func:`mows.sweep.decompose.decompose`, ``curvature``). Several probes spread over a coil
+pair's field sit where its curvature is not small, and left in the residual it leaks into the
+field wherever the points' σ differ. The curvature's 1θ0 part cannot be told from the field.
+
 The probes rotate in the global x–y plane (the decomposition's frame).
 """
 
@@ -37,7 +43,14 @@ from mows.estimate.ringdown_types import RingdownFit
 from mows.physics.coupling import PlacedProbe
 from mows.physics.fluxgate import FluxgatePair, pickup_scale_t
 from mows.physics.sources import PointDipole
-from mows.sweep.decompose import Decomposition, NeighbourFields, Ringdowns, decompose, local_potential
+from mows.sweep.decompose import (
+    Decomposition,
+    NeighbourFields,
+    Ringdowns,
+    decompose,
+    local_potential,
+    orientations_problem,
+)
 
 SWING_BRACKET_RAD = (1e-4, 0.7)  # within the potential's interval
 REST_ITERATIONS = 4  # the rest angles' fixed point contracts by ~1e-4 a step at centimetres
@@ -142,6 +155,7 @@ def decompose_probes(
 
 
 def _decompose(sweep: ProbeSweep, neighbours: NeighbourFields | None) -> Decomposition:
+    curvature = not orientations_problem(sweep.theta0_rad, curvature=True)
     return decompose(
         sweep.theta0_rad,
         sweep.shift_hz,
@@ -150,6 +164,7 @@ def _decompose(sweep: ProbeSweep, neighbours: NeighbourFields | None) -> Decompo
         sweep.f00_hz,
         ringdowns=sweep.ringdowns,
         neighbours=neighbours,
+        curvature=curvature,
     )
 
 

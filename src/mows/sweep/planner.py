@@ -242,7 +242,7 @@ class AdaptivePlanner:
     # --- information ----------------------------------------------------------------------------
     def _parameters(self, decomposition: Decomposition | None) -> np.ndarray:
         if decomposition is not None and decomposition.ok and np.all(np.isfinite(decomposition.parameters[:5])):
-            return np.asarray(decomposition.parameters, float)
+            return np.asarray(decomposition.parameters[:6], float)  # the curvature is not planned for
         return np.zeros(6)
 
     def _rows(self, theta0_rad, decomposition) -> np.ndarray:

@@ -17,7 +17,7 @@ from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import UniformField
-from mows.sim.multiprobe import CoupledProbes
+from mows.sim.multiprobe import CoupledProbes, swinging_pickup_t
 
 RATE_HZ = 10_000.0
 NO_FIELD = UniformField([0.0, 0.0, 0.0])
@@ -32,13 +32,7 @@ def test_the_joint_fit_of_two_simulated_probes_sees_their_coupled_frequencies():
         PlacedProbe(P.replace(spring_nm_per_rad=P.spring_nm_per_rad * 1.24), Pose(magnet_position_m=(0.0, 0.03, 0.0))),
     ]
     theta, _ = CoupledProbes(probes, NO_FIELD).ring_down([math.radians(10.0), math.radians(12.0)], 5000, RATE_HZ)
-    pickup = sum(
-        pair.pickup_t(
-            p.pose.magnet_position_at(theta[:, k], p.probe.lever_m),
-            p.probe.moment_am2 * p.pose.moment_direction_at(theta[:, k]),
-        )
-        for k, p in enumerate(probes)
-    )
+    pickup = swinging_pickup_t(pair, probes, theta)
     samples = pickup + 1e-10 * np.random.default_rng(2).standard_normal(pickup.shape)
     model = coupled_frequencies_hz(probes, NO_FIELD)
     lines = [

@@ -21,7 +21,7 @@ from mows.physics.fluxgate import FluxgatePair
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import UniformField
-from mows.sim.multiprobe import CoupledProbes
+from mows.sim.multiprobe import CoupledProbes, swinging_pickup_t
 from mows_bringup.graph import NODES
 from mows_ros.qos import RESULT_QOS
 from node_processes import assert_stops_cleanly
@@ -47,13 +47,7 @@ def three_probes():
     start = [math.radians(a) for a in (4.0, 3.5, 4.0)]  # small swings: the model is at zero amplitude
     theta, _ = CoupledProbes(placed, SCENE).ring_down(start, n, FS)
     pair = FluxgatePair.paper()
-    samples = sum(
-        pair.pickup_t(
-            p.pose.magnet_position_at(theta[:, k], p.probe.lever_m),
-            p.probe.moment_am2 * p.pose.moment_direction_at(theta[:, k]),
-        )
-        for k, p in enumerate(placed)
-    )
+    samples = swinging_pickup_t(pair, placed, theta)
     samples = samples + 1e-10 * np.random.default_rng(5).standard_normal(samples.shape)
     return placed, coupled_frequencies_hz(placed, SCENE), samples
 

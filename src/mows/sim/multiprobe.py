@@ -34,8 +34,20 @@ from numba import njit
 from numpy.typing import ArrayLike
 
 from mows.physics.coupling import PlacedProbe, check_apart
+from mows.physics.fluxgate import FluxgatePair
 from mows.physics.potential import DEFAULT_NODES, ArcPotential, arc_energy_j, chebyshev_nodes_rad
 from mows.physics.sources import MU0_OVER_4PI, FieldSource
+
+
+def swinging_pickup_t(pair: FluxgatePair, placed: Sequence[PlacedProbe], theta_rad: np.ndarray) -> np.ndarray:
+    """What both fluxgates of ``pair`` read, (n, 2) T, of the magnets ``placed`` swinging through
+    the deflections ``theta_rad`` (n, N): each magnet's exact dipole field (Eq. S8) on its
+    lever, summed."""
+    field = np.zeros((theta_rad.shape[0], 2))
+    for k, p in enumerate(placed):
+        positions = p.pose.magnet_position_at(theta_rad[:, k], p.probe.lever_m)
+        field += pair.pickup_t(positions, p.probe.moment_am2 * p.pose.moment_direction_at(theta_rad[:, k]))
+    return field
 
 
 class CoupledProbes:

@@ -42,7 +42,7 @@ from mows.physics.multitone import Tone, coil_amplitudes_a, drive_currents_a, pe
 from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, ArcPotential
 from mows.records.samples import SampleBlock
 from mows.records.stamps import NS_PER_S
-from mows.sim.multiprobe import _coupling_torques
+from mows.sim.multiprobe import _coupling_torques, swinging_pickup_t
 from mows.sim.noise import NoiseStream
 from mows.sim.simulator import INTERVAL_OVER_STOP
 
@@ -231,10 +231,7 @@ class MultiProbeDevice:
         coils_on = (index >= self._drive_on_index) & (index < self._drive_off_index)
         theta = self.integrate(n_samples)
         field = self._static_reading_t + currents @ self._coil_reading_t_per_a + self._noise.draw(first, n_samples)
-        for k, p in enumerate(self.placed):
-            positions = p.pose.magnet_position_at(theta[:, k], p.probe.lever_m)
-            moments = p.probe.moment_am2 * p.pose.moment_direction_at(theta[:, k])
-            field = field + self._pair.pickup_t(positions, moments)
+        field = field + swinging_pickup_t(self._pair, self.placed, theta)
         readings, saturated = self._pair.digitise(field)
         samples = SampleBlock(
             first, round(first * NS_PER_S / self.sample_rate_hz), self.sample_rate_hz, readings, saturated

@@ -22,7 +22,7 @@ from mows.physics.probe import PAPER_PROBE as P
 from mows.sim.cycle import simulate_cycle
 from mows.sim.noise import NoiseStream
 from mows.sim.scenario import Environment, Integrator, Scenario, Sensors, load_scenario
-from mows.sim.simulator import SimulatedDevice
+from mows.sim.simulator import SimulatedDevice, SimulationRefused
 
 FS = 20_000.0
 KM, M, J, DELTA, L = P.spring_nm_per_rad, P.moment_am2, P.inertia_kgm2, P.damping_per_s, P.lever_m
@@ -445,6 +445,14 @@ def test_commands_are_checked():
     device.set_coils([1.0, -1.0], 112.0)
     with pytest.raises(RuntimeError, match="switch the coils off"):
         device.set_orientation(1.0)
+
+
+def test_a_scene_of_several_probes_is_refused_not_simulated_as_its_first_probe():
+    scene = load_scenario("three_probes")
+    with pytest.raises(SimulationRefused, match="scenario 'three_probes' has 3 probes; this simulator integrates one"):
+        SimulatedDevice(scene)
+    alone = scene.replace(probes=scene.probes[1:2], probe=scene.probes[1].probe, pose=scene.probes[1].pose)
+    assert SimulatedDevice(alone).probe.f00_hz == 112.5
 
 
 def test_the_field_shift_follows_the_moment_at_the_temperature():

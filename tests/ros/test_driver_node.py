@@ -180,6 +180,7 @@ def test_parameters_out_of_range_are_rejected_with_their_reason(ros_context):
         (["-p", "scenario:=no_such_scenario"], "scenario 'no_such_scenario' is neither"),
         (["-p", "backend:=serial"], "backend serial needs the device's port"),
         (["-p", "coil_setup:=helmholtz"], "does not drive the coils of scenario"),
+        (["-p", "scenario:=three_probes"], "scenario 'three_probes' has 3 probes; this simulator integrates one"),
         (["-p", "record_path:=/"], "/ exists: a recording goes to a new path"),
         (["-p", "backend:=nidaqmx", "-p", "supply:=none"], "backend nidaqmx: NI-DAQmx (NI's driver runtime) is not"),
         (["-p", "backend:=nidaqmx", "-p", "supply:=scpi"], "supply scpi needs the supply's VISA address"),

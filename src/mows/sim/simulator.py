@@ -108,10 +108,17 @@ class SimulatedDevice:
     """The MOWS device in a :class:`mows.sim.scenario.Scenario`, advanced sample by sample.
 
     The probe starts at rest at the scenario's orientation. ``rng`` defaults to
-    ``numpy.random.default_rng(scenario.seed)``.
+    ``numpy.random.default_rng(scenario.seed)``. A scene with several probes is refused
+    (:class:`SimulationRefused`): simulating its first probe alone would leave out the others'
+    ring-downs and their coupling (:class:`mows.sim.multiprobe_device.MultiProbeDevice` integrates them).
     """
 
     def __init__(self, scenario, rng: np.random.Generator | None = None):
+        if len(scenario.probes) > 1:
+            raise SimulationRefused(
+                f"scenario {scenario.name!r} has {len(scenario.probes)} probes; this simulator integrates one "
+                "(MultiProbeDevice integrates several; the driver does not run them yet)"
+            )
         self.scenario = scenario
         self.probe = scenario.probe
         self.sample_rate_hz = float(scenario.sample_rate_hz)

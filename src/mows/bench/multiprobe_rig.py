@@ -34,13 +34,13 @@ BUFFER_S = 5.0  # the assembler keeps this much of the stream
 @dataclasses.dataclass(frozen=True)
 class MultiProbeSettings:
     """One cycle: the swing each probe's tone aims at (:func:`mows.physics.multitone.tone_for_swing`), the
-    excitation and recorded ring-down times, the settling after the probes turn, the duty
+    excitation and recorded ring-down times, the settling after the probes turn (turn_settle_s), the duty
     limit (fraction of a window) and the samples skipped after the coils' switch-off."""
 
     swing_rad: float = 0.15
     excite_s: float = 0.5
     ringdown_s: float = 0.5
-    settle_s: float = 0.5
+    turn_settle_s: float = 0.5
     max_duty_cycle: float = 0.5
     duty_window_s: float = 10.0
     coil_off_skip_s: float = COIL_OFF_SKIP_S
@@ -83,7 +83,7 @@ class MultiProbeRig:
         """Turn the probes to ``theta0_rad`` (one per probe), excite them and fit their ring-downs."""
         settings, device = self.settings, self.device
         device.set_orientations(theta0_rad)
-        device.idle(settings.settle_s)
+        device.idle(settings.turn_settle_s)
         tones = [
             tone_for_swing(k, p, device.setup, p.probe.f00_hz, settings.swing_rad, settings.excite_s)
             for k, p in enumerate(device.placed)

@@ -96,6 +96,13 @@ def averaging_kernel(
 
     Arguments broadcast to a batch shape (n,); ``pickup`` (n, K + 1) or (K + 1,) as in
     :func:`phase_weight`. See the module docstring for K.
+
+    NaN masses where the weight vanishes over the whole window, so that nothing fixes the
+    phase and there is no fit to average: a start swing of 0, which is what a sweep's model
+    gives where the housing stop lies inside the rest deflection (the field holds the lever on
+    its stop and nothing rings: :meth:`mows.physics.potential.ArcPotential.start_swing_rad`),
+    a pickup that is zero, or a window of no length. The small-swing kernel, the limit A0 → 0,
+    exists but belongs to a ring-down that rings, however little; a lever on its stop has none.
     """
     theta0, amp0, damping, duration = np.broadcast_arrays(
         *(np.atleast_1d(np.asarray(v, float)) for v in (theta0_rad, amplitude_start_rad, damping_per_s, duration_s))
@@ -104,12 +111,19 @@ def averaging_kernel(
     t = (np.arange(GRID_POINTS) + 0.5) * step[:, None]
     per_point = None if pickup is None else np.atleast_2d(np.asarray(pickup, complex))[:, None, :]
     weight = phase_weight(theta0[:, None], amp0[:, None] * np.exp(-damping[:, None] * t), sensor_direction, per_point)
-    centre = (weight * t).sum(-1, keepdims=True) / weight.sum(-1, keepdims=True)
+    centre = _ratio((weight * t).sum(-1, keepdims=True), weight.sum(-1, keepdims=True))
     lever = weight * (t - centre)
     # ∫_t^T w·(s − t̄) ds on the grid: everything after the cell plus half of the cell itself.
     tail = np.cumsum(lever[:, ::-1], axis=-1)[:, ::-1] - 0.5 * lever
     mass = np.clip(tail, 0.0, None)
-    return t, mass / mass.sum(-1, keepdims=True)
+    return t, _ratio(mass, mass.sum(-1, keepdims=True))
+
+
+def _ratio(numerator: np.ndarray, denominator: np.ndarray) -> np.ndarray:
+    """numerator / denominator, NaN where the denominator is not positive: no phase information
+    anywhere in the window, so no kernel (:func:`averaging_kernel`)."""
+    shape = np.broadcast(numerator, denominator).shape
+    return np.divide(numerator, denominator, out=np.full(shape, np.nan), where=denominator > 0)
 
 
 def amplitude_nodes(
@@ -144,13 +158,13 @@ def amplitude_nodes(
     off = np.sqrt(np.stack(beta[1:], -1)) if nodes > 1 else np.zeros((len(x), 0))
     jacobi[:, idx[:-1], idx[1:]] = off
     jacobi[:, idx[1:], idx[:-1]] = off
-    bad = ~np.all(np.isfinite(jacobi), axis=(1, 2))  # NaN inputs give NaN nodes, not an error
+    bad = ~np.all(np.isfinite(jacobi), axis=(1, 2))  # no kernel (NaN inputs, no swing): NaN nodes, not an error
     eigenvalues, vectors = np.linalg.eigh(np.where(bad[:, None, None], 0.0, jacobi))
     eigenvalues[bad] = np.nan
     times = (eigenvalues + 1.0) * span / 2.0
     damping = np.broadcast_to(np.atleast_1d(np.asarray(damping_per_s, float)), (len(x),))
     amp0 = np.broadcast_to(np.atleast_1d(np.asarray(amplitude_start_rad, float)), (len(x),))
-    return amp0[:, None] * np.exp(-damping[:, None] * times), vectors[:, 0, :] ** 2
+    return amp0[:, None] * np.exp(-damping[:, None] * times), np.where(bad[:, None], np.nan, vectors[:, 0, :] ** 2)
 
 
 def default_duration_s(f_hz: ArrayLike) -> np.ndarray:

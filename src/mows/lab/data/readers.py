@@ -20,7 +20,7 @@ import numpy as np
 from mows.device import bags
 from mows.estimate.ringdown import FitStatus
 from mows.lab.data.reference import Reference, reference_columns
-from mows.lab.data.table import FIELD, KNOWN, MeasurementTable, TableError, broken_rules, rows_text, with_notes
+from mows.lab.data.table import FIELD, KNOWN, PROBE, MeasurementTable, TableError, broken_rules, rows_text, with_notes
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.schema import Vector
 from mows.records import stamps
@@ -184,8 +184,11 @@ def from_bag(
       position): the exact field and in-plane gradient there.
 
     Rows are numbered into sweeps by the ``SweepDecomposition`` stamps on ``sweep_topic`` when
-    the bag has them (a sweep's stamp is that of its last ring-down). Each row's start swing
-    is :func:`start_amplitudes_rad`, with the probe's ``theta_stop_rad`` where no fit gives the stop.
+    the bag has them (a sweep's stamp is that of its last ring-down; a sweep of several probes
+    publishes one per probe, with one stamp). Each row's start swing is
+    :func:`start_amplitudes_rad`, with the probe's ``theta_stop_rad`` where no fit gives the stop.
+    Fits of several probes (``probe_id``, docs/multi_probe.md) give the column ``probe``
+    (:mod:`mows.lab.data.probes`), so that the lab keeps each probe's rows apart.
     """
     path = pathlib.Path(path)
     if not path.exists():
@@ -227,10 +230,13 @@ def from_bag(
         "snr_db": np.array([m.snr_db for _, m in fits]),
     }
     notes = [f"skipped {failed} RingdownFit messages whose status is not OK"] if failed else []
-    sweep_ids = np.searchsorted(np.sort(sweeps), times_s - 1e-9).astype(float) if sweeps else np.zeros(len(fits))
+    sweep_ids = np.searchsorted(np.unique(sweeps), times_s - 1e-9).astype(float) if sweeps else np.zeros(len(fits))
     if sweeps:
         columns["sweep"] = sweep_ids
-    start, said = start_amplitudes_rad([m for _, m in fits], sweep_ids, theta_stop_rad)
+    probe_ids = np.array([getattr(m, "probe_id", 0) for _, m in fits], float)
+    if len(np.unique(probe_ids)) > 1:
+        columns[PROBE] = probe_ids
+    start, said = start_amplitudes_rad([m for _, m in fits], sweep_ids, theta_stop_rad, probe_ids)
     columns["amplitude_deg"] = np.degrees(start)
     notes += said
     columns.update(_reference_columns(reference, times_s, fields, magnet_position_m, path))
@@ -238,7 +244,7 @@ def from_bag(
 
 
 def start_amplitudes_rad(
-    fits: Sequence[Any], sweep_ids: np.ndarray, stop_rad: float = math.nan
+    fits: Sequence[Any], sweep_ids: np.ndarray, stop_rad: float = math.nan, probe_ids: np.ndarray | None = None
 ) -> tuple[np.ndarray, list[str]]:
     """Each ring-down's start swing from RingdownFit messages (or fits), and notes of what was
     assumed or left out: the stop less the row's own |rest offset| where its fit determined it
@@ -246,15 +252,22 @@ def start_amplitudes_rad(
     :func:`mows.physics.ringdown_average.start_swing_rad`). The stop is pooled per sweep by a
     median with outliers left out (every ring-down of a sweep starts from the same housing
     stop, and a single fit's θmax is rarely determined), else over all rows, else ``stop_rad``
-    (the probe's). NaN where nothing gives a stop, never a swing ≤ 0."""
+    (the probe's). With ``probe_ids`` (one per fit) each probe's stop is its own housing's,
+    pooled over its rows only. NaN where nothing gives a stop, never a swing ≤ 0."""
     record = SweepRecord([SweepPoint.from_fit(fit, math.nan, math.nan) for fit in fits])
-    everywhere = record.stop_amplitude_rad(fallback_rad=stop_rad)
+    probe_ids = np.zeros(len(fits)) if probe_ids is None else np.asarray(probe_ids, float)
     start = np.empty(len(fits))
     notes: list[str] = []
-    for sweep in np.unique(sweep_ids):
-        rows = np.flatnonzero(sweep_ids == sweep)
-        start[rows], said = SweepRecord([record.points[i] for i in rows]).fitted_start_amplitudes_rad(everywhere)
-        notes += [f"sweep {sweep:g}: {note}" for note in said] if len(np.unique(sweep_ids)) > 1 else said
+    for probe in np.unique(probe_ids):
+        mine = np.flatnonzero(probe_ids == probe)
+        everywhere = SweepRecord([record.points[i] for i in mine]).stop_amplitude_rad(fallback_rad=stop_rad)
+        for sweep in np.unique(sweep_ids[mine]):
+            rows = mine[sweep_ids[mine] == sweep]
+            start[rows], said = SweepRecord([record.points[i] for i in rows]).fitted_start_amplitudes_rad(everywhere)
+            label = (f"probe {probe:g} " if len(np.unique(probe_ids)) > 1 else "") + (
+                f"sweep {sweep:g}" if len(np.unique(sweep_ids)) > 1 else ""
+            )
+            notes += [f"{label.strip()}: {note}" for note in said] if label else said
     return start, notes
 
 

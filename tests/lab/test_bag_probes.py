@@ -1,0 +1,97 @@
+"""A bag of ring-down fits of two probes (``probe_id``, docs/multi_probe.md) read by the lab.
+
+Requirement: ``from_bag`` gives the ``probe`` column and each probe's start swings from its
+own fits; ``mows lab compare BAG`` then fits one f00 per probe. The two probes ring 4 Hz
+apart with σ = 1 mHz: kept apart, χ²/dof is that of the noise (the 95 % bound of χ²/dof for
+38 degrees of freedom is 1.4); mixed, one f00 for both puts χ²/dof near (2 Hz / 1 mHz)² = 4e6.
+A bag of one probe keeps its table without the column.
+"""
+
+import re
+
+import numpy as np
+
+from mows.cli.main import main
+from mows.device import bags
+from mows.lab import from_bag
+from mows.lab.data.table import PROBE
+
+STORE = bags.typestore()
+TYPES = STORE.types
+F00_HZ = {0: 112.5, 1: 116.5}
+STD_HZ = 1e-3
+
+
+def header(seconds):
+    return TYPES["std_msgs/msg/Header"](
+        stamp=TYPES["builtin_interfaces/msg/Time"](sec=seconds, nanosec=0), frame_id="probe"
+    )
+
+
+def ringdown(seconds, probe_id, frequency_hz, amplitude_rad):
+    values = {
+        name: 0.0
+        for name, (kind, detail) in STORE.fielddefs["mows_msgs/msg/RingdownFit"][1]
+        if kind.name == "BASE" and detail[0] == "float64"
+    }
+    values.update(
+        theta0_rad=0.1 * (seconds % 8),
+        frequency_hz=frequency_hz,
+        frequency_std_hz=STD_HZ,
+        amplitude_rad=amplitude_rad,
+        damping_per_s=1.8,
+        duration_s=0.5,
+    )
+    return TYPES["mows_msgs/msg/RingdownFit"](
+        header=header(seconds),
+        cycle_id=seconds,
+        repeat_index=0,
+        tuning=False,
+        status=0,
+        status_name="OK",
+        message="",
+        probe_id=probe_id,
+        theta0_free=False,
+        n_samples=10000,
+        parameter_names=["amplitude_rad", "rest_offset_rad"],  # both determined, σ 0.01 rad
+        covariance=np.diag([1e-4, 1e-4]).ravel(),
+        pickup_real=np.zeros(0),
+        pickup_imag=np.zeros(0),
+        **values,
+    )
+
+
+def write(path, probes, seed=1):
+    """20 windows, each with one fit per probe in ``probes`` (probe 1 starting from 0.3 rad, probe 0 from 0.4)."""
+    rng = np.random.default_rng(seed)
+    messages = [
+        bags.BagMessage(
+            "/mows/ringdown",
+            "mows_msgs/msg/RingdownFit",
+            10**9 * s + k,
+            ringdown(s, k, F00_HZ[k] + STD_HZ * rng.standard_normal(), 0.4 - 0.1 * k),
+        )
+        for s in range(1, 21)
+        for k in probes
+    ]
+    return bags.write_bag(path, messages)
+
+
+def test_a_bag_of_two_probes_gives_a_probe_column_and_each_probes_start_swings(tmp_path):
+    table = from_bag(write(tmp_path / "bag", (0, 1)))
+    probe = table.columns[PROBE]
+    assert sorted(np.unique(probe).tolist()) == [0.0, 1.0] and np.sum(probe == 1) == 20
+    np.testing.assert_allclose(table.columns["amplitude_deg"][probe == 0], np.degrees(0.4))
+    np.testing.assert_allclose(table.columns["amplitude_deg"][probe == 1], np.degrees(0.3))
+    assert not from_bag(write(tmp_path / "one", (0,))).has(PROBE)
+
+
+def chi2_dof(capsys, argv):
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    return float(re.search(r"χ²/dof\s*=?\s*([0-9.e+]+)", out).group(1)), out
+
+
+def test_the_lab_keeps_the_probes_of_a_bag_apart(tmp_path, capsys):
+    chi2, out = chi2_dof(capsys, ["lab", "compare", str(write(tmp_path / "bag", (0, 1)))])
+    assert chi2 < 1.4, out

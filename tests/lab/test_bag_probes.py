@@ -4,7 +4,8 @@ Requirement: ``from_bag`` gives the ``probe`` column and each probe's start swin
 own fits; ``mows lab compare BAG`` then fits one f00 per probe. The two probes ring 4 Hz
 apart with σ = 1 mHz: kept apart, χ²/dof is that of the noise (the 95 % bound of χ²/dof for
 38 degrees of freedom is 1.4); mixed, one f00 for both puts χ²/dof near (2 Hz / 1 mHz)² = 4e6.
-A bag of one probe keeps its table without the column.
+A bag of one probe keeps its table without the column. ``mows fit``, which re-fits the raw
+samples one probe per window, refuses a bag of several probes in one line.
 """
 
 import re
@@ -15,6 +16,7 @@ from mows.cli.main import main
 from mows.device import bags
 from mows.lab import from_bag
 from mows.lab.data.table import PROBE
+from recorded_bags import EXCITATION, ringdown_message
 
 STORE = bags.typestore()
 TYPES = STORE.types
@@ -95,3 +97,19 @@ def chi2_dof(capsys, argv):
 def test_the_lab_keeps_the_probes_of_a_bag_apart(tmp_path, capsys):
     chi2, out = chi2_dof(capsys, ["lab", "compare", str(write(tmp_path / "bag", (0, 1)))])
     assert chi2 < 1.4, out
+
+
+def test_mows_fit_refuses_a_bag_of_several_probes_in_one_line(tmp_path, capsys):
+    """mows fit re-fits the raw samples one probe per window; a window of several needs the
+    estimator's probes list. Whether the bag says so by its fits or by its excitations, the
+    refusal names the probes and what is missing, and writes no table."""
+    excitation = ringdown_message(0, 10_000.0, 1, 0.0, 112.5)
+    excitation.probe_ids = np.array([0, 2], np.uint8)
+    excitation.probe_frequency_hz, excitation.probe_theta0_rad = np.array([112.5, 125.0]), np.zeros(2)
+    announced = bags.write_bag(tmp_path / "announced", [bags.BagMessage("/mows/excitation", EXCITATION, 1, excitation)])
+    for path, probes in ((write(tmp_path / "fitted", (0, 1)), "0, 1"), (announced, "0, 2")):
+        table = tmp_path / f"{path.name}.csv"
+        assert main(["fit", str(path), "--csv", str(table)]) == 2
+        error = capsys.readouterr().err.strip()
+        assert len(error.splitlines()) == 1 and f"probes {probes}" in error and "probes list" in error, error
+        assert not table.exists()

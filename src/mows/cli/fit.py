@@ -9,6 +9,12 @@ damping_per_s, duration_s, and the marker mows_table_format of the project's own
 OK fits, ready for ``mows lab`` with ``--reference`` (no file when none is OK).
 The CSV is never written into the bag nor over an existing file (unless ``--force``), and
 appears whole or not at all (:mod:`mows.records.files`).
+
+A bag of several probes sharing each window (docs/multi_probe.md: its excitations list the
+probes they ring, or its recorded fits carry more than one ``probe_id``) is refused in one
+line: fitting one probe per window would bias each probe's frequency by its neighbours', and
+the joint fit needs the estimator's ``probes`` list, which this command does not take. The
+estimator's own fits in such a bag are read, each probe apart, by ``mows lab compare BAG``.
 """
 
 import math
@@ -16,10 +22,11 @@ import os
 import sys
 
 from mows.cli.inputs import input_file, load_probe, non_negative_float, renamed_option, sensor_length_m
+from mows.device.bags import read_bag
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import fit_segment
 from mows.lab.chirp import recorded_segments
-from mows.lab.data.readers import is_bag
+from mows.lab.data.readers import RINGDOWN_TOPIC, is_bag
 from mows.lab.data.table import tool_table
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import PAPER_PROBE, Probe
@@ -117,10 +124,28 @@ def fit_bag(path, probe: Probe, args):
 def recorded_ringdowns(path, probe: Probe, args):
     """(segment, fit options) of every ring-down in the bag as the bag arguments ask: the
     estimator node's lever-aware pickup at the window's θ0, or Eq. S11 (``--paper-model``)."""
+    check_one_probe(path, args.excitation_topic)
     pair = FluxgatePair.paper(distance_m=args.sensor_distance_m, spacing_m=args.sensor_spacing_m)
     for segment in recorded_segments(path, args.raw_topic, args.excitation_topic, args.tuning):
         theta0 = segment.window.theta0_rad
         yield segment, FitOptions() if args.paper_model else FitOptions.lever_aware(pair, probe, theta0)
+
+
+def check_one_probe(path, excitation_topic: str) -> None:
+    """ValueError when the bag's ring-downs hold several probes (module docstring): the probes
+    its excitations ring (ExcitationState ``probe_ids``) and those of its recorded fits."""
+    ids: set[int] = set()
+    for item in read_bag(path, topics=[excitation_topic, RINGDOWN_TOPIC]):
+        if item.topic == RINGDOWN_TOPIC:
+            ids.add(int(item.message.probe_id))
+        else:
+            ids.update(int(i) for i in item.message.probe_ids)
+    if len(ids) > 1:
+        raise ValueError(
+            f"{path} holds ring-downs of probes {', '.join(map(str, sorted(ids)))} sharing each window: fitting "
+            "them needs the estimator's probes list, which mows fit does not take (the estimator's recorded fits "
+            f"are read, each probe apart, by mows lab compare {path})"
+        )
 
 
 def write_table(path, fits, probe: Probe) -> list[str]:

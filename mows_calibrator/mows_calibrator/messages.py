@@ -38,9 +38,11 @@ def supply_answer(response) -> tuple[bool, str]:
     return response.success, response.message
 
 
-def result_msg(outcome: CalibrationOutcome) -> CalibrateProbe.Result:
-    """The result of a goal that wrote no probe file (yet)."""
-    return CalibrateProbe.Result(success=False, message=outcome.message, supply_at_zero=outcome.supply_at_zero)
+def result_msg(outcome: CalibrationOutcome, others: int = 0) -> CalibrateProbe.Result:
+    """The result of a goal that wrote no probe file (yet); ``others``: the fits of other probes
+    it left out, said in the message when there were any."""
+    message = outcome.message + (f"; {others} ring-down fits of other probes ignored" if others else "")
+    return CalibrateProbe.Result(success=False, message=message, supply_at_zero=outcome.supply_at_zero)
 
 
 def calibrated(result: CalibrateProbe.Result, calibration: ProbeCalibration, path: str) -> CalibrateProbe.Result:

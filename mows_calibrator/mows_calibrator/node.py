@@ -18,6 +18,9 @@ other current. With ``orientation`` manual (a stage without a
 motor) a cycle at a new orientation waits for the operator: the feedback's message says where to
 turn the probe, ``~/confirm_orientation`` (std_srvs/Trigger) says it is done.
 
+With several probes sharing each window (the estimator's ``probes``), a goal calibrates the
+probe ``probe_id``: the fits of the others are left out and counted in the result's message.
+
 The node translates only; it runs on one thread and awaits the driver's answers as coroutines.
 """
 
@@ -54,6 +57,7 @@ class CalibratorNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
         self._calibrator = ProbeCalibrator()
+        self._probe_id, self._others = 0, 0  # the running goal's probe; fits of other probes left out
         self._driver = DriverCycles(self, self._on_fit)
         group = self._driver.group
         self._supply = self.create_client(SetFieldCurrent, SUPPLY_SERVICE, callback_group=group)
@@ -73,6 +77,9 @@ class CalibratorNode(MowsNode):
         run = self._calibrator.run
         if run is None or msg.tuning:
             return None
+        if msg.probe_id != self._probe_id:
+            self._others += 1
+            return None
         try:
             fit = fit_of(msg)
         except ValueError:
@@ -91,6 +98,7 @@ class CalibratorNode(MowsNode):
             self._calibrator.accept(plan, self._param("orientation") == "manual")
         except ValueError as error:
             return str(error)
+        self._probe_id, self._others = self._param("probe_id"), 0
         request = SetFieldCurrent.Request(current_a=0.0)
         response = await call(self, self._supply, request, self._param("supply_timeout_s"))
         ok, message = supply_answer(response)
@@ -141,7 +149,7 @@ class CalibratorNode(MowsNode):
         return run.on_supply(*supply_answer(await call(self, self._supply, request, self._param("supply_timeout_s"))))
 
     def _finish(self, goal_handle, outcome) -> CalibrateProbe.Result:
-        result = result_msg(outcome)
+        result = result_msg(outcome, self._others)
         # A cancel that cut the running cycle short ends the run as that cycle's failure.
         if outcome.cancelled or goal_handle.is_cancel_requested:
             goal_handle.canceled()
@@ -154,7 +162,7 @@ class CalibratorNode(MowsNode):
         try:
             calibration = self._calibrate(path)
         except (CalibrationError, ValueError, OSError) as error:
-            result.message = self._calibrator.last = f"{outcome.message}; calibration: {error}"
+            result.message = self._calibrator.last = f"{result.message}; calibration: {error}"
             goal_handle.abort()
             return result
         self.get_logger().info(f"{self._calibrator.calibrated(calibration, path)}\n{calibration.report()}")

@@ -60,6 +60,13 @@ PARAMETERS = (
         "supply currents of a goal that lists none, A (the default runs on a unipolar supply too: "
         "θ0 = 180° gives the field's other sign)",
     ),
+    ParamSpec(
+        "probe_id",
+        0,
+        "the probe this calibrates, of those the estimator's probes parameter lists: only its ring-down "
+        "fits are used, the others' counted in the result (0: a single probe)",
+        range=(0, 255),
+    ),
     ParamSpec("cycle_timeout_s", 300.0, "longest wait for the driver's cycle, s", range=(1.0, 3600.0)),
     ParamSpec("supply_timeout_s", 60.0, "longest wait for the supply to reach a current, s", range=(1.0, 3600.0)),
     ParamSpec("fit_timeout_s", 10.0, "longest wait for the fits of a finished cycle, s", range=(0.1, 600.0)),

@@ -23,8 +23,9 @@ class StandInDriver:
     """Answers set_field_current (recording every current) and run_cycle (publishing fits of the
     bench's probe in the environment plus the supply's field at the present current)."""
 
-    def __init__(self, ros, slow_cycles=False, supply=True, range_a=(-2.0, 2.0)):
+    def __init__(self, ros, slow_cycles=False, supply=True, range_a=(-2.0, 2.0), probe_id=0, neighbour=None):
         self.ros, self.slow, self.supply, self.range_a = ros, slow_cycles, supply, range_a
+        self.probe_id, self.neighbour, self.others = probe_id, neighbour, 0
         self.currents, self.current, self.cycle = [], 0.0, 0
         self.rng = np.random.default_rng(3)
         self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
@@ -45,8 +46,12 @@ class StandInDriver:
     def run_cycle(self, request, response):
         self.cycle += 1
         for repeat, fields in enumerate(bench_fits(self.current, request.theta0_rad, request.repeats, self.rng)):
-            ok = dict(status=RingdownFit.STATUS_OK, status_name="OK")
-            self.fits.publish(RingdownFit(cycle_id=self.cycle, repeat_index=repeat, **ok, **fields))
+            ok = dict(status=RingdownFit.STATUS_OK, status_name="OK", cycle_id=self.cycle, repeat_index=repeat)
+            if self.neighbour is not None:  # another probe in the same window, 10 Hz higher, first
+                shifted = dict(fields, frequency_hz=fields["frequency_hz"] + 10.0)
+                self.fits.publish(RingdownFit(probe_id=self.neighbour, **ok, **shifted))
+                self.others += 1
+            self.fits.publish(RingdownFit(probe_id=self.probe_id, **ok, **fields))
         response.success, response.cycle_id, response.ringdowns_recorded = True, self.cycle, request.repeats
         return response
 
@@ -77,6 +82,20 @@ def test_a_calibration_recovers_the_bench_probe_and_writes_its_file(ros, calibra
     assert record["hardware_id"] == "bench-3"
     values = dict(zip(done.result.names, done.result.values))
     assert values["f00_hz"] == pytest.approx(record["constants"]["f00_hz"]["value"])
+
+
+def test_one_probe_of_several_is_calibrated_from_its_own_fits(ros, action_server, tmp_path):
+    """Probe 1 is the bench's; probe 0, in the same windows, rings 10 Hz higher and its fits
+    come first: taken for probe 1's, they put the calibrated spring 8 % off."""
+    path = tmp_path / "probe.yaml"
+    args = (f"probe_output_file:={path}", "probe_id:=1")
+    client, _ = action_server("calibrator", CalibrateProbe, "calibrator/calibrate_probe", *args)
+    driver = StandInDriver(ros, probe_id=1, neighbour=0)
+    _, done, feedback = send_goal(ros, client, CalibrateProbe.Goal(currents_a=CURRENTS))
+    assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.success, done.result.message
+    assert Probe.from_yaml(path).spring_nm_per_rad == pytest.approx(BENCH.probe.spring_nm_per_rad, rel=0.01)
+    assert feedback[-1].ringdowns == 2 * len(CURRENTS) == driver.others
+    assert f"; {driver.others} ring-down fits of other probes ignored" in done.result.message
 
 
 def test_cancelling_mid_calibration_ramps_the_supply_to_zero_before_the_result(ros, calibrator):

@@ -6,8 +6,9 @@ from mows_msgs.msg import CandidateEffect, FieldMap, ModelReport, ProbeField, Ri
 from mows.estimate.probe_set import ProbeEntry, probe_frame_id
 from mows.records import stamps
 from mows.sweep.decompose import DecompositionStatus
+from mows.sweep.publication import Publication
 from mows.sweep.record import SweepPoint
-from mows.sweep.runner import SweepFeedback, SweepFit, SweepGoal, SweepMap, SweepOutcome, turn_prompt
+from mows.sweep.runner import SweepFeedback, SweepFit, SweepGoal, SweepMap, SweepOutcome, SweepStep, turn_prompt
 
 # What a probe's point of the field map takes from its SweepDecomposition, as it is there.
 PROBE_FIELD_FROM_SWEEP = (
@@ -61,6 +62,12 @@ def feedback_msg(feedback: SweepFeedback) -> RotationSweep.Feedback:
     )
 
 
+def step_feedback_msgs(step: SweepStep) -> list[RotationSweep.Feedback]:
+    """The feedback a sweep's ``step`` gives, in order: an orientation done, then a turn to ask for."""
+    done = [] if step.feedback is None else [feedback_msg(step.feedback)]
+    return done + ([] if step.turn is None else [turn_feedback_msg(step.turn)])
+
+
 def turn_feedback_msg(theta0_rad: float) -> RotationSweep.Feedback:
     """The operator's prompt before the cycle at ``theta0_rad`` (no shift measured yet: NaN)."""
     nan = float("nan")
@@ -101,6 +108,12 @@ def probe_decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecompositio
     return decomposition_msg(sweep, probe_frame_id(frame_id, sweep.probe_id))
 
 
+def publication_msgs(plan: Publication, frame_id: str) -> list[SweepDecomposition]:
+    """The SweepDecomposition of each sweep ``plan`` publishes, in its probe's frame when it says so."""
+    make = probe_decomposition_msg if plan.per_probe else decomposition_msg
+    return [make(sweep, frame_id) for sweep in plan.sweeps]
+
+
 def field_map_msg(decompositions: list[SweepDecomposition], probes: tuple[ProbeEntry, ...], frame_id: str) -> FieldMap:
     """The field map of a multi-probe sweep: each probe's decomposition at its position in the
     stage's rotation-plane frame ``frame_id``; stamped with the latest ring-down."""
@@ -128,6 +141,17 @@ def outcome_decomposition_msg(outcome: SweepOutcome, frame_id: str) -> SweepDeco
     if outcome.maps:
         return probe_decomposition_msg(outcome.map, frame_id)
     return decomposition_msg(outcome.map, frame_id)
+
+
+def refused_result(message: str) -> RotationSweep.Result:
+    """The result of a sweep goal refused on arrival, with why."""
+    return RotationSweep.Result(success=False, message=message, decomposition=no_decomposition_msg(message))
+
+
+def result_msg(outcome: SweepOutcome, frame_id: str) -> RotationSweep.Result:
+    """The result of a finished sweep, with its decomposition (:func:`outcome_decomposition_msg`)."""
+    decomposition = outcome_decomposition_msg(outcome, frame_id)
+    return RotationSweep.Result(success=outcome.ok, message=outcome.message, decomposition=decomposition)
 
 
 def model_report_msg(report, header, sweep_id: int) -> ModelReport:

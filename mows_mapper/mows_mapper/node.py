@@ -2,63 +2,39 @@
 
 Names are relative (here as in the root namespace). Action ``/mapper/rotation_sweep``
 (RotationSweep; ``/mows/mapper/rotation_sweep``, the previous release's name, is served too for
-one release): for each orientation it asks the driver for one measurement cycle (its action
-``/driver/measurement_cycle``, cancelled when the sweep ends without it), collects that cycle's
-ring-down fits from the estimator (``/mows/ringdown``), reports them as feedback, and at the
-end decomposes the sweep (``mows.sweep.decompose``) into in-plane field and gradient. The result is
-published on ``/mows/sweep`` (SweepDecomposition, reliable and transient-local: a map). With a
-reference (``reference_scenario``) the model lab (``mows.lab.analyse``) compares the
-frequency model with the sweep and publishes ``/mows/model_report`` (ModelReport).
+one release) runs :class:`mows.sweep.runner.SweepRunner`: for each orientation one driver cycle
+(its action ``/driver/measurement_cycle``, cancelled when the sweep ends without it) and that
+cycle's fits (``/mows/ringdown``) as feedback; at the end the decomposition, and what
+:func:`mows.sweep.publication.publication` says to publish: ``/mows/sweep`` (one per probe with
+several ``probes``), ``/mows/field_map`` of several probes, and with ``reference_scenario`` the
+model lab's ``/mows/model_report`` (docs/nodes.md, docs/multi_probe.md). With ``orientation``
+manual each cycle waits for the operator's ``~/confirm_orientation`` (std_srvs/Trigger).
 
-With ``probes`` listing several probes (the estimator's list), each ring-down brings one fit per
-probe; each probe's sweep is decomposed with its neighbours' fields in the model
-(:mod:`mows.sweep.probes`: each probe's external field and gradient) and published on
-``/mows/sweep`` with its
-``probe_id`` (frame ``<frame_id>_<probe_id>``), failed or not (the topic keeps one per probe),
-and all of them together on ``/mows/field_map`` (FieldMap, reliable and transient-local), each
-at its ``position_m`` in ``frame_id``. The model lab reads one probe's sweep: it is not run then.
-
-With ``orientation`` manual (a stage without a motor) each cycle waits for the operator: the
-feedback's ``operator_prompt`` says where to turn the probe, ``~/confirm_orientation``
-(std_srvs/Trigger) says it is done.
-
-The sweep itself is :class:`mows.sweep.runner.SweepRunner`; this node translates its steps.
-Everything runs on one thread: the action awaits the driver, the fits and the CPU-bound
-decomposition and lab (in a worker thread) as a coroutine, so fits, cancels and
+The node translates only. Everything runs on one thread: the action awaits the driver, the fits
+and the CPU-bound decomposition and lab (in a worker thread) as a coroutine, so fits, cancels and
 diagnostics are served meanwhile.
 """
 
-import dataclasses
-
-from diagnostic_msgs.msg import DiagnosticStatus
 from mows_msgs.action import RotationSweep
-from mows_msgs.msg import FieldMap, ModelReport, RingdownFit, SweepDecomposition
+from mows_msgs.msg import RingdownFit
 from rclpy.action import CancelResponse
 
-from mows.lab import analyse, from_sweep
-from mows.sweep.runner import CycleAnswer, CycleRequest, SweepMap, SweepRunner, SweepSettings, SweepStep
-from mows_mapper.messages import (
-    feedback_msg,
-    field_map_msg,
-    model_report_msg,
-    no_decomposition_msg,
-    outcome_decomposition_msg,
-    probe_decomposition_msg,
-    sweep_fit,
-    sweep_goal,
-    turn_feedback_msg,
-)
+from mows.lab import analyse_sweep
+from mows.sweep.publication import Publication, cycle_failed, publication
+from mows.sweep.runner import CycleAnswer, CycleRequest, SweepRunner, SweepSettings, SweepStep
+from mows_mapper import messages
+from mows_mapper.health import sweep_health
+from mows_mapper.outputs import MapperOutputs
 from mows_mapper.parameters import PARAMETERS, sweep_settings
 from mows_ros.awaitables import in_worker, until
 from mows_ros.cycles import DriverCycles
 from mows_ros.diagnostics import Health
-from mows_ros.goals import action_servers
+from mows_ros.goals import action_servers, end_goal
 from mows_ros.node import MowsNode
 from mows_ros.operator import OperatorTurns
 from mows_ros.params import parameter_values
 from mows_ros.probe import probe_of, probe_set
 from mows_ros.process import run_node
-from mows_ros.qos import MAP_QOS, maps_qos
 
 NODE_NAME = "mapper"
 SERVICE_WAIT_S = 5.0  # longest wait for the driver's measurement-cycle action to appear
@@ -72,9 +48,7 @@ class MapperNode(MowsNode):
         self._settings = SweepSettings()  # the running sweep's
         self._driver = DriverCycles(self, self._on_fit)
         probes = probe_set(self._param("probes"), probe_of(self._param("probe_file")))
-        self._sweep_pub = self.create_publisher(SweepDecomposition, "mows/sweep", maps_qos(max(1, len(probes))))
-        self._report_pub = self.create_publisher(ModelReport, "mows/model_report", MAP_QOS)
-        self._field_map_pub = self.create_publisher(FieldMap, "mows/field_map", MAP_QOS)
+        self._outputs = MapperOutputs(self, len(probes))
         self._servers = action_servers(self, RotationSweep, ACTIONS, self._execute, self._cancel, self._driver.group)
         self._operator = OperatorTurns(self, "~/confirm_orientation", lambda: self._runner.turn_awaited)
 
@@ -83,7 +57,7 @@ class MapperNode(MowsNode):
 
     # --- inputs ---------------------------------------------------------------------------
     def _on_fit(self, msg: RingdownFit) -> SweepStep | None:
-        return self._runner.on_fit(sweep_fit(msg))
+        return self._runner.on_fit(messages.sweep_fit(msg))
 
     def _refusal(self, goal: RotationSweep.Goal) -> str | None:
         """Why ``goal`` is refused, or None when the sweep starts (the runner is busy from here)."""
@@ -92,7 +66,7 @@ class MapperNode(MowsNode):
         try:
             probe = probe_of(self._param("probe_file"))
             self._settings = sweep_settings(parameter_values(self, PARAMETERS), probe)
-            self._runner.start(sweep_goal(goal), self._settings, probe)
+            self._runner.start(messages.sweep_goal(goal), self._settings, probe)
         except ValueError as refused:
             return str(refused)
         return None
@@ -105,35 +79,26 @@ class MapperNode(MowsNode):
     # --- the sweep ------------------------------------------------------------------------
     async def _execute(self, goal_handle):
         if (refusal := self._refusal(goal_handle.request)) is not None:
-            message = f"sweep goal refused: {refusal}"
-            self.get_logger().warn(message)
+            result = messages.refused_result(f"sweep goal refused: {refusal}")
+            self.get_logger().warn(result.message)
             goal_handle.abort()
-            return RotationSweep.Result(success=False, message=message, decomposition=no_decomposition_msg(message))
+            return result
         self.get_logger().info("sweep goal accepted")
         try:
             step = self._runner.begin()
             while step.finished is None:
-                if step.feedback is not None:
-                    goal_handle.publish_feedback(feedback_msg(step.feedback))
-                if step.turn is not None:
-                    goal_handle.publish_feedback(turn_feedback_msg(step.turn))
+                for feedback in messages.step_feedback_msgs(step):
+                    goal_handle.publish_feedback(feedback)
                 step = await self._advance(step)
             outcome = step.finished
-            decomposition = outcome_decomposition_msg(outcome, self._param("frame_id"))
-            if step.publish is not None:
-                await self._publish(step.publish, decomposition)
-            if step.publish_probes:
-                self._publish_probes(step)
+            result = messages.result_msg(outcome, self._param("frame_id"))
+            await self._publish(publication(step, self._settings.probes, self._param("reference_scenario")))
         finally:  # an exception must not leave the runner busy for good
             self._runner.abandon("the sweep ended unexpectedly (see the log)")
-        if outcome.cancelled:
-            goal_handle.canceled()
-        elif outcome.ok:
-            goal_handle.succeed()
-        else:
+        if not (outcome.ok or outcome.cancelled):
             self.get_logger().warn(f"sweep aborted: {outcome.message}")
-            goal_handle.abort()
-        return RotationSweep.Result(success=outcome.ok, message=outcome.message, decomposition=decomposition)
+        end_goal(goal_handle, outcome.ok, outcome.cancelled)
+        return result
 
     async def _advance(self, step: SweepStep) -> SweepStep:
         if step.turn is not None:
@@ -155,39 +120,23 @@ class MapperNode(MowsNode):
     async def _run_cycle(self, cycle: CycleRequest) -> CycleAnswer:
         if not await until(self, self._driver.ready, SERVICE_WAIT_S):
             return CycleAnswer(problem="the driver's measurement_cycle action is not available")
-        answer = await self._driver.run(cycle, self._param("cycle_timeout_s"))
-        return dataclasses.replace(answer, problem=f"cycle failed: {answer.problem}") if answer.problem else answer
+        return cycle_failed(await self._driver.run(cycle, self._param("cycle_timeout_s")))
 
-    async def _publish(self, sweep: SweepMap, msg: SweepDecomposition) -> None:
-        """A good decomposition on /mows/sweep, then the model lab's report on it."""
-        self._sweep_pub.publish(msg)
-        self.get_logger().info(f"sweep {sweep.sweep_id}: {self._runner.last}")
-        reference = self._param("reference_scenario")
-        if reference:
-            probe = probe_of(self._param("probe_file"))
-            try:
-                table = from_sweep(sweep.record, reference, probe, sweep.decomposition)
-                report = await in_worker(self, analyse, table, probe, auto=self._param("lab_auto"))
-            except ValueError as error:  # a table the lab cannot use is reported, not fatal
-                self.get_logger().warn(f"model lab: {error}")
-            else:
-                self._report_pub.publish(model_report_msg(report, msg.header, sweep.sweep_id))
-
-    def _publish_probes(self, step: SweepStep) -> None:
-        """Each probe's decomposition on /mows/sweep, then the field map of them all."""
-        frame_id = self._param("frame_id")
-        messages = [probe_decomposition_msg(sweep, frame_id) for sweep in step.publish_probes]
-        for msg in messages:
-            self._sweep_pub.publish(msg)
-        self._field_map_pub.publish(field_map_msg(messages, self._settings.probes, frame_id))
-        self.get_logger().info(f"sweep of {len(messages)} probes: {self._runner.last}")
+    async def _publish(self, plan: Publication) -> None:
+        """The sweep's maps (:class:`MapperOutputs`), then the model lab's report on the first."""
+        published = self._outputs.publish(plan, self._param("frame_id"), self._runner.last)
+        if plan.lab is None:
+            return
+        probe, auto = probe_of(self._param("probe_file")), self._param("lab_auto")
+        try:
+            report = await in_worker(self, analyse_sweep, plan.lab, self._param("reference_scenario"), probe, auto)
+        except ValueError as error:  # a table the lab cannot use is reported, not fatal
+            self.get_logger().warn(f"model lab: {error}")
+        else:
+            self._outputs.publish_report(report, published[0])
 
     def health(self) -> Health:
-        failure = self._runner.last_failure
-        values = {"state": self._runner.state, "sweeps": self._runner.sweeps, "last_failure": failure}
-        if failure:
-            return Health(DiagnosticStatus.WARN, f"the last sweep failed: {failure}", values)
-        return Health(DiagnosticStatus.OK, self._runner.last, values)
+        return sweep_health(self._runner)
 
 
 def main(args: list[str] | None = None) -> int:

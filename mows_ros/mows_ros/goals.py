@@ -34,3 +34,13 @@ def action_servers(
         )
         for name in names
     ]
+
+
+def end_goal(goal_handle, succeeded: bool, cancelled: bool) -> None:
+    """End ``goal_handle`` as cancelled (whatever else), succeeded or aborted."""
+    if cancelled:
+        goal_handle.canceled()
+    elif succeeded:
+        goal_handle.succeed()
+    else:
+        goal_handle.abort()

@@ -25,7 +25,8 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from mows.lab.data.probes import probe_parts, with_probes
-from mows.lab.data.readers import load_table
+from mows.lab.data.readers import from_sweep, load_table
+from mows.lab.data.reference import Reference
 from mows.lab.data.table import MeasurementTable, TableError
 from mows.lab.diagnosis.candidates import Candidate, physics_deviation
 from mows.lab.diagnosis.indistinguishable import Group
@@ -37,6 +38,7 @@ from mows.lab.model.least_squares import FittedParameter, parameters_dict
 from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, search
 from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
+from mows.sweep.runner import SweepMap
 
 CHECK_SIGMAS = 3.0  # a physical value further than this from its free fit is noted
 INCONSISTENT_SIGMAS = 5.0  # … and further than this makes a statistically adequate model inconsistent
@@ -282,3 +284,11 @@ def _check_note(check: PhysicsCheck) -> str:
         f"{check.effect} {state} {values}, {check.deviation_sigma:.1f}σ from its physical value: the "
         "physics as predicted misses something here, or the parameter absorbs another effect"
     )
+
+
+def analyse_sweep(sweep: SweepMap, reference: Reference, probe: Probe, auto: bool = False) -> LabReport:
+    """The model lab on one finished sweep (the mapper's, live): its table in the static
+    ``reference`` with each ring-down's start swing from the sweep's decomposition
+    (:func:`mows.lab.data.readers.from_sweep`), analysed as :func:`analyse` does, with ``auto``.
+    ValueError (a :class:`TableError`) for a sweep whose table the lab cannot use."""
+    return analyse(from_sweep(sweep.record, reference, probe, sweep.decomposition), probe, auto=auto)

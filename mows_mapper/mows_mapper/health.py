@@ -1,0 +1,15 @@
+"""What the mapper says on /diagnostics: the sweep runner's state and how its last sweep ended."""
+
+from diagnostic_msgs.msg import DiagnosticStatus
+
+from mows.sweep.runner import SweepRunner
+from mows_ros.diagnostics import Health
+
+
+def sweep_health(runner: SweepRunner) -> Health:
+    """WARN with the reason while the last sweep failed; otherwise OK with the last decomposition's report."""
+    failure = runner.last_failure
+    values = {"state": runner.state, "sweeps": runner.sweeps, "last_failure": failure}
+    if failure:
+        return Health(DiagnosticStatus.WARN, f"the last sweep failed: {failure}", values)
+    return Health(DiagnosticStatus.OK, runner.last, values)

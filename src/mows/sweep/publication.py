@@ -1,0 +1,50 @@
+"""What the mapper publishes when a sweep ends, and how it says a cycle failed.
+
+:func:`publication` turns the runner's last step (:class:`mows.sweep.runner.SweepStep`) into
+the messages to make, in the order they go out: each decomposition for ``/mows/sweep`` (one
+probe's only when it succeeded; with several probes every probe's, failed or not, each in its
+own probe's frame), the field map of several probes at their places, and the sweep the model
+lab reads when a reference is given (one probe's: the lab reads one probe's sweep, so it is not
+run for several). The mapper node builds each message and publishes it; nothing here does I/O.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from mows.estimate.probe_set import ProbeEntry
+from mows.sweep.runner import CycleAnswer, SweepMap, SweepStep
+
+
+@dataclasses.dataclass(frozen=True)
+class Publication:
+    """The messages of a finished sweep: ``sweeps`` for ``/mows/sweep``, each in its probe's own
+    frame when ``per_probe``; the field map of ``field_map``'s probes (in the order of
+    ``sweeps``) when there are any; ``lab``, the sweep the model lab reads, or None."""
+
+    sweeps: tuple[SweepMap, ...] = ()
+    per_probe: bool = False
+    field_map: tuple[ProbeEntry, ...] = ()
+    lab: SweepMap | None = None
+
+    def summary(self, report: str) -> str:
+        """The log line of what went out, with the runner's ``report`` of the decomposition."""
+        if self.per_probe:
+            return f"sweep of {len(self.sweeps)} probes: {report}"
+        return f"sweep {self.sweeps[0].sweep_id}: {report}" if self.sweeps else report
+
+
+def publication(step: SweepStep, probes: tuple[ProbeEntry, ...], reference: str) -> Publication:
+    """What to publish for the runner's ``step`` at a sweep's end: the sweep's ``probes`` (the
+    ``probes`` setting) and the lab's ``reference`` ('' for none) as the mapper has them."""
+    if step.publish_probes:
+        return Publication(step.publish_probes, per_probe=True, field_map=probes)
+    if step.publish is not None:
+        return Publication((step.publish,), lab=step.publish if reference else None)
+    return Publication()
+
+
+def cycle_failed(answer: CycleAnswer) -> CycleAnswer:
+    """The driver's ``answer`` to a cycle the sweep asked for: a problem is that cycle's failure
+    ("cycle failed: …"); an answer without one is as it came."""
+    return dataclasses.replace(answer, problem=f"cycle failed: {answer.problem}") if answer.problem else answer

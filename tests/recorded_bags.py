@@ -67,6 +67,42 @@ def ringdown_message(index, fs, cycle, theta0, frequency):
     )
 
 
+def ringdown_fit_message(seconds, theta0_rad, frequency_hz, status=0, probe_id=0, amplitude_rad=0.4, determined=()):
+    """An estimator's RingdownFit stamped at ``seconds`` (cycle id the whole seconds): σ 1 mHz,
+    δ 1.8 s⁻¹ over 0.5 s; ``determined`` names the fitted parameters given σ 0.01 rad in its
+    covariance; every other number 0."""
+    values = {
+        name: 0.0
+        for name, (kind, detail) in STORE.fielddefs["mows_msgs/msg/RingdownFit"][1]
+        if kind.name == "BASE" and detail[0] == "float64"
+    }
+    values.update(
+        theta0_rad=theta0_rad,
+        frequency_hz=frequency_hz,
+        frequency_std_hz=1e-3,
+        amplitude_rad=amplitude_rad,
+        damping_per_s=1.8,
+        duration_s=0.5,
+    )
+    return STORE.types["mows_msgs/msg/RingdownFit"](
+        header=header(seconds),
+        cycle_id=int(seconds),
+        repeat_index=0,
+        tuning=False,
+        status=status,
+        status_name="",
+        message="",
+        probe_id=probe_id,
+        theta0_free=False,
+        n_samples=10000,
+        parameter_names=list(determined),
+        covariance=1e-4 * np.eye(len(determined)).ravel(),
+        pickup_real=np.zeros(0),
+        pickup_imag=np.zeros(0),
+        **values,
+    )
+
+
 def record_cycles(path, scenario, degrees, seed):
     """Write a bag at ``path`` of one simulated cycle at each orientation in ``degrees`` (cycle ids
     from 1); return (the bag's path, the cycles' :class:`mows.sim.cycle.CycleRecord`)."""

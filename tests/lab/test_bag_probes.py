@@ -16,51 +16,10 @@ from mows.cli.main import main
 from mows.device import bags
 from mows.lab import from_bag
 from mows.lab.data.table import PROBE
-from recorded_bags import EXCITATION, ringdown_message
+from recorded_bags import EXCITATION, ringdown_fit_message, ringdown_message
 
-STORE = bags.typestore()
-TYPES = STORE.types
 F00_HZ = {0: 112.5, 1: 116.5}
 STD_HZ = 1e-3
-
-
-def header(seconds):
-    return TYPES["std_msgs/msg/Header"](
-        stamp=TYPES["builtin_interfaces/msg/Time"](sec=seconds, nanosec=0), frame_id="probe"
-    )
-
-
-def ringdown(seconds, probe_id, frequency_hz, amplitude_rad):
-    values = {
-        name: 0.0
-        for name, (kind, detail) in STORE.fielddefs["mows_msgs/msg/RingdownFit"][1]
-        if kind.name == "BASE" and detail[0] == "float64"
-    }
-    values.update(
-        theta0_rad=0.1 * (seconds % 8),
-        frequency_hz=frequency_hz,
-        frequency_std_hz=STD_HZ,
-        amplitude_rad=amplitude_rad,
-        damping_per_s=1.8,
-        duration_s=0.5,
-    )
-    return TYPES["mows_msgs/msg/RingdownFit"](
-        header=header(seconds),
-        cycle_id=seconds,
-        repeat_index=0,
-        tuning=False,
-        status=0,
-        status_name="OK",
-        message="",
-        probe_id=probe_id,
-        theta0_free=False,
-        n_samples=10000,
-        parameter_names=["amplitude_rad", "rest_offset_rad"],  # both determined, σ 0.01 rad
-        covariance=np.diag([1e-4, 1e-4]).ravel(),
-        pickup_real=np.zeros(0),
-        pickup_imag=np.zeros(0),
-        **values,
-    )
 
 
 def write(path, probes, seed=1):
@@ -71,7 +30,14 @@ def write(path, probes, seed=1):
             "/mows/ringdown",
             "mows_msgs/msg/RingdownFit",
             10**9 * s + k,
-            ringdown(s, k, F00_HZ[k] + STD_HZ * rng.standard_normal(), 0.4 - 0.1 * k),
+            ringdown_fit_message(
+                s,
+                0.1 * (s % 8),
+                F00_HZ[k] + STD_HZ * rng.standard_normal(),
+                probe_id=k,
+                amplitude_rad=0.4 - 0.1 * k,
+                determined=("amplitude_rad", "rest_offset_rad"),
+            ),
         )
         for s in range(1, 21)
         for k in probes

@@ -8,6 +8,7 @@ import pytest
 
 from mows.device import bags
 from mows.lab import MissingColumnError, TableError, from_bag, load_table, read_csv
+from recorded_bags import ringdown_fit_message
 
 HEADER = "theta0_deg,f_hz,f_std_hz,ref_bx_t,ref_by_t,ref_gxx_t_per_m,ref_gxy_t_per_m,ref_gyy_t_per_m,humidity\n"
 
@@ -80,36 +81,7 @@ def test_a_bag_of_ringdown_fits_with_a_magnetometer_or_a_source_reference(tmp_pa
         )
 
     def ringdown(seconds, theta0, status=0):
-        values = {
-            name: 0.0
-            for name, (kind, detail) in store.fielddefs["mows_msgs/msg/RingdownFit"][1]
-            if kind.name == "BASE" and detail[0] == "float64"
-        }
-        values.update(
-            theta0_rad=theta0,
-            frequency_hz=112.5 + theta0,
-            frequency_std_hz=1e-3,
-            amplitude_rad=0.4,
-            damping_per_s=1.8,
-            duration_s=0.5,
-        )
-        return types["mows_msgs/msg/RingdownFit"](
-            header=header(seconds),
-            cycle_id=seconds,
-            repeat_index=0,
-            tuning=False,
-            status=status,
-            status_name="",
-            message="",
-            probe_id=0,
-            theta0_free=False,
-            n_samples=10000,
-            parameter_names=[],
-            covariance=np.zeros(0),
-            pickup_real=np.zeros(0),
-            pickup_imag=np.zeros(0),
-            **values,
-        )
+        return ringdown_fit_message(seconds, theta0, 112.5 + theta0, status)
 
     def field(seconds, bx):
         vector = types["geometry_msgs/msg/Vector3"](x=bx, y=2e-6, z=-4e-5)

@@ -143,8 +143,8 @@ def check_one_probe(path, excitation_topic: str) -> None:
     if len(ids) > 1:
         raise ValueError(
             f"{path} holds ring-downs of probes {', '.join(map(str, sorted(ids)))} sharing each window: fitting "
-            "them needs the estimator's probes list, which mows fit does not take (the estimator's recorded fits "
-            f"are read, each probe apart, by mows lab compare {path})"
+            "them needs the estimator's probes list, which mows fit and mows lab ringdown do not take "
+            f"(the estimator's recorded fits are read, each probe apart, by mows lab compare {path})"
         )
 
 

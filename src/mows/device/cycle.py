@@ -280,6 +280,7 @@ class CycleSequencer:
         repeat_index: int = 0,
         tuning: bool = False,
         currents: tuple = (),
+        tones: tuple = (),
     ) -> Generator[Reach, CommandResult | None, None]:
         yield Reach(index + 1)
         self._emit(
@@ -290,6 +291,7 @@ class CycleSequencer:
             repeat_index=repeat_index,
             tuning=tuning,
             currents=currents,
+            tones=tones,
         )
 
     def _resume(self) -> None:
@@ -362,7 +364,10 @@ class CycleSequencer:
         tuning: bool = False,
         currents: tuple = (),
         reason: str = "",
+        tones: tuple = (),
     ) -> None:
+        """Announce ``phase``; ``tones`` (:class:`mows.physics.multitone.Tone`) are the probes a
+        multi-tone excitation rings, listed on it and its ring-down, the first one's tone its frequency."""
         self.phase = phase
         # Events are stamped once samples have come (_announce holds them back until then);
         # a cycle's own events come later still, as _plan starts none before the first sample.
@@ -379,11 +384,14 @@ class CycleSequencer:
                 repeats=cycle.repeats if cycle else 0,
                 tuning=tuning,
                 currents_a=currents or (0.0,) * n_coils,
-                frequency_hz=self.frequency_hz,
+                frequency_hz=tones[0].frequency_hz if tones else self.frequency_hz,
                 theta0_rad=cycle.theta0_rad if cycle else 0.0,
                 planned_duration_s=duration_samples / self.sample_rate_hz,
                 setup=self.setup.name,
                 reason=reason,
+                probe_ids=tuple(t.probe_id for t in tones),
+                probe_frequency_hz=tuple(t.frequency_hz for t in tones),
+                probe_theta0_rad=tuple(t.theta0_rad for t in tones),
             )
         )
 

@@ -33,6 +33,7 @@ from mows.device.interface import (
     LinkEvent,
     energises,
 )
+from mows.device.multitone_cycle import MultiToneSequencer
 from mows.device.phases import (
     CycleOutcome,
     CycleRequest,
@@ -181,8 +182,18 @@ class DeviceSession:
         info = self.backend.info
         assert info is not None  # called once the device has described itself (at start or on link up)
         self.assembler = BlockAssembler(round(self.config.block_duration_s * info.sample_rate_hz))
-        if self.backend.can_excite:
-            c = self.config
+        c = self.config
+        if self.backend.probes:
+            self.sequencer = MultiToneSequencer(
+                c.settings,
+                c.setup,
+                c.cap,
+                info.sample_rate_hz,
+                self.backend.probes,
+                self.backend.command_lead_samples,
+                fit=c.fit,
+            )
+        elif self.backend.can_excite:
             self.sequencer = CycleSequencer(
                 c.settings,
                 c.setup,

@@ -111,6 +111,10 @@ class MultiProbeDevice:
         return self._drive_on_index <= self.sample_index < self._drive_off_index
 
     @property
+    def n_coils(self) -> int:
+        return len(self.setup.coils)
+
+    @property
     def theta0_rad(self) -> np.ndarray:
         return np.array([p.pose.theta0_rad for p in self.placed])
 

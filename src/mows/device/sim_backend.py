@@ -161,3 +161,26 @@ class MultiProbeSimBackend(SimBackend):
 
     def stats(self) -> dict:
         return {**super().stats(), "probes": len(self.probes), "peak_coil_current_a": self.device.peak_current_a}
+
+
+def scene_backend(
+    scenario,
+    cap: CurrentCap,
+    theta0_rad: float = 0.0,
+    chunk_s: float = SIM_CHUNK_S,
+    supply_cap_a: float = math.inf,
+    supply_slew_a_per_s: float = math.inf,
+) -> SimBackend:
+    """The paced sim backend of ``scenario``: the one-probe simulator with the probe at
+    ``theta0_rad``, or, for a scene with several probes, the multi-probe device with the shared
+    stage at ``theta0_rad`` (each probe at its home orientation plus it; no field supply)."""
+    if not scenario.probes:
+        device = SimulatedDevice(scenario.replace(pose=scenario.pose.with_theta0(theta0_rad)))
+        return SimBackend(
+            device, cap, chunk_s=chunk_s, supply_cap_a=supply_cap_a, supply_slew_a_per_s=supply_slew_a_per_s
+        )
+    probes = MultiProbeDevice(scenario)
+    probes.integrate(0)  # compiles the integrator (or loads it from numba's cache) now, not while streaming
+    backend = MultiProbeSimBackend(probes, cap, chunk_s=chunk_s)
+    backend.device.schedule_orientation(0, theta0_rad)
+    return backend

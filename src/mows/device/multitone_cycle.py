@@ -124,7 +124,8 @@ class MultiToneSequencer(CycleSequencer):
                 coils_free = switched_off + ringdown
         self._groups = None
         yield from self._enter(c, Phase.IDLE, coils_free, 0)
-        message = f"{recorded} ring-downs recorded of probes {list(plan.groups)} at their f00 (no tuning)"
+        in_turn = " then ".join(str(list(g)) for g in plan.groups)
+        message = f"{recorded} ring-downs recorded of the probes {in_turn} at their f00 (no tuning)"
         if plan.refused:
             message += f"; refused: {refusals(plan)}"
         return CycleOutcome(

@@ -198,12 +198,7 @@ class CycleSequencer:
     def _run(self, c: CyclePlan) -> Run:
         s = c.settings
         ringdown = self._samples(s.ringdown_s)
-        turned = yield from self._answer(
-            self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
-        )
-        settle = self._samples(s.turn_settle_s)
-        yield from self._enter(c, Phase.SETTLING, turned, settle)
-        coils_free = turned + settle  # from here on the coils are off and nothing is scheduled
+        coils_free = yield from self._turn_and_settle(c)
         fits: list[TuningResult] = []
         recorded = 0
         for k in range(c.tuning_steps + c.repeats):
@@ -240,6 +235,16 @@ class CycleSequencer:
         if failed:
             message += f"; {len(failed)} of {len(fits)} tuning fits failed ({failed[-1].report()})"
         return CycleOutcome(True, message, c.cycle_id, self.frequency_hz, recorded, tuple(fits))
+
+    def _turn_and_settle(self, c: CyclePlan) -> Generator[Answer | Reach, CommandResult | None, int]:
+        """Turn to the cycle's θ0 and let it settle (SETTLING); returns the sample from which the
+        coils are off and nothing is scheduled."""
+        turned = yield from self._answer(
+            self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
+        )
+        settle = self._samples(c.settings.turn_settle_s)
+        yield from self._enter(c, Phase.SETTLING, turned, settle)
+        return turned + settle
 
     def _tune(self, c: CyclePlan, recording: Recording) -> TuningResult:
         """Fit a tuning ring-down; a good fit becomes the excitation frequency."""

@@ -25,7 +25,7 @@ from collections.abc import Sequence
 
 from mows.device.cycle import CycleSequencer
 from mows.device.cycle_waits import Reach, Run
-from mows.device.interface import CoilCommand, MultiToneCommand, OrientationCommand
+from mows.device.interface import CoilCommand, MultiToneCommand
 from mows.device.multitone import GroupSequence, on_stage, plan_probes, with_cap
 from mows.device.phases import CycleOutcome, CyclePlan, CycleRequest, CycleSettings, Phase, TuningFit
 from mows.physics.coils import CoilSetup, CurrentCap
@@ -80,12 +80,7 @@ class MultiToneSequencer(CycleSequencer):
     def _run(self, c: CyclePlan) -> Run:
         s = c.settings
         ringdown = self._samples(s.ringdown_s)
-        turned = yield from self._answer(
-            self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
-        )
-        settle = self._samples(s.turn_settle_s)
-        yield from self._enter(c, Phase.SETTLING, turned, settle)
-        coils_free = turned + settle  # from here on the coils are off and nothing is scheduled
+        coils_free = yield from self._turn_and_settle(c)
         plan = self.excitation(c.theta0_rad, s)
         recorded = 0
         for k in range(c.repeats):

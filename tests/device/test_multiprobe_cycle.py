@@ -8,7 +8,9 @@ excites nothing more; a probe whose tone overlaps another's is refused with the 
 the others are measured, and a cycle that can excite no probe is refused with every reason;
 each group's EXCITING and RINGDOWN list its probes, tones and θ0 (home + stage angle); and the
 ring-down windows of a whole cycle, fitted jointly, give each probe's coupled frequency
-(:meth:`MultiProbeDevice.expected_frequencies_hz`, the static coupled model) within 4σ.
+(:meth:`MultiProbeDevice.expected_frequencies_hz`, the static coupled model) within 4σ. A device
+of one tone refuses a multi-tone drive, and the multi-probe device a supply current or a drive
+of coil amplitudes, each with the reason and nothing queued.
 """
 
 import dataclasses
@@ -16,18 +18,25 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mows.device.interface import MultiToneCommand
+from mows.device.interface import (
+    CoilCommand,
+    CommandResult,
+    FieldCurrentCommand,
+    MultiToneCommand,
+    refuse_tones,
+)
 from mows.device.multitone import on_stage, plan_probes
 from mows.device.phases import CycleRequest, CycleSettings, Phase
 from mows.device.scheduled import OverCap
 from mows.device.session import DeviceSession, SessionConfig
-from mows.device.sim_backend import MultiProbeSimBackend
+from mows.device.sim_backend import MultiProbeSimBackend, SimBackend
 from mows.estimate.joint_segment import fit_joint_segment, probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_ringdown
 from mows.estimate.segments import RingdownWindow, SegmentAssembler
 from mows.physics.coils import CurrentCap
 from mows.sim.multiprobe_device import MultiProbeDevice
 from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice
 
 SCENE = load_scenario("three_probes")
 STAGE_RAD = 0.3
@@ -200,3 +209,21 @@ def test_the_windows_of_a_whole_cycle_fitted_jointly_give_each_coupled_frequency
             assert fit.ok, fit.message
             pull = (fit.frequency_hz - expected[fit.probe_id]) / fit.frequency_std_hz
             assert abs(pull) < 4.0, (fit.probe_id, fit.frequency_hz, expected[fit.probe_id], fit.frequency_std_hz)
+
+
+def test_devices_of_one_tone_and_the_supply_refuse_what_they_cannot_do_with_the_reason():
+    tones = plan_probes(SCENE.placed_probes(), SCENE.setup, FAST.excite_s).group_tones(0)
+    drive = MultiToneCommand(1, 0, tones, 100)
+    with pytest.raises(ValueError, match="the serial device drives one tone at a time"):
+        refuse_tones(drive, "serial device")
+    one_probe = SimBackend(SimulatedDevice(load_scenario()), CurrentCap(10.0), paced=False)
+    with pytest.raises(ValueError, match="one-probe simulator drives one tone at a time"):
+        one_probe.send(drive)
+    several = MultiProbeSimBackend(MultiProbeDevice(SCENE), CurrentCap(10.0), paced=False)
+    with pytest.raises(ValueError, match="has no field supply"):
+        several.send(FieldCurrentCommand(2, 0, 1.0))
+    with pytest.raises(ValueError, match="driven by its probes' tones, not by coil amplitudes"):
+        several.send(CoilCommand(3, 0, (1.0, 0.0), 112.5))
+    items = several.poll(0.0)  # nothing was queued: no answers, coils off
+    assert not any(isinstance(item, CommandResult) for item in items)
+    assert not several.device.coil_log and not several.device.coils_on

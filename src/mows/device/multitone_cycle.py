@@ -21,12 +21,12 @@ off at once and drops the groups not yet excited.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Generator, Sequence
 
 from mows.device.cycle import CycleSequencer
-from mows.device.cycle_waits import Reach, Run
-from mows.device.interface import CoilCommand, MultiToneCommand
-from mows.device.multitone import GroupSequence, on_stage, plan_probes, with_cap
+from mows.device.cycle_waits import Answer, Reach, Run
+from mows.device.interface import CoilCommand, CommandResult, MultiToneCommand
+from mows.device.multitone import GroupExcitation, GroupSequence, on_stage, plan_probes, with_cap
 from mows.device.phases import CycleOutcome, CyclePlan, CycleRequest, CycleSettings, Phase, TuningFit
 from mows.physics.coils import CoilSetup, CurrentCap
 from mows.physics.coupling import PlacedProbe
@@ -78,10 +78,8 @@ class MultiToneSequencer(CycleSequencer):
         return ()
 
     def _run(self, c: CyclePlan) -> Run:
-        s = c.settings
-        ringdown = self._samples(s.ringdown_s)
         coils_free = yield from self._turn_and_settle(c)
-        plan = self.excitation(c.theta0_rad, s)
+        plan = self.excitation(c.theta0_rad, c.settings)
         recorded = 0
         for k in range(c.repeats):
             groups = self._groups = GroupSequence(
@@ -91,32 +89,8 @@ class MultiToneSequencer(CycleSequencer):
                 gap = self._samples(c.gap_s) if recorded else 0
                 excitation = groups.next(max(coils_free + gap, self._next_index + self.lead_samples))
                 assert excitation is not None  # not done
-                samples = excitation.off_index - excitation.on_index
-                on = self._issue(MultiToneCommand, excitation.on_index, tones=excitation.tones, samples=samples)
-                off = self._issue(
-                    CoilCommand, excitation.off_index, amplitudes_a=(0.0,) * len(self.setup.coils), frequency_hz=0.0
-                )
-                if excitation.on_index > coils_free:
-                    yield from self._enter(c, Phase.GAP, coils_free, excitation.on_index - coils_free, k)
-                switched_on = yield from self._answer(on)
-                switched_off = yield from self._answer(off)
-                groups.switched(switched_on, switched_off)
-                peaks = tuple(
-                    float(a) for a in peak_current_a(self.setup, excitation.tones, samples / self.sample_rate_hz)
-                )
-                yield from self._enter(
-                    c,
-                    Phase.EXCITING,
-                    switched_on,
-                    switched_off - switched_on,
-                    k,
-                    currents=peaks,
-                    tones=excitation.tones,
-                )
-                yield from self._enter(c, Phase.RINGDOWN, switched_off, ringdown, k, tones=excitation.tones)
-                yield Reach(switched_off + ringdown)
+                coils_free = yield from self._excite(c, k, groups, excitation, coils_free)
                 recorded += 1
-                coils_free = switched_off + ringdown
         self._groups = None
         yield from self._enter(c, Phase.IDLE, coils_free, 0)
         in_turn = " then ".join(str(list(g)) for g in plan.groups)
@@ -126,6 +100,32 @@ class MultiToneSequencer(CycleSequencer):
         return CycleOutcome(
             True, message, c.cycle_id, plan.group_tones(0)[0].frequency_hz, recorded, refused_probes=plan.refused
         )
+
+    def _excite(
+        self, c: CyclePlan, k: int, groups: GroupSequence, excitation: GroupExcitation, coils_free: int
+    ) -> Generator[Answer | Reach, CommandResult | None, int]:
+        """Excite the group ``excitation`` of ``groups`` in round ``k`` and record its ring-down,
+        announcing GAP (if it waits), EXCITING and RINGDOWN; returns the sample from which the
+        coils are free again. The duty limit counts the interval the device applied."""
+        samples = excitation.off_index - excitation.on_index
+        on = self._issue(MultiToneCommand, excitation.on_index, tones=excitation.tones, samples=samples)
+        off = self._issue(
+            CoilCommand, excitation.off_index, amplitudes_a=(0.0,) * len(self.setup.coils), frequency_hz=0.0
+        )
+        if excitation.on_index > coils_free:
+            yield from self._enter(c, Phase.GAP, coils_free, excitation.on_index - coils_free, k)
+        switched_on = yield from self._answer(on)
+        switched_off = yield from self._answer(off)
+        groups.switched(switched_on, switched_off)
+        peaks = tuple(float(a) for a in peak_current_a(self.setup, excitation.tones, samples / self.sample_rate_hz))
+        tones = excitation.tones
+        yield from self._enter(
+            c, Phase.EXCITING, switched_on, switched_off - switched_on, k, currents=peaks, tones=tones
+        )
+        ringdown = self._samples(c.settings.ringdown_s)
+        yield from self._enter(c, Phase.RINGDOWN, switched_off, ringdown, k, tones=tones)
+        yield Reach(switched_off + ringdown)
+        return switched_off + ringdown
 
     def _stop(self, reason: str) -> None:
         """Every tone off now; the groups not yet excited are dropped and the time the coils were

@@ -84,3 +84,23 @@ def test_rclpy_and_rosbags_read_each_others_cdr(msgtype):
     store = bags.typestore()
     assert_same(store.deserialize_cdr(serialize_message(as_rclpy), msgtype), sample)
     assert_same(deserialize_message(bytes(store.serialize_cdr(sample, msgtype)), cls), as_rclpy)
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("setup", ["x", "xyzw"])
+def test_an_excitation_of_one_probe_from_rclpy_is_read_despite_its_trailing_bytes(setup):
+    """One probe: the probe lists are empty, and rclpy's CDR then runs 4–8 bytes past the last
+    field, more than rosbags' own check allows; every field still reads back as written."""
+    from mows_msgs.msg import ExcitationState
+    from rosbags.serde import SerdeError
+
+    msgtype = "mows_msgs/msg/ExcitationState"
+    raw = serialize_message(ExcitationState(phase=3, frequency_hz=112.5, theta0_rad=0.4, setup=setup))
+    store = bags.typestore()
+    with pytest.raises(SerdeError, match="size mismatch"):
+        store.deserialize_cdr(raw, msgtype)
+    read = bags.deserialize_cdr(store, msgtype, raw)
+    assert (read.phase, read.frequency_hz, read.theta0_rad, read.setup) == (3, 112.5, 0.4, setup)
+    assert len(read.probe_ids) == len(read.probe_frequency_hz) == len(read.probe_theta0_rad) == 0
+    with pytest.raises(ValueError, match="bytes after the message's last field"):
+        bags.deserialize_cdr(store, msgtype, raw + bytes(16))

@@ -45,6 +45,8 @@ FIGURES = {
         "solve_ivp_over_simulator",
         "max_theta_difference_cycle_rad",
         "max_theta_difference_free_ringdown_rad",
+        "three_probes_read_ms_per_second_driven",
+        "three_probes_driven_over_one_probe",
     ),
     "stream": ("baseline_generation_share", "session_share", "session_overhead_share", "session_blocks"),
     "lab": ("rows", "effects", "diagnose_s"),

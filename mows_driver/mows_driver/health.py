@@ -61,4 +61,5 @@ class StreamHealth:
             problems.append(f"{stream_errors} streaming errors (see the log)")
         if problems:
             return Health(DiagnosticStatus.WARN, "; ".join(problems), values)
-        return Health(DiagnosticStatus.OK, f"streaming ({backend}), phase {state.get('phase')}", values)
+        probes = f", ringing {state['probes']} probes" if state.get("probes") else ""
+        return Health(DiagnosticStatus.OK, f"streaming ({backend}{probes}), phase {state.get('phase')}", values)

@@ -54,6 +54,9 @@ EVENT_FIELDS = (
     "theta0_rad",
     "planned_duration_s",
     "setup",
+    "probe_ids",
+    "probe_frequency_hz",
+    "probe_theta0_rad",
 )  # a PhaseEvent's fields that ExcitationState carries under the same name
 
 
@@ -62,7 +65,10 @@ def excitation_msg(event: PhaseEvent, frame_id: str) -> ExcitationState:
         phase=int(event.phase),
         phase_name=event.phase.name,
         coil_current_amplitude_a=list(event.currents_a),
-        **{name: getattr(event, name) for name in EVENT_FIELDS},
+        **{
+            name: list(getattr(event, name)) if name.startswith("probe_") else getattr(event, name)
+            for name in EVENT_FIELDS
+        },
     )
     stamps.set_nanoseconds(message.header.stamp, event.stamp_ns)
     message.header.frame_id = frame_id

@@ -12,13 +12,12 @@ from mows.device.scpi import PAPER_SUPPLY_FILE, load_supply_file, open_scpi_supp
 from mows.device.serial_backend import SerialBackend
 from mows.device.serial_link import DEFAULT_BAUD, SerialLink
 from mows.device.session import SessionConfig
-from mows.device.sim_backend import SimBackend
+from mows.device.sim_backend import scene_backend
 from mows.device.tracking import TrackingSettings
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
-from mows.sim.simulator import SimulatedDevice
 from mows.sweep.fast_cycle import tracking_plan
 from mows_ros.params import ParamSpec, spec_named
 
@@ -42,7 +41,8 @@ PARAMETERS = (
     ParamSpec(
         "theta0_rad",
         0.0,
-        "backend sim: probe orientation at start-up, rad (cycles turn it)",
+        "backend sim: probe orientation at start-up, rad (cycles turn it); with several probes, the "
+        "shared stage's angle (each probe at its home orientation plus it)",
         range=(-2.0 * math.pi, 2.0 * math.pi),
         read_only=True,
     ),
@@ -244,11 +244,11 @@ def make_backend(values: dict, cap: CurrentCap):
                 f"coil_setup={values['coil_setup']!r} does not drive the coils of scenario "
                 f"{values['scenario']!r} ({scenario.setup.name})"
             )
-        scenario = scenario.replace(pose=scenario.pose.with_theta0(values["theta0_rad"]))
         # Simulated in pieces of one block: blocks come out evenly, at the least cost per sample.
-        return SimBackend(
-            SimulatedDevice(scenario),
+        return scene_backend(
+            scenario,
             cap,
+            values["theta0_rad"],
             chunk_s=values["block_duration_s"],
             supply_cap_a=values["supply_current_cap_a"],
             supply_slew_a_per_s=values["supply_slew_a_per_s"],
@@ -300,10 +300,15 @@ def tracking_settings(values: dict) -> TrackingSettings | None:
     physics' reach (the bound is in the message)."""
     if not values["tracking"]:
         return None
+    scenario = load_scenario(values["scenario"])
+    if values["backend"] == "sim" and scenario.probes:
+        raise ValueError(
+            f"tracking=True: tracking follows one probe; scenario {values['scenario']!r} has {len(scenario.probes)}"
+        )
     current_a = values["coil_current_cap_a"]
     setup = PRESETS[coil_setup(values)](current_limit_a=values["coil_current_cap_a"])
     plan = tracking_plan(
-        load_scenario(values["scenario"]),
+        scenario,
         values["tracking_theta0_rad"],
         values["tracking_target_std_t"],
         current_a,

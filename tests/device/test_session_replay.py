@@ -1,6 +1,6 @@
 """A session replaying a recording (the bag backend) has no sequencer: the phase it reports is
-the one of the recording's last replayed excitation state; the supply's recorded states come
-back as they were recorded."""
+the one of the recording's last replayed excitation state; the supply's recorded states and
+the probes a multi-tone excitation rang come back as they were recorded."""
 
 import numpy as np
 
@@ -12,6 +12,8 @@ from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import PRESETS, CurrentCap
 
 RATE_HZ, BLOCK = 20_000.0, 500
+# The probes a recorded excitation and its ring-down list: ids, tones, θ0s.
+PROBES = ((0, 2), (100.0, 125.0), (0.3, 1.7))
 
 
 def recording(path, phases=((1, Phase.EXCITING), (2, Phase.RINGDOWN))):
@@ -56,6 +58,12 @@ def recording(path, phases=((1, Phase.EXCITING), (2, Phase.RINGDOWN))):
             0.0,
             0.02,
             "largest_spacing",
+            *(
+                np.array(values, dtype)
+                for values, dtype in zip(
+                    PROBES if phase in (Phase.EXCITING, Phase.RINGDOWN) else ((), (), ()), (np.uint8, float, float)
+                )
+            ),
         )
         messages.append(bags.BagMessage("/mows/excitation", "mows_msgs/msg/ExcitationState", 2 * k + 1, state))
     Supply = store.types["mows_msgs/msg/SupplyState"]
@@ -77,14 +85,16 @@ def test_the_replayed_phase_is_the_recordings(tmp_path):
     recording(tmp_path / "bag")
     session = replaying(tmp_path / "bag")
     assert session.health()["phase"] == "none replayed yet"
-    phases, supply = [], []
+    phases, probes, supply = [], [], []
     while session.health()["link"] != "finished":
         output = session.step(0.05)
         phases += [e.phase for e in output.events]
+        probes += [(e.probe_ids, e.probe_frequency_hz, e.probe_theta0_rad) for e in output.events]
         supply += output.supply
         if output.events:
             assert session.health()["phase"] == output.events[-1].phase.name
     assert phases == [Phase.EXCITING, Phase.RINGDOWN] and session.health()["phase"] == "RINGDOWN"
+    assert probes == [PROBES, PROBES]
     # the supply's ramp and its end come back as recorded: what a replaying driver republishes
     assert [(e.sample_index, e.current_a, e.ramping) for e in supply] == [(507, 1.5, True), (1507, 1.5, False)]
     assert supply[1].stamp_ns == 10**12 + 1507 * 50_000 and session.health()["supply_state_a"] == 1.5

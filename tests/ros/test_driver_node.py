@@ -180,7 +180,10 @@ def test_parameters_out_of_range_are_rejected_with_their_reason(ros_context):
         (["-p", "scenario:=no_such_scenario"], "scenario 'no_such_scenario' is neither"),
         (["-p", "backend:=serial"], "backend serial needs the device's port"),
         (["-p", "coil_setup:=helmholtz"], "does not drive the coils of scenario"),
-        (["-p", "scenario:=three_probes"], "scenario 'three_probes' has 3 probes; this simulator integrates one"),
+        (
+            ["-p", "scenario:=three_probes", "-p", "tracking:=true"],
+            "tracking follows one probe; scenario 'three_probes'",
+        ),
         (["-p", "record_path:=/"], "/ exists: a recording goes to a new path"),
         (["-p", "backend:=nidaqmx", "-p", "supply:=none"], "backend nidaqmx: NI-DAQmx (NI's driver runtime) is not"),
         (["-p", "backend:=nidaqmx", "-p", "supply:=scpi"], "supply scpi needs the supply's VISA address"),
@@ -328,6 +331,9 @@ def synthetic_bag(path, gap_after: int, gap_samples: int, rate_hz: float = RATE_
             0.5,
             0.2,
             "largest_spacing",
+            np.zeros(0, np.uint8),
+            np.zeros(0),
+            np.zeros(0),
         )
         messages.append(bags.BagMessage("/mows/excitation", "mows_msgs/msg/ExcitationState", 100 + index, state))
     bags.write_bag(path, sorted(messages, key=lambda m: m.timestamp_ns))

@@ -20,11 +20,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mows.device.duty import DutyCycleLimit
-from mows.device.multitone import GroupSequence
+from mows.device.multitone import DEFAULT_SWING_RAD, GroupSequence, plan_probes
 from mows.estimate.joint_segment import fit_joint_segment, probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, RingdownFit
 from mows.estimate.segments import RingdownWindow, SegmentAssembler
-from mows.physics.multitone import plan_excitation, tone_for_swing
 from mows.records.stamps import NS_PER_S
 from mows.sim.multiprobe_device import MultiProbeDevice
 
@@ -37,7 +36,7 @@ class MultiProbeSettings:
     excitation and recorded ring-down times, the settling after the probes turn (turn_settle_s), the duty
     limit (fraction of a window) and the samples skipped after the coils' switch-off."""
 
-    swing_rad: float = 0.15
+    swing_rad: float = DEFAULT_SWING_RAD
     excite_s: float = 0.5
     ringdown_s: float = 0.5
     turn_settle_s: float = 0.5
@@ -84,11 +83,7 @@ class MultiProbeRig:
         settings, device = self.settings, self.device
         device.set_orientations(theta0_rad)
         device.idle(settings.turn_settle_s)
-        tones = [
-            tone_for_swing(k, p, device.setup, p.probe.f00_hz, settings.swing_rad, settings.excite_s)
-            for k, p in enumerate(device.placed)
-        ]
-        plan = plan_excitation(device.setup, tones, settings.excite_s)
+        plan = plan_probes(device.placed, device.setup, settings.excite_s, settings.swing_rad)
         sequence = GroupSequence(plan, device.setup, self.duty, self.fs)
         fits: list[RingdownFit] = []
         while (excitation := sequence.next(device.sample_index)) is not None:

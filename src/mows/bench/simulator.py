@@ -5,6 +5,11 @@ at 20 kS/s, two fluxgate channels with noise. Figures: the median time per cycle
 without noise, the kernel's share, numba's compilation (fresh cache) and cache-load time in a
 new process, and the same cycle's equation of motion integrated by
 ``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-10) on the same torque function.
+
+The device of several probes (:class:`mows.sim.multiprobe_device.MultiProbeDevice`, the
+three_probes scene, what the driver's sim backend reads for it): the median time to read one
+second of device time, driven by the probes' summed tones and ringing freely, against one
+second read from the one-probe device in the same run. Real time is 1000 ms per second.
 """
 
 from __future__ import annotations
@@ -20,9 +25,11 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from mows.device.multitone import plan_probes
 from mows.physics.coils import excitation_samples
 from mows.physics.fluxgate import NoiseModel
 from mows.sim.cycle import simulate_cycle
+from mows.sim.multiprobe_device import MultiProbeDevice
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
@@ -115,6 +122,35 @@ def run(repeats: int = 20, first_call: bool = True) -> dict:
         plucked.equation_of_motion(), [math.radians(23.0), 0.0], 0, len(theta_rk4) - 1, plucked.sample_rate_hz
     )[0]
     figures["max_theta_difference_free_ringdown_rad"] = float(np.max(np.abs(theta_rk4 - theta_free)))
+    figures.update(multiprobe_reads(max(3, repeats // 4)))
+    return figures
+
+
+def multiprobe_reads(repeats: int) -> dict:
+    """ms to read one second of the three_probes device, driven and free, and of the one-probe
+    device, with their ratio (module docstring)."""
+    scene = load_scenario("three_probes")
+    second = int(scene.sample_rate_hz)
+    device = MultiProbeDevice(scene)
+    tones = plan_probes(device.placed, device.setup, 1.0).group_tones(0)
+    device.read(10)  # warm-up
+    at_rest = iter([MultiProbeDevice(scene) for _ in range(repeats)])  # each driven from rest, within its interval
+
+    def driven():
+        fresh = next(at_rest)
+        fresh.drive(tones, second)
+        fresh.read(second)
+
+    one = SimulatedDevice(load_scenario())
+    one.read(10)
+    figures = {
+        "three_probes_read_ms_per_second_driven": _median_ms(driven, repeats),
+        "three_probes_read_ms_per_second_free": _median_ms(lambda: device.read(second), repeats),
+        "one_probe_read_ms_per_second": _median_ms(lambda: one.read(second), repeats),
+    }
+    figures["three_probes_driven_over_one_probe"] = (
+        figures["three_probes_read_ms_per_second_driven"] / figures["one_probe_read_ms_per_second"]
+    )
     return figures
 
 

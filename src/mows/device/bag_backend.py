@@ -146,6 +146,9 @@ class BagBackend(Backend):
             state.theta0_rad,
             state.planned_duration_s,
             state.setup,
+            probe_ids=tuple(int(i) for i in state.probe_ids),
+            probe_frequency_hz=tuple(float(f) for f in state.probe_frequency_hz),
+            probe_theta0_rad=tuple(float(a) for a in state.probe_theta0_rad),
         )
 
     def send(self, command: Command) -> None:

@@ -17,6 +17,7 @@ never closed, how to repair it.
 import functools
 import importlib.metadata
 import os
+import struct
 from collections.abc import Callable, Iterable, Iterator
 from io import BytesIO
 from pathlib import Path
@@ -234,10 +235,31 @@ def decoder(connection: Connection, store: Typestore) -> Callable[[bytes], Any]:
     if not recorded or all(
         store.fielddefs.get(name, (None, None))[1] == fields for name, (_, fields) in recorded.items()
     ):
-        return functools.partial(store.deserialize_cdr, typename=msgtype)
+        return functools.partial(deserialize_cdr, store, msgtype)
     earlier = get_typestore(Stores.ROS2_JAZZY)
     earlier.register(recorded)
-    return lambda raw: upgraded(earlier.deserialize_cdr(raw, msgtype), msgtype, store)
+    return lambda raw: upgraded(deserialize_cdr(earlier, msgtype, raw), msgtype, store)
+
+
+# rclpy's serialized messages can run past their last field by up to one 8-byte alignment unit
+# (a message ending in an empty float64[] does), which rosbags' own size check (≤ 3 bytes) refuses.
+TRAILING_BYTES = 8
+
+
+def deserialize_cdr(store: Typestore, msgtype: str, raw: bytes) -> Any:
+    """The ``msgtype`` message of the CDR bytes ``raw`` (the 4-byte encapsulation header first),
+    unused bytes after its last field allowed up to TRAILING_BYTES. ValueError otherwise."""
+    if len(raw) < 4 or bytes(raw[:2]) not in {b"\x00\x00", b"\x00\x01"}:
+        raise ValueError(f"{msgtype}: invalid or unsupported CDR encapsulation")
+    msgdef = store.get_msgdef(msgtype)
+    decode = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be
+    try:
+        message, end = decode(raw[4:], 0, msgdef.cls, store)
+    except (struct.error, UnicodeDecodeError) as error:
+        raise ValueError(f"{msgtype}: cannot decode: {error}") from None
+    if len(raw) - 4 - end > TRAILING_BYTES:
+        raise ValueError(f"{msgtype}: {len(raw) - 4 - end} bytes after the message's last field")
+    return message
 
 
 def recorded_types(connection: Connection) -> dict[str, Any]:

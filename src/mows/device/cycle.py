@@ -198,12 +198,7 @@ class CycleSequencer:
     def _run(self, c: CyclePlan) -> Run:
         s = c.settings
         ringdown = self._samples(s.ringdown_s)
-        turned = yield from self._answer(
-            self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
-        )
-        settle = self._samples(s.turn_settle_s)
-        yield from self._enter(c, Phase.SETTLING, turned, settle)
-        coils_free = turned + settle  # from here on the coils are off and nothing is scheduled
+        coils_free = yield from self._turn_and_settle(c)
         fits: list[TuningResult] = []
         recorded = 0
         for k in range(c.tuning_steps + c.repeats):
@@ -240,6 +235,16 @@ class CycleSequencer:
         if failed:
             message += f"; {len(failed)} of {len(fits)} tuning fits failed ({failed[-1].report()})"
         return CycleOutcome(True, message, c.cycle_id, self.frequency_hz, recorded, tuple(fits))
+
+    def _turn_and_settle(self, c: CyclePlan) -> Generator[Answer | Reach, CommandResult | None, int]:
+        """Turn to the cycle's θ0 and let it settle (SETTLING); returns the sample from which the
+        coils are off and nothing is scheduled."""
+        turned = yield from self._answer(
+            self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
+        )
+        settle = self._samples(c.settings.turn_settle_s)
+        yield from self._enter(c, Phase.SETTLING, turned, settle)
+        return turned + settle
 
     def _tune(self, c: CyclePlan, recording: Recording) -> TuningResult:
         """Fit a tuning ring-down; a good fit becomes the excitation frequency."""
@@ -280,6 +285,7 @@ class CycleSequencer:
         repeat_index: int = 0,
         tuning: bool = False,
         currents: tuple = (),
+        tones: tuple = (),
     ) -> Generator[Reach, CommandResult | None, None]:
         yield Reach(index + 1)
         self._emit(
@@ -290,6 +296,7 @@ class CycleSequencer:
             repeat_index=repeat_index,
             tuning=tuning,
             currents=currents,
+            tones=tones,
         )
 
     def _resume(self) -> None:
@@ -362,7 +369,10 @@ class CycleSequencer:
         tuning: bool = False,
         currents: tuple = (),
         reason: str = "",
+        tones: tuple = (),
     ) -> None:
+        """Announce ``phase``; ``tones`` (:class:`mows.physics.multitone.Tone`) are the probes a
+        multi-tone excitation rings, listed on it and its ring-down, the first one's tone its frequency."""
         self.phase = phase
         # Events are stamped once samples have come (_announce holds them back until then);
         # a cycle's own events come later still, as _plan starts none before the first sample.
@@ -379,11 +389,14 @@ class CycleSequencer:
                 repeats=cycle.repeats if cycle else 0,
                 tuning=tuning,
                 currents_a=currents or (0.0,) * n_coils,
-                frequency_hz=self.frequency_hz,
+                frequency_hz=tones[0].frequency_hz if tones else self.frequency_hz,
                 theta0_rad=cycle.theta0_rad if cycle else 0.0,
                 planned_duration_s=duration_samples / self.sample_rate_hz,
                 setup=self.setup.name,
                 reason=reason,
+                probe_ids=tuple(t.probe_id for t in tones),
+                probe_frequency_hz=tuple(t.frequency_hz for t in tones),
+                probe_theta0_rad=tuple(t.theta0_rad for t in tones),
             )
         )
 

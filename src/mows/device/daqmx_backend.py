@@ -37,6 +37,7 @@ from mows.device.interface import (
     FieldCurrentCommand,
     LinkEvent,
     check_coil_command,
+    refuse_tones,
 )
 from mows.device.payloads import DeviceInfo
 from mows.device.scpi import ScpiSupply, SupplyError, SupplySchedule
@@ -230,6 +231,7 @@ class DaqmxBackend(Backend):
             self.fault += f"; THE SUPPLY DID NOT RAMP TO ZERO: {error}"
 
     def send(self, command: Command) -> None:
+        command = refuse_tones(command, "DAQmx device")
         with self._lock:
             if isinstance(command, CoilCommand):
                 check_coil_command(command, self._info, self.cap.limit_a)

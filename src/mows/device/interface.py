@@ -32,6 +32,23 @@ class CoilCommand:
 
 
 @dataclasses.dataclass(frozen=True)
+class MultiToneCommand:
+    """Drive the coils with the sum of ``tones`` (:class:`mows.physics.multitone.Tone`, one per
+    probe) from device sample ``at_sample_index`` for ``samples`` samples, every tone's time
+    counted from switch-on; the cap holds for the summed peak over those samples. A
+    :class:`CoilCommand` of zeros switches every tone off at once."""
+
+    command_id: int
+    at_sample_index: int
+    tones: tuple
+    samples: int
+
+    @property
+    def off(self) -> bool:
+        return not any(t.amplitude_a for t in self.tones)
+
+
+@dataclasses.dataclass(frozen=True)
 class OrientationCommand:
     """Turn the probe (the rotation stage) to ``theta0_rad`` at device sample ``at_sample_index``."""
 
@@ -51,12 +68,12 @@ class FieldCurrentCommand:
     current_a: float
 
 
-Command = CoilCommand | OrientationCommand | FieldCurrentCommand
+Command = CoilCommand | MultiToneCommand | OrientationCommand | FieldCurrentCommand
 
 
 def energises(command: Command) -> bool:
     """Whether ``command`` puts current through a coil: a coil drive, or a supply current other than zero."""
-    if isinstance(command, CoilCommand):
+    if isinstance(command, (CoilCommand, MultiToneCommand)):
         return not command.off
     return isinstance(command, FieldCurrentCommand) and command.current_a != 0.0
 
@@ -96,14 +113,16 @@ class Backend(abc.ABC):
     ``supply_limits`` is the static-field supply's cap, slew, resolution and polarity when the
     backend drives one it knows (None: no supply, or a device's own that does not say).
     ``info`` describes the device once it is known (None before a serial device answers);
-    ``command_lead_samples`` is how far ahead of the newest received sample a command must
-    be scheduled to reach the device in time (a late one applies at the device's next sample,
-    and its result says which).
+    ``probes`` lists a device's probes when it rings several at once (their cycles drive
+    :class:`MultiToneCommand`), empty for one probe. ``command_lead_samples`` is how far ahead
+    of the newest received sample a command must be scheduled to reach the device in time (a
+    late one applies at the device's next sample, and its result says which).
     """
 
     name: str
     can_excite: bool
     supply_limits: SupplyLimits | None = None  # the field supply's range and limits, if known
+    probes: tuple = ()  # several probes on one stage, driven by tones (PlacedProbe at home); () for one
 
     # Read-only for the driver: a serial device's info and lead follow its link.
     @property
@@ -142,6 +161,15 @@ class Backend(abc.ABC):
     @abc.abstractmethod
     def close(self) -> None:
         """Coils off and the supply to zero, then release the device."""
+
+
+def refuse_tones(command: Command, device: str) -> CoilCommand | OrientationCommand | FieldCurrentCommand:
+    """``command``, unless it is a multi-tone drive: ValueError, ``device`` drives one tone only."""
+    if isinstance(command, MultiToneCommand):
+        raise ValueError(
+            f"the {device} drives one tone at a time: a multi-tone excitation of several probes is refused"
+        )
+    return command
 
 
 def check_coil_command(command: CoilCommand, info: DeviceInfo, cap_a: float) -> None:

@@ -10,19 +10,72 @@ at its sample, drops the groups not yet excited and latches: nothing more is exc
 
 I/O-free: fed the sample a group may start at, the interval the device applied and the stop;
 it returns the excitations to command and the summed coil currents at given samples.
+
+:func:`plan_probes` is what a cycle of several probes plans at one stage angle: each probe's
+tone at its f00 for a swing (:func:`mows.physics.multitone.tone_for_swing`), each at most a
+given current, grouped under the cap with the overlapping tones refused.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from mows.device.duty import DutyCycleLimit
-from mows.physics.coils import CoilSetup
-from mows.physics.multitone import ExcitationPlan, Tone, drive_currents_a, peak_current_a
+from mows.physics.coils import CoilSetup, CurrentCap
+from mows.physics.coupling import PlacedProbe
+from mows.physics.multitone import (
+    ExcitationPlan,
+    Tone,
+    drive_currents_a,
+    peak_current_a,
+    plan_excitation,
+    tone_for_swing,
+)
+
+#: The swing each probe's tone aims at the end of its excitation, rad.
+DEFAULT_SWING_RAD = 0.15
+
+
+def on_stage(home: Sequence[PlacedProbe], stage_rad: float) -> list[PlacedProbe]:
+    """The probes of one shared stage turned by ``stage_rad`` from their home orientations."""
+    return [dataclasses.replace(p, pose=p.pose.with_theta0(p.pose.theta0_rad + stage_rad)) for p in home]
+
+
+def plan_probes(
+    placed: Sequence[PlacedProbe],
+    setup: CoilSetup,
+    duration_s: float,
+    swing_rad: float = DEFAULT_SWING_RAD,
+    tone_limit_a: float = math.inf,
+) -> ExcitationPlan:
+    """The excitation plan of ``placed`` (probe id = index) for excitations of ``duration_s``
+    under ``setup``'s cap: each tone at its probe's f00 and for ``swing_rad``, its base
+    amplitude at most ``tone_limit_a`` (module docstring). A probe the coils put no torque on,
+    or whose tone ``tone_limit_a`` leaves at zero, is refused with the reason."""
+    tones, refused = [], []
+    for k, p in enumerate(placed):
+        try:
+            tone = tone_for_swing(k, p, setup, p.probe.f00_hz, swing_rad, duration_s)
+        except ValueError as no_torque:
+            refused.append((k, str(no_torque)))
+            continue
+        amplitude_a = min(tone.amplitude_a, tone_limit_a)
+        if amplitude_a > 0.0:
+            tones.append(dataclasses.replace(tone, amplitude_a=amplitude_a))
+        else:
+            refused.append((k, f"a tone of at most {tone_limit_a:g} A excites nothing"))
+    plan = plan_excitation(setup, tones, duration_s)
+    return dataclasses.replace(plan, refused=tuple(sorted(refused + list(plan.refused))))
+
+
+def with_cap(setup: CoilSetup, limit_a: float) -> CoilSetup:
+    """``setup`` under the lower of its own cap and ``limit_a``."""
+    return dataclasses.replace(setup, cap=CurrentCap(min(setup.cap.limit_a, limit_a)))
 
 
 @dataclasses.dataclass(frozen=True)

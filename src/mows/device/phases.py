@@ -45,6 +45,11 @@ class PhaseEvent:
     planned_duration_s: float = 0.0  # 0: open-ended
     setup: str = ""
     reason: str = ""  # why, for FAULT
+    # A multi-tone excitation and its ring-down: the probes it rings, in one order; each probe's
+    # tone and its own orientation (its home orientation plus the stage's θ0). Empty for one probe.
+    probe_ids: tuple[int, ...] = ()
+    probe_frequency_hz: tuple[float, ...] = ()
+    probe_theta0_rad: tuple[float, ...] = ()
 
     @property
     def coils_on(self) -> bool:
@@ -181,6 +186,7 @@ class CycleOutcome:
     frequency_hz: float  # the excitation frequency after tuning
     ringdowns_recorded: int
     tuning_fits: tuple = ()
+    refused_probes: tuple[tuple[int, str], ...] = ()  # (probe id, reason) not excited (several probes)
 
 
 @dataclasses.dataclass

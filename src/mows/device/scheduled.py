@@ -46,7 +46,7 @@ class ScheduledDevice:
     ):
         self.device = device
         self.cap = CurrentCap(min(cap.limit_a, device.scenario.setup.cap.limit_a))
-        supply = device.scenario.supply
+        supply = self._supply_of(device)
         # The lower of the driver's and the supply's own cap and slew limit.
         self.supply_limits = (
             None
@@ -58,7 +58,7 @@ class ScheduledDevice:
                 supply.limits.polarity,
             )
         )
-        self.supply_target_a = device.field_current_a
+        self.supply_target_a = 0.0 if supply is None else device.field_current_a
         self._supply_free_index = 0  # the sample after the last queued supply step
         # (sample index, arrival order, kind, action): kind is "turn", "on", "off" or "supply"
         self._queue: list[tuple[int, int, str, Callable[[], None]]] = []
@@ -68,6 +68,11 @@ class ScheduledDevice:
         # from the samples' coil flags, not from the commands.
         self.coil_log: collections.deque = collections.deque(maxlen=COIL_LOG_LENGTH)
         self._logged_on = False
+
+    @staticmethod
+    def _supply_of(device):
+        """The static-field supply the device simulates, if any."""
+        return device.scenario.supply
 
     @property
     def next_index(self) -> int:
@@ -116,7 +121,14 @@ class ScheduledDevice:
             raise ValueError(f"theta0_rad = {theta0_rad!r} must be finite")
         if self.busy:
             raise RuntimeError("the probe cannot turn while the coils are on or a command waits")
-        return self._enqueue(at_index, "turn", functools.partial(self.device.set_orientation, float(theta0_rad)))
+        return self._enqueue(at_index, "turn", functools.partial(self._turn, float(theta0_rad)))
+
+    def _turn(self, theta0_rad: float) -> None:
+        self.device.set_orientation(theta0_rad)
+
+    def schedule_tones(self, at_index: int, tones, samples: int) -> int:
+        """A multi-tone drive: ValueError, the one-probe simulator drives one tone."""
+        raise ValueError("the one-probe simulator drives one tone at a time: a multi-tone excitation is refused")
 
     def cancel(self) -> None:
         """Forget every waiting command of the coils and the stage (a supply ramp goes on: it

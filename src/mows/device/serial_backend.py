@@ -16,6 +16,7 @@ from mows.device.interface import (
     LinkEvent,
     NotExciting,
     check_coil_command,
+    refuse_tones,
 )
 from mows.device.payloads import Ack, Coils, DeviceInfo, FieldCurrent, Orientation, Samples, Status
 from mows.device.serial_link import SerialLink
@@ -110,6 +111,7 @@ class SerialBackend(Backend):
     def send(self, command: Command) -> None:
         if self.info is None:
             raise NotExciting("the device has not described itself yet")
+        command = refuse_tones(command, "serial device")
         body: Coils | Orientation | FieldCurrent
         if isinstance(command, CoilCommand):
             check_coil_command(command, self.info, self.cap.limit_a)

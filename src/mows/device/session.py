@@ -33,6 +33,7 @@ from mows.device.interface import (
     LinkEvent,
     energises,
 )
+from mows.device.multitone_cycle import MultiToneSequencer
 from mows.device.phases import (
     CycleOutcome,
     CycleRequest,
@@ -181,16 +182,13 @@ class DeviceSession:
         info = self.backend.info
         assert info is not None  # called once the device has described itself (at start or on link up)
         self.assembler = BlockAssembler(round(self.config.block_duration_s * info.sample_rate_hz))
-        if self.backend.can_excite:
-            c = self.config
-            self.sequencer = CycleSequencer(
-                c.settings,
-                c.setup,
-                c.cap,
-                info.sample_rate_hz,
-                c.frequency_hz,
-                self.backend.command_lead_samples,
-                fit=c.fit,
+        c, lead = self.config, self.backend.command_lead_samples
+        if self.backend.can_excite:  # several probes: their tones (mows.device.multitone_cycle)
+            common = (c.settings, c.setup, c.cap, info.sample_rate_hz)
+            self.sequencer = (
+                MultiToneSequencer(*common, self.backend.probes, lead, fit=c.fit)
+                if self.backend.probes
+                else CycleSequencer(*common, c.frequency_hz, lead, fit=c.fit)
             )
 
     def _count_arrival(self, n: int) -> None:

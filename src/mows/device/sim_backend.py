@@ -10,11 +10,20 @@ import threading
 import time
 
 from mows.device.clock import DeviceClock
-from mows.device.interface import Backend, CoilCommand, Command, CommandResult, FieldCurrentCommand
+from mows.device.interface import (
+    Backend,
+    CoilCommand,
+    Command,
+    CommandResult,
+    FieldCurrentCommand,
+    MultiToneCommand,
+)
 from mows.device.payloads import DeviceInfo
 from mows.device.scheduled import ScheduledDevice
+from mows.device.scheduled_multiprobe import ScheduledMultiProbeDevice
 from mows.physics.coils import CurrentCap
 from mows.records.samples import SampleBlock
+from mows.sim.multiprobe_device import MultiProbeDevice
 from mows.sim.simulator import SimulatedBlock, SimulatedDevice
 
 # The simulator is read in pieces of at least this: each read has a fixed cost (~0.4 ms), and
@@ -52,6 +61,7 @@ class SimBackend(Backend):
 
     name = "sim"
     can_excite = True
+    scheduled: type[ScheduledDevice] = ScheduledDevice
 
     def __init__(
         self,
@@ -63,7 +73,7 @@ class SimBackend(Backend):
         supply_cap_a: float = math.inf,
         supply_slew_a_per_s: float = math.inf,
     ):
-        self.device = ScheduledDevice(device, cap, supply_cap_a, supply_slew_a_per_s)
+        self.device = self.scheduled(device, cap, supply_cap_a, supply_slew_a_per_s)
         self.supply_limits = self.device.supply_limits
         self._info = simulated_device_info(self.device)
         self.clock = clock or DeviceClock(device.sample_rate_hz)
@@ -96,6 +106,8 @@ class SimBackend(Backend):
                     applied = self.device.schedule_coils(
                         command.at_sample_index, command.amplitudes_a, command.frequency_hz
                     )
+                elif isinstance(command, MultiToneCommand):
+                    applied = self.device.schedule_tones(command.at_sample_index, command.tones, command.samples)
                 elif isinstance(command, FieldCurrentCommand):
                     applied = self.device.schedule_field_current(command.at_sample_index, command.current_a)
                 else:
@@ -125,3 +137,50 @@ class SimBackend(Backend):
         self.coils_off_now()
         with self._lock:
             self.device.read_until(self.device.supply_to_zero() + 1)
+
+
+class MultiProbeSimBackend(SimBackend):
+    """The simulated device of a scene with several probes on one shared stage
+    (:class:`mows.device.scheduled_multiprobe.ScheduledMultiProbeDevice`), paced or unpaced as
+    :class:`SimBackend`; its cycles drive the probes' tones. ``probes``: the probes at their home
+    orientations, probe id = index. No field supply: a supply current is refused with the reason."""
+
+    scheduled = ScheduledMultiProbeDevice
+    device: ScheduledMultiProbeDevice
+
+    def __init__(
+        self,
+        device: MultiProbeDevice,
+        cap: CurrentCap,
+        paced: bool = True,
+        clock: DeviceClock | None = None,
+        chunk_s: float = SIM_CHUNK_S,
+    ):
+        super().__init__(device, cap, paced, clock, chunk_s)  # type: ignore[arg-type]
+        self.probes = self.device.home
+
+    def stats(self) -> dict:
+        return {**super().stats(), "probes": len(self.probes), "peak_coil_current_a": self.device.peak_current_a}
+
+
+def scene_backend(
+    scenario,
+    cap: CurrentCap,
+    theta0_rad: float = 0.0,
+    chunk_s: float = SIM_CHUNK_S,
+    supply_cap_a: float = math.inf,
+    supply_slew_a_per_s: float = math.inf,
+) -> SimBackend:
+    """The paced sim backend of ``scenario``: the one-probe simulator with the probe at
+    ``theta0_rad``, or, for a scene with several probes, the multi-probe device with the shared
+    stage at ``theta0_rad`` (each probe at its home orientation plus it; no field supply)."""
+    if not scenario.probes:
+        device = SimulatedDevice(scenario.replace(pose=scenario.pose.with_theta0(theta0_rad)))
+        return SimBackend(
+            device, cap, chunk_s=chunk_s, supply_cap_a=supply_cap_a, supply_slew_a_per_s=supply_slew_a_per_s
+        )
+    probes = MultiProbeDevice(scenario)
+    probes.integrate(0)  # compiles the integrator (or loads it from numba's cache) now, not while streaming
+    backend = MultiProbeSimBackend(probes, cap, chunk_s=chunk_s)
+    backend.device.schedule_orientation(0, theta0_rad)
+    return backend

@@ -103,7 +103,8 @@ def tone_for_swing(
             for coil in setup.coils
         ]
     )
-    torque_per_a = abs(float(setup.currents_a(pose.theta0_rad, 1.0) @ torques))
+    # The scheme's currents per ampere of base amplitude (sin(θ0 + φ_c)), unchecked: 1 A may be above a low cap.
+    torque_per_a = abs(float(np.sin(pose.theta0_rad + np.array(setup.phases_rad)) @ torques))
     omega, delta = 2.0 * math.pi * frequency_hz, probe.damping_per_s
     gain = (1.0 - math.exp(-delta * duration_s)) / (2.0 * probe.inertia_kgm2 * omega * delta)
     if not torque_per_a * gain > 0.0:

@@ -27,6 +27,7 @@ and the frequencies against the coupled first-principles model.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -134,32 +135,48 @@ class CoupledProbes:
 
 @njit(cache=True)
 def _coupling_torques(theta, moment, lever, pivot, x_axis, y_axis):
-    """τ_i of the module docstring, with the dipole field of magnet j at r = r_i − r_j,
-    B = μ0/(4π)·[3r(m_j·r)/r⁵ − m_j/r³], and its gradient along v = ∂r_i/∂θ,
+    """τ_i of the module docstring (:func:`_coupling_torques_into`), in a new array."""
+    torque = np.empty(theta.size)
+    _coupling_torques_into(theta, moment, lever, pivot, x_axis, y_axis, np.empty((theta.size, 6)), torque)
+    return torque
+
+
+@njit(cache=True)
+def _coupling_torques_into(theta, moment, lever, pivot, x_axis, y_axis, axes, torque):
+    """τ_i of the module docstring into ``torque``, with the dipole field of magnet j at
+    r = r_i − r_j, B = μ0/(4π)·[3r(m_j·r)/r⁵ − m_j/r³], and its gradient along v = ∂r_i/∂θ,
     G·v = 3μ0/(4π r⁵)·[m_j(r·v) + r(m_j·v) + (m_j·r)v − 5(m_j·r)(r·v)r/r²]
-    (the expressions of :class:`mows.physics.sources.PointDipole`)."""
+    (the expressions of :class:`mows.physics.sources.PointDipole`). ``axes`` (N, 6) is scratch
+    for each lever's direction d and turning direction u = ∂d/∂θ. Written out per component: it
+    runs at every substep of the device's integration, where small arrays cost more than the sums."""
     count = theta.size
-    direction = np.empty((count, 3))
-    turning = np.empty((count, 3))
     for i in range(count):
-        c, s = np.cos(theta[i]), np.sin(theta[i])
-        direction[i] = c * x_axis[i] + s * y_axis[i]
-        turning[i] = -s * x_axis[i] + c * y_axis[i]
-    torque = np.zeros(count)
+        c, s = math.cos(theta[i]), math.sin(theta[i])
+        for k in range(3):
+            axes[i, k] = c * x_axis[i, k] + s * y_axis[i, k]
+            axes[i, 3 + k] = -s * x_axis[i, k] + c * y_axis[i, k]
     for i in range(count):
-        m_i = moment[i] * direction[i]
-        dm_i = moment[i] * turning[i]
-        v = lever[i] * turning[i]
-        r_i = pivot[i] + lever[i] * direction[i]
+        dx, dy, dz, ux, uy, uz = axes[i, 0], axes[i, 1], axes[i, 2], axes[i, 3], axes[i, 4], axes[i, 5]
+        vx, vy, vz = lever[i] * ux, lever[i] * uy, lever[i] * uz
+        rix, riy, riz = pivot[i, 0] + lever[i] * dx, pivot[i, 1] + lever[i] * dy, pivot[i, 2] + lever[i] * dz
+        total = 0.0
         for j in range(count):
             if j == i:
                 continue
-            m_j = moment[j] * direction[j]
-            r = r_i - (pivot[j] + lever[j] * direction[j])
-            r2 = r @ r
+            ex, ey, ez = axes[j, 0], axes[j, 1], axes[j, 2]
+            mx, my, mz = moment[j] * ex, moment[j] * ey, moment[j] * ez
+            rx = rix - (pivot[j, 0] + lever[j] * ex)
+            ry = riy - (pivot[j, 1] + lever[j] * ey)
+            rz = riz - (pivot[j, 2] + lever[j] * ez)
+            r2 = rx * rx + ry * ry + rz * rz
             inv_r3 = r2**-1.5
-            mr, rv, mv = m_j @ r, r @ v, m_j @ v
-            field = MU0_OVER_4PI * (3.0 * mr * inv_r3 / r2 * r - inv_r3 * m_j)
-            gradient_v = 3.0 * MU0_OVER_4PI * inv_r3 / r2 * (m_j * rv + r * mv + mr * v - 5.0 * mr * rv / r2 * r)
-            torque[i] += dm_i @ field + m_i @ gradient_v
-    return torque
+            mr, rv, mv = mx * rx + my * ry + mz * rz, rx * vx + ry * vy + rz * vz, mx * vx + my * vy + mz * vz
+            a, b = 3.0 * mr * inv_r3 / r2, inv_r3
+            fx, fy, fz = a * rx - b * mx, a * ry - b * my, a * rz - b * mz
+            g, q = 3.0 * inv_r3 / r2, 5.0 * mr * rv / r2
+            gx = g * (mx * rv + rx * mv + mr * vx - q * rx)
+            gy = g * (my * rv + ry * mv + mr * vy - q * ry)
+            gz = g * (mz * rv + rz * mv + mr * vz - q * rz)
+            # dm_i·B + m_i·(G·v), with m_i = moment_i·d and dm_i = moment_i·u; μ0/4π taken out of both
+            total += ux * fx + uy * fy + uz * fz + dx * gx + dy * gy + dz * gz
+        torque[i] = MU0_OVER_4PI * moment[i] * total

@@ -42,7 +42,7 @@ from mows.physics.multitone import Tone, coil_amplitudes_a, drive_currents_a, pe
 from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, ArcPotential
 from mows.records.samples import SampleBlock
 from mows.records.stamps import NS_PER_S
-from mows.sim.multiprobe import _coupling_torques, swinging_pickup_t
+from mows.sim.multiprobe import _coupling_torques_into, swinging_pickup_t
 from mows.sim.noise import NoiseStream
 from mows.sim.simulator import INTERVAL_OVER_STOP
 
@@ -109,6 +109,10 @@ class MultiProbeDevice:
     @property
     def coils_on(self) -> bool:
         return self._drive_on_index <= self.sample_index < self._drive_off_index
+
+    @property
+    def n_coils(self) -> int:
+        return len(self.setup.coils)
 
     @property
     def theta0_rad(self) -> np.ndarray:
@@ -254,30 +258,32 @@ class MultiProbeDevice:
 @njit(cache=True)
 def _acceleration(
     theta, omega, t, inv_width, spring, inv_inertia, two_delta, env, coil, amplitudes, omegas, t_on, moment, lever,
-    pivot, x_axis, y_axis,
+    pivot, x_axis, y_axis, currents, axes, out,
 ):  # fmt: skip
-    """θ'' of every probe (module docstring) at (θ, θ', t)."""
-    count = theta.size
-    currents = np.zeros(coil.shape[0])
+    """θ'' of every probe (module docstring) at (θ, θ', t) into ``out``; ``currents`` (n_coils,)
+    and ``axes`` (N, 6) are scratch. Without tones the coils' series are skipped (their currents are zero)."""
+    driven = omegas.size > 0
+    for c in range(coil.shape[0]):
+        currents[c] = 0.0
     for tone in range(omegas.size):
         carrier = math.sin(omegas[tone] * (t - t_on))
         for c in range(coil.shape[0]):
             currents[c] += amplitudes[tone, c] * carrier
-    torque = _coupling_torques(theta, moment, lever, pivot, x_axis, y_axis)
-    out = np.empty(count)
-    for i in range(count):
+    _coupling_torques_into(theta, moment, lever, pivot, x_axis, y_axis, axes, out)
+    for i in range(theta.size):
         x = theta[i] * inv_width
         t_prev, t_cur = 1.0, x
         slope = env[i, 0] + env[i, 1] * x
-        for c in range(coil.shape[0]):
-            slope += currents[c] * (coil[c, i, 0] + coil[c, i, 1] * x)
+        if driven:
+            for c in range(coil.shape[0]):
+                slope += currents[c] * (coil[c, i, 0] + coil[c, i, 1] * x)
         for j in range(2, env.shape[1]):
             t_prev, t_cur = t_cur, 2.0 * x * t_cur - t_prev
             slope += env[i, j] * t_cur
-            for c in range(coil.shape[0]):
-                slope += currents[c] * coil[c, i, j] * t_cur
-        out[i] = (torque[i] - spring[i] * theta[i] - slope) * inv_inertia[i] - two_delta[i] * omega[i]
-    return out
+            if driven:
+                for c in range(coil.shape[0]):
+                    slope += currents[c] * coil[c, i, j] * t_cur
+        out[i] = (out[i] - spring[i] * theta[i] - slope) * inv_inertia[i] - two_delta[i] * omega[i]
 
 
 @njit(cache=True)
@@ -287,22 +293,37 @@ def _advance(
 ):  # fmt: skip
     """RK4 over ``n`` samples from ``first_index``, θ at each sample into ``out``; the state
     (θ, θ') is updated in place. Returns the samples done: fewer when a deflection leaves the
-    interval ±w, where the potential's series ends."""
+    interval ±w, where the potential's series ends. The stages' states and accelerations live in
+    arrays made once, not per substep."""
     h = 1.0 / (fs * substeps)
+    count = theta.size
+    currents, axes = np.empty(coil.shape[0]), np.empty((count, 6))
+    a1, a2, a3, a4 = np.empty(count), np.empty(count), np.empty(count), np.empty(count)
+    stage_theta, stage_omega = np.empty(count), np.empty(count)
     args = (inv_width, spring, inv_inertia, two_delta, env, coil, amplitudes, omegas, t_on, moment, lever, pivot,
-            x_axis, y_axis)  # fmt: skip
+            x_axis, y_axis, currents, axes)  # fmt: skip
     for sample in range(n):
-        for i in range(theta.size):
+        for i in range(count):
             if abs(theta[i]) * inv_width >= 1.0:
                 return sample
         out[sample] = theta
         t = (first_index + sample) / fs
         for step in range(substeps):
             ts = t + step * h
-            a1 = _acceleration(theta, omega, ts, *args)
-            a2 = _acceleration(theta + 0.5 * h * omega, omega + 0.5 * h * a1, ts + 0.5 * h, *args)
-            a3 = _acceleration(theta + 0.5 * h * (omega + 0.5 * h * a1), omega + 0.5 * h * a2, ts + 0.5 * h, *args)
-            a4 = _acceleration(theta + h * (omega + 0.5 * h * a2), omega + h * a3, ts + h, *args)
-            theta[:] = theta + h * omega + h * h / 6.0 * (a1 + a2 + a3)
-            omega[:] = omega + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+            _acceleration(theta, omega, ts, *args, a1)
+            for i in range(count):
+                stage_theta[i] = theta[i] + 0.5 * h * omega[i]
+                stage_omega[i] = omega[i] + 0.5 * h * a1[i]
+            _acceleration(stage_theta, stage_omega, ts + 0.5 * h, *args, a2)
+            for i in range(count):
+                stage_theta[i] = theta[i] + 0.5 * h * (omega[i] + 0.5 * h * a1[i])
+                stage_omega[i] = omega[i] + 0.5 * h * a2[i]
+            _acceleration(stage_theta, stage_omega, ts + 0.5 * h, *args, a3)
+            for i in range(count):
+                stage_theta[i] = theta[i] + h * (omega[i] + 0.5 * h * a2[i])
+                stage_omega[i] = omega[i] + h * a3[i]
+            _acceleration(stage_theta, stage_omega, ts + h, *args, a4)
+            for i in range(count):
+                theta[i] = theta[i] + h * omega[i] + h * h / 6.0 * (a1[i] + a2[i] + a3[i])
+                omega[i] = omega[i] + h / 6.0 * (a1[i] + 2.0 * a2[i] + 2.0 * a3[i] + a4[i])
     return n

@@ -117,7 +117,7 @@ class SimulatedDevice:
         if len(scenario.probes) > 1:
             raise SimulationRefused(
                 f"scenario {scenario.name!r} has {len(scenario.probes)} probes; this simulator integrates one "
-                "(MultiProbeDevice integrates several; the driver does not run them yet)"
+                "(MultiProbeDevice integrates several, as the driver's sim backend does)"
             )
         self.scenario = scenario
         self.probe = scenario.probe

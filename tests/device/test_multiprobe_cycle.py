@@ -1,0 +1,229 @@
+"""The driver's cycle of several probes on the simulated multi-probe device, through DeviceSession.
+
+Requirements: nothing whose summed true peak is above the cap is ever queued, and the coil
+currents the device carries never exceed it (a plan above the cap is split into groups); the
+duty limit holds across the groups, counted by brute force over every window of the device's
+own coil log; an emergency stop in the middle of a group switches every tone off at once and
+excites nothing more; a probe whose tone overlaps another's is refused with the reason while
+the others are measured, and a cycle that can excite no probe is refused with every reason;
+each group's EXCITING and RINGDOWN list its probes, tones and θ0 (home + stage angle); and the
+ring-down windows of a whole cycle, fitted jointly, give each probe's coupled frequency
+(:meth:`MultiProbeDevice.expected_frequencies_hz`, the static coupled model) within 4σ. A device
+of one tone refuses a multi-tone drive, and the multi-probe device a supply current or a drive
+of coil amplitudes, each with the reason and nothing queued.
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from mows.device.interface import (
+    CoilCommand,
+    CommandResult,
+    FieldCurrentCommand,
+    MultiToneCommand,
+    refuse_tones,
+)
+from mows.device.multitone import on_stage, plan_probes
+from mows.device.phases import CycleRequest, CycleSettings, Phase
+from mows.device.scheduled import OverCap
+from mows.device.session import DeviceSession, SessionConfig
+from mows.device.sim_backend import MultiProbeSimBackend, SimBackend
+from mows.estimate.joint_segment import fit_joint_segment, probe_lines
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_ringdown
+from mows.estimate.segments import RingdownWindow, SegmentAssembler
+from mows.physics.coils import CurrentCap
+from mows.sim.multiprobe_device import MultiProbeDevice
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice
+
+SCENE = load_scenario("three_probes")
+STAGE_RAD = 0.3
+# The three tones sum to a 0.31 A peak: a 0.25 A cap splits them into two groups.
+LOW_CAP_A = 0.25
+FAST = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.1, repeats=1, turn_settle_s=0.2)
+SMALL_TONE_A = 0.03
+SEED = 1
+CHUNK_S = 0.1  # device time per unpaced poll
+MAX_STEPS = 100_000  # bound for a cycle that never ends (a bug), not a timing
+
+
+def session(scene=SCENE, cap_a=10.0, settings=FAST, seed=1):
+    backend = MultiProbeSimBackend(
+        MultiProbeDevice(scene, np.random.default_rng(seed)), CurrentCap(cap_a), paced=False, chunk_s=CHUNK_S
+    )
+    config = SessionConfig(0.025, settings, scene.setup, CurrentCap(cap_a), 112.5, fit_ringdown)
+    return DeviceSession(backend, config, armed=True)
+
+
+def run(s, request=CycleRequest(STAGE_RAD), until=None):
+    """Start a cycle and step until it ends or ``until(events)`` holds: (outcomes, events, blocks)."""
+    events, blocks, done = [], [], []
+    events += s.step(0.0).events
+    s.start_cycle(request, done.append)
+    for _ in range(MAX_STEPS):
+        if done or (until is not None and until(events)):
+            return done, events, blocks
+        output = s.step(0.0)
+        events += output.events
+        blocks += output.blocks
+    raise AssertionError("the cycle did not end")
+
+
+def on_intervals(coil_log, end_index):
+    """[(on, off)] from the device's coil log of (first sample, on) changes."""
+    changes = [*coil_log, (end_index, False)]
+    return [(a, b) for (a, on), (b, _) in zip(changes, changes[1:]) if on]
+
+
+def true_peak_a(tones, duration_s, step_s=2e-6):
+    """max |Σ_k A_k·sin(θ0_k + φ_c)·sin(2π f_k t)| over coils and [0, T] on a fine grid, by hand."""
+    t = np.arange(0.0, duration_s, step_s)
+    phases = np.array(SCENE.setup.phases_rad)
+    total = sum(
+        tone.amplitude_a
+        * np.sin(tone.theta0_rad + phases)[None, :]
+        * np.sin(2 * np.pi * tone.frequency_hz * t)[:, None]
+        for tone in tones
+    )
+    return float(np.abs(total).max())
+
+
+def test_tones_summed_above_the_cap_are_never_queued():
+    backend = MultiProbeSimBackend(MultiProbeDevice(SCENE), CurrentCap(LOW_CAP_A), paced=False)
+    plan = plan_probes(SCENE.placed_probes(), SCENE.setup, FAST.excite_s)  # one group under the scene's 10 A
+    samples = round(FAST.excite_s * SCENE.sample_rate_hz)
+    tones = plan.group_tones(0)
+    assert max(abs(np.sin(t.theta0_rad + np.array(SCENE.setup.phases_rad))).max() * t.amplitude_a for t in tones) < (
+        LOW_CAP_A
+    )  # each tone alone is within the cap ...
+    assert true_peak_a(tones, FAST.excite_s) > LOW_CAP_A  # ... their sum is not
+    with pytest.raises(OverCap, match=r"peak at .* above the 0.25 A cap"):
+        backend.device.schedule_tones(0, tones, samples)
+    backend.send(MultiToneCommand(1, 0, tones[1:], samples))  # within the cap: taken
+    backend.poll(0.0)
+    while backend.device.next_index < samples + 100:
+        backend.poll(0.0)
+    assert [on for _, on in backend.device.coil_log] == [True, False]
+    assert 0.0 < backend.device.peak_current_a <= LOW_CAP_A
+
+
+def test_a_cycle_splits_its_groups_under_the_cap_and_the_duty_limit():
+    window_s, duty = 2.0, 0.3  # 0.6 s of every 2 s: the second 0.5 s excitation must wait
+    s = session(cap_a=LOW_CAP_A, settings=dataclasses.replace(FAST, max_duty_cycle=duty, duty_window_s=window_s))
+    (outcome,), events, _ = run(s)
+    assert outcome.success, outcome.message
+    assert outcome.ringdowns_recorded == 2 and outcome.refused_probes == ()
+    exciting = [e for e in events if e.phase == Phase.EXCITING]
+    ringdowns = [e for e in events if e.phase == Phase.RINGDOWN]
+    groups = [e.probe_ids for e in exciting]
+    assert [e.probe_ids for e in ringdowns] == groups and len(groups) == 2
+    assert sorted(k for g in groups for k in g) == [0, 1, 2]
+    tones = plan_probes(on_stage(SCENE.placed_probes(), STAGE_RAD), SCENE.setup, FAST.excite_s).tones
+    assert true_peak_a(tones, FAST.excite_s) > LOW_CAP_A  # all three together would be above the cap
+    assert all(true_peak_a([tones[k] for k in g], FAST.excite_s) <= LOW_CAP_A for g in groups)
+    home = np.array([p.pose.theta0_rad for p in SCENE.placed_probes()])
+    for e in exciting + ringdowns:
+        assert e.theta0_rad == STAGE_RAD
+        assert e.probe_theta0_rad == pytest.approx(tuple(home[list(e.probe_ids)] + STAGE_RAD), abs=1e-12)
+        assert e.probe_frequency_hz == pytest.approx(tuple(SCENE.probes[k].probe.f00_hz for k in e.probe_ids))
+    device = s.backend.device
+    assert 0.0 < device.peak_current_a <= LOW_CAP_A
+    assert all(0.0 < a <= LOW_CAP_A for e in exciting for a in e.currents_a)
+    intervals = on_intervals(device.coil_log, device.next_index)
+    assert [on for on, _ in intervals] == [e.sample_index for e in exciting]
+    assert [off for _, off in intervals] == [e.sample_index for e in ringdowns]
+    fs = SCENE.sample_rate_hz
+    on = np.zeros(device.next_index + int(window_s * fs), int)
+    for a, b in intervals:
+        on[a:b] = 1
+    window = int(window_s * fs)
+    assert np.convolve(on, np.ones(window, int), "full").max() <= duty * window  # every window
+    # The limit, not the gap, set the second start: it waited beyond ring-down + gap.
+    assert intervals[1][0] > intervals[0][1] + (FAST.ringdown_s + FAST.gap_s) * fs
+
+
+def test_an_emergency_stop_mid_group_switches_every_tone_off_and_excites_nothing_more():
+    s = session(cap_a=LOW_CAP_A)
+    done, events, _ = run(s, until=lambda ev: any(e.phase == Phase.EXCITING for e in ev))
+    s.step(0.0)  # some samples into the group
+    stop_index = s.backend.device.next_index
+    assert s.backend.device.device.coils_on
+    s.emergency_stop(True, "operator")
+    for _ in range(24):  # 2.4 s of device time: the second group would have come after 1.1 s
+        events += s.step(0.0).events
+    (outcome,) = done
+    assert not outcome.success and "emergency stop: operator" in outcome.message
+    device = s.backend.device
+    intervals = on_intervals(device.coil_log, device.next_index)
+    assert len(intervals) == 1 and intervals[0][1] == stop_index
+    assert len([e for e in events if e.phase == Phase.EXCITING]) == 1
+    assert events[-1].phase == Phase.FAULT
+
+
+def test_an_overlapping_tone_is_refused_with_its_reason_while_the_others_are_measured():
+    probe = SCENE.probes[2].probe
+    spring = probe.inertia_kgm2 * ((2 * np.pi * 101.0) ** 2 + probe.damping_per_s**2)  # f00 = 101 Hz (Eq. S1)
+    near = dataclasses.replace(SCENE.probes[2], probe=probe.replace(spring_nm_per_rad=spring))
+    scene = SCENE.replace(probes=(*SCENE.probes[:2], near))
+    (outcome,), events, _ = run(session(scene))
+    assert outcome.success, outcome.message
+    ((probe_id, reason),) = outcome.refused_probes
+    assert probe_id == 2 and "1 Hz from probe 0" in reason and "exciting either would ring both" in reason
+    assert "refused: probe 2: 1 Hz from probe 0" in outcome.message
+    assert [e.probe_ids for e in events if e.phase in (Phase.EXCITING, Phase.RINGDOWN)] == [(0, 1), (0, 1)]
+
+
+def test_a_cycle_that_can_excite_no_probe_is_refused_with_every_reason():
+    s = session(settings=dataclasses.replace(FAST, excitation_current_a=0.0))
+    s.step(0.0)
+    with pytest.raises(ValueError, match="no probe can be excited") as refused:
+        s.start_cycle(CycleRequest(STAGE_RAD), lambda outcome: None)
+    assert all(f"probe {k}: a tone of at most 0 A excites nothing" in str(refused.value) for k in range(3))
+
+
+def test_the_windows_of_a_whole_cycle_fitted_jointly_give_each_coupled_frequency():
+    # Tones of at most 30 mA swing the probes by 0.02–0.07 rad: their amplitude's shift of the
+    # frequency (≤ 0.2 mHz) stays below a quarter of σ, so the swing-free coupled frequency is the truth.
+    s = session(settings=dataclasses.replace(FAST, repeats=2, excitation_current_a=SMALL_TONE_A), seed=SEED)
+    (outcome,), events, blocks = run(s)
+    assert outcome.success, outcome.message
+    device = s.backend.device.device
+    expected = device.expected_frequencies_hz()  # at the cycle's orientations
+    placed = on_stage(SCENE.placed_probes(), STAGE_RAD)
+    assembler = SegmentAssembler(10.0)
+    for e in events:
+        if e.phase == Phase.RINGDOWN:
+            assembler.announce(RingdownWindow(e.stamp_ns, FAST.ringdown_s, theta0_rad=e.theta0_rad))
+    segments = [segment for block in blocks for segment in assembler.add_block(block)]
+    assert len(segments) == 2
+    windows = [e for e in events if e.phase == Phase.RINGDOWN]
+    for segment, event in zip(segments, windows):
+        lines = probe_lines(
+            SCENE.sensors.pair, [placed[k] for k in event.probe_ids], event.probe_ids, event.probe_frequency_hz
+        )
+        fits = fit_joint_segment(segment, lines, COIL_OFF_SKIP_S)
+        assert [f.probe_id for f in fits] == [0, 1, 2]
+        for fit in fits:
+            assert fit.ok, fit.message
+            pull = (fit.frequency_hz - expected[fit.probe_id]) / fit.frequency_std_hz
+            assert abs(pull) < 4.0, (fit.probe_id, fit.frequency_hz, expected[fit.probe_id], fit.frequency_std_hz)
+
+
+def test_devices_of_one_tone_and_the_supply_refuse_what_they_cannot_do_with_the_reason():
+    tones = plan_probes(SCENE.placed_probes(), SCENE.setup, FAST.excite_s).group_tones(0)
+    drive = MultiToneCommand(1, 0, tones, 100)
+    with pytest.raises(ValueError, match="the serial device drives one tone at a time"):
+        refuse_tones(drive, "serial device")
+    one_probe = SimBackend(SimulatedDevice(load_scenario()), CurrentCap(10.0), paced=False)
+    with pytest.raises(ValueError, match="one-probe simulator drives one tone at a time"):
+        one_probe.send(drive)
+    several = MultiProbeSimBackend(MultiProbeDevice(SCENE), CurrentCap(10.0), paced=False)
+    with pytest.raises(ValueError, match="has no field supply"):
+        several.send(FieldCurrentCommand(2, 0, 1.0))
+    with pytest.raises(ValueError, match="driven by its probes' tones, not by coil amplitudes"):
+        several.send(CoilCommand(3, 0, (1.0, 0.0), 112.5))
+    items = several.poll(0.0)  # nothing was queued: no answers, coils off
+    assert not any(isinstance(item, CommandResult) for item in items)
+    assert not several.device.coil_log and not several.device.coils_on

@@ -179,8 +179,10 @@ def scene_backend(
         return SimBackend(
             device, cap, chunk_s=chunk_s, supply_cap_a=supply_cap_a, supply_slew_a_per_s=supply_slew_a_per_s
         )
+    # A first read compiles the integrator and the pickup (or loads them from numba's cache):
+    # seconds that must pass now, on a device of its own, not while the stream waits for samples.
+    MultiProbeDevice(scenario).read(2)
     probes = MultiProbeDevice(scenario)
-    probes.integrate(0)  # compiles the integrator (or loads it from numba's cache) now, not while streaming
     backend = MultiProbeSimBackend(probes, cap, chunk_s=chunk_s)
     backend.device.schedule_orientation(0, theta0_rad)
     return backend

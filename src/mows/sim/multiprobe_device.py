@@ -286,7 +286,7 @@ def _acceleration(
         out[i] = (out[i] - spring[i] * theta[i] - slope) * inv_inertia[i] - two_delta[i] * omega[i]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # the driver's executor answers requests while it runs
 def _advance(
     theta, omega, first_index, n, fs, substeps, inv_width, spring, inv_inertia, two_delta, env, coil, amplitudes,
     omegas, t_on, moment, lever, pivot, x_axis, y_axis, out,

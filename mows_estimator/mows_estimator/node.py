@@ -94,22 +94,19 @@ class EstimatorNode(MowsNode):
         for segment in segments:
             settings = self._settings()
             for estimated in self._estimator.estimate_all(segment, settings):
-                self._publish(estimated, arrived, settings.joint is not None)
+                self._publish(estimated, arrived)
 
-    def _publish(self, estimated: Estimated, arrived: float, several: bool):
-        frame_id = self.get_parameter("probe_frame_id").value
-        fit_msg = fit_to_msg(estimated, probe_frame_id(frame_id, estimated.fit.probe_id) if several else frame_id)
+    def _publish(self, estimated: Estimated, arrived: float):
+        fit_msg = fit_to_msg(estimated, probe_frame_id(self.get_parameter("probe_frame_id").value, estimated.probe_id))
         self._fit_pub.publish(fit_msg)
         if estimated.estimate.ok:
             self._field_pub.publish(estimate_to_msg(estimated.estimate, fit_msg.header, estimated.window))
             self._magnetic_pub.publish(magnetic_field_msg(estimated.estimate, fit_msg.header))
         if estimated.calibrated:
             self._calibrated.set_result(True)
-        fit, window = estimated.fit, estimated.window
-        self._tally.add(fit.status.name, 1e3 * (time.monotonic() - arrived), fit.probe_id if several else None)
-        if not fit.ok:
-            probe = f" probe {fit.probe_id}" if several else ""
-            self.get_logger().warn(f"cycle {window.cycle_id} repeat {window.repeat_index}{probe}: {fit.report()}")
+        self._tally.add(estimated, 1e3 * (time.monotonic() - arrived))
+        if not estimated.fit.ok:
+            self.get_logger().warn(estimated.report())
 
     # --- calibration ------------------------------------------------------------------------
     async def _on_calibrate(self, request: CalibrateF00.Request, response: CalibrateF00.Response):

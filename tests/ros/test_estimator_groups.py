@@ -5,8 +5,13 @@ Requirement: three probes 5 cm apart (112.5, 125 and 101 Hz) on one stage, at ho
 0°, 40° and 80° (so at 20°, 60° and 100° in their own planes), excited in two groups, come back
 from the node each at its coupled first-principles frequency within 4σ, each fitted at its own
 θ0 with its pickup there; a probe id the announcement lists but the ``probes`` parameter does not
-gets a failed fit naming it, counted on /diagnostics, and the others are fitted. The probes
-that do not ring in a window sit at their coupled rest there: their fields are a constant offset.
+gets a failed fit naming it, counted on /diagnostics, and the others are fitted.
+
+The probes that do not ring in a window sit still at their coupled rest: their fields are a
+constant offset. A probe left out of the list that still swings is a line the joint fit does
+not model: started at 0 instead of at its rest (−0.035°), probe 1 swings that much about it and
+pulls probe 0's frequency by +2.7σ on average (12 noise draws), where at rest the pulls are
+0.1 ± 1.0 and −0.3 ± 0.6.
 """
 
 import math
@@ -16,7 +21,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from mows_msgs.msg import ExcitationState, RingdownFit
 
-from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
+from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz, coupled_rest
 from mows.physics.fluxgate import FluxgatePair
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
@@ -49,7 +54,8 @@ def probes():
 
 def group_samples(placed, ringing, seed):
     """The pair's samples (n, 2) of one ring-down in which only the probes ``ringing`` swing."""
-    start = [math.radians(4.0) if k in ringing else 0.0 for k in range(len(placed))]
+    rest = coupled_rest(placed, SCENE).rest_angle_rad
+    start = [math.radians(4.0) if k in ringing else rest[k] for k in range(len(placed))]
     theta, _ = CoupledProbes(placed, SCENE).ring_down(start, int(DURATION_S * FS), FS)
     samples = swinging_pickup_t(FluxgatePair.paper(), placed, theta)
     return samples + 1e-10 * np.random.default_rng(seed).standard_normal(samples.shape)
@@ -105,7 +111,9 @@ def test_each_group_is_fitted_over_its_probes_at_their_own_orientations(ros, sta
         fit = fits[k]
         assert fit.status == RingdownFit.STATUS_OK, fit.message
         assert fit.theta0_rad == pytest.approx(p.pose.theta0_rad) and fit.header.frame_id == f"mows_probe_{k}"
-        assert abs(fit.frequency_hz - expected) < 4 * fit.frequency_std_hz, (k, fit.frequency_hz, expected)
+        pull = (fit.frequency_hz - expected) / fit.frequency_std_hz
+        print(f"probe {k}: pull {pull:+.2f}, σ {fit.frequency_std_hz:.2e} Hz")
+        assert abs(pull) < 4, (k, fit.frequency_hz, expected)
     assert fits[0].cycle_id == fits[2].cycle_id != fits[1].cycle_id
     unknown = fits[UNKNOWN]
     assert unknown.status != RingdownFit.STATUS_OK and f"probe {UNKNOWN}" in unknown.message

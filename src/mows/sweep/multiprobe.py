@@ -26,6 +26,13 @@ lever's arc when the sweep has the 7 orientations it needs
 pair's field sit where its curvature is not small, and left in the residual it leaks into the
 field wherever the points' σ differ. The curvature's 1θ0 part cannot be told from the field.
 
+The loop takes any probe's share of a sweep that can decompose itself (:class:`SweepOfProbe`):
+the bench's :class:`ProbeSweep`, a point per step, and the mapper's records
+(:class:`mows.sweep.probes.RecordSweep`), whose points are the probe's successful ring-downs,
+each at the step it was taken at. Where probe k rang, each neighbour's moment is turned to the
+neighbour's own θ0 at that step (``orientations_rad``: every probe's θ0 at every step), not
+to probe k's.
+
 The probes rotate in the global x–y plane (the decomposition's frame).
 """
 

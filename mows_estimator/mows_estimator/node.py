@@ -5,8 +5,10 @@ namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock,
 QoS) and ``/mows/excitation`` (ExcitationState). Publishes, per recorded ring-down,
 ``/mows/ringdown`` (RingdownFit, always, with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
 ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). With ``probes`` listing several
-probes, each window is fitted jointly and gives one RingdownFit per probe (its ``probe_id``,
-frame ``<probe_frame_id>_<id>``), and /diagnostics counts each probe's fits. Service
+probes, each window is fitted jointly over the probes its announcement lists (each at its own
+θ0; all of them when it lists none) and gives one RingdownFit per probe (its ``probe_id``, frame
+``<probe_frame_id>_<id>``), and /diagnostics counts each probe's fits and those of ids it does
+not know. Service
 ``/estimator/calibrate`` (CalibrateF00; ``/mows/estimator/calibrate``, the previous release's name,
 is served too for one release) sets f00 from the next ring-downs in a known field.
 The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` and ``mows.estimate.axis``.

@@ -18,19 +18,16 @@ import math
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
-from mows_msgs.msg import ExcitationState, RingdownFit
+from mows_msgs.msg import RingdownFit
 
 from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz, coupled_rest
 from mows.physics.fluxgate import FluxgatePair
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
 from mows.sim.multiprobe import CoupledProbes, swinging_pickup_t
-from mows_bringup.graph import NODES
-from mows_ros.qos import RESULT_QOS
 from node_processes import assert_stops_cleanly
-from test_estimator_node import FS, heard_device
-from test_estimator_probes import DURATION_S, POSITIONS_M, SCENE, SPRING_SCALES, probes_parameter
+from test_estimator_node import FS
+from test_estimator_probes import DURATION_S, POSITIONS_M, SCENE, SPRING_SCALES, ring_down, started_estimator
 
 pytestmark = [pytest.mark.ros, pytest.mark.xdist_group("realtime")]
 
@@ -61,49 +58,27 @@ def group_samples(placed, ringing, seed):
     return samples + 1e-10 * np.random.default_rng(seed).standard_normal(samples.shape)
 
 
-def announce_and_stream(device, group, placed, frequencies_hz, samples):
-    """Announce a ring-down that lists ``group`` (each probe's tone and own θ0) and stream it."""
-    device.cycle += 1
+def announced(group, placed, frequencies_hz):
+    """What the driver announces of a ring-down of ``group``: each probe's tone and own θ0."""
     own = {k: (f, p.pose.theta0_rad) for k, (p, f) in enumerate(zip(placed, frequencies_hz))}
     own[UNKNOWN] = (140.0, STAGE_RAD)
-    device.excitation.publish(
-        ExcitationState(
-            header=device.header(device.index),
-            phase=ExcitationState.PHASE_RINGDOWN,
-            phase_name="RINGDOWN",
-            cycle_id=device.cycle,
-            repeats=1,
-            theta0_rad=STAGE_RAD,
-            frequency_hz=own[group[0]][0],
-            planned_duration_s=DURATION_S,
-            probe_ids=list(group),
-            probe_frequency_hz=[own[k][0] for k in group],
-            probe_theta0_rad=[own[k][1] for k in group],
-        )
+    return dict(
+        theta0_rad=STAGE_RAD,
+        frequency_hz=own[group[0]][0],
+        probe_ids=list(group),
+        probe_frequency_hz=[own[k][0] for k in group],
+        probe_theta0_rad=[own[k][1] for k in group],
     )
-    block = 500
-    for start in range(0, len(samples), block):
-        device.publish_block(samples[start : start + block, 0], samples[start : start + block, 1])
-        device.index += block
-        device.sequence += 1
-    device.idle(5)
 
 
 def test_each_group_is_fitted_over_its_probes_at_their_own_orientations(ros, start, probes):
     placed, coupled_hz = probes
-    node = next(n for n in NODES if n.name == "estimator")
-    process = start(*node.command(["-p", f"probes:='{probes_parameter(placed)}'"]))
-    heard = {"fits": [], "diagnostics": {}}
-    ros.node.create_subscription(RingdownFit, "/mows/ringdown", heard["fits"].append, RESULT_QOS)
-    ros.node.create_subscription(
-        DiagnosticArray, "/diagnostics", lambda a: heard["diagnostics"].update((s.name, s) for s in a.status), 10
-    )
-    device = heard_device(ros, heard)
+    device, heard, process = started_estimator(ros, start, placed)
     # The tones are the driver's: near each resonance, not on it.
     tones_hz = [f + 0.03 for f in coupled_hz]
     for seed, group in enumerate(GROUPS):
         ringing = [k for k in group if k != UNKNOWN]
-        announce_and_stream(device, group, placed, tones_hz, group_samples(placed, ringing, seed))
+        ring_down(device, group_samples(placed, ringing, seed), **announced(group, placed, tones_hz))
     ros.wait_for(lambda: len(heard["fits"]) == 4, "four fits")
     fits = {f.probe_id: f for f in heard["fits"]}
     assert sorted(fits) == [0, 1, 2, UNKNOWN]

@@ -311,8 +311,10 @@ class SweepRunner:
 
     def on_fit(self, fit: SweepFit) -> SweepStep | None:
         """A fit from the stream; a step once the awaited cycle's fits are all in."""
-        # Fits of cycles run by others between sweeps, and tuning ring-downs, are not ours.
-        if self.state != SweepState.SWEEPING or fit.tuning:
+        # Fits of cycles run by others between sweeps, tuning ring-downs, and fits of probes not
+        # listed (the estimator reports an id it does not know) are not ours.
+        unlisted = self._settings.probes and fit.probe_id not in self._records
+        if self.state != SweepState.SWEEPING or fit.tuning or unlisted:
             return None
         self._fits.setdefault(fit.cycle_id, []).append(fit)
         return self._collected()
@@ -368,15 +370,12 @@ class SweepRunner:
         theta0 = self._angles[self._index]
         before = len(self._record.points)
         for fit in fits:
-            # With several probes, each fit goes to its probe's record; a probe not listed is not ours.
-            record = self._records.get(fit.probe_id) if self._settings.probes else self._record
-            if record is None:
-                continue
+            record = self._records[fit.probe_id] if self._settings.probes else self._record
             if fit.point is None:
                 record.failed += 1
             else:
                 record.add(fit.point)
-                self._steps.get(fit.probe_id, []).append(self._index)
+                self._steps.setdefault(fit.probe_id, []).append(self._index)
         # A probe's fits are at its own θ0, not the stage's: its points of this orientation are the new ones.
         here = SweepRecord(self._record.points[before:]) if self._settings.probes else self._record
         shift, std, n_ok = here.at_angle(here.points[0].theta0_rad if self._settings.probes and here.points else theta0)

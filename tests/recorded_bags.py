@@ -61,9 +61,6 @@ def ringdown_message(index, fs, cycle, theta0, frequency):
         theta0_rad=theta0,
         planned_duration_s=0.5,
         setup="largest_spacing",
-        probe_ids=np.zeros(0, np.uint8),
-        probe_frequency_hz=np.zeros(0),
-        probe_theta0_rad=np.zeros(0),
     )
 
 

@@ -7,6 +7,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from mows.estimate.segments import SegmentAssembler
+from mows.estimate.stream import Estimated
 from mows_ros.diagnostics import Health
 
 LATENCY_WINDOW = 500  # fits over which the latency percentiles are taken
@@ -19,17 +20,21 @@ class FitTally:
         self._latency_ms = collections.deque(maxlen=LATENCY_WINDOW)
         self._counts = collections.Counter()
         self._per_probe = collections.Counter()  # probe_<id>_fits_ok, probe_<id>_fits_failed
+        self._unknown_probe_fits = 0
 
     def count(self, what: str) -> None:
         self._counts[what] += 1
 
-    def add(self, status_name: str, latency_ms: float, probe_id: int | None = None) -> None:
-        """A fit published ``latency_ms`` after the message that completed its ring-down; of
-        probe ``probe_id`` when several probes share the windows."""
+    def add(self, estimated: Estimated, latency_ms: float) -> None:
+        """A fit published ``latency_ms`` after the message that completed its ring-down, counted
+        for its probe too when several share the windows, and as ``unknown_probe_fits`` when
+        the window named a probe the ``probes`` parameter does not list."""
+        status_name = estimated.fit.status.name
         self._counts[status_name] += 1
         self._latency_ms.append(latency_ms)
-        if probe_id is not None:
-            self._per_probe[f"probe_{probe_id}_fits_{'ok' if status_name == 'OK' else 'failed'}"] += 1
+        self._unknown_probe_fits += estimated.unknown_probe
+        if estimated.probe_id is not None:
+            self._per_probe[f"probe_{estimated.probe_id}_fits_{'ok' if status_name == 'OK' else 'failed'}"] += 1
 
     def health(self, last: str, assembler: SegmentAssembler, f00_hz: float, f00_std_hz: float) -> Health:
         latency = np.array(self._latency_ms) if self._latency_ms else np.array([math.nan])
@@ -51,6 +56,7 @@ class FitTally:
                 "blocks": assembler.blocks,
                 "f00_hz": f00_hz,
                 "f00_std_hz": f00_std_hz,
+                "unknown_probe_fits": self._unknown_probe_fits,
                 **self._per_probe,
             },
         )

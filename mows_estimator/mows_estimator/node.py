@@ -5,8 +5,10 @@ namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock,
 QoS) and ``/mows/excitation`` (ExcitationState). Publishes, per recorded ring-down,
 ``/mows/ringdown`` (RingdownFit, always, with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
 ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). With ``probes`` listing several
-probes, each window is fitted jointly and gives one RingdownFit per probe (its ``probe_id``,
-frame ``<probe_frame_id>_<id>``), and /diagnostics counts each probe's fits. Service
+probes, each window is fitted jointly over the probes its announcement lists (each at its own
+θ0; all of them when it lists none) and gives one RingdownFit per probe (its ``probe_id``, frame
+``<probe_frame_id>_<id>``), and /diagnostics counts each probe's fits and those of ids it does
+not know. Service
 ``/estimator/calibrate`` (CalibrateF00; ``/mows/estimator/calibrate``, the previous release's name,
 is served too for one release) sets f00 from the next ring-downs in a known field.
 The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` and ``mows.estimate.axis``.
@@ -94,22 +96,19 @@ class EstimatorNode(MowsNode):
         for segment in segments:
             settings = self._settings()
             for estimated in self._estimator.estimate_all(segment, settings):
-                self._publish(estimated, arrived, settings.joint is not None)
+                self._publish(estimated, arrived)
 
-    def _publish(self, estimated: Estimated, arrived: float, several: bool):
-        frame_id = self.get_parameter("probe_frame_id").value
-        fit_msg = fit_to_msg(estimated, probe_frame_id(frame_id, estimated.fit.probe_id) if several else frame_id)
+    def _publish(self, estimated: Estimated, arrived: float):
+        fit_msg = fit_to_msg(estimated, probe_frame_id(self.get_parameter("probe_frame_id").value, estimated.probe_id))
         self._fit_pub.publish(fit_msg)
         if estimated.estimate.ok:
             self._field_pub.publish(estimate_to_msg(estimated.estimate, fit_msg.header, estimated.window))
             self._magnetic_pub.publish(magnetic_field_msg(estimated.estimate, fit_msg.header))
         if estimated.calibrated:
             self._calibrated.set_result(True)
-        fit, window = estimated.fit, estimated.window
-        self._tally.add(fit.status.name, 1e3 * (time.monotonic() - arrived), fit.probe_id if several else None)
-        if not fit.ok:
-            probe = f" probe {fit.probe_id}" if several else ""
-            self.get_logger().warn(f"cycle {window.cycle_id} repeat {window.repeat_index}{probe}: {fit.report()}")
+        self._tally.add(estimated, 1e3 * (time.monotonic() - arrived))
+        if not estimated.fit.ok:
+            self.get_logger().warn(estimated.report())
 
     # --- calibration ------------------------------------------------------------------------
     async def _on_calibrate(self, request: CalibrateF00.Request, response: CalibrateF00.Response):

@@ -1,8 +1,9 @@
 """The estimator's parameter table and the fit settings it makes of the parameters."""
 
 import functools
+from collections.abc import Sequence
 
-from mows.estimate.probe_set import ProbeEntry
+from mows.estimate.probe_set import WindowProbe
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.ringdown_joint import JointOptions, ProbeLine
 from mows.estimate.stream import FitSettings, JointSettings
@@ -69,9 +70,9 @@ def fit_options(values: dict, probe: Probe, theta0_rad: float) -> FitOptions:
     return FitOptions(channels=channels, theta0_free=values["theta0_free"], **common)
 
 
-def joint_lines(values: dict, probes: tuple[ProbeEntry, ...], theta0_rad: float) -> list[ProbeLine]:
-    """The probes' lines at θ0 for the joint fit the parameters ask for; ValueError for what it
-    cannot do (a fitted θ0)."""
+def joint_lines(values: dict, held: Sequence[WindowProbe]) -> list[ProbeLine]:
+    """The lines of the probes a window holds, each at its own θ0, for the joint fit the
+    parameters ask for; ValueError for what it cannot do (a fitted θ0)."""
     if values["theta0_free"]:
         raise ValueError("theta0_free: the joint fit of several probes takes θ0 from the excitation")
     pair = None
@@ -80,7 +81,7 @@ def joint_lines(values: dict, probes: tuple[ProbeEntry, ...], theta0_rad: float)
         pair = FluxgatePair.paper(
             distance_m=values["sensor_distance_m"], spacing_m=values["sensor_spacing_m"], axis=axis
         )
-    return [entry.line(theta0_rad, pair, values["channels"]) for entry in probes]
+    return [p.entry.line(p.theta0_rad, pair, values["channels"], p.tone_hz) for p in held if p.entry is not None]
 
 
 def joint_settings(values: dict, probe: Probe) -> JointSettings | None:
@@ -89,7 +90,7 @@ def joint_settings(values: dict, probe: Probe) -> JointSettings | None:
     if not probes:
         return None
     options = JointOptions(values["channels"], min_periods=values["min_periods"], max_chi2_dof=values["max_chi2_dof"])
-    return JointSettings(probes, functools.partial(joint_lines, values, probes), options)
+    return JointSettings(probes, functools.partial(joint_lines, values), options)
 
 
 def fit_settings(values: dict, probe: Probe) -> FitSettings:

@@ -86,7 +86,9 @@ def test_with_probes_each_gets_its_estimate_from_its_own_f00():
     one = signal_t(t, 0.0, 0.3, 112.6, 0.4, 1.8, 2e-7) + signal_t(t, 0.0, 0.3, 125.1, 1.0, 1.8, 1e-7)
     data = np.column_stack([2 * one, one]) + 1e-10 * np.random.default_rng(2).standard_normal((10_000, 2))
     entries = read("{0: 112.5, 1: 125.0}")
-    joint = JointSettings(entries, lambda theta0: [e.line(theta0, None, "difference") for e in entries], JointOptions())
+    joint = JointSettings(
+        entries, lambda held: [p.entry.line(p.theta0_rad, None, "difference") for p in held], JointOptions()
+    )
     settings = FitSettings(PAPER_PROBE, lambda theta0: FitOptions(), 0.0, 112.48, 0.0, joint)
     estimated = RingdownEstimator(5.0).estimate_all(segment(data), settings)
     assert [e.fit.probe_id for e in estimated] == [0, 1]

@@ -60,8 +60,9 @@ def probes_parameter(placed) -> str:
     return "{" + ", ".join(entries) + "}"
 
 
-def ring_down(device: Device, samples: np.ndarray) -> None:
-    """Announce a ring-down at the device's present sample and stream ``samples`` in blocks."""
+def ring_down(device: Device, samples: np.ndarray, **announced) -> None:
+    """Announce a ring-down at the device's present sample (at THETA0 and f00 unless
+    ``announced`` says otherwise) and stream ``samples`` in blocks."""
     device.cycle += 1
     header = device.header(device.index)
     device.excitation.publish(
@@ -71,9 +72,8 @@ def ring_down(device: Device, samples: np.ndarray) -> None:
             phase_name="RINGDOWN",
             cycle_id=device.cycle,
             repeats=1,
-            theta0_rad=THETA0,
-            frequency_hz=P.f00_hz,
             planned_duration_s=DURATION_S,
+            **({"theta0_rad": THETA0, "frequency_hz": P.f00_hz} | announced),
         )
     )
     block = 500
@@ -84,9 +84,9 @@ def ring_down(device: Device, samples: np.ndarray) -> None:
     device.idle(5)
 
 
-@pytest.fixture
-def estimator(ros, start, three_probes):
-    placed, _, _ = three_probes
+def started_estimator(ros, start, placed):
+    """The estimator node told of ``placed``, a stand-in device it hears, what it publishes
+    (``heard``), and its process."""
     node = next(n for n in NODES if n.name == "estimator")
     # Quoted: a -p value is YAML, and the mapping is the parameter's string.
     process = start(*node.command(["-p", f"probes:='{probes_parameter(placed)}'"]))
@@ -95,7 +95,12 @@ def estimator(ros, start, three_probes):
     ros.node.create_subscription(
         DiagnosticArray, "/diagnostics", lambda a: heard["diagnostics"].update((s.name, s) for s in a.status), 10
     )
-    device = heard_device(ros, heard)
+    return heard_device(ros, heard), heard, process
+
+
+@pytest.fixture
+def estimator(ros, start, three_probes):
+    device, heard, process = started_estimator(ros, start, three_probes[0])
     yield device, heard
     assert_stops_cleanly(process)
 

@@ -80,6 +80,17 @@ def test_a_probe_without_a_good_fit_is_reported_and_the_others_are_decomposed():
     assert np.all(np.isnan(step.publish_probes[1].decomposition.field_t))
 
 
+def test_fits_of_a_probe_not_listed_do_not_complete_an_orientation():
+    runner, rng = SweepRunner(), np.random.default_rng(3)
+    runner.start(SweepGoal(ANGLES, 1), SweepSettings(probes=PROBES[:2]), P)
+    call = runner.begin().run_cycle
+    runner.on_cycle(CycleAnswer(1, 1))
+    fits = [fit(e, f, call.theta0_rad, 1, rng) for e, f in zip(PROBES, FIELDS_T)]
+    assert runner.on_fit(fits[0]) is None and runner.on_fit(fits[2]) is None  # probe 2 is not listed
+    step = runner.on_fit(fits[1])
+    assert step is not None and list(step.feedback.fits) == ["probe 0", "probe 1"]
+
+
 def test_an_adaptive_sweep_of_several_probes_is_refused():
     goal = SweepGoal.asked((), 0, "", "B", 1e-7, 0.0, 60.0)
     with pytest.raises(ValueError, match="adaptive sweep is of one probe; 3 are listed"):

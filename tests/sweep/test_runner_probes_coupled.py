@@ -11,8 +11,10 @@ must be biased by many σ.
 
 Every probe turns with the stage, so each neighbour's moment turns with the probe's own frame:
 its field is nearly constant in that frame and the uncoupled decomposition puts the neighbours
-into the gradient (seed 5: Gxx, Gxy, Gyy off by up to 11σ and 0.48 mT/m, χ²/dof 20–88; the
-fields within 0.3σ). With the coupling, χ²/dof is 0.7–1.1 and the largest of the 15 pulls is
+into the gradient (seed 5: Gxx, Gxy, Gyy off by up to 67σ and 0.48 mT/m, the fields within
+1.3σ). The 8 orientations let the decomposition fit the field's 3θ0 curvature, which takes up
+part of the neighbours' pattern: χ²/dof is then 0.5–1.6 with or without the coupling, and only
+the comparison with the truth shows the bias. With the coupling the largest of the 15 pulls is
 2.6σ. With 15 components a 2σ bound on each fails by chance in about half of all draws
 (1 − 0.954¹⁵), so the bound per component is 3σ (4 % of draws by chance) and χ²/dof ≤ 2.
 """
@@ -27,7 +29,8 @@ from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import LinearGradient
-from mows.sweep.probes import UNCOUPLED_NOTE, decompose_probes
+from mows.sweep.multiprobe import UNCOUPLED_NOTE
+from mows.sweep.probes import decompose_probes
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, SweepSettings
 
@@ -90,6 +93,7 @@ def test_each_probes_external_field_and_gradient_lie_within_two_sigma(swept):
     assert step.finished.ok and [m.probe_id for m in step.publish_probes] == [0, 1, 2]
     coupled = z_scores([m.decomposition for m in step.publish_probes])
     print("z with the coupling (Bx, By, Gxx, Gxy, Gyy):\n", np.round(coupled, 2))
+    print("χ²/dof with the coupling:", [round(m.decomposition.chi2_dof, 2) for m in step.publish_probes])
     assert np.all(np.abs(coupled) < 3.0)
     assert all(m.decomposition.chi2_dof < 2.0 for m in step.publish_probes)
 
@@ -101,8 +105,10 @@ def test_decomposed_without_the_coupling_each_gradient_is_biased_by_its_neighbou
     bias = np.array([d.gradient_t_per_m for d in alone]) - np.array([truth(e)[2:] for e in PROBES])
     print("z without the coupling (Bx, By, Gxx, Gxy, Gyy):\n", np.round(z, 2))
     print("gradient bias without the coupling (mT/m):\n", np.round(bias * 1e3, 3))
-    assert np.abs(z[:, 2:]).max() > 8.0
-    assert min(d.chi2_dof for d in alone) > 5.0
+    print("χ²/dof without the coupling:", [round(d.chi2_dof, 2) for d in alone])
+    # Every probe's gradient is off; χ² need not say so: the fitted 3θ0 curvature takes up part
+    # of the neighbours' pattern.
+    assert np.all(np.abs(z[:, 2:]).max(axis=1) > 8.0)
 
 
 def test_with_the_published_model_the_report_says_the_neighbours_are_left_in(swept):

@@ -12,9 +12,10 @@ A probe given by its f00 alone is the estimator's own probe (``probe_file``) wit
 that gives it that f00 (:func:`with_f00`), its lever, moment, inertia and damping kept; its
 f00 is then also the zero-field frequency its shifts are counted from. ``position_m`` is the probe's
 magnet at rest relative to the single probe's place before the fluxgates, in the rotation
-plane's frame (x = e1 towards the sensors' side, y = e2); every probe is turned about its own
-magnet to the one θ0 the driver announces (stages turned together; a probe orbiting a shared
-axis is not modelled). An empty text is one probe: the single-probe estimator.
+plane's frame (x = e1 towards the sensors' side, y = e2); each probe is turned about its own
+magnet to the θ0 the driver announces for it (``probe_theta0_rad`` of a ring-down that lists its
+probes, :func:`window_probes`; else the one θ0 of the window). A probe orbiting a shared axis is
+not modelled. An empty text is one probe: the single-probe estimator.
 
 At most :data:`MAX_PROBES` probes, each line at least :data:`MIN_SEPARATION_HZ` from the
 others: closer lines are not told apart in a window of a second or less (docs/multi_probe.md).
@@ -24,13 +25,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 import yaml
 
 from mows.estimate.ringdown_joint import ProbeLine
+from mows.estimate.segments import RingdownWindow
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
 from mows.physics.pose import Pose
 from mows.physics.probe import Probe
@@ -51,14 +53,46 @@ class ProbeEntry:
     f00_std_hz: float = 0.0
     position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
-    def line(self, theta0_rad: float, pair: FluxgatePair | None, channels: str) -> ProbeLine:
+    def line(self, theta0_rad: float, pair: FluxgatePair | None, channels: str, tone_hz: float = math.nan) -> ProbeLine:
         """Its line in the joint fit at θ0: the exact pickup of its magnet swinging on its lever
-        before ``pair`` (the fitted channel combination), or the paper's single term (None)."""
+        before ``pair`` (the fitted channel combination), or the paper's single term (None),
+        looked for at ``tone_hz`` (the driver's tone: its resonance in the present field),
+        else at f00."""
         pickup = None
         if pair is not None:
             pose = Pose(theta0_rad=theta0_rad, magnet_position_m=self.position_m)
             pickup = tuple(pickup_harmonics(pair, pose, self.probe.lever_m, self.probe.moment_am2, combine=channels))
-        return ProbeLine(self.probe_id, theta0_rad, self.f00_hz, pickup, self.probe.damping_per_s)
+        expected_hz = tone_hz if math.isfinite(tone_hz) and tone_hz > 0 else self.f00_hz
+        return ProbeLine(self.probe_id, theta0_rad, expected_hz, pickup, self.probe.damping_per_s)
+
+
+@dataclasses.dataclass(frozen=True)
+class WindowProbe:
+    """A probe a ring-down window holds: its id, its own θ0 and tone (NaN: none announced), and
+    its entry in the set (None: an id the set does not list)."""
+
+    probe_id: int
+    theta0_rad: float
+    tone_hz: float
+    entry: ProbeEntry | None
+
+    def unknown_message(self, probes: Sequence[ProbeEntry]) -> str:
+        known = ", ".join(str(e.probe_id) for e in probes)
+        return f"probe {self.probe_id} rang in this window but is not in the probes parameter (listed: {known})"
+
+
+def window_probes(probes: Sequence[ProbeEntry], window: RingdownWindow) -> list[WindowProbe]:
+    """The probes ``window`` holds, in id order: those it lists (``probe_ids``), each at its
+    own ``probe_theta0_rad`` and tone, or, when it lists none, every probe of the set at the
+    window's θ0 with no tone of its own."""
+    if not window.probe_ids:
+        return [WindowProbe(e.probe_id, window.theta0_rad, math.nan, e) for e in probes]
+    known = {e.probe_id: e for e in probes}
+    listed = zip(window.probe_ids, window.probe_theta0_rad, window.probe_frequency_hz)
+    return sorted(
+        (WindowProbe(int(k), float(theta0), float(tone), known.get(int(k))) for k, theta0, tone in listed),
+        key=lambda p: p.probe_id,
+    )
 
 
 def read_probe_set(text: str, own_probe: Probe, read_probe: Callable[[str], Probe]) -> tuple[ProbeEntry, ...]:
@@ -128,7 +162,8 @@ def _number(probe_id: int, name: str, value: Any, low: float, high: float) -> fl
     return float(value)
 
 
-def probe_frame_id(base: str, probe_id: int) -> str:
+def probe_frame_id(base: str, probe_id: int | None) -> str:
     """The frame of probe ``probe_id`` when several are listed: the single probe's frame name
-    with the id appended (``mows_probe`` → ``mows_probe_2``)."""
-    return f"{base}_{probe_id}"
+    with the id appended (``mows_probe`` → ``mows_probe_2``); ``base`` itself for the single
+    probe (None)."""
+    return base if probe_id is None else f"{base}_{probe_id}"

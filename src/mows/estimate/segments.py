@@ -29,7 +29,9 @@ from mows.records.samples import SampleBlock
 @dataclasses.dataclass(frozen=True)
 class RingdownWindow:
     """An announced free ring-down: coils off at ``start_ns`` (device clock, integer ns) for
-    ``duration_s``."""
+    ``duration_s``. A multi-tone excitation lists the probes it rang (``probe_ids``), each
+    with its tone and its own orientation in its own rotation plane, in the same order; empty
+    for one probe (``excitation_frequency_hz``, ``theta0_rad``)."""
 
     start_ns: int
     duration_s: float
@@ -38,6 +40,9 @@ class RingdownWindow:
     theta0_rad: float = 0.0
     excitation_frequency_hz: float = math.nan
     tuning: bool = False  # a frequency-tuning ring-down, not a measurement
+    probe_ids: tuple[int, ...] = ()
+    probe_frequency_hz: tuple[float, ...] = ()
+    probe_theta0_rad: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if not (
@@ -47,6 +52,16 @@ class RingdownWindow:
                 f"ring-down of cycle {self.cycle_id} announced at {self.start_ns!r} ns for "
                 f"{self.duration_s!r} s: not a window"
             )
+        listed = f"ring-down of cycle {self.cycle_id} lists probes {list(self.probe_ids)}"
+        if not len(self.probe_ids) == len(self.probe_frequency_hz) == len(self.probe_theta0_rad):
+            raise ValueError(
+                f"{listed} with {len(self.probe_frequency_hz)} tones and {len(self.probe_theta0_rad)} "
+                "orientations: not one each"
+            )
+        if len(set(self.probe_ids)) != len(self.probe_ids):
+            raise ValueError(f"{listed}: an id twice")
+        if not all(math.isfinite(a) for a in self.probe_theta0_rad):
+            raise ValueError(f"{listed} at orientations {list(self.probe_theta0_rad)} rad: not all finite")
 
 
 def block_from_message(message: Any) -> SampleBlock:
@@ -67,7 +82,8 @@ def block_from_message(message: Any) -> SampleBlock:
 
 
 def window_from_message(message: Any) -> RingdownWindow:
-    """A ``mows_msgs/ExcitationState`` of phase RINGDOWN as a :class:`RingdownWindow`."""
+    """A ``mows_msgs/ExcitationState`` of phase RINGDOWN as a :class:`RingdownWindow` (one
+    recorded before the message listed probes: none listed)."""
     return RingdownWindow(
         stamps.nanoseconds(message.header.stamp),
         float(message.planned_duration_s),
@@ -76,6 +92,9 @@ def window_from_message(message: Any) -> RingdownWindow:
         float(message.theta0_rad),
         float(message.frequency_hz),
         bool(message.tuning),
+        tuple(int(k) for k in getattr(message, "probe_ids", ())),
+        tuple(float(f) for f in getattr(message, "probe_frequency_hz", ())),
+        tuple(float(a) for a in getattr(message, "probe_theta0_rad", ())),
     )
 
 

@@ -4,8 +4,11 @@ the field and gradient along the probe axis (:mod:`mows.estimate.axis`) and, whi
 calibration runs (:mod:`mows.estimate.calibration.f00`), the OK fits offered to it.
 
 With several probes listed (:mod:`mows.estimate.probe_set`) each window is fitted jointly
-(:func:`mows.estimate.ringdown_joint.fit_ringdowns`) and gives one estimate per probe, each
-counted from that probe's f00; the f00 calibration is then refused (it is of one probe).
+(:func:`mows.estimate.ringdown_joint.fit_ringdowns`) over the probes it holds
+(:func:`mows.estimate.probe_set.window_probes`: those its excitation lists, each at its own θ0,
+or every listed probe) and gives one estimate per probe, each counted from that probe's f00.
+A probe id the window lists but the set does not gets a failed fit naming it, never a number.
+The f00 calibration is then refused (it is of one probe).
 
 The estimator node feeds it its subscriptions and publishes what it returns. What the node's
 parameters say (probe, fit options, settling, f00) comes with each ring-down as a
@@ -14,13 +17,13 @@ the next fit.
 """
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from mows.estimate.axis import AxisEstimate, estimate_along_axis
 from mows.estimate.calibration.f00 import F00Calibration
 from mows.estimate.joint_segment import fit_joint_segment
-from mows.estimate.probe_set import ProbeEntry
+from mows.estimate.probe_set import ProbeEntry, WindowProbe, window_probes
 from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure
 from mows.estimate.ringdown_joint import JointOptions, ProbeLine
 from mows.estimate.segments import (
@@ -36,11 +39,11 @@ from mows.physics.probe import Probe
 
 @dataclasses.dataclass(frozen=True)
 class JointSettings:
-    """What the joint fit of several probes takes: the probes, their lines at θ0 (ValueError
-    when no model can be built) and the fit's options."""
+    """What the joint fit of several probes takes: the probes, the lines of those a window holds
+    (each of them known to the set; ValueError when no model can be built) and the fit's options."""
 
     probes: tuple[ProbeEntry, ...]
-    lines: Callable[[float], list[ProbeLine]]
+    lines: Callable[[Sequence[WindowProbe]], list[ProbeLine]]
     options: JointOptions
 
 
@@ -58,13 +61,22 @@ class FitSettings:
 
 @dataclasses.dataclass(frozen=True)
 class Estimated:
-    """One recorded ring-down: its window, fit and estimate along the axis; ``calibrated`` when
-    its fit completed the running f00 calibration."""
+    """One recorded ring-down of one probe: its window, fit and estimate along the axis;
+    ``calibrated`` when its fit completed the running f00 calibration. ``probe_id`` is the
+    probe's when several are listed (None: the single probe); ``unknown_probe`` when the window
+    named a probe the set does not list."""
 
     window: RingdownWindow
     fit: RingdownFit
     estimate: AxisEstimate
     calibrated: bool = False
+    probe_id: int | None = None
+    unknown_probe: bool = False
+
+    def report(self) -> str:
+        """The fit's report with its cycle, repeat and, with several probes, its probe."""
+        probe = "" if self.probe_id is None else f" probe {self.probe_id}"
+        return f"cycle {self.window.cycle_id} repeat {self.window.repeat_index}{probe}: {self.fit.report()}"
 
 
 class RingdownEstimator:
@@ -86,29 +98,40 @@ class RingdownEstimator:
         return self.assembler.announce(window_from_message(message))
 
     def estimate_all(self, segment: Segment, settings: FitSettings) -> list[Estimated]:
-        """The estimate of each probe in ``segment``: one, or one per listed probe in id order."""
+        """The estimate of each probe in ``segment``: one, or one per probe it holds in id order."""
         if settings.joint is None:
             return [self.estimate(segment, settings)]
         joint, window = settings.joint, segment.window
+        held = window_probes(joint.probes, window)
+        known = [p for p in held if p.entry is not None]
+        fits = {fit.probe_id: fit for fit in self._joint_fits(segment, settings, joint, known)}
+        for p in held:
+            if p.entry is None:
+                fits[p.probe_id] = failure(
+                    FitStatus.BAD_FIT, p.unknown_message(joint.probes), theta0_rad=p.theta0_rad, probe_id=p.probe_id
+                )
+        self.last = "; ".join(f"probe {k}: {fits[k].report()}" for k in sorted(fits))
+        return [_estimated(window, fits[p.probe_id], p) for p in held]
+
+    @staticmethod
+    def _joint_fits(
+        segment: Segment, settings: FitSettings, joint: JointSettings, known: list[WindowProbe]
+    ) -> list[RingdownFit]:
+        if not known:
+            return []
         try:
-            lines = joint.lines(window.theta0_rad)
+            lines = joint.lines(known)
         except ValueError as error:
-            fits = [
+            return [
                 failure(
                     FitStatus.BAD_FIT,
                     f"cannot build the signal model: {error}",
-                    theta0_rad=window.theta0_rad,
-                    probe_id=entry.probe_id,
+                    theta0_rad=p.theta0_rad,
+                    probe_id=p.probe_id,
                 )
-                for entry in joint.probes
+                for p in known
             ]
-        else:
-            fits = fit_joint_segment(segment, lines, settings.coil_off_skip_s, joint.options)
-        self.last = "; ".join(f"probe {fit.probe_id}: {fit.report()}" for fit in fits)
-        return [
-            Estimated(window, fit, estimate_along_axis(fit, entry.probe, entry.f00_hz, entry.f00_std_hz))
-            for fit, entry in zip(fits, joint.probes)
-        ]
+        return fit_joint_segment(segment, lines, settings.coil_off_skip_s, joint.options)
 
     def estimate(self, segment: Segment, settings: FitSettings) -> Estimated:
         """Fit ``segment``, invert the fit, and offer an OK one to the running calibration."""
@@ -147,3 +170,13 @@ class RingdownEstimator:
 
     def end_calibration(self) -> None:
         self.calibration = None
+
+
+def _estimated(window: RingdownWindow, fit: RingdownFit, held: WindowProbe) -> Estimated:
+    """One probe's fit of a joint window with its estimate along its own axis."""
+    entry = held.entry
+    if entry is None:
+        estimate = AxisEstimate(fit.status, fit.message, fit.theta0_rad)
+    else:
+        estimate = estimate_along_axis(fit, entry.probe, entry.f00_hz, entry.f00_std_hz)
+    return Estimated(window, fit, estimate, probe_id=held.probe_id, unknown_probe=entry is None)

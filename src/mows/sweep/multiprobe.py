@@ -26,6 +26,13 @@ lever's arc when the sweep has the 7 orientations it needs
 pair's field sit where its curvature is not small, and left in the residual it leaks into the
 field wherever the points' σ differ. The curvature's 1θ0 part cannot be told from the field.
 
+The loop takes any probe's share of a sweep that can decompose itself (:class:`SweepOfProbe`):
+the bench's :class:`ProbeSweep`, a point per step, and the mapper's records
+(:class:`mows.sweep.probes.RecordSweep`), whose points are the probe's successful ring-downs,
+each at the step it was taken at. Where probe k rang, each neighbour's moment is turned to the
+neighbour's own θ0 at that step (``orientations_rad``: every probe's θ0 at every step), not
+to probe k's.
+
 The probes rotate in the global x–y plane (the decomposition's frame).
 """
 
@@ -34,6 +41,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 from scipy.optimize import brentq
@@ -55,13 +63,33 @@ from mows.sweep.decompose import (
 SWING_BRACKET_RAD = (1e-4, 0.7)  # within the potential's interval
 REST_ITERATIONS = 4  # the rest angles' fixed point contracts by ~1e-4 a step at centimetres
 DEFAULT_PASSES = 2
+UNCOUPLED_NOTE = "decomposed without its neighbours' fields"
+
+
+class SweepOfProbe(Protocol):
+    """What the coupled decomposition needs of one probe's share of a sweep: the probe (its
+    constants and its magnet's position), its θ0 at each of its ring-downs, the sweep's step
+    (the stage's turn, one excitation of every group) each was taken at, and its decomposition
+    with the neighbours' fields at its ring-downs (None: alone)."""
+
+    @property
+    def placed(self) -> PlacedProbe: ...
+
+    @property
+    def theta0_rad(self) -> np.ndarray: ...
+
+    @property
+    def steps(self) -> np.ndarray: ...
+
+    def decompose(self, neighbours: NeighbourFields | None) -> Decomposition: ...
 
 
 @dataclasses.dataclass(frozen=True)
 class ProbeSweep:
     """One probe's share of a sweep of several: the probe (constants, its magnet's position),
     its calibrated f00, and per point its θ0, measured shift f − f00 and σ, and how its ring-down
-    was recorded (:class:`mows.sweep.decompose.Ringdowns`, or None: small amplitude)."""
+    was recorded (:class:`mows.sweep.decompose.Ringdowns`, or None: small amplitude). Point j
+    is the sweep's step j."""
 
     placed: PlacedProbe
     f00_hz: float
@@ -69,6 +97,24 @@ class ProbeSweep:
     shift_hz: np.ndarray
     shift_std_hz: np.ndarray
     ringdowns: Ringdowns | None = None
+
+    @property
+    def steps(self) -> np.ndarray:
+        return np.arange(len(self.theta0_rad))
+
+    def decompose(self, neighbours: NeighbourFields | None) -> Decomposition:
+        """Its decomposition by :func:`mows.sweep.decompose.decompose`, the 3θ0 curvature fitted
+        when its orientations allow it."""
+        return decompose(
+            self.theta0_rad,
+            self.shift_hz,
+            self.shift_std_hz,
+            self.placed.probe,
+            self.f00_hz,
+            ringdowns=self.ringdowns,
+            neighbours=neighbours,
+            curvature=not orientations_problem(self.theta0_rad, curvature=True),
+        )
 
 
 def sweeps_of(
@@ -135,66 +181,86 @@ def start_swing_rad(fit: RingdownFit, scale_t: float) -> float:
 
 
 def decompose_probes(
-    sweeps: Sequence[ProbeSweep], coupling: bool = True, passes: int = DEFAULT_PASSES
+    sweeps: Sequence[SweepOfProbe],
+    coupling: bool = True,
+    passes: int = DEFAULT_PASSES,
+    orientations_rad: np.ndarray | None = None,
 ) -> list[Decomposition]:
     """Each probe's external in-plane field and gradient (module docstring); with ``coupling``
-    False each probe is decomposed alone, as if it had no neighbours. ValueError unless every
-    probe has the same number of points (the sweep's)."""
-    counts = {len(s.theta0_rad) for s in sweeps}
-    if len(counts) != 1:
-        raise ValueError(f"every probe of a sweep needs one measurement per point; got {sorted(counts)} points")
-    results = [_decompose(s, None) for s in sweeps]
+    False each probe is decomposed alone, as if it had no neighbours. ``orientations_rad``
+    (probes, steps): every probe's θ0 at every step of the sweep, which sets its moment where
+    its neighbours ring; by default each probe's own θ0 at each step (:func:`own_orientations_rad`).
+    When the coupling cannot be put in the model (a probe without a decomposition leaves its
+    field unknown), each probe is returned alone, its message saying so (:data:`UNCOUPLED_NOTE`)."""
+    results = [s.decompose(None) for s in sweeps]
     if not coupling or len(sweeps) == 1:
         return results
-    for _ in range(passes):
-        if not all(r.ok for r in results):
-            return results
-        fields = neighbour_fields(sweeps, [r.parameters for r in results])
-        results = [_decompose(s, f) for s, f in zip(sweeps, fields)]
+    orientations = own_orientations_rad(sweeps) if orientations_rad is None else orientations_rad
+    for done in range(passes):
+        fields = (
+            None
+            if not all(r.ok for r in results)
+            else neighbour_fields(sweeps, [r.parameters for r in results], orientations)
+        )
+        coupled = None if fields is None else [s.decompose(f) for s, f in zip(sweeps, fields)]
+        if coupled is None or not all(r.ok for r in coupled):
+            return results if done else [uncoupled(r) for r in results]
+        results = coupled
     return results
 
 
-def _decompose(sweep: ProbeSweep, neighbours: NeighbourFields | None) -> Decomposition:
-    curvature = not orientations_problem(sweep.theta0_rad, curvature=True)
-    return decompose(
-        sweep.theta0_rad,
-        sweep.shift_hz,
-        sweep.shift_std_hz,
-        sweep.placed.probe,
-        sweep.f00_hz,
-        ringdowns=sweep.ringdowns,
-        neighbours=neighbours,
-        curvature=curvature,
-    )
+def own_orientations_rad(sweeps: Sequence[SweepOfProbe]) -> np.ndarray:
+    """(probes, steps): each probe's θ0 at each step, from its own points, for sweeps whose every
+    probe has a point at every step. ValueError otherwise."""
+    counts = {len(s.theta0_rad) for s in sweeps}
+    if len(counts) != 1 or any(not np.array_equal(s.steps, np.arange(len(s.theta0_rad))) for s in sweeps):
+        raise ValueError(f"every probe of a sweep needs one measurement per point; got {sorted(counts)} points")
+    return np.array([s.theta0_rad for s in sweeps], float)
 
 
-def neighbour_fields(sweeps: Sequence[ProbeSweep], parameters: Sequence[np.ndarray]) -> list[NeighbourFields]:
-    """For each probe, its neighbours' dipole fields at its magnet at every point, with each
-    probe's external field and gradient ``parameters`` (Bx, By, Gs, Gd, Gxy, …) setting the
-    rest angles."""
-    count, points = len(sweeps), len(sweeps[0].theta0_rad)
+def uncoupled(decomposition: Decomposition) -> Decomposition:
+    """``decomposition`` with its message saying the neighbours' fields are left in its field."""
+    if not decomposition.ok:
+        return decomposition
+    message = f"{decomposition.message}; {UNCOUPLED_NOTE}" if decomposition.message else UNCOUPLED_NOTE
+    return dataclasses.replace(decomposition, message=message)
+
+
+def neighbour_fields(
+    sweeps: Sequence[SweepOfProbe], parameters: Sequence[np.ndarray], orientations_rad: np.ndarray | None = None
+) -> list[NeighbourFields]:
+    """For each probe, its neighbours' dipole fields at its magnet at each of its points, with
+    each probe's external field and gradient ``parameters`` (Bx, By, Gs, Gd, Gxy, …) setting
+    the rest angles and every probe at its ``orientations_rad`` (probes, steps; default: each
+    one's own θ0 at each step) of the step the point was taken at."""
+    orientations = own_orientations_rad(sweeps) if orientations_rad is None else np.asarray(orientations_rad, float)
+    count, steps = orientations.shape
     where = np.array([s.placed.pose.magnet_position_m for s in sweeps], float)
-    rest = np.zeros((count, points))
-    empty = [NeighbourFields(np.zeros((points, 3)), np.zeros((points, 3, 3)), np.zeros((points, 3, 3, 3)))] * count
-    fields = empty
+    fields = [NeighbourFields(np.zeros((steps, 3)), np.zeros((steps, 3, 3)), np.zeros((steps, 3, 3, 3)))] * count
     for _ in range(REST_ITERATIONS):
         rest = np.array(
             [
-                local_potential(p, s.theta0_rad, s.placed.probe, f).rest_angle_rad()
-                for s, p, f in zip(sweeps, parameters, fields)
+                local_potential(p, theta0, s.placed.probe, f).rest_angle_rad()
+                for s, p, theta0, f in zip(sweeps, parameters, orientations, fields)
             ]
         )
-        fields = _dipole_fields(sweeps, rest, where)
-    return fields
+        fields = _dipole_fields(sweeps, orientations, rest, where)
+    return [
+        NeighbourFields(f.field_t[s.steps], f.gradient_t_per_m[s.steps], f.hessian_t_per_m2[s.steps])
+        for s, f in zip(sweeps, fields)
+    ]
 
 
-def _dipole_fields(sweeps: Sequence[ProbeSweep], rest: np.ndarray, where: np.ndarray) -> list[NeighbourFields]:
-    """The neighbours' field, gradient and Hessian at each magnet, with the magnets at ``rest``."""
+def _dipole_fields(
+    sweeps: Sequence[SweepOfProbe], orientations_rad: np.ndarray, rest: np.ndarray, where: np.ndarray
+) -> list[NeighbourFields]:
+    """The neighbours' field, gradient and Hessian at each magnet at each step, every probe at
+    its orientation and ``rest`` angle of that step."""
     count, points = rest.shape
     moments = np.empty((count, points, 3))
     positions = np.empty((count, points, 3))
     for k, s in enumerate(sweeps):
-        for j, theta0 in enumerate(s.theta0_rad):
+        for j, theta0 in enumerate(orientations_rad[k]):
             pose = s.placed.pose.with_theta0(float(theta0))
             moments[k, j] = s.placed.probe.moment_am2 * pose.moment_direction_at(rest[k, j])
             positions[k, j] = pose.magnet_position_at(rest[k, j], s.placed.probe.lever_m)

@@ -2,34 +2,39 @@
 (its ``probe_id``), each probe's fits make its own sweep record, and each record is decomposed
 with its neighbours' fields in the model.
 
-Each probe is first decomposed alone (:meth:`mows.sweep.record.SweepRecord.decompose`). With the
-first-principles model, every probe is then decomposed again with the other probes' static
-dipole fields, gradients and Hessians at its magnet as known terms of the model, their rest
-angles iterated to the coupled fixed point at each of its orientations from the others'
-estimates (:func:`mows.sweep.multiprobe.neighbour_fields`). What it reports is then each
-probe's *external* field and gradient. The probes sit at their ``position_m`` in the stage's
-rotation-plane frame and are all turned to the θ0 the driver announces, so a neighbour's
-orientation at a ring-down is that ring-down's θ0; the planes are parallel (the decomposition
-is in-plane). The published model has no neighbour terms, and a probe without a
-decomposition leaves its neighbours' fields unknown: the probes are then decomposed alone,
-each report saying so.
+Each probe's record becomes a :class:`RecordSweep` and the probes are decomposed together by
+:func:`mows.sweep.multiprobe.decompose_probes`: alone first
+(:meth:`mows.sweep.record.SweepRecord.decompose`, the 3θ0 curvature fitted when the record has
+the orientations it needs), then with the other probes' static dipole fields, gradients and
+Hessians at its magnet as known terms of the first-principles model, their rest angles iterated
+to the coupled fixed point from the others' estimates. What it reports is then each probe's
+*external* field and gradient.
+
+The probes sit at their ``position_m`` in the stage's rotation-plane frame, in parallel planes
+(the decomposition is in-plane). Each ring-down's θ0 is the probe's own, as its fit says (the
+stage's angle plus the probe's home orientation). Where probe k rang, a neighbour's moment is
+turned to that neighbour's θ0 at the same step of the sweep (the same turn of the stage, whichever
+group it was excited in), from its own fits of that step (:func:`orientations_rad`); at a step
+where the neighbour has no successful fit, to the stage's angle there plus the neighbour's home
+orientation, the mean of its fits' θ0 less the stage's angle over the steps where it has them.
+The published model has no neighbour terms, and a probe without a decomposition leaves its
+neighbours' fields unknown: the probes are then decomposed alone, each report saying so.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from mows.estimate.probe_set import ProbeEntry
 from mows.physics.coupling import PlacedProbe
 from mows.physics.pose import Pose
-from mows.sweep.decompose import Decomposition, DecompositionStatus, NeighbourFields
-from mows.sweep.multiprobe import DEFAULT_PASSES, ProbeSweep, neighbour_fields
+from mows.sweep.decompose import Decomposition, DecompositionStatus, NeighbourFields, orientations_problem
+from mows.sweep.multiprobe import DEFAULT_PASSES, uncoupled
+from mows.sweep.multiprobe import decompose_probes as decompose_together
 from mows.sweep.record import SweepRecord
-
-UNCOUPLED_NOTE = "decomposed without its neighbours' fields"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,23 +73,37 @@ def f00_of(record: SweepRecord) -> float:
     return float(np.mean([p.frequency_hz - p.shift_hz for p in record.points]))
 
 
-def decompose_probe(
-    entry: ProbeEntry,
-    records: Mapping[int, SweepRecord],
-    model: str,
-    f00_free: bool,
-    neighbours: NeighbourFields | None = None,
-) -> ProbeDecomposition:
-    """Probe ``entry``'s sweep decomposed from its own record (``records`` holds every probe's),
-    with the ``neighbours``' fields at each of its ring-downs when given."""
-    record = records[entry.probe_id]
-    if not record.points:
-        why = f"no successful ring-down of probe {entry.probe_id} ({record.failed} failed)"
-        failed = Decomposition(model, DecompositionStatus.NO_DECOMPOSITION, why, f00_free=f00_free)
-        return ProbeDecomposition(entry.probe_id, failed, record, entry.f00_hz)
-    f00_hz = f00_of(record)
-    decomposition = record.decompose(entry.probe, f00_hz, model=model, f00_free=f00_free, neighbours=neighbours)
-    return ProbeDecomposition(entry.probe_id, decomposition, record, f00_hz)
+@dataclasses.dataclass(frozen=True)
+class RecordSweep:
+    """One probe's record as its share of the sweep (:class:`mows.sweep.multiprobe.SweepOfProbe`):
+    ``steps`` are the sweep's steps its points were taken at (in the record's order)."""
+
+    entry: ProbeEntry
+    record: SweepRecord
+    steps: np.ndarray
+    model: str
+    f00_free: bool
+
+    @property
+    def placed(self) -> PlacedProbe:
+        return PlacedProbe(self.entry.probe, Pose(magnet_position_m=self.entry.position_m))
+
+    @property
+    def theta0_rad(self) -> np.ndarray:
+        return np.array([p.theta0_rad for p in self.record.points], float)
+
+    def decompose(self, neighbours: NeighbourFields | None) -> Decomposition:
+        """Its record decomposed, with the ``neighbours``' fields at its ring-downs when given."""
+        record = self.record
+        if not record.points:
+            why = f"no successful ring-down of probe {self.entry.probe_id} ({record.failed} failed)"
+            return Decomposition(self.model, DecompositionStatus.NO_DECOMPOSITION, why, f00_free=self.f00_free)
+        curvature = self.model == "first_principles" and not orientations_problem(
+            self.theta0_rad, self.f00_free, curvature=True
+        )
+        return record.decompose(
+            self.entry.probe, f00_of(record), self.model, self.f00_free, neighbours, curvature=curvature
+        )
 
 
 def decompose_probes(
@@ -94,52 +113,47 @@ def decompose_probes(
     f00_free: bool,
     coupling: bool = True,
     passes: int = DEFAULT_PASSES,
+    steps: Mapping[int, Sequence[int]] | None = None,
+    stage_rad: Sequence[float] | None = None,
 ) -> ProbeDecompositions:
     """Every probe's sweep decomposed, with the coupling in the model unless ``coupling`` is
-    False or it cannot be (module docstring)."""
-    results = [decompose_probe(entry, records, model, f00_free) for entry in probes]
-    if not coupling or len(probes) < 2:
-        return ProbeDecompositions(tuple(results))
-    if model != "first_principles" or not all(r.decomposition.ok for r in results):
-        return ProbeDecompositions(tuple(_uncoupled(r) for r in results))
-    for _ in range(passes):
-        parameters = [r.decomposition.parameters for r in results]
-        coupled = [
-            decompose_probe(entry, records, model, f00_free, _neighbours_of(k, probes, records, parameters))
-            for k, entry in enumerate(probes)
-        ]
-        if not all(r.decomposition.ok for r in coupled):
-            return ProbeDecompositions(tuple(_uncoupled(r) for r in results))
-        results = coupled
-    return ProbeDecompositions(tuple(results))
+    False or it cannot be (module docstring). ``steps``: by probe id, the step of each point of
+    its record; ``stage_rad``: the stage's angle at each step. Without them every record must
+    hold one point per step, in order."""
+    given = steps or {e.probe_id: range(len(records[e.probe_id].points)) for e in probes}
+    sweeps = [RecordSweep(e, records[e.probe_id], np.asarray(given[e.probe_id], int), model, f00_free) for e in probes]
+    coupled = coupling and model == "first_principles"
+    orientations = None
+    if coupled and len(probes) > 1 and steps is not None and stage_rad is not None:
+        orientations = orientations_rad(sweeps, np.asarray(stage_rad, float))
+    results = decompose_together(sweeps, coupled, passes, orientations)
+    if coupling and not coupled and len(probes) > 1:
+        results = [uncoupled(d) for d in results]
+    return ProbeDecompositions(
+        tuple(ProbeDecomposition(s.entry.probe_id, d, s.record, _f00_hz(s)) for s, d in zip(sweeps, results))
+    )
 
 
-def _neighbours_of(
-    index: int, probes: tuple[ProbeEntry, ...], records: Mapping[int, SweepRecord], parameters: list[np.ndarray]
-) -> NeighbourFields:
-    """The other probes' fields at probe ``index``'s magnet at each of its ring-downs, every probe
-    turned to that ring-down's θ0 with its estimated external field and gradient."""
-    theta0 = np.array([p.theta0_rad for p in records[probes[index].probe_id].points])
-    zeros = np.zeros_like(theta0)
-    sweeps = [
-        ProbeSweep(PlacedProbe(e.probe, Pose(magnet_position_m=e.position_m)), e.f00_hz, theta0, zeros, zeros)
-        for e in probes
-    ]
-    return neighbour_fields(sweeps, parameters)[index]
+def orientations_rad(sweeps: Sequence[RecordSweep], stage_rad: np.ndarray) -> np.ndarray:
+    """(probes, steps): each probe's θ0 at each step of the sweep, from its own fits of that step;
+    where it has none, the stage's angle there plus its home orientation (the circular mean of
+    its fits' θ0 less the stage's angle at theirs). NaN for a probe with no fit at all (it has
+    no decomposition, so the coupling is not put in the model)."""
+    table = np.full((len(sweeps), len(stage_rad)), np.nan)
+    for row, s in zip(table, sweeps):
+        theta0 = s.theta0_rad
+        if not theta0.size:
+            continue
+        home = float(np.angle(np.mean(np.exp(1j * (theta0 - stage_rad[s.steps])))))
+        row[:] = stage_rad + home
+        row[s.steps] = theta0
+    return table
 
 
-def _uncoupled(result: ProbeDecomposition) -> ProbeDecomposition:
-    """``result`` with its report saying the neighbours' fields are left in its field."""
-    d = result.decomposition
-    if not d.ok:
-        return result
-    return dataclasses.replace(result, decomposition=dataclasses.replace(d, message=_joined(d.message, UNCOUPLED_NOTE)))
+def _f00_hz(sweep: RecordSweep) -> float:
+    return f00_of(sweep.record) if sweep.record.points else sweep.entry.f00_hz
 
 
 def _report(d: Decomposition) -> str:
     """``d``'s report, with its notes when it succeeded."""
     return f"{d.report()} ({d.message})" if d.ok and d.message else d.report()
-
-
-def _joined(message: str, note: str) -> str:
-    return f"{message}; {note}" if message else note

@@ -132,6 +132,7 @@ class SweepRecord:
         model: str = "first_principles",
         f00_free: bool = False,
         neighbours: NeighbourFields | None = None,
+        curvature: bool = False,
     ) -> Decomposition:
         """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
 
@@ -143,7 +144,8 @@ class SweepRecord:
         θs depends on the field it is fitting: a first pass with the fits' own rest offsets gives
         the field, its rest angles give the pooled stop (the probe's where no fit determined
         θmax), and a second pass fits with both. ``neighbours``: other probes' fields at each
-        ring-down, known terms of the first-principles model (:mod:`mows.sweep.probes`).
+        ring-down, known terms of the first-principles model (:mod:`mows.sweep.probes`);
+        ``curvature``: fit the field's 3θ0 curvature too (:func:`decompose`).
         """
         theta0 = self._column("theta0_rad")
         arrays: dict[str, Any] = dict(
@@ -158,7 +160,7 @@ class SweepRecord:
         )
         if model != "first_principles":
             return decompose(**arrays)
-        arrays["neighbours"] = neighbours
+        arrays.update(neighbours=neighbours, curvature=curvature)
 
         damping, duration, pickups = self._column("damping_per_s"), self._column("duration_s"), self.pickups()
 

@@ -16,9 +16,11 @@ ends when a decomposition reaches it or the time budget holds no further cycle. 
 is read from the ring-downs' stamps (first to last, plus a turn and a ring-down).
 
 A sweep of several probes (``SweepSettings.probes``, the estimator's list) collects one fit per
-probe and ring-down, keeps each probe's fits in a record of its own and decomposes each
-(:mod:`mows.sweep.probes`); its feedback's shift is the first listed probe's, its fits are all.
-Adaptive sweeps are of one probe.
+probe and ring-down, keeps each probe's fits in a record of its own, with the step (the
+orientation's index) each was taken at, and decomposes each (:mod:`mows.sweep.probes`). The
+angles it commands are the stage's; each fit comes back at its probe's own θ0 (the stage's angle
+plus the probe's home orientation), which the decomposition takes. Its feedback's shift is the
+first listed probe's at this orientation, its fits are all. Adaptive sweeps are of one probe.
 """
 
 import dataclasses
@@ -199,6 +201,7 @@ class SweepRunner:
         self._awaited: CycleAnswer | None = None  # the cycle whose fits are being collected
         self._record = SweepRecord()  # the first listed probe's, with several
         self._records: dict[int, SweepRecord] = {}  # with several probes: each one's, by id
+        self._steps: dict[int, list[int]] = {}  # with several probes: the step of each point of each record
         self._planner: AdaptivePlanner | None = None  # an adaptive sweep's
         self._decomposition: Decomposition | None = None
         self._decomposed_points = 0
@@ -249,6 +252,7 @@ class SweepRunner:
         self._index, self._cancelled, self._awaited, self._turning = 0, False, None, None
         self._fits.clear()
         self._records = {entry.probe_id: SweepRecord() for entry in settings.probes}
+        self._steps = {entry.probe_id: [] for entry in settings.probes}
         self._record = self._records[settings.probes[0].probe_id] if settings.probes else SweepRecord()
 
     def begin(self) -> SweepStep:
@@ -307,8 +311,10 @@ class SweepRunner:
 
     def on_fit(self, fit: SweepFit) -> SweepStep | None:
         """A fit from the stream; a step once the awaited cycle's fits are all in."""
-        # Fits of cycles run by others between sweeps, and tuning ring-downs, are not ours.
-        if self.state != SweepState.SWEEPING or fit.tuning:
+        # Fits of cycles run by others between sweeps, tuning ring-downs, and fits of probes not
+        # listed (the estimator reports an id it does not know) are not ours.
+        unlisted = self._settings.probes and fit.probe_id not in self._records
+        if self.state != SweepState.SWEEPING or fit.tuning or unlisted:
             return None
         self._fits.setdefault(fit.cycle_id, []).append(fit)
         return self._collected()
@@ -362,16 +368,17 @@ class SweepRunner:
         assert answer is not None  # only called once the awaited cycle has answered
         fits = self._fits.pop(answer.cycle_id, [])
         theta0 = self._angles[self._index]
+        before = len(self._record.points)
         for fit in fits:
-            # With several probes, each fit goes to its probe's record; a probe not listed is not ours.
-            record = self._records.get(fit.probe_id) if self._settings.probes else self._record
-            if record is None:
-                continue
+            record = self._records[fit.probe_id] if self._settings.probes else self._record
             if fit.point is None:
                 record.failed += 1
             else:
                 record.add(fit.point)
-        shift, std, n_ok = self._record.at_angle(theta0)
+                self._steps.setdefault(fit.probe_id, []).append(self._index)
+        # A probe's fits are at its own θ0, not the stage's: its points of this orientation are the new ones.
+        here = SweepRecord(self._record.points[before:]) if self._settings.probes else self._record
+        shift, std, n_ok = here.at_angle(here.points[0].theta0_rad if self._settings.probes and here.points else theta0)
         step = SweepStep(
             feedback=SweepFeedback(
                 self._index, len(self._angles), theta0, shift, std, n_ok, tuple(f.source for f in fits)
@@ -402,7 +409,13 @@ class SweepRunner:
         assert self._probe is not None  # set by start()
         if self._settings.probes:
             step.decompose = functools.partial(
-                decompose_probes, self._settings.probes, dict(self._records), self._model, self._settings.f00_free
+                decompose_probes,
+                self._settings.probes,
+                dict(self._records),
+                self._model,
+                self._settings.f00_free,
+                steps={k: list(v) for k, v in self._steps.items()},
+                stage_rad=list(self._angles),
             )
             return step
         step.decompose = functools.partial(

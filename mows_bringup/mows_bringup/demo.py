@@ -49,7 +49,7 @@ from mows.sim.scenario import load_scenario, scenario_file
 from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
 from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
 from mows.sweep.record import SweepRecord
-from mows_bringup.demo_probes import PROBE_FILES, has_probes, write_probe_files
+from mows_bringup.demo_probes import MAP_FILE, PROBE_FILES, has_probes, write_probe_files
 from mows_bringup.demo_probes import parameters as probe_parameters
 from mows_bringup.demo_probes import run_sweep as run_probes_sweep
 from mows_bringup.graph import NODES, Graph, say
@@ -61,7 +61,7 @@ DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_TURN_SETTLE_S = 10.0, 0.5, 0.5  # the driv
 PROBE_FILE, SCENE_FILE, PARAMETERS_FILE = "calibrated_probe.yaml", "demo_scene.yaml", "demo_parameters.yaml"
 LOG_FILE, TABLE_FILE, REPORT_FILE = "demo_nodes.log", "demo_sweep.csv", "demo_lab_report.html"
 #: What a run writes into --out; each replaces the one an earlier run wrote.
-OUTPUT_FILES = (PROBE_FILE, SCENE_FILE, PARAMETERS_FILE, LOG_FILE, TABLE_FILE, REPORT_FILE, *PROBE_FILES)
+OUTPUT_FILES = (PROBE_FILE, SCENE_FILE, PARAMETERS_FILE, LOG_FILE, TABLE_FILE, REPORT_FILE, MAP_FILE, *PROBE_FILES)
 
 
 def parse_arguments(argv):

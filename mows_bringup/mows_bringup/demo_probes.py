@@ -10,6 +10,8 @@ as the field does (docs/multi_probe.md), and the gradient there. The probes' con
 scene's own: each real probe is calibrated first, one at a time, as the single-probe demo does.
 """
 
+import csv
+import dataclasses
 import pathlib
 
 import numpy as np
@@ -20,10 +22,12 @@ from rclpy.action import ActionClient
 
 from mows.estimate.probe_set import MAX_PROBES
 from mows.lab import swept_reference_at
+from mows.records.files import writing
 from mows.sim.scenario import load_scenario
 from mows_bringup.graph import say
 from mows_ros.qos import MAP_QOS
 
+MAP_FILE = "demo_field_map.csv"  # each probe's components against the truth
 PROBE_FILES = tuple(f"probe_{k}.yaml" for k in range(MAX_PROBES))
 LABELS = ("Bx (µT)", "By (µT)", "Gxx (mT/m)", "Gxy (mT/m)", "Gyy (mT/m)")
 SCALES = np.array([1e6, 1e6, 1e3, 1e3, 1e3])  # SI to the printed units
@@ -88,8 +92,9 @@ def parameters(args, scene_path: str, probe_paths: list[pathlib.Path]) -> dict:
     }
 
 
-def run_sweep(node, spin_until, args, scenario: str) -> bool:
-    """Sweep the shared stage through ``--angles`` orientations and print the field map."""
+def run_sweep(node, spin_until, args, scenario: str, table: pathlib.Path, inputs) -> bool:
+    """Sweep the shared stage through ``--angles`` orientations, print the field map against the
+    truth and write it to ``table`` (CSV)."""
     maps: list[FieldMap] = []
     node.create_subscription(FieldMap, "mows/field_map", maps.append, MAP_QOS)
     client = ActionClient(node, RotationSweep, "mapper/rotation_sweep")
@@ -110,38 +115,72 @@ def run_sweep(node, spin_until, args, scenario: str) -> bool:
         say(f"sweep failed: {outcome.message}")
         return False
     spin_until(lambda: maps, 30.0, "the field map")
-    print_map(scenario, maps[-1])
-    return True
+    rows = against_truth(scenario, maps[-1])
+    print_rows(scenario, maps[-1], rows)
+    with writing([table], inputs, force=True) as outputs:
+        with open(outputs.temporaries[0], "w", newline="") as file:
+            writer = csv.DictWriter(file, fieldnames=list(Row.__annotations__))
+            writer.writeheader()
+            writer.writerows(dataclasses.asdict(row) for row in rows)
+    say(f"the map against the truth: {table}")
+    return all(point.status == 0 for point in maps[-1].probes)
 
 
-def print_map(scenario: str, field_map: FieldMap) -> None:
-    """Each probe of the map against the truth at its magnet, and the pulls over all of them."""
+@dataclasses.dataclass(frozen=True)
+class Row:
+    """One component of one probe's map point against the truth, SI units."""
+
+    probe_id: int
+    quantity: str  # bx_t, by_t, gxx_t_per_m, gxy_t_per_m, gyy_t_per_m
+    value: float
+    sigma: float
+    truth: float
+    pull: float
+
+
+QUANTITIES = ("bx_t", "by_t", "gxx_t_per_m", "gxy_t_per_m", "gyy_t_per_m")
+
+
+def against_truth(scenario: str, field_map: FieldMap) -> list[Row]:
+    """Each decomposed probe's five components against the truth at its magnet."""
     scene = load_scenario(scenario)
-    pulls = []
+    rows = []
     for point in field_map.probes:
-        placed = scene.placed_probes()[point.probe_id]
-        say("")
-        where = ", ".join(f"{x * 100:.1f}" for x in point.position_m)
-        say(f"probe {point.probe_id} (f00 {placed.probe.f00_hz:g} Hz) at ({where}) cm: {point.message or 'OK'}")
         if point.status != 0:
             continue
-        field, gradient = swept_reference_at(
-            scene.environment.source, placed.pose.magnet_position_m, placed.probe.lever_m
-        )
+        placed = scene.placed_probes()[point.probe_id]
+        where, lever = placed.pose.magnet_position_m, placed.probe.lever_m
+        field, gradient = swept_reference_at(scene.environment.source, where, lever)
         truth = np.r_[field[:2], gradient[0, 0], gradient[0, 1], gradient[1, 1]]
         value = np.r_[point.field_t, point.gradient_t_per_m]
-        sigma = np.sqrt(
-            np.r_[
-                np.diag(np.reshape(point.field_covariance_t2, (2, 2))),
-                np.diag(np.reshape(point.gradient_covariance, (3, 3))),
-            ]
-        )
-        say(f"  {'':12s} {'measured':>22s} {'truth':>10s} {'pull':>7s}")
-        for label, v, s, t, scale in zip(LABELS, value, sigma, truth, SCALES):
-            say(f"  {label:12s} {v * scale:13.3f} ± {s * scale:6.3f} {t * scale:10.3f} {(v - t) / s:7.2f}")
-            pulls.append((v - t) / s)
-    if pulls:
-        pulls = np.array(pulls)
+        variance = np.r_[
+            np.diag(np.reshape(point.field_covariance_t2, (2, 2))),
+            np.diag(np.reshape(point.gradient_covariance, (3, 3))),
+        ]
+        sigma = np.sqrt(variance)
+        for name, v, s, t in zip(QUANTITIES, value, sigma, truth):
+            rows.append(Row(point.probe_id, name, float(v), float(s), float(t), float((v - t) / s)))
+    return rows
+
+
+def print_rows(scenario: str, field_map: FieldMap, rows: list[Row]) -> None:
+    """Each probe of the map against the truth, and the pulls over all of them."""
+    scene = load_scenario(scenario)
+    for point in field_map.probes:
+        f00_hz = scene.placed_probes()[point.probe_id].probe.f00_hz
+        where = ", ".join(f"{x * 100:.1f}" for x in point.position_m)
+        say("")
+        say(f"probe {point.probe_id} (f00 {f00_hz:g} Hz) at ({where}) cm: {point.message or 'decomposed'}")
+        own = [row for row in rows if row.probe_id == point.probe_id]
+        if own:
+            say(f"  {'':12s} {'measured':>22s} {'truth':>10s} {'pull':>7s}")
+        for label, row, scale in zip(LABELS, own, SCALES):
+            say(
+                f"  {label:12s} {row.value * scale:13.3f} ± {row.sigma * scale:6.3f} "
+                f"{row.truth * scale:10.3f} {row.pull:7.2f}"
+            )
+    if rows:
+        pulls = np.array([row.pull for row in rows])
         say("")
         say(
             f"{np.sum(np.abs(pulls) <= 2.0)} of {len(pulls)} components within 2σ, the largest pull "

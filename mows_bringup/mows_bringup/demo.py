@@ -214,8 +214,9 @@ def main(argv=None) -> int:
         scene = str(scenario_file(args.scenario))
         sections = probe_parameters(args, scene, probe_paths)
         parameters = write_sections(out / PARAMETERS_FILE, sections, inputs_of(args))
+        table, inputs = out / MAP_FILE, inputs_of(args)
         return run_graph(
-            args, out, parameters, lambda node, spin_until: run_probes_sweep(node, spin_until, args, scene)
+            args, out, parameters, lambda node, spin: run_probes_sweep(node, spin, args, scene, table, inputs)
         )
     probe_path, scene_path = calibrate_probe(args, out)
     parameters = write_parameters(args, out, probe_path, scene_path)

@@ -17,7 +17,7 @@ import pathlib
 import numpy as np
 import yaml
 from mows_msgs.action import RotationSweep
-from mows_msgs.msg import FieldMap
+from mows_msgs.msg import FieldMap, MagnetometerBlock
 from rclpy.action import ActionClient
 
 from mows.estimate.probe_set import MAX_PROBES
@@ -25,7 +25,7 @@ from mows.lab import swept_reference_at
 from mows.records.files import writing
 from mows.sim.scenario import load_scenario
 from mows_bringup.graph import say
-from mows_ros.qos import MAP_QOS
+from mows_ros.qos import MAP_QOS, STREAM_QOS
 
 MAP_FILE = "demo_field_map.csv"  # each probe's components against the truth
 PROBE_FILES = tuple(f"probe_{k}.yaml" for k in range(MAX_PROBES))
@@ -96,9 +96,12 @@ def run_sweep(node, spin_until, args, scenario: str, table: pathlib.Path, inputs
     """Sweep the shared stage through ``--angles`` orientations, print the field map against the
     truth and write it to ``table`` (CSV)."""
     maps: list[FieldMap] = []
+    blocks: list[int] = []
     node.create_subscription(FieldMap, "mows/field_map", maps.append, MAP_QOS)
+    node.create_subscription(MagnetometerBlock, "mows/raw", lambda b: blocks.append(b.sequence), STREAM_QOS)
     client = ActionClient(node, RotationSweep, "mapper/rotation_sweep")
     spin_until(client.server_is_ready, 120.0, "the mapper's sweep action")
+    spin_until(lambda: blocks, 60.0, "the driver's sample stream")
     spin_until(lambda: node.count_publishers("mows/ringdown") > 0, 120.0, "the estimator")
     angles = np.radians(np.arange(args.angles) * 360.0 / args.angles)
     count = len(load_scenario(scenario).probes)

@@ -13,6 +13,9 @@ decomposition, what the paper's published model would have made of the same ring
 the model lab's verdict on which physics the published model is missing. Writes the lab's
 HTML report. Node output goes to a log file so the terminal shows the measurement.
 
+A scene of several probes (``--scenario three_probes``) is mapped by all of them at once
+(:mod:`mows_bringup.demo_probes`): no calibration, each probe against the truth at its magnet.
+
 Every file goes into ``--out`` through the guarded writer (:mod:`mows.records.files`): a run
 replaces the files of an earlier run there, never one of its scenario files, and refuses at once,
 before any work, an ``--out`` that holds one of them.
@@ -26,6 +29,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 
 import numpy as np
 import rclpy
@@ -45,6 +49,9 @@ from mows.sim.scenario import load_scenario, scenario_file
 from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
 from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
 from mows.sweep.record import SweepRecord
+from mows_bringup.demo_probes import MAP_FILE, PROBE_FILES, has_probes, write_probe_files
+from mows_bringup.demo_probes import parameters as probe_parameters
+from mows_bringup.demo_probes import run_sweep as run_probes_sweep
 from mows_bringup.graph import NODES, Graph, say
 from mows_mapper.messages import sweep_point
 from mows_ros.process import EXIT_BAD_PARAMETER
@@ -54,7 +61,7 @@ DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_TURN_SETTLE_S = 10.0, 0.5, 0.5  # the driv
 PROBE_FILE, SCENE_FILE, PARAMETERS_FILE = "calibrated_probe.yaml", "demo_scene.yaml", "demo_parameters.yaml"
 LOG_FILE, TABLE_FILE, REPORT_FILE = "demo_nodes.log", "demo_sweep.csv", "demo_lab_report.html"
 #: What a run writes into --out; each replaces the one an earlier run wrote.
-OUTPUT_FILES = (PROBE_FILE, SCENE_FILE, PARAMETERS_FILE, LOG_FILE, TABLE_FILE, REPORT_FILE)
+OUTPUT_FILES = (PROBE_FILE, SCENE_FILE, PARAMETERS_FILE, LOG_FILE, TABLE_FILE, REPORT_FILE, MAP_FILE, *PROBE_FILES)
 
 
 def parse_arguments(argv):
@@ -92,6 +99,8 @@ def parse_arguments(argv):
         except (OSError, ValueError, KeyError, TypeError) as error:
             sys.stderr.write(f"mows-demo: error: {option} {name}: {error}\n")
             raise SystemExit(EXIT_BAD_PARAMETER) from None
+    if args.target and has_probes(args.scenario):
+        parser.error(f"--target: the adaptive sweep takes one probe; {args.scenario} has several")
     return args
 
 
@@ -164,13 +173,17 @@ def write_parameters(args, directory: pathlib.Path, probe_path, scene_path) -> p
             tuning_steps=plan.tuning_steps,
         )
         mapper.update(repeat_s=plan.cycle_s, turn_s=DRIVER_TURN_SETTLE_S)
-    path = directory / PARAMETERS_FILE
     sections = {
         "/**/driver": {"ros__parameters": driver},
         "/**/estimator": {"ros__parameters": {"probe_file": str(probe_path)}},
         "/**/mapper": {"ros__parameters": mapper},
     }
-    with writing([path], inputs_of(args), force=True) as outputs:
+    return write_sections(directory / PARAMETERS_FILE, sections, inputs_of(args))
+
+
+def write_sections(path: pathlib.Path, sections: dict, inputs) -> pathlib.Path:
+    """The graph's parameter file: one section per node."""
+    with writing([path], inputs, force=True) as outputs:
         outputs.temporaries[0].write_text(yaml.safe_dump(sections))
     return path
 
@@ -195,11 +208,30 @@ def paper_protocol_s(orientations: int = 12) -> float:
 def main(argv=None) -> int:
     args = parse_arguments(sys.argv[1:] if argv is None else argv)
     out = check_out(args)
+    if has_probes(args.scenario):
+        say(f"scene: {args.scenario}, {len(load_scenario(args.scenario).probes)} probes (constants from the scene)")
+        probe_paths = write_probe_files(args.scenario, out, inputs_of(args))
+        scene = str(scenario_file(args.scenario))
+        sections = probe_parameters(args, scene, probe_paths)
+        parameters = write_sections(out / PARAMETERS_FILE, sections, inputs_of(args))
+        table, inputs = out / MAP_FILE, inputs_of(args)
+        return run_graph(
+            args, out, parameters, lambda node, spin: run_probes_sweep(node, spin, args, scene, table, inputs)
+        )
     probe_path, scene_path = calibrate_probe(args, out)
+    parameters = write_parameters(args, out, probe_path, scene_path)
+    return run_graph(
+        args, out, parameters, lambda node, spin_until: run_sweep(node, spin_until, args, out, scene_path, probe_path)
+    )
+
+
+def run_graph(args, out: pathlib.Path, parameters: pathlib.Path, body: Callable) -> int:
+    """Start the node graph with ``parameters``, bring it up and run ``body(node, spin_until)``
+    on a node of the demo's own; 0 when ``body`` succeeded and every node stopped cleanly."""
     # The nodes write into the log while they run, so it cannot be renamed into place whole:
     # it is opened in place, under the same checks as every other output.
     log = open(check_output(out / LOG_FILE, inputs_of(args), force=True), "w")
-    graph = Graph(NODES, ["--params-file", str(write_parameters(args, out, probe_path, scene_path))], output=log)
+    graph = Graph(NODES, ["--params-file", str(parameters)], output=log)
     stopping = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stopping.set())
@@ -209,7 +241,7 @@ def main(argv=None) -> int:
         problem = graph.bring_up(stopping.is_set)
         if problem is not None:
             say(f"bring-up failed: {problem}; see {out / LOG_FILE}")
-        ok = problem is None and run_sweep(args, out, stopping, graph.exited, scene_path, probe_path)
+        ok = problem is None and with_node(stopping, graph.exited, body)
     finally:
         codes = graph.stop()
         log.close()
@@ -219,15 +251,10 @@ def main(argv=None) -> int:
     return 0 if ok and not unclean else 1
 
 
-def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited, scene_path, probe_path) -> bool:
-
+def with_node(stopping: threading.Event, exited, body: Callable) -> bool:
+    """``body(node, spin_until)`` on the demo's node; False, said, when a wait ran out."""
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("mows_demo")
-    fits, reports, blocks = [], [], []
-    node.create_subscription(RingdownFit, "mows/ringdown", fits.append, RESULT_QOS)
-    node.create_subscription(ModelReport, "mows/model_report", reports.append, MAP_QOS)
-    node.create_subscription(MagnetometerBlock, "mows/raw", lambda b: blocks.append(b.sequence), STREAM_QOS)
-    client = ActionClient(node, RotationSweep, "mapper/rotation_sweep")
 
     def spin_until(condition, timeout_s, what):
         deadline = time.monotonic() + timeout_s
@@ -239,44 +266,53 @@ def run_sweep(args, out: pathlib.Path, stopping: threading.Event, exited, scene_
             rclpy.spin_once(node, timeout_sec=0.1)
 
     try:
-        spin_until(client.server_is_ready, 120.0, "the mapper's sweep action")
-        spin_until(lambda: blocks, 60.0, "the driver's sample stream")
-        # The estimator advertises its results once its fit is compiled and loaded.
-        spin_until(lambda: node.count_publishers("mows/ringdown") > 0, 120.0, "the estimator")
-        angles = np.radians(np.arange(args.angles) * 360.0 / args.angles)
-        if args.target:
-            say(f"adaptive sweep of {args.target} to σ ≤ 20 nT, 10 µT/m, cycle from physics")
-            goal = RotationSweep.Goal(target=args.target)
-        else:
-            say(f"sweep: {args.angles} orientations × {args.repeats} ring-downs")
-            goal = RotationSweep.Goal(theta0_rad=angles.tolist(), repeats_per_angle=args.repeats)
-        started = time.monotonic()
-        sent = client.send_goal_async(goal, feedback_callback=lambda f: print_feedback(f.feedback))
-        spin_until(sent.done, 30.0, "the goal to be accepted")
-        if not sent.result().accepted:
-            say("the mapper refused the sweep")
-            return False
-        result = sent.result().get_result_async()
-        spin_until(result.done, 600.0 if args.target else 60.0 + args.angles * args.repeats * 30.0, "the sweep")
-        outcome = result.result().result
-        if args.target:
-            say(
-                f"adaptive sweep: {outcome.message}; {time.monotonic() - started:.1f} s (the simulated device runs in "
-                f"real time); the paper's protocol takes {paper_protocol_s():.0f} s per 12-orientation map on this "
-                "device (mows bench throughput measures it to the same target)"
-            )
-        if not outcome.success:
-            say(f"sweep failed: {outcome.message}")
-            return False
-        spin_until(lambda: reports, 60.0, "the model report")
-        print_outcome(str(scene_path), outcome.decomposition, fits, reports[-1], out, probe_path, inputs_of(args))
-        return True
+        return body(node, spin_until)
     except TimeoutError as error:
         say(str(error))
         return False
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+def run_sweep(node, spin_until, args, out: pathlib.Path, scene_path, probe_path) -> bool:
+    fits, reports, blocks = [], [], []
+    node.create_subscription(RingdownFit, "mows/ringdown", fits.append, RESULT_QOS)
+    node.create_subscription(ModelReport, "mows/model_report", reports.append, MAP_QOS)
+    node.create_subscription(MagnetometerBlock, "mows/raw", lambda b: blocks.append(b.sequence), STREAM_QOS)
+    client = ActionClient(node, RotationSweep, "mapper/rotation_sweep")
+    spin_until(client.server_is_ready, 120.0, "the mapper's sweep action")
+    spin_until(lambda: blocks, 60.0, "the driver's sample stream")
+    # The estimator advertises its results once its fit is compiled and loaded.
+    spin_until(lambda: node.count_publishers("mows/ringdown") > 0, 120.0, "the estimator")
+    angles = np.radians(np.arange(args.angles) * 360.0 / args.angles)
+    if args.target:
+        say(f"adaptive sweep of {args.target} to σ ≤ 20 nT, 10 µT/m, cycle from physics")
+        goal = RotationSweep.Goal(target=args.target)
+    else:
+        say(f"sweep: {args.angles} orientations × {args.repeats} ring-downs")
+        goal = RotationSweep.Goal(theta0_rad=angles.tolist(), repeats_per_angle=args.repeats)
+    started = time.monotonic()
+    sent = client.send_goal_async(goal, feedback_callback=lambda f: print_feedback(f.feedback))
+    spin_until(sent.done, 30.0, "the goal to be accepted")
+    if not sent.result().accepted:
+        say("the mapper refused the sweep")
+        return False
+    result = sent.result().get_result_async()
+    spin_until(result.done, 600.0 if args.target else 60.0 + args.angles * args.repeats * 30.0, "the sweep")
+    outcome = result.result().result
+    if args.target:
+        say(
+            f"adaptive sweep: {outcome.message}; {time.monotonic() - started:.1f} s (the simulated device runs in "
+            f"real time); the paper's protocol takes {paper_protocol_s():.0f} s per 12-orientation map on this "
+            "device (mows bench throughput measures it to the same target)"
+        )
+    if not outcome.success:
+        say(f"sweep failed: {outcome.message}")
+        return False
+    spin_until(lambda: reports, 60.0, "the model report")
+    print_outcome(str(scene_path), outcome.decomposition, fits, reports[-1], out, probe_path, inputs_of(args))
+    return True
 
 
 def print_feedback(feedback) -> None:

@@ -1,6 +1,8 @@
 """The estimator's parameter table and the fit settings it makes of the parameters."""
 
+import array
 import functools
+import math
 from collections.abc import Sequence
 
 from mows.estimate.probe_set import WindowProbe
@@ -11,6 +13,17 @@ from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePai
 from mows.physics.probe import Probe
 from mows_ros.params import ParamSpec
 from mows_ros.probe import PROBE_FILE, PROBES, probe_set
+
+
+def _direction_problem(value) -> str | None:
+    """Why ``value`` is no sensor_direction, or None."""
+    numbers = list(value) if isinstance(value, (list, tuple, array.array)) else []
+    if len(numbers) != 3 or not all(isinstance(x, float) and math.isfinite(x) for x in numbers):
+        return f"sensor_direction = {list(value) if numbers else value!r} is not three finite numbers"
+    if not any(numbers):
+        return "sensor_direction = [0, 0, 0] has no direction"
+    return None
+
 
 PARAMETERS = (
     PROBE_FILE,
@@ -36,8 +49,15 @@ PARAMETERS = (
     ParamSpec(
         "sensor_distance_m",
         PAPER_DISTANCE_M,
-        "distance from the probe to the near fluxgate, along the rotation plane's x axis, m",
+        "distance from the probe to the near fluxgate, along sensor_direction, m",
         range=(0.005, 2.0),
+    ),
+    ParamSpec(
+        "sensor_direction",
+        [1.0, 0.0, 0.0],
+        "the line from the probe through both fluxgates, in the rotation plane's frame (x = e1, y = e2, "
+        "z their normal; the paper: [1, 0, 0]); any length but zero",
+        check=_direction_problem,
     ),
     ParamSpec("sensor_spacing_m", PAPER_SPACING_M, "spacing of the two fluxgates, m", range=(0.001, 2.0)),
     ParamSpec(
@@ -56,6 +76,16 @@ PARAMETERS = (
 )
 
 
+def fluxgate_pair(values: dict) -> FluxgatePair:
+    """The pair the parameters describe, the probe at the origin of the rotation plane's frame."""
+    return FluxgatePair.paper(
+        distance_m=values["sensor_distance_m"],
+        spacing_m=values["sensor_spacing_m"],
+        direction=values["sensor_direction"],
+        axis=(values["sensor_axis_a"], values["sensor_axis_b"], 0.0),
+    )
+
+
 def fit_options(values: dict, probe: Probe, theta0_rad: float) -> FitOptions:
     """The ring-down fit the parameters ask for at θ0. ValueError when no model can be made
     (e.g. a sensing axis of (0, 0))."""
@@ -63,10 +93,7 @@ def fit_options(values: dict, probe: Probe, theta0_rad: float) -> FitOptions:
     channels = values["channels"]
     common = dict(sensor_direction=direction, min_periods=values["min_periods"], max_chi2_dof=values["max_chi2_dof"])
     if values["lever_aware"] and not values["theta0_free"] and channels != "both":
-        pair = FluxgatePair.paper(
-            distance_m=values["sensor_distance_m"], spacing_m=values["sensor_spacing_m"], axis=(*direction, 0.0)
-        )
-        return FitOptions.lever_aware(pair, probe, theta0_rad, channels, **common)
+        return FitOptions.lever_aware(fluxgate_pair(values), probe, theta0_rad, channels, **common)
     return FitOptions(channels=channels, theta0_free=values["theta0_free"], **common)
 
 
@@ -75,12 +102,7 @@ def joint_lines(values: dict, held: Sequence[WindowProbe]) -> list[ProbeLine]:
     parameters ask for; ValueError for what it cannot do (a fitted θ0)."""
     if values["theta0_free"]:
         raise ValueError("theta0_free: the joint fit of several probes takes θ0 from the excitation")
-    pair = None
-    if values["lever_aware"] and values["channels"] != "both":
-        axis = (values["sensor_axis_a"], values["sensor_axis_b"], 0.0)
-        pair = FluxgatePair.paper(
-            distance_m=values["sensor_distance_m"], spacing_m=values["sensor_spacing_m"], axis=axis
-        )
+    pair = fluxgate_pair(values) if values["lever_aware"] and values["channels"] != "both" else None
     return [p.entry.line(p.theta0_rad, pair, values["channels"], p.tone_hz) for p in held if p.entry is not None]
 
 

@@ -34,7 +34,7 @@ and the nodes import from here.
 from mows.lab import progress
 from mows.lab.data.probes import ProbeSet, with_probes
 from mows.lab.data.readers import from_bag, from_sweep, is_bag, load_table, read_csv
-from mows.lab.data.reference import reference_at, reference_columns, with_reference
+from mows.lab.data.reference import reference_at, reference_columns, swept_reference_at, with_reference
 from mows.lab.data.table import MeasurementTable, MissingColumnError, TableError
 from mows.lab.diagnosis.residual_structure import residual_structure
 from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
@@ -73,6 +73,7 @@ __all__ = [
     "reference_at",
     "reference_columns",
     "residual_structure",
+    "swept_reference_at",
     "with_probes",
     "with_reference",
     "write_report",

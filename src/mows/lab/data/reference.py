@@ -62,6 +62,16 @@ def reference_at(reference: Reference, magnet_position_m: Vector = (0.0, 0.0, 0.
     return source.field_t(point), source.gradient_t_per_m(point)
 
 
+def swept_reference_at(source: FieldSource, magnet_position_m: Vector, lever_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """What a rotation sweep in the x–y plane determines of ``source`` at a magnet on a lever of
+    ``lever_m``: the field (3,) plus (l²/4)·∂²B/∂z², and the gradient (3, 3), at the magnet's rest
+    position. The trace part of the field's curvature over the lever's arc turns with θ0 as the
+    field does, so no sweep tells the two apart (docs/multi_probe.md)."""
+    point = np.asarray(magnet_position_m, float)
+    curvature = source.hessian_t_per_m2(point)[:, 2, 2]
+    return source.field_t(point) + lever_m**2 / 4.0 * curvature, source.gradient_t_per_m(point)
+
+
 def reference_source(
     reference: Reference, magnet_position_m: Vector = (0.0, 0.0, 0.0)
 ) -> tuple[FieldSource, np.ndarray]:

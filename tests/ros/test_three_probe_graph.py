@@ -1,0 +1,62 @@
+"""Three probes mapped at once through the real node graph, as ``make demo DEMO_ARGS="--scenario
+three_probes"`` runs it: the driver excites the three probes of the three_probes scene together
+(100, 112.5 and 125 Hz, 5 cm apart about the anti-Helmholtz pair's centre), the estimator fits
+each window jointly, and the mapper decomposes each probe with its neighbours' fields in the model.
+
+Requirement: every probe's field and gradient (15 components) lie within their σ of the truth at
+its magnet (the field there plus (l²/4)·∂²B/∂z², what a sweep determines: docs/multi_probe.md).
+"Every one of 15 within 2σ" fails by chance in half of all draws even with a calibrated σ, so
+the test holds what a calibrated σ gives with a margin: at least 12 of 15 within 2σ (fewer
+happens with probability 0.4 %, binomial with p = 0.046) and none beyond 3.5σ (0.7 %)."""
+
+import csv
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    out = tmp_path_factory.mktemp("three_probes")
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mows_bringup.demo",
+            "--scenario",
+            "three_probes",
+            "--angles",
+            "8",
+            "--repeats",
+            "1",
+            "--gap-s",
+            "0.2",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    log = (out / "demo_nodes.log").read_text() if (out / "demo_nodes.log").exists() else ""
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:] + log[-3000:]
+    with open(out / "demo_field_map.csv", newline="") as file:
+        return run.stdout, list(csv.DictReader(file))
+
+
+def test_every_probe_is_decomposed(demo):
+    _, rows = demo
+    assert sorted({int(row["probe_id"]) for row in rows}) == [0, 1, 2]
+    assert len(rows) == 15
+
+
+def test_each_probes_field_and_gradient_lie_within_their_sigma(demo):
+    stdout, rows = demo
+    pulls = np.array([float(row["pull"]) for row in rows])
+    assert np.all(np.isfinite(pulls)), stdout[-2000:]
+    assert np.sum(np.abs(pulls) <= 2.0) >= 12, stdout[-2000:]
+    assert np.max(np.abs(pulls)) < 3.5, stdout[-2000:]

@@ -9,10 +9,11 @@ the coupling's shift, many σ away from the frequency the probe would have alone
 import math
 
 import numpy as np
+import pytest
 
-from mows.estimate.ringdown_joint import ProbeLine, fit_ringdowns
+from mows.estimate.ringdown_joint import ProbeLine, fit_ringdowns, start_swing_rad
 from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
-from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
+from mows.physics.fluxgate import FluxgatePair, pickup_harmonics, pickup_scale_t
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
@@ -51,3 +52,31 @@ def test_the_joint_fit_of_two_simulated_probes_sees_their_coupled_frequencies():
         assert fit.chi2_dof < 1.2  # the joint model describes the two swinging magnets
         assert abs(fit.frequency_hz - expected) < 4 * fit.frequency_std_hz, (fit.frequency_hz, expected)
         assert abs(fit.frequency_hz - uncoupled) > 10 * fit.frequency_std_hz  # the coupling is seen
+
+
+def test_each_swing_comes_from_its_signals_size_through_the_absolute_pickup():
+    # Small swings, where a joint fit's signal shape barely fixes θmax: its size still does,
+    # through the pickup's absolute scale (the dipole's μ0·m/4π over the sensors' distances).
+    pair = FluxgatePair.paper()
+    probes = [
+        PlacedProbe(P, Pose()),
+        PlacedProbe(P.replace(spring_nm_per_rad=P.spring_nm_per_rad * 1.24), Pose(magnet_position_m=(0.0, 0.03, 0.0))),
+    ]
+    start_rad = [math.radians(3.0), math.radians(5.0)]
+    theta, _ = CoupledProbes(probes, NO_FIELD).ring_down(start_rad, 5000, RATE_HZ)
+    pickup = swinging_pickup_t(pair, probes, theta)
+    samples = pickup + 1e-10 * np.random.default_rng(4).standard_normal(pickup.shape)
+    lines = [
+        ProbeLine(
+            probe_id=k,
+            theta0_rad=0.0,
+            expected_frequency_hz=round(float(f)),
+            pickup=tuple(pickup_harmonics(pair, p.pose, p.probe.lever_m, p.probe.moment_am2)),
+            pickup_scale_t=pickup_scale_t(pair, p.pose.magnet_position_m, p.probe.moment_am2),
+        )
+        for k, (p, f) in enumerate(zip(probes, coupled_frequencies_hz(probes, NO_FIELD)))
+    ]
+    for fit, swing in zip(fit_ringdowns(samples, RATE_HZ, lines), start_rad):
+        assert fit.ok, fit.message
+        assert start_swing_rad(fit, lines[fit.probe_id].pickup_scale_t) == pytest.approx(swing, rel=0.02)
+        assert fit.amplitude_rad == pytest.approx(swing, rel=0.02)  # by its shape or, if not, its size

@@ -68,6 +68,10 @@ def test_each_probe_is_decomposed_from_its_own_fits():
         assert len(m.record.points) == 2 * len(ANGLES) and m.f00_hz == pytest.approx(entry.probe.f00_hz)
         sigma = np.sqrt(np.diag(d.field_covariance_t2))
         assert np.all(np.abs(d.field_t - field[:2]) < 4 * sigma), (m.probe_id, d.field_t, field)
+        # listed without places, the magnets would sit on one another: no coupling is modelled
+        assert d.message.endswith(
+            "decomposed without its neighbours' fields: probes 0 and 1 are listed 0.0 mm apart (position_m)"
+        )
     # the fields differ by far more than σ: a probe fed another's fits would fail the check above
     assert np.abs(FIELDS_T[0] - FIELDS_T[1])[:2].min() > 100 * sigma.max()
 

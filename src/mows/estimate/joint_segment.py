@@ -18,7 +18,7 @@ from mows.estimate.ringdown_joint import JointOptions, ProbeLine, fit_ringdowns
 from mows.estimate.ringdown_types import FitStatus, RingdownFit, failure
 from mows.estimate.segments import Segment, gap_message
 from mows.physics.coupling import PlacedProbe
-from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
+from mows.physics.fluxgate import FluxgatePair, pickup_harmonics, pickup_scale_t
 
 
 def probe_lines(
@@ -37,6 +37,7 @@ def probe_lines(
             expected_frequency_hz=float(f),
             pickup=tuple(pickup_harmonics(pair, p.pose, p.probe.lever_m, p.probe.moment_am2, combine=channels)),
             damping_guess_per_s=p.probe.damping_per_s,
+            pickup_scale_t=pickup_scale_t(pair, p.pose.magnet_position_m, p.probe.moment_am2, channels),
         )
         for p, probe_id, f in zip(placed, probe_ids, expected_frequency_hz)
     ]

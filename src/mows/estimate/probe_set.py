@@ -33,7 +33,7 @@ import yaml
 
 from mows.estimate.ringdown_joint import ProbeLine
 from mows.estimate.segments import RingdownWindow
-from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
+from mows.physics.fluxgate import FluxgatePair, pickup_harmonics, pickup_scale_t
 from mows.physics.pose import Pose
 from mows.physics.probe import Probe
 
@@ -58,12 +58,14 @@ class ProbeEntry:
         before ``pair`` (the fitted channel combination), or the paper's single term (None),
         looked for at ``tone_hz`` (the driver's tone: its resonance in the present field),
         else at f00."""
-        pickup = None
-        if pair is not None:
-            pose = Pose(theta0_rad=theta0_rad, magnet_position_m=self.position_m)
-            pickup = tuple(pickup_harmonics(pair, pose, self.probe.lever_m, self.probe.moment_am2, combine=channels))
         expected_hz = tone_hz if math.isfinite(tone_hz) and tone_hz > 0 else self.f00_hz
-        return ProbeLine(self.probe_id, theta0_rad, expected_hz, pickup, self.probe.damping_per_s)
+        if pair is None:
+            return ProbeLine(self.probe_id, theta0_rad, expected_hz, None, self.probe.damping_per_s)
+        pose = Pose(theta0_rad=theta0_rad, magnet_position_m=self.position_m)
+        moment = self.probe.moment_am2
+        pickup = tuple(pickup_harmonics(pair, pose, self.probe.lever_m, moment, combine=channels))
+        scale_t = pickup_scale_t(pair, self.position_m, moment, channels)
+        return ProbeLine(self.probe_id, theta0_rad, expected_hz, pickup, self.probe.damping_per_s, scale_t)
 
 
 @dataclasses.dataclass(frozen=True)

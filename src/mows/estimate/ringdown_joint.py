@@ -41,6 +41,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing
+from scipy.optimize import brentq
 
 from mows.estimate.ringdown import combine_channels, usable_window, wrapped_rad
 from mows.estimate.ringdown_problem import (
@@ -72,6 +73,9 @@ class ProbeLine:
     pickup : the C_k of its g (:func:`mows.physics.fluxgate.pickup_harmonics`, for the fitted
         channel combination); None: the paper's single term for a sensor along (0, 1).
     damping_guess_per_s : δ to start from.
+    pickup_scale_t : the κ that makes ``pickup`` the sensors' signal in tesla
+        (:func:`mows.physics.fluxgate.pickup_scale_t`); NaN: unknown. Known, it gives the
+        swing from the signal's size where the signal's shape does not (:func:`start_swing_rad`).
     """
 
     probe_id: int
@@ -79,6 +83,7 @@ class ProbeLine:
     expected_frequency_hz: float
     pickup: tuple | None = None
     damping_guess_per_s: float = 1.8
+    pickup_scale_t: float = math.nan
 
     def pickup_series(self) -> np.ndarray:
         return paper_pickup(self.theta0_rad) if self.pickup is None else np.asarray(self.pickup, complex)
@@ -465,7 +470,7 @@ def _probe_fit(
     for c in range(problem.y.shape[0]):
         suffix = "" if problem.y.shape[0] == 1 else f"_{c + 1}"
         names += [f"kappa_t{suffix}", f"offset_t{suffix}"]
-    return RingdownFit(
+    fit = RingdownFit(
         status=FitStatus.OK,
         message=message,
         theta0_rad=float(line.theta0_rad),
@@ -490,3 +495,46 @@ def _probe_fit(
         undetermined=undetermined,
         probe_id=line.probe_id,
     )
+    return _with_swing_from_size(fit, line.pickup_scale_t)
+
+
+def _with_swing_from_size(fit: RingdownFit, scale_t: float) -> RingdownFit:
+    """``fit`` with θmax from its signal's size (:func:`start_swing_rad`) where its shape left
+    it undetermined and the pickup's absolute scale is known; else ``fit`` as it is."""
+    if "amplitude_rad" not in fit.undetermined or not math.isfinite(scale_t):
+        return fit
+    swing = start_swing_rad(fit, scale_t)
+    if not math.isfinite(swing):
+        return fit
+    message = f"θmax {math.degrees(swing):.2f}° from the signal's size through the pickup's absolute scale"
+    return dataclasses.replace(fit, amplitude_rad=swing, undetermined=(), message=message)
+
+
+SWING_BRACKET_RAD = (1e-4, 0.7)  # within the potential's interval
+
+
+def start_swing_rad(fit: RingdownFit, scale_t: float) -> float:
+    """The swing θmax at the start of a fit's window, from the power of its fitted signal.
+
+    ``scale_t`` times the fit's pickup series (:func:`mows.physics.fluxgate.pickup_scale_t`) is
+    the sensors' absolute signal of the swinging magnet in tesla, so the fitted signal's power, ``noise_std_t``² ×
+    10^(``snr_db``/10), fixes the swing: the A0 whose ring-down A0·e^(−δt)·cos(2πft) through
+    the pickup has that variance over the window. A joint fit may leave θmax itself
+    undetermined (its shape barely depends on it), but not its signal's size. NaN if the
+    fit's numbers do not fix it."""
+    power = fit.noise_std_t**2 * 10.0 ** (fit.snr_db / 10.0)
+    if not (math.isfinite(power) and power > 0 and fit.pickup):
+        return math.nan
+    pickup = scale_t * np.asarray(fit.pickup, complex)
+    t = np.linspace(0.0, fit.duration_s, fit.n_samples, endpoint=False)
+    carrier = np.exp(-fit.damping_per_s * t) * np.cos(2.0 * math.pi * fit.frequency_hz * t)
+    orders = np.arange(pickup.size)
+
+    def excess(swing: float) -> float:
+        signal = np.real(np.exp(1j * np.multiply.outer(swing * carrier, orders)) @ pickup)
+        return float(np.var(signal)) - power
+
+    low, high = SWING_BRACKET_RAD
+    if not excess(low) < 0.0 < excess(high):
+        return math.nan
+    return float(brentq(excess, low, high, xtol=1e-7))

@@ -44,9 +44,8 @@ from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
-from scipy.optimize import brentq
 
-from mows.estimate.ringdown_joint import JointOptions
+from mows.estimate.ringdown_joint import JointOptions, start_swing_rad
 from mows.estimate.ringdown_types import RingdownFit
 from mows.physics.coupling import PlacedProbe
 from mows.physics.fluxgate import FluxgatePair, pickup_scale_t
@@ -60,7 +59,6 @@ from mows.sweep.decompose import (
     orientations_problem,
 )
 
-SWING_BRACKET_RAD = (1e-4, 0.7)  # within the potential's interval
 REST_ITERATIONS = 4  # the rest angles' fixed point contracts by ~1e-4 a step at centimetres
 DEFAULT_PASSES = 2
 UNCOUPLED_NOTE = "decomposed without its neighbours' fields"
@@ -153,33 +151,6 @@ def sweeps_of(
     return sweeps
 
 
-def start_swing_rad(fit: RingdownFit, scale_t: float) -> float:
-    """The swing θmax at the start of a fit's window, from the power of its fitted signal.
-
-    ``scale_t`` times the fit's pickup series (:func:`mows.physics.fluxgate.pickup_scale_t`) is
-    the sensors' absolute signal of the swinging magnet in tesla, so the fitted signal's power, ``noise_std_t``² ×
-    10^(``snr_db``/10), fixes the swing: the A0 whose ring-down A0·e^(−δt)·cos(2πft) through
-    the pickup has that variance over the window. A joint fit may leave θmax itself
-    undetermined (its shape barely depends on it), but not its signal's size. NaN if the
-    fit's numbers do not fix it."""
-    power = fit.noise_std_t**2 * 10.0 ** (fit.snr_db / 10.0)
-    if not (math.isfinite(power) and power > 0 and fit.pickup):
-        return math.nan
-    pickup = scale_t * np.asarray(fit.pickup, complex)
-    t = np.linspace(0.0, fit.duration_s, fit.n_samples, endpoint=False)
-    carrier = np.exp(-fit.damping_per_s * t) * np.cos(2.0 * math.pi * fit.frequency_hz * t)
-    orders = np.arange(pickup.size)
-
-    def excess(swing: float) -> float:
-        signal = np.real(np.exp(1j * np.multiply.outer(swing * carrier, orders)) @ pickup)
-        return float(np.var(signal)) - power
-
-    low, high = SWING_BRACKET_RAD
-    if not excess(low) < 0.0 < excess(high):
-        return math.nan
-    return float(brentq(excess, low, high, xtol=1e-7))
-
-
 def decompose_probes(
     sweeps: Sequence[SweepOfProbe],
     coupling: bool = True,
@@ -218,11 +189,13 @@ def own_orientations_rad(sweeps: Sequence[SweepOfProbe]) -> np.ndarray:
     return np.array([s.theta0_rad for s in sweeps], float)
 
 
-def uncoupled(decomposition: Decomposition) -> Decomposition:
-    """``decomposition`` with its message saying the neighbours' fields are left in its field."""
+def uncoupled(decomposition: Decomposition, why: str = "") -> Decomposition:
+    """``decomposition`` with its message saying the neighbours' fields are left in its field
+    (and ``why``, when given)."""
     if not decomposition.ok:
         return decomposition
-    message = f"{decomposition.message}; {UNCOUPLED_NOTE}" if decomposition.message else UNCOUPLED_NOTE
+    note = f"{UNCOUPLED_NOTE}: {why}" if why else UNCOUPLED_NOTE
+    message = f"{decomposition.message}; {note}" if decomposition.message else note
     return dataclasses.replace(decomposition, message=message)
 
 

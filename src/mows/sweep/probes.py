@@ -17,13 +17,15 @@ turned to that neighbour's θ0 at the same step of the sweep (the same turn of t
 group it was excited in), from its own fits of that step (:func:`orientations_rad`); at a step
 where the neighbour has no successful fit, to the stage's angle there plus the neighbour's home
 orientation, the mean of its fits' θ0 less the stage's angle over the steps where it has them.
-The published model has no neighbour terms, and a probe without a decomposition leaves its
-neighbours' fields unknown: the probes are then decomposed alone, each report saying so.
+The published model has no neighbour terms, a probe without a decomposition leaves its
+neighbours' fields unknown, and magnets listed closer than :data:`MIN_APART_M` are no point
+dipoles to each other: the probes are then decomposed alone, each report saying so.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -35,6 +37,10 @@ from mows.sweep.decompose import Decomposition, DecompositionStatus, NeighbourFi
 from mows.sweep.multiprobe import DEFAULT_PASSES, uncoupled
 from mows.sweep.multiprobe import decompose_probes as decompose_together
 from mows.sweep.record import SweepRecord
+
+# Closer magnets are no point dipoles to each other: each swings on a lever of ~2 mm and is
+# ~2 mm across, and a neighbour's field there varies over both.
+MIN_APART_M = 0.01
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,7 +108,13 @@ class RecordSweep:
             self.theta0_rad, self.f00_free, curvature=True
         )
         return record.decompose(
-            self.entry.probe, f00_of(record), self.model, self.f00_free, neighbours, curvature=curvature
+            self.entry.probe,
+            f00_of(record),
+            self.model,
+            self.f00_free,
+            neighbours,
+            curvature=curvature,
+            measured_swings=True,
         )
 
 
@@ -122,16 +134,27 @@ def decompose_probes(
     hold one point per step, in order."""
     given = steps or {e.probe_id: range(len(records[e.probe_id].points)) for e in probes}
     sweeps = [RecordSweep(e, records[e.probe_id], np.asarray(given[e.probe_id], int), model, f00_free) for e in probes]
-    coupled = coupling and model == "first_principles"
+    crowded = crowding(probes)
+    coupled = coupling and model == "first_principles" and not crowded
     orientations = None
     if coupled and len(probes) > 1 and steps is not None and stage_rad is not None:
         orientations = orientations_rad(sweeps, np.asarray(stage_rad, float))
     results = decompose_together(sweeps, coupled, passes, orientations)
     if coupling and not coupled and len(probes) > 1:
-        results = [uncoupled(d) for d in results]
+        results = [uncoupled(d, crowded) for d in results]
     return ProbeDecompositions(
         tuple(ProbeDecomposition(s.entry.probe_id, d, s.record, _f00_hz(s)) for s, d in zip(sweeps, results))
     )
+
+
+def crowding(probes: Sequence[ProbeEntry]) -> str:
+    """Why the probes cannot be point dipoles in each other's model, '' when they can: two
+    magnets listed closer than :data:`MIN_APART_M` (e.g. a ``probes`` list without places)."""
+    for a, b in itertools.combinations(probes, 2):
+        apart_m = float(np.linalg.norm(np.subtract(a.position_m, b.position_m)))
+        if apart_m < MIN_APART_M:
+            return f"probes {a.probe_id} and {b.probe_id} are listed {apart_m * 1e3:.1f} mm apart (position_m)"
+    return ""
 
 
 def orientations_rad(sweeps: Sequence[RecordSweep], stage_rad: np.ndarray) -> np.ndarray:

@@ -133,6 +133,7 @@ class SweepRecord:
         f00_free: bool = False,
         neighbours: NeighbourFields | None = None,
         curvature: bool = False,
+        measured_swings: bool = False,
     ) -> Decomposition:
         """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
 
@@ -145,7 +146,9 @@ class SweepRecord:
         the field, its rest angles give the pooled stop (the probe's where no fit determined
         θmax), and a second pass fits with both. ``neighbours``: other probes' fields at each
         ring-down, known terms of the first-principles model (:mod:`mows.sweep.probes`);
-        ``curvature``: fit the field's 3θ0 curvature too (:func:`decompose`).
+        ``curvature``: fit the field's 3θ0 curvature too (:func:`decompose`). ``measured_swings``:
+        the ring-downs did not start from the stop (a multi-tone excitation's), so each starts with
+        the θmax its fit measured, when every fit measured it.
         """
         theta0 = self._column("theta0_rad")
         arrays: dict[str, Any] = dict(
@@ -166,6 +169,10 @@ class SweepRecord:
 
         def ringdowns(stop):
             return Ringdowns(stop, damping, duration, pickups)
+
+        swings = self._column("amplitude_rad")
+        if measured_swings and np.isfinite(swings).all():
+            return decompose(**arrays, ringdowns=Ringdowns(math.nan, damping, duration, pickups, swings))
 
         first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(fallback_rad=probe.theta_stop_rad)))
         if not first.ok:

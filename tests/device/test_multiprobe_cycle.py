@@ -8,7 +8,9 @@ excites nothing more; a probe whose tone overlaps another's is refused with the 
 the others are measured, and a cycle that can excite no probe is refused with every reason;
 each group's EXCITING and RINGDOWN list its probes, tones and θ0 (home + stage angle); and the
 ring-down windows of a whole cycle, fitted jointly, give each probe's coupled frequency
-(:meth:`MultiProbeDevice.expected_frequencies_hz`, the static coupled model) within 4σ. A device
+(:meth:`MultiProbeDevice.expected_frequencies_hz`, the static coupled model) within 4σ; a session
+configured with its coils by name (the preset about the origin, as the driver builds it) sizes
+each tone by where the device's coils are: every probe swings as planned and its window fits. A device
 of one tone refuses a multi-tone drive, and the multi-probe device a supply current or a drive
 of coil amplitudes, each with the reason and nothing queued.
 """
@@ -25,7 +27,7 @@ from mows.device.interface import (
     MultiToneCommand,
     refuse_tones,
 )
-from mows.device.multitone import on_stage, plan_probes
+from mows.device.multitone import DEFAULT_SWING_RAD, on_stage, plan_probes
 from mows.device.phases import CycleRequest, CycleSettings, Phase
 from mows.device.scheduled import OverCap
 from mows.device.session import DeviceSession, SessionConfig
@@ -33,7 +35,7 @@ from mows.device.sim_backend import MultiProbeSimBackend, SimBackend
 from mows.estimate.joint_segment import fit_joint_segment, probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_ringdown
 from mows.estimate.segments import RingdownWindow, SegmentAssembler
-from mows.physics.coils import CurrentCap
+from mows.physics.coils import PRESETS, CurrentCap
 from mows.sim.multiprobe_device import MultiProbeDevice
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -46,6 +48,8 @@ FAST = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.1, repeats=1, turn_se
 SMALL_TONE_A = 0.03
 SEED = 1
 CHUNK_S = 0.1  # device time per unpaced poll
+PERIOD_SAMPLES = round(SCENE.sample_rate_hz / 100.0)  # the slowest probe's period
+SWING_TOLERANCE = 0.3
 MAX_STEPS = 100_000  # bound for a cycle that never ends (a bug), not a timing
 
 
@@ -209,6 +213,48 @@ def test_the_windows_of_a_whole_cycle_fitted_jointly_give_each_coupled_frequency
             assert fit.ok, fit.message
             pull = (fit.frequency_hz - expected[fit.probe_id]) / fit.frequency_std_hz
             assert abs(pull) < 4.0, (fit.probe_id, fit.frequency_hz, expected[fit.probe_id], fit.frequency_std_hz)
+
+
+class RecordingDevice(MultiProbeDevice):
+    """The multi-probe device keeping every probe's deflection it read: the truth of the swings."""
+
+    def __init__(self, scenario, rng):
+        super().__init__(scenario, rng)
+        self.theta_rad: list[np.ndarray] = []
+
+    def read(self, n_samples):
+        block = super().read(n_samples)
+        self.theta_rad.append(block.theta_rad)
+        return block
+
+
+def test_tones_are_sized_by_the_devices_coils_not_by_the_named_preset():
+    # The driver knows its coils by name and builds that preset about the origin; the scene's
+    # coils sit about its first probe, 2.9 cm away. Sized by the preset's fields at the probes,
+    # the tones of stage angle 0 would ring probe 1 to 0.44 rad (past its 0.42 rad stop), and a
+    # joint model of constant frequencies would not describe its ring-down.
+    named = PRESETS[SCENE.setup.name](current_limit_a=10.0)
+    assert not np.allclose(named.coils[0].sources[0].center_m, SCENE.setup.coils[0].sources[0].center_m)
+    device = RecordingDevice(SCENE, np.random.default_rng(SEED))
+    backend = MultiProbeSimBackend(device, CurrentCap(10.0), paced=False, chunk_s=CHUNK_S)
+    config = SessionConfig(0.025, FAST, named, CurrentCap(10.0), 112.5, fit_ringdown)
+    (outcome,), events, blocks = run(DeviceSession(backend, config, armed=True), CycleRequest(0.0))
+    assert outcome.success, outcome.message
+    (on,) = [e.sample_index for e in events if e.phase == Phase.EXCITING]
+    (ringdown,) = [e for e in events if e.phase == Phase.RINGDOWN]
+    theta = np.concatenate(device.theta_rad)
+    rest = theta[on - PERIOD_SAMPLES : on].mean(axis=0)  # settled before the coils went on
+    swing = np.abs(theta[ringdown.sample_index : ringdown.sample_index + 2 * PERIOD_SAMPLES] - rest).max(axis=0)
+    # The plan's driven oscillator on resonance at f00 leaves out the field's shift of the
+    # resonance and the neighbours' coupling: the scene's probes land within 30% of its swing.
+    assert np.all(np.abs(swing / DEFAULT_SWING_RAD - 1.0) < SWING_TOLERANCE), swing
+    assembler = SegmentAssembler(10.0)
+    assembler.announce(RingdownWindow(ringdown.stamp_ns, FAST.ringdown_s, theta0_rad=0.0))
+    (segment,) = [segment for block in blocks for segment in assembler.add_block(block)]
+    placed = SCENE.placed_probes()
+    lines = probe_lines(SCENE.sensors.pair, placed, ringdown.probe_ids, ringdown.probe_frequency_hz)
+    for fit in fit_joint_segment(segment, lines, COIL_OFF_SKIP_S):
+        assert fit.ok, fit.report()
 
 
 def test_devices_of_one_tone_and_the_supply_refuse_what_they_cannot_do_with_the_reason():

@@ -12,7 +12,7 @@ import abc
 import dataclasses
 
 from mows.device.payloads import DeviceInfo
-from mows.physics.coils import CurrentCap
+from mows.physics.coils import CoilSetup, CurrentCap
 from mows.physics.supply import SupplyLimits
 
 
@@ -114,7 +114,10 @@ class Backend(abc.ABC):
     backend drives one it knows (None: no supply, or a device's own that does not say).
     ``info`` describes the device once it is known (None before a serial device answers);
     ``probes`` lists a device's probes when it rings several at once (their cycles drive
-    :class:`MultiToneCommand`), empty for one probe. ``command_lead_samples`` is how far ahead
+    :class:`MultiToneCommand`), empty for one probe, and ``coils`` are its coils where they stand
+    among those probes, in the same frame: how hard a tone swings a probe depends on where the
+    probe sits in the coils' field, which a coil setup known by name does not say (None for
+    one probe, whose drive needs only the setup's scheme). ``command_lead_samples`` is how far ahead
     of the newest received sample a command must be scheduled to reach the device in time (a
     late one applies at the device's next sample, and its result says which).
     """
@@ -123,6 +126,7 @@ class Backend(abc.ABC):
     can_excite: bool
     supply_limits: SupplyLimits | None = None  # the field supply's range and limits, if known
     probes: tuple = ()  # several probes on one stage, driven by tones (PlacedProbe at home); () for one
+    coils: CoilSetup | None = None  # the coils among ``probes``, in their frame; None for one probe
 
     # Read-only for the driver: a serial device's info and lead follow its link.
     @property

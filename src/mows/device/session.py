@@ -67,7 +67,7 @@ class Output:
 class SessionConfig:
     block_duration_s: float
     settings: CycleSettings
-    setup: CoilSetup
+    setup: CoilSetup  # the coils of one probe (a device of several brings its own, placed among them)
     cap: CurrentCap
     frequency_hz: float  # the first resonance estimate
     fit: TuningFit  # fits the tuning ring-downs (the estimator's fit_ringdown)
@@ -183,12 +183,15 @@ class DeviceSession:
         assert info is not None  # called once the device has described itself (at start or on link up)
         self.assembler = BlockAssembler(round(self.config.block_duration_s * info.sample_rate_hz))
         c, lead = self.config, self.backend.command_lead_samples
-        if self.backend.can_excite:  # several probes: their tones (mows.device.multitone_cycle)
-            common = (c.settings, c.setup, c.cap, info.sample_rate_hz)
-            self.sequencer = (
-                MultiToneSequencer(*common, self.backend.probes, lead, fit=c.fit)
-                if self.backend.probes
-                else CycleSequencer(*common, c.frequency_hz, lead, fit=c.fit)
+        if not self.backend.can_excite:
+            return
+        probes, coils = self.backend.probes, self.backend.coils
+        if probes:  # their tones (mows.device.multitone_cycle), sized by the coils where the device has them
+            assert coils is not None  # a device of several probes says where its coils stand among them
+            self.sequencer = MultiToneSequencer(c.settings, coils, c.cap, info.sample_rate_hz, probes, lead, fit=c.fit)
+        else:
+            self.sequencer = CycleSequencer(
+                c.settings, c.setup, c.cap, info.sample_rate_hz, c.frequency_hz, lead, fit=c.fit
             )
 
     def _count_arrival(self, n: int) -> None:

@@ -143,7 +143,8 @@ class MultiProbeSimBackend(SimBackend):
     """The simulated device of a scene with several probes on one shared stage
     (:class:`mows.device.scheduled_multiprobe.ScheduledMultiProbeDevice`), paced or unpaced as
     :class:`SimBackend`; its cycles drive the probes' tones. ``probes``: the probes at their home
-    orientations, probe id = index. No field supply: a supply current is refused with the reason."""
+    orientations, probe id = index; ``coils``: the scene's coils, placed among them. No field
+    supply: a supply current is refused with the reason."""
 
     scheduled = ScheduledMultiProbeDevice
     device: ScheduledMultiProbeDevice
@@ -158,6 +159,7 @@ class MultiProbeSimBackend(SimBackend):
     ):
         super().__init__(device, cap, paced, clock, chunk_s)  # type: ignore[arg-type]
         self.probes = self.device.home
+        self.coils = device.setup
 
     def stats(self) -> dict:
         return {**super().stats(), "probes": len(self.probes), "peak_coil_current_a": self.device.peak_current_a}

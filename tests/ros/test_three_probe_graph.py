@@ -3,17 +3,13 @@ three_probes"`` runs it: the driver excites the three probes of the three_probes
 (100, 112.5 and 125 Hz, 5 cm apart about the anti-Helmholtz pair's centre), the estimator fits
 each window jointly, and the mapper decomposes each probe with its neighbours' fields in the model.
 
-Requirement: every probe's external field and gradient come back at the truth at its magnet (the
-field there plus (l²/4)·∂²B/∂z², what a sweep determines: docs/multi_probe.md), with the other
-probes' fields taken out: within 0.4 µT and 0.15 mT/m, far inside the neighbours' 1.4 µT at 5 cm.
-Measured in three runs of 8 orientations × 1–2 ring-downs: errors up to 0.20 µT and 0.065 mT/m.
-Ring-downs taken to start from the housing stop, as a single-probe cycle's do, put probe 1 off by
-1.4 µT and 0.7 mT/m.
-
-Not yet met: "within 2σ for every probe". Pulls of 1.6–4.7σ recur in probe 0's Bx and its Gxx
-and Gyy together (a constant frequency error: the swings the joint fits take from their signals'
-size, 3–13 % off in some windows, set the amplitude correction). Each component is held to 6σ,
-and the demo prints the pulls."""
+Requirements: every ring-down of the sweep fits (the tones swing each probe as planned, so the
+joint model describes every window, the first cycle's too); every probe's field and gradient
+(15 components) lie within their σ of the truth at
+its magnet (the field there plus (l²/4)·∂²B/∂z², what a sweep determines: docs/multi_probe.md).
+"Every one of 15 within 2σ" fails by chance in half of all draws even with a calibrated σ, so
+the test holds what a calibrated σ gives with a margin: at least 12 of 15 within 2σ (fewer
+happens with probability 0.4 %, binomial with p = 0.046) and none beyond 3.5σ (0.7 %)."""
 
 import csv
 import subprocess
@@ -51,20 +47,34 @@ def demo(tmp_path_factory):
     log = (out / "demo_nodes.log").read_text() if (out / "demo_nodes.log").exists() else ""
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:] + log[-3000:]
     with open(out / "demo_field_map.csv", newline="") as file:
-        return run.stdout, list(csv.DictReader(file))
+        return run.stdout, list(csv.DictReader(file)), log
+
+
+def test_every_ring_down_fits(demo):
+    _, _, log = demo
+    failed = [line for line in log.splitlines() if "ring-down fit:" in line]
+    assert not failed, "\n".join(failed)
 
 
 def test_every_probe_is_decomposed(demo):
-    _, rows = demo
+    _, rows, _ = demo
     assert sorted({int(row["probe_id"]) for row in rows}) == [0, 1, 2]
     assert len(rows) == 15
 
 
-def test_each_probes_field_and_gradient_lie_at_the_truth_without_their_neighbours(demo):
-    stdout, rows = demo
+def test_each_probe_is_mapped_without_its_neighbours_fields(demo):
+    # The neighbours' field at 5 cm is 1.4 µT, their gradient 0.04 mT/m: taken for the probe's
+    # own, or with ring-downs taken to start from the housing stop, the map is off by more.
+    stdout, rows, _ = demo
     error = np.array([float(row["value"]) - float(row["truth"]) for row in rows])
     field = np.array([row["quantity"].startswith("b") for row in rows])
     assert np.all(np.abs(error[field]) < 0.4e-6), stdout[-2000:]
     assert np.all(np.abs(error[~field]) < 0.15e-3), stdout[-2000:]
+
+
+def test_each_probes_field_and_gradient_lie_within_their_sigma(demo):
+    stdout, rows, _ = demo
     pulls = np.array([float(row["pull"]) for row in rows])
-    assert np.all(np.abs(pulls) < 6.0), stdout[-2000:]
+    assert np.all(np.isfinite(pulls)), stdout[-2000:]
+    assert np.sum(np.abs(pulls) <= 2.0) >= 12, stdout[-2000:]
+    assert np.max(np.abs(pulls)) < 3.5, stdout[-2000:]

@@ -24,8 +24,10 @@ it, whichever fits better; θmax,k at 0.3 rad, δ_k at the guess.
 
 The swing is about the commanded θ0 (no rest offset, as the paper's model has it): the rest
 offset's several minima (:mod:`mows.estimate.ringdown_offset`) are not searched here. θmax is
-kept within the one-probe fit's bounds and reported only where its σ is below a third of that
-fit's tolerance (1°); elsewhere (or at a bound) NaN, named in ``undetermined``.
+kept within the one-probe fit's bounds. Where the pickup's absolute scale is known, the θmax
+reported is the swing the signal's size gives through the pickup about the undeflected lever
+(:func:`start_swing_rad`); elsewhere the fitted one, and only where its σ is below a third of
+the one-probe fit's tolerance (1°); otherwise (or at a bound) NaN, named in ``undetermined``.
 
 Uncertainties. Per probe, ``frequency_std_hz`` from the joint covariance (JᵀJ)⁻¹·s², and
 ``frequency_crb_hz`` from the joint Fisher information with the white-noise level measured from
@@ -499,13 +501,19 @@ def _probe_fit(
 
 
 def _with_swing_from_size(fit: RingdownFit, scale_t: float) -> RingdownFit:
-    """``fit`` with θmax from its signal's size (:func:`start_swing_rad`) where its shape left
-    it undetermined and the pickup's absolute scale is known; else ``fit`` as it is."""
-    if "amplitude_rad" not in fit.undetermined or not math.isfinite(scale_t):
+    """``fit`` with θmax from its signal's size (:func:`start_swing_rad`) where the pickup's
+    absolute scale is known; else ``fit`` as it is. The shape's θmax is not used even where it
+    is determined: the magnet swings about its rest angle, which the model leaves out, and the
+    pickup's harmonics there pass for a different θmax (tens of percent at 15 mrad), while the
+    size is off by only g'(0)/g'(θs), which the sweep's model, knowing θs, takes out
+    (:meth:`mows.sweep.decompose.Ringdowns.start_swing_about_rad`)."""
+    if not math.isfinite(scale_t):
         return fit
     swing = start_swing_rad(fit, scale_t)
     if not math.isfinite(swing):
         return fit
+    if "amplitude_rad" not in fit.undetermined:
+        return dataclasses.replace(fit, amplitude_rad=swing)
     message = f"θmax {math.degrees(swing):.2f}° from the signal's size through the pickup's absolute scale"
     return dataclasses.replace(fit, amplitude_rad=swing, undetermined=(), message=message)
 

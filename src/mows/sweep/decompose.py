@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import itertools
 import math
 
@@ -47,11 +48,14 @@ from mows.physics.frequency import PublishedSweep, weak_field_sensitivity_hz_per
 from mows.physics.pose import probe_axes
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import Probe
-from mows.physics.ringdown_average import amplitude_nodes
+from mows.physics.ringdown_average import amplitude_nodes, swing_about_rest_rad
 
 MODELS = ("first_principles", "published")
 MAX_HARMONIC = 4
 PARAMETER_COUNT = 8  # Bx, By, Gs, Gd, Gxy, Δf00, Hc, Hs
+# The rest angles the measured swings are tabulated at: a sweep's static deflections are tens of
+# mrad; the swing is smooth in them, so linear interpolation over 5 mrad errs by < 0.1 %.
+REST_NODES_RAD = np.linspace(-0.1, 0.1, 41)
 F00_STEP_HZ = 1e-4  # the calibrated f00's step for its Jacobian column (the model is smooth in f00)
 
 
@@ -157,9 +161,33 @@ class Ringdowns:
     damping_per_s: np.ndarray
     duration_s: np.ndarray
     pickup: np.ndarray | None = None
-    # The swing about the rest angle at each window's start, measured (n,): for ring-downs that
-    # do not start from the stop (a multi-tone excitation's); the stop is then not used.
+    # The swing at each window's start, measured (n,), for ring-downs that do not start from the
+    # stop (a multi-tone excitation's; the stop is then not used): from the signal's size through
+    # ``pickup`` about the undeflected lever, as the fit that measured it had no rest angle. The
+    # model turns it into the swing about its own rest angle (:meth:`start_swing_about_rad`).
     start_swing_rad: np.ndarray | None = None
+
+    @functools.cached_property
+    def _swing_table_rad(self) -> np.ndarray:
+        """(n, REST_NODES_RAD.size): each measured swing about each rest angle of the table."""
+        return swing_about_rest_rad(
+            np.asarray(self.start_swing_rad, float)[:, None],
+            np.asarray(self.pickup, complex)[:, None, :],
+            np.asarray(self.damping_per_s, float)[:, None],
+            np.asarray(self.duration_s, float)[:, None],
+            REST_NODES_RAD,
+        )
+
+    def start_swing_about_rad(self, rest_rad) -> np.ndarray:
+        """The measured swings (n,) about the rest angles ``rest_rad`` (n,) of the model: the
+        signal's size means a swing about the undeflected lever that is a few percent off the
+        one about a rest angle of 10 mrad (:func:`mows.physics.ringdown_average.swing_about_rest_rad`,
+        tabulated once and interpolated). As measured without a pickup to convert through."""
+        swings = np.asarray(self.start_swing_rad, float)
+        if self.pickup is None:
+            return swings
+        rest = np.nan_to_num(np.broadcast_to(np.asarray(rest_rad, float), swings.shape))
+        return np.array([np.interp(r, REST_NODES_RAD, row) for r, row in zip(rest, self._swing_table_rad)])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -239,7 +267,7 @@ def model_shift_hz(
     if ringdowns is None:
         return f00 * np.sqrt(potential.stiffness_nm_per_rad() / probe.spring_nm_per_rad) - f00_hz
     if ringdowns.start_swing_rad is not None:
-        start = np.asarray(ringdowns.start_swing_rad, float)
+        start = ringdowns.start_swing_about_rad(potential.rest_angle_rad())
     else:  # 0 where the stop lies inside the deflection (a trial point the data rule out)
         start = np.nan_to_num(potential.start_swing_rad(ringdowns.stop_amplitude_rad))
     amplitudes, weights = amplitude_nodes(

@@ -79,4 +79,4 @@ def test_each_swing_comes_from_its_signals_size_through_the_absolute_pickup():
     for fit, swing in zip(fit_ringdowns(samples, RATE_HZ, lines), start_rad):
         assert fit.ok, fit.message
         assert start_swing_rad(fit, lines[fit.probe_id].pickup_scale_t) == pytest.approx(swing, rel=0.02)
-        assert fit.amplitude_rad == pytest.approx(swing, rel=0.02)  # by its shape or, if not, its size
+        assert fit.amplitude_rad == pytest.approx(swing, rel=0.02)  # by its size: the pickup's scale is known

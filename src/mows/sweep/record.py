@@ -148,7 +148,8 @@ class SweepRecord:
         ring-down, known terms of the first-principles model (:mod:`mows.sweep.probes`);
         ``curvature``: fit the field's 3θ0 curvature too (:func:`decompose`). ``measured_swings``:
         the ring-downs did not start from the stop (a multi-tone excitation's), so each starts with
-        the θmax its fit measured, when every fit measured it.
+        the θmax its fit measured, when every fit measured it: a joint fit's from the signal's size
+        about the undeflected lever, which the model takes about its rest angle (:class:`Ringdowns`).
         """
         theta0 = self._column("theta0_rad")
         arrays: dict[str, Any] = dict(

@@ -24,27 +24,40 @@ RATE_HZ = 10_000.0
 NO_FIELD = UniformField([0.0, 0.0, 0.0])
 
 
-def test_the_joint_fit_of_two_simulated_probes_sees_their_coupled_frequencies():
-    # The paper's probe before the paper's pair, a 125 Hz probe 3 cm beside it, both along x:
-    # the coupling shifts them by −11.5 and −10.3 mHz.
+def ringing_together(start_rad, seed):
+    """The paper's probe before the paper's pair and a 125 Hz probe 3 cm beside it, both along x,
+    ringing down together from ``start_rad``: the pair, the probes and 0.5 s of the pair's
+    samples with 0.1 nT of noise."""
     pair = FluxgatePair.paper()
     probes = [
         PlacedProbe(P, Pose()),
         PlacedProbe(P.replace(spring_nm_per_rad=P.spring_nm_per_rad * 1.24), Pose(magnet_position_m=(0.0, 0.03, 0.0))),
     ]
-    theta, _ = CoupledProbes(probes, NO_FIELD).ring_down([math.radians(10.0), math.radians(12.0)], 5000, RATE_HZ)
+    theta, _ = CoupledProbes(probes, NO_FIELD).ring_down(start_rad, 5000, RATE_HZ)
     pickup = swinging_pickup_t(pair, probes, theta)
-    samples = pickup + 1e-10 * np.random.default_rng(2).standard_normal(pickup.shape)
-    model = coupled_frequencies_hz(probes, NO_FIELD)
-    lines = [
+    return pair, probes, pickup + 1e-10 * np.random.default_rng(seed).standard_normal(pickup.shape)
+
+
+def lines_of(pair, probes):
+    """Each probe's line for the joint fit: its lever-aware pickup on its absolute scale, looked
+    for at its coupled frequency to the nearest hertz."""
+    return [
         ProbeLine(
             probe_id=k,
             theta0_rad=0.0,
             expected_frequency_hz=round(float(f)),
             pickup=tuple(pickup_harmonics(pair, p.pose, p.probe.lever_m, p.probe.moment_am2)),
+            pickup_scale_t=pickup_scale_t(pair, p.pose.magnet_position_m, p.probe.moment_am2),
         )
-        for k, (p, f) in enumerate(zip(probes, model))
+        for k, (p, f) in enumerate(zip(probes, coupled_frequencies_hz(probes, NO_FIELD)))
     ]
+
+
+def test_the_joint_fit_of_two_simulated_probes_sees_their_coupled_frequencies():
+    # The coupling shifts them by −11.5 and −10.3 mHz.
+    pair, probes, samples = ringing_together([math.radians(10.0), math.radians(12.0)], seed=2)
+    model = coupled_frequencies_hz(probes, NO_FIELD)
+    lines = lines_of(pair, probes)
     fits = fit_ringdowns(samples, RATE_HZ, lines)
     alone = np.array([float(ArcPotential.from_source(p.probe, NO_FIELD, p.pose).frequency_hz()) for p in probes])
     for fit, expected, uncoupled in zip(fits, model, alone):
@@ -57,25 +70,9 @@ def test_the_joint_fit_of_two_simulated_probes_sees_their_coupled_frequencies():
 def test_each_swing_comes_from_its_signals_size_through_the_absolute_pickup():
     # Small swings, where a joint fit's signal shape barely fixes θmax: its size still does,
     # through the pickup's absolute scale (the dipole's μ0·m/4π over the sensors' distances).
-    pair = FluxgatePair.paper()
-    probes = [
-        PlacedProbe(P, Pose()),
-        PlacedProbe(P.replace(spring_nm_per_rad=P.spring_nm_per_rad * 1.24), Pose(magnet_position_m=(0.0, 0.03, 0.0))),
-    ]
     start_rad = [math.radians(3.0), math.radians(5.0)]
-    theta, _ = CoupledProbes(probes, NO_FIELD).ring_down(start_rad, 5000, RATE_HZ)
-    pickup = swinging_pickup_t(pair, probes, theta)
-    samples = pickup + 1e-10 * np.random.default_rng(4).standard_normal(pickup.shape)
-    lines = [
-        ProbeLine(
-            probe_id=k,
-            theta0_rad=0.0,
-            expected_frequency_hz=round(float(f)),
-            pickup=tuple(pickup_harmonics(pair, p.pose, p.probe.lever_m, p.probe.moment_am2)),
-            pickup_scale_t=pickup_scale_t(pair, p.pose.magnet_position_m, p.probe.moment_am2),
-        )
-        for k, (p, f) in enumerate(zip(probes, coupled_frequencies_hz(probes, NO_FIELD)))
-    ]
+    pair, probes, samples = ringing_together(start_rad, seed=4)
+    lines = lines_of(pair, probes)
     for fit, swing in zip(fit_ringdowns(samples, RATE_HZ, lines), start_rad):
         assert fit.ok, fit.message
         assert start_swing_rad(fit, lines[fit.probe_id].pickup_scale_t) == pytest.approx(swing, rel=0.02)

@@ -35,8 +35,7 @@ import numpy as np
 import rclpy
 import yaml
 from mows_msgs.action import RotationSweep
-from mows_msgs.msg import MagnetometerBlock, ModelReport, RingdownFit
-from rclpy.action import ActionClient
+from mows_msgs.msg import ModelReport, RingdownFit
 from rclpy.signals import SignalHandlerOptions
 
 from mows.cli.calibrate import compare_with_truth, simulate_calibration
@@ -49,13 +48,13 @@ from mows.sim.scenario import load_scenario, scenario_file
 from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
 from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
 from mows.sweep.record import SweepRecord
-from mows_bringup.demo_probes import MAP_FILE, PROBE_FILES, has_probes, write_probe_files
+from mows_bringup.demo_probes import MAP_FILE, PROBE_FILES, accepted, has_probes, sweep_client, write_probe_files
 from mows_bringup.demo_probes import parameters as probe_parameters
 from mows_bringup.demo_probes import run_sweep as run_probes_sweep
 from mows_bringup.graph import NODES, Graph, say
 from mows_mapper.messages import sweep_point
 from mows_ros.process import EXIT_BAD_PARAMETER
-from mows_ros.qos import MAP_QOS, RESULT_QOS, STREAM_QOS
+from mows_ros.qos import MAP_QOS, RESULT_QOS
 
 DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_TURN_SETTLE_S = 10.0, 0.5, 0.5  # the driver's defaults
 PROBE_FILE, SCENE_FILE, PARAMETERS_FILE = "calibrated_probe.yaml", "demo_scene.yaml", "demo_parameters.yaml"
@@ -276,15 +275,10 @@ def with_node(stopping: threading.Event, exited, body: Callable) -> bool:
 
 
 def run_sweep(node, spin_until, args, out: pathlib.Path, scene_path, probe_path) -> bool:
-    fits, reports, blocks = [], [], []
+    fits, reports = [], []
     node.create_subscription(RingdownFit, "mows/ringdown", fits.append, RESULT_QOS)
     node.create_subscription(ModelReport, "mows/model_report", reports.append, MAP_QOS)
-    node.create_subscription(MagnetometerBlock, "mows/raw", lambda b: blocks.append(b.sequence), STREAM_QOS)
-    client = ActionClient(node, RotationSweep, "mapper/rotation_sweep")
-    spin_until(client.server_is_ready, 120.0, "the mapper's sweep action")
-    spin_until(lambda: blocks, 60.0, "the driver's sample stream")
-    # The estimator advertises its results once its fit is compiled and loaded.
-    spin_until(lambda: node.count_publishers("mows/ringdown") > 0, 120.0, "the estimator")
+    client = sweep_client(node, spin_until)
     angles = np.radians(np.arange(args.angles) * 360.0 / args.angles)
     if args.target:
         say(f"adaptive sweep of {args.target} to σ ≤ 20 nT, 10 µT/m, cycle from physics")
@@ -293,12 +287,9 @@ def run_sweep(node, spin_until, args, out: pathlib.Path, scene_path, probe_path)
         say(f"sweep: {args.angles} orientations × {args.repeats} ring-downs")
         goal = RotationSweep.Goal(theta0_rad=angles.tolist(), repeats_per_angle=args.repeats)
     started = time.monotonic()
-    sent = client.send_goal_async(goal, feedback_callback=lambda f: print_feedback(f.feedback))
-    spin_until(sent.done, 30.0, "the goal to be accepted")
-    if not sent.result().accepted:
-        say("the mapper refused the sweep")
+    if (handle := accepted(spin_until, client, goal, lambda f: print_feedback(f.feedback))) is None:
         return False
-    result = sent.result().get_result_async()
+    result = handle.get_result_async()
     spin_until(result.done, 600.0 if args.target else 60.0 + args.angles * args.repeats * 30.0, "the sweep")
     outcome = result.result().result
     if args.target:

@@ -92,26 +92,41 @@ def parameters(args, scene_path: str, probe_paths: list[pathlib.Path]) -> dict:
     }
 
 
-def run_sweep(node, spin_until, args, scenario: str, table: pathlib.Path, inputs) -> bool:
-    """Sweep the shared stage through ``--angles`` orientations, print the field map against the
-    truth and write it to ``table`` (CSV)."""
-    maps: list[FieldMap] = []
+def sweep_client(node, spin_until) -> ActionClient:
+    """The mapper's sweep action once the graph is ready for a sweep: the action served, the
+    driver's samples streaming and the estimator's fit loaded (it advertises its results then)."""
     blocks: list[int] = []
-    node.create_subscription(FieldMap, "mows/field_map", maps.append, MAP_QOS)
     node.create_subscription(MagnetometerBlock, "mows/raw", lambda b: blocks.append(b.sequence), STREAM_QOS)
     client = ActionClient(node, RotationSweep, "mapper/rotation_sweep")
     spin_until(client.server_is_ready, 120.0, "the mapper's sweep action")
     spin_until(lambda: blocks, 60.0, "the driver's sample stream")
     spin_until(lambda: node.count_publishers("mows/ringdown") > 0, 120.0, "the estimator")
-    angles = np.radians(np.arange(args.angles) * 360.0 / args.angles)
-    count = len(load_scenario(scenario).probes)
-    say(f"sweep of {count} probes at once: {args.angles} orientations of the shared stage × {args.repeats} ring-downs")
-    sent = client.send_goal_async(RotationSweep.Goal(theta0_rad=angles.tolist(), repeats_per_angle=args.repeats))
+    return client
+
+
+def accepted(spin_until, client: ActionClient, goal, feedback=None):
+    """The goal's handle once the mapper accepted it; None, said, when it refused the sweep."""
+    sent = client.send_goal_async(goal, feedback_callback=feedback)
     spin_until(sent.done, 30.0, "the goal to be accepted")
     if not sent.result().accepted:
         say("the mapper refused the sweep")
+        return None
+    return sent.result()
+
+
+def run_sweep(node, spin_until, args, scenario: str, table: pathlib.Path, inputs) -> bool:
+    """Sweep the shared stage through ``--angles`` orientations, print the field map against the
+    truth and write it to ``table`` (CSV)."""
+    maps: list[FieldMap] = []
+    node.create_subscription(FieldMap, "mows/field_map", maps.append, MAP_QOS)
+    client = sweep_client(node, spin_until)
+    angles = np.radians(np.arange(args.angles) * 360.0 / args.angles)
+    count = len(load_scenario(scenario).probes)
+    say(f"sweep of {count} probes at once: {args.angles} orientations of the shared stage × {args.repeats} ring-downs")
+    goal = RotationSweep.Goal(theta0_rad=angles.tolist(), repeats_per_angle=args.repeats)
+    if (handle := accepted(spin_until, client, goal)) is None:
         return False
-    result = sent.result().get_result_async()
+    result = handle.get_result_async()
     spin_until(result.done, 120.0 + args.angles * args.repeats * 30.0, "the sweep")
     outcome = result.result().result
     if not outcome.success:

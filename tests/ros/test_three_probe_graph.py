@@ -11,8 +11,8 @@ magnet (the field there plus (l²/4)·∂²B/∂z², what a sweep determines: do
 "Every one of 15 within 2σ" fails by chance in half of all draws even with a calibrated σ, so
 the test holds what a calibrated σ gives with a margin, at least 12 of 15 within 2σ (fewer
 happens with probability 0.4 %, binomial with p = 0.046), and none beyond 5σ. Three runs gave
-15 of 15 within 2σ (largest 1.7–2.0σ); before each ring-down's swing was taken about the rest
-angle, one run in three had probe 0's Gxx at 3.7σ, and a small common offset of probe 0 remains
+15 of 15 within 2σ (largest 1.7–2.0σ); with each ring-down's swing taken about the undeflected
+lever instead, one run in three had probe 0's Gxx at 3.7σ, and a small common offset of probe 0 remains
 (docs/multi_probe.md)."""
 
 import csv

@@ -1,17 +1,22 @@
 """A node's way to the driver's measurement cycles, shared by the mapper and the calibrator:
 the core's :class:`mows.device.phases.CycleRequest` as a goal of the driver's MeasurementCycle
 action, answered as the core's :class:`mows.sweep.runner.CycleAnswer`; a running cycle
-cancelled when the caller gives up on it; and the ring-down fits of ``/mows/ringdown`` handed
+cancelled when the caller gives up on it; a cycle whose acceptance was lost awaited by its
+goal's id; and the ring-down fits of ``/mows/ringdown`` handed
 to the node, whose answer to each (the core's next step, or None) resumes the coroutine that
 waits for a cycle's fits."""
 
+import uuid
 from collections.abc import Callable
 
+from action_msgs.msg import GoalStatus
 from mows_msgs.action import MeasurementCycle
 from mows_msgs.msg import RingdownFit
 from rclpy.action import ActionClient
+from rclpy.action.client import ClientGoalHandle
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
+from unique_identifier_msgs.msg import UUID
 
 from mows.device.phases import CycleRequest
 from mows.sweep.runner import CycleAnswer
@@ -61,17 +66,26 @@ class DriverCycles:
         action to appear and again for the cycle, which is cancelled when it takes longer."""
         if not await until(self._node, self.ready, timeout_s):
             return CycleAnswer(problem=f"the driver's {CYCLE_ACTION} action did not appear within {timeout_s:g} s")
-        sent = self._client.send_goal_async(cycle_goal(request))
-        if not await within(self._node, sent, GOAL_ANSWER_S):
-            return CycleAnswer(problem=f"the driver did not answer the cycle goal within {GOAL_ANSWER_S:g} s")
-        self._running = handle = sent.result()
-        if not handle.accepted:
-            return CycleAnswer(problem="the driver rejected the cycle goal")
+        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        sent = self._client.send_goal_async(cycle_goal(request), goal_uuid=goal_id)
+        if await within(self._node, sent, GOAL_ANSWER_S):
+            handle = sent.result()
+            if not handle.accepted:
+                return CycleAnswer(problem="the driver rejected the cycle goal")
+        else:
+            # The driver's answer was lost (over a lossy link DDS drops a response whose reader
+            # it has not matched yet) while it may be running the cycle: its result is asked
+            # for by the goal's id, and a goal the driver never received comes back unknown.
+            accepted = MeasurementCycle.Impl.SendGoalService.Response(accepted=True)
+            handle = ClientGoalHandle(self._client, goal_id, accepted)
+        self._running = handle
         try:
             result = handle.get_result_async()
             if not await within(self._node, result, timeout_s):
                 handle.cancel_goal_async()
                 return CycleAnswer(problem=f"the cycle took longer than cycle_timeout_s = {timeout_s:g} s: cancelled")
+            if result.result().status == GoalStatus.STATUS_UNKNOWN:
+                return CycleAnswer(problem=f"the driver did not answer the cycle goal within {GOAL_ANSWER_S:g} s")
             return cycle_answer(result.result().result)
         finally:
             self._running = None

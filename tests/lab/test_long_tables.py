@@ -11,7 +11,7 @@ from mows.bench.lab_long import HIDDEN_SIGMAS, weak_gradient_table
 from mows.lab import analyse, read_csv
 from mows.lab.data.readers import _read_cells
 from mows.lab.data.table import MeasurementTable, stratified_rows
-from mows.lab.model.least_squares import _folds
+from mows.lab.data.folds import cv_folds
 from mows.physics.probe import PAPER_PROBE
 
 
@@ -86,7 +86,7 @@ def test_all_rows_name_the_transverse_gradient_the_subsample_misses():
 
 def test_cross_validation_holds_out_whole_sweeps_in_ten_folds_spread_over_time():
     sweeps = np.repeat(np.arange(1000)[::-1], 12)  # 1000 sweeps of 12 rows, numbered backwards in time
-    folds = _folds(_sweeps_table(sweeps))
+    folds = cv_folds(_sweeps_table(sweeps))
     assert len(folds) == 10
     assert np.array_equal(np.sort(np.concatenate(folds)), np.arange(len(sweeps)))
     held = [set(sweeps[rows]) for rows in folds]
@@ -98,7 +98,7 @@ def test_cross_validation_holds_out_whole_sweeps_in_ten_folds_spread_over_time()
 
 def test_a_table_of_at_most_ten_sweeps_leaves_one_sweep_out():
     sweeps = np.repeat([3, 1, 2], 4)
-    folds = _folds(_sweeps_table(sweeps))
+    folds = cv_folds(_sweeps_table(sweeps))
     assert [list(rows) for rows in folds] == [[0, 1, 2, 3], [4, 5, 6, 7], [8, 9, 10, 11]]
 
 

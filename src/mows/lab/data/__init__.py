@@ -1,6 +1,7 @@
 """The lab's input: measurement tables and where they come from.
 
-``table`` (:class:`MeasurementTable`, its columns, validation and errors), ``reference`` (the
+``table`` (:class:`MeasurementTable`, its columns, validation and errors), ``folds`` (rows held
+out a configuration at a time for cross-validation), ``reference`` (the
 reference field of a static source as table columns), ``probes`` (the constants of a table's
 probes and their neighbours' field at each row), ``readers`` (:func:`load_table`: CSV, the
 project's bags, rotation sweeps) and ``synthetic`` (tables from independent physics and from the

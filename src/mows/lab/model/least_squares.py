@@ -18,6 +18,7 @@ import numpy as np
 
 from mows.estimate.ringdown import FitStatus
 from mows.lab import progress
+from mows.lab.data.folds import cv_folds
 from mows.lab.data.table import MeasurementTable, rows_text
 from mows.lab.model.effects import Effect
 
@@ -25,7 +26,6 @@ if TYPE_CHECKING:  # frequency_model imports this module
     from mows.lab.model.frequency_model import FrequencyModel
 
 FD_STEP = 1e-2  # × parameter scale
-CV_FOLDS = 10  # folds of whole sweeps (K), or of interleaved rows when the table has one sweep
 INVALID_RESIDUAL = 1e6  # weighted residual given to rows where the model has no real frequency
 DEGENERATE_RTOL = 1e-6  # singular value (normalised Jacobian columns) below which a direction is not determined
 CV_PREDICTION_SIGMAS = 10.0  # a fold predicting its rows less precisely than this says nothing
@@ -349,13 +349,13 @@ class FitResult:
         return Problem(self.model, table, rows).columns(self.values, range(self.k))
 
     def cross_validate(self) -> float:
-        """Cross-validated rms prediction error, Hz: K-fold over whole sweeps (K = 10, sweeps
-        dealt to the folds in time order; leave-one-sweep-out with at most K sweeps; interleaved
-        rows when the table has a single sweep): refit without the fold, predict it. NaN when it
+        """Cross-validated rms prediction error, Hz: K-fold over the rows' configurations (whole
+        sweeps, current steps or temperature spans: :func:`mows.lab.data.folds.cv_folds`): refit
+        without the fold, predict it. NaN when it
         is not identifiable: a left-out fold held the only information on a parameter (the fit
         without it cannot determine a parameter the whole table determines, or predicts the
         left-out rows with a median uncertainty above 10 σ of their measurements)."""
-        folds = _folds(self.table)
+        folds = cv_folds(self.table)
         errors = np.empty(self.n)
         for done, rows in enumerate(folds):
             progress.stage("cross-validation (folds)", done, len(folds))
@@ -391,18 +391,3 @@ class FitResult:
         elif not self.ok:
             lines.append(f"  warning: {self.status.name}: the fit did not converge ({self.message})")
         return "\n".join(lines)
-
-
-def _folds(table: MeasurementTable) -> list[np.ndarray]:
-    """Row indices of each cross-validation fold: whole sweeps, sweep k (in order of first row,
-    the table's time order) in fold k mod K, so that every fold spans the table's time; one fold
-    per sweep when there are at most K sweeps; K interleaved folds of rows for a single sweep."""
-    sweeps = table.sweep_ids
-    unique, first, inverse = np.unique(sweeps, return_index=True, return_inverse=True)
-    if len(unique) > 1:
-        rank = np.empty(len(unique), int)
-        rank[np.argsort(first, kind="stable")] = np.arange(len(unique))
-        fold = rank[inverse] % CV_FOLDS
-        return [np.flatnonzero(fold == k) for k in range(min(CV_FOLDS, len(unique)))]
-    count = min(CV_FOLDS, len(table))
-    return [np.arange(i, len(table), count) for i in range(count)]

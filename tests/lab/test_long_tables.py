@@ -9,9 +9,9 @@ import pytest
 from lab.tables import tilted_table
 from mows.bench.lab_long import HIDDEN_SIGMAS, weak_gradient_table
 from mows.lab import analyse, read_csv
+from mows.lab.data.folds import cv_folds
 from mows.lab.data.readers import _read_cells
 from mows.lab.data.table import MeasurementTable, stratified_rows
-from mows.lab.data.folds import cv_folds
 from mows.physics.probe import PAPER_PROBE
 
 

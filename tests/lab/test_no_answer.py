@@ -1,5 +1,6 @@
-"""When no catalog effect explains the residual, the lab says so, shows what the residual follows
-(covariates and products of two) and sketches the plugin."""
+"""When no catalog effect explains the residual, the lab says so, names the terms the search beyond
+the catalog finds (mows.lab.diagnosis.discovery) with the strongest one's plugin, and shows what the
+residual follows (covariates and products of two)."""
 
 import numpy as np
 
@@ -30,8 +31,12 @@ def test_a_hidden_current_times_temperature_term_is_pointed_at():
     assert report.verdict == "unexplained_structure"
     explanation = report.diagnosis.explanation
     assert "The residual follows temperature_k·coil_current_a (correlation +0.9" in explanation
-    assert '@effect(name="my_effect"' in explanation
-    assert "(rows.coil_current_a - rows.coil_current_a.mean())" in explanation
+    # The search beyond the catalog names the product in physical units, with its plugin.
+    assert "finds 1 term: temperature_k·coil_current_a (+0.00" in explanation, explanation
+    assert '@effect(name="discovered_temperature_k_coil_current_a"' in explanation
+    assert '"frequency_hz": c_hz * (rows.temperature_k - 296.' in explanation
+    (term,) = report.discovery.terms
+    assert abs(term.strength - 0.004) < 3 * term.std, (term.strength, term.std)  # Hz per K·A
 
 
 def test_an_angle_pattern_that_changes_in_time_is_not_a_pile_of_catalog_effects():
@@ -55,4 +60,7 @@ def test_an_angle_pattern_that_changes_in_time_is_not_a_pile_of_catalog_effects(
     explanation = report.diagnosis.explanation
     assert "No catalog effect explains the residual" in explanation, explanation
     assert "The residual follows cos(3θ0)·t_s (correlation +1.00" in explanation, explanation
-    assert "np.cos(3 * rows.theta0_rad) * (rows.t_s - rows.t_s.mean()) / rows.t_s.std()" in explanation
+    assert "finds 1 term: t_s·cos(3θ0)" in explanation, explanation
+    assert "c_hz * (rows.t_s - 475.0) * np.cos(3 * rows.theta0_rad)" in explanation
+    (term,) = report.discovery.terms
+    assert abs(term.strength - 0.05 / np.ptp(t)) < 3 * term.std, (term.strength, term.std)  # Hz per s

@@ -4,7 +4,8 @@ Requirement: the magnet's moment falls with temperature (NdFeB, −1e-3/K here) 
 run. No catalog effect is that: the lab must end without catalog effects that are not there
 (those of the truth are the static deflection and, at 2° ring-downs, a negligible finite
 amplitude and damping term), say ``unexplained_structure``, point at temperature × Bx' with a
-plugin sketch in the physical form (a moment scale), and the user's plugin written as physics
+plugin in the physical form (a moment scale, its coefficient read from the table by the search
+beyond the catalog), and the user's plugin written as physics
 (``moment_scale`` through the full potential) must explain the table to χ²/dof ≤ 1.5 and read
 the coefficient back. The truth is the exact arc energy of a probe whose moment is changed row
 by row (:func:`mows.lab.data.synthetic.true_frequency_hz`), independent of the lab's
@@ -79,7 +80,11 @@ def test_the_catalog_alone_adds_only_what_is_there_and_points_at_the_moment(tabl
     assert report.verdict == "unexplained_structure", report.diagnosis.explanation
     explanation = report.diagnosis.explanation
     assert "temperature_k·b_along_t" in explanation, explanation
-    assert '"moment_scale": c * (rows.temperature_k - rows.temperature_k.mean())' in explanation, explanation
+    # The search beyond the catalog writes the moment's plugin and reads its coefficient from the table.
+    assert "finds 1 term: b_along_t·temperature_k" in explanation, explanation
+    assert '"moment_scale": c * (rows.temperature_k - 298.' in explanation, explanation
+    (term,) = report.discovery.terms
+    assert abs(term.plugin_parameter.value - MOMENT_PER_K) < 3 * term.plugin_parameter.std, term.plugin_parameter
 
 
 @pytest.mark.slow  # an --auto selection on 96 rows

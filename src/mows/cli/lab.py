@@ -329,6 +329,8 @@ def format_text(report, table, command: str) -> str:
         lines += ["", _history_text(report.history)]
     if report.physics_checks:
         lines += ["", _checks_text(report.physics_checks)]
+    if report.discovery is not None:
+        lines += ["", *report.discovery.lines()]
     lines += ["", f"verdict: {report.verdict}", "  " + report.diagnosis.explanation]
     return "\n".join(lines)
 
@@ -363,6 +365,8 @@ def _candidates_text(report) -> str:
             f"  {rank:4d} {c.name:22s}  {c.form:10s} {c.delta_bic:9.1f}   {c.p_value:9.2g}   "
             f"{c.chi2_dof_after:10.3f}   {c.group or '-':>4}   {values}"
         )
+        if c.would_need:
+            lines.append(f"         not physics: {c.would_need}")
     for group in report.groups:
         lines.append(
             f"  group {group.number}: {group.separation}"

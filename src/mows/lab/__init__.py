@@ -19,7 +19,7 @@ before it (and, outside the lab, ``mows.sweep``, ``mows.estimate``, ``mows.devic
 2. ``model``: the per-row configuration through the full potential, effects, plugins, the
    catalog, and the frequency model's weighted least-squares fit.
 3. ``diagnosis``: residual structure, each effect as the missing one, exact aliases, effects
-   the table cannot tell apart, and the verdict.
+   the table cannot tell apart, the search beyond the catalog, and the verdict.
 4. ``selection``: stepwise model selection and the error history.
 5. ``report``: :func:`analyse` (all of it) with its :class:`LabReport`, and the HTML report.
 
@@ -36,6 +36,7 @@ from mows.lab.data.probes import ProbeSet, with_probes
 from mows.lab.data.readers import from_bag, from_sweep, is_bag, load_table, read_csv
 from mows.lab.data.reference import reference_at, reference_columns, swept_reference_at, with_reference
 from mows.lab.data.table import MeasurementTable, MissingColumnError, TableError
+from mows.lab.diagnosis.discovery import DiscoveredTerm, Discovery, discover
 from mows.lab.diagnosis.residual_structure import residual_structure
 from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import CATALOG, catalog
@@ -48,6 +49,8 @@ from mows.lab.report.lab_report import LabReport, analyse, analyse_sweep
 __all__ = [
     "CATALOG",
     "Diagnosis",
+    "DiscoveredTerm",
+    "Discovery",
     "Effect",
     "FitResult",
     "FrequencyModel",
@@ -62,6 +65,7 @@ __all__ = [
     "analyse_sweep",
     "catalog",
     "diagnose",
+    "discover",
     "effect",
     "from_bag",
     "from_sweep",

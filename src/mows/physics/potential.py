@@ -48,8 +48,10 @@ from mows.physics.probe import Probe
 from mows.physics.sources import FieldSource
 
 DEFAULT_NODES = 32
+LOCAL_NODES = 24  # nodes of a potential built from a local field expansion (from_local_field)
 DEFAULT_HALF_WIDTH_RAD = 0.75
 BALANCE_POINTS = 48
+HALF_CYCLE = BALANCE_POINTS // 2 + 1  # phases 0 … π: the swing is even in φ, so they hold the whole cycle
 NEWTON_STEPS = 30
 TURNING_STEPS = 2  # fixed-point steps of first_harmonic_rad: each shrinks the error by ~(θc − θs + A2)/A ≲ 2 %
 
@@ -180,24 +182,16 @@ class ArcPotential:
         interval or where the balance is unstable (⟨U''⟩ ≤ 0, beyond spring cancellation).
         """
         amplitude = np.broadcast_to(np.asarray(amplitude_rad, float), self.batch_shape)
-        # At rest the balance is U'(θc) = 0 itself: one point instead of the cycle's.
-        points = BALANCE_POINTS if np.any(amplitude) else 1
-        cos_phi = np.cos(2.0 * np.pi * np.arange(points) / points)
-        offsets = amplitude[..., None] * cos_phi
-        centre = np.zeros(self.batch_shape)
-        for _ in range(NEWTON_STEPS):
-            theta = centre[..., None] + offsets
-            slope = self._spring(theta) * theta + self._eval(self.d1, theta)
-            curvature = self._spring(theta) + self._eval(self.d2, theta)
-            step = slope.mean(-1) / curvature.mean(-1)
-            centre = np.clip(centre - step, -self.half_width_rad, self.half_width_rad)
-            if np.all(np.abs(step) < 1e-15 + 1e-12 * np.abs(centre)):
-                break
-        theta = centre[..., None] + offsets
-        stable = (self._spring(theta) + self._eval(self.d2, theta)).mean(-1) > 0
-        converged = np.abs(step) < 1e-9
-        inside = np.abs(centre) + amplitude < self.half_width_rad
-        return np.where(stable & converged & inside, centre, np.nan)
+        return _centre_rows(*self._rows(), amplitude.ravel(), self.half_width_rad).reshape(self.batch_shape)
+
+    def _rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(U' coefficients, U'' coefficients, kM) with the batch flattened to rows, for the kernels."""
+        count = self.d1.shape[-1]
+        return (
+            np.ascontiguousarray(self.d1.reshape(-1, count)),
+            np.ascontiguousarray(self.d2.reshape(-1, count)),
+            np.ascontiguousarray(self.spring_nm_per_rad, dtype=float).ravel(),
+        )
 
     def effective_stiffness_nm_per_rad(self, amplitude_rad: ArrayLike = 0.0) -> np.ndarray:
         """Harmonic-balance stiffness k(A) with the cycle's second harmonic (module docstring);
@@ -233,30 +227,8 @@ class ArcPotential:
     def _balance(self, amplitude_rad: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(k(A), θc, A2) of the harmonic balance with the second harmonic (module docstring)."""
         amplitude = np.broadcast_to(np.asarray(amplitude_rad, float), self.batch_shape)
-        centre = self.cycle_centre_rad(amplitude)
-        phi = 2.0 * np.pi * np.arange(BALANCE_POINTS) / BALANCE_POINTS
-        first, second_wave = np.cos(phi), np.cos(2.0 * phi)
-        small = amplitude < 1e-9
-        divisor = np.where(small, 1.0, amplitude)
-        swing = amplitude[..., None] * first
-        mean, second = np.nan_to_num(centre), np.zeros(self.batch_shape)
-        for _ in range(NEWTON_STEPS):
-            theta = mean[..., None] + swing + second[..., None] * second_wave
-            slope = self._spring(theta) * theta + self._eval(self.d1, theta)
-            curvature = (self._spring(theta) + self._eval(self.d2, theta)).mean(-1)
-            harmonic = 2.0 * (slope * first).mean(-1) / divisor
-            # Newton on (θc, A2) with the Jacobian's diagonal: its other terms are O(A) smaller.
-            mean_step = slope.mean(-1) / curvature
-            second_residual = 2.0 * (slope * second_wave).mean(-1) - 4.0 * harmonic * second
-            second_step = second_residual / (curvature - 4.0 * harmonic)
-            mean, second = mean - mean_step, second - second_step
-            # A NaN row (unstable, outside the interval) stays NaN: it does not hold the others back.
-            if np.all(~(np.abs(mean_step) + np.abs(second_step) >= 1e-15 + 1e-12 * amplitude)):
-                break
-        valid = np.isfinite(centre) & (np.abs(mean) + amplitude + np.abs(second) < self.half_width_rad)
-        at_rest = self.stiffness_nm_per_rad(np.nan_to_num(centre))
-        stiffness = np.where(small, at_rest, harmonic)
-        return np.where(valid, stiffness, np.nan), np.where(valid, mean, np.nan), np.where(valid, second, np.nan)
+        found = _balance_rows(*self._rows(), amplitude.ravel(), self.half_width_rad)
+        return tuple(values.reshape(self.batch_shape) for values in found)  # type: ignore[return-value]
 
     def frequency_hz(self, amplitude_rad: ArrayLike = 0.0) -> np.ndarray:
         """Ring-down frequency √(k(A)/J − δ²)/2π, Hz (Eq. S1 with the exact k); NaN if unstable."""
@@ -291,7 +263,8 @@ class ArcPotential:
         spring_nm_per_rad: ArrayLike | None = None,
         lever_m: ArrayLike | None = None,
         damping_per_s: ArrayLike | None = None,
-        nodes: int = 24,
+        energy_j: ArrayLike | None = None,
+        nodes: int = LOCAL_NODES,
         half_width_rad: float = DEFAULT_HALF_WIDTH_RAD,
     ) -> ArcPotential:
         """Batch potential from the field's Taylor expansion at the magnet's rest position.
@@ -301,7 +274,8 @@ class ArcPotential:
         element is one measurement. The magnet moves by δr = l·(cos θ − 1, sin θ, 0), so
         B(r(θ)) = B + G·δr + ½·H:δr δr exactly for a field that is quadratic over the arc.
         ``spring_nm_per_rad``, ``lever_m`` and ``damping_per_s`` override the probe's
-        (per-row spring for thermal drift; free lever or damping in a fit).
+        (per-row spring for thermal drift; free lever or damping in a fit). ``energy_j`` (B, nodes)
+        is energy of any other origin at the nodes (:func:`chebyshev_nodes_rad`), added to W.
         """
         theta = chebyshev_nodes_rad(half_width_rad, nodes)
         lever = probe.lever_m if lever_m is None else np.asarray(lever_m, float)
@@ -321,9 +295,108 @@ class ArcPotential:
         if gravity_m_per_s2 is not None:
             weight = probe.magnet_mass_kg * np.asarray(gravity_m_per_s2, float)
             energy = energy - np.einsum("nj,...j->...n", u, weight) * np.asarray(lever)[..., None]
+        if energy_j is not None:
+            energy = energy + np.asarray(energy_j, float)
         spring = probe.spring_nm_per_rad if spring_nm_per_rad is None else spring_nm_per_rad
         damping = probe.damping_per_s if damping_per_s is None else damping_per_s
         return cls(spring, probe.inertia_kgm2, damping, energy, half_width_rad)
+
+
+# --- the balances, row by row (compiled) -----------------------------------------------------
+# The lab solves these for small batches thousands of times per analysis; written as numpy
+# over the batch, the Newton loops spent their time in per-operation overhead. Each row now
+# iterates until it has converged itself.
+@njit(cache=True)
+def _series(coeffs: np.ndarray, x: float) -> float:
+    """Σ c_j T_j(x) (Clenshaw) for one row's coefficients."""
+    b1, b2 = 0.0, 0.0
+    for j in range(coeffs.shape[0] - 1, 0, -1):
+        b1, b2 = 2.0 * x * b1 - b2 + coeffs[j], b1
+    return x * b1 - b2 + coeffs[0]
+
+
+@njit(cache=True)
+def _centre_row(d1: np.ndarray, d2: np.ndarray, spring: float, amplitude: float, half_width: float) -> float:
+    """θc of ⟨U'(θc + A·cos φ)⟩ = 0 for one row (:meth:`ArcPotential.cycle_centre_rad`)."""
+    points = HALF_CYCLE if amplitude != 0.0 else 1  # at rest the balance is U'(θc) = 0 itself
+    centre, step = 0.0, np.inf
+    for _ in range(NEWTON_STEPS):
+        slope, curvature = 0.0, 0.0
+        for i in range(points):
+            theta = centre + amplitude * math.cos(2.0 * math.pi * i / BALANCE_POINTS)
+            weight = _cycle_weight(i, points)
+            slope += weight * (spring * theta + _series(d1, theta / half_width))
+            curvature += weight * (spring + _series(d2, theta / half_width))
+        step = slope / curvature
+        centre = min(max(centre - step, -half_width), half_width)
+        if abs(step) < 1e-15 + 1e-12 * abs(centre):
+            break
+    curvature = 0.0
+    for i in range(points):
+        theta = centre + amplitude * math.cos(2.0 * math.pi * i / BALANCE_POINTS)
+        curvature += _cycle_weight(i, points) * (spring + _series(d2, theta / half_width))
+    if curvature > 0.0 and abs(step) < 1e-9 and abs(centre) + amplitude < half_width:
+        return centre
+    return np.nan
+
+
+@njit(cache=True)
+def _cycle_weight(i: int, points: int) -> float:
+    """Weight of phase φ_i = 2πi/BALANCE_POINTS in a mean over the cycle taken on its first half
+    (i = 0 … BALANCE_POINTS/2): θ(φ) is even in φ, so φ_i and 2π − φ_i count alike."""
+    if points == 1:
+        return 1.0
+    return (1.0 if i == 0 or i == points - 1 else 2.0) / BALANCE_POINTS
+
+
+@njit(cache=True)
+def _centre_rows(
+    d1: np.ndarray, d2: np.ndarray, spring: np.ndarray, amplitude: np.ndarray, half_width: float
+) -> np.ndarray:
+    out = np.empty(amplitude.shape[0])
+    for r in range(amplitude.shape[0]):
+        out[r] = _centre_row(d1[r], d2[r], spring[r], amplitude[r], half_width)
+    return out
+
+
+@njit(cache=True)
+def _balance_rows(
+    d1: np.ndarray, d2: np.ndarray, spring: np.ndarray, amplitude: np.ndarray, half_width: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(k(A), θc, A2) per row: Newton on (θc, A2) with the Jacobian's diagonal (its other
+    terms are O(A) smaller) from the DC balance's centre (:meth:`ArcPotential._balance`)."""
+    rows = amplitude.shape[0]
+    stiffness, mean_out, second_out = np.full(rows, np.nan), np.full(rows, np.nan), np.full(rows, np.nan)
+    phase = 2.0 * np.pi * np.arange(HALF_CYCLE) / BALANCE_POINTS
+    first, second_wave = np.cos(phase), np.cos(2.0 * phase)
+    weight = np.array([_cycle_weight(i, HALF_CYCLE) for i in range(HALF_CYCLE)])
+    for r in range(rows):
+        a = amplitude[r]
+        centre = _centre_row(d1[r], d2[r], spring[r], a, half_width)
+        if not np.isfinite(centre):
+            continue
+        small = a < 1e-9
+        divisor = 1.0 if small else a
+        mean, second, harmonic = centre, 0.0, 0.0
+        for _ in range(NEWTON_STEPS):
+            slope_mean, slope_first, slope_second, curvature = 0.0, 0.0, 0.0, 0.0
+            for i in range(HALF_CYCLE):
+                theta = mean + a * first[i] + second * second_wave[i]
+                slope = weight[i] * (spring[r] * theta + _series(d1[r], theta / half_width))
+                slope_mean += slope
+                slope_first += slope * first[i]
+                slope_second += slope * second_wave[i]
+                curvature += weight[i] * (spring[r] + _series(d2[r], theta / half_width))
+            harmonic = 2.0 * slope_first / divisor
+            mean_step = slope_mean / curvature
+            second_step = (2.0 * slope_second - 4.0 * harmonic * second) / (curvature - 4.0 * harmonic)
+            mean, second = mean - mean_step, second - second_step
+            if not abs(mean_step) + abs(second_step) >= 1e-15 + 1e-12 * a:
+                break
+        if abs(mean) + a + abs(second) < half_width:
+            stiffness[r] = spring[r] + _series(d2[r], centre / half_width) if small else harmonic
+            mean_out[r], second_out[r] = mean, second
+    return stiffness, mean_out, second_out
 
 
 def arc_energy_j(probe: Probe, source: FieldSource, pose: Pose, theta_rad: ArrayLike) -> np.ndarray:

@@ -38,6 +38,16 @@ def inertia_from_beta0(moment_am2: float, beta0_hz_per_t: float, f00_hz: float) 
     return moment_am2 / (8.0 * math.pi**2 * beta0_hz_per_t * f00_hz)
 
 
+DEFAULT_BETA0_REL_STD = 0.01  # a probe file that does not say how well β0 is known: 1 %
+DEFAULT_THETA_STOP_STD_RAD = math.radians(1.0)  # … nor how well its stop is: 1°
+# Probe-file keys written only where they differ from these (older files read as they did).
+UNSET_BY_DEFAULT = {
+    "moment_temp_coeff_per_k": 0.0,
+    "beta0_rel_std": DEFAULT_BETA0_REL_STD,
+    "theta_stop_std_rad": DEFAULT_THETA_STOP_STD_RAD,
+}
+
+
 def lever_from_inertia(inertia_kgm2: float, magnet_mass_kg: float) -> float:
     """Lever length l = √(J/a) of the point-mass model J = a·l² (Eq. S1), in metres."""
     return math.sqrt(inertia_kgm2 / magnet_mass_kg)
@@ -60,6 +70,10 @@ class Probe:
     spring_temp_coeff_per_k : relative change of kM per kelvin (spring steel ≈ −2.6e-4).
     reference_temperature_k : temperature at which kM and m are given, K.
     moment_temp_coeff_per_k : relative change of m per kelvin (NdFeB ≈ −1.2e-3; 0 keeps m fixed).
+    beta0_rel_std : relative standard uncertainty of m/kM (β0) from the calibration (1 % where
+        the file does not say); what the model lab allows a moment-scale error to be.
+    theta_stop_std_rad : standard uncertainty of the housing stop, rad (1° where the file does
+        not say); what the model lab allows the stop to move.
     """
 
     moment_am2: float
@@ -72,6 +86,8 @@ class Probe:
     spring_temp_coeff_per_k: float = -2.6e-4
     reference_temperature_k: float = 293.15
     moment_temp_coeff_per_k: float = 0.0
+    beta0_rel_std: float = DEFAULT_BETA0_REL_STD
+    theta_stop_std_rad: float = DEFAULT_THETA_STOP_STD_RAD
 
     def __post_init__(self) -> None:
         for name in (
@@ -85,6 +101,8 @@ class Probe:
             _require(name, getattr(self, name), lambda v: v > 0, "> 0")
         _require("damping_per_s", self.damping_per_s, lambda v: v >= 0, ">= 0")
         _require("theta_stop_rad", self.theta_stop_rad, lambda v: 0 < v < math.pi / 2, "in (0, pi/2)")
+        _require("beta0_rel_std", self.beta0_rel_std, lambda v: 0 < v < 1, "in (0, 1)")
+        _require("theta_stop_std_rad", self.theta_stop_std_rad, lambda v: 0 < v < math.pi / 4, "in (0, pi/4)")
         for name in ("spring_temp_coeff_per_k", "moment_temp_coeff_per_k"):
             _require(name, getattr(self, name), lambda v: abs(v) < 1e-2, "with |value| < 1e-2 per K")
         if self.damping_per_s**2 >= self.spring_nm_per_rad / self.inertia_kgm2:
@@ -171,13 +189,14 @@ class Probe:
 
         ``f00_hz`` may replace one of ``spring_nm_per_rad`` or ``inertia_kgm2``; when all three
         are given they must agree with Eq. S1 to 1e-4, otherwise the file contradicts itself.
-        ``theta_stop_deg`` is accepted for ``theta_stop_rad``. A ``calibration`` mapping (how the
+        ``theta_stop_deg`` is accepted for ``theta_stop_rad`` (and ``theta_stop_std_deg`` for
+        ``theta_stop_std_rad``). A ``calibration`` mapping (how the
         constants were measured: :func:`calibration_record`) is not a constant and is skipped.
         """
         data = dict(data)
         if not isinstance(data.pop("calibration", {}), dict):
             raise ValueError("the probe file's 'calibration' section must be a mapping")
-        allowed = {f.name for f in dataclasses.fields(cls)} | {"f00_hz", "theta_stop_deg"}
+        allowed = {f.name for f in dataclasses.fields(cls)} | {"f00_hz", "theta_stop_deg", "theta_stop_std_deg"}
         unknown = set(data) - allowed
         if unknown:
             raise ValueError(f"unknown probe keys {sorted(unknown)}; allowed: {sorted(allowed)}")
@@ -187,6 +206,10 @@ class Probe:
             raise ValueError("theta_stop_deg and theta_stop_rad are both given: give one of them")
         if "theta_stop_deg" in data:
             data["theta_stop_rad"] = math.radians(data.pop("theta_stop_deg"))
+        if "theta_stop_std_deg" in data and "theta_stop_std_rad" in data:
+            raise ValueError("theta_stop_std_deg and theta_stop_std_rad are both given: give one of them")
+        if "theta_stop_std_deg" in data:
+            data["theta_stop_std_rad"] = math.radians(data.pop("theta_stop_std_deg"))
         f00 = data.pop("f00_hz", None)
         damping = data.get("damping_per_s", cls.damping_per_s)
         omega2 = None if f00 is None else (TWO_PI * f00) ** 2 + damping**2
@@ -213,11 +236,12 @@ class Probe:
         return probe
 
     def to_dict(self) -> dict:
-        """The probe-file keys; ``moment_temp_coeff_per_k`` only where it is set, so that the
-        files of probes without it read as they always did."""
+        """The probe-file keys; ``moment_temp_coeff_per_k`` and the uncertainties only where they
+        are set, so that the files of probes without them read as they always did."""
         data = {f.name: float(getattr(self, f.name)) for f in dataclasses.fields(self)}
-        if self.moment_temp_coeff_per_k == 0.0:
-            del data["moment_temp_coeff_per_k"]
+        for name, unset in UNSET_BY_DEFAULT.items():
+            if data[name] == unset:
+                del data[name]
         data["f00_hz"] = float(self.f00_hz)
         return data
 

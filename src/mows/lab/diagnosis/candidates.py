@@ -22,7 +22,10 @@ import numpy as np
 import scipy.stats
 
 from mows.lab import progress
+from mows.lab.diagnosis import plausibility
+from mows.lab.diagnosis.plausibility import Conflict
 from mows.lab.diagnosis.projections import Signature, orthonormal_basis, project_out, signature
+from mows.lab.diagnosis.residual_structure import GOODNESS_ALPHA
 from mows.lab.model.effects import Effect, untestable_reason
 from mows.lab.model.least_squares import FitResult, FittedParameter, parameters_dict
 from mows.physics.probe import Probe
@@ -32,6 +35,9 @@ TIE_DELTA_BIC = 2.0
 STRONG_DELTA_BIC = 10.0
 STRONG_P = 1e-3
 REFIT_P = 0.05
+NONLINEAR_MARGIN = 2.0  # a refit may gain up to this × the score statistic (the linearised gain)
+REJECTED_SIGMAS = 3.0  # a free fit this far from an effect's physical value rejects that value
+EXPLAINED_FRACTION = 0.5  # of the excess χ² − dof: a free effect that explains less only shaves the structure
 ABSORBED = "no signature in this table that the current model cannot already absorb"
 
 # worth_refit(effect, signature, free parameters the form adds): refit rather than take the one-step estimate
@@ -58,6 +64,12 @@ class Form:
     added: int = 0  # free parameters the form adds (k)
     rank: int = 0  # of the effect's projected signature
     shift_norm: float = 0.0  # at physics: ‖weighted shift of the residual‖ before the scaling
+    conflicts: tuple[Conflict, ...] = ()  # what the form's fit claims that physics does not allow
+
+    @property
+    def possible(self) -> bool:
+        """The form's fit is physics (:mod:`mows.lab.diagnosis.plausibility`)."""
+        return not self.conflicts
 
     def at_dispersion(self, phi: float, n: int) -> Form:
         """This form judged against the scatter φ: ΔBIC = Δχ²/φ − k·ln n and its p-value (free:
@@ -86,6 +98,7 @@ class Form:
             "delta_bic": finite_or_none(self.delta_bic),
             "p_value": finite_or_none(self.p_value),
             "chi2_dof_after": finite_or_none(self.chi2_dof_after),
+            "would_need": [c.to_dict() for c in self.conflicts],
         }
 
 
@@ -115,7 +128,15 @@ class Candidate:
 
     @property
     def chosen(self) -> Form:
-        return self.physics if self.physics is not None and self.physics.delta_bic >= self.free.delta_bic else self.free
+        """The form the candidate stands for: held at physics unless the data reject the
+        physical value (the free fit lies more than ``REJECTED_SIGMAS`` of its σ from it) and
+        the free form is better by ΔBIC; a form physics allows over one it does not."""
+        if self.physics is None:
+            return self.free
+        if self.physics.possible != self.free.possible:
+            return self.physics if self.physics.possible else self.free
+        rejected = self.physics_deviation > REJECTED_SIGMAS
+        return self.free if rejected and self.free.delta_bic > self.physics.delta_bic else self.physics
 
     @property
     def forms(self) -> list[Form]:
@@ -156,7 +177,14 @@ class Candidate:
 
     @property
     def strong(self) -> bool:
-        return self.delta_bic > STRONG_DELTA_BIC and self.p_value < STRONG_P
+        """Strong evidence, at values physics allows."""
+        return self.delta_bic > STRONG_DELTA_BIC and self.p_value < STRONG_P and self.chosen.possible
+
+    @property
+    def would_need(self) -> str:
+        """What the effect would need, where physics does not allow it ("" where it does): the
+        finding when the data ask for it strongly."""
+        return "; ".join(c.text for c in self.chosen.conflicts)
 
     def to_dict(self) -> dict:
         return {
@@ -172,6 +200,7 @@ class Candidate:
             "at_physics": None if self.physics is None else self.physics.to_dict(),
             "physics_deviation_sigma": finite_or_none(self.physics_deviation),
             "within_bounds": self.within_bounds,
+            "would_need": self.would_need,
             "group": self.group,
             "explanation": self.effect.explanation,
         }
@@ -194,9 +223,9 @@ def dispersion(fit: FitResult, candidates: Iterable[Candidate]) -> float:
     above noise, a raw-χ² BIC rewards any parameter that shaves a little off a huge χ²; judged
     against the scatter that no candidate removes, Δχ²/φ, only an effect that explains the
     structure (and so brings φ to ≈ 1) gains real evidence. One φ for every candidate of a step,
-    so that candidates are ranked by their Δχ², not by their own scatter. φ = 1 once the
-    residual is noise."""
-    after = [f.chi2_after / max(f.dof_after, 1) for c in candidates for f in c.forms]
+    so that candidates are ranked by their Δχ², not by their own scatter; a form at values
+    physics does not allow reaches nothing. φ = 1 once the residual is noise."""
+    after = [f.chi2_after / max(f.dof_after, 1) for c in candidates for f in c.forms if f.possible]
     return max(1.0, min([fit.chi2_dof, *after]))
 
 
@@ -209,23 +238,45 @@ def quasi_gain(old: FitResult, new: FitResult) -> float:
     return (old.chi2 - new.chi2) / phi - (new.k - old.k) * math.log(new.n)
 
 
+def explains_excess(fit: FitResult, form: Form) -> bool:
+    """``form`` accounts for at least ``EXPLAINED_FRACTION`` of ``fit``'s excess χ² − dof. A free
+    effect that explains less of a residual far above noise fits some of the structure of
+    physics it is not: a spring drift takes the mean of a moment falling with temperature."""
+    return fit.chi2 - form.chi2_after >= EXPLAINED_FRACTION * (fit.chi2 - fit.dof)
+
+
+def closes_the_gap(form: Form) -> bool:
+    """With ``form`` the residual is consistent with noise (χ² p ≥ the verdict's GOODNESS_ALPHA).
+    A generic correction (``Effect.generic``) stands for several causes; it is credible only
+    where it explains the data: where structure remains, some other physics is at work and the
+    correction would take a share of its signal (a moment scale of −0.4 %, the mean of a moment
+    falling with temperature, where the calibration is right)."""
+    return float(scipy.stats.chi2.sf(form.chi2_after, max(form.dof_after, 1))) >= GOODNESS_ALPHA
+
+
+def cv_gain(old: FitResult, new: FitResult) -> float:
+    """The held-out χ² ``new`` saves over ``old`` (:attr:`FitResult.held_out_chi2`: each fold
+    predicted by the fit without it), scaled by the scatter as :func:`quasi_gain` scales the
+    in-sample gain. An effect that describes physics predicts configurations the fit did not
+    see; one that only absorbs the structure of a few of them does not."""
+    phi = max(1.0, min(old.chi2_dof, new.chi2_dof))
+    return (old.held_out_chi2 - new.held_out_chi2) / phi
+
+
 def rank_candidates(
     fit: FitResult, effects: Iterable[Effect], probe: Probe, worth_refit: WorthRefit | None = None
 ) -> tuple[list[Candidate], dict[str, str]]:
     """(candidates best first, {effect: why it cannot be tested}) for the ``effects`` not yet in
     ``fit``'s model: score test on the projected signature, then each form's refit where
     ``worth_refit(effect, signature, added)`` (``added``: the free parameters the form adds;
-    default: score p < REFIT_P), else the one-step estimate."""
-    worth_refit = worth_refit or (lambda effect, test, added: test.p_value < REFIT_P)
+    default: :func:`could_be_evidence`), else the one-step estimate."""
     residual = fit.weighted_residual
     model_basis = orthonormal_basis(fit.jacobian)
-    candidates: list[Candidate] = []
+    tests: list[tuple[Effect, Signature]] = []
     untestable: dict[str, str] = {}
-    effects = list(effects)
+    effects = [effect for effect in effects if effect.name not in fit.model.effect_names]
     for done, effect in enumerate(effects):
         progress.stage("ranking candidate effects", done, len(effects))
-        if effect.name in fit.model.effect_names:
-            continue
         reason = untestable_reason(effect, fit.table, probe)
         test = None if reason else signature(fit.extension_columns(effect), model_basis, residual)
         if test is not None and not test.rank:
@@ -234,21 +285,53 @@ def rank_candidates(
             untestable[effect.name] = reason
             continue
         assert test is not None  # there was a test unless there was a reason not to test
-        candidates.append(_candidate(fit, effect, test, functools.partial(worth_refit, effect, test)))
+        tests.append((effect, test))
+    worth_refit = worth_refit or could_be_evidence(fit, [test for _, test in tests])
+    candidates = [
+        _candidate(fit, effect, test, functools.partial(worth_refit, effect, test), probe) for effect, test in tests
+    ]
     phi = dispersion(fit, candidates)
     candidates = [c.at_dispersion(phi, fit.n) for c in candidates]
     candidates.sort(key=lambda c: -c.delta_bic)
     return candidates, untestable
 
 
-def _candidate(fit: FitResult, effect: Effect, test: Signature, refit: Callable[[int], bool]) -> Candidate:
+def could_be_evidence(fit: FitResult, tests: list[Signature]) -> WorthRefit:
+    """The default refit rule: refit a form only where it could be positive evidence (ΔBIC > 2)
+    against the step's scatter. A refit gains at most ``NONLINEAR_MARGIN`` × the score statistic
+    (the linearised Δχ²), and the scatter φ no form can bring below (χ² less the largest such
+    gain, per degree of freedom) scales it. Far above noise, where every score test is
+    significant, this spares the refits of effects that could only shave the residual."""
+    largest = max((test.statistic for test in tests), default=0.0)
+    floor = max(1.0, (fit.chi2 - NONLINEAR_MARGIN * largest) / max(fit.dof, 1))
+    log_n = math.log(fit.n)
+
+    def worth(effect: Effect, test: Signature, added: int) -> bool:
+        return test.p_value < REFIT_P and NONLINEAR_MARGIN * test.statistic / floor - added * log_n > TIE_DELTA_BIC
+
+    return worth
+
+
+def _candidate(
+    fit: FitResult, effect: Effect, test: Signature, refit: Callable[[int], bool], probe: Probe
+) -> Candidate:
     """Refit the model with ``effect`` in each form where ``refit(added free parameters)``, or
     take the one-step (linearised) refit along the projected signature. A Δχ² above the strong
     threshold needs a score statistic above it too (the score is the largest Δχ² of the
     linearised problem), so with the default rule no strong form is left to the one-step
-    estimate."""
+    estimate. Each refitted form is checked against physics (:func:`plausibility.conflicts`)."""
     free, parameters = _free_form(fit, effect, test, refit(len(effect.parameters)))
+    free = dataclasses.replace(
+        free,
+        conflicts=tuple(
+            plausibility.conflicts(free.fit, probe)
+            if free.fit is not None
+            else plausibility.effect_conflicts(effect, parameters, probe)
+        ),
+    )
     physics = None if effect.physical is None else _physics_form(fit, effect, test, refit(0))
+    if physics is not None and physics.fit is not None:
+        physics = dataclasses.replace(physics, conflicts=tuple(plausibility.conflicts(physics.fit, probe)))
     inside = all(
         p.lower + 1e-6 * (p.upper - p.lower) < fitted.value < p.upper - 1e-6 * (p.upper - p.lower)
         for p, fitted in zip(effect.parameters, parameters)

@@ -74,9 +74,9 @@ def _clusters(candidates: list[Candidate]) -> list[list[Candidate]]:
     return [_tie_break([by_name[name] for name in part]) for part in parts if len(part) > 1]
 
 
-def group_candidates(candidates: list[Candidate], fit: FitResult, probe: Probe) -> list[Group]:
+def group_candidates(candidates: list[Candidate], fit: FitResult, probe: Probe, separate: bool = True) -> list[Group]:
     """Number the groups by rank, put each group's members together in tie-break order
-    (``candidates`` is reordered in place) and find what separates each group."""
+    (``candidates`` is reordered in place) and, with ``separate``, find what separates each group."""
     cluster_of = {c.name: members for members in _clusters(candidates) for c in members}
     ranked: list[Candidate] = []
     groups: list[Group] = []
@@ -88,7 +88,9 @@ def group_candidates(candidates: list[Candidate], fit: FitResult, probe: Probe) 
             for member in members:
                 member.group = len(groups) + 1
             ranked.extend(members)
-            groups.append(_separate(members, fit, probe, len(groups) + 1))
+            number = len(groups) + 1
+            names = [c.name for c in members]
+            groups.append(_separate(members, fit, probe, number) if separate else Group(number, names, None, "", []))
     candidates[:] = ranked
     return groups
 

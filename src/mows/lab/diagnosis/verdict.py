@@ -8,7 +8,9 @@ the candidates (:mod:`mows.lab.diagnosis.candidates`), their groups and separati
   half of the excess χ² − dof;
 - else ``adequate`` when χ² is consistent with its dof (p ≥ 0.005) and no structure is
   significant;
-- else ``unexplained_structure``.
+- else ``unexplained_structure``; then the search beyond the catalog
+  (:func:`mows.lab.diagnosis.discovery.discover`) names the terms of the rows' covariates the
+  residual follows, and the explanation gives the strongest one's plugin in its physical form.
 
 :func:`mows.lab.report.lab_report.analyse` turns ``adequate`` into ``inconsistent_physics`` or
 ``needs_generic_term`` when the physics checks say so.
@@ -20,7 +22,8 @@ import dataclasses
 import enum
 from collections.abc import Iterable
 
-from mows.lab.diagnosis.candidates import Candidate, rank_candidates
+from mows.lab.diagnosis.candidates import Candidate, closes_the_gap, explains_excess, rank_candidates
+from mows.lab.diagnosis.discovery import WHY, DiscoveredTerm, Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group, absorbed_groups, group_candidates
 from mows.lab.diagnosis.residual_structure import (
     GOODNESS_ALPHA,
@@ -33,7 +36,6 @@ from mows.lab.model.effects import Effect
 from mows.lab.model.least_squares import FitResult
 from mows.physics.probe import Probe
 
-EXPLAINED_FRACTION = 0.5
 FIELD_SPRINGS = ("b_along_t", "g_t_per_m")  # covariates that are the model's own magnetic springs
 SLOW_COVARIATES = ("temperature_k", "t_s")  # what a spring drifts with
 
@@ -58,33 +60,62 @@ class Diagnosis:
     untestable: dict[str, str]  # effect name → why it cannot be tested
     verdict: Verdict
     explanation: str
+    discovery: Discovery | None = None  # beyond the catalog: for unexplained structure
 
     @property
     def best(self) -> Candidate | None:
         return self.candidates[0] if self.candidates else None
 
 
-def diagnose(fit: FitResult, effects: Iterable[Effect], probe: Probe | None = None) -> Diagnosis:
+def diagnose(
+    fit: FitResult, effects: Iterable[Effect], probe: Probe | None = None, for_report: bool = True
+) -> Diagnosis:
     """Rank ``effects`` (an iterable of :class:`Effect`, those already in the model are skipped)
-    as explanations of ``fit``'s residual; group, propose separating measurements, verdict."""
+    as explanations of ``fit``'s residual; group, propose separating measurements, verdict.
+    ``for_report=False`` leaves out what only a report reads (the separating measurements, the
+    groups of effects the model absorbs, the discovery beyond the catalog): a search step's."""
     probe = probe or fit.model.probe
     assert probe is not None  # a model that was fitted has its probe
     effects = list(effects)
     candidates, untestable = rank_candidates(fit, effects, probe)
-    groups = group_candidates(candidates, fit, probe)
-    groups += absorbed_groups(fit, effects, candidates, untestable, probe, len(groups) + 1)
+    return _diagnosis(fit, effects, probe, candidates, untestable, for_report)
+
+
+def completed(found: Diagnosis, effects: Iterable[Effect], probe: Probe) -> Diagnosis:
+    """A search step's diagnosis (``for_report=False``) with what a report reads added."""
+    return _diagnosis(found.fit, list(effects), probe, found.candidates, found.untestable, True)
+
+
+def _diagnosis(
+    fit: FitResult,
+    effects: list[Effect],
+    probe: Probe,
+    candidates: list[Candidate],
+    untestable: dict[str, str],
+    for_report: bool,
+) -> Diagnosis:
+    groups = group_candidates(candidates, fit, probe, separate=for_report)
+    if for_report:
+        groups += absorbed_groups(fit, effects, candidates, untestable, probe, len(groups) + 1)
     structure = residual_structure(fit)
     verdict, explanation = _verdict(fit, structure, candidates)
-    return Diagnosis(fit, structure, candidates, groups, untestable, verdict, explanation)
+    if verdict != Verdict.UNEXPLAINED_STRUCTURE or not for_report:
+        return Diagnosis(fit, structure, candidates, groups, untestable, verdict, explanation)
+    discovery = discover(fit, probe)
+    explanation = f"{explanation} {_no_answer(fit, structure, discovery)}".strip()
+    return Diagnosis(fit, structure, candidates, groups, untestable, verdict, explanation, discovery)
 
 
 # --- verdict ------------------------------------------------------------------------------------
 def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate]) -> tuple[Verdict, str]:
+    """The verdict and its explanation; for ``unexplained_structure`` without what the residual
+    follows (:func:`_no_answer` adds it)."""
     best = candidates[0] if candidates else None
     excess = fit.chi2 - fit.dof
     if best is not None and best.strong:
         gain = fit.chi2 - best.chosen.chi2_after
-        if gain >= EXPLAINED_FRACTION * excess:
+        credible = not best.effect.generic or closes_the_gap(best.chosen)  # a generic term must explain the data
+        if explains_excess(fit, best.chosen) and credible:
             group = (
                 f" (group {best.group}: the data cannot tell it from "
                 f"{', '.join(c.name for c in candidates if c.group == best.group and c is not best)})"
@@ -99,6 +130,10 @@ def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate]) 
         unexplained = (
             f"The best candidate, {best.label} (ΔBIC = {best.delta_bic:.1f}), accounts for only "
             f"{100 * gain / excess:.0f}% of the excess χ². "
+            if not explains_excess(fit, best.chosen)
+            else f"The best candidate, {best.label} (ΔBIC = {best.delta_bic:.1f}), is a generic correction "
+            f"that leaves structure (χ²/dof {fit.chi2_dof:.3g} → {best.chi2_dof_after:.3g}): it would take a "
+            "share of physics it is not. "
         )
     elif best is not None:
         unexplained = (
@@ -110,21 +145,37 @@ def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate]) 
         unexplained = ""
     if structure.goodness_p >= GOODNESS_ALPHA and not structure.significant:
         return Verdict.ADEQUATE, "The model explains the data: " + structure.summary
-    found = unexplained + " " + structure.summary + " " + _no_answer(fit, structure)
+    found = unexplained + " " + structure.summary
     return Verdict.UNEXPLAINED_STRUCTURE, found.strip()
 
 
-def _no_answer(fit: FitResult, structure: Structure) -> str:
-    """What the residual follows when no catalog effect explains it (single covariates and
-    products of two, angle harmonics included), and the plugin a user would write for the
-    strongest (docs/model_lab.md)."""
+def _no_answer(fit: FitResult, structure: Structure, discovery: Discovery) -> str:
+    """What the residual follows when no catalog effect explains it: the terms the search beyond
+    the catalog found, with the strongest one's plugin in its physical form, then the strongest
+    trends with single covariates and products of two (angle harmonics included); without a
+    discovered term, the plugin a user would write for the strongest trend (docs/model_lab.md)."""
     trends = sorted(structure.covariates + product_trends(fit), key=lambda trend: -abs(trend.correlation))
-    if not trends:
-        return ""
     follows = "; ".join(f"{t.name} (correlation {t.correlation:+.2f}, p = {t.p_value:.1e})" for t in trends[:3])
+    found = [discovery.summary]
+    if discovery.terms:
+        found.append(_discovered_plugin(discovery.terms[0]))
+    if trends:
+        found.append(f"The residual follows {follows}.")
+    if trends and not discovery.terms:
+        found.append(
+            "A plugin for the strongest, to save as my_effect.py and run with --plugin my_effect.py: `{}` ({}).".format(
+                *plugin_sketch(trends[0].name)
+            )
+        )
+    return " ".join(found)
+
+
+def _discovered_plugin(term: DiscoveredTerm) -> str:
+    """The hint for a discovered term: its plugin on one line and the parameter it fits here."""
+    fitted = "" if term.plugin_parameter is None else f"; on this table {term.plugin_parameter.text()}"
     return (
-        f"The residual follows {follows}. A plugin for the strongest, to save as my_effect.py and run with "
-        "--plugin my_effect.py: `{}` ({}).".format(*plugin_sketch(trends[0].name))
+        f"A plugin for the strongest, in its physical form, to save as {term.effect_name}.py and run with "
+        f"--plugin {term.effect_name}.py: `{term.plugin_line}` ({WHY[term.plugin_output]}{fitted})."
     )
 
 

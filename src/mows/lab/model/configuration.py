@@ -48,7 +48,7 @@ import numpy as np
 from mows.lab.data.table import FIELD, GRADIENT
 from mows.physics import ringdown_average
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, probe_axes
-from mows.physics.potential import ArcPotential
+from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, LOCAL_NODES, ArcPotential, chebyshev_nodes_rad
 from mows.physics.probe import Probe
 from mows.physics.schema import FloatOrArray, Vector
 
@@ -56,6 +56,8 @@ if TYPE_CHECKING:
     from mows.lab.data.table import MeasurementTable
 
 SLICE_ROWS = 20_000  # configurations the potential evaluates at once
+SPRING_NODES = 5  # nodes in kM of a configuration whose spring drifts from row to row
+SPRING_SPREAD = 1e-2  # relative spread of kM up to which h is interpolated between them
 AmplitudeNodes = Callable[["Configuration", np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
@@ -102,6 +104,7 @@ class Configuration:
     damping: float = 0.0
     neighbour_field_t: np.ndarray | None = None
     neighbour_gradient_t_per_m: np.ndarray | None = None
+    energy_j: np.ndarray | None = None
 
     @classmethod
     def base(cls, table: MeasurementTable, probe: Probe) -> Configuration:
@@ -155,6 +158,41 @@ class Configuration:
         return axes, field, gradient, hessian
 
 
+@dataclasses.dataclass(frozen=True)
+class LeverArc:
+    """Where the magnet is along its swing, for an energy a plugin adds (``energy_j``).
+
+    Per row and deflection θ at the potential's nodes (m = LOCAL_NODES), all in the probe frame
+    (x' along the undeflected lever): ``theta_rad`` (m,), ``direction`` (m, 3) the moment's
+    unit vector u(θ) = (cos θ, sin θ, 0), ``displacement_m`` (n, m, 3) the magnet's
+    δr = l·(cos θ − 1, sin θ, 0) from its rest position, ``field_t`` (n, m, 3) the field there
+    (B + G·δr + ½·H:δr δr of the configuration, the reference with the effects applied before
+    the plugin), ``gradient_t_per_m`` (n, 3, 3) at the rest position, ``moment_am2`` (n, 1) with
+    the moment's scale, and ``theta0_rad`` (n, 1). Per-row arrays have a trailing axis of 1 (or
+    the nodes'), so that ``-0.5 * alpha * (arc.field_t @ ...)`` broadcasts to (n, m)."""
+
+    theta_rad: np.ndarray
+    direction: np.ndarray
+    displacement_m: np.ndarray
+    field_t: np.ndarray
+    gradient_t_per_m: np.ndarray
+    moment_am2: np.ndarray
+    theta0_rad: np.ndarray
+
+    @classmethod
+    def of(cls, config: Configuration, probe: Probe) -> LeverArc:
+        _, field, gradient, hessian = config.probe_frame()
+        theta = chebyshev_nodes_rad(DEFAULT_HALF_WIDTH_RAD, LOCAL_NODES)
+        direction = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], -1)
+        offset = probe.lever_m * (direction - np.array([1.0, 0.0, 0.0]))
+        displacement = np.broadcast_to(offset, (len(field),) + offset.shape)
+        along = field[:, None, :] + np.einsum("nij,mj->nmi", gradient, offset)
+        if hessian is not None:
+            along = along + 0.5 * np.einsum("nijk,mj,mk->nmi", hessian, offset, offset)
+        moment = probe.moment_am2 * np.broadcast_to(np.asarray(config.moment_factor, float), (len(field),))
+        return cls(theta, direction, displacement, along, gradient, moment[:, None], config.theta0_rad[:, None])
+
+
 def in_probe_frame(
     axes: np.ndarray, field_t: np.ndarray, gradient_t_per_m: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -170,29 +208,81 @@ def frequency_factor(
     Rows whose every per-row input is identical have the same h whatever the parameters, so h
     is evaluated once per distinct configuration (:func:`distinct_rows`) and given to each of
     its rows: the cost and the memory of the potential and the amplitude nodes grow with the
-    distinct configurations, not with the rows. ``amplitude_nodes(config, start_rad)`` gives
-    (A_q (n, q), c_q (n, q)) of the configuration's ring-downs that start at ``start_rad``
-    (default: :func:`ringdown_nodes`, uncached); used when ``config.amplitude`` ≠ 0.
+    distinct configurations, not with the rows. A spring that drifts from row to row (time,
+    temperature) would make every row distinct; within a configuration whose springs spread by
+    at most ``SPRING_SPREAD`` of kM, h is a smooth function of the one number kM, evaluated at
+    ``SPRING_NODES`` Chebyshev nodes of its range and interpolated (:func:`_spring_plan`).
+    ``amplitude_nodes(config, start_rad)`` gives (A_q (n, q), c_q (n, q)) of the
+    configuration's ring-downs that start at ``start_rad`` (default: :func:`ringdown_nodes`,
+    uncached); used when ``config.amplitude`` ≠ 0.
     """
     first, inverse = distinct_rows(config)
+    rows, springs, index, weight = _spring_plan(config.spring_nm_per_rad, first, inverse, probe.spring_nm_per_rad)
+    evaluated = config.rows(rows)
+    evaluated.spring_nm_per_rad = springs
     nodes = amplitude_nodes or ringdown_nodes
     # In slices, so that the potential's work arrays stay bounded where every row differs.
     h = np.concatenate(
         [
-            _frequency_factor(config.rows(first[start : start + SLICE_ROWS]), probe, nodes)
-            for start in range(0, len(first), SLICE_ROWS)
+            _frequency_factor(evaluated.rows(np.arange(start, min(start + SLICE_ROWS, len(rows)))), probe, nodes)
+            for start in range(0, len(rows), SLICE_ROWS)
         ]
     )
-    return h[inverse], config.frequency_hz
+    return np.where(weight != 0.0, h[index] * weight, 0.0).sum(-1), config.frequency_hz
+
+
+def _spring_plan(
+    spring: np.ndarray, first: np.ndarray, inverse: np.ndarray, reference: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, springs, index, weight): the evaluations that give every row's h, and how.
+
+    Evaluation e is row ``rows[e]``'s configuration with kM = ``springs[e]``; row i's h is
+    Σ_j weight[i, j]·h[index[i, j]]. A configuration (``first``/``inverse``: groups equal in
+    everything but kM) whose springs spread by at most ``SPRING_SPREAD``·``reference`` gets
+    ``SPRING_NODES`` Chebyshev nodes over its range and Lagrange weights: h is analytic in kM,
+    so the error falls as (spread/2)^K/K! — below 1e-13 of h at the limit. Other rows are
+    evaluated at their own kM, once per distinct (configuration, kM)."""
+    n, count = len(spring), len(first)
+    low, high = np.full(count, np.inf), np.full(count, -np.inf)
+    np.minimum.at(low, inverse, spring)
+    np.maximum.at(high, inverse, spring)
+    interpolated = (high > low) & (high - low <= SPRING_SPREAD * reference)
+    index, weight = np.zeros((n, SPRING_NODES), int), np.zeros((n, SPRING_NODES))
+    exact = np.flatnonzero(~interpolated[inverse])
+    own, own_inverse = distinct_rows_of([inverse[exact], spring[exact]]) if exact.size else (exact, exact)
+    index[exact, 0], weight[exact, 0] = own_inverse, 1.0
+    groups = np.flatnonzero(interpolated)
+    unit = np.cos(np.pi * (np.arange(SPRING_NODES) + 0.5) / SPRING_NODES)
+    mid, half = 0.5 * (low + high), 0.5 * (high - low)
+    position = np.full(count, -1)
+    position[groups] = np.arange(len(groups))
+    shared = np.flatnonzero(interpolated[inverse])
+    group = inverse[shared]
+    index[shared] = len(own) + position[group][:, None] * SPRING_NODES + np.arange(SPRING_NODES)
+    weight[shared] = _lagrange_weights((spring[shared] - mid[group]) / half[group], unit)
+    rows = np.concatenate([exact[own], np.repeat(first[groups], SPRING_NODES)])
+    springs = np.concatenate([spring[exact[own]], (mid[groups, None] + half[groups, None] * unit).ravel()])
+    return rows, springs, index, weight
+
+
+def _lagrange_weights(x: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """(len(x), len(nodes)): the Lagrange basis polynomials of ``nodes`` at ``x``."""
+    weights = np.ones((len(x), len(nodes)))
+    for k, node in enumerate(nodes):
+        for j, other in enumerate(nodes):
+            if j != k:
+                weights[:, k] *= (x - other) / (node - other)
+    return weights
 
 
 def distinct_rows(config: Configuration) -> tuple[np.ndarray, np.ndarray]:
     """(first, inverse): a row of each distinct configuration and, for every row, the index of its
     configuration in ``first``. Rows are the same configuration when every per-row input that h
     reads is bitwise equal: not the additive ``frequency_hz``, the ring-down's start and window
-    only with the finite-amplitude readout on, its damping only with the damped readout on."""
+    only with the finite-amplitude readout on, its damping only with the damped readout on; and
+    not kM, which :func:`_spring_plan` handles."""
     n = len(config.theta0_rad)
-    unread = {"frequency_hz"}
+    unread = {"frequency_hz", "spring_nm_per_rad"}
     if not config.amplitude:
         unread |= {"start_evidence_rad", "ringdown_damping_per_s", "ringdown_duration_s"}
     if not config.damping:
@@ -278,6 +368,7 @@ def _frequency_factor(config: Configuration, probe: Probe, amplitude_nodes: Ampl
         hessian_t_per_m2=None if hessian is None else factor[..., None, None] * hessian,
         gravity_m_per_s2=gravity,
         spring_nm_per_rad=config.spring_nm_per_rad,
+        energy_j=config.energy_j,
     )
     stiffness = [_rest_stiffness(probe, factor * b, **local) for b in variants]
     h = _readout(config, probe, _blend(stiffness, config.deflection))
@@ -348,6 +439,7 @@ def _potential(
     hessian_t_per_m2: np.ndarray | None,
     gravity_m_per_s2: np.ndarray | None,
     spring_nm_per_rad: np.ndarray,
+    energy_j: np.ndarray | None = None,
     repeat: int | None = None,
 ) -> ArcPotential:
     """ArcPotential.from_local_field for the rows, optionally each repeated ``repeat`` times."""
@@ -362,6 +454,7 @@ def _potential(
         expand(hessian_t_per_m2),
         expand(gravity_m_per_s2),
         spring_nm_per_rad=expand(spring_nm_per_rad),
+        energy_j=expand(energy_j),
     )
 
 

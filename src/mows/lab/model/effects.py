@@ -31,6 +31,9 @@ if TYPE_CHECKING:
     from mows.lab.data.table import MeasurementTable
 
 AT_PHYSICS = " (at physics)"  # label suffix of an effect held at its physical values
+# Each parameter's value as physics and the probe file allow it, (centre, σ), or None where
+# physics says nothing (a free calibration term such as an unreferenced field).
+Prior = Callable[[Probe], tuple[tuple[float, float] | None, ...]]
 
 # Stages: effects are applied in this order, so that e.g. an angle offset turns the probe
 # before fields are projected, and the readout comes last.
@@ -68,7 +71,9 @@ class Effect:
     the effect directly. ``physical`` holds the parameter values at which the effect is the
     physics as predicted from the probe constants and the table (None when its size is not
     known, e.g. gravity's tilt): the effect can then also be tested *at physics*, with no free
-    parameter (:meth:`at_physics`). ``generic`` marks a free correction that stands for
+    parameter (:meth:`at_physics`). ``prior`` gives each parameter's value as physics and the
+    probe file allow it, (centre, σ): a fit that needs a value far outside it is not physics
+    (:mod:`mows.lab.diagnosis.plausibility`). ``generic`` marks a free correction that stands for
     several physical causes and has no value of its own (moment scale, field offset, spring
     drift, angle offset): a model that needs one is not called adequate.
     """
@@ -88,6 +93,7 @@ class Effect:
     generic: bool = False  # a free correction with no physical value (a calibration term)
     needs: str = ""  # why a table without the ``requires`` columns cannot test it, in words (default: the columns)
     free: Effect | None = None  # of an effect held at physics: the same effect with its parameters free
+    prior: Prior | None = None
 
     @property
     def parameter_names(self) -> tuple[str, ...]:

@@ -10,6 +10,7 @@ identifiability, cross-validation and the report. The model and the method are d
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
@@ -347,6 +348,31 @@ class FitResult:
         """d(weighted residual)/d(values) of this model at the fitted values on ``table``'s
         ``rows`` (default: all), (rows, k)."""
         return Problem(self.model, table, rows).columns(self.values, range(self.k))
+
+    @functools.cached_property
+    def held_out_chi2(self) -> float:
+        """χ² of every row as predicted by the fit without its fold (:func:`mows.lab.data.folds.cv_folds`:
+        whole sweeps, current steps or temperature spans), to first order in the parameters:
+        each fold's refit is one Gauss–Newton step from this fit, δ = −(J₋ᵀJ₋)⁺·J₋ᵀr₋ over the
+        other rows, which is exact for parameters that enter linearly (f00, the blended
+        strengths) and costs no evaluation of the model. It is how the search asks whether an
+        effect generalises: one that only fits the structure of some configurations predicts the
+        others worse. Infinite when a fold held the only information on a parameter."""
+        jacobian, residual = self.jacobian, self.weighted_residual
+        scale = np.linalg.norm(jacobian, axis=0)
+        scale = np.where(scale > 0, scale, 1.0)
+        unit = jacobian / scale
+        rank = np.linalg.matrix_rank(unit, rtol=DEGENERATE_RTOL)
+        total = 0.0
+        for rows in cv_folds(self.table):
+            kept = np.ones(self.n, bool)
+            kept[rows] = False
+            if np.linalg.matrix_rank(unit[kept], rtol=DEGENERATE_RTOL) < rank:
+                return math.inf
+            step = np.linalg.lstsq(unit[kept], -residual[kept], rcond=DEGENERATE_RTOL)[0]
+            predicted = residual[rows] + unit[rows] @ step
+            total += float(predicted @ predicted)
+        return total
 
     def cross_validate(self) -> float:
         """Cross-validated rms prediction error, Hz: K-fold over the rows' configurations (whole

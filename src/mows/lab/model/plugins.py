@@ -21,7 +21,20 @@ balance), so they compose with every other effect at any field:
 ``tilt_rad``                          small rotations (about x, about y) of the reference field
                                       and gradient into the plane, rad
 ``frequency_hz``                      added to f after the potential (a readout term, no physics)
+``energy_j``                          a function ``energy(arc) -> U_user`` (J, per row and
+                                      deflection): energy added to U(θ). ``arc`` is a
+                                      :class:`mows.lab.model.configuration.LeverArc`: the
+                                      deflections θ, the moment's direction u(θ), the magnet's
+                                      displacement and the field there, per row. Any mechanical
+                                      or magnetic effect is the energy it adds.
 ====================================  =======================================================
+
+An induced moment (a soft-magnetic part magnetised by the field along it) adds
+U = −½·α·(u·B)²::
+
+    @effect(name="induced_moment", parameters={"alpha_am2_per_t": (0.0, -1e-2, 1e-2, "A·m²/T")})
+    def induced_moment(rows, alpha_am2_per_t):
+        return {"energy_j": lambda arc: -0.5 * alpha_am2_per_t * ((arc.field_t * arc.direction).sum(-1)) ** 2}
 
 Rows expose the table's columns and the reference in the probe frame
 (:meth:`mows.lab.data.table.MeasurementTable.derived_columns`: ``rows.b_along_t``, ``rows.b_perp_t``,
@@ -42,13 +55,21 @@ from typing import Any
 import numpy as np
 
 from mows.lab.data.table import MeasurementTable, MissingColumnError
-from mows.lab.model.configuration import Configuration, rotation_matrix
+from mows.lab.model.configuration import Configuration, LeverArc, rotation_matrix
 from mows.lab.model.effects import MECHANICS, Effect, Parameter
+from mows.physics.potential import LOCAL_NODES
 from mows.physics.probe import Probe
 
 ENTRY_POINT_GROUP = "mows.lab.effects"
 # What a plugin may return: name → the trailing shape of one row's value.
-OUTPUTS = {"moment_scale": (), "stiffness_nm_per_rad": (), "field_offset_t": (3,), "tilt_rad": (2,), "frequency_hz": ()}
+OUTPUTS = {
+    "moment_scale": (),
+    "stiffness_nm_per_rad": (),
+    "field_offset_t": (3,),
+    "tilt_rad": (2,),
+    "frequency_hz": (),
+    "energy_j": (LOCAL_NODES,),
+}
 
 
 def effect(
@@ -99,6 +120,8 @@ def effect(
             if unknown:
                 raise ValueError(f"effect {name} returned {sorted(unknown)}; allowed: {', '.join(OUTPUTS)}")
             n = len(config.theta0_rad)
+            if "energy_j" in result:
+                result["energy_j"] = _energy_at_nodes(where, result["energy_j"], config, probe, called)
             _apply_outputs(config, {key: _finite_values(where, key, value, n, called) for key, value in result.items()})
 
         return Effect(
@@ -128,8 +151,20 @@ def _apply_outputs(config: Configuration, changes: dict[str, np.ndarray]) -> Non
         config.field_t = config.field_t + changes["field_offset_t"]
     if "moment_scale" in changes:
         config.moment_factor = config.moment_factor * (1.0 + changes["moment_scale"])
+    if "energy_j" in changes:
+        config.energy_j = changes["energy_j"] + (0.0 if config.energy_j is None else config.energy_j)
     config.spring_nm_per_rad = config.spring_nm_per_rad + changes.get("stiffness_nm_per_rad", 0.0)
     config.frequency_hz = config.frequency_hz + changes.get("frequency_hz", 0.0)
+
+
+def _energy_at_nodes(where: str, energy: object, config: Configuration, probe: Probe, called: str) -> object:
+    """A plugin's ``energy_j`` function evaluated along the lever's arc (:class:`LeverArc`)."""
+    if not callable(energy):
+        raise ValueError(f"{where} returned energy_j = {energy!r}: expected a function of the lever's arc (LeverArc)")
+    try:
+        return energy(LeverArc.of(config, probe))
+    except Exception as error:  # the plugin's bug is the user's input: say whose and where
+        raise ValueError(f"{where}'s energy_j raised {type(error).__name__}: {error} (called with {called})") from error
 
 
 def _finite_values(where: str, key: str, value: object, n: int, called: str) -> np.ndarray:

@@ -5,7 +5,8 @@ along the probe axis) and Fig. 4 (polar plot of |Δf(θ0)| with its decompositio
 field part, harmonic 1, and the gradient part, harmonic 2); residuals of the base and final
 model on separate axes (each on its own scale) and the final model's pulls, against θ0 and
 against every covariate; the ranked candidates with their alias groups (exact physical aliases
-in words and numbers); the error history (χ²/dof and cross-validated rms per step). Legends
+in words and numbers); the terms found beyond the catalog with the strongest one's plugin; the
+error history (χ²/dof and cross-validated rms per step). Legends
 sit outside the data.
 """
 
@@ -204,6 +205,43 @@ def _rows(cells_list: Iterable[Sequence[object]]) -> str:
     return "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells) + "</tr>" for cells in cells_list)
 
 
+def discovery_html(report: LabReport) -> str:
+    """The search beyond the catalog: its summary, a table of the terms, the strongest's plugin."""
+    found = report.discovery
+    if found is None:
+        return ""
+    rows = _rows(
+        [
+            (
+                t.name,
+                t.family,
+                f"{t.strength:+.4g} ± {t.std:.2g} {t.strength_unit}",
+                f"{100 * t.selection_frequency:.0f}%",
+                f"{t.cv_gain_chi2:.1f}",
+                t.reading,
+                t.plugin_parameter.text() if t.plugin_parameter else "",
+            )
+            for t in found.terms
+        ]
+    )
+    table = (
+        "<table><tr><th>term</th><th>family</th><th>strength</th><th>selected</th><th>held-out χ² gain</th>"
+        f"<th>reading</th><th>plugin parameter</th></tr>{rows}</table>"
+        if found.terms
+        else ""
+    )
+    plugin = (
+        f"<p>Plugin for the strongest, <code>{html.escape(found.terms[0].effect_name)}.py</code>:</p>"
+        f"<pre>{html.escape(found.terms[0].plugin)}</pre>"
+        if found.terms
+        else ""
+    )
+    return (
+        f"<h2>Beyond the catalog</h2><p>On {html.escape(found.on_model)}: {html.escape(found.summary)}</p>"
+        f"{table}{plugin}"
+    )
+
+
 def render_html(report: LabReport) -> str:
     """The report page as a string."""
     table = report.fit.table
@@ -269,6 +307,7 @@ table{{border-collapse:collapse}} tr:nth-child(even){{background:#f2f2f2}} img{{
 <h2>Candidate effects</h2>{_img(figure_candidates(report), "candidates")}
 <table><tr><th>rank</th><th>effect</th><th>ΔBIC</th><th>p</th><th>χ²/dof after</th><th>group</th>
 <th>parameters (free fit)</th></tr>{candidates}</table><ul>{groups}</ul>
+{discovery_html(report)}
 <h2>Error history</h2>{_img(figure_history(report), "history")}
 <table><tr><th>step</th><th>change</th><th>model</th><th>χ²/dof</th><th>BIC</th><th>CV rms (mHz)</th></tr>
 {history}</table>

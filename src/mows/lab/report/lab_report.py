@@ -13,6 +13,12 @@ diagnosis (:mod:`mows.lab.diagnosis.verdict`), with ``auto`` the stepwise select
 Every effect of the final model with a physical value gets a consistency check: its free fit
 with the rest of the model (value ± σ; for one held at physics, a refit with it set free); a
 physical value more than 3σ from it is reported in the notes.
+
+A final model that leaves structure no catalog effect explains, or that needs a generic
+correction, hides physics: the report carries the search beyond the catalog
+(:func:`mows.lab.diagnosis.discovery.discover`) as ``discovery``. For ``needs_generic_term`` it
+searches the residual of the final model without its generic corrections, which would
+otherwise absorb what they stand for.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from mows.lab.data.readers import from_sweep, load_table
 from mows.lab.data.reference import Reference
 from mows.lab.data.table import MeasurementTable, TableError
 from mows.lab.diagnosis.candidates import Candidate, physics_deviation
+from mows.lab.diagnosis.discovery import Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group
 from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import catalog, resolve
@@ -129,6 +136,11 @@ class LabReport:
         return self.diagnosis.untestable
 
     @property
+    def discovery(self) -> Discovery | None:
+        """The search beyond the catalog (module docstring); None when the verdict asks for none."""
+        return self.diagnosis.discovery
+
+    @property
     def effect_names(self) -> list[str]:
         """The final model's effects by name, whatever their form."""
         return self.fit.model.effect_names
@@ -164,6 +176,7 @@ class LabReport:
             "verdict": self.verdict,
             "verdict_explanation": self.diagnosis.explanation,
             "structure": self.diagnosis.structure.to_dict(),
+            "discovery": None if self.discovery is None else self.discovery.to_dict(),
             "untestable": self.untestable,
             "notes": self.notes,
         }
@@ -204,13 +217,16 @@ def analyse(
         )
         history.append(history_step(fit, cross_validate, f"add {effect.label}"))
     pool = list(available.values()) if rank else []
-    found = search(diagnose(fit, pool, probe), pool, probe, history, cross_validate, MAX_AUTO_STEPS if auto else 0)
+    steps = MAX_AUTO_STEPS if auto else 0
+    found = search(diagnose(fit, pool, probe, for_report=False), pool, probe, history, cross_validate, steps)
     fit = found.fit
     if not rank:
         found.explanation += " (Candidate effects were not tested: run `mows lab diagnose`.)"
     checks = physics_checks(fit)
     if found.verdict == Verdict.ADEQUATE:
         found.verdict, found.explanation = _physics_verdict(fit, checks, found.explanation)
+    if found.verdict == Verdict.NEEDS_GENERIC_TERM:
+        found.discovery = discover(without_generic(fit), probe)
     notes = list(table.notes) + [_check_note(c) for c in checks if c.deviation_sigma > CHECK_SIGMAS]
     return LabReport(found, base, history, notes, checks)
 
@@ -243,6 +259,16 @@ def physics_checks(fit: FitResult) -> list[PhysicsCheck]:
         parameters = free.effect_parameters(effect.name)
         checks.append(PhysicsCheck(effect.name, effect.fixed, parameters, physics_deviation(effect, parameters)))
     return checks
+
+
+def without_generic(fit: FitResult) -> FitResult:
+    """``fit``'s model without its generic corrections, refitted from the other effects' values:
+    the residual in which discovery looks for what the corrections stand for."""
+    sizes = [len(e.parameters) for e in fit.model.effects]
+    parts = np.split(fit.effect_values, np.cumsum(sizes)[:-1]) if sizes else []
+    kept = [(e, values) for e, values in zip(fit.model.effects, parts) if not e.generic]
+    start = np.concatenate([values for _, values in kept]) if kept else np.zeros(0)
+    return FrequencyModel(fit.model.probe, [e for e, _ in kept]).fit(fit.table, start=start)
 
 
 def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation: str) -> tuple[Verdict, str]:

@@ -45,18 +45,31 @@ from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
-from mows.lab.diagnosis.candidates import STRONG_DELTA_BIC, TIE_DELTA_BIC, quasi_gain, rank_candidates
+from mows.lab.diagnosis.candidates import (
+    NONLINEAR_MARGIN,
+    REJECTED_SIGMAS,
+    STRONG_DELTA_BIC,
+    TIE_DELTA_BIC,
+    Candidate,
+    closes_the_gap,
+    cv_gain,
+    explains_excess,
+    quasi_gain,
+    rank_candidates,
+)
+from mows.lab.diagnosis.discovery import discover
 from mows.lab.diagnosis.physical_aliases import alias_statements
+from mows.lab.diagnosis.plausibility import conflicts
 from mows.lab.diagnosis.projections import Signature
-from mows.lab.diagnosis.verdict import Diagnosis, diagnose
+from mows.lab.diagnosis.verdict import Diagnosis, completed, diagnose
 from mows.lab.model.effects import Effect, untestable_reason
+from mows.lab.model.frequency_model import FrequencyModel
 from mows.lab.model.least_squares import FitResult, FittedParameter, parameter_values, parameters_dict
 from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
 MAX_AUTO_STEPS = 6
 MAX_REVISIT_MOVES = 6  # per forward step; each move lowers the BIC, so this is only a bound
-NONLINEAR_MARGIN = 2.0  # a refit may gain up to this × the score statistic (the linearised gain)
 
 
 @dataclasses.dataclass
@@ -117,10 +130,10 @@ def search(
     steps: int = MAX_AUTO_STEPS,
 ) -> Diagnosis:
     """The diagnosis of the selected model, starting from ``found`` (the diagnosis of the
-    present fit): up to ``steps`` forward steps, each followed by the revisit, every model
-    appended to ``history`` (module docstring)."""
+    present fit, which may leave out what only a report reads): up to ``steps`` forward steps,
+    each followed by the revisit, every model appended to ``history`` (module docstring)."""
     for _ in range(steps):
-        step = _forward_step(found)
+        step = _forward_step(found, probe)
         if step is None:
             # Only now may an effect held at physics be set free: nothing in the catalog is left
             # to explain the residual with the physics held.
@@ -131,10 +144,10 @@ def search(
             change, fit, check = step
             history.append(history_step(fit, cross_validate, change, check))
             fit = _revisit(fit, pool, probe, history, cross_validate, freeing=False)
-        found = diagnose(fit, pool, probe)
+        found = diagnose(fit, pool, probe, for_report=False)
     if steps:
         found = prefer_physical(found, pool, probe, history, cross_validate)
-    return found
+    return completed(found, pool, probe)
 
 
 def prefer_physical(
@@ -174,7 +187,7 @@ def prefer_physical(
             )
         )
         fit = new
-    return found if fit is found.fit else diagnose(fit, pool, probe)
+    return found if fit is found.fit else diagnose(fit, pool, probe, for_report=False)
 
 
 def _physical_replacements(
@@ -193,29 +206,42 @@ def _physical_replacements(
             continue
         new = (reduced + form).fit(fit.table, start=np.concatenate([start, np.zeros(len(form.parameters))]))
         values = [p.value for p in new.effect_parameters(form.name)]
-        if new.ok and all(p.lower < v < p.upper for p, v in zip(form.parameters, values)):
+        inside = all(p.lower < v < p.upper for p, v in zip(form.parameters, values))
+        if new.ok and inside and not conflicts(new, probe):
             yield form, new
 
 
-def _forward_step(found: Diagnosis) -> tuple[str, FitResult, Sequence[FittedParameter]] | None:
+def _forward_step(found: Diagnosis, probe: Probe) -> tuple[str, FitResult, Sequence[FittedParameter]] | None:
     """(change, fit, check) of the next addition (module docstring), None when there is none.
 
-    The best strong candidate in its better form, known physics first (a candidate held at
-    its physical value has no parameter to absorb other effects with); else the best effect
+    The best strong candidate in its better form that generalises (its fit predicts each fold
+    better than the present fit does, :func:`mows.lab.diagnosis.candidates.cv_gain`) and, free,
+    explains at least half of the excess χ² (:func:`~mows.lab.diagnosis.candidates.explains_excess`;
+    a generic correction must leave a residual at noise, :func:`~mows.lab.diagnosis.candidates.closes_the_gap`), known
+    physics first (a candidate held at its physical value has no parameter to absorb other
+    effects with); else the best effect
     whose predicted signal the model's free parameters absorb but which the data cannot reject
     (:attr:`mows.lab.diagnosis.candidates.Form.kept_physics`), held at physics.
     """
     strong = [c for c in found.candidates if c.strong]
-    best = next((c for c in strong if c.chosen.fixed), strong[0] if strong else None)
-    if best is not None:
+    for best in sorted(strong, key=lambda c: not c.chosen.fixed):  # known physics first, stably
         assert best.chosen.fit is not None  # a strong form is always refitted (candidates._candidate)
-        return f"add {best.label}", best.chosen.fit, best.parameters if best.chosen.fixed else ()
+        explains = best.chosen.fixed or (
+            explains_excess(found.fit, best.chosen) and (not best.effect.generic or closes_the_gap(best.chosen))
+        )
+        if (
+            not explains or cv_gain(found.fit, best.chosen.fit) <= TIE_DELTA_BIC
+        ):  # it predicts rows it was not fitted to
+            continue
+        if best.chosen.fixed or closes_the_gap(best.chosen) or _beside_discovery(found.fit, best, probe):
+            return f"add {best.label}", best.chosen.fit, best.parameters if best.chosen.fixed else ()
     for candidate in found.candidates:
         if candidate.physics is not None and candidate.physics.kept_physics:
             fit = candidate.physics.fit or (found.fit.model + candidate.effect.at_physics()).fit(
                 found.fit.table, start=found.fit.effect_values
             )
-            if quasi_gain(found.fit, fit) > -TIE_DELTA_BIC:  # the one-step estimate may be off
+            acceptable = not conflicts(fit, probe) and cv_gain(found.fit, fit) > -TIE_DELTA_BIC
+            if quasi_gain(found.fit, fit) > -TIE_DELTA_BIC and acceptable:  # the one-step estimate may be off
                 return (
                     f"add {candidate.label_of(candidate.physics)}: known physics the data cannot reject "
                     f"(ΔBIC {found.fit.bic - fit.bic:+.1f}, its predicted signal χ² "
@@ -224,6 +250,25 @@ def _forward_step(found: Diagnosis) -> tuple[str, FitResult, Sequence[FittedPara
                     candidate.parameters,
                 )
     return None
+
+
+def _beside_discovery(fit: FitResult, candidate: Candidate, probe: Probe) -> bool:
+    """A free effect that leaves structure behind keeps strong, generalising evidence beside the
+    terms the residual follows beyond the catalog (:func:`mows.lab.diagnosis.discovery.discover`,
+    held as additive stand-ins with free strengths). Physics outside the catalog has a catalog
+    effect take whatever share of its signal that effect's signature reaches (a tilted plane for
+    the mean of a moment falling with temperature); beside the stand-ins that share is gone,
+    while an effect that is really there keeps its own."""
+    stand_ins = discover(fit, probe).stand_ins
+    if not stand_ins:
+        return True
+    held = FrequencyModel(probe, [*fit.model.effects, *stand_ins])
+    start = np.concatenate([fit.effect_values, np.zeros(len(stand_ins))])
+    beside = held.fit(fit.table, start=start)
+    added = (held + candidate.effect).fit(
+        fit.table, start=np.concatenate([beside.effect_values, np.zeros(len(candidate.effect.parameters))])
+    )
+    return quasi_gain(beside, added) > STRONG_DELTA_BIC and cv_gain(beside, added) > TIE_DELTA_BIC
 
 
 def _revisit(
@@ -252,13 +297,17 @@ def _best_move(fit: FitResult, pool: Sequence[Effect], probe: Probe, freeing: bo
     best: tuple[str, FitResult] | None = None
     for effect in fit.model.effects:
         for change, new, freed in _alternatives(fit, effect, pool, probe):
-            if (freeing or not freed) and _accepted(fit, new, freed) and (best is None or new.bic < best[1].bic):
+            if (freeing or not freed) and _accepted(fit, new, freed, probe) and (best is None or new.bic < best[1].bic):
                 best = (change, new)
     return best
 
 
-def _accepted(old: FitResult, new: FitResult, freed: bool) -> bool:
-    return quasi_gain(old, new) > _required_gain(old.k, new.k, freed)
+def _accepted(old: FitResult, new: FitResult, freed: bool, probe: Probe) -> bool:
+    """The guard on a revisit move: the BIC gain :func:`_required_gain` asks, at values physics
+    allows, and held-out rows predicted no worse (better, for a move that sets an effect free)."""
+    if quasi_gain(old, new) <= _required_gain(old.k, new.k, freed) or conflicts(new, probe):
+        return False
+    return new.k < old.k or cv_gain(old, new) > (TIE_DELTA_BIC if freed else -TIE_DELTA_BIC)
 
 
 def _required_gain(old_k: int, new_k: int, freed: bool) -> float:
@@ -323,9 +372,15 @@ def _replacements(
     # No passengers: what a move adds must itself be positive evidence on ``start``; and a free
     # form pinned at a parameter bound is no minimum, only a fudge (a free damping blend of 100
     # ± 109, bound 100, once bought a nearby-coil table 3 in BIC).
+    # An effect held at physics is set free only where the data reject its physical value.
     return [
-        (c.label_of(form), form.fit, replaced.fixed and c.name == replaced.name)
+        (c.label_of(form), form.fit, freed)
         for c in candidates
         for form in c.forms
-        if form.fit is not None and quasi_gain(start, form.fit) > TIE_DELTA_BIC and (form.fixed or c.within_bounds)
+        for freed in [replaced.fixed and c.name == replaced.name]
+        if form.fit is not None
+        and form.possible
+        and quasi_gain(start, form.fit) > TIE_DELTA_BIC
+        and (form.fixed or c.within_bounds)
+        and (not freed or c.physics_deviation > REJECTED_SIGMAS)
     ]

@@ -1,5 +1,5 @@
 """A device on a serial port as the driver's device (:class:`mows.device.interface.Backend`
-``serial``): the driver's commands turned into frames for :class:`mows.device.serial_link.SerialLink`
+``serial``): the driver's commands turned into frames for :class:`mows.device.serial.link.SerialLink`
 and its frames turned into sample blocks, command results and device faults."""
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from mows.device.interface import (
     check_coil_command,
     refuse_tones,
 )
-from mows.device.payloads import Ack, Coils, DeviceInfo, FieldCurrent, Orientation, Samples, Status
-from mows.device.serial_link import SerialLink
+from mows.device.protocol.payloads import Ack, Coils, DeviceInfo, FieldCurrent, Orientation, Samples, Status
+from mows.device.serial.link import SerialLink
 from mows.physics.coils import CurrentCap
 from mows.records.samples import SampleBlock
 
@@ -27,7 +27,7 @@ COMMAND_LEAD_S = 0.05  # serial commands are scheduled this far ahead of the new
 
 
 class SerialBackend(Backend):
-    """A device on a serial port (:class:`mows.device.serial_link.SerialLink`).
+    """A device on a serial port (:class:`mows.device.serial.link.SerialLink`).
 
     Coil commands above the cap are refused here and never written; the device checks them
     again against its own cap. ``command_lead_s`` covers the link's latency, so that a

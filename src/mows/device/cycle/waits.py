@@ -1,5 +1,5 @@
 """What a running measurement cycle waits for and what it records, apart from the sequencer
-that drives it (:class:`mows.device.cycle.CycleSequencer`).
+that drives it (:class:`mows.device.cycle.sequencer.CycleSequencer`).
 
 A running cycle is a generator (:data:`Run`) that yields a :class:`Reach` (samples up to an
 index) or an :class:`Answer` (the device's result of a command), and raises
@@ -14,8 +14,8 @@ from collections.abc import Generator
 
 import numpy as np
 
+from mows.device.cycle.phases import CycleOutcome
 from mows.device.interface import Command, CommandResult
-from mows.device.phases import CycleOutcome
 from mows.records.samples import SampleBlock
 
 

@@ -1,5 +1,5 @@
 """The simulated device of a scene with several probes, its commands taking effect at chosen
-sample indices: :class:`mows.device.scheduled.ScheduledDevice` over
+sample indices: :class:`mows.device.simulated.scheduled.ScheduledDevice` over
 :class:`mows.sim.multiprobe_device.MultiProbeDevice`.
 
 The scene's probes sit on one shared stage: a turn to the stage angle θ turns every probe to
@@ -18,7 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from mows.device.scheduled import OverCap, ScheduledDevice
+from mows.device.simulated.scheduled import OverCap, ScheduledDevice
 from mows.physics.coils import CurrentCap
 from mows.physics.multitone import Tone, peak_current_a
 from mows.sim.multiprobe_device import MultiProbeBlock, MultiProbeDevice

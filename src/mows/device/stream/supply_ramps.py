@@ -1,10 +1,10 @@
 """The static-field supply's ramps as a driver session sees them: the commands it numbered and
 sent, the answers that accept or refuse them, and the moment the samples reach a ramp's end.
 
-A :class:`SupplyRamps` turns these into :class:`~mows.device.phases.SupplyEvent` s (a ramp
+A :class:`SupplyRamps` turns these into :class:`~mows.device.cycle.phases.SupplyEvent` s (a ramp
 begins, a ramp ends, the driver ramped to zero itself) and calls each request's ``on_done``
 once the device refused it or its samples have passed the ramp's end. It keeps no lock and
-does no I/O: :class:`mows.device.session.DeviceSession` owns it, sends the commands and calls it
+does no I/O: :class:`mows.device.stream.session.DeviceSession` owns it, sends the commands and calls it
 under its lock.
 """
 
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from mows.device.cycle.phases import SupplyEvent
 from mows.device.interface import CommandResult, FieldCurrentCommand
-from mows.device.phases import SupplyEvent
 
 SUPPLY_COMMAND_IDS = 1 << 48  # supply commands are numbered from here: apart from the sequencer's
 

@@ -1,4 +1,4 @@
-"""The vocabulary of a measurement cycle (:mod:`mows.device.cycle`): its phases and the events
+"""The vocabulary of a measurement cycle (:mod:`mows.device.cycle.sequencer`): its phases and the events
 that announce them (and the static-field supply's, :class:`SupplyEvent`), the settings cycles
 run with, a request for one cycle, the plan it resolves to and its outcome, the step the
 sequencer returns, and the tuning fit it is handed.

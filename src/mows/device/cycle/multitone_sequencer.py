@@ -1,13 +1,13 @@
 """The measurement cycle of several probes on one shared stage: :class:`MultiToneSequencer`,
-the sibling of :class:`mows.device.cycle.CycleSequencer` (its inputs, waits, faults and events
+the sibling of :class:`mows.device.cycle.sequencer.CycleSequencer` (its inputs, waits, faults and events
 are that sequencer's; only the cycle itself differs).
 
 One cycle at stage angle θ turns the stage (every probe to its home orientation plus θ) and
 lets the probes settle, then plans the excitation at that angle
-(:func:`mows.device.multitone.plan_probes`: each probe's tone at its f00 for a swing, each at
+(:func:`mows.device.cycle.tone_groups.plan_probes`: each probe's tone at its f00 for a swing, each at
 most ``excitation_current_a``, groups whose summed peak stays within the driver's cap, the
 overlapping tones refused with the reason). Each of ``repeats`` rounds excites the groups in
-turn under the duty limit (:class:`mows.device.multitone.GroupSequence`), with ``gap_s``
+turn under the duty limit (:class:`mows.device.cycle.tone_groups.GroupSequence`), with ``gap_s``
 between a ring-down and the next excitation, and records each group's ring-down. The
 EXCITING and RINGDOWN of a group list its probes, each one's tone and its own θ0.
 
@@ -23,11 +23,11 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Generator, Sequence
 
-from mows.device.cycle import CycleSequencer
-from mows.device.cycle_waits import Answer, Reach, Run
+from mows.device.cycle.phases import CycleOutcome, CyclePlan, CycleRequest, CycleSettings, Phase, TuningFit
+from mows.device.cycle.sequencer import CycleSequencer
+from mows.device.cycle.tone_groups import GroupExcitation, GroupSequence, on_stage, plan_probes, with_cap
+from mows.device.cycle.waits import Answer, Reach, Run
 from mows.device.interface import CoilCommand, CommandResult, MultiToneCommand
-from mows.device.multitone import GroupExcitation, GroupSequence, on_stage, plan_probes, with_cap
-from mows.device.phases import CycleOutcome, CyclePlan, CycleRequest, CycleSettings, Phase, TuningFit
 from mows.physics.coils import CoilSetup, CurrentCap
 from mows.physics.coupling import PlacedProbe
 from mows.physics.multitone import ExcitationPlan, peak_current_a

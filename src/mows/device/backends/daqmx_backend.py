@@ -1,8 +1,8 @@
 """The paper's bench as the driver's device (:class:`mows.device.interface.Backend` ``nidaqmx``):
 the fluxgates and the coils on an NI card through NI's ``nidaqmx``, the field supply (optional)
-through SCPI (:mod:`mows.device.scpi`).
+through SCPI (:mod:`mows.device.instruments.scpi`).
 
-A thin edge over :mod:`mows.device.daq`: two continuous, hardware-timed input channels read in
+A thin edge over :mod:`mows.device.instruments.daq`: two continuous, hardware-timed input channels read in
 blocks and stamped by their sample index (:class:`mows.device.clock.DeviceClock`); two output
 channels on the same rate, started by the inputs' start trigger and never regenerated, written
 ``output_lead_s`` ahead of the newest input sample with the coils' waveforms, so that a coil
@@ -28,7 +28,8 @@ import time
 import numpy as np
 
 from mows.device.clock import DeviceClock
-from mows.device.daq import CoilWaveforms, DaqDevice
+from mows.device.instruments.daq import CoilWaveforms, DaqDevice
+from mows.device.instruments.scpi import ScpiSupply, SupplyError, SupplySchedule
 from mows.device.interface import (
     Backend,
     CoilCommand,
@@ -39,8 +40,7 @@ from mows.device.interface import (
     check_coil_command,
     refuse_tones,
 )
-from mows.device.payloads import DeviceInfo
-from mows.device.scpi import ScpiSupply, SupplyError, SupplySchedule
+from mows.device.protocol.payloads import DeviceInfo
 from mows.physics.coils import CurrentCap
 from mows.physics.supply import RAMP_STEP_S
 from mows.records.samples import SampleBlock

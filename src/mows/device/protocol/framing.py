@@ -25,7 +25,7 @@ import struct
 import zlib
 from collections import Counter
 
-from mows.device.payloads import BODY_TYPES, Body, PayloadError
+from mows.device.protocol.payloads import BODY_TYPES, Body, PayloadError
 
 SYNC = b"\xa5\x5a"
 VERSION = 1

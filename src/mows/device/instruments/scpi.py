@@ -15,7 +15,7 @@ import dataclasses
 import importlib
 import math
 
-from mows.device.daq import HARDWARE_DIR
+from mows.device.instruments.daq import HARDWARE_DIR
 from mows.physics.schema import build_from_yaml, typed
 from mows.physics.supply import SupplyLimits
 
@@ -76,7 +76,7 @@ def load_supply_file(path=PAPER_SUPPLY_FILE) -> ScpiSupplyConfig:
 
 
 class SupplySchedule:
-    """The ramps of a supply on the sample clock, as :class:`mows.device.scheduled.ScheduledDevice`
+    """The ramps of a supply on the sample clock, as :class:`mows.device.simulated.scheduled.ScheduledDevice`
     walks them: each new current is checked against the cap, rounded to the resolution and reached
     by a staircase within the slew limit that starts after any ramp already queued."""
 

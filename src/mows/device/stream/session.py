@@ -5,7 +5,7 @@ The streaming thread calls :meth:`DeviceSession.step` in a loop and publishes wh
 returns (blocks, phase events) in order. Requests from other threads (a cycle, the emergency
 stop, a supply current) take the session's lock, act on the device at once (the emergency stop switches the
 coils off before it returns) and leave their phase events for the next ``step`` to publish.
-In tracking mode (:mod:`mows.device.tracking`) ``step`` starts the next tracking cycle whenever
+In tracking mode (:mod:`mows.device.cycle.tracking`) ``step`` starts the next tracking cycle whenever
 none runs.
 
 The session is *armed* (:meth:`DeviceSession.arm`) only while the driver may energise a coil
@@ -23,18 +23,8 @@ import threading
 import time
 from collections.abc import Callable
 
-from mows.device.blocks import BlockAssembler
-from mows.device.cycle import CycleSequencer
-from mows.device.interface import (
-    Backend,
-    Command,
-    CommandResult,
-    DeviceFault,
-    LinkEvent,
-    energises,
-)
-from mows.device.multitone_cycle import MultiToneSequencer
-from mows.device.phases import (
+from mows.device.cycle.multitone_sequencer import MultiToneSequencer
+from mows.device.cycle.phases import (
     CycleOutcome,
     CycleRequest,
     CycleSettings,
@@ -44,9 +34,19 @@ from mows.device.phases import (
     SupplyEvent,
     TuningFit,
 )
-from mows.device.rate import RateMeter
-from mows.device.supply import SupplyRamps
-from mows.device.tracking import TrackingLoop, TrackingSettings
+from mows.device.cycle.sequencer import CycleSequencer
+from mows.device.cycle.tracking import TrackingLoop, TrackingSettings
+from mows.device.interface import (
+    Backend,
+    Command,
+    CommandResult,
+    DeviceFault,
+    LinkEvent,
+    energises,
+)
+from mows.device.stream.blocks import BlockAssembler
+from mows.device.stream.rate import RateMeter
+from mows.device.stream.supply_ramps import SupplyRamps
 from mows.physics.coils import CoilSetup, CurrentCap
 from mows.records.samples import SampleBlock
 
@@ -107,7 +107,7 @@ class DeviceSession:
         self._last_samples_s = monotonic()
         self._rate = RateMeter()  # the achieved sample rate
         self._next_index = 0  # the sample after the newest received
-        self.supply = SupplyRamps(self._stamp_ns)  # the static-field supply's ramps (mows.device.supply)
+        self.supply = SupplyRamps(self._stamp_ns)  # the static-field supply's ramps (mows.device.stream.supply_ramps)
         self._anchor: tuple[int, int, float] | None = None  # (sample index, stamp ns, rate) of the newest block
         if backend.info is not None:
             self._device_known()
@@ -186,7 +186,7 @@ class DeviceSession:
         if not self.backend.can_excite:
             return
         probes, coils = self.backend.probes, self.backend.coils
-        if probes:  # their tones (mows.device.multitone_cycle), sized by the coils where the device has them
+        if probes:  # their tones (mows.device.cycle.multitone_sequencer), sized by the coils where the device has them
             assert coils is not None  # a device of several probes says where its coils stand among them
             self.sequencer = MultiToneSequencer(c.settings, coils, c.cap, info.sample_rate_hz, probes, lead, fit=c.fit)
         else:
@@ -218,7 +218,7 @@ class DeviceSession:
             done(step.outcome)
 
     def _track(self) -> None:
-        """Start the next tracking cycle once the sequencer is idle (:mod:`mows.device.tracking`)."""
+        """Start the next tracking cycle once the sequencer is idle (:mod:`mows.device.cycle.tracking`)."""
         s = self.sequencer
         if s is None or s.busy or not self.tracking.on or not self.armed or not self.link_up or s.next_index == 0:
             return
@@ -368,7 +368,7 @@ class DeviceSession:
 
     # --- state -----------------------------------------------------------------------------
     def achieved_rate_hz(self) -> float | None:
-        """The achieved sample rate (:class:`mows.device.rate.RateMeter`); None while not yet known."""
+        """The achieved sample rate (:class:`mows.device.stream.rate.RateMeter`); None while not yet known."""
         with self._lock:
             return self._rate.rate_hz(self._monotonic())
 

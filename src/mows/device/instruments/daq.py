@@ -1,5 +1,5 @@
 """The paper's bench on an NI data-acquisition card, without the card: what the ``nidaqmx``
-backend (:mod:`mows.device.daqmx_backend`) computes, as plain functions over arrays.
+backend (:mod:`mows.device.backends.daqmx_backend`) computes, as plain functions over arrays.
 
 The bench (Methods): two FL1-10 fluxgates on two analog inputs, hardware-timed at 20 kS/s; two
 excitation coils on power amplifiers fed by two analog outputs, whose sample clock starts on the

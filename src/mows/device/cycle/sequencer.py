@@ -23,16 +23,8 @@ from __future__ import annotations
 
 from collections.abc import Generator
 
-from mows.device.cycle_waits import Answer, CycleAborted, Reach, Recording, Run
-from mows.device.duty import DutyCycleLimit
-from mows.device.interface import (
-    CoilCommand,
-    Command,
-    CommandResult,
-    LinkEvent,
-    OrientationCommand,
-)
-from mows.device.phases import (
+from mows.device.cycle.duty import DutyCycleLimit
+from mows.device.cycle.phases import (
     CycleOutcome,
     CyclePlan,
     CycleRequest,
@@ -44,6 +36,14 @@ from mows.device.phases import (
     TuningFit,
     TuningResult,
     check_setting,
+)
+from mows.device.cycle.waits import Answer, CycleAborted, Reach, Recording, Run
+from mows.device.interface import (
+    CoilCommand,
+    Command,
+    CommandResult,
+    LinkEvent,
+    OrientationCommand,
 )
 from mows.physics.coils import CoilSetup, CurrentCap, excitation_samples
 from mows.records.samples import SampleBlock

@@ -2,7 +2,7 @@
 turn on the device clock, under the coils' duty-cycle limit and the emergency stop.
 
 A group's tones switch on and off together, so the coils are on for one interval per group:
-the duty limit (:class:`mows.device.duty.DutyCycleLimit`) counts that interval once, whatever
+the duty limit (:class:`mows.device.cycle.duty.DutyCycleLimit`) counts that interval once, whatever
 the number of tones summed in it. A group is delayed, never shortened, until its interval
 keeps the limit. An excitation lasts the whole samples within the plan's duration, the span
 whose summed peak the plan checked against the cap. An emergency stop switches every tone off
@@ -25,7 +25,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mows.device.duty import DutyCycleLimit
+from mows.device.cycle.duty import DutyCycleLimit
 from mows.physics.coils import CoilSetup, CurrentCap
 from mows.physics.coupling import PlacedProbe
 from mows.physics.multitone import (

@@ -20,9 +20,9 @@ import time
 
 import serial
 
-from mows.device.framing import SEQUENCE_MODULUS, Frame, FrameDecoder, encode_frame
 from mows.device.interface import LinkEvent, NotExciting
-from mows.device.payloads import Body, DeviceInfo, Heartbeat, Hello
+from mows.device.protocol.framing import SEQUENCE_MODULUS, Frame, FrameDecoder, encode_frame
+from mows.device.protocol.payloads import Body, DeviceInfo, Heartbeat, Hello
 
 DEFAULT_BAUD = 2_000_000  # 20 kS/s × 2 channels × 4 bytes + framing ≈ 170 kB/s
 HEARTBEAT_PERIOD_S = 0.05  # a third of the device's 150 ms watchdog

@@ -18,9 +18,9 @@ from mows.device.interface import (
     FieldCurrentCommand,
     MultiToneCommand,
 )
-from mows.device.payloads import DeviceInfo
-from mows.device.scheduled import ScheduledDevice
-from mows.device.scheduled_multiprobe import ScheduledMultiProbeDevice
+from mows.device.protocol.payloads import DeviceInfo
+from mows.device.simulated.scheduled import ScheduledDevice
+from mows.device.simulated.scheduled_multiprobe import ScheduledMultiProbeDevice
 from mows.physics.coils import CurrentCap
 from mows.records.samples import SampleBlock
 from mows.sim.multiprobe_device import MultiProbeDevice
@@ -56,7 +56,7 @@ class SimBackend(Backend):
     Paced (the default), it takes samples as their time comes on the host's monotonic clock
     (:class:`mows.device.clock.DeviceClock`), at least ``chunk_s`` at a time; unpaced (tests,
     benchmarks), each poll takes the next ``chunk_s`` at once. Commands are applied at their
-    exact sample by :class:`mows.device.scheduled.ScheduledDevice`.
+    exact sample by :class:`mows.device.simulated.scheduled.ScheduledDevice`.
     """
 
     name = "sim"
@@ -141,7 +141,7 @@ class SimBackend(Backend):
 
 class MultiProbeSimBackend(SimBackend):
     """The simulated device of a scene with several probes on one shared stage
-    (:class:`mows.device.scheduled_multiprobe.ScheduledMultiProbeDevice`), paced or unpaced as
+    (:class:`mows.device.simulated.scheduled_multiprobe.ScheduledMultiProbeDevice`), paced or unpaced as
     :class:`SimBackend`; its cycles drive the probes' tones. ``probes``: the probes at their home
     orientations, probe id = index; ``coils``: the scene's coils, placed among them. No field
     supply: a supply current is refused with the reason."""

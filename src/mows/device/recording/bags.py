@@ -9,7 +9,7 @@ carry their message definitions. Where rosbags writes its own name, they say Jaz
 does (:class:`JazzyWriter`): ``ros_distro`` in ``metadata.yaml`` and in the MCAP file's
 ``rosbag2`` metadata record, and the MCAP Header's library string. A :class:`Recording`
 survives a kill: its ``metadata.yaml`` is there from the start and every chunk is on disk
-once it closes, so that :mod:`mows.device.bag_repair` rebuilds all but the last chunk. A bag
+once it closes, so that :mod:`mows.device.recording.bag_repair` rebuilds all but the last chunk. A bag
 that cannot be read raises :class:`BagError`, which says what is wrong and, for a recording
 never closed, how to repair it.
 """
@@ -34,7 +34,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 PACKAGE = "mows_msgs"
-REPOSITORY_PACKAGE = Path(__file__).resolve().parents[3] / PACKAGE
+REPOSITORY_PACKAGE = Path(__file__).resolve().parents[4] / PACKAGE
 BAG_VERSION: Literal[9] = 9  # rosbag2's metadata version in Jazzy
 ROS_DISTRO = "jazzy"  # what rosbag2 writes as ros_distro; rosbags writes its own name
 MCAP_MAGIC = b"\x89MCAP0\r\n"  # the first and last bytes of an MCAP file (MCAP specification)

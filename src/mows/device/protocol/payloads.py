@@ -1,7 +1,7 @@
 """The payloads of the serial link's frame types (docs/serial_protocol.md): one ``Body`` class
 per type, with its TYPE code, its fields and its exact wire layout (little-endian, encode and a
 decode that checks the bytes fit), and ``BODY_TYPES``, the table the frame decoder
-(``mows.device.framing``) picks a type's class from.
+(``mows.device.protocol.framing``) picks a type's class from.
 """
 
 from __future__ import annotations

@@ -11,10 +11,10 @@ import time
 
 import numpy as np
 
-from mows.device import bags
+from mows.device.cycle.phases import Phase, PhaseEvent, SupplyEvent
 from mows.device.interface import Backend, Command, LinkEvent, NotExciting
-from mows.device.payloads import DeviceInfo
-from mows.device.phases import Phase, PhaseEvent, SupplyEvent
+from mows.device.protocol.payloads import DeviceInfo
+from mows.device.recording import bags
 from mows.records import stamps
 from mows.records.samples import SampleBlock
 

@@ -1,7 +1,7 @@
 """The MOWS device on a pseudo-terminal, speaking docs/serial_protocol.md, backed by the
 simulator: the serial backend is tested end to end with no hardware.
 
-    python -m mows.device.emulator --link /tmp/mows-device [--scenario NAME_OR_YAML]
+    python -m mows.device.serial.emulator --link /tmp/mows-device [--scenario NAME_OR_YAML]
 
 The emulator opens a pty (``os.openpty``) and points a symbolic link at its terminal, so that
 the host always opens the same path, also after :meth:`DeviceEmulator.unplug` and
@@ -42,8 +42,8 @@ from pathlib import Path
 import numpy as np
 
 from mows.device.clock import DeviceClock
-from mows.device.framing import Frame, FrameDecoder, encode_frame
-from mows.device.payloads import (
+from mows.device.protocol.framing import Frame, FrameDecoder, encode_frame
+from mows.device.protocol.payloads import (
     Ack,
     Body,
     Coils,
@@ -55,7 +55,7 @@ from mows.device.payloads import (
     Samples,
     Status,
 )
-from mows.device.scheduled import OverCap, ScheduledDevice
+from mows.device.simulated.scheduled import OverCap, ScheduledDevice
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -328,7 +328,7 @@ class DeviceEmulator:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m mows.device.emulator", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m mows.device.serial.emulator", description=__doc__.splitlines()[0])
     parser.add_argument("--link", required=True, help="path of the symbolic link to the pty (what the host opens)")
     parser.add_argument("--scenario", default="paper_largest_spacing", help="shipped scenario name or YAML file")
     parser.add_argument("--cap-a", type=float, default=CurrentCap().limit_a, help="coil current cap, A")

@@ -1,6 +1,6 @@
 """Tracking mode: kicks and ring-downs at one orientation, back to back, for as long as it is on.
 
-The cycle sequencer (:mod:`mows.device.cycle`) runs one cycle at a time; tracking chains them.
+The cycle sequencer (:mod:`mows.device.cycle.sequencer`) runs one cycle at a time; tracking chains them.
 :class:`TrackingLoop` is the I/O-free state machine that says which cycle comes next: the
 first turns the probe to θ0 and lets it settle, the following ones stay there (no settling:
 the stage has not moved). Each cycle is ``repeats`` short kicks, each followed by its
@@ -22,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from mows.device.phases import CycleOutcome, CycleRequest, CycleSettings, check_setting
+from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, check_setting
 
 CYCLE_S = 2.0  # a tracking cycle lasts about this long: switching tracking off takes effect within it
 

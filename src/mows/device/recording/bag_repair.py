@@ -1,7 +1,7 @@
 """Recovering a recording that was never closed: the driver killed (SIGKILL, power cut), the
 disk full. ``mows bag repair DIR``.
 
-A recording's MCAP file is written as a sequence of chunks (:class:`mows.device.bags.Recording`
+A recording's MCAP file is written as a sequence of chunks (:class:`mows.device.recording.bags.Recording`
 flushes each to disk as it closes); only a closed bag has the summary (chunk index, statistics)
 and the ``metadata.yaml`` that readers need. :func:`salvage` reads the records of the data
 section in file order, the way the MCAP specification lays them out, and keeps every chunk
@@ -22,7 +22,7 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import decompress, get_qos
 from rosbags.typesys import get_types_from_msg
 
-from mows.device import bags
+from mows.device.recording import bags
 
 OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_DATA_END = 0x03, 0x04, 0x05, 0x06, 0x0F
 RECORD_HEADER = struct.Struct("<BQ")  # opcode, content length

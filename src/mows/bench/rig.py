@@ -22,7 +22,7 @@ from mows.device.cycle.tracking import TrackingLoop
 from mows.device.interface import CoilCommand, CommandResult
 from mows.device.simulated.scheduled import OverCap, ScheduledDevice
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit, fit_ringdown
-from mows.estimate.ringdown_start import white_noise_std
+from mows.estimate.ringdown.start import white_noise_std
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.physics.coils import CurrentCap
 from mows.sim.simulator import SimulatedDevice

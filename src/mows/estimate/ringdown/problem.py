@@ -1,7 +1,7 @@
 """The least-squares problem of one ring-down fit, solved by variable projection, and its
 Fisher information (PHYSICS.md §7): what :func:`mows.estimate.ringdown.fit_ringdown` iterates
 on and what the Cramér–Rao bound is computed from. The model and its derivatives are the
-compiled kernels of :mod:`mows.estimate.ringdown_model`.
+compiled kernels of :mod:`mows.estimate.ringdown.model`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mows.estimate.ringdown_model import evaluate_model, levenberg_marquardt, split_pickup
+from mows.estimate.ringdown.model import evaluate_model, levenberg_marquardt, split_pickup
 from mows.physics.fluxgate import paper_pickup
 from mows.physics.schema import Vector
 
@@ -21,7 +21,7 @@ NONLINEAR = ("frequency_hz", "damping_per_s", "amplitude_rad", "phase_rad")
 
 @dataclasses.dataclass
 class Shape:
-    """g(x(t)) and dg/dq at the samples (:mod:`mows.estimate.ringdown_model`)."""
+    """g(x(t)) and dg/dq at the samples (:mod:`mows.estimate.ringdown.model`)."""
 
     g: np.ndarray  # (n,)
     dg_dq: np.ndarray  # (len(q), n)
@@ -46,7 +46,7 @@ class RingdownProblem:
 
     def fitted_pickup(self, q: NDArray[np.float64]) -> NDArray[np.complex128]:
         """The C_k of the model at q: turned by ε = q[4] when it is free, g(ε + x), as
-        :func:`mows.estimate.ringdown_model.evaluate_model` turns them."""
+        :func:`mows.estimate.ringdown.model.evaluate_model` turns them."""
         if not self.offset_free:
             return self.pickup
         return self.pickup * np.exp(1j * np.arange(self.pickup.size) * q[4])
@@ -70,7 +70,7 @@ class Step:
 def evaluate(problem: RingdownProblem, q: NDArray[np.float64], derivatives: bool = True) -> Step:
     """Variable projection at q (Golub–Pereyra, with Kaufman's Jacobian): κ and B_DC by linear
     least squares, the residual and the projected normal equations of q
-    (:func:`mows.estimate.ringdown_model.normal_equations`, where the numerics are explained)."""
+    (:func:`mows.estimate.ringdown.model.normal_equations`, where the numerics are explained)."""
     n_ch, n = problem.y.shape
     p = q.size
     g, m = np.empty(n), np.empty((p if derivatives else 0, n))
@@ -133,7 +133,7 @@ def variable_projection(
     active set) and f, which does not depend on it, converges as usual.
 
     ``damping`` is the initial Marquardt λ: small when q is already near the optimum. The loop
-    is compiled (:func:`mows.estimate.ringdown_model.levenberg_marquardt`): in Python its bookkeeping
+    is compiled (:func:`mows.estimate.ringdown.model.levenberg_marquardt`): in Python its bookkeeping
     cost more than the model evaluations.
 
     Returns (the step at the last accepted q, converged, iterations, free-parameter mask).

@@ -10,7 +10,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from mows.estimate.ringdown_types import FitOptions
+from mows.estimate.ringdown.types import FitOptions
 
 
 def white_noise_std(y: NDArray[np.float64]) -> float:

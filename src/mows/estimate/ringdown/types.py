@@ -153,7 +153,7 @@ class RingdownFit:
     covariance: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
     pickup: tuple = ()  # the fitted model's C_k (complex) over the swing about the rest angle
     undetermined: tuple = ()  # names of the numbers the data did not pin (NaN; why: ``message``)
-    probe_id: int = 0  # which probe, when several ring down together (:mod:`mows.estimate.ringdown_joint`)
+    probe_id: int = 0  # which probe, when several ring down together (:mod:`mows.estimate.ringdown.joint`)
 
     @property
     def ok(self) -> bool:

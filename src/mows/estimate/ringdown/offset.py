@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mows.estimate.ringdown_problem import RingdownProblem
+from mows.estimate.ringdown.problem import RingdownProblem
 
 TWO_PI = 2.0 * math.pi
 OFFSET_STEP_RAD = math.radians(1.0)

@@ -1,6 +1,6 @@
 """The fit of one free ring-down, Eqs. S2, S11, S12, at the Cramér–Rao bound.
 
-Its options and result types are :mod:`mows.estimate.ringdown_types` (imported here too).
+Its options and result types are :mod:`mows.estimate.ringdown.types` (imported here too).
 
 Model of one channel:
 
@@ -32,7 +32,7 @@ fit runs in three stages so that this costs about a millisecond:
    standard deviations of the optimum at 1/D of the cost. In a strong field the cost over
    (θmax, ε) has several minima (near θ0 = 90° the signal is nearly even in the deflection,
    and κ trades off against θmax): this stage is also started from every minimum of a grid
-   search over the whole range (:mod:`mows.estimate.ringdown_offset`), and from the best
+   search over the whole range (:mod:`mows.estimate.ringdown.offset`), and from the best
    one's mirror images, with κ > 0;
 3. Gauss–Newton steps on all samples until the step is < 1e-3 σ in every parameter. The
    Jacobian of the last step gives the covariance and the Fisher information.
@@ -60,8 +60,8 @@ from typing import Any, SupportsFloat
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mows.estimate.ringdown_offset import offset_starts
-from mows.estimate.ringdown_problem import (
+from mows.estimate.ringdown.offset import offset_starts
+from mows.estimate.ringdown.problem import (
     AMPLITUDE,
     NONLINEAR,
     RingdownProblem,
@@ -71,8 +71,8 @@ from mows.estimate.ringdown_problem import (
     scaled_inverse,
     variable_projection,
 )
-from mows.estimate.ringdown_start import start_candidates, white_noise_std
-from mows.estimate.ringdown_types import FitOptions, FitStatus, RingdownFit, failure, parameter_std
+from mows.estimate.ringdown.start import start_candidates, white_noise_std
+from mows.estimate.ringdown.types import FitOptions, FitStatus, RingdownFit, failure, parameter_std
 
 TWO_PI = 2.0 * math.pi
 # Another minimum of the cost closer than this (Δχ², in units of χ²/dof) is a rival: noise
@@ -299,7 +299,7 @@ def _fit_window(
 
 def _offset_minima(coarse: RingdownProblem, step: Step, options: FitOptions) -> list[Step]:
     """The distinct coarse optima reached from every minimum of the cost over the rest offset
-    (:func:`mows.estimate.ringdown_offset.offset_starts`), from the local ``step`` and from the
+    (:func:`mows.estimate.ringdown.offset.offset_starts`), from the local ``step`` and from the
     best one's mirror images, lowest cost first. κ < 0 turns g into −g, the same waveform as a
     pickup turned by another offset: such optima are left out unless there is no other."""
     solutions = [step]

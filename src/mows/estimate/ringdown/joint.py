@@ -23,7 +23,7 @@ not found starts at its expected frequency. φ_k starts at the line's phase or a
 it, whichever fits better; θmax,k at 0.3 rad, δ_k at the guess.
 
 The swing is about the commanded θ0 (no rest offset, as the paper's model has it): the rest
-offset's several minima (:mod:`mows.estimate.ringdown_offset`) are not searched here. θmax is
+offset's several minima (:mod:`mows.estimate.ringdown.offset`) are not searched here. θmax is
 kept within the one-probe fit's bounds. Where the pickup's absolute scale is known, the θmax
 reported is the swing the signal's size gives through the pickup about the undeflected lever
 (:func:`start_swing_rad`); elsewhere the fitted one, and only where its σ is below a third of
@@ -45,8 +45,8 @@ import numpy as np
 import numpy.typing
 from scipy.optimize import brentq
 
-from mows.estimate.ringdown import combine_channels, usable_window, wrapped_rad
-from mows.estimate.ringdown_problem import (
+from mows.estimate.ringdown.fit import combine_channels, usable_window, wrapped_rad
+from mows.estimate.ringdown.problem import (
     AMPLITUDE,
     AMPLITUDE_BOUNDS_RAD,
     NONLINEAR,
@@ -54,8 +54,8 @@ from mows.estimate.ringdown_problem import (
     evaluate,
     scaled_inverse,
 )
-from mows.estimate.ringdown_start import spectral_peak, white_noise_std, windowed_spectrum
-from mows.estimate.ringdown_types import FitOptions, FitStatus, RingdownFit, failure
+from mows.estimate.ringdown.start import spectral_peak, white_noise_std, windowed_spectrum
+from mows.estimate.ringdown.types import FitOptions, FitStatus, RingdownFit, failure
 from mows.physics.fluxgate import paper_pickup
 
 TWO_PI = 2.0 * math.pi

@@ -1,5 +1,5 @@
 """What an MCAP file says about its writer, read by the MCAP specification alone
-(https://mcap.dev/spec), independently of rosbags and of mows.device.bags: the Header record's
+(https://mcap.dev/spec), independently of rosbags and of mows.device.recording.bags: the Header record's
 profile and library, and the Metadata records' names and key-value maps.
 
 A file is the magic, then records (opcode: uint8, content length: uint64, content), the last

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from mows.device import bags
+from mows.device.recording import bags
 from mows.sim.cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 

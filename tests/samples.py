@@ -7,7 +7,7 @@ value of a field depends on its position so that two swapped fields do not compa
 import numpy as np
 from rosbags.typesys.store import Typestore
 
-from mows.device.bags import PARTS, REPOSITORY_PACKAGE, typestore
+from mows.device.recording.bags import PARTS, REPOSITORY_PACKAGE, typestore
 
 
 def interface_names(kind: str) -> list[str]:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from mows.bench.throughput import CAP_A, adaptive_protocol, truth_components
-from mows.device.phases import CycleSettings
+from mows.device.cycle.phases import CycleSettings
 from mows.sim.scenario import load_scenario
 from mows.sweep.fast_cycle import drive_rate_rad_per_s, excitation_s, tuning_needed
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PlannedCycle, PrecisionGoal

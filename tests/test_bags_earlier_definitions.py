@@ -13,10 +13,10 @@ from rosbags.typesys import Stores, get_typestore
 
 from message_equality import field_names
 from mows.cli import main as cli
-from mows.device import bags
-from mows.device.bag_backend import BagBackend
-from mows.device.phases import CycleSettings
-from mows.device.session import DeviceSession, SessionConfig
+from mows.device.backends.bag_backend import BagBackend
+from mows.device.cycle.phases import CycleSettings
+from mows.device.recording import bags
+from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.sim.scenario import load_scenario

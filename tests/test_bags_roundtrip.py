@@ -1,4 +1,4 @@
-"""Every mows_msgs type through a rosbag2 MCAP bag (mows.device.bags), and rosbags' CDR against
+"""Every mows_msgs type through a rosbag2 MCAP bag (mows.device.recording.bags), and rosbags' CDR against
 rclpy's."""
 
 import pytest
@@ -8,7 +8,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 from message_equality import assert_same
-from mows.device import bags
+from mows.device.recording import bags
 from rclpy_conversion import rclpy_class, to_rclpy
 from samples import BAG_TYPES, sample_message
 

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from mows.device.phases import CycleRequest
+from mows.device.cycle.phases import CycleRequest
 from mows.estimate.ringdown import FitStatus, RingdownFit
 from mows.physics.supply import SupplyLimits
 from mows.sweep.calibration.schedule import (

@@ -23,7 +23,7 @@ import pytest
 from mows.cli import calibrate as calibrate_cli
 from mows.cli import sim as sim_cli
 from mows.cli.main import main
-from mows.device import emulator
+from mows.device.serial import emulator
 from mows.physics.probe import PAPER_PROBE
 from mows.records.files import OutputRefused, writing
 from mows.sim.scenario import SCENARIO_DIR, load_scenario

@@ -9,8 +9,8 @@ import sys
 import pytest
 
 from mows.cli.main import main
-from mows.device import bags
-from mows.device.emulator import DeviceEmulator
+from mows.device.recording import bags
+from mows.device.serial.emulator import DeviceEmulator
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
@@ -103,7 +103,10 @@ def test_the_emulator_refuses_a_link_path_that_exists(tmp_path):
         DeviceEmulator(device, path).start()
     assert path.read_bytes() == b"precious" and not path.is_symlink()
     result = subprocess.run(
-        [sys.executable, "-m", "mows.device.emulator", "--link", str(path)], capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "mows.device.serial.emulator", "--link", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert result.returncode == 2 and "Traceback" not in result.stderr and str(path) in result.stderr
     assert path.read_bytes() == b"precious"

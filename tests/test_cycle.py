@@ -10,12 +10,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from device.spy import SpyDevice
-from mows.device.cycle import CycleSequencer
+from mows.device.backends.sim_backend import SimBackend
+from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
+from mows.device.cycle.sequencer import CycleSequencer
 from mows.device.interface import CoilCommand, CommandResult
-from mows.device.phases import CycleRequest, CycleSettings, Phase
-from mows.device.scheduled import ScheduledDevice
-from mows.device.session import DeviceSession, SessionConfig
-from mows.device.sim_backend import SimBackend
+from mows.device.simulated.scheduled import ScheduledDevice
+from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap, helmholtz, largest_spacing
 from mows.records.samples import SampleBlock

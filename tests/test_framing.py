@@ -10,7 +10,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from mows.device.framing import (
+from mows.device.protocol.framing import (
     CRC,
     HEADER,
     MAX_PAYLOAD_BYTES,
@@ -27,7 +27,17 @@ from mows.device.framing import (
     FrameDecoder,
     encode_frame,
 )
-from mows.device.payloads import Ack, Coils, DeviceInfo, FieldCurrent, Heartbeat, Hello, Orientation, Samples, Status
+from mows.device.protocol.payloads import (
+    Ack,
+    Coils,
+    DeviceInfo,
+    FieldCurrent,
+    Heartbeat,
+    Hello,
+    Orientation,
+    Samples,
+    Status,
+)
 
 u8 = st.integers(0, 2**8 - 1)
 u32 = st.integers(0, 2**32 - 1)

@@ -10,7 +10,7 @@ import numpy as np
 
 from mows.bench.multiprobe_rig import MultiProbeRig
 from mows.estimate.joint_segment import fit_joint_segment, probe_lines
-from mows.estimate.ringdown_types import FitStatus
+from mows.estimate.ringdown.types import FitStatus
 from mows.estimate.segments import RingdownWindow, Segment
 from mows.sim.scenario import load_scenario
 

@@ -12,8 +12,8 @@ import pytest
 
 from mows.bench.rig import DeviceTimeRig, max_duty_fraction
 from mows.bench.throughput import CAP_A
-from mows.device.phases import CycleOutcome, CycleRequest, CycleSettings, Phase
-from mows.device.tracking import TrackingLoop, TrackingSettings
+from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, Phase
+from mows.device.cycle.tracking import TrackingLoop, TrackingSettings
 from mows.estimate.ringdown import FitOptions
 from mows.estimate.segments import RingdownWindow, Segment, fit_segment
 from mows.sim.scenario import load_scenario

@@ -33,7 +33,7 @@ from mows_msgs.msg import RingdownFit
 from mows_msgs.srv import SetFieldCurrent
 from rclpy.action import CancelResponse
 
-from mows.device.phases import CycleRequest
+from mows.device.cycle.phases import CycleRequest
 from mows.estimate.calibration.fit import CalibrationError
 from mows.sim.scenario import load_scenario
 from mows.sweep.calibration.run import CalibrationRun, ProbeCalibrator, Turn, goal_plan

@@ -3,7 +3,7 @@ since the last report (new gaps, new device faults) or still is wrong."""
 
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from mows.device.session import DeviceSession
+from mows.device.stream.session import DeviceSession
 from mows_ros.diagnostics import Health
 
 RATE_TOLERANCE = 0.02  # warn when the achieved sample rate is further off nominal

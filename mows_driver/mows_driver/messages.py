@@ -6,9 +6,9 @@ from mows_msgs.msg import ExcitationState, MagnetometerBlock, MagnetometerChanne
 from mows_msgs.srv import EmergencyStop, RunCycle, SetFieldCurrent
 from sensor_msgs.msg import JointState
 
+from mows.device.cycle.phases import CycleOutcome, CycleRequest, PhaseEvent, SupplyEvent
 from mows.device.interface import CommandResult
-from mows.device.payloads import DeviceInfo
-from mows.device.phases import CycleOutcome, CycleRequest, PhaseEvent, SupplyEvent
+from mows.device.protocol.payloads import DeviceInfo
 from mows.records import stamps
 
 

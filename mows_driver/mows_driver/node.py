@@ -1,7 +1,7 @@
 """The driver node: ROS side of the device (the simulator, a serial device, a recorded bag).
 
 It translates only: the device, the stream and the cycle are
-:class:`mows.device.session.DeviceSession`; the parameters are in ``parameters.py``, the
+:class:`mows.device.stream.session.DeviceSession`; the parameters are in ``parameters.py``, the
 topics and the bag in ``outputs.py`` (published in order by a streaming thread,
 ``mows_ros.streaming``), the services in ``services.py`` (served on the executor while a cycle
 or a supply ramp is awaited) and /diagnostics in ``health.py``.
@@ -12,7 +12,7 @@ arms the session, the only state in which a coil may be energised; ``deactivate`
 coils off at the device's next sample, fails a running cycle, ramps the supply to zero, stops
 publishing the stream (``mows/excitation`` still says what the coils do) and refuses cycles
 with the reason; ``cleanup`` closes the link. The rule is the core's
-(:class:`mows.device.session.DeviceSession` refuses to energise unless armed).
+(:class:`mows.device.stream.session.DeviceSession` refuses to energise unless armed).
 
 The node never dies on data and never publishes a number it did not measure: what goes
 wrong is in the service responses, on /diagnostics and in the log. The coils are off in
@@ -22,7 +22,7 @@ SIGTERM), and the static-field supply is ramped to zero when it stops.
 
 from rcl_interfaces.msg import SetParametersResult
 
-from mows.device.session import DeviceSession
+from mows.device.stream.session import DeviceSession
 from mows.physics.coils import CurrentCap
 from mows.precompile import precompile
 from mows_driver.health import StreamHealth

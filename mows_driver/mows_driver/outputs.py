@@ -14,8 +14,8 @@ from mows_msgs.msg import ExcitationState, MagnetometerBlock, SupplyState
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from mows.device.phases import Phase
-from mows.device.session import DeviceSession, Output
+from mows.device.cycle.phases import Phase
+from mows.device.stream.session import DeviceSession, Output
 from mows_driver.messages import block_msg, excitation_msg, joint_state_msg, supply_msg
 from mows_driver.recording import open_recorder
 from mows_ros.qos import EXCITATION_QOS, JOINT_QOS, STREAM_QOS

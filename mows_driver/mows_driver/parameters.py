@@ -4,16 +4,16 @@ device backend it makes of them."""
 import dataclasses
 import math
 
-from mows.device.bag_backend import BagBackend
-from mows.device.daq import PAPER_DEVICE_FILE, load_daq_device
-from mows.device.daqmx_backend import open_daqmx
-from mows.device.phases import CycleSettings
-from mows.device.scpi import PAPER_SUPPLY_FILE, load_supply_file, open_scpi_supply
-from mows.device.serial_backend import SerialBackend
-from mows.device.serial_link import DEFAULT_BAUD, SerialLink
-from mows.device.session import SessionConfig
-from mows.device.sim_backend import scene_backend
-from mows.device.tracking import TrackingSettings
+from mows.device.backends.bag_backend import BagBackend
+from mows.device.backends.daqmx_backend import open_daqmx
+from mows.device.backends.serial_backend import SerialBackend
+from mows.device.backends.sim_backend import scene_backend
+from mows.device.cycle.phases import CycleSettings
+from mows.device.cycle.tracking import TrackingSettings
+from mows.device.instruments.daq import PAPER_DEVICE_FILE, load_daq_device
+from mows.device.instruments.scpi import PAPER_SUPPLY_FILE, load_supply_file, open_scpi_supply
+from mows.device.serial.link import DEFAULT_BAUD, SerialLink
+from mows.device.stream.session import SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.physics.probe import PAPER_PROBE

@@ -6,7 +6,7 @@ before they are published, so a subscriber never receives a message the bag lack
 topic is stored with its message definition and the QoS it is published with, so that
 ``ros2 bag play`` offers it the same way. The bag is complete once :meth:`close` has written
 its summary and metadata (the driver closes it on SIGINT and SIGTERM); after a SIGKILL all
-but the last chunk survive (:class:`mows.device.bags.Recording`) and ``mows bag repair``
+but the last chunk survive (:class:`mows.device.recording.bags.Recording`) and ``mows bag repair``
 rebuilds the bag from them.
 """
 
@@ -21,7 +21,7 @@ from rosbags.interfaces import (
     QosTime,
 )
 
-from mows.device import bags
+from mows.device.recording import bags
 
 UNSET = QosTime(0, 0)  # rosbag2's "default" for deadline, lifespan and lease duration
 
@@ -42,7 +42,7 @@ def bag_qos(profile: QoSProfile) -> Qos:
 
 
 class BagRecorder:
-    """A new bag at ``path`` (which must not exist: :class:`mows.device.bags.BagError`) for
+    """A new bag at ``path`` (which must not exist: :class:`mows.device.recording.bags.BagError`) for
     ``topics``: {name: (msgtype, QoS)}. Used from one thread at a time (the driver's streaming
     thread, then its shutdown)."""
 

@@ -23,7 +23,7 @@ from rclpy.action import CancelResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.task import Future
 
-from mows.device.phases import CycleOutcome
+from mows.device.cycle.phases import CycleOutcome
 from mows_driver.messages import (
     cycle_request,
     cycle_response,

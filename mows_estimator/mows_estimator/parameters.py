@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 from mows.estimate.probe_set import WindowProbe
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
-from mows.estimate.ringdown_joint import JointOptions, ProbeLine
+from mows.estimate.ringdown.joint import JointOptions, ProbeLine
 from mows.estimate.stream import FitSettings, JointSettings
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import Probe

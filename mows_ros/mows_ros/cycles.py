@@ -1,5 +1,5 @@
 """A node's way to the driver's measurement cycles, shared by the mapper and the calibrator:
-the core's :class:`mows.device.phases.CycleRequest` as a goal of the driver's MeasurementCycle
+the core's :class:`mows.device.cycle.phases.CycleRequest` as a goal of the driver's MeasurementCycle
 action, answered as the core's :class:`mows.sweep.runner.CycleAnswer`; a running cycle
 cancelled when the caller gives up on it; a cycle whose acceptance was lost awaited by its
 goal's id; and the ring-down fits of ``/mows/ringdown`` handed
@@ -18,7 +18,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from unique_identifier_msgs.msg import UUID
 
-from mows.device.phases import CycleRequest
+from mows.device.cycle.phases import CycleRequest
 from mows.sweep.runner import CycleAnswer
 from mows_ros.awaitables import Delivery, until, within
 from mows_ros.qos import RESULT_QOS

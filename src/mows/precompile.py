@@ -1,6 +1,6 @@
 """Compile the numba kernels (or load them from numba's on-disk cache) before they are needed.
 
-The ring-down fit (:mod:`mows.estimate.ringdown_model`), the potential's Chebyshev series
+The ring-down fit (:mod:`mows.estimate.ringdown.model`), the potential's Chebyshev series
 (:mod:`mows.physics.potential`) and the simulator's integrator (:mod:`mows.sim.kernel`) are
 compiled on first use: about ten seconds on a fresh checkout, about a second from the cache.
 That must not happen in the middle of a measurement (a driver that stalls for seconds loses its

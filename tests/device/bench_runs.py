@@ -7,7 +7,7 @@ cycle is asked for (the sim backend's stage turns itself, ``turn`` does nothing)
 import dataclasses
 from collections.abc import Callable
 
-from mows.device.phases import CycleRequest, Phase
+from mows.device.cycle.phases import CycleRequest, Phase
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.sweep.calibration.run import CalibrationRun, Turn

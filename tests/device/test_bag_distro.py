@@ -5,7 +5,7 @@ specification (tests/mcap_records.py), not by rosbags. Our reader still reads th
 import yaml
 
 from mcap_records import assert_jazzy
-from mows.device import bags
+from mows.device.recording import bags
 
 STRING = "std_msgs/msg/String"
 

@@ -1,5 +1,5 @@
 """The paper's bench backends: the NI card through the ``nidaqmx`` Task API (on the simulated
-bench, :mod:`mows.device.simulated_daqmx`, which holds the calls to what the real API requires)
+bench, :mod:`mows.device.simulated.daqmx`, which holds the calls to what the real API requires)
 and the NGM202 field supply through PyVISA against pyvisa-sim.
 
 Requirement: a coil drive reaches the amplifiers as V_k = I_k·gain·sin(2πf(i − i_on)/fs) with
@@ -15,11 +15,10 @@ import time
 import numpy as np
 import pytest
 
-from mows.device.daq import CoilWaveforms, load_daq_device
-from mows.device.daqmx_backend import DeviceUnavailable, open_daqmx
-from mows.device.interface import CoilCommand, FieldCurrentCommand, LinkEvent
-from mows.device.phases import CycleRequest, CycleSettings, Phase
-from mows.device.scpi import (
+from mows.device.backends.daqmx_backend import DeviceUnavailable, open_daqmx
+from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
+from mows.device.instruments.daq import CoilWaveforms, load_daq_device
+from mows.device.instruments.scpi import (
     SIMULATED_RESOURCE,
     SIMULATED_SUPPLY_FILE,
     SupplyError,
@@ -27,8 +26,9 @@ from mows.device.scpi import (
     load_supply_file,
     open_scpi_supply,
 )
-from mows.device.session import DeviceSession, SessionConfig
-from mows.device.simulated_daqmx import DaqError, SimulatedBench
+from mows.device.interface import CoilCommand, FieldCurrentCommand, LinkEvent
+from mows.device.simulated.daqmx import DaqError, SimulatedBench
+from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap, largest_spacing
 from mows.physics.supply import SupplyLimits

@@ -23,13 +23,13 @@ import numpy as np
 import pytest
 
 from device.bench_runs import BenchRig
-from mows.device.daq import load_daq_device
-from mows.device.daqmx_backend import open_daqmx
-from mows.device.phases import CycleSettings
-from mows.device.scpi import SIMULATED_RESOURCE, SIMULATED_SUPPLY_FILE, load_supply_file, open_scpi_supply
-from mows.device.session import DeviceSession, SessionConfig
-from mows.device.sim_backend import SimBackend
-from mows.device.simulated_daqmx import SimulatedBench
+from mows.device.backends.daqmx_backend import open_daqmx
+from mows.device.backends.sim_backend import SimBackend
+from mows.device.cycle.phases import CycleSettings
+from mows.device.instruments.daq import load_daq_device
+from mows.device.instruments.scpi import SIMULATED_RESOURCE, SIMULATED_SUPPLY_FILE, load_supply_file, open_scpi_supply
+from mows.device.simulated.daqmx import SimulatedBench
+from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.calibration.constants import CalibrationError, KnownConstants
 from mows.estimate.calibration.fit import calibrate_probe
 from mows.estimate.ringdown import fit_ringdown

@@ -7,10 +7,10 @@ import pytest
 
 from mows.cli.check_hardware import simulated_bench
 from mows.cli.main import main
-from mows.device.daq import load_daq_device
-from mows.device.daqmx_backend import open_daqmx
-from mows.device.hardware_check import HardwareCheck, lock_in_t
-from mows.device.scpi import SIMULATED_RESOURCE, SIMULATED_SUPPLY_FILE, load_supply_file, open_scpi_supply
+from mows.device.backends.daqmx_backend import open_daqmx
+from mows.device.instruments.daq import load_daq_device
+from mows.device.instruments.hardware_check import HardwareCheck, lock_in_t
+from mows.device.instruments.scpi import SIMULATED_RESOURCE, SIMULATED_SUPPLY_FILE, load_supply_file, open_scpi_supply
 from mows.physics.coils import CurrentCap
 
 

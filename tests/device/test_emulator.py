@@ -16,13 +16,13 @@ import time
 import pytest
 
 from device.spy import SpyDevice
-from mows.device.emulator import FRAME_S, DeviceEmulator
+from mows.device.backends.serial_backend import SerialBackend
+from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.interface import CoilCommand, FieldCurrentCommand, LinkEvent
-from mows.device.payloads import Ack, Coils, FieldCurrent, Samples, Status
-from mows.device.phases import CycleRequest, CycleSettings, Phase
-from mows.device.serial_backend import SerialBackend
-from mows.device.serial_link import SerialLink
-from mows.device.session import DeviceSession, SessionConfig
+from mows.device.protocol.payloads import Ack, Coils, FieldCurrent, Samples, Status
+from mows.device.serial.emulator import FRAME_S, DeviceEmulator
+from mows.device.serial.link import SerialLink
+from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario

@@ -8,13 +8,13 @@ import pytest
 
 from device.spy import SpyDevice
 from device.test_emulator import CAP_A, SCENARIO, collect, samples_of, wait_for
-from mows.device.blocks import BlockAssembler
-from mows.device.emulator import DeviceEmulator
+from mows.device.backends.serial_backend import SerialBackend
+from mows.device.cycle.phases import CycleRequest, CycleSettings
 from mows.device.interface import LinkEvent
-from mows.device.phases import CycleRequest, CycleSettings
-from mows.device.serial_backend import SerialBackend
-from mows.device.serial_link import SerialLink
-from mows.device.session import DeviceSession, SessionConfig
+from mows.device.serial.emulator import DeviceEmulator
+from mows.device.serial.link import SerialLink
+from mows.device.stream.blocks import BlockAssembler
+from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
 from mows.records.samples import SampleBlock

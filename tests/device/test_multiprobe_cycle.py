@@ -20,6 +20,9 @@ import dataclasses
 import numpy as np
 import pytest
 
+from mows.device.backends.sim_backend import MultiProbeSimBackend, SimBackend
+from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
+from mows.device.cycle.tone_groups import DEFAULT_SWING_RAD, on_stage, plan_probes
 from mows.device.interface import (
     CoilCommand,
     CommandResult,
@@ -27,11 +30,8 @@ from mows.device.interface import (
     MultiToneCommand,
     refuse_tones,
 )
-from mows.device.multitone import DEFAULT_SWING_RAD, on_stage, plan_probes
-from mows.device.phases import CycleRequest, CycleSettings, Phase
-from mows.device.scheduled import OverCap
-from mows.device.session import DeviceSession, SessionConfig
-from mows.device.sim_backend import MultiProbeSimBackend, SimBackend
+from mows.device.simulated.scheduled import OverCap
+from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.joint_segment import fit_joint_segment, probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_ringdown
 from mows.estimate.segments import RingdownWindow, SegmentAssembler

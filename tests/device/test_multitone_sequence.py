@@ -10,8 +10,8 @@ sample and nothing more is excited.
 import numpy as np
 import pytest
 
-from mows.device.duty import DutyCycleLimit
-from mows.device.multitone import GroupSequence
+from mows.device.cycle.duty import DutyCycleLimit
+from mows.device.cycle.tone_groups import GroupSequence
 from mows.physics.coils import largest_spacing
 from mows.physics.multitone import Tone, plan_excitation
 

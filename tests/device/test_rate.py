@@ -1,8 +1,8 @@
-"""The achieved sample rate: samples per host second over a sliding window (mows.device.rate)."""
+"""The achieved sample rate: samples per host second over a sliding window (mows.device.stream.rate)."""
 
 import pytest
 
-from mows.device.rate import RATE_WINDOW_S, RateMeter
+from mows.device.stream.rate import RATE_WINDOW_S, RateMeter
 
 
 def test_rate_of_a_steady_stream_is_its_samples_per_second():

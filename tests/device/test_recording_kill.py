@@ -12,14 +12,14 @@ import pytest
 
 from mcap_records import assert_jazzy
 from mows.cli.main import main
-from mows.device import bag_repair, bags
+from mows.device.recording import bag_repair, bags
 
 STRING = "std_msgs/msg/String"
 # The child: writes numbered messages of 10 kB into a Recording, says on stdout how many it had
 # written each time a chunk reached the disk, and after ``stop_after`` messages waits to be killed.
 CHILD = textwrap.dedent("""
     import sys, time
-    from mows.device import bags
+    from mows.device.recording import bags
     path, stop_after = sys.argv[1], int(sys.argv[2])
     store = bags.typestore()
     recording = bags.Recording(path, {"/chatter": ("std_msgs/msg/String", [])})

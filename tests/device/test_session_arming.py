@@ -5,9 +5,9 @@ that sends commands refuses a coil drive even when the refusal upstream is missi
 
 import pytest
 
-from mows.device.phases import CycleRequest, CycleSettings, Phase
-from mows.device.session import DeviceSession, SessionConfig
-from mows.device.sim_backend import SimBackend
+from mows.device.backends.sim_backend import SimBackend
+from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
+from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario

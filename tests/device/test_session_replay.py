@@ -4,10 +4,10 @@ the probes a multi-tone excitation rang come back as they were recorded."""
 
 import numpy as np
 
-from mows.device import bags
-from mows.device.bag_backend import BagBackend
-from mows.device.phases import CycleSettings, Phase
-from mows.device.session import DeviceSession, SessionConfig
+from mows.device.backends.bag_backend import BagBackend
+from mows.device.cycle.phases import CycleSettings, Phase
+from mows.device.recording import bags
+from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import PRESETS, CurrentCap
 

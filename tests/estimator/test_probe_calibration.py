@@ -2,7 +2,7 @@
 
 The data are independent of the calibration's model: the time-domain simulator integrates the
 equation of motion in the Pasco pair's exact field (driven into the housing stop, sensor
-noise), the supply steps through :class:`mows.device.scheduled.ScheduledDevice` (cap, slew) in
+noise), the supply steps through :class:`mows.device.simulated.scheduled.ScheduledDevice` (cap, slew) in
 simulated device time, and every ring-down is fitted as the estimator node fits it, with the
 pickup of the *nominal* probe's lever (the true one is what is being calibrated).
 

@@ -6,7 +6,7 @@ import pytest
 
 from mows.estimate.probe_set import MAX_PROBES, read_probe_set
 from mows.estimate.ringdown import FitOptions
-from mows.estimate.ringdown_joint import JointOptions
+from mows.estimate.ringdown.joint import JointOptions
 from mows.estimate.segments import RingdownWindow, Segment
 from mows.estimate.stream import FitSettings, JointSettings, RingdownEstimator
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics

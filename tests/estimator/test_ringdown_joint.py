@@ -22,9 +22,9 @@ from scipy import stats
 from mows.bench.estimator import N_SAMPLES, SAMPLE_RATE_HZ
 from mows.bench.multiprobe import PairCase, pair_cell
 from mows.estimate.ringdown import fit_ringdown
-from mows.estimate.ringdown_joint import ProbeLine, fit_ringdowns, joint_cramer_rao_hz
-from mows.estimate.ringdown_problem import cramer_rao_frequency_hz
-from mows.estimate.ringdown_types import FitOptions, FitStatus, RingdownFit
+from mows.estimate.ringdown.joint import ProbeLine, fit_ringdowns, joint_cramer_rao_hz
+from mows.estimate.ringdown.problem import cramer_rao_frequency_hz
+from mows.estimate.ringdown.types import FitOptions, FitStatus, RingdownFit
 from mows.physics.signal import signal_t
 
 pytestmark = pytest.mark.xdist_group("ringdown_joint")
@@ -40,7 +40,7 @@ def apart():
 
 
 def test_the_bound_with_a_neighbour_is_the_bound_alone_when_apart_and_grows_as_they_approach():
-    # The one-probe bound (mows.estimate.ringdown_problem) is computed independently of the joint one.
+    # The one-probe bound (mows.estimate.ringdown.problem) is computed independently of the joint one.
     ratios = {sep: PairCase(sep, 1.0).crb_hz() / PairCase(sep, 1.0).alone_crb_hz() for sep in (20, 10, 5, 3, 2)}
     assert ratios[20] == pytest.approx([1.0, 1.0], abs=0.01)
     assert ratios[10] == pytest.approx([1.0, 1.0], abs=0.02)

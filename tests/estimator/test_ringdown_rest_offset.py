@@ -23,8 +23,8 @@ import pytest
 
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.estimate.ringdown import FitOptions, starting_point
-from mows.estimate.ringdown_problem import RingdownProblem, variable_projection
-from mows.estimate.ringdown_start import white_noise_std
+from mows.estimate.ringdown.problem import RingdownProblem, variable_projection
+from mows.estimate.ringdown.start import white_noise_std
 from mows.physics.field import UniformField, source_from_dict
 from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario

@@ -16,7 +16,7 @@ import pytest
 
 from mows.estimate.probe_set import read_probe_set, window_probes
 from mows.estimate.ringdown import FitOptions, FitStatus
-from mows.estimate.ringdown_joint import JointOptions
+from mows.estimate.ringdown.joint import JointOptions
 from mows.estimate.segments import RingdownWindow, Segment, window_from_message
 from mows.estimate.stream import FitSettings, JointSettings, RingdownEstimator
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics

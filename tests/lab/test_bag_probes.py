@@ -13,7 +13,7 @@ import re
 import numpy as np
 
 from mows.cli.main import main
-from mows.device import bags
+from mows.device.recording import bags
 from mows.lab import from_bag
 from mows.lab.data.table import PROBE
 from recorded_bags import EXCITATION, ringdown_fit_message, ringdown_message

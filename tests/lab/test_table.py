@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from mows.device import bags
+from mows.device.recording import bags
 from mows.lab import MissingColumnError, TableError, from_bag, load_table, read_csv
 from recorded_bags import ringdown_fit_message
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.constants
 
-from mows.device.scheduled import ScheduledDevice
+from mows.device.simulated.scheduled import ScheduledDevice
 from mows.physics.coils import CurrentCap
 from mows.physics.field import helmholtz_pair
 from mows.physics.probe import PAPER_PROBE

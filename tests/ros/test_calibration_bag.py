@@ -16,7 +16,7 @@ from mows_msgs.action import CalibrateProbe
 from rclpy.action import ActionClient
 
 from mows.cli import main as cli
-from mows.device import bags
+from mows.device.recording import bags
 from mows.physics.probe import calibration_record
 from mows_bringup.graph import NODES
 

@@ -10,7 +10,7 @@ from mows_msgs.action import MeasurementCycle
 from rclpy.action import ActionServer
 from rclpy.task import Future
 
-from mows.device.phases import CycleRequest
+from mows.device.cycle.phases import CycleRequest
 from mows_ros import cycles
 
 pytestmark = pytest.mark.ros

@@ -20,9 +20,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from mcap_records import assert_jazzy
 from mows.cli import main as cli
-from mows.device import bags
-from mows.device.emulator import DeviceEmulator
-from mows.device.phases import Phase
+from mows.device.cycle.phases import Phase
+from mows.device.recording import bags
+from mows.device.serial.emulator import DeviceEmulator
 from mows.records import stamps
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice

@@ -16,7 +16,7 @@ from mows_msgs.msg import ExcitationState, MagnetometerBlock
 from mows_msgs.srv import RunCycle
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from mows.device.phases import Phase
+from mows.device.cycle.phases import Phase
 from mows.records import stamps
 from mows.sim.scenario import load_scenario
 from mows_bringup.graph import NODES

@@ -33,7 +33,7 @@ from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.action import ActionClient
 from rclpy.signals import SignalHandlerOptions
 
-from mows.device.phases import Phase
+from mows.device.cycle.phases import Phase
 from mows_bringup.graph import NODES
 from mows_ros.qos import EXCITATION_QOS
 from node_processes import RosHarness, assert_stops_cleanly, launch, log, send_goal

@@ -18,7 +18,7 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from mows.device.phases import CycleRequest, Phase
+from mows.device.cycle.phases import CycleRequest, Phase
 from mows.records import stamps
 from mows_bringup.graph import NODES
 from mows_bringup.lifecycle import BOUND_S, LifecycleClient

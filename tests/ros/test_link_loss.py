@@ -8,8 +8,8 @@ import sys
 import pytest
 from mows_msgs.srv import RunCycle
 
-from mows.device import bags
-from mows.device.phases import Phase
+from mows.device.cycle.phases import Phase
+from mows.device.recording import bags
 from mows_bringup.graph import NODES
 from node_processes import log
 from test_driver_node import QUICK_CYCLES, Listener
@@ -18,7 +18,7 @@ pytestmark = pytest.mark.ros
 
 
 def start_emulator(start, link):
-    return start(sys.executable, "-m", "mows.device.emulator", "--link", str(link))
+    return start(sys.executable, "-m", "mows.device.serial.emulator", "--link", str(link))
 
 
 @pytest.mark.xdist_group("realtime")  # the device emulator's real-time threads

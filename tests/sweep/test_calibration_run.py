@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mows.device.phases import CycleRequest
+from mows.device.cycle.phases import CycleRequest
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitStatus, RingdownFit
 from mows.physics.probe import PAPER_PROBE
 from mows.sweep.calibration.run import CalibrationRun, ProbeCalibrator, Turn, goal_plan

@@ -20,7 +20,8 @@ import time
 import numpy as np
 from scipy.optimize import curve_fit
 
-from mows.estimate import ringdown, ringdown_problem
+from mows.estimate import ringdown
+from mows.estimate.ringdown import problem
 from mows.physics.signal import signal_t
 
 SAMPLE_RATE_HZ = 20_000.0
@@ -35,8 +36,8 @@ OFFSET_T = 3e-9
 
 def reference_crb_hz(theta0_rad: float, noise_std_t: float, **options) -> float:
     """The Cramér–Rao bound of f for the ring-down of the constants above at θ0 in white noise σ
-    (``options``: those of :func:`mows.estimate.ringdown_problem.cramer_rao_frequency_hz`)."""
-    return ringdown_problem.cramer_rao_frequency_hz(
+    (``options``: those of :func:`mows.estimate.ringdown.problem.cramer_rao_frequency_hz`)."""
+    return problem.cramer_rao_frequency_hz(
         N_SAMPLES,
         SAMPLE_RATE_HZ,
         FREQUENCY_HZ,

@@ -4,7 +4,7 @@ The sibling of :class:`mows.bench.rig.DeviceTimeRig` for a scene with several pr
 cycle turns every probe to its θ0 (:meth:`MultiProbeDevice.set_orientations`), lets them settle,
 plans the multi-tone excitation (:func:`mows.physics.multitone.plan_excitation`: each probe's
 tone at its f00, the cap on the summed peak, overlapping tones refused with the reason) and
-excites its groups in turn under the duty limit (:class:`mows.device.multitone.GroupSequence`).
+excites its groups in turn under the duty limit (:class:`mows.device.cycle.tone_groups.GroupSequence`).
 After each group's excitation it announces the ring-down window at the coils' switch-off, as the
 driver does, cuts it from the stream (:class:`mows.estimate.segments.SegmentAssembler`) and fits
 the group's probes jointly (:func:`mows.estimate.joint_segment.fit_joint_segment`). Stretches
@@ -19,8 +19,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mows.device.duty import DutyCycleLimit
-from mows.device.multitone import DEFAULT_SWING_RAD, GroupSequence, plan_probes
+from mows.device.cycle.duty import DutyCycleLimit
+from mows.device.cycle.tone_groups import DEFAULT_SWING_RAD, GroupSequence, plan_probes
 from mows.estimate.joint_segment import fit_joint_segment, probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, RingdownFit
 from mows.estimate.segments import RingdownWindow, SegmentAssembler

@@ -1,8 +1,8 @@
 """The driver and the estimator on the simulated device, in device time and without ROS.
 
 :class:`DeviceTimeRig` runs the driver's own cycle state machine
-(:class:`mows.device.cycle.CycleSequencer`, with its duty-cycle limit and current cap) on the
-simulated device with commands at exact samples (:class:`mows.device.scheduled.ScheduledDevice`),
+(:class:`mows.device.cycle.sequencer.CycleSequencer`, with its duty-cycle limit and current cap) on the
+simulated device with commands at exact samples (:class:`mows.device.simulated.scheduled.ScheduledDevice`),
 cuts the announced ring-downs out of the stream as the estimator node does
 (:class:`mows.estimate.segments.SegmentAssembler`) and fits them with the lever-aware pick-up
 (:func:`mows.estimate.segments.fit_segment`). The device's clock is the only clock: a run takes
@@ -16,13 +16,13 @@ import dataclasses
 
 import numpy as np
 
-from mows.device.cycle import CycleSequencer
+from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, Phase, PhaseEvent, Step
+from mows.device.cycle.sequencer import CycleSequencer
+from mows.device.cycle.tracking import TrackingLoop
 from mows.device.interface import CoilCommand, CommandResult
-from mows.device.phases import CycleOutcome, CycleRequest, CycleSettings, Phase, PhaseEvent, Step
-from mows.device.scheduled import OverCap, ScheduledDevice
-from mows.device.tracking import TrackingLoop
+from mows.device.simulated.scheduled import OverCap, ScheduledDevice
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit, fit_ringdown
-from mows.estimate.ringdown_start import white_noise_std
+from mows.estimate.ringdown.start import white_noise_std
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.physics.coils import CurrentCap
 from mows.sim.simulator import SimulatedDevice
@@ -97,7 +97,7 @@ class DeviceTimeRig:
         return self._outcome.success, self._outcome.message, self._measured
 
     def run_tracking(self, loop: TrackingLoop, ringdowns: int) -> list[MeasuredRingdown]:
-        """Tracking cycles as the driver's session chains them (:mod:`mows.device.tracking`),
+        """Tracking cycles as the driver's session chains them (:mod:`mows.device.cycle.tracking`),
         over the rig's settings, until ``ringdowns`` are measured or the loop stops."""
         measured: list[MeasuredRingdown] = []
         while len(measured) < ringdowns and (request := loop.next_request(self.sequencer.settings)) is not None:
@@ -181,7 +181,7 @@ class DeviceTimeRig:
 
 def max_duty_fraction(intervals, window_samples: int) -> float:
     """The largest share of coil-on samples in any window of ``window_samples`` (the worst
-    window ends at the end of an excitation, :mod:`mows.device.duty`)."""
+    window ends at the end of an excitation, :mod:`mows.device.cycle.duty`)."""
     worst = 0.0
     for _, off in intervals:
         start = off - window_samples

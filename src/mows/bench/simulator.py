@@ -25,7 +25,7 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from mows.device.multitone import plan_probes
+from mows.device.cycle.tone_groups import plan_probes
 from mows.physics.coils import excitation_samples
 from mows.physics.fluxgate import NoiseModel
 from mows.sim.cycle import simulate_cycle

@@ -26,9 +26,9 @@ import subprocess
 import time
 from pathlib import Path
 
-from mows.device.phases import CycleSettings
-from mows.device.session import DeviceSession, SessionConfig
-from mows.device.sim_backend import SimBackend
+from mows.device.backends.sim_backend import SimBackend
+from mows.device.cycle.phases import CycleSettings
+from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario

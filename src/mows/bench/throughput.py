@@ -27,7 +27,7 @@ field and ≤ 100 µT/m per gradient component; rounds of the multi-probe cycle,
 checked after every point).
 
 ``tracking``: the driver's tracking mode (its plan and its loop of cycles,
-:mod:`mows.device.tracking`) at θ0 = 0°, ring-downs as short as the Cramér–Rao bound allows for
+:mod:`mows.device.cycle.tracking`) at θ0 = 0°, ring-downs as short as the Cramér–Rao bound allows for
 σ ≤ 0.2 µT and σ ≤ 1 µT; measured: updates per device second and the scatter of the estimates.
 """
 
@@ -40,8 +40,8 @@ import numpy as np
 
 from mows.bench import multiprobe_throughput
 from mows.bench.rig import DeviceTimeRig, max_duty_fraction
-from mows.device.phases import CycleRequest, CycleSettings
-from mows.device.tracking import TrackingLoop, TrackingSettings
+from mows.device.cycle.phases import CycleRequest, CycleSettings
+from mows.device.cycle.tracking import TrackingLoop, TrackingSettings
 from mows.estimate.axis import estimate_along_axis
 from mows.lab.data.reference import reference_at
 from mows.records.stamps import NS_PER_S
@@ -219,7 +219,7 @@ def adaptive_protocol(goal: PrecisionGoal = PrecisionGoal(), seed: int = 1, scen
 
 def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, seed: int = 2) -> dict:
     """The driver's tracking mode at θ0 for σ ≤ ``target_std_t`` of B along the axis: its plan
-    and loop (:mod:`mows.device.tracking`) fed the noise measured in the first samples, and what
+    and loop (:mod:`mows.device.cycle.tracking`) fed the noise measured in the first samples, and what
     it measured (updates per device second between consecutive fitted ring-downs, their scatter)."""
     scenario = load_scenario(SCENARIO)
     probe = scenario.probe

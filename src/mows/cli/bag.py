@@ -2,14 +2,14 @@
 
 A driver killed with SIGKILL (or a power cut) leaves a bag whose MCAP file has no summary and
 whose ``metadata.yaml`` still says it is open: readers refuse it. ``repair`` keeps every whole
-chunk (:mod:`mows.device.bag_repair`), writes a closed MCAP and a complete ``metadata.yaml``
+chunk (:mod:`mows.device.recording.bag_repair`), writes a closed MCAP and a complete ``metadata.yaml``
 in the bag directory, keeps the damaged file as ``NAME.mcap.damaged`` and prints how many
 messages were recovered and what was lost. A bag that reads already is left alone (exit 2).
 """
 
 import argparse
 
-from mows.device.bag_repair import repair
+from mows.device.recording.bag_repair import repair
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

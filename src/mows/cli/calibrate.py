@@ -38,7 +38,7 @@ import numpy as np
 from mows.cli.calibrate_bag import SUPPLY_TOPIC, bag_points
 from mows.cli.fit import add_fit_arguments
 from mows.cli.inputs import check_frequencies, finite_float, input_file, load_probe, positive_int
-from mows.device.scheduled import ScheduledDevice
+from mows.device.simulated.scheduled import ScheduledDevice
 from mows.estimate.calibration.constants import CalibrationPoint, KnownConstants
 from mows.estimate.calibration.fit import calibrate_probe
 from mows.estimate.recorded_cycle import fit_cycle
@@ -235,7 +235,7 @@ def _succeeded(outcome: CalibrationOutcome) -> CalibrationOutcome:
 def simulate_calibration(scenario, plan: CalibrationPlan, nominal: Probe, on_feedback=None) -> CalibrationOutcome:
     """Run :class:`CalibrationSchedule` on the simulated device of ``scenario`` in device time.
 
-    The supply ramps through :class:`mows.device.scheduled.ScheduledDevice` (cap, slew,
+    The supply ramps through :class:`mows.device.simulated.scheduled.ScheduledDevice` (cap, slew,
     resolution); every cycle is :func:`mows.sim.simulator.simulate_cycle` and its ring-down is
     fitted as the estimator does, with the lever-aware pickup of the **nominal** probe (the true
     lever is what is being calibrated). ValueError if the schedule does not end at zero current.

@@ -6,7 +6,7 @@ of ``mows fit``); its supply current is the one the driver's ``mows_msgs/SupplyS
 current the calibration action paired the estimator's fit with. Ring-downs during a ramp, after
 the emergency stop's ramp to zero or before the first supply state are left out and counted.
 A bag recorded before the driver published its supply states cannot say at which current a
-ring-down was taken: it is refused with :class:`mows.device.bags.BagError` (``mows calibrate``:
+ring-down was taken: it is refused with :class:`mows.device.recording.bags.BagError` (``mows calibrate``:
 one line, exit status 2).
 """
 
@@ -16,8 +16,8 @@ import bisect
 import dataclasses
 
 from mows.cli.fit import fit_bag
-from mows.device.bag_backend import SUPPLY_TYPE
-from mows.device.bags import BagError, read_bag
+from mows.device.backends.bag_backend import SUPPLY_TYPE
+from mows.device.recording.bags import BagError, read_bag
 from mows.estimate.calibration.constants import CalibrationPoint
 from mows.records import stamps
 from mows.records.stamps import NS_PER_S

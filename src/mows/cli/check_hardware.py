@@ -1,12 +1,12 @@
 """``mows check-hardware``: check the paper's bench step by step before measuring on it.
 
 Opens the NI card of ``--device`` (default: the paper's PCIe-6363 wiring) and the SCPI field
-supply of ``--supply-file`` at ``--supply-resource``, then (:class:`mows.device.hardware_check.HardwareCheck`)
-reads both fluxgates at rest, pulses each coil on its own at a safe current and says what each
-fluxgate saw of it, steps the supply and reads it back, and reports every check. ``--simulate``
-runs the same check on the simulated bench: the ``nidaqmx`` Task API stand-in
-(:mod:`mows.device.simulated_daqmx`) over the paper's largest-spacing scene with the Pasco pair
-on its supply, the NGM202 on pyvisa-sim.
+supply of ``--supply-file`` at ``--supply-resource``, then
+(:class:`mows.device.instruments.hardware_check.HardwareCheck`) reads both fluxgates at rest,
+pulses each coil on its own at a safe current and says what each fluxgate saw of it, steps the
+supply and reads it back, and reports every check. ``--simulate`` runs the same check on the
+simulated bench: the ``nidaqmx`` Task API stand-in (:mod:`mows.device.simulated.daqmx`) over the
+paper's largest-spacing scene with the Pasco pair on its supply, the NGM202 on pyvisa-sim.
 Exit status 0 when every check passed, 3 when one found a problem (each line says which).
 """
 
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import argparse
 
-from mows.device.daq import PAPER_DEVICE_FILE, load_daq_device
-from mows.device.daqmx_backend import open_daqmx
-from mows.device.hardware_check import HardwareCheck
-from mows.device.scpi import (
+from mows.device.backends.daqmx_backend import open_daqmx
+from mows.device.instruments.daq import PAPER_DEVICE_FILE, load_daq_device
+from mows.device.instruments.hardware_check import HardwareCheck
+from mows.device.instruments.scpi import (
     PAPER_SUPPLY_FILE,
     SIMULATED_RESOURCE,
     SIMULATED_SUPPLY_FILE,
@@ -84,7 +84,7 @@ def run(args) -> int:
 
 def simulated_bench(device, supply):
     """The simulated bench wired as ``device`` says, its field supply the pyvisa-sim NGM202."""
-    from mows.device.simulated_daqmx import SimulatedBench
+    from mows.device.simulated.daqmx import SimulatedBench
     from mows.sim.scenario import load_scenario
     from mows.sim.simulator import SimulatedDevice
 

@@ -22,7 +22,7 @@ import os
 import sys
 
 from mows.cli.inputs import input_file, load_probe, non_negative_float, renamed_option, sensor_length_m
-from mows.device.bags import read_bag
+from mows.device.recording.bags import read_bag
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import fit_segment
 from mows.lab.chirp import recorded_segments

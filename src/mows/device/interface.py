@@ -11,7 +11,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 
-from mows.device.payloads import DeviceInfo
+from mows.device.protocol.payloads import DeviceInfo
 from mows.physics.coils import CoilSetup, CurrentCap
 from mows.physics.supply import SupplyLimits
 

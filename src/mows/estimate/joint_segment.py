@@ -3,7 +3,7 @@
 A multi-tone excitation (:mod:`mows.physics.multitone`) leaves every probe of its group ringing
 down in the same window, cut out of the stream like one probe's
 (:class:`mows.estimate.segments.SegmentAssembler`). :func:`probe_lines` says what the joint
-fit (:func:`mows.estimate.ringdown_joint.fit_ringdowns`) is told about each probe: its id, its
+fit (:func:`mows.estimate.ringdown.joint.fit_ringdowns`) is told about each probe: its id, its
 θ0, the frequency it was excited at and the exact pickup of its magnet swinging on its lever
 (:func:`mows.physics.fluxgate.pickup_harmonics`) seen by the fluxgate pair, which differs from
 probe to probe with where each sits. :func:`fit_joint_segment` fits a window, or refuses one
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from mows.estimate.ringdown_joint import JointOptions, ProbeLine, fit_ringdowns
-from mows.estimate.ringdown_types import FitStatus, RingdownFit, failure
+from mows.estimate.ringdown.joint import JointOptions, ProbeLine, fit_ringdowns
+from mows.estimate.ringdown.types import FitStatus, RingdownFit, failure
 from mows.estimate.segments import Segment, gap_message
 from mows.physics.coupling import PlacedProbe
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics, pickup_scale_t

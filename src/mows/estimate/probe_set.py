@@ -1,6 +1,6 @@
 """The probes one estimator tells apart in each ring-down window: the ``probes`` text of the
 estimator's parameters read into each probe's id, constants, f00 and place, and made into the
-joint fit's lines (:mod:`mows.estimate.ringdown_joint`).
+joint fit's lines (:mod:`mows.estimate.ringdown.joint`).
 
 The text is a YAML mapping from probe id (0–255) to the probe, given as its f00 in Hz, as a
 probe constants file (:meth:`mows.physics.probe.Probe.from_yaml`, whose f00 it takes), or as a
@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from mows.estimate.ringdown_joint import ProbeLine
+from mows.estimate.ringdown.joint import ProbeLine
 from mows.estimate.segments import RingdownWindow
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics, pickup_scale_t
 from mows.physics.pose import Pose

@@ -43,8 +43,8 @@ from collections.abc import Iterator
 import numpy as np
 from scipy import stats
 
-from mows.device.bags import read_bag
-from mows.device.phases import Phase
+from mows.device.cycle.phases import Phase
+from mows.device.recording.bags import read_bag
 from mows.estimate.axis import estimate_along_axis
 from mows.estimate.ringdown import FitOptions, RingdownFit, fit_ringdown, usable_window
 from mows.estimate.segments import Segment, SegmentAssembler, block_from_message, window_from_message

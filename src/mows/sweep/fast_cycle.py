@@ -22,7 +22,7 @@ more than ``TUNING_PHASE_SLIP``/t_k (a 1.6 % loss of drive); at 10 A (t_k ≈ 40
 2.5 Hz, a field of ~0.7 mT.
 
 Ring-down length. One ring-down of length T measures f with at best the Cramér–Rao bound
-σ_f(T) (:func:`mows.estimate.ringdown.cramer_rao_frequency_hz`, full model with the
+σ_f(T) (:func:`mows.estimate.ringdown.problem.cramer_rao_frequency_hz`, full model with the
 lever-aware pick-up, PHYSICS.md §7); a cycle costs T plus its overhead (the excitation). The
 information per second 1/(σ_f(T)²·(T + overhead)) grows while the swing is large and falls once
 it has decayed (~1/δ): its maximum, averaged over the orientations of a sweep, is the length,
@@ -49,7 +49,7 @@ from collections.abc import Callable
 import numpy as np
 
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
-from mows.estimate.ringdown_problem import cramer_rao_frequency_hz
+from mows.estimate.ringdown.problem import cramer_rao_frequency_hz
 from mows.physics.field import MU0_OVER_4PI
 from mows.physics.fluxgate import PICKUP_COMBINATIONS
 

@@ -45,8 +45,8 @@ from typing import Protocol
 
 import numpy as np
 
-from mows.estimate.ringdown_joint import JointOptions, start_swing_rad
-from mows.estimate.ringdown_types import RingdownFit
+from mows.estimate.ringdown.joint import JointOptions, start_swing_rad
+from mows.estimate.ringdown.types import RingdownFit
 from mows.physics.coupling import PlacedProbe
 from mows.physics.fluxgate import FluxgatePair, pickup_scale_t
 from mows.physics.sources import PointDipole

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from mows.estimate.ringdown_types import parameter_std
+from mows.estimate.ringdown.types import parameter_std
 from mows.physics.probe import Probe
 from mows.physics.ringdown_average import start_swing_rad
 from mows.sweep.decompose import Decomposition, NeighbourFields, Ringdowns, decompose, local_potential

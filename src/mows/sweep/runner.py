@@ -1,5 +1,5 @@
 """A rotation sweep as an I/O-free state machine, in the manner of
-:class:`mows.device.cycle.CycleSequencer`: fed the goal, the driver's answers to cycle requests,
+:class:`mows.device.cycle.sequencer.CycleSequencer`: fed the goal, the driver's answers to cycle requests,
 the ring-down fits and a cancel, it returns steps (run a cycle at θ0, report feedback,
 decompose, publish the map, the finished result). Who runs the cycles, delivers the fits and
 keeps the time is the caller's business (the mapper node does it over ROS).
@@ -31,7 +31,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mows.device.phases import CycleRequest
+from mows.device.cycle.phases import CycleRequest
 from mows.estimate.probe_set import ProbeEntry
 from mows.physics.probe import Probe
 from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
@@ -108,7 +108,7 @@ class SweepGoal:
 
 @dataclasses.dataclass(frozen=True)
 class CycleAnswer:
-    """The answer to a :class:`~mows.device.phases.CycleRequest`: the cycle that ran and how many
+    """The answer to a :class:`~mows.device.cycle.phases.CycleRequest`: the cycle that ran and how many
     ring-downs it recorded, or ``problem``, why no cycle ran ('' when it did)."""
 
     cycle_id: int = 0

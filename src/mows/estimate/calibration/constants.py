@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from mows.estimate.ringdown_types import RingdownFit
+from mows.estimate.ringdown.types import RingdownFit
 from mows.physics.field import FieldSource
 from mows.physics.probe import Probe
 from mows.physics.schema import Vector

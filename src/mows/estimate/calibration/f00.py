@@ -1,7 +1,7 @@
 """The zero-field frequency f00 calibrated from ring-downs in a known field along the probe axis.
 
 Eq. 6 with no gradient, f = f00·√(1 + m·B/kM), solved for f00 per ring-down and averaged. An
-I/O-free state machine in the manner of :class:`mows.device.cycle.CycleSequencer`: fed the
+I/O-free state machine in the manner of :class:`mows.device.cycle.sequencer.CycleSequencer`: fed the
 frequencies of OK ring-downs (:meth:`F00Calibration.offer`) and the end of its time
 (:meth:`F00Calibration.time_up`), it returns the outcome once it has one.
 """

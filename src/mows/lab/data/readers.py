@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from mows.device import bags
+from mows.device.recording import bags
 from mows.estimate.ringdown import FitStatus
 from mows.lab.data.reference import Reference, reference_columns
 from mows.lab.data.table import FIELD, KNOWN, PROBE, MeasurementTable, TableError, broken_rules, rows_text, with_notes

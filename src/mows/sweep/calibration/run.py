@@ -1,5 +1,5 @@
 """The calibrator's goals as I/O-free classes around :class:`CalibrationSchedule` (paper Fig. 3),
-in the manner of :class:`mows.device.cycle.CycleSequencer`: fed the driver's answers, the
+in the manner of :class:`mows.device.cycle.sequencer.CycleSequencer`: fed the driver's answers, the
 ring-down fits of the stream and the client's cancel, they return the schedule's steps.
 
 :class:`CalibrationRun` runs one goal: it routes each fit to the cycle that made it (by cycle
@@ -15,7 +15,7 @@ import dataclasses
 import enum
 import math
 
-from mows.device.phases import CycleRequest
+from mows.device.cycle.phases import CycleRequest
 from mows.estimate.calibration.constants import KnownConstants, ProbeCalibration
 from mows.estimate.calibration.fit import calibrate_probe
 from mows.physics.probe import Probe

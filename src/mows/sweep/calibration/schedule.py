@@ -11,10 +11,10 @@ cannot give before anything is set. Every ending (done, cancelled, a refused com
 ramps the supply back to zero, and only then reports the outcome, which says whether the
 device confirmed zero.
 
-The schedule does no I/O, like :class:`mows.device.cycle.CycleSequencer`: it is fed the
+The schedule does no I/O, like :class:`mows.device.cycle.sequencer.CycleSequencer`: it is fed the
 device's answers (:meth:`on_supply`, :meth:`on_fit`, :meth:`on_cycle_done`, :meth:`fits_timed_out`)
 and the user's :meth:`cancel`, and returns a :class:`Step` of actions (:class:`SetSupply`, a
-:class:`~mows.device.phases.CycleRequest` whose fits go to :meth:`on_fit` and whose end to
+:class:`~mows.device.cycle.phases.CycleRequest` whose fits go to :meth:`on_fit` and whose end to
 :meth:`on_cycle_done`), feedback and, at the end, the :class:`CalibrationOutcome` with the
 calibration points for :func:`mows.estimate.calibration.fit.calibrate_probe`.
 """
@@ -25,7 +25,7 @@ import dataclasses
 import enum
 import math
 
-from mows.device.phases import CycleRequest
+from mows.device.cycle.phases import CycleRequest
 from mows.estimate.calibration.constants import CalibrationPoint, Wiring
 
 PAPER_CURRENTS_A = (0.0, 0.5, 1.0, 1.5, 2.0, -0.5, -1.0, -1.5, -2.0)

@@ -1,0 +1,9 @@
+"""The driver's devices, each a :class:`mows.device.interface.Backend`: the simulator in this
+process (``sim_backend``, one probe or a scene of several), a device on a serial port
+(``serial_backend``), a recorded bag replayed (``bag_backend``), and the paper's bench on an NI
+card with an SCPI supply (``daqmx_backend``).
+
+May import: the device packages under it (``cycle``, ``recording``, ``serial``, ``instruments``,
+``simulated``, ``interface``, ``clock``, ``protocol``), ``mows.sim``, ``mows.physics``,
+``mows.records``; not ``stream``.
+"""

@@ -1,0 +1,408 @@
+"""The measurement cycle as a state machine over device sample indices (issue: the cycle).
+
+One cycle at one orientation θ0: turn the probe and let it settle; excite at the current
+resonance estimate with the coil setup's orientation-dependent currents; switch off and
+record the free ring-down; the first ``tuning_steps`` ring-downs are fitted
+(by the fit function the sequencer is handed, the estimator's ring-down fit in the driver)
+and retune the excitation frequency, the next
+``repeats`` are the measurements, with a pause of ``gap_s`` between ring-down and excitation.
+
+Time is the device's sample index. Every command is scheduled at a sample, and every phase
+is stamped with the sample at which the device *answered* that its command took effect, so
+that the stamp of a ring-down is the sample the coils went off, exact to one sample. A phase
+is announced once the samples have reached it.
+
+The sequencer does no I/O: it is fed samples, command results and link changes, and returns
+a :class:`Step` of commands to send, phase events to publish, the outcome of a finished
+cycle, and whether the coils must go off at once. The coils are on only in EXCITING: every
+other phase is coils off, and a fault (emergency stop, a refused or unanswered command, a
+lost link) switches them off at once. The emergency stop latches until released.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Generator
+
+from mows.device.cycle.duty import DutyCycleLimit
+from mows.device.cycle.phases import (
+    CycleOutcome,
+    CyclePlan,
+    CycleRequest,
+    CycleSettings,
+    LostTuning,
+    Phase,
+    PhaseEvent,
+    Step,
+    TuningFit,
+    TuningResult,
+    check_setting,
+)
+from mows.device.cycle.waits import Answer, CycleAborted, Reach, Recording, Run
+from mows.device.interface import (
+    CoilCommand,
+    Command,
+    CommandResult,
+    LinkEvent,
+    OrientationCommand,
+)
+from mows.physics.coils import CoilSetup, CurrentCap, excitation_samples
+from mows.records.samples import SampleBlock
+
+
+class CycleSequencer:
+    """Runs one cycle at a time on a device of ``sample_rate_hz`` with the coils of ``setup``.
+
+    ``frequency_hz`` is the first resonance estimate (retuned by every cycle);
+    ``lead_samples`` how far ahead of the newest sample commands are scheduled; ``cap`` the
+    driver's coil current cap (no command above it is ever issued).
+    """
+
+    def __init__(
+        self,
+        settings: CycleSettings,
+        setup: CoilSetup,
+        cap: CurrentCap,
+        sample_rate_hz: float,
+        frequency_hz: float,
+        lead_samples: int = 0,
+        *,
+        fit: TuningFit,
+    ):
+        self.settings = settings
+        self.setup = setup
+        self.cap = cap
+        self.sample_rate_hz = float(sample_rate_hz)
+        self.frequency_hz = float(frequency_hz)
+        self.lead_samples = int(lead_samples)
+        self.latched: str | None = None  # the reason of a latched emergency stop
+        self.phase = Phase.IDLE
+        self.fault = ""  # why the last cycle failed, until the next one starts or a stop is released
+        self._fit = fit
+        self._duty = DutyCycleLimit(settings.max_duty_cycle, self._samples(settings.duty_window_s))
+        self._anchor: tuple[int, int] | None = None  # (sample index, stamp ns) of a received sample
+        self._next_index = 0
+        self._cycle: CyclePlan | None = None
+        self._runner: Run | None = None
+        self._wait: Reach | Answer | None = None
+        self._results: dict[int, CommandResult] = {}
+        self._recordings: list[Recording] = []
+        self._unstamped: list[tuple[Phase, str]] = []  # events raised before the first sample
+        self._last_cycle_id = 0
+        self._last_command_id = 0
+        self._step = Step()
+        self._announce(Phase.IDLE, "driver started")
+
+    # --- inputs ----------------------------------------------------------------------------
+    @property
+    def busy(self) -> bool:
+        return self._runner is not None
+
+    @property
+    def next_index(self) -> int:
+        return self._next_index
+
+    @property
+    def last_cycle_id(self) -> int:
+        """The id of the cycle started last (0 before the first)."""
+        return self._last_cycle_id
+
+    def duty_fraction(self) -> float:
+        """Share of the last duty window with the coils on."""
+        return self._duty.fraction(self._next_index)
+
+    def start(self, request: CycleRequest) -> Step:
+        """Begin a cycle. ValueError, with the reason, if it cannot run."""
+        cycle = self._plan(request)
+        self._step = Step()
+        self.fault = ""
+        self._cycle = cycle
+        self._runner = self._run(cycle)
+        self._advance(None)
+        return self._take_step()
+
+    def on_samples(self, chunk: SampleBlock) -> Step:
+        self._anchor = (chunk.first_sample_index, chunk.stamp_ns)
+        self._next_index = chunk.end_index
+        for recording in self._recordings:
+            recording.add(chunk)
+        for phase, reason in self._unstamped:  # they hold from the first sample on
+            self._emit(phase, chunk.first_sample_index, reason=reason)
+        self._unstamped.clear()
+        self._resume()
+        return self._take_step()
+
+    def on_result(self, result: CommandResult) -> Step:
+        if self.busy:  # an answer that comes after its cycle failed has nobody waiting
+            self._results[result.command_id] = result
+            self._resume()
+        return self._take_step()
+
+    def on_link(self, event: LinkEvent) -> Step:
+        if not event.up and self.busy:
+            self._fault(f"link to the device lost: {event.reason}")
+        return self._take_step()
+
+    def abort(self, reason: str) -> Step:
+        """End the running cycle (coils off at once): the samples stopped, the driver stops."""
+        if self.busy:
+            self._fault(reason)
+        return self._take_step()
+
+    def cancel(self, reason: str) -> Step:
+        """End the running cycle because nobody wants it any more (coils off at once): it
+        fails with ``reason``, and the sequencer is IDLE, not in FAULT."""
+        if self.busy:
+            self._stop(f"cancelled: {reason}")
+            self._announce(Phase.IDLE, f"cancelled: {reason}")
+        return self._take_step()
+
+    def emergency_stop(self, reason: str) -> Step:
+        """Coils off at once, the running cycle failed, and no cycle until :meth:`release`."""
+        self.latched = reason or "no reason given"
+        self._fault(f"emergency stop: {self.latched}")
+        return self._take_step()
+
+    def release(self) -> Step:
+        if self.latched is not None:
+            self.latched, self.fault = None, ""
+            self._announce(Phase.IDLE, "emergency stop released")
+        return self._take_step()
+
+    # --- the cycle -------------------------------------------------------------------------
+    def _plan(self, request: CycleRequest) -> CyclePlan:
+        if self.latched is not None:
+            raise ValueError(f"emergency stop latched ({self.latched}); release it before a cycle")
+        if self.busy:
+            assert self._cycle is not None  # set and cleared together with _runner (start, _end)
+            raise ValueError(f"cycle {self._cycle.cycle_id} is still running")
+        if self._anchor is None:
+            raise ValueError("no samples from the device yet")
+        s = self.settings if request.settings is None else request.settings
+        cycle = CyclePlan.resolve(self._last_cycle_id + 1, request, s)  # ValueError for a request out of range
+        if request.frequency_hz is not None:
+            nyquist_hz = self.sample_rate_hz / 2.0
+            check_setting(
+                "frequency_hz",
+                request.frequency_hz,
+                0.0 < request.frequency_hz < nyquist_hz,
+                f"in (0, {nyquist_hz:g}) Hz",
+            )
+        self._currents(cycle)  # ValueError above the cap
+        self._duty.configure(s.max_duty_cycle, self._samples(s.duty_window_s))
+        self._duty.earliest_start(self._next_index, self._samples(s.excite_s))  # ValueError if it never fits
+        if request.frequency_hz is not None:
+            self.frequency_hz = float(request.frequency_hz)
+        self._last_cycle_id = cycle.cycle_id
+        return cycle
+
+    def _run(self, c: CyclePlan) -> Run:
+        s = c.settings
+        ringdown = self._samples(s.ringdown_s)
+        coils_free = yield from self._turn_and_settle(c)
+        fits: list[TuningResult] = []
+        recorded = 0
+        for k in range(c.tuning_steps + c.repeats):
+            tuning = k < c.tuning_steps
+            index = k if tuning else k - c.tuning_steps
+            gap = self._samples(c.gap_s) if k else 0
+            # Cut at the drive's turning point, whatever the tuned frequency (excitation_samples).
+            excite = excitation_samples(s.excite_s, self.frequency_hz, self.sample_rate_hz)
+            start = self._duty.earliest_start(max(coils_free + gap, self._next_index + self.lead_samples), excite)
+            currents = self._currents(c)
+            on = self._issue(CoilCommand, start, amplitudes_a=currents, frequency_hz=self.frequency_hz)
+            off = self._issue(
+                CoilCommand, start + excite, amplitudes_a=(0.0,) * len(currents), frequency_hz=self.frequency_hz
+            )
+            if start > coils_free:
+                yield from self._enter(c, Phase.GAP, coils_free, start - coils_free, index, tuning)
+            switched_on = yield from self._answer(on)
+            switched_off = yield from self._answer(off)
+            self._duty.record(switched_on, switched_off)
+            recording = Recording(switched_off, switched_off + ringdown)
+            self._recordings.append(recording)
+            yield from self._enter(c, Phase.EXCITING, switched_on, switched_off - switched_on, index, tuning, currents)
+            yield from self._enter(c, Phase.RINGDOWN, switched_off, ringdown, index, tuning)
+            yield Reach(recording.end)
+            self._recordings.remove(recording)
+            if tuning:
+                fits.append(self._tune(c, recording))
+            else:
+                recorded += 1
+            coils_free = recording.end
+        yield from self._enter(c, Phase.IDLE, coils_free, 0)
+        failed = [f for f in fits if not f.ok]
+        message = f"{recorded} ring-downs recorded at {self.frequency_hz:.4f} Hz"
+        if failed:
+            message += f"; {len(failed)} of {len(fits)} tuning fits failed ({failed[-1].report()})"
+        return CycleOutcome(True, message, c.cycle_id, self.frequency_hz, recorded, tuple(fits))
+
+    def _turn_and_settle(self, c: CyclePlan) -> Generator[Answer | Reach, CommandResult | None, int]:
+        """Turn to the cycle's θ0 and let it settle (SETTLING); returns the sample from which the
+        coils are off and nothing is scheduled."""
+        turned = yield from self._answer(
+            self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
+        )
+        settle = self._samples(c.settings.turn_settle_s)
+        yield from self._enter(c, Phase.SETTLING, turned, settle)
+        return turned + settle
+
+    def _tune(self, c: CyclePlan, recording: Recording) -> TuningResult:
+        """Fit a tuning ring-down; a good fit becomes the excitation frequency."""
+        if not recording.complete:
+            return LostTuning()
+        samples, saturated = recording.arrays()
+        fit = self._fit(samples, self.sample_rate_hz, c.theta0_rad, self.frequency_hz, saturated=saturated)
+        if fit.ok:
+            self.frequency_hz = float(fit.frequency_hz)
+        return fit
+
+    def _currents(self, c: CyclePlan) -> tuple:
+        """The setup's coil currents at θ0, checked against the cap (ValueError above it)."""
+        currents = self.setup.currents_a(c.theta0_rad, c.settings.excitation_current_a)
+        return tuple(float(i) for i in self.cap.check(currents))
+
+    # --- waiting ---------------------------------------------------------------------------
+    def _issue(self, kind, at_index: int, **fields) -> Command:
+        self._last_command_id += 1
+        command = kind(self._last_command_id, int(at_index), **fields)
+        self._step.commands.append(command)
+        return command
+
+    def _answer(self, command: Command) -> Generator[Answer, CommandResult | None, int]:
+        deadline = max(command.at_sample_index, self._next_index) + self._samples(self.settings.confirm_timeout_s)
+        result = yield Answer(command, deadline)
+        assert result is not None  # _resume resumes an Answer only with its command's result
+        if not result.accepted:
+            raise CycleAborted(f"the device refused {type(command).__name__} {command.command_id}: {result.reason}")
+        return result.applied_sample_index
+
+    def _enter(
+        self,
+        c: CyclePlan,
+        phase: Phase,
+        index: int,
+        duration_samples: int,
+        repeat_index: int = 0,
+        tuning: bool = False,
+        currents: tuple = (),
+        tones: tuple = (),
+    ) -> Generator[Reach, CommandResult | None, None]:
+        yield Reach(index + 1)
+        self._emit(
+            phase,
+            index,
+            cycle=c,
+            duration_samples=duration_samples,
+            repeat_index=repeat_index,
+            tuning=tuning,
+            currents=currents,
+            tones=tones,
+        )
+
+    def _resume(self) -> None:
+        while self._runner is not None:
+            wait = self._wait
+            assert wait is not None  # a running cycle always waits: _advance keeps what it yields
+            if isinstance(wait, Reach):
+                if self._next_index < wait.index:
+                    return
+                value: CommandResult | None = None
+            else:
+                value = self._results.pop(wait.command.command_id, None)
+                if value is None:
+                    if self._next_index > wait.deadline_index:
+                        self._fault(
+                            f"the device did not answer {type(wait.command).__name__} "
+                            f"{wait.command.command_id} in {self.settings.confirm_timeout_s:g} s"
+                        )
+                    return
+            self._advance(value)
+
+    def _advance(self, value: CommandResult | None) -> None:
+        assert self._runner is not None  # called by start and _resume, with a cycle running
+        try:
+            self._wait = self._runner.send(value)
+        except StopIteration as finished:
+            self._end(finished.value)
+        except CycleAborted as aborted:
+            self._fault(str(aborted))
+
+    def _end(self, outcome: CycleOutcome) -> None:
+        self._step.outcome = outcome
+        self._runner, self._wait, self._cycle = None, None, None
+        self._recordings.clear()
+        self._results.clear()
+
+    def _fault(self, reason: str) -> None:
+        """Coils off now; the running cycle (if any) fails with ``reason``, a fault. Its phases end
+        with this FAULT (it carries the cycle's id: a record of the cycle ends with its fault)."""
+        cycle = self._cycle
+        self._stop(reason)
+        self.fault = reason
+        self._announce(Phase.FAULT, reason, cycle)
+
+    def _stop(self, reason: str) -> None:
+        """Coils off now; the running cycle (if any) fails with ``reason``."""
+        self._step.coils_off_now = True
+        if self._runner is not None:
+            cycle = self._cycle
+            assert cycle is not None  # set and cleared together with _runner (start, _end)
+            self._runner.close()
+            self._end(CycleOutcome(False, reason, cycle.cycle_id, self.frequency_hz, 0))
+
+    # --- events ----------------------------------------------------------------------------
+    def _announce(self, phase: Phase, reason: str, cycle: CyclePlan | None = None) -> None:
+        """A phase that begins at the device's next sample (known only once samples arrive;
+        a cycle runs only once they have)."""
+        if self._anchor is None:
+            self._unstamped.append((phase, reason))
+        else:
+            self._emit(phase, self._next_index, cycle, reason=reason)
+
+    def _emit(
+        self,
+        phase: Phase,
+        index: int,
+        cycle: CyclePlan | None = None,
+        duration_samples: int = 0,
+        repeat_index: int = 0,
+        tuning: bool = False,
+        currents: tuple = (),
+        reason: str = "",
+        tones: tuple = (),
+    ) -> None:
+        """Announce ``phase``; ``tones`` (:class:`mows.physics.multitone.Tone`) are the probes a
+        multi-tone excitation rings, listed on it and its ring-down, the first one's tone its frequency."""
+        self.phase = phase
+        # Events are stamped once samples have come (_announce holds them back until then);
+        # a cycle's own events come later still, as _plan starts none before the first sample.
+        assert self._anchor is not None
+        anchor_index, anchor_ns = self._anchor
+        n_coils = len(self.setup.phases_rad)
+        self._step.events.append(
+            PhaseEvent(
+                phase=phase,
+                sample_index=index,
+                stamp_ns=anchor_ns + round((index - anchor_index) * 1e9 / self.sample_rate_hz),
+                cycle_id=cycle.cycle_id if cycle else 0,
+                repeat_index=repeat_index,
+                repeats=cycle.repeats if cycle else 0,
+                tuning=tuning,
+                currents_a=currents or (0.0,) * n_coils,
+                frequency_hz=tones[0].frequency_hz if tones else self.frequency_hz,
+                theta0_rad=cycle.theta0_rad if cycle else 0.0,
+                planned_duration_s=duration_samples / self.sample_rate_hz,
+                setup=self.setup.name,
+                reason=reason,
+                probe_ids=tuple(t.probe_id for t in tones),
+                probe_frequency_hz=tuple(t.frequency_hz for t in tones),
+                probe_theta0_rad=tuple(t.theta0_rad for t in tones),
+            )
+        )
+
+    def _take_step(self) -> Step:
+        step, self._step = self._step, Step()
+        return step
+
+    def _samples(self, seconds: float) -> int:
+        return int(round(seconds * self.sample_rate_hz))

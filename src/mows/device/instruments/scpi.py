@@ -1,0 +1,214 @@
+"""A laboratory supply that speaks SCPI, as the calibration's static-field supply: the command
+set (YAML, so that another supply is a file, not code), the ramp within the slew limit on the
+device's sample clock, and the thin PyVISA edge.
+
+The paper's supply is a Rohde & Schwarz NGM202 (0.1 mA resolution, 2 A; Methods), the default
+command set (``hardware/rs_ngm202.yaml``): a unipolar source (0 … +cap), so a negative current
+is refused before it is sent. A supply is not on the card's sample clock: the
+backend writes each step of a ramp when the input stream reaches its sample, so a step lands
+within one input block of it, and reads the current back after the last one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import math
+
+from mows.device.instruments.daq import HARDWARE_DIR
+from mows.physics.schema import build_from_yaml, typed
+from mows.physics.supply import SupplyLimits
+
+PAPER_SUPPLY_FILE = HARDWARE_DIR / "rs_ngm202.yaml"
+SIMULATED_SUPPLY_FILE = HARDWARE_DIR / "ngm202_pyvisa_sim.yaml"  # the pyvisa-sim instrument
+SIMULATED_RESOURCE = "TCPIP0::192.168.0.20::inst0::INSTR"  # its address in that file
+
+
+class SupplyError(OSError):
+    """The supply is missing, refused a command, or reads back something else than was set."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ScpiCommands:
+    """What to send for each step; ``{}`` is the value, formatted as written (``CURR {:.4f}``)."""
+
+    set_current: str = "CURR {:.4f}"
+    measure_current: str = "MEAS:CURR?"
+    set_voltage: str = "VOLT {:.3f}"
+    output: str = "OUTP {:d}"
+    query_error: str = "SYST:ERR?"
+    identify: str = "*IDN?"
+    select_channel: str = "INST:NSEL {:d}"  # '' for a supply of one channel
+    no_error: str = "0,"  # how the answer to query_error begins when there is none
+
+
+@dataclasses.dataclass(frozen=True)
+class ScpiSupplyConfig:
+    """The supply file (docs/hardware.md): its limits (cap, slew, resolution and polarity:
+    ``unipolar``, 0 … cap, unless the file says ``bipolar``), the channel the pair is on, the
+    voltage limit (the pair's resistance × the largest current, with margin) and its commands."""
+
+    cap_a: float
+    slew_a_per_s: float
+    resolution_a: float
+    # A laboratory supply sources one sign; a file that does not say so is not trusted with the other.
+    polarity: str = "unipolar"
+    commands: ScpiCommands = ScpiCommands()
+    channel: int = 1
+    voltage_limit_v: float = 10.0
+    write_termination: str = "\n"
+    read_termination: str = "\n"
+    timeout_s: float = 2.0
+    name: str = "scpi"
+    limits: SupplyLimits = dataclasses.field(init=False, repr=False)  # of cap, slew, resolution and polarity
+
+    def __post_init__(self) -> None:
+        object.__setattr__(
+            self, "limits", SupplyLimits(self.cap_a, self.slew_a_per_s, self.resolution_a, self.polarity)
+        )
+
+
+def load_supply_file(path=PAPER_SUPPLY_FILE) -> ScpiSupplyConfig:
+    """The supply YAML at ``path``; ValueError naming the file and the key."""
+    return build_from_yaml(
+        path, "supply", ScpiSupplyConfig, commands=lambda given: typed(ScpiCommands, "commands", given or {})
+    )
+
+
+class SupplySchedule:
+    """The ramps of a supply on the sample clock, as :class:`mows.device.simulated.scheduled.ScheduledDevice`
+    walks them: each new current is checked against the cap, rounded to the resolution and reached
+    by a staircase within the slew limit that starts after any ramp already queued."""
+
+    def __init__(self, limits: SupplyLimits, sample_rate_hz: float):
+        self.limits = limits
+        self.sample_rate_hz = sample_rate_hz
+        self.target_a = 0.0  # where the queued steps end
+        self.current_a = 0.0  # the last step handed out
+        self._steps: list[tuple[int, float]] = []  # (sample index, current), in order
+
+    def ramp(self, at_index: int, next_index: int, current_a: float) -> int:
+        """Queue the staircase to ``current_a`` from ``at_index`` (not before ``next_index`` nor the
+        end of a queued ramp); the sample of its last step. ValueError above the cap."""
+        target = self.limits.check(current_a)
+        start = max(int(at_index), int(next_index), self._steps[-1][0] + 1 if self._steps else 0)
+        return self._queue(start, self.target_a, target)
+
+    def to_zero(self, next_index: int) -> int:
+        """Drop the queued steps and ramp down from the present current; the sample it reaches zero."""
+        self._steps = []
+        return self._queue(int(next_index), self.current_a, 0.0)
+
+    def _queue(self, start: int, from_a: float, to_a: float) -> int:
+        steps = [(start + round(t * self.sample_rate_hz), a) for t, a in self.limits.ramp(from_a, to_a)]
+        self._steps += steps
+        self.target_a = to_a
+        return steps[-1][0]
+
+    def due(self, next_index: int) -> list[float]:
+        """The steps whose sample is before ``next_index``, in order (each once)."""
+        due = [a for index, a in self._steps if index < next_index]
+        self._steps = [(index, a) for index, a in self._steps if index >= next_index]
+        if due:
+            self.current_a = due[-1]
+        return due
+
+    @property
+    def ramping(self) -> bool:
+        return bool(self._steps)
+
+
+class ScpiSupply:
+    """The supply behind a PyVISA ``resource`` (anything with ``write`` and ``query``)."""
+
+    def __init__(self, resource, config: ScpiSupplyConfig):
+        self.resource = resource
+        self.config = config
+        self.identity = ""
+        self.writes = 0
+
+    def prepare(self) -> str:
+        """Identify the supply, select the channel, set the voltage limit and zero current, switch
+        the output on; its identity. SupplyError when it refuses any of it."""
+        commands = self.config.commands
+        self.identity = self._query(commands.identify).strip()
+        if commands.select_channel:
+            self._write(commands.select_channel.format(self.config.channel))
+        self._write(commands.set_voltage.format(self.config.voltage_limit_v))
+        self.set_current_a(0.0)
+        self.output(True)
+        return self.identity
+
+    def set_current_a(self, current_a: float) -> None:
+        """Set the current (checked against the cap and the polarity, and rounded; ValueError
+        before anything is sent); SupplyError if the supply refuses it."""
+        value = self.config.limits.check(current_a)
+        self._write(self.config.commands.set_current.format(value))
+
+    def read_current_a(self) -> float:
+        """The current the supply measures, A; SupplyError for an answer that is not a number."""
+        answer = self._query(self.config.commands.measure_current)
+        try:
+            value = float(answer)
+        except ValueError:
+            raise SupplyError(f"{self.config.name}: current read back as {answer!r}, not a number") from None
+        if not math.isfinite(value):
+            raise SupplyError(f"{self.config.name}: current read back as {answer!r}")
+        return value
+
+    def output(self, on: bool) -> None:
+        self._write(self.config.commands.output.format(int(on)))
+
+    def close(self) -> None:
+        """Current to zero at once (the caller has ramped it down), output off, link released."""
+        try:
+            self.set_current_a(0.0)
+            self.output(False)
+        finally:
+            self.resource.close()
+
+    def _write(self, command: str) -> None:
+        self.writes += 1
+        self._call(self.resource.write, command)
+        error = self._call(self.resource.query, self.config.commands.query_error).strip()
+        if not error.startswith(self.config.commands.no_error):
+            raise SupplyError(f"{self.config.name}: {command!r} refused: {error}")
+
+    def _query(self, command: str) -> str:
+        return self._call(self.resource.query, command)
+
+    def _call(self, method, command: str) -> str:
+        try:
+            return method(command)
+        except Exception as error:  # PyVISA's errors have no common base outside pyvisa.errors
+            raise SupplyError(f"{self.config.name}: {command!r}: {error}") from None
+
+
+def open_scpi_supply(resource_name: str, config: ScpiSupplyConfig, visa_library: str = "@py") -> ScpiSupply:
+    """The supply at ``resource_name`` through PyVISA (``@py``: the pure-Python pyvisa-py; a path
+    to a pyvisa-sim file + ``@sim``: a simulated one), prepared (:meth:`ScpiSupply.prepare`).
+    SupplyError, one line, when PyVISA or the supply is missing."""
+    try:
+        pyvisa = importlib.import_module("pyvisa")
+    except ImportError:
+        raise SupplyError(
+            "supply scpi: the Python package pyvisa is not installed (pip install pyvisa pyvisa-py)"
+        ) from None
+    try:
+        manager = pyvisa.ResourceManager(visa_library)
+        resource = manager.open_resource(
+            resource_name,
+            write_termination=config.write_termination,
+            read_termination=config.read_termination,
+            timeout=round(config.timeout_s * 1000),
+        )
+    except Exception as error:  # noqa: BLE001 (PyVISA raises its own, OSError and ValueError here)
+        first = (str(error).splitlines() or [type(error).__name__])[0][:200]
+        raise SupplyError(f"supply scpi: cannot open {resource_name!r} ({visa_library}): {first}") from None
+    supply = ScpiSupply(resource, config)
+    try:
+        supply.prepare()
+    except SupplyError:
+        resource.close()
+        raise
+    return supply

@@ -57,7 +57,7 @@ THROUGHPUT_KEYS = (
 QUICK: dict[str, dict[str, object]] = {
     "estimator": {"trials": 10, "step_deg": 45.0, "speed_trials": 10, "baseline_trials": 3},
     "simulator": {"repeats": 3, "first_call": False},
-    "lab": {"sweeps": 2},
+    "lab": {"sweeps": 2, "outside_sweeps": 4},
     "stream": {"duration_s": 3.0},
     # a quick --load is a smoke run beside other work (make test): its burners yield (nice 19)
     # and the graph keeps the default policy (one loaded stream, not two). 20 s holds two or

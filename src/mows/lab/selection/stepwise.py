@@ -60,7 +60,7 @@ from mows.lab.diagnosis.candidates import (
 from mows.lab.diagnosis.discovery import discover
 from mows.lab.diagnosis.physical_aliases import alias_statements
 from mows.lab.diagnosis.plausibility import conflicts
-from mows.lab.diagnosis.projections import Signature
+from mows.lab.diagnosis.projections import Signature, cosine_within, orthonormal_basis, project_out
 from mows.lab.diagnosis.verdict import Diagnosis, completed, diagnose
 from mows.lab.model.effects import Effect, untestable_reason
 from mows.lab.model.frequency_model import FrequencyModel
@@ -69,6 +69,7 @@ from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
 MAX_AUTO_STEPS = 6
+SAME_SIGNATURE = 0.95  # a discovered term this close to a candidate's signature is the candidate's own
 MAX_REVISIT_MOVES = 6  # per forward step; each move lowers the BIC, so this is only a bound
 
 
@@ -254,12 +255,12 @@ def _forward_step(found: Diagnosis, probe: Probe) -> tuple[str, FitResult, Seque
 
 def _beside_discovery(fit: FitResult, candidate: Candidate, probe: Probe) -> bool:
     """A free effect that leaves structure behind keeps strong, generalising evidence beside the
-    terms the residual follows beyond the catalog (:func:`mows.lab.diagnosis.discovery.discover`,
-    held as additive stand-ins with free strengths). Physics outside the catalog has a catalog
-    effect take whatever share of its signal that effect's signature reaches (a tilted plane for
-    the mean of a moment falling with temperature); beside the stand-ins that share is gone,
-    while an effect that is really there keeps its own."""
-    stand_ins = discover(fit, probe).stand_ins
+    terms the residual follows beyond the catalog (:func:`_stand_ins`, held as additive
+    frequency terms with free strengths). Physics outside the catalog has a catalog effect take
+    whatever share of its signal that effect's signature reaches (a tilted plane for the mean of
+    a moment falling with temperature); beside the stand-ins that share is gone, while an effect
+    that is really there keeps its own."""
+    stand_ins = _stand_ins(fit, candidate, probe)
     if not stand_ins:
         return True
     held = FrequencyModel(probe, [*fit.model.effects, *stand_ins])
@@ -269,6 +270,22 @@ def _beside_discovery(fit: FitResult, candidate: Candidate, probe: Probe) -> boo
         fit.table, start=np.concatenate([beside.effect_values, np.zeros(len(candidate.effect.parameters))])
     )
     return quasi_gain(beside, added) > STRONG_DELTA_BIC and cv_gain(beside, added) > TIE_DELTA_BIC
+
+
+def _stand_ins(fit: FitResult, candidate: Candidate, probe: Probe) -> list[Effect]:
+    """The terms the residual follows beyond the catalog that ``candidate`` does not make itself:
+    those found with it in the model, and those found without it whose signature lies outside
+    its own (cos < ``SAME_SIGNATURE``: a temperature term is the thermal drift, not a stand-in
+    for something else)."""
+    assert candidate.chosen.fit is not None  # a strong form is refitted
+    found = list(discover(candidate.chosen.fit, probe).stand_ins)
+    model_basis = orthonormal_basis(fit.jacobian)
+    for effect in discover(fit, probe).stand_ins:
+        column = project_out(fit.extension_columns(effect), model_basis)[:, 0]
+        outside = cosine_within(column, candidate.signature.basis) < SAME_SIGNATURE
+        if outside and effect.name not in {e.name for e in found}:
+            found.append(effect)
+    return found
 
 
 def _revisit(

@@ -245,13 +245,14 @@ def explains_excess(fit: FitResult, form: Form) -> bool:
     return fit.chi2 - form.chi2_after >= EXPLAINED_FRACTION * (fit.chi2 - fit.dof)
 
 
-def closes_the_gap(form: Form) -> bool:
-    """With ``form`` the residual is consistent with noise (χ² p ≥ the verdict's GOODNESS_ALPHA).
+def closes_the_gap(form: Form | FitResult) -> bool:
+    """With ``form`` (or in a fit) the residual is consistent with noise (χ² p ≥ the verdict's GOODNESS_ALPHA).
     A generic correction (``Effect.generic``) stands for several causes; it is credible only
     where it explains the data: where structure remains, some other physics is at work and the
     correction would take a share of its signal (a moment scale of −0.4 %, the mean of a moment
     falling with temperature, where the calibration is right)."""
-    return float(scipy.stats.chi2.sf(form.chi2_after, max(form.dof_after, 1))) >= GOODNESS_ALPHA
+    chi2, dof = (form.chi2_after, form.dof_after) if isinstance(form, Form) else (form.chi2, form.dof)
+    return float(scipy.stats.chi2.sf(chi2, max(dof, 1))) >= GOODNESS_ALPHA
 
 
 def cv_gain(old: FitResult, new: FitResult) -> float:

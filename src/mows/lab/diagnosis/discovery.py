@@ -7,11 +7,12 @@ time t, coil current I, the table's start swing ``amplitude_deg``; the model's o
 and start swing at the reference in full (:func:`model_covariates`); and cos kθ0, sin kθ0 for
 k = 1…4. Only those the table has, and not constant. The terms are the factors and their products
 and squares up to :data:`DEGREE` (2), but no product of two angle harmonics (that is another
-harmonic). Factors whose zero is arbitrary (t and extra columns) are centred on the table's
-mean before they multiply, the temperature on the probe's reference temperature (where its
-constants hold: a moment's temperature coefficient is then one term, not that and a scale error);
-those with a physical zero (fields, current, swings, harmonics) are not, so that coil heating is
-one term, I², and not I² and I of a centred current.
+harmonic). Factors whose zero is arbitrary (extra columns) are centred on the table's mean
+before they multiply, the temperature on the probe's reference temperature (where its constants
+hold: a moment's temperature coefficient is then one term, not that and a scale error); those
+with a physical zero (fields, current, swings, harmonics, and time from the table's start, where
+the probe's constants were last known to hold) are not, so that coil heating is one term, I², and
+not I² and I of a centred current, and a moment that ages is one term, B∥·t.
 
 **What is searched.** Each term x, weighted by 1/σ, is projected orthogonally to the current fit's
 Jacobian (:mod:`mows.lab.diagnosis.projections`: only what the model's free parameters cannot
@@ -130,7 +131,7 @@ FACTORS = (
     Factor("b_normal_t", "field_z", "T"),
     *(Factor(name, "gradient", "T/m") for name in GRADIENT_FACTORS),
     Factor("temperature_k", "temperature", "K", centred=True),
-    Factor("t_s", "time", "s", centred=True),
+    Factor("t_s", "time", "s"),
     Factor("coil_current_a", "current", "A"),
     Factor("amplitude_deg", "swing", "deg"),
     *(Factor(name, "swing", "rad") for name in MODEL_FACTORS),
@@ -742,10 +743,11 @@ class _Search:
     means: dict[str, float]
 
 
-def discover(fit: FitResult, probe: Probe, seed: int = 0) -> Discovery:
+def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) -> Discovery:
     """The terms of the rows' covariates that ``fit``'s residual follows beyond what its model
-    absorbs (module docstring), each with its physical plugin; ``seed`` draws the half-samples
-    (and, for a table longer than :data:`MAX_ROWS`, the stratified rows searched)."""
+    absorbs (module docstring), each with its physical plugin (``plugins=False``: without, for a
+    search that only needs the terms' stand-ins); ``seed`` draws the half-samples (and, for a
+    table longer than :data:`MAX_ROWS`, the stratified rows searched)."""
     table = fit.table if fit.problem.rows is None else fit.table.subset(fit.problem.rows)
     if fit.invalid_rows.size or len(table) < MIN_ROWS:  # residuals of rows without a frequency are no data
         why = "the model has no frequency at some rows" if fit.invalid_rows.size else f"{len(table)} rows are too few"
@@ -764,7 +766,8 @@ def discover(fit: FitResult, probe: Probe, seed: int = 0) -> Discovery:
     frequencies = selection_frequencies(searched, residual.values, jacobian, units, np.random.default_rng(seed))
     passed = significant(searched, [int(j) for j in np.flatnonzero(frequencies >= STABLE_FRACTION)], residual)
     terms = sorted(
-        (_term(search, passed, i, frequencies) for i in range(len(passed.chosen))), key=lambda t: -t.cv_gain_chi2
+        (_term(search, passed, i, frequencies, plugins) for i in range(len(passed.chosen))),
+        key=lambda t: -t.cv_gain_chi2,
     )
     summary = _summary(terms, len(searched.terms)) + (
         f" (Searched on {len(table)} stratified rows of {fit.n}.)" if len(table) < fit.n else ""
@@ -780,12 +783,18 @@ def _stand_in(term: DiscoveredTerm, means: dict[str, float], probe: Probe) -> Ef
     return load_source(plugin.source(), plugin.name)
 
 
-def _term(search: _Search, passed: Refit, i: int, frequencies: np.ndarray) -> DiscoveredTerm:
+def _term(search: _Search, passed: Refit, i: int, frequencies: np.ndarray, plugins: bool) -> DiscoveredTerm:
     j = passed.chosen[i]
     term = search.searched.terms[j]
     length = search.searched.length[j]
     rule = rule_of(term.factors)
-    plugin, parameter = _physical_plugin(search, passed, i, rule)
+    if plugins:
+        plugin, parameter = _physical_plugin(search, passed, i, rule)
+    else:
+        plugin, parameter = (
+            Plugin(term.factors, rule, frequency_form(term.factors, search.means), 1.0, search.probe),
+            None,
+        )
     return DiscoveredTerm(
         term.name,
         term.factors,

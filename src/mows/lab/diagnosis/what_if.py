@@ -3,7 +3,10 @@
 The variants, cheapest first: more angles (half-way between the present orientations), half
 the excitation amplitude, the applied field reversed, the applied field doubled, and a
 temperature step when the table has temperatures. :mod:`mows.lab.diagnosis.indistinguishable` evaluates a group's
-signatures on them to find the measurement that would tell its members apart.
+signatures on them to find the measurement that would tell its members apart. A table longer
+than ``WHAT_IF_ROWS`` stands in by that many of its rows (whole sweeps spread over it,
+:func:`mows.lab.data.table.stratified_rows`): whether two signatures can be told apart is a
+question of their patterns in angle, field, amplitude and time, which those rows hold.
 """
 
 from __future__ import annotations
@@ -12,9 +15,11 @@ import dataclasses
 
 import numpy as np
 
-from mows.lab.data.table import WRITER_COLUMN, MeasurementTable
+from mows.lab.data.table import WRITER_COLUMN, MeasurementTable, stratified_rows
 from mows.lab.model.frequency_model import start_swing_rad
 from mows.physics.probe import Probe
+
+WHAT_IF_ROWS = 120
 
 
 @dataclasses.dataclass
@@ -36,6 +41,8 @@ class Variant:
 
 def variants(table: MeasurementTable, probe: Probe) -> list[Variant]:
     """What-if variants of ``table``, cheapest first (module docstring)."""
+    if len(table) > WHAT_IF_ROWS:
+        table = table.subset(stratified_rows(table.sweep_ids, WHAT_IF_ROWS))
     # The variants state their excitation: each row's start swing as the model takes it, as a
     # column of a table the user measured (so that halving it is heard).
     start = np.degrees(start_swing_rad(table, probe))

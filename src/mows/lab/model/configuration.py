@@ -37,7 +37,9 @@ while λ = 1 is the exact physics, interactions included.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
+import hashlib
 import math
 import weakref
 from collections.abc import Callable, Sequence
@@ -58,6 +60,7 @@ if TYPE_CHECKING:
 SLICE_ROWS = 20_000  # configurations the potential evaluates at once
 SPRING_NODES = 5  # nodes in kM of a configuration whose spring drifts from row to row
 SPRING_SPREAD = 1e-2  # relative spread of kM up to which h is interpolated between them
+CACHED_FACTORS = 64  # configurations whose h is kept (:func:`frequency_factor`)
 AmplitudeNodes = Callable[["Configuration", np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
@@ -216,6 +219,10 @@ def frequency_factor(
     configuration's ring-downs that start at ``start_rad`` (default: :func:`ringdown_nodes`,
     uncached); used when ``config.amplitude`` ≠ 0.
     """
+    key = _physics_key(config, probe)
+    if key in _FACTORS:
+        _FACTORS.move_to_end(key)
+        return _FACTORS[key].copy(), config.frequency_hz
     first, inverse = distinct_rows(config)
     rows, springs, index, weight = _spring_plan(config.spring_nm_per_rad, first, inverse, probe.spring_nm_per_rad)
     evaluated = config.rows(rows)
@@ -228,7 +235,34 @@ def frequency_factor(
             for start in range(0, len(rows), SLICE_ROWS)
         ]
     )
-    return np.where(weight != 0.0, h[index] * weight, 0.0).sum(-1), config.frequency_hz
+    found = np.where(weight != 0.0, h[index] * weight, 0.0).sum(-1)
+    _FACTORS[key] = found.copy()
+    if len(_FACTORS) > CACHED_FACTORS:
+        _FACTORS.popitem(last=False)
+    return found, config.frequency_hz
+
+
+# The h of recent configurations, by their physics (every input but the additive frequency): the
+# Jacobian column of a parameter that only adds to f (a plugin's frequency term, a stand-in for
+# physics outside the catalog) then costs no evaluation of the potential.
+_FACTORS: collections.OrderedDict[bytes, np.ndarray] = collections.OrderedDict()
+
+
+def _physics_key(config: Configuration, probe: Probe) -> bytes:
+    """A digest of everything h depends on: every field of ``config`` but ``frequency_hz``, and the probe."""
+    digest = hashlib.blake2b(repr(probe).encode(), digest_size=20)
+    for field in dataclasses.fields(config):
+        if field.name == "frequency_hz":
+            continue
+        value = getattr(config, field.name)
+        digest.update(field.name.encode())
+        if value is None or np.isscalar(value):
+            digest.update(repr(value).encode())
+        else:
+            array = np.ascontiguousarray(value, float)
+            digest.update(repr(array.shape).encode())
+            digest.update(array.tobytes())
+    return digest.digest()
 
 
 def _spring_plan(

@@ -63,13 +63,13 @@ from mows.lab.diagnosis.plausibility import conflicts
 from mows.lab.diagnosis.projections import Signature, cosine_within, orthonormal_basis, project_out
 from mows.lab.diagnosis.verdict import Diagnosis, completed, diagnose
 from mows.lab.model.effects import Effect, untestable_reason
-from mows.lab.model.frequency_model import FrequencyModel
 from mows.lab.model.least_squares import FitResult, FittedParameter, parameter_values, parameters_dict
 from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
 MAX_AUTO_STEPS = 6
 SAME_SIGNATURE = 0.95  # a discovered term this close to a candidate's signature is the candidate's own
+MAX_STAND_INS = 2  # the strongest discovered terms that stand in for physics outside the catalog
 MAX_REVISIT_MOVES = 6  # per forward step; each move lowers the BIC, so this is only a bound
 
 
@@ -254,38 +254,52 @@ def _forward_step(found: Diagnosis, probe: Probe) -> tuple[str, FitResult, Seque
 
 
 def _beside_discovery(fit: FitResult, candidate: Candidate, probe: Probe) -> bool:
-    """A free effect that leaves structure behind keeps strong, generalising evidence beside the
-    terms the residual follows beyond the catalog (:func:`_stand_ins`, held as additive
-    frequency terms with free strengths). Physics outside the catalog has a catalog effect take
-    whatever share of its signal that effect's signature reaches (a tilted plane for the mean of
-    a moment falling with temperature); beside the stand-ins that share is gone, while an effect
-    that is really there keeps its own."""
+    """A free effect that leaves structure behind keeps strong evidence beside the terms the
+    residual follows beyond the catalog (:func:`_stand_ins`, additive terms with free
+    strengths). Physics outside the catalog has a catalog effect take whatever share of its
+    signal that effect's signature reaches (a tilted plane for the mean of a moment falling with
+    temperature: the in-plane field shrinks as the cosine of the tilt); beside the stand-ins
+    that share is gone, while an effect that is really there keeps its own. The stand-ins enter
+    linearly, so each model's χ² beside them is one Gauss–Newton step from its own fit (``fit``
+    and the candidate's), with no refit; judged as :func:`mows.lab.diagnosis.candidates.quasi_gain`."""
     stand_ins = _stand_ins(fit, candidate, probe)
-    if not stand_ins:
+    with_candidate = candidate.chosen.fit
+    if not stand_ins or with_candidate is None:
         return True
-    held = FrequencyModel(probe, [*fit.model.effects, *stand_ins])
-    start = np.concatenate([fit.effect_values, np.zeros(len(stand_ins))])
-    beside = held.fit(fit.table, start=start)
-    added = (held + candidate.effect).fit(
-        fit.table, start=np.concatenate([beside.effect_values, np.zeros(len(candidate.effect.parameters))])
-    )
-    return quasi_gain(beside, added) > STRONG_DELTA_BIC and cv_gain(beside, added) > TIE_DELTA_BIC
+    terms = np.column_stack([fit.extension_columns(e) for e in stand_ins])  # the same at any point: additive
+
+    def beside(model_fit: FitResult) -> tuple[float, int]:
+        basis = _basis(np.column_stack([model_fit.jacobian, terms]))
+        left = project_out(model_fit.weighted_residual[:, None], basis)[:, 0]
+        return float(left @ left), model_fit.n - basis.shape[1]
+
+    without, _ = beside(fit)
+    within, dof = beside(with_candidate)
+    phi = max(1.0, within / max(dof, 1))
+    return (without - within) / phi - len(candidate.effect.parameters) * math.log(fit.n) > STRONG_DELTA_BIC
 
 
 def _stand_ins(fit: FitResult, candidate: Candidate, probe: Probe) -> list[Effect]:
-    """The terms the residual follows beyond the catalog that ``candidate`` does not make itself:
-    those found with it in the model, and those found without it whose signature lies outside
-    its own (cos < ``SAME_SIGNATURE``: a temperature term is the thermal drift, not a stand-in
-    for something else)."""
+    """The terms the residual follows beyond the catalog that ``candidate`` does not make itself,
+    the strongest ``MAX_STAND_INS``: those found with it in the model, and those found without
+    it whose signature lies outside its own (cos < ``SAME_SIGNATURE``: a temperature term is the
+    thermal drift, not a stand-in for something else)."""
     assert candidate.chosen.fit is not None  # a strong form is refitted
-    found = list(discover(candidate.chosen.fit, probe).stand_ins)
-    model_basis = orthonormal_basis(fit.jacobian)
-    for effect in discover(fit, probe).stand_ins:
+    found = list(discover(candidate.chosen.fit, probe, plugins=False).stand_ins[:MAX_STAND_INS])
+    model_basis = _basis(fit.jacobian)
+    for effect in discover(fit, probe, plugins=False).stand_ins:
         column = project_out(fit.extension_columns(effect), model_basis)[:, 0]
         outside = cosine_within(column, candidate.signature.basis) < SAME_SIGNATURE
         if outside and effect.name not in {e.name for e in found}:
             found.append(effect)
-    return found
+    return found[:MAX_STAND_INS]
+
+
+def _basis(columns: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of ``columns``, each taken at unit length: parameters of very different
+    scales (f00 in Hz, a temperature coefficient in 1/K) keep their directions."""
+    norms = np.linalg.norm(columns, axis=0)
+    return orthonormal_basis(columns / np.where(norms > 0, norms, 1.0))
 
 
 def _revisit(
@@ -323,6 +337,9 @@ def _accepted(old: FitResult, new: FitResult, freed: bool, probe: Probe) -> bool
     """The guard on a revisit move: the BIC gain :func:`_required_gain` asks, at values physics
     allows, and held-out rows predicted no worse (better, for a move that sets an effect free)."""
     if quasi_gain(old, new) <= _required_gain(old.k, new.k, freed) or conflicts(new, probe):
+        return False
+    brought = {e.name for e in new.model.effects if e.generic} - set(old.model.effect_names)
+    if brought and not closes_the_gap(new):  # a generic correction must explain the data, however it comes in
         return False
     return new.k < old.k or cv_gain(old, new) > (TIE_DELTA_BIC if freed else -TIE_DELTA_BIC)
 

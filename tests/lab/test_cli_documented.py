@@ -2,9 +2,10 @@
 
 The command lines are read from the documents themselves (fenced blocks and inline code), so a
 documented form that the parser rejects fails here; the plugin file is the documented one too.
-The files the commands name (sweep.csv, sweeps.csv, probe.yaml, coil_heating.py, the paper's
-probe path, the recorded bag ``recording``, a table of three probes with their files) are made in
-a scratch directory that the commands run in.
+The files the commands name (sweep.csv, sweeps.csv, fits.csv, probe.yaml, scenario.yaml,
+coil_heating.py, moment_temperature.py, the paper's probe path, the recorded bag ``recording``,
+a table of three probes with their files) are made in a scratch directory that the commands run
+in.
 """
 
 import pathlib
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 
 from mows.cli.main import main
+from mows.lab import MeasurementTable
 from mows.lab.data import synthetic
 from mows.physics.coupling import PlacedProbe
 from mows.physics.field import SumSource, UniformField, anti_helmholtz_pair
@@ -45,10 +47,10 @@ def documented_commands() -> list:
     return list(dict.fromkeys(found))
 
 
-def documented_plugin() -> str:
-    """The plugin file the docs tell the user to save as coil_heating.py."""
+def documented_plugin(name: str = "coil_heating") -> str:
+    """The plugin file the docs tell the user to save as ``name``.py."""
     text = (ROOT / "docs" / "model_lab.md").read_text()
-    return next(block for language, block in _fenced_blocks(text) if language == "python" and "coil_heating" in block)
+    return next(block for language, block in _fenced_blocks(text) if language == "python" and f'name="{name}"' in block)
 
 
 @pytest.fixture(scope="module")
@@ -75,6 +77,11 @@ def workdir(tmp_path_factory):
     (directory / PAPER_PROBE_PATH).parent.mkdir(parents=True)
     shutil.copy(ROOT / PAPER_PROBE_PATH, directory / PAPER_PROBE_PATH)
     (directory / "coil_heating.py").write_text(documented_plugin())
+    # The walkthrough from a bag: its table (with a temperature log), scene and plugin.
+    fitted = {name: values for name, values in table.columns.items() if not name.startswith("ref_")}
+    MeasurementTable(fitted, "mows fit").to_csv(directory / "fits.csv")  # as `mows fit --csv` writes: no reference
+    load_scenario("paper_largest_spacing").to_yaml(directory / "scenario.yaml")
+    (directory / "moment_temperature.py").write_text(documented_plugin("moment_temperature"))
     # `mows lab add probes.csv --probe 0=a.yaml …`: three paper probes 5 cm apart on one stage.
     placed = [PlacedProbe(PAPER_PROBE, Pose(magnet_position_m=(0.05 * i, 0.0, 0.0))) for i in range(3)]
     rng = np.random.default_rng(4)

@@ -23,7 +23,7 @@ from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
 
 MOMENT_PER_K = -1e-3
-REFERENCE_K = 298.0
+REFERENCE_K = PAPER_PROBE.reference_temperature_k  # where the probe file's moment holds
 AMPLITUDE_DEG = 2.0
 FIELD_T = (4e-4, 1.5e-4, -4e-5)
 PLUGIN = f"""
@@ -82,7 +82,7 @@ def test_the_catalog_alone_adds_only_what_is_there_and_points_at_the_moment(tabl
     assert "temperature_k·b_along_t" in explanation, explanation
     # The search beyond the catalog writes the moment's plugin and reads its coefficient from the table.
     assert "finds 1 term: b_along_t·temperature_k" in explanation, explanation
-    assert '"moment_scale": c * (rows.temperature_k - 298.' in explanation, explanation
+    assert f'"moment_scale": c * (rows.temperature_k - {REFERENCE_K!r})' in explanation, explanation
     (term,) = report.discovery.terms
     assert abs(term.plugin_parameter.value - MOMENT_PER_K) < 3 * term.plugin_parameter.std, term.plugin_parameter
 

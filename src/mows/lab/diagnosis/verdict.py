@@ -22,9 +22,10 @@ import dataclasses
 import enum
 from collections.abc import Iterable
 
-from mows.lab.diagnosis.candidates import Candidate, closes_the_gap, explains_excess, rank_candidates
+from mows.lab.diagnosis.candidates import Candidate, explains_excess, rank_candidates
 from mows.lab.diagnosis.discovery import WHY, DiscoveredTerm, Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group, absorbed_groups, group_candidates
+from mows.lab.diagnosis.missing import is_missing
 from mows.lab.diagnosis.residual_structure import (
     GOODNESS_ALPHA,
     Structure,
@@ -98,7 +99,7 @@ def _diagnosis(
     if for_report:
         groups += absorbed_groups(fit, effects, candidates, untestable, probe, len(groups) + 1)
     structure = residual_structure(fit)
-    verdict, explanation = _verdict(fit, structure, candidates)
+    verdict, explanation = _verdict(fit, structure, candidates, probe)
     if verdict != Verdict.UNEXPLAINED_STRUCTURE or not for_report:
         return Diagnosis(fit, structure, candidates, groups, untestable, verdict, explanation)
     discovery = discover(fit, probe)
@@ -107,15 +108,16 @@ def _diagnosis(
 
 
 # --- verdict ------------------------------------------------------------------------------------
-def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate]) -> tuple[Verdict, str]:
+def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate], probe: Probe) -> tuple[Verdict, str]:
     """The verdict and its explanation; for ``unexplained_structure`` without what the residual
-    follows (:func:`_no_answer` adds it)."""
+    follows (:func:`_no_answer` adds it). The best candidate is missing by the search's own
+    judgement (:func:`mows.lab.diagnosis.missing.is_missing`) and when it explains half the excess."""
     best = candidates[0] if candidates else None
     excess = fit.chi2 - fit.dof
     if best is not None and best.strong:
         gain = fit.chi2 - best.chosen.chi2_after
-        credible = not best.effect.generic or closes_the_gap(best.chosen)  # a generic term must explain the data
-        if explains_excess(fit, best.chosen) and credible:
+        explains = explains_excess(fit, best.chosen)
+        if explains and is_missing(fit, best, probe):
             group = (
                 f" (group {best.group}: the data cannot tell it from "
                 f"{', '.join(c.name for c in candidates if c.group == best.group and c is not best)})"
@@ -127,13 +129,18 @@ def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate]) 
                 f"p = {best.p_value:.1e}, "
                 f"χ²/dof {fit.chi2_dof:.3g} → {best.chi2_dof_after:.3g}."
             )
+        if not explains:
+            why = f"accounts for only {100 * gain / excess:.0f}% of the excess χ²"
+        elif best.effect.generic:
+            why = "is a generic correction that leaves structure: it would take a share of physics it is not"
+        else:
+            why = (
+                "leaves structure that terms beyond the catalog explain, and has no strong evidence of its own "
+                "beside them, or does not predict the configurations it was not fitted to"
+            )
         unexplained = (
-            f"The best candidate, {best.label} (ΔBIC = {best.delta_bic:.1f}), accounts for only "
-            f"{100 * gain / excess:.0f}% of the excess χ². "
-            if not explains_excess(fit, best.chosen)
-            else f"The best candidate, {best.label} (ΔBIC = {best.delta_bic:.1f}), is a generic correction "
-            f"that leaves structure (χ²/dof {fit.chi2_dof:.3g} → {best.chi2_dof_after:.3g}): it would take a "
-            "share of physics it is not. "
+            f"The best candidate, {best.label} (ΔBIC = {best.delta_bic:.1f}, χ²/dof {fit.chi2_dof:.3g} → "
+            f"{best.chi2_dof_after:.3g}), {why}. "
         )
     elif best is not None:
         unexplained = (

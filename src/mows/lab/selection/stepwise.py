@@ -50,17 +50,15 @@ from mows.lab.diagnosis.candidates import (
     REJECTED_SIGMAS,
     STRONG_DELTA_BIC,
     TIE_DELTA_BIC,
-    Candidate,
     closes_the_gap,
     cv_gain,
-    explains_excess,
     quasi_gain,
     rank_candidates,
 )
-from mows.lab.diagnosis.discovery import discover
+from mows.lab.diagnosis.missing import is_missing
 from mows.lab.diagnosis.physical_aliases import alias_statements
 from mows.lab.diagnosis.plausibility import conflicts
-from mows.lab.diagnosis.projections import Signature, cosine_within, orthonormal_basis, project_out
+from mows.lab.diagnosis.projections import Signature
 from mows.lab.diagnosis.verdict import Diagnosis, completed, diagnose
 from mows.lab.model.effects import Effect, untestable_reason
 from mows.lab.model.least_squares import FitResult, FittedParameter, parameter_values, parameters_dict
@@ -68,8 +66,6 @@ from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
 MAX_AUTO_STEPS = 6
-SAME_SIGNATURE = 0.95  # a discovered term this close to a candidate's signature is the candidate's own
-MAX_STAND_INS = 2  # the strongest discovered terms that stand in for physics outside the catalog
 MAX_REVISIT_MOVES = 6  # per forward step; each move lowers the BIC, so this is only a bound
 
 
@@ -215,26 +211,18 @@ def _physical_replacements(
 def _forward_step(found: Diagnosis, probe: Probe) -> tuple[str, FitResult, Sequence[FittedParameter]] | None:
     """(change, fit, check) of the next addition (module docstring), None when there is none.
 
-    The best strong candidate in its better form that generalises (its fit predicts each fold
-    better than the present fit does, :func:`mows.lab.diagnosis.candidates.cv_gain`) and, free,
-    explains at least half of the excess χ² (:func:`~mows.lab.diagnosis.candidates.explains_excess`;
-    a generic correction must leave a residual at noise, :func:`~mows.lab.diagnosis.candidates.closes_the_gap`), known
-    physics first (a candidate held at its physical value has no parameter to absorb other
-    effects with); else the best effect
+    The best strong candidate in its better form that the judgement of
+    :func:`mows.lab.diagnosis.missing.is_missing` takes (it generalises and, free, explains the
+    structure rather than a share of physics outside the catalog), known physics first (a
+    candidate held at its physical value has no parameter to absorb other effects with); else
+    the best effect
     whose predicted signal the model's free parameters absorb but which the data cannot reject
     (:attr:`mows.lab.diagnosis.candidates.Form.kept_physics`), held at physics.
     """
     strong = [c for c in found.candidates if c.strong]
     for best in sorted(strong, key=lambda c: not c.chosen.fixed):  # known physics first, stably
-        assert best.chosen.fit is not None  # a strong form is always refitted (candidates._candidate)
-        explains = best.chosen.fixed or (
-            explains_excess(found.fit, best.chosen) and (not best.effect.generic or closes_the_gap(best.chosen))
-        )
-        if (
-            not explains or cv_gain(found.fit, best.chosen.fit) <= TIE_DELTA_BIC
-        ):  # it predicts rows it was not fitted to
-            continue
-        if best.chosen.fixed or closes_the_gap(best.chosen) or _beside_discovery(found.fit, best, probe):
+        if is_missing(found.fit, best, probe):
+            assert best.chosen.fit is not None  # a strong form is always refitted (candidates._candidate)
             return f"add {best.label}", best.chosen.fit, best.parameters if best.chosen.fixed else ()
     for candidate in found.candidates:
         if candidate.physics is not None and candidate.physics.kept_physics:
@@ -251,55 +239,6 @@ def _forward_step(found: Diagnosis, probe: Probe) -> tuple[str, FitResult, Seque
                     candidate.parameters,
                 )
     return None
-
-
-def _beside_discovery(fit: FitResult, candidate: Candidate, probe: Probe) -> bool:
-    """A free effect that leaves structure behind keeps strong evidence beside the terms the
-    residual follows beyond the catalog (:func:`_stand_ins`, additive terms with free
-    strengths). Physics outside the catalog has a catalog effect take whatever share of its
-    signal that effect's signature reaches (a tilted plane for the mean of a moment falling with
-    temperature: the in-plane field shrinks as the cosine of the tilt); beside the stand-ins
-    that share is gone, while an effect that is really there keeps its own. The stand-ins enter
-    linearly, so each model's χ² beside them is one Gauss–Newton step from its own fit (``fit``
-    and the candidate's), with no refit; judged as :func:`mows.lab.diagnosis.candidates.quasi_gain`."""
-    stand_ins = _stand_ins(fit, candidate, probe)
-    with_candidate = candidate.chosen.fit
-    if not stand_ins or with_candidate is None:
-        return True
-    terms = np.column_stack([fit.extension_columns(e) for e in stand_ins])  # the same at any point: additive
-
-    def beside(model_fit: FitResult) -> tuple[float, int]:
-        basis = _basis(np.column_stack([model_fit.jacobian, terms]))
-        left = project_out(model_fit.weighted_residual[:, None], basis)[:, 0]
-        return float(left @ left), model_fit.n - basis.shape[1]
-
-    without, _ = beside(fit)
-    within, dof = beside(with_candidate)
-    phi = max(1.0, within / max(dof, 1))
-    return (without - within) / phi - len(candidate.effect.parameters) * math.log(fit.n) > STRONG_DELTA_BIC
-
-
-def _stand_ins(fit: FitResult, candidate: Candidate, probe: Probe) -> list[Effect]:
-    """The terms the residual follows beyond the catalog that ``candidate`` does not make itself,
-    the strongest ``MAX_STAND_INS``: those found with it in the model, and those found without
-    it whose signature lies outside its own (cos < ``SAME_SIGNATURE``: a temperature term is the
-    thermal drift, not a stand-in for something else)."""
-    assert candidate.chosen.fit is not None  # a strong form is refitted
-    found = list(discover(candidate.chosen.fit, probe, plugins=False).stand_ins[:MAX_STAND_INS])
-    model_basis = _basis(fit.jacobian)
-    for effect in discover(fit, probe, plugins=False).stand_ins:
-        column = project_out(fit.extension_columns(effect), model_basis)[:, 0]
-        outside = cosine_within(column, candidate.signature.basis) < SAME_SIGNATURE
-        if outside and effect.name not in {e.name for e in found}:
-            found.append(effect)
-    return found[:MAX_STAND_INS]
-
-
-def _basis(columns: np.ndarray) -> np.ndarray:
-    """An orthonormal basis of ``columns``, each taken at unit length: parameters of very different
-    scales (f00 in Hz, a temperature coefficient in 1/K) keep their directions."""
-    norms = np.linalg.norm(columns, axis=0)
-    return orthonormal_basis(columns / np.where(norms > 0, norms, 1.0))
 
 
 def _revisit(

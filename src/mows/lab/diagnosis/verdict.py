@@ -22,7 +22,7 @@ import dataclasses
 import enum
 from collections.abc import Iterable
 
-from mows.lab.diagnosis.candidates import Candidate, explains_excess, rank_candidates
+from mows.lab.diagnosis.candidates import STRONG_DELTA_BIC, Candidate, explains_excess, rank_candidates
 from mows.lab.diagnosis.discovery import WHY, DiscoveredTerm, Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group, absorbed_groups, group_candidates
 from mows.lab.diagnosis.missing import is_missing
@@ -127,7 +127,7 @@ def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate], 
             return Verdict.EFFECT_MISSING, (
                 f"{best.label} is missing{group}: ΔBIC = {best.delta_bic:.1f}, "
                 f"p = {best.p_value:.1e}, "
-                f"χ²/dof {fit.chi2_dof:.3g} → {best.chi2_dof_after:.3g}."
+                f"χ²/dof {fit.chi2_dof:.3g} → {best.chi2_dof_after:.3g}." + _findings(candidates)
             )
         if not explains:
             why = f"accounts for only {100 * gain / excess:.0f}% of the excess χ²"
@@ -152,8 +152,20 @@ def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate], 
         unexplained = ""
     if structure.goodness_p >= GOODNESS_ALPHA and not structure.significant:
         return Verdict.ADEQUATE, "The model explains the data: " + structure.summary
-    found = unexplained + " " + structure.summary
+    found = unexplained + " " + structure.summary + _findings(candidates)
     return Verdict.UNEXPLAINED_STRUCTURE, found.strip()
+
+
+def _findings(candidates: list[Candidate]) -> str:
+    """The candidates the data ask for strongly only at values physics does not allow: each is a
+    finding (the probe file's value is off, or physics outside the catalog looks like the
+    effect), not an effect."""
+    found = [c for c in candidates if c.would_need and c.delta_bic > STRONG_DELTA_BIC]
+    return "".join(
+        f" Finding: {c.label} would take ΔBIC {c.delta_bic:.0f} but {c.would_need}: the probe file's "
+        "value is off by that much, or physics outside the catalog looks like it."
+        for c in found
+    )
 
 
 def _no_answer(fit: FitResult, structure: Structure, discovery: Discovery) -> str:

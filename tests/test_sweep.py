@@ -42,7 +42,7 @@ def test_first_principles_recovers_field_and_gradient(gradient_field, seed):
 
 
 def test_published_model_overstates_an_axial_gradient_two_and_fivefold(gradient_field):
-    # PHYSICS.md §4: the lever also feels Gy'y'; for an axisymmetric gradient along x the
+    # docs/physics.md §6.1: the lever also feels Gy'y'; for an axisymmetric gradient along x the
     # published model must read Gxx twice and Gyy five times too large (cf. the paper's
     # measured γ = 14.14 Hz·m/T against γ0 = β0·l = 7.16 Hz·m/T).
     shift = exact_sweep(gradient_field, 4)

@@ -4,7 +4,7 @@ The wheels were built on a host whose Python lived in /opt/python/cp311-cp311; t
 ``share/**/*.cmake`` files name its include directory and its numpy include directory,
 and CMake then refuses to generate a message package ("includes non-existent path").
 This rewrites those paths to the running interpreter's. Running it twice changes nothing.
-See ../shared/ROS_WHEELS.md, "Two fix-ups after installing".
+docs/command_line.md ("ROS 2 Jazzy from the `ros-jazzy-*` wheels") says what the wheels need.
 """
 
 import pathlib

@@ -114,7 +114,7 @@ def test_the_gradient_sweep_checks_the_lever_and_gives_twice_the_papers_gamma(pa
     lever = calibration.value("gradient_lever_m")
     assert abs(lever / PAPER_PROBE.lever_m - 1.0) < 0.03
     # An anti-Helmholtz pair along x has Gyy = −Gxx/2 at its centre: k gains m·l·(Gxx − 2·Gyy)
-    # = 2·m·l·Gxx, so γ = 2·β0·l (PHYSICS.md §4; the paper's Eq. 8 has β0·l).
+    # = 2·m·l·Gxx, so γ = 2·β0·l (docs/physics.md §6.1; the paper's Eq. 8 has β0·l).
     gamma = calibration.value("gamma_hz_m_per_t")
     assert gamma == pytest.approx(2.0 * PAPER_PROBE.beta0_hz_per_t * PAPER_PROBE.lever_m, rel=0.03)
     assert any("lever check" in note for note in calibration.notes)

@@ -7,7 +7,7 @@ ring-down average (:mod:`mows.physics.ringdown_average`). A bug shared by that e
 tables it makes would go unseen. Nothing of it is used here; only the probe's constants
 (:class:`mows.physics.probe.Probe`) and the field sources' B(r) (:mod:`mows.physics.field`).
 
-Physics (PHYSICS.md §4, the project's conventions). The probe axis x' lies at θ0 in the global
+Physics (docs/physics.md §4, the project's conventions). The probe axis x' lies at θ0 in the global
 x–y plane; the lever deflects by θ in that plane; the moment points along
 u(θ) = (cos(θ0 + θ), sin(θ0 + θ), 0); the magnet sits at r(θ) = l·(u(θ) − u(0)), at the origin
 when θ = 0. The potential of one ring-down's probe is

@@ -132,7 +132,7 @@ def test_a_tilted_plane_makes_a_pendulum():
 
 
 def test_the_first_harmonic_of_a_uniform_field_is_the_bessel_form():
-    """k(A) = kM + m·B∥·2·J1(A)/A (PHYSICS.md §5.4), for a field along and against the axis."""
+    """k(A) = kM + m·B∥·2·J1(A)/A (docs/physics.md §6.3), for a field along and against the axis."""
     amplitude = math.radians(20.0)
     for b_along_t in (2e-3, -2e-3):
         rows = uniform_rows(b_along_t * AXIS)

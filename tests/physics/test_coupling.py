@@ -3,7 +3,7 @@
 Requirements: the field each probe feels of its neighbours is the exact point-dipole field of
 their moments at rest (checked against the formula written out here, not the library's), its
 gradient is the derivative of that field and obeys Maxwell's equations, it falls as 1/r³, it
-is 1.4 µT and a few mHz at 5 cm for the paper's moment (PHYSICS.md §5.10), and the coupled
+is 1.4 µT and a few mHz at 5 cm for the paper's moment (docs/physics.md §9.10), and the coupled
 rest angles are the minimum of the scene's total energy.
 """
 
@@ -96,7 +96,7 @@ def test_the_paper_moment_at_5_cm_gives_1p4_microtesla_and_a_few_millihertz():
     alone = ArcPotential.from_source(P, NO_FIELD, Pose()).frequency_hz()
     shift_hz = coupled_frequencies_hz(pair, NO_FIELD) - alone
     # The published model's k = kM + m·Bx' plus the lever's first-order terms m·l·(Gx'x' − 2Gy'y')
-    # (PHYSICS.md §4); the neglected ones are of order (l/r)² ≈ 1.5e-3 of the shift. The lever
+    # (docs/physics.md §4); the neglected ones are of order (l/r)² ≈ 1.5e-3 of the shift. The lever
     # makes the two shifts differ: one lever points at the other magnet, one away from it.
     gradient = state.neighbour_gradient_t_per_m()
     first_order = P.beta0_hz_per_t * (field[:, 0] + P.lever_m * (gradient[:, 0, 0] - 2 * gradient[:, 1, 1]))

@@ -63,7 +63,7 @@ def test_no_frequency_beyond_spring_cancellation():
 
 
 def test_first_order_sweep_has_the_factor_f00():
-    # PHYSICS.md §3: the paper's Eq. 11 drops f00; the first-order form must match the exact
+    # docs/physics.md §8: the paper's Eq. 11 drops f00; the first-order form must match the exact
     # model at weak fields, which the printed form misses by a factor f00 ≈ 112.
     theta0 = np.radians(np.arange(0, 360, 15))
     field, gradient = (30e-6, -20e-6), (4e-3, 1e-3, -2e-3)
@@ -81,7 +81,7 @@ def test_first_order_sweep_has_the_factor_f00():
 def test_gradient_sensitivity_published_value_is_half_the_papers_measurement():
     # The paper measured γ = 14.14 Hz·m/T in the anti-Helmholtz pair; the published model
     # predicts γ0 = β0·l = 7.16 Hz·m/T. For an axial gradient Gx'x' = G, Gy'y' = −G/2, the
-    # first-principles term m·l·(Gx'x' − 2·Gy'y') is twice m·l·Gx'x' (PHYSICS.md §4),
+    # first-principles term m·l·(Gx'x' − 2·Gy'y') is twice m·l·Gx'x' (docs/physics.md §6.1),
     # which explains the factor 1.97 between measurement and published model.
     gamma0 = F.gradient_sensitivity_hz_m_per_t(0.0, *ARGS, P.lever_m)
     assert gamma0 == pytest.approx(7.16, rel=5e-3)

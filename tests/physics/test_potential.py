@@ -24,7 +24,7 @@ def test_uniform_axial_field_gives_exactly_km_plus_mb(field_t):
 
 @pytest.mark.parametrize("amplitude_deg, factor", [(15.0, 0.991), (24.0, 0.978)])
 def test_finite_amplitude_field_spring_follows_bessel_j1(amplitude_deg, factor):
-    # PHYSICS.md §5.4: first-harmonic stiffness of −mB cos θ is mB·2J1(A)/A.
+    # docs/physics.md §6.3: first-harmonic stiffness of −mB cos θ is mB·2J1(A)/A.
     amplitude = math.radians(amplitude_deg)
     k = along(5e-3).effective_stiffness_nm_per_rad(amplitude)
     assert (k - KM) / (M * 5e-3) == pytest.approx(2 * special.j1(amplitude) / amplitude, rel=1e-10)
@@ -62,7 +62,7 @@ def test_perpendicular_field_turns_the_rest_angle_and_stiffens_the_spring():
     potential = ArcPotential.from_local_field(P, np.array([0.0, b_perp, 0.0]))
     assert potential.rest_angle_rad() == pytest.approx(theta_s, rel=1e-10)
     assert potential.stiffness_nm_per_rad() == pytest.approx(KM + M * b_perp * math.sin(theta_s), rel=1e-12)
-    # PHYSICS.md §5.3: about 7 mHz at 170 µT.
+    # docs/physics.md §6.2: about 7 mHz at 170 µT.
     assert (potential.frequency_hz() - P.f00_hz) * 1e3 == pytest.approx(7.0, abs=0.1)
 
 
@@ -93,7 +93,7 @@ def test_spring_cancellation_drives_the_frequency_to_zero():
 
 
 def test_hanging_magnet_is_a_pendulum_of_about_150_microtesla():
-    # PHYSICS.md §5.5: gravity along the probe axis adds a·g·l, like a field a·g·l/m.
+    # docs/physics.md §9.5: gravity along the probe axis adds a·g·l, like a field a·g·l/m.
     g = 9.80665
     potential = ArcPotential.from_local_field(P, np.zeros(3), gravity_m_per_s2=np.array([g, 0.0, 0.0]))
     assert potential.stiffness_nm_per_rad() == pytest.approx(KM + P.magnet_mass_kg * g * P.lever_m, rel=1e-12)
@@ -102,7 +102,7 @@ def test_hanging_magnet_is_a_pendulum_of_about_150_microtesla():
 
 def test_axial_gradient_of_a_divergence_free_field_doubles_the_published_term():
     # Axisymmetric gradient about x': Gx'x' = G, Gy'y' = Gz'z' = −G/2 (∇·B = 0).
-    # PHYSICS.md §4: k = kM + m·l·(Gx'x' − 2Gy'y') = kM + 2·m·l·G to first order in l.
+    # docs/physics.md §6.1: k = kM + m·l·(Gx'x' − 2Gy'y') = kM + 2·m·l·G to first order in l.
     g = 20e-3
     gradient = np.diag([g, -g / 2, -g / 2])
     potential = ArcPotential.from_local_field(P, np.zeros(3), gradient_t_per_m=gradient)

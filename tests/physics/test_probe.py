@@ -27,7 +27,7 @@ def test_calibration_inverses_agree_with_eq10_up_to_damping():
 
 
 def test_spring_cancellation_field_is_minus_15_mT():
-    # PHYSICS.md §3: f → 0 at B = −kM/m ≈ −15.3 mT.
+    # docs/physics.md §5: f → 0 at B = −kM/m ≈ −15.3 mT.
     assert PAPER_PROBE.cancellation_field_t == pytest.approx(-15.3e-3, rel=5e-3)
 
 

@@ -18,7 +18,7 @@ def test_kappa_is_the_on_axis_dipole_field():
 
 
 def test_zero_to_ninety_degree_amplitude_ratio_is_15_2():
-    # PHYSICS.md §2 corrects Eq. 3: ratio = sin θmax / ((1 − cos θmax)/2) = 15.19 at 15°.
+    # docs/physics.md §3 corrects Eq. 3: ratio = sin θmax / ((1 − cos θmax)/2) = 15.19 at 15°.
     theta_max = math.radians(15.0)
     t = np.linspace(0, 1 / 100, 20001)  # one undamped period
     swing = [np.ptp(signal_t(t, th0, theta_max, 100.0, 0.0, 0.0, 1.0)) / 2 for th0 in (0.0, math.pi / 2)]

@@ -106,7 +106,7 @@ def test_a_weak_field_beta_is_f00_m_over_2km():
 
 
 def test_a_beta_from_the_stop_follows_the_amplitude_averaged_bessel_factor():
-    # PHYSICS.md §5.4: at amplitude A the field spring is m·B·2J1(A)/A. Cycle by cycle of a
+    # docs/physics.md §6.3: at amplitude A the field spring is m·B·2J1(A)/A. Cycle by cycle of a
     # ring-down from the stop, (f(+B) − f(−B))/2B = β0·2J1(A)/A; over the paper's 60 periods
     # β is about 1 % low.
     field = 50e-6
@@ -175,7 +175,7 @@ def exact_half_swing_t(theta0_rad, amplitude_rad):
 def test_c_zero_to_ninety_degree_amplitude_ratio():
     amplitude = math.radians(15.0)
     # A magnet turning in place (l → 0): S = −κ·sin(θ0 + θ) exactly, so the ratio is
-    # sin A / ((1 − cos A)/2) = 15.19 (PHYSICS.md §2; the paper's 7.6 is off by 2).
+    # sin A / ((1 − cos A)/2) = 15.19 (docs/physics.md §3; the paper's 7.6 is off by 2).
     in_place = P.replace(lever_m=1e-9)
     ratio = differential_half_swing_t(in_place, 0.0, amplitude) / differential_half_swing_t(
         in_place, math.pi / 2, amplitude
@@ -223,7 +223,7 @@ def test_d_anti_helmholtz_shift_against_the_published_and_first_principles_terms
     g_xx, g_yy = x_axis @ gradient @ x_axis, y_axis @ gradient @ y_axis
     f00 = P.f00_hz
     published = f00 * L * M * g_xx / (2 * KM)  # Eqs. 5, 6 (γ0·G)
-    first_principles = f00 * M * L * (g_xx - 2 * g_yy) / (2 * KM)  # PHYSICS.md §4, expanded
+    first_principles = f00 * M * L * (g_xx - 2 * g_yy) / (2 * KM)  # docs/physics.md §6.1, expanded
     # The same stiffness through Eq. 6's square root, with the Earth's m·Bx' in both terms:
     # removes the O(Δf²/f00) of the linear form; what is left is O(l²/R²) and O(A²).
     k_earth = M * (x_axis @ earth.field_t(np.zeros(3)))
@@ -421,7 +421,7 @@ def test_spring_follows_the_temperature():
     f_warm = mean_frequency_hz(*ring(warm, math.radians(3.0), 1.0))
     f_ref = mean_frequency_hz(*ring(bare(), math.radians(3.0), 1.0))
     assert f_warm == pytest.approx(linear_frequency_hz(KM * (1 + P.spring_temp_coeff_per_k)), abs=1e-6)
-    assert (f_warm - f_ref) * 1e3 == pytest.approx(-14.6, abs=0.1)  # PHYSICS.md §5.6: ≈ −15 mHz/K
+    assert (f_warm - f_ref) * 1e3 == pytest.approx(-14.6, abs=0.1)  # docs/physics.md §9.6: ≈ −15 mHz/K
 
 
 def test_tilted_plane_turns_the_magnet_into_a_pendulum():

@@ -8,7 +8,7 @@ ratio is defined once, for every orientation, by the strength of the probe's sig
 
 the power of the ring-down's first harmonic at θ0 = 0 over the noise power per sample. Near
 θ0 = 90° the signal is mostly at 2f and far weaker, so the bound there is much larger at the
-same SNR (Eq. 3 and PHYSICS.md §2).
+same SNR (Eq. 3 and docs/physics.md §3).
 """
 
 from __future__ import annotations

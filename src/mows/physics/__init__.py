@@ -1,4 +1,4 @@
-"""The physics of the magneto-oscillatory sensor, from first principles (PHYSICS.md).
+"""The physics of the magneto-oscillatory sensor, from first principles (docs/physics.md).
 
 The probe's constants (``probe``), field sources (``field``: the closed-form ``sources`` and
 current ``loops``, with their YAML form), where the probe sits

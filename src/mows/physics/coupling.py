@@ -11,7 +11,7 @@ its far-field reduction)
 with the analytic gradient and Hessian of :class:`mows.physics.sources.PointDipole`. On the
 axis of the paper's moment (0.89 mA·m²) at 5 cm that is μ0·2m/(4π·r³) = 1.42 µT, which moves the
 neighbour's frequency by about 5 mHz, fifteen times the probe's 0.33 mHz precision
-(PHYSICS.md §5.10).
+(docs/physics.md §9.10).
 
 So the external field of probe i is the scene's field plus its neighbours' dipoles
 (:func:`external_source`), and its frequency is the single-probe first-principles one

@@ -4,7 +4,7 @@
 ``Δf = f00·(√(1 + (kB + kG)/kM) − 1)`` (Eq. 6). This is the model the paper fits; the
 physics it leaves out is in :mod:`mows.physics.potential` and the model lab.
 
-Corrections to the paper (PHYSICS.md §3): the Taylor form of the rotation sweep (Eq. 11 and
+Corrections to the paper (docs/physics.md §8): the Taylor form of the rotation sweep (Eq. 11 and
 the supplement's decomposition section) lacks the factor f00; here it has it. All
 functions accept numpy arrays and broadcast.
 
@@ -158,7 +158,7 @@ class PublishedSweep:
 
         The probe axis is x' = (cos θ0, sin θ0); kB = m·Bx', kG = l·m·Gx'x' with
         Gx'x' = x'ᵀ·G·x'. With ``exact`` the √ of Eq. 6 is kept; otherwise the first-order
-        form Δf = f00·(kB + kG)/(2kM) of Eq. 11, corrected by the factor f00 (PHYSICS.md §3).
+        form Δf = f00·(kB + kG)/(2kM) of Eq. 11, corrected by the factor f00 (docs/physics.md §8).
         """
         theta0 = np.asarray(theta0_rad, dtype=float)
         c, s = np.cos(theta0), np.sin(theta0)

@@ -1,4 +1,4 @@
-"""The probe's potential from first principles (PHYSICS.md §4) and the frequency it implies.
+"""The probe's potential from first principles (docs/physics.md §4) and the frequency it implies.
 
 For the magnet on its lever, deflected by θ in the rotation plane,
 
@@ -25,7 +25,7 @@ J·θ'' + U'(θ) = 0 in its mean, cos φ and cos 2φ parts,
 
 gives the effective stiffness k(A) = J·ω² = 2·⟨U'·cos φ⟩/A, A the swing's first harmonic
 (the θmax a ring-down fit reports). For a potential symmetric about its rest angle A2 = 0 and
-this is first-harmonic balance (PHYSICS.md §5.4: for −m·B·cos θ, k = kM + m·B·2·J1(A)/A).
+this is first-harmonic balance (docs/physics.md §6.3: for −m·B·cos θ, k = kM + m·B·2·J1(A)/A).
 Where the rest angle is deflected (a field across the probe, gravity, a gradient) the
 potential is lopsided about it and the cycle's second harmonic matters: for
 U' = k·x + α·x² + β·x³ about the rest angle it gives ω² = (k + (3β/4 − 5α²/(6k))·A²)/J, the

@@ -2,7 +2,8 @@
 
 The probe is a torsional oscillator: a magnet of moment ``m`` and mass ``a`` at the end of a
 lever ``l`` on a spring ``kM``, with inertia ``J`` and damping ``δ`` (paper, Fig. S1).
-Equation numbers refer to Fischer, Jeong & Qiu (see ``../shared/seed``).
+Equation numbers are those of "Miniature magneto-oscillatory wireless sensor for magnetic field
+and gradient measurements", F. Fischer, M. Jeong, T. Qiu (docs/physics.md §1).
 """
 
 from __future__ import annotations
@@ -137,7 +138,7 @@ class Probe:
         return -self.spring_nm_per_rad / self.moment_am2
 
     def spring_at(self, temperature_k: FloatOrArray) -> FloatOrArray:
-        """kM at ``temperature_k``: kM·(1 + α·(T − T_ref)), N·m/rad (PHYSICS.md §5.6)."""
+        """kM at ``temperature_k``: kM·(1 + α·(T − T_ref)), N·m/rad (docs/physics.md §9.6)."""
         return self.spring_nm_per_rad * (
             1.0 + self.spring_temp_coeff_per_k * (temperature_k - self.reference_temperature_k)
         )
@@ -314,7 +315,7 @@ def _require(name: str, value: object, ok: Callable[[float], bool], what: str) -
         raise ValueError(f"{name} = {value!r} is out of range: must be finite and {what}")
 
 
-#: The paper's device (PHYSICS.md §6): m = 0.89 mA·m², f00 = 112.48 Hz, β0 = 3.68 Hz/mT,
+#: The paper's device (docs/physics.md §10): m = 0.89 mA·m², f00 = 112.48 Hz, β0 = 3.68 Hz/mT,
 #: a = 7.2 mg, δ = 1.8 1/s. Gives kM = 1.360e-5 N·m, J = 2.723e-11 kg·m², l = 1.945 mm.
 PAPER_PROBE = Probe.from_calibration(
     moment_am2=0.89e-3,

@@ -60,7 +60,7 @@ def peak_amplitude(theta0_rad: float, amplitude_rad: float) -> float:
     """Half the peak-to-peak swing of −sin(θ0 + x) for x in [−θmax, θmax], in units of κ.
 
     Exact. At θ0 = 0 it is sin θmax (Eq. 2); at θ0 = 90° it is (1 − cos θmax)/2 ≈ θmax²/4,
-    half of the paper's Eq. 3 (PHYSICS.md §2), so the 0°:90° ratio at θmax = 15° is 15.19.
+    half of the paper's Eq. 3 (docs/physics.md §3), so the 0°:90° ratio at θmax = 15° is 15.19.
     """
     # The extremes of a sine on an interval are at its ends or at an interior crest.
     crests = np.pi / 2 + np.pi * np.arange(-4, 5) - theta0_rad

@@ -54,7 +54,7 @@ class CycleRecord:
     def ringdown_frequency_hz(self, duration_s: float, points: int = 32) -> float:
         """Truth for a fit of the first ``duration_s`` of the ring-down: the time average of
         f(A(t)) with A(t) = A0·e^(−δt) from the first swing A0 (the frequency drifts as the
-        amplitude decays, PHYSICS.md §5.4)."""
+        amplitude decays, docs/physics.md §6.3, §6.5)."""
         t = (np.arange(points) + 0.5) / points * duration_s
         amplitudes = self.ringdown_amplitude_rad() * np.exp(-float(self.potential.damping_per_s) * t)
         return float(np.mean([self.potential.frequency_hz(a) for a in amplitudes]))

@@ -1,10 +1,10 @@
-"""The simulator's dynamics: the numba kernels that integrate the probe's motion (PHYSICS.md §1, §4).
+"""The simulator's dynamics: the numba kernels that integrate the probe's motion (docs/physics.md §2, §4).
 
 Equation of motion. The deflection θ (θt of Eq. S2) obeys
 
     J·θ'' = −U'(θ, t) − 2J·δ·θ' − Σ_k I_k(t)·W_k'(θ) + τ_stop(θ, θ'),
 
-with U(θ, t) = ½·kM(T(t))·θ² + W(θ) the full potential of PHYSICS.md §4 in the environment
+with U(θ, t) = ½·kM(T(t))·θ² + W(θ) the full potential of docs/physics.md §4 in the environment
 field at the current pose (gravity included, nothing expanded: :class:`mows.physics.potential.ArcPotential`),
 W_k(θ) = −m(θ)·B_k(r(θ)) the energy of the magnet in coil k's field per ampere along the same
 arc, and I_k(t) = A_k·sin(2πf·(t − t_on)) the drive. Free, δ gives the envelope e^(−δt) and the

@@ -47,7 +47,7 @@ class Environment:
     """The static surroundings: field sources (global frame) and the temperature.
 
     ``temperature_k`` at device time 0 drifts linearly at ``temperature_rate_k_per_s``; the
-    probe's kM follows it (PHYSICS.md §5.6, :meth:`mows.physics.probe.Probe.spring_at`).
+    probe's kM follows it (docs/physics.md §9.6, :meth:`mows.physics.probe.Probe.spring_at`).
     """
 
     sources: tuple = ()

@@ -1,4 +1,4 @@
-"""The simulated MOWS device (:class:`SimulatedDevice`), sample by sample like the hardware (PHYSICS.md §1, §4).
+"""The simulated MOWS device (:class:`SimulatedDevice`), sample by sample like the hardware (docs/physics.md §2, §4).
 
 It integrates the probe's motion with the kernels of :mod:`mows.sim.kernel` (equation of
 motion, housing stop, integrator and its step error are described there) and reads the two

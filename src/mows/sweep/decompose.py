@@ -10,8 +10,8 @@ Gd = (Gxx − Gyy)/2, Gxy), the probe axis x' = (cos θ0, sin θ0) sees
 Two models are offered:
 
 ``published``   k = kM + m·Bx' + l·m·Gx'x' in Eq. 6 (the paper's Eqs. 11-12 are its first
-                order, with the factor f00 restored, PHYSICS.md §3);
-``first_principles``  k = U''(θs) of the full potential (PHYSICS.md §4) in the local field
+                order, with the factor f00 restored, docs/physics.md §8);
+``first_principles``  k = U''(θs) of the full potential (docs/physics.md §4) in the local field
                 B + G·δr: exact rest angle (static deflection by By'), the lever's transverse
                 gradient term. To first order m·l·(Gx'x' − 2Gy'y') = m·l·(−Gs + 3·(Gd·cos 2θ0
                 + Gxy·sin 2θ0)): the 2θ0 harmonic is three times the published one, and the
@@ -148,7 +148,7 @@ class Ringdowns:
 
     Every ring-down starts from the housing stop: at ``stop_amplitude_rad`` from the lever's
     undeflected position, so its swing about the rest angle θs (turned by the perpendicular
-    field, PHYSICS.md §5.3) is stop − |θs|, which the model computes from its own potential.
+    field, docs/physics.md §6.2) is stop − |θs|, which the model computes from its own potential.
     ``damping_per_s`` and ``duration_s`` (per point) give the averaging of a constant-frequency
     fit over the decaying swing (:mod:`mows.physics.ringdown_average`), weighted by where in
     the swing the signal carries phase: ``pickup`` (n, K + 1) are the series C_k each fit used

@@ -23,10 +23,10 @@ more than ``TUNING_PHASE_SLIP``/t_k (a 1.6 % loss of drive); at 10 A (t_k ≈ 40
 
 Ring-down length. One ring-down of length T measures f with at best the Cramér–Rao bound
 σ_f(T) (:func:`mows.estimate.ringdown.problem.cramer_rao_frequency_hz`, full model with the
-lever-aware pick-up, PHYSICS.md §7); a cycle costs T plus its overhead (the excitation). The
+lever-aware pick-up, docs/physics.md §6.7, §11); a cycle costs T plus its overhead (the excitation). The
 information per second 1/(σ_f(T)²·(T + overhead)) grows while the swing is large and falls once
 it has decayed (~1/δ): its maximum, averaged over the orientations of a sweep, is the length,
-but not past ``MAX_DECAY``/δ. The frequency drifts with the decaying swing (PHYSICS.md §5.4) and
+but not past ``MAX_DECAY``/δ. The frequency drifts with the decaying swing (docs/physics.md §6.5) and
 the decomposition describes a ring-down's frequency by an average over it
 (:mod:`mows.physics.ringdown_average`), which holds less well as the swing decays further:
 measured on 12-orientation sweeps in the anti-Helmholtz scene with locked 10 A kicks, the

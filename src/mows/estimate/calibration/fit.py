@@ -454,7 +454,7 @@ def _derive(
 
 
 def _gradient_factor(wirings: Mapping[str, Wiring], gradient_points: Sequence[CalibrationPoint]) -> float:
-    """γ/(β0·l) of the gradient wiring at θ0 = 0: 1 − 2·Gy'y'/Gx'x' (PHYSICS.md §4: k gains
+    """γ/(β0·l) of the gradient wiring at θ0 = 0: 1 − 2·Gy'y'/Gx'x' (docs/physics.md §6.1: k gains
     m·l·(Gx'x' − 2·Gy'y')); 2 for an anti-Helmholtz pair along x."""
     gradient = np.asarray(wirings[gradient_points[0].wiring].gradient_per_a_t_per_m, float)
     if gradient[0, 0] == 0.0:

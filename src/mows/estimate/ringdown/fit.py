@@ -22,7 +22,7 @@ pickup (:func:`mows.physics.fluxgate.pickup_harmonics`) adds harmonics of relati
 the excitation state (the commanded orientation), or, in the paper's model, fitted.
 
 Estimator. Least squares is the maximum-likelihood estimator for white Gaussian noise, and
-reaches the Cramér–Rao bound (PHYSICS.md §7) once the fit is converged at full rate. The
+reaches the Cramér–Rao bound (docs/physics.md §11) once the fit is converged at full rate. The
 fit runs in three stages so that this costs about a millisecond:
 
 1. a start from the zero-padded spectrum: the peaks at f and 2f (near 90° the signal is

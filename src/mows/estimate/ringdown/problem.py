@@ -1,5 +1,5 @@
 """The least-squares problem of one ring-down fit, solved by variable projection, and its
-Fisher information (PHYSICS.md §7): what :func:`mows.estimate.ringdown.fit_ringdown` iterates
+Fisher information (docs/physics.md §11): what :func:`mows.estimate.ringdown.fit_ringdown` iterates
 on and what the Cramér–Rao bound is computed from. The model and its derivatives are the
 compiled kernels of :mod:`mows.estimate.ringdown.model`.
 """
@@ -167,7 +167,7 @@ def cramer_rao_frequency_hz(
     rest_offset_rad: float = 0.0,
 ) -> float:
     """Cramér–Rao bound of f for one channel of ``n_samples`` in white noise σ:
-    √[(JᵀJ/σ²)⁻¹]_ff (PHYSICS.md §7), J the Jacobian of the full model over all its
+    √[(JᵀJ/σ²)⁻¹]_ff (docs/physics.md §11), J the Jacobian of the full model over all its
     parameters (f, δ, θmax, φ, [ε], κ, B_DC) at the given values, ε the rest offset (or θ0's
     error) that ``FitOptions.rest_offset_free`` (``theta0_free``) fits: ``offset_free`` as the
     fit had it. t = 0 at the first sample; ``pickup`` is the series at the commanded θ0.

@@ -11,7 +11,7 @@ value means as the other:
 - **plane_tilt ≡ field_offset** while the reference's Bz is constant: small rotations (t_x, t_y)
   of the plane bring the in-plane field (t_y·Bz, −t_x·Bz).
 - **finite_amplitude ≡ moment_scale** while the amplitudes are the same in every row: the
-  first-harmonic balance scales the field spring by 2·J1(A)/A (PHYSICS.md §5.4), averaged
+  first-harmonic balance scales the field spring by 2·J1(A)/A (docs/physics.md §6.3), averaged
   over the ring-down's amplitudes, so ε = ⟨2·J1(A)/A⟩ − 1 ≈ −⟨A²⟩/8.
 - **thermal_drift ≡ spring_drift** while the temperature changes linearly in time:
   kM·(1 + α·(T − T_ref)) = kM·(1 + r·t) + const with r = α·dT/dt.

@@ -2,7 +2,7 @@
 
 Every effect edits the per-row :class:`mows.lab.model.configuration.Configuration` (field, gradient,
 Hessian, gravity, spring, readout), and the frequency follows from the potential U(θ) of
-PHYSICS.md §4 with the exact rest angle and harmonic balance, so effects compose and stay
+docs/physics.md §4 with the exact rest angle and harmonic balance, so effects compose and stay
 right at mT fields. Every effect is *off* when all its parameters are 0 and is smooth there
 (score tests and refits start from 0). Where the size of an effect follows from probe
 constants (gravity: a·g·l; static deflection: m, kM and By'), the free parameter is the unknown

@@ -10,7 +10,7 @@ A plugin file defines effects with the :func:`effect` decorator::
         return {"stiffness_nm_per_rad": k_per_a2_nm_per_rad * rows.coil_current_a ** 2}
 
 A plugin returns a dict of per-row changes (each a number or one per row). The physical ones go
-through the full potential U(θ) (PHYSICS.md §4: exact rest angle, start swing and harmonic
+through the full potential U(θ) (docs/physics.md §4, §6: exact rest angle, start swing and harmonic
 balance), so they compose with every other effect at any field:
 
 ====================================  =======================================================

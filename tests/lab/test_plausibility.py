@@ -57,3 +57,26 @@ def test_gravity_cannot_stand_in_for_a_field_it_would_need_more_than_g_for():
     assert found["|gravity.down|"].value > 1.3 and found["|gravity.down|"].sigmas > 10.0, found
     report = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
     assert "gravity" not in report.effect_names, [step.change for step in report.history]
+
+
+def test_gravity_and_a_plane_tilt_must_be_one_tilt():
+    """The reference is tilted by 0.05 rad about x against the plane, so that its Bz (−0.4 mT in
+    two sweeps, +0.4 mT in the third) leaks into y', and a field the reference misses, 46 µT
+    along x, looks like gravity with d = (0.3, 0). A level reference tilted so would put
+    gravity's in-plane part at (0, 0.05): the two disagree on the plane's tilt."""
+    tilt_x_rad = 0.05
+    rotation = np.array(
+        [[1.0, 0.0, 0.0], [0.0, np.cos(tilt_x_rad), -np.sin(tilt_x_rad)], [0.0, np.sin(tilt_x_rad), np.cos(tilt_x_rad)]]
+    )
+    hidden = 0.3 * 154e-6 * np.array([1.0, 0.0, 0.0])
+    references = [np.array([4e-4, 1.5e-4, -4e-4 if row < 48 else 4e-4]) for row in range(72)]
+    truth = [UniformField(tuple(rotation @ reference + hidden)) for reference in references]
+    table = _table(PAPER_PROBE, truth, reference=[UniformField(tuple(reference)) for reference in references])
+    effects = catalog()
+    fit = (FrequencyModel(PAPER_PROBE) + effects["gravity"] + effects["plane_tilt"]).fit(table)
+    tilt = fit.effect_parameters("plane_tilt")[0]
+    assert abs(tilt.value - tilt_x_rad) < 5 * tilt.std + 0.005, tilt  # the tilt is determined
+    found = [c for c in conflicts(fit, PAPER_PROBE) if c.parameter.endswith("(the plane tilt's)")]
+    assert found and max(c.sigmas for c in found) > 10.0, conflicts(fit, PAPER_PROBE)
+    alone = (FrequencyModel(PAPER_PROBE) + effects["plane_tilt"]).fit(table)
+    assert not [c for c in conflicts(alone, PAPER_PROBE) if "plane tilt" in c.parameter]

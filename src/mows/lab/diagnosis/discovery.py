@@ -84,6 +84,7 @@ from mows.records.json_numbers import finite_or_none
 DEGREE = 2  # products and squares of up to this many factors
 HARMONICS = range(1, 5)  # cos kθ0, sin kθ0
 RESAMPLES = 100  # half-samples of the stability selection (50 complementary pairs)
+SCREEN_RESAMPLES = 40  # … for the search's stand-ins (plugins=False), a screen that reports nothing
 STABLE_FRACTION = 0.8  # a term is kept when selected in at least this fraction of them
 SELECTION_ALPHA = 0.05  # family-wise level over the library of one half-sample's path
 ALPHA = 0.01  # family-wise level (Bonferroni over the library) of a reported term
@@ -469,13 +470,18 @@ def half_samples(units: np.ndarray, resamples: int, rng: np.random.Generator) ->
 
 
 def selection_frequencies(
-    searched: Searched, residual: np.ndarray, jacobian: np.ndarray, units: np.ndarray, rng: np.random.Generator
+    searched: Searched,
+    residual: np.ndarray,
+    jacobian: np.ndarray,
+    units: np.ndarray,
+    rng: np.random.Generator,
+    resamples: int = RESAMPLES,
 ) -> np.ndarray:
-    """The fraction of :data:`RESAMPLES` half-samples in which the path selects each term; each
+    """The fraction of ``resamples`` half-samples in which the path selects each term; each
     half-sample is projected against the model's Jacobian on its own rows."""
     z = threshold(searched.unit.shape[1], SELECTION_ALPHA)
     counts = np.zeros(searched.unit.shape[1])
-    samples = half_samples(units, RESAMPLES, rng)
+    samples = half_samples(units, resamples, rng)
     for done, rows in enumerate(samples):
         progress.stage("discovery (half-samples)", done, len(samples))
         basis = orthonormal_basis(jacobian[rows])
@@ -745,9 +751,10 @@ class _Search:
 
 def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) -> Discovery:
     """The terms of the rows' covariates that ``fit``'s residual follows beyond what its model
-    absorbs (module docstring), each with its physical plugin (``plugins=False``: without, for a
-    search that only needs the terms' stand-ins); ``seed`` draws the half-samples (and, for a
-    table longer than :data:`MAX_ROWS`, the stratified rows searched)."""
+    absorbs (module docstring), each with its physical plugin (``plugins=False``: without, on
+    :data:`SCREEN_RESAMPLES` half-samples, for a search that only needs the terms' stand-ins);
+    ``seed`` draws the half-samples (and, for a table longer than :data:`MAX_ROWS`, the
+    stratified rows searched)."""
     table = fit.table if fit.problem.rows is None else fit.table.subset(fit.problem.rows)
     if fit.invalid_rows.size or len(table) < MIN_ROWS:  # residuals of rows without a frequency are no data
         why = "the model has no frequency at some rows" if fit.invalid_rows.size else f"{len(table)} rows are too few"
@@ -763,7 +770,9 @@ def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) 
     search = _Search(fit, probe, table, residual, searched, means)
     groups = fit.problem.inverse[kept]
     units = groups if len(np.unique(groups)) >= MIN_UNITS else np.arange(len(table))
-    frequencies = selection_frequencies(searched, residual.values, jacobian, units, np.random.default_rng(seed))
+    resamples = RESAMPLES if plugins else SCREEN_RESAMPLES
+    rng = np.random.default_rng(seed)
+    frequencies = selection_frequencies(searched, residual.values, jacobian, units, rng, resamples)
     passed = significant(searched, [int(j) for j in np.flatnonzero(frequencies >= STABLE_FRACTION)], residual)
     terms = sorted(
         (_term(search, passed, i, frequencies, plugins) for i in range(len(passed.chosen))),
@@ -773,7 +782,7 @@ def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) 
         f" (Searched on {len(table)} stratified rows of {fit.n}.)" if len(table) < fit.n else ""
     )
     stand_ins = tuple(_stand_in(term, means, probe) for term in terms)
-    return Discovery(terms, len(searched.terms), RESAMPLES, DEGREE, summary, fit.model.name, stand_ins)
+    return Discovery(terms, len(searched.terms), resamples, DEGREE, summary, fit.model.name, stand_ins)
 
 
 def _stand_in(term: DiscoveredTerm, means: dict[str, float], probe: Probe) -> Effect:

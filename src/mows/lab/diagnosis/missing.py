@@ -21,6 +21,7 @@ A strong candidate (ΔBIC > 10 against the residual's own scatter, at values phy
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 
@@ -32,7 +33,7 @@ from mows.lab.diagnosis.candidates import (
     cv_gain,
     explains_excess,
 )
-from mows.lab.diagnosis.discovery import discover
+from mows.lab.diagnosis.discovery import Discovery, discover
 from mows.lab.diagnosis.projections import cosine_within, orthonormal_basis, project_out
 from mows.lab.model.effects import Effect
 from mows.lab.model.least_squares import FitResult
@@ -88,12 +89,22 @@ def stand_ins(fit: FitResult, candidate: Candidate, probe: Probe) -> list[Effect
     model_basis = _unit_basis(fit.jacobian)
     found: list[Effect] = []
     for model_fit in (candidate.chosen.fit, fit):
-        for effect in discover(model_fit, probe, plugins=False).stand_ins:
+        for effect in _discovered(model_fit, probe).stand_ins:
             column = project_out(fit.extension_columns(effect), model_basis)[:, 0]
             outside = cosine_within(column, candidate.signature.basis) < SAME_SIGNATURE
             if outside and effect.name not in {e.name for e in found}:
                 found.append(effect)
     return found[:MAX_STAND_INS]
+
+
+# fit → what the discovery finds beside it (every candidate of a step asks of the same fit)
+_DISCOVERED: weakref.WeakKeyDictionary[FitResult, Discovery] = weakref.WeakKeyDictionary()
+
+
+def _discovered(fit: FitResult, probe: Probe) -> Discovery:
+    if fit not in _DISCOVERED:
+        _DISCOVERED[fit] = discover(fit, probe, plugins=False)
+    return _DISCOVERED[fit]
 
 
 def _unit_basis(columns: np.ndarray) -> np.ndarray:

@@ -77,7 +77,18 @@ def outside_catalog_table(seed: int = 0, sweeps: int = OUTSIDE_SWEEPS):
             for angle, kelvin in zip(theta0, temperature)
         ]
     )
-    return synthetic.synthesize(PAPER_PROBE, source, theta0, rng, 3.3e-4, 2.0, temperature, truth_hz=truth, **sweep)
+    return synthetic.synthesize(
+        PAPER_PROBE,
+        source,
+        theta0,
+        rng,
+        3.3e-4,
+        2.0,
+        temperature,
+        truth_hz=truth,
+        t_s=sweep["t_s"],
+        sweep=sweep["sweep"],
+    )
 
 
 def run(sweeps: int = SWEEPS, outside_sweeps: int = OUTSIDE_SWEEPS) -> dict:

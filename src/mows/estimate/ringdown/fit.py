@@ -23,7 +23,7 @@ the excitation state (the commanded orientation), or, in the paper's model, fitt
 
 Estimator. Least squares is the maximum-likelihood estimator for white Gaussian noise, and
 reaches the Cramér–Rao bound (docs/physics.md §11) once the fit is converged at full rate. The
-fit runs in three stages so that this costs about a millisecond:
+fit runs in three stages so that this costs 1–2 ms (0.5 s at 20 kS/s):
 
 1. a start from the zero-padded spectrum: the peaks at f and 2f (near 90° the signal is
    mostly at 2f), the phase of the complex demodulate, and the envelope decay for δ;
@@ -33,7 +33,12 @@ fit runs in three stages so that this costs about a millisecond:
    (θmax, ε) has several minima (near θ0 = 90° the signal is nearly even in the deflection,
    and κ trades off against θmax): this stage is also started from every minimum of a grid
    search over the whole range (:mod:`mows.estimate.ringdown.offset`), and from the best
-   one's mirror images, with κ > 0;
+   one's mirror images, with κ > 0. The search (2–3 ms, more than the rest of the fit) runs
+   only where the data can pin θmax or ε: where the local optimum's σ of both, scaled to the
+   full rate, exceeds the reporting limit below, the fit goes on from the local optimum and
+   reports both as not determined (another minimum might pin one; not reporting a number is
+   always allowed, a wrong one never). Should the full-rate fit pin one after all, the search
+   runs then;
 3. Gauss–Newton steps on all samples until the step is < 1e-3 σ in every parameter. The
    Jacobian of the last step gives the covariance and the Fisher information.
 
@@ -45,7 +50,9 @@ ones are within the tolerance (tests/estimator/test_ringdown_rest_offset.py); a 
 ring-down there determines ε in a few percent of the fits and θmax (σ ≥ 0.35°) in none.
 
 Uncertainties. ``frequency_std_hz`` comes from the covariance (JᵀJ)⁻¹·s² with the residual
-variance s²; ``frequency_crb_hz`` from the Fisher information with the white-noise level
+variance s² (where a diagonal entry of that inverse comes out below zero, rounding in a
+numerically singular matrix, the parameter's row and column are NaN and it is named not
+determined); ``frequency_crb_hz`` from the Fisher information with the white-noise level
 measured independently of the model (from the third difference of the data). If the model
 misses something, s exceeds the noise level: χ²/dof > 1 and std > CRB.
 """
@@ -80,6 +87,7 @@ TWO_PI = 2.0 * math.pi
 RIVAL_CHI2 = 25.0
 # A number is reported where its tolerance is this many σ: beyond it lies 1 fit in 370.
 DETERMINED_SIGMAS = 3.0
+OFFSET = len(NONLINEAR)  # q's index of the rest offset ε (or θ0's error) when it is free
 
 
 def _parameter_names(n_channels: int, options: FitOptions) -> list[str]:
@@ -266,19 +274,20 @@ def _fit_window(
             **known,
         )
     step, _, _, _ = variable_projection(coarse, q0, options.max_iterations, tol_chi2=1e-2)
-    others = []
-    if options.rest_offset_free and not options.theta0_free:
-        step, *others = _offset_minima(coarse, step, options)
-    # The coarse optimum is within a few σ of the full-rate one: start as Gauss–Newton.
-    start = step.q
-    step, converged, iters, free = variable_projection(problem, start, options.max_iterations, 1e-4, damping=1e-6)
-    if not converged:  # a weakly determined θmax or rest offset can crawl: the cautious Marquardt λ
-        step, converged, iters, free = variable_projection(problem, start, options.max_iterations, 1e-4, damping=1e-3)
-    if converged:
-        fit = _summarise(step, problem, free, 1.0 / problem.weights, options, expected_hz, start_s, known)
-        fit = _undetermined_removed(fit, problem, step.cost, others, options) if fit.ok else fit
-    else:
-        fit = failure(FitStatus.NOT_CONVERGED, f"the fit did not converge in {iters} iterations", **known)
+    fit: RingdownFit | None = None
+    searched = options.rest_offset_free and not options.theta0_free
+    if searched and not _pinned_locally(step, coarse, problem, options):
+        # Neither θmax nor ε has σ within its reporting limit at the local optimum: the search
+        # over (θmax, ε) could only move numbers that are not reported, at twice the fit's cost.
+        # Kept only if the full-rate fit agrees (both NaN); else the search runs as below.
+        fit = _refined(problem, step.q, [], options, expected_hz, start_s, known)
+        if not (fit.ok and math.isnan(fit.amplitude_rad) and math.isnan(fit.rest_offset_rad)):
+            fit = None
+    if fit is None:
+        others: list[Step] = []
+        if searched:
+            step, *others = _offset_minima(coarse, step, options)
+        fit = _refined(problem, step.q, others, options, expected_hz, start_s, known)
     if fit.status == FitStatus.NOT_CONVERGED and options.rest_offset_free and not options.theta0_free:
         # The offset has no handle (near 90° the signal is even in it, at a small θmax it is
         # lost in κ): the swing about θ0, as the paper's model has it, and the reason said.
@@ -295,6 +304,45 @@ def _fit_window(
             undetermined=tuple(dict.fromkeys(("rest_offset_rad", "amplitude_rad", *fit.undetermined))),
         )
     return fit
+
+
+def _refined(
+    problem: RingdownProblem,
+    start: NDArray[np.float64],
+    others: list[Step],
+    options: FitOptions,
+    expected_hz: float,
+    start_s: float,
+    known: dict[str, Any],
+) -> RingdownFit:
+    """The full-rate fit from a coarse optimum ``start`` (within a few σ of the full-rate one:
+    started as Gauss–Newton), summarised, with what ``others`` (rival coarse optima) or the
+    σ leave undetermined removed."""
+    step, converged, iters, free = variable_projection(problem, start, options.max_iterations, 1e-4, damping=1e-6)
+    if not converged:  # a weakly determined θmax or rest offset can crawl: the cautious Marquardt λ
+        step, converged, iters, free = variable_projection(problem, start, options.max_iterations, 1e-4, damping=1e-3)
+    if not converged:
+        return failure(FitStatus.NOT_CONVERGED, f"the fit did not converge in {iters} iterations", **known)
+    fit = _summarise(step, problem, free, 1.0 / problem.weights, options, expected_hz, start_s, known)
+    return _undetermined_removed(fit, problem, step.cost, others, options) if fit.ok else fit
+
+
+def _pinned_locally(step: Step, coarse: RingdownProblem, problem: RingdownProblem, options: FitOptions) -> bool:
+    """Whether θmax or ε could be reported from the coarse optimum ``step``: its σ at the full
+    rate (the coarse covariance scaled by the ratio of the sample counts, the noise level as
+    the weights have it) within tolerance/DETERMINED_SIGMAS. A numerically singular normal
+    matrix pins neither."""
+    if step.normal_matrix is None:
+        return True
+    try:
+        covariance = scaled_inverse(step.normal_matrix) * coarse.y.shape[1] / problem.y.shape[1]
+    except np.linalg.LinAlgError:
+        return False
+    limits = {AMPLITUDE: options.amplitude_tolerance_rad, OFFSET: options.rest_offset_tolerance_rad}
+    return any(
+        covariance[i, i] >= 0 and math.sqrt(covariance[i, i]) <= tolerance / DETERMINED_SIGMAS
+        for i, tolerance in limits.items()
+    )
 
 
 def _offset_minima(coarse: RingdownProblem, step: Step, options: FitOptions) -> list[Step]:
@@ -421,6 +469,12 @@ def _summarise(
     covariance = fisher_inv * chi2_dof
     if not np.all(np.isfinite(covariance[np.ix_(fitted, fitted)])) or covariance[0, 0] <= 0:
         return failure(FitStatus.NOT_CONVERGED, "covariance is not finite", **known)
+    # A variance below zero is rounding in a numerically singular inverse (θmax against κ near
+    # 90°), not a σ: that parameter's row and column are NaN and it is named as not determined.
+    names = _parameter_names(n_ch, options)
+    singular = [i for i in np.flatnonzero(fitted) if covariance[i, i] < 0]
+    covariance[singular, :] = covariance[:, singular] = np.nan
+    singular_names = tuple(names[i] for i in singular)
     if chi2_dof > options.max_chi2_dof:
         return failure(
             FitStatus.BAD_FIT,
@@ -437,7 +491,11 @@ def _summarise(
         amp, phi = -amp, phi + math.pi
     if not free[AMPLITUDE]:  # held at a bound: a number the data did not give
         amp = math.nan
-    return RingdownFit(
+    if singular_names:
+        note = "; ".join(
+            filter(None, [note, f"{', '.join(singular_names)} not determined: numerically singular covariance"])
+        )
+    fit = RingdownFit(
         status=FitStatus.OK,
         message=note,
         theta0_rad=float(problem.theta0 + q[4] if options.theta0_free else problem.theta0),
@@ -458,8 +516,11 @@ def _summarise(
         n_samples=n,
         duration_s=n * problem.dt,
         start_offset_s=start_s,
-        parameter_names=tuple(_parameter_names(n_ch, options)),
+        parameter_names=tuple(names),
         covariance=covariance,
         pickup=tuple(complex(c) for c in problem.fitted_pickup(q)),
-        undetermined=() if free[AMPLITUDE] else ("amplitude_rad",),
+        undetermined=tuple(dict.fromkeys((() if free[AMPLITUDE] else ("amplitude_rad",)) + singular_names)),
     )
+    # A number whose σ is not determined is not reported either (the fields of one channel's fit).
+    reported: dict[str, Any] = {name: math.nan for name in singular_names if hasattr(fit, name)}
+    return dataclasses.replace(fit, **reported) if reported else fit

@@ -65,6 +65,9 @@ class Step:
     coef: np.ndarray
     residual: np.ndarray  # (C, n), unweighted
     cost: float  # Σ_c (w_c·|r_c|)²
+    # The projected normal matrix of q (κ and B_DC eliminated) at q, weighted by w_c²: its
+    # inverse is q's covariance at the noise level 1/w. None where it was not formed.
+    normal_matrix: np.ndarray | None = None
 
 
 def evaluate(problem: RingdownProblem, q: NDArray[np.float64], derivatives: bool = True) -> Step:
@@ -77,7 +80,7 @@ def evaluate(problem: RingdownProblem, q: NDArray[np.float64], derivatives: bool
     residual, coef = np.empty((n_ch, n)), np.empty((n_ch, 2))
     jtj, jtr = np.zeros((p, p)), np.zeros(p)
     cost = evaluate_model(np.asarray(q, float), *problem.kernel_data(), derivatives, g, m, residual, coef, jtj, jtr)
-    return Step(q, Shape(g, m), coef, residual, float(cost))
+    return Step(q, Shape(g, m), coef, residual, float(cost), jtj if derivatives else None)
 
 
 def _column_scale(jtj: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -138,7 +141,7 @@ def variable_projection(
 
     Returns (the step at the last accepted q, converged, iterations, free-parameter mask).
     """
-    q, converged, used, free, cost, g, m, residual, coef, _, _ = levenberg_marquardt(
+    q, converged, used, free, cost, g, m, residual, coef, jtj, _ = levenberg_marquardt(
         np.asarray(q, float).copy(),
         *problem.kernel_data(),
         iterations,
@@ -147,7 +150,7 @@ def variable_projection(
         *AMPLITUDE_BOUNDS_RAD,
         AMPLITUDE,
     )
-    return Step(q, Shape(g, m), coef, residual, float(cost)), bool(converged), int(used), free
+    return Step(q, Shape(g, m), coef, residual, float(cost), jtj), bool(converged), int(used), free
 
 
 # --- the bound itself -------------------------------------------------------------------

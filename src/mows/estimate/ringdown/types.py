@@ -124,9 +124,11 @@ class RingdownFit:
     θ0 + ``rest_offset_rad``; its σ is :attr:`amplitude_std_rad`. Each is NaN, named in
     ``undetermined`` with the reason in ``message``, where the data do not pin it within
     ``FitOptions.amplitude_tolerance_rad`` / ``rest_offset_tolerance_rad`` (another minimum of
-    the cost fits nearly as well, or its σ is too large, or θmax ran to its bound). The offset's
-    sign is fixed through κ > 0; where its mirror image fits as well (near θ0 = 90° the signal
-    is even in the deflection) the offset is not reported.
+    the cost fits nearly as well, or its σ is too large, or θmax ran to its bound). Any parameter
+    whose variance came out below zero (a numerically singular covariance) is NaN with its
+    covariance row and column, and named there too. The offset's sign is fixed through κ > 0;
+    where its mirror image fits as well (near θ0 = 90° the signal is even in the deflection) the
+    offset is not reported.
     """
 
     status: FitStatus

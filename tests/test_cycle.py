@@ -195,6 +195,24 @@ def test_a_cancel_or_a_disarm_switches_off_at_once_and_is_no_fault():
         assert outcome.success, outcome.message
 
 
+def test_a_cycle_started_at_once_after_a_cancel_turns_only_once_the_coils_are_off():
+    """A cancel switches the coils off at the device's next sample, which can lie ahead of the
+    samples received (in a stream, up to a command lead); a device refuses to turn the probe
+    while its coils are on. A cycle asked for at once must wait for the switch-off, not fail."""
+    session = session_on_simulator()
+    run(session, until=lambda events: any(e.phase == Phase.EXCITING for e in events))
+    assert session.cancel_cycle(session.sequencer.last_cycle_id, "the client left")
+    done = []
+    session.start_cycle(CycleRequest(0.3), done.append)  # before any sample after the cancel
+    for _ in range(MAX_STEPS):
+        if done:
+            break
+        session.step(0.0)
+    assert done and done[0].success, done[0].message if done else "the cycle did not end"
+    stop = coil_log(session)[-2 * FAST.repeats - 2 * FAST.tuning_steps - 1]
+    assert stop[1] is False  # the cancelled cycle's switch-off, before the new cycle's drives
+
+
 def test_a_fault_is_reported_apart_from_the_phase_until_the_next_cycle():
     session = session_on_simulator()
     run(session, until=lambda events: any(e.phase == Phase.EXCITING for e in events))

@@ -82,32 +82,19 @@ def test_the_control_ends_adequate_with_only_the_physics_of_its_truth(case):
     assert set(report.effect_names) <= info.present, report.effects
 
 
+PLUGINS = [(case, "physical") for case in sorted(CASES)] + [
+    (case, "energy") for case in sorted(name for name, info in INFO.items() if info.energy_plugin_source)
+]
+
+
 @pytest.mark.slow  # an --auto selection with the plugin on every case
-@pytest.mark.parametrize("case", sorted(CASES))
-def test_the_users_physical_plugin_explains_the_case(case, tmp_path):
+@pytest.mark.parametrize(("case", "form"), PLUGINS)
+def test_the_users_plugin_explains_the_case(case, form, tmp_path):
+    """The user's plugin in its physical form, and, where only an energy is exact (induced
+    moment, quartic hinge), written as that energy (``energy_j``)."""
     table, info = CASES[case](0)
     path = tmp_path / f"{info.plugin_effect}.py"
-    path.write_text(info.plugin_source)
-    report = analyse(table, PAPER_PROBE, auto=True, plugins=[str(path)], cross_validate=False)
-    assert info.plugin_effect in report.effect_names, report.effects
-    assert set(report.effect_names) - {info.plugin_effect} <= info.present, report.effects
-    assert report.chi2_dof <= 1.5, report.chi2_dof
-    for name, truth in info.plugin_truth.items():
-        value, std = report.effect_parameter(f"{info.plugin_effect}.{name}")
-        assert abs(value - truth) <= 3 * std, (name, value, std, truth)
-
-
-ENERGY_CASES = sorted(name for name, info in INFO.items() if info.energy_plugin_source)
-
-
-@pytest.mark.slow  # an --auto selection with the plugin
-@pytest.mark.parametrize("case", ENERGY_CASES)
-def test_the_hidden_energy_written_as_energy_explains_the_case(case, tmp_path):
-    """Where only an energy is exact (induced moment, quartic hinge), the plugin that returns
-    it (``energy_j``) must explain the independent truth as the first-order plugin does."""
-    table, info = CASES[case](0)
-    path = tmp_path / f"{info.plugin_effect}.py"
-    path.write_text(info.energy_plugin_source)
+    path.write_text(info.energy_plugin_source if form == "energy" else info.plugin_source)
     report = analyse(table, PAPER_PROBE, auto=True, plugins=[str(path)], cross_validate=False)
     assert info.plugin_effect in report.effect_names, report.effects
     assert set(report.effect_names) - {info.plugin_effect} <= info.present, report.effects

@@ -89,6 +89,7 @@ class CycleSequencer:
         self._unstamped: list[tuple[Phase, str]] = []  # events raised before the first sample
         self._last_cycle_id = 0
         self._last_command_id = 0
+        self._coils_stopped_at: int | None = None  # our next sample when coils were last switched off now
         self._step = Step()
         self._announce(Phase.IDLE, "driver started")
 
@@ -238,7 +239,13 @@ class CycleSequencer:
 
     def _turn_and_settle(self, c: CyclePlan) -> Generator[Answer | Reach, CommandResult | None, int]:
         """Turn to the cycle's θ0 and let it settle (SETTLING); returns the sample from which the
-        coils are off and nothing is scheduled."""
+        coils are off and nothing is scheduled. After coils were switched off now (a cancelled or
+        failed cycle), the switch-off applies at the device's next sample, which runs up to a
+        command lead ahead of the samples received: the turn waits until they have passed it, as
+        a device refuses to turn the probe while its coils are on."""
+        switched_off = None if self._coils_stopped_at is None else self._coils_stopped_at + self.lead_samples + 1
+        if switched_off is not None and self._next_index < switched_off:
+            yield Reach(switched_off)  # the samples up to the switch-off's received
         turned = yield from self._answer(
             self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
         )
@@ -344,6 +351,7 @@ class CycleSequencer:
     def _stop(self, reason: str) -> None:
         """Coils off now; the running cycle (if any) fails with ``reason``."""
         self._step.coils_off_now = True
+        self._coils_stopped_at = self._next_index
         if self._runner is not None:
             cycle = self._cycle
             assert cycle is not None  # set and cleared together with _runner (start, _end)

@@ -1,4 +1,4 @@
-"""The measurement cycle as a state machine over device sample indices (issue: the cycle).
+"""The measurement cycle as a state machine over device sample indices.
 
 One cycle at one orientation θ0: turn the probe and let it settle; excite at the current
 resonance estimate with the coil setup's orientation-dependent currents; switch off and

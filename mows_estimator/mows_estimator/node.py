@@ -93,9 +93,8 @@ class EstimatorNode(MowsNode):
             self._tally.count(malformed)
             self.get_logger().warn(warning.format(error=error))
             return
-        for segment in segments:
-            settings = self._settings()
-            for estimated in self._estimator.estimate_all(segment, settings):
+        if segments:  # the settings (parameters, the probe file) are read only for a ring-down
+            for estimated in self._estimator.estimate_segments(segments, self._settings()):
                 self._publish(estimated, arrived)
 
     def _publish(self, estimated: Estimated, arrived: float):
@@ -117,13 +116,8 @@ class EstimatorNode(MowsNode):
             response.success, response.message = False, inactive
             return response
         try:
-            joint = self._settings().joint
             calibration = self._estimator.begin_calibration(
-                self.probe(),
-                request.reference_field_t,
-                request.n_ringdowns,
-                request.timeout_s,
-                1 if joint is None else len(joint.probes),
+                self._settings(), request.reference_field_t, request.n_ringdowns, request.timeout_s
             )
         except ValueError as error:
             response.success, response.message = False, str(error)

@@ -97,4 +97,4 @@ def test_with_probes_each_gets_its_estimate_from_its_own_f00():
         assert abs(e.fit.frequency_hz - f_true) < 4 * e.fit.frequency_std_hz
         assert e.estimate.frequency_shift_hz == pytest.approx(e.fit.frequency_hz - f00)
     with pytest.raises(ValueError, match="2 probes are listed"):
-        RingdownEstimator(5.0).begin_calibration(PAPER_PROBE, 1e-5, 2, 10.0, probes=2)
+        RingdownEstimator(5.0).begin_calibration(settings, 1e-5, 2, 10.0)

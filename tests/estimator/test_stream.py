@@ -107,9 +107,9 @@ def test_malformed_messages_are_refused_and_leave_nothing_behind():
 def test_a_calibration_takes_the_next_ok_ringdowns_and_one_at_a_time():
     estimator = RingdownEstimator(buffer_s=5.0)
     # In zero field f = f00 (Eq. 6), so the calibrated f00 is the mean fitted frequency.
-    calibration = estimator.begin_calibration(PAPER_PROBE, 0.0, 3, 10.0)
+    calibration = estimator.begin_calibration(settings(), 0.0, 3, 10.0)
     with pytest.raises(ValueError, match="already running"):
-        estimator.begin_calibration(PAPER_PROBE, 0.0, 3, 10.0)
+        estimator.begin_calibration(settings(), 0.0, 3, 10.0)
     results = [ringdown(estimator, k)[0] for k in range(3)]
     assert [r.calibrated for r in results] == [False, False, True]
     outcome = calibration.outcome
@@ -118,12 +118,12 @@ def test_a_calibration_takes_the_next_ok_ringdowns_and_one_at_a_time():
     assert abs(outcome.f00_hz - FREQUENCY_HZ) < 5 * outcome.f00_std_hz
     estimator.end_calibration()
     assert not ringdown(estimator, 3)[0].calibrated  # nobody is calibrating any more
-    estimator.begin_calibration(PAPER_PROBE, 0.0, 1, 10.0)  # and a new one may start
+    estimator.begin_calibration(settings(), 0.0, 1, 10.0)  # and a new one may start
 
 
 def test_a_failed_ringdown_is_not_offered_to_the_calibration():
     estimator = RingdownEstimator(buffer_s=5.0)
-    calibration = estimator.begin_calibration(PAPER_PROBE, 0.0, 1, 10.0)
+    calibration = estimator.begin_calibration(settings(), 0.0, 1, 10.0)
 
     def no_model(theta0_rad):
         raise ValueError("no model")

@@ -97,6 +97,10 @@ class RingdownEstimator:
         announcement that is no window."""
         return self.assembler.announce(window_from_message(message))
 
+    def estimate_segments(self, segments: list[Segment], settings: FitSettings) -> list[Estimated]:
+        """The estimates of every probe in each of ``segments`` (:meth:`estimate_all`), in order."""
+        return [estimated for segment in segments for estimated in self.estimate_all(segment, settings)]
+
     def estimate_all(self, segment: Segment, settings: FitSettings) -> list[Estimated]:
         """The estimate of each probe in ``segment``: one, or one per probe it holds in id order."""
         if settings.joint is None:
@@ -152,17 +156,18 @@ class RingdownEstimator:
         return Estimated(window, fit, estimate, calibrated)
 
     def begin_calibration(
-        self, probe: Probe, reference_field_t: float, n_ringdowns: int, timeout_s: float, probes: int = 1
+        self, settings: FitSettings, reference_field_t: float, n_ringdowns: int, timeout_s: float
     ) -> F00Calibration:
-        """A calibration of f00 from the next OK ring-downs (:class:`F00Calibration`); ValueError,
-        with the reason, for a request it cannot meet, while another one runs, or when
-        ``probes`` (the probes listed) share the windows."""
+        """A calibration of f00 of ``settings``' probe from the next OK ring-downs
+        (:class:`F00Calibration`); ValueError, with the reason, for a request it cannot meet,
+        while another one runs, or when several probes (``settings.joint``) share the windows."""
+        probes = 1 if settings.joint is None else len(settings.joint.probes)
         if probes > 1:
             raise ValueError(
                 f"the f00 calibration is of one probe and {probes} probes are listed: "
                 "give each its f00 in the probes parameter, or calibrate each alone"
             )
-        calibration = F00Calibration(probe, reference_field_t, n_ringdowns, timeout_s)
+        calibration = F00Calibration(settings.probe, reference_field_t, n_ringdowns, timeout_s)
         if self.calibration is not None:
             raise ValueError("a calibration is already running: try again after it")
         self.calibration = calibration

@@ -17,7 +17,6 @@ Truths from exact sources (:mod:`mows.lab.data.synthetic`); building the tables 
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import numpy as np
@@ -61,22 +60,8 @@ def outside_catalog_table(seed: int = 0, sweeps: int = OUTSIDE_SWEEPS):
     warming = WARMING_K * sweep["t_s"] / max(float(np.ptp(sweep["t_s"])), 1.0)
     temperature = PAPER_PROBE.reference_temperature_k + warming + rng.uniform(-0.5, 0.5, len(theta0))
     source = UniformField((4e-4, 1.5e-4, -4e-5))
-    truth = np.concatenate(
-        [
-            synthetic.true_frequency_hz(
-                dataclasses.replace(
-                    PAPER_PROBE,
-                    moment_am2=PAPER_PROBE.moment_am2
-                    * (1.0 + MOMENT_PER_K * (kelvin - PAPER_PROBE.reference_temperature_k)),
-                ),
-                source,
-                np.radians([angle]),
-                np.radians(2.0),
-                temperature_k=kelvin,
-            )
-            for angle, kelvin in zip(theta0, temperature)
-        ]
-    )
+    magnet = PAPER_PROBE.replace(moment_temp_coeff_per_k=MOMENT_PER_K)
+    truth = synthetic.true_frequency_hz(magnet, source, np.radians(theta0), np.radians(2.0), temperature)
     return synthetic.synthesize(
         PAPER_PROBE,
         source,

@@ -65,16 +65,18 @@ def true_frequency_hz(
     """Noise-free ring-down frequencies (n,), Hz, from the exact sources (module docstring).
 
     ``sources``: one :class:`~mows.physics.field.FieldSource` or one per row. Per-row arguments broadcast
-    to (n,); ``duration_s`` defaults to 60 periods.
+    to (n,); ``duration_s`` defaults to 60 periods. At ``temperature_k`` the spring and the
+    magnet's moment follow the probe's coefficients (:meth:`Probe.spring_at`, :meth:`Probe.at_temperature`).
     """
     theta0 = np.atleast_1d(np.asarray(theta0_rad, float))
     n = len(theta0)
     rows = _per_row(sources, n)
     nodes = chebyshev_nodes_rad()
+    kelvin = [None] * n if temperature_k is None else np.broadcast_to(np.asarray(temperature_k, float), (n,))
     energy = np.stack(
         [
             arc_energy_j(
-                probe,
+                probe if t_k is None else probe.at_temperature(float(t_k)),
                 source,
                 Pose(
                     magnet_position_m=tuple(magnet_position_m),
@@ -83,7 +85,7 @@ def true_frequency_hz(
                 ),
                 nodes,
             )
-            for source, t in zip(rows, theta0)
+            for source, t, t_k in zip(rows, theta0, kelvin)
         ]
     )
     spring = (

@@ -72,7 +72,7 @@ from mows.lab import progress
 from mows.lab.data.folds import cv_folds
 from mows.lab.data.probes import ProbeSet, probe_parts
 from mows.lab.data.table import KNOWN, LABELS, MAGNET, NEIGHBOUR, NOT_COVARIATES, MeasurementTable, stratified_rows
-from mows.lab.diagnosis.projections import RANK_RTOL, SPAN_COSINE, orthonormal_basis, project_out
+from mows.lab.diagnosis.projections import RANK_RTOL, SPAN_COSINE, orthonormal_basis, project_out, unit_columns
 from mows.lab.model.configuration import Configuration
 from mows.lab.model.effects import Effect
 from mows.lab.model.frequency_model import FrequencyModel
@@ -528,16 +528,11 @@ def refit(searched: Searched, chosen: list[int], residual: Residual) -> Refit:
     phi = residual.scatter(columns)
     inverse = np.linalg.pinv(columns.T @ columns)
     gain = coefficients**2 / np.diag(inverse)
-    design = _normalised(np.column_stack([residual.jacobian, searched.weighted[:, chosen]]))
+    design = unit_columns(np.column_stack([residual.jacobian, searched.weighted[:, chosen]]))
     width = residual.jacobian.shape[1]
     held_out = _held_out_chi2(design, residual)
     cv_gain = [_held_out_chi2(np.delete(design, width + i, axis=1), residual) - held_out for i in range(len(chosen))]
     return Refit(chosen, coefficients, inverse * phi, gain, scipy.stats.chi2.sf(gain / phi, 1), np.array(cv_gain))
-
-
-def _normalised(columns: np.ndarray) -> np.ndarray:
-    norms = np.linalg.norm(columns, axis=0)
-    return np.divide(columns, norms, out=np.zeros_like(columns), where=norms > 0)
 
 
 def _held_out_chi2(design: np.ndarray, residual: Residual) -> float:
@@ -761,7 +756,7 @@ def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) 
         return Discovery([], 0, 0, DEGREE, f"No search beyond the catalog: {why}.", fit.model.name)
     kept = stratified_rows(table.sweep_ids, MAX_ROWS, seed)
     table = table.subset(kept) if len(kept) < len(table) else table
-    jacobian = _normalised(fit.jacobian[kept])
+    jacobian = unit_columns(fit.jacobian[kept])
     model_basis = orthonormal_basis(jacobian)
     factors = factor_values(table, probe)
     searched = searchable(library(factors), fit.problem.row_weight[kept], model_basis)

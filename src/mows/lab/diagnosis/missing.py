@@ -34,7 +34,7 @@ from mows.lab.diagnosis.candidates import (
     explains_excess,
 )
 from mows.lab.diagnosis.discovery import Discovery, discover
-from mows.lab.diagnosis.projections import cosine_within, orthonormal_basis, project_out
+from mows.lab.diagnosis.projections import cosine_within, orthonormal_basis, project_out, unit_columns
 from mows.lab.model.effects import Effect
 from mows.lab.model.least_squares import FitResult
 from mows.physics.probe import Probe
@@ -69,7 +69,7 @@ def beside_discovery(fit: FitResult, candidate: Candidate, probe: Probe) -> bool
     terms = np.column_stack([fit.extension_columns(e) for e in terms_in])  # the same at any point: additive
 
     def beside(model_fit: FitResult) -> tuple[float, int]:
-        directions = _unit_basis(np.column_stack([model_fit.jacobian, terms]))
+        directions = orthonormal_basis(unit_columns(np.column_stack([model_fit.jacobian, terms])))
         left = project_out(model_fit.weighted_residual[:, None], directions)[:, 0]
         return float(left @ left), model_fit.n - directions.shape[1]
 
@@ -86,7 +86,7 @@ def stand_ins(fit: FitResult, candidate: Candidate, probe: Probe) -> list[Effect
     own (cos < ``SAME_SIGNATURE``: a temperature term is the thermal drift, not a stand-in for
     something else)."""
     assert candidate.chosen.fit is not None  # a strong form is refitted
-    model_basis = _unit_basis(fit.jacobian)
+    model_basis = orthonormal_basis(unit_columns(fit.jacobian))
     found: list[Effect] = []
     for model_fit in (candidate.chosen.fit, fit):
         for effect in _discovered(model_fit, probe).stand_ins:
@@ -105,10 +105,3 @@ def _discovered(fit: FitResult, probe: Probe) -> Discovery:
     if fit not in _DISCOVERED:
         _DISCOVERED[fit] = discover(fit, probe, plugins=False)
     return _DISCOVERED[fit]
-
-
-def _unit_basis(columns: np.ndarray) -> np.ndarray:
-    """An orthonormal basis of ``columns``, each taken at unit length: parameters of very different
-    scales (f00 in Hz, a temperature coefficient in 1/K) keep their directions."""
-    norms = np.linalg.norm(columns, axis=0)
-    return orthonormal_basis(columns / np.where(norms > 0, norms, 1.0))

@@ -31,6 +31,13 @@ def orthonormal_basis(columns: np.ndarray, reference_norm: float | None = None) 
     return u[:, s > RANK_RTOL * scale] if scale > 0 else u[:, :0]
 
 
+def unit_columns(columns: np.ndarray) -> np.ndarray:
+    """``columns`` each at unit length (zero columns stay zero): parameters of very different
+    scales (f00 in Hz, a temperature coefficient in 1/K) keep their directions in a basis."""
+    norms = np.linalg.norm(columns, axis=0)
+    return np.divide(columns, norms, out=np.zeros_like(columns), where=norms > 0)
+
+
 def project_out(columns: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """Columns with their components along the orthonormal ``basis`` removed."""
     return columns - basis @ (basis.T @ columns)

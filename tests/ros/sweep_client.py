@@ -1,7 +1,10 @@
 """Runs one rotation sweep through the graph it finds and prints the outcome as JSON (one line):
 for tests that must put the client in another network namespace than pytest's own. With the
-outcome: the ring-down fits it heard, by status, and the last diagnostics of the driver and the
-estimator (once the estimator's counts take in every fit heard here).
+outcome: the measurement ring-downs the driver announced, the fits it heard, by status, and the
+last diagnostics of the driver and the estimator. It waits, after the sweep, until a fit of every
+announced ring-down is heard and the estimator's counts take them all in: a fit over a gap may
+come after the sweep's answer (the mapper goes on without a cycle's fits after its
+fit_timeout_s), and one that never comes is a failure (the client gives up at BOUND_S).
 
     python sweep_client.py THETA0_DEG,... REPEATS BOUND_S
 """
@@ -15,7 +18,7 @@ import time
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from mows_msgs.action import RotationSweep
-from mows_msgs.msg import MagnetometerBlock, RingdownFit
+from mows_msgs.msg import ExcitationState, MagnetometerBlock, RingdownFit
 from rclpy.action import ActionClient
 
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
@@ -24,9 +27,19 @@ from mows_ros.qos import RESULT_QOS, STREAM_QOS
 def main(angles_deg: str, repeats: str, bound_s: str) -> int:
     rclpy.init()
     node = rclpy.create_node("sweep_client")
-    blocks, statuses, fits = [], {}, []
+    blocks, statuses, fits, announced = [], {}, [], set()
     node.create_subscription(MagnetometerBlock, "/mows/raw", blocks.append, STREAM_QOS)
     node.create_subscription(RingdownFit, "/mows/ringdown", fits.append, RESULT_QOS)
+    node.create_subscription(
+        ExcitationState,
+        "/mows/excitation",
+        lambda s: (
+            announced.add((s.cycle_id, s.repeat_index))
+            if s.phase == ExcitationState.PHASE_RINGDOWN and not s.tuning
+            else None
+        ),
+        RESULT_QOS,
+    )
     node.create_subscription(
         DiagnosticArray,
         "/diagnostics",
@@ -41,7 +54,7 @@ def main(angles_deg: str, repeats: str, bound_s: str) -> int:
     def spin_until(condition, what):
         while not condition():
             if time.monotonic() > deadline:
-                raise TimeoutError(f"gave up waiting for {what}")
+                raise TimeoutError(f"gave up waiting for {what() if callable(what) else what}")
             rclpy.spin_once(node, timeout_sec=0.1)
         return condition()
 
@@ -54,7 +67,13 @@ def main(angles_deg: str, repeats: str, bound_s: str) -> int:
     handle = spin_until(lambda: sent.done() and sent.result(), "the goal's answer")
     result = handle.get_result_async()
     done = spin_until(lambda: result.done() and result.result(), "the sweep")
-    spin_until(lambda: "/driver" in statuses and _fits_counted(statuses.get("/estimator")) == len(fits), "diagnostics")
+    spin_until(
+        lambda: "/driver" in statuses and len(fits) == len(announced) == _fits_counted(statuses.get("/estimator")),
+        lambda: (
+            f"a fit of each of the {len(announced)} ring-downs announced (heard {len(fits)}, the estimator "
+            f"counts {_fits_counted(statuses.get('/estimator'))})"
+        ),
+    )
     print(
         json.dumps(
             {
@@ -63,6 +82,7 @@ def main(angles_deg: str, repeats: str, bound_s: str) -> int:
                 "message": done.result.message,
                 "n_points": done.result.decomposition.n_points,
                 "blocks_heard": len(blocks),
+                "ringdowns_announced": len(announced),
                 "fits": collections.Counter(f.status_name for f in fits),
                 "failed_fits_with_numbers": sum(
                     f.status != RingdownFit.STATUS_OK and math.isfinite(f.frequency_hz) for f in fits

@@ -63,6 +63,7 @@ import dataclasses
 import itertools
 import math
 import textwrap
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -439,9 +440,14 @@ def lasso_selection(columns: np.ndarray, residual: np.ndarray, model_rank: int, 
     σ̂: a residual far above its noise, most of it one term, lets that term in, where the scatter
     of the residual itself would hold it out on a short table."""
     n = len(residual)
-    from sklearn.linear_model import lars_path  # here: importing scikit-learn takes a second or two
+    from sklearn.exceptions import ConvergenceWarning  # here: importing scikit-learn takes a second or two
+    from sklearn.linear_model import lars_path
 
-    alphas, _, coefs = lars_path(columns, residual, method="lasso", max_iter=MAX_TERMS)
+    # The library holds near-collinear columns (a product beside its factors on a short table):
+    # LARS dropping a degenerate one is the path working as meant, not a result to warn about.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        alphas, _, coefs = lars_path(columns, residual, method="lasso", max_iter=MAX_TERMS)
     active = np.zeros(0, int)
     for knot, alpha in enumerate(alphas):
         active = np.flatnonzero(coefs[:, knot])

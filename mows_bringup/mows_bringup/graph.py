@@ -15,7 +15,8 @@ higher priority, still preempts them. It needs root or an RLIMIT_RTPRIO of at le
 Exit status: 0 when the graph was stopped (by a signal or after --duration) and
 every node stopped cleanly; 2 when the ROS arguments are refused before any node starts (a
 parameter without a node's prefix, a prefix or a name no node has, a parameter file that
-is none); 1 when a node refused a transition, exited by itself or did not stop cleanly.
+is none; ROS's own parameters, such as ``use_sim_time``, may be given with or without a
+node's prefix); 1 when a node refused a transition, exited by itself or did not stop cleanly.
 """
 
 import argparse
@@ -36,7 +37,7 @@ from pathlib import Path
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
 from mows_bringup.lifecycle import BringUpError, bring_up
-from mows_ros.params import nearest_hint, renamed_to, ros_argument_values, unknown_name_hint
+from mows_ros.params import ROS_OWN, nearest_hint, renamed_to, ros_argument_values, unknown_name_hint
 from mows_ros.process import EXIT_BAD_PARAMETER, arguments_problem
 
 STOP_TIMEOUT_S = 10.0  # a node still running this long after SIGINT is aborted
@@ -83,6 +84,8 @@ def parameter_rule_problem(rule: str) -> str | None:
     names = [node.name for node in NODES]
     if "/" in prefix:
         return None  # a fully qualified node name: rcl matches it, the node checks the name
+    if name in ROS_OWN and (not colon or prefix in names):
+        return None  # every node has it (use_sim_time): for all of them, or for the one named
     tables = {node.name: importlib.import_module(f"{node.package}.parameters").PARAMETERS for node in NODES}
     if not colon:
         return unprefixed_rule_problem(rule, name, tables)

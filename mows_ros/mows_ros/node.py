@@ -30,7 +30,14 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 
 import mows
 from mows_ros.diagnostics import DiagnosticsPublisher, Health
-from mows_ros.params import ParamSpec, declare_parameters, parameter_values, prefixed_overrides, unknown_parameter
+from mows_ros.params import (
+    ROS_OWN,
+    ParamSpec,
+    declare_parameters,
+    parameter_values,
+    prefixed_overrides,
+    unknown_parameter,
+)
 
 UNCONFIGURED, INACTIVE, ACTIVE, FINALIZED = "unconfigured", "inactive", "active", "finalized"
 REFUSALS = (ValueError, OSError)  # what configure and activate refuse with: a FAILURE, not an error
@@ -49,7 +56,10 @@ class MowsNode(LifecycleNode):
         super().__init__(name)
         self.parameter_table = tuple(table)
         # ``-p driver:name:=value`` in a namespace, which rcl drops (the process's own command line)
-        self._parameter_overrides.update(prefixed_overrides(self.get_name(), sys.argv, GRAPH_NODE_NAMES))
+        prefixed = prefixed_overrides(self.get_name(), sys.argv, GRAPH_NODE_NAMES)
+        self._parameter_overrides.update(prefixed)
+        # rclpy declared its own (use_sim_time) before the overrides above could reach them.
+        self.set_parameters([value for name, value in prefixed.items() if name in ROS_OWN and self.has_parameter(name)])
         declare_parameters(self, self.parameter_table)
         self.lifecycle_state = UNCONFIGURED
         self.lifecycle_problem = ""  # why the last transition failed; '' once one succeeds

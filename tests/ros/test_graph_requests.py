@@ -3,8 +3,9 @@
 Driven as `ros2 service call` and `ros2 action send_goal` drive it (rclpy clients, a client in a
 process of its own), on one start-up of three nodes for the whole module: a driver in the root
 namespace, a mapper that gives up on a cycle after 1 s, and a second driver in the namespace
-/sim with ``use_sim_time`` set (no /clock is published) and its scenario given as
-``-p driver:scenario:=…``, the node-prefixed form.
+/sim with ``use_sim_time`` set (no /clock is published) and its scenario, both given in the
+node-prefixed form ``-p driver:name:=…`` that mows-graph documents (rcl alone drops it inside a
+namespace).
 
 Requirements: a request outside the limits of the parameter of its name is refused with that
 reason in the response (a goal: accepted, then aborted with it); a cycle whose requesting client
@@ -91,7 +92,15 @@ class Graph:
         self.heard = Heard(ros)
         self.driver = launch(NODES[0].command(QUICK), directory / "driver.log")
         self.mapper = launch(NODES[2].command(["-p", "cycle_timeout_s:=1.0"]), directory / "mapper.log")
-        sim_ros_args = ["-r", "__ns:=/sim", "-p", "use_sim_time:=true", "-p", "driver:scenario:=helmholtz", *QUICK]
+        sim_ros_args = [
+            "-r",
+            "__ns:=/sim",
+            "-p",
+            "driver:use_sim_time:=true",
+            "-p",
+            "driver:scenario:=helmholtz",
+            *QUICK,
+        ]
         self.sim_driver = launch(NODES[0].command(sim_ros_args), directory / "sim_driver.log")
         for name in ("/driver", "/sim/driver", "/mapper"):
             ros.wait_for(lambda name=name: name in self.heard.diagnostics, f"{name} on /diagnostics", 240.0)

@@ -1,7 +1,7 @@
 """The node graph as processes: mows-graph starts the three nodes, each reports on
-/diagnostics, and the graph stops cleanly (exit 0) after --duration or on a signal; a node
-that dies makes it fail. A node alone takes a `/**/node` parameter file in a namespace and
-stops cleanly on SIGTERM."""
+/diagnostics, takes ROS arguments (use_sim_time for all nodes or one), and the graph stops
+cleanly (exit 0) after --duration or on a signal; a node that dies makes it fail. A node alone
+takes a `/**/node` parameter file in a namespace and stops cleanly on SIGTERM."""
 
 import os
 import re
@@ -11,6 +11,7 @@ import subprocess
 import pytest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.srv import GetParameters
 
 from mows_bringup.graph import NODES, parse_arguments
 from node_processes import log
@@ -47,9 +48,24 @@ def test_graph_runs_for_its_duration_and_stops_cleanly(ros, diagnostics, start):
     assert exit_code(ros, graph) == 0, log(graph)
 
 
+def use_sim_time(ros, node_name: str) -> bool:
+    client = ros.node.create_client(GetParameters, f"{node_name}/get_parameters")
+    try:
+        ros.wait_for(client.service_is_ready, f"{node_name}'s parameters")
+        answer = client.call_async(GetParameters.Request(names=["use_sim_time"]))
+        return ros.wait_for(lambda: answer.done() and answer.result(), "the answer").values[0].bool_value
+    finally:
+        ros.node.destroy_client(client)
+
+
 def test_graph_passes_ros_arguments_and_forwards_sigterm(ros, diagnostics, start):
-    graph = start("mows-graph", "--realtime-priority", "10", "--ros-args", "-r", "__ns:=/lab")
+    # use_sim_time, ROS's own parameter, for every node and (prefixed) for one of them.
+    sim_time = ["-p", "use_sim_time:=true", "-p", "mapper:use_sim_time:=false"]
+    graph = start("mows-graph", "--realtime-priority", "10", "--ros-args", "-r", "__ns:=/lab", *sim_time)
     hear_all(ros, diagnostics, {f"/lab{name}" for name in NODE_NAMES}, graph)
+    assert {node.name: use_sim_time(ros, f"/lab/{node.name}") for node in NODES} == {
+        node.name: node.name != "mapper" for node in NODES
+    }
     # The ring-down path runs under SCHED_FIFO at the asked priority, the rest as before.
     for node in NODES:
         pid = int(re.search(rf"started {node.name} \(pid (\d+)", log(graph)).group(1))

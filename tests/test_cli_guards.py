@@ -25,7 +25,7 @@ from mows.cli import sim as sim_cli
 from mows.cli.main import main
 from mows.device.serial import emulator
 from mows.physics.probe import PAPER_PROBE
-from mows.records.files import OutputRefused, writing
+from mows.records.files import OutputRefused, recover, writing
 from mows.sim.scenario import SCENARIO_DIR, load_scenario
 from recorded_bags import record_cycles
 
@@ -500,3 +500,81 @@ def test_lab_report_json_keeps_stdout_for_the_json(tmp_path, capsys):
     captured = capsys.readouterr()
     assert json.loads(captured.out)["base"]["n"] > 0
     assert captured.err.splitlines()[-1] == f"wrote {page}"
+
+
+# --- kills ----------------------------------------------------------------------------------------
+CALIBRATE = ["calibrate", str(CALIBRATION_TABLE), "--gradient-scenario", "calibration_gradient", "--force"]
+
+KILLED_AFTER_FIRST_RENAME = """
+import os, signal, sys
+import mows.records.files as files
+from mows.cli.main import main
+renamed = []
+def replace(source, target):
+    if renamed:  # SIGKILL between the first rename and the second: no clean-up runs
+        os.kill(os.getpid(), signal.SIGKILL)
+    renamed.append(target)
+    os.rename(source, target)
+files.os.replace = replace
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def digests(directory: pathlib.Path) -> dict[str, str]:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(directory.iterdir())}
+
+
+def killed_calibration(tmp_path: pathlib.Path) -> tuple[list[str], dict[str, str]]:
+    """A calibration's two outputs over an older pair, killed between its two renames: the
+    command, and the digests of the older pair."""
+    outputs = ["-o", str(tmp_path / "p.yaml"), "--table", str(tmp_path / "t.csv")]
+    (tmp_path / "p.yaml").write_text("old probe\n")
+    (tmp_path / "t.csv").write_text("old table\n")
+    before = digests(tmp_path)
+    run = subprocess.run([sys.executable, "-c", KILLED_AFTER_FIRST_RENAME, *CALIBRATE, *outputs], timeout=600)
+    assert run.returncode == -signal.SIGKILL
+    leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert any(name.endswith(".commit") for name in leftovers), leftovers  # the journal of the cut commit
+    assert digests(tmp_path)["p.yaml"] != before["p.yaml"] and digests(tmp_path)["t.csv"] == before["t.csv"]
+    return [*CALIBRATE, *outputs], before
+
+
+@pytest.mark.slow  # two calibrations in fresh interpreters: ~20 s
+def test_a_kill_between_two_renames_is_undone_and_a_second_run_does_the_job(tmp_path, capsys):
+    command, before = killed_calibration(tmp_path)
+    assert main(command) == 0
+    after = digests(tmp_path)
+    assert sorted(after) == ["p.yaml", "t.csv"]  # no temporary, copy or journal left
+    assert after["p.yaml"] != before["p.yaml"] and after["t.csv"] != before["t.csv"]
+    assert "replaced" in capsys.readouterr().out
+
+
+def test_the_old_pair_is_put_back_from_the_journal_of_a_killed_commit(tmp_path):
+    _, before = killed_calibration(tmp_path)
+    assert recover(tmp_path) == [tmp_path / "p.yaml"]
+    assert digests(tmp_path) == before
+
+
+@pytest.mark.slow  # a fresh interpreter loads the simulator: ~10 s
+def test_sigterm_to_a_running_command_ends_it_with_143_and_no_output(tmp_path):
+    out = tmp_path / "x.npz"
+    command = [sys.executable, "-m", "mows.cli.main", "sim", "--fit", "--repeats", "200", "--out", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert process.stdout.readline().startswith("θ0")
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 143 and err == "mows sim: terminated\n", err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_killed_writer_s_temporary_is_removed_by_the_next_write(tmp_path):
+    out = tmp_path / "x.csv"
+    killed = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    killed.kill()
+    killed.wait()
+    (tmp_path / f".x.csv.{killed.pid}.abc123.partial.csv").write_text("torn")
+    running = tmp_path / f".x.csv.{os.getpid()}.def456.partial.csv"  # a writer still at work: left alone
+    running.write_text("being written")
+    with writing([out]) as outputs:
+        outputs.temporaries[0].write_text("whole")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [running.name, "x.csv"]

@@ -110,3 +110,44 @@ def test_an_empty_directory_and_a_foreign_file_are_no_bag(tmp_path):
     with pytest.raises(bags.BagError, match="not an MCAP file"):
         bag_repair.salvage(other)
     assert os.path.getsize(other) == 9
+
+
+# The repair, killed at each step of its swap: after the damaged file is renamed, after the
+# rebuilt one is moved in. No clean-up runs (SIGKILL).
+KILLED_REPAIR = textwrap.dedent("""
+    import os, shutil, signal, sys
+    from pathlib import Path
+    from mows.device.recording import bag_repair
+    step = sys.argv[2]
+    if step == "rename":
+        rename = Path.rename
+        def killing_rename(self, target):
+            rename(self, target)
+            os.kill(os.getpid(), signal.SIGKILL)
+        Path.rename = killing_rename
+    else:
+        move = shutil.move
+        def killing_move(source, target):
+            move(source, target)
+            os.kill(os.getpid(), signal.SIGKILL)
+        bag_repair.shutil.move = killing_move
+    bag_repair.repair(sys.argv[1])
+""")
+
+
+@pytest.mark.parametrize("step", ["rename", "move"])
+def test_a_repair_killed_midway_is_undone_and_the_next_one_finishes(tmp_path, capsys, step):
+    bag = tmp_path / "recording"
+    flushed = killed_recording(bag, 250)
+    run = subprocess.run([sys.executable, "-c", KILLED_REPAIR, str(bag), step], timeout=300)
+    assert run.returncode == -signal.SIGKILL
+    assert (tmp_path / ".recording.repairing").is_dir()  # what the kill left
+    if step == "rename":  # no recording under its name: reading says to repair (moved: it reads)
+        with pytest.raises(bags.BagError, match="mows bag repair"):
+            list(bags.read_bag(bag))
+    # and the repair finishes the job: no loop between the two.
+    assert main(["bag", "repair", str(bag)]) == 0
+    assert f"recovered {flushed[-1]} messages" in capsys.readouterr().out
+    assert numbers(bag) == list(range(flushed[-1]))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["recording"]
+    assert sorted(p.name for p in bag.iterdir()) == ["metadata.yaml", "recording.mcap", "recording.mcap.damaged"]

@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import yaml
 
-from mows.cli.status import EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED, caused_by_interrupt
+from mows.cli.status import EXIT_BAD_INPUT, EXIT_BUG, caused_by_interrupt, interrupted
 from mows.lab.data.table import FIELD, GRADIENT, MeasurementTable, rows_text
 from mows.physics.probe import Probe
 
@@ -197,14 +197,16 @@ def check_reference(table: MeasurementTable, probe: Probe) -> None:
 
 def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> int:
     """``work()``'s exit status; a bad input → one line and 2, a bug → one line and 1, Ctrl-C
-    → one line and 130 (outputs are only renamed into place once complete, so none is left)."""
+    → one line and 130, SIGTERM 143 (outputs are only renamed into place once complete, so none
+    is left)."""
     try:
         return work()
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as error:
         if debug:
             raise
-        print(f"{prog}: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        line, status = interrupted(prog, error)
+        print(line, file=sys.stderr)
+        return status
     except INPUT_ERRORS as error:
         if debug:
             raise
@@ -214,8 +216,9 @@ def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> in
         if debug:
             raise
         if caused_by_interrupt(error):
-            print(f"{prog}: interrupted", file=sys.stderr)
-            return EXIT_INTERRUPTED
+            line, status = interrupted(prog, error)
+            print(line, file=sys.stderr)
+            return status
         print(
             f"{prog}: internal error: {type(error).__name__}: {one_line(error)} "
             "(a bug: rerun with --debug for the traceback and report it)",

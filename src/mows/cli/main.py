@@ -14,7 +14,7 @@ import functools
 import importlib
 import sys
 
-from mows.cli.status import EXIT_INTERRUPTED, caused_by_interrupt
+from mows.cli.status import caused_by_interrupt, interrupted, stop_on_sigterm
 
 SUBCOMMANDS = {
     "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
@@ -28,20 +28,24 @@ SUBCOMMANDS = {
 
 
 EPILOG = """exit status: 0 done; 1 a bug (one line; --debug for the traceback); 2 a bad input or
-usage (one line naming the file, key or option); 130 interrupted (Ctrl-C). Outputs appear whole
+usage (one line naming the file, key or option); 130 interrupted (Ctrl-C); 143 terminated
+(SIGTERM). Outputs appear whole
 or not at all, never over an input, over an existing file only with --force (docs/cli.md)."""
 
 
 def main(argv=None) -> int:
     words = sys.argv[1:] if argv is None else list(argv)
+    if argv is None:  # the command itself, not a caller's test
+        stop_on_sigterm()
     try:
         return _main(words)
     # Ctrl-C while the subcommand's modules load (within it, report_errors says it)
     except (KeyboardInterrupt, ImportError) as error:
         if "--debug" in words or not caused_by_interrupt(error):
             raise
-        print("mows: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        line, status = interrupted("mows", error)
+        print(line, file=sys.stderr)
+        return status
 
 
 def _main(argv: list) -> int:

@@ -4,17 +4,26 @@ there unless told to (``force``, and then only over a regular file), and never h
 :func:`check_output` says before any work starts whether an output path may be written
 (so that a long analysis does not end in a refusal); :func:`writing` writes one or several
 outputs through temporary files in their directories and renames them into place only once
-every writer has finished, so a crash, an error or Ctrl-C leaves the old files (or none) and
-never a torn one, nor one output written and another not: a rename that fails puts back what
-the renames before it replaced.
+every writer has finished, so a crash, an error, Ctrl-C or SIGTERM leaves the old files (or
+none) and never a torn one, nor one output written and another not: a rename that fails puts
+back what the renames before it replaced.
+
+A process killed outright (SIGKILL, a power cut) runs no clean-up, so what it leaves says whose
+it was: every temporary is named ``.NAME.PID.*`` after the writing process, and before its
+renames a commit writes a journal (``.NAME.PID.commit``: each temporary, its output and the copy
+of the file it replaces). The next :func:`writing` into that directory finds the leftovers of
+writers no longer running and puts the old set back from the journal, so the outputs are never
+a mix of two runs and the next run does the whole job again.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import os
 import pathlib
+import re
 import shutil
 import stat
 import tempfile
@@ -114,13 +123,15 @@ def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iter
     paths are checked with :func:`check_outputs` first, and again just before the renames (a file
     may have appeared meanwhile). Each temporary keeps its target's suffix (numpy, for one,
     appends ``.npz`` to names without it)."""
+    for directory in {pathlib.Path(path).resolve().parent for path in paths}:
+        recover(directory)
     targets = check_outputs(paths, inputs, force)
     outputs = Outputs(targets, [])
     try:
         for path in targets:
             try:
                 descriptor, name = tempfile.mkstemp(
-                    prefix=f".{path.name}.", suffix=f".partial{path.suffix}", dir=path.resolve().parent
+                    prefix=_own_prefix(path), suffix=f".partial{path.suffix}", dir=path.resolve().parent
                 )
             except OSError as error:
                 raise _unwritable(path, error) from error
@@ -142,25 +153,98 @@ def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iter
 
 
 def _replace_all(temporaries: Sequence[pathlib.Path], targets: Sequence[pathlib.Path]) -> None:
-    """Rename each temporary onto its target, all or none: a rename that fails (or Ctrl-C between
-    two) puts back the files the earlier ones replaced, kept aside until every rename is done,
-    and removes the ones they created."""
-    placed: list[tuple[pathlib.Path, pathlib.Path | None]] = []
+    """Rename each temporary onto its target, all or none. The files they replace are copied
+    aside and the journal written first; a rename that fails (or Ctrl-C between two) puts back
+    what the earlier ones replaced and removes what they created, and so does :func:`recover`
+    for a process killed between two renames."""
+    asides = [_set_aside(path) for path in targets]
+    journal = _write_journal(temporaries, targets, asides)
+    placed = 0
     try:
         for temporary, path in zip(temporaries, targets):
-            aside = _set_aside(path)
             try:
                 os.replace(temporary, path)
             except OSError as error:
-                _discard(aside)
                 raise _unwritable(path, error) from error
-            placed.append((path, aside))
+            placed += 1
     except BaseException:
-        for path, aside in reversed(placed):
+        for path, aside in reversed(list(zip(targets[:placed], asides))):
             _put_back(path, aside)
         raise
-    for _, aside in placed:
-        _discard(aside)
+    finally:
+        journal.unlink(missing_ok=True)
+        for aside in asides[placed:] if placed < len(targets) else asides:
+            _discard(aside)  # copies of files left as they were, or of a commit done
+
+
+def _own_prefix(path: pathlib.Path, pid: int | None = None) -> str:
+    """The start of the name of every file this process leaves beside ``path`` while it writes."""
+    return f".{path.name}.{os.getpid() if pid is None else pid}."
+
+
+def _write_journal(
+    temporaries: Sequence[pathlib.Path], targets: Sequence[pathlib.Path], asides: Sequence[pathlib.Path | None]
+) -> pathlib.Path:
+    """The commit's journal, on disk before the first rename, beside the first output."""
+    entries = [
+        {"temporary": str(t), "output": str(o), "replaced": None if a is None else str(a)}
+        for t, o, a in zip(temporaries, targets, asides)
+    ]
+    journal = targets[0].resolve().parent / f"{_own_prefix(targets[0])}commit"
+    with open(journal, "w", encoding="utf-8") as handle:
+        json.dump(entries, handle)
+        handle.flush()
+        os.fsync(handle.fileno())
+    return journal
+
+
+LEFTOVER = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.(?:commit|.*\.partial.*|.*\.replaced)$")
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: running
+        return True
+    return True
+
+
+def recover(directory) -> list[pathlib.Path]:
+    """Undo what writers killed in ``directory`` left half done: each journal's outputs put back
+    as they were before its commit, then every temporary and copy of those writers removed.
+    Returns the outputs put back. Leftovers of a running process are not touched."""
+    directory = pathlib.Path(directory)
+    try:
+        names = sorted(os.listdir(directory))
+    except OSError:
+        return []
+    dead = [name for name in names if (m := LEFTOVER.match(name)) and not _running(int(m["pid"]))]
+    restored = []
+    for name in dead:
+        if name.endswith(".commit"):
+            restored += _roll_back(directory / name)
+    for name in dead:
+        with contextlib.suppress(OSError):
+            (directory / name).unlink(missing_ok=True)
+    return restored
+
+
+def _roll_back(journal: pathlib.Path) -> list[pathlib.Path]:
+    """The outputs of an interrupted commit as they were before it (an unreadable journal, torn
+    while it was written, means no rename had begun)."""
+    try:
+        entries = json.loads(journal.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return []
+    restored = []
+    for entry in entries:
+        if not os.path.lexists(entry["temporary"]):  # renamed onto its output already
+            aside = entry["replaced"]
+            _put_back(pathlib.Path(entry["output"]), None if aside is None else pathlib.Path(aside))
+            restored.append(pathlib.Path(entry["output"]))
+    return restored
 
 
 def _set_aside(path: pathlib.Path) -> pathlib.Path | None:
@@ -169,7 +253,7 @@ def _set_aside(path: pathlib.Path) -> pathlib.Path | None:
     if not os.path.lexists(path):
         return None
     try:
-        descriptor, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".replaced", dir=path.resolve().parent)
+        descriptor, name = tempfile.mkstemp(prefix=_own_prefix(path), suffix=".replaced", dir=path.resolve().parent)
         os.close(descriptor)
         shutil.copy2(path, name)
     except OSError as error:
@@ -179,7 +263,7 @@ def _set_aside(path: pathlib.Path) -> pathlib.Path | None:
 
 def _put_back(path: pathlib.Path, aside: pathlib.Path | None) -> None:
     """``path`` as it was before :func:`_replace_all`; where that fails, the copy stays beside it
-    (named ``.NAME.*.replaced``) rather than be lost."""
+    (named ``.NAME.PID.*.replaced``) rather than be lost."""
     with contextlib.suppress(OSError):
         if aside is None:
             path.unlink(missing_ok=True)

@@ -13,6 +13,8 @@ file, which it keeps as ``NAME.mcap.damaged``: nothing is deleted.
 from __future__ import annotations
 
 import dataclasses
+import json
+import os
 import shutil
 import struct
 from pathlib import Path
@@ -26,6 +28,7 @@ from mows.device.recording import bags
 
 OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_DATA_END = 0x03, 0x04, 0x05, 0x06, 0x0F
 RECORD_HEADER = struct.Struct("<BQ")  # opcode, content length
+SWAP = "swap.json"  # in the staging directory: the renames of the swap, written before them
 
 
 @dataclasses.dataclass
@@ -191,10 +194,15 @@ def _free_name(path: Path) -> Path:
 def repair(directory) -> Salvage:
     """Rebuild the bag in ``directory`` from the intact chunks of its MCAP file: a new closed
     MCAP and ``metadata.yaml``; the old file is kept as ``NAME.mcap.damaged``. A bag that
-    reads already is left alone (:class:`bags.BagError` says so)."""
+    reads already is left alone (:class:`bags.BagError` says so). The rebuilt bag is written in
+    ``.DIR.repairing`` beside the bag and swapped in at the end; a repair killed meanwhile is
+    undone by the next one, which then does the whole job."""
     directory = Path(directory)
     if not directory.is_dir():
         raise bags.BagError(f"{directory} is not a bag directory")
+    staging = directory.parent / f".{directory.name}.repairing"
+    if staging.is_dir():
+        _undo_interrupted(staging)
     info = _metadata(directory)
     mcap = _mcap_of(directory, info)
     try:
@@ -208,15 +216,43 @@ def repair(directory) -> Salvage:
         raise bags.BagError(
             f"{mcap}: no intact chunk holds the topics ({found.problem or 'empty'}): nothing can be recovered"
         )
-    staging = _free_name(directory.parent / f".{directory.name}.repairing")
     try:
         rebuilt = _write(found, staging / mcap.stem)
-        mcap.rename(_free_name(mcap.with_name(mcap.name + ".damaged")))
-        shutil.move(str(rebuilt / f"{mcap.stem}.mcap"), str(mcap))
+        damaged = _free_name(mcap.with_name(mcap.name + ".damaged"))
+        new_mcap = rebuilt / f"{mcap.stem}.mcap"
+        _write_swap(staging, {"mcap": str(mcap), "damaged": str(damaged), "new": str(new_mcap)})
+        mcap.rename(damaged)
+        shutil.move(str(new_mcap), str(mcap))
         (rebuilt / "metadata.yaml").replace(directory / "metadata.yaml")
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return found
+
+
+def _write_swap(staging: Path, swap: dict) -> None:
+    """What the swap of the rebuilt bag for the damaged one is about to rename, on disk first."""
+    with open(staging / SWAP, "w", encoding="utf-8") as handle:
+        json.dump(swap, handle)
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
+def _undo_interrupted(staging: Path) -> None:
+    """The bag as it was before a repair that was killed (its staging directory is still there):
+    a swap cut short is turned back (the damaged file under its own name again, the rebuilt one
+    it had moved in removed), so that this repair starts from the killed recording. A swap that
+    had ended (the rebuilt metadata moved in too) is kept."""
+    try:
+        swap = json.loads((staging / SWAP).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        swap = None  # killed before the swap began: the bag is untouched
+    if swap is not None and (Path(swap["new"]).parent / "metadata.yaml").exists():
+        mcap, damaged = Path(swap["mcap"]), Path(swap["damaged"])
+        if damaged.exists():
+            if not Path(swap["new"]).exists():
+                mcap.unlink(missing_ok=True)  # the rebuilt file, moved in before the kill
+            damaged.rename(mcap)
+    shutil.rmtree(staging, ignore_errors=True)
 
 
 def _write(found: Salvage, path: Path) -> Path:

@@ -578,3 +578,15 @@ def test_a_killed_writer_s_temporary_is_removed_by_the_next_write(tmp_path):
     with writing([out]) as outputs:
         outputs.temporaries[0].write_text("whole")
     assert sorted(p.name for p in tmp_path.iterdir()) == [running.name, "x.csv"]
+
+
+@pytest.mark.slow  # a fresh interpreter loads the simulator: ~10 s
+def test_a_reader_that_leaves_stdout_ends_the_command_quietly(tmp_path):
+    """``mows sim --fit … | head -1``: status 141 (as a shell reports SIGPIPE), nothing on stderr."""
+    command = [sys.executable, "-m", "mows.cli.main", "sim", "--fit", "--repeats", "200", "--out", str(tmp_path / "x")]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert process.stdout.readline().startswith("θ0")
+    process.stdout.close()
+    err = process.stderr.read()
+    assert process.wait(timeout=120) == 141 and err == "", err
+    assert list(tmp_path.iterdir()) == []

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import pathlib
 import sys
 from collections.abc import Callable, Iterator
@@ -21,7 +22,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import yaml
 
-from mows.cli.status import EXIT_BAD_INPUT, EXIT_BUG, caused_by_interrupt, interrupted
+from mows.cli.status import EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_BUG, caused_by_interrupt, interrupted
 from mows.lab.data.table import FIELD, GRADIENT, MeasurementTable, rows_text
 from mows.physics.probe import Probe
 
@@ -207,6 +208,11 @@ def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> in
         line, status = interrupted(prog, error)
         print(line, file=sys.stderr)
         return status
+    except BrokenPipeError:
+        # The reader of stdout left (``| head``): nothing is wrong, and nothing more can be said
+        # there; Python's own flush at exit would fail again, so stdout goes to /dev/null.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except INPUT_ERRORS as error:
         if debug:
             raise

@@ -175,15 +175,15 @@ def scene_backend(
 ) -> SimBackend:
     """The paced sim backend of ``scenario``: the one-probe simulator with the probe at
     ``theta0_rad``, or, for a scene with several probes, the multi-probe device with the shared
-    stage at ``theta0_rad`` (each probe at its home orientation plus it; no field supply)."""
+    stage at ``theta0_rad`` (each probe at its home orientation plus it; no field supply). Its
+    integrator is compiled beforehand by :func:`mows.precompile.precompile`, as the driver does
+    before it opens the device: otherwise the first read compiles it, seconds in which the
+    stream waits for samples."""
     if not scenario.probes:
         device = SimulatedDevice(scenario.replace(pose=scenario.pose.with_theta0(theta0_rad)))
         return SimBackend(
             device, cap, chunk_s=chunk_s, supply_cap_a=supply_cap_a, supply_slew_a_per_s=supply_slew_a_per_s
         )
-    # A first read compiles the integrator and the pickup (or loads them from numba's cache):
-    # seconds that must pass now, on a device of its own, not while the stream waits for samples.
-    MultiProbeDevice(scenario).read(2)
     probes = MultiProbeDevice(scenario)
     backend = MultiProbeSimBackend(probes, cap, chunk_s=chunk_s)
     backend.device.schedule_orientation(0, theta0_rad)

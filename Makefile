@@ -46,9 +46,12 @@ $(VENV_STAMP): requirements.txt constraints.txt tools/fix_ros_cmake_paths.py
 	touch $@
 
 # Apart from the venv stamp, so that editing pyproject.toml (say, pytest options) does not
-# rebuild the ROS packages. Its dependencies are pinned in requirements.txt.
+# rebuild the ROS packages. Its dependencies are pinned in requirements.txt. The kernels are
+# compiled into numba's cache here (a minute on a new machine), so that a node's first start
+# loads them instead.
 $(CORE_STAMP): $(VENV_STAMP) pyproject.toml
 	$(VENV)/bin/pip install --disable-pip-version-check -q --no-deps -e .
+	$(VENV)/bin/python -m mows.precompile  # numba's cache filled now, not at a node's first start
 	touch $@
 
 # colcon cannot turn a build made without --symlink-install into one with it (it fails on

@@ -22,6 +22,7 @@ import pytest
 
 from mows.cli import calibrate as calibrate_cli
 from mows.cli import sim as sim_cli
+from mows.cli.inputs import report_errors
 from mows.cli.main import main
 from mows.device.serial import emulator
 from mows.physics.probe import PAPER_PROBE
@@ -68,6 +69,10 @@ def work(tmp_path_factory):
     (d / "empty.csv").write_text("")
     rewrite(SWEEP_TABLE, d / "sweep_khz.csv", scale("f_hz", 1e-3))
     rewrite(SWEEP_TABLE, d / "sweep_field_in_ut.csv", scale("ref_bx_t", 1e6))
+    mt_as_t = ("ref_bx_t", "ref_by_t", "ref_bz_t", "ref_gxx_t_per_m", "ref_gxy_t_per_m", "ref_gyy_t_per_m")
+    rewrite(SWEEP_TABLE, d / "sweep_reference_in_mt.csv", lambda i, row: [scale(c, 1e3)(i, row) for c in mt_as_t])
+    rewrite(SWEEP_TABLE, d / "sweep_huge_std.csv", lambda i, row: row.update(f_std_hz="1e30"))
+    rewrite(SWEEP_TABLE, d / "sweep_probe_words.csv", lambda i, row: row.update(probe="abc"[i % 3]))
     (d / "sweep_semicolons.csv").write_text(SWEEP_TABLE.read_text().replace(",", ";"))
     rewrite(SWEEP_TABLE, d / "sweep_one_row.csv", lambda i, row: None)
     rewrite(SWEEP_TABLE, d / "sweep_no_reference.csv", lambda i, row: [row.pop(k) for k in list(row) if "ref_" in k])
@@ -256,6 +261,14 @@ CASES = [
         ["reference field 16 T", "factor 10 from f00", "µT"],
     ),
     ("lab-f-in-khz", ["lab", "compare", "{d}/sweep_khz.csv"], 2, ["f00", "kHz"]),
+    (
+        "lab-reference-in-mt-as-t",
+        ["lab", "compare", "{d}/sweep_reference_in_mt.csv"],
+        2,
+        ["the ring-downs move 0.00", "Eq. 6", "in mT or µT given in T"],
+    ),
+    ("lab-std-not-physical", ["lab", "compare", "{d}/sweep_huge_std.csv"], 2, ["f_std_hz", "1/10 of f_hz"]),
+    ("lab-probe-not-a-number", ["lab", "compare", "{d}/sweep_probe_words.csv"], 2, ["column 'probe'", "not a number"]),
     ("lab-semicolons", ["lab", "compare", "{d}/sweep_semicolons.csv"], 2, ["separated by ';'", "comma"]),
     ("lab-one-row", ["lab", "compare", "{d}/sweep_one_row.csv"], 2, ["1 row", "degrees of freedom"]),
     ("lab-ringdown-negative-f00", ["lab", "ringdown", "{d}/bag", "--f00-hz", "-3"], 2, ["--f00-hz"]),
@@ -271,6 +284,12 @@ CASES = [
         ["lab", "report", "{d}/sweep.csv", "--x"],
         2,
         ["mows lab report: error: unrecognized arguments: --x (see mows lab report --help)"],
+    ),
+    (
+        "check-hardware-frequency-zero",
+        ["check-hardware", "--simulate", "--frequency-hz", "0"],
+        2,
+        ["--frequency-hz: 0 must be > 0"],
     ),
     ("bench-unknown-suite", ["bench", "nosuch"], 2, ["mows bench: error: ", "'nosuch'", "(see mows bench --help)"]),
     # probe files
@@ -508,6 +527,7 @@ CALIBRATE = ["calibrate", str(CALIBRATION_TABLE), "--gradient-scenario", "calibr
 KILLED_AFTER_FIRST_RENAME = """
 import os, signal, sys
 import mows.records.files as files
+from mows.cli.inputs import report_errors
 from mows.cli.main import main
 renamed = []
 def replace(source, target):
@@ -590,3 +610,19 @@ def test_a_reader_that_leaves_stdout_ends_the_command_quietly(tmp_path):
     err = process.stderr.read()
     assert process.wait(timeout=120) == 141 and err == "", err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_warnings_on_the_way_to_an_error_are_not_said_and_on_success_once_each(capsys):
+    def failing() -> int:
+        np.log(np.zeros(3))  # numpy: "divide by zero encountered in log", as over a bad column
+        raise ValueError("the column is bad")
+
+    def succeeding() -> int:
+        for _ in range(3):
+            np.log(np.zeros(3))
+        return 0
+
+    assert report_errors("mows x", failing) == 2
+    assert capsys.readouterr().err == "mows x: error: the column is bad\n"
+    assert report_errors("mows x", succeeding) == 0
+    assert capsys.readouterr().err == "mows x: warning: divide by zero encountered in log\n"

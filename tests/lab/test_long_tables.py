@@ -104,4 +104,4 @@ def test_a_table_of_at_most_ten_sweeps_leaves_one_sweep_out():
 
 def _sweeps_table(sweeps):
     ones = np.ones(len(sweeps))
-    return MeasurementTable({"theta0_deg": ones, "f_hz": ones, "f_std_hz": ones, "sweep": sweeps})
+    return MeasurementTable({"theta0_deg": ones, "f_hz": ones, "f_std_hz": 1e-3 * ones, "sweep": sweeps})

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 
+from mows.cli.inputs import finite_float, positive_float
 from mows.device.backends.daqmx_backend import open_daqmx
 from mows.device.instruments.daq import PAPER_DEVICE_FILE, load_daq_device
 from mows.device.instruments.hardware_check import HardwareCheck
@@ -37,11 +38,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--supply-file", default=str(PAPER_SUPPLY_FILE), help="the supply's YAML (commands, limits)")
     parser.add_argument("--supply-resource", default="", help="the supply's VISA address ('' : no supply check)")
     parser.add_argument("--visa-library", default="@py", help="PyVISA backend (@py: pyvisa-py, no vendor VISA)")
-    parser.add_argument("--coil-current-a", type=float, default=0.02, help="the safe current of each coil's pulse, A")
     parser.add_argument(
-        "--frequency-hz", type=float, default=300.0, help="the pulses' frequency, Hz (away from the resonance)"
+        "--coil-current-a", type=positive_float, default=0.02, help="the safe current of each coil's pulse, A"
     )
-    parser.add_argument("--supply-step-a", type=float, default=0.1, help="the supply's test current, A")
+    parser.add_argument(
+        "--frequency-hz", type=positive_float, default=300.0, help="the pulses' frequency, Hz (away from the resonance)"
+    )
+    parser.add_argument("--supply-step-a", type=finite_float, default=0.1, help="the supply's test current, A")
     parser.add_argument("--simulate", action="store_true", help="check the simulated bench instead")
 
 

@@ -17,13 +17,15 @@ import contextlib
 import os
 import pathlib
 import sys
+import warnings
 from collections.abc import Callable, Iterator
 
 import numpy as np
 import yaml
 
-from mows.cli.status import EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_BUG, caused_by_interrupt, interrupted
+from mows.cli.status import EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_BUG, EXIT_OK, caused_by_interrupt, interrupted
 from mows.lab.data.table import FIELD, GRADIENT, MeasurementTable, rows_text
+from mows.physics.frequency import field_spring_nm_per_rad, frequency_shift_hz, gradient_spring_nm_per_rad
 from mows.physics.probe import Probe
 
 #: Exceptions that mean "the input is bad". ValueError covers the library's own refusals
@@ -194,12 +196,58 @@ def check_reference(table: MeasurementTable, probe: Probe) -> None:
                 f"itself move the frequency more than a factor {FREQUENCY_FACTOR:g} from f00 (Eq. 6): "
                 f"a column in m{unit} or µ{unit} given in {unit}?"
             )
+    check_reference_scale(table, probe)
+
+
+#: A predicted spread of frequencies this many times the measurement's noise makes the
+#: reference's scale measurable against the ring-downs.
+SCALE_EVIDENCE_SIGMAS = 10.0
+
+
+def check_reference_scale(table: MeasurementTable, probe: Probe) -> None:
+    """ValueError when the ring-downs move with the reference a factor FREQUENCY_FACTOR more or
+    less than Eq. 6 says they must: the measured f against the published model's f for each
+    row's reference (its field and gradient along the probe's axis), fitted as a line, has a
+    slope near ±1 for a reference in tesla; near 10⁻³ for one in mT given as T. Judged only
+    where the reference's predicted spread stands SCALE_EVIDENCE_SIGMAS above the noise."""
+    derived = table.derived_columns()
+    if "b_along_t" not in derived and "g_t_per_m" not in derived:
+        return
+    spring = field_spring_nm_per_rad(probe.moment_am2, derived.get("b_along_t", 0.0)) + gradient_spring_nm_per_rad(
+        probe.moment_am2, probe.lever_m, derived.get("g_t_per_m", 0.0)
+    )
+    predicted = frequency_shift_hz(probe.f00_hz, probe.spring_nm_per_rad, spring) * np.ones(table.n)
+    usable = np.isfinite(predicted)
+    noise_hz = float(np.median(table.f_std_hz))
+    if usable.sum() < 3 or np.std(predicted[usable]) < SCALE_EVIDENCE_SIGMAS * noise_hz:
+        return
+    slope = np.polyfit(predicted[usable], table.f_hz[usable], 1, w=1.0 / table.f_std_hz[usable])[0]
+    if not 1.0 / FREQUENCY_FACTOR <= abs(slope) <= FREQUENCY_FACTOR:
+        raise ValueError(
+            f"{table.source}: the ring-downs move {abs(slope):.3g} times as much as the reference field and "
+            f"gradient say they must (Eq. 6, spread {np.std(predicted[usable]):.3g} Hz predicted): "
+            "the reference in mT or µT given in T, or another bench's?"
+        )
 
 
 def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> int:
     """``work()``'s exit status; a bad input → one line and 2, a bug → one line and 1, Ctrl-C
     → one line and 130, SIGTERM 143 (outputs are only renamed into place once complete, so none
-    is left)."""
+    is left). Warnings raised on the way (numpy's, over values a check then refuses) never come
+    before that line: a command that ends in an error says only the error; one that succeeds
+    says each distinct warning once, on a line of its own. ``debug`` shows everything as raised."""
+    if debug:
+        return _status(prog, work, debug)
+    with warnings.catch_warnings(record=True) as caught:
+        status = _status(prog, work, debug)
+    if status == EXIT_OK:
+        for text in dict.fromkeys(" ".join(str(w.message).split()) for w in caught):
+            print(f"{prog}: warning: {text}", file=sys.stderr)
+    return status
+
+
+def _status(prog: str, work: Callable[[], int], debug: bool) -> int:
+    """:func:`report_errors` without the warnings."""
     try:
         return work()
     except KeyboardInterrupt as error:

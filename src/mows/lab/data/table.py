@@ -53,17 +53,16 @@ from mows.physics.pose import probe_axes
 REQUIRED = ("theta0_deg", "f_hz", "f_std_hz")
 FIELD = ("ref_bx_t", "ref_by_t", "ref_bz_t")
 GRADIENT = ("ref_gxx_t_per_m", "ref_gxy_t_per_m", "ref_gyy_t_per_m")
+# Columns of a table of several probes (mows.lab.data.probes).
+PROBE = "probe"
+STEP = "step"
 KNOWN = (
     REQUIRED
-    + ("t_s", "sweep")
+    + ("t_s", "sweep", PROBE, STEP)
     + FIELD
     + GRADIENT
     + ("coil_current_a", "amplitude_deg", "temperature_k", "damping_per_s", "duration_s")
 )
-
-# Columns of a table of several probes (mows.lab.data.probes).
-PROBE = "probe"
-STEP = "step"
 MAGNET = ("magnet_x_m", "magnet_y_m", "magnet_z_m")
 NEIGHBOUR_FIELD = ("neighbour_bx_t", "neighbour_by_t", "neighbour_bz_t")
 NEIGHBOUR_GRADIENT = ("neighbour_gxx_t_per_m", "neighbour_gxy_t_per_m", "neighbour_gyy_t_per_m")
@@ -78,6 +77,9 @@ LABELS = ("sweep", PROBE, STEP)  # integer labels of rows, not quantities
 
 MIN_SWEEPS = 10  # a subsample keeps at least this many sweeps (or all): folds for the cross-validation
 POSITIVE = ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k")
+#: f_std_hz above f_hz/MAX_RELATIVE_STD is no measurement: a ring-down of a second pins f to a
+#: fraction of a hertz (its Fourier width), and the lab's effects are millihertz.
+MAX_RELATIVE_STD = 10.0
 # A ring-down decays (δ ≥ 0) and its fit starts at or after the switch-off.
 NON_NEGATIVE = ("damping_per_s", "start_offset_s")
 WRITER_COLUMN = "mows_table_format"  # the marker of the project's own tables (module docstring)
@@ -370,6 +372,11 @@ def broken_rules(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, str, 
             bad = np.flatnonzero(columns[name] < 0)
             if bad.size:
                 yield name, "must be ≥ 0: not so", bad
+    if "f_hz" in columns and "f_std_hz" in columns:
+        bad = np.flatnonzero(columns["f_std_hz"] * MAX_RELATIVE_STD > columns["f_hz"])
+        if bad.size:
+            rule = f"must be below 1/{MAX_RELATIVE_STD:g} of f_hz (no ring-down measures f that poorly; another unit?)"
+            yield "f_std_hz", f"{rule}: not so", bad
 
 
 def with_notes(columns: Mapping[str, np.ndarray], source: str, notes: list[str]) -> MeasurementTable:

@@ -5,6 +5,6 @@ and the static-field supply's ramps), the same for a scene of several probes on 
 (``scheduled_multiprobe``), and the paper's NI card in wall-clock time under NI's own ``nidaqmx``,
 its C library's interpreter replaced (``daqmx_card``: :class:`~mows.device.simulated.daqmx_card.SimulatedCard`).
 
-May import: ``mows.sim``, ``mows.physics``, ``mows.records``, NI's ``nidaqmx`` (``daqmx_card``), and ``mows.device.interface``,
-``mows.device.clock``, ``mows.device.protocol``; no other device package.
+May import: ``mows.sim``, ``mows.physics``, ``mows.records``, NI's ``nidaqmx`` (``daqmx_card``), and
+``mows.device.interface``, ``mows.device.clock``, ``mows.device.protocol``; no other device package.
 """

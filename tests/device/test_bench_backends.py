@@ -1,20 +1,28 @@
-"""The paper's bench backends: the NI card through the ``nidaqmx`` Task API (on the simulated
-bench, :mod:`mows.device.simulated.daqmx`, which holds the calls to what the real API requires)
-and the NGM202 field supply through PyVISA against pyvisa-sim.
+"""The paper's bench backends: the NI card through NI's own ``nidaqmx`` package, its C library's
+interpreter replaced by the simulated card (:mod:`mows.device.simulated.daqmx_card`, in wall-clock
+time), and the NGM202 field supply through PyVISA against pyvisa-sim.
 
 Requirement: a coil drive reaches the amplifiers as V_k = I_k·gain·sin(2πf(i − i_on)/fs) with
 the setup's orientation-dependent I_k, on and off at the commanded samples; the fluxgates come
 back in tesla, saturated at the input range's end; the supply is set, ramped within its slew
-limit and read back, its refusals reported; a missing runtime or card is one clear line.
+limit and read back, its refusals reported; a missing runtime or card is one clear line. A host
+late by 0.5 s does not underflow the outputs; a card error (underflow, overrun, a card pulled
+out) is a fault with its reason, the coils and the supply off, and the card re-armed.
 """
 
 import dataclasses
 import math
+import subprocess
+import sys
 import time
 
+import nidaqmx
+import nidaqmx.stream_writers
 import numpy as np
 import pytest
+from nidaqmx.errors import DaqError
 
+from mows.device.backends import daqmx_backend
 from mows.device.backends.daqmx_backend import DeviceUnavailable, open_daqmx
 from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.instruments.daq import CoilWaveforms, load_daq_device
@@ -26,8 +34,8 @@ from mows.device.instruments.scpi import (
     load_supply_file,
     open_scpi_supply,
 )
-from mows.device.interface import CoilCommand, FieldCurrentCommand, LinkEvent
-from mows.device.simulated.daqmx import DaqError, SimulatedBench
+from mows.device.interface import CoilCommand, DeviceFault, FieldCurrentCommand, LinkEvent
+from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap, largest_spacing
@@ -52,13 +60,31 @@ def supply_state(supply) -> tuple[float, int]:
     return properties["current"].get_value(), properties["output"].get_value()
 
 
-def on_bench(scenario="paper_largest_spacing", supply=None, watchdog_s=WATCHDOG_S):
-    bench = SimulatedBench(SimulatedDevice(load_scenario(scenario)))
-    if supply is not None:
-        bench.supply_current_a = lambda: supply_state(supply)[0] * supply_state(supply)[1]
-    device = dataclasses.replace(load_daq_device(), watchdog_s=watchdog_s)
-    backend = open_daqmx(device, CurrentCap(10.0), supply, daqmx=bench.module())
-    return bench, backend
+@pytest.fixture
+def on_bench(installed):
+    """The backend on a simulated card of ``scenario`` (with ``supply`` on it), and the card."""
+
+    def make(scenario="paper_largest_spacing", supply=None, watchdog_s=WATCHDOG_S):
+        card = installed(SimulatedCard(SimulatedDevice(load_scenario(scenario))))
+        if supply is not None:
+            card.supply_current_a = lambda: supply_state(supply)[0] * supply_state(supply)[1]
+        device = dataclasses.replace(load_daq_device(), watchdog_s=watchdog_s)
+        return card, open_daqmx(device, CurrentCap(10.0), supply)
+
+    return make
+
+
+def poll_for(backend, duration_s: float) -> list:
+    """Everything the backend hands out over ``duration_s`` of wall time, polled as a driver does."""
+    items: list = []
+    end = time.monotonic() + duration_s
+    while time.monotonic() < end:
+        items += backend.poll(0.05)
+    return items
+
+
+def blocks(items) -> list[SampleBlock]:
+    return [i for i in items if isinstance(i, SampleBlock)]
 
 
 def run_cycle(session, theta0_rad):
@@ -120,9 +146,8 @@ def test_a_device_file_whose_cap_the_outputs_cannot_reach_is_refused(tmp_path):
         load_daq_device(path)
 
 
-# --- the nidaqmx backend on the simulated bench ---------------------------------------------------
+# --- the nidaqmx backend on the simulated card --------------------------------------------------
 def test_without_nis_runtime_the_backend_says_so_in_one_line():
-    nidaqmx = pytest.importorskip("nidaqmx")
     try:
         nidaqmx.Task().close()
     except nidaqmx.errors.DaqNotFoundError:
@@ -134,92 +159,222 @@ def test_without_nis_runtime_the_backend_says_so_in_one_line():
     assert "NI-DAQmx" in str(error.value) and "\n" not in str(error.value)
 
 
-def test_a_card_that_is_not_there_is_one_line_naming_it():
-    bench = SimulatedBench(SimulatedDevice(load_scenario()), inputs=("Dev2/ai0", "Dev2/ai1"))
+FRESH_START = """
+import importlib, sys
+from mows.device.backends import daqmx_backend
+from mows.device.instruments.daq import load_daq_device
+from mows.device.simulated.daqmx_card import SimulatedCard
+from mows.physics.coils import CurrentCap
+from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice
+
+card = SimulatedCard(SimulatedDevice(load_scenario()))
+with card.installed():
+    print("stream modules loaded:", "nidaqmx.stream_readers" in sys.modules or "nidaqmx.stream_writers" in sys.modules)
+    try:  # NI's package as plain `import nidaqmx` gives it
+        daqmx_backend.DaqmxBackend(importlib.import_module("nidaqmx"), load_daq_device(), CurrentCap(10.0))
+    except AttributeError as error:
+        print("plain import:", error, "; tasks left open:", len(card.tasks))
+    backend = daqmx_backend.open_daqmx(load_daq_device(), CurrentCap(10.0))
+    print("open_daqmx: blocks", sum(hasattr(i, "samples_t") for i in backend.poll(0.1)))
+    backend.close()
+"""
+
+
+def test_the_backend_imports_nis_stream_readers_and_writers_itself():
+    # A fresh interpreter: in this one another test may have imported them already.
+    run = subprocess.run([sys.executable, "-c", FRESH_START], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    lines = run.stdout.splitlines()
+    assert lines[0] == "stream modules loaded: False"  # `import nidaqmx` loads neither
+    assert "stream_readers" in lines[1] and lines[1].endswith("tasks left open: 0")
+    assert lines[2] == "open_daqmx: blocks 1"
+
+
+def test_a_card_that_is_not_there_is_one_line_naming_it(installed):
+    card = installed(SimulatedCard(SimulatedDevice(load_scenario()), inputs=("Dev2/ai0", "Dev2/ai1")))
     with pytest.raises(DeviceUnavailable) as error:
-        open_daqmx(load_daq_device(), CurrentCap(10.0), daqmx=bench.module())
+        open_daqmx(load_daq_device(), CurrentCap(10.0))
     assert str(error.value).startswith("backend nidaqmx: card 'Dev1': Device identifier is invalid")
-    assert "\n" not in str(error.value)
-    assert all(task.closed for task in bench.tasks)  # nothing is left open on the card
+    assert "(-200220)" in str(error.value) and "\n" not in str(error.value)
+    assert len(card.made) == 2 and not card.tasks  # nothing is left open on the card
+    with pytest.raises(DeviceUnavailable):  # so a second try is refused for the card, not for the names
+        open_daqmx(load_daq_device(), CurrentCap(10.0))
+    assert len(card.made) == 4 and not card.tasks
 
 
-def test_the_tasks_are_made_as_the_api_requires():
-    bench, backend = on_bench()
-    ai, ao = bench.tasks
+def test_the_tasks_are_made_as_the_api_requires(on_bench):
+    card, backend = on_bench()
+    ai, ao = card.made
     assert [c for c, _ in ai.channels] == ["Dev1/ai0", "Dev1/ai1"] and [c for c, _ in ao.channels] == [
         "Dev1/ao0",
         "Dev1/ao1",
     ]
     assert ao.trigger == "/Dev1/ai/StartTrigger" and ai.rate_hz == ao.rate_hz == 20_000.0
-    assert ai.running and ao.running
+    assert (ai.name, ao.name) == ("mows_fluxgates", "mows_coils") and ai.running and ao.running
     backend.close()
-    assert ai.closed and ao.closed
+    assert not card.tasks and not ai.running and not ao.running
 
 
-def test_the_simulated_card_refuses_what_the_real_one_refuses():
-    bench = SimulatedBench(SimulatedDevice(load_scenario()))
-    daqmx = bench.module()
-    ao = daqmx.Task("ao")
-    ao.ao_channels.add_ao_voltage_chan("Dev1/ao0")
-    ao.timing.cfg_samp_clk_timing(20_000.0, sample_mode=daqmx.constants.AcquisitionType.CONTINUOUS)
-    ao.out_stream.regen_mode = daqmx.constants.RegenerationMode.DONT_ALLOW_REGENERATION
-    ao.ao_channels.all.ao_idle_output_behavior = daqmx.constants.AOIdleOutputBehavior.ZERO_VOLTS
-    ao.triggers.start_trigger.cfg_dig_edge_start_trig("/Dev1/ai/StartTrigger")
-    with pytest.raises(DaqError, match="output buffer is empty"):
-        ao.start()
-    writer = daqmx.stream_writers.AnalogMultiChannelWriter(ao.out_stream)
-    with pytest.raises(DaqError, match="out of range"):
-        writer.write_many_sample(np.full((1, 10), 11.0))
-    with pytest.raises(DaqError, match="larger than the space"):
-        writer.write_many_sample(np.zeros((1, 1001)))
+def test_the_simulated_card_refuses_what_the_real_one_refuses(installed):
+    installed(SimulatedCard(SimulatedDevice(load_scenario())))
+    constants = nidaqmx.constants
+    with nidaqmx.Task("ao") as ao:
+        ao.ao_channels.add_ao_voltage_chan("Dev1/ao0")
+        ao.timing.cfg_samp_clk_timing(20_000.0, sample_mode=constants.AcquisitionType.CONTINUOUS)
+        ao.out_stream.regen_mode = constants.RegenerationMode.DONT_ALLOW_REGENERATION
+        ao.ao_channels.all.ao_idle_output_behavior = constants.AOIdleOutputBehavior.ZERO_VOLTS
+        ao.triggers.start_trigger.cfg_dig_edge_start_trig("/Dev1/ai/StartTrigger")
+        with pytest.raises(DaqError, match="output buffer is empty") as empty:
+            ao.start()
+        assert empty.value.error_code == -200462
+        writer = nidaqmx.stream_writers.AnalogMultiChannelWriter(ao.out_stream, auto_start=False)
+        with pytest.raises(DaqError, match="out of range"):
+            writer.write_many_sample(np.full((1, 10), 11.0))
+        with pytest.raises(nidaqmx.errors.DaqWriteError, match="larger than the space"):
+            writer.write_many_sample(np.zeros((1, 1001)))
+        with pytest.raises(DaqError) as duplicate:
+            nidaqmx.Task("ao")
+        assert duplicate.value.error_type == nidaqmx.error_codes.DAQmxErrors.DUPLICATE_TASK
 
 
-def test_a_cycle_switches_the_coils_at_the_commanded_samples():
-    bench, backend = on_bench()
+def test_a_cycle_switches_the_coils_at_the_commanded_samples(on_bench):
+    card, backend = on_bench()
     session = DeviceSession(
         backend,
-        SessionConfig(0.025, FAST, bench.device.scenario.setup, CurrentCap(10.0), 112.0, fit_ringdown),
+        SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), 112.0, fit_ringdown),
         armed=True,
     )
     theta0 = 2.2
-    bench.turn_probe(theta0)
+    card.turn_probe(theta0)
     outcome, events = run_cycle(session, theta0)
     assert outcome.success, outcome.message
     on = [e for e in events if e.phase == Phase.EXCITING]
     off = [e for e in events if e.phase == Phase.RINGDOWN]
     # What the coils got, read back from the output volts, is what the sequencer commanded.
-    assert [d[0] for d in bench.drives] == [e.sample_index for e in on]
-    assert bench.offs == [e.sample_index for e in off]
+    assert [d[0] for d in card.drives] == [e.sample_index for e in on]
+    assert card.offs == [e.sample_index for e in off]
     expected = largest_spacing().currents_a(theta0, FAST.excitation_current_a)
-    for (_, amplitudes, frequency_hz), event in zip(bench.drives, on):
+    for (_, amplitudes, frequency_hz), event in zip(card.drives, on):
         np.testing.assert_allclose(amplitudes, expected, rtol=1e-9)
         assert frequency_hz == pytest.approx(event.frequency_hz, rel=1e-9)
     # The tuned frequency is the probe's resonance at the bench's field (10 mHz, as the sim backend).
-    assert outcome.frequency_hz == pytest.approx(bench.device.expected_frequency_hz(), abs=0.01)
+    assert outcome.frequency_hz == pytest.approx(card.device.expected_frequency_hz(), abs=0.01)
+    assert card.underflows == card.overruns == backend.card_faults == 0
     backend.close()
 
 
-def test_commands_above_the_cap_are_refused_and_never_written():
-    bench, backend = on_bench()
+def test_commands_above_the_cap_are_refused_and_never_written(on_bench):
+    card, backend = on_bench()
     with pytest.raises(ValueError, match="exceeds the cap"):
         backend.send(CoilCommand(1, 5000, (10.5, 0.0), 112.0))
-    for _ in range(20):
-        backend.poll(0.0)
-    assert not bench.drives
+    poll_for(backend, 0.5)
+    assert not card.drives
     backend.close()
 
 
-def test_a_host_that_stops_writing_underflows_the_card_and_is_told_so():
-    bench, backend = on_bench()
-    backend.poll(0.0)
-    backend._write_ahead = lambda: None  # the host falls behind: no more output samples
-    items = []
-    for _ in range(20):
-        items += backend.poll(0.0)
-    links = [i for i in items if isinstance(i, LinkEvent)]
-    assert len(links) == 1 and not links[0].up and "underflow" in links[0].reason
-    assert backend.stats()["link"] == "down"
-    assert sum(isinstance(i, SampleBlock) for i in items) == 3  # the samples the card had, then none
+def drive(backend, items, duration_s=2.0, command_id=1):
+    """A drive of ``duration_s`` from the first sample the backend takes; its on and off samples."""
+    backend.send(CoilCommand(command_id, 0, (0.5, -0.3), 112.0))
+    items += backend.poll(0.05)
+    on = next(i.applied_sample_index for i in items if getattr(i, "command_id", None) == command_id)
+    off = on + round(duration_s * 20_000.0)
+    backend.send(CoilCommand(command_id + 1, off, (0.0, 0.0), 0.0))
+    return on, off
+
+
+def test_a_host_stalled_half_a_second_mid_drive_does_not_underflow_the_card(on_bench):
+    card, backend = on_bench()
+    items = poll_for(backend, 0.2)
+    on, off = drive(backend, items, duration_s=1.5)
+    while not card.drives:
+        items += backend.poll(0.05)
+    time.sleep(0.5)  # the host stalls with the coils on (a fit, a supply's slow answer)
+    items += poll_for(backend, 2.5)
+    assert card.underflows == 0 and backend.card_faults == 0
+    assert not [i for i in items if isinstance(i, (LinkEvent, DeviceFault))]
+    assert [d[0] for d in card.drives] == [on] and card.offs == [off]  # the drive as commanded
+    read = blocks(items)
+    assert all(b.first_sample_index == a.first_sample_index + len(a) for a, b in zip(read, read[1:]))  # no gap
+    backend.close()
+
+
+def test_a_host_late_beyond_the_lead_has_the_coils_off_a_fault_told_and_the_card_re_armed(on_bench):
+    card, backend = on_bench()
+    items = poll_for(backend, 0.2)
+    on, off = drive(backend, items, duration_s=5.0)
+    while not card.drives:
+        items += backend.poll(0.05)
+    time.sleep(1.2)  # beyond the lead (0.75 s): the card generates all it has, then underflows
+    before = len(items)
+    items += backend.poll(0.05)
+    down, up, fault = items[before:]
+    assert not down.up and "(-200290)" in down.reason and down.reason.startswith("the card stopped: outputs:")
+    assert up.up and up.reason == f"the card re-armed after: {down.reason}" and fault.reason == down.reason
+    assert backend.stats()["card_faults"] == 1 and backend.stats()["last_card_fault"] == down.reason
+    # The coils went off where the written samples ended, long before the commanded switch-off.
+    assert card.underflows == 1 and len(card.offs) == 1 and on < card.offs[0] < off
+    assert card.offs[0] - on <= round((0.75 + 0.1) * 20_000.0)
+    items += poll_for(backend, 1.0)
+    assert len(card.drives) == 1  # the queued switch-off and nothing else: no stale drive comes back
+    assert backend.stats()["link"] == "nidaqmx" and not backend.stats()["device_coils_on"]
+    read = blocks(items)
+    gap = [b for a, b in zip(read, read[1:]) if b.first_sample_index != a.first_sample_index + len(a)]
+    assert len(gap) == 1 and gap[0].first_sample_index > read[0].first_sample_index  # on, after the lost time
+    backend.close()
+
+
+def test_an_input_overrun_is_told_beside_the_outputs_underflow(on_bench, monkeypatch):
+    monkeypatch.setattr(daqmx_backend, "INPUT_BUFFER_S", 0.3)
+    card, backend = on_bench()
+    poll_for(backend, 0.2)
+    time.sleep(1.2)
+    (down, up, _) = backend.poll(0.05)
+    assert "outputs:" in down.reason and "(-200290)" in down.reason
+    assert "inputs:" in down.reason and "(-200279)" in down.reason and card.overruns == 1
+    assert up.up
+    backend.close()
+
+
+def test_a_card_pulled_out_is_closed_at_once_and_re_armed_when_it_is_back(on_bench):
+    card, backend = on_bench()
+    poll_for(backend, 0.2)
+    card.unplug()
+    items = poll_for(backend, 1.0)
+    (down,) = [i for i in items if isinstance(i, LinkEvent)]
+    assert not down.up and "(-201003)" in down.reason and not card.tasks  # its tasks closed, not left running
+    assert not blocks(items[items.index(down) :]) and backend.stats()["link"] == "down"
+    assert "re-arming:" in backend.stats()["last_card_fault"]
+    card.plug_in()
+    items = poll_for(backend, 2.5)
+    (up,) = [i for i in items if isinstance(i, LinkEvent)]
+    assert up.up and blocks(items) and len(card.tasks) == 2
+    backend.close()
+    assert not card.tasks
+
+
+def test_after_a_card_fault_the_supply_is_at_zero_and_off(on_bench):
+    supply = simulated_supply()
+    card, backend = on_bench("calibration", supply)
+    backend.send(FieldCurrentCommand(1, 0, 1.0))
+    while not backend.poll(0.05) or backend.supply_schedule.ramping:
+        pass
+    poll_for(backend, 0.1)
+    assert supply_state(supply) == (1.0, 1)
+    card.unplug()
+    (down,) = backend.poll(0.05)
+    # Told once the supply is safe: ramped down within its slew limit and switched off.
+    assert not down.up and supply_state(supply) == (0.0, 0)
+    card.plug_in()
+    items = poll_for(backend, 1.5)
+    assert [i.up for i in items if isinstance(i, LinkEvent)] == [True] and supply_state(supply) == (0.0, 0)
+    backend.send(FieldCurrentCommand(2, 0, 0.2))  # a new ramp switches it on again, from zero
+    while backend.supply_schedule.ramping or not backend.poll(0.05):
+        backend.poll(0.05)
+    poll_for(backend, 0.1)
+    assert supply_state(supply) == (0.2, 1)
+    backend.close()
+    assert supply_state(supply) == (0.0, 0)
 
 
 # --- the SCPI supply against pyvisa-sim -----------------------------------------------------------
@@ -292,7 +447,7 @@ def test_a_ramp_steps_within_the_slew_limit_on_the_sample_clock():
     assert schedule.due(back + 1)[-1] == 0.0 and not schedule.ramping
 
 
-def test_the_backend_ramps_the_supply_and_zeroes_it_on_close():
+def test_the_backend_ramps_the_supply_and_zeroes_it_on_close(on_bench):
     supply = simulated_supply()
     bench, backend = on_bench("calibration", supply)
     backend.send(FieldCurrentCommand(1, 0, 0.5))
@@ -313,7 +468,7 @@ def test_the_backend_ramps_the_supply_and_zeroes_it_on_close():
     assert supply_state(supply) == (0.0, 0)
 
 
-def test_without_a_supply_a_field_current_is_refused_with_the_reason():
+def test_without_a_supply_a_field_current_is_refused_with_the_reason(on_bench):
     _, backend = on_bench()
     backend.send(FieldCurrentCommand(7, 0, 0.5))
     (result,) = backend.poll(0.0)[:1]
@@ -321,10 +476,10 @@ def test_without_a_supply_a_field_current_is_refused_with_the_reason():
     backend.close()
 
 
-def test_a_host_that_stops_reading_has_the_coils_and_the_supply_switched_off():
+def test_a_host_that_stops_reading_has_the_coils_and_the_supply_switched_off(on_bench):
     supply = simulated_supply()
-    bench, backend = on_bench("calibration", supply, watchdog_s=0.2)
-    ao = bench.tasks[1]
+    card, backend = on_bench("calibration", supply, watchdog_s=0.2)
+    ao = card.made[1]
     backend.send(FieldCurrentCommand(1, 0, 0.3))
     while backend.supply_schedule.ramping:
         backend.poll(0.0)
@@ -333,8 +488,10 @@ def test_a_host_that_stops_reading_has_the_coils_and_the_supply_switched_off():
     while supply_state(supply)[0] != 0.0 and time.monotonic() < deadline:
         time.sleep(0.05)  # the host is silent: no poll
     assert supply_state(supply)[0] == 0.0 and not ao.running
-    (link,) = backend.poll(0.0)
-    assert not link.up and link.reason.startswith("watchdog: no read for")
-    assert backend.poll(0.0) == []  # told once
+    assert supply_state(supply) == (0.0, 0) and not card.tasks  # the output off, the tasks closed
+    down, up, fault = backend.poll(0.0)  # the card re-armed on the next read
+    assert not down.up and down.reason.startswith("watchdog: no read for") and fault.reason == down.reason
+    assert up.up and ao not in card.tasks.values() and len(card.tasks) == 2
+    assert not [i for i in backend.poll(0.05) if isinstance(i, LinkEvent)]  # told once
     backend.close()
     assert supply_state(supply) == (0.0, 0)

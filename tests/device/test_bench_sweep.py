@@ -1,5 +1,5 @@
 """A rotation sweep and a probe calibration on the paper's bench backends (the NI card through
-the ``nidaqmx`` Task API on the simulated bench, the NGM202 through PyVISA on pyvisa-sim), run
+NI's ``nidaqmx`` on the simulated card, the NGM202 through PyVISA on pyvisa-sim), run
 by the core's state machines as the mapper and the calibrator run them.
 
 Requirement (the bench's Done-when): the sweep on the DAQmx and SCPI backends decomposes within
@@ -28,7 +28,7 @@ from mows.device.backends.sim_backend import SimBackend
 from mows.device.cycle.phases import CycleSettings
 from mows.device.instruments.daq import load_daq_device
 from mows.device.instruments.scpi import SIMULATED_RESOURCE, SIMULATED_SUPPLY_FILE, load_supply_file, open_scpi_supply
-from mows.device.simulated.daqmx import SimulatedBench
+from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.calibration.constants import CalibrationError, KnownConstants
 from mows.estimate.calibration.fit import calibrate_probe
@@ -51,22 +51,24 @@ SUPPLY_A = 0.5
 CAP = CurrentCap(10.0)
 
 
-def sim_rig(scenario):
+def sim_rig(scenario, installed=None):
     backend = SimBackend(SimulatedDevice(scenario), CAP, paced=False, supply_cap_a=2.0, supply_slew_a_per_s=2.0)
     return BenchRig(session(backend, scenario), scenario), backend.device.device
 
 
-def daqmx_rig(scenario):
+def daqmx_rig(scenario, installed):
     supply = open_scpi_supply(SIMULATED_RESOURCE, load_supply_file(), f"{SIMULATED_SUPPLY_FILE}@sim")
     properties = supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties
-    bench = SimulatedBench(
-        SimulatedDevice(scenario),
-        supply_current_a=lambda: properties["current"].get_value() * properties["output"].get_value(),
+    card = installed(
+        SimulatedCard(
+            SimulatedDevice(scenario),
+            supply_current_a=lambda: properties["current"].get_value() * properties["output"].get_value(),
+        )
     )
     # The rig decomposes between reads (the driver's stream never waits for the mapper): no watchdog.
     device = dataclasses.replace(load_daq_device(), watchdog_s=3600.0)
-    backend = open_daqmx(device, CAP, supply, daqmx=bench.module())
-    return BenchRig(session(backend, scenario), scenario, bench.turn_probe, manual=True), bench.device
+    backend = open_daqmx(device, CAP, supply)
+    return BenchRig(session(backend, scenario), scenario, card.turn_probe, manual=True), card.device
 
 
 def session(backend, scenario):
@@ -86,8 +88,8 @@ def pulls(decomposition, device):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("make_rig", [sim_rig, daqmx_rig], ids=["sim", "nidaqmx+scpi"])
-def test_a_sweep_decomposes_within_two_sigma(make_rig):
-    rig, device = make_rig(load_scenario("calibration_gradient"))
+def test_a_sweep_decomposes_within_two_sigma(make_rig, installed):
+    rig, device = make_rig(load_scenario("calibration_gradient"), installed)
     assert rig.supply(SUPPLY_A).accepted
     outcome = rig.sweep(ANGLES_RAD, 2)
     assert outcome.ok, outcome.message
@@ -136,11 +138,11 @@ def test_a_calibration_on_the_simulator_backend_recovers_the_probe():
 
 
 @pytest.mark.slow
-def test_a_calibration_on_the_unipolar_supply_recovers_the_probe_with_the_lever_check():
+def test_a_calibration_on_the_unipolar_supply_recovers_the_probe_with_the_lever_check(installed):
     scenario, gradient = load_scenario("calibration"), load_scenario("calibration_gradient")
     outcomes = []
     for scene, wiring in ((scenario, "helmholtz"), (gradient, GRADIENT_WIRING)):
-        rig, _ = daqmx_rig(scene)
+        rig, _ = daqmx_rig(scene, installed)
         limits = rig.session.backend.supply_limits
         plan = CalibrationPlan(UNIPOLAR_CURRENTS_A, (0.0, math.pi), wiring=wiring)
         plan.check_supply(limits.min_current_a, limits.cap_a)  # as the calibrator checks a goal
@@ -160,8 +162,8 @@ def test_a_calibration_on_the_unipolar_supply_recovers_the_probe_with_the_lever_
         calibrated(at_zero_deg[:1], scenario_wirings(scenario))
 
 
-def test_the_paper_plan_is_refused_up_front_on_the_unipolar_supply():
-    rig, _ = daqmx_rig(load_scenario("calibration"))
+def test_the_paper_plan_is_refused_up_front_on_the_unipolar_supply(installed):
+    rig, _ = daqmx_rig(load_scenario("calibration"), installed)
     supply = rig.session.backend.supply
     writes = supply.writes
     limits = rig.session.backend.supply_limits

@@ -1,11 +1,16 @@
 """``mows check-hardware``: the step-by-step check of the paper's bench, on the simulated bench
-(the ``nidaqmx`` stand-in and the NGM202 on pyvisa-sim). Requirement: every check passes on a
-bench wired as its device file says, and a wiring fault shows as a PROBLEM line naming it."""
+(NI's ``nidaqmx`` on the simulated card and the NGM202 on pyvisa-sim). Requirement: every check
+passes on a bench wired as its device file says, a wiring fault shows as a PROBLEM line naming it,
+and a card that faults or a supply that refuses a step ends the check with PROBLEM and the reason,
+never a hang."""
+
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
-from mows.cli.check_hardware import simulated_bench
+from mows.cli.check_hardware import PROBLEM_EXIT, simulated_card
 from mows.cli.main import main
 from mows.device.backends.daqmx_backend import open_daqmx
 from mows.device.instruments.daq import load_daq_device
@@ -30,13 +35,14 @@ def test_the_simulated_bench_passes_every_check(capsys):
 def test_a_fluxgate_on_an_unwired_input_is_a_problem():
     device = load_daq_device()
     supply = open_scpi_supply(SIMULATED_RESOURCE, load_supply_file(), f"{SIMULATED_SUPPLY_FILE}@sim")
-    bench = simulated_bench(device, supply)
-    bench.inputs = ("Dev1/ai0", "Dev1/ai5")  # the far fluxgate's cable on another terminal
-    backend = open_daqmx(device, CurrentCap(10.0), supply, bench.module())
-    try:
-        lines = HardwareCheck(backend).run()
-    finally:
-        backend.close()
+    card = simulated_card(device, supply)
+    card.inputs = ("Dev1/ai0", "Dev1/ai5")  # the far fluxgate's cable on another terminal
+    with card.installed():
+        backend = open_daqmx(device, CurrentCap(10.0), supply)
+        try:
+            lines = HardwareCheck(backend).run()
+        finally:
+            backend.close()
     assert not lines[0].ok and lines[0].saw.endswith(
         "fluxgate 2 +0.000 µT ± 0 nT rms, 0 of 20000 saturated (flat: is it wired to its input?)"
     )
@@ -72,3 +78,54 @@ def test_without_the_card_the_supply_is_switched_off_again(monkeypatch, capsys):
     assert "mows check-hardware: error: no card" in capsys.readouterr().err
     properties = closed[0].resource.visalib.devices[SIMULATED_RESOURCE]._properties
     assert (properties["current"].get_value(), properties["output"].get_value()) == (0.0, 0)
+
+
+HANG_BOUND_S = 30.0  # a check that has not ended by then hangs: the bound, not a timing
+PULLED_OUT = """
+import sys, threading
+from mows.cli import check_hardware
+from mows.cli.main import main
+
+made = check_hardware.simulated_card
+
+
+def pulled_out_mid_check(device, supply):
+    card = made(device, supply)
+    threading.Timer(1.5, card.unplug).start()  # during the first coil's pulse
+    return card
+
+
+check_hardware.simulated_card = pulled_out_mid_check
+sys.exit(main(["check-hardware", "--simulate"]))
+"""
+
+
+def check_in_a_process(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=HANG_BOUND_S, check=False)
+
+
+def test_a_card_that_faults_mid_check_ends_it_with_the_reason():
+    run = check_in_a_process("-c", PULLED_OUT)
+    assert run.returncode == PROBLEM_EXIT, run.stderr
+    lines = run.stdout.splitlines()
+    assert lines[1].startswith("ok      fluxgates at rest")
+    assert lines[2].startswith("PROBLEM coil 1 at 0.02 A, 300 Hz, 0.2 s: stopped: the link went down: the card stopped")
+    assert "(-201003)" in lines[2] and lines[2].endswith("the checks after it were not run")
+    assert len(lines) == 3
+
+
+def test_a_supply_that_refuses_a_step_ends_the_check_with_the_reason(tmp_path):
+    # The file allows 3 A, the instrument 2 A: the ramp's steps above 2 A are refused mid-check.
+    supply_file = tmp_path / "supply.yaml"
+    supply_file.write_text(load_supply_file.__defaults__[0].read_text().replace("cap_a: 2.0", "cap_a: 3.0"))
+    args = ["-m", "mows.cli.main", "check-hardware", "--simulate"]
+    run = check_in_a_process(*args, "--supply-file", str(supply_file), "--supply-step-a", "2.5")
+    assert run.returncode == PROBLEM_EXIT, run.stderr
+    lines = run.stdout.splitlines()
+    assert [line.split(":")[0] for line in lines[1:4]] == [
+        "ok      fluxgates at rest",
+        "ok      coil 1 at 0.02 A, 300 Hz, 0.2 s",
+        "ok      coil 2 at 0.02 A, 300 Hz, 0.2 s",
+    ]
+    assert lines[4].startswith("PROBLEM field supply: stopped: the link went down: the supply failed:")
+    assert "THE SUPPLY" not in lines[4]  # ramped to zero and switched off all the same

@@ -5,8 +5,8 @@ supply of ``--supply-file`` at ``--supply-resource``, then
 (:class:`mows.device.instruments.hardware_check.HardwareCheck`) reads both fluxgates at rest,
 pulses each coil on its own at a safe current and says what each fluxgate saw of it, steps the
 supply and reads it back, and reports every check. ``--simulate`` runs the same check on the
-simulated bench: the ``nidaqmx`` Task API stand-in (:mod:`mows.device.simulated.daqmx`) over the
-paper's largest-spacing scene with the Pasco pair on its supply, the NGM202 on pyvisa-sim.
+simulated bench: NI's ``nidaqmx`` on the simulated card (:mod:`mows.device.simulated.daqmx_card`)
+over the paper's largest-spacing scene with the Pasco pair on its supply, the NGM202 on pyvisa-sim.
 Exit status 0 when every check passed, 3 when one found a problem (each line says which).
 """
 
@@ -54,15 +54,19 @@ def run(args) -> int:
     cap = CurrentCap(device.current_cap_a)
     cap.check(args.coil_current_a)
     config.limits.check(args.supply_step_a)
-    daqmx = None
     supply: ScpiSupply | None
     if args.simulate:
         supply = open_scpi_supply(SIMULATED_RESOURCE, config, f"{SIMULATED_SUPPLY_FILE}@sim")
-        daqmx = simulated_bench(device, supply).module()
-    else:
-        supply = open_scpi_supply(args.supply_resource, config, args.visa_library) if args.supply_resource else None
+        with simulated_card(device, supply).installed():
+            return _check(args, device, config, supply)
+    supply = open_scpi_supply(args.supply_resource, config, args.visa_library) if args.supply_resource else None
+    return _check(args, device, config, supply)
+
+
+def _check(args, device, config, supply: ScpiSupply | None) -> int:
+    """The check on the card of ``device`` with ``supply``; the exit status."""
     try:
-        backend = open_daqmx(device, cap, supply, daqmx)
+        backend = open_daqmx(device, CurrentCap(device.current_cap_a), supply)
     except BaseException:
         if supply is not None:  # opened and switched on: off again before the error is told
             supply.close()
@@ -77,7 +81,7 @@ def run(args) -> int:
             supply_resolution_a=config.limits.resolution_a,
             names=tuple(f"fluxgate {k + 1} ({i.physical_channel})" for k, i in enumerate(device.inputs)),
         )
-        lines = check.run() if supply else check.run()[:-1]
+        lines = check.run(supply=supply is not None)
     finally:
         backend.close()
     for line in lines:
@@ -85,14 +89,14 @@ def run(args) -> int:
     return 0 if all(line.ok for line in lines) else PROBLEM_EXIT
 
 
-def simulated_bench(device, supply):
-    """The simulated bench wired as ``device`` says, its field supply the pyvisa-sim NGM202."""
-    from mows.device.simulated.daqmx import SimulatedBench
+def simulated_card(device, supply):
+    """The simulated card wired as ``device`` says, its field supply the pyvisa-sim NGM202."""
+    from mows.device.simulated.daqmx_card import SimulatedCard
     from mows.sim.scenario import load_scenario
     from mows.sim.simulator import SimulatedDevice
 
     properties = supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties
-    return SimulatedBench(
+    return SimulatedCard(
         SimulatedDevice(
             load_scenario(SIMULATED_SCENARIO).replace(supply=load_scenario(SIMULATED_SUPPLY_SCENARIO).supply)
         ),

@@ -5,14 +5,24 @@ through SCPI (:mod:`mows.device.instruments.scpi`).
 A thin edge over :mod:`mows.device.instruments.daq`: two continuous, hardware-timed input channels read in
 blocks and stamped by their sample index (:class:`mows.device.clock.DeviceClock`); two output
 channels on the same rate, started by the inputs' start trigger and never regenerated, written
-``output_lead_s`` ahead of the newest input sample with the coils' waveforms, so that a coil
-command for a sample beyond what is written applies exactly there. The stage is turned by hand
-(``orientation: manual``): an orientation command is the operator's turn, confirmed before the
-cycle was asked for, and is accepted at once.
+``output_lead_s`` ahead of the newer of the newest input sample and the sample the card is
+generating, so that a host late by less than the lead (0.75 s on the paper's bench) never
+underflows them. The lead holds only what was commanded: the coils' drives with their
+switch-offs, zeros elsewhere; a coil command for a sample beyond what is written applies exactly
+there. The stage is turned by hand (``orientation: manual``): an orientation command is the
+operator's turn, confirmed before the cycle was asked for, and is accepted at once.
+
+A card error (the outputs underflowed, the inputs overran, the card went away; every task's error
+told, not only the first) is a fault, never a latch for the session: the tasks are closed (the
+outputs idle at 0 V: the coils go off), the queued drives dropped, the supply ramped to zero in
+host time and switched off, and the link reported down with the reason (a running cycle fails);
+then the tasks are made and armed again, starting with the coils off, at once and, while the card
+refuses, every ``read_timeout_s``. The link comes back up with a :class:`DeviceFault` that
+carries the reason to the driver's /diagnostics; the stream's sample index jumps by the time the
+card was down (the blocks' gap). The supply is switched on again, at zero, before its next ramp.
 
 A watchdog thread stands in for the serial device's: a host that stops reading for
-``watchdog_s`` (a hung driver) has the outputs stopped (they idle at 0 V: the coils go off) and
-the supply ramped to zero within its slew limit; the next read reports the link down.
+``watchdog_s`` (a hung driver) faults the card as above; the next read re-arms it.
 
 ``nidaqmx`` is imported when a backend is made, not before: without NI's runtime, the package or
 the card, :func:`open_daqmx` says so in one line (:class:`DeviceUnavailable`).
@@ -35,6 +45,7 @@ from mows.device.interface import (
     CoilCommand,
     Command,
     CommandResult,
+    DeviceFault,
     FieldCurrentCommand,
     LinkEvent,
     check_coil_command,
@@ -46,6 +57,7 @@ from mows.physics.supply import RAMP_STEP_S
 from mows.records.samples import SampleBlock
 
 INPUT_BUFFER_S = 10.0  # the card's input buffer: a host late by less than this loses nothing
+TASK_NAMES = ("mows_fluxgates", "mows_coils")  # named: a second driver on the card is refused
 
 
 class DeviceUnavailable(OSError):
@@ -53,21 +65,27 @@ class DeviceUnavailable(OSError):
 
 
 def import_nidaqmx():
-    """NI's ``nidaqmx`` package; DeviceUnavailable, one line, when it is not installed."""
+    """NI's ``nidaqmx`` package with its stream readers and writers (``import nidaqmx`` loads
+    neither); DeviceUnavailable, one line, when it is not installed."""
     try:
-        return importlib.import_module("nidaqmx")
+        nidaqmx = importlib.import_module("nidaqmx")
+        importlib.import_module("nidaqmx.stream_readers")
+        importlib.import_module("nidaqmx.stream_writers")
     except ImportError:
         raise DeviceUnavailable(
             "backend nidaqmx: the Python package nidaqmx is not installed (pip install nidaqmx==1.7.0)"
         ) from None
+    return nidaqmx
 
 
 def _first_line(error: Exception) -> str:
-    return (str(error).strip().splitlines() or [type(error).__name__])[0]
+    line = (str(error).strip().splitlines() or [type(error).__name__])[0]
+    code = getattr(error, "error_code", None)
+    return f"{line} ({code})" if code is not None and str(code) not in line else line
 
 
 class DaqmxBackend(Backend):
-    """The card's tasks (made by :func:`open_daqmx`), the coils' waveforms and the supply."""
+    """The card's tasks, the coils' waveforms and the supply (made by :func:`open_daqmx`)."""
 
     name = "nidaqmx"
     can_excite = True
@@ -92,34 +110,48 @@ class DaqmxBackend(Backend):
         )
         self.next_index = 0  # the sample after the newest read
         self.stage_theta0_rad = math.nan  # where the operator turned the probe
-        self.fault = ""  # why the card stopped, once it did
-        self._fault_told = False  # the LinkEvent that says so has been handed out
+        self.fault = ""  # why the card is down, while it is
+        self.card_faults = 0
+        self.last_card_fault = ""
         self.supply_readback_a = math.nan
+        self._supply_a = 0.0  # the last current the supply accepted
+        self._supply_off = False  # switched off by a fault: prepared again before its next step
         self._results: list[CommandResult] = []
+        self._told: list[LinkEvent | DeviceFault] = []  # not yet handed out
         self._lock = threading.Lock()
         self._buffer = np.zeros((2, device.block_samples))
-        self._ai, self._ao = self._tasks()
-        self._reader = daqmx.stream_readers.AnalogMultiChannelReader(self._ai.in_stream)
-        self._writer = daqmx.stream_writers.AnalogMultiChannelWriter(self._ao.out_stream, auto_start=False)
-        self._write_ahead()  # the outputs start with data, before their trigger
-        self._ao.start()
-        self._ai.start()
-        self._last_poll_s = time.monotonic()
+        self._tasks: list = []  # the input and the output task, while armed
+        self._origin = 0  # the stream's index of the card's sample 0
+        self._rearm_at_s = 0.0
+        self._arm(0)
+        self._last_poll_s = self._last_read_s = time.monotonic()
         self._stop = threading.Event()
         self._watchdog = threading.Thread(target=self._watch, name="mows-daqmx-watchdog", daemon=True)
         self._watchdog.start()
 
-    def _tasks(self):
-        """The input and output tasks, configured (both closed again if the card refuses either)."""
-        ai = self.daqmx.Task("mows_fluxgates")
-        ao = self.daqmx.Task("mows_coils")
+    # --- the card's tasks ----------------------------------------------------------------------
+    def _arm(self, first_index: int) -> None:
+        """Make and configure the tasks, write the outputs' first samples (coils off) and start them
+        on the inputs' trigger, the card's sample 0 being the stream's ``first_index``. Whatever
+        was made is closed again when any step fails."""
+        self.next_index = self._origin = first_index
+        self.waveforms.restart(first_index)
+        tasks: list = []
         try:
+            for name in TASK_NAMES:
+                tasks.append(self.daqmx.Task(name))
+            ai, ao = tasks
             self._configure(ai, ao)
+            self._reader = self.daqmx.stream_readers.AnalogMultiChannelReader(ai.in_stream)
+            self._writer = self.daqmx.stream_writers.AnalogMultiChannelWriter(ao.out_stream, auto_start=False)
+            self._tasks = tasks
+            self._write_ahead()  # the outputs start with data, before their trigger
+            ao.start()
+            ai.start()
         except BaseException:
-            ai.close()
-            ao.close()
+            self._tasks = []
+            self._close(tasks)
             raise
-        return ai, ao
 
     def _configure(self, ai, ao) -> None:
         constants, device = self.daqmx.constants, self.device
@@ -147,6 +179,16 @@ class DaqmxBackend(Backend):
         ao.triggers.start_trigger.cfg_dig_edge_start_trig(device.start_trigger)
         ao.out_stream.regen_mode = constants.RegenerationMode.DONT_ALLOW_REGENERATION
 
+    def _close(self, tasks: list) -> list[str]:
+        """Close every task, whatever the others do (a card that went away refuses); what failed."""
+        problems = []
+        for task in tasks:
+            try:
+                task.close()
+            except self.daqmx.errors.DaqError as error:
+                problems.append(_first_line(error))
+        return problems
+
     @property
     def info(self) -> DeviceInfo:
         return self._info
@@ -156,34 +198,56 @@ class DaqmxBackend(Backend):
         return self.device.lead_samples + self.device.block_samples
 
     def _write_ahead(self) -> None:
-        end = self.next_index + self.device.block_samples + self.device.lead_samples
+        """The outputs written ``output_lead_s`` ahead of the newest block read or of the sample the
+        card generates now, whichever is later (a host catching up after a stall has both)."""
+        generated = self._origin + self._tasks[1].out_stream.total_samp_per_chan_generated
+        end = max(self.next_index + self.device.block_samples, generated) + self.device.lead_samples
         volts = self.waveforms.synthesise(end)
         if volts.shape[1]:
             self._writer.write_many_sample(np.ascontiguousarray(volts), timeout=self.device.read_timeout_s)
 
+    # --- the stream ----------------------------------------------------------------------------
     def poll(self, timeout_s: float) -> list:
         with self._lock:
             self._last_poll_s = time.monotonic()
             items: list = list(self._results)
             self._results = []
-            if self.fault:
-                return items + self._fault_event()
-            try:
-                self._write_ahead()
-                self._reader.read_many_sample(
-                    self._buffer,
-                    number_of_samples_per_channel=self.device.block_samples,
-                    timeout=self.device.read_timeout_s,
-                )
-            except self.daqmx.errors.DaqError as error:
-                self.fault = f"the card stopped: {_first_line(error)}"
-                return items + self._fault_event()
-            first = self.next_index
-            self.next_index += self.device.block_samples
-            field, saturated = self.device.field_t(self._buffer)
-            items.append(SampleBlock(first, self.clock.stamp_ns(first), self.device.sample_rate_hz, field, saturated))
-            items += self._supply_steps()
+            if not self.fault:
+                items += self._stream()
+            if self.fault and time.monotonic() >= self._rearm_at_s:
+                self._rearm()
+            items += self._told
+            self._told = []
+            waiting = bool(self.fault) and not items
+        if waiting:  # the card is away: no busy loop while it stays so
+            time.sleep(min(timeout_s, self.device.read_timeout_s))
         return items
+
+    def _stream(self) -> list:
+        """The outputs written ahead, a block read and the supply's steps that are due; on a card
+        error, the fault, with both tasks' errors (an input overrun is not hidden behind the outputs')."""
+        errors = []
+        try:
+            self._write_ahead()
+        except self.daqmx.errors.DaqError as error:
+            errors.append(f"outputs: {_first_line(error)}")
+        try:
+            self._reader.read_many_sample(
+                self._buffer,
+                number_of_samples_per_channel=self.device.block_samples,
+                timeout=self.device.read_timeout_s,
+            )
+        except self.daqmx.errors.DaqError as error:
+            errors.append(f"inputs: {_first_line(error)}")
+        if errors:
+            self._fault("the card stopped: " + "; ".join(errors))
+            return []
+        self._last_read_s = time.monotonic()
+        first = self.next_index
+        self.next_index += self.device.block_samples
+        field, saturated = self.device.field_t(self._buffer)
+        block = SampleBlock(first, self.clock.stamp_ns(first), self.device.sample_rate_hz, field, saturated)
+        return [block, *self._supply_steps()]
 
     def _supply_steps(self) -> list:
         """Write the supply's steps whose sample has come; read the current back after a ramp's last."""
@@ -191,48 +255,80 @@ class DaqmxBackend(Backend):
             return []
         due = self.supply_schedule.due(self.next_index)
         try:
+            if due and self._supply_off:
+                self.supply.prepare()  # at zero, output on, as when it was opened
+                self._supply_off = False
             for current_a in due:
                 self.supply.set_current_a(current_a)
+                self._supply_a = current_a
             if due and not self.supply_schedule.ramping:
                 self.supply_readback_a = self.supply.read_current_a()
         except SupplyError as error:
-            self.fault = f"the supply failed: {error}"
-            self.waveforms.off_now()
-            return self._fault_event()
+            self._fault(f"the supply failed: {error}")
         return []
 
-    def _fault_event(self) -> list[LinkEvent]:
-        """The link down, once: the driver fails a running cycle on it."""
-        told, self._fault_told = self._fault_told, True
-        return [] if told else [LinkEvent(False, self.fault)]
+    def _fault(self, reason: str) -> None:
+        """The card down: its tasks closed (the outputs idle at 0 V: the coils off), the drives
+        dropped, the supply ramped to zero and switched off, the link down with ``reason``."""
+        self.waveforms.off_now()
+        self._close(self._tasks)
+        self._tasks = []
+        self.fault = self.last_card_fault = reason + self._supply_safe()
+        self.card_faults += 1
+        self._rearm_at_s = time.monotonic()
+        self._told.append(LinkEvent(False, self.fault))
+
+    def _supply_safe(self) -> str:
+        """Ramp the supply to zero in host time from the last current it accepted, within its slew
+        limit, and switch its output off; what went wrong, for the fault's reason."""
+        if self.supply is None or self.supply_schedule is None:
+            return ""
+        end = self.supply_schedule.to_zero(self.next_index)
+        self.supply_schedule.due(end + 1)  # walked in host time below: the card's samples have stopped
+        problems = []
+        try:
+            for _, current_a in self.supply.config.limits.ramp(self._supply_a, 0.0):
+                self.supply.set_current_a(current_a)
+                self._supply_a = current_a
+                time.sleep(RAMP_STEP_S)
+        except SupplyError as error:
+            problems.append(f"THE SUPPLY DID NOT RAMP TO ZERO: {error}")
+        try:
+            self.supply.set_current_a(0.0)
+            self.supply.output(False)
+            self._supply_a, self._supply_off = 0.0, True
+        except SupplyError as error:
+            problems.append(f"THE SUPPLY'S OUTPUT IS STILL ON: {error}")
+        return "".join(f"; {problem}" for problem in problems)
+
+    def _rearm(self) -> None:
+        """Arm the card again, the coils off, its index on from the time lost; the link up and the
+        fault told to the driver (its /diagnostics), or the next try in ``read_timeout_s``."""
+        lost = round((time.monotonic() - self._last_read_s) * self.device.sample_rate_hz)
+        try:
+            self._arm(self.next_index + lost)
+        except self.daqmx.errors.DaqError as error:
+            self._rearm_at_s = time.monotonic() + self.device.read_timeout_s
+            self.last_card_fault = f"{self.fault}; re-arming: {_first_line(error)}"
+            return
+        self._last_read_s = time.monotonic()
+        reason, self.fault = self.fault, ""
+        self._told += [LinkEvent(True, f"the card re-armed after: {reason}"), DeviceFault(reason)]
 
     def _watch(self) -> None:
         while not self._stop.wait(RAMP_STEP_S):
             with self._lock:
                 silent_s = time.monotonic() - self._last_poll_s
                 if not self.fault and silent_s > self.device.watchdog_s:
-                    self._trip(f"watchdog: no read for {silent_s:.1f} s: coils off, supply ramped to zero")
+                    self._fault(f"watchdog: no read for {silent_s:.1f} s: coils off, supply ramped to zero")
 
-    def _trip(self, reason: str) -> None:
-        """Outputs stopped (they idle at 0 V), the supply ramped down in host time."""
-        self.fault = reason
-        try:
-            self._ao.stop()
-        except self.daqmx.errors.DaqError:
-            pass  # a card that stopped by itself has its outputs idle already
-        if self.supply is None or self.supply_schedule is None:
-            return
-        try:
-            for _, current_a in self.supply.config.limits.ramp(self.supply_schedule.current_a, 0.0):
-                self.supply.set_current_a(current_a)
-                self.supply_schedule.current_a = current_a
-                time.sleep(RAMP_STEP_S)
-        except SupplyError as error:
-            self.fault += f"; THE SUPPLY DID NOT RAMP TO ZERO: {error}"
-
+    # --- commands ------------------------------------------------------------------------------
     def send(self, command: Command) -> None:
         command = refuse_tones(command, "DAQmx device")
         with self._lock:
+            if self.fault:
+                self._results.append(CommandResult(command.command_id, False, reason=f"the card is down: {self.fault}"))
+                return
             if isinstance(command, CoilCommand):
                 check_coil_command(command, self._info, self.cap.limit_a)
                 applied = self.waveforms.schedule(command.at_sample_index, command.amplitudes_a, command.frequency_hz)
@@ -266,9 +362,9 @@ class DaqmxBackend(Backend):
             "device_coils_on": self.waveforms.coils_on,
             "samples_read": self.next_index,
             "stage": "manual",
+            "card_faults": self.card_faults,
+            "last_card_fault": self.last_card_fault,
         }
-        if self.fault:
-            values["fault"] = self.fault
         if self.supply is not None and self.supply_schedule is not None:
             values.update(
                 supply=self.supply.identity,
@@ -279,28 +375,36 @@ class DaqmxBackend(Backend):
 
     def close(self) -> None:
         """Coils off, the supply ramped to zero while the card streams on, then the tasks and the
-        supply released."""
+        supply released, each whatever the others did."""
         self._stop.set()
         self._watchdog.join()
-        self.coils_off_now()
-        self.supply_to_zero_now()
-        while self.supply_schedule is not None and self.supply_schedule.ramping and not self.fault:
-            self.poll(self.device.read_timeout_s)
-        self.poll(self.device.read_timeout_s)  # the zeros of the switch-off reach the card
         try:
-            for task in (self._ao, self._ai):
-                task.stop()
-                task.close()
+            self.coils_off_now()
+            self.supply_to_zero_now()
+            polls = 0
+            while self.supply_schedule is not None and self.supply_schedule.ramping and not self.fault:
+                self.poll(self.device.read_timeout_s)
+                polls += 1
+                if polls * self.device.block_s > 60.0:  # a ramp from the cap takes seconds, not this
+                    with self._lock:
+                        self._fault("close: the supply's ramp to zero did not end")
+            if not self.fault:
+                self.poll(self.device.read_timeout_s)  # the zeros of the switch-off reach the card
         finally:
-            if self.supply is not None:
-                self.supply.close()
+            try:
+                with self._lock:
+                    self._close(self._tasks)
+                    self._tasks = []
+            finally:
+                if self.supply is not None:
+                    self.supply.close()
 
 
-def open_daqmx(device: DaqDevice, cap: CurrentCap, supply: ScpiSupply | None = None, daqmx=None) -> DaqmxBackend:
-    """The backend on the card of ``device`` (``daqmx``: the ``nidaqmx`` module or a stand-in with
-    its API; default: NI's, imported now). DeviceUnavailable, in one line, when the package, NI's
-    runtime or the card is missing, or the card refuses the tasks."""
-    daqmx = daqmx or import_nidaqmx()
+def open_daqmx(device: DaqDevice, cap: CurrentCap, supply: ScpiSupply | None = None) -> DaqmxBackend:
+    """The backend on the card of ``device``, through NI's ``nidaqmx`` (imported now).
+    DeviceUnavailable, in one line, when the package, NI's runtime or the card is missing, or the
+    card refuses the tasks."""
+    daqmx = import_nidaqmx()
     try:
         return DaqmxBackend(daqmx, device, cap, supply)
     except daqmx.errors.DaqNotFoundError:

@@ -77,7 +77,9 @@ class DaqDevice:
     amplifier_v_per_a: float
     sample_rate_hz: float = 20_000.0
     block_s: float = 0.025  # the inputs are read in blocks of this
-    output_lead_s: float = 0.1  # the outputs are written this far ahead of the newest input sample
+    # The outputs are written this far ahead of the newest input sample: a host late by less (a
+    # fit, a supply's answer, a busy machine) never underflows them.
+    output_lead_s: float = 0.75
     read_timeout_s: float = 1.0  # a read that waits longer than this is a fault of the card
     current_cap_a: float = 10.0  # the amplifiers' limit (Methods: up to 10 A)
     watchdog_s: float = 1.0  # a host that stops reading this long: coils and supply off
@@ -202,6 +204,11 @@ class CoilWaveforms:
         keys = [d.on_index for d in self._drives]
         self._drives.insert(bisect.bisect_right(keys, applied), drive)
         return applied
+
+    def restart(self, index: int) -> None:
+        """Every drive dropped, nothing written before sample ``index``: the coils off from there."""
+        self.written = int(index)
+        self._drives = [dataclasses.replace(self._off, on_index=self.written)]
 
     def off_now(self) -> int:
         """Cancel every queued drive and switch off at the first unwritten sample."""

@@ -3,22 +3,31 @@ docs/hardware.md): the fluxgates at rest, each coil on its own at a safe current
 supply stepped and read back (with the field change at the fluxgates shown).
 
 Each check reads the backend (:class:`mows.device.interface.Backend`) for a while and says what
-it saw; what it concludes comes from the plain functions below (:func:`lock_in_t`, the noise
-floor), so that a wiring fault (a coil on the wrong output, a fluxgate on the wrong input, a
-supply that does not deliver) shows as a number next to the one expected.
+it saw. Every wait has a deadline: a device that stops answering, a link that goes down (a card
+fault, a supply that refuses a step) or a refused command ends the check with a PROBLEM line that
+says why, and the checks after it are not run. What it concludes comes from the plain functions
+below (:func:`lock_in_t`, the noise floor), so that a wiring fault (a coil on the wrong output, a
+fluxgate on the wrong input, a supply that does not deliver) shows as a number next to the one
+expected.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numpy as np
 
-from mows.device.interface import CoilCommand, CommandResult, FieldCurrentCommand
+from mows.device.interface import CoilCommand, CommandResult, DeviceFault, FieldCurrentCommand, LinkEvent
 from mows.records.samples import SampleBlock
 
 VISIBLE = 10.0  # a coil or a supply step is seen when its signal is this many noise σ
+ANSWER_S = 5.0  # a device answers a command, or delivers the samples due, within this (beyond their time)
+
+
+class CheckStopped(RuntimeError):
+    """The device stopped the check: its link went down, it faulted, or it did not answer in time."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,13 +85,26 @@ class HardwareCheck:
         self._ids = 0
         self._next_index = 0
 
-    def run(self) -> list[CheckLine]:
-        rest = self._read(self.rest_s)
-        noise = rest.std(axis=0)
-        lines = [self._fluxgates(rest)]
-        lines += [self._coil(k, noise) for k in range(self.info.n_coils)]
-        lines.append(self._supply(rest.mean(axis=0)))
+    def run(self, supply: bool = True) -> list[CheckLine]:
+        """Every check in turn (the supply's when ``supply``), until one is stopped by the device."""
+        lines: list[CheckLine] = []
+        name = "fluxgates at rest"
+        try:
+            rest = self._read(self.rest_s)
+            noise = rest.std(axis=0)
+            lines.append(self._fluxgates(rest))
+            for k in range(self.info.n_coils):
+                name = self._coil_name(k)
+                lines.append(self._coil(k, noise))
+            if supply:
+                name = "field supply"
+                lines.append(self._supply(rest.mean(axis=0)))
+        except CheckStopped as stopped:
+            lines.append(CheckLine(name, False, f"stopped: {stopped}; the checks after it were not run"))
         return lines
+
+    def _coil_name(self, k: int) -> str:
+        return f"coil {k + 1} at {self.coil_current_a:g} A, {self.frequency_hz:g} Hz, {self.pulse_s:g} s"
 
     def _fluxgates(self, rest: np.ndarray) -> CheckLine:
         saturated = np.abs(rest) >= self.info.range_t
@@ -99,6 +121,8 @@ class HardwareCheck:
         amplitudes = [0.0] * self.info.n_coils
         amplitudes[k] = self.coil_current_a
         on = self._command(CoilCommand(0, 0, tuple(amplitudes), self.frequency_hz))
+        if not on.accepted:
+            return CheckLine(self._coil_name(k), False, f"refused: {on.reason}")
         n = round(self.pulse_s * self.info.sample_rate_hz)
         off = self._command(CoilCommand(0, on.applied_sample_index + n, (0.0,) * self.info.n_coils, 0.0))
         samples = self._read_span(on.applied_sample_index, off.applied_sample_index)
@@ -113,7 +137,7 @@ class HardwareCheck:
             for name, s, f, c in zip(self.names, seen, floor, clipped)
         )
         return CheckLine(
-            f"coil {k + 1} at {self.coil_current_a:g} A, {self.frequency_hz:g} Hz, {self.pulse_s:g} s",
+            self._coil_name(k),
             bool(np.any(seen > VISIBLE * floor)),
             saw,
         )
@@ -154,17 +178,23 @@ class HardwareCheck:
             command, command_id=self._ids, at_sample_index=max(command.at_sample_index, self._lead())
         )
         self.backend.send(command)
-        for _ in range(1000):
+        deadline = time.monotonic() + ANSWER_S
+        while time.monotonic() < deadline:
             for item in self.backend.poll(0.05):
                 self._take(item)
                 if isinstance(item, CommandResult) and item.command_id == self._ids:
                     return item
-        raise RuntimeError(f"the device did not answer command {command}")
+        raise CheckStopped(f"the device did not answer {command} within {ANSWER_S:g} s")
 
     def _lead(self) -> int:
         return self._next_index + self.backend.command_lead_samples
 
     def _take(self, item) -> np.ndarray | None:
+        """A block's samples; CheckStopped when the link went down or the device faulted."""
+        if isinstance(item, LinkEvent) and not item.up:
+            raise CheckStopped(f"the link went down: {item.reason}")
+        if isinstance(item, DeviceFault):
+            raise CheckStopped(f"the device faulted: {item.reason}")
         if isinstance(item, SampleBlock):
             self._next_index = item.first_sample_index + len(item)
             return item.samples_t
@@ -178,7 +208,10 @@ class HardwareCheck:
         """Samples [start, end) (those before the next one to arrive are gone)."""
         pieces: list[np.ndarray] = []
         first = end
+        deadline = time.monotonic() + (end - self._next_index) / self.info.sample_rate_hz + ANSWER_S
         while self._next_index < end:
+            if time.monotonic() > deadline:
+                raise CheckStopped(f"the device delivered no samples for {ANSWER_S:g} s beyond their time")
             for item in self.backend.poll(0.05):
                 samples = self._take(item)
                 if samples is not None:

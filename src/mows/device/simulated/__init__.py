@@ -2,9 +2,9 @@
 emulator, the bench and the tests: a device whose commands take effect at chosen sample indices
 (``scheduled``: :class:`~mows.device.simulated.scheduled.ScheduledDevice`, with the current cap
 and the static-field supply's ramps), the same for a scene of several probes on one stage
-(``scheduled_multiprobe``), and the paper's bench behind a stand-in of NI's ``nidaqmx`` Task API
-(``daqmx``: :class:`~mows.device.simulated.daqmx.SimulatedBench`).
+(``scheduled_multiprobe``), and the paper's NI card in wall-clock time under NI's own ``nidaqmx``,
+its C library's interpreter replaced (``daqmx_card``: :class:`~mows.device.simulated.daqmx_card.SimulatedCard`).
 
-May import: ``mows.sim``, ``mows.physics``, ``mows.records``, and ``mows.device.interface``,
-``mows.device.clock``, ``mows.device.protocol``; no other device package.
+May import: ``mows.sim``, ``mows.physics``, ``mows.records``, NI's ``nidaqmx`` (``daqmx_card``), and
+``mows.device.interface``, ``mows.device.clock``, ``mows.device.protocol``; no other device package.
 """

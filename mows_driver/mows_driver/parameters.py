@@ -102,8 +102,8 @@ PARAMETERS = (
     ParamSpec(
         "record_path",
         "",
-        "write /mows/raw, /mows/excitation and /mows/supply to a new rosbag2 MCAP bag here "
-        "('' records nothing); fixed at start-up",
+        "write /mows/raw, /mows/excitation and /mows/supply, with the graph's fits, sweeps, maps, "
+        "model reports and /diagnostics, to a new rosbag2 MCAP bag here ('' records nothing); fixed at start-up",
         read_only=True,
     ),
     ParamSpec("block_duration_s", 0.025, "length of one MagnetometerBlock on /mows/raw, s", range=(0.01, 0.05)),

@@ -1,5 +1,6 @@
-"""Recording what the driver publishes into a rosbag2 bag (MCAP storage, metadata version 9)
-with ``rosbags``, which Jazzy's ``ros2 bag info/play`` read.
+"""Recording what the driver publishes, and what the graph concludes from it, into one rosbag2
+bag (MCAP storage, metadata version 9) with ``rosbags``, which Jazzy's ``ros2 bag info/play``
+read.
 
 Messages are serialised with ``rclpy.serialization`` (the same CDR as rosbags) and written
 before they are published, so a subscriber never receives a message the bag lacks. Each
@@ -9,6 +10,8 @@ its summary and metadata (the driver closes it on SIGINT and SIGTERM); after a S
 but the last chunk survive (:class:`mows.device.recording.bags.Recording`) and ``mows bag repair``
 rebuilds the bag from them.
 """
+
+import threading
 
 from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
@@ -43,33 +46,39 @@ def bag_qos(profile: QoSProfile) -> Qos:
 
 class BagRecorder:
     """A new bag at ``path`` (which must not exist: :class:`mows.device.recording.bags.BagError`) for
-    ``topics``: {name: (msgtype, QoS)}. Used from one thread at a time (the driver's streaming
-    thread, then its shutdown)."""
+    ``topics``: {name: (msgtype, QoS)}. Written from the driver's streaming thread (what it
+    publishes) and its executor (what it hears of the graph), one at a time."""
 
     def __init__(self, path: str, topics: dict[str, tuple[str, QoSProfile]]):
         self._recording = bags.Recording(
             path, {topic: (msgtype, [bag_qos(qos)]) for topic, (msgtype, qos) in topics.items()}
         )
         self.path = self._recording.path
+        self._lock = threading.Lock()
+        self._closed = False  # a conclusion heard while the bag closes is not written
 
     @property
     def messages(self) -> int:
         return self._recording.messages
 
     def write(self, topic: str, message, timestamp_ns: int) -> None:
-        self._recording.write(topic, serialize_message(message), timestamp_ns)
+        raw = serialize_message(message)
+        with self._lock:
+            if not self._closed:
+                self._recording.write(topic, raw, timestamp_ns)
 
     def close(self) -> None:
-        self._recording.close()
+        with self._lock:
+            if not self._closed:
+                self._closed = True
+                self._recording.close()
 
 
-def open_recorder(path: str, publishers: list) -> BagRecorder | None:
-    """A new bag at ``path`` of what ``publishers`` [(publisher, its QoS)] publish; None for ''."""
+def open_recorder(path: str, topics: list) -> BagRecorder | None:
+    """A new bag at ``path`` of ``topics`` [(name, message class, its QoS)]; None for ''."""
     if not path:
         return None
-    return BagRecorder(
-        path, {publisher.topic_name: (message_type(publisher.msg_type), qos) for publisher, qos in publishers}
-    )
+    return BagRecorder(path, {name: (message_type(cls), qos) for name, cls, qos in topics})
 
 
 def message_type(cls) -> str:

@@ -1,8 +1,10 @@
-"""The ring-down fit's vocabulary: its options, its result and the outcome codes.
+"""The ring-down fit's vocabulary: its options, what it is told of each probe, its result and
+the outcome codes.
 
-:func:`mows.estimate.ringdown.fit_ringdown` takes :class:`FitOptions` and returns a
-:class:`RingdownFit` whose :class:`FitStatus` says whether the numbers mean anything; the
-estimator node, the calibration and the lab read these without running a fit.
+:func:`mows.estimate.ringdown.fit_ringdowns` takes a :class:`ProbeLine` per probe ringing in
+the window and :class:`FitOptions`, and returns a :class:`RingdownFit` per probe whose
+:class:`FitStatus` says whether the numbers mean anything; the estimator node, the calibration
+and the lab read these without running a fit.
 """
 
 from __future__ import annotations
@@ -116,9 +118,40 @@ class FitOptions:
         return paper_pickup(theta0_rad, self.sensor_direction)
 
 
+@dataclasses.dataclass(frozen=True)
+class ProbeLine:
+    """What the fit is told about one probe ringing in the window.
+
+    probe_id : carried into its :class:`RingdownFit`.
+    theta0_rad : its commanded orientation.
+    expected_frequency_hz : where its line is, e.g. its excitation frequency.
+    pickup : the C_k of its g (:func:`mows.physics.fluxgate.pickup_harmonics`, for the fitted
+        channel combination); None: ``FitOptions.pickup``, else the paper's single term.
+    damping_guess_per_s : δ to start from.
+    pickup_scale_t : the κ that makes ``pickup`` the sensors' signal in tesla
+        (:func:`mows.physics.fluxgate.pickup_scale_t`); NaN: unknown. Known, it gives the
+        swing from the signal's size where the signal's shape does not
+        (:func:`mows.estimate.ringdown.summary.start_swing_rad`).
+    """
+
+    probe_id: int
+    theta0_rad: float
+    expected_frequency_hz: float
+    pickup: tuple | None = None
+    damping_guess_per_s: float = 1.8
+    pickup_scale_t: float = math.nan
+
+    def pickup_series(self, sensor_direction: tuple = (0.0, 1.0)) -> NDArray[np.complex128]:
+        """Its C_k: ``pickup``, or the paper's single term for a sensor along ``sensor_direction``."""
+        if self.pickup is None:
+            return paper_pickup(self.theta0_rad, sensor_direction)
+        return np.asarray(self.pickup, complex)
+
+
 @dataclasses.dataclass
 class RingdownFit:
-    """Result of :func:`fit_ringdown`. SI units; every number is NaN unless status is OK.
+    """Result of :func:`mows.estimate.ringdown.fit_ringdowns` for one probe. SI units; every
+    number is NaN unless status is OK.
 
     ``amplitude_rad`` is θmax, the swing at the first fitted sample about the rest angle
     θ0 + ``rest_offset_rad``; its σ is :attr:`amplitude_std_rad`. Each is NaN, named in
@@ -155,7 +188,7 @@ class RingdownFit:
     covariance: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
     pickup: tuple = ()  # the fitted model's C_k (complex) over the swing about the rest angle
     undetermined: tuple = ()  # names of the numbers the data did not pin (NaN; why: ``message``)
-    probe_id: int = 0  # which probe, when several ring down together (:mod:`mows.estimate.ringdown.joint`)
+    probe_id: int = 0  # which probe (:class:`ProbeLine`), when several ring down together
 
     @property
     def ok(self) -> bool:

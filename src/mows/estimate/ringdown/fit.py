@@ -242,9 +242,7 @@ def _problem(y: NDArray[np.float64], fs: float, lines: Sequence[ProbeLine], opti
     noise = np.array([white_noise_std(ch) for ch in y])
     if np.any(noise <= 0):  # noiseless, or quantised to a constant: weight channels equally
         noise = np.full(y.shape[0], max(float(np.ptp(y)) * 1e-9, 1e-30))
-    pickups = padded_pickups(
-        [options.pickup_at(line.theta0_rad) if line.pickup is None else line.pickup_series() for line in lines]
-    )
+    pickups = padded_pickups([line.pickup_series(options) for line in lines])
     offset_free = options.offset_free and len(lines) == 1
     return RingdownProblem(np.ascontiguousarray(y, float), 1.0 / noise, 1.0 / fs, pickups, offset_free)
 

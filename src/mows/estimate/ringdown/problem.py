@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mows.estimate.ringdown.model import evaluate_model, levenberg_marquardt, split_pickup
-from mows.estimate.ringdown.types import ProbeLine
+from mows.estimate.ringdown.types import FitOptions, ProbeLine
 from mows.physics.schema import Vector
 
 NONLINEAR = ("frequency_hz", "damping_per_s", "amplitude_rad", "phase_rad")
@@ -201,7 +201,7 @@ def cramer_rao_hz(
         np.zeros((1, int(n_samples))),
         np.array([1.0 / noise_std_t]),
         1.0 / sample_rate_hz,
-        padded_pickups([line.pickup_series(sensor_direction) for line in lines]),
+        padded_pickups([line.pickup_series(FitOptions(sensor_direction=tuple(sensor_direction))) for line in lines]),
         offsets is not None,
     )
     step = evaluate(problem, q)

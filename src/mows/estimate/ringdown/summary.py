@@ -220,7 +220,7 @@ def _tone_fit(
     signal_power = float(np.mean(kappa**2) * np.var(step.g[k]))
     n = problem.y.shape[1]
     offset = q[OFFSET] if problem.offset_free else 0.0
-    pickup = problem.fitted_pickup(step.q, k)[: line.pickup_series(options.sensor_direction).size]
+    pickup = problem.fitted_pickup(step.q, k)[: line.pickup_series(options).size]
     fit = RingdownFit(
         status=FitStatus.OK,
         message=note,

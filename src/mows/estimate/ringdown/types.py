@@ -48,20 +48,22 @@ class FitOptions:
         paper's model.
     pickup : coefficients C_k (complex, k = 0 …) of g for the commanded θ0, from
         :func:`mows.physics.fluxgate.pickup_harmonics`; replaces the paper's model when given.
-    theta0_free : fit θ0 instead of taking the commanded value (paper's model only: the
-        pickup's dependence on θ0 is not a rotation once the lever moves the magnet).
+    theta0_free : fit θ0 instead of taking the commanded value (paper's model of one probe only:
+        the pickup's dependence on θ0 is not a rotation once the lever moves the magnet).
     rest_offset_free : fit the rest-angle offset ε = θs − θ0 (the static deflection by a
         perpendicular field, gravity or a gradient). The lever turns by ε about its pivot, so
         the signal is g(ε + x): the pickup turned by ε, exact for any pickup. Without it the
         model swings about θ0, and κ and θmax trade off against the missing offset (θmax
         off by up to 50° near θ0 = 180° in a strong perpendicular field); f barely moves.
-        With ``theta0_free`` the same parameter is reported as θ0 instead.
+        With ``theta0_free`` the same parameter is reported as θ0 instead. Fitted for one probe
+        only (:mod:`mows.estimate.ringdown.fit` says why).
     search_fraction : the spectral search covers expected f ± this fraction.
     min_periods : fewer usable periods than this gives TOO_SHORT.
     min_frequency_fraction : a peak below this fraction of the expected frequency means the
         probe has (nearly) no restoring spring: NEGATIVE_STIFFNESS.
     detection_snr : the spectral peak must exceed the noise floor by this power ratio.
     max_chi2_dof : above this the model does not describe the data: BAD_FIT.
+    max_iterations : the Levenberg–Marquardt budget of each stage (trial steps, rejected ones too).
     theta_stop_rad : the housing stop: the rest offset is searched within ±stop (a probe
         deflected beyond it rests on the stop) and θmax within 2·stop.
     amplitude_tolerance_rad, rest_offset_tolerance_rad : θmax and the rest offset are reported
@@ -141,10 +143,10 @@ class ProbeLine:
     damping_guess_per_s: float = 1.8
     pickup_scale_t: float = math.nan
 
-    def pickup_series(self, sensor_direction: tuple = (0.0, 1.0)) -> NDArray[np.complex128]:
-        """Its C_k: ``pickup``, or the paper's single term for a sensor along ``sensor_direction``."""
+    def pickup_series(self, options: FitOptions = FitOptions()) -> NDArray[np.complex128]:
+        """Its C_k: ``pickup``, else ``options``' (:meth:`FitOptions.pickup_at` its θ0)."""
         if self.pickup is None:
-            return paper_pickup(self.theta0_rad, sensor_direction)
+            return options.pickup_at(self.theta0_rad)
         return np.asarray(self.pickup, complex)
 
 

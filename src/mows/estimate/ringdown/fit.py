@@ -98,7 +98,7 @@ from mows.estimate.ringdown.summary import (
 )
 from mows.estimate.ringdown.types import FitOptions, FitStatus, ProbeLine, RingdownFit, failure
 
-START_AMPLITUDE_RAD = 0.3
+START_AMPLITUDE_RAD = 0.3  # θmax to start from (17°, a typical swing after the excitation)
 
 # --- the usable window -----------------------------------------------------------------------
 # The coil current's decay after switch-off: what the estimator node, `mows fit` and the lab leave

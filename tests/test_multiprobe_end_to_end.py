@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from mows.estimate.ringdown.joint import ProbeLine, fit_ringdowns, start_swing_rad
+from mows.estimate.ringdown import ProbeLine, fit_ringdowns, start_swing_rad
 from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics, pickup_scale_t
 from mows.physics.pose import Pose

@@ -9,9 +9,9 @@ samples missing is refused for every probe, not patched.
 import numpy as np
 
 from mows.bench.multiprobe_rig import MultiProbeRig
-from mows.estimate.joint_segment import fit_joint_segment, probe_lines
+from mows.estimate.probe_set import probe_lines
 from mows.estimate.ringdown.types import FitStatus
-from mows.estimate.segments import RingdownWindow, Segment
+from mows.estimate.segments import RingdownWindow, Segment, fit_joint_segment
 from mows.sim.scenario import load_scenario
 
 SCENE = load_scenario("three_probes")

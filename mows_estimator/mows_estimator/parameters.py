@@ -6,8 +6,7 @@ import math
 from collections.abc import Sequence
 
 from mows.estimate.probe_set import WindowProbe
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
-from mows.estimate.ringdown.joint import JointOptions, ProbeLine
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, ProbeLine
 from mows.estimate.stream import FitSettings, JointSettings
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import Probe
@@ -111,7 +110,7 @@ def joint_settings(values: dict, probe: Probe) -> JointSettings | None:
     probes = probe_set(values["probes"], probe)
     if not probes:
         return None
-    options = JointOptions(values["channels"], min_periods=values["min_periods"], max_chi2_dof=values["max_chi2_dof"])
+    options = FitOptions(values["channels"], min_periods=values["min_periods"], max_chi2_dof=values["max_chi2_dof"])
     return JointSettings(probes, functools.partial(joint_lines, values), options)
 
 

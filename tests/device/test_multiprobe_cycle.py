@@ -32,9 +32,9 @@ from mows.device.interface import (
 )
 from mows.device.simulated.scheduled import OverCap
 from mows.device.stream.session import DeviceSession, SessionConfig
-from mows.estimate.joint_segment import fit_joint_segment, probe_lines
+from mows.estimate.probe_set import probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_ringdown
-from mows.estimate.segments import RingdownWindow, SegmentAssembler
+from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_joint_segment
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.sim.multiprobe_device import MultiProbeDevice
 from mows.sim.scenario import load_scenario

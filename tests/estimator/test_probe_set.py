@@ -6,7 +6,6 @@ import pytest
 
 from mows.estimate.probe_set import MAX_PROBES, read_probe_set
 from mows.estimate.ringdown import FitOptions
-from mows.estimate.ringdown.joint import JointOptions
 from mows.estimate.segments import RingdownWindow, Segment
 from mows.estimate.stream import FitSettings, JointSettings, RingdownEstimator
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
@@ -87,7 +86,7 @@ def test_with_probes_each_gets_its_estimate_from_its_own_f00():
     data = np.column_stack([2 * one, one]) + 1e-10 * np.random.default_rng(2).standard_normal((10_000, 2))
     entries = read("{0: 112.5, 1: 125.0}")
     joint = JointSettings(
-        entries, lambda held: [p.entry.line(p.theta0_rad, None, "difference") for p in held], JointOptions()
+        entries, lambda held: [p.entry.line(p.theta0_rad, None, "difference") for p in held], FitOptions()
     )
     settings = FitSettings(PAPER_PROBE, lambda theta0: FitOptions(), 0.0, 112.48, 0.0, joint)
     estimated = RingdownEstimator(5.0).estimate_all(segment(data), settings)

@@ -21,9 +21,7 @@ from scipy import stats
 
 from mows.bench.estimator import N_SAMPLES, SAMPLE_RATE_HZ
 from mows.bench.multiprobe import PairCase, pair_cell
-from mows.estimate.ringdown import fit_ringdown
-from mows.estimate.ringdown.joint import ProbeLine, fit_ringdowns, joint_cramer_rao_hz
-from mows.estimate.ringdown.problem import cramer_rao_frequency_hz
+from mows.estimate.ringdown import ProbeLine, cramer_rao_frequency_hz, cramer_rao_hz, fit_ringdown, fit_ringdowns
 from mows.estimate.ringdown.types import FitOptions, FitStatus, RingdownFit
 from mows.physics.signal import signal_t
 
@@ -159,7 +157,7 @@ def test_three_probes_at_different_orientations_are_each_at_their_bound():
     clean = sum(signal_t(t, theta0, a, f, phase, d, k) for f, d, a, phase, k, theta0 in truth)
     sigma = 3e-10
     lines = [ProbeLine(i, row[5], round(row[0])) for i, row in enumerate(truth)]
-    crb = joint_cramer_rao_hz(n, rate, lines, [row[:5] for row in truth], sigma)
+    crb = cramer_rao_hz(n, rate, lines, [row[:5] for row in truth], sigma)
     alone = [
         cramer_rao_frequency_hz(n, rate, f, d, a, phase, theta0, k, sigma, offset_free=False)
         for f, d, a, phase, k, theta0 in truth

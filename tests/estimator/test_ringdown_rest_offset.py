@@ -122,8 +122,7 @@ def test_a_local_fit_lands_in_a_wrong_minimum_that_the_fit_does_not_report():
         y,
         np.array([1.0 / white_noise_std(y[0])]),
         1.0 / record.sample_rate_hz,
-        record.theta0_rad,
-        options.pickup_at(record.theta0_rad),
+        options.pickup_at(record.theta0_rad)[None, :],
         True,
     )
     q0 = starting_point(y[0], record.sample_rate_hz, record.theta0_rad, record.frequency_hz, options)

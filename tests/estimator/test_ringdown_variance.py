@@ -6,7 +6,8 @@ parameter's σ is NaN, its row and column of the covariance are NaN, and it is n
 ``RingdownFit.undetermined`` with the reason in the message. Property: over random but valid
 ring-downs (any orientation, swing, rest offset, a lever harmonic, SNR 5–60 dB, 0.25–0.5 s),
 no OK fit has a negative entry on its covariance's diagonal, and every fitted parameter whose
-variance is NaN is named as not determined.
+variance is NaN is named as not determined. The same holds for each probe of a fit of two
+ringing down together (each about its θ0, as the fit of several has it).
 """
 
 import math
@@ -15,7 +16,7 @@ import numpy as np
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from mows.estimate.ringdown import FitOptions, fit_ringdown
+from mows.estimate.ringdown import FitOptions, ProbeLine, fit_ringdown, fit_ringdowns
 from mows.physics.fluxgate import paper_pickup
 
 SAMPLE_RATE_HZ = 20_000.0
@@ -24,14 +25,23 @@ KAPPA_T = 1.2e-7
 
 
 def ringdown_t(
-    theta0_rad, amplitude_rad, rest_offset_rad, lever, lever_phase_rad, damping_per_s, duration_s, snr_db, seed
+    theta0_rad,
+    amplitude_rad,
+    rest_offset_rad,
+    lever,
+    lever_phase_rad,
+    damping_per_s,
+    duration_s,
+    snr_db,
+    seed,
+    frequency_hz=FREQUENCY_HZ,
 ):
     """(samples, pickup): κ·g(ε + x) + B_DC in white noise, g with the paper's term at θ0 and a
     second harmonic of relative size ``lever`` (a lever's pickup, ~(3l/r)²)."""
     pickup = paper_pickup(theta0_rad).astype(complex)
     pickup = np.concatenate([pickup, [lever * abs(pickup[1]) * np.exp(1j * lever_phase_rad)]])
     t = np.arange(int(duration_s * SAMPLE_RATE_HZ)) / SAMPLE_RATE_HZ
-    x = amplitude_rad * np.exp(-damping_per_s * t) * np.cos(2 * math.pi * FREQUENCY_HZ * t + 0.7)
+    x = amplitude_rad * np.exp(-damping_per_s * t) * np.cos(2 * math.pi * frequency_hz * t + 0.7)
     k = np.arange(pickup.size)
     g = np.real(pickup[None, :] * np.exp(1j * k[None, :] * (rest_offset_rad + x)[:, None])).sum(axis=1)
     noise_std_t = KAPPA_T * math.sin(amplitude_rad) / math.sqrt(2.0) / 10 ** (snr_db / 20.0)
@@ -89,3 +99,42 @@ def test_no_fit_reports_a_negative_variance(
             assert name in fit.undetermined, (name, fit.message)
     if "amplitude_rad" in fit.undetermined:
         assert math.isnan(fit.amplitude_rad) and math.isnan(fit.amplitude_std_rad)
+
+
+def assert_no_negative_variance(fit):
+    variance = np.diag(fit.covariance)
+    assert not np.any(variance < 0), (fit.parameter_names, variance, fit.message)
+    for name, value in zip(fit.parameter_names, variance):
+        if math.isnan(value):
+            assert name in fit.undetermined, (name, fit.message)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    theta0_deg=st.tuples(st.floats(0.0, 360.0), st.one_of(st.floats(0.0, 360.0), st.floats(85.0, 95.0))),
+    amplitude_deg=st.tuples(st.floats(1.0, 60.0), st.floats(1.0, 60.0)),
+    lever=st.floats(0.0, 0.15),
+    separation_hz=st.floats(3.0, 20.0),
+    ratio=st.floats(0.05, 1.0),
+    duration_s=st.floats(0.25, 0.5),
+    snr_db=st.floats(5.0, 60.0),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_no_fit_of_two_probes_reports_a_negative_variance(
+    theta0_deg, amplitude_deg, lever, separation_hz, ratio, duration_s, snr_db, seed
+):
+    frequencies = (FREQUENCY_HZ, FREQUENCY_HZ + separation_hz)
+    parts = [
+        ringdown_t(math.radians(theta), math.radians(amp), 0.0, lever, 0.5, 1.8, duration_s, 300.0, seed, f)
+        for theta, amp, f in zip(theta0_deg, amplitude_deg, frequencies)
+    ]
+    noise_std_t = KAPPA_T * math.sin(math.radians(amplitude_deg[0])) / math.sqrt(2.0) / 10 ** (snr_db / 20.0)
+    rng = np.random.default_rng(seed)
+    samples = parts[0][0] + ratio * parts[1][0] + noise_std_t * rng.standard_normal(parts[0][0].size)
+    lines = [
+        ProbeLine(k, math.radians(theta), f * error, tuple(pickup))
+        for k, (theta, f, error, (_, pickup)) in enumerate(zip(theta0_deg, frequencies, (0.995, 1.004), parts))
+    ]
+    for fit in fit_ringdowns(samples, SAMPLE_RATE_HZ, lines):
+        if fit.ok:
+            assert_no_negative_variance(fit)

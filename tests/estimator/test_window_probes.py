@@ -16,7 +16,6 @@ import pytest
 
 from mows.estimate.probe_set import read_probe_set, window_probes
 from mows.estimate.ringdown import FitOptions, FitStatus
-from mows.estimate.ringdown.joint import JointOptions
 from mows.estimate.segments import RingdownWindow, Segment, window_from_message
 from mows.estimate.stream import FitSettings, JointSettings, RingdownEstimator
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
@@ -100,7 +99,7 @@ def settings():
     def lines(held):
         return [p.entry.line(p.theta0_rad, None, "difference", p.tone_hz) for p in held]
 
-    joint = JointSettings(PROBES, lines, JointOptions())
+    joint = JointSettings(PROBES, lines, FitOptions())
     return FitSettings(PAPER_PROBE, lambda theta0: FitOptions(), 0.0, 112.48, 0.0, joint)
 
 
@@ -126,7 +125,7 @@ def test_fitted_at_the_windows_one_theta0_the_same_group_is_not_at_its_frequenci
     def lines(held):
         return [p.entry.line(p.theta0_rad, None, "difference") for p in held]
 
-    joint = JointSettings(only_listed, lines, JointOptions())
+    joint = JointSettings(only_listed, lines, FitOptions())
     fitted = RingdownEstimator(5.0).estimate_all(
         Segment(stage_only, 0, FS, data, np.zeros(data.shape, bool), 0),
         FitSettings(PAPER_PROBE, lambda theta0: FitOptions(), 0.0, 112.48, 0.0, joint),

@@ -5,7 +5,7 @@ Synthetic windows hold two ring-downs of the fit model (Eqs. S2, S12, the probes
 (:mod:`mows.bench.estimator`: 112.6 Hz, 20°, SNR 40 dB), the second has its κ times the
 amplitude ratio. For each separation and ratio: each probe's Cramér–Rao bound in the
 presence of the other over its bound alone (what the neighbour costs in principle), and the
-Monte Carlo error of :func:`mows.estimate.ringdown.joint.fit_ringdowns` over its bound
+Monte Carlo error of :func:`mows.estimate.ringdown.fit_ringdowns` over its bound
 (what the estimator loses on top), with its bias in units of its scatter.
 """
 
@@ -28,8 +28,7 @@ from mows.bench.estimator import (
     SAMPLE_RATE_HZ,
     RingdownCase,
 )
-from mows.estimate.ringdown.joint import ProbeLine, fit_ringdowns, joint_cramer_rao_hz
-from mows.estimate.ringdown.problem import cramer_rao_frequency_hz
+from mows.estimate.ringdown import ProbeLine, cramer_rao_frequency_hz, cramer_rao_hz, fit_ringdowns
 from mows.physics.signal import signal_t
 
 SNR_DB = 40.0
@@ -81,7 +80,7 @@ class PairCase:
 
     def crb_hz(self) -> np.ndarray:
         """Each probe's bound in the presence of the other."""
-        return joint_cramer_rao_hz(N_SAMPLES, SAMPLE_RATE_HZ, self.lines(), self.truth(), self.noise_std_t)
+        return cramer_rao_hz(N_SAMPLES, SAMPLE_RATE_HZ, self.lines(), self.truth(), self.noise_std_t)
 
     def alone_crb_hz(self) -> np.ndarray:
         """Each probe's bound were it alone (the one-probe bound, without a rest offset)."""

@@ -7,7 +7,7 @@ tone at its f00, the cap on the summed peak, overlapping tones refused with the 
 excites its groups in turn under the duty limit (:class:`mows.device.cycle.tone_groups.GroupSequence`).
 After each group's excitation it announces the ring-down window at the coils' switch-off, as the
 driver does, cuts it from the stream (:class:`mows.estimate.segments.SegmentAssembler`) and fits
-the group's probes jointly (:func:`mows.estimate.joint_segment.fit_joint_segment`). Stretches
+the group's probes jointly (:func:`mows.estimate.segments.fit_joint_segment`). Stretches
 nobody records (settling, waiting for the duty limit) are integrated without reading the sensors.
 """
 
@@ -21,9 +21,9 @@ from numpy.typing import ArrayLike
 
 from mows.device.cycle.duty import DutyCycleLimit
 from mows.device.cycle.tone_groups import DEFAULT_SWING_RAD, GroupSequence, plan_probes
-from mows.estimate.joint_segment import fit_joint_segment, probe_lines
+from mows.estimate.probe_set import probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, RingdownFit
-from mows.estimate.segments import RingdownWindow, SegmentAssembler
+from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_joint_segment
 from mows.records.stamps import NS_PER_S
 from mows.sim.multiprobe_device import MultiProbeDevice
 

@@ -1,6 +1,7 @@
 """The probes one estimator tells apart in each ring-down window: the ``probes`` text of the
 estimator's parameters read into each probe's id, constants, f00 and place, and made into the
-joint fit's lines (:mod:`mows.estimate.ringdown.joint`).
+fit's lines (:class:`mows.estimate.ringdown.ProbeLine`); and the lines of a scene's placed
+probes (:func:`probe_lines`).
 
 The text is a YAML mapping from probe id (0–255) to the probe, given as its f00 in Hz, as a
 probe constants file (:meth:`mows.physics.probe.Probe.from_yaml`, whose f00 it takes), or as a
@@ -31,8 +32,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from mows.estimate.ringdown.joint import ProbeLine
+from mows.estimate.ringdown import FitOptions, ProbeLine
 from mows.estimate.segments import RingdownWindow
+from mows.physics.coupling import PlacedProbe
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics, pickup_scale_t
 from mows.physics.pose import Pose
 from mows.physics.probe import Probe
@@ -54,18 +56,40 @@ class ProbeEntry:
     position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def line(self, theta0_rad: float, pair: FluxgatePair | None, channels: str, tone_hz: float = math.nan) -> ProbeLine:
-        """Its line in the joint fit at θ0: the exact pickup of its magnet swinging on its lever
-        before ``pair`` (the fitted channel combination), or the paper's single term (None),
-        looked for at ``tone_hz`` (the driver's tone: its resonance in the present field),
-        else at f00."""
+        """Its line in the fit at θ0 (:func:`probe_line`, at its place), looked for at
+        ``tone_hz`` (the driver's tone: its resonance in the present field), else at f00."""
         expected_hz = tone_hz if math.isfinite(tone_hz) and tone_hz > 0 else self.f00_hz
-        if pair is None:
-            return ProbeLine(self.probe_id, theta0_rad, expected_hz, None, self.probe.damping_per_s)
         pose = Pose(theta0_rad=theta0_rad, magnet_position_m=self.position_m)
-        moment = self.probe.moment_am2
-        pickup = tuple(pickup_harmonics(pair, pose, self.probe.lever_m, moment, combine=channels))
-        scale_t = pickup_scale_t(pair, self.position_m, moment, channels)
-        return ProbeLine(self.probe_id, theta0_rad, expected_hz, pickup, self.probe.damping_per_s, scale_t)
+        return probe_line(self.probe_id, self.probe, pose, expected_hz, pair, channels)
+
+
+def probe_line(
+    probe_id: int, probe: Probe, pose: Pose, expected_hz: float, pair: FluxgatePair | None, channels: str
+) -> ProbeLine:
+    """The line of ``probe`` at ``pose`` in the fit: the exact pickup of its magnet swinging on
+    its lever before ``pair`` (the fitted channel combination) with its absolute scale, or the
+    paper's single term (``pair`` None); its line expected at ``expected_hz``."""
+    if pair is None:
+        return ProbeLine(probe_id, pose.theta0_rad, expected_hz, None, probe.damping_per_s)
+    moment = probe.moment_am2
+    pickup = tuple(pickup_harmonics(pair, pose, probe.lever_m, moment, combine=channels))
+    scale_t = pickup_scale_t(pair, pose.magnet_position_m, moment, channels)
+    return ProbeLine(probe_id, pose.theta0_rad, expected_hz, pickup, probe.damping_per_s, scale_t)
+
+
+def probe_lines(
+    pair: FluxgatePair,
+    placed: Sequence[PlacedProbe],
+    probe_ids: Sequence[int],
+    expected_frequency_hz: Sequence[float],
+    channels: str = FitOptions.channels,
+) -> list[ProbeLine]:
+    """One line per probe of a scene: ``placed[k]`` (at its present θ0) with id
+    ``probe_ids[k]``, its line expected at ``expected_frequency_hz[k]`` (its tone's)."""
+    return [
+        probe_line(int(probe_id), p.probe, p.pose, float(f), pair, channels)
+        for p, probe_id, f in zip(placed, probe_ids, expected_frequency_hz)
+    ]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -17,11 +17,12 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure, fit_ringdown
+from mows.estimate.ringdown import FitOptions, FitStatus, ProbeLine, RingdownFit, failure, fit_ringdown, fit_ringdowns
 from mows.records import stamps
 from mows.records.samples import SampleBlock
 
@@ -235,7 +236,8 @@ def gap_message(segment: Segment) -> str:
 def fit_segment(
     segment: Segment, options: FitOptions = FitOptions(), coil_off_skip_s: float = 0.0, damping_guess_per_s: float = 1.8
 ) -> RingdownFit:
-    """Fit one assembled ring-down; a segment with missing samples is refused, not patched."""
+    """Fit one assembled ring-down of one probe (:func:`mows.estimate.ringdown.fit_ringdown`);
+    a segment with missing samples is refused, not patched."""
     window = segment.window
     if segment.missing_samples:
         return failure(
@@ -254,3 +256,21 @@ def fit_segment(
         damping_guess_per_s,
         coil_off_skip_s,
     )
+
+
+def fit_joint_segment(
+    segment: Segment,
+    lines: Sequence[ProbeLine],
+    coil_off_skip_s: float = 0.0,
+    options: FitOptions = FitOptions(),
+) -> list[RingdownFit]:
+    """The fit of one assembled window in which the probes of ``lines`` ring down together, a
+    multi-tone excitation's (:mod:`mows.physics.multitone`): one :class:`RingdownFit` per line,
+    in order (:func:`mows.estimate.ringdown.fit_ringdowns`). A window with missing samples is
+    refused for every probe (``FitStatus.DATA_GAP``), never patched."""
+    if segment.missing_samples:
+        message = gap_message(segment)
+        return [
+            failure(FitStatus.DATA_GAP, message, theta0_rad=line.theta0_rad, probe_id=line.probe_id) for line in lines
+        ]
+    return fit_ringdowns(segment.samples_t, segment.sample_rate_hz, lines, segment.saturated, options, coil_off_skip_s)

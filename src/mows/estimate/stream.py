@@ -4,7 +4,7 @@ the field and gradient along the probe axis (:mod:`mows.estimate.axis`) and, whi
 calibration runs (:mod:`mows.estimate.calibration.f00`), the OK fits offered to it.
 
 With several probes listed (:mod:`mows.estimate.probe_set`) each window is fitted jointly
-(:func:`mows.estimate.ringdown.joint.fit_ringdowns`) over the probes it holds
+(:func:`mows.estimate.ringdown.fit_ringdowns`) over the probes it holds
 (:func:`mows.estimate.probe_set.window_probes`: those its excitation lists, each at its own θ0,
 or every listed probe) and gives one estimate per probe, each counted from that probe's f00.
 A probe id the window lists but the set does not gets a failed fit naming it, never a number.
@@ -22,15 +22,14 @@ from typing import Any
 
 from mows.estimate.axis import AxisEstimate, estimate_along_axis
 from mows.estimate.calibration.f00 import F00Calibration
-from mows.estimate.joint_segment import fit_joint_segment
 from mows.estimate.probe_set import ProbeEntry, WindowProbe, window_probes
-from mows.estimate.ringdown import FitOptions, FitStatus, RingdownFit, failure
-from mows.estimate.ringdown.joint import JointOptions, ProbeLine
+from mows.estimate.ringdown import FitOptions, FitStatus, ProbeLine, RingdownFit, failure
 from mows.estimate.segments import (
     RingdownWindow,
     Segment,
     SegmentAssembler,
     block_from_message,
+    fit_joint_segment,
     fit_segment,
     window_from_message,
 )
@@ -44,7 +43,7 @@ class JointSettings:
 
     probes: tuple[ProbeEntry, ...]
     lines: Callable[[Sequence[WindowProbe]], list[ProbeLine]]
-    options: JointOptions
+    options: FitOptions
 
 
 @dataclasses.dataclass(frozen=True)

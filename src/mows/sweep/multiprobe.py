@@ -1,7 +1,7 @@
 """Each probe's external field and gradient from a sweep of several probes, the coupling in the model.
 
 In a sweep of several probes every point turns them all (their stages) and measures each one's
-frequency shift (:mod:`mows.estimate.joint_segment`). Probe k feels the external field and
+frequency shift (:func:`mows.estimate.segments.fit_joint_segment`). Probe k feels the external field and
 gradient at its magnet and its neighbours' dipole fields (:mod:`mows.physics.coupling`):
 
     B_k(r) = B_ext,k + G_ext,k·(r − r_k) + Σ_{l≠k} B_dipole(m_l(θ0_l, θs_l), r_l(θ0_l, θs_l); r),
@@ -45,7 +45,7 @@ from typing import Protocol
 
 import numpy as np
 
-from mows.estimate.ringdown.joint import JointOptions, start_swing_rad
+from mows.estimate.ringdown import FitOptions, start_swing_rad
 from mows.estimate.ringdown.types import RingdownFit
 from mows.physics.coupling import PlacedProbe
 from mows.physics.fluxgate import FluxgatePair, pickup_scale_t
@@ -119,7 +119,7 @@ def sweeps_of(
     placed: Sequence[PlacedProbe],
     points: Sequence[Sequence[RingdownFit]],
     pair: FluxgatePair,
-    channels: str = JointOptions.channels,
+    channels: str = FitOptions.channels,
 ) -> list[ProbeSweep]:
     """Each probe's :class:`ProbeSweep` from the fits of every point (one fit per probe, by
     ``probe_id`` = the index in ``placed``; the fits' channel combination ``channels`` of the

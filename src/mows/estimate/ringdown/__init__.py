@@ -1,15 +1,16 @@
-"""The ring-down fit: one free ring-down fitted at the Cramér–Rao bound, and several probes
-ringing down together in one window fitted jointly.
+"""The ring-down fit: K ≥ 1 probes ringing down in one window, fitted jointly at the
+Cramér–Rao bound; one probe is the group of one.
 
-``fit`` (:func:`fit_ringdown`, the model and the estimator in its docstring), ``types`` (its
-:class:`FitOptions`, :class:`RingdownFit`, :class:`FitStatus`), ``problem`` (variable projection,
-the Fisher information, the bound), ``start`` (the noise level and the spectral start),
-``offset`` (the rest offset and θmax searched over their whole range), ``model`` (the compiled
-kernels) and ``joint`` (:func:`mows.estimate.ringdown.joint.fit_ringdowns`, several probes in
-one window). Each imports only those before it in the order model, types, problem, start,
-offset, fit, joint.
+``fit`` (:func:`fit_ringdowns`, and :func:`fit_ringdown` for one probe; the model and the
+estimator in its docstring), ``types`` (:class:`FitOptions`, :class:`ProbeLine`,
+:class:`RingdownFit`, :class:`FitStatus`), ``model`` (the compiled kernels), ``problem``
+(variable projection, Levenberg–Marquardt, the Fisher information, the bound), ``start`` (the
+noise level and the spectral start), ``offset`` (one probe's rest offset and θmax searched over
+their whole range), ``summary`` (the covariance, the bound and what the data do not determine,
+into one :class:`RingdownFit` per probe). Each imports only those before it in the order
+model, types, problem, start, offset, summary, fit.
 
-This package's ``__init__`` re-exports the single fit's public names:
+This package's ``__init__`` re-exports the fit's public names:
 ``from mows.estimate.ringdown import fit_ringdown, FitOptions``.
 
 May import: ``mows.physics``, ``mows.records``; nothing else of ``mows.estimate``.
@@ -17,15 +18,15 @@ May import: ``mows.physics``, ``mows.records``; nothing else of ``mows.estimate`
 
 from mows.estimate.ringdown.fit import (
     COIL_OFF_SKIP_S,
-    DETERMINED_SIGMAS,
-    RIVAL_CHI2,
     combine_channels,
     fit_ringdown,
+    fit_ringdowns,
     starting_point,
     usable_window,
-    wrapped_rad,
 )
-from mows.estimate.ringdown.types import FitOptions, FitStatus, RingdownFit, failure, parameter_std
+from mows.estimate.ringdown.problem import cramer_rao_frequency_hz, cramer_rao_hz
+from mows.estimate.ringdown.summary import DETERMINED_SIGMAS, RIVAL_CHI2, start_swing_rad, wrapped_rad
+from mows.estimate.ringdown.types import FitOptions, FitStatus, ProbeLine, RingdownFit, failure, parameter_std
 
 __all__ = [
     "COIL_OFF_SKIP_S",
@@ -33,11 +34,16 @@ __all__ = [
     "RIVAL_CHI2",
     "FitOptions",
     "FitStatus",
+    "ProbeLine",
     "RingdownFit",
     "combine_channels",
+    "cramer_rao_frequency_hz",
+    "cramer_rao_hz",
     "failure",
     "fit_ringdown",
+    "fit_ringdowns",
     "parameter_std",
+    "start_swing_rad",
     "starting_point",
     "usable_window",
     "wrapped_rad",

@@ -1,4 +1,4 @@
-"""The rest offset ε and the swing θmax of a ring-down, searched over their whole range.
+"""The rest offset ε and the swing θmax of the ring-down of one probe, searched over their whole range.
 
 With f, δ and φ held (the spectral and local stages find them well: they are nearly orthogonal
 to ε and θmax), the model of one channel is linear in the pickup's turned coefficients:
@@ -40,7 +40,7 @@ def _shape_columns(
     t = np.arange(problem.y.shape[1]) * problem.dt
     base = np.exp(-q[1] * t) * np.cos(TWO_PI * q[0] * t + q[3])
     x = amplitudes_rad[:, None] * base[None, :]
-    order = problem.pickup.size - 1
+    order = problem.pickups.shape[1] - 1
     columns = np.empty((x.shape[0], 2 * order, x.shape[1]))
     cos_x, sin_x = np.cos(x), np.sin(x)
     columns[:, 0], columns[:, order] = cos_x, sin_x
@@ -75,7 +75,7 @@ def cost_map(
     flip = np.concatenate([np.ones(columns.shape[1] // 2), -np.ones(columns.shape[1] // 2)])
     gram = np.concatenate([(gram * np.outer(flip, flip))[::-1], gram])
     products = np.concatenate([(products * flip)[::-1], products])
-    weights = _weights(problem.pickup, offsets_rad)
+    weights = _weights(problem.pickups[0], offsets_rad)
     norm2 = np.sum((weights @ gram) * weights, axis=2)
     projection = products @ weights.T
     explained = np.where(projection > 0, projection**2 / np.maximum(norm2, 1e-300)[:, None, :], 0.0)

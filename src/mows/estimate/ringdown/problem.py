@@ -1,67 +1,85 @@
-"""The least-squares problem of one ring-down fit, solved by variable projection, and its
-Fisher information (docs/physics.md §11): what :func:`mows.estimate.ringdown.fit_ringdown` iterates
-on and what the Cramér–Rao bound is computed from. The model and its derivatives are the
-compiled kernels of :mod:`mows.estimate.ringdown.model`.
+"""The least-squares problem of a ring-down fit of K ≥ 1 tones in one window, solved by variable
+projection, and its Fisher information (docs/physics.md §11): what
+:func:`mows.estimate.ringdown.fit_ringdowns` iterates on and what the Cramér–Rao bound is
+computed from. The model and its derivatives are the compiled kernels of
+:mod:`mows.estimate.ringdown.model`.
+
+q holds each tone's nonlinear parameters in turn, (f, δ, θmax, φ[, ε]) per tone; the linear
+ones of each channel are (κ_1 … κ_K, B_DC).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mows.estimate.ringdown.model import evaluate_model, levenberg_marquardt, split_pickup
-from mows.physics.fluxgate import paper_pickup
+from mows.estimate.ringdown.types import FitOptions, ProbeLine
 from mows.physics.schema import Vector
 
 NONLINEAR = ("frequency_hz", "damping_per_s", "amplitude_rad", "phase_rad")
 
 
-@dataclasses.dataclass
-class Shape:
-    """g(x(t)) and dg/dq at the samples (:mod:`mows.estimate.ringdown.model`)."""
-
-    g: np.ndarray  # (n,)
-    dg_dq: np.ndarray  # (len(q), n)
-
-
 @dataclasses.dataclass(frozen=True)
 class RingdownProblem:
-    """Data and fixed settings of one fit: y is (C, n), uniformly sampled every ``dt``."""
+    """Data and fixed settings of one fit: y is (C, n), uniformly sampled every ``dt``;
+    ``pickups`` (K, L) the C_k of each tone's g (complex) at its commanded θ0, zero-padded."""
 
     y: np.ndarray
     weights: np.ndarray  # 1/σ per channel
     dt: float  # sample interval, s (t = 0 at the first sample)
-    theta0: float
-    pickup: np.ndarray  # C_k of g (complex) at the commanded θ0
-    offset_free: bool  # q[4] = ε turns the pickup, g(ε + x): the rest offset (or θ0's error)
+    pickups: np.ndarray
+    offset_free: bool  # each tone's last parameter ε turns its pickup, g(ε + x): the rest offset (or θ0's error)
+
+    @property
+    def tones(self) -> int:
+        return int(self.pickups.shape[0])
+
+    @property
+    def per_tone(self) -> int:
+        """Nonlinear parameters per tone: f, δ, θmax, φ and ε where it is free."""
+        return len(NONLINEAR) + int(self.offset_free)
 
     def kernel_data(self) -> tuple[float, np.ndarray, np.ndarray, bool, np.ndarray, np.ndarray]:
         """The data and settings as the compiled kernels take them: (dt, Re C_k, Im C_k, offset
         free, y, weights)."""
-        cr, ci = split_pickup(self.pickup)
+        cr, ci = split_pickup(self.pickups)
         return self.dt, cr, ci, self.offset_free, self.y, self.weights
 
-    def fitted_pickup(self, q: NDArray[np.float64]) -> NDArray[np.complex128]:
-        """The C_k of the model at q: turned by ε = q[4] when it is free, g(ε + x), as
+    def fitted_pickup(self, q: NDArray[np.float64], tone: int = 0) -> NDArray[np.complex128]:
+        """The C_k of ``tone``'s model at q: turned by its ε when it is free, g(ε + x), as
         :func:`mows.estimate.ringdown.model.evaluate_model` turns them."""
+        pickup = self.pickups[tone]
         if not self.offset_free:
-            return self.pickup
-        return self.pickup * np.exp(1j * np.arange(self.pickup.size) * q[4])
+            return pickup
+        return pickup * np.exp(1j * np.arange(pickup.size) * q[(tone + 1) * self.per_tone - 1])
 
     def subsampled(self, step: int) -> RingdownProblem:
         return dataclasses.replace(self, y=np.ascontiguousarray(self.y[:, ::step]), dt=self.dt * step)
 
 
+def padded_pickups(pickups: Sequence[ArrayLike]) -> NDArray[np.complex128]:
+    """The tones' pickup series as one (K, L) array, each zero-padded to the longest."""
+    series = [np.asarray(p, complex).ravel() for p in pickups]
+    out = np.zeros((len(series), max(s.size for s in series)), complex)
+    for k, s in enumerate(series):
+        out[k, : s.size] = s
+    return out
+
+
 @dataclasses.dataclass
 class Step:
-    """Everything known at one parameter vector q: the shape, κ and B_DC per channel
-    (``coef``, (C, 2)) and the weighted cost."""
+    """Everything known at one parameter vector q: each tone's shape g (K, n) and ∂g/∂q
+    (``dg``, (K·P, n)), κ of each tone and B_DC per channel (``coef``, (C, K + 1)) and the
+    weighted cost."""
 
     q: np.ndarray
-    shape: Shape
+    g: np.ndarray
+    dg: np.ndarray
     coef: np.ndarray
     residual: np.ndarray  # (C, n), unweighted
     cost: float  # Σ_c (w_c·|r_c|)²
@@ -75,12 +93,12 @@ def evaluate(problem: RingdownProblem, q: NDArray[np.float64], derivatives: bool
     least squares, the residual and the projected normal equations of q
     (:func:`mows.estimate.ringdown.model.normal_equations`, where the numerics are explained)."""
     n_ch, n = problem.y.shape
-    p = q.size
-    g, m = np.empty(n), np.empty((p if derivatives else 0, n))
-    residual, coef = np.empty((n_ch, n)), np.empty((n_ch, 2))
+    p, n_tones = q.size, problem.tones
+    g, m = np.empty((n_tones, n)), np.empty((p if derivatives else 0, n))
+    residual, coef = np.empty((n_ch, n)), np.empty((n_ch, n_tones + 1))
     jtj, jtr = np.zeros((p, p)), np.zeros(p)
     cost = evaluate_model(np.asarray(q, float), *problem.kernel_data(), derivatives, g, m, residual, coef, jtj, jtr)
-    return Step(q, Shape(g, m), coef, residual, float(cost), jtj if derivatives else None)
+    return Step(q, g, m, coef, residual, float(cost), jtj if derivatives else None)
 
 
 def _column_scale(jtj: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -97,21 +115,26 @@ def scaled_inverse(jtj: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def fisher_information(step: Step, weights: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Fisher information (JᵀJ with weights) over all parameters: q, then κ and B_DC of each
-    channel. J's columns are κ_c·∂g/∂q, g and 1, so JᵀJ is assembled from Gram sums of
-    those rows without forming the n × P Jacobian."""
-    m, g = step.shape.dg_dq, step.shape.g
-    p, n_ch = m.shape[0], step.coef.shape[0]
-    gram = np.empty((p + 2, p + 2))  # Gram matrix of the rows M, g, 1
+    """Fisher information (JᵀJ with weights) over all parameters: q, then (κ_1 … κ_K, B_DC) of
+    each channel. J's columns are κ_c,k·∂g_k/∂q, g_k and 1, so JᵀJ is assembled from Gram sums
+    of those rows without forming the n × P Jacobian."""
+    m, g = step.dg, step.g
+    p, n_tones, n_ch = m.shape[0], g.shape[0], step.coef.shape[0]
+    per_tone = p // n_tones
+    n_lin = n_tones + 1
+    gram = np.empty((p + n_lin, p + n_lin))  # the Gram matrix of the rows M, g_1 … g_K, 1
     gram[:p, :p] = m @ m.T
-    gram[:p, p] = gram[p, :p] = m @ g
-    gram[:p, p + 1] = gram[p + 1, :p] = m.sum(axis=1)
-    gram[p, p], gram[p, p + 1] = g @ g, g.sum()
-    gram[p + 1, p], gram[p + 1, p + 1] = gram[p, p + 1], g.size
-    fisher = np.zeros((p + 2 * n_ch, p + 2 * n_ch))
+    gram[:p, p:-1] = m @ g.T
+    gram[:p, -1] = m.sum(axis=1)
+    gram[p:-1, p:-1] = g @ g.T
+    gram[p:-1, -1] = g.sum(axis=1)
+    gram[-1, -1] = g.shape[1]
+    gram[p:, :p] = gram[:p, p:].T
+    gram[-1, p:-1] = gram[p:-1, -1]
+    fisher = np.zeros((p + n_lin * n_ch, p + n_lin * n_ch))
     for c in range(n_ch):
-        scale = np.concatenate([np.full(p, step.coef[c, 0]), [1.0, 1.0]])
-        idx = np.r_[0:p, p + 2 * c, p + 2 * c + 1]
+        scale = np.concatenate([np.repeat(step.coef[c, :n_tones], per_tone), np.ones(n_lin)])
+        idx = np.r_[0:p, p + n_lin * c : p + n_lin * (c + 1)]
         fisher[np.ix_(idx, idx)] += weights[c] ** 2 * gram * np.outer(scale, scale)
     return fisher
 
@@ -150,10 +173,43 @@ def variable_projection(
         *AMPLITUDE_BOUNDS_RAD,
         AMPLITUDE,
     )
-    return Step(q, Shape(g, m), coef, residual, float(cost), jtj), bool(converged), int(used), free
+    return Step(q, g, m, coef, residual, float(cost), jtj), bool(converged), int(used), free
 
 
 # --- the bound itself -------------------------------------------------------------------
+def cramer_rao_hz(
+    n_samples: int,
+    sample_rate_hz: float,
+    lines: Sequence[ProbeLine],
+    truth: Sequence[Sequence[float]],
+    noise_std_t: float,
+    rest_offsets_rad: Sequence[float] | None = None,
+    sensor_direction: Vector = (0.0, 1.0),
+) -> NDArray[np.float64]:
+    """(K,): the Cramér–Rao bound of each tone's frequency in the presence of the others, for
+    one channel of ``n_samples`` in white noise σ: √[(JᵀJ/σ²)⁻¹]_{f_k f_k} (docs/physics.md
+    §11), J the Jacobian of the full model over all its parameters at the given values.
+    ``truth[k]`` = (f, δ, θmax, φ, κ) of tone k, whose pickup is ``lines[k]``'s
+    (:meth:`ProbeLine.pickup_series`); ``rest_offsets_rad`` the ε of each where the fit frees it
+    (``FitOptions.rest_offset_free``, or θ0's error with ``theta0_free``), None where it does
+    not. t = 0 at the first sample."""
+    offsets = None if rest_offsets_rad is None else [float(e) for e in rest_offsets_rad]
+    q = np.concatenate(
+        [list(row[:4]) + ([] if offsets is None else [offsets[k]]) for k, row in enumerate(truth)]
+    ).astype(float)
+    problem = RingdownProblem(
+        np.zeros((1, int(n_samples))),
+        np.array([1.0 / noise_std_t]),
+        1.0 / sample_rate_hz,
+        padded_pickups([line.pickup_series(FitOptions(sensor_direction=tuple(sensor_direction))) for line in lines]),
+        offsets is not None,
+    )
+    step = evaluate(problem, q)
+    step.coef = np.array([[row[4] for row in truth] + [0.0]])
+    inverse = scaled_inverse(fisher_information(step, problem.weights))
+    return np.sqrt(np.diag(inverse)[0 : q.size : problem.per_tone])
+
+
 def cramer_rao_frequency_hz(
     n_samples: int,
     sample_rate_hz: float,
@@ -169,22 +225,11 @@ def cramer_rao_frequency_hz(
     pickup: ArrayLike | None = None,
     rest_offset_rad: float = 0.0,
 ) -> float:
-    """Cramér–Rao bound of f for one channel of ``n_samples`` in white noise σ:
-    √[(JᵀJ/σ²)⁻¹]_ff (docs/physics.md §11), J the Jacobian of the full model over all its
-    parameters (f, δ, θmax, φ, [ε], κ, B_DC) at the given values, ε the rest offset (or θ0's
-    error) that ``FitOptions.rest_offset_free`` (``theta0_free``) fits: ``offset_free`` as the
-    fit had it. t = 0 at the first sample; ``pickup`` is the series at the commanded θ0.
-    """
-    q = np.array([frequency_hz, damping_per_s, amplitude_rad, phase_rad] + ([rest_offset_rad] if offset_free else []))
-    coefficients = paper_pickup(theta0_rad, sensor_direction) if pickup is None else np.asarray(pickup, complex)
-    problem = RingdownProblem(
-        np.zeros((1, int(n_samples))),
-        np.array([1.0 / noise_std_t]),
-        1.0 / sample_rate_hz,
-        theta0_rad,
-        coefficients,
-        offset_free,
-    )
-    shape = evaluate(problem, q).shape
-    step = Step(q, shape, np.array([[kappa_t, 0.0]]), np.empty((1, 0)), math.nan)
-    return float(math.sqrt(scaled_inverse(fisher_information(step, problem.weights))[0, 0]))
+    """:func:`cramer_rao_hz` of one tone: the bound of f over (f, δ, θmax, φ, [ε], κ, B_DC) at
+    the given values, ε the rest offset (or θ0's error) where ``offset_free`` (as the fit had
+    it); ``pickup`` the series at the commanded θ0 (None: the paper's single term for a sensor
+    along ``sensor_direction``)."""
+    line = ProbeLine(0, theta0_rad, frequency_hz, None if pickup is None else tuple(np.asarray(pickup, complex)))
+    truth = [(frequency_hz, damping_per_s, amplitude_rad, phase_rad, kappa_t)]
+    offsets = [rest_offset_rad] if offset_free else None
+    return float(cramer_rao_hz(n_samples, sample_rate_hz, [line], truth, noise_std_t, offsets, sensor_direction)[0])

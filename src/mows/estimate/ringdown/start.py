@@ -1,16 +1,26 @@
-"""Where a ring-down fit starts: the white-noise level from the data alone, and starting points
-(f, δ, θmax, φ) from the zero-padded spectrum (the lines at f and 2f; near θ0 = 90° the
-signal is mostly at 2f)."""
+"""Where a ring-down fit starts: the white-noise level from the data alone, and each tone's
+starting (f, φ) from the zero-padded spectrum.
+
+The lines at f are found one at a time: the strongest peak of the spectrum of what is left in
+the tones' bands, refined by Gaussian interpolation, its damped sinusoid fitted and subtracted
+(a line of a strong probe would otherwise hide a weak neighbour's in its skirt). The lines are
+assigned to the tones in order of frequency. A tone whose line at f is not found is looked for
+at 2f in what is left (near θ0 = 90° its signal is mostly there); one found nowhere starts at
+its expected frequency.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
-from mows.estimate.ringdown.types import FitOptions
+from mows.estimate.ringdown.types import FitOptions, ProbeLine
+
+TWO_PI = 2.0 * math.pi
 
 
 def white_noise_std(y: NDArray[np.float64]) -> float:
@@ -59,28 +69,66 @@ def spectral_peak(
     return Peak(freqs[k] + shift * bin_hz, power[k], float(np.angle(spectrum[k])))
 
 
-def start_candidates(
-    y: NDArray[np.float64], fs: float, expected_hz: float, options: FitOptions, damping_guess: float
-) -> list[NDArray[np.float64]]:
-    """Starting points (f, δ, θmax, φ) from the spectrum; the best of them is refined."""
-    pad = 1 << int(math.ceil(math.log2(4 * y.size)))
-    lo, hi = expected_hz * (1 - options.search_fraction), expected_hz * (1 + options.search_fraction)
-    spectrum, freqs = windowed_spectrum(y, fs, pad)
+def line_starts(
+    y: NDArray[np.float64], fs: float, lines: Sequence[ProbeLine], options: FitOptions
+) -> list[list[tuple[float, float]]] | None:
+    """Each tone's candidate starts (f, φ), in the order of ``lines``, from the spectrum of the
+    summed channels ``y`` (module docstring); None where no tone's line stands above the noise
+    floor by ``options.detection_snr``. A line at f fixes φ up to the sign of κ: φ and φ + π.
+    A line at 2f fixes 2φ up to the sign of its coefficient, which depends on θ0: every quarter
+    turn. The data choose among them."""
+    residual = np.asarray(y, float) - float(np.mean(y))
+    t = np.arange(residual.size) / fs
+    pad = 1 << int(math.ceil(math.log2(4 * residual.size)))
+    bands = [line.expected_frequency_hz * (1 + options.search_fraction * np.array([-1.0, 1.0])) for line in lines]
+    spectrum, freqs = windowed_spectrum(residual, fs, pad)
     power = np.abs(spectrum) ** 2
-    p1 = spectral_peak(spectrum, power, freqs, lo, hi, fs / pad)
-    p2 = spectral_peak(spectrum, power, freqs, 2 * lo, 2 * hi, fs / pad)
-    floor = np.median(power[1:])
-    found = [p for p in (p1, p2) if p is not None and p.power > options.detection_snr * floor]
-    if not found:
-        return []
-    # A line at f fixes φ up to the sign of κ; a line at 2f fixes 2φ up to the sign of its
-    # coefficient, which depends on θ0: try every quarter turn and let the data choose.
-    starts = []
-    if p1 is not None and p1 in found:
-        starts += [np.array([p1.frequency_hz, damping_guess, 0.3, p1.phase_rad + k * math.pi]) for k in (0, 1)]
-    if p2 is not None and p2 in found:
-        starts += [
-            np.array([p2.frequency_hz / 2.0, damping_guess, 0.3, p2.phase_rad / 2.0 + k * math.pi / 2])
-            for k in range(4)
-        ]
+    threshold = options.detection_snr * float(np.median(power[1:]))  # the data's floor, before any line is taken out
+    found: list[tuple[float, float]] = []
+    guess = float(np.mean([line.damping_guess_per_s for line in lines]))
+    for round_ in range(len(lines)):
+        if round_ > 0:
+            spectrum, freqs = windowed_spectrum(residual, fs, pad)
+            power = np.abs(spectrum) ** 2
+        peaks = [spectral_peak(spectrum, power, freqs, low, high, fs / pad) for low, high in bands]
+        peak = max((p for p in peaks if p is not None), key=lambda p: p.power, default=None)
+        if peak is None or not peak.power > threshold:
+            break
+        # The line's damped sinusoid, fitted and taken out, so that the next is found beside it.
+        carrier = np.exp((-guess + 1j * TWO_PI * peak.frequency_hz) * t)
+        a, b = np.linalg.lstsq(np.column_stack([carrier.real, carrier.imag]), residual, rcond=None)[0]
+        found.append((peak.frequency_hz, float(np.angle(complex(a, -b)))))
+        residual = residual - (complex(a, -b) * carrier).real
+    # Where a tone is left without a line, the loop stopped on the spectrum of what is left.
+    starts = _assigned(found, lines)
+    candidates: list[list[tuple[float, float]]] = []
+    for (low, high), start in zip(bands, starts):
+        if start is not None:
+            candidates.append([(start[0], start[1] + k * math.pi) for k in (0, 1)])
+            continue
+        double = spectral_peak(spectrum, power, freqs, 2 * low, 2 * high, fs / pad)
+        if double is not None and double.power > threshold:
+            f, half = double.frequency_hz / 2.0, double.phase_rad / 2.0
+            candidates.append([(f, half + k * math.pi / 2) for k in range(4)])
+        else:
+            candidates.append([])
+    if not any(candidates):
+        return None
+    return [c or [(line.expected_frequency_hz, k * math.pi) for k in (0, 1)] for c, line in zip(candidates, lines)]
+
+
+def _assigned(found: list[tuple[float, float]], lines: Sequence[ProbeLine]) -> list[tuple[float, float] | None]:
+    """The found lines given to the tones in order of frequency; where fewer lines were found,
+    each goes to the tone expected nearest it, the others get None."""
+    starts: list[tuple[float, float] | None] = [None] * len(lines)
+    if len(found) == len(lines):
+        order = np.argsort([line.expected_frequency_hz for line in lines])
+        for tone, line in zip(order, sorted(found)):
+            starts[tone] = line
+        return starts
+    free = set(range(len(lines)))
+    for f, phase in found:
+        nearest = min(free, key=lambda i: abs(lines[i].expected_frequency_hz - f))
+        starts[nearest] = (f, phase)
+        free.discard(nearest)
     return starts

@@ -1,8 +1,10 @@
-"""The ring-down fit's vocabulary: its options, its result and the outcome codes.
+"""The ring-down fit's vocabulary: its options, what it is told of each probe, its result and
+the outcome codes.
 
-:func:`mows.estimate.ringdown.fit_ringdown` takes :class:`FitOptions` and returns a
-:class:`RingdownFit` whose :class:`FitStatus` says whether the numbers mean anything; the
-estimator node, the calibration and the lab read these without running a fit.
+:func:`mows.estimate.ringdown.fit_ringdowns` takes a :class:`ProbeLine` per probe ringing in
+the window and :class:`FitOptions`, and returns a :class:`RingdownFit` per probe whose
+:class:`FitStatus` says whether the numbers mean anything; the estimator node, the calibration
+and the lab read these without running a fit.
 """
 
 from __future__ import annotations
@@ -46,20 +48,22 @@ class FitOptions:
         paper's model.
     pickup : coefficients C_k (complex, k = 0 …) of g for the commanded θ0, from
         :func:`mows.physics.fluxgate.pickup_harmonics`; replaces the paper's model when given.
-    theta0_free : fit θ0 instead of taking the commanded value (paper's model only: the
-        pickup's dependence on θ0 is not a rotation once the lever moves the magnet).
+    theta0_free : fit θ0 instead of taking the commanded value (paper's model of one probe only:
+        the pickup's dependence on θ0 is not a rotation once the lever moves the magnet).
     rest_offset_free : fit the rest-angle offset ε = θs − θ0 (the static deflection by a
         perpendicular field, gravity or a gradient). The lever turns by ε about its pivot, so
         the signal is g(ε + x): the pickup turned by ε, exact for any pickup. Without it the
         model swings about θ0, and κ and θmax trade off against the missing offset (θmax
         off by up to 50° near θ0 = 180° in a strong perpendicular field); f barely moves.
-        With ``theta0_free`` the same parameter is reported as θ0 instead.
+        With ``theta0_free`` the same parameter is reported as θ0 instead. Fitted for one probe
+        only (:mod:`mows.estimate.ringdown.fit` says why).
     search_fraction : the spectral search covers expected f ± this fraction.
     min_periods : fewer usable periods than this gives TOO_SHORT.
     min_frequency_fraction : a peak below this fraction of the expected frequency means the
         probe has (nearly) no restoring spring: NEGATIVE_STIFFNESS.
     detection_snr : the spectral peak must exceed the noise floor by this power ratio.
     max_chi2_dof : above this the model does not describe the data: BAD_FIT.
+    max_iterations : the Levenberg–Marquardt budget of each stage (trial steps, rejected ones too).
     theta_stop_rad : the housing stop: the rest offset is searched within ±stop (a probe
         deflected beyond it rests on the stop) and θmax within 2·stop.
     amplitude_tolerance_rad, rest_offset_tolerance_rad : θmax and the rest offset are reported
@@ -116,9 +120,40 @@ class FitOptions:
         return paper_pickup(theta0_rad, self.sensor_direction)
 
 
+@dataclasses.dataclass(frozen=True)
+class ProbeLine:
+    """What the fit is told about one probe ringing in the window.
+
+    probe_id : carried into its :class:`RingdownFit`.
+    theta0_rad : its commanded orientation.
+    expected_frequency_hz : where its line is, e.g. its excitation frequency.
+    pickup : the C_k of its g (:func:`mows.physics.fluxgate.pickup_harmonics`, for the fitted
+        channel combination); None: ``FitOptions.pickup``, else the paper's single term.
+    damping_guess_per_s : δ to start from.
+    pickup_scale_t : the κ that makes ``pickup`` the sensors' signal in tesla
+        (:func:`mows.physics.fluxgate.pickup_scale_t`); NaN: unknown. Known, it gives the
+        swing from the signal's size where the signal's shape does not
+        (:func:`mows.estimate.ringdown.summary.start_swing_rad`).
+    """
+
+    probe_id: int
+    theta0_rad: float
+    expected_frequency_hz: float
+    pickup: tuple | None = None
+    damping_guess_per_s: float = 1.8
+    pickup_scale_t: float = math.nan
+
+    def pickup_series(self, options: FitOptions = FitOptions()) -> NDArray[np.complex128]:
+        """Its C_k: ``pickup``, else ``options``' (:meth:`FitOptions.pickup_at` its θ0)."""
+        if self.pickup is None:
+            return options.pickup_at(self.theta0_rad)
+        return np.asarray(self.pickup, complex)
+
+
 @dataclasses.dataclass
 class RingdownFit:
-    """Result of :func:`fit_ringdown`. SI units; every number is NaN unless status is OK.
+    """Result of :func:`mows.estimate.ringdown.fit_ringdowns` for one probe. SI units; every
+    number is NaN unless status is OK.
 
     ``amplitude_rad`` is θmax, the swing at the first fitted sample about the rest angle
     θ0 + ``rest_offset_rad``; its σ is :attr:`amplitude_std_rad`. Each is NaN, named in
@@ -155,7 +190,7 @@ class RingdownFit:
     covariance: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
     pickup: tuple = ()  # the fitted model's C_k (complex) over the swing about the rest angle
     undetermined: tuple = ()  # names of the numbers the data did not pin (NaN; why: ``message``)
-    probe_id: int = 0  # which probe, when several ring down together (:mod:`mows.estimate.ringdown.joint`)
+    probe_id: int = 0  # which probe (:class:`ProbeLine`), when several ring down together
 
     @property
     def ok(self) -> bool:

@@ -10,7 +10,8 @@ figure.
 
 ``--duration S`` runs cycles back to back for S seconds instead of ``--cycles``; ``--load``
 (60 s unless ``--duration`` says otherwise) runs them beside two CPU burners and a 1 kHz
-JointState loop (``mows_bringup.load``), and adds the load as run to the figures. Either way the
+JointState loop (``mows_bringup.load``), and adds the load as run to the figures. ``startup_s`` is
+the time from starting the two processes to both active (bring-up included). Either way the
 figures say how many gaps the estimator found in the raw stream (runs of lost blocks, from its
 /diagnostics), how many this process found (``listener_gaps``: each subscriber loses its own),
 and how many fits the estimator refused for a gap.
@@ -66,6 +67,7 @@ def main(argv=None) -> int:
     )
     path = tuple(n for n in NODES if n.name in ("driver", "estimator"))
     graph = Graph(path, mode, output=log, realtime_priority=args.realtime_priority)
+    started = time.monotonic()
     graph.start()
     if load is not None:
         load.start()
@@ -74,11 +76,18 @@ def main(argv=None) -> int:
         if problem is not None:
             say(f"bring-up failed: {problem}")
             return 1
+        startup_s = time.monotonic() - started
         stream = measure(args.cycles, args.repeats, duration_s, graph.exited, args.tracking)
     finally:
         load_as_run = load.stop() if load is not None else None
         graph.stop()
-    figures = {"mode": "tracking" if args.tracking else "cycles", "realtime_priority": args.realtime_priority}
+    figures = {
+        "mode": "tracking" if args.tracking else "cycles",
+        "realtime_priority": args.realtime_priority,
+        # from starting the processes to both active: imports, numba's cache (make build fills
+        # it), configure; what a robot's launch waits for
+        "startup_s": startup_s,
+    }
     figures.update(summary(stream.latencies()))
     figures.update(stream.counts())
     if load_as_run is not None:

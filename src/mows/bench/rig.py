@@ -16,7 +16,7 @@ import dataclasses
 
 import numpy as np
 
-from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, Phase, PhaseEvent, Step
+from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, CycleStep, Phase, PhaseEvent
 from mows.device.cycle.sequencer import CycleSequencer
 from mows.device.cycle.tracking import TrackingLoop
 from mows.device.interface import CoilCommand, CommandResult
@@ -124,7 +124,7 @@ class DeviceTimeRig:
             self._act(self.sequencer.on_samples(block.samples))
         return blocks
 
-    def _act(self, step: Step) -> None:
+    def _act(self, step: CycleStep) -> None:
         steps = [step]
         while steps:
             step = steps.pop(0)

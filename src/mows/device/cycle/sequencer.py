@@ -125,7 +125,7 @@ class CycleSequencer:
         self._results: dict[int, CommandResult] = {}
         self._recordings: list[Recording] = []
         self._groups: GroupSequence | None = None  # several probes: the running round's groups
-        self._in_flight: Excitation | None = None  # one probe's excitation, commanded, its interval not yet counted
+        self._in_flight: Excitation | None = None  # commanded, its interval not yet counted by the duty limit
         self._unstamped: list[tuple[Phase, str]] = []  # events raised before the first sample
         self._last_cycle_id = 0
         self._last_command_id = 0

@@ -42,8 +42,9 @@ def scheduled_device(scenario, cap: CurrentCap, rng: np.random.Generator) -> Sch
 
 class DeviceTimeLoop:
     """Cycles of ``settings`` on ``device`` (module docstring), its coils capped by the device's
-    cap; ``fit`` retunes one probe's excitation. ``on_block`` hears every block read and
-    ``on_event`` every phase announced, in the order the device produced them."""
+    cap; ``fit`` retunes one probe's excitation from the f00 of the scene's probe (of its first
+    probe, for several). ``on_block`` hears every block read and ``on_event`` every phase
+    announced, in the order the device produced them."""
 
     def __init__(
         self,

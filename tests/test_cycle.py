@@ -146,6 +146,27 @@ def test_an_excitation_longer_than_the_duty_budget_is_refused():
     assert coil_log(session) == []
 
 
+def test_an_excitation_stopped_before_its_answers_counts_towards_the_duty_limit():
+    # A device that answers late (a serial link) may have switched the coils on at the commanded
+    # sample: a stop before its answers counts the samples from there up to the stop.
+    rate = 1000.0
+    quick = CycleSettings(excite_s=0.1, ringdown_s=0.1, repeats=1, tuning_steps=0, turn_settle_s=0.0, duty_window_s=1.0)
+    sequencer = CycleSequencer(quick, largest_spacing(), CurrentCap(CAP_A), rate, 110.0, fit=fit_ringdown)
+
+    def samples(first, n):
+        return SampleBlock(first, round(first * 1e9 / rate), rate, np.zeros((n, 2)), np.zeros((n, 2), bool))
+
+    sequencer.on_samples(samples(0, 1))
+    (turn,) = sequencer.start(CycleRequest(0.3)).commands
+    sequencer.on_result(CommandResult(turn.command_id, True, turn.at_sample_index))
+    on, off = sequencer.on_samples(samples(1, 10)).commands
+    assert isinstance(on, CoilCommand) and any(on.amplitudes_a) and not any(off.amplitudes_a)
+    sequencer.on_samples(samples(11, on.at_sample_index + 50 - 11))  # no answer yet
+    assert sequencer.duty_fraction() == 0.0
+    assert sequencer.emergency_stop("operator").coils_off_now
+    assert sequencer.duty_fraction() * round(quick.duty_window_s * rate) == pytest.approx(50)
+
+
 def test_the_emergency_stop_switches_off_at_once_and_latches():
     session = session_on_simulator()
     done, _ = run(session, until=lambda events: any(e.phase == Phase.EXCITING for e in events))

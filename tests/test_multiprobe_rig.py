@@ -8,7 +8,8 @@ samples missing is refused for every probe, not patched.
 
 import numpy as np
 
-from mows.bench.multiprobe_rig import MultiProbeRig
+from mows.bench.rig import ONE_ROUND, DeviceTimeRig
+from mows.device.cycle.phases import CycleRequest
 from mows.estimate.probe_set import probe_lines
 from mows.estimate.ringdown.types import FitStatus
 from mows.estimate.segments import RingdownWindow, Segment, fit_joint_segment
@@ -18,13 +19,13 @@ SCENE = load_scenario("three_probes")
 
 
 def test_one_cycle_fits_every_probe_jointly_with_its_id():
-    rig = MultiProbeRig(SCENE, seed=3)
-    cycle = rig.run_cycle(rig.home_orientations_rad())
-    assert cycle.refused == ()
+    rig = DeviceTimeRig(SCENE, ONE_ROUND, seed=3)
+    cycle = rig.run_cycle(CycleRequest(0.0))
+    assert cycle.outcome.refused_probes == ()
     assert [f.probe_id for f in cycle.fits] == [0, 1, 2]
     assert 0.0 < rig.peak_current_a <= SCENE.setup.cap.limit_a
-    coupled = rig.device.expected_frequencies_hz()
-    alone = [p.probe.f00_hz for p in rig.device.placed]
+    coupled = rig.device.device.expected_frequencies_hz()
+    alone = [p.probe.f00_hz for p in rig.device.device.placed]
     for fit, expected, f00 in zip(cycle.fits, coupled, alone):
         assert fit.ok, fit.message
         assert fit.frequency_std_hz < 5e-3  # 0.1 to 2.2 mHz measured
@@ -34,8 +35,8 @@ def test_one_cycle_fits_every_probe_jointly_with_its_id():
 
 
 def test_a_window_with_missing_samples_is_refused_for_every_probe():
-    rig = MultiProbeRig(SCENE)
-    lines = probe_lines(SCENE.sensors.pair, rig.device.placed, [0, 1, 2], [100.0, 112.5, 125.0])
+    rig = DeviceTimeRig(SCENE, ONE_ROUND)
+    lines = probe_lines(SCENE.sensors.pair, rig.device.device.placed, [0, 1, 2], [100.0, 112.5, 125.0])
     samples = np.zeros((1000, 2))
     segment = Segment(RingdownWindow(0, 0.05), 0, 20_000.0, samples, np.zeros((1000, 2), bool), missing_samples=7)
     fits = fit_joint_segment(segment, lines)

@@ -6,15 +6,16 @@ window's first fitted sample, is known within 1.5 % (its amplitude correction of
 the signal's size through the pickup about the undeflected lever; the decomposition's model
 turns that into the swing about its rest angle (mows.sweep.decompose.Ringdowns). Taken about
 the undeflected lever as it is, it is 5–14 % off where a probe's static deflection of 10–15
-mrad meets a strong second harmonic of its pickup (seed 1, three cycles: 0.8 % converted).
+mrad meets a strong second harmonic of its pickup (seed 1, three cycles: 0.4 % converted).
 """
 
 import math
 
 import numpy as np
 
-import mows.bench.multiprobe_rig as multiprobe_rig
-from mows.bench.multiprobe_rig import MultiProbeRig
+import mows.bench.rig as device_time_rig
+from mows.bench.rig import ONE_ROUND, DeviceTimeRig
+from mows.device.cycle.phases import CycleRequest
 from mows.physics.ringdown_average import swing_about_rest_rad
 from mows.sim.scenario import load_scenario
 
@@ -33,30 +34,42 @@ def simulated_swing(theta_rad: np.ndarray, fit, fs: float) -> tuple[float, float
     return math.hypot(a, b), centre
 
 
+def simulated_theta(reads, first: int, n_samples: int) -> np.ndarray:
+    """(n_samples, probes): the simulated deflections of the samples [first, first + n_samples),
+    from the device's reads, which cover them without a gap."""
+    rows = [
+        (start, block.theta_rad) for start, block in reads if start < first + n_samples and start + len(block) > first
+    ]
+    assert all(a + len(t) == b for (a, t), (b, _) in zip(rows, rows[1:]))  # no gap between the reads
+    theta = np.concatenate([t for _, t in rows])[first - rows[0][0] :][:n_samples]
+    assert len(theta) == n_samples
+    return theta
+
+
 def windows(monkeypatch):
     """(fit, simulated swing, simulated rest angle) of every ring-down of CYCLES cycles."""
-    rig = MultiProbeRig(load_scenario("three_probes"), seed=1)
+    rig = DeviceTimeRig(load_scenario("three_probes"), ONE_ROUND, seed=1)
+    simulator = rig.device.device
     reads, found = [], []
-    read, fit_segment = rig.device.read, multiprobe_rig.fit_joint_segment
+    read, fit_segment = simulator.read, device_time_rig.fit_joint_segment
 
     def recording_read(n_samples):
-        reads.append((rig.device.sample_index, block := read(n_samples)))
+        reads.append((simulator.sample_index, block := read(n_samples)))
         return block
 
     def recording_fit(segment, lines, skip):
         fits = fit_segment(segment, lines, skip)
-        first, block = reads[-1]
-        assert first == segment.first_sample_index
+        block_theta = simulated_theta(reads, segment.first_sample_index, len(segment.samples_t))
         for fit in fits:
             start = round(fit.start_offset_s * segment.sample_rate_hz)
-            theta = block.theta_rad[start : start + fit.n_samples, fit.probe_id]
+            theta = block_theta[start : start + fit.n_samples, fit.probe_id]
             found.append((fit, *simulated_swing(theta, fit, segment.sample_rate_hz)))
         return fits
 
-    monkeypatch.setattr(rig.device, "read", recording_read)
-    monkeypatch.setattr(multiprobe_rig, "fit_joint_segment", recording_fit)
+    monkeypatch.setattr(simulator, "read", recording_read)
+    monkeypatch.setattr(device_time_rig, "fit_joint_segment", recording_fit)
     for j in range(CYCLES):
-        rig.run_cycle(rig.home_orientations_rad() + 2 * np.pi * j / STEPS)
+        rig.run_cycle(CycleRequest(2 * np.pi * j / STEPS))
     return found
 
 

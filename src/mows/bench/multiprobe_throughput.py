@@ -2,9 +2,9 @@
 
 A map point is one probe's in-plane field and gradient decomposed to the target σ (the same
 target per component for every probe). Both cases run the same cycle in device time
-(:class:`mows.bench.multiprobe_rig.MultiProbeRig`: turn, settle, multi-tone excitation, joint
-fit) in the ``three_probes`` scene, round after round of ``points`` orientations on the shared
-stage, and decompose every probe with the coupling in the model
+(:class:`mows.bench.rig.DeviceTimeRig`, the driver's cycle: turn, settle, multi-tone
+excitation; the estimator's joint fit) in the ``three_probes`` scene, round after round of
+``points`` orientations on the shared stage, and decompose every probe with the coupling in the model
 (:func:`mows.sweep.multiprobe.decompose_probes`) after every point from the one that gives the
 sweep the orientations its model needs (7 for the field's 3θ0 curvature, or all ``points`` when
 fewer), until every probe reaches the target or ``max_sweeps`` rounds have run. Probes that
@@ -24,7 +24,8 @@ import math
 
 import numpy as np
 
-from mows.bench.multiprobe_rig import MultiProbeRig
+from mows.bench.rig import ONE_ROUND, DeviceTimeRig
+from mows.device.cycle.phases import CycleRequest
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import unknown_count
 from mows.sweep.multiprobe import decompose_probes, sweeps_of
@@ -36,13 +37,13 @@ SINGLE_PROBE = 1  # the paper's f00
 
 def time_to_target(scenario, goal: PrecisionGoal, points: int, max_sweeps: int, seed: int) -> dict:
     """Sweeps of ``scenario``'s probes until every probe reaches ``goal``: the figures."""
-    rig = MultiProbeRig(scenario, seed=seed)
+    rig = DeviceTimeRig(scenario, ONE_ROUND, seed=seed)
     placed = scenario.placed_probes()
     first_check = min(points, unknown_count(curvature=True))
     fits: list = []
     decompositions: list = []
     for j in range(points * max_sweeps):
-        fits.append(rig.run_cycle(rig.home_orientations_rad() + 2.0 * np.pi * j / points).fits)
+        fits.append(rig.run_cycle(CycleRequest(2.0 * np.pi * j / points)).fits)
         if len(fits) < first_check:
             continue
         decompositions = decompose_probes(sweeps_of(placed, fits, scenario.sensors.pair))

@@ -1,13 +1,14 @@
-"""The driver and the estimator on the simulated device, in device time and without ROS.
+"""The driver and the estimator on the simulated device, in device time and without ROS, for
+one probe or for a scene's probes on one shared stage.
 
-:class:`DeviceTimeRig` runs the driver's own cycle state machine
-(:class:`mows.device.cycle.sequencer.CycleSequencer`, with its duty-cycle limit and current cap) on the
-simulated device with commands at exact samples (:class:`mows.device.simulated.scheduled.ScheduledDevice`),
-cuts the announced ring-downs out of the stream as the estimator node does
-(:class:`mows.estimate.segments.SegmentAssembler`) and fits them with the lever-aware pick-up
-(:func:`mows.estimate.segments.fit_segment`). The device's clock is the only clock: a run takes
-as long as the simulator needs, not as long as the device would. Stretches nobody records (a gap,
-the probe settling) are integrated without reading the sensors.
+:class:`DeviceTimeRig` runs the driver's own cycles (:class:`mows.device.stream.device_time.DeviceTimeLoop`:
+the driver's :class:`~mows.device.cycle.sequencer.CycleSequencer` with its duty-cycle limit and
+current cap, on the simulated device with commands at exact samples), cuts the announced
+ring-downs out of the stream as the estimator node does
+(:class:`mows.estimate.segments.SegmentAssembler`) and fits them: one probe's with the lever-aware
+pick-up (:func:`mows.estimate.segments.fit_segment`), a multi-tone window's probes jointly
+(:func:`mows.estimate.segments.fit_joint_segment`), each fit carrying its probe id. Tuning
+ring-downs retune the excitation and are not measurements.
 """
 
 from __future__ import annotations
@@ -16,33 +17,48 @@ import dataclasses
 
 import numpy as np
 
-from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, Phase, PhaseEvent, Step
-from mows.device.cycle.sequencer import CycleSequencer
+from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, Phase, PhaseEvent
 from mows.device.cycle.tracking import TrackingLoop
-from mows.device.interface import CoilCommand, CommandResult
-from mows.device.simulated.scheduled import OverCap, ScheduledDevice
+from mows.device.simulated.scheduled_multiprobe import ScheduledMultiProbeDevice
+from mows.device.stream.device_time import Block, DeviceTimeLoop, scheduled_device
+from mows.estimate.probe_set import probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit, fit_ringdown
 from mows.estimate.ringdown.start import white_noise_std
-from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
+from mows.estimate.segments import RingdownWindow, Segment, SegmentAssembler, fit_joint_segment, fit_segment
 from mows.physics.coils import CurrentCap
-from mows.sim.simulator import SimulatedDevice
 
-CHUNK_S = 0.025  # samples are read in pieces of this, as the sim backend does
 BUFFER_S = 5.0  # the assembler keeps this much of the stream
+#: One ring-down per group and cycle, the groups back to back: a map point of several probes per cycle.
+ONE_ROUND = CycleSettings(repeats=1, gap_s=0.0)
 
 
 @dataclasses.dataclass(frozen=True)
 class MeasuredRingdown:
-    """A measurement ring-down (not a tuning one): its window, its fit and which of its samples
-    the device flagged saturated."""
+    """A measurement ring-down (not a tuning one) of one probe: its window, its fit (with the
+    probe's id) and which of its samples the device flagged saturated."""
 
     window: RingdownWindow
     fit: RingdownFit
     saturated: np.ndarray
 
 
+@dataclasses.dataclass(frozen=True)
+class MeasuredCycle:
+    """One cycle to its end: the driver's outcome and its measurement ring-downs, in the order
+    they were recorded."""
+
+    outcome: CycleOutcome
+    measured: tuple[MeasuredRingdown, ...]
+
+    @property
+    def fits(self) -> tuple[RingdownFit, ...]:
+        """Every measurement fit, by probe id (in recorded order for each probe)."""
+        return tuple(sorted((m.fit for m in self.measured), key=lambda fit: fit.probe_id))
+
+
 class DeviceTimeRig:
-    """``scenario``'s device driven by cycles of ``settings`` with the coils capped at ``cap_a``."""
+    """``scenario``'s device (its probes on one shared stage when it has several) driven by
+    cycles of ``settings`` with the coils capped at ``cap_a``."""
 
     def __init__(
         self,
@@ -53,57 +69,45 @@ class DeviceTimeRig:
         coil_off_skip_s: float = COIL_OFF_SKIP_S,
     ):
         self.scenario = scenario
-        self.probe = scenario.probe
         rng = np.random.default_rng(scenario.seed if seed is None else seed)
-        self.device = ScheduledDevice(SimulatedDevice(scenario, rng), CurrentCap(cap_a))
-        self.fs = self.device.device.sample_rate_hz
-        self.sequencer = CycleSequencer(
-            settings, scenario.setup, self.device.cap, self.fs, self.probe.f00_hz, fit=fit_ringdown
-        )
         self.assembler = SegmentAssembler(BUFFER_S)
         self.coil_off_skip_s = coil_off_skip_s
         self.peak_current_a = 0.0
-        self._chunk = max(1, round(CHUNK_S * self.fs))
-        self._results: list[CommandResult] = []
         self._options: dict[float, FitOptions] = {}
         self._measured: list[MeasuredRingdown] = []
-        self._outcome: CycleOutcome | None = None
-        self._idle_until = 0
-        # The sequencer anchors its clock on the first samples; the probe rests, so they show the noise.
-        self._quiet = self._read(self._chunk)[0].samples.samples_t
+        self.device = scheduled_device(scenario, CurrentCap(cap_a), rng)
+        self.loop = DeviceTimeLoop(self.device, settings, fit=fit_ringdown, on_block=self._block, on_event=self._event)
+        self.sequencer, self.fs = self.loop.sequencer, self.loop.fs
 
     @property
     def time_s(self) -> float:
         """Device time so far."""
-        return self.device.next_index / self.fs
+        return self.loop.time_s
 
     def first_block_noise_std_t(self) -> float:
-        """White-noise σ per sample of the difference channel, measured on the first samples."""
-        return white_noise_std(self._quiet[:, 0] - self._quiet[:, 1])
+        """White-noise σ per sample of the difference channel, measured on the first samples
+        (the probe rests: they show the noise)."""
+        quiet = self.loop.first_block.samples.samples_t
+        return white_noise_std(quiet[:, 0] - quiet[:, 1])
 
     def set_settings(self, settings: CycleSettings) -> None:
         self.sequencer.settings = settings
 
-    def run_cycle(self, request: CycleRequest) -> tuple[bool, str, list[MeasuredRingdown]]:
-        """One cycle to its end: (success, message, its measurement ring-downs and their fits)."""
-        self._outcome, self._measured = None, []
-        self._act(self.sequencer.start(request))
-        while self._outcome is None:
-            if self._idle_until > self.device.next_index:
-                self.device.idle_until(self._idle_until)
-                self._idle_until = 0
-            self._read(self._chunk)
-        # The last ring-down's segment completes with the block that reaches its end.
-        return self._outcome.success, self._outcome.message, self._measured
+    def run_cycle(self, request: CycleRequest) -> MeasuredCycle:
+        """One cycle to its end, its measurement ring-downs fitted (the last one's segment
+        completes with the block that reaches its end)."""
+        self._measured = []
+        outcome = self.loop.run_cycle(request)
+        return MeasuredCycle(outcome, tuple(self._measured))
 
     def run_tracking(self, loop: TrackingLoop, ringdowns: int) -> list[MeasuredRingdown]:
         """Tracking cycles as the driver's session chains them (:mod:`mows.device.cycle.tracking`),
         over the rig's settings, until ``ringdowns`` are measured or the loop stops."""
         measured: list[MeasuredRingdown] = []
         while len(measured) < ringdowns and (request := loop.next_request(self.sequencer.settings)) is not None:
-            measured += self.run_cycle(request)[2]
-            assert self._outcome is not None  # run_cycle returns once its cycle has ended
-            loop.on_outcome(self._outcome)
+            cycle = self.run_cycle(request)
+            measured += cycle.measured
+            loop.on_outcome(cycle.outcome)
         return measured
 
     def coil_intervals(self) -> list[tuple[int, int]]:
@@ -113,70 +117,55 @@ class DeviceTimeRig:
         offs = [index for index, on in log if not on]
         return [(a, b) for a, b in zip(ons, offs)]
 
-    # --- the loop ----------------------------------------------------------------------------
-    def _read(self, n: int) -> list:
-        blocks = self.device.read_until(self.device.next_index + n)
-        for block in blocks:
-            if block.currents_a.size:
-                self.peak_current_a = max(self.peak_current_a, float(np.max(np.abs(block.currents_a))))
-            for segment in self.assembler.add_block(block.samples):
-                self._fit(segment)
-            self._act(self.sequencer.on_samples(block.samples))
-        return blocks
-
-    def _act(self, step: Step) -> None:
-        steps = [step]
-        while steps:
-            step = steps.pop(0)
-            if step.coils_off_now:
-                self.device.switch_off_at(self.device.next_index)
-            for command in step.commands:
-                self._send(command)
-            for event in step.events:
-                self._event(event)
-            if step.outcome is not None:
-                self._outcome = step.outcome
-            results, self._results = self._results, []
-            steps += [self.sequencer.on_result(result) for result in results]
-
-    def _send(self, command) -> None:
-        try:
-            if isinstance(command, CoilCommand):
-                applied = self.device.schedule_coils(
-                    command.at_sample_index, command.amplitudes_a, command.frequency_hz
-                )
-            else:
-                applied = self.device.schedule_orientation(command.at_sample_index, command.theta0_rad)
-            self._results.append(CommandResult(command.command_id, True, applied))
-        except (OverCap, RuntimeError, ValueError) as refused:
-            self._results.append(CommandResult(command.command_id, False, reason=str(refused)))
+    # --- what the loop hands on ----------------------------------------------------------------
+    def _block(self, block: Block) -> None:
+        if block.currents_a.size:
+            self.peak_current_a = max(self.peak_current_a, float(np.max(np.abs(block.currents_a))))
+        for segment in self.assembler.add_block(block.samples):
+            self._fit(segment)
 
     def _event(self, event: PhaseEvent) -> None:
-        if event.phase in (Phase.GAP, Phase.SETTLING) and event.planned_duration_s > 0:
-            # Nobody records these samples: the probe moves on without its sensors being read.
-            self._idle_until = event.sample_index + round(event.planned_duration_s * self.fs)
         if event.phase == Phase.RINGDOWN:
             window = RingdownWindow(
                 event.stamp_ns,
                 event.planned_duration_s,
                 event.cycle_id,
                 event.repeat_index,
-                event.theta0_rad,
+                # a multi-tone window: its first probe's own θ0 (each probe's is in its line)
+                event.probe_theta0_rad[0] if event.probe_ids else event.theta0_rad,
                 event.frequency_hz,
                 event.tuning,
+                event.probe_ids,
+                event.probe_frequency_hz,
+                event.probe_theta0_rad,
             )
             for segment in self.assembler.announce(window):
                 self._fit(segment)
 
-    def _fit(self, segment) -> None:
+    def _fit(self, segment: Segment) -> None:
         window = segment.window
         if window.tuning:
             return
+        if window.probe_ids:
+            self._fit_jointly(segment)
+            return
+        probe = self.scenario.probe
         key = round(window.theta0_rad, 12)
         if key not in self._options:
-            self._options[key] = FitOptions.lever_aware(self.scenario.sensors.pair, self.probe, window.theta0_rad)
-        fit = fit_segment(segment, self._options[key], self.coil_off_skip_s, self.probe.damping_per_s)
+            self._options[key] = FitOptions.lever_aware(self.scenario.sensors.pair, probe, window.theta0_rad)
+        fit = fit_segment(segment, self._options[key], self.coil_off_skip_s, probe.damping_per_s)
         self._measured.append(MeasuredRingdown(window, fit, segment.saturated))
+
+    def _fit_jointly(self, segment: Segment) -> None:
+        """The window's probes fitted jointly, each at the tone it was driven with."""
+        assert isinstance(self.device, ScheduledMultiProbeDevice)  # only its cycles announce probes
+        window, placed = segment.window, self.device.device.placed  # the probes where the stage stands
+        members = window.probe_ids
+        lines = probe_lines(
+            self.scenario.sensors.pair, [placed[k] for k in members], members, window.probe_frequency_hz
+        )
+        for fit in fit_joint_segment(segment, lines, self.coil_off_skip_s):
+            self._measured.append(MeasuredRingdown(window, fit, segment.saturated))
 
 
 def max_duty_fraction(intervals, window_samples: int) -> float:

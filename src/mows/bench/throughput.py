@@ -172,10 +172,10 @@ def fixed_protocol(
     angles = np.radians(np.arange(n_angles) * 360.0 / n_angles)
     while rig.time_s < max_s:
         for theta0 in angles:
-            ok, message, measured = rig.run_cycle(CycleRequest(float(theta0)))
-            if not ok:
-                return sweep.result(name, rig, goal, f"cycle failed: {message}")
-            sweep.add(measured)
+            cycle = rig.run_cycle(CycleRequest(float(theta0)))
+            if not cycle.outcome.success:
+                return sweep.result(name, rig, goal, f"cycle failed: {cycle.outcome.message}")
+            sweep.add(cycle.measured)
             if reached(goal, sweep.decomposition):
                 return sweep.result(name, rig, goal, "target reached")
     return sweep.result(name, rig, goal, f"not reached in {max_s:g} s")
@@ -209,12 +209,10 @@ def adaptive_protocol(goal: PrecisionGoal = PrecisionGoal(), seed: int = 1, scen
         if isinstance(step, PlanEnd):
             return sweep.result("adaptive", rig, goal, step.message), plan
         frequency = planner.drive_frequency_hz(sweep.record, sweep.decomposition, step.theta0_rad)
-        ok, message, measured = rig.run_cycle(
-            CycleRequest(step.theta0_rad, repeats=step.repeats, frequency_hz=frequency)
-        )
-        if not ok:
-            return sweep.result("adaptive", rig, goal, f"cycle failed: {message}"), plan
-        sweep.add(measured)
+        cycle = rig.run_cycle(CycleRequest(step.theta0_rad, repeats=step.repeats, frequency_hz=frequency))
+        if not cycle.outcome.success:
+            return sweep.result("adaptive", rig, goal, f"cycle failed: {cycle.outcome.message}"), plan
+        sweep.add(cycle.measured)
 
 
 def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, seed: int = 2) -> dict:

@@ -28,6 +28,7 @@ not at all, never over an input, over an existing file only with ``--force``
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import math
 import warnings
@@ -38,19 +39,19 @@ import numpy as np
 from mows.cli.calibrate_bag import SUPPLY_TOPIC, bag_points
 from mows.cli.fit import add_fit_arguments
 from mows.cli.inputs import check_frequencies, finite_float, input_file, load_probe, positive_int
-from mows.device.simulated.scheduled import ScheduledDevice
+from mows.device.cycle.phases import CycleSettings, Phase, PhaseEvent
+from mows.device.stream.device_time import DeviceTimeLoop, scheduled_device
 from mows.estimate.calibration.constants import CalibrationPoint, KnownConstants
 from mows.estimate.calibration.fit import calibrate_probe
-from mows.estimate.recorded_cycle import fit_cycle
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, fit_ringdown
+from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.lab.data.readers import is_bag, load_table
 from mows.lab.data.table import MeasurementTable, rows_text
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.ringdown_average import start_swing_rad
 from mows.records.files import check_outputs, writing
-from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
-from mows.sim.simulator import SimulatedDevice
 from mows.sweep.calibration.schedule import (
     GRADIENT_WIRING,
     CalibrationOutcome,
@@ -62,6 +63,7 @@ from mows.sweep.calibration.schedule import (
 )
 
 SUPPLY_SETTLE_S = 0.5  # the probe rings after a supply step: wait before the next cycle
+SEGMENT_BUFFER_S = 5.0  # the stream kept to cut the ring-downs from, as the estimator keeps it
 
 #: The options that shape --simulate's calibration alone (by argparse name), and their defaults
 #: (the currents' default follows the supply's polarity: ``default_currents_a``).
@@ -235,13 +237,21 @@ def _succeeded(outcome: CalibrationOutcome) -> CalibrationOutcome:
 def simulate_calibration(scenario, plan: CalibrationPlan, nominal: Probe, on_feedback=None) -> CalibrationOutcome:
     """Run :class:`CalibrationSchedule` on the simulated device of ``scenario`` in device time.
 
-    The supply ramps through :class:`mows.device.simulated.scheduled.ScheduledDevice` (cap, slew,
-    resolution); every cycle is :func:`mows.sim.simulator.simulate_cycle` and its ring-down is
-    fitted as the estimator does, with the lever-aware pickup of the **nominal** probe (the true
-    lever is what is being calibrated). ValueError if the schedule does not end at zero current.
+    The supply ramps and the cycles run as the driver runs them
+    (:class:`mows.device.stream.device_time.DeviceTimeLoop`: the supply's cap, slew and resolution;
+    the driver's cycle with its default settings but the scene's excitation), each cycle driven
+    where the paper's tuning leaves the drive (:func:`_resonance_hz`), and every measurement
+    ring-down is cut from the stream and fitted as the estimator does, with the lever-aware
+    pickup of the **nominal** probe (the true lever is what is being calibrated). ValueError if
+    the schedule does not end at zero current.
     """
-    device = ScheduledDevice(SimulatedDevice(scenario), CurrentCap())
-    fit_scenario = scenario.replace(probe=nominal)
+    excitation = scenario.excitation
+    settings = CycleSettings(
+        excitation_current_a=excitation.amplitude_a, excite_s=excitation.excite_s, ringdown_s=excitation.ringdown_s
+    )
+    fits = _NominalFits(scenario.sensors.pair, nominal)
+    device = scheduled_device(scenario, CurrentCap(), np.random.default_rng(scenario.seed))
+    loop = DeviceTimeLoop(device, settings, fit=fit_ringdown, on_block=fits.block, on_event=fits.event)
     schedule = CalibrationSchedule(plan)
     pending = [schedule.start()]
     while pending:
@@ -254,30 +264,57 @@ def simulate_calibration(scenario, plan: CalibrationPlan, nominal: Probe, on_fee
                 raise ValueError(f"the supply is at {device.device.field_current_a} A after the calibration")
             return step.outcome
         for action in step.actions:
-            pending += _perform(action, schedule, device, scenario, fit_scenario)
+            if isinstance(action, SetSupply):
+                refused = loop.ramp_supply(action.current_a, SUPPLY_SETTLE_S)
+                pending.append(schedule.on_supply(not refused, refused))
+                continue
+            tuned = _resonance_hz(device.device, action.theta0_rad)
+            outcome = loop.run_cycle(dataclasses.replace(action, frequency_hz=tuned, tuning_steps=0))
+            pending += [schedule.on_fit(fit) for fit in fits.take()]
+            pending.append(schedule.on_cycle_done(outcome.success, outcome.message))
     raise RuntimeError("the calibration schedule stopped without an outcome")
 
 
-def _perform(action, schedule, device, scenario, fit_scenario) -> list:
-    if isinstance(action, SetSupply):
-        try:
-            reached = device.schedule_field_current(device.next_index, action.current_a)
-        except ValueError as refused:
-            return [schedule.on_supply(False, str(refused))]
-        device.read_until(reached + 1 + round(SUPPLY_SETTLE_S * device.device.sample_rate_hz))
-        return [schedule.on_supply(True)]
-    steps = []
-    excitation = scenario.excitation
-    for _ in range(action.repeats):
-        cycle = simulate_cycle(
-            device.device,
-            action.theta0_rad,
-            excitation.amplitude_a,
-            excite_s=excitation.excite_s,
-            ringdown_s=excitation.ringdown_s,
-        )
-        steps.append(schedule.on_fit(fit_cycle(cycle, fit_scenario)))
-    return steps + [schedule.on_cycle_done(True)]
+def _resonance_hz(device, theta0_rad: float) -> float:
+    """The simulated probe's small-amplitude resonance at ``theta0_rad`` in the present supply
+    field: where the paper's tuning leaves the drive. The stage is turned there first (between
+    cycles, the coils off); the cycle's own turn then finds it there."""
+    device.set_orientation(theta0_rad)
+    return device.expected_frequency_hz()
+
+
+class _NominalFits:
+    """The measurement ring-downs announced on the stream, cut and fitted as the estimator fits
+    them with the lever-aware pickup of the ``nominal`` probe seen by ``pair``."""
+
+    def __init__(self, pair, nominal: Probe):
+        self.pair, self.nominal = pair, nominal
+        self.assembler = SegmentAssembler(SEGMENT_BUFFER_S)
+        self._fits: list = []
+
+    def block(self, block) -> None:
+        self._fits += [self._fit(segment) for segment in self.assembler.add_block(block.samples)]
+
+    def event(self, event: PhaseEvent) -> None:
+        if event.phase == Phase.RINGDOWN and not event.tuning:
+            window = RingdownWindow(
+                event.stamp_ns,
+                event.planned_duration_s,
+                event.cycle_id,
+                event.repeat_index,
+                event.theta0_rad,
+                event.frequency_hz,
+            )
+            self._fits += [self._fit(segment) for segment in self.assembler.announce(window)]
+
+    def take(self) -> list:
+        """The fits made since the last call."""
+        fits, self._fits = self._fits, []
+        return fits
+
+    def _fit(self, segment):
+        options = FitOptions.lever_aware(self.pair, self.nominal, segment.window.theta0_rad)
+        return fit_segment(segment, options, COIL_OFF_SKIP_S, self.nominal.damping_per_s)
 
 
 def compare_with_truth(calibration, truth: Probe) -> str:

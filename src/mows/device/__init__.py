@@ -4,7 +4,8 @@ it in this list (``pyproject.toml``, import-linter); the two modules beside them
 and ``clock``, sit under all but ``protocol``.
 
 1. ``stream``: the driver's session over one backend (cycles, the emergency stop, the supply's
-   ramps, arming), the blocks it publishes and the sample rate it receives.
+   ramps, arming), the blocks it publishes and the sample rate it receives; beside it the same
+   sequencer's cycles on the simulator in device time.
    ``backends``: the driver's devices (``sim``, ``serial``, ``bag``, ``nidaqmx``), each a
    :class:`~mows.device.interface.Backend`. The two never import each other: the driver node
    hands a backend to a session.

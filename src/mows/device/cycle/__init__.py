@@ -2,12 +2,11 @@
 command results and link changes, returning the commands to send and the events to publish.
 
 ``phases`` (the vocabulary: phases and their events, settings, a request, its plan and outcome,
-the step a sequencer returns), ``sequencer`` (:class:`~mows.device.cycle.sequencer.CycleSequencer`:
-one probe's cycle), ``waits`` (what a running cycle waits for and records), ``duty`` (the coils'
-duty-cycle limit), ``tone_groups`` (the groups of a multi-tone plan excited in turn, and the plan
-of several probes at one stage angle), ``multitone_sequencer``
-(:class:`~mows.device.cycle.multitone_sequencer.MultiToneSequencer`: the cycle of several probes)
-and ``tracking`` (tracking mode's cycles, back to back).
+the step the sequencer returns), ``sequencer`` (:class:`~mows.device.cycle.sequencer.CycleSequencer`:
+the cycle of one probe or of several on one stage), ``waits`` (what a running cycle waits for and
+records), ``duty`` (the coils' duty-cycle limit), ``tone_groups`` (the groups of a multi-tone plan
+excited in turn, and the plan of several probes at one stage angle) and ``tracking`` (tracking
+mode's cycles, back to back).
 
 May import: ``mows.device.interface``, ``mows.device.clock``, ``mows.device.protocol``,
 ``mows.device.simulated``, ``mows.sim``, ``mows.physics``, ``mows.records``; not ``recording``,

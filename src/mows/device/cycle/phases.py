@@ -1,7 +1,7 @@
 """The vocabulary of a measurement cycle (:mod:`mows.device.cycle.sequencer`): its phases and the events
 that announce them (and the static-field supply's, :class:`SupplyEvent`), the settings cycles
 run with, a request for one cycle, the plan it resolves to and its outcome, the step the
-sequencer returns, and the tuning fit it is handed.
+sequencer returns (:class:`CycleStep`), and the tuning fit it is handed.
 
 The phase numbers are those of ``mows_msgs/ExcitationState`` PHASE_*.
 """
@@ -190,8 +190,8 @@ class CycleOutcome:
 
 
 @dataclasses.dataclass
-class Step:
-    """What the caller must do after feeding the sequencer: send ``commands``, publish
+class CycleStep:
+    """What the caller must do after feeding the cycle sequencer: send ``commands``, publish
     ``events``, report ``outcome`` (a cycle ended), and switch the coils off now if told."""
 
     commands: list = dataclasses.field(default_factory=list)

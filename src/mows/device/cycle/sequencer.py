@@ -1,11 +1,24 @@
-"""The measurement cycle as a state machine over device sample indices.
+"""The measurement cycle as a state machine over device sample indices, for one probe or for
+several probes on one shared stage: several probes are the general case, one probe a cycle of one.
 
-One cycle at one orientation θ0: turn the probe and let it settle; excite at the current
-resonance estimate with the coil setup's orientation-dependent currents; switch off and
-record the free ring-down; the first ``tuning_steps`` ring-downs are fitted
-(by the fit function the sequencer is handed, the estimator's ring-down fit in the driver)
-and retune the excitation frequency, the next
-``repeats`` are the measurements, with a pause of ``gap_s`` between ring-down and excitation.
+One cycle at one orientation θ0 (the stage angle): turn the stage and let it settle; then
+``tuning_steps + repeats`` rounds, each exciting the cycle's groups in turn under the
+duty-cycle limit and recording each group's free ring-down, with a pause of ``gap_s`` between a
+ring-down and the next excitation.
+
+* One probe (no ``probes``): one group, driven with the coil setup's orientation-dependent
+  currents at the current resonance estimate. The first ``tuning_steps`` ring-downs are fitted
+  (by the fit function the sequencer is handed, the estimator's ring-down fit in the driver)
+  and retune the excitation frequency; the next ``repeats`` are the measurements.
+* Several probes (``probes``, at their home orientations; probe id = index): the excitation is
+  planned at the stage angle (:func:`mows.device.cycle.tone_groups.plan_probes`: each probe's
+  tone at its f00 for a swing, each at most ``excitation_current_a``, groups whose summed peak
+  stays within the driver's cap, overlapping tones refused with the reason) and its groups are
+  excited in turn (:class:`mows.device.cycle.tone_groups.GroupSequence`). No tuning ring-downs
+  are run (a tuning step retunes one frequency, a multi-tone cycle has one per probe). Probes
+  the plan refuses are named with the reason in the outcome while the others are measured; a
+  cycle whose probes are all refused is refused before it starts. The EXCITING and RINGDOWN of
+  a group list its probes, each one's tone and its own θ0.
 
 Time is the device's sample index. Every command is scheduled at a sample, and every phase
 is stamped with the sample at which the device *answered* that its command took effect, so
@@ -13,15 +26,18 @@ that the stamp of a ring-down is the sample the coils went off, exact to one sam
 is announced once the samples have reached it.
 
 The sequencer does no I/O: it is fed samples, command results and link changes, and returns
-a :class:`Step` of commands to send, phase events to publish, the outcome of a finished
-cycle, and whether the coils must go off at once. The coils are on only in EXCITING: every
-other phase is coils off, and a fault (emergency stop, a refused or unanswered command, a
-lost link) switches them off at once. The emergency stop latches until released.
+a :class:`~mows.device.cycle.phases.CycleStep` of commands to send, phase events to publish,
+the outcome of a finished cycle, and whether the coils must go off at once. The coils are on
+only in EXCITING: every other phase is coils off, and a fault (emergency stop, a refused or
+unanswered command, a lost link) switches them off at once, every tone together; the groups
+not yet excited are dropped, and the time the coils were on counts towards the duty limit. The
+emergency stop latches until released.
 """
 
 from __future__ import annotations
 
-from collections.abc import Generator
+import dataclasses
+from collections.abc import Generator, Sequence
 
 from mows.device.cycle.duty import DutyCycleLimit
 from mows.device.cycle.phases import (
@@ -29,32 +45,52 @@ from mows.device.cycle.phases import (
     CyclePlan,
     CycleRequest,
     CycleSettings,
+    CycleStep,
     LostTuning,
     Phase,
     PhaseEvent,
-    Step,
     TuningFit,
     TuningResult,
     check_setting,
 )
+from mows.device.cycle.tone_groups import GroupSequence, on_stage, plan_probes, with_cap
 from mows.device.cycle.waits import Answer, CycleAborted, Reach, Recording, Run
 from mows.device.interface import (
     CoilCommand,
     Command,
     CommandResult,
     LinkEvent,
+    MultiToneCommand,
     OrientationCommand,
 )
 from mows.physics.coils import CoilSetup, CurrentCap, excitation_samples
+from mows.physics.coupling import PlacedProbe
+from mows.physics.multitone import ExcitationPlan, Tone, peak_current_a
 from mows.records.samples import SampleBlock
 
 
-class CycleSequencer:
-    """Runs one cycle at a time on a device of ``sample_rate_hz`` with the coils of ``setup``.
+@dataclasses.dataclass(frozen=True)
+class Excitation:
+    """One group's excitation, on for samples [``on_index``, ``off_index``): the coil currents it
+    announces (one probe: signed per coil; several: each coil's summed peak), its drive's
+    frequency, and the tones of a multi-tone drive (empty for one probe's)."""
 
-    ``frequency_hz`` is the first resonance estimate (retuned by every cycle);
+    on_index: int
+    off_index: int
+    currents_a: tuple[float, ...]
+    frequency_hz: float
+    tones: tuple[Tone, ...] = ()
+
+
+class CycleSequencer:
+    """Runs one cycle at a time on a device of ``sample_rate_hz`` with the coils of ``setup``
+    (module docstring).
+
+    ``frequency_hz`` is the first resonance estimate (retuned by one probe's cycles);
     ``lead_samples`` how far ahead of the newest sample commands are scheduled; ``cap`` the
-    driver's coil current cap (no command above it is ever issued).
+    driver's coil current cap (no command above it is ever issued, a multi-tone drive's summed
+    peak included); ``probes`` the probes of one shared stage at their home orientations, empty
+    for one probe.
     """
 
     def __init__(
@@ -67,6 +103,7 @@ class CycleSequencer:
         lead_samples: int = 0,
         *,
         fit: TuningFit,
+        probes: Sequence[PlacedProbe] = (),
     ):
         self.settings = settings
         self.setup = setup
@@ -74,6 +111,7 @@ class CycleSequencer:
         self.sample_rate_hz = float(sample_rate_hz)
         self.frequency_hz = float(frequency_hz)
         self.lead_samples = int(lead_samples)
+        self.probes = tuple(probes)
         self.latched: str | None = None  # the reason of a latched emergency stop
         self.phase = Phase.IDLE
         self.fault = ""  # why the last cycle failed, until the next one starts or a stop is released
@@ -86,11 +124,13 @@ class CycleSequencer:
         self._wait: Reach | Answer | None = None
         self._results: dict[int, CommandResult] = {}
         self._recordings: list[Recording] = []
+        self._groups: GroupSequence | None = None  # several probes: the running round's groups
+        self._in_flight: Excitation | None = None  # commanded, its interval not yet counted by the duty limit
         self._unstamped: list[tuple[Phase, str]] = []  # events raised before the first sample
         self._last_cycle_id = 0
         self._last_command_id = 0
         self._coils_stopped_at: int | None = None  # our next sample when coils were last switched off now
-        self._step = Step()
+        self._step = CycleStep()
         self._announce(Phase.IDLE, "driver started")
 
     # --- inputs ----------------------------------------------------------------------------
@@ -111,17 +151,17 @@ class CycleSequencer:
         """Share of the last duty window with the coils on."""
         return self._duty.fraction(self._next_index)
 
-    def start(self, request: CycleRequest) -> Step:
+    def start(self, request: CycleRequest) -> CycleStep:
         """Begin a cycle. ValueError, with the reason, if it cannot run."""
         cycle = self._plan(request)
-        self._step = Step()
+        self._step = CycleStep()
         self.fault = ""
         self._cycle = cycle
         self._runner = self._run(cycle)
         self._advance(None)
         return self._take_step()
 
-    def on_samples(self, chunk: SampleBlock) -> Step:
+    def on_samples(self, chunk: SampleBlock) -> CycleStep:
         self._anchor = (chunk.first_sample_index, chunk.stamp_ns)
         self._next_index = chunk.end_index
         for recording in self._recordings:
@@ -132,24 +172,24 @@ class CycleSequencer:
         self._resume()
         return self._take_step()
 
-    def on_result(self, result: CommandResult) -> Step:
+    def on_result(self, result: CommandResult) -> CycleStep:
         if self.busy:  # an answer that comes after its cycle failed has nobody waiting
             self._results[result.command_id] = result
             self._resume()
         return self._take_step()
 
-    def on_link(self, event: LinkEvent) -> Step:
+    def on_link(self, event: LinkEvent) -> CycleStep:
         if not event.up and self.busy:
             self._fault(f"link to the device lost: {event.reason}")
         return self._take_step()
 
-    def abort(self, reason: str) -> Step:
+    def abort(self, reason: str) -> CycleStep:
         """End the running cycle (coils off at once): the samples stopped, the driver stops."""
         if self.busy:
             self._fault(reason)
         return self._take_step()
 
-    def cancel(self, reason: str) -> Step:
+    def cancel(self, reason: str) -> CycleStep:
         """End the running cycle because nobody wants it any more (coils off at once): it
         fails with ``reason``, and the sequencer is IDLE, not in FAULT."""
         if self.busy:
@@ -157,13 +197,13 @@ class CycleSequencer:
             self._announce(Phase.IDLE, f"cancelled: {reason}")
         return self._take_step()
 
-    def emergency_stop(self, reason: str) -> Step:
+    def emergency_stop(self, reason: str) -> CycleStep:
         """Coils off at once, the running cycle failed, and no cycle until :meth:`release`."""
         self.latched = reason or "no reason given"
         self._fault(f"emergency stop: {self.latched}")
         return self._take_step()
 
-    def release(self) -> Step:
+    def release(self) -> CycleStep:
         if self.latched is not None:
             self.latched, self.fault = None, ""
             self._announce(Phase.IDLE, "emergency stop released")
@@ -180,6 +220,8 @@ class CycleSequencer:
             raise ValueError("no samples from the device yet")
         s = self.settings if request.settings is None else request.settings
         cycle = CyclePlan.resolve(self._last_cycle_id + 1, request, s)  # ValueError for a request out of range
+        if self.probes:  # driven at their f00: no tuning
+            cycle = dataclasses.replace(cycle, tuning_steps=0)
         if request.frequency_hz is not None:
             nyquist_hz = self.sample_rate_hz / 2.0
             check_setting(
@@ -188,7 +230,10 @@ class CycleSequencer:
                 0.0 < request.frequency_hz < nyquist_hz,
                 f"in (0, {nyquist_hz:g}) Hz",
             )
-        self._currents(cycle)  # ValueError above the cap
+        if self.probes:
+            self._tone_plan(cycle.theta0_rad, s)  # ValueError when it excites no probe
+        else:
+            self._currents(cycle)  # ValueError above the cap
         self._duty.configure(s.max_duty_cycle, self._samples(s.duty_window_s))
         self._duty.earliest_start(self._next_index, self._samples(s.excite_s))  # ValueError if it never fits
         if request.frequency_hz is not None:
@@ -196,41 +241,104 @@ class CycleSequencer:
         self._last_cycle_id = cycle.cycle_id
         return cycle
 
+    def _tone_plan(self, theta0_rad: float, settings: CycleSettings) -> ExcitationPlan:
+        """The plan of a cycle of the probes at stage angle ``theta0_rad``. ValueError, with every
+        probe's reason, when it excites none."""
+        plan = plan_probes(
+            on_stage(self.probes, theta0_rad),
+            self._capped_setup(),
+            settings.excite_s,
+            tone_limit_a=settings.excitation_current_a,
+        )
+        if not plan.groups:
+            raise ValueError(f"no probe can be excited at θ0 = {theta0_rad:.4g} rad: {refusals(plan)}")
+        return plan
+
     def _run(self, c: CyclePlan) -> Run:
-        s = c.settings
-        ringdown = self._samples(s.ringdown_s)
         coils_free = yield from self._turn_and_settle(c)
+        plan = self._tone_plan(c.theta0_rad, c.settings) if self.probes else None
         fits: list[TuningResult] = []
-        recorded = 0
+        rung = recorded = 0
         for k in range(c.tuning_steps + c.repeats):
             tuning = k < c.tuning_steps
             index = k if tuning else k - c.tuning_steps
-            gap = self._samples(c.gap_s) if k else 0
-            # Cut at the drive's turning point, whatever the tuned frequency (excitation_samples).
-            excite = excitation_samples(s.excite_s, self.frequency_hz, self.sample_rate_hz)
-            start = self._duty.earliest_start(max(coils_free + gap, self._next_index + self.lead_samples), excite)
-            currents = self._currents(c)
-            on = self._issue(CoilCommand, start, amplitudes_a=currents, frequency_hz=self.frequency_hz)
-            off = self._issue(
-                CoilCommand, start + excite, amplitudes_a=(0.0,) * len(currents), frequency_hz=self.frequency_hz
-            )
-            if start > coils_free:
-                yield from self._enter(c, Phase.GAP, coils_free, start - coils_free, index, tuning)
-            switched_on = yield from self._answer(on)
-            switched_off = yield from self._answer(off)
-            self._duty.record(switched_on, switched_off)
-            recording = Recording(switched_off, switched_off + ringdown)
-            self._recordings.append(recording)
-            yield from self._enter(c, Phase.EXCITING, switched_on, switched_off - switched_on, index, tuning, currents)
-            yield from self._enter(c, Phase.RINGDOWN, switched_off, ringdown, index, tuning)
-            yield Reach(recording.end)
-            self._recordings.remove(recording)
-            if tuning:
-                fits.append(self._tune(c, recording))
-            else:
-                recorded += 1
-            coils_free = recording.end
+            if plan is not None:
+                self._groups = GroupSequence(plan, self._capped_setup(), self._duty, self.sample_rate_hz)
+            for _ in range(1 if plan is None else len(plan.groups)):
+                gap = self._samples(c.gap_s) if rung else 0
+                excitation = self._next_excitation(c, max(coils_free + gap, self._next_index + self.lead_samples))
+                recording = yield from self._excite(c, excitation, coils_free, index, tuning)
+                rung += 1
+                if tuning:
+                    fits.append(self._tune(c, recording))
+                else:
+                    recorded += 1
+                coils_free = recording.end
+        self._groups = None
         yield from self._enter(c, Phase.IDLE, coils_free, 0)
+        return self._outcome(c, plan, recorded, fits)
+
+    def _next_excitation(self, c: CyclePlan, not_before: int) -> Excitation:
+        """The next group's excitation, at the first sample ≥ ``not_before`` that keeps the duty
+        limit: one probe's at the tuned frequency, cut at the drive's turning point
+        (excitation_samples), or the round's next group of tones."""
+        if self._groups is None:
+            excite = excitation_samples(c.settings.excite_s, self.frequency_hz, self.sample_rate_hz)
+            start = self._duty.earliest_start(not_before, excite)
+            return Excitation(start, start + excite, self._currents(c), self.frequency_hz)
+        group = self._groups.next(not_before)
+        assert group is not None  # a group is asked for only while some remain
+        duration_s = (group.off_index - group.on_index) / self.sample_rate_hz
+        peaks = tuple(float(a) for a in peak_current_a(self.setup, group.tones, duration_s))
+        return Excitation(group.on_index, group.off_index, peaks, group.tones[0].frequency_hz, group.tones)
+
+    def _excite(
+        self, c: CyclePlan, e: Excitation, coils_free: int, index: int, tuning: bool
+    ) -> Generator[Answer | Reach, CommandResult | None, Recording]:
+        """Excite ``e`` and record its ring-down, announcing GAP (if it waits), EXCITING and
+        RINGDOWN; returns the ring-down's recording, complete if a tuning fit needs its samples.
+        The duty limit counts the interval the device applied."""
+        samples = e.off_index - e.on_index
+        if e.tones:
+            on = self._issue(MultiToneCommand, e.on_index, tones=e.tones, samples=samples)
+        else:
+            on = self._issue(CoilCommand, e.on_index, amplitudes_a=e.currents_a, frequency_hz=e.frequency_hz)
+        off = self._issue(
+            CoilCommand, e.off_index, amplitudes_a=(0.0,) * len(self.setup.coils), frequency_hz=e.frequency_hz
+        )
+        self._in_flight = e
+        if e.on_index > coils_free:
+            yield from self._enter(c, Phase.GAP, coils_free, e.on_index - coils_free, index, tuning)
+        switched_on = yield from self._answer(on)
+        switched_off = yield from self._answer(off)
+        self._switched(switched_on, switched_off)
+        recording = Recording(switched_off, switched_off + self._samples(c.settings.ringdown_s))
+        if tuning:
+            self._recordings.append(recording)
+        yield from self._enter(c, Phase.EXCITING, switched_on, switched_off - switched_on, index, tuning, e)
+        yield from self._enter(c, Phase.RINGDOWN, switched_off, recording.end - switched_off, index, tuning, e)
+        yield Reach(recording.end)
+        if tuning:
+            self._recordings.remove(recording)
+        return recording
+
+    def _switched(self, on_index: int, off_index: int) -> None:
+        """The device applied the excitation in flight over [``on_index``, ``off_index``): the duty
+        limit counts it."""
+        if self._groups is not None:
+            self._groups.switched(on_index, off_index)
+        else:
+            self._duty.record(on_index, off_index)
+        self._in_flight = None
+
+    def _outcome(self, c: CyclePlan, plan: ExcitationPlan | None, recorded: int, fits: list) -> CycleOutcome:
+        if plan is not None:
+            in_turn = " then ".join(str(list(g)) for g in plan.groups)
+            message = f"{recorded} ring-downs recorded of the probes {in_turn} at their f00 (no tuning)"
+            if plan.refused:
+                message += f"; refused: {refusals(plan)}"
+            frequency_hz = plan.group_tones(0)[0].frequency_hz
+            return CycleOutcome(True, message, c.cycle_id, frequency_hz, recorded, refused_probes=plan.refused)
         failed = [f for f in fits if not f.ok]
         message = f"{recorded} ring-downs recorded at {self.frequency_hz:.4f} Hz"
         if failed:
@@ -263,10 +371,14 @@ class CycleSequencer:
             self.frequency_hz = float(fit.frequency_hz)
         return fit
 
-    def _currents(self, c: CyclePlan) -> tuple:
-        """The setup's coil currents at θ0, checked against the cap (ValueError above it)."""
+    def _currents(self, c: CyclePlan) -> tuple[float, ...]:
+        """One probe's coil currents at θ0, checked against the cap (ValueError above it)."""
         currents = self.setup.currents_a(c.theta0_rad, c.settings.excitation_current_a)
         return tuple(float(i) for i in self.cap.check(currents))
+
+    def _capped_setup(self) -> CoilSetup:
+        """The setup under the driver's cap, which a multi-tone plan holds on the summed peak."""
+        return with_cap(self.setup, self.cap.limit_a)
 
     # --- waiting ---------------------------------------------------------------------------
     def _issue(self, kind, at_index: int, **fields) -> Command:
@@ -291,8 +403,7 @@ class CycleSequencer:
         duration_samples: int,
         repeat_index: int = 0,
         tuning: bool = False,
-        currents: tuple = (),
-        tones: tuple = (),
+        excitation: Excitation | None = None,
     ) -> Generator[Reach, CommandResult | None, None]:
         yield Reach(index + 1)
         self._emit(
@@ -302,8 +413,7 @@ class CycleSequencer:
             duration_samples=duration_samples,
             repeat_index=repeat_index,
             tuning=tuning,
-            currents=currents,
-            tones=tones,
+            excitation=excitation,
         )
 
     def _resume(self) -> None:
@@ -349,9 +459,16 @@ class CycleSequencer:
         self._announce(Phase.FAULT, reason, cycle)
 
     def _stop(self, reason: str) -> None:
-        """Coils off now; the running cycle (if any) fails with ``reason``."""
+        """Coils off now, every tone together; the running cycle (if any) fails with ``reason``.
+        The groups not yet excited are dropped, and the time the coils were on counts towards the
+        duty limit."""
         self._step.coils_off_now = True
         self._coils_stopped_at = self._next_index
+        if self._groups is not None and not self._groups.done:
+            self._groups.emergency_stop(self._next_index, reason or "stopped")
+        elif (e := self._in_flight) is not None:
+            self._duty.record(e.on_index, max(e.on_index, min(e.off_index, self._next_index)))
+        self._groups, self._in_flight = None, None
         if self._runner is not None:
             cycle = self._cycle
             assert cycle is not None  # set and cleared together with _runner (start, _end)
@@ -375,18 +492,19 @@ class CycleSequencer:
         duration_samples: int = 0,
         repeat_index: int = 0,
         tuning: bool = False,
-        currents: tuple = (),
         reason: str = "",
-        tones: tuple = (),
+        excitation: Excitation | None = None,
     ) -> None:
-        """Announce ``phase``; ``tones`` (:class:`mows.physics.multitone.Tone`) are the probes a
-        multi-tone excitation rings, listed on it and its ring-down, the first one's tone its frequency."""
+        """Announce ``phase``; an EXCITING and its RINGDOWN carry their ``excitation``: its
+        currents (EXCITING only), its drive's frequency and the probes a multi-tone drive rings,
+        each with its tone and its θ0."""
         self.phase = phase
         # Events are stamped once samples have come (_announce holds them back until then);
         # a cycle's own events come later still, as _plan starts none before the first sample.
         assert self._anchor is not None
         anchor_index, anchor_ns = self._anchor
-        n_coils = len(self.setup.phases_rad)
+        currents = excitation.currents_a if excitation is not None and phase == Phase.EXCITING else ()
+        tones = excitation.tones if excitation is not None else ()
         self._step.events.append(
             PhaseEvent(
                 phase=phase,
@@ -396,8 +514,8 @@ class CycleSequencer:
                 repeat_index=repeat_index,
                 repeats=cycle.repeats if cycle else 0,
                 tuning=tuning,
-                currents_a=currents or (0.0,) * n_coils,
-                frequency_hz=tones[0].frequency_hz if tones else self.frequency_hz,
+                currents_a=currents or (0.0,) * len(self.setup.phases_rad),
+                frequency_hz=excitation.frequency_hz if excitation is not None else self.frequency_hz,
                 theta0_rad=cycle.theta0_rad if cycle else 0.0,
                 planned_duration_s=duration_samples / self.sample_rate_hz,
                 setup=self.setup.name,
@@ -408,9 +526,14 @@ class CycleSequencer:
             )
         )
 
-    def _take_step(self) -> Step:
-        step, self._step = self._step, Step()
+    def _take_step(self) -> CycleStep:
+        step, self._step = self._step, CycleStep()
         return step
 
     def _samples(self, seconds: float) -> int:
         return int(round(seconds * self.sample_rate_hz))
+
+
+def refusals(plan: ExcitationPlan) -> str:
+    """The refused probes and their reasons, in one line."""
+    return "; ".join(f"probe {probe_id}: {reason}" for probe_id, reason in plan.refused)

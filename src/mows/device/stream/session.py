@@ -23,14 +23,13 @@ import threading
 import time
 from collections.abc import Callable
 
-from mows.device.cycle.multitone_sequencer import MultiToneSequencer
 from mows.device.cycle.phases import (
     CycleOutcome,
     CycleRequest,
     CycleSettings,
+    CycleStep,
     Phase,
     PhaseEvent,
-    Step,
     SupplyEvent,
     TuningFit,
 )
@@ -186,19 +185,20 @@ class DeviceSession:
         if not self.backend.can_excite:
             return
         probes, coils = self.backend.probes, self.backend.coils
-        if probes:  # their tones (mows.device.cycle.multitone_sequencer), sized by the coils where the device has them
+        if probes:  # their tones are sized by the coils where the device has them, driven at their f00
             assert coils is not None  # a device of several probes says where its coils stand among them
-            self.sequencer = MultiToneSequencer(c.settings, coils, c.cap, info.sample_rate_hz, probes, lead, fit=c.fit)
+            setup, frequency_hz = coils, probes[0].probe.f00_hz
         else:
-            self.sequencer = CycleSequencer(
-                c.settings, c.setup, c.cap, info.sample_rate_hz, c.frequency_hz, lead, fit=c.fit
-            )
+            setup, frequency_hz = c.setup, c.frequency_hz
+        self.sequencer = CycleSequencer(
+            c.settings, setup, c.cap, info.sample_rate_hz, frequency_hz, lead, fit=c.fit, probes=probes
+        )
 
     def _count_arrival(self, n: int) -> None:
         self._last_samples_s = self._monotonic()
         self._rate.add(self._last_samples_s, n)
 
-    def _act(self, step: Step) -> None:
+    def _act(self, step: CycleStep) -> None:
         """Carry out what the sequencer asked for."""
         if step.coils_off_now:
             self.backend.coils_off_now()

@@ -38,6 +38,7 @@ def block_message(first, fs, samples, saturated):
     return STORE.types[RAW](
         header=header(first / fs),
         sequence=first // BLOCK,
+        device_epoch=0,
         first_sample_index=first,
         sample_rate_hz=fs,
         range_t=1e-5,
@@ -52,6 +53,7 @@ def ringdown_message(index, fs, cycle, theta0, frequency):
         phase=3,
         phase_name="RINGDOWN",
         cycle_id=cycle,
+        device_epoch=0,
         repeat_index=0,
         repeats=1,
         tuning=False,

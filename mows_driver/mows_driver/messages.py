@@ -16,6 +16,7 @@ def block_msg(block, info: DeviceInfo, frame_id: str, sensor_frame_ids: list) ->
     """One block of samples; channel i is in ``sensor_frame_ids[i]`` (``channel_<i+1>`` past them)."""
     message = MagnetometerBlock(
         sequence=block.sequence,
+        device_epoch=block.epoch,
         first_sample_index=block.first_sample_index,
         sample_rate_hz=info.sample_rate_hz,
         range_t=info.range_t,
@@ -60,8 +61,10 @@ EVENT_FIELDS = (
 )  # a PhaseEvent's fields that ExcitationState carries under the same name
 
 
-def excitation_msg(event: PhaseEvent, frame_id: str) -> ExcitationState:
+def excitation_msg(event: PhaseEvent, frame_id: str, device_epoch: int = 0) -> ExcitationState:
+    """A phase change, stamped on the device clock of ``device_epoch``."""
     message = ExcitationState(
+        device_epoch=device_epoch,
         phase=int(event.phase),
         phase_name=event.phase.name,
         coil_current_amplitude_a=list(event.currents_a),

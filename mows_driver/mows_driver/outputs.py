@@ -115,7 +115,7 @@ class DriverOutputs:
             if session.stage_angle_rad is not None:  # the stage with every block: TF at its stamps
                 self.joints.publish(joint_state_msg(block.stamp_ns, session.stage_angle_rad))
         for event in output.events:
-            self._send(self.excitation, excitation_msg(event, values["probe_frame_id"]))
+            self._send(self.excitation, excitation_msg(event, values["probe_frame_id"], session.epoch))
             if event.phase == Phase.FAULT:
                 self._logger.error(f"coils forced off: {event.reason}")
         for supply in output.supply:

@@ -40,6 +40,11 @@ def test_a_restarted_device_counts_its_samples_before_the_first_received_as_miss
     assembler.add(chunk(140_000))  # it restarted 7 s ago: its index started again at 0
     assert (assembler.gaps, assembler.restarts) == (1, 1)
     assert assembler.missing_samples == 140_000  # not "0 samples missing" after a 7 s outage
+    # The blocks before the restart are of the first clock, those after it of the next: a
+    # subscriber starts its stream again instead of taking them for repeats of the old.
+    published = assembler.flush() + [b for first in range(140_100, 141_100, 100) for b in assembler.add(chunk(first))]
+    assert [b.epoch for b in published] == [1, 1, 1]
+    assert BlockAssembler(500, first_epoch=3).epoch == 3  # a driver reconfigured goes on counting
 
 
 def test_frames_the_device_sent_before_the_first_connection_are_not_lost(tmp_path):

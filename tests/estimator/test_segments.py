@@ -122,3 +122,45 @@ def test_saturation_flags_travel_with_the_samples():
 def test_bad_buffer_length_is_an_error():
     with pytest.raises(ValueError, match="buffer_s"):
         SegmentAssembler(buffer_s=0.0)
+
+
+def restarted(blocks_of_a_clock, epoch):
+    """The same stream from a device whose clock started again: indices and stamps from 0."""
+    return [
+        SampleBlock(
+            b.first_sample_index - 1000,
+            b.stamp_ns - EPOCH_NS - 1000 * NS_PER_SAMPLE,
+            FS,
+            b.samples_t,
+            b.saturated,
+            epoch=epoch,
+        )
+        for b in blocks_of_a_clock
+    ]
+
+
+def test_a_restarted_device_clock_starts_the_stream_again():
+    """After a restart the indices run from 0 again: without the epoch every block would look
+    like a repeat and be dropped. A window of the old clock that was still waiting is returned
+    with its samples missing (refused as a gap, not fitted on another clock's samples); one of
+    the new clock is cut from the new clock's blocks."""
+    samples, saturated = stream(8000)
+    assembler = SegmentAssembler()
+    old = list(blocks(samples[:4000], saturated[:4000], 500))
+    for block in old[:4]:
+        assembler.add_block(block)
+    assert assembler.announce(window_at(1500, 1000)) == []  # waits for samples up to 2500
+    new = restarted(list(blocks(samples[4000:], saturated[4000:], 500)), epoch=1)
+    lost = assembler.add_block(new[0])
+    assert len(lost) == 1 and lost[0].window.start_ns == window_at(1500, 1000).start_ns
+    assert fit_segment(lost[0]).status == FitStatus.DATA_GAP and assembler.device_restarts == 1
+    # A window of the new clock (its stamps start at 0): the new blocks' samples, exact.
+    window = RingdownWindow(start_ns=200 * NS_PER_SAMPLE, duration_s=1000 / FS, device_epoch=1)
+    done = assembler.announce(window)
+    for block in new[1:]:
+        done += assembler.add_block(block)
+    assert len(done) == 1 and done[0].missing_samples == 0
+    np.testing.assert_array_equal(done[0].samples_t, samples[4200:5200])
+    # An announcement of the old clock that arrives late is refused at once.
+    (stale,) = assembler.announce(window_at(3000, 500))
+    assert stale.missing_samples and fit_segment(stale).status == FitStatus.DATA_GAP

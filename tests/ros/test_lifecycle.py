@@ -11,7 +11,7 @@ from action_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
 from mows_msgs.action import RotationSweep
-from mows_msgs.msg import ExcitationState, MagnetometerBlock
+from mows_msgs.msg import ExcitationState, MagnetometerBlock, RingdownFit
 from mows_msgs.srv import CalibrateF00, EmergencyStop, RunCycle
 from rclpy.action import ActionClient
 from rclpy.lifecycle import TransitionCallbackReturn
@@ -257,3 +257,55 @@ def test_mows_graph_configures_all_then_activates_in_data_flow_order(ros, lifecy
     assert {lifecycle.state(name) for name in names} == {"active"}, log(graph)
     steps = re.findall(r"^\[graph\] (configured: .*|\w+ active)$", log(graph), re.MULTILINE)
     assert steps == [f"configured: {', '.join(names)}", *(f"{name} active" for name in names)]
+
+
+def test_a_driver_restarted_mid_session_keeps_the_estimator_fitting(supervisor, start):
+    """A lifecycle restart (deactivate, cleanup, configure, activate) starts the simulated device's
+    clock again: the estimator must start a new stream on it, not drop every block as a repeat,
+    and the next cycle's fit must come as promptly as before (within 1 s of the cycle's answer,
+    where it never came); cycle ids are not reused, and both nodes count the restart."""
+    sup = supervisor
+    fits: list[tuple[float, RingdownFit]] = []
+    sup.ros.node.create_subscription(RingdownFit, "/mows/ringdown", lambda f: fits.append((time.monotonic(), f)), 100)
+    estimator_reports: list[dict] = []
+    sup.ros.node.create_subscription(
+        DiagnosticArray,
+        "/diagnostics",
+        lambda a: estimator_reports.extend(
+            {kv.key: kv.value for kv in s.values} for s in a.status if s.name == "/estimator"
+        ),
+        10,
+    )
+    driver_process = start(*NODES[0].command(QUICK_CYCLES, autostart=False))
+    start(*NODES[1].command([]))
+    active = "the estimator active (its kernels compiled)"
+    sup.ros.wait_for(lambda: estimator_reports and estimator_reports[-1]["lifecycle_state"] == "active", active, 300.0)
+    for transition in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE):
+        assert sup.transition(transition)
+    sup.ros.wait_for(lambda: sup.blocks, "the first block")
+    assert sup.blocks[-1].device_epoch == 0
+    first = sup.result(sup.cycle(theta0_rad=0.3))
+    assert first.success, first.message
+    sup.ros.wait_for(lambda: any(f.cycle_id == first.cycle_id for _, f in fits), "the first cycle's fit")
+    for transition in (
+        Transition.TRANSITION_DEACTIVATE,
+        Transition.TRANSITION_CLEANUP,
+        Transition.TRANSITION_CONFIGURE,
+        Transition.TRANSITION_ACTIVATE,
+    ):
+        assert sup.transition(transition)
+    # The restarted device's clock: the blocks say so, and a cycle waits for its first samples.
+    sup.ros.wait_for(lambda: sup.blocks and sup.blocks[-1].device_epoch == 1, "a block of the new clock")
+    second = sup.result(sup.cycle(theta0_rad=0.6))
+    answered = time.monotonic()
+    assert second.success, second.message
+    assert second.cycle_id > first.cycle_id  # not a second "cycle 1" on /mows/ringdown
+    arrived, fit = sup.ros.wait_for(
+        lambda: next(((t, f) for t, f in fits if f.cycle_id == second.cycle_id), None), "the second cycle's fit"
+    )
+    assert fit.status == RingdownFit.STATUS_OK, fit.message
+    assert arrived - answered < 1.0, f"the fit came {arrived - answered:.1f} s after the cycle's answer"
+    assert sup.report_in("active")["device_restarts"] == "1"
+    sup.ros.wait_for(lambda: estimator_reports and estimator_reports[-1]["device_restarts"] == "1", "the estimator")
+    driver_process.terminate()
+    assert driver_process.wait(timeout=30) == 0, log(driver_process)

@@ -9,7 +9,10 @@ with a gap (``FitStatus.DATA_GAP``).
 
 Device time and sample index are tied by t = t0 + (index − first_index)/fs within a block; the
 announcement's time is converted to an index with the newest block's mapping, so the start
-is exact to one sample as long as both come from the same clock.
+is exact to one sample as long as both come from the same clock. When the device's clock
+restarts (a new ``epoch`` on the blocks: the driver reconfigured, the device rebooted) the
+stream starts again: the samples buffered are of another clock, and a window announced on it
+that has not completed never will (it is returned with every sample missing).
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ class RingdownWindow:
     probe_ids: tuple[int, ...] = ()
     probe_frequency_hz: tuple[float, ...] = ()
     probe_theta0_rad: tuple[float, ...] = ()
+    device_epoch: int = 0  # the device clock start_ns is on (the blocks' epoch)
 
     def __post_init__(self) -> None:
         if not (
@@ -79,6 +83,7 @@ def block_from_message(message: Any) -> SampleBlock:
         samples,
         saturated,
         int(message.sequence),
+        int(getattr(message, "device_epoch", 0)),
     )
 
 
@@ -96,6 +101,7 @@ def window_from_message(message: Any) -> RingdownWindow:
         tuple(int(k) for k in getattr(message, "probe_ids", ())),
         tuple(float(f) for f in getattr(message, "probe_frequency_hz", ())),
         tuple(float(a) for a in getattr(message, "probe_theta0_rad", ())),
+        int(getattr(message, "device_epoch", 0)),
     )
 
 
@@ -124,7 +130,8 @@ class SegmentAssembler:
     Counters (for diagnostics): ``blocks``, ``gaps`` (blocks that did not follow on from the one
     before: lost blocks, one gap per run of them), ``missing_samples`` (the samples in those gaps),
     ``rate_changes`` (a new sample rate or number of channels restarts the buffer), ``late_windows``
-    (announced after their samples left the buffer).
+    (announced after their samples left the buffer), ``device_restarts`` (blocks of a new device
+    clock: the stream starts again).
     """
 
     def __init__(self, buffer_s: float = 5.0) -> None:
@@ -138,11 +145,19 @@ class SegmentAssembler:
         self.missing_samples = 0
         self.rate_changes = 0
         self.late_windows = 0
+        self.device_restarts = 0
 
     # --- input --------------------------------------------------------------------------
     def add_block(self, block: SampleBlock) -> list[Segment]:
-        """Take a block; return the segments it completes."""
+        """Take a block; return the segments it completes (and, on a new device clock, those
+        that never will)."""
         newest = self._blocks[-1] if self._blocks else None
+        lost: list[Segment] = []
+        if newest is not None and block.epoch != newest.epoch:
+            self.device_restarts += 1
+            lost = self._of_another_clock(block.epoch)
+            self._blocks.clear()
+            newest = None
         if newest is not None and (
             block.sample_rate_hz != newest.sample_rate_hz or block.samples_t.shape[1] != newest.samples_t.shape[1]
         ):
@@ -156,15 +171,28 @@ class SegmentAssembler:
         self._blocks.append(block)
         self.blocks += 1
         self._prune()
-        return self._complete()
+        return lost + self._complete()
 
     def announce(self, window: RingdownWindow) -> list[Segment]:
-        """Register a ring-down; return it at once if its samples are all here already."""
-        if not self._blocks:
-            self._pending.append(_Pending(window, *self._index_range(window, None)))
-            return []
-        self._pending.append(_Pending(window, *self._index_range(window, self._blocks[-1])))
-        return self._complete()
+        """Register a ring-down; return it at once if its samples are all here already, or if
+        they are of a device clock that has restarted since."""
+        newest = self._blocks[-1] if self._blocks else None
+        if newest is not None and window.device_epoch < newest.epoch:
+            return [self._unrecorded(window)]
+        same_clock = newest is not None and window.device_epoch == newest.epoch
+        self._pending.append(_Pending(window, *self._index_range(window, newest if same_clock else None)))
+        return self._complete() if newest is not None else []
+
+    def _of_another_clock(self, epoch: int) -> list[Segment]:
+        """The windows that blocks of ``epoch`` can no longer complete: those of earlier clocks."""
+        lost = [p.window for p in self._pending if p.window.device_epoch < epoch]
+        self._pending = [p for p in self._pending if p.window.device_epoch >= epoch]
+        return [self._unrecorded(window) for window in lost]
+
+    @staticmethod
+    def _unrecorded(window: RingdownWindow) -> Segment:
+        """A window none of whose samples will arrive: the device's clock restarted."""
+        return Segment(window, -1, 1.0, np.full((1, 1), np.nan), np.zeros((1, 1), bool), 1)
 
     # --- assembly -----------------------------------------------------------------------
     @staticmethod
@@ -178,6 +206,9 @@ class SegmentAssembler:
         newest = self._blocks[-1]
         done, waiting = [], []
         for pending in self._pending:
+            if pending.window.device_epoch != newest.epoch:  # a later clock's: its blocks are to come
+                waiting.append(pending)
+                continue
             if pending.start_index < 0:
                 pending.start_index, pending.stop_index = self._index_range(pending.window, newest)
             if pending.stop_index <= newest.end_index:
@@ -229,7 +260,7 @@ def gap_message(segment: Segment) -> str:
     """Why a segment with missing samples is not fitted."""
     return (
         f"{segment.missing_samples} of {len(segment.samples_t)} samples of the ring-down never "
-        "arrived (sequence gap or late announcement); not fitted across a gap"
+        "arrived (a sequence gap, a late announcement or the device clock restarted); not fitted across a gap"
     )
 
 

@@ -5,7 +5,8 @@ Row i of ``samples_t`` was taken at device time ``stamp_ns + i / sample_rate_hz`
 nanoseconds, REP-145: the stamp is the time of the first sample) and is device sample
 ``first_sample_index + i``. ``samples_t`` (n, channels) tesla; ``saturated`` (n, channels)
 flags samples clipped at the sensor's range (their value is not a measurement). ``sequence``
-numbers published blocks (0 until a block assembler numbers them).
+numbers published blocks (0 until a block assembler numbers them); ``epoch`` counts the device
+clock's restarts (indices and stamps of two epochs do not compare).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ class SampleBlock:
     samples_t: np.ndarray
     saturated: np.ndarray
     sequence: int = 0
+    epoch: int = 0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.sample_rate_hz) and self.sample_rate_hz > 0):

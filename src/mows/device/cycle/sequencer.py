@@ -104,6 +104,7 @@ class CycleSequencer:
         *,
         fit: TuningFit,
         probes: Sequence[PlacedProbe] = (),
+        last_cycle_id: int = 0,
     ):
         self.settings = settings
         self.setup = setup
@@ -127,7 +128,7 @@ class CycleSequencer:
         self._groups: GroupSequence | None = None  # several probes: the running round's groups
         self._in_flight: Excitation | None = None  # commanded, its interval not yet counted by the duty limit
         self._unstamped: list[tuple[Phase, str]] = []  # events raised before the first sample
-        self._last_cycle_id = 0
+        self._last_cycle_id = last_cycle_id  # ids go on from another sequencer's (the driver reconfigured)
         self._last_command_id = 0
         self._coils_stopped_at: int | None = None  # our next sample when coils were last switched off now
         self._step = CycleStep()

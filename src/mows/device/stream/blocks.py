@@ -4,11 +4,13 @@ Blocks hold ``block_samples`` consecutive samples. A block never spans a gap: wh
 are missing, the block being filled is published short, the gap is counted, and the next
 block's sequence number jumps by one more than the blocks' worth of samples lost (at least
 2), so that a subscriber sees the loss in ``sequence`` as well as in ``first_sample_index``.
-Nothing is interpolated or filled in.
+Nothing is interpolated or filled in. A jump backwards is the device's clock starting again:
+the blocks after it carry the next ``epoch``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -20,8 +22,9 @@ class BlockAssembler:
     """Sample blocks as the device sent them in, blocks of ``block_samples`` numbered by
     ``sequence`` out (``block_samples`` may change between blocks)."""
 
-    def __init__(self, block_samples: int):
+    def __init__(self, block_samples: int, first_epoch: int = 0):
         self.block_samples = int(block_samples)
+        self.first_epoch = int(first_epoch)  # the epoch of this assembler's first block
         self.gaps = 0  # discontinuities of the sample index
         self.missing_samples = 0  # samples lost in them: forward jumps, and a restarted device's
         # samples before the first received (at least that many)
@@ -47,6 +50,11 @@ class BlockAssembler:
         while self._pending >= self.block_samples:
             blocks.append(self._cut(self.block_samples))
         return blocks
+
+    @property
+    def epoch(self) -> int:
+        """The device clock's epoch now: the first one plus the restarts seen since."""
+        return self.first_epoch + self.restarts
 
     def flush(self) -> list[SampleBlock]:
         """The block being filled, short, if it holds any samples."""
@@ -78,6 +86,6 @@ class BlockAssembler:
             else:
                 rest.append(part)
         self._parts, self._pending = rest, self._pending - n
-        block = SampleBlock.concatenate(taken, sequence=self._sequence)
+        block = dataclasses.replace(SampleBlock.concatenate(taken, sequence=self._sequence), epoch=self.epoch)
         self._sequence += 1
         return block

@@ -70,6 +70,10 @@ class SessionConfig:
     cap: CurrentCap
     frequency_hz: float  # the first resonance estimate
     fit: TuningFit  # fits the tuning ring-downs (the estimator's fit_ringdown)
+    # A session that follows another on the same device link (the driver reconfigured) goes on
+    # from where it left: the next device clock's epoch, and cycle ids not used before.
+    first_epoch: int = 0
+    last_cycle_id: int = 0
 
 
 class DeviceSession:
@@ -180,7 +184,9 @@ class DeviceSession:
     def _device_known(self) -> None:
         info = self.backend.info
         assert info is not None  # called once the device has described itself (at start or on link up)
-        self.assembler = BlockAssembler(round(self.config.block_duration_s * info.sample_rate_hz))
+        self.assembler = BlockAssembler(
+            round(self.config.block_duration_s * info.sample_rate_hz), self.config.first_epoch
+        )
         c, lead = self.config, self.backend.command_lead_samples
         if not self.backend.can_excite:
             return
@@ -191,7 +197,15 @@ class DeviceSession:
         else:
             setup, frequency_hz = c.setup, c.frequency_hz
         self.sequencer = CycleSequencer(
-            c.settings, setup, c.cap, info.sample_rate_hz, frequency_hz, lead, fit=c.fit, probes=probes
+            c.settings,
+            setup,
+            c.cap,
+            info.sample_rate_hz,
+            frequency_hz,
+            lead,
+            fit=c.fit,
+            probes=probes,
+            last_cycle_id=c.last_cycle_id,
         )
 
     def _count_arrival(self, n: int) -> None:
@@ -275,6 +289,11 @@ class DeviceSession:
             self._last_samples_s = self._monotonic()
             self._act(step)
             return self.sequencer.last_cycle_id
+
+    @property
+    def epoch(self) -> int:
+        """The device clock's epoch of the newest samples (:class:`BlockAssembler`)."""
+        return self.config.first_epoch if self.assembler is None else self.assembler.epoch
 
     def cancel_cycle(self, cycle_id: int, reason: str) -> bool:
         """End cycle ``cycle_id`` if it is the one running (coils off at the device's next
@@ -394,7 +413,7 @@ class DeviceSession:
                     samples=a.samples,
                     gaps=a.gaps,
                     missing_samples=a.missing_samples,
-                    device_restarts=a.restarts,
+                    device_restarts=a.epoch,
                     saturated_samples=a.saturated_samples,
                 )
             if s is None:  # a recording: the phase of its last replayed event

@@ -43,6 +43,7 @@ are no point dipoles to each other: the probes are then decomposed alone, each m
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 from collections.abc import Sequence
 
@@ -59,6 +60,7 @@ from mows.sweep.decompose import (
     Decomposition,
     DecompositionStatus,
     NeighbourFields,
+    Ringdowns,
     local_potential,
     orientations_problem,
 )
@@ -108,6 +110,13 @@ class ProbeSweep:
     def theta0_rad(self) -> np.ndarray:
         return np.array([p.theta0_rad for p in self.record.points], float)
 
+    @functools.cached_property
+    def _measured(self) -> Ringdowns | None:
+        """The record's :meth:`~mows.sweep.record.SweepRecord.measured_ringdowns`, once: their
+        swings about each rest angle are tabulated on first use, for every pass of
+        :func:`decompose_probes` (the record does not change while it is decomposed)."""
+        return self.record.measured_ringdowns()
+
     def decompose(self, options: DecomposeOptions, neighbours: NeighbourFields | None = None) -> Decomposition:
         """Its record decomposed, with the ``neighbours``' fields at its ring-downs when given."""
         record, model = self.record, options.model
@@ -126,7 +135,7 @@ class ProbeSweep:
             options.f00_free,
             neighbours,
             curvature=curvature,
-            measured_swings=options.measured_swings,
+            measured=self._measured if options.measured_swings else None,
         )
 
 
@@ -178,10 +187,10 @@ def decompose_probes(
     why = crowding(sweeps)
     if why or options.model != "first_principles":
         return [uncoupled(d, why) for d in results]
+    if not all(r.ok for r in results):  # a probe without a decomposition leaves its field unknown
+        return [uncoupled(r) for r in results]
     orientations = own_orientations_rad(sweeps) if orientations_rad is None else orientations_rad
     for done in range(passes):
-        if not all(r.ok for r in results):
-            return results if done else [uncoupled(r) for r in results]
         fields = neighbour_fields(sweeps, [r.parameters for r in results], orientations)
         coupled = [s.decompose(options, f) for s, f in zip(sweeps, fields)]
         if not all(r.ok for r in coupled):

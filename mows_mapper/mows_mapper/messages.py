@@ -103,15 +103,15 @@ def decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
     return msg
 
 
-def probe_decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
-    """One probe's decomposition of a multi-probe sweep, in its own rotation-plane frame."""
-    return decomposition_msg(sweep, probe_frame_id(frame_id, sweep.probe_id))
+def sweep_frame_id(sweep: SweepMap, frame_id: str, per_probe: bool) -> str:
+    """The frame of a probe's decomposition: its own rotation-plane frame when the probes are
+    listed (``per_probe``), else the single probe's ``frame_id``."""
+    return probe_frame_id(frame_id, sweep.probe_id if per_probe else None)
 
 
 def publication_msgs(plan: Publication, frame_id: str) -> list[SweepDecomposition]:
     """The SweepDecomposition of each sweep ``plan`` publishes, in its probe's frame when it says so."""
-    make = probe_decomposition_msg if plan.per_probe else decomposition_msg
-    return [make(sweep, frame_id) for sweep in plan.sweeps]
+    return [decomposition_msg(sweep, sweep_frame_id(sweep, frame_id, plan.per_probe)) for sweep in plan.sweeps]
 
 
 def field_map_msg(decompositions: list[SweepDecomposition], probes: tuple[ProbeEntry, ...], frame_id: str) -> FieldMap:
@@ -133,14 +133,12 @@ def no_decomposition_msg(message: str) -> SweepDecomposition:
     return SweepDecomposition(status=int(DecompositionStatus.NO_DECOMPOSITION), message=message)
 
 
-def outcome_decomposition_msg(outcome: SweepOutcome, frame_id: str) -> SweepDecomposition:
-    """The decomposition of a finished sweep (the first listed probe's, with several);
-    NO_DECOMPOSITION, with why, if it had none."""
+def outcome_decomposition_msg(outcome: SweepOutcome, frame_id: str, per_probe: bool) -> SweepDecomposition:
+    """The decomposition of a finished sweep (the first probe's), in its probe's frame when
+    ``per_probe``; NO_DECOMPOSITION, with why, if it had none."""
     if outcome.map is None:
         return no_decomposition_msg(outcome.message)
-    if outcome.maps:
-        return probe_decomposition_msg(outcome.map, frame_id)
-    return decomposition_msg(outcome.map, frame_id)
+    return decomposition_msg(outcome.map, sweep_frame_id(outcome.map, frame_id, per_probe))
 
 
 def refused_result(message: str) -> RotationSweep.Result:
@@ -148,9 +146,9 @@ def refused_result(message: str) -> RotationSweep.Result:
     return RotationSweep.Result(success=False, message=message, decomposition=no_decomposition_msg(message))
 
 
-def result_msg(outcome: SweepOutcome, frame_id: str) -> RotationSweep.Result:
+def result_msg(outcome: SweepOutcome, frame_id: str, per_probe: bool) -> RotationSweep.Result:
     """The result of a finished sweep, with its decomposition (:func:`outcome_decomposition_msg`)."""
-    decomposition = outcome_decomposition_msg(outcome, frame_id)
+    decomposition = outcome_decomposition_msg(outcome, frame_id, per_probe)
     return RotationSweep.Result(success=outcome.ok, message=outcome.message, decomposition=decomposition)
 
 

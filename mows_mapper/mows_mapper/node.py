@@ -91,8 +91,9 @@ class MapperNode(MowsNode):
                     goal_handle.publish_feedback(feedback)
                 step = await self._advance(step)
             outcome = step.finished
-            result = messages.result_msg(outcome, self._param("frame_id"))
-            await self._publish(publication(step, self._settings.probes, self._param("reference_scenario")))
+            plan = publication(step, self._settings.probes, self._param("reference_scenario"))
+            result = messages.result_msg(outcome, self._param("frame_id"), plan.per_probe)
+            await self._publish(plan)
         finally:  # an exception must not leave the runner busy for good
             self._runner.abandon("the sweep ended unexpectedly (see the log)")
         if not (outcome.ok or outcome.cancelled):

@@ -24,7 +24,8 @@ from mows.physics.coupling import coupled_rest
 from mows.physics.sources import LinearGradient
 from mows.sim.scenario import load_scenario
 from mows.sim.sections import Environment
-from mows.sweep.multiprobe import ProbeSweep, decompose_probes, neighbour_fields, sweeps_of
+from mows.sweep.probes import ProbeSweep, decompose_probes, neighbour_fields, sweeps_of
+from mows.sweep.record import SweepPoint, SweepRecord
 
 SCENE = load_scenario("three_probes")
 POINTS = 8
@@ -83,7 +84,8 @@ def coupled(seeded):
 def test_the_sweep_keeps_every_point_and_finds_each_probes_swing(sweeps):
     for sweep in sweeps:
         assert len(sweep.theta0_rad) == POINTS
-        assert np.all((sweep.ringdowns.start_swing_rad > 0.05) & (sweep.ringdowns.start_swing_rad < 0.3))
+        start_swing_rad = np.array([p.amplitude_rad for p in sweep.record.points])
+        assert np.all((start_swing_rad > 0.05) & (start_swing_rad < 0.3))
 
 
 @pytest.mark.slow
@@ -131,12 +133,20 @@ def test_in_a_field_without_curvature_the_coupled_decomposition_is_unbiased():
     assert np.abs(alone).max() > 6.0  # 59.5 measured
 
 
+def one_point(theta0_rad, f00_hz):
+    """A record of one ring-down at ``theta0_rad``, where only its θ0 counts."""
+    return SweepRecord([SweepPoint(theta0_rad, f00_hz, 1.0, 0.0, 1.0, np.nan, np.nan, np.nan, 0.0)])
+
+
 def test_the_neighbour_fields_are_those_of_the_coupled_rest():
     # From the scene's own fields at each probe (its linear part), the decomposition's model
     # of the neighbours reproduces the coupled rest state of mows.physics.coupling.
     placed = SCENE.placed_probes()
     home = np.array([[p.pose.theta0_rad] for p in placed])
-    sweeps = [ProbeSweep(p, p.probe.f00_hz, home[k], np.zeros(1), np.ones(1)) for k, p in enumerate(placed)]
+    sweeps = [
+        ProbeSweep(k, p, one_point(home[k][0], p.probe.f00_hz), p.probe.f00_hz, np.arange(1))
+        for k, p in enumerate(placed)
+    ]
     parameters = []
     for p in placed:
         bx, by, gxx, gxy, gyy = truth(p)

@@ -27,7 +27,7 @@ def sweep_map(probe_id=0):
 @pytest.mark.parametrize("reference", ["", "anti_helmholtz"])
 def test_one_probes_sweep_is_published_when_handed_over_and_read_by_the_lab_with_a_reference(reference):
     single = sweep_map()
-    plan = publication(SweepStep(publish=single), (), reference)
+    plan = publication(SweepStep(publish=(single,)), (), reference)
     assert plan == Publication((single,), lab=single if reference else None)
     assert plan.summary("report") == "sweep 3: report"
     assert publication(SweepStep(), (), reference) == Publication()
@@ -35,7 +35,7 @@ def test_one_probes_sweep_is_published_when_handed_over_and_read_by_the_lab_with
 
 def test_several_probes_are_each_published_in_their_frames_with_the_field_map_and_no_lab():
     maps = (sweep_map(0), sweep_map(1))
-    plan = publication(SweepStep(publish_probes=maps), PROBES, "anti_helmholtz")
+    plan = publication(SweepStep(publish=maps), PROBES, "anti_helmholtz")
     assert plan.sweeps == maps and plan.per_probe and plan.field_map == PROBES and plan.lab is None
     assert plan.summary("report") == "sweep of 2 probes: report"
 

@@ -76,7 +76,7 @@ def test_a_sweep_runs_a_cycle_per_angle_and_recovers_the_field():
     assert all(f.n_ok == 2 and len(f.fits) == 2 and f.n_angles == len(ANGLES) for f in feedback)
     assert runner.state == "decomposing" and runner.on_fit(driver.fit(0.0)) is None
     step = runner.on_decomposed(step.decompose())
-    outcome, sweep = step.finished, step.publish
+    outcome, (sweep,) = step.finished, step.publish
     assert outcome.ok and sweep is outcome.map and sweep.sweep_id == 1 and runner.state == "idle"
     d = sweep.decomposition
     sigma = np.sqrt(np.diag(d.field_covariance_t2))
@@ -113,7 +113,7 @@ def test_a_failing_driver_ends_the_sweep_with_its_reason(problem):
     step = StandIn().run(runner, step)
     step = runner.on_cycle(CycleAnswer(problem=problem))
     assert not step.finished.ok and step.finished.message == f"orientation 1 (30.0°): {problem}"
-    assert step.publish is None and runner.state == "idle" and runner.sweeps == 0
+    assert step.publish == () and runner.state == "idle" and runner.sweeps == 0
 
 
 def test_a_cancel_ends_the_sweep_before_the_next_orientation():
@@ -132,7 +132,7 @@ def test_a_sweep_without_one_good_ringdown_fails_and_publishes_nothing():
     while step.finished is None:
         step = driver.run(runner, step, ok=False)
     assert not step.finished.ok and step.finished.message == "no successful ring-down in the sweep (10 failed)"
-    assert step.publish is None and runner.sweeps == 1
+    assert step.publish == () and runner.sweeps == 1
 
 
 def test_a_failed_decomposition_ends_the_sweep_and_leaves_nothing_to_publish():
@@ -141,8 +141,8 @@ def test_a_failed_decomposition_ends_the_sweep_and_leaves_nothing_to_publish():
     while step.decompose is None:
         step = driver.run(runner, step)
     failed = Decomposition("first_principles", DecompositionStatus.NOT_CONVERGED, "the fit did not converge")
-    step = runner.on_decomposed(failed)
-    assert step.publish is None and not step.finished.ok and step.finished.message == "the fit did not converge"
+    step = runner.on_decomposed([failed])
+    assert step.publish == () and not step.finished.ok and step.finished.message == "the fit did not converge"
     assert step.finished.map.decomposition is failed and runner.state == "idle"
 
 

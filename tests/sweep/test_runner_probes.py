@@ -59,8 +59,8 @@ def run(settings, fails=()):
 
 def test_each_probe_is_decomposed_from_its_own_fits():
     runner, step = run(SweepSettings(probes=PROBES))
-    maps = step.publish_probes
-    assert step.finished.ok and step.finished.maps == maps and step.publish is None
+    maps = step.publish
+    assert step.finished.ok and step.finished.maps == maps and step.finished.map is maps[0]
     assert [m.probe_id for m in maps] == [0, 1, 2]
     for m, entry, field in zip(maps, PROBES, FIELDS_T):
         d = m.decomposition
@@ -80,8 +80,8 @@ def test_a_probe_without_a_good_fit_is_reported_and_the_others_are_decomposed():
     _, step = run(SweepSettings(probes=PROBES), fails=(1,))
     outcome = step.finished
     assert not outcome.ok and "probe 1: no successful ring-down of probe 1 (16 failed)" in outcome.message
-    assert [m.decomposition.ok for m in step.publish_probes] == [True, False, True]
-    assert np.all(np.isnan(step.publish_probes[1].decomposition.field_t))
+    assert [m.decomposition.ok for m in step.publish] == [True, False, True]
+    assert np.all(np.isnan(step.publish[1].decomposition.field_t))
 
 
 def test_fits_of_a_probe_not_listed_do_not_complete_an_orientation():

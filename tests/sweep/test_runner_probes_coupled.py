@@ -29,8 +29,7 @@ from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import LinearGradient
-from mows.sweep.multiprobe import UNCOUPLED_NOTE
-from mows.sweep.probes import decompose_probes
+from mows.sweep.probes import UNCOUPLED_NOTE, DecomposeOptions, decompose_probes, report
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, SweepSettings
 
@@ -66,7 +65,7 @@ def fits(theta0_rad, cycle_id, rng):
 
 @pytest.fixture(scope="module")
 def swept():
-    """The runner's step after the sweep's decomposition, and its per-probe records."""
+    """The runner's step after the sweep's decomposition, and its probes' shares."""
     runner, rng = SweepRunner(), np.random.default_rng(5)
     runner.start(SweepGoal(ANGLES, REPEATS), SweepSettings(probes=PROBES), P)
     step, cycle = runner.begin(), 0
@@ -74,8 +73,8 @@ def swept():
         cycle += 1
         runner.on_cycle(CycleAnswer(cycle, REPEATS))
         step = [runner.on_fit(f) for f in fits(step.run_cycle.theta0_rad, cycle, rng)][-1]
-    records = step.decompose.args[1]
-    return runner.on_decomposed(step.decompose()), records
+    shares = step.decompose.args[0]
+    return runner.on_decomposed(step.decompose()), shares
 
 
 def z_scores(decompositions):
@@ -90,17 +89,17 @@ def z_scores(decompositions):
 
 def test_each_probes_external_field_and_gradient_lie_within_two_sigma(swept):
     step, _ = swept
-    assert step.finished.ok and [m.probe_id for m in step.publish_probes] == [0, 1, 2]
-    coupled = z_scores([m.decomposition for m in step.publish_probes])
+    assert step.finished.ok and [m.probe_id for m in step.publish] == [0, 1, 2]
+    coupled = z_scores([m.decomposition for m in step.publish])
     print("z with the coupling (Bx, By, Gxx, Gxy, Gyy):\n", np.round(coupled, 2))
-    print("χ²/dof with the coupling:", [round(m.decomposition.chi2_dof, 2) for m in step.publish_probes])
+    print("χ²/dof with the coupling:", [round(m.decomposition.chi2_dof, 2) for m in step.publish])
     assert np.all(np.abs(coupled) < 3.0)
-    assert all(m.decomposition.chi2_dof < 2.0 for m in step.publish_probes)
+    assert all(m.decomposition.chi2_dof < 2.0 for m in step.publish)
 
 
 def test_decomposed_without_the_coupling_each_gradient_is_biased_by_its_neighbours(swept):
-    _, records = swept
-    alone = [p.decomposition for p in decompose_probes(PROBES, records, "first_principles", False, False).probes]
+    _, shares = swept
+    alone = decompose_probes(shares, DecomposeOptions("first_principles", False), coupling=False)
     z = z_scores(alone)
     bias = np.array([d.gradient_t_per_m for d in alone]) - np.array([truth(e)[2:] for e in PROBES])
     print("z without the coupling (Bx, By, Gxx, Gxy, Gyy):\n", np.round(z, 2))
@@ -112,7 +111,7 @@ def test_decomposed_without_the_coupling_each_gradient_is_biased_by_its_neighbou
 
 
 def test_with_the_published_model_the_report_says_the_neighbours_are_left_in(swept):
-    _, records = swept
-    result = decompose_probes(PROBES, records, "published", False)
-    assert all(p.decomposition.ok and UNCOUPLED_NOTE in p.decomposition.message for p in result.probes)
-    assert UNCOUPLED_NOTE in result.report()
+    _, shares = swept
+    result = decompose_probes(shares, DecomposeOptions("published", False))
+    assert all(d.ok and UNCOUPLED_NOTE in d.message for d in result)
+    assert UNCOUPLED_NOTE in report(shares, result)

@@ -19,8 +19,7 @@ import pytest
 from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
-from mows.sweep.multiprobe import decompose_probes as decompose_together
-from mows.sweep.probes import RecordSweep, orientations_rad
+from mows.sweep.probes import decompose_probes, step_orientations_rad
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, SweepSettings
 
@@ -62,26 +61,26 @@ def swept():
 
 def test_each_probes_external_field_and_gradient_at_its_own_orientations(swept):
     _, done, _ = swept
-    assert done.finished.ok and [m.probe_id for m in done.publish_probes] == [0, 1, 2]
-    decompositions = [m.decomposition for m in done.publish_probes]
+    assert done.finished.ok and [m.probe_id for m in done.publish] == [0, 1, 2]
+    decompositions = [m.decomposition for m in done.publish]
     z = z_scores(decompositions)
     print("z (Bx, By, Gxx, Gxy, Gyy):\n", np.round(z, 2))
     print("χ²/dof:", [round(d.chi2_dof, 2) for d in decompositions])
     assert np.all(np.abs(z) < 3.0) and all(d.chi2_dof < 2.0 for d in decompositions)
-    assert len(done.publish_probes[1].record.points) == REPEATS * (len(ANGLES) - 1)
+    assert len(done.publish[1].record.points) == REPEATS * (len(ANGLES) - 1)
 
 
 def test_the_neighbours_orientations_are_theirs_at_each_step(swept):
     step, _, _ = swept
-    records, kw = step.decompose.args[1], step.decompose.keywords
-    steps = {k: np.array(v) for k, v in kw["steps"].items()}
-    sweeps = [RecordSweep(e, records[e.probe_id], steps[e.probe_id], "first_principles", False) for e in PROBES]
-    table = orientations_rad(sweeps, np.array(kw["stage_rad"]))
+    sweeps = step.decompose.args[0]
+    steps = {s.probe_id: s.steps for s in sweeps}
+    table = step_orientations_rad(sweeps, np.array(ANGLES))
+    assert np.array_equal(step.decompose.keywords["orientations_rad"], table)
     expected = np.array(ANGLES) + HOME_RAD[:, None]
     assert np.allclose(np.angle(np.exp(1j * (table - expected))), 0.0, atol=1e-12)  # probe 1's failed step too
     assert 3 not in steps[1] and list(steps[0]) == [j for j in range(len(ANGLES)) for _ in range(REPEATS)]
     # The control: the neighbours turned to the stage's angle, their home orientations left out.
-    at_stage = decompose_together(sweeps, orientations_rad=np.array([kw["stage_rad"]] * len(PROBES)))
+    at_stage = decompose_probes(sweeps, orientations_rad=np.array([ANGLES] * len(PROBES)))
     z = z_scores(at_stage)
     print("z with the neighbours at the stage's angle:\n", np.round(z, 2))
     assert np.abs(z).max() > 8.0

@@ -5,7 +5,7 @@ target per component for every probe). Both cases run the same cycle in device t
 (:class:`mows.bench.rig.DeviceTimeRig`, the driver's cycle: turn, settle, multi-tone
 excitation; the estimator's joint fit) in the ``three_probes`` scene, round after round of
 ``points`` orientations on the shared stage, and decompose every probe with the coupling in the model
-(:func:`mows.sweep.multiprobe.decompose_probes`) after every point from the one that gives the
+(:func:`mows.sweep.probes.decompose_probes`) after every point from the one that gives the
 sweep the orientations its model needs (7 for the field's 3θ0 curvature, or all ``points`` when
 fewer), until every probe reaches the target or ``max_sweeps`` rounds have run. Probes that
 reached the target are measured on with the others: their points cost nothing extra. One
@@ -28,8 +28,8 @@ from mows.bench.rig import ONE_ROUND, DeviceTimeRig
 from mows.device.cycle.phases import CycleRequest
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import unknown_count
-from mows.sweep.multiprobe import decompose_probes, sweeps_of
 from mows.sweep.planner import PrecisionGoal, achieved_std, reached
+from mows.sweep.probes import decompose_probes, sweeps_of
 
 SCENARIO = "three_probes"
 SINGLE_PROBE = 1  # the paper's f00

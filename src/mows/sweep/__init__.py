@@ -1,6 +1,8 @@
 """Rotation sweeps: (θ0, Δf) points of many orientations decomposed into in-plane field and
-gradient (``decompose``), the ring-downs of one sweep as they arrive (``record``), a sweep run as
-an I/O-free state machine (``runner``), the supply sweep that calibrates a probe and the
+gradient (``decompose``), the ring-downs of one sweep as they arrive (``record``), one or several
+probes' shares of a sweep decomposed, each with its neighbours' fields (``probes``), a sweep run
+as an I/O-free state machine (``runner``) and what the mapper publishes at its end
+(``publication``), the supply sweep that calibrates a probe and the
 calibrator's goals around it (``calibration``), the measurement cycle from the probe's physics
 and tracking plans (``fast_cycle``), and the adaptive choice of orientations and repeats for a
 target precision (``planner``).

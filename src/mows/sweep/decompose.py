@@ -194,7 +194,7 @@ class Ringdowns:
 class NeighbourFields:
     """What other probes' magnets add at this probe's magnet (its rest position), per point of
     the sweep, global frame: field (n, 3), T; gradient (n, 3, 3), T/m; Hessian (n, 3, 3, 3),
-    T/m² (:mod:`mows.sweep.multiprobe`). Known terms of the model, not fitted."""
+    T/m² (:mod:`mows.sweep.probes`). Known terms of the model, not fitted."""
 
     field_t: np.ndarray
     gradient_t_per_m: np.ndarray

@@ -1,11 +1,11 @@
 """What the mapper publishes when a sweep ends, and how it says a cycle failed.
 
 :func:`publication` turns the runner's last step (:class:`mows.sweep.runner.SweepStep`) into
-the messages to make, in the order they go out: each decomposition for ``/mows/sweep`` (one
-probe's only when it succeeded; with several probes every probe's, failed or not, each in its
-own probe's frame), the field map of several probes at their places, and the sweep the model
-lab reads when a reference is given (one probe's: the lab reads one probe's sweep, so it is not
-run for several). The mapper node builds each message and publishes it; nothing here does I/O.
+the messages to make, in the order they go out: each probe's decomposition for ``/mows/sweep``
+(in its probe's own frame when the ``probes`` are listed), the field map of listed probes at
+their places, and the sweep the model lab reads when a reference is given (the lone probe's:
+the lab reads one probe's sweep, so it is not run for listed probes). The mapper node builds
+each message and publishes it; nothing here does I/O.
 """
 
 from __future__ import annotations
@@ -18,9 +18,10 @@ from mows.sweep.runner import CycleAnswer, SweepMap, SweepStep
 
 @dataclasses.dataclass(frozen=True)
 class Publication:
-    """The messages of a finished sweep: ``sweeps`` for ``/mows/sweep``, each in its probe's own
-    frame when ``per_probe``; the field map of ``field_map``'s probes (in the order of
-    ``sweeps``) when there are any; ``lab``, the sweep the model lab reads, or None."""
+    """The messages of a finished sweep: ``sweeps`` for ``/mows/sweep``; each decomposition,
+    the action result's too, in its probe's own frame when ``per_probe``; the field map of
+    ``field_map``'s probes (in the order of ``sweeps``) when there are any; ``lab``, the sweep
+    the model lab reads, or None."""
 
     sweeps: tuple[SweepMap, ...] = ()
     per_probe: bool = False
@@ -35,12 +36,13 @@ class Publication:
 
 
 def publication(step: SweepStep, probes: tuple[ProbeEntry, ...], reference: str) -> Publication:
-    """What to publish for the runner's ``step`` at a sweep's end: the sweep's ``probes`` (the
-    ``probes`` setting) and the lab's ``reference`` ('' for none) as the mapper has them."""
-    if step.publish_probes:
-        return Publication(step.publish_probes, per_probe=True, field_map=probes)
-    if step.publish is not None:
-        return Publication((step.publish,), lab=step.publish if reference else None)
+    """What to publish for the runner's ``step`` at a sweep's end: the sweep's listed ``probes``
+    (the ``probes`` setting; () for the lone probe) and the lab's ``reference`` ('' for none) as
+    the mapper has them."""
+    if probes:
+        return Publication(step.publish, per_probe=True, field_map=probes if step.publish else ())
+    if step.publish:
+        return Publication(step.publish, lab=step.publish[0] if reference else None)
     return Publication()
 
 

@@ -133,7 +133,7 @@ class SweepRecord:
         f00_free: bool = False,
         neighbours: NeighbourFields | None = None,
         curvature: bool = False,
-        measured_swings: bool = False,
+        measured: Ringdowns | None = None,
     ) -> Decomposition:
         """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
 
@@ -146,10 +146,9 @@ class SweepRecord:
         the field, its rest angles give the pooled stop (the probe's where no fit determined
         θmax), and a second pass fits with both. ``neighbours``: other probes' fields at each
         ring-down, known terms of the first-principles model (:mod:`mows.sweep.probes`);
-        ``curvature``: fit the field's 3θ0 curvature too (:func:`decompose`). ``measured_swings``:
-        the ring-downs did not start from the stop (a multi-tone excitation's), so each starts with
-        the θmax its fit measured, when every fit measured it: a joint fit's from the signal's size
-        about the undeflected lever, which the model takes about its rest angle (:class:`Ringdowns`).
+        ``curvature``: fit the field's 3θ0 curvature too (:func:`decompose`). ``measured``: the
+        ring-downs did not start from the stop (a multi-tone excitation's), and each starts with the
+        θmax its fit measured (:meth:`measured_ringdowns`, None where a fit did not measure it).
         """
         theta0 = self._column("theta0_rad")
         arrays: dict[str, Any] = dict(
@@ -165,21 +164,29 @@ class SweepRecord:
         if model != "first_principles":
             return decompose(**arrays)
         arrays.update(neighbours=neighbours, curvature=curvature)
+        if measured is not None:
+            return decompose(**arrays, ringdowns=measured)
 
         damping, duration, pickups = self._column("damping_per_s"), self._column("duration_s"), self.pickups()
 
         def ringdowns(stop):
             return Ringdowns(stop, damping, duration, pickups)
 
-        swings = self._column("amplitude_rad")
-        if measured_swings and np.isfinite(swings).all():
-            return decompose(**arrays, ringdowns=Ringdowns(math.nan, damping, duration, pickups, swings))
-
         first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(fallback_rad=probe.theta_stop_rad)))
         if not first.ok:
             return first
         stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe, neighbours), probe.theta_stop_rad)
         return decompose(**arrays, ringdowns=ringdowns(stop), start=first.parameters)
+
+    def measured_ringdowns(self) -> Ringdowns | None:
+        """The ring-downs as recorded when they do not start from the stop (a multi-tone
+        excitation's): each starts with the θmax its fit measured, a joint fit's from the signal's
+        size about the undeflected lever, which the model takes about its rest angle
+        (:class:`Ringdowns`). None when a fit did not measure it."""
+        swings = self._column("amplitude_rad")
+        if not np.isfinite(swings).all():
+            return None
+        return Ringdowns(math.nan, self._column("damping_per_s"), self._column("duration_s"), self.pickups(), swings)
 
     def pickups(self) -> np.ndarray | None:
         """Every ring-down's pickup series C_k (n, K + 1), zero-padded to the longest; None when

@@ -6,8 +6,9 @@ keeps the time is the caller's business (the mapper node does it over ROS).
 
 One sweep: for each orientation one driver cycle of ``repeats`` ring-downs; once the driver
 says how many it recorded, their fits are collected (or the caller says their time is up);
-after the last orientation every OK ring-down is decomposed (:meth:`SweepRecord.decompose`)
-with f00 taken as the mean of the estimator's own (frequency − shift).
+after the last orientation every OK ring-down is decomposed
+(:func:`mows.sweep.probes.decompose_probes`) with f00 taken as the mean of the estimator's own
+(frequency − shift).
 
 An adaptive sweep (a goal with a ``target``) lets :class:`mows.sweep.planner.AdaptivePlanner`
 choose each next orientation and its repeats from the ring-downs so far; the sweep is decomposed
@@ -15,12 +16,15 @@ whenever the planner's linearised prediction comes within ``DECOMPOSE_NEAR`` of 
 ends when a decomposition reaches it or the time budget holds no further cycle. Its device time
 is read from the ring-downs' stamps (first to last, plus a turn and a ring-down).
 
-A sweep of several probes (``SweepSettings.probes``, the estimator's list) collects one fit per
-probe and ring-down, keeps each probe's fits in a record of its own, with the step (the
-orientation's index) each was taken at, and decomposes each (:mod:`mows.sweep.probes`). The
-angles it commands are the stage's; each fit comes back at its probe's own θ0 (the stage's angle
-plus the probe's home orientation), which the decomposition takes. Its feedback's shift is the
-first listed probe's at this orientation, its fits are all. Adaptive sweeps are of one probe.
+The sweep's probes are those ``SweepSettings.probes`` lists (the estimator's list), else the one
+``probe`` the goal is run with, as probe 0. It collects one fit per probe and ring-down, keeps
+each probe's fits in a record of its own, with the step (the orientation's index) each was
+taken at, and decomposes the probes' shares together (:mod:`mows.sweep.probes`). Listed probes
+ring together under the multi-tone drive, each fit measuring its swing, and the 3θ0 curvature is
+fitted; the lone probe rings from the housing stop. The angles it commands are the stage's; each
+fit comes back at its probe's own θ0 (the stage's angle plus the probe's home orientation),
+which the decomposition takes. Its feedback's shift is the first probe's at its own θ0 of this
+orientation, its fits are all. Adaptive sweeps are of one probe.
 """
 
 import dataclasses
@@ -36,7 +40,15 @@ from mows.estimate.probe_set import ProbeEntry
 from mows.physics.probe import Probe
 from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal
-from mows.sweep.probes import ProbeDecompositions, decompose_probes, f00_of
+from mows.sweep.probes import (
+    DecomposeOptions,
+    ProbeSweep,
+    decompose_probes,
+    f00_of,
+    problems,
+    report,
+    step_orientations_rad,
+)
 from mows.sweep.record import SweepPoint, SweepRecord
 
 DECOMPOSE_NEAR = 1.25  # decompose an adaptive sweep once the prediction is this close to the target
@@ -143,7 +155,8 @@ class SweepFeedback:
 
 @dataclasses.dataclass(frozen=True)
 class SweepMap:
-    """A decomposed sweep to publish: the decomposition, its ring-downs and the f00 used."""
+    """One probe's decomposed sweep to publish: the decomposition, its ring-downs, the f00
+    used and the probe's id."""
 
     sweep_id: int
     decomposition: Decomposition
@@ -160,30 +173,33 @@ class SweepOutcome:
     ok: bool
     message: str
     cancelled: bool = False
-    map: SweepMap | None = None  # the first listed probe's, with several
-    maps: tuple[SweepMap, ...] = ()  # with several probes: each probe's, in id order
+    maps: tuple[SweepMap, ...] = ()  # each probe's, in the order listed
+
+    @property
+    def map(self) -> SweepMap | None:
+        """The first probe's map (the action result's), None before a decomposition."""
+        return self.maps[0] if self.maps else None
 
 
 @dataclasses.dataclass
 class SweepStep:
-    """What the caller does next, in this order: report ``feedback``, publish ``publish`` (with
-    several probes: each of ``publish_probes``, which holds failed decompositions too), then
-    one of: ask the operator to turn the stage to ``turn`` (rad, :func:`turn_prompt`) and call
+    """What the caller does next, in this order: report ``feedback``, publish each of
+    ``publish`` (a probe's failed decomposition too, beside others that succeeded), then one of:
+    ask the operator to turn the stage to ``turn`` (rad, :func:`turn_prompt`) and call
     :meth:`SweepRunner.on_turned` once confirmed, run ``run_cycle``, call ``decompose``
-    (CPU-bound, seconds) and feed its result to :meth:`SweepRunner.on_decomposed`, end with
-    ``finished``, or (none of these) wait for fits."""
+    (CPU-bound, seconds) and feed its result, each probe's decomposition, to
+    :meth:`SweepRunner.on_decomposed`, end with ``finished``, or (none of these) wait for fits."""
 
     feedback: SweepFeedback | None = None
-    publish: SweepMap | None = None
-    publish_probes: tuple[SweepMap, ...] = ()
+    publish: tuple[SweepMap, ...] = ()
     turn: float | None = None
     run_cycle: CycleRequest | None = None
-    decompose: Callable[[], Decomposition | ProbeDecompositions] | None = None
+    decompose: Callable[[], list[Decomposition]] | None = None
     finished: SweepOutcome | None = None
 
 
 class SweepRunner:
-    """Runs one sweep at a time of ``probe``; ``state`` is a :class:`SweepState`."""
+    """Runs one sweep at a time; ``state`` is a :class:`SweepState`."""
 
     def __init__(self) -> None:
         self.state = SweepState.IDLE
@@ -195,13 +211,14 @@ class SweepRunner:
         self._index = 0
         self._model = ""
         self._settings = SweepSettings()
-        self._probe: Probe | None = None
+        self._probes: tuple[ProbeEntry, ...] = ()  # the listed probes, or the goal's probe as probe 0
         self._cancelled = False
         self._fits: dict[int, list[SweepFit]] = {}
         self._awaited: CycleAnswer | None = None  # the cycle whose fits are being collected
-        self._record = SweepRecord()  # the first listed probe's, with several
-        self._records: dict[int, SweepRecord] = {}  # with several probes: each one's, by id
-        self._steps: dict[int, list[int]] = {}  # with several probes: the step of each point of each record
+        self._records: dict[int, SweepRecord] = {}  # each probe's, by id
+        self._record = SweepRecord()  # the first probe's
+        self._steps: dict[int, list[int]] = {}  # the step of each point of each record
+        self._shares: list[ProbeSweep] = []  # the probes' shares being decomposed
         self._planner: AdaptivePlanner | None = None  # an adaptive sweep's
         self._decomposition: Decomposition | None = None
         self._decomposed_points = 0
@@ -244,16 +261,17 @@ class SweepRunner:
                 problems.append(str(refused))
         if problems:
             raise ValueError("; ".join(problems))
-        self.state, self._settings, self._probe = SweepState.SWEEPING, settings, probe
+        self.state, self._settings = SweepState.SWEEPING, settings
+        self._probes = settings.probes or (ProbeEntry(0, probe, probe.f00_hz),)
         self._planner, self._decomposition, self._decomposed_points = planner, None, 0
         self._angles = [] if planner else angles
         self._repeats = goal.repeats_per_angle or settings.repeats_per_angle
         self._model = goal.model or settings.model
         self._index, self._cancelled, self._awaited, self._turning = 0, False, None, None
         self._fits.clear()
-        self._records = {entry.probe_id: SweepRecord() for entry in settings.probes}
-        self._steps = {entry.probe_id: [] for entry in settings.probes}
-        self._record = self._records[settings.probes[0].probe_id] if settings.probes else SweepRecord()
+        self._records = {entry.probe_id: SweepRecord() for entry in self._probes}
+        self._steps = {entry.probe_id: [] for entry in self._probes}
+        self._record = self._records[self._probes[0].probe_id]
 
     def begin(self) -> SweepStep:
         """The accepted sweep's first step."""
@@ -312,9 +330,8 @@ class SweepRunner:
     def on_fit(self, fit: SweepFit) -> SweepStep | None:
         """A fit from the stream; a step once the awaited cycle's fits are all in."""
         # Fits of cycles run by others between sweeps, tuning ring-downs, and fits of probes not
-        # listed (the estimator reports an id it does not know) are not ours.
-        unlisted = self._settings.probes and fit.probe_id not in self._records
-        if self.state != SweepState.SWEEPING or fit.tuning or unlisted:
+        # the sweep's (the estimator reports an id it does not know) are not ours.
+        if self.state != SweepState.SWEEPING or fit.tuning or fit.probe_id not in self._records:
             return None
         self._fits.setdefault(fit.cycle_id, []).append(fit)
         return self._collected()
@@ -331,34 +348,27 @@ class SweepRunner:
             return SweepStep()
         return self._end(SweepStep(), SweepOutcome(False, reason))
 
-    def on_decomposed(self, decomposition: Decomposition | ProbeDecompositions) -> SweepStep:
-        """The result of the step's ``decompose``: the map to publish (only when the decomposition
-        succeeded: a failed one has no numbers to show) and the sweep's end (an adaptive sweep goes
-        on unless the planner ends it)."""
-        if isinstance(decomposition, ProbeDecompositions):
-            return self._probes_decomposed(decomposition)
+    def on_decomposed(self, decompositions: list[Decomposition]) -> SweepStep:
+        """The result of the step's ``decompose``, each probe's decomposition: the maps to publish,
+        when one succeeded (a failed one has no numbers to show, but beside others it shows its
+        probe's status), and the sweep's end (an adaptive sweep goes on unless the planner ends it)."""
         if self._planner is not None:
-            self._decomposition, self._decomposed_points = decomposition, len(self._record.points)
+            self._decomposition, self._decomposed_points = decompositions[0], len(self._record.points)
             self.state = SweepState.SWEEPING
             return self._next_planned(SweepStep())
-        self.last = decomposition.report()
-        sweep_map = SweepMap(self.sweeps, decomposition, self._record, self._f00_hz())
-        outcome = SweepOutcome(decomposition.ok, decomposition.message or self.last, map=sweep_map)
-        return self._end(SweepStep(publish=sweep_map if decomposition.ok else None), outcome)
-
-    def _probes_decomposed(self, decompositions: ProbeDecompositions) -> SweepStep:
-        """Every probe's map, published failed or not (a field map shows each probe's status)."""
-        self.last = decompositions.report()
+        self.last = report(self._shares, decompositions)
         maps = tuple(
-            SweepMap(self.sweeps, d.decomposition, d.record, d.f00_hz, d.probe_id) for d in decompositions.probes
+            SweepMap(self.sweeps, d, s.record, s.f00_hz, s.probe_id) for s, d in zip(self._shares, decompositions)
         )
-        outcome = SweepOutcome(decompositions.ok, decompositions.message or self.last, map=maps[0], maps=maps)
-        return self._end(SweepStep(publish_probes=maps), outcome)
+        ok = all(d.ok for d in decompositions)
+        outcome = SweepOutcome(ok, problems(self._shares, decompositions) or self.last, maps=maps)
+        published = maps if any(d.ok for d in decompositions) else ()
+        return self._end(SweepStep(publish=published), outcome)
 
     # --- the sweep -------------------------------------------------------------------------
     def _collected(self) -> SweepStep | None:
         answer = self._awaited
-        expected = answer.ringdowns_recorded * max(1, len(self._settings.probes)) if answer else 0
+        expected = answer.ringdowns_recorded * len(self._probes) if answer else 0
         if answer is None or len(self._fits.get(answer.cycle_id, ())) < expected:
             return None
         return self._orientation_done()
@@ -370,15 +380,15 @@ class SweepRunner:
         theta0 = self._angles[self._index]
         before = len(self._record.points)
         for fit in fits:
-            record = self._records[fit.probe_id] if self._settings.probes else self._record
+            record = self._records[fit.probe_id]
             if fit.point is None:
                 record.failed += 1
             else:
                 record.add(fit.point)
-                self._steps.setdefault(fit.probe_id, []).append(self._index)
-        # A probe's fits are at its own θ0, not the stage's: its points of this orientation are the new ones.
-        here = SweepRecord(self._record.points[before:]) if self._settings.probes else self._record
-        shift, std, n_ok = here.at_angle(here.points[0].theta0_rad if self._settings.probes and here.points else theta0)
+                self._steps[fit.probe_id].append(self._index)
+        # A probe's fits are at its own θ0, not the stage's: that of its new points, if any.
+        new = self._record.points[before:]
+        shift, std, n_ok = self._record.at_angle(new[0].theta0_rad if new else theta0)
         step = SweepStep(
             feedback=SweepFeedback(
                 self._index, len(self._angles), theta0, shift, std, n_ok, tuple(f.source for f in fits)
@@ -401,40 +411,33 @@ class SweepRunner:
 
     def _measured(self, step: SweepStep) -> SweepStep:
         self.sweeps += 1
-        records = list(self._records.values()) if self._settings.probes else [self._record]
+        records = self._records.values()
         if not any(r.points for r in records):
             failed = sum(r.failed for r in records)
             return self._end(step, SweepOutcome(False, f"no successful ring-down in the sweep ({failed} failed)"))
+        return self._decomposing(step)
+
+    def _decomposing(self, step: SweepStep) -> SweepStep:
+        """``step`` with the decomposition of every probe's share of the sweep so far."""
         self.state = SweepState.DECOMPOSING
-        assert self._probe is not None  # set by start()
-        if self._settings.probes:
-            step.decompose = functools.partial(
-                decompose_probes,
-                self._settings.probes,
-                dict(self._records),
-                self._model,
-                self._settings.f00_free,
-                steps={k: list(v) for k, v in self._steps.items()},
-                stage_rad=list(self._angles),
-            )
-            return step
-        step.decompose = functools.partial(
-            self._record.decompose, self._probe, self._f00_hz(), model=self._model, f00_free=self._settings.f00_free
-        )
+        self._shares = [
+            ProbeSweep.of_entry(e, self._records[e.probe_id], self._steps[e.probe_id]) for e in self._probes
+        ]
+        # Listed probes ring together under the multi-tone drive (module docstring).
+        listed = bool(self._settings.probes)
+        options = DecomposeOptions(self._model, self._settings.f00_free, curvature=listed, measured_swings=listed)
+        orientations = step_orientations_rad(self._shares, self._angles)
+        step.decompose = functools.partial(decompose_probes, self._shares, options, orientations_rad=orientations)
         return step
 
     # --- an adaptive sweep -------------------------------------------------------------------
     def _next_planned(self, step: SweepStep) -> SweepStep:
         planner = self._planner
-        assert planner is not None and self._probe is not None  # an adaptive sweep, set by start()
+        assert planner is not None  # an adaptive sweep, set by start()
         if self._cancelled:
             return self._end(step, SweepOutcome(False, f"cancelled after {self._index} cycles", cancelled=True))
         if self._decomposition_due(planner):
-            self.state = SweepState.DECOMPOSING
-            step.decompose = functools.partial(
-                self._record.decompose, self._probe, self._f00_hz(), model=self._model, f00_free=self._settings.f00_free
-            )
-            return step
+            return self._decomposing(step)
         choice = planner.next(self._record, self._decomposition, self._elapsed_s())
         if isinstance(choice, PlanEnd):
             return self._planned_end(step, choice)
@@ -469,11 +472,8 @@ class SweepRunner:
         if decomposition is None or not decomposition.ok:
             return self._end(step, SweepOutcome(False, end.message))
         self.last = decomposition.report()
-        step.publish = SweepMap(self.sweeps, decomposition, self._record, self._f00_hz())
-        return self._end(step, SweepOutcome(end.reached, end.message, map=step.publish))
-
-    def _f00_hz(self) -> float:
-        return f00_of(self._record)
+        step.publish = (SweepMap(self.sweeps, decomposition, self._record, f00_of(self._record)),)
+        return self._end(step, SweepOutcome(end.reached, end.message, maps=step.publish))
 
     def _end(self, step: SweepStep, outcome: SweepOutcome) -> SweepStep:
         self.state, self._awaited, self._turning = SweepState.IDLE, None, None

@@ -1,6 +1,7 @@
 """mows-graph: run the MOWS node graph without ``ros2 launch`` (not installed here).
 
-    mows-graph [--duration S] [--unconfigured] [--realtime-priority N] [--ros-args ARGS...]
+    mows-graph [--duration S] [--unconfigured] [--realtime-priority N] [--foxglove[=PORT]]
+               [--ros-args ARGS...]
 
 Starts every node's console script with its parameter file (share/<package>/config/<node>.yaml)
 and any ``--ros-args`` given here, prefixes each line a node writes with ``[node]``, and
@@ -11,6 +12,9 @@ a supervisor. ``--realtime-priority N`` runs the nodes on the ring-down path (dr
 estimator) under SCHED_FIFO at priority N, so that busy processes beside them (a robot stack's
 planners, compilers) delay neither the stream nor the fits; a robot's own control loop, at a
 higher priority, still preempts them. It needs root or an RLIMIT_RTPRIO of at least N.
+``--foxglove[=PORT]`` also starts the viz node (mows_viz), which serves the graph to
+Foxglove over its WebSocket protocol on PORT (default 8765; 0: any free port) with the probe
+mount's frames (docs/visualisation.md); the address to open is printed.
 
 Exit status: 0 when the graph was stopped (by a signal or after --duration) and
 every node stopped cleanly; 2 when the ROS arguments are refused before any node starts (a
@@ -74,6 +78,18 @@ NODES = (  # in data-flow order: the order of activation
     GraphNode("mapper", "mows_mapper", "mows_mapper"),
     GraphNode("calibrator", "mows_calibrator", "mows_calibrator"),
 )
+VIZ = GraphNode("viz", "mows_viz", "mows_viz")  # with --foxglove, after the others
+FOXGLOVE_PORT = 8765  # Foxglove's default for a WebSocket connection
+
+
+def foxglove_arguments(port: int) -> list[str]:
+    """The viz node's ROS arguments for ``--foxglove=port``: the port and the shipped mount."""
+    mount = Path(get_package_share_directory("mows_bringup")) / "urdf" / "mows_probe_mount.urdf"
+    return ["-p", f"{VIZ.name}:port:={port}", "-p", f"{VIZ.name}:mount_file:={mount}"]
+
+
+def graph_nodes(foxglove: bool) -> tuple[GraphNode, ...]:
+    return (*NODES, VIZ) if foxglove else NODES
 
 
 def parameter_rule_problem(rule: str) -> str | None:
@@ -81,12 +97,12 @@ def parameter_rule_problem(rule: str) -> str | None:
     one would stop on it, a prefix or a name no node has reaches none. None when it is fine."""
     target = rule.partition(":=")[0]
     prefix, colon, name = target.rpartition(":")
-    names = [node.name for node in NODES]
+    names = [node.name for node in (*NODES, VIZ)]
     if "/" in prefix:
         return None  # a fully qualified node name: rcl matches it, the node checks the name
     if name in ROS_OWN and (not colon or prefix in names):
         return None  # every node has it (use_sim_time): for all of them, or for the one named
-    tables = {node.name: importlib.import_module(f"{node.package}.parameters").PARAMETERS for node in NODES}
+    tables = {node.name: importlib.import_module(f"{node.package}.parameters").PARAMETERS for node in (*NODES, VIZ)}
     if not colon:
         return unprefixed_rule_problem(rule, name, tables)
     if prefix not in names:
@@ -291,6 +307,28 @@ def add_realtime_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def foxglove_port(text: str) -> int:
+    """``--foxglove``'s port: a TCP port, 0 for any free one; argparse.ArgumentTypeError otherwise."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"must be 0–65535 (0: any free port), got {port}")
+    return port
+
+
+def add_foxglove_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--foxglove",
+        type=foxglove_port,
+        nargs="?",
+        const=FOXGLOVE_PORT,
+        metavar="PORT",
+        help=f"also serve the graph to Foxglove (the viz node) on PORT (default {FOXGLOVE_PORT}; 0: any free port)",
+    )
+
+
 def parse_arguments(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     """Split ``argv`` into the runner's own options and the ROS arguments for every node."""
     own, ros_args = argv, []
@@ -312,6 +350,7 @@ def parse_arguments(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
         help="leave the nodes unconfigured, for a supervisor to bring up (lifecycle services)",
     )
     add_realtime_option(parser)
+    add_foxglove_option(parser)
     args = parser.parse_args(own)
     if args.duration is not None and args.duration <= 0:
         parser.error(f"--duration must be positive, got {args.duration}")
@@ -323,7 +362,9 @@ def main(argv: list[str] | None = None) -> int:
     if (problem := ros_arguments_problem(ros_args)) is not None:
         sys.stderr.write(f"mows-graph: error: {problem}\n")
         return EXIT_BAD_PARAMETER
-    graph = Graph(NODES, ros_args, realtime_priority=args.realtime_priority)
+    foxglove = args.foxglove is not None
+    node_args = [*ros_args, *foxglove_arguments(args.foxglove)] if foxglove else ros_args
+    graph = Graph(graph_nodes(foxglove), node_args, realtime_priority=args.realtime_priority)
     signal.signal(signal.SIGINT, graph.on_signal)
     signal.signal(signal.SIGTERM, graph.on_signal)
     graph.start()

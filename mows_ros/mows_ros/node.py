@@ -41,7 +41,7 @@ from mows_ros.params import (
 
 UNCONFIGURED, INACTIVE, ACTIVE, FINALIZED = "unconfigured", "inactive", "active", "finalized"
 REFUSALS = (ValueError, OSError)  # what configure and activate refuse with: a FAILURE, not an error
-GRAPH_NODE_NAMES = ("driver", "estimator", "mapper", "calibrator")  # mows_bringup.graph.NODES, in order
+GRAPH_NODE_NAMES = ("driver", "estimator", "mapper", "calibrator", "viz")  # mows_bringup.graph.NODES, in order, and VIZ
 
 
 class MowsNode(LifecycleNode):

@@ -12,7 +12,7 @@ from rclpy.parameter import Parameter
 
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import scenario_file
-from mows_bringup.graph import NODES
+from mows_bringup.graph import NODES, VIZ
 from mows_calibrator import node as calibrator
 from mows_driver import node as driver
 from mows_estimator import node as estimator
@@ -218,7 +218,7 @@ def test_the_demo_refuses_an_out_that_holds_a_scenario_it_reads(tmp_path, option
 def test_the_graph_s_node_names_are_the_ones_every_node_knows():
     """A node takes ``-p NAME:…`` for another node of the graph silently, and refuses any other
     prefix: the names it knows must be the graph's."""
-    assert tuple(node.name for node in NODES) == GRAPH_NODE_NAMES
+    assert tuple(node.name for node in (*NODES, VIZ)) == GRAPH_NODE_NAMES
 
 
 # Parameters that meant two things, by their previous release's name: each is refused wherever it

@@ -23,6 +23,7 @@ SUBCOMMANDS = {
     "lab": ("mows.cli.lab", "compare the frequency model with measurements, find missing effects"),
     "bench": ("mows.cli.bench", "benchmarks: estimator, simulator, stream, lab (figures, never a failure)"),
     "calibrate": ("mows.cli.calibrate", "calibrate a new probe from a supply sweep (BAG, TABLE or --simulate)"),
+    "viz": ("mows.cli.viz", "a recorded bag's view for Foxglove: scene, model curves and plots in an MCAP file"),
     "check-hardware": ("mows.cli.check_hardware", "check the NI card, the coils and the SCPI supply step by step"),
 }
 

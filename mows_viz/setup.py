@@ -1,0 +1,4 @@
+# Everything is declared in setup.cfg.
+from setuptools import setup
+
+setup()

@@ -50,8 +50,7 @@ from mows.sim.kernel import (
     G_PIVOT,
     G_X_AXIS,
     G_Y_AXIS,
-    N_GEOMETRY,
-    N_PARAMS,
+    HEAD,
     P_C_STOP,
     P_INV_INERTIA,
     P_INV_WIDTH,
@@ -65,6 +64,7 @@ from mows.sim.kernel import (
     advance,
     contact_mode,
     coupling_torques,
+    kernel_table,
 )
 from mows.sim.noise import NoiseStream
 
@@ -179,14 +179,14 @@ class SimulatedDevice:
         stop_rad = max(p.probe.theta_stop_rad for p in self.placed)
         self.half_width_rad = max(DEFAULT_HALF_WIDTH_RAD, INTERVAL_OVER_STOP * stop_rad)
         self._check_resolvable()
-        self._params = self._kernel_parameters()
+        self._head = self._kernel_parameters()
         self._tone_amplitudes_a = np.zeros((0, self.n_coils))  # (tones, coils)
         self._tone_omegas = np.zeros(0)
+        self._drive_series, self._drive_omegas = np.zeros((0, len(self.placed), 0)), np.zeros(0)
         self._drive_on_index = self._drive_off_index = 0
         self._state = np.zeros((3, len(self.placed)))  # θ, θ', contact mode of each probe
         self._magnets = self._magnets_now()
         self.set_orientations([p.pose.theta0_rad for p in self.placed])
-        self._drive_series, self._drive_omegas = self._drive_of(self._tone_amplitudes_a, self._tone_omegas)
         rest = self.truth.rest_angle_rad
         self._state[0] = np.where(np.isfinite(rest), rest, 0.0)  # beyond spring cancellation: it buckles
 
@@ -210,9 +210,10 @@ class SimulatedDevice:
                 )
 
     def _kernel_parameters(self) -> np.ndarray:
-        """(N, N_PARAMS): each probe's row of the kernel's parameters."""
+        """(N, HEAD): each probe's head of the kernel's table, its parameters (the P_* columns;
+        the geometry, G_*, follows its orientation: :meth:`_build_series`)."""
         env, housing = self.scenario.environment, self.scenario.housing
-        params = np.zeros((len(self.placed), N_PARAMS))
+        params = np.zeros((len(self.placed), HEAD))
         for row, p in zip(params, self.placed):
             probe = p.probe
             spring_rate = probe.spring_nm_per_rad * probe.spring_temp_coeff_per_k * env.temperature_rate_k_per_s
@@ -273,13 +274,11 @@ class SimulatedDevice:
             np.zeros(0) if self._supply is None else self._slope_series(m, self._supply.source, pose)
             for m, pose in zip(self._magnets, no_gravity)
         ]
-        geometry = np.zeros((len(self.placed), N_GEOMETRY))
-        for row, m, pose in zip(geometry, self._magnets, poses):
+        for row, m, pose in zip(self._head, self._magnets, poses):
             x_axis, y_axis, _ = pose.axes()
             row[G_MOMENT], row[G_LEVER] = m.moment_am2, m.lever_m
             row[G_PIVOT : G_PIVOT + 3] = pose.pivot_m(m.lever_m)
             row[G_X_AXIS : G_X_AXIS + 3], row[G_Y_AXIS : G_Y_AXIS + 3] = x_axis, y_axis
-        self._geometry = geometry
         self._combine_static()
 
     def set_field_current(self, current_a: float) -> None:
@@ -308,6 +307,11 @@ class SimulatedDevice:
             row[: len(supply)] += self.field_current_a * supply
         self._env_series = series
         self._env_reading_t = self._fixed_reading_t + self.field_current_a * self._supply_reading_t_per_a
+        self._pack()
+
+    def _pack(self) -> None:
+        """The kernel's table of the present parameters, geometry, static field and drive."""
+        self._table = kernel_table(self._head, self._env_series, self._drive_series, self._drive_omegas)
 
     def set_coils(self, amplitudes_a, frequency_hz: float) -> None:
         """Drive coil k with amplitudes_a[k]·sin(2πf·(t − t_on)) from now (t_on = this sample)
@@ -342,6 +346,7 @@ class SimulatedDevice:
         self._tone_omegas = TWO_PI * frequencies_hz
         self._drive_on_index, self._drive_off_index = self.sample_index, off_index
         self._drive_series, self._drive_omegas = self._drive_of(self._tone_amplitudes_a, self._tone_omegas)
+        self._pack()
 
     def _drive_of(self, amplitudes_a: np.ndarray, omegas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Chebyshev coefficients (K, N, n) of Σ_c A_kc·W_ic'(θ) of every tone k of coil amplitudes
@@ -386,7 +391,7 @@ class SimulatedDevice:
         theta_dot = np.broadcast_to(np.asarray(theta_dot_rad_per_s, float), theta.shape)
         if not np.all(np.isfinite(theta_dot)):
             raise ValueError(f"theta_dot_rad_per_s = {theta_dot_rad_per_s!r} must be finite")
-        modes = [contact_mode(a, r, self._params, i) for i, (a, r) in enumerate(zip(theta, theta_dot))]
+        modes = [contact_mode(a, r, self._table, i) for i, (a, r) in enumerate(zip(theta, theta_dot))]
         self._state[:] = theta, theta_dot, modes
 
     def ring_down(self, start_rad: ArrayLike, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
@@ -419,12 +424,12 @@ class SimulatedDevice:
         """
         amplitudes = np.zeros((0, self.n_coils)) if amplitudes_a is None else np.reshape(amplitudes_a, (1, -1))
         drive, omegas = self._drive_of(np.asarray(amplitudes, float), np.full(len(amplitudes), TWO_PI * frequency_hz))
-        params, env, geometry, count = self._params, self._env_series, self._geometry, len(self.placed)
+        table, count = kernel_table(self._head, self._env_series, drive, omegas), len(self.placed)
 
         def rhs(t, y):
             theta, omega = np.asarray(y[:count], float), np.asarray(y[count:], float)
-            mode = np.array([contact_mode(a, r, params, i) for i, (a, r) in enumerate(zip(theta, omega))])
-            acceleration = accelerations(theta, omega, t, mode, params, env, drive, omegas, drive_t0_s, geometry)
+            mode = np.array([contact_mode(a, r, table, i) for i, (a, r) in enumerate(zip(theta, omega))])
+            acceleration = accelerations(theta, omega, t, mode, table, drive_t0_s, len(omegas))
             return np.concatenate([omega, acceleration])
 
         return rhs
@@ -432,7 +437,7 @@ class SimulatedDevice:
     def coupling_torque_nm(self, theta_rad: ArrayLike) -> np.ndarray:
         """(N,): τ_i, the torque of the other magnets on each probe at deflections ``theta_rad``
         (:mod:`mows.sim.kernel`)."""
-        return coupling_torques(np.asarray(theta_rad, float), self._geometry)
+        return coupling_torques(np.asarray(theta_rad, float), self._table)
 
     def integrate(self, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
         """Advance the probes by ``n_samples`` without reading the sensors: θ and θ' (n, N) at the samples."""
@@ -440,7 +445,6 @@ class SimulatedDevice:
             raise ValueError(f"n_samples = {n_samples!r} must be an integer ≥ 0")
         count = len(self.placed)
         theta, theta_dot = np.empty((n_samples, count)), np.empty((n_samples, count))
-        no_drive = np.zeros((0, count, 0))
         integrator = self.scenario.integrator
         done = 0
         while done < n_samples:
@@ -451,16 +455,13 @@ class SimulatedDevice:
             stretch = n_samples - done if switch <= index else min(n_samples - done, switch - index)
             finished = advance(
                 self._state,
+                self._table,
                 index,
                 self.sample_rate_hz,
                 integrator.substeps,
                 integrator.contact_substeps,
-                self._params,
-                self._env_series,
-                self._drive_series if driven else no_drive,
-                self._drive_omegas if driven else np.zeros(0),
                 self._drive_on_index / self.sample_rate_hz,
-                self._geometry,
+                len(self._drive_omegas) if driven else 0,
                 theta[done : done + stretch],
                 theta_dot[done : done + stretch],
             )

@@ -1,7 +1,7 @@
 """Cycles of several probes excited together, cut and fitted jointly, in device time, without ROS.
 
 The sibling of :class:`mows.bench.rig.DeviceTimeRig` for a scene with several probes. One
-cycle turns every probe to its θ0 (:meth:`MultiProbeDevice.set_orientations`), lets them settle,
+cycle turns every probe to its θ0 (:meth:`mows.sim.simulator.SimulatedDevice.set_orientations`), lets them settle,
 plans the multi-tone excitation (:func:`mows.physics.multitone.plan_excitation`: each probe's
 tone at its f00, the cap on the summed peak, overlapping tones refused with the reason) and
 excites its groups in turn under the duty limit (:class:`mows.device.cycle.tone_groups.GroupSequence`).
@@ -25,7 +25,7 @@ from mows.estimate.joint_segment import fit_joint_segment, probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, RingdownFit
 from mows.estimate.segments import RingdownWindow, SegmentAssembler
 from mows.records.stamps import NS_PER_S
-from mows.sim.multiprobe_device import MultiProbeDevice
+from mows.sim.simulator import SimulatedDevice
 
 BUFFER_S = 5.0  # the assembler keeps this much of the stream
 
@@ -64,7 +64,7 @@ class MultiProbeRig:
         self.scenario = scenario
         self.settings = settings
         rng = np.random.default_rng(scenario.seed if seed is None else seed)
-        self.device = MultiProbeDevice(scenario, rng)
+        self.device = SimulatedDevice(scenario, rng)
         self.fs = self.device.sample_rate_hz
         self.assembler = SegmentAssembler(BUFFER_S)
         self.duty = DutyCycleLimit(settings.max_duty_cycle, round(settings.duty_window_s * self.fs))

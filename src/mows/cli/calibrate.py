@@ -236,7 +236,7 @@ def simulate_calibration(scenario, plan: CalibrationPlan, nominal: Probe, on_fee
     """Run :class:`CalibrationSchedule` on the simulated device of ``scenario`` in device time.
 
     The supply ramps through :class:`mows.device.simulated.scheduled.ScheduledDevice` (cap, slew,
-    resolution); every cycle is :func:`mows.sim.simulator.simulate_cycle` and its ring-down is
+    resolution); every cycle is :func:`mows.sim.cycle.simulate_cycle` and its ring-down is
     fitted as the estimator does, with the lever-aware pickup of the **nominal** probe (the true
     lever is what is being calibrated). ValueError if the schedule does not end at zero current.
     """

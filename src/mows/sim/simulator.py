@@ -144,12 +144,13 @@ class SimulatedDevice:
     """The MOWS device in a :class:`mows.sim.scenario.Scenario` with all of its probes
     (:meth:`mows.sim.scenario.Scenario.placed_probes`), advanced sample by sample.
 
-    The probes start at rest, in each other's fields, at their home orientations. ``rng``
-    defaults to ``numpy.random.default_rng(scenario.seed)``. ``probe`` is the scenario's (its
-    first probe's, with several).
+    The probes start at rest, in each other's fields, at the orientations ``theta0_rad`` (N,)
+    (default: their home orientations). ``rng`` defaults to
+    ``numpy.random.default_rng(scenario.seed)``. ``probe`` is the scenario's (its first probe's,
+    with several).
     """
 
-    def __init__(self, scenario, rng: np.random.Generator | None = None):
+    def __init__(self, scenario, rng: np.random.Generator | None = None, theta0_rad: ArrayLike | None = None):
         self.scenario = scenario
         self.probe = scenario.probe
         self.setup = scenario.setup
@@ -186,7 +187,7 @@ class SimulatedDevice:
         self._drive_on_index = self._drive_off_index = 0
         self._state = np.zeros((3, len(self.placed)))  # θ, θ', contact mode of each probe
         self._magnets = self._magnets_now()
-        self.set_orientations([p.pose.theta0_rad for p in self.placed])
+        self.set_orientations([p.pose.theta0_rad for p in self.placed] if theta0_rad is None else theta0_rad)
         rest = self.truth.rest_angle_rad
         self._state[0] = np.where(np.isfinite(rest), rest, 0.0)  # beyond spring cancellation: it buckles
 

@@ -1,8 +1,8 @@
 """The simulator (:mod:`mows.sim`) dressed as hardware, for the sim backend, the device
 emulator, the bench and the tests: a device whose commands take effect at chosen sample indices
-(``scheduled``: :class:`~mows.device.simulated.scheduled.ScheduledDevice`, with the current cap
-and the static-field supply's ramps), the same for a scene of several probes on one stage
-(``scheduled_multiprobe``), and the paper's bench behind a stand-in of NI's ``nidaqmx`` Task API
+(``scheduled``: :class:`~mows.device.simulated.scheduled.ScheduledDevice`, one probe or a scene
+of several on one stage, with the current cap and the static-field supply's ramps), and the
+paper's bench behind a stand-in of NI's ``nidaqmx`` Task API
 (``daqmx``: :class:`~mows.device.simulated.daqmx.SimulatedBench`).
 
 May import: ``mows.sim``, ``mows.physics``, ``mows.records``, and ``mows.device.interface``,

@@ -83,7 +83,7 @@ class SimulatedBench:
 
     def turn_probe(self, theta0_rad: float) -> None:
         """The operator turns the stage (the coils must be off)."""
-        self.device.set_orientation(theta0_rad)
+        self.device.set_orientations([theta0_rad])
 
     # --- the outputs -------------------------------------------------------------------------
     def write(self, volts: np.ndarray) -> None:

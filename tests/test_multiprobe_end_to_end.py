@@ -18,7 +18,8 @@ from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import UniformField
-from mows.sim.multiprobe import CoupledProbes, swinging_pickup_t
+from mows.sim.simulator import swinging_pickup_t
+from scenes import scene_device
 
 RATE_HZ = 10_000.0
 NO_FIELD = UniformField([0.0, 0.0, 0.0])
@@ -33,7 +34,7 @@ def ringing_together(start_rad, seed):
         PlacedProbe(P, Pose()),
         PlacedProbe(P.replace(spring_nm_per_rad=P.spring_nm_per_rad * 1.24), Pose(magnet_position_m=(0.0, 0.03, 0.0))),
     ]
-    theta, _ = CoupledProbes(probes, NO_FIELD).ring_down(start_rad, 5000, RATE_HZ)
+    theta, _ = scene_device(probes, sample_rate_hz=RATE_HZ).ring_down(start_rad, 5000)
     pickup = swinging_pickup_t(pair, probes, theta)
     return pair, probes, pickup + 1e-10 * np.random.default_rng(seed).standard_normal(pickup.shape)
 

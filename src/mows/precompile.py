@@ -1,12 +1,12 @@
 """Compile the numba kernels (or load them from numba's on-disk cache) before they are needed.
 
 The ring-down fit (:mod:`mows.estimate.ringdown.model`), the potential's Chebyshev series
-(:mod:`mows.physics.potential`) and the simulator's integrators (:mod:`mows.sim.kernel` for one
-probe, :mod:`mows.sim.multiprobe_device` for a scene of several, with the dipole pickup of
-:mod:`mows.sim.multiprobe`) are compiled on first use: about ten seconds on a fresh checkout,
-about a second from the cache. That must not happen in the middle of a measurement (a driver
-that stalls for seconds loses its device link; an estimator that stalls misses ring-downs), so
-the nodes and the test session call :func:`precompile` first. ``python -m mows.precompile`` does it by hand.
+(:mod:`mows.physics.potential`) and the simulator's integrator (:mod:`mows.sim.kernel`, one for
+one probe and for a scene of several) are compiled on first use: about ten seconds on a fresh
+checkout, about a second from the cache. That must not happen in the middle of a measurement (a
+driver that stalls for seconds loses its device link; an estimator that stalls misses
+ring-downs), so the nodes and the test session call :func:`precompile` first.
+``python -m mows.precompile`` does it by hand.
 """
 
 import math
@@ -21,8 +21,8 @@ from mows.physics.probe import PAPER_PROBE
 
 
 def precompile(simulator: bool = True) -> float:
-    """Run one small fit (and, with ``simulator``, a few steps of the simulator of one probe and
-    of a scene of several); return the seconds it took."""
+    """Run one small fit (and, with ``simulator``, a few steps of the simulator with one probe and
+    with a scene of several); return the seconds it took."""
     start = time.perf_counter()
     t = np.arange(4000) / 20_000.0
     near = np.sin(0.3 * np.cos(2 * math.pi * 112.0 * t) * np.exp(-1.8 * t))
@@ -33,12 +33,11 @@ def precompile(simulator: bool = True) -> float:
         # Imported only when asked for: the estimator node (simulator=False) never runs the
         # simulator, and importing it (scipy.signal, the kernels' module) would add seconds to
         # the node's start on top of the fit's modules.
-        from mows.sim.multiprobe_device import MultiProbeDevice
         from mows.sim.scenario import Scenario, load_scenario
         from mows.sim.simulator import SimulatedDevice
 
-        SimulatedDevice(Scenario()).read(10)
-        MultiProbeDevice(load_scenario("three_probes")).read(2)
+        for scenario in (Scenario(), load_scenario("three_probes")):
+            SimulatedDevice(scenario).read(10)
     return time.perf_counter() - start
 
 

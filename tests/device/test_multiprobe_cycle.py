@@ -1,4 +1,4 @@
-"""The driver's cycle of several probes on the simulated multi-probe device, through DeviceSession.
+"""The driver's cycle of several probes on the simulated device of their scene, through DeviceSession.
 
 Requirements: nothing whose summed true peak is above the cap is ever queued, and the coil
 currents the device carries never exceed it (a plan above the cap is split into groups); the
@@ -8,11 +8,12 @@ excites nothing more; a probe whose tone overlaps another's is refused with the 
 the others are measured, and a cycle that can excite no probe is refused with every reason;
 each group's EXCITING and RINGDOWN list its probes, tones and θ0 (home + stage angle); and the
 ring-down windows of a whole cycle, fitted jointly, give each probe's coupled frequency
-(:meth:`MultiProbeDevice.expected_frequencies_hz`, the static coupled model) within 4σ; a session
+(:meth:`SimulatedDevice.expected_frequencies_hz`, the static coupled model) within 4σ; a session
 configured with its coils by name (the preset about the origin, as the driver builds it) sizes
 each tone by where the device's coils are: every probe swings as planned and its window fits. A device
-of one tone refuses a multi-tone drive, and the multi-probe device a supply current or a drive
-of coil amplitudes, each with the reason and nothing queued.
+of one tone refuses a multi-tone drive, the simulated device of one probe the tones of probes it does
+not have, and a device without a supply a supply current, each with the reason and nothing queued;
+the simulated device of one probe takes its probe's tone.
 """
 
 import dataclasses
@@ -20,11 +21,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mows.device.backends.sim_backend import MultiProbeSimBackend, SimBackend
+from mows.device.backends.sim_backend import SimBackend
 from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.cycle.tone_groups import DEFAULT_SWING_RAD, on_stage, plan_probes
 from mows.device.interface import (
-    CoilCommand,
     CommandResult,
     FieldCurrentCommand,
     MultiToneCommand,
@@ -36,7 +36,7 @@ from mows.estimate.probe_set import probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_ringdown
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_joint_segment
 from mows.physics.coils import PRESETS, CurrentCap
-from mows.sim.multiprobe_device import MultiProbeDevice
+from mows.physics.multitone import Tone
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
@@ -54,8 +54,8 @@ MAX_STEPS = 100_000  # bound for a cycle that never ends (a bug), not a timing
 
 
 def session(scene=SCENE, cap_a=10.0, settings=FAST, seed=1):
-    backend = MultiProbeSimBackend(
-        MultiProbeDevice(scene, np.random.default_rng(seed)), CurrentCap(cap_a), paced=False, chunk_s=CHUNK_S
+    backend = SimBackend(
+        SimulatedDevice(scene, np.random.default_rng(seed)), CurrentCap(cap_a), paced=False, chunk_s=CHUNK_S
     )
     config = SessionConfig(0.025, settings, scene.setup, CurrentCap(cap_a), 112.5, fit_ringdown)
     return DeviceSession(backend, config, armed=True)
@@ -95,7 +95,7 @@ def true_peak_a(tones, duration_s, step_s=2e-6):
 
 
 def test_tones_summed_above_the_cap_are_never_queued():
-    backend = MultiProbeSimBackend(MultiProbeDevice(SCENE), CurrentCap(LOW_CAP_A), paced=False)
+    backend = SimBackend(SimulatedDevice(SCENE), CurrentCap(LOW_CAP_A), paced=False)
     plan = plan_probes(SCENE.placed_probes(), SCENE.setup, FAST.excite_s)  # one group under the scene's 10 A
     samples = round(FAST.excite_s * SCENE.sample_rate_hz)
     tones = plan.group_tones(0)
@@ -215,8 +215,8 @@ def test_the_windows_of_a_whole_cycle_fitted_jointly_give_each_coupled_frequency
             assert abs(pull) < 4.0, (fit.probe_id, fit.frequency_hz, expected[fit.probe_id], fit.frequency_std_hz)
 
 
-class RecordingDevice(MultiProbeDevice):
-    """The multi-probe device keeping every probe's deflection it read: the truth of the swings."""
+class RecordingDevice(SimulatedDevice):
+    """The simulated device keeping every probe's deflection it read: the truth of the swings."""
 
     def __init__(self, scenario, rng):
         super().__init__(scenario, rng)
@@ -236,7 +236,7 @@ def test_tones_are_sized_by_the_devices_coils_not_by_the_named_preset():
     named = PRESETS[SCENE.setup.name](current_limit_a=10.0)
     assert not np.allclose(named.coils[0].sources[0].center_m, SCENE.setup.coils[0].sources[0].center_m)
     device = RecordingDevice(SCENE, np.random.default_rng(SEED))
-    backend = MultiProbeSimBackend(device, CurrentCap(10.0), paced=False, chunk_s=CHUNK_S)
+    backend = SimBackend(device, CurrentCap(10.0), paced=False, chunk_s=CHUNK_S)
     config = SessionConfig(0.025, FAST, named, CurrentCap(10.0), 112.5, fit_ringdown)
     (outcome,), events, blocks = run(DeviceSession(backend, config, armed=True), CycleRequest(0.0))
     assert outcome.success, outcome.message
@@ -257,19 +257,26 @@ def test_tones_are_sized_by_the_devices_coils_not_by_the_named_preset():
         assert fit.ok, fit.report()
 
 
-def test_devices_of_one_tone_and_the_supply_refuse_what_they_cannot_do_with_the_reason():
+def test_devices_refuse_what_they_cannot_do_with_the_reason():
     tones = plan_probes(SCENE.placed_probes(), SCENE.setup, FAST.excite_s).group_tones(0)
     drive = MultiToneCommand(1, 0, tones, 100)
     with pytest.raises(ValueError, match="the serial device drives one tone at a time"):
         refuse_tones(drive, "serial device")
     one_probe = SimBackend(SimulatedDevice(load_scenario()), CurrentCap(10.0), paced=False)
-    with pytest.raises(ValueError, match="one-probe simulator drives one tone at a time"):
-        one_probe.send(drive)
-    several = MultiProbeSimBackend(MultiProbeDevice(SCENE), CurrentCap(10.0), paced=False)
+    with pytest.raises(ValueError, match=r"must be Tones of distinct probes 0 to 0"):
+        one_probe.send(drive)  # the scene's three tones
+    several = SimBackend(SimulatedDevice(SCENE), CurrentCap(10.0), paced=False)
     with pytest.raises(ValueError, match="has no field supply"):
         several.send(FieldCurrentCommand(2, 0, 1.0))
-    with pytest.raises(ValueError, match="driven by its probes' tones, not by coil amplitudes"):
-        several.send(CoilCommand(3, 0, (1.0, 0.0), 112.5))
-    items = several.poll(0.0)  # nothing was queued: no answers, coils off
-    assert not any(isinstance(item, CommandResult) for item in items)
-    assert not several.device.coil_log and not several.device.coils_on
+    for backend in (one_probe, several):
+        items = backend.poll(0.0)  # nothing was queued: no answers, coils off
+        assert not any(isinstance(item, CommandResult) for item in items)
+        assert not backend.device.coil_log and not backend.device.coils_on
+    # One probe is a scene of one: its own tone drives it, as the tones of a scene drive theirs.
+    (placed,) = load_scenario().placed_probes()
+    start = one_probe.device.next_index
+    one_probe.send(MultiToneCommand(3, 0, (Tone.of(0, placed, placed.probe.f00_hz, 0.5),), 100))
+    (answer,) = [item for item in one_probe.poll(0.0) if isinstance(item, CommandResult)]
+    assert answer.accepted and answer.applied_sample_index == start
+    assert list(one_probe.device.coil_log) == [(start, True), (start + 100, False)]
+    assert one_probe.device.peak_current_a > 0.1

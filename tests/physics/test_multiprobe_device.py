@@ -1,4 +1,4 @@
-"""The simulated device of a scene with several probes, against an independent integration.
+"""The simulated device with a scene of several probes, against an independent integration.
 
 Requirement: the device's compiled RK4 of all probes together, under the multi-tone coil drive
 and each other's fields, follows the equation of motion written directly from the fields
@@ -14,16 +14,16 @@ from scipy import integrate
 from mows.physics.fluxgate import NoiseModel
 from mows.physics.multitone import Tone, drive_currents_a
 from mows.physics.sources import PointDipole
-from mows.sim.multiprobe_device import MultiProbeDevice
 from mows.sim.scenario import load_scenario
+from mows.sim.simulator import SimulatedDevice
 
 QUIET = load_scenario("three_probes").replace(noise=NoiseModel())
 
 
 def direct_rhs(device, tones, t_on_s):
     """θ'' from the fields themselves, for the probes at the device's present orientations."""
-    placed, setup, scene = device.placed, device.setup, device.source
-    count = len(placed)
+    placed, setup, scene = device.placed, device.setup, device.static_source
+    springs, count = device.truth.spring_nm_per_rad, len(placed)
 
     def rhs(t, y):
         theta, omega = y[:count], y[count:]
@@ -40,7 +40,7 @@ def direct_rhs(device, tones, t_on_s):
             gradient = sum(s.gradient_t_per_m(positions[i]) for s in sources)
             magnetic = p.probe.moment_am2 * turning @ field + moments[i] @ gradient @ (p.probe.lever_m * turning)
             gravity = p.probe.magnet_mass_kg * p.probe.lever_m * turning @ np.asarray(p.pose.gravity_m_per_s2)
-            spring = device._spring[i] * theta[i]
+            spring = springs[i] * theta[i]
             acceleration[i] = (magnetic + gravity - spring) / p.probe.inertia_kgm2 - 2 * p.probe.damping_per_s * omega[
                 i
             ]
@@ -51,11 +51,11 @@ def direct_rhs(device, tones, t_on_s):
 
 @pytest.mark.slow  # DOP853 on loop fields: 30–45 s on a loaded machine
 def test_the_driven_probes_follow_the_equation_of_motion_written_from_the_fields():
-    device = MultiProbeDevice(QUIET)
+    device = SimulatedDevice(QUIET)
     device.set_orientations(device.theta0_rad + 0.3)
     frequencies = device.expected_frequencies_hz()
     tones = [Tone.of(k, p, f, 0.2) for k, (p, f) in enumerate(zip(device.placed, frequencies))]
-    start = np.r_[device._theta, device._omega]
+    start = np.r_[device.truth.theta_rad, device.truth.theta_dot_rad_per_s]
     fs, driven, free = device.sample_rate_hz, 160, 80
     device.drive(tones, driven)
     theta = device.read(driven + free).theta_rad
@@ -73,12 +73,12 @@ def test_the_driven_probes_follow_the_equation_of_motion_written_from_the_fields
 
 
 def test_the_fluxgates_read_every_magnet():
-    device = MultiProbeDevice(QUIET)
+    device = SimulatedDevice(QUIET)
     device.set_orientations(device.theta0_rad + 0.5)
     block = device.read(10)
-    pair = QUIET.sensors.pair
-    nulled = pair.with_offsets_nulled(device.source.field_t(pair.positions_m))
-    field = nulled.component_t(device.source.field_t(pair.positions_m))
+    pair, scene = QUIET.sensors.pair, device.static_source
+    nulled = pair.with_offsets_nulled(scene.field_t(pair.positions_m))
+    field = nulled.component_t(scene.field_t(pair.positions_m))
     for k, p in enumerate(device.placed):
         angle = block.theta_rad[:, k]
         moment = p.probe.moment_am2 * p.pose.moment_direction_at(angle)

@@ -1,4 +1,5 @@
-"""Several probes integrated together, against solve_ivp and the coupled first-principles model.
+"""Several probes integrated together by the simulated device, against solve_ivp and the coupled
+first-principles model.
 
 Requirements: the RK4 integration of the coupled equations of motion agrees with an independent
 integrator (scipy's DOP853 at tight tolerances) and converges at fourth order; the ring-down
@@ -18,7 +19,7 @@ from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import UniformField
-from mows.sim.multiprobe import CoupledProbes
+from scenes import scene_device
 
 NO_FIELD = UniformField([0.0, 0.0, 0.0])
 STIFFER = P.replace(spring_nm_per_rad=P.spring_nm_per_rad * 1.24)  # f00 ≈ 125 Hz
@@ -35,12 +36,11 @@ def crossing_frequency_hz(theta, rate_hz):
 def test_rk4_agrees_with_solve_ivp_and_converges_at_fourth_order():
     # 1 cm apart, across each other's axes, large swings: strong, nonlinear coupling.
     close = [PlacedProbe(P, Pose()), PlacedProbe(STIFFER, Pose(magnet_position_m=(0.0, 0.01, 0.0), theta0_rad=0.4))]
-    probes = CoupledProbes(close, NO_FIELD)
     start, n = [0.17, -0.09], 500
     times = np.arange(n) / RATE_HZ
     reference = (
         integrate.solve_ivp(
-            probes.rhs(),
+            scene_device(close, sample_rate_hz=RATE_HZ).equation_of_motion(),
             (0.0, times[-1]),
             np.r_[start, 0.0, 0.0],
             method="DOP853",
@@ -51,14 +51,17 @@ def test_rk4_agrees_with_solve_ivp_and_converges_at_fourth_order():
         .y[:2]
         .T
     )
-    errors = [np.abs(probes.ring_down(start, n, RATE_HZ, substeps)[0] - reference).max() for substeps in (2, 4)]
+    errors = [
+        np.abs(scene_device(close, sample_rate_hz=RATE_HZ, substeps=substeps).ring_down(start, n)[0] - reference).max()
+        for substeps in (2, 4)
+    ]
     assert errors[0] < 3e-7  # rad, over 6 periods of a 10° swing
     assert errors[0] / errors[1] > 10  # 2⁴ = 16 for a fourth-order method
 
 
 def test_the_coupling_torque_is_the_derivative_of_the_interaction_energy():
     close = [PlacedProbe(P, Pose()), PlacedProbe(STIFFER, Pose(magnet_position_m=(0.004, 0.008, 0.002)))]
-    probes = CoupledProbes(close, NO_FIELD)
+    probes = scene_device(close, sample_rate_hz=RATE_HZ)
     theta, h = np.array([0.2, -0.3]), 1e-6
 
     def interaction_j(angles):
@@ -79,7 +82,7 @@ def test_the_coupling_torque_is_the_derivative_of_the_interaction_energy():
 def test_simulated_frequencies_are_the_coupled_model_s():
     # The paper's probe and a stiffer one 5 cm apart on a common axis: 6.5 and 3.7 mHz shifts.
     pair = [PlacedProbe(P, Pose()), PlacedProbe(STIFFER, Pose(magnet_position_m=(0.05, 0.0, 0.0)))]
-    theta, _ = CoupledProbes(pair, NO_FIELD).ring_down([math.radians(1.0)] * 2, 3000, RATE_HZ)
+    theta, _ = scene_device(pair, sample_rate_hz=RATE_HZ).ring_down([math.radians(1.0)] * 2, 3000)
     simulated = np.array([crossing_frequency_hz(theta[:, i], RATE_HZ) for i in range(2)])
     model = coupled_frequencies_hz(pair, NO_FIELD)
     alone = np.array([float(ArcPotential.from_source(p.probe, NO_FIELD, p.pose).frequency_hz()) for p in pair])
@@ -89,8 +92,8 @@ def test_simulated_frequencies_are_the_coupled_model_s():
 
 
 def test_bad_starts_are_refused_by_value():
-    probes = CoupledProbes([PlacedProbe(P, Pose()), PlacedProbe(P, Pose(magnet_position_m=(0.05, 0, 0)))], NO_FIELD)
+    probes = scene_device([PlacedProbe(P, Pose()), PlacedProbe(P, Pose(magnet_position_m=(0.05, 0, 0)))])
     with pytest.raises(ValueError, match=r"start_rad = \[0.1\] must give one deflection per probe \(2\)"):
-        probes.ring_down([0.1], 10, RATE_HZ)
+        probes.ring_down([0.1], 10)
     with pytest.raises(ValueError, match="n_samples = 0"):
-        probes.ring_down([0.1, 0.1], 0, RATE_HZ)
+        probes.ring_down([0.1, 0.1], 0)

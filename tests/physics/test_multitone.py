@@ -31,7 +31,7 @@ from mows.physics.multitone import (
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import UniformField
-from mows.sim.multiprobe import CoupledProbes
+from scenes import scene_device
 
 SETUP = largest_spacing()
 DELTA = P.damping_per_s
@@ -195,7 +195,7 @@ def test_two_coupled_probes_ring_up_to_their_own_tones():
         PlacedProbe(P, Pose(theta0_rad=0.4)),
         PlacedProbe(STIFFER, Pose(magnet_position_m=(0.0, 0.04, 0.0), theta0_rad=1.3)),
     ]
-    probes = CoupledProbes(placed, NO_FIELD)
+    probes = scene_device(placed)
     frequencies = coupled_frequencies_hz(placed, NO_FIELD)
     rest = coupled_rest(placed, NO_FIELD).rest_angle_rad
     tones = [Tone.of(k, p, f, 0.05) for k, (p, f) in enumerate(zip(placed, frequencies))]
@@ -212,7 +212,7 @@ def test_two_coupled_probes_ring_up_to_their_own_tones():
     inertia = np.array([p.probe.inertia_kgm2 for p in placed])
 
     def run(active):
-        base = probes.rhs()
+        base = probes.equation_of_motion()
         # The drive of the tones ``active``: Σ_k A_kc·sin(ω_k·t), what drive_currents_a sums.
         scheme = amplitudes[active]
 

@@ -15,6 +15,7 @@ from scipy import signal as sp_signal
 from scipy.special import j1
 
 from mows.estimate.ringdown import fit_ringdown
+from mows.physics.coupling import coupled_rest
 from mows.physics.field import MU0_OVER_4PI, UniformField
 from mows.physics.fluxgate import Fluxgate, FluxgatePair, NoiseModel
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
@@ -22,7 +23,7 @@ from mows.physics.probe import PAPER_PROBE as P
 from mows.sim.cycle import simulate_cycle
 from mows.sim.noise import NoiseStream
 from mows.sim.scenario import Environment, Integrator, Scenario, Sensors, load_scenario
-from mows.sim.simulator import SimulatedDevice, SimulationRefused
+from mows.sim.simulator import SimulatedDevice
 
 FS = 20_000.0
 KM, M, J, DELTA, L = P.spring_nm_per_rad, P.moment_am2, P.inertia_kgm2, P.damping_per_s, P.lever_m
@@ -83,11 +84,12 @@ def bare(field_t=(0.0, 0.0, 0.0), probe=P, theta0_rad=0.0, **changes) -> Scenari
 
 
 def ring(scenario, amplitude_rad, seconds, reference=None):
-    """θ(t), θ'(t) of a ring-down plucked ``amplitude_rad`` from the rest angle (or ``reference``)."""
+    """θ(t), θ'(t) of the probe's ring-down plucked ``amplitude_rad`` from the rest angle (or ``reference``)."""
     device = SimulatedDevice(scenario)
-    start = device.truth.rest_angle_rad if reference is None else reference
+    start = device.truth.rest_angle_rad[0] if reference is None else reference
     device.pluck(start + amplitude_rad)
-    return device.integrate(int(seconds * FS))
+    theta, theta_dot = device.integrate(int(seconds * FS))
+    return theta[:, 0], theta_dot[:, 0]
 
 
 def linear_frequency_hz(spring_nm_per_rad, probe=P):
@@ -214,7 +216,7 @@ def test_d_anti_helmholtz_shift_against_the_published_and_first_principles_terms
     earth_only = with_pair.replace(environment=Environment((earth,)))
     amplitude = math.radians(2.0)
     f_pair, f_earth = (
-        mean_frequency_hz(*ring(s, amplitude, 1.0), SimulatedDevice(s).truth.rest_angle_rad)
+        mean_frequency_hz(*ring(s, amplitude, 1.0), SimulatedDevice(s).truth.rest_angle_rad[0])
         for s in (with_pair, earth_only)
     )
     simulated = f_pair - f_earth
@@ -341,9 +343,9 @@ def test_the_stop_never_holds_the_probe():
     the contact, whose spring then pulled, and the probe stayed glued to the stop through the
     excitation and every ring-down after it (fits: NO_OSCILLATION). Released, it swings free."""
     device = SimulatedDevice(bare())
-    device._state[:] = -(STOP - math.radians(0.024)), 0.0, -1.0  # contact mode −1, not penetrating
+    device._state[:, 0] = -(STOP - math.radians(0.024)), 0.0, -1.0  # contact mode −1, not penetrating
     theta, _ = device.integrate(round(0.05 * device.sample_rate_hz))
-    assert device._state[2] == 0.0
+    assert device._state[2, 0] == 0.0
     assert theta.max() > STOP - math.radians(1.0)  # half a period later: at the other side
 
 
@@ -444,15 +446,35 @@ def test_commands_are_checked():
         device.set_coils([1.0, 0.0, 0.0], 112.0)
     device.set_coils([1.0, -1.0], 112.0)
     with pytest.raises(RuntimeError, match="switch the coils off"):
-        device.set_orientation(1.0)
+        device.set_orientations([1.0])
 
 
-def test_a_scene_of_several_probes_is_refused_not_simulated_as_its_first_probe():
-    scene = load_scenario("three_probes")
-    with pytest.raises(SimulationRefused, match="scenario 'three_probes' has 3 probes; this simulator integrates one"):
-        SimulatedDevice(scene)
-    alone = scene.replace(probes=scene.probes[1:2], probe=scene.probes[1].probe, pose=scene.probes[1].pose)
-    assert SimulatedDevice(alone).probe.f00_hz == 112.5
+def test_a_scene_of_several_probes_is_simulated_with_all_of_its_probes():
+    """The three_probes scene rings down with each probe in its neighbours' dipole fields. Each
+    probe's frequency from its zero crossings (a 0.1° swing) is Eq. S1 with the exact stiffness at
+    its rest angle: U'' of U(θ) = ½kM·θ² − m(θ)·B(r(θ)) by central differences, B the scene's field
+    plus the neighbours' point dipoles at their rest (:func:`mows.physics.coupling.coupled_rest`).
+    Without the neighbours the frequencies would be 1.2 to 5.6 mHz away."""
+    device = SimulatedDevice(load_scenario("three_probes").replace(noise=NoiseModel()))
+    assert len(device.placed) == 3
+    rest = coupled_rest(device.placed, device.static_source)
+    theta, theta_dot = device.ring_down(rest.rest_angle_rad + math.radians(0.1), int(FS))
+    simulated = [mean_frequency_hz(theta[:, k], theta_dot[:, k], a) for k, a in enumerate(rest.rest_angle_rad)]
+
+    def exact_hz(k, source):
+        probe, pose, h = device.placed[k].probe, device.placed[k].pose, 1e-4
+        angles = rest.rest_angle_rad[k] + np.array([-h, 0.0, h])
+        moments = probe.moment_am2 * pose.moment_direction_at(angles)
+        field = source.field_t(pose.magnet_position_at(angles, probe.lever_m))
+        energy = 0.5 * probe.spring_nm_per_rad * angles**2 - np.sum(moments * field, axis=1)
+        stiffness = (energy[0] - 2 * energy[1] + energy[2]) / h**2
+        return math.sqrt(stiffness / probe.inertia_kgm2 - probe.damping_per_s**2) / (2 * math.pi)
+
+    for k in range(3):
+        with_neighbours = exact_hz(k, device.static_source + rest.neighbours(k))
+        print(f"\nprobe {k}: simulated − Eq. S1 {1e3 * (simulated[k] - with_neighbours):+.4f} mHz")
+        assert abs(with_neighbours - exact_hz(k, device.static_source)) > 1e-3  # Hz: the neighbours matter
+        assert simulated[k] == pytest.approx(with_neighbours, abs=5e-5)  # 3 µHz measured
 
 
 def test_the_field_shift_follows_the_moment_at_the_temperature():

@@ -24,8 +24,9 @@ from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz, coupled_r
 from mows.physics.fluxgate import FluxgatePair
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
-from mows.sim.multiprobe import CoupledProbes, swinging_pickup_t
+from mows.sim.simulator import swinging_pickup_t
 from node_processes import assert_stops_cleanly
+from scenes import scene_device
 from test_estimator_node import FS
 from test_estimator_probes import DURATION_S, POSITIONS_M, SCENE, SPRING_SCALES, ring_down, started_estimator
 
@@ -53,7 +54,7 @@ def group_samples(placed, ringing, seed):
     """The pair's samples (n, 2) of one ring-down in which only the probes ``ringing`` swing."""
     rest = coupled_rest(placed, SCENE).rest_angle_rad
     start = [math.radians(4.0) if k in ringing else rest[k] for k in range(len(placed))]
-    theta, _ = CoupledProbes(placed, SCENE).ring_down(start, int(DURATION_S * FS), FS)
+    theta, _ = scene_device(placed, [SCENE], FS).ring_down(start, int(DURATION_S * FS))
     samples = swinging_pickup_t(FluxgatePair.paper(), placed, theta)
     return samples + 1e-10 * np.random.default_rng(seed).standard_normal(samples.shape)
 

@@ -21,10 +21,11 @@ from mows.physics.fluxgate import FluxgatePair
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import UniformField
-from mows.sim.multiprobe import CoupledProbes, swinging_pickup_t
+from mows.sim.simulator import swinging_pickup_t
 from mows_bringup.graph import NODES
 from mows_ros.qos import RESULT_QOS
 from node_processes import assert_stops_cleanly
+from scenes import scene_device
 from test_estimator_node import FS, Device, heard_device
 
 pytestmark = [pytest.mark.ros, pytest.mark.xdist_group("realtime")]
@@ -45,7 +46,7 @@ def three_probes():
     ]
     n = int(DURATION_S * FS)
     start = [math.radians(a) for a in (4.0, 3.5, 4.0)]  # small swings: the model is at zero amplitude
-    theta, _ = CoupledProbes(placed, SCENE).ring_down(start, n, FS)
+    theta, _ = scene_device(placed, [SCENE], FS).ring_down(start, n)
     pair = FluxgatePair.paper()
     samples = swinging_pickup_t(pair, placed, theta)
     samples = samples + 1e-10 * np.random.default_rng(5).standard_normal(samples.shape)

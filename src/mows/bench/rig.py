@@ -19,7 +19,6 @@ import numpy as np
 
 from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, Phase, PhaseEvent
 from mows.device.cycle.tracking import TrackingLoop
-from mows.device.simulated.scheduled_multiprobe import ScheduledMultiProbeDevice
 from mows.device.stream.device_time import Block, DeviceTimeLoop, scheduled_device
 from mows.estimate.probe_set import probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit, fit_ringdown
@@ -158,7 +157,7 @@ class DeviceTimeRig:
 
     def _fit_jointly(self, segment: Segment) -> None:
         """The window's probes fitted jointly, each at the tone it was driven with."""
-        assert isinstance(self.device, ScheduledMultiProbeDevice)  # only its cycles announce probes
+        assert self.device.device.scenario.probes  # only a scene's cycles announce probes
         window, placed = segment.window, self.device.device.placed  # the probes where the stage stands
         members = window.probe_ids
         lines = probe_lines(

@@ -6,10 +6,10 @@ without noise, the kernel's share, numba's compilation (fresh cache) and cache-l
 new process, and the same cycle's equation of motion integrated by
 ``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-10) on the same torque function.
 
-The device of several probes (:class:`mows.sim.multiprobe_device.MultiProbeDevice`, the
-three_probes scene, what the driver's sim backend reads for it): the median time to read one
-second of device time, driven by the probes' summed tones and ringing freely, against one
-second read from the one-probe device in the same run. Real time is 1000 ms per second.
+The same device with several probes (the three_probes scene, what the driver's sim backend
+reads for it): the median time to read one second of device time, driven by the probes' summed
+tones and ringing freely, against one second read with one probe in the same run. Real time is
+1000 ms per second.
 """
 
 from __future__ import annotations
@@ -29,7 +29,6 @@ from mows.device.cycle.tone_groups import plan_probes
 from mows.physics.coils import excitation_samples
 from mows.physics.fluxgate import NoiseModel
 from mows.sim.cycle import simulate_cycle
-from mows.sim.multiprobe_device import MultiProbeDevice
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
@@ -84,7 +83,7 @@ def solve_ivp_cycle(
     frequency = device.expected_frequency_hz()
     drive = device.equation_of_motion(device.scenario.setup.currents_a(0.0, amplitude_a), frequency)
     n_excite, n_ring = excitation_samples(excite_s, frequency, fs), int(round(ringdown_s * fs))
-    excited = solve_ivp_theta(drive, [device.truth.rest_angle_rad, 0.0], 0, n_excite, fs)
+    excited = solve_ivp_theta(drive, [device.truth.rest_angle_rad[0], 0.0], 0, n_excite, fs)
     ringing = solve_ivp_theta(device.equation_of_motion(), excited[:, -1], n_excite, n_ring - 1, fs)
     return np.concatenate([excited[0, :-1], ringing[0]])
 
@@ -117,7 +116,7 @@ def run(repeats: int = 20, first_call: bool = True) -> dict:
     figures["max_theta_difference_cycle_rad"] = float(np.max(np.abs(record.theta_rad - theta_ivp)))
     plucked = SimulatedDevice(silent)
     plucked.pluck(math.radians(23.0))
-    theta_rk4, _ = plucked.integrate(int(plucked.sample_rate_hz))
+    theta_rk4 = plucked.integrate(int(plucked.sample_rate_hz))[0][:, 0]
     theta_free = solve_ivp_theta(
         plucked.equation_of_motion(), [math.radians(23.0), 0.0], 0, len(theta_rk4) - 1, plucked.sample_rate_hz
     )[0]
@@ -131,10 +130,10 @@ def multiprobe_reads(repeats: int) -> dict:
     device, with their ratio (module docstring)."""
     scene = load_scenario("three_probes")
     second = int(scene.sample_rate_hz)
-    device = MultiProbeDevice(scene)
+    device = SimulatedDevice(scene)
     tones = plan_probes(device.placed, device.setup, 1.0).group_tones(0)
     device.read(10)  # warm-up
-    at_rest = iter([MultiProbeDevice(scene) for _ in range(repeats)])  # each driven from rest, within its interval
+    at_rest = iter([SimulatedDevice(scene) for _ in range(repeats)])  # each driven from rest, within its interval
 
     def driven():
         fresh = next(at_rest)

@@ -279,7 +279,7 @@ def _resonance_hz(device, theta0_rad: float) -> float:
     """The simulated probe's small-amplitude resonance at ``theta0_rad`` in the present supply
     field: where the paper's tuning leaves the drive. The stage is turned there first (between
     cycles, the coils off); the cycle's own turn then finds it there."""
-    device.set_orientation(theta0_rad)
+    device.set_orientations([theta0_rad])
     return device.expected_frequency_hz()
 
 

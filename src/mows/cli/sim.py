@@ -62,7 +62,7 @@ def run(args) -> int:
     records = []
     for theta0_deg in angles:
         for _ in range(args.repeats):
-            device.set_orientation(math.radians(theta0_deg))
+            device.set_orientations(scenario.stage_orientations_rad(math.radians(theta0_deg)))
             device.idle(excitation.gap_s)
             record = simulate_cycle(
                 device,

@@ -39,7 +39,8 @@ class CycleRecord:
 
     @property
     def theta_rad(self) -> np.ndarray:
-        return self.block.theta_rad
+        """The deflection of the probe (the first of a scene) at the samples (n,)."""
+        return self.block.theta_rad[:, 0]
 
     def expected_frequency_hz(self, amplitude_rad=0.0):
         """Truth f(A) from the full potential (harmonic balance, Eq. S1)."""
@@ -68,12 +69,13 @@ def simulate_cycle(
     excite_s: float = 0.5,
     ringdown_s: float = 0.5,
 ) -> CycleRecord:
-    """Turn to θ0, drive the coils with the setup's current scheme for ``excite_s`` (base
+    """Turn the device's stage to θ0 (:meth:`mows.sim.scenario.Scenario.stage_orientations_rad`: the
+    probe of a one-probe scene to θ0), drive the coils with the setup's current scheme for ``excite_s`` (base
     amplitude ``amplitude_a``; ``frequency_hz`` None: the expected small-amplitude frequency,
     as after the paper's tuning), switch them off at the drive current's peak nearest
     ``excite_s`` (:func:`mows.physics.coils.excitation_samples`) and record ``ringdown_s`` of
     ring-down."""
-    device.set_orientation(theta0_rad)
+    device.set_orientations(device.scenario.stage_orientations_rad(theta0_rad))
     frequency = device.expected_frequency_hz() if frequency_hz is None else float(frequency_hz)
     currents = device.scenario.setup.currents_a(theta0_rad, amplitude_a)
     device.set_coils(currents, frequency)

@@ -98,6 +98,14 @@ class Scenario:
             raise ValueError(f"theta0_rad = {theta0_rad!r} must give one angle for each of the {len(scene)} probes")
         return [p.placed(a) for p, a in zip(scene, angles)]
 
+    def stage_orientations_rad(self, stage_rad: float) -> np.ndarray:
+        """Each probe's θ0 with the shared stage at ``stage_rad``: a scene's probes at their home
+        orientations plus it; the probe of a one-probe scene at ``stage_rad`` itself (its home
+        is 0, so that the driver's θ0 is the probe's orientation)."""
+        if not self.probes:
+            return np.array([float(stage_rad)])
+        return np.array([p.pose.theta0_rad for p in self.probes]) + float(stage_rad)
+
     def replace(self, **changes) -> Scenario:
         return dataclasses.replace(self, **changes)
 

@@ -1,6 +1,6 @@
 """The simulator as the driver's device (:class:`mows.device.interface.Backend` ``sim``): the
-first-principles simulator in this process, paced in real time or unpaced, with commands applied
-at their exact sample."""
+first-principles simulator of a scene's probes (one, or several on one stage) in this process,
+paced in real time or unpaced, with commands applied at their exact sample."""
 
 from __future__ import annotations
 
@@ -20,10 +20,8 @@ from mows.device.interface import (
 )
 from mows.device.protocol.payloads import DeviceInfo
 from mows.device.simulated.scheduled import ScheduledDevice
-from mows.device.simulated.scheduled_multiprobe import ScheduledMultiProbeDevice
 from mows.physics.coils import CurrentCap
 from mows.records.samples import SampleBlock
-from mows.sim.multiprobe_device import MultiProbeDevice
 from mows.sim.simulator import SimulatedBlock, SimulatedDevice
 
 # The simulator is read in pieces of at least this: each read has a fixed cost (~0.4 ms), and
@@ -57,11 +55,14 @@ class SimBackend(Backend):
     (:class:`mows.device.clock.DeviceClock`), at least ``chunk_s`` at a time; unpaced (tests,
     benchmarks), each poll takes the next ``chunk_s`` at once. Commands are applied at their
     exact sample by :class:`mows.device.simulated.scheduled.ScheduledDevice`.
+
+    For a scene of several probes on one shared stage, ``probes`` lists them at their home
+    orientations (probe id = index) and ``coils`` are the scene's coils, placed among them: the
+    driver's cycles then drive the probes' tones. Both are empty for one probe.
     """
 
     name = "sim"
     can_excite = True
-    scheduled: type[ScheduledDevice] = ScheduledDevice
 
     def __init__(
         self,
@@ -73,7 +74,9 @@ class SimBackend(Backend):
         supply_cap_a: float = math.inf,
         supply_slew_a_per_s: float = math.inf,
     ):
-        self.device = self.scheduled(device, cap, supply_cap_a, supply_slew_a_per_s)
+        self.device = ScheduledDevice(device, cap, supply_cap_a, supply_slew_a_per_s)
+        if device.scenario.probes:
+            self.probes, self.coils = self.device.home, device.setup
         self.supply_limits = self.device.supply_limits
         self._info = simulated_device_info(self.device)
         self.clock = clock or DeviceClock(device.sample_rate_hz)
@@ -126,6 +129,8 @@ class SimBackend(Backend):
 
     def stats(self) -> dict:
         values = {"link": "simulated", "device_coils_on": self.device.coils_on}
+        if self.probes:
+            values.update(probes=len(self.probes), peak_coil_current_a=self.device.peak_current_a)
         if self.device.supply_limits is not None:
             values.update(
                 supply_current_a=self.device.device.field_current_a, supply_target_a=self.device.supply_target_a
@@ -139,32 +144,6 @@ class SimBackend(Backend):
             self.device.read_until(self.device.supply_to_zero() + 1)
 
 
-class MultiProbeSimBackend(SimBackend):
-    """The simulated device of a scene with several probes on one shared stage
-    (:class:`mows.device.simulated.scheduled_multiprobe.ScheduledMultiProbeDevice`), paced or unpaced as
-    :class:`SimBackend`; its cycles drive the probes' tones. ``probes``: the probes at their home
-    orientations, probe id = index; ``coils``: the scene's coils, placed among them. No field
-    supply: a supply current is refused with the reason."""
-
-    scheduled = ScheduledMultiProbeDevice
-    device: ScheduledMultiProbeDevice
-
-    def __init__(
-        self,
-        device: MultiProbeDevice,
-        cap: CurrentCap,
-        paced: bool = True,
-        clock: DeviceClock | None = None,
-        chunk_s: float = SIM_CHUNK_S,
-    ):
-        super().__init__(device, cap, paced, clock, chunk_s)  # type: ignore[arg-type]
-        self.probes = self.device.home
-        self.coils = device.setup
-
-    def stats(self) -> dict:
-        return {**super().stats(), "probes": len(self.probes), "peak_coil_current_a": self.device.peak_current_a}
-
-
 def scene_backend(
     scenario,
     cap: CurrentCap,
@@ -173,18 +152,11 @@ def scene_backend(
     supply_cap_a: float = math.inf,
     supply_slew_a_per_s: float = math.inf,
 ) -> SimBackend:
-    """The paced sim backend of ``scenario``: the one-probe simulator with the probe at
-    ``theta0_rad``, or, for a scene with several probes, the multi-probe device with the shared
-    stage at ``theta0_rad`` (each probe at its home orientation plus it; no field supply). Its
+    """The paced sim backend of ``scenario`` with the stage at ``theta0_rad``: the probe of a
+    one-probe scene at that orientation, each probe of a scene of several at its home orientation
+    plus it (:meth:`mows.sim.scenario.Scenario.stage_orientations_rad`), at rest there. Its
     integrator is compiled beforehand by :func:`mows.precompile.precompile`, as the driver does
-    before it opens the device: otherwise the first read compiles it, seconds in which the
-    stream waits for samples."""
-    if not scenario.probes:
-        device = SimulatedDevice(scenario.replace(pose=scenario.pose.with_theta0(theta0_rad)))
-        return SimBackend(
-            device, cap, chunk_s=chunk_s, supply_cap_a=supply_cap_a, supply_slew_a_per_s=supply_slew_a_per_s
-        )
-    probes = MultiProbeDevice(scenario)
-    backend = MultiProbeSimBackend(probes, cap, chunk_s=chunk_s)
-    backend.device.schedule_orientation(0, theta0_rad)
-    return backend
+    before it opens the device: otherwise the first read compiles it, seconds in which the stream
+    waits for samples."""
+    device = SimulatedDevice(scenario, theta0_rad=scenario.stage_orientations_rad(theta0_rad))
+    return SimBackend(device, cap, chunk_s=chunk_s, supply_cap_a=supply_cap_a, supply_slew_a_per_s=supply_slew_a_per_s)

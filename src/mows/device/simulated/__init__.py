@@ -1,9 +1,9 @@
 """The simulator (:mod:`mows.sim`) dressed as hardware, for the sim backend, the device
 emulator, the bench and the tests: a device whose commands take effect at chosen sample indices
-(``scheduled``: :class:`~mows.device.simulated.scheduled.ScheduledDevice`, with the current cap
-and the static-field supply's ramps), the same for a scene of several probes on one stage
-(``scheduled_multiprobe``), and the paper's NI card in wall-clock time under NI's own ``nidaqmx``,
-its C library's interpreter replaced (``daqmx_card``: :class:`~mows.device.simulated.daqmx_card.SimulatedCard`).
+(``scheduled``: :class:`~mows.device.simulated.scheduled.ScheduledDevice`, one probe or a scene
+of several on one stage, with the current cap and the static-field supply's ramps), and the
+paper's NI card in wall-clock time under NI's own ``nidaqmx``, its C library's interpreter
+replaced (``daqmx_card``: :class:`~mows.device.simulated.daqmx_card.SimulatedCard`).
 
 May import: ``mows.sim``, ``mows.physics``, ``mows.records``, NI's ``nidaqmx`` (``daqmx_card``), and
 ``mows.device.interface``, ``mows.device.clock``, ``mows.device.protocol``; no other device package.

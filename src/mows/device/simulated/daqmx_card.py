@@ -169,7 +169,7 @@ class SimulatedCard:
     def turn_probe(self, theta0_rad: float) -> None:
         """The operator turns the stage (the coils must be off)."""
         with self._lock:
-            self.device.set_orientation(theta0_rad)
+            self.device.set_orientations([theta0_rad])
 
     def unplug(self) -> None:
         """The card is gone: its tasks fail and stop, the coils' amplifiers get 0 V."""

@@ -5,9 +5,17 @@ Hardware applies a command at a sample of its own clock; so does this wrapper of
 reads at their indices. That makes the instant the coils switch off, where a ring-down
 starts, exact to the sample. The sim backend and the device emulator both run on it.
 
+The scene's probes (one, or several) sit on one shared stage: a turn to the stage angle θ turns
+each to its orientation there (:meth:`mows.sim.scenario.Scenario.stage_orientations_rad`: a
+scene's home orientations plus θ, the one probe of a one-probe scene to θ itself). The coils
+carry one tone (a coil amplitude each, :class:`mows.device.interface.CoilCommand`) or the sum of
+the probes' tones (:class:`mows.device.interface.MultiToneCommand`); a switch-off (coils of zero
+amplitude, an emergency stop) switches every tone off at once.
+
 Every coil command is checked against the current cap (the lower of the driver's and the
-scenario's) when it is scheduled, so that nothing above the cap is ever queued, let alone
-applied. The static-field supply (:mod:`mows.physics.supply`) likewise: a new supply current is
+scenario's) when it is scheduled, tones on their summed true peak over the whole excitation
+(:func:`mows.physics.multitone.peak_current_a`), so that nothing above the cap is ever queued,
+let alone applied. The static-field supply (:mod:`mows.physics.supply`) likewise: a new supply current is
 checked against its cap, rounded to its resolution and reached by a staircase within its slew
 limit, each step queued at its sample; cancelling the coils' commands leaves a ramp alone, and
 :meth:`ScheduledDevice.supply_to_zero` ramps the supply down from wherever it is.
@@ -19,11 +27,12 @@ import bisect
 import collections
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from mows.physics.coils import CurrentCap
+from mows.physics.multitone import Tone, peak_current_a
 from mows.physics.supply import SupplyLimits
 from mows.sim.simulator import SimulatedBlock, SimulatedDevice
 
@@ -35,7 +44,9 @@ class OverCap(ValueError):
 
 
 class ScheduledDevice:
-    """``device`` with a command queue; ``cap`` is the driver's coil current cap."""
+    """``device`` (its probes on one shared stage) with a command queue; ``cap`` is the driver's
+    coil current cap. ``home`` holds the probes at their home orientations; ``peak_current_a``
+    is the largest coil current the device carried."""
 
     def __init__(
         self,
@@ -44,9 +55,17 @@ class ScheduledDevice:
         supply_cap_a: float = math.inf,
         supply_slew_a_per_s: float = math.inf,
     ):
+        stages = {p.stage for p in device.scenario.probes}
+        if len(stages) > 1:
+            raise ValueError(
+                f"scenario {device.scenario.name!r}: its probes are on the stages {sorted(stages)}; "
+                "the driver turns one shared stage"
+            )
         self.device = device
+        self.home = tuple(device.scenario.placed_probes())
+        self.peak_current_a = 0.0
         self.cap = CurrentCap(min(cap.limit_a, device.scenario.setup.cap.limit_a))
-        supply = self._supply_of(device)
+        supply = device.scenario.supply
         # The lower of the driver's and the supply's own cap and slew limit.
         self.supply_limits = (
             None
@@ -68,11 +87,6 @@ class ScheduledDevice:
         # from the samples' coil flags, not from the commands.
         self.coil_log: collections.deque = collections.deque(maxlen=COIL_LOG_LENGTH)
         self._logged_on = False
-
-    @staticmethod
-    def _supply_of(device):
-        """The static-field supply the device simulates, if any."""
-        return device.scenario.supply
 
     @property
     def next_index(self) -> int:
@@ -111,11 +125,11 @@ class ScheduledDevice:
         amplitudes = self.check_coils(amplitudes_a, frequency_hz)
         kind = "on" if any(amplitudes) else "off"
         if kind == "on" and any(entry[2] == "turn" for entry in self._queue):
-            raise RuntimeError("coils cannot go on while a turn of the probe is waiting")
+            raise RuntimeError("coils cannot go on while a turn of the stage is waiting")
         return self._enqueue(at_index, kind, functools.partial(self._drive, amplitudes, float(frequency_hz)))
 
     def schedule_orientation(self, at_index: int, theta0_rad: float) -> int:
-        """Turn the probe at sample ``at_index``; returns the sample it applies at.
+        """Turn the stage to ``theta0_rad`` at sample ``at_index``; returns the sample it applies at.
         ValueError for a non-finite angle; RuntimeError while the coils are on or a switch-on or a turn waits."""
         if not math.isfinite(theta0_rad):
             raise ValueError(f"theta0_rad = {theta0_rad!r} must be finite")
@@ -124,11 +138,41 @@ class ScheduledDevice:
         return self._enqueue(at_index, "turn", functools.partial(self._turn, float(theta0_rad)))
 
     def _turn(self, theta0_rad: float) -> None:
-        self.device.set_orientation(theta0_rad)
+        self.device.set_orientations(self.device.scenario.stage_orientations_rad(theta0_rad))
 
-    def schedule_tones(self, at_index: int, tones, samples: int) -> int:
-        """A multi-tone drive: ValueError, the one-probe simulator drives one tone."""
-        raise ValueError("the one-probe simulator drives one tone at a time: a multi-tone excitation is refused")
+    def check_tones(self, tones: Sequence[Tone], samples: int) -> tuple[Tone, ...]:
+        """The tones as a tuple if the device can take them for ``samples`` samples; OverCap when
+        their summed peak is above the cap, ValueError for anything else malformed."""
+        tones = tuple(tones)
+        ids = [t.probe_id for t in tones] if all(isinstance(t, Tone) for t in tones) else None
+        if not tones or ids is None or len(set(ids)) != len(ids) or not set(ids) <= set(range(len(self.home))):
+            raise ValueError(f"tones {tones!r} must be Tones of distinct probes 0 to {len(self.home) - 1}")
+        if not (isinstance(samples, (int, np.integer)) and samples > 0):
+            raise ValueError(f"samples = {samples!r} must be an integer > 0")
+        nyquist_hz = self.device.sample_rate_hz / 2.0
+        for t in tones:
+            if t.frequency_hz >= nyquist_hz:
+                raise ValueError(f"tone of probe {t.probe_id}: {t.frequency_hz!r} Hz must be below {nyquist_hz:g} Hz")
+        try:
+            peak = float(peak_current_a(self.device.setup, tones, samples / self.device.sample_rate_hz).max())
+        except ValueError as alone:  # one tone alone above the setup's cap
+            raise OverCap(str(alone)) from None
+        if peak > self.cap.limit_a:
+            raise OverCap(f"the tones of probes {ids} peak at {peak:.6g} A, above the {self.cap.limit_a:g} A cap")
+        return tones
+
+    def schedule_tones(self, at_index: int, tones: Sequence[Tone], samples: int) -> int:
+        """Drive the coils with the sum of ``tones`` for ``samples`` samples from ``at_index``;
+        returns the sample it applies at. OverCap above the cap, ValueError for a malformed
+        drive; RuntimeError while a turn of the stage waits."""
+        checked = self.check_tones(tones, samples)
+        if any(entry[2] == "turn" for entry in self._queue):
+            raise RuntimeError("coils cannot go on while a turn of the stage is waiting")
+        return self._enqueue(at_index, "on", functools.partial(self._drive_tones, checked, int(samples)))
+
+    def _drive_tones(self, tones: tuple[Tone, ...], samples: int) -> None:
+        self.device.drive(tones, self.device.sample_index + samples)
+        self.coils_on = True
 
     def cancel(self) -> None:
         """Forget every waiting command of the coils and the stage (a supply ramp goes on: it
@@ -208,6 +252,8 @@ class ScheduledDevice:
         for i in changes:
             self._logged_on = bool(block.coils_on[i])
             self.coil_log.append((block.samples.first_sample_index + int(i), self._logged_on))
+        if block.currents_a.size:
+            self.peak_current_a = max(self.peak_current_a, float(np.max(np.abs(block.currents_a))))
 
     def _drive(self, amplitudes_a: tuple, frequency_hz: float) -> None:
         if any(amplitudes_a):

@@ -2,9 +2,8 @@
 
 :class:`DeviceTimeLoop` runs :class:`mows.device.cycle.sequencer.CycleSequencer` (its duty-cycle
 limit, current cap, tuning and faults) on the simulated device of a scene, with commands at exact
-samples: :class:`mows.device.simulated.scheduled.ScheduledDevice` for one probe,
-:class:`mows.device.simulated.scheduled_multiprobe.ScheduledMultiProbeDevice` for a scene's probes
-on one shared stage. It reads the device in pieces as the sim backend does, feeds each block to
+samples (:class:`mows.device.simulated.scheduled.ScheduledDevice`: one probe, or a scene's
+probes on one shared stage). It reads the device in pieces as the sim backend does, feeds each block to
 the sequencer and carries out the steps it returns (commands scheduled, their results fed back,
 coils off at once), handing every block and phase event to its listeners. The device's clock is
 the only clock: a run takes as long as the simulator needs, not as long as the device would.
@@ -22,21 +21,17 @@ from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, 
 from mows.device.cycle.sequencer import CycleSequencer
 from mows.device.interface import CoilCommand, Command, CommandResult, MultiToneCommand, OrientationCommand
 from mows.device.simulated.scheduled import ScheduledDevice
-from mows.device.simulated.scheduled_multiprobe import ScheduledMultiProbeDevice
 from mows.physics.coils import CurrentCap
-from mows.sim.multiprobe_device import MultiProbeBlock, MultiProbeDevice
 from mows.sim.simulator import SimulatedBlock, SimulatedDevice
 
 CHUNK_S = 0.025  # samples are read in pieces of this, as the sim backend does
 
-Block = SimulatedBlock | MultiProbeBlock
+Block = SimulatedBlock
 
 
 def scheduled_device(scenario, cap: CurrentCap, rng: np.random.Generator) -> ScheduledDevice:
     """``scenario``'s simulated device with commands at exact samples: its probes on one shared
     stage when it has several (:attr:`mows.sim.scenario.Scenario.probes`), else its one probe."""
-    if scenario.probes:
-        return ScheduledMultiProbeDevice(MultiProbeDevice(scenario, rng), cap)
     return ScheduledDevice(SimulatedDevice(scenario, rng), cap)
 
 
@@ -57,7 +52,7 @@ class DeviceTimeLoop:
     ):
         self.device = device
         self.fs = device.device.sample_rate_hz
-        probes = device.home if isinstance(device, ScheduledMultiProbeDevice) else ()
+        probes = device.home if device.device.scenario.probes else ()  # a scene's: driven at their tones
         frequency_hz = probes[0].probe.f00_hz if probes else device.device.scenario.probe.f00_hz
         self.sequencer = CycleSequencer(
             settings, device.device.scenario.setup, device.cap, self.fs, frequency_hz, fit=fit, probes=probes

@@ -208,7 +208,7 @@ def test_a_cancel_or_a_disarm_switches_off_at_once_and_is_no_fault():
         assert coil_log(session)[-1] == (stop_index, False)
         reason = "the client left" if end == "cancel" else "deactivated"
         assert [(e.phase, e.reason) for e in events] == [(Phase.IDLE, f"cancelled: {reason}")]
-        assert not done[0].success and done[0].message == f"cancelled: {reason}"
+        assert not done[0].success and done[0].message == f"cancelled: {reason}" and done[0].cancelled
         state = session.health()
         assert (state["phase"], state["fault"], state["cycle_running"]) == ("IDLE", "", False)
         session.arm()
@@ -443,3 +443,16 @@ def test_a_cycle_drives_at_the_frequency_it_is_asked_for():
     assert {e.frequency_hz for e in events if e.phase == Phase.EXCITING} == {112.9}
     with pytest.raises(ValueError, match="frequency_hz"):
         session.start_cycle(CycleRequest(0.0, frequency_hz=20000.0), lambda _: None)
+
+
+def test_a_cancelled_cycle_reports_the_ring_downs_it_recorded():
+    """Cancelled in its second measurement's excitation, a cycle has recorded one measurement
+    ring-down whole (its two tuning ones are no measurements): it says 1, not 0, and the
+    half-rung second is not counted."""
+    session = session_on_simulator()
+    second = lambda events: any(e.phase == Phase.EXCITING and not e.tuning and e.repeat_index == 1 for e in events)  # noqa: E731
+    done, events = run(session, until=second)
+    assert [(e.tuning, e.repeat_index) for e in events if e.phase == Phase.RINGDOWN][-1] == (False, 0)
+    assert session.cancel_cycle(session.sequencer.last_cycle_id, "the client left")
+    session.step(0.0)
+    assert not done[0].success and done[0].ringdowns_recorded == 1

@@ -89,9 +89,12 @@ class DriverServices:
             outcome = await finished
         finally:
             self._watched.pop(cycle_id, None)
-        # One call site per severity: rclpy refuses to change a call site's severity.
+        # One call site per severity: rclpy refuses to change a call site's severity. A cancel
+        # (its client's, a deactivate) is asked for: no error.
         if outcome.success:
             self._log.info(f"cycle {outcome.cycle_id}: {outcome.message}")
+        elif outcome.cancelled:
+            self._log.info(f"cycle {outcome.cycle_id} ended: {outcome.message}")
         else:
             self._log.error(f"cycle {outcome.cycle_id}: {outcome.message}")
         return outcome

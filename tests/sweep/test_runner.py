@@ -228,3 +228,16 @@ def test_the_last_failure_stays_until_a_sweep_succeeds_and_a_cancel_leaves_it():
     while step.decompose is None:
         step = driver.run(runner, step)
     assert runner.on_decomposed(step.decompose()).finished.ok and runner.last_failure == ""
+
+
+def test_a_cancel_that_stops_the_running_cycle_ends_the_sweep_cancelled_not_failed():
+    """The client cancels while a cycle runs: the mapper cancels that cycle, whose answer then
+    says so. That answer is the cancel taking effect, not a failure: CANCELED, and the last
+    failure (the mapper's WARN on /diagnostics) untouched."""
+    runner, step = started()
+    assert step.run_cycle is not None
+    runner.cancel()
+    step = runner.on_cycle(CycleAnswer(problem="cycle failed: cancelled: its goal was cancelled"))
+    assert step.finished.cancelled and not step.finished.ok
+    assert step.finished.message == "cancelled during orientation 0 (0.0°)"
+    assert runner.last_failure == ""

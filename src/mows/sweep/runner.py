@@ -322,8 +322,10 @@ class SweepRunner:
         if self.state != SweepState.SWEEPING:
             return SweepStep()
         if answer.problem:
-            theta0 = self._angles[self._index]
-            return self.abandon(f"orientation {self._index} ({math.degrees(theta0):.1f}°): {answer.problem}")
+            where = f"orientation {self._index} ({math.degrees(self._angles[self._index]):.1f}°)"
+            if self._cancelled:  # the cycle stopped because the sweep was cancelled: no failure
+                return self._end(SweepStep(), SweepOutcome(False, f"cancelled during {where}", cancelled=True))
+            return self.abandon(f"{where}: {answer.problem}")
         self._awaited = answer
         return self._collected() or SweepStep()
 

@@ -187,6 +187,7 @@ class CycleOutcome:
     ringdowns_recorded: int
     tuning_fits: tuple = ()
     refused_probes: tuple[tuple[int, str], ...] = ()  # (probe id, reason) not excited (several probes)
+    cancelled: bool = False  # ended because nobody wanted it any more (a client's cancel, a deactivate): no fault
 
 
 @dataclasses.dataclass

@@ -130,6 +130,7 @@ class CycleSequencer:
         self._unstamped: list[tuple[Phase, str]] = []  # events raised before the first sample
         self._last_cycle_id = last_cycle_id  # ids go on from another sequencer's (the driver reconfigured)
         self._last_command_id = 0
+        self._recorded = 0  # the running cycle's measurement ring-downs recorded whole so far
         self._coils_stopped_at: int | None = None  # our next sample when coils were last switched off now
         self._step = CycleStep()
         self._announce(Phase.IDLE, "driver started")
@@ -194,7 +195,7 @@ class CycleSequencer:
         """End the running cycle because nobody wants it any more (coils off at once): it
         fails with ``reason``, and the sequencer is IDLE, not in FAULT."""
         if self.busy:
-            self._stop(f"cancelled: {reason}")
+            self._stop(f"cancelled: {reason}", cancelled=True)
             self._announce(Phase.IDLE, f"cancelled: {reason}")
         return self._take_step()
 
@@ -259,7 +260,7 @@ class CycleSequencer:
         coils_free = yield from self._turn_and_settle(c)
         plan = self._tone_plan(c.theta0_rad, c.settings) if self.probes else None
         fits: list[TuningResult] = []
-        rung = recorded = 0
+        rung = self._recorded = 0
         for k in range(c.tuning_steps + c.repeats):
             tuning = k < c.tuning_steps
             index = k if tuning else k - c.tuning_steps
@@ -273,11 +274,11 @@ class CycleSequencer:
                 if tuning:
                     fits.append(self._tune(c, recording))
                 else:
-                    recorded += 1
+                    self._recorded += 1
                 coils_free = recording.end
         self._groups = None
         yield from self._enter(c, Phase.IDLE, coils_free, 0)
-        return self._outcome(c, plan, recorded, fits)
+        return self._outcome(c, plan, self._recorded, fits)
 
     def _next_excitation(self, c: CyclePlan, not_before: int) -> Excitation:
         """The next group's excitation, at the first sample ≥ ``not_before`` that keeps the duty
@@ -459,7 +460,7 @@ class CycleSequencer:
         self.fault = reason
         self._announce(Phase.FAULT, reason, cycle)
 
-    def _stop(self, reason: str) -> None:
+    def _stop(self, reason: str, cancelled: bool = False) -> None:
         """Coils off now, every tone together; the running cycle (if any) fails with ``reason``.
         The groups not yet excited are dropped, and the time the coils were on counts towards the
         duty limit."""
@@ -474,7 +475,9 @@ class CycleSequencer:
             cycle = self._cycle
             assert cycle is not None  # set and cleared together with _runner (start, _end)
             self._runner.close()
-            self._end(CycleOutcome(False, reason, cycle.cycle_id, self.frequency_hz, 0))
+            self._end(
+                CycleOutcome(False, reason, cycle.cycle_id, self.frequency_hz, self._recorded, cancelled=cancelled)
+            )
 
     # --- events ----------------------------------------------------------------------------
     def _announce(self, phase: Phase, reason: str, cycle: CyclePlan | None = None) -> None:

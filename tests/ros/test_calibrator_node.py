@@ -159,12 +159,13 @@ def test_a_manual_stage_waits_for_the_operator_before_each_turn(ros, action_serv
         prompts = [f for f in feedback if f.message.startswith("turn the probe")]
         return len(prompts) > k and prompts[k]
 
-    for k in range(2 * len(CURRENTS)):  # 0° then 180° at each current
-        asked = ros.wait_for(lambda k=k: prompt(k), f"the prompt for cycle {k}")
-        assert asked.message == f"turn the probe to θ0 = {180 * (k % 2)}° and confirm"
-        assert driver.cycle == k  # the cycle waits for the operator
+    for k in range(2):  # every current at 0°, then every current at 180°: one turn each
+        asked = ros.wait_for(lambda k=k: prompt(k), f"the prompt for turn {k}")
+        assert asked.message == f"turn the probe to θ0 = {180 * k}° and confirm"
+        assert driver.cycle == k * len(CURRENTS)  # the cycle waits for the operator
         future = confirm.call_async(Trigger.Request())
         assert ros.wait_for(lambda f=future: f.done() and f.result(), "the confirmation").success
     done = ros.wait_for(lambda: result.done() and result.result(), "the calibration's result")
     assert done.result.success, done.result.message
     assert driver.cycle == 2 * len(CURRENTS) and done.result.supply_at_zero
+    assert len([f for f in feedback if f.message.startswith("turn the probe")]) == 2

@@ -412,7 +412,7 @@ def open_daqmx(device: DaqDevice, cap: CurrentCap, supply: ScpiSupply | None = N
     except daqmx.errors.DaqNotFoundError:
         raise DeviceUnavailable(
             "backend nidaqmx: NI-DAQmx (NI's driver runtime) is not installed on this machine: install it "
-            "from ni.com (on Linux: python -m nidaqmx installdriver)"
+            "from ni.com (Ubuntu, RHEL or openSUSE; not Debian: docs/hardware.md)"
         ) from None
     except daqmx.errors.DaqError as error:
         raise DeviceUnavailable(f"backend nidaqmx: card {device.device_name!r}: {_first_line(error)}") from None

@@ -70,8 +70,9 @@ def test_a_calibration_recovers_the_bench_probe_and_writes_its_file(ros, calibra
     driver = StandInDriver(ros)
     _, done, feedback = send_goal(ros, client, CalibrateProbe.Goal(currents_a=CURRENTS))
     assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.success, done.result.message
-    # The supply is set to zero on arrival (is there one?), then stepped, then back to zero.
-    assert driver.currents == [0.0] + CURRENTS + [0.0] and done.result.supply_at_zero
+    # The supply is set to zero on arrival (is there one?), then stepped up at 0° and down at
+    # 180° (no ramp at the turn), then back to zero.
+    assert driver.currents == [0.0] + CURRENTS + CURRENTS[-2::-1] + [0.0] and done.result.supply_at_zero
     assert feedback[-1].steps == 2 * len(CURRENTS) and feedback[-1].ringdowns == 2 * len(CURRENTS)
     probe = Probe.from_yaml(done.result.probe_file)
     assert done.result.probe_file == str(path)

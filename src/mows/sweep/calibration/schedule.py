@@ -1,17 +1,17 @@
 """The calibration procedure as a state machine (paper Fig. 3): supply steps × orientations × cycles.
 
-At every orientation of the plan (θ0 = 0° and 180° by default: the field term flips sign
-between them, offsets do not), for every supply current of the plan: ramp the supply there and
-wait until the device says it is, run one measurement cycle and collect its ring-down fits; then
-the next current. The orientation is the outer loop, so a stage turned by hand is turned once
-per orientation, not at every current, and the currents run up at one orientation and down at
-the next, so the supply never ramps back across its range between them. On a unipolar supply (0 … +cap, the paper's NGM202) the plan's currents are
-non-negative and the field's other sign comes from θ0 + 180° alone: the applied fields along
-the probe are the same −cap … +cap as the paper's plan gives, at half the cycles
-(:data:`UNIPOLAR_CURRENTS_A`); :meth:`CalibrationPlan.check_supply` refuses a plan the supply
-cannot give before anything is set. Every ending (done, cancelled, a refused command, a failed cycle) first
-ramps the supply back to zero, and only then reports the outcome, which says whether the
-device confirmed zero.
+At every orientation of the plan (θ0 = 0° and 180° by default: the field term flips sign between
+them, offsets do not), for every supply current of the plan: ramp the supply there and wait
+until the device says it is, run one measurement cycle and collect its ring-down fits; then the
+next current. The orientation is the outer loop, so a stage turned by hand is turned once per
+orientation, not at every current, and the currents run up at one orientation and down at the
+next, so the supply never ramps back across its range between them. On a unipolar supply (0 …
++cap, the paper's NGM202) the plan's currents are non-negative and the field's other sign comes
+from θ0 + 180° alone: the applied fields along the probe are the same −cap … +cap as the paper's
+plan gives, at half the cycles (:data:`UNIPOLAR_CURRENTS_A`);
+:meth:`CalibrationPlan.check_supply` refuses a plan the supply cannot give before anything is
+set. Every ending (done, cancelled, a refused command, a failed cycle) first ramps the supply
+back to zero, and only then reports the outcome, which says whether the device confirmed zero.
 
 The schedule does no I/O, like :class:`mows.device.cycle.sequencer.CycleSequencer`: it is fed the
 device's answers (:meth:`on_supply`, :meth:`on_fit`, :meth:`on_cycle_done`, :meth:`fits_timed_out`)

@@ -55,13 +55,14 @@ def run_until_end(schedule, step, fits_per_cycle=None, refuse=None):
     raise AssertionError("no outcome")
 
 
-def test_the_plan_is_walked_current_by_current_and_ends_at_zero():
+def test_the_plan_is_walked_orientation_by_orientation_and_ends_at_zero():
     schedule = CalibrationSchedule(PLAN)
     seen, outcome = run_until_end(schedule, schedule.start())
     supplies = [a.current_a for a in seen if isinstance(a, SetSupply)]
     cycles = [a for a in seen if isinstance(a, CycleRequest)]
-    assert supplies == [0.0, 1.0, -1.0, 0.0]
-    assert [c.theta0_rad for c in cycles] == [0.0, math.pi] * 3 and all(c.repeats == 2 for c in cycles)
+    # The currents up at 0°, down at 180° (no ramp at the turn), then back to zero.
+    assert supplies == [0.0, 1.0, -1.0, 1.0, 0.0, 0.0]
+    assert [c.theta0_rad for c in cycles] == [0.0] * 3 + [math.pi] * 3 and all(c.repeats == 2 for c in cycles)
     assert outcome.success and outcome.supply_at_zero and not outcome.cancelled
     assert len(outcome.points) == 10  # 12 ring-downs, 2 saturated at −1 A
     assert outcome.failed == {(-1.0, "SATURATED"): 2}
@@ -79,8 +80,17 @@ def test_feedback_counts_the_steps_and_the_ring_downs():
     schedule.on_fit(fit())
     schedule.on_fit(fit())
     step = schedule.on_cycle_done(True)
-    assert step.actions == [CycleRequest(math.pi, 2)]
+    assert step.actions == [SetSupply(1.0)]  # the next current at the same orientation
     assert step.feedback[0].step == 2 and step.feedback[0].ringdowns == 2
+    schedule.on_supply(True)
+    for current_a in (1.0, -1.0):
+        schedule.on_fit(fit())
+        schedule.on_fit(fit())
+        step = schedule.on_cycle_done(True)
+        if current_a == 1.0:
+            schedule.on_supply(True)
+    assert step.actions == [CycleRequest(math.pi, 2)]  # the turn, at the current already set
+    assert step.feedback[0].step == 4 and step.feedback[0].ringdowns == 6
 
 
 def test_cancel_mid_cycle_ramps_to_zero_before_it_reports_and_ignores_late_fits():

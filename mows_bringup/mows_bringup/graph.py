@@ -20,7 +20,9 @@ Exit status: 0 when the graph was stopped (by a signal or after --duration) and
 every node stopped cleanly; 2 when the ROS arguments are refused before any node starts (a
 parameter without a node's prefix, a prefix or a name no node has, a parameter file that
 is none; ROS's own parameters, such as ``use_sim_time``, may be given with or without a
-node's prefix); 1 when a node refused a transition, exited by itself or did not stop cleanly.
+node's prefix; a driver backend that cannot turn the stage, nidaqmx, without
+``-p mapper:orientation:=manual -p calibrator:orientation:=manual``); 1 when a node refused a
+transition, exited by itself or did not stop cleanly.
 """
 
 import argparse
@@ -38,10 +40,18 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import yaml
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
 from mows_bringup.lifecycle import BringUpError, bring_up
-from mows_ros.params import ROS_OWN, nearest_hint, renamed_to, ros_argument_values, unknown_name_hint
+from mows_ros.params import (
+    ROS_OWN,
+    nearest_hint,
+    prefixed_overrides,
+    renamed_to,
+    ros_argument_values,
+    unknown_name_hint,
+)
 from mows_ros.process import EXIT_BAD_PARAMETER, arguments_problem
 
 STOP_TIMEOUT_S = 10.0  # a node still running this long after SIGINT is aborted
@@ -134,6 +144,44 @@ def ros_arguments_problem(ros_args: list[str]) -> str | None:
         return problem
     rules = ros_argument_values(argv, ("-p", "--param"))
     return next((problem for rule in rules if (problem := parameter_rule_problem(rule)) is not None), None)
+
+
+# Backends that cannot turn the stage: every orientation is the operator's turn, so the nodes
+# whose goals turn the probe must ask for it (orientation manual), or each "angle" would be
+# measured at the one angle the probe happens to stand at.
+STAGELESS_BACKENDS = ("nidaqmx",)
+TURNING_NODES = ("mapper", "calibrator")
+
+
+def start_value(node: str, name: str, ros_args: list[str]):
+    """The value ``node`` starts with for parameter ``name``: its parameter file's, then any
+    ``--params-file``'s, then ``-p NODE:name:=value`` (the order rcl applies them in)."""
+    argv = ["mows-graph", "--ros-args", *ros_args]
+    graph_node = next(n for n in NODES if n.name == node)
+    value = None
+    for path in [graph_node.config_path(), *ros_argument_values(argv, ("--params-file",))]:
+        for key, section in (yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}).items():
+            if key.rsplit("/", 1)[-1] in (node, "**") and isinstance(section, dict):
+                value = (section.get("ros__parameters") or {}).get(name, value)
+    override = prefixed_overrides(node, argv, [n.name for n in NODES]).get(name)
+    return override.value if override is not None else value
+
+
+def stage_problem(ros_args: list[str]) -> str | None:
+    """Why the graph is refused: a driver backend that cannot turn the stage with a node that
+    would turn it (orientation stage); None when every turn is the operator's or the driver's."""
+    backend = start_value("driver", "backend", ros_args)
+    if backend not in STAGELESS_BACKENDS:
+        return None
+    turning = [node for node in TURNING_NODES if start_value(node, "orientation", ros_args) != "manual"]
+    if not turning:
+        return None
+    give = " ".join(f"-p {node}:orientation:=manual" for node in turning)
+    return (
+        f"driver backend {backend!r} cannot turn the stage, but the {' and the '.join(turning)} would "
+        f"(orientation stage): every orientation would be measured where the probe stands. Give {give}: "
+        "each turn is then asked for here and confirmed"
+    )
 
 
 def say(text: str) -> None:
@@ -359,7 +407,7 @@ def parse_arguments(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
 
 def main(argv: list[str] | None = None) -> int:
     args, ros_args = parse_arguments(sys.argv[1:] if argv is None else argv)
-    if (problem := ros_arguments_problem(ros_args)) is not None:
+    if (problem := ros_arguments_problem(ros_args) or stage_problem(ros_args)) is not None:
         sys.stderr.write(f"mows-graph: error: {problem}\n")
         return EXIT_BAD_PARAMETER
     foxglove = args.foxglove is not None

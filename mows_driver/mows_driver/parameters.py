@@ -275,10 +275,7 @@ def bench_backend(values: dict, cap: CurrentCap):
         if not values["supply_resource"]:
             raise ValueError("supply_resource='' : supply scpi needs the supply's VISA address")
         config = load_supply_file(values["supply_file"] or PAPER_SUPPLY_FILE)
-        config = dataclasses.replace(
-            config,
-            limits=dataclasses.replace(config.limits, cap_a=min(config.limits.cap_a, values["supply_current_cap_a"])),
-        )
+        config = dataclasses.replace(config, cap_a=min(config.cap_a, values["supply_current_cap_a"]))  # its limits too
         supply = open_scpi_supply(values["supply_resource"], config, values["visa_library"])
     try:
         return open_daqmx(device, cap, supply)

@@ -25,6 +25,7 @@ from nidaqmx.errors import DaqError
 from mows.device.backends import daqmx_backend
 from mows.device.backends.daqmx_backend import DeviceUnavailable, open_daqmx
 from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
+from mows.device.instruments import scpi
 from mows.device.instruments.daq import CoilWaveforms, load_daq_device
 from mows.device.instruments.scpi import (
     SIMULATED_RESOURCE,
@@ -378,17 +379,111 @@ def test_after_a_card_fault_the_supply_is_at_zero_and_off(on_bench):
 
 
 # --- the SCPI supply against pyvisa-sim -----------------------------------------------------------
-def test_the_supply_is_set_read_back_and_switched():
+def instrument_setting(supply, name):
+    return supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties[name].get_value()
+
+
+class Sent:
+    """What a supply's resource was sent, in order; ``refuse`` makes the writes of one command fail."""
+
+    def __init__(self, supply, refuse=()):
+        self.commands: list[str] = []
+        self._write = supply.resource.write
+        self.refuse = refuse
+        supply.resource.write = self.write
+
+    def write(self, command):
+        if not command.endswith("?"):  # a query is written too
+            self.commands.append(command)
+        if command in self.refuse:
+            raise OSError("VI_ERROR_TMO (-1073807339): Timeout expired before operation completed.")
+        return self._write(command)
+
+
+def test_the_supply_is_set_read_back_after_it_settles_and_switched():
     supply = simulated_supply()
+    config = supply.config
     assert supply.identity.startswith("Rohde&Schwarz,NGM202")
     assert supply_state(supply) == (0.0, 1)  # prepared: zero current, output on
     supply.set_current_a(0.12345)
-    assert supply.read_current_a() == pytest.approx(0.1234)  # rounded to the 0.1 mA resolution, not clipped
+    assert instrument_setting(supply, "current") == 0.1234  # rounded to the 0.1 mA resolution, not clipped
+    # At once the pair has not settled: a read-back compared now is a false alarm.
+    assert abs(supply.read_current_a() - 0.1234) > config.readback_tolerance_a(0.1234)
+    time.sleep(config.settle_s)
+    assert supply.read_current_a() == pytest.approx(0.1234, abs=config.readback_tolerance_a(0.1234))
+    readings = [supply.read_current_a() for _ in range(20)]
+    assert np.std(readings) > 0.0  # a read-back is a measurement, not the setting echoed
     with pytest.raises(ValueError, match="exceeds the cap of 2 A"):
         supply.set_current_a(2.5)
     assert supply_state(supply)[0] == pytest.approx(0.1234)
     supply.close()
     assert supply_state(supply) == (0.0, 0)
+    time.sleep(config.settle_s)
+    assert supply.resource.visalib.instruments[SIMULATED_RESOURCE].delivered_a() == pytest.approx(0.0, abs=1e-5)
+
+
+def test_the_supply_is_cleared_identified_and_protected_before_its_output_goes_on():
+    supply = simulated_supply()
+    supply.close()
+    supply.resource.open()
+    supply.resource.write("FOO")  # an old error in the queue: cleared at open, not blamed on the first command
+    sent = Sent(supply)
+    supply.prepare()
+    assert sent.commands[0] == "*CLS"
+    on = sent.commands.index("OUTP 1")
+    protections = ["CURR:ALIM 2.0000", "VOLT:ALIM 10.000", "ALIM 1", "VOLT:PROT:LEV 12.000", "VOLT:PROT 1"]
+    assert all(sent.commands.index(c) < on for c in [*protections, "CURR 0.0000", "VOLT 10.000"])
+    assert sent.commands[on + 1 :] == ["OUTP:GEN 1"]  # the master output, which this model has
+    assert instrument_setting(supply, "safety_limits") == 1 and instrument_setting(supply, "general") == 1
+    assert instrument_setting(supply, "current_safety_limit") == 2.0
+    assert instrument_setting(supply, "over_voltage_level") == 12.0
+    assert instrument_setting(supply, "over_voltage_protection") == 1
+    supply.close()
+
+
+def test_a_model_without_a_master_output_is_not_sent_one(tmp_path):
+    path = tmp_path / "supply.yaml"
+    path.write_text(load_supply_file.__defaults__[0].read_text().replace('"OUTP:GEN {:d}"', '""'))
+    supply = open_scpi_supply(SIMULATED_RESOURCE, load_supply_file(path), f"{SIMULATED_SUPPLY_FILE}@sim")
+    sent = Sent(supply)
+    supply.prepare()
+    assert not [c for c in sent.commands if c.startswith("OUTP:GEN")]
+    supply.close()
+
+
+def test_another_model_at_the_address_is_refused_with_its_name_and_sent_nothing(tmp_path):
+    path = tmp_path / "other.yaml"
+    path.write_text(SIMULATED_SUPPLY_FILE.read_text().replace("Rohde&Schwarz,NGM202,", "Rohde&Schwarz,NGL202,"))
+    with pytest.raises(SupplyError) as refused:
+        open_scpi_supply(SIMULATED_RESOURCE, load_supply_file(), f"{path}@sim")
+    assert "model 'NGL202', not the supply file's 'NGM202'" in str(refused.value)
+    import pyvisa
+
+    device = pyvisa.ResourceManager(scpi._library(f"{path}@sim")).visalib.devices[SIMULATED_RESOURCE]
+    assert device._properties["output"].get_value() == 0 and device._properties["safety_limits"].get_value() == 0
+
+
+def test_every_entry_of_the_error_queue_is_read_and_reported():
+    supply = simulated_supply()
+    supply.set_current_a(0.5)
+    for bad in ("CURR 7.0000", "FOO", "VOLT 99.000"):  # three errors queued behind the supply's back
+        supply.resource.write(bad)
+    with pytest.raises(SupplyError) as refused:
+        supply.set_current_a(0.25)
+    assert str(refused.value) == "ngm202: 'CURR 0.2500' refused: " + "; ".join(['-100,"Command error"'] * 3)
+    supply.set_current_a(0.25)  # the queue was drained: the next command is judged on its own
+    assert supply_state(supply) == (0.25, 1)
+    supply.close()
+
+
+def test_close_zeroes_and_switches_off_each_whatever_the_other_did_then_returns_to_local():
+    supply = simulated_supply()
+    supply.set_current_a(0.5)
+    sent = Sent(supply, refuse={"CURR 0.0000"})
+    with pytest.raises(SupplyError, match=r"'CURR 0.0000': VI_ERROR_TMO"):
+        supply.close()
+    assert sent.commands == ["CURR 0.0000", "OUTP 0", "SYST:LOC"]
+    assert supply_state(supply) == (0.5, 0)  # the current could not be zeroed: the output is off
 
 
 def test_the_ngm202_is_unipolar_and_a_negative_current_is_never_sent():
@@ -429,7 +524,8 @@ def test_another_supply_is_a_file(tmp_path):
         SIMULATED_RESOURCE, load_supply_file(tmp_path / "supply.yaml"), f"{tmp_path / 'sim.yaml'}@sim"
     )
     supply.set_current_a(1.5)
-    assert supply.read_current_a() == 1.5
+    time.sleep(supply.config.settle_s)
+    assert supply.read_current_a() == pytest.approx(1.5, abs=supply.config.readback_tolerance_a(1.5))
     supply.close()
 
 
@@ -457,8 +553,10 @@ def test_the_backend_ramps_the_supply_and_zeroes_it_on_close(on_bench):
     while backend.supply_schedule.ramping:
         backend.poll(0.0)
         seen.append(bench.device.field_current_a)
-    backend.poll(0.0)
-    assert backend.supply_readback_a == 0.5 and bench.device.field_current_a == 0.5
+    assert math.isnan(backend.supply_readback_a)  # not at once: the pair is still settling
+    poll_for(backend, supply.config.settle_s + 0.1)  # read back once the last step has settled
+    tolerance = supply.config.readback_tolerance_a(0.5)
+    assert backend.supply_readback_a == pytest.approx(0.5, abs=tolerance) and bench.device.field_current_a == 0.5
     # The steps are written as the blocks come: the current changes by at most the slew limit over
     # a block and a step (the average rate is the limit; no step is skipped).
     assert np.max(np.diff(seen)) <= 2.0 * (0.025 + 0.01) + 1e-9 and len(set(seen)) > 5
@@ -485,7 +583,7 @@ def test_a_host_that_stops_reading_has_the_coils_and_the_supply_switched_off(on_
         backend.poll(0.0)
     assert supply_state(supply)[0] == pytest.approx(0.3)
     deadline = time.monotonic() + 30.0  # a bound for a watchdog that never trips, not a timing
-    while supply_state(supply)[0] != 0.0 and time.monotonic() < deadline:
+    while supply_state(supply) != (0.0, 0) and time.monotonic() < deadline:
         time.sleep(0.05)  # the host is silent: no poll
     assert supply_state(supply)[0] == 0.0 and not ao.running
     assert supply_state(supply) == (0.0, 0) and not card.tasks  # the output off, the tasks closed

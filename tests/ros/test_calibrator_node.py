@@ -70,8 +70,9 @@ def test_a_calibration_recovers_the_bench_probe_and_writes_its_file(ros, calibra
     driver = StandInDriver(ros)
     _, done, feedback = send_goal(ros, client, CalibrateProbe.Goal(currents_a=CURRENTS))
     assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.success, done.result.message
-    # The supply is set to zero on arrival (is there one?), then stepped, then back to zero.
-    assert driver.currents == [0.0] + CURRENTS + [0.0] and done.result.supply_at_zero
+    # The supply is set to zero on arrival (is there one?), then stepped up at 0° and down at
+    # 180° (no ramp at the turn), then back to zero.
+    assert driver.currents == [0.0] + CURRENTS + CURRENTS[-2::-1] + [0.0] and done.result.supply_at_zero
     assert feedback[-1].steps == 2 * len(CURRENTS) and feedback[-1].ringdowns == 2 * len(CURRENTS)
     probe = Probe.from_yaml(done.result.probe_file)
     assert done.result.probe_file == str(path)
@@ -159,12 +160,13 @@ def test_a_manual_stage_waits_for_the_operator_before_each_turn(ros, action_serv
         prompts = [f for f in feedback if f.message.startswith("turn the probe")]
         return len(prompts) > k and prompts[k]
 
-    for k in range(2 * len(CURRENTS)):  # 0° then 180° at each current
-        asked = ros.wait_for(lambda k=k: prompt(k), f"the prompt for cycle {k}")
-        assert asked.message == f"turn the probe to θ0 = {180 * (k % 2)}° and confirm"
-        assert driver.cycle == k  # the cycle waits for the operator
+    for k in range(2):  # every current at 0°, then every current at 180°: one turn each
+        asked = ros.wait_for(lambda k=k: prompt(k), f"the prompt for turn {k}")
+        assert asked.message == f"turn the probe to θ0 = {180 * k}° and confirm"
+        assert driver.cycle == k * len(CURRENTS)  # the cycle waits for the operator
         future = confirm.call_async(Trigger.Request())
         assert ros.wait_for(lambda f=future: f.done() and f.result(), "the confirmation").success
     done = ros.wait_for(lambda: result.done() and result.result(), "the calibration's result")
     assert done.result.success, done.result.message
     assert driver.cycle == 2 * len(CURRENTS) and done.result.supply_at_zero
+    assert len([f for f in feedback if f.message.startswith("turn the probe")]) == 2

@@ -455,3 +455,30 @@ def test_the_supply_ramps_on_request_is_capped_and_the_emergency_stop_zeroes_it(
     stop = listen.result(listen.call(listen.estop, EmergencyStop.Request(engage=True, reason="test")))
     assert stop.success
     listen.ros.wait_for(lambda: listen.diagnostics.get("supply_current_a") == "0.0", "the supply back at zero")
+
+
+def test_the_bench_backend_opens_the_scpi_supply_under_the_driver_s_lower_cap():
+    """``supply_current_cap_a`` below the supply file's cap: the supply's limits (and the
+    instrument's own safety limit) are the lower cap; closing leaves it at zero, output off."""
+    from mows.device.instruments.scpi import SIMULATED_RESOURCE, SIMULATED_SUPPLY_FILE
+    from mows.device.simulated.daqmx_card import SimulatedCard
+    from mows.physics.coils import CurrentCap
+    from mows_driver.parameters import bench_backend
+
+    values = {
+        "supply": "scpi",
+        "daq_device_file": "",
+        "supply_file": "",
+        "supply_resource": SIMULATED_RESOURCE,
+        "visa_library": f"{SIMULATED_SUPPLY_FILE}@sim",
+        "supply_current_cap_a": 1.0,
+    }
+    with SimulatedCard(SimulatedDevice(load_scenario("calibration"))).installed():
+        backend = bench_backend(values, CurrentCap(10.0))
+        try:
+            assert backend.supply_limits.cap_a == 1.0
+            properties = backend.supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties
+            assert properties["current_safety_limit"].get_value() == 1.0
+        finally:
+            backend.close()
+    assert (properties["current"].get_value(), properties["output"].get_value()) == (0.0, 0)

@@ -189,8 +189,26 @@ def test_node_arguments_it_cannot_take_end_it_in_one_line(graph_node, arguments,
         ),
         (["mows-graph", "--ros-args", "-p", "calibrator:probe_file:=p.yaml"], "renamed probe_output_file"),
         (["mows-demo", "--scenario", "nosuch"], "--scenario nosuch: scenario 'nosuch' is neither"),
+        (
+            ["mows-graph", "--ros-args", "-p", "driver:backend:=nidaqmx"],
+            "driver backend 'nidaqmx' cannot turn the stage, but the mapper and the calibrator would (orientation "
+            "stage): every orientation would be measured where the probe stands. Give -p mapper:orientation:=manual "
+            "-p calibrator:orientation:=manual",
+        ),
+        (
+            ["mows-graph", "--ros-args", "-p", "driver:backend:=nidaqmx", "-p", "mapper:orientation:=manual"],
+            "cannot turn the stage, but the calibrator would (orientation stage)",
+        ),
     ],
-    ids=["graph-unprefixed", "graph-misspelt", "graph-renamed", "graph-renamed-prefixed", "demo-scenario"],
+    ids=[
+        "graph-unprefixed",
+        "graph-misspelt",
+        "graph-renamed",
+        "graph-renamed-prefixed",
+        "demo-scenario",
+        "graph-stage-on-nidaqmx",
+        "graph-calibrator-stage-on-nidaqmx",
+    ],
 )
 def test_the_graph_s_commands_refuse_bad_arguments_in_one_line_before_starting_a_node(command, reason):
     line = one_line_refusal(subprocess.run(command, capture_output=True, text=True, timeout=120))
@@ -250,3 +268,15 @@ def test_a_renamed_parameter_is_refused_wherever_it_is_set_with_its_new_name(
     graph_node = next(n for n in NODES if n.name == node_name)
     line = one_line_refusal(subprocess.run(graph_node.command(arguments), capture_output=True, text=True, timeout=120))
     assert f"unknown parameter '{old}': renamed {new}" in line and f"set {new}" in line, line
+
+
+def test_the_graph_takes_a_stage_the_nodes_can_turn_or_the_operator_turns(tmp_path):
+    from mows_bringup.graph import stage_problem
+
+    manual = ["-p", "mapper:orientation:=manual", "-p", "calibrator:orientation:=manual"]
+    assert stage_problem(["-p", "driver:backend:=nidaqmx", *manual]) is None
+    assert stage_problem([]) is None  # the sim backend turns its simulated stage
+    params = tmp_path / "bench.yaml"  # the same from a parameter file as from -p
+    params.write_text("/**/driver:\n  ros__parameters:\n    backend: nidaqmx\n")
+    assert "the mapper and the calibrator would" in stage_problem(["--params-file", str(params)])
+    assert stage_problem(["--params-file", str(params), *manual]) is None

@@ -84,7 +84,8 @@ def test_a_calibration_recovers_the_bench_probe(fits_first):
     run = calibrator.accept(goal_plan(goal(currents), BENCH.supply.name, ()))
     outcome = run_through(run, driver, fits_first)
     assert outcome.success and outcome.supply_at_zero, outcome.message
-    assert driver.currents == [*currents, 0.0]
+    # Up at the first orientation, down at the second (no ramp at the turn), then zero.
+    assert driver.currents == [*currents, *reversed(currents[:-1]), 0.0]
     assert len(outcome.points) == 2 * len(currents) and not outcome.failed
     calibrator.keep(outcome)
     # The nominal probe gives only what a calibration takes as known: the moment, the magnet's
@@ -142,7 +143,7 @@ def test_one_goal_at_a_time_and_no_constants_without_a_homogeneous_sweep():
     assert calibrator.accept(CalibrationPlan()) is calibrator.run
 
 
-def test_a_manual_stage_is_turned_before_each_change_of_orientation():
+def test_a_manual_stage_is_turned_once_per_orientation():
     plan = CalibrationPlan((0.0, 1.0), (0.0, math.pi), 1)
     run = CalibrationRun(plan, manual_orientation=True)
     driver, turns, prompts = StandInDriver(), [], []
@@ -163,9 +164,9 @@ def test_a_manual_stage_is_turned_before_each_change_of_orientation():
             assert [run.on_fit(answer.cycle_id, fit) for fit in fits] == [None]
             step = run.on_cycle(answer)
     assert step.outcome.success and len(step.outcome.points) == plan.steps
-    # At each current 0° then 180°: every cycle is at another orientation than the one before.
-    assert turns == [0.0, math.pi, 0.0, math.pi]
-    assert prompts == ["turn the probe to θ0 = 0° and confirm", "turn the probe to θ0 = 180° and confirm"] * 2
+    # Every current at 0°, then every current at 180°: one turn per orientation.
+    assert turns == [0.0, math.pi]
+    assert prompts == ["turn the probe to θ0 = 0° and confirm", "turn the probe to θ0 = 180° and confirm"]
 
 
 def test_a_cancel_while_the_operator_turns_ramps_the_supply_down():

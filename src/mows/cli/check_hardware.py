@@ -78,7 +78,7 @@ def _check(args, device, config, supply: ScpiSupply | None) -> int:
             args.coil_current_a,
             args.frequency_hz,
             supply_step_a=args.supply_step_a,
-            supply_resolution_a=config.limits.resolution_a,
+            supply_config=config,
             names=tuple(f"fluxgate {k + 1} ({i.physical_channel})" for k, i in enumerate(device.inputs)),
         )
         lines = check.run(supply=supply is not None)
@@ -95,7 +95,7 @@ def simulated_card(device, supply):
     from mows.sim.scenario import load_scenario
     from mows.sim.simulator import SimulatedDevice
 
-    properties = supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties
+    instrument = supply.resource.visalib.instruments[SIMULATED_RESOURCE]
     return SimulatedCard(
         SimulatedDevice(
             load_scenario(SIMULATED_SCENARIO).replace(supply=load_scenario(SIMULATED_SUPPLY_SCENARIO).supply)
@@ -104,5 +104,5 @@ def simulated_card(device, supply):
         tuple(o.physical_channel for o in device.outputs),
         device.amplifier_v_per_a,
         device.inputs[0].sensitivity_v_per_t,
-        supply_current_a=lambda: properties["current"].get_value() * properties["output"].get_value(),
+        supply_current_a=instrument.delivered_a,
     )

@@ -113,7 +113,8 @@ class DaqmxBackend(Backend):
         self.fault = ""  # why the card is down, while it is
         self.card_faults = 0
         self.last_card_fault = ""
-        self.supply_readback_a = math.nan
+        self.supply_readback_a = math.nan  # read settle_s after a ramp's last step
+        self._readback_index: int | None = None  # the sample it is read at, while one is due
         self._supply_a = 0.0  # the last current the supply accepted
         self._supply_off = False  # switched off by a fault: prepared again before its next step
         self._results: list[CommandResult] = []
@@ -250,7 +251,8 @@ class DaqmxBackend(Backend):
         return [block, *self._supply_steps()]
 
     def _supply_steps(self) -> list:
-        """Write the supply's steps whose sample has come; read the current back after a ramp's last."""
+        """Write the supply's steps whose sample has come; read the current back ``settle_s`` after
+        a ramp's last (a read-back at once sees the pair still settling)."""
         if self.supply is None or self.supply_schedule is None:
             return []
         due = self.supply_schedule.due(self.next_index)
@@ -261,7 +263,10 @@ class DaqmxBackend(Backend):
             for current_a in due:
                 self.supply.set_current_a(current_a)
                 self._supply_a = current_a
-            if due and not self.supply_schedule.ramping:
+            if due and not self.supply_schedule.ramping:  # read back once the last step has settled
+                self._readback_index = self.next_index + round(self.supply.config.settle_s * self.device.sample_rate_hz)
+            if self._readback_index is not None and self.next_index >= self._readback_index:
+                self._readback_index = None
                 self.supply_readback_a = self.supply.read_current_a()
         except SupplyError as error:
             self._fault(f"the supply failed: {error}")
@@ -293,12 +298,9 @@ class DaqmxBackend(Backend):
                 time.sleep(RAMP_STEP_S)
         except SupplyError as error:
             problems.append(f"THE SUPPLY DID NOT RAMP TO ZERO: {error}")
-        try:
-            self.supply.set_current_a(0.0)
-            self.supply.output(False)
-            self._supply_a, self._supply_off = 0.0, True
-        except SupplyError as error:
-            problems.append(f"THE SUPPLY'S OUTPUT IS STILL ON: {error}")
+        refused = self.supply.safe()  # zero and off, each tried whatever the other did
+        self._supply_a, self._supply_off = 0.0, True
+        problems += [f"THE SUPPLY MAY STILL BE ON: {problem}" for problem in refused]
         return "".join(f"; {problem}" for problem in problems)
 
     def _rearm(self) -> None:
@@ -410,7 +412,7 @@ def open_daqmx(device: DaqDevice, cap: CurrentCap, supply: ScpiSupply | None = N
     except daqmx.errors.DaqNotFoundError:
         raise DeviceUnavailable(
             "backend nidaqmx: NI-DAQmx (NI's driver runtime) is not installed on this machine: install it "
-            "from ni.com (on Linux: python -m nidaqmx installdriver)"
+            "from ni.com (Ubuntu, RHEL or openSUSE; not Debian: docs/hardware.md)"
         ) from None
     except daqmx.errors.DaqError as error:
         raise DeviceUnavailable(f"backend nidaqmx: card {device.device_name!r}: {_first_line(error)}") from None

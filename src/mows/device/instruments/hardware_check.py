@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from mows.device.instruments.scpi import ScpiSupplyConfig, load_supply_file
 from mows.device.interface import CoilCommand, CommandResult, DeviceFault, FieldCurrentCommand, LinkEvent
 from mows.records.samples import SampleBlock
 
@@ -60,7 +61,9 @@ def lock_in_noise_t(noise_std_t: np.ndarray, n_samples: int) -> np.ndarray:
 
 
 class HardwareCheck:
-    """The checks on ``backend`` (a device that excites), with coils and supply at the given currents."""
+    """The checks on ``backend`` (a device that excites), with coils and supply at the given
+    currents; the supply's read-back judged by its file's stated accuracy after its settling time
+    (``supply_config``, the paper's NGM202 unless given)."""
 
     def __init__(
         self,
@@ -69,7 +72,7 @@ class HardwareCheck:
         frequency_hz=300.0,
         pulse_s=0.2,
         supply_step_a=0.1,
-        supply_resolution_a=1e-4,
+        supply_config: ScpiSupplyConfig | None = None,
         rest_s=1.0,
         names=(),
     ):
@@ -79,7 +82,7 @@ class HardwareCheck:
         self.frequency_hz = frequency_hz
         self.pulse_s = pulse_s
         self.supply_step_a = supply_step_a
-        self.supply_resolution_a = supply_resolution_a
+        self.supply_config = supply_config or load_supply_file()
         self.rest_s = rest_s
         self.names = names or tuple(f"fluxgate {k + 1}" for k in range(self.info.n_channels))
         self._ids = 0
@@ -147,20 +150,22 @@ class HardwareCheck:
         if not result.accepted:
             return CheckLine("field supply", False, f"refused: {result.reason}")
         self._read_span(self._next_index, result.applied_sample_index + 1)
-        stepped = self._read(0.5)
+        settled_s = self.supply_config.settle_s + 0.05  # the read-back is taken settle_s after the last step
+        stepped = self._read(max(0.5, settled_s))
         readback = self._readback_a()
         back = self._command(FieldCurrentCommand(0, 0, 0.0))
         self._read_span(self._next_index, back.applied_sample_index + 1)
-        self._read(0.05)  # the last step is written once the stream passes it
+        self._read(settled_s)
         at_zero = self._readback_a()
         change = stepped.mean(axis=0) - rest_mean_t
-        read_ok = (
-            abs(readback - self.supply_step_a) <= self.supply_resolution_a and abs(at_zero) <= self.supply_resolution_a
-        )
+        step_tolerance_a = self.supply_config.readback_tolerance_a(self.supply_step_a)
+        zero_tolerance_a = self.supply_config.readback_tolerance_a(0.0)
+        read_ok = abs(readback - self.supply_step_a) <= step_tolerance_a and abs(at_zero) <= zero_tolerance_a
         saw = (
-            f"set {self.supply_step_a:.4f} A, read back {readback:.4f} A; field change "
+            f"set {self.supply_step_a:.4f} A, read back {readback:.4f} A (± {1e3 * step_tolerance_a:.2g} mA); "
+            "field change "
             + ", ".join(f"{name} {1e9 * c:+.4g} nT" for name, c in zip(self.names, change))
-            + f"; set 0 A, read back {at_zero:.4f} A"
+            + f"; set 0 A, read back {at_zero:.4f} A (± {1e3 * zero_tolerance_a:.2g} mA)"
         )
         # Judged by the read-back only: a pair whose field at the fluxgates is across their axes
         # (the Pasco pair along the sensor line) is not seen there; the change is for the operator.

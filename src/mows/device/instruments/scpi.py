@@ -6,7 +6,14 @@ The paper's supply is a Rohde & Schwarz NGM202 (0.1 mA resolution, 2 A; Methods)
 command set (``hardware/rs_ngm202.yaml``): a unipolar source (0 … +cap), so a negative current
 is refused before it is sent. A supply is not on the card's sample clock: the
 backend writes each step of a ramp when the input stream reaches its sample, so a step lands
-within one input block of it, and reads the current back after the last one.
+within one input block of it, and reads the current back ``settle_s`` after the last one.
+
+The supply fails safe. At open its status is cleared, its ``*IDN?`` must name the file's model
+(another instrument at the address gets nothing more), its safety limits and over-voltage
+protection are set from the file's caps before its output is switched on. After every command its
+whole error queue is read and any entry refuses the command. On close the current is set to zero
+and the output switched off, each tried whatever the other did, and the instrument is returned
+to local control.
 """
 
 from __future__ import annotations
@@ -22,6 +29,9 @@ from mows.physics.supply import SupplyLimits
 PAPER_SUPPLY_FILE = HARDWARE_DIR / "rs_ngm202.yaml"
 SIMULATED_SUPPLY_FILE = HARDWARE_DIR / "ngm202_pyvisa_sim.yaml"  # the pyvisa-sim instrument
 SIMULATED_RESOURCE = "TCPIP0::192.168.0.20::inst0::INSTR"  # its address in that file
+
+
+MAX_ERRORS = 32  # entries read from the error queue after one command; more are said to be left
 
 
 class SupplyError(OSError):
@@ -40,22 +50,39 @@ class ScpiCommands:
     identify: str = "*IDN?"
     select_channel: str = "INST:NSEL {:d}"  # '' for a supply of one channel
     no_error: str = "0,"  # how the answer to query_error begins when there is none
+    clear_status: str = "*CLS"
+    # Each of the following is '' for a model without it.
+    master_output: str = "OUTP:GEN {:d}"  # the switch behind every channel's output
+    current_safety_limit: str = "CURR:ALIM {:.4f}"  # the instrument refuses a current above it
+    voltage_safety_limit: str = "VOLT:ALIM {:.3f}"
+    safety_limits: str = "ALIM {:d}"  # the two limits above switched on
+    over_voltage_level: str = "VOLT:PROT:LEV {:.3f}"
+    over_voltage_protection: str = "VOLT:PROT {:d}"
+    local: str = "SYST:LOC"  # the front panel back to the operator
 
 
 @dataclasses.dataclass(frozen=True)
 class ScpiSupplyConfig:
-    """The supply file (docs/hardware.md): its limits (cap, slew, resolution and polarity:
-    ``unipolar``, 0 … cap, unless the file says ``bipolar``), the channel the pair is on, the
-    voltage limit (the pair's resistance × the largest current, with margin) and its commands."""
+    """The supply file (docs/hardware.md): the model its ``*IDN?`` must name, its limits (cap,
+    slew, resolution and polarity: ``unipolar``, 0 … cap, unless the file says ``bipolar``), the
+    channel the pair is on, the voltage limit (the pair's resistance × the largest current, with
+    margin), the over-voltage protection's level above it, the read-back's stated accuracy
+    (± ``readback_accuracy_rel`` × I ± ``readback_accuracy_a``) and the time the current takes
+    to settle after a step (the pair's inductance), and its commands."""
 
     cap_a: float
     slew_a_per_s: float
     resolution_a: float
+    model: str  # the second field of *IDN? ("Rohde&Schwarz,NGM202,…")
     # A laboratory supply sources one sign; a file that does not say so is not trusted with the other.
     polarity: str = "unipolar"
     commands: ScpiCommands = ScpiCommands()
     channel: int = 1
     voltage_limit_v: float = 10.0
+    over_voltage_v: float = 12.0
+    readback_accuracy_a: float = 1.0e-3
+    readback_accuracy_rel: float = 5.0e-4
+    settle_s: float = 0.1
     write_termination: str = "\n"
     read_termination: str = "\n"
     timeout_s: float = 2.0
@@ -66,6 +93,22 @@ class ScpiSupplyConfig:
         object.__setattr__(
             self, "limits", SupplyLimits(self.cap_a, self.slew_a_per_s, self.resolution_a, self.polarity)
         )
+        if not self.model.strip():
+            raise ValueError("model = '' : the supply file names the model its *IDN? must report")
+        if not self.over_voltage_v > self.voltage_limit_v:
+            raise ValueError(
+                f"over_voltage_v = {self.over_voltage_v!r} must exceed voltage_limit_v = {self.voltage_limit_v!r} "
+                "(the protection would trip at the limit itself)"
+            )
+        for name in ("readback_accuracy_a", "readback_accuracy_rel", "settle_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} = {value!r} must be a finite number ≥ 0")
+
+    def readback_tolerance_a(self, current_a: float) -> float:
+        """How far a settled read-back of ``current_a`` may be from it: the stated accuracy plus
+        half the set resolution (what was sent is rounded to it)."""
+        return self.readback_accuracy_rel * abs(current_a) + self.readback_accuracy_a + 0.5 * self.resolution_a
 
 
 def load_supply_file(path=PAPER_SUPPLY_FILE) -> ScpiSupplyConfig:
@@ -119,25 +162,59 @@ class SupplySchedule:
 
 
 class ScpiSupply:
-    """The supply behind a PyVISA ``resource`` (anything with ``write`` and ``query``)."""
+    """The supply behind a PyVISA ``resource`` (anything with ``write``, ``query`` and ``close``)."""
 
     def __init__(self, resource, config: ScpiSupplyConfig):
         self.resource = resource
         self.config = config
         self.identity = ""
+        self.identified = False  # its *IDN? named the file's model: commands may be sent
         self.writes = 0
 
     def prepare(self) -> str:
-        """Identify the supply, select the channel, set the voltage limit and zero current, switch
-        the output on; its identity. SupplyError when it refuses any of it."""
+        """Clear its status, check its identity against the file's model, select the channel, set
+        zero current with the output off, the safety limits and the over-voltage protection from
+        the file's caps, then switch the output (and the master output) on; its identity.
+        SupplyError when it is another model or refuses any of it."""
         commands = self.config.commands
+        self._write(commands.clear_status)
         self.identity = self._query(commands.identify).strip()
+        self._check_model()
+        self.identified = True
         if commands.select_channel:
             self._write(commands.select_channel.format(self.config.channel))
-        self._write(commands.set_voltage.format(self.config.voltage_limit_v))
+        self.output(False)
         self.set_current_a(0.0)
+        self._write(commands.set_voltage.format(self.config.voltage_limit_v))
+        self._protect()
         self.output(True)
+        if commands.master_output:
+            self._write(commands.master_output.format(1))
         return self.identity
+
+    def _check_model(self) -> None:
+        fields = [field.strip() for field in self.identity.split(",")]
+        model = fields[1] if len(fields) > 1 else self.identity
+        if model.casefold() != self.config.model.strip().casefold():
+            raise SupplyError(
+                f"{self.config.name}: the instrument at this address is {self.identity!r}, model {model!r}, "
+                f"not the supply file's {self.config.model!r}: nothing else was sent to it"
+            )
+
+    def _protect(self) -> None:
+        """The instrument's own limits (the NGx's safety limits: a current above the cap is refused
+        by the instrument too) and its over-voltage protection, each where the model has it."""
+        commands, config = self.config.commands, self.config
+        settings = (
+            (commands.current_safety_limit, config.limits.cap_a),
+            (commands.voltage_safety_limit, config.voltage_limit_v),
+            (commands.safety_limits, 1),
+            (commands.over_voltage_level, config.over_voltage_v),
+            (commands.over_voltage_protection, 1),
+        )
+        for command, value in settings:
+            if command:
+                self._write(command.format(value))
 
     def set_current_a(self, current_a: float) -> None:
         """Set the current (checked against the cap and the polarity, and rounded; ValueError
@@ -159,20 +236,49 @@ class ScpiSupply:
     def output(self, on: bool) -> None:
         self._write(self.config.commands.output.format(int(on)))
 
+    def safe(self) -> list[str]:
+        """Current to zero and output off, each tried whatever the other did; what failed."""
+        problems = []
+        for step in (lambda: self.set_current_a(0.0), lambda: self.output(False)):
+            try:
+                step()
+            except SupplyError as error:
+                problems.append(str(error))
+        return problems
+
     def close(self) -> None:
-        """Current to zero at once (the caller has ramped it down), output off, link released."""
+        """Current to zero at once (the caller has ramped it down) and output off (:meth:`safe`),
+        the instrument back to local control, the link released; SupplyError naming every step
+        that failed, after all were tried."""
+        problems = self.safe()
         try:
-            self.set_current_a(0.0)
-            self.output(False)
+            if self.config.commands.local:
+                self._write(self.config.commands.local)
+        except SupplyError as error:
+            problems.append(str(error))
         finally:
             self.resource.close()
+        if problems:
+            raise SupplyError("; ".join(problems))
 
     def _write(self, command: str) -> None:
+        """Send ``command`` and read the whole error queue; SupplyError naming every entry."""
         self.writes += 1
         self._call(self.resource.write, command)
-        error = self._call(self.resource.query, self.config.commands.query_error).strip()
-        if not error.startswith(self.config.commands.no_error):
-            raise SupplyError(f"{self.config.name}: {command!r} refused: {error}")
+        errors = self._errors()
+        if errors:
+            raise SupplyError(f"{self.config.name}: {command!r} refused: {'; '.join(errors)}")
+
+    def _errors(self) -> list[str]:
+        """The error queue's entries, oldest first, until it answers that there is none."""
+        commands = self.config.commands
+        errors: list[str] = []
+        for _ in range(MAX_ERRORS):
+            entry = self._call(self.resource.query, commands.query_error).strip()
+            if entry.startswith(commands.no_error):
+                return errors
+            errors.append(entry)
+        return [*errors, f"more than {MAX_ERRORS} entries, the rest left in the queue"]
 
     def _query(self, command: str) -> str:
         return self._call(self.resource.query, command)
@@ -186,8 +292,10 @@ class ScpiSupply:
 
 def open_scpi_supply(resource_name: str, config: ScpiSupplyConfig, visa_library: str = "@py") -> ScpiSupply:
     """The supply at ``resource_name`` through PyVISA (``@py``: the pure-Python pyvisa-py; a path
-    to a pyvisa-sim file + ``@sim``: a simulated one), prepared (:meth:`ScpiSupply.prepare`).
-    SupplyError, one line, when PyVISA or the supply is missing."""
+    to a pyvisa-sim file + ``@sim``: a simulated one, :mod:`mows.device.simulated.visa_supply`),
+    prepared (:meth:`ScpiSupply.prepare`). SupplyError, one line, when PyVISA or the supply is
+    missing, is another model or refuses its preparation (then, if it is the file's model, at zero
+    current with its output off)."""
     try:
         pyvisa = importlib.import_module("pyvisa")
     except ImportError:
@@ -195,7 +303,7 @@ def open_scpi_supply(resource_name: str, config: ScpiSupplyConfig, visa_library:
             "supply scpi: the Python package pyvisa is not installed (pip install pyvisa pyvisa-py)"
         ) from None
     try:
-        manager = pyvisa.ResourceManager(visa_library)
+        manager = pyvisa.ResourceManager(_library(visa_library))
         resource = manager.open_resource(
             resource_name,
             write_termination=config.write_termination,
@@ -209,6 +317,18 @@ def open_scpi_supply(resource_name: str, config: ScpiSupplyConfig, visa_library:
     try:
         supply.prepare()
     except SupplyError:
+        if supply.identified:
+            supply.safe()
         resource.close()
         raise
     return supply
+
+
+def _library(visa_library: str):
+    """PyVISA's library for ``visa_library``; a pyvisa-sim file (``…@sim``) under the supply's
+    behaviour that pyvisa-sim cannot express (:class:`SimulatedSupplyLibrary`)."""
+    if not visa_library.endswith("@sim"):
+        return visa_library
+    from mows.device.simulated.visa_supply import SimulatedSupplyLibrary  # pyvisa-sim only when simulating
+
+    return SimulatedSupplyLibrary(visa_library.removesuffix("@sim") or "unset")

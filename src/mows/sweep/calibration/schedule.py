@@ -1,15 +1,17 @@
 """The calibration procedure as a state machine (paper Fig. 3): supply steps × orientations × cycles.
 
-For every supply current of the plan: ramp the supply there and wait until the device says it
-is; at every orientation of the plan (θ0 = 0° and 180° by default: the field term flips sign
-between them, offsets do not) run one measurement cycle and collect its ring-down fits; then
-the next current. On a unipolar supply (0 … +cap, the paper's NGM202) the plan's currents are
-non-negative and the field's other sign comes from θ0 + 180° alone: the applied fields along
-the probe are the same −cap … +cap as the paper's plan gives, at half the cycles
-(:data:`UNIPOLAR_CURRENTS_A`); :meth:`CalibrationPlan.check_supply` refuses a plan the supply
-cannot give before anything is set. Every ending (done, cancelled, a refused command, a failed cycle) first
-ramps the supply back to zero, and only then reports the outcome, which says whether the
-device confirmed zero.
+At every orientation of the plan (θ0 = 0° and 180° by default: the field term flips sign between
+them, offsets do not), for every supply current of the plan: ramp the supply there and wait
+until the device says it is, run one measurement cycle and collect its ring-down fits; then the
+next current. The orientation is the outer loop, so a stage turned by hand is turned once per
+orientation, not at every current, and the currents run up at one orientation and down at the
+next, so the supply never ramps back across its range between them. On a unipolar supply (0 …
++cap, the paper's NGM202) the plan's currents are non-negative and the field's other sign comes
+from θ0 + 180° alone: the applied fields along the probe are the same −cap … +cap as the paper's
+plan gives, at half the cycles (:data:`UNIPOLAR_CURRENTS_A`);
+:meth:`CalibrationPlan.check_supply` refuses a plan the supply cannot give before anything is
+set. Every ending (done, cancelled, a refused command, a failed cycle) first ramps the supply
+back to zero, and only then reports the outcome, which says whether the device confirmed zero.
 
 The schedule does no I/O, like :class:`mows.device.cycle.sequencer.CycleSequencer`: it is fed the
 device's answers (:meth:`on_supply`, :meth:`on_fit`, :meth:`on_cycle_done`, :meth:`fits_timed_out`)
@@ -132,7 +134,10 @@ class CalibrationSchedule:
     def __init__(self, plan: CalibrationPlan):
         self.plan = plan
         self.state = State.IDLE
-        self._step = 0  # index into current × orientation
+        self._step = 0  # index into _order
+        # (orientation, current) indices: orientations outermost, the currents up then down.
+        n = len(plan.currents_a)
+        self._order = [(k, i if k % 2 == 0 else n - 1 - i) for k in range(len(plan.theta0_rad)) for i in range(n)]
         self._fits_seen = 0
         self._points: list[CalibrationPoint] = []
         self._failed: dict = {}
@@ -140,11 +145,11 @@ class CalibrationSchedule:
 
     @property
     def current_a(self) -> float:
-        return self.plan.currents_a[min(self._step, self.plan.steps - 1) // len(self.plan.theta0_rad)]
+        return self.plan.currents_a[self._order[min(self._step, self.plan.steps - 1)][1]]
 
     @property
     def theta0_rad(self) -> float:
-        return self.plan.theta0_rad[min(self._step, self.plan.steps - 1) % len(self.plan.theta0_rad)]
+        return self.plan.theta0_rad[self._order[min(self._step, self.plan.steps - 1)][0]]
 
     @property
     def finished(self) -> bool:
@@ -225,7 +230,7 @@ class CalibrationSchedule:
                 f"{len(self._points)} ring-downs at {len(self.plan.currents_a)} supply "
                 f"currents and {len(self.plan.theta0_rad)} orientations",
             )
-        if self._step % len(self.plan.theta0_rad) == 0:
+        if self.current_a != self.plan.currents_a[self._order[self._step - 1][1]]:
             self.state = State.RAMPING
             return Step(
                 actions=[SetSupply(self.current_a)], feedback=[self._feedback(f"supply to {self.current_a:+.4f} A")]

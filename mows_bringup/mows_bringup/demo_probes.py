@@ -13,11 +13,12 @@ scene's own: each real probe is calibrated first, one at a time, as the single-p
 import csv
 import dataclasses
 import pathlib
+import time
 
 import numpy as np
 import yaml
 from mows_msgs.action import RotationSweep
-from mows_msgs.msg import FieldMap, MagnetometerBlock
+from mows_msgs.msg import FieldMap, MagnetometerBlock, RingdownFit
 from rclpy.action import ActionClient
 
 from mows.estimate.probe_set import MAX_PROBES
@@ -25,7 +26,7 @@ from mows.lab import swept_reference_at
 from mows.records.files import writing
 from mows.sim.scenario import load_scenario
 from mows_bringup.graph import say
-from mows_ros.qos import MAP_QOS, STREAM_QOS
+from mows_ros.qos import MAP_QOS, RESULT_QOS, STREAM_QOS
 
 MAP_FILE = "demo_field_map.csv"  # each probe's components against the truth
 PROBE_FILES = tuple(f"probe_{k}.yaml" for k in range(MAX_PROBES))
@@ -118,7 +119,11 @@ def run_sweep(node, spin_until, args, scenario: str, table: pathlib.Path, inputs
     """Sweep the shared stage through ``--angles`` orientations, print the field map against the
     truth and write it to ``table`` (CSV)."""
     maps: list[FieldMap] = []
-    node.create_subscription(FieldMap, "mows/field_map", maps.append, MAP_QOS)
+    heard: dict[str, float] = {}  # when the last fit and the map arrived (this host's monotonic clock)
+    node.create_subscription(
+        FieldMap, "mows/field_map", lambda m: (maps.append(m), heard.update(map=time.monotonic())), MAP_QOS
+    )
+    node.create_subscription(RingdownFit, "mows/ringdown", lambda f: heard.update(fit=time.monotonic()), RESULT_QOS)
     client = sweep_client(node, spin_until)
     angles = np.radians(np.arange(args.angles) * 360.0 / args.angles)
     count = len(load_scenario(scenario).probes)
@@ -133,6 +138,7 @@ def run_sweep(node, spin_until, args, scenario: str, table: pathlib.Path, inputs
         say(f"sweep failed: {outcome.message}")
         return False
     spin_until(lambda: maps, 30.0, "the field map")
+    say(f"the field map came {heard['map'] - heard['fit']:.1f} s after the last ring-down's fit")
     rows = against_truth(scenario, maps[-1])
     print_rows(scenario, maps[-1], rows)
     with writing([table], inputs, force=True) as outputs:

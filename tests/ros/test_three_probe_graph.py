@@ -16,6 +16,7 @@ lever instead, one run in three had probe 0's Gxx at 3.7σ, and a small common o
 (docs/multi_probe.md)."""
 
 import csv
+import re
 import subprocess
 import sys
 
@@ -61,9 +62,12 @@ def test_every_ring_down_fits(demo):
 
 
 def test_every_probe_is_decomposed(demo):
-    _, rows, _ = demo
+    stdout, rows, _ = demo
     assert sorted({int(row["probe_id"]) for row in rows}) == [0, 1, 2]
     assert len(rows) == 15
+    # How long the map took after the last fit is said (a figure, not a requirement here:
+    # mows bench latency reports it).
+    assert re.search(r"the field map came \d+\.\d s after the last ring-down's fit", stdout), stdout[-2000:]
 
 
 def test_each_probe_is_mapped_without_its_neighbours_fields(demo):

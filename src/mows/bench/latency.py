@@ -7,12 +7,17 @@ run here as a subprocess in the sourced workspace (``source install/setup.bash``
 burners and a 1 kHz JointState loop, with the gaps counted and the load as run reported, and
 the same stream without the load as the baseline. Under load the driver and the estimator run
 under SCHED_FIFO (``--realtime-priority``, as a robot computer would run them); the same loaded
-stream at the default priority is reported beside it (``default_priority``).
+stream at the default priority is reported beside it (``default_priority``). Both give
+``startup_s``, the processes' start to both active (numba's cache as ``make build`` leaves it).
+With ``three_probe_map`` the three-probe demo (``mows-demo --scenario three_probes``) runs too,
+for ``three_probe_map_s``: from the last ring-down's fit to the field map of the three probes.
 """
 
 import json
+import re
 import shutil
 import subprocess
+import tempfile
 
 # SCHED_FIFO priority of the ring-down path under load: above everything best-effort, below a
 # robot's own control loop (commonly 80–98 on a PREEMPT_RT computer).
@@ -27,6 +32,7 @@ def run(
     load_duration_s: float = 60.0,
     burner_nice: int = 0,
     realtime_priority: int = REALTIME_PRIORITY,
+    three_probe_map: bool = True,
 ) -> dict:
     """``mows-latency``'s figures; ``tracking``: of the driver's tracking mode (cycles × repeats
     ring-downs); ``load``: under load, with as ``baseline`` the same stream without the load, run
@@ -38,7 +44,8 @@ def run(
     if tool is None:
         return {"skipped": "mows-latency not on PATH: source install/setup.bash (make bench does)"}
     if not load:
-        return _measure(tool, repeats, ["--cycles", str(cycles), *(["--tracking"] if tracking else [])])
+        figures = _measure(tool, repeats, ["--cycles", str(cycles), *(["--tracking"] if tracking else [])])
+        return {**figures, **_three_probe_map()} if three_probe_map and not tracking else figures
     baseline = _measure(tool, repeats, ["--duration", str(load_duration_s)])
     loaded = ["--load", "--duration", str(load_duration_s), "--burner-nice", str(burner_nice)]
     figures = {
@@ -61,3 +68,29 @@ def _measure(tool: str, repeats: int, how: list[str]) -> dict:
     if done.returncode != 0 or not lines:
         return {"failed": (done.stderr or done.stdout)[-500:]}
     return json.loads(lines[-1])
+
+
+def _three_probe_map() -> dict:
+    """The three-probe demo's delay from the last fit to the field map, and its wall time."""
+    demo = shutil.which("mows-demo")
+    if demo is None:
+        return {"three_probe_map": "mows-demo not on PATH: source install/setup.bash (make bench does)"}
+    with tempfile.TemporaryDirectory() as out:
+        command = [
+            demo,
+            "--scenario",
+            "three_probes",
+            "--angles",
+            "8",
+            "--repeats",
+            "2",
+            "--gap-s",
+            "0.2",
+            "--out",
+            out,
+        ]
+        done = subprocess.run(command, capture_output=True, text=True, timeout=1800)
+    found = re.search(r"the field map came (\d+\.\d+) s after the last ring-down's fit", done.stdout)
+    if done.returncode != 0 or found is None:
+        return {"three_probe_map": f"failed: {(done.stderr or done.stdout)[-300:]}"}
+    return {"three_probe_map_s": float(found.group(1))}

@@ -63,7 +63,14 @@ QUICK: dict[str, dict[str, object]] = {
     # and the graph keeps the default policy (one loaded stream, not two). 20 s holds two or
     # more cycles of 5 ring-downs: beside a busy test worker a 10 s stream held one, and that
     # cycle fitted 3 of 5 (2 DATA_GAP), so one load spike could leave the run with no fit.
-    "latency": {"cycles": 1, "repeats": 5, "load_duration_s": 20.0, "burner_nice": 19, "realtime_priority": 0},
+    "latency": {
+        "cycles": 1,
+        "repeats": 5,
+        "load_duration_s": 20.0,
+        "burner_nice": 19,
+        "realtime_priority": 0,
+        "three_probe_map": False,  # a three-probe graph run of minutes: tests/ros/test_three_probe_graph.py runs it
+    },
     "latency_tracking": {"cycles": 2, "repeats": 5},
     "multiprobe": {"trials": 4, "separations_hz": (2.0, 10.0), "ratios": (1.0,)},
     # above the lab's subsample of mows.cli.lab.MAX_ROWS rows, so that the subsampling runs

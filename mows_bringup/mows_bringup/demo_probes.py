@@ -21,8 +21,8 @@ from mows_msgs.action import RotationSweep
 from mows_msgs.msg import FieldMap, MagnetometerBlock, RingdownFit
 from rclpy.action import ActionClient
 
-from mows.estimate.probe_set import MAX_PROBES
 from mows.lab import swept_reference_at
+from mows.physics.multitone import MAX_PROBES
 from mows.records.files import writing
 from mows.sim.scenario import load_scenario
 from mows_bringup.graph import say

@@ -4,11 +4,12 @@ one line naming it, and an empty text leaving the single-probe estimator as it i
 import numpy as np
 import pytest
 
-from mows.estimate.probe_set import MAX_PROBES, read_probe_set
+from mows.estimate.probe_set import read_probe_set
 from mows.estimate.ringdown import FitOptions
 from mows.estimate.segments import RingdownWindow, Segment
 from mows.estimate.stream import FitSettings, JointSettings, RingdownEstimator
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
+from mows.physics.multitone import MAX_PROBES
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
 from mows.physics.signal import signal_t

@@ -36,10 +36,10 @@ from mows.estimate.ringdown import FitOptions, ProbeLine
 from mows.estimate.segments import RingdownWindow
 from mows.physics.coupling import PlacedProbe
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics, pickup_scale_t
+from mows.physics.multitone import MAX_PROBES
 from mows.physics.pose import Pose
 from mows.physics.probe import Probe
 
-MAX_PROBES = 4
 MIN_SEPARATION_HZ = 1.0
 KEYS = ("f00_hz", "f00_std_hz", "probe_file", "position_m")
 

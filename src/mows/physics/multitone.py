@@ -47,6 +47,9 @@ from mows.physics.coils import CoilSetup
 from mows.physics.coupling import PlacedProbe
 from mows.physics.potential import arc_energy_j
 
+#: Probes that share one drive, one scene and one ring-down window, at most: their tones must
+#: fit between the fluxgates' band edges at the separations the joint fit resolves.
+MAX_PROBES = 4
 #: Default largest cross-talk ρ of equal torques between the tones of one drive.
 DEFAULT_MAX_CROSSTALK = 0.1
 #: The peak's grid margin h²/8·Σ|A|ω² is at most this fraction of Σ|A|.

@@ -58,8 +58,6 @@ from numba import njit
 
 from mows.physics.sources import MU0_OVER_4PI
 
-TWO_PI = 2.0 * math.pi
-
 # In a sample where |θ| + 2|θ'|·Δt + this margin reaches θstop the contact sub-steps are used.
 CONTACT_MARGIN_RAD = 1e-3
 

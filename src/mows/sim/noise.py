@@ -7,8 +7,6 @@ import math
 import numpy as np
 from scipy import signal as sp_signal
 
-TWO_PI = 2.0 * math.pi
-
 # 1/f noise: pole–zero pairs spaced 2 per decade from PINK_LOW_HZ up (NoiseStream).
 PINK_LOW_HZ = 0.01
 PINK_POLES_PER_DECADE = 2
@@ -33,7 +31,7 @@ class NoiseStream:
         self.model = model
         self.sample_rate_hz = float(sample_rate_hz)
         self.rng = rng
-        self._mains_phase = rng.uniform(0.0, TWO_PI)
+        self._mains_phase = rng.uniform(0.0, math.tau)
         self._sos, self._pink_gain = pink_filter(self.sample_rate_hz, model.common_pink_t_per_rthz_at_1hz)
         self._state = np.zeros((self._sos.shape[0], 2))
 
@@ -52,7 +50,7 @@ class NoiseStream:
         common = (
             m.common_white_t_per_rthz * white_scale * normals[:, 0]
             + self._pink_gain * pink
-            + m.mains_t * np.sin(TWO_PI * m.mains_hz * t + self._mains_phase)
+            + m.mains_t * np.sin(math.tau * m.mains_hz * t + self._mains_phase)
         )
         return common[:, None] + m.sensor_white_t_per_rthz * white_scale * normals[:, 2:]
 
@@ -64,7 +62,7 @@ def pink_filter(sample_rate_hz: float, asd_at_1hz_t_per_rthz: float):
     poles_hz = PINK_LOW_HZ * spacing ** np.arange(n_pairs)
     zeros_hz = poles_hz * math.sqrt(spacing)
     sos = sp_signal.zpk2sos(
-        np.exp(-TWO_PI * zeros_hz / sample_rate_hz), np.exp(-TWO_PI * poles_hz / sample_rate_hz), 1.0
+        np.exp(-math.tau * zeros_hz / sample_rate_hz), np.exp(-math.tau * poles_hz / sample_rate_hz), 1.0
     )
     _, response = sp_signal.sosfreqz(sos, worN=[1.0], fs=sample_rate_hz)
     # Unit white noise has one-sided PSD 2/fs; the gain makes the output's PSD asd² at 1 Hz.

@@ -18,10 +18,11 @@ import yaml
 
 from mows.physics.field import source_from_dict
 from mows.physics.fluxgate import FL1_RANGE_T, FL1_RESOLUTION_T, Fluxgate, FluxgatePair, NoiseModel
+from mows.physics.multitone import MAX_PROBES
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.schema import check_keys, vector3
-from mows.sim.sections import MAX_PROBES, Environment, Excitation, SceneProbe, Sensors, floats, number
+from mows.sim.sections import Environment, Excitation, SceneProbe, Sensors, floats, number
 
 SCENARIO_DIR = pathlib.Path(__file__).with_name("scenarios")
 BASE_SCENARIO = "base"  # what the shipped scenes share; not a scene of its own

@@ -20,7 +20,6 @@ from mows.physics.probe import PAPER_PROBE, Probe
 #: How a probe of a scene with several is turned: by a stage of its own, or by the one stage
 #: all "shared" probes sit on (each keeps its own θ0 on it, turned by the same angle).
 STAGES = ("own", "shared")
-MAX_PROBES = 4
 
 
 def number(section: str, key: str, value) -> float:

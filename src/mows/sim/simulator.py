@@ -59,7 +59,6 @@ from mows.sim.kernel import (
     P_SPRING_RATE,
     P_STOP,
     P_TWO_DELTA,
-    TWO_PI,
     accelerations,
     advance,
     contact_mode,
@@ -204,7 +203,8 @@ class SimulatedDevice:
             if not omega_dt < RK4_MAX_OMEGA_DT:
                 needed = math.ceil(omega / (RK4_MAX_OMEGA_DT * self.sample_rate_hz))
                 raise SimulationRefused(
-                    f"the field at the probe, |B| = {field_t:.4g} T, makes the lever ring at {omega / TWO_PI:.4g} Hz, "
+                    f"the field at the probe, |B| = {field_t:.4g} T, makes the lever ring at "
+                    f"{omega / math.tau:.4g} Hz, "
                     f"faster than integrator substeps = {substeps} at {self.sample_rate_hz:g} S/s resolve "
                     f"(ω·dt = {omega_dt:.3g}, must stay below {RK4_MAX_OMEGA_DT}): use a weaker field or "
                     f"integrator: substeps ≥ {needed}"
@@ -344,7 +344,7 @@ class SimulatedDevice:
         """Tones of coil amplitudes (K, n_coils) at ``frequencies_hz`` (K,) from this sample to ``off_index``."""
         self._hold_moment()
         self._tone_amplitudes_a = amplitudes_a
-        self._tone_omegas = TWO_PI * frequencies_hz
+        self._tone_omegas = math.tau * frequencies_hz
         self._drive_on_index, self._drive_off_index = self.sample_index, off_index
         self._drive_series, self._drive_omegas = self._drive_of(self._tone_amplitudes_a, self._tone_omegas)
         self._pack()
@@ -424,7 +424,7 @@ class SimulatedDevice:
         read from the state at each call, without the event location of the kernel.
         """
         amplitudes = np.zeros((0, self.n_coils)) if amplitudes_a is None else np.reshape(amplitudes_a, (1, -1))
-        drive, omegas = self._drive_of(np.asarray(amplitudes, float), np.full(len(amplitudes), TWO_PI * frequency_hz))
+        drive, omegas = self._drive_of(np.asarray(amplitudes, float), np.full(len(amplitudes), math.tau * frequency_hz))
         table, count = kernel_table(self._head, self._env_series, drive, omegas), len(self.placed)
 
         def rhs(t, y):

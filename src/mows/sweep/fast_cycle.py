@@ -53,7 +53,6 @@ from mows.estimate.ringdown.problem import cramer_rao_frequency_hz
 from mows.physics.field import MU0_OVER_4PI
 from mows.physics.fluxgate import PICKUP_COMBINATIONS
 
-TWO_PI = 2.0 * math.pi
 TUNING_PHASE_SLIP = 0.1  # Δf·t_k above which a detuned kick loses > 1.6 % of its drive
 EXCITATION_MARGIN = 1.25  # drive this much longer than the worst case needs to reach the stop
 LOCK_PERIODS = 6  # drive periods against the stop that lock the motion to the drive
@@ -94,7 +93,7 @@ def drive_rate_rad_per_s(probe, setup, pose, current_a: float, frequency_hz: flo
         at = pose.with_theta0(theta0)
         field = setup.field_t(np.asarray(at.magnet_position_m, float), setup.currents_a(theta0, current_a))
         weakest = min(weakest, abs(float(np.asarray(field).reshape(3) @ at.axes()[1])))
-    return probe.moment_am2 * weakest / (2.0 * probe.inertia_kgm2 * TWO_PI * frequency_hz)
+    return probe.moment_am2 * weakest / (2.0 * probe.inertia_kgm2 * math.tau * frequency_hz)
 
 
 def excitation_s(
@@ -135,7 +134,7 @@ def ringdown_std_model(
     pickups: dict[float, tuple | None] = {}
 
     def std_hz(theta0_rad: float, duration_s: float) -> float:
-        key = round(float(theta0_rad) % TWO_PI, 9)
+        key = round(float(theta0_rad) % math.tau, 9)
         if key not in pickups:
             pickups[key] = FitOptions.lever_aware(pair, probe, key).pickup
         n = int(round((duration_s - recovery_s) * sample_rate_hz))

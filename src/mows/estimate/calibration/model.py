@@ -10,6 +10,7 @@ constants is :mod:`mows.estimate.calibration.fit`.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -18,7 +19,7 @@ from mows.estimate.calibration.constants import CalibrationError, CalibrationPoi
 from mows.physics import ringdown_average
 from mows.physics.pose import probe_axes
 from mows.physics.potential import ArcPotential
-from mows.physics.probe import TWO_PI, Probe
+from mows.physics.probe import Probe
 
 AMPLITUDE_NODES = 3
 
@@ -65,7 +66,7 @@ def rows_of(points: Sequence[CalibrationPoint], wirings: Mapping[str, Wiring], k
 
 def inertia_from(f00_hz: float, spring_nm_per_rad: float, damping_per_s: float) -> float:
     """J = kM/((2π·f00)² + δ²): Eq. 10 with the damping of Eq. S1 kept."""
-    return spring_nm_per_rad / ((TWO_PI * f00_hz) ** 2 + damping_per_s**2)
+    return spring_nm_per_rad / ((math.tau * f00_hz) ** 2 + damping_per_s**2)
 
 
 def frequencies(

@@ -77,8 +77,8 @@ from numpy.typing import ArrayLike, NDArray
 from mows.estimate.ringdown.offset import offset_starts
 from mows.estimate.ringdown.problem import (
     AMPLITUDE,
+    Evaluation,
     RingdownProblem,
-    Step,
     evaluate,
     padded_pickups,
     scaled_inverse,
@@ -324,7 +324,7 @@ def _fit_window(
         if not (fit.ok and math.isnan(fit.amplitude_rad) and math.isnan(fit.rest_offset_rad)):
             fits = None
     if fits is None:
-        others: list[Step] = []
+        others: list[Evaluation] = []
         if searched:
             step, *others = _offset_minima(coarse, step, options)
         fits = _refined(problem, step.q, others, lines, options, start_s)
@@ -352,7 +352,7 @@ def _fit_window(
 def _refined(
     problem: RingdownProblem,
     start: NDArray[np.float64],
-    others: list[Step],
+    others: list[Evaluation],
     lines: Sequence[ProbeLine],
     options: FitOptions,
     start_s: float,
@@ -372,7 +372,7 @@ def _refined(
     return [with_swing_from_size(fit, line.pickup_scale_t) for fit, line in zip(fits, lines)]
 
 
-def _pinned_locally(step: Step, coarse: RingdownProblem, problem: RingdownProblem, options: FitOptions) -> bool:
+def _pinned_locally(step: Evaluation, coarse: RingdownProblem, problem: RingdownProblem, options: FitOptions) -> bool:
     """Whether θmax or ε could be reported from the coarse optimum ``step`` of one probe: its σ
     at the full rate (the coarse covariance scaled by the ratio of the sample counts, the noise
     level as the weights have it) within tolerance/DETERMINED_SIGMAS. A numerically singular
@@ -390,7 +390,7 @@ def _pinned_locally(step: Step, coarse: RingdownProblem, problem: RingdownProble
     )
 
 
-def _offset_minima(coarse: RingdownProblem, step: Step, options: FitOptions) -> list[Step]:
+def _offset_minima(coarse: RingdownProblem, step: Evaluation, options: FitOptions) -> list[Evaluation]:
     """The distinct coarse optima of one probe reached from every minimum of the cost over the
     rest offset (:func:`mows.estimate.ringdown.offset.offset_starts`), from the local ``step``
     and from the best one's mirror images, lowest cost first. κ < 0 turns g into −g, the same
@@ -403,9 +403,9 @@ def _offset_minima(coarse: RingdownProblem, step: Step, options: FitOptions) -> 
             variable_projection(coarse, start, options.max_iterations, tol_chi2=1e-2)[0] for start in starts
         )
 
-    def distinct() -> list[Step]:
+    def distinct() -> list[Evaluation]:
         physical = [s for s in solutions if np.all(s.coef[:, 0] > 0)] or solutions
-        kept: list[Step] = []
+        kept: list[Evaluation] = []
         for solution in sorted(physical, key=lambda s: s.cost):
             if not any(_agree(solution.q, other.q, options) for other in kept):
                 kept.append(solution)

@@ -32,7 +32,6 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-TWO_PI = 2.0 * math.pi
 # Taylor coefficients of sin x / x and cos x in x², to x²³ and x²⁴: for |x| ≤ π/2 (the bound
 # on θmax) the first neglected term is below 1e-20, so the polynomials are exact to rounding.
 _SIN = np.array([(-1.0) ** k / math.factorial(2 * k + 1) for k in range(12)])
@@ -97,8 +96,8 @@ def _tone(
     n, p = g.size, m.shape[0]
     f, delta, amp, phi = q[0], q[1], q[2], q[3]
     decay = math.exp(-delta * dt)
-    rr = decay * math.cos(TWO_PI * f * dt)
-    ri = decay * math.sin(TWO_PI * f * dt)
+    rr = decay * math.cos(math.tau * f * dt)
+    ri = decay * math.sin(math.tau * f * dt)
     carrier, quadrature, x = np.empty(n), np.empty(n), np.empty(n)
     zr, zi = math.cos(phi), math.sin(phi)
     for i in range(n):
@@ -114,7 +113,7 @@ def _tone(
         if derivatives:
             t = i * dt
             m[3, i] = -amp * zi * dg  # ∂/∂φ
-            m[0, i] = TWO_PI * t * m[3, i]  # ∂/∂f
+            m[0, i] = math.tau * t * m[3, i]  # ∂/∂f
             m[2, i] = zr * dg  # ∂/∂θmax
             m[1, i] = -amp * t * m[2, i]  # ∂/∂δ
             if p > 4:

@@ -28,7 +28,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from mows.estimate.ringdown.problem import RingdownProblem
 
-TWO_PI = 2.0 * math.pi
 OFFSET_STEP_RAD = math.radians(1.0)
 AMPLITUDE_STEP_RAD = math.radians(1.0)
 
@@ -38,7 +37,7 @@ def _shape_columns(
 ) -> NDArray[np.float64]:
     """cos(kx), sin(kx) for k = 1 … K at every sample: (A, 2K, n) for each θmax."""
     t = np.arange(problem.y.shape[1]) * problem.dt
-    base = np.exp(-q[1] * t) * np.cos(TWO_PI * q[0] * t + q[3])
+    base = np.exp(-q[1] * t) * np.cos(math.tau * q[0] * t + q[3])
     x = amplitudes_rad[:, None] * base[None, :]
     order = problem.pickups.shape[1] - 1
     columns = np.empty((x.shape[0], 2 * order, x.shape[1]))

@@ -72,7 +72,7 @@ def padded_pickups(pickups: Sequence[ArrayLike]) -> NDArray[np.complex128]:
 
 
 @dataclasses.dataclass
-class Step:
+class Evaluation:
     """Everything known at one parameter vector q: each tone's shape g (K, n) and ∂g/∂q
     (``dg``, (K·P, n)), κ of each tone and B_DC per channel (``coef``, (C, K + 1)) and the
     weighted cost."""
@@ -88,7 +88,7 @@ class Step:
     normal_matrix: np.ndarray | None = None
 
 
-def evaluate(problem: RingdownProblem, q: NDArray[np.float64], derivatives: bool = True) -> Step:
+def evaluate(problem: RingdownProblem, q: NDArray[np.float64], derivatives: bool = True) -> Evaluation:
     """Variable projection at q (Golub–Pereyra, with Kaufman's Jacobian): κ and B_DC by linear
     least squares, the residual and the projected normal equations of q
     (:func:`mows.estimate.ringdown.model.normal_equations`, where the numerics are explained)."""
@@ -98,7 +98,7 @@ def evaluate(problem: RingdownProblem, q: NDArray[np.float64], derivatives: bool
     residual, coef = np.empty((n_ch, n)), np.empty((n_ch, n_tones + 1))
     jtj, jtr = np.zeros((p, p)), np.zeros(p)
     cost = evaluate_model(np.asarray(q, float), *problem.kernel_data(), derivatives, g, m, residual, coef, jtj, jtr)
-    return Step(q, g, m, coef, residual, float(cost), jtj if derivatives else None)
+    return Evaluation(q, g, m, coef, residual, float(cost), jtj if derivatives else None)
 
 
 def _column_scale(jtj: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -114,7 +114,7 @@ def scaled_inverse(jtj: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.linalg.inv(jtj / np.outer(scale, scale)) / np.outer(scale, scale)
 
 
-def fisher_information(step: Step, weights: NDArray[np.float64]) -> NDArray[np.float64]:
+def fisher_information(step: Evaluation, weights: NDArray[np.float64]) -> NDArray[np.float64]:
     """Fisher information (JᵀJ with weights) over all parameters: q, then (κ_1 … κ_K, B_DC) of
     each channel. J's columns are κ_c,k·∂g_k/∂q, g_k and 1, so JᵀJ is assembled from Gram sums
     of those rows without forming the n × P Jacobian."""
@@ -145,7 +145,7 @@ AMPLITUDE = NONLINEAR.index("amplitude_rad")
 
 def variable_projection(
     problem: RingdownProblem, q: ArrayLike, iterations: int, tol_chi2: float, damping: float = 1e-3
-) -> tuple[Step, bool, int, NDArray[np.bool_]]:
+) -> tuple[Evaluation, bool, int, NDArray[np.bool_]]:
     """Levenberg–Marquardt on the nonlinear parameters with κ and B_DC solved exactly at every
     step (Golub–Pereyra variable projection). Eliminating the linear parameters removes the
     curved θmax–κ valley (only κ·θmax is well determined at θ0 = 0°, κ·θmax² at 90°), in
@@ -173,7 +173,7 @@ def variable_projection(
         *AMPLITUDE_BOUNDS_RAD,
         AMPLITUDE,
     )
-    return Step(q, g, m, coef, residual, float(cost), jtj), bool(converged), int(used), free
+    return Evaluation(q, g, m, coef, residual, float(cost), jtj), bool(converged), int(used), free
 
 
 # --- the bound itself -------------------------------------------------------------------

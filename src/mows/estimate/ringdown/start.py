@@ -20,8 +20,6 @@ from numpy.typing import NDArray
 
 from mows.estimate.ringdown.types import FitOptions, ProbeLine
 
-TWO_PI = 2.0 * math.pi
-
 
 def white_noise_std(y: NDArray[np.float64]) -> float:
     """White-noise σ per sample from the third difference, robust to outliers.
@@ -95,7 +93,7 @@ def line_starts(
         if peak is None or not peak.power > threshold:
             break
         # The line's damped sinusoid, fitted and taken out, so that the next is found beside it.
-        carrier = np.exp((-guess + 1j * TWO_PI * peak.frequency_hz) * t)
+        carrier = np.exp((-guess + 1j * math.tau * peak.frequency_hz) * t)
         a, b = np.linalg.lstsq(np.column_stack([carrier.real, carrier.imag]), residual, rcond=None)[0]
         found.append((peak.frequency_hz, float(np.angle(complex(a, -b)))))
         residual = residual - (complex(a, -b) * carrier).real

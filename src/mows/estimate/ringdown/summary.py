@@ -30,15 +30,14 @@ from scipy.optimize import brentq
 from mows.estimate.ringdown.problem import (
     AMPLITUDE,
     NONLINEAR,
+    Evaluation,
     RingdownProblem,
-    Step,
     evaluate,
     fisher_information,
     scaled_inverse,
 )
 from mows.estimate.ringdown.types import FitOptions, FitStatus, ProbeLine, RingdownFit, failure, parameter_std
 
-TWO_PI = 2.0 * math.pi
 # Another minimum of the cost closer than this (Δχ², in units of χ²/dof) is a rival: noise
 # reverses the order of two minima 25 apart less than once in 150 (Δχ²'s σ is 2·√Δχ²).
 RIVAL_CHI2 = 25.0
@@ -49,7 +48,7 @@ OFFSET = len(NONLINEAR)  # a tone's index of the rest offset ε (or θ0's error)
 
 def wrapped_rad(angle_rad: float) -> float:
     """The angle in (−π, π]."""
-    return float(-((math.pi - angle_rad) % TWO_PI - math.pi)) + 0.0  # + 0.0: no −0.0
+    return float(-((math.pi - angle_rad) % math.tau - math.pi)) + 0.0  # + 0.0: no −0.0
 
 
 def known_of(line: ProbeLine, options: FitOptions) -> dict[str, Any]:
@@ -75,7 +74,7 @@ def parameter_names(problem: RingdownProblem, options: FitOptions) -> list[str]:
 
 
 def summarise(
-    step: Step,
+    step: Evaluation,
     problem: RingdownProblem,
     free: NDArray[np.bool_],
     lines: Sequence[ProbeLine],
@@ -159,7 +158,7 @@ def _soft(frequency_hz: float, line: ProbeLine, options: FitOptions) -> Ringdown
 
 def _unless_soft(
     stiff: list[bool],
-    step: Step,
+    step: Evaluation,
     lines: Sequence[ProbeLine],
     options: FitOptions,
     status: FitStatus,
@@ -176,7 +175,7 @@ def _unless_soft(
 def _tone_fit(
     k: int,
     line: ProbeLine,
-    step: Step,
+    step: Evaluation,
     problem: RingdownProblem,
     free: NDArray[np.bool_],
     covariance: NDArray[np.float64],
@@ -263,7 +262,7 @@ def amplitude_apart(q: NDArray[np.float64], other: NDArray[np.float64], options:
 
 
 def undetermined_removed(
-    fit: RingdownFit, problem: RingdownProblem, cost: float, others: list[Step], options: FitOptions
+    fit: RingdownFit, problem: RingdownProblem, cost: float, others: list[Evaluation], options: FitOptions
 ) -> RingdownFit:
     """``fit`` with θmax and the rest offset NaN, the reason said, where the data do not pin
     them within ``options``' tolerances: another minimum of the cost (``others``, coarse

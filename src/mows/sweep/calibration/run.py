@@ -24,7 +24,7 @@ from mows.sweep.calibration.schedule import (
     CalibrationOutcome,
     CalibrationPlan,
     CalibrationSchedule,
-    Step,
+    CalibrationStep,
 )
 from mows.sweep.runner import CycleAnswer, turn_prompt
 
@@ -65,28 +65,28 @@ class CalibrationRun:
         self._fits: dict[int, list] = {}  # cycle id → its fits so far
         self._awaited: CycleAnswer | None = None  # the finished cycle whose fits are due
         self._stage_rad = math.nan  # where the operator last confirmed the stage
-        self._turning: Step | None = None  # the cycle's step that waits for the operator's turn
+        self._turning: CalibrationStep | None = None  # the cycle's step that waits for the operator's turn
 
     @property
     def turn_awaited(self) -> float | None:
         """The orientation (rad) the operator has been asked to turn the stage to, if any."""
         return None if self._turning is None else self._turning.actions[0].theta0_rad
 
-    def start(self) -> Step:
+    def start(self) -> CalibrationStep:
         return self.schedule.start()
 
-    def on_supply(self, accepted: bool, reason: str = "") -> Step:
+    def on_supply(self, accepted: bool, reason: str = "") -> CalibrationStep:
         return self._gate(self.schedule.on_supply(accepted, reason))
 
-    def on_turned(self) -> Step:
+    def on_turned(self) -> CalibrationStep:
         """The operator confirmed the turn: the cycle that waited for it."""
         step, self._turning = self._turning, None
         if step is None:
-            return Step()
+            return CalibrationStep()
         self._stage_rad = step.actions[0].theta0_rad
-        return Step(actions=step.actions)
+        return CalibrationStep(actions=step.actions)
 
-    def _gate(self, step: Step) -> Step:
+    def _gate(self, step: CalibrationStep) -> CalibrationStep:
         """With a manual stage, a cycle at another orientation than the stage's waits for a turn."""
         if not self.manual_orientation:
             return step
@@ -96,32 +96,32 @@ class CalibrationRun:
         self._turning = step
         # The schedule words every cycle's step (its feedback); the prompt is that, reworded.
         prompt = dataclasses.replace(step.feedback[-1], message=turn_prompt(cycles[0].theta0_rad))
-        return Step(actions=[Turn(cycles[0].theta0_rad)], feedback=[*step.feedback, prompt])
+        return CalibrationStep(actions=[Turn(cycles[0].theta0_rad)], feedback=[*step.feedback, prompt])
 
-    def on_cycle(self, answer: CycleAnswer) -> Step | None:
+    def on_cycle(self, answer: CycleAnswer) -> CalibrationStep | None:
         """The driver's answer to the step's ``CycleRequest``; None while that cycle's fits are due."""
         if answer.problem:
             return self.schedule.on_cycle_done(False, answer.problem)
         self._awaited = answer
         return self._collected(late=False)
 
-    def on_fit(self, cycle_id: int, fit) -> Step | None:
+    def on_fit(self, cycle_id: int, fit) -> CalibrationStep | None:
         """A fit of the stream (``RingdownFit``; tuning fits are not passed); a step once the
         awaited cycle's fits are all in. Fits may come before the driver's answer."""
         self._fits.setdefault(cycle_id, []).append(fit)
         return self._collected(late=False)
 
-    def fits_time_up(self) -> Step | None:
+    def fits_time_up(self) -> CalibrationStep | None:
         """The awaited cycle's fits are late: go on with those that came."""
         return self._collected(late=True)
 
-    def cancel(self, reason: str) -> Step | None:
+    def cancel(self, reason: str) -> CalibrationStep | None:
         """The supply's way to zero; None when the schedule is on it already (its step stands)."""
         self._turning = None
         step = self.schedule.cancel(reason)
         return step if step.actions else None
 
-    def _collected(self, late: bool) -> Step | None:
+    def _collected(self, late: bool) -> CalibrationStep | None:
         answer = self._awaited
         if answer is None or (not late and len(self._fits.get(answer.cycle_id, ())) < answer.ringdowns_recorded):
             return None

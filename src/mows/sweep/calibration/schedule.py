@@ -15,7 +15,7 @@ back to zero, and only then reports the outcome, which says whether the device c
 
 The schedule does no I/O, like :class:`mows.device.cycle.sequencer.CycleSequencer`: it is fed the
 device's answers (:meth:`on_supply`, :meth:`on_fit`, :meth:`on_cycle_done`, :meth:`fits_timed_out`)
-and the user's :meth:`cancel`, and returns a :class:`Step` of actions (:class:`SetSupply`, a
+and the user's :meth:`cancel`, and returns a :class:`CalibrationStep` of actions (:class:`SetSupply`, a
 :class:`~mows.device.cycle.phases.CycleRequest` whose fits go to :meth:`on_fit` and whose end to
 :meth:`on_cycle_done`), feedback and, at the end, the :class:`CalibrationOutcome` with the
 calibration points for :func:`mows.estimate.calibration.fit.calibrate_probe`.
@@ -111,7 +111,7 @@ class CalibrationOutcome:
 
 
 @dataclasses.dataclass
-class Step:
+class CalibrationStep:
     actions: list = dataclasses.field(default_factory=list)
     feedback: list = dataclasses.field(default_factory=list)
     outcome: CalibrationOutcome | None = None
@@ -155,33 +155,33 @@ class CalibrationSchedule:
     def finished(self) -> bool:
         return self.state == State.DONE
 
-    def start(self) -> Step:
+    def start(self) -> CalibrationStep:
         if self.state != State.IDLE:
             raise ValueError("a calibration schedule runs once")
         self.state = State.RAMPING
-        return Step(
+        return CalibrationStep(
             actions=[SetSupply(self.current_a)], feedback=[self._feedback(f"supply to {self.current_a:+.4f} A")]
         )
 
     # --- the device's answers -----------------------------------------------------------------
-    def on_supply(self, accepted: bool, reason: str = "") -> Step:
+    def on_supply(self, accepted: bool, reason: str = "") -> CalibrationStep:
         """The device reached the commanded current (or refused it, with ``reason``)."""
         if self.state == State.RETURNING:
             return self._finish(accepted, reason)
         if self.state != State.RAMPING:
-            return Step()
+            return CalibrationStep()
         if not accepted:
             return self._end(False, False, f"the supply refused {self.current_a:+.4f} A: {reason}")
         self.state = State.CYCLING
-        return Step(
+        return CalibrationStep(
             actions=[CycleRequest(self.theta0_rad, self.plan.repeats)],
             feedback=[self._feedback(f"cycle at θ0 = {math.degrees(self.theta0_rad):.1f}°")],
         )
 
-    def on_fit(self, fit) -> Step:
+    def on_fit(self, fit) -> CalibrationStep:
         """A ring-down fit (``RingdownFit``) of the running cycle (tuning fits are not passed)."""
         if self.state not in (State.CYCLING, State.AWAITING_FITS):
-            return Step()
+            return CalibrationStep()
         self._fits_seen += 1
         if fit.ok:
             self._points.append(CalibrationPoint.from_fit(fit, self.plan.wiring, self.current_a))
@@ -190,11 +190,11 @@ class CalibrationSchedule:
             self._failed[key] = self._failed.get(key, 0) + 1
         if self.state == State.AWAITING_FITS and self._fits_seen >= self.plan.repeats:
             return self._next()
-        return Step()
+        return CalibrationStep()
 
-    def on_cycle_done(self, success: bool, message: str = "") -> Step:
+    def on_cycle_done(self, success: bool, message: str = "") -> CalibrationStep:
         if self.state != State.CYCLING:
-            return Step()
+            return CalibrationStep()
         if not success:
             return self._end(
                 False,
@@ -204,23 +204,23 @@ class CalibrationSchedule:
         if self._fits_seen >= self.plan.repeats:
             return self._next()
         self.state = State.AWAITING_FITS
-        return Step()
+        return CalibrationStep()
 
-    def fits_timed_out(self) -> Step:
+    def fits_timed_out(self) -> CalibrationStep:
         """The caller waited long enough for the cycle's fits: go on without the missing ones."""
         if self.state != State.AWAITING_FITS:
-            return Step()
+            return CalibrationStep()
         key = (self.current_a, "NO_FIT")
         self._failed[key] = self._failed.get(key, 0) + self.plan.repeats - self._fits_seen
         return self._next()
 
-    def cancel(self, reason: str = "cancelled") -> Step:
+    def cancel(self, reason: str = "cancelled") -> CalibrationStep:
         if self.state in (State.RETURNING, State.DONE):
-            return Step()
+            return CalibrationStep()
         return self._end(False, True, reason)
 
     # --- sequencing ---------------------------------------------------------------------------
-    def _next(self) -> Step:
+    def _next(self) -> CalibrationStep:
         self._step += 1
         self._fits_seen = 0
         if self._step >= self.plan.steps:
@@ -232,28 +232,28 @@ class CalibrationSchedule:
             )
         if self.current_a != self.plan.currents_a[self._order[self._step - 1][1]]:
             self.state = State.RAMPING
-            return Step(
+            return CalibrationStep(
                 actions=[SetSupply(self.current_a)], feedback=[self._feedback(f"supply to {self.current_a:+.4f} A")]
             )
         self.state = State.CYCLING
-        return Step(
+        return CalibrationStep(
             actions=[CycleRequest(self.theta0_rad, self.plan.repeats)],
             feedback=[self._feedback(f"cycle at θ0 = {math.degrees(self.theta0_rad):.1f}°")],
         )
 
-    def _end(self, success: bool, cancelled: bool, message: str) -> Step:
+    def _end(self, success: bool, cancelled: bool, message: str) -> CalibrationStep:
         """Every ending ramps the supply to zero first."""
         self._ending = (success, cancelled, message)
         self.state = State.RETURNING
-        return Step(actions=[SetSupply(0.0)], feedback=[self._feedback(f"{message}; supply to zero")])
+        return CalibrationStep(actions=[SetSupply(0.0)], feedback=[self._feedback(f"{message}; supply to zero")])
 
-    def _finish(self, at_zero: bool, reason: str) -> Step:
+    def _finish(self, at_zero: bool, reason: str) -> CalibrationStep:
         assert self._ending is not None  # RETURNING is entered by _end only
         success, cancelled, message = self._ending
         if not at_zero:
             message += f"; THE SUPPLY DID NOT CONFIRM ZERO ({reason})"
         self.state = State.DONE
-        return Step(
+        return CalibrationStep(
             outcome=CalibrationOutcome(
                 success and at_zero, cancelled, at_zero, message, tuple(self._points), dict(self._failed)
             )

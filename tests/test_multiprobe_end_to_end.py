@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from mows.estimate.ringdown import ProbeLine, fit_ringdowns, start_swing_rad
+from mows.estimate.ringdown import ProbeLine, fit_ringdowns, swing_from_signal_rad
 from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics, pickup_scale_t
 from mows.physics.pose import Pose
@@ -76,5 +76,5 @@ def test_each_swing_comes_from_its_signals_size_through_the_absolute_pickup():
     lines = lines_of(pair, probes)
     for fit, swing in zip(fit_ringdowns(samples, RATE_HZ, lines), start_rad):
         assert fit.ok, fit.message
-        assert start_swing_rad(fit, lines[fit.probe_id].pickup_scale_t) == pytest.approx(swing, rel=0.02)
+        assert swing_from_signal_rad(fit, lines[fit.probe_id].pickup_scale_t) == pytest.approx(swing, rel=0.02)
         assert fit.amplitude_rad == pytest.approx(swing, rel=0.02)  # by its size: the pickup's scale is known

@@ -50,7 +50,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from mows.estimate.probe_set import ProbeEntry
-from mows.estimate.ringdown import FitOptions, start_swing_rad
+from mows.estimate.ringdown import FitOptions, swing_from_signal_rad
 from mows.estimate.ringdown.types import RingdownFit
 from mows.physics.coupling import PlacedProbe
 from mows.physics.fluxgate import FluxgatePair, pickup_scale_t
@@ -153,7 +153,7 @@ def sweeps_of(
     """Each probe's share from the joint fits of every point (one fit per probe, by ``probe_id``
     = the index in ``placed``), shifts against each probe's f00, each ring-down's start swing
     from its signal's size through the absolute pickup of the fits' channel combination
-    ``channels`` of the fluxgate ``pair`` (:func:`mows.estimate.ringdown.summary.start_swing_rad`).
+    ``channels`` of the fluxgate ``pair`` (:func:`mows.estimate.ringdown.summary.swing_from_signal_rad`).
     Points where a probe's fit is not OK are left out of every probe's share."""
     usable = [fits for fits in points if all(f.ok for f in fits) and len(fits) == len(placed)]
     sweeps = []
@@ -164,7 +164,7 @@ def sweeps_of(
         for point in usable:
             fit = next(f for f in point if f.probe_id == k)
             shifted = SweepPoint.from_fit(fit, fit.frequency_hz - f00_hz, fit.frequency_std_hz)
-            record.add(dataclasses.replace(shifted, amplitude_rad=start_swing_rad(fit, scale_t)))
+            record.add(dataclasses.replace(shifted, amplitude_rad=swing_from_signal_rad(fit, scale_t)))
         sweeps.append(ProbeSweep(k, p, record, f00_hz, np.arange(len(usable))))
     return sweeps
 

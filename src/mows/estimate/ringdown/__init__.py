@@ -25,7 +25,7 @@ from mows.estimate.ringdown.fit import (
     usable_window,
 )
 from mows.estimate.ringdown.problem import cramer_rao_frequency_hz, cramer_rao_hz
-from mows.estimate.ringdown.summary import DETERMINED_SIGMAS, RIVAL_CHI2, start_swing_rad, wrapped_rad
+from mows.estimate.ringdown.summary import DETERMINED_SIGMAS, RIVAL_CHI2, swing_from_signal_rad, wrapped_rad
 from mows.estimate.ringdown.types import FitOptions, FitStatus, ProbeLine, RingdownFit, failure, parameter_std
 
 __all__ = [
@@ -43,7 +43,7 @@ __all__ = [
     "fit_ringdown",
     "fit_ringdowns",
     "parameter_std",
-    "start_swing_rad",
+    "swing_from_signal_rad",
     "starting_point",
     "usable_window",
     "wrapped_rad",

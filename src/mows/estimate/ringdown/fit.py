@@ -21,7 +21,7 @@ time by 0–12 %). It is fitted, and its several minima searched, for one probe 
 several, each probe's (θmax, ε) minima would multiply into a search over 2K dimensions, for
 numbers f does not need; there each swings about its commanded θ0, as the paper's model has
 it, and θmax comes from the signal's size where the pickup's absolute scale is known
-(:func:`mows.estimate.ringdown.summary.start_swing_rad`).
+(:func:`mows.estimate.ringdown.summary.swing_from_signal_rad`).
 
 g is the sensor's signal as a function of the deflection, normalised by κ. The paper's model
 (Eq. S11, a sensor along (a, b) and a magnet turning in place) is the single term

@@ -13,7 +13,7 @@ parameter's row and column are NaN and it is named as not determined.
 ``FitOptions``' tolerances, no rival minimum of the cost (one probe, :mod:`mows.estimate.ringdown.fit`)
 within Δχ² = :data:`RIVAL_CHI2`, θmax not held at a bound. Where the model has no rest offset
 and the pickup's absolute scale is known, θmax is the swing the signal's size gives
-(:func:`start_swing_rad`).
+(:func:`swing_from_signal_rad`).
 """
 
 from __future__ import annotations
@@ -310,7 +310,7 @@ def undetermined_removed(
 
 # --- the swing from the signal's size --------------------------------------------------------
 def with_swing_from_size(fit: RingdownFit, scale_t: float) -> RingdownFit:
-    """``fit`` with θmax from its signal's size (:func:`start_swing_rad`) where the pickup's
+    """``fit`` with θmax from its signal's size (:func:`swing_from_signal_rad`) where the pickup's
     absolute scale is known; else ``fit`` as it is. For a model without a rest offset: the
     magnet swings about its rest angle, which such a model leaves out, and the pickup's
     harmonics there pass for a different θmax (tens of percent at 15 mrad), while the size is
@@ -318,7 +318,7 @@ def with_swing_from_size(fit: RingdownFit, scale_t: float) -> RingdownFit:
     (:meth:`mows.sweep.decompose.Ringdowns.start_swing_about_rad`)."""
     if not (fit.ok and math.isfinite(scale_t)):
         return fit
-    swing = start_swing_rad(fit, scale_t)
+    swing = swing_from_signal_rad(fit, scale_t)
     if not math.isfinite(swing):
         return fit
     if "amplitude_rad" not in fit.undetermined:
@@ -330,7 +330,7 @@ def with_swing_from_size(fit: RingdownFit, scale_t: float) -> RingdownFit:
 SWING_BRACKET_RAD = (1e-4, 0.7)  # within the potential's interval
 
 
-def start_swing_rad(fit: RingdownFit, scale_t: float) -> float:
+def swing_from_signal_rad(fit: RingdownFit, scale_t: float) -> float:
     """The swing θmax at the start of a fit's window, from the power of its fitted signal.
 
     ``scale_t`` times the fit's pickup series (:func:`mows.physics.fluxgate.pickup_scale_t`) is

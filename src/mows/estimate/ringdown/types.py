@@ -133,7 +133,7 @@ class ProbeLine:
     pickup_scale_t : the κ that makes ``pickup`` the sensors' signal in tesla
         (:func:`mows.physics.fluxgate.pickup_scale_t`); NaN: unknown. Known, it gives the
         swing from the signal's size where the signal's shape does not
-        (:func:`mows.estimate.ringdown.summary.start_swing_rad`).
+        (:func:`mows.estimate.ringdown.summary.swing_from_signal_rad`).
     """
 
     probe_id: int

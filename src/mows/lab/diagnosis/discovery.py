@@ -333,7 +333,7 @@ def term_unit(factors: Sequence[str]) -> str:
 
 def model_covariates(table: MeasurementTable, probe: Probe) -> dict[str, np.ndarray]:
     """The model's rest angle θs and start swing of every row (rad), at the table's reference in
-    full and the probe's stop, as :func:`mows.lab.model.frequency_model.start_swing_rad` takes
+    full and the probe's stop, as :func:`mows.lab.model.frequency_model.table_start_swing_rad` takes
     them; ``table``'s own rows, each probe of a :class:`ProbeSet` with its constants."""
     found = {name: np.empty(len(table)) for name in MODEL_FACTORS}
     for rows, member in probe_parts(table, probe):

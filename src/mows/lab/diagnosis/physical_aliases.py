@@ -27,7 +27,7 @@ import scipy.special
 
 from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import Configuration, base_start_swing_rad, ringdown_nodes
-from mows.lab.model.frequency_model import FrequencyModel, start_swing_rad
+from mows.lab.model.frequency_model import FrequencyModel, table_start_swing_rad
 from mows.lab.model.least_squares import FitResult, parameter_values
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2
 from mows.physics.probe import Probe
@@ -117,7 +117,7 @@ def amplitude_scale_error(table: MeasurementTable, probe: Probe) -> tuple[float,
 
 def _amplitude_scale(table: MeasurementTable, probe: Probe, values: FittedValues) -> str:
     epsilon, spread = amplitude_scale_error(table, probe)
-    start = np.degrees(start_swing_rad(table, probe))
+    start = np.degrees(table_start_swing_rad(table, probe))
     text = (
         f"finite_amplitude ≡ moment_scale: the amplitude scales the field spring by ⟨2·J1(A)/A⟩ − 1 ≈ −⟨A²⟩/8 "
         f"= {epsilon * 100:.3g} % over these ring-downs (start {np.median(start):.3g}°)"

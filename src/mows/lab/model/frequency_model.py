@@ -237,7 +237,7 @@ def _in_words(solution: scipy.optimize.OptimizeResult) -> str:
     return f"stopped at the limit of {solution.nfev} model evaluations before the tolerances were met"
 
 
-def start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
+def table_start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
     """Each row's start swing at the table's reference field and the probe's stop
     (:func:`mows.lab.model.configuration.base_start_swing_rad`), evaluated once per
     configuration group of the published model."""

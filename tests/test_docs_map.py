@@ -98,3 +98,12 @@ def test_nothing_refers_outside_the_repository():
             if not resolved.is_relative_to(ROOT):
                 offenders.append(f"{path.relative_to(ROOT)}: link to {target}")
     assert not offenders, f"references to paths outside the repository: {offenders}"
+
+
+def test_the_tests_mirror_the_packages_of_mows():
+    """Each package of ``mows`` has its tests in the folder of its name, and every folder of
+    tests but the nodes' (``ros``) is one of them: a newcomer finds a module's tests where the
+    module is."""
+    packages = {p.name for p in (ROOT / "src" / "mows").iterdir() if (p / "__init__.py").is_file()}
+    folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and any(p.glob("test_*.py"))}
+    assert folders - {"ros"} == packages

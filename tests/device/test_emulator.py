@@ -302,7 +302,7 @@ def test_a_driver_lost_mid_calibration_leaves_the_supply_at_zero(supplied):
     down, so this is a test of the device's watchdog, the link cut mid-ramp. The simulated
     device lives inside the driver's process and dies with it, leaving no supply to be at zero;
     the sim path's graceful endings (close on SIGINT/SIGTERM, the emergency stop, a cancel) are
-    tested on the session (tests/test_cycle.py)."""
+    tested on the session (tests/device/test_cycle.py)."""
     bench, link = supplied
     backend = SerialBackend(link, CurrentCap(CAP_A))
     collect(link, "the stream to run", lambda items: len(samples_of(items)) >= 20)

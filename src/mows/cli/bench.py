@@ -52,7 +52,7 @@ THROUGHPUT_KEYS = (
     "points_per_minute",
     "points_per_minute_ratio",
 )
-# --quick: a smoke run of every suite (tests/test_bench_smoke.py runs them all in make test, a
+# --quick: a smoke run of every suite (tests/bench/test_bench_smoke.py runs them all in make test, a
 # few seconds of CPU each): every code path of a suite, on less data, so its figures are rough.
 QUICK: dict[str, dict[str, object]] = {
     "estimator": {"trials": 10, "step_deg": 45.0, "speed_trials": 10, "baseline_trials": 3},

@@ -44,7 +44,7 @@ the step fraction, and RK4 keeps its fourth order through impacts (trajectories 
 contact sub-steps agree to 1e-7 rad). RK4's phase error is (ωh)⁴/120 per radian: at 2 steps
 per 50 µs sample and 112 Hz, 8e-10 relative, i.e. 0.1 µHz, far below the 0.01 mHz the
 estimator resolves; its energy error, (ωh)⁶/144 per step, acts like a damping of 1e-8 1/s
-(tests/physics/test_simulator.py measures both; tests/physics/test_multiprobe_simulation.py the
+(tests/sim/test_simulator.py measures both; tests/sim/test_multiprobe_simulation.py the
 coupled probes against scipy's solve_ivp). The kernels are compiled by numba once per machine
 (``cache=True``, ≈ 6 s of CPU); later processes load them from the cache (:mod:`mows.precompile`).
 """

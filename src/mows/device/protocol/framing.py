@@ -66,7 +66,7 @@ def encode_frame(frame: Frame) -> bytes:
 class FrameDecoder:
     """Finds frames in a byte stream fed in pieces of any size.
 
-    Invariants (tests/test_framing.py): ``feed`` never raises; every frame it returns was
+    Invariants (tests/device/test_framing.py): ``feed`` never raises; every frame it returns was
     encoded exactly so; ``bytes_in == bytes of returned frames + discarded_bytes + pending``.
     After a rejection the decoder steps one byte past the rejected sync word and searches
     again, so a corrupted length never swallows the good frames that follow.

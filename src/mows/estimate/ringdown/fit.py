@@ -11,7 +11,7 @@ Model of one channel:
 Probes that share a pair of fluxgates are told apart by their frequencies; each has its own
 pickup series g_k and its own κ_k, and the sensor sees their sum. A fit of one probe on the
 mixed signal would not reach the bound: its model has no room for the neighbour, whose line
-leaks into its frequency (tests/estimator/test_ringdown_joint.py).
+leaks into its frequency (tests/estimate/test_ringdown_joint.py).
 
 ε is the rest-angle offset θs − θ0 (``FitOptions.rest_offset_free``, on by default): a field across
 the probe, gravity in the plane or a gradient deflects the rest angle, and the probe swings about
@@ -59,7 +59,7 @@ What the data do not determine is not reported. θmax and ε are NaN, named in
 ``RingdownFit.undetermined`` and the reason in its message, where another minimum that differs
 by more than half their tolerance (``FitOptions``: 1° and 0.5°) fits within Δχ² = 25, or where
 their σ exceeds a third of it. In fields up to 5 mT and gradients up to 50 mT/m the reported
-ones are within the tolerance (tests/estimator/test_ringdown_rest_offset.py); a 0.25–0.5 s
+ones are within the tolerance (tests/estimate/test_ringdown_rest_offset.py); a 0.25–0.5 s
 ring-down there determines ε in a few percent of the fits and θmax (σ ≥ 0.35°) in none.
 """
 

@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from device.test_cycle import session_on_simulator
 from mows.bench.rig import DeviceTimeRig, max_duty_fraction
 from mows.bench.throughput import CAP_A
 from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, Phase
@@ -18,7 +19,6 @@ from mows.estimate.ringdown import FitOptions
 from mows.estimate.segments import RingdownWindow, Segment, fit_segment
 from mows.sim.scenario import load_scenario
 from mows.sweep.fast_cycle import plan_tracking, ringdown_std_model, tracking_plan
-from test_cycle import session_on_simulator
 
 DUTY = CycleSettings(max_duty_cycle=0.2, duty_window_s=2.0, turn_settle_s=0.2)  # tighter than the kicks want
 CLIPPING_RANGE_T = 0.2e-6  # a near sensor this narrow clips the first swings of a ring-down from the stop

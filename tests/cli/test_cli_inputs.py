@@ -14,7 +14,7 @@ from mows.device.serial.emulator import DeviceEmulator
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
-TABLE = os.path.join(os.path.dirname(__file__), "lab", "data", "demo_sweep.csv")
+TABLE = os.path.join(os.path.dirname(__file__), os.pardir, "lab", "data", "demo_sweep.csv")
 PROBE = "moment_am2: 0.89e-3\nmagnet_mass_kg: 7.2e-6\nspring_nm_per_rad: 1.36e-5\n"
 
 

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from mows.cli.main import main
 
-TABLE = (pathlib.Path(__file__).parent / "lab" / "data" / "demo_sweep.csv").read_bytes()
+TABLE = (pathlib.Path(__file__).parents[1] / "lab" / "data" / "demo_sweep.csv").read_bytes()
 HEADER, *ROWS = TABLE.decode().splitlines()
 COLUMNS = HEADER.split(",")
 PROBE = {"moment_am2": 0.89e-3, "magnet_mass_kg": 7.2e-6, "spring_nm_per_rad": 1.36e-5, "f00_hz": None}

@@ -30,8 +30,8 @@ from mows.records.files import OutputRefused, recover, writing
 from mows.sim.scenario import SCENARIO_DIR, load_scenario
 from recorded_bags import record_cycles
 
-HERE = pathlib.Path(__file__).parent
-CALIBRATION_TABLE = HERE / "estimator" / "data" / "calibration_36.csv"
+HERE = pathlib.Path(__file__).parents[1]  # tests/
+CALIBRATION_TABLE = HERE / "estimate" / "data" / "calibration_36.csv"
 SWEEP_TABLE = HERE / "lab" / "data" / "demo_sweep.csv"
 
 

@@ -236,6 +236,10 @@ BAD_SCENARIO_FILES = {  # scene.yaml's text, and its refusal after the file's na
     "a probe file's value": ("probe: probe.yaml\n", r"probe: probe file .*probe.yaml: f00_hz = nan must be .*"),
     "a base file's text": ("extends: base_of_mine.yaml\n", r"scenario .*base_of_mine.yaml: not valid YAML: line 2, .*"),
     "a key twice": ("seed: 1\nseed: 2\n", "not valid YAML: line 2, column 1: key 'seed' is given twice"),
+    "a count that is no integer": (
+        "integrator: {substeps: true}\n",
+        r"integrator.substeps = True must be an integer in \[1, 1000\]",
+    ),
 }
 
 

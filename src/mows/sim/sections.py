@@ -16,7 +16,7 @@ from mows.physics.field import FieldSource, SumSource
 from mows.physics.fluxgate import FluxgatePair
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE, Probe
-from mows.physics.schema import refused
+from mows.physics.schema import is_number, refused
 
 #: How a probe of a scene with several is turned: by a stage of its own, or by the one stage
 #: all "shared" probes sit on (each keeps its own θ0 on it, turned by the same angle).
@@ -145,5 +145,5 @@ class Integrator:
     def __post_init__(self):
         for name in ("substeps", "contact_substeps"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, np.integer)) and 1 <= value <= 1000):
+            if not (is_number(value) and isinstance(value, (int, np.integer)) and 1 <= value <= 1000):
                 raise refused(name, value, "must be an integer in [1, 1000]")

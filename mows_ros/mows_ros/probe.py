@@ -9,8 +9,6 @@ the middle of a fit; setting the same path again reads it again.
 
 import functools
 
-import yaml
-
 from mows.estimate.probe_set import ProbeEntry, read_probe_set
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows_ros.params import ParamSpec
@@ -21,7 +19,7 @@ _READ = {"": PAPER_PROBE}  # by path, as last read when the parameter was set
 def probe_file_problem(path: str) -> str | None:
     try:
         _READ[path] = Probe.from_yaml(path) if path else PAPER_PROBE
-    except (OSError, ValueError, TypeError, yaml.YAMLError) as error:
+    except ValueError as error:  # every refusal of a file or text, on one line
         return f"probe_file={path!r}: {error}"
     return None
 
@@ -50,7 +48,7 @@ def probes_problem(text: str) -> str | None:
     """Why ``probes`` cannot be read, or None (its bare f00s checked with the paper's probe)."""
     try:
         probe_set(text, PAPER_PROBE)
-    except (OSError, ValueError, TypeError, yaml.YAMLError) as error:
+    except ValueError as error:  # every refusal of a file or text, on one line
         return f"probes={text!r}: {error}"
     return None
 

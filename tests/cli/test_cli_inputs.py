@@ -9,6 +9,8 @@ import sys
 import pytest
 
 from mows.cli.main import main
+from mows.device.instruments.daq import PAPER_DEVICE_FILE
+from mows.device.instruments.scpi import PAPER_SUPPLY_FILE
 from mows.device.recording import bags
 from mows.device.serial.emulator import DeviceEmulator
 from mows.sim.scenario import load_scenario
@@ -135,6 +137,13 @@ SCENARIOS = {
     ),
     "1000 T": ("environment:\n  sources: [{type: uniform, field_t: [1000, 0, 0]}]\n", ["1000 T", "substeps"]),
     "not YAML": ("excitation: [1\n", ["YAML", "line"]),
+    "a quoted number": ('excitation: {amplitude_a: "2.0"}\n', ["excitation.amplitude_a = '2.0' is not a number"]),
+    "NaN": ("excitation: {gap_s: .nan}\n", ["excitation.gap_s = nan must be a finite number"]),
+    "a seed that is no integer": ("seed: 1.5\n", ["seed = 1.5 must be an integer"]),
+    "magnets too close": (
+        "probes:\n  - {pose: {magnet_position_m: [0, 0, 0]}}\n  - {pose: {magnet_position_m: [0, 5e-3, 0]}}\n",
+        ["probes[1].pose.magnet_position_m = [0.0, 0.005, 0.0] is 5.00 mm from probes[0]", "7.78 mm apart"],
+    ),
 }
 
 
@@ -165,10 +174,12 @@ PROBES = {
     "malformed YAML": ("moment_am2: [1\n", ["probe file", "YAML", "line 2"]),
     "a word for a number": ('f00_hz: "hundred"\n' + PROBE, ["f00_hz", "'hundred'", "not a number"]),
     "NaN": ("f00_hz: .nan\n" + PROBE, ["f00_hz", "nan", "finite"]),
-    "YAML 1.1 exponent": (
-        "moment_am2: 1e-3\nmagnet_mass_kg: 7.2e-6\nf00_hz: 112.0\nspring_nm_per_rad: 1.36e-5\n",
-        ["moment_am2", "7.0e-6"],
+    "a quoted number": ('lever_m: "1.9e-3"\n' + PROBE, ["lever_m = '1.9e-3' is not a number"]),
+    "a key twice": (
+        "moment_am2: 1e-3\n" + PROBE,
+        ["not valid YAML: line 2, column 1: key 'moment_am2' is given twice"],
     ),
+    "a directory": (None, ["probe file", "is a directory"]),
 }
 
 
@@ -176,9 +187,60 @@ PROBES = {
 def test_a_bad_probe_file_is_one_line_naming_the_key(table, tmp_path, capsys, case):
     text, words = PROBES[case]
     probe = tmp_path / "probe.yaml"
-    probe.write_text(text)
-    err = one_line_error(capsys, main(["lab", "compare", str(table), "--probe", str(probe), "--no-cv"]), *words)
+    if text is None:
+        probe.mkdir()
+    else:
+        probe.write_text(text)
+    err = one_line_error(
+        capsys, main(["lab", "compare", str(table), "--probe", str(probe), "--no-cv"]), str(probe), *words
+    )
     assert "inertia_kgm2" not in err  # not blamed on the inertia derived from the NaN
+
+
+def test_numbers_in_our_files_are_read_as_yaml_1_2(table, tmp_path, capsys):
+    """``1e-3`` (no dot) is a number, as YAML 1.2 and our docs write it: the probe file and the
+    scenario that names it are read."""
+    probe = tmp_path / "probe.yaml"
+    probe.write_text("moment_am2: .89e-3\nmagnet_mass_kg: 7.2E-6\nf00_hz: 112.48\nspring_nm_per_rad: 136e-7\n")
+    assert main(["lab", "compare", str(table), "--probe", str(probe), "--no-cv"]) == 0
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("probe: probe.yaml\nnoise: {mains_t: 1e-8}\nexcitation: {ringdown_s: 2e-1, excite_s: 1e-1}\n")
+    assert main(["sim", str(scene), "--fit"]) == 0
+    assert "θ0 =" in capsys.readouterr().out
+
+
+HARDWARE_FILES = {
+    "supply: NaN voltage limit": (
+        "--supply-file",
+        ("voltage_limit_v: 10.0", "voltage_limit_v: .nan"),
+        ["supply file", "voltage_limit_v = nan must be a finite number"],
+    ),
+    "supply: set_current not a format of the current": (
+        "--supply-file",
+        ('set_current: "CURR {:.4f}"', 'set_current: "CURR {:d}"'),
+        ["commands.set_current = 'CURR {:d}' must hold one {} for the value, formatting a float"],
+    ),
+    "supply: channel no integer": (
+        "--supply-file",
+        ("channel: 1", "channel: 1.5"),
+        ["channel = 1.5 is not an integer"],
+    ),
+    "device: both fluxgates on one input": (
+        "--device",
+        ("physical_channel: Dev1/ai1", "physical_channel: Dev1/ai0"),
+        ["device file", "inputs[1].physical_channel = 'Dev1/ai0' is inputs[0]'s too"],
+    ),
+}
+
+
+@pytest.mark.parametrize("case", HARDWARE_FILES)
+def test_a_bad_bench_file_is_one_line(tmp_path, capsys, case):
+    option, (good, bad), words = HARDWARE_FILES[case]
+    shipped = PAPER_SUPPLY_FILE if option == "--supply-file" else PAPER_DEVICE_FILE
+    assert good in shipped.read_text()
+    path = tmp_path / "bench.yaml"
+    path.write_text(shipped.read_text().replace(good, bad))
+    one_line_error(capsys, main(["check-hardware", "--simulate", option, str(path)]), str(path), *words)
 
 
 PLUGINS = {

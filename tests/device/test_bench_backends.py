@@ -12,6 +12,7 @@ out) is a fault with its reason, the coils and the supply off, and the card re-a
 
 import dataclasses
 import math
+import re
 import subprocess
 import sys
 import time
@@ -145,6 +146,90 @@ def test_a_device_file_whose_cap_the_outputs_cannot_reach_is_refused(tmp_path):
     path.write_text(text.replace("amplifier_v_per_a: 2.0", "amplifier_v_per_a: 1.0\nspeed: 3"))
     with pytest.raises(ValueError, match=r"unknown keys \['speed'\]"):
         load_daq_device(path)
+
+
+BAD_BENCH_FILES = {  # (the shipped file, its line, the line instead), and the refusal after the file's name
+    "device: both fluxgates on one input": (
+        "device",
+        ("physical_channel: Dev1/ai1", "physical_channel: dev1/AI0"),
+        r"inputs\[1\].physical_channel = 'dev1/AI0' is inputs\[0\]'s too: each fluxgate needs a channel of its own",
+    ),
+    "device: both coils on one output": (
+        "device",
+        ("physical_channel: Dev1/ao1", "physical_channel: Dev1/ao0"),
+        r"outputs\[1\].physical_channel = 'Dev1/ao0' is outputs\[0\]'s too: .*",
+    ),
+    "device: an infinite rate": (
+        "device",
+        ("sample_rate_hz: 20000.0", "sample_rate_hz: .inf"),
+        "sample_rate_hz = inf must be a finite number",
+    ),
+    "device: a sensitivity as text": (
+        "device",
+        ("sensitivity_v_per_t: 1.0e+6}  # far", 'sensitivity_v_per_t: "1e6"}  # far'),
+        r"inputs\[1\].sensitivity_v_per_t = '1e6' is not a number",
+    ),
+    "device: a negative range": (
+        "device",
+        ("range_v: 10.0}  # coil 2", "range_v: -1e1}  # coil 2"),
+        r"outputs\[1\].range_v = -10.0 .*",
+    ),
+    "supply: a NaN voltage limit": (
+        "supply",
+        ("voltage_limit_v: 10.0", "voltage_limit_v: .nan"),
+        "voltage_limit_v = nan must be a finite number",
+    ),
+    "supply: a negative voltage limit": (
+        "supply",
+        ("voltage_limit_v: 10.0", "voltage_limit_v: -1e1"),
+        "voltage_limit_v = -10.0 must be a finite number > 0",
+    ),
+    "supply: an integer format for the current": (
+        "supply",
+        ('set_current: "CURR {:.4f}"', 'set_current: "CURR {:d}"'),
+        r"commands.set_current = 'CURR \{:d\}' must hold one \{\} for the value, formatting a float .*",
+    ),
+    "supply: an unclosed format": (
+        "supply",
+        ('set_current: "CURR {:.4f}"', 'set_current: "CURR {:.4f"'),
+        r"commands.set_current = 'CURR \{:.4f' must hold one \{\} .*",
+    ),
+    "supply: no value in the command": (
+        "supply",
+        ('set_current: "CURR {:.4f}"', 'set_current: "CURR 1"'),
+        r"commands.set_current = 'CURR 1' must hold one \{\} .*",
+    ),
+    "supply: a named value": (
+        "supply",
+        ('output: "OUTP {:d}"', 'output: "OUTP {on:d}"'),
+        r"commands.output = 'OUTP \{on:d\}' must hold one \{\} for the value, formatting a int.*",
+    ),
+    "supply: a channel that is no integer": (
+        "supply",
+        ("channel: 1", "channel: 1.5"),
+        "channel = 1.5 is not an integer",
+    ),
+    "supply: a cap as text": ("supply", ("cap_a: 2.0", "cap_a: 2 A"), "cap_a = '2 A' is not a number"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_BENCH_FILES)
+def test_a_bad_bench_file_is_refused_in_one_line_naming_the_file_key_and_value(tmp_path, case):
+    kind, (line, instead), message = BAD_BENCH_FILES[case]
+    load = load_daq_device if kind == "device" else load_supply_file
+    text = load.__defaults__[0].read_text()
+    assert line in text
+    path = tmp_path / "bench.yaml"
+    path.write_text(text.replace(line, instead, 1))
+    with pytest.raises(ValueError) as refused:
+        load(path)
+    assert re.fullmatch(f"{kind} file {re.escape(str(path))}: {message}", str(refused.value)), refused.value
+
+
+def test_bench_files_read_numbers_as_yaml_1_2(tmp_path):
+    path = tmp_path / "supply.yaml"
+    path.write_text(load_supply_file.__defaults__[0].read_text().replace("resolution_a: 1.0e-4", "resolution_a: 1e-4"))
+    assert load_supply_file(path).limits.resolution_a == 1e-4
 
 
 # --- the nidaqmx backend on the simulated card --------------------------------------------------

@@ -11,7 +11,7 @@ from mows.estimate.stream import FitSettings, JointSettings, RingdownEstimator
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
 from mows.physics.multitone import MAX_PROBES
 from mows.physics.pose import Pose
-from mows.physics.probe import PAPER_PROBE
+from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.signal import signal_t
 
 OTHER = PAPER_PROBE.replace(spring_nm_per_rad=PAPER_PROBE.spring_nm_per_rad * 1.2)
@@ -31,6 +31,15 @@ def test_each_form_gives_its_probe_in_order_of_id():
     assert read("") == () and read("  ") == ()
 
 
+def test_numbers_read_as_yaml_1_2_and_places_given_only_where_stated():
+    entries = read("{0: 1.125e2, 1: {f00_hz: 125, position_m: [0, 1e-2, 0]}}")
+    assert entries[0].f00_hz == 112.5 and entries[1].position_m == (0.0, 0.01, 0.0)
+    # Probes without a place share the single probe's: no spacing to keep between them.
+    assert [e.position_m for e in read("{0: 112.5, 1: 125}")] == [(0.0, 0.0, 0.0)] * 2
+    with pytest.raises(ValueError, match=r"^probes\[0\]: probe file 1.125e2 does not exist$"):
+        read_probe_set('{0: "1.125e2"}', PAPER_PROBE, Probe.from_yaml)  # quoted: text, a file's name
+
+
 @pytest.mark.parametrize(
     "text, named",
     [
@@ -40,11 +49,19 @@ def test_each_form_gives_its_probe_in_order_of_id():
         ("{0: 112.5, 1: 112.9}", "probes 0 and 1"),
         ("{0: -3}", "f00_hz = -3"),
         ("{0: .nan}", "f00_hz = nan"),
-        ("{0: {f00_hz: 112.5, lever: 2}}", "probe 0"),
-        ("{0: {f00_hz: 112.5, position_m: [0, 1]}}", "position_m [0, 1]"),
+        ("{0: {f00_hz: 112.5, lever: 2}}", "probes[0] = {'f00_hz': 112.5, 'lever': 2} is not an f00"),
+        ("{0: {f00_hz: 112.5, position_m: [0, 1]}}", "probes[0].position_m = [0, 1] must be a finite 3-vector"),
+        ("{0: {f00_hz: 112.5, position_m: [0, .nan, 0]}}", "probes[0].position_m = [0, nan, 0] must be a finite"),
+        ("{a: 112.5}", "probe id 'a' is not an integer"),
+        ("{true: 112.5}", "probe id True is not an integer"),
+        (
+            "{0: {f00_hz: 112.5, position_m: [0, 0, 0]}, 1: {f00_hz: 125, position_m: [0, 0.005, 0]}}",
+            "probes[1].position_m = [0.0, 0.005, 0.0] is 5.00 mm from probes[0].position_m = [0.0, 0.0, 0.0]: "
+            "magnets must be more than 7.78 mm apart",
+        ),
         ("{0: {f00_hz: 112.5, f00_std_hz: 20}}", "f00_std_hz = 20"),
         ("{" + ", ".join(f"{k}: {100 + 5 * k}" for k in range(MAX_PROBES + 1)) + "}", f"at most {MAX_PROBES}"),
-        ("{0: [", "not YAML"),
+        ("{0: [", "probes: not valid YAML: line 1, column 6"),
     ],
 )
 def test_a_bad_entry_is_refused_in_one_line_naming_it(text, named):

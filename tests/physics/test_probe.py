@@ -1,6 +1,7 @@
 """Probe constants and calibration inverses against the paper's reported numbers."""
 
 import math
+import re
 
 import pytest
 
@@ -73,3 +74,43 @@ def test_the_moment_follows_its_temperature_coefficient_from_the_probe_file(tmp_
     assert (warm.spring_nm_per_rad, warm.magnet_mass_kg) == (probe.spring_nm_per_rad, probe.magnet_mass_kg)
     with pytest.raises(ValueError, match=r"moment_temp_coeff_per_k = 0\.05 is out of range"):
         PAPER_PROBE.replace(moment_temp_coeff_per_k=0.05)
+
+
+BAD_PROBE_FILES = {  # the paper's probe file with a line replaced (or added), and the refusal after the file's name
+    "a NaN": ("f00_hz: .nan", r"f00_hz = nan must be a finite number"),
+    "text for a number": ('lever_m: "1.9e-3"', r"lever_m = '1.9e-3' is not a number"),
+    "out of range": ("theta_stop_rad: 2.0", r"theta_stop_rad = 2.0 is out of range: must be finite and in \(0, pi/2\)"),
+    "a key twice": (
+        "moment_am2: 1.0e-3\nmoment_am2: 1.0e-3",
+        r"not valid YAML: line \d+, column 1: key 'moment_am2' is given twice",
+    ),
+    "not YAML": ("lever_m: [1", r"not valid YAML: line \d+, column \d+: expected ',' or '\]', but got ':'"),
+    "a list": (None, "a probe file is a mapping of constants, got list"),
+}
+
+
+def with_line(text, line):
+    """``text`` with the line of ``line``'s key replaced by it."""
+    key = line.split(":")[0]
+    return "\n".join(line if old.startswith(key + ":") else old for old in text.splitlines()) + "\n"
+
+
+@pytest.mark.parametrize("case", BAD_PROBE_FILES)
+def test_a_bad_probe_file_is_one_line_naming_the_file_key_and_value(tmp_path, case):
+    line, message = BAD_PROBE_FILES[case]
+    path = tmp_path / "probe.yaml"
+    path.write_text("- 1\n" if line is None else with_line(PAPER_PROBE.yaml_text(), line))
+    with pytest.raises(ValueError) as refused:
+        Probe.from_yaml(path)
+    assert re.fullmatch(f"probe file {re.escape(str(path))}: {message}", str(refused.value)), refused.value
+
+
+def test_probe_file_numbers_are_read_as_yaml_1_2(tmp_path):
+    """``7.2e-6`` and ``7.2E-6`` with no dot, ``.89e-3`` without a leading digit: numbers."""
+    path = tmp_path / "probe.yaml"
+    path.write_text(
+        "moment_am2: .89e-3\nmagnet_mass_kg: 72E-7\nf00_hz: +112.48\nbeta0_rel_std: 1e-2\nspring_nm_per_rad: 1360e-8\n"
+    )
+    probe = Probe.from_yaml(path)
+    assert (probe.moment_am2, probe.magnet_mass_kg, probe.beta0_rel_std) == (0.89e-3, 7.2e-6, 0.01)
+    assert probe.f00_hz == pytest.approx(112.48, rel=1e-12) and probe.spring_nm_per_rad == 1.36e-5

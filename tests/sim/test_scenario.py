@@ -76,9 +76,17 @@ def test_a_single_probe_scene_is_one_placed_probe():
     [
         ({"pose": {"theta0_deg": 10.0}}, "either probe and pose"),
         ({"probes": []}, "list of 1 to 4 probes"),
-        ({"probes": [{"pose": {"magnet_position_m": [0.0, 0.0, 0.0]}}] * 2}, "mm apart"),
-        ({"probes": [{"stage": "turntable"}]}, "stage = 'turntable'"),
-        ({"probes": [{"colour": "red"}]}, "colour"),
+        (
+            {"probes": [{"pose": {"magnet_position_m": [0.0, 0.0, 0.0]}}] * 2},
+            "probes[1].pose.magnet_position_m = [0.0, 0.0, 0.0] is 0.00 mm from probes[0].pose.magnet_position_m",
+        ),
+        ({"probes": [{"stage": "turntable"}]}, "probes[0].stage = 'turntable'"),
+        ({"probes": [{"colour": "red"}]}, "probes[0]: unknown keys ['colour']"),
+        ({"probes": [{"pose": {"theta0_deg": "east"}}]}, "probes[0].pose.theta0_deg = 'east' is not a number"),
+        (
+            {"probes": [{"probe": {**PAPER_PROBE.to_dict(), "moment_am2": -1.0}}]},
+            "probes[0].probe.moment_am2 = -1.0 is out of range",
+        ),
     ],
 )
 def test_bad_probe_lists_are_refused_by_name(change, message):
@@ -130,19 +138,25 @@ def test_probe_forms(tmp_path):
     "data, message",
     [
         ({"colour": 1}, r"unknown keys \['colour'\].*allowed keys are \['name'"),
-        ({"noise": {"white": 1e-11}}, r"section 'noise': unknown keys \['white'\].*sensor_white_t_per_rthz"),
-        ({"pose": {"theta0_rad": 1.0}}, r"section 'pose': unknown keys \['theta0_rad'\].*theta0_deg"),
+        ({"noise": {"white": 1e-11}}, r"^noise: unknown keys \['white'\].*sensor_white_t_per_rthz"),
+        ({"pose": {"theta0_rad": 1.0}}, r"^pose: unknown keys \['theta0_rad'\].*theta0_deg"),
         ({"pose": {"tilt_deg": 10.0, "gravity_m_per_s2": [0, 0, -9.8]}}, "either tilt_deg"),
-        ({"pose": {"theta0_deg": "north"}}, r"theta0_deg = 'north' must be a number"),
+        ({"pose": {"theta0_deg": "north"}}, r"^pose.theta0_deg = 'north' is not a number"),
         ({"excitation": {"amplitude_a": 12.0}}, "exceeds the cap of 10 A"),
-        ({"excitation": {"ringdown_s": 0.0}}, r"ringdown_s = 0.0 is out of range \(0, 3600\]"),
+        ({"excitation": {"ringdown_s": 0.0}}, r"^excitation.ringdown_s = 0.0 is out of range \(0, 3600\]"),
         ({"sample_rate_hz": -1.0}, r"sample_rate_hz = -1.0 is out of range"),
-        ({"housing": {"restitution": 1.5}}, r"restitution = 1.5 is out of range \(0, 1\]"),
-        ({"integrator": {"substeps": 0}}, r"substeps = 0 must be an integer in \[1, 1000\]"),
-        ({"sensors": {"positions_m": [[0.06, 0, 0]]}}, "positions_m must be two 3-vectors"),
-        ({"probe": "no_such_probe.yaml"}, "neither 'paper' nor a probe file"),
-        ({"environment": {"sources": [{"type": "magnet"}]}}, "field source type 'magnet'"),
-        ({"setup": {"preset": "triangle"}}, "coil preset 'triangle'"),
+        ({"housing": {"restitution": 1.5}}, r"^housing.restitution = 1.5 is out of range \(0, 1\]"),
+        ({"integrator": {"substeps": 0}}, r"^integrator.substeps = 0 must be an integer in \[1, 1000\]"),
+        (
+            {"sensors": {"positions_m": [[0.06, 0, 0]]}},
+            r"^sensors.positions_m = \[\[0.06, 0, 0\]\] must be two 3-vectors",
+        ),
+        ({"probe": "no_such_probe.yaml"}, "^probe = 'no_such_probe.yaml' is neither 'paper' nor a probe file"),
+        (
+            {"environment": {"sources": [{"type": "magnet"}]}},
+            r"^environment.sources\[0\]: .*field source type 'magnet'",
+        ),
+        ({"setup": {"preset": "triangle"}}, "^setup: .*coil preset 'triangle'"),
         ({"pose": {"plane_e1": [1, 0, 0], "plane_e2": [0, 0, 1]}}, r"not x–y .* setup \(a coil preset\) and sensors"),
     ],
 )
@@ -201,3 +215,50 @@ def test_an_extends_cycle_and_an_unknown_base_are_refused(tmp_path):
 
 def test_the_code_and_the_shipped_scenes_share_one_seed():
     assert Scenario().seed == Scenario.from_dict({}).seed == load_scenario().seed == 1
+
+
+BAD_SCENARIO_FILES = {  # scene.yaml's text, and its refusal after the file's name
+    "a NaN": ("noise: {mains_t: .nan}\n", "noise.mains_t = nan must be a finite number"),
+    "text for a number": ('excitation: {gap_s: "1e1"}\n', "excitation.gap_s = '1e1' is not a number"),
+    "a probe of a list": (
+        "probes:\n  - {pose: {magnet_position_m: [0, 0, 0]}}\n  - {pose: {magnet_position_m: [0, 1e-3, .inf]}}\n",
+        r"probes\[1\].pose.magnet_position_m = \[0, 0.001, inf\] must be a finite 3-vector",
+    ),
+    "magnets too close": (
+        "probes:\n  - {pose: {magnet_position_m: [0, 0, 0]}}\n  - {pose: {magnet_position_m: [0, 5e-3, 0]}}\n",
+        r"probes\[1\].pose.magnet_position_m = \[0.0, 0.005, 0.0\] is 5.00 mm from probes\[0\].pose.magnet_position_m"
+        r" = \[0.0, 0.0, 0.0\]: magnets must be more than 7.78 mm apart \(twice the sum of their levers\) .*",
+    ),
+    "a field source": (
+        "environment:\n  sources: [{type: uniform, field_t: [0, 0, 0]}, {type: uniform, field_t: [1e-6, 0]}]\n",
+        r"environment.sources\[1\].field_t = \[1e-06, 0\] must be a finite 3-vector",
+    ),
+    "a probe file's value": ("probe: probe.yaml\n", r"probe: probe file .*probe.yaml: f00_hz = nan must be .*"),
+    "a base file's text": ("extends: base_of_mine.yaml\n", r"scenario .*base_of_mine.yaml: not valid YAML: line 2, .*"),
+    "a key twice": ("seed: 1\nseed: 2\n", "not valid YAML: line 2, column 1: key 'seed' is given twice"),
+    "a count that is no integer": (
+        "integrator: {substeps: true}\n",
+        r"integrator.substeps = True must be an integer in \[1, 1000\]",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", BAD_SCENARIO_FILES)
+def test_a_bad_scenario_file_is_one_line_naming_the_file_key_and_value(tmp_path, case):
+    text, message = BAD_SCENARIO_FILES[case]
+    (tmp_path / "probe.yaml").write_text(PAPER_PROBE.yaml_text().replace("f00_hz: 112.48", "f00_hz: .nan"))
+    (tmp_path / "base_of_mine.yaml").write_text("seed: [1\n")
+    path = tmp_path / "scene.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError) as refused:
+        load_scenario(path)
+    assert re.fullmatch(f"scenario {re.escape(str(path))}: {message}", str(refused.value)), refused.value
+
+
+def test_scenario_numbers_are_read_as_yaml_1_2(tmp_path):
+    """The noise levels as the docs write them (1e-8, no dot): numbers, not text."""
+    path = tmp_path / "scene.yaml"
+    path.write_text("noise: {mains_t: 1e-8, sensor_white_t_per_rthz: 1E-11}\nexcitation: {excite_s: .5e0}\n")
+    scenario = load_scenario(path)
+    assert (scenario.noise.mains_t, scenario.noise.sensor_white_t_per_rthz) == (1e-8, 1e-11)
+    assert scenario.excitation.excite_s == 0.5

@@ -38,7 +38,7 @@ import numpy as np
 
 from mows.cli.calibrate_bag import SUPPLY_TOPIC, bag_points
 from mows.cli.fit import add_fit_arguments
-from mows.cli.inputs import check_frequencies, finite_float, input_file, load_probe, positive_int
+from mows.cli.inputs import check_frequencies, finite_float, input_file, positive_int
 from mows.device.cycle.phases import CycleSettings, Phase, PhaseEvent
 from mows.device.stream.device_time import DeviceTimeLoop, scheduled_device
 from mows.estimate.calibration.constants import CalibrationPoint, KnownConstants
@@ -124,7 +124,7 @@ def run(args) -> int:
     outputs = [args.output] + ([args.table] if args.table else [])
     check_outputs(outputs, inputs, args.force)
     _source_options(args)
-    nominal = load_probe(args.probe) if args.probe else PAPER_PROBE
+    nominal = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
     scenario = _scenario(args.scenario)
     gradient = _scenario(args.gradient_scenario) if args.gradient_scenario else None
     wirings = scenario_wirings(scenario, gradient)

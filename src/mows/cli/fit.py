@@ -21,7 +21,7 @@ import math
 import os
 import sys
 
-from mows.cli.inputs import input_file, load_probe, non_negative_float, renamed_option, sensor_length_m
+from mows.cli.inputs import input_file, non_negative_float, renamed_option, sensor_length_m
 from mows.device.recording.bags import read_bag
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import fit_segment
@@ -79,7 +79,7 @@ def run(args) -> int:
         )
     if args.csv:
         check_output(args.csv, inputs, args.force)
-    probe = load_probe(args.probe) if args.probe else PAPER_PROBE
+    probe = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
     with input_file(args.bag):
         fits = list(fit_bag(args.bag, probe, args))
         check_ringdowns(args.bag, [window for window, _ in fits], args)

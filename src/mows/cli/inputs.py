@@ -4,8 +4,9 @@ A bad input (a table, a bag, a probe or scenario file, a plugin, an argument) en
 command with one line on stderr that names the file, the row or key and what is allowed, and
 exit status 2 (a command line the parser refuses too: :class:`OneLineParser`); ``--debug``
 shows the traceback instead. Ctrl-C is one line and exit status 130 (docs/cli.md).
-:func:`input_file` blames what goes wrong while a file is read on that file, in words (a
-directory, not UTF-8, not YAML);
+Our YAML files (probe files, scenarios, the bench's device and supply files) name themselves in
+their refusals (:func:`mows.physics.schema.load_yaml`); :func:`input_file` blames what goes
+wrong while any other file is read on that file, in words (a directory, not UTF-8, not YAML);
 :func:`report_errors` turns the errors into the line and the status. Anything else is a bug:
 exit status 1, one line, and the traceback with ``--debug``.
 """
@@ -27,6 +28,7 @@ from mows.cli.status import EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_BUG, EXIT_OK,
 from mows.lab.data.table import FIELD, GRADIENT, MeasurementTable, rows_text
 from mows.physics.frequency import field_spring_nm_per_rad, frequency_shift_hz, gradient_spring_nm_per_rad
 from mows.physics.probe import Probe
+from mows.physics.schema import unreadable, yaml_problem
 
 #: Exceptions that mean "the input is bad". ValueError covers the library's own refusals
 #: (TableError, OutputRefused, a scenario's out-of-range value) and UnicodeDecodeError.
@@ -44,10 +46,8 @@ def one_line(error: BaseException) -> str:
     """The error's message on one line (YAML errors and some numpy ones span several)."""
     if isinstance(error, KeyError) and len(error.args) == 1:
         return f"missing key {error.args[0]!r}"
-    if isinstance(error, yaml.MarkedYAMLError):
-        mark = error.problem_mark
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
-        return f"not valid YAML: {where}{error.problem or error.context}"
+    if isinstance(error, yaml.YAMLError):
+        return yaml_problem(error)
     return " ".join(str(error).split()) or type(error).__name__
 
 
@@ -61,24 +61,11 @@ def input_file(path, what: str = "") -> Iterator[pathlib.Path]:
         yield path
     except InputError:
         raise
-    except IsADirectoryError:
-        raise InputError(f"{name} is a directory, expected a file") from None
-    except FileNotFoundError:
-        raise InputError(f"{name} does not exist") from None
-    except UnicodeDecodeError as error:
-        byte = error.object[error.start : error.start + 1]
-        raise InputError(f"{name} is not UTF-8 text (byte {error.start}: {byte!r}): save it as UTF-8") from None
-    except OSError as error:
-        raise InputError(f"{name}: {error.strerror or one_line(error)}") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise InputError(unreadable(name, error)) from None
     except (ValueError, KeyError, yaml.YAMLError) as error:
         message = one_line(error)
         raise InputError(message if str(path) in message else f"{name}: {message}") from error
-
-
-def load_probe(path):
-    """The probe constants of the YAML file ``path``, or :class:`InputError`."""
-    with input_file(path, "probe file"):
-        return Probe.from_yaml(path)
 
 
 class UsageError(ValueError):

@@ -40,13 +40,13 @@ from mows.cli.inputs import (
     check_frequencies,
     check_reference,
     input_file,
-    load_probe,
     positive_float,
 )
 from mows.cli.lab_ringdown import run_ringdown
 from mows.lab import ProbeSet, analyse, is_bag, load_table, progress, with_reference, write_report
 from mows.lab.chirp import PIECE_PERIODS
 from mows.lab.data.table import PROBE
+from mows.physics.probe import Probe
 from mows.records.files import check_output, writing
 
 MAX_ROWS = 500_000
@@ -311,7 +311,7 @@ def table_probes(table, default, named):
 
 def _probe(source):
     path = PAPER_PROBE_FILE if source == "paper" else pathlib.Path(source)
-    return load_probe(path)
+    return Probe.from_yaml(path)
 
 
 # --- text ------------------------------------------------------------------------------------

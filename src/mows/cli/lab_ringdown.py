@@ -15,13 +15,13 @@ import json
 import math
 
 from mows.cli.fit import recorded_ringdowns
-from mows.cli.inputs import InputError, input_file, load_probe
+from mows.cli.inputs import InputError, input_file
 from mows.lab.chirp import ChirpError, diagnose_ringdown
-from mows.physics.probe import PAPER_PROBE
+from mows.physics.probe import PAPER_PROBE, Probe
 
 
 def run_ringdown(args) -> int:
-    probe = load_probe(args.probe) if args.probe else PAPER_PROBE
+    probe = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
     results: list[tuple] = []
     with input_file(args.bag):
         for segment, options in recorded_ringdowns(args.bag, probe, args):

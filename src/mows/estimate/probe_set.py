@@ -20,6 +20,10 @@ not modelled. An empty text is one probe: the single-probe estimator.
 
 At most :data:`MAX_PROBES` probes, each line at least :data:`MIN_SEPARATION_HZ` from the
 others: closer lines are not told apart in a window of a second or less (docs/multi_probe.md).
+The probes whose ``position_m`` is given must lie as far apart as a scene's
+(:func:`mows.physics.coupling.check_apart`); those without one share the single probe's place.
+The text is read as our YAML files are (:func:`mows.physics.schema.parse_yaml`: ``1e2`` is a
+number), and a refusal names the key path (``probes[2].position_m = …``) and the value.
 """
 
 from __future__ import annotations
@@ -29,16 +33,14 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import numpy as np
-import yaml
-
 from mows.estimate.ringdown import FitOptions, ProbeLine
 from mows.estimate.segments import RingdownWindow
-from mows.physics.coupling import PlacedProbe
+from mows.physics.coupling import PlacedProbe, check_apart
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics, pickup_scale_t
 from mows.physics.multitone import MAX_PROBES
 from mows.physics.pose import Pose
 from mows.physics.probe import Probe
+from mows.physics.schema import SchemaError, at, is_number, parse_yaml, refused, vector3
 
 MIN_SEPARATION_HZ = 1.0
 KEYS = ("f00_hz", "f00_std_hz", "probe_file", "position_m")
@@ -127,16 +129,25 @@ def read_probe_set(text: str, own_probe: Probe, read_probe: Callable[[str], Prob
     errors pass through)."""
     if not text.strip():
         return ()
-    try:
-        given = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        raise ValueError(f"probes={text!r} is not YAML: {' '.join(str(error).split())}") from None
+    with at("probes"):
+        given = parse_yaml(text)
     if not isinstance(given, dict) or not given:
-        raise ValueError(f"probes={text!r} is not a mapping of probe id to f00 (Hz) or probe file")
+        raise refused("probes", given, "is not a mapping of probe id to f00 (Hz) or probe file")
     if len(given) > MAX_PROBES:
-        raise ValueError(f"probes lists {len(given)} probes; at most {MAX_PROBES} share a window")
-    entries = tuple(_entry(key, value, own_probe, read_probe) for key, value in sorted(given.items(), key=str))
-    entries = tuple(sorted(entries, key=lambda e: e.probe_id))
+        raise SchemaError("probes", f"lists {len(given)} probes; at most {MAX_PROBES} share a window")
+    for key in given:
+        if not is_number(key) or not isinstance(key, int) or not 0 <= key <= 255:
+            raise SchemaError("probes", f"probe id {key!r} is not an integer in 0–255")
+    placed = {}
+    with at("probes"):
+        entries = []
+        for key, value in sorted(given.items()):
+            with at(key):
+                entry, placed_here = _entry(key, value, own_probe, read_probe)
+            entries.append(entry)
+            if placed_here:
+                placed[key] = PlacedProbe(entry.probe, Pose(magnet_position_m=entry.position_m))
+    check_apart(list(placed.values()), [f"probes[{key}].position_m" for key in placed])
     f00s = sorted((e.f00_hz, e.probe_id) for e in entries)
     for (low, a), (high, b) in zip(f00s, f00s[1:]):
         if high - low < MIN_SEPARATION_HZ:
@@ -144,28 +155,24 @@ def read_probe_set(text: str, own_probe: Probe, read_probe: Callable[[str], Prob
                 f"probes {a} and {b}: f00 {low:g} and {high:g} Hz are closer than {MIN_SEPARATION_HZ:g} Hz "
                 "(docs/multi_probe.md: keep lines at least 5/T apart)"
             )
-    return entries
+    return tuple(entries)
 
 
-def _entry(key: object, value: object, own_probe: Probe, read_probe: Callable[[str], Probe]) -> ProbeEntry:
-    if isinstance(key, bool) or not isinstance(key, int) or not 0 <= key <= 255:
-        raise ValueError(f"probe id {key!r} is not an integer in 0–255")
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
+def _entry(key: int, value: object, own_probe: Probe, read_probe: Callable[[str], Probe]) -> tuple[ProbeEntry, bool]:
+    """The entry of probe ``key``, and whether its place is given."""
+    if is_number(value):
         value = {"f00_hz": value}
     elif isinstance(value, str):
         value = {"probe_file": value}
     if not isinstance(value, dict) or set(value) - set(KEYS):
-        raise ValueError(f"probe {key}: {value!r} is not an f00 in Hz, a probe file or a mapping of {', '.join(KEYS)}")
+        raise refused("", value, f"is not an f00 in Hz, a probe file or a mapping of {', '.join(KEYS)}")
     probe = read_probe(value["probe_file"]) if "probe_file" in value else own_probe
-    f00_hz = _number(key, "f00_hz", value.get("f00_hz", probe.f00_hz), 0.0, 10_000.0)
+    f00_hz = _number("f00_hz", value.get("f00_hz", probe.f00_hz), 0.0, 10_000.0)
     if "probe_file" not in value:
         probe = with_f00(probe, f00_hz)
-    f00_std_hz = _number(key, "f00_std_hz", value.get("f00_std_hz", 0.0), 0.0, 10.0)
-    position = np.asarray(value.get("position_m", (0.0, 0.0, 0.0)), dtype=object)
-    if position.shape != (3,) or not all(_is_number(x) and math.isfinite(x) for x in position):
-        raise ValueError(f"probe {key}: position_m {value.get('position_m')!r} is not three finite numbers (m)")
-    x, y, z = (float(v) for v in position)
-    return ProbeEntry(key, probe, f00_hz, f00_std_hz, (x, y, z))
+    f00_std_hz = _number("f00_std_hz", value.get("f00_std_hz", 0.0), 0.0, 10.0)
+    x, y, z = (float(v) for v in vector3("position_m", value.get("position_m", (0.0, 0.0, 0.0))))
+    return ProbeEntry(key, probe, f00_hz, f00_std_hz, (x, y, z)), "position_m" in value
 
 
 def with_f00(probe: Probe, f00_hz: float) -> Probe:
@@ -175,16 +182,12 @@ def with_f00(probe: Probe, f00_hz: float) -> Probe:
     return dataclasses.replace(probe, spring_nm_per_rad=spring)
 
 
-def _is_number(x: object) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-
-def _number(probe_id: int, name: str, value: Any, low: float, high: float) -> float:
+def _number(name: str, value: Any, low: float, high: float) -> float:
     """``value`` as a float in [low, high] (f00 above ``low``), else ValueError naming it."""
-    positive = name != "f00_hz" or value > low if _is_number(value) else False
-    if not (_is_number(value) and math.isfinite(value) and low <= value <= high and positive):
+    positive = name != "f00_hz" or value > low if is_number(value) else False
+    if not (is_number(value) and math.isfinite(value) and low <= value <= high and positive):
         bounds = f"({low:g}, {high:g}]" if name == "f00_hz" else f"[{low:g}, {high:g}]"
-        raise ValueError(f"probe {probe_id}: {name} = {value!r} is outside {bounds}")
+        raise refused(name, value, f"is outside {bounds}")
     return float(value)
 
 

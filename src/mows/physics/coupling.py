@@ -38,6 +38,7 @@ import numpy as np
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import Probe
+from mows.physics.schema import refused
 from mows.physics.sources import FieldSource, PointDipole, SumSource
 
 #: The rest angles are converged when no probe's angle changes by more than this in a step.
@@ -89,18 +90,24 @@ def magnets_at(placed: Sequence[PlacedProbe], rest_angle_rad: np.ndarray) -> tup
     return moments, positions
 
 
-def check_apart(placed: Sequence[PlacedProbe]) -> None:
+def check_apart(placed: Sequence[PlacedProbe], names: Sequence[str] = ()) -> None:
     """Refuse magnets closer than twice the sum of their levers: their swings would bring them
-    within a few magnet sizes of each other, where a point dipole no longer describes them."""
+    within a few magnet sizes of each other, where a point dipole no longer describes them. The
+    one spacing rule of every scene and probe list; ``names`` says where each magnet's place is
+    given (a key path: ``probes[1].pose.magnet_position_m``), ``probe k`` if not."""
+    names = list(names) or [f"probe {k}" for k in range(len(placed))]
     positions = [np.asarray(p.pose.magnet_position_m, float) for p in placed]
     for i in range(len(placed)):
         for j in range(i + 1, len(placed)):
             distance = float(np.linalg.norm(positions[i] - positions[j]))
             reach = 2.0 * (placed[i].probe.lever_m + placed[j].probe.lever_m)
             if not distance > reach:
-                raise ValueError(
-                    f"probes {i} and {j} are {distance * 1e3:.2f} mm apart: they must be more than "
-                    f"{reach * 1e3:.2f} mm apart (twice the sum of their levers) for point-dipole coupling"
+                raise refused(
+                    names[j],
+                    [float(x) for x in positions[j]],
+                    f"is {distance * 1e3:.2f} mm from {names[i]} = {[float(x) for x in positions[i]]}: "
+                    f"magnets must be more than {reach * 1e3:.2f} mm apart (twice the sum of their levers) "
+                    "for point-dipole coupling",
                 )
 
 

@@ -11,16 +11,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import pathlib
 from collections.abc import Callable, Iterable
 
 import numpy as np
 import yaml
 
-from mows.physics.schema import FloatOrArray
+from mows.physics.schema import FloatOrArray, SchemaError, finite_number, load_yaml, refused
 from mows.records.files import writing
 
-TWO_PI = 2.0 * math.pi
 #: How far a probe's constants may lie from the paper's before they are called implausible:
 #: wide for a new cantilever, narrow against a unit error (a factor of 1000).
 PLAUSIBLE_FACTOR = 100.0
@@ -107,9 +105,10 @@ class Probe:
         for name in ("spring_temp_coeff_per_k", "moment_temp_coeff_per_k"):
             _require(name, getattr(self, name), lambda v: abs(v) < 1e-2, "with |value| < 1e-2 per K")
         if self.damping_per_s**2 >= self.spring_nm_per_rad / self.inertia_kgm2:
-            raise ValueError(
-                f"damping_per_s = {self.damping_per_s} makes the probe overdamped "
-                f"(needs δ² < kM/J = {self.spring_nm_per_rad / self.inertia_kgm2:.4g} s⁻²)"
+            raise SchemaError(
+                "damping_per_s",
+                f"= {self.damping_per_s} makes the probe overdamped "
+                f"(needs δ² < kM/J = {self.spring_nm_per_rad / self.inertia_kgm2:.4g} s⁻²)",
             )
 
     @property
@@ -120,7 +119,7 @@ class Probe:
     def frequency_for_spring_hz(self, spring_nm_per_rad: FloatOrArray) -> FloatOrArray:
         """Damped frequency √(k/J − δ²)/2π for a total stiffness k (Eq. S1); NaN where k/J ≤ δ²."""
         omega2 = np.asarray(spring_nm_per_rad, dtype=float) / self.inertia_kgm2 - self.damping_per_s**2
-        return np.sqrt(np.where(omega2 > 0, omega2, np.nan)) / TWO_PI
+        return np.sqrt(np.where(omega2 > 0, omega2, np.nan)) / math.tau
 
     @property
     def beta0_hz_per_t(self) -> float:
@@ -172,7 +171,7 @@ class Probe:
         """
         spring = spring_from_beta0(f00_hz, moment_am2, beta0_hz_per_t)
         damping = others.get("damping_per_s", cls.damping_per_s)
-        inertia = spring / ((TWO_PI * f00_hz) ** 2 + damping**2)
+        inertia = spring / ((math.tau * f00_hz) ** 2 + damping**2)
         lever = others.pop("lever_m", None) or lever_from_inertia(inertia, magnet_mass_kg)
         return cls(
             moment_am2=moment_am2,
@@ -193,7 +192,10 @@ class Probe:
         ``theta_stop_deg`` is accepted for ``theta_stop_rad`` (and ``theta_stop_std_deg`` for
         ``theta_stop_std_rad``). A ``calibration`` mapping (how the
         constants were measured: :func:`calibration_record`) is not a constant and is skipped.
+        Every value must be a finite number (YAML 1.2's ``7e-6`` is one).
         """
+        if not isinstance(data, dict):
+            raise ValueError(f"a probe file is a mapping of constants, got {type(data).__name__}")
         data = dict(data)
         if not isinstance(data.pop("calibration", {}), dict):
             raise ValueError("the probe file's 'calibration' section must be a mapping")
@@ -201,8 +203,8 @@ class Probe:
         unknown = set(data) - allowed
         if unknown:
             raise ValueError(f"unknown probe keys {sorted(unknown)}; allowed: {sorted(allowed)}")
-        for key, value in data.items():
-            _given_number(key, value)
+        for key, value in data.items():  # before anything is derived from them: a NaN f00_hz is f00_hz's
+            finite_number(key, value)
         if "theta_stop_deg" in data and "theta_stop_rad" in data:
             raise ValueError("theta_stop_deg and theta_stop_rad are both given: give one of them")
         if "theta_stop_deg" in data:
@@ -213,7 +215,7 @@ class Probe:
             data["theta_stop_std_rad"] = math.radians(data.pop("theta_stop_std_deg"))
         f00 = data.pop("f00_hz", None)
         damping = data.get("damping_per_s", cls.damping_per_s)
-        omega2 = None if f00 is None else (TWO_PI * f00) ** 2 + damping**2
+        omega2 = None if f00 is None else (math.tau * f00) ** 2 + damping**2
         if "spring_nm_per_rad" not in data and omega2 is not None and "inertia_kgm2" in data:
             data["spring_nm_per_rad"] = data["inertia_kgm2"] * omega2
         if "inertia_kgm2" not in data and omega2 is not None and "spring_nm_per_rad" in data:
@@ -227,9 +229,10 @@ class Probe:
             )
         probe = cls(**{k: float(v) for k, v in data.items()})
         if f00 is not None and abs(probe.f00_hz / f00 - 1.0) > 1e-4:
-            raise ValueError(
-                f"f00_hz = {f00} contradicts spring_nm_per_rad, inertia_kgm2 and damping_per_s, "
-                f"which give √(kM/J − δ²)/2π = {probe.f00_hz:.6f} Hz (Eq. S1)"
+            raise SchemaError(
+                "f00_hz",
+                f"= {f00} contradicts spring_nm_per_rad, inertia_kgm2 and damping_per_s, "
+                f"which give √(kM/J − δ²)/2π = {probe.f00_hz:.6f} Hz (Eq. S1)",
             )
         implausible = probe.implausible()
         if implausible:
@@ -248,11 +251,8 @@ class Probe:
 
     @classmethod
     def from_yaml(cls, path: str | os.PathLike[str]) -> Probe:
-        text = pathlib.Path(path).read_text()
-        data = yaml.safe_load(text)
-        if not isinstance(data, dict):
-            raise ValueError(f"{path}: a probe file is a mapping of constants, got {type(data).__name__}")
-        return cls.from_dict(data)
+        """The probe file at ``path`` (:meth:`from_dict`); ValueError naming the file, the key and the value."""
+        return load_yaml(path, "probe file", cls.from_dict)
 
     def to_yaml(
         self,
@@ -290,29 +290,12 @@ class Probe:
 
 def calibration_record(path: str | os.PathLike[str]) -> dict | None:
     """The ``calibration`` section of a probe file (None if the file has none)."""
-    data = yaml.safe_load(pathlib.Path(path).read_text())
-    return data.get("calibration") if isinstance(data, dict) else None
-
-
-def _given_number(key: str, value: object) -> None:
-    """A probe-file value must be a finite number, checked before anything is derived from it
-    (so that a NaN f00_hz is blamed on f00_hz, not on the inertia computed from it)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        hint = ""
-        if isinstance(value, str):
-            try:
-                float(value)
-                hint = " (YAML reads a number like 7e-6 as text: write 7.0e-6)"
-            except ValueError:
-                pass
-        raise ValueError(f"{key} = {value!r} is not a number{hint}")
-    if not math.isfinite(value):
-        raise ValueError(f"{key} = {value!r} must be a finite number")
+    return load_yaml(path, "probe file", lambda data: data.get("calibration") if isinstance(data, dict) else None)
 
 
 def _require(name: str, value: object, ok: Callable[[float], bool], what: str) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and ok(value)):
-        raise ValueError(f"{name} = {value!r} is out of range: must be finite and {what}")
+        raise refused(name, value, f"is out of range: must be finite and {what}")
 
 
 #: The paper's device (docs/physics.md §10): m = 0.89 mA·m², f00 = 112.48 Hz, β0 = 3.68 Hz/mT,

@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from mows.physics.field import FieldSource, source_from_dict, source_to_dict
-from mows.physics.schema import check_keys
+from mows.physics.schema import check_keys, refused
 
 PAPER_CAP_A = 2.0  # Methods: the supply's maximum
 PAPER_RESOLUTION_A = 1e-4  # Methods: 0.1 mA
@@ -135,8 +135,8 @@ def supply_from_dict(data: dict) -> FieldSupply:
     ``cap_a``, ``slew_a_per_s``, ``resolution_a``, ``polarity`` (``bipolar``, the default, or
     ``unipolar``), ``name``."""
     if not isinstance(data, dict):
-        raise ValueError(f"scenario section 'supply' must be a mapping, got {data!r}")
-    check_keys("scenario section 'supply'", data, _supply)
+        raise refused("", data, "must be a mapping")
+    check_keys("", data, _supply)
     return _supply(**data)
 
 

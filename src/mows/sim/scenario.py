@@ -7,8 +7,10 @@ section has defaults; ``Scenario()`` is the paper's probe in the largest-spacing
 environment field and no noise, and ``load_scenario()`` is the documented default scenario
 (the paper's device in its largest-spacing setup, in the Earth's field).
 
-YAML keys carry SI unit suffixes; degrees appear only in keys ending ``_deg``. Unknown keys,
-missing required keys and out-of-range values raise ValueError naming the section and key.
+YAML keys carry SI unit suffixes; degrees appear only in keys ending ``_deg``; numbers are read
+as YAML 1.2 reads them (``1e-8`` is a number, :func:`mows.physics.schema.load_yaml`). Unknown
+keys, missing required keys and out-of-range values raise ValueError on one line naming the file,
+the key path (``probes[1].pose.magnet_position_m``), the value and what is allowed.
 Shipped scenarios live in ``src/mows/sim/scenarios/<name>.yaml`` and are loaded by name. A
 scenario may ``extends:`` another (a shipped name or a YAML path): its mapping is deep-merged
 over the base's, so the shipped scenes state only how they differ from ``base.yaml``.
@@ -33,7 +35,7 @@ from mows.physics.field import source_to_dict
 from mows.physics.fluxgate import DAQ_SAMPLE_RATE_HZ, NoiseModel
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE, Probe
-from mows.physics.schema import check_keys
+from mows.physics.schema import at, check_keys, finite_number, load_yaml, refused
 from mows.physics.supply import FieldSupply, supply_from_dict
 from mows.records.files import writing
 from mows.sim.scenario_yaml import (
@@ -54,7 +56,7 @@ from mows.sim.scenario_yaml import (
     shipped_scenarios,
     with_bases,
 )
-from mows.sim.sections import Environment, Excitation, Housing, Integrator, SceneProbe, Sensors, check_range, number
+from mows.sim.sections import Environment, Excitation, Housing, Integrator, SceneProbe, Sensors, check_range
 
 DEFAULT_SCENARIO = "paper_largest_spacing"
 
@@ -83,10 +85,10 @@ class Scenario:
 
     def __post_init__(self):
         if self.probes:
-            check_apart(self.placed_probes())
-        check_range("scenario", "sample_rate_hz", self.sample_rate_hz, 0.0, 1e7, low_open=True)
-        if not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            raise ValueError(f"scenario: seed = {self.seed!r} must be an integer ≥ 0")
+            check_apart(self.placed_probes(), [f"probes[{k}].pose.magnet_position_m" for k in range(len(self.probes))])
+        check_range("sample_rate_hz", self.sample_rate_hz, 0.0, 1e7, low_open=True)
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise refused("seed", self.seed, "must be an integer ≥ 0")
         self.setup.cap.check(self.excitation.amplitude_a)
 
     def placed_probes(self, theta0_rad=None) -> list[PlacedProbe]:
@@ -115,7 +117,7 @@ class Scenario:
         """Scenario from its YAML mapping; probe file paths and an ``extends:`` file path are
         relative to ``base_dir`` (in a base file: to that file's folder)."""
         data = with_bases(data, base_dir)
-        check_keys("scenario", data, _scenario_from_sections)
+        check_keys("", data, _scenario_from_sections)
         return _scenario_from_sections(**data)
 
     def to_dict(self) -> dict:
@@ -144,9 +146,9 @@ class Scenario:
 
     @classmethod
     def from_yaml(cls, path) -> Scenario:
+        """The scenario file at ``path``; ValueError naming the file, the key path and the value."""
         path = pathlib.Path(path)
-        data = yaml.safe_load(path.read_text())
-        return cls.from_dict(data, base_dir=path.parent)
+        return load_yaml(path, "scenario", lambda data: cls.from_dict(data, base_dir=path.parent))
 
     def to_yaml(self, path, inputs: Iterable = (), force: bool = False) -> str:
         """Write the scenario as a new file, never over ``inputs`` nor, unless ``force``, over an
@@ -174,6 +176,12 @@ def scenario_file(name_or_path=DEFAULT_SCENARIO) -> pathlib.Path:
     return path
 
 
+def _at(key: str, build, data):
+    """``build(data)``, a refusal inside being at ``key``."""
+    with at(key):
+        return build(data)
+
+
 def _probe_entry(scene_probe: SceneProbe) -> dict:
     return {"probe": scene_probe.probe.to_dict(), "pose": pose_to_dict(scene_probe.pose), "stage": scene_probe.stage}
 
@@ -198,16 +206,16 @@ def _scenario_from_sections(
 ) -> Scenario:
     scene_probes = () if probes is None else probes_from(probes)
     if scene_probes and (pose is not None or probe != PAPER_PROBE_NAME):
-        raise ValueError("scenario: give either probe and pose (one probe) or probes (several), not both")
+        raise ValueError("give either probe and pose (one probe) or probes (several), not both")
     the_pose = scene_probes[0].pose if scene_probes else section("pose", pose, pose_from)
-    fs = number("scenario", "sample_rate_hz", sample_rate_hz)
+    fs = finite_number("sample_rate_hz", sample_rate_hz)
     setup = {"preset": "largest_spacing"} if setup is None else setup
     require_explicit_geometry(the_pose, setup, sensors)
     if isinstance(setup, dict) and "preset" in setup:  # the preset's coils sit around the probe
         setup = {"probe_position_m": list(the_pose.magnet_position_m), **setup}
     return Scenario(
         probe=scene_probes[0].probe if scene_probes else probe_from(probe),
-        setup=setup_from_dict(setup),
+        setup=_at("setup", setup_from_dict, setup),
         environment=section("environment", environment, environment_from),
         pose=the_pose,
         sensors=section("sensors", sensors, functools.partial(sensors_from, the_pose)),
@@ -219,6 +227,6 @@ def _scenario_from_sections(
         seed=seed,
         name=str(name),
         description=str(description),
-        supply=None if supply is None else supply_from_dict(supply),
+        supply=None if supply is None else _at("supply", supply_from_dict, supply),
         probes=scene_probes,
     )

@@ -3,7 +3,9 @@
 A scenario's mapping is deep-merged over the one it ``extends:`` (a shipped name or a YAML path,
 itself possibly extending another). Each section is built by a function whose signature is
 the section's YAML keys (checked by :func:`mows.physics.schema.check_keys`), and the inverse
-for the sections written back to YAML. :mod:`mows.sim.scenario` assembles the sections.
+for the sections written back to YAML. :mod:`mows.sim.scenario` assembles the sections. A
+refusal names its key path in the scenario (``probes[1].pose.magnet_position_m = …``,
+:func:`mows.physics.schema.at`).
 """
 
 from __future__ import annotations
@@ -14,15 +16,14 @@ import pathlib
 from typing import Any
 
 import numpy as np
-import yaml
 
 from mows.physics.field import source_from_dict
 from mows.physics.fluxgate import FL1_RANGE_T, FL1_RESOLUTION_T, Fluxgate, FluxgatePair, NoiseModel
 from mows.physics.multitone import MAX_PROBES
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.probe import PAPER_PROBE, Probe
-from mows.physics.schema import check_keys, vector3
-from mows.sim.sections import Environment, Excitation, SceneProbe, Sensors, floats, number
+from mows.physics.schema import at, check_keys, finite_number, load_yaml, refused, vector3
+from mows.sim.sections import Environment, Excitation, SceneProbe, Sensors, floats
 
 SCENARIO_DIR = pathlib.Path(__file__).with_name("scenarios")
 BASE_SCENARIO = "base"  # what the shipped scenes share; not a scene of its own
@@ -54,8 +55,8 @@ def with_bases(data, base_dir, chain: tuple = ()) -> dict:
         return data
     path = _base_path(data.pop("extends"), base_dir)
     if path in chain:
-        raise ValueError("scenario: extends forms a cycle: " + " → ".join(p.name for p in (*chain, path)))
-    base = with_bases(yaml.safe_load(path.read_text()), path.parent, (*chain, path))
+        raise ValueError("extends forms a cycle: " + " → ".join(p.name for p in (*chain, path)))
+    base = load_yaml(path, "scenario", lambda given: with_bases(given, path.parent, (*chain, path)))
     return _deep_merge(base, data)
 
 
@@ -69,13 +70,15 @@ def _relative_probe_file(value, base_dir):
 def _base_path(name, base_dir) -> pathlib.Path:
     """The file of ``extends: name``: a YAML path (relative to ``base_dir``) or a shipped name."""
     if not isinstance(name, str):
-        raise ValueError(f"scenario: extends = {name!r} must be a scenario name or a YAML file path")
+        raise refused("extends", name, "must be a scenario name or a YAML file path")
     is_file = pathlib.Path(name).suffix in (".yaml", ".yml")
     path = pathlib.Path(base_dir or ".") / name if is_file else SCENARIO_DIR / f"{name}.yaml"
     if not path.is_file():
-        raise ValueError(
-            f"scenario: extends = {name!r} is neither a YAML file (looked for {path}) nor one of "
-            f"the shipped scenarios {[BASE_SCENARIO, *shipped_scenarios()]}"
+        raise refused(
+            "extends",
+            name,
+            f"is neither a YAML file (looked for {path}) nor one of the shipped scenarios "
+            f"{[BASE_SCENARIO, *shipped_scenarios()]}",
         )
     return path.resolve()
 
@@ -111,53 +114,59 @@ def require_explicit_geometry(pose: Pose, setup, sensors) -> None:
         )
 
 
-def section(name, data, builder):
-    """``builder(**data)`` after checking the keys against its signature; {} if absent."""
-    data = {} if data is None else data
-    if not isinstance(data, dict):
-        raise ValueError(f"scenario section {name!r} must be a mapping, got {data!r}")
-    check_keys(f"scenario section {name!r}", data, builder)
-    return builder(**data)
+def section(name: str | int, data, builder):
+    """``builder(**data)`` after checking the keys against its signature; {} if absent. A
+    refusal inside is at ``name`` (:func:`mows.physics.schema.at`)."""
+    with at(name):
+        data = {} if data is None else data
+        if not isinstance(data, dict):
+            raise refused("", data, "must be a mapping")
+        check_keys("", data, builder)
+        return builder(**data)
 
 
 def probe_from(value) -> Probe:
-    """``paper``, a probe YAML file or an inline mapping of constants."""
-    if isinstance(value, dict):
-        return Probe.from_dict(value)
-    if value == PAPER_PROBE_NAME:
-        return PAPER_PROBE
-    if isinstance(value, str):
-        path = pathlib.Path(value)
-        if not path.is_file():
-            raise ValueError(
-                f"scenario section 'probe': {value!r} is neither {PAPER_PROBE_NAME!r} nor a probe "
-                f"file (looked for {path})"
-            )
-        return Probe.from_yaml(path)
-    raise ValueError(f"scenario section 'probe' must be {PAPER_PROBE_NAME!r}, a file path or a mapping, got {value!r}")
+    """The ``probe`` section: ``paper``, a probe YAML file or an inline mapping of constants."""
+    with at("probe"):
+        if isinstance(value, dict):
+            return Probe.from_dict(value)
+        if value == PAPER_PROBE_NAME:
+            return PAPER_PROBE
+        if isinstance(value, str):
+            path = pathlib.Path(value)
+            if not path.is_file():
+                raise refused("", value, f"is neither {PAPER_PROBE_NAME!r} nor a probe file (looked for {path})")
+            return Probe.from_yaml(path)
+        raise refused("", value, f"must be {PAPER_PROBE_NAME!r}, a file path or a mapping")
 
 
 def probes_from(entries) -> tuple[SceneProbe, ...]:
     """The ``probes:`` list of a scene with several probes: each entry a mapping of ``probe``
     (as the ``probe`` section), ``pose`` (as the ``pose`` section) and ``stage`` (own | shared)."""
     if not isinstance(entries, list) or not 1 <= len(entries) <= MAX_PROBES:
-        raise ValueError(f"scenario: probes must be a list of 1 to {MAX_PROBES} probes, got {entries!r}")
-    return tuple(section(f"probes[{k}]", entry, _scene_probe) for k, entry in enumerate(entries))
+        raise refused("probes", entries, f"must be a list of 1 to {MAX_PROBES} probes")
+    with at("probes"):
+        return tuple(section(k, entry, _scene_probe) for k, entry in enumerate(entries))
 
 
 def _scene_probe(probe=PAPER_PROBE_NAME, pose=None, stage="own") -> SceneProbe:
-    return SceneProbe(probe_from(probe), section("pose", pose, pose_from), str(stage))
+    return SceneProbe(probe_from(probe), section("pose", pose, pose_from), stage)
 
 
 def environment_from(
     sources=(), temperature_k=Environment.temperature_k, temperature_rate_k_per_s=Environment.temperature_rate_k_per_s
 ):
     if not isinstance(sources, (list, tuple)):
-        raise ValueError(f"scenario section 'environment': sources must be a list of field sources, got {sources!r}")
+        raise refused("sources", sources, "must be a list of field sources")
+    with at("sources"):
+        built = []
+        for k, source in enumerate(sources):
+            with at(k):
+                built.append(source_from_dict(source))
     return Environment(
-        tuple(source_from_dict(s) for s in sources),
-        number("environment", "temperature_k", temperature_k),
-        number("environment", "temperature_rate_k_per_s", temperature_rate_k_per_s),
+        tuple(built),
+        finite_number("temperature_k", temperature_k),
+        finite_number("temperature_rate_k_per_s", temperature_rate_k_per_s),
     )
 
 
@@ -171,25 +180,25 @@ def pose_from(
     tilt_axis_deg=0.0,
 ) -> Pose:
     place: dict[str, Any] = {
-        "magnet_position_m": tuple(floats(vector3("pose: magnet_position_m", magnet_position_m))),
-        "theta0_rad": math.radians(number("pose", "theta0_deg", theta0_deg)),
+        "magnet_position_m": tuple(floats(vector3("magnet_position_m", magnet_position_m))),
+        "theta0_rad": math.radians(finite_number("theta0_deg", theta0_deg)),
     }
     plane: dict[str, Any] = {
-        "plane_e1": tuple(floats(vector3("pose: plane_e1", plane_e1))),
-        "plane_e2": tuple(floats(vector3("pose: plane_e2", plane_e2))),
+        "plane_e1": tuple(floats(vector3("plane_e1", plane_e1))),
+        "plane_e2": tuple(floats(vector3("plane_e2", plane_e2))),
     }
     if tilt_deg is None:
         gravity = (0.0, 0.0, -STANDARD_GRAVITY_M_PER_S2) if gravity_m_per_s2 is None else gravity_m_per_s2
-        return Pose(gravity_m_per_s2=tuple(floats(vector3("pose: gravity_m_per_s2", gravity))), **place, **plane)
+        return Pose(gravity_m_per_s2=tuple(floats(vector3("gravity_m_per_s2", gravity))), **place, **plane)
     if gravity_m_per_s2 is not None or plane != {"plane_e1": (1.0, 0.0, 0.0), "plane_e2": (0.0, 1.0, 0.0)}:
         raise ValueError(
-            "scenario section 'pose': tilt_deg describes the x–y plane tilted under gravity; "
+            "tilt_deg describes the x–y plane tilted under gravity; "
             "give either tilt_deg (and tilt_axis_deg) or gravity_m_per_s2 with plane_e1/plane_e2"
         )
-    tilt = number("pose", "tilt_deg", tilt_deg)
+    tilt = finite_number("tilt_deg", tilt_deg)
     if not -90.0 <= tilt <= 90.0:
-        raise ValueError(f"scenario section 'pose': tilt_deg = {tilt} must be in [-90, 90]")
-    return Pose.tilted(math.radians(tilt), math.radians(number("pose", "tilt_axis_deg", tilt_axis_deg)), **place)
+        raise refused("tilt_deg", tilt, "must be in [-90, 90]")
+    return Pose.tilted(math.radians(tilt), math.radians(finite_number("tilt_axis_deg", tilt_axis_deg)), **place)
 
 
 def pose_to_dict(pose: Pose) -> dict:
@@ -214,13 +223,14 @@ def sensors_from(
     if positions_m is None:
         positions = FluxgatePair.paper(pose.magnet_position_m).positions_m
     else:
-        positions = np.asarray(positions_m, dtype=float)
+        listed = isinstance(positions_m, (list, tuple, np.ndarray))
+        positions = np.array([vector3("positions_m", p) for p in positions_m] if listed else [])
         if positions.shape != (2, 3):
-            raise ValueError(f"scenario section 'sensors': positions_m must be two 3-vectors, got {positions_m!r}")
+            raise refused("positions_m", positions_m, "must be two 3-vectors")
     if not isinstance(null_offsets, bool):
-        raise ValueError(f"scenario section 'sensors': null_offsets must be true or false, got {null_offsets!r}")
+        raise refused("null_offsets", null_offsets, "must be true or false")
     sensors = [
-        Fluxgate(p, axis, number("sensors", "range_t", range_t), number("sensors", "resolution_t", resolution_t))
+        Fluxgate(p, axis, finite_number("range_t", range_t), finite_number("resolution_t", resolution_t))
         for p in positions
     ]
     return Sensors(FluxgatePair(tuple(sensors)), null_offsets)
@@ -241,7 +251,7 @@ def numbers_into(cls):
     """A builder that converts every value to float before calling ``cls`` (same keys)."""
 
     def build(**values):
-        return cls(**{k: number(cls.__name__.lower(), k, v) for k, v in values.items()})
+        return cls(**{k: finite_number(k, v) for k, v in values.items()})
 
     build.__signature__ = inspect.signature(cls)
     return build
@@ -258,8 +268,8 @@ def excitation_from(
     gap_s=Excitation.gap_s,
 ) -> Excitation:
     values = {
-        k: number("excitation", k, v)
+        k: finite_number(k, v)
         for k, v in dict(amplitude_a=amplitude_a, excite_s=excite_s, ringdown_s=ringdown_s, gap_s=gap_s).items()
     }
-    frequency = None if frequency_hz is None else number("excitation", "frequency_hz", frequency_hz)
+    frequency = None if frequency_hz is None else finite_number("frequency_hz", frequency_hz)
     return Excitation(frequency_hz=frequency, **values)

@@ -1,6 +1,6 @@
 """The scenario's own sections (those without a dataclass elsewhere in mows.physics): the
 environment, the sensors, the default excitation, the housing stop and the integrator, each
-checking its ranges (ValueError naming the section and key). :class:`mows.sim.scenario.Scenario`
+checking its ranges (ValueError naming the key and the value). :class:`mows.sim.scenario.Scenario`
 holds them; :mod:`mows.sim.scenario_yaml` builds them from YAML.
 """
 
@@ -16,25 +16,20 @@ from mows.physics.field import FieldSource, SumSource
 from mows.physics.fluxgate import FluxgatePair
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE, Probe
+from mows.physics.schema import is_number, refused
 
 #: How a probe of a scene with several is turned: by a stage of its own, or by the one stage
 #: all "shared" probes sit on (each keeps its own θ0 on it, turned by the same angle).
 STAGES = ("own", "shared")
 
 
-def number(section: str, key: str, value) -> float:
-    """``value`` as a float; ValueError naming the section and key if it is not a number."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"scenario section {section!r}: {key} = {value!r} must be a number")
-    return float(value)
-
-
-def check_range(section, key, value, low, high, low_open=False):
-    """ValueError naming the section and key unless low ≤ value ≤ high (low < value if ``low_open``)."""
+def check_range(key, value, low, high, low_open=False):
+    """:class:`mows.physics.schema.SchemaError` naming the key and value unless low ≤ value ≤ high
+    (low < value if ``low_open``); the section's name is added on the way out of its YAML."""
     ok = math.isfinite(value) and (low < value if low_open else low <= value) and value <= high
     if not ok:
         bracket = "(" if low_open else "["
-        raise ValueError(f"{section}: {key} = {value!r} is out of range {bracket}{low:g}, {high:g}]")
+        raise refused(key, value, f"is out of range {bracket}{low:g}, {high:g}]")
 
 
 def floats(vector) -> list:
@@ -57,8 +52,8 @@ class Environment:
         object.__setattr__(self, "sources", tuple(self.sources))
         if not all(isinstance(s, FieldSource) for s in self.sources):
             raise ValueError(f"environment sources must be field sources, got {self.sources!r}")
-        check_range("environment", "temperature_k", self.temperature_k, 0.0, math.inf, low_open=True)
-        check_range("environment", "temperature_rate_k_per_s", self.temperature_rate_k_per_s, -1.0, 1.0)
+        check_range("temperature_k", self.temperature_k, 0.0, math.inf, low_open=True)
+        check_range("temperature_rate_k_per_s", self.temperature_rate_k_per_s, -1.0, 1.0)
 
     @property
     def source(self) -> FieldSource:
@@ -96,12 +91,12 @@ class Excitation:
     gap_s: float = 10.0
 
     def __post_init__(self):
-        check_range("excitation", "amplitude_a", self.amplitude_a, 0.0, math.inf)
+        check_range("amplitude_a", self.amplitude_a, 0.0, math.inf)
         if self.frequency_hz is not None:
-            check_range("excitation", "frequency_hz", self.frequency_hz, 0.0, math.inf, low_open=True)
-        check_range("excitation", "excite_s", self.excite_s, 0.0, 3600.0)
-        check_range("excitation", "ringdown_s", self.ringdown_s, 0.0, 3600.0, low_open=True)
-        check_range("excitation", "gap_s", self.gap_s, 0.0, 3600.0)
+            check_range("frequency_hz", self.frequency_hz, 0.0, math.inf, low_open=True)
+        check_range("excite_s", self.excite_s, 0.0, 3600.0)
+        check_range("ringdown_s", self.ringdown_s, 0.0, 3600.0, low_open=True)
+        check_range("gap_s", self.gap_s, 0.0, 3600.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,7 +110,7 @@ class SceneProbe:
 
     def __post_init__(self):
         if self.stage not in STAGES:
-            raise ValueError(f"probes: stage = {self.stage!r} must be one of {STAGES}")
+            raise refused("stage", self.stage, f"must be one of {STAGES}")
 
     def placed(self, theta0_rad: float | None = None) -> PlacedProbe:
         """The probe at its pose, turned to ``theta0_rad`` (default: its home orientation)."""
@@ -135,8 +130,8 @@ class Housing:
     restitution: float = 0.5
 
     def __post_init__(self):
-        check_range("housing", "stiffness_ratio", self.stiffness_ratio, 10.0, 1e5)
-        check_range("housing", "restitution", self.restitution, 0.0, 1.0, low_open=True)
+        check_range("stiffness_ratio", self.stiffness_ratio, 10.0, 1e5)
+        check_range("restitution", self.restitution, 0.0, 1.0, low_open=True)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -149,5 +144,5 @@ class Integrator:
     def __post_init__(self):
         for name in ("substeps", "contact_substeps"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, np.integer)) and 1 <= value <= 1000):
-                raise ValueError(f"integrator: {name} = {value!r} must be an integer in [1, 1000]")
+            if not (is_number(value) and isinstance(value, (int, np.integer)) and 1 <= value <= 1000):
+                raise refused(name, value, "must be an integer in [1, 1000]")

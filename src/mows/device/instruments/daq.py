@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from mows.physics.coils import CurrentCap
-from mows.physics.schema import build_from_yaml, positive, typed
+from mows.physics.schema import at, load_yaml, positive, refused, typed
 
 HARDWARE_DIR = pathlib.Path(__file__).parent / "hardware"
 PAPER_DEVICE_FILE = HARDWARE_DIR / "ni_pcie6363.yaml"
@@ -49,12 +49,10 @@ class AnalogInput:
     terminal_config: str = "DIFF"
 
     def __post_init__(self):
-        positive(f"{self.physical_channel}: sensitivity_v_per_t", self.sensitivity_v_per_t)
-        positive(f"{self.physical_channel}: range_v", self.range_v)
+        positive("sensitivity_v_per_t", self.sensitivity_v_per_t)
+        positive("range_v", self.range_v)
         if self.terminal_config not in TERMINAL_CONFIGS:
-            raise ValueError(
-                f"{self.physical_channel}: terminal_config {self.terminal_config!r} is not one of {TERMINAL_CONFIGS}"
-            )
+            raise refused("terminal_config", self.terminal_config, f"is not one of {TERMINAL_CONFIGS}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,7 +63,7 @@ class AnalogOutput:
     range_v: float = 10.0
 
     def __post_init__(self):
-        positive(f"{self.physical_channel}: range_v", self.range_v)
+        positive("range_v", self.range_v)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,7 +90,7 @@ class DaqDevice:
                 f"got {len(self.inputs)} and {len(self.outputs)}"
             )
         for name in ("amplifier_v_per_a", "sample_rate_hz", "block_s", "output_lead_s", "read_timeout_s", "watchdog_s"):
-            positive(f"{self.name}: {name}", getattr(self, name))
+            positive(name, getattr(self, name))
         CurrentCap(self.current_cap_a)
         if self.output_lead_s <= self.block_s:
             raise ValueError(
@@ -106,6 +104,8 @@ class DaqDevice:
                     f"{self.current_cap_a * self.amplifier_v_per_a:g} V exceeds {output.physical_channel}'s "
                     f"range of ±{output.range_v:g} V"
                 )
+        _own_channels("inputs", [i.physical_channel for i in self.inputs], "fluxgate")
+        _own_channels("outputs", [o.physical_channel for o in self.outputs], "coil's amplifier")
         if len({i.physical_channel.split("/")[0] for i in self.inputs}) != 1:
             raise ValueError(f"{self.name}: both inputs must be on one device (one task, one start trigger)")
 
@@ -147,24 +147,41 @@ class DaqDevice:
         return (volts / sensitivity).T, (np.abs(volts) >= limit).T
 
 
+def _own_channels(key: str, channels: list[str], what: str) -> None:
+    """Refuse two channels wired to one terminal (NI's names ignore case): the second one's
+    ``physical_channel`` names the first."""
+    seen: dict[str, int] = {}
+    for k, channel in enumerate(channels):
+        first = seen.setdefault(channel.strip().lower(), k)
+        if first != k:
+            own = f"is {key}[{first}]'s too: each {what} needs a channel of its own"
+            raise refused(f"{key}[{k}].physical_channel", channel, own)
+
+
 def _lsb_v(range_v: float) -> float:
     return 2.0 * range_v / 2**ADC_BITS
 
 
 def load_daq_device(path=PAPER_DEVICE_FILE) -> DaqDevice:
-    """The device YAML at ``path`` (docs/hardware.md); ValueError naming the file and the key."""
-    return build_from_yaml(
-        path, "device", DaqDevice, inputs=_channels("input", AnalogInput), outputs=_channels("output", AnalogOutput)
+    """The device YAML at ``path`` (docs/hardware.md); ValueError naming the file, the key and the value."""
+    return load_yaml(
+        path,
+        "device file",
+        lambda data: typed(DaqDevice, data, inputs=_channels(AnalogInput), outputs=_channels(AnalogOutput)),
     )
 
 
-def _channels(what: str, cls: type) -> Callable[[Any], tuple]:
-    """The YAML list of ``what`` channels as a tuple of ``cls``."""
+def _channels(cls: type) -> Callable[[Any], tuple]:
+    """A YAML list of channels as a tuple of ``cls``."""
 
     def channels(items: Any) -> tuple:
         if not isinstance(items, list):
-            raise ValueError(f"{what}s must be a list, got {items!r}")
-        return tuple(typed(cls, f"an {what}", item) for item in items)
+            raise refused("", items, "must be a list of channels")
+        built: list[Any] = []
+        for k, item in enumerate(items):
+            with at(k):
+                built.append(typed(cls, item))
+        return tuple(built)
 
     return channels
 

@@ -21,9 +21,11 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import math
+import string
+from typing import Any
 
 from mows.device.instruments.daq import HARDWARE_DIR
-from mows.physics.schema import build_from_yaml, typed
+from mows.physics.schema import load_yaml, positive, refused, typed
 from mows.physics.supply import SupplyLimits
 
 PAPER_SUPPLY_FILE = HARDWARE_DIR / "rs_ngm202.yaml"
@@ -60,6 +62,39 @@ class ScpiCommands:
     over_voltage_protection: str = "VOLT:PROT {:d}"
     local: str = "SYST:LOC"  # the front panel back to the operator
 
+    def __post_init__(self) -> None:
+        formats = {
+            "set_current": 1.5,
+            "set_voltage": 10.0,
+            "output": 1,
+            "select_channel": 1,
+            "master_output": 1,
+            "current_safety_limit": 1.5,
+            "voltage_safety_limit": 10.0,
+            "safety_limits": 1,
+            "over_voltage_level": 10.0,
+            "over_voltage_protection": 1,
+        }
+        required = ("set_current", "set_voltage", "output")  # the others are '' for a model without them
+        for name, sample in formats.items():
+            if name in required or getattr(self, name):
+                _check_format(name, getattr(self, name), sample)
+
+
+def _check_format(name: str, command: str, sample: float) -> None:
+    """Refuse a command that is not one value's format (``CURR {:.4f}``): no ``{}``, several,
+    a named one, or a format the value (a float, or an int for ``{:d}`` commands) cannot take.
+    Checked when the file is read, not when the first current is sent."""
+    kind = type(sample).__name__
+    expected = f"must hold one {{}} for the value, formatting a {kind} (e.g. 'CURR {{:.4f}}')"
+    try:
+        fields = [field for _, field, _, _ in string.Formatter().parse(command) if field is not None]
+        command.format(sample)
+    except (ValueError, IndexError, KeyError) as error:
+        raise refused(name, command, f"{expected}: {error}") from None
+    if fields not in ([""], ["0"]):
+        raise refused(name, command, expected)
+
 
 @dataclasses.dataclass(frozen=True)
 class ScpiSupplyConfig:
@@ -93,6 +128,10 @@ class ScpiSupplyConfig:
         object.__setattr__(
             self, "limits", SupplyLimits(self.cap_a, self.slew_a_per_s, self.resolution_a, self.polarity)
         )
+        positive("voltage_limit_v", self.voltage_limit_v)  # never sent as VOLT nan, nor as a negative limit
+        positive("timeout_s", self.timeout_s)
+        if self.channel < 1:
+            raise refused("channel", self.channel, "is not a channel number (1, 2, …)")
         if not self.model.strip():
             raise ValueError("model = '' : the supply file names the model its *IDN? must report")
         if not self.over_voltage_v > self.voltage_limit_v:
@@ -112,10 +151,12 @@ class ScpiSupplyConfig:
 
 
 def load_supply_file(path=PAPER_SUPPLY_FILE) -> ScpiSupplyConfig:
-    """The supply YAML at ``path``; ValueError naming the file and the key."""
-    return build_from_yaml(
-        path, "supply", ScpiSupplyConfig, commands=lambda given: typed(ScpiCommands, "commands", given or {})
-    )
+    """The supply YAML at ``path``; ValueError naming the file, the key and the value."""
+    return load_yaml(path, "supply file", _supply_config)
+
+
+def _supply_config(data: Any) -> ScpiSupplyConfig:
+    return typed(ScpiSupplyConfig, data, commands=lambda given: typed(ScpiCommands, given or {}))
 
 
 class SupplySchedule:

@@ -21,11 +21,10 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-import yaml
 
 from mows.lab.data.table import FIELD, GRADIENT, NO_BZ, NO_FIELD, NO_GRADIENT, MeasurementTable, TableError
 from mows.physics.field import FieldSource, source_from_dict
-from mows.physics.schema import Vector
+from mows.physics.schema import Vector, load_yaml
 from mows.sim.scenario import Scenario, load_scenario
 
 # The four ways of naming a reference (module docstring).
@@ -90,10 +89,16 @@ def reference_source(
     return reference, np.asarray(magnet_position_m, float)
 
 
-def _read(name: str | os.PathLike[str]) -> Mapping[str, Any] | Scenario:
-    """A field-source mapping from a YAML file that holds one, else the scenario so named."""
+def _read(name: str | os.PathLike[str]) -> FieldSource | Scenario:
+    """The field source of a YAML file that holds one, else the scenario so named (a YAML file or
+    a shipped scenario's name); the file read once."""
     path = pathlib.Path(name)
-    data = yaml.safe_load(path.read_text()) if path.is_file() else None
+    if not path.is_file() and path.suffix not in (".yaml", ".yml"):
+        return load_scenario(str(name))  # a shipped scenario's name
+    return load_yaml(path, "reference", lambda data: _source_or_scenario(data, path.parent))
+
+
+def _source_or_scenario(data: Any, base_dir: pathlib.Path) -> FieldSource | Scenario:
     if isinstance(data, Mapping) and "type" in data:
-        return data
-    return load_scenario(str(name))
+        return source_from_dict(dict(data))
+    return Scenario.from_dict(data, base_dir=base_dir)

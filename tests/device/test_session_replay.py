@@ -34,6 +34,7 @@ def recording(path, phases=((1, Phase.EXCITING), (2, Phase.RINGDOWN))):
             Block(
                 header(k * BLOCK),
                 k,
+                0,  # device_epoch
                 k * BLOCK,
                 RATE_HZ,
                 1e-5,
@@ -49,6 +50,7 @@ def recording(path, phases=((1, Phase.EXCITING), (2, Phase.RINGDOWN))):
             int(phase),
             phase.name,
             1,
+            0,  # device_epoch
             0,
             1,
             False,

@@ -313,7 +313,7 @@ def synthetic_bag(path, gap_after: int, gap_samples: int, rate_hz: float = RATE_
                 "/mows/raw",
                 "mows_msgs/msg/MagnetometerBlock",
                 k,
-                Block(header(index), k, index, rate_hz, 1e-5, 1e-10, channels),
+                Block(header(index), k, 0, index, rate_hz, 1e-5, 1e-10, channels),  # device_epoch 0
             )
         )
     for phase, index in [(Phase.EXCITING, 2000), (Phase.RINGDOWN, 4000)]:
@@ -322,6 +322,7 @@ def synthetic_bag(path, gap_after: int, gap_samples: int, rate_hz: float = RATE_
             int(phase),
             phase.name,
             7,
+            0,  # device_epoch
             0,
             1,
             False,

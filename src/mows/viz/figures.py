@@ -143,7 +143,7 @@ def sweep_figure(panels: Panels) -> tuple[Figure, dict[str, np.ndarray]]:
     axis.legend(fontsize=8)
     theta0_deg, drawn_shift = _xy(points.lines[0])
     (segments,) = points.lines[2]
-    ends = np.array([path.vertices[:, 1] for path in segments.get_paths()])
+    ends = np.array([np.asarray(path.vertices, float)[:, 1] for path in segments.get_paths()])
     curve_theta0_deg, curve_shift_hz = _xy(curve)
     return figure, {
         "theta0_deg": theta0_deg,

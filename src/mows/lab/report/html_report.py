@@ -380,7 +380,8 @@ def render_html(report: LabReport) -> str:
     return f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>MOWS model lab: {html.escape(table.source)}</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:auto}} td{{padding:2px 8px}}
-table{{border-collapse:collapse}} tr:nth-child(even){{background:#f2f2f2}} img,svg{{max-width:100%;height:auto}}</style></head>
+table{{border-collapse:collapse}} tr:nth-child(even){{background:#f2f2f2}}
+img,svg{{max-width:100%;height:auto}}</style></head>
 <body><h1>MOWS model lab</h1>
 <p>Table <code>{html.escape(table.source)}</code>: {report.n} rows. Base model (Eq. 6, f00 fitted):
 χ²/dof = {report.base.chi2_dof:.3f}. Final model <b>{html.escape(report.model)}</b>: χ²/dof = {report.chi2_dof:.3f}.</p>

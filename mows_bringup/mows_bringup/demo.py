@@ -13,6 +13,9 @@ decomposition, what the paper's published model would have made of the same ring
 the model lab's verdict on which physics the published model is missing. Writes the lab's
 HTML report. Node output goes to a log file so the terminal shows the measurement.
 
+``--foxglove[=PORT]`` also runs the viz node, as ``mows-graph --foxglove`` does, and prints the
+address to open in Foxglove once the node serves it (docs/visualisation.md).
+
 A scene of several probes (``--scenario three_probes``) is mapped by all of them at once
 (:mod:`mows_bringup.demo_probes`): no calibration, each probe against the truth at its magnet.
 
@@ -25,6 +28,7 @@ import argparse
 import datetime
 import math
 import pathlib
+import re
 import signal
 import sys
 import threading
@@ -51,7 +55,7 @@ from mows.sweep.record import SweepRecord
 from mows_bringup.demo_probes import MAP_FILE, PROBE_FILES, accepted, has_probes, sweep_client, write_probe_files
 from mows_bringup.demo_probes import parameters as probe_parameters
 from mows_bringup.demo_probes import run_sweep as run_probes_sweep
-from mows_bringup.graph import NODES, Graph, say
+from mows_bringup.graph import Graph, add_foxglove_option, foxglove_arguments, graph_nodes, say
 from mows_mapper.messages import sweep_point
 from mows_ros.process import EXIT_BAD_PARAMETER
 from mows_ros.qos import MAP_QOS, RESULT_QOS
@@ -59,6 +63,7 @@ from mows_ros.qos import MAP_QOS, RESULT_QOS
 DRIVER_CAP_A, DRIVER_MAX_DUTY, DRIVER_TURN_SETTLE_S = 10.0, 0.5, 0.5  # the driver's defaults
 PROBE_FILE, SCENE_FILE, PARAMETERS_FILE = "calibrated_probe.yaml", "demo_scene.yaml", "demo_parameters.yaml"
 LOG_FILE, TABLE_FILE, REPORT_FILE = "demo_nodes.log", "demo_sweep.csv", "demo_lab_report.html"
+FOXGLOVE_LINE = re.compile(r"Foxglove: open (ws://\S+)")  # what the viz node logs once it serves
 #: What a run writes into --out; each replaces the one an earlier run wrote.
 OUTPUT_FILES = (PROBE_FILE, SCENE_FILE, PARAMETERS_FILE, LOG_FILE, TABLE_FILE, REPORT_FILE, MAP_FILE, *PROBE_FILES)
 
@@ -89,6 +94,7 @@ def parse_arguments(argv):
         default="calibration",
         help="scenario whose (not the paper's) probe is calibrated first and then mapped with",
     )
+    add_foxglove_option(parser)
     args = parser.parse_args(argv)
     if args.angles < 6:
         parser.error("a sweep needs at least 6 orientations to separate field (1θ0) from gradient (2θ0)")
@@ -230,7 +236,9 @@ def run_graph(args, out: pathlib.Path, parameters: pathlib.Path, body: Callable)
     # The nodes write into the log while they run, so it cannot be renamed into place whole:
     # it is opened in place, under the same checks as every other output.
     log = open(check_output(out / LOG_FILE, inputs_of(args), force=True), "w")
-    graph = Graph(NODES, ["--params-file", str(parameters)], output=log)
+    foxglove = args.foxglove is not None
+    ros_args = ["--params-file", str(parameters), *(foxglove_arguments(args.foxglove) if foxglove else [])]
+    graph = Graph(graph_nodes(foxglove), ros_args, output=NodeLog(log))
     stopping = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stopping.set())
@@ -248,6 +256,21 @@ def run_graph(args, out: pathlib.Path, parameters: pathlib.Path, body: Callable)
     if unclean:
         say(f"nodes that did not stop cleanly: {unclean}")
     return 0 if ok and not unclean else 1
+
+
+class NodeLog:
+    """The nodes' output, into the log file; the viz node's address also said on the terminal."""
+
+    def __init__(self, log):
+        self._log = log
+
+    def write(self, text: str) -> None:
+        self._log.write(text)
+        if (found := FOXGLOVE_LINE.search(text)) is not None:
+            say(f"Foxglove: open {found.group(1)}")
+
+    def flush(self) -> None:
+        self._log.flush()
 
 
 def with_node(stopping: threading.Event, exited, body: Callable) -> bool:

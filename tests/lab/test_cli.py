@@ -56,7 +56,8 @@ def test_compare_and_report(tilted_csv, tmp_path, capsys):
     page = tmp_path / "page.html"
     assert main(["lab", "report", str(tilted_csv), "--auto", "-o", str(page), "--no-cv"]) == 0
     text = page.read_text()
-    assert text.count("data:image/png;base64,") >= 6 and "gravity" in text
+    pictures = text.count("data:image/png;base64,") + text.count("<svg")  # the residuals are inline SVG
+    assert pictures >= 6 and "<svg" in text and "gravity" in text
 
 
 @pytest.mark.parametrize(

@@ -87,6 +87,14 @@ def test_a_moment_that_changes_with_temperature_is_found_as_field_times_temperat
     assert within(term.strength, strength, term.std), (term.strength, term.std, strength)
     assert term.selection_frequency >= discovery.STABLE_FRACTION and term.cv_gain_chi2 > 0
     assert "temperature coefficient" in term.reading
+    # What its strength is fitted to (the report's picture): the residual it explains against the
+    # term beyond the model, whose weighted least-squares slope is the strength.
+    shown = term.fitted
+    weight = shown.std_hz**-2
+    slope = np.sum(weight * shown.beyond_model * shown.residual_hz) / np.sum(weight * shown.beyond_model**2)
+    assert slope == pytest.approx(term.strength, rel=1e-9)
+    np.testing.assert_array_equal(shown.std_hz, measured.f_std_hz)
+    assert "fitted" not in term.to_dict()
     # Its plugin is the moment changing with temperature, and reads the coefficient back.
     assert term.plugin_output == "moment_scale"
     assert within(term.plugin_parameter.value, MOMENT_PER_K, term.plugin_parameter.std)

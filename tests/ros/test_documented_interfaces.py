@@ -1,4 +1,5 @@
-"""docs/nodes.md lists every topic, service, action and parameter of the four nodes, and
+"""docs/nodes.md lists every topic, service, action and parameter of the five nodes (the viz
+node's Foxglove channels too), and
 docs/command_line.md's environment for running them by hand finds every interface package."""
 
 import os
@@ -7,10 +8,12 @@ from pathlib import Path
 
 import pytest
 
+from mows.viz import channels
 from mows_calibrator import node as calibrator
 from mows_driver import node as driver
 from mows_estimator import node as estimator
 from mows_mapper import node as mapper
+from mows_viz import node as viz
 
 pytestmark = pytest.mark.ros
 
@@ -40,10 +43,13 @@ INTERFACES = [
     "/calibrator/calibrate_probe",
     "/calibrator/confirm_orientation",
 ]
+FOXGLOVE_CHANNELS = channels.TOPICS
 
 
 @pytest.mark.parametrize(
-    "module", [driver, estimator, mapper, calibrator], ids=["driver", "estimator", "mapper", "calibrator"]
+    "module",
+    [driver, estimator, mapper, calibrator, viz],
+    ids=["driver", "estimator", "mapper", "calibrator", "viz"],
 )
 def test_every_parameter_is_in_the_nodes_doc(module):
     assert [spec.name for spec in module.PARAMETERS if f"`{spec.name}`" not in NODES_DOC] == []
@@ -51,6 +57,11 @@ def test_every_parameter_is_in_the_nodes_doc(module):
 
 def test_every_topic_service_and_action_is_in_the_nodes_doc():
     assert [name for name in INTERFACES if f"`{name}`" not in NODES_DOC] == []
+
+
+def test_every_foxglove_channel_of_the_viz_node_is_in_the_nodes_doc():
+    assert len(FOXGLOVE_CHANNELS) == 8
+    assert [name for name in FOXGLOVE_CHANNELS if f"`{name}`" not in NODES_DOC] == []
 
 
 def test_the_by_hand_environment_lets_the_ament_index_find_every_interface_package():

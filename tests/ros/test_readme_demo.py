@@ -2,9 +2,12 @@
 a fresh demo's output, not its numbers (they move from run to run).
 
 The demo runs once, as `make demo` runs it (`mows-demo`), with a shorter sweep (6 orientations ×
-1 ring-down) that prints the same lines. The results table (header, the five components, the
-χ²/dof line) must match line for line in its words and in each row's width, so that its columns
-line up as they do; every other line the README shows must be a kind of line the demo prints."""
+1 ring-down) that prints the same lines, and with ``--foxglove=0`` (the viz node on any free port;
+`make demo DEMO_ARGS=--foxglove`), whose address line it must print once the node serves it.
+
+The results table (header, the five components, the χ²/dof line) must match line for line in its
+words and in each row's width, so that its columns line up as they do; every other line the
+README shows must be a kind of line the demo prints."""
 
 import re
 import subprocess
@@ -48,7 +51,18 @@ def kind(line: str) -> str:
 def demo_lines(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     run = subprocess.run(
-        [sys.executable, "-m", "mows_bringup.demo", "--angles", "6", "--repeats", "1", "--out", str(out)],
+        [
+            sys.executable,
+            "-m",
+            "mows_bringup.demo",
+            "--angles",
+            "6",
+            "--repeats",
+            "1",
+            "--foxglove=0",
+            "--out",
+            str(out),
+        ],
         capture_output=True,
         text=True,
         timeout=480,
@@ -78,3 +92,21 @@ def test_the_readme_results_table_has_the_demo_s_lines_and_format(demo_lines):
 def test_every_line_the_readme_shows_is_a_line_the_demo_prints(demo_lines):
     printed = {kind(line) for line in demo_lines}
     assert [line for line in readme_demo_lines() if kind(line) not in printed] == []
+
+
+def test_the_demo_prints_the_foxglove_address_once_the_viz_node_serves_it(demo_lines):
+    addresses = [line for line in demo_lines if re.fullmatch(r"\[graph\] Foxglove: open ws://127\.0\.0\.1:\d+", line)]
+    assert len(addresses) == 1, [line for line in demo_lines if "Foxglove" in line]
+    port = int(addresses[0].rpartition(":")[2])
+    assert port > 0  # the port the server took, not the 0 asked for
+
+
+def test_the_demo_takes_foxglove_with_or_without_a_port():
+    from mows_bringup.demo import parse_arguments
+    from mows_bringup.graph import FOXGLOVE_PORT
+
+    assert parse_arguments([]).foxglove is None
+    assert parse_arguments(["--foxglove"]).foxglove == FOXGLOVE_PORT
+    assert parse_arguments(["--foxglove=0"]).foxglove == 0
+    with pytest.raises(SystemExit):
+        parse_arguments(["--foxglove=70000"])

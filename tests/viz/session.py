@@ -1,14 +1,15 @@
 """A recorded session for the viz tests: simulated cycles streamed as the driver records them
 (tests/recorded_bags.py), each fitted as the estimator fits it (its RingdownFit in the bag, at
-its window's device time), and what the graph concludes later: a sweep, a model report, the
-stage's joint state and /diagnostics."""
+its window's device time), each cycle's excitation with its coil currents, and what the graph
+concludes later: a sweep, the lab's model reports after three sweeps, the stage's joint state and
+/diagnostics."""
 
 import numpy as np
 
 from mows.device.recording import bags
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.sim.scenario import load_scenario
-from recorded_bags import STORE, header, record_cycles
+from recorded_bags import STORE, header, record_cycles, ringdown_message
 
 DEGREES = (0.0, 60.0)
 SWEEP = {  # in-plane B (T) and gradient (Gxx, Gxy, Gyy, T/m) with covariances
@@ -17,6 +18,7 @@ SWEEP = {  # in-plane B (T) and gradient (Gxx, Gxy, Gyy, T/m) with covariances
     "gradient_t_per_m": np.array([2.0e-4, 5.0e-5, -2.0e-4]),
     "gradient_covariance": np.diag([1e-12, 4e-12, 9e-12]).ravel(),
 }
+LAB_ERRORS_HZ = ((1, 0.05), (2, 0.03), (3, 0.02))  # the model reports' sweeps and cv_rms_hz
 
 
 def fit_message(fit, start_ns: int, cycle: int):
@@ -93,6 +95,15 @@ def model_report_message(seconds: float, sweep_id: int, cv_rms_hz: float):
     )
 
 
+def exciting_message(record, cycle: int):
+    """The driver's ExcitationState as ``record``'s coils start: phase EXCITING, its currents."""
+    fs = record.sample_rate_hz
+    msg = ringdown_message(record.block.samples.first_sample_index, fs, cycle, record.theta0_rad, record.frequency_hz)
+    msg.phase, msg.phase_name, msg.coils_on = 2, "EXCITING", True
+    msg.coil_current_amplitude_a = np.asarray(record.currents_a, float)
+    return msg
+
+
 def joint_state_message(seconds: float, theta0_rad: float):
     return STORE.types["sensor_msgs/msg/JointState"](
         header=header(seconds), name=["mows_stage"], position=np.array([theta0_rad]), velocity=np.zeros(0),
@@ -130,14 +141,33 @@ def recorded_session(directory):
                 joint_state_message(start_ns / 1e9, record.theta0_rad),
             )
         )
+        messages.append(
+            bags.BagMessage(
+                "/mows/excitation",
+                "mows_msgs/msg/ExcitationState",
+                round(record.block.samples.first_sample_index / record.sample_rate_hz * 1e9),
+                exciting_message(record, cycle),
+            )
+        )
         fits.append(fit)
     last = max(m.timestamp_ns for m in messages)
     conclusions = [
         ("/mows/sweep", "mows_msgs/msg/SweepDecomposition", sweep_message(last / 1e9)),
-        ("/mows/model_report", "mows_msgs/msg/ModelReport", model_report_message(last / 1e9, 1, 0.02)),
+        *(
+            ("/mows/model_report", "mows_msgs/msg/ModelReport", model_report_message(last / 1e9, sweep, cv_rms_hz))
+            for sweep, cv_rms_hz in LAB_ERRORS_HZ
+        ),
         ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", diagnostics_message(last / 1e9)),
     ]
     for offset, (topic, msgtype, msg) in enumerate(conclusions, start=1):
         messages.append(bags.BagMessage(topic, msgtype, last + offset * 1000, msg))
     messages.sort(key=lambda m: m.timestamp_ns)
     return bags.write_bag(directory / "session", messages), fits
+
+
+# The session of docs/visualisation.md's pictures: PYTHONPATH=src:tests python -m viz.session DIR
+if __name__ == "__main__":
+    import sys
+    from pathlib import Path
+
+    print(recorded_session(Path(sys.argv[1]))[0])

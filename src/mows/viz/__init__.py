@@ -16,7 +16,8 @@ the order they build on each other:
 - ``channels``: the channels' topics, schemas and bytes (Foxglove's protobuf schemas from
   ``foxglove-sdk``, JSON with a JSON schema for the plots).
 - ``recording``: a recorded bag's derived channels written into an MCAP file (``mcap``).
+- ``figures``: each panel's content drawn as a PNG (matplotlib), from the same channel content.
 
 May import: ``mows.estimate``, ``mows.device`` (the bag reader), ``mows.physics``,
-``mows.records``, and ``foxglove-sdk`` and ``mcap``; never ``rclpy``.
+``mows.records``, and ``foxglove-sdk``, ``mcap`` and ``matplotlib``; never ``rclpy``.
 """

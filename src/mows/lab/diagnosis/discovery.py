@@ -214,6 +214,19 @@ def _factor(name: str) -> Factor:
     return next((f for f in FACTORS if f.name == name), Factor(name, "extra", f"[{name}]", centred=True))
 
 
+@dataclasses.dataclass(frozen=True)
+class TermFit:
+    """What a term's strength is fitted to, row by row on the rows searched (a picture's numbers):
+    the term beyond what the model absorbs (its weighted column projected off the model's
+    Jacobian, over the row's weight w = 1/σ: in the term's unit) and the residual it explains (the
+    weighted residual less the other kept terms' fits, over w: Hz), with each row's σ (Hz). The
+    weighted least-squares slope of ``residual_hz`` on ``beyond_model`` is the term's strength."""
+
+    beyond_model: np.ndarray
+    residual_hz: np.ndarray
+    std_hz: np.ndarray
+
+
 @dataclasses.dataclass
 class DiscoveredTerm:
     """A term the residual follows beyond the catalog (module docstring)."""
@@ -233,6 +246,7 @@ class DiscoveredTerm:
     plugin_parameter: FittedParameter | None = None  # the plugin's parameter fitted on this table
     plugin_output: str = FREQUENCY  # the plugin output that writes it
     plugin_line: str = ""  # the plugin on one line, for explanations
+    fitted: TermFit | None = dataclasses.field(default=None, compare=False, repr=False)
 
     @property
     def strength_unit(self) -> str:
@@ -254,7 +268,8 @@ class DiscoveredTerm:
         )
 
     def to_dict(self) -> dict:
-        found = dataclasses.asdict(self)
+        found = dataclasses.asdict(dataclasses.replace(self, fitted=None))
+        del found["fitted"]
         found["factors"], found["aliases"] = list(self.factors), list(self.aliases)
         found["strength_unit"] = self.strength_unit
         found["plugin_parameter"] = (
@@ -748,6 +763,7 @@ class _Search:
     residual: Residual
     searched: Searched
     means: dict[str, float]
+    weight: np.ndarray  # 1/σ of the rows searched
 
 
 def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) -> Discovery:
@@ -768,7 +784,7 @@ def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) 
     searched = searchable(library(factors), fit.problem.row_weight[kept], model_basis)
     residual = Residual(fit.weighted_residual[kept], jacobian, model_basis.shape[1], cv_folds(table))
     means = factor_centres({name: table.columns[name] for name in factors if _factor(name).centred}, probe)
-    search = _Search(fit, probe, table, residual, searched, means)
+    search = _Search(fit, probe, table, residual, searched, means, fit.problem.row_weight[kept])
     groups = fit.problem.inverse[kept]
     units = groups if len(np.unique(groups)) >= MIN_UNITS else np.arange(len(table))
     resamples = RESAMPLES if plugins else SCREEN_RESAMPLES
@@ -821,7 +837,17 @@ def _term(search: _Search, passed: Refit, i: int, frequencies: np.ndarray, plugi
         parameter,
         plugin.form.output,
         plugin.line(),
+        _term_fit(search, passed, i),
     )
+
+
+def _term_fit(search: _Search, passed: Refit, i: int) -> TermFit:
+    """Term ``i`` of ``passed`` beside the residual it explains (:class:`TermFit`)."""
+    j, others = passed.chosen[i], [k for k in range(len(passed.chosen)) if k != i]
+    columns = search.searched.unit[:, [passed.chosen[k] for k in others]]
+    explained = search.residual.values - columns @ passed.coefficients[others]
+    beyond = search.searched.unit[:, j] * search.searched.length[j]
+    return TermFit(beyond / search.weight, explained / search.weight, 1.0 / search.weight)
 
 
 def _physical_plugin(search: _Search, passed: Refit, i: int, rule: Rule) -> tuple[Plugin, FittedParameter]:

@@ -1,12 +1,14 @@
-"""The lab's HTML report: one self-contained page, PNG plots embedded as base64 (matplotlib, Agg).
+"""The lab's HTML report: one self-contained page, plots by matplotlib (Agg): the residuals and the
+terms found beyond the catalog as inline SVG, the others as PNG embedded as base64.
 
 Plots: model against measurement in the style of the paper's Fig. 3 (Δf against the field
 along the probe axis) and Fig. 4 (polar plot of |Δf(θ0)| with its decomposition into the
 field part, harmonic 1, and the gradient part, harmonic 2); residuals of the base and final
 model on separate axes (each on its own scale) and the final model's pulls, against θ0 and
-against every covariate; the ranked candidates with their alias groups (exact physical aliases
-in words and numbers); the terms found beyond the catalog with the strongest one's plugin; the
-error history (χ²/dof and cross-validated rms per step). Legends
+against every covariate, first those the diagnosis names (a significant trend of the residual,
+a factor of a term found beyond the catalog); the ranked candidates with their alias groups (exact physical aliases
+in words and numbers); the terms found beyond the catalog, each beside the residual it explains,
+with the strongest one's plugin; the error history (χ²/dof and cross-validated rms per step). Legends
 sit outside the data.
 """
 
@@ -34,9 +36,23 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from mows.lab.data.table import MeasurementTable
+    from mows.lab.diagnosis.discovery import DiscoveredTerm
     from mows.lab.model.least_squares import FitResult
     from mows.lab.report.lab_report import LabReport
     from mows.physics.schema import FloatOrArray
+
+
+RASTER_ROWS = 2000  # more points than this: an SVG's markers are drawn as one image, so the page stays small
+
+
+def _svg(figure: Figure) -> str:
+    """The figure as an ``<svg>`` element to inline in the page (text as text, not as glyph paths)."""
+    buffer = io.StringIO()
+    with plt.rc_context({"svg.fonttype": "none"}):
+        figure.savefig(buffer, format="svg", bbox_inches="tight")
+    plt.close(figure)
+    text = buffer.getvalue()
+    return text[text.index("<svg") :]
 
 
 def _png(figure: Figure) -> str:
@@ -134,7 +150,17 @@ def figure_polar(report: LabReport) -> str | None:
 def _residual_panel(axis: Axes, x: np.ndarray, fit: FitResult, label: str, color: str) -> None:
     """Residuals f − model (mHz) with their σ, and the data's ±σ band (median σ)."""
     sigma = fit.table.f_std_hz * 1e3
-    axis.errorbar(x, fit.residual_hz * 1e3, sigma, fmt=".", ms=3, alpha=0.7, color=color, label=label)
+    axis.errorbar(
+        x,
+        fit.residual_hz * 1e3,
+        sigma,
+        fmt=".",
+        ms=3,
+        alpha=0.7,
+        color=color,
+        label=label,
+        rasterized=len(x) > RASTER_ROWS,
+    )
     band = float(np.median(sigma))
     axis.axhspan(-band, band, color="tab:green", alpha=0.15, label="±σ (median)")
     axis.axhline(0, color="k", lw=0.5)
@@ -156,7 +182,15 @@ def figure_residuals(report: LabReport, x: np.ndarray, xlabel: str) -> str:
     for axis, (fit, label, color) in zip(axes, fits):
         _residual_panel(axis, x, fit, label, color)
     pulls = axes[-1]
-    pulls.plot(x, report.fit.weighted_residual, ".", ms=3, color=fits[-1][2], label=f"pulls, {fits[-1][1]}")
+    pulls.plot(
+        x,
+        report.fit.weighted_residual,
+        ".",
+        ms=3,
+        color=fits[-1][2],
+        label=f"pulls, {fits[-1][1]}",
+        rasterized=len(x) > RASTER_ROWS,
+    )
     axes[0].set_title(f"final model: {report.model}" if report.effects else "", fontsize=8, loc="left")
     for level, style in ((1, "-"), (3, "--")):
         pulls.axhline(level, color="tab:green", ls=style, lw=0.8)
@@ -166,7 +200,38 @@ def figure_residuals(report: LabReport, x: np.ndarray, xlabel: str) -> str:
     pulls.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
     for axis in axes:
         axis.label_outer()
-    return _png(figure)
+    return _svg(figure)
+
+
+def named_covariates(report: LabReport) -> list[str]:
+    """The covariates the diagnosis names, in the table's order: those the residual follows
+    significantly (:class:`mows.lab.diagnosis.residual_structure.Structure`) and the factors of
+    the terms found beyond the catalog."""
+    structure = report.diagnosis.structure
+    named = {c.name for c in structure.covariates if c.p_value < structure.alpha}
+    named |= {factor for term in (report.discovery.terms if report.discovery else []) for factor in term.factors}
+    return [name for name in report.fit.table.covariates() if name in named]
+
+
+def figure_term(term: DiscoveredTerm) -> str:
+    """A term found beyond the catalog: the residual it explains against the term beyond what the
+    model absorbs (:class:`mows.lab.diagnosis.discovery.TermFit`), with its fitted strength ± σ."""
+    fitted = term.fitted
+    assert fitted is not None
+    figure, axis = plt.subplots(figsize=(6.5, 3.5))
+    many = len(fitted.beyond_model) > RASTER_ROWS
+    axis.errorbar(
+        fitted.beyond_model, fitted.residual_hz * 1e3, fitted.std_hz * 1e3, fmt=".", ms=3, alpha=0.7,
+        color="k", label="residual it explains", rasterized=many,
+    )  # fmt: skip
+    x = np.linspace(np.min(fitted.beyond_model), np.max(fitted.beyond_model), 50)
+    axis.plot(x, term.strength * x * 1e3, "-", color="tab:red", label=f"{term.strength:+.4g} {term.strength_unit}")
+    band = np.abs(term.std * x) * 1e3
+    axis.fill_between(x, (term.strength * x) * 1e3 - band, (term.strength * x) * 1e3 + band, color="tab:red", alpha=0.2)
+    axis.set(xlabel=f"{term.name} beyond the model ({term.unit})", ylabel="f − model (mHz)")
+    axis.set_title(f"{term.name}: {term.family}", fontsize=9, loc="left")
+    axis.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
+    return _svg(figure)
 
 
 def figure_candidates(report: LabReport) -> str | None:
@@ -201,6 +266,14 @@ def _img(source: str | None, alt: str) -> str:
     return f'<img src="{source}" alt="{html.escape(alt)}">' if source else ""
 
 
+def _figure(svg: str, kind: str, name: str, caption: str) -> str:
+    """An inline SVG plot, marked with what it shows (``data-covariate``, ``data-term``)."""
+    return (
+        f'<figure class="{kind}" data-{kind}="{html.escape(name)}">{svg}'
+        f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+    )
+
+
 def _rows(cells_list: Iterable[Sequence[object]]) -> str:
     return "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells) + "</tr>" for cells in cells_list)
 
@@ -230,6 +303,11 @@ def discovery_html(report: LabReport) -> str:
         if found.terms
         else ""
     )
+    fits = "".join(
+        _figure(figure_term(t), "term", t.name, f"the residual {t.name} explains, and its fit")
+        for t in found.terms
+        if t.fitted is not None
+    )
     plugin = (
         f"<p>Plugin for the strongest, <code>{html.escape(found.terms[0].effect_name)}.py</code>:</p>"
         f"<pre>{html.escape(found.terms[0].plugin)}</pre>"
@@ -238,7 +316,7 @@ def discovery_html(report: LabReport) -> str:
     )
     return (
         f"<h2>Beyond the catalog</h2><p>On {html.escape(found.on_model)}: {html.escape(found.summary)}</p>"
-        f"{table}{plugin}"
+        f"{table}{fits}{plugin}"
     )
 
 
@@ -246,10 +324,20 @@ def render_html(report: LabReport) -> str:
     """The report page as a string."""
     table = report.fit.table
     covariates = table.covariates()
-    residual_plots = [_img(figure_residuals(report, np.degrees(table.theta0_rad), "θ0 (deg)"), "residual vs θ0")]
-    residual_plots += [
-        _img(figure_residuals(report, values, name), f"residual vs {name}") for name, values in covariates.items()
+    named = named_covariates(report)
+    residual_plots = [
+        _figure(figure_residuals(report, np.degrees(table.theta0_rad), "θ0 (deg)"), "covariate", "θ0", "residual vs θ0")
     ]
+    residual_plots += [
+        _figure(
+            figure_residuals(report, covariates[name], name),
+            "covariate",
+            name,
+            f"residual vs {name}" + (" (named by the diagnosis)" if name in named else ""),
+        )
+        for name in named + [name for name in covariates if name not in named]
+    ]
+    named_line = f"<p>The diagnosis names {html.escape(', '.join(named))}: plotted first.</p>" if named else ""
     candidates = _rows(
         [
             (
@@ -292,7 +380,8 @@ def render_html(report: LabReport) -> str:
     return f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>MOWS model lab: {html.escape(table.source)}</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:auto}} td{{padding:2px 8px}}
-table{{border-collapse:collapse}} tr:nth-child(even){{background:#f2f2f2}} img{{max-width:100%}}</style></head>
+table{{border-collapse:collapse}} tr:nth-child(even){{background:#f2f2f2}}
+img,svg{{max-width:100%;height:auto}}</style></head>
 <body><h1>MOWS model lab</h1>
 <p>Table <code>{html.escape(table.source)}</code>: {report.n} rows. Base model (Eq. 6, f00 fitted):
 χ²/dof = {report.base.chi2_dof:.3f}. Final model <b>{html.escape(report.model)}</b>: χ²/dof = {report.chi2_dof:.3f}.</p>
@@ -303,7 +392,7 @@ table{{border-collapse:collapse}} tr:nth-child(even){{background:#f2f2f2}} img{{
 <p>Effects with a physical value: their free fit with the rest of the model against it:</p>
 <table><tr><th>effect</th><th>in the model</th><th>free fit</th><th>physical value off by (σ)</th></tr>
 {checks}</table>
-<h2>Residuals</h2><p>{html.escape(report.structure)}</p>{"".join(residual_plots)}
+<h2>Residuals</h2><p>{html.escape(report.structure)}</p>{named_line}{"".join(residual_plots)}
 <h2>Candidate effects</h2>{_img(figure_candidates(report), "candidates")}
 <table><tr><th>rank</th><th>effect</th><th>ΔBIC</th><th>p</th><th>χ²/dof after</th><th>group</th>
 <th>parameters (free fit)</th></tr>{candidates}</table><ul>{groups}</ul>

@@ -42,7 +42,6 @@ from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit
 from rclpy.signals import SignalHandlerOptions
 
-from mows.cli.calibrate import compare_with_truth, simulate_calibration
 from mows.estimate.calibration.fit import KnownConstants
 from mows.estimate.calibration.fit import calibrate_probe as fit_constants
 from mows.lab import analyse, from_sweep, reference_at, write_report
@@ -50,6 +49,7 @@ from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import OutputRefused, check_output, check_outputs, writing
 from mows.sim.scenario import load_scenario, scenario_file
 from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
+from mows.sweep.calibration.simulated import compare_with_truth, simulate_calibration
 from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
 from mows.sweep.record import SweepRecord
 from mows_bringup.demo_probes import MAP_FILE, PROBE_FILES, accepted, has_probes, sweep_client, write_probe_files

@@ -24,6 +24,7 @@ import dataclasses
 
 from rcl_interfaces.msg import SetParametersResult
 
+from mows.device.backends.factory import make_backend
 from mows.device.stream.session import DeviceSession
 from mows.physics.coils import CurrentCap
 from mows.precompile import precompile
@@ -31,9 +32,9 @@ from mows_driver.health import StreamHealth
 from mows_driver.outputs import DriverOutputs
 from mows_driver.parameters import (
     PARAMETERS,
+    backend_settings,
     current_problem,
     cycle_settings,
-    make_backend,
     session_config,
     settings_problem,
     tracking_changed,
@@ -77,7 +78,7 @@ class DriverNode(MowsNode):
         # The cycle fits its tuning ring-downs and the sim backend integrates: compile both (or
         # load them from numba's cache) now, not while the device streams.
         self.get_logger().info(f"numba kernels ready in {precompile(simulator=values['backend'] == 'sim'):.1f} s")
-        backend = make_backend(values, cap)  # a ValueError or OSError refuses, with its reason
+        backend = make_backend(backend_settings(values), cap)  # a ValueError or OSError refuses, with its reason
         try:
             self.outputs.record(values["record_path"])
         except BaseException:

@@ -1,24 +1,20 @@
-"""The driver's parameter table, the checks across its parameters, and the cycle settings and
-device backend it makes of them."""
+"""The driver's parameter table, the checks across its parameters, and the core's settings it
+makes of them: the cycle's, the device backend's (:class:`mows.device.backends.factory.BackendSettings`)
+and tracking's."""
 
 import dataclasses
 import math
 
-from mows.device.backends.bag_backend import BagBackend
-from mows.device.backends.daqmx_backend import open_daqmx
-from mows.device.backends.serial_backend import SerialBackend
-from mows.device.backends.sim_backend import scene_backend
+from mows.device.backends.factory import BackendSettings
 from mows.device.cycle.phases import CycleSettings
 from mows.device.cycle.tracking import TrackingSettings
-from mows.device.instruments.daq import PAPER_DEVICE_FILE, load_daq_device
-from mows.device.instruments.scpi import PAPER_SUPPLY_FILE, load_supply_file, open_scpi_supply
-from mows.device.serial.link import DEFAULT_BAUD, SerialLink
+from mows.device.serial.link import DEFAULT_BAUD
 from mows.device.stream.session import SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.physics.probe import PAPER_PROBE
-from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
-from mows.sweep.fast_cycle import tracking_plan
+from mows.sim.scenario import DEFAULT_SCENARIO
+from mows.sweep import fast_cycle
 from mows_ros.params import ParamSpec, spec_named
 
 PARAMETERS = (
@@ -210,13 +206,13 @@ def cycle_settings(values: dict) -> CycleSettings:
     return CycleSettings(**{name: values[name] for name in CYCLE_PARAMETERS})
 
 
-def coil_setup(values: dict) -> str:
-    """The coil setup that drives the coils: ``coil_setup``, or when it is '' the scenario's."""
-    return values["coil_setup"] or load_scenario(values["scenario"]).setup.name
+def backend_settings(values: dict) -> BackendSettings:
+    """The parameters that choose and open the device, as the core's settings of the same names."""
+    return BackendSettings(**{field.name: values[field.name] for field in dataclasses.fields(BackendSettings)})
 
 
 def session_config(values: dict, cap: CurrentCap) -> SessionConfig:
-    setup = PRESETS[coil_setup(values)](current_limit_a=cap.limit_a)
+    setup = PRESETS[backend_settings(values).setup_name()](current_limit_a=cap.limit_a)
     return SessionConfig(
         values["block_duration_s"], cycle_settings(values), setup, cap, values["initial_frequency_hz"], fit_ringdown
     )
@@ -232,92 +228,27 @@ def current_problem(values: dict) -> str | None:
     )
 
 
-def make_backend(values: dict, cap: CurrentCap):
-    """The backend the parameters choose. ValueError (naming the parameter) when it cannot be made."""
-    backend = values["backend"]
-    if values["supply"] == "scpi" and backend != "nidaqmx":
-        raise ValueError(f"supply='scpi' goes with backend nidaqmx, not {backend!r} (its supply is the device's)")
-    if backend == "sim":
-        scenario = load_scenario(values["scenario"])
-        if scenario.setup.name != coil_setup(values):
-            raise ValueError(
-                f"coil_setup={values['coil_setup']!r} does not drive the coils of scenario "
-                f"{values['scenario']!r} ({scenario.setup.name})"
-            )
-        # Simulated in pieces of one block: blocks come out evenly, at the least cost per sample.
-        return scene_backend(
-            scenario,
-            cap,
-            values["theta0_rad"],
-            chunk_s=values["block_duration_s"],
-            supply_cap_a=values["supply_current_cap_a"],
-            supply_slew_a_per_s=values["supply_slew_a_per_s"],
-        )
-    if backend == "serial":
-        if not values["serial_port"]:
-            raise ValueError("serial_port='' : backend serial needs the device's port")
-        return SerialBackend(SerialLink(values["serial_port"], values["baud"]).start(), cap)
-    if backend == "nidaqmx":
-        return bench_backend(values, cap)
-    if not values["bag_path"]:
-        raise ValueError("bag_path='' : backend bag needs the bag to replay")
-    return BagBackend(values["bag_path"], values["bag_rate"])
-
-
-def bench_backend(values: dict, cap: CurrentCap):
-    """The paper's bench: the NI card of ``daq_device_file`` and, with ``supply`` scpi, the supply
-    of ``supply_file`` at ``supply_resource``. ValueError or OSError (one line) when it cannot be made."""
-    if values["supply"] == "device":
-        raise ValueError("supply='device' : the NI card has no supply of its own; use scpi or none")
-    device = load_daq_device(values["daq_device_file"] or PAPER_DEVICE_FILE)
-    supply = None
-    if values["supply"] == "scpi":
-        if not values["supply_resource"]:
-            raise ValueError("supply_resource='' : supply scpi needs the supply's VISA address")
-        config = load_supply_file(values["supply_file"] or PAPER_SUPPLY_FILE)
-        config = dataclasses.replace(config, cap_a=min(config.cap_a, values["supply_current_cap_a"]))  # its limits too
-        supply = open_scpi_supply(values["supply_resource"], config, values["visa_library"])
-    try:
-        return open_daqmx(device, cap, supply)
-    except BaseException:
-        if supply is not None:
-            supply.close()
-        raise
-
-
 def tracking_changed(names) -> bool:
     """Whether any of the parameters ``names`` is one of tracking's."""
     return any(name.startswith("tracking") for name in names)
 
 
 def tracking_settings(values: dict) -> TrackingSettings | None:
-    """Tracking's kicks and ring-downs from the physics of the scenario's device
-    (:func:`mows.sweep.fast_cycle.tracking_plan`) at the largest current the cap allows (the
-    shortest kick); None when tracking is off. ValueError when the target is out of the
-    physics' reach (the bound is in the message)."""
+    """Tracking's kicks and ring-downs at the largest current the cap allows
+    (:func:`mows.sweep.fast_cycle.tracking_settings`); None when tracking is off. ValueError when
+    the scene has several probes or the target is out of the physics' reach."""
     if not values["tracking"]:
         return None
-    scenario = load_scenario(values["scenario"])
-    if values["backend"] == "sim" and scenario.probes:
-        raise ValueError(
-            f"tracking=True: tracking follows one probe; scenario {values['scenario']!r} has {len(scenario.probes)}"
-        )
+    backend = backend_settings(values)
     current_a = values["coil_current_cap_a"]
-    setup = PRESETS[coil_setup(values)](current_limit_a=values["coil_current_cap_a"])
-    plan = tracking_plan(
-        scenario,
+    return fast_cycle.tracking_settings(
+        backend.tracking_scenario(),
         values["tracking_theta0_rad"],
         values["tracking_target_std_t"],
         current_a,
         values["tracking_noise_std_t"] or None,
-        setup,
+        PRESETS[backend.setup_name()](current_limit_a=current_a),
     )
-    if not plan.feasible:
-        raise ValueError(
-            f"tracking_target_std_t={values['tracking_target_std_t']!r}: below the Cramér–Rao bound of "
-            f"the longest ring-down ({plan.bound_std_t:.3g} T in {plan.ringdown_s:.2f} s)"
-        )
-    return TrackingSettings(values["tracking_theta0_rad"], current_a, plan.excite_s, plan.ringdown_s)
 
 
 def settings_problem(values: dict) -> str | None:

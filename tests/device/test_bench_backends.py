@@ -25,6 +25,7 @@ from nidaqmx.errors import DaqError
 
 from mows.device.backends import daqmx_backend
 from mows.device.backends.daqmx_backend import DeviceUnavailable, open_daqmx
+from mows.device.backends.factory import BackendSettings, BenchSettings, make_backend
 from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.instruments import scpi
 from mows.device.instruments.daq import CoilWaveforms, load_daq_device
@@ -678,3 +679,23 @@ def test_a_host_that_stops_reading_has_the_coils_and_the_supply_switched_off(on_
     assert not [i for i in backend.poll(0.05) if isinstance(i, LinkEvent)]  # told once
     backend.close()
     assert supply_state(supply) == (0.0, 0)
+
+
+def test_the_driver_s_supply_cap_lowers_the_supply_file_s_and_never_raises_it(installed):
+    assert BenchSettings(supply_current_cap_a=5.0).supply_config().limits.cap_a == 2.0  # the NGM202's own
+    installed(SimulatedCard(SimulatedDevice(load_scenario("calibration"))))
+    settings = BackendSettings(
+        backend="nidaqmx",
+        supply="scpi",
+        supply_resource=SIMULATED_RESOURCE,
+        visa_library=f"{SIMULATED_SUPPLY_FILE}@sim",
+        supply_current_cap_a=1.5,
+    )
+    backend = make_backend(settings, CurrentCap(10.0))
+    try:
+        assert backend.supply.config.limits.cap_a == 1.5
+        with pytest.raises(ValueError, match="exceeds the cap"):
+            backend.send(FieldCurrentCommand(1, 0, 1.8))
+    finally:
+        backend.close()
+    assert supply_state(backend.supply) == (0.0, 0)

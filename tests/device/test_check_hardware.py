@@ -78,7 +78,7 @@ def test_without_the_card_the_supply_is_switched_off_again(monkeypatch, capsys):
         raise OSError("no card")
 
     monkeypatch.setattr("mows.cli.check_hardware.open_scpi_supply", opened)
-    monkeypatch.setattr("mows.cli.check_hardware.open_daqmx", no_card)
+    monkeypatch.setattr("mows.device.backends.factory.open_daqmx", no_card)
     assert main(["check-hardware", "--supply-resource", "TCPIP0::1.2.3.4::inst0::INSTR"]) == 2
     assert "mows check-hardware: error: no card" in capsys.readouterr().err
     properties = closed[0].resource.visalib.devices[SIMULATED_RESOURCE]._properties

@@ -10,9 +10,9 @@ import pathlib
 import numpy as np
 import pytest
 
-from mows.cli.calibrate import read_points, write_points
 from mows.estimate.calibration.constants import KnownConstants
 from mows.estimate.calibration.fit import calibrate_probe
+from mows.lab.data.calibration_table import read_points, write_points
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
 from mows.sweep.calibration.schedule import scenario_wirings

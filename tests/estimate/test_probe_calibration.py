@@ -16,12 +16,12 @@ import math
 import numpy as np
 import pytest
 
-from mows.cli.calibrate import simulate_calibration
 from mows.estimate.calibration.constants import CalibrationError, CalibrationPoint, KnownConstants, Wiring
 from mows.estimate.calibration.fit import calibrate_probe
 from mows.physics.probe import PAPER_PROBE, Probe, calibration_record
 from mows.sim.scenario import load_scenario
 from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
+from mows.sweep.calibration.simulated import simulate_calibration
 
 SEEDS = 20
 PLAN = CalibrationPlan(currents_a=(0.0, 1.0, 2.0, -1.0, -2.0))

@@ -4,8 +4,8 @@ import math
 
 import numpy as np
 
-from mows.cli.calibrate import read_points, write_points
 from mows.estimate.calibration.constants import CalibrationPoint
+from mows.lab.data.calibration_table import read_points, write_points
 
 
 def test_a_swing_no_fit_measured_is_written_by_the_stop_rule_and_read_back_as_unknown(tmp_path):

@@ -1,6 +1,6 @@
 """The calibration points of a bag the driver recorded while a calibration ran (``mows calibrate BAG``).
 
-Every ring-down is fitted as the estimator node fits it (:func:`mows.cli.fit.fit_bag`, the path
+Every ring-down is fitted as the estimator node fits it (:func:`mows.lab.data.ringdowns.fit_bag`, the path
 of ``mows fit``); its supply current is the one the driver's ``mows_msgs/SupplyState`` messages
 (``/mows/supply``) say was steady from before the ring-down began until after it ended: the
 current the calibration action paired the estimator's fit with. Ring-downs during a ramp, after
@@ -15,10 +15,10 @@ from __future__ import annotations
 import bisect
 import dataclasses
 
-from mows.cli.fit import fit_bag
 from mows.device.backends.bag_backend import SUPPLY_TYPE
 from mows.device.recording.bags import BagError, read_bag
 from mows.estimate.calibration.constants import CalibrationPoint
+from mows.lab.data.ringdowns import BagFitting, fit_bag
 from mows.records import stamps
 from mows.records.stamps import NS_PER_S
 
@@ -65,14 +65,15 @@ class SupplyTimeline:
         return self.currents_a[i]
 
 
-def bag_points(path, nominal, wiring: str, args) -> tuple[list, dict, int]:
-    """The bag's ring-downs as calibration points of ``wiring``, fitted with the ``nominal``
-    probe's pickup: (points, failed fits by (current, status), ring-downs at no steady current)."""
-    timeline = SupplyTimeline.of_bag(path, args.supply_topic)
+def bag_points(path, nominal, wiring: str, supply_topic: str, how: BagFitting) -> tuple[list, dict, int]:
+    """The bag's ring-downs as calibration points of ``wiring``, fitted as ``how`` says with the
+    ``nominal`` probe's pickup, each at the current the supply states on ``supply_topic`` held
+    steady over it: (points, failed fits by (current, status), ring-downs at no steady current)."""
+    timeline = SupplyTimeline.of_bag(path, supply_topic)
     points: list[CalibrationPoint] = []
     failed: dict[tuple[float, str], int] = {}
     unknown = 0
-    for window, fit in fit_bag(path, nominal, args):
+    for window, fit in fit_bag(path, nominal, how):
         end_ns = window.start_ns + round(window.duration_s * NS_PER_S)
         current = timeline.steady_current_a(window.start_ns, end_ns)
         if current is None:

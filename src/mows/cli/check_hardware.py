@@ -13,9 +13,10 @@ Exit status 0 when every check passed, 3 when one found a problem (each line say
 from __future__ import annotations
 
 import argparse
+import dataclasses
 
 from mows.cli.inputs import finite_float, positive_float
-from mows.device.backends.daqmx_backend import open_daqmx
+from mows.device.backends.factory import BenchSettings, open_bench
 from mows.device.instruments.daq import PAPER_DEVICE_FILE, load_daq_device
 from mows.device.instruments.hardware_check import HardwareCheck
 from mows.device.instruments.scpi import (
@@ -23,7 +24,6 @@ from mows.device.instruments.scpi import (
     SIMULATED_RESOURCE,
     SIMULATED_SUPPLY_FILE,
     ScpiSupply,
-    load_supply_file,
     open_scpi_supply,
 )
 from mows.physics.coils import CurrentCap
@@ -49,28 +49,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    device = load_daq_device(args.device)
-    config = load_supply_file(args.supply_file)
+    bench = BenchSettings(args.device, args.supply_file, args.supply_resource, args.visa_library)
+    if args.simulate:
+        bench = dataclasses.replace(
+            bench, supply_resource=SIMULATED_RESOURCE, visa_library=f"{SIMULATED_SUPPLY_FILE}@sim"
+        )
+    device = load_daq_device(bench.daq_device_file)
+    config = bench.supply_config()
     cap = CurrentCap(device.current_cap_a)
     cap.check(args.coil_current_a)
     config.limits.check(args.supply_step_a)
-    supply: ScpiSupply | None
+    supply = open_scpi_supply(bench.supply_resource, config, bench.visa_library) if bench.supply_resource else None
     if args.simulate:
-        supply = open_scpi_supply(SIMULATED_RESOURCE, config, f"{SIMULATED_SUPPLY_FILE}@sim")
         with simulated_card(device, supply).installed():
             return _check(args, device, config, supply)
-    supply = open_scpi_supply(args.supply_resource, config, args.visa_library) if args.supply_resource else None
     return _check(args, device, config, supply)
 
 
 def _check(args, device, config, supply: ScpiSupply | None) -> int:
     """The check on the card of ``device`` with ``supply``; the exit status."""
-    try:
-        backend = open_daqmx(device, CurrentCap(device.current_cap_a), supply)
-    except BaseException:
-        if supply is not None:  # opened and switched on: off again before the error is told
-            supply.close()
-        raise
+    backend = open_bench(device, CurrentCap(device.current_cap_a), supply)
     try:
         print(f"card {device.device_name} ({device.name}), supply {supply.identity if supply else 'none'}")
         check = HardwareCheck(

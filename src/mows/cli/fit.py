@@ -17,18 +17,17 @@ the joint fit needs the estimator's ``probes`` list, which this command does not
 estimator's own fits in such a bag are read, each probe apart, by ``mows lab compare BAG``.
 """
 
+import dataclasses
 import math
 import os
 import sys
 
 from mows.cli.inputs import input_file, non_negative_float, renamed_option, sensor_length_m
-from mows.device.recording.bags import read_bag
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
-from mows.estimate.segments import fit_segment
-from mows.lab.chirp import recorded_segments
-from mows.lab.data.readers import RINGDOWN_TOPIC, is_bag
+from mows.estimate.ringdown import COIL_OFF_SKIP_S
+from mows.lab.data.readers import is_bag
+from mows.lab.data.ringdowns import BagFitting, fit_bag
 from mows.lab.data.table import tool_table
-from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
+from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import check_output, writing
 from mows.records.stamps import NS_PER_S
@@ -80,9 +79,10 @@ def run(args) -> int:
     if args.csv:
         check_output(args.csv, inputs, args.force)
     probe = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
+    how = bag_fitting(args)
     with input_file(args.bag):
-        fits = list(fit_bag(args.bag, probe, args))
-        check_ringdowns(args.bag, [window for window, _ in fits], args)
+        fits = list(fit_bag(args.bag, probe, how))
+        check_ringdowns(args.bag, [window for window, _ in fits], how)
     for window, fit in fits:
         print(
             f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):7.2f}°: "
@@ -101,50 +101,22 @@ def run(args) -> int:
     return 0
 
 
-def check_ringdowns(path, windows, args) -> None:
+def bag_fitting(args) -> BagFitting:
+    """The bag arguments (:func:`add_fit_arguments`, ``--tuning``) as the core's settings of the same names."""
+    return BagFitting(**{field.name: getattr(args, field.name) for field in dataclasses.fields(BagFitting)})
+
+
+def check_ringdowns(path, windows, how: BagFitting) -> None:
     """ValueError when the bag holds no ring-down to fit, or ``--coil-off-skip-s`` skips all of each."""
     if not windows:
         raise ValueError(
-            f"{path} holds no ring-down: no RINGDOWN phase on {args.excitation_topic} with samples on "
-            f"{args.raw_topic}{'' if args.tuning else ' (tuning ones skipped: --tuning)'}"
+            f"{path} holds no ring-down: no RINGDOWN phase on {how.excitation_topic} with samples on "
+            f"{how.raw_topic}{'' if how.tuning else ' (tuning ones skipped: --tuning)'}"
         )
     longest = max(window.duration_s for window in windows)
-    if args.coil_off_skip_s >= longest:
+    if how.coil_off_skip_s >= longest:
         raise ValueError(
-            f"--coil-off-skip-s {args.coil_off_skip_s:g} s skips the whole of every ring-down (longest {longest:g} s)"
-        )
-
-
-def fit_bag(path, probe: Probe, args):
-    """(window, fit) for every ring-down in the bag, in order (tuning ones with ``args.tuning``)."""
-    for segment, options in recorded_ringdowns(path, probe, args):
-        yield segment.window, fit_segment(segment, options, args.coil_off_skip_s, probe.damping_per_s)
-
-
-def recorded_ringdowns(path, probe: Probe, args):
-    """(segment, fit options) of every ring-down in the bag as the bag arguments ask: the
-    estimator node's lever-aware pickup at the window's θ0, or Eq. S11 (``--paper-model``)."""
-    check_one_probe(path, args.excitation_topic)
-    pair = FluxgatePair.paper(distance_m=args.sensor_distance_m, spacing_m=args.sensor_spacing_m)
-    for segment in recorded_segments(path, args.raw_topic, args.excitation_topic, args.tuning):
-        theta0 = segment.window.theta0_rad
-        yield segment, FitOptions() if args.paper_model else FitOptions.lever_aware(pair, probe, theta0)
-
-
-def check_one_probe(path, excitation_topic: str) -> None:
-    """ValueError when the bag's ring-downs hold several probes (module docstring): the probes
-    its excitations ring (ExcitationState ``probe_ids``) and those of its recorded fits."""
-    ids: set[int] = set()
-    for item in read_bag(path, topics=[excitation_topic, RINGDOWN_TOPIC]):
-        if item.topic == RINGDOWN_TOPIC:
-            ids.add(int(item.message.probe_id))
-        else:
-            ids.update(int(i) for i in item.message.probe_ids)
-    if len(ids) > 1:
-        raise ValueError(
-            f"{path} holds ring-downs of probes {', '.join(map(str, sorted(ids)))} sharing each window: fitting "
-            "them needs the estimator's probes list, which mows fit and mows lab ringdown do not take "
-            f"(the estimator's recorded fits are read, each probe apart, by mows lab compare {path})"
+            f"--coil-off-skip-s {how.coil_off_skip_s:g} s skips the whole of every ring-down (longest {longest:g} s)"
         )
 
 

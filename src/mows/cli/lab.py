@@ -35,17 +35,11 @@ import time
 from tqdm import tqdm
 
 from mows.cli.fit import add_bag_arguments
-from mows.cli.inputs import (
-    OneLineParser,
-    check_frequencies,
-    check_reference,
-    input_file,
-    positive_float,
-)
+from mows.cli.inputs import OneLineParser, input_file, positive_float
 from mows.cli.lab_ringdown import run_ringdown
-from mows.lab import ProbeSet, analyse, is_bag, load_table, progress, with_reference, write_report
+from mows.lab import analyse, is_bag, load_table, progress, with_reference, write_report
 from mows.lab.chirp import PIECE_PERIODS
-from mows.lab.data.table import PROBE
+from mows.lab.data.scale import check_reference, table_probes
 from mows.physics.probe import Probe
 from mows.records.files import check_output, writing
 
@@ -146,11 +140,10 @@ def _add_ringdown_arguments(sub) -> None:
     command.add_argument("--cycle", type=int, help="only this cycle id")
     command.add_argument("--piece-periods", type=positive_float, default=PIECE_PERIODS, help="periods per piece")
     command.add_argument("--json", action="store_true", help="print JSON instead of text")
+    command.set_defaults(_run=run_ringdown)  # a bag, not a table: its own command
 
 
 def run(args) -> int:
-    if args.lab_command == "ringdown":
-        return run_ringdown(args)
     default, named = probe_options(args.probe)
     inputs = [args.table, default, *named.values(), *args.plugin] + ([args.reference] if args.reference else [])
     if args.lab_command == "report":
@@ -254,7 +247,8 @@ class WorkBar:
 
 
 def _table(args, default, named):
-    """The table to analyse, with its reference, and the probe of its rows (``table_probes``);
+    """The table to analyse, with its reference, and the probe of its rows
+    (:func:`mows.lab.data.scale.table_probes`);
     what is wrong with a file is blamed on that file."""
     with input_file(args.table):
         table = load_table(
@@ -289,24 +283,6 @@ def probe_options(values: list[str]) -> tuple[str, dict[int, str]]:
             "and ID=FILE for the others"
         )
     return (bare[0] if bare else str(PAPER_PROBE_FILE)), named
-
-
-def table_probes(table, default, named):
-    """The probe of every row: ``default`` for a table without a probe column (and no file named
-    by id), else a ProbeSet; each probe's frequencies checked against its f00."""
-    if not table.has(PROBE):
-        if named:
-            raise ValueError(
-                f"--probe ID=FILE given for probe {', '.join(map(str, named))}, but the table has no "
-                f"column '{PROBE}' saying which row is which probe"
-            )
-        check_frequencies(table.columns["f_hz"], default, "f_hz")
-        return default
-    probes = ProbeSet.for_table(table, default, named)
-    index = probes.index(table)
-    for k, (i, member) in enumerate(probes.members):
-        check_frequencies(table.columns["f_hz"][index == k], member, f"f_hz of probe {i}")
-    return probes
 
 
 def _probe(source):

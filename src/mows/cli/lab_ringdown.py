@@ -14,17 +14,19 @@ import dataclasses
 import json
 import math
 
-from mows.cli.fit import recorded_ringdowns
+from mows.cli.fit import bag_fitting
 from mows.cli.inputs import InputError, input_file
 from mows.lab.chirp import ChirpError, diagnose_ringdown
+from mows.lab.data.ringdowns import recorded_ringdowns
 from mows.physics.probe import PAPER_PROBE, Probe
 
 
 def run_ringdown(args) -> int:
+    how = bag_fitting(args)
     probe = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
     results: list[tuple] = []
     with input_file(args.bag):
-        for segment, options in recorded_ringdowns(args.bag, probe, args):
+        for segment, options in recorded_ringdowns(args.bag, probe, how):
             window = segment.window
             if args.cycle is not None and window.cycle_id != args.cycle:
                 continue

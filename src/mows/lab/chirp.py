@@ -37,17 +37,12 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
-import os
-from collections.abc import Iterator
 
 import numpy as np
 from scipy import stats
 
-from mows.device.cycle.phases import Phase
-from mows.device.recording.bags import read_bag
 from mows.estimate.axis import estimate_along_axis
 from mows.estimate.ringdown import FitOptions, RingdownFit, fit_ringdown, usable_window
-from mows.estimate.segments import Segment, SegmentAssembler, block_from_message, window_from_message
 from mows.physics import ringdown_average
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import Probe
@@ -255,23 +250,3 @@ def _verdict(numbers: dict[str, float], std: np.ndarray, predicted: np.ndarray) 
         f"a constant frequency describes every piece (no chirp detected: {sizes}); the finite amplitude's chirp over "
         f"the window, {span * 1e3:.3g} mHz, is {span / float(np.median(std)):.2g} × a piece's σ"
     )
-
-
-def recorded_segments(
-    path: str | os.PathLike[str],
-    raw_topic: str = "/mows/raw",
-    excitation_topic: str = "/mows/excitation",
-    tuning: bool = False,
-) -> Iterator[Segment]:
-    """Every ring-down the driver recorded in the bag at ``path``: its announced RINGDOWN window
-    (tuning ones only with ``tuning``) cut out of the raw blocks by device stamps, as
-    :class:`mows.estimate.segments.Segment`, in order (as the estimator node assembles them)."""
-    assembler = SegmentAssembler(buffer_s=60.0)
-    for item in read_bag(path, topics=[raw_topic, excitation_topic]):
-        message = item.message
-        if item.topic == excitation_topic:
-            if message.phase != Phase.RINGDOWN or (message.tuning and not tuning):
-                continue
-            yield from assembler.announce(window_from_message(message))
-        else:
-            yield from assembler.add_block(block_from_message(message))

@@ -2,10 +2,11 @@
 gradient (``decompose``), the ring-downs of one sweep as they arrive (``record``), one or several
 probes' shares of a sweep decomposed, each with its neighbours' fields (``probes``), a sweep run
 as an I/O-free state machine (``runner``) and what the mapper publishes at its end
-(``publication``), the supply sweep that calibrates a probe and the
-calibrator's goals around it (``calibration``), the measurement cycle from the probe's physics
-and tracking plans (``fast_cycle``), and the adaptive choice of orientations and repeats for a
-target precision (``planner``).
+(``publication``), the supply sweep that calibrates a probe, the calibrator's goals around it
+and the same sweep on the simulated device (``calibration``), the measurement cycle from the
+probe's physics and tracking mode's settings (``fast_cycle``), and the adaptive choice of
+orientations and repeats for a target precision (``planner``).
 
-May import: ``mows.estimate``, ``mows.physics``, ``mows.records``.
+May import: ``mows.device`` (the cycle's and tracking's settings, the device-time loop),
+``mows.estimate``, ``mows.physics``, ``mows.records``.
 """

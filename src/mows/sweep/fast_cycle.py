@@ -48,6 +48,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from mows.device.cycle.tracking import TrackingSettings
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.ringdown.problem import cramer_rao_frequency_hz
 from mows.physics.field import MU0_OVER_4PI
@@ -279,3 +280,18 @@ def tracking_plan(
     return plan_tracking(
         scenario.probe, setup or scenario.setup, scenario.pose, std, theta0_rad, target_std_t, current_cap_a
     )
+
+
+def tracking_settings(
+    scenario, theta0_rad: float, target_std_t: float, current_a: float, noise_std_t: float | None = None, setup=None
+) -> TrackingSettings:
+    """Tracking mode's kicks and ring-downs at ``theta0_rad`` from :func:`tracking_plan`, the
+    kicks at ``current_a`` (the largest the cap allows: the shortest kick). ValueError when the
+    target is out of the physics' reach (the bound of the longest ring-down is in the message)."""
+    plan = tracking_plan(scenario, theta0_rad, target_std_t, current_a, noise_std_t, setup)
+    if not plan.feasible:
+        raise ValueError(
+            f"tracking_target_std_t={target_std_t!r}: below the Cramér–Rao bound of "
+            f"the longest ring-down ({plan.bound_std_t:.3g} T in {plan.ringdown_s:.2f} s)"
+        )
+    return TrackingSettings(theta0_rad, current_a, plan.excite_s, plan.ringdown_s)

@@ -1,0 +1,152 @@
+"""The driver's backend made from plain settings: the simulator of a scenario, a device on a
+serial port, a recorded bag, or the paper's bench (the NI card and its SCPI field supply,
+docs/hardware.md). :class:`BackendSettings` carries the driver's parameters of the same names
+(docs/nodes.md); :func:`make_backend` builds the backend they choose. The bench alone is
+:class:`BenchSettings` (``mows check-hardware`` opens it too), whose supply cap is lowered to the
+driver's ``supply_current_cap_a`` by one rule, :meth:`BenchSettings.supply_config`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import pathlib
+
+from mows.device.backends.bag_backend import BagBackend
+from mows.device.backends.daqmx_backend import DaqmxBackend, open_daqmx
+from mows.device.backends.serial_backend import SerialBackend
+from mows.device.backends.sim_backend import scene_backend
+from mows.device.instruments.daq import PAPER_DEVICE_FILE, DaqDevice, load_daq_device
+from mows.device.instruments.scpi import (
+    PAPER_SUPPLY_FILE,
+    ScpiSupply,
+    ScpiSupplyConfig,
+    load_supply_file,
+    open_scpi_supply,
+)
+from mows.device.interface import Backend
+from mows.device.serial.link import DEFAULT_BAUD, SerialLink
+from mows.physics.coils import CurrentCap
+from mows.sim.scenario import DEFAULT_SCENARIO, Scenario, load_scenario
+
+
+@dataclasses.dataclass(frozen=True)
+class BenchSettings:
+    """The paper's bench: the NI card of ``daq_device_file`` and the SCPI supply of
+    ``supply_file`` at the VISA address ``supply_resource`` ('' : no supply) through the PyVISA
+    backend ``visa_library``, its current never above ``supply_current_cap_a`` (A)."""
+
+    daq_device_file: str | pathlib.Path = PAPER_DEVICE_FILE
+    supply_file: str | pathlib.Path = PAPER_SUPPLY_FILE
+    supply_resource: str = ""
+    visa_library: str = "@py"
+    supply_current_cap_a: float = math.inf
+
+    def supply_config(self) -> ScpiSupplyConfig:
+        """The supply file, its cap lowered to ``supply_current_cap_a`` (never raised above the
+        file's). ValueError naming the file and the key."""
+        config = load_supply_file(self.supply_file)
+        return dataclasses.replace(config, cap_a=min(config.cap_a, self.supply_current_cap_a))
+
+
+def open_bench(device: DaqDevice, cap: CurrentCap, supply: ScpiSupply | None) -> DaqmxBackend:
+    """The backend on the card of ``device`` with ``supply``; a supply already opened is closed
+    (switched off) again when the card cannot be opened, before the error goes on."""
+    try:
+        return open_daqmx(device, cap, supply)
+    except BaseException:
+        if supply is not None:
+            supply.close()
+        raise
+
+
+@dataclasses.dataclass(frozen=True)
+class BackendSettings:
+    """Where the driver's blocks come from, in the driver's parameters of these names
+    (docs/nodes.md): ``backend`` sim (``scenario`` with the stage at ``theta0_rad``, simulated in
+    pieces of ``block_duration_s``; its supply capped at ``supply_current_cap_a``, slewing at
+    ``supply_slew_a_per_s``), serial (``serial_port`` at ``baud``), bag (``bag_path`` replayed at
+    ``bag_rate``) or nidaqmx (the bench: ``daq_device_file`` and, with ``supply`` scpi,
+    ``supply_file`` at ``supply_resource``; '' the paper's files). ``coil_setup``: the coils' setup,
+    '' the scenario's."""
+
+    backend: str = "sim"
+    scenario: str = DEFAULT_SCENARIO
+    coil_setup: str = ""
+    theta0_rad: float = 0.0
+    block_duration_s: float = 0.025
+    serial_port: str = ""
+    baud: int = DEFAULT_BAUD
+    bag_path: str = ""
+    bag_rate: float = 1.0
+    supply: str = "device"
+    supply_current_cap_a: float = 2.0
+    supply_slew_a_per_s: float = 2.0
+    daq_device_file: str = ""
+    supply_file: str = ""
+    supply_resource: str = ""
+    visa_library: str = "@py"
+
+    def setup_name(self) -> str:
+        """The coil setup that drives the coils: ``coil_setup``, or when it is '' the scenario's."""
+        return self.coil_setup or load_scenario(self.scenario).setup.name
+
+    def tracking_scenario(self) -> Scenario:
+        """The scenario whose device tracking mode follows; ValueError when the simulated scene
+        has several probes (tracking follows one)."""
+        scenario = load_scenario(self.scenario)
+        if self.backend == "sim" and scenario.probes:
+            raise ValueError(
+                f"tracking=True: tracking follows one probe; scenario {self.scenario!r} has {len(scenario.probes)}"
+            )
+        return scenario
+
+
+def make_backend(settings: BackendSettings, cap: CurrentCap) -> Backend:
+    """The backend ``settings`` choose, its coils under ``cap``. ValueError (naming the setting)
+    when it cannot be made, OSError (one line) when its device cannot be opened."""
+    s = settings
+    if s.supply == "scpi" and s.backend != "nidaqmx":
+        raise ValueError(f"supply='scpi' goes with backend nidaqmx, not {s.backend!r} (its supply is the device's)")
+    if s.backend == "sim":
+        scenario = load_scenario(s.scenario)
+        if s.coil_setup not in ("", scenario.setup.name):
+            raise ValueError(
+                f"coil_setup={s.coil_setup!r} does not drive the coils of scenario "
+                f"{s.scenario!r} ({scenario.setup.name})"
+            )
+        # Simulated in pieces of one block: blocks come out evenly, at the least cost per sample.
+        return scene_backend(
+            scenario,
+            cap,
+            s.theta0_rad,
+            chunk_s=s.block_duration_s,
+            supply_cap_a=s.supply_current_cap_a,
+            supply_slew_a_per_s=s.supply_slew_a_per_s,
+        )
+    if s.backend == "serial":
+        if not s.serial_port:
+            raise ValueError("serial_port='' : backend serial needs the device's port")
+        return SerialBackend(SerialLink(s.serial_port, s.baud).start(), cap)
+    if s.backend == "bag":
+        if not s.bag_path:
+            raise ValueError("bag_path='' : backend bag needs the bag to replay")
+        return BagBackend(s.bag_path, s.bag_rate)
+    if s.backend != "nidaqmx":
+        raise ValueError(f"backend={s.backend!r} is not one of sim, serial, bag, nidaqmx")
+    if s.supply == "device":
+        raise ValueError("supply='device' : the NI card has no supply of its own; use scpi or none")
+    if s.supply == "scpi" and not s.supply_resource:
+        raise ValueError("supply_resource='' : supply scpi needs the supply's VISA address")
+    bench = BenchSettings(
+        s.daq_device_file or PAPER_DEVICE_FILE,
+        s.supply_file or PAPER_SUPPLY_FILE,
+        s.supply_resource if s.supply == "scpi" else "",
+        s.visa_library,
+        s.supply_current_cap_a,
+    )
+    device = load_daq_device(bench.daq_device_file)
+    supply = None
+    if bench.supply_resource:
+        supply = open_scpi_supply(bench.supply_resource, bench.supply_config(), bench.visa_library)
+    return open_bench(device, cap, supply)

@@ -42,8 +42,8 @@ from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit
 from rclpy.signals import SignalHandlerOptions
 
-from mows.estimate.calibration.fit import KnownConstants
-from mows.estimate.calibration.fit import calibrate_probe as fit_constants
+from mows.estimate.calibration.fit_constants import KnownConstants
+from mows.estimate.calibration.fit_constants import calibrate_probe as fit_constants
 from mows.lab import analyse, from_sweep, reference_at, write_report
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import OutputRefused, check_output, check_outputs, writing

@@ -34,7 +34,7 @@ from mows_msgs.srv import SetFieldCurrent
 from rclpy.action import CancelResponse
 
 from mows.device.cycle.phases import CycleRequest
-from mows.estimate.calibration.fit import CalibrationError
+from mows.estimate.calibration.fit_constants import CalibrationError
 from mows.sim.scenario import load_scenario
 from mows.sweep.calibration.run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
 from mows_calibrator.messages import calibrated, feedback_msg, fit_of, result_msg, supply_answer

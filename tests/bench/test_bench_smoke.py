@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from mows.bench import simulator
+from mows.bench import cycle_simulation
 from mows.cli.bench import SUITES
 from mows.cli.main import main
 from mows.cli.status import EXIT_BUG
@@ -107,7 +107,7 @@ def test_a_suite_that_raises_is_a_bug_with_its_traceback(monkeypatch, capsys):
     def broken(**options):
         raise ValueError("operands could not be broadcast together")
 
-    monkeypatch.setattr(simulator, "run", broken)
+    monkeypatch.setattr(cycle_simulation, "run", broken)
     assert main(["bench", "simulator", "--quick", "--json"]) == EXIT_BUG
     error = capsys.readouterr().err
     assert "Traceback" in error and "ValueError: operands could not be broadcast" in error
@@ -115,7 +115,9 @@ def test_a_suite_that_raises_is_a_bug_with_its_traceback(monkeypatch, capsys):
 
 
 def test_a_suite_that_measured_nothing_fails_the_run(monkeypatch, capsys):
-    monkeypatch.setattr(simulator, "run", lambda **options: {"failed": "[graph] bring-up failed:\n driver refused"})
+    monkeypatch.setattr(
+        cycle_simulation, "run", lambda **options: {"failed": "[graph] bring-up failed:\n driver refused"}
+    )
     assert main(["bench", "simulator", "--quick"]) == EXIT_BUG
     assert "the simulator suite measured nothing: [graph] bring-up failed: driver refused" in capsys.readouterr().err
 

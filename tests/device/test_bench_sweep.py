@@ -31,7 +31,7 @@ from mows.device.instruments.scpi import SIMULATED_RESOURCE, SIMULATED_SUPPLY_FI
 from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.calibration.constants import CalibrationError, KnownConstants
-from mows.estimate.calibration.fit import calibrate_probe
+from mows.estimate.calibration.fit_constants import calibrate_probe
 from mows.estimate.ringdown import fit_ringdown
 from mows.lab import reference_at
 from mows.physics.coils import CurrentCap

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from mows.estimate.calibration.constants import KnownConstants
-from mows.estimate.calibration.fit import calibrate_probe
+from mows.estimate.calibration.fit_constants import calibrate_probe
 from mows.lab.data.calibration_table import read_points, write_points
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from mows.estimate.calibration.constants import CalibrationError, CalibrationPoint, KnownConstants, Wiring
-from mows.estimate.calibration.fit import calibrate_probe
+from mows.estimate.calibration.fit_constants import calibrate_probe
 from mows.physics.probe import PAPER_PROBE, Probe, calibration_record
 from mows.sim.scenario import load_scenario
 from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from mows.physics.coils import excitation_samples
-from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
+from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 
 

@@ -20,9 +20,9 @@ from mows.physics.field import MU0_OVER_4PI, UniformField
 from mows.physics.fluxgate import Fluxgate, FluxgatePair, NoiseModel
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.probe import PAPER_PROBE as P
-from mows.sim.cycle import simulate_cycle
 from mows.sim.noise import NoiseStream
 from mows.sim.scenario import Environment, Integrator, Scenario, Sensors, load_scenario
+from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 
 FS = 20_000.0

@@ -13,8 +13,8 @@ from scipy import stats
 
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.lab import reference_at
-from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
+from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.record import SweepPoint, SweepRecord
 

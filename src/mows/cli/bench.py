@@ -24,9 +24,9 @@ from mows.records.json_numbers import finite_or_none
 
 SUITES = {
     "estimator": ("mows.bench.estimator", "ring-down fit: speed against curve_fit, precision against the CRB"),
-    "simulator": ("mows.bench.simulator", "one measurement cycle, against solve_ivp"),
+    "simulator": ("mows.bench.cycle_simulation", "one measurement cycle, against solve_ivp"),
     "stream": ("mows.bench.streaming", "CPU share of one core to stream 20 kS/s × 2 channels"),
-    "lab": ("mows.bench.lab", "model lab diagnose on 1000 rows with the whole catalog"),
+    "lab": ("mows.bench.lab_diagnose", "model lab diagnose on 1000 rows with the whole catalog"),
     "lab_long": ("mows.bench.lab_long", "mows lab diagnose on a 500 000-row CSV: wall time and peak memory"),
     "latency": ("mows.bench.latency", "last sample of a ring-down to its published fit, in the node graph"),
     "latency_tracking": ("mows.bench.latency_tracking", "the same in the driver's tracking mode"),

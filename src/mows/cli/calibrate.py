@@ -18,7 +18,7 @@ Input (one of):
 The supply's field (and gradient) per ampere at the probe come from the ``supply`` section of
 ``--scenario`` (and ``--gradient-scenario``); the magnet's moment, mass and the housing stop from
 ``--probe`` (the nominal probe: data sheet and scale). The fit is
-:func:`mows.estimate.calibration.fit.calibrate_probe`; it finds each pair's polarity from the
+:func:`mows.estimate.calibration.fit_constants.calibrate_probe`; it finds each pair's polarity from the
 data (``--polarity`` states it instead) and refuses implausible constants by name.
 
 Supply currents beyond the supply's cap and frequencies far from the nominal probe's f00 are
@@ -33,10 +33,10 @@ import datetime
 import math
 
 from mows.cli.calibrate_bag import SUPPLY_TOPIC, bag_points
-from mows.cli.fit import add_fit_arguments, bag_fitting
+from mows.cli.fit_bag import add_fit_arguments, bag_fitting
 from mows.cli.inputs import finite_float, input_file, positive_int
 from mows.estimate.calibration.constants import KnownConstants
-from mows.estimate.calibration.fit import calibrate_probe
+from mows.estimate.calibration.fit_constants import calibrate_probe
 from mows.lab.data.calibration_table import read_points, write_points
 from mows.lab.data.readers import is_bag
 from mows.lab.data.scale import check_frequencies

@@ -34,7 +34,7 @@ import time
 
 from tqdm import tqdm
 
-from mows.cli.fit import add_bag_arguments
+from mows.cli.fit_bag import add_bag_arguments
 from mows.cli.inputs import OneLineParser, input_file, positive_float
 from mows.cli.lab_ringdown import run_ringdown
 from mows.lab import analyse, is_bag, load_table, progress, with_reference, write_report

@@ -14,7 +14,7 @@ import dataclasses
 import json
 import math
 
-from mows.cli.fit import bag_fitting
+from mows.cli.fit_bag import bag_fitting
 from mows.cli.inputs import InputError, input_file
 from mows.lab.chirp import ChirpError, diagnose_ringdown
 from mows.lab.data.ringdowns import recorded_ringdowns

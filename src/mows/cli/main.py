@@ -18,7 +18,7 @@ from mows.cli.status import caused_by_interrupt, interrupted, stop_on_sigterm
 
 SUBCOMMANDS = {
     "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
-    "fit": ("mows.cli.fit", "fit the ring-downs of a recorded bag (--csv: a model-lab table)"),
+    "fit": ("mows.cli.fit_bag", "fit the ring-downs of a recorded bag (--csv: a model-lab table)"),
     "bag": ("mows.cli.bag", "repair a recording that was never closed (killed): rebuild it from its intact chunks"),
     "lab": ("mows.cli.lab", "compare the frequency model with measurements, find missing effects"),
     "bench": ("mows.cli.bench", "benchmarks: estimator, simulator, stream, lab (figures, never a failure)"),

@@ -1,9 +1,9 @@
 """``mows sim``: simulate measurement cycles of a scenario and write the samples to .npz.
 
 For every θ0 and repeat: turn, let the scenario's gap pass, excite, record the ring-down
-(:func:`mows.sim.cycle.simulate_cycle`). With ``--fit`` each ring-down is fitted as the
+(:func:`mows.sim.simulated_cycle.simulate_cycle`). With ``--fit`` each ring-down is fitted as the
 estimator node does (:func:`mows.estimate.recorded_cycle.fit_cycle`: the lever-aware pickup) and compared with
-the truth from the full potential (:meth:`mows.sim.cycle.CycleRecord.ringdown_frequency_hz`).
+the truth from the full potential (:meth:`mows.sim.simulated_cycle.CycleRecord.ringdown_frequency_hz`).
 ``--out`` writes a new file (an existing one only with ``--force``, never the scenario), whole
 or not at all.
 """
@@ -19,8 +19,8 @@ import yaml
 from mows.cli.inputs import finite_float, input_file, positive_int
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.records.files import check_output, writing
-from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
+from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 
 

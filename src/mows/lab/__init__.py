@@ -32,7 +32,7 @@ and the nodes import from here.
 """
 
 from mows.lab import progress
-from mows.lab.data.probes import ProbeSet, with_probes
+from mows.lab.data.probe_rows import ProbeSet, with_probes
 from mows.lab.data.readers import from_bag, from_sweep, is_bag, load_table, read_csv
 from mows.lab.data.reference import reference_at, reference_columns, swept_reference_at, with_reference
 from mows.lab.data.table import MeasurementTable, MissingColumnError, TableError

@@ -1,4 +1,4 @@
-"""What a probe calibration takes and gives (:mod:`mows.estimate.calibration.fit`).
+"""What a probe calibration takes and gives (:mod:`mows.estimate.calibration.fit_constants`).
 
 In: the fitted ring-downs at supply currents (:class:`CalibrationPoint`), how each wiring of the
 supply makes a field at the probe (:class:`Wiring`) and what is taken as given

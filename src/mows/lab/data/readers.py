@@ -188,7 +188,7 @@ def from_bag(
     publishes one per probe, with one stamp). Each row's start swing is
     :func:`start_amplitudes_rad`, with the probe's ``theta_stop_rad`` where no fit gives the stop.
     Fits of several probes (``probe_id``, docs/multi_probe.md) give the column ``probe``
-    (:mod:`mows.lab.data.probes`), so that the lab keeps each probe's rows apart.
+    (:mod:`mows.lab.data.probe_rows`), so that the lab keeps each probe's rows apart.
     """
     path = pathlib.Path(path)
     if not path.exists():

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mows.lab.data.probes import ProbeSet
+from mows.lab.data.probe_rows import ProbeSet
 from mows.lab.data.table import FIELD, GRADIENT, PROBE, MeasurementTable, rows_text
 from mows.physics.frequency import field_spring_nm_per_rad, frequency_shift_hz, gradient_spring_nm_per_rad
 from mows.physics.probe import Probe

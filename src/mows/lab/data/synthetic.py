@@ -34,8 +34,8 @@ from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_rad
 from mows.physics.probe import Probe
 from mows.physics.schema import FloatOrArray, Vector
-from mows.sim.cycle import CycleRecord, simulate_cycle
 from mows.sim.scenario import Scenario
+from mows.sim.simulated_cycle import CycleRecord, simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -197,7 +197,7 @@ def coupled_probes_table(
     ``coupled`` is False. The frequencies are :func:`true_frequency_hz` of ring-downs from
     ``amplitude_deg`` plus noise of ``f_std_hz``. The reference is the scene alone, and the
     columns ``probe`` (its index in ``placed``), ``step``, ``sweep``, ``t_s`` and the magnet's
-    position say where and when each row was measured (:mod:`mows.lab.data.probes`).
+    position say where and when each row was measured (:mod:`mows.lab.data.probe_rows`).
     """
     steps = np.tile(np.asarray(stage_deg, float), sweeps)
     sources: list[list[FieldSource]] = [[] for _ in placed]

@@ -22,7 +22,7 @@ Columns (CSV header names, SI units but for the ``*_deg`` columns):
 ``mows_table_format``                   optional   the marker of a table the project's own tools wrote
 ``probe``, ``step``, ``magnet_x_m``,     optional   a table of several probes: each row's probe id, its
 ``magnet_y_m``, ``magnet_z_m``                     sweep step and its magnet's position
-                                                   (:mod:`mows.lab.data.probes`)
+                                                   (:mod:`mows.lab.data.probe_rows`)
 any other numeric column                optional   kept as a covariate for the diagnostics
 =====================================  =========  ===================================================
 
@@ -53,7 +53,7 @@ from mows.physics.pose import probe_axes
 REQUIRED = ("theta0_deg", "f_hz", "f_std_hz")
 FIELD = ("ref_bx_t", "ref_by_t", "ref_bz_t")
 GRADIENT = ("ref_gxx_t_per_m", "ref_gxy_t_per_m", "ref_gyy_t_per_m")
-# Columns of a table of several probes (mows.lab.data.probes).
+# Columns of a table of several probes (mows.lab.data.probe_rows).
 PROBE = "probe"
 STEP = "step"
 KNOWN = (

@@ -71,7 +71,7 @@ import scipy.stats
 
 from mows.lab import progress
 from mows.lab.data.folds import cv_folds
-from mows.lab.data.probes import ProbeSet, probe_parts
+from mows.lab.data.probe_rows import ProbeSet, probe_parts
 from mows.lab.data.table import KNOWN, LABELS, MAGNET, NEIGHBOUR, NOT_COVARIATES, MeasurementTable, stratified_rows
 from mows.lab.diagnosis.projections import RANK_RTOL, SPAN_COSINE, orthonormal_basis, project_out, unit_columns
 from mows.lab.model.configuration import Configuration
@@ -731,7 +731,7 @@ def _probe_source(probe: Probe) -> list[str]:
     lines = ["from mows.lab.diagnosis.discovery import model_covariates", "from mows.physics.probe import Probe"]
     if isinstance(probe, ProbeSet):
         members = ", ".join(f"{i}: Probe.from_dict({member.to_dict()!r})" for i, member in probe.members)
-        return lines + ["from mows.lab.data.probes import ProbeSet", "", f"PROBE = ProbeSet.of({{{members}}})"]
+        return lines + ["from mows.lab.data.probe_rows import ProbeSet", "", f"PROBE = ProbeSet.of({{{members}}})"]
     return lines + ["", f"PROBE = Probe.from_dict({probe.to_dict()!r})"]
 
 

@@ -14,7 +14,7 @@ Eq. 6, √(1 + (m·Bx' + l·m·Gx'x')/kM), with the table's reference field and 
 
 Nuisance parameter: f00 is always fitted (the zero-field frequency drifts with wear, and the
 calibration is never perfect), one per probe for a table of several probes
-(:class:`mows.lab.data.probes.ProbeSet`, whose rows are each evaluated with their own probe's
+(:class:`mows.lab.data.probe_rows.ProbeSet`, whose rows are each evaluated with their own probe's
 constants). Nothing else in the base model is free.
 
 Fit: weighted least squares (σ = ``f_std_hz``) by scipy's trust-region reflective method within
@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import scipy.optimize
 
-from mows.lab.data.probes import ProbeSet, probe_parts
+from mows.lab.data.probe_rows import ProbeSet, probe_parts
 from mows.lab.data.table import PROBE, MeasurementTable
 from mows.lab.model.configuration import (
     Configuration,

@@ -30,7 +30,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from mows.lab.data.probes import probe_parts, with_probes
+from mows.lab.data.probe_rows import probe_parts, with_probes
 from mows.lab.data.readers import from_sweep, load_table
 from mows.lab.data.reference import Reference
 from mows.lab.data.table import MeasurementTable, TableError
@@ -197,7 +197,7 @@ def analyse(
     ----------
     table : a :class:`MeasurementTable`, a CSV path or a bag (see :func:`load_table`).
     probe : :class:`mows.physics.probe.Probe`: of every row; for a table with a ``probe`` column
-        a :class:`mows.lab.data.probes.ProbeSet`, or one Probe for all its probes.
+        a :class:`mows.lab.data.probe_rows.ProbeSet`, or one Probe for all its probes.
     effects : effect names added one by one to the base model (each a step of the history);
         ``name (at physics)`` adds the effect held at its physical value.
     auto : then select effects stepwise (module docstring).

@@ -7,7 +7,7 @@ id), waits until a finished cycle's fits are in (or the caller says their time i
 then hands them to the schedule. :class:`ProbeCalibrator` takes one goal at a time, keeps each
 wiring's last complete sweep across goals (a gradient sweep of an earlier goal adds the lever
 check to a later homogeneous one) and fits the probe's constants from them
-(:func:`mows.estimate.calibration.fit.calibrate_probe`). Reading scenarios and writing the
+(:func:`mows.estimate.calibration.fit_constants.calibrate_probe`). Reading scenarios and writing the
 probe file are the caller's business.
 """
 
@@ -17,7 +17,7 @@ import math
 
 from mows.device.cycle.phases import CycleRequest
 from mows.estimate.calibration.constants import KnownConstants, ProbeCalibration
-from mows.estimate.calibration.fit import calibrate_probe
+from mows.estimate.calibration.fit_constants import calibrate_probe
 from mows.physics.probe import Probe
 from mows.sweep.calibration.schedule import (
     GRADIENT_WIRING,

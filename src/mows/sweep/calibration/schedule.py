@@ -18,7 +18,7 @@ device's answers (:meth:`on_supply`, :meth:`on_fit`, :meth:`on_cycle_done`, :met
 and the user's :meth:`cancel`, and returns a :class:`CalibrationStep` of actions (:class:`SetSupply`, a
 :class:`~mows.device.cycle.phases.CycleRequest` whose fits go to :meth:`on_fit` and whose end to
 :meth:`on_cycle_done`), feedback and, at the end, the :class:`CalibrationOutcome` with the
-calibration points for :func:`mows.estimate.calibration.fit.calibrate_probe`.
+calibration points for :func:`mows.estimate.calibration.fit_constants.calibrate_probe`.
 """
 
 from __future__ import annotations

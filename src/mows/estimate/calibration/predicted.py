@@ -4,7 +4,7 @@ Every ring-down is the harmonic-balance frequency of the full potential
 (:class:`mows.physics.potential.ArcPotential`) in the applied field and gradient plus the
 environment field, at the ring-down's decaying amplitude, averaged over amplitude nodes as a
 constant-frequency fit averages it (:mod:`mows.physics.ringdown_average`). The fit of the
-constants is :mod:`mows.estimate.calibration.fit`.
+constants is :mod:`mows.estimate.calibration.fit_constants`.
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def frequencies(
     damping: float,
 ) -> np.ndarray:
     """Ring-down frequencies of every row for the constants given (module docstring of
-    :mod:`mows.estimate.calibration.fit`)."""
+    :mod:`mows.estimate.calibration.fit_constants`)."""
     spring = f00 * known.moment_am2 / (2.0 * beta0)
     try:
         probe = Probe(

@@ -28,8 +28,8 @@ from scipy.integrate import solve_ivp
 from mows.device.cycle.tone_groups import plan_probes
 from mows.physics.coils import excitation_samples
 from mows.physics.fluxgate import NoiseModel
-from mows.sim.cycle import simulate_cycle
 from mows.sim.scenario import load_scenario
+from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 
 _FIRST_CALL = """
@@ -76,7 +76,7 @@ def solve_ivp_theta(rhs, state, first_index: int, n_samples: int, sample_rate_hz
 def solve_ivp_cycle(
     device: SimulatedDevice, amplitude_a: float, excite_s: float = 0.5, ringdown_s: float = 0.5
 ) -> np.ndarray:
-    """θ at the samples of :func:`mows.sim.cycle.simulate_cycle` at θ0 = 0 from rest, by DOP853
+    """θ at the samples of :func:`mows.sim.simulated_cycle.simulate_cycle` at θ0 = 0 from rest, by DOP853
     on the device's own equation of motion; the excitation ends where the cycle's does, at a
     drive-current peak (:func:`mows.physics.coils.excitation_samples`)."""
     fs = device.sample_rate_hz

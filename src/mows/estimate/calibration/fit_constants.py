@@ -1,7 +1,7 @@
 """Calibrating a new probe from ring-downs at known applied fields (paper Fig. 3, Eqs. 9–10).
 
 This module is the fit and the derived constants; what goes in and comes out is
-:mod:`mows.estimate.calibration.constants`, the model of one ring-down :mod:`mows.estimate.calibration.model`.
+:mod:`mows.estimate.calibration.constants`, the model of one ring-down :mod:`mows.estimate.calibration.predicted`.
 
 The paper steps a Helmholtz pair's current, reads Δf against B, takes the slope β0 and derives
 kM = f00·m/(2β0) (Eq. 9 inverted) and J = m/(8π²·β0·f00) (Eq. 10), and l = √(J/a) from the
@@ -54,7 +54,7 @@ from mows.estimate.calibration.constants import (
     ProbeCalibration,
     Wiring,
 )
-from mows.estimate.calibration.model import frequencies, inertia_from, rows_of
+from mows.estimate.calibration.predicted import frequencies, inertia_from, rows_of
 from mows.physics.probe import lever_from_inertia
 
 FIELD_UNIT_T = 1e-6  # fit units keep the normal equations well scaled: µT, Hz/mT, mm

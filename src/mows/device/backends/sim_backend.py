@@ -12,11 +12,8 @@ import time
 from mows.device.clock import DeviceClock
 from mows.device.interface import (
     Backend,
-    CoilCommand,
     Command,
     CommandResult,
-    FieldCurrentCommand,
-    MultiToneCommand,
 )
 from mows.device.protocol.payloads import DeviceInfo
 from mows.device.simulated.scheduled import ScheduledDevice
@@ -105,17 +102,7 @@ class SimBackend(Backend):
     def send(self, command: Command) -> None:
         with self._lock:
             try:
-                if isinstance(command, CoilCommand):
-                    applied = self.device.schedule_coils(
-                        command.at_sample_index, command.amplitudes_a, command.frequency_hz
-                    )
-                elif isinstance(command, MultiToneCommand):
-                    applied = self.device.schedule_tones(command.at_sample_index, command.tones, command.samples)
-                elif isinstance(command, FieldCurrentCommand):
-                    applied = self.device.schedule_field_current(command.at_sample_index, command.current_a)
-                else:
-                    applied = self.device.schedule_orientation(command.at_sample_index, command.theta0_rad)
-                self._results.append(CommandResult(command.command_id, True, applied))
+                self._results.append(CommandResult(command.command_id, True, self.device.schedule(command)))
             except RuntimeError as busy:
                 self._results.append(CommandResult(command.command_id, False, reason=str(busy)))
 

@@ -31,6 +31,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from mows.device.interface import CoilCommand, Command, FieldCurrentCommand, MultiToneCommand, OrientationCommand
 from mows.physics.coils import CurrentCap
 from mows.physics.multitone import Tone, peak_current_a
 from mows.physics.supply import SupplyLimits
@@ -127,6 +128,18 @@ class ScheduledDevice:
         if kind == "on" and any(entry[2] == "turn" for entry in self._queue):
             raise RuntimeError("coils cannot go on while a turn of the stage is waiting")
         return self._enqueue(at_index, kind, functools.partial(self._drive, amplitudes, float(frequency_hz)))
+
+    def schedule(self, command: Command) -> int:
+        """A driver's command at its sample: the index where it applies. RuntimeError while
+        the device is busy with another, ValueError for one it refuses."""
+        if isinstance(command, CoilCommand):
+            return self.schedule_coils(command.at_sample_index, command.amplitudes_a, command.frequency_hz)
+        if isinstance(command, MultiToneCommand):
+            return self.schedule_tones(command.at_sample_index, command.tones, command.samples)
+        if isinstance(command, FieldCurrentCommand):
+            return self.schedule_field_current(command.at_sample_index, command.current_a)
+        assert isinstance(command, OrientationCommand)  # the commands a driver sends
+        return self.schedule_orientation(command.at_sample_index, command.theta0_rad)
 
     def schedule_orientation(self, at_index: int, theta0_rad: float) -> int:
         """Turn the stage to ``theta0_rad`` at sample ``at_index``; returns the sample it applies at.

@@ -19,7 +19,7 @@ import numpy as np
 
 from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, CycleStep, Phase, PhaseEvent, TuningFit
 from mows.device.cycle.sequencer import CycleSequencer
-from mows.device.interface import CoilCommand, Command, CommandResult, MultiToneCommand, OrientationCommand
+from mows.device.interface import Command, CommandResult
 from mows.device.simulated.scheduled import ScheduledDevice
 from mows.physics.coils import CurrentCap
 from mows.sim.simulator import SimulatedBlock, SimulatedDevice
@@ -119,15 +119,7 @@ class DeviceTimeLoop:
     def _send(self, command: Command) -> CommandResult:
         """Schedule ``command`` on the device; its result (refused with the reason, never raised)."""
         try:
-            if isinstance(command, CoilCommand):
-                applied = self.device.schedule_coils(
-                    command.at_sample_index, command.amplitudes_a, command.frequency_hz
-                )
-            elif isinstance(command, MultiToneCommand):
-                applied = self.device.schedule_tones(command.at_sample_index, command.tones, command.samples)
-            else:
-                assert isinstance(command, OrientationCommand)  # the sequencer ramps no supply
-                applied = self.device.schedule_orientation(command.at_sample_index, command.theta0_rad)
+            applied = self.device.schedule(command)
         except (RuntimeError, ValueError) as refused:
             return CommandResult(command.command_id, False, reason=str(refused))
         return CommandResult(command.command_id, True, applied)

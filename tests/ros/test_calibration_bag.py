@@ -59,8 +59,10 @@ def test_a_recorded_calibration_gives_the_actions_constants_offline(ros, start, 
 
     # What the driver recorded of the supply: zero as the goal arrived (the calibrator's check
     # that there is a supply), every commanded current, steady once reached, and zero at the end.
+    # The plan runs the currents up at 0° and down at 180° (the stage turned once), so the
+    # current at the turn is held, not set again.
     states = [m.message for m in bags.read_bag(bag, topics=["/mows/supply"])]
-    assert [s.current_a for s in states if not s.ramping] == [0.0, *CURRENTS, 0.0]
+    assert [s.current_a for s in states if not s.ramping] == [0.0, *CURRENTS, *CURRENTS[-2::-1], 0.0]
     assert cli.main(["calibrate", str(bag), "-o", str(offline), "--scenario", "calibration"]) == 0
     printed = capsys.readouterr().out
     action = dict(zip(done.result.names, zip(done.result.values, done.result.stds)))

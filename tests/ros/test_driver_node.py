@@ -461,21 +461,22 @@ def test_the_supply_ramps_on_request_is_capped_and_the_emergency_stop_zeroes_it(
 def test_the_bench_backend_opens_the_scpi_supply_under_the_driver_s_lower_cap():
     """``supply_current_cap_a`` below the supply file's cap: the supply's limits (and the
     instrument's own safety limit) are the lower cap; closing leaves it at zero, output off."""
+    from mows.device.backends.factory import make_backend
     from mows.device.instruments.scpi import SIMULATED_RESOURCE, SIMULATED_SUPPLY_FILE
     from mows.device.simulated.daqmx_card import SimulatedCard
     from mows.physics.coils import CurrentCap
-    from mows_driver.parameters import bench_backend
+    from mows_driver.parameters import backend_settings
 
     values = {
+        **{spec.name: spec.default for spec in driver.PARAMETERS},
+        "backend": "nidaqmx",
         "supply": "scpi",
-        "daq_device_file": "",
-        "supply_file": "",
         "supply_resource": SIMULATED_RESOURCE,
         "visa_library": f"{SIMULATED_SUPPLY_FILE}@sim",
         "supply_current_cap_a": 1.0,
     }
     with SimulatedCard(SimulatedDevice(load_scenario("calibration"))).installed():
-        backend = bench_backend(values, CurrentCap(10.0))
+        backend = make_backend(backend_settings(values), CurrentCap(10.0))  # as the driver's configure
         try:
             assert backend.supply_limits.cap_a == 1.0
             properties = backend.supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties

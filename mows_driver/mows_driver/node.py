@@ -20,12 +20,10 @@ every phase but EXCITING, in every lifecycle state but active, and when the node
 SIGTERM), and the static-field supply is ramped to zero when it stops.
 """
 
-import dataclasses
-
 from rcl_interfaces.msg import SetParametersResult
 
 from mows.device.backends.factory import make_backend
-from mows.device.stream.session import DeviceSession
+from mows.device.stream.session import DeviceSession, continued
 from mows.physics.coils import CurrentCap
 from mows.precompile import precompile
 from mows_driver.health import StreamHealth
@@ -57,9 +55,7 @@ class DriverNode(MowsNode):
         super().__init__(NODE_NAME, PARAMETERS)
         self.values = parameter_values(self, PARAMETERS)
         self.session: DeviceSession | None = None  # from configure to cleanup: the device link
-        # What a reconfigured driver goes on from: the device clock restarts with a new session
-        # (the next epoch), and its cycle ids never repeat those the graph has seen.
-        self._next_session = {"first_epoch": 0, "last_cycle_id": 0}
+        self._previous: DeviceSession | None = None  # the session a reconfigured driver goes on from
         self.outputs = DriverOutputs(self)
         self._health = StreamHealth()
         self.add_on_set_parameters_callback(self._validate)
@@ -84,7 +80,7 @@ class DriverNode(MowsNode):
         except BaseException:
             backend.close()
             raise
-        self.session = DeviceSession(backend, dataclasses.replace(session_config(values, cap), **self._next_session))
+        self.session = DeviceSession(backend, continued(self._previous, session_config(values, cap)))
         self.session.disarm(INACTIVE)
         if values["backend"] == "sim":  # the simulated stage starts where the parameter puts it
             self.session.stage_angle_rad = values["theta0_rad"]
@@ -106,11 +102,7 @@ class DriverNode(MowsNode):
         self._streaming.stop()
         if self.session is not None:
             self.session.close()
-            self._next_session = {
-                "first_epoch": self.session.epoch + 1,
-                "last_cycle_id": self.session.sequencer.last_cycle_id if self.session.sequencer else 0,
-            }
-            self.session = None
+            self._previous, self.session = self.session, None
         self.outputs.close()
 
     # --- parameters ------------------------------------------------------------------------

@@ -112,10 +112,9 @@ class EstimatorNode(MowsNode):
     # --- calibration ------------------------------------------------------------------------
     async def _on_calibrate(self, request: CalibrateF00.Request, response: CalibrateF00.Response):
         """f00 from the next ring-downs (:class:`mows.estimate.calibration.f00.F00Calibration`)."""
-        if (inactive := self.inactive_reason()) is not None:
-            response.success, response.message = False, inactive
-            return response
-        try:
+        try:  # one refusal path: a node not active, or a request the core refuses
+            if (inactive := self.inactive_reason()) is not None:
+                raise ValueError(inactive)
             calibration = self._estimator.begin_calibration(
                 self._settings(), request.reference_field_t, request.n_ringdowns, request.timeout_s
             )

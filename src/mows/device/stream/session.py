@@ -430,3 +430,13 @@ class DeviceSession:
                     duty_cycle=s.duty_fraction(),
                 )
             return values
+
+
+def continued(previous: DeviceSession | None, config: SessionConfig) -> SessionConfig:
+    """``config`` for a session that follows ``previous`` on the same device link (the driver
+    reconfigured): the device clock starts again, so the next epoch, and cycle ids go on from
+    the last one the graph has seen."""
+    if previous is None:
+        return config
+    last = previous.sequencer.last_cycle_id if previous.sequencer is not None else previous.config.last_cycle_id
+    return dataclasses.replace(config, first_epoch=previous.epoch + 1, last_cycle_id=last)

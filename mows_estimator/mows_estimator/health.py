@@ -53,6 +53,7 @@ class FitTally:
                 "gaps": assembler.gaps,
                 "missing_samples": missing,
                 "late_windows": assembler.late_windows,
+                "windows_before_start": assembler.windows_before_start,
                 "device_restarts": assembler.device_restarts,
                 "blocks": assembler.blocks,
                 "f00_hz": f00_hz,

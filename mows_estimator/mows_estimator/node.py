@@ -2,7 +2,7 @@
 
 Topic and service names are relative, so the graph can run in a namespace; in the root
 namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock, sensor-data
-QoS) and ``/mows/excitation`` (ExcitationState). Publishes, per recorded ring-down,
+QoS) and ``/mows/excitation`` (ExcitationState, transient local). Publishes, per recorded ring-down,
 ``/mows/ringdown`` (RingdownFit, always, with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
 ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). With ``probes`` listing several
 probes, each window is fitted jointly over the probes its announcement lists (each at its own
@@ -36,7 +36,7 @@ from mows_ros.node import MowsNode
 from mows_ros.params import parameter_values
 from mows_ros.probe import probe_of
 from mows_ros.process import run_node
-from mows_ros.qos import RESULT_QOS, STREAM_QOS
+from mows_ros.qos import EXCITATION_QOS, RESULT_QOS, STREAM_QOS
 
 NODE_NAME = "estimator"
 CALIBRATE_SERVICES = ("~/calibrate", "mows/estimator/calibrate")  # the node's own, the previous release's
@@ -53,7 +53,9 @@ class EstimatorNode(MowsNode):
         self._tally = FitTally()
         self._calibrated = Future()
         self.create_subscription(MagnetometerBlock, "mows/raw", self.when_active(self._on_block), STREAM_QOS)
-        self.create_subscription(ExcitationState, "mows/excitation", self.when_active(self._on_excitation), RESULT_QOS)
+        # Transient local: an announcement made before discovery matched the reader still arrives.
+        on_excitation = self.when_active(self._on_excitation)
+        self.create_subscription(ExcitationState, "mows/excitation", on_excitation, EXCITATION_QOS)
         self._fit_pub = self.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
         self._field_pub = self.create_publisher(FieldEstimate, "mows/field", RESULT_QOS)
         self._magnetic_pub = self.create_publisher(MagneticField, "mows/magnetic_field", STREAM_QOS)

@@ -20,7 +20,8 @@ def _keep_last(depth: int, reliability, durability) -> QoSProfile:
 STREAM_QOS = _keep_last(64, qos_profile_sensor_data.reliability, qos_profile_sensor_data.durability)
 
 # Excitation phase changes: every one matters, and a subscriber that joins late learns the
-# present one (a RESULT_QOS subscriber, volatile, is compatible with it).
+# recent ones: the estimator hears a ring-down announced before discovery matched it (a
+# RESULT_QOS subscriber, volatile, is compatible with it; a volatile publisher is not).
 EXCITATION_QOS = _keep_last(100, ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)
 
 # Per-event results (excitation states, ring-down fits, field estimates): low rate, and a

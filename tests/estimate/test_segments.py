@@ -1,5 +1,7 @@
 """Ring-down windows cut from a block stream: exact, complete, and honest about gaps."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -95,6 +97,35 @@ def test_a_window_announced_after_its_samples_left_the_buffer():
         assembler.add_block(block)
     late = assembler.announce(window_at(100, 2000))
     assert late and late[0].missing_samples == 2000 and assembler.late_windows == 1
+
+
+@pytest.mark.parametrize("heard", ["before the first block", "after it"])
+def test_ringdowns_over_before_listening_began_are_counted_not_answered(heard):
+    """A late listener hears the announcements the driver kept (transient local): those of
+    ring-downs over before its first block, or on an earlier clock, are not its to fit; one that
+    overlaps the first block is answered, with the samples it never had counted missing."""
+    samples, saturated = stream()
+    stream_start = 1000 + 4000  # the listener's first block: 4000 samples into the device's stream
+    kept = [
+        window_at(0, 2000, cycle_id=1),  # over 2000 samples before listening began
+        window_at(2000, 2000, cycle_id=2),  # ends exactly where it began
+        dataclasses.replace(window_at(6000, 2000, cycle_id=3), device_epoch=-1),  # an earlier clock
+        window_at(3000, 2000, cycle_id=4),  # half before, half after
+        window_at(6000, 2000, cycle_id=5),  # wholly heard
+    ]
+    assembler = SegmentAssembler()
+    got = []
+    if heard == "before the first block":
+        for window in kept:
+            got += assembler.announce(window)
+    for block in blocks(samples[4000:], saturated[4000:], 500, start_index=stream_start):
+        got += assembler.add_block(block)
+        if heard == "after it" and assembler.blocks == 1:
+            for window in kept:
+                got += assembler.announce(window)
+    assert [s.window.cycle_id for s in got] == [4, 5]
+    assert [s.missing_samples for s in got] == [1000, 0]
+    assert assembler.windows_before_start == 3
 
 
 def test_duplicates_are_ignored_and_rate_changes_restart_the_buffer():

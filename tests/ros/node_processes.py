@@ -45,13 +45,14 @@ class RosHarness:
 
 
 @pytest.fixture
-def start(tmp_path):
-    """Starts a command with its output in a log file; kills what is left at the end.
+def start(tmp_path, request):
+    """Starts a command with its output in a log file; kills what is left at the end. A failed
+    test's report carries every log (``pytest_runtest_makereport`` in conftest.py).
 
     The command is killed with the test's worker too (setpriv --pdeathsig): a worker that
     crashed once left its nodes running in its ROS domain, which the replacement worker took
     over, and the suite hung on them."""
-    processes = []
+    processes = request.node.started_processes = []
 
     def start(*command: str) -> subprocess.Popen:
         processes.append(launch(command, tmp_path / f"process-{len(processes)}.log"))

@@ -59,7 +59,9 @@ def main(angles_deg: str, repeats: str, bound_s: str) -> int:
         return condition()
 
     spin_until(lambda: client.server_is_ready() and blocks, "the sweep action and the driver's stream")
-    spin_until(lambda: node.count_publishers("/mows/ringdown"), "the estimator")
+    # The estimator hears the stream (discovery takes seconds on a loaded machine): a ring-down
+    # over before its first block would be counted by it, not fitted.
+    spin_until(lambda: int(statuses.get("/estimator", {}).get("blocks", 0)), "the estimator hearing the stream")
     goal = RotationSweep.Goal(
         theta0_rad=[math.radians(float(a)) for a in angles_deg.split(",")], repeats_per_angle=int(repeats)
     )

@@ -20,7 +20,7 @@ from mows.physics.probe import PAPER_PROBE
 from mows.physics.signal import signal_t
 from mows.records import stamps
 from mows_bringup.graph import NODES
-from mows_ros.qos import RESULT_QOS, STREAM_QOS
+from mows_ros.qos import EXCITATION_QOS, RESULT_QOS, STREAM_QOS
 from node_processes import assert_stops_cleanly
 
 pytestmark = pytest.mark.ros
@@ -42,7 +42,7 @@ class Device:
     def __init__(self, ros):
         self.ros = ros
         self.raw = ros.node.create_publisher(MagnetometerBlock, "/mows/raw", STREAM_QOS)
-        self.excitation = ros.node.create_publisher(ExcitationState, "/mows/excitation", RESULT_QOS)
+        self.excitation = ros.node.create_publisher(ExcitationState, "/mows/excitation", EXCITATION_QOS)
         self.index = 0
         self.sequence = 0
         self.cycle = 0

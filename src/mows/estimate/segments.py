@@ -13,6 +13,10 @@ is exact to one sample as long as both come from the same clock. When the device
 restarts (a new ``epoch`` on the blocks: the driver reconfigured, the device rebooted) the
 stream starts again: the samples buffered are of another clock, and a window announced on it
 that has not completed never will (it is returned with every sample missing).
+
+Announcements are kept by the driver for subscribers that join late, so the estimator hears
+those made before it listened: a window that ended before the first block this buffer
+received (or on an earlier clock) is not this estimator's to answer, and is only counted.
 """
 
 from __future__ import annotations
@@ -131,7 +135,8 @@ class SegmentAssembler:
     before: lost blocks, one gap per run of them), ``missing_samples`` (the samples in those gaps),
     ``rate_changes`` (a new sample rate or number of channels restarts the buffer), ``late_windows``
     (announced after their samples left the buffer), ``device_restarts`` (blocks of a new device
-    clock: the stream starts again).
+    clock: the stream starts again), ``windows_before_start`` (ring-downs over before the first
+    block arrived: announced to a late listener, not recorded by it).
     """
 
     def __init__(self, buffer_s: float = 5.0) -> None:
@@ -146,6 +151,8 @@ class SegmentAssembler:
         self.rate_changes = 0
         self.late_windows = 0
         self.device_restarts = 0
+        self.windows_before_start = 0
+        self._start: SampleBlock | None = None  # the first block received: where listening began
 
     # --- input --------------------------------------------------------------------------
     def add_block(self, block: SampleBlock) -> list[Segment]:
@@ -170,18 +177,31 @@ class SegmentAssembler:
             return []  # a repeat or an out-of-order block: the samples are already here or gone
         self._blocks.append(block)
         self.blocks += 1
+        if self._start is None:
+            self._start = block
+            self._pending = [p for p in self._pending if not self._before_start(p.window, block)]
         self._prune()
         return lost + self._complete()
 
     def announce(self, window: RingdownWindow) -> list[Segment]:
         """Register a ring-down; return it at once if its samples are all here already, or if
         they are of a device clock that has restarted since."""
+        if self._start is not None and self._before_start(window, self._start):
+            return []
         newest = self._blocks[-1] if self._blocks else None
         if newest is not None and window.device_epoch < newest.epoch:
             return [self._unrecorded(window)]
         same_clock = newest is not None and window.device_epoch == newest.epoch
         self._pending.append(_Pending(window, *self._index_range(window, newest if same_clock else None)))
         return self._complete() if newest is not None else []
+
+    def _before_start(self, window: RingdownWindow, start: SampleBlock) -> bool:
+        """Whether ``window`` was over before ``start``, the first block (counted when it was)."""
+        before = window.device_epoch < start.epoch or (
+            window.device_epoch == start.epoch and self._index_range(window, start)[1] <= start.first_sample_index
+        )
+        self.windows_before_start += before
+        return before
 
     def _of_another_clock(self, epoch: int) -> list[Segment]:
         """The windows that blocks of ``epoch`` can no longer complete: those of earlier clocks."""

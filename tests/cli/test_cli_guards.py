@@ -87,6 +87,11 @@ def work(tmp_path_factory):
     record_cycles(d / "bag", load_scenario(), (0.0,), 3)
     record_cycles(d / "empty_bag", load_scenario(), (), 3)
     (d / "existing.yaml").write_text("kept\n")
+    # Files a command reads without naming them: a scenario's probe file and its extends: base.
+    PAPER_PROBE.to_yaml(d / "scene_probe.yaml")
+    (d / "scene.yaml").write_text("extends: paper_largest_spacing\nprobe: scene_probe.yaml\n")
+    (d / "scene_base.yaml").write_text("extends: calibration_gradient\n")
+    (d / "scene_child.yaml").write_text("extends: scene_base.yaml\n")
     os.mkfifo(d / "fifo")
     if os.geteuid() == 0:  # only root makes device files: the test of one needs it
         os.mknod(d / "null", 0o666 | stat.S_IFCHR, os.makedev(1, 3))
@@ -135,6 +140,76 @@ CASES = [
     ("fit-force-fifo", ["fit", "{d}/bag", "--csv", "{d}/fifo", "--force"], 2, ["FIFO"]),
     ("sim-force-fifo", ["sim", "--out", "{d}/fifo", "--force"], 2, ["FIFO"]),
     ("lab-report-force-fifo", ["lab", "report", "{d}/sweep.csv", "-o", "{d}/fifo", "--force"], 2, ["FIFO"]),
+    # ... nor over a file the command read without naming it (a scenario's probe: or extends:)
+    (
+        "sim-over-its-scenario-s-probe",
+        ["sim", "{d}/scene.yaml", "--out", "{d}/scene_probe.yaml", "--force"],
+        2,
+        ["input", "scene_probe.yaml"],
+    ),
+    (
+        "sim-over-its-scenario-s-base",
+        ["sim", "{d}/scene_child.yaml", "--out", "{d}/scene_base.yaml", "--force"],
+        2,
+        ["input", "scene_base.yaml"],
+    ),
+    (
+        "calibrate-over-its-scenario-s-probe",
+        ["calibrate", "--simulate", "--scenario", "{d}/scene.yaml", "-o", "{d}/scene_probe.yaml", "--force"],
+        2,
+        ["input", "scene_probe.yaml"],
+    ),
+    (
+        "calibrate-table-over-its-gradient-scenario-s-base",
+        [
+            *CAL[:2],
+            "--gradient-scenario",
+            "{d}/scene_child.yaml",
+            "-o",
+            "{d}/p.yaml",
+            "--table",
+            "{d}/scene_base.yaml",
+            "--force",
+        ],
+        2,
+        ["input", "scene_base.yaml"],
+    ),
+    (
+        "lab-report-over-its-reference-s-probe",
+        [
+            "lab",
+            "report",
+            "{d}/sweep_no_reference.csv",
+            "--reference",
+            "{d}/scene.yaml",
+            "-o",
+            "{d}/scene_probe.yaml",
+            "--force",
+        ],
+        2,
+        ["input", "scene_probe.yaml"],
+    ),
+    (
+        "lab-report-over-its-reference-s-base",
+        [
+            "lab",
+            "report",
+            "{d}/sweep_no_reference.csv",
+            "--reference",
+            "{d}/scene_child.yaml",
+            "-o",
+            "{d}/scene_base.yaml",
+            "--force",
+        ],
+        2,
+        ["input", "scene_base.yaml"],
+    ),
+    (
+        "calibrate-over-its-scenario-s-base",
+        ["calibrate", "--simulate", "--scenario", "{d}/scene_child.yaml", "-o", "{d}/scene_base.yaml", "--force"],
+        2,
+        ["input", "scene_base.yaml"],
+    ),
     # calibration: currents beyond the cap, units, non-finite values, too little data
     (
         "calibrate-500-a",

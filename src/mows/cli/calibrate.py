@@ -103,11 +103,11 @@ def add_arguments(parser) -> None:
 def run(args) -> int:
     inputs = [path for path in (args.input, args.probe, args.scenario, args.gradient_scenario) if path]
     outputs = [args.output] + ([args.table] if args.table else [])
-    check_outputs(outputs, inputs, args.force)
     _source_options(args)
     nominal = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
     scenario = _scenario(args.scenario)
     gradient = _scenario(args.gradient_scenario) if args.gradient_scenario else None
+    check_outputs(outputs, inputs, args.force)  # the files the scenarios pulled in are inputs too
     wirings = scenario_wirings(scenario, gradient)
     field_wiring = next(iter(wirings))  # the scenario's own supply: the homogeneous wiring
     limits = scenario.supply.limits

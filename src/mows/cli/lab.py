@@ -146,8 +146,6 @@ def _add_ringdown_arguments(sub) -> None:
 def run(args) -> int:
     default, named = probe_options(args.probe)
     inputs = [args.table, default, *named.values(), *args.plugin] + ([args.reference] if args.reference else [])
-    if args.lab_command == "report":
-        check_output(args.output, inputs, args.force)
     probe = _probe(default)
     quiet = args.json or not sys.stderr.isatty()
     stages = tqdm(
@@ -160,6 +158,8 @@ def run(args) -> int:
     )
     with stages, WorkBar(quiet) as work, progress.listening(work):
         table, probe = _table(args, probe, {i: _probe(path) for i, path in named.items()})
+        if args.lab_command == "report":  # read: the files a reference pulled in are inputs too
+            check_output(args.output, inputs, args.force)
         if len(table) > MAX_ROWS and not args.all_rows:
             table = table.subsample(MAX_ROWS, SUBSAMPLE_SEED)
         stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")

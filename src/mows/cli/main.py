@@ -51,6 +51,7 @@ def main(argv=None) -> int:
 
 def _main(argv: list) -> int:
     from mows.cli.inputs import OneLineParser, UsageError, report_errors  # numpy: within main's Ctrl-C
+    from mows.records.files import command_inputs
 
     parser = OneLineParser(
         prog="mows",
@@ -74,7 +75,8 @@ def _main(argv: list) -> int:
             _chosen(parser, args).error(f"unrecognized arguments: {' '.join(unknown)}")
     except UsageError as error:  # the one line and the status of every bad input
         return report_errors(error.prog, functools.partial(_refuse, error), "--debug" in argv)
-    return report_errors(f"mows {args.command}", lambda: args._run(args), args.debug)
+    with command_inputs():  # every file the command reads is an input, not only its arguments
+        return report_errors(f"mows {args.command}", lambda: args._run(args), args.debug)
 
 
 def _chosen(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:

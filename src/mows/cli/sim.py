@@ -49,13 +49,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    if args.out:
-        check_output(args.out, [args.scenario], args.force)
     with input_file(args.scenario):
         scenario = load_scenario(args.scenario)
         if args.seed is not None:
             scenario = scenario.replace(seed=args.seed)
         device = SimulatedDevice(scenario)
+    if args.out:  # after loading: the files the scenario pulled in are inputs too
+        check_output(args.out, [args.scenario], args.force)
     excitation = scenario.excitation
     amplitude = excitation.amplitude_a if args.amplitude_a is None else args.amplitude_a
     angles = [math.degrees(scenario.pose.theta0_rad)] if args.theta0_deg is None else args.theta0_deg

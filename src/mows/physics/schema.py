@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import inspect
 import os
-import pathlib
 import re
 import typing
 from collections.abc import Callable, Iterator, Sequence
@@ -24,6 +23,8 @@ from typing import Any, TypeVar
 import numpy as np
 import yaml
 from numpy.typing import ArrayLike
+
+from mows.records.files import read_input
 
 #: A number or an array of numbers: the physics works element-wise on either.
 FloatOrArray = float | np.ndarray
@@ -133,7 +134,7 @@ def load_yaml(path: str | os.PathLike[str], what: str, build: Callable[[Any], T]
     ValueError on one line that names the file (unless the message names it already)."""
     name = f"{what} {path}"
     try:
-        text = pathlib.Path(path).read_text(encoding="utf-8")
+        text = read_input(path).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
         raise ValueError(unreadable(name, error)) from None
     try:

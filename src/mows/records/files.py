@@ -14,11 +14,17 @@ renames a commit writes a journal (``.NAME.PID.commit``: each temporary, its out
 of the file it replaces). The next :func:`writing` into that directory finds the leftovers of
 writers no longer running and puts the old set back from the journal, so the outputs are never
 a mix of two runs and the next run does the whole job again.
+
+A command's inputs are more than its arguments: a scenario pulls in its ``extends:`` base and its
+``probe:`` files, a reference its scenario. Within :func:`command_inputs` every file read through
+:func:`read_input` (the YAML loader and the table readers call it) is an input too, so ``--force``
+never replaces a file the command read, whichever way it came in.
 """
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import dataclasses
 import json
 import os
@@ -32,6 +38,31 @@ from collections.abc import Iterable, Iterator, Sequence
 
 class OutputRefused(ValueError):
     """An output path a command must not write: an input, inside an input, or existing."""
+
+
+# The files the running command has read (None: no command runs, reads are not kept).
+_read_by_command: contextvars.ContextVar[set[pathlib.Path] | None] = contextvars.ContextVar(
+    "read_by_command", default=None
+)
+
+
+@contextlib.contextmanager
+def command_inputs() -> Iterator[None]:
+    """Within the block, every file read through :func:`read_input` is an input of every check."""
+    token = _read_by_command.set(set())
+    try:
+        yield
+    finally:
+        _read_by_command.reset(token)
+
+
+def read_input(path: str | os.PathLike[str]) -> pathlib.Path:
+    """``path``, kept (within :func:`command_inputs`) as a file the command read."""
+    path = pathlib.Path(path)
+    read = _read_by_command.get()
+    if read is not None:
+        read.add(path.resolve())
+    return path
 
 
 def _inside(path: pathlib.Path, directory: pathlib.Path) -> bool:
@@ -54,14 +85,15 @@ def _kind(mode: int) -> str:
 def check_output(path, inputs: Iterable = (), force: bool = False) -> pathlib.Path:
     """``path`` if a command reading ``inputs`` may write it, else :class:`OutputRefused`.
 
-    An input, or any path inside an input directory (a bag's ``metadata.yaml``), is refused
-    even with ``force``: the command would destroy what it reads. An existing file is refused
+    An input (of ``inputs``, or read within :func:`command_inputs`), or any path inside an input
+    directory (a bag's ``metadata.yaml``), is refused even with ``force``: the command would
+    destroy what it reads. An existing file is refused
     unless ``force``; anything but a regular file (a directory, a device, a FIFO, a link)
     always: ``force`` replaces files, never what a path stands for.
     """
     path = pathlib.Path(path)
     resolved = path.resolve()
-    for source in inputs:
+    for source in [*inputs, *sorted(_read_by_command.get() or ())]:
         source_path = pathlib.Path(source).resolve()
         if _inside(resolved, source_path) or (source_path.is_file() and resolved == source_path):
             raise OutputRefused(f"output {path} is an input of this command ({source}): choose another output path")

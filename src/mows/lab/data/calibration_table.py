@@ -19,6 +19,7 @@ from mows.estimate.calibration.constants import CalibrationPoint
 from mows.lab.data.readers import load_table
 from mows.lab.data.table import MeasurementTable, rows_text
 from mows.physics.ringdown_average import start_swing_rad
+from mows.records.files import read_input
 from mows.sweep.calibration.schedule import GRADIENT_WIRING
 
 #: A cantilever's swing is a fraction of a turn: a θmax of half a turn or more is no angle in degrees.
@@ -114,7 +115,7 @@ def _numeric_columns(path: str | os.PathLike[str]) -> dict | None:
 
 def read_points(path: str | os.PathLike[str], field_wiring: str) -> list[CalibrationPoint]:
     """Calibration points from a calibration table (CSV)."""
-    c = _table_columns(path)
+    c = _table_columns(read_input(path))
     missing = [name for name in TABLE_COLUMNS if name not in c]
     if missing:
         raise ValueError(f"{path}: a calibration table needs the columns {list(TABLE_COLUMNS)}; missing {missing}")

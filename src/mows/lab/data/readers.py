@@ -24,6 +24,7 @@ from mows.lab.data.table import FIELD, KNOWN, PROBE, MeasurementTable, TableErro
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.schema import Vector
 from mows.records import stamps
+from mows.records.files import read_input
 from mows.sweep.decompose import Decomposition
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -39,7 +40,7 @@ def read_csv(path: str | os.PathLike[str], drop_invalid: bool = False) -> Measur
     with empty, non-numeric, NaN or non-positive values in known columns are dropped and listed
     in ``notes`` instead of raising :class:`TableError`.
     """
-    path = pathlib.Path(path)
+    path = read_input(path)
     numeric = _read_numeric(path)
     if numeric is not None:
         columns, notes = numeric, []

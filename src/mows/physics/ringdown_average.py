@@ -174,6 +174,7 @@ def amplitude_nodes(
 
 
 SWING_ITERATIONS = 12  # the fixed point A ← A·√(v/v(A)) gains ~2 digits a step (v ∝ A² to first order)
+SWING_TOLERANCE = 1e-13  # relative step below which the fixed point has converged to rounding
 
 
 def pickup_variance(
@@ -186,13 +187,17 @@ def pickup_variance(
     coefficients = np.asarray(pickup, complex)
     fraction = (np.arange(GRID_POINTS) + 0.5) / GRID_POINTS
     decay = np.exp(-np.multiply.outer(np.asarray(damping_per_s, float) * np.asarray(duration_s, float), fraction))
-    phase = np.cos(2.0 * np.pi * (np.arange(PHASE_POINTS) + 0.5) / PHASE_POINTS)
+    # cos Φ at the cycle's midpoints: those of the second half repeat the first's, as often
+    phase = np.cos(2.0 * np.pi * (np.arange(PHASE_POINTS // 2) + 0.5) / PHASE_POINTS)
     angle = np.asarray(rest_rad, float)[..., None, None] + np.asarray(swing_rad, float)[..., None, None] * (
         decay[..., :, None] * phase
     )
-    orders = np.arange(coefficients.shape[-1])
-    signal = np.real(np.exp(1j * angle[..., None] * orders) @ coefficients[..., None, :, None])[..., 0]
-    return signal.var(axis=(-2, -1))
+    # Σ_k C_k·z^k by Horner's rule in z = e^(iθ): one complex exponential per sample, not K + 1
+    z = np.exp(1j * angle)
+    signal = np.broadcast_to(coefficients[..., -1, None, None], z.shape)
+    for k in range(coefficients.shape[-1] - 2, -1, -1):
+        signal = signal * z + coefficients[..., k, None, None]
+    return signal.real.var(axis=(-2, -1))
 
 
 def swing_about_rest_rad(
@@ -210,7 +215,10 @@ def swing_about_rest_rad(
     swing = np.broadcast_to(np.asarray(swing_rad, float), np.broadcast(target, np.asarray(rest_rad)).shape).copy()
     for _ in range(SWING_ITERATIONS):
         variance = pickup_variance(swing, pickup, damping_per_s, duration_s, rest_rad)
-        swing = swing * np.sqrt(np.divide(target, variance, out=np.full(swing.shape, np.nan), where=variance > 0))
+        step = np.sqrt(np.divide(target, variance, out=np.full(swing.shape, np.nan), where=variance > 0))
+        swing = swing * step
+        if not np.any(np.abs(step - 1.0) > SWING_TOLERANCE):  # NaN (no signal) stays NaN, converged
+            break
     return swing
 
 

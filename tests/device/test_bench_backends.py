@@ -572,6 +572,68 @@ def test_close_zeroes_and_switches_off_each_whatever_the_other_did_then_returns_
     assert supply_state(supply) == (0.5, 0)  # the current could not be zeroed: the output is off
 
 
+def test_an_output_that_stays_on_is_read_back_and_said(tmp_path):
+    """The switch-off is read back (OUTP?): a relay that sticks is a problem named, not a belief."""
+    text = SIMULATED_SUPPLY_FILE.read_text().replace('q: "OUTP?"\n          r: "{:d}"', 'q: "OUTP?"\n          r: "1"')
+    assert text != SIMULATED_SUPPLY_FILE.read_text()
+    path = tmp_path / "sticky.yaml"
+    path.write_text(text)
+    supply = open_scpi_supply(SIMULATED_RESOURCE, load_supply_file(), f"{path}@sim")
+    supply.set_current_a(0.5)
+    assert supply.safe() == ["ngm202: OUTP? answers '1' after the output was switched off"]
+    assert simulated_supply().safe() == []
+
+
+def test_after_an_emergency_stop_the_supply_is_ramped_to_zero_and_switched_off(on_bench):
+    supply = simulated_supply()
+    card, backend = on_bench("calibration", supply)
+    config = SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), 112.5, fit_ringdown)
+    session = DeviceSession(backend, config, armed=True)
+    session.set_field_current(0.5, lambda result: None)
+    for _ in range(MAX_POLLS):
+        session.step(0.0)
+        if not backend.supply_schedule.ramping and supply_state(supply) == (0.5, 1):
+            break
+    assert supply_state(supply) == (0.5, 1)
+    assert session.emergency_stop(True, "test")
+    seen = []
+    for _ in range(MAX_POLLS):
+        session.step(0.0)
+        seen.append(supply_state(supply))
+        if seen[-1][1] == 0:
+            break
+    assert seen[-1] == (0.0, 0) and not backend.fault  # at zero, then off, read back so
+    assert all(current <= 0.5 for current, _ in seen) and len({c for c, _ in seen}) > 3  # ramped, not stepped
+    session.emergency_stop(False, "")
+    session.set_field_current(0.2, lambda result: None)  # a new ramp switches it on again, from zero
+    for _ in range(MAX_POLLS):
+        session.step(0.0)
+        if not backend.supply_schedule.ramping and supply_state(supply) == (0.2, 1):
+            break
+    assert supply_state(supply) == (0.2, 1)
+    session.close()
+    assert supply_state(supply) == (0.0, 0)
+
+
+def test_a_supply_error_mid_ramp_leaves_it_at_zero_and_off(on_bench):
+    supply = simulated_supply()
+    card, backend = on_bench("calibration", supply)
+    steps = [f"CURR {current_a:.4f}" for _, current_a in supply.config.limits.ramp(0.0, 0.6)]
+    refused = steps[len(steps) // 2]  # mid-ramp
+    sent = Sent(supply, refuse={refused})
+    backend.send(FieldCurrentCommand(1, 0, 0.6))
+    items = []
+    for _ in range(MAX_POLLS):
+        items += backend.poll(0.05)
+        if any(isinstance(i, LinkEvent) for i in items):
+            break
+    down = next(i for i in items if isinstance(i, LinkEvent))
+    assert not down.up and "the supply failed" in down.reason and f"'{refused}'" in down.reason
+    assert supply_state(supply) == (0.0, 0) and "OUTP 0" in sent.commands
+    backend.close()
+    assert supply_state(supply) == (0.0, 0)
+
+
 def test_the_ngm202_is_unipolar_and_a_negative_current_is_never_sent():
     supply = simulated_supply()
     assert supply.config.limits.polarity == "unipolar" and supply.config.limits.range_a() == (0.0, 2.0)

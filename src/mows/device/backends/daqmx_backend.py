@@ -117,6 +117,7 @@ class DaqmxBackend(Backend):
         self._readback_index: int | None = None  # the sample it is read at, while one is due
         self._supply_a = 0.0  # the last current the supply accepted
         self._supply_off = False  # switched off by a fault: prepared again before its next step
+        self._off_at_zero = False  # an emergency stop's ramp to zero: the output off once it ends
         self._results: list[CommandResult] = []
         self._told: list[LinkEvent | DeviceFault] = []  # not yet handed out
         self._lock = threading.Lock()
@@ -263,7 +264,9 @@ class DaqmxBackend(Backend):
             for current_a in due:
                 self.supply.set_current_a(current_a)
                 self._supply_a = current_a
-            if due and not self.supply_schedule.ramping:  # read back once the last step has settled
+            if due and not self.supply_schedule.ramping and self._off_at_zero:
+                self._switch_off(self.supply)
+            elif due and not self.supply_schedule.ramping:  # read back once the last step has settled
                 self._readback_index = self.next_index + round(self.supply.config.settle_s * self.device.sample_rate_hz)
             if self._readback_index is not None and self.next_index >= self._readback_index:
                 self._readback_index = None
@@ -271,6 +274,13 @@ class DaqmxBackend(Backend):
         except SupplyError as error:
             self._fault(f"the supply failed: {error}")
         return []
+
+    def _switch_off(self, supply: ScpiSupply) -> None:
+        """The emergency stop's ramp has reached zero: the output off and read back so (a fault
+        when it is not); the next ramp switches it on again."""
+        self._off_at_zero, self._supply_off = False, True
+        if refused := supply.safe():
+            self._fault(f"the supply did not switch off after the emergency stop: {'; '.join(refused)}")
 
     def _fault(self, reason: str) -> None:
         """The card down: its tasks closed (the outputs idle at 0 V: the coils off), the drives
@@ -341,6 +351,7 @@ class DaqmxBackend(Backend):
                     )
                     return
                 applied = self.supply_schedule.ramp(command.at_sample_index, self.next_index, command.current_a)
+                self._off_at_zero = False
             else:
                 if self.waveforms.coils_on:
                     self._results.append(CommandResult(command.command_id, False, reason="the coils are on"))
@@ -357,6 +368,7 @@ class DaqmxBackend(Backend):
         with self._lock:
             if self.supply_schedule is not None:
                 self.supply_schedule.to_zero(self.next_index)
+                self._off_at_zero = not self._supply_off
 
     def stats(self) -> dict:
         values: dict = {

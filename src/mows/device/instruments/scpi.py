@@ -61,6 +61,7 @@ class ScpiCommands:
     over_voltage_level: str = "VOLT:PROT:LEV {:.3f}"
     over_voltage_protection: str = "VOLT:PROT {:d}"
     local: str = "SYST:LOC"  # the front panel back to the operator
+    output_state: str = "OUTP?"  # answers 0 once the output is off: read back after switching it off
 
     def __post_init__(self) -> None:
         formats = {
@@ -278,14 +279,20 @@ class ScpiSupply:
         self._write(self.config.commands.output.format(int(on)))
 
     def safe(self) -> list[str]:
-        """Current to zero and output off, each tried whatever the other did; what failed."""
+        """Current to zero and output off, each tried whatever the other did, and the output read
+        back as off; what failed."""
         problems = []
-        for step in (lambda: self.set_current_a(0.0), lambda: self.output(False)):
+        for step in (lambda: self.set_current_a(0.0), lambda: self.output(False), self._read_back_off):
             try:
                 step()
             except SupplyError as error:
                 problems.append(str(error))
         return problems
+
+    def _read_back_off(self) -> None:
+        query = self.config.commands.output_state
+        if query and (answer := self._query(query).strip()) not in ("0", "OFF"):
+            raise SupplyError(f"{self.config.name}: {query} answers {answer!r} after the output was switched off")
 
     def close(self) -> None:
         """Current to zero at once (the caller has ramped it down) and output off (:meth:`safe`),

@@ -138,3 +138,61 @@ def record_cycles(path, scenario, degrees, seed):
         records.append(record)
     messages.sort(key=lambda m: m.timestamp_ns)
     return bags.write_bag(path, messages), records
+
+
+def excitation_message(event):
+    """The driver's ExcitationState of a session's PhaseEvent (with the probes it lists)."""
+    return STORE.types[EXCITATION](
+        header=header(event.stamp_ns / 1e9),
+        phase=int(event.phase),
+        phase_name=event.phase.name,
+        cycle_id=event.cycle_id,
+        device_epoch=0,
+        repeat_index=event.repeat_index,
+        repeats=event.repeats,
+        tuning=event.tuning,
+        coils_on=event.coils_on,
+        coil_current_amplitude_a=np.zeros(2),
+        frequency_hz=event.frequency_hz,
+        theta0_rad=event.theta0_rad,
+        planned_duration_s=event.planned_duration_s,
+        setup=event.setup,
+        probe_ids=np.array(event.probe_ids, np.uint8),
+        probe_frequency_hz=np.array(event.probe_frequency_hz, float),
+        probe_theta0_rad=np.array(event.probe_theta0_rad, float),
+    )
+
+
+def record_session(path, scenario, stage_rad, settings, seed, max_steps=100_000):
+    """Write a bag at ``path`` of one driver cycle at stage angle ``stage_rad`` on the simulated
+    device of ``scenario`` (all its probes rung by one multi-tone excitation per repeat of
+    ``settings``): its excitation states and raw blocks as the driver records them. Returns (the
+    bag's path, each probe's frequency at zero swing in the cycle's field and its neighbours'
+    (:meth:`SimulatedDevice.expected_frequencies_hz`))."""
+    from mows.device.backends.sim_backend import SimBackend
+    from mows.device.cycle.phases import CycleRequest
+    from mows.device.stream.session import DeviceSession, SessionConfig
+    from mows.estimate.ringdown import fit_ringdown
+    from mows.physics.coils import CurrentCap
+
+    cap = CurrentCap(10.0)
+    device = SimulatedDevice(scenario, np.random.default_rng(seed))
+    backend = SimBackend(device, cap, paced=False, chunk_s=0.1)
+    config = SessionConfig(0.025, settings, scenario.setup, cap, scenario.probe.f00_hz, fit_ringdown)
+    session = DeviceSession(backend, config, armed=True)
+    events, blocks, done = list(session.step(0.0).events), [], []
+    session.start_cycle(CycleRequest(stage_rad), done.append)
+    for _ in range(max_steps):
+        if done:
+            break
+        output = session.step(0.0)
+        events += output.events
+        blocks += output.blocks
+    assert done and done[0].success, done
+    messages = [bags.BagMessage("/mows/excitation", EXCITATION, e.stamp_ns, excitation_message(e)) for e in events]
+    for b in blocks:
+        message = block_message(b.first_sample_index, b.sample_rate_hz, b.samples_t, b.saturated)
+        message.header = header(b.stamp_ns / 1e9)
+        messages.append(bags.BagMessage("/mows/raw", RAW, b.stamp_ns, message))
+    messages.sort(key=lambda m: m.timestamp_ns)
+    return bags.write_bag(path, messages), device.expected_frequencies_hz()

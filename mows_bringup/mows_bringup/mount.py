@@ -19,10 +19,11 @@ from pathlib import Path
 from ament_index_python.packages import get_package_share_directory
 
 from mows.estimate.probe_set import ProbeEntry, probe_frame_id
+from mows.estimate.settings import probe_set
 from mows_driver.messages import STAGE_JOINT
 from mows_estimator.parameters import PARAMETERS as ESTIMATOR
 from mows_mapper.parameters import PARAMETERS as MAPPER
-from mows_ros.probe import probe_of, probe_set
+from mows_ros.probe import probe_of
 
 # The frames the nodes name with their defaults: the mapper's plane, the estimator's probe.
 PLANE = next(spec.default for spec in MAPPER if spec.name == "frame_id")

@@ -24,12 +24,13 @@ from rclpy.task import Future
 from sensor_msgs.msg import MagneticField
 
 from mows.estimate.probe_set import probe_frame_id
+from mows.estimate.settings import FitParameters
 from mows.estimate.stream import Estimated, FitSettings, RingdownEstimator
 from mows.physics.probe import Probe
 from mows.precompile import precompile
 from mows_estimator.health import FitTally
 from mows_estimator.messages import estimate_to_msg, fit_to_msg, magnetic_field_msg
-from mows_estimator.parameters import PARAMETERS, fit_settings
+from mows_estimator.parameters import PARAMETERS
 from mows_ros.awaitables import within
 from mows_ros.diagnostics import Health
 from mows_ros.node import MowsNode
@@ -74,7 +75,7 @@ class EstimatorNode(MowsNode):
         return probe_of(self.get_parameter("probe_file").value)
 
     def _settings(self) -> FitSettings:
-        return fit_settings(parameter_values(self, PARAMETERS), self.probe())
+        return FitParameters.of(parameter_values(self, PARAMETERS)).fit_settings(self.probe())
 
     # --- stream -----------------------------------------------------------------------------
     def _on_excitation(self, msg: ExcitationState):

@@ -19,6 +19,7 @@ from mows_msgs.action import RotationSweep
 from mows_msgs.msg import RingdownFit
 from rclpy.action import CancelResponse
 
+from mows.estimate.settings import probe_set
 from mows.lab import analyse_sweep
 from mows.sweep.publication import Publication, cycle_failed, publication
 from mows.sweep.runner import CycleAnswer, CycleRequest, SweepRunner, SweepSettings, SweepStep
@@ -33,7 +34,7 @@ from mows_ros.goals import action_servers, end_goal
 from mows_ros.node import MowsNode
 from mows_ros.operator import OperatorTurns
 from mows_ros.params import parameter_values
-from mows_ros.probe import probe_of, probe_set
+from mows_ros.probe import probe_of
 from mows_ros.process import run_node
 
 NODE_NAME = "mapper"

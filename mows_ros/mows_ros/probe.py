@@ -1,15 +1,14 @@
 """The ``probe_file`` parameter of the estimator and the mapper: a probe constants YAML
 (:meth:`mows.physics.probe.Probe.from_yaml`), or empty for the paper's probe; and their
-``probes`` parameter, the probes sharing each ring-down window (:mod:`mows.estimate.probe_set`).
+``probes`` parameter, the probes sharing each ring-down window (:mod:`mows.estimate.probe_set`,
+read by :func:`mows.estimate.settings.probe_set`).
 
 The file is read when the parameter is set, so that a missing or malformed file is refused
 with its reason by ``ros2 param set`` (or stops the node at start-up) instead of failing in
 the middle of a fit; setting the same path again reads it again.
 """
 
-import functools
-
-from mows.estimate.probe_set import ProbeEntry, read_probe_set
+from mows.estimate.settings import probe_set
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows_ros.params import ParamSpec
 
@@ -35,13 +34,6 @@ PROBE_FILE = ParamSpec(
     "probe constants YAML (mows.physics.probe.Probe.from_yaml); empty: the paper's probe",
     check=probe_file_problem,
 )
-
-
-@functools.lru_cache(maxsize=8)
-def probe_set(text: str, own_probe: Probe) -> tuple[ProbeEntry, ...]:
-    """The probes of a ``probes`` value, with ``own_probe`` (the ``probe_file``'s) for those given
-    by their f00 alone; read once per value and probe, not per fit."""
-    return read_probe_set(text, own_probe, Probe.from_yaml)
 
 
 def probes_problem(text: str) -> str | None:

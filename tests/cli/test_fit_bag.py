@@ -6,6 +6,11 @@ import pytest
 
 from mows.cli import main as cli
 from mows.cli.calibrate_bag import SupplyTimeline
+from mows.device.recording.bags import read_bag
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
+from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
+from mows.physics.fluxgate import FluxgatePair
+from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
 from recorded_bags import record_cycles
 
@@ -53,3 +58,27 @@ def test_a_ring_down_has_a_supply_current_only_if_the_supply_held_steady_over_it
     assert timeline.steady_current_a(-10, 0) is None  # before the supply was set
     # a "ramp" to the present current starts and ends at one sample: the later state holds
     assert SupplyTimeline((0, 0), (0.0, 0.0), (True, False)).steady_current_a(10, 20) == 0.0
+
+
+def test_one_probe_is_fitted_as_before_the_estimators_stream_core_took_it(bag, tmp_path, capsys):
+    """The stream core (mows.estimate.stream) gives, for one probe, bit for bit the fits of the
+    segments assembled and fitted directly with the lever-aware model of the paper's pair."""
+    path, _ = bag
+    assembler, segments = SegmentAssembler(buffer_s=60.0), []
+    for item in read_bag(path, topics=["/mows/raw", "/mows/excitation"]):
+        if item.topic == "/mows/excitation":
+            segments += assembler.announce(window_from_message(item.message))
+        else:
+            segments += assembler.add_block(block_from_message(item.message))
+    pair = FluxgatePair.paper()
+    direct = [
+        fit_segment(s, FitOptions.lever_aware(pair, PAPER_PROBE, s.window.theta0_rad), COIL_OFF_SKIP_S, 1.8)
+        for s in segments
+    ]
+    table = tmp_path / "fits.csv"
+    assert cli.main(["fit", str(path), "--csv", str(table)]) == 0
+    rows = list(csv.DictReader(open(table)))
+    assert [(float(r["f_hz"]), float(r["f_std_hz"])) for r in rows] == [
+        (fit.frequency_hz, fit.frequency_std_hz) for fit in direct
+    ]
+    assert "probe" not in rows[0]

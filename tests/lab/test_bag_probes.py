@@ -4,8 +4,8 @@ Requirement: ``from_bag`` gives the ``probe`` column and each probe's start swin
 own fits; ``mows lab compare BAG`` then fits one f00 per probe. The two probes ring 4 Hz
 apart with σ = 1 mHz: kept apart, χ²/dof is that of the noise (the 95 % bound of χ²/dof for
 38 degrees of freedom is 1.4); mixed, one f00 for both puts χ²/dof near (2 Hz / 1 mHz)² = 4e6.
-A bag of one probe keeps its table without the column. ``mows fit``, which re-fits the raw
-samples one probe per window, refuses a bag of several probes in one line.
+A bag of one probe keeps its table without the column. ``mows fit`` without ``--probes``, which
+would re-fit the raw samples one probe per window, refuses a bag of several probes in one line.
 """
 
 import re
@@ -66,9 +66,9 @@ def test_the_lab_keeps_the_probes_of_a_bag_apart(tmp_path, capsys):
 
 
 def test_mows_fit_refuses_a_bag_of_several_probes_in_one_line(tmp_path, capsys):
-    """mows fit re-fits the raw samples one probe per window; a window of several needs the
-    estimator's probes list. Whether the bag says so by its fits or by its excitations, the
-    refusal names the probes and what is missing, and writes no table."""
+    """Without --probes mows fit would re-fit the raw samples one probe per window. Whether the
+    bag says it holds several by its fits or by its excitations, the refusal names the probes
+    and says to pass --probes, and writes no table."""
     excitation = ringdown_message(0, 10_000.0, 1, 0.0, 112.5)
     excitation.probe_ids = np.array([0, 2], np.uint8)
     excitation.probe_frequency_hz, excitation.probe_theta0_rad = np.array([112.5, 125.0]), np.zeros(2)
@@ -77,5 +77,5 @@ def test_mows_fit_refuses_a_bag_of_several_probes_in_one_line(tmp_path, capsys):
         table = tmp_path / f"{path.name}.csv"
         assert main(["fit", str(path), "--csv", str(table)]) == 2
         error = capsys.readouterr().err.strip()
-        assert len(error.splitlines()) == 1 and f"probes {probes}" in error and "probes list" in error, error
+        assert len(error.splitlines()) == 1 and f"probes {probes}" in error and "--probes" in error, error
         assert not table.exists()

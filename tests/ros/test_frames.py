@@ -13,6 +13,7 @@ from mows_msgs.msg import MagnetometerBlock
 from mows_msgs.srv import RunCycle
 from sensor_msgs.msg import JointState
 
+from mows.estimate.settings import probe_set
 from mows.physics.pose import Pose, probe_axes
 from mows.physics.probe import PAPER_PROBE
 from mows.records import stamps
@@ -22,7 +23,6 @@ from mows_driver import node as driver
 from mows_driver.messages import STAGE_JOINT
 from mows_estimator import parameters as estimator
 from mows_mapper import parameters as mapper
-from mows_ros.probe import probe_set
 from mows_ros.qos import JOINT_QOS, STREAM_QOS
 
 pytestmark = pytest.mark.ros

@@ -33,7 +33,7 @@ import datetime
 import math
 
 from mows.cli.calibrate_bag import SUPPLY_TOPIC, bag_points
-from mows.cli.fit_bag import add_fit_arguments, bag_fitting
+from mows.cli.fit_bag import add_fit_arguments, bag_fitting, fit_settings
 from mows.cli.inputs import finite_float, input_file, positive_int
 from mows.estimate.calibration.constants import KnownConstants
 from mows.estimate.calibration.fit_constants import calibrate_probe
@@ -58,6 +58,7 @@ BAG_OPTIONS = (
     "coil_off_skip_s",
     "sensor_distance_m",
     "sensor_spacing_m",
+    "sensor_direction",
 )
 
 
@@ -97,7 +98,7 @@ def add_arguments(parser) -> None:
     add_fit_arguments(parser)  # BAG: how its ring-downs are fitted (as the estimator's parameters)
     # None marks an option not given (refused by name without a BAG); its default comes in later
     bag_defaults = {name: parser.get_default(name) for name in BAG_OPTIONS}
-    parser.set_defaults(tuning=False, bag_defaults=bag_defaults, **dict.fromkeys(BAG_OPTIONS))
+    parser.set_defaults(tuning=False, probes="", bag_defaults=bag_defaults, **dict.fromkeys(BAG_OPTIONS))
 
 
 def run(args) -> int:
@@ -120,10 +121,10 @@ def run(args) -> int:
         seed = scenario.seed if args.seed is None else args.seed
         points, failed = simulated_points(scenario, gradient, nominal, plan, seed)
     elif args.input and is_bag(args.input):
+        how = bag_fitting(args)
+        settings = fit_settings(how, nominal)
         with input_file(args.input, "bag"):
-            points, failed, unknown = bag_points(
-                args.input, nominal, field_wiring, args.supply_topic, bag_fitting(args)
-            )
+            points, failed, unknown = bag_points(args.input, settings, field_wiring, args.supply_topic, how)
         if unknown:
             print(f"{unknown} ring-down(s) at no steady supply current (ramping, or before it was set) left out")
     elif args.input:

@@ -18,6 +18,7 @@ import dataclasses
 from mows.device.backends.bag_backend import SUPPLY_TYPE
 from mows.device.recording.bags import BagError, read_bag
 from mows.estimate.calibration.constants import CalibrationPoint
+from mows.estimate.stream import FitSettings
 from mows.lab.data.ringdowns import BagFitting, fit_bag
 from mows.records import stamps
 from mows.records.stamps import NS_PER_S
@@ -65,15 +66,17 @@ class SupplyTimeline:
         return self.currents_a[i]
 
 
-def bag_points(path, nominal, wiring: str, supply_topic: str, how: BagFitting) -> tuple[list, dict, int]:
-    """The bag's ring-downs as calibration points of ``wiring``, fitted as ``how`` says with the
-    ``nominal`` probe's pickup, each at the current the supply states on ``supply_topic`` held
-    steady over it: (points, failed fits by (current, status), ring-downs at no steady current)."""
+def bag_points(path, settings: FitSettings, wiring: str, supply_topic: str, how: BagFitting) -> tuple[list, dict, int]:
+    """The bag's ring-downs as calibration points of ``wiring``, found as ``how`` says and fitted
+    with ``settings`` (the nominal probe's pickup), each at the current the supply states on
+    ``supply_topic`` held steady over it: (points, failed fits by (current, status), ring-downs
+    at no steady current)."""
     timeline = SupplyTimeline.of_bag(path, supply_topic)
     points: list[CalibrationPoint] = []
     failed: dict[tuple[float, str], int] = {}
     unknown = 0
-    for window, fit in fit_bag(path, nominal, how):
+    for estimated in fit_bag(path, settings, how):
+        window, fit = estimated.window, estimated.fit
         end_ns = window.start_ns + round(window.duration_s * NS_PER_S)
         current = timeline.steady_current_a(window.start_ns, end_ns)
         if current is None:

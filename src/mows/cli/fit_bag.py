@@ -1,32 +1,39 @@
 """``mows fit BAG``: fit every ring-down in a bag the driver recorded, offline.
 
-The bag's ``/mows/raw`` blocks and ``/mows/excitation`` phases go through the same path as in
-the estimator node (:mod:`mows.estimate.segments`, :mod:`mows.estimate.ringdown`): each recorded RINGDOWN phase
+The bag's ``/mows/raw`` blocks and ``/mows/excitation`` phases go through the estimator node's
+own stream core and fit settings (:mod:`mows.lab.data.ringdowns`): each recorded RINGDOWN phase
 (tuning ones skipped unless ``--tuning``) is cut out by its device stamps and fitted with the
-lever-aware signal model of the paper's geometry (``--paper-model`` for Eq. S11). One line per
-ring-down; ``--csv`` writes a model-lab table (theta0_deg, f_hz, f_std_hz, t_s, amplitude_deg,
-damping_per_s, duration_s, and the marker mows_table_format of the project's own tables) of the
-OK fits, ready for ``mows lab`` with ``--reference`` (no file when none is OK).
-The CSV is never written into the bag nor over an existing file (unless ``--force``), and
-appears whole or not at all (:mod:`mows.records.files`).
+lever-aware signal model of the fluxgate pair the options describe (``--paper-model`` for Eq.
+S11). One line per ring-down; ``--csv`` writes a model-lab table (theta0_deg, f_hz, f_std_hz,
+t_s, amplitude_deg, damping_per_s, duration_s, and the marker mows_table_format of the
+project's own tables) of the OK fits, ready for ``mows lab`` with ``--reference`` (no file when
+none is OK). The CSV is never written into the bag nor over an existing file (unless
+``--force``), and appears whole or not at all (:mod:`mows.records.files`).
 
 A bag of several probes sharing each window (docs/multi_probe.md: its excitations list the
-probes they ring, or its recorded fits carry more than one ``probe_id``) is refused in one
-line: fitting one probe per window would bias each probe's frequency by its neighbours', and
-the joint fit needs the estimator's ``probes`` list, which this command does not take. The
-estimator's own fits in such a bag are read, each probe apart, by ``mows lab compare BAG``.
+probes they ring) is fitted jointly with ``--probes SPEC``, the estimator's ``probes``
+parameter (YAML: probe id → f00 in Hz, a probe file, or ``{f00_hz, f00_std_hz, probe_file,
+position_m}``; the probe files it names are inputs): one line per ring-down and probe, and the
+table's column ``probe`` says each row's probe, each probe's start swings from its own fits
+(:func:`mows.lab.data.readers.start_amplitudes_rad`). A probe a window lists but ``--probes``
+does not is a failed fit naming it. Without ``--probes`` such a bag is refused in one line
+naming its probes (fitting one probe per window would bias each probe's frequency by its
+neighbours').
 """
 
-import dataclasses
 import math
 import os
 import sys
 
-from mows.cli.inputs import input_file, non_negative_float, renamed_option, sensor_length_m
+import numpy as np
+
+from mows.cli.inputs import finite_float, input_file, non_negative_float, renamed_option, sensor_length_m
 from mows.estimate.ringdown import COIL_OFF_SKIP_S
-from mows.lab.data.readers import is_bag
+from mows.estimate.settings import FitParameters
+from mows.estimate.stream import Estimated, FitSettings
+from mows.lab.data.readers import is_bag, start_amplitudes_rad
 from mows.lab.data.ringdowns import BagFitting, fit_bag
-from mows.lab.data.table import tool_table
+from mows.lab.data.table import PROBE, tool_table
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import check_output, writing
@@ -48,6 +55,13 @@ def add_bag_arguments(parser) -> None:
     """How a recorded bag's ring-downs are found and fitted (also ``mows lab ringdown``)."""
     parser.add_argument("--probe", help="probe constants YAML (default: the paper's probe)")
     parser.add_argument("--tuning", action="store_true", help="also fit the tuning ring-downs")
+    parser.add_argument(
+        "--probes",
+        default="",
+        metavar="SPEC",
+        help="the probes sharing each window, fitted jointly: the estimator's probes parameter, YAML "
+        "{ID: F00_HZ | PROBE_FILE | {f00_hz, f00_std_hz, probe_file, position_m}, ...} (docs/multi_probe.md)",
+    )
     add_fit_arguments(parser)
 
 
@@ -64,9 +78,17 @@ def add_fit_arguments(parser) -> None:
         "--sensor-distance-m",
         type=sensor_length_m,
         default=PAPER_DISTANCE_M,
-        help="probe to near fluxgate along the plane's x axis, m (as the estimator's parameter)",
+        help="probe to near fluxgate along --sensor-direction, m (as the estimator's parameter)",
     )
     parser.add_argument("--sensor-spacing-m", type=sensor_length_m, default=PAPER_SPACING_M, help="fluxgate spacing, m")
+    parser.add_argument(
+        "--sensor-direction",
+        type=finite_float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        default=FitParameters.sensor_direction,
+        help="the line from the probe through both fluxgates in the rotation plane's frame (z: its normal)",
+    )
 
 
 def run(args) -> int:
@@ -80,16 +102,14 @@ def run(args) -> int:
         check_output(args.csv, inputs, args.force)
     probe = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
     how = bag_fitting(args)
+    settings = fit_settings(how, probe)
     with input_file(args.bag):
-        fits = list(fit_bag(args.bag, probe, how))
-        check_ringdowns(args.bag, [window for window, _ in fits], how)
-    for window, fit in fits:
-        print(
-            f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):7.2f}°: "
-            f"{fit.report()}"
-        )
-    ok = [(w, f) for w, f in fits if f.ok]
-    print(f"{len(ok)} of {len(fits)} ring-downs fitted")
+        fits = list(fit_bag(args.bag, settings, how))
+        check_ringdowns(args.bag, fits, how)
+    for estimated in fits:
+        print(f"{_heading(estimated)}: {estimated.fit.report()}")
+    ok = [estimated for estimated in fits if estimated.fit.ok]
+    print(f"{len(ok)} of {len(fits)} {_fitted(fits)}")
     if args.csv and ok:
         with writing([args.csv], inputs, args.force) as outputs:
             notes = write_table(outputs.temporaries[0], ok, probe)
@@ -101,47 +121,101 @@ def run(args) -> int:
     return 0
 
 
+def _heading(estimated: Estimated) -> str:
+    """Its window and, of several probes, its probe at the probe's own θ0."""
+    window = estimated.window
+    if estimated.probe_id is None:
+        return f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):7.2f}°"
+    return (
+        f"cycle {window.cycle_id} repeat {window.repeat_index} probe {estimated.probe_id} "
+        f"θ0 {math.degrees(estimated.fit.theta0_rad):7.2f}°"
+    )
+
+
+def _fitted(fits: list[Estimated]) -> str:
+    """What the count counts: ring-downs, or probes' fits in so many ring-downs."""
+    if all(estimated.probe_id is None for estimated in fits):
+        return "ring-downs fitted"
+    return f"probes' fits OK in {len({id(estimated.window) for estimated in fits})} ring-downs"
+
+
 def bag_fitting(args) -> BagFitting:
-    """The bag arguments (:func:`add_fit_arguments`, ``--tuning``) as the core's settings of the same names."""
-    return BagFitting(**{field.name: getattr(args, field.name) for field in dataclasses.fields(BagFitting)})
+    """The bag arguments (:func:`add_fit_arguments`, ``--tuning``, ``--probes``) as the core's
+    settings of the estimator's parameters of the same names."""
+    parameters = FitParameters(
+        lever_aware=not args.paper_model,
+        sensor_distance_m=args.sensor_distance_m,
+        sensor_direction=tuple(args.sensor_direction),
+        sensor_spacing_m=args.sensor_spacing_m,
+        coil_off_skip_s=args.coil_off_skip_s,
+        probes=args.probes,
+    )
+    return BagFitting(args.raw_topic, args.excitation_topic, args.tuning, parameters)
 
 
-def check_ringdowns(path, windows, how: BagFitting) -> None:
+def fit_settings(how: BagFitting, probe: Probe) -> FitSettings:
+    """The estimator's fit settings of ``how`` for ``probe``; ValueError naming the option that
+    is wrong (``--probes``, ``--sensor-direction``), before any ring-down is read."""
+    try:
+        how.parameters.fluxgate_pair()
+    except ValueError as error:
+        raise ValueError(f"--sensor-direction: {error}") from None
+    try:
+        return how.parameters.fit_settings(probe)
+    except ValueError as error:
+        raise ValueError(f"--probes: {error}") from None
+
+
+def check_ringdowns(path, fits: list[Estimated], how: BagFitting) -> None:
     """ValueError when the bag holds no ring-down to fit, or ``--coil-off-skip-s`` skips all of each."""
-    if not windows:
+    if not fits:
         raise ValueError(
             f"{path} holds no ring-down: no RINGDOWN phase on {how.excitation_topic} with samples on "
             f"{how.raw_topic}{'' if how.tuning else ' (tuning ones skipped: --tuning)'}"
         )
-    longest = max(window.duration_s for window in windows)
-    if how.coil_off_skip_s >= longest:
-        raise ValueError(
-            f"--coil-off-skip-s {how.coil_off_skip_s:g} s skips the whole of every ring-down (longest {longest:g} s)"
-        )
+    longest = max(estimated.window.duration_s for estimated in fits)
+    skip_s = how.parameters.coil_off_skip_s
+    if skip_s >= longest:
+        raise ValueError(f"--coil-off-skip-s {skip_s:g} s skips the whole of every ring-down (longest {longest:g} s)")
 
 
-def write_table(path, fits, probe: Probe) -> list[str]:
+def write_table(path, fits: list[Estimated], probe: Probe) -> list[str]:
     """The OK fits as a model-lab table; returns notes of how the start swings were found.
 
-    Every ring-down starts at the housing stop, so its swing is stop − |θs|
+    Every ring-down of one probe starts at the housing stop, so its swing is stop − |θs|
     (:func:`mows.physics.ringdown_average.start_swing_rad`). θs comes from the first-principles
     decomposition of all the fits as one sweep in one static field
     (:meth:`mows.sweep.record.SweepRecord.start_amplitudes_rad`) where that describes them
     (χ²/dof ≤ MAX_SWEEP_CHI2_DOF), else from each fit's own rest offset
     (:meth:`~mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`); the stop is pooled
-    over the fits that determined θmax, else the probe's. The table is marked as the project's
+    over the fits that determined θmax, else the probe's. Fits of several probes, whose
+    multi-tone excitation need not swing them to the stop, are marked by the column ``probe``
+    and each probe's start swings come from its own fits, as those the estimator recorded
+    (:func:`mows.lab.data.readers.start_amplitudes_rad`). The table is marked as the project's
     own (:func:`mows.lab.data.table.tool_table`)."""
     record = SweepRecord(
         [
-            SweepPoint.from_fit(fit, fit.frequency_hz - probe.f00_hz, fit.frequency_std_hz, window.start_ns / NS_PER_S)
-            for window, fit in fits
+            SweepPoint.from_fit(
+                e.fit, e.estimate.frequency_shift_hz, e.estimate.frequency_shift_std_hz, e.window.start_ns / NS_PER_S
+            )
+            for e in fits
         ]
     )
+    if fits[0].probe_id is not None:
+        probe_ids = np.array([e.probe_id for e in fits], float)
+        start, notes = start_amplitudes_rad([e.fit for e in fits], np.zeros(len(fits)), probe.theta_stop_rad, probe_ids)
+        columns = record.table_columns(start) | {PROBE: probe_ids}
+    else:
+        start, notes = _start_swings_rad(record, probe)
+        columns = record.table_columns(start)
+    tool_table(columns, str(path)).to_csv(path)
+    return notes
+
+
+def _start_swings_rad(record: SweepRecord, probe: Probe) -> tuple[np.ndarray, list[str]]:
+    """Each ring-down's start swing of one probe's record (:func:`write_table`) and how it was found."""
     decomposition = record.decompose(probe, probe.f00_hz)
     if decomposition.ok and decomposition.chi2_dof <= MAX_SWEEP_CHI2_DOF:
         start = record.start_amplitudes_rad(decomposition, probe)
-        notes = [f"start swings: the stop less the rest angle in the sweep's field ({decomposition.report()})"]
-    else:
-        start, notes = record.fitted_start_amplitudes_rad(probe.theta_stop_rad)
-    tool_table(record.table_columns(start), str(path)).to_csv(path)
-    return notes
+        return start, [f"start swings: the stop less the rest angle in the sweep's field ({decomposition.report()})"]
+    return record.fitted_start_amplitudes_rad(probe.theta_stop_rad)

@@ -8,7 +8,11 @@ m·Bx'·2J1(A)/A ≈ m·Bx'·(1 − A²/8)), so the instantaneous frequency drif
 decays: a chirp.
 
 Method. The fitted window is cut into consecutive pieces of ``piece_periods`` periods, each fitted
-with the same signal model (f_i ± σ_i, δ_i). Piece i starts at the amplitude
+with the same signal model (f_i ± σ_i, δ_i). A window of several probes (a multi-tone
+excitation's, docs/multi_probe.md) is fitted jointly, over the whole window and over each piece
+(:func:`mows.estimate.ringdown.fit_ringdowns`, each probe at its own θ0), the pieces as long as
+``piece_periods`` periods of the slowest probe, and each probe is diagnosed from its own fits;
+one probe is a window of one line. Piece i starts at the amplitude
 A_i = A_0·e^(−δ·t_i), A_0 the whole-window fit's θmax where it determined it, else the stop
 less its rest offset (:func:`mows.physics.ringdown_average.start_swing_rad`), and the
 potential predicts its frequency as the estimator would read it, Σ_q c_q·f(A_q) over the piece's amplitude nodes
@@ -36,13 +40,18 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from scipy import stats
 
 from mows.estimate.axis import estimate_along_axis
-from mows.estimate.ringdown import FitOptions, RingdownFit, fit_ringdown, usable_window
+from mows.estimate.probe_set import window_probes
+from mows.estimate.ringdown import FitOptions, ProbeLine, RingdownFit, fit_ringdowns, usable_window
+from mows.estimate.segments import Segment, gap_message
+from mows.estimate.stream import FitSettings
 from mows.physics import ringdown_average
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import Probe
@@ -106,41 +115,115 @@ class ChirpError(ValueError):
 def diagnose_ringdown(
     samples: np.ndarray,
     sample_rate_hz: float,
-    theta0_rad: float,
-    expected_hz: float,
-    probe: Probe,
+    lines: Sequence[ProbeLine],
+    probes: Sequence[Probe],
     options: FitOptions,
-    f00_hz: float | None = None,
+    f00_hz: Sequence[float],
     saturated: np.ndarray | None = None,
     coil_off_skip_s: float = 0.0,
     piece_periods: float = PIECE_PERIODS,
-) -> ChirpDiagnosis:
-    """The chirp diagnosis of one ring-down (module docstring); :class:`ChirpError` when the
-    whole-window fit fails or gives fewer than three pieces or no amplitude."""
+) -> list[ChirpDiagnosis | ChirpError]:
+    """The chirp diagnosis (module docstring) of each probe ringing in one window: ``lines[k]``
+    (:class:`mows.estimate.ringdown.ProbeLine`) of the probe of constants ``probes[k]`` and
+    zero-field frequency ``f00_hz[k]``, all fitted jointly over the window and over each piece
+    (:func:`mows.estimate.ringdown.fit_ringdowns`; one probe is a window of one line). The
+    pieces are ``piece_periods`` periods of the slowest probe long. In the order of ``lines``,
+    a :class:`ChirpError` in place of a probe's diagnosis when its whole-window fit fails, the
+    window holds fewer than three pieces, or the probe has no amplitude or fewer than three
+    fitted pieces."""
     samples = np.asarray(samples, float)
     mask = np.zeros(samples.shape, bool) if saturated is None else np.asarray(saturated, bool)
-    fit = fit_ringdown(
-        samples, sample_rate_hz, theta0_rad, expected_hz, mask, options, probe.damping_per_s, coil_off_skip_s
+    try:
+        fits = fit_ringdowns(samples, sample_rate_hz, lines, mask, options, coil_off_skip_s)
+    except ValueError as error:  # e.g. a window announced at no frequency
+        return [ChirpError(f"no fit: {error}") for _ in lines]
+    found: list[ChirpDiagnosis | ChirpError] = [
+        ChirpError(f"the whole-window fit failed: {fit.report()}") for fit in fits
+    ]
+    ok = [k for k, fit in enumerate(fits) if fit.ok]
+    if not ok:
+        return found
+    start, stop = usable_window(mask, int(round(coil_off_skip_s * sample_rate_hz)))
+    length = int(round(piece_periods * sample_rate_hz / min(fits[k].frequency_hz for k in ok)))
+    count = (stop - start) // length
+    if count < 3:
+        short = ChirpError(f"{fits[ok[0]].duration_s:.3f} s hold {count} pieces of {piece_periods:g} periods; need 3")
+        return [found[k] if k not in ok else short for k in range(len(fits))]
+    piece_lines = [
+        dataclasses.replace(line, expected_frequency_hz=fit.frequency_hz) if fit.ok else line
+        for line, fit in zip(lines, fits)
+    ]
+    piece_options = dataclasses.replace(options, min_periods=0.8 * piece_periods)  # f may sit above the whole f
+    piece_fits = [
+        fit_ringdowns(
+            samples[start + i * length : start + (i + 1) * length], sample_rate_hz, piece_lines, None, piece_options
+        )
+        for i in range(count)
+    ]
+    for k in ok:
+        try:
+            found[k] = _probe_diagnosis(
+                fits[k], [p[k] for p in piece_fits], probes[k], f00_hz[k], length, sample_rate_hz
+            )
+        except ChirpError as error:
+            found[k] = error
+    return found
+
+
+def diagnose_segment(
+    segment: Segment, settings: FitSettings, piece_periods: float = PIECE_PERIODS
+) -> list[tuple[int | None, ChirpDiagnosis | ChirpError]]:
+    """(probe id, diagnosis) of each probe in a recorded window, fitted as the estimator fits it
+    with ``settings`` (:meth:`mows.estimate.stream.RingdownEstimator.estimate_all`): one probe
+    (id None) at the window's θ0 and tone, or, with ``settings.joint``, every probe the window
+    holds, each at its own θ0 and tone (a probe the set does not list: a ChirpError naming it)."""
+    window, joint = segment.window, settings.joint
+    diagnose = functools.partial(
+        diagnose_ringdown,
+        segment.samples_t,
+        segment.sample_rate_hz,
+        saturated=segment.saturated,
+        coil_off_skip_s=settings.coil_off_skip_s,
+        piece_periods=piece_periods,
     )
-    if not fit.ok:
-        raise ChirpError(f"the whole-window fit failed: {fit.report()}")
+    if segment.missing_samples:
+        return [(None, ChirpError(gap_message(segment)))]
+    if joint is None:
+        try:
+            options = settings.options(window.theta0_rad)
+        except ValueError as error:
+            return [(None, ChirpError(f"cannot build the signal model: {error}"))]
+        line = ProbeLine(0, window.theta0_rad, window.excitation_frequency_hz, None, settings.probe.damping_per_s)
+        (diagnosis,) = diagnose([line], [settings.probe], options, [settings.f00_hz])
+        return [(None, diagnosis)]
+    held = window_probes(joint.probes, window)
+    known = [p for p in held if p.entry is not None]
+    found: dict[int, ChirpDiagnosis | ChirpError] = {
+        p.probe_id: ChirpError(p.unknown_message(joint.probes)) for p in held if p.entry is None
+    }
+    try:
+        lines = joint.lines(known) if known else []
+    except ValueError as error:
+        found |= {p.probe_id: ChirpError(f"cannot build the signal model: {error}") for p in known}
+    else:
+        entries = [p.entry for p in known if p.entry is not None]
+        probes, f00s = [e.probe for e in entries], [e.f00_hz for e in entries]
+        if lines:
+            found |= dict(zip((p.probe_id for p in known), diagnose(lines, probes, joint.options, f00s)))
+    return [(p.probe_id, found[p.probe_id]) for p in held]
+
+
+def _probe_diagnosis(
+    fit: RingdownFit, piece_fits: Sequence[RingdownFit], probe: Probe, f00_hz: float, length: int, sample_rate_hz: float
+) -> ChirpDiagnosis:
+    """One probe's diagnosis from its whole-window fit and its fit in each piece of ``length`` samples."""
     start_amplitude = _start_amplitude_rad(fit, probe)
     if not math.isfinite(start_amplitude):
         raise ChirpError("the rest offset lies beyond the stop: the chirp cannot be put against amplitude")
-    start, stop = usable_window(mask, int(round(coil_off_skip_s * sample_rate_hz)))
-    length = int(round(piece_periods * sample_rate_hz / fit.frequency_hz))
-    count = (stop - start) // length
-    if count < 3:
-        raise ChirpError(f"{fit.duration_s:.3f} s hold {count} pieces of {piece_periods:g} periods; need 3")
-    field = _field_along_axis(fit, probe, probe.f00_hz if f00_hz is None else f00_hz, start_amplitude)
-    piece_options = dataclasses.replace(options, min_periods=0.8 * piece_periods)  # f may sit above the whole f
+    field = _field_along_axis(fit, probe, f00_hz, start_amplitude)
     pieces: list[Piece] = []
-    failures: list[str] = []
-    for i in range(count):
-        part = slice(start + i * length, start + (i + 1) * length)
-        piece = fit_ringdown(samples[part], sample_rate_hz, theta0_rad, fit.frequency_hz, None, piece_options)
+    for i, piece in enumerate(piece_fits):
         if not piece.ok:
-            failures.append(piece.message)
             continue
         t = (i * length) / sample_rate_hz
         amplitude = start_amplitude * math.exp(-fit.damping_per_s * t)
@@ -150,7 +233,8 @@ def diagnose_ringdown(
             Piece(t, amplitude, piece.frequency_hz, piece.frequency_std_hz, piece.damping_per_s, damping_std, predicted)
         )
     if len(pieces) < 3:
-        raise ChirpError(f"only {len(pieces)} of {count} pieces could be fitted ({failures[0]}); need 3")
+        failed = next(piece.message for piece in piece_fits if not piece.ok)
+        raise ChirpError(f"only {len(pieces)} of {len(piece_fits)} pieces could be fitted ({failed}); need 3")
     return _diagnosis(fit, tuple(pieces), field)
 
 

@@ -1,12 +1,15 @@
-"""The ring-downs a driver recorded in a bag, cut out and fitted as the estimator node does them
-(:mod:`mows.estimate.segments`, :mod:`mows.estimate.ringdown`): each announced RINGDOWN window
-cut from the raw blocks by its device stamps and fitted with the lever-aware signal model of the
-paper's geometry, or Eq. S11 (``paper_model``). :class:`BagFitting` says how, in the estimator's
-parameters of the same names (``mows fit``, ``mows lab ringdown``, ``mows calibrate BAG``).
+"""The ring-downs a driver recorded in a bag, fitted offline as the estimator node fits them:
+the bag's raw blocks and RINGDOWN announcements go through the node's own stream core
+(:class:`mows.estimate.stream.RingdownEstimator`) with the fit settings of the node's
+parameters (:class:`mows.estimate.settings.FitParameters`), so each window is cut from the raw
+blocks by its device stamps and fitted with the lever-aware signal model of the fluxgate pair
+the parameters describe, or Eq. S11 (``lever_aware`` False). :class:`BagFitting` says where
+the ring-downs are and how they are fitted (``mows fit``, ``mows lab ringdown``, ``mows calibrate BAG``).
 
-A bag of several probes sharing each window is refused (:func:`check_one_probe`): fitting one
-probe per window would bias each probe's frequency by its neighbours', and the joint fit needs the
-estimator's ``probes`` list (docs/multi_probe.md).
+A bag of several probes sharing each window is fitted jointly, one fit per probe, when the
+parameters list the probes (``probes``, :mod:`mows.estimate.probe_set`); without that list it
+is refused (:func:`check_probes`): fitting one probe per window would bias each probe's
+frequency by its neighbours'.
 """
 
 from __future__ import annotations
@@ -17,57 +20,42 @@ from collections.abc import Iterator
 
 from mows.device.cycle.phases import Phase
 from mows.device.recording.bags import read_bag
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit
-from mows.estimate.segments import (
-    RingdownWindow,
-    Segment,
-    SegmentAssembler,
-    block_from_message,
-    fit_segment,
-    window_from_message,
-)
+from mows.estimate.segments import Segment
+from mows.estimate.settings import FitParameters
+from mows.estimate.stream import Estimated, FitSettings, RingdownEstimator
 from mows.lab.data.readers import RINGDOWN_TOPIC
-from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
-from mows.physics.probe import Probe
+
+BUFFER_S = 60.0  # raw samples kept while a window is assembled: a bag's blocks come in order, none late
 
 
 @dataclasses.dataclass(frozen=True)
 class BagFitting:
     """Where a bag's ring-downs are (``raw_topic``, ``excitation_topic``; tuning ones too with
-    ``tuning``) and how they are fitted: the lever-aware pickup of fluxgates ``sensor_distance_m``
-    from the probe and ``sensor_spacing_m`` apart, or Eq. S11 (``paper_model``), leaving out
-    ``coil_off_skip_s`` after the coils switch off."""
+    ``tuning``) and how they are fitted: the estimator's ``parameters``."""
 
     raw_topic: str = "/mows/raw"
     excitation_topic: str = "/mows/excitation"
     tuning: bool = False
-    paper_model: bool = False
-    coil_off_skip_s: float = COIL_OFF_SKIP_S
-    sensor_distance_m: float = PAPER_DISTANCE_M
-    sensor_spacing_m: float = PAPER_SPACING_M
+    parameters: FitParameters = FitParameters()
 
 
-def fit_bag(
-    path: str | os.PathLike[str], probe: Probe, how: BagFitting
-) -> Iterator[tuple[RingdownWindow, RingdownFit]]:
-    """(window, fit) for every ring-down in the bag, in order (tuning ones with ``how.tuning``)."""
-    for segment, options in recorded_ringdowns(path, probe, how):
-        yield segment.window, fit_segment(segment, options, how.coil_off_skip_s, probe.damping_per_s)
+def fit_bag(path: str | os.PathLike[str], settings: FitSettings, how: BagFitting) -> Iterator[Estimated]:
+    """Every ring-down in the bag fitted and inverted as the estimator node does it with
+    ``settings`` (e.g. ``how.parameters.fit_settings(probe)``), in order (tuning ones with
+    ``how.tuning``): one :class:`Estimated` per window, or one per probe of each window when
+    ``settings`` list several probes (a bag of several without them: :func:`check_probes`)."""
+    estimator = RingdownEstimator(BUFFER_S)
+    for segments in _completed(path, settings, how, estimator):
+        yield from estimator.estimate_segments(segments, settings)
 
 
-def recorded_ringdowns(
-    path: str | os.PathLike[str], probe: Probe, how: BagFitting
-) -> Iterator[tuple[Segment, FitOptions]]:
-    """(segment, fit options) of every ring-down in the bag as ``how`` says: the estimator
-    node's lever-aware pickup at the window's θ0, or Eq. S11 (``paper_model``)."""
-    check_one_probe(path, how.excitation_topic)
-    pair = FluxgatePair.paper(distance_m=how.sensor_distance_m, spacing_m=how.sensor_spacing_m)
-    for segment in recorded_segments(path, how.raw_topic, how.excitation_topic, how.tuning):
-        theta0 = segment.window.theta0_rad
-        yield segment, FitOptions() if how.paper_model else FitOptions.lever_aware(pair, probe, theta0)
+def recorded_ringdowns(path: str | os.PathLike[str], settings: FitSettings, how: BagFitting) -> Iterator[Segment]:
+    """Every ring-down in the bag as ``how`` says, cut out as :func:`fit_bag` cuts them."""
+    for segments in _completed(path, settings, how, RingdownEstimator(BUFFER_S)):
+        yield from segments
 
 
-def check_one_probe(path: str | os.PathLike[str], excitation_topic: str) -> None:
+def check_probes(path: str | os.PathLike[str], excitation_topic: str) -> None:
     """ValueError when the bag's ring-downs hold several probes (module docstring): the probes
     its excitations ring (ExcitationState ``probe_ids``) and those of its recorded fits."""
     ids: set[int] = set()
@@ -77,28 +65,24 @@ def check_one_probe(path: str | os.PathLike[str], excitation_topic: str) -> None
         else:
             ids.update(int(i) for i in item.message.probe_ids)
     if len(ids) > 1:
+        listed = ", ".join(f"{k}: F00_HZ" for k in sorted(ids))
         raise ValueError(
-            f"{path} holds ring-downs of probes {', '.join(map(str, sorted(ids)))} sharing each window: fitting "
-            "them needs the estimator's probes list, which mows fit and mows lab ringdown do not take "
-            f"(the estimator's recorded fits are read, each probe apart, by mows lab compare {path})"
+            f"{path} holds ring-downs of probes {', '.join(map(str, sorted(ids)))} sharing each window: "
+            f"fit them jointly with --probes '{{{listed}}}' (the estimator's probes parameter, docs/multi_probe.md)"
         )
 
 
-def recorded_segments(
-    path: str | os.PathLike[str],
-    raw_topic: str = "/mows/raw",
-    excitation_topic: str = "/mows/excitation",
-    tuning: bool = False,
-) -> Iterator[Segment]:
-    """Every ring-down the driver recorded in the bag at ``path``: its announced RINGDOWN window
-    (tuning ones only with ``tuning``) cut out of the raw blocks by device stamps, as
-    :class:`mows.estimate.segments.Segment`, in order (as the estimator node assembles them)."""
-    assembler = SegmentAssembler(buffer_s=60.0)
-    for item in read_bag(path, topics=[raw_topic, excitation_topic]):
+def _completed(
+    path: str | os.PathLike[str], settings: FitSettings, how: BagFitting, estimator: RingdownEstimator
+) -> Iterator[list[Segment]]:
+    """The ring-downs each of the bag's raw blocks and RINGDOWN announcements completes, fed to
+    ``estimator`` as the node feeds it its subscriptions (tuning ones only with ``how.tuning``);
+    ValueError for a bag of several probes that ``settings`` fit one by one."""
+    if settings.joint is None:
+        check_probes(path, how.excitation_topic)
+    for item in read_bag(path, topics=[how.raw_topic, how.excitation_topic]):
         message = item.message
-        if item.topic == excitation_topic:
-            if message.phase != Phase.RINGDOWN or (message.tuning and not tuning):
-                continue
-            yield from assembler.announce(window_from_message(message))
-        else:
-            yield from assembler.add_block(block_from_message(message))
+        if item.topic == how.raw_topic:
+            yield estimator.add_block(message)
+        elif message.phase == Phase.RINGDOWN and (how.tuning or not message.tuning):
+            yield estimator.announce(message)

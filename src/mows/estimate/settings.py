@@ -1,0 +1,108 @@
+"""The fit settings of the estimator's parameters: the one path from the values of the estimator
+node's parameters (``f00_hz``, ``channels``, ``sensor_*``, ``probes`` …) to the
+:class:`mows.estimate.stream.FitSettings` of each ring-down, taken by the node and by the
+offline commands that fit a recorded bag as the node would (``mows fit``, ``mows lab ringdown``).
+
+:class:`FitParameters` holds those values under the parameters' names, with the parameters'
+defaults; the node's parameter table takes its defaults from it and checks the values' ranges.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from mows.estimate.probe_set import ProbeEntry, WindowProbe, read_probe_set
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, ProbeLine
+from mows.estimate.stream import FitSettings, JointSettings
+from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
+from mows.physics.probe import Probe
+
+
+@dataclasses.dataclass(frozen=True)
+class FitParameters:
+    """The estimator's parameters that say how a ring-down is fitted and inverted, under their
+    names (docs/nodes.md): f00 (0: the probe's), the channels fitted, the sensing axis (a, b),
+    θ0 fitted or taken, the lever-aware pickup of the fluxgate pair ``sensor_distance_m`` from
+    the probe along ``sensor_direction`` and ``sensor_spacing_m`` apart, the samples skipped
+    after coil-off, the shortest usable ring-down, the χ²/dof refused, and the ``probes`` text
+    of several probes per window (:mod:`mows.estimate.probe_set`; empty: one probe)."""
+
+    f00_hz: float = 0.0
+    f00_std_hz: float = 0.0
+    channels: str = FitOptions.channels
+    sensor_axis_a: float = 0.0
+    sensor_axis_b: float = 1.0
+    theta0_free: bool = False
+    lever_aware: bool = True
+    sensor_distance_m: float = PAPER_DISTANCE_M
+    sensor_direction: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    sensor_spacing_m: float = PAPER_SPACING_M
+    coil_off_skip_s: float = COIL_OFF_SKIP_S
+    min_periods: float = FitOptions.min_periods
+    max_chi2_dof: float = FitOptions.max_chi2_dof
+    probes: str = ""
+
+    @classmethod
+    def of(cls, values: Mapping[str, Any]) -> FitParameters:
+        """The fields of ``values`` (a node's parameter values, others ignored)."""
+        given = {field.name: values[field.name] for field in dataclasses.fields(cls)}
+        return cls(**given | {"sensor_direction": tuple(float(x) for x in given["sensor_direction"])})
+
+    def fluxgate_pair(self) -> FluxgatePair:
+        """The pair the parameters describe, the probe at the origin of the rotation plane's frame."""
+        return FluxgatePair.paper(
+            distance_m=self.sensor_distance_m,
+            spacing_m=self.sensor_spacing_m,
+            direction=self.sensor_direction,
+            axis=(self.sensor_axis_a, self.sensor_axis_b, 0.0),
+        )
+
+    def fit_options(self, probe: Probe, theta0_rad: float) -> FitOptions:
+        """The ring-down fit of one probe at θ0. ValueError when no model can be made (e.g. a
+        sensing axis of (0, 0))."""
+        direction = (self.sensor_axis_a, self.sensor_axis_b)
+        common: dict[str, Any] = dict(
+            sensor_direction=direction, min_periods=self.min_periods, max_chi2_dof=self.max_chi2_dof
+        )
+        if self.lever_aware and not self.theta0_free and self.channels != "both":
+            return FitOptions.lever_aware(self.fluxgate_pair(), probe, theta0_rad, self.channels, **common)
+        return FitOptions(channels=self.channels, theta0_free=self.theta0_free, **common)
+
+    def joint_lines(self, held: Sequence[WindowProbe]) -> list[ProbeLine]:
+        """The lines of the probes a window holds, each at its own θ0, for their joint fit;
+        ValueError for what it cannot do (a fitted θ0)."""
+        if self.theta0_free:
+            raise ValueError("theta0_free: the joint fit of several probes takes θ0 from the excitation")
+        pair = self.fluxgate_pair() if self.lever_aware and self.channels != "both" else None
+        return [p.entry.line(p.theta0_rad, pair, self.channels, p.tone_hz) for p in held if p.entry is not None]
+
+    def joint_settings(self, probe: Probe) -> JointSettings | None:
+        """The joint fit of the listed probes; None when ``probes`` is empty (one probe).
+        ValueError naming what is wrong in ``probes``."""
+        probes = probe_set(self.probes, probe)
+        if not probes:
+            return None
+        options = FitOptions(self.channels, min_periods=self.min_periods, max_chi2_dof=self.max_chi2_dof)
+        return JointSettings(probes, self.joint_lines, options)
+
+    def fit_settings(self, probe: Probe) -> FitSettings:
+        """What the parameters ask of each ring-down's fit and inversion; f00 = 0 is the probe's."""
+        return FitSettings(
+            probe,
+            functools.partial(self.fit_options, probe),
+            self.coil_off_skip_s,
+            self.f00_hz if self.f00_hz > 0 else probe.f00_hz,
+            self.f00_std_hz,
+            self.joint_settings(probe),
+        )
+
+
+@functools.lru_cache(maxsize=8)
+def probe_set(text: str, own_probe: Probe) -> tuple[ProbeEntry, ...]:
+    """The probes of a ``probes`` value (:func:`mows.estimate.probe_set.read_probe_set`, probe
+    files read by :meth:`Probe.from_yaml`), with ``own_probe`` for those given by their f00
+    alone; read once per value and probe, not per fit."""
+    return read_probe_set(text, own_probe, Probe.from_yaml)

@@ -107,6 +107,14 @@ def test_several_probes_without_probes_are_refused_naming_them(bag, capsys):
     assert len(error.splitlines()) == 1 and "probes 0, 1, 2" in error and "--probes '{0: F00_HZ" in error, error
 
 
+def test_calibrate_refuses_a_bag_of_several_probes_in_its_own_words(bag, tmp_path, capsys):
+    path, _ = bag
+    assert main(["calibrate", str(path), "-o", str(tmp_path / "p.yaml")]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and "probes 0, 1, 2" in error and "a calibration is of one probe" in error
+    assert "--probes" not in error and not (tmp_path / "p.yaml").exists(), error
+
+
 def test_lab_ringdown_diagnoses_each_probe_inside_each_joint_window(bag, capsys):
     """Each probe's pieces, fitted jointly with its neighbours, average to its truth within 4σ,
     and at swings of 1–3° (a predicted chirp below 0.1 mHz, a piece's σ 15–150 mHz) every

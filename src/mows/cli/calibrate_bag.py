@@ -19,7 +19,7 @@ from mows.device.backends.bag_backend import SUPPLY_TYPE
 from mows.device.recording.bags import BagError, read_bag
 from mows.estimate.calibration.constants import CalibrationPoint
 from mows.estimate.stream import FitSettings
-from mows.lab.data.ringdowns import BagFitting, fit_bag
+from mows.lab.data.ringdowns import BagFitting, fit_bag, probes_in
 from mows.records import stamps
 from mows.records.stamps import NS_PER_S
 
@@ -71,6 +71,11 @@ def bag_points(path, settings: FitSettings, wiring: str, supply_topic: str, how:
     with ``settings`` (the nominal probe's pickup), each at the current the supply states on
     ``supply_topic`` held steady over it: (points, failed fits by (current, status), ring-downs
     at no steady current)."""
+    if len(ids := probes_in(path, how.excitation_topic)) > 1:
+        raise ValueError(
+            f"{path} holds ring-downs of probes {', '.join(map(str, ids))} sharing each window: a calibration is of "
+            "one probe; record each probe's calibration alone"
+        )
     timeline = SupplyTimeline.of_bag(path, supply_topic)
     points: list[CalibrationPoint] = []
     failed: dict[tuple[float, str], int] = {}

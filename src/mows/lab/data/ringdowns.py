@@ -55,19 +55,24 @@ def recorded_ringdowns(path: str | os.PathLike[str], settings: FitSettings, how:
         yield from segments
 
 
-def check_probes(path: str | os.PathLike[str], excitation_topic: str) -> None:
-    """ValueError when the bag's ring-downs hold several probes (module docstring): the probes
-    its excitations ring (ExcitationState ``probe_ids``) and those of its recorded fits."""
+def probes_in(path: str | os.PathLike[str], excitation_topic: str) -> list[int]:
+    """The probes whose ring-downs the bag holds, in order: those its excitations ring
+    (ExcitationState ``probe_ids``) and those of its recorded fits."""
     ids: set[int] = set()
     for item in read_bag(path, topics=[excitation_topic, RINGDOWN_TOPIC]):
         if item.topic == RINGDOWN_TOPIC:
             ids.add(int(item.message.probe_id))
         else:
             ids.update(int(i) for i in item.message.probe_ids)
-    if len(ids) > 1:
-        listed = ", ".join(f"{k}: F00_HZ" for k in sorted(ids))
+    return sorted(ids)
+
+
+def check_probes(path: str | os.PathLike[str], excitation_topic: str) -> None:
+    """ValueError when the bag's ring-downs hold several probes (module docstring)."""
+    if len(ids := probes_in(path, excitation_topic)) > 1:
+        listed = ", ".join(f"{k}: F00_HZ" for k in ids)
         raise ValueError(
-            f"{path} holds ring-downs of probes {', '.join(map(str, sorted(ids)))} sharing each window: "
+            f"{path} holds ring-downs of probes {', '.join(map(str, ids))} sharing each window: "
             f"fit them jointly with --probes '{{{listed}}}' (the estimator's probes parameter, docs/multi_probe.md)"
         )
 

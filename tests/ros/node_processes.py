@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 import pytest
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from mows_msgs.action import MeasurementCycle
 from rclpy.action import ActionClient, ActionServer
 from rclpy.executors import SingleThreadedExecutor
@@ -32,6 +33,21 @@ class RosHarness:
                 raise AssertionError(f"gave up after {bound_s} s waiting for {what}")
             self.executor.spin_once(timeout_sec=0.1)
         return value
+
+    def wait_for_estimator_hearing(self, name: str = "/estimator") -> None:
+        """Wait until the estimator ``name`` reports blocks heard on /diagnostics, as a supervisor
+        would before a first cycle: discovery takes seconds on a loaded machine, and a ring-down
+        over before the estimator's first block is counted by it, not fitted."""
+        heard: list[int] = []
+
+        def on_diagnostics(array: DiagnosticArray) -> None:
+            heard.extend(int(kv.value) for s in array.status if s.name == name for kv in s.values if kv.key == "blocks")
+
+        subscription = self.node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+        try:
+            self.wait_for(lambda: any(heard), f"{name} hearing the stream", 300.0)
+        finally:
+            self.node.destroy_subscription(subscription)
 
     def close(self):
         # Everything is destroyed in order, children first: the node leaves the executor, and

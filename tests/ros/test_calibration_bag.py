@@ -47,6 +47,7 @@ def test_a_recorded_calibration_gives_the_actions_constants_offline(ros, start, 
     calibrator = start(*NODE["calibrator"].command(["-p", f"probe_output_file:={online}"]))
     client = ActionClient(ros.node, CalibrateProbe, "calibrator/calibrate_probe")
     ros.wait_for(client.server_is_ready, "the calibration action server")
+    ros.wait_for_estimator_hearing()  # or the first ring-down may be over before it listens
     sent = client.send_goal_async(CalibrateProbe.Goal(currents_a=CURRENTS))
     handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")
     assert handle.accepted

@@ -284,10 +284,7 @@ def test_a_driver_restarted_mid_session_keeps_the_estimator_fitting(supervisor, 
         assert sup.transition(transition)
     sup.ros.wait_for(lambda: sup.blocks, "the first block")
     assert sup.blocks[-1].device_epoch == 0
-    # As a supervisor would: the first cycle once the estimator hears the stream. Discovery
-    # takes seconds on a loaded machine, and a ring-down over before the estimator's first
-    # block is counted by it, not fitted.
-    sup.ros.wait_for(lambda: int(estimator_reports[-1]["blocks"]), "the estimator hearing the stream")
+    sup.ros.wait_for_estimator_hearing()
     first = sup.result(sup.cycle(theta0_rad=0.3))
     assert first.success, first.message
     sup.ros.wait_for(lambda: any(f.cycle_id == first.cycle_id for _, f in fits), "the first cycle's fit")

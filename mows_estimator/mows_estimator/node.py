@@ -1,17 +1,16 @@
 """The estimator node: fits every ring-down announced by the driver and publishes the result.
 
 Topic and service names are relative, so the graph can run in a namespace; in the root
-namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock, sensor-data
-QoS) and ``/mows/excitation`` (ExcitationState, transient local). Publishes, per recorded ring-down,
-``/mows/ringdown`` (RingdownFit, always, with a status), and when the fit is OK ``/mows/field`` (FieldEstimate) and
-``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). With ``probes`` listing several
-probes, each window is fitted jointly over the probes its announcement lists (each at its own
-θ0; all of them when it lists none) and gives one RingdownFit per probe (its ``probe_id``, frame
-``<probe_frame_id>_<id>``), and /diagnostics counts each probe's fits and those of ids it does
-not know. Service
-``/estimator/calibrate`` (CalibrateF00; ``/mows/estimator/calibrate``, the previous release's name,
-is served too for one release) sets f00 from the next ring-downs in a known field.
-The estimation itself is ``mows.estimate.segments``, ``mows.estimate.ringdown`` and ``mows.estimate.axis``.
+namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock, sensor-data QoS)
+and ``/mows/excitation`` (ExcitationState, transient local). Publishes, per recorded ring-down,
+``/mows/ringdown`` (RingdownFit, always, with a status), and when the fit is OK ``/mows/field``
+(FieldEstimate) and ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). With ``probes``
+listing several probes, each window is fitted jointly over the probes its announcement lists (each
+at its own θ0; all of them when it lists none) and gives one RingdownFit per probe (its
+``probe_id``, frame ``<probe_frame_id>_<id>``), and /diagnostics counts each probe's fits and those
+of ids it does not know. Service ``/estimator/calibrate`` (CalibrateF00; ``/mows/estimator/calibrate``,
+the previous release's name, is served too for one release) sets f00 from the next ring-downs in a
+known field. The estimation itself is :class:`mows.estimate.stream.RingdownEstimator`.
 """
 
 import time
@@ -26,7 +25,6 @@ from sensor_msgs.msg import MagneticField
 from mows.estimate.probe_set import probe_frame_id
 from mows.estimate.settings import FitParameters
 from mows.estimate.stream import Estimated, FitSettings, RingdownEstimator
-from mows.physics.probe import Probe
 from mows.precompile import precompile
 from mows_estimator.health import FitTally
 from mows_estimator.messages import estimate_to_msg, fit_to_msg, magnetic_field_msg
@@ -54,8 +52,7 @@ class EstimatorNode(MowsNode):
         self._tally = FitTally()
         self._calibrated = Future()
         self.create_subscription(MagnetometerBlock, "mows/raw", self.when_active(self._on_block), STREAM_QOS)
-        # Transient local: an announcement made before discovery matched the reader still arrives.
-        on_excitation = self.when_active(self._on_excitation)
+        on_excitation = self.when_active(self._on_excitation)  # transient local: heard if sent before discovery
         self.create_subscription(ExcitationState, "mows/excitation", on_excitation, EXCITATION_QOS)
         self._fit_pub = self.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
         self._field_pub = self.create_publisher(FieldEstimate, "mows/field", RESULT_QOS)
@@ -71,17 +68,14 @@ class EstimatorNode(MowsNode):
         # Compile the fit (or load it from numba's cache) now, not on the first real ring-down.
         self.get_logger().info(f"fit kernels ready in {precompile(simulator=False):.1f} s")
 
-    def probe(self) -> Probe:
-        return probe_of(self.get_parameter("probe_file").value)
-
     def _settings(self) -> FitSettings:
-        return FitParameters.of(parameter_values(self, PARAMETERS)).fit_settings(self.probe())
+        probe = probe_of(self.get_parameter("probe_file").value)
+        return FitParameters.of(parameter_values(self, PARAMETERS)).fit_settings(probe)
 
     # --- stream -----------------------------------------------------------------------------
     def _on_excitation(self, msg: ExcitationState):
-        tuning_ignored = msg.tuning and not self.get_parameter("fit_tuning_ringdowns").value
-        if msg.phase == ExcitationState.PHASE_RINGDOWN and not tuning_ignored:
-            self._take(self._estimator.announce, msg, "malformed_excitation", "{error}: ignored")
+        fit_tuning = self.get_parameter("fit_tuning_ringdowns").value
+        self._take(lambda m: self._estimator.announce(m, fit_tuning), msg, "malformed_excitation", "{error}: ignored")
 
     def _on_block(self, msg: MagnetometerBlock):
         warning = f"malformed MagnetometerBlock {msg.sequence}: {{error}}"  # not samples a device could send

@@ -50,6 +50,8 @@ def ringdown_msg(cycle_id: int, first: int = 0, duration_s: float = N_SAMPLES / 
         theta0_rad=0.0,
         frequency_hz=FREQUENCY_HZ,
         tuning=False,
+        phase=3,
+        PHASE_RINGDOWN=3,
     )
 
 

@@ -91,9 +91,12 @@ class RingdownEstimator:
         could have sent (nothing of them is kept)."""
         return self.assembler.add_block(block_from_message(message))
 
-    def announce(self, message: Any) -> list[Segment]:
-        """An ``ExcitationState`` of a ring-down; the ring-downs complete by now. ValueError for an
+    def announce(self, message: Any, fit_tuning: bool = False) -> list[Segment]:
+        """An ``ExcitationState``; the ring-downs complete by now once it announces one (phase
+        RINGDOWN; a frequency-tuning one only with ``fit_tuning``). ValueError for an
         announcement that is no window."""
+        if message.phase != message.PHASE_RINGDOWN or (message.tuning and not fit_tuning):
+            return []
         return self.assembler.announce(window_from_message(message))
 
     def estimate_segments(self, segments: list[Segment], settings: FitSettings) -> list[Estimated]:

@@ -18,7 +18,6 @@ import dataclasses
 import os
 from collections.abc import Iterator
 
-from mows.device.cycle.phases import Phase
 from mows.device.recording.bags import read_bag
 from mows.estimate.segments import Segment
 from mows.estimate.settings import FitParameters
@@ -89,5 +88,5 @@ def _completed(
         message = item.message
         if item.topic == how.raw_topic:
             yield estimator.add_block(message)
-        elif message.phase == Phase.RINGDOWN and (how.tuning or not message.tuning):
-            yield estimator.announce(message)
+        else:
+            yield estimator.announce(message, how.tuning)

@@ -177,11 +177,12 @@ def measure(cycles: int, repeats: int, duration_s: float | None, exited, trackin
     node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, stream.on_diagnostics, DIAGNOSTICS_DEPTH)
     client = node.create_client(RunCycle, "driver/run_cycle")
     try:
-        # The estimator advertises its fits once it listens (after its kernels are compiled):
-        # a cycle run before would reach it through the latched excitation states only, late.
+        # The first cycle once the estimator hears the stream (its /diagnostics count blocks):
+        # discovery takes seconds on a loaded machine, and a ring-down over before the
+        # estimator's first block is counted by it, not fitted.
         _spin_until(
             node,
-            lambda: client.service_is_ready() and stream.block_arrivals and node.count_publishers("/mows/ringdown") > 0,
+            lambda: client.service_is_ready() and stream.block_arrivals and int(stream.estimator.get("blocks", 0)),
             exited,
             120.0,
         )

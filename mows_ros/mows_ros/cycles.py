@@ -25,6 +25,7 @@ from mows_ros.qos import RESULT_QOS
 
 CYCLE_ACTION = "driver/measurement_cycle"  # the driver's, in the caller's namespace
 GOAL_ANSWER_S = 10.0  # longest wait for the driver to accept a goal (it answers in milliseconds)
+FITS_HEARD_S = 10.0  # longest wait, before a cycle, for discovery to match a publisher of the fits
 
 
 def cycle_goal(request: CycleRequest) -> MeasurementCycle.Goal:
@@ -53,7 +54,7 @@ class DriverCycles:
         self._client = ActionClient(node, MeasurementCycle, CYCLE_ACTION, callback_group=group)
         self._running = None  # the goal handle of the cycle awaited now
         deliver = self._fits_in.deliver
-        node.create_subscription(
+        self._fit_subscription = node.create_subscription(
             RingdownFit, "mows/ringdown", lambda msg: deliver(on_fit(msg)), RESULT_QOS, callback_group=group
         )
 
@@ -61,11 +62,19 @@ class DriverCycles:
         """Whether the driver's measurement-cycle action is there."""
         return self._client.server_is_ready()
 
+    def hears_fits(self) -> bool:
+        """Whether discovery has matched a publisher of the fits (an estimator) to this node."""
+        return self._fit_subscription.get_publisher_count() > 0
+
     async def run(self, request: CycleRequest, timeout_s: float) -> CycleAnswer:
         """The driver's answer to ``request``: waiting up to ``timeout_s`` for the
         action to appear and again for the cycle, which is cancelled when it takes longer."""
         if not await until(self._node, self.ready, timeout_s):
             return CycleAnswer(problem=f"the driver's {CYCLE_ACTION} action did not appear within {timeout_s:g} s")
+        # Fits are volatile: those published before discovery matches this node are never heard,
+        # and a loaded machine takes seconds. Without an estimator the cycle still runs; the
+        # caller's wait for its fits then reports them missing.
+        await until(self._node, self.hears_fits, FITS_HEARD_S)
         goal_id = UUID(uuid=list(uuid.uuid4().bytes))
         sent = self._client.send_goal_async(cycle_goal(request), goal_uuid=goal_id)
         if await within(self._node, sent, GOAL_ANSWER_S):

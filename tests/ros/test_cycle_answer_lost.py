@@ -2,16 +2,22 @@
 response whose reader it has not matched yet, while the driver, which did receive the goal, runs
 the cycle. The caller (the mapper, the calibrator) must still get that cycle's answer, asked for
 by the goal's id, or its sweep loses every ring-down of the cycle; a goal the driver never
-received is reported as unanswered at once, not awaited until the cycle's timeout."""
+received is reported as unanswered at once, not awaited until the cycle's timeout.
+
+Fits are volatile too: a cycle sent before discovery has matched the caller to a publisher of
+the fits (an estimator) would have fits the caller never hears, so the caller waits for that
+match before it sends the goal."""
 
 import pytest
 import rclpy
 from mows_msgs.action import MeasurementCycle
+from mows_msgs.msg import RingdownFit
 from rclpy.action import ActionServer
 from rclpy.task import Future
 
 from mows.device.cycle.phases import CycleRequest
 from mows_ros import cycles
+from mows_ros.qos import RESULT_QOS
 
 pytestmark = pytest.mark.ros
 
@@ -31,6 +37,7 @@ def test_a_cycle_whose_acceptance_is_lost_is_awaited_by_its_goal_id(ros, monkeyp
         return MeasurementCycle.Result(success=True, cycle_id=7, ringdowns_recorded=3)
 
     server = ActionServer(driver, MeasurementCycle, cycles.CYCLE_ACTION, execute)
+    driver.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)  # an estimator's
     client = cycles.DriverCycles(ros.node, lambda fit: None)
     send = client._client.send_goal_async
 
@@ -54,3 +61,32 @@ def test_a_cycle_whose_acceptance_is_lost_is_awaited_by_its_goal_id(ros, monkeyp
     else:
         assert executed == []
         assert answer.problem == "the driver did not answer the cycle goal within 1 s"
+
+
+def test_a_cycle_waits_until_a_publisher_of_its_fits_is_matched(ros, monkeypatch):
+    monkeypatch.setattr(cycles, "FITS_HEARD_S", 60.0)
+    driver = rclpy.create_node("driver_stand_in")
+    ros.executor.add_node(driver)
+    executed = []
+
+    def execute(goal_handle):
+        executed.append(goal_handle.request.theta0_rad)
+        goal_handle.succeed()
+        return MeasurementCycle.Result(success=True, cycle_id=3, ringdowns_recorded=1)
+
+    server = ActionServer(driver, MeasurementCycle, cycles.CYCLE_ACTION, execute)
+    client = cycles.DriverCycles(ros.node, lambda fit: None)
+    try:
+        ros.wait_for(client.ready, "the stand-in driver's action")
+        task = ros.executor.create_task(client.run(CycleRequest(0.25, repeats=1), CYCLE_TIMEOUT_S))
+        for _ in range(20):  # 2 s of spinning: no estimator, no goal
+            ros.executor.spin_once(timeout_sec=0.1)
+        assert executed == [] and not task.done()
+        driver.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
+        answer = ros.wait_for(lambda: task.done() and task.result(), "the cycle's answer", bound_s=20.0)
+    finally:
+        server.destroy()
+        ros.executor.remove_node(driver)
+        driver.destroy_node()
+    assert executed == [0.25]
+    assert (answer.cycle_id, answer.problem) == (3, "")

@@ -27,6 +27,7 @@ before any work, an ``--out`` that holds one of them.
 import argparse
 import datetime
 import math
+import os
 import pathlib
 import re
 import signal
@@ -51,12 +52,11 @@ from mows.sim.scenario import load_scenario, scenario_file
 from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
 from mows.sweep.calibration.simulated import compare_with_truth, simulate_calibration
 from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
-from mows.sweep.record import SweepRecord
+from mows.sweep.record import SweepPoint, SweepRecord
 from mows_bringup.demo_probes import MAP_FILE, PROBE_FILES, accepted, has_probes, sweep_client, write_probe_files
 from mows_bringup.demo_probes import parameters as probe_parameters
 from mows_bringup.demo_probes import run_sweep as run_probes_sweep
 from mows_bringup.graph import Graph, add_foxglove_option, foxglove_arguments, graph_nodes, say
-from mows_mapper.messages import sweep_point
 from mows_ros.process import EXIT_BAD_PARAMETER
 from mows_ros.qos import MAP_QOS, RESULT_QOS
 
@@ -90,6 +90,13 @@ def parse_arguments(argv):
     )
     parser.add_argument("--out", default="out", help="directory for the lab report and the node log")
     parser.add_argument(
+        "--record",
+        metavar="DIR",
+        default="",
+        help="record the session into the new bag DIR (the driver's record_path): mows map, mows fit and "
+        "mows lab read it later",
+    )
+    parser.add_argument(
         "--probe-scenario",
         default="calibration",
         help="scenario whose (not the paper's) probe is calibrated first and then mapped with",
@@ -104,6 +111,9 @@ def parse_arguments(argv):
         except (OSError, ValueError, KeyError, TypeError) as error:
             sys.stderr.write(f"mows-demo: error: {option} {name}: {error}\n")
             raise SystemExit(EXIT_BAD_PARAMETER) from None
+    if args.record and os.path.lexists(args.record):
+        sys.stderr.write(f"mows-demo: error: --record {args.record}: exists; a recording goes into a new directory\n")
+        raise SystemExit(EXIT_BAD_PARAMETER)
     if args.target and has_probes(args.scenario):
         parser.error(f"--target: the adaptive sweep takes one probe; {args.scenario} has several")
     return args
@@ -166,6 +176,7 @@ def write_parameters(args, directory: pathlib.Path, probe_path, scene_path) -> p
         "repeats": args.repeats,
         "tuning_steps": args.tuning_steps,
         "gap_s": args.gap_s,
+        **recording(args),
     }
     mapper = {"reference_scenario": str(scene_path), "repeats_per_angle": args.repeats, "probe_file": str(probe_path)}
     if args.target:
@@ -184,6 +195,11 @@ def write_parameters(args, directory: pathlib.Path, probe_path, scene_path) -> p
         "/**/mapper": {"ros__parameters": mapper},
     }
     return write_sections(directory / PARAMETERS_FILE, sections, inputs_of(args))
+
+
+def recording(args) -> dict:
+    """The driver's parameter that records the session when ``--record`` asks for it."""
+    return {"record_path": str(pathlib.Path(args.record).absolute())} if args.record else {}
 
 
 def write_sections(path: pathlib.Path, sections: dict, inputs) -> pathlib.Path:
@@ -218,6 +234,7 @@ def main(argv=None) -> int:
         probe_paths = write_probe_files(args.scenario, out, inputs_of(args))
         scene = str(scenario_file(args.scenario))
         sections = probe_parameters(args, scene, probe_paths)
+        sections["/**/driver"]["ros__parameters"].update(recording(args))
         parameters = write_sections(out / PARAMETERS_FILE, sections, inputs_of(args))
         table, inputs = out / MAP_FILE, inputs_of(args)
         return run_graph(
@@ -350,7 +367,7 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, prob
     record = SweepRecord()
     for fit in fits:
         if fit.status_name == "OK":
-            record.add(sweep_point(fit))
+            record.add(SweepPoint.from_message(fit))
     f00 = float(np.mean([f.frequency_hz - f.frequency_shift_hz for f in fits if f.status_name == "OK"]))
     published = record.decompose(probe, f00, model="published")
     first_principles = record.decompose(probe, f00)

@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 import yaml
+from diagnostic_msgs.msg import DiagnosticArray
 from mows_msgs.action import RotationSweep
 from mows_msgs.msg import FieldMap, MagnetometerBlock, RingdownFit
 from rclpy.action import ActionClient
@@ -95,14 +96,25 @@ def parameters(args, scene_path: str, probe_paths: list[pathlib.Path]) -> dict:
 
 def sweep_client(node, spin_until) -> ActionClient:
     """The mapper's sweep action once the graph is ready for a sweep: the action served, the
-    driver's samples streaming and the estimator's fit loaded (it advertises its results then)."""
+    driver's samples streaming and the estimator hearing them (its /diagnostics count blocks;
+    discovery takes seconds on a loaded machine, and a ring-down that began before the
+    estimator's first block is a gap to it)."""
     blocks: list[int] = []
+    heard: list[int] = []
     node.create_subscription(MagnetometerBlock, "mows/raw", lambda b: blocks.append(b.sequence), STREAM_QOS)
+    node.create_subscription(DiagnosticArray, "/diagnostics", lambda a: heard.extend(_blocks_heard(a)), 10)
     client = ActionClient(node, RotationSweep, "mapper/rotation_sweep")
     spin_until(client.server_is_ready, 120.0, "the mapper's sweep action")
     spin_until(lambda: blocks, 60.0, "the driver's sample stream")
-    spin_until(lambda: node.count_publishers("mows/ringdown") > 0, 120.0, "the estimator")
+    spin_until(lambda: any(heard), 120.0, "the estimator hearing the stream")
     return client
+
+
+def _blocks_heard(array: DiagnosticArray) -> list[int]:
+    """The blocks the estimator reports heard, if ``array`` holds its status."""
+    return [
+        int(kv.value) for s in array.status if s.name.endswith("/estimator") for kv in s.values if kv.key == "blocks"
+    ]
 
 
 def accepted(spin_until, client: ActionClient, goal, feedback=None):

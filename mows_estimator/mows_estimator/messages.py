@@ -16,7 +16,7 @@ def fit_to_msg(estimated: Estimated, frame_id: str) -> RingdownFit:
     """The fit of a ring-down, with the frequency shift of its estimate."""
     fit, window = estimated.fit, estimated.window
     msg = RingdownFit()
-    stamps.set_nanoseconds(msg.header.stamp, window.start_ns + round(fit.start_offset_s * stamps.NS_PER_S))
+    stamps.set_nanoseconds(msg.header.stamp, estimated.stamp_ns)
     msg.header.frame_id = frame_id
     msg.cycle_id, msg.repeat_index, msg.tuning = window.cycle_id, window.repeat_index, window.tuning
     msg.status, msg.status_name, msg.message = int(fit.status), fit.status.name, fit.message

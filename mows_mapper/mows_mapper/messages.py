@@ -1,14 +1,13 @@
 """Translation between mows_msgs and the sweep runner's dataclasses (no logic of its own)."""
 
 from mows_msgs.action import RotationSweep
-from mows_msgs.msg import CandidateEffect, FieldMap, ModelReport, ProbeField, RingdownFit, SweepDecomposition
+from mows_msgs.msg import CandidateEffect, FieldMap, ModelReport, ProbeField, SweepDecomposition
 
 from mows.estimate.probe_set import ProbeEntry, probe_frame_id
 from mows.records import stamps
 from mows.sweep.decompose import DecompositionStatus
 from mows.sweep.publication import Publication
-from mows.sweep.record import SweepPoint
-from mows.sweep.runner import SweepFeedback, SweepFit, SweepGoal, SweepMap, SweepOutcome, SweepStep, turn_prompt
+from mows.sweep.runner import SweepFeedback, SweepGoal, SweepMap, SweepOutcome, SweepStep, turn_prompt
 
 # What a probe's point of the field map takes from its SweepDecomposition, as it is there.
 PROBE_FIELD_FROM_SWEEP = (
@@ -35,19 +34,6 @@ def sweep_goal(goal: RotationSweep.Goal) -> SweepGoal:
         goal.target_gradient_std_t_per_m,
         goal.budget_s,
     )
-
-
-def sweep_point(fit: RingdownFit) -> SweepPoint:
-    """A successful RingdownFit as a point of the sweep, with σ of θmax from its covariance."""
-    stamp_ns = stamps.nanoseconds(fit.header.stamp)
-    return SweepPoint.from_fit(
-        fit, fit.frequency_shift_hz, fit.frequency_shift_std_hz, stamp_ns / stamps.NS_PER_S, stamp_ns
-    )
-
-
-def sweep_fit(fit: RingdownFit) -> SweepFit:
-    ok = fit.status_name == "OK"
-    return SweepFit(fit.cycle_id, fit.tuning, sweep_point(fit) if ok else None, fit, fit.probe_id)
 
 
 def feedback_msg(feedback: SweepFeedback) -> RotationSweep.Feedback:

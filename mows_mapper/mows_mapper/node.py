@@ -22,7 +22,7 @@ from rclpy.action import CancelResponse
 from mows.estimate.settings import probe_set
 from mows.lab import analyse_sweep
 from mows.sweep.publication import Publication, cycle_failed, publication
-from mows.sweep.runner import CycleAnswer, CycleRequest, SweepRunner, SweepSettings, SweepStep
+from mows.sweep.runner import CycleAnswer, CycleRequest, SweepFit, SweepRunner, SweepSettings, SweepStep
 from mows_mapper import messages
 from mows_mapper.health import sweep_health
 from mows_mapper.outputs import MapperOutputs
@@ -58,7 +58,7 @@ class MapperNode(MowsNode):
 
     # --- inputs ---------------------------------------------------------------------------
     def _on_fit(self, msg: RingdownFit) -> SweepStep | None:
-        return self._runner.on_fit(messages.sweep_fit(msg))
+        return self._runner.on_fit(SweepFit.from_message(msg))
 
     def _refusal(self, goal: RotationSweep.Goal) -> str | None:
         """Why ``goal`` is refused, or None when the sweep starts (the runner is busy from here)."""

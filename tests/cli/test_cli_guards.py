@@ -309,6 +309,11 @@ CASES = [
     ("fit-60-m-distance", ["fit", "{d}/bag", "--sensor-distance-m", "60"], 2, ["--sensor-distance-m", "1 m"]),
     ("fit-no-such-topic", ["fit", "{d}/bag", "--raw-topic", "/nope"], 2, ["no ring-down", "/nope"]),
     ("fit-empty-bag", ["fit", "{d}/empty_bag"], 2, ["empty_bag holds no ring-down"]),
+    ("map-no-fits", ["map", "{d}/bag"], 2, ["no ring-down fit recorded", "--refit"]),
+    ("map-one-orientation", ["map", "{d}/bag", "--refit"], 2, ["{d}/bag", "orientations"]),
+    ("map-empty-bag", ["map", "{d}/empty_bag", "--refit"], 2, ["no measurement ring-down"]),
+    ("map-a-csv", ["map", "{d}/sweep.csv"], 2, ["not a bag"]),
+    ("map-bad-model", ["map", "{d}/bag", "--model", "eq6"], 2, ["--model", "first_principles"]),
     ("fit-a-csv", ["fit", "{d}/sweep.csv"], 2, ["not a bag", "mows lab"]),
     # lab
     (

@@ -27,6 +27,7 @@ import numpy as np
 import pytest
 
 from mows.cli import main as cli
+from mows.lab import reference_at
 from mows.physics.field import UniformField
 from mows.sim.scenario import load_scenario
 from recorded_bags import record_cycles
@@ -73,7 +74,7 @@ SCENES = {
 @pytest.fixture(scope="module")
 def path(tmp_path_factory):
     """scene → (scenario, the lab's JSON report, the table's rows as read back), each run once."""
-    found, files = {}, {}
+    found, files, bags = {}, {}, {}
 
     def run(scene, seed=SEED):
         if (scene, seed) not in found:
@@ -89,10 +90,11 @@ def path(tmp_path_factory):
             reference = folder / "scenario.yaml"
             scenario.to_yaml(reference)
             files[scene, seed] = table, probe, reference
+            bags[scene, seed] = bag
             found[scene, seed] = scenario, _lab(*files[scene, seed]), list(csv.DictReader(open(table)))
         return found[scene, seed]
 
-    run.files = files
+    run.files, run.bags = files, bags
 
     return run
 
@@ -174,6 +176,25 @@ def test_a_strong_uniform_field_is_the_deflection_and_the_amplitude_from_the_sto
 def test_an_anti_helmholtz_gradient_is_the_transverse_gradient(path):
     _, report, _ = path("anti_helmholtz")
     assert_named(report, {"transverse_gradient", "finite_amplitude"})
+
+
+@pytest.mark.parametrize("scene", ["control", "anti_helmholtz"])
+def test_the_bag_maps_offline_to_the_scenes_field_and_gradient(path, scene):
+    """`mows map BAG --refit`: the bag's raw ring-downs fitted again and decomposed as the mapper
+    does, one sweep of both turns, lands within 4σ of the field and gradient at the probe."""
+    scenario, _, _ = path(scene)
+    _, probe, _ = path.files[scene, SEED]
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert cli.main(["map", str(path.bags[scene, SEED]), "--refit", "--probe", str(probe), "--json"]) == 0
+    (sweep,) = json.loads(out.getvalue())["sweeps"]
+    (mapped,) = sweep["maps"]
+    assert sweep["ok"] and mapped["points"] == len(ANGLES_DEG), sweep["message"]
+    field, gradient = reference_at(scenario)
+    truth = {"field_t": field[:2], "gradient_t_per_m": [gradient[0, 0], gradient[0, 1], gradient[1, 1]]}
+    for name, std in (("field_t", "field_std_t"), ("gradient_t_per_m", "gradient_std_t_per_m")):
+        pulls = (np.array(mapped[name]) - truth[name]) / np.array(mapped[std])
+        assert np.all(np.abs(pulls) < 4.0), (name, pulls, sweep["message"])
 
 
 def test_a_tilted_plane_is_gravity(path):

@@ -14,9 +14,8 @@ from mows.estimate.ringdown import FitOptions, fit_ringdown
 from mows.estimate.segments import RingdownWindow
 from mows.estimate.stream import Estimated
 from mows.sim.scenario import load_scenario
-from mows.sweep.record import SweepRecord
+from mows.sweep.record import SweepPoint, SweepRecord
 from mows_estimator.messages import fit_to_msg
-from mows_mapper.messages import sweep_point
 
 pytestmark = pytest.mark.ros
 
@@ -37,7 +36,7 @@ def test_the_fits_pickup_series_reaches_the_sweep_point_exactly():
     estimate = estimate_along_axis(fit, scenario.probe, scenario.probe.f00_hz)
     window = RingdownWindow(1_000_000_000, 0.5, cycle_id=3, theta0_rad=fit.theta0_rad)
     msg = fit_to_msg(Estimated(window, fit, estimate), "mows_probe")
-    point = sweep_point(msg)
+    point = SweepPoint.from_message(msg)
     assert len(fit.pickup) == 7 and point.pickup == fit.pickup
     record = SweepRecord([point, point])
     np.testing.assert_array_equal(record.pickups(), np.array([fit.pickup, fit.pickup]))
@@ -45,6 +44,6 @@ def test_the_fits_pickup_series_reaches_the_sweep_point_exactly():
 
 def test_a_message_without_a_pickup_series_leaves_the_averaging_to_eq_s11():
     msg = RingdownFitMsg(theta0_rad=0.5, frequency_hz=112.0, frequency_std_hz=1e-3, status_name="OK")
-    point = sweep_point(msg)
+    point = SweepPoint.from_message(msg)
     assert point.pickup == ()
     assert SweepRecord([point]).pickups() is None

@@ -1,7 +1,8 @@
 """One recording holds what the graph concludes: a driver recording while the estimator and the
 mapper run a sweep writes, beside its stream, every fit the estimator published, the sweep's
 decomposition, and /diagnostics; `mows lab compare BAG` then analyses that bag from its
-recorded fits, without the graph."""
+recorded fits, without the graph, and `mows map BAG` makes the sweep again from them: the
+decomposition the mapper published, to 1e-6σ."""
 
 import json
 import signal
@@ -9,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 
@@ -63,3 +65,12 @@ def test_a_recording_holds_the_fits_the_sweep_and_the_diagnostics(ros, start, tm
     capsys.readouterr()
     assert main(["lab", "compare", str(bag)]) == 0
     assert f"{outcome['fits']['OK']} rows" in capsys.readouterr().out
+
+    # The bag alone makes the sweep again, as the mapper made it.
+    assert main(["map", str(bag), "--json"]) == 0
+    (replayed,) = json.loads(capsys.readouterr().out)["sweeps"][0]["maps"]
+    assert replayed["points"] == sweep.n_points
+    for name, covariance in (("field_t", "field_covariance_t2"), ("gradient_t_per_m", "gradient_covariance")):
+        published = np.array(getattr(sweep, name))
+        sigma = np.sqrt(np.diag(np.reshape(getattr(sweep, covariance), (published.size,) * 2)))
+        assert np.all(np.abs(np.array(replayed[name]) - published) <= 1e-6 * sigma), (name, replayed[name], published)

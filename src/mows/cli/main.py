@@ -19,6 +19,7 @@ from mows.cli.status import caused_by_interrupt, interrupted, stop_on_sigterm
 SUBCOMMANDS = {
     "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
     "fit": ("mows.cli.fit_bag", "fit the ring-downs of a recorded bag (--csv: a model-lab table)"),
+    "map": ("mows.cli.map_bag", "the field map of a recorded session, made again offline as the mapper made it"),
     "bag": ("mows.cli.bag", "repair a recording that was never closed (killed): rebuild it from its intact chunks"),
     "lab": ("mows.cli.lab", "compare the frequency model with measurements, find missing effects"),
     "bench": ("mows.cli.bench", "benchmarks: estimator, simulator, stream, lab (figures, never a failure)"),

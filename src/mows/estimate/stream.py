@@ -34,6 +34,7 @@ from mows.estimate.segments import (
     window_from_message,
 )
 from mows.physics.probe import Probe
+from mows.records.stamps import NS_PER_S
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,6 +72,11 @@ class Estimated:
     calibrated: bool = False
     probe_id: int | None = None
     unknown_probe: bool = False
+
+    @property
+    def stamp_ns(self) -> int:
+        """Device time of the fit's first sample (the window's start and the fit's offset in it)."""
+        return self.window.start_ns + round(self.fit.start_offset_s * NS_PER_S)
 
     def report(self) -> str:
         """The fit's report with its cycle, repeat and, with several probes, its probe."""

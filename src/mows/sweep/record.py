@@ -12,6 +12,7 @@ import numpy as np
 from mows.estimate.ringdown.types import parameter_std
 from mows.physics.probe import Probe
 from mows.physics.ringdown_average import start_swing_rad
+from mows.records import stamps
 from mows.sweep.decompose import Decomposition, NeighbourFields, Ringdowns, decompose, local_potential
 
 REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its σ is below this…
@@ -80,6 +81,15 @@ class SweepPoint:
             float(getattr(fit, "rest_offset_rad", math.nan)),
             parameter_std(fit.parameter_names, fit.covariance, "rest_offset_rad"),
             fitted_pickup(fit),
+        )
+
+    @classmethod
+    def from_message(cls, fit) -> SweepPoint:
+        """A successful RingdownFit message (live, or read from a bag: the fields are the same)
+        at its device stamp, with the frequency shift the estimator published."""
+        stamp_ns = stamps.nanoseconds(fit.header.stamp)
+        return cls.from_fit(
+            fit, fit.frequency_shift_hz, fit.frequency_shift_std_hz, stamp_ns / stamps.NS_PER_S, stamp_ns
         )
 
 

@@ -37,7 +37,9 @@ import numpy as np
 
 from mows.device.cycle.phases import CycleRequest
 from mows.estimate.probe_set import ProbeEntry
+from mows.estimate.stream import Estimated
 from mows.physics.probe import Probe
+from mows.records.stamps import NS_PER_S
 from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal
 from mows.sweep.probes import (
@@ -138,6 +140,24 @@ class SweepFit:
     point: SweepPoint | None
     source: object = None
     probe_id: int = 0
+
+    @classmethod
+    def from_message(cls, fit) -> "SweepFit":
+        """A RingdownFit message, live or read from a bag."""
+        point = SweepPoint.from_message(fit) if fit.status_name == "OK" else None
+        return cls(fit.cycle_id, fit.tuning, point, fit, fit.probe_id)
+
+    @classmethod
+    def from_estimated(cls, estimated: Estimated) -> "SweepFit":
+        """A ring-down fitted offline as the estimator fits it (:mod:`mows.estimate.stream`)."""
+        fit, window, shift = estimated.fit, estimated.window, estimated.estimate
+        point = None
+        if fit.ok:
+            t_s = estimated.stamp_ns / NS_PER_S
+            point = SweepPoint.from_fit(
+                fit, shift.frequency_shift_hz, shift.frequency_shift_std_hz, t_s, estimated.stamp_ns
+            )
+        return cls(window.cycle_id, window.tuning, point, estimated, fit.probe_id)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -36,6 +36,7 @@ def fit_to_msg(estimated: Estimated, frame_id: str) -> RingdownFit:
         "r_squared",
         "snr_db",
         "duration_s",
+        "start_offset_s",
     ):
         setattr(msg, name, float(getattr(fit, name)))
     shift = estimated.estimate

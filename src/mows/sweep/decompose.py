@@ -149,6 +149,10 @@ class Ringdowns:
     Every ring-down starts from the housing stop: at ``stop_amplitude_rad`` from the lever's
     undeflected position, so its swing about the rest angle θs (turned by the perpendicular
     field, docs/physics.md §6.2) is stop − |θs|, which the model computes from its own potential.
+    The coils are cut with the lever at the stop; the fit's window starts ``start_offset_s``
+    (per point) later, over which the swing decays by e^(−δ·t): 0.5 % over the estimator's
+    3 ms skip, 0.13° of a 24° swing, which through the field spring's amplitude dependence
+    reads a 3.4 mT field 0.14 µT high (docs/physics.md §6.4).
     ``damping_per_s`` and ``duration_s`` (per point) give the averaging of a constant-frequency
     fit over the decaying swing (:mod:`mows.physics.ringdown_average`), weighted by where in
     the swing the signal carries phase: ``pickup`` (n, K + 1) are the series C_k each fit used
@@ -166,6 +170,14 @@ class Ringdowns:
     # ``pickup`` about the undeflected lever, as the fit that measured it had no rest angle. The
     # model turns it into the swing about its own rest angle (:meth:`start_swing_about_rad`).
     start_swing_rad: np.ndarray | None = None
+    start_offset_s: np.ndarray | float = 0.0  # each window's first sample after the coil switch-off
+
+    def released_swing_rad(self, potential: ArcPotential) -> np.ndarray:
+        """The swing at each window's first sample of a ring-down released at the stop: the
+        first harmonic of the swing that turns there, decayed over ``start_offset_s``; 0 where
+        the stop lies inside the deflection (a trial point the data rule out)."""
+        swing = np.nan_to_num(potential.start_swing_rad(self.stop_amplitude_rad))
+        return swing * np.exp(-np.asarray(self.damping_per_s, float) * np.asarray(self.start_offset_s, float))
 
     @functools.cached_property
     def _swing_table_rad(self) -> np.ndarray:
@@ -250,7 +262,7 @@ def model_shift_hz(
     With ``ringdowns`` the first-principles model reports what the fit of each decaying
     ring-down reports: the weighted average of the harmonic-balance frequency over its swing
     (:func:`mows.physics.ringdown_average.amplitude_nodes`), from the stop
-    (:meth:`mows.physics.potential.ArcPotential.start_swing_rad`). Without, the
+    (:meth:`Ringdowns.released_swing_rad`). Without, the
     small-amplitude stiffness. The published model has no amplitude (nor ``neighbours``: the
     other probes' fields, first-principles only).
     """
@@ -268,8 +280,8 @@ def model_shift_hz(
         return f00 * np.sqrt(potential.stiffness_nm_per_rad() / probe.spring_nm_per_rad) - f00_hz
     if ringdowns.start_swing_rad is not None:
         start = ringdowns.start_swing_about_rad(potential.rest_angle_rad())
-    else:  # 0 where the stop lies inside the deflection (a trial point the data rule out)
-        start = np.nan_to_num(potential.start_swing_rad(ringdowns.stop_amplitude_rad))
+    else:
+        start = ringdowns.released_swing_rad(potential)
     amplitudes, weights = amplitude_nodes(
         theta0, start, ringdowns.damping_per_s, ringdowns.duration_s, pickup=ringdowns.pickup
     )

@@ -59,6 +59,7 @@ class SweepPoint:
     rest_offset_rad: float = math.nan  # the fit's rest-angle offset θs − θ0 (NaN: not fitted)
     rest_offset_std_rad: float = math.nan
     pickup: tuple = ()  # the fit's pickup series C_k (complex); empty: unknown, Eq. S11 assumed
+    start_offset_s: float = 0.0  # the fit's first sample after the coil switch-off (0: not recorded)
 
     @classmethod
     def from_fit(cls, fit, shift_hz: float, shift_std_hz: float, t_s: float = 0.0, stamp_ns: int = 0) -> SweepPoint:
@@ -81,6 +82,7 @@ class SweepPoint:
             float(getattr(fit, "rest_offset_rad", math.nan)),
             parameter_std(fit.parameter_names, fit.covariance, "rest_offset_rad"),
             fitted_pickup(fit),
+            float(fit.start_offset_s),
         )
 
     @classmethod
@@ -124,15 +126,21 @@ class SweepRecord:
         determined = (std <= REST_OFFSET_STD_RAD) & (offset > REST_OFFSET_SIGMAS * std)
         return np.where(determined, offset, np.nan)
 
+    def _released(self) -> np.ndarray:
+        """e^(−δ·t) of each point: how much of the swing it was released with at the stop is left
+        at its fit's first sample, t after the switch-off (:class:`Ringdowns`)."""
+        return np.exp(-self._column("damping_per_s") * self._column("start_offset_s"))
+
     def stop_amplitude_rad(self, rest_angles_rad=None, fallback_rad: float = math.nan) -> float:
         """The housing stop every ring-down starts from, as far from the lever's undeflected
-        position: the median of θmax + |θs| over the points whose fit determined θmax (θs each
-        point's rest angle, by default the fit's own rest offset where it determined it), after
+        position: the median of θmax + |θs| over the points whose fit determined θmax (θmax grown
+        back by e^(δ·t) to the switch-off; θs each point's rest angle, by default the fit's own
+        rest offset where it determined it), after
         leaving out those more than OUTLIER_SIGMAS robust σ from it; ``fallback_rad`` (the
         probe's stop) where no point gives it. The median, because a few fits in a strong field
         sit in a wrong minimum with a small σ, and one such fit would lead an inverse-variance mean."""
         rest = self.rest_offsets_rad() if rest_angles_rad is None else np.abs(np.asarray(rest_angles_rad, float))
-        stops = (self._column("amplitude_rad") + rest) if self.points else np.zeros(0)
+        stops = (self._column("amplitude_rad") / self._released() + rest) if self.points else np.zeros(0)
         return robust_median(stops[np.isfinite(stops)], fallback_rad)
 
     def decompose(
@@ -180,7 +188,7 @@ class SweepRecord:
         damping, duration, pickups = self._column("damping_per_s"), self._column("duration_s"), self.pickups()
 
         def ringdowns(stop):
-            return Ringdowns(stop, damping, duration, pickups)
+            return Ringdowns(stop, damping, duration, pickups, start_offset_s=self._column("start_offset_s"))
 
         first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(fallback_rad=probe.theta_stop_rad)))
         if not first.ok:
@@ -224,22 +232,24 @@ class SweepRecord:
         return np.abs(np.nan_to_num(potential.rest_angle_rad()))
 
     def start_amplitudes_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
-        """Each ring-down's start swing, stop − |θs| (:func:`mows.physics.ringdown_average.start_swing_rad`),
-        θs at the decomposition's field and gradient, the stop pooled (the probe's where no fit gives it)."""
+        """Each ring-down's start swing, stop − |θs| (:func:`mows.physics.ringdown_average.start_swing_rad`)
+        decayed to its fit's first sample, θs at the decomposition's field and gradient, the stop
+        pooled (the probe's where no fit gives it)."""
         rest = self.rest_angles_rad(decomposition, probe)
-        return start_swing_rad(self.stop_amplitude_rad(rest, probe.theta_stop_rad), rest)
+        return start_swing_rad(self.stop_amplitude_rad(rest, probe.theta_stop_rad), rest) * self._released()
 
     def fitted_start_amplitudes_rad(self, stop_rad: float = math.nan) -> tuple[np.ndarray, list[str]]:
         """Each ring-down's start swing from its fit alone, and notes of what was assumed: the
-        fit's θmax where it determined it within the stop, else stop − |θs − θ0| with the fit's rest offset
-        (the stop pooled, ``stop_rad`` where no fit gives it); where a fit determined neither,
-        the probe is taken as undeflected."""
+        fit's θmax where it determined it within the stop, else stop − |θs − θ0| with the fit's rest
+        offset decayed to its first sample (the stop pooled, ``stop_rad`` where no fit gives it);
+        where a fit determined neither, the probe is taken as undeflected."""
         rest = self.rest_offsets_rad()
         stop = self.stop_amplitude_rad(fallback_rad=stop_rad)
         amplitude = self._column("amplitude_rad")
         beyond = amplitude > stop  # no swing about the rest angle is wider than the stop
         amplitude[beyond] = np.nan
-        start = np.where(np.isfinite(amplitude), amplitude, start_swing_rad(stop, np.nan_to_num(rest)))
+        released = start_swing_rad(stop, np.nan_to_num(rest)) * self._released()
+        start = np.where(np.isfinite(amplitude), amplitude, released)
         unknown = np.count_nonzero(~np.isfinite(rest) & ~np.isfinite(amplitude))
         notes = []
         if beyond.any():

@@ -14,7 +14,9 @@ planners, compilers) delay neither the stream nor the fits; a robot's own contro
 higher priority, still preempts them. It needs root or an RLIMIT_RTPRIO of at least N.
 ``--foxglove[=PORT]`` also starts the viz node (mows_viz), which serves the graph to
 Foxglove over its WebSocket protocol on PORT (default 8765; 0: any free port) with the probe
-mount's frames (docs/visualisation.md); the address to open is printed.
+mount's frames (docs/visualisation.md); the address to open is printed. When the mapper or the
+calibrator turns the probe by hand (``orientation: manual``), each line typed into this
+terminal (Enter) confirms the turn a node awaits, as ``mows-confirm-orientation`` does.
 
 Exit status: 0 when the graph was stopped (by a signal or after --duration) and
 every node stopped cleanly; 2 when the ROS arguments are refused before any node starts (a
@@ -43,6 +45,7 @@ from pathlib import Path
 import yaml
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
+from mows_bringup.confirm import TURNING_NODES, confirm_turn
 from mows_bringup.lifecycle import BringUpError, bring_up
 from mows_ros.params import (
     ROS_OWN,
@@ -150,7 +153,6 @@ def ros_arguments_problem(ros_args: list[str]) -> str | None:
 # whose goals turn the probe must ask for it (orientation manual), or each "angle" would be
 # measured at the one angle the probe happens to stand at.
 STAGELESS_BACKENDS = ("nidaqmx",)
-TURNING_NODES = ("mapper", "calibrator")
 
 
 def start_value(node: str, name: str, ros_args: list[str]):
@@ -173,7 +175,7 @@ def stage_problem(ros_args: list[str]) -> str | None:
     backend = start_value("driver", "backend", ros_args)
     if backend not in STAGELESS_BACKENDS:
         return None
-    turning = [node for node in TURNING_NODES if start_value(node, "orientation", ros_args) != "manual"]
+    turning = [node for node in TURNING_NODES if node not in manual_turns(ros_args)]
     if not turning:
         return None
     give = " ".join(f"-p {node}:orientation:=manual" for node in turning)
@@ -182,6 +184,25 @@ def stage_problem(ros_args: list[str]) -> str | None:
         f"(orientation stage): every orientation would be measured where the probe stands. Give {give}: "
         "each turn is then asked for here and confirmed"
     )
+
+
+def manual_turns(ros_args: list[str]) -> list[str]:
+    """The nodes that will ask the operator to turn the probe by hand (``orientation: manual``)."""
+    return [node for node in TURNING_NODES if start_value(node, "orientation", ros_args) == "manual"]
+
+
+def answer_turns_from(lines, ros_args: list[str]) -> threading.Thread:
+    """Each line of ``lines`` (Enter in the terminal) confirms the turn a node awaits, as
+    mows-confirm-orientation does; each node's answer is said."""
+
+    def answer() -> None:
+        for _ in lines:
+            for line in confirm_turn(ros_args)[1]:
+                say(line)
+
+    thread = threading.Thread(target=answer, name="operator", daemon=True)  # a blocked read ends with the process
+    thread.start()
+    return thread
 
 
 def say(text: str) -> None:
@@ -423,6 +444,9 @@ def main(argv: list[str] | None = None) -> int:
         problem = graph.bring_up()
     if problem is not None:
         say(f"bring-up failed: {problem}")
+    elif manual := manual_turns(ros_args):
+        say(f"the {' and the '.join(manual)} turn the probe by hand: press Enter here once it is turned as asked")
+        answer_turns_from(sys.stdin, ros_args)
     died = graph.wait(args.duration) if problem is None else None
     codes = graph.stop()
     unclean = {name: code for name, code in codes.items() if code != 0}

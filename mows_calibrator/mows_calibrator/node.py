@@ -183,11 +183,8 @@ class CalibratorNode(MowsNode):
         return calibration
 
     def health(self) -> Health:
-        return Health(
-            DiagnosticStatus.OK,
-            self._calibrator.last,
-            {"state": self._calibrator.state, "calibrations": self._calibrator.calibrations},
-        )
+        values = {"state": self._calibrator.state, "calibrations": self._calibrator.calibrations}
+        return self._operator.reported(Health(DiagnosticStatus.OK, self._calibrator.last, values))
 
 
 def main(args: list[str] | None = None) -> int:

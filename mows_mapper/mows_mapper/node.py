@@ -138,7 +138,7 @@ class MapperNode(MowsNode):
             self._outputs.publish_report(report, published[0])
 
     def health(self) -> Health:
-        return sweep_health(self._runner)
+        return self._operator.reported(sweep_health(self._runner))
 
 
 def main(args: list[str] | None = None) -> int:

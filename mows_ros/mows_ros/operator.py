@@ -2,12 +2,15 @@
 service (std_srvs/Trigger) that a waiting sweep or calibration awaits after asking for a turn
 in its action feedback (``orientation: manual``)."""
 
+import dataclasses
 import math
 from collections.abc import Callable
 
 from std_srvs.srv import Trigger
 
+from mows.sweep.runner import turn_prompt
 from mows_ros.awaitables import until
+from mows_ros.diagnostics import Health
 from mows_ros.params import ParamSpec
 
 PARAMETERS = (  # of every node whose goals turn the probe
@@ -22,6 +25,10 @@ PARAMETERS = (  # of every node whose goals turn the probe
         "confirm_timeout_s", 600.0, "orientation manual: longest wait for the operator's turn, s", range=(1.0, 86400.0)
     ),
 )
+
+
+AWAITED_TURN_KEY = "awaited_turn_deg"  # on /diagnostics
+HOW_TO_CONFIRM = "Enter in mows-graph's terminal, mows-confirm-orientation, or the ~/confirm_orientation service"
 
 
 class OperatorTurns:
@@ -43,8 +50,18 @@ class OperatorTurns:
         )
         return response
 
+    def reported(self, health: Health) -> Health:
+        """``health`` with the turn awaited, if any (``awaited_turn_deg``, '' for none): what a
+        confirmation whose answer was lost checks (mows_bringup.confirm)."""
+        theta0 = self._awaited()
+        awaited = "" if theta0 is None or self._confirmed else f"{math.degrees(theta0):g}"
+        return dataclasses.replace(health, values={**health.values, AWAITED_TURN_KEY: awaited})
+
     async def confirmed(self, timeout_s: float, cancelled: Callable[[], bool]) -> bool:
         """Await the operator's confirmation (True) or a cancel (True: the caller sees it);
         False after ``timeout_s`` of neither."""
         self._confirmed = False
+        theta0 = self._awaited()
+        if theta0 is not None:
+            self._node.get_logger().info(f"{turn_prompt(theta0)}: {HOW_TO_CONFIRM}")
         return await until(self._node, lambda: self._confirmed or cancelled(), timeout_s)

@@ -70,8 +70,8 @@ def start(tmp_path, request):
     over, and the suite hung on them."""
     processes = request.node.started_processes = []
 
-    def start(*command: str) -> subprocess.Popen:
-        processes.append(launch(command, tmp_path / f"process-{len(processes)}.log"))
+    def start(*command: str, stdin=subprocess.DEVNULL) -> subprocess.Popen:
+        processes.append(launch(command, tmp_path / f"process-{len(processes)}.log", stdin))
         return processes[-1]
 
     yield start
@@ -81,8 +81,9 @@ def start(tmp_path, request):
             process.wait()
 
 
-def launch(command, log_path) -> subprocess.Popen:
-    """``command`` with its output in ``log_path``, killed with the test's worker.
+def launch(command, log_path, stdin=subprocess.DEVNULL) -> subprocess.Popen:
+    """``command`` with its output in ``log_path`` (``stdin``: subprocess.PIPE to type into
+    it), killed with the test's worker.
 
     Its SIGINT is the default, as for a command run from a terminal: a suite started as a
     shell's background job inherits SIGINT ignored, and a Ctrl-C sent to the command would
@@ -90,7 +91,7 @@ def launch(command, log_path) -> subprocess.Popen:
     with open(log_path, "w") as log:
         process = subprocess.Popen(
             ["setpriv", "--pdeathsig", "KILL", "env", "--default-signal=INT", *command],
-            stdin=subprocess.DEVNULL,
+            stdin=stdin,
             stdout=log,
             stderr=subprocess.STDOUT,
         )

@@ -73,7 +73,8 @@ class DriverNode(MowsNode):
         cap = CurrentCap(values["coil_current_cap_a"])
         # The cycle fits its tuning ring-downs and the sim backend integrates: compile both (or
         # load them from numba's cache) now, not while the device streams.
-        self.get_logger().info(f"numba kernels ready in {precompile(simulator=values['backend'] == 'sim'):.1f} s")
+        simulator = values["backend"] == "sim" or values["daq_simulated"]
+        self.get_logger().info(f"numba kernels ready in {precompile(simulator=simulator):.1f} s")
         backend = make_backend(backend_settings(values), cap)  # a ValueError or OSError refuses, with its reason
         try:
             self.outputs.record(values["record_path"])
@@ -102,6 +103,7 @@ class DriverNode(MowsNode):
         self._streaming.stop()
         if self.session is not None:
             self.session.close()
+            self.get_logger().info(f"device closed: {self.session.backend.closed_state() or 'nothing read back'}")
             self._previous, self.session = self.session, None
         self.outputs.close()
 

@@ -69,6 +69,14 @@ PARAMETERS = (
         read_only=True,
     ),
     ParamSpec(
+        "daq_simulated",
+        False,
+        "backend nidaqmx: rehearse on the simulated bench, no hardware: NI's nidaqmx package on a simulated "
+        "card (the paper's largest-spacing scene, in wall-clock time) and, with supply scpi, the NGM202 on "
+        "pyvisa-sim (supply_resource '' or its address); fixed at start-up",
+        read_only=True,
+    ),
+    ParamSpec(
         "supply",
         "device",
         "the static-field supply: device (the backend's own: sim, serial), scpi (a SCPI supply through PyVISA, "

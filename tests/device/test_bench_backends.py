@@ -580,7 +580,7 @@ def test_an_output_that_stays_on_is_read_back_and_said(tmp_path):
     path.write_text(text)
     supply = open_scpi_supply(SIMULATED_RESOURCE, load_supply_file(), f"{path}@sim")
     supply.set_current_a(0.5)
-    assert supply.safe() == ["ngm202: OUTP? answers '1' after the output was switched off"]
+    assert supply.safe() == ["ngm202: OUTP? reads back on after the output was switched off"]
     assert simulated_supply().safe() == []
 
 
@@ -761,3 +761,64 @@ def test_the_driver_s_supply_cap_lowers_the_supply_file_s_and_never_raises_it(in
     finally:
         backend.close()
     assert supply_state(backend.supply) == (0.0, 0)
+
+
+def test_the_emergency_stop_s_switch_off_holds_through_a_deactivation_and_close(on_bench):
+    """A supply the emergency stop switched off is not switched on again to be ramped to zero."""
+    supply = simulated_supply()
+    card, backend = on_bench("calibration", supply)
+    config = SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), 112.5, fit_ringdown)
+    session = DeviceSession(backend, config, armed=True)
+    session.set_field_current(0.5, lambda result: None)
+    for _ in range(MAX_POLLS):
+        session.step(0.0)
+        if backend.stats()["supply_output"] == "on":  # read back once settled at 0.5 A
+            break
+    assert supply_state(supply) == (0.5, 1)
+    session.emergency_stop(True, "test")
+    for _ in range(MAX_POLLS):
+        session.step(0.0)
+        if backend.stats()["supply_output"] == "off":
+            break
+    session.disarm("deactivated")
+    end = time.monotonic() + 2.0 * supply.config.settle_s
+    while time.monotonic() < end:
+        session.step(0.05)
+        assert supply_state(supply) == (0.0, 0)
+    stats, tolerance = backend.stats(), supply.config.readback_tolerance_a(0.0)
+    assert stats["supply_output"] == "off" and abs(stats["supply_readback_a"]) <= tolerance
+    session.close()
+    assert backend.closed_state() == f"supply off at {backend.supply_readback_a:.4f} A (read back)"
+
+
+def test_the_simulated_bench_is_the_backend_on_the_simulated_card_until_it_is_closed():
+    """``daq_simulated``: no card installed by the test; NI's package drives the simulated one
+    while the backend is open, its own library again once closed."""
+    from nidaqmx import _library_interpreter
+
+    real = _library_interpreter.LibraryInterpreter
+    settings = BackendSettings(backend="nidaqmx", supply="scpi", daq_simulated=True)
+    backend = make_backend(settings, CurrentCap(10.0))
+    try:
+        assert _library_interpreter.LibraryInterpreter is not real
+        assert backend.supply.identity.startswith("Rohde&Schwarz,NGM202")
+        assert blocks(poll_for(backend, 0.2))
+    finally:
+        backend.close()
+    assert _library_interpreter.LibraryInterpreter is real
+    assert supply_state(backend.supply) == (0.0, 0) and backend.closed_state().startswith("supply off at ")
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        (BackendSettings(daq_simulated=True), "daq_simulated=True goes with backend nidaqmx, not 'sim'"),
+        (
+            BackendSettings(backend="nidaqmx", supply="scpi", supply_resource="ASRL1::INSTR", daq_simulated=True),
+            "supply_resource='ASRL1::INSTR': the simulated bench's supply is at 'TCPIP0::192.168.0.20::inst0::INSTR'",
+        ),
+    ],
+)
+def test_the_simulated_bench_refuses_what_it_cannot_be(settings, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        make_backend(settings, CurrentCap(10.0))

@@ -11,9 +11,10 @@ import sys
 import numpy as np
 import pytest
 
-from mows.cli.check_hardware import PROBLEM_EXIT, simulated_card
+from mows.cli.check_hardware import PROBLEM_EXIT
 from mows.cli.main import main
 from mows.device.backends.daqmx_backend import open_daqmx
+from mows.device.backends.factory import simulated_card
 from mows.device.instruments.daq import load_daq_device
 from mows.device.instruments.hardware_check import HardwareCheck, lock_in_t
 from mows.device.instruments.scpi import SIMULATED_RESOURCE, SIMULATED_SUPPLY_FILE, load_supply_file, open_scpi_supply
@@ -77,7 +78,7 @@ def test_without_the_card_the_supply_is_switched_off_again(monkeypatch, capsys):
     def no_card(*args):
         raise OSError("no card")
 
-    monkeypatch.setattr("mows.cli.check_hardware.open_scpi_supply", opened)
+    monkeypatch.setattr("mows.device.backends.factory.open_scpi_supply", opened)
     monkeypatch.setattr("mows.device.backends.factory.open_daqmx", no_card)
     assert main(["check-hardware", "--supply-resource", "TCPIP0::1.2.3.4::inst0::INSTR"]) == 2
     assert "mows check-hardware: error: no card" in capsys.readouterr().err
@@ -88,10 +89,10 @@ def test_without_the_card_the_supply_is_switched_off_again(monkeypatch, capsys):
 HANG_BOUND_S = 30.0  # a check that has not ended by then hangs: the bound, not a timing
 PULLED_OUT = """
 import sys, threading
-from mows.cli import check_hardware
 from mows.cli.main import main
+from mows.device.backends import factory
 
-made = check_hardware.simulated_card
+made = factory.simulated_card
 
 
 def pulled_out_mid_check(device, supply):
@@ -100,7 +101,7 @@ def pulled_out_mid_check(device, supply):
     return card
 
 
-check_hardware.simulated_card = pulled_out_mid_check
+factory.simulated_card = pulled_out_mid_check
 sys.exit(main(["check-hardware", "--simulate"]))
 """
 
@@ -121,10 +122,10 @@ def test_a_card_that_faults_mid_check_ends_it_with_the_reason():
 
 REFUSING_SUPPLY = """
 import sys
-from mows.cli import check_hardware
 from mows.cli.main import main
+from mows.device.backends import factory
 
-check_hardware.SIMULATED_SUPPLY_FILE = sys.argv[1]
+factory.SIMULATED_SUPPLY_FILE = sys.argv[1]
 sys.exit(main(["check-hardware", "--simulate", "--supply-step-a", "1.5"]))
 """
 

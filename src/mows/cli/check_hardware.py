@@ -1,36 +1,29 @@
 """``mows check-hardware``: check the paper's bench step by step before measuring on it.
 
 Opens the NI card of ``--device`` (default: the paper's PCIe-6363 wiring) and the SCPI field
-supply of ``--supply-file`` at ``--supply-resource``, then
+supply of ``--supply-file`` at ``--supply-resource``
+(:func:`mows.device.backends.factory.open_bench`), then
 (:class:`mows.device.instruments.hardware_check.HardwareCheck`) reads both fluxgates at rest,
 pulses each coil on its own at a safe current and says what each fluxgate saw of it, steps the
 supply and reads it back, and reports every check. ``--simulate`` runs the same check on the
-simulated bench: NI's ``nidaqmx`` on the simulated card (:mod:`mows.device.simulated.daqmx_card`)
-over the paper's largest-spacing scene with the Pasco pair on its supply, the NGM202 on pyvisa-sim.
+simulated bench, as the driver's ``daq_simulated`` does: NI's ``nidaqmx`` on the simulated card
+(:func:`mows.device.backends.factory.simulated_card`) over the paper's largest-spacing scene with
+the Pasco pair on its supply, the NGM202 on pyvisa-sim.
 Exit status 0 when every check passed, 3 when one found a problem (each line says which).
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 from mows.cli.inputs import finite_float, positive_float
 from mows.device.backends.factory import BenchSettings, open_bench
 from mows.device.instruments.daq import PAPER_DEVICE_FILE, load_daq_device
 from mows.device.instruments.hardware_check import HardwareCheck
-from mows.device.instruments.scpi import (
-    PAPER_SUPPLY_FILE,
-    SIMULATED_RESOURCE,
-    SIMULATED_SUPPLY_FILE,
-    ScpiSupply,
-    open_scpi_supply,
-)
+from mows.device.instruments.scpi import PAPER_SUPPLY_FILE, SIMULATED_RESOURCE
 from mows.physics.coils import CurrentCap
 
 PROBLEM_EXIT = 3
-SIMULATED_SCENARIO = "paper_largest_spacing"  # the coils both seen at the fluxgates (Fig. 2a)
-SIMULATED_SUPPLY_SCENARIO = "calibration"  # lends its supply: the Pasco pair on the NGM202
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -49,27 +42,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    bench = BenchSettings(args.device, args.supply_file, args.supply_resource, args.visa_library)
-    if args.simulate:
-        bench = dataclasses.replace(
-            bench, supply_resource=SIMULATED_RESOURCE, visa_library=f"{SIMULATED_SUPPLY_FILE}@sim"
-        )
+    resource = SIMULATED_RESOURCE if args.simulate else args.supply_resource
+    bench = BenchSettings(args.device, args.supply_file, resource, args.visa_library, simulated=args.simulate)
     device = load_daq_device(bench.daq_device_file)
     config = bench.supply_config()
     cap = CurrentCap(device.current_cap_a)
     cap.check(args.coil_current_a)
     config.limits.check(args.supply_step_a)
-    supply = open_scpi_supply(bench.supply_resource, config, bench.visa_library) if bench.supply_resource else None
-    if args.simulate:
-        with simulated_card(device, supply).installed():
-            return _check(args, device, config, supply)
-    return _check(args, device, config, supply)
-
-
-def _check(args, device, config, supply: ScpiSupply | None) -> int:
-    """The check on the card of ``device`` with ``supply``; the exit status."""
-    backend = open_bench(device, CurrentCap(device.current_cap_a), supply)
+    backend = open_bench(bench, cap)
     try:
+        supply = backend.supply
         print(f"card {device.device_name} ({device.name}), supply {supply.identity if supply else 'none'}")
         check = HardwareCheck(
             backend,
@@ -85,22 +67,3 @@ def _check(args, device, config, supply: ScpiSupply | None) -> int:
     for line in lines:
         print(line)
     return 0 if all(line.ok for line in lines) else PROBLEM_EXIT
-
-
-def simulated_card(device, supply):
-    """The simulated card wired as ``device`` says, its field supply the pyvisa-sim NGM202."""
-    from mows.device.simulated.daqmx_card import SimulatedCard
-    from mows.sim.scenario import load_scenario
-    from mows.sim.simulator import SimulatedDevice
-
-    instrument = supply.resource.visalib.instruments[SIMULATED_RESOURCE]
-    return SimulatedCard(
-        SimulatedDevice(
-            load_scenario(SIMULATED_SCENARIO).replace(supply=load_scenario(SIMULATED_SUPPLY_SCENARIO).supply)
-        ),
-        tuple(i.physical_channel for i in device.inputs),
-        tuple(o.physical_channel for o in device.outputs),
-        device.amplifier_v_per_a,
-        device.inputs[0].sensitivity_v_per_t,
-        supply_current_a=instrument.delivered_a,
-    )

@@ -166,6 +166,11 @@ class Backend(abc.ABC):
     def close(self) -> None:
         """Coils off and the supply to zero, then release the device."""
 
+    def closed_state(self) -> str:
+        """What the device was left in by ``close``, as read back from it, for the log; '' when
+        it has nothing read back to say."""
+        return ""
+
 
 def refuse_tones(command: Command, device: str) -> CoilCommand | OrientationCommand | FieldCurrentCommand:
     """``command``, unless it is a multi-tone drive: ValueError, ``device`` drives one tone only."""

@@ -30,6 +30,7 @@ the card, :func:`open_daqmx` says so in one line (:class:`DeviceUnavailable`).
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import math
 import threading
@@ -90,8 +91,16 @@ class DaqmxBackend(Backend):
     name = "nidaqmx"
     can_excite = True
 
-    def __init__(self, daqmx, device: DaqDevice, cap: CurrentCap, supply: ScpiSupply | None = None):
+    def __init__(
+        self,
+        daqmx,
+        device: DaqDevice,
+        cap: CurrentCap,
+        supply: ScpiSupply | None = None,
+        held: contextlib.ExitStack | None = None,
+    ):
         self.daqmx = daqmx
+        self.held = held or contextlib.ExitStack()  # released after the card and the supply (a simulated card's seam)
         self.device = device
         self.cap = CurrentCap(min(cap.limit_a, device.current_cap_a))
         self.supply = supply
@@ -114,9 +123,10 @@ class DaqmxBackend(Backend):
         self.card_faults = 0
         self.last_card_fault = ""
         self.supply_readback_a = math.nan  # read settle_s after a ramp's last step
+        self.supply_output = ""  # 'on' or 'off' as read back with it
         self._readback_index: int | None = None  # the sample it is read at, while one is due
         self._supply_a = 0.0  # the last current the supply accepted
-        self._supply_off = False  # switched off by a fault: prepared again before its next step
+        self._supply_off = False  # switched off (a fault, a ramp to zero's end): prepared again before its next step
         self._off_at_zero = False  # an emergency stop's ramp to zero: the output off once it ends
         self._results: list[CommandResult] = []
         self._told: list[LinkEvent | DeviceFault] = []  # not yet handed out
@@ -264,13 +274,14 @@ class DaqmxBackend(Backend):
             for current_a in due:
                 self.supply.set_current_a(current_a)
                 self._supply_a = current_a
-            if due and not self.supply_schedule.ramping and self._off_at_zero:
-                self._switch_off(self.supply)
-            elif due and not self.supply_schedule.ramping:  # read back once the last step has settled
+            if due and not self.supply_schedule.ramping:  # read back once the last step has settled
+                if self._off_at_zero:
+                    self._switch_off(self.supply)
                 self._readback_index = self.next_index + round(self.supply.config.settle_s * self.device.sample_rate_hz)
             if self._readback_index is not None and self.next_index >= self._readback_index:
                 self._readback_index = None
                 self.supply_readback_a = self.supply.read_current_a()
+                self.supply_output = self.supply.output_state()
         except SupplyError as error:
             self._fault(f"the supply failed: {error}")
         return []
@@ -310,6 +321,8 @@ class DaqmxBackend(Backend):
             problems.append(f"THE SUPPLY DID NOT RAMP TO ZERO: {error}")
         refused = self.supply.safe()  # zero and off, each tried whatever the other did
         self._supply_a, self._supply_off = 0.0, True
+        self.supply_readback_a, self.supply_output = math.nan, ""
+        self._readback_index = self.next_index  # read back once the card is back
         problems += [f"THE SUPPLY MAY STILL BE ON: {problem}" for problem in refused]
         return "".join(f"; {problem}" for problem in problems)
 
@@ -365,10 +378,14 @@ class DaqmxBackend(Backend):
             self.waveforms.off_now()
 
     def supply_to_zero_now(self) -> None:
+        """The ramp to zero, the output switched off at its end; a supply already switched off
+        stays off (its waiting ramp dropped), not switched on again to be ramped."""
         with self._lock:
-            if self.supply_schedule is not None:
+            if self.supply_schedule is not None and self._supply_off:
+                self.supply_schedule.drop()
+            elif self.supply_schedule is not None:
                 self.supply_schedule.to_zero(self.next_index)
-                self._off_at_zero = not self._supply_off
+                self._off_at_zero = True
 
     def stats(self) -> dict:
         values: dict = {
@@ -384,19 +401,21 @@ class DaqmxBackend(Backend):
                 supply=self.supply.identity,
                 supply_target_a=self.supply_schedule.target_a,
                 supply_readback_a=self.supply_readback_a,
+                supply_output=self.supply_output,
             )
         return values
 
     def close(self) -> None:
-        """Coils off, the supply ramped to zero while the card streams on, then the tasks and the
-        supply released, each whatever the others did."""
+        """Coils off, the supply ramped to zero and switched off while the card streams on, and
+        read back once settled; then the tasks and the supply released, each whatever the others
+        did, and last what the backend held."""
         self._stop.set()
         self._watchdog.join()
         try:
             self.coils_off_now()
             self.supply_to_zero_now()
             polls = 0
-            while self.supply_schedule is not None and self.supply_schedule.ramping and not self.fault:
+            while self._supply_pending() and not self.fault:
                 self.poll(self.device.read_timeout_s)
                 polls += 1
                 if polls * self.device.block_s > 60.0:  # a ramp from the cap takes seconds, not this
@@ -410,17 +429,33 @@ class DaqmxBackend(Backend):
                     self._close(self._tasks)
                     self._tasks = []
             finally:
-                if self.supply is not None:
-                    self.supply.close()
+                with self.held:
+                    if self.supply is not None:
+                        self.supply.close()
+
+    def _supply_pending(self) -> bool:
+        """A ramp of the supply, or its read-back, still to come."""
+        schedule = self.supply_schedule
+        return schedule is not None and (schedule.ramping or self._readback_index is not None)
+
+    def closed_state(self) -> str:
+        """The supply as it read back, settled, after its ramp to zero and switch-off on close."""
+        if self.supply is None:
+            return ""
+        output = self.supply_output or "output not read back"
+        return f"supply {output} at {self.supply_readback_a:.4f} A (read back)"
 
 
-def open_daqmx(device: DaqDevice, cap: CurrentCap, supply: ScpiSupply | None = None) -> DaqmxBackend:
-    """The backend on the card of ``device``, through NI's ``nidaqmx`` (imported now).
+def open_daqmx(
+    device: DaqDevice, cap: CurrentCap, supply: ScpiSupply | None = None, held: contextlib.ExitStack | None = None
+) -> DaqmxBackend:
+    """The backend on the card of ``device``, through NI's ``nidaqmx`` (imported now), holding
+    ``held`` until it is closed.
     DeviceUnavailable, in one line, when the package, NI's runtime or the card is missing, or the
     card refuses the tasks."""
     daqmx = import_nidaqmx()
     try:
-        return DaqmxBackend(daqmx, device, cap, supply)
+        return DaqmxBackend(daqmx, device, cap, supply, held)
     except daqmx.errors.DaqNotFoundError:
         raise DeviceUnavailable(
             "backend nidaqmx: NI-DAQmx (NI's driver runtime) is not installed on this machine: install it "

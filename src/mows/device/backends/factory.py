@@ -2,12 +2,15 @@
 serial port, a recorded bag, or the paper's bench (the NI card and its SCPI field supply,
 docs/hardware.md). :class:`BackendSettings` carries the driver's parameters of the same names
 (docs/nodes.md); :func:`make_backend` builds the backend they choose. The bench alone is
-:class:`BenchSettings` (``mows check-hardware`` opens it too), whose supply cap is lowered to the
-driver's ``supply_current_cap_a`` by one rule, :meth:`BenchSettings.supply_config`.
+:class:`BenchSettings` (``mows check-hardware`` opens it too, :func:`open_bench`), whose supply
+cap is lowered to the driver's ``supply_current_cap_a`` by one rule,
+:meth:`BenchSettings.supply_config`. The simulated bench, for a rehearsal without hardware, is
+the same backend on NI's own package with only its lowest layer replaced (:func:`simulated_card`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import pathlib
@@ -19,6 +22,8 @@ from mows.device.backends.sim_backend import scene_backend
 from mows.device.instruments.daq import PAPER_DEVICE_FILE, DaqDevice, load_daq_device
 from mows.device.instruments.scpi import (
     PAPER_SUPPLY_FILE,
+    SIMULATED_RESOURCE,
+    SIMULATED_SUPPLY_FILE,
     ScpiSupply,
     ScpiSupplyConfig,
     load_supply_file,
@@ -28,19 +33,33 @@ from mows.device.interface import Backend
 from mows.device.serial.link import DEFAULT_BAUD, SerialLink
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import DEFAULT_SCENARIO, Scenario, load_scenario
+from mows.sim.simulator import SimulatedDevice
+
+SIMULATED_SCENARIO = "paper_largest_spacing"  # the coils both seen at the fluxgates (Fig. 2a)
+SIMULATED_SUPPLY_SCENARIO = "calibration"  # lends its supply: the Pasco pair on the NGM202
 
 
 @dataclasses.dataclass(frozen=True)
 class BenchSettings:
     """The paper's bench: the NI card of ``daq_device_file`` and the SCPI supply of
     ``supply_file`` at the VISA address ``supply_resource`` ('' : no supply) through the PyVISA
-    backend ``visa_library``, its current never above ``supply_current_cap_a`` (A)."""
+    backend ``visa_library``, its current never above ``supply_current_cap_a`` (A).
+    ``simulated``: the simulated bench (:func:`simulated_card`), its supply the NGM202 on
+    pyvisa-sim at ``SIMULATED_RESOURCE`` (the only address it has)."""
 
     daq_device_file: str | pathlib.Path = PAPER_DEVICE_FILE
     supply_file: str | pathlib.Path = PAPER_SUPPLY_FILE
     supply_resource: str = ""
     visa_library: str = "@py"
     supply_current_cap_a: float = math.inf
+    simulated: bool = False
+
+    def __post_init__(self) -> None:
+        if self.simulated and self.supply_resource not in ("", SIMULATED_RESOURCE):
+            raise ValueError(
+                f"supply_resource={self.supply_resource!r}: the simulated bench's supply is at "
+                f"{SIMULATED_RESOURCE!r} ('' : the simulated bench without a supply)"
+            )
 
     def supply_config(self) -> ScpiSupplyConfig:
         """The supply file, its cap lowered to ``supply_current_cap_a`` (never raised above the
@@ -48,16 +67,48 @@ class BenchSettings:
         config = load_supply_file(self.supply_file)
         return dataclasses.replace(config, cap_a=min(config.cap_a, self.supply_current_cap_a))
 
+    def open_supply(self) -> ScpiSupply | None:
+        """The supply, prepared (:func:`mows.device.instruments.scpi.open_scpi_supply`); None
+        without one."""
+        if not self.supply_resource:
+            return None
+        library = f"{SIMULATED_SUPPLY_FILE}@sim" if self.simulated else self.visa_library
+        return open_scpi_supply(self.supply_resource, self.supply_config(), library)
 
-def open_bench(device: DaqDevice, cap: CurrentCap, supply: ScpiSupply | None) -> DaqmxBackend:
-    """The backend on the card of ``device`` with ``supply``; a supply already opened is closed
+
+def open_bench(bench: BenchSettings, cap: CurrentCap) -> DaqmxBackend:
+    """The backend on the card of ``bench`` with its supply; on the simulated bench, NI's package
+    drives the simulated card until the backend is closed. A supply already opened is closed
     (switched off) again when the card cannot be opened, before the error goes on."""
+    device = load_daq_device(bench.daq_device_file)
+    supply = bench.open_supply()
+    held = contextlib.ExitStack()
     try:
-        return open_daqmx(device, cap, supply)
+        if bench.simulated:
+            held.enter_context(simulated_card(device, supply).installed())
+        return open_daqmx(device, cap, supply, held)
     except BaseException:
+        held.close()
         if supply is not None:
             supply.close()
         raise
+
+
+def simulated_card(device: DaqDevice, supply: ScpiSupply | None):
+    """The simulated card wired as ``device`` says, in wall-clock time, over the paper's
+    largest-spacing scene with the Pasco pair on its field supply, driven by ``supply`` (the
+    NGM202 on pyvisa-sim; None: no current)."""
+    from mows.device.simulated.daqmx_card import SimulatedCard  # NI's package only when simulating
+
+    scenario = load_scenario(SIMULATED_SCENARIO)
+    return SimulatedCard(
+        SimulatedDevice(scenario.replace(supply=load_scenario(SIMULATED_SUPPLY_SCENARIO).supply)),
+        tuple(i.physical_channel for i in device.inputs),
+        tuple(o.physical_channel for o in device.outputs),
+        device.amplifier_v_per_a,
+        device.inputs[0].sensitivity_v_per_t,
+        supply_current_a=supply.resource.visalib.instruments[SIMULATED_RESOURCE].delivered_a if supply else None,
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,8 +118,9 @@ class BackendSettings:
     pieces of ``block_duration_s``; its supply capped at ``supply_current_cap_a``, slewing at
     ``supply_slew_a_per_s``), serial (``serial_port`` at ``baud``), bag (``bag_path`` replayed at
     ``bag_rate``) or nidaqmx (the bench: ``daq_device_file`` and, with ``supply`` scpi,
-    ``supply_file`` at ``supply_resource``; '' the paper's files). ``coil_setup``: the coils' setup,
-    '' the scenario's."""
+    ``supply_file`` at ``supply_resource``; '' the paper's files; ``daq_simulated``: the simulated
+    bench instead, its supply at the simulated address). ``coil_setup``: the coils' setup, '' the
+    scenario's."""
 
     backend: str = "sim"
     scenario: str = DEFAULT_SCENARIO
@@ -86,6 +138,7 @@ class BackendSettings:
     supply_file: str = ""
     supply_resource: str = ""
     visa_library: str = "@py"
+    daq_simulated: bool = False
 
     def setup_name(self) -> str:
         """The coil setup that drives the coils: ``coil_setup``, or when it is '' the scenario's."""
@@ -108,6 +161,8 @@ def make_backend(settings: BackendSettings, cap: CurrentCap) -> Backend:
     s = settings
     if s.supply == "scpi" and s.backend != "nidaqmx":
         raise ValueError(f"supply='scpi' goes with backend nidaqmx, not {s.backend!r} (its supply is the device's)")
+    if s.daq_simulated and s.backend != "nidaqmx":
+        raise ValueError(f"daq_simulated=True goes with backend nidaqmx, not {s.backend!r}")
     if s.backend == "sim":
         scenario = load_scenario(s.scenario)
         if s.coil_setup not in ("", scenario.setup.name):
@@ -136,17 +191,15 @@ def make_backend(settings: BackendSettings, cap: CurrentCap) -> Backend:
         raise ValueError(f"backend={s.backend!r} is not one of sim, serial, bag, nidaqmx")
     if s.supply == "device":
         raise ValueError("supply='device' : the NI card has no supply of its own; use scpi or none")
-    if s.supply == "scpi" and not s.supply_resource:
+    if s.supply == "scpi" and not s.supply_resource and not s.daq_simulated:
         raise ValueError("supply_resource='' : supply scpi needs the supply's VISA address")
+    resource = s.supply_resource or (SIMULATED_RESOURCE if s.daq_simulated else "")
     bench = BenchSettings(
         s.daq_device_file or PAPER_DEVICE_FILE,
         s.supply_file or PAPER_SUPPLY_FILE,
-        s.supply_resource if s.supply == "scpi" else "",
+        resource if s.supply == "scpi" else "",
         s.visa_library,
         s.supply_current_cap_a,
+        s.daq_simulated,
     )
-    device = load_daq_device(bench.daq_device_file)
-    supply = None
-    if bench.supply_resource:
-        supply = open_scpi_supply(bench.supply_resource, bench.supply_config(), bench.visa_library)
-    return open_bench(device, cap, supply)
+    return open_bench(bench, cap)

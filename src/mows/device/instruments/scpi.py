@@ -34,6 +34,7 @@ SIMULATED_RESOURCE = "TCPIP0::192.168.0.20::inst0::INSTR"  # its address in that
 
 
 MAX_ERRORS = 32  # entries read from the error queue after one command; more are said to be left
+OUTPUT_STATES = {"0": "off", "OFF": "off", "1": "on", "ON": "on"}  # the answers to output_state, as SCPI allows
 
 
 class SupplyError(OSError):
@@ -190,6 +191,11 @@ class SupplySchedule:
         self.target_a = to_a
         return steps[-1][0]
 
+    def drop(self) -> None:
+        """Drop the queued steps: the supply was switched off at zero."""
+        self._steps = []
+        self.target_a = self.current_a = 0.0
+
     def due(self, next_index: int) -> list[float]:
         """The steps whose sample is before ``next_index``, in order (each once)."""
         due = [a for index, a in self._steps if index < next_index]
@@ -289,10 +295,21 @@ class ScpiSupply:
                 problems.append(str(error))
         return problems
 
-    def _read_back_off(self) -> None:
+    def output_state(self) -> str:
+        """The output as the supply reads it back: 'on' or 'off'; '' for a model without the
+        query. SupplyError for an answer that is neither."""
         query = self.config.commands.output_state
-        if query and (answer := self._query(query).strip()) not in ("0", "OFF"):
-            raise SupplyError(f"{self.config.name}: {query} answers {answer!r} after the output was switched off")
+        if not query:
+            return ""
+        answer = self._query(query).strip()
+        if answer not in OUTPUT_STATES:
+            raise SupplyError(f"{self.config.name}: {query} answers {answer!r}, neither on nor off")
+        return OUTPUT_STATES[answer]
+
+    def _read_back_off(self) -> None:
+        if self.output_state() == "on":
+            query = self.config.commands.output_state
+            raise SupplyError(f"{self.config.name}: {query} reads back on after the output was switched off")
 
     def close(self) -> None:
         """Current to zero at once (the caller has ramped it down) and output off (:meth:`safe`),

@@ -1,0 +1,119 @@
+"""The driver node as a process on the simulated bench (``backend:=nidaqmx``, ``supply:=scpi``,
+``daq_simulated:=true``: NI's ``nidaqmx`` on the simulated card in wall-clock time, the NGM202 on
+pyvisa-sim), its supply set to 0.5 A. Requirement: a lifecycle deactivate, the emergency stop and
+a Ctrl-C of mows-graph each leave the supply at 0 A with its output off, as the instrument reads
+them back (``MEAS:CURR?``, ``OUTP?``): on the driver's /diagnostics while it runs, in its last
+log line once it has exited. Every wait ends as soon as its condition holds."""
+
+import re
+import signal
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from lifecycle_msgs.msg import Transition
+from mows_msgs.srv import EmergencyStop, SetFieldCurrent
+
+from mows.device.instruments.scpi import load_supply_file
+from mows_bringup.graph import NODES
+from mows_bringup.lifecycle import BOUND_S, LifecycleClient
+from node_processes import WAIT_S, assert_stops_cleanly, log
+
+# The card's clock is the wall clock: a worker starved for the output lead underflows it.
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]
+
+BENCH = {"backend": "nidaqmx", "supply": "scpi", "daq_simulated": "true"}
+CURRENT_A = 0.5
+SUPPLY = load_supply_file()  # the paper's NGM202: the read-back's stated accuracy
+# The driver's last word on the supply: as it read back, settled, after its ramp to zero and switch-off.
+CLOSED = re.compile(r"\[driver\]: device closed: supply (\w+) at (\S+) A \(read back\)")
+
+
+class Bench:
+    """What the test node hears of the driver on the simulated bench, and its services."""
+
+    def __init__(self, ros):
+        self.ros = ros
+        self.diagnostics: dict[str, str] = {}
+        ros.node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 10)
+        self.supply = ros.node.create_client(SetFieldCurrent, "/driver/set_field_current")
+        self.estop = ros.node.create_client(EmergencyStop, "/driver/emergency_stop")
+
+    def _diagnostics(self, array: DiagnosticArray) -> None:
+        for status in array.status:
+            if status.name == "/driver":
+                self.diagnostics = {kv.key: kv.value for kv in status.values}
+
+    def call(self, client, request):
+        self.ros.wait_for(client.service_is_ready, f"the service {client.srv_name}")
+        future = client.call_async(request)
+        return self.ros.wait_for(lambda: future.done() and future.result(), "the service's response")
+
+    def reads_back(self, current_a: float, output: str) -> bool:
+        """Whether the supply reads back ``current_a`` (within its stated accuracy) and ``output``."""
+        values = self.diagnostics
+        if values.get("supply_output") != output:
+            return False
+        return abs(float(values["supply_readback_a"]) - current_a) <= SUPPLY.readback_tolerance_a(current_a)
+
+    def wait_until(self, current_a: float, output: str, bound_s: float = WAIT_S) -> None:
+        what = f"the supply read back at {current_a} A, output {output}"
+        self.ros.wait_for(lambda: self.reads_back(current_a, output), what, bound_s)
+
+    def set_current(self, current_a: float, bound_s: float = WAIT_S) -> None:
+        response = self.call(self.supply, SetFieldCurrent.Request(current_a=current_a))
+        assert response.success, response.message
+        self.wait_until(current_a, "on", bound_s)
+
+
+@pytest.fixture
+def bench(ros):
+    return Bench(ros)
+
+
+@pytest.fixture
+def bench_driver(start):
+    """The driver alone on the simulated bench, active."""
+    return start(*NODES[0].command([arg for name, value in BENCH.items() for arg in ("-p", f"{name}:={value}")]))
+
+
+def assert_closed_at_zero_and_off(process) -> None:
+    """The driver's last word on the supply: off at 0 A, as read back."""
+    closed = CLOSED.search(log(process))
+    assert closed, log(process)
+    output, current_a = closed.group(1), float(closed.group(2))
+    assert output == "off" and abs(current_a) <= SUPPLY.readback_tolerance_a(0.0), closed.group(0)
+
+
+def test_a_deactivate_leaves_the_supply_at_zero_and_off(bench, bench_driver):
+    bench.set_current(CURRENT_A)
+    lifecycle = LifecycleClient([], give_up=lambda: None)
+    try:
+        assert lifecycle.transition("driver", Transition.TRANSITION_DEACTIVATE, "inactive")
+    finally:
+        lifecycle.close()
+    bench.wait_until(0.0, "off")
+    assert bench.diagnostics["lifecycle_state"] == "inactive"
+    assert_stops_cleanly(bench_driver)
+    assert_closed_at_zero_and_off(bench_driver)
+
+
+def test_the_emergency_stop_leaves_the_supply_at_zero_and_off(bench, bench_driver):
+    bench.set_current(CURRENT_A)
+    stop = bench.call(bench.estop, EmergencyStop.Request(engage=True, reason="test"))
+    assert stop.success and stop.latched
+    bench.wait_until(0.0, "off")
+    assert bench.diagnostics["estop_latched"] == "True"
+    assert_stops_cleanly(bench_driver)
+    assert_closed_at_zero_and_off(bench_driver)
+
+
+def test_a_ctrl_c_of_mows_graph_leaves_the_supply_at_zero_and_off(bench, start):
+    overrides = {**{f"driver:{name}": value for name, value in BENCH.items()}, "mapper:orientation": "manual"}
+    overrides["calibrator:orientation"] = "manual"  # the bench's stage is turned by hand
+    graph = start("mows-graph", "--ros-args", *(a for rule in overrides.items() for a in ("-p", ":=".join(rule))))
+    # Bounded as mows-graph bounds it: configuring compiles, minutes on a loaded machine.
+    bench.ros.wait_for(lambda: "every node is active" in log(graph) or graph.poll() is not None, "bring-up", BOUND_S)
+    bench.set_current(CURRENT_A)
+    graph.send_signal(signal.SIGINT)
+    assert graph.wait(timeout=WAIT_S) == 0, log(graph)
+    assert_closed_at_zero_and_off(graph)

@@ -3,15 +3,24 @@
 pyvisa-sim), its supply set to 0.5 A. Requirement: a lifecycle deactivate, the emergency stop and
 a Ctrl-C of mows-graph each leave the supply at 0 A with its output off, as the instrument reads
 them back (``MEAS:CURR?``, ``OUTP?``): on the driver's /diagnostics while it runs, in its last
-log line once it has exited. Every wait ends as soon as its condition holds."""
+log line once it has exited. Every wait ends as soon as its condition holds.
+
+And the bench for one person: in mows-graph on the simulated bench, whose stage is turned by
+hand, a calibration on the unipolar supply runs end to end with each turn it asks for answered
+by Enter in mows-graph's terminal (the simulated operator turns the simulated probe as asked), at
+most 4 turns for the wiring, and ends with the supply at zero; the Ctrl-C comes after it."""
 
 import re
 import signal
+import subprocess
+import time
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from lifecycle_msgs.msg import Transition
+from mows_msgs.action import CalibrateProbe
 from mows_msgs.srv import EmergencyStop, SetFieldCurrent
+from rclpy.action import ActionClient
 
 from mows.device.instruments.scpi import load_supply_file
 from mows_bringup.graph import NODES
@@ -23,6 +32,8 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realti
 
 BENCH = {"backend": "nidaqmx", "supply": "scpi", "daq_simulated": "true"}
 CURRENT_A = 0.5
+CALIBRATION_CURRENTS_A = [0.0, 1.0, 2.0]  # the NGM202 is unipolar: θ0 + 180° gives the other sign
+MAX_TURNS_PER_WIRING = 4
 SUPPLY = load_supply_file()  # the paper's NGM202: the read-back's stated accuracy
 # The driver's last word on the supply: as it read back, settled, after its ramp to zero and switch-off.
 CLOSED = re.compile(r"\[driver\]: device closed: supply (\w+) at (\S+) A \(read back\)")
@@ -107,12 +118,39 @@ def test_the_emergency_stop_leaves_the_supply_at_zero_and_off(bench, bench_drive
     assert_closed_at_zero_and_off(bench_driver)
 
 
-def test_a_ctrl_c_of_mows_graph_leaves_the_supply_at_zero_and_off(bench, start):
+def calibrate_by_hand(bench, graph) -> int:
+    """A calibration through the graph, each turn it asks for answered by Enter in the graph's
+    terminal; the number of turns."""
+    client = ActionClient(bench.ros.node, CalibrateProbe, "/calibrator/calibrate_probe")
+    bench.ros.wait_for(client.server_is_ready, "the calibration action")
+    bench.ros.wait_for_estimator_hearing()
+    sent = client.send_goal_async(CalibrateProbe.Goal(currents_a=CALIBRATION_CURRENTS_A))
+    result = bench.ros.wait_for(lambda: sent.done() and sent.result(), "the goal's answer").get_result_async()
+    turns, deadline = 0, time.monotonic() + BOUND_S
+    while not result.done():
+        assert time.monotonic() < deadline, log(graph)
+        asked = [line for line in log(graph).splitlines() if "[calibrator]" in line and "turn the probe to" in line]
+        if len(asked) > turns:
+            confirmed = f"calibrator: θ0 = {asked[turns].split('θ0 = ')[1].split('°')[0]}° confirmed"
+            graph.stdin.write(b"\n")
+            graph.stdin.flush()
+            bench.ros.wait_for(lambda c=confirmed: c in log(graph), f"the graph's word: {confirmed}")
+            turns += 1
+        bench.ros.executor.spin_once(timeout_sec=0.1)
+    done = result.result().result
+    assert done.success and done.supply_at_zero, (done.message, log(graph))
+    return turns
+
+
+def test_a_hand_turned_calibration_then_a_ctrl_c_of_mows_graph_leave_the_supply_at_zero_and_off(bench, start):
     overrides = {**{f"driver:{name}": value for name, value in BENCH.items()}, "mapper:orientation": "manual"}
     overrides["calibrator:orientation"] = "manual"  # the bench's stage is turned by hand
-    graph = start("mows-graph", "--ros-args", *(a for rule in overrides.items() for a in ("-p", ":=".join(rule))))
+    overrides.update({"driver:tuning_steps": "0", "driver:turn_settle_s": "0.2", "driver:gap_s": "0.1"})  # quick
+    rules = [a for rule in overrides.items() for a in ("-p", ":=".join(rule))]
+    graph = start("mows-graph", "--ros-args", *rules, stdin=subprocess.PIPE)
     # Bounded as mows-graph bounds it: configuring compiles, minutes on a loaded machine.
     bench.ros.wait_for(lambda: "every node is active" in log(graph) or graph.poll() is not None, "bring-up", BOUND_S)
+    assert 1 <= calibrate_by_hand(bench, graph) <= MAX_TURNS_PER_WIRING
     bench.set_current(CURRENT_A)
     graph.send_signal(signal.SIGINT)
     assert graph.wait(timeout=WAIT_S) == 0, log(graph)

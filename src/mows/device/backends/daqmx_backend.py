@@ -10,7 +10,8 @@ generating, so that a host late by less than the lead (0.75 s on the paper's ben
 underflows them. The lead holds only what was commanded: the coils' drives with their
 switch-offs, zeros elsewhere; a coil command for a sample beyond what is written applies exactly
 there. The stage is turned by hand (``orientation: manual``): an orientation command is the
-operator's turn, confirmed before the cycle was asked for, and is accepted at once.
+operator's turn, confirmed before the cycle was asked for, and is accepted at once (``turned``
+hears it: the simulated bench's operator turns its simulated probe there).
 
 A card error (the outputs underflowed, the inputs overran, the card went away; every task's error
 told, not only the first) is a fault, never a latch for the session: the tasks are closed (the
@@ -35,6 +36,7 @@ import importlib
 import math
 import threading
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -98,8 +100,10 @@ class DaqmxBackend(Backend):
         cap: CurrentCap,
         supply: ScpiSupply | None = None,
         held: contextlib.ExitStack | None = None,
+        turned: Callable[[float], None] | None = None,
     ):
         self.daqmx = daqmx
+        self._turned = turned
         self.held = held or contextlib.ExitStack()  # released after the card and the supply (a simulated card's seam)
         self.device = device
         self.cap = CurrentCap(min(cap.limit_a, device.current_cap_a))
@@ -370,6 +374,8 @@ class DaqmxBackend(Backend):
                     self._results.append(CommandResult(command.command_id, False, reason="the coils are on"))
                     return
                 self.stage_theta0_rad = command.theta0_rad  # turned by hand before the cycle was asked for
+                if self._turned is not None:
+                    self._turned(command.theta0_rad)
                 applied = max(command.at_sample_index, self.next_index)
             self._results.append(CommandResult(command.command_id, True, applied))
 
@@ -447,15 +453,19 @@ class DaqmxBackend(Backend):
 
 
 def open_daqmx(
-    device: DaqDevice, cap: CurrentCap, supply: ScpiSupply | None = None, held: contextlib.ExitStack | None = None
+    device: DaqDevice,
+    cap: CurrentCap,
+    supply: ScpiSupply | None = None,
+    held: contextlib.ExitStack | None = None,
+    turned: Callable[[float], None] | None = None,
 ) -> DaqmxBackend:
     """The backend on the card of ``device``, through NI's ``nidaqmx`` (imported now), holding
-    ``held`` until it is closed.
+    ``held`` until it is closed; ``turned`` hears each turn of the stage (:class:`DaqmxBackend`).
     DeviceUnavailable, in one line, when the package, NI's runtime or the card is missing, or the
     card refuses the tasks."""
     daqmx = import_nidaqmx()
     try:
-        return DaqmxBackend(daqmx, device, cap, supply, held)
+        return DaqmxBackend(daqmx, device, cap, supply, held, turned)
     except daqmx.errors.DaqNotFoundError:
         raise DeviceUnavailable(
             "backend nidaqmx: NI-DAQmx (NI's driver runtime) is not installed on this machine: install it "

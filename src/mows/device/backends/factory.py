@@ -84,9 +84,10 @@ def open_bench(bench: BenchSettings, cap: CurrentCap) -> DaqmxBackend:
     supply = bench.open_supply()
     held = contextlib.ExitStack()
     try:
-        if bench.simulated:
-            held.enter_context(simulated_card(device, supply).installed())
-        return open_daqmx(device, cap, supply, held)
+        if not bench.simulated:
+            return open_daqmx(device, cap, supply, held)
+        card = held.enter_context(simulated_card(device, supply).installed())
+        return open_daqmx(device, cap, supply, held, turned=card.turn_probe)  # the operator turns its probe
     except BaseException:
         held.close()
         if supply is not None:

@@ -584,7 +584,8 @@ def test_an_output_that_stays_on_is_read_back_and_said(tmp_path):
     assert simulated_supply().safe() == []
 
 
-def test_after_an_emergency_stop_the_supply_is_ramped_to_zero_and_switched_off(on_bench):
+def session_at_half_an_ampere(on_bench):
+    """A session on the bench with the simulated supply ramped to 0.5 A and read back so."""
     supply = simulated_supply()
     card, backend = on_bench("calibration", supply)
     config = SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), 112.5, fit_ringdown)
@@ -592,9 +593,14 @@ def test_after_an_emergency_stop_the_supply_is_ramped_to_zero_and_switched_off(o
     session.set_field_current(0.5, lambda result: None)
     for _ in range(MAX_POLLS):
         session.step(0.0)
-        if not backend.supply_schedule.ramping and supply_state(supply) == (0.5, 1):
+        if backend.stats()["supply_output"] == "on":  # read back once settled at 0.5 A
             break
     assert supply_state(supply) == (0.5, 1)
+    return supply, backend, session
+
+
+def test_after_an_emergency_stop_the_supply_is_ramped_to_zero_and_switched_off(on_bench):
+    supply, backend, session = session_at_half_an_ampere(on_bench)
     assert session.emergency_stop(True, "test")
     seen = []
     for _ in range(MAX_POLLS):
@@ -765,16 +771,7 @@ def test_the_driver_s_supply_cap_lowers_the_supply_file_s_and_never_raises_it(in
 
 def test_the_emergency_stop_s_switch_off_holds_through_a_deactivation_and_close(on_bench):
     """A supply the emergency stop switched off is not switched on again to be ramped to zero."""
-    supply = simulated_supply()
-    card, backend = on_bench("calibration", supply)
-    config = SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), 112.5, fit_ringdown)
-    session = DeviceSession(backend, config, armed=True)
-    session.set_field_current(0.5, lambda result: None)
-    for _ in range(MAX_POLLS):
-        session.step(0.0)
-        if backend.stats()["supply_output"] == "on":  # read back once settled at 0.5 A
-            break
-    assert supply_state(supply) == (0.5, 1)
+    supply, backend, session = session_at_half_an_ampere(on_bench)
     session.emergency_stop(True, "test")
     for _ in range(MAX_POLLS):
         session.step(0.0)

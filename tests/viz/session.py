@@ -28,6 +28,7 @@ def fit_message(fit, start_ns: int, cycle: int):
         for name in (
             "theta0_rad", "frequency_hz", "frequency_std_hz", "frequency_crb_hz", "damping_per_s", "amplitude_rad",
             "rest_offset_rad", "phase_rad", "kappa_t", "offset_t", "chi2_dof", "r_squared", "snr_db", "duration_s",
+            "start_offset_s",
         )
     }  # fmt: skip
     pickup = np.asarray(fit.pickup, complex)

@@ -142,10 +142,11 @@ def calibrate_by_hand(bench, graph) -> int:
     return turns
 
 
-def test_a_hand_turned_calibration_then_a_ctrl_c_of_mows_graph_leave_the_supply_at_zero_and_off(bench, start):
+def test_a_hand_turned_calibration_then_a_ctrl_c_of_mows_graph_leave_the_supply_at_zero_and_off(bench, start, tmp_path):
     overrides = {**{f"driver:{name}": value for name, value in BENCH.items()}, "mapper:orientation": "manual"}
     overrides["calibrator:orientation"] = "manual"  # the bench's stage is turned by hand
     overrides.update({"driver:tuning_steps": "0", "driver:turn_settle_s": "0.2", "driver:gap_s": "0.1"})  # quick
+    overrides["calibrator:probe_output_file"] = str(tmp_path / "calibrated_probe.yaml")  # not the working directory
     rules = [a for rule in overrides.items() for a in ("-p", ":=".join(rule))]
     graph = start("mows-graph", "--ros-args", *rules, stdin=subprocess.PIPE)
     # Bounded as mows-graph bounds it: configuring compiles, minutes on a loaded machine.

@@ -71,11 +71,11 @@ class DriverNode(MowsNode):
         if (problem := current_problem(values)) is not None:
             raise ValueError(problem)
         cap = CurrentCap(values["coil_current_cap_a"])
-        # The cycle fits its tuning ring-downs and the sim backend integrates: compile both (or
+        # The cycle fits its tuning ring-downs and a simulated device integrates: compile both (or
         # load them from numba's cache) now, not while the device streams.
-        simulator = values["backend"] == "sim" or values["daq_simulated"]
-        self.get_logger().info(f"numba kernels ready in {precompile(simulator=simulator):.1f} s")
-        backend = make_backend(backend_settings(values), cap)  # a ValueError or OSError refuses, with its reason
+        settings = backend_settings(values)
+        self.get_logger().info(f"numba kernels ready in {precompile(simulator=settings.simulated):.1f} s")
+        backend = make_backend(settings, cap)  # a ValueError or OSError refuses, with its reason
         try:
             self.outputs.record(values["record_path"])
         except BaseException:
@@ -102,8 +102,7 @@ class DriverNode(MowsNode):
         """Stop streaming, coils off, supply to zero, device released, bag closed."""
         self._streaming.stop()
         if self.session is not None:
-            self.session.close()
-            self.get_logger().info(f"device closed: {self.session.backend.closed_state() or 'nothing read back'}")
+            self.get_logger().info(f"device closed: {self.session.close() or 'nothing read back'}")
             self._previous, self.session = self.session, None
         self.outputs.close()
 

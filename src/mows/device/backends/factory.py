@@ -141,6 +141,12 @@ class BackendSettings:
     visa_library: str = "@py"
     daq_simulated: bool = False
 
+    @property
+    def simulated(self) -> bool:
+        """Whether the device is simulated here (the sim backend, the simulated NI bench): the
+        simulator's kernels are then compiled before it streams."""
+        return self.backend == "sim" or self.daq_simulated
+
     def setup_name(self) -> str:
         """The coil setup that drives the coils: ``coil_setup``, or when it is '' the scenario's."""
         return self.coil_setup or load_scenario(self.scenario).setup.name

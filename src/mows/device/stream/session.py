@@ -377,13 +377,15 @@ class DeviceSession:
             if self.sequencer is not None:
                 self.sequencer.settings = settings
 
-    def close(self) -> None:
-        """Coils off, the supply ramped to zero and the device released; a running cycle fails."""
+    def close(self) -> str:
+        """Coils off, the supply ramped to zero and the device released; a running cycle fails.
+        What the device was left in, as read back from it ('' when it reads nothing back)."""
         with self._lock:
             self.tracking.stop("the driver is shutting down")
             if self.sequencer is not None and self.sequencer.busy:
                 self._act(self.sequencer.abort("the driver is shutting down"))
             self.backend.close()
+            return self.backend.closed_state()
 
     # --- state -----------------------------------------------------------------------------
     def achieved_rate_hz(self) -> float | None:

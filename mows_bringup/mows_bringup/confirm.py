@@ -22,13 +22,10 @@ import sys
 import time
 from collections.abc import Callable
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import Trigger
 
+from mows_bringup.own_node import OwnNode
 from mows_ros.operator import AWAITED_TURN_KEY
 
 TURNING_NODES = ("mapper", "calibrator")  # the nodes whose goals turn the probe
@@ -38,19 +35,11 @@ REPORT_S = 1.5  # a report this long after a request shows what became of it (re
 SENDS = 3  # requests at most, each sent only when the one before never arrived
 
 
-class Operator:
+class Operator(OwnNode):
     """A node of its own that hears the turning nodes' reports and calls their services."""
 
     def __init__(self, ros_args: list[str]):
-        self._context = Context()
-        rclpy.init(
-            args=["mows-confirm-orientation", "--ros-args", *ros_args],
-            context=self._context,
-            signal_handler_options=SignalHandlerOptions.NO,
-        )
-        self.node = rclpy.create_node("mows_operator", context=self._context)
-        self._executor = SingleThreadedExecutor(context=self._context)
-        self._executor.add_node(self.node)
+        super().__init__("mows-confirm-orientation", "mows_operator", ros_args)
         self.reports: dict[str, tuple[float, str]] = {}  # node → (when heard, the turn it awaits)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._heard, 10)
         self.deadline = time.monotonic() + ANSWER_S
@@ -66,7 +55,7 @@ class Operator:
     def spin_until(self, condition: Callable[[], object], until_s: float) -> object:
         """Spin until ``condition()`` is true (its value) or the monotonic time ``until_s``."""
         while not (value := condition()) and time.monotonic() < min(until_s, self.deadline):
-            self._executor.spin_once(timeout_sec=0.05)
+            self.executor.spin_once(timeout_sec=0.05)
         return value
 
     def confirm(self, name: str) -> tuple[bool, str]:
@@ -91,11 +80,6 @@ class Operator:
             if self.reports[name][1] != awaited:
                 return True, f"θ0 = {awaited}° confirmed (its answer was lost; its report shows the turn taken)"
         return False, "no answer"
-
-    def close(self) -> None:
-        self._executor.shutdown()
-        self.node.destroy_node()
-        self._context.try_shutdown()
 
 
 def confirm_turn(ros_args: list[str]) -> tuple[bool, list[str]]:

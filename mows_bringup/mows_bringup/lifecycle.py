@@ -11,13 +11,11 @@ import math
 import time
 from collections.abc import Callable, Sequence
 
-import rclpy
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
+
+from mows_bringup.own_node import OwnNode
 
 # A bound for a hang only; each wait ends as soon as its answer comes. A node's start-up and its
 # configure (which compiles the numba kernels) take minutes on a cold cache on a loaded machine.
@@ -30,7 +28,7 @@ class BringUpError(RuntimeError):
     """A node refused or did not answer a transition, or the bring-up was given up."""
 
 
-class LifecycleClient:
+class LifecycleClient(OwnNode):
     """Asks nodes, by name, for lifecycle transitions and their state; ``give_up()`` says why
     to stop waiting (a node that exited, a signal) or None.
 
@@ -43,15 +41,7 @@ class LifecycleClient:
     """
 
     def __init__(self, ros_args: Sequence[str], give_up: Callable[[], str | None]):
-        self._context = Context()
-        rclpy.init(
-            args=["mows-graph", "--ros-args", *ros_args],
-            context=self._context,
-            signal_handler_options=SignalHandlerOptions.NO,
-        )
-        self.node = rclpy.create_node("mows_graph", context=self._context)
-        self._executor = SingleThreadedExecutor(context=self._context)
-        self._executor.add_node(self.node)
+        super().__init__("mows-graph", "mows_graph", ros_args)
         self._give_up = give_up
         self._clients: dict = {}
 
@@ -115,13 +105,8 @@ class LifecycleClient:
                 raise BringUpError(f"{why} while waiting for {what}")
             if time.monotonic() > deadline:
                 raise BringUpError(f"gave up after {bound_s:g} s waiting for {what}")
-            self._executor.spin_once(timeout_sec=0.1)
+            self.executor.spin_once(timeout_sec=0.1)
         return value
-
-    def close(self) -> None:
-        self._executor.shutdown()
-        self.node.destroy_node()
-        self._context.try_shutdown()
 
 
 def bring_up(

@@ -19,7 +19,7 @@ from mows.cli.fit_bag import add_fit_arguments, bag_fitting, fit_settings
 from mows.cli.inputs import input_file
 from mows.estimate.settings import probe_set
 from mows.lab.data.readers import is_bag
-from mows.lab.data.ringdowns import fit_bag
+from mows.lab.data.ringdowns import check_probes, fit_bag
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sweep.decompose import MODELS
 from mows.sweep.replay import read_session, replay_sweep
@@ -60,14 +60,14 @@ def run(args) -> int:
             fits = tuple(SweepFit.from_estimated(e) for e in fit_bag(args.bag, fit_settings(how, probe), how))
         if not fits:
             raise ValueError("no ring-down fit recorded (the estimator was not running?): --refit fits the raw stream")
-        probes = sorted({fit.probe_id for fit in fits})
-        if len(probes) > 1 and not settings.probes:
-            raise ValueError(f"fits of probes {probes}: pass --probes, the mapper's probes parameter")
-        outcomes = [replay_sweep(cycles, fits, settings, probe) for cycles in session.sweeps()]
+        if not settings.probes:
+            check_probes(args.bag, args.excitation_topic)
+        sweeps = session.sweeps()
+        outcomes = [replay_sweep(cycles, fits, settings, probe) for cycles in sweeps]
     if args.json:
         print(json.dumps({"sweeps": [_numbers(outcome) for outcome in outcomes]}))
         return 0
-    for k, (cycles, outcome) in enumerate(zip(session.sweeps(), outcomes), 1):
+    for k, (cycles, outcome) in enumerate(zip(sweeps, outcomes), 1):
         print(f"sweep {k} ({len(cycles)} orientations): {outcome.message}")
     return 0
 

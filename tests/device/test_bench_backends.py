@@ -697,6 +697,23 @@ def test_a_ramp_steps_within_the_slew_limit_on_the_sample_clock():
     assert schedule.due(back + 1)[-1] == 0.0 and not schedule.ramping
 
 
+def test_a_host_behind_the_card_reads_the_supply_back_settled(on_bench):
+    """A host that stalled gets a ramp's samples in a burst and writes its steps one after the
+    other: the supply settles from the last write in its own time, however far the card's clock
+    has run on by then."""
+    supply = simulated_supply()
+    bench, backend = on_bench("calibration", supply)
+    backend.send(FieldCurrentCommand(1, 0, 0.5))
+    time.sleep(0.5)  # the stall: the ramp (0.24 s) and settle_s after it are buffered on the card
+    while backend.supply_schedule.ramping:
+        backend.poll(0.0)
+    assert math.isnan(backend.supply_readback_a)
+    poll_for(backend, supply.config.settle_s + 0.1)
+    tolerance = supply.config.readback_tolerance_a(0.5)
+    assert backend.supply_readback_a == pytest.approx(0.5, abs=tolerance) and bench.device.field_current_a == 0.5
+    backend.close()
+
+
 def test_the_backend_ramps_the_supply_and_zeroes_it_on_close(on_bench):
     supply = simulated_supply()
     bench, backend = on_bench("calibration", supply)

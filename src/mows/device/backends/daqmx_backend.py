@@ -128,7 +128,7 @@ class DaqmxBackend(Backend):
         self.last_card_fault = ""
         self.supply_readback_a = math.nan  # read settle_s after a ramp's last step
         self.supply_output = ""  # 'on' or 'off' as read back with it
-        self._readback_index: int | None = None  # the sample it is read at, while one is due
+        self._readback_at_s: float | None = None  # time.monotonic() it is read at, while one is due
         self._supply_a = 0.0  # the last current the supply accepted
         self._supply_off = False  # switched off (a fault, a ramp to zero's end): prepared again before its next step
         self._off_at_zero = False  # an emergency stop's ramp to zero: the output off once it ends
@@ -267,7 +267,10 @@ class DaqmxBackend(Backend):
 
     def _supply_steps(self) -> list:
         """Write the supply's steps whose sample has come; read the current back ``settle_s`` after
-        a ramp's last (a read-back at once sees the pair still settling)."""
+        a ramp's last (a read-back at once sees the pair still settling). The supply settles in its
+        own time from the write, not on the card's clock: a host catching up on buffered samples
+        reaches a sample ``settle_s`` on in less than that, and read the pair 2 % short of its
+        current so."""
         if self.supply is None or self.supply_schedule is None:
             return []
         due = self.supply_schedule.due(self.next_index)
@@ -281,9 +284,9 @@ class DaqmxBackend(Backend):
             if due and not self.supply_schedule.ramping:  # read back once the last step has settled
                 if self._off_at_zero:
                     self._switch_off(self.supply)
-                self._readback_index = self.next_index + round(self.supply.config.settle_s * self.device.sample_rate_hz)
-            if self._readback_index is not None and self.next_index >= self._readback_index:
-                self._readback_index = None
+                self._readback_at_s = time.monotonic() + self.supply.config.settle_s
+            if self._readback_at_s is not None and time.monotonic() >= self._readback_at_s:
+                self._readback_at_s = None
                 self.supply_readback_a = self.supply.read_current_a()
                 self.supply_output = self.supply.output_state()
         except SupplyError as error:
@@ -326,7 +329,7 @@ class DaqmxBackend(Backend):
         refused = self.supply.safe()  # zero and off, each tried whatever the other did
         self._supply_a, self._supply_off = 0.0, True
         self.supply_readback_a, self.supply_output = math.nan, ""
-        self._readback_index = self.next_index  # read back once the card is back
+        self._readback_at_s = time.monotonic()  # read back once the card is back
         problems += [f"THE SUPPLY MAY STILL BE ON: {problem}" for problem in refused]
         return "".join(f"; {problem}" for problem in problems)
 
@@ -442,7 +445,7 @@ class DaqmxBackend(Backend):
     def _supply_pending(self) -> bool:
         """A ramp of the supply, or its read-back, still to come."""
         schedule = self.supply_schedule
-        return schedule is not None and (schedule.ramping or self._readback_index is not None)
+        return schedule is not None and (schedule.ramping or self._readback_at_s is not None)
 
     def closed_state(self) -> str:
         """The supply as it read back, settled, after its ramp to zero and switch-off on close."""

@@ -10,6 +10,7 @@ import argparse
 import faulthandler
 import re
 import sys
+import time
 from collections.abc import Callable
 
 import rclpy
@@ -28,6 +29,7 @@ from mows_ros.params import UnknownParameterError, params_file_problem, ros_argu
 EXIT_BAD_PARAMETER = 2
 RCLInvalidROSArgsError = rclpy_implementation.RCLInvalidROSArgsError
 AUTOSTART = "--autostart"
+SHUTDOWN_WAIT_S = 5.0  # a bound only: the signal handler's thread shuts down in milliseconds
 
 
 def arguments_problem(argv: list[str]) -> str | None:
@@ -98,7 +100,7 @@ def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -
         # The signal handler shuts the context down from under the executor: one building its
         # next wait set gets an RCLError, one taking a message a plain RuntimeError from the
         # binding (RCLError is one too). Either is the normal end, but only if shutdown happened.
-        if rclpy.ok():
+        if not _shut_down_within(SHUTDOWN_WAIT_S):
             raise
     except (InvalidParameterValueException, InvalidParameterTypeException, UnknownParameterError) as error:
         sys.stderr.write(f"error: {error}\n")
@@ -111,6 +113,18 @@ def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -
             node.destroy_node()
         _shutdown()
     return 0
+
+
+def _shut_down_within(timeout_s: float) -> bool:
+    """Whether the context is shut down, or is within ``timeout_s``: rclpy's signal handler shuts
+    it down from a thread of its own, so a take can fail before ``rclpy.ok()`` turns false (the viz
+    node exited 1 on SIGTERM that way, under load)."""
+    deadline = time.monotonic() + timeout_s
+    while rclpy.ok():
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.01)
+    return True
 
 
 def _shutdown() -> None:

@@ -7,6 +7,7 @@ import os
 import re
 import signal
 import subprocess
+import sys
 
 import pytest
 import yaml
@@ -110,3 +111,30 @@ def test_graph_arguments_split_at_ros_args():
     assert (args.duration, ros_args) == (3.0, ["-r", "__ns:=/x"])
     with pytest.raises(SystemExit):
         parse_arguments(["--duration", "0"])
+
+
+# A node process whose executor fails on a take as the signal handler's thread shuts the context
+# down from under it (the binding's RuntimeError), that thread still ``late_s`` from done; or
+# never (None): a failure that is no shutdown.
+TAKE_FAILS = """
+import sys, threading, rclpy
+from rclpy.executors import SingleThreadedExecutor
+from mows_ros import process
+late_s = {late_s}
+def spin(self):
+    if late_s is not None:
+        threading.Timer(late_s, rclpy.try_shutdown).start()
+    raise RuntimeError("Unable to convert call argument '0' to Python object")
+SingleThreadedExecutor.spin = spin
+process.SHUTDOWN_WAIT_S = 1.0
+sys.exit(process.run_node(lambda: rclpy.create_node("take_fails"), ["take_fails"]))
+"""
+
+
+@pytest.mark.parametrize("late_s", [0.3, None])
+def test_a_take_that_fails_as_the_context_shuts_down_is_a_clean_stop_and_only_then(late_s):
+    run = subprocess.run([sys.executable, "-c", TAKE_FAILS.format(late_s=late_s)], capture_output=True, text=True)
+    if late_s is None:
+        assert run.returncode == 1 and "RuntimeError: Unable to convert" in run.stderr, run.stderr
+    else:
+        assert run.returncode == 0, run.stderr

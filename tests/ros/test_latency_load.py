@@ -9,11 +9,12 @@ import json
 
 import pytest
 
+from mows.cli.bench import QUICK
 from mows.cli.main import main
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]
 
-QUICK_LOAD_DURATION_S = 20.0  # mows.cli.bench.QUICK["latency"]
+QUICK_LOAD_DURATION_S = QUICK["latency"]["load_duration_s"]
 
 
 def test_the_latency_bench_runs_under_load_and_reports_it(capsys):

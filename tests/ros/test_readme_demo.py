@@ -3,15 +3,14 @@ a fresh demo's output, not its numbers (they move from run to run).
 
 The demo runs once, as `make demo` runs it (`mows-demo`), with a shorter sweep (6 orientations ×
 1 ring-down) that prints the same lines, and with ``--foxglove=0`` (the viz node on any free port;
-`make demo DEMO_ARGS=--foxglove`), whose address line it must print once the node serves it.
+`make demo DEMO_ARGS=--foxglove`), whose address line it must print once the node serves it
+(the ``demo_session`` fixture, whose recording tests/ros/test_recording_conclusions.py reads).
 
 The results table (header, the five components, the χ²/dof line) must match line for line in its
 words and in each row's width, so that its columns line up as they do; every other line the
 README shows must be a kind of line the demo prints."""
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -47,28 +46,9 @@ def kind(line: str) -> str:
     return match.group(1) + NUMBER.sub("#", match.group(2).split(":")[0]) if match else line
 
 
-@pytest.fixture(scope="module")
-def demo_lines(tmp_path_factory):
-    out = tmp_path_factory.mktemp("demo")
-    run = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "mows_bringup.demo",
-            "--angles",
-            "6",
-            "--repeats",
-            "1",
-            "--foxglove=0",
-            "--out",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=480,
-    )
-    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
-    return (run.stdout + run.stderr).splitlines()
+@pytest.fixture
+def demo_lines(demo_session):
+    return demo_session.lines
 
 
 def test_the_readme_shows_a_demo_block_with_its_results_table():

@@ -4,14 +4,16 @@ DDS discovers across the link (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET with ROS_STA
 only, so shared memory cannot bypass the link), and a sweep completes.
 
 Then over a lossy link: 5 % of the UDP datagrams leaving either end of the veth pair dropped at
-random, and (a second run) each of them delayed by 20 ms too. ``tc netem`` would do both, but
+random, and each of them delayed by 20 ms too. ``tc netem`` would do both, but
 kernels without sch_netem (or sch_fq) exist, this machine's among them ("Specified qdisc kind is
 unknown"): the loss is an nftables rule (``numgen random mod 100 < 5 drop``, on the veth only)
 and the delay an iptables NFQUEUE rule with ``delay_link.py`` giving the verdicts 20 ms late.
 Lost raw blocks must be counted as gaps, every fit over one refused (DATA_GAP, no numbers) and
 kept out of the map, the reliable fits all delivered and counted alike on both sides, the sweep
-action answered, and /diagnostics must report the loss. The delayed run is skipped, with the
-reason, where no netfilter queue can be had.
+action answered, and /diagnostics must report the loss. Where no netfilter queue can be had,
+the link only loses datagrams, and the test says that the delay was not tested and why. (The
+loss alone is not run beside the loss with the delay: the same sweep, the same checks, a
+minute more of the suite.)
 
 Skipped, saying so, where network namespaces cannot be created (not root, no iproute2)."""
 
@@ -22,6 +24,7 @@ import shutil
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -193,20 +196,18 @@ def delayed(handlers) -> int:
     return sum(int(re.search(r"delayed (\d+)", log(h)).group(1)) for h in handlers)
 
 
-@pytest.mark.parametrize("impairment", ["loss", "loss_and_delay"])
-def test_a_sweep_over_a_lossy_link(hosts, start, impairment):
+def test_a_sweep_over_a_lossy_link(hosts, start):
     drop_at_random(hosts)
-    handlers = []
-    if impairment == "loss_and_delay":
-        handlers = delay(hosts, start)
-        if isinstance(handlers, str):
-            pytest.skip(f"{DELAY_MS} ms delay not tested ({handlers}); the loss alone is")
+    handlers = delay(hosts, start)
+    if isinstance(handlers, str):
+        warnings.warn(f"{DELAY_MS} ms delay not tested ({handlers}); the loss alone is", stacklevel=1)
+        handlers = []
     outcome = sweep(hosts, start, LOSSY, LOSSY_ANGLES, LOSSY_REPEATS)
     estimator, fits = outcome["estimator"], outcome["fits"]
     lost, held = dropped(hosts), delayed(handlers)
-    print(f"{impairment}: {lost} datagrams dropped, {held} delayed {DELAY_MS} ms; fits {fits}; ")
+    print(f"{lost} datagrams dropped, {held} delayed {DELAY_MS} ms; fits {fits}; ")
     print(f"estimator gaps {estimator['gaps']}, missing samples {estimator['missing_samples']}; {outcome['message']}")
-    assert lost > 0 and (held > 0 or impairment == "loss")
+    assert lost > 0 and (held > 0 or not handlers)
     # Lost raw blocks are counted as gaps, and reported on /diagnostics with a warning.
     assert int(estimator["gaps"]) > 0 and int(estimator["missing_samples"]) > 0, estimator
     assert estimator["level"] == ord(DiagnosticStatus.WARN)

@@ -27,6 +27,10 @@ from mows.sim.sections import Environment
 from mows.sweep.probes import ProbeSweep, decompose_probes, neighbour_fields, sweeps_of
 from mows.sweep.record import SweepPoint, SweepRecord
 
+# One worker runs the whole module, so that its module fixture (18 s of simulation) is computed
+# once, not once per xdist worker.
+pytestmark = pytest.mark.xdist_group("multiprobe_sweep")
+
 SCENE = load_scenario("three_probes")
 POINTS = 8
 

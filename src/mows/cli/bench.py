@@ -60,13 +60,15 @@ QUICK: dict[str, dict[str, object]] = {
     "lab": {"sweeps": 2, "outside_sweeps": 4},
     "stream": {"duration_s": 3.0},
     # a quick --load is a smoke run beside other work (make test): its burners yield (nice 19)
-    # and the graph keeps the default policy (one loaded stream, not two). 20 s holds two or
-    # more cycles of 5 ring-downs: beside a busy test worker a 10 s stream held one, and that
-    # cycle fitted 3 of 5 (2 DATA_GAP), so one load spike could leave the run with no fit.
+    # and the graph keeps the default policy (one loaded stream, not two; SCHED_FIFO nodes
+    # starting up beside a test of the simulated NI card made its output underflow). 12 s holds
+    # two cycles of 5 ring-downs without the load (about 6 s each); under it, at the default
+    # policy, one cycle can take half a minute on an idle machine (3 of 5 fitted, the stream's
+    # samples half lost), and the run ends after the first cycle that ends past 12 s.
     "latency": {
         "cycles": 1,
         "repeats": 5,
-        "load_duration_s": 20.0,
+        "load_duration_s": 12.0,
         "burner_nice": 19,
         "realtime_priority": 0,
         "three_probe_map": False,  # a three-probe graph run of minutes: tests/ros/test_three_probe_graph.py runs it

@@ -269,8 +269,8 @@ class DaqmxBackend(Backend):
         """Write the supply's steps whose sample has come; read the current back ``settle_s`` after
         a ramp's last (a read-back at once sees the pair still settling). The supply settles in its
         own time from the write, not on the card's clock: a host catching up on buffered samples
-        reaches a sample ``settle_s`` on in less than that, and read the pair 2 % short of its
-        current so."""
+        reaches the sample ``settle_s`` after the write's within milliseconds, and had read the
+        pair 2 % short of its current so."""
         if self.supply is None or self.supply_schedule is None:
             return []
         due = self.supply_schedule.due(self.next_index)

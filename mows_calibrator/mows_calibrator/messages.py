@@ -1,6 +1,7 @@
 """Translation between mows_msgs and the calibration's dataclasses (no logic of its own)."""
 
 import dataclasses
+import math
 
 from mows_msgs.action import CalibrateProbe
 from mows_msgs.msg import RingdownFit
@@ -36,6 +37,11 @@ def supply_answer(response) -> tuple[bool, str]:
     if response is None:
         return False, "no answer from the driver's set_field_current"
     return response.success, response.message
+
+
+def supply_range(response) -> tuple[float, float]:
+    """The supply's range (A) a SetFieldCurrent response states; NaN … NaN when none came."""
+    return (math.nan, math.nan) if response is None else (response.min_current_a, response.max_current_a)
 
 
 def result_msg(outcome: CalibrationOutcome, others: int = 0) -> CalibrateProbe.Result:

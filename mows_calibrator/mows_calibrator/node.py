@@ -1,30 +1,18 @@
 """The calibrator node: the paper's probe calibration (Fig. 3) as an action, writing a probe file.
 
 Names are relative (here as in the root namespace). Action ``/calibrator/calibrate_probe``
-(CalibrateProbe; ``/mows/calibrator/calibrate_probe``, the previous release's name, is served
-too for one release) runs :class:`mows.sweep.calibration.run.CalibrationRun`: it steps the
-driver's static-field supply (``/driver/set_field_current``), runs one driver cycle per
-orientation at each current (the action ``/driver/measurement_cycle``, cancelled with the goal),
-collects that cycle's ring-down fits
-(``/mows/ringdown``) and sends feedback per cycle. Every ending, cancelled or failed, ramps the
-supply back to zero before the result is returned. With the homogeneous wiring's points it fits
-the constants (:class:`mows.sweep.calibration.run.ProbeCalibrator`) and writes the probe file
-that the estimator and the mapper load by ``probe_file``; gradient points of an earlier goal
-(``wiring: gradient``) add the lever check. A goal the node cannot run (inactive, a plan it
-refuses, a driver without a supply, found by setting the supply to zero first, a plan outside
-the supply's range that the driver's answer states: a negative current on a unipolar supply) is
-accepted and aborted at once, with the reason in the result, before the supply is set to any
-other current. With ``orientation`` manual (a stage without a
-motor) a cycle at a new orientation waits for the operator: the feedback's message says where to
-turn the probe, ``~/confirm_orientation`` (std_srvs/Trigger) says it is done.
-
-With several probes sharing each window (the estimator's ``probes``), a goal calibrates the
-probe ``probe_id``: the fits of the others are left out and counted in the result's message.
+(CalibrateProbe; the previous release's ``/mows/calibrator/calibrate_probe`` too) runs
+:class:`mows.sweep.calibration.run.CalibrationRun` through the driver: its supply
+(``/driver/set_field_current``), its cycles (``/driver/measurement_cycle``, cancelled with the
+goal), their fits (``/mows/ringdown``); docs/nodes.md has the goal, its endings, a manual stage
+and ``probe_id``. A goal the node cannot run (inactive, a plan it refuses, a driver without a
+supply, found by setting it to zero first, a plan outside the range the driver's answer states)
+is accepted and aborted at once with the reason, before any other current is set. From the
+sweeps kept, :class:`mows.sweep.calibration.run.ProbeCalibrator` writes the probe file.
 
 The node translates only; it runs on one thread and awaits the driver's answers as coroutines.
 """
 
-import datetime
 import math
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -37,7 +25,7 @@ from mows.device.cycle.phases import CycleRequest
 from mows.estimate.calibration.fit_constants import CalibrationError
 from mows.sim.scenario import load_scenario
 from mows.sweep.calibration.run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
-from mows_calibrator.messages import calibrated, feedback_msg, fit_of, result_msg, supply_answer
+from mows_calibrator.messages import calibrated, feedback_msg, fit_of, result_msg, supply_answer, supply_range
 from mows_calibrator.parameters import PARAMETERS, bench_of
 from mows_ros.awaitables import call
 from mows_ros.cycles import DriverCycles
@@ -57,16 +45,11 @@ class CalibratorNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
         self._calibrator = ProbeCalibrator()
-        self._probe_id, self._others = 0, 0  # the running goal's probe; fits of other probes left out
         self._driver = DriverCycles(self, self._on_fit)
         group = self._driver.group
         self._supply = self.create_client(SetFieldCurrent, SUPPLY_SERVICE, callback_group=group)
         self._servers = action_servers(self, CalibrateProbe, ACTIONS, self._execute, self._cancel, group)
-        self._operator = OperatorTurns(
-            self,
-            "~/confirm_orientation",
-            lambda: self._calibrator.run and self._calibrator.run.turn_awaited,
-        )
+        self._operator = OperatorTurns(self, "~/confirm_orientation", lambda: self._calibrator.turn_awaited)
 
     def _param(self, name):
         return self.get_parameter(name).value
@@ -75,10 +58,7 @@ class CalibratorNode(MowsNode):
     def _on_fit(self, msg: RingdownFit):
         """The run's step once the fits of its cycle are in (None before, and between goals)."""
         run = self._calibrator.run
-        if run is None or msg.tuning:
-            return None
-        if msg.probe_id != self._probe_id:
-            self._others += 1
+        if run is None or msg.tuning or not self._calibrator.calibrates(msg.probe_id):
             return None
         try:
             fit = fit_of(msg)
@@ -89,27 +69,18 @@ class CalibratorNode(MowsNode):
 
     async def _refusal(self, goal) -> str | None:
         """Why ``goal`` is refused, or None when its run is accepted (the calibrator is busy
-        from here). A driver that cannot set its supply to zero has none to calibrate with."""
+        from here): the plan, then the driver's answer to the supply set to zero."""
         if (inactive := self.inactive_reason()) is not None:
             return inactive
         try:
             homogeneous = load_scenario(self._param("scenario")).supply.name
             plan = goal_plan(goal, homogeneous, self._param("currents_a"))
-            self._calibrator.accept(plan, self._param("orientation") == "manual")
+            self._calibrator.accept(plan, self._param("orientation") == "manual", self._param("probe_id"))
         except ValueError as error:
             return str(error)
-        self._probe_id, self._others = self._param("probe_id"), 0
         request = SetFieldCurrent.Request(current_a=0.0)
         response = await call(self, self._supply, request, self._param("supply_timeout_s"))
-        ok, message = supply_answer(response)
-        try:
-            if not ok:
-                raise ValueError(f"the driver's supply cannot be set: {message}")
-            plan.check_supply(response.min_current_a, response.max_current_a)
-        except ValueError as error:
-            self._calibrator.release()
-            return str(error)
-        return None
+        return self._calibrator.on_zero_supply(*supply_answer(response), *supply_range(response))
 
     def _cancel(self, _) -> CancelResponse:
         self._driver.cancel()
@@ -149,7 +120,7 @@ class CalibratorNode(MowsNode):
         return run.on_supply(*supply_answer(await call(self, self._supply, request, self._param("supply_timeout_s"))))
 
     def _finish(self, goal_handle, outcome) -> CalibrateProbe.Result:
-        result = result_msg(outcome, self._others)
+        result = result_msg(outcome, self._calibrator.others)
         # A cancel that cut the running cycle short ends the run as that cycle's failure.
         if outcome.cancelled or goal_handle.is_cancel_requested:
             goal_handle.canceled()
@@ -160,27 +131,15 @@ class CalibratorNode(MowsNode):
         self._calibrator.keep(outcome)
         path = goal_handle.request.probe_output_file or self._param("probe_output_file")
         try:
-            calibration = self._calibrate(path)
+            calibration, written = self._calibrator.write_probe(bench_of(parameter_values(self, PARAMETERS)), path)
         except (CalibrationError, ValueError, OSError) as error:
             result.message = self._calibrator.last = f"{result.message}; calibration: {error}"
             goal_handle.abort()
             return result
-        self.get_logger().info(f"{self._calibrator.calibrated(calibration, path)}\n{calibration.report()}")
+        self.get_logger().info(f"probe file: {written}")
+        self.get_logger().info(f"{self._calibrator.last}\n{calibration.report()}")
         goal_handle.succeed()
         return calibrated(result, calibration, path)
-
-    def _calibrate(self, path: str):
-        """The constants from the sweeps so far, written to the probe file at ``path``."""
-        bench = bench_of(parameter_values(self, PARAMETERS))
-        calibration = self._calibrator.calibrate(bench.wirings, bench.homogeneous, bench.nominal)
-        date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-        # A goal replaces the probe file of an earlier one (force), never a device, a FIFO or
-        # the nominal probe the calibration reads.
-        nominal_file = parameter_values(self, PARAMETERS)["nominal_probe_file"]
-        record = calibration.record(date, bench.hardware_id)
-        written = calibration.probe().to_yaml(path, record, inputs=[nominal_file] if nominal_file else [], force=True)
-        self.get_logger().info(f"probe file: {written}")
-        return calibration
 
     def health(self) -> Health:
         values = {"state": self._calibrator.state, "calibrations": self._calibrator.calibrations}

@@ -1,10 +1,9 @@
 """The calibrator's parameter table, with the checks that its scenarios and nominal probe exist,
 and the bench they describe."""
 
-import dataclasses
-
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sim.scenario import load_scenario
+from mows.sweep.calibration.run import Bench
 from mows.sweep.calibration.schedule import UNIPOLAR_CURRENTS_A, scenario_wirings
 from mows_ros import operator
 from mows_ros.params import ParamSpec
@@ -74,20 +73,11 @@ PARAMETERS = (
 )
 
 
-@dataclasses.dataclass(frozen=True)
-class Bench:
-    """The calibration bench the parameters describe: the supply's wirings by name (the
-    homogeneous one's name), the nominal probe and the hardware id for the probe file."""
-
-    wirings: dict
-    homogeneous: str
-    nominal: Probe
-    hardware_id: str
-
-
 def bench_of(values: dict) -> Bench:
+    """The bench the parameter ``values`` describe."""
     scenario = load_scenario(values["scenario"])
     gradient = load_scenario(values["gradient_scenario"]) if values["gradient_scenario"] else None
-    nominal = Probe.from_yaml(values["nominal_probe_file"]) if values["nominal_probe_file"] else PAPER_PROBE
+    nominal_file = values["nominal_probe_file"]
+    nominal = Probe.from_yaml(nominal_file) if nominal_file else PAPER_PROBE
     wirings = scenario_wirings(scenario, gradient)
-    return Bench(wirings, scenario.supply.name, nominal, values["hardware_id"] or scenario.name)
+    return Bench(wirings, scenario.supply.name, nominal, values["hardware_id"] or scenario.name, nominal_file)

@@ -10,8 +10,8 @@ import pytest
 
 from mows.device.cycle.phases import CycleRequest
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitStatus, RingdownFit
-from mows.physics.probe import PAPER_PROBE
-from mows.sweep.calibration.run import CalibrationRun, ProbeCalibrator, Turn, goal_plan
+from mows.physics.probe import PAPER_PROBE, Probe, calibration_record
+from mows.sweep.calibration.run import Bench, CalibrationRun, ProbeCalibrator, Turn, goal_plan
 from mows.sweep.calibration.schedule import CalibrationPlan, SetSupply, scenario_wirings
 from mows.sweep.runner import CycleAnswer
 from sweep.calibration_bench import BENCH, STD_HZ, bench_fits
@@ -96,6 +96,55 @@ def test_a_calibration_recovers_the_bench_probe(fits_first):
     assert probe.inertia_kgm2 == pytest.approx(BENCH.probe.inertia_kgm2, rel=0.01)
     assert calibrator.calibrated(calibration, "probe.yaml").startswith("calibration 1: ")
     assert calibrator.calibrations == 1
+
+
+def test_the_probe_file_is_what_the_estimator_loads_and_never_the_nominal_one(tmp_path):
+    nominal_file = tmp_path / "nominal.yaml"
+    PAPER_PROBE.to_yaml(nominal_file)
+    bench = Bench(scenario_wirings(BENCH), BENCH.supply.name, PAPER_PROBE, "bench-3", str(nominal_file))
+    calibrator, path = ProbeCalibrator(), tmp_path / "probe.yaml"
+    outcome = run_through(calibrator.accept(goal_plan(goal((0.0, 1.0, 2.0)), BENCH.supply.name, ())), StandInDriver())
+    calibrator.keep(outcome)
+    calibration, written = calibrator.write_probe(bench, str(path), "2026-01-02T03:04:05+00:00")
+    assert written == f"wrote {path}" and calibrator.calibrations == 1 and str(path) in calibrator.last
+    assert Probe.from_yaml(path).spring_nm_per_rad == pytest.approx(BENCH.probe.spring_nm_per_rad, rel=0.01)
+    record = calibration_record(path)
+    assert (record["date"], record["hardware_id"]) == ("2026-01-02T03:04:05+00:00", "bench-3")
+    assert record["constants"]["f00_hz"]["value"] == pytest.approx(calibration.value("f00_hz"))
+    # A later goal replaces it, but not the nominal probe file the calibration reads.
+    assert calibrator.write_probe(bench, str(path))[1] == f"replaced {path}"
+    nominal_text = nominal_file.read_text()
+    with pytest.raises(ValueError, match="is an input"):
+        calibrator.write_probe(bench, str(nominal_file))
+    assert nominal_file.read_text() == nominal_text and calibrator.calibrations == 2
+
+
+def test_a_driver_without_a_supply_or_with_too_small_a_range_frees_the_calibrator():
+    calibrator = ProbeCalibrator()
+    calibrator.accept(CalibrationPlan((0.0, -1.0)))
+    assert (
+        calibrator.on_zero_supply(False, "no supply", math.nan, math.nan)
+        == "the driver's supply cannot be set: no supply"
+    )
+    assert calibrator.run is None
+    calibrator.accept(CalibrationPlan((0.0, -1.0)))
+    assert calibrator.on_zero_supply(True, "", 0.0, 2.0).startswith("supply current -1 A of the plan is outside")
+    assert calibrator.run is None
+    run = calibrator.accept(CalibrationPlan((0.0, -1.0)))
+    assert calibrator.on_zero_supply(True, "", -2.0, 2.0) is None and calibrator.run is run
+    calibrator.release()
+    calibrator.accept(CalibrationPlan((0.0, -1.0)))
+    assert calibrator.on_zero_supply(True, "", math.nan, math.nan) is None  # no range stated: the device refuses
+
+
+def test_a_goal_takes_the_fits_of_its_probe_and_counts_the_others():
+    calibrator = ProbeCalibrator()
+    calibrator.accept(CalibrationPlan(), probe_id=1)
+    assert [calibrator.calibrates(i) for i in (0, 1, 2, 1)] == [False, True, False, True]
+    assert calibrator.others == 2
+    calibrator.release()
+    calibrator.accept(CalibrationPlan())
+    assert calibrator.others == 0 and calibrator.calibrates(0)
 
 
 def test_fits_of_other_cycles_and_late_fits_are_told_apart():

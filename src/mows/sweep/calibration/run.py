@@ -7,11 +7,12 @@ id), waits until a finished cycle's fits are in (or the caller says their time i
 then hands them to the schedule. :class:`ProbeCalibrator` takes one goal at a time, keeps each
 wiring's last complete sweep across goals (a gradient sweep of an earlier goal adds the lever
 check to a later homogeneous one) and fits the probe's constants from them
-(:func:`mows.estimate.calibration.fit_constants.calibrate_probe`). Reading scenarios and writing the
-probe file are the caller's business.
+(:func:`mows.estimate.calibration.fit_constants.calibrate_probe`) and writes the probe file.
+Reading scenarios and the driver's answers are the caller's business.
 """
 
 import dataclasses
+import datetime
 import enum
 import math
 
@@ -132,6 +133,19 @@ class CalibrationRun:
         return self._gate(step if step.actions or step.outcome else self.schedule.fits_timed_out())
 
 
+@dataclasses.dataclass(frozen=True)
+class Bench:
+    """The calibration bench: the supply's wirings by name (:class:`Wiring`; ``homogeneous`` the
+    one that gives β0), the nominal probe (read from ``nominal_file``, '' none) and the hardware
+    id for the probe file."""
+
+    wirings: dict
+    homogeneous: str
+    nominal: Probe
+    hardware_id: str
+    nominal_file: str = ""
+
+
 class CalibratorState(enum.StrEnum):
     """Whether :class:`ProbeCalibrator` runs a goal; the values are what /diagnostics shows."""
 
@@ -144,21 +158,49 @@ class ProbeCalibrator:
 
     def __init__(self) -> None:
         self.run: CalibrationRun | None = None
+        self.probe_id, self.others = 0, 0  # the running goal's probe; fits of other probes left out
         self.calibrations = 0
         self.last = "no calibration yet"
         self._sweeps: dict[str, tuple] = {}  # wiring → (points, failed) of its last complete sweep
 
     @property
+    def turn_awaited(self) -> float | None:
+        """The orientation (rad) the running goal has asked the operator to turn the stage to, if any."""
+        return None if self.run is None else self.run.turn_awaited
+
+    @property
     def state(self) -> CalibratorState:
         return CalibratorState.IDLE if self.run is None else CalibratorState.CALIBRATING
 
-    def accept(self, plan: CalibrationPlan, manual_orientation: bool = False) -> CalibrationRun:
-        """The goal's run (on a stage the operator turns with ``manual_orientation``); ValueError
-        while another one runs."""
+    def accept(self, plan: CalibrationPlan, manual_orientation: bool = False, probe_id: int = 0) -> CalibrationRun:
+        """The goal's run (on a stage the operator turns with ``manual_orientation``) of the probe
+        ``probe_id`` (of several sharing each window); ValueError while another one runs."""
         if self.run is not None:
             raise ValueError("a calibration is running")
         self.run = CalibrationRun(plan, manual_orientation)
+        self.probe_id, self.others = probe_id, 0
         return self.run
+
+    def calibrates(self, probe_id: int) -> bool:
+        """Whether a fit of ``probe_id`` is of the goal's probe; those of others are counted."""
+        if probe_id != self.probe_id:
+            self.others += 1
+        return probe_id == self.probe_id
+
+    def on_zero_supply(self, accepted: bool, reason: str, min_current_a: float, max_current_a: float) -> str | None:
+        """The driver's answer to the supply set to zero before the run (a driver that cannot
+        has no supply to calibrate with) and the supply's range it states, which the plan must
+        lie in before any other current is set: None when the run goes on, else why not (the
+        goal is released)."""
+        assert self.run is not None  # only an accepted goal's supply is set
+        try:
+            if not accepted:
+                raise ValueError(f"the driver's supply cannot be set: {reason}")
+            self.run.plan.check_supply(min_current_a, max_current_a)
+        except ValueError as error:
+            self.release()
+            return str(error)
+        return None
 
     def release(self) -> None:
         """The goal ended (however it did): the next one may come."""
@@ -180,6 +222,21 @@ class ProbeCalibrator:
             points += wiring_points
             failed.update(wiring_failed)
         return calibrate_probe(points, wirings, KnownConstants.of(nominal), homogeneous, failed, nominal.lever_m)
+
+    def write_probe(self, bench: Bench, path: str, date: str | None = None) -> tuple[ProbeCalibration, str]:
+        """The constants from every wiring's latest sweep (:meth:`calibrate`) written to the
+        probe file at ``path`` with their record, dated ``date`` (None: now, UTC), and counted
+        (:meth:`calibrated`); the calibration and the writer's report. A goal replaces the probe
+        file of an earlier one, never a device, a FIFO or the bench's nominal probe file the
+        calibration reads. CalibrationError, ValueError or OSError with the reason; nothing
+        counted then."""
+        calibration = self.calibrate(bench.wirings, bench.homogeneous, bench.nominal)
+        date = date or datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+        record = calibration.record(date, bench.hardware_id)
+        inputs = [bench.nominal_file] if bench.nominal_file else []
+        written = calibration.probe().to_yaml(path, record, inputs=inputs, force=True)
+        self.calibrated(calibration, path)
+        return calibration, written
 
     def calibrated(self, calibration: ProbeCalibration, path: str) -> str:
         """Counts a calibration written to ``path``; the line that reports it."""

@@ -21,6 +21,10 @@ from lab.outside_catalog import CASES, INFO, NOISE_HZ, control, fitted_swing_deg
 from mows.lab import analyse, discover
 from mows.physics.probe import PAPER_PROBE
 
+# One worker runs the whole module, so that each case's noise-free truth (1–5 s, cached per
+# process) is computed once, not once per xdist worker.
+pytestmark = pytest.mark.xdist_group("outside_catalog")
+
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_a_case_is_a_rotation_sweep_whose_hidden_term_is_far_above_noise(case):

@@ -34,6 +34,17 @@ class RosHarness:
             self.executor.spin_once(timeout_sec=0.1)
         return value
 
+    def diagnostics_of(self, name: str) -> dict[str, str]:
+        """The key-values the node ``name`` reports on /diagnostics, each as last reported,
+        kept up to date as this node spins (empty until its first report)."""
+        values: dict[str, str] = {}
+
+        def take(array: DiagnosticArray) -> None:
+            values.update({kv.key: kv.value for s in array.status if s.name == name for kv in s.values})
+
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", take, 10)
+        return values
+
     def wait_for_estimator_hearing(self, name: str = "/estimator") -> None:
         """Wait until the estimator ``name`` reports blocks heard on /diagnostics, as a supervisor
         would before a first cycle: discovery takes seconds on a loaded machine, and a ring-down

@@ -16,7 +16,6 @@ import subprocess
 import time
 
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
 from lifecycle_msgs.msg import Transition
 from mows_msgs.action import CalibrateProbe
 from mows_msgs.srv import EmergencyStop, SetFieldCurrent
@@ -44,15 +43,9 @@ class Bench:
 
     def __init__(self, ros):
         self.ros = ros
-        self.diagnostics: dict[str, str] = {}
-        ros.node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 10)
+        self.diagnostics = ros.diagnostics_of("/driver")
         self.supply = ros.node.create_client(SetFieldCurrent, "/driver/set_field_current")
         self.estop = ros.node.create_client(EmergencyStop, "/driver/emergency_stop")
-
-    def _diagnostics(self, array: DiagnosticArray) -> None:
-        for status in array.status:
-            if status.name == "/driver":
-                self.diagnostics = {kv.key: kv.value for kv in status.values}
 
     def call(self, client, request):
         self.ros.wait_for(client.service_is_ready, f"the service {client.srv_name}")

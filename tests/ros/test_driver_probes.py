@@ -11,7 +11,6 @@ split into groups, and the coil currents the device carried never exceed the cap
 import math
 
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
 from mows_msgs.msg import ExcitationState, MagnetometerBlock
 from mows_msgs.srv import RunCycle
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -40,14 +39,9 @@ def stamp_ns(message) -> int:
 def test_a_cycle_of_three_probes_lists_them_on_each_excitation_and_keeps_the_cap(ros, start):
     blocks: list[MagnetometerBlock] = []
     states: list[ExcitationState] = []
-    diagnostics: dict[str, str] = {}
-
-    def diagnosed(array):
-        diagnostics.update({kv.key: kv.value for s in array.status if s.name == "/driver" for kv in s.values})
-
     ros.node.create_subscription(MagnetometerBlock, "/mows/raw", blocks.append, RAW_QOS)
     ros.node.create_subscription(ExcitationState, "/mows/excitation", states.append, EXCITATION_QOS)
-    ros.node.create_subscription(DiagnosticArray, "/diagnostics", diagnosed, 10)
+    diagnostics = ros.diagnostics_of("/driver")
     run_cycle = ros.node.create_client(RunCycle, "/driver/run_cycle")
     start(*NODES[0].command(ARGS))
     ros.wait_for(lambda: blocks and diagnostics.get("probes") == "3", "the stream and the device's three probes")

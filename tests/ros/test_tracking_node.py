@@ -6,7 +6,6 @@ wall clock; every wait ends as soon as its condition holds."""
 import math
 
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
 from mows_msgs.msg import FieldEstimate
 from sensor_msgs.msg import MagneticField
 
@@ -21,22 +20,10 @@ UPDATES = 12
 TARGET_STD_T = 0.2e-6  # the driver's default tracking_target_std_t
 
 
-def driver_diagnostics(ros) -> dict:
-    heard: dict = {}
-
-    def take(array: DiagnosticArray) -> None:
-        for status in array.status:
-            if status.name == "/driver":
-                heard.update({kv.key: kv.value for kv in status.values})
-
-    ros.node.create_subscription(DiagnosticArray, "/diagnostics", take, 10)
-    return heard
-
-
 def test_tracking_is_off_by_default(ros, start):
     assert next(p for p in PARAMETERS if p.name == "tracking").default is False
     start(*NODES[0].command([]))
-    heard = driver_diagnostics(ros)
+    heard = ros.diagnostics_of("/driver")
     ros.wait_for(lambda: "tracking" in heard, "the driver's diagnostics")
     assert heard["tracking"] == "False" and heard["tracking_stopped_reason"] == ""  # it never ran
 

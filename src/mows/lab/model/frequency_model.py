@@ -8,7 +8,7 @@ effect brings parameters with units and physical bounds like lmfit. The predicti
 
     f_i = f00·h_i(p) + c_i(p),
 
-with h from the potential (:func:`mows.lab.model.configuration.frequency_factor`), p the effect parameters
+with h from the potential (:func:`mows.lab.model.factors.frequency_factor`), p the effect parameters
 and c the additive frequency contributions of plugins. The base model has no effect: h is
 Eq. 6, √(1 + (m·Bx' + l·m·Gx'x')/kM), with the table's reference field and gradient.
 
@@ -38,15 +38,9 @@ import scipy.optimize
 
 from mows.lab.data.probe_rows import ProbeSet, probe_parts
 from mows.lab.data.table import PROBE, MeasurementTable
-from mows.lab.model.configuration import (
-    Configuration,
-    base_start_swing_rad,
-    default_window_s,
-    distinct_rows_of,
-    frequency_factor,
-    ringdown_nodes,
-)
+from mows.lab.model.configuration import Configuration, default_window_s, distinct_rows_of
 from mows.lab.model.effects import Effect, Parameter, untestable_reason
+from mows.lab.model.factors import base_start_swing_rad, frequency_factor, ringdown_nodes
 from mows.lab.model.least_squares import FitResult, Problem
 from mows.physics.probe import Probe
 
@@ -239,7 +233,7 @@ def _in_words(solution: scipy.optimize.OptimizeResult) -> str:
 
 def table_start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
     """Each row's start swing at the table's reference field and the probe's stop
-    (:func:`mows.lab.model.configuration.base_start_swing_rad`), evaluated once per
+    (:func:`mows.lab.model.factors.base_start_swing_rad`), evaluated once per
     configuration group of the published model."""
     distinct, inverse = FrequencyModel(probe).groups(table)
     found = np.empty(len(distinct))

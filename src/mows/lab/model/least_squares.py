@@ -412,7 +412,7 @@ class FitResult:
         if self.status is FitStatus.BAD_FIT:
             lines.append(
                 f"  warning: {self.status.name}: the model has no real frequency at "
-                f"{rows_text(self.invalid_rows)} (mows.lab.model.configuration.unevaluable_rows says why)"
+                f"{rows_text(self.invalid_rows)} (mows.lab.model.factors.unevaluable_rows says why)"
             )
         elif not self.ok:
             lines.append(f"  warning: {self.status.name}: the fit did not converge ({self.message})")

@@ -39,7 +39,7 @@ from mows.lab.diagnosis.discovery import Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group
 from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import catalog, resolve
-from mows.lab.model.configuration import unevaluable_rows
+from mows.lab.model.factors import unevaluable_rows
 from mows.lab.model.frequency_model import FitResult, FrequencyModel
 from mows.lab.model.least_squares import FittedParameter, parameters_dict
 from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, search
@@ -233,7 +233,7 @@ def analyse(
 
 def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:
     """The table without the rows the potential cannot evaluate, each named with the reason in
-    the notes (:func:`mows.lab.model.configuration.unevaluable_rows`); TableError when no row is left."""
+    the notes (:func:`mows.lab.model.factors.unevaluable_rows`); TableError when no row is left."""
     distinct, inverse = FrequencyModel(probe).groups(table)
     found = {}  # a reason holds for every row of its configuration
     for rows, member in probe_parts(distinct, probe):

@@ -34,7 +34,13 @@ import numpy as np
 from mows.lab.data.table import FIELD, GRADIENT
 from mows.physics import ringdown_average
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, probe_axes
-from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, LOCAL_NODES, ArcPotential, chebyshev_nodes_rad
+from mows.physics.potential import (
+    DEFAULT_HALF_WIDTH_RAD,
+    LOCAL_NODES,
+    ArcPotential,
+    arc_displacement_m,
+    chebyshev_nodes_rad,
+)
 from mows.physics.probe import Probe
 from mows.physics.schema import FloatOrArray, Vector
 
@@ -64,6 +70,11 @@ class Configuration:
     neighbour_field_t, neighbour_gradient_t_per_m : (n, 3), (n, 3, 3) or None: the other probes'
         magnets' field and gradient, which act in full whatever ``transverse`` and ``deflection``
         say of the reference (their Hessian is in ``hessian_t_per_m2``).
+    energy_j : (n, LOCAL_NODES) or None: energy added to U(θ) at the potential's nodes.
+    magnet_offset_m : (n, 3) or None: the magnet's position from (l, 0, 0) in the lever's frame
+        (along, across, normal), turning with the lever (:func:`mows.physics.potential.arc_displacement_m`).
+    pivot_offset_m : (n, 3) or None: the pivot's position from where the reference puts it,
+        global frame. The reference is given at the nominal magnet position (:meth:`probe_frame`).
     """
 
     theta0_rad: np.ndarray
@@ -86,6 +97,8 @@ class Configuration:
     neighbour_field_t: np.ndarray | None = None
     neighbour_gradient_t_per_m: np.ndarray | None = None
     energy_j: np.ndarray | None = None
+    magnet_offset_m: np.ndarray | None = None
+    pivot_offset_m: np.ndarray | None = None
 
     @classmethod
     def base(cls, table: MeasurementTable, probe: Probe) -> Configuration:
@@ -128,7 +141,10 @@ class Configuration:
         return np.where(np.isfinite(self.start_evidence_rad), self.start_evidence_rad, from_stop)
 
     def probe_frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
-        """(axes, field', gradient', Hessian') with axes (n, 3, 3) holding rows x', y', z'."""
+        """(axes, field', gradient', Hessian') at the magnet's rest position, with axes (n, 3, 3)
+        holding rows x', y', z'. Where the magnet or the pivot is moved (by d from where the
+        reference is given), the reference's quadratic expansion in full gives the field there,
+        B + G·d + ½·H:d d, and the gradient G + H·d, whatever the model keeps of them."""
         axes = probe_axes(self.theta0_rad)
         field, gradient = in_probe_frame(axes, self.field_t, self.gradient_t_per_m)
         hessian = (
@@ -136,7 +152,21 @@ class Configuration:
             if self.hessian_t_per_m2 is None
             else np.einsum("nai,nbj,nck,nijk->nabc", axes, axes, axes, self.hessian_t_per_m2, optimize=True)
         )
+        moved = self.rest_offset_m(axes)
+        if moved is not None:
+            field = field + np.einsum("nij,nj->ni", gradient, moved)
+            if hessian is not None:
+                field = field + 0.5 * np.einsum("nijk,nj,nk->ni", hessian, moved, moved)
+                gradient = gradient + np.einsum("nijk,nk->nij", hessian, moved)
         return axes, field, gradient, hessian
+
+    def rest_offset_m(self, axes: np.ndarray) -> np.ndarray | None:
+        """d (n, 3), probe frame: the magnet's rest position from the nominal one, the pivot's
+        offset plus the magnet's on the lever; None where neither is moved."""
+        if self.magnet_offset_m is None and self.pivot_offset_m is None:
+            return None
+        pivot = 0.0 if self.pivot_offset_m is None else np.einsum("nij,nj->ni", axes, self.pivot_offset_m)
+        return np.asarray(pivot + (0.0 if self.magnet_offset_m is None else self.magnet_offset_m), float)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -146,9 +176,11 @@ class LeverArc:
     Per row and deflection θ at the potential's nodes (m = LOCAL_NODES), all in the probe frame
     (x' along the undeflected lever): ``theta_rad`` (m,), ``direction`` (m, 3) the moment's
     unit vector u(θ) = (cos θ, sin θ, 0), ``displacement_m`` (n, m, 3) the magnet's
-    δr = l·(cos θ − 1, sin θ, 0) from its rest position, ``field_t`` (n, m, 3) the field there
+    δr = l·(cos θ − 1, sin θ, 0) from its rest position (on a moved magnet:
+    :func:`mows.physics.potential.arc_displacement_m`), ``field_t`` (n, m, 3) the field there
     (B + G·δr + ½·H:δr δr of the configuration, the reference with the effects applied before
-    the plugin), ``gradient_t_per_m`` (n, 3, 3) at the rest position, ``moment_am2`` (n, 1) with
+    the plugin, at the magnet's rest position: :meth:`Configuration.probe_frame`),
+    ``gradient_t_per_m`` (n, 3, 3) at the rest position, ``moment_am2`` (n, 1) with
     the moment's scale, and ``theta0_rad`` (n, 1). Per-row arrays have a trailing axis of 1 (or
     the nodes'), so that ``-0.5 * alpha * (arc.field_t @ ...)`` broadcasts to (n, m)."""
 
@@ -165,11 +197,11 @@ class LeverArc:
         _, field, gradient, hessian = config.probe_frame()
         theta = chebyshev_nodes_rad(DEFAULT_HALF_WIDTH_RAD, LOCAL_NODES)
         direction = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], -1)
-        offset = probe.lever_m * (direction - np.array([1.0, 0.0, 0.0]))
-        displacement = np.broadcast_to(offset, (len(field),) + offset.shape)
-        along = field[:, None, :] + np.einsum("nij,mj->nmi", gradient, offset)
+        offset = arc_displacement_m(theta, probe.lever_m, config.magnet_offset_m)
+        displacement = np.broadcast_to(offset, (len(field), len(theta), 3))
+        along = field[:, None, :] + np.einsum("nij,nmj->nmi", gradient, displacement)
         if hessian is not None:
-            along = along + 0.5 * np.einsum("nijk,mj,mk->nmi", hessian, offset, offset)
+            along = along + 0.5 * np.einsum("nijk,nmj,nmk->nmi", hessian, displacement, displacement)
         moment = probe.moment_am2 * np.broadcast_to(np.asarray(config.moment_factor, float), (len(field),))
         return cls(theta, direction, displacement, along, gradient, moment[:, None], config.theta0_rad[:, None])
 

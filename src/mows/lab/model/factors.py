@@ -179,6 +179,9 @@ def _frequency_factor(config: Configuration, probe: Probe, amplitude_nodes: Ampl
         neighbour, neighbour_gradient = in_probe_frame(
             axes, config.neighbour_field_t, config.neighbour_gradient_t_per_m
         )
+        moved = config.rest_offset_m(axes)  # their Hessian's share is in probe_frame's
+        if moved is not None:
+            neighbour = neighbour + np.einsum("nij,nj->ni", neighbour_gradient, moved)
         along, field = along + neighbour, field + neighbour
         active_gradient = active_gradient + neighbour_gradient
     variants = [along] + ([field] if config.deflection else [])
@@ -189,6 +192,7 @@ def _frequency_factor(config: Configuration, probe: Probe, amplitude_nodes: Ampl
         gravity_m_per_s2=gravity,
         spring_nm_per_rad=config.spring_nm_per_rad,
         energy_j=config.energy_j,
+        magnet_offset_m=config.magnet_offset_m,
     )
     stiffness = [_rest_stiffness(probe, factor * b, **local) for b in variants]
     h = _readout(config, probe, _blend(stiffness, config.deflection))
@@ -241,6 +245,7 @@ def _potential(
     spring_nm_per_rad: np.ndarray,
     energy_j: np.ndarray | None = None,
     repeat: int | None = None,
+    magnet_offset_m: np.ndarray | None = None,
 ) -> ArcPotential:
     """ArcPotential.from_local_field for the rows, optionally each repeated ``repeat`` times."""
 
@@ -255,6 +260,7 @@ def _potential(
         expand(gravity_m_per_s2),
         spring_nm_per_rad=expand(spring_nm_per_rad),
         energy_j=expand(energy_j),
+        magnet_offset_m=expand(magnet_offset_m),
     )
 
 

@@ -212,9 +212,7 @@ def analyse(
     base = fit
     history = [history_step(fit, cross_validate)]
     for effect in resolve(list(effects or ()), available):
-        fit = (fit.model + effect).fit(
-            table, start=np.concatenate([fit.effect_values, np.zeros(len(effect.parameters))])
-        )
+        fit = (fit.model + effect).fit(table, start=np.concatenate([fit.effect_values, effect.off_values]))
         history.append(history_step(fit, cross_validate, f"add {effect.label}"))
     pool = list(available.values()) if rank else []
     steps = MAX_AUTO_STEPS if auto else 0

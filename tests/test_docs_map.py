@@ -18,7 +18,6 @@ module or to a name its module does not define, or a slash path ``….py`` is no
 """
 
 import ast
-import functools
 import pathlib
 import re
 import subprocess
@@ -141,7 +140,7 @@ def test_the_rule_sees_a_module_missing():
 @pytest.mark.parametrize(
     "text, stale",
     [
-        # a module named in its package's row that the package does not have (now simulated_cycle.py)
+        # a module or sub-package named in its package's row that the package does not have
         ("| `mows.sim` | x | `simulator.py`, `cycle.py` (one simulated cycle) | physics |", "mows.sim: cycle.py"),
         ("| `mows.device` | x | `stream/` (`session.py`), `loops/` | sim |", "mows.device: loops/"),
         ("| `mows_driver/` | the node: `node.py`, `gone.py` |", "mows_driver: gone.py"),
@@ -163,11 +162,11 @@ def test_the_rule_sees_a_stale_name(text, stale):
 
 def test_the_rule_passes_names_that_exist():
     text = (
-        "| `mows.sim` | x | `simulator.py`, `simulated_cycle.py` | physics |\n"
+        "| `mows.sim` | x | `scenario.py`, `kernel.py` | physics |\n"
         "| `mows.device` | x | `stream/` (`session.py`), `instruments/` (`hardware/`) | sim |\n"
-        "`mows.device.cycle.sequencer.CycleSequencer.start`, `mows.sweep.runner`, `mows_bringup.lifecycle`, "
+        "`mows.physics.potential.ArcPotential.rest_angle_rad`, `mows.sweep.decompose`, `mows_bringup.lifecycle`, "
         "`mows.estimate.ringdown.fit_ringdowns` (re-exported), `config/mows.foxglove.json`, "
-        "`mows/device/__init__.py`, `src/mows/sim/simulator.py`, `estimate/ringdown/fit.py`, "
+        "`mows/device/__init__.py`, `src/mows/sim/scenario.py`, `physics/probe.py`, "
         "`mows_driver/node.py`, `tests/test_docs_map.py`"
     )
     assert stale_names(text) == []

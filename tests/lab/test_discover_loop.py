@@ -10,7 +10,7 @@ import re
 
 import numpy as np
 
-from lab.test_discovery import MOMENT_PER_K, moment_temperature_hz, rows, table
+from lab.test_discovery import FIELD, MOMENT_PER_K, moment_temperature_hz, rows, table
 from mows.cli.main import main
 from mows.lab import load_plugins
 from mows.lab.data import synthetic
@@ -21,18 +21,12 @@ FIELD_CASE_SEED = 1
 
 def _table_csv(directory):
     theta0, columns = rows()
-    truth = synthetic.true_frequency_hz(PAPER_PROBE, synthetic_field(), np.radians(theta0), np.radians(2.0))
+    truth = synthetic.true_frequency_hz(PAPER_PROBE, FIELD, np.radians(theta0), np.radians(2.0))
     base = table((theta0, columns, truth), FIELD_CASE_SEED)
     measured = base.with_columns(f_hz=base.f_hz + moment_temperature_hz(base))
     path = directory / "table.csv"
     measured.to_csv(path)
     return path
-
-
-def synthetic_field():
-    from lab.test_discovery import FIELD
-
-    return FIELD
 
 
 def test_add_discover_saves_the_plugin_beside_the_table_and_the_error_falls(tmp_path, capsys):

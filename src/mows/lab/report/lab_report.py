@@ -326,7 +326,7 @@ def analyse_discovering(
     error falling through it. Stops after ``rounds`` terms, at a term already added, or when a
     term added does not lower χ²/dof (its report is then not kept). Returns the last report and
     the terms added, in order."""
-    plugins, added = list(plugins), []
+    plugins, added = list(plugins), list[DiscoveredTerm]()
     report = analyse(table, probe, effects, auto=True, plugins=plugins, cross_validate=cross_validate)
     for _ in range(rounds):
         found = report.discovery

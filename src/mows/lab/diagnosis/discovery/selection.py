@@ -88,7 +88,7 @@ def searchable(terms: list[Term], model_basis: np.ndarray) -> Searched:
     kept: list[int] = []
     aliases: dict[int, list[str]] = {}
     for j in range(len(free)):
-        twins = np.flatnonzero(np.abs(unit[:, kept].T @ unit[:, j]) >= SPAN_COSINE) if kept else []
+        twins = np.flatnonzero(np.abs(unit[:, kept].T @ unit[:, j]) >= SPAN_COSINE) if kept else np.zeros(0, int)
         if len(twins):
             aliases[kept[int(twins[0])]].append(terms[free[j]].name)
         else:

@@ -34,20 +34,18 @@ DEFAULT_FOLDS = 5
 def readout_design(basis: SolidHarmonics, position_m: ArrayLike, readout: Readout) -> np.ndarray:
     """(k, K): the readout's values (less the offset) per unit coefficient at ``position_m``."""
     rows = np.einsum("pi,ik->pk", readout.field, basis.design(position_m, 0)[0])
-    rows = rows + np.einsum("pij,ijk->pk", readout.gradient, basis.design(position_m, 1)[0])
+    if np.any(readout.gradient):
+        rows = rows + np.einsum("pij,ijk->pk", readout.gradient, basis.design(position_m, 1)[0])
     if np.any(readout.hessian):
         rows = rows + np.einsum("pijl,ijlk->pk", readout.hessian, basis.design(position_m, 2)[0])
     return rows
 
 
-def whitened(basis: SolidHarmonics, observations: Sequence[Observation]) -> tuple[np.ndarray, np.ndarray]:
-    """The stacked design and data, each observation multiplied by L⁻¹ (C = L·Lᵀ)."""
-    designs, data = [], []
-    for obs in observations:
-        factor = np.linalg.cholesky(obs.covariance)
-        designs.append(np.linalg.solve(factor, readout_design(basis, obs.position_m, obs.readout)))
-        data.append(np.linalg.solve(factor, obs.values - obs.readout.offset))
-    return np.concatenate(designs), np.concatenate(data)
+def whitened_rows(basis: SolidHarmonics, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
+    """One observation's design and data, multiplied by L⁻¹ (C = L·Lᵀ)."""
+    factor = np.linalg.cholesky(obs.covariance)
+    design = np.linalg.solve(factor, readout_design(basis, obs.position_m, obs.readout))
+    return design, np.linalg.solve(factor, obs.values - obs.readout.offset)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,7 +87,12 @@ def fit(observations: Sequence[Observation], basis: SolidHarmonics) -> Workspace
     """Weighted least squares of ``basis``'s coefficients to ``observations``. ValueError when
     they cannot determine every coefficient (too few, or all in a plane the basis cannot see
     out of)."""
-    design, data = whitened(basis, observations)
+    return _solve(basis, [whitened_rows(basis, obs) for obs in observations])
+
+
+def _solve(basis: SolidHarmonics, rows: Sequence[tuple[np.ndarray, np.ndarray]]) -> WorkspaceModel:
+    design = np.concatenate([r[0] for r in rows])
+    data = np.concatenate([r[1] for r in rows])
     if design.shape[0] < basis.size:
         raise ValueError(f"{design.shape[0]} measured values cannot determine {basis.size} coefficients")
     u, singular, vt = np.linalg.svd(design, full_matrices=False)
@@ -126,13 +129,15 @@ def _folds(groups: np.ndarray, n_folds: int) -> list[np.ndarray]:
 def held_out_score(observations: Sequence[Observation], basis: SolidHarmonics, n_folds: int = DEFAULT_FOLDS) -> float:
     """Held-out χ² per value over ``n_folds`` folds of whole groups (module docstring)."""
     groups = np.array([obs.group for obs in observations])
+    rows = [whitened_rows(basis, obs) for obs in observations]
     chi2, count = 0.0, 0
     for held in _folds(groups, n_folds):
-        model = fit([o for o, h in zip(observations, held) if not h], basis)
-        for obs in (o for o, h in zip(observations, held) if h):
-            predicted, covariance = model.observation(obs)
-            difference = obs.values - predicted
-            chi2 += float(difference @ np.linalg.solve(obs.covariance + covariance, difference))
+        model = _solve(basis, [r for r, h in zip(rows, held) if not h])
+        for (design, data), _ in filter(lambda pair: pair[1], zip(rows, held)):
+            # in whitened units the measurement's covariance is the identity
+            difference = data - design @ model.coefficients
+            covariance = np.eye(data.size) + design @ model.covariance @ design.T
+            chi2 += float(difference @ np.linalg.solve(covariance, difference))
             count += difference.size
     return chi2 / count
 

@@ -14,7 +14,7 @@ import functools
 import importlib
 import sys
 
-from mows.cli.status import caused_by_interrupt, interrupted, stop_on_sigterm
+from mows.cli.status import caused_by_interrupt, interrupted, settle, stop_on_signals
 
 SUBCOMMANDS = {
     "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
@@ -38,16 +38,27 @@ or not at all, never over an input, over an existing file only with --force (doc
 def main(argv=None) -> int:
     words = sys.argv[1:] if argv is None else list(argv)
     if argv is None:  # the command itself, not a caller's test
-        stop_on_sigterm()
+        stop_on_signals()
+    prog = _prog(words)
     try:
-        return _main(words)
+        status = _main(words)
     # Ctrl-C while the subcommand's modules load (within it, report_errors says it)
     except (KeyboardInterrupt, ImportError) as error:
         if "--debug" in words or not caused_by_interrupt(error):
             raise
         line, status = interrupted("mows", error)
         print(line, file=sys.stderr)
-        return status
+    return settle(prog, status) if argv is None else status
+
+
+def _prog(words: list) -> str:
+    """``mows`` and its subcommand as its errors name it (``mows lab report``)."""
+    named = [word for word in words if not word.startswith("-")]
+    return (
+        " ".join(["mows", *named[: 2 if named[:1] == ["lab"] else 1]])
+        if named[:1] and named[0] in SUBCOMMANDS
+        else "mows"
+    )
 
 
 def _main(argv: list) -> int:

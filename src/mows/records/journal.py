@@ -136,8 +136,8 @@ def recover(directory, inputs: Iterable = ()) -> list[pathlib.Path]:
             continue
         journal = directory / name
         entries, problem = _trusted_entries(journal, int(match["pid"]), protected)
-        listed.update(_names_in(journal))
         if problem:
+            listed.update(_names_in(journal))
             warnings.warn(f"left {journal} as it is: {problem}", JournalLeft, stacklevel=2)
             continue
         restored += _roll_back(directory, entries)
@@ -175,10 +175,12 @@ def _remove_temporary(intent: pathlib.Path, prefix: str, listed: set[str]) -> No
     if not valid or not name.startswith(prefix):
         warnings.warn(f"left {intent} as it is: it is not a note this version wrote", JournalLeft, stacklevel=3)
         return
+    if name in listed:  # a journal left in place lists it: all of that writer's files stay
+        return
     temporary = intent.parent / name
     with contextlib.suppress(OSError):
         info = temporary.lstat()
-        if name not in listed and (info.st_ino, info.st_dev) == (inode, device):
+        if (info.st_ino, info.st_dev) == (inode, device):
             temporary.unlink()
     discard(intent)
 

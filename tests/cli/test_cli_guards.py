@@ -87,6 +87,8 @@ def work(tmp_path_factory):
     record_cycles(d / "bag", load_scenario(), (0.0,), 3)
     record_cycles(d / "empty_bag", load_scenario(), (), 3)
     (d / "existing.yaml").write_text("kept\n")
+    (d / "mount.urdf").write_text('<robot name="m"><link name="a"/></robot>\n')
+    (d / "mount_not_xml.urdf").write_text("robot: {}\n")
     # Files a command reads without naming them: a scenario's probe file and its extends: base.
     PAPER_PROBE.to_yaml(d / "scene_probe.yaml")
     (d / "scene.yaml").write_text("extends: paper_largest_spacing\nprobe: scene_probe.yaml\n")
@@ -140,6 +142,46 @@ CASES = [
     ("fit-force-fifo", ["fit", "{d}/bag", "--csv", "{d}/fifo", "--force"], 2, ["FIFO"]),
     ("sim-force-fifo", ["sim", "--out", "{d}/fifo", "--force"], 2, ["FIFO"]),
     ("lab-report-force-fifo", ["lab", "report", "{d}/sweep.csv", "-o", "{d}/fifo", "--force"], 2, ["FIFO"]),
+    # ... nor inside a bag folder, the bag named by its folder or its .mcap file, nor over --mount
+    (
+        "fit-csv-over-the-bag-s-metadata",
+        ["fit", "{d}/bag/bag.mcap", "--csv", "{d}/bag/metadata.yaml", "--force"],
+        2,
+        ["inside the bag {d}/bag"],
+    ),
+    (
+        "viz-over-the-bag-s-metadata",
+        ["viz", "{d}/bag/bag.mcap", "-o", "{d}/bag/metadata.yaml", "--force"],
+        2,
+        ["inside the bag {d}/bag"],
+    ),
+    (
+        "viz-over-its-mount",
+        ["viz", "{d}/bag", "--mount", "{d}/mount.urdf", "-o", "{d}/mount.urdf", "--force"],
+        2,
+        ["input", "mount.urdf"],
+    ),
+    ("fit-csv-inside-the-bag", ["fit", "{d}/bag/bag.mcap", "--csv", "{d}/bag/fits.csv"], 2, ["inside the bag {d}/bag"]),
+    ("viz-inside-the-bag", ["viz", "{d}/bag/bag.mcap", "-o", "{d}/bag/new.mcap"], 2, ["inside the bag {d}/bag"]),
+    ("viz-figures-in-the-bag", ["viz", "{d}/bag/bag.mcap", "--figures", "{d}/bag"], 2, ["inside the bag {d}/bag"]),
+    (
+        "viz-figures-under-the-bag",
+        ["viz", "{d}/bag", "--figures", "{d}/bag/figures"],
+        2,
+        ["input of this command ({d}/bag)"],
+    ),
+    (
+        "lab-report-inside-a-bag",
+        ["lab", "report", "{d}/sweep.csv", "-o", "{d}/bag/r.html"],
+        2,
+        ["inside the bag {d}/bag"],
+    ),
+    (
+        "viz-mount-not-xml",
+        ["viz", "{d}/bag", "--mount", "{d}/mount_not_xml.urdf", "-o", "{d}/v.mcap"],
+        2,
+        ["mount {d}/mount_not_xml.urdf", "not a URDF"],
+    ),
     # ... nor over a file the command read without naming it (a scenario's probe: or extends:)
     (
         "sim-over-its-scenario-s-probe",
@@ -535,10 +577,9 @@ def interrupted_import(*_args, **_kwargs):
 def test_ctrl_c_while_a_module_loads_is_one_line_and_130(tmp_path, capsys, monkeypatch, where):
     if where == "loading the subcommand":
         monkeypatch.setattr("mows.cli.main.importlib.import_module", interrupted_import)
-        prog = "mows"
     else:
         monkeypatch.setattr(sim_cli, "simulate_cycle", interrupted_import)
-        prog = "mows sim"
+    prog = "mows sim"
     assert main(["sim", "--out", str(tmp_path / "x.npz")]) == 130
     assert capsys.readouterr().err == f"{prog}: interrupted\n"
     assert list(tmp_path.iterdir()) == []
@@ -685,7 +726,7 @@ def test_a_killed_writer_s_temporary_is_removed_by_the_next_write_and_nothing_el
     left = sorted(p.name for p in tmp_path.iterdir())
     assert len(left) == 2 and left[0].endswith(".partial.csv") and left[1].endswith(".writing"), left
     # names of the same form that no writer's note vouches for: a user's files, never removed
-    lookalikes = [f".x.csv.999999.abcdefgh.partial.csv", ".x.csv.999999.abcdefgh.replaced"]
+    lookalikes = [".x.csv.999999.abcdefgh.partial.csv", ".x.csv.999999.abcdefgh.replaced"]
     running = f".x.csv.{os.getpid()}.def456gh.partial.csv"  # a writer still at work: left alone
     for name in [*lookalikes, running]:
         (tmp_path / name).write_text("the user's")

@@ -10,8 +10,11 @@ alone (and :mod:`mows.cli.status`): Ctrl-C while numpy or scipy load is then ins
 """
 
 import argparse
+import atexit
+import contextlib
 import functools
 import importlib
+import os
 import sys
 
 from mows.cli.status import caused_by_interrupt, interrupted, settle, stop_on_signals
@@ -46,9 +49,18 @@ def main(argv=None) -> int:
     except (KeyboardInterrupt, ImportError) as error:
         if "--debug" in words or not caused_by_interrupt(error):
             raise
-        line, status = interrupted("mows", error)
+        line, status = interrupted(prog, error)
         print(line, file=sys.stderr)
-    return settle(prog, status) if argv is None else status
+    if argv is not None:
+        return status
+    status = settle(prog, status)
+    # Out now: a signal during the interpreter's own shutdown (its handlers restored to the
+    # default) would end the process without a word, after the status was decided.
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError):  # a reader that left has been told nothing more
+            stream.flush()
+    os._exit(status)
 
 
 def _prog(words: list) -> str:
@@ -88,7 +100,7 @@ def _main(argv: list) -> int:
     except UsageError as error:  # the one line and the status of every bad input
         return report_errors(error.prog, functools.partial(_refuse, error), "--debug" in argv)
     with command_inputs():  # every file the command reads is an input, not only its arguments
-        return report_errors(f"mows {args.command}", lambda: args._run(args), args.debug)
+        return report_errors(_chosen(parser, args).prog, lambda: args._run(args), args.debug)
 
 
 def _chosen(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:

@@ -8,6 +8,7 @@ import contextlib
 import os
 import signal
 import sys
+import threading
 
 EXIT_OK = 0
 EXIT_BUG = 1
@@ -24,16 +25,16 @@ class Terminated(KeyboardInterrupt):
 
 # Signals always win. The handler raises the interrupt where the command is (so that it unwinds
 # through every clean-up); but Python discards an exception raised inside a weakref callback or
-# a __del__ (it reaches sys.unraisablehook instead), so the hook sends the signal again and the
-# next bytecode of the command gets it. Each signal is also written by the C-level handler to a
+# a __del__ (it reaches sys.unraisablehook instead), so the hook has the signal sent again and
+# the command's next bytecode gets it. Each signal is also written by the C-level handler to a
 # pipe (signal.set_wakeup_fd), which the command's last step reads: a signal whose exception was
 # swallowed anyway, or that came while the interpreter was about to exit, still decides the
 # status and the line.
 _received: list[int] = []  # the signals the handler has seen, in order
 _raised = False  # an interrupt is on its way up the stack: a second signal does not cut its clean-up
 _wakeup: int | None = None  # the read end of the pipe the C handler writes signal numbers to
-_EXCEPTIONS = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: Terminated}
-EXIT_OF = {signal.SIGINT: EXIT_INTERRUPTED, signal.SIGTERM: EXIT_TERMINATED}
+_EXCEPTIONS: dict[int, type[KeyboardInterrupt]] = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: Terminated}
+EXIT_OF: dict[int, int] = {signal.SIGINT: EXIT_INTERRUPTED, signal.SIGTERM: EXIT_TERMINATED}
 
 
 def _on_signal(signum, _frame) -> None:
@@ -49,7 +50,9 @@ def _unraisable(unraisable, default=sys.unraisablehook) -> None:
     global _raised
     if isinstance(unraisable.exc_value, KeyboardInterrupt) and _received:
         _raised = False
-        signal.raise_signal(_received[0])
+        # from another thread, once this hook has returned: a signal raised here would be
+        # handled here, inside the hook, and discarded again
+        threading.Timer(0.0, os.kill, (os.getpid(), _received[0])).start()
         return
     default(unraisable)
 

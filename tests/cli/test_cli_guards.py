@@ -89,6 +89,7 @@ def work(tmp_path_factory):
     (d / "existing.yaml").write_text("kept\n")
     (d / "mount.urdf").write_text('<robot name="m"><link name="a"/></robot>\n')
     (d / "mount_not_xml.urdf").write_text("robot: {}\n")
+    (d / "exits.py").write_text("import sys\n\nsys.exit(0)\n")
     # Files a command reads without naming them: a scenario's probe file and its extends: base.
     PAPER_PROBE.to_yaml(d / "scene_probe.yaml")
     (d / "scene.yaml").write_text("extends: paper_largest_spacing\nprobe: scene_probe.yaml\n")
@@ -181,6 +182,12 @@ CASES = [
         ["viz", "{d}/bag", "--mount", "{d}/mount_not_xml.urdf", "-o", "{d}/v.mcap"],
         2,
         ["mount {d}/mount_not_xml.urdf", "not a URDF"],
+    ),
+    (
+        "lab-plugin-that-exits",
+        ["lab", "compare", "{d}/sweep.csv", "--plugin", "{d}/exits.py"],
+        2,
+        ["{d}/exits.py:3 tried to end the command (sys.exit(0))"],
     ),
     # ... nor over a file the command read without naming it (a scenario's probe: or extends:)
     (

@@ -90,6 +90,12 @@ def work(tmp_path_factory):
     (d / "mount.urdf").write_text('<robot name="m"><link name="a"/></robot>\n')
     (d / "mount_not_xml.urdf").write_text("robot: {}\n")
     (d / "exits.py").write_text("import sys\n\nsys.exit(0)\n")
+    (d / "magic.mcap").write_bytes(b"\x89MCAP0\r\n")  # MCAP's magic and nothing else
+    shutil.copytree(d / "bag", d / "latin_bag")
+    metadata = d / "latin_bag" / "metadata.yaml"
+    metadata.write_bytes(b"# caf\xe9\n" + metadata.read_bytes())  # Latin-1, not UTF-8
+    (d / "deep.yaml").write_text("a: " + "[" * 5000 + "]" * 5000 + "\n")
+    (d / "huge_cell.csv").write_text(SWEEP_TABLE.read_text() + '"' + "1" * 200_000 + '"\n')
     # Files a command reads without naming them: a scenario's probe file and its extends: base.
     PAPER_PROBE.to_yaml(d / "scene_probe.yaml")
     (d / "scene.yaml").write_text("extends: paper_largest_spacing\nprobe: scene_probe.yaml\n")
@@ -189,6 +195,30 @@ CASES = [
         2,
         ["{d}/exits.py:3 tried to end the command (sys.exit(0))"],
     ),
+    # malformed files: one line naming the file and the problem
+    *[
+        (f"{argv[0]}-{argv[1] if argv[0] == 'lab' else ''}-magic-only", argv, 2, ["magic.mcap cannot be read as a bag"])
+        for argv in (
+            ["fit", "{d}/magic.mcap"],
+            ["map", "{d}/magic.mcap"],
+            ["viz", "{d}/magic.mcap", "-o", "{d}/v.mcap"],
+            ["lab", "compare", "{d}/magic.mcap"],
+            ["lab", "report", "{d}/magic.mcap", "-o", "{d}/r.html"],
+            ["lab", "ringdown", "{d}/magic.mcap"],
+            ["calibrate", "{d}/magic.mcap", "-o", "{d}/p.yaml"],
+        )
+    ],
+    ("fit-metadata-not-utf8", ["fit", "{d}/latin_bag"], 2, ["{d}/latin_bag/metadata.yaml is not UTF-8"]),
+    ("sim-yaml-5000-deep", ["sim", "{d}/deep.yaml"], 2, ["scenario {d}/deep.yaml", "nested deeper"]),
+    (
+        "lab-probe-yaml-5000-deep",
+        ["lab", "compare", "{d}/sweep.csv", "--probe", "{d}/deep.yaml"],
+        2,
+        ["probe file {d}/deep.yaml", "nested deeper"],
+    ),
+    ("lab-csv-cell-over-128-kib", ["lab", "compare", "{d}/huge_cell.csv"], 2, ["{d}/huge_cell.csv: line", "field"]),
+    ("lab-compare-a-fifo", ["lab", "compare", "{d}/fifo"], 2, ["{d}/fifo is a FIFO, not a file"]),
+    ("calibrate-a-fifo", ["calibrate", "{d}/fifo", "-o", "{d}/p.yaml"], 2, ["{d}/fifo is a FIFO, not a file"]),
     # ... nor over a file the command read without naming it (a scenario's probe: or extends:)
     (
         "sim-over-its-scenario-s-probe",

@@ -56,9 +56,18 @@ def command_inputs() -> Iterator[None]:
         _read_by_command.reset(token)
 
 
+class InputRefused(ValueError):
+    """An input that is no file to read: a FIFO, a device, a socket (reading would block or never end)."""
+
+
 def read_input(path: str | os.PathLike[str]) -> pathlib.Path:
-    """``path``, kept (within :func:`command_inputs`) as a file the command read."""
+    """``path``, kept (within :func:`command_inputs`) as a file the command read; a FIFO, a
+    device or a socket is refused (:class:`InputRefused`): a command reads files and folders."""
     path = pathlib.Path(path)
+    with contextlib.suppress(OSError):
+        mode = path.stat().st_mode
+        if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+            raise InputRefused(f"{path} is {_kind(mode)}, not a file: give a file to read")
     read = _read_by_command.get()
     if read is not None:
         read.add(path.resolve())

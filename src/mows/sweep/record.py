@@ -95,6 +95,20 @@ class SweepPoint:
         )
 
 
+def sweep_numbers(theta0_rad: np.ndarray) -> np.ndarray:
+    """The sweep (0, 1, …) of each ring-down of a recording, in order: a sweep measures each
+    orientation once, so a ring-down at an orientation the current sweep has already measured
+    (to 1e-6 rad) starts the next."""
+    numbers = np.zeros(len(theta0_rad), int)
+    seen: list[float] = []
+    for i, angle in enumerate(np.asarray(theta0_rad, float)):
+        if any(abs(math.remainder(angle - other, math.tau)) < 1e-6 for other in seen):
+            numbers[i:] += 1
+            seen = []
+        seen.append(angle)
+    return numbers
+
+
 @dataclasses.dataclass
 class SweepRecord:
     """The ring-downs of one rotation sweep, collected as they arrive."""

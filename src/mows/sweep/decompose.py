@@ -184,7 +184,8 @@ class Ringdowns:
         """(n, REST_NODES_RAD.size): each measured swing about each rest angle of the table, NaN
         until first asked for (:meth:`_swing_cells`). A fit moves each point's rest angle by
         a few mrad, so it asks for two or three nodes of each row, not all 41."""
-        return np.full((len(np.atleast_1d(self.start_swing_rad)), REST_NODES_RAD.size), np.nan)
+        rows = np.shape(np.asarray(self.pickup))[0]
+        return np.nan * np.ones((rows, REST_NODES_RAD.size))
 
     @functools.cached_property
     def _swing_tabulated(self) -> np.ndarray:

@@ -228,7 +228,8 @@ class SweepRunner:
         self.last = "no sweep yet"  # the last decomposition's report
         self.last_failure = ""  # why the last sweep failed ('' once one succeeds; a cancel leaves it)
         self.cancels = 0  # sweeps cancelled (by their client, or because it left)
-        self.last_cancel = ""  # how the last cancelled sweep ended
+        self.last_cancel = ""  # how the last sweep ended when it was cancelled, and why ('' once one ends otherwise)
+        self._cancel_reason = ""
         self._angles: list[float] = []
         self._repeats = 0
         self._index = 0
@@ -302,11 +303,11 @@ class SweepRunner:
         """The accepted sweep's first step."""
         return self._next_orientation(SweepStep())
 
-    def cancel(self) -> None:
+    def cancel(self, reason: str = "") -> None:
         """End the sweep before its next orientation, or with no map once a decomposition
-        under way returns."""
-        if self.state != SweepState.IDLE:
-            self._cancelled = True
+        under way returns; ``reason`` ('' for its client's own cancel) goes into ``last_cancel``."""
+        if self.state != SweepState.IDLE and not self._cancelled:
+            self._cancelled, self._cancel_reason = True, reason
 
     def cancelled(self) -> bool:
         """Whether a cancel came for the running sweep."""
@@ -515,9 +516,10 @@ class SweepRunner:
     def _end(self, step: SweepStep, outcome: SweepOutcome) -> SweepStep:
         self.state, self._awaited, self._turning = SweepState.IDLE, None, None
         if outcome.cancelled:
-            self.cancels, self.last_cancel = self.cancels + 1, outcome.message
+            reason = f" ({self._cancel_reason})" if self._cancel_reason else ""
+            self.cancels, self.last_cancel = self.cancels + 1, outcome.message + reason
         else:
-            self.last_failure = "" if outcome.ok else outcome.message
+            self.last_failure, self.last_cancel = ("" if outcome.ok else outcome.message), ""
         self._fits.clear()
         step.finished = outcome
         return step

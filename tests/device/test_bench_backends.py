@@ -308,13 +308,15 @@ def test_the_simulated_card_refuses_what_the_real_one_refuses(installed):
         assert duplicate.value.error_type == nidaqmx.error_codes.DAQmxErrors.DUPLICATE_TASK
 
 
+def armed_session(card, backend, frequency_hz=112.0) -> DeviceSession:
+    """The driver's session on the bench, armed, its cycles ``FAST``."""
+    config = SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), frequency_hz, fit_ringdown)
+    return DeviceSession(backend, config, armed=True)
+
+
 def test_a_cycle_switches_the_coils_at_the_commanded_samples(on_bench):
     card, backend = on_bench()
-    session = DeviceSession(
-        backend,
-        SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), 112.0, fit_ringdown),
-        armed=True,
-    )
+    session = armed_session(card, backend)
     theta0 = 2.2
     card.turn_probe(theta0)
     outcome, events = run_cycle(session, theta0)
@@ -378,6 +380,7 @@ def test_a_host_late_beyond_the_lead_has_the_coils_off_a_fault_told_and_the_card
     time.sleep(1.2)  # beyond the lead (0.75 s): the card generates all it has, then underflows
     before = len(items)
     items += backend.poll(0.05)
+    assert len(items[before:]) == 3, (items[before:], backend.stats())
     down, up, fault = items[before:]
     assert not down.up and "(-200290)" in down.reason and down.reason.startswith("the card stopped: outputs:")
     assert up.up and up.reason == f"the card re-armed after: {down.reason}" and fault.reason == down.reason

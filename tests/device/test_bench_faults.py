@@ -15,8 +15,8 @@ import time
 import pytest
 
 from device.test_bench_backends import (
-    FAST,
     MAX_POLLS,
+    armed_session,
     blocks,
     run_cycle,
     simulated_supply,
@@ -37,8 +37,6 @@ from mows.device.instruments.scpi import (
 )
 from mows.device.interface import FieldCurrentCommand, LinkEvent
 from mows.device.simulated.daqmx_card import SimulatedCard
-from mows.device.stream.session import DeviceSession, SessionConfig
-from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -132,11 +130,7 @@ def test_check_hardware_judges_the_read_back_of_the_step_it_checks(on_bench):
 
 def test_the_nidaqmx_bench_refuses_a_turn_the_operator_did_not_make(on_bench):
     card, backend = on_bench()
-    session = DeviceSession(
-        backend,
-        SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), 112.0, fit_ringdown),
-        armed=True,
-    )
+    session = armed_session(card, backend)
     done: list = []
     session.step(0.0)
     session.start_cycle(CycleRequest(1.5707963), done.append)  # a mapper that thinks a motor turns it

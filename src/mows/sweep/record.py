@@ -152,6 +152,7 @@ class SweepRecord:
         neighbours: NeighbourFields | None = None,
         curvature: bool = False,
         measured: Ringdowns | None = None,
+        start=None,
     ) -> Decomposition:
         """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
 
@@ -167,6 +168,7 @@ class SweepRecord:
         ``curvature``: fit the field's 3θ0 curvature too (:func:`decompose`). ``measured``: the
         ring-downs did not start from the stop (a multi-tone excitation's), and each starts with the
         θmax its fit measured (:meth:`measured_ringdowns`, None where a fit did not measure it).
+        ``start``: the parameters to start from (:func:`decompose`'s), e.g. an earlier pass's.
         """
         theta0 = self._column("theta0_rad")
         arrays: dict[str, Any] = dict(
@@ -178,6 +180,7 @@ class SweepRecord:
             model=model,
             f00_free=f00_free,
             f00_std_hz=self.f00_std_hz(),
+            start=start,
         )
         if model != "first_principles":
             return decompose(**arrays)
@@ -194,7 +197,7 @@ class SweepRecord:
         if not first.ok:
             return first
         stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe, neighbours), probe.theta_stop_rad)
-        return decompose(**arrays, ringdowns=ringdowns(stop), start=first.parameters)
+        return decompose(**{**arrays, "start": first.parameters}, ringdowns=ringdowns(stop))
 
     def measured_ringdowns(self) -> Ringdowns | None:
         """The ring-downs as recorded when they do not start from the stop (a multi-tone

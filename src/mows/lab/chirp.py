@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import functools
 import math
 from collections.abc import Sequence
 
@@ -172,44 +171,39 @@ def diagnose_ringdown(
 
 def diagnose_segment(
     segment: Segment, settings: FitSettings, piece_periods: float = PIECE_PERIODS
-) -> list[tuple[int | None, ChirpDiagnosis | ChirpError]]:
+) -> list[tuple[int, ChirpDiagnosis | ChirpError]]:
     """(probe id, diagnosis) of each probe in a recorded window, fitted as the estimator fits it
-    with ``settings`` (:meth:`mows.estimate.stream.RingdownEstimator.estimate_all`): one probe
-    (id None) at the window's θ0 and tone, or, with ``settings.joint``, every probe the window
-    holds, each at its own θ0 and tone (a probe the set does not list: a ChirpError naming it)."""
-    window, joint = segment.window, settings.joint
-    diagnose = functools.partial(
-        diagnose_ringdown,
-        segment.samples_t,
-        segment.sample_rate_hz,
-        saturated=segment.saturated,
-        coil_off_skip_s=settings.coil_off_skip_s,
-        piece_periods=piece_periods,
-    )
+    with ``settings`` (:meth:`mows.estimate.stream.FitSettings.window_fits`): every probe the
+    window holds, each at its own θ0 and tone (a probe the set does not list, or a window with
+    missing samples: a ChirpError saying why)."""
+    window = segment.window
+    held = window_probes(settings.probes, window)
     if segment.missing_samples:
-        return [(None, ChirpError(gap_message(segment)))]
-    if joint is None:
-        try:
-            options = settings.options(window.theta0_rad)
-        except ValueError as error:
-            return [(None, ChirpError(f"cannot build the signal model: {error}"))]
-        line = ProbeLine(0, window.theta0_rad, window.excitation_frequency_hz, None, settings.probe.damping_per_s)
-        (diagnosis,) = diagnose([line], [settings.probe], options, [settings.f00_hz])
-        return [(None, diagnosis)]
-    held = window_probes(joint.probes, window)
+        return [(p.probe_id, ChirpError(gap_message(segment))) for p in held]
     known = [p for p in held if p.entry is not None]
     found: dict[int, ChirpDiagnosis | ChirpError] = {
-        p.probe_id: ChirpError(p.unknown_message(joint.probes)) for p in held if p.entry is None
+        p.probe_id: ChirpError(p.unknown_message(settings.probes)) for p in held if p.entry is None
     }
     try:
-        lines = joint.lines(known) if known else []
+        lines = settings.lines(known) if known else []
     except ValueError as error:
         found |= {p.probe_id: ChirpError(f"cannot build the signal model: {error}") for p in known}
     else:
         entries = [p.entry for p in known if p.entry is not None]
         probes, f00s = [e.probe for e in entries], [e.f00_hz for e in entries]
         if lines:
-            found |= dict(zip((p.probe_id for p in known), diagnose(lines, probes, joint.options, f00s)))
+            diagnoses = diagnose_ringdown(
+                segment.samples_t,
+                segment.sample_rate_hz,
+                lines,
+                probes,
+                settings.options,
+                f00s,
+                saturated=segment.saturated,
+                coil_off_skip_s=settings.coil_off_skip_s,
+                piece_periods=piece_periods,
+            )
+            found |= dict(zip((p.probe_id for p in known), diagnoses))
     return [(p.probe_id, found[p.probe_id]) for p in held]
 
 

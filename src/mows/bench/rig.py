@@ -5,9 +5,9 @@ one probe or for a scene's probes on one shared stage.
 the driver's :class:`~mows.device.cycle.sequencer.CycleSequencer` with its duty-cycle limit and
 current cap, on the simulated device with commands at exact samples), cuts the announced
 ring-downs out of the stream as the estimator node does
-(:class:`mows.estimate.segments.SegmentAssembler`) and fits them: one probe's with the lever-aware
-pick-up (:func:`mows.estimate.segments.fit_segment`), a multi-tone window's probes jointly
-(:func:`mows.estimate.segments.fit_joint_segment`), each fit carrying its probe id. Tuning
+(:class:`mows.estimate.segments.SegmentAssembler`) and fits each window's probes jointly with
+their lever-aware pick-up (:func:`mows.estimate.segments.fit_segment`), each fit carrying its
+probe id. Tuning
 ring-downs retune the excitation and are not measurements.
 """
 

@@ -39,7 +39,7 @@ from mows.lab.diagnosis.discovery import Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group
 from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import catalog, resolve
-from mows.lab.model.configuration import unevaluable_rows
+from mows.lab.model.factors import unevaluable_rows
 from mows.lab.model.frequency_model import FitResult, FrequencyModel
 from mows.lab.model.least_squares import FittedParameter, parameters_dict
 from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, search
@@ -212,9 +212,7 @@ def analyse(
     base = fit
     history = [history_step(fit, cross_validate)]
     for effect in resolve(list(effects or ()), available):
-        fit = (fit.model + effect).fit(
-            table, start=np.concatenate([fit.effect_values, np.zeros(len(effect.parameters))])
-        )
+        fit = (fit.model + effect).fit(table, start=np.concatenate([fit.effect_values, effect.off_values]))
         history.append(history_step(fit, cross_validate, f"add {effect.label}"))
     pool = list(available.values()) if rank else []
     steps = MAX_AUTO_STEPS if auto else 0
@@ -233,7 +231,7 @@ def analyse(
 
 def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:
     """The table without the rows the potential cannot evaluate, each named with the reason in
-    the notes (:func:`mows.lab.model.configuration.unevaluable_rows`); TableError when no row is left."""
+    the notes (:func:`mows.lab.model.factors.unevaluable_rows`); TableError when no row is left."""
     distinct, inverse = FrequencyModel(probe).groups(table)
     found = {}  # a reason holds for every row of its configuration
     for rows, member in probe_parts(distinct, probe):

@@ -180,7 +180,7 @@ def write_table(path, fits: list[Estimated], probe: Probe, named: bool) -> list[
     """The OK fits as a model-lab table; returns notes of how the start swings were found.
 
     Every ring-down of one probe starts at the housing stop, so its swing is stop − |θs|
-    (:func:`mows.physics.ringdown_average.start_swing_rad`). θs comes from the first-principles
+    (:func:`mows.physics.ringdown_average.swing_from_stop_rad`). θs comes from the first-principles
     decomposition of all the fits as one sweep in one static field
     (:meth:`mows.sweep.record.SweepRecord.start_amplitudes_rad`) where that describes them
     (χ²/dof ≤ MAX_SWEEP_CHI2_DOF), else from each fit's own rest offset

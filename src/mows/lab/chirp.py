@@ -14,7 +14,7 @@ excitation's, docs/multi_probe.md) is fitted jointly, over the whole window and 
 ``piece_periods`` periods of the slowest probe, and each probe is diagnosed from its own fits;
 one probe is a window of one line. Piece i starts at the amplitude
 A_i = A_0·e^(−δ·t_i), A_0 the whole-window fit's θmax where it determined it, else the stop
-less its rest offset (:func:`mows.physics.ringdown_average.start_swing_rad`), and the
+less its rest offset (:func:`mows.physics.ringdown_average.swing_from_stop_rad`), and the
 potential predicts its frequency as the estimator would read it, Σ_q c_q·f(A_q) over the piece's amplitude nodes
 (:func:`mows.physics.ringdown_average.amplitude_nodes`). The potential is that of the paper's
 Eq. 6 field along the axis Bx', taken from the ring-down's own frequency: Eq. 6 inverted
@@ -236,11 +236,11 @@ def _start_amplitude_rad(fit: RingdownFit, probe: Probe) -> float:
     """The swing at the first fitted sample: the fit's θmax where it determined it, else the
     probe's stop less the fit's rest offset (0 where not determined: the model here has the
     field along the axis only), decayed from the switch-off
-    (:func:`mows.physics.ringdown_average.start_swing_rad`); NaN where the offset passes the stop."""
+    (:func:`mows.physics.ringdown_average.swing_from_stop_rad`); NaN where the offset passes the stop."""
     if math.isfinite(fit.amplitude_rad):
         return fit.amplitude_rad
-    swing = float(ringdown_average.start_swing_rad(probe.theta_stop_rad, np.nan_to_num(fit.rest_offset_rad)))
-    return swing * math.exp(-fit.damping_per_s * fit.start_offset_s)
+    rest, since_release = np.nan_to_num(fit.rest_offset_rad), fit.start_offset_s
+    return float(ringdown_average.swing_from_stop_rad(probe.theta_stop_rad, rest, fit.damping_per_s, since_release))
 
 
 def _field_along_axis(fit: RingdownFit, probe: Probe, f00_hz: float, amplitude_rad: float) -> float:

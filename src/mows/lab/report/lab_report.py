@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import pathlib
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -35,7 +35,7 @@ from mows.lab.data.readers import from_sweep, load_table
 from mows.lab.data.reference import Reference
 from mows.lab.data.table import MeasurementTable, TableError
 from mows.lab.diagnosis.candidates import Candidate, physics_deviation
-from mows.lab.diagnosis.discovery import Discovery, discover
+from mows.lab.diagnosis.discovery import DiscoveredTerm, Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group
 from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import catalog, resolve
@@ -49,6 +49,7 @@ from mows.sweep.runner import SweepMap
 
 CHECK_SIGMAS = 3.0  # a physical value further than this from its free fit is noted
 INCONSISTENT_SIGMAS = 5.0  # … and further than this makes a statistically adequate model inconsistent
+DISCOVERY_ROUNDS = 3  # terms beyond the catalog added one after another (analyse_discovering)
 
 
 @dataclasses.dataclass
@@ -308,6 +309,38 @@ def _check_note(check: PhysicsCheck) -> str:
         f"{check.effect} {state} {values}, {check.deviation_sigma:.1f}σ from its physical value: the "
         "physics as predicted misses something here, or the parameter absorbs another effect"
     )
+
+
+def analyse_discovering(
+    table: MeasurementTable,
+    probe: Probe,
+    save: Callable[[DiscoveredTerm], pathlib.Path],
+    effects: Iterable[str] = (),
+    plugins: Iterable[str | pathlib.Path] = (),
+    cross_validate: bool = True,
+    rounds: int = DISCOVERY_ROUNDS,
+) -> tuple[LabReport, list[DiscoveredTerm]]:
+    """:func:`analyse` with ``auto``, then, while the search beyond the catalog finds a term: the
+    strongest term's plugin saved by ``save`` (which returns its path), added after the effects
+    the model already holds, and the table analysed again, so that the report's history shows the
+    error falling through it. Stops after ``rounds`` terms, at a term already added, or when a
+    term added does not lower χ²/dof (its report is then not kept). Returns the last report and
+    the terms added, in order."""
+    plugins, added = list(plugins), list[DiscoveredTerm]()
+    report = analyse(table, probe, effects, auto=True, plugins=plugins, cross_validate=cross_validate)
+    for _ in range(rounds):
+        found = report.discovery
+        if found is None or not found.terms or found.terms[0].effect_name in {t.effect_name for t in added}:
+            break
+        term = found.terms[0]
+        trial_plugins = [*plugins, save(term)]
+        chosen = [*report.effects, term.effect_name]
+        trial = analyse(table, probe, chosen, auto=True, plugins=trial_plugins, cross_validate=cross_validate)
+        if not trial.chi2_dof < report.chi2_dof:
+            break
+        report, plugins = trial, trial_plugins
+        added.append(term)
+    return report, added
 
 
 def analyse_sweep(sweep: SweepMap, reference: Reference, probe: Probe, auto: bool = False) -> LabReport:

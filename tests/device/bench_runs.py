@@ -34,7 +34,7 @@ class BenchRig:
         if not turned:
             self.turn(theta0_rad)
         done, fits = [], []
-        self.session.start_cycle(CycleRequest(theta0_rad, repeats=repeats), done.append)
+        self.session.start_cycle(CycleRequest(theta0_rad, repeats=repeats, turned_by_hand=self.manual), done.append)
         for _ in range(MAX_STEPS):
             fits += self._step()
             if done and len(fits) >= done[0].ringdowns_recorded:

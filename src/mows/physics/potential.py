@@ -330,16 +330,9 @@ def arc_displacement_m(
 
 def _turned(theta_rad: np.ndarray, offset_m: ArrayLike) -> np.ndarray:
     """Rz(θ)·offset, offsets B + (3,) at deflections θ (n,): B + (n, 3)."""
-    offset = np.asarray(offset_m, float)[..., None, :]
-    cos, sin = np.cos(theta_rad)[:, None], np.sin(theta_rad)[:, None]
-    return np.concatenate(
-        [
-            cos * offset[..., :1] - sin * offset[..., 1:2],
-            sin * offset[..., :1] + cos * offset[..., 1:2],
-            np.broadcast_to(offset[..., 2:], np.broadcast_shapes(offset[..., 2:].shape, cos.shape)),
-        ],
-        -1,
-    )
+    c, s, zero, one = np.cos(theta_rad), np.sin(theta_rad), np.zeros_like(theta_rad), np.ones_like(theta_rad)
+    turns = np.stack([c, -s, zero, s, c, zero, zero, zero, one], -1).reshape(-1, 3, 3)
+    return np.einsum("nij,...j->...ni", turns, np.asarray(offset_m, float))
 
 
 # --- the balances, row by row (compiled) -----------------------------------------------------

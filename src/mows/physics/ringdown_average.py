@@ -232,13 +232,26 @@ def swing_about_rest_rad(
     swing ``swing_rad`` about the undeflected lever (θ = 0) has (module docstring): the signal's
     size is what was measured, θs is what the swing is about. Arguments broadcast as in
     :func:`pickup_variance`; NaN where the swing or the pickup gives no signal."""
-    target = pickup_variance(swing_rad, pickup, damping_per_s, duration_s, 0.0)
-    swing = np.broadcast_to(np.asarray(swing_rad, float), np.broadcast(target, np.asarray(rest_rad)).shape).copy()
+    coefficients = np.asarray(pickup, complex)
+    shape = np.broadcast_shapes(
+        np.shape(swing_rad), coefficients.shape[:-1], np.shape(damping_per_s), np.shape(duration_s), np.shape(rest_rad)
+    )
+    swing0, damping, duration, rest = (
+        np.broadcast_to(np.asarray(a, float), shape) for a in (swing_rad, damping_per_s, duration_s, rest_rad)
+    )
+    coefficients = np.broadcast_to(coefficients, (*shape, coefficients.shape[-1]))
+    target = pickup_variance(swing0, coefficients, damping, duration, 0.0)
+    swing = swing0.copy()
+    # Each element iterates until its own step converges, whatever else is asked with it: a
+    # swing is the same alone as in a table.
+    todo = np.ones(shape, bool)
     for _ in range(SWING_ITERATIONS):
-        variance = pickup_variance(swing, pickup, damping_per_s, duration_s, rest_rad)
-        step = np.sqrt(np.divide(target, variance, out=np.full(swing.shape, np.nan), where=variance > 0))
-        swing = swing * step
-        if not np.any(np.abs(step - 1.0) > SWING_TOLERANCE):  # NaN (no signal) stays NaN, converged
+        at = todo.copy()
+        variance = pickup_variance(swing[at], coefficients[at], damping[at], duration[at], rest[at])
+        step = np.sqrt(np.divide(target[at], variance, out=np.full(variance.shape, np.nan), where=variance > 0))
+        swing[at] = swing[at] * step
+        todo[at] = np.abs(step - 1.0) > SWING_TOLERANCE  # NaN (no signal) stays NaN, converged
+        if not todo.any():
             break
     return swing
 

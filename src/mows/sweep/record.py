@@ -95,6 +95,20 @@ class SweepPoint:
         )
 
 
+def sweep_numbers(theta0_rad: np.ndarray) -> np.ndarray:
+    """The sweep (0, 1, …) of each ring-down of a recording, in order: a sweep measures each
+    orientation once, so a ring-down at an orientation the current sweep has already measured
+    (to 1e-6 rad) starts the next."""
+    numbers = np.zeros(len(theta0_rad), int)
+    seen: list[float] = []
+    for i, angle in enumerate(np.asarray(theta0_rad, float)):
+        if any(abs(math.remainder(angle - other, math.tau)) < 1e-6 for other in seen):
+            numbers[i:] += 1
+            seen = []
+        seen.append(angle)
+    return numbers
+
+
 @dataclasses.dataclass
 class SweepRecord:
     """The ring-downs of one rotation sweep, collected as they arrive."""
@@ -154,6 +168,7 @@ class SweepRecord:
         neighbours: NeighbourFields | None = None,
         curvature: bool = False,
         measured: Ringdowns | None = None,
+        start=None,
     ) -> Decomposition:
         """:func:`decompose` of every ring-down (not of per-angle means, so χ² keeps its dof).
 
@@ -169,6 +184,7 @@ class SweepRecord:
         ``curvature``: fit the field's 3θ0 curvature too (:func:`decompose`). ``measured``: the
         ring-downs did not start from the stop (a multi-tone excitation's), and each starts with the
         θmax its fit measured (:meth:`measured_ringdowns`, None where a fit did not measure it).
+        ``start``: the parameters to start from (:func:`decompose`'s), e.g. an earlier pass's.
         """
         theta0 = self._column("theta0_rad")
         arrays: dict[str, Any] = dict(
@@ -180,6 +196,7 @@ class SweepRecord:
             model=model,
             f00_free=f00_free,
             f00_std_hz=self.f00_std_hz(),
+            start=start,
         )
         if model != "first_principles":
             return decompose(**arrays)
@@ -196,7 +213,7 @@ class SweepRecord:
         if not first.ok:
             return first
         stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe, neighbours), probe.theta_stop_rad)
-        return decompose(**arrays, ringdowns=ringdowns(stop), start=first.parameters)
+        return decompose(**{**arrays, "start": first.parameters}, ringdowns=ringdowns(stop))
 
     def measured_ringdowns(self) -> Ringdowns | None:
         """The ring-downs as recorded when they do not start from the stop (a multi-tone

@@ -278,7 +278,7 @@ def start_amplitudes_rad(
     """Each ring-down's start swing from RingdownFit messages (or fits), and notes of what was
     assumed or left out: the stop less the row's own |rest offset| where its fit determined it
     (:meth:`mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`, the rule of
-    :func:`mows.physics.ringdown_average.start_swing_rad`). The stop is pooled per sweep by a
+    :func:`mows.physics.ringdown_average.swing_from_stop_rad`). The stop is pooled per sweep by a
     median with outliers left out (every ring-down of a sweep starts from the same housing
     stop, and a single fit's θmax is rarely determined), else over all rows, else ``stop_rad``
     (the probe's). With ``probe_ids`` (one per fit) each probe's stop is its own housing's,

@@ -10,8 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from mows.bench.throughput import CAP_A, adaptive_protocol, truth_components
+from mows.bench.throughput import CAP_A, adaptive_protocol
 from mows.device.cycle.phases import CycleSettings
+from mows.lab.data.truth import scene_truth
 from mows.sim.scenario import load_scenario
 from mows.sweep.fast_cycle import drive_rate_rad_per_s, excitation_s, tuning_needed
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PlannedCycle, PrecisionGoal
@@ -135,5 +136,5 @@ def test_tuning_is_needed_only_when_the_kick_is_long_against_the_detuning():
 
 
 def test_truth_of_the_scene_is_in_plane():
-    truth = truth_components(load_scenario("anti_helmholtz"))
+    truth = scene_truth(load_scenario("anti_helmholtz"))
     assert truth[2] == pytest.approx(-2 * truth[4], rel=1e-3)  # axial symmetry of the pair: Gxx = −2 Gyy

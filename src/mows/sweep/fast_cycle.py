@@ -48,6 +48,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from mows.device.cycle.phases import CycleSettings
 from mows.device.cycle.tracking import TrackingSettings
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.ringdown.problem import cramer_rao_frequency_hz
@@ -65,6 +66,11 @@ MAX_DECAY = 1.3  # ring-downs end by the time δ·T reaches this (the swing at 2
 UNLOCKED_KICK_STD_T = 0.1e-6
 MIN_RINGDOWN_PERIODS = 12  # the fit takes ten periods at least, after the recovery
 SWEEP_ANGLES_RAD = np.radians(np.arange(0.0, 180.0, 45.0))  # σ_f(θ0 + 180°) ≈ σ_f(θ0)
+# The paper's protocol, the habit this module's cycle replaces: at each of 12 orientations two
+# tuning excitations and five ring-downs, each a 0.5 s drive and 60 periods of ring-down (at
+# 112.5 Hz), 10 s apart.
+PAPER_CYCLE = CycleSettings(excite_s=0.5, ringdown_s=60.0 / 112.5, gap_s=10.0, repeats=5, tuning_steps=2)
+PAPER_ORIENTATIONS = 12
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,6 +90,15 @@ class CyclePlan:
     def cycle_s(self) -> float:
         """Device time of one repeat: excitation, ring-down, gap."""
         return self.excite_s + self.ringdown_s + self.gap_s
+
+
+def map_s(settings: CycleSettings, orientations: int) -> float:
+    """Device time of one map of ``orientations`` by cycles of ``settings``, without the delays a
+    duty-cycle limit may add: at each orientation the settling, every excitation and ring-down
+    (tuning ones too) and the gaps between them."""
+    excitations = settings.tuning_steps + settings.repeats
+    at_one = excitations * (settings.excite_s + settings.ringdown_s) + (excitations - 1) * settings.gap_s
+    return orientations * (settings.turn_settle_s + at_one)
 
 
 def drive_rate_rad_per_s(probe, setup, pose, current_a: float, frequency_hz: float) -> float:
@@ -265,18 +280,33 @@ def plan_tracking(
     return TrackingPlan(target_std_t, True, kick(high), high, std_hz(theta0_rad, high) / beta)
 
 
-def tracking_plan(
-    scenario, theta0_rad: float, target_std_t: float, current_cap_a: float, noise_std_t: float | None = None, setup=None
-) -> TrackingPlan:
-    """:func:`plan_tracking` for the device ``scenario`` describes (probe, pose, sensors, coils,
-    sample rate; ``setup`` replaces its coils). ``noise_std_t``: white σ per sample of the
-    difference channel (a measured figure); None: the scenario's noise model's white floor
+def scenario_std_model(scenario, noise_std_t: float | None = None) -> Callable[[float, float], float]:
+    """:func:`ringdown_std_model` of the device ``scenario`` describes (probe, pose, sensors, sample
+    rate). ``noise_std_t``: white σ per sample of the difference channel (a measured figure);
+    None: the scenario's noise model's white floor
     (:meth:`mows.physics.fluxgate.NoiseModel.difference_white_std_t`)."""
     fs = scenario.sample_rate_hz
     noise = scenario.noise.difference_white_std_t(fs) if noise_std_t is None else noise_std_t
     if not (noise > 0 and math.isfinite(noise)):
         raise ValueError(f"noise σ {noise!r} T per sample: the bound needs a positive noise figure")
-    std = ringdown_std_model(scenario.sensors.pair, scenario.probe, scenario.pose, fs, noise)
+    return ringdown_std_model(scenario.sensors.pair, scenario.probe, scenario.pose, fs, noise)
+
+
+def scenario_cycle_plan(
+    scenario, current_cap_a: float, max_duty_cycle: float, noise_std_t: float | None = None
+) -> CyclePlan:
+    """:func:`plan_cycle` for the device ``scenario`` describes, σ_f from
+    :func:`scenario_std_model` with ``noise_std_t``."""
+    std = scenario_std_model(scenario, noise_std_t)
+    return plan_cycle(scenario.probe, scenario.setup, scenario.pose, std, current_cap_a, max_duty_cycle)
+
+
+def tracking_plan(
+    scenario, theta0_rad: float, target_std_t: float, current_cap_a: float, noise_std_t: float | None = None, setup=None
+) -> TrackingPlan:
+    """:func:`plan_tracking` for the device ``scenario`` describes (``setup`` replaces its coils),
+    σ_f from :func:`scenario_std_model` with ``noise_std_t``."""
+    std = scenario_std_model(scenario, noise_std_t)
     return plan_tracking(
         scenario.probe, setup or scenario.setup, scenario.pose, std, theta0_rad, target_std_t, current_cap_a
     )

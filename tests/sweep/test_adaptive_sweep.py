@@ -12,9 +12,10 @@ import pytest
 
 from mows.bench.throughput import CAP_A, adaptive_protocol
 from mows.device.cycle.phases import CycleSettings
+from mows.device.cycle.tracking_plan import drive_rate_rad_per_s, excitation_s
 from mows.lab.data.truth import scene_truth
 from mows.sim.scenario import load_scenario
-from mows.sweep.fast_cycle import drive_rate_rad_per_s, excitation_s, tuning_needed
+from mows.sweep.fast_cycle import tuning_needed
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PlannedCycle, PrecisionGoal
 from mows.sweep.record import SweepPoint, SweepRecord
 

@@ -42,12 +42,13 @@ from mows.bench import multiprobe_throughput
 from mows.bench.rig import DeviceTimeRig, max_duty_fraction
 from mows.device.cycle.phases import CycleRequest, CycleSettings
 from mows.device.cycle.tracking import TrackingLoop, TrackingSettings
+from mows.device.cycle.tracking_plan import tracking_plan
 from mows.estimate.axis import estimate_along_axis
 from mows.lab.data.truth import scene_truth
 from mows.records.stamps import NS_PER_S
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import Decomposition, orientations_problem
-from mows.sweep.fast_cycle import PAPER_CYCLE, PAPER_ORIENTATIONS, plan_cycle, scenario_std_model, tracking_plan
+from mows.sweep.fast_cycle import PAPER_CYCLE, PAPER_ORIENTATIONS, fit_std_model, plan_cycle
 from mows.sweep.planner import COMPONENTS, AdaptivePlanner, PlanEnd, PrecisionGoal, achieved_std, reached
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -170,7 +171,7 @@ def adaptive_protocol(goal: PrecisionGoal = PrecisionGoal(), seed: int = 1, scen
     scenario = scenario or load_scenario(SCENARIO)
     probe = scenario.probe
     rig = DeviceTimeRig(scenario, CycleSettings(), CAP_A, seed)
-    std = scenario_std_model(scenario, rig.first_block_noise_std_t())
+    std = fit_std_model(scenario, rig.first_block_noise_std_t())
     plan = plan_cycle(probe, scenario.setup, scenario.pose, std, CAP_A, CycleSettings().max_duty_cycle)
     rig.set_settings(
         CycleSettings(
@@ -205,7 +206,9 @@ def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, se
     scenario = load_scenario(SCENARIO)
     probe = scenario.probe
     rig = DeviceTimeRig(scenario, CycleSettings(turn_settle_s=TURN_SETTLE_S), CAP_A, seed)
-    plan = tracking_plan(scenario, theta0_rad, target_std_t, CAP_A, rig.first_block_noise_std_t())
+    plan = tracking_plan(
+        scenario, theta0_rad, target_std_t, CAP_A, fit_std_model(scenario, rig.first_block_noise_std_t())
+    )
     figures: dict[str, object] = {
         "target_t": target_std_t,
         "feasible": plan.feasible,

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mows.lab.data.reference import swept_reference_at
 from mows.sim.scenario import Scenario
@@ -21,7 +22,7 @@ QUANTITIES = ("bx_t", "by_t", "gxx_t_per_m", "gxy_t_per_m", "gyy_t_per_m")
 WITHIN_SIGMAS = 2.0  # a component this many σ from the truth or closer counts as within
 
 
-def in_plane(field_t, gradient_t_per_m) -> np.ndarray:
+def in_plane(field_t: ArrayLike, gradient_t_per_m: ArrayLike) -> np.ndarray:
     """(Bx, By, Gxx, Gxy, Gyy) of a field (≥ 2,) and of the in-plane gradient, given as its three
     components (Gxx, Gxy, Gyy) or as the tensor (3, 3)."""
     gradient = np.asarray(gradient_t_per_m, float)
@@ -30,7 +31,7 @@ def in_plane(field_t, gradient_t_per_m) -> np.ndarray:
     return np.r_[np.asarray(field_t, float)[:2], gradient]
 
 
-def in_plane_std(field_covariance_t2, gradient_covariance) -> np.ndarray:
+def in_plane_std(field_covariance_t2: ArrayLike, gradient_covariance: ArrayLike) -> np.ndarray:
     """σ of (Bx, By, Gxx, Gxy, Gyy) from the field's covariance (2, 2) and the gradient's (3, 3),
     either given flat, as a decomposition's message carries them."""
     field = np.reshape(np.asarray(field_covariance_t2, float), (2, 2))
@@ -60,14 +61,14 @@ class Component:
     pull: float  # (value − truth)/σ
 
 
-def against_truth(scenario: Scenario, probe_id: int, value, sigma) -> list[Component]:
+def against_truth(scenario: Scenario, probe_id: int, value: ArrayLike, sigma: ArrayLike) -> list[Component]:
     """The five components ``value`` ± ``sigma`` (:func:`in_plane`, :func:`in_plane_std`) of the
     scene's probe ``probe_id`` against its truth (:func:`scene_truth`)."""
     truth = scene_truth(scenario, probe_id)
-    value, sigma = np.asarray(value, float), np.asarray(sigma, float)
+    values, sigmas = np.asarray(value, float), np.asarray(sigma, float)
     return [
         Component(probe_id, name, float(v), float(s), float(t), float((v - t) / s))
-        for name, v, s, t in zip(QUANTITIES, value, sigma, truth)
+        for name, v, s, t in zip(QUANTITIES, values, sigmas, truth)
     ]
 
 

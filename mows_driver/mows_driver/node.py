@@ -73,7 +73,7 @@ class DriverNode(MowsNode):
         if (problem := current_problem(values)) is not None:
             raise ValueError(problem)
         cap = CurrentCap(values["coil_current_cap_a"])
-        settings = self.backend  # a ValueError or OSError refuses, with its reason
+        settings = self.device_settings  # a ValueError or OSError refuses, with its reason
         # The cycle fits its tuning ring-downs and a simulated device integrates: compile both (or
         # load them from numba's cache) now, not while the device streams.
         self.get_logger().info(f"numba kernels ready in {precompile(simulator=settings.simulated):.1f} s")
@@ -110,15 +110,14 @@ class DriverNode(MowsNode):
 
     # --- parameters ------------------------------------------------------------------------
     @functools.cached_property
-    def backend(self) -> BackendSettings:
-        """The device's settings, made once (their parameters are fixed at start-up, the scenario
-        read then); ValueError or OSError, each time asked, while they cannot be made."""
+    def device_settings(self) -> BackendSettings:
+        """Made once: their parameters are fixed at start-up (ValueError, OSError while unreadable)."""
         return backend_settings(self.values)
 
     def _validate(self, parameters) -> SetParametersResult:
         """Checks across parameters (each one alone is checked by its table row)."""
         try:
-            reason = settings_problem({**self.values, **{p.name: p.value for p in parameters}}, self.backend)
+            reason = settings_problem({**self.values, **{p.name: p.value for p in parameters}}, self.device_settings)
         except (OSError, ValueError) as unreadable:  # the scenario
             reason = str(unreadable)
         return SetParametersResult(successful=reason is None, reason=reason or "")
@@ -129,7 +128,7 @@ class DriverNode(MowsNode):
             return  # configure reads them
         cycle = cycle_settings(self.values)
         retrack = tracking_changed(p.name for p in parameters)  # an emergency stop's end of tracking holds till then
-        tracking = tracking_settings(self.values, self.backend) if retrack else None
+        tracking = tracking_settings(self.values, self.device_settings) if retrack else None
         self.session.set_block_duration(self.values["block_duration_s"])
         self.session.set_cycle_settings(cycle)
         if retrack:

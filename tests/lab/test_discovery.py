@@ -16,7 +16,12 @@ import pytest
 from mows.lab import FrequencyModel, analyse, catalog, load_plugins
 from mows.lab.data import synthetic
 from mows.lab.diagnosis import discovery
-from mows.lab.diagnosis.discovery import FAMILIES, discover, rule_of
+from mows.lab.diagnosis.discovery import CHANNELS, discover
+from mows.lab.diagnosis.discovery.channels import BY_NAME, FREQUENCY, jacobians
+from mows.lab.diagnosis.discovery.library import factor_values, monomial_values
+from mows.lab.diagnosis.discovery.plugin_source import writable
+from mows.lab.diagnosis.discovery.readings import family, reading
+from mows.lab.diagnosis.discovery.selection import RESAMPLES, STABLE_FRACTION
 from mows.lab.report.html_report import discovery_html
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
@@ -79,13 +84,15 @@ def test_a_moment_that_changes_with_temperature_is_found_as_field_times_temperat
     fit = physical_fit(measured)
     assert fit.chi2_dof > 5.0, fit.chi2_dof  # far above noise: no catalog effect of the model has it
     found = discover(fit, PAPER_PROBE)
-    assert [t.name for t in found.terms] == ["b_along_t·temperature_k"], found.summary
+    assert [t.name for t in found.terms] == ["moment × temperature_k"], found.summary
     term = found.terms[0]
-    strength = PAPER_PROBE.beta0_hz_per_t * MOMENT_PER_K  # Hz per T·K
-    assert term.family == "field_times_temperature"
-    assert term.strength_unit == "Hz/(T·K)"
-    assert within(term.strength, strength, term.std), (term.strength, term.std, strength)
-    assert term.selection_frequency >= discovery.STABLE_FRACTION and term.cv_gain_chi2 > 0
+    assert term.channel == "moment" and term.family == "moment_temperature"
+    assert term.strength_unit == "1/K"
+    assert within(term.strength, MOMENT_PER_K, term.std), (term.strength, term.std, MOMENT_PER_K)
+    # A reference sensor whose gain drifts with temperature scales the field's spring alike: listed,
+    # with the measurement that tells the two apart.
+    assert any(a.startswith("field_along × b_along_t·temperature_k") for a in term.alternatives), term.alternatives
+    assert term.selection_frequency >= STABLE_FRACTION and term.cv_gain_chi2 > 0
     assert "temperature coefficient" in term.reading
     # What its strength is fitted to (the report's picture): the residual it explains against the
     # term beyond the model, whose weighted least-squares slope is the strength.
@@ -116,12 +123,12 @@ def test_coil_heating_is_found_as_current_squared_and_written_as_the_spring(exac
     measured = base.with_columns(f_hz=base.f_hz + HEATING_HZ_PER_A2 * base.coil_current_a**2)
     fit = physical_fit(measured)
     found = discover(fit, PAPER_PROBE)
-    assert [t.name for t in found.terms] == ["coil_current_a²"], found.summary
+    assert [t.name for t in found.terms] == ["spring × coil_current_a²"], found.summary
     term = found.terms[0]
-    assert term.family == "current_squared" and term.factors == ("coil_current_a", "coil_current_a")
-    assert within(term.strength, HEATING_HZ_PER_A2, term.std), (term.strength, term.std)
+    assert term.family == "spring_current_squared" and term.factors == ("coil_current_a", "coil_current_a")
     # Δk = 2·kM·Δf/f00 of a spring heated by I².
     spring = 2.0 * PAPER_PROBE.spring_nm_per_rad * HEATING_HZ_PER_A2 / PAPER_PROBE.f00_hz
+    assert within(term.strength, spring, term.std), (term.strength, term.std)
     assert term.plugin_output == "stiffness_nm_per_rad"
     assert within(term.plugin_parameter.value, spring, term.plugin_parameter.std), term.plugin_parameter
     path = tmp_path / f"{term.effect_name}.py"
@@ -154,50 +161,44 @@ def test_a_long_table_is_searched_in_seconds():
     start = time.process_time()
     found = discover(fit, PAPER_PROBE)
     assert time.process_time() - start < 5.0
-    assert [t.name for t in found.terms] == ["b_along_t·temperature_k"], found.summary
+    assert [t.name for t in found.terms] == ["moment × temperature_k"], found.summary
     term = found.terms[0]
-    assert within(term.strength, PAPER_PROBE.beta0_hz_per_t * MOMENT_PER_K / 3.0, term.std)
+    assert within(term.strength, MOMENT_PER_K / 3.0, term.std)
 
 
 @pytest.mark.parametrize(
-    ("factors", "family", "output"),
+    ("channel", "factors"),
     [
-        (("b_along_t", "b_along_t"), "field_squared", "moment_scale"),
-        (("b_along_t", "temperature_k"), "field_times_temperature", "moment_scale"),
-        (("g_t_per_m", "t_s"), "field_times_time", "moment_scale"),
-        (("b_along_t", "coil_current_a"), "field_times_current", "moment_scale"),
-        (("temperature_k",), "temperature", "stiffness_nm_per_rad"),
-        (("t_s",), "time", "stiffness_nm_per_rad"),
-        (("coil_current_a", "coil_current_a"), "current_squared", "stiffness_nm_per_rad"),
-        (("coil_current_a",), "current", "frequency_hz"),
-        (("start_swing_rad", "start_swing_rad"), "amplitude_squared", "stiffness_nm_per_rad"),
-        (("rest_angle_rad", "start_swing_rad"), "amplitude_squared", "stiffness_nm_per_rad"),
-        (("cos(1θ0)",), "angle_harmonic", "field_offset_t"),
-        (("sin(3θ0)",), "angle_harmonic", "frequency_hz"),
-        (("b_normal_t", "sin(1θ0)"), "field_z", "tilt_rad"),
-        (("g_xy_t_per_m", "cos(2θ0)"), "gradient", "frequency_hz"),
-        (("t_s", "cos(3θ0)"), "other", "frequency_hz"),
+        (c.name, factors)
+        for c in CHANNELS
+        if writable(c)
+        for factors in [(), ("temperature_k",), ("coil_current_a", "coil_current_a")]
+        if factors or c is not FREQUENCY  # the frequency has no constant term: f00 is one
     ],
 )
-def test_every_family_has_a_plugin_that_loads_and_acts(exact, tmp_path, factors, family, output):
-    """The family follows from the factors (one rule table), and each plugin form loads with
-    load_plugins and changes the model's frequency where its factors vary."""
-    assert family in FAMILIES
-    rule = rule_of(factors)
-    assert rule.family == family
+def test_every_channel_writes_a_plugin_whose_signature_is_the_term(exact, tmp_path, channel, factors):
+    """Every channel times a monomial: its reading is physics in words, and its plugin loads with
+    load_plugins and changes the frequency as the channel's Jacobian times the monomial (the
+    term the search fits), row by row: the written plugin is the term found."""
     measured = table(exact, 4)
-    measured = measured.with_columns(ref_gxy_t_per_m=np.full(len(measured), 1e-3))  # a gradient for its terms
     fit = physical_fit(measured)
-    means = {"temperature_k": REFERENCE_K, "t_s": float(measured.t_s.mean())}
-    form = discovery.plugin_form(factors, rule, means, PAPER_PROBE)
-    assert form.output == output
-    plugin = discovery.Plugin(tuple(factors), rule, form, 1e-3, PAPER_PROBE)
+    chosen = BY_NAME[channel]
+    assert reading(chosen, factors) and family(chosen, factors).startswith(channel)
+    means = {"temperature_k": REFERENCE_K}
+    values = monomial_values(factor_values(measured, PAPER_PROBE), factors, len(measured))
+    # A bound whose finite-difference step (1e-3 of the range) moves the channel as little as the
+    # Jacobian's own step: the frequency is linear in the channel there.
+    bound = 1e3 * chosen.step / np.abs(values).max()
+    plugin = discovery.Plugin(chosen, factors, means, bound, PAPER_PROBE, reading(chosen, factors))
     path = tmp_path / f"{plugin.name}.py"
     path.write_text(plugin.source())
     (effect,) = load_plugins([path])
-    assert effect.name == plugin.name and effect.parameters[0].upper == 1e-3
-    signature = fit.extension_columns(effect)[:, 0]
-    assert np.ptp(signature) > 0, signature
+    assert effect.name == plugin.name and effect.parameters[0].upper == bound
+    signature = -fit.extension_columns(effect)[:, 0]
+    weight = 1.0 / measured.f_std_hz
+    term = (weight * values) if chosen is FREQUENCY else jacobians(fit, measured, weight)[channel] * values
+    assert np.ptp(signature) > 0
+    np.testing.assert_allclose(signature, term, rtol=1e-3, atol=1e-4 * np.abs(term).max())
 
 
 def test_the_verdict_and_the_report_carry_the_discovery(exact):
@@ -210,14 +211,15 @@ def test_the_verdict_and_the_report_carry_the_discovery(exact):
     report = analyse(measured, PAPER_PROBE, effects=["static_deflection (at physics)"], cross_validate=False)
     assert report.verdict == "unexplained_structure", report.diagnosis.explanation
     explanation = report.diagnosis.explanation
-    assert "finds 1 term: b_along_t·temperature_k" in explanation, explanation
-    assert "--plugin discovered_b_along_t_temperature_k.py" in explanation
+    assert "finds 1 term: moment × temperature_k" in explanation, explanation
+    assert "--plugin discovered_moment_temperature_k.py" in explanation
     assert f'"moment_scale": c * (rows.temperature_k - {REFERENCE_K!r})' in explanation
     found = report.to_dict()["discovery"]
-    assert found["terms"][0]["family"] == "field_times_temperature"
-    assert found["library"] > 0 and found["resamples"] == discovery.RESAMPLES and found["degree"] == 2
-    assert "plugin for the strongest, to save as discovered_b_along_t_temperature_k.py" in format_text(
-        report, measured, "diagnose"
+    assert found["terms"][0]["family"] == "moment_temperature"
+    assert found["library"] > 0 and found["resamples"] == RESAMPLES and found["degree"] == 2
+    assert (
+        "plugin for the strongest, in its channel (moment), to save as discovered_moment_temperature_k.py"
+        in format_text(report, measured, "diagnose")
     )
     assert "<h2>Beyond the catalog</h2>" in discovery_html(report)
 
@@ -234,6 +236,6 @@ def test_a_generic_correction_is_searched_without_it(exact):
     assert report.verdict == "needs_generic_term", report.history
     assert report.discovery is not None and "moment_scale" not in report.discovery.on_model
     term = report.discovery.terms[0]
-    assert term.name == "b_along_t" and term.plugin_output == "moment_scale", report.discovery.summary
+    assert term.name == "moment × 1" and term.plugin_output == "moment_scale", report.discovery.summary
     assert within(term.plugin_parameter.value, 0.01, term.plugin_parameter.std, sigmas=5.0), term.plugin_parameter
     assert not math.isnan(term.cv_gain_chi2) and term.cv_gain_chi2 > 0

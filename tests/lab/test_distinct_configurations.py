@@ -17,7 +17,7 @@ import pytest
 
 from mows.lab import FrequencyModel, catalog, diagnose
 from mows.lab.data import synthetic
-from mows.lab.model import configuration, frequency_model
+from mows.lab.model import configuration, factors, frequency_model
 from mows.lab.model.effects import Effect, Parameter
 from mows.physics.field import UniformField, anti_helmholtz_pair
 from mows.physics.probe import PAPER_PROBE
@@ -51,6 +51,7 @@ def _each_row_its_own(keys):
 def _fits(table, monkeypatch, grouped: bool):
     if not grouped:
         monkeypatch.setattr(configuration, "distinct_rows_of", _each_row_its_own)
+        monkeypatch.setattr(factors, "distinct_rows_of", _each_row_its_own)
         monkeypatch.setattr(frequency_model, "distinct_rows_of", _each_row_its_own)
         table = dataclasses.replace(table)  # a table of its own: nothing grouped is cached for it
     pool = [catalog()[name] for name in EFFECTS]
@@ -73,7 +74,7 @@ def test_a_column_that_an_effect_reads_keys_the_groups(table):
     drifting = base + catalog()["spring_drift"]
     assert "t_s" not in base.read_columns(timed) and "t_s" in drifting.read_columns(timed)
     assert len(base.groups(timed)[0]) == 12 and len(drifting.groups(timed)[0]) == ROWS
-    first, inverse = configuration.distinct_rows(configuration.Configuration.base(timed, PAPER_PROBE))
+    first, inverse = factors.distinct_rows(configuration.Configuration.base(timed, PAPER_PROBE))
     assert len(first) == 12 and np.array_equal(table.theta0_deg, table.theta0_deg[first][inverse])
     # kM·(1 + r·t) scales f by √(1 + r·t) where the field spring is small (here 1e-4 of kM)
     rate_per_s = 4e-8

@@ -89,9 +89,9 @@ def test_a_plugin_file_defines_an_effect_that_the_lab_finds(tmp_path):
         ("x = 1\n", ["defines no effect"]),
         ("raise RuntimeError('boom')\n", ["failed to load", "boom"]),
         (
-            "from mows.lab import effect\n@effect(name='e', parameters={'a': (1.0, -1, 2, '1')})\ndef e(rows, a):\n"
+            "from mows.lab import effect\n@effect(name='e', parameters={'a': (3.0, -1, 2, '1')})\ndef e(rows, a):\n"
             "    return {}\n",
-            ["off at 0"],
+            ["lower ≤ off value ≤ upper"],
         ),
     ],
 )

@@ -34,11 +34,13 @@ def test_a_hidden_current_times_temperature_term_is_pointed_at():
     explanation = report.diagnosis.explanation
     assert "The residual follows temperature_k·coil_current_a (correlation +0.9" in explanation
     # The search beyond the catalog names the product in physical units, with its plugin.
-    assert "finds 1 term: temperature_k·coil_current_a (+0.00" in explanation, explanation
-    assert '@effect(name="discovered_temperature_k_coil_current_a"' in explanation
-    assert '"frequency_hz": c_hz * (rows.temperature_k - 293.15) * rows.coil_current_a' in explanation
+    # A frequency change with no field pattern is the spring's: Δk = 2·kM·Δf/f00 per K·A.
+    assert "finds 1 term: spring × temperature_k·coil_current_a" in explanation, explanation
+    assert '@effect(name="discovered_spring_temperature_k_coil_current_a"' in explanation
+    assert '"stiffness_nm_per_rad": k_nm_per_rad * (rows.temperature_k - 293.15) * rows.coil_current_a' in explanation
     (term,) = report.discovery.terms
-    assert abs(term.strength - 0.004) < 3 * term.std, (term.strength, term.std)  # Hz per K·A
+    spring = 2.0 * PAPER_PROBE.spring_nm_per_rad * 0.004 / PAPER_PROBE.f00_hz
+    assert abs(term.strength - spring) < 3 * term.std, (term.strength, term.std, spring)  # N·m/rad per K·A
 
 
 def test_an_angle_pattern_that_changes_in_time_is_not_a_pile_of_catalog_effects():
@@ -62,7 +64,8 @@ def test_an_angle_pattern_that_changes_in_time_is_not_a_pile_of_catalog_effects(
     explanation = report.diagnosis.explanation
     # field_curvature would take the 3θ0 share of the term: beside the discovered term it has no evidence
     assert "leaves structure that terms beyond the catalog explain" in explanation, explanation
-    assert "finds 1 term: t_s·cos(3θ0)" in explanation, explanation
+    # No channel of the potential makes a 3θ0 pattern in a uniform field: the last resort, said so.
+    assert "finds 1 term: frequency × t_s·cos(3θ0)" in explanation, explanation
     assert "c_hz * rows.t_s * np.cos(3 * rows.theta0_rad)" in explanation
     (term,) = report.discovery.terms
     assert abs(term.strength - 0.05 / np.ptp(t)) < 3 * term.std, (term.strength, term.std)  # Hz per s

@@ -69,7 +69,7 @@ def test_the_catalog_alone_adds_only_what_is_there_and_points_at_the_moment(tabl
     explanation = report.diagnosis.explanation
     assert "temperature_k·b_along_t" in explanation, explanation
     # The search beyond the catalog writes the moment's plugin and reads its coefficient from the table.
-    assert "finds 1 term: b_along_t·temperature_k" in explanation, explanation
+    assert "finds 1 term: moment × temperature_k" in explanation, explanation
     assert f'"moment_scale": c * (rows.temperature_k - {REFERENCE_K!r})' in explanation, explanation
     (term,) = report.discovery.terms
     assert abs(term.plugin_parameter.value - MOMENT_PER_K) < 3 * term.plugin_parameter.std, term.plugin_parameter

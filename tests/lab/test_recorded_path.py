@@ -236,8 +236,8 @@ def test_a_moment_falling_with_temperature_needs_the_users_plugin(path, tmp_path
     add --auto``): the lab keeps only the physics that is there (the spring's drift, the
     deflection and the amplitude at physics; before the search was held to physics it also took
     a tilted plane or a moment-scale error) and ends ``unexplained_structure`` (χ²/dof 215 at
-    seed 0), its search beyond the catalog naming B∥·T, a field-times-temperature term
-    (−4.32 ± 0.09 Hz/(T·K)), with the moment's temperature coefficient as the plugin. The
+    seed 0), its search beyond the catalog naming the moment's temperature coefficient
+    (the moment channel times T), with it as the plugin. The
     user's plugin written as physics (the docs' worked example, a moment scale through the
     full potential) ends adequate (χ²/dof 1.35) and reads the coefficient back
     (−1.18e-3 ± 0.02e-3)."""
@@ -246,7 +246,7 @@ def test_a_moment_falling_with_temperature_needs_the_users_plugin(path, tmp_path
     assert report["final"]["chi2_dof"] > 1.5, report["history"]
     assert names(report["effects"]) <= KNOWN_PHYSICS | {"thermal_drift"}, report["history"]
     terms = report["discovery"]["terms"]
-    assert terms and terms[0]["family"] == "field_times_temperature", report["discovery"]["summary"]
+    assert terms and terms[0]["family"] == "moment_temperature", report["discovery"]["summary"]
     assert '"moment_scale": c * (rows.temperature_k - 293.15)' in terms[0]["plugin"]
     plugin = tmp_path / "moment_temperature.py"
     plugin.write_text(MOMENT_PLUGIN)

@@ -2,7 +2,9 @@
 
     mows lab compare  TABLE [--probe P]              χ²/dof, residual structure, verdict
     mows lab diagnose TABLE [--probe P]              + ranked candidate effects, groups
-    mows lab add      TABLE [--probe P] EFFECT… | --auto   refit with effects, error history
+    mows lab add      TABLE [--probe P] EFFECT… | --auto [--discover]   refit with effects, error history;
+                                                     --discover: save, add and refit the plugins found
+                                                     beyond the catalog
     mows lab report   TABLE [--probe P] [-o page.html] [--auto] [EFFECT…]
     mows lab ringdown BAG   [--probe P] [--f00-hz F] [--cycle N]   inside each recorded ring-down:
                                                      chirp, damping, the effect that explains them
@@ -37,7 +39,7 @@ from tqdm import tqdm
 from mows.cli.fit_bag import add_bag_arguments
 from mows.cli.inputs import OneLineParser, input_file, positive_float
 from mows.cli.lab_ringdown import run_ringdown
-from mows.lab import analyse, is_bag, load_table, progress, with_reference, write_report
+from mows.lab import analyse, analyse_discovering, is_bag, load_table, progress, with_reference, write_report
 from mows.lab.chirp import PIECE_PERIODS
 from mows.lab.data.scale import check_reference, table_probes
 from mows.physics.probe import Probe
@@ -116,16 +118,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             action="store_true",
             help=f"analyse every row of a table longer than {MAX_ROWS} rows (default: a subsample)",
         )
+        command.add_argument(
+            "--save-plugin",
+            metavar="FILE",
+            help="write the plugin of the strongest term found beyond the catalog to FILE (the file alone)",
+        )
         if name in ("add", "report"):
             command.add_argument("effects", nargs="*", metavar="EFFECT", help="effects to add, in order")
             command.add_argument("--auto", action="store_true", help="add effects forward while the evidence is strong")
+        if name == "add":
+            command.add_argument(
+                "--discover",
+                action="store_true",
+                help="with --auto: save the plugin of each term found beyond the catalog next to the table, "
+                "add it and refit, while the error falls",
+            )
         else:
             command.add_argument("--effects", default="", help="comma-separated effects already in the model")
         if name == "report":
             command.add_argument("-o", "--output", default="lab_report.html", help="HTML file to write (a new file)")
-            command.add_argument(
-                "--force", action="store_true", help="replace an existing output file (never an input)"
-            )
+        command.add_argument("--force", action="store_true", help="replace an existing output file (never an input)")
     _add_ringdown_arguments(sub)
 
 
@@ -160,6 +172,8 @@ def run(args) -> int:
         table, probe = _table(args, probe, {i: _probe(path) for i, path in named.items()})
         if args.lab_command == "report":  # read: the files a reference pulled in are inputs too
             check_output(args.output, inputs, args.force)
+        if args.save_plugin:
+            check_output(args.save_plugin, inputs, args.force)
         if len(table) > MAX_ROWS and not args.all_rows:
             table = table.subsample(MAX_ROWS, SUBSAMPLE_SEED)
         stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")
@@ -170,15 +184,21 @@ def run(args) -> int:
                 "measure more orientations"
             )
         effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
-        report = analyse(
-            table,
-            probe,
-            effects=effects,
-            auto=getattr(args, "auto", False),
-            plugins=args.plugin,
-            rank=args.lab_command != "compare",
-            cross_validate=not args.no_cv,
-        )
+        added: list = []
+        if getattr(args, "discover", False):
+            report, added = analyse_discovering(
+                table, probe, _plugin_saver(args, inputs), effects, args.plugin, cross_validate=not args.no_cv
+            )
+        else:
+            report = analyse(
+                table,
+                probe,
+                effects=effects,
+                auto=getattr(args, "auto", False),
+                plugins=args.plugin,
+                rank=args.lab_command != "compare",
+                cross_validate=not args.no_cv,
+            )
         stages.update()
         if report.base.dof <= 0:
             raise ValueError(
@@ -192,11 +212,63 @@ def run(args) -> int:
             stages.update()
     if args.lab_command == "report":  # on stderr beside JSON, which stdout must carry alone
         print(outputs.report(), file=sys.stderr if args.json else sys.stdout)
+    if args.save_plugin:
+        print(
+            _save_strongest(report, args.save_plugin, inputs, args.force), file=sys.stderr if args.json else sys.stdout
+        )
     if args.json:
         print(json.dumps(report.to_dict(), indent=2, default=float))
     elif args.lab_command != "report":
         print(format_text(report, table, args.lab_command))
+        if added:
+            print("\n" + _added_text(report, added))
     return 0
+
+
+def plugin_directory(table: str) -> pathlib.Path:
+    """Where ``add --discover`` saves plugins: beside the table (a CSV file or a bag directory)."""
+    return pathlib.Path(table).resolve().parent
+
+
+def _plugin_saver(args, inputs):
+    """The function that saves a discovered term's plugin beside the table and returns its path:
+    a file already there with the same text is reused; another is replaced only with --force."""
+
+    def save(term) -> pathlib.Path:
+        path = plugin_directory(args.table) / f"{term.effect_name}.py"
+        if not (path.is_file() and path.read_text(encoding="utf-8") == term.plugin):
+            _write_text(path, term.plugin, inputs, args.force)
+        return path
+
+    return save
+
+
+def _write_text(path, text: str, inputs, force: bool) -> None:
+    with writing([path], inputs, force) as outputs:
+        outputs.temporaries[0].write_text(text, encoding="utf-8")
+
+
+def _save_strongest(report, path, inputs, force: bool) -> str:
+    """Write the strongest discovered term's plugin alone to ``path``; what was done, in words."""
+    found = report.discovery
+    if found is None or not found.terms:
+        return f"no term beyond the catalog: {path} not written"
+    term = found.terms[0]
+    _write_text(path, term.plugin, inputs, force)
+    return f"wrote {path}: the plugin of {term.name} ({term.reading}), written as {term.plugin_output}"
+
+
+def _added_text(report, added) -> str:
+    """What ``add --discover`` added: each term's plugin file, reading and parameter after the refit."""
+    lines = ["added beyond the catalog (plugins saved beside the table):"]
+    for term in added:
+        parameter = term.plugin_parameter
+        value, std = report.effect_parameter(f"{term.effect_name}.{parameter.name}")
+        lines.append(
+            f"  {term.effect_name}.py: {term.name}, {term.reading}; {parameter.name} = {value:.4g} ± {std:.2g} "
+            f"{parameter.unit}" + (f" (last resort: {term.last_resort})" if term.last_resort else "")
+        )
+    return "\n".join(lines)
 
 
 class WorkBar:

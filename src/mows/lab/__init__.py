@@ -44,7 +44,7 @@ from mows.lab.model.effects import Effect, Parameter
 from mows.lab.model.frequency_model import FitResult, FrequencyModel
 from mows.lab.model.plugins import effect, load_plugins
 from mows.lab.report.html_report import write_html as write_report
-from mows.lab.report.lab_report import LabReport, analyse, analyse_sweep
+from mows.lab.report.lab_report import LabReport, analyse, analyse_discovering, analyse_sweep
 
 __all__ = [
     "CATALOG",
@@ -62,6 +62,7 @@ __all__ = [
     "TableError",
     "Verdict",
     "analyse",
+    "analyse_discovering",
     "analyse_sweep",
     "catalog",
     "diagnose",

@@ -268,6 +268,7 @@ class ArcPotential:
         lever_m: ArrayLike | None = None,
         damping_per_s: ArrayLike | None = None,
         energy_j: ArrayLike | None = None,
+        magnet_offset_m: ArrayLike | None = None,
         nodes: int = LOCAL_NODES,
         half_width_rad: float = DEFAULT_HALF_WIDTH_RAD,
     ) -> ArcPotential:
@@ -280,13 +281,14 @@ class ArcPotential:
         ``spring_nm_per_rad``, ``lever_m`` and ``damping_per_s`` override the probe's
         (per-row spring for thermal drift; free lever or damping in a fit). ``energy_j`` (B, nodes)
         is energy of any other origin at the nodes (:func:`chebyshev_nodes_rad`), added to W.
+        ``magnet_offset_m`` (B, 3) puts the magnet off the lever's axis (:func:`arc_displacement_m`;
+        the expansion is still at its rest position); the moment stays along the lever.
         """
         theta = chebyshev_nodes_rad(half_width_rad, nodes)
         lever = probe.lever_m if lever_m is None else np.asarray(lever_m, float)
         field = np.asarray(field_t, float)
         u = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], -1)  # (n, 3)
-        dr = np.stack([np.cos(theta) - 1.0, np.sin(theta), np.zeros_like(theta)], -1)
-        dr = np.multiply.outer(np.asarray(lever), dr) if np.ndim(lever) else lever * dr
+        dr = arc_displacement_m(theta, lever, magnet_offset_m)
         b_along_arc = np.broadcast_to(field[..., None, :], np.broadcast_shapes(field[..., None, :].shape, dr.shape))
         # G·δr and ½·H:δr δr as batched matrix products (einsum's broadcast loops are ~5× slower).
         if gradient_t_per_m is not None:
@@ -299,11 +301,45 @@ class ArcPotential:
         if gravity_m_per_s2 is not None:
             weight = probe.magnet_mass_kg * np.asarray(gravity_m_per_s2, float)
             energy = energy - np.einsum("nj,...j->...n", u, weight) * np.asarray(lever)[..., None]
+            if magnet_offset_m is not None:  # the offset turns with the lever: its height changes too
+                energy = energy - np.einsum("...nj,...j->...n", _turned(theta, magnet_offset_m), weight)
         if energy_j is not None:
             energy = energy + np.asarray(energy_j, float)
         spring = probe.spring_nm_per_rad if spring_nm_per_rad is None else spring_nm_per_rad
         damping = probe.damping_per_s if damping_per_s is None else damping_per_s
         return cls(spring, probe.inertia_kgm2, damping, energy, half_width_rad)
+
+
+def arc_displacement_m(
+    theta_rad: np.ndarray, lever_m: ArrayLike, magnet_offset_m: ArrayLike | None = None
+) -> np.ndarray:
+    """δr(θ), the magnet's displacement from its rest position at deflections θ (n,), probe
+    frame, m: shape (n, 3), or B + (n, 3) for a per-row lever or offset.
+
+    The magnet sits at (l, 0, 0) + ``magnet_offset_m`` (along, across, normal) from the pivot in
+    the lever's own frame, which turns with θ about z': with the arm r = (l + a, c, n),
+
+        δr(θ) = Rz(θ)·r − r.
+    """
+    unit = np.stack([np.cos(theta_rad) - 1.0, np.sin(theta_rad), np.zeros_like(theta_rad)], -1)
+    dr: np.ndarray = np.multiply.outer(np.asarray(lever_m), unit) if np.ndim(lever_m) else np.asarray(lever_m) * unit
+    if magnet_offset_m is not None:
+        dr = dr + _turned(theta_rad, magnet_offset_m) - np.asarray(magnet_offset_m, float)[..., None, :]
+    return dr
+
+
+def _turned(theta_rad: np.ndarray, offset_m: ArrayLike) -> np.ndarray:
+    """Rz(θ)·offset, offsets B + (3,) at deflections θ (n,): B + (n, 3)."""
+    offset = np.asarray(offset_m, float)[..., None, :]
+    cos, sin = np.cos(theta_rad)[:, None], np.sin(theta_rad)[:, None]
+    return np.concatenate(
+        [
+            cos * offset[..., :1] - sin * offset[..., 1:2],
+            sin * offset[..., :1] + cos * offset[..., 1:2],
+            np.broadcast_to(offset[..., 2:], np.broadcast_shapes(offset[..., 2:].shape, cos.shape)),
+        ],
+        -1,
+    )
 
 
 # --- the balances, row by row (compiled) -----------------------------------------------------

@@ -344,7 +344,7 @@ def _free_form(fit: FitResult, effect: Effect, test: Signature, refit: bool) -> 
     """(Form, parameters) of ``effect`` added with its parameters free."""
     k = len(effect.parameters)
     if refit:
-        after = (fit.model + effect).fit(fit.table, start=np.concatenate([fit.effect_values, np.zeros(k)]))
+        after = (fit.model + effect).fit(fit.table, start=np.concatenate([fit.effect_values, effect.off_values]))
         chi2_after, dof_after, parameters = after.chi2, after.dof, after.effect_parameters(effect.name)
     else:
         after = None
@@ -352,7 +352,7 @@ def _free_form(fit: FitResult, effect: Effect, test: Signature, refit: bool) -> 
         std = np.sqrt(np.clip(np.diag(np.linalg.pinv(test.projected.T @ test.projected)), 0, None))
         chi2_after, dof_after = fit.chi2 - test.statistic, fit.dof - test.rank
         parameters = [
-            FittedParameter(p.name, float(v), float(e), p.unit) for p, v, e in zip(effect.parameters, step, std)
+            FittedParameter(p.name, p.off + float(v), float(e), p.unit) for p, v, e in zip(effect.parameters, step, std)
         ]
     raw = Form(False, math.nan, math.nan, chi2_after, dof_after, after, gain_chi2=fit.chi2 - chi2_after, added=k)
     return dataclasses.replace(raw, rank=test.rank).at_dispersion(1.0, fit.n), parameters

@@ -26,7 +26,8 @@ import numpy as np
 import scipy.special
 
 from mows.lab.data.table import MeasurementTable
-from mows.lab.model.configuration import Configuration, base_start_swing_rad, ringdown_nodes
+from mows.lab.model.configuration import Configuration
+from mows.lab.model.factors import base_start_swing_rad, ringdown_nodes
 from mows.lab.model.frequency_model import FrequencyModel, table_start_swing_rad
 from mows.lab.model.least_squares import FitResult, parameter_values
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2

@@ -8,7 +8,8 @@ right at mT fields. Every effect is *off* when all its parameters are 0 and is s
 constants (gravity: a·g·l; static deflection: m, kM and By'), the free parameter is the unknown
 geometry or a dimensionless strength with 1 = the physics as predicted; an effect whose size is
 known entirely (``physical``) can also be held at it, with no free parameter
-(:meth:`Effect.at_physics`, labelled ``name (at physics)``).
+(:meth:`Effect.at_physics`, labelled ``name (at physics)``). A plugin may declare another value as
+its parameter's "off" (:attr:`Parameter.off`).
 
 The built-in effects are in :mod:`mows.lab.model.catalog`, user plugins are read by
 :mod:`mows.lab.model.plugins`; effects join a model with ``FrequencyModel(probe) + effect``
@@ -42,8 +43,9 @@ ORIENTATION, SOURCES, COMPONENTS, MECHANICS, READOUT = range(5)
 
 @dataclasses.dataclass(frozen=True)
 class Parameter:
-    """A free parameter: value 0 is "effect off"; ``lower``/``upper`` are physical bounds;
-    ``scale`` a typical size (finite-difference step and parameter scaling)."""
+    """A free parameter: value ``off`` (0 unless declared, e.g. a stiffness off at the spring
+    the model already has) is "effect off"; ``lower``/``upper`` are physical bounds; ``scale`` a
+    typical size (finite-difference step and parameter scaling)."""
 
     name: str
     unit: str
@@ -51,12 +53,13 @@ class Parameter:
     upper: float
     scale: float
     description: str = ""
+    off: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (self.lower <= 0.0 <= self.upper and self.lower < self.upper and self.scale > 0):
+        if not (self.lower <= self.off <= self.upper and self.lower < self.upper and self.scale > 0):
             raise ValueError(
-                f"parameter {self.name}: needs lower ≤ 0 ≤ upper, lower < upper and scale > 0 "
-                f"(got {self.lower}, {self.upper}, {self.scale})"
+                f"parameter {self.name}: needs lower ≤ off value ≤ upper, lower < upper and scale > 0 "
+                f"(got {self.lower}, {self.off}, {self.upper}, {self.scale})"
             )
 
 
@@ -100,6 +103,11 @@ class Effect:
         return tuple(p.name for p in self.parameters)
 
     @property
+    def off_values(self) -> np.ndarray:
+        """The parameter values at which the effect is absent (fit order)."""
+        return np.array([p.off for p in self.parameters], float)
+
+    @property
     def fixed(self) -> bool:
         """True for an effect held at its physical values (no free parameter)."""
         return self.free is not None
@@ -136,7 +144,7 @@ def untestable_reason(effect_: Effect, table: MeasurementTable, probe: Probe) ->
         return f"needs column{'s' if len(missing) > 1 else ''} {', '.join(missing)}"
     row = table.subset(np.arange(1))  # effects read a row's own columns: one row says it
     try:
-        effect_.apply(Configuration.base(row, probe), row, probe, *[0.0] * len(effect_.parameters))
+        effect_.apply(Configuration.base(row, probe), row, probe, *effect_.off_values)
     except MissingColumnError as error:
         return f"needs column {error.column}"
     return None

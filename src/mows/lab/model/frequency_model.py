@@ -8,7 +8,7 @@ effect brings parameters with units and physical bounds like lmfit. The predicti
 
     f_i = f00·h_i(p) + c_i(p),
 
-with h from the potential (:func:`mows.lab.model.configuration.frequency_factor`), p the effect parameters
+with h from the potential (:func:`mows.lab.model.factors.frequency_factor`), p the effect parameters
 and c the additive frequency contributions of plugins. The base model has no effect: h is
 Eq. 6, √(1 + (m·Bx' + l·m·Gx'x')/kM), with the table's reference field and gradient.
 
@@ -38,15 +38,9 @@ import scipy.optimize
 
 from mows.lab.data.probe_rows import ProbeSet, probe_parts
 from mows.lab.data.table import PROBE, MeasurementTable
-from mows.lab.model.configuration import (
-    Configuration,
-    base_start_swing_rad,
-    default_window_s,
-    distinct_rows_of,
-    frequency_factor,
-    ringdown_nodes,
-)
+from mows.lab.model.configuration import Configuration, default_window_s, distinct_rows_of
 from mows.lab.model.effects import Effect, Parameter, untestable_reason
+from mows.lab.model.factors import base_start_swing_rad, frequency_factor, ringdown_nodes
 from mows.lab.model.least_squares import FitResult, Problem
 from mows.physics.probe import Probe
 
@@ -110,6 +104,11 @@ class FrequencyModel:
         return [(f"{e.name}.{p.name}", p) for e in self.effects for p in e.parameters]
 
     @property
+    def off_values(self) -> np.ndarray:
+        """The effect parameter values (fit order) at which every effect is absent."""
+        return np.concatenate([np.zeros(0)] + [e.off_values for e in self.effects])
+
+    @property
     def f00_names(self) -> list[str]:
         """The nuisance parameters: ``f00_hz``, or one ``probe_<id>.f00_hz`` per probe of a :class:`ProbeSet`."""
         if isinstance(self.probe, ProbeSet):
@@ -151,7 +150,7 @@ class FrequencyModel:
         row = table.subset(np.arange(1))
         recorder = _RecordingColumns(row.columns)
         object.__setattr__(row, "columns", recorder)
-        self._configuration(row, np.zeros(len(self.parameters)), self._require_probe())
+        self._configuration(row, self.off_values, self._require_probe())
         if isinstance(self.probe, ProbeSet):  # each probe's rows are evaluated with its own constants
             recorder.read.add(PROBE)
         return frozenset(name for name in recorder.read if table.has(name) and name not in MEASURED)
@@ -201,14 +200,14 @@ class FrequencyModel:
         rows: np.ndarray | None = None,
     ) -> FitResult:
         """Weighted least-squares fit to ``table`` (to its ``rows``, indices, when given: a
-        cross-validation fold); ``start`` = effect parameter values (default 0)."""
+        cross-validation fold); ``start`` = effect parameter values (default: every effect off)."""
         probe = self._require_probe()
         for effect in self.effects:
             reason = untestable_reason(effect, table, probe)
             if reason:
                 raise ValueError(f"effect {effect.name} cannot be fitted to this table: {reason}")
         problem = Problem(self, table, rows)
-        p0 = np.zeros(len(self.parameters)) if start is None else np.asarray(start, float)
+        p0 = self.off_values if start is None else np.asarray(start, float)
         x0 = np.concatenate([problem.best_f00(p0), p0])
         if x0.size == self.f00_count:  # f00 alone enters linearly: the closed form is the optimum
             return problem.result(x0, True, "f00 in closed form")
@@ -239,7 +238,7 @@ def _in_words(solution: scipy.optimize.OptimizeResult) -> str:
 
 def table_start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
     """Each row's start swing at the table's reference field and the probe's stop
-    (:func:`mows.lab.model.configuration.base_start_swing_rad`), evaluated once per
+    (:func:`mows.lab.model.factors.base_start_swing_rad`), evaluated once per
     configuration group of the published model."""
     distinct, inverse = FrequencyModel(probe).groups(table)
     found = np.empty(len(distinct))

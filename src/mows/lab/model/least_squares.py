@@ -326,10 +326,10 @@ class FitResult:
 
     def extension_columns(self, effect: Effect, table: MeasurementTable | None = None) -> np.ndarray:
         """d(weighted residual)/d(parameters of ``effect``) with ``effect`` added to this model at
-        0 (off) and the other parameters at their fitted values: the candidate's signature.
+        its off values and the other parameters at their fitted values: the candidate's signature.
         On ``table`` (default: the fitted table; e.g. a what-if variant of it)."""
         extended = self.model + effect
-        x = np.concatenate([self.values, np.zeros(len(effect.parameters))])
+        x = np.concatenate([self.values, effect.off_values])
         first = len(self.model.parameters) + self.model.f00_count
         return Problem(extended, self.table if table is None else table).columns(
             x, range(first, first + len(effect.parameters))
@@ -412,7 +412,7 @@ class FitResult:
         if self.status is FitStatus.BAD_FIT:
             lines.append(
                 f"  warning: {self.status.name}: the model has no real frequency at "
-                f"{rows_text(self.invalid_rows)} (mows.lab.model.configuration.unevaluable_rows says why)"
+                f"{rows_text(self.invalid_rows)} (mows.lab.model.factors.unevaluable_rows says why)"
             )
         elif not self.ok:
             lines.append(f"  warning: {self.status.name}: the fit did not converge ({self.message})")

@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import pathlib
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -35,11 +35,11 @@ from mows.lab.data.readers import from_sweep, load_table
 from mows.lab.data.reference import Reference
 from mows.lab.data.table import MeasurementTable, TableError
 from mows.lab.diagnosis.candidates import Candidate, physics_deviation
-from mows.lab.diagnosis.discovery import Discovery, discover
+from mows.lab.diagnosis.discovery import DiscoveredTerm, Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group
 from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import catalog, resolve
-from mows.lab.model.configuration import unevaluable_rows
+from mows.lab.model.factors import unevaluable_rows
 from mows.lab.model.frequency_model import FitResult, FrequencyModel
 from mows.lab.model.least_squares import FittedParameter, parameters_dict
 from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, search
@@ -49,6 +49,7 @@ from mows.sweep.runner import SweepMap
 
 CHECK_SIGMAS = 3.0  # a physical value further than this from its free fit is noted
 INCONSISTENT_SIGMAS = 5.0  # … and further than this makes a statistically adequate model inconsistent
+DISCOVERY_ROUNDS = 3  # terms beyond the catalog added one after another (analyse_discovering)
 
 
 @dataclasses.dataclass
@@ -212,9 +213,7 @@ def analyse(
     base = fit
     history = [history_step(fit, cross_validate)]
     for effect in resolve(list(effects or ()), available):
-        fit = (fit.model + effect).fit(
-            table, start=np.concatenate([fit.effect_values, np.zeros(len(effect.parameters))])
-        )
+        fit = (fit.model + effect).fit(table, start=np.concatenate([fit.effect_values, effect.off_values]))
         history.append(history_step(fit, cross_validate, f"add {effect.label}"))
     pool = list(available.values()) if rank else []
     steps = MAX_AUTO_STEPS if auto else 0
@@ -233,7 +232,7 @@ def analyse(
 
 def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:
     """The table without the rows the potential cannot evaluate, each named with the reason in
-    the notes (:func:`mows.lab.model.configuration.unevaluable_rows`); TableError when no row is left."""
+    the notes (:func:`mows.lab.model.factors.unevaluable_rows`); TableError when no row is left."""
     distinct, inverse = FrequencyModel(probe).groups(table)
     found = {}  # a reason holds for every row of its configuration
     for rows, member in probe_parts(distinct, probe):
@@ -310,6 +309,38 @@ def _check_note(check: PhysicsCheck) -> str:
         f"{check.effect} {state} {values}, {check.deviation_sigma:.1f}σ from its physical value: the "
         "physics as predicted misses something here, or the parameter absorbs another effect"
     )
+
+
+def analyse_discovering(
+    table: MeasurementTable,
+    probe: Probe,
+    save: Callable[[DiscoveredTerm], pathlib.Path],
+    effects: Iterable[str] = (),
+    plugins: Iterable[str | pathlib.Path] = (),
+    cross_validate: bool = True,
+    rounds: int = DISCOVERY_ROUNDS,
+) -> tuple[LabReport, list[DiscoveredTerm]]:
+    """:func:`analyse` with ``auto``, then, while the search beyond the catalog finds a term: the
+    strongest term's plugin saved by ``save`` (which returns its path), added after the effects
+    the model already holds, and the table analysed again, so that the report's history shows the
+    error falling through it. Stops after ``rounds`` terms, at a term already added, or when a
+    term added does not lower χ²/dof (its report is then not kept). Returns the last report and
+    the terms added, in order."""
+    plugins, added = list(plugins), list[DiscoveredTerm]()
+    report = analyse(table, probe, effects, auto=True, plugins=plugins, cross_validate=cross_validate)
+    for _ in range(rounds):
+        found = report.discovery
+        if found is None or not found.terms or found.terms[0].effect_name in {t.effect_name for t in added}:
+            break
+        term = found.terms[0]
+        trial_plugins = [*plugins, save(term)]
+        chosen = [*report.effects, term.effect_name]
+        trial = analyse(table, probe, chosen, auto=True, plugins=trial_plugins, cross_validate=cross_validate)
+        if not trial.chi2_dof < report.chi2_dof:
+            break
+        report, plugins = trial, trial_plugins
+        added.append(term)
+    return report, added
 
 
 def analyse_sweep(sweep: SweepMap, reference: Reference, probe: Probe, auto: bool = False) -> LabReport:

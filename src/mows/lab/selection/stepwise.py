@@ -201,7 +201,7 @@ def _physical_replacements(
         form = effect.at_physics() if effect.physical is not None else effect
         if len(form.parameters) > len(generic.parameters):
             continue
-        new = (reduced + form).fit(fit.table, start=np.concatenate([start, np.zeros(len(form.parameters))]))
+        new = (reduced + form).fit(fit.table, start=np.concatenate([start, form.off_values]))
         values = [p.value for p in new.effect_parameters(form.name)]
         inside = all(p.lower < v < p.upper for p, v in zip(form.parameters, values))
         if new.ok and inside and not conflicts(new, probe):

@@ -345,7 +345,7 @@ CASES = [
         "lab-reference-in-mt-as-t",
         ["lab", "compare", "{d}/sweep_reference_in_mt.csv"],
         2,
-        ["the ring-downs move 0.00", "Eq. 6", "in mT or µT given in T"],
+        ["the ring-downs move 0.00", "Eq. 6", "a factor 10^3 is a unit, the reference in mT given in T"],
     ),
     ("lab-std-not-physical", ["lab", "compare", "{d}/sweep_huge_std.csv"], 2, ["f_std_hz", "1/10 of f_hz"]),
     ("lab-probe-not-a-number", ["lab", "compare", "{d}/sweep_probe_words.csv"], 2, ["column 'probe'", "not a number"]),

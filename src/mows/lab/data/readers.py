@@ -138,6 +138,31 @@ def _drop_invalid_rows(
     return {k: v[keep] for k, v in columns.items()}, sorted(bad)
 
 
+def logged_at(path: str | os.PathLike[str], times_s: np.ndarray, column: str = "temperature_k") -> np.ndarray:
+    """``column`` of a logger's CSV (a header with ``t_s``, on the device clock of the bag's
+    stamps, and ``column``) at ``times_s``, interpolated linearly between its samples;
+    ValueError naming what is wrong: a missing column, a cell that is no finite number, times
+    that do not increase, or ``times_s`` outside the log's span (never extrapolated)."""
+    path = read_input(path)
+    with open(path, newline="", encoding="utf-8-sig") as handle:
+        rows = list(csv.DictReader(handle))
+    if not rows or not {"t_s", column} <= set(rows[0]):
+        raise ValueError(f"a log of t_s and {column} needs both columns in its header")
+    try:
+        times, values = (np.array([float(row[name]) for row in rows]) for name in ("t_s", column))
+    except (TypeError, ValueError):
+        raise ValueError(f"every t_s and {column} of the log must be a number") from None
+    if not (np.isfinite(times).all() and np.isfinite(values).all() and np.all(np.diff(times) > 0)):
+        raise ValueError(f"the log's t_s must increase and its t_s and {column} be finite numbers")
+    outside = np.flatnonzero((times_s < times[0]) | (times_s > times[-1]))
+    if outside.size:
+        raise ValueError(
+            f"the log spans t_s {times[0]:.6g} … {times[-1]:.6g} s, but ring-down {outside[0] + 1} is at "
+            f"{times_s[outside[0]]:.6g} s (device clock): a log of another run, or of another clock?"
+        )
+    return np.interp(times_s, times, values)
+
+
 def load_table(
     source: MeasurementTable | Mapping[str, Any] | str | os.PathLike[str],
     drop_invalid: bool = False,
@@ -252,7 +277,7 @@ def start_amplitudes_rad(
     """Each ring-down's start swing from RingdownFit messages (or fits), and notes of what was
     assumed or left out: the stop less the row's own |rest offset| where its fit determined it
     (:meth:`mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`, the rule of
-    :func:`mows.physics.ringdown_average.start_swing_rad`). The stop is pooled per sweep by a
+    :func:`mows.physics.ringdown_average.swing_from_stop_rad`). The stop is pooled per sweep by a
     median with outliers left out (every ring-down of a sweep starts from the same housing
     stop, and a single fit's θmax is rarely determined), else over all rows, else ``stop_rad``
     (the probe's). With ``probe_ids`` (one per fit) each probe's stop is its own housing's,

@@ -224,4 +224,3 @@ def _sweeps(fits: list[Estimated]) -> np.ndarray:
     first = [i for i, e in enumerate(fits) if i == 0 or e.window is not fits[i - 1].window]
     numbers = sweep_numbers(np.array([fits[i].window.theta0_rad for i in first]))
     return np.repeat(numbers, np.diff([*first, len(fits)]))
-

@@ -65,7 +65,7 @@ def _read_numeric(path: pathlib.Path) -> dict[str, np.ndarray] | None:
             with warnings.catch_warnings():  # a header without rows: said by _read_cells
                 warnings.simplefilter("ignore", UserWarning)
                 values = np.loadtxt(handle, delimiter=",", comments=None, quotechar='"', ndmin=2)
-    except (OSError, ValueError):  # ValueError: a cell that is no number, a short row, not UTF-8
+    except (OSError, ValueError, csv.Error):  # a cell that is no number, a short row, not UTF-8, too long
         return None
     if values.shape != (len(values), len(header)) or not len(values) or not np.isfinite(values).all():
         return None
@@ -76,9 +76,12 @@ def _read_cells(path: pathlib.Path, drop_invalid: bool) -> MeasurementTable:
     """:func:`read_csv` cell by cell: every problem named by column and row."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:  # -sig: Excel's byte-order mark
-            rows = list(csv.reader(handle))
+            reader = csv.reader(handle)
+            rows = list(reader)
     except OSError as error:
         raise TableError(f"cannot read {path}: {error.strerror}") from None
+    except csv.Error as error:  # a cell beyond the csv module's field limit (128 KiB): no number
+        raise TableError(f"{path}: line {reader.line_num}: {error}: not a table of numbers") from None
     rows = [row for row in rows if any(cell.strip() for cell in row)]
     if not rows:
         raise TableError(f"{path} is empty: expected a header row and data rows")

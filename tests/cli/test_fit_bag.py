@@ -8,6 +8,7 @@ import pytest
 from mows.cli import main as cli
 from mows.cli.calibrate_bag import SupplyTimeline
 from mows.device.recording.bags import read_bag
+from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import SegmentAssembler, block_from_message, fit_segment, window_from_message
 from mows.physics.fluxgate import FluxgatePair
@@ -73,8 +74,15 @@ def test_one_probe_is_fitted_as_before_the_estimators_stream_core_took_it(bag, t
         else:
             segments += assembler.add_block(block_from_message(item.message))
     pair = FluxgatePair.paper()
+    own = ProbeEntry(0, PAPER_PROBE, PAPER_PROBE.f00_hz)
+    options = FitOptions(theta_stop_rad=PAPER_PROBE.theta_stop_rad)
     direct = [
-        fit_segment(s, FitOptions.lever_aware(pair, PAPER_PROBE, s.window.theta0_rad), COIL_OFF_SKIP_S, 1.8)
+        fit_segment(
+            s,
+            [own.line(s.window.theta0_rad, pair, "difference", s.window.excitation_frequency_hz)],
+            COIL_OFF_SKIP_S,
+            options,
+        )[0]
         for s in segments
     ]
     table = tmp_path / "fits.csv"

@@ -15,6 +15,7 @@ from mows.bench.rig import DeviceTimeRig, max_duty_fraction
 from mows.bench.throughput import CAP_A
 from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, Phase
 from mows.device.cycle.tracking import TrackingLoop, TrackingSettings
+from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.ringdown import FitOptions
 from mows.estimate.segments import RingdownWindow, Segment, fit_segment
 from mows.sim.scenario import load_scenario
@@ -151,8 +152,9 @@ def test_a_saturated_stretch_inside_a_window_is_never_fitted_across():
     saturated[int(0.1 * fs) : int(0.12 * fs), 0] = True  # e.g. a passing disturbance
     samples[saturated] = 1e-5
     window = RingdownWindow(0, 0.3, theta0_rad=0.0, excitation_frequency_hz=probe.f00_hz)
-    fit = fit_segment(
-        Segment(window, 0, fs, samples, saturated, 0), FitOptions.lever_aware(scenario.sensors.pair, probe, 0.0)
+    line = ProbeEntry(0, probe, probe.f00_hz).line(0.0, scenario.sensors.pair, "difference", probe.f00_hz)
+    (fit,) = fit_segment(
+        Segment(window, 0, fs, samples, saturated, 0), [line], options=FitOptions(theta_stop_rad=probe.theta_stop_rad)
     )
     assert fit.ok, fit.report()
     first, last = round(fit.start_offset_s * fs), round(fit.start_offset_s * fs) + fit.n_samples

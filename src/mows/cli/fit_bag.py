@@ -120,7 +120,8 @@ def run(args) -> int:
     print(f"{len(ok)} of {len(fits)} {_fitted(fits)}")
     if args.csv and ok:
         with writing([args.csv], inputs, args.force) as outputs:
-            notes = write_table(outputs.temporaries[0], ok, probe, args.temperature_log)
+            named = bool(how.parameters.probes.strip())
+            notes = write_table(outputs.temporaries[0], ok, probe, named, args.temperature_log)
         print(f"{outputs.report()}: {len(ok)} rows")
         for note in notes:
             print(f"note: {note}")
@@ -130,10 +131,8 @@ def run(args) -> int:
 
 
 def _heading(estimated: Estimated) -> str:
-    """Its window and, of several probes, its probe at the probe's own θ0."""
+    """Its window and probe, at the probe's own θ0."""
     window = estimated.window
-    if estimated.probe_id is None:
-        return f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):7.2f}°"
     return (
         f"cycle {window.cycle_id} repeat {window.repeat_index} probe {estimated.probe_id} "
         f"θ0 {math.degrees(estimated.fit.theta0_rad):7.2f}°"
@@ -141,10 +140,9 @@ def _heading(estimated: Estimated) -> str:
 
 
 def _fitted(fits: list[Estimated]) -> str:
-    """What the count counts: ring-downs, or probes' fits in so many ring-downs."""
-    if all(estimated.probe_id is None for estimated in fits):
-        return "ring-downs fitted"
-    return f"probes' fits OK in {len({id(estimated.window) for estimated in fits})} ring-downs"
+    """What the count counts: ring-downs where each held one probe, else probes' fits in so many ring-downs."""
+    windows = len({id(estimated.window) for estimated in fits})
+    return "ring-downs fitted" if windows == len(fits) else f"probes' fits OK in {windows} ring-downs"
 
 
 def bag_fitting(args) -> BagFitting:
@@ -187,18 +185,18 @@ def check_ringdowns(path, fits: list[Estimated], how: BagFitting) -> None:
         raise ValueError(f"--coil-off-skip-s {skip_s:g} s skips the whole of every ring-down (longest {longest:g} s)")
 
 
-def write_table(path, fits: list[Estimated], probe: Probe, temperature_log=None) -> list[str]:
+def write_table(path, fits: list[Estimated], probe: Probe, named: bool, temperature_log=None) -> list[str]:
     """The OK fits as a model-lab table, numbered by sweep and with ``temperature_log`` joined
     where given (module docstring); returns notes of how the start swings were found.
 
     Every ring-down of one probe starts at the housing stop, so its swing is stop − |θs|
-    (:func:`mows.physics.ringdown_average.start_swing_rad`). θs comes from the first-principles
+    (:func:`mows.physics.ringdown_average.swing_from_stop_rad`). θs comes from the first-principles
     decomposition of all the fits as one sweep in one static field
     (:meth:`mows.sweep.record.SweepRecord.start_amplitudes_rad`) where that describes them
     (χ²/dof ≤ MAX_SWEEP_CHI2_DOF), else from each fit's own rest offset
     (:meth:`~mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`); the stop is pooled
-    over the fits that determined θmax, else the probe's. Fits of several probes, whose
-    multi-tone excitation need not swing them to the stop, are marked by the column ``probe``
+    over the fits that determined θmax, else the probe's. Fits of probes named by ``--probes``
+    (``named``), whose multi-tone excitation need not swing them to the stop, are marked by the column ``probe``
     and each probe's start swings come from its own fits, as those the estimator recorded
     (:func:`mows.lab.data.readers.start_amplitudes_rad`). The table is marked as the project's
     own (:func:`mows.lab.data.table.tool_table`)."""
@@ -210,7 +208,7 @@ def write_table(path, fits: list[Estimated], probe: Probe, temperature_log=None)
             for e in fits
         ]
     )
-    if fits[0].probe_id is not None:
+    if named:
         probe_ids = np.array([e.probe_id for e in fits], float)
         start, notes = start_amplitudes_rad([e.fit for e in fits], np.zeros(len(fits)), probe.theta_stop_rad, probe_ids)
         columns = record.table_columns(start) | {PROBE: probe_ids}

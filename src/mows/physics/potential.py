@@ -222,10 +222,10 @@ class ArcPotential:
     def start_swing_rad(self, stop_rad: ArrayLike) -> np.ndarray:
         """θmax of a ring-down released at the housing stop: the first harmonic of the swing that
         turns at the nearer stop, θstop − |θs| from the rest angle θs on the side θs turns to
-        (:func:`mows.physics.ringdown_average.start_swing_rad`); NaN where the stop lies inside
-        the deflection (no free swing) or the potential has no stable rest angle."""
+        (:func:`mows.physics.ringdown_average.swing_from_stop_rad` at the release); NaN where
+        the stop lies inside the deflection (no free swing) or the potential has no stable rest angle."""
         rest = self.rest_angle_rad()
-        distance = ringdown_average.start_swing_rad(np.asarray(stop_rad, float), rest)
+        distance = ringdown_average.swing_from_stop_rad(np.asarray(stop_rad, float), rest)
         return self.first_harmonic_rad(np.where(rest < 0.0, -distance, distance))
 
     def _balance(self, amplitude_rad: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

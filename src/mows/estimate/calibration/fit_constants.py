@@ -56,6 +56,7 @@ from mows.estimate.calibration.constants import (
 )
 from mows.estimate.calibration.predicted import frequencies, inertia_from, rows_of
 from mows.physics.probe import lever_from_inertia
+from mows.physics.ringdown_average import stop_from_swing_rad
 
 FIELD_UNIT_T = 1e-6  # fit units keep the normal equations well scaled: µT, Hz/mT, mm
 BETA_UNIT_HZ_PER_T = 1e3
@@ -123,7 +124,7 @@ def calibrate_probe(
     if not fit_lever:
         notes.append("no gradient points: the lever comes from J and the magnet mass alone, unchecked")
     damping, damping_var = _mean_damping(points)
-    swing, swing_std = _start_swing(points, known)
+    swing, swing_std = _housing_stop(points, known)
     unit_axis = axis / np.linalg.norm(axis)
     fixed_environment = np.zeros(3) if fit_environment else np.asarray(known.environment_field_t, float)
 
@@ -258,18 +259,21 @@ def _least_squares(residuals: Residuals, x0: np.ndarray, steps: np.ndarray) -> o
     return result
 
 
-def _start_swing(points: Sequence[CalibrationPoint], known: KnownConstants) -> tuple[float, float]:
+def _housing_stop(points: Sequence[CalibrationPoint], known: KnownConstants) -> tuple[float, float]:
     """The housing stop every ring-down starts from, and its standard uncertainty: as given
-    (``known.start_swing_rad``), else measured by the fits that determined both θmax and the
+    (``known.measured_stop_rad``), else measured by the fits that determined both θmax and the
     rest offset, θmax grown back by e^(δ·t) to the switch-off plus |θs − θ0|
-    (:func:`mows.physics.ringdown_average.start_swing_rad` inverted), their median with its
+    (:func:`mows.physics.ringdown_average.stop_from_swing_rad`), their median with its
     standard error from the median absolute deviation; with fewer than MIN_STOP_FITS of them
     the probe's stop ± STOP_PRIOR_STD_RAD.
     A homogeneous sweep cannot tell the stop from β0: this is what holds it."""
-    if known.start_swing_rad is not None:
-        return known.start_swing_rad, known.start_swing_std_rad
-    stops = np.array(
-        [p.amplitude_rad * math.exp(p.damping_per_s * p.start_offset_s) + abs(p.rest_offset_rad) for p in points]
+    if known.measured_stop_rad is not None:
+        return known.measured_stop_rad, known.measured_stop_std_rad
+    stops = stop_from_swing_rad(
+        [p.amplitude_rad for p in points],
+        [p.rest_offset_rad for p in points],
+        [p.damping_per_s for p in points],
+        [p.start_offset_s for p in points],
     )
     stops = stops[np.isfinite(stops)]
     if stops.size < MIN_STOP_FITS:  # a spread from fewer is no standard error

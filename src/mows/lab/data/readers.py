@@ -63,7 +63,7 @@ def _read_numeric(path: pathlib.Path) -> dict[str, np.ndarray] | None:
             with warnings.catch_warnings():  # a header without rows: said by _read_cells
                 warnings.simplefilter("ignore", UserWarning)
                 values = np.loadtxt(handle, delimiter=",", comments=None, quotechar='"', ndmin=2)
-    except (OSError, ValueError):  # ValueError: a cell that is no number, a short row, not UTF-8
+    except (OSError, ValueError, csv.Error):  # a cell that is no number, a short row, not UTF-8, too long
         return None
     if values.shape != (len(values), len(header)) or not len(values) or not np.isfinite(values).all():
         return None
@@ -74,9 +74,12 @@ def _read_cells(path: pathlib.Path, drop_invalid: bool) -> MeasurementTable:
     """:func:`read_csv` cell by cell: every problem named by column and row."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:  # -sig: Excel's byte-order mark
-            rows = list(csv.reader(handle))
+            reader = csv.reader(handle)
+            rows = list(reader)
     except OSError as error:
         raise TableError(f"cannot read {path}: {error.strerror}") from None
+    except csv.Error as error:  # a cell beyond the csv module's field limit (128 KiB): no number
+        raise TableError(f"{path}: line {reader.line_num}: {error}: not a table of numbers") from None
     rows = [row for row in rows if any(cell.strip() for cell in row)]
     if not rows:
         raise TableError(f"{path} is empty: expected a header row and data rows")
@@ -275,7 +278,7 @@ def start_amplitudes_rad(
     """Each ring-down's start swing from RingdownFit messages (or fits), and notes of what was
     assumed or left out: the stop less the row's own |rest offset| where its fit determined it
     (:meth:`mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`, the rule of
-    :func:`mows.physics.ringdown_average.start_swing_rad`). The stop is pooled per sweep by a
+    :func:`mows.physics.ringdown_average.swing_from_stop_rad`). The stop is pooled per sweep by a
     median with outliers left out (every ring-down of a sweep starts from the same housing
     stop, and a single fit's θmax is rarely determined), else over all rows, else ``stop_rad``
     (the probe's). With ``probe_ids`` (one per fit) each probe's stop is its own housing's,

@@ -57,12 +57,12 @@ PHYSICAL_COSINE = 0.95  # a plugin's signature at least this close to the term's
 
 
 def library_terms(factors: dict[str, np.ndarray], jacobian: dict[str, np.ndarray], weight: np.ndarray) -> list[Term]:
-    """Every channel times its monomials (:mod:`.library`), in library order: the physical
-    channels' columns w·∂f/∂p·x, the frequency's w·(x − x̄) (f00 takes a constant)."""
+    """Every channel of ``jacobian`` times its monomials (:mod:`.library`), in library order: the
+    physical channels' columns w·∂f/∂p·x, the frequency's w·(x − x̄) (f00 takes a constant)."""
     n = len(weight)
     found = []
-    for channel in CHANNELS:
-        for chosen in monomials(factors, harmonics=channel is FREQUENCY):
+    for channel in (channel for channel in CHANNELS if channel.name in jacobian):
+        for chosen in monomials(factors, channel.excludes):
             values = monomial_values(factors, chosen, n)
             column = weight * (values - values.mean()) if channel is FREQUENCY else jacobian[channel.name] * values
             found.append(Term(channel, chosen, column))
@@ -98,7 +98,10 @@ def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) 
     jacobian = unit_columns(fit.jacobian[kept])
     model_basis = orthonormal_basis(jacobian)
     factors = factor_values(table, probe)
-    searched = searchable(library_terms(factors, jacobians(fit, table, weight), weight), model_basis)
+    # The screen (stand-ins beside which catalog effects are judged, once per candidate of every
+    # step) searches the frequency alone: the channels' Jacobians cost a model evaluation each.
+    channels = CHANNELS if plugins else (FREQUENCY,)
+    searched = searchable(library_terms(factors, jacobians(fit, table, weight, channels), weight), model_basis)
     residual = Residual(fit.weighted_residual[kept], jacobian, model_basis.shape[1], cv_folds(table))
     means = factor_centres({name: table.columns[name] for name in factors if factor(name).centred}, probe)
     search = _Search(fit, probe, table, residual, searched, means, weight)

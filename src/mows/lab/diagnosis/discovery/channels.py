@@ -18,9 +18,10 @@ through the shape of the energy, not through a moment or a spring that knows it)
 takes no field (a spring that follows the field is a magnetic energy: the moment or an added
 energy). The frequency, the last resort, takes them all.
 
-The channels are listed in library order: of terms the rows cannot tell apart the first is kept
-(:func:`mows.lab.diagnosis.discovery.search.searchable`), so physics comes before the readout
-term, and the simplest physics before the more particular.
+The channels are listed in library order: of terms of one degree that the rows cannot tell apart
+the first is kept (:func:`mows.lab.diagnosis.discovery.search.library_terms`), so physics comes
+before the readout term, the simplest physics before the more particular, and a turned probe
+before a field that turns with it (a torque across the lever moves the rest angle as a turn does).
 """
 
 from __future__ import annotations
@@ -157,6 +158,11 @@ CHANNELS = (
         frozenset({"angle", "swing", "field", "field_z", "gradient"}),
     ),
     Channel(
+        "angle", "angle_offset_rad", "offset_rad", "rad", 1e-7, ORIENTATION, _angle, "{value}",
+        "the probe's angle measured optically, or a reversed field (an angle turns the field's pattern, "
+        "a field adds to it)",
+    ),
+    Channel(
         "field_along", "field_offset_t", "b_t", "T", 1e-9, MECHANICS, _field_along,
         _PER_ROW + " * " + _ALONG,
         "a magnetometer at the probe's position as the stage turns (a field that turns with the probe)",
@@ -173,11 +179,6 @@ CHANNELS = (
     Channel(
         "field_y", "field_offset_t", "b_t", "T", 1e-9, MECHANICS, _field_y, "np.multiply.outer({value}, (0.0, 1.0))",
         "a magnetometer at the probe's position (a field fixed in the lab, one that the reference misses)",
-    ),
-    Channel(
-        "angle", "angle_offset_rad", "offset_rad", "rad", 1e-7, ORIENTATION, _angle, "{value}",
-        "the probe's angle measured optically, or a reversed field (an angle turns the field's pattern, "
-        "a field adds to it)",
     ),
     Channel(
         "magnet_along", "magnet_offset_m", "d_m", "m", 1e-7, MECHANICS, _magnet_along,

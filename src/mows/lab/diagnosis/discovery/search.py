@@ -12,6 +12,10 @@ through the plugin's own signature (:meth:`FitResult.extension_columns`); the si
 channel term is its column, so the two agree, and where they do not (|cos| <
 :data:`PHYSICAL_COSINE`), or the plugin interface has no output for the channel, the plugin is the
 additive frequency term closest to it, and the term says why.
+
+Of the readings the rows cannot tell apart, the simplest is reported (:func:`simplest`: the lowest
+degree of the monomial), and the others are listed beside it with the measurement that would tell
+them apart (:func:`mows.lab.diagnosis.discovery.readings.alternatives`).
 """
 
 from __future__ import annotations
@@ -66,7 +70,26 @@ def library_terms(factors: dict[str, np.ndarray], jacobian: dict[str, np.ndarray
             values = monomial_values(factors, chosen, n)
             column = weight * (values - values.mean()) if channel is FREQUENCY else jacobian[channel.name] * values
             found.append(Term(channel, chosen, column))
-    return found
+    # Of terms the rows cannot tell apart the first is kept: the lowest degree first (an angle
+    # that follows T before a field along the lever that follows B⊥·T), then the channels' order.
+    return sorted(found, key=lambda term: len(term.factors))
+
+
+def simplest(searched: Searched, passed: Refit) -> list[int]:
+    """The terms of ``passed``, each replaced by the first term in library order (the lowest
+    degree, then the channels' order) that the rows cannot tell from it: swapping them changes χ²
+    by less than :data:`mows.lab.diagnosis.discovery.readings.DISTINGUISH_CHI2`. A physical
+    channel is never replaced by the additive frequency."""
+    chosen = list(passed.chosen)
+    physical = np.array([term.channel is not FREQUENCY for term in searched.terms])
+    for i, j in enumerate(passed.chosen):
+        cosine = np.abs(searched.unit.T @ searched.unit[:, j])
+        close = passed.gain_chi2[i] * (1.0 - cosine**2) <= readings.DISTINGUISH_CHI2
+        close &= physical | (not physical[j])
+        candidates = [int(k) for k in np.flatnonzero(close[:j]) if k not in chosen]
+        if candidates:
+            chosen[i] = candidates[0]
+    return chosen
 
 
 @dataclasses.dataclass
@@ -111,6 +134,8 @@ def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) 
     rng = np.random.default_rng(seed)
     frequencies = selection_frequencies(searched, residual.values, jacobian, units, rng, resamples)
     passed = significant(searched, [int(j) for j in np.flatnonzero(frequencies >= STABLE_FRACTION)], residual)
+    if passed.chosen and (simpler := simplest(searched, passed)) != passed.chosen:
+        passed = significant(searched, simpler, residual)
     found = sorted(
         (_term(search, passed, i, frequencies, plugins) for i in range(len(passed.chosen))),
         key=lambda t: -t[0].cv_gain_chi2,

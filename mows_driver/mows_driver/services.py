@@ -7,7 +7,7 @@ or its shortcut, the service ``~/run_cycle`` (RunCycle). Both run the same corou
 awaits the streaming thread (which completes the cycle) in a reentrant group, so that the
 emergency stop and the parameter services are served meanwhile. A cycle ends early, coils off
 at the device's next sample, when its goal is cancelled or when every node that may wait for
-it has left the graph (``mows_driver.requesters``). ``set_field_current`` awaits the supply's
+it has left the graph (``mows_ros.requesters``). ``set_field_current`` awaits the supply's
 ramp the same way.
 
 Names are node-private (``/driver/run_cycle`` in the root namespace); the names of the
@@ -33,9 +33,9 @@ from mows_driver.messages import (
     supply_response,
 )
 from mows_driver.parameters import cycle_request_problem, supply_problem
-from mows_driver.requesters import RequesterWatch
 from mows_ros.awaitables import completer
 from mows_ros.goals import action_servers
+from mows_ros.requesters import RequesterWatch
 from mows_ros.wall import steady_timer
 
 RUN_CYCLE_SERVICE = "~/run_cycle"
@@ -83,7 +83,7 @@ class DriverServices:
         except ValueError as refused:
             self._log.warning(f"cycle refused: {refused}")
             return CycleOutcome(False, f"cycle refused: {refused}", 0, float("nan"), 0)
-        self._watched[cycle_id] = RequesterWatch(self._node, asked_through)
+        self._watched[cycle_id] = RequesterWatch(self._node, (asked_through,))
         started(cycle_id)
         try:
             outcome = await finished

@@ -7,9 +7,18 @@ from mows_ros.diagnostics import Health
 
 
 def sweep_health(runner: SweepRunner) -> Health:
-    """WARN with the reason while the last sweep failed; otherwise OK with the last decomposition's report."""
-    failure = runner.last_failure
-    values = {"state": runner.state, "sweeps": runner.sweeps, "last_failure": failure}
+    """WARN with the reason while the last sweep failed; OK with how it ended when it was cancelled;
+    otherwise OK with the last decomposition's report."""
+    failure, cancel = runner.last_failure, runner.last_cancel
+    values = {
+        "state": runner.state,
+        "sweeps": runner.sweeps,
+        "last_failure": failure,
+        "cancels": runner.cancels,
+        "last_cancel": cancel,
+    }
     if failure:
         return Health(DiagnosticStatus.WARN, f"the last sweep failed: {failure}", values)
+    if cancel:
+        return Health(DiagnosticStatus.OK, f"the last sweep was {cancel}", values)
     return Health(DiagnosticStatus.OK, runner.last, values)

@@ -68,7 +68,7 @@ def turn_feedback_msg(theta0_rad: float) -> RotationSweep.Feedback:
 def decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
     d, record = sweep.decomposition, sweep.record
     msg = SweepDecomposition(sweep_id=sweep.sweep_id, model=d.model, message=d.message, status=int(d.status))
-    msg.probe_id = sweep.probe_id
+    msg.probe_id, msg.cycle_ids = sweep.probe_id, list(sweep.cycle_ids)
     msg.header.frame_id = frame_id
     # A probe of a multi-probe sweep may have no ring-down at all: its stamp is then unknown (0).
     stamps.set_nanoseconds(msg.header.stamp, max((p.stamp_ns for p in record.points), default=0))

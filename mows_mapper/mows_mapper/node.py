@@ -8,7 +8,10 @@ cycle's fits (``/mows/ringdown``) as feedback; at the end the decomposition, and
 :func:`mows.sweep.publication.publication` says to publish: ``/mows/sweep`` (one per probe with
 several ``probes``), ``/mows/field_map`` of several probes, and with ``reference_scenario`` the
 model lab's ``/mows/model_report`` (docs/nodes.md, docs/multi_probe.md). With ``orientation``
-manual each cycle waits for the operator's ``~/confirm_orientation`` (std_srvs/Trigger).
+manual each cycle waits for the operator's ``~/confirm_orientation`` (std_srvs/Trigger). A sweep
+whose client has left the graph (``mows_ros.requesters``) is cancelled, its running cycle with
+it, and ends aborted (it was never asked to cancel); every cancel and abort is logged and counted
+on /diagnostics.
 
 The node translates only. Everything runs on one thread: the action awaits the driver, the fits
 and the CPU-bound decomposition and lab (in a worker thread) as a coroutine, so fits, cancels and
@@ -36,10 +39,13 @@ from mows_ros.operator import OperatorTurns
 from mows_ros.params import parameter_values
 from mows_ros.probe import probe_of
 from mows_ros.process import run_node
+from mows_ros.requesters import RequesterWatch, send_goal_services
+from mows_ros.wall import steady_timer
 
 NODE_NAME = "mapper"
 SERVICE_WAIT_S = 5.0  # longest wait for the driver's measurement-cycle action to appear
 ACTIONS = ("~/rotation_sweep", "mows/mapper/rotation_sweep")  # the node's own, the previous release's
+WATCH_S = 0.1  # how often a running sweep looks for its client in the graph
 
 
 class MapperNode(MowsNode):
@@ -73,9 +79,22 @@ class MapperNode(MowsNode):
         return None
 
     def _cancel(self, _) -> CancelResponse:
-        self._runner.cancel()
-        self._driver.cancel()
+        self._cancel_sweep()
         return CancelResponse.ACCEPT
+
+    def _cancel_sweep(self, reason: str = "") -> None:
+        """The runner told, the running cycle cancelled, and the fits of a cycle that has
+        ended no longer awaited: the sweep ends at once."""
+        self._runner.cancel(reason)
+        self._driver.cancel()
+        self._driver.deliver(self._runner.fits_time_up())
+
+    def _watch(self, watch: RequesterWatch) -> None:
+        """Cancel the sweep once every client that may wait for it has left the graph."""
+        if not self._runner.cancelled() and watch.gone():
+            reason = f"every node that asked for it through {watch.service_name} has left"
+            self.get_logger().warning(f"sweep cancelled, its cycle with it: {reason}")
+            self._cancel_sweep(reason)
 
     # --- the sweep ------------------------------------------------------------------------
     async def _execute(self, goal_handle):
@@ -85,6 +104,8 @@ class MapperNode(MowsNode):
             goal_handle.abort()
             return result
         self.get_logger().info("sweep goal accepted")
+        watch = RequesterWatch(self, send_goal_services(self, ACTIONS))
+        timer = steady_timer(self, WATCH_S, lambda: self._watch(watch), callback_group=self._driver.group)
         try:
             step = self._runner.begin()
             while step.finished is None:
@@ -96,9 +117,13 @@ class MapperNode(MowsNode):
             result = messages.result_msg(outcome, self._param("frame_id"), plan.per_probe)
             await self._publish(plan)
         finally:  # an exception must not leave the runner busy for good
+            self.destroy_timer(timer)
             self._runner.abandon("the sweep ended unexpectedly (see the log)")
-        if not (outcome.ok or outcome.cancelled):
-            self.get_logger().warn(f"sweep aborted: {outcome.message}")
+        # One call site per severity: rclpy refuses to change a call site's severity.
+        if outcome.cancelled:
+            self.get_logger().info(f"sweep {self._runner.last_cancel}")
+        elif not outcome.ok:
+            self.get_logger().warning(f"sweep aborted: {outcome.message}")
         end_goal(goal_handle, outcome.ok, outcome.cancelled)
         return result
 
@@ -122,7 +147,8 @@ class MapperNode(MowsNode):
     async def _run_cycle(self, cycle: CycleRequest) -> CycleAnswer:
         if not await until(self, self._driver.ready, SERVICE_WAIT_S):
             return CycleAnswer(problem="the driver's measurement_cycle action is not available")
-        return cycle_failed(await self._driver.run(cycle, self._param("cycle_timeout_s")))
+        answer = await self._driver.run(cycle, self._param("cycle_timeout_s"), self._runner.cancelled)
+        return cycle_failed(answer)
 
     async def _publish(self, plan: Publication) -> None:
         """The sweep's maps (:class:`MapperOutputs`), then the model lab's report on the first."""

@@ -26,13 +26,21 @@ from mows_ros.qos import RESULT_QOS
 CYCLE_ACTION = "driver/measurement_cycle"  # the driver's, in the caller's namespace
 GOAL_ANSWER_S = 10.0  # longest wait for the driver to accept a goal (it answers in milliseconds)
 FITS_HEARD_S = 10.0  # longest wait, before a cycle, for discovery to match a publisher of the fits
+CANCELLED_BEFORE = "cancelled before the cycle was asked for"
 
 
 def cycle_goal(request: CycleRequest) -> MeasurementCycle.Goal:
-    """A cycle of ``request.repeats`` ring-downs at ``request.theta0_rad``; tuning steps, gap
-    and repeats the request leaves open (None) are the driver's parameters (−1)."""
+    """A cycle of ``request.repeats`` ring-downs at ``request.theta0_rad`` (turned by hand when the
+    request says so); tuning steps, gap and repeats the request leaves open (None) are the
+    driver's parameters (−1)."""
     repeats = -1 if request.repeats is None else int(request.repeats)
-    return MeasurementCycle.Goal(theta0_rad=float(request.theta0_rad), repeats=repeats, tuning_steps=-1, gap_s=-1.0)
+    return MeasurementCycle.Goal(
+        theta0_rad=float(request.theta0_rad),
+        repeats=repeats,
+        tuning_steps=-1,
+        gap_s=-1.0,
+        turned_by_hand=request.turned_by_hand,
+    )
 
 
 def cycle_answer(result: MeasurementCycle.Result) -> CycleAnswer:
@@ -66,15 +74,21 @@ class DriverCycles:
         """Whether discovery has matched a publisher of the fits (an estimator) to this node."""
         return self._fit_subscription.get_publisher_count() > 0
 
-    async def run(self, request: CycleRequest, timeout_s: float) -> CycleAnswer:
+    async def run(
+        self, request: CycleRequest, timeout_s: float, cancelled: Callable[[], bool] = lambda: False
+    ) -> CycleAnswer:
         """The driver's answer to ``request``: waiting up to ``timeout_s`` for the
-        action to appear and again for the cycle, which is cancelled when it takes longer."""
+        action to appear and again for the cycle, which is cancelled when it takes longer. A
+        cancel of the caller's (``cancelled()``) that came before the goal was sent sends none;
+        one that came while it was being sent cancels it once the driver has it."""
         if not await until(self._node, self.ready, timeout_s):
             return CycleAnswer(problem=f"the driver's {CYCLE_ACTION} action did not appear within {timeout_s:g} s")
         # Fits are volatile: those published before discovery matches this node are never heard,
         # and a loaded machine takes seconds. Without an estimator the cycle still runs; the
         # caller's wait for its fits then reports them missing.
-        await until(self._node, self.hears_fits, FITS_HEARD_S)
+        await until(self._node, lambda: self.hears_fits() or cancelled(), FITS_HEARD_S)
+        if cancelled():
+            return CycleAnswer(problem=CANCELLED_BEFORE)
         goal_id = UUID(uuid=list(uuid.uuid4().bytes))
         sent = self._client.send_goal_async(cycle_goal(request), goal_uuid=goal_id)
         if await within(self._node, sent, GOAL_ANSWER_S):
@@ -88,6 +102,8 @@ class DriverCycles:
             accepted = MeasurementCycle.Impl.SendGoalService.Response(accepted=True)
             handle = ClientGoalHandle(self._client, goal_id, accepted)
         self._running = handle
+        if cancelled():  # cancel() came while the goal was on its way: nothing to cancel then
+            handle.cancel_goal_async()
         try:
             result = handle.get_result_async()
             if not await within(self._node, result, timeout_s):
@@ -103,6 +119,10 @@ class DriverCycles:
         """Cancel the cycle awaited now, if any (its answer then says it was cancelled)."""
         if self._running is not None:
             self._running.cancel_goal_async()
+
+    def deliver(self, step) -> None:
+        """Resume the coroutine awaiting :meth:`fits` with ``step`` (None: nothing), as a fit would."""
+        self._fits_in.deliver(step)
 
     async def fits(self, timeout_s: float, time_up: Callable[[], object]):
         """The first non-None answer of ``on_fit`` from now, or ``time_up()``'s after ``timeout_s``."""

@@ -37,9 +37,13 @@ def action_servers(
 
 
 def end_goal(goal_handle, succeeded: bool, cancelled: bool) -> None:
-    """End ``goal_handle`` as cancelled (whatever else), succeeded or aborted."""
-    if cancelled:
+    """End ``goal_handle`` as cancelled (whatever else), succeeded or aborted. A goal the node
+    cancelled itself, its client gone (``mows_ros.requesters``), was never asked to cancel and
+    cannot end CANCELED (the action's state machine): it ends aborted."""
+    if cancelled and goal_handle.is_cancel_requested:
         goal_handle.canceled()
+    elif cancelled:
+        goal_handle.abort()
     elif succeeded:
         goal_handle.succeed()
     else:

@@ -9,8 +9,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from mows_driver import requesters
-from mows_driver.requesters import UNSEEN_S, RequesterWatch
+from mows_ros import requesters
+from mows_ros.requesters import UNSEEN_S, RequesterWatch
 
 pytestmark = pytest.mark.ros
 
@@ -41,7 +41,7 @@ def clock(monkeypatch):
 def test_a_cycle_runs_while_one_of_its_requesters_stays(clock):
     graph = Graph()
     graph.show(b"mapper", b"cli")
-    watch = RequesterWatch(graph, SERVICE)
+    watch = RequesterWatch(graph, (SERVICE,))
     graph.show(b"mapper", b"another")  # the command-line client left, another came
     clock.s += 60
     assert not watch.gone()
@@ -51,7 +51,7 @@ def test_a_cycle_runs_while_one_of_its_requesters_stays(clock):
 
 def test_a_requester_seen_a_moment_after_its_request_is_watched(clock):
     graph = Graph()
-    watch = RequesterWatch(graph, SERVICE)
+    watch = RequesterWatch(graph, (SERVICE,))
     clock.s += UNSEEN_S / 2
     assert not watch.gone()  # not yet shown: too early to tell
     graph.show(b"cli")
@@ -63,7 +63,7 @@ def test_a_requester_seen_a_moment_after_its_request_is_watched(clock):
 
 def test_a_requester_never_seen_is_taken_as_gone_after_the_graph_had_time(clock):
     graph = Graph()
-    watch = RequesterWatch(graph, SERVICE)
+    watch = RequesterWatch(graph, (SERVICE,))
     clock.s += UNSEEN_S * 0.99
     assert not watch.gone()
     clock.s += UNSEEN_S * 0.02

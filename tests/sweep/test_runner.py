@@ -189,6 +189,7 @@ def test_a_manual_stage_asks_the_operator_before_each_cycle():
         assert runner.on_fit(driver.fit(step.turn)) is None  # a fit before the turn is no cycle's
         step = runner.on_turned()
         assert runner.turn_awaited is None and step.run_cycle.theta0_rad == turns[-1]
+        assert step.run_cycle.turned_by_hand  # the driver hears that the operator turned it
         step = driver.run(runner, step)
     assert turns == list(ANGLES)
     assert turn_prompt(math.radians(45.0)) == "turn the probe to θ0 = 45° and confirm"
@@ -241,3 +242,41 @@ def test_a_cancel_that_stops_the_running_cycle_ends_the_sweep_cancelled_not_fail
     assert step.finished.cancelled and not step.finished.ok
     assert step.finished.message == "cancelled during orientation 0 (0.0°)"
     assert runner.last_failure == ""
+
+
+def test_a_cancel_during_the_last_orientation_ends_the_sweep_without_a_map():
+    """A cancel that comes while the last cycle's fits are awaited (the cycle itself had ended)
+    must not let the sweep run on to a map nobody waits for."""
+    runner, step = started(SweepGoal(ANGLES[:5], 1))
+    driver = StandIn()
+    for _ in range(4):
+        step = driver.run(runner, step)
+    driver.cycle_id += 1
+    assert not runner.on_cycle(CycleAnswer(driver.cycle_id, 1)).run_cycle  # its fit is awaited
+    runner.cancel()
+    step = runner.on_fit(driver.fit(step.run_cycle.theta0_rad))
+    assert step.decompose is None and step.publish == ()
+    assert step.finished.cancelled and step.finished.message == "cancelled after 5 of 5 orientations"
+    assert runner.cancels == 1 and runner.last_cancel == step.finished.message and runner.state == "idle"
+
+
+def test_a_cancel_during_the_decomposition_publishes_nothing():
+    runner, step = started(SweepGoal(ANGLES[:5], 1))
+    driver = StandIn()
+    while step.decompose is None:
+        step = driver.run(runner, step)
+    runner.cancel()  # the decomposition is under way in a worker thread
+    step = runner.on_decomposed(step.decompose())
+    assert step.publish == () and step.finished.cancelled and not step.finished.ok
+    assert step.finished.message == "cancelled while decomposing 5 orientations"
+    assert runner.state == "idle" and runner.last_failure == ""
+
+
+def test_a_map_names_the_cycles_of_its_sweep():
+    runner, step = started(SweepGoal(ANGLES[:5], 1))
+    driver = StandIn()
+    driver.cycle_id = 40  # cycles run before the sweep are not its
+    while step.decompose is None:
+        step = driver.run(runner, step)
+    (sweep,) = runner.on_decomposed(step.decompose()).publish
+    assert sweep.cycle_ids == (41, 42, 43, 44, 45)

@@ -31,6 +31,10 @@ SUITES = {
     "latency": ("mows.bench.latency", "last sample of a ring-down to its published fit, in the node graph"),
     "latency_tracking": ("mows.bench.latency_tracking", "the same in the driver's tracking mode"),
     "multiprobe": ("mows.bench.multiprobe", "two probes in one ring-down: joint fit against the bound, 2–20 Hz apart"),
+    "workspace": (
+        "mows.bench.workspace",
+        "workspace map of an 8-coil system: B-and-G sweeps against a Hall-probe map, points to 0.05 %",
+    ),
     "throughput": (
         "mows.bench.throughput",
         "device seconds to σ ≤ 20 nT, 10 µT/m: paper, default, demo and adaptive sweeps; tracking rate",
@@ -77,6 +81,15 @@ QUICK: dict[str, dict[str, object]] = {
     "multiprobe": {"trials": 4, "separations_hz": (2.0, 10.0), "ratios": (1.0,)},
     # above the lab's subsample of mows.cli.lab.MAX_ROWS rows, so that the subsampling runs
     "lab_long": {"rows": 5_000, "commands": ("compare",)},
+    # a goal 100× looser, few sweeps and low degrees: every path, rough figures
+    "workspace": {
+        "sweep_counts": (6, 8),
+        "hall_counts": (20, 30),
+        "degrees": (2, 3),
+        "held_out": 50,
+        "target_b": 5e-2,
+        "target_g": 0.5,
+    },
     # a goal 5× looser than the default: 25× less device time
     "throughput": {
         "protocols": ("demo",),

@@ -9,7 +9,9 @@ supply and reads it back, and reports every check. ``--simulate`` runs the same 
 simulated bench, as the driver's ``daq_simulated`` does: NI's ``nidaqmx`` on the simulated card
 (:func:`mows.device.backends.factory.simulated_card`) over the paper's largest-spacing scene with
 the Pasco pair on its supply, the NGM202 on pyvisa-sim.
-Exit status 0 when every check passed, 3 when one found a problem (each line says which).
+Every check's line is printed before the bench is closed; the cleanup is a line of its own, a
+PROBLEM when the supply could not be switched off and read back so. Exit status 0 when every
+check and the cleanup passed, 3 when one found a problem (each line says which).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import argparse
 from mows.cli.inputs import finite_float, positive_float
 from mows.device.backends.factory import BenchSettings, open_bench
 from mows.device.instruments.daq import PAPER_DEVICE_FILE, load_daq_device
-from mows.device.instruments.hardware_check import HardwareCheck
+from mows.device.instruments.hardware_check import CheckLine, HardwareCheck
 from mows.device.instruments.scpi import PAPER_SUPPLY_FILE, SIMULATED_RESOURCE
 from mows.physics.coils import CurrentCap
 
@@ -62,8 +64,21 @@ def run(args) -> int:
             names=tuple(f"fluxgate {k + 1} ({i.physical_channel})" for k, i in enumerate(device.inputs)),
         )
         lines = check.run(supply=supply is not None)
-    finally:
+        for line in lines:
+            print(line, flush=True)  # before the cleanup, which may fail: what was seen is kept
+    except BaseException:
         backend.close()
-    for line in lines:
-        print(line)
+        raise
+    lines.append(cleanup(backend))
+    print(lines[-1])
     return 0 if all(line.ok for line in lines) else PROBLEM_EXIT
+
+
+def cleanup(backend) -> CheckLine:
+    """Close the bench (coils off, the supply ramped to zero, every output off and read back) and
+    say how it was left, or what failed."""
+    try:
+        backend.close()
+    except OSError as error:
+        return CheckLine("cleanup", False, f"{error}; check the supply's front panel")
+    return CheckLine("cleanup", True, backend.closed_state() or "the card's tasks closed")

@@ -2,12 +2,15 @@
 
 The bag is a recording of the graph (the driver's ``record_path``): its measurement cycles and
 the estimator's fits recorded beside them go through the mapper's own sweep state machine
-(:mod:`mows.sweep.replay`), one sweep per sweep the mapper published (cycles after the last form
-one more). ``--refit`` fits the ring-downs again from the raw stream, as ``mows fit`` does, with
-the same options, instead of taking the recorded fits. What the bag does not hold are the
-mapper's parameters: ``--probe`` (``probe_file``), ``--probes`` (``probes``: the same YAML,
-docs/multi_probe.md), ``--model`` and ``--f00-free``. One line per sweep, each probe's field and
-gradient in the mapper's words; ``--json`` prints them as numbers (SI) instead.
+(:mod:`mows.sweep.replay`), one sweep per sweep the mapper published, with the cycles it names
+(cycles after the last form one more; cycles before or between them, another client's or a
+cancelled sweep's, are left out and counted). ``--refit`` fits the ring-downs again from the raw
+stream, as ``mows fit`` does, with the same options, instead of taking the recorded fits. What
+the bag does not hold are the mapper's parameters: ``--probe`` (``probe_file``), ``--probes``
+(``probes``: the same YAML, docs/multi_probe.md), ``--model`` and ``--f00-free``. One line per
+sweep, each probe's field and gradient in the mapper's words, or why that sweep cannot be made
+again (too few orientations, say) beside the others; ``--json`` prints them as numbers (SI)
+instead. Exit status 2 only when no sweep can be made again.
 """
 
 import json
@@ -22,7 +25,7 @@ from mows.lab.data.readers import is_bag
 from mows.lab.data.ringdowns import check_probes, fit_bag
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sweep.decompose import MODELS
-from mows.sweep.replay import read_session, replay_sweep
+from mows.sweep.replay import RecordedCycle, read_session, replay_sweep
 from mows.sweep.runner import SweepFit, SweepOutcome, SweepSettings
 
 
@@ -62,14 +65,34 @@ def run(args) -> int:
             raise ValueError("no ring-down fit recorded (the estimator was not running?): --refit fits the raw stream")
         if not settings.probes:
             check_probes(args.bag, args.excitation_topic)
-        sweeps = session.sweeps()
-        outcomes = [replay_sweep(cycles, fits, settings, probe) for cycles in sweeps]
+        sweeps = [(f"sweep {k}", cycles) for k, cycles in enumerate(session.sweeps(), 1)]
+        if after := session.after_last():
+            sweeps.append(("after the last recorded sweep", after))
+        outcomes = [_replayed(cycles, fits, settings, probe) for _, cycles in sweeps]
+        if not any(outcome.maps or outcome.ok for outcome in outcomes):
+            raise ValueError("; ".join(f"{name}: {outcome.message}" for (name, _), outcome in zip(sweeps, outcomes)))
+    left_out = [c.cycle_id for c in session.left_out()]
     if args.json:
-        print(json.dumps({"sweeps": [_numbers(outcome) for outcome in outcomes]}))
+        made = [
+            {"name": name, "cycle_ids": [c.cycle_id for c in cycles], **_numbers(outcome)}
+            for (name, cycles), outcome in zip(sweeps, outcomes)
+        ]
+        print(json.dumps({"sweeps": made, "left_out_cycle_ids": left_out}))
         return 0
-    for k, (cycles, outcome) in enumerate(zip(sweeps, outcomes), 1):
-        print(f"sweep {k} ({len(cycles)} orientations): {outcome.message}")
+    for (name, cycles), outcome in zip(sweeps, outcomes):
+        print(f"{name} ({len(cycles)} orientations): {outcome.message}")
+    if left_out:
+        print(f"{len(left_out)} cycles in no recorded sweep left out (cycle ids {', '.join(map(str, left_out))})")
     return 0
+
+
+def _replayed(cycles: tuple[RecordedCycle, ...], fits, settings: SweepSettings, probe: Probe) -> SweepOutcome:
+    """The sweep of ``cycles`` made again; one the runner refuses (too few orientations) is a
+    failed outcome with the reason, reported beside the others."""
+    try:
+        return replay_sweep(cycles, fits, settings, probe)
+    except ValueError as refused:
+        return SweepOutcome(False, f"not made again: {refused}")
 
 
 def _numbers(outcome: SweepOutcome) -> dict:

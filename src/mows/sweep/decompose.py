@@ -181,25 +181,56 @@ class Ringdowns:
 
     @functools.cached_property
     def _swing_table_rad(self) -> np.ndarray:
-        """(n, REST_NODES_RAD.size): each measured swing about each rest angle of the table."""
-        return swing_about_rest_rad(
-            np.asarray(self.start_swing_rad, float)[:, None],
-            np.asarray(self.pickup, complex)[:, None, :],
-            np.asarray(self.damping_per_s, float)[:, None],
-            np.asarray(self.duration_s, float)[:, None],
-            REST_NODES_RAD,
-        )
+        """(n, REST_NODES_RAD.size): each measured swing about each rest angle of the table, NaN
+        until first asked for (:meth:`_swing_cells`). A fit moves each point's rest angle by
+        a few mrad, so it asks for two or three nodes of each row, not all 41."""
+        rows = np.shape(np.asarray(self.pickup))[0]
+        return np.nan * np.ones((rows, REST_NODES_RAD.size))
+
+    @functools.cached_property
+    def _swing_tabulated(self) -> np.ndarray:
+        """Which cells of :attr:`_swing_table_rad` are computed (a swing may be NaN: no signal)."""
+        return np.zeros(self._swing_table_rad.shape, bool)
+
+    def _swing_cells(self, columns: np.ndarray) -> np.ndarray:
+        """The table with, for each row r, the nodes ``columns[r]`` and ``columns[r] + 1``
+        computed (:func:`mows.physics.ringdown_average.swing_about_rest_rad`, all missing
+        cells in one call)."""
+        table, done = self._swing_table_rad, self._swing_tabulated
+        rows = np.arange(len(table))
+        rows, columns = np.concatenate((rows, rows)), np.concatenate((columns, columns + 1))
+        missing = ~done[rows, columns]
+        if missing.any():
+            r, c = rows[missing], columns[missing]
+            n = len(table)
+            table[r, c] = swing_about_rest_rad(
+                np.broadcast_to(np.asarray(self.start_swing_rad, float), (n,))[r],
+                np.asarray(self.pickup, complex)[r],
+                np.broadcast_to(np.asarray(self.damping_per_s, float), (n,))[r],
+                np.broadcast_to(np.asarray(self.duration_s, float), (n,))[r],
+                REST_NODES_RAD[c],
+            )
+            done[r, c] = True
+        return table
 
     def start_swing_about_rad(self, rest_rad) -> np.ndarray:
         """The measured swings (n,) about the rest angles ``rest_rad`` (n,) of the model: the
         signal's size means a swing about the undeflected lever that is a few percent off the
         one about a rest angle of 10 mrad (:func:`mows.physics.ringdown_average.swing_about_rest_rad`,
-        tabulated once and interpolated). As measured without a pickup to convert through."""
+        tabulated where asked for and interpolated linearly, held at the table's ends). As
+        measured without a pickup to convert through."""
         swings = np.asarray(self.start_swing_rad, float)
         if self.pickup is None:
             return swings
-        rest = np.nan_to_num(np.broadcast_to(np.asarray(rest_rad, float), swings.shape))
-        return np.array([np.interp(r, REST_NODES_RAD, row) for r, row in zip(rest, self._swing_table_rad)])
+        nodes = REST_NODES_RAD
+        rest = np.clip(np.nan_to_num(np.broadcast_to(np.asarray(rest_rad, float), swings.shape)), nodes[0], nodes[-1])
+        below = np.clip(np.searchsorted(nodes, rest, side="right") - 1, 0, nodes.size - 2)
+        weight = (rest - nodes[below]) / (nodes[below + 1] - nodes[below])
+        table = self._swing_cells(below)
+        rows = np.arange(len(table))
+        low, high = table[rows, below], table[rows, below + 1]
+        # A weight of 0 or 1 is the node's value, whatever its neighbour (NaN: no signal there).
+        return np.where(weight == 0.0, low, np.where(weight == 1.0, high, low + weight * (high - low)))
 
 
 @dataclasses.dataclass(frozen=True)

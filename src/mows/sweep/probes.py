@@ -117,8 +117,11 @@ class ProbeSweep:
         :func:`decompose_probes` (the record does not change while it is decomposed)."""
         return self.record.measured_ringdowns()
 
-    def decompose(self, options: DecomposeOptions, neighbours: NeighbourFields | None = None) -> Decomposition:
-        """Its record decomposed, with the ``neighbours``' fields at its ring-downs when given."""
+    def decompose(
+        self, options: DecomposeOptions, neighbours: NeighbourFields | None = None, start=None
+    ) -> Decomposition:
+        """Its record decomposed, with the ``neighbours``' fields at its ring-downs when given,
+        from the parameters ``start`` when given (:func:`mows.sweep.decompose.decompose`'s)."""
         record, model = self.record, options.model
         if not record.points:
             why = f"no successful ring-down of probe {self.probe_id} ({record.failed} failed)"
@@ -136,6 +139,7 @@ class ProbeSweep:
             neighbours,
             curvature=curvature,
             measured=self._measured if options.measured_swings else None,
+            start=start,
         )
 
 
@@ -192,7 +196,9 @@ def decompose_probes(
     orientations = own_orientations_rad(sweeps) if orientations_rad is None else orientations_rad
     for done in range(passes):
         fields = neighbour_fields(sweeps, [r.parameters for r in results], orientations)
-        coupled = [s.decompose(options, f) for s, f in zip(sweeps, fields)]
+        # Each pass starts where the last ended: the neighbours' fields move the optimum by
+        # microtesla, a few steps of the fit, not the whole way from the harmonics.
+        coupled = [s.decompose(options, f, r.parameters) for s, f, r in zip(sweeps, fields, results)]
         if not all(r.ok for r in coupled):
             return results if done else [uncoupled(r) for r in results]
         results = coupled

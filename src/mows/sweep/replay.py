@@ -6,10 +6,12 @@ map the graph published, for one probe or several, with no node running (``mows 
 
 A bag's measurement cycles are those whose RINGDOWN phases it recorded (tuning ones are not
 measurements); each is one orientation of the stage, at the phase's ``theta0_rad`` (the stage's;
-each probe's own θ0 is in its fits), answered with the ring-downs recorded. The cycles are cut
-into sweeps by the recorded SweepDecomposition stamps, each that of its sweep's last ring-down;
-cycles after the last one (a sweep the recording stopped in, or a bag without sweeps) are one
-more sweep. What the recording does not hold is the caller's to say: the probes and their
+each probe's own θ0 is in its fits), answered with the ring-downs recorded. Each recorded
+SweepDecomposition names its sweep's cycles (``cycle_ids``): a sweep is those, and cycles run
+before or between sweeps (another client's, a cancelled sweep's) are left out; cycles after the
+last one (a sweep the recording stopped in, or a bag without sweeps) are one more. A recording
+made before the mapper named them is cut by the sweeps' stamps instead, each that of its
+sweep's last ring-down. What the recording does not hold is the caller's to say: the probes and their
 constants, the model and whether f00 is free (the mapper's parameters).
 
 Imports: the sweep's own modules, the estimate's stream results and the device's bag reader.
@@ -49,9 +51,38 @@ class RecordedSession:
     cycles: tuple[RecordedCycle, ...]
     fits: tuple[SweepFit, ...]  # the estimator's, as recorded
     sweep_stamps_ns: tuple[int, ...]  # each recorded sweep's, in order
+    sweep_cycle_ids: tuple[tuple[int, ...], ...] = ()  # each recorded sweep's cycles, when it names them
 
     def sweeps(self) -> list[tuple[RecordedCycle, ...]]:
-        """The cycles of each sweep, in order (module docstring)."""
+        """The cycles of each recorded sweep, in order (module docstring)."""
+        if not self.sweep_cycle_ids:
+            return self._cut_by_stamps()[0]
+        by_id = {c.cycle_id: c for c in self.cycles}
+        named = [tuple(by_id[i] for i in ids if i in by_id) for ids in self.sweep_cycle_ids]
+        return [group for group in named if group]
+
+    def after_last(self) -> tuple[RecordedCycle, ...]:
+        """The cycles after the last recorded sweep's (all of them when none was recorded): a
+        sweep the recording stopped in, or another client's cycles."""
+        if not self.sweep_cycle_ids:
+            return self._cut_by_stamps()[1]
+        named = self._named()
+        end_ns = max((c.stamp_ns for c in self.cycles if c.cycle_id in named), default=-1)
+        return tuple(c for c in self.cycles if c.cycle_id not in named and c.stamp_ns > end_ns)
+
+    def left_out(self) -> tuple[RecordedCycle, ...]:
+        """The cycles before or between the recorded sweeps that are none of theirs (another
+        client's, a cancelled sweep's); none in a recording cut by stamps."""
+        after = set(self.after_last())
+        named = self._named()
+        return tuple(c for c in self.cycles if self.sweep_cycle_ids and c.cycle_id not in named and c not in after)
+
+    def _named(self) -> set[int]:
+        return {i for ids in self.sweep_cycle_ids for i in ids}
+
+    def _cut_by_stamps(self) -> tuple[list[tuple[RecordedCycle, ...]], tuple[RecordedCycle, ...]]:
+        """Each recorded sweep's cycles, those whose last ring-down came no later than its stamp,
+        and the cycles after the last."""
         groups: list[tuple[RecordedCycle, ...]] = []
         cycles = list(self.cycles)
         for stamp in self.sweep_stamps_ns:
@@ -59,7 +90,7 @@ class RecordedSession:
             cycles = cycles[len(mine) :]
             if mine:
                 groups.append(tuple(mine))
-        return groups + ([tuple(cycles)] if cycles else [])
+        return groups, tuple(cycles)
 
 
 def read_session(path: str | os.PathLike[str]) -> RecordedSession:
@@ -67,12 +98,15 @@ def read_session(path: str | os.PathLike[str]) -> RecordedSession:
     measurement ring-down: there is no sweep to make again)."""
     ringdowns: dict[int, list] = {}  # each cycle's RINGDOWN announcements, in order
     fits, sweeps = [], set()
+    named: dict[int, tuple[int, ...]] = {}  # each recorded sweep's cycles, by sweep id
     for item in read_bag(path, topics=(EXCITATION_TOPIC, RINGDOWN_TOPIC, SWEEP_TOPIC)):
         message = item.message
         if item.topic == RINGDOWN_TOPIC:
             fits.append(SweepFit.from_message(message))
         elif item.topic == SWEEP_TOPIC:
             sweeps.add(stamps.nanoseconds(message.header.stamp))
+            # one message per probe of a sweep, all naming its cycles (none in an older recording)
+            named.setdefault(message.sweep_id, tuple(int(i) for i in getattr(message, "cycle_ids", ())))
         elif message.phase == Phase.RINGDOWN and not message.tuning:
             ringdowns.setdefault(message.cycle_id, []).append(message)
     if not ringdowns:
@@ -86,7 +120,8 @@ def read_session(path: str | os.PathLike[str]) -> RecordedSession:
         )
         for cycle_id, phases in ringdowns.items()
     )
-    return RecordedSession(tuple(sorted(cycles, key=lambda c: c.stamp_ns)), tuple(fits), tuple(sorted(sweeps)))
+    ids = tuple(named[k] for k in sorted(named)) if all(named.values()) else ()
+    return RecordedSession(tuple(sorted(cycles, key=lambda c: c.stamp_ns)), tuple(fits), tuple(sorted(sweeps)), ids)
 
 
 def replay_sweep(

@@ -183,6 +183,7 @@ class SweepMap:
     record: SweepRecord
     f00_hz: float
     probe_id: int = 0
+    cycle_ids: tuple[int, ...] = ()  # the sweep's measurement cycles, in order: where it begins and ends
 
 
 @dataclasses.dataclass(frozen=True)
@@ -226,6 +227,9 @@ class SweepRunner:
         self.sweeps = 0  # sweeps that came as far as the decomposition
         self.last = "no sweep yet"  # the last decomposition's report
         self.last_failure = ""  # why the last sweep failed ('' once one succeeds; a cancel leaves it)
+        self.cancels = 0  # sweeps cancelled (by their client, or because it left)
+        self.last_cancel = ""  # how the last sweep ended when it was cancelled, and why ('' once one ends otherwise)
+        self._cancel_reason = ""
         self._angles: list[float] = []
         self._repeats = 0
         self._index = 0
@@ -243,6 +247,7 @@ class SweepRunner:
         self._decomposition: Decomposition | None = None
         self._decomposed_points = 0
         self._turning: CycleRequest | None = None  # the cycle that waits for the operator's turn
+        self._cycle_ids: list[int] = []  # the cycles of the sweep so far
 
     # --- inputs ----------------------------------------------------------------------------
     def start(self, goal: SweepGoal, settings: SweepSettings, probe: Probe) -> None:
@@ -289,6 +294,7 @@ class SweepRunner:
         self._model = goal.model or settings.model
         self._index, self._cancelled, self._awaited, self._turning = 0, False, None, None
         self._fits.clear()
+        self._cycle_ids = []
         self._records = {entry.probe_id: SweepRecord() for entry in self._probes}
         self._steps = {entry.probe_id: [] for entry in self._probes}
         self._record = self._records[self._probes[0].probe_id]
@@ -297,10 +303,11 @@ class SweepRunner:
         """The accepted sweep's first step."""
         return self._next_orientation(SweepStep())
 
-    def cancel(self) -> None:
-        """End the sweep before its next orientation."""
-        if self.state == SweepState.SWEEPING:
-            self._cancelled = True
+    def cancel(self, reason: str = "") -> None:
+        """End the sweep before its next orientation, or with no map once a decomposition
+        under way returns; ``reason`` ('' for its client's own cancel) goes into ``last_cancel``."""
+        if self.state != SweepState.IDLE and not self._cancelled:
+            self._cancelled, self._cancel_reason = True, reason
 
     def cancelled(self) -> bool:
         """Whether a cancel came for the running sweep."""
@@ -331,9 +338,10 @@ class SweepRunner:
         return SweepStep(run_cycle=call)
 
     def _cycle(self, step: SweepStep, call: CycleRequest) -> SweepStep:
-        """Run ``call`` next, after the operator's turn when the stage has no motor."""
+        """Run ``call`` next, after the operator's turn when the stage has no motor (the cycle
+        then says the stage was turned by hand)."""
         if self._settings.manual_orientation:
-            self._turning, step.turn = call, call.theta0_rad
+            self._turning, step.turn = dataclasses.replace(call, turned_by_hand=True), call.theta0_rad
         else:
             step.run_cycle = call
         return step
@@ -373,14 +381,20 @@ class SweepRunner:
     def on_decomposed(self, decompositions: list[Decomposition]) -> SweepStep:
         """The result of the step's ``decompose``, each probe's decomposition: the maps to publish,
         when one succeeded (a failed one has no numbers to show, but beside others it shows its
-        probe's status), and the sweep's end (an adaptive sweep goes on unless the planner ends it)."""
+        probe's status), and the sweep's end (an adaptive sweep goes on unless the planner ends it).
+        A sweep cancelled meanwhile publishes nothing: nobody waits for its map."""
+        if self._cancelled:
+            where = f"while decomposing {len(self._cycle_ids)} orientations"
+            return self._end(SweepStep(), SweepOutcome(False, f"cancelled {where}", cancelled=True))
         if self._planner is not None:
             self._decomposition, self._decomposed_points = decompositions[0], len(self._record.points)
             self.state = SweepState.SWEEPING
             return self._next_planned(SweepStep())
         self.last = report(self._shares, decompositions)
+        cycles = tuple(self._cycle_ids)
         maps = tuple(
-            SweepMap(self.sweeps, d, s.record, s.f00_hz, s.probe_id) for s, d in zip(self._shares, decompositions)
+            SweepMap(self.sweeps, d, s.record, s.f00_hz, s.probe_id, cycles)
+            for s, d in zip(self._shares, decompositions)
         )
         ok = all(d.ok for d in decompositions)
         outcome = SweepOutcome(ok, problems(self._shares, decompositions) or self.last, maps=maps)
@@ -399,6 +413,7 @@ class SweepRunner:
         answer, self._awaited = self._awaited, None
         assert answer is not None  # only called once the awaited cycle has answered
         fits = self._fits.pop(answer.cycle_id, [])
+        self._cycle_ids.append(answer.cycle_id)
         theta0 = self._angles[self._index]
         before = len(self._record.points)
         for fit in fits:
@@ -422,13 +437,13 @@ class SweepRunner:
     def _next_orientation(self, step: SweepStep) -> SweepStep:
         if self._planner is not None:
             return self._next_planned(step)
-        if self._index == len(self._angles):
-            return self._measured(step)
-        if self._cancelled:
+        if self._cancelled:  # the last orientation's too: nobody waits for the map
             outcome = SweepOutcome(
                 False, f"cancelled after {self._index} of {len(self._angles)} orientations", cancelled=True
             )
             return self._end(step, outcome)
+        if self._index == len(self._angles):
+            return self._measured(step)
         return self._cycle(step, CycleRequest(self._angles[self._index], self._repeats))
 
     def _measured(self, step: SweepStep) -> SweepStep:
@@ -494,13 +509,18 @@ class SweepRunner:
         if decomposition is None or not decomposition.ok:
             return self._end(step, SweepOutcome(False, end.message))
         self.last = decomposition.report()
-        step.publish = (SweepMap(self.sweeps, decomposition, self._record, f00_of(self._record)),)
+        step.publish = (
+            SweepMap(self.sweeps, decomposition, self._record, f00_of(self._record), cycle_ids=tuple(self._cycle_ids)),
+        )
         return self._end(step, SweepOutcome(end.reached, end.message, maps=step.publish))
 
     def _end(self, step: SweepStep, outcome: SweepOutcome) -> SweepStep:
         self.state, self._awaited, self._turning = SweepState.IDLE, None, None
-        if not outcome.cancelled:
-            self.last_failure = "" if outcome.ok else outcome.message
+        if outcome.cancelled:
+            reason = f" ({self._cancel_reason})" if self._cancel_reason else ""
+            self.cancels, self.last_cancel = self.cancels + 1, outcome.message + reason
+        else:
+            self.last_failure, self.last_cancel = ("" if outcome.ok else outcome.message), ""
         self._fits.clear()
         step.finished = outcome
         return step

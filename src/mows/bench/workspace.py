@@ -1,0 +1,161 @@
+"""Workspace maps: the solid-harmonic model fitted to sweeps' B and G against the same model
+fitted to a Hall-probe map, on an eight-coil navigation system.
+
+The truth is :func:`mows.sim.navigation.navigation_system` (finite windings with errors, exact
+current loops, iron cores as dipole chains; 1.5 mT at the centre); the workspace is a ball of
+5 cm diameter about its centre. Sweeps (:func:`mows.workspace.simulated.simulate_sweep`: the
+probe's full potential, decomposed by the sweep's own code) and Hall points (3D B, σ = 0.1 %
+of |B| per component) are taken at the same nested, evenly spread positions on the ball's
+boundary; each prefix is fitted with its degree chosen by cross-validation over sweeps (or
+points), and predicts B and G at held-out points uniform in the ball.
+
+Figures: for each count, the rms error of B over the rms |B| (``b_error``), of G over the rms
+‖G‖ (Frobenius, ``g_error``), and the pulls' standard deviations (each component's error over
+its predicted σ); the fewest sweeps, and the fewest Hall points, that reach the stated accuracy
+(B ≤ ``target_b``, and for the sweeps G ≤ ``target_g``), with their minutes of robot time
+(:mod:`mows.workspace.simulated`'s time model) and the ratio of points.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from mows.physics.field import FieldSource
+from mows.physics.probe import PAPER_PROBE
+from mows.sim.navigation import navigation_system
+from mows.workspace import simulated
+from mows.workspace.fit import WorkspaceModel, choose_degree, fit
+from mows.workspace.harmonics import SolidHarmonics
+from mows.workspace.observations import Observation
+from mows.workspace.poses import PoseError, fit_with_pose_errors, moved
+
+RADIUS_M = 0.025
+CENTRE_FIELD_T = 1.5e-3
+TARGET_B = 5e-4
+TARGET_G = 5e-3
+DEGREES = tuple(range(2, 11))
+SWEEP_COUNTS = (8, 10, 12, 15, 18, 21, 25, 30)
+# The arm's accuracy, (σ per position component, m; σ per rotation component, deg): none, an
+# industrial arm's, between, a surgical arm's.
+POSE_ERRORS = ((1e-5, 1e-3), (1e-4, 0.01), (3e-4, 0.1), (1e-3, 1.0))
+HALL_COUNTS = (20, 30, 45, 60, 80, 100, 130, 160, 200, 250, 320, 400)
+
+
+def accuracy(model: WorkspaceModel, source: FieldSource, points_m: np.ndarray) -> dict[str, float]:
+    """Held-out errors and pulls of ``model`` against ``source`` at ``points_m`` (module docstring)."""
+    field, field_std = model.field_t(points_m)
+    gradient, gradient_std = model.gradient_t_per_m(points_m)
+    true_field, true_gradient = source.field_t(points_m), source.gradient_t_per_m(points_m)
+    return {
+        "b_error": float(np.sqrt(np.mean((field - true_field) ** 2) / np.mean(true_field**2))),
+        "g_error": float(np.sqrt(np.mean((gradient - true_gradient) ** 2) / np.mean(true_gradient**2))),
+        "b_pull_sd": float(np.std((field - true_field) / field_std)),
+        "g_pull_sd": float(np.std((gradient - true_gradient) / gradient_std)),
+    }
+
+
+def fitted(observations: Sequence[Observation], degrees: Sequence[int]) -> WorkspaceModel:
+    """The model of the cross-validated degree."""
+    choice = choose_degree(observations, degrees, scale_m=RADIUS_M)
+    return fit(observations, SolidHarmonics(choice.chosen, (0.0, 0.0, 0.0), RADIUS_M))
+
+
+def _curve(observations, counts, degrees, source, points) -> list[dict]:
+    rows = []
+    for count in counts:
+        model = fitted(observations[:count], degrees)
+        rows.append({"count": count, "degree": model.basis.max_degree, **accuracy(model, source, points)})
+    return rows
+
+
+def _first(rows: list[dict], target_b: float, target_g: float | None) -> int | None:
+    for row in rows:
+        if row["b_error"] <= target_b and (target_g is None or row["g_error"] <= target_g):
+            return int(row["count"])
+    return None
+
+
+def pose_curve(
+    sweeps: Sequence[Observation],
+    degree: int,
+    source: FieldSource,
+    points: np.ndarray,
+    levels: Sequence[tuple[float, float]],
+    rng: np.random.Generator,
+) -> list[dict]:
+    """For each pose error (σ_p, σ_φ in degrees): the sweeps reported at poses off by a draw of
+    it, fitted ignoring it (``naive_*``) and carrying it (``eiv_*``), at ``degree``."""
+    basis = SolidHarmonics(degree, (0.0, 0.0, 0.0), RADIUS_M)
+    rows = []
+    for position_std_m, angle_std_deg in levels:
+        error = PoseError(position_std_m, math.radians(angle_std_deg))
+        reported = [moved(obs, rng.normal(size=6) * error.std) for obs in sweeps]
+        naive = fit(reported, basis)
+        carried = fit_with_pose_errors(reported, basis, error, naive).model
+        rows.append(
+            {
+                "position_std_m": position_std_m,
+                "angle_std_deg": angle_std_deg,
+                **{f"naive_{k}": v for k, v in accuracy(naive, source, points).items()},
+                **{f"eiv_{k}": v for k, v in accuracy(carried, source, points).items()},
+            }
+        )
+    return rows
+
+
+def run(
+    sweep_counts: Sequence[int] = SWEEP_COUNTS,
+    hall_counts: Sequence[int] = HALL_COUNTS,
+    degrees: Sequence[int] = DEGREES,
+    held_out: int = 300,
+    target_b: float = TARGET_B,
+    target_g: float = TARGET_G,
+    pose_errors: Sequence[tuple[float, float]] = POSE_ERRORS,
+    seed: int = 0,
+) -> dict:
+    rng = np.random.default_rng(seed)
+    source = navigation_system(CENTRE_FIELD_T, seed=seed)
+    probe = PAPER_PROBE
+    points = simulated.ball_points(held_out, RADIUS_M, rng)
+    poses = simulated.random_planes(simulated.boundary_positions(max(sweep_counts), RADIUS_M), rng)
+    sweeps = simulated.sweep_observations(
+        [simulated.simulate_sweep(source, p, probe, rng) for p in poses], poses, probe
+    )
+    hall = simulated.simulate_hall(source, simulated.boundary_positions(max(hall_counts), RADIUS_M), rng)
+    sweep_rows = _curve(sweeps, sweep_counts, degrees, source, points)
+    hall_rows = _curve(hall, hall_counts, degrees, source, points)
+    sweeps_needed = _first(sweep_rows, target_b, target_g)
+    hall_needed = _first(hall_rows, target_b, None)
+    sweep_s, hall_s = simulated.sweep_seconds(), simulated.MOVE_S + simulated.HALL_POINT_S
+    last = sweep_rows[-1]
+    poses_rows = pose_curve(sweeps, last["degree"], source, points, pose_errors, rng)
+    return {
+        "sweeps": last["count"],
+        "degree": last["degree"],
+        "b_error": last["b_error"],
+        "g_error": last["g_error"],
+        "b_pull_sd": last["b_pull_sd"],
+        "g_pull_sd": last["g_pull_sd"],
+        "hall_points": hall_rows[-1]["count"],
+        "hall_b_error": hall_rows[-1]["b_error"],
+        "hall_b_pull_sd": hall_rows[-1]["b_pull_sd"],
+        "sweeps_needed": sweeps_needed if sweeps_needed is not None else math.nan,
+        "hall_points_needed": hall_needed if hall_needed is not None else math.nan,
+        "points_ratio": hall_needed / sweeps_needed if sweeps_needed and hall_needed else math.nan,
+        "sweep_minutes": sweeps_needed * sweep_s / 60.0 if sweeps_needed else math.nan,
+        "hall_minutes": hall_needed * hall_s / 60.0 if hall_needed else math.nan,
+        "sweep_curve": [[r["count"], r["degree"], r["b_error"], r["g_error"]] for r in sweep_rows],
+        "hall_curve": [[r["count"], r["degree"], r["b_error"], r["g_error"]] for r in hall_rows],
+        "pose_curve_columns": list(poses_rows[0]) if poses_rows else [],
+        "pose_curve": [list(row.values()) for row in poses_rows],
+        **(_pose_figures(poses_rows[-1]) if poses_rows else {}),
+    }
+
+
+def _pose_figures(row: dict) -> dict:
+    """The largest pose error's figures, at the top level."""
+    keys = ("b_error", "g_error", "b_pull_sd", "g_pull_sd")
+    return {f"pose_{kind}_{key}": row[f"{kind}_{key}"] for kind in ("naive", "eiv") for key in keys}

@@ -10,6 +10,7 @@ output is a fault that leaves the supply at zero and off.
 """
 
 import dataclasses
+import threading
 import time
 
 import pytest
@@ -195,14 +196,27 @@ def test_on_close_every_output_and_the_master_output_are_off_and_read_back(on_be
 
 
 def test_a_supply_ten_milliseconds_per_exchange_does_not_hold_up_the_card(on_bench, monkeypatch):
+    """Every exchange with the supply happens off the thread that polls the card (the driver's
+    stream thread): at 10 ms each, a ramp's steps written there made the host fall a second
+    behind the card's samples."""
     supply = simulated_supply()
-    monkeypatch.setattr(instrument(supply), "latency_s", 0.01)
+    sim = instrument(supply)
+    monkeypatch.setattr(sim, "latency_s", 0.01)
+    exchanged_on = []
+    match = sim._device._match
+
+    def recorded(query):
+        exchanged_on.append(threading.current_thread())
+        return match(query)
+
+    monkeypatch.setattr(sim._device, "_match", recorded)
     card, backend = on_bench("calibration", supply)
     items = []
     for command_id, current_a in ((1, 2.0), (2, 0.0)):  # two full ramps: 200 steps, 400 exchanges
         backend.send(FieldCurrentCommand(command_id, 0, current_a))
         items += settle(backend)
-    assert supply_state(supply) == (0.0, 1)
+    assert supply_state(supply) == (0.0, 1) and len(exchanged_on) >= 400
+    assert threading.current_thread() not in exchanged_on
     assert card.underflows == 0 and backend.card_faults == 0
     assert not [i for i in items if isinstance(i, LinkEvent)]
     read = blocks(items)

@@ -19,12 +19,14 @@ from device.test_bench_backends import (
     MAX_POLLS,
     armed_session,
     blocks,
+    poll_for,
     run_cycle,
     simulated_supply,
     supply_state,
 )
 from mows.cli.main import main
-from mows.device.backends.daqmx_backend import DeviceUnavailable, open_daqmx
+from mows.device.backends.daqmx_backend import open_daqmx
+from mows.device.backends.daqmx_tasks import DeviceUnavailable
 from mows.device.cycle.phases import CycleRequest
 from mows.device.instruments import scpi
 from mows.device.instruments.daq import load_daq_device
@@ -39,6 +41,7 @@ from mows.device.instruments.scpi import (
 from mows.device.interface import FieldCurrentCommand, LinkEvent
 from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.physics.coils import CurrentCap
+from mows.records.samples import SampleBlock
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
@@ -274,3 +277,19 @@ def test_an_over_voltage_trip_is_a_fault_and_the_next_ramp_clears_it(on_bench):
     assert supply_state(supply) == (0.2, 1) and not instrument(supply).tripped
     backend.close()
     assert supply_state(supply) == (0.0, 0)
+
+
+def test_a_host_behind_its_card_that_stalls_beyond_the_lead_is_told_at_once(on_bench):
+    """Behind the card (its outputs written ahead of the sample it generates, beyond the newest
+    block read), then stalled beyond the lead: the outputs underflow, and the next poll says so,
+    although it has nothing new to write."""
+    card, backend = on_bench()
+    poll_for(backend, 0.2)
+    time.sleep(0.5)  # behind the card by half a second, within the lead
+    backend.poll(0.05)  # one block read; the outputs written the lead ahead of the card's sample
+    time.sleep(1.2)  # a stall beyond the lead
+    told = [i for i in backend.poll(0.05) if not isinstance(i, SampleBlock)]
+    assert [type(i).__name__ for i in told] == ["LinkEvent", "LinkEvent", "DeviceFault"], told
+    down, up, _ = told
+    assert not down.up and "(-200290)" in down.reason and up.up and card.underflows == 1
+    backend.close()

@@ -109,6 +109,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             help="probe position for a field-source reference, m",
         )
         command.add_argument(
+            "--trust-reference",
+            action="store_true",
+            help="take the reference as given even where the ring-downs move a unit factor (10³, 10⁴, 10⁶) "
+            "more or less than it says (otherwise refused as mT, gauss or µT given in T)",
+        )
+        command.add_argument(
             "--drop-invalid", action="store_true", help="drop rows with missing or invalid values instead of stopping"
         )
         command.add_argument("--json", action="store_true", help="print JSON instead of text")
@@ -332,8 +338,7 @@ def _table(args, default, named):
     if args.reference and not is_bag(args.table):
         with input_file(args.reference, "reference"):
             table = with_reference(table, args.reference, args.magnet_position)
-    check_reference(table, probe)
-    return table, probe
+    return check_reference(table, probe, args.trust_reference), probe
 
 
 def probe_options(values: list[str]) -> tuple[str, dict[int, str]]:

@@ -53,6 +53,10 @@ from mows.physics.pose import probe_axes
 REQUIRED = ("theta0_deg", "f_hz", "f_std_hz")
 FIELD = ("ref_bx_t", "ref_by_t", "ref_bz_t")
 GRADIENT = ("ref_gxx_t_per_m", "ref_gxy_t_per_m", "ref_gyy_t_per_m")
+# The curvature of a reference given as a field source (mows.lab.data.reference.with_reference):
+# the in-plane Hessian at the probe, and how far it changes over the probe's placement.
+CURVATURE = ("ref_hxxx_t_per_m2", "ref_hxxy_t_per_m2", "ref_hxyy_t_per_m2", "ref_hyyy_t_per_m2")
+CURVATURE_SPREAD = "ref_h_spread_t_per_m2"
 # Columns of a table of several probes (mows.lab.data.probe_rows).
 PROBE = "probe"
 STEP = "step"
@@ -61,6 +65,8 @@ KNOWN = (
     + ("t_s", "sweep", PROBE, STEP)
     + FIELD
     + GRADIENT
+    + CURVATURE
+    + (CURVATURE_SPREAD,)
     + ("coil_current_a", "amplitude_deg", "temperature_k", "damping_per_s", "duration_s")
 )
 MAGNET = ("magnet_x_m", "magnet_y_m", "magnet_z_m")
@@ -88,6 +94,7 @@ DERIVED = ("b_abs_t", "b_along_t", "b_perp_t", "b_normal_t", "g_t_per_m", "g_xy_
 COVARIATE_DERIVED = ("b_abs_t", "b_perp_t", "b_along_t", "g_t_per_m")  # what the diagnostics test
 NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t", WRITER_COLUMN, PROBE, STEP}
 NOT_COVARIATES |= set(MAGNET + NEIGHBOUR)  # where a probe is and what its neighbours make: the model's inputs
+NOT_COVARIATES |= {*CURVATURE, CURVATURE_SPREAD}  # what the reference's sources allow, not a quantity of the row
 
 
 # What a reader notes of the reference (with_notes); joining one (reference.with_reference) drops them.

@@ -32,9 +32,10 @@ if TYPE_CHECKING:
     from mows.lab.data.table import MeasurementTable
 
 AT_PHYSICS = " (at physics)"  # label suffix of an effect held at its physical values
-# Each parameter's value as physics and the probe file allow it, (centre, σ), or None where
-# physics says nothing (a free calibration term such as an unreferenced field).
-Prior = Callable[[Probe], tuple[tuple[float, float] | None, ...]]
+# Each parameter's value as physics, the probe file and the table's reference allow it,
+# (centre, σ), or None where physics says nothing (a free calibration term such as an
+# unreferenced field).
+Prior = Callable[[Probe, "MeasurementTable"], tuple[tuple[float, float] | None, ...]]
 
 # Stages: effects are applied in this order, so that e.g. an angle offset turns the probe
 # before fields are projected, and the readout comes last.

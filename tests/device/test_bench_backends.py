@@ -714,8 +714,9 @@ def test_the_backend_ramps_the_supply_and_zeroes_it_on_close(on_bench):
         backend.poll(0.0)
         seen.append(bench.device.field_current_a)
     assert math.isnan(backend.supply_readback.current_a)  # not at once: the pair is still settling
-    while backend.supply_pending:  # read back once the last step has settled
+    while backend.supply_pending:  # the steps written, and read back once the last has settled
         backend.poll(0.0)
+        seen.append(bench.device.field_current_a)
     assert backend.supply_readback.step_index == result.applied_sample_index
     tolerance = supply.config.readback_tolerance_a(0.5)
     assert backend.supply_readback.current_a == pytest.approx(0.5, abs=tolerance)

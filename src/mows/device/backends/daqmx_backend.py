@@ -355,7 +355,9 @@ class DaqmxBackend(Backend):
         """Coils off, the supply ramped to zero and switched off while the card streams on, and
         read back once settled; then the tasks and the supply released (every output off and
         read back), each whatever the others did, and last what the backend held. SupplyError
-        when the supply's release failed, after all of it was tried."""
+        when the supply's release failed, after all of it was tried. Once closed, nothing more."""
+        if self._stop.is_set():
+            return
         self._stop.set()
         self._watchdog.join()
         try:

@@ -137,6 +137,12 @@ def implausible_inputs(d: pathlib.Path) -> None:
     ]:
         assert old in supply
         (d / f"supply_{name}.yaml").write_text(supply.replace(old, new))
+    scene = "extends: paper_largest_spacing\nsensors:\n  positions_m: {}\n"
+    (d / "scene_one_spot.yaml").write_text(scene.format("[[0.06, 0.0, 0.0], [0.06, 0.0, 0.0]]"))
+    (d / "scene_at_magnet.yaml").write_text(scene.format("[[0.0, 0.0, 0.0], [0.03, 0.0, 0.0]]"))
+    (d / "scene_probe_and_probes.yaml").write_text(
+        "extends: paper_largest_spacing\nprobe: paper\nprobes:\n  - probe: paper\n"
+    )
     card = (HARDWARE / "ni_pcie6363.yaml").read_text()
     (d / "card_long_lead.yaml").write_text(card.replace("output_lead_s: 0.75", "output_lead_s: 1.0e6"))
 
@@ -259,6 +265,9 @@ CASES = [
         ["--magnet-position", "finite"],
     ),
     ("sim-amplitude-0", ["sim", "--amplitude-a", "0"], 2, ["--amplitude-a 0", "no current"]),
+    ("sim-fluxgates-at-one-spot", ["sim", "{d}/scene_one_spot.yaml"], 2, ["scene_one_spot.yaml", "at one spot"]),
+    ("sim-fluxgate-at-the-magnet", ["sim", "{d}/scene_at_magnet.yaml"], 2, ["positions_m[0]", "at the magnet"]),
+    ("sim-probe-and-probes", ["sim", "{d}/scene_probe_and_probes.yaml"], 2, ["both probe:", "give one of them"]),
     ("sim-amplitude-2000", ["sim", "--amplitude-a", "2000"], 2, ["--amplitude-a = 2000 A", "beyond any bench"]),
     (
         "check-hardware-supply-step-0",

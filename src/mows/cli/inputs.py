@@ -119,7 +119,9 @@ def positive_float(text: str) -> float:
 
 
 def sensor_length_m(text: str) -> float:
-    """An argparse type: a length of the sensor geometry, m, in its range (:mod:`mows.physics.ranges`)."""
+    """An argparse type: a length of the sensor geometry, m, > 0 and in its range (:mod:`mows.physics.ranges`)."""
+    if finite_float(text) <= 0.0:
+        raise argparse.ArgumentTypeError(f"{text} m: a sensor length is > 0")
     return _ranged("sensor_length_m", text)
 
 

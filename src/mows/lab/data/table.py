@@ -389,7 +389,8 @@ def broken_rules(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, str, 
             rule = f"must be below 1/{MAX_RELATIVE_STD:g} of f_hz (no ring-down measures f that poorly; another unit?)"
             yield "f_std_hz", f"{rule}: not so", bad
         floor = RANGES["f_rel_std"].possible[0]
-        bad = np.flatnonzero(columns["f_std_hz"] < floor * columns["f_hz"])
+        measured = columns["f_hz"] <= RANGES["frequency_hz"].possible[1]  # beyond: said of f_hz, as kHz
+        bad = np.flatnonzero(measured & (columns["f_std_hz"] < floor * columns["f_hz"]))
         if bad.size:
             rule = f"must be at least {floor:g} of f_hz (no clock, no ring-down measures f better)"
             yield "f_std_hz", f"{rule}: not so", bad

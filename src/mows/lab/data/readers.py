@@ -8,6 +8,7 @@ fields of static sources come from :mod:`mows.lab.data.reference`.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import os
 import pathlib
@@ -26,6 +27,7 @@ from mows.physics.schema import Vector
 from mows.records import stamps
 from mows.records.files import read_input
 from mows.sweep.decompose import Decomposition
+from mows.sweep.probes import f00_of
 from mows.sweep.record import SweepPoint, SweepRecord
 
 RINGDOWN_TOPIC = "/mows/ringdown"
@@ -336,3 +338,24 @@ def from_sweep(
     columns = record.table_columns(starts)
     columns.update(reference_columns(reference, len(record.points)))
     return MeasurementTable(columns, "sweep")
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepReadings:
+    """One probe's rotation sweep read from the f00 its ring-downs carry: by the first-principles
+    model and by the published one (Eqs. 11, 12), and the lab's table of it."""
+
+    f00_hz: float
+    first_principles: Decomposition
+    published: Decomposition
+    table: MeasurementTable
+
+
+def read_sweep(record: SweepRecord, reference: Reference, probe: Probe) -> SweepReadings:
+    """``record`` (its successful ring-downs) decomposed both ways from the estimator's f00 of its
+    ring-downs (:func:`mows.sweep.probes.f00_of`), and its table in the static ``reference``
+    (:func:`from_sweep`, the start swings at the first-principles field)."""
+    f00_hz = f00_of(record)
+    first_principles = record.decompose(probe, f00_hz)
+    published = record.decompose(probe, f00_hz, model="published")
+    return SweepReadings(f00_hz, first_principles, published, from_sweep(record, reference, probe, first_principles))

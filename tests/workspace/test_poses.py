@@ -1,7 +1,8 @@
 """The arm's pose error carried by the fit: at a surgical arm's 1 mm and 1° the map that
 carries it beats the one that ignores it, and its σ stay honest (pulls of sd near 1), where
-the ignorant map does not even fit its own sweeps. The sweeps are exact readouts of a closed-form field (two dipoles) at the
-true poses, reported at poses off by a draw of the stated error."""
+the ignorant map does not even fit its own sweeps. The sweeps are exact readouts of a
+closed-form field (two dipoles) at the true poses, reported at poses off by a draw of the
+stated error."""
 
 import math
 

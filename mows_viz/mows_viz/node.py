@@ -6,7 +6,8 @@ Subscribes (names relative, as the graph's) to ``mows/raw``, ``mows/excitation``
 ``mows/model_report`` and ``/diagnostics``, each with its publisher's QoS, and logs what the View
 shows on the channels of :mod:`mows.viz.channels` (``/mows/viz/...``), the raw stream at its
 samples' device time, the rest at the host's clock. The server runs while the node is active,
-on ``host``:``port``; the address to open is logged and on /diagnostics (``address``).
+on ``host``:``port``; the address to open is logged and on /diagnostics (``address``). Each
+channel's last message is re-sent to a client that subscribes later (:mod:`mows.viz.live`).
 """
 
 import foxglove
@@ -22,7 +23,7 @@ from mows_msgs.msg import (
 )
 from sensor_msgs.msg import JointState
 
-from mows.viz import channels
+from mows.viz.live import LiveChannels
 from mows.viz.mount import Mount
 from mows.viz.view import Shown, View
 from mows_ros.diagnostics import DIAGNOSTICS_DEPTH, DIAGNOSTICS_TOPIC, Health
@@ -42,7 +43,7 @@ class VizNode(MowsNode):
         super().__init__(NODE_NAME, PARAMETERS)
         self._view: View | None = None
         self._server = None
-        self._channels: dict[str, foxglove.Channel] = {}
+        self._channels: LiveChannels | None = None
         self._logged = 0
         feeds = (
             (MagnetometerBlock, "mows/raw", lambda view, msg, _now: view.on_raw(msg), STREAM_QOS),
@@ -70,8 +71,9 @@ class VizNode(MowsNode):
         return take
 
     def _log(self, shown: Shown) -> None:
-        self._channels[shown.topic].log(channels.payload(shown), log_time=int(shown.log_time_ns))
-        self._logged += 1
+        if self._channels is not None:
+            self._channels.log(shown)
+            self._logged += 1
 
     # --- the lifecycle -------------------------------------------------------------------
     def configure(self) -> None:
@@ -81,17 +83,12 @@ class VizNode(MowsNode):
             with open(mount_file, encoding="utf-8") as text:
                 mount = Mount(text.read())
         self._view = View(view_settings(parameter_values(self, PARAMETERS)), mount)
-        # Every channel advertised from the start, so a client sees them all before data comes.
-        for topic in channels.TOPICS:
-            found = channels.schema(topic)
-            self._channels[topic] = foxglove.Channel(
-                topic,
-                schema=foxglove.Schema(name=found.name, encoding=found.encoding, data=found.data),
-                message_encoding=found.message_encoding,
-            )
+        self._channels = LiveChannels()
 
     def activate(self) -> None:
-        self._server = foxglove.start_server(name="mows", host=self._param("host"), port=self._param("port"))
+        self._server = foxglove.start_server(
+            name="mows", host=self._param("host"), port=self._param("port"), server_listener=self._channels
+        )
         self.get_logger().info(f"Foxglove: open ws://{self.address()} (Open connection, Foxglove WebSocket)")
 
     def address(self) -> str:
@@ -104,9 +101,9 @@ class VizNode(MowsNode):
 
     def cleanup(self) -> None:
         self.deactivate()
-        for channel in self._channels.values():
-            channel.close()
-        self._channels.clear()
+        if self._channels is not None:
+            self._channels.close()
+            self._channels = None
         self._view = None
 
     def health(self) -> Health:

@@ -8,7 +8,14 @@ shows on the channels of :mod:`mows.viz.channels` (``/mows/viz/...``), the raw s
 samples' device time, the rest at the host's clock. The server runs while the node is active,
 on ``host``:``port``; the address to open is logged and on /diagnostics (``address``). Each
 channel's last message is re-sent to a client that subscribes later (:mod:`mows.viz.live`).
+
+The ring-downs are drawn on a thread of their own, in the order their samples complete: a
+drawing can take seconds under load, and on the executor's thread it would hold back the
+stream, whose blocks the fit's window needs (the fit then drawn over NaN, or dropped).
 """
+
+import queue
+import threading
 
 import foxglove
 from diagnostic_msgs.msg import DiagnosticArray
@@ -25,7 +32,7 @@ from sensor_msgs.msg import JointState
 
 from mows.viz.live import LiveChannels
 from mows.viz.mount import Mount
-from mows.viz.view import Shown, View
+from mows.viz.view import RingdownWindow, Shown, View
 from mows_ros.diagnostics import DIAGNOSTICS_DEPTH, DIAGNOSTICS_TOPIC, Health
 from mows_ros.node import MowsNode
 from mows_ros.params import parameter_values
@@ -45,11 +52,14 @@ class VizNode(MowsNode):
         self._server = None
         self._channels: LiveChannels | None = None
         self._logged = 0
+        self._count_lock = threading.Lock()
+        self._to_draw: queue.SimpleQueue[RingdownWindow | None] = queue.SimpleQueue()
+        self._drawer: threading.Thread | None = None
         feeds = (
-            (MagnetometerBlock, "mows/raw", lambda view, msg, _now: view.on_raw(msg), STREAM_QOS),
+            (MagnetometerBlock, "mows/raw", lambda view, msg, _now: view.raw_points(msg), STREAM_QOS),
             (ExcitationState, "mows/excitation", View.on_excitation, EXCITATION_QOS),
             (JointState, "mows/joint_states", View.on_joint_states, JOINT_QOS),
-            (RingdownFit, "mows/ringdown", View.on_ringdown, RESULT_QOS),
+            (RingdownFit, "mows/ringdown", lambda view, msg, now: view.keep_fit(msg, now) or [], RESULT_QOS),
             (FieldEstimate, "mows/field", View.on_field, RESULT_QOS),
             (SweepDecomposition, "mows/sweep", View.on_sweep, MAPS),
             (FieldMap, "mows/field_map", View.on_field_map, MAP_QOS),
@@ -67,13 +77,21 @@ class VizNode(MowsNode):
             if self._view is not None:
                 for shown in feed(self._view, msg, SYSTEM.now().nanoseconds):
                     self._log(shown)
+                for window in self._view.ready_ringdowns():
+                    self._to_draw.put(window)
 
         return take
 
     def _log(self, shown: Shown) -> None:
         if self._channels is not None:
             self._channels.log(shown)
-            self._logged += 1
+            with self._count_lock:
+                self._logged += 1
+
+    def _drawing(self) -> None:
+        while (window := self._to_draw.get()) is not None:
+            if self._view is not None:
+                self._log(window.drawn(self._view.settings))
 
     # --- the lifecycle -------------------------------------------------------------------
     def configure(self) -> None:
@@ -89,12 +107,18 @@ class VizNode(MowsNode):
         self._server = foxglove.start_server(
             name="mows", host=self._param("host"), port=self._param("port"), server_listener=self._channels
         )
+        self._drawer = threading.Thread(target=self._drawing, name="viz-drawing", daemon=True)
+        self._drawer.start()
         self.get_logger().info(f"Foxglove: open ws://{self.address()} (Open connection, Foxglove WebSocket)")
 
     def address(self) -> str:
         return f"{self._param('host')}:{self._server.port}" if self._server is not None else ""
 
     def deactivate(self) -> None:
+        if self._drawer is not None:  # the ring-downs already queued are drawn first
+            self._to_draw.put(None)
+            self._drawer.join()
+            self._drawer = None
         if self._server is not None:
             self._server.stop()
             self._server = None

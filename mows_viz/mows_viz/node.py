@@ -10,8 +10,12 @@ on ``host``:``port``; the address to open is logged and on /diagnostics (``addre
 channel's last message is re-sent to a client that subscribes later (:mod:`mows.viz.live`).
 
 The ring-downs are drawn on a thread of their own, in the order their samples complete: a
-drawing can take seconds under load, and on the executor's thread it would hold back the
-stream, whose blocks the fit's window needs (the fit then drawn over NaN, or dropped).
+drawing can take a second under load, and on the executor's thread it would hold back the
+stream, whose blocks the fit's window needs (the fit then drawn over NaN, or dropped). At a
+stop the ring-downs still queued are drawn for at most ``DRAW_AT_STOP_S`` (mows-graph aborts a
+node that has not stopped 10 s after its signal); /diagnostics count the ring-downs drawn and
+those that were not (``ringdowns_drawn``, ``ringdowns_not_drawn``: samples no longer kept, or
+still queued at a stop).
 """
 
 import queue
@@ -32,7 +36,7 @@ from sensor_msgs.msg import JointState
 
 from mows.viz.live import LiveChannels
 from mows.viz.mount import Mount
-from mows.viz.view import RingdownWindow, Shown, View
+from mows.viz.view import RingdownToDraw, Shown, View, ViewSettings
 from mows_ros.diagnostics import DIAGNOSTICS_DEPTH, DIAGNOSTICS_TOPIC, Health
 from mows_ros.node import MowsNode
 from mows_ros.params import parameter_values
@@ -42,6 +46,7 @@ from mows_ros.wall import SYSTEM
 from mows_viz.parameters import PARAMETERS, view_settings
 
 NODE_NAME = "viz"
+DRAW_AT_STOP_S = 5.0
 MAPS = maps_qos(4)  # /mows/sweep keeps one per probe (at most 4)
 
 
@@ -53,8 +58,10 @@ class VizNode(MowsNode):
         self._channels: LiveChannels | None = None
         self._logged = 0
         self._count_lock = threading.Lock()
-        self._to_draw: queue.SimpleQueue[RingdownWindow | None] = queue.SimpleQueue()
+        self._to_draw: queue.SimpleQueue[RingdownToDraw | None] = queue.SimpleQueue()
         self._drawer: threading.Thread | None = None
+        self._stop_drawing = threading.Event()
+        self._drawn = self._undrawn = 0
         feeds = (
             (MagnetometerBlock, "mows/raw", lambda view, msg, _now: view.raw_points(msg), STREAM_QOS),
             (ExcitationState, "mows/excitation", View.on_excitation, EXCITATION_QOS),
@@ -88,10 +95,13 @@ class VizNode(MowsNode):
             with self._count_lock:
                 self._logged += 1
 
-    def _drawing(self) -> None:
-        while (window := self._to_draw.get()) is not None:
-            if self._view is not None:
-                self._log(window.drawn(self._view.settings))
+    def _drawing(self, settings: ViewSettings) -> None:
+        while (ringdown := self._to_draw.get()) is not None:
+            if self._stop_drawing.is_set():
+                self._undrawn += 1
+                continue
+            self._log(ringdown.drawn(settings))
+            self._drawn += 1
 
     # --- the lifecycle -------------------------------------------------------------------
     def configure(self) -> None:
@@ -107,7 +117,10 @@ class VizNode(MowsNode):
         self._server = foxglove.start_server(
             name="mows", host=self._param("host"), port=self._param("port"), server_listener=self._channels
         )
-        self._drawer = threading.Thread(target=self._drawing, name="viz-drawing", daemon=True)
+        self._stop_drawing.clear()
+        self._drawer = threading.Thread(
+            target=self._drawing, args=(self._view.settings,), name="viz-drawing", daemon=True
+        )
         self._drawer.start()
         self.get_logger().info(f"Foxglove: open ws://{self.address()} (Open connection, Foxglove WebSocket)")
 
@@ -115,9 +128,11 @@ class VizNode(MowsNode):
         return f"{self._param('host')}:{self._server.port}" if self._server is not None else ""
 
     def deactivate(self) -> None:
-        if self._drawer is not None:  # the ring-downs already queued are drawn first
+        if self._drawer is not None:  # the ring-downs already queued drawn first, for a while
             self._to_draw.put(None)
-            self._drawer.join()
+            self._drawer.join(DRAW_AT_STOP_S)
+            self._stop_drawing.set()
+            self._drawer.join()  # the drawing under way, then the rest counted
             self._drawer = None
         if self._server is not None:
             self._server.stop()
@@ -133,7 +148,11 @@ class VizNode(MowsNode):
     def health(self) -> Health:
         base = super().health()
         address = f"ws://{self.address()}" if self.address() else ""
-        return Health(base.level, base.message, {**base.values, "address": address, "messages_logged": self._logged})
+        lost = self._view.fits_without_samples if self._view is not None else 0
+        counts = {"ringdowns_drawn": self._drawn, "ringdowns_not_drawn": lost + self._undrawn}
+        return Health(
+            base.level, base.message, {**base.values, "address": address, "messages_logged": self._logged, **counts}
+        )
 
 
 def main(args=None) -> int:

@@ -147,7 +147,7 @@ class Shown:
 
 
 @dataclass(frozen=True)
-class RingdownWindow:
+class RingdownToDraw:
     """A fit with its window's samples (rows: samples, columns: fluxgates), ready to draw: the
     drawing (the model where θmax is undetermined, :mod:`mows.viz.curves`) may take seconds,
     so a live server does it off the stream's thread."""
@@ -159,8 +159,8 @@ class RingdownWindow:
     sample_rate_hz: float
 
     def drawn(self, settings: ViewSettings) -> Shown:
-        curve = ringdown_curve(self.samples_t, self.sample_rate_hz, self.model, settings.channels)
-        every = stride(curve.t_s.size, settings.max_points)
+        every = stride(len(self.samples_t), settings.max_points)
+        curve = ringdown_curve(self.samples_t, self.sample_rate_hz, self.model, settings.channels, every)
         msg: Any = self.fit
         plot = RingdownPlot(
             int(msg.cycle_id),
@@ -169,7 +169,7 @@ class RingdownWindow:
             str(msg.status_name),
             float(msg.frequency_hz),
             float(msg.frequency_std_hz),
-            *(_listed(values[::every]) for values in (curve.t_s, curve.data_t, curve.model_t, curve.residual_t)),
+            *(_listed(values) for values in (curve.t_s, curve.data_t, curve.model_t, curve.residual_t)),
         )
         return Shown(RINGDOWN, self.log_time_ns, plot)
 
@@ -186,6 +186,7 @@ class View:
     _fields: dict[int, ProbeField] = field(default_factory=dict)
     _history: list = field(default_factory=list)
     _fits: list = field(default_factory=list)  # (fit message, model, log time) waiting for samples
+    fits_without_samples: int = 0  # OK fits not drawn: none of their samples was kept
 
     # --- the stream ----------------------------------------------------------------------
     def on_raw(self, msg) -> list[Shown]:
@@ -243,9 +244,9 @@ class View:
         if msg.status == STATUS_OK and model.drawable:
             self._fits.append((msg, model, time_ns))
 
-    def ready_ringdowns(self) -> list[RingdownWindow]:
+    def ready_ringdowns(self) -> list[RingdownToDraw]:
         """The kept fits whose window the stream has passed, with a copy of their samples (NaN
-        where a block is missing); a fit whose samples are no longer kept is left out."""
+        where a block is missing); a fit whose samples are no longer kept is left out, counted."""
         if not self._blocks:
             return []
         newest = self._blocks[-1]
@@ -257,7 +258,9 @@ class View:
                 continue
             kept = self.window(start_ns, n_samples)
             if kept is not None:
-                ready.append(RingdownWindow(msg, model, time_ns, *kept))
+                ready.append(RingdownToDraw(msg, model, time_ns, *kept))
+            else:
+                self.fits_without_samples += 1
         self._fits = waiting
         return ready
 

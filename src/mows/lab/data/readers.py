@@ -1,7 +1,7 @@
 """Reading measurement tables: CSV files, the project's rosbag2 bags and rotation sweeps.
 
 Each reader gathers the columns of :mod:`mows.lab.data.table` and hands them to
-:func:`mows.lab.data.table.with_notes`, which validates them and notes what was assumed. Reference
+:func:`mows.lab.data.intake.with_notes`, which validates them and notes what was assumed. Reference
 fields of static sources come from :mod:`mows.lab.data.reference`.
 """
 
@@ -20,8 +20,9 @@ import numpy as np
 
 from mows.device.recording import bags
 from mows.estimate.ringdown import FitStatus
+from mows.lab.data.intake import with_notes
 from mows.lab.data.reference import Reference, reference_columns
-from mows.lab.data.table import FIELD, KNOWN, PROBE, MeasurementTable, TableError, broken_rules, rows_text, with_notes
+from mows.lab.data.table import FIELD, KNOWN, PROBE, MeasurementTable, TableError, broken_rules, rows_text
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.schema import Vector
 from mows.records import stamps

@@ -276,7 +276,7 @@ def from_bag(
 
 
 def start_amplitudes_rad(
-    fits: Sequence[Any], sweep_ids: np.ndarray, stop_rad: float = math.nan, probe_ids: np.ndarray | None = None
+    fits: Sequence[Any], sweep_ids: np.ndarray, stop_rad: float, probe_ids: np.ndarray
 ) -> tuple[np.ndarray, list[str]]:
     """Each ring-down's start swing from RingdownFit messages (or fits), and notes of what was
     assumed or left out: the stop less the row's own |rest offset| where its fit determined it
@@ -284,10 +284,10 @@ def start_amplitudes_rad(
     :func:`mows.physics.ringdown_average.swing_from_stop_rad`). The stop is pooled per sweep by a
     median with outliers left out (every ring-down of a sweep starts from the same housing
     stop, and a single fit's θmax is rarely determined), else over all rows, else ``stop_rad``
-    (the probe's). With ``probe_ids`` (one per fit) each probe's stop is its own housing's,
-    pooled over its rows only. NaN where nothing gives a stop, never a swing ≤ 0."""
+    (the probe's, NaN for none). Each probe's stop (``probe_ids``: one per fit) is its own
+    housing's, pooled over its rows only. NaN where nothing gives a stop, never a swing ≤ 0."""
     record = SweepRecord([SweepPoint.from_fit(fit, math.nan, math.nan) for fit in fits])
-    probe_ids = np.zeros(len(fits)) if probe_ids is None else np.asarray(probe_ids, float)
+    probe_ids = np.asarray(probe_ids, float)
     start = np.empty(len(fits))
     notes: list[str] = []
     for probe in np.unique(probe_ids):

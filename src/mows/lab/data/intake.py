@@ -26,6 +26,7 @@ from mows.lab.data.table import (
     WRITER_COLUMN,
     MeasurementTable,
     broken_rules,
+    rows_outside,
     rows_text,
 )
 from mows.physics.ranges import RANGES
@@ -81,8 +82,7 @@ def unusual_values(columns: Mapping[str, np.ndarray]) -> list[str]:
     for name, quantity in RANGED_COLUMNS.items():
         if name in columns:
             bounds = RANGES[quantity]
-            low, high = bounds.usual
-            odd = np.flatnonzero((np.abs(columns[name]) < low) | (np.abs(columns[name]) > high))
+            odd = rows_outside(columns[name], bounds.usual)
             if odd.size:
                 notes.append(
                     f"{name} is unusual in {rows_text(odd)} (usually {bounds.text(bounds.usual)}; {bounds.hint}): "

@@ -319,6 +319,12 @@ def _validate(columns: dict[str, np.ndarray]) -> None:
             )
 
 
+def rows_outside(values: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
+    """The rows whose |value| lies outside ``interval`` (low, high)."""
+    low, high = interval
+    return np.flatnonzero((np.abs(values) < low) | (np.abs(values) > high))
+
+
 def broken_rules(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, str, np.ndarray]]:
     """(column, rule, rows) for the values no column may hold: NaN or ±inf anywhere, values
     ≤ 0 in the columns that are positive by nature and < 0 in those that are not negative."""
@@ -350,8 +356,7 @@ def broken_rules(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, str, 
     for name, quantity in RANGED_COLUMNS.items():
         if name in columns:
             bounds = RANGES[quantity]
-            low, high = bounds.possible
-            bad = np.flatnonzero((np.abs(columns[name]) < low) | (np.abs(columns[name]) > high))
+            bad = rows_outside(columns[name], bounds.possible)
             if bad.size:
                 yield (
                     name,

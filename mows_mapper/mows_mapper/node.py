@@ -165,7 +165,8 @@ class MapperNode(MowsNode):
             return WorkspaceMap.Result(success=False, message=f"workspace map refused: {refusal}")
         self._map_cancelled = False
         try:
-            result = await self._mapping.run(goal_handle, settings.probes[0].probe, lambda: self._map_cancelled)
+            carried = settings.probes[0].probe if settings.probes else probe
+            result = await self._mapping.run(goal_handle, carried, lambda: self._map_cancelled)
         except ValueError as error:  # no pose left within reach; sweeps that cannot determine a map
             result = WorkspaceMap.Result(success=False, message=f"workspace map failed: {error}")
         if not result.success:
@@ -176,7 +177,7 @@ class MapperNode(MowsNode):
     def _map_refusal(self, settings: SweepSettings) -> str | None:
         if self._runner.state != SweepState.IDLE:
             return "a sweep is running"
-        if len(settings.probes) != 1:
+        if len(settings.probes) > 1:
             return f"the arm carries one probe; the mapper has {len(settings.probes)}"
         return None
 

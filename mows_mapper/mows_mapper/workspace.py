@@ -22,12 +22,12 @@ from rclpy.node import Node
 
 from mows.physics.probe import Probe
 from mows.sweep.runner import SweepGoal, SweepOutcome
-from mows.workspace.arm import Reach
+from mows.workspace.arm import Reach, StampedPose
 from mows.workspace.mapping import MapSettings, PosePlan, PoseWatch, sweep_observations, workspace_map
 from mows.workspace.mapping import WorkspaceMap as FittedMap
 from mows.workspace.poses import PoseError
 from mows_mapper.messages import outcome_decomposition_msg
-from mows_mapper.workspace_messages import field_at_response, pose_stamped_msg, stamped_pose, workspace_model_msg
+from mows_mapper.workspace_messages import field_at_response, pose_stamped_msg, workspace_model_msg
 from mows_ros.awaitables import in_worker, until
 from mows_ros.qos import MAP_QOS, STREAM_QOS
 
@@ -72,7 +72,7 @@ class ArmMapping:
 
     def _on_pose(self, msg: PoseStamped) -> None:
         try:
-            self.watch.on_pose(stamped_pose(msg))
+            self.watch.on_pose(StampedPose.of(msg))
         except ValueError as error:  # a malformed pose never stands for a sweep
             self.bad_poses += 1
             self._node.get_logger().warning(f"measured_cp ignored: {error}", throttle_duration_sec=5.0)

@@ -13,17 +13,6 @@ from mows.workspace.mapping import WorkspaceMap
 from mows.workspace.tool import wrench
 
 
-def stamped_pose(msg: PoseStamped) -> StampedPose:
-    """ValueError for a pose that is not one (a quaternion not of unit length, NaN)."""
-    p, q = msg.pose.position, msg.pose.orientation
-    return StampedPose(
-        stamps.nanoseconds(msg.header.stamp),
-        msg.header.frame_id,
-        np.array([p.x, p.y, p.z]),
-        np.array([q.x, q.y, q.z, q.w]),
-    )
-
-
 def pose_stamped_msg(pose: StampedPose) -> PoseStamped:
     msg = PoseStamped()
     stamps.set_nanoseconds(msg.header.stamp, pose.stamp_ns)
@@ -66,20 +55,14 @@ def field_at_response(the_map: WorkspaceMap | None, request: FieldAt.Request, re
     if the_map is None:
         response.success, response.message = False, "no workspace map yet: run a workspace_map goal first"
         return response
-    settings = the_map.settings
     point = np.array([[request.position.x, request.position.y, request.position.z]])
-    distance_m = float(np.linalg.norm(point[0] - np.asarray(settings.centre_m)))
-    if not np.all(np.isfinite(point)) or distance_m > settings.radius_m:
-        response.success = False
-        response.message = (
-            f"the point is {distance_m * 1e3:.1f} mm from the workspace's centre, outside its "
-            f"{settings.radius_m * 1e3:.1f} mm: the map does not extrapolate"
-        )
+    if problem := the_map.outside_problem(point[0]):
+        response.success, response.message = False, problem
         return response
     field, field_std = the_map.model.field_t(point)
     gradient, gradient_std = the_map.model.gradient_t_per_m(point)
     tool = wrench(the_map.model, point, np.asarray(request.tool_moment_am2, float))
-    response.success, response.message, response.frame_id = True, "", settings.frame_id
+    response.success, response.message, response.frame_id = True, "", the_map.settings.frame_id
     response.field_t, response.field_std_t = field[0].tolist(), field_std[0].tolist()
     response.gradient_t_per_m, response.gradient_std_t_per_m = (
         gradient[0].ravel().tolist(),

@@ -7,23 +7,30 @@ publishes (transient local) and its ``field_at`` service predict held-out points
 The arm is harder than a real one where a map feels it: its reports are 20 ms late, every move
 ends off its goal by a draw of its stated accuracy, and the probe sweeps where it truly is."""
 
+import json
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import PoseStamped
 from mows_msgs.action import WorkspaceMap
-from mows_msgs.msg import RingdownFit, WorkspaceModel
+from mows_msgs.msg import ExcitationState, RingdownFit, SweepDecomposition, WorkspaceModel
 from mows_msgs.srv import FieldAt
 
+from mows.cli.main import main
+from mows.device.cycle.phases import Phase
 from mows.physics.probe import PAPER_PROBE
 from mows.records import stamps
 from mows.sim.navigation import navigation_system
 from mows.workspace.arm import NS_PER_S, Reach, SimulatedArm, StampedPose
 from mows.workspace.poses import PoseError
 from mows.workspace.simulated import RINGDOWN_STD_HZ, SweepPose, ball_points, sweep_shifts_hz
-from mows_ros.qos import MAP_QOS, RESULT_QOS
+from mows_driver.recording import open_recorder
+from mows_ros.qos import EXCITATION_QOS, MAP_QOS, RESULT_QOS, maps_qos
 from node_processes import serve_cycles
 
 pytestmark = pytest.mark.ros
@@ -33,6 +40,7 @@ RADIUS_M = 0.015
 SWEEPS = 10
 ANGLES = np.radians(np.arange(0.0, 360.0, 45.0))
 ACCURACY = PoseError(1e-4, math.radians(0.01))  # an industrial arm's, stated to the mapper
+DOC = Path(__file__).parents[2] / "docs" / "workspace_maps.md"
 MAP_BOUND_S = 400.0  # a bound for a hang only: 80 cycles and a fit, on a loaded machine
 
 
@@ -54,9 +62,7 @@ class ArmNode:
         ros.node.create_timer(0.02, self.publish)
 
     def on_goal(self, msg: PoseStamped) -> None:
-        p, q = msg.pose.position, msg.pose.orientation
-        goal = StampedPose(0, msg.header.frame_id, np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w]))
-        if not (answer := self.arm.move_cp(goal, now_s(self.ros))).accepted:
+        if not (answer := self.arm.move_cp(StampedPose.of(msg), now_s(self.ros))).accepted:
             self.refusals.append(answer.reason)
 
     def publish(self) -> None:
@@ -77,6 +83,7 @@ class ArmDriver:
         self.ros, self.arm, self.rng, self.cycle = ros, arm, rng, 0
         self.source = navigation_system(1.5e-3, seed=2)  # about the workspace's centre
         self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
+        self.excitation = ros.node.create_publisher(ExcitationState, "mows/excitation", EXCITATION_QOS)
         self.server = serve_cycles(ros, self.run_cycle)
 
     def run_cycle(self, request, response):
@@ -84,6 +91,12 @@ class ArmDriver:
         pose = SweepPose(truth.position_m - CENTRE_M, truth.plane)
         self.cycle += 1
         for repeat in range(request.repeats):
+            ringdown = ExcitationState(
+                phase=int(Phase.RINGDOWN), phase_name="RINGDOWN", cycle_id=self.cycle, repeat_index=repeat
+            )
+            ringdown.repeats, ringdown.theta0_rad = request.repeats, request.theta0_rad
+            stamps.set_nanoseconds(ringdown.header.stamp, self.ros.node.get_clock().now().nanoseconds)
+            self.excitation.publish(ringdown)
             shift = sweep_shifts_hz(self.source, pose, PAPER_PROBE, np.array([request.theta0_rad]))[0]
             shift += RINGDOWN_STD_HZ * self.rng.standard_normal()
             msg = RingdownFit(
@@ -104,6 +117,23 @@ class ArmDriver:
             self.fits.publish(msg)
         response.success, response.cycle_id, response.ringdowns_recorded = True, self.cycle, request.repeats
         return response
+
+
+# What the driver records of the graph (its ``record_path``): the cycles, the fits, the maps.
+RECORDED = (
+    ("/mows/excitation", ExcitationState, EXCITATION_QOS),
+    ("/mows/ringdown", RingdownFit, RESULT_QOS),
+    ("/mows/sweep", SweepDecomposition, maps_qos(16)),
+    ("/mows/workspace_model", WorkspaceModel, MAP_QOS),
+)
+
+
+def record(ros, path):
+    recorder = open_recorder(str(path), list(RECORDED))
+    for topic, cls, qos in RECORDED:
+        write = lambda msg, topic=topic: recorder.write(topic, msg, ros.node.get_clock().now().nanoseconds)  # noqa: E731
+        ros.node.create_subscription(cls, topic, write, qos)
+    return recorder
 
 
 @pytest.fixture
@@ -135,11 +165,12 @@ def field_at(ros, point_m, moment_am2=(0.0, 0.0, 0.0)) -> FieldAt.Response:
 
 
 @pytest.mark.slow
-def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, mapper):
+def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, mapper, tmp_path, capsys):
     client, _ = mapper
     rng = np.random.default_rng(4)
     arm = ArmNode(ros, rng)
     driver = ArmDriver(ros, arm.arm, rng)
+    recorder = record(ros, tmp_path / "session")
     done, feedback = run_map(
         ros,
         client,
@@ -178,6 +209,22 @@ def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, mapper)
     answer = field_at(ros, CENTRE_M, (0.0, 0.0, 0.1))
     np.testing.assert_allclose(answer.torque_nm, np.cross([0.0, 0.0, 0.1], answer.field_t), rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(answer.force_n, np.reshape(answer.gradient_t_per_m, (3, 3)) @ [0.0, 0.0, 0.1], rtol=1e-9)
+    # The docs' request (``ros2 service call``, which the wheels do not carry), through rclpy.
+    printed = yaml.safe_load(
+        re.search(r"ros2 service call /mapper/field_at mows_msgs/srv/FieldAt \\\n\s*\"(.*?)\"", DOC.read_text())[1]
+    )
+    position = printed["position"]
+    answer = field_at(ros, [position["x"], position["y"], position["z"]], printed["tool_moment_am2"])
+    assert answer.success, answer.message
+    # The recording alone makes the same map again (`mows map BAG`): one path, live and offline.
+    recorder.close()
+    capsys.readouterr()
+    assert main(["map", str(tmp_path / "session"), "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)["workspace"]
+    assert again["degree"] == model.degree and again["sweeps"] == SWEEPS
+    np.testing.assert_allclose(
+        again["coefficients_t"], model.coefficients_t, rtol=0, atol=1e-6 * min(model.coefficient_std_t)
+    )
     outside = field_at(ros, CENTRE_M + [0.0, 0.0, 2 * RADIUS_M])
     assert not outside.success and "outside its 15.0 mm" in outside.message
     # A workspace the arm cannot reach is refused with the reason, and the arm not moved.

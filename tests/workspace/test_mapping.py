@@ -9,7 +9,7 @@ import pytest
 
 from mows.physics.probe import PAPER_PROBE
 from mows.workspace.arm import NS_PER_S, Reach, StampedPose
-from mows.workspace.mapping import MapSettings, PosePlan, PoseWatch, workspace_map
+from mows.workspace.mapping import MapSettings, PosePlan, PoseWatch, WorkspaceMap, workspace_map
 from mows.workspace.poses import PoseError
 
 REACH = Reach((0.0, 0.0, 0.0), 0.1, 0.6)
@@ -79,3 +79,11 @@ def test_a_map_refuses_sweeps_in_another_frame():
     settings = MapSettings((0.3, 0.0, 0.0), 0.02, PoseError(1e-4, 1e-4), REACH)
     with pytest.raises(ValueError, match="frame 'world', the map is in 'arm_base'"):
         workspace_map([(None, pose(1.0, frame="world"))], PAPER_PROBE, settings)
+
+
+def test_a_map_does_not_extrapolate_beyond_its_workspace():
+    settings = MapSettings((0.3, 0.0, 0.0), 0.02, PoseError(1e-4, 1e-4), REACH)
+    the_map = WorkspaceMap(None, None, (), settings)
+    assert the_map.outside_problem(np.array([0.3, 0.0, 0.019])) == ""
+    assert "25.0 mm from the workspace's centre, outside its 20.0 mm" in the_map.outside_problem([0.3, 0.025, 0.0])
+    assert "outside" in the_map.outside_problem([math.nan, 0.0, 0.0])

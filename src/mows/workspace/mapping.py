@@ -43,7 +43,7 @@ class MapSettings:
     """A workspace ball (``centre_m``, ``radius_m``, in the arm's base frame ``frame_id``), the
     arm's ``reach`` and stated ``accuracy``, gravity in that frame, and the degrees tried."""
 
-    centre_m: tuple[float, float, float]
+    centre_m: tuple[float, ...]
     radius_m: float
     accuracy: PoseError
     reach: Reach = Reach()
@@ -177,6 +177,16 @@ class WorkspaceMap:
     choice: DegreeChoice
     poses: tuple[StampedPose, ...]
     settings: MapSettings
+
+    def outside_problem(self, point_m: np.ndarray) -> str:
+        """Why the map does not answer at ``point_m`` ('' inside its workspace ball)."""
+        distance_m = float(np.linalg.norm(np.asarray(point_m, float) - np.asarray(self.settings.centre_m, float)))
+        if math.isfinite(distance_m) and distance_m <= self.settings.radius_m:
+            return ""
+        return (
+            f"the point is {distance_m * 1e3:.1f} mm from the workspace's centre, outside its "
+            f"{self.settings.radius_m * 1e3:.1f} mm: the map does not extrapolate"
+        )
 
     def rms_std(self) -> tuple[float, float]:
         """The rms σ of B (T) and of G (T/m) over points spread through the workspace ball."""

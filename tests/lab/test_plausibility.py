@@ -111,3 +111,16 @@ def test_a_curvature_the_references_sources_cannot_make_is_a_finding_not_an_effe
     assert abs(needed["field_curvature.hyyy_t_per_m2"].value - 0.494) < 0.15, needed
     physics = analyse(_curvature_table("truth"), PAPER_PROBE, auto=True, cross_validate=False)
     assert "field_curvature" in physics.effect_names, [step.change for step in physics.history]
+
+
+def test_a_curvature_added_by_hand_at_an_impossible_value_is_not_adequate():
+    """The user adds the curvature to the physics that is there: the residuals become noise, but
+    the verdict reports the value the pair's centre cannot have instead of accepting it."""
+    known = ["finite_amplitude (at physics)", "static_deflection (at physics)", "transverse_gradient (at physics)"]
+    table = _curvature_table("pair")
+    added = analyse(table, PAPER_PROBE, effects=[*known, "field_curvature"], rank=False, cross_validate=False)
+    assert added.verdict == "inconsistent_physics", added.diagnosis.explanation
+    assert "would need field_curvature.hyyy_t_per_m2" in added.diagnosis.explanation
+    assert added.fit.chi2_dof < 1.5  # what the statistics alone would have called adequate
+    physics = analyse(_curvature_table("truth"), PAPER_PROBE, effects=[*known, "field_curvature"], rank=False)
+    assert physics.verdict == "adequate", physics.diagnosis.explanation

@@ -15,6 +15,7 @@ import math
 import numpy as np
 import pytest
 
+from mows.cli.main import main
 from mows.lab.data import synthetic
 from mows.lab.data.probe_rows import ProbeSet
 from mows.lab.data.scale import check_reference, table_probes
@@ -119,3 +120,13 @@ def test_several_probes_with_their_column_are_judged_each_by_itself():
     assert check_reference(table, probes) is table  # each probe moves as Eq. 6 says: nothing to note
     shifted = table.with_columns(f_hz=np.where(table.columns[PROBE] == 1, table.f_hz - 3.0, table.f_hz))
     assert check_reference(shifted, probes) is shifted  # an offset between the probes is their f00s
+
+
+def test_the_command_line_refuses_a_unit_and_takes_it_with_trust_reference(tmp_path, capsys):
+    path = tmp_path / "sweep.csv"
+    _scaled(_table(field_t=4e-4), 1e3).to_csv(path)
+    assert main(["lab", "compare", str(path)]) == 2
+    assert "the reference in mT given in T? (--trust-reference takes it as given)" in capsys.readouterr().err
+    assert main(["lab", "compare", str(path), "--trust-reference", "--no-cv"]) == 0
+    out = capsys.readouterr().out
+    assert "note: the ring-downs move 0.000999 times as much" in out and "verdict:" in out

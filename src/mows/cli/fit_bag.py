@@ -43,9 +43,6 @@ from mows.records.files import check_output, writing
 from mows.records.stamps import NS_PER_S
 from mows.sweep.record import SweepPoint, SweepRecord, sweep_numbers
 
-# Fits that one static field describes this well are one sweep: its field gives each rest angle.
-MAX_SWEEP_CHI2_DOF = 10.0
-
 
 def add_arguments(parser) -> None:
     parser.add_argument("bag", help="a rosbag2 directory (or .mcap) recorded by the driver (record_path)")
@@ -189,15 +186,12 @@ def write_table(path, fits: list[Estimated], probe: Probe, named: bool, temperat
     """The OK fits as a model-lab table, numbered by sweep and with ``temperature_log`` joined
     where given (module docstring); returns notes of how the start swings were found.
 
-    Every ring-down of one probe starts at the housing stop, so its swing is stop − |θs|
-    (:func:`mows.physics.ringdown_average.swing_from_stop_rad`). θs comes from the first-principles
-    decomposition of all the fits as one sweep in one static field
-    (:meth:`mows.sweep.record.SweepRecord.start_amplitudes_rad`) where that describes them
-    (χ²/dof ≤ MAX_SWEEP_CHI2_DOF), else from each fit's own rest offset
-    (:meth:`~mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`); the stop is pooled
-    over the fits that determined θmax, else the probe's. Fits of probes named by ``--probes``
-    (``named``), whose multi-tone excitation need not swing them to the stop, are marked by the column ``probe``
-    and each probe's start swings come from its own fits, as those the estimator recorded
+    Every ring-down of one probe starts at the housing stop
+    (:meth:`mows.sweep.record.SweepRecord.start_swings_rad`: the rest angle from the sweep's field
+    where one static field describes the fits, else from each fit). Fits of probes named by
+    ``--probes`` (``named``), whose multi-tone excitation need not swing them to the stop, are
+    marked by the column ``probe`` and each probe's start swings come from its own fits, as those
+    the estimator recorded
     (:func:`mows.lab.data.readers.start_amplitudes_rad`). The table is marked as the project's
     own (:func:`mows.lab.data.table.tool_table`)."""
     record = SweepRecord(
@@ -213,7 +207,7 @@ def write_table(path, fits: list[Estimated], probe: Probe, named: bool, temperat
         start, notes = start_amplitudes_rad([e.fit for e in fits], np.zeros(len(fits)), probe.theta_stop_rad, probe_ids)
         columns = record.table_columns(start) | {PROBE: probe_ids}
     else:
-        start, notes = _start_swings_rad(record, probe)
+        start, notes = record.start_swings_rad(probe)
         columns = record.table_columns(start)
     columns["sweep"] = _sweeps(fits).astype(float)
     if temperature_log is not None:
@@ -230,12 +224,3 @@ def _sweeps(fits: list[Estimated]) -> np.ndarray:
     first = [i for i, e in enumerate(fits) if i == 0 or e.window is not fits[i - 1].window]
     numbers = sweep_numbers(np.array([fits[i].window.theta0_rad for i in first]))
     return np.repeat(numbers, np.diff([*first, len(fits)]))
-
-
-def _start_swings_rad(record: SweepRecord, probe: Probe) -> tuple[np.ndarray, list[str]]:
-    """Each ring-down's start swing of one probe's record (:func:`write_table`) and how it was found."""
-    decomposition = record.decompose(probe, probe.f00_hz)
-    if decomposition.ok and decomposition.chi2_dof <= MAX_SWEEP_CHI2_DOF:
-        start = record.start_amplitudes_rad(decomposition, probe)
-        return start, [f"start swings: the stop less the rest angle in the sweep's field ({decomposition.report()})"]
-    return record.fitted_start_amplitudes_rad(probe.theta_stop_rad)

@@ -18,6 +18,7 @@ import contextlib
 import os
 import pathlib
 import sys
+import traceback
 import warnings
 from collections.abc import Callable, Iterator
 
@@ -26,6 +27,7 @@ import yaml
 
 from mows.cli.status import EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_BUG, EXIT_OK, caused_by_interrupt, interrupted
 from mows.physics.schema import unreadable, yaml_problem
+from mows.records.files import read_input
 
 #: Exceptions that mean "the input is bad". ValueError covers the library's own refusals
 #: (TableError, OutputRefused, a scenario's out-of-range value) and UnicodeDecodeError.
@@ -49,7 +51,7 @@ def one_line(error: BaseException) -> str:
 def input_file(path, what: str = "") -> Iterator[pathlib.Path]:
     """Read ``path`` inside the ``with`` block; what goes wrong is reported as this file's fault
     (:class:`InputError` with ``what`` and the file's name), unless the message already names it."""
-    path = pathlib.Path(path)
+    path = read_input(path)
     name = f"{what} {path}" if what else str(path)
     try:
         yield path
@@ -157,6 +159,12 @@ def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> in
     return status
 
 
+def _exit_site(error: BaseException) -> str:
+    """Where ``error`` was raised: the file and line of its innermost frame."""
+    frames = traceback.extract_tb(error.__traceback__)
+    return f"{frames[-1].filename}:{frames[-1].lineno}" if frames else "the command"
+
+
 def _status(prog: str, work: Callable[[], int], debug: bool) -> int:
     """:func:`report_errors` without the warnings."""
     try:
@@ -167,6 +175,15 @@ def _status(prog: str, work: Callable[[], int], debug: bool) -> int:
         line, status = interrupted(prog, error)
         print(line, file=sys.stderr)
         return status
+    except SystemExit as error:  # our commands return their status: this came from a plugin or library
+        if debug:
+            raise
+        print(
+            f"{prog}: error: {_exit_site(error)} tried to end the command (sys.exit({error.code!r})): "
+            "a plugin must return or raise, never exit",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
     except BrokenPipeError:
         # The reader of stdout left (``| head``): nothing is wrong, and nothing more can be said
         # there; Python's own flush at exit would fail again, so stdout goes to /dev/null.

@@ -19,6 +19,8 @@ REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its
 REST_OFFSET_SIGMAS = 4.0  # …and it is this many σ from 0
 OUTLIER_SIGMAS = 3.0  # a pooled value this many robust σ from the median is left out
 MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
+# Ring-downs that one static field describes this well are one sweep: its field gives each rest angle.
+MAX_SWEEP_CHI2_DOF = 10.0
 
 
 def robust_median(values, fallback: float = math.nan) -> float:
@@ -256,6 +258,18 @@ class SweepRecord:
         field and gradient, the stop pooled (the probe's where no fit gives it)."""
         rest = self.rest_angles_rad(decomposition, probe)
         return swing_from_stop_rad(self.stop_amplitude_rad(rest, probe.theta_stop_rad), rest, *self._since_release())
+
+    def start_swings_rad(self, probe: Probe) -> tuple[np.ndarray, list[str]]:
+        """Each ring-down's start swing, the record being one probe's released at the stop, and
+        notes of how it was found: from the first-principles decomposition of all its ring-downs
+        as one sweep in one static field (:meth:`start_amplitudes_rad`) where that describes them
+        (χ²/dof ≤ ``MAX_SWEEP_CHI2_DOF``), else from each fit alone
+        (:meth:`fitted_start_amplitudes_rad`, the probe's stop where no fit gives it)."""
+        decomposition = self.decompose(probe, probe.f00_hz)
+        if decomposition.ok and decomposition.chi2_dof <= MAX_SWEEP_CHI2_DOF:
+            note = f"start swings: the stop less the rest angle in the sweep's field ({decomposition.report()})"
+            return self.start_amplitudes_rad(decomposition, probe), [note]
+        return self.fitted_start_amplitudes_rad(probe.theta_stop_rad)
 
     def fitted_start_amplitudes_rad(self, stop_rad: float = math.nan) -> tuple[np.ndarray, list[str]]:
         """Each ring-down's start swing from its fit alone, and notes of what was assumed: the

@@ -8,6 +8,7 @@ fields of static sources come from :mod:`mows.lab.data.reference`.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import os
 import pathlib
@@ -26,6 +27,7 @@ from mows.physics.schema import Vector
 from mows.records import stamps
 from mows.records.files import read_input
 from mows.sweep.decompose import Decomposition
+from mows.sweep.probes import f00_of
 from mows.sweep.record import SweepPoint, SweepRecord
 
 RINGDOWN_TOPIC = "/mows/ringdown"
@@ -63,7 +65,7 @@ def _read_numeric(path: pathlib.Path) -> dict[str, np.ndarray] | None:
             with warnings.catch_warnings():  # a header without rows: said by _read_cells
                 warnings.simplefilter("ignore", UserWarning)
                 values = np.loadtxt(handle, delimiter=",", comments=None, quotechar='"', ndmin=2)
-    except (OSError, ValueError):  # ValueError: a cell that is no number, a short row, not UTF-8
+    except (OSError, ValueError, csv.Error):  # a cell that is no number, a short row, not UTF-8, too long
         return None
     if values.shape != (len(values), len(header)) or not len(values) or not np.isfinite(values).all():
         return None
@@ -74,9 +76,12 @@ def _read_cells(path: pathlib.Path, drop_invalid: bool) -> MeasurementTable:
     """:func:`read_csv` cell by cell: every problem named by column and row."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:  # -sig: Excel's byte-order mark
-            rows = list(csv.reader(handle))
+            reader = csv.reader(handle)
+            rows = list(reader)
     except OSError as error:
         raise TableError(f"cannot read {path}: {error.strerror}") from None
+    except csv.Error as error:  # a cell beyond the csv module's field limit (128 KiB): no number
+        raise TableError(f"{path}: line {reader.line_num}: {error}: not a table of numbers") from None
     rows = [row for row in rows if any(cell.strip() for cell in row)]
     if not rows:
         raise TableError(f"{path} is empty: expected a header row and data rows")
@@ -333,3 +338,24 @@ def from_sweep(
     columns = record.table_columns(starts)
     columns.update(reference_columns(reference, len(record.points)))
     return MeasurementTable(columns, "sweep")
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepReadings:
+    """One probe's rotation sweep read from the f00 its ring-downs carry: by the first-principles
+    model and by the published one (Eqs. 11, 12), and the lab's table of it."""
+
+    f00_hz: float
+    first_principles: Decomposition
+    published: Decomposition
+    table: MeasurementTable
+
+
+def read_sweep(record: SweepRecord, reference: Reference, probe: Probe) -> SweepReadings:
+    """``record`` (its successful ring-downs) decomposed both ways from the estimator's f00 of its
+    ring-downs (:func:`mows.sweep.probes.f00_of`), and its table in the static ``reference``
+    (:func:`from_sweep`, the start swings at the first-principles field)."""
+    f00_hz = f00_of(record)
+    first_principles = record.decompose(probe, f00_hz)
+    published = record.decompose(probe, f00_hz, model="published")
+    return SweepReadings(f00_hz, first_principles, published, from_sweep(record, reference, probe, first_principles))

@@ -23,6 +23,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from mows.device.stream.simulated_cycle import CycleRecord, simulate_cycle
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.estimate.ringdown import COIL_OFF_SKIP_S
 from mows.lab.data.reference import reference_columns
@@ -35,7 +36,6 @@ from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_r
 from mows.physics.probe import Probe
 from mows.physics.schema import FloatOrArray, Vector
 from mows.sim.scenario import Scenario
-from mows.sim.simulated_cycle import CycleRecord, simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.record import SweepPoint, SweepRecord
 

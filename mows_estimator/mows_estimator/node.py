@@ -8,9 +8,10 @@ and ``/mows/excitation`` (ExcitationState, transient local). Publishes, per reco
 fitted jointly over the probes its announcement lists, each at its own θ0 (all of them when it
 lists none, as bags recorded before the lists do), and gives one RingdownFit per probe with its
 ``probe_id``: the node's own probe (0) alone, or those ``probes`` names, each in frame
-``<probe_frame_id>_<id>`` and counted on /diagnostics with the fits of ids it does not know. Service ``/estimator/calibrate`` (CalibrateF00; ``/mows/estimator/calibrate``,
-the previous release's name, is served too for one release) sets f00 from the next ring-downs in a
-known field. The estimation itself is :class:`mows.estimate.stream.RingdownEstimator`.
+``<probe_frame_id>_<id>`` and counted on /diagnostics with the fits of ids it does not know.
+Service ``/estimator/calibrate`` (CalibrateF00; ``/mows/estimator/calibrate``, the previous
+release's name, is served too for one release) sets f00 from the next ring-downs in a known field.
+The estimation itself is :class:`mows.estimate.stream.RingdownEstimator`.
 """
 
 import time

@@ -47,11 +47,13 @@ from mows.physics.probe import Probe
 
 
 class FrequencyModel:
-    """The published frequency model plus ``effects`` for ``probe`` (a :class:`mows.physics.probe.Probe`).
+    """The published frequency model plus ``effects`` for ``probe``: a table's
+    :class:`~mows.lab.data.probe_rows.ProbeSet`, held as given, or one
+    :class:`~mows.physics.probe.Probe`, held as its set of one (:meth:`ProbeSet.covering`).
 
     ``model + effect`` and ``effect + model`` give new models (``FrequencyModel() + a + b``
-    one without a probe, to add to others); parameters are named
-    ``f00_hz`` and ``<effect>.<parameter>``.
+    one without a probe, to add to others); parameters are named by the set's f00s
+    (``f00_hz``, or ``probe_<id>.f00_hz``) and ``<effect>.<parameter>``.
     """
 
     def __init__(self, probe: Probe | None = None, effects: Sequence[Effect] = ()) -> None:

@@ -28,14 +28,19 @@ def installed():
 def on_bench(installed):
     """The backend on a simulated card of ``scenario`` (with ``supply`` on it), and the card."""
 
+    made = []
+
     def make(scenario="paper_largest_spacing", supply=None, watchdog_s=WATCHDOG_S):
         card = installed(SimulatedCard(SimulatedDevice(load_scenario(scenario))))
         if supply is not None:
             card.supply_current_a = lambda: _supply_state(supply)[0] * _supply_state(supply)[1]
         device = dataclasses.replace(load_daq_device(), watchdog_s=watchdog_s)
-        return card, open_daqmx(device, CurrentCap(10.0), supply)
+        made.append(open_daqmx(device, CurrentCap(10.0), supply))
+        return card, made[-1]
 
-    return make
+    yield make
+    for backend in made:  # a failed test's bench closed, not left to switch the next test's supply off
+        backend.close()
 
 
 def _supply_state(supply) -> tuple[float, int]:

@@ -22,8 +22,9 @@ import numpy as np
 import pytest
 from nidaqmx.errors import DaqError
 
-from mows.device.backends import daqmx_backend
-from mows.device.backends.daqmx_backend import DeviceUnavailable, open_daqmx
+from mows.device.backends import daqmx_tasks
+from mows.device.backends.daqmx_backend import open_daqmx
+from mows.device.backends.daqmx_tasks import DeviceUnavailable
 from mows.device.backends.factory import BackendSettings, BenchSettings, make_backend
 from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.instruments import scpi
@@ -398,7 +399,7 @@ def test_a_host_late_beyond_the_lead_has_the_coils_off_a_fault_told_and_the_card
 
 
 def test_an_input_overrun_is_told_beside_the_outputs_underflow(on_bench, monkeypatch):
-    monkeypatch.setattr(daqmx_backend, "INPUT_BUFFER_S", 0.3)
+    monkeypatch.setattr(daqmx_tasks, "INPUT_BUFFER_S", 0.3)
     card, backend = on_bench()
     poll_for(backend, 0.2)
     time.sleep(1.2)
@@ -713,8 +714,9 @@ def test_the_backend_ramps_the_supply_and_zeroes_it_on_close(on_bench):
         backend.poll(0.0)
         seen.append(bench.device.field_current_a)
     assert math.isnan(backend.supply_readback.current_a)  # not at once: the pair is still settling
-    while backend.supply_pending:  # read back once the last step has settled
+    while backend.supply_pending:  # the steps written, and read back once the last has settled
         backend.poll(0.0)
+        seen.append(bench.device.field_current_a)
     assert backend.supply_readback.step_index == result.applied_sample_index
     tolerance = supply.config.readback_tolerance_a(0.5)
     assert backend.supply_readback.current_a == pytest.approx(0.5, abs=tolerance)

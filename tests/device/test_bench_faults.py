@@ -10,6 +10,7 @@ output is a fault that leaves the supply at zero and off.
 """
 
 import dataclasses
+import threading
 import time
 
 import pytest
@@ -18,12 +19,14 @@ from device.test_bench_backends import (
     MAX_POLLS,
     armed_session,
     blocks,
+    poll_for,
     run_cycle,
     simulated_supply,
     supply_state,
 )
 from mows.cli.main import main
-from mows.device.backends.daqmx_backend import DeviceUnavailable, open_daqmx
+from mows.device.backends.daqmx_backend import open_daqmx
+from mows.device.backends.daqmx_tasks import DeviceUnavailable
 from mows.device.cycle.phases import CycleRequest
 from mows.device.instruments import scpi
 from mows.device.instruments.daq import load_daq_device
@@ -38,6 +41,7 @@ from mows.device.instruments.scpi import (
 from mows.device.interface import FieldCurrentCommand, LinkEvent
 from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.physics.coils import CurrentCap
+from mows.records.samples import SampleBlock
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
@@ -195,14 +199,27 @@ def test_on_close_every_output_and_the_master_output_are_off_and_read_back(on_be
 
 
 def test_a_supply_ten_milliseconds_per_exchange_does_not_hold_up_the_card(on_bench, monkeypatch):
+    """Every exchange with the supply happens off the thread that polls the card (the driver's
+    stream thread): at 10 ms each, a ramp's steps written there made the host fall a second
+    behind the card's samples."""
     supply = simulated_supply()
-    monkeypatch.setattr(instrument(supply), "latency_s", 0.01)
+    sim = instrument(supply)
+    monkeypatch.setattr(sim, "latency_s", 0.01)
+    exchanged_on = []
+    match = sim._device._match
+
+    def recorded(query):
+        exchanged_on.append(threading.current_thread())
+        return match(query)
+
+    monkeypatch.setattr(sim._device, "_match", recorded)
     card, backend = on_bench("calibration", supply)
     items = []
     for command_id, current_a in ((1, 2.0), (2, 0.0)):  # two full ramps: 200 steps, 400 exchanges
         backend.send(FieldCurrentCommand(command_id, 0, current_a))
         items += settle(backend)
-    assert supply_state(supply) == (0.0, 1)
+    assert supply_state(supply) == (0.0, 1) and len(exchanged_on) >= 400
+    assert threading.current_thread() not in exchanged_on
     assert card.underflows == 0 and backend.card_faults == 0
     assert not [i for i in items if isinstance(i, LinkEvent)]
     read = blocks(items)
@@ -260,3 +277,19 @@ def test_an_over_voltage_trip_is_a_fault_and_the_next_ramp_clears_it(on_bench):
     assert supply_state(supply) == (0.2, 1) and not instrument(supply).tripped
     backend.close()
     assert supply_state(supply) == (0.0, 0)
+
+
+def test_a_host_behind_its_card_that_stalls_beyond_the_lead_is_told_at_once(on_bench):
+    """Behind the card (its outputs written ahead of the sample it generates, beyond the newest
+    block read), then stalled beyond the lead: the outputs underflow, and the next poll says so,
+    although it has nothing new to write."""
+    card, backend = on_bench()
+    poll_for(backend, 0.2)
+    time.sleep(0.5)  # behind the card by half a second, within the lead
+    backend.poll(0.05)  # one block read; the outputs written the lead ahead of the card's sample
+    time.sleep(1.2)  # a stall beyond the lead
+    told = [i for i in backend.poll(0.05) if not isinstance(i, SampleBlock)]
+    assert [type(i).__name__ for i in told] == ["LinkEvent", "LinkEvent", "DeviceFault"], told
+    down, up, _ = told
+    assert not down.up and "(-200290)" in down.reason and up.up and card.underflows == 1
+    backend.close()

@@ -4,7 +4,8 @@ from the stream thread (two exchanges every 10 ms step) made the host fall behin
 
 :class:`SupplyLine` owns the :class:`mows.device.instruments.scpi.ScpiSupply` and does, in order,
 what the backend hands it: the steps of a ramp (the supply prepared again first when it was
-switched off), the switch-off at the end of an emergency stop's ramp to zero, and the read-back
+switched off; never closer than the ramp's 10 ms step, so that the slew limit holds however late
+they come), the switch-off at the end of an emergency stop's ramp to zero, and the read-back
 ``settle_s`` after a ramp's last step, in the supply's own time from the write, stamped with that
 step's sample (:class:`Readback`): a read-back is judged only against the step it follows. While
 the output should be on it is read back every ``WATCH_S`` too: an output that went off by itself
@@ -60,7 +61,9 @@ class SupplyLine:
         self._watch_at_s = math.inf
         self._busy_since_s: float | None = None  # when the exchange under way began
         self._stopping = False
+        self._working = False  # a job under way
         self._step_index = -1
+        self._stepped_s = -math.inf  # when the last step was written
         self._safe_job: Callable[[], None] | None = None
         self._condition = threading.Condition()
         self._thread = threading.Thread(target=self._run, name="mows-supply", daemon=True)
@@ -86,9 +89,9 @@ class SupplyLine:
 
     @property
     def busy(self) -> bool:
-        """Steps to write, an exchange under way, or a ramp's read-back still to come."""
+        """Steps to write, one under way, or a ramp's read-back still to come."""
         with self._condition:
-            return bool(self._jobs) or self._busy_since_s is not None or self._settled_at is not None
+            return bool(self._jobs) or self._working or self._settled_at is not None
 
     # --- a fault ------------------------------------------------------------------------------
     def make_safe(self, step_index: int) -> list[str]:
@@ -153,6 +156,7 @@ class SupplyLine:
                     job = self._next_job()
                 if job is None:
                     return
+                self._working = True
             try:
                 job()
             except SupplyError as error:
@@ -162,6 +166,9 @@ class SupplyLine:
                     self._jobs.clear()
                     self._jobs.extend(kept)
                     self._settled_at, self._watch_at_s = None, math.inf
+            finally:
+                with self._condition:
+                    self._working = False
 
     def _next_job(self) -> Callable[[], None] | None:
         now = time.monotonic()
@@ -192,6 +199,10 @@ class SupplyLine:
         if self.off:
             self._exchange(self.supply.prepare)  # at zero, output on, as when it was opened
             self.off = False
+        # The slew limit holds in the supply's time: steps that waited (a busy host) are paced
+        # one per RAMP_STEP_S, never written as a burst.
+        time.sleep(max(0.0, self._stepped_s + RAMP_STEP_S - time.monotonic()))
+        self._stepped_s = time.monotonic()
         self._exchange(self.supply.set_current_a, current_a)
         self.current_a, self._step_index = current_a, index
         with self._condition:

@@ -36,7 +36,6 @@ the card, :func:`open_daqmx` says so in one line (:class:`DeviceUnavailable`).
 from __future__ import annotations
 
 import contextlib
-import importlib
 import math
 import threading
 import time
@@ -45,6 +44,14 @@ from collections.abc import Callable
 import numpy as np
 
 from mows.device.backends.bench_supply import NOT_READ, Readback, SupplyLine
+from mows.device.backends.daqmx_tasks import (
+    TASK_NAMES,
+    DeviceUnavailable,
+    close_tasks,
+    configure_tasks,
+    first_line,
+    import_nidaqmx,
+)
 from mows.device.clock import DeviceClock
 from mows.device.instruments.daq import CoilWaveforms, DaqDevice
 from mows.device.instruments.scpi import ScpiSupply, SupplySchedule
@@ -64,33 +71,6 @@ from mows.device.protocol.payloads import DeviceInfo
 from mows.physics.coils import CurrentCap
 from mows.physics.supply import RAMP_STEP_S
 from mows.records.samples import SampleBlock
-
-INPUT_BUFFER_S = 10.0  # the card's input buffer: a host late by less than this loses nothing
-TASK_NAMES = ("mows_fluxgates", "mows_coils")  # named: a second driver on the card is refused
-
-
-class DeviceUnavailable(OSError):
-    """NI's runtime, the ``nidaqmx`` package or the card is missing, or the card refused the tasks."""
-
-
-def import_nidaqmx():
-    """NI's ``nidaqmx`` package with its stream readers and writers (``import nidaqmx`` loads
-    neither); DeviceUnavailable, one line, when it is not installed."""
-    try:
-        nidaqmx = importlib.import_module("nidaqmx")
-        importlib.import_module("nidaqmx.stream_readers")
-        importlib.import_module("nidaqmx.stream_writers")
-    except ImportError:
-        raise DeviceUnavailable(
-            "backend nidaqmx: the Python package nidaqmx is not installed (pip install nidaqmx==1.7.0)"
-        ) from None
-    return nidaqmx
-
-
-def _first_line(error: Exception) -> str:
-    line = (str(error).strip().splitlines() or [type(error).__name__])[0]
-    code = getattr(error, "error_code", None)
-    return f"{line} ({code})" if code is not None and str(code) not in line else line
 
 
 class DaqmxBackend(Backend):
@@ -159,7 +139,7 @@ class DaqmxBackend(Backend):
             for name in TASK_NAMES:
                 tasks.append(self.daqmx.Task(name))
             ai, ao = tasks
-            self._configure(ai, ao)
+            configure_tasks(self.daqmx, self.device, ai, ao)
             self._reader = self.daqmx.stream_readers.AnalogMultiChannelReader(ai.in_stream)
             self._writer = self.daqmx.stream_writers.AnalogMultiChannelWriter(ao.out_stream, auto_start=False)
             self._tasks = tasks
@@ -168,59 +148,8 @@ class DaqmxBackend(Backend):
             ai.start()
         except BaseException:
             self._tasks = []
-            self._close(tasks)
+            close_tasks(self.daqmx, tasks)
             raise
-
-    def _configure(self, ai, ao) -> None:
-        constants, device = self.daqmx.constants, self.device
-        for channel in device.inputs:
-            ai.ai_channels.add_ai_voltage_chan(
-                channel.physical_channel,
-                terminal_config=constants.TerminalConfiguration[channel.terminal_config],
-                min_val=-channel.range_v,
-                max_val=channel.range_v,
-            )
-        ai.timing.cfg_samp_clk_timing(
-            device.sample_rate_hz,
-            sample_mode=constants.AcquisitionType.CONTINUOUS,
-            samps_per_chan=round(INPUT_BUFFER_S * device.sample_rate_hz),
-        )
-        self._check_rate(ai)
-        for output in device.outputs:
-            ao.ao_channels.add_ao_voltage_chan(output.physical_channel, min_val=-output.range_v, max_val=output.range_v)
-        # When the host stops writing the card underflows and stops: the coils go to zero, not stay on.
-        ao.ao_channels.all.ao_idle_output_behavior = constants.AOIdleOutputBehavior.ZERO_VOLTS
-        ao.timing.cfg_samp_clk_timing(
-            device.sample_rate_hz,
-            sample_mode=constants.AcquisitionType.CONTINUOUS,
-            samps_per_chan=2 * (device.lead_samples + device.block_samples),
-        )
-        self._check_rate(ao)
-        ao.triggers.start_trigger.cfg_dig_edge_start_trig(device.start_trigger)
-        ao.out_stream.regen_mode = constants.RegenerationMode.DONT_ALLOW_REGENERATION
-
-    def _check_rate(self, task) -> None:
-        """The rate the card runs ``task`` at, read back: a card coerces a rate its timebase does
-        not divide to one it does (30 kS/s on 100 MHz is 30 003 S/s, a 100 ppm bias on every
-        frequency), which the stamps and fits would not know; DeviceUnavailable, one line."""
-        actual_hz, wanted_hz = task.timing.samp_clk_rate, self.device.sample_rate_hz
-        if not math.isclose(actual_hz, wanted_hz, rel_tol=1e-12):
-            timebase_hz = task.timing.samp_clk_timebase_rate
-            raise DeviceUnavailable(
-                f"backend nidaqmx: card {self.device.device_name!r} samples at {actual_hz:.6f} S/s, not "
-                f"sample_rate_hz = {wanted_hz:g}: its {timebase_hz / 1e6:g} MHz timebase does not divide it; "
-                f"give a rate it divides (e.g. {timebase_hz / math.ceil(timebase_hz / wanted_hz):.6g})"
-            )
-
-    def _close(self, tasks: list) -> list[str]:
-        """Close every task, whatever the others do (a card that went away refuses); what failed."""
-        problems = []
-        for task in tasks:
-            try:
-                task.close()
-            except self.daqmx.errors.DaqError as error:
-                problems.append(_first_line(error))
-        return problems
 
     @property
     def info(self) -> DeviceInfo:
@@ -260,9 +189,14 @@ class DaqmxBackend(Backend):
         error, the fault, with both tasks' errors (an input overrun is not hidden behind the outputs')."""
         errors = []
         try:
-            self._write_ahead()
+            # NI's check of a continuous generation: it raises the error that stopped it. A host
+            # behind the card may have nothing new to write, and only a write would say so.
+            if self._tasks[1].is_task_done():
+                errors.append("outputs: the generation stopped")
+            else:
+                self._write_ahead()
         except self.daqmx.errors.DaqError as error:
-            errors.append(f"outputs: {_first_line(error)}")
+            errors.append(f"outputs: {first_line(error)}")
         try:
             self._reader.read_many_sample(
                 self._buffer,
@@ -270,7 +204,7 @@ class DaqmxBackend(Backend):
                 timeout=self.device.read_timeout_s,
             )
         except self.daqmx.errors.DaqError as error:
-            errors.append(f"inputs: {_first_line(error)}")
+            errors.append(f"inputs: {first_line(error)}")
         if errors:
             self._fault("the card stopped: " + "; ".join(errors))
             return []
@@ -302,7 +236,7 @@ class DaqmxBackend(Backend):
         """The card down: its tasks closed (the outputs idle at 0 V: the coils off), the drives
         dropped, the supply ramped to zero and switched off, the link down with ``reason``."""
         self.waveforms.off_now()
-        self._close(self._tasks)
+        close_tasks(self.daqmx, self._tasks)
         self._tasks = []
         self.fault = self.last_card_fault = reason + self._supply_safe()
         self.card_faults += 1
@@ -327,7 +261,7 @@ class DaqmxBackend(Backend):
             self._arm(self.next_index + lost)
         except self.daqmx.errors.DaqError as error:
             self._rearm_at_s = time.monotonic() + self.device.read_timeout_s
-            self.last_card_fault = f"{self.fault}; re-arming: {_first_line(error)}"
+            self.last_card_fault = f"{self.fault}; re-arming: {first_line(error)}"
             return
         self._last_read_s = time.monotonic()
         reason, self.fault = self.fault, ""
@@ -421,7 +355,9 @@ class DaqmxBackend(Backend):
         """Coils off, the supply ramped to zero and switched off while the card streams on, and
         read back once settled; then the tasks and the supply released (every output off and
         read back), each whatever the others did, and last what the backend held. SupplyError
-        when the supply's release failed, after all of it was tried."""
+        when the supply's release failed, after all of it was tried. Once closed, nothing more."""
+        if self._stop.is_set():
+            return
         self._stop.set()
         self._watchdog.join()
         try:
@@ -439,7 +375,7 @@ class DaqmxBackend(Backend):
         finally:
             try:
                 with self._lock:
-                    self._close(self._tasks)
+                    close_tasks(self.daqmx, self._tasks)
                     self._tasks = []
             finally:
                 with self.held:
@@ -481,4 +417,4 @@ def open_daqmx(
             "from ni.com (Ubuntu, RHEL or openSUSE; not Debian: docs/hardware.md)"
         ) from None
     except daqmx.errors.DaqError as error:
-        raise DeviceUnavailable(f"backend nidaqmx: card {device.device_name!r}: {_first_line(error)}") from None
+        raise DeviceUnavailable(f"backend nidaqmx: card {device.device_name!r}: {first_line(error)}") from None

@@ -128,6 +128,15 @@ class SimulatedInterpreter(BaseInterpreter):
         self.card.start(task)
 
     @_locked
+    def is_task_done(self, task):
+        """Whether ``task`` has stopped; the error that stopped it raised, as NI's library does."""
+        card_task = self.card.task(task)
+        self.card._advance()
+        if card_task.error is not None:
+            raise card_task.error
+        return not card_task.running
+
+    @_locked
     def stop_task(self, task):
         self.card.stop(task)
 

@@ -26,6 +26,7 @@ import numpy as np
 import yaml
 
 from mows.cli.status import EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_BUG, EXIT_OK, caused_by_interrupt, interrupted
+from mows.physics import ranges
 from mows.physics.schema import unreadable, yaml_problem
 from mows.records.files import read_input
 
@@ -90,11 +91,6 @@ def renamed_option(parser: argparse.ArgumentParser, old: str, new: str) -> None:
     parser.add_argument(old, action=Renamed, help=argparse.SUPPRESS)
 
 
-#: Sensor geometry beyond this is no bench of a millimetre magnet (its field at a metre is
-#: ~1e-13 T): a unit error (mm for m) or a typo.
-MAX_SENSOR_M = 1.0
-
-
 def finite_float(text: str) -> float:
     """An argparse type: a finite number."""
     try:
@@ -123,13 +119,22 @@ def positive_float(text: str) -> float:
 
 
 def sensor_length_m(text: str) -> float:
-    """An argparse type: a length of the sensor geometry, in (0, MAX_SENSOR_M] metres."""
-    value = finite_float(text)
-    if not 0.0 < value <= MAX_SENSOR_M:
-        raise argparse.ArgumentTypeError(
-            f"{value:g} m is out of range: a sensor length is > 0 and at most {MAX_SENSOR_M:g} m (mm given as m?)"
-        )
-    return value
+    """An argparse type: a length of the sensor geometry, m, > 0 and in its range (:mod:`mows.physics.ranges`)."""
+    if finite_float(text) <= 0.0:
+        raise argparse.ArgumentTypeError(f"{text} m: a sensor length is > 0")
+    return _ranged("sensor_length_m", text)
+
+
+def magnet_position_m(text: str) -> float:
+    """An argparse type: a coordinate of the magnet's position, m, in its range."""
+    return _ranged("magnet_position_m", text)
+
+
+def _ranged(quantity: str, text: str) -> float:
+    try:
+        return ranges.check(quantity, finite_float(text), "the value", warn=False)  # parsed before warnings are kept
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def positive_int(text: str) -> int:

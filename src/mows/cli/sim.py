@@ -21,6 +21,7 @@ import yaml
 from mows.cli.inputs import finite_float, input_file, positive_int
 from mows.device.stream.simulated_cycle import cycles_npz, simulate_cycle
 from mows.estimate.recorded_cycle import fit_cycle
+from mows.physics import ranges
 from mows.records.files import check_output, writing
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -60,6 +61,9 @@ def run(args) -> int:
         check_output(args.out, [args.scenario], args.force)
     excitation = scenario.excitation
     amplitude = excitation.amplitude_a if args.amplitude_a is None else args.amplitude_a
+    if amplitude == 0.0:
+        raise ValueError("--amplitude-a 0: no current, no swing, no ring-down to simulate; give the coils' amplitude")
+    ranges.check("coil_current_a", amplitude, "--amplitude-a")
     angles = [math.degrees(scenario.pose.theta0_rad)] if args.theta0_deg is None else args.theta0_deg
     records = []
     for theta0_deg in angles:

@@ -28,6 +28,7 @@ from collections.abc import Callable
 from typing import Any
 
 from mows.device.instruments.daq import HARDWARE_DIR
+from mows.physics import ranges
 from mows.physics.schema import load_yaml, positive, refused, typed
 from mows.physics.supply import SupplyLimits
 
@@ -139,6 +140,14 @@ class ScpiSupplyConfig:
         )
         positive("voltage_limit_v", self.voltage_limit_v)  # never sent as VOLT nan, nor as a negative limit
         positive("timeout_s", self.timeout_s)
+        for name, quantity in (("timeout_s", "timeout_s"), ("settle_s", "settle_s"), ("slew_a_per_s", "slew_a_per_s")):
+            ranges.check(quantity, getattr(self, name), name)
+        ramp_s = self.cap_a / self.slew_a_per_s
+        if ramp_s > ranges.MAX_WAIT_S:
+            raise ValueError(
+                f"slew_a_per_s = {self.slew_a_per_s:g} A/s takes {ramp_s:.3g} s to ramp to cap_a = {self.cap_a:g} A: "
+                f"beyond the {ranges.MAX_WAIT_S:g} s any wait of the bench may last"
+            )
         if self.channel < 1:
             raise refused("channel", self.channel, "is not a channel number (1, 2, …)")
         if self.channels < self.channel:

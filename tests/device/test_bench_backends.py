@@ -10,6 +10,7 @@ late by 0.5 s does not underflow the outputs; a card error (underflow, overrun, 
 out) is a fault with its reason, the coils and the supply off, and the card re-armed.
 """
 
+import dataclasses
 import math
 import re
 import subprocess
@@ -59,6 +60,12 @@ def supply_state(supply) -> tuple[float, int]:
     """The pyvisa-sim instrument's own current and output state (not through the backend)."""
     properties = supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties
     return properties["current"].get_value(), properties["output"].get_value()
+
+
+def watchdog(backend, watchdog_s: float) -> None:
+    """The backend's watchdog at ``watchdog_s`` from now: a short one only once the test means the
+    host to go silent (before, a loaded machine may well pause reading longer than that)."""
+    backend.device = dataclasses.replace(backend.device, watchdog_s=watchdog_s)
 
 
 def poll_for(backend, duration_s: float) -> list:
@@ -740,17 +747,19 @@ def test_without_a_supply_a_field_current_is_refused_with_the_reason(on_bench):
 
 def test_a_host_that_stops_reading_has_the_coils_and_the_supply_switched_off(on_bench):
     supply = simulated_supply()
-    card, backend = on_bench("calibration", supply, watchdog_s=0.2)
+    card, backend = on_bench("calibration", supply)
     ao = card.made[1]
     backend.send(FieldCurrentCommand(1, 0, 0.3))
     while backend.supply_pending:
         backend.poll(0.0)
     assert supply_state(supply)[0] == pytest.approx(0.3)
+    watchdog(backend, 0.2)
     deadline = time.monotonic() + 30.0  # a bound for a watchdog that never trips, not a timing
     while supply_state(supply) != (0.0, 0) and time.monotonic() < deadline:
         time.sleep(0.05)  # the host is silent: no poll
     assert supply_state(supply)[0] == 0.0 and not ao.running
     assert supply_state(supply) == (0.0, 0) and not card.tasks  # the output off, the tasks closed
+    watchdog(backend, 30.0)  # the host reads again, as a loaded one does
     down, up, fault = backend.poll(0.0)  # the card re-armed on the next read
     assert not down.up and down.reason.startswith("watchdog: no read for") and fault.reason == down.reason
     assert up.up and ao not in card.tasks.values() and len(card.tasks) == 2

@@ -15,6 +15,8 @@ the order they build on each other:
   attribute) in, each channel's messages out.
 - ``channels``: the channels' topics, schemas and bytes (Foxglove's protobuf schemas from
   ``foxglove-sdk``, JSON with a JSON schema for the plots).
+- ``live``: the live server's channels, each one's last message re-sent to a client that
+  subscribes later.
 - ``recording``: a recorded bag's derived channels written into an MCAP file (``mcap``).
 - ``figures``: each panel's content drawn as a PNG (matplotlib), from the same channel content.
 

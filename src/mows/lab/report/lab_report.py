@@ -238,9 +238,8 @@ def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:
     the notes (:func:`mows.lab.model.factors.unevaluable_rows`); TableError when no row is left."""
     distinct, inverse = FrequencyModel(probe).groups(table)
     found = {}  # a reason holds for every row of its configuration
-    for rows, member in probe_parts(distinct, probe):
-        reasons = unevaluable_rows(distinct if rows is None else distinct.subset(rows), member)
-        found.update(reasons if rows is None else {int(rows[row]): reason for row, reason in reasons.items()})
+    for rows, part, entry in probe_parts(distinct, probe):
+        found.update({int(rows[row]): reason for row, reason in unevaluable_rows(part, entry.probe).items()})
     problems = {int(row): found[int(inverse[row])] for row in np.flatnonzero(np.isin(inverse, list(found)))}
     if len(problems) == len(table):
         raise TableError(f"the model cannot evaluate any row of {table.source}: {next(iter(problems.values()))[0]}")

@@ -17,10 +17,10 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import time
 
 import numpy as np
 
+from mows.bench.cycle_simulation import median_ms
 from mows.device.stream.simulated_cycle import simulate_cycle
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.sim.scenario import load_scenario
@@ -52,15 +52,6 @@ def ringdown(seed: int = 0) -> tuple[np.ndarray, float, RingdownModel]:
     return samples, record.sample_rate_hz, model
 
 
-def _median_ms(draw, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        draw()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times) * 1e3)
-
-
 def run(repeats: int = 10) -> dict:
     samples, rate_hz, model = ringdown()
     settings = ViewSettings()
@@ -70,13 +61,11 @@ def run(repeats: int = 10) -> dict:
     figures = {
         "ringdown_s": len(samples) / rate_hz,
         "plotted_points": len(range(0, len(samples), every)),
-        "draw_ms_median": _median_ms(
-            lambda: ringdown_curve(samples, rate_hz, model, settings.channels, every), repeats
-        ),
-        "draw_whole_window_ms_median": _median_ms(
+        "draw_ms_median": median_ms(lambda: ringdown_curve(samples, rate_hz, model, settings.channels, every), repeats),
+        "draw_whole_window_ms_median": median_ms(
             lambda: ringdown_curve(samples, rate_hz, model, settings.channels), repeats
         ),
-        "draw_blas_product_ms_median": _median_ms(
+        "draw_blas_product_ms_median": median_ms(
             lambda: ringdown_curve(samples, rate_hz, product, settings.channels, every), repeats
         ),
     }

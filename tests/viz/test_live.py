@@ -1,49 +1,20 @@
 """The live server's channels with a client that connects late: foxglove-sdk's WebSocket server
-on a free port, a client speaking its protocol with the ``websockets`` package (opcode 0x01:
-subscription id, log time, the message's bytes; tests/ros/test_viz_live.py), subscribing after
-the sweep was shown."""
+on a free port, a client speaking its protocol (tests/foxglove_client.py), subscribing after the
+sweep was shown; and the protocol's names that server accepts."""
 
 import asyncio
 import json
-import struct
 
 import foxglove
+import pytest
 import websockets
 
+from foxglove_client import OLD_SUBPROTOCOL, SUBPROTOCOL, FoxgloveClient
 from foxglove_protobuf import decode, descriptors
 from mows.viz import channels
 from mows.viz.live import KEPT, LiveChannels
 from mows.viz.view import RAW, SCENE, SWEEP, View
 from viz.session import sweep_message
-
-SUBPROTOCOL = "foxglove.sdk.v1"
-MESSAGE_DATA = 0x01
-
-
-async def first_messages(port: int, seconds: float = 5.0) -> dict[str, list[tuple[int, bytes]]]:
-    """What a client subscribing to every channel receives within ``seconds``, by topic."""
-    received: dict[str, list[tuple[int, bytes]]] = {}
-    topics: dict[int, str] = {}
-    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL]) as ws:
-        loop = asyncio.get_running_loop()
-        end = loop.time() + seconds
-        while (left := end - loop.time()) > 0:
-            try:
-                frame = await asyncio.wait_for(ws.recv(), left)
-            except TimeoutError:
-                break
-            if isinstance(frame, str):
-                message = json.loads(frame)
-                if message["op"] == "advertise":
-                    wanted = []
-                    for channel in message["channels"]:
-                        topics[channel["id"]] = channel["topic"]
-                        wanted.append({"id": channel["id"], "channelId": channel["id"]})
-                    await ws.send(json.dumps({"op": "subscribe", "subscriptions": wanted}))
-            elif frame[0] == MESSAGE_DATA:
-                subscription, log_time = struct.unpack_from("<IQ", frame, 1)
-                received.setdefault(topics[subscription], []).append((log_time, frame[13:]))
-    return received
 
 
 def test_a_client_connecting_after_a_sweep_sees_its_scene_and_sweep_at_once():
@@ -55,11 +26,17 @@ def test_a_client_connecting_after_a_sweep_sees_its_scene_and_sweep_at_once():
         for time_ns, msg in ((1_000_000_000, older), (2_000_000_000, newer)):
             for shown in view.on_sweep(msg, time_ns):
                 live.log(shown)
-        received = asyncio.run(first_messages(server.port))
+        client = FoxgloveClient(server.port)
+        try:
+            client.wait_for(lambda: SCENE in client.messages and SWEEP in client.messages, "the scene and the sweep")
+            client.wait_for(lambda: len(client.channels) == len(channels.TOPICS), "every channel advertised")
+        finally:
+            client.close()
     finally:
         server.stop()
         live.close()
     # The latest of each kept channel shown so far, once, and nothing of the channels not shown.
+    received = client.messages
     assert set(received) == {SCENE, SWEEP}
     ((sweep_time, sweep),), ((scene_time, scene),) = received[SWEEP], received[SCENE]
     assert (sweep_time, json.loads(sweep)["sweep_id"]) == (2_000_000_000, 2)
@@ -70,3 +47,19 @@ def test_a_client_connecting_after_a_sweep_sees_its_scene_and_sweep_at_once():
 
 def test_every_channel_but_the_raw_stream_is_kept():
     assert set(KEPT) == set(channels.TOPICS) - {RAW}
+
+
+def test_the_server_speaks_foxglove_sdk_v1_and_refuses_the_older_name_alone():
+    # foxglove-sdk has no setting for the subprotocols it accepts (docs/visualisation.md): a
+    # viewer that offers only foxglove.websocket.v1 cannot connect, one that offers both can.
+    async def handshake(offered: list[str]) -> str:
+        async with websockets.connect(f"ws://127.0.0.1:{server.port}", subprotocols=offered) as ws:
+            return ws.subprotocol
+
+    server = foxglove.start_server(name="mows-test", port=0)
+    try:
+        assert asyncio.run(handshake([OLD_SUBPROTOCOL, SUBPROTOCOL])) == SUBPROTOCOL
+        with pytest.raises(websockets.InvalidStatus, match="HTTP 400"):
+            asyncio.run(handshake([OLD_SUBPROTOCOL]))
+    finally:
+        server.stop()

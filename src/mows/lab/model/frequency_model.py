@@ -38,7 +38,7 @@ import numpy as np
 import scipy.optimize
 
 from mows.lab.data.probe_rows import ProbeSet, probe_parts
-from mows.lab.data.table import PROBE, MeasurementTable
+from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import Configuration, default_window_s, distinct_rows_of
 from mows.lab.model.effects import Effect, Parameter, untestable_reason
 from mows.lab.model.factors import base_start_swing_rad, frequency_factor, ringdown_nodes
@@ -47,11 +47,13 @@ from mows.physics.probe import Probe
 
 
 class FrequencyModel:
-    """The published frequency model plus ``effects`` for ``probe`` (a :class:`mows.physics.probe.Probe`).
+    """The published frequency model plus ``effects`` for ``probe``: a table's
+    :class:`~mows.lab.data.probe_rows.ProbeSet`, held as given, or one
+    :class:`~mows.physics.probe.Probe`, held as its set of one (:meth:`ProbeSet.covering`).
 
     ``model + effect`` and ``effect + model`` give new models (``FrequencyModel() + a + b``
-    one without a probe, to add to others); parameters are named
-    ``f00_hz`` and ``<effect>.<parameter>``.
+    one without a probe, to add to others); parameters are named by the set's f00s
+    (``f00_hz``, or ``probe_<id>.f00_hz``) and ``<effect>.<parameter>``.
     """
 
     def __init__(self, probe: Probe | None = None, effects: Sequence[Effect] = ()) -> None:
@@ -147,8 +149,10 @@ class FrequencyModel:
         row = table.subset(np.arange(1))
         recorder = _RecordingColumns(row.columns)
         object.__setattr__(row, "columns", recorder)
-        self._configuration(row, self.off_values, self._require_probe())
-        recorder.read.add(PROBE)  # each probe's rows are evaluated with its own constants
+        # Reading the row's probe (each probe's rows are evaluated with its own constants) records
+        # its column where the set is named by it.
+        ((_, part, entry),) = probe_parts(row, self._require_probe())
+        self._configuration(part, self.off_values, entry.probe)
         return frozenset(name for name in recorder.read if table.has(name) and name not in MEASURED)
 
     def group_factors(

@@ -12,7 +12,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mows.lab import FrequencyModel, ProbeSet, TableError, catalog, effect, with_probes
+from mows.lab import FrequencyModel, ProbeSet, TableError, catalog, diagnose, effect, with_probes
 from mows.lab.data.probe_rows import probe_parts
 from mows.physics.probe import PAPER_PROBE, Probe
 
@@ -52,7 +52,8 @@ def test_probes_named_by_id_need_the_column(table):
 
 def test_a_plugin_sees_each_rows_own_probe_never_the_set(table):
     """docs/model_lab.md: a plugin ``(rows, probe, …)`` gets its rows' probe's constants, also
-    where the lab checks it can be evaluated and records the columns it reads."""
+    where the lab checks it can be evaluated (in a fit and among the candidates) and records
+    the columns it reads."""
     other = dataclasses.replace(PAPER_PROBE, spring_nm_per_rad=PAPER_PROBE.spring_nm_per_rad * 1.072)
     two = table.with_columns(probe=np.arange(len(table)) % 2.0)
     probes = ProbeSet.of({0: PAPER_PROBE, 1: other})
@@ -63,7 +64,9 @@ def test_a_plugin_sees_each_rows_own_probe_never_the_set(table):
         seen.append((probe, set(rows.probe.tolist())))
         return {"frequency_hz": k * np.ones(len(rows))}
 
-    (FrequencyModel(probes) + probe_check).fit(two)
+    fit = FrequencyModel(probes).fit(two)
+    (fit.model + probe_check).fit(two)
+    diagnose(fit, [probe_check], probes)  # ranks it as a candidate
     assert seen and all(type(probe) is Probe for probe, _ in seen)
     for probe, ids in seen:
         (member,) = ids

@@ -22,10 +22,12 @@ from mows_msgs.action import RotationSweep
 from mows_msgs.msg import RingdownFit
 from rclpy.action import CancelResponse
 
+from mows.device.cycle.phases import CycleRequest
 from mows.estimate.settings import probe_set
 from mows.lab import analyse_sweep
+from mows.sweep.events import CycleAnswer, SweepFit, SweepSettings, SweepStep
 from mows.sweep.publication import Publication, cycle_failed, publication
-from mows.sweep.runner import CycleAnswer, CycleRequest, SweepFit, SweepRunner, SweepSettings, SweepStep
+from mows.sweep.runner import SweepRunner
 from mows_mapper import messages
 from mows_mapper.health import sweep_health
 from mows_mapper.outputs import MapperOutputs

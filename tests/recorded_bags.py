@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from mows.device.recording import bags
-from mows.sim.simulated_cycle import simulate_cycle
+from mows.device.stream.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 
 STORE = bags.typestore()
@@ -107,7 +107,7 @@ def ringdown_fit_message(seconds, theta0_rad, frequency_hz, status=0, probe_id=0
 
 def record_cycles(path, scenario, degrees, seed):
     """Write a bag at ``path`` of one simulated cycle at each orientation in ``degrees`` (cycle ids
-    from 1); return (the bag's path, the cycles' :class:`mows.sim.simulated_cycle.CycleRecord`)."""
+    from 1); return (the bag's path, the cycles' :class:`mows.device.stream.simulated_cycle.CycleRecord`)."""
     device = SimulatedDevice(scenario, np.random.default_rng(seed))
     messages, records = [], []
     for cycle, deg in enumerate(degrees, start=1):

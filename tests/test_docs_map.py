@@ -145,7 +145,7 @@ def test_the_rule_sees_a_module_missing():
         ("| `mows.device` | x | `stream/` (`session.py`), `loops/` | sim |", "mows.device: loops/"),
         ("| `mows_driver/` | the node: `node.py`, `gone.py` |", "mows_driver: gone.py"),
         # a dotted path to a module or a name that does not exist
-        ("the cycle: `mows.sim.simulated_cycle.CycleSequencer`", "mows.sim.simulated_cycle.CycleSequencer"),
+        ("the cycle: `mows.sim.simulator.CycleSequencer`", "mows.sim.simulator.CycleSequencer"),
         ("`mows.sim.cycle.simulate_cycle`", "mows.sim.cycle.simulate_cycle"),
         ("`mows_ros.node.NoSuchNode`", "mows_ros.node.NoSuchNode"),
         (

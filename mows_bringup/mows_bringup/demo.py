@@ -45,15 +45,26 @@ from rclpy.signals import SignalHandlerOptions
 
 from mows.estimate.calibration.fit_constants import KnownConstants
 from mows.estimate.calibration.fit_constants import calibrate_probe as fit_constants
-from mows.lab import analyse, from_sweep, reference_at, write_report
+from mows.lab import analyse, write_report
+from mows.lab.data.readers import read_sweep
+from mows.lab.data.truth import against_truth, in_plane, in_plane_std
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import OutputRefused, check_output, check_outputs, writing
 from mows.sim.scenario import load_scenario, scenario_file
 from mows.sweep.calibration.schedule import CalibrationPlan, scenario_wirings
 from mows.sweep.calibration.simulated import compare_with_truth, simulate_calibration
-from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model
+from mows.sweep.fast_cycle import PAPER_CYCLE, PAPER_ORIENTATIONS, map_s, scenario_cycle_plan
 from mows.sweep.record import SweepPoint, SweepRecord
-from mows_bringup.demo_probes import MAP_FILE, PROBE_FILES, accepted, has_probes, sweep_client, write_probe_files
+from mows_bringup.demo_probes import (
+    LABELS,
+    MAP_FILE,
+    PROBE_FILES,
+    SCALES,
+    accepted,
+    has_probes,
+    sweep_client,
+    write_probe_files,
+)
 from mows_bringup.demo_probes import parameters as probe_parameters
 from mows_bringup.demo_probes import run_sweep as run_probes_sweep
 from mows_bringup.graph import Graph, add_foxglove_option, foxglove_arguments, graph_nodes, say
@@ -180,7 +191,7 @@ def write_parameters(args, directory: pathlib.Path, probe_path, scene_path) -> p
     }
     mapper = {"reference_scenario": str(scene_path), "repeats_per_angle": args.repeats, "probe_file": str(probe_path)}
     if args.target:
-        plan = fast_plan(scenario)
+        plan = scenario_cycle_plan(scenario, DRIVER_CAP_A, DRIVER_MAX_DUTY)
         driver.update(
             excitation_current_a=plan.excitation_current_a,
             excite_s=plan.excite_s,
@@ -207,23 +218,6 @@ def write_sections(path: pathlib.Path, sections: dict, inputs) -> pathlib.Path:
     with writing([path], inputs, force=True) as outputs:
         outputs.temporaries[0].write_text(yaml.safe_dump(sections))
     return path
-
-
-def fast_plan(scenario):
-    """The cycle from physics (:func:`mows.sweep.fast_cycle.plan_cycle`) for the simulated scene,
-    at the driver's default cap, for the fluxgates' white noise in the difference channel."""
-
-    fs = scenario.sample_rate_hz
-    noise = math.sqrt(2.0) * scenario.noise.sensor_white_t_per_rthz * math.sqrt(fs / 2.0)
-    std = ringdown_std_model(scenario.sensors.pair, scenario.probe, scenario.pose, fs, noise)
-    return plan_cycle(scenario.probe, scenario.setup, scenario.pose, std, DRIVER_CAP_A, DRIVER_MAX_DUTY)
-
-
-def paper_protocol_s(orientations: int = 12) -> float:
-    """Device time of one map by the paper's protocol on this device: per orientation the
-    driver's 0.5 s settling, two tuning excitations and five ring-downs (0.5 s drive, 60
-    periods of ring-down each) with 10 s gaps between them."""
-    return orientations * (DRIVER_TURN_SETTLE_S + 7 * (0.5 + 60.0 / 112.5) + 6 * 10.0)
 
 
 def main(argv=None) -> int:
@@ -335,7 +329,8 @@ def run_sweep(node, spin_until, args, out: pathlib.Path, scene_path, probe_path)
     if args.target:
         say(
             f"adaptive sweep: {outcome.message}; {time.monotonic() - started:.1f} s (the simulated device runs in "
-            f"real time); the paper's protocol takes {paper_protocol_s():.0f} s per 12-orientation map on this "
+            f"real time); the paper's protocol takes {map_s(PAPER_CYCLE, PAPER_ORIENTATIONS):.0f} s per "
+            f"{PAPER_ORIENTATIONS}-orientation map on this "
             "device (mows bench throughput measures it to the same target)"
         )
     if not outcome.success:
@@ -354,32 +349,25 @@ def print_feedback(feedback) -> None:
 
 
 def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, probe_path, inputs) -> None:
-
-    field, gradient = reference_at(scenario)
-    truth = {
-        "Bx (µT)": field[0] * 1e6,
-        "By (µT)": field[1] * 1e6,
-        "Gxx (mT/m)": gradient[0, 0] * 1e3,
-        "Gxy (mT/m)": gradient[0, 1] * 1e3,
-        "Gyy (mT/m)": gradient[1, 1] * 1e3,
-    }
+    """The mapper's decomposition against the scene's truth and against the published model's
+    reading of the same ring-downs, the lab's live report, and the lab run here on the sweep's
+    table (written with the HTML report)."""
     probe = Probe.from_yaml(probe_path)
-    record = SweepRecord()
-    for fit in fits:
-        if fit.status_name == "OK":
-            record.add(SweepPoint.from_message(fit))
-    f00 = float(np.mean([f.frequency_hz - f.frequency_shift_hz for f in fits if f.status_name == "OK"]))
-    published = record.decompose(probe, f00, model="published")
-    first_principles = record.decompose(probe, f00)
+    record = SweepRecord([SweepPoint.from_message(fit) for fit in fits if fit.status_name == "OK"])
+    readings = read_sweep(record, scenario, probe)
+    value = in_plane(decomposition.field_t, decomposition.gradient_t_per_m)
+    sigma = in_plane_std(decomposition.field_covariance_t2, decomposition.gradient_covariance)
+    measured = against_truth(load_scenario(scenario), 0, value, sigma)
+    published = in_plane(readings.published.field_t, readings.published.gradient_t_per_m)
     say("")
     say(f"{'':12s} {'first principles':>22s} {'truth':>10s} {'pull':>7s} {'published model':>17s}")
-    for label, value, sigma, pub in zip(truth, *_values(decomposition), _values_of(published)):
+    for label, row, pub, scale in zip(LABELS, measured, published, SCALES):
         say(
-            f"{label:12s} {value:13.3f} ± {sigma:6.3f} {truth[label]:10.3f} {(value - truth[label]) / sigma:7.2f} "
-            f"{pub:17.3f}"
+            f"{label:12s} {row.value * scale:13.3f} ± {row.sigma * scale:6.3f} {row.truth * scale:10.3f} "
+            f"{row.pull:7.2f} {pub * scale:17.3f}"
         )
     say(
-        f"χ²/dof: first principles {decomposition.chi2_dof:.2f}, published {published.chi2_dof:.2f}"
+        f"χ²/dof: first principles {decomposition.chi2_dof:.2f}, published {readings.published.chi2_dof:.2f}"
         + (
             "  (well above 1: the field is not linear over the lever; the lab below says what is missing)"
             if decomposition.chi2_dof > 3
@@ -397,12 +385,11 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, prob
             f"{candidate.chi2_dof_after:.2f}  group {candidate.group}"
         )
     say(f"  residual structure: {report.structure}")
-    table = from_sweep(record, scenario, probe, first_principles)
     table_path = out / TABLE_FILE
     with writing([table_path], inputs, force=True) as outputs:
-        table.to_csv(outputs.temporaries[0])
+        readings.table.to_csv(outputs.temporaries[0])
     say(f"sweep table: {table_path} (try: mows lab diagnose {table_path} --probe <probe.yaml>)")
-    lab = analyse(table, probe, auto=True)
+    lab = analyse(readings.table, probe, auto=True)
     for step in lab.history:
         say(
             f"  error history: {' + '.join(['published'] + step.effects):60s} χ²/dof {step.chi2_dof:9.2f}  "
@@ -412,18 +399,6 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, prob
     with writing([path], inputs, force=True) as outputs:
         write_report(lab, outputs.temporaries[0])
     say(f"lab report: {path}")
-
-
-def _values(msg):
-    covariance = np.reshape(msg.field_covariance_t2, (2, 2))
-    g_cov = np.reshape(msg.gradient_covariance, (3, 3))
-    values = [msg.field_t[0] * 1e6, msg.field_t[1] * 1e6, *(np.array(msg.gradient_t_per_m) * 1e3)]
-    sigmas = [*(np.sqrt(np.diag(covariance)) * 1e6), *(np.sqrt(np.diag(g_cov)) * 1e3)]
-    return values, sigmas
-
-
-def _values_of(decomposition):
-    return [decomposition.field_t[0] * 1e6, decomposition.field_t[1] * 1e6, *(decomposition.gradient_t_per_m * 1e3)]
 
 
 if __name__ == "__main__":

@@ -4,10 +4,9 @@ fit per probe, and the mapper decomposes each probe's sweep with its neighbours'
 model and publishes the field map of all of them. Each probe's field and gradient are printed
 against the scene's truth at its magnet.
 
-The truth is what a rotation sweep determines: the field at the magnet's rest position plus
-(l²/4)·∂²(Bx, By)/∂z², the part of the field's curvature over the lever's arc that turns with θ0
-as the field does (docs/multi_probe.md), and the gradient there. The probes' constants are the
-scene's own: each real probe is calibrated first, one at a time, as the single-probe demo does.
+The truth is what a rotation sweep determines (:mod:`mows.lab.data.truth`, docs/multi_probe.md).
+The probes' constants are the scene's own: each real probe is calibrated first, one at a time,
+as the single-probe demo does.
 """
 
 import csv
@@ -22,7 +21,7 @@ from mows_msgs.action import RotationSweep
 from mows_msgs.msg import FieldMap, MagnetometerBlock, RingdownFit
 from rclpy.action import ActionClient
 
-from mows.lab import swept_reference_at
+from mows.lab.data.truth import Component, Pulls, against_truth, in_plane, in_plane_std
 from mows.physics.multitone import MAX_PROBES
 from mows.records.files import writing
 from mows.sim.scenario import load_scenario
@@ -151,55 +150,30 @@ def run_sweep(node, spin_until, args, scenario: str, table: pathlib.Path, inputs
         return False
     spin_until(lambda: maps, 30.0, "the field map")
     say(f"the field map came {heard['map'] - heard['fit']:.1f} s after the last ring-down's fit")
-    rows = against_truth(scenario, maps[-1])
+    rows = map_against_truth(scenario, maps[-1])
     print_rows(scenario, maps[-1], rows)
     with writing([table], inputs, force=True) as outputs:
         with open(outputs.temporaries[0], "w", newline="") as file:
-            writer = csv.DictWriter(file, fieldnames=list(Row.__annotations__))
+            writer = csv.DictWriter(file, fieldnames=[field.name for field in dataclasses.fields(Component)])
             writer.writeheader()
             writer.writerows(dataclasses.asdict(row) for row in rows)
     say(f"the map against the truth: {table}")
     return all(point.status == 0 for point in maps[-1].probes)
 
 
-@dataclasses.dataclass(frozen=True)
-class Row:
-    """One component of one probe's map point against the truth, SI units."""
-
-    probe_id: int
-    quantity: str  # bx_t, by_t, gxx_t_per_m, gxy_t_per_m, gyy_t_per_m
-    value: float
-    sigma: float
-    truth: float
-    pull: float
-
-
-QUANTITIES = ("bx_t", "by_t", "gxx_t_per_m", "gxy_t_per_m", "gyy_t_per_m")
-
-
-def against_truth(scenario: str, field_map: FieldMap) -> list[Row]:
+def map_against_truth(scenario: str, field_map: FieldMap) -> list[Component]:
     """Each decomposed probe's five components against the truth at its magnet."""
     scene = load_scenario(scenario)
-    rows = []
+    rows: list[Component] = []
     for point in field_map.probes:
-        if point.status != 0:
-            continue
-        placed = scene.placed_probes()[point.probe_id]
-        where, lever = placed.pose.magnet_position_m, placed.probe.lever_m
-        field, gradient = swept_reference_at(scene.environment.source, where, lever)
-        truth = np.r_[field[:2], gradient[0, 0], gradient[0, 1], gradient[1, 1]]
-        value = np.r_[point.field_t, point.gradient_t_per_m]
-        variance = np.r_[
-            np.diag(np.reshape(point.field_covariance_t2, (2, 2))),
-            np.diag(np.reshape(point.gradient_covariance, (3, 3))),
-        ]
-        sigma = np.sqrt(variance)
-        for name, v, s, t in zip(QUANTITIES, value, sigma, truth):
-            rows.append(Row(point.probe_id, name, float(v), float(s), float(t), float((v - t) / s)))
+        if point.status == 0:
+            value = in_plane(point.field_t, point.gradient_t_per_m)
+            sigma = in_plane_std(point.field_covariance_t2, point.gradient_covariance)
+            rows += against_truth(scene, point.probe_id, value, sigma)
     return rows
 
 
-def print_rows(scenario: str, field_map: FieldMap, rows: list[Row]) -> None:
+def print_rows(scenario: str, field_map: FieldMap, rows: list[Component]) -> None:
     """Each probe of the map against the truth, and the pulls over all of them."""
     scene = load_scenario(scenario)
     for point in field_map.probes:
@@ -216,9 +190,5 @@ def print_rows(scenario: str, field_map: FieldMap, rows: list[Row]) -> None:
                 f"{row.truth * scale:10.3f} {row.pull:7.2f}"
             )
     if rows:
-        pulls = np.array([row.pull for row in rows])
         say("")
-        say(
-            f"{np.sum(np.abs(pulls) <= 2.0)} of {len(pulls)} components within 2σ, the largest pull "
-            f"{np.max(np.abs(pulls)):.2f}σ, mean pull² {np.mean(pulls**2):.2f} (1 for a calibrated σ)"
-        )
+        say(Pulls.of(rows).report())

@@ -88,12 +88,14 @@ def supply_msg(event: SupplyEvent, frame_id: str) -> SupplyState:
 
 
 def cycle_request(request: RunCycle.Request) -> CycleRequest:
-    """A RunCycle request; a negative repeats, tuning_steps or gap_s takes the parameter."""
+    """A RunCycle request (or MeasurementCycle goal); a negative repeats, tuning_steps or gap_s
+    takes the parameter."""
     return CycleRequest(
         request.theta0_rad,
         request.repeats if request.repeats >= 0 else None,
         request.tuning_steps if request.tuning_steps >= 0 else None,
         request.gap_s if request.gap_s >= 0.0 else None,
+        turned_by_hand=request.turned_by_hand,
     )
 
 

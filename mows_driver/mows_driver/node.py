@@ -20,9 +20,11 @@ every phase but EXCITING, in every lifecycle state but active, and when the node
 SIGTERM), and the static-field supply is ramped to zero when it stops.
 """
 
+import functools
+
 from rcl_interfaces.msg import SetParametersResult
 
-from mows.device.backends.factory import make_backend
+from mows.device.backends.factory import BackendSettings, make_backend
 from mows.device.stream.session import DeviceSession, continued
 from mows.physics.coils import CurrentCap
 from mows.precompile import precompile
@@ -71,9 +73,9 @@ class DriverNode(MowsNode):
         if (problem := current_problem(values)) is not None:
             raise ValueError(problem)
         cap = CurrentCap(values["coil_current_cap_a"])
+        settings = self.device_settings  # a ValueError or OSError refuses, with its reason
         # The cycle fits its tuning ring-downs and a simulated device integrates: compile both (or
         # load them from numba's cache) now, not while the device streams.
-        settings = backend_settings(values)
         self.get_logger().info(f"numba kernels ready in {precompile(simulator=settings.simulated):.1f} s")
         backend = make_backend(settings, cap)  # a ValueError or OSError refuses, with its reason
         try:
@@ -81,11 +83,11 @@ class DriverNode(MowsNode):
         except BaseException:
             backend.close()
             raise
-        self.session = DeviceSession(backend, continued(self._previous, session_config(values, cap)))
+        self.session = DeviceSession(backend, continued(self._previous, session_config(values, cap, settings)))
         self.session.disarm(INACTIVE)
         if values["backend"] == "sim":  # the simulated stage starts where the parameter puts it
             self.session.stage_angle_rad = values["theta0_rad"]
-        self.session.set_tracking(tracking_settings(values))  # a ValueError refuses, with its reason
+        self.session.set_tracking(tracking_settings(values, settings))  # a ValueError refuses, with its reason
         self._streaming.start()
 
     def activate(self) -> None:
@@ -107,18 +109,30 @@ class DriverNode(MowsNode):
         self.outputs.close()
 
     # --- parameters ------------------------------------------------------------------------
+    @functools.cached_property
+    def device_settings(self) -> BackendSettings:
+        """Made once: their parameters are fixed at start-up (ValueError, OSError while unreadable)."""
+        return backend_settings(self.values)
+
     def _validate(self, parameters) -> SetParametersResult:
         """Checks across parameters (each one alone is checked by its table row)."""
-        reason = settings_problem({**self.values, **{p.name: p.value for p in parameters}})
+        try:
+            reason = settings_problem({**self.values, **{p.name: p.value for p in parameters}}, self.device_settings)
+        except (OSError, ValueError) as unreadable:  # the scenario
+            reason = str(unreadable)
         return SetParametersResult(successful=reason is None, reason=reason or "")
 
     def _apply(self, parameters) -> None:
         self.values = {**self.values, **{p.name: p.value for p in parameters}}
-        if self.session is not None:  # else configure reads them
-            self.session.set_block_duration(self.values["block_duration_s"])
-            self.session.set_cycle_settings(cycle_settings(self.values))
-            if tracking_changed(p.name for p in parameters):  # an emergency stop's end of tracking holds till then
-                self.session.set_tracking(tracking_settings(self.values))
+        if self.session is None:
+            return  # configure reads them
+        cycle = cycle_settings(self.values)
+        retrack = tracking_changed(p.name for p in parameters)  # an emergency stop's end of tracking holds till then
+        tracking = tracking_settings(self.values, self.device_settings) if retrack else None
+        self.session.set_block_duration(self.values["block_duration_s"])
+        self.session.set_cycle_settings(cycle)
+        if retrack:
+            self.session.set_tracking(tracking)
 
     def linked(self) -> DeviceSession:
         """The device session; ValueError, with the reason, while there is none."""

@@ -1,20 +1,23 @@
 """The driver's parameter table, the checks across its parameters, and the core's settings it
-makes of them: the cycle's, the device backend's (:class:`mows.device.backends.factory.BackendSettings`)
-and tracking's."""
+makes of them: the device backend's (:class:`mows.device.backends.factory.BackendSettings`, made
+once: its parameters are fixed at start-up, and its scenario is read then), the cycle's and
+tracking's (planned by the device layer, :func:`mows.device.cycle.tracking_plan.tracking_settings`,
+with the estimator's Cramér–Rao bound)."""
 
 import dataclasses
 import math
 
 from mows.device.backends.factory import BackendSettings
+from mows.device.cycle import tracking_plan
 from mows.device.cycle.phases import CycleSettings
 from mows.device.cycle.tracking import TrackingSettings
 from mows.device.serial.link import DEFAULT_BAUD
 from mows.device.stream.session import SessionConfig
-from mows.estimate.ringdown import fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_ringdown
+from mows.estimate.ringdown.problem import cramer_rao_frequency_hz
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import DEFAULT_SCENARIO
-from mows.sweep import fast_cycle
 from mows_ros.params import ParamSpec, spec_named
 
 PARAMETERS = (
@@ -215,12 +218,14 @@ def cycle_settings(values: dict) -> CycleSettings:
 
 
 def backend_settings(values: dict) -> BackendSettings:
-    """The parameters that choose and open the device, as the core's settings of the same names."""
-    return BackendSettings(**{field.name: values[field.name] for field in dataclasses.fields(BackendSettings)})
+    """The parameters that choose and open the device, as the core's settings of the same names
+    (its scenario read); ValueError or OSError when the scenario cannot be read."""
+    names = (field.name for field in dataclasses.fields(BackendSettings) if field.init)
+    return BackendSettings(**{name: values[name] for name in names})
 
 
-def session_config(values: dict, cap: CurrentCap) -> SessionConfig:
-    setup = PRESETS[backend_settings(values).setup_name()](current_limit_a=cap.limit_a)
+def session_config(values: dict, cap: CurrentCap, backend: BackendSettings) -> SessionConfig:
+    setup = PRESETS[backend.setup_name()](current_limit_a=cap.limit_a)
     return SessionConfig(
         values["block_duration_s"], cycle_settings(values), setup, cap, values["initial_frequency_hz"], fit_ringdown
     )
@@ -241,31 +246,28 @@ def tracking_changed(names) -> bool:
     return any(name.startswith("tracking") for name in names)
 
 
-def tracking_settings(values: dict) -> TrackingSettings | None:
-    """Tracking's kicks and ring-downs at the largest current the cap allows
-    (:func:`mows.sweep.fast_cycle.tracking_settings`); None when tracking is off. ValueError when
-    the scene has several probes or the target is out of the physics' reach."""
+def tracking_settings(values: dict, backend: BackendSettings) -> TrackingSettings | None:
+    """Tracking's kicks and ring-downs at the largest current the cap allows, planned by the
+    device layer with the estimator's bound; None when tracking is off. ValueError when the scene
+    has several probes or the target is out of the physics' reach."""
     if not values["tracking"]:
         return None
-    backend = backend_settings(values)
+    scene = backend.tracking_scenario()
     current_a = values["coil_current_cap_a"]
-    return fast_cycle.tracking_settings(
-        backend.tracking_scenario(),
-        values["tracking_theta0_rad"],
-        values["tracking_target_std_t"],
-        current_a,
-        values["tracking_noise_std_t"] or None,
-        PRESETS[backend.setup_name()](current_limit_a=current_a),
-    )
+    noise_std_t = values["tracking_noise_std_t"] or None  # 0: the scenario's noise model
+    std_hz = tracking_plan.scenario_std_model(scene, cramer_rao_frequency_hz, COIL_OFF_SKIP_S, noise_std_t)
+    setup = PRESETS[backend.setup_name()](current_limit_a=current_a)
+    theta0_rad, target_std_t = values["tracking_theta0_rad"], values["tracking_target_std_t"]
+    return tracking_plan.tracking_settings(scene, theta0_rad, target_std_t, current_a, std_hz, setup)
 
 
-def settings_problem(values: dict) -> str | None:
+def settings_problem(values: dict, backend: BackendSettings) -> str | None:
     """Why ``values`` cannot drive the coils (the checks across parameters), or None."""
     reason = current_problem(values)
     if reason is None:
         try:
             cycle_settings(values)
-            tracking_settings(values)
+            tracking_settings(values, backend)
         except ValueError as error:
             reason = str(error)
     return reason

@@ -25,15 +25,15 @@ class FitTally:
     def count(self, what: str) -> None:
         self._counts[what] += 1
 
-    def add(self, estimated: Estimated, latency_ms: float) -> None:
+    def add(self, estimated: Estimated, latency_ms: float, per_probe: bool) -> None:
         """A fit published ``latency_ms`` after the message that completed its ring-down, counted
-        for its probe too when several share the windows, and as ``unknown_probe_fits`` when
-        the window named a probe the ``probes`` parameter does not list."""
+        for its probe too with ``per_probe`` (the ``probes`` parameter names them), and as
+        ``unknown_probe_fits`` when the window named a probe that parameter does not list."""
         status_name = estimated.fit.status.name
         self._counts[status_name] += 1
         self._latency_ms.append(latency_ms)
         self._unknown_probe_fits += estimated.unknown_probe
-        if estimated.probe_id is not None:
+        if per_probe:
             self._per_probe[f"probe_{estimated.probe_id}_fits_{'ok' if status_name == 'OK' else 'failed'}"] += 1
 
     def health(self, last: str, assembler: SegmentAssembler, f00_hz: float, f00_std_hz: float) -> Health:

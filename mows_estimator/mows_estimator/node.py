@@ -25,6 +25,7 @@ from sensor_msgs.msg import MagneticField
 from mows.estimate.probe_set import probe_frame_id
 from mows.estimate.settings import FitParameters
 from mows.estimate.stream import Estimated, FitSettings, RingdownEstimator
+from mows.physics.probe import Probe
 from mows.precompile import precompile
 from mows_estimator.health import FitTally
 from mows_estimator.messages import estimate_to_msg, fit_to_msg, magnetic_field_msg
@@ -69,8 +70,14 @@ class EstimatorNode(MowsNode):
         self.get_logger().info(f"fit kernels ready in {precompile(simulator=False):.1f} s")
 
     def _settings(self) -> FitSettings:
-        probe = probe_of(self.get_parameter("probe_file").value)
-        return FitParameters.of(parameter_values(self, PARAMETERS)).fit_settings(probe)
+        return FitParameters.of(parameter_values(self, PARAMETERS)).fit_settings(self._probe())
+
+    def _probe(self) -> Probe:
+        return probe_of(self.get_parameter("probe_file").value)
+
+    def _named(self) -> bool:
+        """Whether ``probes`` names the probes: their fits then carry frames and counts of their own."""
+        return bool(self.get_parameter("probes").value.strip())
 
     # --- stream -----------------------------------------------------------------------------
     def _on_excitation(self, msg: ExcitationState):
@@ -95,14 +102,16 @@ class EstimatorNode(MowsNode):
                 self._publish(estimated, arrived)
 
     def _publish(self, estimated: Estimated, arrived: float):
-        fit_msg = fit_to_msg(estimated, probe_frame_id(self.get_parameter("probe_frame_id").value, estimated.probe_id))
+        named = self._named()
+        frame_id = probe_frame_id(self.get_parameter("probe_frame_id").value, estimated.probe_id if named else None)
+        fit_msg = fit_to_msg(estimated, frame_id)
         self._fit_pub.publish(fit_msg)
         if estimated.estimate.ok:
             self._field_pub.publish(estimate_to_msg(estimated.estimate, fit_msg.header, estimated.window))
             self._magnetic_pub.publish(magnetic_field_msg(estimated.estimate, fit_msg.header))
         if estimated.calibrated:
             self._calibrated.set_result(True)
-        self._tally.add(estimated, 1e3 * (time.monotonic() - arrived))
+        self._tally.add(estimated, 1e3 * (time.monotonic() - arrived), named)
         if not estimated.fit.ok:
             self.get_logger().warn(estimated.report())
 
@@ -141,8 +150,8 @@ class EstimatorNode(MowsNode):
 
     # --- health ---------------------------------------------------------------------------
     def health(self) -> Health:
-        settings = self._settings()
-        return self._tally.health(self._estimator.last, self._estimator.assembler, settings.f00_hz, settings.f00_std_hz)
+        own = FitParameters.of(parameter_values(self, PARAMETERS)).own_entry(self._probe())
+        return self._tally.health(self._estimator.last, self._estimator.assembler, own.f00_hz, own.f00_std_hz)
 
 
 def main(args: list[str] | None = None) -> int:

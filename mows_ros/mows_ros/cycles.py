@@ -30,10 +30,17 @@ CANCELLED_BEFORE = "cancelled before the cycle was asked for"
 
 
 def cycle_goal(request: CycleRequest) -> MeasurementCycle.Goal:
-    """A cycle of ``request.repeats`` ring-downs at ``request.theta0_rad``; tuning steps, gap
-    and repeats the request leaves open (None) are the driver's parameters (−1)."""
+    """A cycle of ``request.repeats`` ring-downs at ``request.theta0_rad`` (turned by hand when the
+    request says so); tuning steps, gap and repeats the request leaves open (None) are the
+    driver's parameters (−1)."""
     repeats = -1 if request.repeats is None else int(request.repeats)
-    return MeasurementCycle.Goal(theta0_rad=float(request.theta0_rad), repeats=repeats, tuning_steps=-1, gap_s=-1.0)
+    return MeasurementCycle.Goal(
+        theta0_rad=float(request.theta0_rad),
+        repeats=repeats,
+        tuning_steps=-1,
+        gap_s=-1.0,
+        turned_by_hand=request.turned_by_hand,
+    )
 
 
 def cycle_answer(result: MeasurementCycle.Result) -> CycleAnswer:

@@ -49,6 +49,6 @@ PROBES = ParamSpec(
     "probes",
     "",
     "several probes in each ring-down window: YAML mapping of probe id to f00 (Hz), a probe file, "
-    "or {f00_hz, f00_std_hz, probe_file, position_m} (mows.estimate.probe_set); empty: one probe",
+    "or {f00_hz, f00_std_hz, probe_file, position_m} (mows.estimate.probe_set); empty: the node's own probe alone",
     check=probes_problem,
 )

@@ -60,7 +60,17 @@ FIGURES = {
         "sep_2hz_ratio_1_probe1_crb_over_alone",
     ),
     "latency_tracking": LATENCY,
-    "workspace": ("b_error", "g_error", "b_pull_sd", "g_pull_sd", "hall_b_error", "points_ratio", "sweep_minutes"),
+    "workspace": (
+        "b_error",
+        "g_error",
+        "b_pull_sd",
+        "g_pull_sd",
+        "hall_b_error",
+        "points_ratio",
+        "sweep_minutes",
+        "pose_eiv_b_error",
+        "pose_naive_b_error",
+    ),
     "throughput": (
         "adaptive_s",
         "adaptive_ringdowns",

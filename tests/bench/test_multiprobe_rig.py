@@ -12,7 +12,7 @@ from mows.bench.rig import ONE_ROUND, DeviceTimeRig
 from mows.device.cycle.phases import CycleRequest
 from mows.estimate.probe_set import probe_lines
 from mows.estimate.ringdown.types import FitStatus
-from mows.estimate.segments import RingdownWindow, Segment, fit_joint_segment
+from mows.estimate.segments import RingdownWindow, Segment, fit_segment
 from mows.sim.scenario import load_scenario
 
 SCENE = load_scenario("three_probes")
@@ -39,6 +39,6 @@ def test_a_window_with_missing_samples_is_refused_for_every_probe():
     lines = probe_lines(SCENE.sensors.pair, rig.device.device.placed, [0, 1, 2], [100.0, 112.5, 125.0])
     samples = np.zeros((1000, 2))
     segment = Segment(RingdownWindow(0, 0.05), 0, 20_000.0, samples, np.zeros((1000, 2), bool), missing_samples=7)
-    fits = fit_joint_segment(segment, lines)
+    fits = fit_segment(segment, lines)
     assert [f.probe_id for f in fits] == [0, 1, 2]
     assert all(f.status is FitStatus.DATA_GAP and "7 of 1000" in f.message for f in fits)

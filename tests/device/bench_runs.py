@@ -8,6 +8,7 @@ import dataclasses
 from collections.abc import Callable
 
 from mows.device.cycle.phases import CycleRequest, Phase
+from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.sweep.calibration.run import CalibrationRun, Turn
@@ -34,7 +35,7 @@ class BenchRig:
         if not turned:
             self.turn(theta0_rad)
         done, fits = [], []
-        self.session.start_cycle(CycleRequest(theta0_rad, repeats=repeats), done.append)
+        self.session.start_cycle(CycleRequest(theta0_rad, repeats=repeats, turned_by_hand=self.manual), done.append)
         for _ in range(MAX_STEPS):
             fits += self._step()
             if done and len(fits) >= done[0].ringdowns_recorded:
@@ -55,10 +56,14 @@ class BenchRig:
                 )
                 segments += self.assembler.announce(window)
         probe, pair = self.scenario.probe, self.scenario.sensors.pair
+        own, options = ProbeEntry(0, probe, probe.f00_hz), FitOptions(theta_stop_rad=probe.theta_stop_rad)
         return [
             fit_segment(
-                s, FitOptions.lever_aware(pair, probe, s.window.theta0_rad), COIL_OFF_SKIP_S, probe.damping_per_s
-            )
+                s,
+                [own.line(s.window.theta0_rad, pair, "difference", s.window.excitation_frequency_hz)],
+                COIL_OFF_SKIP_S,
+                options,
+            )[0]
             for s in segments
         ]
 

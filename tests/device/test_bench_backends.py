@@ -10,7 +10,6 @@ late by 0.5 s does not underflow the outputs; a card error (underflow, overrun, 
 out) is a fault with its reason, the coils and the supply off, and the card re-armed.
 """
 
-import dataclasses
 import math
 import re
 import subprocess
@@ -23,8 +22,9 @@ import numpy as np
 import pytest
 from nidaqmx.errors import DaqError
 
-from mows.device.backends import daqmx_backend
-from mows.device.backends.daqmx_backend import DeviceUnavailable, open_daqmx
+from mows.device.backends import daqmx_tasks
+from mows.device.backends.daqmx_backend import open_daqmx
+from mows.device.backends.daqmx_tasks import DeviceUnavailable
 from mows.device.backends.factory import BackendSettings, BenchSettings, make_backend
 from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.instruments import scpi
@@ -49,8 +49,6 @@ from mows.sim.simulator import SimulatedDevice
 
 FAST = CycleSettings(excite_s=0.5, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, turn_settle_s=0.1)
 MAX_POLLS = 10_000  # bound for a cycle that never ends (a bug), not a timing
-# The tests fit tuning ring-downs between reads on a busy machine: the watchdog is for a host that hung.
-WATCHDOG_S = 30.0
 
 
 def simulated_supply():
@@ -61,20 +59,6 @@ def supply_state(supply) -> tuple[float, int]:
     """The pyvisa-sim instrument's own current and output state (not through the backend)."""
     properties = supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties
     return properties["current"].get_value(), properties["output"].get_value()
-
-
-@pytest.fixture
-def on_bench(installed):
-    """The backend on a simulated card of ``scenario`` (with ``supply`` on it), and the card."""
-
-    def make(scenario="paper_largest_spacing", supply=None, watchdog_s=WATCHDOG_S):
-        card = installed(SimulatedCard(SimulatedDevice(load_scenario(scenario))))
-        if supply is not None:
-            card.supply_current_a = lambda: supply_state(supply)[0] * supply_state(supply)[1]
-        device = dataclasses.replace(load_daq_device(), watchdog_s=watchdog_s)
-        return card, open_daqmx(device, CurrentCap(10.0), supply)
-
-    return make
 
 
 def poll_for(backend, duration_s: float) -> list:
@@ -93,7 +77,7 @@ def blocks(items) -> list[SampleBlock]:
 def run_cycle(session, theta0_rad):
     done, events = [], []
     events += session.step(0.0).events
-    session.start_cycle(CycleRequest(theta0_rad), done.append)
+    session.start_cycle(CycleRequest(theta0_rad, turned_by_hand=True), done.append)
     for _ in range(MAX_POLLS):
         if done:
             return done[0], events
@@ -325,13 +309,15 @@ def test_the_simulated_card_refuses_what_the_real_one_refuses(installed):
         assert duplicate.value.error_type == nidaqmx.error_codes.DAQmxErrors.DUPLICATE_TASK
 
 
+def armed_session(card, backend, frequency_hz=112.0) -> DeviceSession:
+    """The driver's session on the bench, armed, its cycles ``FAST``."""
+    config = SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), frequency_hz, fit_ringdown)
+    return DeviceSession(backend, config, armed=True)
+
+
 def test_a_cycle_switches_the_coils_at_the_commanded_samples(on_bench):
     card, backend = on_bench()
-    session = DeviceSession(
-        backend,
-        SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), 112.0, fit_ringdown),
-        armed=True,
-    )
+    session = armed_session(card, backend)
     theta0 = 2.2
     card.turn_probe(theta0)
     outcome, events = run_cycle(session, theta0)
@@ -395,6 +381,7 @@ def test_a_host_late_beyond_the_lead_has_the_coils_off_a_fault_told_and_the_card
     time.sleep(1.2)  # beyond the lead (0.75 s): the card generates all it has, then underflows
     before = len(items)
     items += backend.poll(0.05)
+    assert len(items[before:]) == 3, (items[before:], backend.stats())
     down, up, fault = items[before:]
     assert not down.up and "(-200290)" in down.reason and down.reason.startswith("the card stopped: outputs:")
     assert up.up and up.reason == f"the card re-armed after: {down.reason}" and fault.reason == down.reason
@@ -412,7 +399,7 @@ def test_a_host_late_beyond_the_lead_has_the_coils_off_a_fault_told_and_the_card
 
 
 def test_an_input_overrun_is_told_beside_the_outputs_underflow(on_bench, monkeypatch):
-    monkeypatch.setattr(daqmx_backend, "INPUT_BUFFER_S", 0.3)
+    monkeypatch.setattr(daqmx_tasks, "INPUT_BUFFER_S", 0.3)
     card, backend = on_bench()
     poll_for(backend, 0.2)
     time.sleep(1.2)
@@ -444,9 +431,8 @@ def test_after_a_card_fault_the_supply_is_at_zero_and_off(on_bench):
     supply = simulated_supply()
     card, backend = on_bench("calibration", supply)
     backend.send(FieldCurrentCommand(1, 0, 1.0))
-    while not backend.poll(0.05) or backend.supply_schedule.ramping:
-        pass
-    poll_for(backend, 0.1)
+    while backend.supply_pending:
+        backend.poll(0.05)
     assert supply_state(supply) == (1.0, 1)
     card.unplug()
     (down,) = backend.poll(0.05)
@@ -456,9 +442,8 @@ def test_after_a_card_fault_the_supply_is_at_zero_and_off(on_bench):
     items = poll_for(backend, 1.5)
     assert [i.up for i in items if isinstance(i, LinkEvent)] == [True] and supply_state(supply) == (0.0, 0)
     backend.send(FieldCurrentCommand(2, 0, 0.2))  # a new ramp switches it on again, from zero
-    while backend.supply_schedule.ramping or not backend.poll(0.05):
+    while backend.supply_pending:
         backend.poll(0.05)
-    poll_for(backend, 0.1)
     assert supply_state(supply) == (0.2, 1)
     backend.close()
     assert supply_state(supply) == (0.0, 0)
@@ -556,7 +541,8 @@ def test_every_entry_of_the_error_queue_is_read_and_reported():
         supply.resource.write(bad)
     with pytest.raises(SupplyError) as refused:
         supply.set_current_a(0.25)
-    assert str(refused.value) == "ngm202: 'CURR 0.2500' refused: " + "; ".join(['-100,"Command error"'] * 3)
+    out_of_range, unknown = '-222,"Data out of range"', '-100,"Command error"'  # the NGM202's codes
+    assert str(refused.value) == f"ngm202: 'CURR 0.2500' refused: {out_of_range}; {unknown}; {out_of_range}"
     supply.set_current_a(0.25)  # the queue was drained: the next command is judged on its own
     assert supply_state(supply) == (0.25, 1)
     supply.close()
@@ -568,7 +554,8 @@ def test_close_zeroes_and_switches_off_each_whatever_the_other_did_then_returns_
     sent = Sent(supply, refuse={"CURR 0.0000"})
     with pytest.raises(SupplyError, match=r"'CURR 0.0000': VI_ERROR_TMO"):
         supply.close()
-    assert sent.commands == ["CURR 0.0000", "OUTP 0", "SYST:LOC"]
+    # Every channel's output and the master output off, each whatever the others did.
+    assert sent.commands == ["CURR 0.0000", "OUTP 0", "INST:NSEL 2", "OUTP 0", "INST:NSEL 1", "OUTP:GEN 0", "SYST:LOC"]
     assert supply_state(supply) == (0.5, 0)  # the current could not be zeroed: the output is off
 
 
@@ -652,7 +639,7 @@ def test_the_ngm202_is_unipolar_and_a_negative_current_is_never_sent():
     assert supply.writes == writes and supply_state(supply) == (0.5, 1)
     # The stand-in refuses it as the NGM202 does, had it been sent.
     supply.resource.write("CURR -0.1000")
-    assert supply.resource.query("SYST:ERR?").startswith("-100") and supply_state(supply) == (0.5, 1)
+    assert supply.resource.query("SYST:ERR?").startswith("-222") and supply_state(supply) == (0.5, 1)
     supply.close()
 
 
@@ -707,10 +694,12 @@ def test_a_host_behind_the_card_reads_the_supply_back_settled(on_bench):
     time.sleep(0.5)  # the stall: the ramp (0.24 s) and settle_s after it are buffered on the card
     while backend.supply_schedule.ramping:
         backend.poll(0.0)
-    assert math.isnan(backend.supply_readback_a)
-    poll_for(backend, supply.config.settle_s + 0.1)
+    assert math.isnan(backend.supply_readback.current_a)
+    while backend.supply_pending:
+        backend.poll(0.0)
     tolerance = supply.config.readback_tolerance_a(0.5)
-    assert backend.supply_readback_a == pytest.approx(0.5, abs=tolerance) and bench.device.field_current_a == 0.5
+    assert backend.supply_readback.current_a == pytest.approx(0.5, abs=tolerance)
+    assert bench.device.field_current_a == 0.5
     backend.close()
 
 
@@ -724,10 +713,14 @@ def test_the_backend_ramps_the_supply_and_zeroes_it_on_close(on_bench):
     while backend.supply_schedule.ramping:
         backend.poll(0.0)
         seen.append(bench.device.field_current_a)
-    assert math.isnan(backend.supply_readback_a)  # not at once: the pair is still settling
-    poll_for(backend, supply.config.settle_s + 0.1)  # read back once the last step has settled
+    assert math.isnan(backend.supply_readback.current_a)  # not at once: the pair is still settling
+    while backend.supply_pending:  # the steps written, and read back once the last has settled
+        backend.poll(0.0)
+        seen.append(bench.device.field_current_a)
+    assert backend.supply_readback.step_index == result.applied_sample_index
     tolerance = supply.config.readback_tolerance_a(0.5)
-    assert backend.supply_readback_a == pytest.approx(0.5, abs=tolerance) and bench.device.field_current_a == 0.5
+    assert backend.supply_readback.current_a == pytest.approx(0.5, abs=tolerance)
+    assert bench.device.field_current_a == 0.5
     # The steps are written as the blocks come: the current changes by at most the slew limit over
     # a block and a step (the average rate is the limit; no step is skipped).
     assert np.max(np.diff(seen)) <= 2.0 * (0.025 + 0.01) + 1e-9 and len(set(seen)) > 5
@@ -750,7 +743,7 @@ def test_a_host_that_stops_reading_has_the_coils_and_the_supply_switched_off(on_
     card, backend = on_bench("calibration", supply, watchdog_s=0.2)
     ao = card.made[1]
     backend.send(FieldCurrentCommand(1, 0, 0.3))
-    while backend.supply_schedule.ramping:
+    while backend.supply_pending:
         backend.poll(0.0)
     assert supply_state(supply)[0] == pytest.approx(0.3)
     deadline = time.monotonic() + 30.0  # a bound for a watchdog that never trips, not a timing
@@ -802,7 +795,7 @@ def test_the_emergency_stop_s_switch_off_holds_through_a_deactivation_and_close(
     stats, tolerance = backend.stats(), supply.config.readback_tolerance_a(0.0)
     assert stats["supply_output"] == "off" and abs(stats["supply_readback_a"]) <= tolerance
     session.close()
-    assert backend.closed_state() == f"supply off at {backend.supply_readback_a:.4f} A (read back)"
+    assert backend.closed_state() == f"supply off at {backend.supply_readback.current_a:.4f} A (read back)"
 
 
 def test_the_simulated_bench_is_the_backend_on_the_simulated_card_until_it_is_closed():

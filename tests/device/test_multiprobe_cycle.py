@@ -34,7 +34,7 @@ from mows.device.simulated.scheduled import OverCap
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.probe_set import probe_lines
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_ringdown
-from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_joint_segment
+from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.physics.multitone import Tone
 from mows.sim.scenario import load_scenario
@@ -207,7 +207,7 @@ def test_the_windows_of_a_whole_cycle_fitted_jointly_give_each_coupled_frequency
         lines = probe_lines(
             SCENE.sensors.pair, [placed[k] for k in event.probe_ids], event.probe_ids, event.probe_frequency_hz
         )
-        fits = fit_joint_segment(segment, lines, COIL_OFF_SKIP_S)
+        fits = fit_segment(segment, lines, COIL_OFF_SKIP_S)
         assert [f.probe_id for f in fits] == [0, 1, 2]
         for fit in fits:
             assert fit.ok, fit.message
@@ -253,7 +253,7 @@ def test_tones_are_sized_by_the_devices_coils_not_by_the_named_preset():
     (segment,) = [segment for block in blocks for segment in assembler.add_block(block)]
     placed = SCENE.placed_probes()
     lines = probe_lines(SCENE.sensors.pair, placed, ringdown.probe_ids, ringdown.probe_frequency_hz)
-    for fit in fit_joint_segment(segment, lines, COIL_OFF_SKIP_S):
+    for fit in fit_segment(segment, lines, COIL_OFF_SKIP_S):
         assert fit.ok, fit.report()
 
 

@@ -15,10 +15,12 @@ from mows.bench.rig import DeviceTimeRig, max_duty_fraction
 from mows.bench.throughput import CAP_A
 from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, Phase
 from mows.device.cycle.tracking import TrackingLoop, TrackingSettings
+from mows.device.cycle.tracking_plan import plan_tracking, tracking_plan
+from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.ringdown import FitOptions
 from mows.estimate.segments import RingdownWindow, Segment, fit_segment
 from mows.sim.scenario import load_scenario
-from mows.sweep.fast_cycle import plan_tracking, ringdown_std_model, tracking_plan
+from mows.sweep.fast_cycle import fit_std_model
 
 DUTY = CycleSettings(max_duty_cycle=0.2, duty_window_s=2.0, turn_settle_s=0.2)  # tighter than the kicks want
 CLIPPING_RANGE_T = 0.2e-6  # a near sensor this narrow clips the first swings of a ring-down from the stop
@@ -27,7 +29,7 @@ CLIPPING_RANGE_T = 0.2e-6  # a near sensor this narrow clips the first swings of
 def run_tracking(scenario, settings: CycleSettings, ringdowns: int):
     """The driver's tracking mode (its plan and loop) on the simulated device, in device time."""
     rig = DeviceTimeRig(scenario, settings, CAP_A, seed=11)
-    plan = tracking_plan(scenario, 0.0, 1e-6, CAP_A, rig.first_block_noise_std_t())
+    plan = tracking_plan(scenario, 0.0, 1e-6, CAP_A, fit_std_model(scenario, rig.first_block_noise_std_t()))
     loop = TrackingLoop()
     loop.start(TrackingSettings(0.0, CAP_A, plan.excite_s, plan.ringdown_s))
     return rig, plan, loop, rig.run_tracking(loop, ringdowns)
@@ -151,8 +153,9 @@ def test_a_saturated_stretch_inside_a_window_is_never_fitted_across():
     saturated[int(0.1 * fs) : int(0.12 * fs), 0] = True  # e.g. a passing disturbance
     samples[saturated] = 1e-5
     window = RingdownWindow(0, 0.3, theta0_rad=0.0, excitation_frequency_hz=probe.f00_hz)
-    fit = fit_segment(
-        Segment(window, 0, fs, samples, saturated, 0), FitOptions.lever_aware(scenario.sensors.pair, probe, 0.0)
+    line = ProbeEntry(0, probe, probe.f00_hz).line(0.0, scenario.sensors.pair, "difference", probe.f00_hz)
+    (fit,) = fit_segment(
+        Segment(window, 0, fs, samples, saturated, 0), [line], options=FitOptions(theta_stop_rad=probe.theta_stop_rad)
     )
     assert fit.ok, fit.report()
     first, last = round(fit.start_offset_s * fs), round(fit.start_offset_s * fs) + fit.n_samples
@@ -161,7 +164,7 @@ def test_a_saturated_stretch_inside_a_window_is_never_fitted_across():
 
 def test_a_target_below_the_bound_is_reported_with_the_bound():
     scenario = load_scenario("anti_helmholtz")
-    std = ringdown_std_model(scenario.sensors.pair, scenario.probe, scenario.pose, scenario.sample_rate_hz, 1.4e-9)
+    std = fit_std_model(scenario, 1.4e-9)
     plan = plan_tracking(scenario.probe, scenario.setup, scenario.pose, std, 0.0, 1e-9, CAP_A)
     assert not plan.feasible and plan.bound_std_t > 1e-9
     reachable = plan_tracking(scenario.probe, scenario.setup, scenario.pose, std, 0.0, 0.2e-6, CAP_A)

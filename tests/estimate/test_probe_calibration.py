@@ -133,8 +133,8 @@ def test_without_the_finite_amplitude_beta0_would_be_low_by_the_bessel_factor(pa
         PAPER_PROBE.moment_am2,
         PAPER_PROBE.magnet_mass_kg,
         math.radians(0.5),
-        start_swing_rad=math.radians(0.5),
-        start_swing_std_rad=math.radians(0.01),
+        measured_stop_rad=math.radians(0.5),
+        measured_stop_std_rad=math.radians(0.01),
     )
     naive = calibrate_probe(
         [p for p in points if p.wiring == "helmholtz"], scenario_wirings(load_scenario("calibration")), small

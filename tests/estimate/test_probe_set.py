@@ -7,7 +7,8 @@ import pytest
 from mows.estimate.probe_set import read_probe_set
 from mows.estimate.ringdown import FitOptions
 from mows.estimate.segments import RingdownWindow, Segment
-from mows.estimate.stream import FitSettings, JointSettings, RingdownEstimator
+from mows.estimate.settings import FitParameters
+from mows.estimate.stream import FitSettings, RingdownEstimator
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
 from mows.physics.multitone import MAX_PROBES
 from mows.physics.pose import Pose
@@ -87,15 +88,16 @@ def segment(samples):
     return Segment(window, 0, 20_000.0, samples, np.zeros(samples.shape, bool), 0)
 
 
-def test_without_probes_the_estimate_is_the_single_probe_one():
+def test_without_probes_the_set_is_the_estimators_own_probe_alone():
     t = np.arange(10_000) / 20_000.0
     clean = signal_t(t, 0.0, 0.3, 112.5, 0.4, 1.8, 2e-7)
     data = np.column_stack([2 * clean, clean]) + 1e-10 * np.random.default_rng(1).standard_normal((10_000, 2))
-    settings = FitSettings(PAPER_PROBE, lambda theta0: FitOptions(), 0.0, 112.48, 0.0)
-    (alone,) = RingdownEstimator(5.0).estimate_all(segment(data), settings)
-    single = RingdownEstimator(5.0).estimate(segment(data), settings)
-    assert alone.fit.probe_id == 0 and alone.fit.frequency_hz == single.fit.frequency_hz
-    assert alone.estimate == single.estimate
+    settings = FitParameters(f00_hz=112.48, lever_aware=False).fit_settings(PAPER_PROBE)
+    assert [(e.probe_id, e.probe, e.f00_hz) for e in settings.probes] == [(0, PAPER_PROBE, 112.48)]
+    (alone,) = RingdownEstimator(5.0).estimate(segment(data), settings)
+    assert alone.fit.ok and alone.fit.probe_id == alone.probe_id == 0, alone.fit.message
+    assert abs(alone.fit.frequency_hz - 112.5) < 4 * alone.fit.frequency_std_hz
+    assert alone.estimate.frequency_shift_hz == pytest.approx(alone.fit.frequency_hz - 112.48)
 
 
 def test_with_probes_each_gets_its_estimate_from_its_own_f00():
@@ -103,11 +105,10 @@ def test_with_probes_each_gets_its_estimate_from_its_own_f00():
     one = signal_t(t, 0.0, 0.3, 112.6, 0.4, 1.8, 2e-7) + signal_t(t, 0.0, 0.3, 125.1, 1.0, 1.8, 1e-7)
     data = np.column_stack([2 * one, one]) + 1e-10 * np.random.default_rng(2).standard_normal((10_000, 2))
     entries = read("{0: 112.5, 1: 125.0}")
-    joint = JointSettings(
-        entries, lambda held: [p.entry.line(p.theta0_rad, None, "difference") for p in held], FitOptions()
+    settings = FitSettings(
+        entries, lambda held: [p.entry.line(p.theta0_rad, None, "difference") for p in held], FitOptions(), 0.0
     )
-    settings = FitSettings(PAPER_PROBE, lambda theta0: FitOptions(), 0.0, 112.48, 0.0, joint)
-    estimated = RingdownEstimator(5.0).estimate_all(segment(data), settings)
+    estimated = RingdownEstimator(5.0).estimate(segment(data), settings)
     assert [e.fit.probe_id for e in estimated] == [0, 1]
     for e, f_true, f00 in zip(estimated, (112.6, 125.1), (112.5, 125.0)):
         assert e.fit.ok, e.fit.message

@@ -11,12 +11,12 @@ import math
 import numpy as np
 import pytest
 
+from mows.device.stream.simulated_cycle import simulate_cycle
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, fit_ringdown
 from mows.physics.field import UniformField
 from mows.sim.scenario import load_scenario
 from mows.sim.sections import Environment
-from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 
 

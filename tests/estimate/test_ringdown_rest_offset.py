@@ -21,6 +21,7 @@ import math
 import numpy as np
 import pytest
 
+from mows.device.stream.simulated_cycle import simulate_cycle
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.estimate.ringdown import FitOptions, starting_point
 from mows.estimate.ringdown.problem import RingdownProblem, variable_projection
@@ -28,7 +29,6 @@ from mows.estimate.ringdown.start import white_noise_std
 from mows.physics.field import UniformField, source_from_dict
 from mows.sim.scenario import load_scenario
 from mows.sim.sections import Environment
-from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 
 RINGDOWN_S = 0.25

@@ -7,9 +7,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mows.estimate.ringdown import FitStatus
+from mows.estimate.ringdown import FitStatus, ProbeLine
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.records.samples import SampleBlock
+
+
+def line_of(window: RingdownWindow) -> ProbeLine:
+    """The window's one probe, at its θ0, looked for at its tone."""
+    return ProbeLine(0, window.theta0_rad, window.excitation_frequency_hz)
+
 
 FS = 20_000.0
 EPOCH_NS = 1_700_000_000 * 10**9  # device clock: ns since its epoch
@@ -75,7 +81,7 @@ def test_a_sequence_gap_is_counted_and_refused():
         got += assembler.add_block(block)
     assert assembler.missing_samples == 500
     assert got[0].missing_samples == 500
-    fit = fit_segment(got[0])
+    (fit,) = fit_segment(got[0], [line_of(got[0].window)])
     assert fit.status == FitStatus.DATA_GAP and "500" in fit.message
 
 
@@ -184,7 +190,10 @@ def test_a_restarted_device_clock_starts_the_stream_again():
     new = restarted(list(blocks(samples[4000:], saturated[4000:], 500)), epoch=1)
     lost = assembler.add_block(new[0])
     assert len(lost) == 1 and lost[0].window.start_ns == window_at(1500, 1000).start_ns
-    assert fit_segment(lost[0]).status == FitStatus.DATA_GAP and assembler.device_restarts == 1
+    assert (
+        fit_segment(lost[0], [line_of(lost[0].window)])[0].status == FitStatus.DATA_GAP
+        and assembler.device_restarts == 1
+    )
     # A window of the new clock (its stamps start at 0): the new blocks' samples, exact.
     window = RingdownWindow(start_ns=200 * NS_PER_SAMPLE, duration_s=1000 / FS, device_epoch=1)
     done = assembler.announce(window)
@@ -194,4 +203,4 @@ def test_a_restarted_device_clock_starts_the_stream_again():
     np.testing.assert_array_equal(done[0].samples_t, samples[4200:5200])
     # An announcement of the old clock that arrives late is refused at once.
     (stale,) = assembler.announce(window_at(3000, 500))
-    assert stale.missing_samples and fit_segment(stale).status == FitStatus.DATA_GAP
+    assert stale.missing_samples and fit_segment(stale, [line_of(stale.window)])[0].status == FitStatus.DATA_GAP

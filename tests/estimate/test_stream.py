@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from mows.bench.estimator import FREQUENCY_HZ, N_SAMPLES, SAMPLE_RATE_HZ, RingdownCase
+from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.ringdown import FitOptions, FitStatus
 from mows.estimate.stream import FitSettings, RingdownEstimator
 from mows.physics.probe import PAPER_PROBE
@@ -55,11 +56,16 @@ def ringdown_msg(cycle_id: int, first: int = 0, duration_s: float = N_SAMPLES / 
     )
 
 
-def settings(options=lambda theta0_rad: FitOptions(), f00_hz=F00_HZ):
-    return FitSettings(PAPER_PROBE, options, coil_off_skip_s=0.0, f00_hz=f00_hz, f00_std_hz=0.0)
+def paper_lines(held):
+    """The lines of the paper's single-term pickup (Eq. S11) at each probe's θ0 and tone."""
+    return [p.entry.line(p.theta0_rad, None, "difference", p.tone_hz) for p in held]
 
 
-def ringdown(estimator, k, options=lambda theta0_rad: FitOptions()):
+def settings(lines=paper_lines, f00_hz=F00_HZ):
+    return FitSettings((ProbeEntry(0, PAPER_PROBE, f00_hz),), lines, FitOptions(), coil_off_skip_s=0.0)
+
+
+def ringdown(estimator, k, lines=paper_lines):
     """Announce the ``k``-th ring-down of the stream (cycle k + 1), then stream its samples
     (noise drawn with seed k); what the estimator returns."""
     case = RingdownCase(0.0, snr_db=40.0)
@@ -69,7 +75,8 @@ def ringdown(estimator, k, options=lambda theta0_rad: FitOptions()):
     for j in range(per_ringdown):
         segments += estimator.add_block(block_msg(k * per_ringdown + j, samples[j * BLOCK : (j + 1) * BLOCK]))
     assert len(segments) == 1
-    return estimator.estimate(segments[0], settings(options)), case
+    (estimated,) = estimator.estimate(segments[0], settings(lines))
+    return estimated, case
 
 
 def test_a_streamed_ringdown_is_fitted_and_inverted_along_the_axis():
@@ -83,14 +90,14 @@ def test_a_streamed_ringdown_is_fitted_and_inverted_along_the_axis():
     assert estimated.estimate.frequency_shift_hz == pytest.approx(estimated.fit.frequency_hz - F00_HZ, abs=1e-12)
     # Δf > 0: the field along x' stiffens the spring (positive B_x').
     assert estimated.estimate.field_along_axis_t > 0
-    assert estimator.last == estimated.fit.report()
+    assert estimator.last == f"probe 0: {estimated.fit.report()}"
 
 
 def test_a_model_that_cannot_be_built_is_a_failed_fit_not_an_exception():
-    def no_model(theta0_rad):
+    def no_model(held):
         raise ValueError("sensing axis (0, 0)")
 
-    estimated, _ = ringdown(RingdownEstimator(buffer_s=5.0), 0, options=no_model)
+    estimated, _ = ringdown(RingdownEstimator(buffer_s=5.0), 0, lines=no_model)
     assert estimated.fit.status is FitStatus.BAD_FIT and "sensing axis (0, 0)" in estimated.fit.message
     assert not estimated.estimate.ok and math.isnan(estimated.estimate.field_along_axis_t)
 
@@ -127,9 +134,9 @@ def test_a_failed_ringdown_is_not_offered_to_the_calibration():
     estimator = RingdownEstimator(buffer_s=5.0)
     calibration = estimator.begin_calibration(settings(), 0.0, 1, 10.0)
 
-    def no_model(theta0_rad):
+    def no_model(held):
         raise ValueError("no model")
 
-    assert not ringdown(estimator, 0, options=no_model)[0].calibrated
+    assert not ringdown(estimator, 0, lines=no_model)[0].calibrated
     assert not calibration.done
     assert ringdown(estimator, 1)[0].calibrated and calibration.outcome.ok

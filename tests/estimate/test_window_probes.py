@@ -17,7 +17,7 @@ import pytest
 from mows.estimate.probe_set import read_probe_set, window_probes
 from mows.estimate.ringdown import FitOptions, FitStatus
 from mows.estimate.segments import RingdownWindow, Segment, window_from_message
-from mows.estimate.stream import FitSettings, JointSettings, RingdownEstimator
+from mows.estimate.stream import FitSettings, RingdownEstimator
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
@@ -99,14 +99,13 @@ def settings():
     def lines(held):
         return [p.entry.line(p.theta0_rad, None, "difference", p.tone_hz) for p in held]
 
-    joint = JointSettings(PROBES, lines, FitOptions())
-    return FitSettings(PAPER_PROBE, lambda theta0: FitOptions(), 0.0, 112.48, 0.0, joint)
+    return FitSettings(PROBES, lines, FitOptions(), 0.0)
 
 
 def test_a_group_is_fitted_over_its_probes_each_at_its_own_theta0_and_an_unknown_id_is_reported():
     data = samples((1, 125.08), (2, 101.04))
     segment = Segment(window((1, 2, 9)), 0, FS, data, np.zeros(data.shape, bool), 0)
-    one, two, nine = RingdownEstimator(5.0).estimate_all(segment, settings())
+    one, two, nine = RingdownEstimator(5.0).estimate(segment, settings())
     for e, k, f_true in ((one, 1, 125.08), (two, 2, 101.04)):
         assert e.fit.ok and e.probe_id == k and not e.unknown_probe, e.fit.message
         assert e.fit.theta0_rad == THETA0[k] and abs(e.fit.frequency_hz - f_true) < 4 * e.fit.frequency_std_hz
@@ -125,10 +124,9 @@ def test_fitted_at_the_windows_one_theta0_the_same_group_is_not_at_its_frequenci
     def lines(held):
         return [p.entry.line(p.theta0_rad, None, "difference") for p in held]
 
-    joint = JointSettings(only_listed, lines, FitOptions())
-    fitted = RingdownEstimator(5.0).estimate_all(
+    fitted = RingdownEstimator(5.0).estimate(
         Segment(stage_only, 0, FS, data, np.zeros(data.shape, bool), 0),
-        FitSettings(PAPER_PROBE, lambda theta0: FitOptions(), 0.0, 112.48, 0.0, joint),
+        FitSettings(only_listed, lines, FitOptions(), 0.0),
     )
     assert not all(e.fit.ok for e in fitted) or any(
         abs(e.fit.frequency_hz - f) > 4 * e.fit.frequency_std_hz for e, f in zip(fitted, (125.08, 101.04))

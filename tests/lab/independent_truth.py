@@ -125,7 +125,9 @@ class Rows:
 
     ``moment_am2`` and ``spring_nm_per_rad`` are per row, so that a moment that changes with
     temperature or age, or a spring warmed by a coil, is the physics of that row.
-    ``induced_am2_per_t`` (α) and ``quartic_nm_per_rad3`` (k3) are the hidden energy terms.
+    ``induced_am2_per_t`` (α) and ``quartic_nm_per_rad3`` (k3) are the hidden energy terms;
+    ``magnet_along_m`` (δ) puts the magnet δ beyond its nominal place along the lever, where the
+    table's reference is given: r(θ) = l·(u(θ) − u(0)) + δ·u(θ).
     """
 
     probe: Probe
@@ -135,6 +137,7 @@ class Rows:
     spring_nm_per_rad: np.ndarray
     induced_am2_per_t: float = 0.0
     quartic_nm_per_rad3: float = 0.0
+    magnet_along_m: float = 0.0  # the magnet glued this far beyond its nominal place on the lever
     gravity_m_per_s2: tuple[float, float, float] = LEVEL_GRAVITY_M_PER_S2
 
     @classmethod
@@ -179,8 +182,10 @@ def moment_direction(rows: Rows, theta_rad: np.ndarray) -> np.ndarray:
 
 
 def magnet_position_m(rows: Rows, theta_rad: np.ndarray) -> np.ndarray:
-    """r(θ) = l·(u(θ) − u(0)) (..., n, 3): the pivot lies l behind the undeflected magnet."""
-    return rows.probe.lever_m * (moment_direction(rows, theta_rad) - moment_direction(rows, 0.0))
+    """r(θ) = l·(u(θ) − u(0)) + δ·u(θ) (..., n, 3): the pivot lies l behind the magnet's nominal
+    place, the magnet δ beyond it."""
+    u = moment_direction(rows, theta_rad)
+    return rows.probe.lever_m * (u - moment_direction(rows, 0.0)) + rows.magnet_along_m * u
 
 
 def field_energy_j(rows: Rows, theta_rad: np.ndarray) -> np.ndarray:
@@ -191,8 +196,10 @@ def field_energy_j(rows: Rows, theta_rad: np.ndarray) -> np.ndarray:
     angle = rows.theta0_rad + np.asarray(theta_rad, float)
     u = np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=-1)
     undeflected = np.stack([np.cos(rows.theta0_rad), np.sin(rows.theta0_rad), np.zeros(len(rows))], axis=-1)
-    along = (u * rows.scene.field_t(rows.probe.lever_m * (u - undeflected))).sum(-1)
-    gravity = rows.probe.magnet_mass_kg * rows.probe.lever_m * (u @ np.asarray(rows.gravity_m_per_s2))
+    along = (u * rows.scene.field_t(rows.probe.lever_m * (u - undeflected) + rows.magnet_along_m * u)).sum(-1)
+    gravity = (
+        rows.probe.magnet_mass_kg * (rows.probe.lever_m + rows.magnet_along_m) * (u @ np.asarray(rows.gravity_m_per_s2))
+    )
     return -rows.moment_am2 * along - 0.5 * rows.induced_am2_per_t * along**2 - gravity
 
 

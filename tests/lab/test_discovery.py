@@ -181,6 +181,10 @@ def test_every_channel_writes_a_plugin_whose_signature_is_the_term(exact, tmp_pa
     load_plugins and changes the frequency as the channel's Jacobian times the monomial (the
     term the search fits), row by row: the written plugin is the term found."""
     measured = table(exact, 4)
+    # A gradient, so that the magnet's position acts (through l·m·Gx'x' and the deflection's geometry).
+    measured = measured.with_columns(
+        ref_gxx_t_per_m=np.full(len(measured), 1e-2), ref_gxy_t_per_m=np.full(len(measured), 5e-3)
+    )
     fit = physical_fit(measured)
     chosen = BY_NAME[channel]
     assert reading(chosen, factors) and family(chosen, factors).startswith(channel)

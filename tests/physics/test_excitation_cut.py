@@ -11,9 +11,9 @@ import math
 import numpy as np
 import pytest
 
+from mows.device.stream.simulated_cycle import simulate_cycle
 from mows.physics.coils import excitation_samples
 from mows.sim.scenario import load_scenario
-from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 
 

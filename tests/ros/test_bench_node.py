@@ -11,9 +11,11 @@ by Enter in mows-graph's terminal (the simulated operator turns the simulated pr
 most 4 turns for the wiring, and ends with the supply at zero; the Ctrl-C comes after it."""
 
 import re
+import shlex
 import signal
 import subprocess
 import time
+from pathlib import Path
 
 import pytest
 from lifecycle_msgs.msg import Transition
@@ -86,6 +88,26 @@ def assert_closed_at_zero_and_off(process) -> None:
     assert closed, log(process)
     output, current_a = closed.group(1), float(closed.group(2))
     assert output == "off" and abs(current_a) <= SUPPLY.readback_tolerance_a(0.0), closed.group(0)
+
+
+def documented_start(marker: str) -> list[str]:
+    """The driver's start command that docs/hardware.md prints with ``marker``, as a shell reads it."""
+    text = (Path(__file__).parents[2] / "docs" / "hardware.md").read_text()
+    blocks = re.findall(r"^```\w*\n(.*?)^```$", text, re.S | re.M)
+    (block,) = [b for b in blocks if b.startswith("install/mows_driver/") and marker in b]
+    return shlex.split(block.replace("\\\n", " "))
+
+
+def test_the_documented_start_command_starts_the_driver(bench, start):
+    """The rehearsal's command as printed (from the repository, as the docs say), and the bench's
+    the same but for its supply's address."""
+    bench_command = documented_start("supply_resource:=")
+    command = documented_start("daq_simulated:=true")
+    assert bench_command[:8] == command[:8] and Path(command[0]).is_file()
+    driver = start(*command)
+    bench.set_current(CURRENT_A, BOUND_S)  # active, on the simulated bench with its supply
+    assert_stops_cleanly(driver)
+    assert_closed_at_zero_and_off(driver)
 
 
 def test_a_deactivate_leaves_the_supply_at_zero_and_off(bench, bench_driver):

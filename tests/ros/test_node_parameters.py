@@ -11,7 +11,7 @@ import yaml
 from rclpy.parameter import Parameter
 
 from mows.physics.probe import PAPER_PROBE
-from mows.sim.scenario import scenario_file
+from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_file
 from mows_bringup.graph import NODES, VIZ
 from mows_calibrator import node as calibrator
 from mows_driver import node as driver
@@ -280,3 +280,35 @@ def test_the_graph_takes_a_stage_the_nodes_can_turn_or_the_operator_turns(tmp_pa
     params.write_text("/**/driver:\n  ros__parameters:\n    backend: nidaqmx\n")
     assert "the mapper and the calibrator would" in stage_problem(["--params-file", str(params)])
     assert stage_problem(["--params-file", str(params), *manual]) is None
+
+
+def test_the_driver_reads_its_scenario_once_and_checks_tracking_against_it(ros_context, monkeypatch):
+    """Parameter changes are checked against the scenario read once: set four times, tracking's
+    plan is made from it each time, and the scenario file is read once."""
+    from mows.device.backends import factory
+
+    reads = []
+    monkeypatch.setattr(factory, "load_scenario", lambda name: reads.append(name) or load_scenario(name))
+    node = driver.DriverNode()
+    for target_t in (1e-6, 0.5e-6, 0.3e-6):
+        result = node.set_parameters_atomically(
+            [Parameter("tracking", value=True), Parameter("tracking_target_std_t", value=target_t)]
+        )
+        assert result.successful, result.reason
+    (refused,) = node.set_parameters([Parameter("tracking_target_std_t", value=1e-9)])
+    assert not refused.successful and "below the Cramér–Rao bound" in refused.reason
+    assert reads == [DEFAULT_SCENARIO]
+    node.destroy_node()
+
+
+def test_tracking_is_planned_from_the_scenario_as_read_not_as_the_file_is_now(tmp_path):
+    from mows_driver import parameters
+
+    scene = tmp_path / "scene.yaml"
+    load_scenario("anti_helmholtz").to_yaml(scene)
+    values = {spec.name: spec.default for spec in parameters.PARAMETERS} | {"scenario": str(scene), "tracking": True}
+    settings = parameters.backend_settings(values)
+    scene.unlink()  # nothing reads it again
+    assert parameters.settings_problem(values, settings) is None
+    tracking = parameters.tracking_settings(values, settings)
+    assert tracking.excitation_current_a == values["coil_current_cap_a"] and tracking.ringdown_s > 0

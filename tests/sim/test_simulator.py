@@ -14,6 +14,7 @@ from scipy import integrate, optimize
 from scipy import signal as sp_signal
 from scipy.special import j1
 
+from mows.device.stream.simulated_cycle import simulate_cycle
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coupling import coupled_rest
 from mows.physics.field import MU0_OVER_4PI, UniformField
@@ -22,7 +23,6 @@ from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, Pose
 from mows.physics.probe import PAPER_PROBE as P
 from mows.sim.noise import NoiseStream
 from mows.sim.scenario import Environment, Integrator, Scenario, Sensors, load_scenario
-from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 
 FS = 20_000.0

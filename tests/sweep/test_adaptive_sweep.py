@@ -10,10 +10,12 @@ import math
 import numpy as np
 import pytest
 
-from mows.bench.throughput import CAP_A, adaptive_protocol, truth_components
+from mows.bench.throughput import CAP_A, adaptive_protocol
 from mows.device.cycle.phases import CycleSettings
+from mows.device.cycle.tracking_plan import drive_rate_rad_per_s, excitation_s
+from mows.lab.data.truth import scene_truth
 from mows.sim.scenario import load_scenario
-from mows.sweep.fast_cycle import drive_rate_rad_per_s, excitation_s, tuning_needed
+from mows.sweep.fast_cycle import tuning_needed
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PlannedCycle, PrecisionGoal
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -135,5 +137,5 @@ def test_tuning_is_needed_only_when_the_kick_is_long_against_the_detuning():
 
 
 def test_truth_of_the_scene_is_in_plane():
-    truth = truth_components(load_scenario("anti_helmholtz"))
+    truth = scene_truth(load_scenario("anti_helmholtz"))
     assert truth[2] == pytest.approx(-2 * truth[4], rel=1e-3)  # axial symmetry of the pair: Gxx = −2 Gyy

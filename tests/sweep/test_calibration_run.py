@@ -207,8 +207,11 @@ def test_a_manual_stage_is_turned_once_per_orientation():
             assert run.turn_awaited == action.theta0_rad
             turns.append(action.theta0_rad)
             step = run.on_turned()
-            assert run.turn_awaited is None and step.actions == [CycleRequest(action.theta0_rad, 1)]
+            assert run.turn_awaited is None and step.actions == [
+                CycleRequest(action.theta0_rad, 1, turned_by_hand=True)
+            ]
         else:
+            assert action.turned_by_hand  # every cycle on this stage was turned by the operator
             answer, fits = driver.cycle(action)
             assert [run.on_fit(answer.cycle_id, fit) for fit in fits] == [None]
             step = run.on_cycle(answer)

@@ -51,7 +51,7 @@ def windows(monkeypatch):
     rig = DeviceTimeRig(load_scenario("three_probes"), ONE_ROUND, seed=1)
     simulator = rig.device.device
     reads, found = [], []
-    read, fit_segment = simulator.read, device_time_rig.fit_joint_segment
+    read, fit_segment = simulator.read, device_time_rig.fit_segment
 
     def recording_read(n_samples):
         reads.append((simulator.sample_index, block := read(n_samples)))
@@ -67,7 +67,7 @@ def windows(monkeypatch):
         return fits
 
     monkeypatch.setattr(simulator, "read", recording_read)
-    monkeypatch.setattr(device_time_rig, "fit_joint_segment", recording_fit)
+    monkeypatch.setattr(device_time_rig, "fit_segment", recording_fit)
     for j in range(CYCLES):
         rig.run_cycle(CycleRequest(2 * np.pi * j / STEPS))
     return found

@@ -183,6 +183,7 @@ def test_a_manual_stage_asks_the_operator_before_each_cycle():
         assert runner.on_fit(driver.fit(step.turn)) is None  # a fit before the turn is no cycle's
         step = runner.on_turned()
         assert runner.turn_awaited is None and step.run_cycle.theta0_rad == turns[-1]
+        assert step.run_cycle.turned_by_hand  # the driver hears that the operator turned it
         step = driver.run(runner, step)
     assert turns == list(ANGLES)
     assert turn_prompt(math.radians(45.0)) == "turn the probe to θ0 = 45° and confirm"

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from mows.device.stream.simulated_cycle import simulate_cycle
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.lab import reference_at
 from mows.sim.scenario import load_scenario
-from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.record import SweepPoint, SweepRecord
 

@@ -71,6 +71,7 @@ def sweep_message(seconds: float):
         harmonic_amplitude_hz=amplitude,
         harmonic_phase_rad=phase,
         theta0_rad=theta,
+        cycle_ids=np.arange(1, theta.size + 1, dtype=np.uint64),
         frequency_shift_hz=shift,
         frequency_shift_std_hz=np.full(theta.size, 0.01),
         chi2_dof=1.1,

@@ -44,3 +44,11 @@ def test_mows_viz_writes_the_channels_foxglove_opens(tmp_path, capsys):
     named = {topic for topic in schemas if topic in layout}
     assert named == set(schemas), sorted(set(schemas) - named)
     assert main(["viz", str(bag), "--mount", MOUNT]) == 2  # never over an existing file without --force
+
+
+def test_the_layouts_xy_plots_show_the_latest_message():
+    # "custom" accumulates every message's arrays: each ring-down would be drawn over the last.
+    panels = json.loads(LAYOUT.read_text())["configById"]
+    xy = {name: panel for name, panel in panels.items() if name.startswith("Plot!") and "xAxisPath" in panel}
+    assert set(xy) == {"Plot!ringdown", "Plot!sweep", "Plot!sweep_points", "Plot!lab"}
+    assert {name: panel["xAxisVal"] for name, panel in xy.items()} == dict.fromkeys(xy, "currentCustom")

@@ -126,7 +126,7 @@ def test_principal_gradients_and_their_sigma_by_perturbation():
         assert matrix @ p.direction == pytest.approx(p.value_t_per_m * p.direction, abs=1e-12)
 
 
-def test_the_largest_arrows_have_the_asked_length_and_labels_say_value_and_sigma():
+def test_the_largest_b_and_a_significant_gradient_have_the_asked_length_and_labels_say_value_and_sigma():
     msg = sweep_message(1.0)
     near = ProbeField.of(msg, "plane")
     far = ProbeField(1, "plane", np.array([0.0, 0.05, 0.0]), near.field_t / 2, near.field_covariance_t2,
@@ -137,9 +137,37 @@ def test_the_largest_arrows_have_the_asked_length_and_labels_say_value_and_sigma
     magnitude, sigma = field_magnitude(near.field_t, near.field_covariance_t2)
     assert b0.label == f"B {magnitude * 1e6:.4g} ± {sigma * 1e6:.2g} µT"
     assert b0.direction[:2] == pytest.approx(near.field_t / magnitude)
-    assert max(a.length_m for a in arrows[0][1:]) == pytest.approx(0.1)
-    assert max(a.length_m for a in arrows[1][1:]) == pytest.approx(0.025)
+    # Both probes' gradients are over 5 σ: full length, whatever their size.
+    far_principals = principal_gradients(far.gradient_t_per_m, far.gradient_covariance)
+    assert min(abs(p.value_t_per_m) / p.std_t_per_m for p in far_principals) > 5
+    assert [a.length_m for probe in (0, 1) for a in arrows[probe][1:]] == pytest.approx([0.1] * 8)
     assert np.allclose(arrows[1][0].tail_m, [0.0, 0.05, 0.0])
+
+
+@pytest.mark.parametrize("value_mt_per_m, std_mt_per_m", [(-0.013, 0.032), (0.05, 0.02), (0.2, 0.02), (0.0, 0.0)])
+def test_a_gradient_arrow_is_as_long_as_its_significance(value_mt_per_m, std_mt_per_m):
+    # Gxx alone: λ = Gxx along x with σ_λ = σ(Gxx); next to it a probe with a large, sure gradient.
+    msg = sweep_message(1.0)
+    sure = ProbeField.of(msg, "plane")
+    covariance = np.diag([(std_mt_per_m * 1e-3) ** 2, 0.0, 0.0])
+    faint = ProbeField(1, "plane", np.array([0.0, 0.05, 0.0]), sure.field_t, sure.field_covariance_t2,
+                       np.array([value_mt_per_m * 1e-3, 0.0, 0.0]), covariance)  # fmt: skip
+    arrows = probe_arrows([sure, faint], arrow_length_m=0.1)
+    first = arrows[1][1]
+    z = abs(value_mt_per_m) / std_mt_per_m if std_mt_per_m else 0.0
+    assert first.length_m == pytest.approx(0.1 * min(z, 5.0) / 5.0)
+    assert first.label.startswith(f"G1 {value_mt_per_m:+.3g} ± {std_mt_per_m:.2g} mT/m")
+    assert [a.length_m for a in arrows[0][1:]] == pytest.approx([0.1] * 4)
+
+
+def test_a_gradient_of_unknown_sigma_draws_no_arrow_but_says_so():
+    msg = sweep_message(1.0)
+    sure = ProbeField.of(msg, "plane")
+    unknown = ProbeField(0, "plane", sure.position_m, sure.field_t, sure.field_covariance_t2,
+                         sure.gradient_t_per_m, np.full((3, 3), np.nan))  # fmt: skip
+    (arrows,) = probe_arrows([unknown]).values()
+    assert [a.length_m for a in arrows[1:]] == [0.0] * 4
+    assert "± nan" in arrows[1].label
 
 
 def test_mount_frames_turn_the_probe_by_the_stage_angle():

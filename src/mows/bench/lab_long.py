@@ -35,12 +35,13 @@ COMMANDS = {"diagnose": ["diagnose"], "compare": ["compare"], "add": ["add", "tr
 # The child reports its own peak memory and CPU time (getrusage of the bench process would mix in
 # other suites).
 CHILD = (
-    "import resource, runpy, sys\n"
-    "sys.argv = ['mows'] + sys.argv[1:]\n"
-    "try:\n    runpy.run_module('mows.cli.main', run_name='__main__')\n"
+    "import resource, sys\n"
+    "from mows.cli.main import main\n"
+    "try:\n    status = main(sys.argv[1:])\n"
     "finally:\n"
     "    usage = resource.getrusage(resource.RUSAGE_SELF)\n"
     "    print('usage', usage.ru_maxrss, usage.ru_utime + usage.ru_stime, file=sys.stderr)\n"
+    "sys.exit(status)\n"
 )
 
 

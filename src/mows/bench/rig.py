@@ -5,9 +5,9 @@ one probe or for a scene's probes on one shared stage.
 the driver's :class:`~mows.device.cycle.sequencer.CycleSequencer` with its duty-cycle limit and
 current cap, on the simulated device with commands at exact samples), cuts the announced
 ring-downs out of the stream as the estimator node does
-(:class:`mows.estimate.segments.SegmentAssembler`) and fits them: one probe's with the lever-aware
-pick-up (:func:`mows.estimate.segments.fit_segment`), a multi-tone window's probes jointly
-(:func:`mows.estimate.segments.fit_joint_segment`), each fit carrying its probe id. Tuning
+(:class:`mows.estimate.segments.SegmentAssembler`) and fits each window's probes jointly with
+their lever-aware pick-up (:func:`mows.estimate.segments.fit_segment`), each fit carrying its
+probe id. Tuning
 ring-downs retune the excitation and are not measurements.
 """
 
@@ -21,9 +21,9 @@ from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, 
 from mows.device.cycle.tracking import TrackingLoop
 from mows.device.stream.device_time import Block, DeviceTimeLoop, scheduled_device
 from mows.estimate.probe_set import probe_lines
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit, fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, ProbeLine, RingdownFit, fit_ringdown
 from mows.estimate.ringdown.start import white_noise_std
-from mows.estimate.segments import RingdownWindow, Segment, SegmentAssembler, fit_joint_segment, fit_segment
+from mows.estimate.segments import RingdownWindow, Segment, SegmentAssembler, fit_segment
 from mows.physics.coils import CurrentCap
 
 BUFFER_S = 5.0  # the assembler keeps this much of the stream
@@ -152,7 +152,8 @@ class DeviceTimeRig:
         key = round(window.theta0_rad, 12)
         if key not in self._options:
             self._options[key] = FitOptions.lever_aware(self.scenario.sensors.pair, probe, window.theta0_rad)
-        fit = fit_segment(segment, self._options[key], self.coil_off_skip_s, probe.damping_per_s)
+        line = ProbeLine(0, window.theta0_rad, window.excitation_frequency_hz, None, probe.damping_per_s)
+        (fit,) = fit_segment(segment, [line], self.coil_off_skip_s, self._options[key])
         self._measured.append(MeasuredRingdown(window, fit, segment.saturated))
 
     def _fit_jointly(self, segment: Segment) -> None:
@@ -163,7 +164,7 @@ class DeviceTimeRig:
         lines = probe_lines(
             self.scenario.sensors.pair, [placed[k] for k in members], members, window.probe_frequency_hz
         )
-        for fit in fit_joint_segment(segment, lines, self.coil_off_skip_s):
+        for fit in fit_segment(segment, lines, self.coil_off_skip_s):
             self._measured.append(MeasuredRingdown(window, fit, segment.saturated))
 
 

@@ -42,32 +42,22 @@ from mows.bench import multiprobe_throughput
 from mows.bench.rig import DeviceTimeRig, max_duty_fraction
 from mows.device.cycle.phases import CycleRequest, CycleSettings
 from mows.device.cycle.tracking import TrackingLoop, TrackingSettings
+from mows.device.cycle.tracking_plan import tracking_plan
 from mows.estimate.axis import estimate_along_axis
-from mows.lab.data.reference import reference_at
+from mows.lab.data.truth import scene_truth
 from mows.records.stamps import NS_PER_S
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import Decomposition, orientations_problem
-from mows.sweep.fast_cycle import plan_cycle, ringdown_std_model, tracking_plan
+from mows.sweep.fast_cycle import PAPER_CYCLE, PAPER_ORIENTATIONS, fit_std_model, plan_cycle
 from mows.sweep.planner import COMPONENTS, AdaptivePlanner, PlanEnd, PrecisionGoal, achieved_std, reached
 from mows.sweep.record import SweepPoint, SweepRecord
 
 SCENARIO = "anti_helmholtz"
 CAP_A = 10.0
 TURN_SETTLE_S = 0.5
-PAPER_RINGDOWN_S = 60.0 / 112.5  # 60 periods
 DECOMPOSE_NEAR = 1.25
 PROTOCOLS = {
-    "paper": (
-        CycleSettings(
-            excite_s=0.5,
-            ringdown_s=PAPER_RINGDOWN_S,
-            gap_s=10.0,
-            repeats=5,
-            tuning_steps=2,
-            turn_settle_s=TURN_SETTLE_S,
-        ),
-        12,
-    ),
+    "paper": (dataclasses.replace(PAPER_CYCLE, turn_settle_s=TURN_SETTLE_S), PAPER_ORIENTATIONS),
     "default": (CycleSettings(repeats=5, tuning_steps=2, gap_s=1.0, turn_settle_s=TURN_SETTLE_S), 12),
     "demo": (CycleSettings(repeats=2, tuning_steps=1, gap_s=0.2, turn_settle_s=TURN_SETTLE_S), 8),
 }
@@ -101,11 +91,6 @@ class ProtocolResult:
             f"{self.name}_peak_current_a": self.peak_current_a,
             f"{self.name}_max_duty": self.max_duty,
         }
-
-
-def truth_components(scenario) -> np.ndarray:
-    field, gradient = reference_at(scenario)
-    return np.array([field[0], field[1], gradient[0, 0], gradient[0, 1], gradient[1, 1]])
 
 
 class _Sweep:
@@ -153,7 +138,7 @@ class _Sweep:
             reached(goal, d),
             message,
             std,
-            (estimate - truth_components(self.scenario)) / std,
+            (estimate - scene_truth(self.scenario)) / std,
             len(self.record.points),
             len({round(p.theta0_rad, 9) for p in self.record.points}),
             rig.peak_current_a,
@@ -184,10 +169,9 @@ def fixed_protocol(
 def adaptive_protocol(goal: PrecisionGoal = PrecisionGoal(), seed: int = 1, scenario=None):
     """The physics cycle and the adaptive planner: (result, the cycle plan)."""
     scenario = scenario or load_scenario(SCENARIO)
-    probe, fs = scenario.probe, scenario.sample_rate_hz
+    probe = scenario.probe
     rig = DeviceTimeRig(scenario, CycleSettings(), CAP_A, seed)
-    noise = rig.first_block_noise_std_t()
-    std = ringdown_std_model(scenario.sensors.pair, probe, scenario.pose, fs, noise)
+    std = fit_std_model(scenario, rig.first_block_noise_std_t())
     plan = plan_cycle(probe, scenario.setup, scenario.pose, std, CAP_A, CycleSettings().max_duty_cycle)
     rig.set_settings(
         CycleSettings(
@@ -222,7 +206,9 @@ def tracking(target_std_t: float, updates: int = 40, theta0_rad: float = 0.0, se
     scenario = load_scenario(SCENARIO)
     probe = scenario.probe
     rig = DeviceTimeRig(scenario, CycleSettings(turn_settle_s=TURN_SETTLE_S), CAP_A, seed)
-    plan = tracking_plan(scenario, theta0_rad, target_std_t, CAP_A, rig.first_block_noise_std_t())
+    plan = tracking_plan(
+        scenario, theta0_rad, target_std_t, CAP_A, fit_std_model(scenario, rig.first_block_noise_std_t())
+    )
     figures: dict[str, object] = {
         "target_t": target_std_t,
         "feasible": plan.feasible,

@@ -30,6 +30,7 @@ from mows.workspace import simulated
 from mows.workspace.fit import WorkspaceModel, choose_degree, fit
 from mows.workspace.harmonics import SolidHarmonics
 from mows.workspace.observations import Observation
+from mows.workspace.poses import PoseError, fit_with_pose_errors, moved
 
 RADIUS_M = 0.025
 CENTRE_FIELD_T = 1.5e-3
@@ -37,6 +38,9 @@ TARGET_B = 5e-4
 TARGET_G = 5e-3
 DEGREES = tuple(range(2, 11))
 SWEEP_COUNTS = (8, 10, 12, 15, 18, 21, 25, 30)
+# The arm's accuracy, (σ per position component, m; σ per rotation component, deg): none, an
+# industrial arm's, between, a surgical arm's.
+POSE_ERRORS = ((1e-5, 1e-3), (1e-4, 0.01), (3e-4, 0.1), (1e-3, 1.0))
 HALL_COUNTS = (20, 30, 45, 60, 80, 100, 130, 160, 200, 250, 320, 400)
 
 
@@ -74,6 +78,34 @@ def _first(rows: list[dict], target_b: float, target_g: float | None) -> int | N
     return None
 
 
+def pose_curve(
+    sweeps: Sequence[Observation],
+    degree: int,
+    source: FieldSource,
+    points: np.ndarray,
+    levels: Sequence[tuple[float, float]],
+    rng: np.random.Generator,
+) -> list[dict]:
+    """For each pose error (σ_p, σ_φ in degrees): the sweeps reported at poses off by a draw of
+    it, fitted ignoring it (``naive_*``) and carrying it (``eiv_*``), at ``degree``."""
+    basis = SolidHarmonics(degree, (0.0, 0.0, 0.0), RADIUS_M)
+    rows = []
+    for position_std_m, angle_std_deg in levels:
+        error = PoseError(position_std_m, math.radians(angle_std_deg))
+        reported = [moved(obs, rng.normal(size=6) * error.std) for obs in sweeps]
+        naive = fit(reported, basis)
+        carried = fit_with_pose_errors(reported, basis, error, naive).model
+        rows.append(
+            {
+                "position_std_m": position_std_m,
+                "angle_std_deg": angle_std_deg,
+                **{f"naive_{k}": v for k, v in accuracy(naive, source, points).items()},
+                **{f"eiv_{k}": v for k, v in accuracy(carried, source, points).items()},
+            }
+        )
+    return rows
+
+
 def run(
     sweep_counts: Sequence[int] = SWEEP_COUNTS,
     hall_counts: Sequence[int] = HALL_COUNTS,
@@ -81,6 +113,7 @@ def run(
     held_out: int = 300,
     target_b: float = TARGET_B,
     target_g: float = TARGET_G,
+    pose_errors: Sequence[tuple[float, float]] = POSE_ERRORS,
     seed: int = 0,
 ) -> dict:
     rng = np.random.default_rng(seed)
@@ -98,6 +131,7 @@ def run(
     hall_needed = _first(hall_rows, target_b, None)
     sweep_s, hall_s = simulated.sweep_seconds(), simulated.MOVE_S + simulated.HALL_POINT_S
     last = sweep_rows[-1]
+    poses_rows = pose_curve(sweeps, last["degree"], source, points, pose_errors, rng)
     return {
         "sweeps": last["count"],
         "degree": last["degree"],
@@ -115,4 +149,13 @@ def run(
         "hall_minutes": hall_needed * hall_s / 60.0 if hall_needed else math.nan,
         "sweep_curve": [[r["count"], r["degree"], r["b_error"], r["g_error"]] for r in sweep_rows],
         "hall_curve": [[r["count"], r["degree"], r["b_error"], r["g_error"]] for r in hall_rows],
+        "pose_curve_columns": list(poses_rows[0]) if poses_rows else [],
+        "pose_curve": [list(row.values()) for row in poses_rows],
+        **(_pose_figures(poses_rows[-1]) if poses_rows else {}),
     }
+
+
+def _pose_figures(row: dict) -> dict:
+    """The largest pose error's figures, at the top level."""
+    keys = ("b_error", "g_error", "b_pull_sd", "g_pull_sd")
+    return {f"pose_{kind}_{key}": row[f"{kind}_{key}"] for kind in ("naive", "eiv") for key in keys}

@@ -89,6 +89,7 @@ QUICK: dict[str, dict[str, object]] = {
         "held_out": 50,
         "target_b": 5e-2,
         "target_g": 0.5,
+        "pose_errors": ((1e-3, 1.0),),
     },
     # a goal 5× looser than the default: 25× less device time
     "throughput": {

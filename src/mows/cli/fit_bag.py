@@ -5,9 +5,12 @@ own stream core and fit settings (:mod:`mows.lab.data.ringdowns`): each recorded
 (tuning ones skipped unless ``--tuning``) is cut out by its device stamps and fitted with the
 lever-aware signal model of the fluxgate pair the options describe (``--paper-model`` for Eq.
 S11). One line per ring-down; ``--csv`` writes a model-lab table (theta0_deg, f_hz, f_std_hz,
-t_s, amplitude_deg, damping_per_s, duration_s, and the marker mows_table_format of the
+t_s, sweep, amplitude_deg, damping_per_s, duration_s, and the marker mows_table_format of the
 project's own tables) of the OK fits, ready for ``mows lab`` with ``--reference`` (no file when
-none is OK). The CSV is never written into the bag nor over an existing file (unless
+none is OK). A sweep measures each orientation once (:func:`mows.sweep.record.sweep_numbers`).
+``--temperature-log`` joins a logger's CSV (``t_s`` on the device clock, ``temperature_k``) as
+the column ``temperature_k`` at each ring-down's start (:func:`mows.lab.data.readers.logged_at`).
+The CSV is never written into the bag nor over an existing file (unless
 ``--force``), and appears whole or not at all (:mod:`mows.records.files`).
 
 A bag of several probes sharing each window (docs/multi_probe.md: its excitations list the
@@ -31,23 +34,25 @@ from mows.cli.inputs import finite_float, input_file, non_negative_float, rename
 from mows.estimate.ringdown import COIL_OFF_SKIP_S
 from mows.estimate.settings import FitParameters
 from mows.estimate.stream import Estimated, FitSettings
-from mows.lab.data.readers import is_bag, start_amplitudes_rad
+from mows.lab.data.readers import is_bag, logged_at, start_amplitudes_rad
 from mows.lab.data.ringdowns import BagFitting, fit_bag
 from mows.lab.data.table import PROBE, tool_table
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import check_output, writing
 from mows.records.stamps import NS_PER_S
-from mows.sweep.record import SweepPoint, SweepRecord
-
-# Fits that one static field describes this well are one sweep: its field gives each rest angle.
-MAX_SWEEP_CHI2_DOF = 10.0
+from mows.sweep.record import SweepPoint, SweepRecord, sweep_numbers
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("bag", help="a rosbag2 directory (or .mcap) recorded by the driver (record_path)")
     add_bag_arguments(parser)
     parser.add_argument("--csv", help="write the OK fits as a model-lab table (a new file)")
+    parser.add_argument(
+        "--temperature-log",
+        metavar="CSV",
+        help="a logger's CSV of t_s (device clock, s) and temperature_k, joined to the --csv table's rows",
+    )
     parser.add_argument("--force", action="store_true", help="replace an existing --csv file (never the bag)")
 
 
@@ -92,7 +97,7 @@ def add_fit_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    inputs = [args.bag] + ([args.probe] if args.probe else [])
+    inputs = [args.bag] + [path for path in (args.probe, args.temperature_log) if path]
     if os.path.isfile(args.bag) and not is_bag(args.bag):
         raise ValueError(
             f"{args.bag} is not a bag (a bag is a directory or an .mcap file): "
@@ -112,7 +117,8 @@ def run(args) -> int:
     print(f"{len(ok)} of {len(fits)} {_fitted(fits)}")
     if args.csv and ok:
         with writing([args.csv], inputs, args.force) as outputs:
-            notes = write_table(outputs.temporaries[0], ok, probe)
+            named = bool(how.parameters.probes.strip())
+            notes = write_table(outputs.temporaries[0], ok, probe, named, args.temperature_log)
         print(f"{outputs.report()}: {len(ok)} rows")
         for note in notes:
             print(f"note: {note}")
@@ -122,10 +128,8 @@ def run(args) -> int:
 
 
 def _heading(estimated: Estimated) -> str:
-    """Its window and, of several probes, its probe at the probe's own θ0."""
+    """Its window and probe, at the probe's own θ0."""
     window = estimated.window
-    if estimated.probe_id is None:
-        return f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):7.2f}°"
     return (
         f"cycle {window.cycle_id} repeat {window.repeat_index} probe {estimated.probe_id} "
         f"θ0 {math.degrees(estimated.fit.theta0_rad):7.2f}°"
@@ -133,10 +137,9 @@ def _heading(estimated: Estimated) -> str:
 
 
 def _fitted(fits: list[Estimated]) -> str:
-    """What the count counts: ring-downs, or probes' fits in so many ring-downs."""
-    if all(estimated.probe_id is None for estimated in fits):
-        return "ring-downs fitted"
-    return f"probes' fits OK in {len({id(estimated.window) for estimated in fits})} ring-downs"
+    """What the count counts: ring-downs where each held one probe, else probes' fits in so many ring-downs."""
+    windows = len({id(estimated.window) for estimated in fits})
+    return "ring-downs fitted" if windows == len(fits) else f"probes' fits OK in {windows} ring-downs"
 
 
 def bag_fitting(args) -> BagFitting:
@@ -179,18 +182,16 @@ def check_ringdowns(path, fits: list[Estimated], how: BagFitting) -> None:
         raise ValueError(f"--coil-off-skip-s {skip_s:g} s skips the whole of every ring-down (longest {longest:g} s)")
 
 
-def write_table(path, fits: list[Estimated], probe: Probe) -> list[str]:
-    """The OK fits as a model-lab table; returns notes of how the start swings were found.
+def write_table(path, fits: list[Estimated], probe: Probe, named: bool, temperature_log=None) -> list[str]:
+    """The OK fits as a model-lab table, numbered by sweep and with ``temperature_log`` joined
+    where given (module docstring); returns notes of how the start swings were found.
 
-    Every ring-down of one probe starts at the housing stop, so its swing is stop − |θs|
-    (:func:`mows.physics.ringdown_average.start_swing_rad`). θs comes from the first-principles
-    decomposition of all the fits as one sweep in one static field
-    (:meth:`mows.sweep.record.SweepRecord.start_amplitudes_rad`) where that describes them
-    (χ²/dof ≤ MAX_SWEEP_CHI2_DOF), else from each fit's own rest offset
-    (:meth:`~mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`); the stop is pooled
-    over the fits that determined θmax, else the probe's. Fits of several probes, whose
-    multi-tone excitation need not swing them to the stop, are marked by the column ``probe``
-    and each probe's start swings come from its own fits, as those the estimator recorded
+    Every ring-down of one probe starts at the housing stop
+    (:meth:`mows.sweep.record.SweepRecord.start_swings_rad`: the rest angle from the sweep's field
+    where one static field describes the fits, else from each fit). Fits of probes named by
+    ``--probes`` (``named``), whose multi-tone excitation need not swing them to the stop, are
+    marked by the column ``probe`` and each probe's start swings come from its own fits, as those
+    the estimator recorded
     (:func:`mows.lab.data.readers.start_amplitudes_rad`). The table is marked as the project's
     own (:func:`mows.lab.data.table.tool_table`)."""
     record = SweepRecord(
@@ -201,21 +202,25 @@ def write_table(path, fits: list[Estimated], probe: Probe) -> list[str]:
             for e in fits
         ]
     )
-    if fits[0].probe_id is not None:
+    if named:
         probe_ids = np.array([e.probe_id for e in fits], float)
         start, notes = start_amplitudes_rad([e.fit for e in fits], np.zeros(len(fits)), probe.theta_stop_rad, probe_ids)
         columns = record.table_columns(start) | {PROBE: probe_ids}
     else:
-        start, notes = _start_swings_rad(record, probe)
+        start, notes = record.start_swings_rad(probe)
         columns = record.table_columns(start)
+    columns["sweep"] = _sweeps(fits).astype(float)
+    if temperature_log is not None:
+        with input_file(temperature_log, "temperature log"):
+            columns["temperature_k"] = logged_at(
+                temperature_log, np.array([e.window.start_ns / NS_PER_S for e in fits])
+            )
     tool_table(columns, str(path)).to_csv(path)
     return notes
 
 
-def _start_swings_rad(record: SweepRecord, probe: Probe) -> tuple[np.ndarray, list[str]]:
-    """Each ring-down's start swing of one probe's record (:func:`write_table`) and how it was found."""
-    decomposition = record.decompose(probe, probe.f00_hz)
-    if decomposition.ok and decomposition.chi2_dof <= MAX_SWEEP_CHI2_DOF:
-        start = record.start_amplitudes_rad(decomposition, probe)
-        return start, [f"start swings: the stop less the rest angle in the sweep's field ({decomposition.report()})"]
-    return record.fitted_start_amplitudes_rad(probe.theta_stop_rad)
+def _sweeps(fits: list[Estimated]) -> np.ndarray:
+    """Each fit's sweep by its window's orientation; the probes of one window share it."""
+    first = [i for i, e in enumerate(fits) if i == 0 or e.window is not fits[i - 1].window]
+    numbers = sweep_numbers(np.array([fits[i].window.theta0_rad for i in first]))
+    return np.repeat(numbers, np.diff([*first, len(fits)]))

@@ -18,6 +18,7 @@ import contextlib
 import os
 import pathlib
 import sys
+import traceback
 import warnings
 from collections.abc import Callable, Iterator
 
@@ -25,7 +26,9 @@ import numpy as np
 import yaml
 
 from mows.cli.status import EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_BUG, EXIT_OK, caused_by_interrupt, interrupted
+from mows.physics import ranges
 from mows.physics.schema import unreadable, yaml_problem
+from mows.records.files import read_input
 
 #: Exceptions that mean "the input is bad". ValueError covers the library's own refusals
 #: (TableError, OutputRefused, a scenario's out-of-range value) and UnicodeDecodeError.
@@ -49,7 +52,7 @@ def one_line(error: BaseException) -> str:
 def input_file(path, what: str = "") -> Iterator[pathlib.Path]:
     """Read ``path`` inside the ``with`` block; what goes wrong is reported as this file's fault
     (:class:`InputError` with ``what`` and the file's name), unless the message already names it."""
-    path = pathlib.Path(path)
+    path = read_input(path)
     name = f"{what} {path}" if what else str(path)
     try:
         yield path
@@ -88,11 +91,6 @@ def renamed_option(parser: argparse.ArgumentParser, old: str, new: str) -> None:
     parser.add_argument(old, action=Renamed, help=argparse.SUPPRESS)
 
 
-#: Sensor geometry beyond this is no bench of a millimetre magnet (its field at a metre is
-#: ~1e-13 T): a unit error (mm for m) or a typo.
-MAX_SENSOR_M = 1.0
-
-
 def finite_float(text: str) -> float:
     """An argparse type: a finite number."""
     try:
@@ -121,13 +119,22 @@ def positive_float(text: str) -> float:
 
 
 def sensor_length_m(text: str) -> float:
-    """An argparse type: a length of the sensor geometry, in (0, MAX_SENSOR_M] metres."""
-    value = finite_float(text)
-    if not 0.0 < value <= MAX_SENSOR_M:
-        raise argparse.ArgumentTypeError(
-            f"{value:g} m is out of range: a sensor length is > 0 and at most {MAX_SENSOR_M:g} m (mm given as m?)"
-        )
-    return value
+    """An argparse type: a length of the sensor geometry, m, > 0 and in its range (:mod:`mows.physics.ranges`)."""
+    if finite_float(text) <= 0.0:
+        raise argparse.ArgumentTypeError(f"{text} m: a sensor length is > 0")
+    return _ranged("sensor_length_m", text)
+
+
+def magnet_position_m(text: str) -> float:
+    """An argparse type: a coordinate of the magnet's position, m, in its range."""
+    return _ranged("magnet_position_m", text)
+
+
+def _ranged(quantity: str, text: str) -> float:
+    try:
+        return ranges.check(quantity, finite_float(text), "the value", warn=False)  # parsed before warnings are kept
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def positive_int(text: str) -> int:
@@ -157,6 +164,12 @@ def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> in
     return status
 
 
+def _exit_site(error: BaseException) -> str:
+    """Where ``error`` was raised: the file and line of its innermost frame."""
+    frames = traceback.extract_tb(error.__traceback__)
+    return f"{frames[-1].filename}:{frames[-1].lineno}" if frames else "the command"
+
+
 def _status(prog: str, work: Callable[[], int], debug: bool) -> int:
     """:func:`report_errors` without the warnings."""
     try:
@@ -167,6 +180,15 @@ def _status(prog: str, work: Callable[[], int], debug: bool) -> int:
         line, status = interrupted(prog, error)
         print(line, file=sys.stderr)
         return status
+    except SystemExit as error:  # our commands return their status: this came from a plugin or library
+        if debug:
+            raise
+        print(
+            f"{prog}: error: {_exit_site(error)} tried to end the command (sys.exit({error.code!r})): "
+            "a plugin must return or raise, never exit",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
     except BrokenPipeError:
         # The reader of stdout left (``| head``): nothing is wrong, and nothing more can be said
         # there; Python's own flush at exit would fail again, so stdout goes to /dev/null.

@@ -37,11 +37,12 @@ import time
 from tqdm import tqdm
 
 from mows.cli.fit_bag import add_bag_arguments
-from mows.cli.inputs import OneLineParser, input_file, positive_float
+from mows.cli.inputs import OneLineParser, input_file, magnet_position_m, positive_float
 from mows.cli.lab_ringdown import run_ringdown
 from mows.lab import analyse, analyse_discovering, is_bag, load_table, progress, with_reference, write_report
 from mows.lab.chirp import PIECE_PERIODS
 from mows.lab.data.scale import check_reference, table_probes
+from mows.lab.data.table import check_design
 from mows.physics.probe import Probe
 from mows.records.files import check_output, writing
 
@@ -102,11 +103,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         )
         command.add_argument(
             "--magnet-position",
-            type=float,
+            type=magnet_position_m,
             nargs=3,
             default=(0.0, 0.0, 0.0),
             metavar=("X", "Y", "Z"),
             help="probe position for a field-source reference, m",
+        )
+        command.add_argument(
+            "--trust-reference",
+            action="store_true",
+            help="take the reference as given even where the ring-downs move a unit factor (10³, 10⁴, 10⁶) "
+            "more or less than it says (otherwise refused as mT, gauss or µT given in T)",
         )
         command.add_argument(
             "--drop-invalid", action="store_true", help="drop rows with missing or invalid values instead of stopping"
@@ -178,11 +185,7 @@ def run(args) -> int:
             table = table.subsample(MAX_ROWS, SUBSAMPLE_SEED)
         stages.set_description(f"mows lab {args.lab_command}: analysing {len(table)} rows")
         stages.update()
-        if len(table) < 2:  # no model is tested by one row, and its cross-validation has no fold
-            raise ValueError(
-                f"{table.source}: {len(table)} row leaves no degrees of freedom for any model: nothing would test it; "
-                "measure more orientations"
-            )
+        check_design(table)
         effects = args.effects if isinstance(args.effects, list) else [e for e in args.effects.split(",") if e]
         added: list = []
         if getattr(args, "discover", False):
@@ -332,8 +335,7 @@ def _table(args, default, named):
     if args.reference and not is_bag(args.table):
         with input_file(args.reference, "reference"):
             table = with_reference(table, args.reference, args.magnet_position)
-    check_reference(table, probe)
-    return table, probe
+    return check_reference(table, probe, args.trust_reference), probe
 
 
 def probe_options(values: list[str]) -> tuple[str, dict[int, str]]:

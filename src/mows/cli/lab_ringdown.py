@@ -51,9 +51,7 @@ def run_ringdown(args) -> int:
 
 
 def _heading(window, probe_id) -> str:
-    """The window, and of several probes the probe at its own θ0 (as announced, else the window's)."""
-    if probe_id is None:
-        return f"cycle {window.cycle_id} repeat {window.repeat_index} θ0 {math.degrees(window.theta0_rad):.2f}°"
+    """The window and the probe at its own θ0 (as announced, else the window's)."""
     theta0 = dict(zip(window.probe_ids, window.probe_theta0_rad)).get(probe_id, window.theta0_rad)
     return f"cycle {window.cycle_id} repeat {window.repeat_index} probe {probe_id} θ0 {math.degrees(theta0):.2f}°"
 
@@ -83,9 +81,12 @@ def _text(window, probe_id, diagnosis, reason) -> str:
 
 
 def _as_dict(window, probe_id, diagnosis, reason) -> dict:
-    head = {"cycle_id": window.cycle_id, "repeat_index": window.repeat_index, "theta0_rad": window.theta0_rad}
-    if probe_id is not None:
-        head |= {"probe_id": probe_id}
+    head = {
+        "cycle_id": window.cycle_id,
+        "repeat_index": window.repeat_index,
+        "theta0_rad": window.theta0_rad,
+        "probe_id": probe_id,
+    }
     if diagnosis is None:
         return head | {"verdict": None, "reason": reason}
     found = {k: v for k, v in dataclasses.asdict(diagnosis).items() if k not in ("fit", "pieces")}

@@ -10,11 +10,14 @@ alone (and :mod:`mows.cli.status`): Ctrl-C while numpy or scipy load is then ins
 """
 
 import argparse
+import atexit
+import contextlib
 import functools
 import importlib
+import os
 import sys
 
-from mows.cli.status import caused_by_interrupt, interrupted, stop_on_sigterm
+from mows.cli.status import caused_by_interrupt, interrupted, settle, stop_on_signals
 
 SUBCOMMANDS = {
     "sim": ("mows.cli.sim", "simulate measurement cycles from a scenario"),
@@ -38,16 +41,36 @@ or not at all, never over an input, over an existing file only with --force (doc
 def main(argv=None) -> int:
     words = sys.argv[1:] if argv is None else list(argv)
     if argv is None:  # the command itself, not a caller's test
-        stop_on_sigterm()
+        stop_on_signals()
+    prog = _prog(words)
     try:
-        return _main(words)
+        status = _main(words)
     # Ctrl-C while the subcommand's modules load (within it, report_errors says it)
     except (KeyboardInterrupt, ImportError) as error:
         if "--debug" in words or not caused_by_interrupt(error):
             raise
-        line, status = interrupted("mows", error)
+        line, status = interrupted(prog, error)
         print(line, file=sys.stderr)
+    if argv is not None:
         return status
+    status = settle(prog, status)
+    # Out now: a signal during the interpreter's own shutdown (its handlers restored to the
+    # default) would end the process without a word, after the status was decided.
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError):  # a reader that left has been told nothing more
+            stream.flush()
+    os._exit(status)
+
+
+def _prog(words: list) -> str:
+    """``mows`` and its subcommand as its errors name it (``mows lab report``)."""
+    named = [word for word in words if not word.startswith("-")]
+    return (
+        " ".join(["mows", *named[: 2 if named[:1] == ["lab"] else 1]])
+        if named[:1] and named[0] in SUBCOMMANDS
+        else "mows"
+    )
 
 
 def _main(argv: list) -> int:
@@ -77,7 +100,7 @@ def _main(argv: list) -> int:
     except UsageError as error:  # the one line and the status of every bad input
         return report_errors(error.prog, functools.partial(_refuse, error), "--debug" in argv)
     with command_inputs():  # every file the command reads is an input, not only its arguments
-        return report_errors(f"mows {args.command}", lambda: args._run(args), args.debug)
+        return report_errors(_chosen(parser, args).prog, lambda: args._run(args), args.debug)
 
 
 def _chosen(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:

@@ -1,11 +1,13 @@
 """``mows sim``: simulate measurement cycles of a scenario and write the samples to .npz.
 
-For every θ0 and repeat: turn, let the scenario's gap pass, excite, record the ring-down
-(:func:`mows.sim.simulated_cycle.simulate_cycle`). With ``--fit`` each ring-down is fitted as the
-estimator node does (:func:`mows.estimate.recorded_cycle.fit_cycle`: the lever-aware pickup) and compared with
-the truth from the full potential (:meth:`mows.sim.simulated_cycle.CycleRecord.ringdown_frequency_hz`).
-``--out`` writes a new file (an existing one only with ``--force``, never the scenario), whole
-or not at all.
+For every θ0 and repeat one cycle of the driver's own sequencer on the simulated device
+(:func:`mows.device.stream.simulated_cycle.simulate_cycle`): turn, settle for the scenario's gap,
+excite, record the ring-down. With ``--fit`` each ring-down is fitted as the estimator node does
+(:func:`mows.estimate.recorded_cycle.fit_cycle`: the lever-aware pickup) and compared with the
+truth from the full potential
+(:meth:`mows.device.stream.simulated_cycle.CycleRecord.ringdown_frequency_hz`). ``--out`` writes
+a new file (:func:`mows.device.stream.simulated_cycle.cycles_npz`; an existing one only with
+``--force``, never the scenario), whole or not at all.
 """
 
 from __future__ import annotations
@@ -17,10 +19,11 @@ import numpy as np
 import yaml
 
 from mows.cli.inputs import finite_float, input_file, positive_int
+from mows.device.stream.simulated_cycle import cycles_npz, simulate_cycle
 from mows.estimate.recorded_cycle import fit_cycle
+from mows.physics import ranges
 from mows.records.files import check_output, writing
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario
-from mows.sim.simulated_cycle import simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 
 
@@ -58,12 +61,13 @@ def run(args) -> int:
         check_output(args.out, [args.scenario], args.force)
     excitation = scenario.excitation
     amplitude = excitation.amplitude_a if args.amplitude_a is None else args.amplitude_a
+    if amplitude == 0.0:
+        raise ValueError("--amplitude-a 0: no current, no swing, no ring-down to simulate; give the coils' amplitude")
+    ranges.check("coil_current_a", amplitude, "--amplitude-a")
     angles = [math.degrees(scenario.pose.theta0_rad)] if args.theta0_deg is None else args.theta0_deg
     records = []
     for theta0_deg in angles:
         for _ in range(args.repeats):
-            device.set_orientations(scenario.stage_orientations_rad(math.radians(theta0_deg)))
-            device.idle(excitation.gap_s)
             record = simulate_cycle(
                 device,
                 math.radians(theta0_deg),
@@ -71,6 +75,7 @@ def run(args) -> int:
                 excitation.frequency_hz,
                 excitation.excite_s,
                 excitation.ringdown_s,
+                settle_s=excitation.gap_s,
             )
             records.append(record)
             if args.fit:
@@ -80,7 +85,7 @@ def run(args) -> int:
         scenario_yaml = yaml.safe_dump(scenario.to_dict(), sort_keys=False)
         with writing([args.out], [args.scenario], args.force) as outputs:
             with open(outputs.temporaries[0], "wb") as handle:
-                np.savez_compressed(handle, **_arrays(records), scenario_yaml=scenario_yaml)
+                np.savez_compressed(handle, **cycles_npz(records, scenario_yaml))
         print(f"{outputs.report()}: {len(records)} cycles")
     return 0
 
@@ -94,30 +99,3 @@ def _compare(fit, record) -> str:
         f"{fit.report()}; truth {truth:.6f} Hz from {math.degrees(record.ringdown_amplitude_rad()):.1f}° "
         f"(fit − truth = {(fit.frequency_hz - truth) * 1e3:+.3f} mHz)"
     )
-
-
-def _arrays(records) -> dict:
-    return {
-        "sample_rate_hz": records[0].sample_rate_hz,
-        "theta0_rad": np.array([r.theta0_rad for r in records]),
-        "frequency_hz": np.array([r.frequency_hz for r in records]),
-        "currents_a": np.stack([r.currents_a for r in records]),
-        "first_sample_index": np.array([r.block.samples.first_sample_index for r in records]),
-        "coil_off_index": np.array([r.coil_off_index for r in records]),
-        # Cycles differ in length (the excitation ends at a peak of its drive): padded to the
-        # longest, NaN (not saturated) after each cycle's n_samples.
-        "n_samples": np.array([len(r.samples_t) for r in records]),
-        "samples_t": _padded([r.samples_t for r in records], np.nan),
-        "saturated": _padded([r.saturated for r in records], False),
-        "theta_rad": _padded([r.theta_rad for r in records], np.nan),
-        "expected_frequency_hz": np.array([float(r.expected_frequency_hz()) for r in records]),
-    }
-
-
-def _padded(arrays, fill) -> np.ndarray:
-    """The arrays stacked, each padded at the end with ``fill`` to the longest one's length."""
-    longest = max(len(a) for a in arrays)
-    out = np.full((len(arrays), longest, *arrays[0].shape[1:]), fill, dtype=arrays[0].dtype)
-    for row, array in zip(out, arrays):
-        row[: len(array)] = array
-    return out

@@ -4,7 +4,11 @@ Standard library only: the command's entry point imports it before anything slow
 that Ctrl-C while the command starts is one line and status 130 too.
 """
 
+import contextlib
+import os
 import signal
+import sys
+import threading
 
 EXIT_OK = 0
 EXIT_BUG = 1
@@ -19,13 +23,71 @@ class Terminated(KeyboardInterrupt):
     temporaries removed, nothing half-written (:mod:`mows.records.files`)."""
 
 
-def _terminate(_signum, _frame) -> None:
-    raise Terminated
+# Signals always win. The handler raises the interrupt where the command is (so that it unwinds
+# through every clean-up); but Python discards an exception raised inside a weakref callback or
+# a __del__ (it reaches sys.unraisablehook instead), so the hook has the signal sent again and
+# the command's next bytecode gets it. Each signal is also written by the C-level handler to a
+# pipe (signal.set_wakeup_fd), which the command's last step reads: a signal whose exception was
+# swallowed anyway, or that came while the interpreter was about to exit, still decides the
+# status and the line.
+_received: list[int] = []  # the signals the handler has seen, in order
+_raised = False  # an interrupt is on its way up the stack: a second signal does not cut its clean-up
+_wakeup: int | None = None  # the read end of the pipe the C handler writes signal numbers to
+_EXCEPTIONS: dict[int, type[KeyboardInterrupt]] = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: Terminated}
+EXIT_OF: dict[int, int] = {signal.SIGINT: EXIT_INTERRUPTED, signal.SIGTERM: EXIT_TERMINATED}
 
 
-def stop_on_sigterm() -> None:
-    """SIGTERM ends the command as Ctrl-C does (:class:`Terminated`), not on the spot."""
-    signal.signal(signal.SIGTERM, _terminate)
+def _on_signal(signum, _frame) -> None:
+    global _raised
+    _received.append(signum)
+    if not _raised:
+        _raised = True
+        raise _EXCEPTIONS[_received[0]]
+
+
+def _unraisable(unraisable, default=sys.unraisablehook) -> None:
+    """An interrupt Python discarded (raised in a weakref callback, a __del__): sent again."""
+    global _raised
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and _received:
+        _raised = False
+        # from another thread, once this hook has returned: a signal raised here would be
+        # handled here, inside the hook, and discarded again
+        threading.Timer(0.0, os.kill, (os.getpid(), _received[0])).start()
+        return
+    default(unraisable)
+
+
+def stop_on_signals() -> None:
+    """SIGINT and SIGTERM end the command with one line and status 130 or 143, whenever they
+    come (a SIGINT ignored by whoever started us, as for a background job, stays ignored)."""
+    global _wakeup
+    read, write = os.pipe()
+    os.set_blocking(read, False)
+    os.set_blocking(write, False)
+    signal.set_wakeup_fd(write, warn_on_full_buffer=False)
+    _wakeup = read
+    for signum in _EXCEPTIONS:
+        if signal.getsignal(signum) is not signal.SIG_IGN:
+            signal.signal(signum, _on_signal)
+    sys.unraisablehook = _unraisable
+
+
+def settle(prog: str, status: int) -> int:
+    """The command's final status: from here on signals are ignored, and one that came at any
+    time before (even one whose exception was swallowed) makes it 130 or 143, saying so in one
+    line unless the command already did."""
+    for signum in _EXCEPTIONS:
+        if signal.getsignal(signum) is _on_signal:
+            signal.signal(signum, signal.SIG_IGN)
+    received = list(_received)
+    if _wakeup is not None:
+        with contextlib.suppress(BlockingIOError):
+            received += [byte for byte in os.read(_wakeup, 64) if byte in EXIT_OF]
+    if not received or status in EXIT_OF.values():
+        return status
+    line, status = interrupted(prog, _EXCEPTIONS[received[0]]())
+    print(line, file=sys.stderr)
+    return status
 
 
 def interrupt_behind(error: BaseException | None) -> KeyboardInterrupt | None:

@@ -53,7 +53,7 @@ def run(args) -> int:
     if args.figures is not None:
         return write_figures(args, view)
     output = args.output or default_output(args.bag)
-    with writing([output], [args.bag], args.force) as outputs:
+    with writing([output], _inputs(args), args.force) as outputs:
         counts = write_view(args.bag, outputs.temporaries[0], view)
     print(outputs.report())
     for topic, count in sorted(counts.items()):
@@ -63,15 +63,20 @@ def run(args) -> int:
 
 def write_figures(args, view: View) -> int:
     """Each panel the session has, as ``DIR/<panel>.png``."""
-    from mows.records.files import writing
+    from mows.records.files import check_not_input, writing
     from mows.viz.figures import Panels, draw
     from mows.viz.recording import view_messages
 
+    check_not_input(args.figures / "scene.png", _inputs(args))  # before the folder is made
     panels = Panels.of(view_messages(args.bag, view))
     names = panels.names()
     args.figures.mkdir(parents=True, exist_ok=True)
-    with writing([args.figures / f"{name}.png" for name in names], [args.bag], args.force) as outputs:
+    with writing([args.figures / f"{name}.png" for name in names], _inputs(args), args.force) as outputs:
         for name, temporary in zip(names, outputs.temporaries):
             temporary.write_bytes(draw(panels, name).png)
     print(outputs.report())
     return 0
+
+
+def _inputs(args) -> list:
+    return [args.bag] + ([args.mount] if args.mount is not None else [])

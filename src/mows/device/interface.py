@@ -50,11 +50,14 @@ class MultiToneCommand:
 
 @dataclasses.dataclass(frozen=True)
 class OrientationCommand:
-    """Turn the probe (the rotation stage) to ``theta0_rad`` at device sample ``at_sample_index``."""
+    """Turn the probe (the rotation stage) to ``theta0_rad`` at device sample ``at_sample_index``;
+    ``by_hand``: the operator has turned it there and confirmed it (a stage without a motor
+    takes no other turn)."""
 
     command_id: int
     at_sample_index: int
     theta0_rad: float
+    by_hand: bool = False
 
 
 @dataclasses.dataclass(frozen=True)

@@ -16,7 +16,8 @@ magnet at rest relative to the single probe's place before the fluxgates, in the
 plane's frame (x = e1 towards the sensors' side, y = e2); each probe is turned about its own
 magnet to the θ0 the driver announces for it (``probe_theta0_rad`` of a ring-down that lists its
 probes, :func:`window_probes`; else the one θ0 of the window). A probe orbiting a shared axis is
-not modelled. An empty text is one probe: the single-probe estimator.
+not modelled. An empty text lists none: the estimator then tells apart its own probe alone
+(:meth:`mows.estimate.settings.FitParameters.probe_entries`).
 
 At most :data:`MAX_PROBES` probes, each line at least :data:`MIN_SEPARATION_HZ` from the
 others: closer lines are not told apart in a window of a second or less (docs/multi_probe.md).
@@ -111,10 +112,14 @@ class WindowProbe:
 
 def window_probes(probes: Sequence[ProbeEntry], window: RingdownWindow) -> list[WindowProbe]:
     """The probes ``window`` holds, in id order: those it lists (``probe_ids``), each at its
-    own ``probe_theta0_rad`` and tone, or, when it lists none, every probe of the set at the
-    window's θ0 with no tone of its own."""
+    own ``probe_theta0_rad`` and tone. A window that lists none (recorded before excitations
+    listed their probes) was rung by one tone at one θ0: every probe of the set is at the
+    window's θ0, and the one whose f00 is nearest the window's tone (that tone's probe) is
+    looked for at it, the others at their f00."""
     if not window.probe_ids:
-        return [WindowProbe(e.probe_id, window.theta0_rad, math.nan, e) for e in probes]
+        tone_hz = window.excitation_frequency_hz
+        driven = min(probes, key=lambda e: abs(e.f00_hz - tone_hz)) if math.isfinite(tone_hz) else None
+        return [WindowProbe(e.probe_id, window.theta0_rad, tone_hz if e is driven else math.nan, e) for e in probes]
     known = {e.probe_id: e for e in probes}
     listed = zip(window.probe_ids, window.probe_theta0_rad, window.probe_frequency_hz)
     return sorted(

@@ -2,7 +2,7 @@
 
 A recorded cycle is any object with the cycle's samples (``samples_t``, ``saturated``), its
 ``sample_rate_hz``, commanded ``theta0_rad``, excitation ``frequency_hz`` and the sample index
-of the coil switch-off (``coil_off_index``), such as :class:`mows.sim.simulated_cycle.CycleRecord`; the
+of the coil switch-off (``coil_off_index``), such as :class:`mows.device.stream.simulated_cycle.CycleRecord`; the
 scene only lends its probe and fluxgate pair (``scene.probe``, ``scene.sensors.pair``). The
 simulator, the calibration command and ``mows sim`` fit their cycles here, so that all of them
 fit exactly as the node does.

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from mows.estimate.ringdown import FitOptions, FitStatus, ProbeLine, RingdownFit, failure, fit_ringdown, fit_ringdowns
+from mows.estimate.ringdown import FitOptions, FitStatus, ProbeLine, RingdownFit, failure, fit_ringdowns
 from mows.records import stamps
 from mows.records.samples import SampleBlock
 
@@ -37,9 +37,11 @@ from mows.records.samples import SampleBlock
 @dataclasses.dataclass(frozen=True)
 class RingdownWindow:
     """An announced free ring-down: coils off at ``start_ns`` (device clock, integer ns) for
-    ``duration_s``. A multi-tone excitation lists the probes it rang (``probe_ids``), each
-    with its tone and its own orientation in its own rotation plane, in the same order; empty
-    for one probe (``excitation_frequency_hz``, ``theta0_rad``)."""
+    ``duration_s``. The excitation lists the probes it rang (``probe_ids``: one, or several of
+    a multi-tone drive), each with its tone and its own orientation in its own rotation plane,
+    in the same order. An announcement recorded before excitations listed their probes lists
+    none: one tone (``excitation_frequency_hz``) at one orientation (``theta0_rad``) rang
+    whichever probes the estimator tells apart (:func:`mows.estimate.probe_set.window_probes`)."""
 
     start_ns: int
     duration_s: float
@@ -285,40 +287,15 @@ def gap_message(segment: Segment) -> str:
 
 
 def fit_segment(
-    segment: Segment, options: FitOptions = FitOptions(), coil_off_skip_s: float = 0.0, damping_guess_per_s: float = 1.8
-) -> RingdownFit:
-    """Fit one assembled ring-down of one probe (:func:`mows.estimate.ringdown.fit_ringdown`);
-    a segment with missing samples is refused, not patched."""
-    window = segment.window
-    if segment.missing_samples:
-        return failure(
-            FitStatus.DATA_GAP,
-            gap_message(segment),
-            theta0_rad=window.theta0_rad,
-            theta0_free=options.theta0_free,
-        )
-    return fit_ringdown(
-        segment.samples_t,
-        segment.sample_rate_hz,
-        window.theta0_rad,
-        window.excitation_frequency_hz,
-        segment.saturated,
-        options,
-        damping_guess_per_s,
-        coil_off_skip_s,
-    )
-
-
-def fit_joint_segment(
     segment: Segment,
     lines: Sequence[ProbeLine],
     coil_off_skip_s: float = 0.0,
     options: FitOptions = FitOptions(),
 ) -> list[RingdownFit]:
-    """The fit of one assembled window in which the probes of ``lines`` ring down together, a
-    multi-tone excitation's (:mod:`mows.physics.multitone`): one :class:`RingdownFit` per line,
-    in order (:func:`mows.estimate.ringdown.fit_ringdowns`). A window with missing samples is
-    refused for every probe (``FitStatus.DATA_GAP``), never patched."""
+    """The fit of one assembled window in which the probes of ``lines`` ring down, one or several
+    together (a multi-tone excitation's, :mod:`mows.physics.multitone`): one
+    :class:`RingdownFit` per line, in order (:func:`mows.estimate.ringdown.fit_ringdowns`). A
+    window with missing samples is refused for every probe (``FitStatus.DATA_GAP``), never patched."""
     if segment.missing_samples:
         message = gap_message(segment)
         return [

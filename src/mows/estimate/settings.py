@@ -16,7 +16,7 @@ from typing import Any
 
 from mows.estimate.probe_set import ProbeEntry, WindowProbe, read_probe_set
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, ProbeLine
-from mows.estimate.stream import FitSettings, JointSettings
+from mows.estimate.stream import FitSettings
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
 from mows.physics.probe import Probe
 
@@ -28,7 +28,8 @@ class FitParameters:
     θ0 fitted or taken, the lever-aware pickup of the fluxgate pair ``sensor_distance_m`` from
     the probe along ``sensor_direction`` and ``sensor_spacing_m`` apart, the samples skipped
     after coil-off, the shortest usable ring-down, the χ²/dof refused, and the ``probes`` text
-    of several probes per window (:mod:`mows.estimate.probe_set`; empty: one probe)."""
+    of the probes told apart in each window (:mod:`mows.estimate.probe_set`; empty: the
+    estimator's own probe alone)."""
 
     f00_hz: float = 0.0
     f00_std_hz: float = 0.0
@@ -60,44 +61,44 @@ class FitParameters:
             axis=(self.sensor_axis_a, self.sensor_axis_b, 0.0),
         )
 
-    def fit_options(self, probe: Probe, theta0_rad: float) -> FitOptions:
-        """The ring-down fit of one probe at θ0. ValueError when no model can be made (e.g. a
-        sensing axis of (0, 0))."""
-        direction = (self.sensor_axis_a, self.sensor_axis_b)
-        common: dict[str, Any] = dict(
-            sensor_direction=direction, min_periods=self.min_periods, max_chi2_dof=self.max_chi2_dof
-        )
-        if self.lever_aware and not self.theta0_free and self.channels != "both":
-            return FitOptions.lever_aware(self.fluxgate_pair(), probe, theta0_rad, self.channels, **common)
-        return FitOptions(channels=self.channels, theta0_free=self.theta0_free, **common)
+    def own_entry(self, probe: Probe) -> ProbeEntry:
+        """The estimator's own probe (``probe_file``) as the set's probe 0, at the f00 the
+        parameters give it (f00 = 0: the probe's)."""
+        return ProbeEntry(0, probe, self.f00_hz if self.f00_hz > 0 else probe.f00_hz, self.f00_std_hz)
 
-    def joint_lines(self, held: Sequence[WindowProbe]) -> list[ProbeLine]:
-        """The lines of the probes a window holds, each at its own θ0, for their joint fit;
-        ValueError for what it cannot do (a fitted θ0)."""
-        if self.theta0_free:
-            raise ValueError("theta0_free: the joint fit of several probes takes θ0 from the excitation")
-        pair = self.fluxgate_pair() if self.lever_aware and self.channels != "both" else None
+    def probe_entries(self, probe: Probe) -> tuple[ProbeEntry, ...]:
+        """The probes told apart in each window: those ``probes`` lists, or, when it lists none,
+        the estimator's own probe alone (:meth:`own_entry`). ValueError naming what is wrong
+        in ``probes``."""
+        return probe_set(self.probes, probe) or (self.own_entry(probe),)
+
+    def fit_options(self, probes: Sequence[ProbeEntry]) -> FitOptions:
+        """The fit's options for ``probes``: the rest offset searched within the narrowest of
+        their housing stops."""
+        return FitOptions(
+            self.channels,
+            sensor_direction=(self.sensor_axis_a, self.sensor_axis_b),
+            theta0_free=self.theta0_free,
+            min_periods=self.min_periods,
+            max_chi2_dof=self.max_chi2_dof,
+            theta_stop_rad=min(e.probe.theta_stop_rad for e in probes),
+        )
+
+    def lines(self, held: Sequence[WindowProbe]) -> list[ProbeLine]:
+        """The lines of the probes a window holds (each known to the set), each at its own θ0:
+        the lever-aware pickup of its magnet at its place where asked for and possible (θ0
+        taken, one combined channel), else the paper's single term along the sensing axis.
+        ValueError for what cannot be built (a sensing axis of (0, 0), θ0 fitted for several)."""
+        if self.theta0_free and len(held) > 1:
+            raise ValueError(f"theta0_free fits the θ0 of one probe; {len(held)} probes share this window")
+        lever_aware = self.lever_aware and not self.theta0_free and self.channels != "both"
+        pair = self.fluxgate_pair() if lever_aware else None
         return [p.entry.line(p.theta0_rad, pair, self.channels, p.tone_hz) for p in held if p.entry is not None]
 
-    def joint_settings(self, probe: Probe) -> JointSettings | None:
-        """The joint fit of the listed probes; None when ``probes`` is empty (one probe).
-        ValueError naming what is wrong in ``probes``."""
-        probes = probe_set(self.probes, probe)
-        if not probes:
-            return None
-        options = FitOptions(self.channels, min_periods=self.min_periods, max_chi2_dof=self.max_chi2_dof)
-        return JointSettings(probes, self.joint_lines, options)
-
     def fit_settings(self, probe: Probe) -> FitSettings:
-        """What the parameters ask of each ring-down's fit and inversion; f00 = 0 is the probe's."""
-        return FitSettings(
-            probe,
-            functools.partial(self.fit_options, probe),
-            self.coil_off_skip_s,
-            self.f00_hz if self.f00_hz > 0 else probe.f00_hz,
-            self.f00_std_hz,
-            self.joint_settings(probe),
-        )
+        """What the parameters ask of each ring-down's fit and inversion."""
+        probes = self.probe_entries(probe)
+        return FitSettings(probes, self.lines, self.fit_options(probes), self.coil_off_skip_s)
 
 
 @functools.lru_cache(maxsize=8)

@@ -3,15 +3,16 @@ the messages carry them), and per recorded ring-down its fit (:mod:`mows.estimat
 the field and gradient along the probe axis (:mod:`mows.estimate.axis`) and, while an f00
 calibration runs (:mod:`mows.estimate.calibration.f00`), the OK fits offered to it.
 
-With several probes listed (:mod:`mows.estimate.probe_set`) each window is fitted jointly
+The estimator tells apart the probes of its set (:mod:`mows.estimate.probe_set`; one, or
+several sharing the fluxgates): each window is fitted jointly
 (:func:`mows.estimate.ringdown.fit_ringdowns`) over the probes it holds
-(:func:`mows.estimate.probe_set.window_probes`: those its excitation lists, each at its own θ0,
-or every listed probe) and gives one estimate per probe, each counted from that probe's f00.
-A probe id the window lists but the set does not gets a failed fit naming it, never a number.
-The f00 calibration is then refused (it is of one probe).
+(:func:`mows.estimate.probe_set.window_probes`: those its excitation lists, each at its own θ0)
+and gives one estimate per probe, each counted from that probe's f00. A probe id the window
+lists but the set does not gets a failed fit naming it, never a number. The f00 calibration is
+of a set of one probe.
 
 The estimator node feeds it its subscriptions and publishes what it returns. What the node's
-parameters say (probe, fit options, settling, f00) comes with each ring-down as a
+parameters say (probes, fit options, settling) comes with each ring-down as a
 :class:`FitSettings`, read when the ring-down is complete, so a parameter change applies to
 the next fit.
 """
@@ -29,48 +30,55 @@ from mows.estimate.segments import (
     Segment,
     SegmentAssembler,
     block_from_message,
-    fit_joint_segment,
     fit_segment,
     window_from_message,
 )
-from mows.physics.probe import Probe
 from mows.records.stamps import NS_PER_S
 
 
 @dataclasses.dataclass(frozen=True)
-class JointSettings:
-    """What the joint fit of several probes takes: the probes, the lines of those a window holds
-    (each of them known to the set; ValueError when no model can be built) and the fit's options."""
+class FitSettings:
+    """What fitting and inverting a ring-down window take: the probes told apart in it (one or
+    more, in id order), the fit's lines of those a window holds (each known to the set;
+    ValueError when no model can be built), the fit's options and the samples skipped after
+    coil-off."""
 
     probes: tuple[ProbeEntry, ...]
     lines: Callable[[Sequence[WindowProbe]], list[ProbeLine]]
     options: FitOptions
-
-
-@dataclasses.dataclass(frozen=True)
-class FitSettings:
-    """What fitting and inverting one ring-down take."""
-
-    probe: Probe
-    options: Callable[[float], FitOptions]  # θ0 → the fit's options; ValueError when no model can be built
     coil_off_skip_s: float
-    f00_hz: float
-    f00_std_hz: float
-    joint: JointSettings | None = None  # several probes: their joint fit; None: one probe
+
+    def __post_init__(self) -> None:
+        if not self.probes:
+            raise ValueError("no probe to fit: the set of probes is empty")
+
+    def window_fits(self, segment: Segment) -> list[tuple[WindowProbe, RingdownFit]]:
+        """Each probe ``segment``'s window holds with its fit, in id order: a probe the set does
+        not list, or one whose model cannot be built, gets a failed fit saying why."""
+        held = window_probes(self.probes, segment.window)
+        known = [p for p in held if p.entry is not None]
+        fits = {p.probe_id: _bad_fit(p, p.unknown_message(self.probes)) for p in held if p.entry is None}
+        try:
+            lines = self.lines(known) if known else []
+        except ValueError as error:
+            fits |= {p.probe_id: _bad_fit(p, f"cannot build the signal model: {error}") for p in known}
+        else:
+            if lines:
+                fits |= {fit.probe_id: fit for fit in fit_segment(segment, lines, self.coil_off_skip_s, self.options)}
+        return [(p, fits[p.probe_id]) for p in held]
 
 
 @dataclasses.dataclass(frozen=True)
 class Estimated:
     """One recorded ring-down of one probe: its window, fit and estimate along the axis;
-    ``calibrated`` when its fit completed the running f00 calibration. ``probe_id`` is the
-    probe's when several are listed (None: the single probe); ``unknown_probe`` when the window
-    named a probe the set does not list."""
+    ``calibrated`` when its fit completed the running f00 calibration; ``unknown_probe`` when
+    the window named a probe the set does not list."""
 
     window: RingdownWindow
     fit: RingdownFit
     estimate: AxisEstimate
     calibrated: bool = False
-    probe_id: int | None = None
+    probe_id: int = 0
     unknown_probe: bool = False
 
     @property
@@ -79,9 +87,9 @@ class Estimated:
         return self.window.start_ns + round(self.fit.start_offset_s * NS_PER_S)
 
     def report(self) -> str:
-        """The fit's report with its cycle, repeat and, with several probes, its probe."""
-        probe = "" if self.probe_id is None else f" probe {self.probe_id}"
-        return f"cycle {self.window.cycle_id} repeat {self.window.repeat_index}{probe}: {self.fit.report()}"
+        """The fit's report with its cycle, repeat and probe."""
+        window = self.window
+        return f"cycle {window.cycle_id} repeat {window.repeat_index} probe {self.probe_id}: {self.fit.report()}"
 
 
 class RingdownEstimator:
@@ -106,76 +114,36 @@ class RingdownEstimator:
         return self.assembler.announce(window_from_message(message))
 
     def estimate_segments(self, segments: list[Segment], settings: FitSettings) -> list[Estimated]:
-        """The estimates of every probe in each of ``segments`` (:meth:`estimate_all`), in order."""
-        return [estimated for segment in segments for estimated in self.estimate_all(segment, settings)]
+        """The estimates of every probe in each of ``segments`` (:meth:`estimate`), in order."""
+        return [estimated for segment in segments for estimated in self.estimate(segment, settings)]
 
-    def estimate_all(self, segment: Segment, settings: FitSettings) -> list[Estimated]:
-        """The estimate of each probe in ``segment``: one, or one per probe it holds in id order."""
-        if settings.joint is None:
-            return [self.estimate(segment, settings)]
-        joint, window = settings.joint, segment.window
-        held = window_probes(joint.probes, window)
-        known = [p for p in held if p.entry is not None]
-        fits = {fit.probe_id: fit for fit in self._joint_fits(segment, settings, joint, known)}
-        for p in held:
-            if p.entry is None:
-                fits[p.probe_id] = failure(
-                    FitStatus.BAD_FIT, p.unknown_message(joint.probes), theta0_rad=p.theta0_rad, probe_id=p.probe_id
-                )
-        self.last = "; ".join(f"probe {k}: {fits[k].report()}" for k in sorted(fits))
-        return [_estimated(window, fits[p.probe_id], p) for p in held]
+    def estimate(self, segment: Segment, settings: FitSettings) -> list[Estimated]:
+        """The estimate of each probe ``segment`` holds, in id order; an OK one is offered to the
+        running calibration."""
+        fits = settings.window_fits(segment)
+        self.last = "; ".join(f"probe {p.probe_id}: {fit.report()}" for p, fit in fits)
+        return [self._offered(_estimated(segment.window, fit, p)) for p, fit in fits]
 
-    @staticmethod
-    def _joint_fits(
-        segment: Segment, settings: FitSettings, joint: JointSettings, known: list[WindowProbe]
-    ) -> list[RingdownFit]:
-        if not known:
-            return []
-        try:
-            lines = joint.lines(known)
-        except ValueError as error:
-            return [
-                failure(
-                    FitStatus.BAD_FIT,
-                    f"cannot build the signal model: {error}",
-                    theta0_rad=p.theta0_rad,
-                    probe_id=p.probe_id,
-                )
-                for p in known
-            ]
-        return fit_joint_segment(segment, lines, settings.coil_off_skip_s, joint.options)
-
-    def estimate(self, segment: Segment, settings: FitSettings) -> Estimated:
-        """Fit ``segment``, invert the fit, and offer an OK one to the running calibration."""
-        window = segment.window
-        try:
-            options = settings.options(window.theta0_rad)
-        except ValueError as error:  # e.g. a sensing axis of (0, 0): no model to fit
-            fit = failure(FitStatus.BAD_FIT, f"cannot build the signal model: {error}", theta0_rad=window.theta0_rad)
-        else:
-            fit = fit_segment(segment, options, settings.coil_off_skip_s, settings.probe.damping_per_s)
-        estimate = estimate_along_axis(fit, settings.probe, settings.f00_hz, settings.f00_std_hz)
-        self.last = fit.report()
-        calibrated = (
-            estimate.ok
-            and self.calibration is not None
-            and self.calibration.offer(fit.frequency_hz, fit.frequency_std_hz) is not None
-        )
-        return Estimated(window, fit, estimate, calibrated)
+    def _offered(self, estimated: Estimated) -> Estimated:
+        """``estimated``, ``calibrated`` when it completed the running calibration."""
+        if not (estimated.estimate.ok and self.calibration is not None):
+            return estimated
+        fit = estimated.fit
+        done = self.calibration.offer(fit.frequency_hz, fit.frequency_std_hz) is not None
+        return dataclasses.replace(estimated, calibrated=done)
 
     def begin_calibration(
         self, settings: FitSettings, reference_field_t: float, n_ringdowns: int, timeout_s: float
     ) -> F00Calibration:
         """A calibration of f00 of ``settings``' probe from the next OK ring-downs
         (:class:`F00Calibration`); ValueError, with the reason, for a request it cannot meet,
-        while another one runs, or when several probes (``settings.joint``) share the windows."""
-        probes = 1 if settings.joint is None else len(settings.joint.probes)
-        if probes > 1:
+        while another one runs, or when several probes share the windows."""
+        if len(settings.probes) > 1:
             raise ValueError(
-                f"the f00 calibration is of one probe and {probes} probes are listed: "
+                f"the f00 calibration is of one probe and {len(settings.probes)} probes are listed: "
                 "give each its f00 in the probes parameter, or calibrate each alone"
             )
-        calibration = F00Calibration(settings.probe, reference_field_t, n_ringdowns, timeout_s)
+        calibration = F00Calibration(settings.probes[0].probe, reference_field_t, n_ringdowns, timeout_s)
         if self.calibration is not None:
             raise ValueError("a calibration is already running: try again after it")
         self.calibration = calibration
@@ -193,3 +161,7 @@ def _estimated(window: RingdownWindow, fit: RingdownFit, held: WindowProbe) -> E
     else:
         estimate = estimate_along_axis(fit, entry.probe, entry.f00_hz, entry.f00_std_hz)
     return Estimated(window, fit, estimate, probe_id=held.probe_id, unknown_probe=entry is None)
+
+
+def _bad_fit(held: WindowProbe, message: str) -> RingdownFit:
+    return failure(FitStatus.BAD_FIT, message, theta0_rad=held.theta0_rad, probe_id=held.probe_id)

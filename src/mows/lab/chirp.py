@@ -14,7 +14,7 @@ excitation's, docs/multi_probe.md) is fitted jointly, over the whole window and 
 ``piece_periods`` periods of the slowest probe, and each probe is diagnosed from its own fits;
 one probe is a window of one line. Piece i starts at the amplitude
 A_i = A_0·e^(−δ·t_i), A_0 the whole-window fit's θmax where it determined it, else the stop
-less its rest offset (:func:`mows.physics.ringdown_average.start_swing_rad`), and the
+less its rest offset (:func:`mows.physics.ringdown_average.swing_from_stop_rad`), and the
 potential predicts its frequency as the estimator would read it, Σ_q c_q·f(A_q) over the piece's amplitude nodes
 (:func:`mows.physics.ringdown_average.amplitude_nodes`). The potential is that of the paper's
 Eq. 6 field along the axis Bx', taken from the ring-down's own frequency: Eq. 6 inverted
@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import functools
 import math
 from collections.abc import Sequence
 
@@ -172,44 +171,39 @@ def diagnose_ringdown(
 
 def diagnose_segment(
     segment: Segment, settings: FitSettings, piece_periods: float = PIECE_PERIODS
-) -> list[tuple[int | None, ChirpDiagnosis | ChirpError]]:
+) -> list[tuple[int, ChirpDiagnosis | ChirpError]]:
     """(probe id, diagnosis) of each probe in a recorded window, fitted as the estimator fits it
-    with ``settings`` (:meth:`mows.estimate.stream.RingdownEstimator.estimate_all`): one probe
-    (id None) at the window's θ0 and tone, or, with ``settings.joint``, every probe the window
-    holds, each at its own θ0 and tone (a probe the set does not list: a ChirpError naming it)."""
-    window, joint = segment.window, settings.joint
-    diagnose = functools.partial(
-        diagnose_ringdown,
-        segment.samples_t,
-        segment.sample_rate_hz,
-        saturated=segment.saturated,
-        coil_off_skip_s=settings.coil_off_skip_s,
-        piece_periods=piece_periods,
-    )
+    with ``settings`` (:meth:`mows.estimate.stream.FitSettings.window_fits`): every probe the
+    window holds, each at its own θ0 and tone (a probe the set does not list, or a window with
+    missing samples: a ChirpError saying why)."""
+    window = segment.window
+    held = window_probes(settings.probes, window)
     if segment.missing_samples:
-        return [(None, ChirpError(gap_message(segment)))]
-    if joint is None:
-        try:
-            options = settings.options(window.theta0_rad)
-        except ValueError as error:
-            return [(None, ChirpError(f"cannot build the signal model: {error}"))]
-        line = ProbeLine(0, window.theta0_rad, window.excitation_frequency_hz, None, settings.probe.damping_per_s)
-        (diagnosis,) = diagnose([line], [settings.probe], options, [settings.f00_hz])
-        return [(None, diagnosis)]
-    held = window_probes(joint.probes, window)
+        return [(p.probe_id, ChirpError(gap_message(segment))) for p in held]
     known = [p for p in held if p.entry is not None]
     found: dict[int, ChirpDiagnosis | ChirpError] = {
-        p.probe_id: ChirpError(p.unknown_message(joint.probes)) for p in held if p.entry is None
+        p.probe_id: ChirpError(p.unknown_message(settings.probes)) for p in held if p.entry is None
     }
     try:
-        lines = joint.lines(known) if known else []
+        lines = settings.lines(known) if known else []
     except ValueError as error:
         found |= {p.probe_id: ChirpError(f"cannot build the signal model: {error}") for p in known}
     else:
         entries = [p.entry for p in known if p.entry is not None]
         probes, f00s = [e.probe for e in entries], [e.f00_hz for e in entries]
         if lines:
-            found |= dict(zip((p.probe_id for p in known), diagnose(lines, probes, joint.options, f00s)))
+            diagnoses = diagnose_ringdown(
+                segment.samples_t,
+                segment.sample_rate_hz,
+                lines,
+                probes,
+                settings.options,
+                f00s,
+                saturated=segment.saturated,
+                coil_off_skip_s=settings.coil_off_skip_s,
+                piece_periods=piece_periods,
+            )
+            found |= dict(zip((p.probe_id for p in known), diagnoses))
     return [(p.probe_id, found[p.probe_id]) for p in held]
 
 
@@ -242,11 +236,11 @@ def _start_amplitude_rad(fit: RingdownFit, probe: Probe) -> float:
     """The swing at the first fitted sample: the fit's θmax where it determined it, else the
     probe's stop less the fit's rest offset (0 where not determined: the model here has the
     field along the axis only), decayed from the switch-off
-    (:func:`mows.physics.ringdown_average.start_swing_rad`); NaN where the offset passes the stop."""
+    (:func:`mows.physics.ringdown_average.swing_from_stop_rad`); NaN where the offset passes the stop."""
     if math.isfinite(fit.amplitude_rad):
         return fit.amplitude_rad
-    swing = float(ringdown_average.start_swing_rad(probe.theta_stop_rad, np.nan_to_num(fit.rest_offset_rad)))
-    return swing * math.exp(-fit.damping_per_s * fit.start_offset_s)
+    rest, since_release = np.nan_to_num(fit.rest_offset_rad), fit.start_offset_s
+    return float(ringdown_average.swing_from_stop_rad(probe.theta_stop_rad, rest, fit.damping_per_s, since_release))
 
 
 def _field_along_axis(fit: RingdownFit, probe: Probe, f00_hz: float, amplitude_rad: float) -> float:

@@ -222,10 +222,10 @@ class ArcPotential:
     def start_swing_rad(self, stop_rad: ArrayLike) -> np.ndarray:
         """θmax of a ring-down released at the housing stop: the first harmonic of the swing that
         turns at the nearer stop, θstop − |θs| from the rest angle θs on the side θs turns to
-        (:func:`mows.physics.ringdown_average.start_swing_rad`); NaN where the stop lies inside
-        the deflection (no free swing) or the potential has no stable rest angle."""
+        (:func:`mows.physics.ringdown_average.swing_from_stop_rad` at the release); NaN where
+        the stop lies inside the deflection (no free swing) or the potential has no stable rest angle."""
         rest = self.rest_angle_rad()
-        distance = ringdown_average.start_swing_rad(np.asarray(stop_rad, float), rest)
+        distance = ringdown_average.swing_from_stop_rad(np.asarray(stop_rad, float), rest)
         return self.first_harmonic_rad(np.where(rest < 0.0, -distance, distance))
 
     def _balance(self, amplitude_rad: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -330,16 +330,9 @@ def arc_displacement_m(
 
 def _turned(theta_rad: np.ndarray, offset_m: ArrayLike) -> np.ndarray:
     """Rz(θ)·offset, offsets B + (3,) at deflections θ (n,): B + (n, 3)."""
-    offset = np.asarray(offset_m, float)[..., None, :]
-    cos, sin = np.cos(theta_rad)[:, None], np.sin(theta_rad)[:, None]
-    return np.concatenate(
-        [
-            cos * offset[..., :1] - sin * offset[..., 1:2],
-            sin * offset[..., :1] + cos * offset[..., 1:2],
-            np.broadcast_to(offset[..., 2:], np.broadcast_shapes(offset[..., 2:].shape, cos.shape)),
-        ],
-        -1,
-    )
+    c, s, zero, one = np.cos(theta_rad), np.sin(theta_rad), np.zeros_like(theta_rad), np.ones_like(theta_rad)
+    turns = np.stack([c, -s, zero, s, c, zero, zero, zero, one], -1).reshape(-1, 3, 3)
+    return np.einsum("nij,...j->...ni", turns, np.asarray(offset_m, float))
 
 
 # --- the balances, row by row (compiled) -----------------------------------------------------

@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterable
 import numpy as np
 import yaml
 
+from mows.physics import ranges
 from mows.physics.schema import FloatOrArray, SchemaError, finite_number, load_yaml, refused
 from mows.records.files import writing
 
@@ -99,6 +100,8 @@ class Probe:
         ):
             _require(name, getattr(self, name), lambda v: v > 0, "> 0")
         _require("damping_per_s", self.damping_per_s, lambda v: v >= 0, ">= 0")
+        ranges.check("magnet_mass_kg", self.magnet_mass_kg)
+        ranges.check("temperature_k", self.reference_temperature_k, "reference_temperature_k")
         _require("theta_stop_rad", self.theta_stop_rad, lambda v: 0 < v < math.pi / 2, "in (0, pi/2)")
         _require("beta0_rel_std", self.beta0_rel_std, lambda v: 0 < v < 1, "in (0, 1)")
         _require("theta_stop_std_rad", self.theta_stop_std_rad, lambda v: 0 < v < math.pi / 4, "in (0, pi/4)")

@@ -24,7 +24,7 @@ nodes, so that f_fit = Σ_q c_q·f(A_q) costs a few harmonic-balance evaluations
 derivation is checked against the estimator itself on chirped ring-downs (tests/lab).
 
 The ring-down's start amplitude is the swing about the rest angle at the first fitted sample
-(:func:`start_swing_rad` at the switch-off; the CSV column ``amplitude_deg``); by default the fit window is
+(:func:`swing_from_stop_rad`; the CSV column ``amplitude_deg``); by default the fit window is
 the paper's 60 periods.
 
 A swing measured from the signal's size through a pickup about the undeflected lever (θ = 0,
@@ -40,15 +40,36 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mows.physics.fluxgate import paper_pickup
-from mows.physics.schema import FloatOrArray, Vector
+from mows.physics.schema import Vector
 
 
-def start_swing_rad(stop_rad: FloatOrArray, rest_angle_rad: FloatOrArray) -> np.ndarray:
-    """The swing a ring-down starts with about its rest angle: every ring-down starts at the
-    housing stop, so the swing is the stop less the rest deflection |θs − θ0| (NaN where the
-    stop lies inside the deflection: no free swing)."""
+def swing_from_stop_rad(
+    stop_rad: ArrayLike,
+    rest_angle_rad: ArrayLike,
+    damping_per_s: ArrayLike = 0.0,
+    since_release_s: ArrayLike = 0.0,
+) -> np.ndarray:
+    """The swing a ring-down has about its rest angle ``since_release_s`` after its release (the
+    switch-off; its fit's first sample is ``start_offset_s`` after it): every ring-down is
+    released at the housing stop ``stop_rad`` (measured from the lever's undeflected position),
+    so it starts swinging stop − |θs − θ0| about the rest angle θs (``rest_angle_rad`` =
+    θs − θ0), and the swing decays as e^(−δ·t) (Eq. S2). NaN where the stop lies inside the
+    deflection: no free swing."""
     swing = np.asarray(stop_rad, float) - np.abs(np.asarray(rest_angle_rad, float))
-    return np.where(swing > 0, swing, np.nan)
+    decayed = swing * np.exp(-np.asarray(damping_per_s, float) * np.asarray(since_release_s, float))
+    return np.where(swing > 0, decayed, np.nan)
+
+
+def stop_from_swing_rad(
+    swing_rad: ArrayLike,
+    rest_angle_rad: ArrayLike,
+    damping_per_s: ArrayLike = 0.0,
+    since_release_s: ArrayLike = 0.0,
+) -> np.ndarray:
+    """The housing stop a ring-down was released at, from its swing about the rest angle
+    ``since_release_s`` after the release: :func:`swing_from_stop_rad` inverted, θmax·e^(δ·t) + |θs − θ0|."""
+    grown = np.asarray(swing_rad, float) * np.exp(np.asarray(damping_per_s, float) * np.asarray(since_release_s, float))
+    return grown + np.abs(np.asarray(rest_angle_rad, float))
 
 
 DEFAULT_PERIODS = 60.0  # the paper evaluates 60 periods per ring-down

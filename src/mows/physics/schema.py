@@ -114,6 +114,8 @@ def parse_yaml(text: str) -> Any:
         return yaml.load(text, NumberLoader)
     except yaml.YAMLError as error:
         raise ValueError(yaml_problem(error)) from None
+    except RecursionError:  # PyYAML composes nested collections recursively
+        raise ValueError("its collections are nested deeper than any file of ours (thousands of levels)") from None
 
 
 def unreadable(name: str, error: OSError | UnicodeDecodeError) -> str:

@@ -8,12 +8,13 @@ every writer has finished, so a crash, an error, Ctrl-C or SIGTERM leaves the ol
 none) and never a torn one, nor one output written and another not: a rename that fails puts
 back what the renames before it replaced.
 
-A process killed outright (SIGKILL, a power cut) runs no clean-up, so what it leaves says whose
-it was: every temporary is named ``.NAME.PID.*`` after the writing process, and before its
-renames a commit writes a journal (``.NAME.PID.commit``: each temporary, its output and the copy
-of the file it replaces). The next :func:`writing` into that directory finds the leftovers of
-writers no longer running and puts the old set back from the journal, so the outputs are never
-a mix of two runs and the next run does the whole job again.
+A process killed outright (SIGKILL, a power cut) leaves its temporaries and, mid-commit, a
+journal; the next :func:`writing` into that directory puts the old set back from the journal
+when every file in it is as that writer left it (:mod:`mows.records.journal`).
+
+A bag folder (a directory holding a rosbag2 ``metadata.yaml`` and its storage files) is never
+written in, whether the bag is an input or not: a file dropped there may break the recording,
+and a bag named by its ``.mcap`` file protects its whole folder.
 
 A command's inputs are more than its arguments: a scenario pulls in its ``extends:`` base and its
 ``probe:`` files, a reference its scenario. Within :func:`command_inputs` every file read through
@@ -26,14 +27,13 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import dataclasses
-import json
 import os
 import pathlib
-import re
-import shutil
 import stat
 import tempfile
 from collections.abc import Iterable, Iterator, Sequence
+
+from mows.records.journal import discard, own_prefix, put_back, recover, set_aside, write_intent, write_journal
 
 
 class OutputRefused(ValueError):
@@ -56,9 +56,18 @@ def command_inputs() -> Iterator[None]:
         _read_by_command.reset(token)
 
 
+class InputRefused(ValueError):
+    """An input that is no file to read: a FIFO, a device, a socket (reading would block or never end)."""
+
+
 def read_input(path: str | os.PathLike[str]) -> pathlib.Path:
-    """``path``, kept (within :func:`command_inputs`) as a file the command read."""
+    """``path``, kept (within :func:`command_inputs`) as a file the command read; a FIFO, a
+    device or a socket is refused (:class:`InputRefused`): a command reads files and folders."""
     path = pathlib.Path(path)
+    with contextlib.suppress(OSError):
+        mode = path.stat().st_mode
+        if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+            raise InputRefused(f"{path} is {_kind(mode)}, not a file: give a file to read")
     read = _read_by_command.get()
     if read is not None:
         read.add(path.resolve())
@@ -93,10 +102,7 @@ def check_output(path, inputs: Iterable = (), force: bool = False) -> pathlib.Pa
     """
     path = pathlib.Path(path)
     resolved = path.resolve()
-    for source in [*inputs, *sorted(_read_by_command.get() or ())]:
-        source_path = pathlib.Path(source).resolve()
-        if _inside(resolved, source_path) or (source_path.is_file() and resolved == source_path):
-            raise OutputRefused(f"output {path} is an input of this command ({source}): choose another output path")
+    check_not_input(path, inputs)
     if not resolved.parent.is_dir():
         what = "is a file, not a directory" if resolved.parent.exists() else "does not exist"
         raise OutputRefused(f"output {path}: directory {path.parent} {what}")
@@ -112,6 +118,32 @@ def check_output(path, inputs: Iterable = (), force: bool = False) -> pathlib.Pa
     if not os.access(resolved.parent, os.W_OK):
         raise OutputRefused(f"output {path}: directory {path.parent} is not writable")
     return path
+
+
+def bag_folder(path) -> pathlib.Path | None:
+    """The bag folder ``path`` is in or is (a directory, or an ancestor, holding a rosbag2
+    ``metadata.yaml`` beside its ``.mcap`` or ``.db3`` storage), None if none."""
+    resolved = pathlib.Path(path).resolve()
+    for directory in [resolved, *resolved.parents]:
+        if (directory / "metadata.yaml").is_file() and (any(directory.glob("*.mcap")) or any(directory.glob("*.db3"))):
+            return directory
+    return None
+
+
+def check_not_input(path, inputs: Iterable = ()) -> None:
+    """:class:`OutputRefused` if ``path`` is an input of the command (of ``inputs``, or read
+    within :func:`command_inputs`), inside an input directory, or inside a bag folder."""
+    path = pathlib.Path(path)
+    resolved = path.resolve()
+    for source in [*inputs, *sorted(_read_by_command.get() or ())]:
+        source_path = pathlib.Path(source).resolve()
+        if _inside(resolved, source_path) or (source_path.is_file() and resolved == source_path):
+            raise OutputRefused(f"output {path} is an input of this command ({source}): choose another output path")
+    bag = bag_folder(resolved.parent)
+    if bag is not None:
+        raise OutputRefused(
+            f"output {path} is inside the bag {bag}: a bag's folder is never written in; choose a path outside it"
+        )
 
 
 def _unwritable(path: pathlib.Path, error: OSError) -> OutputRefused:
@@ -155,20 +187,24 @@ def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iter
     paths are checked with :func:`check_outputs` first, and again just before the renames (a file
     may have appeared meanwhile). Each temporary keeps its target's suffix (numpy, for one,
     appends ``.npz`` to names without it)."""
+    protected = [*inputs, *sorted(_read_by_command.get() or ())]
     for directory in {pathlib.Path(path).resolve().parent for path in paths}:
-        recover(directory)
+        if bag_folder(directory) is None:
+            recover(directory, protected)
     targets = check_outputs(paths, inputs, force)
     outputs = Outputs(targets, [])
+    intents: list[pathlib.Path] = []
     try:
         for path in targets:
             try:
                 descriptor, name = tempfile.mkstemp(
-                    prefix=_own_prefix(path), suffix=f".partial{path.suffix}", dir=path.resolve().parent
+                    prefix=own_prefix(path), suffix=f".partial{path.suffix}", dir=path.resolve().parent
                 )
             except OSError as error:
                 raise _unwritable(path, error) from error
             os.close(descriptor)
             outputs.temporaries.append(pathlib.Path(name))
+            intents.append(write_intent(path, pathlib.Path(name)))
         yield outputs
         check_outputs(paths, inputs, force)
         for temporary in outputs.temporaries:
@@ -182,15 +218,24 @@ def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iter
             # a directory that turned read-only keeps its temporary: the error that says so matters more
             with contextlib.suppress(OSError):
                 temporary.unlink(missing_ok=True)
+        for intent in intents:
+            discard(intent)
 
 
 def _replace_all(temporaries: Sequence[pathlib.Path], targets: Sequence[pathlib.Path]) -> None:
     """Rename each temporary onto its target, all or none. The files they replace are copied
     aside and the journal written first; a rename that fails (or Ctrl-C between two) puts back
-    what the earlier ones replaced and removes what they created, and so does :func:`recover`
-    for a process killed between two renames."""
-    asides = [_set_aside(path) for path in targets]
-    journal = _write_journal(temporaries, targets, asides)
+    what the earlier ones replaced and removes what they created, and so does
+    :func:`mows.records.journal.recover` for a process killed between two renames."""
+    asides = []
+    try:
+        for path in targets:
+            asides.append(set_aside(path))
+        journal = write_journal(temporaries, targets, asides)
+    except OSError as error:
+        for aside in asides:
+            discard(aside)
+        raise _unwritable(targets[len(asides) if len(asides) < len(targets) else 0], error) from error
     placed = 0
     try:
         for temporary, path in zip(temporaries, targets):
@@ -201,112 +246,12 @@ def _replace_all(temporaries: Sequence[pathlib.Path], targets: Sequence[pathlib.
             placed += 1
     except BaseException:
         for path, aside in reversed(list(zip(targets[:placed], asides))):
-            _put_back(path, aside)
+            put_back(path, aside)
         raise
     finally:
         journal.unlink(missing_ok=True)
         for aside in asides[placed:] if placed < len(targets) else asides:
-            _discard(aside)  # copies of files left as they were, or of a commit done
-
-
-def _own_prefix(path: pathlib.Path, pid: int | None = None) -> str:
-    """The start of the name of every file this process leaves beside ``path`` while it writes."""
-    return f".{path.name}.{os.getpid() if pid is None else pid}."
-
-
-def _write_journal(
-    temporaries: Sequence[pathlib.Path], targets: Sequence[pathlib.Path], asides: Sequence[pathlib.Path | None]
-) -> pathlib.Path:
-    """The commit's journal, on disk before the first rename, beside the first output."""
-    entries = [
-        {"temporary": str(t), "output": str(o), "replaced": None if a is None else str(a)}
-        for t, o, a in zip(temporaries, targets, asides)
-    ]
-    journal = targets[0].resolve().parent / f"{_own_prefix(targets[0])}commit"
-    with open(journal, "w", encoding="utf-8") as handle:
-        json.dump(entries, handle)
-        handle.flush()
-        os.fsync(handle.fileno())
-    return journal
-
-
-LEFTOVER = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.(?:commit|.*\.partial.*|.*\.replaced)$")
-
-
-def _running(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process: running
-        return True
-    return True
-
-
-def recover(directory) -> list[pathlib.Path]:
-    """Undo what writers killed in ``directory`` left half done: each journal's outputs put back
-    as they were before its commit, then every temporary and copy of those writers removed.
-    Returns the outputs put back. Leftovers of a running process are not touched."""
-    directory = pathlib.Path(directory)
-    try:
-        names = sorted(os.listdir(directory))
-    except OSError:
-        return []
-    dead = [name for name in names if (m := LEFTOVER.match(name)) and not _running(int(m["pid"]))]
-    restored = []
-    for name in dead:
-        if name.endswith(".commit"):
-            restored += _roll_back(directory / name)
-    for name in dead:
-        with contextlib.suppress(OSError):
-            (directory / name).unlink(missing_ok=True)
-    return restored
-
-
-def _roll_back(journal: pathlib.Path) -> list[pathlib.Path]:
-    """The outputs of an interrupted commit as they were before it (an unreadable journal, torn
-    while it was written, means no rename had begun)."""
-    try:
-        entries = json.loads(journal.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return []
-    restored = []
-    for entry in entries:
-        if not os.path.lexists(entry["temporary"]):  # renamed onto its output already
-            aside = entry["replaced"]
-            _put_back(pathlib.Path(entry["output"]), None if aside is None else pathlib.Path(aside))
-            restored.append(pathlib.Path(entry["output"]))
-    return restored
-
-
-def _set_aside(path: pathlib.Path) -> pathlib.Path | None:
-    """A copy of the file at ``path`` beside it (None where there is none yet). A copy, not a
-    rename, so the output never goes missing; not a hard link, which an immutable file refuses."""
-    if not os.path.lexists(path):
-        return None
-    try:
-        descriptor, name = tempfile.mkstemp(prefix=_own_prefix(path), suffix=".replaced", dir=path.resolve().parent)
-        os.close(descriptor)
-        shutil.copy2(path, name)
-    except OSError as error:
-        raise _unwritable(path, error) from error
-    return pathlib.Path(name)
-
-
-def _put_back(path: pathlib.Path, aside: pathlib.Path | None) -> None:
-    """``path`` as it was before :func:`_replace_all`; where that fails, the copy stays beside it
-    (named ``.NAME.PID.*.replaced``) rather than be lost."""
-    with contextlib.suppress(OSError):
-        if aside is None:
-            path.unlink(missing_ok=True)
-        else:
-            os.replace(aside, path)
-
-
-def _discard(aside: pathlib.Path | None) -> None:
-    if aside is not None:
-        with contextlib.suppress(OSError):
-            aside.unlink(missing_ok=True)
+            discard(aside)  # copies of files left as they were, or of a commit done
 
 
 def _umask() -> int:

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from mows.physics import ranges
 from mows.physics.field import source_from_dict
 from mows.physics.fluxgate import FL1_RANGE_T, FL1_RESOLUTION_T, Fluxgate, FluxgatePair, NoiseModel
 from mows.physics.multitone import MAX_PROBES
@@ -41,6 +42,8 @@ def with_bases(data, base_dir, chain: tuple = ()) -> dict:
     if not isinstance(data, dict):
         raise ValueError(f"a scenario must be a mapping of sections, got {type(data).__name__}")
     data = dict(data)
+    if data.get("probe") is not None and data.get("probes") is not None:
+        raise ValueError("the scenario gives both probe: (one probe) and probes: (several): give one of them")
     data["probe"] = _relative_probe_file(data.get("probe"), base_dir)
     if isinstance(data.get("probes"), list):
         data["probes"] = [
@@ -211,6 +214,28 @@ def pose_to_dict(pose: Pose) -> dict:
     }
 
 
+def _check_places(positions: np.ndarray, magnet_m: np.ndarray) -> None:
+    """Two fluxgates are two places, each away from the magnet: a sensor is millimetres across."""
+    lowest = ranges.RANGES["sensor_length_m"].possible[0]
+    apart = float(np.linalg.norm(positions[1] - positions[0]))
+    if apart < lowest:
+        raise refused(
+            "positions_m",
+            positions.tolist(),
+            f"puts both fluxgates at one spot ({apart:g} m apart): "
+            "the difference channel would read nothing; give their two places",
+        )
+    for k, position in enumerate(positions):
+        distance = float(np.linalg.norm(position - magnet_m))
+        if distance < lowest:
+            raise refused(
+                f"positions_m[{k}]",
+                position.tolist(),
+                f"is {distance:g} m from the magnet: "
+                "a fluxgate cannot sit at the magnet; give its place on the line from the probe",
+            )
+
+
 def sensors_from(
     pose: Pose,
     positions_m=None,
@@ -227,6 +252,7 @@ def sensors_from(
         positions = np.array([vector3("positions_m", p) for p in positions_m] if listed else [])
         if positions.shape != (2, 3):
             raise refused("positions_m", positions_m, "must be two 3-vectors")
+        _check_places(positions, np.asarray(pose.magnet_position_m, float))
     if not isinstance(null_offsets, bool):
         raise refused("null_offsets", null_offsets, "must be true or false")
     sensors = [

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from mows.physics import ranges
 from mows.physics.coupling import PlacedProbe
 from mows.physics.field import FieldSource, SumSource
 from mows.physics.fluxgate import FluxgatePair
@@ -53,6 +54,7 @@ class Environment:
         if not all(isinstance(s, FieldSource) for s in self.sources):
             raise ValueError(f"environment sources must be field sources, got {self.sources!r}")
         check_range("temperature_k", self.temperature_k, 0.0, math.inf, low_open=True)
+        ranges.check("temperature_k", self.temperature_k)
         check_range("temperature_rate_k_per_s", self.temperature_rate_k_per_s, -1.0, 1.0)
 
     @property

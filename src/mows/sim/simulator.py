@@ -3,8 +3,8 @@ sample like the hardware (docs/physics.md §2, §4; docs/multi_probe.md). One pr
 
 It integrates the probes' motion together with the kernels of :mod:`mows.sim.kernel` (equation
 of motion, the neighbours' coupling, housing stop, integrator and its step error are described
-there) and reads the two fluxgates with the noise of :mod:`mows.sim.noise`; :mod:`mows.sim.simulated_cycle`
-runs one measurement cycle of one probe on it.
+there) and reads the two fluxgates with the noise of :mod:`mows.sim.noise`; the driver's measurement
+cycle runs on it in device time (:mod:`mows.device.stream.simulated_cycle`).
 
 Drive. The coils carry one sinusoid per coil (:meth:`SimulatedDevice.set_coils`, the current
 scheme of one probe) or the sum of the tones of several probes

@@ -4,9 +4,9 @@ probes' shares of a sweep decomposed, each with its neighbours' fields (``probes
 as an I/O-free state machine (``runner``) and what the mapper publishes at its end
 (``publication``), the supply sweep that calibrates a probe, the calibrator's goals around it
 and the same sweep on the simulated device (``calibration``), the measurement cycle from the
-probe's physics and tracking mode's settings (``fast_cycle``), and the adaptive choice of
+probe's physics and the paper's protocol beside it (``fast_cycle``), and the adaptive choice of
 orientations and repeats for a target precision (``planner``).
 
-May import: ``mows.device`` (the cycle's and tracking's settings, the device-time loop),
+May import: ``mows.device`` (the cycle's settings and the drive's physics, the device-time loop),
 ``mows.estimate``, ``mows.physics``, ``mows.records``.
 """

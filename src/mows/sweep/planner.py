@@ -14,7 +14,7 @@ another ring-down.
 
 I/O-free: fed the record of ring-downs so far, their decomposition and the elapsed device time,
 it returns the next cycle or the end. The predicted σ(θ0) of a ring-down (e.g. the Cramér–Rao
-bound of :func:`mows.sweep.fast_cycle.ringdown_std_model`) is rescaled by what the measured
+bound of :func:`mows.device.cycle.tracking_plan.ringdown_std_model`) is rescaled by what the measured
 ring-downs reported.
 """
 

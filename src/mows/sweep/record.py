@@ -11,7 +11,7 @@ import numpy as np
 
 from mows.estimate.ringdown.types import parameter_std
 from mows.physics.probe import Probe
-from mows.physics.ringdown_average import start_swing_rad
+from mows.physics.ringdown_average import stop_from_swing_rad, swing_from_stop_rad
 from mows.records import stamps
 from mows.sweep.decompose import Decomposition, NeighbourFields, Ringdowns, decompose, local_potential
 
@@ -19,6 +19,8 @@ REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its
 REST_OFFSET_SIGMAS = 4.0  # …and it is this many σ from 0
 OUTLIER_SIGMAS = 3.0  # a pooled value this many robust σ from the median is left out
 MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
+# Ring-downs that one static field describes this well are one sweep: its field gives each rest angle.
+MAX_SWEEP_CHI2_DOF = 10.0
 
 
 def robust_median(values, fallback: float = math.nan) -> float:
@@ -95,6 +97,20 @@ class SweepPoint:
         )
 
 
+def sweep_numbers(theta0_rad: np.ndarray) -> np.ndarray:
+    """The sweep (0, 1, …) of each ring-down of a recording, in order: a sweep measures each
+    orientation once, so a ring-down at an orientation the current sweep has already measured
+    (to 1e-6 rad) starts the next."""
+    numbers = np.zeros(len(theta0_rad), int)
+    seen: list[float] = []
+    for i, angle in enumerate(np.asarray(theta0_rad, float)):
+        if any(abs(math.remainder(angle - other, math.tau)) < 1e-6 for other in seen):
+            numbers[i:] += 1
+            seen = []
+        seen.append(angle)
+    return numbers
+
+
 @dataclasses.dataclass
 class SweepRecord:
     """The ring-downs of one rotation sweep, collected as they arrive."""
@@ -126,10 +142,10 @@ class SweepRecord:
         determined = (std <= REST_OFFSET_STD_RAD) & (offset > REST_OFFSET_SIGMAS * std)
         return np.where(determined, offset, np.nan)
 
-    def _released(self) -> np.ndarray:
-        """e^(−δ·t) of each point: how much of the swing it was released with at the stop is left
-        at its fit's first sample, t after the switch-off (:class:`Ringdowns`)."""
-        return np.exp(-self._column("damping_per_s") * self._column("start_offset_s"))
+    def _since_release(self) -> tuple[np.ndarray, np.ndarray]:
+        """(δ, t) of each point: its damping and its fit's first sample's time after the
+        switch-off, over which the swing released at the stop decays (:class:`Ringdowns`)."""
+        return self._column("damping_per_s"), self._column("start_offset_s")
 
     def stop_amplitude_rad(self, rest_angles_rad=None, fallback_rad: float = math.nan) -> float:
         """The housing stop every ring-down starts from, as far from the lever's undeflected
@@ -139,8 +155,10 @@ class SweepRecord:
         leaving out those more than OUTLIER_SIGMAS robust σ from it; ``fallback_rad`` (the
         probe's stop) where no point gives it. The median, because a few fits in a strong field
         sit in a wrong minimum with a small σ, and one such fit would lead an inverse-variance mean."""
-        rest = self.rest_offsets_rad() if rest_angles_rad is None else np.abs(np.asarray(rest_angles_rad, float))
-        stops = (self._column("amplitude_rad") / self._released() + rest) if self.points else np.zeros(0)
+        rest = self.rest_offsets_rad() if rest_angles_rad is None else np.asarray(rest_angles_rad, float)
+        if not self.points:
+            return fallback_rad
+        stops = stop_from_swing_rad(self._column("amplitude_rad"), rest, *self._since_release())
         return robust_median(stops[np.isfinite(stops)], fallback_rad)
 
     def decompose(
@@ -235,11 +253,23 @@ class SweepRecord:
         return np.abs(np.nan_to_num(potential.rest_angle_rad()))
 
     def start_amplitudes_rad(self, decomposition: Decomposition, probe: Probe) -> np.ndarray:
-        """Each ring-down's start swing, stop − |θs| (:func:`mows.physics.ringdown_average.start_swing_rad`)
-        decayed to its fit's first sample, θs at the decomposition's field and gradient, the stop
-        pooled (the probe's where no fit gives it)."""
+        """Each ring-down's start swing at its fit's first sample
+        (:func:`mows.physics.ringdown_average.swing_from_stop_rad`), θs at the decomposition's
+        field and gradient, the stop pooled (the probe's where no fit gives it)."""
         rest = self.rest_angles_rad(decomposition, probe)
-        return start_swing_rad(self.stop_amplitude_rad(rest, probe.theta_stop_rad), rest) * self._released()
+        return swing_from_stop_rad(self.stop_amplitude_rad(rest, probe.theta_stop_rad), rest, *self._since_release())
+
+    def start_swings_rad(self, probe: Probe) -> tuple[np.ndarray, list[str]]:
+        """Each ring-down's start swing, the record being one probe's released at the stop, and
+        notes of how it was found: from the first-principles decomposition of all its ring-downs
+        as one sweep in one static field (:meth:`start_amplitudes_rad`) where that describes them
+        (χ²/dof ≤ ``MAX_SWEEP_CHI2_DOF``), else from each fit alone
+        (:meth:`fitted_start_amplitudes_rad`, the probe's stop where no fit gives it)."""
+        decomposition = self.decompose(probe, probe.f00_hz)
+        if decomposition.ok and decomposition.chi2_dof <= MAX_SWEEP_CHI2_DOF:
+            note = f"start swings: the stop less the rest angle in the sweep's field ({decomposition.report()})"
+            return self.start_amplitudes_rad(decomposition, probe), [note]
+        return self.fitted_start_amplitudes_rad(probe.theta_stop_rad)
 
     def fitted_start_amplitudes_rad(self, stop_rad: float = math.nan) -> tuple[np.ndarray, list[str]]:
         """Each ring-down's start swing from its fit alone, and notes of what was assumed: the
@@ -251,7 +281,7 @@ class SweepRecord:
         amplitude = self._column("amplitude_rad")
         beyond = amplitude > stop  # no swing about the rest angle is wider than the stop
         amplitude[beyond] = np.nan
-        released = start_swing_rad(stop, np.nan_to_num(rest)) * self._released()
+        released = swing_from_stop_rad(stop, np.nan_to_num(rest), *self._since_release())
         start = np.where(np.isfinite(amplitude), amplitude, released)
         unknown = np.count_nonzero(~np.isfinite(rest) & ~np.isfinite(amplitude))
         notes = []

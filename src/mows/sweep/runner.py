@@ -190,9 +190,10 @@ class SweepRunner:
         return SweepStep(run_cycle=call)
 
     def _cycle(self, step: SweepStep, call: CycleRequest) -> SweepStep:
-        """Run ``call`` next, after the operator's turn when the stage has no motor."""
+        """Run ``call`` next, after the operator's turn when the stage has no motor (the cycle
+        then says the stage was turned by hand)."""
         if self._settings.manual_orientation:
-            self._turning, step.turn = call, call.theta0_rad
+            self._turning, step.turn = dataclasses.replace(call, turned_by_hand=True), call.theta0_rad
         else:
             step.run_cycle = call
         return step

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mows.estimate.ringdown.fit import combine_channels
 from mows.estimate.ringdown.problem import AMPLITUDE_BOUNDS_RAD
+from mows.estimate.ringdown.window import combine_channels
 
 SWING_GRID_RAD = np.geomspace(*AMPLITUDE_BOUNDS_RAD, 64)  # the fit's range of θmax
 
@@ -99,7 +99,7 @@ def ringdown_curve(
     samples_t: ArrayLike, sample_rate_hz: float, model: RingdownModel, channels: str = "difference"
 ) -> RingdownCurve:
     """The fitted window's samples (rows: samples, columns: the fluxgates) combined as the fit
-    combined them (``channels``, :func:`mows.estimate.ringdown.fit.combine_channels`; one
+    combined them (``channels``, :func:`mows.estimate.ringdown.window.combine_channels`; one
     channel: 'difference', 'channel1' or 'channel2'), beside the model of ``model``."""
     if channels == "both":
         raise ValueError("channels = 'both': a fit of both channels has a κ per channel; draw one channel")

@@ -91,7 +91,10 @@ class Mount:
     """The joints of a URDF (its text); :meth:`transforms` at given joint positions."""
 
     def __init__(self, urdf_text: str):
-        robot = ET.fromstring(urdf_text)
+        try:
+            robot = ET.fromstring(urdf_text)
+        except ET.ParseError as error:  # a SyntaxError, not a ValueError: said as the file's fault
+            raise ValueError(f"not a URDF: XML error: {error}") from None
         self.joints = []
         for joint in robot.iter("joint"):
             origin, mimic = joint.find("origin"), joint.find("mimic")

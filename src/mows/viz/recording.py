@@ -71,6 +71,9 @@ def write_view(bag: str | os.PathLike, output: Path, view: View) -> Counter:
 
 
 def default_output(bag: str | os.PathLike) -> Path:
-    """Next to the recording: ``<bag>.view.mcap`` beside the bag's directory (or file)."""
+    """Next to the recording: ``<bag>.view.mcap`` beside the bag's directory (or beside the
+    ``.mcap`` file of a bag named by it, outside its folder, which is never written in)."""
     path = Path(bag)
+    if path.is_file() and (path.parent / "metadata.yaml").is_file():
+        path = path.parent if path.parent.name else path.resolve().parent
     return path.parent / f"{path.name}.view.mcap"

@@ -1,5 +1,8 @@
 """The 3D scene's arrows: each probe's in-plane field B and its gradient's principal directions,
-with lengths scaled so the largest of each kind is ``arrow_length_m`` and labels value ± σ.
+labelled value ± σ. The B arrows' lengths are scaled so that the largest |B| is
+``arrow_length_m``; a principal gradient's length is its significance |λ|/σ_λ, full length
+(``arrow_length_m``) from ``FULL_SIGNIFICANCE`` σ up, so a gradient the data do not separate from
+zero is drawn short rather than as large as a measured one (and not at all where σ_λ is unknown).
 
 B = (Bx, By) in the sweep's rotation-plane frame (x = e1, y = e2, docs/architecture.md "Frames
 and geometry"); |B| ± σ with σ² = uᵀΣu, u = B/|B| (first order). The in-plane gradient
@@ -19,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-ARROW_LENGTH_M = 0.05  # the largest arrow of each kind in the scene
+ARROW_LENGTH_M = 0.05  # the largest B arrow, and a principal gradient of FULL_SIGNIFICANCE σ or more
+FULL_SIGNIFICANCE = 5.0  # |λ|/σ_λ drawn at full length
 
 
 @dataclass(frozen=True)
@@ -98,13 +102,12 @@ def principal_gradients(gradient_t_per_m: ArrayLike, covariance: ArrayLike) -> l
 
 def probe_arrows(probes: list[ProbeField], arrow_length_m: float = ARROW_LENGTH_M) -> dict[int, list[Arrow]]:
     """Each known probe's arrows: B, then the gradient's two principal directions (each drawn
-    both ways, module docstring); the largest |B| and the largest |λ| of all probes are
-    ``arrow_length_m`` long."""
+    both ways, module docstring); the largest |B| of all probes is ``arrow_length_m`` long, a
+    principal gradient :func:`significance_length_m` long."""
     known = [p for p in probes if p.known]
     fields = {p.probe_id: field_magnitude(p.field_t, p.field_covariance_t2) for p in known}
     principals = {p.probe_id: principal_gradients(p.gradient_t_per_m, p.gradient_covariance) for p in known}
     largest_b = max((b for b, _ in fields.values()), default=0.0) or 1.0
-    largest_g = max((abs(q.value_t_per_m) for qs in principals.values() for q in qs), default=0.0) or 1.0
     arrows: dict[int, list[Arrow]] = {}
     for probe in known:
         b, b_std = fields[probe.probe_id]
@@ -120,7 +123,7 @@ def probe_arrows(probes: list[ProbeField], arrow_length_m: float = ARROW_LENGTH_
             )
         ]
         for index, q in enumerate(principals[probe.probe_id], start=1):
-            length = arrow_length_m * abs(q.value_t_per_m) / largest_g
+            length = significance_length_m(q, arrow_length_m)
             label = f"G{index} {q.value_t_per_m * 1e3:+.3g} ± {q.std_t_per_m * 1e3:.2g} mT/m"
             for sign in (1.0, -1.0):
                 along = sign * np.append(q.direction, 0.0)
@@ -138,6 +141,16 @@ def probe_arrows(probes: list[ProbeField], arrow_length_m: float = ARROW_LENGTH_
                 )
         arrows[probe.probe_id] = shown
     return arrows
+
+
+def significance_length_m(principal: Principal, arrow_length_m: float = ARROW_LENGTH_M) -> float:
+    """A principal gradient's arrow length: ``arrow_length_m`` times its significance |λ|/σ_λ
+    over :data:`FULL_SIGNIFICANCE`, at most ``arrow_length_m``; zero where σ_λ is not known."""
+    value, std = abs(principal.value_t_per_m), principal.std_t_per_m
+    if not math.isfinite(std) or not math.isfinite(value):
+        return 0.0
+    significance = value / std if std > 0 else (math.inf if value > 0 else 0.0)
+    return arrow_length_m * min(significance, FULL_SIGNIFICANCE) / FULL_SIGNIFICANCE
 
 
 def axis_arrow(frame_id: str, field_along_axis_t: float, std_t: float, arrow_length_m: float = ARROW_LENGTH_M) -> Arrow:

@@ -31,21 +31,38 @@ from mows.workspace.observations import Observation, Readout
 DEFAULT_FOLDS = 5
 
 
+def point_designs(basis: SolidHarmonics, position_m: ArrayLike, ranks: int = 3) -> tuple[np.ndarray, ...]:
+    """The designs of B, G and H (the first ``ranks`` of them) at one position: (3, K),
+    (3, 3, K), (3, 3, 3, K)."""
+    return tuple(basis.design(position_m, rank)[0] for rank in range(ranks))
+
+
+def apply_readout(designs: tuple[np.ndarray, ...], readout: Readout) -> np.ndarray:
+    """(k, K): the readout's values (less the offset) per unit coefficient, from the designs
+    at its position (:func:`point_designs`)."""
+    rows = np.einsum("pi,ik->pk", readout.field, designs[0])
+    if np.any(readout.gradient):
+        rows = rows + np.einsum("pij,ijk->pk", readout.gradient, designs[1])
+    if np.any(readout.hessian):
+        rows = rows + np.einsum("pijl,ijlk->pk", readout.hessian, designs[2])
+    return rows
+
+
 def readout_design(basis: SolidHarmonics, position_m: ArrayLike, readout: Readout) -> np.ndarray:
     """(k, K): the readout's values (less the offset) per unit coefficient at ``position_m``."""
-    rows = np.einsum("pi,ik->pk", readout.field, basis.design(position_m, 0)[0])
-    if np.any(readout.gradient):
-        rows = rows + np.einsum("pij,ijk->pk", readout.gradient, basis.design(position_m, 1)[0])
-    if np.any(readout.hessian):
-        rows = rows + np.einsum("pijl,ijlk->pk", readout.hessian, basis.design(position_m, 2)[0])
-    return rows
+    ranks = 3 if np.any(readout.hessian) else 2 if np.any(readout.gradient) else 1
+    return apply_readout(point_designs(basis, position_m, ranks), readout)
+
+
+def whiten(obs: Observation, design: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``design`` and the observation's data, multiplied by L⁻¹ (C = L·Lᵀ)."""
+    factor = np.linalg.cholesky(obs.covariance)
+    return np.linalg.solve(factor, design), np.linalg.solve(factor, obs.values - obs.readout.offset)
 
 
 def whitened_rows(basis: SolidHarmonics, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
     """One observation's design and data, multiplied by L⁻¹ (C = L·Lᵀ)."""
-    factor = np.linalg.cholesky(obs.covariance)
-    design = np.linalg.solve(factor, readout_design(basis, obs.position_m, obs.readout))
-    return design, np.linalg.solve(factor, obs.values - obs.readout.offset)
+    return whiten(obs, readout_design(basis, obs.position_m, obs.readout))
 
 
 @dataclasses.dataclass(frozen=True)

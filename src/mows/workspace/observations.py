@@ -10,8 +10,8 @@ G_ij = ∂B_i/∂x_j, each with its covariance. Two known terms sit in what it r
 * the field's curvature over the lever's arc: the sweep's field is B + (l²/4)·∂²B/∂z'² at the
   magnet's rest position, z' = e1 × e2 (:mod:`mows.sweep.decompose`).
 
-A Hall probe reports the 3D field B. Each observation here is ``values`` = A_B·B + A_G·G +
-A_H·H + ``offset`` at ``position_m`` with the ``covariance`` of ``values``; the workspace fit
+A Hall probe reports the 3D field B. Each observation here is ``values`` = A_B·(B + B_known) +
+A_G·G + A_H·H at ``position_m`` with the ``covariance`` of ``values``; the workspace fit
 (:mod:`mows.workspace.fit`) turns it into rows of its design. ``group`` is the unit the
 cross-validation holds out together (a sweep, or one Hall point).
 """
@@ -32,17 +32,33 @@ HALL_COMPONENTS = ("bx", "by", "bz")
 
 @dataclasses.dataclass(frozen=True)
 class Readout:
-    """values = field·B + gradient·G + hessian·H + offset: ``field`` (k, 3), ``gradient``
-    (k, 3, 3), ``hessian`` (k, 3, 3, 3), ``offset`` (k,) in the units of the values."""
+    """values = field·(B + known_field_t) + gradient·G + hessian·H: ``field`` (k, 3),
+    ``gradient`` (k, 3, 3), ``hessian`` (k, 3, 3, 3); ``known_field_t`` (3,), global frame, is
+    what the instrument adds to the field it reads (the magnet's weight on a sweep)."""
 
     field: np.ndarray
     gradient: np.ndarray
     hessian: np.ndarray
-    offset: np.ndarray
+    known_field_t: np.ndarray
 
     @property
     def size(self) -> int:
         return self.field.shape[0]
+
+    @property
+    def offset(self) -> np.ndarray:
+        return self.field @ self.known_field_t
+
+    def rotated(self, rotation: np.ndarray) -> Readout:
+        """The readout of the instrument turned by ``rotation`` (3, 3) about its position: every
+        direction it reads along, d, becomes rotation·d."""
+        r = np.asarray(rotation, float)
+        return Readout(
+            self.field @ r.T,
+            np.einsum("ai,pij,bj->pab", r, self.gradient, r),
+            np.einsum("ai,pijk,bj,ck->pabc", r, self.hessian, r, r),
+            self.known_field_t,
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,9 +101,7 @@ def plane_readout(plane: ArrayLike, lever_m: float, gravity_field_t: ArrayLike) 
     gradient[4] = np.outer(e[1], e[1])
     hessian = np.zeros((5, 3, 3, 3))
     hessian[:2] = 0.25 * lever_m**2 * np.einsum("pi,j,k->pijk", e, normal, normal)
-    offset = np.zeros(5)
-    offset[:2] = e @ np.asarray(gravity_field_t, float)
-    return Readout(field, gradient, hessian, offset)
+    return Readout(field, gradient, hessian, np.asarray(gravity_field_t, float))
 
 
 def gravity_field_t(probe: Probe, gravity_m_per_s2: ArrayLike) -> np.ndarray:
@@ -120,7 +134,7 @@ def sweep_observation(
 
 def hall_observation(position_m: ArrayLike, field_t: ArrayLike, covariance_t2: ArrayLike, group: int) -> Observation:
     """A 3-axis Hall probe's reading B (3,) with its covariance at ``position_m``."""
-    readout = Readout(np.eye(3), np.zeros((3, 3, 3)), np.zeros((3, 3, 3, 3)), np.zeros(3))
+    readout = Readout(np.eye(3), np.zeros((3, 3, 3)), np.zeros((3, 3, 3, 3)), np.zeros(3))  # nothing added
     return Observation(
         np.asarray(position_m, float),
         None,

@@ -4,14 +4,17 @@ through SCPI (:mod:`mows.device.instruments.scpi`).
 
 A thin edge over :mod:`mows.device.instruments.daq`: two continuous, hardware-timed input channels read in
 blocks and stamped by their sample index (:class:`mows.device.clock.DeviceClock`); two output
-channels on the same rate, started by the inputs' start trigger and never regenerated, written
+channels on the same rate (the rate the card reads back: a rate its timebase does not divide is
+refused, not coerced), started by the inputs' start trigger and never regenerated, written
 ``output_lead_s`` ahead of the newer of the newest input sample and the sample the card is
 generating, so that a host late by less than the lead (0.75 s on the paper's bench) never
 underflows them. The lead holds only what was commanded: the coils' drives with their
 switch-offs, zeros elsewhere; a coil command for a sample beyond what is written applies exactly
-there. The stage is turned by hand (``orientation: manual``): an orientation command is the
-operator's turn, confirmed before the cycle was asked for, and is accepted at once (``turned``
-hears it: the simulated bench's operator turns its simulated probe there).
+there. The stage is turned by hand (``orientation: manual``): an orientation command is accepted
+only as the operator's turn, confirmed before the cycle was asked for (``by_hand``), and refused
+otherwise, since nothing here turns the probe; ``turned`` hears it (the simulated bench's
+operator turns its simulated probe there). The supply's I/O runs on a thread of its own, each
+exchange under a deadline (:mod:`mows.device.backends.bench_supply`).
 
 A card error (the outputs underflowed, the inputs overran, the card went away; every task's error
 told, not only the first) is a fault, never a latch for the session: the tasks are closed (the
@@ -22,8 +25,9 @@ refuses, every ``read_timeout_s``. The link comes back up with a :class:`DeviceF
 carries the reason to the driver's /diagnostics; the stream's sample index jumps by the time the
 card was down (the blocks' gap). The supply is switched on again, at zero, before its next ramp.
 
-A watchdog thread stands in for the serial device's: a host that stops reading for
-``watchdog_s`` (a hung driver) faults the card as above; the next read re-arms it.
+A watchdog thread stands in for the serial device's: a host that has not read a block for
+``watchdog_s`` (a hung driver, or one whose every poll fails) faults the card as above; the next
+poll re-arms it.
 
 ``nidaqmx`` is imported when a backend is made, not before: without NI's runtime, the package or
 the card, :func:`open_daqmx` says so in one line (:class:`DeviceUnavailable`).
@@ -32,7 +36,6 @@ the card, :func:`open_daqmx` says so in one line (:class:`DeviceUnavailable`).
 from __future__ import annotations
 
 import contextlib
-import importlib
 import math
 import threading
 import time
@@ -40,9 +43,18 @@ from collections.abc import Callable
 
 import numpy as np
 
+from mows.device.backends.bench_supply import NOT_READ, Readback, SupplyLine
+from mows.device.backends.daqmx_tasks import (
+    TASK_NAMES,
+    DeviceUnavailable,
+    close_tasks,
+    configure_tasks,
+    first_line,
+    import_nidaqmx,
+)
 from mows.device.clock import DeviceClock
 from mows.device.instruments.daq import CoilWaveforms, DaqDevice
-from mows.device.instruments.scpi import ScpiSupply, SupplyError, SupplySchedule
+from mows.device.instruments.scpi import ScpiSupply, SupplySchedule
 from mows.device.interface import (
     Backend,
     CoilCommand,
@@ -51,6 +63,7 @@ from mows.device.interface import (
     DeviceFault,
     FieldCurrentCommand,
     LinkEvent,
+    OrientationCommand,
     check_coil_command,
     refuse_tones,
 )
@@ -58,33 +71,6 @@ from mows.device.protocol.payloads import DeviceInfo
 from mows.physics.coils import CurrentCap
 from mows.physics.supply import RAMP_STEP_S
 from mows.records.samples import SampleBlock
-
-INPUT_BUFFER_S = 10.0  # the card's input buffer: a host late by less than this loses nothing
-TASK_NAMES = ("mows_fluxgates", "mows_coils")  # named: a second driver on the card is refused
-
-
-class DeviceUnavailable(OSError):
-    """NI's runtime, the ``nidaqmx`` package or the card is missing, or the card refused the tasks."""
-
-
-def import_nidaqmx():
-    """NI's ``nidaqmx`` package with its stream readers and writers (``import nidaqmx`` loads
-    neither); DeviceUnavailable, one line, when it is not installed."""
-    try:
-        nidaqmx = importlib.import_module("nidaqmx")
-        importlib.import_module("nidaqmx.stream_readers")
-        importlib.import_module("nidaqmx.stream_writers")
-    except ImportError:
-        raise DeviceUnavailable(
-            "backend nidaqmx: the Python package nidaqmx is not installed (pip install nidaqmx==1.7.0)"
-        ) from None
-    return nidaqmx
-
-
-def _first_line(error: Exception) -> str:
-    line = (str(error).strip().splitlines() or [type(error).__name__])[0]
-    code = getattr(error, "error_code", None)
-    return f"{line} ({code})" if code is not None and str(code) not in line else line
 
 
 class DaqmxBackend(Backend):
@@ -108,6 +94,7 @@ class DaqmxBackend(Backend):
         self.device = device
         self.cap = CurrentCap(min(cap.limit_a, device.current_cap_a))
         self.supply = supply
+        self.supply_line = SupplyLine(supply, 2.0 * supply.config.timeout_s) if supply else None
         self.supply_schedule = SupplySchedule(supply.config.limits, device.sample_rate_hz) if supply else None
         self.supply_limits = supply.config.limits if supply else None
         self.clock = DeviceClock(device.sample_rate_hz)
@@ -126,11 +113,6 @@ class DaqmxBackend(Backend):
         self.fault = ""  # why the card is down, while it is
         self.card_faults = 0
         self.last_card_fault = ""
-        self.supply_readback_a = math.nan  # read settle_s after a ramp's last step
-        self.supply_output = ""  # 'on' or 'off' as read back with it
-        self._readback_at_s: float | None = None  # time.monotonic() it is read at, while one is due
-        self._supply_a = 0.0  # the last current the supply accepted
-        self._supply_off = False  # switched off (a fault, a ramp to zero's end): prepared again before its next step
         self._off_at_zero = False  # an emergency stop's ramp to zero: the output off once it ends
         self._results: list[CommandResult] = []
         self._told: list[LinkEvent | DeviceFault] = []  # not yet handed out
@@ -140,7 +122,7 @@ class DaqmxBackend(Backend):
         self._origin = 0  # the stream's index of the card's sample 0
         self._rearm_at_s = 0.0
         self._arm(0)
-        self._last_poll_s = self._last_read_s = time.monotonic()
+        self._last_read_s = time.monotonic()
         self._stop = threading.Event()
         self._watchdog = threading.Thread(target=self._watch, name="mows-daqmx-watchdog", daemon=True)
         self._watchdog.start()
@@ -157,7 +139,7 @@ class DaqmxBackend(Backend):
             for name in TASK_NAMES:
                 tasks.append(self.daqmx.Task(name))
             ai, ao = tasks
-            self._configure(ai, ao)
+            configure_tasks(self.daqmx, self.device, ai, ao)
             self._reader = self.daqmx.stream_readers.AnalogMultiChannelReader(ai.in_stream)
             self._writer = self.daqmx.stream_writers.AnalogMultiChannelWriter(ao.out_stream, auto_start=False)
             self._tasks = tasks
@@ -166,44 +148,8 @@ class DaqmxBackend(Backend):
             ai.start()
         except BaseException:
             self._tasks = []
-            self._close(tasks)
+            close_tasks(self.daqmx, tasks)
             raise
-
-    def _configure(self, ai, ao) -> None:
-        constants, device = self.daqmx.constants, self.device
-        for channel in device.inputs:
-            ai.ai_channels.add_ai_voltage_chan(
-                channel.physical_channel,
-                terminal_config=constants.TerminalConfiguration[channel.terminal_config],
-                min_val=-channel.range_v,
-                max_val=channel.range_v,
-            )
-        ai.timing.cfg_samp_clk_timing(
-            device.sample_rate_hz,
-            sample_mode=constants.AcquisitionType.CONTINUOUS,
-            samps_per_chan=round(INPUT_BUFFER_S * device.sample_rate_hz),
-        )
-        for output in device.outputs:
-            ao.ao_channels.add_ao_voltage_chan(output.physical_channel, min_val=-output.range_v, max_val=output.range_v)
-        # When the host stops writing the card underflows and stops: the coils go to zero, not stay on.
-        ao.ao_channels.all.ao_idle_output_behavior = constants.AOIdleOutputBehavior.ZERO_VOLTS
-        ao.timing.cfg_samp_clk_timing(
-            device.sample_rate_hz,
-            sample_mode=constants.AcquisitionType.CONTINUOUS,
-            samps_per_chan=2 * (device.lead_samples + device.block_samples),
-        )
-        ao.triggers.start_trigger.cfg_dig_edge_start_trig(device.start_trigger)
-        ao.out_stream.regen_mode = constants.RegenerationMode.DONT_ALLOW_REGENERATION
-
-    def _close(self, tasks: list) -> list[str]:
-        """Close every task, whatever the others do (a card that went away refuses); what failed."""
-        problems = []
-        for task in tasks:
-            try:
-                task.close()
-            except self.daqmx.errors.DaqError as error:
-                problems.append(_first_line(error))
-        return problems
 
     @property
     def info(self) -> DeviceInfo:
@@ -225,7 +171,6 @@ class DaqmxBackend(Backend):
     # --- the stream ----------------------------------------------------------------------------
     def poll(self, timeout_s: float) -> list:
         with self._lock:
-            self._last_poll_s = time.monotonic()
             items: list = list(self._results)
             self._results = []
             if not self.fault:
@@ -244,9 +189,14 @@ class DaqmxBackend(Backend):
         error, the fault, with both tasks' errors (an input overrun is not hidden behind the outputs')."""
         errors = []
         try:
-            self._write_ahead()
+            # NI's check of a continuous generation: it raises the error that stopped it. A host
+            # behind the card may have nothing new to write, and only a write would say so.
+            if self._tasks[1].is_task_done():
+                errors.append("outputs: the generation stopped")
+            else:
+                self._write_ahead()
         except self.daqmx.errors.DaqError as error:
-            errors.append(f"outputs: {_first_line(error)}")
+            errors.append(f"outputs: {first_line(error)}")
         try:
             self._reader.read_many_sample(
                 self._buffer,
@@ -254,7 +204,7 @@ class DaqmxBackend(Backend):
                 timeout=self.device.read_timeout_s,
             )
         except self.daqmx.errors.DaqError as error:
-            errors.append(f"inputs: {_first_line(error)}")
+            errors.append(f"inputs: {first_line(error)}")
         if errors:
             self._fault("the card stopped: " + "; ".join(errors))
             return []
@@ -266,45 +216,27 @@ class DaqmxBackend(Backend):
         return [block, *self._supply_steps()]
 
     def _supply_steps(self) -> list:
-        """Write the supply's steps whose sample has come; read the current back ``settle_s`` after
-        a ramp's last (a read-back at once sees the pair still settling). The supply settles in its
-        own time from the write, not on the card's clock: a host catching up on buffered samples
-        reaches the sample ``settle_s`` after the write's within milliseconds, and had read the
-        pair 2 % short of its current so."""
-        if self.supply is None or self.supply_schedule is None:
+        """Hand the supply's steps whose sample has come to its line (written there, off this
+        thread), the last of a ramp to be read back once settled; a failure of the supply (an
+        error, an exchange past its deadline, an output that went off by itself) is a fault."""
+        if self.supply_line is None or self.supply_schedule is None:
             return []
         due = self.supply_schedule.due(self.next_index)
-        try:
-            if due and self._supply_off:
-                self.supply.prepare()  # at zero, output on, as when it was opened
-                self._supply_off = False
-            for current_a in due:
-                self.supply.set_current_a(current_a)
-                self._supply_a = current_a
-            if due and not self.supply_schedule.ramping:  # read back once the last step has settled
-                if self._off_at_zero:
-                    self._switch_off(self.supply)
-                self._readback_at_s = time.monotonic() + self.supply.config.settle_s
-            if self._readback_at_s is not None and time.monotonic() >= self._readback_at_s:
-                self._readback_at_s = None
-                self.supply_readback_a = self.supply.read_current_a()
-                self.supply_output = self.supply.output_state()
-        except SupplyError as error:
-            self._fault(f"the supply failed: {error}")
+        for k, current_a in enumerate(due):
+            last = k == len(due) - 1 and not self.supply_schedule.ramping
+            self.supply_line.step(current_a, self.supply_schedule.last_index, last)
+        if due and not self.supply_schedule.ramping and self._off_at_zero:
+            self._off_at_zero = False
+            self.supply_line.switch_off()  # the emergency stop's ramp has reached zero
+        if failure := self.supply_line.failure():
+            self._fault(failure)
         return []
-
-    def _switch_off(self, supply: ScpiSupply) -> None:
-        """The emergency stop's ramp has reached zero: the output off and read back so (a fault
-        when it is not); the next ramp switches it on again."""
-        self._off_at_zero, self._supply_off = False, True
-        if refused := supply.safe():
-            self._fault(f"the supply did not switch off after the emergency stop: {'; '.join(refused)}")
 
     def _fault(self, reason: str) -> None:
         """The card down: its tasks closed (the outputs idle at 0 V: the coils off), the drives
         dropped, the supply ramped to zero and switched off, the link down with ``reason``."""
         self.waveforms.off_now()
-        self._close(self._tasks)
+        close_tasks(self.daqmx, self._tasks)
         self._tasks = []
         self.fault = self.last_card_fault = reason + self._supply_safe()
         self.card_faults += 1
@@ -314,24 +246,12 @@ class DaqmxBackend(Backend):
     def _supply_safe(self) -> str:
         """Ramp the supply to zero in host time from the last current it accepted, within its slew
         limit, and switch its output off; what went wrong, for the fault's reason."""
-        if self.supply is None or self.supply_schedule is None:
+        if self.supply_line is None or self.supply_schedule is None:
             return ""
         end = self.supply_schedule.to_zero(self.next_index)
-        self.supply_schedule.due(end + 1)  # walked in host time below: the card's samples have stopped
-        problems = []
-        try:
-            for _, current_a in self.supply.config.limits.ramp(self._supply_a, 0.0):
-                self.supply.set_current_a(current_a)
-                self._supply_a = current_a
-                time.sleep(RAMP_STEP_S)
-        except SupplyError as error:
-            problems.append(f"THE SUPPLY DID NOT RAMP TO ZERO: {error}")
-        refused = self.supply.safe()  # zero and off, each tried whatever the other did
-        self._supply_a, self._supply_off = 0.0, True
-        self.supply_readback_a, self.supply_output = math.nan, ""
-        self._readback_at_s = time.monotonic()  # read back once the card is back
-        problems += [f"THE SUPPLY MAY STILL BE ON: {problem}" for problem in refused]
-        return "".join(f"; {problem}" for problem in problems)
+        self.supply_schedule.due(end + 1)  # walked in host time: the card's samples have stopped
+        self._off_at_zero = False
+        return "".join(f"; {problem}" for problem in self.supply_line.make_safe(self.supply_schedule.last_index))
 
     def _rearm(self) -> None:
         """Arm the card again, the coils off, its index on from the time lost; the link up and the
@@ -341,7 +261,7 @@ class DaqmxBackend(Backend):
             self._arm(self.next_index + lost)
         except self.daqmx.errors.DaqError as error:
             self._rearm_at_s = time.monotonic() + self.device.read_timeout_s
-            self.last_card_fault = f"{self.fault}; re-arming: {_first_line(error)}"
+            self.last_card_fault = f"{self.fault}; re-arming: {first_line(error)}"
             return
         self._last_read_s = time.monotonic()
         reason, self.fault = self.fault, ""
@@ -350,7 +270,7 @@ class DaqmxBackend(Backend):
     def _watch(self) -> None:
         while not self._stop.wait(RAMP_STEP_S):
             with self._lock:
-                silent_s = time.monotonic() - self._last_poll_s
+                silent_s = time.monotonic() - self._last_read_s
                 if not self.fault and silent_s > self.device.watchdog_s:
                     self._fault(f"watchdog: no read for {silent_s:.1f} s: coils off, supply ramped to zero")
 
@@ -373,14 +293,24 @@ class DaqmxBackend(Backend):
                 applied = self.supply_schedule.ramp(command.at_sample_index, self.next_index, command.current_a)
                 self._off_at_zero = False
             else:
-                if self.waveforms.coils_on:
-                    self._results.append(CommandResult(command.command_id, False, reason="the coils are on"))
+                if (refused := self._turn_refused(command)) is not None:
+                    self._results.append(CommandResult(command.command_id, False, reason=refused))
                     return
                 self.stage_theta0_rad = command.theta0_rad  # turned by hand before the cycle was asked for
                 if self._turned is not None:
                     self._turned(command.theta0_rad)
                 applied = max(command.at_sample_index, self.next_index)
             self._results.append(CommandResult(command.command_id, True, applied))
+
+    def _turn_refused(self, command: OrientationCommand) -> str | None:
+        if self.waveforms.coils_on:
+            return "the coils are on"
+        if not command.by_hand:
+            return (
+                f"this bench's stage is turned by hand: a cycle at θ0 = {command.theta0_rad:.4g} rad needs the "
+                "operator's turn first (orientation: manual in the mapper and the calibrator)"
+            )
+        return None
 
     def coils_off_now(self) -> None:
         with self._lock:
@@ -390,7 +320,7 @@ class DaqmxBackend(Backend):
         """The ramp to zero, the output switched off at its end; a supply already switched off
         stays off (its waiting ramp dropped), not switched on again to be ramped."""
         with self._lock:
-            if self.supply_schedule is not None and self._supply_off:
+            if self.supply_schedule is not None and self.supply_line is not None and self.supply_line.off:
                 self.supply_schedule.drop()
             elif self.supply_schedule is not None:
                 self.supply_schedule.to_zero(self.next_index)
@@ -406,25 +336,35 @@ class DaqmxBackend(Backend):
             "last_card_fault": self.last_card_fault,
         }
         if self.supply is not None and self.supply_schedule is not None:
+            readback = self.supply_readback
             values.update(
                 supply=self.supply.identity,
                 supply_target_a=self.supply_schedule.target_a,
-                supply_readback_a=self.supply_readback_a,
-                supply_output=self.supply_output,
+                supply_readback_a=readback.current_a,
+                supply_output=readback.output,
+                supply_readback_step=readback.step_index,
             )
         return values
 
+    @property
+    def supply_readback(self) -> Readback:
+        """The supply's last read-back, stamped with the step it follows."""
+        return self.supply_line.readback if self.supply_line is not None else NOT_READ
+
     def close(self) -> None:
         """Coils off, the supply ramped to zero and switched off while the card streams on, and
-        read back once settled; then the tasks and the supply released, each whatever the others
-        did, and last what the backend held."""
+        read back once settled; then the tasks and the supply released (every output off and
+        read back), each whatever the others did, and last what the backend held. SupplyError
+        when the supply's release failed, after all of it was tried. Once closed, nothing more."""
+        if self._stop.is_set():
+            return
         self._stop.set()
         self._watchdog.join()
         try:
             self.coils_off_now()
             self.supply_to_zero_now()
             polls = 0
-            while self._supply_pending() and not self.fault:
+            while self.supply_pending and not self.fault:
                 self.poll(self.device.read_timeout_s)
                 polls += 1
                 if polls * self.device.block_s > 60.0:  # a ramp from the cap takes seconds, not this
@@ -435,24 +375,26 @@ class DaqmxBackend(Backend):
         finally:
             try:
                 with self._lock:
-                    self._close(self._tasks)
+                    close_tasks(self.daqmx, self._tasks)
                     self._tasks = []
             finally:
                 with self.held:
-                    if self.supply is not None:
-                        self.supply.close()
+                    if self.supply_line is not None:
+                        self.supply_line.close()
 
-    def _supply_pending(self) -> bool:
-        """A ramp of the supply, or its read-back, still to come."""
-        schedule = self.supply_schedule
-        return schedule is not None and (schedule.ramping or self._readback_at_s is not None)
+    @property
+    def supply_pending(self) -> bool:
+        """A ramp of the supply, its steps' writes or its read-back, still to come."""
+        schedule, line = self.supply_schedule, self.supply_line
+        return schedule is not None and line is not None and (schedule.ramping or line.busy)
 
     def closed_state(self) -> str:
         """The supply as it read back, settled, after its ramp to zero and switch-off on close."""
         if self.supply is None:
             return ""
-        output = self.supply_output or "output not read back"
-        return f"supply {output} at {self.supply_readback_a:.4f} A (read back)"
+        readback = self.supply_readback
+        output = readback.output or "output not read back"
+        return f"supply {output} at {readback.current_a:.4f} A (read back)"
 
 
 def open_daqmx(
@@ -475,4 +417,4 @@ def open_daqmx(
             "from ni.com (Ubuntu, RHEL or openSUSE; not Debian: docs/hardware.md)"
         ) from None
     except daqmx.errors.DaqError as error:
-        raise DeviceUnavailable(f"backend nidaqmx: card {device.device_name!r}: {_first_line(error)}") from None
+        raise DeviceUnavailable(f"backend nidaqmx: card {device.device_name!r}: {first_line(error)}") from None

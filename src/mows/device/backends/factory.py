@@ -18,7 +18,7 @@ import pathlib
 from mows.device.backends.bag_backend import BagBackend
 from mows.device.backends.daqmx_backend import DaqmxBackend, open_daqmx
 from mows.device.backends.serial_backend import SerialBackend
-from mows.device.backends.sim_backend import scene_backend
+from mows.device.backends.sim_backend import SimBackend
 from mows.device.instruments.daq import PAPER_DEVICE_FILE, DaqDevice, load_daq_device
 from mows.device.instruments.scpi import (
     PAPER_SUPPLY_FILE,
@@ -121,7 +121,9 @@ class BackendSettings:
     ``bag_rate``) or nidaqmx (the bench: ``daq_device_file`` and, with ``supply`` scpi,
     ``supply_file`` at ``supply_resource``; '' the paper's files; ``daq_simulated``: the simulated
     bench instead, its supply at the simulated address). ``coil_setup``: the coils' setup, '' the
-    scenario's."""
+    scenario's. ``scene``: the scenario, read once when the settings are made (the coils' setup
+    and tracking's device come from it whatever the backend); ValueError or OSError when it
+    cannot be read."""
 
     backend: str = "sim"
     scenario: str = DEFAULT_SCENARIO
@@ -140,6 +142,10 @@ class BackendSettings:
     supply_resource: str = ""
     visa_library: str = "@py"
     daq_simulated: bool = False
+    scene: Scenario = dataclasses.field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "scene", load_scenario(self.scenario))
 
     @property
     def simulated(self) -> bool:
@@ -149,17 +155,16 @@ class BackendSettings:
 
     def setup_name(self) -> str:
         """The coil setup that drives the coils: ``coil_setup``, or when it is '' the scenario's."""
-        return self.coil_setup or load_scenario(self.scenario).setup.name
+        return self.coil_setup or self.scene.setup.name
 
     def tracking_scenario(self) -> Scenario:
         """The scenario whose device tracking mode follows; ValueError when the simulated scene
         has several probes (tracking follows one)."""
-        scenario = load_scenario(self.scenario)
-        if self.backend == "sim" and scenario.probes:
+        if self.backend == "sim" and self.scene.probes:
             raise ValueError(
-                f"tracking=True: tracking follows one probe; scenario {self.scenario!r} has {len(scenario.probes)}"
+                f"tracking=True: tracking follows one probe; scenario {self.scenario!r} has {len(self.scene.probes)}"
             )
-        return scenario
+        return self.scene
 
 
 def make_backend(settings: BackendSettings, cap: CurrentCap) -> Backend:
@@ -171,17 +176,19 @@ def make_backend(settings: BackendSettings, cap: CurrentCap) -> Backend:
     if s.daq_simulated and s.backend != "nidaqmx":
         raise ValueError(f"daq_simulated=True goes with backend nidaqmx, not {s.backend!r}")
     if s.backend == "sim":
-        scenario = load_scenario(s.scenario)
-        if s.coil_setup not in ("", scenario.setup.name):
+        if s.coil_setup not in ("", s.scene.setup.name):
             raise ValueError(
                 f"coil_setup={s.coil_setup!r} does not drive the coils of scenario "
-                f"{s.scenario!r} ({scenario.setup.name})"
+                f"{s.scenario!r} ({s.scene.setup.name})"
             )
-        # Simulated in pieces of one block: blocks come out evenly, at the least cost per sample.
-        return scene_backend(
-            scenario,
+        # At rest with the stage at theta0_rad (each probe of a scene at its home orientation plus
+        # it), its integrator compiled beforehand (mows.precompile, as the driver does: else the
+        # first read compiles it while the stream waits); simulated in pieces of one block, so that
+        # blocks come out evenly at the least cost per sample.
+        device = SimulatedDevice(s.scene, theta0_rad=s.scene.stage_orientations_rad(s.theta0_rad))
+        return SimBackend(
+            device,
             cap,
-            s.theta0_rad,
             chunk_s=s.block_duration_s,
             supply_cap_a=s.supply_current_cap_a,
             supply_slew_a_per_s=s.supply_slew_a_per_s,

@@ -129,21 +129,3 @@ class SimBackend(Backend):
         self.coils_off_now()
         with self._lock:
             self.device.read_until(self.device.supply_to_zero() + 1)
-
-
-def scene_backend(
-    scenario,
-    cap: CurrentCap,
-    theta0_rad: float = 0.0,
-    chunk_s: float = SIM_CHUNK_S,
-    supply_cap_a: float = math.inf,
-    supply_slew_a_per_s: float = math.inf,
-) -> SimBackend:
-    """The paced sim backend of ``scenario`` with the stage at ``theta0_rad``: the probe of a
-    one-probe scene at that orientation, each probe of a scene of several at its home orientation
-    plus it (:meth:`mows.sim.scenario.Scenario.stage_orientations_rad`), at rest there. Its
-    integrator is compiled beforehand by :func:`mows.precompile.precompile`, as the driver does
-    before it opens the device: otherwise the first read compiles it, seconds in which the stream
-    waits for samples."""
-    device = SimulatedDevice(scenario, theta0_rad=scenario.stage_orientations_rad(theta0_rad))
-    return SimBackend(device, cap, chunk_s=chunk_s, supply_cap_a=supply_cap_a, supply_slew_a_per_s=supply_slew_a_per_s)

@@ -5,8 +5,9 @@ command results and link changes, returning the commands to send and the events 
 the step the sequencer returns), ``sequencer`` (:class:`~mows.device.cycle.sequencer.CycleSequencer`:
 the cycle of one probe or of several on one stage), ``waits`` (what a running cycle waits for and
 records), ``duty`` (the coils' duty-cycle limit), ``tone_groups`` (the groups of a multi-tone plan
-excited in turn, and the plan of several probes at one stage angle) and ``tracking`` (tracking
-mode's cycles, back to back).
+excited in turn, and the plan of several probes at one stage angle), ``tracking`` (tracking
+mode's cycles, back to back) and ``tracking_plan`` (its kicks and ring-downs from the probe's
+physics, and the drive's physics every planned cycle uses).
 
 May import: ``mows.device.interface``, ``mows.device.clock``, ``mows.device.protocol``,
 ``mows.device.simulated``, ``mows.sim``, ``mows.physics``, ``mows.records``; not ``recording``,

@@ -134,7 +134,9 @@ class LostTuning:
 class CycleRequest:
     """One cycle at ``theta0_rad``; None takes the value from the settings. ``frequency_hz`` is
     where to drive (a predicted resonance); None: the sequencer's present estimate.
-    ``settings``: this cycle's own settings (tracking's kicks); None: the sequencer's."""
+    ``settings``: this cycle's own settings (tracking's kicks); None: the sequencer's.
+    ``turned_by_hand``: the operator has turned the stage to ``theta0_rad`` and confirmed it
+    (a bench whose stage has no motor refuses a cycle without it)."""
 
     theta0_rad: float
     repeats: int | None = None
@@ -142,6 +144,7 @@ class CycleRequest:
     gap_s: float | None = None
     frequency_hz: float | None = None
     settings: CycleSettings | None = None
+    turned_by_hand: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,6 +157,7 @@ class CyclePlan:
     tuning_steps: int
     gap_s: float
     settings: CycleSettings
+    turned_by_hand: bool = False
 
     @classmethod
     def resolve(cls, cycle_id: int, request: CycleRequest, s: CycleSettings) -> CyclePlan:
@@ -165,6 +169,7 @@ class CyclePlan:
             s.tuning_steps if request.tuning_steps is None else request.tuning_steps,
             s.gap_s if request.gap_s is None else request.gap_s,
             s,
+            request.turned_by_hand,
         )
         CycleSettings(
             **{

@@ -357,7 +357,12 @@ class CycleSequencer:
         if switched_off is not None and self._next_index < switched_off:
             yield Reach(switched_off)  # the samples up to the switch-off's received
         turned = yield from self._answer(
-            self._issue(OrientationCommand, self._next_index + self.lead_samples, theta0_rad=c.theta0_rad)
+            self._issue(
+                OrientationCommand,
+                self._next_index + self.lead_samples,
+                theta0_rad=c.theta0_rad,
+                by_hand=c.turned_by_hand,
+            )
         )
         settle = self._samples(c.settings.turn_settle_s)
         yield from self._enter(c, Phase.SETTLING, turned, settle)

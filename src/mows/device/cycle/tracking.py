@@ -14,7 +14,7 @@ Every limit stays where it is: the kicks' currents are checked against the drive
 the sequencer, the duty-cycle limit delays kicks, and a cycle that fails (an emergency stop,
 a refused or unanswered command, a lost link) ends tracking, which stays off, with the
 reason, until it is switched on again. The kick and ring-down lengths come from the physics of
-the probe (:func:`mows.sweep.fast_cycle.plan_tracking`); this module only runs them.
+the probe (:mod:`mows.device.cycle.tracking_plan`); this module only runs them.
 """
 
 from __future__ import annotations

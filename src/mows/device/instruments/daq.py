@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from mows.physics import ranges
 from mows.physics.coils import CurrentCap
 from mows.physics.schema import at, load_yaml, positive, refused, typed
 
@@ -66,6 +67,17 @@ class AnalogOutput:
         positive("range_v", self.range_v)
 
 
+# Each number of a device file and the quantity whose range it must lie in (mows.physics.ranges).
+RANGED = {
+    "sample_rate_hz": "sample_rate_hz",
+    "block_s": "block_s",
+    "output_lead_s": "output_lead_s",
+    "read_timeout_s": "timeout_s",
+    "watchdog_s": "watchdog_s",
+    "current_cap_a": "coil_current_a",
+}
+
+
 @dataclasses.dataclass(frozen=True)
 class DaqDevice:
     """The card and what is wired to it (YAML: :func:`load_daq_device`)."""
@@ -91,6 +103,8 @@ class DaqDevice:
             )
         for name in ("amplifier_v_per_a", "sample_rate_hz", "block_s", "output_lead_s", "read_timeout_s", "watchdog_s"):
             positive(name, getattr(self, name))
+        for name, quantity in RANGED.items():
+            ranges.check(quantity, getattr(self, name), f"{self.name}: {name}")
         CurrentCap(self.current_cap_a)
         if self.output_lead_s <= self.block_s:
             raise ValueError(

@@ -8,7 +8,7 @@ fault, a supply that refuses a step) or a refused command ends the check with a 
 says why, and the checks after it are not run. What it concludes comes from the plain functions
 below (:func:`lock_in_t`, the noise floor), so that a wiring fault (a coil on the wrong output, a
 fluxgate on the wrong input, a supply that does not deliver) shows as a number next to the one
-expected.
+expected. A supply's read-back is judged only when it is stamped after the step it judges.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from mows.records.samples import SampleBlock
 
 VISIBLE = 10.0  # a coil or a supply step is seen when its signal is this many noise σ
 ANSWER_S = 5.0  # a device answers a command, or delivers the samples due, within this (beyond their time)
+READ_S = 0.05  # read in pieces of this while waiting for something other than samples
 
 
 class CheckStopped(RuntimeError):
@@ -149,14 +150,10 @@ class HardwareCheck:
         result = self._command(FieldCurrentCommand(0, 0, self.supply_step_a))
         if not result.accepted:
             return CheckLine("field supply", False, f"refused: {result.reason}")
-        self._read_span(self._next_index, result.applied_sample_index + 1)
-        settled_s = self.supply_config.settle_s + 0.05  # the read-back is taken settle_s after the last step
-        stepped = self._read(max(0.5, settled_s))
-        readback = self._readback_a()
+        readback = self._readback_after(result.applied_sample_index)
+        stepped = self._read(0.5)  # settled: it was read back so
         back = self._command(FieldCurrentCommand(0, 0, 0.0))
-        self._read_span(self._next_index, back.applied_sample_index + 1)
-        self._read(settled_s)
-        at_zero = self._readback_a()
+        at_zero = self._readback_after(back.applied_sample_index)
         change = stepped.mean(axis=0) - rest_mean_t
         step_tolerance_a = self.supply_config.readback_tolerance_a(self.supply_step_a)
         zero_tolerance_a = self.supply_config.readback_tolerance_a(0.0)
@@ -175,6 +172,19 @@ class HardwareCheck:
         """The supply's current as the device reports it (NaN when it reports none)."""
         stats = self.backend.stats()
         return float(stats.get("supply_readback_a", stats.get("supply_current_a", math.nan)))
+
+    def _readback_after(self, step_index: int) -> float:
+        """The supply's current read back after its step at sample ``step_index``: an older
+        read-back (the step before, on a host catching up with the card) is not this step's.
+        The backend reads back ``settle_s`` after it wrote the step, in the supply's own time."""
+        self._read_span(self._next_index, step_index + 1)
+        wait_s = self.supply_config.settle_s + ANSWER_S
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            if self.backend.stats().get("supply_readback_step", -1) >= step_index:
+                return self._readback_a()
+            self._read(READ_S)
+        raise CheckStopped(f"the supply was not read back within {wait_s:g} s of its step")
 
     # --- the backend -------------------------------------------------------------------------
     def _command(self, command) -> CommandResult:

@@ -11,20 +11,24 @@ within one input block of it, and reads the current back ``settle_s`` after the 
 The supply fails safe. At open its status is cleared, its ``*IDN?`` must name the file's model
 (another instrument at the address gets nothing more), its safety limits and over-voltage
 protection are set from the file's caps before its output is switched on. After every command its
-whole error queue is read and any entry refuses the command. On close the current is set to zero
-and the output switched off, each tried whatever the other did, and the instrument is returned
-to local control.
+whole error queue is read and any entry refuses the command. On close (and on any fault) the
+current is set to zero, the channel's output, every other channel's and the master output are
+switched off and each is read back off, every step tried whatever the others did; on close the
+instrument is then returned to local control.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib
 import math
 import string
+from collections.abc import Callable
 from typing import Any
 
 from mows.device.instruments.daq import HARDWARE_DIR
+from mows.physics import ranges
 from mows.physics.schema import load_yaml, positive, refused, typed
 from mows.physics.supply import SupplyLimits
 
@@ -63,6 +67,9 @@ class ScpiCommands:
     over_voltage_protection: str = "VOLT:PROT {:d}"
     local: str = "SYST:LOC"  # the front panel back to the operator
     output_state: str = "OUTP?"  # answers 0 once the output is off: read back after switching it off
+    master_output_state: str = "OUTP:GEN?"  # the master output, read back after switching it off
+    protection_tripped: str = "VOLT:PROT:TRIP?"  # answers 1 once the over-voltage protection has tripped
+    clear_protection: str = "VOLT:PROT:CLE"  # a tripped protection reset (the output stays off until then)
 
     def __post_init__(self) -> None:
         formats = {
@@ -115,6 +122,7 @@ class ScpiSupplyConfig:
     polarity: str = "unipolar"
     commands: ScpiCommands = ScpiCommands()
     channel: int = 1
+    channels: int = 1  # the model's outputs: each is switched off and read back so on close
     voltage_limit_v: float = 10.0
     over_voltage_v: float = 12.0
     readback_accuracy_a: float = 1.0e-3
@@ -132,8 +140,18 @@ class ScpiSupplyConfig:
         )
         positive("voltage_limit_v", self.voltage_limit_v)  # never sent as VOLT nan, nor as a negative limit
         positive("timeout_s", self.timeout_s)
+        for name, quantity in (("timeout_s", "timeout_s"), ("settle_s", "settle_s"), ("slew_a_per_s", "slew_a_per_s")):
+            ranges.check(quantity, getattr(self, name), name)
+        ramp_s = self.cap_a / self.slew_a_per_s
+        if ramp_s > ranges.MAX_WAIT_S:
+            raise ValueError(
+                f"slew_a_per_s = {self.slew_a_per_s:g} A/s takes {ramp_s:.3g} s to ramp to cap_a = {self.cap_a:g} A: "
+                f"beyond the {ranges.MAX_WAIT_S:g} s any wait of the bench may last"
+            )
         if self.channel < 1:
             raise refused("channel", self.channel, "is not a channel number (1, 2, …)")
+        if self.channels < self.channel:
+            raise refused("channels", self.channels, f"must count channel {self.channel} among the model's outputs")
         if not self.model.strip():
             raise ValueError("model = '' : the supply file names the model its *IDN? must report")
         if not self.over_voltage_v > self.voltage_limit_v:
@@ -171,6 +189,7 @@ class SupplySchedule:
         self.sample_rate_hz = sample_rate_hz
         self.target_a = 0.0  # where the queued steps end
         self.current_a = 0.0  # the last step handed out
+        self.last_index = -1  # its sample
         self._steps: list[tuple[int, float]] = []  # (sample index, current), in order
 
     def ramp(self, at_index: int, next_index: int, current_a: float) -> int:
@@ -198,11 +217,11 @@ class SupplySchedule:
 
     def due(self, next_index: int) -> list[float]:
         """The steps whose sample is before ``next_index``, in order (each once)."""
-        due = [a for index, a in self._steps if index < next_index]
+        due = [(index, a) for index, a in self._steps if index < next_index]
         self._steps = [(index, a) for index, a in self._steps if index >= next_index]
         if due:
-            self.current_a = due[-1]
-        return due
+            self.last_index, self.current_a = due[-1]
+        return [a for _, a in due]
 
     @property
     def ramping(self) -> bool:
@@ -235,6 +254,8 @@ class ScpiSupply:
         self.set_current_a(0.0)
         self._write(commands.set_voltage.format(self.config.voltage_limit_v))
         self._protect()
+        if commands.clear_protection:
+            self._write(commands.clear_protection)  # a trip told before is reset only now, at zero
         self.output(True)
         if commands.master_output:
             self._write(commands.master_output.format(1))
@@ -285,15 +306,34 @@ class ScpiSupply:
         self._write(self.config.commands.output.format(int(on)))
 
     def safe(self) -> list[str]:
-        """Current to zero and output off, each tried whatever the other did, and the output read
-        back as off; what failed."""
+        """Current to zero and output off, then every other channel's output and the master
+        output off, each tried whatever the others did and read back as off; what failed."""
+        commands = self.config.commands
+        steps: list[Callable[[], None]] = [lambda: self.set_current_a(0.0), lambda: self.output(False)]
+        steps.append(self._read_back_off)
+        for channel in range(1, self.config.channels + 1):
+            if channel != self.config.channel:
+                steps += [functools.partial(self._select, channel), lambda: self.output(False), self._read_back_off]
+        if self.config.channels > 1:
+            steps.append(lambda: self._select(self.config.channel))
+        if commands.master_output:
+            steps += [lambda: self._write(commands.master_output.format(0)), self._read_back_master_off]
         problems = []
-        for step in (lambda: self.set_current_a(0.0), lambda: self.output(False), self._read_back_off):
+        for step in steps:
             try:
                 step()
             except SupplyError as error:
                 problems.append(str(error))
         return problems
+
+    def _select(self, channel: int) -> None:
+        if self.config.commands.select_channel:
+            self._write(self.config.commands.select_channel.format(channel))
+
+    def tripped(self) -> bool:
+        """Whether the over-voltage protection has tripped (False for a model that cannot say)."""
+        query = self.config.commands.protection_tripped
+        return bool(query) and self._query(query).strip() in ("1", "ON")
 
     def output_state(self) -> str:
         """The output as the supply reads it back: 'on' or 'off'; '' for a model without the
@@ -310,6 +350,11 @@ class ScpiSupply:
         if self.output_state() == "on":
             query = self.config.commands.output_state
             raise SupplyError(f"{self.config.name}: {query} reads back on after the output was switched off")
+
+    def _read_back_master_off(self) -> None:
+        query = self.config.commands.master_output_state
+        if query and OUTPUT_STATES.get(self._query(query).strip()) != "off":
+            raise SupplyError(f"{self.config.name}: {query} does not read back off after the master output was")
 
     def close(self) -> None:
         """Current to zero at once (the caller has ramped it down) and output off (:meth:`safe`),

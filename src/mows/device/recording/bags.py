@@ -33,6 +33,8 @@ from rosbags.rosbag2.storage_mcap import McapWriter, write_record, write_string
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
+from mows.records.files import read_input
+
 PACKAGE = "mows_msgs"
 REPOSITORY_PACKAGE = Path(__file__).resolve().parents[4] / PACKAGE
 BAG_VERSION: Literal[9] = 9  # rosbag2's metadata version in Jazzy
@@ -152,16 +154,35 @@ def check_readable(path: str | os.PathLike) -> Path:
             f"{path} has no metadata.yaml: the recording was never closed; "
             f"`mows bag repair {path}` recovers its intact chunks"
         )
+    metadata = path / "metadata.yaml" if path.is_dir() else None
+    if metadata is not None and metadata.is_file():
+        try:
+            metadata.read_text(encoding="utf-8")
+        except UnicodeDecodeError as error:
+            raise BagError(
+                f"{metadata} is not UTF-8 text (byte {error.start}): not rosbag2's metadata; "
+                f"restore it, or `mows bag repair {path}` rebuilds the bag from its .mcap file"
+            ) from None
     try:
         with Reader(path):
             pass
-    except ReaderError as error:
-        bag = path if path.is_dir() else path.parent
-        raise BagError(
-            f"{path} cannot be read ({error}): if the recording was cut off, "
-            f"`mows bag repair {bag}` recovers its intact chunks"
-        ) from None
+    except (ReaderError, *READER_FAULTS) as error:
+        raise _unreadable(path, error) from None
     return path
+
+
+# What rosbags raises, besides its ReaderError, on a file that is not what it expects (a file of
+# only MCAP's magic: TypeError from ord() of nothing).
+READER_FAULTS = (ValueError, TypeError, KeyError, IndexError, AttributeError, struct.error, EOFError, yaml.YAMLError)
+
+
+def _unreadable(path: Path, error: Exception) -> BagError:
+    bag = path if path.is_dir() else path.parent
+    problem = " ".join(str(error).split()) or type(error).__name__
+    return BagError(
+        f"{path} cannot be read as a bag ({problem}): if the recording was cut off, "
+        f"`mows bag repair {bag}` recovers its intact chunks"
+    )
 
 
 def as_jazzy(metadata_yaml: str) -> str:
@@ -211,15 +232,20 @@ def read_bag(path: str | os.PathLike, topics: Iterable[str] | None = None) -> It
     ``pkg/srv/msg/`` and then cannot open a bag that holds service parts.
     """
     store = typestore()
-    path = check_readable(path)
-    with Reader(path) as reader:
-        wanted = set(topics) if topics is not None else None
-        connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
-        if not connections:  # rosbags reads every connection when given none
-            return
-        decoders = {c.id: decoder(c, store) for c in connections}
-        for connection, timestamp_ns, raw in reader.messages(connections=connections):
-            yield BagMessage(connection.topic, connection.msgtype, timestamp_ns, decoders[connection.id](raw))
+    path = check_readable(read_input(path))
+    try:
+        with Reader(path) as reader:
+            wanted = set(topics) if topics is not None else None
+            connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
+            if not connections:  # rosbags reads every connection when given none
+                return
+            decoders = {c.id: decoder(c, store) for c in connections}
+            for connection, timestamp_ns, raw in reader.messages(connections=connections):
+                yield BagMessage(connection.topic, connection.msgtype, timestamp_ns, decoders[connection.id](raw))
+    except BagError:
+        raise
+    except (ReaderError, *READER_FAULTS) as error:  # a bag damaged past its opening
+        raise _unreadable(path, error) from None
 
 
 def decoder(connection: Connection, store: Typestore) -> Callable[[bytes], Any]:

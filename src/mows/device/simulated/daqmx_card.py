@@ -3,8 +3,9 @@ check-hardware --simulate`` drive :class:`nidaqmx.Task`, its channels, timing, t
 stream readers and writers as they are, and only the package's lowest layer, the interpreter that
 calls NI's C library (``nidaqmx._library_interpreter.LibraryInterpreter``, which
 ``nidaqmx.utils._select_interpreter`` makes for every task), is replaced by
-:class:`SimulatedInterpreter` (:meth:`SimulatedCard.installed`). Every attribute path, argument,
-constant and error class the backend meets is NI's.
+:class:`mows.device.simulated.daqmx_interpreter.SimulatedInterpreter` on this card
+(:meth:`SimulatedCard.installed`). Every attribute path, argument, constant and error class the
+backend meets is NI's.
 
 The card keeps wall-clock time: from the inputs' start trigger its sample clock advances with
 ``time.monotonic``, not with the reads. A host that reads late finds the samples waiting, up to
@@ -17,7 +18,9 @@ non-regenerating output the host did not keep fed) and idle at 0 V. A card pulle
 It holds the calls to what the bench requires of them, with NI's error codes: channels on the
 card's terminals within its ranges; continuous hardware timing; the outputs started before the
 inputs, on the inputs' start trigger, at their rate, with data written first, regeneration off and
-0 V when idle; writes within the output buffer and its range; named tasks unique while open.
+0 V when idle; writes within the output buffer and its range; named tasks unique while open. Its
+sample clock is its 100 MHz timebase divided by an integer: a rate it does not divide is coerced
+to the next one above, as NI's cards do, and read back so.
 
 What the outputs generate is what the amplifiers feed the coils: the card reads each drive back
 from the volts (the sinusoid's frequency from three samples, its amplitude from one) and gives it
@@ -29,7 +32,6 @@ stopped (coils off), so that a re-armed card finds the probe where time has take
 
 from __future__ import annotations
 
-import abc
 import contextlib
 import dataclasses
 import math
@@ -40,55 +42,18 @@ from collections.abc import Callable, Iterator
 
 import nidaqmx._library_interpreter
 import numpy as np
-from nidaqmx._base_interpreter import BaseInterpreter
-from nidaqmx.constants import AcquisitionType, AOIdleOutputBehavior, ChannelType, RegenerationMode
+from nidaqmx.constants import AcquisitionType, AOIdleOutputBehavior, RegenerationMode
 from nidaqmx.error_codes import DAQmxErrors
-from nidaqmx.errors import DaqError, DaqFunctionNotSupportedError, DaqReadError, DaqWriteError
+from nidaqmx.errors import DaqError
 
+from mows.device.simulated.daqmx_interpreter import SimulatedInterpreter, daq_error
 from mows.sim.simulator import SimulatedDevice
 
 MAX_RATE_HZ = 2.0e6  # the PCIe-6363's aggregate input rate
+TIMEBASE_HZ = 100.0e6  # its sample clock's timebase: a rate is this divided by an integer
 AI_RANGE_V = 10.0
 AO_RANGE_V = 10.0
 DRIVE_TOLERANCE_V = 1e-6  # a drive's samples follow its sinusoid to this, or the card refuses
-
-# The attributes the bench's calls reach (NI's ids, as nidaqmx's generated properties pass them).
-TASK_NAME = 0x1276
-CHANNEL_TYPE = 0x187F
-AO_IDLE_OUTPUT_BEHAVIOR = 0x2240
-REGEN_MODE = 0x1453
-READ_NUM_CHANS = 0x217B
-WRITE_NUM_CHANS = 0x217E
-READ_AVAIL_SAMP_PER_CHAN = 0x1223
-READ_TOTAL_SAMP_PER_CHAN_ACQUIRED = 0x192A
-WRITE_TOTAL_SAMP_PER_CHAN_GENERATED = 0x192B
-
-_MESSAGES = {
-    DAQmxErrors.SAMPLES_NO_LONGER_AVAILABLE: (
-        "Attempted to read samples that are no longer available. The requested sample was previously "
-        "available, but has since been overwritten."
-    ),
-    DAQmxErrors.GEN_STOPPED_TO_PREVENT_REGEN_OF_OLD_SAMPLES: (
-        "The generation has stopped to prevent the regeneration of old samples. Your application was "
-        "unable to write samples to the background buffer fast enough to prevent old samples from "
-        "being regenerated."
-    ),
-    DAQmxErrors.DEV_CANNOT_BE_ACCESSED: (
-        "Device cannot be accessed. Possible causes: Device is no longer present in the system."
-    ),
-    DAQmxErrors.SAMPLES_NOT_YET_AVAILABLE: "Some or all of the samples requested have not yet been acquired.",
-}
-
-
-def _error(code: DAQmxErrors, detail: str = "", *, read: bool = False, write: bool = False) -> DaqError:
-    """NI's error class for ``code`` as its library interpreter raises it (a read or a write: with
-    the samples transferred, none)."""
-    message = " ".join(part for part in (_MESSAGES.get(code, ""), detail) if part)
-    if read:
-        return DaqReadError(message, code.value, 0)
-    if write:
-        return DaqWriteError(message, code.value, 0)
-    return DaqError(message, code.value)
 
 
 @dataclasses.dataclass
@@ -132,6 +97,7 @@ class SimulatedCard:
         self.supply_current_a = supply_current_a
         self.clock = clock
         self.present = True
+        self.timebase_hz = TIMEBASE_HZ
         self.tasks: dict[int, _Task] = {}  # by handle, while open
         self.made: list[_Task] = []  # every task ever made, in order
         self.drives: list[tuple[int, tuple, float]] = []  # (on sample, amplitudes A, Hz): what the coils got
@@ -178,7 +144,9 @@ class SimulatedCard:
             self.present = False
             for task in self.tasks.values():
                 if task.running:
-                    gone = _error(DAQmxErrors.DEV_CANNOT_BE_ACCESSED, read=task.kind == "ai", write=task.kind == "ao")
+                    gone = daq_error(
+                        DAQmxErrors.DEV_CANNOT_BE_ACCESSED, read=task.kind == "ai", write=task.kind == "ao"
+                    )
                     self._stop(task, gone)
 
     def plug_in(self) -> None:
@@ -207,7 +175,7 @@ class SimulatedCard:
             return
         if self._acquired() > ao.position:
             self.underflows += 1
-            self._stop(ao, _error(DAQmxErrors.GEN_STOPPED_TO_PREVENT_REGEN_OF_OLD_SAMPLES, write=True), ao.position)
+            self._stop(ao, daq_error(DAQmxErrors.GEN_STOPPED_TO_PREVENT_REGEN_OF_OLD_SAMPLES, write=True), ao.position)
 
     def _stop(self, task: _Task, error: DaqError | None = None, at_sample: int | None = None) -> None:
         """``task`` stops (at its card sample ``at_sample``, default now); outputs idle at 0 V."""
@@ -225,10 +193,10 @@ class SimulatedCard:
         if task.error is not None:
             raise task.error
         if task.running and not self.present:
-            raise _error(DAQmxErrors.DEV_CANNOT_BE_ACCESSED, write=True)
+            raise daq_error(DAQmxErrors.DEV_CANNOT_BE_ACCESSED, write=True)
         generated = min(self._acquired(), task.position) if task.running else 0
         if task.position + volts.shape[1] - generated > task.buffer_samples:
-            raise _error(
+            raise daq_error(
                 DAQmxErrors.SAMPLES_CAN_NOT_YET_BE_WRITTEN,
                 "Write cannot be performed, because the number of samples to write is larger than the space "
                 f"available in the buffer ({task.buffer_samples} samples).",
@@ -298,17 +266,19 @@ class SimulatedCard:
             if task.error is not None:
                 raise task.error
             if not task.running:
-                raise _error(DAQmxErrors.CANNOT_READ_WHEN_AUTO_START_FALSE_AND_TASK_NOT_RUNNING_OR_COMMITTED, read=True)
+                raise daq_error(
+                    DAQmxErrors.CANNOT_READ_WHEN_AUTO_START_FALSE_AND_TASK_NOT_RUNNING_OR_COMMITTED, read=True
+                )
             acquired = self._acquired()
             if acquired - task.position > task.buffer_samples:
                 self.overruns += 1
-                self._stop(task, _error(DAQmxErrors.SAMPLES_NO_LONGER_AVAILABLE, read=True))
+                self._stop(task, daq_error(DAQmxErrors.SAMPLES_NO_LONGER_AVAILABLE, read=True))
                 raise task.error  # type: ignore[misc]  # set just now
             if task.position + n <= acquired:
                 break
             wait_s = (task.position + n - acquired) / self.device.sample_rate_hz
             if self.clock() + wait_s > deadline:
-                raise _error(DAQmxErrors.SAMPLES_NOT_YET_AVAILABLE, f"Timeout: {timeout_s} s.", read=True)
+                raise daq_error(DAQmxErrors.SAMPLES_NOT_YET_AVAILABLE, f"Timeout: {timeout_s} s.", read=True)
             self._lock.release()  # the clock runs on while the host waits (a stop may come meanwhile)
             try:
                 time.sleep(wait_s)
@@ -358,7 +328,7 @@ class SimulatedCard:
     # --- the tasks ---------------------------------------------------------------------------
     def create(self, name: str) -> int:
         if name and any(t.name == name for t in self.tasks.values()):
-            raise _error(DAQmxErrors.DUPLICATE_TASK, f"Task name {name!r} is already used by an open task.")
+            raise daq_error(DAQmxErrors.DUPLICATE_TASK, f"Task name {name!r} is already used by an open task.")
         self._handles += 1
         task = _Task(name or f"_unnamedTask<{self._handles}>")
         self.tasks[self._handles] = task
@@ -367,26 +337,28 @@ class SimulatedCard:
 
     def task(self, handle: int) -> _Task:
         if handle not in self.tasks:
-            raise _error(DAQmxErrors.INVALID_TASK, f"Task handle {handle!r} is not an open task.")
+            raise daq_error(DAQmxErrors.INVALID_TASK, f"Task handle {handle!r} is not an open task.")
         return self.tasks[handle]
 
     def add_channel(self, handle: int, kind: str, terminal: str, min_v: float, max_v: float) -> None:
         task = self.task(handle)
         if not self.present:
-            raise _error(DAQmxErrors.DEV_CANNOT_BE_ACCESSED, f"Device: {self.device_name}")
+            raise daq_error(DAQmxErrors.DEV_CANNOT_BE_ACCESSED, f"Device: {self.device_name}")
         match = re.fullmatch(r"(\w+)/(ai|ao)(\d+)", str(terminal))
         if not match or match.group(1) != self.device_name:
-            raise _error(
+            raise daq_error(
                 DAQmxErrors.INVALID_DEVICE_ID,
                 f"Device identifier is invalid. Device Specified: {str(terminal).split('/')[0]}",
             )
         if match.group(2) != kind:
-            raise _error(DAQmxErrors.INVALID_PHYS_CHAN_TYPE, f"Physical channel {terminal!r} is not an {kind} channel.")
+            raise daq_error(
+                DAQmxErrors.INVALID_PHYS_CHAN_TYPE, f"Physical channel {terminal!r} is not an {kind} channel."
+            )
         if task.kind not in ("", kind):
-            raise _error(DAQmxErrors.MULTI_CHAN_TYPES_IN_TASK, "Input and output channels cannot be in one task.")
+            raise daq_error(DAQmxErrors.MULTI_CHAN_TYPES_IN_TASK, "Input and output channels cannot be in one task.")
         limit = AI_RANGE_V if kind == "ai" else AO_RANGE_V
         if not (-limit <= min_v < max_v <= limit):
-            raise _error(
+            raise daq_error(
                 DAQmxErrors.INVALID_ATTRIBUTE_VALUE, f"Requested range [{min_v}, {max_v}] V exceeds ±{limit} V."
             )
         task.kind = kind
@@ -395,20 +367,24 @@ class SimulatedCard:
     def timing(self, handle: int, rate_hz: float, sample_mode: int, samps_per_chan: int) -> None:
         task = self.task(handle)
         if not task.channels:
-            raise _error(DAQmxErrors.CAN_NOT_PERFORM_OP_WHEN_NO_CHANS_IN_TASK)
+            raise daq_error(DAQmxErrors.CAN_NOT_PERFORM_OP_WHEN_NO_CHANS_IN_TASK)
         if sample_mode != AcquisitionType.CONTINUOUS.value:
-            raise _error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, "The bench streams: sample_mode must be CONTINUOUS.")
+            raise daq_error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, "The bench streams: sample_mode must be CONTINUOUS.")
         if not 0.0 < rate_hz <= MAX_RATE_HZ:
-            raise _error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, f"Sample clock rate {rate_hz} Hz is out of range.")
-        task.rate_hz, task.buffer_samples = float(rate_hz), int(samps_per_chan)
+            raise daq_error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, f"Sample clock rate {rate_hz} Hz is out of range.")
+        # The card divides its timebase by an integer: another rate is coerced to the next one above.
+        task.rate_hz, task.buffer_samples = (
+            self.timebase_hz / math.floor(self.timebase_hz / rate_hz),
+            int(samps_per_chan),
+        )
 
     def start(self, handle: int) -> None:
         task = self.task(handle)
         self._advance()
         if not self.present:
-            raise _error(DAQmxErrors.DEV_CANNOT_BE_ACCESSED, f"Device: {self.device_name}")
+            raise daq_error(DAQmxErrors.DEV_CANNOT_BE_ACCESSED, f"Device: {self.device_name}")
         if not task.rate_hz:
-            raise _error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, "The task has no sample clock timing.")
+            raise daq_error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, "The task has no sample clock timing.")
         if task.kind == "ao":
             self._start_outputs(task)
         else:
@@ -416,18 +392,18 @@ class SimulatedCard:
 
     def _start_outputs(self, task: _Task) -> None:
         if task.trigger != f"/{self.device_name}/ai/StartTrigger":
-            raise _error(
+            raise daq_error(
                 DAQmxErrors.TRIG_LINE_NOT_FOUND_ROUTING,
                 f"The outputs must start on the inputs' start trigger, not {task.trigger!r}.",
             )
         if task.regen_mode != RegenerationMode.DONT_ALLOW_REGENERATION.value:
-            raise _error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, "A streamed output must not regenerate its buffer.")
+            raise daq_error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, "A streamed output must not regenerate its buffer.")
         if task.idle_behavior != AOIdleOutputBehavior.ZERO_VOLTS.value:
-            raise _error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, "The coils must go to zero when the outputs stop.")
+            raise daq_error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, "The coils must go to zero when the outputs stop.")
         if not task.position:
-            raise _error(DAQmxErrors.OUTPUT_BUFFER_EMPTY, "Generation cannot start: the output buffer is empty.")
+            raise daq_error(DAQmxErrors.OUTPUT_BUFFER_EMPTY, "Generation cannot start: the output buffer is empty.")
         if self._running("ai") is not None:
-            raise _error(
+            raise daq_error(
                 DAQmxErrors.CAN_NOT_PERFORM_OP_WHILE_TASK_RUNNING,
                 "The inputs' start trigger has passed: start the outputs first.",
             )
@@ -436,7 +412,7 @@ class SimulatedCard:
     def _start_inputs(self, task: _Task) -> None:
         outputs = [t for t in self.tasks.values() if t.kind == "ao"]
         if not all(t.running and t.rate_hz == task.rate_hz for t in outputs):
-            raise _error(
+            raise daq_error(
                 DAQmxErrors.CAN_NOT_PERFORM_OP_WHILE_TASK_RUNNING,
                 "The outputs must be armed on the inputs' trigger and rate before the inputs start.",
             )
@@ -462,157 +438,3 @@ class SimulatedCard:
         if handle in self.tasks:
             self.stop(handle)
             del self.tasks[handle]
-
-
-def _locked(method):
-    """The card's lock around an interpreter call (the driver's stream and watchdog threads share it)."""
-
-    def call(self, *args):
-        with self.card._lock:
-            return method(self, *args)
-
-    call.__name__ = method.__name__
-    return call
-
-
-class SimulatedInterpreter(BaseInterpreter):
-    """NI's interpreter interface (:class:`nidaqmx._base_interpreter.BaseInterpreter`) on a
-    :class:`SimulatedCard`; the calls the bench does not make raise ``DaqFunctionNotSupportedError``."""
-
-    __slots__ = ("card",)
-
-    def __init__(self, card: SimulatedCard):
-        self.card = card
-
-    @_locked
-    def create_task(self, session_name):
-        return self.card.create(session_name), True
-
-    @_locked
-    def clear_task(self, task):
-        self.card.clear(task)
-
-    def hash_task_handle(self, task_handle):
-        return hash(task_handle)
-
-    def internal_get_last_created_chan(self):
-        raise DaqFunctionNotSupportedError("internal_get_last_created_chan")
-
-    @_locked
-    def create_ai_voltage_chan(
-        self, task, physical_channel, name_to_assign_to_channel, terminal_config, min_val, max_val, units, scale
-    ):
-        self.card.add_channel(task, "ai", physical_channel, min_val, max_val)
-
-    @_locked
-    def create_ao_voltage_chan(self, task, physical_channel, name_to_assign_to_channel, min_val, max_val, units, scale):
-        self.card.add_channel(task, "ao", physical_channel, min_val, max_val)
-
-    @_locked
-    def cfg_samp_clk_timing(self, task, rate, source, active_edge, sample_mode, samps_per_chan):
-        self.card.timing(task, rate, sample_mode, samps_per_chan)
-
-    @_locked
-    def cfg_dig_edge_start_trig(self, task, trigger_source, trigger_edge):
-        self.card.task(task).trigger = trigger_source
-
-    @_locked
-    def start_task(self, task):
-        self.card.start(task)
-
-    @_locked
-    def stop_task(self, task):
-        self.card.stop(task)
-
-    @_locked
-    def read_analog_f64(self, task, num_samps_per_chan, timeout, fill_mode, read_array):
-        card_task = self.card.task(task)
-        if not 0.0 < timeout < math.inf:
-            raise _error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, f"The bench's reads time out: timeout = {timeout!r} s.")
-        if not 0 < num_samps_per_chan <= card_task.buffer_samples:
-            raise _error(DAQmxErrors.READ_BUFFER_TOO_SMALL, f"{num_samps_per_chan} samples per channel requested.")
-        read_array[:] = self.card.read(card_task, num_samps_per_chan, timeout)
-        return read_array, num_samps_per_chan
-
-    @_locked
-    def write_analog_f64(self, task, num_samps_per_chan, auto_start, timeout, data_layout, write_array):
-        card_task = self.card.task(task)
-        if auto_start:
-            raise _error(DAQmxErrors.INVALID_ATTRIBUTE_VALUE, "A triggered output is started explicitly.")
-        ranges = np.array([r for _, r in card_task.channels])[:, None]
-        if np.any(np.abs(write_array) > ranges):
-            raise _error(DAQmxErrors.INVALID_AO_DATA_WRITE, "Value passed to the Task/Channels is out of range.")
-        return self.card.write(card_task, np.array(write_array[:, :num_samps_per_chan]))
-
-    @_locked
-    def get_task_attribute_string(self, task, attribute):
-        if attribute != TASK_NAME:
-            raise DaqFunctionNotSupportedError(f"task attribute {attribute:#x}")
-        return self.card.task(task).name
-
-    @_locked
-    def get_chan_attribute_int32(self, task, channel, attribute):
-        if attribute != CHANNEL_TYPE:
-            raise DaqFunctionNotSupportedError(f"channel attribute {attribute:#x}")
-        kind = self.card.task(task).kind
-        return (ChannelType.ANALOG_INPUT if kind == "ai" else ChannelType.ANALOG_OUTPUT).value
-
-    @_locked
-    def set_chan_attribute_int32(self, task, channel, attribute, value):
-        if attribute != AO_IDLE_OUTPUT_BEHAVIOR:
-            raise DaqFunctionNotSupportedError(f"channel attribute {attribute:#x}")
-        self.card.task(task).idle_behavior = value
-
-    @_locked
-    def set_write_attribute_int32(self, task, attribute, value):
-        if attribute != REGEN_MODE:
-            raise DaqFunctionNotSupportedError(f"write attribute {attribute:#x}")
-        self.card.task(task).regen_mode = value
-
-    @_locked
-    def get_write_attribute_int32(self, task, attribute):
-        if attribute != REGEN_MODE:
-            raise DaqFunctionNotSupportedError(f"write attribute {attribute:#x}")
-        return self.card.task(task).regen_mode
-
-    @_locked
-    def get_read_attribute_uint32(self, task, attribute):
-        card_task = self.card.task(task)
-        if attribute == READ_NUM_CHANS:
-            return len(card_task.channels)
-        if attribute == READ_AVAIL_SAMP_PER_CHAN:
-            return max(0, self.card._acquired() - card_task.position) if card_task.running else 0
-        raise DaqFunctionNotSupportedError(f"read attribute {attribute:#x}")
-
-    @_locked
-    def get_read_attribute_uint64(self, task, attribute):
-        if attribute != READ_TOTAL_SAMP_PER_CHAN_ACQUIRED:
-            raise DaqFunctionNotSupportedError(f"read attribute {attribute:#x}")
-        return self.card._acquired() if self.card.task(task).running else 0
-
-    @_locked
-    def get_write_attribute_uint32(self, task, attribute):
-        if attribute != WRITE_NUM_CHANS:
-            raise DaqFunctionNotSupportedError(f"write attribute {attribute:#x}")
-        return len(self.card.task(task).channels)
-
-    @_locked
-    def get_write_attribute_uint64(self, task, attribute):
-        if attribute != WRITE_TOTAL_SAMP_PER_CHAN_GENERATED:
-            raise DaqFunctionNotSupportedError(f"write attribute {attribute:#x}")
-        card_task = self.card.task(task)
-        self.card._advance()
-        return min(self.card._acquired(), card_task.position) if card_task.running else 0
-
-
-def _unsupported(name: str):
-    def call(self, *args, **kwargs):
-        raise DaqFunctionNotSupportedError(f"{name} is not simulated: the bench does not call it")
-
-    call.__name__ = name
-    return call
-
-
-for _name in BaseInterpreter.__abstractmethods__ - vars(SimulatedInterpreter).keys():
-    setattr(SimulatedInterpreter, _name, _unsupported(_name))
-abc.update_abstractmethods(SimulatedInterpreter)

@@ -5,7 +5,8 @@ the session owns: the stream cut into published blocks with gaps counted (``bloc
 sample rate received (``rate``) and the static-field supply's ramps from sent to reached
 (``supply_ramps``). Beside the session, its counterpart on the simulator in device time
 (``device_time``: :class:`~mows.device.stream.device_time.DeviceTimeLoop`, the sequencer's cycles
-without threads, for the benchmarks and the simulated calibration).
+without threads, for the benchmarks and the simulated calibration), and its cycles' ring-downs
+recorded with the simulation's truth (``simulated_cycle``: ``mows sim``, the physics tests).
 
 May import: the device packages under it (``cycle``, ``recording``, ``serial``, ``instruments``,
 ``simulated``, ``interface``, ``clock``, ``protocol``), ``mows.sim``, ``mows.physics``,

@@ -78,15 +78,15 @@ class CalibrationPoint:
 class KnownConstants:
     """What the calibration takes as given: the magnet's moment and mass (data sheet, scale),
     the housing stop, and optionally the environment field at the probe with the supply at
-    zero (a reference magnetometer), global frame, and the ring-downs' start swing at the
-    switch-off with its uncertainty when it was measured apart (None: from the fits' θmax)."""
+    zero (a reference magnetometer), global frame, and the housing stop the ring-downs are
+    released at with its uncertainty when it was measured apart (None: from the fits' θmax)."""
 
     moment_am2: float
     magnet_mass_kg: float
     theta_stop_rad: float = math.radians(24.0)
     environment_field_t: tuple[float, ...] | None = None
-    start_swing_rad: float | None = None
-    start_swing_std_rad: float = 0.0
+    measured_stop_rad: float | None = None
+    measured_stop_std_rad: float = 0.0
 
     @classmethod
     def of(cls, probe: Probe, environment_field_t: Vector | None = None) -> KnownConstants:

@@ -1,7 +1,9 @@
 """Calibrating a new probe from ring-downs at known applied fields (paper Fig. 3, Eqs. 9–10).
 
-This module is the fit and the derived constants; what goes in and comes out is
-:mod:`mows.estimate.calibration.constants`, the model of one ring-down :mod:`mows.estimate.calibration.predicted`.
+This module is the fit; what goes in and comes out is :mod:`mows.estimate.calibration.constants`,
+the model of one ring-down :mod:`mows.estimate.calibration.predicted`, the constants derived from
+the fitted parameters :mod:`mows.estimate.calibration.derived`, and which way each wiring is
+connected :mod:`mows.estimate.calibration.polarity`.
 
 The paper steps a Helmholtz pair's current, reads Δf against B, takes the slope β0 and derives
 kM = f00·m/(2β0) (Eq. 9 inverted) and J = m/(8π²·β0·f00) (Eq. 10), and l = √(J/a) from the
@@ -54,8 +56,10 @@ from mows.estimate.calibration.constants import (
     ProbeCalibration,
     Wiring,
 )
-from mows.estimate.calibration.predicted import frequencies, inertia_from, rows_of
-from mows.physics.probe import lever_from_inertia
+from mows.estimate.calibration.derived import Fitted, Unpacked, derive
+from mows.estimate.calibration.polarity import polarity_note, wiring_polarities
+from mows.estimate.calibration.predicted import frequencies, rows_of
+from mows.physics.ringdown_average import stop_from_swing_rad
 
 FIELD_UNIT_T = 1e-6  # fit units keep the normal equations well scaled: µT, Hz/mT, mm
 BETA_UNIT_HZ_PER_T = 1e3
@@ -74,12 +78,9 @@ MEDIAN_EFFICIENCY = 1.2533  # √(π/2): the median's standard error over the me
 STOP_PRIOR_STD_RAD = math.radians(0.01)
 MIN_STOP_FITS = 5
 SWING_FLOOR_RAD = 1e-6  # fits that agree exactly (synthetic data) still leave a finite weight
-NOMINAL_BETA0_HZ_PER_T = 3.68e3  # the paper's probe: only the sign of a model shift is used
 
 
 Residuals = Callable[[np.ndarray], np.ndarray]
-# (f00 Hz, β0 Hz/T, environment field (3,) T, lever m, start swing rad) of the fit's parameters x
-Unpacked = tuple[float, float, np.ndarray, float, float]
 
 
 # --- the fit -----------------------------------------------------------------------------------
@@ -111,7 +112,7 @@ def calibrate_probe(
     ]
     notes = _dropped_notes(points, usable) + _failure_notes(failed or {}, usable)
     polarity = {**wiring_polarities(usable, wirings, known, nominal_lever_m), **(polarity or {})}
-    notes += [_polarity_note(name, sign) for name, sign in polarity.items() if sign < 0]
+    notes += [polarity_note(name, sign) for name, sign in polarity.items() if sign < 0]
     points = [dataclasses.replace(p, supply_current_a=p.supply_current_a * polarity.get(p.wiring, 1)) for p in usable]
     field_points = [p for p in points if p.wiring == field_wiring]
     gradient_points = [p for p in points if p.wiring != field_wiring]
@@ -123,7 +124,7 @@ def calibrate_probe(
     if not fit_lever:
         notes.append("no gradient points: the lever comes from J and the magnet mass alone, unchecked")
     damping, damping_var = _mean_damping(points)
-    swing, swing_std = _start_swing(points, known)
+    swing, swing_std = _housing_stop(points, known)
     unit_axis = axis / np.linalg.norm(axis)
     fixed_environment = np.zeros(3) if fit_environment else np.asarray(known.environment_field_t, float)
 
@@ -173,61 +174,14 @@ def calibrate_probe(
     cov_x = _covariance(
         jac, ["f00", "β0", "start swing"] + ["environment field"] * fit_environment + ["lever"] * fit_lever
     )
-    fitted = _Fitted(result.x, cov_x, unpack, damping, damping_var, unit_axis, fit_environment, fit_lever)
-    calibration = _derive(fitted, wirings, gradient_points, known, chi2_dof, len(points), tuple(notes))
+    fitted = Fitted(result.x, cov_x, unpack, damping, damping_var, unit_axis, fit_environment, fit_lever)
+    calibration = derive(fitted, wirings, gradient_points, known, chi2_dof, len(points), tuple(notes))
     implausible = calibration.probe().implausible()
     if implausible:
         raise CalibrationError(
             f"implausible constants, probably a unit error (currents in mA? f_hz in kHz?): {'; '.join(implausible)}"
         )
     return dataclasses.replace(calibration, polarity=polarity)
-
-
-# --- the wiring's polarity -------------------------------------------------------------------
-POLARITY_SIGMAS = 3.0  # a slope this many standard errors from zero tells the sign
-
-
-def wiring_polarities(
-    points: Sequence[CalibrationPoint], wirings: Mapping[str, Wiring], known: KnownConstants, nominal_lever_m: float
-) -> dict[str, int]:
-    """+1 or −1 for each wiring whose points tell: the sign of the slope of the measured
-    frequencies against the model's frequency shifts of the paper-like constants, within each
-    orientation (which removes the environment field's offset). −1: the frequencies move
-    against the model, so the wiring's current has the other sign than the table says (a pair
-    connected the other way round). A wiring whose slope is within POLARITY_SIGMAS standard
-    errors of zero is left out (taken as wired)."""
-    if not points:
-        return {}
-    rows = rows_of(points, wirings, known)
-    damping = float(np.mean([p.damping_per_s for p in points]))
-    constants = (float(np.median(rows.frequency_hz)), NOMINAL_BETA0_HZ_PER_T)
-    idle = dataclasses.replace(rows, field_t=0.0 * rows.field_t, gradient_t_per_m=0.0 * rows.gradient_t_per_m)
-    shift = [
-        frequencies(r, known, *constants, np.zeros(3), nominal_lever_m, known.theta_stop_rad, damping)
-        for r in (rows, idle)
-    ]
-    model_shift_hz = shift[0] - shift[1]
-    weight = 1.0 / rows.frequency_std_hz**2
-    wiring = np.array([p.wiring for p in points])
-    group = np.round(np.mod(rows.theta0_rad, 2.0 * math.pi), 6)
-    polarity: dict[str, int] = {}
-    for name in np.unique(wiring):
-        sxy = sxx = 0.0
-        for theta0 in np.unique(group[wiring == name]):
-            rows_in = (wiring == name) & (group == theta0)
-            w, x, y = weight[rows_in], model_shift_hz[rows_in], rows.frequency_hz[rows_in]
-            dx, dy = x - np.average(x, weights=w), y - np.average(y, weights=w)
-            sxy, sxx = sxy + float(np.sum(w * dx * dy)), sxx + float(np.sum(w * dx * dx))
-        if sxx > 0.0 and abs(sxy) / math.sqrt(sxx) >= POLARITY_SIGMAS:
-            polarity[str(name)] = 1 if sxy > 0.0 else -1
-    return polarity
-
-
-def _polarity_note(wiring: str, sign: int) -> str:
-    return (
-        f"the {wiring!r} wiring is reversed: its frequencies move against its current as written "
-        "(the pair is connected the other way round); calibrated with the current's sign flipped"
-    )
 
 
 def _dropped_notes(points: Sequence[CalibrationPoint], usable: Sequence[CalibrationPoint]) -> list[str]:
@@ -258,18 +212,21 @@ def _least_squares(residuals: Residuals, x0: np.ndarray, steps: np.ndarray) -> o
     return result
 
 
-def _start_swing(points: Sequence[CalibrationPoint], known: KnownConstants) -> tuple[float, float]:
+def _housing_stop(points: Sequence[CalibrationPoint], known: KnownConstants) -> tuple[float, float]:
     """The housing stop every ring-down starts from, and its standard uncertainty: as given
-    (``known.start_swing_rad``), else measured by the fits that determined both θmax and the
+    (``known.measured_stop_rad``), else measured by the fits that determined both θmax and the
     rest offset, θmax grown back by e^(δ·t) to the switch-off plus |θs − θ0|
-    (:func:`mows.physics.ringdown_average.start_swing_rad` inverted), their median with its
+    (:func:`mows.physics.ringdown_average.stop_from_swing_rad`), their median with its
     standard error from the median absolute deviation; with fewer than MIN_STOP_FITS of them
     the probe's stop ± STOP_PRIOR_STD_RAD.
     A homogeneous sweep cannot tell the stop from β0: this is what holds it."""
-    if known.start_swing_rad is not None:
-        return known.start_swing_rad, known.start_swing_std_rad
-    stops = np.array(
-        [p.amplitude_rad * math.exp(p.damping_per_s * p.start_offset_s) + abs(p.rest_offset_rad) for p in points]
+    if known.measured_stop_rad is not None:
+        return known.measured_stop_rad, known.measured_stop_std_rad
+    stops = stop_from_swing_rad(
+        [p.amplitude_rad for p in points],
+        [p.rest_offset_rad for p in points],
+        [p.damping_per_s for p in points],
+        [p.start_offset_s for p in points],
     )
     stops = stops[np.isfinite(stops)]
     if stops.size < MIN_STOP_FITS:  # a spread from fewer is no standard error
@@ -381,82 +338,3 @@ def _start(points: Sequence[CalibrationPoint], wiring: Wiring, known: KnownConst
     )
     slope, intercept = np.polyfit(along, [p.frequency_hz for p in points], 1)
     return float(intercept), float(slope) if slope > 0 else 3.68e3
-
-
-@dataclasses.dataclass(frozen=True)
-class _Fitted:
-    """The fit's parameters x (fit units) with their covariance, how they unpack into (f00, β0,
-    environment field, lever, start swing), and the ring-downs' mean damping δ with its variance."""
-
-    x: np.ndarray
-    cov_x: np.ndarray
-    unpack: Callable[[np.ndarray], Unpacked]
-    damping: float
-    damping_var: float
-    unit_axis: np.ndarray  # the homogeneous supply's field direction
-    fit_environment: bool
-    fit_lever: bool
-
-
-def _derive(
-    fitted: _Fitted,
-    wirings: Mapping[str, Wiring],
-    gradient_points: Sequence[CalibrationPoint],
-    known: KnownConstants,
-    chi2_dof: float,
-    n_points: int,
-    notes: tuple[str, ...],
-) -> ProbeCalibration:
-    """The reported constants and their covariance by the delta method over (x, δ)."""
-    x, cov_x, unpack, unit_axis = fitted.x, fitted.cov_x, fitted.unpack, fitted.unit_axis
-    fit_environment, fit_lever = fitted.fit_environment, fitted.fit_lever
-    names = [
-        "f00_hz",
-        "beta0_hz_per_t",
-        "spring_nm_per_rad",
-        "inertia_kgm2",
-        "lever_m",
-        "damping_per_s",
-        "start_swing_rad",
-    ]
-    names += ["environment_field_along_supply_t"] * fit_environment
-    gradient_factor = _gradient_factor(wirings, gradient_points) if fit_lever else None
-    names += ["gradient_lever_m", "gamma_hz_m_per_t"] * fit_lever
-
-    def constants(z: np.ndarray) -> np.ndarray:
-        f00, beta0, environment, lever, stop = unpack(z[:-1])
-        delta = z[-1]
-        spring = f00 * known.moment_am2 / (2.0 * beta0)
-        inertia = inertia_from(f00, spring, delta)
-        values = [f00, beta0, spring, inertia, lever_from_inertia(inertia, known.magnet_mass_kg), delta, stop]
-        values += [float(environment @ unit_axis)] * fit_environment
-        if fit_lever:
-            assert gradient_factor is not None  # computed whenever the lever is fitted
-            values += [lever, beta0 * lever * gradient_factor]
-        return np.array(values)
-
-    z = np.append(x, fitted.damping)
-    cov_z = np.zeros((len(z), len(z)))
-    cov_z[:-1, :-1], cov_z[-1, -1] = cov_x, fitted.damping_var
-    steps = np.maximum(np.abs(z), 1e-12) * 1e-6
-    jac = np.stack([(constants(z + e) - constants(z - e)) / (2.0 * s) for e, s in zip(np.diag(steps), steps)], -1)
-    values = constants(z)
-    covariance = jac @ cov_z @ jac.T
-    if fit_lever:
-        lever, lever_j = values[names.index("gradient_lever_m")], values[names.index("lever_m")]
-        i, j = names.index("gradient_lever_m"), names.index("lever_m")
-        sigma = math.sqrt(max(covariance[i, i] + covariance[j, j] - 2.0 * covariance[i, j], 0.0))
-        notes = notes + (
-            f"lever check: l from the gradient {lever * 1e3:.4f} mm against l = √(J/a) "
-            f"{lever_j * 1e3:.4f} mm, {(lever - lever_j) / sigma:+.2f} σ apart",
-        )
-    return ProbeCalibration(tuple(names), values, covariance, chi2_dof, n_points, known, notes)
-
-
-def _gradient_factor(wirings: Mapping[str, Wiring], gradient_points: Sequence[CalibrationPoint]) -> float:
-    """γ/(β0·l) of the gradient wiring at θ0 = 0: 1 − 2·Gy'y'/Gx'x' (docs/physics.md §6.1: k gains
-    m·l·(Gx'x' − 2·Gy'y')); 2 for an anti-Helmholtz pair along x."""
-    gradient = np.asarray(wirings[gradient_points[0].wiring].gradient_per_a_t_per_m, float)
-    if gradient[0, 0] == 0.0:
-        raise CalibrationError("the gradient wiring has no Gxx at the probe: γ along x undetermined")
-    return 1.0 - 2.0 * gradient[1, 1] / gradient[0, 0]

@@ -49,7 +49,8 @@ def rows_of(points: Sequence[CalibrationPoint], wirings: Mapping[str, Wiring], k
     gradient = np.array([wirings[p.wiring].gradient_per_a_t_per_m for p in points]) * current[:, None, None]
     theta0 = np.array([p.theta0_rad for p in points])
     damping = np.array([p.damping_per_s for p in points])
-    start = known.theta_stop_rad * np.exp(-damping * np.array([p.start_offset_s for p in points]))
+    # the nodes of a swing released at the stop about θ0, scaled to each row's own rest angle by the model
+    start = ringdown_average.swing_from_stop_rad(known.theta_stop_rad, 0.0, damping, [p.start_offset_s for p in points])
     amplitudes, weights = ringdown_average.amplitude_nodes(
         theta0, start, damping, np.array([p.duration_s for p in points]), nodes=AMPLITUDE_NODES
     )

@@ -63,8 +63,8 @@ ones are within the tolerance (tests/estimate/test_ringdown_rest_offset.py); a 0
 ring-down there determines ε in a few percent of the fits and θmax (σ ≥ 0.35°) in none.
 
 Nor is a probe of several whose line is not in the data (it did not ring): its tone would fit
-noise or share a neighbour's line, at an OK status. Where the coarse fit without one tone is
-worse by less than ABSENT_CHI2, the probe none of the remaining lines is nearest is
+noise or share a neighbour's line, at an OK status (:mod:`mows.estimate.ringdown.absent`). Where
+the coarse fit without one tone is worse by less than ABSENT_CHI2, the probe none of the remaining lines is nearest is
 NO_OSCILLATION and the others are fitted without it; a probe whose fitted line is nearer another
 probe's expected frequency than its own is NO_OSCILLATION too.
 """
@@ -80,12 +80,14 @@ from typing import SupportsFloat
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from mows.estimate.ringdown.absent import absent_tone, own_lines
 from mows.estimate.ringdown.offset import offset_starts
 from mows.estimate.ringdown.problem import (
     AMPLITUDE,
     Evaluation,
     RingdownProblem,
     evaluate,
+    finite_cost,
     padded_pickups,
     scaled_inverse,
     variable_projection,
@@ -103,45 +105,9 @@ from mows.estimate.ringdown.summary import (
     with_swing_from_size,
 )
 from mows.estimate.ringdown.types import FitOptions, FitStatus, ProbeLine, RingdownFit, failure
+from mows.estimate.ringdown.window import combine_channels, usable_window
 
 START_AMPLITUDE_RAD = 0.3  # θmax to start from (17°, a typical swing after the excitation)
-# A tone whose removal raises χ² by less than this (in units of χ²/dof) is not in the data: a
-# tone fitted to noise over its band gains ~10 (5 parameters, the best of ~30 resolved
-# frequencies); the weakest line the spectral stage detects (×30 over the floor) gains hundreds.
-ABSENT_CHI2 = 25.0
-
-# --- the usable window -----------------------------------------------------------------------
-# The coil current's decay after switch-off: what the estimator node, `mows fit` and the lab leave
-# out of a ring-down (fit_ringdown's ``coil_off_skip_s``; 0 there, for data that start clean).
-COIL_OFF_SKIP_S = 0.003
-
-
-def usable_window(saturated: NDArray[np.bool_], skip_samples: int = 0) -> tuple[int, int]:
-    """(start, stop) of the longest run of samples after ``skip_samples`` in which no channel
-    is saturated; the coil-on tail and any clipped stretch are thereby excluded."""
-    bad = np.asarray(np.asarray(saturated).reshape(len(saturated), -1).any(axis=1))
-    bad[:skip_samples] = True
-    good = np.concatenate([[False], ~bad, [False]]).astype(np.int8)
-    edges = np.flatnonzero(np.diff(good))
-    starts, stops = edges[0::2], edges[1::2]
-    if starts.size == 0:
-        return 0, 0
-    longest = np.argmax(stops - starts)
-    return int(starts[longest]), int(stops[longest])
-
-
-def combine_channels(samples: ArrayLike, mode: str) -> NDArray[np.float64]:
-    """(C, n) data for the fit: the difference of the pair, one channel, or both."""
-    samples = np.asarray(samples, float)
-    if samples.ndim == 1:
-        return samples[None, :]
-    if mode == "difference":
-        return (samples[:, 0] - samples[:, 1])[None, :]
-    if mode == "channel1":
-        return samples[:, 0][None, :]
-    if mode == "channel2":
-        return samples[:, 1][None, :]
-    return samples.T.copy()
 
 
 # --- the fit ----------------------------------------------------------------------------
@@ -229,7 +195,7 @@ def fit_ringdowns(
         )
         return failures(why, message, lines, options)
     y = combine_channels(data[start:stop], options.channels)
-    return _own_lines(_fit_window(y, fs, lines, options, start / fs), lines, options)
+    return own_lines(_fit_window(y, fs, lines, options, start / fs), lines, options)
 
 
 def _check_lines(lines: Sequence[ProbeLine], options: FitOptions) -> None:
@@ -270,7 +236,7 @@ def _coarse_start(
         return coarse, None
     extra = [0.0] if problem.offset_free else []  # the rest offset (or θ0's error) starts at 0
     starts = (_start_q(combo, lines, extra) for combo in itertools.product(*candidates))
-    return coarse, min(starts, key=lambda q: _finite_cost(evaluate(coarse, q, False).cost))
+    return coarse, min(starts, key=lambda q: finite_cost(evaluate(coarse, q, False).cost))
 
 
 def _start_q(
@@ -280,10 +246,6 @@ def _start_q(
     return np.concatenate(
         [[f, line.damping_guess_per_s, START_AMPLITUDE_RAD, phase, *extra] for (f, phase), line in zip(combo, lines)]
     )
-
-
-def _finite_cost(cost: float) -> float:
-    return cost if math.isfinite(cost) else math.inf
 
 
 def starting_point(
@@ -324,7 +286,7 @@ def _fit_window(
         return failures(FitStatus.NO_OSCILLATION, message, lines, options)
     step, _, _, _ = variable_projection(coarse, q0, options.max_iterations, tol_chi2=1e-2)
     if len(lines) > 1:
-        absent = _absent_tone(coarse, step, lines, options)
+        absent = absent_tone(coarse, step, lines, options)
         if absent is not None:
             k, message = absent
             present = _fit_window(y, fs, [line for i, line in enumerate(lines) if i != k], options, start_s)
@@ -364,60 +326,6 @@ def _fit_window(
             for fit in fits
         ]
     return fits
-
-
-def _own_lines(fits: list[RingdownFit], lines: Sequence[ProbeLine], options: FitOptions) -> list[RingdownFit]:
-    """``fits`` with NO_OSCILLATION for each probe whose fitted line is nearer another probe's
-    expected frequency than its own: that is the other's line (its own is not in the data, and
-    the fit took the nearest it found), never a number of its own."""
-    fits = list(fits)
-    for k, (fit, line) in enumerate(zip(fits, lines)):
-        if not fit.ok:
-            continue
-        nearest = min(lines, key=lambda other: abs(other.expected_frequency_hz - fit.frequency_hz))
-        if abs(nearest.expected_frequency_hz - fit.frequency_hz) < abs(line.expected_frequency_hz - fit.frequency_hz):
-            message = (
-                f"no line of probe {line.probe_id} near {line.expected_frequency_hz:.2f} Hz: its tone went to "
-                f"{fit.frequency_hz:.2f} Hz, nearer probe {nearest.probe_id}'s {nearest.expected_frequency_hz:.2f} Hz"
-            )
-            fits[k] = failure(FitStatus.NO_OSCILLATION, message, **known_of(line, options))
-    return fits
-
-
-def _absent_tone(
-    coarse: RingdownProblem, step: Evaluation, lines: Sequence[ProbeLine], options: FitOptions
-) -> tuple[int, str] | None:
-    """The tone the data do without, and why, or None: the one whose removal raises the coarse
-    optimum's χ² least, where that is less than ABSENT_CHI2 (in units of its χ²/dof). A probe
-    that did not ring (no magnet, its excitation refused) leaves its tone free to fit noise or
-    to share a neighbour's line, at an OK status; its line is then not in the data, and the
-    others are fitted without it."""
-    per_tone = coarse.per_tone
-    dof = coarse.y.size - step.q.size - step.coef.size
-    unit = step.cost / dof if dof > 0 and step.cost > 0 else math.inf
-    rises, kept_hz = [], []
-    for k in range(len(lines)):
-        kept = np.arange(len(lines)) != k
-        without = dataclasses.replace(coarse, pickups=coarse.pickups[kept])
-        q = np.delete(step.q, np.s_[k * per_tone : (k + 1) * per_tone])
-        fitted = variable_projection(without, q, options.max_iterations, tol_chi2=1e-2)[0]
-        rises.append((_finite_cost(fitted.cost) - step.cost) / unit)
-        kept_hz.append(fitted.q[::per_tone])
-    k = int(np.argmin(rises))
-    if not rises[k] < ABSENT_CHI2:
-        return None
-    # The lines that are there belong to the probes expected nearest them: the probe none is
-    # nearest to is the one absent (the tone dropped may have sat on its neighbour's line).
-    expected = np.array([line.expected_frequency_hz for line in lines])
-    owners = {int(np.argmin(np.abs(expected - f))) for f in kept_hz[k]}
-    unowned = [i for i in range(len(lines)) if i not in owners]
-    absent = unowned[0] if len(unowned) == 1 else k
-    line = lines[absent]
-    return absent, (
-        f"no line of probe {line.probe_id} near {line.expected_frequency_hz:.2f} Hz: the fit without it is "
-        f"worse by only Δχ² = {max(rises[k], 0.0):.1f} < {ABSENT_CHI2:g}; "
-        "the probe did not ring down (absent, or not excited)"
-    )
 
 
 def _refined(

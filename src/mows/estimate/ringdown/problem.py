@@ -88,6 +88,11 @@ class Evaluation:
     normal_matrix: np.ndarray | None = None
 
 
+def finite_cost(cost: float) -> float:
+    """A cost that compares: +∞ for one that is not finite (a diverged evaluation)."""
+    return cost if math.isfinite(cost) else math.inf
+
+
 def evaluate(problem: RingdownProblem, q: NDArray[np.float64], derivatives: bool = True) -> Evaluation:
     """Variable projection at q (Golub–Pereyra, with Kaufman's Jacobian): κ and B_DC by linear
     least squares, the residual and the projected normal equations of q

@@ -7,8 +7,9 @@ probes and their neighbours' field at each row), ``readers`` (:func:`load_table`
 project's bags, rotation sweeps), ``scale`` (a table's frequencies and reference held against
 its probes: a column in the wrong unit), ``ringdowns`` (a driver's bag's ring-downs cut and
 fitted as the estimator does), ``calibration_table`` (the probe calibration's table, written
-and read back) and ``synthetic`` (tables from independent physics and from the simulator and
-estimator, the lab's test data).
+and read back), ``truth`` (a decomposition against its simulated scene's truth, with pulls) and
+``synthetic`` (tables from independent physics and from the simulator and estimator, the lab's
+test data).
 
 May import: ``mows.lab.progress`` and the core below the lab (``mows.sweep``, ``mows.estimate``,
 ``mows.device``, ``mows.sim``, ``mows.physics``, ``mows.records``); no other lab package.

@@ -18,7 +18,7 @@ import numpy as np
 from mows.estimate.calibration.constants import CalibrationPoint
 from mows.lab.data.readers import load_table
 from mows.lab.data.table import MeasurementTable, rows_text
-from mows.physics.ringdown_average import start_swing_rad
+from mows.physics.ringdown_average import swing_from_stop_rad
 from mows.records.files import read_input
 from mows.sweep.calibration.schedule import GRADIENT_WIRING
 
@@ -57,11 +57,16 @@ def write_points(
 
 
 def _start_amplitudes_rad(points: Sequence[CalibrationPoint], stop_rad: float) -> np.ndarray:
-    """Each point's θmax, or where its fit did not determine it the stop less the fit's rest
-    offset (0 where that is not determined either): a swing the physics allows, never NaN."""
+    """Each point's θmax, or where its fit did not determine it the swing released at the stop
+    about the fit's rest offset (0 where that is not determined either), decayed to the fit's
+    first sample (:func:`mows.physics.ringdown_average.swing_from_stop_rad`): a swing the
+    physics allows, never NaN."""
     amplitude = np.array([p.amplitude_rad for p in points], float)
     rest = np.nan_to_num(np.array([p.rest_offset_rad for p in points], float))
-    return np.where(np.isfinite(amplitude), amplitude, np.nan_to_num(start_swing_rad(stop_rad, rest)))
+    damping = np.array([p.damping_per_s for p in points], float)
+    since_release = np.array([p.start_offset_s for p in points], float)
+    released = np.nan_to_num(swing_from_stop_rad(stop_rad, rest, damping, since_release))
+    return np.where(np.isfinite(amplitude), amplitude, released)
 
 
 def _table_columns(path: str | os.PathLike[str]) -> Mapping:

@@ -8,6 +8,7 @@ fields of static sources come from :mod:`mows.lab.data.reference`.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import os
 import pathlib
@@ -26,6 +27,7 @@ from mows.physics.schema import Vector
 from mows.records import stamps
 from mows.records.files import read_input
 from mows.sweep.decompose import Decomposition
+from mows.sweep.probes import f00_of
 from mows.sweep.record import SweepPoint, SweepRecord
 
 RINGDOWN_TOPIC = "/mows/ringdown"
@@ -63,7 +65,7 @@ def _read_numeric(path: pathlib.Path) -> dict[str, np.ndarray] | None:
             with warnings.catch_warnings():  # a header without rows: said by _read_cells
                 warnings.simplefilter("ignore", UserWarning)
                 values = np.loadtxt(handle, delimiter=",", comments=None, quotechar='"', ndmin=2)
-    except (OSError, ValueError):  # ValueError: a cell that is no number, a short row, not UTF-8
+    except (OSError, ValueError, csv.Error):  # a cell that is no number, a short row, not UTF-8, too long
         return None
     if values.shape != (len(values), len(header)) or not len(values) or not np.isfinite(values).all():
         return None
@@ -74,9 +76,12 @@ def _read_cells(path: pathlib.Path, drop_invalid: bool) -> MeasurementTable:
     """:func:`read_csv` cell by cell: every problem named by column and row."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:  # -sig: Excel's byte-order mark
-            rows = list(csv.reader(handle))
+            reader = csv.reader(handle)
+            rows = list(reader)
     except OSError as error:
         raise TableError(f"cannot read {path}: {error.strerror}") from None
+    except csv.Error as error:  # a cell beyond the csv module's field limit (128 KiB): no number
+        raise TableError(f"{path}: line {reader.line_num}: {error}: not a table of numbers") from None
     rows = [row for row in rows if any(cell.strip() for cell in row)]
     if not rows:
         raise TableError(f"{path} is empty: expected a header row and data rows")
@@ -134,6 +139,31 @@ def _drop_invalid_rows(
         bad |= set(rows.tolist())
     keep = np.setdiff1d(np.arange(len(next(iter(columns.values())))), sorted(bad))
     return {k: v[keep] for k, v in columns.items()}, sorted(bad)
+
+
+def logged_at(path: str | os.PathLike[str], times_s: np.ndarray, column: str = "temperature_k") -> np.ndarray:
+    """``column`` of a logger's CSV (a header with ``t_s``, on the device clock of the bag's
+    stamps, and ``column``) at ``times_s``, interpolated linearly between its samples;
+    ValueError naming what is wrong: a missing column, a cell that is no finite number, times
+    that do not increase, or ``times_s`` outside the log's span (never extrapolated)."""
+    path = read_input(path)
+    with open(path, newline="", encoding="utf-8-sig") as handle:
+        rows = list(csv.DictReader(handle))
+    if not rows or not {"t_s", column} <= set(rows[0]):
+        raise ValueError(f"a log of t_s and {column} needs both columns in its header")
+    try:
+        times, values = (np.array([float(row[name]) for row in rows]) for name in ("t_s", column))
+    except (TypeError, ValueError):
+        raise ValueError(f"every t_s and {column} of the log must be a number") from None
+    if not (np.isfinite(times).all() and np.isfinite(values).all() and np.all(np.diff(times) > 0)):
+        raise ValueError(f"the log's t_s must increase and its t_s and {column} be finite numbers")
+    outside = np.flatnonzero((times_s < times[0]) | (times_s > times[-1]))
+    if outside.size:
+        raise ValueError(
+            f"the log spans t_s {times[0]:.6g} … {times[-1]:.6g} s, but ring-down {outside[0] + 1} is at "
+            f"{times_s[outside[0]]:.6g} s (device clock): a log of another run, or of another clock?"
+        )
+    return np.interp(times_s, times, values)
 
 
 def load_table(
@@ -250,7 +280,7 @@ def start_amplitudes_rad(
     """Each ring-down's start swing from RingdownFit messages (or fits), and notes of what was
     assumed or left out: the stop less the row's own |rest offset| where its fit determined it
     (:meth:`mows.sweep.record.SweepRecord.fitted_start_amplitudes_rad`, the rule of
-    :func:`mows.physics.ringdown_average.start_swing_rad`). The stop is pooled per sweep by a
+    :func:`mows.physics.ringdown_average.swing_from_stop_rad`). The stop is pooled per sweep by a
     median with outliers left out (every ring-down of a sweep starts from the same housing
     stop, and a single fit's θmax is rarely determined), else over all rows, else ``stop_rad``
     (the probe's). With ``probe_ids`` (one per fit) each probe's stop is its own housing's,
@@ -308,3 +338,24 @@ def from_sweep(
     columns = record.table_columns(starts)
     columns.update(reference_columns(reference, len(record.points)))
     return MeasurementTable(columns, "sweep")
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepReadings:
+    """One probe's rotation sweep read from the f00 its ring-downs carry: by the first-principles
+    model and by the published one (Eqs. 11, 12), and the lab's table of it."""
+
+    f00_hz: float
+    first_principles: Decomposition
+    published: Decomposition
+    table: MeasurementTable
+
+
+def read_sweep(record: SweepRecord, reference: Reference, probe: Probe) -> SweepReadings:
+    """``record`` (its successful ring-downs) decomposed both ways from the estimator's f00 of its
+    ring-downs (:func:`mows.sweep.probes.f00_of`), and its table in the static ``reference``
+    (:func:`from_sweep`, the start swings at the first-principles field)."""
+    f00_hz = f00_of(record)
+    first_principles = record.decompose(probe, f00_hz)
+    published = record.decompose(probe, f00_hz, model="published")
+    return SweepReadings(f00_hz, first_principles, published, from_sweep(record, reference, probe, first_principles))

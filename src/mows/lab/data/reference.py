@@ -22,13 +22,27 @@ from typing import Any
 
 import numpy as np
 
-from mows.lab.data.table import FIELD, GRADIENT, NO_BZ, NO_FIELD, NO_GRADIENT, MeasurementTable, TableError
+from mows.lab.data.table import (
+    CURVATURE,
+    CURVATURE_SPREAD,
+    FIELD,
+    GRADIENT,
+    NO_BZ,
+    NO_FIELD,
+    NO_GRADIENT,
+    MeasurementTable,
+    TableError,
+)
 from mows.physics.field import FieldSource, source_from_dict
 from mows.physics.schema import Vector, load_yaml
 from mows.sim.scenario import Scenario, load_scenario
 
 # The four ways of naming a reference (module docstring).
 Reference = FieldSource | Scenario | Mapping[str, Any] | str | os.PathLike[str]
+# How far a probe's magnet may sit from the position stated with a field-source reference: set by
+# hand at a coil's centre, a few millimetres. What the reference's curvature may be is its value
+# at the stated point give or take its change over this distance.
+PLACEMENT_M = 5e-3
 
 
 def reference_columns(
@@ -50,9 +64,31 @@ def with_reference(
     own = [name for name in (*FIELD, *GRADIENT) if table.has(name)]
     if own:
         raise TableError(f"{table.source} already has reference columns ({', '.join(own)}): give no --reference")
-    joined = table.with_columns(**reference_columns(reference, len(table), magnet_position_m))
+    columns = reference_columns(reference, len(table), magnet_position_m)
+    joined = table.with_columns(**columns, **curvature_columns(reference, len(table), magnet_position_m))
     notes = tuple(note for note in table.notes if note not in (NO_FIELD, NO_BZ, NO_GRADIENT))
     return dataclasses.replace(joined, notes=notes + (f"reference: {reference} (static, at the probe)",))
+
+
+def curvature_columns(
+    reference: Reference, n: int, magnet_position_m: Vector = (0.0, 0.0, 0.0)
+) -> dict[str, np.ndarray]:
+    """The curvature columns of ``n`` rows in a static field-source reference: the in-plane
+    components of its Hessian at the probe (CURVATURE), and the most any of them changes when the
+    probe is moved by PLACEMENT_M along x, y or z (CURVATURE_SPREAD): what the reference's
+    sources can make there (:mod:`mows.lab.diagnosis.plausibility`)."""
+    source, point = reference_source(reference, magnet_position_m)
+    index = ((0, 0, 0), (0, 0, 1), (0, 1, 1), (1, 1, 1))
+
+    def in_plane(at: np.ndarray) -> np.ndarray:
+        hessian = source.hessian_t_per_m2(at)
+        return np.array([hessian[i] for i in index])
+
+    centre = in_plane(point)
+    moved = [in_plane(point + sign * PLACEMENT_M * axis) for axis in np.eye(3) for sign in (-1.0, 1.0)]
+    spread = float(np.max(np.abs(np.array(moved) - centre)))
+    columns = {name: np.full(n, value) for name, value in zip(CURVATURE, centre)}
+    return columns | {CURVATURE_SPREAD: np.full(n, spread)}
 
 
 def reference_at(reference: Reference, magnet_position_m: Vector = (0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:

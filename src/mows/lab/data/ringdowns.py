@@ -8,8 +8,8 @@ the ring-downs are and how they are fitted (``mows fit``, ``mows lab ringdown``,
 
 A bag of several probes sharing each window is fitted jointly, one fit per probe, when the
 parameters list the probes (``probes``, :mod:`mows.estimate.probe_set`); without that list it
-is refused (:func:`check_probes`): fitting one probe per window would bias each probe's
-frequency by its neighbours'.
+is refused (:func:`check_probes`): fitting the estimator's own probe alone in each window
+would bias its frequency by its neighbours'.
 """
 
 from __future__ import annotations
@@ -81,8 +81,8 @@ def _completed(
 ) -> Iterator[list[Segment]]:
     """The ring-downs each of the bag's raw blocks and RINGDOWN announcements completes, fed to
     ``estimator`` as the node feeds it its subscriptions (tuning ones only with ``how.tuning``);
-    ValueError for a bag of several probes that ``settings`` fit one by one."""
-    if settings.joint is None:
+    ValueError for a bag of several probes when the parameters do not list them."""
+    if not how.parameters.probes.strip():
         check_probes(path, how.excitation_topic)
     for item in read_bag(path, topics=[how.raw_topic, how.excitation_topic]):
         message = item.message

@@ -1,29 +1,50 @@
 """A table's numbers held against its probes' scale, before any fit: ring-down frequencies near
 each probe's f00, and a reference field a ring-down of the probe could be measured in (Eq. 6).
-What fails is a column in the wrong unit (kHz, mT given as T) or another probe's table; each
-refusal is a ValueError naming the column, the rows and the likely unit.
+
+What is refused is what no bench produces: a column in the wrong unit (kHz; mT, gauss or µT
+given as T), another probe's table, or several probes' rows in one table that does not say
+which is which. Each refusal is a ValueError naming the column, the rows and the likely cause.
+Physics is never refused: ring-downs that move with the reference by a factor that is no unit
+(a weak field on a tilted plane, where gravity's torque nearly cancels the field's, gives 12.7)
+are what the lab is for, and the table goes on with a note saying so.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mows.lab.data.probe_rows import ProbeSet
+from mows.lab.data.probe_rows import ProbeSet, probe_parts
 from mows.lab.data.table import FIELD, GRADIENT, PROBE, MeasurementTable, rows_text
-from mows.physics.frequency import field_spring_nm_per_rad, frequency_shift_hz, gradient_spring_nm_per_rad
+from mows.physics.frequency import field_spring_nm_per_rad, gradient_spring_nm_per_rad
 from mows.physics.probe import Probe
 
 #: Ring-down frequencies this far (a factor) from the probe's f00 are no ring-downs of it: a
 #: unit error (kHz) or another probe. The strongest fields of the paper move f by a factor ~2.
 FREQUENCY_FACTOR = 10.0
+#: The factors a reference in the wrong unit puts between the ring-downs' response and Eq. 6's:
+#: mT, gauss or µT given as T (and the inverse), with the words for each.
+UNIT_FACTORS = {1e3: "mT", 1e4: "gauss", 1e6: "µT"}
+#: How near (a factor) a response must come to a unit factor to be called one: the physics the
+#: model leaves out changes the response by less than this (gravity against a weak field: 12.7
+#: lies a factor 79 from 10³).
+UNIT_TOLERANCE = 2.0
+#: A response this far (a factor) from Eq. 6's is said in a note: physics the model must find.
+NOTE_FACTOR = 2.0
+#: Rows of one configuration whose frequencies split by more than this share of f00 (a few
+#: hundred times what a drift of one sweep moves them) are several probes': two probes of one
+#: make differ by percents.
+PROBE_GAP = 0.01
 
 
 def table_probes(table: MeasurementTable, default: Probe, named: Mapping[int, Probe]) -> Probe:
     """The probe of every row: ``default`` for a table without a probe column (and no file named
-    by id), else a ProbeSet; each probe's frequencies checked against its f00."""
+    by id), else a ProbeSet; each probe's frequencies checked against its f00, and a table without
+    the column that holds several probes' rows refused (:func:`check_one_probe`)."""
     if not table.has(PROBE):
         if named:
             raise ValueError(
@@ -31,6 +52,7 @@ def table_probes(table: MeasurementTable, default: Probe, named: Mapping[int, Pr
                 f"column '{PROBE}' saying which row is which probe"
             )
         check_frequencies(table.columns["f_hz"], default, "f_hz")
+        check_one_probe(table, default)
         return default
     probes = ProbeSet.for_table(table, default, named)
     index = probes.index(table)
@@ -54,18 +76,45 @@ def check_frequencies(f_hz: ArrayLike, probe: Probe, what: str = "f_hz") -> None
         )
 
 
-def check_reference(table: MeasurementTable, probe: Probe) -> None:
-    """ValueError when a row's reference field or gradient is one no ring-down of ``probe`` could
-    be measured in: its spring alone, kB = m·|B| or kG = l·m·|G| (Eq. 6), would move f by more
+def check_one_probe(table: MeasurementTable, probe: Probe) -> None:
+    """ValueError when rows measured in one configuration (one sweep, orientation and reference)
+    ring at frequencies in separate groups more than PROBE_GAP·f00 apart, the same number of groups
+    in most configurations: several probes' rows in a table without the column ``probe``."""
+    names = ["theta0_deg", *(name for name in (*FIELD, *GRADIENT) if table.has(name))]
+    keys = np.column_stack([table.sweep_ids, *(table.columns[name] for name in names)])
+    _, cell = np.unique(keys, axis=0, return_inverse=True)
+    groups = []
+    for rows in (np.flatnonzero(cell.ravel() == c) for c in range(int(cell.max()) + 1)):
+        if rows.size > 1:
+            gaps = np.diff(np.sort(table.f_hz[rows]))
+            groups.append(1 + int(np.sum(gaps > PROBE_GAP * probe.f00_hz)))
+    if not groups:
+        return
+    count = int(np.median(groups))
+    if count > 1:
+        raise ValueError(
+            f"{table.source}: rows measured in the same sweep, orientation and reference ring at {count} "
+            f"frequencies more than {PROBE_GAP * probe.f00_hz:.3g} Hz apart ({len(groups)} configurations): "
+            f"several probes in one table? Give the column '{PROBE}' saying which row is which probe "
+            "(docs/multi_probe.md)"
+        )
+
+
+def check_reference(table: MeasurementTable, probe: Probe, trust_scale: bool = False) -> MeasurementTable:
+    """``table``, with a note where its ring-downs move with the reference otherwise than Eq. 6
+    says; ValueError where a row's reference field or gradient is one no ring-down of ``probe``
+    could be measured in: its spring alone, kB = m·|B| or kG = l·m·|G| (Eq. 6), would move f by more
     than FREQUENCY_FACTOR from f00 (k/kM > FREQUENCY_FACTOR²), where check_frequencies has
-    found the measured ones. A column in mT or µT given as T, or another bench's reference."""
+    found the measured ones (a column in mT or µT given as T, or another bench's reference), or
+    where the ring-downs move a unit factor more or less than it says (:func:`reference_response`).
+    ``trust_scale`` takes the reference as given in both cases."""
     springs = {
         "field": (FIELD, probe.moment_am2, "T"),
         "gradient": (GRADIENT, probe.lever_m * probe.moment_am2, "T/m"),
     }
     for what, (names, per_unit, unit) in springs.items():
         given = [table.columns[name] for name in names if table.has(name)]
-        if not given:
+        if not given or trust_scale:
             continue
         size = np.max(np.abs(given), axis=0)
         bad = np.flatnonzero(per_unit * size / probe.spring_nm_per_rad > FREQUENCY_FACTOR**2 - 1.0)
@@ -73,9 +122,45 @@ def check_reference(table: MeasurementTable, probe: Probe) -> None:
             raise ValueError(
                 f"{table.source}: the reference {what} {size[bad[0]]:.4g} {unit} ({rows_text(bad)}) would by "
                 f"itself move the frequency more than a factor {FREQUENCY_FACTOR:g} from f00 (Eq. 6): "
-                f"a column in m{unit} or µ{unit} given in {unit}?"
+                f"a column in m{unit} or µ{unit} given in {unit}? (--trust-reference takes it as given)"
             )
-    check_reference_scale(table, probe)
+    notes = []
+    for rows, member in probe_parts(table, probe):
+        part = table if rows is None else table.subset(rows)
+        whose = "" if rows is None else f" of probe {_probe_id(part)}"
+        response = reference_response(part, member)
+        if response is None:
+            continue
+        slope, spread_hz = response
+        found = unit_factor(slope)
+        said = (
+            f"the ring-downs{whose} move {abs(slope):.3g} times as much as the reference field and gradient "
+            f"say they must (Eq. 6, spread {spread_hz:.3g} Hz predicted)"
+        )
+        if found is not None and not trust_scale:
+            factor, name = found
+            raise ValueError(
+                f"{table.source}: {said}: a factor 10^{round(math.log10(factor))} is a unit, the reference in "
+                f"{name} given in T? (--trust-reference takes it as given)"
+            )
+        if not 1.0 / NOTE_FACTOR <= abs(slope) <= NOTE_FACTOR:
+            notes.append(f"{said}: physics the model must find (gravity against a weak field, a moment off its file)")
+    return dataclasses.replace(table, notes=table.notes + tuple(notes)) if notes else table
+
+
+def _probe_id(table: MeasurementTable) -> int:
+    return int(table.columns[PROBE][0])
+
+
+def unit_factor(slope: float) -> tuple[float, str] | None:
+    """(factor, unit) when ``slope`` (the ring-downs' response over Eq. 6's) lies within
+    UNIT_TOLERANCE of 1/factor or factor for a factor of UNIT_FACTORS, else None."""
+    size = abs(slope)
+    for factor, name in UNIT_FACTORS.items():
+        for near in (1.0 / factor, factor):
+            if size > 0 and abs(math.log(size / near)) <= math.log(UNIT_TOLERANCE):
+                return factor, name
+    return None
 
 
 #: A predicted spread of frequencies this many times the measurement's noise makes the
@@ -83,27 +168,22 @@ def check_reference(table: MeasurementTable, probe: Probe) -> None:
 SCALE_EVIDENCE_SIGMAS = 10.0
 
 
-def check_reference_scale(table: MeasurementTable, probe: Probe) -> None:
-    """ValueError when the ring-downs move with the reference a factor FREQUENCY_FACTOR more or
-    less than Eq. 6 says they must: the measured f against the published model's f for each
-    row's reference (its field and gradient along the probe's axis), fitted as a line, has a
-    slope near ±1 for a reference in tesla; near 10⁻³ for one in mT given as T. Judged only
-    where the reference's predicted spread stands SCALE_EVIDENCE_SIGMAS above the noise."""
+def reference_response(table: MeasurementTable, probe: Probe) -> tuple[float, float] | None:
+    """(response, predicted spread in Hz): how much the ring-downs' spring moves per the spring
+    Eq. 6 gives each row's reference (its field and gradient along the probe's axis), s = k/kM − 1.
+    Eq. 6 is f² = f00²·(1 + s), linear in s, so the weighted line f² = a + b·s gives the response
+    b/a with f00 free: 1 for a reference in tesla, exactly 10⁻³ for one in mT given as T, however
+    strong. None where the reference's predicted spread, f00·std(s)/2, does not stand
+    SCALE_EVIDENCE_SIGMAS above the noise (nothing to judge)."""
     derived = table.derived_columns()
     if "b_along_t" not in derived and "g_t_per_m" not in derived:
-        return
+        return None
     spring = field_spring_nm_per_rad(probe.moment_am2, derived.get("b_along_t", 0.0)) + gradient_spring_nm_per_rad(
         probe.moment_am2, probe.lever_m, derived.get("g_t_per_m", 0.0)
     )
-    predicted = frequency_shift_hz(probe.f00_hz, probe.spring_nm_per_rad, spring) * np.ones(table.n)
-    usable = np.isfinite(predicted)
-    noise_hz = float(np.median(table.f_std_hz))
-    if usable.sum() < 3 or np.std(predicted[usable]) < SCALE_EVIDENCE_SIGMAS * noise_hz:
-        return
-    slope = np.polyfit(predicted[usable], table.f_hz[usable], 1, w=1.0 / table.f_std_hz[usable])[0]
-    if not 1.0 / FREQUENCY_FACTOR <= abs(slope) <= FREQUENCY_FACTOR:
-        raise ValueError(
-            f"{table.source}: the ring-downs move {abs(slope):.3g} times as much as the reference field and "
-            f"gradient say they must (Eq. 6, spread {np.std(predicted[usable]):.3g} Hz predicted): "
-            "the reference in mT or µT given in T, or another bench's?"
-        )
+    predicted = spring / probe.spring_nm_per_rad * np.ones(table.n)
+    spread_hz = 0.5 * probe.f00_hz * float(np.std(predicted))
+    if table.n < 3 or spread_hz < SCALE_EVIDENCE_SIGMAS * float(np.median(table.f_std_hz)):
+        return None
+    slope, intercept = np.polyfit(predicted, table.f_hz**2, 1, w=1.0 / (2.0 * table.f_hz * table.f_std_hz))
+    return float(slope / intercept), spread_hz

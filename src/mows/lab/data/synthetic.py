@@ -23,6 +23,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from mows.device.stream.simulated_cycle import CycleRecord, simulate_cycle
 from mows.estimate.recorded_cycle import fit_cycle
 from mows.estimate.ringdown import COIL_OFF_SKIP_S
 from mows.lab.data.reference import reference_columns
@@ -35,7 +36,6 @@ from mows.physics.potential import ArcPotential, arc_energy_j, chebyshev_nodes_r
 from mows.physics.probe import Probe
 from mows.physics.schema import FloatOrArray, Vector
 from mows.sim.scenario import Scenario
-from mows.sim.simulated_cycle import CycleRecord, simulate_cycle
 from mows.sim.simulator import SimulatedDevice
 from mows.sweep.record import SweepPoint, SweepRecord
 
@@ -298,7 +298,8 @@ def _simulated_sweep(
 
 
 def _start_amplitudes_rad(records: list[SweepRecord], probe: Probe) -> list[np.ndarray]:
-    """Each ring-down's start swing, stop − |θs|: θs the rest angle at its sweep's own
+    """Each ring-down's start swing at its fit's first sample, released at the stop about θs
+    (:func:`mows.physics.ringdown_average.swing_from_stop_rad`): θs the rest angle at its sweep's own
     first-principles decomposition (0 where that fails), the stop pooled over every ring-down
     of every sweep (:meth:`mows.sweep.record.SweepRecord.stop_amplitude_rad`; the probe's where
     no fit determined θmax). Every ring-down
@@ -310,7 +311,12 @@ def _start_amplitudes_rad(records: list[SweepRecord], probe: Probe) -> list[np.n
         rests.append(record.rest_angles_rad(decomposition, probe) if decomposition.ok else np.zeros(len(record.points)))
     every = SweepRecord([point for record in records for point in record.points])
     stop = every.stop_amplitude_rad(np.concatenate(rests), probe.theta_stop_rad) if every.points else np.nan
-    return [ringdown_average.start_swing_rad(stop, rest) for rest in rests]
+    return [
+        ringdown_average.swing_from_stop_rad(
+            stop, rest, [p.damping_per_s for p in record.points], [p.start_offset_s for p in record.points]
+        )
+        for record, rest in zip(records, rests)
+    ]
 
 
 def _ringdown_point(scenario: Scenario, cycle: CycleRecord, coil_off_skip_s: float) -> SweepPoint | None:

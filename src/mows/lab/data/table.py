@@ -49,10 +49,15 @@ from collections.abc import Iterable, Iterator, Mapping
 import numpy as np
 
 from mows.physics.pose import probe_axes
+from mows.physics.ranges import RANGES
 
 REQUIRED = ("theta0_deg", "f_hz", "f_std_hz")
 FIELD = ("ref_bx_t", "ref_by_t", "ref_bz_t")
 GRADIENT = ("ref_gxx_t_per_m", "ref_gxy_t_per_m", "ref_gyy_t_per_m")
+# The curvature of a reference given as a field source (mows.lab.data.reference.with_reference):
+# the in-plane Hessian at the probe, and how far it changes over the probe's placement.
+CURVATURE = ("ref_hxxx_t_per_m2", "ref_hxxy_t_per_m2", "ref_hxyy_t_per_m2", "ref_hyyy_t_per_m2")
+CURVATURE_SPREAD = "ref_h_spread_t_per_m2"
 # Columns of a table of several probes (mows.lab.data.probe_rows).
 PROBE = "probe"
 STEP = "step"
@@ -61,6 +66,8 @@ KNOWN = (
     + ("t_s", "sweep", PROBE, STEP)
     + FIELD
     + GRADIENT
+    + CURVATURE
+    + (CURVATURE_SPREAD,)
     + ("coil_current_a", "amplitude_deg", "temperature_k", "damping_per_s", "duration_s")
 )
 MAGNET = ("magnet_x_m", "magnet_y_m", "magnet_z_m")
@@ -82,12 +89,16 @@ POSITIVE = ("f_hz", "f_std_hz", "amplitude_deg", "duration_s", "temperature_k")
 MAX_RELATIVE_STD = 10.0
 # A ring-down decays (δ ≥ 0) and its fit starts at or after the switch-off.
 NON_NEGATIVE = ("damping_per_s", "start_offset_s")
+# Columns of a quantity with a physical range (mows.physics.ranges), and the quantity.
+RANGED_COLUMNS = {"temperature_k": "temperature_k", "coil_current_a": "coil_current_a", "duration_s": "duration_s"}
+RADIAN_LOOKING_DEG = 2.0 * np.pi  # angles in degrees all within ±2π: most likely radians
 WRITER_COLUMN = "mows_table_format"  # the marker of the project's own tables (module docstring)
 TABLE_FORMAT = 1.0
 DERIVED = ("b_abs_t", "b_along_t", "b_perp_t", "b_normal_t", "g_t_per_m", "g_xy_t_per_m", "g_yy_t_per_m")
 COVARIATE_DERIVED = ("b_abs_t", "b_perp_t", "b_along_t", "g_t_per_m")  # what the diagnostics test
 NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t", WRITER_COLUMN, PROBE, STEP}
 NOT_COVARIATES |= set(MAGNET + NEIGHBOUR)  # where a probe is and what its neighbours make: the model's inputs
+NOT_COVARIATES |= {*CURVATURE, CURVATURE_SPREAD}  # what the reference's sources allow, not a quantity of the row
 
 
 # What a reader notes of the reference (with_notes); joining one (reference.with_reference) drops them.
@@ -377,6 +388,79 @@ def broken_rules(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, str, 
         if bad.size:
             rule = f"must be below 1/{MAX_RELATIVE_STD:g} of f_hz (no ring-down measures f that poorly; another unit?)"
             yield "f_std_hz", f"{rule}: not so", bad
+        floor = RANGES["f_rel_std"].possible[0]
+        measured = columns["f_hz"] <= RANGES["frequency_hz"].possible[1]  # beyond: said of f_hz, as kHz
+        bad = np.flatnonzero(measured & (columns["f_std_hz"] < floor * columns["f_hz"]))
+        if bad.size:
+            rule = f"must be at least {floor:g} of f_hz (no clock, no ring-down measures f better)"
+            yield "f_std_hz", f"{rule}: not so", bad
+    for name, quantity in RANGED_COLUMNS.items():
+        if name in columns:
+            bounds = RANGES[quantity]
+            low, high = bounds.possible
+            bad = np.flatnonzero((np.abs(columns[name]) < low) | (np.abs(columns[name]) > high))
+            if bad.size:
+                yield (
+                    name,
+                    f"must lie within {bounds.text(bounds.possible)} as on any bench ({bounds.hint}): not so",
+                    bad,
+                )
+    if PROBE in columns:
+        bad = np.flatnonzero(columns[PROBE] < 0)
+        if bad.size:
+            yield PROBE, "is a probe id, 0 or more: not so", bad
+
+
+#: Fewer rows than this test no model: the base model's parameters take them all, or nearly.
+MIN_ROWS = 3
+
+
+def check_design(table: MeasurementTable) -> None:
+    """ValueError for a table that cannot test a model, with what to measure instead: too few
+    rows, rows that are copies of one measurement, every row at one orientation in one field."""
+    n = len(table)
+    if n < MIN_ROWS:
+        raise TableError(
+            f"{table.source}: {n} row{'s leave' if n != 1 else ' leaves'} no degrees of freedom to test any model: "
+            f"measure at least {MIN_ROWS} orientations"
+        )
+    c = table.columns
+    fields = [c[name] for name in FIELD + GRADIENT if name in c]
+    design = np.column_stack([c["theta0_deg"] % 360.0, *fields])
+    if len(np.unique(np.column_stack([design, c["f_hz"], c["f_std_hz"]]), axis=0)) == 1:
+        raise TableError(
+            f"{table.source}: all {n} rows are one measurement (θ0, f_hz and f_std_hz alike to every digit): "
+            "copies, not measurements; give each ring-down's own result"
+        )
+    if len(np.unique(design, axis=0)) == 1:
+        raise TableError(
+            f"{table.source}: every row is at θ0 = {c['theta0_deg'][0] % 360.0:g}° in one field: nothing varies "
+            "that a model could be tested on; measure at several orientations (a sweep) or in several fields"
+        )
+
+
+def unusual_values(columns: Mapping[str, np.ndarray]) -> list[str]:
+    """Notes of values that are possible but seldom meant (:mod:`mows.physics.ranges`): a
+    temperature in °C, a duration in ms, angles in radians, times before the start."""
+    notes = []
+    for name, quantity in RANGED_COLUMNS.items():
+        if name in columns:
+            bounds = RANGES[quantity]
+            low, high = bounds.usual
+            odd = np.flatnonzero((np.abs(columns[name]) < low) | (np.abs(columns[name]) > high))
+            if odd.size:
+                notes.append(
+                    f"{name} is unusual in {rows_text(odd)} (usually {bounds.text(bounds.usual)}; {bounds.hint}): "
+                    "used as given"
+                )
+    for name in ("theta0_deg", "amplitude_deg"):
+        values = columns.get(name, np.zeros(0))
+        values = values[np.isfinite(values)]
+        if len(values) > 2 and np.all(np.abs(values) <= RADIAN_LOOKING_DEG):
+            notes.append(f"{name} lies within ±{RADIAN_LOOKING_DEG:.2f} in every row: radians given as degrees?")
+    if "t_s" in columns and np.any(columns["t_s"] < 0):
+        notes.append(f"t_s is negative in {rows_text(np.flatnonzero(columns['t_s'] < 0))}: times before the start?")
+    return notes
 
 
 def with_notes(columns: Mapping[str, np.ndarray], source: str, notes: list[str]) -> MeasurementTable:
@@ -391,6 +475,7 @@ def with_notes(columns: Mapping[str, np.ndarray], source: str, notes: list[str])
             f"theta0_deg outside [0, 360) in {rows_text(wrapped)}: read as the same orientation modulo "
             f"360 (e.g. {first:g}° is {first % 360.0:g}°)"
         )
+    notes += unusual_values(columns)
     if not any(name in columns for name in FIELD):
         notes.append(NO_FIELD)
     elif "ref_bz_t" not in columns and "ref_bx_t" in columns:

@@ -327,7 +327,7 @@ def _candidate(
         conflicts=tuple(
             plausibility.conflicts(free.fit, probe)
             if free.fit is not None
-            else plausibility.effect_conflicts(effect, parameters, probe)
+            else plausibility.effect_conflicts(effect, parameters, probe, fit.table)
         ),
     )
     physics = None if effect.physical is None else _physics_form(fit, effect, test, refit(0))

@@ -7,8 +7,10 @@ search and the verdict hold every fit to physics and to what the user stated:
 
 - each parameter with a prior (:attr:`mows.lab.model.effects.Effect.prior`, (centre, σ): a
   strength of 1 ± 1 %, m/kM within the probe file's calibration σ, the housing stop within its
-  stated σ, the spring's temperature coefficient within that of spring steels) must lie within
-  ``IMPOSSIBLE_SIGMAS`` of it, its own σ and the prior's combined;
+  stated σ, the spring's temperature coefficient within that of spring steels, the field's
+  curvature within what the reference's sources make over the probe's placement where a field
+  source gives the reference) must lie within ``IMPOSSIBLE_SIGMAS`` of it, its own σ and the
+  prior's combined;
 - gravity's in-plane part is that of a unit vector: |d| ≤ 1 (the size a·g·l is known, only the
   direction of "down" is free);
 - gravity and a plane tilt, both in a model, must describe one tilt of the rotation plane
@@ -27,6 +29,7 @@ import math
 
 import numpy as np
 
+from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import rotation_matrix
 from mows.lab.model.effects import Effect
 from mows.lab.model.least_squares import FitResult, FittedParameter
@@ -68,18 +71,23 @@ class Conflict:
 def conflicts(fit: FitResult, probe: Probe) -> list[Conflict]:
     """Every parameter of ``fit`` that physics does not allow (module docstring), worst first."""
     found = [
-        c for effect in fit.model.effects for c in effect_conflicts(effect, fit.effect_parameters(effect.name), probe)
+        c
+        for effect in fit.model.effects
+        for c in effect_conflicts(effect, fit.effect_parameters(effect.name), probe, fit.table)
     ]
     return sorted(found + _gravity_conflicts(fit), key=lambda c: -c.sigmas)
 
 
-def effect_conflicts(effect: Effect, fitted: list[FittedParameter], probe: Probe) -> list[Conflict]:
-    """The parameters of one effect, ``fitted`` (a fit's or a one-step estimate's), that its prior rules out."""
+def effect_conflicts(
+    effect: Effect, fitted: list[FittedParameter], probe: Probe, table: MeasurementTable
+) -> list[Conflict]:
+    """The parameters of one effect, ``fitted`` (a fit's or a one-step estimate's on ``table``),
+    that its prior rules out."""
     if effect.prior is None or not fitted:
         return []
     return [
         dataclasses.replace(conflict, parameter=f"{effect.name}.{parameter.name}")
-        for parameter, prior in zip(fitted, effect.prior(probe))
+        for parameter, prior in zip(fitted, effect.prior(probe, table))
         if prior is not None and (conflict := _against(parameter, *prior)) is not None
     ]
 

@@ -158,12 +158,12 @@ def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate], 
 
 def _findings(candidates: list[Candidate]) -> str:
     """The candidates the data ask for strongly only at values physics does not allow: each is a
-    finding (the probe file's value is off, or physics outside the catalog looks like the
-    effect), not an effect."""
+    finding (the probe file's or the reference's value is off, or physics outside the catalog
+    looks like the effect), not an effect."""
     found = [c for c in candidates if c.would_need and c.delta_bic > STRONG_DELTA_BIC]
     return "".join(
-        f" Finding: {c.label} would take ΔBIC {c.delta_bic:.0f} but {c.would_need}: the probe file's "
-        "value is off by that much, or physics outside the catalog looks like it."
+        f" Finding: {c.label} would take ΔBIC {c.delta_bic:.0f} but {c.would_need}: the probe file's or "
+        "the reference's value is off by that much, or physics outside the catalog looks like it."
         for c in found
     )
 

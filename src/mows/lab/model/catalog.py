@@ -16,6 +16,8 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from mows.lab.data.table import (
+    CURVATURE,
+    CURVATURE_SPREAD,
     NEIGHBOUR,
     NEIGHBOUR_FIELD,
     NEIGHBOUR_GRADIENT,
@@ -38,8 +40,18 @@ STRENGTH_TOLERANCE = 0.01
 SPRING_TEMP_COEFF_STD_PER_K = 2e-4
 
 
-def _strength_prior(probe: Probe) -> tuple[tuple[float, float]]:
+def _strength_prior(probe: Probe, table: MeasurementTable) -> tuple[tuple[float, float]]:
     return ((1.0, STRENGTH_TOLERANCE),)
+
+
+def _curvature_prior(probe: Probe, table: MeasurementTable) -> tuple[tuple[float, float] | None, ...]:
+    """What the reference's sources make of each curvature component where a field source gives
+    the reference (the table's CURVATURE columns: its value at the probe ± its change over the
+    probe's placement); nothing is said where the reference is a field and gradient alone."""
+    if not all(table.has(name) for name in (*CURVATURE, CURVATURE_SPREAD)):
+        return (None,) * len(CURVATURE)
+    spread = float(np.max(table.columns[CURVATURE_SPREAD]))
+    return tuple((float(np.median(table.columns[name])), spread) for name in CURVATURE)
 
 
 def _angle_offset(config: Configuration, rows: MeasurementTable, probe: Probe, offset_rad: float) -> None:
@@ -174,6 +186,7 @@ CATALOG = (
         SOURCES,
         priority=50,
         check="map the field at two more points (±5 mm) with the reference: the curvature is their second difference",
+        prior=_curvature_prior,
     ),
     Effect(
         "static_deflection",
@@ -218,7 +231,7 @@ CATALOG = (
         _housing_stop,
         READOUT,
         priority=22,
-        prior=lambda probe: ((0.0, probe.theta_stop_std_rad),),
+        prior=lambda probe, table: ((0.0, probe.theta_stop_std_rad),),
         check="film the lever at the stop (or fit θmax of ring-downs in zero field, where θs = 0)",
     ),
     Effect(
@@ -247,7 +260,7 @@ CATALOG = (
         MECHANICS,
         requires=("temperature_k",),
         priority=40,
-        prior=lambda probe: ((probe.spring_temp_coeff_per_k, SPRING_TEMP_COEFF_STD_PER_K),),
+        prior=lambda probe, table: ((probe.spring_temp_coeff_per_k, SPRING_TEMP_COEFF_STD_PER_K),),
         check="change the temperature by a few kelvin at a fixed angle",
     ),
     Effect(
@@ -330,7 +343,7 @@ CATALOG = (
         COMPONENTS,
         priority=85,
         generic=True,
-        prior=lambda probe: ((0.0, probe.beta0_rel_std),),
+        prior=lambda probe, table: ((0.0, probe.beta0_rel_std),),
         check="a field sweep along x' at one amplitude: the slope at B = 0 is β0",
     ),
     Effect(
@@ -350,7 +363,7 @@ CATALOG = (
         requires=NEIGHBOUR,
         priority=35,
         physical=PHYSICAL_STRENGTH,
-        prior=lambda probe: ((1.0, probe.beta0_rel_std),),
+        prior=lambda probe, table: ((1.0, probe.beta0_rel_std),),
         needs="needs two or more probes in one table, with their sweep steps and magnet positions "
         "(columns probe, step, magnet_x_m, magnet_y_m, magnet_z_m): a single probe has no neighbour",
         check="take one probe out of the scene: its neighbours' shifts vanish, or turn it by 180° at a "

@@ -3,13 +3,13 @@
 Every effect edits the per-row :class:`mows.lab.model.configuration.Configuration` (field, gradient,
 Hessian, gravity, spring, readout), and the frequency follows from the potential U(θ) of
 docs/physics.md §4 with the exact rest angle and harmonic balance, so effects compose and stay
-right at mT fields. Every effect is *off* when all its parameters are 0 and is smooth there
-(score tests and refits start from 0). Where the size of an effect follows from probe
+right at mT fields. Every effect is *off* when all its parameters are at their off values (0,
+unless a plugin declares another: :attr:`Parameter.off`) and is smooth there (score tests and
+refits start from there). Where the size of an effect follows from probe
 constants (gravity: a·g·l; static deflection: m, kM and By'), the free parameter is the unknown
 geometry or a dimensionless strength with 1 = the physics as predicted; an effect whose size is
 known entirely (``physical``) can also be held at it, with no free parameter
-(:meth:`Effect.at_physics`, labelled ``name (at physics)``). A plugin may declare another value as
-its parameter's "off" (:attr:`Parameter.off`).
+(:meth:`Effect.at_physics`, labelled ``name (at physics)``).
 
 The built-in effects are in :mod:`mows.lab.model.catalog`, user plugins are read by
 :mod:`mows.lab.model.plugins`; effects join a model with ``FrequencyModel(probe) + effect``
@@ -32,9 +32,10 @@ if TYPE_CHECKING:
     from mows.lab.data.table import MeasurementTable
 
 AT_PHYSICS = " (at physics)"  # label suffix of an effect held at its physical values
-# Each parameter's value as physics and the probe file allow it, (centre, σ), or None where
-# physics says nothing (a free calibration term such as an unreferenced field).
-Prior = Callable[[Probe], tuple[tuple[float, float] | None, ...]]
+# Each parameter's value as physics, the probe file and the table's reference allow it,
+# (centre, σ), or None where physics says nothing (a free calibration term such as an
+# unreferenced field).
+Prior = Callable[[Probe, "MeasurementTable"], tuple[tuple[float, float] | None, ...]]
 
 # Stages: effects are applied in this order, so that e.g. an angle offset turns the probe
 # before fields are projected, and the readout comes last.

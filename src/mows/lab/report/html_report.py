@@ -228,7 +228,7 @@ def figure_term(term: DiscoveredTerm) -> str:
     axis.plot(x, term.strength * x * 1e3, "-", color="tab:red", label=f"{term.strength:+.4g} {term.strength_unit}")
     band = np.abs(term.std * x) * 1e3
     axis.fill_between(x, (term.strength * x) * 1e3 - band, (term.strength * x) * 1e3 + band, color="tab:red", alpha=0.2)
-    axis.set(xlabel=f"{term.name} beyond the model ({term.unit})", ylabel="f − model (mHz)")
+    axis.set(xlabel=f"{term.name} beyond the model (Hz per {term.strength_unit})", ylabel="f − model (mHz)")
     axis.set_title(f"{term.name}: {term.family}", fontsize=9, loc="left")
     axis.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
     return _svg(figure)

@@ -34,6 +34,7 @@ from mows.lab.data.probe_rows import probe_parts, with_probes
 from mows.lab.data.readers import from_sweep, load_table
 from mows.lab.data.reference import Reference
 from mows.lab.data.table import MeasurementTable, TableError
+from mows.lab.diagnosis import plausibility
 from mows.lab.diagnosis.candidates import Candidate, physics_deviation
 from mows.lab.diagnosis.discovery import DiscoveredTerm, Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group
@@ -273,23 +274,27 @@ def without_generic(fit: FitResult) -> FitResult:
 def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation: str) -> tuple[Verdict, str]:
     """(verdict, explanation) of a model whose residuals the statistics call adequate:
     ``inconsistent_physics`` when an effect's free fit lies more than 5σ from its physical
-    value, else ``needs_generic_term`` when a generic correction is in the model (what it
-    stands for must still be found), else ``adequate``."""
+    value, or a parameter where physics does not allow it (:func:`plausibility.conflicts`: an
+    effect the user added that is adequate only at an impossible value), else
+    ``needs_generic_term`` when a generic correction is in the model (what it stands for must
+    still be found), else ``adequate``."""
     inconsistent = [c for c in checks if c.deviation_sigma > INCONSISTENT_SIGMAS]
+    impossible = plausibility.conflicts(fit, fit.model.probe) if fit.model.probe is not None else []
     generic = [e for e in fit.model.effects if e.generic]
-    if not inconsistent and not generic:
+    if not inconsistent and not impossible and not generic:
         return Verdict.ADEQUATE, explanation
     found = [
         f"{c.effect} ({'held at physics; its free fit gives' if c.held else 'free:'} {_values(c.parameters)}) "
         f"is {c.deviation_sigma:.1f}σ from its physical value"
         for c in inconsistent
     ]
+    found += [conflict.text for conflict in impossible]
     found += [
         f"{e.name} ({_values(fit.effect_parameters(e.name))}) is a generic correction with no physical value "
         f"of its own; to find what it stands for: {e.check}"
         for e in generic
     ]
-    verdict = Verdict.INCONSISTENT_PHYSICS if inconsistent else Verdict.NEEDS_GENERIC_TERM
+    verdict = Verdict.INCONSISTENT_PHYSICS if inconsistent or impossible else Verdict.NEEDS_GENERIC_TERM
     return verdict, (
         "The residuals are consistent with noise, but the physics is not: "
         + "; ".join(found)

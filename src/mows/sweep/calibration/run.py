@@ -88,9 +88,14 @@ class CalibrationRun:
         return CalibrationStep(actions=step.actions)
 
     def _gate(self, step: CalibrationStep) -> CalibrationStep:
-        """With a manual stage, a cycle at another orientation than the stage's waits for a turn."""
+        """With a manual stage, a cycle at another orientation than the stage's waits for a turn,
+        and every cycle says the stage was turned by hand."""
         if not self.manual_orientation:
             return step
+        by_hand = [
+            dataclasses.replace(a, turned_by_hand=True) if isinstance(a, CycleRequest) else a for a in step.actions
+        ]
+        step = dataclasses.replace(step, actions=by_hand)
         cycles = [a for a in step.actions if isinstance(a, CycleRequest)]
         if not cycles or cycles[0].theta0_rad == self._stage_rad:
             return step
@@ -243,3 +248,8 @@ class ProbeCalibrator:
         self.calibrations += 1
         self.last = f"calibration {self.calibrations}: {calibration.report().splitlines()[0]} → {path}"
         return self.last
+
+
+def _by_hand(action):
+    """A cycle of the step said to be at the operator's turn; any other action as it is."""
+    return dataclasses.replace(action, turned_by_hand=True) if isinstance(action, CycleRequest) else action

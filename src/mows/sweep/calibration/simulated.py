@@ -16,7 +16,7 @@ import numpy as np
 
 from mows.device.cycle.phases import CycleSettings, Phase, PhaseEvent
 from mows.device.stream.device_time import DeviceTimeLoop, scheduled_device
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, ProbeLine, fit_ringdown
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import Probe
@@ -132,8 +132,11 @@ class _NominalFits:
         return fits
 
     def _fit(self, segment):
-        options = FitOptions.lever_aware(self.pair, self.nominal, segment.window.theta0_rad)
-        return fit_segment(segment, options, COIL_OFF_SKIP_S, self.nominal.damping_per_s)
+        window = segment.window
+        options = FitOptions.lever_aware(self.pair, self.nominal, window.theta0_rad)
+        line = ProbeLine(0, window.theta0_rad, window.excitation_frequency_hz, None, self.nominal.damping_per_s)
+        (fit,) = fit_segment(segment, [line], COIL_OFF_SKIP_S, options)
+        return fit
 
 
 def compare_with_truth(calibration, truth: Probe) -> str:

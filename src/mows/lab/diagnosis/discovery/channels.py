@@ -2,24 +2,32 @@
 
 A channel is one quantity of the exact potential U(θ) (docs/physics.md §4) that a plugin can
 change row by row (:mod:`mows.lab.model.plugins`): the moment's scale, the spring, a field at the
-magnet in the lab frame (x, y) or the probe frame (along, across the lever), the probe's angle, an
-added energy (a moment induced along the lever, −½·α·(u·B)²; a stiffening hinge, ¼·k3·θ⁴), and,
-last, an additive frequency (a readout term, no physics). A term of the search is a channel times
+magnet in the lab frame (x, y) or the probe frame (along, across the lever), the probe's angle, the
+magnet's position on the lever (along, across), an added energy (a moment induced along the
+lever, −½·α·(u·B)²; a stiffening hinge, ¼·k3·θ⁴), and, last, an additive frequency (a readout
+term, no physics). A term of the search is a channel times
 a monomial x of the covariates (:mod:`.library`): the channel's value on row i is p·x_i, and since
 each row's frequency depends on its own value only, the term's column is the channel's Jacobian
 ∂f_i/∂p times x_i, to first order in p (exact for the frequency). One model evaluation per channel
 gives every monomial's column. A frequency term of degree 3 (B∥·I²) is then a channel term of
 degree 2 (the moment × I²).
 
-The channels are listed in library order: of terms the rows cannot tell apart the first is kept
-(:func:`mows.lab.diagnosis.discovery.search.searchable`), so physics comes before the readout
-term, and the simplest physics before the more particular.
+A channel takes only the covariates it can follow (:attr:`Channel.excludes`): none takes the
+stage's angle (the field channels make the harmonics) or the ring-down's swing (a swing acts
+through the shape of the energy, not through a moment or a spring that knows it), and the spring
+takes no field (a spring that follows the field is a magnetic energy: the moment or an added
+energy). The frequency, the last resort, takes them all.
+
+The channels are listed in library order: of terms of one degree that the rows cannot tell apart
+the first is kept (:func:`mows.lab.diagnosis.discovery.search.library_terms`), so physics comes
+before the readout term, the simplest physics before the more particular, and a turned probe
+before a field that turns with it (a torque across the lever moves the rest angle as a turn does).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -48,6 +56,7 @@ class Channel:
     edit: Edit
     returned: str
     tells_apart: str
+    excludes: frozenset[str] = frozenset({"angle", "swing"})  # kinds of covariates it cannot follow
 
     def jacobian_effect(self) -> Effect:
         """The channel as an effect of one constant parameter (its Jacobian's signature)."""
@@ -98,6 +107,19 @@ def _angle(config: Configuration, probe: Probe, value: float) -> None:
     config.theta0_rad = config.theta0_rad + value
 
 
+def _magnet(config: Configuration, offset: np.ndarray) -> None:
+    before = np.zeros((len(config.theta0_rad), 3)) if config.magnet_offset_m is None else config.magnet_offset_m
+    config.magnet_offset_m = before + offset
+
+
+def _magnet_along(config: Configuration, probe: Probe, value: float) -> None:
+    _magnet(config, np.array([value, 0.0, 0.0]))
+
+
+def _magnet_across(config: Configuration, probe: Probe, value: float) -> None:
+    _magnet(config, np.array([0.0, value, 0.0]))
+
+
 def _add_energy(config: Configuration, energy: np.ndarray) -> None:
     config.energy_j = energy + (0.0 if config.energy_j is None else config.energy_j)
 
@@ -133,6 +155,12 @@ CHANNELS = (
     Channel(
         "spring", "stiffness_nm_per_rad", "k_nm_per_rad", "N·m/rad", 1e-12, MECHANICS, _spring, "{value}",
         "the zero-field frequency f00 at the same covariate (only the spring acts without a field)",
+        frozenset({"angle", "swing", "field", "field_z", "gradient"}),
+    ),
+    Channel(
+        "angle", "angle_offset_rad", "offset_rad", "rad", 1e-7, ORIENTATION, _angle, "{value}",
+        "the probe's angle measured optically, or a reversed field (an angle turns the field's pattern, "
+        "a field adds to it)",
     ),
     Channel(
         "field_along", "field_offset_t", "b_t", "T", 1e-9, MECHANICS, _field_along,
@@ -153,9 +181,16 @@ CHANNELS = (
         "a magnetometer at the probe's position (a field fixed in the lab, one that the reference misses)",
     ),
     Channel(
-        "angle", "angle_offset_rad", "offset_rad", "rad", 1e-7, ORIENTATION, _angle, "{value}",
-        "the probe's angle measured optically, or a reversed field (an angle turns the field's pattern, "
-        "a field adds to it)",
+        "magnet_along", "magnet_offset_m", "d_m", "m", 1e-7, MECHANICS, _magnet_along,
+        "np.multiply.outer({value}, (1.0, 0.0))",
+        "the magnet's position on the lever measured (a microscope), or the gradient reversed (a position "
+        "acts only through the gradient and curvature)",
+    ),
+    Channel(
+        "magnet_across", "magnet_offset_m", "d_m", "m", 1e-7, MECHANICS, _magnet_across,
+        "np.multiply.outer({value}, (0.0, 1.0))",
+        "the magnet's position on the lever measured (a microscope), or the gradient reversed (a position "
+        "acts only through the gradient and curvature)",
     ),
     Channel(
         "induced_moment", "energy_j", "alpha_am2_per_t", "A·m²/T", 1e-7, MECHANICS, _induced,
@@ -170,16 +205,21 @@ CHANNELS = (
     Channel(
         "frequency", "frequency_hz", "c_hz", "Hz", 1e-6, READOUT, _frequency, "{value}",
         "none: an additive frequency is a readout term, not physics; find the physics that makes it",
+        frozenset(),
     ),
 )  # fmt: skip
 FREQUENCY = CHANNELS[-1]
 BY_NAME = {channel.name: channel for channel in CHANNELS}
 
 
-def jacobians(fit: FitResult, table: MeasurementTable, weight: np.ndarray) -> dict[str, np.ndarray]:
-    """Each channel's weighted Jacobian w·∂f/∂p on ``table``'s rows (n,), beside ``fit``'s model at
-    its fitted values (``weight`` w: the frequency's)."""
-    found = {FREQUENCY.name: weight}
-    for channel in CHANNELS[:-1]:
-        found[channel.name] = -fit.extension_columns(channel.jacobian_effect(), table)[:, 0]
+def jacobians(
+    fit: FitResult, table: MeasurementTable, weight: np.ndarray, channels: Sequence[Channel] = CHANNELS
+) -> dict[str, np.ndarray]:
+    """Each of ``channels``' weighted Jacobian w·∂f/∂p on ``table``'s rows (n,), beside ``fit``'s
+    model at its fitted values (``weight`` w: the frequency's); one model evaluation each."""
+    found = {}
+    for channel in channels:
+        found[channel.name] = (
+            weight if channel is FREQUENCY else -fit.extension_columns(channel.jacobian_effect(), table)[:, 0]
+        )
     return found

@@ -13,8 +13,8 @@ where the probe's constants were last known to hold) are not, so that coil heati
 I², and not I² and I of a centred current, and a moment that ages is one term, m·t.
 
 A monomial is a product of up to :data:`DEGREE` factors, without products of two angle harmonics
-(that is another harmonic); the physical channels (:mod:`.channels`) take no angle harmonic at all
-(a moment or a spring does not know the stage's angle) and the empty monomial 1.
+(that is another harmonic); each channel (:mod:`.channels`) takes the kinds of covariates it can
+follow, and the physical ones the empty monomial 1.
 """
 
 from __future__ import annotations
@@ -143,11 +143,12 @@ def factor_centres(factors: dict[str, np.ndarray], probe: Probe) -> dict[str, fl
     }
 
 
-def monomials(factors: dict[str, np.ndarray], harmonics: bool, degree: int = DEGREE) -> list[tuple[str, ...]]:
-    """The products of up to ``degree`` of ``factors`` (with the empty one, 1, where not
-    ``harmonics``), at most one angle harmonic each; none at all without ``harmonics``."""
-    names = [name for name in factors if harmonics or factor(name).kind != "angle"]
-    found: list[tuple[str, ...]] = [] if harmonics else [()]
+def monomials(factors: dict[str, np.ndarray], excludes: frozenset[str], degree: int = DEGREE) -> list[tuple[str, ...]]:
+    """The products of up to ``degree`` of ``factors`` but those of the kinds ``excludes``, at
+    most one angle harmonic each; with the empty one, 1, where angle harmonics are excluded (else
+    the monomials are an additive frequency's, and f00 is its 1)."""
+    names = [name for name in factors if factor(name).kind not in excludes]
+    found: list[tuple[str, ...]] = [()] if "angle" in excludes else []
     for size in range(1, degree + 1):
         for chosen in itertools.combinations_with_replacement(names, size):
             if sum(factor(name).kind == "angle" for name in chosen) <= 1:

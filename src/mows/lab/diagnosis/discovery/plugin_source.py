@@ -28,6 +28,7 @@ WHY = {
     "field_offset_t": "a field the reference misses, through the potential",
     "tilt_rad": "the plane's tilt turns Bz into the plane",
     "angle_offset_rad": "the probe's angle changes with it, before the field is projected",
+    "magnet_offset_m": "the magnet's position on the lever changes with it: it feels the gradient elsewhere",
     "energy_j": "the energy it adds to U(θ) along the lever's arc, through the potential",
     "frequency_hz": "an additive frequency term (a readout term, no physics); better the physics that makes it",
 }

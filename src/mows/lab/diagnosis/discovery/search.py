@@ -12,6 +12,10 @@ through the plugin's own signature (:meth:`FitResult.extension_columns`); the si
 channel term is its column, so the two agree, and where they do not (|cos| <
 :data:`PHYSICAL_COSINE`), or the plugin interface has no output for the channel, the plugin is the
 additive frequency term closest to it, and the term says why.
+
+Of the readings the rows cannot tell apart, the simplest is reported (:func:`simplest`: the lowest
+degree of the monomial), and the others are listed beside it with the measurement that would tell
+them apart (:func:`mows.lab.diagnosis.discovery.readings.alternatives`).
 """
 
 from __future__ import annotations
@@ -57,16 +61,35 @@ PHYSICAL_COSINE = 0.95  # a plugin's signature at least this close to the term's
 
 
 def library_terms(factors: dict[str, np.ndarray], jacobian: dict[str, np.ndarray], weight: np.ndarray) -> list[Term]:
-    """Every channel times its monomials (:mod:`.library`), in library order: the physical
-    channels' columns w·∂f/∂p·x, the frequency's w·(x − x̄) (f00 takes a constant)."""
+    """Every channel of ``jacobian`` times its monomials (:mod:`.library`), in library order: the
+    physical channels' columns w·∂f/∂p·x, the frequency's w·(x − x̄) (f00 takes a constant)."""
     n = len(weight)
     found = []
-    for channel in CHANNELS:
-        for chosen in monomials(factors, harmonics=channel is FREQUENCY):
+    for channel in (channel for channel in CHANNELS if channel.name in jacobian):
+        for chosen in monomials(factors, channel.excludes):
             values = monomial_values(factors, chosen, n)
             column = weight * (values - values.mean()) if channel is FREQUENCY else jacobian[channel.name] * values
             found.append(Term(channel, chosen, column))
-    return found
+    # Of terms the rows cannot tell apart the first is kept: the lowest degree first (an angle
+    # that follows T before a field along the lever that follows B⊥·T), then the channels' order.
+    return sorted(found, key=lambda term: len(term.factors))
+
+
+def simplest(searched: Searched, passed: Refit) -> list[int]:
+    """The terms of ``passed``, each replaced by the first term in library order (the lowest
+    degree, then the channels' order) that the rows cannot tell from it: swapping them changes χ²
+    by less than :data:`mows.lab.diagnosis.discovery.readings.DISTINGUISH_CHI2`. A physical
+    channel is never replaced by the additive frequency."""
+    chosen = list(passed.chosen)
+    physical = np.array([term.channel is not FREQUENCY for term in searched.terms])
+    for i, j in enumerate(passed.chosen):
+        cosine = np.abs(searched.unit.T @ searched.unit[:, j])
+        close = passed.gain_chi2[i] * (1.0 - cosine**2) <= readings.DISTINGUISH_CHI2
+        close &= physical | (not physical[j])
+        candidates = [int(k) for k in np.flatnonzero(close[:j]) if k not in chosen]
+        if candidates:
+            chosen[i] = candidates[0]
+    return chosen
 
 
 @dataclasses.dataclass
@@ -98,7 +121,10 @@ def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) 
     jacobian = unit_columns(fit.jacobian[kept])
     model_basis = orthonormal_basis(jacobian)
     factors = factor_values(table, probe)
-    searched = searchable(library_terms(factors, jacobians(fit, table, weight), weight), model_basis)
+    # The screen (stand-ins beside which catalog effects are judged, once per candidate of every
+    # step) searches the frequency alone: the channels' Jacobians cost a model evaluation each.
+    channels = CHANNELS if plugins else (FREQUENCY,)
+    searched = searchable(library_terms(factors, jacobians(fit, table, weight, channels), weight), model_basis)
     residual = Residual(fit.weighted_residual[kept], jacobian, model_basis.shape[1], cv_folds(table))
     means = factor_centres({name: table.columns[name] for name in factors if factor(name).centred}, probe)
     search = _Search(fit, probe, table, residual, searched, means, weight)
@@ -108,6 +134,8 @@ def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) 
     rng = np.random.default_rng(seed)
     frequencies = selection_frequencies(searched, residual.values, jacobian, units, rng, resamples)
     passed = significant(searched, [int(j) for j in np.flatnonzero(frequencies >= STABLE_FRACTION)], residual)
+    if passed.chosen and (simpler := simplest(searched, passed)) != passed.chosen:
+        passed = significant(searched, simpler, residual)
     found = sorted(
         (_term(search, passed, i, frequencies, plugins) for i in range(len(passed.chosen))),
         key=lambda t: -t[0].cv_gain_chi2,

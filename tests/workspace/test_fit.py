@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mows.physics.probe import PAPER_PROBE
-from mows.workspace.fit import choose_degree, fit
+from mows.workspace.fit import choose_degree, fit, whitened_rows
 from mows.workspace.harmonics import SolidHarmonics
 from mows.workspace.observations import Observation, gravity_field_t, hall_observation
 from mows.workspace.simulated import boundary_positions
@@ -86,3 +86,12 @@ def test_force_and_torque_on_a_tool_follow_the_energy_of_its_moment():
     torque = np.cross(moment, SOURCE.field_t(points))
     assert np.all(np.abs(result.torque_nm - torque) < 5 * result.torque_std_nm)
     assert np.all(result.force_std_n > 0) and np.all(result.torque_std_nm > 0)
+
+
+def test_a_map_that_does_not_fit_its_data_widens_its_sigma_by_its_chi2():
+    observations = sweeps(30, np.random.default_rng(10))
+    basis = SolidHarmonics(3, (0.0, 0.0, 0.0), RADIUS_M)  # too low for the dipoles: χ²/dof ≫ 1
+    model = fit(observations, basis)
+    assert model.chi2_dof > 10
+    design = np.concatenate([whitened_rows(basis, obs)[0] for obs in observations])
+    assert np.allclose(model.covariance, np.linalg.inv(design.T @ design) * model.chi2_dof, rtol=1e-6)

@@ -27,6 +27,7 @@ which the decomposition takes. Its feedback's shift is the first probe's at its 
 orientation, its fits are all. Adaptive sweeps are of one probe.
 """
 
+import dataclasses
 import enum
 import functools
 import math

@@ -30,6 +30,7 @@ from mows.workspace.arm import NS_PER_S, Reach, SimulatedArm, StampedPose
 from mows.workspace.poses import PoseError
 from mows.workspace.simulated import RINGDOWN_STD_HZ, SweepPose, ball_points, sweep_shifts_hz
 from mows_driver.recording import open_recorder
+from mows_mapper.parameters import PARAMETERS
 from mows_ros.qos import EXCITATION_QOS, MAP_QOS, RESULT_QOS, maps_qos
 from node_processes import serve_cycles
 
@@ -169,7 +170,7 @@ def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, mapper,
     client, _ = mapper
     rng = np.random.default_rng(4)
     arm = ArmNode(ros, rng)
-    driver = ArmDriver(ros, arm.arm, rng)
+    driver = ArmDriver(ros, arm.arm, np.random.default_rng(5))
     recorder = record(ros, tmp_path / "session")
     done, feedback = run_map(
         ros,
@@ -230,3 +231,15 @@ def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, mapper,
     # A workspace the arm cannot reach is refused with the reason, and the arm not moved.
     done, _ = run_map(ros, client, sweeps=3, centre_m=[0.9, 0.0, 0.0], radius_m=RADIUS_M)
     assert done.status == GoalStatus.STATUS_ABORTED and "no pose left within the arm's reach" in done.result.message
+
+
+def test_the_docs_command_that_connects_an_arm_sets_the_mappers_parameters():
+    """`mows-graph --ros-args -p mapper:NAME:=VALUE ...` as docs/workspace_maps.md prints it: every
+    NAME is a mapper parameter and every VALUE within its limits."""
+    command = re.search(r"    (mows-graph --ros-args .*?)\n\n", DOC.read_text(), re.S)[1]
+    given = dict(re.findall(r"-p mapper:(\w+):=(\S+)", command))
+    table = {spec.name: spec for spec in PARAMETERS}
+    assert given and set(given) <= set(table), set(given) - set(table)
+    for name, text in given.items():
+        value = type(table[name].default)(text)
+        assert table[name].request_problem(value, name) is None

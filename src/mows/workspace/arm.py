@@ -137,6 +137,8 @@ class SimulatedArm:
         frame_id: str = "arm_base",
     ) -> None:
         self.rng, self.accuracy, self.encoder_noise, self.reach = rng, accuracy, encoder_noise, reach
+        # The encoders' own stream: where a move ends must not depend on how often the arm was read.
+        self._encoder_rng = rng.spawn(1)[0]
         self.latency_s, self.speed_m_per_s, self.turn_rad_per_s, self.frame_id = (
             latency_s,
             speed_m_per_s,
@@ -195,7 +197,7 @@ class SimulatedArm:
         (on its way, or at its goal once there), with encoder noise; stamped with that earlier time."""
         then_s = now_s - self.latency_s
         believed = self._commanded(then_s)
-        noise = self.rng.normal(size=6) * self.encoder_noise.std
+        noise = self._encoder_rng.normal(size=6) * self.encoder_noise.std
         return StampedPose(
             int(then_s * NS_PER_S),
             self.frame_id,

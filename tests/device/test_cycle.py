@@ -89,7 +89,7 @@ def test_tuning_converges_to_the_resonance():
     start_hz = 107.0  # 5 % below the probe's resonance: the drive is far off it
     session = session_on_simulator(frequency_hz=start_hz)
     (outcome,), events = run(session)
-    truth_hz = session.backend.device.device.expected_frequency_hz()
+    truth_hz = session.backend.device.device.expected_frequencies_hz()[0]
     assert abs(start_hz - truth_hz) > 5.0
     assert [fit.ok for fit in outcome.tuning_fits] == [True, True]
     # The tuned frequency is the fitted ring-down frequency: within 10 mHz of the truth.

@@ -33,9 +33,10 @@ import numpy as np
 
 from mows.device.interface import CoilCommand, Command, FieldCurrentCommand, MultiToneCommand, OrientationCommand
 from mows.physics.coils import CurrentCap
-from mows.physics.multitone import Tone, peak_current_a
+from mows.physics.multitone import Tone, coil_amplitudes_a, peak_current_a
 from mows.physics.supply import SupplyLimits
-from mows.sim.simulator import SimulatedBlock, SimulatedDevice
+from mows.sim.readings import SimulatedBlock
+from mows.sim.simulator import SimulatedDevice
 
 COIL_LOG_LENGTH = 10000  # coil changes kept (two per excitation)
 
@@ -184,7 +185,11 @@ class ScheduledDevice:
         return self._enqueue(at_index, "on", functools.partial(self._drive_tones, checked, int(samples)))
 
     def _drive_tones(self, tones: tuple[Tone, ...], samples: int) -> None:
-        self.device.drive(tones, self.device.sample_index + samples)
+        self.device.drive(
+            coil_amplitudes_a(self.device.setup, tones),
+            [t.frequency_hz for t in tones],
+            self.device.sample_index + samples,
+        )
         self.coils_on = True
 
     def cancel(self) -> None:
@@ -270,7 +275,7 @@ class ScheduledDevice:
 
     def _drive(self, amplitudes_a: tuple, frequency_hz: float) -> None:
         if any(amplitudes_a):
-            self.device.set_coils(np.array(amplitudes_a), frequency_hz)
+            self.device.drive([amplitudes_a], [frequency_hz])
         else:
             self.device.coils_off()
         self.coils_on = any(amplitudes_a)

@@ -57,38 +57,35 @@ from mows.device.cycle.tone_groups import GroupSequence, on_stage, plan_probes, 
 from mows.device.cycle.waits import Answer, CycleAborted, Reach, Recording, Run
 from mows.device.interface import (
     CoilCommand,
+    CoilTone,
     Command,
     CommandResult,
     LinkEvent,
-    MultiToneCommand,
     OrientationCommand,
+    coil_tones,
 )
 from mows.physics.coils import CoilSetup, CurrentCap, excitation_samples
 from mows.physics.coupling import PlacedProbe
-from mows.physics.multitone import ExcitationPlan, Tone, peak_current_a
+from mows.physics.multitone import ExcitationPlan, peak_current_a
 from mows.records.samples import SampleBlock
 
 
 @dataclasses.dataclass(frozen=True)
 class Excitation:
     """One group's excitation, on for samples [``on_index``, ``off_index``): the coil currents it
-    announces (one probe: signed per coil; several: each coil's summed peak), its drive's
-    frequency, the tones of a multi-tone drive (empty for one probe's) and the probes' θ0."""
+    announces (one probe: signed per coil; several: each coil's summed peak), the tones of the
+    probes it rings (one probe's a tone of one) and each one's θ0, in the same order."""
 
     on_index: int
     off_index: int
     currents_a: tuple[float, ...]
-    frequency_hz: float
-    tones: tuple[Tone, ...] = ()
-    theta0_rad: float = 0.0
+    tones: tuple[CoilTone, ...]
+    theta0_rad: tuple[float, ...]
 
     @property
-    def rung(self) -> tuple[tuple[int, float, float], ...]:
-        """(id, tone, θ0) of each probe it rings: its tones', or the one probe's (id 0) at the
-        drive's frequency."""
-        if self.tones:
-            return tuple((t.probe_id, t.frequency_hz, t.theta0_rad) for t in self.tones)
-        return ((0, self.frequency_hz, self.theta0_rad),)
+    def frequency_hz(self) -> float:
+        """The drive's frequency: its first probe's tone."""
+        return self.tones[0].frequency_hz
 
 
 class CycleSequencer:
@@ -296,12 +293,15 @@ class CycleSequencer:
         if self._groups is None:
             excite = excitation_samples(c.settings.excite_s, self.frequency_hz, self.sample_rate_hz)
             start = self._duty.earliest_start(not_before, excite)
-            return Excitation(start, start + excite, self._currents(c), self.frequency_hz, (), c.theta0_rad)
+            currents = self._currents(c)
+            tone = CoilTone(0, self.frequency_hz, currents)
+            return Excitation(start, start + excite, currents, (tone,), (c.theta0_rad,))
         group = self._groups.next(not_before)
         assert group is not None  # a group is asked for only while some remain
         duration_s = (group.off_index - group.on_index) / self.sample_rate_hz
         peaks = tuple(float(a) for a in peak_current_a(self.setup, group.tones, duration_s))
-        return Excitation(group.on_index, group.off_index, peaks, group.tones[0].frequency_hz, group.tones)
+        theta0_rad = tuple(t.theta0_rad for t in group.tones)
+        return Excitation(group.on_index, group.off_index, peaks, coil_tones(self.setup, group.tones), theta0_rad)
 
     def _excite(
         self, c: CyclePlan, e: Excitation, coils_free: int, index: int, tuning: bool
@@ -309,14 +309,8 @@ class CycleSequencer:
         """Excite ``e`` and record its ring-down, announcing GAP (if it waits), EXCITING and
         RINGDOWN; returns the ring-down's recording, complete if a tuning fit needs its samples.
         The duty limit counts the interval the device applied."""
-        samples = e.off_index - e.on_index
-        if e.tones:
-            on = self._issue(MultiToneCommand, e.on_index, tones=e.tones, samples=samples)
-        else:
-            on = self._issue(CoilCommand, e.on_index, amplitudes_a=e.currents_a, frequency_hz=e.frequency_hz)
-        off = self._issue(
-            CoilCommand, e.off_index, amplitudes_a=(0.0,) * len(self.setup.coils), frequency_hz=e.frequency_hz
-        )
+        on = self._issue(CoilCommand, e.on_index, tones=e.tones, samples=e.off_index - e.on_index)
+        off = self._issue(CoilCommand, e.off_index)
         self._in_flight = e
         if e.on_index > coils_free:
             yield from self._enter(c, Phase.GAP, coils_free, e.on_index - coils_free, index, tuning)
@@ -522,7 +516,7 @@ class CycleSequencer:
         assert self._anchor is not None
         anchor_index, anchor_ns = self._anchor
         currents = excitation.currents_a if excitation is not None and phase == Phase.EXCITING else ()
-        rung = excitation.rung if excitation is not None else ()
+        tones = excitation.tones if excitation is not None else ()
         self._step.events.append(
             PhaseEvent(
                 phase=phase,
@@ -538,9 +532,9 @@ class CycleSequencer:
                 planned_duration_s=duration_samples / self.sample_rate_hz,
                 setup=self.setup.name,
                 reason=reason,
-                probe_ids=tuple(k for k, _, _ in rung),
-                probe_frequency_hz=tuple(f for _, f, _ in rung),
-                probe_theta0_rad=tuple(a for _, _, a in rung),
+                probe_ids=tuple(t.probe_id for t in tones),
+                probe_frequency_hz=tuple(t.frequency_hz for t in tones),
+                probe_theta0_rad=excitation.theta0_rad if excitation is not None else (),
             )
         )
 

@@ -23,6 +23,7 @@ from mows_msgs.msg import (
     RingdownFit,
     SupplyState,
     SweepDecomposition,
+    WorkspaceModel,
 )
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -45,6 +46,7 @@ CONCLUSIONS = (
     ("mows/sweep", SweepDecomposition, maps_qos(16)),
     ("mows/field_map", FieldMap, MAP_QOS),
     ("mows/model_report", ModelReport, MAP_QOS),
+    ("mows/workspace_model", WorkspaceModel, MAP_QOS),
     ("/diagnostics", DiagnosticArray, RESULT_QOS),
 )
 

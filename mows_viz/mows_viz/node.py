@@ -31,6 +31,7 @@ from mows_msgs.msg import (
     ModelReport,
     RingdownFit,
     SweepDecomposition,
+    WorkspaceModel,
 )
 from sensor_msgs.msg import JointState
 
@@ -71,6 +72,7 @@ class VizNode(MowsNode):
             (SweepDecomposition, "mows/sweep", View.on_sweep, MAPS),
             (FieldMap, "mows/field_map", View.on_field_map, MAP_QOS),
             (ModelReport, "mows/model_report", View.on_model_report, MAP_QOS),
+            (WorkspaceModel, "mows/workspace_model", View.on_workspace_model, MAP_QOS),
             (DiagnosticArray, DIAGNOSTICS_TOPIC, View.on_diagnostics, DIAGNOSTICS_DEPTH),
         )
         for cls, topic, feed, qos in feeds:

@@ -43,7 +43,7 @@ from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap, largest_spacing
-from mows.physics.supply import SupplyLimits
+from mows.physics.supply import RAMP_STEP_S, SupplyLimits
 from mows.records.samples import SampleBlock
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -710,27 +710,37 @@ def test_a_host_behind_the_card_reads_the_supply_back_settled(on_bench):
     backend.close()
 
 
-def test_the_backend_ramps_the_supply_and_zeroes_it_on_close(on_bench):
+def test_the_backend_ramps_the_supply_and_zeroes_it_on_close(on_bench, monkeypatch):
     supply = simulated_supply()
+    sim = supply.resource.visalib.instruments[SIMULATED_RESOURCE]
+    written: list[float] = []  # each current as the instrument received it
+    match = sim._device._match
+
+    def recorded(query):
+        if query.startswith(b"CURR "):
+            written.append(float(query.split()[1]))
+        return match(query)
+
+    monkeypatch.setattr(sim._device, "_match", recorded)
     bench, backend = on_bench("calibration", supply)
     backend.send(FieldCurrentCommand(1, 0, 0.5))
     (result,) = backend.poll(0.0)[:1]
     assert result.accepted and result.applied_sample_index == round(0.24 * 20_000.0)
-    seen = []
     while backend.supply_schedule.ramping:
         backend.poll(0.0)
-        seen.append(bench.device.field_current_a)
     assert math.isnan(backend.supply_readback.current_a)  # not at once: the pair is still settling
     while backend.supply_pending:  # the steps written, and read back once the last has settled
         backend.poll(0.0)
-        seen.append(bench.device.field_current_a)
     assert backend.supply_readback.step_index == result.applied_sample_index
     tolerance = supply.config.readback_tolerance_a(0.5)
     assert backend.supply_readback.current_a == pytest.approx(0.5, abs=tolerance)
     assert bench.device.field_current_a == 0.5
-    # The steps are written as the blocks come: the current changes by at most the slew limit over
-    # a block and a step (the average rate is the limit; no step is skipped).
-    assert np.max(np.diff(seen)) <= 2.0 * (0.025 + 0.01) + 1e-9 and len(set(seen)) > 5
+    # Every step of the staircase reaches the instrument, in order, none skipped: at most one
+    # step's worth of the slew limit apart (the line paces them one per step, however late the
+    # host hands them over).
+    step_a = supply.config.limits.slew_a_per_s * RAMP_STEP_S
+    assert written[-1] == 0.5 and len(written) >= round(0.5 / step_a)
+    assert np.max(np.diff([0.0, *written])) <= step_a + 1e-9 and np.all(np.diff(written) > 0.0)
     with pytest.raises(ValueError, match="exceeds the cap"):
         backend.send(FieldCurrentCommand(2, 0, 2.5))
     backend.close()

@@ -7,12 +7,14 @@ The truth is the table without the column; nothing here compares the code with i
 path.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from mows.lab import FrequencyModel, ProbeSet, TableError, catalog, with_probes
+from mows.lab import FrequencyModel, ProbeSet, TableError, catalog, diagnose, effect, with_probes
 from mows.lab.data.probe_rows import probe_parts
-from mows.physics.probe import PAPER_PROBE
+from mows.physics.probe import PAPER_PROBE, Probe
 
 from .tables import tilted_table
 
@@ -46,3 +48,27 @@ def test_every_row_of_a_table_without_the_column_is_its_one_probe(table):
 def test_probes_named_by_id_need_the_column(table):
     with pytest.raises(TableError, match="no column 'probe'"):
         with_probes(table, ProbeSet.of({0: PAPER_PROBE, 1: PAPER_PROBE}))
+
+
+def test_a_plugin_sees_each_rows_own_probe_never_the_set(table):
+    """docs/model_lab.md: a plugin ``(rows, probe, …)`` gets its rows' probe's constants, also
+    where the lab checks it can be evaluated (in a fit and among the candidates) and records
+    the columns it reads."""
+    other = dataclasses.replace(PAPER_PROBE, spring_nm_per_rad=PAPER_PROBE.spring_nm_per_rad * 1.072)
+    two = table.with_columns(probe=np.arange(len(table)) % 2.0)
+    probes = ProbeSet.of({0: PAPER_PROBE, 1: other})
+    seen = []
+
+    @effect(name="probe_check", parameters={"k": (0.0, -1.0, 1.0, "Hz")})
+    def probe_check(rows, probe, k):
+        seen.append((probe, set(rows.probe.tolist())))
+        return {"frequency_hz": k * np.ones(len(rows))}
+
+    fit = FrequencyModel(probes).fit(two)
+    (fit.model + probe_check).fit(two)
+    diagnose(fit, [probe_check], probes)  # ranks it as a candidate
+    assert seen and all(type(probe) is Probe for probe, _ in seen)
+    for probe, ids in seen:
+        (member,) = ids
+        assert probe == probes.members[int(member)].probe
+    assert {member for _, ids in seen for member in ids} == {0.0, 1.0}

@@ -50,18 +50,22 @@ class RingdownModel:
         numbers = (self.frequency_hz, self.damping_per_s, self.phase_rad, self.kappa_t, self.offset_t)
         return all(math.isfinite(x) for x in numbers) and bool(self.pickup)
 
-    def series(self, t_s: ArrayLike, amplitude_rad: float) -> NDArray[np.float64]:
-        """The pickup series g(x(t)) with the swing ``amplitude_rad``."""
+    def deflection_rad(self, t_s: ArrayLike, amplitude_rad: float) -> NDArray[np.float64]:
+        """x(t) of the module docstring with the swing ``amplitude_rad``."""
         t = np.asarray(t_s, float)
-        x = (
+        return (
             amplitude_rad
             * np.exp(-self.damping_per_s * t)
             * np.cos(2 * math.pi * self.frequency_hz * t + self.phase_rad)
         )
+
+    def series(self, t_s: ArrayLike, amplitude_rad: float) -> NDArray[np.float64]:
+        """The pickup series g(x(t)) with the swing ``amplitude_rad``."""
         orders = np.arange(len(self.pickup))
-        # A sum, not ``@``: a threaded BLAS's complex product took 44 ms instead of 0.01 ms on a
-        # loaded host, seconds per drawing.
-        return np.real((np.exp(1j * np.multiply.outer(x, orders)) * np.asarray(self.pickup, complex)).sum(axis=-1))
+        terms = np.exp(1j * np.multiply.outer(self.deflection_rad(t_s, amplitude_rad), orders))
+        # A sum, not ``@``: a threaded BLAS's product waits on threads a loaded host has taken
+        # (docs/performance.md, live view).
+        return np.real((terms * np.asarray(self.pickup, complex)).sum(axis=-1))
 
     def completed(self, t_s: ArrayLike, data_t: ArrayLike) -> RingdownModel:
         """This model, or where θmax is NaN the one of the fits it stands for that is nearest

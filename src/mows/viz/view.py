@@ -27,6 +27,7 @@ from mows.records.samples import SampleBlock
 from mows.viz.curves import RingdownModel, ringdown_curve, stride, sweep_curve_hz
 from mows.viz.mount import FrameTransform, Mount
 from mows.viz.scene import ARROW_LENGTH_M, Arrow, ProbeField, axis_arrow, probe_arrows
+from mows.viz.workspace_scene import workspace_arrows
 
 # The channels' topics (docs/visualisation.md), beside the graph's own under /mows/.
 SCENE, FRAMES = "/mows/viz/scene", "/mows/viz/frames"
@@ -306,6 +307,11 @@ class View:
         for probe in msg.probes:
             if probe.status == STATUS_OK:
                 self._fields[int(probe.probe_id)] = ProbeField.of(probe, msg.header.frame_id, probe.position_m)
+        return [self._scene(time_ns)]
+
+    def on_workspace_model(self, msg, time_ns: int) -> list[Shown]:
+        """The workspace map's field on a grid and its poses (replacing an earlier map's)."""
+        self._entities.update(workspace_arrows(msg))
         return [self._scene(time_ns)]
 
     def _scene(self, time_ns: int) -> Shown:

@@ -1,10 +1,13 @@
-"""Tables of several probes: each probe's constants, and its neighbours' field at each row.
+"""A table's probes: each row's probe and its constants, and its neighbours' field at each row.
+
+:class:`ProbeSet` is the one way the lab holds a table's probes: a table of one probe is a set
+of one and takes the same path as several (:func:`probe_parts`).
 
 A table may hold several probes that share a scene (docs/multi_probe.md). The column ``probe``
 names each row's probe by an integer id; ``step`` numbers the steps of a sweep, so that rows
 with equal ``sweep`` and ``step`` were measured together; ``magnet_x_m``, ``magnet_y_m`` and
 ``magnet_z_m`` give where the row's magnet sits undeflected (global frame, as
-``--magnet-position`` does for one probe). :class:`ProbeSet` holds each probe's constants.
+``--magnet-position`` does for one probe).
 
 :func:`with_neighbour_field` gives every row its neighbours' field at its magnet: the exact
 point-dipole field (Eq. S8 before its far-field reduction), with its in-plane gradient and
@@ -46,10 +49,11 @@ class ProbeSet(Probe):
     the set holds one probe (id 0), every row is its, and its f00 is the parameter ``f00_hz``;
     with it, probe i's f00 is ``probe_<i>.f00_hz``.
 
-    As a :class:`~mows.physics.probe.Probe` it carries its first member's constants. Only the
-    diagnosis's explanatory texts use them. The frequency model evaluates each probe's rows with
-    that probe's own constants and fits one f00 per probe
-    (:mod:`mows.lab.model.frequency_model`).
+    As a :class:`~mows.physics.probe.Probe` it carries its first member's constants: the
+    diagnosis takes them where it needs one probe's for the whole table (its explanatory texts,
+    the physical range of an effect parameter all the probes share). The frequency model
+    evaluates each probe's rows with that probe's own constants and fits one f00 per probe
+    (:mod:`mows.lab.model.frequency_model`), and an effect sees each row's own probe.
     """
 
     members: tuple[ProbeEntry, ...] = ()

@@ -198,9 +198,9 @@ class FrequencyModel:
     ) -> FitResult:
         """Weighted least-squares fit to ``table`` (to its ``rows``, indices, when given: a
         cross-validation fold); ``start`` = effect parameter values (default: every effect off)."""
-        first = probe_parts(table, self._require_probe())[0]  # effects read a row's own columns
+        probe = self._require_probe()
         for effect in self.effects:
-            reason = untestable_reason(effect, first.table, first.entry.probe)
+            reason = untestable_reason(effect, table, probe)
             if reason:
                 raise ValueError(f"effect {effect.name} cannot be fitted to this table: {reason}")
         problem = Problem(self, table, rows)

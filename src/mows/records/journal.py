@@ -12,9 +12,9 @@ run does the whole job again.
 A journal is acted on only when everything in it is as that writer left it: its process is
 gone, every path it names is in its own directory and carries its writer's name, none is an
 input of the command now running, and each file holds the very bytes the journal recorded (a
-file edited since the crash is the user's). Otherwise nothing is touched and a warning names
-the journal. Only files a journal (or a temporary's own name) shows the writer made are ever
-removed.
+file edited since the crash is the user's). Otherwise nothing is touched, not even that
+writer's temporaries, and a warning names the journal. Only files a journal (or a temporary's
+own name) shows the writer made are ever removed.
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def recover(directory, inputs: Iterable = ()) -> list[pathlib.Path]:
         return []
     protected = {pathlib.Path(path).resolve() for path in inputs}
     restored: list[pathlib.Path] = []
-    listed: set[str] = set()
+    left: set[int] = set()  # the writers whose journal stays: every file of theirs stays with it
     for name in names:
         match = COMMIT.match(name)
         if match is None or running(int(match["pid"])):
@@ -137,7 +137,7 @@ def recover(directory, inputs: Iterable = ()) -> list[pathlib.Path]:
         journal = directory / name
         entries, problem = _trusted_entries(journal, int(match["pid"]), protected)
         if problem:
-            listed.update(_names_in(journal))
+            left.add(int(match["pid"]))
             warnings.warn(f"left {journal} as it is: {problem}", JournalLeft, stacklevel=2)
             continue
         restored += _roll_back(directory, entries)
@@ -148,8 +148,8 @@ def recover(directory, inputs: Iterable = ()) -> list[pathlib.Path]:
         discard(journal)
     for name in names:
         match = INTENT.match(name)
-        if match and not running(int(match["pid"])):
-            _remove_temporary(directory / name, own_prefix(pathlib.Path(match["name"]), int(match["pid"])), listed)
+        if match and int(match["pid"]) not in left and not running(int(match["pid"])):
+            _remove_temporary(directory / name, own_prefix(pathlib.Path(match["name"]), int(match["pid"])))
     return restored
 
 
@@ -163,9 +163,9 @@ def write_intent(output: pathlib.Path, temporary: pathlib.Path) -> pathlib.Path:
     return intent
 
 
-def _remove_temporary(intent: pathlib.Path, prefix: str, listed: set[str]) -> None:
+def _remove_temporary(intent: pathlib.Path, prefix: str) -> None:
     """The temporary a dead writer's intent names, removed if it is still the very file it made
-    (its name and inode) and no journal left in place lists it; then the intent."""
+    (its name and inode); then the intent."""
     try:
         document = json.loads(intent.read_text(encoding="utf-8"))
         name, inode, device = document["temporary"], document["inode"], document["device"]
@@ -175,24 +175,12 @@ def _remove_temporary(intent: pathlib.Path, prefix: str, listed: set[str]) -> No
     if not valid or not name.startswith(prefix):
         warnings.warn(f"left {intent} as it is: it is not a note this version wrote", JournalLeft, stacklevel=3)
         return
-    if name in listed:  # a journal left in place lists it: all of that writer's files stay
-        return
     temporary = intent.parent / name
     with contextlib.suppress(OSError):
         info = temporary.lstat()
         if (info.st_ino, info.st_dev) == (inode, device):
             temporary.unlink()
     discard(intent)
-
-
-def _names_in(journal: pathlib.Path) -> set[str]:
-    """Every file name a journal lists (read as loosely as it can be)."""
-    try:
-        document = json.loads(journal.read_text(encoding="utf-8"))
-        entries = document["entries"] if isinstance(document, dict) else document
-        return {os.path.basename(str(e.get(k))) for e in entries for k in ("temporary", "replaced") if e.get(k)}
-    except (OSError, ValueError, TypeError, KeyError, AttributeError):
-        return set()
 
 
 def _trusted_entries(journal: pathlib.Path, pid: int, protected: set[pathlib.Path]) -> tuple[list[dict], str]:

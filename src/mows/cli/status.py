@@ -33,6 +33,7 @@ class Terminated(KeyboardInterrupt):
 _received: list[int] = []  # the signals the handler has seen, in order
 _raised = False  # an interrupt is on its way up the stack: a second signal does not cut its clean-up
 _wakeup: int | None = None  # the read end of the pipe the C handler writes signal numbers to
+_handling = False  # this process's SIGINT and SIGTERM come to _on_signal (the command itself runs)
 _EXCEPTIONS: dict[int, type[KeyboardInterrupt]] = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: Terminated}
 EXIT_OF: dict[int, int] = {signal.SIGINT: EXIT_INTERRUPTED, signal.SIGTERM: EXIT_TERMINATED}
 
@@ -60,7 +61,7 @@ def _unraisable(unraisable, default=sys.unraisablehook) -> None:
 def stop_on_signals() -> None:
     """SIGINT and SIGTERM end the command with one line and status 130 or 143, whenever they
     come (a SIGINT ignored by whoever started us, as for a background job, stays ignored)."""
-    global _wakeup
+    global _wakeup, _handling
     read, write = os.pipe()
     os.set_blocking(read, False)
     os.set_blocking(write, False)
@@ -70,6 +71,14 @@ def stop_on_signals() -> None:
         if signal.getsignal(signum) is not signal.SIG_IGN:
             signal.signal(signum, _on_signal)
     sys.unraisablehook = _unraisable
+    _handling = True
+
+
+def raised_by_a_signal() -> bool:
+    """Whether a KeyboardInterrupt now on its way up came from a signal: where the command's own
+    handlers are in place, only if they have seen one (otherwise code raised it); where they are
+    not (a caller's ``main(argv)``), it may have, and is taken so."""
+    return bool(_received) or not _handling
 
 
 def settle(prog: str, status: int) -> int:

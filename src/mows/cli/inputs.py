@@ -21,6 +21,7 @@ import sys
 import traceback
 import warnings
 from collections.abc import Callable, Iterator
+from typing import NoReturn
 
 import numpy as np
 import yaml
@@ -182,10 +183,10 @@ def _exits_refused() -> Iterator[None]:
     it unseen (a plugin's, say); a forked child (another process id) still exits by it."""
     owner, exit_now = os.getpid(), os._exit
 
-    def refuse(code: int) -> None:
+    def refuse(status: int) -> NoReturn:
         if os.getpid() != owner:
-            exit_now(code)
-        raise ExitCalled(code)
+            exit_now(status)
+        raise ExitCalled(status)
 
     os._exit = refuse
     try:
@@ -197,12 +198,11 @@ def _exits_refused() -> Iterator[None]:
 def _exit_site(error: BaseException) -> str:
     """Where ``error`` was raised: the file and line of its innermost frame (of its caller's, for
     :class:`ExitCalled`, whose innermost frame is the refusal's)."""
-    frames = traceback.extract_tb(error.__traceback__)
-    frames = frames[:-1] if isinstance(error, ExitCalled) else frames
+    frames = list(traceback.extract_tb(error.__traceback__))[: -1 if isinstance(error, ExitCalled) else None]
     return f"{frames[-1].filename}:{frames[-1].lineno}" if frames else "the command"
 
 
-def _refuse_exit(prog: str, error: BaseException) -> int:
+def _refuse_exit(prog: str, error: SystemExit | KeyboardInterrupt) -> int:
     """The line and the status of code (a plugin's) that tried to end the command."""
     if isinstance(error, KeyboardInterrupt):
         how = "raise KeyboardInterrupt, without a signal"

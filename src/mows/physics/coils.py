@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mows.physics import ranges
 from mows.physics.field import (
     FieldSource,
     anti_helmholtz_pair,
@@ -51,7 +52,6 @@ from mows.physics.field import (
     source_from_dict,
     source_to_dict,
 )
-from mows.physics import ranges
 from mows.physics.schema import as_points_m, check_keys, vector3
 
 LSIP330_RADIUS_M = 0.025

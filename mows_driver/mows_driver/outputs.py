@@ -23,6 +23,7 @@ from mows_msgs.msg import (
     RingdownFit,
     SupplyState,
     SweepDecomposition,
+    WorkspaceModel,
 )
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -45,6 +46,7 @@ CONCLUSIONS = (
     ("mows/sweep", SweepDecomposition, maps_qos(16)),
     ("mows/field_map", FieldMap, MAP_QOS),
     ("mows/model_report", ModelReport, MAP_QOS),
+    ("mows/workspace_model", WorkspaceModel, MAP_QOS),
     ("/diagnostics", DiagnosticArray, RESULT_QOS),
 )
 
@@ -75,7 +77,12 @@ class DriverOutputs:
             ]
 
     def _own_topics(self) -> list:
-        return [(self.raw, STREAM_QOS), (self.excitation, EXCITATION_QOS), (self.supply, EXCITATION_QOS)]
+        return [
+            (self.raw, STREAM_QOS),
+            (self.excitation, EXCITATION_QOS),
+            (self.supply, EXCITATION_QOS),
+            (self.joints, JOINT_QOS),  # the mount's frames of a recording (``mows viz BAG --mount``)
+        ]
 
     def _recording(self, topic: str):
         def write(message) -> None:
@@ -113,7 +120,7 @@ class DriverOutputs:
             self._send(self.raw, block_msg(block, session.backend.info, values["frame_id"], values["sensor_frame_ids"]))
             self.blocks_published += 1
             if session.stage_angle_rad is not None:  # the stage with every block: TF at its stamps
-                self.joints.publish(joint_state_msg(block.stamp_ns, session.stage_angle_rad))
+                self._send(self.joints, joint_state_msg(block.stamp_ns, session.stage_angle_rad))
         for event in output.events:
             self._send(self.excitation, excitation_msg(event, values["probe_frame_id"], session.epoch))
             if event.phase == Phase.FAULT:

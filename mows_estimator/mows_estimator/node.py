@@ -4,13 +4,14 @@ Topic and service names are relative, so the graph can run in a namespace; in th
 namespace they are the names below. Subscribes ``/mows/raw`` (MagnetometerBlock, sensor-data QoS)
 and ``/mows/excitation`` (ExcitationState, transient local). Publishes, per recorded ring-down,
 ``/mows/ringdown`` (RingdownFit, always, with a status), and when the fit is OK ``/mows/field``
-(FieldEstimate) and ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). With ``probes``
-listing several probes, each window is fitted jointly over the probes its announcement lists (each
-at its own θ0; all of them when it lists none) and gives one RingdownFit per probe (its
-``probe_id``, frame ``<probe_frame_id>_<id>``), and /diagnostics counts each probe's fits and those
-of ids it does not know. Service ``/estimator/calibrate`` (CalibrateF00; ``/mows/estimator/calibrate``,
-the previous release's name, is served too for one release) sets f00 from the next ring-downs in a
-known field. The estimation itself is :class:`mows.estimate.stream.RingdownEstimator`.
+(FieldEstimate) and ``/mows/magnetic_field`` (sensor_msgs/MagneticField, REP-145). Each window is
+fitted jointly over the probes its announcement lists, each at its own θ0 (all of them when it
+lists none, as bags recorded before the lists do), and gives one RingdownFit per probe with its
+``probe_id``: the node's own probe (0) alone, or those ``probes`` names, each in frame
+``<probe_frame_id>_<id>`` and counted on /diagnostics with the fits of ids it does not know.
+Service ``/estimator/calibrate`` (CalibrateF00; ``/mows/estimator/calibrate``, the previous
+release's name, is served too for one release) sets f00 from the next ring-downs in a known field.
+The estimation itself is :class:`mows.estimate.stream.RingdownEstimator`.
 """
 
 import time

@@ -18,18 +18,29 @@ and the CPU-bound decomposition and lab (in a worker thread) as a coroutine, so 
 diagnostics are served meanwhile.
 """
 
-from mows_msgs.action import RotationSweep
+from mows_msgs.action import RotationSweep, WorkspaceMap
 from mows_msgs.msg import RingdownFit
 from rclpy.action import CancelResponse
 
 from mows.estimate.settings import probe_set
 from mows.lab import analyse_sweep
 from mows.sweep.publication import Publication, cycle_failed, publication
-from mows.sweep.runner import CycleAnswer, CycleRequest, SweepFit, SweepRunner, SweepSettings, SweepStep
-from mows_mapper import messages
+from mows.sweep.runner import (
+    CycleAnswer,
+    CycleRequest,
+    SweepFit,
+    SweepGoal,
+    SweepOutcome,
+    SweepRunner,
+    SweepSettings,
+    SweepState,
+    SweepStep,
+)
+from mows_mapper import messages, workspace
 from mows_mapper.health import sweep_health
 from mows_mapper.outputs import MapperOutputs
 from mows_mapper.parameters import PARAMETERS, sweep_settings
+from mows_mapper.workspace import ArmMapping
 from mows_ros.awaitables import in_worker, until
 from mows_ros.cycles import DriverCycles
 from mows_ros.diagnostics import Health
@@ -46,6 +57,14 @@ NODE_NAME = "mapper"
 SERVICE_WAIT_S = 5.0  # longest wait for the driver's measurement-cycle action to appear
 ACTIONS = ("~/rotation_sweep", "mows/mapper/rotation_sweep")  # the node's own, the previous release's
 WATCH_S = 0.1  # how often a running sweep looks for its client in the graph
+MAP_ACTIONS = (workspace.ACTION,)
+
+
+class _NoFeedback:
+    """A workspace map's sweeps report through the map's own feedback."""
+
+    def publish_feedback(self, _) -> None:
+        pass
 
 
 class MapperNode(MowsNode):
@@ -58,6 +77,11 @@ class MapperNode(MowsNode):
         self._outputs = MapperOutputs(self, len(probes))
         self._servers = action_servers(self, RotationSweep, ACTIONS, self._execute, self._cancel, self._driver.group)
         self._operator = OperatorTurns(self, "~/confirm_orientation", lambda: self._runner.turn_awaited)
+        self._mapping = ArmMapping(self, lambda: parameter_values(self, PARAMETERS), self._map_sweep)
+        self._map_servers = action_servers(
+            self, WorkspaceMap, MAP_ACTIONS, self._execute_map, self._cancel_map, self._driver.group
+        )
+        self._map_cancelled = False
 
     def _param(self, name):
         return self.get_parameter(name).value
@@ -104,17 +128,23 @@ class MapperNode(MowsNode):
             goal_handle.abort()
             return result
         self.get_logger().info("sweep goal accepted")
-        watch = RequesterWatch(self, send_goal_services(self, ACTIONS))
+        outcome, plan = await self._sweep(ACTIONS, lambda step: messages.step_feedback_msgs(step), goal_handle)
+        result = messages.result_msg(outcome, self._param("frame_id"), plan.per_probe)
+        end_goal(goal_handle, outcome.ok, outcome.cancelled)
+        return result
+
+    async def _sweep(self, actions, feedback_msgs, goal_handle) -> tuple[SweepOutcome, Publication]:
+        """The started sweep run to its end and published, its client watched under ``actions``."""
+        watch = RequesterWatch(self, send_goal_services(self, actions))
         timer = steady_timer(self, WATCH_S, lambda: self._watch(watch), callback_group=self._driver.group)
         try:
             step = self._runner.begin()
             while step.finished is None:
-                for feedback in messages.step_feedback_msgs(step):
+                for feedback in feedback_msgs(step):
                     goal_handle.publish_feedback(feedback)
                 step = await self._advance(step)
             outcome = step.finished
             plan = publication(step, self._settings.probes, self._param("reference_scenario"))
-            result = messages.result_msg(outcome, self._param("frame_id"), plan.per_probe)
             await self._publish(plan)
         finally:  # an exception must not leave the runner busy for good
             self.destroy_timer(timer)
@@ -124,8 +154,48 @@ class MapperNode(MowsNode):
             self.get_logger().info(f"sweep {self._runner.last_cancel}")
         elif not outcome.ok:
             self.get_logger().warning(f"sweep aborted: {outcome.message}")
-        end_goal(goal_handle, outcome.ok, outcome.cancelled)
+        return outcome, plan
+
+    # --- the workspace map ------------------------------------------------------------------
+    async def _execute_map(self, goal_handle):
+        probe = probe_of(self._param("probe_file"))
+        settings = sweep_settings(parameter_values(self, PARAMETERS), probe)
+        if (refusal := self.inactive_reason() or self._map_refusal(settings)) is not None:
+            goal_handle.abort()
+            return WorkspaceMap.Result(success=False, message=f"workspace map refused: {refusal}")
+        self._map_cancelled = False
+        try:
+            carried = settings.probes[0].probe if settings.probes else probe
+            result = await self._mapping.run(goal_handle, carried, lambda: self._map_cancelled)
+        except ValueError as error:  # no pose left within reach; sweeps that cannot determine a map
+            result = WorkspaceMap.Result(success=False, message=f"workspace map failed: {error}")
+        if not result.success:
+            self.get_logger().warning(result.message)
+        end_goal(goal_handle, result.success, self._map_cancelled)
         return result
+
+    def _map_refusal(self, settings: SweepSettings) -> str | None:
+        if self._runner.state != SweepState.IDLE:
+            return "a sweep is running"
+        if len(settings.probes) > 1:
+            return f"the arm carries one probe; the mapper has {len(settings.probes)}"
+        return None
+
+    def _cancel_map(self, _) -> CancelResponse:
+        self._map_cancelled = True
+        self._cancel_sweep()
+        return CancelResponse.ACCEPT
+
+    async def _map_sweep(self, goal: SweepGoal) -> SweepOutcome:
+        """One rotation sweep of the workspace map where the arm holds the probe."""
+        try:
+            probe = probe_of(self._param("probe_file"))
+            self._settings = sweep_settings(parameter_values(self, PARAMETERS), probe)
+            self._runner.start(goal, self._settings, probe)
+        except ValueError as refused:
+            return SweepOutcome(False, f"sweep refused: {refused}")
+        outcome, _ = await self._sweep(MAP_ACTIONS, lambda _: (), _NoFeedback())
+        return outcome
 
     async def _advance(self, step: SweepStep) -> SweepStep:
         if step.turn is not None:

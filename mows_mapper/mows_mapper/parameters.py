@@ -45,6 +45,29 @@ PARAMETERS = (
     ),
     ParamSpec("turn_s", 0.5, "adaptive sweeps: device time to turn the probe and let it settle, s", range=(0.0, 60.0)),
     *operator.PARAMETERS,
+    # The workspace map: the arm (CRTK topics <arm>/measured_cp, <arm>/move_cp) and the workspace.
+    ParamSpec("arm", "arm", "namespace of the arm's CRTK topics (measured_cp, move_cp), e.g. PSM1"),
+    ParamSpec("arm_frame", "arm_base", "the arm's base frame: measured_cp's frame_id, the map's frame"),
+    ParamSpec("workspace_x_m", 0.3, "workspace map: centre's x in the arm's base frame when the goal gives none, m"),
+    ParamSpec("workspace_y_m", 0.0, "workspace map: centre's y in the arm's base frame when the goal gives none, m"),
+    ParamSpec("workspace_z_m", 0.0, "workspace map: centre's z in the arm's base frame when the goal gives none, m"),
+    ParamSpec("workspace_radius_m", 0.025, "workspace map: radius when the goal gives none, m", range=(1e-3, 2.0)),
+    ParamSpec("workspace_sweeps", 15, "workspace map: sweeps when the goal says 0", range=(3, 1000)),
+    ParamSpec("reach_min_radius_m", 0.1, "the arm's reach: nearest to its base frame's origin, m", range=(0.0, 10.0)),
+    ParamSpec(
+        "reach_max_radius_m", 0.6, "the arm's reach: farthest from its base frame's origin, m", range=(0.0, 10.0)
+    ),
+    ParamSpec("arm_position_std_m", 1e-4, "the arm's stated position accuracy per component, m", range=(1e-9, 0.1)),
+    ParamSpec("arm_angle_std_deg", 0.01, "the arm's stated rotation accuracy per component, deg", range=(1e-7, 10.0)),
+    ParamSpec(
+        "arm_tolerance_m",
+        1e-4,
+        "measured_cp this near the goal and its last report: arrived and still, m",
+        range=(1e-7, 0.01),
+    ),
+    ParamSpec("arm_tolerance_deg", 0.05, "measured_cp this near in angle: arrived and still, deg", range=(1e-6, 5.0)),
+    ParamSpec("pose_max_age_s", 0.5, "a measured_cp older than this cannot stand for a sweep, s", range=(0.001, 60.0)),
+    ParamSpec("move_timeout_s", 60.0, "longest wait for the arm to report a pose asked for, s", range=(0.1, 3600.0)),
 )
 
 

@@ -60,6 +60,13 @@ FIGURES = {
         "sep_2hz_ratio_1_probe1_crb_over_alone",
     ),
     "latency_tracking": LATENCY,
+    "viz": (
+        "draw_ms_median",
+        "draw_whole_window_ms_median",
+        "draw_blas_product_ms_median",
+        "draw_to_ringdown_ratio",
+        "blas_product_ratio",
+    ),
     "workspace": (
         "b_error",
         "g_error",

@@ -10,6 +10,7 @@ late by 0.5 s does not underflow the outputs; a card error (underflow, overrun, 
 out) is a fault with its reason, the coils and the supply off, and the card re-armed.
 """
 
+import dataclasses
 import math
 import re
 import subprocess
@@ -42,7 +43,7 @@ from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap, largest_spacing
-from mows.physics.supply import SupplyLimits
+from mows.physics.supply import RAMP_STEP_S, SupplyLimits
 from mows.records.samples import SampleBlock
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -59,6 +60,12 @@ def supply_state(supply) -> tuple[float, int]:
     """The pyvisa-sim instrument's own current and output state (not through the backend)."""
     properties = supply.resource.visalib.devices[SIMULATED_RESOURCE]._properties
     return properties["current"].get_value(), properties["output"].get_value()
+
+
+def watchdog(backend, watchdog_s: float) -> None:
+    """The backend's watchdog at ``watchdog_s`` from now: a short one only once the test means the
+    host to go silent (before, a loaded machine may well pause reading longer than that)."""
+    backend.device = dataclasses.replace(backend.device, watchdog_s=watchdog_s)
 
 
 def poll_for(backend, duration_s: float) -> list:
@@ -703,27 +710,37 @@ def test_a_host_behind_the_card_reads_the_supply_back_settled(on_bench):
     backend.close()
 
 
-def test_the_backend_ramps_the_supply_and_zeroes_it_on_close(on_bench):
+def test_the_backend_ramps_the_supply_and_zeroes_it_on_close(on_bench, monkeypatch):
     supply = simulated_supply()
+    sim = supply.resource.visalib.instruments[SIMULATED_RESOURCE]
+    written: list[float] = []  # each current as the instrument received it
+    match = sim._device._match
+
+    def recorded(query):
+        if query.startswith(b"CURR "):
+            written.append(float(query.split()[1]))
+        return match(query)
+
+    monkeypatch.setattr(sim._device, "_match", recorded)
     bench, backend = on_bench("calibration", supply)
     backend.send(FieldCurrentCommand(1, 0, 0.5))
     (result,) = backend.poll(0.0)[:1]
     assert result.accepted and result.applied_sample_index == round(0.24 * 20_000.0)
-    seen = []
     while backend.supply_schedule.ramping:
         backend.poll(0.0)
-        seen.append(bench.device.field_current_a)
     assert math.isnan(backend.supply_readback.current_a)  # not at once: the pair is still settling
     while backend.supply_pending:  # the steps written, and read back once the last has settled
         backend.poll(0.0)
-        seen.append(bench.device.field_current_a)
     assert backend.supply_readback.step_index == result.applied_sample_index
     tolerance = supply.config.readback_tolerance_a(0.5)
     assert backend.supply_readback.current_a == pytest.approx(0.5, abs=tolerance)
     assert bench.device.field_current_a == 0.5
-    # The steps are written as the blocks come: the current changes by at most the slew limit over
-    # a block and a step (the average rate is the limit; no step is skipped).
-    assert np.max(np.diff(seen)) <= 2.0 * (0.025 + 0.01) + 1e-9 and len(set(seen)) > 5
+    # Every step of the staircase reaches the instrument, in order, none skipped: at most one
+    # step's worth of the slew limit apart (the line paces them one per step, however late the
+    # host hands them over).
+    step_a = supply.config.limits.slew_a_per_s * RAMP_STEP_S
+    assert written[-1] == 0.5 and len(written) >= round(0.5 / step_a)
+    assert np.max(np.diff([0.0, *written])) <= step_a + 1e-9 and np.all(np.diff(written) > 0.0)
     with pytest.raises(ValueError, match="exceeds the cap"):
         backend.send(FieldCurrentCommand(2, 0, 2.5))
     backend.close()
@@ -740,17 +757,19 @@ def test_without_a_supply_a_field_current_is_refused_with_the_reason(on_bench):
 
 def test_a_host_that_stops_reading_has_the_coils_and_the_supply_switched_off(on_bench):
     supply = simulated_supply()
-    card, backend = on_bench("calibration", supply, watchdog_s=0.2)
+    card, backend = on_bench("calibration", supply)
     ao = card.made[1]
     backend.send(FieldCurrentCommand(1, 0, 0.3))
     while backend.supply_pending:
         backend.poll(0.0)
     assert supply_state(supply)[0] == pytest.approx(0.3)
+    watchdog(backend, 0.2)
     deadline = time.monotonic() + 30.0  # a bound for a watchdog that never trips, not a timing
     while supply_state(supply) != (0.0, 0) and time.monotonic() < deadline:
         time.sleep(0.05)  # the host is silent: no poll
     assert supply_state(supply)[0] == 0.0 and not ao.running
     assert supply_state(supply) == (0.0, 0) and not card.tasks  # the output off, the tasks closed
+    watchdog(backend, 30.0)  # the host reads again, as a loaded one does
     down, up, fault = backend.poll(0.0)  # the card re-armed on the next read
     assert not down.up and down.reason.startswith("watchdog: no read for") and fault.reason == down.reason
     assert up.up and ao not in card.tasks.values() and len(card.tasks) == 2

@@ -23,6 +23,7 @@ from device.test_bench_backends import (
     run_cycle,
     simulated_supply,
     supply_state,
+    watchdog,
 )
 from mows.cli.main import main
 from mows.device.backends.daqmx_backend import open_daqmx
@@ -72,7 +73,7 @@ def poll_until_down(backend) -> LinkEvent:
 
 def test_a_driver_whose_every_read_fails_has_the_supply_switched_off(on_bench, monkeypatch):
     supply = simulated_supply()
-    card, backend = on_bench("calibration", supply, watchdog_s=0.3)
+    card, backend = on_bench("calibration", supply)
     backend.send(FieldCurrentCommand(1, 0, 1.0))
     settle(backend)
     assert supply_state(supply) == (1.0, 1)
@@ -81,8 +82,9 @@ def test_a_driver_whose_every_read_fails_has_the_supply_switched_off(on_bench, m
         raise RuntimeError("a read that fails in the host, not on the card")
 
     monkeypatch.setattr(backend._reader, "read_many_sample", broken)
+    watchdog(backend, 0.3)
     failed, deadline = 0, time.monotonic() + BOUND_S
-    while supply_state(supply) != (0.0, 0) and time.monotonic() < deadline:
+    while (supply_state(supply) != (0.0, 0) or not failed) and time.monotonic() < deadline:
         try:  # the driver's stream thread never dies on a step: it polls again
             backend.poll(0.05)
         except RuntimeError:
@@ -260,6 +262,22 @@ def test_an_exchange_past_its_deadline_is_a_fault_without_holding_up_the_card(on
     settle(backend)  # it answers again: the ramp to zero goes on
     backend.close()
     assert supply_state(supply) == (0.0, 0)
+
+
+def test_a_supply_slow_but_answering_is_ramped_to_zero_to_the_end_on_a_fault(on_bench, monkeypatch):
+    """Each exchange within its deadline, the ramp to zero long (a loaded host, a slow link):
+    waited for to its end, not cut short with a false alarm."""
+    supply = quick_supply()  # each exchange's deadline 0.4 s
+    card, backend = on_bench("calibration", supply)
+    backend.send(FieldCurrentCommand(1, 0, 0.5))
+    settle(backend)
+    monkeypatch.setattr(instrument(supply), "latency_s", 0.05)  # 0.1 s a step: 50 steps take 5 s
+    card.unplug()
+    down = poll_until_down(backend)
+    assert "(-201003)" in down.reason and "THE SUPPLY" not in down.reason, down.reason
+    assert supply_state(supply) == (0.0, 0)
+    card.plug_in()
+    backend.close()
 
 
 def test_an_over_voltage_trip_is_a_fault_and_the_next_ramp_clears_it(on_bench):

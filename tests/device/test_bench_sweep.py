@@ -68,8 +68,9 @@ def daqmx_rig(scenario, installed):
             supply_current_a=lambda: properties["current"].get_value() * properties["output"].get_value(),
         )
     )
-    # The rig decomposes between reads (the driver's stream never waits for the mapper): no watchdog.
-    device = dataclasses.replace(load_daq_device(), watchdog_s=3600.0)
+    # The rig decomposes between reads (the driver's stream never waits for the mapper): the
+    # longest watchdog a bench file may give; the card's 10 s input buffer bounds the pause anyway.
+    device = dataclasses.replace(load_daq_device(), watchdog_s=60.0)
     backend = open_daqmx(device, CAP, supply)
     return BenchRig(session(backend, scenario), scenario, card.turn_probe, manual=True), card.device
 

@@ -8,7 +8,7 @@ exact field, ring-downs integrated and fitted as the estimator does), with Gauss
 =====================  ==========================================  ===========================
 case                   hidden term                                 family
 =====================  ==========================================  ===========================
-``induced_moment``     U ∋ −½·α·(u·B)² (soft-magnetic lever)       ``field_along_field`` (INFO)
+``induced_moment``     U ∋ −½·α·(u·B)² (soft-magnetic lever)       ``induced_moment``
 ``moment_temperature`` m(T) = m·(1 + c·(T − 293.15 K))             ``moment_temperature``
 ``moment_aging``       m(t) = m·(1 + r·t) (slow demagnetisation)   ``moment_time``
 ``nonlinear_spring``   U ∋ ¼·k3·θ⁴ (a stiffening hinge)            ``quartic_hinge``
@@ -422,7 +422,7 @@ def _info(name: str, hidden: bool) -> CaseInfo:
 
 
 def induced_moment(seed: int = 0, hidden: bool = True) -> tuple[MeasurementTable, CaseInfo]:
-    """A moment induced along the lever, α = 3e-4 A·m²/T, in 0.6 and 1.8 mT (family field_along_field, see INFO)."""
+    """A moment induced along the lever, α = 3e-4 A·m²/T, in 0.6 and 1.8 mT (family induced_moment)."""
     return table_of("induced_moment", seed, hidden), _info("induced_moment", hidden)
 
 
@@ -471,19 +471,17 @@ CASES: dict[str, Callable[..., tuple[MeasurementTable, CaseInfo]]] = {
 INFO = {
     "induced_moment": CaseInfo(
         name="induced_moment",
-        # The search reads a field along the lever ∝ |B| here, not the induced moment: the
-        # selection's model holds the static deflection free, which takes the term's harmonic 2,
-        # and what is left (a constant per field level) that field fits a little better than the
-        # induced moment's first-order column (χ² 95 against 120 on 96 rows at seed 0; with the
-        # deflection at physics the induced moment reads α = 2.99e-4, truth 3e-4). Its own
-        # plugin still closes the gap (χ²/dof 0.9–1.3 on 10 seeds).
-        family="field_along_field",
+        # Beside the selection's free static deflection (which takes the term's harmonic 2) the
+        # search reads a field along the lever ∝ |B|, and that deflection ends 60σ from physics:
+        # the loop searches again with it held at physics and reads the induced moment.
+        family="induced_moment",
         description=_induced_moment_design.__doc__ or "",
         hidden={"induced_am2_per_t": INDUCED_AM2_PER_T},
         present=PHYSICAL,
         plugin_source=INDUCED_MOMENT_PLUGIN,
         plugin_effect="induced_moment",
         plugin_truth={"alpha_am2_per_t": INDUCED_AM2_PER_T},
+        discovered_truth=INDUCED_AM2_PER_T,
         plugin_exact=False,
         energy_plugin_source=INDUCED_MOMENT_ENERGY_PLUGIN,
         plugin_note=(

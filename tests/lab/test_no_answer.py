@@ -68,4 +68,7 @@ def test_an_angle_pattern_that_changes_in_time_is_not_a_pile_of_catalog_effects(
     assert "finds 1 term: frequency × t_s·cos(3θ0)" in explanation, explanation
     assert "c_hz * rows.t_s * np.cos(3 * rows.theta0_rad)" in explanation
     (term,) = report.discovery.terms
+    assert term.plugin_output == "frequency_hz" and "no channel of the potential" in term.last_resort
+    assert any("written as an additive frequency, the last resort" in line for line in report.discovery.lines())
+    assert "Last resort: no channel of the potential" in " ".join(term.plugin.split())
     assert abs(term.strength - 0.05 / np.ptp(t)) < 3 * term.std, (term.strength, term.std)  # Hz per s

@@ -174,11 +174,15 @@ def test_a_strong_uniform_field_is_the_deflection_and_the_amplitude_from_the_sto
 
 
 def test_an_anti_helmholtz_gradient_is_the_transverse_gradient(path):
-    """Its χ²/dof stays above 1 on average: over seeds 0–7 it was 0.48–1.89 (mean 1.23) with
-    the simulator's own cycle and 0.89–2.68 (mean 1.41) with the driver's, a bound of 1.5 failing
-    3 of 8 seeds either way; something small of this scene is left in the residual."""
+    """Judged by the lab's own test (adequate: χ² consistent with its 23 dof at p ≥ 0.005 and no
+    significant structure), not a fixed χ²/dof of 1.5, which a right model exceeds in 1 of 17
+    seeds at 23 dof. Over seeds 0–9 this scene ended adequate in 9 of 10, at χ²/dof 0.89–1.64;
+    its mean over them, 1.33 where a right model gives 1.00 ± 0.09, and seed 1 (2.68, structure:
+    harmonic 1 of θ0 along b_perp_t, 0.73 ± 0.16 mHz) say that something small of this scene is
+    not yet in the model."""
     _, report, _ = path("anti_helmholtz")
-    assert_named(report, {"transverse_gradient", "finite_amplitude"}, chi2_dof=3.0)
+    assert_named(report, {"transverse_gradient", "finite_amplitude"}, chi2_dof=math.inf)
+    assert report["verdict"] == "adequate", (report["final"]["chi2_dof"], report["verdict_explanation"])
 
 
 @pytest.mark.parametrize("scene", ["control", "anti_helmholtz", "strong_field"])

@@ -17,7 +17,7 @@ import scipy.optimize
 
 from mows.lab import FrequencyModel, TableError, catalog, load_table
 from mows.lab.data import synthetic
-from mows.lab.data.table import tool_table
+from mows.lab.data.intake import tool_table
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential, arc_energy_j

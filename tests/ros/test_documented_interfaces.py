@@ -31,6 +31,7 @@ INTERFACES = [
     "/mows/sweep",
     "/mows/field_map",
     "/mows/model_report",
+    "/mows/workspace_model",
     "/diagnostics",
     # services and actions are node-private: their names in the root namespace
     "/driver/measurement_cycle",
@@ -40,6 +41,8 @@ INTERFACES = [
     "/estimator/calibrate",
     "/mapper/rotation_sweep",
     "/mapper/confirm_orientation",
+    "/mapper/workspace_map",
+    "/mapper/field_at",
     "/calibrator/calibrate_probe",
     "/calibrator/confirm_orientation",
 ]

@@ -16,6 +16,7 @@ import yaml
 
 from mows.cli.main import main
 from mows.device.recording import bags
+from mows.records import stamps
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]
 
@@ -55,3 +56,39 @@ def test_a_recording_holds_the_fits_the_sweep_and_the_diagnostics(demo_session, 
         published = np.array(getattr(sweep, name))
         sigma = np.sqrt(np.diag(np.reshape(getattr(sweep, covariance), (published.size,) * 2)))
         assert np.all(np.abs(np.array(replayed[name]) - published) <= 1e-6 * sigma), (name, replayed[name], published)
+
+
+def test_a_recording_holds_the_stage_so_its_view_has_the_mount_s_frames(demo_session, capsys):
+    from mcap.reader import make_reader
+
+    recorded = {}
+    for message in bags.read_bag(demo_session.bag, ["/mows/raw", "/mows/joint_states", "/mows/ringdown"]):
+        recorded.setdefault(message.topic, []).append(message.message)
+    # The stage's angle with every block, as published, once the first cycle has made it known.
+    joints = [stamps.nanoseconds(m.header.stamp) for m in recorded["/mows/joint_states"]]
+    blocks = [stamps.nanoseconds(m.header.stamp) for m in recorded["/mows/raw"]]
+    assert joints and joints == [stamp for stamp in blocks if stamp >= joints[0]]
+    assert main(["viz", str(demo_session.bag), "--mount", "mows_bringup/urdf/mows_probe_mount.urdf"]) == 0
+    output = demo_session.bag.parent / f"{demo_session.bag.name}.view.mcap"
+    with open(output, "rb") as stream:
+        counts: dict[str, int] = {}
+        for _, channel, _ in make_reader(stream).iter_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    assert counts.get("/mows/viz/frames", 0) == len(recorded["/mows/joint_states"])
+    # Every OK fit drawn, none dropped.
+    assert counts.get("/mows/viz/ringdown", 0) == sum(f.status_name == "OK" for f in recorded["/mows/ringdown"])
+
+
+def test_a_viewer_connected_through_the_demo_got_every_fit_of_the_recording_drawn(demo_session):
+    # The live view draws each OK fit the estimator published, which the bag holds, over all of
+    # its samples: none dropped, none drawn over samples the stream had not yet brought.
+    fits = [m.message for m in bags.read_bag(demo_session.bag, ["/mows/ringdown"]) if m.message.status_name == "OK"]
+    assert len(fits) == ORIENTATIONS
+    plots = [json.loads(data) for data in demo_session.live.payloads("/mows/viz/ringdown")]
+    drawn = {(p["cycle_id"], p["repeat_index"], p["probe_id"]): p for p in plots}
+    assert sorted(drawn) == sorted((f.cycle_id, f.repeat_index, f.probe_id) for f in fits), demo_session.lines[-40:]
+    for fit in fits:
+        plot = drawn[(fit.cycle_id, fit.repeat_index, fit.probe_id)]
+        assert plot["frequency_hz"] == fit.frequency_hz
+        data = np.array(plot["data_t"], float)
+        assert np.all(np.isfinite(data)), (fit.cycle_id, int(np.isnan(data).sum()), data.size)

@@ -1,31 +1,19 @@
 """The graph live in Foxglove: ``mows-graph --foxglove`` on the simulator in tracking mode, a
-client speaking Foxglove's WebSocket protocol (github.com/foxglove/ws-protocol, docs/spec.md)
-with the ``websockets`` package, and the values
-it receives checked against the graph's own topics: each ring-down's frequency on
-/mows/ringdown, the field along the axis on /mows/field, and a sweep's field on /mows/sweep.
-
-The protocol: the server's text frames are JSON (``serverInfo``, ``advertise`` with each
-channel's id, topic, encoding, schema name and schema); the client sends ``subscribe`` with
-its own subscription ids; the server's binary frames are opcode 0x01 (message data), then the
-subscription id (uint32 LE), the log time (uint64 LE, ns) and the message's bytes.
-foxglove-sdk's server names the protocol ``foxglove.sdk.v1`` (the same protocol as
-``foxglove.websocket.v1``, renamed; foxglove/ros-foxglove-bridge#382) and refuses a handshake
-offering only the older name; the Foxglove app offers both.
+client speaking Foxglove's WebSocket protocol (tests/foxglove_client.py), and the values it
+receives checked against the graph's own topics: each ring-down's frequency on /mows/ringdown,
+the field along the axis on /mows/field, and a sweep's field on /mows/sweep.
 """
 
-import asyncio
 import base64
 import json
 import math
 import socket
-import struct
-import threading
 
 import numpy as np
 import pytest
-import websockets
 from mows_msgs.msg import FieldEstimate, RingdownFit, SweepDecomposition
 
+from foxglove_client import FoxgloveClient
 from foxglove_protobuf import decode, descriptors
 from mows.viz.scene import field_magnitude
 from mows_ros.qos import MAP_QOS, RESULT_QOS
@@ -33,8 +21,6 @@ from node_processes import log
 
 pytestmark = pytest.mark.ros
 
-SUBPROTOCOL = "foxglove.sdk.v1"
-MESSAGE_DATA = 0x01
 WANTED = ("/mows/viz/scene", "/mows/viz/ringdown", "/mows/viz/raw", "/mows/viz/frames")
 
 
@@ -42,62 +28,6 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-class FoxgloveClient:
-    """A client on its own thread and event loop: channels advertised, messages by topic."""
-
-    def __init__(self, port: int):
-        self.port = port
-        self.channels: dict[int, dict] = {}
-        self.messages: dict[str, list[bytes]] = {topic: [] for topic in WANTED}
-        self.errors: list[BaseException] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=lambda: asyncio.run(self._run()), daemon=True)
-        self._thread.start()
-
-    async def _run(self) -> None:
-        try:
-            while not self._stop.is_set():
-                try:
-                    async with websockets.connect(f"ws://127.0.0.1:{self.port}", subprotocols=[SUBPROTOCOL]) as ws:
-                        assert ws.subprotocol == SUBPROTOCOL
-                        await self._talk(ws)
-                        return
-                except OSError:  # the server is not up yet
-                    await asyncio.sleep(0.5)
-        except BaseException as error:  # noqa: BLE001 (told to the test)
-            self.errors.append(error)
-
-    async def _talk(self, ws) -> None:
-        subscribed: dict[int, str] = {}
-        while not self._stop.is_set():
-            try:
-                frame = await asyncio.wait_for(ws.recv(), 0.5)
-            except TimeoutError:
-                continue
-            if isinstance(frame, str):
-                message = json.loads(frame)
-                if message["op"] == "advertise":
-                    wanted = []
-                    for channel in message["channels"]:
-                        self.channels[channel["id"]] = channel
-                        if channel["topic"] in WANTED:
-                            subscription = len(subscribed) + 1
-                            subscribed[subscription] = channel["topic"]
-                            wanted.append({"id": subscription, "channelId": channel["id"]})
-                    if wanted:
-                        await ws.send(json.dumps({"op": "subscribe", "subscriptions": wanted}))
-            elif frame[0] == MESSAGE_DATA:
-                subscription, _log_time = struct.unpack_from("<IQ", frame, 1)
-                self.messages[subscribed[subscription]].append(frame[13:])
-
-    def channel(self, topic: str) -> dict:
-        return next(c for c in self.channels.values() if c["topic"] == topic)
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(10)
 
 
 def sweep_message() -> SweepDecomposition:
@@ -128,19 +58,19 @@ def test_foxglove_client_sees_the_graph_s_values(ros, start):
     fits, fields = [], []
     ros.node.create_subscription(RingdownFit, "mows/ringdown", fits.append, RESULT_QOS)
     ros.node.create_subscription(FieldEstimate, "mows/field", fields.append, RESULT_QOS)
-    client = FoxgloveClient(port)
+    client = FoxgloveClient(port, WANTED)
     try:
         ros.wait_for(
             lambda: f"ws://127.0.0.1:{port}" in log(graph) or graph.poll() is not None, "the viz node's address"
         )
         assert graph.poll() is None, log(graph)
         ros.wait_for(
-            lambda: all(client.messages[t] for t in WANTED[1:3]) or client.errors, "ring-downs and raw samples"
+            lambda: all(client.payloads(t) for t in WANTED[1:3]) or client.errors, "ring-downs and raw samples"
         )
         assert not client.errors, client.errors
         # The ring-down channel's plots are the graph's fits: the same frequency, cycle by cycle.
         heard = {(f.cycle_id, f.repeat_index): f for f in fits if f.status == 0}
-        plots = [json.loads(m) for m in client.messages["/mows/viz/ringdown"]]
+        plots = [json.loads(m) for m in client.payloads("/mows/viz/ringdown")]
         ros.wait_for(
             lambda: all((p["cycle_id"], p["repeat_index"]) in heard for p in plots), "the fits on /mows/ringdown"
         )
@@ -149,15 +79,15 @@ def test_foxglove_client_sees_the_graph_s_values(ros, start):
             assert plot["frequency_hz"] == fit.frequency_hz and plot["frequency_std_hz"] == fit.frequency_std_hz
             residual = np.array(plot["residual_t"], float)
             assert np.nanstd(residual) < 0.5 * np.nanstd(np.array(plot["data_t"], float))
-        raw = json.loads(client.messages["/mows/viz/raw"][-1])
+        raw = json.loads(client.payloads("/mows/viz/raw")[-1])
         assert raw["difference_t"] == pytest.approx(raw["near_t"] - raw["far_t"])
         # The scene: the axis arrow of the latest field estimate, labelled with its value ± σ.
         scene = client.channel("/mows/viz/scene")
         assert (scene["encoding"], scene["schemaName"], scene["schemaEncoding"]) == (
             "protobuf", "foxglove.SceneUpdate", "protobuf",
         )  # fmt: skip
-        ros.wait_for(lambda: client.messages["/mows/viz/scene"] and fields, "the scene")
-        labels = texts(client.messages["/mows/viz/scene"][-1], scene)
+        ros.wait_for(lambda: client.payloads("/mows/viz/scene") and fields, "the scene")
+        labels = texts(client.payloads("/mows/viz/scene")[-1], scene)
         estimates = {f"B∥ {f.field_along_axis_t * 1e6:.4g} ± {f.field_along_axis_std_t * 1e6:.2g} µT" for f in fields}
         assert labels["mows_probe/axis"][0] in estimates
         # A sweep on /mows/sweep: its field arrow, |B| ± σ, in the next scene.
@@ -168,19 +98,19 @@ def test_foxglove_client_sees_the_graph_s_values(ros, start):
         expected = f"B {magnitude * 1e6:.4g} ± {sigma * 1e6:.2g} µT"
 
         def swept():
-            return any("probe_0/field" in texts(m, scene) for m in client.messages["/mows/viz/scene"])
+            return any("probe_0/field" in texts(m, scene) for m in client.payloads("/mows/viz/scene"))
 
         ros.wait_for(swept, "the sweep's arrows")
         latest = next(
-            texts(m, scene) for m in reversed(client.messages["/mows/viz/scene"]) if "probe_0/field" in texts(m, scene)
+            texts(m, scene) for m in reversed(client.payloads("/mows/viz/scene")) if "probe_0/field" in texts(m, scene)
         )
         assert latest["probe_0/field"][0] == expected
         assert latest["probe_0/field"][1].startswith("G1 ") and math.isfinite(magnitude)
         # The mount's frames, turned by the stage.
         frames = client.channel("/mows/viz/frames")
-        ros.wait_for(lambda: client.messages["/mows/viz/frames"], "the mount's frames")
+        ros.wait_for(lambda: client.payloads("/mows/viz/frames"), "the mount's frames")
         types = descriptors(base64.b64decode(frames["schema"]))
-        transforms = decode(client.messages["/mows/viz/frames"][-1], frames["schemaName"], types)["transforms"]
+        transforms = decode(client.payloads("/mows/viz/frames")[-1], frames["schemaName"], types)["transforms"]
         assert {t["child_frame_id"] for t in transforms} >= {"mows_probe", "fluxgate_near", "fluxgate_far"}
     finally:
         client.close()

@@ -57,8 +57,8 @@ def windows(monkeypatch):
         reads.append((simulator.sample_index, block := read(n_samples)))
         return block
 
-    def recording_fit(segment, lines, skip):
-        fits = fit_segment(segment, lines, skip)
+    def recording_fit(segment, lines, skip, options):
+        fits = fit_segment(segment, lines, skip, options)
         block_theta = simulated_theta(reads, segment.first_sample_index, len(segment.samples_t))
         for fit in fits:
             start = round(fit.start_offset_s * segment.sample_rate_hz)

@@ -258,3 +258,29 @@ def test_settings_refuse_by_name():
         ViewSettings(raw_rate_hz=0)
     with pytest.raises(ValueError, match="topic = '/nothing'"):
         channels.schema("/nothing")
+
+
+def test_a_fit_that_comes_before_its_samples_is_drawn_once_they_come(session):
+    # Live, a fit may overtake the last blocks of its window: every fit of the bag is still drawn,
+    # over all of its samples.
+    from mows.viz.recording import FEEDS
+
+    bag, fits = session
+    records = list(bags.read_bag(bag, FEEDS))
+    early = []
+    for fit in (r for r in records if r.topic == "/mows/ringdown"):
+        records.remove(fit)
+        start = fit.message.header.stamp.sec * 10**9 + fit.message.header.stamp.nanosec
+        # Just after the first block of its window.
+        first = next(i for i, r in enumerate(records) if r.topic == "/mows/raw" and _stamp(r.message) >= start)
+        records.insert(first + 1, fit)
+        early.append(fit)
+    view = View()
+    plots = [s.content for r in records for s in FEEDS[r.topic](view, r.message, r.timestamp_ns) if s.topic == RINGDOWN]
+    assert [p.cycle_id for p in plots] == [f.message.cycle_id for f in early] == [1, 2]
+    for plot in plots:
+        assert np.all(np.isfinite(plot.data_t)) and len(plot.data_t) >= ViewSettings().max_points // 2
+
+
+def _stamp(msg) -> int:
+    return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec

@@ -6,8 +6,8 @@ import numpy as np
 
 from mows.physics.field import PointDipole
 from mows.physics.probe import PAPER_PROBE
+from mows.workspace.design import boundary_positions, random_rotation
 from mows.workspace.observations import Observation, gravity_field_t, plane_readout
-from mows.workspace.simulated import boundary_positions, random_rotation
 
 RADIUS_M = 0.025
 # ~1.5 mT and 10 mT/m over the ball, from 0.35 m away: degree 6 holds it to below the noise

@@ -80,3 +80,16 @@ def test_the_mapper_refuses_a_stale_pose_and_a_moving_probe():
     assert "moving" in pose_problem(pose, int(10.0 * NS_PER_S), 0.1, True, REACH)
     far = StampedPose(pose.stamp_ns, "arm_base", np.array([0.0, 0.0, 0.5]), IDENTITY)
     assert "reach" in pose_problem(far, int(10.0 * NS_PER_S), 0.1, False, REACH)
+
+
+def test_measured_cp_follows_a_move_so_the_mapper_sees_the_arm_moving():
+    a = arm()
+    assert a.move_cp(goal([0.0, 0.0, 0.1]), 0.0).accepted  # 2 s at 0.05 m/s
+    halfway = a.measured_cp(1.02)  # where it was 20 ms earlier: halfway
+    np.testing.assert_allclose(halfway.position_m, [0.0, 0.0, 0.05], atol=1e-4)
+    arrived = a.measured_cp(3.0)
+    np.testing.assert_allclose(arrived.position_m, [0.0, 0.0, 0.1], atol=1e-4)
+    half_turn = matrix_quaternion(rotation(np.array([0.0, 0.0, math.pi / 2])))
+    assert a.move_cp(goal([0.0, 0.0, 0.1], half_turn), 3.0).accepted  # π/2 at 1 rad/s
+    turning = a.measured_cp(3.0 + math.pi / 4 + 0.02)
+    np.testing.assert_allclose(turning.rotation, rotation(np.array([0.0, 0.0, math.pi / 4])), atol=1e-4)

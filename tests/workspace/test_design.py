@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from mows.physics.probe import PAPER_PROBE
-from mows.workspace.design import candidate_designs, gains, next_best
+from mows.workspace.design import candidate_designs, gains, next_best, random_rotation
 from mows.workspace.harmonics import SolidHarmonics
 from mows.workspace.observations import gravity_field_t, plane_readout
-from mows.workspace.simulated import ball_points, random_rotation
+from mows.workspace.simulated import ball_points
 
 RADIUS_M = 0.025
 COVARIANCE = np.diag([50e-9, 50e-9, 20e-6, 20e-6, 20e-6]) ** 2

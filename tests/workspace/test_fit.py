@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from mows.physics.probe import PAPER_PROBE
+from mows.workspace.design import boundary_positions
 from mows.workspace.fit import choose_degree, fit, whitened_rows
 from mows.workspace.harmonics import SolidHarmonics
 from mows.workspace.observations import Observation, gravity_field_t, hall_observation
-from mows.workspace.simulated import boundary_positions
 from mows.workspace.tool import wrench
 from workspace.fields import RADIUS_M, SOURCE, sweeps
 

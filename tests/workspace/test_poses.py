@@ -8,10 +8,10 @@ import math
 
 import numpy as np
 
+from mows.workspace.design import boundary_positions
 from mows.workspace.fit import fit
 from mows.workspace.harmonics import SolidHarmonics
 from mows.workspace.poses import PoseError, fit_with_pose_errors, moved, rotation
-from mows.workspace.simulated import boundary_positions
 from workspace.fields import RADIUS_M, SOURCE, sweeps
 
 

@@ -8,8 +8,9 @@ import numpy as np
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.navigation import navigation_system
 from mows.sweep.decompose import decompose
+from mows.workspace.design import random_rotation
 from mows.workspace.observations import gravity_field_t, plane_readout
-from mows.workspace.simulated import GRAVITY_M_PER_S2, SweepPose, random_rotation, sweep_shifts_hz
+from mows.workspace.simulated import GRAVITY_M_PER_S2, SweepPose, sweep_shifts_hz
 
 
 def test_the_readout_predicts_what_the_sweep_decomposes():

@@ -42,7 +42,8 @@ print(time.perf_counter() - start)
 """
 
 
-def _median_ms(action, repeats: int) -> float:
+def median_ms(action, repeats: int) -> float:
+    """The median wall time of ``repeats`` calls of ``action``, ms."""
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
@@ -101,9 +102,9 @@ def run(repeats: int = 20, first_call: bool = True) -> dict:
     free = SimulatedDevice(scenario)
     free.pluck(math.radians(23.0))
     figures = {
-        "cycle_ms_median": _median_ms(lambda: simulate_cycle(noisy, 0.0, amplitude), repeats),
-        "cycle_ms_without_noise": _median_ms(lambda: simulate_cycle(quiet, 0.0, amplitude), repeats),
-        "kernel_ms_per_second_free": _median_ms(lambda: free.integrate(int(free.sample_rate_hz)), repeats),
+        "cycle_ms_median": median_ms(lambda: simulate_cycle(noisy, 0.0, amplitude), repeats),
+        "cycle_ms_without_noise": median_ms(lambda: simulate_cycle(quiet, 0.0, amplitude), repeats),
+        "kernel_ms_per_second_free": median_ms(lambda: free.integrate(int(free.sample_rate_hz)), repeats),
     }
     if first_call:
         figures["first_call_with_compilation_s"], figures["first_call_from_cache_s"] = first_call_s()
@@ -145,9 +146,9 @@ def multiprobe_reads(repeats: int) -> dict:
     one = SimulatedDevice(load_scenario())
     one.read(10)
     figures = {
-        "three_probes_read_ms_per_second_driven": _median_ms(driven, repeats),
-        "three_probes_read_ms_per_second_free": _median_ms(lambda: device.read(second), repeats),
-        "one_probe_read_ms_per_second": _median_ms(lambda: one.read(second), repeats),
+        "three_probes_read_ms_per_second_driven": median_ms(driven, repeats),
+        "three_probes_read_ms_per_second_free": median_ms(lambda: device.read(second), repeats),
+        "one_probe_read_ms_per_second": median_ms(lambda: one.read(second), repeats),
     }
     figures["three_probes_driven_over_one_probe"] = (
         figures["three_probes_read_ms_per_second_driven"] / figures["one_probe_read_ms_per_second"]

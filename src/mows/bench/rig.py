@@ -21,7 +21,7 @@ from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, 
 from mows.device.cycle.tracking import TrackingLoop
 from mows.device.stream.device_time import Block, DeviceTimeLoop, scheduled_device
 from mows.estimate.probe_set import probe_lines
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, ProbeLine, RingdownFit, fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit, fit_ringdown
 from mows.estimate.ringdown.start import white_noise_std
 from mows.estimate.segments import RingdownWindow, Segment, SegmentAssembler, fit_segment
 from mows.physics.coils import CurrentCap
@@ -72,7 +72,6 @@ class DeviceTimeRig:
         self.assembler = SegmentAssembler(BUFFER_S)
         self.coil_off_skip_s = coil_off_skip_s
         self.peak_current_a = 0.0
-        self._options: dict[float, FitOptions] = {}
         self._measured: list[MeasuredRingdown] = []
         self.device = scheduled_device(scenario, CurrentCap(cap_a), rng)
         self.loop = DeviceTimeLoop(self.device, settings, fit=fit_ringdown, on_block=self._block, on_event=self._event)
@@ -130,8 +129,7 @@ class DeviceTimeRig:
                 event.planned_duration_s,
                 event.cycle_id,
                 event.repeat_index,
-                # a multi-tone window: its first probe's own θ0 (each probe's is in its line)
-                event.probe_theta0_rad[0] if event.probe_ids else event.theta0_rad,
+                event.probe_theta0_rad[0],  # its first probe's own θ0 (each probe's is in its line)
                 event.frequency_hz,
                 event.tuning,
                 event.probe_ids,
@@ -142,29 +140,17 @@ class DeviceTimeRig:
                 self._fit(segment)
 
     def _fit(self, segment: Segment) -> None:
+        """The window's probes fitted jointly, each at the tone it was driven with and where the
+        stage holds it, the rest offset searched within their housing stops."""
         window = segment.window
         if window.tuning:
             return
-        if window.probe_ids:
-            self._fit_jointly(segment)
-            return
-        probe = self.scenario.probe
-        key = round(window.theta0_rad, 12)
-        if key not in self._options:
-            self._options[key] = FitOptions.lever_aware(self.scenario.sensors.pair, probe, window.theta0_rad)
-        line = ProbeLine(0, window.theta0_rad, window.excitation_frequency_hz, None, probe.damping_per_s)
-        (fit,) = fit_segment(segment, [line], self.coil_off_skip_s, self._options[key])
-        self._measured.append(MeasuredRingdown(window, fit, segment.saturated))
-
-    def _fit_jointly(self, segment: Segment) -> None:
-        """The window's probes fitted jointly, each at the tone it was driven with."""
-        assert self.device.device.scenario.probes  # only a scene's cycles announce probes
-        window, placed = segment.window, self.device.device.placed  # the probes where the stage stands
-        members = window.probe_ids
+        placed, members = self.device.device.placed, window.probe_ids
         lines = probe_lines(
             self.scenario.sensors.pair, [placed[k] for k in members], members, window.probe_frequency_hz
         )
-        for fit in fit_segment(segment, lines, self.coil_off_skip_s):
+        options = FitOptions(theta_stop_rad=min(placed[k].probe.theta_stop_rad for k in members))
+        for fit in fit_segment(segment, lines, self.coil_off_skip_s, options):
             self._measured.append(MeasuredRingdown(window, fit, segment.saturated))
 
 

@@ -27,6 +27,7 @@ from mows.physics.field import FieldSource
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.navigation import navigation_system
 from mows.workspace import simulated
+from mows.workspace.design import boundary_positions
 from mows.workspace.fit import WorkspaceModel, choose_degree, fit
 from mows.workspace.harmonics import SolidHarmonics
 from mows.workspace.observations import Observation
@@ -120,11 +121,11 @@ def run(
     source = navigation_system(CENTRE_FIELD_T, seed=seed)
     probe = PAPER_PROBE
     points = simulated.ball_points(held_out, RADIUS_M, rng)
-    poses = simulated.random_planes(simulated.boundary_positions(max(sweep_counts), RADIUS_M), rng)
+    poses = simulated.random_planes(boundary_positions(max(sweep_counts), RADIUS_M), rng)
     sweeps = simulated.sweep_observations(
         [simulated.simulate_sweep(source, p, probe, rng) for p in poses], poses, probe
     )
-    hall = simulated.simulate_hall(source, simulated.boundary_positions(max(hall_counts), RADIUS_M), rng)
+    hall = simulated.simulate_hall(source, boundary_positions(max(hall_counts), RADIUS_M), rng)
     sweep_rows = _curve(sweeps, sweep_counts, degrees, source, points)
     hall_rows = _curve(hall, hall_counts, degrees, source, points)
     sweeps_needed = _first(sweep_rows, target_b, target_g)

@@ -31,6 +31,7 @@ SUITES = {
     "latency": ("mows.bench.latency", "last sample of a ring-down to its published fit, in the node graph"),
     "latency_tracking": ("mows.bench.latency_tracking", "the same in the driver's tracking mode"),
     "multiprobe": ("mows.bench.multiprobe", "two probes in one ring-down: joint fit against the bound, 2–20 Hz apart"),
+    "viz": ("mows.bench.viz_drawing", "one ring-down drawn by the live view, θmax undetermined: ms per ring-down"),
     "workspace": (
         "mows.bench.workspace",
         "workspace map of an 8-coil system: B-and-G sweeps against a Hall-probe map, points to 0.05 %",
@@ -78,6 +79,7 @@ QUICK: dict[str, dict[str, object]] = {
         "three_probe_map": False,  # a three-probe graph run of minutes: tests/ros/test_three_probe_graph.py runs it
     },
     "latency_tracking": {"cycles": 2, "repeats": 5},
+    "viz": {"repeats": 2},
     "multiprobe": {"trials": 4, "separations_hz": (2.0, 10.0), "ratios": (1.0,)},
     # above the lab's subsample of mows.cli.lab.MAX_ROWS rows, so that the subsampling runs
     "lab_long": {"rows": 5_000, "commands": ("compare",)},

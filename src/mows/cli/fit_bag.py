@@ -34,9 +34,10 @@ from mows.cli.inputs import finite_float, input_file, non_negative_float, rename
 from mows.estimate.ringdown import COIL_OFF_SKIP_S
 from mows.estimate.settings import FitParameters
 from mows.estimate.stream import Estimated, FitSettings
+from mows.lab.data.intake import tool_table
 from mows.lab.data.readers import is_bag, logged_at, start_amplitudes_rad
 from mows.lab.data.ringdowns import BagFitting, fit_bag
-from mows.lab.data.table import PROBE, tool_table
+from mows.lab.data.table import PROBE
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.records.files import check_output, writing
@@ -193,7 +194,7 @@ def write_table(path, fits: list[Estimated], probe: Probe, named: bool, temperat
     marked by the column ``probe`` and each probe's start swings come from its own fits, as those
     the estimator recorded
     (:func:`mows.lab.data.readers.start_amplitudes_rad`). The table is marked as the project's
-    own (:func:`mows.lab.data.table.tool_table`)."""
+    own (:func:`mows.lab.data.intake.tool_table`)."""
     record = SweepRecord(
         [
             SweepPoint.from_fit(

@@ -10,7 +10,9 @@ the bag does not hold are the mapper's parameters: ``--probe`` (``probe_file``),
 (``probes``: the same YAML, docs/multi_probe.md), ``--model`` and ``--f00-free``. One line per
 sweep, each probe's field and gradient in the mapper's words, or why that sweep cannot be made
 again (too few orientations, say) beside the others; ``--json`` prints them as numbers (SI)
-instead. Exit status 2 only when no sweep can be made again.
+instead. A recording of a workspace map (the mapper's ``workspace_map``) is made again too, its
+sweeps at their recorded poses (:mod:`mows.cli.map_workspace`). Exit status 2 only when no sweep
+can be made again.
 """
 
 import json
@@ -18,6 +20,7 @@ import os
 
 import numpy as np
 
+from mows.cli import map_workspace
 from mows.cli.fit_bag import add_fit_arguments, bag_fitting, fit_settings
 from mows.cli.inputs import input_file
 from mows.estimate.settings import probe_set
@@ -71,18 +74,26 @@ def run(args) -> int:
         outcomes = [_replayed(cycles, fits, settings, probe) for _, cycles in sweeps]
         if not any(outcome.maps or outcome.ok for outcome in outcomes):
             raise ValueError("; ".join(f"{name}: {outcome.message}" for (name, _), outcome in zip(sweeps, outcomes)))
+        model, sweep_ids = map_workspace.recorded_map(args.bag)
+        again = [(tuple(c.cycle_id for c in cycles), outcome) for (_, cycles), outcome in zip(sweeps, outcomes)]
+        workspace = None if model is None else map_workspace.workspace_again(model, sweep_ids, again, probe)
     left_out = [c.cycle_id for c in session.left_out()]
     if args.json:
         made = [
             {"name": name, "cycle_ids": [c.cycle_id for c in cycles], **_numbers(outcome)}
             for (name, cycles), outcome in zip(sweeps, outcomes)
         ]
-        print(json.dumps({"sweeps": made, "left_out_cycle_ids": left_out}))
+        numbers = {"sweeps": made, "left_out_cycle_ids": left_out}
+        if workspace is not None:
+            numbers["workspace"] = map_workspace.workspace_numbers(workspace)
+        print(json.dumps(numbers))
         return 0
     for (name, cycles), outcome in zip(sweeps, outcomes):
         print(f"{name} ({len(cycles)} orientations): {outcome.message}")
     if left_out:
         print(f"{len(left_out)} cycles in no recorded sweep left out (cycle ids {', '.join(map(str, left_out))})")
+    if workspace is not None:
+        print(map_workspace.workspace_line(workspace))
     return 0
 
 

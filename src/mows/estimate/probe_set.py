@@ -50,7 +50,8 @@ KEYS = ("f00_hz", "f00_std_hz", "probe_file", "position_m")
 @dataclasses.dataclass(frozen=True)
 class ProbeEntry:
     """One probe of the set: its id, constants, the f00 its shift is counted from (± σ), and
-    its place relative to the single probe's (m)."""
+    its place relative to the single probe's (m). Also each member of the model lab's probe set
+    (:class:`mows.lab.data.probe_rows.ProbeSet`), there at its constants' f00."""
 
     probe_id: int
     probe: Probe

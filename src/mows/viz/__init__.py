@@ -10,14 +10,17 @@ the order they build on each other:
   and residual, a sweep's harmonic series (Eq. 12), decimation of long series.
 - ``scene``: arrows of the in-plane field and of the gradient's principal directions, their
   lengths and labels (value ± σ).
+- ``workspace_scene``: a workspace map's B on a grid through its ball, |B| ± σ, and its poses.
 - ``mount``: a URDF's frames at the stage's angle (the probe mount's TF).
 - ``view``: **View**, an I/O-free translator: the graph's messages (rclpy's or a bag's, read by
   attribute) in, each channel's messages out.
 - ``channels``: the channels' topics, schemas and bytes (Foxglove's protobuf schemas from
   ``foxglove-sdk``, JSON with a JSON schema for the plots).
+- ``live``: the live server's channels, each one's last message re-sent to a client that
+  subscribes later.
 - ``recording``: a recorded bag's derived channels written into an MCAP file (``mcap``).
 - ``figures``: each panel's content drawn as a PNG (matplotlib), from the same channel content.
 
-May import: ``mows.estimate``, ``mows.device`` (the bag reader), ``mows.physics``,
+May import: ``mows.workspace`` (a map's model), ``mows.estimate``, ``mows.device`` (the bag reader), ``mows.physics``,
 ``mows.records``, and ``foxglove-sdk``, ``mcap`` and ``matplotlib``; never ``rclpy``.
 """

@@ -26,7 +26,7 @@ from mows.viz.scene import Arrow
 
 HEAD_SHARE = 0.25  # of an arrow's length
 SHAFT_DIAMETER_SHARE = 0.06  # of the largest arrow's length
-COLOURS = {"B": (0.85, 0.2, 0.2), "B∥": (0.95, 0.6, 0.1), "G": (0.2, 0.45, 0.9)}
+COLOURS = {"B": (0.85, 0.2, 0.2), "B∥": (0.95, 0.6, 0.1), "G": (0.2, 0.45, 0.9), "pose": (0.5, 0.5, 0.5)}
 # Each plot channel's dataclass (its JSON schema's name is mows.viz.<class name>).
 PLOTS = {
     v.RAW: v.RawSample,

@@ -50,16 +50,22 @@ class RingdownModel:
         numbers = (self.frequency_hz, self.damping_per_s, self.phase_rad, self.kappa_t, self.offset_t)
         return all(math.isfinite(x) for x in numbers) and bool(self.pickup)
 
-    def series(self, t_s: ArrayLike, amplitude_rad: float) -> NDArray[np.float64]:
-        """The pickup series g(x(t)) with the swing ``amplitude_rad``."""
+    def deflection_rad(self, t_s: ArrayLike, amplitude_rad: float) -> NDArray[np.float64]:
+        """x(t) of the module docstring with the swing ``amplitude_rad``."""
         t = np.asarray(t_s, float)
-        x = (
+        return (
             amplitude_rad
             * np.exp(-self.damping_per_s * t)
             * np.cos(2 * math.pi * self.frequency_hz * t + self.phase_rad)
         )
+
+    def series(self, t_s: ArrayLike, amplitude_rad: float) -> NDArray[np.float64]:
+        """The pickup series g(x(t)) with the swing ``amplitude_rad``."""
         orders = np.arange(len(self.pickup))
-        return np.real(np.exp(1j * np.multiply.outer(x, orders)) @ np.asarray(self.pickup, complex))
+        terms = np.exp(1j * np.multiply.outer(self.deflection_rad(t_s, amplitude_rad), orders))
+        # A sum, not ``@``: a threaded BLAS's product waits on threads a loaded host has taken
+        # (docs/performance.md, live view).
+        return np.real((terms * np.asarray(self.pickup, complex)).sum(axis=-1))
 
     def completed(self, t_s: ArrayLike, data_t: ArrayLike) -> RingdownModel:
         """This model, or where θmax is NaN the one of the fits it stands for that is nearest
@@ -96,15 +102,17 @@ class RingdownCurve:
 
 
 def ringdown_curve(
-    samples_t: ArrayLike, sample_rate_hz: float, model: RingdownModel, channels: str = "difference"
+    samples_t: ArrayLike, sample_rate_hz: float, model: RingdownModel, channels: str = "difference", every: int = 1
 ) -> RingdownCurve:
     """The fitted window's samples (rows: samples, columns: the fluxgates) combined as the fit
     combined them (``channels``, :func:`mows.estimate.ringdown.window.combine_channels`; one
-    channel: 'difference', 'channel1' or 'channel2'), beside the model of ``model``."""
+    channel: 'difference', 'channel1' or 'channel2'), beside the model of ``model``; only every
+    ``every``-th sample, the plotted ones: the model is computed at those alone (where θmax is
+    undetermined, its grid of least squares costs seconds over a whole window under load)."""
     if channels == "both":
         raise ValueError("channels = 'both': a fit of both channels has a κ per channel; draw one channel")
-    data = combine_channels(samples_t, channels)[0]
-    t_s = np.arange(data.size) / sample_rate_hz
+    data = combine_channels(samples_t, channels)[0][::every]
+    t_s = np.arange(data.size) * every / sample_rate_hz
     return RingdownCurve(t_s, data, model.completed(t_s, data).signal_t(t_s))
 
 

@@ -26,6 +26,7 @@ FEEDS: dict[str, Callable[[View, object, int], list[Shown]]] = {
     "/mows/sweep": View.on_sweep,
     "/mows/field_map": View.on_field_map,
     "/mows/model_report": View.on_model_report,
+    "/mows/workspace_model": View.on_workspace_model,
     "/mows/excitation": View.on_excitation,
     "/mows/joint_states": View.on_joint_states,
     "/diagnostics": View.on_diagnostics,

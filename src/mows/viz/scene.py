@@ -34,7 +34,7 @@ class Arrow:
     tail_m: NDArray[np.float64]
     direction: NDArray[np.float64]
     length_m: float
-    kind: str  # "B" (in-plane field), "G" (a principal gradient), "B∥" (along the probe axis)
+    kind: str  # "B" (field), "G" (a principal gradient), "B∥" (along the probe axis), "pose" (a sweep's)
     label: str  # value ± σ; "" on the second arrow of a principal direction
 
 

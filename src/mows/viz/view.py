@@ -5,7 +5,8 @@ View returns :class:`Shown` items, each a channel's content at a log time: the s
 probes' arrows, :mod:`mows.viz.scene`), the mount's frames (:mod:`mows.viz.mount`), and the
 plots as dataclasses of numbers and lists (JSON on the channel, :mod:`mows.viz.channels`).
 The raw stream is kept ``buffer_s`` long, so that a ring-down's fit, which arrives after its
-samples, is drawn over them; the stream itself is shown averaged down to ``raw_rate_hz``.
+samples, is drawn over them; a fit that comes before the last of its samples waits for them.
+The stream itself is shown averaged down to ``raw_rate_hz``.
 
 With several probes in one window each fit is drawn over the window's samples with its own
 model, so its residual holds the other probes' tones.
@@ -16,6 +17,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -25,6 +27,7 @@ from mows.records.samples import SampleBlock
 from mows.viz.curves import RingdownModel, ringdown_curve, stride, sweep_curve_hz
 from mows.viz.mount import FrameTransform, Mount
 from mows.viz.scene import ARROW_LENGTH_M, Arrow, ProbeField, axis_arrow, probe_arrows
+from mows.viz.workspace_scene import workspace_arrows
 
 # The channels' topics (docs/visualisation.md), beside the graph's own under /mows/.
 SCENE, FRAMES = "/mows/viz/scene", "/mows/viz/frames"
@@ -144,6 +147,34 @@ class Shown:
     content: object
 
 
+@dataclass(frozen=True)
+class RingdownToDraw:
+    """A fit with its window's samples (rows: samples, columns: fluxgates), ready to draw: the
+    drawing (the model where θmax is undetermined, :mod:`mows.viz.curves`) may take seconds,
+    so a live server does it off the stream's thread."""
+
+    fit: object  # the RingdownFit message
+    model: RingdownModel
+    log_time_ns: int
+    samples_t: np.ndarray
+    sample_rate_hz: float
+
+    def drawn(self, settings: ViewSettings) -> Shown:
+        every = stride(len(self.samples_t), settings.max_points)
+        curve = ringdown_curve(self.samples_t, self.sample_rate_hz, self.model, settings.channels, every)
+        msg: Any = self.fit
+        plot = RingdownPlot(
+            int(msg.cycle_id),
+            int(msg.repeat_index),
+            int(msg.probe_id),
+            str(msg.status_name),
+            float(msg.frequency_hz),
+            float(msg.frequency_std_hz),
+            *(_listed(values) for values in (curve.t_s, curve.data_t, curve.model_t, curve.residual_t)),
+        )
+        return Shown(RINGDOWN, self.log_time_ns, plot)
+
+
 @dataclass
 class View:
     """Module docstring. ``mount``: the probe mount's URDF text, or None for no frames."""
@@ -155,9 +186,17 @@ class View:
     _entities: dict[str, list[Arrow]] = field(default_factory=dict)
     _fields: dict[int, ProbeField] = field(default_factory=dict)
     _history: list = field(default_factory=list)
+    _fits: list = field(default_factory=list)  # (fit message, model, log time) waiting for samples
+    fits_without_samples: int = 0  # OK fits not drawn: none of their samples was kept
 
     # --- the stream ----------------------------------------------------------------------
     def on_raw(self, msg) -> list[Shown]:
+        """The stream's points, then the ring-downs whose samples this block completes, drawn."""
+        return self.raw_points(msg) + self._drawn()
+
+    def raw_points(self, msg) -> list[Shown]:
+        """The stream's points of one block, kept for the ring-downs (cheap: a live server's
+        stream thread calls this, and draws :meth:`ready_ringdowns` elsewhere)."""
         block = block_from_message(msg)
         self._keep(block)
         step = max(1, round(block.sample_rate_hz / self.settings.raw_rate_hz))
@@ -196,24 +235,38 @@ class View:
 
     # --- results -------------------------------------------------------------------------
     def on_ringdown(self, msg, time_ns: int) -> list[Shown]:
+        """The ring-downs whose samples are all here, this one among them once its are, drawn."""
+        self.keep_fit(msg, time_ns)
+        return self._drawn()
+
+    def keep_fit(self, msg, time_ns: int) -> None:
+        """A fit to draw once the stream has passed its window (it may come before its samples)."""
         model = RingdownModel.of(msg)
-        if msg.status != STATUS_OK or not model.drawable:
+        if msg.status == STATUS_OK and model.drawable:
+            self._fits.append((msg, model, time_ns))
+
+    def ready_ringdowns(self) -> list[RingdownToDraw]:
+        """The kept fits whose window the stream has passed, with a copy of their samples (NaN
+        where a block is missing); a fit whose samples are no longer kept is left out, counted."""
+        if not self._blocks:
             return []
-        kept = self.window(stamps.nanoseconds(msg.header.stamp), int(msg.n_samples))
-        if kept is None:
-            return []
-        curve = ringdown_curve(kept[0], kept[1], model, self.settings.channels)
-        every = stride(curve.t_s.size, self.settings.max_points)
-        plot = RingdownPlot(
-            int(msg.cycle_id),
-            int(msg.repeat_index),
-            int(msg.probe_id),
-            str(msg.status_name),
-            float(msg.frequency_hz),
-            float(msg.frequency_std_hz),
-            *(_listed(values[::every]) for values in (curve.t_s, curve.data_t, curve.model_t, curve.residual_t)),
-        )
-        return [Shown(RINGDOWN, time_ns, plot)]
+        newest = self._blocks[-1]
+        ready, waiting = [], []
+        for msg, model, time_ns in self._fits:
+            start_ns, n_samples = stamps.nanoseconds(msg.header.stamp), int(msg.n_samples)
+            if newest.index_at(start_ns) + n_samples > newest.end_index:
+                waiting.append((msg, model, time_ns))
+                continue
+            kept = self.window(start_ns, n_samples)
+            if kept is not None:
+                ready.append(RingdownToDraw(msg, model, time_ns, *kept))
+            else:
+                self.fits_without_samples += 1
+        self._fits = waiting
+        return ready
+
+    def _drawn(self) -> list[Shown]:
+        return [window.drawn(self.settings) for window in self.ready_ringdowns()]
 
     def on_field(self, msg, time_ns: int) -> list[Shown]:
         """A ring-down's field along the probe axis, an arrow in its probe frame."""
@@ -254,6 +307,11 @@ class View:
         for probe in msg.probes:
             if probe.status == STATUS_OK:
                 self._fields[int(probe.probe_id)] = ProbeField.of(probe, msg.header.frame_id, probe.position_m)
+        return [self._scene(time_ns)]
+
+    def on_workspace_model(self, msg, time_ns: int) -> list[Shown]:
+        """The workspace map's field on a grid and its poses (replacing an earlier map's)."""
+        self._entities.update(workspace_arrows(msg))
         return [self._scene(time_ns)]
 
     def _scene(self, time_ns: int) -> Shown:

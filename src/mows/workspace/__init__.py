@@ -9,7 +9,8 @@ magnetic tool (``tool``); the arm's pose error carried by the fit, errors in var
 (``poses``); the next best pose, D- or I-optimal (``design``); the arm that carries the
 probe as CRTK names it (``measured_cp``, ``move_cp``), simulated, and the checks a sweep's
 pose must pass (``arm``); sweeps and Hall points simulated in a known field, decomposed by the
-sweep's own code (``simulated``).
+sweep's own code (``simulated``); a map as the mapper makes it, live or from a recording: the
+pose plan, the checks on the arm's reports through a sweep, the fit (``mapping``).
 
 May import: ``mows.sweep`` (a sweep's decomposition), ``mows.physics``, ``mows.records``; the
 simulated measurements also ``mows.sim`` (the field they are taken in), the fit never.

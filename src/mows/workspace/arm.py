@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation
 
 from mows.workspace.poses import PoseError, rotation
 
@@ -70,6 +71,14 @@ class StampedPose:
             raise ValueError(f"a pose's position is a finite 3-vector in metres, got {self.position_m!r}")
         if quaternion.shape != (4,) or not abs(np.linalg.norm(quaternion) - 1.0) < 1e-6:
             raise ValueError(f"a pose's orientation is a unit quaternion (x, y, z, w), got {self.orientation_xyzw!r}")
+
+    @classmethod
+    def of(cls, msg) -> StampedPose:
+        """From a geometry_msgs/PoseStamped, rclpy's or a bag's (read by attribute); ValueError
+        for one that is not a pose (NaN, a quaternion not of unit length)."""
+        p, q = msg.pose.position, msg.pose.orientation
+        stamp_ns = int(msg.header.stamp.sec) * NS_PER_S + int(msg.header.stamp.nanosec)
+        return cls(stamp_ns, msg.header.frame_id, np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w]))
 
     @property
     def rotation(self) -> np.ndarray:
@@ -135,8 +144,9 @@ class SimulatedArm:
             frame_id,
         )
         self._goal = StampedPose(0, frame_id, np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]))
+        self._start = self._goal
         self._error = np.zeros(6)
-        self._arrival_s = 0.0
+        self._departure_s = self._arrival_s = 0.0
 
     def is_busy(self, now_s: float) -> bool:
         """CRTK's ``operating_state.is_busy``: a move is running."""
@@ -152,6 +162,7 @@ class SimulatedArm:
             return ArmAnswer(False, f"busy: the last move ends in {self._arrival_s - now_s:.2f} s")
         distance = float(np.linalg.norm(np.asarray(goal.position_m) - np.asarray(self._goal.position_m)))
         turn = float(np.arccos(np.clip((np.trace(goal.rotation.T @ self._goal.rotation) - 1) / 2, -1, 1)))
+        self._start, self._departure_s = self._commanded(now_s), now_s
         self._arrival_s = now_s + max(distance / self.speed_m_per_s, turn / self.turn_rad_per_s)
         self._goal = goal
         self._error = self.rng.normal(size=6) * self.accuracy.std
@@ -169,17 +180,27 @@ class SimulatedArm:
             matrix_quaternion(turn),
         )
 
+    def _commanded(self, time_s: float) -> StampedPose:
+        """Where the arm's joints put the tool at ``time_s`` by its own kinematics: along the
+        straight line and the shortest turn from the last pose to the goal, the goal once there."""
+        span_s = self._arrival_s - self._departure_s
+        share = 1.0 if span_s <= 0 else min(1.0, max(0.0, (time_s - self._departure_s) / span_s))
+        start, goal = self._start, self._goal
+        turn = Rotation.from_matrix(start.rotation.T @ goal.rotation).as_rotvec()
+        position = np.asarray(start.position_m) + share * (np.asarray(goal.position_m) - np.asarray(start.position_m))
+        return StampedPose(0, self.frame_id, position, matrix_quaternion(start.rotation @ rotation(share * turn)))
+
     def measured_cp(self, now_s: float) -> StampedPose:
         """What the arm reports at ``now_s``: where it believes the tool was ``latency_s`` ago
-        (its goal, once there), with encoder noise; stamped with that earlier time."""
+        (on its way, or at its goal once there), with encoder noise; stamped with that earlier time."""
         then_s = now_s - self.latency_s
+        believed = self._commanded(then_s)
         noise = self.rng.normal(size=6) * self.encoder_noise.std
-        turn = rotation(noise[3:]) @ self._goal.rotation
         return StampedPose(
             int(then_s * NS_PER_S),
             self.frame_id,
-            np.asarray(self._goal.position_m) + noise[:3],
-            matrix_quaternion(turn),
+            np.asarray(believed.position_m) + noise[:3],
+            matrix_quaternion(rotation(noise[3:]) @ believed.rotation),
         )
 
 

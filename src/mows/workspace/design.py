@@ -20,6 +20,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mows.workspace.fit import readout_design
 from mows.workspace.harmonics import SolidHarmonics
@@ -88,3 +89,28 @@ def next_best(
     if not designs:
         raise ValueError("no candidate pose within the arm's reach")
     return int(np.argmax(gains(basis, info, designs, covariance, criterion, points_m)))
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A rotation matrix uniform over SO(3) (QR of a Gaussian matrix, signs fixed)."""
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def boundary_positions(count: int, radius_m: float, centre_m: ArrayLike = (0, 0, 0)) -> np.ndarray:
+    """``count`` positions on the workspace's bounding sphere, each as far from those before it
+    as the sphere allows (farthest-point order over a Fibonacci lattice), so that every prefix
+    is spread evenly. A harmonic field inside a ball is fixed by its values on the boundary,
+    where the higher degrees are also largest: the boundary is where to measure."""
+    candidates = 20 * count
+    index = np.arange(candidates) + 0.5
+    z = 1.0 - 2.0 * index / candidates
+    azimuth = math.pi * (1.0 + math.sqrt(5.0)) * index
+    lattice = np.stack([np.sqrt(1 - z * z) * np.cos(azimuth), np.sqrt(1 - z * z) * np.sin(azimuth), z], axis=1)
+    chosen = [0]
+    distance = np.linalg.norm(lattice - lattice[0], axis=1)
+    while len(chosen) < count:
+        chosen.append(int(np.argmax(distance)))
+        distance = np.minimum(distance, np.linalg.norm(lattice - lattice[chosen[-1]], axis=1))
+    return np.asarray(centre_m, float) + radius_m * lattice[chosen]

@@ -10,10 +10,12 @@ they come), the switch-off at the end of an emergency stop's ramp to zero, and t
 step's sample (:class:`Readback`): a read-back is judged only against the step it follows. While
 the output should be on it is read back every ``WATCH_S`` too: an output that went off by itself
 (a tripped over-voltage protection) is a failure, as is every error of the supply. Every
-exchange has a deadline: one that has not ended ``deadline_s`` after it began has hung (VISA's
-own timeout did not end it), and the backend faults on it as on an error. On a fault the line
-drops what waits and ramps the supply to zero within its slew limit in host time, switches it
-off and reads it back (:meth:`SupplyLine.make_safe`), within a deadline too.
+exchange (one message to the supply) has a deadline: one that has not ended ``deadline_s``
+after it was sent has hung (VISA's own timeout did not end it), and the backend faults on it as
+on an error. On a fault the line drops what waits and ramps the supply to zero within its slew
+limit in host time, switches it off and reads it back (:meth:`SupplyLine.make_safe`): waited
+for as long as the supply answers (a ramp on a loaded host takes what it takes), each exchange
+under the same deadline.
 """
 
 from __future__ import annotations
@@ -59,7 +61,6 @@ class SupplyLine:
         self._jobs: collections.deque[Callable[[], None]] = collections.deque()
         self._settled_at: tuple[float, int] | None = None  # (time, step) of the read-back a ramp's end is due
         self._watch_at_s = math.inf
-        self._busy_since_s: float | None = None  # when the exchange under way began
         self._stopping = False
         self._working = False  # a job under way
         self._step_index = -1
@@ -82,10 +83,23 @@ class SupplyLine:
         """What went wrong since the last call ('' : nothing): an error, a hung exchange."""
         with self._condition:
             failure, self._failure = self._failure, ""
-            busy = self._busy_since_s
-        if not failure and busy is not None and time.monotonic() - busy > self.deadline_s:
+        if not failure and self._hung():
             failure = f"the supply did not answer within {self.deadline_s:g} s"
         return failure
+
+    def _hung(self) -> bool:
+        """The message under way has not ended ``deadline_s`` after it was sent."""
+        since = self.supply.message_since_s
+        return since is not None and time.monotonic() - since > self.deadline_s
+
+    def _wait(self, done: Callable[[], bool]) -> bool:
+        """Wait until ``done()`` for as long as the supply answers (a ramp on a loaded host takes
+        what it takes); False when a message hung or the worker is gone."""
+        while not done():
+            if self._hung() or not self._thread.is_alive():
+                return done()
+            time.sleep(RAMP_STEP_S)
+        return True
 
     @property
     def busy(self) -> bool:
@@ -97,20 +111,20 @@ class SupplyLine:
     def make_safe(self, step_index: int) -> list[str]:
         """Drop what waits, ramp to zero from the last current accepted within the slew limit in
         host time, switch off and read back (stamped ``step_index``); what went wrong, waiting
-        for it no longer than the ramp and the deadline."""
+        for it while the supply answers, and no longer than the deadline of an exchange that hangs."""
         done = threading.Event()
         problems: list[str] = []
 
         def safe() -> None:
             try:
                 for _, current_a in self.supply.config.limits.ramp(self.current_a, 0.0):
-                    self._exchange(self.supply.set_current_a, current_a)
+                    self.supply.set_current_a(current_a)
                     self.current_a = current_a
                     time.sleep(RAMP_STEP_S)
             except SupplyError as error:
                 problems.append(f"THE SUPPLY DID NOT RAMP TO ZERO: {error}")
             try:
-                problems.extend(f"THE SUPPLY MAY STILL BE ON: {p}" for p in self._exchange(self.supply.safe))
+                problems.extend(f"THE SUPPLY MAY STILL BE ON: {p}" for p in self.supply.safe())
                 self.current_a, self.off = 0.0, True
                 self._read_back(step_index)
             except SupplyError as error:
@@ -124,9 +138,8 @@ class SupplyLine:
             self._jobs.append(safe)
             self._safe_job = safe  # kept when a failure of the exchange under way drops the rest
             self._condition.notify()
-        wait_s = self.supply.config.limits.ramp_s(self.current_a, 0.0) + 2.0 * self.deadline_s
-        if not done.wait(wait_s):
-            return [f"THE SUPPLY MAY STILL BE ON: it did not answer within {wait_s:.3g} s"]
+        if not self._wait(done.is_set):
+            return [f"THE SUPPLY MAY STILL BE ON: it did not answer within {self.deadline_s:g} s"]
         return problems
 
     def close(self) -> None:
@@ -136,8 +149,7 @@ class SupplyLine:
         with self._condition:
             self._stopping = True
             self._condition.notify()
-        self._thread.join(self.supply.config.limits.ramp_s(self.current_a, 0.0) + 2.0 * self.deadline_s)
-        if self._thread.is_alive():
+        if not self._wait(lambda: not self._thread.is_alive()):
             raise SupplyError(f"THE SUPPLY MAY STILL BE ON: it did not answer within {self.deadline_s:g} s")
         self.supply.close()
 
@@ -159,7 +171,7 @@ class SupplyLine:
                 self._working = True
             try:
                 job()
-            except SupplyError as error:
+            except Exception as error:  # noqa: BLE001 (the line never dies on a step: a fault, said)
                 with self._condition:
                     self._failure = self._failure or f"the supply failed: {error}"
                     kept = [j for j in self._jobs if j is self._safe_job]
@@ -185,25 +197,15 @@ class SupplyLine:
         due = min(self._watch_at_s, self._settled_at[0] if self._settled_at else math.inf)
         return None if due == math.inf else max(0.0, due - time.monotonic())
 
-    def _exchange(self, call, *args):
-        """``call(*args)`` with the time it began kept, for the deadline."""
-        with self._condition:
-            self._busy_since_s = time.monotonic()
-        try:
-            return call(*args)
-        finally:
-            with self._condition:
-                self._busy_since_s = None
-
     def _write_step(self, current_a: float, index: int, last: bool) -> None:
         if self.off:
-            self._exchange(self.supply.prepare)  # at zero, output on, as when it was opened
+            self.supply.prepare()  # at zero, output on, as when it was opened
             self.off = False
         # The slew limit holds in the supply's time: steps that waited (a busy host) are paced
         # one per RAMP_STEP_S, never written as a burst.
         time.sleep(max(0.0, self._stepped_s + RAMP_STEP_S - time.monotonic()))
         self._stepped_s = time.monotonic()
-        self._exchange(self.supply.set_current_a, current_a)
+        self.supply.set_current_a(current_a)
         self.current_a, self._step_index = current_a, index
         with self._condition:
             # The pair settles in the supply's own time from the write, not on the card's clock.
@@ -212,7 +214,7 @@ class SupplyLine:
 
     def _switch_off(self) -> None:
         self.off = True
-        refused = self._exchange(self.supply.safe)
+        refused = self.supply.safe()
         if refused:
             raise SupplyError(f"it did not switch off after the emergency stop: {'; '.join(refused)}")
         self._read_back(self._step_index)
@@ -220,12 +222,12 @@ class SupplyLine:
     def _read_back(self, step_index: int, watch: bool = False) -> None:
         """Read the current and the output back; while the output should be on, an output read
         back off (it tripped) is a failure, and the next look is in ``WATCH_S``."""
-        current_a = self._exchange(self.supply.read_current_a)
-        output = self._exchange(self.supply.output_state)
+        current_a = self.supply.read_current_a()
+        output = self.supply.output_state()
         self.readback = Readback(current_a, output, step_index, time.monotonic())
         if watch and not self.off and output == "off":
             self.off = True
-            tripped = " (its over-voltage protection tripped)" if self._exchange(self.supply.tripped) else ""
+            tripped = " (its over-voltage protection tripped)" if self.supply.tripped() else ""
             raise SupplyError(f"its output went off by itself{tripped}")
         with self._condition:
             self._watch_at_s = time.monotonic() + WATCH_S if watch and not self.off else math.inf

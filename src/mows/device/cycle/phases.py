@@ -45,8 +45,9 @@ class PhaseEvent:
     planned_duration_s: float = 0.0  # 0: open-ended
     setup: str = ""
     reason: str = ""  # why, for FAULT
-    # A multi-tone excitation and its ring-down: the probes it rings, in one order; each probe's
-    # tone and its own orientation (its home orientation plus the stage's θ0). Empty for one probe.
+    # An excitation and its ring-down: the probes it rings (one, or the group of a multi-tone
+    # drive), in one order; each probe's tone and its own orientation (its home orientation plus
+    # the stage's θ0). Empty in the other phases.
     probe_ids: tuple[int, ...] = ()
     probe_frequency_hz: tuple[float, ...] = ()
     probe_theta0_rad: tuple[float, ...] = ()

@@ -73,13 +73,22 @@ from mows.records.samples import SampleBlock
 class Excitation:
     """One group's excitation, on for samples [``on_index``, ``off_index``): the coil currents it
     announces (one probe: signed per coil; several: each coil's summed peak), its drive's
-    frequency, and the tones of a multi-tone drive (empty for one probe's)."""
+    frequency, the tones of a multi-tone drive (empty for one probe's) and the probes' θ0."""
 
     on_index: int
     off_index: int
     currents_a: tuple[float, ...]
     frequency_hz: float
     tones: tuple[Tone, ...] = ()
+    theta0_rad: float = 0.0
+
+    @property
+    def rung(self) -> tuple[tuple[int, float, float], ...]:
+        """(id, tone, θ0) of each probe it rings: its tones', or the one probe's (id 0) at the
+        drive's frequency."""
+        if self.tones:
+            return tuple((t.probe_id, t.frequency_hz, t.theta0_rad) for t in self.tones)
+        return ((0, self.frequency_hz, self.theta0_rad),)
 
 
 class CycleSequencer:
@@ -287,7 +296,7 @@ class CycleSequencer:
         if self._groups is None:
             excite = excitation_samples(c.settings.excite_s, self.frequency_hz, self.sample_rate_hz)
             start = self._duty.earliest_start(not_before, excite)
-            return Excitation(start, start + excite, self._currents(c), self.frequency_hz)
+            return Excitation(start, start + excite, self._currents(c), self.frequency_hz, (), c.theta0_rad)
         group = self._groups.next(not_before)
         assert group is not None  # a group is asked for only while some remain
         duration_s = (group.off_index - group.on_index) / self.sample_rate_hz
@@ -505,15 +514,15 @@ class CycleSequencer:
         excitation: Excitation | None = None,
     ) -> None:
         """Announce ``phase``; an EXCITING and its RINGDOWN carry their ``excitation``: its
-        currents (EXCITING only), its drive's frequency and the probes a multi-tone drive rings,
-        each with its tone and its θ0."""
+        currents (EXCITING only), its drive's frequency and the probes it rings, each with its
+        tone and its θ0."""
         self.phase = phase
         # Events are stamped once samples have come (_announce holds them back until then);
         # a cycle's own events come later still, as _plan starts none before the first sample.
         assert self._anchor is not None
         anchor_index, anchor_ns = self._anchor
         currents = excitation.currents_a if excitation is not None and phase == Phase.EXCITING else ()
-        tones = excitation.tones if excitation is not None else ()
+        rung = excitation.rung if excitation is not None else ()
         self._step.events.append(
             PhaseEvent(
                 phase=phase,
@@ -529,9 +538,9 @@ class CycleSequencer:
                 planned_duration_s=duration_samples / self.sample_rate_hz,
                 setup=self.setup.name,
                 reason=reason,
-                probe_ids=tuple(t.probe_id for t in tones),
-                probe_frequency_hz=tuple(t.frequency_hz for t in tones),
-                probe_theta0_rad=tuple(t.theta0_rad for t in tones),
+                probe_ids=tuple(k for k, _, _ in rung),
+                probe_frequency_hz=tuple(f for _, f, _ in rung),
+                probe_theta0_rad=tuple(a for _, _, a in rung),
             )
         )
 

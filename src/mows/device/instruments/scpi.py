@@ -24,6 +24,7 @@ import functools
 import importlib
 import math
 import string
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -237,6 +238,7 @@ class ScpiSupply:
         self.identity = ""
         self.identified = False  # its *IDN? named the file's model: commands may be sent
         self.writes = 0
+        self.message_since_s: float | None = None  # when the message under way was sent (time.monotonic())
 
     def prepare(self) -> str:
         """Clear its status, check its identity against the file's model, select the channel, set
@@ -394,10 +396,15 @@ class ScpiSupply:
         return self._call(self.resource.query, command)
 
     def _call(self, method, command: str) -> str:
+        """One message: ``method(command)``, the time it was sent kept while it is under way (a
+        caller on another thread judges a hung exchange by it)."""
+        self.message_since_s = time.monotonic()
         try:
             return method(command)
         except Exception as error:  # PyVISA's errors have no common base outside pyvisa.errors
             raise SupplyError(f"{self.config.name}: {command!r}: {error}") from None
+        finally:
+            self.message_since_s = None
 
 
 def open_scpi_supply(resource_name: str, config: ScpiSupplyConfig, visa_library: str = "@py") -> ScpiSupply:

@@ -61,7 +61,7 @@ def derive(
         "inertia_kgm2",
         "lever_m",
         "damping_per_s",
-        "start_swing_rad",
+        "theta_stop_rad",  # the housing stop the ring-downs are released at
     ]
     names += ["environment_field_along_supply_t"] * fit_environment
     gradient_factor = _gradient_factor(wirings, gradient_points) if fit_lever else None

@@ -1,10 +1,13 @@
-"""Tables of several probes: each probe's constants, and its neighbours' field at each row.
+"""A table's probes: each row's probe and its constants, and its neighbours' field at each row.
+
+:class:`ProbeSet` is the one way the lab holds a table's probes: a table of one probe is a set
+of one and takes the same path as several (:func:`probe_parts`).
 
 A table may hold several probes that share a scene (docs/multi_probe.md). The column ``probe``
 names each row's probe by an integer id; ``step`` numbers the steps of a sweep, so that rows
 with equal ``sweep`` and ``step`` were measured together; ``magnet_x_m``, ``magnet_y_m`` and
 ``magnet_z_m`` give where the row's magnet sits undeflected (global frame, as
-``--magnet-position`` does for one probe). :class:`ProbeSet` holds each probe's constants.
+``--magnet-position`` does for one probe).
 
 :func:`with_neighbour_field` gives every row its neighbours' field at its magnet: the exact
 point-dipole field (Eq. S8 before its far-field reduction), with its in-plane gradient and
@@ -24,9 +27,11 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from typing import NamedTuple
 
 import numpy as np
 
+from mows.estimate.probe_set import ProbeEntry
 from mows.lab.data.table import MAGNET, NEIGHBOUR, PROBE, STEP, MeasurementTable, TableError, rows_text
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
@@ -36,7 +41,13 @@ from mows.physics.sources import PointDipole
 
 @dataclasses.dataclass(frozen=True)
 class ProbeSet(Probe):
-    """The constants of every probe of a table, by id (``members``: (id, Probe) in id order).
+    """The constants of every probe of a table (``members``: one
+    :class:`~mows.estimate.probe_set.ProbeEntry` per probe, in id order): what the lab carries
+    as a table's probe, for one probe as for several.
+
+    ``column`` says whether the table's column ``probe`` names each row's probe. Without it,
+    the set holds one probe (id 0), every row is its, and its f00 is the parameter ``f00_hz``;
+    with it, probe i's f00 is ``probe_<i>.f00_hz``.
 
     As a :class:`~mows.physics.probe.Probe` it carries its first member's constants. Only the
     diagnosis's explanatory texts use them. The frequency model evaluates each probe's rows with
@@ -44,34 +55,64 @@ class ProbeSet(Probe):
     (:mod:`mows.lab.model.frequency_model`).
     """
 
-    members: tuple[tuple[int, Probe], ...] = ()
+    members: tuple[ProbeEntry, ...] = ()
+    column: bool = True
 
     @classmethod
-    def of(cls, probes: Mapping[int, Probe]) -> ProbeSet:
-        """The set of ``probes`` ({id: constants}); ValueError when it is empty."""
-        ordered = tuple(sorted(probes.items()))
+    def of(cls, probes: Mapping[int, Probe], column: bool = True) -> ProbeSet:
+        """The set of ``probes`` ({id: constants}), named by the table's column ``probe`` unless
+        ``column`` is False (then of one probe); ValueError when it is empty, or of several
+        probes without the column."""
+        ordered = tuple(ProbeEntry(i, probe, probe.f00_hz) for i, probe in sorted(probes.items()))
         if not ordered:
             raise ValueError("a probe set needs at least one probe")
-        first = ordered[0][1]
-        return cls(**{f.name: getattr(first, f.name) for f in dataclasses.fields(Probe)}, members=ordered)
+        if not column and len(ordered) > 1:
+            raise ValueError("a table that does not name its rows' probes holds one probe")
+        first = ordered[0].probe
+        fields = {f.name: getattr(first, f.name) for f in dataclasses.fields(Probe)}
+        return cls(**fields, members=ordered, column=column)
+
+    @classmethod
+    def covering(cls, probe: Probe) -> ProbeSet:
+        """``probe`` as the lab's probe set: a set as it is; one Probe, the probe of every row of a
+        table that does not name its rows' probes (:meth:`for_table` lends it to every id)."""
+        return probe if isinstance(probe, cls) else cls.of({0: probe}, column=False)
 
     @classmethod
     def for_table(cls, table: MeasurementTable, default: Probe, named: Mapping[int, Probe]) -> ProbeSet:
-        """The constants of every probe of ``table``: ``named`` by id, ``default`` for the others."""
-        ids = np.unique(table.columns[PROBE]).astype(int)
-        unknown = sorted(set(named) - set(ids.tolist()))
+        """The constants of every probe of ``table``: ``named`` by id, ``default`` for the others;
+        TableError naming a probe that the table does not hold."""
+        ids = np.unique(table.columns[PROBE]).astype(int).tolist() if table.has(PROBE) else []
+        unknown = sorted(set(named) - set(ids))
         if unknown:
             raise TableError(
                 f"probe file(s) given for probe {', '.join(map(str, unknown))}, which the table does not hold"
+                + ("" if table.has(PROBE) else f" (it has no column '{PROBE}' saying which row is which probe)")
             )
-        return cls.of({int(i): named.get(int(i), default) for i in ids})
+        if not table.has(PROBE):
+            return cls.of({0: default}, column=False)
+        return cls.of({i: named.get(i, default) for i in ids})
 
     @property
     def ids(self) -> tuple[int, ...]:
-        return tuple(i for i, _ in self.members)
+        return tuple(entry.probe_id for entry in self.members)
+
+    @property
+    def f00_names(self) -> list[str]:
+        """Each probe's f00 parameter: ``probe_<id>.f00_hz``, or ``f00_hz`` for the probe of a
+        table that does not name its rows' probes."""
+        return [f"probe_{i}.f00_hz" for i in self.ids] if self.column else ["f00_hz"]
 
     def index(self, table: MeasurementTable) -> np.ndarray:
-        """Each row's position in ``members`` (n,); TableError naming a probe without constants."""
+        """Each row's position in ``members`` (n,); TableError naming a probe without constants,
+        or where the set is named by a column the table does not have."""
+        if not self.column:
+            return np.zeros(len(table), int)
+        if not table.has(PROBE):
+            raise TableError(
+                f"constants of probes {', '.join(map(str, self.ids))} given, but the table has no column "
+                f"'{PROBE}' saying which row is which probe"
+            )
         ids = np.asarray(self.ids)
         found = np.searchsorted(ids, table.columns[PROBE].astype(int))
         known = (found < len(ids)) & (ids[np.minimum(found, len(ids) - 1)] == table.columns[PROBE])
@@ -84,28 +125,37 @@ class ProbeSet(Probe):
         return found
 
 
-def probe_parts(table: MeasurementTable, probe: Probe) -> list[tuple[np.ndarray | None, Probe]]:
-    """(rows, constants) of each probe of ``table``: rows None (all) for one probe; for a
-    :class:`ProbeSet` the indices of each member's rows, for the members the table holds."""
-    if not isinstance(probe, ProbeSet):
-        return [(None, probe)]
-    index = probe.index(table)
-    return [(np.flatnonzero(index == k), member) for k, (_, member) in enumerate(probe.members) if np.any(index == k)]
+class ProbePart(NamedTuple):
+    """The rows of one probe of a table: their indices, those rows as a table (the table itself
+    when they are all its rows: the model's caches are kept per table), and the probe."""
+
+    rows: np.ndarray
+    table: MeasurementTable
+    entry: ProbeEntry
 
 
-def with_probes(table: MeasurementTable, probe: Probe) -> tuple[MeasurementTable, Probe]:
-    """(table, probe) ready for the lab: for a table with a ``probe`` column, a :class:`ProbeSet`
-    (``probe`` for every id when it is one Probe) and the neighbours' field
-    (:func:`with_neighbour_field`); any other table as it is. TableError for a ProbeSet given
-    with a table that does not say which row is which probe."""
-    if not table.has(PROBE):
-        if isinstance(probe, ProbeSet):
-            raise TableError(
-                f"constants of probes {', '.join(map(str, probe.ids))} given, but the table has no column "
-                f"'{PROBE}' saying which row is which probe"
-            )
-        return table, probe
-    probes = probe if isinstance(probe, ProbeSet) else ProbeSet.for_table(table, probe, {})
+def probe_parts(table: MeasurementTable, probe: Probe) -> list[ProbePart]:
+    """The part of ``table`` of each probe of ``probe`` (:meth:`ProbeSet.covering`) that it
+    holds, in id order."""
+    probes = ProbeSet.covering(probe)
+    index = probes.index(table)
+    found = [np.flatnonzero(index == k) for k in range(len(probes.members))]
+    return [
+        ProbePart(rows, table if len(rows) == len(table) else table.subset(rows), entry)
+        for rows, entry in zip(found, probes.members)
+        if rows.size
+    ]
+
+
+def with_probes(table: MeasurementTable, probe: Probe) -> tuple[MeasurementTable, ProbeSet]:
+    """(table, probes) ready for the lab: the table's :class:`ProbeSet` (``probe`` for every id
+    when it is one Probe) and, for a table with a ``probe`` column, the neighbours' field
+    (:func:`with_neighbour_field`). TableError for a set named by ids given with a table that
+    does not say which row is which probe."""
+    probes = ProbeSet.covering(probe)
+    if table.has(PROBE) and not probes.column:
+        probes = ProbeSet.for_table(table, probes.members[0].probe, {})
+    probes.index(table)
     return with_neighbour_field(table, probes), probes
 
 
@@ -169,8 +219,8 @@ def _magnets_at_rest(table: MeasurementTable, probes: ProbeSet) -> tuple[np.ndar
     gradient = np.einsum("nai,nij,nbj->nab", axes, table.gradient_t_per_m, axes)
     moments, positions = np.zeros((len(table), 3)), np.zeros((len(table), 3))
     index = probes.index(table)
-    for k, (_, probe) in enumerate(probes.members):
-        rows = np.flatnonzero(index == k)
+    for k, entry in enumerate(probes.members):
+        rows, probe = np.flatnonzero(index == k), entry.probe
         rest = ArcPotential.from_local_field(probe, field[rows], gradient[rows]).rest_angle_rad()
         for row, angle in zip(rows, rest):
             magnet = tuple(float(table.columns[name][row]) for name in MAGNET)

@@ -1,7 +1,7 @@
 """Reading measurement tables: CSV files, the project's rosbag2 bags and rotation sweeps.
 
 Each reader gathers the columns of :mod:`mows.lab.data.table` and hands them to
-:func:`mows.lab.data.table.with_notes`, which validates them and notes what was assumed. Reference
+:func:`mows.lab.data.intake.with_notes`, which validates them and notes what was assumed. Reference
 fields of static sources come from :mod:`mows.lab.data.reference`.
 """
 
@@ -20,8 +20,9 @@ import numpy as np
 
 from mows.device.recording import bags
 from mows.estimate.ringdown import FitStatus
+from mows.lab.data.intake import with_notes
 from mows.lab.data.reference import Reference, reference_columns
-from mows.lab.data.table import FIELD, KNOWN, PROBE, MeasurementTable, TableError, broken_rules, rows_text, with_notes
+from mows.lab.data.table import FIELD, KNOWN, PROBE, MeasurementTable, TableError, broken_rules, rows_text
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.schema import Vector
 from mows.records import stamps
@@ -275,7 +276,7 @@ def from_bag(
 
 
 def start_amplitudes_rad(
-    fits: Sequence[Any], sweep_ids: np.ndarray, stop_rad: float = math.nan, probe_ids: np.ndarray | None = None
+    fits: Sequence[Any], sweep_ids: np.ndarray, stop_rad: float, probe_ids: np.ndarray
 ) -> tuple[np.ndarray, list[str]]:
     """Each ring-down's start swing from RingdownFit messages (or fits), and notes of what was
     assumed or left out: the stop less the row's own |rest offset| where its fit determined it
@@ -283,10 +284,10 @@ def start_amplitudes_rad(
     :func:`mows.physics.ringdown_average.swing_from_stop_rad`). The stop is pooled per sweep by a
     median with outliers left out (every ring-down of a sweep starts from the same housing
     stop, and a single fit's θmax is rarely determined), else over all rows, else ``stop_rad``
-    (the probe's). With ``probe_ids`` (one per fit) each probe's stop is its own housing's,
-    pooled over its rows only. NaN where nothing gives a stop, never a swing ≤ 0."""
+    (the probe's, NaN for none). Each probe's stop (``probe_ids``: one per fit) is its own
+    housing's, pooled over its rows only. NaN where nothing gives a stop, never a swing ≤ 0."""
     record = SweepRecord([SweepPoint.from_fit(fit, math.nan, math.nan) for fit in fits])
-    probe_ids = np.zeros(len(fits)) if probe_ids is None else np.asarray(probe_ids, float)
+    probe_ids = np.asarray(probe_ids, float)
     start = np.empty(len(fits))
     notes: list[str] = []
     for probe in np.unique(probe_ids):

@@ -22,14 +22,12 @@ from typing import Any
 
 import numpy as np
 
+from mows.lab.data.intake import NO_BZ, NO_FIELD, NO_GRADIENT
 from mows.lab.data.table import (
     CURVATURE,
     CURVATURE_SPREAD,
     FIELD,
     GRADIENT,
-    NO_BZ,
-    NO_FIELD,
-    NO_GRADIENT,
     MeasurementTable,
     TableError,
 )

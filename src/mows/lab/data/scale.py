@@ -18,6 +18,7 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mows.estimate.probe_set import ProbeEntry
 from mows.lab.data.probe_rows import ProbeSet, probe_parts
 from mows.lab.data.table import FIELD, GRADIENT, PROBE, MeasurementTable, rows_text
 from mows.physics.frequency import field_spring_nm_per_rad, gradient_spring_nm_per_rad
@@ -41,23 +42,20 @@ NOTE_FACTOR = 2.0
 PROBE_GAP = 0.01
 
 
-def table_probes(table: MeasurementTable, default: Probe, named: Mapping[int, Probe]) -> Probe:
-    """The probe of every row: ``default`` for a table without a probe column (and no file named
-    by id), else a ProbeSet; each probe's frequencies checked against its f00, and a table without
-    the column that holds several probes' rows refused (:func:`check_one_probe`)."""
-    if not table.has(PROBE):
-        if named:
-            raise ValueError(
-                f"--probe ID=FILE given for probe {', '.join(map(str, named))}, but the table has no "
-                f"column '{PROBE}' saying which row is which probe"
-            )
-        check_frequencies(table.columns["f_hz"], default, "f_hz")
-        check_one_probe(table, default)
-        return default
+def table_probes(table: MeasurementTable, default: Probe, named: Mapping[int, Probe]) -> ProbeSet:
+    """The probes of ``table`` (:meth:`ProbeSet.for_table`: ``named`` by id, ``default`` for the
+    others); each probe's frequencies checked against its f00, and a table without the column
+    ``probe`` that holds several probes' rows refused (:func:`check_one_probe`)."""
+    if named and not table.has(PROBE):
+        raise ValueError(
+            f"--probe ID=FILE given for probe {', '.join(map(str, named))}, but the table has no "
+            f"column '{PROBE}' saying which row is which probe"
+        )
     probes = ProbeSet.for_table(table, default, named)
-    index = probes.index(table)
-    for k, (i, member) in enumerate(probes.members):
-        check_frequencies(table.columns["f_hz"][index == k], member, f"f_hz of probe {i}")
+    for _, part, entry in probe_parts(table, probes):
+        check_frequencies(part.columns["f_hz"], entry.probe, f"f_hz{_of_probe(probes, entry)}")
+    if not probes.column:
+        check_one_probe(table, default)
     return probes
 
 
@@ -125,10 +123,9 @@ def check_reference(table: MeasurementTable, probe: Probe, trust_scale: bool = F
                 f"a column in m{unit} or µ{unit} given in {unit}? (--trust-reference takes it as given)"
             )
     notes = []
-    for rows, member in probe_parts(table, probe):
-        part = table if rows is None else table.subset(rows)
-        whose = "" if rows is None else f" of probe {_probe_id(part)}"
-        response = reference_response(part, member)
+    for _, part, entry in probe_parts(table, probe):
+        whose = _of_probe(ProbeSet.covering(probe), entry)
+        response = reference_response(part, entry.probe)
         if response is None:
             continue
         slope, spread_hz = response
@@ -148,8 +145,9 @@ def check_reference(table: MeasurementTable, probe: Probe, trust_scale: bool = F
     return dataclasses.replace(table, notes=table.notes + tuple(notes)) if notes else table
 
 
-def _probe_id(table: MeasurementTable) -> int:
-    return int(table.columns[PROBE][0])
+def _of_probe(probes: ProbeSet, entry: ProbeEntry) -> str:
+    """ " of probe <id>" where the table names its rows' probes, for messages."""
+    return f" of probe {entry.probe_id}" if probes.column else ""
 
 
 def unit_factor(slope: float) -> tuple[float, str] | None:

@@ -1,7 +1,7 @@
 """The measurement table: one row per ring-down result, its columns and their validation.
 
-Readers (CSV, bags, sweeps) are in :mod:`mows.lab.data.readers`; reference fields of static
-sources in :mod:`mows.lab.data.reference`.
+Readers (CSV, bags, sweeps) are in :mod:`mows.lab.data.readers`, over :mod:`mows.lab.data.intake`;
+reference fields of static sources in :mod:`mows.lab.data.reference`.
 
 Frame (the lab's contract with the user): the rotation plane is the global x–y plane, θ0 is
 counted from +x towards +y, z completes a right-handed frame. The probe frame of a row is
@@ -26,13 +26,9 @@ Columns (CSV header names, SI units but for the ``*_deg`` columns):
 any other numeric column                optional   kept as a covariate for the diagnostics
 =====================================  =========  ===================================================
 
-Tables the project's tools write (``mows fit --csv``, :func:`tool_table`) carry the column
-``mows_table_format`` = 1 in every row. Their ``amplitude_deg`` is an estimate pooled from single
-fits, which the lab does not use (the start swing is the stop less the deflection:
-docs/model_lab.md, "Start swing"), and a row may hold a fit that did not determine it. Such a
-table is never refused for its values: a row whose ``amplitude_deg`` is NaN or ≤ 0 keeps NaN
-there, a row with a NaN, infinite or impossible value in another column is left out, and the
-notes name those rows. A table without the marker (external) with such values is refused, naming the rows.
+The rows a table refuses are those no bench produces (:func:`broken_rules`); a reader's columns
+are made a table, with notes of what was assumed, by :mod:`mows.lab.data.intake`, which mends
+rather than refuses the project's own tables (those with ``mows_table_format``).
 
 The unmeasured gradient components are completed by Maxwell's equations for a field that is
 static and source-free at the probe: Gxz = Gyz = 0 (unknown, taken as zero: they do not act
@@ -91,20 +87,12 @@ MAX_RELATIVE_STD = 10.0
 NON_NEGATIVE = ("damping_per_s", "start_offset_s")
 # Columns of a quantity with a physical range (mows.physics.ranges), and the quantity.
 RANGED_COLUMNS = {"temperature_k": "temperature_k", "coil_current_a": "coil_current_a", "duration_s": "duration_s"}
-RADIAN_LOOKING_DEG = 2.0 * np.pi  # angles in degrees all within ±2π: most likely radians
 WRITER_COLUMN = "mows_table_format"  # the marker of the project's own tables (module docstring)
-TABLE_FORMAT = 1.0
 DERIVED = ("b_abs_t", "b_along_t", "b_perp_t", "b_normal_t", "g_t_per_m", "g_xy_t_per_m", "g_yy_t_per_m")
 COVARIATE_DERIVED = ("b_abs_t", "b_perp_t", "b_along_t", "g_t_per_m")  # what the diagnostics test
 NOT_COVARIATES = {"theta0_deg", "f_hz", "f_std_hz", "sweep", "ref_bx_t", "ref_by_t", WRITER_COLUMN, PROBE, STEP}
 NOT_COVARIATES |= set(MAGNET + NEIGHBOUR)  # where a probe is and what its neighbours make: the model's inputs
 NOT_COVARIATES |= {*CURVATURE, CURVATURE_SPREAD}  # what the reference's sources allow, not a quantity of the row
-
-
-# What a reader notes of the reference (with_notes); joining one (reference.with_reference) drops them.
-NO_FIELD = "no reference field: the base model predicts f = f00 at every row"
-NO_BZ = "no ref_bz_t: the reference z component is taken as 0 (plane_tilt cannot be tested)"
-NO_GRADIENT = "no reference gradient: taken as 0"
 
 
 class TableError(ValueError):
@@ -311,7 +299,7 @@ def _validate(columns: dict[str, np.ndarray]) -> None:
         raise TableError(f"columns have different lengths: {lengths}")
     if lengths["f_hz"] == 0:
         raise TableError("the table has no rows")
-    own = WRITER_COLUMN in columns  # our own start swings may be NaN (module docstring)
+    own = WRITER_COLUMN in columns  # our own start swings may be NaN (mows.lab.data.intake)
     for name, rule, rows in broken_rules(columns):
         if own and name == "amplitude_deg" and not np.any(columns[name][rows] <= 0):
             continue
@@ -331,39 +319,10 @@ def _validate(columns: dict[str, np.ndarray]) -> None:
             )
 
 
-def tool_table(columns: Mapping[str, np.ndarray], source: str) -> MeasurementTable:
-    """The table of ``columns`` as the project's tools write it: marked with
-    ``mows_table_format`` (module docstring), so that the lab reads its ``amplitude_deg`` as
-    evidence and mends rather than refuses its rows."""
-    n = len(next(iter(columns.values())))
-    mended, notes = _mend_own({**columns, WRITER_COLUMN: np.full(n, TABLE_FORMAT)})
-    return MeasurementTable(mended, source, notes)
-
-
-def _mend_own(columns: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], tuple[str, ...]]:
-    """(columns, notes) of one of our own tables made valid: impossible start swings set to NaN,
-    rows with any other impossible value left out; the notes name the rows. Columns that
-    :func:`_validate` would refuse for their names or lengths are left to it."""
-    if any(name not in columns for name in REQUIRED) or len({len(v) for v in columns.values()}) > 1:
-        return columns, ()
-    notes = []
-    if "amplitude_deg" in columns:
-        notes.append(
-            "amplitude_deg (pooled from single fits) is not used: the start swing is the stop less the deflection"
-        )
-        amplitude = columns["amplitude_deg"]
-        bad = np.flatnonzero(~(amplitude > 0))
-        if bad.size:
-            columns = {**columns, "amplitude_deg": np.where(amplitude > 0, amplitude, np.nan)}
-            notes.append(f"amplitude_deg is NaN or ≤ 0 in {rows_text(bad)} (a fit that did not determine it)")
-    checked = {name: values for name, values in columns.items() if name != "amplitude_deg"}
-    broken = {name: rows for name, _, rows in broken_rules(checked)}
-    if broken:
-        rows = np.unique(np.concatenate(list(broken.values())))
-        keep = ~np.isin(np.arange(len(columns["f_hz"])), rows)
-        columns = {name: values[keep] for name, values in columns.items()}
-        notes.append(f"left out {rows_text(rows)}: NaN, infinite or impossible values in {', '.join(sorted(broken))}")
-    return columns, tuple(notes)
+def rows_outside(values: np.ndarray, interval: tuple[float, float]) -> np.ndarray:
+    """The rows whose |value| lies outside ``interval`` (low, high)."""
+    low, high = interval
+    return np.flatnonzero((np.abs(values) < low) | (np.abs(values) > high))
 
 
 def broken_rules(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, str, np.ndarray]]:
@@ -397,8 +356,7 @@ def broken_rules(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, str, 
     for name, quantity in RANGED_COLUMNS.items():
         if name in columns:
             bounds = RANGES[quantity]
-            low, high = bounds.possible
-            bad = np.flatnonzero((np.abs(columns[name]) < low) | (np.abs(columns[name]) > high))
+            bad = rows_outside(columns[name], bounds.possible)
             if bad.size:
                 yield (
                     name,
@@ -437,52 +395,6 @@ def check_design(table: MeasurementTable) -> None:
             f"{table.source}: every row is at θ0 = {c['theta0_deg'][0] % 360.0:g}° in one field: nothing varies "
             "that a model could be tested on; measure at several orientations (a sweep) or in several fields"
         )
-
-
-def unusual_values(columns: Mapping[str, np.ndarray]) -> list[str]:
-    """Notes of values that are possible but seldom meant (:mod:`mows.physics.ranges`): a
-    temperature in °C, a duration in ms, angles in radians, times before the start."""
-    notes = []
-    for name, quantity in RANGED_COLUMNS.items():
-        if name in columns:
-            bounds = RANGES[quantity]
-            low, high = bounds.usual
-            odd = np.flatnonzero((np.abs(columns[name]) < low) | (np.abs(columns[name]) > high))
-            if odd.size:
-                notes.append(
-                    f"{name} is unusual in {rows_text(odd)} (usually {bounds.text(bounds.usual)}; {bounds.hint}): "
-                    "used as given"
-                )
-    for name in ("theta0_deg", "amplitude_deg"):
-        values = columns.get(name, np.zeros(0))
-        values = values[np.isfinite(values)]
-        if len(values) > 2 and np.all(np.abs(values) <= RADIAN_LOOKING_DEG):
-            notes.append(f"{name} lies within ±{RADIAN_LOOKING_DEG:.2f} in every row: radians given as degrees?")
-    if "t_s" in columns and np.any(columns["t_s"] < 0):
-        notes.append(f"t_s is negative in {rows_text(np.flatnonzero(columns['t_s'] < 0))}: times before the start?")
-    return notes
-
-
-def with_notes(columns: Mapping[str, np.ndarray], source: str, notes: list[str]) -> MeasurementTable:
-    if WRITER_COLUMN in columns:
-        columns, mended = _mend_own({name: np.asarray(values, float) for name, values in columns.items()})
-        notes = list(notes) + list(mended)
-    theta = columns.get("theta0_deg", np.zeros(0))
-    wrapped = np.flatnonzero((theta < 0.0) | (theta >= 360.0))
-    if wrapped.size:
-        first = theta[wrapped[0]]
-        notes.append(
-            f"theta0_deg outside [0, 360) in {rows_text(wrapped)}: read as the same orientation modulo "
-            f"360 (e.g. {first:g}° is {first % 360.0:g}°)"
-        )
-    notes += unusual_values(columns)
-    if not any(name in columns for name in FIELD):
-        notes.append(NO_FIELD)
-    elif "ref_bz_t" not in columns and "ref_bx_t" in columns:
-        notes.append(NO_BZ)
-    if not any(name in columns for name in GRADIENT):
-        notes.append(NO_GRADIENT)
-    return MeasurementTable(columns, source, tuple(notes))
 
 
 def stratified_rows(sweep_ids: np.ndarray, rows: int, seed: int = 0) -> np.ndarray:

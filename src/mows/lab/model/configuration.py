@@ -275,7 +275,7 @@ def amplitude_evidence_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
 
     An external table's ``amplitude_deg`` is the user's statement of how the ring-downs were
     excited (a sweep at half the stop, say): used as given. Our own tables' column is an
-    estimate pooled from single fits (:func:`mows.lab.data.table.tool_table`): where it is right
+    estimate pooled from single fits (:func:`mows.lab.data.intake.tool_table`): where it is right
     it equals the stop less the deflection, and where it is not (strong fields) 0.4° of it moves
     a 3.4 mT row by 3 mHz, ten times its σ; so the stop decides every row of our tables, and
     the column stays a covariate. Without the column the stop decides every row."""

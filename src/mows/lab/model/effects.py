@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mows.lab.data.probe_rows import probe_parts
 from mows.lab.data.table import MissingColumnError
 from mows.lab.model.configuration import Configuration
 from mows.physics.probe import Probe
@@ -144,8 +145,9 @@ def untestable_reason(effect_: Effect, table: MeasurementTable, probe: Probe) ->
     if missing:
         return f"needs column{'s' if len(missing) > 1 else ''} {', '.join(missing)}"
     row = table.subset(np.arange(1))  # effects read a row's own columns: one row says it
+    ((_, _, entry),) = probe_parts(row, probe)  # with its own probe's constants
     try:
-        effect_.apply(Configuration.base(row, probe), row, probe, *effect_.off_values)
+        effect_.apply(Configuration.base(row, entry.probe), row, entry.probe, *effect_.off_values)
     except MissingColumnError as error:
         return f"needs column {error.column}"
     return None

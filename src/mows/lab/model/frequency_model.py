@@ -29,6 +29,7 @@ an incomplete model should not claim the precision of a complete one).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import weakref
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
@@ -37,7 +38,7 @@ import numpy as np
 import scipy.optimize
 
 from mows.lab.data.probe_rows import ProbeSet, probe_parts
-from mows.lab.data.table import PROBE, MeasurementTable
+from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import Configuration, default_window_s, distinct_rows_of
 from mows.lab.model.effects import Effect, Parameter, untestable_reason
 from mows.lab.model.factors import base_start_swing_rad, frequency_factor, ringdown_nodes
@@ -46,15 +47,17 @@ from mows.physics.probe import Probe
 
 
 class FrequencyModel:
-    """The published frequency model plus ``effects`` for ``probe`` (a :class:`mows.physics.probe.Probe`).
+    """The published frequency model plus ``effects`` for ``probe``: a table's
+    :class:`~mows.lab.data.probe_rows.ProbeSet`, held as given, or one
+    :class:`~mows.physics.probe.Probe`, held as its set of one (:meth:`ProbeSet.covering`).
 
     ``model + effect`` and ``effect + model`` give new models (``FrequencyModel() + a + b``
-    one without a probe, to add to others); parameters are named
-    ``f00_hz`` and ``<effect>.<parameter>``.
+    one without a probe, to add to others); parameters are named by the set's f00s
+    (``f00_hz``, or ``probe_<id>.f00_hz``) and ``<effect>.<parameter>``.
     """
 
     def __init__(self, probe: Probe | None = None, effects: Sequence[Effect] = ()) -> None:
-        self.probe = probe
+        self.probe = None if probe is None else ProbeSet.covering(probe)
         names = [e.name for e in effects]
         repeated = sorted({n for n in names if names.count(n) > 1})
         if repeated:
@@ -110,10 +113,8 @@ class FrequencyModel:
 
     @property
     def f00_names(self) -> list[str]:
-        """The nuisance parameters: ``f00_hz``, or one ``probe_<id>.f00_hz`` per probe of a :class:`ProbeSet`."""
-        if isinstance(self.probe, ProbeSet):
-            return [f"probe_{i}.f00_hz" for i in self.probe.ids]
-        return ["f00_hz"]
+        """The nuisance parameters: one f00 per probe (:attr:`ProbeSet.f00_names`)."""
+        return self._require_probe().f00_names
 
     @property
     def f00_count(self) -> int:
@@ -125,15 +126,13 @@ class FrequencyModel:
 
     def probe_index(self, table: MeasurementTable) -> np.ndarray:
         """Each row's f00 (its position in :attr:`f00_names`), (n,)."""
-        if isinstance(self.probe, ProbeSet):
-            return self.probe.index(table)
-        return np.zeros(len(table), int)
+        return self._require_probe().index(table)
 
     def __repr__(self) -> str:
         return f"FrequencyModel({self.name})"
 
     # --- evaluation -------------------------------------------------------------------------
-    def _require_probe(self) -> Probe:
+    def _require_probe(self) -> ProbeSet:
         if self.probe is None:
             raise ValueError("this model has no probe: build it as FrequencyModel(probe) + effects")
         return self.probe
@@ -150,9 +149,10 @@ class FrequencyModel:
         row = table.subset(np.arange(1))
         recorder = _RecordingColumns(row.columns)
         object.__setattr__(row, "columns", recorder)
-        self._configuration(row, self.off_values, self._require_probe())
-        if isinstance(self.probe, ProbeSet):  # each probe's rows are evaluated with its own constants
-            recorder.read.add(PROBE)
+        # Reading the row's probe (each probe's rows are evaluated with its own constants) records
+        # its column where the set is named by it.
+        ((_, part, entry),) = probe_parts(row, self._require_probe())
+        self._configuration(part, self.off_values, entry.probe)
         return frozenset(name for name in recorder.read if table.has(name) and name not in MEASURED)
 
     def group_factors(
@@ -161,13 +161,10 @@ class FrequencyModel:
         """(h, c) of f = f00·h + c of each row of a :meth:`groups` table at effect parameter
         values ``values`` (fit order)."""
         h, c = np.empty(len(distinct)), np.empty(len(distinct))
-        for rows, probe in probe_parts(distinct, self._require_probe()):
-            part = distinct if rows is None else distinct.subset(rows)
-            config = self._configuration(part, values, probe)
-            found = frequency_factor(config, probe, lambda part, start_rad: cached_nodes(distinct, part, start_rad))
-            if rows is None:
-                return found
-            h[rows], c[rows] = found
+        for rows, part, entry in probe_parts(distinct, self._require_probe()):
+            config = self._configuration(part, values, entry.probe)
+            nodes = functools.partial(cached_nodes, distinct)
+            h[rows], c[rows] = frequency_factor(config, entry.probe, nodes)
         return h, c
 
     def _configuration(
@@ -242,10 +239,8 @@ def table_start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
     configuration group of the published model."""
     distinct, inverse = FrequencyModel(probe).groups(table)
     found = np.empty(len(distinct))
-    for rows, member in probe_parts(distinct, probe):
-        if rows is None:
-            return base_start_swing_rad(distinct, probe)[inverse]
-        found[rows] = base_start_swing_rad(distinct.subset(rows), member)
+    for rows, part, entry in probe_parts(distinct, probe):
+        found[rows] = base_start_swing_rad(part, entry.probe)
     return found[inverse]
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import pathlib
+import tempfile
 from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
@@ -40,6 +41,7 @@ from mows.lab.diagnosis.discovery import DiscoveredTerm, Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group
 from mows.lab.diagnosis.verdict import Diagnosis, Verdict, diagnose
 from mows.lab.model.catalog import catalog, resolve
+from mows.lab.model.effects import AT_PHYSICS
 from mows.lab.model.factors import unevaluable_rows
 from mows.lab.model.frequency_model import FitResult, FrequencyModel
 from mows.lab.model.least_squares import FittedParameter, parameters_dict
@@ -236,9 +238,8 @@ def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:
     the notes (:func:`mows.lab.model.factors.unevaluable_rows`); TableError when no row is left."""
     distinct, inverse = FrequencyModel(probe).groups(table)
     found = {}  # a reason holds for every row of its configuration
-    for rows, member in probe_parts(distinct, probe):
-        reasons = unevaluable_rows(distinct if rows is None else distinct.subset(rows), member)
-        found.update(reasons if rows is None else {int(rows[row]): reason for row, reason in reasons.items()})
+    for rows, part, entry in probe_parts(distinct, probe):
+        found.update({int(rows[row]): reason for row, reason in unevaluable_rows(part, entry.probe).items()})
     problems = {int(row): found[int(inverse[row])] for row in np.flatnonzero(np.isin(inverse, list(found)))}
     if len(problems) == len(table):
         raise TableError(f"the model cannot evaluate any row of {table.source}: {next(iter(problems.values()))[0]}")
@@ -326,26 +327,74 @@ def analyse_discovering(
     rounds: int = DISCOVERY_ROUNDS,
 ) -> tuple[LabReport, list[DiscoveredTerm]]:
     """:func:`analyse` with ``auto``, then, while the search beyond the catalog finds a term: the
-    strongest term's plugin saved by ``save`` (which returns its path), added after the effects
-    the model already holds, and the table analysed again, so that the report's history shows the
-    error falling through it. Stops after ``rounds`` terms, at a term already added, or when a
-    term added does not lower χ²/dof (its report is then not kept). Returns the last report and
-    the terms added, in order."""
+    strongest term's plugin added after the effects the model already holds, and the table
+    analysed again, so that the report's history shows the error falling through it; the plugin
+    kept is saved by ``save`` (which returns its path). Stops after ``rounds`` terms, at a term
+    already added, or when a term added does not lower χ²/dof (its report is then not kept).
+    Returns the last report and the terms added, in order.
+
+    A term that leaves a free catalog effect more than :data:`INCONSISTENT_SIGMAS` from its
+    physical value was read beside a parameter that absorbs part of it (a free static deflection
+    takes an induced moment's harmonic 2, and a field along the lever fits what is left): the
+    search runs again with that effect held at physics, and its term replaces the first when its
+    model is consistent with physics and lowers χ²/dof."""
     plugins, added = list(plugins), list[DiscoveredTerm]()
     report = analyse(table, probe, effects, auto=True, plugins=plugins, cross_validate=cross_validate)
-    for _ in range(rounds):
-        found = report.discovery
-        if found is None or not found.terms or found.terms[0].effect_name in {t.effect_name for t in added}:
-            break
-        term = found.terms[0]
-        trial_plugins = [*plugins, save(term)]
-        chosen = [*report.effects, term.effect_name]
-        trial = analyse(table, probe, chosen, auto=True, plugins=trial_plugins, cross_validate=cross_validate)
-        if not trial.chi2_dof < report.chi2_dof:
-            break
-        report, plugins = trial, trial_plugins
-        added.append(term)
+    with tempfile.TemporaryDirectory() as scratch:
+        trying = _Trying(table, probe, pathlib.Path(scratch), cross_validate)
+        for _ in range(rounds):
+            found = report.discovery
+            if found is None or not found.terms or found.terms[0].effect_name in {t.effect_name for t in added}:
+                break
+            term, trial = found.terms[0], trying.added(report.effects, found.terms[0], plugins)
+            if held := _pushed_from_physics(trial):
+                term, trial = trying.beside_physics(report, held, plugins, (term, trial))
+            if not trial.chi2_dof < report.chi2_dof:
+                break
+            report, plugins = trial, [*plugins, save(term)]
+            added.append(term)
     return report, added
+
+
+def _pushed_from_physics(report: LabReport) -> list[str]:
+    """The free effects of ``report`` whose free fit lies beyond :data:`INCONSISTENT_SIGMAS`."""
+    return [c.effect for c in report.physics_checks if not c.held and c.deviation_sigma > INCONSISTENT_SIGMAS]
+
+
+@dataclasses.dataclass
+class _Trying:
+    """Trials of :func:`analyse_discovering`: a term's plugin written to ``scratch`` and added."""
+
+    table: MeasurementTable
+    probe: Probe
+    scratch: pathlib.Path
+    cross_validate: bool
+
+    def added(self, labels: Sequence[str], term: DiscoveredTerm, plugins: Sequence[str | pathlib.Path]) -> LabReport:
+        path = self.scratch / f"{term.effect_name}.py"
+        path.write_text(term.plugin, encoding="utf-8")
+        chosen = [*labels, term.effect_name]
+        return analyse(
+            self.table, self.probe, chosen, auto=True, plugins=[*plugins, path], cross_validate=self.cross_validate
+        )
+
+    def beside_physics(
+        self,
+        report: LabReport,
+        held: Sequence[str],
+        plugins: Sequence[str | pathlib.Path],
+        first: tuple[DiscoveredTerm, LabReport],
+    ) -> tuple[DiscoveredTerm, LabReport]:
+        """``first`` (term, trial), or the term found beside ``report``'s effects with ``held``
+        at physics and its trial, when that trial is consistent with physics and lowers χ²/dof."""
+        labels = [f"{label}{AT_PHYSICS}" if label in held else label for label in report.effects]
+        again = analyse(self.table, self.probe, labels, plugins=plugins, rank=False, cross_validate=False).discovery
+        if again is None or not again.terms or again.terms[0].effect_name == first[0].effect_name:
+            return first
+        trial = self.added(labels, again.terms[0], plugins)
+        if _pushed_from_physics(trial) or not trial.chi2_dof < report.chi2_dof:
+            return first
+        return again.terms[0], trial
 
 
 def analyse_sweep(sweep: SweepMap, reference: Reference, probe: Probe, auto: bool = False) -> LabReport:

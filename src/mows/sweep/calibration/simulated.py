@@ -16,7 +16,8 @@ import numpy as np
 
 from mows.device.cycle.phases import CycleSettings, Phase, PhaseEvent
 from mows.device.stream.device_time import DeviceTimeLoop, scheduled_device
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, ProbeLine, fit_ringdown
+from mows.estimate.probe_set import ProbeEntry, window_probes
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, fit_ringdown
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import Probe
@@ -123,6 +124,10 @@ class _NominalFits:
                 event.repeat_index,
                 event.theta0_rad,
                 event.frequency_hz,
+                event.tuning,
+                event.probe_ids,
+                event.probe_frequency_hz,
+                event.probe_theta0_rad,
             )
             self._fits += [self._fit(segment) for segment in self.assembler.announce(window)]
 
@@ -132,10 +137,13 @@ class _NominalFits:
         return fits
 
     def _fit(self, segment):
-        window = segment.window
-        options = FitOptions.lever_aware(self.pair, self.nominal, window.theta0_rad)
-        line = ProbeLine(0, window.theta0_rad, window.excitation_frequency_hz, None, self.nominal.damping_per_s)
-        (fit,) = fit_segment(segment, [line], COIL_OFF_SKIP_S, options)
+        own = ProbeEntry(0, self.nominal, self.nominal.f00_hz)
+        lines = [
+            p.entry.line(p.theta0_rad, self.pair, "difference", p.tone_hz)
+            for p in window_probes((own,), segment.window)
+            if p.entry
+        ]
+        (fit,) = fit_segment(segment, lines, COIL_OFF_SKIP_S, FitOptions(theta_stop_rad=self.nominal.theta_stop_rad))
         return fit
 
 

@@ -102,16 +102,14 @@ def model_covariates(table: MeasurementTable, probe: Probe) -> dict[str, np.ndar
     full and the probe's stop, as :func:`mows.lab.model.frequency_model.table_start_swing_rad` takes
     them; ``table``'s own rows, each probe of a :class:`ProbeSet` with its constants."""
     found = {name: np.empty(len(table)) for name in MODEL_FACTORS}
-    for rows, member in probe_parts(table, probe):
-        part = table if rows is None else table.subset(rows)
-        config = Configuration.base(part, member)
+    for rows, part, entry in probe_parts(table, probe):
+        config = Configuration.base(part, entry.probe)
         _, field, gradient, _ = config.probe_frame()
         potential = ArcPotential.from_local_field(
-            member, field, gradient, None, None, spring_nm_per_rad=config.spring_nm_per_rad
+            entry.probe, field, gradient, None, None, spring_nm_per_rad=config.spring_nm_per_rad
         )
-        index = slice(None) if rows is None else rows
-        found["rest_angle_rad"][index] = potential.rest_angle_rad()
-        found["start_swing_rad"][index] = config.start_swing_rad(potential)
+        found["rest_angle_rad"][rows] = potential.rest_angle_rad()
+        found["start_swing_rad"][rows] = config.start_swing_rad(potential)
     return found
 
 

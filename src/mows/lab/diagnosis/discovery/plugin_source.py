@@ -130,10 +130,10 @@ class Plugin:
 def _probe_source(probe: Probe) -> list[str]:
     """Lines that build ``PROBE`` (the analysis's probe constants) for a plugin reading the model's own θs or swing."""
     lines = ["from mows.lab.diagnosis.discovery import model_covariates", "from mows.physics.probe import Probe"]
-    if isinstance(probe, ProbeSet):
-        members = ", ".join(f"{i}: Probe.from_dict({member.to_dict()!r})" for i, member in probe.members)
-        return lines + ["from mows.lab.data.probe_rows import ProbeSet", "", f"PROBE = ProbeSet.of({{{members}}})"]
-    return lines + ["", f"PROBE = Probe.from_dict({probe.to_dict()!r})"]
+    probes = ProbeSet.covering(probe)
+    members = ", ".join(f"{e.probe_id}: Probe.from_dict({e.probe.to_dict()!r})" for e in probes.members)
+    built = f"PROBE = ProbeSet.of({{{members}}}, column={probes.column})"
+    return lines + ["from mows.lab.data.probe_rows import ProbeSet", "", built]
 
 
 def load_source(source: str, name: str) -> Effect:

@@ -158,7 +158,10 @@ def _term(
     reading = readings.reading(term.channel, term.factors)
     plugin = Plugin(term.channel, term.factors, search.means, bound_for(strength, std), search.probe, reading)
     parameter, why = None, ""
-    if not writable(term.channel):
+    if term.channel is FREQUENCY:
+        why = "no channel of the potential makes this term on these rows"
+        plugin = dataclasses.replace(plugin, note=f" (Last resort: {why}.)")
+    elif not writable(term.channel):
         why = f"the plugin interface has no {term.channel.output} output"
         plugin = _last_resort(search, j, reading, why)
     if plugins:

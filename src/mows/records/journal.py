@@ -25,8 +25,8 @@ import json
 import os
 import pathlib
 import re
+import secrets
 import shutil
-import tempfile
 import warnings
 from collections.abc import Iterable, Sequence
 
@@ -54,10 +54,15 @@ def digest(path: pathlib.Path) -> str:
     return sha.hexdigest()
 
 
+def journal_path(targets: Sequence[pathlib.Path]) -> pathlib.Path:
+    """Where the journal of a commit of ``targets`` is written: beside the first."""
+    return targets[0].resolve().parent / f"{own_prefix(targets[0])}commit"
+
+
 def write_journal(
     temporaries: Sequence[pathlib.Path], targets: Sequence[pathlib.Path], asides: Sequence[pathlib.Path | None]
 ) -> pathlib.Path:
-    """The commit's journal, on disk before the first rename, beside the first output."""
+    """The commit's journal, on disk before the first rename, at :func:`journal_path`."""
     entries = [
         {
             "temporary": t.name,
@@ -69,7 +74,7 @@ def write_journal(
         }
         for t, o, a in zip(temporaries, targets, asides)
     ]
-    journal = targets[0].resolve().parent / f"{own_prefix(targets[0])}commit"
+    journal = journal_path(targets)
     with open(journal, "w", encoding="utf-8") as handle:
         json.dump({"format": JOURNAL_FORMAT, "entries": entries}, handle)
         handle.flush()
@@ -77,16 +82,30 @@ def write_journal(
     return journal
 
 
-def set_aside(path: pathlib.Path) -> pathlib.Path | None:
-    """A copy of the file at ``path`` beside it (None where there is none yet). A copy, not a
-    rename, so the output never goes missing; not a hard link, which an immutable file refuses.
-    OSError where it cannot be made."""
+def create_beside(path: pathlib.Path, suffix: str, made: list[pathlib.Path]) -> pathlib.Path:
+    """A new empty file beside ``path`` named after this process (``.NAME.PID.XXXXXXXX`` and
+    ``suffix``). Its name joins ``made`` before the file exists: an interrupt at any moment
+    leaves it named there, for the clean-up."""
+    while True:
+        name = path.resolve().parent / f"{own_prefix(path)}{secrets.token_hex(4)}{suffix}"
+        made.append(name)
+        try:
+            os.close(os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        except FileExistsError:  # another's file (a name drawn twice): not ours to remove
+            made.pop()
+            continue
+        return name
+
+
+def set_aside(path: pathlib.Path, made: list[pathlib.Path]) -> pathlib.Path | None:
+    """A copy of the file at ``path`` beside it (None where there is none yet), named in ``made``
+    before it exists. A copy, not a rename, so the output never goes missing; not a hard link,
+    which an immutable file refuses. OSError where it cannot be made."""
     if not os.path.lexists(path):
         return None
-    descriptor, name = tempfile.mkstemp(prefix=own_prefix(path), suffix=".replaced", dir=path.resolve().parent)
-    os.close(descriptor)
-    shutil.copy2(path, name)
-    return pathlib.Path(name)
+    copy = create_beside(path, ".replaced", made)
+    shutil.copy2(path, copy)
+    return copy
 
 
 def put_back(path: pathlib.Path, aside: pathlib.Path | None) -> None:
@@ -153,11 +172,16 @@ def recover(directory, inputs: Iterable = ()) -> list[pathlib.Path]:
     return restored
 
 
+def intent_path(output: pathlib.Path, temporary: pathlib.Path) -> pathlib.Path:
+    """Where the note that this process made ``temporary`` (for ``output``) is written."""
+    return temporary.parent / f"{own_prefix(output)}writing"
+
+
 def write_intent(output: pathlib.Path, temporary: pathlib.Path) -> pathlib.Path:
-    """A note beside ``temporary`` (``.NAME.PID.writing``) that this process made it, by name and
+    """A note beside ``temporary`` (:func:`intent_path`) that this process made it, by name and
     inode: what lets the next write remove it if this process is killed, and nothing else."""
     info = temporary.stat()
-    intent = temporary.parent / f"{own_prefix(output)}writing"
+    intent = intent_path(output, temporary)
     document = {"format": JOURNAL_FORMAT, "temporary": temporary.name, "inode": info.st_ino, "device": info.st_dev}
     intent.write_text(json.dumps(document), encoding="utf-8")
     return intent

@@ -30,6 +30,7 @@ from mows.workspace.arm import NS_PER_S, Reach, SimulatedArm, StampedPose
 from mows.workspace.poses import PoseError
 from mows.workspace.simulated import RINGDOWN_STD_HZ, SweepPose, ball_points, sweep_shifts_hz
 from mows_driver.recording import open_recorder
+from mows_mapper.parameters import PARAMETERS
 from mows_ros.qos import EXCITATION_QOS, MAP_QOS, RESULT_QOS, maps_qos
 from node_processes import serve_cycles
 
@@ -79,8 +80,9 @@ class ArmNode:
 class ArmDriver:
     """Answers measurement cycles with ring-down fits of the probe where the arm truly holds it."""
 
-    def __init__(self, ros, arm: SimulatedArm, rng):
+    def __init__(self, ros, arm: SimulatedArm, rng, turned_by_arm: bool):
         self.ros, self.arm, self.rng, self.cycle = ros, arm, rng, 0
+        self.turned_by_arm = turned_by_arm  # no stage: the probe sits at θ = 0 in the arm's tool frame
         self.source = navigation_system(1.5e-3, seed=2)  # about the workspace's centre
         self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
         self.excitation = ros.node.create_publisher(ExcitationState, "mows/excitation", EXCITATION_QOS)
@@ -90,6 +92,7 @@ class ArmDriver:
         truth = self.arm.true_pose(now_s(self.ros))  # refuses a probe between poses
         pose = SweepPose(truth.position_m - CENTRE_M, truth.plane)
         self.cycle += 1
+        theta0 = 0.0 if self.turned_by_arm else request.theta0_rad
         for repeat in range(request.repeats):
             ringdown = ExcitationState(
                 phase=int(Phase.RINGDOWN), phase_name="RINGDOWN", cycle_id=self.cycle, repeat_index=repeat
@@ -97,7 +100,7 @@ class ArmDriver:
             ringdown.repeats, ringdown.theta0_rad = request.repeats, request.theta0_rad
             stamps.set_nanoseconds(ringdown.header.stamp, self.ros.node.get_clock().now().nanoseconds)
             self.excitation.publish(ringdown)
-            shift = sweep_shifts_hz(self.source, pose, PAPER_PROBE, np.array([request.theta0_rad]))[0]
+            shift = sweep_shifts_hz(self.source, pose, PAPER_PROBE, np.array([theta0]))[0]
             shift += RINGDOWN_STD_HZ * self.rng.standard_normal()
             msg = RingdownFit(
                 cycle_id=self.cycle,
@@ -136,14 +139,14 @@ def record(ros, path):
     return recorder
 
 
-@pytest.fixture
-def mapper(action_server):
+def start_mapper(action_server, turn_with: str):
     return action_server(
         "mapper",
         WorkspaceMap,
         "mapper/workspace_map",
         f"arm_position_std_m:={ACCURACY.position_std_m}",
         f"arm_angle_std_deg:={math.degrees(ACCURACY.angle_std_rad)}",
+        f"turn_with:={turn_with}",
     )
 
 
@@ -165,11 +168,15 @@ def field_at(ros, point_m, moment_am2=(0.0, 0.0, 0.0)) -> FieldAt.Response:
 
 
 @pytest.mark.slow
-def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, mapper, tmp_path, capsys):
-    client, _ = mapper
+@pytest.mark.parametrize("turn_with", ["stage", "arm"])
+def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, action_server, turn_with, tmp_path, capsys):
+    """With ``turn_with`` arm there is no stage: the arm's last joint turns the probe to each
+    orientation (on move_cp, the tool frame turned about its z), and the driver's probe sits at
+    θ = 0 in the tool frame."""
+    client, _ = start_mapper(action_server, turn_with)
     rng = np.random.default_rng(4)
     arm = ArmNode(ros, rng)
-    driver = ArmDriver(ros, arm.arm, rng)
+    driver = ArmDriver(ros, arm.arm, np.random.default_rng(5), turn_with == "arm")
     recorder = record(ros, tmp_path / "session")
     done, feedback = run_map(
         ros,
@@ -230,3 +237,15 @@ def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, mapper,
     # A workspace the arm cannot reach is refused with the reason, and the arm not moved.
     done, _ = run_map(ros, client, sweeps=3, centre_m=[0.9, 0.0, 0.0], radius_m=RADIUS_M)
     assert done.status == GoalStatus.STATUS_ABORTED and "no pose left within the arm's reach" in done.result.message
+
+
+def test_the_docs_command_that_connects_an_arm_sets_the_mappers_parameters():
+    """`mows-graph --ros-args -p mapper:NAME:=VALUE ...` as docs/workspace_maps.md prints it: every
+    NAME is a mapper parameter and every VALUE within its limits."""
+    command = re.search(r"    (mows-graph --ros-args .*?)\n\n", DOC.read_text(), re.S)[1]
+    given = dict(re.findall(r"-p mapper:(\w+):=(\S+)", command))
+    table = {spec.name: spec for spec in PARAMETERS}
+    assert given and set(given) <= set(table), set(given) - set(table)
+    for name, text in given.items():
+        value = type(table[name].default)(text)
+        assert table[name].request_problem(value, name) is None

@@ -49,10 +49,11 @@ class ProbeSet(Probe):
     the set holds one probe (id 0), every row is its, and its f00 is the parameter ``f00_hz``;
     with it, probe i's f00 is ``probe_<i>.f00_hz``.
 
-    As a :class:`~mows.physics.probe.Probe` it carries its first member's constants. Only the
-    diagnosis's explanatory texts use them. The frequency model evaluates each probe's rows with
-    that probe's own constants and fits one f00 per probe
-    (:mod:`mows.lab.model.frequency_model`).
+    As a :class:`~mows.physics.probe.Probe` it carries its first member's constants: the
+    diagnosis takes them where it needs one probe's for the whole table (its explanatory texts,
+    the physical range of an effect parameter all the probes share). The frequency model
+    evaluates each probe's rows with that probe's own constants and fits one f00 per probe
+    (:mod:`mows.lab.model.frequency_model`), and an effect sees each row's own probe.
     """
 
     members: tuple[ProbeEntry, ...] = ()

@@ -122,9 +122,9 @@ def check_reference(table: MeasurementTable, probe: Probe, trust_scale: bool = F
                 f"itself move the frequency more than a factor {FREQUENCY_FACTOR:g} from f00 (Eq. 6): "
                 f"a column in m{unit} or µ{unit} given in {unit}? (--trust-reference takes it as given)"
             )
-    notes = []
-    for _, part, entry in probe_parts(table, probe):
-        whose = _of_probe(ProbeSet.covering(probe), entry)
+    notes, probes = [], ProbeSet.covering(probe)
+    for _, part, entry in probe_parts(table, probes):
+        whose = _of_probe(probes, entry)
         response = reference_response(part, entry.probe)
         if response is None:
             continue

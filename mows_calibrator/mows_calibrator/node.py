@@ -8,7 +8,10 @@ goal), their fits (``/mows/ringdown``); docs/nodes.md has the goal, its endings,
 and ``probe_id``. A goal the node cannot run (inactive, a plan it refuses, a driver without a
 supply, found by setting it to zero first, a plan outside the range the driver's answer states)
 is accepted and aborted at once with the reason, before any other current is set. From the
-sweeps kept, :class:`mows.sweep.calibration.run.ProbeCalibrator` writes the probe file.
+sweeps kept, :class:`mows.sweep.calibration.run.ProbeCalibrator` writes the probe file. A run
+whose client has left the graph (``mows_ros.requesters``) is cancelled, its cycle with it, and
+ends aborted (it was never asked to cancel); every cancel and abort is logged and counted on
+/diagnostics.
 
 The node translates only; it runs on one thread and awaits the driver's answers as coroutines.
 """
@@ -30,15 +33,18 @@ from mows_calibrator.parameters import PARAMETERS, bench_of
 from mows_ros.awaitables import call
 from mows_ros.cycles import DriverCycles
 from mows_ros.diagnostics import Health
-from mows_ros.goals import action_servers
+from mows_ros.goals import action_servers, end_goal
 from mows_ros.node import MowsNode
 from mows_ros.operator import OperatorTurns
 from mows_ros.params import parameter_values
 from mows_ros.process import run_node
+from mows_ros.requesters import RequesterWatch, send_goal_services
+from mows_ros.wall import steady_timer
 
 NODE_NAME = "calibrator"
 ACTIONS = ("~/calibrate_probe", "mows/calibrator/calibrate_probe")  # the node's own, the previous release's
 SUPPLY_SERVICE = "driver/set_field_current"  # the driver's, in this node's namespace
+WATCH_S = 0.1  # how often a running calibration looks for its client in the graph
 
 
 class CalibratorNode(MowsNode):
@@ -50,6 +56,8 @@ class CalibratorNode(MowsNode):
         self._supply = self.create_client(SetFieldCurrent, SUPPLY_SERVICE, callback_group=group)
         self._servers = action_servers(self, CalibrateProbe, ACTIONS, self._execute, self._cancel, group)
         self._operator = OperatorTurns(self, "~/confirm_orientation", lambda: self._calibrator.turn_awaited)
+        self._client_gone = ""  # why the running calibration is cancelled by the node itself
+        self.cancels, self.last_ending = 0, ""  # for /diagnostics
 
     def _param(self, name):
         return self.get_parameter(name).value
@@ -86,6 +94,13 @@ class CalibratorNode(MowsNode):
         self._driver.cancel()
         return CancelResponse.ACCEPT
 
+    def _watch(self, watch: RequesterWatch) -> None:
+        """Cancel the calibration once every client that may wait for it has left the graph."""
+        if not self._client_gone and watch.gone():
+            self._client_gone = f"every node that asked for it through {watch.service_name} has left"
+            self.get_logger().warning(f"calibration cancelled, its cycle with it: {self._client_gone}")
+            self._driver.cancel()
+
     # --- the calibration --------------------------------------------------------------------
     async def _execute(self, goal_handle):
         if (refusal := await self._refusal(goal_handle.request)) is not None:
@@ -94,16 +109,24 @@ class CalibratorNode(MowsNode):
             goal_handle.abort()
             return CalibrateProbe.Result(success=False, message=message, supply_at_zero=False)
         run = self._calibrator.run
+        self._client_gone = ""
+        watch = RequesterWatch(self, send_goal_services(self, ACTIONS))
+        timer = steady_timer(self, WATCH_S, lambda: self._watch(watch), callback_group=self._driver.group)
+
+        def cancelled() -> bool:
+            return goal_handle.is_cancel_requested or bool(self._client_gone)
+
         try:
             step = run.start()
             while step.outcome is None:
                 for feedback in step.feedback:
                     goal_handle.publish_feedback(feedback_msg(feedback))
-                if goal_handle.is_cancel_requested:
-                    step = run.cancel("cancelled by the client") or step
-                step = await self._act(run, step, lambda: goal_handle.is_cancel_requested)
+                if cancelled():
+                    step = run.cancel(self._client_gone or "cancelled by the client") or step
+                step = await self._act(run, step, cancelled)
             return self._finish(goal_handle, step.outcome)
         finally:
+            self.destroy_timer(timer)
             self._calibrator.release()
 
     async def _act(self, run: CalibrationRun, step, cancelled):
@@ -114,7 +137,7 @@ class CalibratorNode(MowsNode):
                 return step if cancelled() else run.on_turned()  # a cancel is taken at the loop's top
             return run.cancel(f"no confirmation of θ0 = {math.degrees(action.theta0_rad):g}° within {timeout_s:g} s")
         if isinstance(action, CycleRequest):
-            answered = run.on_cycle(await self._driver.run(action, self._param("cycle_timeout_s")))
+            answered = run.on_cycle(await self._driver.run(action, self._param("cycle_timeout_s"), cancelled))
             return answered or await self._driver.fits(self._param("fit_timeout_s"), run.fits_time_up)
         request = SetFieldCurrent.Request(current_a=float(action.current_a))
         return run.on_supply(*supply_answer(await call(self, self._supply, request, self._param("supply_timeout_s"))))
@@ -122,10 +145,14 @@ class CalibratorNode(MowsNode):
     def _finish(self, goal_handle, outcome) -> CalibrateProbe.Result:
         result = result_msg(outcome, self._calibrator.others)
         # A cancel that cut the running cycle short ends the run as that cycle's failure.
-        if outcome.cancelled or goal_handle.is_cancel_requested:
-            goal_handle.canceled()
+        if outcome.cancelled or goal_handle.is_cancel_requested or self._client_gone:
+            self.cancels, self.last_ending = self.cancels + 1, f"cancelled: {result.message}"
+            self.get_logger().info(f"calibration {self.last_ending}")
+            end_goal(goal_handle, False, cancelled=True)
             return result
         if not outcome.success:
+            self.last_ending = f"aborted: {result.message}"
+            self.get_logger().warning(f"calibration {self.last_ending}")
             goal_handle.abort()
             return result
         self._calibrator.keep(outcome)
@@ -134,15 +161,23 @@ class CalibratorNode(MowsNode):
             calibration, written = self._calibrator.write_probe(bench_of(parameter_values(self, PARAMETERS)), path)
         except (CalibrationError, ValueError, OSError) as error:
             result.message = self._calibrator.last = f"{result.message}; calibration: {error}"
+            self.last_ending = f"aborted: {result.message}"
+            self.get_logger().warning(f"calibration {self.last_ending}")
             goal_handle.abort()
             return result
         self.get_logger().info(f"probe file: {written}")
         self.get_logger().info(f"{self._calibrator.last}\n{calibration.report()}")
+        self.last_ending = "succeeded"
         goal_handle.succeed()
         return calibrated(result, calibration, path)
 
     def health(self) -> Health:
-        values = {"state": self._calibrator.state, "calibrations": self._calibrator.calibrations}
+        values = {
+            "state": self._calibrator.state,
+            "calibrations": self._calibrator.calibrations,
+            "cancels": self.cancels,
+            "last_ending": self.last_ending,
+        }
         return self._operator.reported(Health(DiagnosticStatus.OK, self._calibrator.last, values))
 
 

@@ -62,4 +62,6 @@ class StreamHealth:
         if problems:
             return Health(DiagnosticStatus.WARN, "; ".join(problems), values)
         probes = f", ringing {state['probes']} probes" if state.get("probes") else ""
-        return Health(DiagnosticStatus.OK, f"streaming ({backend}{probes}), phase {state.get('phase')}", values)
+        # Disarmed (not active), the device is read but nothing is published.
+        doing = "streaming" if state.get("armed") else "reading the device, publishing nothing"
+        return Health(DiagnosticStatus.OK, f"{doing} ({backend}{probes}), phase {state.get('phase')}", values)

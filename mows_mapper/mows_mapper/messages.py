@@ -6,8 +6,8 @@ from mows_msgs.msg import CandidateEffect, FieldMap, ModelReport, ProbeField, Sw
 from mows.estimate.probe_set import ProbeEntry, probe_frame_id
 from mows.records import stamps
 from mows.sweep.decompose import DecompositionStatus
+from mows.sweep.events import SweepFeedback, SweepGoal, SweepMap, SweepOutcome, SweepStep, turn_prompt
 from mows.sweep.publication import Publication
-from mows.sweep.runner import SweepFeedback, SweepGoal, SweepMap, SweepOutcome, SweepStep, turn_prompt
 
 # What a probe's point of the field map takes from its SweepDecomposition, as it is there.
 PROBE_FIELD_FROM_SWEEP = (

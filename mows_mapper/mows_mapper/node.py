@@ -18,24 +18,18 @@ and the CPU-bound decomposition and lab (in a worker thread) as a coroutine, so 
 diagnostics are served meanwhile.
 """
 
+import dataclasses
+
 from mows_msgs.action import RotationSweep, WorkspaceMap
 from mows_msgs.msg import RingdownFit
 from rclpy.action import CancelResponse
 
+from mows.device.cycle.phases import CycleRequest
 from mows.estimate.settings import probe_set
 from mows.lab import analyse_sweep
+from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepOutcome, SweepSettings, SweepStep
 from mows.sweep.publication import Publication, cycle_failed, publication
-from mows.sweep.runner import (
-    CycleAnswer,
-    CycleRequest,
-    SweepFit,
-    SweepGoal,
-    SweepOutcome,
-    SweepRunner,
-    SweepSettings,
-    SweepState,
-    SweepStep,
-)
+from mows.sweep.runner import SweepRunner, SweepState
 from mows_mapper import messages, workspace
 from mows_mapper.health import sweep_health
 from mows_mapper.outputs import MapperOutputs
@@ -82,6 +76,7 @@ class MapperNode(MowsNode):
             self, WorkspaceMap, MAP_ACTIONS, self._execute_map, self._cancel_map, self._driver.group
         )
         self._map_cancelled = False
+        self._arm_turn: workspace.Turn | None = None
 
     def _param(self, name):
         return self.get_parameter(name).value
@@ -186,15 +181,22 @@ class MapperNode(MowsNode):
         self._cancel_sweep()
         return CancelResponse.ACCEPT
 
-    async def _map_sweep(self, goal: SweepGoal) -> SweepOutcome:
-        """One rotation sweep of the workspace map where the arm holds the probe."""
+    async def _map_sweep(self, goal: SweepGoal, arm_turn: workspace.Turn | None) -> SweepOutcome:
+        """One rotation sweep of the workspace map where the arm holds the probe; ``arm_turn``
+        turns it to each orientation when the arm's last joint does (no stage)."""
         try:
             probe = probe_of(self._param("probe_file"))
             self._settings = sweep_settings(parameter_values(self, PARAMETERS), probe)
+            if arm_turn is not None:  # each orientation is the arm's: turned, then measured
+                self._settings = dataclasses.replace(self._settings, manual_orientation=True)
             self._runner.start(goal, self._settings, probe)
         except ValueError as refused:
             return SweepOutcome(False, f"sweep refused: {refused}")
-        outcome, _ = await self._sweep(MAP_ACTIONS, lambda _: (), _NoFeedback())
+        self._arm_turn = arm_turn
+        try:
+            outcome, _ = await self._sweep(MAP_ACTIONS, lambda _: (), _NoFeedback())
+        finally:
+            self._arm_turn = None
         return outcome
 
     async def _advance(self, step: SweepStep) -> SweepStep:
@@ -208,7 +210,11 @@ class MapperNode(MowsNode):
         return await self._driver.fits(self._param("fit_timeout_s"), self._runner.fits_time_up)
 
     async def _turned(self) -> SweepStep:
-        """The operator's confirmation (or a cancel) goes on with the sweep; silence ends it."""
+        """The operator's confirmation (or a cancel) goes on with the sweep; silence ends it. In
+        a workspace map whose arm turns the probe, the arm's turn instead."""
+        if self._arm_turn is not None:
+            problem = await self._arm_turn(self._runner.turn_awaited)
+            return self._runner.abandon(problem) if problem else self._runner.on_turned()
         timeout_s = self._param("confirm_timeout_s")
         if await self._operator.confirmed(timeout_s, self._runner.cancelled):
             return self._runner.on_turned()

@@ -6,7 +6,7 @@ from mows.estimate.settings import probe_set
 from mows.lab import reference_at
 from mows.physics.probe import Probe
 from mows.sweep.decompose import MODELS
-from mows.sweep.runner import REPEATS_PER_ANGLE_RANGE, SweepSettings
+from mows.sweep.events import REPEATS_PER_ANGLE_RANGE, SweepSettings
 from mows_ros import operator
 from mows_ros.params import ParamSpec
 from mows_ros.probe import PROBE_FILE, PROBES
@@ -47,6 +47,12 @@ PARAMETERS = (
     *operator.PARAMETERS,
     # The workspace map: the arm (CRTK topics <arm>/measured_cp, <arm>/move_cp) and the workspace.
     ParamSpec("arm", "arm", "namespace of the arm's CRTK topics (measured_cp, move_cp), e.g. PSM1"),
+    ParamSpec(
+        "turn_with",
+        "stage",
+        "workspace map: what turns the probe through a sweep's orientations: the stage, or the arm's last joint",
+        choices=("stage", "arm"),
+    ),
     ParamSpec("arm_frame", "arm_base", "the arm's base frame: measured_cp's frame_id, the map's frame"),
     ParamSpec("workspace_x_m", 0.3, "workspace map: centre's x in the arm's base frame when the goal gives none, m"),
     ParamSpec("workspace_y_m", 0.0, "workspace map: centre's y in the arm's base frame when the goal gives none, m"),

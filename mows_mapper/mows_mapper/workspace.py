@@ -21,9 +21,9 @@ from mows_msgs.srv import FieldAt
 from rclpy.node import Node
 
 from mows.physics.probe import Probe
-from mows.sweep.runner import SweepGoal, SweepOutcome
+from mows.sweep.events import SweepGoal, SweepOutcome
 from mows.workspace.arm import Reach, StampedPose
-from mows.workspace.mapping import MapSettings, PosePlan, PoseWatch, sweep_observations, workspace_map
+from mows.workspace.mapping import MapSettings, PosePlan, PoseWatch, sweep_observations, turned, workspace_map
 from mows.workspace.mapping import WorkspaceMap as FittedMap
 from mows.workspace.poses import PoseError
 from mows_mapper.messages import outcome_decomposition_msg
@@ -34,7 +34,8 @@ from mows_ros.qos import MAP_QOS, STREAM_QOS
 ACTION = "~/workspace_map"
 # A map gives up after this many poses in a row are refused: an arm that never gets there
 REFUSALS_IN_A_ROW = 5
-Sweep = Callable[[SweepGoal], Awaitable[SweepOutcome]]  # one rotation sweep where the probe is
+Turn = Callable[[float], Awaitable[str]]  # the arm turns the probe to θ0: '' or why it did not
+Sweep = Callable[[SweepGoal, Turn | None], Awaitable[SweepOutcome]]  # one rotation sweep where the probe is
 
 
 def map_settings(values: dict, goal: WorkspaceMap.Goal) -> MapSettings:
@@ -68,7 +69,8 @@ class ArmMapping:
     def _pose_watch(self, reach: Reach) -> PoseWatch:
         values = self._values()
         tolerance_rad = math.radians(values["arm_tolerance_deg"])
-        return PoseWatch(values["arm_tolerance_m"], tolerance_rad, values["pose_max_age_s"], reach)
+        turns = values["turn_with"] == "arm"
+        return PoseWatch(values["arm_tolerance_m"], tolerance_rad, values["pose_max_age_s"], reach, turns)
 
     def _on_pose(self, msg: PoseStamped) -> None:
         try:
@@ -94,7 +96,7 @@ class ArmMapping:
                     success=False, message=f"{refused} poses in a row refused, the last: {refusal}"
                 )
             refusal, outcome = await self._visit(plan.next_goal(), settings, sweep_goal)
-            pose = self.watch.latest
+            pose = self.watch.latest if refusal else self.watch.start
             feedback = WorkspaceMap.Feedback(
                 sweep_index=len(sweeps), n_sweeps=count, accepted=not refusal, refusal=refusal
             )
@@ -127,16 +129,30 @@ class ArmMapping:
         self._node.get_logger().info(message)
         return WorkspaceMap.Result(success=True, message=message, model=msg)
 
+    async def _reach(self, target, what: str) -> str:
+        """Ask the arm for ``target`` and wait for its report there: '' or why it did not."""
+        timeout_s = self._values()["move_timeout_s"]
+        self._move.publish(pose_stamped_msg(target))
+        if not await until(self._node, lambda: self.watch.arrived(target), timeout_s):
+            return f"the arm did not {what} within {timeout_s:.0f} s"
+        return ""
+
+    def _turns_from(self, pose) -> Turn:
+        """The arm's last joint turning the probe about the normal of ``pose``'s plane."""
+
+        async def turn(theta0_rad: float) -> str:
+            return await self._reach(turned(pose, theta0_rad), f"turn the probe to θ0 = {math.degrees(theta0_rad):g}°")
+
+        return turn
+
     async def _visit(self, target, settings: MapSettings, sweep_goal: SweepGoal) -> tuple[str, SweepOutcome | None]:
         """Move to ``target``, check the pose, sweep, check again: the refusal ('' for none) and
         the sweep's outcome."""
-        values = self._values()
-        self._move.publish(pose_stamped_msg(target))
-        if not await until(self._node, lambda: self.watch.arrived(target), values["move_timeout_s"]):
-            return f"the arm did not report the pose asked for within {values['move_timeout_s']:.0f} s", None
+        if problem := await self._reach(target, "report the pose asked for"):
+            return problem, None
         if problem := self.watch.start_problem(self._now_ns(), settings.frame_id):
             return problem, None
-        outcome = await self._sweep(sweep_goal)
+        outcome = await self._sweep(sweep_goal, self._turns_from(target) if self.watch.turns_probe else None)
         if not outcome.ok:
             return outcome.message, outcome
         return self.watch.end_problem(self._now_ns()), outcome

@@ -1,6 +1,6 @@
 """A node's way to the driver's measurement cycles, shared by the mapper and the calibrator:
 the core's :class:`mows.device.cycle.phases.CycleRequest` as a goal of the driver's MeasurementCycle
-action, answered as the core's :class:`mows.sweep.runner.CycleAnswer`; a running cycle
+action, answered as the core's :class:`mows.sweep.events.CycleAnswer`; a running cycle
 cancelled when the caller gives up on it; a cycle whose acceptance was lost awaited by its
 goal's id; and the ring-down fits of ``/mows/ringdown`` handed
 to the node, whose answer to each (the core's next step, or None) resumes the coroutine that
@@ -19,7 +19,7 @@ from rclpy.node import Node
 from unique_identifier_msgs.msg import UUID
 
 from mows.device.cycle.phases import CycleRequest
-from mows.sweep.runner import CycleAnswer
+from mows.sweep.events import CycleAnswer
 from mows_ros.awaitables import Delivery, until, within
 from mows_ros.qos import RESULT_QOS
 

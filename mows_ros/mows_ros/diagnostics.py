@@ -1,6 +1,9 @@
 """A node's state on /diagnostics, once a second, in the diagnostic_msgs form that
 diagnostic aggregators and ``ros2 topic echo /diagnostics`` read.
-They run on wall time (``mows_ros.wall``): under ``use_sim_time`` too, once a second of real time."""
+They run on wall time (``mows_ros.wall``): under ``use_sim_time`` too, once a second of real time.
+Each array is stamped with the node's ROS time, as a diagnostic aggregator beside a simulator
+expects: the system clock, or under ``use_sim_time`` the time ``/clock`` gives, once it has given
+one (the system clock until then: a stamp of zero says nothing)."""
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -24,6 +27,13 @@ class Health:
     values: Mapping[str, object] = field(default_factory=dict)
 
 
+def ros_stamp(node: Node):
+    """Now on ``node``'s ROS clock (simulated time under ``use_sim_time``), or on the system
+    clock while that clock has not started (no ``/clock`` yet)."""
+    now = node.get_clock().now()
+    return now.to_msg() if now.nanoseconds > 0 else wall_stamp()
+
+
 class DiagnosticsPublisher:
     """Publishes ``health()`` of ``node`` on /diagnostics every ``period_s`` seconds.
 
@@ -40,7 +50,7 @@ class DiagnosticsPublisher:
     def publish(self) -> None:
         health = self._health()
         array = DiagnosticArray()
-        array.header.stamp = wall_stamp()
+        array.header.stamp = ros_stamp(self._node)
         array.status = [
             DiagnosticStatus(
                 level=health.level,

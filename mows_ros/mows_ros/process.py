@@ -9,6 +9,7 @@ A node starts unconfigured, for a supervisor (mows-graph, ``ros2 lifecycle``) to
 import argparse
 import faulthandler
 import re
+import signal
 import sys
 import time
 from collections.abc import Callable
@@ -21,6 +22,7 @@ from rclpy.exceptions import (
 )
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation
+from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
 from mows_ros.node import MowsNode
@@ -29,7 +31,8 @@ from mows_ros.params import UnknownParameterError, params_file_problem, ros_argu
 EXIT_BAD_PARAMETER = 2
 RCLInvalidROSArgsError = rclpy_implementation.RCLInvalidROSArgsError
 AUTOSTART = "--autostart"
-SHUTDOWN_WAIT_S = 5.0  # a bound only: the signal handler's thread shuts down in milliseconds
+SHUTDOWN_WAIT_S = 5.0  # a bound only: a signal handler's thread shuts down in milliseconds
+STOP_POLL_S = 0.1  # the executor's longest wait: how soon a stop signal is taken when nothing else wakes it
 
 
 def arguments_problem(argv: list[str]) -> str | None:
@@ -72,9 +75,11 @@ def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -
     MultiThreadedExecutor: rclpy 7.1.6's re-submits a callback its pool has not started yet
     without waiting, starves the pool of the GIL, and never shuts the pool down.
 
-    ``rclpy.init`` installs handlers for SIGINT and SIGTERM that shut the context down, so
-    either signal ends ``spin`` with ``ExternalShutdownException`` (or KeyboardInterrupt when
-    it lands outside of spin): both are the normal way for a node to stop. A value from a
+    SIGINT and SIGTERM ask the node to stop (:class:`StopSignals`, not rclpy's handlers): the
+    executor stops spinning, the node releases what it holds while its context still runs (its
+    last log lines reach /rosout, where after rclpy's handler each failed with "publisher's
+    context is invalid"), and only then is the context shut down. A second signal stops it at
+    once (KeyboardInterrupt). Either is the normal way for a node to stop. A value from a
     parameter file or ``-p`` that the node rejects, or a parameter it does not have, ends it
     with EXIT_BAD_PARAMETER and the reason, not a traceback: it is a configuration error, not
     a bug. So does a configure or activate refused with ``--autostart``.
@@ -84,7 +89,8 @@ def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -
         sys.stderr.write(f"error: {problem}\n")
         return EXIT_BAD_PARAMETER
     autostart = autostart_asked(args)
-    rclpy.init(args=args)
+    stop = StopSignals()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     executor = SingleThreadedExecutor()
     try:
@@ -93,13 +99,15 @@ def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -
             sys.stderr.write(f"error: {problem}\n")
             return EXIT_BAD_PARAMETER
         executor.add_node(node)
-        executor.spin()
+        while not stop.asked:
+            executor.spin_once(timeout_sec=STOP_POLL_S)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RuntimeError:
-        # The signal handler shuts the context down from under the executor: one building its
-        # next wait set gets an RCLError, one taking a message a plain RuntimeError from the
-        # binding (RCLError is one too). Either is the normal end, but only if shutdown happened.
+        # A context shut down from under the executor (by another handler than ours): one
+        # building its next wait set gets an RCLError, one taking a message a plain RuntimeError
+        # from the binding (RCLError is one too). Either is the normal end, but only if shutdown
+        # happened.
         if not _shut_down_within(SHUTDOWN_WAIT_S):
             raise
     except (InvalidParameterValueException, InvalidParameterTypeException, UnknownParameterError) as error:
@@ -113,6 +121,22 @@ def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -
             node.destroy_node()
         _shutdown()
     return 0
+
+
+class StopSignals:
+    """SIGINT and SIGTERM, from their arrival on: the first asks the node to stop (``asked``),
+    a second stops it at once. Python runs the handler between the executor's turns, which
+    :data:`STOP_POLL_S` bounds."""
+
+    def __init__(self):
+        self.asked = False
+        for number in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(number, self._on_signal)
+
+    def _on_signal(self, number, _frame) -> None:
+        if self.asked:
+            raise KeyboardInterrupt
+        self.asked = True
 
 
 def _shut_down_within(timeout_s: float) -> bool:

@@ -3,8 +3,9 @@
 A node started with ``use_sim_time:=true`` runs its ROS clock from ``/clock``; with no
 simulator publishing it, that clock stands at zero and a timer on it never fires. What MOWS
 times is real: a device streams in real time, a client waits in real time, and a supervisor
-reads /diagnostics in real time. So its timers run on the steady clock and /diagnostics is
-stamped with the system clock; the data keep the device's stamps (REP-145) either way.
+reads /diagnostics in real time. So its timers run on the steady clock (/diagnostics is
+stamped on ROS time once ``/clock`` runs it, ``mows_ros.diagnostics``); the data keep the
+device's stamps (REP-145) either way.
 """
 
 from collections.abc import Callable

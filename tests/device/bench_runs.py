@@ -12,8 +12,9 @@ from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.sweep.calibration.run import CalibrationRun, Turn
+from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings
 from mows.sweep.record import SweepPoint
-from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, SweepSettings
+from mows.sweep.runner import SweepRunner
 
 MAX_STEPS = 200_000  # bound for a run that never ends (a bug), not a timing
 

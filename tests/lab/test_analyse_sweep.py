@@ -20,8 +20,8 @@ from mows.physics.potential import ArcPotential
 from mows.physics.ringdown_average import amplitude_nodes
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import Decomposition, DecompositionStatus
+from mows.sweep.events import SweepMap
 from mows.sweep.record import SweepPoint, SweepRecord
-from mows.sweep.runner import SweepMap
 
 STD_HZ, DURATION_S = 5e-4, 0.5
 SCENE = load_scenario("anti_helmholtz")

@@ -8,9 +8,11 @@ noise only. Against the lab (slow):
 
 - on every case, ``--auto`` adds no catalog effect the truth lacks (only the exact potential's
   own: deflection, transverse gradient, amplitude, damping), ends ``unexplained_structure``, and
-  its search beyond the catalog names the hidden term's family (channel × covariates) first; the
-  plugin the lab writes for it, added back, ends at χ²/dof ≤ 1.5 and reads the truth to 3σ (the
-  sweep over ten noise seeds of each case: docs/model_lab.md, "Outside the catalog");
+  the term the user's loop adds names the hidden term's family (channel × covariates): the search's
+  first, or, where that pushes a free effect from physics (the induced moment), the one found
+  with that effect held at physics; the plugin the lab writes for it, added back, ends at
+  χ²/dof ≤ 1.5 and reads the truth to 3σ (the sweep over ten noise seeds of each case:
+  docs/model_lab.md, "Outside the catalog");
 - every control ends ``adequate`` with nothing but the physics its truth holds, and the search
   beyond the catalog finds nothing on any of 40 noise seeds;
 - the user's physical plugin of each case explains its table and reads its parameter back, also

@@ -136,7 +136,7 @@ def test_the_report_plots_what_the_diagnosis_names_and_the_term_found(named_page
     named = named_covariates(report)
     assert {"temperature_k", "b_along_t"} <= set(named)  # the hidden term's covariates
     (term,) = report.discovery.terms
-    assert term.name == "b_along_t·temperature_k"
+    assert term.name == "moment × temperature_k"  # the channel the truth acts in
     check, console = render(path)
     assert check["failed"] == [] and console == []
     residuals = [f["name"] for f in check["figures"] if f["kind"] == "covariate"]

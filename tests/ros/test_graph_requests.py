@@ -10,8 +10,8 @@ namespace).
 Requirements: a request outside the limits of the parameter of its name is refused with that
 reason in the response (a goal: accepted, then aborted with it); a cycle whose requesting client
 leaves the graph has its coils off within 1 s; a mapper that gives up on a cycle cancels it and
-says why; use_sim_time leaves /diagnostics on wall time at 1 Hz and cycles working; a deactivate
-is not a fault.
+says why; use_sim_time leaves /diagnostics on wall time at 1 Hz and cycles working, and stamped
+on /clock's time once one is published; a deactivate is not a fault.
 """
 
 import math
@@ -22,6 +22,7 @@ import time
 import pytest
 import rclpy
 from action_msgs.msg import GoalStatus
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
@@ -33,6 +34,7 @@ from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.action import ActionClient
 from rclpy.signals import SignalHandlerOptions
+from rosgraph_msgs.msg import Clock
 
 from mows.device.cycle.phases import Phase
 from mows_bringup.graph import NODES
@@ -263,6 +265,26 @@ def test_use_sim_time_keeps_diagnostics_on_wall_time_and_cycles_working(graph):
     request = RunCycle.Request(theta0_rad=0.5, repeats=1, tuning_steps=0, gap_s=0.0)
     response = graph.call(RunCycle, "/sim/driver/run_cycle", request)
     assert response.success and response.ringdowns_recorded == 1, response.message
+
+
+def test_with_a_clock_published_the_diagnostics_follow_it(graph):
+    """A simulator's /clock: the driver under use_sim_time stamps its diagnostics with that time
+    (docs/robot_integration.md), the other keeps the system clock; both still report at 1 Hz."""
+    sim_s = 1000
+    clock = graph.ros.node.create_publisher(Clock, "/clock", 10)
+    reports = graph.heard.diagnostics["/sim/driver"]
+    count = len(reports)
+    try:
+
+        def stamped_by_the_clock():
+            clock.publish(Clock(clock=Time(sec=sim_s + len(reports) - count)))
+            return len(reports) > count and abs(reports[-1][2].sec - sim_s) < 60
+
+        graph.ros.wait_for(stamped_by_the_clock, "a report of /sim/driver stamped on /clock's time", 30.0)
+    finally:
+        graph.ros.node.destroy_publisher(clock)
+    received_s, _, stamp = graph.heard.diagnostics["/driver"][-1]
+    assert abs(stamp.sec + stamp.nanosec * 1e-9 - received_s) < 5.0  # no use_sim_time: the system clock
 
 
 def test_an_unknown_parameter_is_refused_with_the_nearest_name(graph):

@@ -139,6 +139,7 @@ def test_the_driver_energises_coils_only_while_active_through_every_transition(s
         "an inactive driver reading its device",
     )
     assert report["armed"] == "False" and report["device_coils_on"] == "False"
+    assert "streaming" not in report["message"] and "publishing nothing" in report["message"], report["message"]
     sup.assert_silent_for_a_second(0)
     assert not sup.joints
     refused = sup.result(sup.cycle(theta0_rad=0.0))

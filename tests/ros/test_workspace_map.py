@@ -80,8 +80,9 @@ class ArmNode:
 class ArmDriver:
     """Answers measurement cycles with ring-down fits of the probe where the arm truly holds it."""
 
-    def __init__(self, ros, arm: SimulatedArm, rng):
+    def __init__(self, ros, arm: SimulatedArm, rng, turned_by_arm: bool):
         self.ros, self.arm, self.rng, self.cycle = ros, arm, rng, 0
+        self.turned_by_arm = turned_by_arm  # no stage: the probe sits at θ = 0 in the arm's tool frame
         self.source = navigation_system(1.5e-3, seed=2)  # about the workspace's centre
         self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)
         self.excitation = ros.node.create_publisher(ExcitationState, "mows/excitation", EXCITATION_QOS)
@@ -91,6 +92,7 @@ class ArmDriver:
         truth = self.arm.true_pose(now_s(self.ros))  # refuses a probe between poses
         pose = SweepPose(truth.position_m - CENTRE_M, truth.plane)
         self.cycle += 1
+        theta0 = 0.0 if self.turned_by_arm else request.theta0_rad
         for repeat in range(request.repeats):
             ringdown = ExcitationState(
                 phase=int(Phase.RINGDOWN), phase_name="RINGDOWN", cycle_id=self.cycle, repeat_index=repeat
@@ -98,7 +100,7 @@ class ArmDriver:
             ringdown.repeats, ringdown.theta0_rad = request.repeats, request.theta0_rad
             stamps.set_nanoseconds(ringdown.header.stamp, self.ros.node.get_clock().now().nanoseconds)
             self.excitation.publish(ringdown)
-            shift = sweep_shifts_hz(self.source, pose, PAPER_PROBE, np.array([request.theta0_rad]))[0]
+            shift = sweep_shifts_hz(self.source, pose, PAPER_PROBE, np.array([theta0]))[0]
             shift += RINGDOWN_STD_HZ * self.rng.standard_normal()
             msg = RingdownFit(
                 cycle_id=self.cycle,
@@ -137,14 +139,14 @@ def record(ros, path):
     return recorder
 
 
-@pytest.fixture
-def mapper(action_server):
+def start_mapper(action_server, turn_with: str):
     return action_server(
         "mapper",
         WorkspaceMap,
         "mapper/workspace_map",
         f"arm_position_std_m:={ACCURACY.position_std_m}",
         f"arm_angle_std_deg:={math.degrees(ACCURACY.angle_std_rad)}",
+        f"turn_with:={turn_with}",
     )
 
 
@@ -166,11 +168,15 @@ def field_at(ros, point_m, moment_am2=(0.0, 0.0, 0.0)) -> FieldAt.Response:
 
 
 @pytest.mark.slow
-def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, mapper, tmp_path, capsys):
-    client, _ = mapper
+@pytest.mark.parametrize("turn_with", ["stage", "arm"])
+def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, action_server, turn_with, tmp_path, capsys):
+    """With ``turn_with`` arm there is no stage: the arm's last joint turns the probe to each
+    orientation (on move_cp, the tool frame turned about its z), and the driver's probe sits at
+    θ = 0 in the tool frame."""
+    client, _ = start_mapper(action_server, turn_with)
     rng = np.random.default_rng(4)
     arm = ArmNode(ros, rng)
-    driver = ArmDriver(ros, arm.arm, np.random.default_rng(5))
+    driver = ArmDriver(ros, arm.arm, np.random.default_rng(5), turn_with == "arm")
     recorder = record(ros, tmp_path / "session")
     done, feedback = run_map(
         ros,

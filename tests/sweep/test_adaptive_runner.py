@@ -11,9 +11,10 @@ from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
+from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings
 from mows.sweep.planner import PrecisionGoal
 from mows.sweep.record import SweepPoint
-from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, SweepSettings
+from mows.sweep.runner import SweepRunner
 
 FIELD_T = np.array([30e-6, -20e-6, 0.0])
 SETTINGS = SweepSettings(repeat_s=0.8, turn_s=0.5)

@@ -13,7 +13,7 @@ from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitStatus, RingdownFit
 from mows.physics.probe import PAPER_PROBE, Probe, calibration_record
 from mows.sweep.calibration.run import Bench, CalibrationRun, ProbeCalibrator, Turn, goal_plan
 from mows.sweep.calibration.schedule import CalibrationPlan, SetSupply, scenario_wirings
-from mows.sweep.runner import CycleAnswer
+from mows.sweep.events import CycleAnswer
 from sweep.calibration_bench import BENCH, STD_HZ, bench_fits
 
 

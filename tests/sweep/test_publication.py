@@ -12,9 +12,9 @@ import pytest
 from mows.estimate.probe_set import ProbeEntry
 from mows.physics.probe import PAPER_PROBE
 from mows.sweep.decompose import Decomposition, DecompositionStatus
+from mows.sweep.events import CycleAnswer, SweepMap, SweepStep
 from mows.sweep.publication import Publication, cycle_failed, publication
 from mows.sweep.record import SweepRecord
-from mows.sweep.runner import CycleAnswer, SweepMap, SweepStep
 
 PROBES = (ProbeEntry(0, PAPER_PROBE, 112.5), ProbeEntry(1, PAPER_PROBE, 125.0))
 

@@ -12,15 +12,9 @@ from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
 from mows.sweep.decompose import Decomposition, DecompositionStatus
+from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings, turn_prompt
 from mows.sweep.record import SweepPoint
-from mows.sweep.runner import (
-    CycleAnswer,
-    SweepFit,
-    SweepGoal,
-    SweepRunner,
-    SweepSettings,
-    turn_prompt,
-)
+from mows.sweep.runner import SweepRunner
 
 FIELD_T = np.array([30e-6, -20e-6, 0.0])
 STD_HZ = 5e-4

@@ -16,8 +16,9 @@ from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
+from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings
 from mows.sweep.record import SweepPoint
-from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, SweepSettings
+from mows.sweep.runner import SweepRunner
 
 STD_HZ = 5e-4
 ANGLES = tuple(np.radians(np.arange(0.0, 360.0, 45.0)))

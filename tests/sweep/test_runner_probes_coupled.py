@@ -29,9 +29,10 @@ from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import LinearGradient
+from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings
 from mows.sweep.probes import UNCOUPLED_NOTE, DecomposeOptions, decompose_probes, report
 from mows.sweep.record import SweepPoint
-from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, SweepSettings
+from mows.sweep.runner import SweepRunner
 
 STD_HZ = 2e-4
 REPEATS = 2

@@ -19,9 +19,10 @@ import pytest
 from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
+from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings
 from mows.sweep.probes import decompose_probes, step_orientations_rad
 from mows.sweep.record import SweepPoint
-from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepRunner, SweepSettings
+from mows.sweep.runner import SweepRunner
 
 from .test_runner_probes_coupled import ANGLES, PROBES, REPEATS, SCENE, STD_HZ, z_scores
 

@@ -93,3 +93,18 @@ def test_measured_cp_follows_a_move_so_the_mapper_sees_the_arm_moving():
     assert a.move_cp(goal([0.0, 0.0, 0.1], half_turn), 3.0).accepted  # π/2 at 1 rad/s
     turning = a.measured_cp(3.0 + math.pi / 4 + 0.02)
     np.testing.assert_allclose(turning.rotation, rotation(np.array([0.0, 0.0, math.pi / 4])), atol=1e-4)
+
+
+def test_a_turn_of_the_last_joint_keeps_the_arms_error_a_move_draws_a_new_one():
+    a = arm()
+    start = goal([0.0, 0.0, 0.1])
+    assert a.move_cp(start, 0.0).accepted
+    before = a.true_pose(10.0)
+    quarter = matrix_quaternion(quaternion_matrix(IDENTITY) @ rotation(np.array([0.0, 0.0, math.pi / 2])))
+    assert a.move_cp(goal([0.0, 0.0, 0.1], quarter), 10.0).accepted
+    after = a.true_pose(20.0)
+    np.testing.assert_allclose(after.position_m, before.position_m, atol=1e-15)
+    np.testing.assert_allclose(after.rotation[:, 2], before.rotation[:, 2], atol=1e-12)
+    assert a.move_cp(goal([0.0, 0.0, 0.12]), 20.0).accepted
+    moved = a.true_pose(30.0)
+    assert abs(np.linalg.norm(moved.position_m - before.position_m) - 0.02) > 1e-5  # a fresh error

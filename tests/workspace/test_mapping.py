@@ -9,7 +9,7 @@ import pytest
 
 from mows.physics.probe import PAPER_PROBE
 from mows.workspace.arm import NS_PER_S, Reach, StampedPose
-from mows.workspace.mapping import MapSettings, PosePlan, PoseWatch, WorkspaceMap, workspace_map
+from mows.workspace.mapping import MapSettings, PosePlan, PoseWatch, WorkspaceMap, turned, workspace_map
 from mows.workspace.poses import PoseError
 
 REACH = Reach((0.0, 0.0, 0.0), 0.1, 0.6)
@@ -87,3 +87,18 @@ def test_a_map_does_not_extrapolate_beyond_its_workspace():
     assert the_map.outside_problem(np.array([0.3, 0.0, 0.019])) == ""
     assert "25.0 mm from the workspace's centre, outside its 20.0 mm" in the_map.outside_problem([0.3, 0.025, 0.0])
     assert "outside" in the_map.outside_problem([math.nan, 0.0, 0.0])
+
+
+def test_an_arm_that_turns_the_probe_may_turn_about_the_normal_but_not_tilt_it():
+    w = PoseWatch(1e-4, math.radians(0.05), 0.5, REACH, turns_probe=True)
+    w.on_pose(pose(1.0))
+    w.on_pose(pose(1.02))
+    assert w.start_problem(int(1.05 * NS_PER_S), "arm_base") == ""
+    for k, theta in enumerate(np.radians([45.0, 90.0, 315.0])):
+        w.on_pose(turned(pose(2.0 + k), theta))
+    assert turned(pose(0.0), math.pi / 2).rotation @ [1, 0, 0] == pytest.approx([0, 1, 0])
+    w.on_pose(pose(5.0))
+    assert w.end_problem(int(5.05 * NS_PER_S)) == ""
+    tilted = (math.sin(math.radians(0.05)), 0.0, 0.0, math.cos(math.radians(0.05)))  # 0.1° about x
+    w.on_pose(pose(5.5, quaternion=tilted))
+    assert "0.100° from where it started" in w.end_problem(int(5.55 * NS_PER_S))

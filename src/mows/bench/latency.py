@@ -10,10 +10,15 @@ under SCHED_FIFO (``--realtime-priority``, as a robot computer would run them); 
 stream at the default priority is reported beside it (``default_priority``). Both give
 ``startup_s``, the processes' start to both active (numba's cache as ``make build`` leaves it).
 With ``three_probe_map`` the three-probe demo (``mows-demo --scenario three_probes``) runs too,
-for ``three_probe_map_s``: from the last ring-down's fit to the field map of the three probes.
+for ``three_probe_map_s``: from the last ring-down's fit to the field map of the three probes;
+with ``load`` beside the same number of CPU burners (``three_probe_map_load``: the load average
+at its start and end).
 """
 
+import contextlib
 import json
+import multiprocessing
+import os
 import re
 import shutil
 import subprocess
@@ -22,6 +27,7 @@ import tempfile
 # SCHED_FIFO priority of the ring-down path under load: above everything best-effort, below a
 # robot's own control loop (commonly 80–98 on a PREEMPT_RT computer).
 REALTIME_PRIORITY = 40
+BURNERS = 2  # mows-latency --load's
 
 
 def run(
@@ -54,7 +60,39 @@ def run(
     }
     if realtime_priority:
         figures["default_priority"] = _measure(tool, repeats, loaded)
+    if three_probe_map:
+        with _burning(BURNERS, burner_nice):
+            start = os.getloadavg()[0]
+            figures |= _three_probe_map()
+            figures["three_probe_map_load"] = {
+                "load_average_1min_start": start,
+                "load_average_1min_end": os.getloadavg()[0],
+            }
     return figures
+
+
+def _burn(stop, nice: int) -> None:
+    """Spin until told to stop: one core's worth of load, at niceness ``nice``."""
+    os.nice(nice)
+    while not stop.is_set():
+        for _ in range(100_000):
+            pass
+
+
+@contextlib.contextmanager
+def _burning(count: int, nice: int):
+    """``count`` spinning processes while the block runs."""
+    context = multiprocessing.get_context("spawn")
+    stop = context.Event()
+    burners = [context.Process(target=_burn, args=(stop, nice), daemon=True) for _ in range(count)]
+    for burner in burners:
+        burner.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        for burner in burners:
+            burner.join()
 
 
 def _measure(tool: str, repeats: int, how: list[str]) -> dict:

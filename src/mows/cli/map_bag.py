@@ -28,8 +28,8 @@ from mows.lab.data.readers import is_bag
 from mows.lab.data.ringdowns import check_probes, fit_bag
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.sweep.decompose import MODELS
+from mows.sweep.events import SweepFit, SweepOutcome, SweepSettings
 from mows.sweep.replay import RecordedCycle, read_session, replay_sweep
-from mows.sweep.runner import SweepFit, SweepOutcome, SweepSettings
 
 
 def add_arguments(parser) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 
 from mows.device.recording.bags import read_bag
 from mows.physics.probe import Probe
-from mows.sweep.runner import SweepOutcome
+from mows.sweep.events import SweepOutcome
 from mows.workspace.arm import StampedPose
 from mows.workspace.mapping import MapSettings, WorkspaceMap, workspace_map
 from mows.workspace.poses import PoseError

@@ -19,8 +19,10 @@ reports them as part of the external field, biased (tests/sweep/test_multiprobe_
 probe is decomposed again with them as known terms of the first-principles model
 (:class:`mows.sweep.decompose.NeighbourFields`: exact dipole field, gradient and Hessian at the
 magnet, so the field along the whole arc). They depend on the estimates only through the rest
-angles (a few degrees move them by a few percent), so the rounds converge at once; the rest
-angles at each step are the coupled ones, iterated to a fixed point.
+angles (a few degrees move them by a few percent), so the rounds converge at once: once a round
+would move every probe's neighbour fields by less than :data:`SETTLED_STD` of its own σ, it is
+not run (after the first coupled round they move by ~0.002σ); the rest angles at each step are
+the coupled ones, iterated to a fixed point.
 
 How each share is decomposed (:class:`DecomposeOptions`) depends on how the sweep was made. Probes
 rung together by the multi-tone drive do not start from the housing stop: each ring-down starts
@@ -68,6 +70,7 @@ from mows.sweep.record import SweepPoint, SweepRecord
 
 REST_ITERATIONS = 4  # the rest angles' fixed point contracts by ~1e-4 a step at centimetres
 DEFAULT_PASSES = 2
+SETTLED_STD = 0.01  # a round whose known terms move by less than this many σ of the estimate is not run
 UNCOUPLED_NOTE = "decomposed without its neighbours' fields"
 # Closer magnets are no point dipoles to each other: each swings on a lever of ~2 mm and is
 # ~2 mm across, and a neighbour's field there varies over both.
@@ -194,8 +197,12 @@ def decompose_probes(
     if not all(r.ok for r in results):  # a probe without a decomposition leaves its field unknown
         return [uncoupled(r) for r in results]
     orientations = own_orientations_rad(sweeps) if orientations_rad is None else orientations_rad
+    used: list[NeighbourFields] = []
     for done in range(passes):
         fields = neighbour_fields(sweeps, [r.parameters for r in results], orientations)
+        if used and all(map(settled, used, fields, results)):
+            break
+        used = fields
         # Each pass starts where the last ended: the neighbours' fields move the optimum by
         # microtesla, a few steps of the fit, not the whole way from the harmonics.
         coupled = [s.decompose(options, f, r.parameters) for s, f, r in zip(sweeps, fields, results)]
@@ -203,6 +210,17 @@ def decompose_probes(
             return results if done else [uncoupled(r) for r in results]
         results = coupled
     return results
+
+
+def settled(before: NeighbourFields, after: NeighbourFields, decomposition: Decomposition) -> bool:
+    """Whether the neighbours' field and gradient at a probe moved by less than :data:`SETTLED_STD`
+    of its decomposition's σ (in-plane field, gradient), at every point: another round with
+    them would move its estimate by less."""
+    field_std = np.sqrt(np.diag(decomposition.field_covariance_t2)).min()
+    gradient_std = np.sqrt(np.diag(decomposition.gradient_covariance)).min()
+    moved_field = np.abs(after.field_t - before.field_t).max(initial=0.0)
+    moved_gradient = np.abs(after.gradient_t_per_m - before.gradient_t_per_m).max(initial=0.0)
+    return bool(moved_field < SETTLED_STD * field_std and moved_gradient < SETTLED_STD * gradient_std)
 
 
 def report(sweeps: Sequence[ProbeSweep], decompositions: Sequence[Decomposition]) -> str:

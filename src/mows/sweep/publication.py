@@ -1,6 +1,6 @@
 """What the mapper publishes when a sweep ends, and how it says a cycle failed.
 
-:func:`publication` turns the runner's last step (:class:`mows.sweep.runner.SweepStep`) into
+:func:`publication` turns the runner's last step (:class:`mows.sweep.events.SweepStep`) into
 the messages to make, in the order they go out: each probe's decomposition for ``/mows/sweep``
 (in its probe's own frame when the ``probes`` are listed), the field map of listed probes at
 their places, and the sweep the model lab reads when a reference is given (the lone probe's:
@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 
 from mows.estimate.probe_set import ProbeEntry
-from mows.sweep.runner import CycleAnswer, SweepMap, SweepStep
+from mows.sweep.events import CycleAnswer, SweepMap, SweepStep
 
 
 @dataclasses.dataclass(frozen=True)

@@ -28,7 +28,8 @@ from mows.device.cycle.phases import Phase
 from mows.device.recording.bags import read_bag
 from mows.physics.probe import Probe
 from mows.records import stamps
-from mows.sweep.runner import CycleAnswer, SweepFit, SweepGoal, SweepOutcome, SweepRunner, SweepSettings, SweepStep
+from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepOutcome, SweepSettings, SweepStep
+from mows.sweep.runner import SweepRunner
 
 EXCITATION_TOPIC, RINGDOWN_TOPIC, SWEEP_TOPIC = "/mows/excitation", "/mows/ringdown", "/mows/sweep"
 

@@ -1,14 +1,14 @@
 """A rotation sweep as an I/O-free state machine, in the manner of
-:class:`mows.device.cycle.sequencer.CycleSequencer`: fed the goal, the driver's answers to cycle requests,
-the ring-down fits and a cancel, it returns steps (run a cycle at θ0, report feedback,
-decompose, publish the map, the finished result). Who runs the cycles, delivers the fits and
-keeps the time is the caller's business (the mapper node does it over ROS).
+:class:`mows.device.cycle.sequencer.CycleSequencer`: fed the goal, the driver's answers to cycle
+requests, the ring-down fits and a cancel (:mod:`mows.sweep.events`, what it is fed and
+returns), it returns steps (run a cycle at θ0, report feedback, decompose, publish the map, the
+finished result). Who runs the cycles, delivers the fits and keeps the time is the caller's
+business (the mapper node does it over ROS).
 
-One sweep: for each orientation one driver cycle of ``repeats`` ring-downs; once the driver
-says how many it recorded, their fits are collected (or the caller says their time is up);
-after the last orientation every OK ring-down is decomposed
-(:func:`mows.sweep.probes.decompose_probes`) with f00 taken as the mean of the estimator's own
-(frequency − shift).
+One sweep: for each orientation one driver cycle of ``repeats`` ring-downs; once the driver says
+how many it recorded, their fits are collected (or the caller says their time is up); after the
+last orientation every OK ring-down is decomposed (:func:`mows.sweep.probes.decompose_probes`)
+with f00 taken as the mean of the estimator's own (frequency − shift).
 
 An adaptive sweep (a goal with a ``target``) lets :class:`mows.sweep.planner.AdaptivePlanner`
 choose each next orientation and its repeats from the ring-downs so far; the sweep is decomposed
@@ -18,9 +18,9 @@ is read from the ring-downs' stamps (first to last, plus a turn and a ring-down)
 
 The sweep's probes are those ``SweepSettings.probes`` lists (the estimator's list), else the one
 ``probe`` the goal is run with, as probe 0. It collects one fit per probe and ring-down, keeps
-each probe's fits in a record of its own, with the step (the orientation's index) each was
-taken at, and decomposes the probes' shares together (:mod:`mows.sweep.probes`). Listed probes
-ring together under the multi-tone drive, each fit measuring its swing, and the 3θ0 curvature is
+each probe's fits in a record of its own, with the step (the orientation's index) each was taken
+at, and decomposes the probes' shares together (:mod:`mows.sweep.probes`). Listed probes ring
+together under the multi-tone drive, each fit measuring its swing, and the 3θ0 curvature is
 fitted; the lone probe rings from the housing stop. The angles it commands are the stage's; each
 fit comes back at its probe's own θ0 (the stage's angle plus the probe's home orientation),
 which the decomposition takes. Its feedback's shift is the first probe's at its own θ0 of this
@@ -31,17 +31,25 @@ import dataclasses
 import enum
 import functools
 import math
-from collections.abc import Callable
 
 import numpy as np
 
 from mows.device.cycle.phases import CycleRequest
 from mows.estimate.probe_set import ProbeEntry
-from mows.estimate.stream import Estimated
 from mows.physics.probe import Probe
-from mows.records.stamps import NS_PER_S
 from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
-from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal
+from mows.sweep.events import (
+    REPEATS_PER_ANGLE_RANGE,
+    CycleAnswer,
+    SweepFeedback,
+    SweepFit,
+    SweepGoal,
+    SweepMap,
+    SweepOutcome,
+    SweepSettings,
+    SweepStep,
+)
+from mows.sweep.planner import AdaptivePlanner, PlanEnd
 from mows.sweep.probes import (
     DecomposeOptions,
     ProbeSweep,
@@ -51,10 +59,9 @@ from mows.sweep.probes import (
     report,
     step_orientations_rad,
 )
-from mows.sweep.record import SweepPoint, SweepRecord
+from mows.sweep.record import SweepRecord
 
 DECOMPOSE_NEAR = 1.25  # decompose an adaptive sweep once the prediction is this close to the target
-REPEATS_PER_ANGLE_RANGE = (1, 100)  # ring-downs per orientation a goal or the settings may ask for
 
 
 class SweepState(enum.StrEnum):
@@ -63,160 +70,6 @@ class SweepState(enum.StrEnum):
     IDLE = "idle"
     SWEEPING = "sweeping"
     DECOMPOSING = "decomposing"
-
-
-@dataclasses.dataclass(frozen=True)
-class SweepSettings:
-    """What a goal leaves unsaid, and how the sweep is decomposed."""
-
-    repeats_per_angle: int = 5
-    angle_step_deg: float = 30.0
-    model: str = "first_principles"
-    f00_free: bool = False
-    repeat_s: float = 0.82  # adaptive sweeps: device time of one ring-down (kick, ring-down, gap)
-    turn_s: float = 0.5  # adaptive sweeps: device time of a turn and the settling
-    manual_orientation: bool = False  # no motor: the operator turns the stage and confirms each orientation
-    probes: tuple[ProbeEntry, ...] = ()  # several probes in each window; (): one
-
-
-def turn_prompt(theta0_rad: float) -> str:
-    """What the operator of a stage without a motor is asked before a cycle at ``theta0_rad``."""
-    return f"turn the probe to θ0 = {math.degrees(theta0_rad):g}° and confirm"
-
-
-@dataclasses.dataclass(frozen=True)
-class SweepGoal:
-    """A sweep as asked: no angles, 0 repeats or no model mean the settings' choice. With a
-    ``target`` the sweep is adaptive: the angles, if any, are the orientations it may choose from."""
-
-    theta0_rad: tuple = ()
-    repeats_per_angle: int = 0
-    model: str = ""
-    target: PrecisionGoal | None = None
-
-    @classmethod
-    def asked(
-        cls,
-        theta0_rad=(),
-        repeats_per_angle: int = 0,
-        model: str = "",
-        target: str = "",
-        field_std_t: float = 0.0,
-        gradient_std_t_per_m: float = 0.0,
-        budget_s: float = 0.0,
-    ) -> "SweepGoal":
-        """The goal as a client words it (a RotationSweep goal): no ``target`` quantity is a
-        sweep over the angles; zero target σ take :class:`PrecisionGoal`'s defaults and a zero
-        budget means none. ValueError, with the reason, for a target that cannot be met."""
-        precision = None
-        if target:
-            defaults = PrecisionGoal()
-            precision = PrecisionGoal(
-                target,
-                field_std_t or defaults.field_std_t,
-                gradient_std_t_per_m or defaults.gradient_std_t_per_m,
-                budget_s or math.inf,
-            )
-        return cls(tuple(theta0_rad), repeats_per_angle, model, precision)
-
-
-@dataclasses.dataclass(frozen=True)
-class CycleAnswer:
-    """The answer to a :class:`~mows.device.cycle.phases.CycleRequest`: the cycle that ran and how many
-    ring-downs it recorded, or ``problem``, why no cycle ran ('' when it did)."""
-
-    cycle_id: int = 0
-    ringdowns_recorded: int = 0
-    problem: str = ""
-
-
-@dataclasses.dataclass(frozen=True)
-class SweepFit:
-    """One ring-down fit as it arrives: ``point`` is None unless the fit is OK. ``source`` (the
-    fit as received) is handed back in the feedback untouched."""
-
-    cycle_id: int
-    tuning: bool
-    point: SweepPoint | None
-    source: object = None
-    probe_id: int = 0
-
-    @classmethod
-    def from_message(cls, fit) -> "SweepFit":
-        """A RingdownFit message, live or read from a bag."""
-        point = SweepPoint.from_message(fit) if fit.status_name == "OK" else None
-        return cls(fit.cycle_id, fit.tuning, point, fit, fit.probe_id)
-
-    @classmethod
-    def from_estimated(cls, estimated: Estimated) -> "SweepFit":
-        """A ring-down fitted offline as the estimator fits it (:mod:`mows.estimate.stream`)."""
-        fit, window, shift = estimated.fit, estimated.window, estimated.estimate
-        point = None
-        if fit.ok:
-            t_s = estimated.stamp_ns / NS_PER_S
-            point = SweepPoint.from_fit(
-                fit, shift.frequency_shift_hz, shift.frequency_shift_std_hz, t_s, estimated.stamp_ns
-            )
-        return cls(window.cycle_id, window.tuning, point, estimated, fit.probe_id)
-
-
-@dataclasses.dataclass(frozen=True)
-class SweepFeedback:
-    """One orientation done: its weighted mean shift and the fits of its cycle."""
-
-    angle_index: int
-    n_angles: int
-    theta0_rad: float
-    shift_hz: float
-    shift_std_hz: float
-    n_ok: int
-    fits: tuple
-
-
-@dataclasses.dataclass(frozen=True)
-class SweepMap:
-    """One probe's decomposed sweep to publish: the decomposition, its ring-downs, the f00
-    used and the probe's id."""
-
-    sweep_id: int
-    decomposition: Decomposition
-    record: SweepRecord
-    f00_hz: float
-    probe_id: int = 0
-    cycle_ids: tuple[int, ...] = ()  # the sweep's measurement cycles, in order: where it begins and ends
-
-
-@dataclasses.dataclass(frozen=True)
-class SweepOutcome:
-    """A finished sweep: succeeded (``ok``), cancelled, or failed, with why; ``map`` once it
-    was decomposed (successfully or not)."""
-
-    ok: bool
-    message: str
-    cancelled: bool = False
-    maps: tuple[SweepMap, ...] = ()  # each probe's, in the order listed
-
-    @property
-    def map(self) -> SweepMap | None:
-        """The first probe's map (the action result's), None before a decomposition."""
-        return self.maps[0] if self.maps else None
-
-
-@dataclasses.dataclass
-class SweepStep:
-    """What the caller does next, in this order: report ``feedback``, publish each of
-    ``publish`` (a probe's failed decomposition too, beside others that succeeded), then one of:
-    ask the operator to turn the stage to ``turn`` (rad, :func:`turn_prompt`) and call
-    :meth:`SweepRunner.on_turned` once confirmed, run ``run_cycle``, call ``decompose``
-    (CPU-bound, seconds) and feed its result, each probe's decomposition, to
-    :meth:`SweepRunner.on_decomposed`, end with ``finished``, or (none of these) wait for fits."""
-
-    feedback: SweepFeedback | None = None
-    publish: tuple[SweepMap, ...] = ()
-    turn: float | None = None
-    run_cycle: CycleRequest | None = None
-    decompose: Callable[[], list[Decomposition]] | None = None
-    finished: SweepOutcome | None = None
 
 
 class SweepRunner:

@@ -27,7 +27,7 @@ from mows.workspace.design import boundary_positions, candidate_designs, informa
 from mows.workspace.fit import DegreeChoice, WorkspaceModel, choose_degree, fit
 from mows.workspace.harmonics import SolidHarmonics, coefficient_count
 from mows.workspace.observations import Observation, gravity_field_t, plane_readout, sweep_observation
-from mows.workspace.poses import PoseError, fit_with_pose_errors
+from mows.workspace.poses import PoseError, fit_with_pose_errors, rotation
 
 # What a sweep is expected to give before the first is in (σ of Bx, By in T, of the gradient's
 # three in T/m): ten orientations of one ring-down each at the paper's frequency noise.
@@ -110,23 +110,37 @@ def pose_distance(a: StampedPose, b: StampedPose) -> tuple[float, float]:
     return float(np.linalg.norm(a.position_m - b.position_m)), rotation_angle_rad(a.rotation, b.rotation)
 
 
+def turned(pose: StampedPose, theta0_rad: float) -> StampedPose:
+    """``pose`` turned by ``theta0_rad`` about its own z, the normal of the probe's plane: where
+    an arm whose last joint turns the probe puts it for the orientation θ0."""
+    return dataclasses.replace(
+        pose, orientation_xyzw=matrix_quaternion(pose.rotation @ rotation(np.array([0.0, 0.0, theta0_rad])))
+    )
+
+
 class PoseWatch:
     """``measured_cp`` through a move and a sweep. The arm is still when two successive reports
     are within ``tolerance_m`` and ``tolerance_rad`` of each other, and at a goal when its
-    report is that near the goal; a sweep's reports must stay that near its first."""
+    report is that near the goal; a sweep's reports must stay that near its first, the
+    sweep's pose (``start``). With ``turns_probe`` the arm turns the probe about the plane's
+    normal through the sweep: then only the position and the normal must stay."""
 
-    def __init__(self, tolerance_m: float, tolerance_rad: float, max_age_s: float, reach: Reach):
+    def __init__(self, tolerance_m: float, tolerance_rad: float, max_age_s: float, reach: Reach, turns_probe=False):
         self.tolerance_m, self.tolerance_rad, self.max_age_s, self.reach = tolerance_m, tolerance_rad, max_age_s, reach
+        self.turns_probe = turns_probe
         self.latest: StampedPose | None = None
         self._previous: StampedPose | None = None
-        self._start: StampedPose | None = None
+        self.start: StampedPose | None = None
         self._moved = (0.0, 0.0)
 
     def on_pose(self, pose: StampedPose) -> None:
         self._previous, self.latest = self.latest, pose
-        if self._start is not None and pose.frame_id == self._start.frame_id:
-            distance = pose_distance(pose, self._start)
-            self._moved = (max(self._moved[0], distance[0]), max(self._moved[1], distance[1]))
+        if self.start is not None and pose.frame_id == self.start.frame_id:
+            distance_m, angle_rad = pose_distance(pose, self.start)
+            if self.turns_probe:  # the plane's normal, the turn's axis, must stay
+                normals = float(np.dot(pose.rotation[:, 2], self.start.rotation[:, 2]))
+                angle_rad = float(np.arccos(np.clip(normals, -1.0, 1.0)))
+            self._moved = (max(self._moved[0], distance_m), max(self._moved[1], angle_rad))
 
     def _near(self, a: StampedPose | None, b: StampedPose | None) -> bool:
         if a is None or b is None or a.frame_id != b.frame_id:
@@ -150,7 +164,7 @@ class PoseWatch:
             return f"the arm reports poses in frame {self.latest.frame_id!r}, the map is in {frame_id!r}"
         problem = pose_problem(self.latest, now_ns, self.max_age_s, not self.still(), self.reach)
         if not problem:
-            self._start, self._moved = self.latest, (0.0, 0.0)
+            self.start, self._moved = self.latest, (0.0, 0.0)
         return problem
 
     def end_problem(self, now_ns: int) -> str:

@@ -48,7 +48,7 @@ from mows.lab.model.least_squares import FittedParameter, parameters_dict
 from mows.lab.selection.stepwise import MAX_AUTO_STEPS, HistoryStep, history_step, search
 from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
-from mows.sweep.runner import SweepMap
+from mows.sweep.events import SweepMap
 
 CHECK_SIGMAS = 3.0  # a physical value further than this from its free fit is noted
 INCONSISTENT_SIGMAS = 5.0  # … and further than this makes a statistically adequate model inconsistent

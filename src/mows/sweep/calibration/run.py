@@ -27,7 +27,7 @@ from mows.sweep.calibration.schedule import (
     CalibrationSchedule,
     CalibrationStep,
 )
-from mows.sweep.runner import CycleAnswer, turn_prompt
+from mows.sweep.events import CycleAnswer, turn_prompt
 
 
 @dataclasses.dataclass(frozen=True)

@@ -117,18 +117,23 @@ class DriverOutputs:
         # Published only while armed (active): disarming flips it under the session's lock, so
         # no block with a sample read after the deactivation is published.
         for block in output.blocks if session.armed else ():
-            self._send(self.raw, block_msg(block, session.backend.info, values["frame_id"], values["sensor_frame_ids"]))
-            self.blocks_published += 1
+            sends = [(self.raw, block_msg(block, session.backend.info, values["frame_id"], values["sensor_frame_ids"]))]
             if session.stage_angle_rad is not None:  # the stage with every block: TF at its stamps
-                self._send(self.joints, joint_state_msg(block.stamp_ns, session.stage_angle_rad))
+                sends.append((self.joints, joint_state_msg(block.stamp_ns, session.stage_angle_rad)))
+            self._send(*sends)
+            self.blocks_published += 1
         for event in output.events:
-            self._send(self.excitation, excitation_msg(event, values["probe_frame_id"], session.epoch))
+            self._send((self.excitation, excitation_msg(event, values["probe_frame_id"], session.epoch)))
             if event.phase == Phase.FAULT:
                 self._logger.error(f"coils forced off: {event.reason}")
         for supply in output.supply:
-            self._send(self.supply, supply_msg(supply, values["probe_frame_id"]))
+            self._send((self.supply, supply_msg(supply, values["probe_frame_id"])))
 
-    def _send(self, publisher, message) -> None:
-        if self.recorder is not None:
-            self.recorder.write(publisher.topic_name, message, time.time_ns())
-        publisher.publish(message)
+    def _send(self, *sends) -> None:
+        """Each (publisher, message) of ``sends`` written, then each published: a block and its
+        joint state are in the bag together even when a shutdown stops the publishing between."""
+        for publisher, message in sends:
+            if self.recorder is not None:
+                self.recorder.write(publisher.topic_name, message, time.time_ns())
+        for publisher, message in sends:
+            publisher.publish(message)

@@ -25,7 +25,7 @@ PARAMETERS = (
         "raw_rate_hz", 1000.0, "the raw stream's plotted rate (samples averaged down to it), Hz", range=(1.0, 100000.0)
     ),
     ParamSpec(
-        "buffer_s", 5.0, "raw samples kept to draw each ring-down under its fit, s", range=(0.5, 60.0), read_only=True
+        "buffer_s", 20.0, "raw samples kept to draw each ring-down under its fit, s", range=(0.5, 60.0), read_only=True
     ),
     ParamSpec(
         "coil_current_cap_a",

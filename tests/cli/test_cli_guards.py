@@ -92,6 +92,9 @@ def work(tmp_path_factory):
     (d / "mount.urdf").write_text('<robot name="m"><link name="a"/></robot>\n')
     (d / "mount_not_xml.urdf").write_text("robot: {}\n")
     (d / "exits.py").write_text("import sys\n\nsys.exit(0)\n")
+    (d / "raises_exit.py").write_text("raise SystemExit(3)\n")
+    (d / "plugin.py").write_text(PLUGIN.format(body="return {'frequency_hz': 0.0 * k}"))
+    (d / "plugin_exits.py").write_text(PLUGIN.format(body="sys.exit(1)"))
     (d / "magic.mcap").write_bytes(b"\x89MCAP0\r\n")  # MCAP's magic and nothing else
     shutil.copytree(d / "bag", d / "latin_bag")
     metadata = d / "latin_bag" / "metadata.yaml"
@@ -108,6 +111,18 @@ def work(tmp_path_factory):
     if os.geteuid() == 0:  # only root makes device files: the test of one needs it
         os.mknod(d / "null", 0o666 | stat.S_IFCHR, os.makedev(1, 3))
     return d
+
+
+#: A plugin of one effect whose function does ``body``.
+PLUGIN = """import sys
+
+from mows.lab import effect
+
+
+@effect(name="boom", parameters={{"k": (0.0, -1.0, 1.0, "Hz")}})
+def boom(rows, k):
+    {body}
+"""
 
 
 def implausible_inputs(d: pathlib.Path) -> None:
@@ -140,6 +155,12 @@ def implausible_inputs(d: pathlib.Path) -> None:
     scene = "extends: paper_largest_spacing\nsensors:\n  positions_m: {}\n"
     (d / "scene_one_spot.yaml").write_text(scene.format("[[0.06, 0.0, 0.0], [0.06, 0.0, 0.0]]"))
     (d / "scene_at_magnet.yaml").write_text(scene.format("[[0.0, 0.0, 0.0], [0.03, 0.0, 0.0]]"))
+    (d / "scene_coils_1_mm.yaml").write_text(
+        "extends: paper_largest_spacing\nsetup: {preset: largest_spacing, distance_m: 0.001}\n"
+    )
+    (d / "scene_10_t.yaml").write_text(
+        "extends: paper_largest_spacing\nenvironment:\n  sources: [{type: uniform, field_t: [10.0, 0, 0]}]\n"
+    )
     (d / "scene_probe_and_probes.yaml").write_text(
         "extends: paper_largest_spacing\nprobe: paper\nprobes:\n  - probe: paper\n"
     )
@@ -230,6 +251,30 @@ CASES = [
         ["mount {d}/mount_not_xml.urdf", "not a URDF"],
     ),
     (
+        "lab-report-over-its-plugin",
+        ["lab", "report", "{d}/sweep.csv", "--plugin", "{d}/plugin.py", "-o", "{d}/plugin.py", "--force"],
+        2,
+        ["input", "plugin.py"],
+    ),
+    (
+        "lab-report-over-its-probe",
+        ["lab", "report", "{d}/sweep.csv", "--probe", "{d}/probe.yaml", "-o", "{d}/probe.yaml", "--force"],
+        2,
+        ["input", "probe.yaml"],
+    ),
+    (
+        "lab-plugin-raises-system-exit",
+        ["lab", "compare", "{d}/sweep.csv", "--plugin", "{d}/raises_exit.py"],
+        2,
+        ["{d}/raises_exit.py:1 tried to end the command (sys.exit(3))"],
+    ),
+    (
+        "lab-plugin-effect-that-exits",
+        ["lab", "diagnose", "{d}/sweep.csv", "--plugin", "{d}/plugin_exits.py", "--no-cv"],
+        2,
+        ["{d}/plugin_exits.py:8 tried to end the command (sys.exit(1))"],
+    ),
+    (
         "lab-plugin-that-exits",
         ["lab", "compare", "{d}/sweep.csv", "--plugin", "{d}/exits.py"],
         2,
@@ -268,6 +313,12 @@ CASES = [
     ("sim-fluxgates-at-one-spot", ["sim", "{d}/scene_one_spot.yaml"], 2, ["scene_one_spot.yaml", "at one spot"]),
     ("sim-fluxgate-at-the-magnet", ["sim", "{d}/scene_at_magnet.yaml"], 2, ["positions_m[0]", "at the magnet"]),
     ("sim-probe-and-probes", ["sim", "{d}/scene_probe_and_probes.yaml"], 2, ["both probe:", "give one of them"]),
+    (
+        "sim-coils-1-mm-from-the-probe",
+        ["sim", "{d}/scene_coils_1_mm.yaml"],
+        2,
+        ["scene_coils_1_mm.yaml", "distance_m = 0.001 m puts the probe inside the coil"],
+    ),
     ("sim-amplitude-2000", ["sim", "--amplitude-a", "2000"], 2, ["--amplitude-a = 2000 A", "beyond any bench"]),
     (
         "check-hardware-supply-step-0",
@@ -320,6 +371,21 @@ CASES = [
     ("lab-csv-cell-over-128-kib", ["lab", "compare", "{d}/huge_cell.csv"], 2, ["{d}/huge_cell.csv: line", "field"]),
     ("lab-compare-a-fifo", ["lab", "compare", "{d}/fifo"], 2, ["{d}/fifo is a FIFO, not a file"]),
     ("calibrate-a-fifo", ["calibrate", "{d}/fifo", "-o", "{d}/p.yaml"], 2, ["{d}/fifo is a FIFO, not a file"]),
+    *[
+        (f"{name}-a-{kind}", [*argv, f"{{d}}/{kind}", *more], 2, [f"{{d}}/{kind} is a {what}, not a file"])
+        for name, argv, more in (
+            ("sim-scenario", ["sim"], []),
+            ("lab-probe", ["lab", "compare", "{d}/sweep.csv", "--probe"], []),
+            ("lab-plugin", ["lab", "compare", "{d}/sweep.csv", "--plugin"], []),
+            ("lab-reference", ["lab", "compare", "{d}/sweep_no_reference.csv", "--reference"], []),
+            ("fit-bag", ["fit"], []),
+            ("viz-mount", ["viz", "{d}/bag", "--mount"], ["-o", "{d}/v.mcap"]),
+            ("check-hardware-supply-file", ["check-hardware", "--simulate", "--supply-file"], []),
+            ("check-hardware-device", ["check-hardware", "--simulate", "--device"], []),
+            ("calibrate-scenario", ["calibrate", "--simulate", "-o", "{d}/p.yaml", "--scenario"], []),
+        )
+        for kind, what in (("fifo", "FIFO"), ("null", "character device"))
+    ],
     # ... nor over a file the command read without naming it (a scenario's probe: or extends:)
     (
         "sim-over-its-scenario-s-probe",
@@ -583,27 +649,59 @@ def test_a_bad_input_is_one_line_with_its_status_and_changes_nothing(work, capsy
 
 
 #: Possible but seldom meant: used as given, with a note or warning that says what it may be.
+LAB = ["lab", "compare", "--no-cv"]
 WARNING_CASES = [
-    ("temperature-in-c", ["{d}/sweep_temperature_in_c.csv"], ["temperature_k is unusual", "°C given in K?"]),
-    ("duration-in-ms", ["{d}/sweep_duration_in_ms.csv"], ["duration_s is unusual", "ms given as s?"]),
-    ("amplitude-in-rad", ["{d}/sweep_amplitude_in_rad.csv"], ["amplitude_deg lies within", "radians"]),
-    ("theta-in-rad", ["{d}/sweep_theta_in_rad.csv"], ["theta0_deg lies within", "radians"]),
-    ("negative-t", ["{d}/sweep_negative_t.csv"], ["t_s is negative"]),
+    ("temperature-in-c", [*LAB, "{d}/sweep_temperature_in_c.csv"], ["temperature_k is unusual", "°C given in K?"]),
+    ("duration-in-ms", [*LAB, "{d}/sweep_duration_in_ms.csv"], ["duration_s is unusual", "ms given as s?"]),
+    ("amplitude-in-rad", [*LAB, "{d}/sweep_amplitude_in_rad.csv"], ["amplitude_deg lies within", "radians"]),
+    ("theta-in-rad", [*LAB, "{d}/sweep_theta_in_rad.csv"], ["theta0_deg lies within", "radians"]),
+    ("negative-t", [*LAB, "{d}/sweep_negative_t.csv"], ["t_s is negative"]),
     (
         "reference-20-k",
-        ["{d}/sweep.csv", "--probe", "{d}/probe_20_k.yaml"],
+        [*LAB, "{d}/sweep.csv", "--probe", "{d}/probe_20_k.yaml"],
         ["warning: reference_temperature_k = 20 K is unusual", "°C given in K?"],
     ),
+    ("field-10-t", ["sim", "{d}/scene_10_t.yaml"], ["warning: |field_t| = 10 T is unusual", "mT or µT given as T?"]),
 ]
 
 
 @pytest.mark.parametrize("argv, words", [c[1:] for c in WARNING_CASES], ids=[c[0] for c in WARNING_CASES])
 def test_an_unusual_value_is_used_and_said(work, capsys, argv, words):
     before = snapshot(work)
-    assert main(["lab", "compare", "--no-cv", *(word.format(d=work) for word in argv)]) == 0
+    assert main([word.format(d=work) for word in argv]) == 0
     out = "".join(capsys.readouterr())
     assert all(word in out for word in words), out
     assert snapshot(work) == before
+
+
+@pytest.mark.slow  # a fresh interpreter loads the lab: ~10 s each on a loaded machine
+@pytest.mark.parametrize(
+    "body, how",
+    [("os._exit(0)", "os._exit(0)"), ("raise KeyboardInterrupt", "raise KeyboardInterrupt, without a signal")],
+    ids=["os-exit", "keyboard-interrupt"],
+)
+def test_a_plugin_cannot_end_the_command_unseen(tmp_path, body, how):
+    """What only the command's own process shows: ``os._exit`` would end it with no word (and
+    in a test, the test's process), and a KeyboardInterrupt that no signal raised would pass
+    for Ctrl-C (its handlers, in place only there, know)."""
+    shutil.copy(SWEEP_TABLE, tmp_path / "sweep.csv")
+    (tmp_path / "plugin.py").write_text(PLUGIN.format(body=f"import os\n    {body}"))
+    before = snapshot(tmp_path)
+    command = [
+        sys.executable,
+        "-m",
+        "mows.cli.main",
+        "lab",
+        "diagnose",
+        "sweep.csv",
+        "--plugin",
+        "plugin.py",
+        "--no-cv",
+    ]
+    run = subprocess.run([*command, "--no-cv"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    line = f"mows lab diagnose: error: {tmp_path}/plugin.py:9 tried to end the command ({how}): "
+    assert run.returncode == 2 and run.stderr.startswith(line) and len(run.stderr.splitlines()) == 1, run.stderr
+    assert snapshot(tmp_path) == before
 
 
 EMULATOR_CASES = [

@@ -135,7 +135,10 @@ SCENARIOS = {
         "environment:\n  sources: [{type: linear_gradient, gradient_t_per_m: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}]\n",
         ["traceless"],
     ),
-    "1000 T": ("environment:\n  sources: [{type: uniform, field_t: [1000, 0, 0]}]\n", ["1000 T", "substeps"]),
+    "1000 T": (
+        "environment:\n  sources: [{type: uniform, field_t: [1000, 0, 0]}]\n",
+        ["|field_t| = 1000 T is beyond any bench", "0 … 100 T"],
+    ),
     "not YAML": ("excitation: [1\n", ["YAML", "line"]),
     "a quoted number": ('excitation: {amplitude_a: "2.0"}\n', ["excitation.amplitude_a = '2.0' is not a number"]),
     "NaN": ("excitation: {gap_s: .nan}\n", ["excitation.gap_s = nan must be a finite number"]),

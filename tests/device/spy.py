@@ -10,6 +10,6 @@ class SpyDevice(SimulatedDevice):
         super().__init__(scenario)
         self.drives = []
 
-    def set_coils(self, amplitudes_a, frequency_hz):
-        self.drives.append(np.array(amplitudes_a, float))
-        super().set_coils(amplitudes_a, frequency_hz)
+    def drive(self, amplitudes_a, frequencies_hz, *off_index):
+        self.drives.extend(np.array(amplitudes_a, float))
+        super().drive(amplitudes_a, frequencies_hz, *off_index)

@@ -38,7 +38,7 @@ from mows.device.instruments.scpi import (
     load_supply_file,
     open_scpi_supply,
 )
-from mows.device.interface import CoilCommand, DeviceFault, FieldCurrentCommand, LinkEvent
+from mows.device.interface import CoilCommand, CoilTone, DeviceFault, FieldCurrentCommand, LinkEvent
 from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
@@ -339,7 +339,7 @@ def test_a_cycle_switches_the_coils_at_the_commanded_samples(on_bench):
         np.testing.assert_allclose(amplitudes, expected, rtol=1e-9)
         assert frequency_hz == pytest.approx(event.frequency_hz, rel=1e-9)
     # The tuned frequency is the probe's resonance at the bench's field (10 mHz, as the sim backend).
-    assert outcome.frequency_hz == pytest.approx(card.device.expected_frequency_hz(), abs=0.01)
+    assert outcome.frequency_hz == pytest.approx(card.device.expected_frequencies_hz()[0], abs=0.01)
     assert card.underflows == card.overruns == backend.card_faults == 0
     backend.close()
 
@@ -347,7 +347,7 @@ def test_a_cycle_switches_the_coils_at_the_commanded_samples(on_bench):
 def test_commands_above_the_cap_are_refused_and_never_written(on_bench):
     card, backend = on_bench()
     with pytest.raises(ValueError, match="exceeds the cap"):
-        backend.send(CoilCommand(1, 5000, (10.5, 0.0), 112.0))
+        backend.send(CoilCommand(1, 5000, (CoilTone(0, 112.0, (10.5, 0.0)),)))
     poll_for(backend, 0.5)
     assert not card.drives
     backend.close()
@@ -355,11 +355,11 @@ def test_commands_above_the_cap_are_refused_and_never_written(on_bench):
 
 def drive(backend, items, duration_s=2.0, command_id=1):
     """A drive of ``duration_s`` from the first sample the backend takes; its on and off samples."""
-    backend.send(CoilCommand(command_id, 0, (0.5, -0.3), 112.0))
+    backend.send(CoilCommand(command_id, 0, (CoilTone(0, 112.0, (0.5, -0.3)),)))
     items += backend.poll(0.05)
     on = next(i.applied_sample_index for i in items if getattr(i, "command_id", None) == command_id)
     off = on + round(duration_s * 20_000.0)
-    backend.send(CoilCommand(command_id + 1, off, (0.0, 0.0), 0.0))
+    backend.send(CoilCommand(command_id + 1, off))
     return on, off
 
 

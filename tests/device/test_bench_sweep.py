@@ -75,6 +75,17 @@ def daqmx_rig(scenario, installed):
     return BenchRig(session(backend, scenario), scenario, card.turn_probe, manual=True), card.device
 
 
+@pytest.fixture
+def closing():
+    """Closes each session handed to it when the test ends, passed or failed. The simulated
+    supplies of one process are one pyvisa-sim instrument: a bench left open would switch the
+    next test's supply off (its watchdog, once nobody reads it)."""
+    sessions: list = []
+    yield sessions.append
+    for opened in sessions:
+        opened.close()
+
+
 def session(backend, scenario):
     config = SessionConfig(0.025, SETTINGS, scenario.setup, CAP, scenario.probe.f00_hz, fit_ringdown)
     return DeviceSession(backend, config, armed=True)
@@ -92,8 +103,9 @@ def pulls(decomposition, device):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("make_rig", [sim_rig, daqmx_rig], ids=["sim", "nidaqmx+scpi"])
-def test_a_sweep_decomposes_within_two_sigma(make_rig, installed):
+def test_a_sweep_decomposes_within_two_sigma(make_rig, installed, closing):
     rig, device = make_rig(load_scenario("calibration_gradient"), installed)
+    closing(rig.session)
     assert rig.supply(SUPPLY_A).accepted
     outcome = rig.sweep(ANGLES_RAD, 2)
     assert outcome.ok, outcome.message
@@ -142,11 +154,12 @@ def test_a_calibration_on_the_simulator_backend_recovers_the_probe():
 
 
 @pytest.mark.slow
-def test_a_calibration_on_the_unipolar_supply_recovers_the_probe_with_the_lever_check(installed):
+def test_a_calibration_on_the_unipolar_supply_recovers_the_probe_with_the_lever_check(installed, closing):
     scenario, gradient = load_scenario("calibration"), load_scenario("calibration_gradient")
     outcomes = []
     for scene, wiring in ((scenario, "helmholtz"), (gradient, GRADIENT_WIRING)):
         rig, _ = daqmx_rig(scene, installed)
+        closing(rig.session)
         limits = rig.session.backend.supply_limits
         plan = CalibrationPlan(UNIPOLAR_CURRENTS_A[::2], (0.0, math.pi), wiring=wiring)
         plan.check_supply(limits.min_current_a, limits.cap_a)  # as the calibrator checks a goal
@@ -166,8 +179,9 @@ def test_a_calibration_on_the_unipolar_supply_recovers_the_probe_with_the_lever_
         calibrated(at_zero_deg[:1], scenario_wirings(scenario))
 
 
-def test_the_paper_plan_is_refused_up_front_on_the_unipolar_supply(installed):
+def test_the_paper_plan_is_refused_up_front_on_the_unipolar_supply(installed, closing):
     rig, _ = daqmx_rig(load_scenario("calibration"), installed)
+    closing(rig.session)
     supply = rig.session.backend.supply
     writes = supply.writes
     limits = rig.session.backend.supply_limits

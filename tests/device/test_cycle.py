@@ -13,7 +13,7 @@ from device.spy import SpyDevice
 from mows.device.backends.sim_backend import SimBackend
 from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.cycle.sequencer import CycleSequencer
-from mows.device.interface import CoilCommand, CommandResult
+from mows.device.interface import CoilCommand, CoilTone, CommandResult
 from mows.device.simulated.scheduled import ScheduledDevice
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
@@ -89,7 +89,7 @@ def test_tuning_converges_to_the_resonance():
     start_hz = 107.0  # 5 % below the probe's resonance: the drive is far off it
     session = session_on_simulator(frequency_hz=start_hz)
     (outcome,), events = run(session)
-    truth_hz = session.backend.device.device.expected_frequency_hz()
+    truth_hz = session.backend.device.device.expected_frequencies_hz()[0]
     assert abs(start_hz - truth_hz) > 5.0
     assert [fit.ok for fit in outcome.tuning_fits] == [True, True]
     # The tuned frequency is the fitted ring-down frequency: within 10 mHz of the truth.
@@ -160,7 +160,7 @@ def test_an_excitation_stopped_before_its_answers_counts_towards_the_duty_limit(
     (turn,) = sequencer.start(CycleRequest(0.3)).commands
     sequencer.on_result(CommandResult(turn.command_id, True, turn.at_sample_index))
     on, off = sequencer.on_samples(samples(1, 10)).commands
-    assert isinstance(on, CoilCommand) and any(on.amplitudes_a) and not any(off.amplitudes_a)
+    assert isinstance(on, CoilCommand) and not on.off and off.off
     sequencer.on_samples(samples(11, on.at_sample_index + 50 - 11))  # no answer yet
     assert sequencer.duty_fraction() == 0.0
     assert sequencer.emergency_stop("operator").coils_off_now
@@ -259,18 +259,23 @@ SCENARIO = load_scenario()
 currents = st.floats(-50.0, 50.0, allow_nan=False)
 
 
+def one_tone(*amplitudes_a):
+    """One probe's coil drive at 110 Hz: a tone of one."""
+    return (CoilTone(0, 110.0, amplitudes_a),)
+
+
 def test_the_probe_turns_while_only_a_switch_off_waits_and_never_while_the_coils_are_on_or_commanded():
     # The host switches the coils off whenever its link comes up; a cycle's first turn can reach
     # the device before that switch-off applies, and must not be refused as "coils are on".
     device = ScheduledDevice(SpyDevice(SCENARIO), CurrentCap(CAP_A))
-    device.schedule_coils(0, (0.0, 0.0), 110.0)  # the off a link-up sends, not applied yet
+    device.schedule_coils(0, one_tone(0.0, 0.0))  # the off a link-up sends, not applied yet
     assert device.schedule_orientation(10, 0.5) == 10
     device.read_until(20)
-    device.schedule_coils(30, (1.0, -1.0), 110.0)
+    device.schedule_coils(30, one_tone(1.0, -1.0))
     with pytest.raises(RuntimeError, match="cannot turn"):  # a switch-on waits
         device.schedule_orientation(40, 0.0)
     device.read_until(35)
-    device.schedule_coils(50, (0.0, 0.0), 110.0)
+    device.schedule_coils(50, one_tone(0.0, 0.0))
     with pytest.raises(RuntimeError, match="cannot turn"):  # on, with its switch-off waiting
         device.schedule_orientation(60, 0.0)
     device.read_until(55)
@@ -287,9 +292,9 @@ def test_no_coil_drive_above_the_cap_reaches_the_simulated_device(cap_a, command
     for at_index, i1, i2 in commands:
         if max(abs(i1), abs(i2)) > limit:
             with pytest.raises(ValueError, match="exceeds the cap"):
-                device.schedule_coils(at_index, (i1, i2), 110.0)
+                device.schedule_coils(at_index, one_tone(i1, i2))
         else:
-            device.schedule_coils(at_index, (i1, i2), 110.0)
+            device.schedule_coils(at_index, one_tone(i1, i2))
     device.read_until(500)
     assert all(np.max(np.abs(drive)) <= limit for drive in spy.drives)
 
@@ -356,7 +361,7 @@ def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a,
     assert outcome.success
     coil_commands = [c for c in device.commands if isinstance(c, CoilCommand)]
     assert len(coil_commands) == 2 * (repeats + tuning)
-    assert all(max(abs(i) for i in c.amplitudes_a) <= cap_a for c in coil_commands)
+    assert all(abs(i) <= cap_a for c in coil_commands for t in c.tones for i in t.amplitudes_a)
 
 
 # --- the static-field supply through the session ------------------------------------------------

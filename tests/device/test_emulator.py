@@ -18,7 +18,7 @@ import pytest
 from device.spy import SpyDevice
 from mows.device.backends.serial_backend import SerialBackend
 from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
-from mows.device.interface import CoilCommand, FieldCurrentCommand, LinkEvent
+from mows.device.interface import CoilCommand, CoilTone, FieldCurrentCommand, LinkEvent
 from mows.device.protocol.payloads import Ack, Coils, FieldCurrent, Samples, Status
 from mows.device.serial.emulator import FRAME_S, DeviceEmulator
 from mows.device.serial.link import SerialLink
@@ -98,7 +98,7 @@ def test_commands_above_the_cap_never_reach_the_device(emulator, link):
     backend = SerialBackend(link, CurrentCap(CAP_A))
     collect(link, "the device to answer", lambda items: link.up)
     with pytest.raises(ValueError, match="exceeds the cap"):
-        backend.send(CoilCommand(1, 0, (CAP_A * 1.001, 0.0), 110.0))
+        backend.send(CoilCommand(1, 0, (CoilTone(0, 110.0, (CAP_A * 1.001, 0.0)),)))
     # Past the driver's check, straight onto the wire: the device refuses them itself.
     refused = {
         link.send(Coils(0, 0, 110.0, (0.0, -CAP_A * 1.5))): Ack.REFUSED_OVER_CAP,
@@ -122,7 +122,7 @@ def test_commands_above_the_cap_never_reach_the_device(emulator, link):
 def test_the_watchdog_switches_the_coils_off_when_the_driver_is_lost(emulator, link):
     backend = SerialBackend(link, CurrentCap(CAP_A))
     collect(link, "the device to answer", lambda items: link.up)
-    backend.send(CoilCommand(1, 0, (1.0, -1.0), 110.0))
+    backend.send(CoilCommand(1, 0, (CoilTone(0, 110.0, (1.0, -1.0)),)))
     collect(link, "the coils to go on", lambda items: emulator.device.coils_on)
     link.close()  # the driver is gone: no heartbeat, no frame
     wait_for(lambda: emulator.watchdog_trips, "the watchdog")
@@ -138,7 +138,7 @@ def test_the_watchdog_switches_the_coils_off_when_the_driver_is_lost(emulator, l
 def test_heartbeats_keep_the_coils_on(emulator, link):
     backend = SerialBackend(link, CurrentCap(CAP_A))
     collect(link, "the device to answer", lambda items: link.up)
-    backend.send(CoilCommand(1, 0, (1.0, -1.0), 110.0))
+    backend.send(CoilCommand(1, 0, (CoilTone(0, 110.0, (1.0, -1.0)),)))
     items = collect(
         link,
         "1 s of device time with the coils on",

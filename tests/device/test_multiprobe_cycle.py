@@ -25,10 +25,11 @@ from mows.device.backends.sim_backend import SimBackend
 from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.cycle.tone_groups import DEFAULT_SWING_RAD, on_stage, plan_probes
 from mows.device.interface import (
+    CoilCommand,
     CommandResult,
     FieldCurrentCommand,
-    MultiToneCommand,
-    refuse_tones,
+    coil_tones,
+    one_tone,
 )
 from mows.device.simulated.scheduled import OverCap
 from mows.device.stream.session import DeviceSession, SessionConfig
@@ -104,8 +105,8 @@ def test_tones_summed_above_the_cap_are_never_queued():
     )  # each tone alone is within the cap ...
     assert true_peak_a(tones, FAST.excite_s) > LOW_CAP_A  # ... their sum is not
     with pytest.raises(OverCap, match=r"peak at .* above the 0.25 A cap"):
-        backend.device.schedule_tones(0, tones, samples)
-    backend.send(MultiToneCommand(1, 0, tones[1:], samples))  # within the cap: taken
+        backend.device.schedule_coils(0, coil_tones(SCENE.setup, tones), samples)
+    backend.send(CoilCommand(1, 0, coil_tones(SCENE.setup, tones[1:]), samples))  # within the cap: taken
     backend.poll(0.0)
     while backend.device.next_index < samples + 100:
         backend.poll(0.0)
@@ -259,9 +260,9 @@ def test_tones_are_sized_by_the_devices_coils_not_by_the_named_preset():
 
 def test_devices_refuse_what_they_cannot_do_with_the_reason():
     tones = plan_probes(SCENE.placed_probes(), SCENE.setup, FAST.excite_s).group_tones(0)
-    drive = MultiToneCommand(1, 0, tones, 100)
+    drive = CoilCommand(1, 0, coil_tones(SCENE.setup, tones), 100)
     with pytest.raises(ValueError, match="the serial device drives one tone at a time"):
-        refuse_tones(drive, "serial device")
+        one_tone(drive, "serial device", len(SCENE.setup.coils))
     one_probe = SimBackend(SimulatedDevice(load_scenario()), CurrentCap(10.0), paced=False)
     with pytest.raises(ValueError, match=r"must be Tones of distinct probes 0 to 0"):
         one_probe.send(drive)  # the scene's three tones
@@ -275,7 +276,8 @@ def test_devices_refuse_what_they_cannot_do_with_the_reason():
     # One probe is a scene of one: its own tone drives it, as the tones of a scene drive theirs.
     (placed,) = load_scenario().placed_probes()
     start = one_probe.device.next_index
-    one_probe.send(MultiToneCommand(3, 0, (Tone.of(0, placed, placed.probe.f00_hz, 0.5),), 100))
+    one_tone_drive = coil_tones(load_scenario().setup, (Tone.of(0, placed, placed.probe.f00_hz, 0.5),))
+    one_probe.send(CoilCommand(3, 0, one_tone_drive, 100))
     (answer,) = [item for item in one_probe.poll(0.0) if isinstance(item, CommandResult)]
     assert answer.accepted and answer.applied_sample_index == start
     assert list(one_probe.device.coil_log) == [(start, True), (start + 100, False)]

@@ -20,7 +20,7 @@ from mows.sim.simulator import SimulatedDevice
 def test_ringdowns_start_at_the_stop_wherever_the_requested_excitation_ends():
     scenario = load_scenario("calibration")
     device = SimulatedDevice(scenario, np.random.default_rng(5))
-    frequency = device.expected_frequency_hz()
+    frequency = float(device.expected_frequencies_hz()[0])
     stop_deg = math.degrees(scenario.probe.theta_stop_rad)
     # Four requested lengths an eighth of a drive period apart: the phase of a cut after a
     # fixed time would step through 45°, 90°, 135° of the swing.

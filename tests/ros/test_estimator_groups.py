@@ -24,7 +24,7 @@ from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz, coupled_r
 from mows.physics.fluxgate import FluxgatePair
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
-from mows.sim.simulator import swinging_pickup_t
+from mows.sim.readings import swinging_pickup_t
 from node_processes import assert_stops_cleanly
 from scenes import scene_device
 from test_estimator_node import FS

@@ -64,7 +64,8 @@ def test_a_recording_holds_the_stage_so_its_view_has_the_mount_s_frames(demo_ses
     recorded = {}
     for message in bags.read_bag(demo_session.bag, ["/mows/raw", "/mows/joint_states", "/mows/ringdown"]):
         recorded.setdefault(message.topic, []).append(message.message)
-    # The stage's angle with every block, as published, once the first cycle has made it known.
+    # The stage's angle with every block, once the first cycle has made it known (the last
+    # block's too, when the shutdown stopped the publishing after its block was recorded).
     joints = [stamps.nanoseconds(m.header.stamp) for m in recorded["/mows/joint_states"]]
     blocks = [stamps.nanoseconds(m.header.stamp) for m in recorded["/mows/raw"]]
     assert joints and joints == [stamp for stamp in blocks if stamp >= joints[0]]

@@ -12,7 +12,7 @@ import pytest
 from scipy import integrate
 
 from mows.physics.fluxgate import NoiseModel
-from mows.physics.multitone import Tone, drive_currents_a
+from mows.physics.multitone import Tone, coil_amplitudes_a, drive_currents_a
 from mows.physics.sources import PointDipole
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -57,7 +57,7 @@ def test_the_driven_probes_follow_the_equation_of_motion_written_from_the_fields
     tones = [Tone.of(k, p, f, 0.2) for k, (p, f) in enumerate(zip(device.placed, frequencies))]
     start = np.r_[device.truth.theta_rad, device.truth.theta_dot_rad_per_s]
     fs, driven, free = device.sample_rate_hz, 160, 80
-    device.drive(tones, driven)
+    device.drive(coil_amplitudes_a(device.setup, tones), [t.frequency_hz for t in tones], driven)
     theta = device.read(driven + free).theta_rad
     times = np.arange(driven + free) / fs
     options = dict(method="DOP853", rtol=1e-10, atol=1e-12)

@@ -246,7 +246,7 @@ def test_d_anti_helmholtz_shift_against_the_published_and_first_principles_terms
 def test_e_ringdown_follows_first_harmonic_balance_within_0p1_mhz_at_5_mt():
     scenario = bare((5e-3, 0, 0))
     freqs, amplitudes = cycle_frequencies(*ring(scenario, math.radians(23.0), 0.6))
-    potential = SimulatedDevice(scenario).potential()
+    potential = SimulatedDevice(scenario).potentials()[0]
     balance = np.array([potential.frequency_hz(a) for a in amplitudes])
     worst = np.abs(freqs - balance).max()
     print(
@@ -274,7 +274,7 @@ def exact_period_frequency_hz(field_t, amplitude_rad):
 def test_e_undamped_swing_has_the_exact_period_and_harmonic_balance_is_close_below_15_degrees(field_t):
     undamped = P.replace(damping_per_s=0.0)
     scenario = bare((field_t, 0, 0), probe=undamped)
-    potential = SimulatedDevice(scenario).potential()
+    potential = SimulatedDevice(scenario).potentials()[0]
     for amplitude_deg in (10.0, 15.0, 23.0):
         amplitude = math.radians(amplitude_deg)
         simulated = mean_frequency_hz(*ring(scenario, amplitude, 0.3))
@@ -394,7 +394,7 @@ def test_one_read_equals_two_reads_noise_included():
     blocks = []
     for cuts in ((4000,), (1500, 2500)):
         device = SimulatedDevice(scenario)
-        device.set_coils(scenario.setup.currents_a(0.0, 2.0), P.f00_hz)
+        device.drive([scenario.setup.currents_a(0.0, 2.0)], [P.f00_hz])
         blocks.append(np.concatenate([device.read(n).samples.samples_t for n in cuts]))
     np.testing.assert_array_equal(blocks[0], blocks[1])
 
@@ -439,12 +439,12 @@ def test_tilted_plane_turns_the_magnet_into_a_pendulum():
 def test_commands_are_checked():
     device = SimulatedDevice(load_scenario())
     with pytest.raises(ValueError, match="exceeds the cap"):
-        device.set_coils([10.5, 0.0], 112.0)
+        device.drive([[10.5, 0.0]], [112.0])
     with pytest.raises(ValueError, match="frequency_hz"):
-        device.set_coils([1.0, 0.0], 0.0)
+        device.drive([[1.0, 0.0]], [0.0])
     with pytest.raises(ValueError, match="2 coils"):
-        device.set_coils([1.0, 0.0, 0.0], 112.0)
-    device.set_coils([1.0, -1.0], 112.0)
+        device.drive([[1.0, 0.0, 0.0]], [112.0])
+    device.drive([[1.0, -1.0]], [112.0])
     with pytest.raises(RuntimeError, match="switch the coils off"):
         device.set_orientations([1.0])
 

@@ -18,7 +18,7 @@ from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import UniformField
-from mows.sim.simulator import swinging_pickup_t
+from mows.sim.readings import swinging_pickup_t
 from scenes import scene_device
 
 RATE_HZ = 10_000.0

@@ -29,6 +29,7 @@ from mows.device.cycle.tone_groups import plan_probes
 from mows.device.stream.simulated_cycle import simulate_cycle
 from mows.physics.coils import excitation_samples
 from mows.physics.fluxgate import NoiseModel
+from mows.physics.multitone import coil_amplitudes_a
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
@@ -82,9 +83,9 @@ def solve_ivp_cycle(
     equation of motion; the excitation ends where the cycle's does, at a drive-current peak
     (:func:`mows.physics.coils.excitation_samples`)."""
     fs = device.sample_rate_hz
-    frequency = device.expected_frequency_hz()
+    frequency = float(device.expected_frequencies_hz()[0])
     currents = device.scenario.setup.currents_a(0.0, amplitude_a)
-    drive = device.equation_of_motion(currents, frequency, drive_t0_s=first_index / fs)
+    drive = device.equation_of_motion([currents], [frequency], drive_t0_s=first_index / fs)
     n_excite, n_ring = excitation_samples(excite_s, frequency, fs), int(round(ringdown_s * fs))
     excited = solve_ivp_theta(drive, [device.truth.rest_angle_rad[0], 0.0], first_index, n_excite, fs)
     ringing = solve_ivp_theta(device.equation_of_motion(), excited[:, -1], first_index + n_excite, n_ring - 1, fs)
@@ -110,7 +111,7 @@ def run(repeats: int = 20, first_call: bool = True) -> dict:
         figures["first_call_with_compilation_s"], figures["first_call_from_cache_s"] = first_call_s()
     silent = scenario.replace(noise=NoiseModel())
     reference = SimulatedDevice(silent)
-    record = simulate_cycle(reference, 0.0, amplitude, SimulatedDevice(silent).expected_frequency_hz())
+    record = simulate_cycle(reference, 0.0, amplitude, SimulatedDevice(silent).expected_frequencies_hz()[0])
     start = time.perf_counter()
     theta_ivp = solve_ivp_cycle(SimulatedDevice(silent), amplitude, record.block.samples.first_sample_index)
     figures["solve_ivp_dop853_ms_per_cycle"] = 1e3 * (time.perf_counter() - start)
@@ -140,7 +141,7 @@ def multiprobe_reads(repeats: int) -> dict:
 
     def driven():
         fresh = next(at_rest)
-        fresh.drive(tones, second)
+        fresh.drive(coil_amplitudes_a(fresh.setup, tones), [t.frequency_hz for t in tones], second)
         fresh.read(second)
 
     one = SimulatedDevice(load_scenario())

@@ -21,11 +21,20 @@ import sys
 import traceback
 import warnings
 from collections.abc import Callable, Iterator
+from typing import NoReturn
 
 import numpy as np
 import yaml
 
-from mows.cli.status import EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_BUG, EXIT_OK, caused_by_interrupt, interrupted
+from mows.cli.status import (
+    EXIT_BAD_INPUT,
+    EXIT_BROKEN_PIPE,
+    EXIT_BUG,
+    EXIT_OK,
+    caused_by_interrupt,
+    interrupted,
+    raised_by_a_signal,
+)
 from mows.physics import ranges
 from mows.physics.schema import unreadable, yaml_problem
 from mows.records.files import read_input
@@ -164,31 +173,66 @@ def report_errors(prog: str, work: Callable[[], int], debug: bool = False) -> in
     return status
 
 
+class ExitCalled(SystemExit):
+    """``os._exit`` called in the command's own process while it works (:func:`_exits_refused`)."""
+
+
+@contextlib.contextmanager
+def _exits_refused() -> Iterator[None]:
+    """Within the block ``os._exit`` in this process raises :class:`ExitCalled` instead of ending
+    it unseen (a plugin's, say); a forked child (another process id) still exits by it."""
+    owner, exit_now = os.getpid(), os._exit
+
+    def refuse(status: int) -> NoReturn:
+        if os.getpid() != owner:
+            exit_now(status)
+        raise ExitCalled(status)
+
+    os._exit = refuse
+    try:
+        yield
+    finally:
+        os._exit = exit_now
+
+
 def _exit_site(error: BaseException) -> str:
-    """Where ``error`` was raised: the file and line of its innermost frame."""
-    frames = traceback.extract_tb(error.__traceback__)
+    """Where ``error`` was raised: the file and line of its innermost frame (of its caller's, for
+    :class:`ExitCalled`, whose innermost frame is the refusal's)."""
+    frames = list(traceback.extract_tb(error.__traceback__))[: -1 if isinstance(error, ExitCalled) else None]
     return f"{frames[-1].filename}:{frames[-1].lineno}" if frames else "the command"
+
+
+def _refuse_exit(prog: str, error: SystemExit | KeyboardInterrupt) -> int:
+    """The line and the status of code (a plugin's) that tried to end the command."""
+    if isinstance(error, KeyboardInterrupt):
+        how = "raise KeyboardInterrupt, without a signal"
+    else:
+        how = f"{'os._exit' if isinstance(error, ExitCalled) else 'sys.exit'}({error.code!r})"
+    print(
+        f"{prog}: error: {_exit_site(error)} tried to end the command ({how}): "
+        "a plugin must return or raise, never exit",
+        file=sys.stderr,
+    )
+    return EXIT_BAD_INPUT
 
 
 def _status(prog: str, work: Callable[[], int], debug: bool) -> int:
     """:func:`report_errors` without the warnings."""
     try:
-        return work()
+        with _exits_refused():
+            return work()
     except KeyboardInterrupt as error:
         if debug:
             raise
+        if not raised_by_a_signal():  # raised by code (a plugin's), not by Ctrl-C or SIGTERM
+            return _refuse_exit(prog, error)
         line, status = interrupted(prog, error)
         print(line, file=sys.stderr)
         return status
     except SystemExit as error:  # our commands return their status: this came from a plugin or library
         if debug:
             raise
-        print(
-            f"{prog}: error: {_exit_site(error)} tried to end the command (sys.exit({error.code!r})): "
-            "a plugin must return or raise, never exit",
-            file=sys.stderr,
-        )
-        return EXIT_BAD_INPUT
+        return _refuse_exit(prog, error)
     except BrokenPipeError:
         # The reader of stdout left (``| head``): nothing is wrong, and nothing more can be said
         # there; Python's own flush at exit would fail again, so stdout goes to /dev/null.

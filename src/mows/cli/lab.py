@@ -44,7 +44,7 @@ from mows.lab.chirp import PIECE_PERIODS
 from mows.lab.data.scale import check_reference, table_probes
 from mows.lab.data.table import check_design
 from mows.physics.probe import Probe
-from mows.records.files import check_output, writing
+from mows.records.files import check_output, read_input, writing
 
 MAX_ROWS = 500_000
 SUBSAMPLE_SEED = 0
@@ -163,6 +163,9 @@ def _add_ringdown_arguments(sub) -> None:
 
 
 def run(args) -> int:
+    for plugin in args.plugin:  # a plugin file is read as every input is: a FIFO or a device refused
+        if pathlib.Path(plugin).exists() or pathlib.Path(plugin).is_symlink():
+            read_input(plugin)
     default, named = probe_options(args.probe)
     inputs = [args.table, default, *named.values(), *args.plugin] + ([args.reference] if args.reference else [])
     probe = _probe(default)

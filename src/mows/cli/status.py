@@ -9,6 +9,7 @@ import os
 import signal
 import sys
 import threading
+import time
 
 EXIT_OK = 0
 EXIT_BUG = 1
@@ -33,6 +34,10 @@ class Terminated(KeyboardInterrupt):
 _received: list[int] = []  # the signals the handler has seen, in order
 _raised = False  # an interrupt is on its way up the stack: a second signal does not cut its clean-up
 _wakeup: int | None = None  # the read end of the pipe the C handler writes signal numbers to
+_handling = False  # this process's SIGINT and SIGTERM come to _on_signal (the command itself runs)
+# _unraisable is at work: a signal now is only noted. A plain flag: its last store in the hook
+# runs no code after it in which the signal sent again could be handled (within the hook).
+_in_hook = False
 _EXCEPTIONS: dict[int, type[KeyboardInterrupt]] = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: Terminated}
 EXIT_OF: dict[int, int] = {signal.SIGINT: EXIT_INTERRUPTED, signal.SIGTERM: EXIT_TERMINATED}
 
@@ -40,27 +45,37 @@ EXIT_OF: dict[int, int] = {signal.SIGINT: EXIT_INTERRUPTED, signal.SIGTERM: EXIT
 def _on_signal(signum, _frame) -> None:
     global _raised
     _received.append(signum)
-    if not _raised:
+    if not _raised and not _in_hook:  # raised in the hook, it would be discarded again
         _raised = True
         raise _EXCEPTIONS[_received[0]]
 
 
 def _unraisable(unraisable, default=sys.unraisablehook) -> None:
-    """An interrupt Python discarded (raised in a weakref callback, a __del__): sent again."""
-    global _raised
+    """An interrupt Python discarded (raised in a weakref callback, a __del__): sent again, from
+    another thread once this hook has returned (starting that thread waits for it, and a signal
+    that came meanwhile would be raised, and discarded, here)."""
+    global _raised, _in_hook
     if isinstance(unraisable.exc_value, KeyboardInterrupt) and _received:
         _raised = False
-        # from another thread, once this hook has returned: a signal raised here would be
-        # handled here, inside the hook, and discarded again
-        threading.Timer(0.0, os.kill, (os.getpid(), _received[0])).start()
+        _in_hook = True
+        try:
+            threading.Thread(target=_send_again, args=(_received[0],), daemon=True).start()
+        finally:
+            _in_hook = False
         return
     default(unraisable)
+
+
+def _send_again(signum: int) -> None:
+    while _in_hook:
+        time.sleep(0.001)
+    os.kill(os.getpid(), signum)
 
 
 def stop_on_signals() -> None:
     """SIGINT and SIGTERM end the command with one line and status 130 or 143, whenever they
     come (a SIGINT ignored by whoever started us, as for a background job, stays ignored)."""
-    global _wakeup
+    global _wakeup, _handling
     read, write = os.pipe()
     os.set_blocking(read, False)
     os.set_blocking(write, False)
@@ -70,6 +85,14 @@ def stop_on_signals() -> None:
         if signal.getsignal(signum) is not signal.SIG_IGN:
             signal.signal(signum, _on_signal)
     sys.unraisablehook = _unraisable
+    _handling = True
+
+
+def raised_by_a_signal() -> bool:
+    """Whether a KeyboardInterrupt now on its way up came from a signal: where the command's own
+    handlers are in place, only if they have seen one (otherwise code raised it); where they are
+    not (a caller's ``main(argv)``), it may have, and is taken so."""
+    return bool(_received) or not _handling
 
 
 def settle(prog: str, status: int) -> int:

@@ -10,42 +10,47 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+from collections.abc import Sequence
 
 from mows.device.protocol.payloads import DeviceInfo
 from mows.physics.coils import CoilSetup, CurrentCap
+from mows.physics.multitone import Tone, coil_amplitudes_a
 from mows.physics.supply import SupplyLimits
 
 
 @dataclasses.dataclass(frozen=True)
-class CoilCommand:
-    """Drive the coils with signed peak currents ``amplitudes_a`` at ``frequency_hz`` from
-    device sample ``at_sample_index`` on; all amplitudes zero switches them off."""
+class CoilTone:
+    """One probe's share of a coil drive: probe ``probe_id`` driven at ``frequency_hz`` with a
+    signed peak current per coil, ``amplitudes_a``."""
 
-    command_id: int
-    at_sample_index: int
-    amplitudes_a: tuple
+    probe_id: int
     frequency_hz: float
+    amplitudes_a: tuple[float, ...]
 
-    @property
-    def off(self) -> bool:
-        return not any(self.amplitudes_a)
+
+def coil_tones(setup: CoilSetup, tones: Sequence[Tone]) -> tuple[CoilTone, ...]:
+    """The coil currents of ``tones`` (:class:`mows.physics.multitone.Tone`) in ``setup``'s scheme,
+    one CoilTone each (ValueError if one alone is above the setup's cap)."""
+    rows = coil_amplitudes_a(setup, tones)
+    return tuple(CoilTone(t.probe_id, t.frequency_hz, tuple(float(a) for a in row)) for t, row in zip(tones, rows))
 
 
 @dataclasses.dataclass(frozen=True)
-class MultiToneCommand:
-    """Drive the coils with the sum of ``tones`` (:class:`mows.physics.multitone.Tone`, one per
-    probe) from device sample ``at_sample_index`` for ``samples`` samples, every tone's time
-    counted from switch-on; the cap holds for the summed peak over those samples. A
-    :class:`CoilCommand` of zeros switches every tone off at once."""
+class CoilCommand:
+    """Drive the coils with the sum of ``tones`` from device sample ``at_sample_index`` on, every
+    tone's time counted from switch-on: one probe's drive is one tone, several probes excited at
+    once one tone each. No tones (or all of zero current) switches every tone off at once.
+    ``samples``: how long the drive lasts, its cap held on the summed peak over those samples
+    (0: until the next coil command, the cap on each coil's summed amplitude)."""
 
     command_id: int
     at_sample_index: int
-    tones: tuple
-    samples: int
+    tones: tuple[CoilTone, ...] = ()
+    samples: int = 0
 
     @property
     def off(self) -> bool:
-        return not any(t.amplitude_a for t in self.tones)
+        return not any(any(t.amplitudes_a) for t in self.tones)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,12 +76,12 @@ class FieldCurrentCommand:
     current_a: float
 
 
-Command = CoilCommand | MultiToneCommand | OrientationCommand | FieldCurrentCommand
+Command = CoilCommand | OrientationCommand | FieldCurrentCommand
 
 
 def energises(command: Command) -> bool:
     """Whether ``command`` puts current through a coil: a coil drive, or a supply current other than zero."""
-    if isinstance(command, (CoilCommand, MultiToneCommand)):
+    if isinstance(command, CoilCommand):
         return not command.off
     return isinstance(command, FieldCurrentCommand) and command.current_a != 0.0
 
@@ -116,8 +121,8 @@ class Backend(abc.ABC):
     ``supply_limits`` is the static-field supply's cap, slew, resolution and polarity when the
     backend drives one it knows (None: no supply, or a device's own that does not say).
     ``info`` describes the device once it is known (None before a serial device answers);
-    ``probes`` lists a device's probes when it rings several at once (their cycles drive
-    :class:`MultiToneCommand`), empty for one probe, and ``coils`` are its coils where they stand
+    ``probes`` lists a device's probes when it rings several at once (their cycles drive one
+    tone each), empty for one probe, and ``coils`` are its coils where they stand
     among those probes, in the same frame: how hard a tone swings a probe depends on where the
     probe sits in the coils' field, which a coil setup known by name does not say (None for
     one probe, whose drive needs only the setup's scheme). ``command_lead_samples`` is how far ahead
@@ -175,18 +180,22 @@ class Backend(abc.ABC):
         return ""
 
 
-def refuse_tones(command: Command, device: str) -> CoilCommand | OrientationCommand | FieldCurrentCommand:
-    """``command``, unless it is a multi-tone drive: ValueError, ``device`` drives one tone only."""
-    if isinstance(command, MultiToneCommand):
+def one_tone(command: CoilCommand, device: str, n_coils: int) -> tuple[float, tuple[float, ...]]:
+    """The frequency and the coil currents of ``command`` for a ``device`` of ``n_coils`` coils
+    that drives one tone at a time (zeros: off); ValueError for several tones."""
+    if command.off:
+        return 0.0, (0.0,) * n_coils
+    if len(command.tones) > 1:
         raise ValueError(
             f"the {device} drives one tone at a time: a multi-tone excitation of several probes is refused"
         )
-    return command
+    (tone,) = command.tones
+    return tone.frequency_hz, tone.amplitudes_a
 
 
-def check_coil_command(command: CoilCommand, info: DeviceInfo, cap_a: float) -> None:
-    """ValueError if ``command`` has the wrong number of coils or a current above ``cap_a``
+def check_coil_currents(amplitudes_a: Sequence[float], info: DeviceInfo, cap_a: float) -> None:
+    """ValueError if ``amplitudes_a`` has the wrong number of coils or a current above ``cap_a``
     or the device's own cap: such a command is never sent."""
-    if len(command.amplitudes_a) != info.n_coils:
-        raise ValueError(f"{len(command.amplitudes_a)} coil amplitudes given; the device has {info.n_coils} coils")
-    CurrentCap(min(cap_a, info.current_cap_a)).check(command.amplitudes_a)
+    if len(amplitudes_a) != info.n_coils:
+        raise ValueError(f"{len(amplitudes_a)} coil amplitudes given; the device has {info.n_coils} coils")
+    CurrentCap(min(cap_a, info.current_cap_a)).check(amplitudes_a)

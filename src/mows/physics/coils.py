@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mows.physics import ranges
 from mows.physics.field import (
     FieldSource,
     anti_helmholtz_pair,
@@ -215,6 +216,12 @@ def two_coil_setup(
     ``distance_m`` from it."""
     placements = PLACEMENTS_DEG[name]
     probe = vector3("probe_position_m", probe_position_m)
+    if not distance_m > LSIP330_LENGTH_M / 2:  # the probe would sit inside the coil's winding
+        raise ValueError(
+            f"distance_m = {distance_m:g} m puts the probe inside the coil (its half length is "
+            f"{LSIP330_LENGTH_M / 2:g} m): give the distance from the probe to the coil's centre, m"
+        )
+    ranges.check("magnet_position_m", distance_m, "distance_m")
     coils = [
         lsip330(probe + distance_m * _in_plane(np.radians(where)), _in_plane(np.radians(along)))
         for where, along, _ in placements

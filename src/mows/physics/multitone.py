@@ -131,16 +131,27 @@ def drive_currents_a(setup: CoilSetup, tones: Sequence[Tone], times_s: ArrayLike
 
 
 def peak_current_a(setup: CoilSetup, tones: Sequence[Tone], duration_s: float) -> np.ndarray:
-    """(n_coils,): an upper bound of max |I_c(t)| over [0, ``duration_s``], within
-    PEAK_MARGIN_FRACTION of the true peak (module docstring), never above Σ_k |A_kc|."""
-    if not (math.isfinite(duration_s) and duration_s > 0.0):
-        raise ValueError(f"duration_s = {duration_s!r} must be finite and > 0")
-    amplitudes = np.abs(coil_amplitudes_a(setup, tones))  # (K, n_coils)
-    omegas = 2.0 * np.pi * np.array([t.frequency_hz for t in tones])
+    """(n_coils,): an upper bound of max |I_c(t)| over [0, ``duration_s``] of ``tones`` driven by
+    ``setup``'s scheme (:func:`summed_peak_a`)."""
+    return summed_peak_a(coil_amplitudes_a(setup, tones), [t.frequency_hz for t in tones], duration_s)
+
+
+def summed_peak_a(amplitudes_a: ArrayLike, frequencies_hz: ArrayLike, duration_s: float) -> np.ndarray:
+    """(n_coils,): an upper bound of max |I_c(t)| over [0, ``duration_s``] of tones of signed
+    coil amplitudes ``amplitudes_a`` (K, n_coils) at ``frequencies_hz`` (K,), within
+    PEAK_MARGIN_FRACTION of the true peak (module docstring), never above Σ_k |A_kc|, which it
+    is for an unbounded drive (``duration_s`` infinite: the tones come into phase)."""
+    if not (duration_s > 0.0):
+        raise ValueError(f"duration_s = {duration_s!r} must be > 0")
+    amplitudes = np.abs(np.asarray(amplitudes_a, float))  # (K, n_coils)
+    if math.isinf(duration_s):
+        return amplitudes.sum(axis=0)
+    omegas = 2.0 * np.pi * np.asarray(frequencies_hz, float)
     step_s = math.sqrt(8.0 * PEAK_MARGIN_FRACTION) / omegas.max()
     times = np.linspace(0.0, duration_s, int(math.ceil(duration_s / step_s)) + 1)
     h = times[1] - times[0]
-    sampled = np.abs(drive_currents_a(setup, tones, times)).max(axis=0)
+    carriers = np.sin(times[:, None] * omegas)  # (n, K)
+    sampled = np.abs(carriers @ np.asarray(amplitudes_a, float)).max(axis=0)
     margin = h * h / 8.0 * (omegas**2 @ amplitudes)
     return np.minimum(sampled + margin, amplitudes.sum(axis=0))
 

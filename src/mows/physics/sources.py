@@ -18,6 +18,7 @@ import numpy as np
 import scipy.constants
 from numpy.typing import ArrayLike
 
+from mows.physics import ranges
 from mows.physics.schema import as_points_m, plain, vector3
 
 MU0 = scipy.constants.mu_0  # T·m/A (CODATA 2022 in scipy 1.17)
@@ -121,6 +122,7 @@ class UniformField(FieldSource):
 
     def __init__(self, field_t: ArrayLike) -> None:
         self.uniform_t = vector3("field_t", field_t)
+        ranges.check("field_t", float(np.linalg.norm(self.uniform_t)), "|field_t|")
 
     def field_t(self, points_m: ArrayLike) -> np.ndarray:
         return np.broadcast_to(self.uniform_t, as_points_m(points_m).shape).copy()

@@ -30,10 +30,19 @@ import dataclasses
 import os
 import pathlib
 import stat
-import tempfile
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 
-from mows.records.journal import discard, own_prefix, put_back, recover, set_aside, write_intent, write_journal
+from mows.records.journal import (
+    create_beside,
+    discard,
+    intent_path,
+    journal_path,
+    put_back,
+    recover,
+    set_aside,
+    write_intent,
+    write_journal,
+)
 
 
 class OutputRefused(ValueError):
@@ -193,18 +202,16 @@ def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iter
             recover(directory, protected)
     targets = check_outputs(paths, inputs, force)
     outputs = Outputs(targets, [])
-    intents: list[pathlib.Path] = []
+    made: list[pathlib.Path] = []  # every file this writer makes, named before it exists
     try:
         for path in targets:
             try:
-                descriptor, name = tempfile.mkstemp(
-                    prefix=own_prefix(path), suffix=f".partial{path.suffix}", dir=path.resolve().parent
-                )
+                temporary = create_beside(path, f".partial{path.suffix}", made)
             except OSError as error:
                 raise _unwritable(path, error) from error
-            os.close(descriptor)
-            outputs.temporaries.append(pathlib.Path(name))
-            intents.append(write_intent(path, pathlib.Path(name)))
+            outputs.temporaries.append(temporary)
+            made.append(intent_path(path, temporary))
+            write_intent(path, temporary)
         yield outputs
         check_outputs(paths, inputs, force)
         for temporary in outputs.temporaries:
@@ -214,44 +221,58 @@ def writing(paths: Sequence, inputs: Iterable = (), force: bool = False) -> Iter
         outputs.replaced = [os.path.lexists(path) for path in targets]
         _replace_all(outputs.temporaries, targets)
     finally:
-        for temporary in outputs.temporaries:
-            # a directory that turned read-only keeps its temporary: the error that says so matters more
-            with contextlib.suppress(OSError):
-                temporary.unlink(missing_ok=True)
-        for intent in intents:
-            discard(intent)
+        # a directory that turned read-only keeps its temporary: the error that says so matters more
+        _each(discard, made)
+
+
+def _each(action: Callable[[pathlib.Path], None], paths: Sequence[pathlib.Path]) -> None:
+    """``action`` on every path, even when Ctrl-C or SIGTERM comes meanwhile (it is raised once
+    all are done): a clean-up cut short would leave files behind, or an old file not put back.
+    Each action may be done twice (removing a file that is gone is nothing)."""
+    interrupt = None
+    for path in paths:
+        while True:
+            try:
+                action(path)
+                break
+            except KeyboardInterrupt as error:
+                interrupt = error
+    if interrupt is not None:
+        raise interrupt
 
 
 def _replace_all(temporaries: Sequence[pathlib.Path], targets: Sequence[pathlib.Path]) -> None:
     """Rename each temporary onto its target, all or none. The files they replace are copied
     aside and the journal written first; a rename that fails (or Ctrl-C between two) puts back
     what the earlier ones replaced and removes what they created, and so does
-    :func:`mows.records.journal.recover` for a process killed between two renames."""
-    asides = []
+    :func:`mows.records.journal.recover` for a process killed between two renames. Which
+    renames were done is read from the disk (a temporary gone is renamed), not counted: an
+    interrupt may come between a rename and its count."""
+    journal = journal_path(targets)
+    copies: list[pathlib.Path] = []  # every copy made, named before it exists
+    asides: list[pathlib.Path | None] = []
+    done = False
     try:
-        for path in targets:
-            asides.append(set_aside(path))
-        journal = write_journal(temporaries, targets, asides)
-    except OSError as error:
-        for aside in asides:
-            discard(aside)
-        raise _unwritable(targets[len(asides) if len(asides) < len(targets) else 0], error) from error
-    placed = 0
-    try:
+        try:
+            for path in targets:
+                asides.append(set_aside(path, copies))
+            write_journal(temporaries, targets, asides)
+        except OSError as error:
+            raise _unwritable(targets[len(asides) if len(asides) < len(targets) else 0], error) from error
         for temporary, path in zip(temporaries, targets):
             try:
                 os.replace(temporary, path)
             except OSError as error:
                 raise _unwritable(path, error) from error
-            placed += 1
-    except BaseException:
-        for path, aside in reversed(list(zip(targets[:placed], asides))):
-            put_back(path, aside)
-        raise
+        done = True
     finally:
-        journal.unlink(missing_ok=True)
-        for aside in asides[placed:] if placed < len(targets) else asides:
-            discard(aside)  # copies of files left as they were, or of a commit done
+        renamed = {path for temporary, path in zip(temporaries, targets) if not os.path.lexists(temporary)}
+        if not done:
+            _each(lambda path: put_back(path, asides[targets.index(path)]), [p for p in targets if p in renamed])
+        # copies of files left as they were, or of a commit done; a copy put back is gone, and
+        # one that could not be is kept (its file is not as it was)
+        kept = set() if done else {a for p, a in zip(targets, asides) if p in renamed and a is not None}
+        _each(discard, [journal, *(copy for copy in copies if copy not in kept)])
 
 
 def _umask() -> int:

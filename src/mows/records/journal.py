@@ -12,9 +12,9 @@ run does the whole job again.
 A journal is acted on only when everything in it is as that writer left it: its process is
 gone, every path it names is in its own directory and carries its writer's name, none is an
 input of the command now running, and each file holds the very bytes the journal recorded (a
-file edited since the crash is the user's). Otherwise nothing is touched and a warning names
-the journal. Only files a journal (or a temporary's own name) shows the writer made are ever
-removed.
+file edited since the crash is the user's). Otherwise nothing is touched, not even that
+writer's temporaries, and a warning names the journal. Only files a journal (or a temporary's
+own name) shows the writer made are ever removed.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ import json
 import os
 import pathlib
 import re
+import secrets
 import shutil
-import tempfile
 import warnings
 from collections.abc import Iterable, Sequence
 
@@ -54,10 +54,15 @@ def digest(path: pathlib.Path) -> str:
     return sha.hexdigest()
 
 
+def journal_path(targets: Sequence[pathlib.Path]) -> pathlib.Path:
+    """Where the journal of a commit of ``targets`` is written: beside the first."""
+    return targets[0].resolve().parent / f"{own_prefix(targets[0])}commit"
+
+
 def write_journal(
     temporaries: Sequence[pathlib.Path], targets: Sequence[pathlib.Path], asides: Sequence[pathlib.Path | None]
 ) -> pathlib.Path:
-    """The commit's journal, on disk before the first rename, beside the first output."""
+    """The commit's journal, on disk before the first rename, at :func:`journal_path`."""
     entries = [
         {
             "temporary": t.name,
@@ -69,7 +74,7 @@ def write_journal(
         }
         for t, o, a in zip(temporaries, targets, asides)
     ]
-    journal = targets[0].resolve().parent / f"{own_prefix(targets[0])}commit"
+    journal = journal_path(targets)
     with open(journal, "w", encoding="utf-8") as handle:
         json.dump({"format": JOURNAL_FORMAT, "entries": entries}, handle)
         handle.flush()
@@ -77,16 +82,30 @@ def write_journal(
     return journal
 
 
-def set_aside(path: pathlib.Path) -> pathlib.Path | None:
-    """A copy of the file at ``path`` beside it (None where there is none yet). A copy, not a
-    rename, so the output never goes missing; not a hard link, which an immutable file refuses.
-    OSError where it cannot be made."""
+def create_beside(path: pathlib.Path, suffix: str, made: list[pathlib.Path]) -> pathlib.Path:
+    """A new empty file beside ``path`` named after this process (``.NAME.PID.XXXXXXXX`` and
+    ``suffix``). Its name joins ``made`` before the file exists: an interrupt at any moment
+    leaves it named there, for the clean-up."""
+    while True:
+        name = path.resolve().parent / f"{own_prefix(path)}{secrets.token_hex(4)}{suffix}"
+        made.append(name)
+        try:
+            os.close(os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        except FileExistsError:  # another's file (a name drawn twice): not ours to remove
+            made.pop()
+            continue
+        return name
+
+
+def set_aside(path: pathlib.Path, made: list[pathlib.Path]) -> pathlib.Path | None:
+    """A copy of the file at ``path`` beside it (None where there is none yet), named in ``made``
+    before it exists. A copy, not a rename, so the output never goes missing; not a hard link,
+    which an immutable file refuses. OSError where it cannot be made."""
     if not os.path.lexists(path):
         return None
-    descriptor, name = tempfile.mkstemp(prefix=own_prefix(path), suffix=".replaced", dir=path.resolve().parent)
-    os.close(descriptor)
-    shutil.copy2(path, name)
-    return pathlib.Path(name)
+    copy = create_beside(path, ".replaced", made)
+    shutil.copy2(path, copy)
+    return copy
 
 
 def put_back(path: pathlib.Path, aside: pathlib.Path | None) -> None:
@@ -129,7 +148,7 @@ def recover(directory, inputs: Iterable = ()) -> list[pathlib.Path]:
         return []
     protected = {pathlib.Path(path).resolve() for path in inputs}
     restored: list[pathlib.Path] = []
-    listed: set[str] = set()
+    left: set[int] = set()  # the writers whose journal stays: every file of theirs stays with it
     for name in names:
         match = COMMIT.match(name)
         if match is None or running(int(match["pid"])):
@@ -137,7 +156,7 @@ def recover(directory, inputs: Iterable = ()) -> list[pathlib.Path]:
         journal = directory / name
         entries, problem = _trusted_entries(journal, int(match["pid"]), protected)
         if problem:
-            listed.update(_names_in(journal))
+            left.add(int(match["pid"]))
             warnings.warn(f"left {journal} as it is: {problem}", JournalLeft, stacklevel=2)
             continue
         restored += _roll_back(directory, entries)
@@ -148,24 +167,29 @@ def recover(directory, inputs: Iterable = ()) -> list[pathlib.Path]:
         discard(journal)
     for name in names:
         match = INTENT.match(name)
-        if match and not running(int(match["pid"])):
-            _remove_temporary(directory / name, own_prefix(pathlib.Path(match["name"]), int(match["pid"])), listed)
+        if match and int(match["pid"]) not in left and not running(int(match["pid"])):
+            _remove_temporary(directory / name, own_prefix(pathlib.Path(match["name"]), int(match["pid"])))
     return restored
 
 
+def intent_path(output: pathlib.Path, temporary: pathlib.Path) -> pathlib.Path:
+    """Where the note that this process made ``temporary`` (for ``output``) is written."""
+    return temporary.parent / f"{own_prefix(output)}writing"
+
+
 def write_intent(output: pathlib.Path, temporary: pathlib.Path) -> pathlib.Path:
-    """A note beside ``temporary`` (``.NAME.PID.writing``) that this process made it, by name and
+    """A note beside ``temporary`` (:func:`intent_path`) that this process made it, by name and
     inode: what lets the next write remove it if this process is killed, and nothing else."""
     info = temporary.stat()
-    intent = temporary.parent / f"{own_prefix(output)}writing"
+    intent = intent_path(output, temporary)
     document = {"format": JOURNAL_FORMAT, "temporary": temporary.name, "inode": info.st_ino, "device": info.st_dev}
     intent.write_text(json.dumps(document), encoding="utf-8")
     return intent
 
 
-def _remove_temporary(intent: pathlib.Path, prefix: str, listed: set[str]) -> None:
+def _remove_temporary(intent: pathlib.Path, prefix: str) -> None:
     """The temporary a dead writer's intent names, removed if it is still the very file it made
-    (its name and inode) and no journal left in place lists it; then the intent."""
+    (its name and inode); then the intent."""
     try:
         document = json.loads(intent.read_text(encoding="utf-8"))
         name, inode, device = document["temporary"], document["inode"], document["device"]
@@ -175,24 +199,12 @@ def _remove_temporary(intent: pathlib.Path, prefix: str, listed: set[str]) -> No
     if not valid or not name.startswith(prefix):
         warnings.warn(f"left {intent} as it is: it is not a note this version wrote", JournalLeft, stacklevel=3)
         return
-    if name in listed:  # a journal left in place lists it: all of that writer's files stay
-        return
     temporary = intent.parent / name
     with contextlib.suppress(OSError):
         info = temporary.lstat()
         if (info.st_ino, info.st_dev) == (inode, device):
             temporary.unlink()
     discard(intent)
-
-
-def _names_in(journal: pathlib.Path) -> set[str]:
-    """Every file name a journal lists (read as loosely as it can be)."""
-    try:
-        document = json.loads(journal.read_text(encoding="utf-8"))
-        entries = document["entries"] if isinstance(document, dict) else document
-        return {os.path.basename(str(e.get(k))) for e in entries for k in ("temporary", "replaced") if e.get(k)}
-    except (OSError, ValueError, TypeError, KeyError, AttributeError):
-        return set()
 
 
 def _trusted_entries(journal: pathlib.Path, pid: int, protected: set[pathlib.Path]) -> tuple[list[dict], str]:

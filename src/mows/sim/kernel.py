@@ -58,6 +58,8 @@ from numba import njit
 
 from mows.physics.sources import MU0_OVER_4PI
 
+# RK4 is stable for ω·dt below 2.78 on an undamped oscillator; half of that keeps it accurate.
+RK4_MAX_OMEGA_DT = 1.4
 # In a sample where |θ| + 2|θ'|·Δt + this margin reaches θstop the contact sub-steps are used.
 CONTACT_MARGIN_RAD = 1e-3
 
@@ -98,6 +100,55 @@ _THETA, _OMEGA, _MODE, _NEXT, _A1, _A2, _A3, _A4, _O2, _O3, _O4, _STAGE, _AXES, 
     20,
 )
 _WORK_ROWS = 21
+
+
+class SimulationRefused(ValueError):
+    """A scenario the simulator cannot integrate (a field so strong the lever rings faster than
+    the integrator's steps resolve): a bad input, said before the first step."""
+
+
+def check_resolvable(placed, source, substeps: int, sample_rate_hz: float) -> None:
+    """Refuse (SimulationRefused) a field ``source`` whose spring m·|B| makes ω = √((kM + m|B|)/J)
+    of one of the probes ``placed`` too fast for the integrator's step 1/(substeps·fs) (Eq. S1
+    with the field's spring added)."""
+    for p in placed:
+        probe = p.probe
+        field_t = float(np.linalg.norm(source.field_t(np.asarray(p.pose.magnet_position_m, float))))
+        omega = math.sqrt((probe.spring_nm_per_rad + probe.moment_am2 * field_t) / probe.inertia_kgm2)
+        omega_dt = omega / (substeps * sample_rate_hz)
+        if not omega_dt < RK4_MAX_OMEGA_DT:
+            needed = math.ceil(omega / (RK4_MAX_OMEGA_DT * sample_rate_hz))
+            raise SimulationRefused(
+                f"the field at the probe, |B| = {field_t:.4g} T, makes the lever ring at "
+                f"{omega / math.tau:.4g} Hz, "
+                f"faster than integrator substeps = {substeps} at {sample_rate_hz:g} S/s resolve "
+                f"(ω·dt = {omega_dt:.3g}, must stay below {RK4_MAX_OMEGA_DT}): use a weaker field or "
+                f"integrator: substeps ≥ {needed}"
+            )
+
+
+def probe_parameters(probes, environment, housing, half_width_rad: float) -> np.ndarray:
+    """(N, HEAD): the head of the kernel's table of ``probes`` in ``environment``
+    (:class:`mows.sim.sections.Environment`: the temperature and its rate) and ``housing`` (the
+    stop's contact), their potentials represented on ±``half_width_rad``: the P_* columns (the
+    geometry, G_*, follows each probe's orientation and is the caller's)."""
+    params = np.zeros((len(probes), HEAD))
+    for row, probe in zip(params, probes):
+        spring_rate = probe.spring_nm_per_rad * probe.spring_temp_coeff_per_k * environment.temperature_rate_k_per_s
+        k_stop = housing.stiffness_ratio * probe.spring_nm_per_rad
+        log_e = math.log(housing.restitution)
+        zeta = -log_e / math.sqrt(math.pi**2 + log_e**2)
+        row[[P_INV_INERTIA, P_TWO_DELTA, P_SPRING0, P_SPRING_RATE, P_INV_WIDTH, P_STOP, P_K_STOP, P_C_STOP]] = (
+            1.0 / probe.inertia_kgm2,
+            2.0 * probe.damping_per_s,
+            probe.spring_at(environment.temperature_k),
+            spring_rate,
+            1.0 / half_width_rad,
+            probe.theta_stop_rad,
+            k_stop,
+            2.0 * zeta * math.sqrt(k_stop * probe.inertia_kgm2),
+        )
+    return params
 
 
 def kernel_table(head: np.ndarray, env: np.ndarray, drive: np.ndarray, omegas: np.ndarray) -> np.ndarray:

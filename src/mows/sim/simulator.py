@@ -6,10 +6,10 @@ of motion, the neighbours' coupling, housing stop, integrator and its step error
 there) and reads the two fluxgates with the noise of :mod:`mows.sim.noise`; the driver's measurement
 cycle runs on it in device time (:mod:`mows.device.stream.simulated_cycle`).
 
-Drive. The coils carry one sinusoid per coil (:meth:`SimulatedDevice.set_coils`, the current
-scheme of one probe) or the sum of the tones of several probes
-(:meth:`SimulatedDevice.drive`, :func:`mows.physics.multitone.drive_currents_a`), from the sample
-they switch on to the sample they switch off.
+Drive. The coils carry tones (:meth:`SimulatedDevice.drive`): per tone a signed amplitude per
+coil at one frequency, summed, from the sample they switch on to the sample they switch off. One
+probe's drive is one tone, the current scheme of :class:`mows.physics.coils.CoilSetup`; several
+probes' are the sum of theirs (:func:`mows.physics.multitone.coil_amplitudes_a`).
 
 Fluxgates. At every sample: the exact dipole field of every magnet at its actual position with
 its actual moment (:func:`swinging_pickup_t`; the moment at the temperature of the cycle's phase,
@@ -32,15 +32,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from mows.physics.coupling import PlacedProbe, coupled_rest, external_source
 from mows.physics.field import SumSource
-from mows.physics.fluxgate import FluxgatePair
-from mows.physics.multitone import Tone, coil_amplitudes_a, peak_current_a
+from mows.physics.multitone import summed_peak_a
 from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, ArcPotential
 from mows.records.samples import SampleBlock
 from mows.records.stamps import NS_PER_S
@@ -50,93 +48,23 @@ from mows.sim.kernel import (
     G_PIVOT,
     G_X_AXIS,
     G_Y_AXIS,
-    HEAD,
-    P_C_STOP,
-    P_INV_INERTIA,
-    P_INV_WIDTH,
-    P_K_STOP,
-    P_SPRING0,
-    P_SPRING_RATE,
-    P_STOP,
-    P_TWO_DELTA,
     accelerations,
     advance,
+    check_resolvable,
     contact_mode,
     coupling_torques,
     kernel_table,
+    probe_parameters,
 )
 from mows.sim.noise import NoiseStream
+from mows.sim.readings import DeviceTruth, SimulatedBlock, swinging_pickup_t
 
 # The Chebyshev interval covers the stop with room for the contact's penetration.
 INTERVAL_OVER_STOP = 1.5
 # Chebyshev terms below this fraction of kM·w (N·m) are dropped from the kernel's series.
 SERIES_TOLERANCE = 1e-15
-# RK4 is stable for ω·dt below 2.78 on an undamped oscillator; half of that keeps it accurate.
-RK4_MAX_OMEGA_DT = 1.4
 # The off sample of a drive that runs until it is switched off.
 NEVER = 2**62
-
-
-class SimulationRefused(ValueError):
-    """A scenario the simulator cannot integrate (a field so strong the lever rings faster than
-    the integrator's steps resolve): a bad input, said before the first step."""
-
-
-def swinging_pickup_t(pair: FluxgatePair, placed: Sequence[PlacedProbe], theta_rad: np.ndarray) -> np.ndarray:
-    """What both fluxgates of ``pair`` read, (n, 2) T, of the magnets ``placed`` swinging through
-    the deflections ``theta_rad`` (n, N): each magnet's exact dipole field (Eq. S8) on its
-    lever, summed."""
-    field = np.zeros((theta_rad.shape[0], 2))
-    for k, p in enumerate(placed):
-        positions = p.pose.magnet_position_at(theta_rad[:, k], p.probe.lever_m)
-        field += pair.pickup_t(positions, p.probe.moment_am2 * p.pose.moment_direction_at(theta_rad[:, k]))
-    return field
-
-
-# --- what the device returns ---------------------------------------------------------------
-@dataclasses.dataclass(frozen=True, eq=False)
-class SimulatedBlock:
-    """What the device read (``samples``: a :class:`~mows.records.samples.SampleBlock` of both
-    fluxgates, column 0 the near sensor, stamped on a device clock that starts at 0) and the
-    simulation's truth at those samples, which hardware would not know: ``coils_on`` (n,), each
-    probe's ``theta_rad`` and ``theta_dot_rad_per_s`` (n, N), the coil currents ``currents_a``
-    (n, n_coils)."""
-
-    samples: SampleBlock
-    coils_on: np.ndarray
-    theta_rad: np.ndarray
-    theta_dot_rad_per_s: np.ndarray
-    currents_a: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.samples)
-
-    @staticmethod
-    def concatenate(blocks) -> SimulatedBlock:
-        """One block of consecutive ``blocks``."""
-        blocks = list(blocks)
-        truth = {
-            f.name: np.concatenate([getattr(b, f.name) for b in blocks])
-            for f in dataclasses.fields(SimulatedBlock)
-            if f.name != "samples"
-        }
-        return SimulatedBlock(SampleBlock.concatenate(b.samples for b in blocks), **truth)
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class DeviceTruth:
-    """What the simulation knows and the hardware would not: each probe's state (N,) and potential."""
-
-    time_s: float
-    theta0_rad: np.ndarray
-    theta_rad: np.ndarray
-    theta_dot_rad_per_s: np.ndarray
-    rest_angle_rad: np.ndarray
-    temperature_k: float
-    spring_nm_per_rad: np.ndarray
-    field_t: np.ndarray  # (N, 3) static field at each magnet's rest position, global frame, neighbours left out
-    gradient_t_per_m: np.ndarray  # (N, 3, 3) G[i, j] = ∂B_i/∂x_j there
-    potentials: tuple[ArcPotential, ...]  # U(θ) of each probe at this pose and temperature
 
 
 class SimulatedDevice:
@@ -178,8 +106,10 @@ class SimulatedDevice:
         )  # (K, 2)
         stop_rad = max(p.probe.theta_stop_rad for p in self.placed)
         self.half_width_rad = max(DEFAULT_HALF_WIDTH_RAD, INTERVAL_OVER_STOP * stop_rad)
-        self._check_resolvable()
-        self._head = self._kernel_parameters()
+        check_resolvable(self.placed, self.static_source, scenario.integrator.substeps, self.sample_rate_hz)
+        self._head = probe_parameters(
+            [p.probe for p in self.placed], scenario.environment, scenario.housing, self.half_width_rad
+        )
         self._tone_amplitudes_a = np.zeros((0, self.n_coils))  # (tones, coils)
         self._tone_omegas = np.zeros(0)
         self._drive_series, self._drive_omegas = np.zeros((0, len(self.placed), 0)), np.zeros(0)
@@ -191,48 +121,6 @@ class SimulatedDevice:
         self._state[0] = np.where(np.isfinite(rest), rest, 0.0)  # beyond spring cancellation: it buckles
 
     # --- set-up --------------------------------------------------------------------------
-    def _check_resolvable(self) -> None:
-        """Refuse a field whose spring m·|B| makes ω = √((kM + m|B|)/J) too fast for the
-        integrator's step 1/(substeps·fs) (Eq. S1 with the field's spring added), for any probe."""
-        substeps = self.scenario.integrator.substeps
-        for p in self.placed:
-            probe = p.probe
-            field_t = float(np.linalg.norm(self.static_source.field_t(np.asarray(p.pose.magnet_position_m, float))))
-            omega = math.sqrt((probe.spring_nm_per_rad + probe.moment_am2 * field_t) / probe.inertia_kgm2)
-            omega_dt = omega / (substeps * self.sample_rate_hz)
-            if not omega_dt < RK4_MAX_OMEGA_DT:
-                needed = math.ceil(omega / (RK4_MAX_OMEGA_DT * self.sample_rate_hz))
-                raise SimulationRefused(
-                    f"the field at the probe, |B| = {field_t:.4g} T, makes the lever ring at "
-                    f"{omega / math.tau:.4g} Hz, "
-                    f"faster than integrator substeps = {substeps} at {self.sample_rate_hz:g} S/s resolve "
-                    f"(ω·dt = {omega_dt:.3g}, must stay below {RK4_MAX_OMEGA_DT}): use a weaker field or "
-                    f"integrator: substeps ≥ {needed}"
-                )
-
-    def _kernel_parameters(self) -> np.ndarray:
-        """(N, HEAD): each probe's head of the kernel's table, its parameters (the P_* columns;
-        the geometry, G_*, follows its orientation: :meth:`_build_series`)."""
-        env, housing = self.scenario.environment, self.scenario.housing
-        params = np.zeros((len(self.placed), HEAD))
-        for row, p in zip(params, self.placed):
-            probe = p.probe
-            spring_rate = probe.spring_nm_per_rad * probe.spring_temp_coeff_per_k * env.temperature_rate_k_per_s
-            k_stop = housing.stiffness_ratio * probe.spring_nm_per_rad
-            log_e = math.log(housing.restitution)
-            zeta = -log_e / math.sqrt(math.pi**2 + log_e**2)
-            row[[P_INV_INERTIA, P_TWO_DELTA, P_SPRING0, P_SPRING_RATE, P_INV_WIDTH, P_STOP, P_K_STOP, P_C_STOP]] = (
-                1.0 / probe.inertia_kgm2,
-                2.0 * probe.damping_per_s,
-                probe.spring_at(env.temperature_k),
-                spring_rate,
-                1.0 / self.half_width_rad,
-                probe.theta_stop_rad,
-                k_stop,
-                2.0 * zeta * math.sqrt(k_stop * probe.inertia_kgm2),
-            )
-        return params
-
     def _slope_series(self, magnet, source, pose) -> np.ndarray:
         """Chebyshev coefficients of W'(θ) of ``magnet`` in ``source`` at ``pose``, negligible tail dropped."""
         coeffs = ArcPotential.from_source(magnet, source, pose, half_width_rad=self.half_width_rad).d1
@@ -314,38 +202,40 @@ class SimulatedDevice:
         """The kernel's table of the present parameters, geometry, static field and drive."""
         self._table = kernel_table(self._head, self._env_series, self._drive_series, self._drive_omegas)
 
-    def set_coils(self, amplitudes_a, frequency_hz: float) -> None:
-        """Drive coil k with amplitudes_a[k]·sin(2πf·(t − t_on)) from now (t_on = this sample)
-        until :meth:`coils_off`.
+    def drive(self, amplitudes_a: ArrayLike, frequencies_hz: ArrayLike, off_index: int = NEVER) -> None:
+        """The coils carry tones from this sample (t_on) until sample ``off_index`` (exclusive; by
+        default until :meth:`coils_off`): coil c carries Σ_k amplitudes_a[k][c]·sin(2π·f_k·(t − t_on)),
+        one row of signed coil amplitudes (K, n_coils) per tone at ``frequencies_hz`` (K,). One
+        probe's drive is one tone; the tones of probes are
+        :func:`mows.physics.multitone.coil_amplitudes_a`.
 
-        ValueError if a current exceeds the setup's cap, the count is not ``n_coils`` or the
-        frequency is not in (0, fs/2).
+        ValueError if the count of coils is not ``n_coils``, a frequency is not in (0, fs/2) or
+        the tones' summed peak over the span (:func:`mows.physics.multitone.summed_peak_a`)
+        exceeds the setup's cap.
         """
-        amplitudes = self.setup.cap.check(amplitudes_a).reshape(-1)
-        if amplitudes.shape != (self.n_coils,):
-            raise ValueError(f"amplitudes_a has {amplitudes.size} values; the setup has {self.n_coils} coils")
-        if not (math.isfinite(frequency_hz) and 0.0 < frequency_hz < self.sample_rate_hz / 2.0):
-            raise ValueError(f"frequency_hz = {frequency_hz!r} must be in (0, {self.sample_rate_hz / 2.0:g}) Hz")
-        self._switch_on(amplitudes[None, :], np.array([float(frequency_hz)]), NEVER)
-
-    def drive(self, tones: Sequence[Tone], off_index: int) -> None:
-        """The coils carry the sum of ``tones`` from this sample until sample ``off_index``
-        (exclusive). ValueError if the summed peak over that span is above the setup's cap."""
+        amplitudes = np.asarray(amplitudes_a, float)
+        frequencies = np.asarray(frequencies_hz, float).reshape(-1)
+        if amplitudes.ndim != 2 or amplitudes.shape[1] != self.n_coils or len(amplitudes) != len(frequencies):
+            raise ValueError(
+                f"amplitudes_a {amplitudes.shape} must give one row of {self.n_coils} coils (the setup's) "
+                f"for each of the {len(frequencies)} frequencies"
+            )
         off = int(off_index)
-        if off <= self.sample_index or not tones:
-            raise ValueError(f"drive: tones {tones!r} until sample {off_index!r} must be some tones over a later span")
-        duration_s = (off - self.sample_index) / self.sample_rate_hz
-        peak = float(peak_current_a(self.setup, tones, duration_s).max())
-        if peak > self.setup.cap.limit_a:
-            raise ValueError(f"drive: the tones peak at {peak:.6g} A, above the {self.setup.cap.limit_a:g} A cap")
-        self._switch_on(coil_amplitudes_a(self.setup, tones), np.array([t.frequency_hz for t in tones]), off)
-
-    def _switch_on(self, amplitudes_a: np.ndarray, frequencies_hz: np.ndarray, off_index: int) -> None:
-        """Tones of coil amplitudes (K, n_coils) at ``frequencies_hz`` (K,) from this sample to ``off_index``."""
+        if not len(frequencies) or off <= self.sample_index:
+            raise ValueError(
+                f"drive: tones {frequencies_hz!r} until sample {off_index!r} must be some tones over a later span"
+            )
+        nyquist_hz = self.sample_rate_hz / 2.0
+        if not np.all(np.isfinite(frequencies) & (frequencies > 0.0) & (frequencies < nyquist_hz)):
+            raise ValueError(
+                f"frequencies_hz = {frequencies_hz!r}: each frequency_hz must be in (0, {nyquist_hz:g}) Hz"
+            )
+        duration_s = math.inf if off == NEVER else (off - self.sample_index) / self.sample_rate_hz
+        self.setup.cap.check(summed_peak_a(amplitudes, frequencies, duration_s))
         self._hold_moment()
-        self._tone_amplitudes_a = amplitudes_a
-        self._tone_omegas = math.tau * frequencies_hz
-        self._drive_on_index, self._drive_off_index = self.sample_index, off_index
+        self._tone_amplitudes_a = amplitudes
+        self._tone_omegas = math.tau * frequencies
+        self._drive_on_index, self._drive_off_index = self.sample_index, off
         self._drive_series, self._drive_omegas = self._drive_of(self._tone_amplitudes_a, self._tone_omegas)
         self._pack()
 
@@ -416,15 +306,16 @@ class SimulatedDevice:
         return theta
 
     # --- running -------------------------------------------------------------------------
-    def equation_of_motion(self, amplitudes_a=None, frequency_hz: float = 0.0, drive_t0_s: float = 0.0):
+    def equation_of_motion(self, amplitudes_a: ArrayLike = (), frequencies_hz: ArrayLike = (), drive_t0_s: float = 0.0):
         """rhs(t, [θ_1 … θ_N, θ'_1 … θ'_N]) → [θ', θ''] at the present poses, for other
         integrators (solve_ivp).
 
-        Coil k carries amplitudes_a[k]·sin(2πf·(t − drive_t0_s)). The stop's contact mode is
-        read from the state at each call, without the event location of the kernel.
+        The coils carry the tones of :meth:`drive` (none by default), from ``drive_t0_s``. The
+        stop's contact mode is read from the state at each call, without the event location of
+        the kernel.
         """
-        amplitudes = np.zeros((0, self.n_coils)) if amplitudes_a is None else np.reshape(amplitudes_a, (1, -1))
-        drive, omegas = self._drive_of(np.asarray(amplitudes, float), np.full(len(amplitudes), math.tau * frequency_hz))
+        amplitudes = np.asarray(amplitudes_a, float).reshape(-1, self.n_coils)
+        drive, omegas = self._drive_of(amplitudes, math.tau * np.asarray(frequencies_hz, float).reshape(-1))
         table, count = kernel_table(self._head, self._env_series, drive, omegas), len(self.placed)
 
         def rhs(t, y):
@@ -531,18 +422,10 @@ class SimulatedDevice:
             for p, s in zip(magnets, sources)
         )
 
-    def potential(self, probe: int = 0) -> ArcPotential:
-        """U(θ) of probe ``probe`` (:meth:`potentials`)."""
-        return self.potentials()[probe]
-
     def expected_frequencies_hz(self, amplitude_rad: float = 0.0) -> np.ndarray:
         """(N,): each probe's ring-down frequency at swing ``amplitude_rad`` from its full potential
         (harmonic balance, Eq. S1; with several, in its neighbours' fields, :meth:`potentials`)."""
         return np.array([float(p.frequency_hz(amplitude_rad)) for p in self.potentials()])
-
-    def expected_frequency_hz(self, amplitude_rad: float = 0.0, probe: int = 0) -> float:
-        """The ring-down frequency of probe ``probe`` at swing ``amplitude_rad`` (:meth:`expected_frequencies_hz`)."""
-        return float(self.potential(probe).frequency_hz(amplitude_rad))
 
     @property
     def truth(self) -> DeviceTruth:

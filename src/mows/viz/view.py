@@ -40,7 +40,9 @@ STATUS_OK = 0  # RingdownFit, FieldEstimate, SweepDecomposition, ProbeField
 class ViewSettings:
     channels: str = "difference"  # what the estimator fitted (its ``channels``)
     raw_rate_hz: float = 1000.0  # the raw stream's plotted rate
-    buffer_s: float = 5.0  # raw samples kept for the ring-downs' plots
+    # raw samples kept for the ring-downs' plots: a fit later than this is not drawn (a loaded
+    # host's graph at the default priority published fits up to 9.6 s late, docs/performance.md)
+    buffer_s: float = 20.0
     max_points: int = 2000  # points of one ring-down's plot
     coil_current_cap_a: float = 10.0  # the driver's coil_current_cap_a
     arrow_length_m: float = ARROW_LENGTH_M

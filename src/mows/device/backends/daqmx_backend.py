@@ -64,8 +64,8 @@ from mows.device.interface import (
     FieldCurrentCommand,
     LinkEvent,
     OrientationCommand,
-    check_coil_command,
-    refuse_tones,
+    check_coil_currents,
+    one_tone,
 )
 from mows.device.protocol.payloads import DeviceInfo
 from mows.physics.coils import CurrentCap
@@ -276,14 +276,15 @@ class DaqmxBackend(Backend):
 
     # --- commands ------------------------------------------------------------------------------
     def send(self, command: Command) -> None:
-        command = refuse_tones(command, "DAQmx device")
+        if isinstance(command, CoilCommand):
+            frequency_hz, amplitudes = one_tone(command, "DAQmx device", self._info.n_coils)
         with self._lock:
             if self.fault:
                 self._results.append(CommandResult(command.command_id, False, reason=f"the card is down: {self.fault}"))
                 return
             if isinstance(command, CoilCommand):
-                check_coil_command(command, self._info, self.cap.limit_a)
-                applied = self.waveforms.schedule(command.at_sample_index, command.amplitudes_a, command.frequency_hz)
+                check_coil_currents(amplitudes, self._info, self.cap.limit_a)
+                applied = self.waveforms.schedule(command.at_sample_index, amplitudes, frequency_hz)
             elif isinstance(command, FieldCurrentCommand):
                 if self.supply_schedule is None:
                     self._results.append(

@@ -15,8 +15,8 @@ from mows.device.interface import (
     FieldCurrentCommand,
     LinkEvent,
     NotExciting,
-    check_coil_command,
-    refuse_tones,
+    check_coil_currents,
+    one_tone,
 )
 from mows.device.protocol.payloads import Ack, Coils, DeviceInfo, FieldCurrent, Orientation, Samples, Status
 from mows.device.serial.link import SerialLink
@@ -111,11 +111,11 @@ class SerialBackend(Backend):
     def send(self, command: Command) -> None:
         if self.info is None:
             raise NotExciting("the device has not described itself yet")
-        command = refuse_tones(command, "serial device")
         body: Coils | Orientation | FieldCurrent
         if isinstance(command, CoilCommand):
-            check_coil_command(command, self.info, self.cap.limit_a)
-            body = Coils(0, command.at_sample_index, command.frequency_hz, tuple(command.amplitudes_a))
+            frequency_hz, amplitudes = one_tone(command, "serial device", self.info.n_coils)
+            check_coil_currents(amplitudes, self.info, self.cap.limit_a)
+            body = Coils(0, command.at_sample_index, frequency_hz, amplitudes)
         elif isinstance(command, FieldCurrentCommand):
             body = FieldCurrent(0, command.at_sample_index, float(command.current_a))
         else:

@@ -19,7 +19,8 @@ from mows.device.protocol.payloads import DeviceInfo
 from mows.device.simulated.scheduled import ScheduledDevice
 from mows.physics.coils import CurrentCap
 from mows.records.samples import SampleBlock
-from mows.sim.simulator import SimulatedBlock, SimulatedDevice
+from mows.sim.readings import SimulatedBlock
+from mows.sim.simulator import SimulatedDevice
 
 # The simulator is read in pieces of at least this: each read has a fixed cost (~0.4 ms), and
 # reads woken from sleep run on cold caches, so 25 ms pieces cost half of what 10 ms ones do.

@@ -32,6 +32,16 @@ only in EXCITING: every other phase is coils off, and a fault (emergency stop, a
 unanswered command, a lost link) switches them off at once, every tone together; the groups
 not yet excited are dropped, and the time the coils were on counts towards the duty limit. The
 emergency stop latches until released.
+
+Every excitation, one probe's or a group's, is an :class:`~mows.device.cycle.excitation.Excitation`
+driven by one :class:`~mows.device.interface.CoilCommand` of its tones (one probe's a tone of one)
+and announced with its probes, their tones and θ0s (:mod:`mows.device.cycle.excitation`).
+
+Why this module is over 450 lines: it is one state machine. Its inputs, the cycle it runs as a
+generator and the waits that resume that generator share the machine's state (the commands in
+flight, the samples' anchor, the duty limit, the phase announced); split, each part would reach
+into the others'. What an excitation drives (``excitation``), what a cycle waits for and records
+(``waits``) and the plan of several probes (``tone_groups``) are apart.
 """
 
 from __future__ import annotations
@@ -40,6 +50,14 @@ import dataclasses
 from collections.abc import Generator, Sequence
 
 from mows.device.cycle.duty import DutyCycleLimit
+from mows.device.cycle.excitation import (
+    Excitation,
+    group_excitation,
+    plan_at,
+    probe_currents,
+    probe_excitation,
+    refusals,
+)
 from mows.device.cycle.phases import (
     CycleOutcome,
     CyclePlan,
@@ -53,42 +71,19 @@ from mows.device.cycle.phases import (
     TuningResult,
     check_setting,
 )
-from mows.device.cycle.tone_groups import GroupSequence, on_stage, plan_probes, with_cap
+from mows.device.cycle.tone_groups import GroupSequence, with_cap
 from mows.device.cycle.waits import Answer, CycleAborted, Reach, Recording, Run
 from mows.device.interface import (
     CoilCommand,
     Command,
     CommandResult,
     LinkEvent,
-    MultiToneCommand,
     OrientationCommand,
 )
 from mows.physics.coils import CoilSetup, CurrentCap, excitation_samples
 from mows.physics.coupling import PlacedProbe
-from mows.physics.multitone import ExcitationPlan, Tone, peak_current_a
+from mows.physics.multitone import ExcitationPlan
 from mows.records.samples import SampleBlock
-
-
-@dataclasses.dataclass(frozen=True)
-class Excitation:
-    """One group's excitation, on for samples [``on_index``, ``off_index``): the coil currents it
-    announces (one probe: signed per coil; several: each coil's summed peak), its drive's
-    frequency, the tones of a multi-tone drive (empty for one probe's) and the probes' θ0."""
-
-    on_index: int
-    off_index: int
-    currents_a: tuple[float, ...]
-    frequency_hz: float
-    tones: tuple[Tone, ...] = ()
-    theta0_rad: float = 0.0
-
-    @property
-    def rung(self) -> tuple[tuple[int, float, float], ...]:
-        """(id, tone, θ0) of each probe it rings: its tones', or the one probe's (id 0) at the
-        drive's frequency."""
-        if self.tones:
-            return tuple((t.probe_id, t.frequency_hz, t.theta0_rad) for t in self.tones)
-        return ((0, self.frequency_hz, self.theta0_rad),)
 
 
 class CycleSequencer:
@@ -242,9 +237,9 @@ class CycleSequencer:
                 f"in (0, {nyquist_hz:g}) Hz",
             )
         if self.probes:
-            self._tone_plan(cycle.theta0_rad, s)  # ValueError when it excites no probe
+            plan_at(self.probes, cycle.theta0_rad, self._capped_setup(), s)  # ValueError when it excites none
         else:
-            self._currents(cycle)  # ValueError above the cap
+            probe_currents(self.setup, self.cap, cycle.theta0_rad, s.excitation_current_a)  # ValueError above the cap
         self._duty.configure(s.max_duty_cycle, self._samples(s.duty_window_s))
         self._duty.earliest_start(self._next_index, self._samples(s.excite_s))  # ValueError if it never fits
         if request.frequency_hz is not None:
@@ -252,22 +247,9 @@ class CycleSequencer:
         self._last_cycle_id = cycle.cycle_id
         return cycle
 
-    def _tone_plan(self, theta0_rad: float, settings: CycleSettings) -> ExcitationPlan:
-        """The plan of a cycle of the probes at stage angle ``theta0_rad``. ValueError, with every
-        probe's reason, when it excites none."""
-        plan = plan_probes(
-            on_stage(self.probes, theta0_rad),
-            self._capped_setup(),
-            settings.excite_s,
-            tone_limit_a=settings.excitation_current_a,
-        )
-        if not plan.groups:
-            raise ValueError(f"no probe can be excited at θ0 = {theta0_rad:.4g} rad: {refusals(plan)}")
-        return plan
-
     def _run(self, c: CyclePlan) -> Run:
         coils_free = yield from self._turn_and_settle(c)
-        plan = self._tone_plan(c.theta0_rad, c.settings) if self.probes else None
+        plan = plan_at(self.probes, c.theta0_rad, self._capped_setup(), c.settings) if self.probes else None
         fits: list[TuningResult] = []
         rung = self._recorded = 0
         for k in range(c.tuning_steps + c.repeats):
@@ -296,12 +278,11 @@ class CycleSequencer:
         if self._groups is None:
             excite = excitation_samples(c.settings.excite_s, self.frequency_hz, self.sample_rate_hz)
             start = self._duty.earliest_start(not_before, excite)
-            return Excitation(start, start + excite, self._currents(c), self.frequency_hz, (), c.theta0_rad)
+            amplitude_a = c.settings.excitation_current_a
+            return probe_excitation(self.setup, self.cap, c.theta0_rad, amplitude_a, self.frequency_hz, start, excite)
         group = self._groups.next(not_before)
         assert group is not None  # a group is asked for only while some remain
-        duration_s = (group.off_index - group.on_index) / self.sample_rate_hz
-        peaks = tuple(float(a) for a in peak_current_a(self.setup, group.tones, duration_s))
-        return Excitation(group.on_index, group.off_index, peaks, group.tones[0].frequency_hz, group.tones)
+        return group_excitation(self.setup, group, self.sample_rate_hz)
 
     def _excite(
         self, c: CyclePlan, e: Excitation, coils_free: int, index: int, tuning: bool
@@ -309,14 +290,8 @@ class CycleSequencer:
         """Excite ``e`` and record its ring-down, announcing GAP (if it waits), EXCITING and
         RINGDOWN; returns the ring-down's recording, complete if a tuning fit needs its samples.
         The duty limit counts the interval the device applied."""
-        samples = e.off_index - e.on_index
-        if e.tones:
-            on = self._issue(MultiToneCommand, e.on_index, tones=e.tones, samples=samples)
-        else:
-            on = self._issue(CoilCommand, e.on_index, amplitudes_a=e.currents_a, frequency_hz=e.frequency_hz)
-        off = self._issue(
-            CoilCommand, e.off_index, amplitudes_a=(0.0,) * len(self.setup.coils), frequency_hz=e.frequency_hz
-        )
+        on = self._issue(CoilCommand, e.on_index, tones=e.tones, samples=e.off_index - e.on_index)
+        off = self._issue(CoilCommand, e.off_index)
         self._in_flight = e
         if e.on_index > coils_free:
             yield from self._enter(c, Phase.GAP, coils_free, e.on_index - coils_free, index, tuning)
@@ -386,11 +361,6 @@ class CycleSequencer:
         if fit.ok:
             self.frequency_hz = float(fit.frequency_hz)
         return fit
-
-    def _currents(self, c: CyclePlan) -> tuple[float, ...]:
-        """One probe's coil currents at θ0, checked against the cap (ValueError above it)."""
-        currents = self.setup.currents_a(c.theta0_rad, c.settings.excitation_current_a)
-        return tuple(float(i) for i in self.cap.check(currents))
 
     def _capped_setup(self) -> CoilSetup:
         """The setup under the driver's cap, which a multi-tone plan holds on the summed peak."""
@@ -522,7 +492,7 @@ class CycleSequencer:
         assert self._anchor is not None
         anchor_index, anchor_ns = self._anchor
         currents = excitation.currents_a if excitation is not None and phase == Phase.EXCITING else ()
-        rung = excitation.rung if excitation is not None else ()
+        tones = excitation.tones if excitation is not None else ()
         self._step.events.append(
             PhaseEvent(
                 phase=phase,
@@ -538,9 +508,9 @@ class CycleSequencer:
                 planned_duration_s=duration_samples / self.sample_rate_hz,
                 setup=self.setup.name,
                 reason=reason,
-                probe_ids=tuple(k for k, _, _ in rung),
-                probe_frequency_hz=tuple(f for _, f, _ in rung),
-                probe_theta0_rad=tuple(a for _, _, a in rung),
+                probe_ids=tuple(t.probe_id for t in tones),
+                probe_frequency_hz=tuple(t.frequency_hz for t in tones),
+                probe_theta0_rad=excitation.theta0_rad if excitation is not None else (),
             )
         )
 
@@ -550,8 +520,3 @@ class CycleSequencer:
 
     def _samples(self, seconds: float) -> int:
         return int(round(seconds * self.sample_rate_hz))
-
-
-def refusals(plan: ExcitationPlan) -> str:
-    """The refused probes and their reasons, in one line."""
-    return "; ".join(f"probe {probe_id}: {reason}" for probe_id, reason in plan.refused)

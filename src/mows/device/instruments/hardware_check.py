@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from mows.device.instruments.scpi import ScpiSupplyConfig, load_supply_file
-from mows.device.interface import CoilCommand, CommandResult, DeviceFault, FieldCurrentCommand, LinkEvent
+from mows.device.interface import CoilCommand, CoilTone, CommandResult, DeviceFault, FieldCurrentCommand, LinkEvent
 from mows.records.samples import SampleBlock
 
 VISIBLE = 10.0  # a coil or a supply step is seen when its signal is this many noise σ
@@ -124,11 +124,11 @@ class HardwareCheck:
     def _coil(self, k: int, noise_t: np.ndarray) -> CheckLine:
         amplitudes = [0.0] * self.info.n_coils
         amplitudes[k] = self.coil_current_a
-        on = self._command(CoilCommand(0, 0, tuple(amplitudes), self.frequency_hz))
+        on = self._command(CoilCommand(0, 0, (CoilTone(0, self.frequency_hz, tuple(amplitudes)),)))
         if not on.accepted:
             return CheckLine(self._coil_name(k), False, f"refused: {on.reason}")
         n = round(self.pulse_s * self.info.sample_rate_hz)
-        off = self._command(CoilCommand(0, on.applied_sample_index + n, (0.0,) * self.info.n_coils, 0.0))
+        off = self._command(CoilCommand(0, on.applied_sample_index + n))
         samples = self._read_span(on.applied_sample_index, off.applied_sample_index)
         seen = lock_in_t(samples, self.frequency_hz, self.info.sample_rate_hz)
         floor = lock_in_noise_t(noise_t, len(samples))

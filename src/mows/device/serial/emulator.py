@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from mows.device.clock import DeviceClock
+from mows.device.interface import CoilTone
 from mows.device.protocol.framing import Frame, FrameDecoder, encode_frame
 from mows.device.protocol.payloads import (
     Ack,
@@ -283,12 +284,11 @@ class DeviceEmulator:
                 return self._supply(body)
             if isinstance(body, Orientation):
                 return Ack.OK, self.device.schedule_orientation(body.at_sample_index, body.theta0_rad)
-            self.device.check_coils(body.amplitudes_a, body.frequency_hz)
+            tones = (CoilTone(0, body.frequency_hz, body.amplitudes_a),)  # the protocol's one tone
+            self.device.check_coils(tones)
             if body.immediate:
                 self.device.cancel()
-            return Ack.OK, self.device.schedule_coils(
-                0 if body.immediate else body.at_sample_index, body.amplitudes_a, body.frequency_hz
-            )
+            return Ack.OK, self.device.schedule_coils(0 if body.immediate else body.at_sample_index, tones)
         except OverCap:
             return Ack.REFUSED_OVER_CAP, 0
         except ValueError:

@@ -300,7 +300,7 @@ class SimulatedCard:
                 self.device.coils_off()
                 self.offs.append(index)
             elif amplitudes:
-                self.device.set_coils(np.array(amplitudes), frequency_hz)
+                self.device.drive([amplitudes], [frequency_hz])
                 self.drives.append((index, amplitudes, frequency_hz))
 
     def _device_volts(self, start: int, n: int, channels: list[tuple[str, float]]) -> np.ndarray:

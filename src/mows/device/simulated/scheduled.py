@@ -8,13 +8,13 @@ starts, exact to the sample. The sim backend and the device emulator both run on
 The scene's probes (one, or several) sit on one shared stage: a turn to the stage angle θ turns
 each to its orientation there (:meth:`mows.sim.scenario.Scenario.stage_orientations_rad`: a
 scene's home orientations plus θ, the one probe of a one-probe scene to θ itself). The coils
-carry one tone (a coil amplitude each, :class:`mows.device.interface.CoilCommand`) or the sum of
-the probes' tones (:class:`mows.device.interface.MultiToneCommand`); a switch-off (coils of zero
-amplitude, an emergency stop) switches every tone off at once.
+carry the sum of the tones of a :class:`mows.device.interface.CoilCommand`, one per probe it
+drives (one probe's drive is a tone of one); a switch-off (no tones, an emergency stop) switches
+every tone off at once.
 
 Every coil command is checked against the current cap (the lower of the driver's and the
-scenario's) when it is scheduled, tones on their summed true peak over the whole excitation
-(:func:`mows.physics.multitone.peak_current_a`), so that nothing above the cap is ever queued,
+scenario's) when it is scheduled, on the tones' summed true peak over the whole excitation
+(:func:`mows.physics.multitone.summed_peak_a`), so that nothing above the cap is ever queued,
 let alone applied. The static-field supply (:mod:`mows.physics.supply`) likewise: a new supply current is
 checked against its cap, rounded to its resolution and reached by a staircase within its slew
 limit, each step queued at its sample; cancelling the coils' commands leaves a ramp alone, and
@@ -25,17 +25,19 @@ from __future__ import annotations
 
 import bisect
 import collections
+import dataclasses
 import functools
 import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from mows.device.interface import CoilCommand, Command, FieldCurrentCommand, MultiToneCommand, OrientationCommand
+from mows.device.interface import CoilCommand, CoilTone, Command, FieldCurrentCommand, OrientationCommand
 from mows.physics.coils import CurrentCap
-from mows.physics.multitone import Tone, peak_current_a
+from mows.physics.multitone import summed_peak_a
 from mows.physics.supply import SupplyLimits
-from mows.sim.simulator import SimulatedBlock, SimulatedDevice
+from mows.sim.readings import SimulatedBlock
+from mows.sim.simulator import NEVER, SimulatedDevice
 
 COIL_LOG_LENGTH = 10000  # coil changes kept (two per excitation)
 
@@ -102,40 +104,53 @@ class ScheduledDevice:
         them on, ``coils_on`` already says busy. Nor is a supply ramp."""
         return self.coils_on or any(entry[2] in ("on", "turn") for entry in self._queue)
 
-    def check_coils(self, amplitudes_a, frequency_hz: float) -> tuple:
-        """The amplitudes as a tuple if the device can take them; OverCap above the cap,
+    def check_coils(self, tones: Sequence[CoilTone], samples: int = 0) -> tuple[CoilTone, ...]:
+        """``tones`` as a tuple if the device can drive them for ``samples`` samples (0: until the
+        next coil command); OverCap when their summed peak over those samples is above the cap,
         ValueError for anything else malformed."""
-        amplitudes = np.asarray(amplitudes_a, dtype=float).reshape(-1)
-        if not np.all(np.isfinite(amplitudes)):
-            raise ValueError(f"coil amplitudes must be finite, got {amplitudes_a!r}")
-        try:
-            self.cap.check(amplitudes)
-        except ValueError as above:
-            raise OverCap(str(above)) from None
-        if amplitudes.shape != (self.device.n_coils,):
-            raise ValueError(f"{amplitudes.size} coil amplitudes given; the device has {self.device.n_coils} coils")
-        nyquist_hz = self.device.sample_rate_hz / 2.0
-        if amplitudes.any() and not (math.isfinite(frequency_hz) and 0.0 < frequency_hz < nyquist_hz):
-            raise ValueError(f"frequency_hz = {frequency_hz!r} must be in (0, {nyquist_hz:g}) Hz")
-        return tuple(float(a) for a in amplitudes)
+        tones = tuple(tones)
+        ids = [t.probe_id for t in tones] if all(isinstance(t, CoilTone) for t in tones) else None
+        if ids is None or len(set(ids)) != len(ids) or not set(ids) <= set(range(len(self.home))):
+            raise ValueError(f"tones {tones!r} must be Tones of distinct probes 0 to {len(self.home) - 1}")
+        if not (isinstance(samples, (int, np.integer)) and samples >= 0):
+            raise ValueError(f"samples = {samples!r} must be an integer ≥ 0")
+        n_coils, nyquist_hz = self.device.n_coils, self.device.sample_rate_hz / 2.0
+        for t in tones:
+            amplitudes = np.asarray(t.amplitudes_a, dtype=float)
+            if not np.all(np.isfinite(amplitudes)):
+                raise ValueError(f"coil amplitudes must be finite, got {t.amplitudes_a!r}")
+            if amplitudes.shape != (n_coils,):
+                raise ValueError(f"{amplitudes.size} coil amplitudes given; the device has {n_coils} coils")
+            if amplitudes.any() and not (math.isfinite(t.frequency_hz) and 0.0 < t.frequency_hz < nyquist_hz):
+                raise ValueError(f"frequency_hz = {t.frequency_hz!r} must be in (0, {nyquist_hz:g}) Hz")
+        active = [t for t in tones if any(t.amplitudes_a)]
+        if active:
+            duration_s = samples / self.device.sample_rate_hz if samples else math.inf
+            rows = [t.amplitudes_a for t in active]
+            peak = float(summed_peak_a(rows, [t.frequency_hz for t in active], duration_s).max())
+            if peak > self.cap.limit_a:
+                raise OverCap(
+                    f"the tones of probes {ids} peak at {peak:.6g} A, above the {self.cap.limit_a:g} A cap "
+                    "(a drive that exceeds the cap is refused, never clipped)"
+                )
+        return tuple(dataclasses.replace(t, amplitudes_a=tuple(float(a) for a in t.amplitudes_a)) for t in tones)
 
-    def schedule_coils(self, at_index: int, amplitudes_a, frequency_hz: float) -> int:
-        """Drive the coils from sample ``at_index`` (all zero: off); returns the sample it
-        applies at. ValueError above the cap or for a malformed drive; RuntimeError while a
-        turn of the probe waits."""
-        amplitudes = self.check_coils(amplitudes_a, frequency_hz)
-        kind = "on" if any(amplitudes) else "off"
-        if kind == "on" and any(entry[2] == "turn" for entry in self._queue):
+    def schedule_coils(self, at_index: int, tones: Sequence[CoilTone], samples: int = 0) -> int:
+        """Drive the coils with the sum of ``tones`` for ``samples`` samples (0: until the next
+        coil command) from sample ``at_index`` (no tones, or all of zero current: off); returns
+        the sample it applies at. OverCap above the cap, ValueError for a malformed drive;
+        RuntimeError while a turn of the stage waits."""
+        checked = self.check_coils(tones, samples)
+        on = any(any(t.amplitudes_a) for t in checked)
+        if on and any(entry[2] == "turn" for entry in self._queue):
             raise RuntimeError("coils cannot go on while a turn of the stage is waiting")
-        return self._enqueue(at_index, kind, functools.partial(self._drive, amplitudes, float(frequency_hz)))
+        return self._enqueue(at_index, "on" if on else "off", functools.partial(self._drive, checked, int(samples)))
 
     def schedule(self, command: Command) -> int:
         """A driver's command at its sample: the index where it applies. RuntimeError while
         the device is busy with another, ValueError for one it refuses."""
         if isinstance(command, CoilCommand):
-            return self.schedule_coils(command.at_sample_index, command.amplitudes_a, command.frequency_hz)
-        if isinstance(command, MultiToneCommand):
-            return self.schedule_tones(command.at_sample_index, command.tones, command.samples)
+            return self.schedule_coils(command.at_sample_index, command.tones, command.samples)
         if isinstance(command, FieldCurrentCommand):
             return self.schedule_field_current(command.at_sample_index, command.current_a)
         assert isinstance(command, OrientationCommand)  # the commands a driver sends
@@ -152,40 +167,6 @@ class ScheduledDevice:
 
     def _turn(self, theta0_rad: float) -> None:
         self.device.set_orientations(self.device.scenario.stage_orientations_rad(theta0_rad))
-
-    def check_tones(self, tones: Sequence[Tone], samples: int) -> tuple[Tone, ...]:
-        """The tones as a tuple if the device can take them for ``samples`` samples; OverCap when
-        their summed peak is above the cap, ValueError for anything else malformed."""
-        tones = tuple(tones)
-        ids = [t.probe_id for t in tones] if all(isinstance(t, Tone) for t in tones) else None
-        if not tones or ids is None or len(set(ids)) != len(ids) or not set(ids) <= set(range(len(self.home))):
-            raise ValueError(f"tones {tones!r} must be Tones of distinct probes 0 to {len(self.home) - 1}")
-        if not (isinstance(samples, (int, np.integer)) and samples > 0):
-            raise ValueError(f"samples = {samples!r} must be an integer > 0")
-        nyquist_hz = self.device.sample_rate_hz / 2.0
-        for t in tones:
-            if t.frequency_hz >= nyquist_hz:
-                raise ValueError(f"tone of probe {t.probe_id}: {t.frequency_hz!r} Hz must be below {nyquist_hz:g} Hz")
-        try:
-            peak = float(peak_current_a(self.device.setup, tones, samples / self.device.sample_rate_hz).max())
-        except ValueError as alone:  # one tone alone above the setup's cap
-            raise OverCap(str(alone)) from None
-        if peak > self.cap.limit_a:
-            raise OverCap(f"the tones of probes {ids} peak at {peak:.6g} A, above the {self.cap.limit_a:g} A cap")
-        return tones
-
-    def schedule_tones(self, at_index: int, tones: Sequence[Tone], samples: int) -> int:
-        """Drive the coils with the sum of ``tones`` for ``samples`` samples from ``at_index``;
-        returns the sample it applies at. OverCap above the cap, ValueError for a malformed
-        drive; RuntimeError while a turn of the stage waits."""
-        checked = self.check_tones(tones, samples)
-        if any(entry[2] == "turn" for entry in self._queue):
-            raise RuntimeError("coils cannot go on while a turn of the stage is waiting")
-        return self._enqueue(at_index, "on", functools.partial(self._drive_tones, checked, int(samples)))
-
-    def _drive_tones(self, tones: tuple[Tone, ...], samples: int) -> None:
-        self.device.drive(tones, self.device.sample_index + samples)
-        self.coils_on = True
 
     def cancel(self) -> None:
         """Forget every waiting command of the coils and the stage (a supply ramp goes on: it
@@ -227,7 +208,7 @@ class ScheduledDevice:
         """Cancel every waiting command and switch the coils off at ``at_index`` (the next
         sample if that has passed); returns the sample it applies at."""
         self.cancel()
-        return self._enqueue(at_index, "off", functools.partial(self._drive, (0.0,) * self.device.n_coils, 0.0))
+        return self._enqueue(at_index, "off", functools.partial(self._drive, (), 0))
 
     def _enqueue(self, at_index: int, kind: str, action: Callable[[], None]) -> int:
         applied = max(int(at_index), self.next_index)
@@ -268,9 +249,11 @@ class ScheduledDevice:
         if block.currents_a.size:
             self.peak_current_a = max(self.peak_current_a, float(np.max(np.abs(block.currents_a))))
 
-    def _drive(self, amplitudes_a: tuple, frequency_hz: float) -> None:
-        if any(amplitudes_a):
-            self.device.set_coils(np.array(amplitudes_a), frequency_hz)
+    def _drive(self, tones: tuple[CoilTone, ...], samples: int) -> None:
+        active = [t for t in tones if any(t.amplitudes_a)]
+        if active:
+            off_index = self.device.sample_index + samples if samples else NEVER
+            self.device.drive([t.amplitudes_a for t in active], [t.frequency_hz for t in active], off_index)
         else:
             self.device.coils_off()
-        self.coils_on = any(amplitudes_a)
+        self.coils_on = bool(active)

@@ -22,7 +22,8 @@ from mows.device.cycle.sequencer import CycleSequencer
 from mows.device.interface import Command, CommandResult
 from mows.device.simulated.scheduled import ScheduledDevice
 from mows.physics.coils import CurrentCap
-from mows.sim.simulator import SimulatedBlock, SimulatedDevice
+from mows.sim.readings import SimulatedBlock
+from mows.sim.simulator import SimulatedDevice
 
 CHUNK_S = 0.025  # samples are read in pieces of this, as the sim backend does
 

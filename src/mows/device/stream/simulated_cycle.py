@@ -23,7 +23,8 @@ from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase, PhaseEv
 from mows.device.simulated.scheduled import ScheduledDevice
 from mows.device.stream.device_time import DeviceTimeLoop
 from mows.physics.potential import ArcPotential
-from mows.sim.simulator import SimulatedBlock, SimulatedDevice
+from mows.sim.readings import SimulatedBlock
+from mows.sim.simulator import SimulatedDevice
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -90,7 +91,7 @@ def simulate_cycle(
     cycle cannot start or run (a current above the setup's cap, say), with the sequencer's reason."""
     if frequency_hz is None:
         device.set_orientations(device.scenario.stage_orientations_rad(theta0_rad))
-        frequency_hz = device.expected_frequency_hz()
+        frequency_hz = float(device.expected_frequencies_hz()[0])
     settings = CycleSettings(
         excitation_current_a=amplitude_a,
         excite_s=excite_s,
@@ -121,7 +122,7 @@ class _Heard:
         if event.phase is Phase.EXCITING:
             self._exciting = event
         elif event.phase is Phase.RINGDOWN and self._exciting is not None:
-            self.excitations.append((self._exciting, event, self.device.potential()))
+            self.excitations.append((self._exciting, event, self.device.potentials()[0]))
             self._exciting = None
 
     def record(self, theta0_rad: float, ringdown_samples: int) -> CycleRecord:

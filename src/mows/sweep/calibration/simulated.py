@@ -100,7 +100,7 @@ def _resonance_hz(device, theta0_rad: float) -> float:
     field: where the paper's tuning leaves the drive. The stage is turned there first (between
     cycles, the coils off); the cycle's own turn then finds it there."""
     device.set_orientations([theta0_rad])
-    return device.expected_frequency_hz()
+    return float(device.expected_frequencies_hz()[0])
 
 
 class _NominalFits:

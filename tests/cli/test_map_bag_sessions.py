@@ -42,31 +42,12 @@ def _cycle(cycle_id: int, theta0_rad: float, field_t, rng) -> list[bags.BagMessa
 
 
 def _published_sweep(seconds: float) -> bags.BagMessage:
-    """The mapper's SweepDecomposition naming its cycles (its numbers are not read back)."""
-    message = STORE.types["mows_msgs/msg/SweepDecomposition"](
-        header=header(seconds, "mows_rotation_plane"),
-        sweep_id=1,
-        status=0,
-        message="",
-        model="first_principles",
-        probe_id=0,
-        cycle_ids=np.array(SWEEP, dtype=np.uint64),
-        field_t=np.zeros(2),
-        field_covariance_t2=np.zeros(4),
-        gradient_t_per_m=np.zeros(3),
-        gradient_covariance=np.zeros(9),
-        f00_hz=P.f00_hz,
-        f00_free=False,
-        harmonic_amplitude_hz=np.zeros(0),
-        harmonic_phase_rad=np.zeros(0),
-        theta0_rad=np.zeros(0),
-        frequency_shift_hz=np.zeros(0),
-        frequency_shift_std_hz=np.zeros(0),
-        chi2_dof=0.0,
-        rms_residual_hz=0.0,
-        n_points=len(SWEEP),
-    )
-    return bags.BagMessage("/mows/sweep", "mows_msgs/msg/SweepDecomposition", round(seconds * 1e9), message)
+    """The mapper's SweepDecomposition naming its cycles (its numbers, zero here, are not read back)."""
+    kind = "mows_msgs/msg/SweepDecomposition"
+    fields = {name: bags.zero(k, detail, STORE) for name, (k, detail) in STORE.fielddefs[kind][1]}
+    fields.update(header=header(seconds, "mows_rotation_plane"), sweep_id=1, model="first_principles")
+    fields.update(cycle_ids=np.array(SWEEP, dtype=np.uint64), f00_hz=P.f00_hz, n_points=len(SWEEP))
+    return bags.BagMessage("/mows/sweep", kind, round(seconds * 1e9), STORE.types[kind](**fields))
 
 
 def _recording(path, seed=0):

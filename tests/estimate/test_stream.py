@@ -140,3 +140,33 @@ def test_a_failed_ringdown_is_not_offered_to_the_calibration():
     assert not ringdown(estimator, 0, lines=no_model)[0].calibrated
     assert not calibration.done
     assert ringdown(estimator, 1)[0].calibrated and calibration.outcome.ok
+
+
+def phase_msg(phase: int, at: int):
+    """An ExcitationState of another phase (IDLE 0, GAP 4, FAULT 5) beginning at sample ``at``."""
+    return SimpleNamespace(
+        header=SimpleNamespace(stamp=stamp(START_NS + at * NS_PER_SAMPLE)), phase=phase, PHASE_RINGDOWN=3
+    )
+
+
+@pytest.mark.parametrize("phase, at_s, cut", [(0, 0.3, True), (5, 0.3, True), (4, None, False), (0, None, False)])
+def test_a_ring_down_its_cycle_ended_inside_is_no_measurement(phase, at_s, cut):
+    """A cycle cancelled (IDLE) or aborted (FAULT) 0.3 s into its ring-down: the driver does not
+    count that ring-down as recorded, so no OK fit of it is published (TOO_SHORT, saying why),
+    though the samples of its whole window come. The next phase at the window's end (a GAP, the
+    cycle's IDLE) cuts nothing."""
+    estimator = RingdownEstimator(buffer_s=5.0)
+    samples = RingdownCase(0.0, snr_db=40.0).draw(np.random.default_rng(0))
+    at = N_SAMPLES if at_s is None else round(at_s * SAMPLE_RATE_HZ)
+    segments = estimator.announce(ringdown_msg(1))
+    for j in range(N_SAMPLES // BLOCK):
+        segments += estimator.add_block(block_msg(j, samples[j * BLOCK : (j + 1) * BLOCK]))
+        if (j + 1) * BLOCK == min(at, N_SAMPLES - BLOCK):  # heard before the window's last block
+            assert segments == []
+            segments += estimator.announce(phase_msg(phase, at))
+    (segment,) = segments
+    (estimated,) = estimator.estimate(segment, settings())
+    assert estimated.fit.ok is not cut and segment.cut_short is cut, estimated.fit.report()
+    if cut:
+        assert estimated.fit.status is FitStatus.TOO_SHORT and "cut short after 0.30 s" in estimated.fit.message
+        assert len(segment.samples_t) == at and not estimated.estimate.ok

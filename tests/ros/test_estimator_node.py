@@ -48,8 +48,9 @@ class Device:
         self.cycle = 0
         self.rng = np.random.default_rng(0)
 
-    def ringdown(self, seconds=0.5, corrupt=None, skip_block=None, announce=True):
-        """Announce a ring-down starting at the current sample and stream it."""
+    def ringdown(self, seconds=0.5, corrupt=None, skip_block=None, announce=True, cancel_block=None):
+        """Announce a ring-down starting at the current sample and stream it; with
+        ``cancel_block``, its cycle is cancelled (IDLE announced) as that block begins."""
         self.cycle += 1
         n = int(seconds * FS)
         t = np.arange(n) / FS
@@ -72,6 +73,10 @@ class Device:
                 )
             )
         for k, start in enumerate(range(0, n, BLOCK)):
+            if k == cancel_block:
+                self.excitation.publish(
+                    ExcitationState(header=self.header(self.index), phase=ExcitationState.PHASE_IDLE, phase_name="IDLE")
+                )
             if k != skip_block:
                 self.publish_block(near[start : start + BLOCK], far[start : start + BLOCK])
             self.index += BLOCK
@@ -184,6 +189,20 @@ def test_bad_ringdowns_get_a_status_and_no_field(ros, estimator, corrupt, skip, 
     assert heard["fits"][1].status == RingdownFit.STATUS_OK
     assert len(heard["fields"]) == 1 and heard["fields"][0].cycle_id == heard["fits"][1].cycle_id
     assert process.poll() is None
+
+
+def test_a_ringdown_cancelled_inside_gives_no_ok_fit_and_no_field(ros, estimator):
+    """A cycle cancelled 0.3 s into its 0.5 s ring-down: the driver counts it as not recorded,
+    and though the stream goes on through the whole window, its fit says why it is none."""
+    device, heard, _ = estimator
+    device.ringdown(cancel_block=round(0.3 * FS / BLOCK))
+    ros.wait_for(lambda: heard["fits"], "a fit result")
+    (fit,) = heard["fits"]
+    assert fit.status == RingdownFit.STATUS_TOO_SHORT and "cut short after 0.30 s of 0.50 s" in fit.message
+    device.ringdown()  # the next ring-down is fitted
+    ros.wait_for(lambda: len(heard["fits"]) == 2 and heard["fields"], "the next fit and its field")
+    assert heard["fits"][1].status == RingdownFit.STATUS_OK
+    assert [f.cycle_id for f in heard["fields"]] == [heard["fits"][1].cycle_id]
 
 
 def test_malformed_messages_do_not_stop_the_node(ros, estimator):

@@ -87,11 +87,11 @@ def test_a_probe_file_is_read_when_set_and_refused_with_its_reason(ros_context, 
     dataclasses.replace(PAPER_PROBE, damping_per_s=2.5).to_yaml(path)
     (result,) = node.set_parameters([Parameter("probe_file", value=str(path))])
     assert result.successful, result.reason
-    assert node._settings().probe.damping_per_s == 2.5
+    assert [p.probe.damping_per_s for p in node._settings().probes] == [2.5]
     path.write_text("moment_am2: -1\n")
     (result,) = node.set_parameters([Parameter("probe_file", value=str(path))])
     assert not result.successful and "probe_file" in result.reason and "lacks" in result.reason
-    assert node._settings().probe.damping_per_s == 2.5  # the accepted file's probe stays in use
+    assert [p.probe.damping_per_s for p in node._settings().probes] == [2.5]  # the accepted file's probe stays in use
     node.destroy_node()
 
 

@@ -113,7 +113,8 @@ def window_from_message(message: Any) -> RingdownWindow:
 
 @dataclasses.dataclass(frozen=True)
 class Segment:
-    """The samples of one window (channels as columns), and how many of them never arrived."""
+    """The samples of one window (channels as columns), and how many of them never arrived;
+    ``cut_short`` when its cycle ended inside it (the samples end there)."""
 
     window: RingdownWindow
     first_sample_index: int
@@ -121,6 +122,7 @@ class Segment:
     samples_t: np.ndarray
     saturated: np.ndarray
     missing_samples: int
+    cut_short: bool = False
 
 
 @dataclasses.dataclass
@@ -128,6 +130,7 @@ class _Pending:
     window: RingdownWindow
     start_index: int
     stop_index: int
+    cut_short: bool = False
 
 
 class SegmentAssembler:
@@ -196,6 +199,20 @@ class SegmentAssembler:
         same_clock = newest is not None and window.device_epoch == newest.epoch
         self._pending.append(_Pending(window, *self._index_range(window, newest if same_clock else None)))
         return self._complete() if newest is not None else []
+
+    def interrupt(self, stamp_ns: int, device_epoch: int) -> list[Segment]:
+        """A phase announced at ``stamp_ns`` on the clock ``device_epoch``: a ring-down it
+        begins inside was cut short (its cycle was cancelled or aborted; a cycle's next phase
+        begins where its ring-down ends). Such a window ends there; the windows complete by now."""
+        newest = self._blocks[-1] if self._blocks else None
+        if newest is None or newest.epoch != device_epoch:
+            return []
+        at = newest.index_at(stamp_ns)
+        for pending in self._pending:
+            # one sample's slack: the announcement's stamp and the window's are rounded apart
+            if pending.window.device_epoch == device_epoch and pending.start_index < at < pending.stop_index - 1:
+                pending.stop_index, pending.cut_short = max(at, pending.start_index + 1), True
+        return self._complete()
 
     def _before_start(self, window: RingdownWindow, start: SampleBlock) -> bool:
         """Whether ``window`` was over before ``start``, the first block (counted when it was)."""
@@ -268,6 +285,7 @@ class SegmentAssembler:
             samples,
             saturated,
             int(np.count_nonzero(~filled)),
+            pending.cut_short,
         )
 
     def _prune(self) -> None:
@@ -295,7 +313,17 @@ def fit_segment(
     """The fit of one assembled window in which the probes of ``lines`` ring down, one or several
     together (a multi-tone excitation's, :mod:`mows.physics.multitone`): one
     :class:`RingdownFit` per line, in order (:func:`mows.estimate.ringdown.fit_ringdowns`). A
-    window with missing samples is refused for every probe (``FitStatus.DATA_GAP``), never patched."""
+    window with missing samples is refused for every probe (``FitStatus.DATA_GAP``), never patched;
+    one cut short by its cycle's end is not a measurement (``FitStatus.TOO_SHORT``): the driver
+    does not count it as recorded."""
+    if segment.cut_short:
+        message = (
+            f"the ring-down was cut short after {len(segment.samples_t) / segment.sample_rate_hz:.2f} s of "
+            f"{segment.window.duration_s:.2f} s: its cycle ended (cancelled or aborted); not a measurement"
+        )
+        return [
+            failure(FitStatus.TOO_SHORT, message, theta0_rad=line.theta0_rad, probe_id=line.probe_id) for line in lines
+        ]
     if segment.missing_samples:
         message = gap_message(segment)
         return [

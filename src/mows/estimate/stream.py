@@ -33,7 +33,7 @@ from mows.estimate.segments import (
     fit_segment,
     window_from_message,
 )
-from mows.records.stamps import NS_PER_S
+from mows.records.stamps import NS_PER_S, nanoseconds
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,9 +107,12 @@ class RingdownEstimator:
 
     def announce(self, message: Any, fit_tuning: bool = False) -> list[Segment]:
         """An ``ExcitationState``; the ring-downs complete by now once it announces one (phase
-        RINGDOWN; a frequency-tuning one only with ``fit_tuning``). ValueError for an
-        announcement that is no window."""
-        if message.phase != message.PHASE_RINGDOWN or (message.tuning and not fit_tuning):
+        RINGDOWN; a frequency-tuning one only with ``fit_tuning``), or once another phase begins
+        inside one (its cycle ended: it is cut short there). ValueError for an announcement that
+        is no window."""
+        if message.phase != message.PHASE_RINGDOWN:
+            return self.assembler.interrupt(nanoseconds(message.header.stamp), int(getattr(message, "device_epoch", 0)))
+        if message.tuning and not fit_tuning:
             return []
         return self.assembler.announce(window_from_message(message))
 

@@ -8,7 +8,6 @@ not as independent noise per ring-down. The checks are independent of the covari
 refits with the stop moved by ±δ, and sweeps whose stop is drawn from its distribution.
 """
 
-import dataclasses
 import math
 
 import numpy as np
@@ -28,7 +27,9 @@ DELTA_RAD = math.radians(0.02)
 
 def ringdowns(stop_rad: float, stop_std_rad: float = 0.0) -> Ringdowns:
     n = ANGLES.size
-    return Ringdowns(stop_rad, np.full(n, P.damping_per_s), np.full(n, 0.5), None, start_offset_s=0.003, stop_std_rad=stop_std_rad)
+    return Ringdowns(
+        stop_rad, np.full(n, P.damping_per_s), np.full(n, 0.5), None, start_offset_s=0.003, stop_std_rad=stop_std_rad
+    )
 
 
 def shifts(stop_rad: float, rng) -> np.ndarray:
@@ -37,7 +38,9 @@ def shifts(stop_rad: float, rng) -> np.ndarray:
 
 
 def fit(shift, stop_rad: float, stop_std_rad: float = 0.0):
-    return decompose(ANGLES, shift, np.full(ANGLES.size, STD_HZ), P, P.f00_hz, ringdowns=ringdowns(stop_rad, stop_std_rad))
+    return decompose(
+        ANGLES, shift, np.full(ANGLES.size, STD_HZ), P, P.f00_hz, ringdowns=ringdowns(stop_rad, stop_std_rad)
+    )
 
 
 def variances(d) -> np.ndarray:
@@ -81,8 +84,20 @@ def test_sweeps_whose_stop_differs_from_the_files_have_unit_pulls():
 def points(amplitude_rad, rest_offset_rad=math.nan):
     shift = shifts(P.theta_stop_rad, np.random.default_rng(5))
     return [
-        SweepPoint(t, P.f00_hz + s, STD_HZ, s, STD_HZ, a, P.damping_per_s, 0.5, 0.0, rest_offset_rad=rest_offset_rad,
-                   rest_offset_std_rad=1e-4, start_offset_s=0.003)
+        SweepPoint(
+            t,
+            P.f00_hz + s,
+            STD_HZ,
+            s,
+            STD_HZ,
+            a,
+            P.damping_per_s,
+            0.5,
+            0.0,
+            rest_offset_rad=rest_offset_rad,
+            rest_offset_std_rad=1e-4,
+            start_offset_s=0.003,
+        )
         for t, s, a in zip(ANGLES, shift, amplitude_rad)
     ]
 

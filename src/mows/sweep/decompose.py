@@ -405,21 +405,22 @@ def decompose(
     params[free] = result.x
     # A calibrated f00 off by δ moves every residual as the Δf00 parameter does (model_shift_hz):
     # its column of the Jacobian, held fixed in the fit, carries f00's σ into the parameters.
-    shared = []
+    shared: list[tuple[np.ndarray, float]] = []
     if not f00_free and f00_std_hz > 0.0:
         step = np.eye(PARAMETER_COUNT)[5] * F00_STEP_HZ
         f00_column = (residual_of(params + step) - residual_of(params - step)) / (2.0 * F00_STEP_HZ)
         shared.append((f00_column, float(f00_std_hz)))
-    if model == "first_principles" and _released_with_std(ringdowns):
-        shared.append((_stop_column(params, theta0, shift, std, probe, f00_hz, ringdowns, neighbours), ringdowns.stop_std_rad))
+    if model == "first_principles" and ringdowns is not None and _released_with_std(ringdowns):
+        stop_column = _stop_column(params, theta0, shift, std, probe, f00_hz, ringdowns, neighbours)
+        shared.append((stop_column, ringdowns.stop_std_rad))
     decomposition = _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics, shared)
     decomposition.parameters = params
     return decomposition
 
 
-def _released_with_std(ringdowns: Ringdowns | None) -> bool:
+def _released_with_std(ringdowns: Ringdowns) -> bool:
     """Whether the ring-downs start from the stop and its σ is given."""
-    return ringdowns is not None and ringdowns.start_swing_rad is None and ringdowns.stop_std_rad > 0.0
+    return ringdowns.start_swing_rad is None and ringdowns.stop_std_rad > 0.0
 
 
 def _stop_column(params, theta0, shift, std, probe, f00_hz, ringdowns: Ringdowns, neighbours) -> np.ndarray:

@@ -168,8 +168,10 @@ class SweepRecord:
         from the stops' robust spread where at least MIN_STOP_FITS fits give one, else
         ``fallback_std_rad`` (the probe's stop's σ, written by its calibration)."""
         rest = self.rest_offsets_rad() if rest_angles_rad is None else np.asarray(rest_angles_rad, float)
-        stops = stop_from_swing_rad(self._column("amplitude_rad"), rest, *self._since_release()) if self.points else []
-        stops = np.asarray(stops, float)[np.isfinite(stops)]
+        if len(self.points) < MIN_STOP_FITS:
+            return fallback_std_rad
+        stops = stop_from_swing_rad(self._column("amplitude_rad"), rest, *self._since_release())
+        stops = stops[np.isfinite(stops)]
         if stops.size < MIN_STOP_FITS:
             return fallback_std_rad
         spread = MAD_TO_SD * float(np.median(np.abs(stops - np.median(stops))))

@@ -19,6 +19,8 @@ REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its
 REST_OFFSET_SIGMAS = 4.0  # …and it is this many σ from 0
 OUTLIER_SIGMAS = 3.0  # a pooled value this many robust σ from the median is left out
 MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
+MEDIAN_EFFICIENCY = 1.2533  # √(π/2): the median's standard error over the mean's, normal samples
+MIN_STOP_FITS = 5  # a spread from fewer fits is no standard error: the probe's σ then
 # Ring-downs that one static field describes this well are one sweep: its field gives each rest angle.
 MAX_SWEEP_CHI2_DOF = 10.0
 
@@ -161,6 +163,20 @@ class SweepRecord:
         stops = stop_from_swing_rad(self._column("amplitude_rad"), rest, *self._since_release())
         return robust_median(stops[np.isfinite(stops)], fallback_rad)
 
+    def stop_std_rad(self, rest_angles_rad=None, fallback_std_rad: float = math.nan) -> float:
+        """The standard uncertainty of :meth:`stop_amplitude_rad`: the median's standard error
+        from the stops' robust spread where at least MIN_STOP_FITS fits give one, else
+        ``fallback_std_rad`` (the probe's stop's σ, written by its calibration)."""
+        rest = self.rest_offsets_rad() if rest_angles_rad is None else np.asarray(rest_angles_rad, float)
+        if len(self.points) < MIN_STOP_FITS:
+            return fallback_std_rad
+        stops = stop_from_swing_rad(self._column("amplitude_rad"), rest, *self._since_release())
+        stops = stops[np.isfinite(stops)]
+        if stops.size < MIN_STOP_FITS:
+            return fallback_std_rad
+        spread = MAD_TO_SD * float(np.median(np.abs(stops - np.median(stops))))
+        return MEDIAN_EFFICIENCY * spread / math.sqrt(stops.size)
+
     def decompose(
         self,
         probe: Probe,
@@ -208,14 +224,18 @@ class SweepRecord:
 
         damping, duration, pickups = self._column("damping_per_s"), self._column("duration_s"), self.pickups()
 
-        def ringdowns(stop):
-            return Ringdowns(stop, damping, duration, pickups, start_offset_s=self._column("start_offset_s"))
+        def ringdowns(rest=None):
+            stop = self.stop_amplitude_rad(rest, probe.theta_stop_rad)
+            std = self.stop_std_rad(rest, probe.theta_stop_std_rad)
+            return Ringdowns(
+                stop, damping, duration, pickups, start_offset_s=self._column("start_offset_s"), stop_std_rad=std
+            )
 
-        first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(fallback_rad=probe.theta_stop_rad)))
+        first = decompose(**arrays, ringdowns=ringdowns())
         if not first.ok:
             return first
-        stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe, neighbours), probe.theta_stop_rad)
-        return decompose(**{**arrays, "start": first.parameters}, ringdowns=ringdowns(stop))
+        rest = self.rest_angles_rad(first, probe, neighbours)
+        return decompose(**{**arrays, "start": first.parameters}, ringdowns=ringdowns(rest))
 
     def measured_ringdowns(self) -> Ringdowns | None:
         """The ring-downs as recorded when they do not start from the stop (a multi-tone

@@ -124,7 +124,12 @@ def calibrate_probe(
     if not fit_lever:
         notes.append("no gradient points: the lever comes from J and the magnet mass alone, unchecked")
     damping, damping_var = _mean_damping(points)
-    swing, swing_std = _housing_stop(points, known)
+    swing, swing_std, stop_measured = _housing_stop(points, known)
+    if not stop_measured:
+        notes.append(
+            f"no fit determined θmax: the stop is the nominal {math.degrees(swing):.3f}°, "
+            f"± {math.degrees(max(swing_std, known.theta_stop_std_rad)):.3f}° as stated"
+        )
     unit_axis = axis / np.linalg.norm(axis)
     fixed_environment = np.zeros(3) if fit_environment else np.asarray(known.environment_field_t, float)
 
@@ -181,7 +186,7 @@ def calibrate_probe(
         raise CalibrationError(
             f"implausible constants, probably a unit error (currents in mA? f_hz in kHz?): {'; '.join(implausible)}"
         )
-    return dataclasses.replace(calibration, polarity=polarity)
+    return dataclasses.replace(calibration, polarity=polarity, stop_measured=stop_measured)
 
 
 def _dropped_notes(points: Sequence[CalibrationPoint], usable: Sequence[CalibrationPoint]) -> list[str]:
@@ -212,16 +217,16 @@ def _least_squares(residuals: Residuals, x0: np.ndarray, steps: np.ndarray) -> o
     return result
 
 
-def _housing_stop(points: Sequence[CalibrationPoint], known: KnownConstants) -> tuple[float, float]:
-    """The housing stop every ring-down starts from, and its standard uncertainty: as given
-    (``known.measured_stop_rad``), else measured by the fits that determined both θmax and the
-    rest offset, θmax grown back by e^(δ·t) to the switch-off plus |θs − θ0|
-    (:func:`mows.physics.ringdown_average.stop_from_swing_rad`), their median with its
+def _housing_stop(points: Sequence[CalibrationPoint], known: KnownConstants) -> tuple[float, float, bool]:
+    """The housing stop every ring-down starts from, its standard uncertainty, and whether it
+    was measured: as given (``known.measured_stop_rad``), else measured by the fits that
+    determined both θmax and the rest offset, θmax grown back by e^(δ·t) to the switch-off plus
+    |θs − θ0| (:func:`mows.physics.ringdown_average.stop_from_swing_rad`), their median with its
     standard error from the median absolute deviation; with fewer than MIN_STOP_FITS of them
-    the probe's stop ± STOP_PRIOR_STD_RAD.
+    the probe's stop ± STOP_PRIOR_STD_RAD, not measured.
     A homogeneous sweep cannot tell the stop from β0: this is what holds it."""
     if known.measured_stop_rad is not None:
-        return known.measured_stop_rad, known.measured_stop_std_rad
+        return known.measured_stop_rad, known.measured_stop_std_rad, True
     stops = stop_from_swing_rad(
         [p.amplitude_rad for p in points],
         [p.rest_offset_rad for p in points],
@@ -230,11 +235,11 @@ def _housing_stop(points: Sequence[CalibrationPoint], known: KnownConstants) -> 
     )
     stops = stops[np.isfinite(stops)]
     if stops.size < MIN_STOP_FITS:  # a spread from fewer is no standard error
-        return known.theta_stop_rad, STOP_PRIOR_STD_RAD
+        return known.theta_stop_rad, STOP_PRIOR_STD_RAD, False
     median = float(np.median(stops))
     spread = MAD_TO_SD * float(np.median(np.abs(stops - median)))
     std = MEDIAN_EFFICIENCY * spread / math.sqrt(len(stops))
-    return median, max(std, SWING_FLOOR_RAD)
+    return median, max(std, SWING_FLOOR_RAD), True
 
 
 def _swing_slope_hz_per_rad(model: Residuals, x: np.ndarray) -> np.ndarray:

@@ -2,7 +2,9 @@
 them behind; and a node of the graph started as an action server, with its goals sent."""
 
 import os
+import signal
 import subprocess
+import sys
 import time
 from collections.abc import Callable
 
@@ -190,6 +192,18 @@ def serve_cycles(ros, run_cycle) -> ActionServer:
         return result
 
     return ActionServer(ros.node, MeasurementCycle, "driver/measurement_cycle", execute)
+
+
+def leave_while_running(ros, start, driver, action_type: str, action: str, goal: str) -> None:
+    """A client of ``action`` in a process of its own (:func:`goal_client`) sends ``goal``;
+    once its goal runs a cycle of ``driver`` (:class:`HeldCycles`) and it heard the goal
+    accepted (which may come after), Ctrl-C: returns once the node cancelled that cycle."""
+    client = start(sys.executable, "-c", goal_client(action_type, action, goal))
+    ros.wait_for(lambda: driver.goals, "the goal's first cycle")
+    ros.wait_for(lambda: "accepted" in log(client), "the client to hear its goal accepted")
+    client.send_signal(signal.SIGINT)
+    assert client.wait(timeout=30) == 0, log(client)
+    ros.wait_for(lambda: driver.cancelled, "the node to cancel the cycle nobody waits for")
 
 
 def goal_client(action_type: str, action: str, goal: str) -> str:

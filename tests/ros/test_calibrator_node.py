@@ -1,9 +1,6 @@
 """The calibrator node: the probe calibration action through a stand-in driver whose ring-down
 fits come from the exact field of the calibration bench, and the supply at zero in every ending."""
 
-import signal
-import sys
-
 import numpy as np
 import pytest
 from action_msgs.msg import GoalStatus
@@ -14,7 +11,7 @@ from std_srvs.srv import Trigger
 
 from mows.physics.probe import Probe, calibration_record
 from mows_ros.qos import RESULT_QOS
-from node_processes import HeldCycles, goal_client, log, send_goal, serve_cycles
+from node_processes import HeldCycles, leave_while_running, log, send_goal, serve_cycles
 from sweep.calibration_bench import BENCH, bench_fits
 
 pytestmark = pytest.mark.ros
@@ -203,12 +200,7 @@ def test_a_calibration_whose_client_leaves_is_cancelled_with_the_supply_at_zero(
     driver = HeldSupply(ros)
     diagnostics = ros.diagnostics_of("/calibrator")
     goal = f"CalibrateProbe.Goal(currents_a={CURRENTS})"
-    client = start(sys.executable, "-c", goal_client("CalibrateProbe", "/calibrator/calibrate_probe", goal))
-    ros.wait_for(lambda: driver.goals, "the calibration's first cycle")
-    ros.wait_for(lambda: "accepted" in log(client), "the client to hear its goal accepted")
-    client.send_signal(signal.SIGINT)
-    assert client.wait(timeout=30) == 0, log(client)
-    ros.wait_for(lambda: driver.cancelled, "the calibrator to cancel the cycle nobody waits for")
+    leave_while_running(ros, start, driver, "CalibrateProbe", "/calibrator/calibrate_probe", goal)
     reason = "every node that asked for it through /calibrator/calibrate_probe/_action/send_goal has left"
     ros.wait_for(lambda: f"calibration cancelled, its cycle with it: {reason}" in log(process), "the log line")
     ros.wait_for(lambda: diagnostics.get("cancels") == "1", "the cancel counted on /diagnostics")

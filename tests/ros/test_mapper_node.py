@@ -2,8 +2,6 @@
 ring-down fits computed from the exact field of a scenario, decomposed into B and G."""
 
 import math
-import signal
-import sys
 
 import numpy as np
 import pytest
@@ -21,7 +19,7 @@ from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import DecompositionStatus
 from mows_ros.qos import MAP_QOS, RESULT_QOS
-from node_processes import HeldCycles, goal_client, log, send_goal, serve_cycles
+from node_processes import HeldCycles, leave_while_running, log, send_goal, serve_cycles
 
 pytestmark = pytest.mark.ros
 
@@ -248,12 +246,7 @@ def test_a_sweep_whose_client_leaves_is_cancelled_with_its_cycle_logged_and_coun
     driver = HeldCycles(ros)
     diagnostics = ros.diagnostics_of("/mapper")
     goal = "RotationSweep.Goal(theta0_rad=[0.0, 1.0, 2.0, 3.0, 4.0, 5.0], repeats_per_angle=1)"
-    client = start(sys.executable, "-c", goal_client("RotationSweep", "/mapper/rotation_sweep", goal))
-    ros.wait_for(lambda: driver.goals, "the sweep's first cycle")
-    ros.wait_for(lambda: "accepted" in log(client), "the client to hear its goal accepted")  # it may come after
-    client.send_signal(signal.SIGINT)
-    assert client.wait(timeout=30) == 0, log(client)
-    ros.wait_for(lambda: driver.cancelled, "the mapper to cancel the cycle nobody waits for")
+    leave_while_running(ros, start, driver, "RotationSweep", "/mapper/rotation_sweep", goal)
     reason = "every node that asked for it through /mapper/rotation_sweep/_action/send_goal has left"
     ros.wait_for(lambda: f"sweep cancelled, its cycle with it: {reason}" in log(process), "the log line")
     ros.wait_for(lambda: diagnostics.get("cancels") == "1", "the cancel counted on /diagnostics")

@@ -190,8 +190,11 @@ class SweepRecord:
         The first-principles model needs the swing each ring-down starts with, stop − |θs|, and
         θs depends on the field it is fitting: a first pass with the fits' own rest offsets gives
         the field, its rest angles give the pooled stop (the probe's where no fit determined
-        θmax), and a second pass fits with both. ``neighbours``: other probes' fields at each
-        ring-down, known terms of the first-principles model (:mod:`mows.sweep.probes`);
+        θmax), and a second pass fits with both. The stop's σ (:meth:`stop_std_rad`: the pooled
+        stop's, else the probe file's ``theta_stop_std_rad``) enters the covariance as one error
+        shared by every ring-down (:class:`Ringdowns`' ``stop_std_rad``). ``neighbours``: other
+        probes' fields at each ring-down, known terms of the first-principles model
+        (:mod:`mows.sweep.probes`);
         ``curvature``: fit the field's 3θ0 curvature too (:func:`decompose`). ``measured``: the
         ring-downs did not start from the stop (a multi-tone excitation's), and each starts with the
         θmax its fit measured (:meth:`measured_ringdowns`, None where a fit did not measure it).

@@ -393,6 +393,27 @@ def _centre_rows(
 
 
 @njit(cache=True)
+def _series_at(coeffs: np.ndarray, x: np.ndarray, out: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> None:
+    """``out[i]`` = Σ c_j T_j(x[i]) by :func:`_series`'s arithmetic, with the points innermost:
+    their recurrences are independent, so they run side by side in vector registers instead of
+    one latency-bound chain after another. Top coefficients that are exactly 0 (a derivative's
+    last) leave the recurrence at 0 and are skipped. ``b1``, ``b2``: work arrays like ``x``."""
+    top = coeffs.shape[0]
+    while top > 1 and coeffs[top - 1] == 0.0:
+        top -= 1
+    b1[:] = 0.0
+    b2[:] = 0.0
+    for j in range(top - 1, 0, -1):
+        c = coeffs[j]
+        for i in range(x.shape[0]):
+            t = 2.0 * x[i] * b1[i] - b2[i] + c
+            b2[i] = b1[i]
+            b1[i] = t
+    for i in range(x.shape[0]):
+        out[i] = x[i] * b1[i] - b2[i] + coeffs[0]
+
+
+@njit(cache=True)
 def _balance_rows(
     d1: np.ndarray, d2: np.ndarray, spring: np.ndarray, amplitude: np.ndarray, half_width: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -403,6 +424,8 @@ def _balance_rows(
     phase = 2.0 * np.pi * np.arange(HALF_CYCLE) / BALANCE_POINTS
     first, second_wave = np.cos(phase), np.cos(2.0 * phase)
     weight = np.array([_cycle_weight(i, HALF_CYCLE) for i in range(HALF_CYCLE)])
+    theta, x, b1, b2 = np.empty(HALF_CYCLE), np.empty(HALF_CYCLE), np.empty(HALF_CYCLE), np.empty(HALF_CYCLE)
+    torque, bend = np.empty(HALF_CYCLE), np.empty(HALF_CYCLE)
     for r in range(rows):
         a = amplitude[r]
         # From the rest angle (a one-point Newton): the cycle's own balance moves the centre by
@@ -416,14 +439,18 @@ def _balance_rows(
         mean, second, harmonic, curvature = rest, 0.0, 0.0, 0.0
         converged = False
         for _ in range(NEWTON_STEPS):
+            for i in range(HALF_CYCLE):
+                theta[i] = mean + a * first[i] + second * second_wave[i]
+                x[i] = theta[i] / half_width
+            _series_at(d1[r], x, torque, b1, b2)
+            _series_at(d2[r], x, bend, b1, b2)
             slope_mean, slope_first, slope_second, curvature = 0.0, 0.0, 0.0, 0.0
             for i in range(HALF_CYCLE):
-                theta = mean + a * first[i] + second * second_wave[i]
-                slope = weight[i] * (spring[r] * theta + _series(d1[r], theta / half_width))
+                slope = weight[i] * (spring[r] * theta[i] + torque[i])
                 slope_mean += slope
                 slope_first += slope * first[i]
                 slope_second += slope * second_wave[i]
-                curvature += weight[i] * (spring[r] + _series(d2[r], theta / half_width))
+                curvature += weight[i] * (spring[r] + bend[i])
             harmonic = 2.0 * slope_first / divisor
             mean_step = slope_mean / curvature
             second_step = (2.0 * slope_second - 4.0 * harmonic * second) / (curvature - 4.0 * harmonic)

@@ -210,7 +210,6 @@ def _frequency_factor(config: Configuration, probe: Probe, amplitude_nodes: Ampl
             neighbour = neighbour + np.einsum("nij,nj->ni", neighbour_gradient, moved)
         along, field = along + neighbour, field + neighbour
         active_gradient = active_gradient + neighbour_gradient
-    variants = [along] + ([field] if config.deflection else [])
     gravity = None if config.gravity_m_per_s2 is None else np.einsum("nij,nj->ni", axes, config.gravity_m_per_s2)
     local: dict[str, Any] = dict(
         gradient_t_per_m=factor[..., None] * active_gradient,
@@ -220,12 +219,16 @@ def _frequency_factor(config: Configuration, probe: Probe, amplitude_nodes: Ampl
         energy_j=config.energy_j,
         magnet_offset_m=config.magnet_offset_m,
     )
-    stiffness = [_rest_stiffness(probe, factor * b, **local) for b in variants]
+    # The potential with the field along the probe, and with the whole field where the deflection
+    # is on; each serves the rest stiffness and the amplitude nodes, and the whole field's the
+    # start swing (built for it alone where the deflection is off).
+    variants = [_potential(probe, factor * b, **local) for b in [along] + ([field] if config.deflection else [])]
+    stiffness = [_rest_stiffness(potential) for potential in variants]
     h = _readout(config, probe, _blend(stiffness, config.deflection))
     if config.amplitude:
-        start = config.start_swing_rad(_potential(probe, factor * field, **local))
+        start = config.start_swing_rad(variants[-1] if config.deflection else _potential(probe, factor * field, **local))
         amplitudes, weights = amplitude_nodes(config, start)
-        at_amplitude = [_amplitude_stiffness(probe, factor * b, amplitudes, **local) for b in variants]
+        at_amplitude = [potential.effective_stiffness_nm_per_rad(amplitudes) for potential in variants]
         averaged = (weights * _readout(config, probe, _blend(at_amplitude, config.deflection))).sum(-1)
         h = h + config.amplitude * (averaged - h)
     return h
@@ -270,38 +273,25 @@ def _potential(
     gravity_m_per_s2: np.ndarray | None,
     spring_nm_per_rad: np.ndarray,
     energy_j: np.ndarray | None = None,
-    repeat: int | None = None,
     magnet_offset_m: np.ndarray | None = None,
 ) -> ArcPotential:
-    """ArcPotential.from_local_field for the rows, optionally each repeated ``repeat`` times."""
-
-    def expand(a: np.ndarray | None) -> Any:
-        return a if a is None or repeat is None else np.repeat(a, repeat, axis=0)
-
+    """ArcPotential.from_local_field for the rows."""
     return ArcPotential.from_local_field(
         probe,
-        expand(field),
-        expand(gradient_t_per_m),
-        expand(hessian_t_per_m2),
-        expand(gravity_m_per_s2),
-        spring_nm_per_rad=expand(spring_nm_per_rad),
-        energy_j=expand(energy_j),
-        magnet_offset_m=expand(magnet_offset_m),
+        field,
+        gradient_t_per_m,
+        hessian_t_per_m2,
+        gravity_m_per_s2,
+        spring_nm_per_rad=spring_nm_per_rad,
+        energy_j=energy_j,
+        magnet_offset_m=magnet_offset_m,
     )
 
 
-def _rest_stiffness(probe: Probe, field: np.ndarray, **local: Any) -> np.ndarray:
+def _rest_stiffness(potential: ArcPotential) -> np.ndarray:
     """U''(θs) at the exact rest angle (:meth:`ArcPotential.rest_angle_rad`); NaN where unstable."""
-    potential = _potential(probe, field, **local)
     theta = potential.rest_angle_rad()
     return np.where(np.isfinite(theta), potential.stiffness_nm_per_rad(np.nan_to_num(theta)), np.nan)
-
-
-def _amplitude_stiffness(probe: Probe, field: np.ndarray, amplitudes: np.ndarray, **local: Any) -> np.ndarray:
-    """Harmonic-balance stiffness k(A) (n, q) at the amplitude nodes."""
-    n, q = amplitudes.shape
-    potential = _potential(probe, field, repeat=q, **local)
-    return potential.effective_stiffness_nm_per_rad(amplitudes.reshape(-1)).reshape(n, q)
 
 
 def unevaluable_rows(table: MeasurementTable, probe: Probe) -> dict[int, tuple[str, str]]:

@@ -127,7 +127,7 @@ def _physics_key(config: Configuration, probe: Probe) -> bytes:
         else:
             array = np.ascontiguousarray(value, float)
             digest.update(repr(array.shape).encode())
-            digest.update(array)  # its buffer, not a copy
+            digest.update(array.data)  # its buffer, not a copy
     return digest.digest()
 
 
@@ -227,7 +227,8 @@ def _frequency_factor(config: Configuration, probe: Probe, amplitude_nodes: Ampl
     stiffness = [_rest_stiffness(potential) for potential in variants]
     h = _readout(config, probe, _blend(stiffness, config.deflection))
     if config.amplitude:
-        start = config.start_swing_rad(variants[-1] if config.deflection else _potential(probe, factor * field, **local))
+        whole = variants[-1] if config.deflection else _potential(probe, factor * field, **local)
+        start = config.start_swing_rad(whole)
         amplitudes, weights = amplitude_nodes(config, start)
         at_amplitude = [potential.effective_stiffness_nm_per_rad(amplitudes) for potential in variants]
         averaged = (weights * _readout(config, probe, _blend(at_amplitude, config.deflection))).sum(-1)

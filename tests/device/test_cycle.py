@@ -18,12 +18,16 @@ from mows.device.simulated.scheduled import ScheduledDevice
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap, helmholtz, largest_spacing
+from mows.physics.coupling import PlacedProbe
+from mows.physics.pose import Pose
+from mows.physics.probe import PAPER_PROBE
 from mows.records.samples import SampleBlock
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
 
 CAP_A = 10.0
 FAST = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.2, repeats=2, tuning_steps=2, turn_settle_s=0.2)
+ONE = (PlacedProbe(PAPER_PROBE, Pose()),)  # the paper's probe at the coils' centre, alone on its stage
 MAX_STEPS = 100_000  # bound for a cycle that never ends (a bug), not a timing
 
 
@@ -151,7 +155,7 @@ def test_an_excitation_stopped_before_its_answers_counts_towards_the_duty_limit(
     # sample: a stop before its answers counts the samples from there up to the stop.
     rate = 1000.0
     quick = CycleSettings(excite_s=0.1, ringdown_s=0.1, repeats=1, tuning_steps=0, turn_settle_s=0.0, duty_window_s=1.0)
-    sequencer = CycleSequencer(quick, largest_spacing(), CurrentCap(CAP_A), rate, 110.0, fit=fit_ringdown)
+    sequencer = CycleSequencer(quick, largest_spacing(), CurrentCap(CAP_A), rate, 110.0, fit=fit_ringdown, probes=ONE)
 
     def samples(first, n):
         return SampleBlock(first, round(first * 1e9 / rate), rate, np.zeros((n, 2)), np.zeros((n, 2), bool))
@@ -346,7 +350,7 @@ def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a,
         turn_settle_s=0.0,
         max_duty_cycle=1.0,
     )
-    sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0, fit=fit_ringdown)
+    sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0, fit=fit_ringdown, probes=ONE)
     sequencer.on_samples(SampleBlock(0, 0, 20_000.0, np.zeros((1, 2)), np.zeros((1, 2), bool)))
     device = RecordingDevice()
     # The cap limits what reaches the coils: each coil's current of the orientation-dependent

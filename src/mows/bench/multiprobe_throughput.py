@@ -71,7 +71,7 @@ def run(
     """Points per minute with probe ``single`` alone and with every probe of the scene."""
     scene = load_scenario(SCENARIO)
     alone = scene.probes[single]
-    alone_scene = scene.replace(probes=(alone,), probe=alone.probe, pose=alone.pose)
+    alone_scene = scene.replace(probes=(alone,))
     one = time_to_target(alone_scene, goal, points, max_sweeps, seed)
     every = time_to_target(scene, goal, points, max_sweeps, seed)
     return {

@@ -27,8 +27,11 @@ LOST = "failed to send response (timeout)"  # rclpy's RuntimeWarning for an answ
 
 def answering_when_heard(service: Service, warn) -> Service:
     """``service`` with its ``send_response`` (what the executor calls with each answer) tried
-    again while the client's reader is not yet matched; ``warn`` logs an answer given up."""
+    again while the client's reader is not yet matched; ``warn`` logs an answer given up.
+    A service that answers so already is left as it is."""
     send = service.send_response
+    if getattr(send, "when_heard", False):
+        return service
 
     def send_response(response, header) -> None:
         deadline = time.monotonic() + ANSWER_WAIT_S
@@ -37,6 +40,7 @@ def answering_when_heard(service: Service, warn) -> Service:
                 warn(f"an answer of {service.srv_name} was lost: its client was not discovered in {ANSWER_WAIT_S:g} s")
                 return
 
+    send_response.when_heard = True  # type: ignore[attr-defined]
     service.send_response = send_response
     return service
 

@@ -55,7 +55,7 @@ class MowsNode(LifecycleNode):
 
     def __init__(self, name: str, table: Sequence[ParamSpec]):
         super().__init__(name)
-        for service in self.services:  # rclpy's own: the parameter and lifecycle services
+        for service in self.services:  # the lifecycle services, which rclpy makes without create_service
             answering_when_heard(service, self.get_logger().warning)
         self.parameter_table = tuple(table)
         # ``-p driver:name:=value`` in a namespace, which rcl drops (the process's own command line)

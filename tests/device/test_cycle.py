@@ -15,6 +15,7 @@ from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.cycle.sequencer import CycleSequencer
 from mows.device.interface import CoilCommand, CoilTone, CommandResult
 from mows.device.simulated.scheduled import ScheduledDevice
+from mows.device.stream.device_time import DeviceTimeLoop, scheduled_device
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap, helmholtz, largest_spacing
@@ -22,7 +23,7 @@ from mows.physics.coupling import PlacedProbe
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE
 from mows.records.samples import SampleBlock
-from mows.sim.scenario import load_scenario
+from mows.sim.scenario import Scenario, load_scenario
 from mows.sim.simulator import SimulatedDevice
 
 CAP_A = 10.0
@@ -465,3 +466,33 @@ def test_a_cancelled_cycle_reports_the_ring_downs_it_recorded():
     assert session.cancel_cycle(session.sequencer.last_cycle_id, "the client left")
     session.step(0.0)
     assert not done[0].success and done[0].ringdowns_recorded == 1
+
+
+def _phases_of(scenario) -> list:
+    """The phase events of one cycle at θ0 = 30° of ``scenario``'s device, in device time."""
+    events = []
+    loop = DeviceTimeLoop(
+        scheduled_device(scenario, CurrentCap(CAP_A), np.random.default_rng(5)),
+        FAST,
+        fit=fit_ringdown,
+        on_event=events.append,
+    )
+    outcome = loop.run_cycle(CycleRequest(math.radians(30.0), repeats=1, tuning_steps=1))
+    assert outcome.success, outcome.message
+    return events
+
+
+def test_a_list_of_one_probe_runs_the_cycle_of_the_older_shape_of_one_probe():
+    """One probe on its stage is tuned and driven at the excitation current (to the stop),
+    whether its scene gives it as ``probe`` and ``pose`` or as a ``probes:`` list of one."""
+    pose = {"magnet_position_m": [0.0, 0.0, 0.0], "theta0_deg": 0.0}
+    base = {k: v for k, v in load_scenario().to_dict().items() if k not in ("probe", "pose", "probes")}
+    older = base | {"probe": "paper", "pose": pose}
+    listed = base | {"probes": [{"probe": "paper", "pose": pose}]}
+    first, second = (_phases_of(Scenario.from_dict(d)) for d in (older, listed))
+    assert first == second
+    exciting = [e for e in first if e.phase == Phase.EXCITING]
+    assert [e.tuning for e in exciting] == [True, False]
+    expected = largest_spacing().currents_a(math.radians(30.0), FAST.excitation_current_a)
+    np.testing.assert_allclose(exciting[0].currents_a, expected)
+    assert exciting[0].probe_ids == (0,) and exciting[0].probe_theta0_rad == pytest.approx((math.radians(30.0),))

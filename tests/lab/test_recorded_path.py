@@ -191,8 +191,10 @@ def test_the_bag_maps_offline_to_the_scenes_field_and_gradient(path, scene):
     does, one sweep of both turns, lands within 4σ of the field and gradient at the probe. In
     3.4 mT the field needs each ring-down's swing to 0.01°: the swing released at the stop has
     decayed by 0.5 % when the fit's window starts 3 ms later. This seed's Bx: +3.7σ without that
-    decay, −3.4σ with it (seeds 1–5: +4.5σ to +5.5σ, now −2.0σ to −2.5σ); the rest is the
-    probe's nominal stop, which the fits do not determine here (docs/physics.md §6.4)."""
+    decay, −3.4σ with it (seeds 1–5: +4.5σ to +5.5σ, then −2.0σ to −2.5σ); the rest is the
+    probe's nominal stop, which the fits do not determine here (docs/physics.md §6.4). This probe
+    file states no σ for its stop, so the map carries 1°: 2.6 µT of Bx's σ (the test below states
+    the simulated housing's 0.05°)."""
     scenario, _, _ = path(scene)
     _, probe, _ = path.files[scene, SEED]
     out = io.StringIO()

@@ -77,3 +77,11 @@ def test_a_client_never_matched_is_given_up_after_the_bound_with_one_line(monkey
     assert not service.delivered and not printed
     assert 0.9 * ANSWER_WAIT_S / 0.1 <= service.tries <= ANSWER_WAIT_S / 0.1 + 2
     assert logged == [f"an answer of /driver/get_state was lost: its client was not discovered in {ANSWER_WAIT_S:g} s"]
+
+
+def test_a_service_made_to_answer_so_twice_is_wrapped_once():
+    """rclpy makes the parameter services through create_service, which a node wraps, during the
+    node's own construction, before it wraps every service it has."""
+    service = HalfDiscovered(matched_at=2)
+    once = answering_when_heard(service, [].append).send_response
+    assert answering_when_heard(service, [].append).send_response is once

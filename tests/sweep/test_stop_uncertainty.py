@@ -16,6 +16,7 @@ from scipy.stats import norm
 
 from mows.physics.probe import PAPER_PROBE as P
 from mows.sweep.decompose import Ringdowns, decompose, model_shift_hz
+from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal, achieved_std
 from mows.sweep.record import SweepPoint, SweepRecord
 
 ANGLES = np.radians(np.arange(0.0, 360.0, 15.0))
@@ -120,3 +121,18 @@ def test_a_stop_pooled_from_its_fits_carries_the_medians_standard_error():
     assert record.stop_std_rad(np.zeros(ANGLES.size), 1.0) == pytest.approx(
         math.sqrt(math.pi / 2) * math.radians(0.05) / math.sqrt(ANGLES.size), rel=0.05
     )
+
+
+def test_an_adaptive_sweep_whose_target_lies_below_the_stops_share_ends_saying_so():
+    """A target no number of ring-downs reaches (the stop's share of Bx's σ at 3.4 mT is 2.6 µT
+    for a stop known to 1°) ends the sweep at once, saying why, instead of running on forever."""
+    stop = P.theta_stop_rad
+    decomposition = fit(shifts(stop, np.random.default_rng(4)), stop, math.radians(1.0))
+    shared = decomposition.shared_std
+    assert shared[0] == pytest.approx(2.6e-6, rel=0.3) and np.all(shared <= achieved_std(decomposition))
+    planner = AdaptivePlanner(P, P.f00_hz, PrecisionGoal("B", 20e-9), repeat_s=1.0, turn_s=0.5)
+    end = planner.next(SweepRecord(points(np.full(ANGLES.size, np.nan))), decomposition, 10.0)
+    assert isinstance(end, PlanEnd) and not end.reached and "shared by every ring-down" in end.message
+    # a target above the stop's share (Gxy: 1.4 µT/m), not yet reached (9 µT/m), plans on
+    loose = AdaptivePlanner(P, P.f00_hz, PrecisionGoal("gxy", gradient_std_t_per_m=5e-6), repeat_s=1.0, turn_s=0.5)
+    assert not isinstance(loose.next(SweepRecord(points(np.full(ANGLES.size, np.nan))), decomposition, 10.0), PlanEnd)

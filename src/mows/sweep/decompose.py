@@ -116,6 +116,9 @@ class Decomposition:
     residual_hz: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     # Bx, By, Gs, Gd, Gxy, Δf00, Hc, Hs (the field's in-plane 3θ0 curvature, T/m², 0 unless fitted)
     parameters: np.ndarray = dataclasses.field(default_factory=lambda: np.full(PARAMETER_COUNT, np.nan))
+    # σ of (Bx, By, Gxx, Gxy, Gyy) from the errors shared by every ring-down (the calibrated f00,
+    # the stop): their part of the covariance, which no number of ring-downs reduces
+    shared_std: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(5))
 
     @property
     def ok(self) -> bool:
@@ -497,15 +500,16 @@ def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmon
     jac = result.jac
     normal_inverse = np.linalg.pinv(jac.T @ jac)
     cov_free = normal_inverse * max(1.0, chi2_dof if math.isfinite(chi2_dof) else 1.0)
+    shared_free = np.zeros_like(cov_free)
     for column, shared_std in shared:
         sensitivity = -normal_inverse @ jac.T @ column  # ∂(free parameters)/∂(the shared quantity)
-        cov_free = cov_free + shared_std**2 * np.outer(sensitivity, sensitivity)
-    cov = np.full((PARAMETER_COUNT, PARAMETER_COUNT), np.nan)
-    cov[np.ix_(free, free)] = cov_free
+        shared_free = shared_free + shared_std**2 * np.outer(sensitivity, sensitivity)
+    cov, shared_cov = np.full((2, PARAMETER_COUNT, PARAMETER_COUNT), np.nan)
+    cov[np.ix_(free, free)] = cov_free + shared_free
+    shared_cov[np.ix_(free, free)] = shared_free
     bx, by, gs, gd, gxy, df00 = params[:6]
-    # (Gxx, Gxy, Gyy) = (Gs + Gd, Gxy, Gs − Gd): a linear map of (Gs, Gd, Gxy).
-    to_xy = np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, -1.0, 0.0]])
-    g_cov = to_xy @ np.nan_to_num(cov[2:5, 2:5]) @ to_xy.T  # a parameter held fixed has no variance
+    g_cov = _gradient_covariance(cov)
+    shared_std = np.sqrt(np.r_[np.diag(np.nan_to_num(shared_cov[:2, :2])), np.diag(_gradient_covariance(shared_cov))])
     gradient = np.array([gs + gd, gxy, gs - gd])
     if f00_free:  # only (Gxx − Gyy)/2 and Gxy are determined; Gxx and Gyy alone are not
         gradient[[0, 2]] = np.nan
@@ -525,4 +529,12 @@ def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmon
         chi2_dof=chi2_dof,
         rms_residual_hz=float(np.sqrt(np.mean(residual**2))),
         residual_hz=residual,
+        shared_std=shared_std,
     )
+
+
+def _gradient_covariance(cov: np.ndarray) -> np.ndarray:
+    """Of (Gxx, Gxy, Gyy) = (Gs + Gd, Gxy, Gs − Gd), a linear map of (Gs, Gd, Gxy); a parameter
+    held fixed (NaN) has no variance."""
+    to_xy = np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, -1.0, 0.0]])
+    return to_xy @ np.nan_to_num(cov[2:5, 2:5]) @ to_xy.T

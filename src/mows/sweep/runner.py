@@ -124,7 +124,7 @@ class SweepRunner:
             problems.append(f"model {goal.model!r} is not one of {', '.join(MODELS)}")
         if self.state != SweepState.IDLE:
             problems.append(f"another sweep is still running ({self.state})")
-        if goal.target is not None and settings.probes:
+        if goal.target is not None and len(settings.entries(probe)) > 1:
             problems.append(f"an adaptive sweep is of one probe; {len(settings.probes)} are listed")
         planner = None
         if goal.target is not None and not problems:
@@ -143,7 +143,7 @@ class SweepRunner:
         if problems:
             raise ValueError("; ".join(problems))
         self.state, self._settings = SweepState.SWEEPING, settings
-        self._probes = settings.probes or (ProbeEntry(0, probe, probe.f00_hz),)
+        self._probes = settings.entries(probe)
         self._planner, self._decomposition, self._decomposed_points = planner, None, 0
         self._angles = [] if planner else angles
         self._repeats = goal.repeats_per_angle or settings.repeats_per_angle

@@ -112,9 +112,6 @@ class SimulatedCard:
         self._start_s = math.nan  # when the inputs' start trigger fired
         self._stopped_at = 0  # the samples the inputs had taken when they stopped
         self._base = 0  # the device sample of the card's sample 0 since that trigger
-        self._taken_first = 0  # the device sample of the first simulated sample not yet read
-        n_sensors = len(self.inputs)
-        self._taken_t, self._taken_saturated = np.zeros((0, n_sensors)), np.zeros((0, n_sensors), bool)
         self._pending = np.zeros((len(self.outputs), 0))  # output volts written before the trigger
         self._ao = np.zeros((len(self.outputs), 0))  # output volts not yet generated, by device sample
         self._ao_first = 0  # the device sample of self._ao's first column
@@ -184,8 +181,7 @@ class SimulatedCard:
             self._stop(ao, daq_error(DAQmxErrors.GEN_STOPPED_TO_PREVENT_REGEN_OF_OLD_SAMPLES, write=True), ao.position)
 
     def _unfed_until(self, now_s: float) -> None:
-        """The host is back (a write, or the underflow its absence caused): how long the
-        generating outputs went without a write."""
+        """The host is back (a write, or the underflow its absence caused): how long it left the outputs."""
         self.longest_write_gap_s = max(self.longest_write_gap_s, now_s - self._last_write_s)
         self._last_write_s = now_s
 
@@ -300,30 +296,7 @@ class SimulatedCard:
                 self._lock.acquire()
         start = self._base + task.position
         task.position += n
-        return self._device_volts(start, n, task.channels, self._base + acquired)
-
-    def _taken(self, start: int, end: int, taken: int) -> tuple[np.ndarray, np.ndarray]:
-        """The fluxgates' device samples [start, end), T, and their saturation flags. A host behind
-        the clock has the samples up to ``taken`` (those the card has taken) simulated in one go,
-        not one block at a time: the simulator's cost is mostly per call, and a host that fell
-        behind on a loaded machine must not fall further behind for it."""
-        if end > self._taken_first + len(self._taken_t):
-            stop = max(end, taken)
-            if self.supply_current_a is not None:
-                current_a = self.supply_current_a()
-                if current_a != self.device.field_current_a:
-                    self.device.set_field_current(current_a)
-            pieces = []
-            for index, amplitudes, frequency_hz in self._changes(self.device.sample_index, stop) + [(stop, (), 0.0)]:
-                if index > self.device.sample_index:
-                    pieces.append(self.device.read(index - self.device.sample_index).samples)
-                self._coils([(index, amplitudes, frequency_hz)])
-            keep = start - self._taken_first
-            self._taken_t = np.concatenate([self._taken_t[keep:], *(p.samples_t for p in pieces)])
-            self._taken_saturated = np.concatenate([self._taken_saturated[keep:], *(p.saturated for p in pieces)])
-            self._taken_first = start
-        first = start - self._taken_first
-        return self._taken_t[first : first + end - start], self._taken_saturated[first : first + end - start]
+        return self._device_volts(start, n, task.channels)
 
     def _catch_up(self, sample: int) -> None:
         """The device runs on, coils off and nobody reading, to ``sample``."""
@@ -340,9 +313,19 @@ class SimulatedCard:
                 self.device.drive([amplitudes], [frequency_hz])
                 self.drives.append((index, amplitudes, frequency_hz))
 
-    def _device_volts(self, start: int, n: int, channels: list[tuple[str, float]], taken: int) -> np.ndarray:
+    def _device_volts(self, start: int, n: int, channels: list[tuple[str, float]]) -> np.ndarray:
         """Device samples [start, start + n) at the input ``channels`` ((terminal, range V)), volts."""
-        readings, saturated = self._taken(start, start + n, taken)
+        if self.supply_current_a is not None:
+            current_a = self.supply_current_a()
+            if current_a != self.device.field_current_a:
+                self.device.set_field_current(current_a)
+        pieces = []
+        for index, amplitudes, frequency_hz in self._changes(start, start + n) + [(start + n, (), 0.0)]:
+            if index > self.device.sample_index:
+                pieces.append(self.device.read(index - self.device.sample_index).samples)
+            self._coils([(index, amplitudes, frequency_hz)])
+        readings = np.concatenate([p.samples_t for p in pieces])
+        saturated = np.concatenate([p.saturated for p in pieces])
         volts = np.zeros((len(channels), n))
         for row, (terminal, range_v) in enumerate(channels):
             if terminal in self.inputs:
@@ -446,13 +429,11 @@ class SimulatedCard:
         # The trigger: the card's sample 0 is the device's present sample; the outputs written
         # so far are generated from it.
         self._catch_up(self._world_sample())
-        self._base = self._taken_first = self.device.sample_index
-        self._taken_t, self._taken_saturated = self._taken_t[:0], self._taken_saturated[:0]
+        self._base = self.device.sample_index
         self._ao, self._ao_first, self._ao_end = self._pending, self._base, None
         self._pending = self._pending[:, :0]
-        self._start_s, self._stopped_at = self.clock(), 0
-        self._last_write_s = self._start_s
-        task.position, task.running, task.error = 0, True, None
+        self._start_s = self._last_write_s = self.clock()
+        task.position, task.running, task.error, self._stopped_at = 0, True, None, 0
 
     def stop(self, handle: int) -> None:
         task = self.task(handle)

@@ -116,6 +116,7 @@ class DaqmxBackend(Backend):
             math.inf,
         )
         self.next_index = 0  # the sample after the newest read
+        self.catch_up_blocks = CATCH_UP_BLOCKS
         self.stage_theta0_rad = math.nan  # where the operator turned the probe
         self.fault = ""  # why the card is down, while it is
         self.card_faults = 0
@@ -230,11 +231,11 @@ class DaqmxBackend(Backend):
         return [*blocks, *self._supply_steps()]
 
     def _read(self) -> np.ndarray:
-        """The next block, or the blocks waiting on the card, up to ``CATCH_UP_BLOCKS``: a host
+        """The next block, or the blocks waiting on the card, up to ``catch_up_blocks``: a host
         behind its card catches up in larger reads, each cheaper per sample than a block's."""
         n = self.device.block_samples
         waiting = min(self._tasks[0].in_stream.avail_samp_per_chan, input_buffer_samples(self.device))
-        count = min(max(1, waiting // n), CATCH_UP_BLOCKS)
+        count = min(max(1, waiting // n), self.catch_up_blocks)
         volts = self._buffer if count == 1 else np.zeros((self._buffer.shape[0], count * n))
         self._reader.read_many_sample(
             volts, number_of_samples_per_channel=count * n, timeout=self.device.read_timeout_s

@@ -258,7 +258,7 @@ with card.installed():
     except AttributeError as error:
         print("plain import:", error, "; tasks left open:", len(card.tasks))
     backend = daqmx_backend.open_daqmx(load_daq_device(), CurrentCap(10.0))
-    print("open_daqmx: blocks", sum(hasattr(i, "samples_t") for i in backend.poll(0.1)))
+    print("open_daqmx: blocks read", any(hasattr(i, "samples_t") for i in backend.poll(0.1)))
     backend.close()
 """
 
@@ -270,7 +270,7 @@ def test_the_backend_imports_nis_stream_readers_and_writers_itself():
     lines = run.stdout.splitlines()
     assert lines[0] == "stream modules loaded: False"  # `import nidaqmx` loads neither
     assert "stream_readers" in lines[1] and lines[1].endswith("tasks left open: 0")
-    assert lines[2] == "open_daqmx: blocks 1"
+    assert lines[2] == "open_daqmx: blocks read True"  # one, or more on a loaded host behind the card
 
 
 def test_a_card_that_is_not_there_is_one_line_naming_it(installed):

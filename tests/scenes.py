@@ -12,8 +12,6 @@ def scene_device(placed, sources=(), sample_rate_hz=10_000.0, substeps=2) -> Sim
     scene = tuple(SceneProbe(p.probe, p.pose) for p in placed)
     return SimulatedDevice(
         Scenario(
-            probe=scene[0].probe,
-            pose=scene[0].pose,
             probes=scene,
             environment=Environment(tuple(sources)),
             sample_rate_hz=sample_rate_hz,

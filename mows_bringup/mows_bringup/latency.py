@@ -9,8 +9,8 @@ object with ``--json`` (used by ``mows bench``). A benchmark: it reports, it nev
 figure.
 
 ``--duration S`` runs cycles back to back for S seconds instead of ``--cycles``; ``--load``
-(60 s unless ``--duration`` says otherwise) runs them beside two CPU burners and a 1 kHz
-JointState loop (``mows_bringup.load``), and adds the load as run to the figures. ``startup_s`` is
+(60 s unless ``--duration`` says otherwise) runs them beside ``--burners`` CPU burners (two unless
+said) and a 1 kHz JointState loop (``mows_bringup.load``), and adds the load as run to the figures. ``startup_s`` is
 the time from starting the two processes to both active (bring-up included). Either way the
 figures say how many gaps the estimator found in the raw stream (runs of lost blocks, from its
 /diagnostics), how many this process found (``listener_gaps``: each subscriber loses its own),
@@ -47,7 +47,8 @@ def main(argv=None) -> int:
         "--tracking", action="store_true", help="the driver's tracking mode: cycles × repeats of its ring-downs"
     )
     parser.add_argument("--duration", type=float, help="run cycles back to back for this many seconds instead")
-    parser.add_argument("--load", action="store_true", help="beside two CPU burners and a 1 kHz JointState loop")
+    parser.add_argument("--load", action="store_true", help="beside CPU burners and a 1 kHz JointState loop")
+    parser.add_argument("--burners", type=int, default=2, help="with --load: how many CPU burners (default 2)")
     parser.add_argument(
         "--burner-nice",
         type=int,
@@ -58,7 +59,7 @@ def main(argv=None) -> int:
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     duration_s = args.duration if args.duration is not None else (LOAD_DURATION_S if args.load else None)
-    load = Load(burner_nice=args.burner_nice) if args.load else None
+    load = Load(burners=args.burners, burner_nice=args.burner_nice) if args.load else None
     log = open("/dev/null", "w")
     mode = (
         ["-p", "driver:tracking:=true"]

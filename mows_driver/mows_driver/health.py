@@ -61,7 +61,8 @@ class StreamHealth:
             problems.append(f"{stream_errors} streaming errors (see the log)")
         if problems:
             return Health(DiagnosticStatus.WARN, "; ".join(problems), values)
-        probes = f", ringing {state['probes']} probes" if state.get("probes") else ""
+        count = state.get("probes", 0)
+        probes = f", ringing {count} probe{'' if count == 1 else 's'}" if count else ""
         # Disarmed (not active), the device is read but nothing is published.
         doing = "streaming" if state.get("armed") else "reading the device, publishing nothing"
         return Health(DiagnosticStatus.OK, f"{doing} ({backend}{probes}), phase {state.get('phase')}", values)

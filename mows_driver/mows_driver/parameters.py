@@ -40,8 +40,7 @@ PARAMETERS = (
     ParamSpec(
         "theta0_rad",
         0.0,
-        "backend sim: probe orientation at start-up, rad (cycles turn it); with several probes, the "
-        "shared stage's angle (each probe at its home orientation plus it)",
+        "backend sim: the stage's angle at start-up, rad (cycles turn it): each probe at its home orientation plus it",
         range=(-2.0 * math.pi, 2.0 * math.pi),
         read_only=True,
     ),

@@ -160,7 +160,7 @@ class MapperNode(MowsNode):
             return WorkspaceMap.Result(success=False, message=f"workspace map refused: {refusal}")
         self._map_cancelled = False
         try:
-            carried = settings.probes[0].probe if settings.probes else probe
+            carried = settings.entries(probe)[0].probe
             result = await self._mapping.run(goal_handle, carried, lambda: self._map_cancelled)
         except ValueError as error:  # no pose left within reach; sweeps that cannot determine a map
             result = WorkspaceMap.Result(success=False, message=f"workspace map failed: {error}")

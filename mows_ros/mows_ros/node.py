@@ -29,6 +29,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 import mows
+from mows_ros.answers import answering_when_heard
 from mows_ros.diagnostics import DiagnosticsPublisher, Health
 from mows_ros.params import (
     ROS_OWN,
@@ -54,6 +55,8 @@ class MowsNode(LifecycleNode):
 
     def __init__(self, name: str, table: Sequence[ParamSpec]):
         super().__init__(name)
+        for service in self.services:  # the lifecycle services, which rclpy makes without create_service
+            answering_when_heard(service, self.get_logger().warning)
         self.parameter_table = tuple(table)
         # ``-p driver:name:=value`` in a namespace, which rcl drops (the process's own command line)
         prefixed = prefixed_overrides(self.get_name(), sys.argv, GRAPH_NODE_NAMES)
@@ -67,6 +70,10 @@ class MowsNode(LifecycleNode):
         change_state.callback = self._refusing_unknown_transitions(change_state.callback)
         self.diagnostics = DiagnosticsPublisher(self, self._report)
         self.get_logger().info("up: " + ", ".join(f"{k}={v!r}" for k, v in parameter_values(self, table).items()))
+
+    def create_service(self, *args, **kwargs):
+        """rclpy's, with answers sent once the client is discovered (:mod:`mows_ros.answers`)."""
+        return answering_when_heard(super().create_service(*args, **kwargs), self.get_logger().warning)
 
     # --- the hooks a node overrides ----------------------------------------------------------
     def configure(self) -> None:

@@ -618,6 +618,13 @@ CASES = [
         ["--frequency-hz: 0 must be > 0"],
     ),
     ("bench-unknown-suite", ["bench", "nosuch"], 2, ["mows bench: error: ", "'nosuch'", "(see mows bench --help)"]),
+    (
+        "bench-no-burners",
+        ["bench", "latency", "--load", "--burners", "0"],
+        2,
+        ["mows bench: error: ", "--burners", "at least 1, got '0'"],
+    ),
+    ("bench-map-runs-word", ["bench", "latency", "--map-runs", "x"], 2, ["--map-runs", "at least 1, got 'x'"]),
     # probe files
     (
         "probe-1000x-moment",

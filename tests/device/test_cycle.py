@@ -15,15 +15,20 @@ from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.cycle.sequencer import CycleSequencer
 from mows.device.interface import CoilCommand, CoilTone, CommandResult
 from mows.device.simulated.scheduled import ScheduledDevice
+from mows.device.stream.device_time import DeviceTimeLoop, scheduled_device
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap, helmholtz, largest_spacing
+from mows.physics.coupling import PlacedProbe
+from mows.physics.pose import Pose
+from mows.physics.probe import PAPER_PROBE
 from mows.records.samples import SampleBlock
-from mows.sim.scenario import load_scenario
+from mows.sim.scenario import Scenario, load_scenario
 from mows.sim.simulator import SimulatedDevice
 
 CAP_A = 10.0
 FAST = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.2, repeats=2, tuning_steps=2, turn_settle_s=0.2)
+ONE = (PlacedProbe(PAPER_PROBE, Pose()),)  # the paper's probe at the coils' centre, alone on its stage
 MAX_STEPS = 100_000  # bound for a cycle that never ends (a bug), not a timing
 
 
@@ -151,7 +156,7 @@ def test_an_excitation_stopped_before_its_answers_counts_towards_the_duty_limit(
     # sample: a stop before its answers counts the samples from there up to the stop.
     rate = 1000.0
     quick = CycleSettings(excite_s=0.1, ringdown_s=0.1, repeats=1, tuning_steps=0, turn_settle_s=0.0, duty_window_s=1.0)
-    sequencer = CycleSequencer(quick, largest_spacing(), CurrentCap(CAP_A), rate, 110.0, fit=fit_ringdown)
+    sequencer = CycleSequencer(quick, largest_spacing(), CurrentCap(CAP_A), rate, 110.0, fit=fit_ringdown, probes=ONE)
 
     def samples(first, n):
         return SampleBlock(first, round(first * 1e9 / rate), rate, np.zeros((n, 2)), np.zeros((n, 2), bool))
@@ -346,7 +351,7 @@ def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a,
         turn_settle_s=0.0,
         max_duty_cycle=1.0,
     )
-    sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0, fit=fit_ringdown)
+    sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0, fit=fit_ringdown, probes=ONE)
     sequencer.on_samples(SampleBlock(0, 0, 20_000.0, np.zeros((1, 2)), np.zeros((1, 2), bool)))
     device = RecordingDevice()
     # The cap limits what reaches the coils: each coil's current of the orientation-dependent
@@ -461,3 +466,33 @@ def test_a_cancelled_cycle_reports_the_ring_downs_it_recorded():
     assert session.cancel_cycle(session.sequencer.last_cycle_id, "the client left")
     session.step(0.0)
     assert not done[0].success and done[0].ringdowns_recorded == 1
+
+
+def _phases_of(scenario) -> list:
+    """The phase events of one cycle at θ0 = 30° of ``scenario``'s device, in device time."""
+    events = []
+    loop = DeviceTimeLoop(
+        scheduled_device(scenario, CurrentCap(CAP_A), np.random.default_rng(5)),
+        FAST,
+        fit=fit_ringdown,
+        on_event=events.append,
+    )
+    outcome = loop.run_cycle(CycleRequest(math.radians(30.0), repeats=1, tuning_steps=1))
+    assert outcome.success, outcome.message
+    return events
+
+
+def test_a_list_of_one_probe_runs_the_cycle_of_the_older_shape_of_one_probe():
+    """One probe on its stage is tuned and driven at the excitation current (to the stop),
+    whether its scene gives it as ``probe`` and ``pose`` or as a ``probes:`` list of one."""
+    pose = {"magnet_position_m": [0.0, 0.0, 0.0], "theta0_deg": 0.0}
+    base = {k: v for k, v in load_scenario().to_dict().items() if k not in ("probe", "pose", "probes")}
+    older = base | {"probe": "paper", "pose": pose}
+    listed = base | {"probes": [{"probe": "paper", "pose": pose}]}
+    first, second = (_phases_of(Scenario.from_dict(d)) for d in (older, listed))
+    assert first == second
+    exciting = [e for e in first if e.phase == Phase.EXCITING]
+    assert [e.tuning for e in exciting] == [True, False]
+    expected = largest_spacing().currents_a(math.radians(30.0), FAST.excitation_current_a)
+    np.testing.assert_allclose(exciting[0].currents_a, expected)
+    assert exciting[0].probe_ids == (0,) and exciting[0].probe_theta0_rad == pytest.approx((math.radians(30.0),))

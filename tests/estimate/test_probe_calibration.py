@@ -11,6 +11,7 @@ within 3 %, f00 within 2σ, pulls of width ≈ 1 over 20 seeds; the paper's prob
 β0 = 3.68 Hz/mT.
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -194,3 +195,29 @@ def test_a_current_whose_ring_downs_all_failed_is_named():
         calibrate_probe(points, [WIRING], KnownConstants.of(PAPER_PROBE), failed={(2.0, "SATURATED"): 2})
     calibration = calibrate_probe(points, [WIRING], KnownConstants.of(PAPER_PROBE), failed={(1.0, "SATURATED"): 1})
     assert any("SATURATED" in note for note in calibration.notes)
+
+
+def test_the_probe_file_carries_the_stop_the_ring_downs_were_released_at(paper, tmp_path):
+    """The stop every strong-field map rests on (docs/physics.md §6.4) is written with its σ. The
+    simulated housing is at 24°; the user's nominal file says 23.95° ± 0.1°. No fit here
+    determines θmax, so the file gets the nominal stop with its stated tolerance (not the 0.01°
+    scatter the fit holds it with, nor a default); a stop measured apart is written as measured."""
+    points, _ = paper
+    wirings = scenario_wirings(load_scenario("calibration"), load_scenario("calibration_gradient"))
+    nominal = PAPER_PROBE.replace(theta_stop_rad=math.radians(23.95), theta_stop_std_rad=math.radians(0.1))
+    for known, expected_std in (
+        (KnownConstants.of(nominal), math.radians(0.1)),
+        (
+            dataclasses.replace(
+                KnownConstants.of(nominal),
+                measured_stop_rad=math.radians(24.004),
+                measured_stop_std_rad=math.radians(0.01),
+            ),
+            math.radians(0.01),
+        ),
+    ):
+        path = tmp_path / "probe.yaml"
+        calibrate_probe(points, wirings, known).probe().to_yaml(path, force=True)
+        written = Probe.from_yaml(path)
+        assert written.theta_stop_std_rad == pytest.approx(expected_std, rel=0.05)
+        assert abs(written.theta_stop_rad - PAPER_PROBE.theta_stop_rad) < written.theta_stop_std_rad

@@ -19,6 +19,8 @@ noise only. Against the lab (slow):
   written as the energy it adds where only an energy is exact.
 """
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -26,12 +28,18 @@ from lab.outside_catalog import CASES, INFO, NOISE_HZ, control, fitted_swing_deg
 from mows.lab import analyse, analyse_discovering, discover
 from mows.physics.probe import PAPER_PROBE
 
-# One worker runs the whole module, so that each case's noise-free truth (1–5 s, cached per
-# process) is computed once, not once per xdist worker.
-pytestmark = pytest.mark.xdist_group("outside_catalog")
+
+def on_its_worker(case, *rest):
+    """One worker runs every test of a case, so that its noise-free truths (1–5 s, cached per
+    process) and its control's selection are computed once, not once per xdist worker; the
+    cases themselves spread over the workers (the module is several minutes of CPU)."""
+    return pytest.param(case, *rest, marks=pytest.mark.xdist_group(f"outside_catalog_{case}"))
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
+EACH_CASE = [on_its_worker(case) for case in sorted(CASES)]
+
+
+@pytest.mark.parametrize("case", EACH_CASE)
 def test_a_case_is_a_rotation_sweep_whose_hidden_term_is_far_above_noise(case):
     table, info = CASES[case](3)
     assert info.name == case and info.family and info.plugin_effect in info.plugin_source
@@ -57,7 +65,7 @@ def test_a_case_is_a_rotation_sweep_whose_hidden_term_is_far_above_noise(case):
 
 
 @pytest.mark.slow  # the user's loop on every case: two --auto selections
-@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("case", EACH_CASE)
 def test_outside_the_catalog_the_labs_own_plugin_closes_the_gap(case, tmp_path):
     """``mows lab add --auto --discover``: the selection adds only the truth's own physics, the
     search names the hidden term's channel and covariates, and the plugin the lab writes and adds
@@ -80,12 +88,19 @@ def test_outside_the_catalog_the_labs_own_plugin_closes_the_gap(case, tmp_path):
         assert abs(value - info.discovered_truth) <= 3 * std, (value, std, info.discovered_truth)
 
 
+@functools.cache
+def control_selection(case):
+    """The ``--auto`` selection on the control's seed 0, which two tests read: made once (the
+    module runs on one worker)."""
+    return analyse(control(case, 0)[0], PAPER_PROBE, auto=True, cross_validate=False)
+
+
 @pytest.mark.slow  # the truth of every control and 40 fits and searches each
-@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("case", EACH_CASE)
 def test_the_search_beyond_the_catalog_finds_nothing_on_40_controls(case):
     """The model the control's selection ends with (its truth's physics), refitted on 40 noise
     draws: no term is reported on any."""
-    model = analyse(control(case, 0)[0], PAPER_PROBE, auto=True, cross_validate=False).diagnosis.fit.model
+    model = control_selection(case).diagnosis.fit.model
     found = {}
     for seed in range(40):
         discovery = discover(model.fit(control(case, seed)[0]), PAPER_PROBE)
@@ -94,17 +109,17 @@ def test_the_search_beyond_the_catalog_finds_nothing_on_40_controls(case):
     assert not found, found
 
 
-@pytest.mark.slow  # the truth of every control (~20 s) and an --auto selection each
-@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.slow  # the truth of every control (~20 s) and its --auto selection (made once, above)
+@pytest.mark.parametrize("case", EACH_CASE)
 def test_the_control_ends_adequate_with_only_the_physics_of_its_truth(case):
-    table, info = control(case, 0)
-    report = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
+    info = control(case, 0)[1]
+    report = control_selection(case)
     assert report.verdict == "adequate", (report.chi2_dof, report.diagnosis.explanation)
     assert set(report.effect_names) <= info.present, report.effects
 
 
-PLUGINS = [(case, "physical") for case in sorted(CASES)] + [
-    (case, "energy") for case in sorted(name for name, info in INFO.items() if info.energy_plugin_source)
+PLUGINS = [on_its_worker(case, "physical") for case in sorted(CASES)] + [
+    on_its_worker(case, "energy") for case in sorted(name for name, info in INFO.items() if info.energy_plugin_source)
 ]
 
 

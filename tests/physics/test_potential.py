@@ -31,6 +31,19 @@ def test_finite_amplitude_field_spring_follows_bessel_j1(amplitude_deg, factor):
     assert 2 * special.j1(amplitude) / amplitude == pytest.approx(factor, abs=5e-4)
 
 
+def test_amplitude_nodes_of_each_row_follow_bessel_j1():
+    # Several amplitudes per batch element (a ring-down's nodes), in fields of either sign, each
+    # against mB·2J1(A)/A; a zero amplitude is the rest stiffness kM + mB.
+    fields = np.array([5e-3, -3e-3, 40e-3])
+    amplitudes = np.radians([[0.0, 8.0, 15.0, 24.0], [3.0, 12.0, 20.0, 30.0], [1.0, 5.0, 10.0, 15.0]])
+    potential = ArcPotential.from_local_field(P, np.stack([fields, 0 * fields, 0 * fields], -1))
+    k = potential.effective_stiffness_nm_per_rad(amplitudes)
+    safe = np.where(amplitudes > 0, amplitudes, 1.0)
+    bessel = np.where(amplitudes > 0, 2 * special.j1(safe) / safe, 1.0)
+    assert k.shape == amplitudes.shape
+    np.testing.assert_allclose((k - KM) / (M * fields[:, None]), bessel, rtol=1e-10)
+
+
 def exact_period_s(field_t, amplitude):
     """Period of the undamped swing from energy conservation, T = 4∫dθ/θ'."""
 

@@ -2,7 +2,9 @@
 them behind; and a node of the graph started as an action server, with its goals sent."""
 
 import os
+import signal
 import subprocess
+import sys
 import time
 from collections.abc import Callable
 
@@ -10,10 +12,13 @@ import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from mows_msgs.action import MeasurementCycle
-from rclpy.action import ActionClient, ActionServer
+from mows_msgs.msg import RingdownFit
+from rclpy.action import ActionClient, ActionServer, CancelResponse
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.task import Future
 
 from mows_bringup.graph import NODES
+from mows_ros.qos import RESULT_QOS
 
 # Only a bound for a test that hangs; a test passes as soon as its condition holds.
 WAIT_S = float(os.environ.get("MOWS_TEST_WAIT_S", 60.0))
@@ -187,3 +192,68 @@ def serve_cycles(ros, run_cycle) -> ActionServer:
         return result
 
     return ActionServer(ros.node, MeasurementCycle, "driver/measurement_cycle", execute)
+
+
+def leave_while_running(ros, start, driver, action_type: str, action: str, goal: str) -> None:
+    """A client of ``action`` in a process of its own (:func:`goal_client`) sends ``goal``;
+    once its goal runs a cycle of ``driver`` (:class:`HeldCycles`) and it heard the goal
+    accepted (which may come after), Ctrl-C: returns once the node cancelled that cycle."""
+    client = start(sys.executable, "-c", goal_client(action_type, action, goal))
+    ros.wait_for(lambda: driver.goals, "the goal's first cycle")
+    ros.wait_for(lambda: "accepted" in log(client), "the client to hear its goal accepted")
+    client.send_signal(signal.SIGINT)
+    assert client.wait(timeout=30) == 0, log(client)
+    ros.wait_for(lambda: driver.cancelled, "the node to cancel the cycle nobody waits for")
+
+
+def goal_client(action_type: str, action: str, goal: str) -> str:
+    """A program that sends ``goal`` (Python, of the mows_msgs action ``action_type``) to
+    ``action`` and waits for its result until it is stopped (Ctrl-C), as ``ros2 action
+    send_goal`` does; it prints "accepted" once the goal is."""
+    return f"""
+import rclpy
+from rclpy.action import ActionClient
+from rclpy.executors import ExternalShutdownException
+from mows_msgs.action import {action_type}
+rclpy.init()
+node = rclpy.create_node("goal_requester")
+client = ActionClient(node, {action_type}, "{action}")
+client.wait_for_server()
+sent = client.send_goal_async({goal})
+try:
+    rclpy.spin_until_future_complete(node, sent)
+    print("accepted", flush=True)
+    rclpy.spin_until_future_complete(node, sent.result().get_result_async())
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+node.destroy_node()
+rclpy.try_shutdown()
+"""
+
+
+class HeldCycles:
+    """A stand-in driver whose measurement cycles run until they are cancelled."""
+
+    def __init__(self, ros):
+        self.goals, self.cancelled = [], []
+        self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)  # a node waits for one
+        self.server = ActionServer(
+            ros.node,
+            MeasurementCycle,
+            "driver/measurement_cycle",
+            self.execute,
+            cancel_callback=lambda _: CancelResponse.ACCEPT,
+        )
+        self._ros = ros
+
+    async def execute(self, goal_handle):
+        self.goals.append(goal_handle)
+        ended = Future()
+        timer = self._ros.node.create_timer(
+            0.05, lambda: goal_handle.is_cancel_requested and not ended.done() and ended.set_result(True)
+        )
+        await ended
+        self._ros.node.destroy_timer(timer)
+        self.cancelled.append(goal_handle)
+        goal_handle.canceled()
+        return MeasurementCycle.Result(success=False, message="cancelled: its goal was cancelled")

@@ -11,7 +11,7 @@ from std_srvs.srv import Trigger
 
 from mows.physics.probe import Probe, calibration_record
 from mows_ros.qos import RESULT_QOS
-from node_processes import send_goal, serve_cycles
+from node_processes import HeldCycles, leave_while_running, log, send_goal, serve_cycles
 from sweep.calibration_bench import BENCH, bench_fits
 
 pytestmark = pytest.mark.ros
@@ -170,3 +170,41 @@ def test_a_manual_stage_waits_for_the_operator_before_each_turn(ros, action_serv
     assert done.result.success, done.result.message
     assert driver.cycle == 2 * len(CURRENTS) and done.result.supply_at_zero
     assert len([f for f in feedback if f.message.startswith("turn the probe")]) == 2
+
+
+class HeldSupply(HeldCycles):
+    """A stand-in driver whose cycles run until they are cancelled, with a supply that records
+    every current set."""
+
+    def __init__(self, ros):
+        super().__init__(ros)
+        self.currents = []
+        ros.node.create_service(SetFieldCurrent, "driver/set_field_current", self.set_current)
+
+    def set_current(self, request, response):
+        self.currents.append(request.current_a)
+        response.min_current_a, response.max_current_a = -2.0, 2.0
+        response.success, response.current_a, response.message = True, request.current_a, "ok"
+        return response
+
+
+def test_a_calibration_whose_client_leaves_is_cancelled_with_the_supply_at_zero(ros, action_server, start, tmp_path):
+    """Ctrl-C on the calibration's only client: nobody waits for it, so the calibrator cancels
+    it and the cycle it is waiting for, ramps the supply to zero, writes no probe file, and
+    says so in its log and on /diagnostics."""
+    path = tmp_path / "probe.yaml"
+    fixture_client, process = action_server(
+        "calibrator", CalibrateProbe, "calibrator/calibrate_probe", f"probe_output_file:={path}"
+    )
+    fixture_client.destroy()  # a client of the action that stays would be one that may wait
+    driver = HeldSupply(ros)
+    diagnostics = ros.diagnostics_of("/calibrator")
+    goal = f"CalibrateProbe.Goal(currents_a={CURRENTS})"
+    leave_while_running(ros, start, driver, "CalibrateProbe", "/calibrator/calibrate_probe", goal)
+    reason = "every node that asked for it through /calibrator/calibrate_probe/_action/send_goal has left"
+    ros.wait_for(lambda: f"calibration cancelled, its cycle with it: {reason}" in log(process), "the log line")
+    ros.wait_for(lambda: diagnostics.get("cancels") == "1", "the cancel counted on /diagnostics")
+    assert diagnostics["last_ending"].startswith("cancelled"), diagnostics
+    assert driver.currents[0] == 0.0 and driver.currents[-1] == 0.0, driver.currents  # zero at the start and end
+    assert len(driver.goals) == 1 and not path.exists()  # no cycle after it, no probe file
+    ros.wait_for(lambda: diagnostics.get("state") == "idle", "the calibrator free again")

@@ -2,17 +2,14 @@
 ring-down fits computed from the exact field of a scenario, decomposed into B and G."""
 
 import math
-import signal
-import sys
 
 import numpy as np
 import pytest
 from action_msgs.msg import GoalStatus
+from action_msgs.srv import CancelGoal
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from mows_msgs.action import MeasurementCycle, RotationSweep
+from mows_msgs.action import RotationSweep
 from mows_msgs.msg import ModelReport, RingdownFit, SweepDecomposition
-from rclpy.action import ActionServer, CancelResponse
-from rclpy.task import Future
 from std_srvs.srv import Trigger
 
 from mows.lab import reference_at
@@ -22,7 +19,7 @@ from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
 from mows.sweep.decompose import DecompositionStatus
 from mows_ros.qos import MAP_QOS, RESULT_QOS
-from node_processes import log, send_goal, serve_cycles
+from node_processes import HeldCycles, leave_while_running, log, send_goal, serve_cycles
 
 pytestmark = pytest.mark.ros
 
@@ -241,57 +238,6 @@ def test_a_manual_stage_waits_for_the_operator_at_each_orientation(ros, action_s
     assert driver.cycle == len(angles)
 
 
-# A sweep's client in a process of its own, as `ros2 action send_goal` is: it sends the goal and
-# waits for the result until it is stopped (Ctrl-C).
-SWEEP_CLIENT = """
-import rclpy
-from rclpy.action import ActionClient
-from rclpy.executors import ExternalShutdownException
-from mows_msgs.action import MeasurementCycle, RotationSweep
-rclpy.init()
-node = rclpy.create_node("sweep_requester")
-client = ActionClient(node, RotationSweep, "/mapper/rotation_sweep")
-client.wait_for_server()
-sent = client.send_goal_async(RotationSweep.Goal(theta0_rad=[0.0, 1.0, 2.0, 3.0, 4.0, 5.0], repeats_per_angle=1))
-try:
-    rclpy.spin_until_future_complete(node, sent)
-    print("accepted", flush=True)
-    rclpy.spin_until_future_complete(node, sent.result().get_result_async())
-except (KeyboardInterrupt, ExternalShutdownException):
-    pass
-node.destroy_node()
-rclpy.try_shutdown()
-"""
-
-
-class HeldCycles:
-    """A stand-in driver whose cycles run until they are cancelled."""
-
-    def __init__(self, ros):
-        self.goals, self.cancelled = [], []
-        self.fits = ros.node.create_publisher(RingdownFit, "mows/ringdown", RESULT_QOS)  # the mapper waits for one
-        self.server = ActionServer(
-            ros.node,
-            MeasurementCycle,
-            "driver/measurement_cycle",
-            self.execute,
-            cancel_callback=lambda _: CancelResponse.ACCEPT,
-        )
-        self._ros = ros
-
-    async def execute(self, goal_handle):
-        self.goals.append(goal_handle)
-        ended = Future()
-        timer = self._ros.node.create_timer(
-            0.05, lambda: goal_handle.is_cancel_requested and not ended.done() and ended.set_result(True)
-        )
-        await ended
-        self._ros.node.destroy_timer(timer)
-        self.cancelled.append(goal_handle)
-        goal_handle.canceled()
-        return MeasurementCycle.Result(success=False, message="cancelled: its goal was cancelled")
-
-
 def test_a_sweep_whose_client_leaves_is_cancelled_with_its_cycle_logged_and_counted(ros, mapper, start):
     """Ctrl-C on the sweep's only client: nobody waits for the sweep, so the mapper cancels it
     and the cycle it is waiting for, says so in its log and counts it on /diagnostics."""
@@ -299,12 +245,8 @@ def test_a_sweep_whose_client_leaves_is_cancelled_with_its_cycle_logged_and_coun
     fixture_client.destroy()  # a client of the sweep action that stays would be one that may wait
     driver = HeldCycles(ros)
     diagnostics = ros.diagnostics_of("/mapper")
-    client = start(sys.executable, "-c", SWEEP_CLIENT)
-    ros.wait_for(lambda: driver.goals, "the sweep's first cycle")
-    assert "accepted" in log(client)
-    client.send_signal(signal.SIGINT)
-    assert client.wait(timeout=30) == 0, log(client)
-    ros.wait_for(lambda: driver.cancelled, "the mapper to cancel the cycle nobody waits for")
+    goal = "RotationSweep.Goal(theta0_rad=[0.0, 1.0, 2.0, 3.0, 4.0, 5.0], repeats_per_angle=1)"
+    leave_while_running(ros, start, driver, "RotationSweep", "/mapper/rotation_sweep", goal)
     reason = "every node that asked for it through /mapper/rotation_sweep/_action/send_goal has left"
     ros.wait_for(lambda: f"sweep cancelled, its cycle with it: {reason}" in log(process), "the log line")
     ros.wait_for(lambda: diagnostics.get("cancels") == "1", "the cancel counted on /diagnostics")
@@ -313,3 +255,22 @@ def test_a_sweep_whose_client_leaves_is_cancelled_with_its_cycle_logged_and_coun
     )
     assert len(driver.goals) == 1  # no cycle after it
     ros.wait_for(lambda: diagnostics.get("state") == "idle", "the mapper free again")
+
+
+def test_a_cancel_that_comes_after_the_sweep_ended_leaves_the_mapper_as_it_was(ros, mapper):
+    """The client's cancel arrives once the last cycle's fits are in and the map is out (a
+    Ctrl-C a moment too late): it is refused as too late, nothing is counted as cancelled, and
+    the next sweep runs from a clean state."""
+    client, process = mapper
+    StandInDriver(ros)
+    diagnostics = ros.diagnostics_of("/mapper")
+    handle, done, _ = sweep(ros, client, theta0_rad=ANGLES.tolist(), repeats_per_angle=1)
+    assert done.status == GoalStatus.STATUS_SUCCEEDED, done.result.message
+    answer = handle.cancel_goal_async()
+    refusal = ros.wait_for(lambda: answer.done() and answer.result(), "the answer to the late cancel")
+    assert refusal.return_code == CancelGoal.Response.ERROR_GOAL_TERMINATED and not refusal.goals_canceling
+    ros.wait_for(lambda: diagnostics.get("sweeps") == "1" and diagnostics["state"] == "idle", "the mapper idle")
+    assert diagnostics["cancels"] == "0" and diagnostics["last_cancel"] == "", diagnostics
+    _, again, _ = sweep(ros, client, theta0_rad=ANGLES.tolist(), repeats_per_angle=1)
+    assert again.status == GoalStatus.STATUS_SUCCEEDED, again.result.message
+    assert "cancelled" not in log(process)

@@ -15,6 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.srv import GetParameters
 
 from mows_bringup.graph import NODES, parse_arguments
+from mows_bringup.load import Load
 from node_processes import log
 
 pytestmark = pytest.mark.ros
@@ -47,6 +48,28 @@ def test_graph_runs_for_its_duration_and_stops_cleanly(ros, diagnostics, start):
     graph = start("mows-graph", "--duration", "5")
     hear_all(ros, diagnostics, NODE_NAMES, graph)
     assert exit_code(ros, graph) == 0, log(graph)
+
+
+STARTS = 5  # each about 10 s at a load of 10
+
+
+@pytest.mark.slow
+def test_the_graph_starts_under_load_and_answers_every_first_call(ros, start):
+    """Beside two CPU burners and a 1 kHz JointState loop, the graph is started STARTS times
+    and each node's parameters are asked for as soon as it serves them (a ``ros2 param get``):
+    every answer comes, and no node says it dropped one ("failed to send response (timeout)":
+    its client's reader not yet discovered, mows_ros.answers)."""
+    load = Load()
+    load.start()
+    try:
+        for _ in range(STARTS):
+            graph = start("mows-graph", "--duration", "3")
+            for node in NODES:
+                use_sim_time(ros, f"/{node.name}")
+            assert exit_code(ros, graph) == 0, log(graph)
+            assert "failed to send response" not in log(graph), log(graph)
+    finally:
+        load.stop()
 
 
 def use_sim_time(ros, node_name: str) -> bool:

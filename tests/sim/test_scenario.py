@@ -12,6 +12,7 @@ import yaml
 from mows.physics.coupling import PlacedProbe
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import SCENARIO_DIR, Scenario, load_scenario, shipped_scenarios
+from mows.sim.scenario_yaml import pose_to_dict
 
 DOC = pathlib.Path(__file__).parents[2] / "docs" / "scenario_format.md"
 SETUPS = {
@@ -65,10 +66,24 @@ def test_a_scene_of_three_probes_places_each_with_its_own_constants():
     assert turned[2].pose.magnet_position_m == placed[2].pose.magnet_position_m
 
 
-def test_a_single_probe_scene_is_one_placed_probe():
+def test_a_single_probe_scene_is_a_group_of_one():
     scenario = load_scenario("anti_helmholtz")
-    assert scenario.probes == () and "probes" not in scenario.to_dict()
+    assert len(scenario.probes) == 1 and scenario.probes[0].stage == "own"
     assert scenario.placed_probes() == [PlacedProbe(scenario.probe, scenario.pose)]
+    # Written in the one shape, it reads back as the same group of one.
+    written = scenario.to_dict()
+    assert "probe" not in written and "pose" not in written and len(written["probes"]) == 1
+    again = Scenario.from_dict(written)
+    assert again.probes == scenario.probes and again.to_dict() == written
+
+
+def test_the_older_shape_and_a_list_of_one_are_the_same_scene():
+    pose = {"magnet_position_m": [0.01, 0.0, 0.0], "theta0_deg": 30.0}
+    older = Scenario.from_dict({"probe": "paper", "pose": pose})
+    listed = Scenario.from_dict({"probes": [{"probe": "paper", "pose": pose}]})
+    assert older.probes == listed.probes and older.to_dict() == listed.to_dict()
+    # The stage turns each probe from its home orientation, the probe of one as those of several.
+    assert older.stage_orientations_rad(0.5) == pytest.approx([math.radians(30.0) + 0.5])
 
 
 @pytest.mark.parametrize(
@@ -176,9 +191,13 @@ SHIPPED_BEFORE_EXTENDS = pathlib.Path(__file__).with_name("data") / "shipped_sce
 @pytest.mark.parametrize("name", sorted(set(SETUPS) - {"three_probes"}))
 def test_shipped_scenarios_load_as_they_did_when_every_file_was_written_out_in_full(name):
     """data/shipped_scenarios.json is ``to_dict()`` of each shipped scene captured from the
-    files as they were before they shared a base (``extends``); JSON keeps floats exactly."""
+    files as they were before they shared a base (``extends``), in the older shape of one probe
+    (``probe`` and ``pose``), which reads as a group of one; JSON keeps floats exactly."""
     before = json.loads(SHIPPED_BEFORE_EXTENDS.read_text())[name]
-    assert json.loads(json.dumps(load_scenario(name).to_dict())) == before
+    assert "probe" in before and "probes" not in before
+    assert json.loads(json.dumps(load_scenario(name).to_dict())) == Scenario.from_dict(before).to_dict()
+    probe_and_pose = load_scenario(name).probes[0]
+    assert (probe_and_pose.probe.to_dict(), pose_to_dict(probe_and_pose.pose)) == (before["probe"], before["pose"])
 
 
 def test_extends_merges_mappings_key_by_key_and_replaces_lists(tmp_path):

@@ -78,8 +78,8 @@ def cycle_frequencies(theta, theta_dot):
 
 def bare(field_t=(0.0, 0.0, 0.0), probe=P, theta0_rad=0.0, **changes) -> Scenario:
     """The probe alone in a uniform field (no Earth, no noise), horizontal plane."""
-    return Scenario(
-        probe=probe, environment=Environment((UniformField(field_t),)), pose=Pose(theta0_rad=theta0_rad), **changes
+    return Scenario(environment=Environment((UniformField(field_t),)), **changes).replace(
+        probe=probe, pose=Pose(theta0_rad=theta0_rad)
     )
 
 

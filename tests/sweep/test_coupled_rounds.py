@@ -3,6 +3,8 @@ mows.sweep.decompose): a coupled round is left out only when it would move no es
 than SETTLED_STD of its σ, and the measured swings tabulated where the fit asks for them are the
 conversion itself, computed at the rest angle (within the table's interpolation, < 0.1 %)."""
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -11,7 +13,9 @@ from mows.device.cycle.phases import CycleRequest
 from mows.physics.ringdown_average import swing_about_rest_rad
 from mows.sim.scenario import load_scenario
 from mows.sweep import probes
+from mows.sweep.decompose import Decomposition, DecompositionStatus
 from mows.sweep.probes import decompose_probes, sweeps_of
+from mows.sweep.record import SweepRecord
 
 pytestmark = pytest.mark.slow
 
@@ -55,3 +59,28 @@ def test_the_measured_swings_are_converted_at_each_asked_rest_angle(three_probes
     # Asked again, elsewhere and here: the cells computed first are reused, not changed.
     ringdowns.start_swing_about_rad(rest_rad[::-1])
     np.testing.assert_allclose(ringdowns.start_swing_about_rad(rest_rad), direct, rtol=1e-3)
+
+
+def test_the_probes_are_decomposed_at_the_same_time(monkeypatch):
+    """Each probe's decomposition runs while the others' do (a thread each): every one waits
+    at a barrier for all of them, which one after another would never pass."""
+    scene = load_scenario("three_probes")
+    sweeps = [
+        probes.ProbeSweep(k, placed, SweepRecord(), placed.probe.f00_hz, np.arange(0))
+        for k, placed in enumerate(scene.placed_probes())
+    ]
+    together = threading.Barrier(len(sweeps), timeout=60.0)  # a bound for a hang only
+
+    def decompose(sweep, options, neighbours=None, start=None):
+        together.wait()
+        return Decomposition("first_principles", DecompositionStatus.NOT_CONVERGED, f"probe {sweep.probe_id}")
+
+    monkeypatch.setattr(probes.ProbeSweep, "decompose", decompose)
+    assert [d.message for d in decompose_probes(sweeps)] == ["probe 0", "probe 1", "probe 2"]
+
+
+def test_decomposed_together_or_one_after_another_the_numbers_are_the_same(three_probes, monkeypatch):
+    together = estimates(decompose_probes(three_probes()))
+    monkeypatch.setattr(probes, "_concurrently", lambda decompose, jobs: [decompose(job) for job in jobs])
+    for mine, theirs in zip(together, estimates(decompose_probes(three_probes()))):
+        np.testing.assert_array_equal(mine, theirs)

@@ -18,7 +18,7 @@ from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
 from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings
 from mows.sweep.record import SweepPoint
-from mows.sweep.runner import SweepRunner
+from mows.sweep.runner import SweepRunner, SweepState
 
 STD_HZ = 5e-4
 ANGLES = tuple(np.radians(np.arange(0.0, 360.0, 45.0)))
@@ -100,3 +100,10 @@ def test_an_adaptive_sweep_of_several_probes_is_refused():
     goal = SweepGoal.asked((), 0, "", "B", 1e-7, 0.0, 60.0)
     with pytest.raises(ValueError, match="adaptive sweep is of one probe; 3 are listed"):
         SweepRunner().start(goal, SweepSettings(probes=PROBES), P)
+
+
+def test_an_adaptive_sweep_of_a_list_of_one_probe_is_that_probe_s():
+    goal = SweepGoal.asked((), 0, "", "B", 1e-7, 0.0, 60.0)
+    runner = SweepRunner()
+    runner.start(goal, SweepSettings(probes=PROBES[1:2]), P)
+    assert runner.state == SweepState.SWEEPING

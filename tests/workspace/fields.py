@@ -1,4 +1,4 @@
-"""Sweeps in a closed-form field for the workspace tests: two point dipoles outside the
+"""Sweeps in a known field for the workspace tests: by default two point dipoles outside the
 workspace (mows.physics.sources), read exactly at each pose with Gaussian noise of the stated
 covariance, so that the fit is tested against the physics, not against itself."""
 
@@ -16,24 +16,38 @@ SOURCE = PointDipole([240.0, -80.0, 160.0], [0.28, 0.14, -0.14]) + PointDipole(
 )
 FIELD_STD_T = 50e-9
 GRADIENT_STD_T_PER_M = 20e-6
+STD = (FIELD_STD_T, FIELD_STD_T, GRADIENT_STD_T_PER_M, GRADIENT_STD_T_PER_M, GRADIENT_STD_T_PER_M)
 
 
-def sweeps(count, rng, gravity=(0.0, 0.0, -9.80665)):
-    """Sweep-like observations: in-plane B (with gravity and the lever's curvature) and G."""
+_FIELDS = {}  # B, G and H of a source at a count's positions: a Biot–Savart Hessian takes a while
+
+
+def _fields(source, count):
+    key = (id(source), count)
+    if key not in _FIELDS:
+        positions = boundary_positions(count, RADIUS_M)
+        _FIELDS[key] = (source, positions, source.field_t(positions), source.gradient_t_per_m(positions))
+        _FIELDS[key] += (source.hessian_t_per_m2(positions),)
+    return _FIELDS[key][1:]
+
+
+def sweeps(count, rng, gravity=(0.0, 0.0, -9.80665), source=SOURCE, std=STD):
+    """Sweep-like observations: in-plane B (with gravity and the lever's curvature) and G, of
+    σ ``std`` (Bx, By, Gxx, Gxy, Gyy), at ``count`` positions on the ball's boundary."""
+    positions, *fields = _fields(source, count)
+    std = np.asarray(std, float)
     observations = []
-    for group, position in enumerate(boundary_positions(count, RADIUS_M)):
+    for group, (position, field, gradient, hessian) in enumerate(zip(positions, *fields)):
         plane = random_rotation(rng)[:2]
         readout = plane_readout(plane, PAPER_PROBE.lever_m, gravity_field_t(PAPER_PROBE, gravity))
         exact = (
-            readout.field @ SOURCE.field_t(position)
-            + np.einsum("pij,ij->p", readout.gradient, SOURCE.gradient_t_per_m(position))
-            + np.einsum("pijk,ijk->p", readout.hessian, SOURCE.hessian_t_per_m2(position))
+            readout.field @ field
+            + np.einsum("pij,ij->p", readout.gradient, gradient)
+            + np.einsum("pijk,ijk->p", readout.hessian, hessian)
             + readout.offset
         )
-        std = np.array([FIELD_STD_T] * 2 + [GRADIENT_STD_T_PER_M] * 3)
-        cov = np.diag(std**2)
         values = exact + rng.normal(size=5) * std
         observations.append(
-            Observation(position, plane, values, cov, readout, group, ("bx", "by", "gxx", "gxy", "gyy"))
+            Observation(position, plane, values, np.diag(std**2), readout, group, ("bx", "by", "gxx", "gxy", "gyy"))
         )
     return observations

@@ -7,11 +7,12 @@ stated error."""
 import math
 
 import numpy as np
+import pytest
 
 from mows.workspace.design import boundary_positions
 from mows.workspace.fit import fit
 from mows.workspace.harmonics import SolidHarmonics
-from mows.workspace.poses import PoseError, fit_with_pose_errors, moved, rotation
+from mows.workspace.poses import PoseError, fit_with_pose_errors, frame_bound, moved, rotation
 from workspace.fields import RADIUS_M, SOURCE, sweeps
 
 
@@ -42,3 +43,21 @@ def test_carrying_a_surgical_arms_pose_error_beats_ignoring_it():
     # the map that ignores the error does not fit its own sweeps; its σ, widened by that χ²,
     # cover its error only by being wide
     assert naive.chi2_dof > 100
+
+
+def test_the_frame_bound_is_the_error_of_the_field_shifted_and_turned_by_the_mean_pose_error():
+    """A map whose every sweep sat off by the same shift and turn is the true field shifted and
+    turned (no fit can tell): over draws of the mean of 30 sweeps' errors its B's rms error is
+    the bound. Exact fields at the moved points here, the bound's first-order sums there."""
+    error, count = PoseError(1e-3, math.radians(1.0)), 30
+    points = boundary_positions(40, 0.8 * RADIUS_M)
+    field, gradient = SOURCE.field_t(points), SOURCE.gradient_t_per_m(points)
+    rng = np.random.default_rng(7)
+    field_error = []
+    for _ in range(400):
+        shift = rng.normal(size=3) * error.position_std_m / math.sqrt(count)
+        turn = rotation(rng.normal(size=3) * error.angle_std_rad / math.sqrt(count))
+        field_error.append(np.mean((SOURCE.field_t(points + shift) @ turn.T - field) ** 2))
+    # 400 draws of a 6-dimensional error: the mean square known to ~4 %, its root to ~2 %
+    bound = frame_bound(field, gradient, error, count)
+    assert math.sqrt(np.mean(field_error) / np.mean(field**2)) == pytest.approx(bound, rel=0.08)

@@ -10,9 +10,10 @@ under SCHED_FIFO (``--realtime-priority``, as a robot computer would run them); 
 stream at the default priority is reported beside it (``default_priority``). Both give
 ``startup_s``, the processes' start to both active (numba's cache as ``make build`` leaves it).
 With ``three_probe_map`` the three-probe demo (``mows-demo --scenario three_probes``) runs too,
-for ``three_probe_map_s``: from the last ring-down's fit to the field map of the three probes;
-with ``load`` beside the same number of CPU burners (``three_probe_map_load``: the load average
-at its start and end).
+for ``three_probe_map_s``: from the last ring-down's fit to the field map of the three probes,
+the median of ``three_probe_runs`` demos (each one's in ``three_probe_map_runs_s``); with
+``load`` beside the same ``burners`` (``three_probe_map_load``: the load average at the start
+and end of each demo).
 """
 
 import contextlib
@@ -21,13 +22,14 @@ import multiprocessing
 import os
 import re
 import shutil
+import statistics
 import subprocess
 import tempfile
 
 # SCHED_FIFO priority of the ring-down path under load: above everything best-effort, below a
 # robot's own control loop (commonly 80–98 on a PREEMPT_RT computer).
 REALTIME_PRIORITY = 40
-BURNERS = 2  # mows-latency --load's
+BURNERS = 2  # mows-latency --load's default
 
 
 def run(
@@ -39,21 +41,26 @@ def run(
     burner_nice: int = 0,
     realtime_priority: int = REALTIME_PRIORITY,
     three_probe_map: bool = True,
+    burners: int = BURNERS,
+    three_probe_runs: int = 1,
 ) -> dict:
     """``mows-latency``'s figures; ``tracking``: of the driver's tracking mode (cycles × repeats
     ring-downs); ``load``: under load, with as ``baseline`` the same stream without the load, run
     just before (the machine is shared: its own load is in both); ``burner_nice``: the burners'
     niceness (19 in a quick smoke run, so that it does not starve the tests beside it);
     ``realtime_priority``: the ring-down path's SCHED_FIFO priority under load (0: the default
-    policy, and no second loaded stream)."""
+    policy, and no second loaded stream); ``burners``: how many CPU burners make the load;
+    ``three_probe_runs``: how many three-probe demos (one after the other) the map's delay is
+    the median of."""
     tool = shutil.which("mows-latency")
     if tool is None:
         return {"skipped": "mows-latency not on PATH: source install/setup.bash (make bench does)"}
     if not load:
         figures = _measure(tool, repeats, ["--cycles", str(cycles), *(["--tracking"] if tracking else [])])
-        return {**figures, **_three_probe_map()} if three_probe_map and not tracking else figures
+        return {**figures, **_three_probe_maps(three_probe_runs)} if three_probe_map and not tracking else figures
     baseline = _measure(tool, repeats, ["--duration", str(load_duration_s)])
     loaded = ["--load", "--duration", str(load_duration_s), "--burner-nice", str(burner_nice)]
+    loaded += ["--burners", str(burners)]
     figures = {
         **_measure(tool, repeats, [*loaded, "--realtime-priority", str(realtime_priority)]),
         "baseline": baseline,
@@ -61,13 +68,28 @@ def run(
     if realtime_priority:
         figures["default_priority"] = _measure(tool, repeats, loaded)
     if three_probe_map:
-        with _burning(BURNERS, burner_nice):
-            start = os.getloadavg()[0]
-            figures |= _three_probe_map()
-            figures["three_probe_map_load"] = {
-                "load_average_1min_start": start,
-                "load_average_1min_end": os.getloadavg()[0],
-            }
+        with _burning(burners, burner_nice):
+            figures |= _three_probe_maps(three_probe_runs, loaded=True)
+    return figures
+
+
+def _three_probe_maps(runs: int, loaded: bool = False) -> dict:
+    """``runs`` three-probe demos: the median delay (``three_probe_map_s``), each run's, and with
+    ``loaded`` the 1-minute load average at each run's start and end."""
+    delays, loads = [], []
+    for _ in range(runs):
+        start = os.getloadavg()[0]
+        figures = _three_probe_map()
+        if "three_probe_map_s" not in figures:
+            return figures  # the demo failed: its reason
+        delays.append(figures["three_probe_map_s"])
+        loads.append((start, os.getloadavg()[0]))
+    figures = {"three_probe_map_s": statistics.median(delays), "three_probe_map_runs_s": delays}
+    if loaded:
+        figures["three_probe_map_load"] = {
+            "load_average_1min_start": [start for start, _ in loads],
+            "load_average_1min_end": [end for _, end in loads],
+        }
     return figures
 
 

@@ -1,9 +1,10 @@
 """Map points per minute of device time with one probe and with several probes excited together.
 
 A map point is one probe's in-plane field and gradient decomposed to the target σ (the same
-target per component for every probe). Both cases run the same cycle in device time
-(:class:`mows.bench.rig.DeviceTimeRig`, the driver's cycle: turn, settle, multi-tone
-excitation; the estimator's joint fit) in the ``three_probes`` scene, round after round of
+target per component for every probe). Both cases run the driver's cycle in device time
+(:class:`mows.bench.rig.DeviceTimeRig`: turn, settle, excite; the estimator's fit) in the
+``three_probes`` scene: the probe alone has the coils to itself and is tuned and driven to the
+stop, the probes together share a multi-tone drive at their f00; round after round of
 ``points`` orientations on the shared stage, and decompose every probe with the coupling in the model
 (:func:`mows.sweep.probes.decompose_probes`) after every point from the one that gives the
 sweep the orientations its model needs (7 for the field's 3θ0 curvature, or all ``points`` when
@@ -13,9 +14,10 @@ probe is the scene with only ``single`` of its probes (by default the paper's 11
 several are all of them. Points per minute = probes × 60 / device seconds, NaN when the target
 was not reached (the reason is reported).
 
-Several probes cost no more excitation time than one (their tones sum in one group), so the
-ratio of several to one is the number of probes, times how much longer the slowest probe of the
-group needs than the single one: the probes differ in where they sit before the fluxgates.
+Several probes cost no more excitation time than one measured ring-down of one (their tones sum
+in one group) and skip its tuning ring-downs, so the ratio of several to one is the number of
+probes times the time a point of one takes over a point of the group, divided by how much
+longer the slowest probe of the group needs than the single one (docs/multi_probe.md).
 """
 
 from __future__ import annotations
@@ -71,7 +73,7 @@ def run(
     """Points per minute with probe ``single`` alone and with every probe of the scene."""
     scene = load_scenario(SCENARIO)
     alone = scene.probes[single]
-    alone_scene = scene.replace(probes=(alone,), probe=alone.probe, pose=alone.pose)
+    alone_scene = scene.replace(probes=(alone,))
     one = time_to_target(alone_scene, goal, points, max_sweeps, seed)
     every = time_to_target(scene, goal, points, max_sweeps, seed)
     return {

@@ -54,6 +54,9 @@ from mows.sweep.record import SweepPoint, SweepRecord
 
 SCENARIO = "anti_helmholtz"
 CAP_A = 10.0
+# The simulated lever is released 0.03°–0.04° beyond its housing's stop (docs/physics.md §6.4):
+# the probe file of the simulated probe states its stop to this, and the map carries it.
+SIMULATED_STOP_STD_RAD = math.radians(0.05)
 TURN_SETTLE_S = 0.5
 DECOMPOSE_NEAR = 1.25
 PROTOCOLS = {
@@ -99,7 +102,8 @@ class _Sweep:
     a first-principles decomposition costs seconds."""
 
     def __init__(self, scenario, goal: PrecisionGoal):
-        self.scenario, self.probe, self.goal = scenario, scenario.probe, goal
+        self.scenario, self.goal = scenario, goal
+        self.probe = scenario.probe.replace(theta_stop_std_rad=SIMULATED_STOP_STD_RAD)
         self.record = SweepRecord()
         self.decomposition: Decomposition | None = None
         # Only its prediction from measured ring-downs is used: no σ model for unmeasured ones.

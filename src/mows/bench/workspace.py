@@ -31,7 +31,7 @@ from mows.workspace.design import boundary_positions
 from mows.workspace.fit import WorkspaceModel, choose_degree, fit
 from mows.workspace.harmonics import SolidHarmonics
 from mows.workspace.observations import Observation
-from mows.workspace.poses import PoseError, fit_with_pose_errors, moved
+from mows.workspace.poses import PoseError, frame_bound, map_with_pose_error, moved
 
 RADIUS_M = 0.025
 CENTRE_FIELD_T = 1.5e-3
@@ -39,9 +39,12 @@ TARGET_B = 5e-4
 TARGET_G = 5e-3
 DEGREES = tuple(range(2, 11))
 SWEEP_COUNTS = (8, 10, 12, 15, 18, 21, 25, 30)
-# The arm's accuracy, (σ per position component, m; σ per rotation component, deg): none, an
-# industrial arm's, between, a surgical arm's.
-POSE_ERRORS = ((1e-5, 1e-3), (1e-4, 0.01), (3e-4, 0.1), (1e-3, 1.0))
+# The arm's accuracy, (σ per position component, m; σ per rotation component, deg): an
+# industrial arm's, between, a surgical arm's (none is the sweep curve's last row).
+POSE_ERRORS = ((1e-4, 0.01), (3e-4, 0.1), (1e-3, 1.0))
+# Draws of each pose error: one map's pulls are correlated through its few largest pose errors,
+# its B error through their mean; each figure carries its Monte Carlo σ.
+POSE_DRAWS = 4
 HALL_COUNTS = (20, 30, 45, 60, 80, 100, 130, 160, 200, 250, 320, 400)
 
 
@@ -81,30 +84,52 @@ def _first(rows: list[dict], target_b: float, target_g: float | None) -> int | N
 
 def pose_curve(
     sweeps: Sequence[Observation],
-    degree: int,
+    degrees: Sequence[int],
     source: FieldSource,
     points: np.ndarray,
     levels: Sequence[tuple[float, float]],
     rng: np.random.Generator,
+    draws: int = 1,
 ) -> list[dict]:
-    """For each pose error (σ_p, σ_φ in degrees): the sweeps reported at poses off by a draw of
-    it, fitted ignoring it (``naive_*``) and carrying it (``eiv_*``), at ``degree``."""
-    basis = SolidHarmonics(degree, (0.0, 0.0, 0.0), RADIUS_M)
+    """For each pose error (σ_p, σ_φ in degrees), over ``draws`` draws of it: the sweeps
+    reported at poses off by the draw, fitted ignoring it (``naive_*``, the degree chosen by
+    the sweeps' noise alone) and carrying it (``eiv_*``, the degree chosen with it); each
+    figure the rms over the draws (the pulls' sd pooled), with its Monte Carlo σ (``*_mc``),
+    and ``bound_b_error``, the B error no map of these sweeps can avoid (:func:`frame_bound`)."""
+    truth = source.field_t(points), source.gradient_t_per_m(points)
     rows = []
     for position_std_m, angle_std_deg in levels:
         error = PoseError(position_std_m, math.radians(angle_std_deg))
-        reported = [moved(obs, rng.normal(size=6) * error.std) for obs in sweeps]
-        naive = fit(reported, basis)
-        carried = fit_with_pose_errors(reported, basis, error, naive).model
-        rows.append(
-            {
-                "position_std_m": position_std_m,
-                "angle_std_deg": angle_std_deg,
-                **{f"naive_{k}": v for k, v in accuracy(naive, source, points).items()},
-                **{f"eiv_{k}": v for k, v in accuracy(carried, source, points).items()},
-            }
-        )
+        figures: dict[str, list[float]] = {}
+        for _ in range(draws):
+            reported = [moved(obs, rng.normal(size=6) * error.std) for obs in sweeps]
+            fitted_maps = map_with_pose_error(reported, degrees, error, (0.0, 0.0, 0.0), RADIUS_M)
+            naive, carried = fitted_maps.plain, fitted_maps.carried.model
+            for kind, model in (("naive", naive), ("eiv", carried)):
+                figures.setdefault(f"{kind}_degree", []).append(model.basis.max_degree)
+                for key, value in accuracy(model, source, points).items():
+                    figures.setdefault(f"{kind}_{key}", []).append(value)
+        bound = frame_bound(*truth, error, len(sweeps))
+        row: dict[str, float] = {"position_std_m": position_std_m, "angle_std_deg": angle_std_deg}
+        for key, values in figures.items():
+            row[key] = float(np.median(values)) if key.endswith("degree") else _rms(values)
+        for key, values in figures.items():
+            if not key.endswith("degree"):
+                row[f"{key}_mc"] = _monte_carlo_std(values)
+        rows.append({**row, "bound_b_error": bound})
     return rows
+
+
+def _rms(values: Sequence[float]) -> float:
+    return float(np.sqrt(np.mean(np.square(values))))
+
+
+def _monte_carlo_std(values: Sequence[float]) -> float:
+    """σ of the rms of ``values`` over their draws: σ(x²)/(2·rms·√n); NaN from one draw."""
+    squares = np.square(values)
+    if squares.size < 2:
+        return math.nan
+    return float(np.std(squares, ddof=1) / (2.0 * _rms(values) * math.sqrt(squares.size)))
 
 
 def run(
@@ -115,6 +140,7 @@ def run(
     target_b: float = TARGET_B,
     target_g: float = TARGET_G,
     pose_errors: Sequence[tuple[float, float]] = POSE_ERRORS,
+    pose_draws: int = POSE_DRAWS,
     seed: int = 0,
 ) -> dict:
     rng = np.random.default_rng(seed)
@@ -132,7 +158,7 @@ def run(
     hall_needed = _first(hall_rows, target_b, None)
     sweep_s, hall_s = simulated.sweep_seconds(), simulated.MOVE_S + simulated.HALL_POINT_S
     last = sweep_rows[-1]
-    poses_rows = pose_curve(sweeps, last["degree"], source, points, pose_errors, rng)
+    poses_rows = pose_curve(sweeps, degrees, source, points, pose_errors, rng, pose_draws)
     return {
         "sweeps": last["count"],
         "degree": last["degree"],

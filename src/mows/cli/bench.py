@@ -92,6 +92,7 @@ QUICK: dict[str, dict[str, object]] = {
         "target_b": 5e-2,
         "target_g": 0.5,
         "pose_errors": ((1e-3, 1.0),),
+        "pose_draws": 2,
     },
     # a goal 5× looser than the default: 25× less device time
     "throughput": {
@@ -120,8 +121,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--load",
         action="store_true",
-        help="latency: a 60 s stream beside two CPU burners and a 1 kHz JointState loop (a robot's control loop)",
+        help="latency: a 60 s stream beside CPU burners and a 1 kHz JointState loop (a robot's control loop)",
     )
+    parser.add_argument(
+        "--burners",
+        type=positive_count,
+        default=2,
+        metavar="N",
+        help="latency --load: how many CPU burners beside the graph (default 2)",
+    )
+    parser.add_argument(
+        "--map-runs",
+        type=positive_count,
+        default=1,
+        metavar="N",
+        help="latency: run the three-probe demo N times and report the median delay of its map (default 1)",
+    )
+
+
+def positive_count(text: str) -> int:
+    """A count of at least 1, or argparse's refusal."""
+    try:
+        count = int(text)
+    except ValueError:
+        count = 0
+    if count < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number of at least 1, got {text!r}")
+    return count
 
 
 def suite(name: str) -> str:
@@ -139,8 +165,10 @@ def run(args) -> int:
             print(f"== {name}: {what}", flush=True)
         start = time.perf_counter()
         options = dict(QUICK.get(name, {}) if args.quick else {})
-        if args.load and name == "latency":
-            options["load"] = True
+        if name == "latency":
+            if args.load:
+                options["load"] = True
+            options["burners"], options["three_probe_runs"] = args.burners, args.map_runs
         try:
             result = importlib.import_module(module_name).run(**options)
         except Exception:  # noqa: BLE001 - a benchmark has no user input: whatever it raises is a bug

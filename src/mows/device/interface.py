@@ -14,7 +14,10 @@ from collections.abc import Sequence
 
 from mows.device.protocol.payloads import DeviceInfo
 from mows.physics.coils import CoilSetup, CurrentCap
+from mows.physics.coupling import PlacedProbe
 from mows.physics.multitone import Tone, coil_amplitudes_a
+from mows.physics.pose import Pose
+from mows.physics.probe import PAPER_PROBE
 from mows.physics.supply import SupplyLimits
 
 
@@ -121,11 +124,12 @@ class Backend(abc.ABC):
     ``supply_limits`` is the static-field supply's cap, slew, resolution and polarity when the
     backend drives one it knows (None: no supply, or a device's own that does not say).
     ``info`` describes the device once it is known (None before a serial device answers);
-    ``probes`` lists a device's probes when it rings several at once (their cycles drive one
-    tone each), empty for one probe, and ``coils`` are its coils where they stand
+    ``probes`` are the probes its stage carries, at their home orientations (one or several;
+    several are driven one tone each): the paper's probe at the coils' centre for a device that
+    does not say (a serial device, the bench), and ``coils`` are its coils where they stand
     among those probes, in the same frame: how hard a tone swings a probe depends on where the
-    probe sits in the coils' field, which a coil setup known by name does not say (None for
-    one probe, whose drive needs only the setup's scheme). ``command_lead_samples`` is how far ahead
+    probe sits in the coils' field, which a coil setup known by name does not say (None: the
+    driver's coil setup, by name). ``command_lead_samples`` is how far ahead
     of the newest received sample a command must be scheduled to reach the device in time (a
     late one applies at the device's next sample, and its result says which).
     """
@@ -133,8 +137,8 @@ class Backend(abc.ABC):
     name: str
     can_excite: bool
     supply_limits: SupplyLimits | None = None  # the field supply's range and limits, if known
-    probes: tuple = ()  # several probes on one stage, driven by tones (PlacedProbe at home); () for one
-    coils: CoilSetup | None = None  # the coils among ``probes``, in their frame; None for one probe
+    probes: tuple[PlacedProbe, ...] = (PlacedProbe(PAPER_PROBE, Pose()),)  # on its stage, at home
+    coils: CoilSetup | None = None  # the coils among ``probes``, in their frame; None: the named setup
 
     # Read-only for the driver: a serial device's info and lead follow its link.
     @property

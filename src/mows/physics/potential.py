@@ -177,6 +177,11 @@ class ArcPotential:
     # --- equilibrium, finite amplitude and frequency ----------------------------------------
     def rest_angle_rad(self) -> np.ndarray:
         """Exact rest angle θs (U'(θs) = 0, U''(θs) > 0) nearest 0; NaN where none is stable."""
+        return self._rest_rad.copy()
+
+    @functools.cached_property
+    def _rest_rad(self) -> np.ndarray:
+        """θs, solved once: the balances at every amplitude start from it."""
         return self.cycle_centre_rad(np.zeros(self.batch_shape))
 
     def cycle_centre_rad(self, amplitude_rad: ArrayLike) -> np.ndarray:
@@ -199,7 +204,9 @@ class ArcPotential:
 
     def effective_stiffness_nm_per_rad(self, amplitude_rad: ArrayLike = 0.0) -> np.ndarray:
         """Harmonic-balance stiffness k(A) with the cycle's second harmonic (module docstring);
-        U''(θs) at A = 0; NaN where the balance is unstable or the swing leaves the interval."""
+        U''(θs) at A = 0; NaN where the balance is unstable or the swing leaves the interval.
+        ``amplitude_rad`` broadcasts to the batch shape B, or is B + (q,): q amplitudes of each
+        element (a ring-down's amplitude nodes), which share its rest angle and coefficients."""
         return self._balance(amplitude_rad)[0]
 
     def first_harmonic_rad(self, turning_rad: ArrayLike) -> np.ndarray:
@@ -229,10 +236,14 @@ class ArcPotential:
         return self.first_harmonic_rad(np.where(rest < 0.0, -distance, distance))
 
     def _balance(self, amplitude_rad: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(k(A), θc, A2) of the harmonic balance with the second harmonic (module docstring)."""
-        amplitude = np.broadcast_to(np.asarray(amplitude_rad, float), self.batch_shape)
-        found = _balance_rows(*self._rows(), amplitude.ravel(), self.half_width_rad)
-        return tuple(values.reshape(self.batch_shape) for values in found)  # type: ignore[return-value]
+        """(k(A), θc, A2) of the harmonic balance with the second harmonic (module docstring),
+        amplitudes of shape B or B + (q,) (:meth:`effective_stiffness_nm_per_rad`)."""
+        amplitude = np.asarray(amplitude_rad, float)
+        nodes = amplitude.shape[-1] if amplitude.ndim > len(self.batch_shape) else 1
+        shape = self.batch_shape + amplitude.shape[-1:] if amplitude.ndim > len(self.batch_shape) else self.batch_shape
+        amplitude = np.ascontiguousarray(np.broadcast_to(amplitude, shape)).reshape(-1, nodes)
+        found = _balance_rows(*self._rows(), self._rest_rad.ravel(), amplitude, self.half_width_rad)
+        return tuple(values.reshape(shape) for values in found)  # type: ignore[return-value]
 
     def frequency_hz(self, amplitude_rad: ArrayLike = 0.0) -> np.ndarray:
         """Ring-down frequency √(k(A)/J − δ²)/2π, Hz (Eq. S1 with the exact k); NaN if unstable."""
@@ -393,47 +404,75 @@ def _centre_rows(
 
 
 @njit(cache=True)
+def _series_at(coeffs: np.ndarray, x: np.ndarray, out: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> None:
+    """``out[i]`` = Σ c_j T_j(x[i]) by :func:`_series`'s arithmetic, with the points innermost:
+    their recurrences are independent, so they run side by side in vector registers instead of
+    one latency-bound chain after another. Top coefficients that are exactly 0 (a derivative's
+    last) leave the recurrence at 0 and are skipped. ``b1``, ``b2``: work arrays like ``x``."""
+    top = coeffs.shape[0]
+    while top > 1 and coeffs[top - 1] == 0.0:
+        top -= 1
+    b1[:] = 0.0
+    b2[:] = 0.0
+    for j in range(top - 1, 0, -1):
+        c = coeffs[j]
+        for i in range(x.shape[0]):
+            t = 2.0 * x[i] * b1[i] - b2[i] + c
+            b2[i] = b1[i]
+            b1[i] = t
+    for i in range(x.shape[0]):
+        out[i] = x[i] * b1[i] - b2[i] + coeffs[0]
+
+
+@njit(cache=True)
 def _balance_rows(
-    d1: np.ndarray, d2: np.ndarray, spring: np.ndarray, amplitude: np.ndarray, half_width: float
+    d1: np.ndarray, d2: np.ndarray, spring: np.ndarray, rest: np.ndarray, amplitude: np.ndarray, half_width: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(k(A), θc, A2) per row: Newton on (θc, A2) with the Jacobian's diagonal (its other
-    terms are O(A) smaller) from the DC balance's centre (:meth:`ArcPotential._balance`)."""
-    rows = amplitude.shape[0]
-    stiffness, mean_out, second_out = np.full(rows, np.nan), np.full(rows, np.nan), np.full(rows, np.nan)
+    """(k(A), θc, A2) per row and amplitude (``amplitude``: (rows, q)): Newton on (θc, A2) with
+    the Jacobian's diagonal (its other terms are O(A) smaller) from the row's ``rest`` angle
+    (:meth:`ArcPotential._balance`)."""
+    rows, nodes = amplitude.shape
+    stiffness = np.full((rows, nodes), np.nan)
+    mean_out, second_out = np.full((rows, nodes), np.nan), np.full((rows, nodes), np.nan)
     phase = 2.0 * np.pi * np.arange(HALF_CYCLE) / BALANCE_POINTS
     first, second_wave = np.cos(phase), np.cos(2.0 * phase)
     weight = np.array([_cycle_weight(i, HALF_CYCLE) for i in range(HALF_CYCLE)])
+    theta, x, b1, b2 = np.empty(HALF_CYCLE), np.empty(HALF_CYCLE), np.empty(HALF_CYCLE), np.empty(HALF_CYCLE)
+    torque, bend = np.empty(HALF_CYCLE), np.empty(HALF_CYCLE)
     for r in range(rows):
-        a = amplitude[r]
-        # From the rest angle (a one-point Newton): the cycle's own balance moves the centre by
-        # O(A²) from there and converges as fast as from the DC balance's centre, at a fraction
-        # of its cost.
-        rest = _centre_row(d1[r], d2[r], spring[r], 0.0, half_width)
-        if not np.isfinite(rest):
+        # From the rest angle: the cycle's own balance moves the centre by O(A²) from there and
+        # converges as fast as from the DC balance's centre, at a fraction of its cost.
+        if not np.isfinite(rest[r]):
             continue
-        small = a < 1e-9
-        divisor = 1.0 if small else a
-        mean, second, harmonic, curvature = rest, 0.0, 0.0, 0.0
-        converged = False
-        for _ in range(NEWTON_STEPS):
-            slope_mean, slope_first, slope_second, curvature = 0.0, 0.0, 0.0, 0.0
-            for i in range(HALF_CYCLE):
-                theta = mean + a * first[i] + second * second_wave[i]
-                slope = weight[i] * (spring[r] * theta + _series(d1[r], theta / half_width))
-                slope_mean += slope
-                slope_first += slope * first[i]
-                slope_second += slope * second_wave[i]
-                curvature += weight[i] * (spring[r] + _series(d2[r], theta / half_width))
-            harmonic = 2.0 * slope_first / divisor
-            mean_step = slope_mean / curvature
-            second_step = (2.0 * slope_second - 4.0 * harmonic * second) / (curvature - 4.0 * harmonic)
-            mean, second = mean - mean_step, second - second_step
-            if not abs(mean_step) + abs(second_step) >= 1e-15 + 1e-12 * a:
-                converged = True
-                break
-        if converged and curvature > 0.0 and abs(mean) + a + abs(second) < half_width:
-            stiffness[r] = spring[r] + _series(d2[r], rest / half_width) if small else harmonic
-            mean_out[r], second_out[r] = mean, second
+        for q in range(nodes):
+            a = amplitude[r, q]
+            small = a < 1e-9
+            divisor = 1.0 if small else a
+            mean, second, harmonic, curvature = rest[r], 0.0, 0.0, 0.0
+            converged = False
+            for _ in range(NEWTON_STEPS):
+                for i in range(HALF_CYCLE):
+                    theta[i] = mean + a * first[i] + second * second_wave[i]
+                    x[i] = theta[i] / half_width
+                _series_at(d1[r], x, torque, b1, b2)
+                _series_at(d2[r], x, bend, b1, b2)
+                slope_mean, slope_first, slope_second, curvature = 0.0, 0.0, 0.0, 0.0
+                for i in range(HALF_CYCLE):
+                    slope = weight[i] * (spring[r] * theta[i] + torque[i])
+                    slope_mean += slope
+                    slope_first += slope * first[i]
+                    slope_second += slope * second_wave[i]
+                    curvature += weight[i] * (spring[r] + bend[i])
+                harmonic = 2.0 * slope_first / divisor
+                mean_step = slope_mean / curvature
+                second_step = (2.0 * slope_second - 4.0 * harmonic * second) / (curvature - 4.0 * harmonic)
+                mean, second = mean - mean_step, second - second_step
+                if not abs(mean_step) + abs(second_step) >= 1e-15 + 1e-12 * a:
+                    converged = True
+                    break
+            if converged and curvature > 0.0 and abs(mean) + a + abs(second) < half_width:
+                stiffness[r, q] = spring[r] + _series(d2[r], rest[r] / half_width) if small else harmonic
+                mean_out[r, q], second_out[r, q] = mean, second
     return stiffness, mean_out, second_out
 
 

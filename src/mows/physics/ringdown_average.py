@@ -72,6 +72,23 @@ def stop_from_swing_rad(
     return grown + np.abs(np.asarray(rest_angle_rad, float))
 
 
+MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
+MEDIAN_EFFICIENCY = 1.2533  # √(π/2): the median's standard error over the mean's, normal samples
+MIN_STOP_FITS = 5  # a spread from fewer ring-downs is no standard error
+
+
+def stop_median_std_rad(stops_rad: ArrayLike) -> float:
+    """The standard error of the median of the stops the ring-downs give
+    (:func:`stop_from_swing_rad`, the finite ones): √(π/2)·sd/√n with sd from their median
+    absolute deviation; NaN from fewer than MIN_STOP_FITS."""
+    stops = np.asarray(stops_rad, float)
+    stops = stops[np.isfinite(stops)]
+    if stops.size < MIN_STOP_FITS:
+        return float("nan")
+    spread = MAD_TO_SD * float(np.median(np.abs(stops - np.median(stops))))
+    return MEDIAN_EFFICIENCY * spread / float(np.sqrt(stops.size))
+
+
 DEFAULT_PERIODS = 60.0  # the paper evaluates 60 periods per ring-down
 GRID_POINTS = 128  # midpoint grid over the ring-down for K(t)
 PHASE_POINTS = 16  # samples of the cycle average ⟨…⟩_Φ (exact for the low harmonics involved)

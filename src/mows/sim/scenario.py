@@ -33,6 +33,7 @@ from mows.physics.coils import CoilSetup, largest_spacing, setup_from_dict
 from mows.physics.coupling import PlacedProbe, check_apart
 from mows.physics.field import source_to_dict
 from mows.physics.fluxgate import DAQ_SAMPLE_RATE_HZ, NoiseModel
+from mows.physics.multitone import MAX_PROBES
 from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.schema import at, check_keys, finite_number, load_yaml, refused
@@ -65,10 +66,12 @@ DEFAULT_SCENARIO = "paper_largest_spacing"
 class Scenario:
     """Everything the simulator needs (module docstring); build variants with :meth:`replace`."""
 
-    probe: Probe = PAPER_PROBE
+    # The scene's probes (docs/multi_probe.md), one or several: a scene of one probe is a group
+    # of one. The first is the scene's ``probe`` at its ``pose``: the coil preset and the sensors
+    # sit around it.
+    probes: tuple[SceneProbe, ...] = (SceneProbe(PAPER_PROBE, Pose()),)
     setup: CoilSetup = dataclasses.field(default_factory=largest_spacing)
     environment: Environment = Environment()
-    pose: Pose = Pose()
     sensors: Sensors = dataclasses.field(default_factory=Sensors)
     noise: NoiseModel = NoiseModel()
     excitation: Excitation = Excitation()
@@ -79,36 +82,52 @@ class Scenario:
     name: str = "custom"
     description: str = ""
     supply: FieldSupply | None = None  # the static-field supply the driver controls (calibration)
-    # A scene with several probes (docs/multi_probe.md); empty for one. With probes, ``probe``
-    # and ``pose`` are the first one's, so that the coil preset and the sensors sit around it.
-    probes: tuple[SceneProbe, ...] = ()
 
     def __post_init__(self):
-        if self.probes:
-            check_apart(self.placed_probes(), [f"probes[{k}].pose.magnet_position_m" for k in range(len(self.probes))])
+        if not 1 <= len(self.probes) <= MAX_PROBES:
+            raise refused("probes", len(self.probes), f"must be 1 to {MAX_PROBES} probes")
+        check_apart(self.placed_probes(), [f"probes[{k}].pose.magnet_position_m" for k in range(len(self.probes))])
         check_range("sample_rate_hz", self.sample_rate_hz, 0.0, 1e7, low_open=True)
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise refused("seed", self.seed, "must be an integer ≥ 0")
         self.setup.cap.check(self.excitation.amplitude_a)
 
+    @property
+    def probe(self) -> Probe:
+        """The first probe's constants (the scene's probe that the coils and sensors sit around)."""
+        return self.probes[0].probe
+
+    @property
+    def pose(self) -> Pose:
+        """The first probe's pose."""
+        return self.probes[0].pose
+
     def placed_probes(self, theta0_rad=None) -> list[PlacedProbe]:
-        """Every probe of the scene at its pose (one for a single-probe scene), turned to
-        ``theta0_rad`` (one θ0 per probe; default: their home orientations)."""
-        scene = self.probes or (SceneProbe(self.probe, self.pose),)
-        angles = [None] * len(scene) if theta0_rad is None else list(theta0_rad)
-        if len(angles) != len(scene):
-            raise ValueError(f"theta0_rad = {theta0_rad!r} must give one angle for each of the {len(scene)} probes")
-        return [p.placed(a) for p, a in zip(scene, angles)]
+        """Every probe of the scene at its pose, turned to ``theta0_rad`` (one θ0 per probe;
+        default: their home orientations)."""
+        angles = [None] * len(self.probes) if theta0_rad is None else list(theta0_rad)
+        if len(angles) != len(self.probes):
+            raise ValueError(
+                f"theta0_rad = {theta0_rad!r} must give one angle for each of the {len(self.probes)} probes"
+            )
+        return [p.placed(a) for p, a in zip(self.probes, angles)]
 
     def stage_orientations_rad(self, stage_rad: float) -> np.ndarray:
-        """Each probe's θ0 with the shared stage at ``stage_rad``: a scene's probes at their home
-        orientations plus it; the probe of a one-probe scene at ``stage_rad`` itself (its home
-        is 0, so that the driver's θ0 is the probe's orientation)."""
-        if not self.probes:
-            return np.array([float(stage_rad)])
+        """Each probe's θ0 with the shared stage at ``stage_rad``: its home orientation plus it
+        (the driver's θ0 is the probe's orientation where the probe's home is 0, as in every
+        shipped scene of one probe)."""
         return np.array([p.pose.theta0_rad for p in self.probes]) + float(stage_rad)
 
     def replace(self, **changes) -> Scenario:
+        """A variant with ``changes``; ``probe`` and ``pose`` change the first probe's."""
+        if "probe" in changes or "pose" in changes:
+            first = self.probes[0]
+            first = dataclasses.replace(
+                first, probe=changes.pop("probe", first.probe), pose=changes.pop("pose", first.pose)
+            )
+            if "probes" in changes:
+                raise ValueError("give either probes or the first probe's probe and pose, not both")
+            changes["probes"] = (first, *self.probes[1:])
         return dataclasses.replace(self, **changes)
 
     # --- YAML ---------------------------------------------------------------------------
@@ -122,11 +141,10 @@ class Scenario:
 
     def to_dict(self) -> dict:
         """The full YAML mapping (presets and the paper probe written out in full)."""
-        one_probe = {} if self.probes else {"probe": self.probe.to_dict(), "pose": pose_to_dict(self.pose)}
         return {
             "name": self.name,
             "description": self.description,
-            **one_probe,
+            "probes": [_probe_entry(p) for p in self.probes],
             "setup": self.setup.to_dict(),
             "environment": {
                 "sources": [source_to_dict(s) for s in self.environment.sources],
@@ -141,7 +159,6 @@ class Scenario:
             "sample_rate_hz": float(self.sample_rate_hz),
             "seed": int(self.seed),
             **({} if self.supply is None else {"supply": self.supply.to_dict()}),
-            **({} if not self.probes else {"probes": [_probe_entry(p) for p in self.probes]}),
         }
 
     @classmethod
@@ -204,20 +221,17 @@ def _scenario_from_sections(
     supply=None,
     probes=None,
 ) -> Scenario:
-    scene_probes = () if probes is None else probes_from(probes)
-    if scene_probes and (pose is not None or probe != PAPER_PROBE_NAME):
-        raise ValueError("give either probe and pose (one probe) or probes (several), not both")
-    the_pose = scene_probes[0].pose if scene_probes else section("pose", pose, pose_from)
+    scene_probes = _scene_probes(probe, pose, probes)
+    the_pose = scene_probes[0].pose
     fs = finite_number("sample_rate_hz", sample_rate_hz)
     setup = {"preset": "largest_spacing"} if setup is None else setup
     require_explicit_geometry(the_pose, setup, sensors)
     if isinstance(setup, dict) and "preset" in setup:  # the preset's coils sit around the probe
         setup = {"probe_position_m": list(the_pose.magnet_position_m), **setup}
     return Scenario(
-        probe=scene_probes[0].probe if scene_probes else probe_from(probe),
+        probes=scene_probes,
         setup=_at("setup", setup_from_dict, setup),
         environment=section("environment", environment, environment_from),
-        pose=the_pose,
         sensors=section("sensors", sensors, functools.partial(sensors_from, the_pose)),
         noise=section("noise", noise, noise_from),
         excitation=section("excitation", excitation, excitation_from),
@@ -228,5 +242,14 @@ def _scenario_from_sections(
         name=str(name),
         description=str(description),
         supply=None if supply is None else _at("supply", supply_from_dict, supply),
-        probes=scene_probes,
     )
+
+
+def _scene_probes(probe, pose, probes) -> tuple[SceneProbe, ...]:
+    """The scene's probes: the ``probes:`` list, or the older shape's ``probe`` at ``pose`` read
+    as a group of one (a probe on its own stage)."""
+    if probes is None:
+        return (SceneProbe(probe_from(probe), section("pose", pose, pose_from)),)
+    if pose is not None or probe != PAPER_PROBE_NAME:
+        raise ValueError("give either probe and pose (the older shape of one probe) or probes, not both")
+    return probes_from(probes)

@@ -43,7 +43,7 @@ def with_bases(data, base_dir, chain: tuple = ()) -> dict:
         raise ValueError(f"a scenario must be a mapping of sections, got {type(data).__name__}")
     data = dict(data)
     if data.get("probe") is not None and data.get("probes") is not None:
-        raise ValueError("the scenario gives both probe: (one probe) and probes: (several): give one of them")
+        raise ValueError("the scenario gives both probe: (the older shape of one probe) and probes: give one of them")
     data["probe"] = _relative_probe_file(data.get("probe"), base_dir)
     if isinstance(data.get("probes"), list):
         data["probes"] = [
@@ -144,7 +144,7 @@ def probe_from(value) -> Probe:
 
 
 def probes_from(entries) -> tuple[SceneProbe, ...]:
-    """The ``probes:`` list of a scene with several probes: each entry a mapping of ``probe``
+    """The ``probes:`` list of a scene's probes (one or several): each entry a mapping of ``probe``
     (as the ``probe`` section), ``pose`` (as the ``pose`` section) and ``stage`` (own | shared)."""
     if not isinstance(entries, list) or not 1 <= len(entries) <= MAX_PROBES:
         raise refused("probes", entries, f"must be a list of 1 to {MAX_PROBES} probes")

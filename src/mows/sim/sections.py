@@ -103,7 +103,7 @@ class Excitation:
 
 @dataclasses.dataclass(frozen=True)
 class SceneProbe:
-    """One probe of a scene with several: its constants, its pose (where its magnet rests, its
+    """One probe of a scene: its constants, its pose (where its magnet rests, its
     rotation plane and its home orientation θ0) and the stage that turns it (``STAGES``)."""
 
     probe: Probe

@@ -57,6 +57,7 @@ PARAMETER_COUNT = 8  # Bx, By, Gs, Gd, Gxy, Δf00, Hc, Hs
 # mrad; the swing is smooth in them, so linear interpolation over 5 mrad errs by < 0.1 %.
 REST_NODES_RAD = np.linspace(-0.1, 0.1, 41)
 F00_STEP_HZ = 1e-4  # the calibrated f00's step for its Jacobian column (the model is smooth in f00)
+STOP_STEP_RAD = 1e-4  # the stop's step for its column: 0.006°, within the model's linear range
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,6 +116,9 @@ class Decomposition:
     residual_hz: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     # Bx, By, Gs, Gd, Gxy, Δf00, Hc, Hs (the field's in-plane 3θ0 curvature, T/m², 0 unless fitted)
     parameters: np.ndarray = dataclasses.field(default_factory=lambda: np.full(PARAMETER_COUNT, np.nan))
+    # σ of (Bx, By, Gxx, Gxy, Gyy) from the errors shared by every ring-down (the calibrated f00,
+    # the stop): their part of the covariance, which no number of ring-downs reduces
+    shared_std: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(5))
 
     @property
     def ok(self) -> bool:
@@ -171,6 +175,9 @@ class Ringdowns:
     # model turns it into the swing about its own rest angle (:meth:`start_swing_about_rad`).
     start_swing_rad: np.ndarray | None = None
     start_offset_s: np.ndarray | float = 0.0  # each window's first sample after the coil switch-off
+    # The stop's standard uncertainty: one error shared by every ring-down of the sweep
+    # (:func:`decompose` carries it into the covariance); 0 for a stop taken as exact.
+    stop_std_rad: float = 0.0
 
     def released_swing_rad(self, potential: ArcPotential) -> np.ndarray:
         """The swing at each window's first sample of a ring-down released at the stop: the
@@ -401,12 +408,34 @@ def decompose(
     params[free] = result.x
     # A calibrated f00 off by δ moves every residual as the Δf00 parameter does (model_shift_hz):
     # its column of the Jacobian, held fixed in the fit, carries f00's σ into the parameters.
-    step = np.eye(PARAMETER_COUNT)[5] * F00_STEP_HZ
-    f00_column = (residual_of(params + step) - residual_of(params - step)) / (2.0 * F00_STEP_HZ)
-    f00_effect = None if f00_free or not f00_std_hz > 0.0 else (f00_column, float(f00_std_hz))
-    decomposition = _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics, f00_effect)
+    shared: list[tuple[np.ndarray, float]] = []
+    if not f00_free and f00_std_hz > 0.0:
+        step = np.eye(PARAMETER_COUNT)[5] * F00_STEP_HZ
+        f00_column = (residual_of(params + step) - residual_of(params - step)) / (2.0 * F00_STEP_HZ)
+        shared.append((f00_column, float(f00_std_hz)))
+    if model == "first_principles" and ringdowns is not None and _released_with_std(ringdowns):
+        stop_column = _stop_column(params, theta0, shift, std, probe, f00_hz, ringdowns, neighbours)
+        shared.append((stop_column, ringdowns.stop_std_rad))
+    decomposition = _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics, shared)
     decomposition.parameters = params
     return decomposition
+
+
+def _released_with_std(ringdowns: Ringdowns) -> bool:
+    """Whether the ring-downs start from the stop and its σ is given."""
+    return ringdowns.start_swing_rad is None and ringdowns.stop_std_rad > 0.0
+
+
+def _stop_column(params, theta0, shift, std, probe, f00_hz, ringdowns: Ringdowns, neighbours) -> np.ndarray:
+    """∂(residual)/∂stop at ``params``: the stop moved by ±STOP_STEP_RAD through the model's
+    own amplitude-dependent springs and start swings."""
+
+    def residual_at(stop_rad: float) -> np.ndarray:
+        moved = dataclasses.replace(ringdowns, stop_amplitude_rad=stop_rad)
+        return (model_shift_hz(params, theta0, probe, f00_hz, "first_principles", moved, neighbours) - shift) / std
+
+    stop = ringdowns.stop_amplitude_rad
+    return (residual_at(stop + STOP_STEP_RAD) - residual_at(stop - STOP_STEP_RAD)) / (2.0 * STOP_STEP_RAD)
 
 
 def _distinct_angles(theta0) -> int:
@@ -463,22 +492,24 @@ def _start(harmonics: Harmonics, probe: Probe, f00_hz: float, model: str) -> np.
     )
 
 
-def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics, f00_effect) -> Decomposition:
+def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmonics, shared) -> Decomposition:
+    """The decomposition of the fit ``result``; ``shared``: (Jacobian column, σ) of each error
+    common to every ring-down (the calibrated f00, the stop), added to the covariance."""
     dof = shift.size - int(free.sum())
     chi2_dof = float(result.fun @ result.fun) / dof if dof > 0 else math.nan
     jac = result.jac
     normal_inverse = np.linalg.pinv(jac.T @ jac)
     cov_free = normal_inverse * max(1.0, chi2_dof if math.isfinite(chi2_dof) else 1.0)
-    if f00_effect is not None:
-        column, f00_std_hz = f00_effect
-        sensitivity = -normal_inverse @ jac.T @ column  # ∂(free parameters)/∂f00
-        cov_free = cov_free + f00_std_hz**2 * np.outer(sensitivity, sensitivity)
-    cov = np.full((PARAMETER_COUNT, PARAMETER_COUNT), np.nan)
-    cov[np.ix_(free, free)] = cov_free
+    shared_free = np.zeros_like(cov_free)
+    for column, shared_std in shared:
+        sensitivity = -normal_inverse @ jac.T @ column  # ∂(free parameters)/∂(the shared quantity)
+        shared_free = shared_free + shared_std**2 * np.outer(sensitivity, sensitivity)
+    cov, shared_cov = np.full((2, PARAMETER_COUNT, PARAMETER_COUNT), np.nan)
+    cov[np.ix_(free, free)] = cov_free + shared_free
+    shared_cov[np.ix_(free, free)] = shared_free
     bx, by, gs, gd, gxy, df00 = params[:6]
-    # (Gxx, Gxy, Gyy) = (Gs + Gd, Gxy, Gs − Gd): a linear map of (Gs, Gd, Gxy).
-    to_xy = np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, -1.0, 0.0]])
-    g_cov = to_xy @ np.nan_to_num(cov[2:5, 2:5]) @ to_xy.T  # a parameter held fixed has no variance
+    g_cov = _gradient_covariance(cov)
+    shared_std = np.sqrt(np.r_[np.diag(np.nan_to_num(shared_cov[:2, :2])), np.diag(_gradient_covariance(shared_cov))])
     gradient = np.array([gs + gd, gxy, gs - gd])
     if f00_free:  # only (Gxx − Gyy)/2 and Gxy are determined; Gxx and Gyy alone are not
         gradient[[0, 2]] = np.nan
@@ -498,4 +529,12 @@ def _summarise(model, result, params, free, shift, std, f00_hz, f00_free, harmon
         chi2_dof=chi2_dof,
         rms_residual_hz=float(np.sqrt(np.mean(residual**2))),
         residual_hz=residual,
+        shared_std=shared_std,
     )
+
+
+def _gradient_covariance(cov: np.ndarray) -> np.ndarray:
+    """Of (Gxx, Gxy, Gyy) = (Gs + Gd, Gxy, Gs − Gd), a linear map of (Gs, Gd, Gxy); a parameter
+    held fixed (NaN) has no variance."""
+    to_xy = np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, -1.0, 0.0]])
+    return to_xy @ np.nan_to_num(cov[2:5, 2:5]) @ to_xy.T

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from mows.device.cycle.phases import CycleRequest
 from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.stream import Estimated
+from mows.physics.probe import Probe
 from mows.records.stamps import NS_PER_S
 from mows.sweep.decompose import Decomposition
 from mows.sweep.planner import PrecisionGoal
@@ -31,7 +32,12 @@ class SweepSettings:
     repeat_s: float = 0.82  # adaptive sweeps: device time of one ring-down (kick, ring-down, gap)
     turn_s: float = 0.5  # adaptive sweeps: device time of a turn and the settling
     manual_orientation: bool = False  # no motor: the operator turns the stage and confirms each orientation
-    probes: tuple[ProbeEntry, ...] = ()  # several probes in each window; (): one
+    probes: tuple[ProbeEntry, ...] = ()  # the probes listed by id (the mapper's ``probes``); (): none listed
+
+    def entries(self, probe: Probe) -> tuple[ProbeEntry, ...]:
+        """The sweep's probes: those listed, else ``probe`` (the mapper's probe file) as probe 0,
+        a set of one."""
+        return self.probes or (ProbeEntry(0, probe, probe.f00_hz),)
 
 
 def turn_prompt(theta0_rad: float) -> str:

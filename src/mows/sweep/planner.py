@@ -100,6 +100,13 @@ def reached(goal: PrecisionGoal, decomposition: Decomposition | None) -> bool:
     return bool(np.all(std[asked] <= goal.targets()[asked]))
 
 
+def beyond_reach(goal: PrecisionGoal, decomposition: Decomposition) -> bool:
+    """Whether a target of ``goal`` lies below the σ the errors shared by every ring-down give
+    (:attr:`Decomposition.shared_std`): no sweep of this probe reaches it."""
+    asked = np.isfinite(goal.targets())
+    return bool(np.any(decomposition.shared_std[asked] > goal.targets()[asked]))
+
+
 @dataclasses.dataclass(frozen=True)
 class PlannedCycle:
     """Run ``repeats`` ring-downs at θ0; ``predicted_std`` is σ of (Bx, By, Gxx, Gxy, Gyy) expected after."""
@@ -164,6 +171,12 @@ class AdaptivePlanner:
         driver's cycle does), so its cost is the turn plus its repeats."""
         if decomposition is not None and reached(self.goal, decomposition):
             return PlanEnd(True, "target reached: " + self._describe(achieved_std(decomposition)))
+        if decomposition is not None and decomposition.ok and beyond_reach(self.goal, decomposition):
+            return PlanEnd(
+                False,
+                "target below what the errors shared by every ring-down allow (the stop's and f00's σ, "
+                "which more ring-downs do not reduce): " + self._describe(decomposition.shared_std),
+            )
         remaining = self.goal.budget_s - elapsed_s
         if remaining < self.turn_s + self.repeat_s:
             where = (

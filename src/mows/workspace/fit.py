@@ -13,9 +13,12 @@ sweeps' maps from 0.93–1.38 to 0.93–1.10 (docs/performance.md).
 
 The degree is chosen by K-fold cross-validation over groups (a sweep's five values are held
 out together, as they share a pose): for each candidate degree, each fold is predicted from a
-fit to the others, and the score is the held-out χ² per value with the prediction's covariance
-added to the measurement's. Too low a degree leaves the field's higher terms in the residual;
-too high a degree's predictions scatter; the lowest score wins.
+fit to the others, and the score is the held-out −2·log of the predictive density per value,
+χ² + log det S with S the measurement's covariance plus the prediction's (less the constant
+log 2π). Too low a degree leaves the field's higher terms in the residual (χ² grows); too high a
+degree predicts with a wide S (log det S grows); the lowest score wins. χ² alone is no score: it
+rewards the unsure prediction, and with the sweeps' pose errors in their covariance it chose a
+degree whose folds just determined their coefficients.
 """
 
 from __future__ import annotations
@@ -131,7 +134,7 @@ def _solve(basis: SolidHarmonics, rows: Sequence[tuple[np.ndarray, np.ndarray]])
 
 @dataclasses.dataclass(frozen=True)
 class DegreeChoice:
-    """The cross-validation: ``scores`` (held-out χ² per value) of each of ``degrees``; NaN
+    """The cross-validation: ``scores`` (held-out −2·log predictive density per value) of each of ``degrees``; NaN
     where a fold could not be fitted."""
 
     degrees: tuple[int, ...]
@@ -140,7 +143,10 @@ class DegreeChoice:
 
     def report(self) -> str:
         scores = ", ".join(f"{d}: {s:.3g}" for d, s in zip(self.degrees, self.scores))
-        return f"degree {self.chosen} by {len(self.degrees)}-degree cross-validation (held-out χ²/value {scores})"
+        return (
+            f"degree {self.chosen} by {len(self.degrees)}-degree cross-validation "
+            f"(held-out −2·log density per value {scores})"
+        )
 
 
 def _folds(groups: np.ndarray, n_folds: int) -> list[np.ndarray]:
@@ -149,19 +155,20 @@ def _folds(groups: np.ndarray, n_folds: int) -> list[np.ndarray]:
 
 
 def held_out_score(observations: Sequence[Observation], basis: SolidHarmonics, n_folds: int = DEFAULT_FOLDS) -> float:
-    """Held-out χ² per value over ``n_folds`` folds of whole groups (module docstring)."""
+    """Held-out −2·log predictive density per value over ``n_folds`` folds of whole groups, in
+    the whitened units where the measurement's covariance is the identity (module docstring)."""
     groups = np.array([obs.group for obs in observations])
     rows = [whitened_rows(basis, obs) for obs in observations]
-    chi2, count = 0.0, 0
+    score, count = 0.0, 0
     for held in _folds(groups, n_folds):
         model = _solve(basis, [r for r, h in zip(rows, held) if not h])
         for (design, data), _ in filter(lambda pair: pair[1], zip(rows, held)):
             # in whitened units the measurement's covariance is the identity
             difference = data - design @ model.coefficients
             covariance = np.eye(data.size) + design @ model.covariance @ design.T
-            chi2 += float(difference @ np.linalg.solve(covariance, difference))
+            score += float(difference @ np.linalg.solve(covariance, difference)) + np.linalg.slogdet(covariance)[1]
             count += difference.size
-    return chi2 / count
+    return score / count
 
 
 def choose_degree(

@@ -8,8 +8,8 @@ information (D-optimal, :mod:`mows.workspace.design`) given the sweeps at the po
 reported. :class:`PoseWatch` follows ``measured_cp`` through a sweep: the arm has arrived when
 its report is at the goal and still; a sweep whose probe moved, or whose last report is older
 than a sweep allows, is refused with the reason. :func:`workspace_map` fits every sweep at its
-reported pose, the degree chosen by cross-validation over sweeps and the arm's stated accuracy
-carried (:mod:`mows.workspace.poses`): the one function of the mapper node and ``mows map``.
+reported pose, the arm's stated accuracy carried (:mod:`mows.workspace.poses`) in the fit and
+in the cross-validation over sweeps that chooses its degree: the one function of the mapper node and ``mows map``.
 """
 
 from __future__ import annotations
@@ -24,10 +24,10 @@ from mows.physics.probe import Probe
 from mows.sweep.decompose import Decomposition
 from mows.workspace.arm import NS_PER_S, Reach, StampedPose, matrix_quaternion, pose_problem
 from mows.workspace.design import boundary_positions, candidate_designs, information, next_best, random_rotation
-from mows.workspace.fit import DegreeChoice, WorkspaceModel, choose_degree, fit
+from mows.workspace.fit import DegreeChoice, WorkspaceModel
 from mows.workspace.harmonics import SolidHarmonics, coefficient_count
 from mows.workspace.observations import Observation, gravity_field_t, plane_readout, sweep_observation
-from mows.workspace.poses import PoseError, fit_with_pose_errors, rotation
+from mows.workspace.poses import PoseError, map_with_pose_error, rotation
 
 # What a sweep is expected to give before the first is in (σ of Bx, By in T, of the gradient's
 # three in T/m): ten orientations of one ring-down each at the paper's frequency noise.
@@ -236,7 +236,5 @@ def workspace_map(
     degrees = tuple(d for d in settings.degrees if coefficient_count(d) < 0.8 * values - 5)
     if not degrees:
         raise ValueError(f"{len(observations)} sweeps cannot determine a map of degree {min(settings.degrees)}")
-    choice = choose_degree(observations, degrees, settings.centre_m, settings.radius_m)
-    basis = SolidHarmonics(choice.chosen, tuple(settings.centre_m), settings.radius_m)
-    model = fit_with_pose_errors(observations, basis, settings.accuracy, fit(observations, basis)).model
-    return WorkspaceMap(model, choice, tuple(pose for _, pose in sweeps), settings)
+    fitted = map_with_pose_error(observations, degrees, settings.accuracy, settings.centre_m, settings.radius_m)
+    return WorkspaceMap(fitted.carried.model, fitted.choice, tuple(pose for _, pose in sweeps), settings)

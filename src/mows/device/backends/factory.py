@@ -159,8 +159,8 @@ class BackendSettings:
 
     def tracking_scenario(self) -> Scenario:
         """The scenario whose device tracking mode follows; ValueError when the simulated scene
-        has several probes (tracking follows one)."""
-        if self.backend == "sim" and self.scene.probes:
+        has several probes (tracking retunes one probe's kicks)."""
+        if self.backend == "sim" and len(self.scene.probes) > 1:
             raise ValueError(
                 f"tracking=True: tracking follows one probe; scenario {self.scenario!r} has {len(self.scene.probes)}"
             )

@@ -54,9 +54,9 @@ class SimBackend(Backend):
     benchmarks), each poll takes the next ``chunk_s`` at once. Commands are applied at their
     exact sample by :class:`mows.device.simulated.scheduled.ScheduledDevice`.
 
-    For a scene of several probes on one shared stage, ``probes`` lists them at their home
-    orientations (probe id = index) and ``coils`` are the scene's coils, placed among them: the
-    driver's cycles then drive the probes' tones. Both are empty for one probe.
+    ``probes`` are the scene's probes on its one shared stage, at their home orientations
+    (probe id = index), and ``coils`` are the scene's coils, placed among them: the driver's
+    cycles drive the probes (:mod:`mows.device.cycle.sequencer`).
     """
 
     name = "sim"
@@ -73,8 +73,7 @@ class SimBackend(Backend):
         supply_slew_a_per_s: float = math.inf,
     ):
         self.device = ScheduledDevice(device, cap, supply_cap_a, supply_slew_a_per_s)
-        if device.scenario.probes:
-            self.probes, self.coils = self.device.home, device.setup
+        self.probes, self.coils = self.device.home, device.setup
         self.supply_limits = self.device.supply_limits
         self._info = simulated_device_info(self.device)
         self.clock = clock or DeviceClock(device.sample_rate_hz)
@@ -116,9 +115,12 @@ class SimBackend(Backend):
             self.device.supply_to_zero()
 
     def stats(self) -> dict:
-        values = {"link": "simulated", "device_coils_on": self.device.coils_on}
-        if self.probes:
-            values.update(probes=len(self.probes), peak_coil_current_a=self.device.peak_current_a)
+        values = {
+            "link": "simulated",
+            "device_coils_on": self.device.coils_on,
+            "probes": len(self.probes),
+            "peak_coil_current_a": self.device.peak_current_a,
+        }
         if self.device.supply_limits is not None:
             values.update(
                 supply_current_a=self.device.device.field_current_a, supply_target_a=self.device.supply_target_a

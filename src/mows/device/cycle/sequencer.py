@@ -1,16 +1,19 @@
-"""The measurement cycle as a state machine over device sample indices, for one probe or for
-several probes on one shared stage: several probes are the general case, one probe a cycle of one.
+"""The measurement cycle as a state machine over device sample indices, for the probes of one
+shared stage (``probes``, at their home orientations; probe id = index): one probe or several.
 
-One cycle at one orientation θ0 (the stage angle): turn the stage and let it settle; then
-``tuning_steps + repeats`` rounds, each exciting the cycle's groups in turn under the
-duty-cycle limit and recording each group's free ring-down, with a pause of ``gap_s`` between a
-ring-down and the next excitation.
+One cycle at one orientation θ0 (the stage angle; each probe at its home orientation plus it):
+turn the stage and let it settle; then ``tuning_steps + repeats`` rounds, each exciting the
+cycle's groups in turn under the duty-cycle limit and recording each group's free ring-down,
+with a pause of ``gap_s`` between a ring-down and the next excitation.
 
-* One probe (no ``probes``): one group, driven with the coil setup's orientation-dependent
-  currents at the current resonance estimate. The first ``tuning_steps`` ring-downs are fitted
-  (by the fit function the sequencer is handed, the estimator's ring-down fit in the driver)
-  and retune the excitation frequency; the next ``repeats`` are the measurements.
-* Several probes (``probes``, at their home orientations; probe id = index): the excitation is
+How the probes are driven follows from whether they share the coils:
+
+* A probe that has the coils to itself (the stage carries one) is driven with the coil setup's
+  orientation-dependent currents at ``excitation_current_a`` (to the housing stop) at its
+  current resonance estimate, and the first ``tuning_steps`` ring-downs are fitted (by the fit
+  function the sequencer is handed, the estimator's ring-down fit of one probe in the driver)
+  and retune that frequency; the next ``repeats`` are the measurements.
+* Probes that share the coils (the stage carries several): the excitation is
   planned at the stage angle (:func:`mows.device.cycle.tone_groups.plan_probes`: each probe's
   tone at its f00 for a swing, each at most ``excitation_current_a``, groups whose summed peak
   stays within the driver's cap, overlapping tones refused with the reason) and its groups are
@@ -90,11 +93,11 @@ class CycleSequencer:
     """Runs one cycle at a time on a device of ``sample_rate_hz`` with the coils of ``setup``
     (module docstring).
 
-    ``frequency_hz`` is the first resonance estimate (retuned by one probe's cycles);
-    ``lead_samples`` how far ahead of the newest sample commands are scheduled; ``cap`` the
-    driver's coil current cap (no command above it is ever issued, a multi-tone drive's summed
-    peak included); ``probes`` the probes of one shared stage at their home orientations, empty
-    for one probe.
+    ``probes`` are the probes of one shared stage at their home orientations (one or several);
+    ``frequency_hz`` is the first resonance estimate of a probe that has the coils to itself
+    (retuned by its tuning ring-downs); ``lead_samples`` how far ahead of the newest sample
+    commands are scheduled; ``cap`` the driver's coil current cap (no command above it is ever
+    issued, a multi-tone drive's summed peak included).
     """
 
     def __init__(
@@ -107,9 +110,11 @@ class CycleSequencer:
         lead_samples: int = 0,
         *,
         fit: TuningFit,
-        probes: Sequence[PlacedProbe] = (),
+        probes: Sequence[PlacedProbe],
         last_cycle_id: int = 0,
     ):
+        if not probes:
+            raise ValueError("a cycle needs the probes it rings (one or several)")
         self.settings = settings
         self.setup = setup
         self.cap = cap
@@ -117,6 +122,8 @@ class CycleSequencer:
         self.frequency_hz = float(frequency_hz)
         self.lead_samples = int(lead_samples)
         self.probes = tuple(probes)
+        # One probe has the coils to itself: tuned, to the stop. Several share them (module docstring).
+        self.tuned = len(self.probes) == 1
         self.latched: str | None = None  # the reason of a latched emergency stop
         self.phase = Phase.IDLE
         self.fault = ""  # why the last cycle failed, until the next one starts or a stop is released
@@ -226,7 +233,7 @@ class CycleSequencer:
             raise ValueError("no samples from the device yet")
         s = self.settings if request.settings is None else request.settings
         cycle = CyclePlan.resolve(self._last_cycle_id + 1, request, s)  # ValueError for a request out of range
-        if self.probes:  # driven at their f00: no tuning
+        if not self.tuned:  # driven at their f00
             cycle = dataclasses.replace(cycle, tuning_steps=0)
         if request.frequency_hz is not None:
             nyquist_hz = self.sample_rate_hz / 2.0
@@ -236,10 +243,10 @@ class CycleSequencer:
                 0.0 < request.frequency_hz < nyquist_hz,
                 f"in (0, {nyquist_hz:g}) Hz",
             )
-        if self.probes:
+        if not self.tuned:
             plan_at(self.probes, cycle.theta0_rad, self._capped_setup(), s)  # ValueError when it excites none
         else:
-            probe_currents(self.setup, self.cap, cycle.theta0_rad, s.excitation_current_a)  # ValueError above the cap
+            probe_currents(self.setup, self.cap, self._orientation(cycle), s.excitation_current_a)  # above the cap
         self._duty.configure(s.max_duty_cycle, self._samples(s.duty_window_s))
         self._duty.earliest_start(self._next_index, self._samples(s.excite_s))  # ValueError if it never fits
         if request.frequency_hz is not None:
@@ -249,7 +256,7 @@ class CycleSequencer:
 
     def _run(self, c: CyclePlan) -> Run:
         coils_free = yield from self._turn_and_settle(c)
-        plan = plan_at(self.probes, c.theta0_rad, self._capped_setup(), c.settings) if self.probes else None
+        plan = None if self.tuned else plan_at(self.probes, c.theta0_rad, self._capped_setup(), c.settings)
         fits: list[TuningResult] = []
         rung = self._recorded = 0
         for k in range(c.tuning_steps + c.repeats):
@@ -279,7 +286,8 @@ class CycleSequencer:
             excite = excitation_samples(c.settings.excite_s, self.frequency_hz, self.sample_rate_hz)
             start = self._duty.earliest_start(not_before, excite)
             amplitude_a = c.settings.excitation_current_a
-            return probe_excitation(self.setup, self.cap, c.theta0_rad, amplitude_a, self.frequency_hz, start, excite)
+            theta0_rad = self._orientation(c)
+            return probe_excitation(self.setup, self.cap, theta0_rad, amplitude_a, self.frequency_hz, start, excite)
         group = self._groups.next(not_before)
         assert group is not None  # a group is asked for only while some remain
         return group_excitation(self.setup, group, self.sample_rate_hz)
@@ -357,10 +365,14 @@ class CycleSequencer:
         if not recording.complete:
             return LostTuning()
         samples, saturated = recording.arrays()
-        fit = self._fit(samples, self.sample_rate_hz, c.theta0_rad, self.frequency_hz, saturated=saturated)
+        fit = self._fit(samples, self.sample_rate_hz, self._orientation(c), self.frequency_hz, saturated=saturated)
         if fit.ok:
             self.frequency_hz = float(fit.frequency_hz)
         return fit
+
+    def _orientation(self, c: CyclePlan) -> float:
+        """The θ0 of the probe that has the coils to itself: its home orientation plus the stage's."""
+        return self.probes[0].pose.theta0_rad + c.theta0_rad
 
     def _capped_setup(self) -> CoilSetup:
         """The setup under the driver's cap, which a multi-tone plan holds on the summed peak."""

@@ -32,15 +32,15 @@ Block = SimulatedBlock
 
 def scheduled_device(scenario, cap: CurrentCap, rng: np.random.Generator) -> ScheduledDevice:
     """``scenario``'s simulated device with commands at exact samples: its probes on one shared
-    stage when it has several (:attr:`mows.sim.scenario.Scenario.probes`), else its one probe."""
+    stage (:attr:`mows.sim.scenario.Scenario.probes`, one or several)."""
     return ScheduledDevice(SimulatedDevice(scenario, rng), cap)
 
 
 class DeviceTimeLoop:
     """Cycles of ``settings`` on ``device`` (module docstring), its coils capped by the device's
-    cap; ``fit`` retunes one probe's excitation from the f00 of the scene's probe (of its first
-    probe, for several). ``on_block`` hears every block read and ``on_event`` every phase
-    announced, in the order the device produced them."""
+    cap; ``fit`` retunes the excitation of a probe that has the coils to itself, from its f00.
+    ``on_block`` hears every block read and ``on_event`` every phase announced, in the order
+    the device produced them."""
 
     def __init__(
         self,
@@ -53,10 +53,9 @@ class DeviceTimeLoop:
     ):
         self.device = device
         self.fs = device.device.sample_rate_hz
-        probes = device.home if device.device.scenario.probes else ()  # a scene's: driven at their tones
-        frequency_hz = probes[0].probe.f00_hz if probes else device.device.scenario.probe.f00_hz
+        scenario = device.device.scenario
         self.sequencer = CycleSequencer(
-            settings, device.device.scenario.setup, device.cap, self.fs, frequency_hz, fit=fit, probes=probes
+            settings, scenario.setup, device.cap, self.fs, scenario.probe.f00_hz, fit=fit, probes=device.home
         )
         self.on_block, self.on_event = on_block, on_event
         self._chunk = max(1, round(CHUNK_S * self.fs))

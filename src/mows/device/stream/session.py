@@ -66,9 +66,9 @@ class Output:
 class SessionConfig:
     block_duration_s: float
     settings: CycleSettings
-    setup: CoilSetup  # the coils of one probe (a device of several brings its own, placed among them)
+    setup: CoilSetup  # the coils by name (a device that knows where they stand brings its own)
     cap: CurrentCap
-    frequency_hz: float  # the first resonance estimate
+    frequency_hz: float  # the first resonance estimate of a probe that has the coils to itself
     fit: TuningFit  # fits the tuning ring-downs (the estimator's fit_ringdown)
     # A session that follows another on the same device link (the driver reconfigured) goes on
     # from where it left: the next device clock's epoch, and cycle ids not used before.
@@ -190,21 +190,17 @@ class DeviceSession:
         c, lead = self.config, self.backend.command_lead_samples
         if not self.backend.can_excite:
             return
-        probes, coils = self.backend.probes, self.backend.coils
-        if probes:  # their tones are sized by the coils where the device has them, driven at their f00
-            assert coils is not None  # a device of several probes says where its coils stand among them
-            setup, frequency_hz = coils, probes[0].probe.f00_hz
-        else:
-            setup, frequency_hz = c.setup, c.frequency_hz
+        # Tones are sized by the coils where the device has them among its probes, if it says.
+        setup = c.setup if self.backend.coils is None else self.backend.coils
         self.sequencer = CycleSequencer(
             c.settings,
             setup,
             c.cap,
             info.sample_rate_hz,
-            frequency_hz,
+            c.frequency_hz,
             lead,
             fit=c.fit,
-            probes=probes,
+            probes=self.backend.probes,
             last_cycle_id=c.last_cycle_id,
         )
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from mows.estimate.ringdown.types import RingdownFit
 from mows.physics.field import FieldSource
-from mows.physics.probe import Probe
+from mows.physics.probe import DEFAULT_THETA_STOP_STD_RAD, Probe
 from mows.physics.schema import Vector
 
 
@@ -87,6 +87,7 @@ class KnownConstants:
     environment_field_t: tuple[float, ...] | None = None
     measured_stop_rad: float | None = None
     measured_stop_std_rad: float = 0.0
+    theta_stop_std_rad: float = DEFAULT_THETA_STOP_STD_RAD  # the nominal stop's stated tolerance
 
     @classmethod
     def of(cls, probe: Probe, environment_field_t: Vector | None = None) -> KnownConstants:
@@ -95,6 +96,7 @@ class KnownConstants:
             probe.magnet_mass_kg,
             probe.theta_stop_rad,
             None if environment_field_t is None else tuple(float(b) for b in environment_field_t),
+            theta_stop_std_rad=probe.theta_stop_std_rad,
         )
 
 
@@ -110,6 +112,7 @@ class ProbeCalibration:
     known: KnownConstants
     notes: tuple[str, ...] = ()
     polarity: dict[str, int] = dataclasses.field(default_factory=dict)  # wiring → +1 as written, −1 reversed
+    stop_measured: bool = True  # False: no fit determined the stop, the nominal one was held
 
     def value(self, name: str) -> float:
         return float(self.values[self.names.index(name)])
@@ -123,8 +126,17 @@ class ProbeCalibration:
         with np.errstate(invalid="ignore", divide="ignore"):
             return self.covariance / np.outer(std, std)
 
+    def stop_std_rad(self) -> float:
+        """The σ of the stop the probe file carries: the calibration's, where it measured the
+        stop; else the nominal stop's stated tolerance, which the fit's prior (the drive's
+        scatter about it) would understate."""
+        if self.stop_measured:
+            return self.std("theta_stop_rad")
+        return max(self.std("theta_stop_rad"), self.known.theta_stop_std_rad)
+
     def probe(self) -> Probe:
-        """The calibrated probe (lever from J and the magnet mass)."""
+        """The calibrated probe (lever from J and the magnet mass), with the stop the ring-downs
+        were released at and its σ (:meth:`stop_std_rad`), which every strong-field map rests on."""
         return Probe(
             moment_am2=self.known.moment_am2,
             spring_nm_per_rad=self.value("spring_nm_per_rad"),
@@ -132,7 +144,8 @@ class ProbeCalibration:
             lever_m=self.value("lever_m"),
             magnet_mass_kg=self.known.magnet_mass_kg,
             damping_per_s=self.value("damping_per_s"),
-            theta_stop_rad=self.known.theta_stop_rad,
+            theta_stop_rad=self.value("theta_stop_rad"),
+            theta_stop_std_rad=self.stop_std_rad(),
         )
 
     def record(self, date: str, hardware_id: str) -> dict:

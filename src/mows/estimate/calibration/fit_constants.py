@@ -59,7 +59,7 @@ from mows.estimate.calibration.constants import (
 from mows.estimate.calibration.derived import Fitted, Unpacked, derive
 from mows.estimate.calibration.polarity import polarity_note, wiring_polarities
 from mows.estimate.calibration.predicted import frequencies, rows_of
-from mows.physics.ringdown_average import stop_from_swing_rad
+from mows.physics.ringdown_average import stop_from_swing_rad, stop_median_std_rad
 
 FIELD_UNIT_T = 1e-6  # fit units keep the normal equations well scaled: µT, Hz/mT, mm
 BETA_UNIT_HZ_PER_T = 1e3
@@ -70,13 +70,10 @@ AMPLITUDE_UNIT_RAD = 1e-3
 STEPS = {"f00": 1e-4, "beta0": 1e-5, "swing": 1e-2, "environment": 0.1, "lever": 1e-4}
 SCATTER_ITERATIONS = 2  # weights from the scatter, the scatter from the fit: twice settles it
 MAX_SCATTER_RAD = math.radians(1.0)  # a start swing scattering more is no drive into the stop
-MAD_TO_SD = 1.4826  # the median absolute deviation of a normal sample is 0.6745 sd
-MEDIAN_EFFICIENCY = 1.2533  # √(π/2): the median's standard error over the mean's, normal samples
 # Where no fit pins the stop: the drive, switched off at a current peak, leaves every ring-down
 # at the housing stop, scattered by sd 0.01° (the simulator's first swing + |θs| over 30
 # ring-downs at 0 to ±2 A for a 24° stop: 24.03 ± 0.01°, mean ± sd).
 STOP_PRIOR_STD_RAD = math.radians(0.01)
-MIN_STOP_FITS = 5
 SWING_FLOOR_RAD = 1e-6  # fits that agree exactly (synthetic data) still leave a finite weight
 
 
@@ -124,7 +121,12 @@ def calibrate_probe(
     if not fit_lever:
         notes.append("no gradient points: the lever comes from J and the magnet mass alone, unchecked")
     damping, damping_var = _mean_damping(points)
-    swing, swing_std = _housing_stop(points, known)
+    swing, swing_std, stop_measured = _housing_stop(points, known)
+    if not stop_measured:
+        notes.append(
+            f"no fit determined θmax: the stop is the nominal {math.degrees(swing):.3f}°, "
+            f"± {math.degrees(max(swing_std, known.theta_stop_std_rad)):.3f}° as stated"
+        )
     unit_axis = axis / np.linalg.norm(axis)
     fixed_environment = np.zeros(3) if fit_environment else np.asarray(known.environment_field_t, float)
 
@@ -181,7 +183,7 @@ def calibrate_probe(
         raise CalibrationError(
             f"implausible constants, probably a unit error (currents in mA? f_hz in kHz?): {'; '.join(implausible)}"
         )
-    return dataclasses.replace(calibration, polarity=polarity)
+    return dataclasses.replace(calibration, polarity=polarity, stop_measured=stop_measured)
 
 
 def _dropped_notes(points: Sequence[CalibrationPoint], usable: Sequence[CalibrationPoint]) -> list[str]:
@@ -212,29 +214,26 @@ def _least_squares(residuals: Residuals, x0: np.ndarray, steps: np.ndarray) -> o
     return result
 
 
-def _housing_stop(points: Sequence[CalibrationPoint], known: KnownConstants) -> tuple[float, float]:
-    """The housing stop every ring-down starts from, and its standard uncertainty: as given
-    (``known.measured_stop_rad``), else measured by the fits that determined both θmax and the
-    rest offset, θmax grown back by e^(δ·t) to the switch-off plus |θs − θ0|
-    (:func:`mows.physics.ringdown_average.stop_from_swing_rad`), their median with its
-    standard error from the median absolute deviation; with fewer than MIN_STOP_FITS of them
-    the probe's stop ± STOP_PRIOR_STD_RAD.
+def _housing_stop(points: Sequence[CalibrationPoint], known: KnownConstants) -> tuple[float, float, bool]:
+    """The housing stop every ring-down starts from, its standard uncertainty, and whether it
+    was measured: as given (``known.measured_stop_rad``), else measured by the fits that
+    determined both θmax and the rest offset, θmax grown back by e^(δ·t) to the switch-off plus
+    |θs − θ0| (:func:`mows.physics.ringdown_average.stop_from_swing_rad`), their median with its
+    standard error (:func:`mows.physics.ringdown_average.stop_median_std_rad`); with too few of
+    them the probe's stop ± STOP_PRIOR_STD_RAD, not measured.
     A homogeneous sweep cannot tell the stop from β0: this is what holds it."""
     if known.measured_stop_rad is not None:
-        return known.measured_stop_rad, known.measured_stop_std_rad
+        return known.measured_stop_rad, known.measured_stop_std_rad, True
     stops = stop_from_swing_rad(
         [p.amplitude_rad for p in points],
         [p.rest_offset_rad for p in points],
         [p.damping_per_s for p in points],
         [p.start_offset_s for p in points],
     )
-    stops = stops[np.isfinite(stops)]
-    if stops.size < MIN_STOP_FITS:  # a spread from fewer is no standard error
-        return known.theta_stop_rad, STOP_PRIOR_STD_RAD
-    median = float(np.median(stops))
-    spread = MAD_TO_SD * float(np.median(np.abs(stops - median)))
-    std = MEDIAN_EFFICIENCY * spread / math.sqrt(len(stops))
-    return median, max(std, SWING_FLOOR_RAD)
+    std = stop_median_std_rad(stops)
+    if not math.isfinite(std):  # too few fits for a spread
+        return known.theta_stop_rad, STOP_PRIOR_STD_RAD, False
+    return float(np.nanmedian(stops)), max(std, SWING_FLOOR_RAD), True
 
 
 def _swing_slope_hz_per_rad(model: Residuals, x: np.ndarray) -> np.ndarray:

@@ -345,11 +345,16 @@ def swing_from_signal_rad(fit: RingdownFit, scale_t: float) -> float:
     pickup = scale_t * np.asarray(fit.pickup, complex)
     t = np.linspace(0.0, fit.duration_s, fit.n_samples, endpoint=False)
     carrier = np.exp(-fit.damping_per_s * t) * np.cos(2.0 * math.pi * fit.frequency_hz * t)
-    orders = np.arange(pickup.size)
 
     def excess(swing: float) -> float:
-        signal = np.real(np.exp(1j * np.multiply.outer(swing * carrier, orders)) @ pickup)
-        return float(np.var(signal)) - power
+        # The pickup series Σ p_k·e^(ik·θ(t)) by Horner's rule in z = e^(iθ(t)): one complex
+        # exponential per sample instead of one per sample and order, and no BLAS call (whose
+        # threads only spin on a loaded machine); the same numbers to rounding.
+        z = np.exp(1j * swing * carrier)
+        signal = np.full(z.shape, pickup[-1])
+        for coefficient in pickup[-2::-1]:
+            signal = signal * z + coefficient
+        return float(np.var(signal.real)) - power
 
     low, high = SWING_BRACKET_RAD
     if not excess(low) < 0.0 < excess(high):

@@ -33,6 +33,13 @@ def probe_axes(theta0_rad: ArrayLike) -> np.ndarray:
     return axes
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b of two 3-vectors, as ``np.cross`` computes it (the same products and differences):
+    the simulator asks for a pose's axes at every block it reads, and ``np.cross``'s
+    general-shape handling cost more than the rest of the block's geometry."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 @dataclasses.dataclass(frozen=True)
 class Pose:
     """Placement of the probe. Vectors are global-frame, SI units."""
@@ -57,7 +64,7 @@ class Pose:
         """Probe axes (x', y', z') as three global unit vectors."""
         e1, e2 = np.asarray(self.plane_e1, float), np.asarray(self.plane_e2, float)
         c, s = math.cos(self.theta0_rad), math.sin(self.theta0_rad)
-        return c * e1 + s * e2, -s * e1 + c * e2, np.cross(e1, e2)
+        return c * e1 + s * e2, -s * e1 + c * e2, _cross(e1, e2)
 
     def with_theta0(self, theta0_rad: float) -> Pose:
         return dataclasses.replace(self, theta0_rad=float(theta0_rad))

@@ -5,7 +5,7 @@ from mows_msgs.msg import CandidateEffect, FieldMap, ModelReport, ProbeField, Sw
 
 from mows.estimate.probe_set import ProbeEntry, probe_frame_id
 from mows.records import stamps
-from mows.sweep.decompose import DecompositionStatus
+from mows.sweep.decomposition import DecompositionStatus
 from mows.sweep.events import SweepFeedback, SweepGoal, SweepMap, SweepOutcome, SweepStep, turn_prompt
 from mows.sweep.publication import Publication
 

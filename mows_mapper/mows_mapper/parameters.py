@@ -5,8 +5,8 @@ import dataclasses
 from mows.estimate.settings import probe_set
 from mows.lab import reference_at
 from mows.physics.probe import Probe
-from mows.sweep.decompose import MODELS
 from mows.sweep.events import REPEATS_PER_ANGLE_RANGE, SweepSettings
+from mows.sweep.shift_model import MODELS
 from mows_ros import operator
 from mows_ros.params import ParamSpec
 from mows_ros.probe import PROBE_FILE, PROBES

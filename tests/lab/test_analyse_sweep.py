@@ -19,7 +19,7 @@ from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.ringdown_average import amplitude_nodes
 from mows.sim.scenario import load_scenario
-from mows.sweep.decompose import Decomposition, DecompositionStatus
+from mows.sweep.decomposition import Decomposition, DecompositionStatus
 from mows.sweep.events import SweepMap
 from mows.sweep.record import SweepPoint, SweepRecord
 

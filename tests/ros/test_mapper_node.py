@@ -17,7 +17,7 @@ from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
-from mows.sweep.decompose import DecompositionStatus
+from mows.sweep.decomposition import DecompositionStatus
 from mows_ros.qos import MAP_QOS, RESULT_QOS
 from node_processes import HeldCycles, leave_while_running, log, send_goal, serve_cycles
 

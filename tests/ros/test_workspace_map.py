@@ -10,6 +10,7 @@ ends off its goal by a draw of its stated accuracy, and the probe sweeps where i
 import json
 import math
 import re
+import shlex
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from geometry_msgs.msg import PoseStamped
 from mows_msgs.action import WorkspaceMap
 from mows_msgs.msg import ExcitationState, RingdownFit, SweepDecomposition, WorkspaceModel
 from mows_msgs.srv import FieldAt
+from rcl_interfaces.srv import GetParameters
 
 from mows.cli.main import main
 from mows.device.cycle.phases import Phase
@@ -32,7 +34,7 @@ from mows.workspace.simulated import RINGDOWN_STD_HZ, SweepPose, ball_points, sw
 from mows_driver.recording import open_recorder
 from mows_mapper.parameters import PARAMETERS
 from mows_ros.qos import EXCITATION_QOS, MAP_QOS, RESULT_QOS, maps_qos
-from node_processes import serve_cycles
+from node_processes import log, serve_cycles
 
 pytestmark = pytest.mark.ros
 
@@ -239,13 +241,39 @@ def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, action_
     assert done.status == GoalStatus.STATUS_ABORTED and "no pose left within the arm's reach" in done.result.message
 
 
+def printed_graph_command() -> str:
+    """`mows-graph --ros-args -p mapper:NAME:=VALUE ...` as docs/workspace_maps.md prints it."""
+    return re.search(r"    (mows-graph --ros-args .*?)\n\n", DOC.read_text(), re.S)[1]
+
+
 def test_the_docs_command_that_connects_an_arm_sets_the_mappers_parameters():
-    """`mows-graph --ros-args -p mapper:NAME:=VALUE ...` as docs/workspace_maps.md prints it: every
-    NAME is a mapper parameter and every VALUE within its limits."""
-    command = re.search(r"    (mows-graph --ros-args .*?)\n\n", DOC.read_text(), re.S)[1]
-    given = dict(re.findall(r"-p mapper:(\w+):=(\S+)", command))
+    """Every NAME of the printed command is a mapper parameter and every VALUE within its limits."""
+    given = dict(re.findall(r"-p mapper:(\w+):=(\S+)", printed_graph_command()))
     table = {spec.name: spec for spec in PARAMETERS}
     assert given and set(given) <= set(table), set(given) - set(table)
     for name, text in given.items():
         value = type(table[name].default)(text)
         assert table[name].request_problem(value, name) is None
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group("realtime")
+def test_the_docs_command_that_connects_an_arm_runs_as_printed(ros, start):
+    """The printed command, run as printed, brings the graph up with its mapper on the named
+    arm's CRTK topics and with the printed accuracy."""
+    command = printed_graph_command()
+    graph = start(*shlex.split(command.replace("\\\n", " ")))
+    given = dict(re.findall(r"-p mapper:(\w+):=(\S+)", command))
+    arm = given["arm"]
+    ros.wait_for(
+        lambda: ros.node.count_subscribers(f"/{arm}/measured_cp") and ros.node.count_publishers(f"/{arm}/move_cp"),
+        "the mapper on the arm's measured_cp and move_cp",
+        MAP_BOUND_S,
+    )
+    ros.wait_for(lambda: "every node is active" in log(graph), "the bring-up", MAP_BOUND_S)
+    client = ros.node.create_client(GetParameters, "/mapper/get_parameters")
+    ros.wait_for(client.service_is_ready, "the mapper's parameters")
+    answer = client.call_async(GetParameters.Request(names=list(given)))
+    values = ros.wait_for(lambda: answer.done() and answer.result(), "the mapper's parameters").values
+    read = {name: value.string_value or value.double_value for name, value in zip(given, values)}
+    assert read == {name: text if name in ("arm", "arm_frame") else float(text) for name, text in given.items()}

@@ -13,7 +13,7 @@ from mows.device.cycle.phases import CycleRequest
 from mows.physics.ringdown_average import swing_about_rest_rad
 from mows.sim.scenario import load_scenario
 from mows.sweep import probes
-from mows.sweep.decompose import Decomposition, DecompositionStatus
+from mows.sweep.decomposition import Decomposition, DecompositionStatus
 from mows.sweep.probes import decompose_probes, sweeps_of
 from mows.sweep.record import SweepRecord
 

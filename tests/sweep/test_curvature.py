@@ -14,7 +14,9 @@ import pytest
 
 from mows.physics.potential import ArcPotential
 from mows.sim.scenario import load_scenario
-from mows.sweep.decompose import DecompositionStatus, curvature_hessian_t_per_m2, decompose
+from mows.sweep.decompose import decompose
+from mows.sweep.decomposition import DecompositionStatus
+from mows.sweep.shift_model import curvature_hessian_t_per_m2
 
 SCENE = load_scenario("three_probes")
 SOURCE = SCENE.environment.source

@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from mows.physics.probe import PAPER_PROBE as P
-from mows.sweep.decompose import decompose, model_shift_hz
+from mows.sweep.decompose import decompose
 from mows.sweep.record import SweepPoint, SweepRecord
+from mows.sweep.shift_model import model_shift_hz
 
 ANGLES = np.radians(np.arange(0.0, 360.0, 15.0))
 TRUE = np.array([60e-6, -25e-6, 4e-3, 1.5e-3, -2e-3, 0.0])  # Bx, By, Gs, Gd, Gxy, Δf00

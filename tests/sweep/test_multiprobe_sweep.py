@@ -8,7 +8,7 @@ biased by many σ.
 
 What a sweep determines is the field at the magnet's rest position (the stage's axis) plus
 (l²/4)·∂²(Bx, By)/∂z², the part of the field's curvature over the lever's arc that turns with
-θ0 as the field does (mows.sweep.decompose). It is −39 to +72 nT at these probes, 0.5–1.7σ of
+θ0 as the field does (mows.sweep.shift_model). It is −39 to +72 nT at these probes, 0.5–1.7σ of
 one sweep, so the truth is taken with it; the field at the magnet alone is the stated limit
 (docs/multi_probe.md). Seeds 1–4, 60 components: 58 within 2σ, the largest 2.30σ, mean z² 0.64
 (a calibrated σ puts 57 ± 1.6 of 60 within 2σ); against the field at the magnet alone probe

@@ -4,7 +4,7 @@ Requirement: the swing a multi-tone ring-down starts with, about its probe's res
 window's first fitted sample, is known within 1.5 % (its amplitude correction of the frequency,
 ~3 mHz at 0.15 rad, then errs by < 0.1 mHz, well below a fit's σ). The joint fit measures it from
 the signal's size through the pickup about the undeflected lever; the decomposition's model
-turns that into the swing about its rest angle (mows.sweep.decompose.Ringdowns). Taken about
+turns that into the swing about its rest angle (mows.sweep.shift_model.Ringdowns). Taken about
 the undeflected lever as it is, it is 5–14 % off where a probe's static deflection of 10–15
 mrad meets a strong second harmonic of its pickup (seed 1, three cycles: 0.4 % converted).
 """

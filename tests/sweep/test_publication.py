@@ -11,7 +11,7 @@ import pytest
 
 from mows.estimate.probe_set import ProbeEntry
 from mows.physics.probe import PAPER_PROBE
-from mows.sweep.decompose import Decomposition, DecompositionStatus
+from mows.sweep.decomposition import Decomposition, DecompositionStatus
 from mows.sweep.events import CycleAnswer, SweepMap, SweepStep
 from mows.sweep.publication import Publication, cycle_failed, publication
 from mows.sweep.record import SweepRecord

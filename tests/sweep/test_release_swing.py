@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE
-from mows.sweep.decompose import Ringdowns
+from mows.sweep.shift_model import Ringdowns
 
 # The first fitted sample after the switch-off: the estimator skips 3 ms; 10 ms puts a whole cycle
 # before it, for the truth's first harmonic, and makes the loss 1.8 %.

@@ -15,9 +15,10 @@ import pytest
 from scipy.stats import norm
 
 from mows.physics.probe import PAPER_PROBE as P
-from mows.sweep.decompose import Ringdowns, decompose, model_shift_hz
+from mows.sweep.decompose import decompose
 from mows.sweep.planner import AdaptivePlanner, PlanEnd, PrecisionGoal, achieved_std
 from mows.sweep.record import SweepPoint, SweepRecord
+from mows.sweep.shift_model import Ringdowns, model_shift_hz
 
 ANGLES = np.radians(np.arange(0.0, 360.0, 15.0))
 TRUE = np.array([3.4e-3, 12e-6, 2e-3, -1e-3, 0.5e-3, 0.0])  # Bx, By, Gs, Gd, Gxy, Δf00

@@ -10,7 +10,8 @@ from mows.physics.frequency import PublishedSweep
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
-from mows.sweep.decompose import DecompositionStatus, decompose, fit_harmonics, unknown_count
+from mows.sweep.decompose import decompose, unknown_count
+from mows.sweep.decomposition import DecompositionStatus, fit_harmonics
 
 THETA0 = np.radians(np.arange(0.0, 360.0, 15.0))
 STD_HZ = 3e-4

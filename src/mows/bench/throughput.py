@@ -47,7 +47,8 @@ from mows.estimate.axis import estimate_along_axis
 from mows.lab.data.truth import scene_truth
 from mows.records.stamps import NS_PER_S
 from mows.sim.scenario import load_scenario
-from mows.sweep.decompose import Decomposition, orientations_problem
+from mows.sweep.decompose import orientations_problem
+from mows.sweep.decomposition import Decomposition
 from mows.sweep.fast_cycle import PAPER_CYCLE, PAPER_ORIENTATIONS, fit_std_model, plan_cycle
 from mows.sweep.planner import COMPONENTS, AdaptivePlanner, PlanEnd, PrecisionGoal, achieved_std, reached
 from mows.sweep.record import SweepPoint, SweepRecord

@@ -27,9 +27,9 @@ from mows.estimate.settings import probe_set
 from mows.lab.data.readers import is_bag
 from mows.lab.data.ringdowns import check_probes, fit_bag
 from mows.physics.probe import PAPER_PROBE, Probe
-from mows.sweep.decompose import MODELS
 from mows.sweep.events import SweepFit, SweepOutcome, SweepSettings
 from mows.sweep.replay import RecordedCycle, read_session, replay_sweep
+from mows.sweep.shift_model import MODELS
 
 
 def add_arguments(parser) -> None:

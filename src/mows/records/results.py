@@ -1,6 +1,6 @@
 """What every stage's result offers, whatever it computed: the ring-down fit
 (:class:`mows.estimate.ringdown.RingdownFit`), the sweep decomposition
-(:class:`mows.sweep.decompose.Decomposition`) and the lab's fit
+(:class:`mows.sweep.decomposition.Decomposition`) and the lab's fit
 (:class:`mows.lab.model.least_squares.FitResult`).
 
 ``ok`` says whether its numbers may be used; ``status`` says why not, as a member of the

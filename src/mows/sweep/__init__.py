@@ -1,5 +1,6 @@
 """Rotation sweeps: (θ0, Δf) points of many orientations decomposed into in-plane field and
-gradient (``decompose``), the ring-downs of one sweep as they arrive (``record``), one or several
+gradient (``decompose``: the fit of the sweep's model, ``shift_model``, reporting a
+``decomposition``), the ring-downs of one sweep as they arrive (``record``), one or several
 probes' shares of a sweep decomposed, each with its neighbours' fields (``probes``), a sweep run
 as an I/O-free state machine (``runner``) and what the mapper publishes at its end
 (``publication``), the supply sweep that calibrates a probe, the calibrator's goals around it

@@ -14,7 +14,7 @@ from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.stream import Estimated
 from mows.physics.probe import Probe
 from mows.records.stamps import NS_PER_S
-from mows.sweep.decompose import Decomposition
+from mows.sweep.decomposition import Decomposition
 from mows.sweep.planner import PrecisionGoal
 from mows.sweep.record import SweepPoint, SweepRecord
 

@@ -27,8 +27,10 @@ from collections.abc import Callable
 import numpy as np
 
 from mows.physics.probe import Probe
-from mows.sweep.decompose import Decomposition, model_shift_hz, unknown_count
+from mows.sweep.decompose import unknown_count
+from mows.sweep.decomposition import Decomposition
 from mows.sweep.record import SweepRecord
+from mows.sweep.shift_model import model_shift_hz
 
 COMPONENTS = ("bx", "by", "gxx", "gxy", "gyy")
 QUANTITIES = {"B": COMPONENTS[:2], "G": COMPONENTS[2:], "both": COMPONENTS, **{name: (name,) for name in COMPONENTS}}

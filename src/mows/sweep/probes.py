@@ -17,7 +17,7 @@ for the paper's moment, far above a sweep's precision: a decomposition that leav
 reports them as part of the external field, biased (tests/sweep/test_multiprobe_sweep.py). For
 ``passes`` rounds the neighbours' fields are held at those the present estimates give and each
 probe is decomposed again with them as known terms of the first-principles model
-(:class:`mows.sweep.decompose.NeighbourFields`: exact dipole field, gradient and Hessian at the
+(:class:`mows.sweep.shift_model.NeighbourFields`: exact dipole field, gradient and Hessian at the
 magnet, so the field along the whole arc). They depend on the estimates only through the rest
 angles (a few degrees move them by a few percent), so the rounds converge at once: once a round
 would move every probe's neighbour fields by less than :data:`SETTLED_STD` of its own σ, it is
@@ -60,15 +60,10 @@ from mows.physics.coupling import PlacedProbe
 from mows.physics.fluxgate import FluxgatePair, pickup_scale_t
 from mows.physics.pose import Pose
 from mows.physics.sources import PointDipole
-from mows.sweep.decompose import (
-    Decomposition,
-    DecompositionStatus,
-    NeighbourFields,
-    Ringdowns,
-    local_potential,
-    orientations_problem,
-)
+from mows.sweep.decompose import orientations_problem
+from mows.sweep.decomposition import Decomposition, DecompositionStatus
 from mows.sweep.record import SweepPoint, SweepRecord
+from mows.sweep.shift_model import NeighbourFields, Ringdowns, local_potential
 
 T = TypeVar("T")
 REST_ITERATIONS = 4  # the rest angles' fixed point contracts by ~1e-4 a step at centimetres

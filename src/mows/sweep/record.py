@@ -13,7 +13,9 @@ from mows.estimate.ringdown.types import parameter_std
 from mows.physics.probe import Probe
 from mows.physics.ringdown_average import MAD_TO_SD, stop_from_swing_rad, stop_median_std_rad, swing_from_stop_rad
 from mows.records import stamps
-from mows.sweep.decompose import Decomposition, NeighbourFields, Ringdowns, decompose, local_potential
+from mows.sweep.decompose import decompose
+from mows.sweep.decomposition import Decomposition
+from mows.sweep.shift_model import NeighbourFields, Ringdowns, local_potential
 
 REST_OFFSET_STD_RAD = math.radians(1.0)  # a fitted rest offset is used when its σ is below this…
 REST_OFFSET_SIGMAS = 4.0  # …and it is this many σ from 0

@@ -38,7 +38,8 @@ import numpy as np
 from mows.device.cycle.phases import CycleRequest
 from mows.estimate.probe_set import ProbeEntry
 from mows.physics.probe import Probe
-from mows.sweep.decompose import MODELS, Decomposition, orientations_problem
+from mows.sweep.decompose import orientations_problem
+from mows.sweep.decomposition import Decomposition
 from mows.sweep.events import (
     REPEATS_PER_ANGLE_RANGE,
     CycleAnswer,
@@ -61,6 +62,7 @@ from mows.sweep.probes import (
     step_orientations_rad,
 )
 from mows.sweep.record import SweepRecord
+from mows.sweep.shift_model import MODELS
 
 DECOMPOSE_NEAR = 1.25  # decompose an adaptive sweep once the prediction is this close to the target
 

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from mows.physics.probe import Probe
-from mows.sweep.decompose import Decomposition
+from mows.sweep.decomposition import Decomposition
 from mows.workspace.arm import NS_PER_S, Reach, StampedPose, matrix_quaternion, pose_problem
 from mows.workspace.design import boundary_positions, candidate_designs, information, next_best, random_rotation
 from mows.workspace.fit import DegreeChoice, WorkspaceModel

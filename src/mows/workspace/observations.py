@@ -8,7 +8,7 @@ G_ij = ∂B_i/∂x_j, each with its covariance. Two known terms sit in what it r
   −m(θ)·B with B_g = (a·l/m)·g (docs/physics.md §5, 154 µT for the paper's probe): the sweep's
   field is B + B_g in the plane, and a tilted plane sees part of it;
 * the field's curvature over the lever's arc: the sweep's field is B + (l²/4)·∂²B/∂z'² at the
-  magnet's rest position, z' = e1 × e2 (:mod:`mows.sweep.decompose`).
+  magnet's rest position, z' = e1 × e2 (:mod:`mows.sweep.shift_model`).
 
 A Hall probe reports the 3D field B. Each observation here is ``values`` = A_B·(B + B_known) +
 A_G·G + A_H·H at ``position_m`` with the ``covariance`` of ``values``; the workspace fit
@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mows.physics.probe import Probe
-from mows.sweep.decompose import Decomposition
+from mows.sweep.decomposition import Decomposition
 
 SWEEP_COMPONENTS = ("bx", "by", "gxx", "gxy", "gyy")
 HALL_COMPONENTS = ("bx", "by", "bz")

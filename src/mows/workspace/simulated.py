@@ -28,7 +28,8 @@ from mows.physics.field import FieldSource
 from mows.physics.pose import STANDARD_GRAVITY_M_PER_S2, probe_axes
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import Probe
-from mows.sweep.decompose import Decomposition, decompose
+from mows.sweep.decompose import decompose
+from mows.sweep.decomposition import Decomposition
 from mows.workspace.design import random_rotation
 from mows.workspace.observations import Observation, hall_observation, sweep_observation
 

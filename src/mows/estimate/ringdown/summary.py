@@ -315,7 +315,7 @@ def with_swing_from_size(fit: RingdownFit, scale_t: float) -> RingdownFit:
     magnet swings about its rest angle, which such a model leaves out, and the pickup's
     harmonics there pass for a different θmax (tens of percent at 15 mrad), while the size is
     off by only g'(0)/g'(θs), which the sweep's model, knowing θs, takes out
-    (:meth:`mows.sweep.decompose.Ringdowns.start_swing_about_rad`)."""
+    (:meth:`mows.sweep.shift_model.Ringdowns.start_swing_about_rad`)."""
     if not (fit.ok and math.isfinite(scale_t)):
         return fit
     swing = swing_from_signal_rad(fit, scale_t)

@@ -27,7 +27,7 @@ from mows.physics.probe import PAPER_PROBE, Probe
 from mows.physics.schema import Vector
 from mows.records import stamps
 from mows.records.files import read_input
-from mows.sweep.decompose import Decomposition
+from mows.sweep.decomposition import Decomposition
 from mows.sweep.probes import f00_of
 from mows.sweep.record import SweepPoint, SweepRecord
 

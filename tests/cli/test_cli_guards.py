@@ -165,7 +165,7 @@ def implausible_inputs(d: pathlib.Path) -> None:
         "extends: paper_largest_spacing\nprobe: paper\nprobes:\n  - probe: paper\n"
     )
     card = (HARDWARE / "ni_pcie6363.yaml").read_text()
-    (d / "card_long_lead.yaml").write_text(card.replace("output_lead_s: 0.75", "output_lead_s: 1.0e6"))
+    (d / "card_long_lead.yaml").write_text(card.replace("output_lead_s: 2.0", "output_lead_s: 1.0e6"))
 
 
 def snapshot(directory: pathlib.Path) -> dict:

@@ -17,16 +17,28 @@ WATCHDOG_S = 30.0
 
 
 @pytest.fixture
-def installed():
+def installed(record_property):
     """Installs a simulated card (:class:`mows.device.simulated.daqmx_card.SimulatedCard`: NI's
-    ``nidaqmx`` drives it) until the test ends; gives back the card."""
+    ``nidaqmx`` drives it) until the test ends; gives back the card. The longest the host left
+    the card's outputs unfed goes to the test's report (``--junitxml``: the stalls a loaded
+    machine gives, beside the output lead)."""
+    cards: list[SimulatedCard] = []
+
+    def install(card: SimulatedCard) -> SimulatedCard:
+        cards.append(card)
+        return stack.enter_context(card.installed())
+
     with contextlib.ExitStack() as stack:
-        yield lambda card: stack.enter_context(card.installed())
+        yield install
+    if cards:
+        record_property("longest_write_gap_s", round(max(c.longest_write_gap_s for c in cards), 3))
+        record_property("underflows", sum(c.underflows for c in cards))
 
 
 @pytest.fixture
 def on_bench(installed):
-    """The backend on a simulated card of ``scenario`` (with ``supply`` on it), and the card."""
+    """The backend on a simulated card of ``scenario`` (with ``supply`` on it), and the card;
+    ``watchdog_s`` None: the paper's device file's own."""
 
     made = []
 
@@ -34,7 +46,8 @@ def on_bench(installed):
         card = installed(SimulatedCard(SimulatedDevice(load_scenario(scenario))))
         if supply is not None:
             card.supply_current_a = lambda: _supply_state(supply)[0] * _supply_state(supply)[1]
-        device = dataclasses.replace(load_daq_device(), watchdog_s=watchdog_s)
+        device = load_daq_device()
+        device = device if watchdog_s is None else dataclasses.replace(device, watchdog_s=watchdog_s)
         made.append(open_daqmx(device, CurrentCap(10.0), supply))
         return card, made[-1]
 

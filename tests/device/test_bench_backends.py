@@ -6,8 +6,9 @@ Requirement: a coil drive reaches the amplifiers as V_k = I_k·gain·sin(2πf(i 
 the setup's orientation-dependent I_k, on and off at the commanded samples; the fluxgates come
 back in tesla, saturated at the input range's end; the supply is set, ramped within its slew
 limit and read back, its refusals reported; a missing runtime or card is one clear line. A host
-late by 0.5 s does not underflow the outputs; a card error (underflow, overrun, a card pulled
-out) is a fault with its reason, the coils and the supply off, and the card re-armed.
+stalled for 1 s, half the paper's output lead, loses nothing; a host stalled beyond the lead
+underflows the outputs, and a card error (underflow, overrun, a card pulled out) is a fault with
+its reason, the coils and the supply off, and the card re-armed.
 """
 
 import dataclasses
@@ -50,6 +51,9 @@ from mows.sim.simulator import SimulatedDevice
 
 FAST = CycleSettings(excite_s=0.5, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, turn_settle_s=0.1)
 MAX_POLLS = 10_000  # bound for a cycle that never ends (a bug), not a timing
+# The stall the tests give the host on purpose: half the paper's lead (2 s), the other half left
+# to the stalls of a loaded machine itself.
+STALL_S = 1.0
 
 
 def simulated_supply():
@@ -254,7 +258,7 @@ with card.installed():
     except AttributeError as error:
         print("plain import:", error, "; tasks left open:", len(card.tasks))
     backend = daqmx_backend.open_daqmx(load_daq_device(), CurrentCap(10.0))
-    print("open_daqmx: blocks", sum(hasattr(i, "samples_t") for i in backend.poll(0.1)))
+    print("open_daqmx: blocks read", any(hasattr(i, "samples_t") for i in backend.poll(0.1)))
     backend.close()
 """
 
@@ -266,7 +270,7 @@ def test_the_backend_imports_nis_stream_readers_and_writers_itself():
     lines = run.stdout.splitlines()
     assert lines[0] == "stream modules loaded: False"  # `import nidaqmx` loads neither
     assert "stream_readers" in lines[1] and lines[1].endswith("tasks left open: 0")
-    assert lines[2] == "open_daqmx: blocks 1"
+    assert lines[2] == "open_daqmx: blocks read True"  # one, or more on a loaded host behind the card
 
 
 def test_a_card_that_is_not_there_is_one_line_naming_it(installed):
@@ -328,6 +332,7 @@ def test_a_cycle_switches_the_coils_at_the_commanded_samples(on_bench):
     theta0 = 2.2
     card.turn_probe(theta0)
     outcome, events = run_cycle(session, theta0)
+    backend.close()  # before the truth is computed: a bench left streaming unread would underflow
     assert outcome.success, outcome.message
     on = [e for e in events if e.phase == Phase.EXCITING]
     off = [e for e in events if e.phase == Phase.RINGDOWN]
@@ -341,7 +346,6 @@ def test_a_cycle_switches_the_coils_at_the_commanded_samples(on_bench):
     # The tuned frequency is the probe's resonance at the bench's field (10 mHz, as the sim backend).
     assert outcome.frequency_hz == pytest.approx(card.device.expected_frequencies_hz()[0], abs=0.01)
     assert card.underflows == card.overruns == backend.card_faults == 0
-    backend.close()
 
 
 def test_commands_above_the_cap_are_refused_and_never_written(on_bench):
@@ -363,29 +367,51 @@ def drive(backend, items, duration_s=2.0, command_id=1):
     return on, off
 
 
-def test_a_host_stalled_half_a_second_mid_drive_does_not_underflow_the_card(on_bench):
-    card, backend = on_bench()
-    items = poll_for(backend, 0.2)
-    on, off = drive(backend, items, duration_s=1.5)
+def supply_at(backend, current_a: float, items: list) -> None:
+    backend.send(FieldCurrentCommand(100, 0, current_a))
+    while backend.supply_pending:
+        items += backend.poll(0.05)
+
+
+def test_a_host_stalled_for_half_the_lead_mid_drive_loses_nothing(on_bench):
+    """The paper's device file as it is (its lead and its watchdog), the supply on, the coils
+    driving: a host stall of STALL_S underflows nothing and faults nothing; the drive ends as
+    commanded, the stream has no gap and the supply stays on at its current."""
+    supply = simulated_supply()
+    card, backend = on_bench("calibration", supply, watchdog_s=None)
+    assert backend.device.stall_survived_s >= 2 * STALL_S
+    items: list = []
+    supply_at(backend, 1.0, items)
+    on, off = drive(backend, items, duration_s=3.0)
     while not card.drives:
         items += backend.poll(0.05)
-    time.sleep(0.5)  # the host stalls with the coils on (a fit, a supply's slow answer)
-    items += poll_for(backend, 2.5)
+    time.sleep(STALL_S)  # the host stalls with the coils on (a tuning fit, a busy machine)
+    for _ in range(MAX_POLLS):
+        items += backend.poll(0.05)
+        if backend.next_index > off:
+            break
     assert card.underflows == 0 and backend.card_faults == 0
     assert not [i for i in items if isinstance(i, (LinkEvent, DeviceFault))]
     assert [d[0] for d in card.drives] == [on] and card.offs == [off]  # the drive as commanded
     read = blocks(items)
     assert all(b.first_sample_index == a.first_sample_index + len(a) for a, b in zip(read, read[1:]))  # no gap
+    assert supply_state(supply) == (1.0, 1)
     backend.close()
+    assert supply_state(supply) == (0.0, 0)
 
 
-def test_a_host_late_beyond_the_lead_has_the_coils_off_a_fault_told_and_the_card_re_armed(on_bench):
-    card, backend = on_bench()
-    items = poll_for(backend, 0.2)
-    on, off = drive(backend, items, duration_s=5.0)
+def test_a_host_stalled_beyond_the_lead_has_the_coils_and_the_supply_off_a_fault_told_and_the_card_re_armed(
+    on_bench,
+):
+    supply = simulated_supply()
+    card, backend = on_bench("calibration", supply)
+    items: list = []
+    supply_at(backend, 1.0, items)
+    lead_s = backend.device.output_lead_s
+    on, off = drive(backend, items, duration_s=lead_s + 3.0)
     while not card.drives:
         items += backend.poll(0.05)
-    time.sleep(1.2)  # beyond the lead (0.75 s): the card generates all it has, then underflows
+    time.sleep(lead_s + 0.5)  # beyond the lead: the card generates all it has, then underflows
     before = len(items)
     items += backend.poll(0.05)
     assert len(items[before:]) == 3, (items[before:], backend.stats())
@@ -393,12 +419,14 @@ def test_a_host_late_beyond_the_lead_has_the_coils_off_a_fault_told_and_the_card
     assert not down.up and "(-200290)" in down.reason and down.reason.startswith("the card stopped: outputs:")
     assert up.up and up.reason == f"the card re-armed after: {down.reason}" and fault.reason == down.reason
     assert backend.stats()["card_faults"] == 1 and backend.stats()["last_card_fault"] == down.reason
-    # The coils went off where the written samples ended, long before the commanded switch-off.
+    # Told once the supply is safe: ramped down within its slew limit and switched off.
+    assert supply_state(supply) == (0.0, 0)
+    # The coils went off where the written samples ended, before the commanded switch-off.
     assert card.underflows == 1 and len(card.offs) == 1 and on < card.offs[0] < off
-    assert card.offs[0] - on <= round((0.75 + 0.1) * 20_000.0)
     items += poll_for(backend, 1.0)
     assert len(card.drives) == 1  # the queued switch-off and nothing else: no stale drive comes back
     assert backend.stats()["link"] == "nidaqmx" and not backend.stats()["device_coils_on"]
+    assert supply_state(supply) == (0.0, 0)
     read = blocks(items)
     gap = [b for a, b in zip(read, read[1:]) if b.first_sample_index != a.first_sample_index + len(a)]
     assert len(gap) == 1 and gap[0].first_sample_index > read[0].first_sample_index  # on, after the lost time
@@ -409,7 +437,7 @@ def test_an_input_overrun_is_told_beside_the_outputs_underflow(on_bench, monkeyp
     monkeypatch.setattr(daqmx_tasks, "INPUT_BUFFER_S", 0.3)
     card, backend = on_bench()
     poll_for(backend, 0.2)
-    time.sleep(1.2)
+    time.sleep(backend.device.output_lead_s + 0.5)
     (down, up, _) = backend.poll(0.05)
     assert "outputs:" in down.reason and "(-200290)" in down.reason
     assert "inputs:" in down.reason and "(-200279)" in down.reason and card.overruns == 1

@@ -305,7 +305,7 @@ def test_a_host_behind_its_card_that_stalls_beyond_the_lead_is_told_at_once(on_b
     poll_for(backend, 0.2)
     time.sleep(0.5)  # behind the card by half a second, within the lead
     backend.poll(0.05)  # one block read; the outputs written the lead ahead of the card's sample
-    time.sleep(1.2)  # a stall beyond the lead
+    time.sleep(backend.device.output_lead_s + 0.5)  # a stall beyond the lead
     told = [i for i in backend.poll(0.05) if not isinstance(i, SampleBlock)]
     assert [type(i).__name__ for i in told] == ["LinkEvent", "LinkEvent", "DeviceFault"], told
     down, up, _ = told

@@ -12,6 +12,12 @@ pieces of one 25 ms block (what the driver does):
   (/proc/<pid>/stat, all threads) over ``duration_s`` after a warm-up, when the ROS workspace
   is built and sourced; None, with the reason, when it is not.
 
+* ``nidaqmx_catch_up``: the NI backend on the simulated card (NI's ``nidaqmx`` above it), its
+  host held ``BEHIND_S`` behind the card's wall clock, then reading until it has caught up: CPU
+  seconds per second of stream read, in reads of up to ``CATCH_UP_BLOCKS`` blocks and, in the
+  same run, block by block (``nidaqmx_catch_up_block_by_block``). Their ratio is what the larger
+  reads save a host that a loaded machine has put behind.
+
 ``*_overhead`` is a figure minus the baseline: what streaming adds to making the samples.
 Reads woken from sleep cost about twice what back-to-back reads do (cold caches), which is
 why the baseline is paced like the stream.
@@ -26,8 +32,11 @@ import subprocess
 import time
 from pathlib import Path
 
+from mows.device.backends.daqmx_backend import CATCH_UP_BLOCKS, open_daqmx
 from mows.device.backends.sim_backend import SimBackend
 from mows.device.cycle.phases import CycleSettings
+from mows.device.instruments.daq import load_daq_device
+from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.ringdown import fit_ringdown
 from mows.physics.coils import CurrentCap
@@ -38,6 +47,7 @@ GOAL_SHARE = 0.10
 BLOCK_S = 0.025  # the driver's default block, and the piece in which it reads the simulator
 NODE_WARM_UP_S = 5.0  # imports, the simulator's compiled kernel, the first blocks
 CLOCK_TICKS_PER_S = os.sysconf("SC_CLK_TCK")
+BEHIND_S = 1.5  # how far the NI backend's host is held behind its card, within the output lead
 
 
 def _cpu_s() -> float:
@@ -72,6 +82,24 @@ def session_share(duration_s: float) -> tuple[float, int]:
     share = (_cpu_s() - start_cpu) / (time.monotonic() - start_wall)
     session.close()
     return share, blocks
+
+
+def catch_up_share(catch_up_blocks: int) -> float:
+    """CPU seconds per second of stream that the NI backend, ``BEHIND_S`` behind its simulated
+    card, spends catching up in reads of up to ``catch_up_blocks`` blocks."""
+    card = SimulatedCard(SimulatedDevice(load_scenario()))
+    with card.installed():
+        backend = open_daqmx(load_daq_device(), CurrentCap())
+        backend.catch_up_blocks = catch_up_blocks
+        try:
+            backend.poll(0.05)  # the compiled kernel's first call
+            time.sleep(BEHIND_S)
+            start_cpu, start_index = _cpu_s(), backend.next_index
+            while backend.next_index - start_index < BEHIND_S * backend.device.sample_rate_hz:
+                backend.poll(0.05)
+            return (_cpu_s() - start_cpu) * backend.device.sample_rate_hz / (backend.next_index - start_index)
+        finally:
+            backend.close()
 
 
 def driver_executable() -> Path | None:
@@ -119,6 +147,7 @@ def run(duration_s: float = 10.0) -> dict:
     baseline = baseline_share(duration_s)
     session, blocks = session_share(duration_s)
     node, note = node_share(duration_s)
+    catch_up, block_by_block = catch_up_share(CATCH_UP_BLOCKS), catch_up_share(1)
     return {
         "duration_s": duration_s,
         "stream": "20 kS/s x 2 channels, 25 ms blocks",
@@ -131,4 +160,8 @@ def run(duration_s: float = 10.0) -> dict:
         "node_note": note,
         "goal_share": GOAL_SHARE,
         "meets_goal": None if node is None else node < GOAL_SHARE,
+        "nidaqmx_behind_s": BEHIND_S,
+        "nidaqmx_catch_up_cpu_s_per_s": catch_up,
+        "nidaqmx_catch_up_block_by_block_cpu_s_per_s": block_by_block,
+        "nidaqmx_catch_up_over_block_by_block": catch_up / block_by_block,
     }

@@ -7,13 +7,17 @@ blocks and stamped by their sample index (:class:`mows.device.clock.DeviceClock`
 channels on the same rate (the rate the card reads back: a rate its timebase does not divide is
 refused, not coerced), started by the inputs' start trigger and never regenerated, written
 ``output_lead_s`` ahead of the newer of the newest input sample and the sample the card is
-generating, so that a host late by less than the lead (0.75 s on the paper's bench) never
-underflows them. The lead holds only what was commanded: the coils' drives with their
-switch-offs, zeros elsewhere; a coil command for a sample beyond what is written applies exactly
-there. The stage is turned by hand (``orientation: manual``): an orientation command is accepted
-only as the operator's turn, confirmed before the cycle was asked for (``by_hand``), and refused
-otherwise, since nothing here turns the probe; ``turned`` hears it (the simulated bench's
-operator turns its simulated probe there). The supply's I/O runs on a thread of its own, each
+generating, so that a host stalled for less than the lead (2 s on the paper's bench, sized for
+the stalls of a loaded machine; :attr:`DaqDevice.stall_survived_s`) never underflows them. A
+host stalled for longer finds them underflowed (−200290): a fault, as below, never a silent
+loss. The lead holds only what was commanded: the coils' drives with their switch-offs, zeros
+elsewhere; a coil command for a sample beyond what is written applies exactly there. A host
+behind its card catches up in reads of several blocks (``CATCH_UP_BLOCKS``), each cheaper per
+sample than a block's, so that a loaded host does not fall further behind. The stage is turned
+by hand (``orientation: manual``): an orientation command is accepted only as the operator's
+turn, confirmed before the cycle was asked for (``by_hand``), and refused otherwise, since
+nothing here turns the probe; ``turned`` hears it (the simulated bench's operator turns its
+simulated probe there). The supply's I/O runs on a thread of its own, each
 exchange under a deadline (:mod:`mows.device.backends.bench_supply`).
 
 A card error (the outputs underflowed, the inputs overran, the card went away; every task's error
@@ -51,6 +55,7 @@ from mows.device.backends.daqmx_tasks import (
     configure_tasks,
     first_line,
     import_nidaqmx,
+    input_buffer_samples,
 )
 from mows.device.clock import DeviceClock
 from mows.device.instruments.daq import CoilWaveforms, DaqDevice
@@ -71,6 +76,8 @@ from mows.device.protocol.payloads import DeviceInfo
 from mows.physics.coils import CurrentCap
 from mows.physics.supply import RAMP_STEP_S
 from mows.records.samples import SampleBlock
+
+CATCH_UP_BLOCKS = 20  # the most blocks read at once by a host behind its card (0.5 s on the paper's bench)
 
 
 class DaqmxBackend(Backend):
@@ -109,6 +116,7 @@ class DaqmxBackend(Backend):
             math.inf,
         )
         self.next_index = 0  # the sample after the newest read
+        self.catch_up_blocks = CATCH_UP_BLOCKS
         self.stage_theta0_rad = math.nan  # where the operator turned the probe
         self.fault = ""  # why the card is down, while it is
         self.card_faults = 0
@@ -185,8 +193,9 @@ class DaqmxBackend(Backend):
         return items
 
     def _stream(self) -> list:
-        """The outputs written ahead, a block read and the supply's steps that are due; on a card
-        error, the fault, with both tasks' errors (an input overrun is not hidden behind the outputs')."""
+        """The outputs written ahead, the blocks read and the supply's steps that are due; on a
+        card error, the fault, with both tasks' errors (an input overrun is not hidden behind the
+        outputs')."""
         errors = []
         try:
             # NI's check of a continuous generation: it raises the error that stopped it. A host
@@ -198,22 +207,40 @@ class DaqmxBackend(Backend):
         except self.daqmx.errors.DaqError as error:
             errors.append(f"outputs: {first_line(error)}")
         try:
-            self._reader.read_many_sample(
-                self._buffer,
-                number_of_samples_per_channel=self.device.block_samples,
-                timeout=self.device.read_timeout_s,
-            )
+            volts = self._read()
         except self.daqmx.errors.DaqError as error:
             errors.append(f"inputs: {first_line(error)}")
         if errors:
             self._fault("the card stopped: " + "; ".join(errors))
             return []
         self._last_read_s = time.monotonic()
-        first = self.next_index
-        self.next_index += self.device.block_samples
-        field, saturated = self.device.field_t(self._buffer)
-        block = SampleBlock(first, self.clock.stamp_ns(first), self.device.sample_rate_hz, field, saturated)
-        return [block, *self._supply_steps()]
+        field, saturated = self.device.field_t(volts)
+        n, blocks = self.device.block_samples, []
+        for start in range(0, volts.shape[1], n):
+            first = self.next_index
+            self.next_index += n
+            blocks.append(
+                SampleBlock(
+                    first,
+                    self.clock.stamp_ns(first),
+                    self.device.sample_rate_hz,
+                    field[start : start + n],
+                    saturated[start : start + n],
+                )
+            )
+        return [*blocks, *self._supply_steps()]
+
+    def _read(self) -> np.ndarray:
+        """The next block, or the blocks waiting on the card, up to ``catch_up_blocks``: a host
+        behind its card catches up in larger reads, each cheaper per sample than a block's."""
+        n = self.device.block_samples
+        waiting = min(self._tasks[0].in_stream.avail_samp_per_chan, input_buffer_samples(self.device))
+        count = min(max(1, waiting // n), self.catch_up_blocks)
+        volts = self._buffer if count == 1 else np.zeros((self._buffer.shape[0], count * n))
+        self._reader.read_many_sample(
+            volts, number_of_samples_per_channel=count * n, timeout=self.device.read_timeout_s
+        )
+        return volts
 
     def _supply_steps(self) -> list:
         """Hand the supply's steps whose sample has come to its line (written there, off this

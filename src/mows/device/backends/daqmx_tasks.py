@@ -41,6 +41,11 @@ def first_line(error: Exception) -> str:
     return f"{line} ({code})" if code is not None and str(code) not in line else line
 
 
+def input_buffer_samples(device: DaqDevice) -> int:
+    """The inputs' buffer on the card, samples per channel."""
+    return round(INPUT_BUFFER_S * device.sample_rate_hz)
+
+
 def configure_tasks(daqmx, device: DaqDevice, ai, ao) -> None:
     """Channels, timing (the rate read back: :func:`check_rate`), the outputs' trigger on the
     inputs' start, regeneration off and 0 V when idle, as the bench needs them."""
@@ -55,7 +60,7 @@ def configure_tasks(daqmx, device: DaqDevice, ai, ao) -> None:
     ai.timing.cfg_samp_clk_timing(
         device.sample_rate_hz,
         sample_mode=constants.AcquisitionType.CONTINUOUS,
-        samps_per_chan=round(INPUT_BUFFER_S * device.sample_rate_hz),
+        samps_per_chan=input_buffer_samples(device),
     )
     check_rate(device, ai)
     for output in device.outputs:

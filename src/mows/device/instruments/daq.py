@@ -87,12 +87,15 @@ class DaqDevice:
     amplifier_v_per_a: float
     sample_rate_hz: float = 20_000.0
     block_s: float = 0.025  # the inputs are read in blocks of this
-    # The outputs are written this far ahead of the newest input sample: a host late by less (a
-    # fit, a supply's answer, a busy machine) never underflows them.
-    output_lead_s: float = 0.75
+    # The outputs are written this far ahead of the newest input sample: a host stalled for less
+    # (a tuning fit, a busy machine: stalls of 1.3 s at load 20-30 on two cores) never underflows
+    # them. It is also the command lead: a coil command, a cancel too, applies this much later.
+    output_lead_s: float = 2.0
     read_timeout_s: float = 1.0  # a read that waits longer than this is a fault of the card
     current_cap_a: float = 10.0  # the amplifiers' limit (Methods: up to 10 A)
-    watchdog_s: float = 1.0  # a host that stops reading this long: coils and supply off
+    # A host that stops reading this long: coils and supply off. Longer than the lead, so that a
+    # stall the lead survives is not cut short here.
+    watchdog_s: float = 2.5
     name: str = "daq"
 
     def __post_init__(self):
@@ -140,6 +143,12 @@ class DaqDevice:
     @property
     def lead_samples(self) -> int:
         return round(self.output_lead_s * self.sample_rate_hz)
+
+    @property
+    def stall_survived_s(self) -> float:
+        """The longest host stall that loses nothing: the outputs' lead, unless the watchdog
+        faults the card sooner."""
+        return min(self.output_lead_s, self.watchdog_s)
 
     @property
     def range_t(self) -> float:

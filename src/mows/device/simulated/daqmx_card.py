@@ -104,6 +104,8 @@ class SimulatedCard:
         self.offs: list[int] = []  # the samples the coils went off at
         self.underflows = 0
         self.overruns = 0
+        self.longest_write_gap_s = 0.0  # the longest the host left the generating outputs unfed, s
+        self._last_write_s = 0.0  # the outputs' trigger or their last write since
         self._lock = threading.RLock()
         self._handles = 0
         self._world_start_s = math.nan  # the first trigger: the device's sample 0 is the card's first
@@ -175,7 +177,13 @@ class SimulatedCard:
             return
         if self._acquired() > ao.position:
             self.underflows += 1
+            self._unfed_until(self.clock())
             self._stop(ao, daq_error(DAQmxErrors.GEN_STOPPED_TO_PREVENT_REGEN_OF_OLD_SAMPLES, write=True), ao.position)
+
+    def _unfed_until(self, now_s: float) -> None:
+        """The host is back (a write, or the underflow its absence caused): how long it left the outputs."""
+        self.longest_write_gap_s = max(self.longest_write_gap_s, now_s - self._last_write_s)
+        self._last_write_s = now_s
 
     def _stop(self, task: _Task, error: DaqError | None = None, at_sample: int | None = None) -> None:
         """``task`` stops (at its card sample ``at_sample``, default now); outputs idle at 0 V."""
@@ -192,6 +200,8 @@ class SimulatedCard:
         self._advance()
         if task.error is not None:
             raise task.error
+        if task.running:
+            self._unfed_until(self.clock())
         if task.running and not self.present:
             raise daq_error(DAQmxErrors.DEV_CANNOT_BE_ACCESSED, write=True)
         generated = min(self._acquired(), task.position) if task.running else 0
@@ -422,8 +432,8 @@ class SimulatedCard:
         self._base = self.device.sample_index
         self._ao, self._ao_first, self._ao_end = self._pending, self._base, None
         self._pending = self._pending[:, :0]
-        self._start_s, self._stopped_at = self.clock(), 0
-        task.position, task.running, task.error = 0, True, None
+        self._start_s = self._last_write_s = self.clock()
+        task.position, task.running, task.error, self._stopped_at = 0, True, None, 0
 
     def stop(self, handle: int) -> None:
         task = self.task(handle)

@@ -208,7 +208,7 @@ def test_every_channel_writes_a_plugin_whose_signature_is_the_term(exact, tmp_pa
 def test_the_verdict_and_the_report_carry_the_discovery(exact):
     """A table the catalog cannot explain: the verdict's hint is the discovered term's physical
     plugin, and the report's JSON, text and HTML show the discovery."""
-    from mows.cli.lab import format_text
+    from mows.cli.lab_text import format_text
 
     base = table(exact, 5)
     measured = base.with_columns(f_hz=base.f_hz + moment_temperature_hz(base))

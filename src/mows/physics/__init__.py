@@ -2,7 +2,8 @@
 
 The probe's constants (``probe``), field sources (``field``: the closed-form ``sources`` and
 current ``loops``, with their YAML form), where the probe sits
-(``pose``), the full potential U(θ) of the magnet on its lever (``potential``), the published
+(``pose``), the full potential U(θ) of the magnet on its lever (``potential``; the balance of a swing in
+it, ``harmonic_balance``), the published
 frequency model and its inverses (``frequency``, Eqs. 1, 4–8, S13–S24), the amplitude a decaying
 ring-down's frequency belongs to (``ringdown_average``), the magnetometer signal (``signal``,
 ``fluxgate``), the excitation coils (``coils``) and what probes sharing a scene do to each other

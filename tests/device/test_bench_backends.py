@@ -35,10 +35,10 @@ from mows.device.instruments.scpi import (
     SIMULATED_RESOURCE,
     SIMULATED_SUPPLY_FILE,
     SupplyError,
-    SupplySchedule,
     load_supply_file,
     open_scpi_supply,
 )
+from mows.device.instruments.supply_schedule import SupplySchedule
 from mows.device.interface import CoilCommand, CoilTone, DeviceFault, FieldCurrentCommand, LinkEvent
 from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig

@@ -59,7 +59,8 @@ from mows.device.backends.daqmx_tasks import (
 )
 from mows.device.clock import DeviceClock
 from mows.device.instruments.daq import CoilWaveforms, DaqDevice
-from mows.device.instruments.scpi import ScpiSupply, SupplySchedule
+from mows.device.instruments.scpi import ScpiSupply
+from mows.device.instruments.supply_schedule import SupplySchedule
 from mows.device.interface import (
     Backend,
     CoilCommand,

@@ -1,6 +1,6 @@
 """The MOWS node graph for a full ROS 2 Jazzy install: ``ros2 launch mows_bringup mows.launch.py``.
 
-The same nodes and parameter files as ``mows-graph`` (mows_bringup.graph.NODES). The nodes are
+The same nodes and parameter files as ``mows-graph`` (mows_bringup.nodes.NODES). The nodes are
 managed (lifecycle) nodes; by default each configures and activates itself (``--autostart``);
 ``autostart:=false`` leaves them unconfigured for a supervisor (``ros2 lifecycle set``,
 nav2's lifecycle_manager or mows-graph's order: configure all, activate in data-flow order).
@@ -12,7 +12,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from launch import LaunchDescription
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 
 
 def generate_launch_description() -> LaunchDescription:

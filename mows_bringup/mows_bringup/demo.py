@@ -67,7 +67,8 @@ from mows_bringup.demo_probes import (
 )
 from mows_bringup.demo_probes import parameters as probe_parameters
 from mows_bringup.demo_probes import run_sweep as run_probes_sweep
-from mows_bringup.graph import Graph, add_foxglove_option, foxglove_arguments, graph_nodes, say
+from mows_bringup.graph import Graph, add_foxglove_option, say
+from mows_bringup.nodes import foxglove_arguments, graph_nodes
 from mows_ros.process import EXIT_BAD_PARAMETER
 from mows_ros.qos import MAP_QOS, RESULT_QOS
 

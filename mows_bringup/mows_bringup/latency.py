@@ -30,8 +30,9 @@ from mows_msgs.msg import MagnetometerBlock, RingdownFit
 from mows_msgs.srv import RunCycle
 
 from mows.records import stamps
-from mows_bringup.graph import NODES, Graph, add_realtime_option, say
+from mows_bringup.graph import Graph, add_realtime_option, say
 from mows_bringup.load import Load
+from mows_bringup.nodes import NODES
 from mows_ros.diagnostics import DIAGNOSTICS_DEPTH, DIAGNOSTICS_TOPIC
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
 

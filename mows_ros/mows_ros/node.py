@@ -42,7 +42,7 @@ from mows_ros.params import (
 
 UNCONFIGURED, INACTIVE, ACTIVE, FINALIZED = "unconfigured", "inactive", "active", "finalized"
 REFUSALS = (ValueError, OSError)  # what configure and activate refuse with: a FAILURE, not an error
-GRAPH_NODE_NAMES = ("driver", "estimator", "mapper", "calibrator", "viz")  # mows_bringup.graph.NODES, in order, and VIZ
+GRAPH_NODE_NAMES = ("driver", "estimator", "mapper", "calibrator", "viz")  # mows_bringup.nodes.NODES, in order, and VIZ
 
 
 class MowsNode(LifecycleNode):

@@ -17,7 +17,7 @@ from rclpy.action import ActionClient, ActionServer, CancelResponse
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.task import Future
 
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 from mows_ros.qos import RESULT_QOS
 
 # Only a bound for a test that hangs; a test passes as soon as its condition holds.

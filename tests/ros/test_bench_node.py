@@ -24,8 +24,8 @@ from mows_msgs.srv import EmergencyStop, SetFieldCurrent
 from rclpy.action import ActionClient
 
 from mows.device.instruments.scpi import load_supply_file
-from mows_bringup.graph import NODES
 from mows_bringup.lifecycle import BOUND_S, LifecycleClient
+from mows_bringup.nodes import NODES
 from node_processes import WAIT_S, assert_stops_cleanly, log
 
 # The card's clock is the wall clock: a worker starved for the output lead underflows it.

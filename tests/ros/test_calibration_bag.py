@@ -18,7 +18,7 @@ from rclpy.action import ActionClient
 from mows.cli import main as cli
 from mows.device.recording import bags
 from mows.physics.probe import calibration_record
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 
 pytestmark = pytest.mark.ros
 

@@ -26,7 +26,7 @@ from mows.device.serial.emulator import DeviceEmulator
 from mows.records import stamps
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 from mows_driver import node as driver
 from mows_driver import outputs, services
 from mows_ros.process import EXIT_BAD_PARAMETER

@@ -18,7 +18,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from mows.device.cycle.phases import Phase
 from mows.records import stamps
 from mows.sim.scenario import load_scenario
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 from mows_ros.qos import EXCITATION_QOS
 
 pytestmark = [pytest.mark.ros, pytest.mark.xdist_group("realtime")]  # the simulator paced in real time

@@ -19,7 +19,7 @@ from mows.physics.frequency import frequency_shift_hz
 from mows.physics.probe import PAPER_PROBE
 from mows.physics.signal import signal_t
 from mows.records import stamps
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 from mows_ros.qos import EXCITATION_QOS, RESULT_QOS, STREAM_QOS
 from node_processes import assert_stops_cleanly
 

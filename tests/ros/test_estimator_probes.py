@@ -22,7 +22,7 @@ from mows.physics.pose import Pose
 from mows.physics.probe import PAPER_PROBE as P
 from mows.physics.sources import UniformField
 from mows.sim.readings import swinging_pickup_t
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 from mows_ros.qos import RESULT_QOS
 from node_processes import assert_stops_cleanly
 from scenes import scene_device

@@ -17,8 +17,8 @@ from mows.estimate.settings import probe_set
 from mows.physics.pose import Pose, probe_axes
 from mows.physics.probe import PAPER_PROBE
 from mows.records import stamps
-from mows_bringup.graph import NODES
 from mows_bringup.mount import probes_mount
+from mows_bringup.nodes import NODES
 from mows_driver import node as driver
 from mows_driver.messages import STAGE_JOINT
 from mows_estimator import parameters as estimator

@@ -37,7 +37,7 @@ from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 
 from mows.device.cycle.phases import Phase
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 from mows_ros.qos import EXCITATION_QOS
 from node_processes import RosHarness, assert_stops_cleanly, launch, log, send_goal
 

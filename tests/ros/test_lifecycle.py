@@ -20,8 +20,8 @@ from sensor_msgs.msg import JointState
 
 from mows.device.cycle.phases import CycleRequest, Phase
 from mows.records import stamps
-from mows_bringup.graph import NODES
 from mows_bringup.lifecycle import BOUND_S, LifecycleClient
+from mows_bringup.nodes import NODES
 from mows_driver import node as driver
 from mows_ros.qos import EXCITATION_QOS
 from node_processes import WAIT_S, log, send_goal

@@ -10,7 +10,7 @@ from mows_msgs.srv import RunCycle
 
 from mows.device.cycle.phases import Phase
 from mows.device.recording import bags
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 from node_processes import log
 from test_driver_node import QUICK_CYCLES, Listener
 

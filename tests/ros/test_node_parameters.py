@@ -12,7 +12,7 @@ from rclpy.parameter import Parameter
 
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_file
-from mows_bringup.graph import NODES, VIZ
+from mows_bringup.nodes import NODES, VIZ
 from mows_calibrator import node as calibrator
 from mows_driver import node as driver
 from mows_estimator import node as estimator
@@ -271,7 +271,7 @@ def test_a_renamed_parameter_is_refused_wherever_it_is_set_with_its_new_name(
 
 
 def test_the_graph_takes_a_stage_the_nodes_can_turn_or_the_operator_turns(tmp_path):
-    from mows_bringup.graph import stage_problem
+    from mows_bringup.nodes import stage_problem
 
     manual = ["-p", "mapper:orientation:=manual", "-p", "calibrator:orientation:=manual"]
     assert stage_problem(["-p", "driver:backend:=nidaqmx", *manual]) is None

@@ -14,8 +14,9 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.srv import GetParameters
 
-from mows_bringup.graph import NODES, parse_arguments
+from mows_bringup.graph import parse_arguments
 from mows_bringup.load import Load
+from mows_bringup.nodes import NODES
 from node_processes import log
 
 pytestmark = pytest.mark.ros

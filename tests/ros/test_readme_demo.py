@@ -83,7 +83,7 @@ def test_the_demo_prints_the_foxglove_address_once_the_viz_node_serves_it(demo_l
 
 def test_the_demo_takes_foxglove_with_or_without_a_port():
     from mows_bringup.demo import parse_arguments
-    from mows_bringup.graph import FOXGLOVE_PORT
+    from mows_bringup.nodes import FOXGLOVE_PORT
 
     assert parse_arguments([]).foxglove is None
     assert parse_arguments(["--foxglove"]).foxglove == FOXGLOVE_PORT

@@ -10,7 +10,7 @@ from mows_msgs.msg import FieldEstimate
 from sensor_msgs.msg import MagneticField
 
 from mows.records import stamps
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 from mows_driver.parameters import PARAMETERS
 from mows_ros.qos import RESULT_QOS, STREAM_QOS
 

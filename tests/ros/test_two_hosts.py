@@ -30,7 +30,7 @@ from pathlib import Path
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from mows_bringup.graph import NODES
+from mows_bringup.nodes import NODES
 from node_processes import log
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]

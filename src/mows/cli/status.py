@@ -63,6 +63,11 @@ def _unraisable(unraisable, default=sys.unraisablehook) -> None:
         finally:
             _in_hook = False
         return
+    if _received:
+        # The command is ending on a signal (its line said or about to be): an error in the
+        # clean-up of work the signal cut short (a __del__ of numba's compiler, interrupted while
+        # it compiled on a first run) is that interruption's debris, not a second story.
+        return
     default(unraisable)
 
 

@@ -97,7 +97,7 @@ class CalibratorNode(MowsNode):
     def _watch(self, watch: RequesterWatch) -> None:
         """Cancel the calibration once every client that may wait for it has left the graph."""
         if not self._client_gone and watch.gone():
-            self._client_gone = f"every node that asked for it through {watch.service_name} has left"
+            self._client_gone = watch.reason
             self.get_logger().warning(f"calibration cancelled, its cycle with it: {self._client_gone}")
             self._driver.cancel()
 

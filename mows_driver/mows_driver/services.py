@@ -103,9 +103,8 @@ class DriverServices:
         """Cancel every running cycle whose requesters have all left the graph."""
         for cycle_id, watch in list(self._watched.items()):
             if watch.gone() and (session := self._node.session) is not None:
-                reason = f"every node that asked for it through {watch.service_name} has left"
-                if session.cancel_cycle(cycle_id, reason):
-                    self._log.warning(f"cycle {cycle_id} cancelled, coils off: {reason}")
+                if session.cancel_cycle(cycle_id, watch.reason):
+                    self._log.warning(f"cycle {cycle_id} cancelled, coils off: {watch.reason}")
 
     async def run_cycle(self, request: RunCycle.Request, response: RunCycle.Response) -> RunCycle.Response:
         outcome = await self._cycle(request, self._node.resolve_service_name(RUN_CYCLE_SERVICE), lambda _: None)

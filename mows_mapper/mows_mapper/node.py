@@ -11,7 +11,8 @@ model lab's ``/mows/model_report`` (docs/nodes.md, docs/multi_probe.md). With ``
 manual each cycle waits for the operator's ``~/confirm_orientation`` (std_srvs/Trigger). A sweep
 whose client has left the graph (``mows_ros.requesters``) is cancelled, its running cycle with
 it, and ends aborted (it was never asked to cancel); every cancel and abort is logged and counted
-on /diagnostics.
+on /diagnostics. Who asked, the cancels and what each ending reports are
+:class:`mows.sweep.requests.SweepRequests`'s.
 
 The node translates only. Everything runs on one thread: the action awaits the driver, the fits
 and the CPU-bound decomposition and lab (in a worker thread) as a coroutine, so fits, cancels and
@@ -29,7 +30,8 @@ from mows.estimate.settings import probe_set
 from mows.lab import analyse_sweep
 from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepOutcome, SweepSettings, SweepStep
 from mows.sweep.publication import Publication, cycle_failed, publication
-from mows.sweep.runner import SweepRunner, SweepState
+from mows.sweep.requests import Cancel, LogLine, Severity, SweepRequests
+from mows.sweep.runner import SweepRunner
 from mows_mapper import messages, workspace
 from mows_mapper.health import sweep_health
 from mows_mapper.outputs import MapperOutputs
@@ -44,7 +46,7 @@ from mows_ros.operator import OperatorTurns
 from mows_ros.params import parameter_values
 from mows_ros.probe import probe_of
 from mows_ros.process import run_node
-from mows_ros.requesters import RequesterWatch, send_goal_services
+from mows_ros.requesters import request_writers, send_goal_services, steady_s
 from mows_ros.wall import steady_timer
 
 NODE_NAME = "mapper"
@@ -65,6 +67,7 @@ class MapperNode(MowsNode):
     def __init__(self):
         super().__init__(NODE_NAME, PARAMETERS)
         self._runner = SweepRunner()
+        self._requests = SweepRequests(self._runner)
         self._settings = SweepSettings()  # the running sweep's
         self._driver = DriverCycles(self, self._on_fit)
         probes = probe_set(self._param("probes"), probe_of(self._param("probe_file")))
@@ -75,7 +78,6 @@ class MapperNode(MowsNode):
         self._map_servers = action_servers(
             self, WorkspaceMap, MAP_ACTIONS, self._execute_map, self._cancel_map, self._driver.group
         )
-        self._map_cancelled = False
         self._arm_turn: workspace.Turn | None = None
 
     def _param(self, name):
@@ -98,22 +100,31 @@ class MapperNode(MowsNode):
         return None
 
     def _cancel(self, _) -> CancelResponse:
-        self._cancel_sweep()
+        return self._carry_out(self._requests.on_cancel())
+
+    def _cancel_map(self, _) -> CancelResponse:
+        return self._carry_out(self._requests.on_cancel_map())
+
+    def _watch(self) -> None:
+        present = request_writers(self, self._requests.service_names)
+        self._carry_out(self._requests.on_graph(present, steady_s()))
+
+    def _carry_out(self, cancel: Cancel | None) -> CancelResponse:
+        """The running cycle cancelled and the fits of a cycle that has ended no longer awaited:
+        the sweep ends at once (nothing, and the cancel refused, for None)."""
+        if cancel is None:
+            return CancelResponse.REJECT
+        self._log(cancel.log)
+        self._driver.cancel()
+        self._driver.deliver(cancel.step)
         return CancelResponse.ACCEPT
 
-    def _cancel_sweep(self, reason: str = "") -> None:
-        """The runner told, the running cycle cancelled, and the fits of a cycle that has
-        ended no longer awaited: the sweep ends at once."""
-        self._runner.cancel(reason)
-        self._driver.cancel()
-        self._driver.deliver(self._runner.fits_time_up())
-
-    def _watch(self, watch: RequesterWatch) -> None:
-        """Cancel the sweep once every client that may wait for it has left the graph."""
-        if not self._runner.cancelled() and watch.gone():
-            reason = f"every node that asked for it through {watch.service_name} has left"
-            self.get_logger().warning(f"sweep cancelled, its cycle with it: {reason}")
-            self._cancel_sweep(reason)
+    def _log(self, line: LogLine | None) -> None:
+        # One call site per severity: rclpy refuses to change a call site's severity.
+        if line is not None and line.severity == Severity.INFO:
+            self.get_logger().info(line.text)
+        elif line is not None:
+            self.get_logger().warning(line.text)
 
     # --- the sweep ------------------------------------------------------------------------
     async def _execute(self, goal_handle):
@@ -130,8 +141,9 @@ class MapperNode(MowsNode):
 
     async def _sweep(self, actions, feedback_msgs, goal_handle) -> tuple[SweepOutcome, Publication]:
         """The started sweep run to its end and published, its client watched under ``actions``."""
-        watch = RequesterWatch(self, send_goal_services(self, actions))
-        timer = steady_timer(self, WATCH_S, lambda: self._watch(watch), callback_group=self._driver.group)
+        services = send_goal_services(self, actions)
+        self._requests.watch(services, request_writers(self, services), steady_s())
+        timer = steady_timer(self, WATCH_S, self._watch, callback_group=self._driver.group)
         try:
             step = self._runner.begin()
             while step.finished is None:
@@ -143,43 +155,28 @@ class MapperNode(MowsNode):
             await self._publish(plan)
         finally:  # an exception must not leave the runner busy for good
             self.destroy_timer(timer)
-            self._runner.abandon("the sweep ended unexpectedly (see the log)")
-        # One call site per severity: rclpy refuses to change a call site's severity.
-        if outcome.cancelled:
-            self.get_logger().info(f"sweep {self._runner.last_cancel}")
-        elif not outcome.ok:
-            self.get_logger().warning(f"sweep aborted: {outcome.message}")
+            self._requests.abandon("the sweep ended unexpectedly (see the log)")
+        self._log(self._requests.ended(outcome))
         return outcome, plan
 
     # --- the workspace map ------------------------------------------------------------------
     async def _execute_map(self, goal_handle):
         probe = probe_of(self._param("probe_file"))
         settings = sweep_settings(parameter_values(self, PARAMETERS), probe)
-        if (refusal := self.inactive_reason() or self._map_refusal(settings)) is not None:
+        if (refusal := self.inactive_reason() or self._requests.start_map(len(settings.probes))) is not None:
             goal_handle.abort()
             return WorkspaceMap.Result(success=False, message=f"workspace map refused: {refusal}")
-        self._map_cancelled = False
         try:
             carried = settings.entries(probe)[0].probe
-            result = await self._mapping.run(goal_handle, carried, lambda: self._map_cancelled)
+            result = await self._mapping.run(goal_handle, carried, lambda: self._requests.map_cancelled)
         except ValueError as error:  # no pose left within reach; sweeps that cannot determine a map
             result = WorkspaceMap.Result(success=False, message=f"workspace map failed: {error}")
+        finally:
+            self._requests.map_ended()
         if not result.success:
             self.get_logger().warning(result.message)
-        end_goal(goal_handle, result.success, self._map_cancelled)
+        end_goal(goal_handle, result.success, self._requests.map_cancelled)
         return result
-
-    def _map_refusal(self, settings: SweepSettings) -> str | None:
-        if self._runner.state != SweepState.IDLE:
-            return "a sweep is running"
-        if len(settings.probes) > 1:
-            return f"the arm carries one probe; the mapper has {len(settings.probes)}"
-        return None
-
-    def _cancel_map(self, _) -> CancelResponse:
-        self._map_cancelled = True
-        self._cancel_sweep()
-        return CancelResponse.ACCEPT
 
     async def _map_sweep(self, goal: SweepGoal, arm_turn: workspace.Turn | None) -> SweepOutcome:
         """One rotation sweep of the workspace map where the arm holds the probe; ``arm_turn``

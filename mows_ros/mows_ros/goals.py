@@ -11,6 +11,8 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import CallbackGroup
 from rclpy.node import Node
 
+from mows.sweep.requests import Ending, goal_ending
+
 
 def action_servers(
     node: Node,
@@ -37,14 +39,13 @@ def action_servers(
 
 
 def end_goal(goal_handle, succeeded: bool, cancelled: bool) -> None:
-    """End ``goal_handle`` as cancelled (whatever else), succeeded or aborted. A goal the node
-    cancelled itself, its client gone (``mows_ros.requesters``), was never asked to cancel and
-    cannot end CANCELED (the action's state machine): it ends aborted."""
-    if cancelled and goal_handle.is_cancel_requested:
+    """End ``goal_handle`` as :func:`mows.sweep.requests.goal_ending` says: cancelled (whatever
+    else) as its client asked, succeeded or aborted; a goal the node cancelled itself, its client
+    gone (``mows_ros.requesters``), ends aborted."""
+    ending = goal_ending(succeeded, cancelled, goal_handle.is_cancel_requested)
+    if ending == Ending.CANCELED:
         goal_handle.canceled()
-    elif cancelled:
-        goal_handle.abort()
-    elif succeeded:
+    elif ending == Ending.SUCCEEDED:
         goal_handle.succeed()
     else:
         goal_handle.abort()

@@ -99,7 +99,7 @@ class SweepRequests:
         self._runner = runner
         self._requesters: Requesters | None = None  # the running sweep's, while it is watched
         self.mapping = False  # whether a workspace map goal runs
-        self.map_cancelled = False  # whether the running (or last) map's client cancelled it
+        self.map_cancelled = False  # whether the running (or last) map was cancelled, or its client left
 
     # --- who waits ------------------------------------------------------------------------
     def watch(self, service_names: Sequence[str], seen: frozenset[bytes], now_s: float) -> None:
@@ -141,7 +141,6 @@ class SweepRequests:
         """The sweep ended with ``outcome`` (watched no more, unless a map's): what the log says of it."""
         if not self.mapping:
             self._requesters = None
-        # One call site per severity: rclpy refuses to change a call site's severity.
         if outcome.cancelled:
             return LogLine(Severity.INFO, f"sweep {self._runner.last_cancel}")
         if not outcome.ok:

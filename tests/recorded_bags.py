@@ -172,13 +172,13 @@ def record_session(path, scenario, stage_rad, settings, seed, max_steps=100_000)
     from mows.device.backends.sim_backend import SimBackend
     from mows.device.cycle.phases import CycleRequest
     from mows.device.stream.session import DeviceSession, SessionConfig
-    from mows.estimate.ringdown import fit_ringdown
+    from mows.estimate.ringdown import fit_tuning
     from mows.physics.coils import CurrentCap
 
     cap = CurrentCap(10.0)
     device = SimulatedDevice(scenario, np.random.default_rng(seed))
     backend = SimBackend(device, cap, paced=False, chunk_s=0.1)
-    config = SessionConfig(0.025, settings, scenario.setup, cap, scenario.probe.f00_hz, fit_ringdown)
+    config = SessionConfig(0.025, settings, scenario.setup, cap, scenario.probe.f00_hz, fit_tuning)
     session = DeviceSession(backend, config, armed=True)
     events, blocks, done = list(session.step(0.0).events), [], []
     session.start_cycle(CycleRequest(stage_rad), done.append)

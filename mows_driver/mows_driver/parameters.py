@@ -13,7 +13,7 @@ from mows.device.cycle.phases import CycleSettings
 from mows.device.cycle.tracking import TrackingSettings
 from mows.device.serial.link import DEFAULT_BAUD
 from mows.device.stream.session import SessionConfig
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_tuning
 from mows.estimate.ringdown.problem import cramer_rao_frequency_hz
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.physics.probe import PAPER_PROBE
@@ -226,7 +226,7 @@ def backend_settings(values: dict) -> BackendSettings:
 def session_config(values: dict, cap: CurrentCap, backend: BackendSettings) -> SessionConfig:
     setup = PRESETS[backend.setup_name()](current_limit_a=cap.limit_a)
     return SessionConfig(
-        values["block_duration_s"], cycle_settings(values), setup, cap, values["initial_frequency_hz"], fit_ringdown
+        values["block_duration_s"], cycle_settings(values), setup, cap, values["initial_frequency_hz"], fit_tuning
     )
 
 

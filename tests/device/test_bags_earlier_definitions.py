@@ -17,7 +17,7 @@ from mows.device.backends.bag_backend import BagBackend
 from mows.device.cycle.phases import CycleSettings
 from mows.device.recording import bags
 from mows.device.stream.session import DeviceSession, SessionConfig
-from mows.estimate.ringdown import fit_ringdown
+from mows.estimate.ringdown import fit_tuning
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.sim.scenario import load_scenario
 from recorded_bags import record_cycles
@@ -137,7 +137,7 @@ def test_the_driver_replays_an_earlier_bag_whole(earlier_recording):
     path, recorded = earlier_recording
     cap = CurrentCap(10.0)
     config = SessionConfig(
-        0.025, CycleSettings(), PRESETS["largest_spacing"](current_limit_a=cap.limit_a), cap, 110.0, fit_ringdown
+        0.025, CycleSettings(), PRESETS["largest_spacing"](current_limit_a=cap.limit_a), cap, 110.0, fit_tuning
     )
     backend = BagBackend(path, rate=1000.0)
     session = DeviceSession(backend, config)

@@ -42,7 +42,7 @@ from mows.device.instruments.supply_schedule import SupplySchedule
 from mows.device.interface import CoilCommand, CoilTone, DeviceFault, FieldCurrentCommand, LinkEvent
 from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig
-from mows.estimate.ringdown import fit_ringdown
+from mows.estimate.ringdown import fit_tuning
 from mows.physics.coils import CurrentCap, largest_spacing
 from mows.physics.supply import RAMP_STEP_S, SupplyLimits
 from mows.records.samples import SampleBlock
@@ -322,7 +322,7 @@ def test_the_simulated_card_refuses_what_the_real_one_refuses(installed):
 
 def armed_session(card, backend, frequency_hz=112.0) -> DeviceSession:
     """The driver's session on the bench, armed, its cycles ``FAST``."""
-    config = SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), frequency_hz, fit_ringdown)
+    config = SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), frequency_hz, fit_tuning)
     return DeviceSession(backend, config, armed=True)
 
 
@@ -610,7 +610,7 @@ def session_at_half_an_ampere(on_bench):
     """A session on the bench with the simulated supply ramped to 0.5 A and read back so."""
     supply = simulated_supply()
     card, backend = on_bench("calibration", supply)
-    config = SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), 112.5, fit_ringdown)
+    config = SessionConfig(0.025, FAST, card.device.scenario.setup, CurrentCap(10.0), 112.5, fit_tuning)
     session = DeviceSession(backend, config, armed=True)
     session.set_field_current(0.5, lambda result: None)
     for _ in range(MAX_POLLS):

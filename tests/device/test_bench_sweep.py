@@ -35,7 +35,7 @@ from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.calibration.constants import CalibrationError, KnownConstants
 from mows.estimate.calibration.fit_constants import calibrate_probe
-from mows.estimate.ringdown import fit_ringdown
+from mows.estimate.ringdown import fit_tuning
 from mows.lab import reference_at
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
@@ -87,7 +87,7 @@ def closing():
 
 
 def session(backend, scenario):
-    config = SessionConfig(0.025, SETTINGS, scenario.setup, CAP, scenario.probe.f00_hz, fit_ringdown)
+    config = SessionConfig(0.025, SETTINGS, scenario.setup, CAP, scenario.probe.f00_hz, fit_tuning)
     return DeviceSession(backend, config, armed=True)
 
 

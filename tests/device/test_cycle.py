@@ -17,7 +17,7 @@ from mows.device.interface import CoilCommand, CoilTone, CommandResult
 from mows.device.simulated.scheduled import ScheduledDevice
 from mows.device.stream.device_time import DeviceTimeLoop, scheduled_device
 from mows.device.stream.session import DeviceSession, SessionConfig
-from mows.estimate.ringdown import fit_ringdown
+from mows.estimate.ringdown import fit_tuning
 from mows.physics.coils import CurrentCap, helmholtz, largest_spacing
 from mows.physics.coupling import PlacedProbe
 from mows.physics.pose import Pose
@@ -37,7 +37,7 @@ def session_on_simulator(cycle_settings=FAST, frequency_hz=110.0, cap_a=CAP_A):
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(cap_a), paced=False)
     return DeviceSession(
         backend,
-        SessionConfig(0.025, cycle_settings, scenario.setup, CurrentCap(cap_a), frequency_hz, fit_ringdown),
+        SessionConfig(0.025, cycle_settings, scenario.setup, CurrentCap(cap_a), frequency_hz, fit_tuning),
         armed=True,
     )
 
@@ -156,7 +156,7 @@ def test_an_excitation_stopped_before_its_answers_counts_towards_the_duty_limit(
     # sample: a stop before its answers counts the samples from there up to the stop.
     rate = 1000.0
     quick = CycleSettings(excite_s=0.1, ringdown_s=0.1, repeats=1, tuning_steps=0, turn_settle_s=0.0, duty_window_s=1.0)
-    sequencer = CycleSequencer(quick, largest_spacing(), CurrentCap(CAP_A), rate, 110.0, fit=fit_ringdown, probes=ONE)
+    sequencer = CycleSequencer(quick, largest_spacing(), CurrentCap(CAP_A), rate, 110.0, fit=fit_tuning, probes=ONE)
 
     def samples(first, n):
         return SampleBlock(first, round(first * 1e9 / rate), rate, np.zeros((n, 2)), np.zeros((n, 2), bool))
@@ -351,7 +351,7 @@ def test_no_cycle_ever_commands_a_current_above_the_cap(setup, cap_a, current_a,
         turn_settle_s=0.0,
         max_duty_cycle=1.0,
     )
-    sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0, fit=fit_ringdown, probes=ONE)
+    sequencer = CycleSequencer(quick, setup, CurrentCap(cap_a), 20_000.0, 110.0, fit=fit_tuning, probes=ONE)
     sequencer.on_samples(SampleBlock(0, 0, 20_000.0, np.zeros((1, 2)), np.zeros((1, 2), bool)))
     device = RecordingDevice()
     # The cap limits what reaches the coils: each coil's current of the orientation-dependent
@@ -374,7 +374,7 @@ def supplied_session(supply_cap_a=2.0):
     scenario = load_scenario("calibration")
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(CAP_A), paced=False, supply_cap_a=supply_cap_a)
     return DeviceSession(
-        backend, SessionConfig(0.025, FAST, scenario.setup, CurrentCap(CAP_A), 125.0, fit_ringdown), armed=True
+        backend, SessionConfig(0.025, FAST, scenario.setup, CurrentCap(CAP_A), 125.0, fit_tuning), armed=True
     ), backend
 
 
@@ -474,7 +474,7 @@ def _phases_of(scenario) -> list:
     loop = DeviceTimeLoop(
         scheduled_device(scenario, CurrentCap(CAP_A), np.random.default_rng(5)),
         FAST,
-        fit=fit_ringdown,
+        fit=fit_tuning,
         on_event=events.append,
     )
     outcome = loop.run_cycle(CycleRequest(math.radians(30.0), repeats=1, tuning_steps=1))

@@ -23,7 +23,7 @@ from mows.device.protocol.payloads import Ack, Coils, FieldCurrent, Samples, Sta
 from mows.device.serial.emulator import FRAME_S, DeviceEmulator
 from mows.device.serial.link import SerialLink
 from mows.device.stream.session import DeviceSession, SessionConfig
-from mows.estimate.ringdown import fit_ringdown
+from mows.estimate.ringdown import fit_tuning
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -62,7 +62,7 @@ def link(emulator):
 def session(link):
     backend = SerialBackend(link, CurrentCap(CAP_A))
     settings = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tuning_steps=1, turn_settle_s=0.1)
-    config = SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown)
+    config = SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_tuning)
     session = DeviceSession(backend, config, armed=True)
     yield session
     session.close()
@@ -206,7 +206,7 @@ def cycle_with_coils_on(tmp_path, attempt, stack):
     settings = CycleSettings(excite_s=2.0, ringdown_s=0.3, repeats=1, tuning_steps=0, turn_settle_s=0.1)
     session = DeviceSession(
         SerialBackend(link, CurrentCap(CAP_A)),
-        SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown),
+        SessionConfig(0.025, settings, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_tuning),
         armed=True,
     )
     step_until(session, lambda: session.health().get("samples", 0) > 0, "samples")

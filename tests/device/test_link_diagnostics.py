@@ -15,7 +15,7 @@ from mows.device.serial.emulator import DeviceEmulator
 from mows.device.serial.link import SerialLink
 from mows.device.stream.blocks import BlockAssembler
 from mows.device.stream.session import DeviceSession, SessionConfig
-from mows.estimate.ringdown import fit_ringdown
+from mows.estimate.ringdown import fit_tuning
 from mows.physics.coils import CurrentCap
 from mows.records.samples import SampleBlock
 
@@ -25,7 +25,7 @@ SETTINGS = CycleSettings(excite_s=0.3, ringdown_s=0.3, gap_s=0.1, repeats=1, tun
 def session_on(link):
     return DeviceSession(
         SerialBackend(link, CurrentCap(CAP_A)),
-        SessionConfig(0.025, SETTINGS, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_ringdown),
+        SessionConfig(0.025, SETTINGS, SCENARIO.setup, CurrentCap(CAP_A), 110.0, fit_tuning),
     )
 
 

@@ -34,7 +34,7 @@ from mows.device.interface import (
 from mows.device.simulated.scheduled import OverCap
 from mows.device.stream.session import DeviceSession, SessionConfig
 from mows.estimate.probe_set import probe_lines
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, fit_tuning
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.physics.coils import PRESETS, CurrentCap
 from mows.physics.multitone import Tone
@@ -45,7 +45,7 @@ SCENE = load_scenario("three_probes")
 STAGE_RAD = 0.3
 # The three tones sum to a 0.31 A peak: a 0.25 A cap splits them into two groups.
 LOW_CAP_A = 0.25
-FAST = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.1, repeats=1, turn_settle_s=0.2)
+FAST = CycleSettings(excite_s=0.5, ringdown_s=0.5, gap_s=0.1, repeats=1, tuning_steps=0, turn_settle_s=0.2)
 SMALL_TONE_A = 0.03
 SEED = 1
 CHUNK_S = 0.1  # device time per unpaced poll
@@ -58,7 +58,7 @@ def session(scene=SCENE, cap_a=10.0, settings=FAST, seed=1):
     backend = SimBackend(
         SimulatedDevice(scene, np.random.default_rng(seed)), CurrentCap(cap_a), paced=False, chunk_s=CHUNK_S
     )
-    config = SessionConfig(0.025, settings, scene.setup, CurrentCap(cap_a), 112.5, fit_ringdown)
+    config = SessionConfig(0.025, settings, scene.setup, CurrentCap(cap_a), 112.5, fit_tuning)
     return DeviceSession(backend, config, armed=True)
 
 
@@ -238,7 +238,7 @@ def test_tones_are_sized_by_the_devices_coils_not_by_the_named_preset():
     assert not np.allclose(named.coils[0].sources[0].center_m, SCENE.setup.coils[0].sources[0].center_m)
     device = RecordingDevice(SCENE, np.random.default_rng(SEED))
     backend = SimBackend(device, CurrentCap(10.0), paced=False, chunk_s=CHUNK_S)
-    config = SessionConfig(0.025, FAST, named, CurrentCap(10.0), 112.5, fit_ringdown)
+    config = SessionConfig(0.025, FAST, named, CurrentCap(10.0), 112.5, fit_tuning)
     (outcome,), events, blocks = run(DeviceSession(backend, config, armed=True), CycleRequest(0.0))
     assert outcome.success, outcome.message
     (on,) = [e.sample_index for e in events if e.phase == Phase.EXCITING]

@@ -8,7 +8,7 @@ import pytest
 from mows.device.backends.sim_backend import SimBackend
 from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.stream.session import DeviceSession, SessionConfig
-from mows.estimate.ringdown import fit_ringdown
+from mows.estimate.ringdown import fit_tuning
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -22,7 +22,7 @@ INACTIVE = "the driver is inactive"
 def session_on(scene="calibration") -> DeviceSession:
     scenario = load_scenario(scene)
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(CAP_A), paced=False, supply_cap_a=2.0)
-    return DeviceSession(backend, SessionConfig(0.025, QUICK, scenario.setup, CurrentCap(CAP_A), 125.0, fit_ringdown))
+    return DeviceSession(backend, SessionConfig(0.025, QUICK, scenario.setup, CurrentCap(CAP_A), 125.0, fit_tuning))
 
 
 def step_until(session, condition) -> list:

@@ -8,7 +8,7 @@ from mows.device.backends.bag_backend import BagBackend
 from mows.device.cycle.phases import CycleSettings, Phase
 from mows.device.recording import bags
 from mows.device.stream.session import DeviceSession, SessionConfig
-from mows.estimate.ringdown import fit_ringdown
+from mows.estimate.ringdown import fit_tuning
 from mows.physics.coils import PRESETS, CurrentCap
 
 RATE_HZ, BLOCK = 20_000.0, 500
@@ -78,7 +78,7 @@ def recording(path, phases=((1, Phase.EXCITING), (2, Phase.RINGDOWN))):
 def replaying(path) -> DeviceSession:
     cap = CurrentCap(10.0)
     config = SessionConfig(
-        0.025, CycleSettings(), PRESETS["largest_spacing"](current_limit_a=cap.limit_a), cap, 110.0, fit_ringdown
+        0.025, CycleSettings(), PRESETS["largest_spacing"](current_limit_a=cap.limit_a), cap, 110.0, fit_tuning
     )
     return DeviceSession(BagBackend(path, rate=100.0), config)
 

@@ -27,7 +27,7 @@ CAP_A = 0.25
 STAGE_RAD = 0.4
 ARGS = [
     *("-p", "scenario:=three_probes", "-p", f"coil_current_cap_a:={CAP_A}", "-p", f"excitation_current_a:={CAP_A}"),
-    *("-p", "excite_s:=0.3", "-p", "ringdown_s:=0.3", "-p", "turn_settle_s:=0.1"),
+    *("-p", "excite_s:=0.3", "-p", "ringdown_s:=0.3", "-p", "turn_settle_s:=0.1", "-p", "tuning_steps:=0"),
 ]
 RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
 

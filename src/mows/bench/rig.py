@@ -21,14 +21,14 @@ from mows.device.cycle.phases import CycleOutcome, CycleRequest, CycleSettings, 
 from mows.device.cycle.tracking import TrackingLoop
 from mows.device.stream.device_time import Block, DeviceTimeLoop, scheduled_device
 from mows.estimate.probe_set import probe_lines
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit, fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, RingdownFit, fit_tuning
 from mows.estimate.ringdown.start import white_noise_std
 from mows.estimate.segments import RingdownWindow, Segment, SegmentAssembler, fit_segment
 from mows.physics.coils import CurrentCap
 
 BUFFER_S = 5.0  # the assembler keeps this much of the stream
 #: One ring-down per group and cycle, the groups back to back: a map point of several probes per cycle.
-ONE_ROUND = CycleSettings(repeats=1, gap_s=0.0)
+ONE_ROUND = CycleSettings(repeats=1, gap_s=0.0, tuning_steps=0)  # one measured round, untuned
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,7 +74,7 @@ class DeviceTimeRig:
         self.peak_current_a = 0.0
         self._measured: list[MeasuredRingdown] = []
         self.device = scheduled_device(scenario, CurrentCap(cap_a), rng)
-        self.loop = DeviceTimeLoop(self.device, settings, fit=fit_ringdown, on_block=self._block, on_event=self._event)
+        self.loop = DeviceTimeLoop(self.device, settings, fit=fit_tuning, on_block=self._block, on_event=self._event)
         self.sequencer, self.fs = self.loop.sequencer, self.loop.fs
 
     @property

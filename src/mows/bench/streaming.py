@@ -38,7 +38,7 @@ from mows.device.cycle.phases import CycleSettings
 from mows.device.instruments.daq import load_daq_device
 from mows.device.simulated.daqmx_card import SimulatedCard
 from mows.device.stream.session import DeviceSession, SessionConfig
-from mows.estimate.ringdown import fit_ringdown
+from mows.estimate.ringdown import fit_tuning
 from mows.physics.coils import CurrentCap
 from mows.sim.scenario import load_scenario
 from mows.sim.simulator import SimulatedDevice
@@ -72,7 +72,7 @@ def session_share(duration_s: float) -> tuple[float, int]:
     scenario = load_scenario()
     backend = SimBackend(SimulatedDevice(scenario), CurrentCap(), chunk_s=BLOCK_S)
     session = DeviceSession(
-        backend, SessionConfig(BLOCK_S, CycleSettings(), scenario.setup, CurrentCap(), 112.5, fit_ringdown)
+        backend, SessionConfig(BLOCK_S, CycleSettings(), scenario.setup, CurrentCap(), 112.5, fit_tuning)
     )
     session.step(1.0)  # the compiled kernel's first call
     blocks = 0

@@ -98,22 +98,29 @@ def tone_for_swing(
     τ·(1 − e^(−δT))/(2J·ω·δ), τ the scheme's torque per ampere of the base amplitude at rest
     (the coils' fields on the magnet's arc, exact). Capped at the setup's limit; ValueError
     if the coils cannot turn this probe (no torque)."""
-    probe, pose = placed.probe, dataclasses.replace(placed.pose, gravity_m_per_s2=(0.0, 0.0, 0.0))
-    step_rad = 1e-4
-    torques = np.array(
-        [
-            -np.diff(arc_energy_j(probe, coil, pose, np.array([-step_rad, step_rad])))[0] / (2 * step_rad)
-            for coil in setup.coils
-        ]
-    )
-    # The scheme's currents per ampere of base amplitude (sin(θ0 + φ_c)), unchecked: 1 A may be above a low cap.
-    torque_per_a = abs(float(np.sin(pose.theta0_rad + np.array(setup.phases_rad)) @ torques))
+    probe, pose = placed.probe, placed.pose
+    torque_per_a = scheme_torque_nm_per_a(placed, setup, pose.theta0_rad)
     omega, delta = 2.0 * math.pi * frequency_hz, probe.damping_per_s
     gain = (1.0 - math.exp(-delta * duration_s)) / (2.0 * probe.inertia_kgm2 * omega * delta)
     if not torque_per_a * gain > 0.0:
         raise ValueError(f"probe {probe_id}: the coils put no torque on it at θ0 = {pose.theta0_rad:.4g} rad")
     amplitude = min(swing_rad / (torque_per_a * gain), setup.cap.limit_a)
     return Tone(probe_id, float(frequency_hz), pose.theta0_rad, amplitude, delta)
+
+
+def scheme_torque_nm_per_a(placed: PlacedProbe, setup: CoilSetup, theta0_rad: float) -> float:
+    """|τ| on ``placed`` at rest per ampere of base amplitude of ``setup``'s scheme for a probe at
+    ``theta0_rad`` (currents sin(θ0 + φ_c) per ampere, unchecked: 1 A may be above a low cap):
+    the coils' fields on the magnet's arc, exact."""
+    pose = dataclasses.replace(placed.pose, gravity_m_per_s2=(0.0, 0.0, 0.0))
+    step_rad = 1e-4
+    torques = np.array(
+        [
+            -np.diff(arc_energy_j(placed.probe, coil, pose, np.array([-step_rad, step_rad])))[0] / (2 * step_rad)
+            for coil in setup.coils
+        ]
+    )
+    return abs(float(np.sin(theta0_rad + np.array(setup.phases_rad)) @ torques))
 
 
 def coil_amplitudes_a(setup: CoilSetup, tones: Sequence[Tone]) -> np.ndarray:

@@ -3,10 +3,10 @@ command results and link changes, returning the commands to send and the events 
 
 ``phases`` (the vocabulary: phases and their events, settings, a request, its plan and outcome,
 the step the sequencer returns), ``sequencer`` (:class:`~mows.device.cycle.sequencer.CycleSequencer`:
-the cycle of one probe or of several on one stage), ``excitation`` (what one excitation of a
-cycle drives and announces: one probe's tone, or a group's), ``waits`` (what a running cycle waits for and
-records), ``duty`` (the coils' duty-cycle limit), ``tone_groups`` (the groups of a multi-tone plan
-excited in turn, and the plan of several probes at one stage angle), ``tracking`` (tracking
+the cycle of the probes of one stage, one probe a stage of one), ``excitation`` (each round's
+plan of tones and what a group's excitation drives and announces), ``waits`` (what a running
+cycle waits for and records), ``duty`` (the coils' duty-cycle limit), ``tone_groups`` (the groups
+of a plan excited in turn, and the tones sized for a swing), ``tracking`` (tracking
 mode's cycles, back to back) and ``tracking_plan`` (its kicks and ring-downs from the probe's
 physics, and the drive's physics every planned cycle uses).
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from mows.records.results import Result
@@ -109,10 +109,12 @@ class TuningResult(Result, Protocol):
     def frequency_hz(self) -> float: ...
 
 
-# (ring-down samples (n, channels) T, sample rate Hz, θ0 rad, expected frequency Hz,
-#  saturated=(n, channels) flags) → a result with ``frequency_hz``: the estimator's
-# fit_ringdown, handed in by whoever builds the sequencer (the device layer does not fit).
-TuningFit = Callable[..., TuningResult]
+# (ring-down samples (n, channels) T, sample rate Hz, each ringing probe's θ0 rad and expected
+#  frequency Hz (tuples, in one order), saturated=(n, channels) flags) → a result with
+# ``frequency_hz`` per probe, in that order: the estimator's fit_tuning (the joint fit of the
+# probes ringing in one window), handed in by whoever builds the sequencer (the device layer
+# does not fit).
+TuningFit = Callable[..., Sequence[TuningResult]]
 
 
 class TuningStatus(enum.Enum):
@@ -191,8 +193,8 @@ class CycleOutcome:
     cycle_id: int
     frequency_hz: float  # the excitation frequency after tuning
     ringdowns_recorded: int
-    tuning_fits: tuple = ()
-    refused_probes: tuple[tuple[int, str], ...] = ()  # (probe id, reason) not excited (several probes)
+    tuning_fits: tuple = ()  # each tuning ring-down's fits, one per probe it rang, in turn
+    refused_probes: tuple[tuple[int, str], ...] = ()  # (probe id, reason) not excited
     cancelled: bool = False  # ended because nobody wanted it any more (a client's cancel, a deactivate): no fault
 
 

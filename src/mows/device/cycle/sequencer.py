@@ -1,27 +1,27 @@
 """The measurement cycle as a state machine over device sample indices, for the probes of one
-shared stage (``probes``, at their home orientations; probe id = index): one probe or several.
+shared stage (``probes``, at their home orientations; probe id = index), one probe a stage of one.
 
 One cycle at one orientation θ0 (the stage angle; each probe at its home orientation plus it):
 turn the stage and let it settle; then ``tuning_steps + repeats`` rounds, each exciting the
-cycle's groups in turn under the duty-cycle limit and recording each group's free ring-down,
-with a pause of ``gap_s`` between a ring-down and the next excitation.
+round's groups of tones in turn under the duty-cycle limit and recording each group's free
+ring-down, with a pause of ``gap_s`` between a ring-down and the next excitation.
 
-How the probes are driven follows from whether they share the coils:
+Each round is planned at the stage angle (:func:`mows.device.cycle.excitation.plan_at`), every
+probe's tone at its own resonance estimate: a tone that rings no other probe driven alone to
+the housing stop at ``excitation_current_a``, cut at its drive's turning point; tones that ring
+each other sized for a swing and grouped under the driver's cap, overlapping ones refused with
+the reason (:mod:`mows.device.cycle.excitation`). The groups are excited in turn
+(:class:`mows.device.cycle.tone_groups.GroupSequence`). The first ``tuning_steps`` rounds'
+ring-downs are fitted by the fit function the sequencer is handed (the estimator's joint fit of
+the probes ringing in one window, in the driver), each probe's good fit retuning its estimate;
+the next ``repeats`` rounds are the measurements. Probes the plan refuses are named with the
+reason in the outcome while the others are measured; a cycle whose probes are all refused is
+refused before it starts. The EXCITING and RINGDOWN of a group list its probes, each one's tone
+and its own θ0.
 
-* A probe that has the coils to itself (the stage carries one) is driven with the coil setup's
-  orientation-dependent currents at ``excitation_current_a`` (to the housing stop) at its
-  current resonance estimate, and the first ``tuning_steps`` ring-downs are fitted (by the fit
-  function the sequencer is handed, the estimator's ring-down fit of one probe in the driver)
-  and retune that frequency; the next ``repeats`` are the measurements.
-* Probes that share the coils (the stage carries several): the excitation is
-  planned at the stage angle (:func:`mows.device.cycle.tone_groups.plan_probes`: each probe's
-  tone at its f00 for a swing, each at most ``excitation_current_a``, groups whose summed peak
-  stays within the driver's cap, overlapping tones refused with the reason) and its groups are
-  excited in turn (:class:`mows.device.cycle.tone_groups.GroupSequence`). No tuning ring-downs
-  are run (a tuning step retunes one frequency, a multi-tone cycle has one per probe). Probes
-  the plan refuses are named with the reason in the outcome while the others are measured; a
-  cycle whose probes are all refused is refused before it starts. The EXCITING and RINGDOWN of
-  a group list its probes, each one's tone and its own θ0.
+Each probe's estimate starts at its f00 and carries from cycle to cycle. A single frequency (the
+sequencer's ``frequency_hz``, a request's ``frequency_hz``) is a resonance estimate of one probe:
+the probe whose estimate is nearest it takes it (the stage's probe, when it carries one).
 
 Time is the device's sample index. Every command is scheduled at a sample, and every phase
 is stamped with the sample at which the device *answered* that its command took effect, so
@@ -36,31 +36,19 @@ unanswered command, a lost link) switches them off at once, every tone together;
 not yet excited are dropped, and the time the coils were on counts towards the duty limit. The
 emergency stop latches until released.
 
-Every excitation, one probe's or a group's, is an :class:`~mows.device.cycle.excitation.Excitation`
-driven by one :class:`~mows.device.interface.CoilCommand` of its tones (one probe's a tone of one)
-and announced with its probes, their tones and θ0s (:mod:`mows.device.cycle.excitation`).
-
 Why this module is over 450 lines: it is one state machine. Its inputs, the cycle it runs as a
 generator and the waits that resume that generator share the machine's state (the commands in
 flight, the samples' anchor, the duty limit, the phase announced); split, each part would reach
 into the others'. What an excitation drives (``excitation``), what a cycle waits for and records
-(``waits``) and the plan of several probes (``tone_groups``) are apart.
+(``waits``) and the groups in turn (``tone_groups``) are apart.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Generator, Sequence
 
 from mows.device.cycle.duty import DutyCycleLimit
-from mows.device.cycle.excitation import (
-    Excitation,
-    group_excitation,
-    plan_at,
-    probe_currents,
-    probe_excitation,
-    refusals,
-)
+from mows.device.cycle.excitation import Excitation, StagePlan, group_excitation, plan_at, refusals
 from mows.device.cycle.phases import (
     CycleOutcome,
     CyclePlan,
@@ -83,9 +71,9 @@ from mows.device.interface import (
     LinkEvent,
     OrientationCommand,
 )
-from mows.physics.coils import CoilSetup, CurrentCap, excitation_samples
+from mows.physics.coils import CoilSetup, CurrentCap
 from mows.physics.coupling import PlacedProbe
-from mows.physics.multitone import ExcitationPlan
+from mows.physics.multitone import ExcitationPlan, Tone
 from mows.records.samples import SampleBlock
 
 
@@ -93,11 +81,11 @@ class CycleSequencer:
     """Runs one cycle at a time on a device of ``sample_rate_hz`` with the coils of ``setup``
     (module docstring).
 
-    ``probes`` are the probes of one shared stage at their home orientations (one or several);
-    ``frequency_hz`` is the first resonance estimate of a probe that has the coils to itself
-    (retuned by its tuning ring-downs); ``lead_samples`` how far ahead of the newest sample
-    commands are scheduled; ``cap`` the driver's coil current cap (no command above it is ever
-    issued, a multi-tone drive's summed peak included).
+    ``probes`` are the probes of one shared stage at their home orientations; ``frequency_hz``
+    a first resonance estimate, of the probe whose f00 is nearest it (module docstring);
+    ``lead_samples`` how far ahead of the newest sample commands are scheduled; ``cap`` the
+    driver's coil current cap (no command above it is ever issued, a multi-tone drive's summed
+    peak included); ``fit`` fits a tuning ring-down (:data:`mows.device.cycle.phases.TuningFit`).
     """
 
     def __init__(
@@ -114,16 +102,15 @@ class CycleSequencer:
         last_cycle_id: int = 0,
     ):
         if not probes:
-            raise ValueError("a cycle needs the probes it rings (one or several)")
+            raise ValueError("a cycle needs the probes it rings")
         self.settings = settings
         self.setup = setup
         self.cap = cap
         self.sample_rate_hz = float(sample_rate_hz)
-        self.frequency_hz = float(frequency_hz)
         self.lead_samples = int(lead_samples)
         self.probes = tuple(probes)
-        # One probe has the coils to itself: tuned, to the stop. Several share them (module docstring).
-        self.tuned = len(self.probes) == 1
+        # Each probe's resonance estimate, retuned by its tuning fits (module docstring).
+        self.frequencies_hz, self._named = _named(tuple(p.probe.f00_hz for p in self.probes), frequency_hz)
         self.latched: str | None = None  # the reason of a latched emergency stop
         self.phase = Phase.IDLE
         self.fault = ""  # why the last cycle failed, until the next one starts or a stop is released
@@ -136,8 +123,7 @@ class CycleSequencer:
         self._wait: Reach | Answer | None = None
         self._results: dict[int, CommandResult] = {}
         self._recordings: list[Recording] = []
-        self._groups: GroupSequence | None = None  # several probes: the running round's groups
-        self._in_flight: Excitation | None = None  # commanded, its interval not yet counted by the duty limit
+        self._groups: GroupSequence | None = None  # the running round's groups
         self._unstamped: list[tuple[Phase, str]] = []  # events raised before the first sample
         self._last_cycle_id = last_cycle_id  # ids go on from another sequencer's (the driver reconfigured)
         self._last_command_id = 0
@@ -233,8 +219,7 @@ class CycleSequencer:
             raise ValueError("no samples from the device yet")
         s = self.settings if request.settings is None else request.settings
         cycle = CyclePlan.resolve(self._last_cycle_id + 1, request, s)  # ValueError for a request out of range
-        if not self.tuned:  # driven at their f00
-            cycle = dataclasses.replace(cycle, tuning_steps=0)
+        frequencies_hz, named = self.frequencies_hz, self._named
         if request.frequency_hz is not None:
             nyquist_hz = self.sample_rate_hz / 2.0
             check_setting(
@@ -243,54 +228,50 @@ class CycleSequencer:
                 0.0 < request.frequency_hz < nyquist_hz,
                 f"in (0, {nyquist_hz:g}) Hz",
             )
-        if not self.tuned:
-            plan_at(self.probes, cycle.theta0_rad, self._capped_setup(), s)  # ValueError when it excites none
-        else:
-            probe_currents(self.setup, self.cap, self._orientation(cycle), s.excitation_current_a)  # above the cap
+            frequencies_hz, named = _named(frequencies_hz, request.frequency_hz)
         self._duty.configure(s.max_duty_cycle, self._samples(s.duty_window_s))
-        self._duty.earliest_start(self._next_index, self._samples(s.excite_s))  # ValueError if it never fits
-        if request.frequency_hz is not None:
-            self.frequency_hz = float(request.frequency_hz)
+        # ValueError above the cap, when it excites no probe or never fits the duty limit.
+        self._groups_of(self._plan_at(cycle, frequencies_hz))
+        self.frequencies_hz, self._named = frequencies_hz, named
         self._last_cycle_id = cycle.cycle_id
         return cycle
 
     def _run(self, c: CyclePlan) -> Run:
         coils_free = yield from self._turn_and_settle(c)
-        plan = None if self.tuned else plan_at(self.probes, c.theta0_rad, self._capped_setup(), c.settings)
         fits: list[TuningResult] = []
         rung = self._recorded = 0
         for k in range(c.tuning_steps + c.repeats):
             tuning = k < c.tuning_steps
             index = k if tuning else k - c.tuning_steps
-            if plan is not None:
-                self._groups = GroupSequence(plan, self._capped_setup(), self._duty, self.sample_rate_hz)
-            for _ in range(1 if plan is None else len(plan.groups)):
+            try:  # each round at the estimates the last one's tuning left
+                stage = self._plan_at(c, self.frequencies_hz)
+                self._groups = self._groups_of(stage)
+            except ValueError as refused:
+                raise CycleAborted(f"round {k + 1} cannot be excited: {refused}") from refused
+            for _ in stage.plan.groups:
                 gap = self._samples(c.gap_s) if rung else 0
-                excitation = self._next_excitation(c, max(coils_free + gap, self._next_index + self.lead_samples))
+                group = self._groups.next(max(coils_free + gap, self._next_index + self.lead_samples))
+                assert group is not None  # a group is asked for only while some remain
+                to_stop = group.probe_ids[0] in stage.to_stop
+                excitation = group_excitation(self.setup, group, self.sample_rate_hz, to_stop)
                 recording = yield from self._excite(c, excitation, coils_free, index, tuning)
                 rung += 1
                 if tuning:
-                    fits.append(self._tune(c, recording))
+                    fits += self._tune(recording, group.tones)
                 else:
                     self._recorded += 1
                 coils_free = recording.end
         self._groups = None
         yield from self._enter(c, Phase.IDLE, coils_free, 0)
-        return self._outcome(c, plan, self._recorded, fits)
+        return self._outcome(c, stage.plan, self._recorded, fits)
 
-    def _next_excitation(self, c: CyclePlan, not_before: int) -> Excitation:
-        """The next group's excitation, at the first sample ≥ ``not_before`` that keeps the duty
-        limit: one probe's at the tuned frequency, cut at the drive's turning point
-        (excitation_samples), or the round's next group of tones."""
-        if self._groups is None:
-            excite = excitation_samples(c.settings.excite_s, self.frequency_hz, self.sample_rate_hz)
-            start = self._duty.earliest_start(not_before, excite)
-            amplitude_a = c.settings.excitation_current_a
-            theta0_rad = self._orientation(c)
-            return probe_excitation(self.setup, self.cap, theta0_rad, amplitude_a, self.frequency_hz, start, excite)
-        group = self._groups.next(not_before)
-        assert group is not None  # a group is asked for only while some remain
-        return group_excitation(self.setup, group, self.sample_rate_hz)
+    def _plan_at(self, c: CyclePlan, frequencies_hz: tuple[float, ...]) -> StagePlan:
+        return plan_at(self.probes, c.theta0_rad, self.setup, self.cap, c.settings, frequencies_hz)
+
+    def _groups_of(self, stage: StagePlan) -> GroupSequence:
+        """The groups of ``stage`` under the driver's cap and the duty limit (ValueError if a group
+        is above the cap or never fits the limit)."""
+        return GroupSequence(stage.plan, self._capped_setup(), self._duty, self.sample_rate_hz, stage.to_stop)
 
     def _excite(
         self, c: CyclePlan, e: Excitation, coils_free: int, index: int, tuning: bool
@@ -300,12 +281,12 @@ class CycleSequencer:
         The duty limit counts the interval the device applied."""
         on = self._issue(CoilCommand, e.on_index, tones=e.tones, samples=e.off_index - e.on_index)
         off = self._issue(CoilCommand, e.off_index)
-        self._in_flight = e
         if e.on_index > coils_free:
             yield from self._enter(c, Phase.GAP, coils_free, e.on_index - coils_free, index, tuning)
         switched_on = yield from self._answer(on)
         switched_off = yield from self._answer(off)
-        self._switched(switched_on, switched_off)
+        assert self._groups is not None  # the round's groups, until the cycle ends
+        self._groups.switched(switched_on, switched_off)  # the duty limit counts what the device applied
         recording = Recording(switched_off, switched_off + self._samples(c.settings.ringdown_s))
         if tuning:
             self._recordings.append(recording)
@@ -316,28 +297,17 @@ class CycleSequencer:
             self._recordings.remove(recording)
         return recording
 
-    def _switched(self, on_index: int, off_index: int) -> None:
-        """The device applied the excitation in flight over [``on_index``, ``off_index``): the duty
-        limit counts it."""
-        if self._groups is not None:
-            self._groups.switched(on_index, off_index)
-        else:
-            self._duty.record(on_index, off_index)
-        self._in_flight = None
-
-    def _outcome(self, c: CyclePlan, plan: ExcitationPlan | None, recorded: int, fits: list) -> CycleOutcome:
-        if plan is not None:
-            in_turn = " then ".join(str(list(g)) for g in plan.groups)
-            message = f"{recorded} ring-downs recorded of the probes {in_turn} at their f00 (no tuning)"
-            if plan.refused:
-                message += f"; refused: {refusals(plan)}"
-            frequency_hz = plan.group_tones(0)[0].frequency_hz
-            return CycleOutcome(True, message, c.cycle_id, frequency_hz, recorded, refused_probes=plan.refused)
+    def _outcome(self, c: CyclePlan, plan: ExcitationPlan, recorded: int, fits: list) -> CycleOutcome:
+        groups = (plan.group_tones(g) for g in range(len(plan.groups)))
+        in_turn = " then ".join(str([f"{t.probe_id}: {t.frequency_hz:.4f} Hz" for t in tones]) for tones in groups)
+        message = f"{recorded} ring-downs recorded of the probes {in_turn}"
         failed = [f for f in fits if not f.ok]
-        message = f"{recorded} ring-downs recorded at {self.frequency_hz:.4f} Hz"
         if failed:
             message += f"; {len(failed)} of {len(fits)} tuning fits failed ({failed[-1].report()})"
-        return CycleOutcome(True, message, c.cycle_id, self.frequency_hz, recorded, tuple(fits))
+        if plan.refused:
+            message += f"; refused: {refusals(plan)}"
+        frequency_hz = plan.group_tones(0)[0].frequency_hz
+        return CycleOutcome(True, message, c.cycle_id, frequency_hz, recorded, tuple(fits), plan.refused)
 
     def _turn_and_settle(self, c: CyclePlan) -> Generator[Answer | Reach, CommandResult | None, int]:
         """Turn to the cycle's θ0 and let it settle (SETTLING); returns the sample from which the
@@ -360,23 +330,29 @@ class CycleSequencer:
         yield from self._enter(c, Phase.SETTLING, turned, settle)
         return turned + settle
 
-    def _tune(self, c: CyclePlan, recording: Recording) -> TuningResult:
-        """Fit a tuning ring-down; a good fit becomes the excitation frequency."""
+    def _tune(self, recording: Recording, tones: Sequence[Tone]) -> list[TuningResult]:
+        """Fit a tuning ring-down of ``tones``' probes; each good fit becomes its probe's estimate."""
         if not recording.complete:
-            return LostTuning()
+            return [LostTuning() for _ in tones]
         samples, saturated = recording.arrays()
-        fit = self._fit(samples, self.sample_rate_hz, self._orientation(c), self.frequency_hz, saturated=saturated)
-        if fit.ok:
-            self.frequency_hz = float(fit.frequency_hz)
-        return fit
-
-    def _orientation(self, c: CyclePlan) -> float:
-        """The θ0 of the probe that has the coils to itself: its home orientation plus the stage's."""
-        return self.probes[0].pose.theta0_rad + c.theta0_rad
+        theta0_rad = tuple(t.theta0_rad for t in tones)
+        expected_hz = tuple(t.frequency_hz for t in tones)
+        fits = list(self._fit(samples, self.sample_rate_hz, theta0_rad, expected_hz, saturated=saturated))
+        estimates = list(self.frequencies_hz)
+        for tone, fit in zip(tones, fits, strict=True):
+            if fit.ok:
+                estimates[tone.probe_id] = float(fit.frequency_hz)
+        self.frequencies_hz = tuple(estimates)
+        return fits
 
     def _capped_setup(self) -> CoilSetup:
         """The setup under the driver's cap, which a multi-tone plan holds on the summed peak."""
         return with_cap(self.setup, self.cap.limit_a)
+
+    @property
+    def frequency_hz(self) -> float:
+        """The estimate of the probe the last single frequency named (reported outside an excitation)."""
+        return self.frequencies_hz[self._named]
 
     # --- waiting ---------------------------------------------------------------------------
     def _issue(self, kind, at_index: int, **fields) -> Command:
@@ -462,11 +438,9 @@ class CycleSequencer:
         duty limit."""
         self._step.coils_off_now = True
         self._coils_stopped_at = self._next_index
-        if self._groups is not None and not self._groups.done:
+        if self._groups is not None:  # an excitation in flight counts up to now
             self._groups.emergency_stop(self._next_index, reason or "stopped")
-        elif (e := self._in_flight) is not None:
-            self._duty.record(e.on_index, max(e.on_index, min(e.off_index, self._next_index)))
-        self._groups, self._in_flight = None, None
+        self._groups = None
         if self._runner is not None:
             cycle = self._cycle
             assert cycle is not None  # set and cleared together with _runner (start, _end)
@@ -532,3 +506,10 @@ class CycleSequencer:
 
     def _samples(self, seconds: float) -> int:
         return int(round(seconds * self.sample_rate_hz))
+
+
+def _named(estimates_hz: tuple[float, ...], frequency_hz: float) -> tuple[tuple[float, ...], int]:
+    """``estimates_hz`` with the one nearest ``frequency_hz`` replaced by it, and its index
+    (module docstring)."""
+    k = min(range(len(estimates_hz)), key=lambda j: abs(estimates_hz[j] - frequency_hz))
+    return tuple(float(frequency_hz) if j == k else f for j, f in enumerate(estimates_hz)), k

@@ -11,9 +11,11 @@ at its sample, drops the groups not yet excited and latches: nothing more is exc
 I/O-free: fed the sample a group may start at, the interval the device applied and the stop;
 it returns the excitations to command and the summed coil currents at given samples.
 
-:func:`plan_probes` is what a cycle of several probes plans at one stage angle: each probe's
-tone at its f00 for a swing (:func:`mows.physics.multitone.tone_for_swing`), each at most a
-given current, grouped under the cap with the overlapping tones refused.
+A tone that rings other probes of the stage (:func:`rings_others`) is sized for a swing
+(:func:`swing_tone`, :func:`mows.physics.multitone.tone_for_swing`), at most a given current;
+:func:`plan_probes` plans a stage's probes so at their f00, grouped under the cap with the
+overlapping tones refused. The group of a tone driven to the stop is cut at its drive's turning
+point instead (:mod:`mows.device.cycle.excitation`).
 """
 
 from __future__ import annotations
@@ -26,14 +28,15 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mows.device.cycle.duty import DutyCycleLimit
-from mows.physics.coils import CoilSetup, CurrentCap
+from mows.physics.coils import CoilSetup, CurrentCap, excitation_samples
 from mows.physics.coupling import PlacedProbe
 from mows.physics.multitone import (
     ExcitationPlan,
     Tone,
     drive_currents_a,
-    peak_current_a,
     plan_excitation,
+    scheme_torque_nm_per_a,
+    summed_peak_a,
     tone_for_swing,
 )
 
@@ -54,23 +57,44 @@ def plan_probes(
     tone_limit_a: float = math.inf,
 ) -> ExcitationPlan:
     """The excitation plan of ``placed`` (probe id = index) for excitations of ``duration_s``
-    under ``setup``'s cap: each tone at its probe's f00 and for ``swing_rad``, its base
-    amplitude at most ``tone_limit_a`` (module docstring). A probe the coils put no torque on,
-    or whose tone ``tone_limit_a`` leaves at zero, is refused with the reason."""
+    under ``setup``'s cap: each tone at its probe's f00 (:func:`swing_tone`), the refused with
+    the reason."""
     tones, refused = [], []
     for k, p in enumerate(placed):
         try:
-            tone = tone_for_swing(k, p, setup, p.probe.f00_hz, swing_rad, duration_s)
-        except ValueError as no_torque:
-            refused.append((k, str(no_torque)))
-            continue
-        amplitude_a = min(tone.amplitude_a, tone_limit_a)
-        if amplitude_a > 0.0:
-            tones.append(dataclasses.replace(tone, amplitude_a=amplitude_a))
-        else:
-            refused.append((k, f"a tone of at most {tone_limit_a:g} A excites nothing"))
+            tones.append(swing_tone(k, p, setup, p.probe.f00_hz, duration_s, swing_rad, tone_limit_a))
+        except ValueError as why:
+            refused.append((k, str(why)))
     plan = plan_excitation(setup, tones, duration_s)
     return dataclasses.replace(plan, refused=tuple(sorted(refused + list(plan.refused))))
+
+
+def swing_tone(
+    probe_id: int,
+    placed: PlacedProbe,
+    setup: CoilSetup,
+    frequency_hz: float,
+    duration_s: float,
+    swing_rad: float = DEFAULT_SWING_RAD,
+    tone_limit_a: float = math.inf,
+) -> Tone:
+    """The tone of ``placed`` at ``frequency_hz`` for ``swing_rad`` after ``duration_s``
+    (:func:`mows.physics.multitone.tone_for_swing`), its amplitude at most ``tone_limit_a``.
+    ValueError, with the reason, for a probe the coils put no torque on or whose tone
+    ``tone_limit_a`` leaves at zero."""
+    tone = tone_for_swing(probe_id, placed, setup, frequency_hz, swing_rad, duration_s)
+    amplitude_a = min(tone.amplitude_a, tone_limit_a)
+    if not amplitude_a > 0.0:
+        raise ValueError(f"a tone of at most {tone_limit_a:g} A excites nothing")
+    return dataclasses.replace(tone, amplitude_a=amplitude_a)
+
+
+def rings_others(probe_id: int, placed: Sequence[PlacedProbe], setup: CoilSetup) -> bool:
+    """Whether the tone of ``placed[probe_id]`` (``setup``'s scheme at its θ0) puts a torque on
+    another probe of the stage: any at all, as a tone driven to the housing stop rings a
+    neighbour far above the swing its own tone gives it."""
+    theta0_rad = placed[probe_id].pose.theta0_rad
+    return any(scheme_torque_nm_per_a(p, setup, theta0_rad) > 0.0 for k, p in enumerate(placed) if k != probe_id)
 
 
 def with_cap(setup: CoilSetup, limit_a: float) -> CoilSetup:
@@ -93,24 +117,43 @@ class GroupExcitation:
 
 
 class GroupSequence:
-    """Excites the groups of ``plan`` in turn with the coils of ``setup`` (module docstring).
+    """Excites the groups of ``plan`` in turn with the coils of ``setup`` (module docstring); the
+    group of a probe in ``to_stop`` (driven to the housing stop, alone) is cut at its drive's
+    turning point (:func:`mows.physics.coils.excitation_samples`).
 
     ValueError if a group's summed peak is above the setup's cap or its excitation could never
     keep the duty limit ``duty``.
     """
 
-    def __init__(self, plan: ExcitationPlan, setup: CoilSetup, duty: DutyCycleLimit, sample_rate_hz: float):
+    def __init__(
+        self,
+        plan: ExcitationPlan,
+        setup: CoilSetup,
+        duty: DutyCycleLimit,
+        sample_rate_hz: float,
+        to_stop: frozenset[int] = frozenset(),
+    ):
         if not (math.isfinite(sample_rate_hz) and sample_rate_hz > 0.0):
             raise ValueError(f"sample_rate_hz = {sample_rate_hz!r} must be finite and > 0")
         self.setup = setup
         self.sample_rate_hz = float(sample_rate_hz)
         self.excite_samples = math.floor(plan.duration_s * sample_rate_hz)
         self._groups = [plan.group_tones(k) for k in range(len(plan.groups))]
+        self._samples = [
+            excitation_samples(plan.duration_s, tones[0].frequency_hz, sample_rate_hz)
+            if tones[0].probe_id in to_stop
+            else self.excite_samples
+            for tones in self._groups
+        ]
+        phases = np.array(setup.phases_rad)
         for k, tones in enumerate(self._groups):
-            peak = peak_current_a(setup, tones, plan.duration_s).max()
+            # Each coil's true peak, the amplitude of a tone driven to the stop may be above the cap.
+            amplitudes = [t.amplitude_a * np.sin(t.theta0_rad + phases) for t in tones]
+            peak = summed_peak_a(amplitudes, [t.frequency_hz for t in tones], plan.duration_s).max()
             if peak > setup.cap.limit_a:
                 raise ValueError(f"group {k + 1} peaks at {peak:.6g} A, above the {setup.cap.limit_a:g} A cap")
-        duty.earliest_start(0, self.excite_samples)  # ValueError if it never fits
+        for samples in self._samples:
+            duty.earliest_start(0, samples)  # ValueError if it never fits
         self._duty = duty
         self.excitations: list[GroupExcitation] = []
         self.stop_reason = ""  # the latched emergency stop's reason, '' while none
@@ -128,9 +171,9 @@ class GroupSequence:
             return None
         if self._recorded < len(self.excitations):
             raise ValueError("the previous excitation's applied interval was not reported (switched)")
-        start = self._duty.earliest_start(int(not_before), self.excite_samples)
         k = len(self.excitations)
-        excitation = GroupExcitation(k, self._groups[k], start, start + self.excite_samples)
+        start = self._duty.earliest_start(int(not_before), self._samples[k])
+        excitation = GroupExcitation(k, self._groups[k], start, start + self._samples[k])
         self.excitations.append(excitation)
         return excitation
 

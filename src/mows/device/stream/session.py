@@ -68,8 +68,8 @@ class SessionConfig:
     settings: CycleSettings
     setup: CoilSetup  # the coils by name (a device that knows where they stand brings its own)
     cap: CurrentCap
-    frequency_hz: float  # the first resonance estimate of a probe that has the coils to itself
-    fit: TuningFit  # fits the tuning ring-downs (the estimator's fit_ringdown)
+    frequency_hz: float  # a first resonance estimate, of the probe whose f00 is nearest it
+    fit: TuningFit  # fits the tuning ring-downs (the estimator's fit_tuning)
     # A session that follows another on the same device link (the driver reconfigured) goes on
     # from where it left: the next device clock's epoch, and cycle ids not used before.
     first_epoch: int = 0

@@ -17,7 +17,7 @@ This package's ``__init__`` re-exports the fit's public names:
 May import: ``mows.physics``, ``mows.records``; nothing else of ``mows.estimate``.
 """
 
-from mows.estimate.ringdown.fit import fit_ringdown, fit_ringdowns, starting_point
+from mows.estimate.ringdown.fit import fit_ringdown, fit_ringdowns, fit_tuning, starting_point
 from mows.estimate.ringdown.problem import cramer_rao_frequency_hz, cramer_rao_hz
 from mows.estimate.ringdown.summary import DETERMINED_SIGMAS, RIVAL_CHI2, swing_from_signal_rad, wrapped_rad
 from mows.estimate.ringdown.types import FitOptions, FitStatus, ProbeLine, RingdownFit, failure, parameter_std
@@ -37,6 +37,7 @@ __all__ = [
     "failure",
     "fit_ringdown",
     "fit_ringdowns",
+    "fit_tuning",
     "parameter_std",
     "swing_from_signal_rad",
     "starting_point",

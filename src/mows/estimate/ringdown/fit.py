@@ -1,5 +1,6 @@
 """The fit of K ≥ 1 probes ringing down in one window, Eqs. S2, S11, S12, at the Cramér–Rao
-bound: :func:`fit_ringdowns`, and :func:`fit_ringdown`, the fit of one.
+bound: :func:`fit_ringdowns`, and :func:`fit_ringdown`, the fit of one; :func:`fit_tuning`, the
+cycle sequencer's tuning fit.
 
 Its options and result types are :mod:`mows.estimate.ringdown.types` (imported here too).
 
@@ -196,6 +197,23 @@ def fit_ringdowns(
         return failures(why, message, lines, options)
     y = combine_channels(data[start:stop], options.channels)
     return own_lines(_fit_window(y, fs, lines, options, start / fs), lines, options)
+
+
+def fit_tuning(
+    samples: ArrayLike,
+    sample_rate_hz: float,
+    theta0_rad: Sequence[float],
+    expected_frequency_hz: Sequence[float],
+    saturated: ArrayLike | None = None,
+) -> list[RingdownFit]:
+    """The cycle sequencer's tuning fit (:data:`mows.device.cycle.phases.TuningFit`): the probes
+    ringing in one ring-down, each at its θ0 and expected at its drive's frequency (in one
+    order), fitted jointly by :func:`fit_ringdowns`; one fit per probe, in that order."""
+    lines = [
+        ProbeLine(k, float(theta0), float(frequency_hz))
+        for k, (theta0, frequency_hz) in enumerate(zip(theta0_rad, expected_frequency_hz, strict=True))
+    ]
+    return fit_ringdowns(samples, sample_rate_hz, lines, saturated)
 
 
 def _check_lines(lines: Sequence[ProbeLine], options: FitOptions) -> None:

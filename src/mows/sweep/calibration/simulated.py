@@ -17,7 +17,7 @@ import numpy as np
 from mows.device.cycle.phases import CycleSettings, Phase, PhaseEvent
 from mows.device.stream.device_time import DeviceTimeLoop, scheduled_device
 from mows.estimate.probe_set import ProbeEntry, window_probes
-from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, fit_ringdown
+from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, fit_tuning
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.physics.coils import CurrentCap
 from mows.physics.probe import Probe
@@ -71,7 +71,7 @@ def simulate_calibration(scenario, plan: CalibrationPlan, nominal: Probe, on_fee
     )
     fits = _NominalFits(scenario.sensors.pair, nominal)
     device = scheduled_device(scenario, CurrentCap(), np.random.default_rng(scenario.seed))
-    loop = DeviceTimeLoop(device, settings, fit=fit_ringdown, on_block=fits.block, on_event=fits.event)
+    loop = DeviceTimeLoop(device, settings, fit=fit_tuning, on_block=fits.block, on_event=fits.event)
     schedule = CalibrationSchedule(plan)
     pending = [schedule.start()]
     while pending:

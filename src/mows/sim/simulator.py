@@ -67,6 +67,21 @@ SERIES_TOLERANCE = 1e-15
 NEVER = 2**62
 
 
+def slope_series(magnets, poses, static_source, driven_sources, half_width_rad: float) -> tuple[list, list]:
+    """The Chebyshev coefficients of W'(θ) of each of ``magnets`` at its pose, the negligible
+    tail dropped: in ``static_source`` with gravity's torque, [probe]; and in each of
+    ``driven_sources`` (a coil's or the supply's field per ampere) without it, [source][probe]."""
+    weightless = [dataclasses.replace(pose, gravity_m_per_s2=(0.0, 0.0, 0.0)) for pose in poses]
+
+    def series(magnet, source, pose) -> np.ndarray:
+        coeffs = ArcPotential.from_source(magnet, source, pose, half_width_rad=half_width_rad).d1
+        significant = np.flatnonzero(np.abs(coeffs) > SERIES_TOLERANCE * magnet.spring_nm_per_rad * half_width_rad)
+        return np.ascontiguousarray(coeffs[: max(2, significant[-1] + 1 if significant.size else 2)])
+
+    static = [series(m, static_source, pose) for m, pose in zip(magnets, poses)]
+    return static, [[series(m, source, pose) for m, pose in zip(magnets, weightless)] for source in driven_sources]
+
+
 class SimulatedDevice:
     """The MOWS device in a :class:`mows.sim.scenario.Scenario` with all of its probes
     (:meth:`mows.sim.scenario.Scenario.placed_probes`), advanced sample by sample.
@@ -115,18 +130,11 @@ class SimulatedDevice:
         self._drive_series, self._drive_omegas = np.zeros((0, len(self.placed), 0)), np.zeros(0)
         self._drive_on_index = self._drive_off_index = 0
         self._state = np.zeros((3, len(self.placed)))  # θ, θ', contact mode of each probe
-        self._magnets = self._magnets_now()
         self.set_orientations([p.pose.theta0_rad for p in self.placed] if theta0_rad is None else theta0_rad)
         rest = self.truth.rest_angle_rad
         self._state[0] = np.where(np.isfinite(rest), rest, 0.0)  # beyond spring cancellation: it buckles
 
     # --- set-up --------------------------------------------------------------------------
-    def _slope_series(self, magnet, source, pose) -> np.ndarray:
-        """Chebyshev coefficients of W'(θ) of ``magnet`` in ``source`` at ``pose``, negligible tail dropped."""
-        coeffs = ArcPotential.from_source(magnet, source, pose, half_width_rad=self.half_width_rad).d1
-        significant = np.flatnonzero(np.abs(coeffs) > SERIES_TOLERANCE * magnet.spring_nm_per_rad * self.half_width_rad)
-        return np.ascontiguousarray(coeffs[: max(2, significant[-1] + 1 if significant.size else 2)])
-
     @property
     def theta0_rad(self) -> np.ndarray:
         """(N,): each probe's present orientation."""
@@ -153,16 +161,12 @@ class SimulatedDevice:
         """W' of every source for every probe at its present pose, for its magnet's present
         moment, and the probes' geometry for their coupling."""
         poses = [p.pose for p in self.placed]
-        no_gravity = [dataclasses.replace(pose, gravity_m_per_s2=(0.0, 0.0, 0.0)) for pose in poses]
-        self._fixed_series = [self._slope_series(m, self._fixed_source, pose) for m, pose in zip(self._magnets, poses)]
-        self._coil_series = [
-            [self._slope_series(m, coil, pose) for m, pose in zip(self._magnets, no_gravity)]
-            for coil in self.setup.coils
-        ]  # [coil][probe]
-        self._supply_series = [
-            np.zeros(0) if self._supply is None else self._slope_series(m, self._supply.source, pose)
-            for m, pose in zip(self._magnets, no_gravity)
-        ]
+        supply = () if self._supply is None else (self._supply.source,)
+        self._fixed_series, driven = slope_series(
+            self._magnets, poses, self._fixed_source, (*self.setup.coils, *supply), self.half_width_rad
+        )
+        self._coil_series = driven[: self.n_coils]  # [coil][probe]
+        self._supply_series = driven[self.n_coils] if supply else [np.zeros(0) for _ in poses]
         for row, m, pose in zip(self._head, self._magnets, poses):
             x_axis, y_axis, _ = pose.axes()
             row[G_MOMENT], row[G_LEVER] = m.moment_am2, m.lever_m

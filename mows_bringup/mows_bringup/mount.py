@@ -38,14 +38,14 @@ def probes_mount(probes: tuple[ProbeEntry, ...], mount: Path | None = None) -> s
     """The URDF text of the mount with every probe's frames (module docstring)."""
     robot = ET.parse(mount or shipped_mount()).getroot()
     for entry in probes:
-        plane, probe = probe_frame_id(PLANE, entry.probe_id), probe_frame_id(PROBE, entry.probe_id)
+        plane, probe, joint = (probe_frame_id(base, entry.probe_id, named=True) for base in (PLANE, PROBE, STAGE_JOINT))
         ET.SubElement(robot, "link", name=plane)
         ET.SubElement(robot, "link", name=probe)
         fixed = ET.SubElement(robot, "joint", name=f"{plane}_mount", type="fixed")
         ET.SubElement(fixed, "parent", link=PLANE)
         ET.SubElement(fixed, "child", link=plane)
         ET.SubElement(fixed, "origin", xyz=" ".join(repr(x) for x in entry.position_m), rpy="0 0 0")
-        stage = ET.SubElement(robot, "joint", name=probe_frame_id(STAGE_JOINT, entry.probe_id), type="continuous")
+        stage = ET.SubElement(robot, "joint", name=joint, type="continuous")
         ET.SubElement(stage, "parent", link=plane)
         ET.SubElement(stage, "child", link=probe)
         ET.SubElement(stage, "origin", xyz="0 0 0", rpy="0 0 0")

@@ -104,7 +104,7 @@ class EstimatorNode(MowsNode):
 
     def _publish(self, estimated: Estimated, arrived: float):
         named = self._named()
-        frame_id = probe_frame_id(self.get_parameter("probe_frame_id").value, estimated.probe_id if named else None)
+        frame_id = probe_frame_id(self.get_parameter("probe_frame_id").value, estimated.probe_id, named)
         fit_msg = fit_to_msg(estimated, frame_id)
         self._fit_pub.publish(fit_msg)
         if estimated.estimate.ok:

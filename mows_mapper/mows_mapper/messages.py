@@ -92,7 +92,7 @@ def decomposition_msg(sweep: SweepMap, frame_id: str) -> SweepDecomposition:
 def sweep_frame_id(sweep: SweepMap, frame_id: str, per_probe: bool) -> str:
     """The frame of a probe's decomposition: its own rotation-plane frame when the probes are
     listed (``per_probe``), else the single probe's ``frame_id``."""
-    return probe_frame_id(frame_id, sweep.probe_id if per_probe else None)
+    return probe_frame_id(frame_id, sweep.probe_id, per_probe)
 
 
 def publication_msgs(plan: Publication, frame_id: str) -> list[SweepDecomposition]:

@@ -151,7 +151,7 @@ class MapperNode(MowsNode):
                     goal_handle.publish_feedback(feedback)
                 step = await self._advance(step)
             outcome = step.finished
-            plan = publication(step, self._settings.probes, self._param("reference_scenario"))
+            plan = publication(step, self._settings, self._param("reference_scenario"))
             await self._publish(plan)
         finally:  # an exception must not leave the runner busy for good
             self.destroy_timer(timer)

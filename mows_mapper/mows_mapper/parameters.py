@@ -2,7 +2,8 @@
 
 import dataclasses
 
-from mows.estimate.settings import probe_set
+from mows.estimate.probe_set import own_probe_entry
+from mows.estimate.settings import node_probes
 from mows.lab import reference_at
 from mows.physics.probe import Probe
 from mows.sweep.events import REPEATS_PER_ANGLE_RANGE, SweepSettings
@@ -87,5 +88,6 @@ def sweep_settings(values: dict, probe: Probe) -> SweepSettings:
         values["repeat_s"],
         values["turn_s"],
         values["orientation"] == "manual",
-        probe_set(values["probes"], probe),
+        node_probes(values["probes"], own_probe_entry(probe)),
+        bool(values["probes"].strip()),
     )

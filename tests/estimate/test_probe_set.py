@@ -4,10 +4,10 @@ one line naming it, and an empty text leaving the single-probe estimator as it i
 import numpy as np
 import pytest
 
-from mows.estimate.probe_set import read_probe_set
+from mows.estimate.probe_set import own_probe_entry, read_probe_set, with_f00
 from mows.estimate.ringdown import FitOptions
 from mows.estimate.segments import RingdownWindow, Segment
-from mows.estimate.settings import FitParameters
+from mows.estimate.settings import FitParameters, node_probes
 from mows.estimate.stream import FitSettings, RingdownEstimator
 from mows.physics.fluxgate import FluxgatePair, pickup_harmonics
 from mows.physics.multitone import MAX_PROBES
@@ -98,6 +98,14 @@ def test_without_probes_the_set_is_the_estimators_own_probe_alone():
     assert alone.fit.ok and alone.fit.probe_id == alone.probe_id == 0, alone.fit.message
     assert abs(alone.fit.frequency_hz - 112.5) < 4 * alone.fit.frequency_std_hz
     assert alone.estimate.frequency_shift_hz == pytest.approx(alone.fit.frequency_hz - 112.48)
+
+
+def test_a_nodes_probes_are_never_none_its_own_probe_a_set_of_one_as_a_listed_one_is():
+    own = own_probe_entry(PAPER_PROBE, 112.48, 0.01)
+    assert node_probes("", own) == node_probes("  ", own) == (own,)
+    (listed,) = node_probes("{0: 112.48}", own)
+    assert (listed.probe_id, listed.f00_hz, listed.probe) == (0, 112.48, with_f00(PAPER_PROBE, 112.48))
+    assert [e.probe_id for e in node_probes("{3: 112.5, 1: 125.0}", own)] == [1, 3]
 
 
 def test_with_probes_each_gets_its_estimate_from_its_own_f00():

@@ -10,6 +10,7 @@ import pytest
 import yaml
 from rclpy.parameter import Parameter
 
+from mows.estimate.probe_set import own_probe_entry
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import DEFAULT_SCENARIO, load_scenario, scenario_file
 from mows_bringup.nodes import NODES, VIZ
@@ -17,6 +18,7 @@ from mows_calibrator import node as calibrator
 from mows_driver import node as driver
 from mows_estimator import node as estimator
 from mows_mapper import node as mapper
+from mows_mapper.parameters import sweep_settings
 from mows_ros.node import GRAPH_NODE_NAMES
 from mows_ros.process import EXIT_BAD_PARAMETER
 
@@ -93,6 +95,14 @@ def test_a_probe_file_is_read_when_set_and_refused_with_its_reason(ros_context, 
     assert not result.successful and "probe_file" in result.reason and "lacks" in result.reason
     assert [p.probe.damping_per_s for p in node._settings().probes] == [2.5]  # the accepted file's probe stays in use
     node.destroy_node()
+
+
+def test_the_mappers_settings_hold_its_own_probe_as_a_set_of_one_unless_probes_names_them():
+    values = {spec.name: spec.default for spec in mapper.PARAMETERS}
+    own = sweep_settings(values, PAPER_PROBE)
+    assert own.probes == (own_probe_entry(PAPER_PROBE),) and not own.named
+    named = sweep_settings(values | {"probes": "{0: 112.5, 2: 125.0}"}, PAPER_PROBE)
+    assert [e.probe_id for e in named.probes] == [0, 2] and named.named
 
 
 def test_a_bad_value_at_start_up_stops_the_node():

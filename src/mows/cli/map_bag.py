@@ -23,7 +23,8 @@ import numpy as np
 from mows.cli import map_workspace
 from mows.cli.fit_bag import add_fit_arguments, bag_fitting, fit_settings
 from mows.cli.inputs import input_file
-from mows.estimate.settings import probe_set
+from mows.estimate.probe_set import own_probe_entry
+from mows.estimate.settings import node_probes
 from mows.lab.data.readers import is_bag
 from mows.lab.data.ringdowns import check_probes, fit_bag
 from mows.physics.probe import PAPER_PROBE, Probe
@@ -55,7 +56,10 @@ def run(args) -> int:
         raise ValueError(f"{args.bag} is not a bag (a bag is a directory or an .mcap file)")
     probe = Probe.from_yaml(args.probe) if args.probe else PAPER_PROBE
     try:
-        settings = SweepSettings(model=args.model, f00_free=args.f00_free, probes=probe_set(args.probes, probe))
+        probes = node_probes(args.probes, own_probe_entry(probe))
+        settings = SweepSettings(
+            model=args.model, f00_free=args.f00_free, probes=probes, named=bool(args.probes.strip())
+        )
     except ValueError as error:
         raise ValueError(f"--probes: {error}") from None
     with input_file(args.bag):
@@ -66,7 +70,7 @@ def run(args) -> int:
             fits = tuple(SweepFit.from_estimated(e) for e in fit_bag(args.bag, fit_settings(how, probe), how))
         if not fits:
             raise ValueError("no ring-down fit recorded (the estimator was not running?): --refit fits the raw stream")
-        if not settings.probes:
+        if not settings.named:
             check_probes(args.bag, args.excitation_topic)
         sweeps = [(f"sweep {k}", cycles) for k, cycles in enumerate(session.sweeps(), 1)]
         if after := session.after_last():

@@ -16,8 +16,8 @@ magnet at rest relative to the single probe's place before the fluxgates, in the
 plane's frame (x = e1 towards the sensors' side, y = e2); each probe is turned about its own
 magnet to the θ0 the driver announces for it (``probe_theta0_rad`` of a ring-down that lists its
 probes, :func:`window_probes`; else the one θ0 of the window). A probe orbiting a shared axis is
-not modelled. An empty text lists none: the estimator then tells apart its own probe alone
-(:meth:`mows.estimate.settings.FitParameters.probe_entries`).
+not modelled. An empty text lists none: a node then tells apart its own probe alone, as probe 0
+(:func:`mows.estimate.settings.node_probes`, the one place where a text is made a set).
 
 At most :data:`MAX_PROBES` probes, each line at least :data:`MIN_SEPARATION_HZ` from the
 others: closer lines are not told apart in a window of a second or less (docs/multi_probe.md).
@@ -65,6 +65,12 @@ class ProbeEntry:
         expected_hz = tone_hz if math.isfinite(tone_hz) and tone_hz > 0 else self.f00_hz
         pose = Pose(theta0_rad=theta0_rad, magnet_position_m=self.position_m)
         return probe_line(self.probe_id, self.probe, pose, expected_hz, pair, channels)
+
+
+def own_probe_entry(probe: Probe, f00_hz: float = 0.0, f00_std_hz: float = 0.0) -> ProbeEntry:
+    """A node's own probe (its ``probe_file``) as probe 0 of its set, at ``f00_hz`` (0: the
+    probe's) ± ``f00_std_hz``."""
+    return ProbeEntry(0, probe, f00_hz if f00_hz > 0 else probe.f00_hz, f00_std_hz)
 
 
 def probe_line(
@@ -197,8 +203,8 @@ def _number(name: str, value: Any, low: float, high: float) -> float:
     return float(value)
 
 
-def probe_frame_id(base: str, probe_id: int | None) -> str:
-    """The frame of probe ``probe_id`` when several are listed: the single probe's frame name
-    with the id appended (``mows_probe`` → ``mows_probe_2``); ``base`` itself for the single
-    probe (None)."""
-    return base if probe_id is None else f"{base}_{probe_id}"
+def probe_frame_id(base: str, probe_id: int, named: bool) -> str:
+    """The frame of probe ``probe_id``: where the ``probes`` setting names the probes, the frame
+    name ``base`` with the id appended (``mows_probe`` → ``mows_probe_2``); ``base`` itself for
+    a node's own probe (not named)."""
+    return f"{base}_{probe_id}" if named else base

@@ -14,7 +14,7 @@ import functools
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from mows.estimate.probe_set import ProbeEntry, WindowProbe, read_probe_set
+from mows.estimate.probe_set import ProbeEntry, WindowProbe, own_probe_entry, read_probe_set
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions, ProbeLine
 from mows.estimate.stream import FitSettings
 from mows.physics.fluxgate import PAPER_DISTANCE_M, PAPER_SPACING_M, FluxgatePair
@@ -28,8 +28,7 @@ class FitParameters:
     θ0 fitted or taken, the lever-aware pickup of the fluxgate pair ``sensor_distance_m`` from
     the probe along ``sensor_direction`` and ``sensor_spacing_m`` apart, the samples skipped
     after coil-off, the shortest usable ring-down, the χ²/dof refused, and the ``probes`` text
-    of the probes told apart in each window (:mod:`mows.estimate.probe_set`; empty: the
-    estimator's own probe alone)."""
+    of the probes told apart in each window (read by :func:`node_probes`)."""
 
     f00_hz: float = 0.0
     f00_std_hz: float = 0.0
@@ -64,13 +63,7 @@ class FitParameters:
     def own_entry(self, probe: Probe) -> ProbeEntry:
         """The estimator's own probe (``probe_file``) as the set's probe 0, at the f00 the
         parameters give it (f00 = 0: the probe's)."""
-        return ProbeEntry(0, probe, self.f00_hz if self.f00_hz > 0 else probe.f00_hz, self.f00_std_hz)
-
-    def probe_entries(self, probe: Probe) -> tuple[ProbeEntry, ...]:
-        """The probes told apart in each window: those ``probes`` lists, or, when it lists none,
-        the estimator's own probe alone (:meth:`own_entry`). ValueError naming what is wrong
-        in ``probes``."""
-        return probe_set(self.probes, probe) or (self.own_entry(probe),)
+        return own_probe_entry(probe, self.f00_hz, self.f00_std_hz)
 
     def fit_options(self, probes: Sequence[ProbeEntry]) -> FitOptions:
         """The fit's options for ``probes``: the rest offset searched within the narrowest of
@@ -97,7 +90,7 @@ class FitParameters:
 
     def fit_settings(self, probe: Probe) -> FitSettings:
         """What the parameters ask of each ring-down's fit and inversion."""
-        probes = self.probe_entries(probe)
+        probes = node_probes(self.probes, self.own_entry(probe))
         return FitSettings(probes, self.lines, self.fit_options(probes), self.coil_off_skip_s)
 
 
@@ -107,3 +100,12 @@ def probe_set(text: str, own_probe: Probe) -> tuple[ProbeEntry, ...]:
     files read by :meth:`Probe.from_yaml`), with ``own_probe`` for those given by their f00
     alone; read once per value and probe, not per fit."""
     return read_probe_set(text, own_probe, Probe.from_yaml)
+
+
+def node_probes(text: str, own: ProbeEntry) -> tuple[ProbeEntry, ...]:
+    """The probes a node tells apart, read once from its ``probes`` value, never none: those it
+    lists (:func:`probe_set`, those given by f00 alone ``own``'s probe at that f00), and for a
+    value that lists none ``own``, the node's own probe as probe 0, a set of one. Whatever reads
+    them after this takes one path for one probe and for several. ValueError naming what is
+    wrong in ``text``."""
+    return probe_set(text, own.probe) or (own,)

@@ -1,11 +1,11 @@
 """What the mapper publishes when a sweep ends, and how it says a cycle failed.
 
 :func:`publication` turns the runner's last step (:class:`mows.sweep.events.SweepStep`) into
-the messages to make, in the order they go out: each probe's decomposition for ``/mows/sweep``
-(in its probe's own frame when the ``probes`` are listed), the field map of listed probes at
-their places, and the sweep the model lab reads when a reference is given (the lone probe's:
-the lab reads one probe's sweep, so it is not run for listed probes). The mapper node builds
-each message and publishes it; nothing here does I/O.
+the messages to make, in the order they go out: each probe's decomposition for ``/mows/sweep``,
+in its probe's own frame when the ``probes`` setting names the probes, with the field map of
+them all at their places; and the sweep the model lab reads when a reference is given and the
+probes are not named (the node's own probe: the lab reads one probe's sweep). The mapper node
+builds each message and publishes it; nothing here does I/O.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 
 from mows.estimate.probe_set import ProbeEntry
-from mows.sweep.events import CycleAnswer, SweepMap, SweepStep
+from mows.sweep.events import CycleAnswer, SweepMap, SweepSettings, SweepStep
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,15 +35,17 @@ class Publication:
         return f"sweep {self.sweeps[0].sweep_id}: {report}" if self.sweeps else report
 
 
-def publication(step: SweepStep, probes: tuple[ProbeEntry, ...], reference: str) -> Publication:
-    """What to publish for the runner's ``step`` at a sweep's end: the sweep's listed ``probes``
-    (the ``probes`` setting; () for the lone probe) and the lab's ``reference`` ('' for none) as
-    the mapper has them."""
-    if probes:
-        return Publication(step.publish, per_probe=True, field_map=probes if step.publish else ())
-    if step.publish:
-        return Publication(step.publish, lab=step.publish[0] if reference else None)
-    return Publication()
+def publication(step: SweepStep, settings: SweepSettings, reference: str) -> Publication:
+    """What to publish for the runner's ``step`` at a sweep's end, with the sweep's ``settings``
+    (its probes, whether they are named) and the lab's ``reference`` ('' for none) as the
+    mapper has them."""
+    named, maps = settings.named, step.publish
+    return Publication(
+        maps,
+        per_probe=named,
+        field_map=settings.probes if named and maps else (),
+        lab=maps[0] if maps and reference and not named else None,
+    )
 
 
 def cycle_failed(answer: CycleAnswer) -> CycleAnswer:

@@ -12,7 +12,7 @@ import pytest
 from mows.workspace.design import boundary_positions
 from mows.workspace.fit import fit
 from mows.workspace.harmonics import SolidHarmonics
-from mows.workspace.poses import PoseError, fit_with_pose_errors, frame_bound, moved, rotation
+from mows.workspace.poses import PoseError, error_split, fit_with_pose_errors, frame_bound, moved, rotation
 from workspace.fields import RADIUS_M, SOURCE, sweeps
 
 
@@ -61,3 +61,22 @@ def test_the_frame_bound_is_the_error_of_the_field_shifted_and_turned_by_the_mea
     # 400 draws of a 6-dimensional error: the mean square known to ~4 %, its root to ~2 %
     bound = frame_bound(field, gradient, error, count)
     assert math.sqrt(np.mean(field_error) / np.mean(field**2)) == pytest.approx(bound, rel=0.08)
+
+
+def test_the_maps_sigma_splits_into_noise_each_sweeps_pose_error_and_their_mean():
+    """The carried map's σ of B, split by cause: the share of the sweeps' mean pose error is the
+    frame bound (the fit's covariance holds what no fit can see), and the three shares add up,
+    in squares, to the σ the map reports."""
+    error = PoseError(1e-4, math.radians(0.01))
+    basis = SolidHarmonics(5, (0.0, 0.0, 0.0), RADIUS_M)
+    points = boundary_positions(30, 0.7 * RADIUS_M)
+    rng = np.random.default_rng(31)
+    reported = [moved(obs, rng.normal(size=6) * error.std) for obs in sweeps(25, rng)]
+    model = fit_with_pose_errors(reported, basis, error, fit(reported, basis)).model
+    split = error_split(reported, model, error, points)
+    bound = frame_bound(SOURCE.field_t(points), SOURCE.gradient_t_per_m(points), error, 25)
+    rms_field = math.sqrt(np.mean(np.sum(SOURCE.field_t(points) ** 2, axis=1)))
+    assert split.field_t["common"] / rms_field == pytest.approx(bound, rel=0.02)
+    reported_std = math.sqrt(np.mean(np.sum(model.field_t(points)[1] ** 2, axis=1)))
+    assert math.sqrt(sum(v**2 for v in split.field_t.values())) == pytest.approx(reported_std, rel=0.02)
+    assert all(v > 0 for v in (*split.field_t.values(), *split.gradient_t_per_m.values()))

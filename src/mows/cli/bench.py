@@ -93,6 +93,8 @@ QUICK: dict[str, dict[str, object]] = {
         "target_g": 0.5,
         "pose_errors": ((1e-3, 1.0),),
         "pose_draws": 2,
+        "lever_cases": ((8, 1.0),),
+        "lever_degree": 3,
     },
     # a goal 5× looser than the default: 25× less device time
     "throughput": {

@@ -26,7 +26,9 @@ blurred by the pose errors, cannot determine.
 
 What no fit can see is the mean of the sweeps' pose errors: a field shifted by δ̄ and turned by
 δφ̄ fits the sweeps as well as the true one, so a map of N sweeps is off by at least
-G·δ̄ + δφ̄ × B in B, with δ̄ ~ N(0, σ_p²/N) (:func:`frame_bound`).
+G·δ̄ + δφ̄ × B in B, with δ̄ ~ N(0, σ_p²/N) (:func:`frame_bound`). :func:`error_split` splits a
+carried map's σ by cause: that mean's share (the bound), the rest of the pose errors' (each
+sweep's own, which the coefficients partly absorb) and the sweeps' noise's.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from mows.workspace.fit import (
     apply_readout,
     choose_degree,
     fit,
+    readout_design,
     whiten,
 )
 from mows.workspace.harmonics import SolidHarmonics
@@ -142,6 +145,47 @@ def frame_bound(field_t: np.ndarray, gradient_t_per_m: np.ndarray, pose_error: P
     # E|G·δ|² = σ²‖G‖², E|δφ × B|² = 2σ²|B|²
     error_var = shift_var * np.sum(gradient_t_per_m**2, axis=(1, 2)) + 2.0 * turn_var * np.sum(field_t**2, axis=1)
     return math.sqrt(np.mean(error_var) / np.mean(np.sum(field_t**2, axis=1)))
+
+
+@dataclasses.dataclass(frozen=True)
+class ErrorSplit:
+    """The rms σ of B (T) and of G (T/m) over a map's points, split by cause (:func:`error_split`):
+    each sweep's ``noise``, the ``common`` mean of the sweeps' pose errors that no fit can see,
+    and the ``differential`` rest of the pose errors, each sweep's own."""
+
+    field_t: dict[str, float]
+    gradient_t_per_m: dict[str, float]
+
+
+def error_split(
+    observations: Sequence[Observation], model: WorkspaceModel, pose_error: PoseError, points_m: np.ndarray
+) -> ErrorSplit:
+    """The σ of the map the pose error is carried in, to first order, split by cause: with J_s the
+    reading's change with sweep s's pose at ``model`` and V_s = C_s + J_s·Σ·J_sᵀ, the estimate
+    ĉ = Σ_s M_s·y_s, M_s = (Σ AᵀV⁻¹A)⁻¹·A_sᵀ·V_s⁻¹, has the covariance Σ_s M_s·C_s·M_sᵀ from the
+    noise and Σ_s M_s·J_s·Σ·J_sᵀ·M_sᵀ from the pose errors, of which K·Σ·Kᵀ/N (K = Σ_s M_s·J_s)
+    comes from their mean, the shift and turn of the whole map (:func:`frame_bound`)."""
+    basis = model.basis
+    designs, jacobians, inverses = [], [], []
+    variance = np.diag(pose_error.std**2)
+    for obs in observations:
+        designs.append(readout_design(basis, obs.position_m, obs.readout))
+        jacobians.append(pose_jacobian(model, obs))
+        inverses.append(np.linalg.inv(obs.covariance + jacobians[-1] @ variance @ jacobians[-1].T))
+    covariance = np.linalg.inv(sum(a.T @ v @ a for a, v in zip(designs, inverses)))
+    estimators = [covariance @ a.T @ v for a, v in zip(designs, inverses)]
+    noise = sum(m @ obs.covariance @ m.T for m, obs in zip(estimators, observations))
+    pose = sum(m @ j @ variance @ j.T @ m.T for m, j in zip(estimators, jacobians))
+    mean = sum(m @ j for m, j in zip(estimators, jacobians))
+    common = mean @ variance @ mean.T / len(observations)
+    parts = {"noise": noise, "common": common, "differential": pose - common}
+    count = len(np.atleast_2d(points_m))
+    field, gradient = (basis.design(points_m, rank).reshape(-1, basis.size) for rank in (0, 1))
+
+    def rms(design: np.ndarray, part: np.ndarray) -> float:  # of the vector's (tensor's) length
+        return math.sqrt(max(float(np.einsum("ik,kl,il->", design, part, design)), 0.0) / count)
+
+    return ErrorSplit({k: rms(field, v) for k, v in parts.items()}, {k: rms(gradient, v) for k, v in parts.items()})
 
 
 @dataclasses.dataclass(frozen=True)

@@ -264,8 +264,9 @@ with card.installed():
 
 
 def test_the_backend_imports_nis_stream_readers_and_writers_itself():
-    # A fresh interpreter: in this one another test may have imported them already.
-    run = subprocess.run([sys.executable, "-c", FRESH_START], capture_output=True, text=True, timeout=120)
+    # A fresh interpreter: in this one another test may have imported them already. Its bound is
+    # for a hang, below pytest's own: a fresh interpreter at load 36 took more than 120 s.
+    run = subprocess.run([sys.executable, "-c", FRESH_START], capture_output=True, text=True, timeout=540)
     assert run.returncode == 0, run.stderr
     lines = run.stdout.splitlines()
     assert lines[0] == "stream modules loaded: False"  # `import nidaqmx` loads neither

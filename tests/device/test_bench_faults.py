@@ -311,3 +311,23 @@ def test_a_host_behind_its_card_that_stalls_beyond_the_lead_is_told_at_once(on_b
     down, up, _ = told
     assert not down.up and "(-200290)" in down.reason and up.up and card.underflows == 1
     backend.close()
+
+
+def test_a_supply_failure_met_as_the_card_faults_is_told_with_the_fault(on_bench):
+    """The supply's line failed (a lost answer) and the card faulted before the driver took the
+    failure: the card's fault tells both, rather than dropping the supply's."""
+    supply = quick_supply()
+    card, backend = on_bench("calibration", supply)
+    backend.send(FieldCurrentCommand(1, 0, 1.0))
+    while supply_state(supply)[0] < 0.3:
+        backend.poll(0.05)
+    instrument(supply).lose(2)
+    deadline = time.monotonic() + BOUND_S
+    while not backend.supply_line._failure and time.monotonic() < deadline:  # not polled: not taken
+        time.sleep(0.01)
+    card.unplug()
+    down = poll_until_down(backend)
+    assert "(-201003)" in down.reason and "the supply failed" in down.reason and "VI_ERROR_TMO" in down.reason
+    assert supply_state(supply) == (0.0, 0)
+    card.plug_in()
+    backend.close()

@@ -49,9 +49,10 @@ NOT_READ = Readback(math.nan, "", -1, math.nan)
 
 
 class SupplyLine:
-    """``supply``'s I/O on a worker thread; each exchange ends within ``deadline_s``."""
+    """``supply``'s I/O on a worker thread; each exchange ends within ``deadline_s``. The worker
+    calls ``started`` first (the backend's real-time priority, :mod:`mows.device.backends.realtime`)."""
 
-    def __init__(self, supply: ScpiSupply, deadline_s: float):
+    def __init__(self, supply: ScpiSupply, deadline_s: float, started: Callable[[], object] = lambda: None):
         self.supply = supply
         self.deadline_s = deadline_s
         self.readback = NOT_READ
@@ -67,6 +68,7 @@ class SupplyLine:
         self._stepped_s = -math.inf  # when the last step was written
         self._safe_job: Callable[[], None] | None = None
         self._condition = threading.Condition()
+        self._started = started
         self._thread = threading.Thread(target=self._run, name="mows-supply", daemon=True)
         self._thread.start()
 
@@ -101,6 +103,21 @@ class SupplyLine:
             time.sleep(RAMP_STEP_S)
         return True
 
+    def stats(self, target_a: float) -> dict:
+        """The supply for the driver's diagnostics: its identity, ``target_a`` and its last read-back."""
+        readback = self.readback
+        return {
+            "supply": self.supply.identity,
+            "supply_target_a": target_a,
+            "supply_readback_a": readback.current_a,
+            "supply_output": readback.output,
+            "supply_readback_step": readback.step_index,
+        }
+
+    def closed_state(self) -> str:
+        """The supply as it read back last (after its ramp to zero and switch-off on close)."""
+        return f"supply {self.readback.output or 'output not read back'} at {self.readback.current_a:.4f} A (read back)"
+
     @property
     def busy(self) -> bool:
         """Steps to write, one under way, or a ramp's read-back still to come."""
@@ -110,7 +127,8 @@ class SupplyLine:
     # --- a fault ------------------------------------------------------------------------------
     def make_safe(self, step_index: int) -> list[str]:
         """Drop what waits, ramp to zero from the last current accepted within the slew limit in
-        host time, switch off and read back (stamped ``step_index``); what went wrong, waiting
+        host time, switch off and read back (stamped ``step_index``); what went wrong (a failure
+        of the supply not yet taken by :meth:`failure` first), waiting
         for it while the supply answers, and no longer than the deadline of an exchange that hangs."""
         done = threading.Event()
         problems: list[str] = []
@@ -133,14 +151,15 @@ class SupplyLine:
                 done.set()
 
         with self._condition:
+            untold = [self._failure] if self._failure else []  # told with the fault, not dropped
             self._jobs.clear()
             self._settled_at, self._watch_at_s, self._failure = None, math.inf, ""
             self._jobs.append(safe)
             self._safe_job = safe  # kept when a failure of the exchange under way drops the rest
             self._condition.notify()
         if not self._wait(done.is_set):
-            return [f"THE SUPPLY MAY STILL BE ON: it did not answer within {self.deadline_s:g} s"]
-        return problems
+            return [*untold, f"THE SUPPLY MAY STILL BE ON: it did not answer within {self.deadline_s:g} s"]
+        return untold + problems
 
     def close(self) -> None:
         """Stop the worker once its jobs are done, then close the supply (zero, every output off
@@ -160,6 +179,7 @@ class SupplyLine:
             self._condition.notify()
 
     def _run(self) -> None:
+        self._started()
         while True:
             with self._condition:
                 job = self._next_job()

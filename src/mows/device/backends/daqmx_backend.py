@@ -29,9 +29,12 @@ refuses, every ``read_timeout_s``. The link comes back up with a :class:`DeviceF
 carries the reason to the driver's /diagnostics; the stream's sample index jumps by the time the
 card was down (the blocks' gap). The supply is switched on again, at zero, before its next ramp.
 
+A switch-off (a cancel, an emergency stop) does not wait for the lead: a drive written ahead is
+cut by stopping the card and arming it again, the coils off (:meth:`DaqmxBackend.coils_off_now`).
 A watchdog thread stands in for the serial device's: a host that has not read a block for
 ``watchdog_s`` (a hung driver, or one whose every poll fails) faults the card as above; the next
-poll re-arms it.
+poll re-arms it. The threads that feed the card (the one that polls it, the supply's, the
+watchdog) run under SCHED_FIFO at ``realtime_priority`` where allowed (:mod:`.realtime`).
 
 ``nidaqmx`` is imported when a backend is made, not before: without NI's runtime, the package or
 the card, :func:`open_daqmx` says so in one line (:class:`DeviceUnavailable`).
@@ -55,8 +58,9 @@ from mows.device.backends.daqmx_tasks import (
     configure_tasks,
     first_line,
     import_nidaqmx,
-    input_buffer_samples,
+    read_waiting,
 )
+from mows.device.backends.realtime import Priority
 from mows.device.clock import DeviceClock
 from mows.device.instruments.daq import CoilWaveforms, DaqDevice
 from mows.device.instruments.scpi import ScpiSupply
@@ -102,7 +106,8 @@ class DaqmxBackend(Backend):
         self.device = device
         self.cap = CurrentCap(min(cap.limit_a, device.current_cap_a))
         self.supply = supply
-        self.supply_line = SupplyLine(supply, 2.0 * supply.config.timeout_s) if supply else None
+        self.priority = priority = Priority(device.realtime_priority)  # of the threads that feed the card
+        self.supply_line = SupplyLine(supply, 2.0 * supply.config.timeout_s, priority.raise_thread) if supply else None
         self.supply_schedule = SupplySchedule(supply.config.limits, device.sample_rate_hz) if supply else None
         self.supply_limits = supply.config.limits if supply else None
         self.clock = DeviceClock(device.sample_rate_hz)
@@ -171,14 +176,18 @@ class DaqmxBackend(Backend):
     def _write_ahead(self) -> None:
         """The outputs written ``output_lead_s`` ahead of the newest block read or of the sample the
         card generates now, whichever is later (a host catching up after a stall has both)."""
-        generated = self._origin + self._tasks[1].out_stream.total_samp_per_chan_generated
-        end = max(self.next_index + self.device.block_samples, generated) + self.device.lead_samples
+        end = max(self.next_index + self.device.block_samples, self._generated()) + self.device.lead_samples
         volts = self.waveforms.synthesise(end)
         if volts.shape[1]:
             self._writer.write_many_sample(np.ascontiguousarray(volts), timeout=self.device.read_timeout_s)
 
+    def _generated(self) -> int:
+        """The stream's index of the sample the card generates now."""
+        return self._origin + self._tasks[1].out_stream.total_samp_per_chan_generated
+
     # --- the stream ----------------------------------------------------------------------------
     def poll(self, timeout_s: float) -> list:
+        self.priority.raise_thread()  # the thread that feeds the card: the driver's stream thread
         with self._lock:
             items: list = list(self._results)
             self._results = []
@@ -208,7 +217,7 @@ class DaqmxBackend(Backend):
         except self.daqmx.errors.DaqError as error:
             errors.append(f"outputs: {first_line(error)}")
         try:
-            volts = self._read()
+            volts = read_waiting(self._tasks[0], self._reader, self.device, self._buffer, self.catch_up_blocks)
         except self.daqmx.errors.DaqError as error:
             errors.append(f"inputs: {first_line(error)}")
         if errors:
@@ -218,30 +227,10 @@ class DaqmxBackend(Backend):
         field, saturated = self.device.field_t(volts)
         n, blocks = self.device.block_samples, []
         for start in range(0, volts.shape[1], n):
-            first = self.next_index
-            self.next_index += n
-            blocks.append(
-                SampleBlock(
-                    first,
-                    self.clock.stamp_ns(first),
-                    self.device.sample_rate_hz,
-                    field[start : start + n],
-                    saturated[start : start + n],
-                )
-            )
+            first, self.next_index, rows = self.next_index, self.next_index + n, slice(start, start + n)
+            stamp_ns = self.clock.stamp_ns(first)
+            blocks.append(SampleBlock(first, stamp_ns, self.device.sample_rate_hz, field[rows], saturated[rows]))
         return [*blocks, *self._supply_steps()]
-
-    def _read(self) -> np.ndarray:
-        """The next block, or the blocks waiting on the card, up to ``catch_up_blocks``: a host
-        behind its card catches up in larger reads, each cheaper per sample than a block's."""
-        n = self.device.block_samples
-        waiting = min(self._tasks[0].in_stream.avail_samp_per_chan, input_buffer_samples(self.device))
-        count = min(max(1, waiting // n), self.catch_up_blocks)
-        volts = self._buffer if count == 1 else np.zeros((self._buffer.shape[0], count * n))
-        self._reader.read_many_sample(
-            volts, number_of_samples_per_channel=count * n, timeout=self.device.read_timeout_s
-        )
-        return volts
 
     def _supply_steps(self) -> list:
         """Hand the supply's steps whose sample has come to its line (written there, off this
@@ -282,20 +271,26 @@ class DaqmxBackend(Backend):
         return "".join(f"; {problem}" for problem in self.supply_line.make_safe(self.supply_schedule.last_index))
 
     def _rearm(self) -> None:
-        """Arm the card again, the coils off, its index on from the time lost; the link up and the
-        fault told to the driver (its /diagnostics), or the next try in ``read_timeout_s``."""
-        lost = round((time.monotonic() - self._last_read_s) * self.device.sample_rate_hz)
-        try:
-            self._arm(self.next_index + lost)
-        except self.daqmx.errors.DaqError as error:
+        """Arm the card again, the coils off; the link up and the fault told to the driver (its
+        /diagnostics), or the next try in ``read_timeout_s``."""
+        if refused := self._arm_on():
             self._rearm_at_s = time.monotonic() + self.device.read_timeout_s
-            self.last_card_fault = f"{self.fault}; re-arming: {first_line(error)}"
+            self.last_card_fault = f"{self.fault}; re-arming: {refused}"
             return
-        self._last_read_s = time.monotonic()
         reason, self.fault = self.fault, ""
         self._told += [LinkEvent(True, f"the card re-armed after: {reason}"), DeviceFault(reason)]
 
+    def _arm_on(self) -> str:
+        """Arm the card, its index on from the samples it took since the last read; '' or why not."""
+        try:
+            self._arm(self.next_index + round((time.monotonic() - self._last_read_s) * self.device.sample_rate_hz))
+        except self.daqmx.errors.DaqError as error:
+            return first_line(error)
+        self._last_read_s = time.monotonic()
+        return ""
+
     def _watch(self) -> None:
+        self.priority.raise_thread()
         while not self._stop.wait(RAMP_STEP_S):
             with self._lock:
                 silent_s = time.monotonic() - self._last_read_s
@@ -342,8 +337,20 @@ class DaqmxBackend(Backend):
         return None
 
     def coils_off_now(self) -> None:
+        """The coils off at once: the queued drives dropped, and a drive already written ahead
+        (up to ``output_lead_s``) cut by stopping the card, whose outputs idle at 0 V, and arming
+        it again with the coils off; the stream goes on after a gap of the samples it took meanwhile."""
         with self._lock:
             self.waveforms.off_now()
+            try:
+                driving = bool(self._tasks) and not self.fault and self.waveforms.driven_until > self._generated()
+            except self.daqmx.errors.DaqError:  # the card stopped, its outputs idle at 0 V: the next poll says why
+                return
+            if driving:
+                close_tasks(self.daqmx, self._tasks)
+                self._tasks = []
+                if refused := self._arm_on():
+                    self._fault(f"the card stopped to switch the coils off: re-arming: {refused}")
 
     def supply_to_zero_now(self) -> None:
         """The ramp to zero, the output switched off at its end; a supply already switched off
@@ -363,16 +370,10 @@ class DaqmxBackend(Backend):
             "stage": "manual",
             "card_faults": self.card_faults,
             "last_card_fault": self.last_card_fault,
+            "realtime": self.priority.state,
         }
-        if self.supply is not None and self.supply_schedule is not None:
-            readback = self.supply_readback
-            values.update(
-                supply=self.supply.identity,
-                supply_target_a=self.supply_schedule.target_a,
-                supply_readback_a=readback.current_a,
-                supply_output=readback.output,
-                supply_readback_step=readback.step_index,
-            )
+        if self.supply_line is not None and self.supply_schedule is not None:
+            values.update(self.supply_line.stats(self.supply_schedule.target_a))
         return values
 
     @property
@@ -408,6 +409,7 @@ class DaqmxBackend(Backend):
                     self._tasks = []
             finally:
                 with self.held:
+                    self.priority.restore()
                     if self.supply_line is not None:
                         self.supply_line.close()
 
@@ -419,11 +421,7 @@ class DaqmxBackend(Backend):
 
     def closed_state(self) -> str:
         """The supply as it read back, settled, after its ramp to zero and switch-off on close."""
-        if self.supply is None:
-            return ""
-        readback = self.supply_readback
-        output = readback.output or "output not read back"
-        return f"supply {output} at {readback.current_a:.4f} A (read back)"
+        return self.supply_line.closed_state() if self.supply_line is not None else ""
 
 
 def open_daqmx(

@@ -10,6 +10,8 @@ from __future__ import annotations
 import importlib
 import math
 
+import numpy as np
+
 from mows.device.instruments.daq import DaqDevice
 
 INPUT_BUFFER_S = 10.0  # the card's input buffer: a host late by less than this loses nothing
@@ -100,3 +102,15 @@ def close_tasks(daqmx, tasks: list) -> list[str]:
         except daqmx.errors.DaqError as error:
             problems.append(first_line(error))
     return problems
+
+
+def read_waiting(ai, reader, device: DaqDevice, buffer: np.ndarray, most_blocks: int) -> np.ndarray:
+    """The next block of the input task ``ai`` (into ``buffer``), or the blocks waiting on the
+    card, up to ``most_blocks``: a host behind its card catches up in larger reads, each cheaper
+    per sample than a block's."""
+    n = device.block_samples
+    waiting = min(ai.in_stream.avail_samp_per_chan, input_buffer_samples(device))
+    count = min(max(1, waiting // n), most_blocks)
+    volts = buffer if count == 1 else np.zeros((buffer.shape[0], count * n))
+    reader.read_many_sample(volts, number_of_samples_per_channel=count * n, timeout=device.read_timeout_s)
+    return volts

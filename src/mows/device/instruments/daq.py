@@ -96,6 +96,10 @@ class DaqDevice:
     # A host that stops reading this long: coils and supply off. Longer than the lead, so that a
     # stall the lead survives is not cut short here.
     watchdog_s: float = 2.5
+    # The threads that feed the card (the one that polls it, the supply's, the watchdog) under
+    # SCHED_FIFO at this priority, 1-99, where the system allows it (0: the default policy):
+    # busy processes beside the driver cannot then stall it beyond the lead.
+    realtime_priority: int = 0
     name: str = "daq"
 
     def __post_init__(self):
@@ -109,6 +113,8 @@ class DaqDevice:
         for name, quantity in RANGED.items():
             ranges.check(quantity, getattr(self, name), f"{self.name}: {name}")
         CurrentCap(self.current_cap_a)
+        if not 0 <= self.realtime_priority <= 99:
+            raise refused("realtime_priority", self.realtime_priority, "must be 1-99 (SCHED_FIFO), or 0: off")
         if self.output_lead_s <= self.block_s:
             raise ValueError(
                 f"{self.name}: output_lead_s = {self.output_lead_s} must exceed block_s = {self.block_s} "
@@ -229,6 +235,7 @@ class CoilWaveforms:
         self.sample_rate_hz = float(sample_rate_hz)
         self.amplifier_v_per_a = float(amplifier_v_per_a)
         self.written = 0
+        self.driven_until = 0  # the sample after the last one synthesised with a coil driven
         self._off = Drive(0, (0.0,) * n_coils, 0.0)
         self._drives = [self._off]  # sorted by on_index; the first one is the present drive
 
@@ -248,6 +255,7 @@ class CoilWaveforms:
     def restart(self, index: int) -> None:
         """Every drive dropped, nothing written before sample ``index``: the coils off from there."""
         self.written = int(index)
+        self.driven_until = 0
         self._drives = [dataclasses.replace(self._off, on_index=self.written)]
 
     def off_now(self) -> int:
@@ -268,6 +276,7 @@ class CoilWaveforms:
                 k = np.arange(self.written, stop) - drive.on_index
                 currents = np.outer(drive.amplitudes_a, np.sin(phase * k))
                 volts[:, self.written - start : stop - start] = currents * self.amplifier_v_per_a
+                self.driven_until = stop
             self.written = stop
             if len(self._drives) > 1 and stop == nxt:
                 self._drives.pop(0)

@@ -156,6 +156,12 @@ class SimulatedCard:
             self.present = True
 
     # --- the sample clock --------------------------------------------------------------------
+    @property
+    def sample_now(self) -> int:
+        """The device sample the card's clock is at now."""
+        with self._lock:
+            return self._world_sample()
+
     def _world_sample(self) -> int:
         if math.isnan(self._world_start_s):
             self._world_start_s = self.clock()

@@ -12,6 +12,7 @@ import os
 import threading
 
 from device.test_bench_backends import blocks, drive, poll_for, simulated_supply
+from mows.device.backends.realtime import Priority
 from mows.device.interface import DeviceFault, LinkEvent
 
 
@@ -65,3 +66,12 @@ def test_a_switch_off_reaches_the_coils_at_once_not_after_the_lead(on_bench):
     assert backend.card_faults == 0 and not [i for i in items if isinstance(i, (LinkEvent, DeviceFault))]
     assert blocks(items)[-1].first_sample_index > after  # the stream goes on
     backend.close()
+
+
+def test_a_thread_two_benches_raise_is_put_back_to_its_own_policy_whichever_closes_first():
+    before = policy(threading.current_thread())
+    first, second = Priority(40), Priority(40)
+    assert first.raise_thread() and second.raise_thread()
+    first.restore()
+    second.restore()
+    assert policy(threading.current_thread()) == before

@@ -39,7 +39,8 @@ class Priority:
         self._lock = threading.Lock()
 
     def raise_thread(self) -> bool:
-        """The calling thread under SCHED_FIFO at the priority (once per thread); whether it is."""
+        """The calling thread under SCHED_FIFO at the priority (once per thread; one already under
+        a real-time policy, the process's or another bench's, is left as it is); whether it is."""
         native_id = threading.get_native_id()
         with self._lock:
             if native_id in self._raised:
@@ -51,6 +52,8 @@ class Priority:
                 return False
             try:
                 before = Raised(native_id, os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+                if before.policy in (os.SCHED_FIFO, os.SCHED_RR):  # real-time already: its owner's, left so
+                    return True
                 os.sched_setscheduler(0, os.SCHED_FIFO, PARAM(self.priority))
             except OSError as error:
                 self.refused = (

@@ -51,9 +51,9 @@ def compiled_kernels():
 
 
 def pytest_collection_modifyitems(items: list) -> None:
-    """Slow tests first: pytest-xdist hands the first test to the first worker, so the 60 s
-    live stream (mostly waiting on the real-time device) runs while the other worker goes
-    through the rest, instead of alone at the end."""
+    """Slow tests first: pytest-xdist (--dist=loadgroup) hands out the xdist groups first, the
+    largest first, then the other tests in this order, so that a long one (the live stream,
+    mostly waiting on the real-time device) starts early instead of alone at the end."""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 

@@ -23,15 +23,13 @@ import pathlib
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
-import numpy as np  # noqa: E402
-
-from mows.lab.data.table import LABELS, PROBE  # noqa: E402
+from mows.lab.data.table import LABELS, PROBE
 
 if TYPE_CHECKING:
+    from types import ModuleType
+
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
@@ -45,12 +43,23 @@ if TYPE_CHECKING:
 RASTER_ROWS = 2000  # more points than this: an SVG's markers are drawn as one image, so the page stays small
 
 
+def _pyplot() -> ModuleType:
+    """matplotlib's pyplot on the Agg backend, imported at the first drawing: every node and
+    command that imports the lab would otherwise pay its ~0.3 s of import at start-up."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot
+
+    return matplotlib.pyplot
+
+
 def _svg(figure: Figure) -> str:
     """The figure as an ``<svg>`` element to inline in the page (text as text, not as glyph paths)."""
     buffer = io.StringIO()
-    with plt.rc_context({"svg.fonttype": "none"}):
+    with _pyplot().rc_context({"svg.fonttype": "none"}):
         figure.savefig(buffer, format="svg", bbox_inches="tight")
-    plt.close(figure)
+    _pyplot().close(figure)
     text = buffer.getvalue()
     return text[text.index("<svg") :]
 
@@ -58,7 +67,7 @@ def _svg(figure: Figure) -> str:
 def _png(figure: Figure) -> str:
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=90, bbox_inches="tight")
-    plt.close(figure)
+    _pyplot().close(figure)
     return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode()
 
 
@@ -79,7 +88,7 @@ def figure_field_response(report: LabReport) -> str:
     along_ut = table.probe_field_t[:, 0] * 1e6
     measured, model = _shift_hz(fit)
     _, base_model = _shift_hz(base)
-    figure, axis = plt.subplots(figsize=(6, 4))
+    figure, axis = _pyplot().subplots(figsize=(6, 4))
     axis.errorbar(along_ut, measured * 1e3, table.f_std_hz * 1e3, fmt=".", color="k", label="measured")
     axis.plot(along_ut, base_model * 1e3, "x", color="tab:gray", label="Eq. 6 (base)")
     axis.plot(along_ut, model * 1e3, "o", mfc="none", color="tab:red", label=report.model)
@@ -135,7 +144,7 @@ def figure_polar(report: LabReport) -> str | None:
     spectrum = np.fft.rfft(curve[:-1]) / 360.0
     grid = np.radians(grid_deg)
     parts = {k: 2 * np.real(spectrum[k] * np.exp(1j * k * grid)) for k in (1, 2)}
-    figure = plt.figure(figsize=(6, 6))
+    figure = _pyplot().figure(figsize=(6, 6))
     axis = figure.add_subplot(projection="polar")
     axis.plot(theta, np.abs(fit.table.f_hz[rows] - f00) * 1e3, ".", color="k", label="|Δf| measured")
     axis.plot(grid, np.abs(curve) * 1e3, "-", color="tab:red", label=f"|Δf| {report.model}")
@@ -176,7 +185,7 @@ def figure_residuals(report: LabReport, x: np.ndarray, xlabel: str) -> str:
     fits = [(report.base, "base (Eq. 6)", "tab:gray")]
     if report.effects:
         fits.append((report.fit, "final model", "tab:red"))
-    figure, axes = plt.subplots(
+    figure, axes = _pyplot().subplots(
         len(fits) + 1, 1, figsize=(7.5, 2.2 * (len(fits) + 1)), sharex=True, constrained_layout=True
     )
     for axis, (fit, label, color) in zip(axes, fits):
@@ -218,7 +227,7 @@ def figure_term(term: DiscoveredTerm) -> str:
     model absorbs (:class:`mows.lab.diagnosis.discovery.TermFit`), with its fitted strength ± σ."""
     fitted = term.fitted
     assert fitted is not None
-    figure, axis = plt.subplots(figsize=(6.5, 3.5))
+    figure, axis = _pyplot().subplots(figsize=(6.5, 3.5))
     many = len(fitted.beyond_model) > RASTER_ROWS
     axis.errorbar(
         fitted.beyond_model, fitted.residual_hz * 1e3, fitted.std_hz * 1e3, fmt=".", ms=3, alpha=0.7,
@@ -238,7 +247,7 @@ def figure_candidates(report: LabReport) -> str | None:
     candidates = report.candidates
     if not candidates:
         return None
-    figure, axis = plt.subplots(figsize=(6, 0.35 * len(candidates) + 1))
+    figure, axis = _pyplot().subplots(figsize=(6, 0.35 * len(candidates) + 1))
     values = [c.delta_bic for c in candidates]
     colors = ["tab:red" if c.strong else "tab:gray" for c in candidates]
     axis.barh([c.label + (f" [group {c.group}]" if c.group else "") for c in candidates], values, color=colors)
@@ -252,7 +261,7 @@ def figure_candidates(report: LabReport) -> str | None:
 def figure_history(report: LabReport) -> str:
     steps = report.history
     labels = [str(i) for i in range(len(steps))]  # the steps' changes are in the table below
-    figure, (left, right) = plt.subplots(1, 2, figsize=(8, 3))
+    figure, (left, right) = _pyplot().subplots(1, 2, figsize=(8, 3))
     left.plot(labels, [s.chi2_dof for s in steps], "o-")
     left.set(yscale="log", ylabel="χ²/dof", title="fit")
     right.plot(labels, [s.cv_rms_hz * 1e3 for s in steps], "o-", color="tab:orange")

@@ -26,6 +26,7 @@ from collections.abc import Callable, Sequence
 from diagnostic_msgs.msg import DiagnosticStatus
 from lifecycle_msgs.srv import ChangeState
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 import mows
@@ -56,7 +57,7 @@ class MowsNode(LifecycleNode):
     def __init__(self, name: str, table: Sequence[ParamSpec]):
         super().__init__(name)
         for service in self.services:  # the lifecycle services, which rclpy makes without create_service
-            answering_when_heard(service, self.get_logger().warning)
+            answering_when_heard(service, self.get_logger().warning, self.every)
         self.parameter_table = tuple(table)
         # ``-p driver:name:=value`` in a namespace, which rcl drops (the process's own command line)
         prefixed = prefixed_overrides(self.get_name(), sys.argv, GRAPH_NODE_NAMES)
@@ -73,7 +74,13 @@ class MowsNode(LifecycleNode):
 
     def create_service(self, *args, **kwargs):
         """rclpy's, with answers sent once the client is discovered (:mod:`mows_ros.answers`)."""
-        return answering_when_heard(super().create_service(*args, **kwargs), self.get_logger().warning)
+        return answering_when_heard(super().create_service(*args, **kwargs), self.get_logger().warning, self.every)
+
+    def every(self, period_s: float, callback: Callable[[], None]) -> Callable[[], None]:
+        """``callback`` every ``period_s`` on the steady clock (whatever use_sim_time says) until
+        the function returned is called."""
+        timer = self.create_timer(period_s, callback, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        return lambda: self.destroy_timer(timer)
 
     # --- the hooks a node overrides ----------------------------------------------------------
     def configure(self) -> None:

@@ -158,28 +158,38 @@ GOAL_ANSWER_S = 15.0
 GOAL_SENDS = 3
 
 
-def send_goal(ros, client, goal, cancel_after_feedback=None):
+def send_goal(ros, client, goal, cancel_after_feedback=None, result_bound_s=WAIT_S):
     """Sends ``goal``: (its handle, its result or None if refused, the feedback that came), the
-    goal cancelled after ``cancel_after_feedback`` feedback messages if that is given."""
+    goal cancelled after ``cancel_after_feedback`` feedback messages if that is given; the
+    result awaited for at most ``result_bound_s``."""
     feedback = []
-    for send in range(1, GOAL_SENDS + 1):
-        sent = client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(f.feedback))
-        try:
-            handle = ros.wait_for(
-                lambda sent=sent: sent.done() and sent.result(), "the goal to be answered", GOAL_ANSWER_S
-            )
-            break
-        except AssertionError:
-            if send == GOAL_SENDS:
-                raise
-            print(f"goal not answered in {GOAL_ANSWER_S} s (send {send} of {GOAL_SENDS}): sending it again")
+    handle = goal_answer(ros, client, goal, feedback.append)
     if not handle.accepted:
         return handle, None, feedback
     if cancel_after_feedback is not None:
         ros.wait_for(lambda: len(feedback) >= cancel_after_feedback, "feedback")
         handle.cancel_goal_async()
     result = handle.get_result_async()
-    return handle, ros.wait_for(lambda: result.done() and result.result(), "the goal's result"), feedback
+    done = ros.wait_for(lambda: result.done() and result.result(), "the goal's result", result_bound_s)
+    return handle, done, feedback
+
+
+def goal_answer(ros, client, goal, on_feedback=None):
+    """The handle of ``goal`` once the server answered it (accepted or not), sent again as a new
+    goal if no answer came (``GOAL_ANSWER_S``, ``GOAL_SENDS``); ``on_feedback`` takes each
+    feedback message of the goal."""
+    sends = 1
+    while True:
+        sent = client.send_goal_async(
+            goal, feedback_callback=None if on_feedback is None else lambda f: on_feedback(f.feedback)
+        )
+        try:
+            return ros.wait_for(lambda sent=sent: sent.done() and sent.result(), "the goal's answer", GOAL_ANSWER_S)
+        except AssertionError:
+            if sends == GOAL_SENDS:
+                raise
+            print(f"goal not answered in {GOAL_ANSWER_S} s (send {sends} of {GOAL_SENDS}): sending it again")
+            sends += 1
 
 
 def serve_cycles(ros, run_cycle) -> ActionServer:

@@ -19,6 +19,7 @@ from mows.cli import main as cli
 from mows.device.recording import bags
 from mows.physics.probe import calibration_record
 from mows_bringup.nodes import NODES
+from node_processes import send_goal
 
 pytestmark = pytest.mark.ros
 
@@ -48,11 +49,8 @@ def test_a_recorded_calibration_gives_the_actions_constants_offline(ros, start, 
     client = ActionClient(ros.node, CalibrateProbe, "calibrator/calibrate_probe")
     ros.wait_for(client.server_is_ready, "the calibration action server")
     ros.wait_for_estimator_hearing()  # or the first ring-down may be over before it listens
-    sent = client.send_goal_async(CalibrateProbe.Goal(currents_a=CURRENTS))
-    handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")
+    handle, done, _ = send_goal(ros, client, CalibrateProbe.Goal(currents_a=CURRENTS), result_bound_s=600.0)
     assert handle.accepted
-    result = handle.get_result_async()
-    done = ros.wait_for(lambda: result.done() and result.result(), "the calibration", bound_s=600.0)
     assert done.status == GoalStatus.STATUS_SUCCEEDED, done.result.message + calibrator.log_path.read_text()
     assert done.result.supply_at_zero
     for process in (calibrator, estimator, driver):

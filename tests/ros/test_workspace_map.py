@@ -34,7 +34,7 @@ from mows.workspace.simulated import RINGDOWN_STD_HZ, SweepPose, ball_points, sw
 from mows_driver.recording import open_recorder
 from mows_mapper.parameters import PARAMETERS
 from mows_ros.qos import EXCITATION_QOS, MAP_QOS, RESULT_QOS, maps_qos
-from node_processes import log, serve_cycles
+from node_processes import log, send_goal, serve_cycles
 
 pytestmark = pytest.mark.ros
 
@@ -153,11 +153,8 @@ def start_mapper(action_server, turn_with: str):
 
 
 def run_map(ros, client, **goal):
-    feedback = []
-    sent = client.send_goal_async(WorkspaceMap.Goal(**goal), feedback_callback=lambda f: feedback.append(f.feedback))
-    handle = ros.wait_for(lambda: sent.done() and sent.result(), "the goal to be answered")
-    result = handle.get_result_async()
-    return ros.wait_for(lambda: result.done() and result.result(), "the map", MAP_BOUND_S), feedback
+    _, done, feedback = send_goal(ros, client, WorkspaceMap.Goal(**goal), result_bound_s=MAP_BOUND_S)
+    return done, feedback
 
 
 def field_at(ros, point_m, moment_am2=(0.0, 0.0, 0.0)) -> FieldAt.Response:

@@ -26,7 +26,6 @@ from collections.abc import Callable, Sequence
 from diagnostic_msgs.msg import DiagnosticStatus
 from lifecycle_msgs.srv import ChangeState
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 import mows
@@ -40,6 +39,7 @@ from mows_ros.params import (
     prefixed_overrides,
     unknown_parameter,
 )
+from mows_ros.wall import steady_timer
 
 UNCONFIGURED, INACTIVE, ACTIVE, FINALIZED = "unconfigured", "inactive", "active", "finalized"
 REFUSALS = (ValueError, OSError)  # what configure and activate refuse with: a FAILURE, not an error
@@ -79,7 +79,7 @@ class MowsNode(LifecycleNode):
     def every(self, period_s: float, callback: Callable[[], None]) -> Callable[[], None]:
         """``callback`` every ``period_s`` on the steady clock (whatever use_sim_time says) until
         the function returned is called."""
-        timer = self.create_timer(period_s, callback, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        timer = steady_timer(self, period_s, callback)
         return lambda: self.destroy_timer(timer)
 
     # --- the hooks a node overrides ----------------------------------------------------------

@@ -22,6 +22,9 @@ from mows_ros.qos import RESULT_QOS
 
 # Only a bound for a test that hangs; a test passes as soon as its condition holds.
 WAIT_S = float(os.environ.get("MOWS_TEST_WAIT_S", 60.0))
+# The bound for a node process to come up, to be discovered and to report (or to die): its
+# imports, kernels and DDS discovery take minutes at a load of 35 on two cores.
+START_S = 300.0
 
 
 class RosHarness:
@@ -130,7 +133,10 @@ def action_server(ros, start):
         process = start(*node.command([arg for parameter in parameters for arg in ("-p", parameter)]))
         started.append(process)
         client = ActionClient(ros.node, action_type, action)
-        ros.wait_for(lambda: client.server_is_ready(), f"the {action} action server")
+        ros.wait_for(
+            lambda: client.server_is_ready() or process.poll() is not None, f"the {action} action server", START_S
+        )
+        assert process.poll() is None, log(process)
         return client, process
 
     yield action_server

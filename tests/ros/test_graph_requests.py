@@ -39,7 +39,7 @@ from rosgraph_msgs.msg import Clock
 from mows.device.cycle.phases import Phase
 from mows_bringup.nodes import NODES
 from mows_ros.qos import EXCITATION_QOS
-from node_processes import RosHarness, assert_stops_cleanly, launch, log, send_goal
+from node_processes import START_S, RosHarness, assert_stops_cleanly, launch, log, send_goal
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realtime")]  # one start-up of three nodes
 
@@ -105,9 +105,9 @@ class Graph:
         ]
         self.sim_driver = launch(NODES[0].command(sim_ros_args), directory / "sim_driver.log")
         for name in ("/driver", "/sim/driver", "/mapper"):
-            ros.wait_for(lambda name=name: name in self.heard.diagnostics, f"{name} on /diagnostics", 240.0)
+            ros.wait_for(lambda name=name: name in self.heard.diagnostics, f"{name} on /diagnostics", START_S)
         for name in ("/driver", "/sim/driver"):
-            ros.wait_for(lambda name=name: self.heard.values(name).get("phase"), f"{name}'s device", 240.0)
+            ros.wait_for(lambda name=name: self.heard.values(name).get("phase"), f"{name}'s device", START_S)
 
     def client(self, kind, name):
         client = self.ros.node.create_client(kind, name)

@@ -17,7 +17,7 @@ from rcl_interfaces.srv import GetParameters
 from mows_bringup.graph import parse_arguments
 from mows_bringup.load import Load
 from mows_bringup.nodes import NODES
-from node_processes import log
+from node_processes import START_S, log
 
 pytestmark = pytest.mark.ros
 
@@ -35,7 +35,7 @@ def diagnostics(ros):
 
 
 def hear_all(ros, heard: dict, names: set[str], process: subprocess.Popen) -> None:
-    ros.wait_for(lambda: names <= heard.keys() or process.poll() is not None, f"diagnostics of {names}")
+    ros.wait_for(lambda: names <= heard.keys() or process.poll() is not None, f"diagnostics of {names}", START_S)
     assert names <= heard.keys(), f"heard only {sorted(heard)}\n{log(process)}"
     assert all(heard[name].level == DiagnosticStatus.OK for name in names)
 
@@ -64,9 +64,12 @@ def test_the_graph_starts_under_load_and_answers_every_first_call(ros, start):
     load.start()
     try:
         for _ in range(STARTS):
-            graph = start("mows-graph", "--duration", "3")
+            # Stopped once every node answered: with --duration, counted from the nodes' first
+            # lines, it could stop before this node has discovered their services.
+            graph = start("mows-graph")
             for node in NODES:
                 use_sim_time(ros, f"/{node.name}")
+            graph.send_signal(signal.SIGINT)
             assert exit_code(ros, graph) == 0, log(graph)
             assert "failed to send response" not in log(graph), log(graph)
     finally:
@@ -76,7 +79,7 @@ def test_the_graph_starts_under_load_and_answers_every_first_call(ros, start):
 def use_sim_time(ros, node_name: str) -> bool:
     client = ros.node.create_client(GetParameters, f"{node_name}/get_parameters")
     try:
-        ros.wait_for(client.service_is_ready, f"{node_name}'s parameters")
+        ros.wait_for(client.service_is_ready, f"{node_name}'s parameters", START_S)
         answer = client.call_async(GetParameters.Request(names=["use_sim_time"]))
         return ros.wait_for(lambda: answer.done() and answer.result(), "the answer").values[0].bool_value
     finally:

@@ -19,7 +19,7 @@ from mows.cli import main as cli
 from mows.device.recording import bags
 from mows.physics.probe import calibration_record
 from mows_bringup.nodes import NODES
-from node_processes import send_goal
+from node_processes import START_S, send_goal
 
 pytestmark = pytest.mark.ros
 
@@ -47,7 +47,7 @@ def test_a_recorded_calibration_gives_the_actions_constants_offline(ros, start, 
     estimator = start(*NODE["estimator"].command([]))
     calibrator = start(*NODE["calibrator"].command(["-p", f"probe_output_file:={online}"]))
     client = ActionClient(ros.node, CalibrateProbe, "calibrator/calibrate_probe")
-    ros.wait_for(client.server_is_ready, "the calibration action server")
+    ros.wait_for(client.server_is_ready, "the calibration action server", START_S)
     ros.wait_for_estimator_hearing()  # or the first ring-down may be over before it listens
     handle, done, _ = send_goal(ros, client, CalibrateProbe.Goal(currents_a=CURRENTS), result_bound_s=600.0)
     assert handle.accepted

@@ -24,6 +24,7 @@ from mows_driver.messages import STAGE_JOINT
 from mows_estimator import parameters as estimator
 from mows_mapper import parameters as mapper
 from mows_ros.qos import JOINT_QOS, STREAM_QOS
+from node_processes import START_S
 
 pytestmark = pytest.mark.ros
 
@@ -124,7 +125,7 @@ def test_the_driver_publishes_the_stage_angle_with_every_block(ros, start):
     joints, blocks = [], []
     ros.node.create_subscription(JointState, "/mows/joint_states", joints.append, JOINT_QOS)
     ros.node.create_subscription(MagnetometerBlock, "/mows/raw", blocks.append, STREAM_QOS)
-    ros.wait_for(lambda: len(joints) >= 5 and blocks, "joint states and blocks")
+    ros.wait_for(lambda: len(joints) >= 5 and blocks, "joint states and blocks", START_S)  # the driver's start
     assert all(j.name == [STAGE_JOINT] and j.position[0] == 0.5 for j in joints)
     # Both streams are best-effort: a block or its joint state may be lost under load, so the
     # common stamp is looked for among everything heard so far, not among the first blocks only.

@@ -17,7 +17,7 @@ from foxglove_client import FoxgloveClient
 from foxglove_protobuf import decode, descriptors
 from mows.viz.scene import field_magnitude
 from mows_ros.qos import MAP_QOS, RESULT_QOS
-from node_processes import log
+from node_processes import START_S, log
 
 pytestmark = pytest.mark.ros
 
@@ -61,12 +61,17 @@ def test_foxglove_client_sees_the_graph_s_values(ros, start):
     client = FoxgloveClient(port, WANTED)
     try:
         ros.wait_for(
-            lambda: f"ws://127.0.0.1:{port}" in log(graph) or graph.poll() is not None, "the viz node's address"
+            lambda: f"ws://127.0.0.1:{port}" in log(graph) or graph.poll() is not None,
+            "the viz node's address",
+            START_S,
         )
         assert graph.poll() is None, log(graph)
         ros.wait_for(
-            lambda: all(client.payloads(t) for t in WANTED[1:3]) or client.errors, "ring-downs and raw samples"
+            lambda: all(client.payloads(t) for t in WANTED[1:3]) or client.errors or graph.poll() is not None,
+            "ring-downs and raw samples once the graph is up",
+            START_S,
         )
+        assert graph.poll() is None, log(graph)
         assert not client.errors, client.errors
         # The ring-down channel's plots are the graph's fits: the same frequency, cycle by cycle.
         heard = {(f.cycle_id, f.repeat_index): f for f in fits if f.status == 0}

@@ -28,6 +28,9 @@ to :class:`mows.sim.simulator.SimulatedDevice` at its exact sample; what the inp
 simulator's fluxgates in volts, the supply's current (a callable, e.g. the pyvisa-sim supply's)
 applied before each read. The device's samples run on with the wall clock while the card is
 stopped (coils off), so that a re-armed card finds the probe where time has taken it.
+
+Why this module is over 450 lines: one card under one lock. Its clock, its tasks and the rules it
+holds their calls to share that state; the interpreter that speaks NI's calls is apart.
 """
 
 from __future__ import annotations

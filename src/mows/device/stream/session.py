@@ -44,7 +44,6 @@ from mows.device.interface import (
     energises,
 )
 from mows.device.stream.blocks import BlockAssembler
-from mows.device.stream.poll_order import answers_first
 from mows.device.stream.rate import RateMeter
 from mows.device.stream.supply_ramps import SupplyRamps
 from mows.physics.coils import CoilSetup, CurrentCap
@@ -111,7 +110,6 @@ class DeviceSession:
         self._last_samples_s = monotonic()
         self._rate = RateMeter()  # the achieved sample rate
         self._next_index = 0  # the sample after the newest received
-        self._commands_sent = 0  # the cycles' commands sent, by any thread
         self.supply = SupplyRamps(self._stamp_ns)  # the static-field supply's ramps (mows.device.stream.supply_ramps)
         self._anchor: tuple[int, int, float] | None = None  # (sample index, stamp ns, rate) of the newest block
         if backend.info is not None:
@@ -120,11 +118,8 @@ class DeviceSession:
     # --- the streaming thread --------------------------------------------------------------
     def step(self, timeout_s: float) -> Output:
         """Poll the backend once (up to ``timeout_s``) and act on what came."""
-        sent = self._commands_sent
         items = self.backend.poll(timeout_s)
         with self._lock:
-            if self._commands_sent != sent:  # another thread's: the samples read came before they were sent
-                items = answers_first(items, self.backend.poll(0.0))
             output = Output()
             for item in items:
                 self._take(item, output)
@@ -221,7 +216,6 @@ class DeviceSession:
             try:
                 self._check_armed(command)
                 self.backend.send(command)
-                self._commands_sent += 1
             except (ValueError, RuntimeError) as refused:
                 # Refused before it left (the cap, a link that is down): the cycle learns why,
                 # fails, and the rest of its commands are not sent.

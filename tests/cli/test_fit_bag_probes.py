@@ -29,7 +29,7 @@ from recorded_bags import record_session
 
 SCENE = load_scenario("three_probes")
 SETTINGS = CycleSettings(
-    excite_s=0.5, ringdown_s=0.5, gap_s=0.1, repeats=6, turn_settle_s=0.2, excitation_current_a=0.03
+    excite_s=0.5, ringdown_s=0.5, gap_s=0.1, repeats=6, turn_settle_s=0.2, excitation_current_a=0.03, tuning_steps=0
 )
 STAGE_RAD = 0.3
 # The scene's pair stands above the probes, along the rotation plane's normal.

@@ -25,6 +25,7 @@ from mows_msgs.msg import (
     SweepDecomposition,
     WorkspaceModel,
 )
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -92,8 +93,12 @@ class DriverOutputs:
         return write
 
     def close(self) -> None:
-        """Closes the bag: complete, with its summary and metadata."""
+        """Closes the bag: complete, with its summary and metadata. A conclusion that reached
+        the node but not yet its executor (a map published just before a shutdown) is written
+        first: the graph stops as soon as its requester has the answer."""
         for subscription in self._hearing:
+            for message in _waiting(subscription):
+                subscription.callback(message)
             self._node.destroy_subscription(subscription)
         self._hearing = []
         if self.recorder is not None:
@@ -137,3 +142,16 @@ class DriverOutputs:
                 self.recorder.write(publisher.topic_name, message, time.time_ns())
         for publisher, message in sends:
             publisher.publish(message)
+
+
+def _waiting(subscription) -> list:
+    """The messages ``subscription`` holds that no callback has taken yet, as rclpy's executor
+    takes them; none once its handle is gone."""
+    taken: list = []
+    try:
+        with subscription.handle:
+            while (message := subscription.handle.take_message(subscription.msg_type, subscription.raw)) is not None:
+                taken.append(message[0])
+    except InvalidHandle:
+        pass
+    return taken

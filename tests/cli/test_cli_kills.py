@@ -333,3 +333,27 @@ def test_an_error_in_a_del_without_a_signal_is_still_reported():
     code = DEBRIS.replace("    os.kill(os.getpid(), signal.SIGTERM)\n", "    raise KeyboardInterrupt\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert "AttributeError: _as_parameter_" in run.stderr, run.stderr
+
+
+HALF_LOADED = """
+import ctypes, os, signal
+from mows.cli import status
+from mows.cli.inputs import report_errors
+status.stop_on_signals()
+class HalfLoaded:  # as a numba kernel cut short while it loaded: its C objects crash when freed
+    def __del__(self):
+        ctypes.string_at(0)
+def work():
+    kernel = HalfLoaded()
+    os.kill(os.getpid(), signal.SIGTERM)
+    while kernel:
+        pass
+os._exit(status.settle("mows sim", report_errors("mows sim", work)))
+"""
+
+
+def test_the_work_a_signal_cut_short_is_never_taken_apart():
+    """What the signal cut short is not freed after the line (the process ends with it whole): a
+    half-loaded kernel whose freeing would crash leaves the status and the line as they are."""
+    run = subprocess.run([sys.executable, "-c", HALF_LOADED], capture_output=True, text=True, timeout=120)
+    assert (run.returncode, run.stderr) == (143, "mows sim: terminated\n"), run.stderr

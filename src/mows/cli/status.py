@@ -38,6 +38,10 @@ _handling = False  # this process's SIGINT and SIGTERM come to _on_signal (the c
 # _unraisable is at work: a signal now is only noted. A plain flag: its last store in the hook
 # runs no code after it in which the signal sent again could be handled (within the hook).
 _in_hook = False
+# The interrupts that ended the command's work, kept until the process ends (os._exit frees
+# nothing): their frames hold what the signal cut short, such as numba's half-loaded kernels,
+# whose C objects may be freed twice if taken apart (a segmentation fault after the line).
+_cut_short: list[BaseException] = []
 _EXCEPTIONS: dict[int, type[KeyboardInterrupt]] = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: Terminated}
 EXIT_OF: dict[int, int] = {signal.SIGINT: EXIT_INTERRUPTED, signal.SIGTERM: EXIT_TERMINATED}
 
@@ -137,7 +141,10 @@ def caused_by_interrupt(error: BaseException | None) -> bool:
 
 
 def interrupted(prog: str, error: BaseException) -> tuple[str, int]:
-    """The one line and the exit status of a command ended by Ctrl-C or SIGTERM."""
+    """The one line and the exit status of a command ended by Ctrl-C or SIGTERM (``error``, with
+    the work it cut short, is kept whole until the command's process ends)."""
+    if _handling:
+        _cut_short.append(error)
     if isinstance(interrupt_behind(error), Terminated):
         return f"{prog}: terminated", EXIT_TERMINATED
     return f"{prog}: interrupted", EXIT_INTERRUPTED

@@ -89,8 +89,8 @@ class MapperNode(MowsNode):
 
     def _refusal(self, goal: RotationSweep.Goal) -> str | None:
         """Why ``goal`` is refused, or None when the sweep starts (the runner is busy from here)."""
-        if (inactive := self.inactive_reason()) is not None:
-            return inactive
+        if (refusal := self.inactive_reason() or self._requests.sweep_refusal()) is not None:
+            return refusal
         try:
             probe = probe_of(self._param("probe_file"))
             self._settings = sweep_settings(parameter_values(self, PARAMETERS), probe)

@@ -95,7 +95,9 @@ class ArmMapping:
                 return WorkspaceMap.Result(
                     success=False, message=f"{refused} poses in a row refused, the last: {refusal}"
                 )
-            refusal, outcome = await self._visit(plan.next_goal(), settings, sweep_goal)
+            refusal, outcome = await self._visit(plan.next_goal(), settings, sweep_goal, cancelled)
+            if cancelled():  # the pose and its sweep given up, not refused
+                break
             pose = self.watch.latest if refusal else self.watch.start
             feedback = WorkspaceMap.Feedback(
                 sweep_index=len(sweeps), n_sweeps=count, accepted=not refusal, refusal=refusal
@@ -145,13 +147,17 @@ class ArmMapping:
 
         return turn
 
-    async def _visit(self, target, settings: MapSettings, sweep_goal: SweepGoal) -> tuple[str, SweepOutcome | None]:
-        """Move to ``target``, check the pose, sweep, check again: the refusal ('' for none) and
-        the sweep's outcome."""
+    async def _visit(
+        self, target, settings: MapSettings, sweep_goal: SweepGoal, cancelled: Callable[[], bool]
+    ) -> tuple[str, SweepOutcome | None]:
+        """Move to ``target``, check the pose, sweep unless the map was cancelled on the way,
+        check again: the refusal ('' for none) and the sweep's outcome."""
         if problem := await self._reach(target, "report the pose asked for"):
             return problem, None
         if problem := self.watch.start_problem(self._now_ns(), settings.frame_id):
             return problem, None
+        if cancelled():
+            return "", None
         outcome = await self._sweep(sweep_goal, self._turns_from(target) if self.watch.turns_probe else None)
         if not outcome.ok:
             return outcome.message, outcome

@@ -18,10 +18,11 @@ import pytest
 import yaml
 from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import PoseStamped
-from mows_msgs.action import WorkspaceMap
+from mows_msgs.action import RotationSweep, WorkspaceMap
 from mows_msgs.msg import ExcitationState, RingdownFit, SweepDecomposition, WorkspaceModel
 from mows_msgs.srv import FieldAt
 from rcl_interfaces.srv import GetParameters
+from rclpy.action import ActionClient
 
 from mows.cli.main import main
 from mows.device.cycle.phases import Phase
@@ -34,7 +35,7 @@ from mows.workspace.simulated import RINGDOWN_STD_HZ, SweepPose, ball_points, sw
 from mows_driver.recording import open_recorder
 from mows_mapper.parameters import PARAMETERS
 from mows_ros.qos import EXCITATION_QOS, MAP_QOS, RESULT_QOS, maps_qos
-from node_processes import log, send_goal, serve_cycles
+from node_processes import goal_answer, log, send_goal, serve_cycles
 
 pytestmark = pytest.mark.ros
 
@@ -236,6 +237,34 @@ def test_the_mapper_maps_the_workspace_at_poses_it_asks_the_arm_for(ros, action_
     # A workspace the arm cannot reach is refused with the reason, and the arm not moved.
     done, _ = run_map(ros, client, sweeps=3, centre_m=[0.9, 0.0, 0.0], radius_m=RADIUS_M)
     assert done.status == GoalStatus.STATUS_ABORTED and "no pose left within the arm's reach" in done.result.message
+
+
+@pytest.mark.slow
+def test_a_map_owns_the_mapper_until_its_cancel_ends_it_at_once(ros, action_server):
+    """A client's sweep goal is refused while a map runs (between its sweeps too); the map's
+    cancel ends it with no further sweep, and the log says it was cancelled, not that a pose
+    was refused."""
+    client, mapper = start_mapper(action_server, "stage")
+    arm = ArmNode(ros, np.random.default_rng(4))
+    ArmDriver(ros, arm.arm, np.random.default_rng(5), False)
+    feedback = []
+    goal = WorkspaceMap.Goal(
+        sweeps=3, centre_m=CENTRE_M.tolist(), radius_m=RADIUS_M, theta0_rad=ANGLES.tolist(), repeats_per_angle=1
+    )
+    handle = goal_answer(ros, client, goal, feedback.append)
+    assert handle.accepted
+    ros.wait_for(lambda: feedback, "the map's first sweep", MAP_BOUND_S)
+    sweeps = ActionClient(ros.node, RotationSweep, "mapper/rotation_sweep")
+    ros.wait_for(sweeps.server_is_ready, "the rotation sweep action")
+    _, refused, _ = send_goal(ros, sweeps, RotationSweep.Goal(theta0_rad=ANGLES.tolist(), repeats_per_angle=1))
+    assert refused.status == GoalStatus.STATUS_ABORTED, refused.result.message
+    assert refused.result.message == "sweep goal refused: a workspace map is running"
+    handle.cancel_goal_async()
+    result = handle.get_result_async()
+    done = ros.wait_for(lambda: result.done() and result.result(), "the cancelled map's end", MAP_BOUND_S)
+    assert done.status == GoalStatus.STATUS_CANCELED and done.result.message == "workspace map cancelled"
+    assert len([f for f in feedback if f.accepted]) < 3
+    assert "workspace map cancelled" in log(mapper) and "pose refused" not in log(mapper), log(mapper)
 
 
 def printed_graph_command() -> str:

@@ -214,6 +214,15 @@ def test_a_map_is_refused_while_a_sweep_or_another_map_runs_or_for_several_probe
     assert requests.start_map(1) is None
 
 
+def test_a_clients_sweep_is_refused_while_a_map_runs_even_between_its_sweeps():
+    requests = SweepRequests(SweepRunner())
+    assert requests.sweep_refusal() is None
+    assert requests.start_map(1) is None
+    assert requests.sweep_refusal() == "a workspace map is running"
+    requests.map_ended()
+    assert requests.sweep_refusal() is None
+
+
 def test_a_map_cancelled_between_its_sweeps_takes_no_further_sweep():
     runner = SweepRunner()
     requests = SweepRequests(runner)

@@ -129,6 +129,11 @@ class SweepRequests:
         return Cancel(self._runner.fits_time_up(), LogLine(Severity.WARNING, warning))
 
     # --- the sweep goal -------------------------------------------------------------------
+    def sweep_refusal(self) -> str | None:
+        """Why a client's sweep goal is refused now, or None: a running workspace map takes each
+        of its sweeps itself, and one started beside it would leave the map's next sweep none."""
+        return "a workspace map is running" if self.mapping else None
+
     def on_cancel(self) -> Cancel | None:
         """The client cancels its sweep goal: the cancel, or None (refused) once the sweep has
         ended (its map is being published or the goal is over)."""

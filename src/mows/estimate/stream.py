@@ -8,8 +8,9 @@ several sharing the fluxgates): each window is fitted jointly
 (:func:`mows.estimate.ringdown.fit_ringdowns`) over the probes it holds
 (:func:`mows.estimate.probe_set.window_probes`: those its excitation lists, each at its own θ0)
 and gives one estimate per probe, each counted from that probe's f00. A probe id the window
-lists but the set does not gets a failed fit naming it, never a number. The f00 calibration is
-of a set of one probe.
+lists but the set does not gets a failed fit naming it, never a number; its line, at the tone
+the window announces for it, is fitted beside the others' so that no listed probe takes it
+(:meth:`FitSettings.unlisted_lines`). The f00 calibration is of a set of one probe.
 
 The estimator node feeds it its subscriptions and publishes what it returns. What the node's
 parameters say (probes, fit options, settling) comes with each ring-down as a
@@ -18,6 +19,7 @@ the next fit.
 """
 
 import dataclasses
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -64,8 +66,24 @@ class FitSettings:
             fits |= {p.probe_id: _bad_fit(p, f"cannot build the signal model: {error}") for p in known}
         else:
             if lines:
-                fits |= {fit.probe_id: fit for fit in fit_segment(segment, lines, self.coil_off_skip_s, self.options)}
+                lines += self.unlisted_lines(held)
+                fitted = fit_segment(segment, lines, self.coil_off_skip_s, self.options)
+                fits |= {fit.probe_id: fit for fit in fitted if fit.probe_id not in fits}
         return [(p, fits[p.probe_id]) for p in held]
+
+    def unlisted_lines(self, held: Sequence[WindowProbe]) -> list[ProbeLine]:
+        """The lines of the probes ``held`` that the set does not list, each at the tone the
+        window announced for it, in the paper's single term (their constants and places are
+        not known). They are fitted, never reported: left out, a line of theirs would be taken
+        by a listed probe's tone (the fit's start gives the lines it finds to the tones in order
+        of frequency). None where θ0 is fitted, which is of one probe only."""
+        if self.options.theta0_free:
+            return []
+        return [
+            ProbeLine(p.probe_id, p.theta0_rad, p.tone_hz)
+            for p in held
+            if p.entry is None and math.isfinite(p.tone_hz) and p.tone_hz > 0
+        ]
 
 
 @dataclasses.dataclass(frozen=True)

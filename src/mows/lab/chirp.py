@@ -125,11 +125,12 @@ def diagnose_ringdown(
     """The chirp diagnosis (module docstring) of each probe ringing in one window: ``lines[k]``
     (:class:`mows.estimate.ringdown.ProbeLine`) of the probe of constants ``probes[k]`` and
     zero-field frequency ``f00_hz[k]``, all fitted jointly over the window and over each piece
-    (:func:`mows.estimate.ringdown.fit_ringdowns`; one probe is a window of one line). The
-    pieces are ``piece_periods`` periods of the slowest probe long. In the order of ``lines``,
-    a :class:`ChirpError` in place of a probe's diagnosis when its whole-window fit fails, the
-    window holds fewer than three pieces, or the probe has no amplitude or fewer than three
-    fitted pieces."""
+    (:func:`mows.estimate.ringdown.fit_ringdowns`; one probe is a window of one line). Lines
+    beyond those of ``probes`` are of probes rung in the window but not diagnosed: fitted
+    beside the others, not reported. The pieces are ``piece_periods`` periods of the slowest
+    line they fit long. In the order of ``probes``, a :class:`ChirpError` in place of a probe's
+    diagnosis when its whole-window fit fails, the window holds fewer than three pieces, or the
+    probe has no amplitude or fewer than three fitted pieces."""
     samples = np.asarray(samples, float)
     mask = np.zeros(samples.shape, bool) if saturated is None else np.asarray(saturated, bool)
     try:
@@ -137,21 +138,22 @@ def diagnose_ringdown(
     except ValueError as error:  # e.g. a window announced at no frequency
         return [ChirpError(f"no fit: {error}") for _ in lines]
     found: list[ChirpDiagnosis | ChirpError] = [
-        ChirpError(f"the whole-window fit failed: {fit.report()}") for fit in fits
+        ChirpError(f"the whole-window fit failed: {fit.report()}") for fit in fits[: len(probes)]
     ]
-    ok = [k for k, fit in enumerate(fits) if fit.ok]
+    ok = [k for k, fit in enumerate(fits[: len(probes)]) if fit.ok]
     if not ok:
         return found
-    start, stop = usable_window(mask, int(round(coil_off_skip_s * sample_rate_hz)))
-    length = int(round(piece_periods * sample_rate_hz / min(fits[k].frequency_hz for k in ok)))
-    count = (stop - start) // length
-    if count < 3:
-        short = ChirpError(f"{fits[ok[0]].duration_s:.3f} s hold {count} pieces of {piece_periods:g} periods; need 3")
-        return [found[k] if k not in ok else short for k in range(len(fits))]
     piece_lines = [
         dataclasses.replace(line, expected_frequency_hz=fit.frequency_hz) if fit.ok else line
         for line, fit in zip(lines, fits)
     ]
+    start, stop = usable_window(mask, int(round(coil_off_skip_s * sample_rate_hz)))
+    # Every line is fitted in each piece, so each piece holds piece_periods of the slowest.
+    length = int(round(piece_periods * sample_rate_hz / min(line.expected_frequency_hz for line in piece_lines)))
+    count = (stop - start) // length
+    if count < 3:
+        short = ChirpError(f"{fits[ok[0]].duration_s:.3f} s hold {count} pieces of {piece_periods:g} periods; need 3")
+        return [found[k] if k not in ok else short for k in range(len(found))]
     piece_options = dataclasses.replace(options, min_periods=0.8 * piece_periods)  # f may sit above the whole f
     piece_fits = [
         fit_ringdowns(
@@ -195,7 +197,7 @@ def diagnose_segment(
             diagnoses = diagnose_ringdown(
                 segment.samples_t,
                 segment.sample_rate_hz,
-                lines,
+                lines + settings.unlisted_lines(held),
                 probes,
                 settings.options,
                 f00s,

@@ -1,7 +1,8 @@
 """The cycle's tuning, one excitation path for any number of probes: a tuning ring-down retunes
 each probe's own tone from its own fit, three probes as one; a probe alone on its stage is
 driven as the cycle of one probe always was (the setup's currents at the excitation current,
-to the stop, at its tuned frequency, cut at the drive's turning point)."""
+to the stop, at its tuned frequency, cut at the drive's turning point); a line nearer a
+neighbour's estimate than the probe's own is the neighbour's, and retunes neither."""
 
 import dataclasses
 import math
@@ -15,6 +16,7 @@ from mows.device.cycle.phases import CycleRequest, CycleSettings, Phase
 from mows.device.cycle.sequencer import CycleSequencer
 from mows.device.interface import CoilCommand, CoilTone
 from mows.device.stream.session import DeviceSession, SessionConfig
+from mows.estimate.probe_set import with_f00
 from mows.estimate.ringdown import fit_tuning
 from mows.physics.coils import CurrentCap, excitation_samples, largest_spacing
 from mows.records.samples import SampleBlock
@@ -90,3 +92,41 @@ def test_a_probe_alone_is_driven_at_the_setup_s_currents_to_the_stop_at_each_tun
     offs = [c for c in device.commands if isinstance(c, CoilCommand) and c.off]
     assert [off.at_sample_index - on.at_sample_index for on, off in zip(drives, offs)] == [c.samples for c in drives]
     assert outcome.frequency_hz == fitted_hz[1] and math.isclose(sequencer.frequency_hz, fitted_hz[1])
+
+
+@pytest.mark.parametrize(
+    "lines_hz, tuned_hz",
+    [
+        ((100.0, 101.8), 101.0),  # probe 0's tone lies nearer probe 1's line: that line retunes neither
+        ((100.4, 101.8), 100.4),  # its own line lies nearest it: retuned
+    ],
+)
+def test_a_tuning_fit_retunes_only_the_probe_whose_estimate_its_line_is_nearest(lines_hz, tuned_hz):
+    """Two probes of f00 101.0 and 102.5 Hz ring at ``lines_hz``: probe 1's tone is refused
+    beside probe 0's (1.5 Hz apart: either would ring both), so each tuning window is probe 0's
+    alone while probe 1 rings in it too. The fit stands in for a one-line fit that finds the
+    line nearest the tone, as it does where the neighbour's line is the stronger."""
+    probes = tuple(dataclasses.replace(p, probe=with_f00(p.probe, f)) for p, f in zip(SCENE.probes, (101.0, 102.5)))
+
+    @dataclasses.dataclass(frozen=True)
+    class Fit:
+        frequency_hz: float
+        ok: bool = True
+
+    def fit(samples, sample_rate_hz, theta0, expected_hz, saturated):
+        return [Fit(min(lines_hz, key=lambda f: abs(f - e))) for e in expected_hz]
+
+    quick = CycleSettings(excite_s=0.5, ringdown_s=0.02, gap_s=0.0, repeats=1, tuning_steps=2, turn_settle_s=0.0)
+    sequencer = CycleSequencer(quick, SCENE.setup, CurrentCap(10.0), 20_000.0, 101.0, fit=fit, probes=probes)
+    sequencer.on_samples(SampleBlock(0, 0, 20_000.0, np.zeros((1, 2)), np.zeros((1, 2), bool)))
+    device = RecordingDevice()
+    outcome = device.run(sequencer, sequencer.start(CycleRequest(STAGE_RAD)))
+    assert outcome.success, outcome.message
+    assert [probe_id for probe_id, _ in outcome.refused_probes] == [1]
+    drives = [c for c in device.commands if isinstance(c, CoilCommand) and not c.off]
+    assert [[t.frequency_hz for t in c.tones] for c in drives][-1] == [tuned_hz]  # the measurement's tone
+    assert sequencer.frequencies_hz == (tuned_hz, 102.5)
+    neighbour = "probe 0's fit at 101.8000 Hz lies nearer probe 1's estimate 102.5000 Hz than its own 101.0000 Hz"
+    retuned = tuned_hz != 101.0
+    assert [fit.ok for fit in outcome.tuning_fits] == [retuned, retuned]
+    assert retuned or all(neighbour in fit.report() for fit in outcome.tuning_fits), outcome.message

@@ -119,6 +119,7 @@ TuningFit = Callable[..., Sequence[TuningResult]]
 
 class TuningStatus(enum.Enum):
     SAMPLES_LOST = "samples of the tuning ring-down were lost"
+    NEIGHBOUR_LINE = "the line fitted is another probe's"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,6 +132,29 @@ class LostTuning:
 
     def report(self) -> str:
         return self.status.value
+
+
+@dataclasses.dataclass(frozen=True)
+class NeighbourLine:
+    """A tuning fit of probe ``probe_id`` whose line lies nearer probe ``neighbour_id``'s
+    resonance estimate than its own: the neighbour's line, taken where the probe's own is weaker
+    or not in the window. It retunes neither probe."""
+
+    probe_id: int
+    line_hz: float
+    own_estimate_hz: float
+    neighbour_id: int
+    neighbour_estimate_hz: float
+    status: TuningStatus = TuningStatus.NEIGHBOUR_LINE
+    ok: bool = False
+    frequency_hz: float = math.nan
+
+    def report(self) -> str:
+        return (
+            f"{self.status.value}: probe {self.probe_id}'s fit at {self.line_hz:.4f} Hz lies nearer probe "
+            f"{self.neighbour_id}'s estimate {self.neighbour_estimate_hz:.4f} Hz than its own "
+            f"{self.own_estimate_hz:.4f} Hz; not retuned"
+        )
 
 
 @dataclasses.dataclass(frozen=True)

@@ -13,8 +13,9 @@ each other sized for a swing and grouped under the driver's cap, overlapping one
 the reason (:mod:`mows.device.cycle.excitation`). The groups are excited in turn
 (:class:`mows.device.cycle.tone_groups.GroupSequence`). The first ``tuning_steps`` rounds'
 ring-downs are fitted by the fit function the sequencer is handed (the estimator's joint fit of
-the probes ringing in one window, in the driver), each probe's good fit retuning its estimate;
-the next ``repeats`` rounds are the measurements. Probes the plan refuses are named with the
+the probes ringing in one window, in the driver), each probe's good fit retuning its estimate
+where its line lies nearer that estimate than any other probe's (else it is a neighbour's line,
+and retunes none); the next ``repeats`` rounds are the measurements. Probes the plan refuses are named with the
 reason in the outcome while the others are measured; a cycle whose probes are all refused is
 refused before it starts. The EXCITING and RINGDOWN of a group list its probes, each one's tone
 and its own θ0.
@@ -56,6 +57,7 @@ from mows.device.cycle.phases import (
     CycleSettings,
     CycleStep,
     LostTuning,
+    NeighbourLine,
     Phase,
     PhaseEvent,
     TuningFit,
@@ -331,17 +333,28 @@ class CycleSequencer:
         return turned + settle
 
     def _tune(self, recording: Recording, tones: Sequence[Tone]) -> list[TuningResult]:
-        """Fit a tuning ring-down of ``tones``' probes; each good fit becomes its probe's estimate."""
+        """Fit a tuning ring-down of ``tones``' probes; each good fit becomes its probe's
+        estimate, unless its line lies nearer another probe's estimate than its own (any probe
+        of the stage, rung in this window or not: a neighbour driven off its resonance, or
+        refused beside this tone, rings too): then it is that probe's line, and retunes none."""
         if not recording.complete:
             return [LostTuning() for _ in tones]
         samples, saturated = recording.arrays()
         theta0_rad = tuple(t.theta0_rad for t in tones)
         expected_hz = tuple(t.frequency_hz for t in tones)
-        fits = list(self._fit(samples, self.sample_rate_hz, theta0_rad, expected_hz, saturated=saturated))
-        estimates = list(self.frequencies_hz)
-        for tone, fit in zip(tones, fits, strict=True):
-            if fit.ok:
-                estimates[tone.probe_id] = float(fit.frequency_hz)
+        fits: list[TuningResult] = list(
+            self._fit(samples, self.sample_rate_hz, theta0_rad, expected_hz, saturated=saturated)
+        )
+        before, estimates = self.frequencies_hz, list(self.frequencies_hz)
+        for k, (tone, fit) in enumerate(zip(tones, fits, strict=True)):
+            if not fit.ok:
+                continue
+            owner = _nearest(before, fit.frequency_hz)
+            if owner == tone.probe_id:
+                estimates[owner] = float(fit.frequency_hz)
+            else:
+                own = before[tone.probe_id]
+                fits[k] = NeighbourLine(tone.probe_id, float(fit.frequency_hz), own, owner, before[owner])
         self.frequencies_hz = tuple(estimates)
         return fits
 
@@ -511,5 +524,10 @@ class CycleSequencer:
 def _named(estimates_hz: tuple[float, ...], frequency_hz: float) -> tuple[tuple[float, ...], int]:
     """``estimates_hz`` with the one nearest ``frequency_hz`` replaced by it, and its index
     (module docstring)."""
-    k = min(range(len(estimates_hz)), key=lambda j: abs(estimates_hz[j] - frequency_hz))
+    k = _nearest(estimates_hz, frequency_hz)
     return tuple(float(frequency_hz) if j == k else f for j, f in enumerate(estimates_hz)), k
+
+
+def _nearest(estimates_hz: tuple[float, ...], frequency_hz: float) -> int:
+    """The probe whose estimate is nearest ``frequency_hz`` (the first of equals)."""
+    return min(range(len(estimates_hz)), key=lambda j: abs(estimates_hz[j] - frequency_hz))

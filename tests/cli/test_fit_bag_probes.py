@@ -183,7 +183,8 @@ def test_lab_ringdown_diagnoses_the_tuning_windows_of_each_probe(tuned_bag, caps
     """With ``--tuning`` the two tuning windows are diagnosed too, each probe at the tone the
     driver announced for it (its f00, then its first fit), its pieces averaging to its truth."""
     path, truth = tuned_bag
-    assert main(["lab", "ringdown", str(path), *GEOMETRY, "--probes", probes_spec((0, 1, 2)), "--tuning", "--json"]) == 0
+    spec = probes_spec((0, 1, 2))
+    assert main(["lab", "ringdown", str(path), *GEOMETRY, "--probes", spec, "--tuning", "--json"]) == 0
     found = json.loads(capsys.readouterr().out)
     assert sorted(item["probe_id"] for item in found) == [0] * 8 + [1] * 8 + [2] * 8
     for item in found:

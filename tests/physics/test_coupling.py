@@ -145,3 +145,69 @@ def test_probes_too_close_or_missing_are_refused_by_name():
         coupled_rest([placed(0.0), placed(0.002)], NO_FIELD)
     with pytest.raises(ValueError, match="at least one probe"):
         coupled_rest([], NO_FIELD)
+
+
+# --- a buckled probe: beyond spring cancellation its rest is off zero ------------------------
+# An axial field 2 % past −kM/m along x: the probe turned to 0° (moment along +x, against the
+# field) buckles by ~20°; one turned to 180° (moment along the field) is stiffened.
+BUCKLING = UniformField([1.02 * P.cancellation_field_t, 0.0, 0.0])
+
+
+def exact_energy_j(angles, poses, scene_t):
+    """Σ ½kM·θ² − Σ m_i·B_scene − Σ_{i<j} m_i·B_j(r_i) of magnets on levers in the xy plane,
+    the geometry written out here: moment along (cos(θ0 + θ), sin(θ0 + θ)), magnet at
+    pivot + l·that, the pivot l behind its rest position."""
+    moments, positions = [], []
+    for (x_m, y_m, theta0), angle in zip(poses, angles):
+        rest_axis = np.array([math.cos(theta0), math.sin(theta0), 0.0])
+        axis = np.array([math.cos(theta0 + angle), math.sin(theta0 + angle), 0.0])
+        moments.append(P.moment_am2 * axis)
+        positions.append(np.array([x_m, y_m, 0.0]) + P.lever_m * (axis - rest_axis))
+    energy = 0.5 * P.spring_nm_per_rad * float(np.sum(np.square(angles)))
+    for i in range(len(poses)):
+        energy -= moments[i] @ np.asarray(scene_t)
+        for j in range(i):
+            energy -= moments[i] @ dipole(moments[j], positions[i] - positions[j])
+    return energy
+
+
+def test_a_lone_buckled_probe_rests_at_the_minimum_of_its_energy():
+    state = coupled_rest([placed(0.0)], BUCKLING)
+    field = BUCKLING.field_t(np.zeros(3))
+    # U = ½kM·θ² − m·Bx·cos θ has two alike wells; the positive one is taken on the symmetric top.
+    well = optimize.minimize_scalar(
+        lambda a: exact_energy_j([a], [(0.0, 0.0, 0.0)], field), bounds=(1e-3, 0.7), method="bounded",
+        options={"xatol": 1e-12},
+    ).x
+    assert math.radians(15.0) < well < math.radians(25.0)
+    # Brent's minimum is good to √ε of the angle; the root of U' there to rounding.
+    assert state.rest_angle_rad[0] == pytest.approx(well, abs=1e-7)
+    torque_free = optimize.brentq(lambda a: P.spring_nm_per_rad * a + P.moment_am2 * field[0] * math.sin(a), well - 1e-3, well + 1e-3)
+    assert state.rest_angle_rad[0] == pytest.approx(torque_free, abs=1e-12)
+
+
+def test_two_probes_one_buckled_rest_at_the_minimum_of_the_total_energy():
+    poses = [(0.0, 0.0, 0.0), (0.02, 0.025, math.pi)]
+    pair = [placed(x, y, math.degrees(theta0)) for x, y, theta0 in poses]
+    state = coupled_rest(pair, BUCKLING)
+    field = BUCKLING.field_t(np.zeros(3))
+    total = lambda angles: exact_energy_j(angles, poses, field)  # noqa: E731
+    # The buckled probe falls to the side its neighbour's field pushes it from 0.
+    h = 1e-7
+    downhill = -np.sign(total([h, 0.0]) - total([-h, 0.0]))
+    buckled, stiff = state.rest_angle_rad
+    assert np.sign(buckled) == downhill and math.radians(15.0) < abs(buckled) < math.radians(25.0)
+    assert abs(stiff) < 1e-3
+    # The coupled rest is the minimum of the total energy, found from a start 0.1 rad away.
+    found = optimize.minimize(
+        total, state.rest_angle_rad + [0.1, -0.1], method="Nelder-Mead",
+        options={"xatol": 1e-12, "fatol": 1e-30, "maxiter": 20_000},
+    ).x
+    assert np.abs(state.rest_angle_rad - found).max() < 1e-7
+    # Each probe's rest is the minimum of its own exact energy with the other held where it rests.
+    for k, bounds in ((0, sorted([downhill * 1e-3, downhill * 0.7])), (1, (-0.3, 0.3))):
+        alone = optimize.minimize_scalar(
+            lambda a: total(np.where(np.arange(2) == k, a, state.rest_angle_rad)), bounds=bounds, method="bounded",
+            options={"xatol": 1e-12},
+        ).x
+        assert state.rest_angle_rad[k] == pytest.approx(alone, abs=1e-7)  # √ε of Brent's minimum

@@ -96,6 +96,34 @@ def test_the_rest_angle_is_the_cycle_centre_of_a_vanishing_swing_and_nan_where_u
     assert np.isnan(tiny_swing[-1])
 
 
+def test_where_the_probe_settles_is_the_minimum_of_u_it_falls_into_from_zero():
+    # Rows: a perpendicular field (a stable rest: the rest angle itself); 3 % past cancellation
+    # along the axis with a field across pushing either way (lopsided double wells: it falls to
+    # the side the field across pushes it); and past cancellation so far that U falls beyond
+    # the interval (±0.75 rad: no rest inside it). U = ½kM·θ² − m·(Bx·cos θ + By·sin θ).
+    cancel = P.cancellation_field_t
+    fields = np.array([[0.0, 170e-6, 0.0], [1.03 * cancel, 50e-6, 0.0], [1.03 * cancel, -50e-6, 0.0], [3 * cancel, 0, 0]])
+    potential = ArcPotential.from_local_field(P, fields)
+    settled = potential.settled_angle_rad()
+    assert settled[0] == potential.rest_angle_rad()[0]
+    for row, bounds in ((1, (1e-3, 0.7)), (2, (-0.7, -1e-3))):
+        bx, by = fields[row, :2]
+        well = optimize.minimize_scalar(
+            lambda t, bx=bx, by=by: 0.5 * KM * t**2 - M * (bx * math.cos(t) + by * math.sin(t)),
+            bounds=bounds,
+            method="bounded",
+            options={"xatol": 1e-12},
+        ).x
+        assert settled[row] == pytest.approx(well, abs=1e-7)  # Brent's minimum: good to √ε of the angle
+        root = optimize.brentq(
+            lambda t, bx=bx, by=by: KM * t + M * (bx * math.sin(t) - by * math.cos(t)), well - 1e-3, well + 1e-3
+        )
+        assert settled[row] == pytest.approx(root, abs=1e-11)  # the 24-node series: 1e-12 rad
+        assert math.radians(15.0) < abs(well) < math.radians(35.0)
+        assert potential.stiffness_nm_per_rad(settled)[row] > 0.0
+    assert np.isnan(settled[3])
+
+
 def test_spring_cancellation_drives_the_frequency_to_zero():
     b_cancel = P.cancellation_field_t
     freqs = [along(b_cancel * (1 - eps)).frequency_hz() for eps in (1e-2, 1e-4)]

@@ -36,7 +36,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from mows.physics.pose import Pose
-from mows.physics.potential import ArcPotential
+from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, ArcPotential
 from mows.physics.probe import Probe
 from mows.physics.schema import refused
 from mows.physics.sources import FieldSource, PointDipole, SumSource
@@ -111,10 +111,18 @@ def check_apart(placed: Sequence[PlacedProbe], names: Sequence[str] = ()) -> Non
                 )
 
 
-def coupled_rest(placed: Sequence[PlacedProbe], scene: FieldSource, temperature_k: float | None = None) -> CoupledRest:
-    """The rest angles of all probes in ``scene``, each in its neighbours' field, to
-    REST_TOLERANCE_RAD (module docstring). ValueError naming the probe if one has no stable rest
-    angle or the iteration does not converge, and for magnets too close to pass each other."""
+def coupled_rest(
+    placed: Sequence[PlacedProbe],
+    scene: FieldSource,
+    temperature_k: float | None = None,
+    half_width_rad: float = DEFAULT_HALF_WIDTH_RAD,
+) -> CoupledRest:
+    """Where all probes in ``scene`` rest, each in its neighbours' field, to REST_TOLERANCE_RAD
+    (module docstring); one probe is a scene of one, in the scene's field alone. Each rests at
+    the minimum of its potential it falls into from its θ0 (:meth:`ArcPotential.settled_angle_rad`):
+    its rest angle, or beyond spring cancellation its buckled rest off zero. ValueError naming
+    the probe if one comes to rest nowhere within ±``half_width_rad`` or the iteration does not
+    converge, and for magnets too close to pass each other."""
     if len(placed) == 0:
         raise ValueError("a scene needs at least one probe")
     check_apart(placed)
@@ -123,14 +131,15 @@ def coupled_rest(placed: Sequence[PlacedProbe], scene: FieldSource, temperature_
         state = CoupledRest(angles, *magnets_at(placed, angles), iteration)
         updated = np.array(
             [
-                float(_potential(p, scene + state.neighbours(i), temperature_k).rest_angle_rad())
+                float(_potential(p, scene + state.neighbours(i), temperature_k, half_width_rad).settled_angle_rad())
                 for i, p in enumerate(placed)
             ]
         )
         unstable = np.flatnonzero(~np.isfinite(updated))
         if unstable.size:
             raise ValueError(
-                f"probe {int(unstable[0])} has no stable rest angle in the scene and its neighbours' field"
+                f"probe {int(unstable[0])} comes to rest nowhere within ±{half_width_rad:g} rad in the scene "
+                "and its neighbours' field (it falls onto its stop)"
             )
         step = np.max(np.abs(updated - angles))
         angles = updated
@@ -144,8 +153,10 @@ def external_source(state: CoupledRest, scene: FieldSource, index: int) -> Field
     return scene + state.neighbours(index)
 
 
-def _potential(placed: PlacedProbe, source: FieldSource, temperature_k: float | None) -> ArcPotential:
-    return ArcPotential.from_source(placed.probe, source, placed.pose, temperature_k)
+def _potential(
+    placed: PlacedProbe, source: FieldSource, temperature_k: float | None, half_width_rad: float = DEFAULT_HALF_WIDTH_RAD
+) -> ArcPotential:
+    return ArcPotential.from_source(placed.probe, source, placed.pose, temperature_k, half_width_rad=half_width_rad)
 
 
 def coupled_frequencies_hz(

@@ -54,6 +54,10 @@ DEFAULT_NODES = 32
 LOCAL_NODES = 24  # nodes of a potential built from a local field expansion (from_local_field)
 DEFAULT_HALF_WIDTH_RAD = 0.75
 TURNING_STEPS = 2  # fixed-point steps of first_harmonic_rad: each shrinks the error by ~(θc − θs + A2)/A ≲ 2 %
+# settled_angle_rad follows U' from θ = 0 on this many steps per half-interval (1.25 mrad at
+# w = 0.75: a well narrower than that is no rest a swinging probe could keep), then bisects.
+SETTLE_STEPS = 600
+SETTLE_BISECTIONS = 60  # a step halved 60 times: ~1e-21 rad, below the rounding of U'
 
 
 def chebyshev_nodes_rad(half_width_rad: float = DEFAULT_HALF_WIDTH_RAD, n: int = DEFAULT_NODES) -> np.ndarray:
@@ -177,6 +181,30 @@ class ArcPotential:
     def rest_angle_rad(self) -> np.ndarray:
         """Exact rest angle θs (U'(θs) = 0, U''(θs) > 0) nearest 0; NaN where none is stable."""
         return self._rest_rad.copy()
+
+    def settled_angle_rad(self) -> np.ndarray:
+        """Where the probe at rest sits: the minimum of U that the probe falls into from θ = 0,
+        which is the rest angle θs where there is one (:meth:`rest_angle_rad`). Beyond spring
+        cancellation (U''(0) < 0) it is a buckled rest off zero: the minimum on the downhill
+        side of 0 (the positive side on a symmetric top, whose two wells are alike), where U'
+        changes sign from − to + along the fall. NaN where U falls to the interval's edge (the
+        probe would lie on its stop, which U does not hold)."""
+        step = self.half_width_rad / SETTLE_STEPS
+        side = np.where(self.torque_nm(np.zeros(self.batch_shape)) < 0.0, -1.0, 1.0)  # downhill from 0
+        path = side[..., None] * (step * np.arange(SETTLE_STEPS))  # B + (m,), inside the interval
+        risen = -side[..., None] * self.torque_nm(path) >= 0.0  # U' has turned against the fall
+        risen[..., 0] = False
+        found = risen.any(axis=-1)
+        index = np.argmax(risen, axis=-1)[..., None]
+        low = np.take_along_axis(path, np.maximum(index - 1, 0), axis=-1)[..., 0]
+        high = np.take_along_axis(path, index, axis=-1)[..., 0]
+        rest = self.rest_angle_rad()
+        in_well = (rest - low) * (rest - high) <= 0.0  # Newton's θs lies in the same step: it is this minimum
+        for _ in range(SETTLE_BISECTIONS):
+            middle = 0.5 * (low + high)
+            turned = -side * self.torque_nm(middle) >= 0.0
+            low, high = np.where(turned, low, middle), np.where(turned, middle, high)
+        return np.where(found, np.where(in_well, rest, 0.5 * (low + high)), np.nan)
 
     @functools.cached_property
     def _rest_rad(self) -> np.ndarray:

@@ -131,8 +131,7 @@ class SimulatedDevice:
         self._drive_on_index = self._drive_off_index = 0
         self._state = np.zeros((3, len(self.placed)))  # θ, θ', contact mode of each probe
         self.set_orientations([p.pose.theta0_rad for p in self.placed] if theta0_rad is None else theta0_rad)
-        rest = self.truth.rest_angle_rad
-        self._state[0] = np.where(np.isfinite(rest), rest, 0.0)  # beyond spring cancellation: it buckles
+        self._state[0] = self.truth.rest_angle_rad
 
     # --- set-up --------------------------------------------------------------------------
     @property
@@ -412,18 +411,15 @@ class SimulatedDevice:
 
     def potentials(self) -> tuple[ArcPotential, ...]:
         """U(θ) of each probe at its present pose and the present temperature, in the static
-        field and, with several, its neighbours' dipoles at their coupled rest
-        (:func:`mows.physics.coupling.coupled_rest`)."""
+        field and its neighbours' dipoles where they rest (:func:`mows.physics.coupling.coupled_rest`)."""
         magnets = [PlacedProbe(m, p.pose) for m, p in zip(self._magnets, self.placed)]
         source, temperature_k = self.static_source, self.temperature_k
-        if len(magnets) == 1:
-            sources = [source]
-        else:
-            rest = coupled_rest(magnets, source, temperature_k)
-            sources = [external_source(rest, source, i) for i in range(len(magnets))]
+        rest = coupled_rest(magnets, source, temperature_k, self.half_width_rad)
         return tuple(
-            ArcPotential.from_source(p.probe, s, p.pose, temperature_k, half_width_rad=self.half_width_rad)
-            for p, s in zip(magnets, sources)
+            ArcPotential.from_source(
+                p.probe, external_source(rest, source, i), p.pose, temperature_k, half_width_rad=self.half_width_rad
+            )
+            for i, p in enumerate(magnets)
         )
 
     def expected_frequencies_hz(self, amplitude_rad: float = 0.0) -> np.ndarray:
@@ -440,7 +436,7 @@ class SimulatedDevice:
             theta0_rad=self.theta0_rad,
             theta_rad=self._state[0].copy(),
             theta_dot_rad_per_s=self._state[1].copy(),
-            rest_angle_rad=np.array([float(p.rest_angle_rad()) for p in potentials]),
+            rest_angle_rad=np.array([float(p.settled_angle_rad()) for p in potentials]),
             temperature_k=self.temperature_k,
             spring_nm_per_rad=np.array([p.probe.spring_at(self.temperature_k) for p in self.placed]),
             field_t=self.static_source.field_t(where),

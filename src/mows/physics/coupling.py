@@ -60,13 +60,15 @@ class CoupledRest:
 
     ``rest_angle_rad[i]`` is probe i's deflection θs from its θ0 at rest; ``moment_am2[i]`` and
     ``position_m[i]`` its magnet's moment and position there; ``iterations`` the fixed-point
-    steps it took.
+    steps it took; ``potentials[i]`` probe i's potential in the scene and its neighbours' field
+    of the last step (:func:`coupled_rest`: its neighbours within REST_TOLERANCE_RAD of their rest).
     """
 
     rest_angle_rad: np.ndarray  # (N,)
     moment_am2: np.ndarray  # (N, 3)
     position_m: np.ndarray  # (N, 3)
     iterations: int
+    potentials: tuple[ArcPotential, ...] = ()
 
     def neighbours(self, index: int) -> SumSource:
         """The dipoles of every magnet but ``index``'s: what probe ``index`` feels of the others."""
@@ -129,22 +131,22 @@ def coupled_rest(
     angles = np.zeros(len(placed))
     for iteration in range(1, MAX_ITERATIONS + 1):
         state = CoupledRest(angles, *magnets_at(placed, angles), iteration)
-        updated = np.array(
-            [
-                float(_potential(p, scene + state.neighbours(i), temperature_k, half_width_rad).settled_angle_rad())
-                for i, p in enumerate(placed)
-            ]
+        potentials = tuple(
+            _potential(p, scene + state.neighbours(i), temperature_k, half_width_rad) for i, p in enumerate(placed)
         )
+        updated = np.array([float(p.settled_angle_rad()) for p in potentials])
         unstable = np.flatnonzero(~np.isfinite(updated))
         if unstable.size:
             raise ValueError(
                 f"probe {int(unstable[0])} comes to rest nowhere within ±{half_width_rad:g} rad in the scene "
                 "and its neighbours' field (it falls onto its stop)"
             )
-        step = np.max(np.abs(updated - angles))
+        # What probe i feels changes only by its neighbours' steps: converged when none moves.
+        moved = np.abs(updated - angles)
+        step = max(float(np.max(np.delete(moved, i), initial=0.0)) for i in range(len(placed)))
         angles = updated
         if step <= REST_TOLERANCE_RAD:
-            return CoupledRest(angles, *magnets_at(placed, angles), iteration)
+            return CoupledRest(angles, *magnets_at(placed, angles), iteration, potentials)
     raise ValueError(f"the probes' rest angles did not converge in {MAX_ITERATIONS} steps (last change {step:.3g} rad)")
 
 
@@ -168,9 +170,4 @@ def coupled_frequencies_hz(
     """(N,): each probe's ring-down frequency at swing ``amplitude_rad`` in the scene and its
     neighbours' fields at the coupled rest (Eq. S1 with the exact stiffness), Hz."""
     state = coupled_rest(placed, scene, temperature_k)
-    return np.array(
-        [
-            float(_potential(p, external_source(state, scene, i), temperature_k).frequency_hz(amplitude_rad))
-            for i, p in enumerate(placed)
-        ]
-    )
+    return np.array([float(p.frequency_hz(amplitude_rad)) for p in state.potentials])

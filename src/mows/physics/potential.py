@@ -194,17 +194,22 @@ class ArcPotential:
         path = side[..., None] * (step * np.arange(SETTLE_STEPS))  # B + (m,), inside the interval
         risen = -side[..., None] * self.torque_nm(path) >= 0.0  # U' has turned against the fall
         risen[..., 0] = False
-        found = risen.any(axis=-1)
         index = np.argmax(risen, axis=-1)[..., None]
         low = np.take_along_axis(path, np.maximum(index - 1, 0), axis=-1)[..., 0]
         high = np.take_along_axis(path, index, axis=-1)[..., 0]
         rest = self.rest_angle_rad()
         in_well = (rest - low) * (rest - high) <= 0.0  # Newton's θs lies in the same step: it is this minimum
+        if not np.all(in_well):
+            rest = np.where(in_well, rest, self._bisected(side, low, high))
+        return np.where(risen.any(axis=-1), rest, np.nan)
+
+    def _bisected(self, side: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """The zero of U' between ``low``, where it is against ``side``, and ``high``, where it is not."""
         for _ in range(SETTLE_BISECTIONS):
             middle = 0.5 * (low + high)
             turned = -side * self.torque_nm(middle) >= 0.0
             low, high = np.where(turned, low, middle), np.where(turned, middle, high)
-        return np.where(found, np.where(in_well, rest, 0.5 * (low + high)), np.nan)
+        return 0.5 * (low + high)
 
     @functools.cached_property
     def _rest_rad(self) -> np.ndarray:

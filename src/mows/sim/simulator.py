@@ -36,7 +36,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mows.physics.coupling import PlacedProbe, coupled_rest, external_source
+from mows.physics.coupling import PlacedProbe, coupled_rest
 from mows.physics.field import SumSource
 from mows.physics.multitone import summed_peak_a
 from mows.physics.potential import DEFAULT_HALF_WIDTH_RAD, ArcPotential
@@ -413,14 +413,7 @@ class SimulatedDevice:
         """U(θ) of each probe at its present pose and the present temperature, in the static
         field and its neighbours' dipoles where they rest (:func:`mows.physics.coupling.coupled_rest`)."""
         magnets = [PlacedProbe(m, p.pose) for m, p in zip(self._magnets, self.placed)]
-        source, temperature_k = self.static_source, self.temperature_k
-        rest = coupled_rest(magnets, source, temperature_k, self.half_width_rad)
-        return tuple(
-            ArcPotential.from_source(
-                p.probe, external_source(rest, source, i), p.pose, temperature_k, half_width_rad=self.half_width_rad
-            )
-            for i, p in enumerate(magnets)
-        )
+        return coupled_rest(magnets, self.static_source, self.temperature_k, self.half_width_rad).potentials
 
     def expected_frequencies_hz(self, amplitude_rad: float = 0.0) -> np.ndarray:
         """(N,): each probe's ring-down frequency at swing ``amplitude_rad`` from its full potential

@@ -28,7 +28,7 @@ from rclpy.action import CancelResponse
 from mows.device.cycle.phases import CycleRequest
 from mows.estimate.settings import probe_set
 from mows.lab import analyse_sweep
-from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepOutcome, SweepSettings, SweepStep
+from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepOutcome, SweepStep
 from mows.sweep.publication import Publication, cycle_failed, publication
 from mows.sweep.requests import Cancel, LogLine, Severity, SweepRequests
 from mows.sweep.runner import SweepRunner
@@ -68,7 +68,6 @@ class MapperNode(MowsNode):
         super().__init__(NODE_NAME, PARAMETERS)
         self._runner = SweepRunner()
         self._requests = SweepRequests(self._runner)
-        self._settings = SweepSettings()  # the running sweep's
         self._driver = DriverCycles(self, self._on_fit)
         probes = probe_set(self._param("probes"), probe_of(self._param("probe_file")))
         self._outputs = MapperOutputs(self, len(probes))
@@ -92,9 +91,8 @@ class MapperNode(MowsNode):
         if (refusal := self.inactive_reason() or self._requests.sweep_refusal()) is not None:
             return refusal
         try:
-            probe = probe_of(self._param("probe_file"))
-            self._settings = sweep_settings(parameter_values(self, PARAMETERS), probe)
-            self._runner.start(messages.sweep_goal(goal), self._settings, probe)
+            settings = sweep_settings(parameter_values(self, PARAMETERS), probe_of(self._param("probe_file")))
+            self._runner.start(messages.sweep_goal(goal), settings)
         except ValueError as refused:
             return str(refused)
         return None
@@ -151,7 +149,7 @@ class MapperNode(MowsNode):
                     goal_handle.publish_feedback(feedback)
                 step = await self._advance(step)
             outcome = step.finished
-            plan = publication(step, self._settings, self._param("reference_scenario"))
+            plan = publication(step, self._runner.settings, self._param("reference_scenario"))
             await self._publish(plan)
         finally:  # an exception must not leave the runner busy for good
             self.destroy_timer(timer)
@@ -167,7 +165,7 @@ class MapperNode(MowsNode):
             goal_handle.abort()
             return WorkspaceMap.Result(success=False, message=f"workspace map refused: {refusal}")
         try:
-            carried = settings.entries(probe)[0].probe
+            carried = settings.probes[0].probe
             result = await self._mapping.run(goal_handle, carried, lambda: self._requests.map_cancelled)
         except ValueError as error:  # no pose left within reach; sweeps that cannot determine a map
             result = WorkspaceMap.Result(success=False, message=f"workspace map failed: {error}")
@@ -182,11 +180,10 @@ class MapperNode(MowsNode):
         """One rotation sweep of the workspace map where the arm holds the probe; ``arm_turn``
         turns it to each orientation when the arm's last joint does (no stage)."""
         try:
-            probe = probe_of(self._param("probe_file"))
-            self._settings = sweep_settings(parameter_values(self, PARAMETERS), probe)
+            settings = sweep_settings(parameter_values(self, PARAMETERS), probe_of(self._param("probe_file")))
             if arm_turn is not None:  # each orientation is the arm's: turned, then measured
-                self._settings = dataclasses.replace(self._settings, manual_orientation=True)
-            self._runner.start(goal, self._settings, probe)
+                settings = dataclasses.replace(settings, manual_orientation=True)
+            self._runner.start(goal, settings)
         except ValueError as refused:
             return SweepOutcome(False, f"sweep refused: {refused}")
         self._arm_turn = arm_turn

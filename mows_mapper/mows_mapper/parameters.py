@@ -88,6 +88,6 @@ def sweep_settings(values: dict, probe: Probe) -> SweepSettings:
         values["repeat_s"],
         values["turn_s"],
         values["orientation"] == "manual",
-        node_probes(values["probes"], own_probe_entry(probe)),
         bool(values["probes"].strip()),
+        probes=node_probes(values["probes"], own_probe_entry(probe)),
     )

@@ -8,7 +8,7 @@ import dataclasses
 from collections.abc import Callable
 
 from mows.device.cycle.phases import CycleRequest, Phase
-from mows.estimate.probe_set import ProbeEntry
+from mows.estimate.probe_set import ProbeEntry, own_probe_entry
 from mows.estimate.ringdown import COIL_OFF_SKIP_S, FitOptions
 from mows.estimate.segments import RingdownWindow, SegmentAssembler, fit_segment
 from mows.sweep.calibration.run import CalibrationRun, Turn
@@ -81,7 +81,8 @@ class BenchRig:
         """A rotation sweep through the core's runner; its outcome (with the decomposition)."""
         runner = SweepRunner()
         probe = self.scenario.probe
-        runner.start(SweepGoal(tuple(angles_rad), repeats), SweepSettings(manual_orientation=self.manual), probe)
+        settings = SweepSettings(manual_orientation=self.manual, probes=(own_probe_entry(probe),))
+        runner.start(SweepGoal(tuple(angles_rad), repeats), settings)
         step = runner.begin()
         while step.finished is None:
             if step.turn is not None:

@@ -176,13 +176,17 @@ def test_a_lone_buckled_probe_rests_at_the_minimum_of_its_energy():
     field = BUCKLING.field_t(np.zeros(3))
     # U = ½kM·θ² − m·Bx·cos θ has two alike wells; the positive one is taken on the symmetric top.
     well = optimize.minimize_scalar(
-        lambda a: exact_energy_j([a], [(0.0, 0.0, 0.0)], field), bounds=(1e-3, 0.7), method="bounded",
+        lambda a: exact_energy_j([a], [(0.0, 0.0, 0.0)], field),
+        bounds=(1e-3, 0.7),
+        method="bounded",
         options={"xatol": 1e-12},
     ).x
     assert math.radians(15.0) < well < math.radians(25.0)
     # Brent's minimum is good to √ε of the angle; the root of U' there to rounding.
     assert state.rest_angle_rad[0] == pytest.approx(well, abs=1e-7)
-    torque_free = optimize.brentq(lambda a: P.spring_nm_per_rad * a + P.moment_am2 * field[0] * math.sin(a), well - 1e-3, well + 1e-3)
+    torque_free = optimize.brentq(
+        lambda a: P.spring_nm_per_rad * a + P.moment_am2 * field[0] * math.sin(a), well - 1e-3, well + 1e-3
+    )
     assert state.rest_angle_rad[0] == pytest.approx(torque_free, abs=1e-12)
 
 
@@ -200,14 +204,18 @@ def test_two_probes_one_buckled_rest_at_the_minimum_of_the_total_energy():
     assert abs(stiff) < 1e-3
     # The coupled rest is the minimum of the total energy, found from a start 0.1 rad away.
     found = optimize.minimize(
-        total, state.rest_angle_rad + [0.1, -0.1], method="Nelder-Mead",
+        total,
+        state.rest_angle_rad + [0.1, -0.1],
+        method="Nelder-Mead",
         options={"xatol": 1e-12, "fatol": 1e-30, "maxiter": 20_000},
     ).x
     assert np.abs(state.rest_angle_rad - found).max() < 1e-7
     # Each probe's rest is the minimum of its own exact energy with the other held where it rests.
     for k, bounds in ((0, sorted([downhill * 1e-3, downhill * 0.7])), (1, (-0.3, 0.3))):
         alone = optimize.minimize_scalar(
-            lambda a: total(np.where(np.arange(2) == k, a, state.rest_angle_rad)), bounds=bounds, method="bounded",
+            lambda a, k=k: total(np.where(np.arange(2) == k, a, state.rest_angle_rad)),
+            bounds=bounds,
+            method="bounded",
             options={"xatol": 1e-12},
         ).x
         assert state.rest_angle_rad[k] == pytest.approx(alone, abs=1e-7)  # √ε of Brent's minimum

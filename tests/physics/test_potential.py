@@ -102,7 +102,9 @@ def test_where_the_probe_settles_is_the_minimum_of_u_it_falls_into_from_zero():
     # the side the field across pushes it); and past cancellation so far that U falls beyond
     # the interval (±0.75 rad: no rest inside it). U = ½kM·θ² − m·(Bx·cos θ + By·sin θ).
     cancel = P.cancellation_field_t
-    fields = np.array([[0.0, 170e-6, 0.0], [1.03 * cancel, 50e-6, 0.0], [1.03 * cancel, -50e-6, 0.0], [3 * cancel, 0, 0]])
+    fields = np.array(
+        [[0.0, 170e-6, 0.0], [1.03 * cancel, 50e-6, 0.0], [1.03 * cancel, -50e-6, 0.0], [3 * cancel, 0, 0]]
+    )
     potential = ArcPotential.from_local_field(P, fields)
     settled = potential.settled_angle_rad()
     assert settled[0] == potential.rest_angle_rad()[0]

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from mows.estimate.probe_set import own_probe_entry
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
@@ -16,8 +17,10 @@ from mows.sweep.planner import PrecisionGoal
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import SweepRunner
 
+OWN = (own_probe_entry(P),)  # the runner's probe: a set of one
+
 FIELD_T = np.array([30e-6, -20e-6, 0.0])
-SETTINGS = SweepSettings(repeat_s=0.8, turn_s=0.5)
+SETTINGS = SweepSettings(probes=OWN, repeat_s=0.8, turn_s=0.5)
 MAX_STEPS = 500  # bound for a sweep that never ends (a bug)
 
 
@@ -31,7 +34,7 @@ def sweep(goal, seed=0):
     rng = np.random.default_rng(seed)
     source = UniformField(FIELD_T)
     runner = SweepRunner()
-    runner.start(SweepGoal(target=goal), SETTINGS, P)
+    runner.start(SweepGoal(target=goal), SETTINGS)
     step, clock, cycles = runner.begin(), 0.0, []
     for cycle_id in range(1, MAX_STEPS):
         if step.finished is not None:
@@ -77,7 +80,7 @@ def test_an_adaptive_sweep_keeps_its_budget():
 def test_an_adaptive_goal_the_decomposition_cannot_meet_is_refused():
     runner = SweepRunner()
     with pytest.raises(ValueError, match="Gxx"):
-        runner.start(SweepGoal(target=PrecisionGoal("gxx")), SweepSettings(f00_free=True), P)
+        runner.start(SweepGoal(target=PrecisionGoal("gxx")), SweepSettings(probes=OWN, f00_free=True))
     assert runner.state == "idle"
 
 

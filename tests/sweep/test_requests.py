@@ -5,6 +5,7 @@ of test_runner."""
 
 import pytest
 
+from mows.estimate.probe_set import own_probe_entry
 from mows.physics.probe import PAPER_PROBE as P
 from mows.sweep.events import CycleAnswer, SweepGoal, SweepSettings
 from mows.sweep.requests import (
@@ -21,6 +22,8 @@ from mows.sweep.runner import SweepRunner, SweepState
 
 from .test_runner import ANGLES, StandIn
 
+OWN = (own_probe_entry(P),)  # the runner's probe: a set of one
+
 SEND_GOAL = ("/mapper/rotation_sweep/_action/send_goal", "/mows/mapper/rotation_sweep/_action/send_goal")
 GONE = "every node that asked for it through /mapper/rotation_sweep/_action/send_goal has left"
 CLI, OTHER = b"cli", b"other"
@@ -31,7 +34,7 @@ def watched(goal=SweepGoal(ANGLES[:5], 1), seen=frozenset({CLI}), now_s=100.0):
     runner and its first step."""
     runner = SweepRunner()
     requests = SweepRequests(runner)
-    runner.start(goal, SweepSettings(), P)
+    runner.start(goal, SweepSettings(probes=OWN))
     requests.watch(SEND_GOAL, seen, now_s)
     return requests, runner, runner.begin()
 
@@ -137,7 +140,7 @@ def test_a_cancel_after_the_sweep_ended_is_refused_and_counts_nothing():
     assert requests.ended(step.finished) is None
     assert requests.on_cancel() is None  # and after the goal ended
     assert runner.cancels == 0 and runner.last_cancel == "" and runner.sweeps == 1
-    runner.start(SweepGoal(ANGLES[:5], 1), SweepSettings(), P)  # the next sweep starts clean
+    runner.start(SweepGoal(ANGLES[:5], 1), SweepSettings(probes=OWN))  # the next sweep starts clean
     assert not runner.cancelled()
     assert run_to_the_end(runner, runner.begin(), StandIn()).finished.ok
 
@@ -149,7 +152,7 @@ def test_the_counts_on_diagnostics_agree_with_the_cancels_carried_out_and_the_ma
     requests, driver = SweepRequests(runner), StandIn()
     carried_out, published, lines = [], [], []
     for ending in ("cancel", "gone", "map", "late cancel"):
-        runner.start(SweepGoal(ANGLES[:5], 1), SweepSettings(), P)
+        runner.start(SweepGoal(ANGLES[:5], 1), SweepSettings(probes=OWN))
         requests.watch(SEND_GOAL, frozenset({CLI}), 0.0)
         step = runner.begin()
         if ending == "cancel":
@@ -239,7 +242,7 @@ def test_a_map_cancelled_mid_sweep_cancels_that_sweep():
     runner = SweepRunner()
     requests = SweepRequests(runner)
     requests.start_map(1)
-    runner.start(SweepGoal(ANGLES[:5], 1), SweepSettings(), P)
+    runner.start(SweepGoal(ANGLES[:5], 1), SweepSettings(probes=OWN))
     requests.watch(MAP, frozenset({CLI}), 0.0)
     step = runner.begin()
     assert requests.on_cancel_map() == Cancel()
@@ -252,7 +255,7 @@ def test_a_maps_sweeps_wait_for_the_maps_client_and_its_leaving_ends_the_map():
     requests = SweepRequests(runner)
     requests.start_map(1)
     for now_s, seen in ((0.0, {CLI}), (30.0, {CLI, OTHER})):  # another client came before the second sweep
-        runner.start(SweepGoal(ANGLES[:5], 1), SweepSettings(), P)
+        runner.start(SweepGoal(ANGLES[:5], 1), SweepSettings(probes=OWN))
         requests.watch(MAP, frozenset(seen), now_s)
         step = runner.begin()
         if now_s == 0.0:

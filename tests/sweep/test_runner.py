@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from mows.estimate.probe_set import own_probe_entry
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
@@ -15,6 +16,8 @@ from mows.sweep.decomposition import Decomposition, DecompositionStatus
 from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings, turn_prompt
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import SweepRunner
+
+OWN = (own_probe_entry(P),)  # the runner's probe: a set of one
 
 FIELD_T = np.array([30e-6, -20e-6, 0.0])
 STD_HZ = 5e-4
@@ -50,9 +53,9 @@ class StandIn:
         return steps[-1]
 
 
-def started(goal=SweepGoal(ANGLES, 2), settings=SweepSettings()):
+def started(goal=SweepGoal(ANGLES, 2), settings=SweepSettings(probes=OWN)):
     runner = SweepRunner()
-    runner.start(goal, settings, P)
+    runner.start(goal, settings)
     return runner, runner.begin()
 
 
@@ -79,7 +82,7 @@ def test_a_sweep_runs_a_cycle_per_angle_and_recovers_the_field():
 
 
 def test_a_goal_without_angles_or_repeats_takes_the_settings():
-    runner, step = started(SweepGoal(), SweepSettings(repeats_per_angle=3, angle_step_deg=72.0))
+    runner, step = started(SweepGoal(), SweepSettings(probes=OWN, repeats_per_angle=3, angle_step_deg=72.0))
     driver, calls = StandIn(), []
     while step.run_cycle is not None:
         calls.append(step.run_cycle)
@@ -117,7 +120,7 @@ def test_a_cancel_ends_the_sweep_before_the_next_orientation():
     assert step.feedback.angle_index == 0 and step.run_cycle is None
     assert step.finished.cancelled and not step.finished.ok
     assert step.finished.message == f"cancelled after 1 of {len(ANGLES)} orientations"
-    runner.start(SweepGoal(ANGLES), SweepSettings(), P)  # free again
+    runner.start(SweepGoal(ANGLES), SweepSettings(probes=OWN))  # free again
 
 
 def test_a_sweep_without_one_good_ringdown_fails_and_publishes_nothing():
@@ -143,21 +146,25 @@ def test_a_failed_decomposition_ends_the_sweep_and_leaves_nothing_to_publish():
 @pytest.mark.parametrize(
     "goal, settings, reason",
     [
-        (SweepGoal((0.0, math.nan)), SweepSettings(), "not all finite"),
-        (SweepGoal(ANGLES, model="paper"), SweepSettings(), "'paper' is not one of first_principles, published"),
+        (SweepGoal((0.0, math.nan)), SweepSettings(probes=OWN), "not all finite"),
+        (
+            SweepGoal(ANGLES, model="paper"),
+            SweepSettings(probes=OWN),
+            "'paper' is not one of first_principles, published",
+        ),
         # The field is the 1θ0 harmonic and the gradient the 2θ0 one: 4 orientations cannot tell
         # them from the constant term, 5 cannot when f00 is free too.
-        (SweepGoal(ANGLES[:4]), SweepSettings(), "4 distinct orientations .* need at least 5"),
-        (SweepGoal(ANGLES[:2] * 3), SweepSettings(), "2 distinct orientations"),
-        (SweepGoal(ANGLES[:5]), SweepSettings(f00_free=True), "need at least 6"),
-        (SweepGoal(), SweepSettings(angle_step_deg=90.0), "4 distinct orientations"),
-        (SweepGoal(ANGLES, 101), SweepSettings(), r"repeats_per_angle=101 is outside \[1, 100\]"),
+        (SweepGoal(ANGLES[:4]), SweepSettings(probes=OWN), "4 distinct orientations .* need at least 5"),
+        (SweepGoal(ANGLES[:2] * 3), SweepSettings(probes=OWN), "2 distinct orientations"),
+        (SweepGoal(ANGLES[:5]), SweepSettings(probes=OWN, f00_free=True), "need at least 6"),
+        (SweepGoal(), SweepSettings(probes=OWN, angle_step_deg=90.0), "4 distinct orientations"),
+        (SweepGoal(ANGLES, 101), SweepSettings(probes=OWN), r"repeats_per_angle=101 is outside \[1, 100\]"),
     ],
 )
 def test_bad_goals_are_refused_with_the_reason_before_any_cycle(goal, settings, reason):
     runner = SweepRunner()
     with pytest.raises(ValueError, match=reason):
-        runner.start(goal, settings, P)
+        runner.start(goal, settings)
     assert runner.state == "idle"
 
 
@@ -169,13 +176,13 @@ def test_five_orientations_are_enough():
 def test_one_sweep_at_a_time_and_the_runner_is_freed_when_abandoned():
     runner, _ = started()
     with pytest.raises(ValueError, match="another sweep is still running"):
-        runner.start(SweepGoal(ANGLES), SweepSettings(), P)
+        runner.start(SweepGoal(ANGLES), SweepSettings(probes=OWN))
     assert not runner.abandon("the node stops").finished.ok and runner.state == "idle"
     assert runner.abandon("again").finished is None
 
 
 def test_a_manual_stage_asks_the_operator_before_each_cycle():
-    runner, step = started(settings=SweepSettings(manual_orientation=True))
+    runner, step = started(settings=SweepSettings(probes=OWN, manual_orientation=True))
     driver, turns = StandIn(), []
     while step.decompose is None:
         assert step.run_cycle is None and step.turn == runner.turn_awaited
@@ -191,7 +198,7 @@ def test_a_manual_stage_asks_the_operator_before_each_cycle():
 
 
 def test_a_sweep_cancelled_while_the_operator_turns_ends_there():
-    runner, step = started(settings=SweepSettings(manual_orientation=True))
+    runner, step = started(settings=SweepSettings(probes=OWN, manual_orientation=True))
     runner.cancel()
     end = runner.on_turned()
     assert end.finished.cancelled and end.run_cycle is None and runner.state == "idle"
@@ -199,7 +206,7 @@ def test_a_sweep_cancelled_while_the_operator_turns_ends_there():
 
 
 def test_a_turn_not_confirmed_in_time_fails_the_sweep_naming_the_orientation():
-    runner, step = started(settings=SweepSettings(manual_orientation=True))
+    runner, step = started(settings=SweepSettings(probes=OWN, manual_orientation=True))
     assert step.turn == ANGLES[0]
     end = runner.turn_timed_out(30.0)
     assert not end.finished.ok and not end.finished.cancelled and runner.state == "idle"
@@ -210,15 +217,15 @@ def test_a_turn_not_confirmed_in_time_fails_the_sweep_naming_the_orientation():
 def test_the_last_failure_stays_until_a_sweep_succeeds_and_a_cancel_leaves_it():
     runner, goal = SweepRunner(), SweepGoal(ANGLES[:5], 1)
     assert runner.last_failure == ""
-    runner.start(goal, SweepSettings(), P)
+    runner.start(goal, SweepSettings(probes=OWN))
     runner.begin()
     runner.abandon("the driver left")
     assert runner.last_failure == "the driver left"
-    runner.start(goal, SweepSettings(), P)
+    runner.start(goal, SweepSettings(probes=OWN))
     step = runner.begin()
     runner.cancel()
     assert StandIn().run(runner, step).finished.cancelled and runner.last_failure == "the driver left"
-    runner.start(goal, SweepSettings(), P)
+    runner.start(goal, SweepSettings(probes=OWN))
     step, driver = runner.begin(), StandIn()
     while step.decompose is None:
         step = driver.run(runner, step)
@@ -274,3 +281,13 @@ def test_a_map_names_the_cycles_of_its_sweep():
         step = driver.run(runner, step)
     (sweep,) = runner.on_decomposed(step.decompose()).publish
     assert sweep.cycle_ids == (41, 42, 43, 44, 45)
+
+
+def test_the_settings_carry_their_probes_one_probe_a_set_of_one():
+    # The runner takes the sweep's probes from its settings alone: there is no other probe to fall back on.
+    with pytest.raises(TypeError, match="probes"):
+        SweepSettings()  # type: ignore[call-arg]
+    with pytest.raises(ValueError, match="one probe is a set of one"):
+        SweepSettings(probes=())
+    runner, _ = started()
+    assert runner.settings.probes == OWN

@@ -40,7 +40,7 @@ def fit(entry, field_t, theta0_rad, cycle_id, rng, ok=True):
 def run(settings, fails=()):
     """The sweep through to its decomposition; ``fails``: probe ids whose every fit fails."""
     runner, rng = SweepRunner(), np.random.default_rng(3)
-    runner.start(SweepGoal(ANGLES, 2), settings, P)
+    runner.start(SweepGoal(ANGLES, 2), settings)
     step, cycle = runner.begin(), 0
     while step.decompose is None:
         cycle += 1
@@ -87,7 +87,7 @@ def test_a_probe_without_a_good_fit_is_reported_and_the_others_are_decomposed():
 
 def test_fits_of_a_probe_not_listed_do_not_complete_an_orientation():
     runner, rng = SweepRunner(), np.random.default_rng(3)
-    runner.start(SweepGoal(ANGLES, 1), SweepSettings(probes=PROBES[:2]), P)
+    runner.start(SweepGoal(ANGLES, 1), SweepSettings(probes=PROBES[:2]))
     call = runner.begin().run_cycle
     runner.on_cycle(CycleAnswer(1, 1))
     fits = [fit(e, f, call.theta0_rad, 1, rng) for e, f in zip(PROBES, FIELDS_T)]
@@ -99,11 +99,11 @@ def test_fits_of_a_probe_not_listed_do_not_complete_an_orientation():
 def test_an_adaptive_sweep_of_several_probes_is_refused():
     goal = SweepGoal.asked((), 0, "", "B", 1e-7, 0.0, 60.0)
     with pytest.raises(ValueError, match="adaptive sweep is of one probe; 3 are listed"):
-        SweepRunner().start(goal, SweepSettings(probes=PROBES), P)
+        SweepRunner().start(goal, SweepSettings(probes=PROBES))
 
 
 def test_an_adaptive_sweep_of_a_list_of_one_probe_is_that_probe_s():
     goal = SweepGoal.asked((), 0, "", "B", 1e-7, 0.0, 60.0)
     runner = SweepRunner()
-    runner.start(goal, SweepSettings(probes=PROBES[1:2]), P)
+    runner.start(goal, SweepSettings(probes=PROBES[1:2]))
     assert runner.state == SweepState.SWEEPING

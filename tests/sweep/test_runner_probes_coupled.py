@@ -68,7 +68,7 @@ def fits(theta0_rad, cycle_id, rng):
 def swept():
     """The runner's step after the sweep's decomposition, and its probes' shares."""
     runner, rng = SweepRunner(), np.random.default_rng(5)
-    runner.start(SweepGoal(ANGLES, REPEATS), SweepSettings(probes=PROBES), P)
+    runner.start(SweepGoal(ANGLES, REPEATS), SweepSettings(probes=PROBES))
     step, cycle = runner.begin(), 0
     while step.decompose is None:
         cycle += 1

@@ -18,7 +18,6 @@ import pytest
 
 from mows.physics.coupling import PlacedProbe, coupled_frequencies_hz
 from mows.physics.pose import Pose
-from mows.physics.probe import PAPER_PROBE as P
 from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings
 from mows.sweep.probes import decompose_probes, step_orientations_rad
 from mows.sweep.record import SweepPoint
@@ -50,7 +49,7 @@ def fits(stage_rad, cycle_id, step, rng):
 @pytest.fixture(scope="module")
 def swept():
     runner, rng = SweepRunner(), np.random.default_rng(5)
-    runner.start(SweepGoal(ANGLES, REPEATS), SweepSettings(probes=PROBES), P)
+    runner.start(SweepGoal(ANGLES, REPEATS), SweepSettings(probes=PROBES))
     step, cycle, feedback = runner.begin(), 0, []
     while step.decompose is None:
         cycle += 1

@@ -75,7 +75,7 @@ def run(args) -> int:
         sweeps = [(f"sweep {k}", cycles) for k, cycles in enumerate(session.sweeps(), 1)]
         if after := session.after_last():
             sweeps.append(("after the last recorded sweep", after))
-        outcomes = [_replayed(cycles, fits, settings, probe) for _, cycles in sweeps]
+        outcomes = [_replayed(cycles, fits, settings) for _, cycles in sweeps]
         if not any(outcome.maps or outcome.ok for outcome in outcomes):
             raise ValueError("; ".join(f"{name}: {outcome.message}" for (name, _), outcome in zip(sweeps, outcomes)))
         model, sweep_ids = map_workspace.recorded_map(args.bag)
@@ -101,11 +101,11 @@ def run(args) -> int:
     return 0
 
 
-def _replayed(cycles: tuple[RecordedCycle, ...], fits, settings: SweepSettings, probe: Probe) -> SweepOutcome:
+def _replayed(cycles: tuple[RecordedCycle, ...], fits, settings: SweepSettings) -> SweepOutcome:
     """The sweep of ``cycles`` made again; one the runner refuses (too few orientations) is a
     failed outcome with the reason, reported beside the others."""
     try:
-        return replay_sweep(cycles, fits, settings, probe)
+        return replay_sweep(cycles, fits, settings)
     except ValueError as refused:
         return SweepOutcome(False, f"not made again: {refused}")
 

@@ -156,7 +156,10 @@ def external_source(state: CoupledRest, scene: FieldSource, index: int) -> Field
 
 
 def _potential(
-    placed: PlacedProbe, source: FieldSource, temperature_k: float | None, half_width_rad: float = DEFAULT_HALF_WIDTH_RAD
+    placed: PlacedProbe,
+    source: FieldSource,
+    temperature_k: float | None,
+    half_width_rad: float = DEFAULT_HALF_WIDTH_RAD,
 ) -> ArcPotential:
     return ArcPotential.from_source(placed.probe, source, placed.pose, temperature_k, half_width_rad=half_width_rad)
 

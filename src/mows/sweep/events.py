@@ -10,9 +10,8 @@ import math
 from collections.abc import Callable
 
 from mows.device.cycle.phases import CycleRequest
-from mows.estimate.probe_set import ProbeEntry, own_probe_entry
+from mows.estimate.probe_set import ProbeEntry
 from mows.estimate.stream import Estimated
-from mows.physics.probe import Probe
 from mows.records.stamps import NS_PER_S
 from mows.sweep.decomposition import Decomposition
 from mows.sweep.planner import PrecisionGoal
@@ -32,17 +31,16 @@ class SweepSettings:
     repeat_s: float = 0.82  # adaptive sweeps: device time of one ring-down (kick, ring-down, gap)
     turn_s: float = 0.5  # adaptive sweeps: device time of a turn and the settling
     manual_orientation: bool = False  # no motor: the operator turns the stage and confirms each orientation
-    # The sweep's probes in id order, as the mapper's ``probes`` and probe file are read
-    # (mows.estimate.settings.node_probes); (): settings made without them, the runner's probe.
-    probes: tuple[ProbeEntry, ...] = ()
+    # The sweep's probes in id order, never none: one probe is a set of one (the mapper's and
+    # `mows map`'s, as mows.estimate.settings.node_probes reads their ``probes`` and probe file).
+    probes: tuple[ProbeEntry, ...] = dataclasses.field(kw_only=True)
     # Whether ``probes`` names them: each decomposition then in its probe's own frame, with the
     # field map of them all and no model lab (which reads one probe's sweep).
     named: bool = False
 
-    def entries(self, probe: Probe) -> tuple[ProbeEntry, ...]:
-        """The sweep's probes: ``probes``, or for settings made without them ``probe`` (the
-        runner's) as probe 0, a set of one."""
-        return self.probes or (own_probe_entry(probe),)
+    def __post_init__(self) -> None:
+        if not self.probes:
+            raise ValueError("a sweep's settings need its probes (one probe is a set of one)")
 
 
 def turn_prompt(theta0_rad: float) -> str:

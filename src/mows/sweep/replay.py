@@ -26,7 +26,6 @@ from collections.abc import Iterable, Sequence
 
 from mows.device.cycle.phases import Phase
 from mows.device.recording.bags import read_bag
-from mows.physics.probe import Probe
 from mows.records import stamps
 from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepOutcome, SweepSettings, SweepStep
 from mows.sweep.runner import SweepRunner
@@ -125,11 +124,9 @@ def read_session(path: str | os.PathLike[str]) -> RecordedSession:
     return RecordedSession(tuple(sorted(cycles, key=lambda c: c.stamp_ns)), tuple(fits), tuple(sorted(sweeps)), ids)
 
 
-def replay_sweep(
-    cycles: Sequence[RecordedCycle], fits: Iterable[SweepFit], settings: SweepSettings, probe: Probe
-) -> SweepOutcome:
+def replay_sweep(cycles: Sequence[RecordedCycle], fits: Iterable[SweepFit], settings: SweepSettings) -> SweepOutcome:
     """The sweep of ``cycles`` with ``fits`` (those of other cycles are not its), run through
-    :class:`SweepRunner` with ``settings`` and ``probe`` as the mapper runs it: each cycle
+    :class:`SweepRunner` with ``settings`` as the mapper runs it: each cycle
     answered with its recorded ring-downs, then its fits; a cycle with fewer fits than it
     recorded goes on with those there are, as the mapper does once their time is up.
     ``ValueError`` when the runner refuses the sweep (e.g. too few orientations)."""
@@ -139,7 +136,7 @@ def replay_sweep(
     for fit in fits:
         by_cycle[fit.cycle_id].append(fit)
     runner = SweepRunner()
-    runner.start(SweepGoal(tuple(c.theta0_rad for c in cycles), max(c.ringdowns for c in cycles)), settings, probe)
+    runner.start(SweepGoal(tuple(c.theta0_rad for c in cycles), max(c.ringdowns for c in cycles)), settings)
     pending = iter(cycles)
     step = runner.begin()
     while step.finished is None:

@@ -16,8 +16,8 @@ whenever the planner's linearised prediction comes within ``DECOMPOSE_NEAR`` of 
 ends when a decomposition reaches it or the time budget holds no further cycle. Its device time
 is read from the ring-downs' stamps (first to last, plus a turn and a ring-down).
 
-The sweep's probes are those ``SweepSettings.probes`` lists (the estimator's list), else the one
-``probe`` the goal is run with, as probe 0. It collects one fit per probe and ring-down, keeps
+The sweep's probes are those ``SweepSettings.probes`` lists (the estimator's list; one probe is
+a set of one). It collects one fit per probe and ring-down, keeps
 each probe's fits in a record of its own, with the step (the orientation's index) each was taken
 at, and decomposes the probes' shares together (:mod:`mows.sweep.probes`). Several probes ring
 together under the multi-tone drive, each fit measuring its swing, and the 3θ0 curvature is
@@ -37,7 +37,6 @@ import numpy as np
 
 from mows.device.cycle.phases import CycleRequest
 from mows.estimate.probe_set import ProbeEntry
-from mows.physics.probe import Probe
 from mows.sweep.decompose import orientations_problem
 from mows.sweep.decomposition import Decomposition
 from mows.sweep.events import (
@@ -90,8 +89,8 @@ class SweepRunner:
         self._repeats = 0
         self._index = 0
         self._model = ""
-        self._settings = SweepSettings()
-        self._probes: tuple[ProbeEntry, ...] = ()  # the listed probes, or the goal's probe as probe 0
+        self._settings: SweepSettings | None = None
+        self._probes: tuple[ProbeEntry, ...] = ()  # the running sweep's
         self._cancelled = False
         self._fits: dict[int, list[SweepFit]] = {}
         self._awaited: CycleAnswer | None = None  # the cycle whose fits are being collected
@@ -106,7 +105,7 @@ class SweepRunner:
         self._cycle_ids: list[int] = []  # the cycles of the sweep so far
 
     # --- inputs ----------------------------------------------------------------------------
-    def start(self, goal: SweepGoal, settings: SweepSettings, probe: Probe) -> None:
+    def start(self, goal: SweepGoal, settings: SweepSettings) -> None:
         """Accept ``goal`` (the sweep begins at :meth:`begin`). ValueError, with the reason, when
         it is refused: a non-finite angle, too few distinct orientations to decompose, repeats
         outside :data:`REPEATS_PER_ANGLE_RANGE`, an unknown model, or a sweep still running."""
@@ -124,14 +123,14 @@ class SweepRunner:
             problems.append(f"model {goal.model!r} is not one of {', '.join(MODELS)}")
         if self.state != SweepState.IDLE:
             problems.append(f"another sweep is still running ({self.state})")
-        if goal.target is not None and len(settings.entries(probe)) > 1:
+        if goal.target is not None and len(settings.probes) > 1:
             problems.append(f"an adaptive sweep is of one probe; {len(settings.probes)} are listed")
         planner = None
         if goal.target is not None and not problems:
             try:
                 planner = AdaptivePlanner(
-                    probe,
-                    probe.f00_hz,
+                    settings.probes[0].probe,
+                    settings.probes[0].f00_hz,
                     goal.target,
                     settings.repeat_s,
                     settings.turn_s,
@@ -143,7 +142,7 @@ class SweepRunner:
         if problems:
             raise ValueError("; ".join(problems))
         self.state, self._settings = SweepState.SWEEPING, settings
-        self._probes = settings.entries(probe)
+        self._probes = settings.probes
         self._planner, self._decomposition, self._decomposed_points = planner, None, 0
         self._angles = [] if planner else angles
         self._repeats = goal.repeats_per_angle or settings.repeats_per_angle
@@ -154,6 +153,13 @@ class SweepRunner:
         self._records = {entry.probe_id: SweepRecord() for entry in self._probes}
         self._steps = {entry.probe_id: [] for entry in self._probes}
         self._record = self._records[self._probes[0].probe_id]
+
+    @property
+    def settings(self) -> SweepSettings:
+        """The settings of the sweep accepted last; RuntimeError before the first."""
+        if self._settings is None:
+            raise RuntimeError("no sweep has been started")
+        return self._settings
 
     def begin(self) -> SweepStep:
         """The accepted sweep's first step."""
@@ -196,7 +202,7 @@ class SweepRunner:
     def _cycle(self, step: SweepStep, call: CycleRequest) -> SweepStep:
         """Run ``call`` next, after the operator's turn when the stage has no motor (the cycle
         then says the stage was turned by hand)."""
-        if self._settings.manual_orientation:
+        if self.settings.manual_orientation:
             self._turning, step.turn = dataclasses.replace(call, turned_by_hand=True), call.theta0_rad
         else:
             step.run_cycle = call
@@ -318,7 +324,7 @@ class SweepRunner:
         ]
         # Several probes share the coils' multi-tone drive; one alone rings from the stop (module docstring).
         shared = len(self._probes) > 1
-        options = DecomposeOptions(self._model, self._settings.f00_free, curvature=shared, measured_swings=shared)
+        options = DecomposeOptions(self._model, self.settings.f00_free, curvature=shared, measured_swings=shared)
         orientations = step_orientations_rad(self._shares, self._angles)
         step.decompose = functools.partial(decompose_probes, self._shares, options, orientations_rad=orientations)
         return step
@@ -342,7 +348,7 @@ class SweepRunner:
         """New ring-downs at enough orientations, and a prediction near the target."""
         points = self._record.points
         if len(points) == self._decomposed_points or orientations_problem(
-            [p.theta0_rad for p in points], self._settings.f00_free
+            [p.theta0_rad for p in points], self.settings.f00_free
         ):
             return False
         targets = planner.goal.targets()
@@ -357,7 +363,7 @@ class SweepRunner:
         if not points:
             return 0.0
         stamps = [p.t_s for p in points]
-        return max(stamps) - min(stamps) + self._settings.turn_s + self._settings.repeat_s
+        return max(stamps) - min(stamps) + self.settings.turn_s + self.settings.repeat_s
 
     def _planned_end(self, step: SweepStep, end: PlanEnd) -> SweepStep:
         self.sweeps += 1

@@ -97,7 +97,7 @@ def run(args) -> int:
     if left_out:
         print(f"{len(left_out)} cycles in no recorded sweep left out (cycle ids {', '.join(map(str, left_out))})")
     if workspace is not None:
-        print(map_workspace.workspace_line(workspace))
+        print(workspace.report())
     return 0
 
 

@@ -67,11 +67,3 @@ def workspace_numbers(the_map: WorkspaceMap) -> dict:
         "chi2": model.chi2,
         "dof": model.dof,
     }
-
-
-def workspace_line(the_map: WorkspaceMap) -> str:
-    field_std, gradient_std = the_map.rms_std()
-    return (
-        f"workspace map of {len(the_map.poses)} sweeps: {the_map.choice.report()}; rms σ over the workspace "
-        f"{field_std * 1e6:.3f} µT, {gradient_std * 1e6:.1f} µT/m"
-    )

@@ -213,6 +213,14 @@ class WorkspaceMap:
         gradient_std = self.model.gradient_t_per_m(points)[1]
         return float(np.sqrt(np.mean(field_std**2))), float(np.sqrt(np.mean(gradient_std**2)))
 
+    def report(self) -> str:
+        """The map's line in the log: its sweeps, its degree's choice and its rms σ."""
+        field_std, gradient_std = self.rms_std()
+        return (
+            f"workspace map of {len(self.poses)} sweeps: {self.choice.report()}; rms σ over the workspace "
+            f"{field_std * 1e6:.3f} µT, {gradient_std * 1e6:.1f} µT/m"
+        )
+
 
 def sweep_observations(
     sweeps: Sequence[tuple[Decomposition, StampedPose]], probe: Probe, settings: MapSettings

@@ -1,16 +1,15 @@
 """The mapper's workspace map: the probe on an arm that speaks CRTK, a sweep at each pose the
 map asks for, and the model of B and G over the workspace (docs/workspace_maps.md).
 
-Action ``~/workspace_map`` (WorkspaceMap): for each sweep the next pose from
-:class:`mows.workspace.mapping.PosePlan` goes to the arm on ``<arm>/move_cp``; once the arm's
-``<arm>/measured_cp`` (both geometry_msgs/PoseStamped) reports it there and still, that report
-is the sweep's pose, checked (:class:`mows.workspace.mapping.PoseWatch`: frame, age, reach,
-stillness) before the sweep and again after it (the probe must not have moved during its
-ring-downs). A refused pose is reported in the feedback with the reason and the plan moves on
-to the next. The fitted map goes on ``mows/workspace_model`` (transient local) and answers
-``~/field_at`` (FieldAt).
+Action ``~/workspace_map`` (WorkspaceMap) runs :class:`mows.workspace.runner.MapRunner`: each
+pose it asks for goes to the arm on ``<arm>/move_cp``, the arm's ``<arm>/measured_cp`` (both
+geometry_msgs/PoseStamped) is fed to it and waited on, each sweep it asks for runs through the
+node, and its feedback (each pose visited, accepted or refused with the reason) goes to the
+goal. The fitted map goes on ``mows/workspace_model`` (transient local) and answers
+``~/field_at`` (FieldAt). This module translates only.
 """
 
+import functools
 import math
 from collections.abc import Awaitable, Callable
 
@@ -23,17 +22,15 @@ from rclpy.node import Node
 from mows.physics.probe import Probe
 from mows.sweep.events import SweepGoal, SweepOutcome
 from mows.workspace.arm import Reach, StampedPose
-from mows.workspace.mapping import MapSettings, PosePlan, PoseWatch, sweep_observations, turned, workspace_map
+from mows.workspace.mapping import MapSettings, PoseWatch
 from mows.workspace.mapping import WorkspaceMap as FittedMap
 from mows.workspace.poses import PoseError
-from mows_mapper.messages import outcome_decomposition_msg
-from mows_mapper.workspace_messages import field_at_response, pose_stamped_msg, workspace_model_msg
+from mows.workspace.runner import MapRunner, MapStep
+from mows_mapper.workspace_messages import feedback_msg, field_at_response, pose_stamped_msg, workspace_model_msg
 from mows_ros.awaitables import in_worker, until
 from mows_ros.qos import MAP_QOS, STREAM_QOS
 
 ACTION = "~/workspace_map"
-# A map gives up after this many poses in a row are refused: an arm that never gets there
-REFUSALS_IN_A_ROW = 5
 Turn = Callable[[float], Awaitable[str]]  # the arm turns the probe to θ0: '' or why it did not
 Sweep = Callable[[SweepGoal, Turn | None], Awaitable[SweepOutcome]]  # one rotation sweep where the probe is
 
@@ -74,91 +71,66 @@ class ArmMapping:
 
     def _on_pose(self, msg: PoseStamped) -> None:
         try:
-            self.watch.on_pose(StampedPose.of(msg))
+            pose = StampedPose.of(msg)
         except ValueError as error:  # a malformed pose never stands for a sweep
             self.bad_poses += 1
             self._node.get_logger().warning(f"measured_cp ignored: {error}", throttle_duration_sec=5.0)
+            return
+        self.watch.on_pose(pose)
 
     def _now_ns(self) -> int:
         return self._node.get_clock().now().nanoseconds
 
     async def run(self, goal_handle, probe: Probe, cancelled: Callable[[], bool]) -> WorkspaceMap.Result:
-        """Sweep at the poses the plan chooses until the goal's count is in, then fit and publish."""
+        """The runner's map of the goal: its steps carried out until it ends, the map published."""
         goal, values = goal_handle.request, self._values()
         settings = map_settings(values, goal)
-        self.watch = self._pose_watch(settings.reach)
-        plan, count = PosePlan(settings, probe), goal.sweeps or values["workspace_sweeps"]
-        sweeps, sweep_ids, stamp_ns, refused, refusal = [], [], 0, 0, ""
+        count = goal.sweeps or values["workspace_sweeps"]
         sweep_goal = SweepGoal.asked(goal.theta0_rad, goal.repeats_per_angle)
-        while len(sweeps) < count and not cancelled():
-            if refused >= REFUSALS_IN_A_ROW:
-                return WorkspaceMap.Result(
-                    success=False, message=f"{refused} poses in a row refused, the last: {refusal}"
-                )
-            refusal, outcome = await self._visit(plan.next_goal(), settings, sweep_goal, cancelled)
-            if cancelled():  # the pose and its sweep given up, not refused
+        self.watch = self._pose_watch(settings.reach)
+        runner = MapRunner(settings, probe, self.watch, count, sweep_goal)
+        step = runner.begin()
+        while True:
+            if step.feedback is not None:
+                goal_handle.publish_feedback(feedback_msg(step.feedback))
+            if step.warning:
+                self._node.get_logger().warning(step.warning)
+            if step.finished is not None:
                 break
-            pose = self.watch.latest if refusal else self.watch.start
-            feedback = WorkspaceMap.Feedback(
-                sweep_index=len(sweeps), n_sweeps=count, accepted=not refusal, refusal=refusal
-            )
-            if pose is not None:
-                feedback.pose = pose_stamped_msg(pose)
-            if outcome is not None and outcome.map is not None:
-                feedback.decomposition = outcome_decomposition_msg(outcome, "", False)
-            goal_handle.publish_feedback(feedback)
-            if outcome is not None and not outcome.ok and not cancelled():  # not the pose: the sweep itself
-                return WorkspaceMap.Result(success=False, message=f"workspace map failed: {outcome.message}")
-            if refusal:
-                self._node.get_logger().warning(f"pose refused: {refusal}")
-                refused += 1
-                continue
-            refused = 0
-            plan.swept(sweep_observations([(outcome.map.decomposition, pose)], probe, settings)[0])
-            sweeps.append((outcome.map.decomposition, pose))
-            sweep_ids.append(outcome.map.sweep_id)
-            stamp_ns = max(stamp_ns, max((p.stamp_ns for p in outcome.map.record.points), default=0))
-        if cancelled():
-            return WorkspaceMap.Result(success=False, message="workspace map cancelled")
-        the_map = await in_worker(self._node, workspace_map, sweeps, probe, settings)
-        self.latest = the_map
-        msg = workspace_model_msg(the_map, sweep_ids, stamp_ns)
+            step = await self._advance(runner, step, cancelled)
+        end = step.finished
+        if end.map is None:
+            return WorkspaceMap.Result(success=False, message=end.message)
+        self.latest = end.map
+        msg = workspace_model_msg(end.map, list(end.sweep_ids), end.stamp_ns)
         self._models.publish(msg)
-        message = (
-            f"workspace map of {len(sweeps)} sweeps: {the_map.choice.report()}; rms σ over the workspace "
-            f"{msg.field_error_t * 1e6:.3f} µT, {msg.gradient_error_t_per_m * 1e6:.1f} µT/m"
-        )
-        self._node.get_logger().info(message)
-        return WorkspaceMap.Result(success=True, message=message, model=msg)
+        self._node.get_logger().info(end.message)
+        return WorkspaceMap.Result(success=True, message=end.message, model=msg)
 
-    async def _reach(self, target, what: str) -> str:
-        """Ask the arm for ``target`` and wait for its report there: '' or why it did not."""
-        timeout_s = self._values()["move_timeout_s"]
+    async def _advance(self, runner: MapRunner, step: MapStep, cancelled: Callable[[], bool]) -> MapStep:
+        """``step``'s move, sweep or fit carried out: the runner's next step (a cancel that came
+        meanwhile fed first)."""
+        if step.move is not None:
+            timeout_s = self._values()["move_timeout_s"]
+            arrived = await self._reach(runner, step.move, timeout_s)
+            if cancelled():
+                runner.cancel()
+            return runner.on_arrived(self._now_ns()) if arrived else runner.move_timed_out(timeout_s)
+        if step.sweep is not None:
+            outcome = await self._sweep(step.sweep, functools.partial(self._turn, runner) if step.turns else None)
+            if cancelled():
+                runner.cancel()
+            return runner.on_swept(outcome, self._now_ns())
+        return runner.on_fitted(await in_worker(self._node, step.fit))
+
+    async def _reach(self, runner: MapRunner, target: StampedPose, timeout_s: float) -> bool:
+        """Ask the arm for ``target``: whether it reports being there within ``timeout_s``."""
         self._move.publish(pose_stamped_msg(target))
-        if not await until(self._node, lambda: self.watch.arrived(target), timeout_s):
-            return f"the arm did not {what} within {timeout_s:.0f} s"
-        return ""
+        return await until(self._node, runner.arrived, timeout_s)
 
-    def _turns_from(self, pose) -> Turn:
-        """The arm's last joint turning the probe about the normal of ``pose``'s plane."""
-
-        async def turn(theta0_rad: float) -> str:
-            return await self._reach(turned(pose, theta0_rad), f"turn the probe to θ0 = {math.degrees(theta0_rad):g}°")
-
-        return turn
-
-    async def _visit(
-        self, target, settings: MapSettings, sweep_goal: SweepGoal, cancelled: Callable[[], bool]
-    ) -> tuple[str, SweepOutcome | None]:
-        """Move to ``target``, check the pose, sweep unless the map was cancelled on the way,
-        check again: the refusal ('' for none) and the sweep's outcome."""
-        if problem := await self._reach(target, "report the pose asked for"):
-            return problem, None
-        if problem := self.watch.start_problem(self._now_ns(), settings.frame_id):
-            return problem, None
-        if cancelled():
-            return "", None
-        outcome = await self._sweep(sweep_goal, self._turns_from(target) if self.watch.turns_probe else None)
-        if not outcome.ok:
-            return outcome.message, outcome
-        return self.watch.end_problem(self._now_ns()), outcome
+    async def _turn(self, runner: MapRunner, theta0_rad: float) -> str:
+        """The arm's last joint turns the probe to ``theta0_rad``: '' or why it did not."""
+        timeout_s = self._values()["move_timeout_s"]
+        if await self._reach(runner, runner.turn(theta0_rad), timeout_s):
+            return ""
+        return runner.turn_timed_out(timeout_s)

@@ -1,16 +1,19 @@
 """The workspace map's messages: CRTK poses (geometry_msgs/PoseStamped) to and from
-:class:`mows.workspace.arm.StampedPose`, the fitted map as ``mows_msgs/WorkspaceModel`` and the
-answer of ``FieldAt``."""
+:class:`mows.workspace.arm.StampedPose`, a visited pose as the action's feedback, the fitted map
+as ``mows_msgs/WorkspaceModel`` and the answer of ``FieldAt``."""
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
+from mows_msgs.action import WorkspaceMap as WorkspaceMapAction
 from mows_msgs.msg import WorkspaceModel
 from mows_msgs.srv import FieldAt
 
 from mows.records import stamps
 from mows.workspace.arm import StampedPose
 from mows.workspace.mapping import WorkspaceMap
+from mows.workspace.runner import MapFeedback
 from mows.workspace.tool import wrench
+from mows_mapper.messages import outcome_decomposition_msg
 
 
 def pose_stamped_msg(pose: StampedPose) -> PoseStamped:
@@ -20,6 +23,20 @@ def pose_stamped_msg(pose: StampedPose) -> PoseStamped:
     msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in pose.position_m)
     o = msg.pose.orientation
     o.x, o.y, o.z, o.w = (float(v) for v in pose.orientation_xyzw)
+    return msg
+
+
+def feedback_msg(feedback: MapFeedback) -> WorkspaceMapAction.Feedback:
+    msg = WorkspaceMapAction.Feedback(
+        sweep_index=feedback.sweep_index,
+        n_sweeps=feedback.n_sweeps,
+        accepted=feedback.accepted,
+        refusal=feedback.refusal,
+    )
+    if feedback.pose is not None:
+        msg.pose = pose_stamped_msg(feedback.pose)
+    if feedback.outcome is not None and feedback.outcome.map is not None:
+        msg.decomposition = outcome_decomposition_msg(feedback.outcome, "", False)
     return msg
 
 

@@ -61,20 +61,30 @@ def coefficient_count(max_degree: int) -> int:
     return (max_degree + 1) ** 2 - 1
 
 
-def _monomial_derivative(exponents: np.ndarray, order: tuple[int, int, int], u: np.ndarray) -> np.ndarray:
-    """∂^order of each monomial at the points u (N, 3): shape (N, M)."""
+@functools.cache
+def _derivative_terms(degree: int, order: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What ∂^order leaves of each monomial of ``degree``: the indices of those it does not
+    send to zero, their reduced exponents and their factors. Cached: a map's fit asks for the
+    same few (degree, order) pairs tens of thousands of times, at a handful of points each."""
+    exponents = _monomials(degree)
     reduced = exponents - np.array(order)
     factor = np.ones(len(exponents))
     for axis in range(3):
         for step in range(order[axis]):
             factor = factor * (exponents[:, axis] - step)
-    alive = np.all(reduced >= 0, axis=1) & (factor != 0)
-    values = np.zeros((u.shape[0], len(exponents)))
-    if np.any(alive):
-        powers = np.ones((u.shape[0], int(alive.sum())))
+    alive = np.flatnonzero(np.all(reduced >= 0, axis=1) & (factor != 0))
+    return alive, reduced[alive], factor[alive]
+
+
+def _monomial_derivative(degree: int, order: tuple[int, int, int], u: np.ndarray) -> np.ndarray:
+    """∂^order of each monomial of ``degree`` at the points u (N, 3): shape (N, M)."""
+    alive, reduced, factor = _derivative_terms(degree, order)
+    values = np.zeros((u.shape[0], len(_monomials(degree))))
+    if len(alive):
+        powers = np.ones((u.shape[0], len(alive)))
         for axis in range(3):
-            powers = powers * u[:, axis : axis + 1] ** reduced[alive, axis]
-        values[:, alive] = powers * factor[alive]
+            powers = powers * u[:, axis : axis + 1] ** reduced[:, axis]
+        values[:, alive] = powers * factor
     return values
 
 
@@ -102,9 +112,7 @@ class SolidHarmonics:
         """∂^order Φ_k / scale^(|order| − 1) for each basis potential, shape (N, K)."""
         points = np.atleast_2d(np.asarray(points_m, float))
         u = (points - np.asarray(self.centre_m, float)) / self.scale_m
-        blocks = [
-            _monomial_derivative(_monomials(n), order, u) @ harmonic_basis(n) for n in range(1, self.max_degree + 1)
-        ]
+        blocks = [_monomial_derivative(n, order, u) @ harmonic_basis(n) for n in range(1, self.max_degree + 1)]
         return np.concatenate(blocks, axis=1) / self.scale_m ** (sum(order) - 1)
 
     def design(self, points_m: ArrayLike, rank: int) -> np.ndarray:

@@ -35,6 +35,13 @@ def claim_domain() -> tuple[int, object]:
     raise RuntimeError(f"every ROS domain in {DOMAIN_IDS} is held by another test run")
 
 
+# One BLAS thread per process, here and in every process a test starts: three workers share two
+# cores, so OpenBLAS's second thread never has a core of its own, and its threads spin waiting
+# for each other (a workspace map's fit took 25 CPU-s with two threads, 9 with one). Read when
+# numpy loads OpenBLAS, so before any test module imports numpy.
+for _threads in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):  # numpy's and scipy's OpenBLAS; scikit-learn's OpenMP
+    os.environ.setdefault(_threads, "1")
+
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 DOMAIN_ID, _domain_lock = claim_domain()  # held open for the whole session
 os.environ["ROS_DOMAIN_ID"] = str(DOMAIN_ID)

@@ -27,7 +27,6 @@ from rclpy.action import CancelResponse
 
 from mows.device.cycle.phases import CycleRequest
 from mows.estimate.settings import probe_set
-from mows.lab import analyse_sweep
 from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepOutcome, SweepStep
 from mows.sweep.publication import Publication, cycle_failed, publication
 from mows.sweep.requests import Cancel, LogLine, Severity, SweepRequests
@@ -227,7 +226,7 @@ class MapperNode(MowsNode):
             return
         probe, auto = probe_of(self._param("probe_file")), self._param("lab_auto")
         try:
-            report = await in_worker(self, analyse_sweep, plan.lab, self._param("reference_scenario"), probe, auto)
+            report = await in_worker(self, lab_report, plan.lab, self._param("reference_scenario"), probe, auto)
         except ValueError as error:  # a table the lab cannot use is reported, not fatal
             self.get_logger().warn(f"model lab: {error}")
         else:
@@ -235,6 +234,14 @@ class MapperNode(MowsNode):
 
     def health(self) -> Health:
         return self._operator.reported(sweep_health(self._runner))
+
+
+def lab_report(sweep, reference: str, probe, auto: bool):
+    """:func:`mows.lab.analyse_sweep`, run in a worker thread. The lab is imported at the first
+    report, not at the node's start (a second of CPU for every mapper started)."""
+    from mows.lab import analyse_sweep
+
+    return analyse_sweep(sweep, reference, probe, auto)
 
 
 def main(args: list[str] | None = None) -> int:

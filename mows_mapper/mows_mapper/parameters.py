@@ -4,7 +4,6 @@ import dataclasses
 
 from mows.estimate.probe_set import own_probe_entry
 from mows.estimate.settings import node_probes
-from mows.lab import reference_at
 from mows.physics.probe import Probe
 from mows.sweep.events import REPEATS_PER_ANGLE_RANGE, SweepSettings
 from mows.sweep.shift_model import MODELS
@@ -17,6 +16,8 @@ def reference_problem(name: str) -> str | None:
     """Why ``reference_scenario`` cannot serve as the lab's reference, or None."""
     try:
         if name:
+            from mows.lab import reference_at  # only then: the lab's import is a second of CPU
+
             reference_at(name)
     except (OSError, ValueError, KeyError, TypeError) as error:
         return f"reference_scenario={name!r}: {error}"

@@ -1,11 +1,12 @@
 """Compile the numba kernels (or load them from numba's on-disk cache) before they are needed.
 
-The ring-down fit (:mod:`mows.estimate.ringdown.model`), the potential's Chebyshev series
-(:mod:`mows.physics.potential`) and the simulator's integrator (:mod:`mows.sim.kernel`, one for
-one probe and for a scene of several) are compiled on first use: about ten seconds on a fresh
-checkout, about a second from the cache. That must not happen in the middle of a measurement (a
-driver that stalls for seconds loses its device link; an estimator that stalls misses
-ring-downs), so the nodes and the test session call :func:`precompile` first.
+The ring-down fit (:mod:`mows.estimate.ringdown.model`), the potential's Chebyshev series and
+harmonic balance (:mod:`mows.physics.potential`) and the simulator's integrator
+(:mod:`mows.sim.kernel`, one for one probe and for a scene of several) are compiled on first
+use: about ten seconds on a fresh checkout, about a second from the cache. That must not happen
+in the middle of a measurement (a driver that stalls for seconds loses its device link; an
+estimator that stalls misses ring-downs), so the nodes and the test session call
+:func:`precompile` first.
 ``python -m mows.precompile`` does it by hand.
 """
 
@@ -27,7 +28,9 @@ def precompile(simulator: bool = True) -> float:
     t = np.arange(4000) / 20_000.0
     near = np.sin(0.3 * np.cos(2 * math.pi * 112.0 * t) * np.exp(-1.8 * t))
     pair = np.stack([near, np.zeros_like(near)], axis=1)
-    ArcPotential(1.0, 1.0, 0.0, np.zeros(DEFAULT_NODES)).stiffness_nm_per_rad(0.0)
+    potential = ArcPotential(1.0, 1.0, 0.0, np.zeros(DEFAULT_NODES))
+    potential.stiffness_nm_per_rad(0.0)
+    potential.effective_stiffness_nm_per_rad(0.1)  # the harmonic balance: the lab's, the calibration's
     fit_ringdown(pair, 20_000.0, 0.0, 112.0, options=FitOptions.lever_aware(FluxgatePair.paper(), PAPER_PROBE, 0.0))
     if simulator:
         # Imported only when asked for: the estimator node (simulator=False) never runs the

@@ -161,6 +161,23 @@ def test_batches_equal_single_evaluations():
     np.testing.assert_allclose(batch, single, rtol=1e-13)
 
 
+def test_the_compiled_kernels_are_given_writable_arrays_whatever_the_caller_passes():
+    """numba compiles a kernel again for a read-only argument (what np.broadcast_to gives), a
+    second or more of CPU in every process the precompiled cache does not hold it for."""
+    from numba import types
+
+    from mows.physics import harmonic_balance, potential
+
+    batch = ArcPotential.from_local_field(P, np.array([[1e-4, 0, 0], [0, 2e-4, 0], [-3e-3, 1e-4, 5e-5]]))
+    batch.frequency_hz(np.radians([0.0, 10.0, 24.0]))  # an amplitude per row, as given
+    batch.frequency_hz(np.radians(10.0))  # one for all rows, broadcast
+    batch.first_harmonic_rad(np.broadcast_to(np.radians(16.0), batch.batch_shape))
+    batch.torque_nm(np.broadcast_to(np.radians([1.0, 2.0]), (3, 2)))
+    for kernel in (harmonic_balance.balance_rows, harmonic_balance.centre_rows, potential._clenshaw_rows):
+        arrays = [arg for signature in kernel.signatures for arg in signature if isinstance(arg, types.Array)]
+        assert arrays and all(arg.mutable for arg in arrays), kernel
+
+
 def free_swing(potential, start_rad, periods=1.2):
     """The undamped swing released at rest from ``start_rad``, integrated by solve_ivp:
     (its frequency from two successive turning points, its first-harmonic amplitude)."""

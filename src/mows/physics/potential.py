@@ -88,11 +88,19 @@ def _clenshaw(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
     x of shape B + (m,); returns B + (m,)."""
     coeffs, x = np.asarray(coeffs, float), np.asarray(x, float)
     if coeffs.ndim == x.ndim == 2 and len(coeffs) == len(x) and coeffs.flags.c_contiguous and x.flags.c_contiguous:
-        return _clenshaw_rows(coeffs, x)  # the common case, without the broadcasting's overhead
+        # the common case, without the broadcasting's overhead
+        return _clenshaw_rows(_kernel_array(coeffs), _kernel_array(x))
     shape = np.broadcast_shapes(coeffs.shape[:-1] + (1,), x.shape)
     rows = np.broadcast_to(coeffs, shape[:-1] + coeffs.shape[-1:]).reshape(-1, coeffs.shape[-1])
     points = np.broadcast_to(x, shape).reshape(-1, shape[-1])
-    return _clenshaw_rows(np.ascontiguousarray(rows), np.ascontiguousarray(points)).reshape(shape)
+    return _clenshaw_rows(_kernel_array(rows), _kernel_array(points)).reshape(shape)
+
+
+def _kernel_array(values: ArrayLike) -> np.ndarray:
+    """``values`` as the compiled kernels take them: float, C-contiguous and writable. numba
+    compiles a kernel once per argument layout, read-only included (what np.broadcast_to gives):
+    one layout, one compilation, which the precompiled cache holds."""
+    return np.require(values, float, ["C", "W"])
 
 
 # Compiled (numba): the lab evaluates small batches tens of thousands of times per analysis, where
@@ -223,15 +231,16 @@ class ArcPotential:
         interval or where the balance is unstable (⟨U''⟩ ≤ 0, beyond spring cancellation).
         """
         amplitude = np.broadcast_to(np.asarray(amplitude_rad, float), self.batch_shape)
-        return centre_rows(*self._rows(), amplitude.ravel(), self.half_width_rad).reshape(self.batch_shape)
+        centres = centre_rows(*self._rows(), _kernel_array(amplitude.ravel()), self.half_width_rad)
+        return centres.reshape(self.batch_shape)
 
     def _rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(U' coefficients, U'' coefficients, kM) with the batch flattened to rows, for the kernels."""
         count = self.d1.shape[-1]
         return (
-            np.ascontiguousarray(self.d1.reshape(-1, count)),
-            np.ascontiguousarray(self.d2.reshape(-1, count)),
-            np.ascontiguousarray(self.spring_nm_per_rad, dtype=float).ravel(),
+            _kernel_array(self.d1.reshape(-1, count)),
+            _kernel_array(self.d2.reshape(-1, count)),
+            _kernel_array(np.ravel(self.spring_nm_per_rad)),
         )
 
     def effective_stiffness_nm_per_rad(self, amplitude_rad: ArrayLike = 0.0) -> np.ndarray:
@@ -273,7 +282,7 @@ class ArcPotential:
         amplitude = np.asarray(amplitude_rad, float)
         nodes = amplitude.shape[-1] if amplitude.ndim > len(self.batch_shape) else 1
         shape = self.batch_shape + amplitude.shape[-1:] if amplitude.ndim > len(self.batch_shape) else self.batch_shape
-        amplitude = np.ascontiguousarray(np.broadcast_to(amplitude, shape)).reshape(-1, nodes)
+        amplitude = _kernel_array(np.broadcast_to(amplitude, shape)).reshape(-1, nodes)
         found = balance_rows(*self._rows(), self._rest_rad.ravel(), amplitude, self.half_width_rad)
         return tuple(values.reshape(shape) for values in found)  # type: ignore[return-value]
 

@@ -5,6 +5,12 @@ The streaming thread calls :meth:`DeviceSession.step` in a loop and publishes wh
 returns (blocks, phase events) in order. Requests from other threads (a cycle, the emergency
 stop, a supply current) take the session's lock, act on the device at once (the emergency stop switches the
 coils off before it returns) and leave their phase events for the next ``step`` to publish.
+A request that sends commands (a cycle, a supply current) first waits until the samples a
+poll in flight has read are taken: a command is scheduled at the newest sample taken, and
+its answer is awaited for ``confirm_timeout_s`` of device samples from there, so samples the
+device sent before the command went out must be taken before it goes. Otherwise, after the
+streaming thread stalled, one poll holds more than that, and a cycle fails for an answer the
+device gave at once.
 In tracking mode (:mod:`mows.device.cycle.tracking`) ``step`` starts the next tracking cycle whenever
 none runs.
 
@@ -102,6 +108,9 @@ class DeviceSession:
         self.last_device_fault = ""
         self._monotonic = monotonic
         self._lock = threading.RLock()
+        self._polling = False  # the streaming thread reads the device outside the lock
+        self._waiting = 0  # requests that wait for what the poll in flight read to be taken
+        self._polled = threading.Condition(self._lock)  # notified when either ends
         self._events: list[PhaseEvent] = []
         self._replayed_phase: Phase | None = None
         self.stage_angle_rad: float | None = None  # where the rotation stage stands, once known
@@ -118,8 +127,18 @@ class DeviceSession:
     # --- the streaming thread --------------------------------------------------------------
     def step(self, timeout_s: float) -> Output:
         """Poll the backend once (up to ``timeout_s``) and act on what came."""
-        items = self.backend.poll(timeout_s)
         with self._lock:
+            # A request that waited for the last poll goes first: else this poll could read
+            # before its command goes out, each time (the lock is not fair).
+            self._polled.wait_for(lambda: not self._waiting)
+            self._polling = True
+        try:
+            items = self.backend.poll(timeout_s)
+        except BaseException:
+            self._poll_taken()
+            raise
+        with self._lock:
+            self._poll_taken()  # the requests it wakes need this lock: they go on after the take
             output = Output()
             for item in items:
                 self._take(item, output)
@@ -137,6 +156,21 @@ class DeviceSession:
                 if event.cycle_id:  # a cycle's phases begin once the stage has turned to its θ0
                     self.stage_angle_rad = event.theta0_rad
             return output
+
+    def _poll_taken(self) -> None:
+        with self._lock:
+            self._polling = False
+            self._polled.notify_all()
+
+    def _after_poll(self) -> None:
+        """Wait (in a request, holding the lock) until what a poll in flight read is taken.
+        Every backend's poll returns within its timeout, so the wait is one poll's."""
+        self._waiting += 1
+        try:
+            self._polled.wait_for(lambda: not self._polling)
+        finally:
+            self._waiting -= 1
+            self._polled.notify_all()
 
     def _take(self, item, output: Output) -> None:
         if isinstance(item, SampleBlock):
@@ -268,6 +302,7 @@ class DeviceSession:
         """Start a cycle; ``on_done(outcome)`` is called (from the streaming thread, or from the
         thread that stops it) when it ends. Returns its cycle id; ValueError if it cannot run."""
         with self._lock:
+            self._after_poll()
             if self.sequencer is None:
                 raise ValueError(
                     f"the {self.backend.name} backend cannot run cycles"
@@ -316,6 +351,7 @@ class DeviceSession:
         end. Returns the command id; ValueError if it cannot be sent (no supply, above the cap,
         no device)."""
         with self._lock:
+            self._after_poll()
             if not self.backend.can_excite:
                 raise ValueError(f"the {self.backend.name} backend has no supply to set")
             if not self.link_up:

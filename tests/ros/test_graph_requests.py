@@ -37,6 +37,8 @@ from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 
 from mows.device.cycle.phases import Phase
+from mows.records.stamps import seconds
+from mows.sweep.requests import UNSEEN_S
 from mows_bringup.nodes import NODES
 from mows_ros.qos import EXCITATION_QOS
 from node_processes import START_S, RosHarness, assert_stops_cleanly, launch, log, send_goal
@@ -45,6 +47,9 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("realti
 
 QUICK = ["-p", "excite_s:=0.3", "-p", "ringdown_s:=0.3", "-p", "turn_settle_s:=0.1", "-p", "gap_s:=0.2"]
 COILS_OFF_S = 1.0  # the requirement: coils off this soon after the requester left
+# When the coils went off is read from the driver's own stamp of its IDLE state: the simulated
+# device's clock is the host's wall clock at its start plus its samples, paced in real time. So
+# the test's own delay in hearing that state (seconds, on a loaded host) is not counted.
 # A requester in a process of its own, as `ros2 service call` is: it asks for the longest cycle
 # the limits allow and waits for the answer until it is stopped ("wait"), or leaves 0.2 s after
 # asking ("leave"), before the graph may have learnt its node.
@@ -199,12 +204,12 @@ def test_a_cycle_whose_requester_disappears_has_its_coils_off_within_a_second(gr
     cycle_id, heard = states[-1].cycle_id, len(states)
     # Ctrl-C on `ros2 service call`; the time counts from the signal, so it includes the
     # client's own way out of the graph.
-    gone_s = time.monotonic()
+    gone_s = time.time()
     requester.send_signal(signal.SIGINT)
     ended = graph.ros.wait_for(
         lambda: next((s for s in states[heard:] if s.phase == Phase.IDLE), None), "the cycle's end"
     )
-    off_after_s = time.monotonic() - gone_s
+    off_after_s = seconds(ended.header.stamp) - gone_s
     assert requester.wait(timeout=30) == 0, log(requester)
     assert not graph.coils_on()
     print(f"coils off {off_after_s:.3f} s after the requester's Ctrl-C")
@@ -219,14 +224,20 @@ def test_a_requester_that_leaves_right_after_asking_is_not_waited_for(graph, tmp
     heard = len(states)
     requester = launch([sys.executable, "-c", REQUESTER, "leave"], tmp_path / "requester.log")
     assert requester.wait(timeout=120) == 0, log(requester)
-    left_s = time.monotonic()
+    left_s = time.time()
     started = graph.ros.wait_for(
         lambda: next((heard + i for i, s in enumerate(states[heard:]) if s.cycle_id != 0), None), "the requested cycle"
     )
     cycle_id = states[started].cycle_id
-    graph.ros.wait_for(lambda: any(s.phase == Phase.IDLE for s in states[started:]), "the cycle's end")
-    off_after_s = time.monotonic() - left_s
-    print(f"coils off {off_after_s:.3f} s after the requester left")
+    ended = graph.ros.wait_for(
+        lambda: next((s for s in states[started:] if s.phase == Phase.IDLE), None), "the cycle's end"
+    )
+    # A requester that left before the driver's graph showed it is taken as gone UNSEEN_S after
+    # the cycle began (mows.sweep.requests.Requesters): the driver cannot tell it from one not
+    # shown yet. So the coils' time counts from whichever came later.
+    decided_s = max(left_s, seconds(states[started].header.stamp) + UNSEEN_S)
+    off_after_s = seconds(ended.header.stamp) - decided_s
+    print(f"coils off {off_after_s:.3f} s after the requester left (or was taken as gone)")
     assert off_after_s < COILS_OFF_S, off_after_s
     assert not graph.coils_on()
     reason = "every node that asked for it through /driver/run_cycle has left"

@@ -45,7 +45,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from mows.estimate.calibration.fit_constants import KnownConstants
 from mows.estimate.calibration.fit_constants import calibrate_probe as fit_constants
-from mows.lab import analyse, write_report
+from mows.lab import ProbeSet, analyse, write_report
 from mows.lab.data.readers import read_sweep
 from mows.lab.data.truth import against_truth, in_plane, in_plane_std
 from mows.physics.probe import PAPER_PROBE, Probe
@@ -390,7 +390,7 @@ def print_outcome(scenario, decomposition, fits, report, out: pathlib.Path, prob
     with writing([table_path], inputs, force=True) as outputs:
         readings.table.to_csv(outputs.temporaries[0])
     say(f"sweep table: {table_path} (try: mows lab diagnose {table_path} --probe <probe.yaml>)")
-    lab = analyse(readings.table, probe, auto=True)
+    lab = analyse(readings.table, ProbeSet.one(probe), auto=True)
     for step in lab.history:
         say(
             f"  error history: {' + '.join(['published'] + step.effects):60s} χ²/dof {step.chi2_dof:9.2f}  "

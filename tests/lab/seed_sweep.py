@@ -19,7 +19,7 @@ import sys
 import tempfile
 
 from lab.outside_catalog import CASES
-from mows.lab import FrequencyModel, analyse_discovering, catalog, discover
+from mows.lab import FrequencyModel, ProbeSet, analyse_discovering, catalog, discover
 from mows.lab.diagnosis.discovery.plugin_source import load_source
 from mows.lab.model.catalog import resolve
 from mows.physics.probe import PAPER_PROBE
@@ -34,16 +34,16 @@ def sweep(case: str, seeds: int, directory: pathlib.Path) -> int:
         path.write_text(term.plugin)
         return path
 
-    report, added = analyse_discovering(table, PAPER_PROBE, save, cross_validate=False)
+    report, added = analyse_discovering(table, ProbeSet.one(PAPER_PROBE), save, cross_validate=False)
     labels = [label for label in report.effects if label not in {term.effect_name for term in added}]
-    model = FrequencyModel(PAPER_PROBE)
+    model = FrequencyModel(ProbeSet.one(PAPER_PROBE))
     for effect in resolve(labels, catalog()):
         model = model + effect
     print(f"{case}: the loop adds {[t.name for t in added]} beside {labels}, χ²/dof {report.chi2_dof:.2f}")
     good = 0
     for seed in range(seeds):
         table, _ = CASES[case](seed)
-        found = discover(model.fit(table), PAPER_PROBE)
+        found = discover(model.fit(table), ProbeSet.one(PAPER_PROBE))
         if not found.terms:
             print(f"  seed {seed}: no term")
             continue

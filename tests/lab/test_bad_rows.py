@@ -8,7 +8,7 @@ the field spring cancels the mechanical one), has no frequency in the model.
 import numpy as np
 
 from mows.cli.main import main
-from mows.lab import FrequencyModel, analyse, catalog
+from mows.lab import FrequencyModel, ProbeSet, analyse, catalog
 from mows.lab.data import synthetic
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
@@ -33,7 +33,7 @@ def _table():
 
 def test_analyse_names_the_rows_it_leaves_out_and_fits_the_rest():
     table = _table()
-    report = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     assert report.n == len(table) - 3
     wide = next(note for note in report.notes if "rows 3, 6 " in note)
     assert "50" in wide and "43" in wide and "beyond" in wide
@@ -46,7 +46,7 @@ def test_analyse_names_the_rows_it_leaves_out_and_fits_the_rest():
 
 def test_a_direct_fit_over_such_rows_is_not_ok_and_says_where():
     table = _table()
-    fit = (FrequencyModel(PAPER_PROBE) + catalog()["finite_amplitude"].at_physics()).fit(table)
+    fit = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + catalog()["finite_amplitude"].at_physics()).fit(table)
     assert fit.status.name == "BAD_FIT" and not fit.ok
     assert set(WIDE_ROWS + [UNSTABLE_ROW]) <= set(fit.invalid_rows.tolist())
     text = fit.report()

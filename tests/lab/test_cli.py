@@ -15,7 +15,7 @@ import pytest
 import mows.cli.lab
 from lab.tables import tilted_table
 from mows.cli.main import main
-from mows.lab import FrequencyModel, catalog, read_csv
+from mows.lab import FrequencyModel, ProbeSet, catalog, read_csv
 from mows.lab.report.html_report import sweep_curve
 from mows.physics.probe import PAPER_PROBE
 
@@ -82,7 +82,7 @@ def test_user_errors_are_one_line_messages(tilted_csv, tmp_path, capsys, args, w
 
 def test_report_polar_curve_passes_through_the_model_at_measured_orientations(tilted_csv):
     table = read_csv(tilted_csv)
-    fit = (FrequencyModel(PAPER_PROBE) + catalog()["gravity"]).fit(table)
+    fit = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + catalog()["gravity"]).fit(table)
     rows = table.sweep_ids == 0
     at_measured = sweep_curve(fit, rows, table.theta0_deg[rows])
     np.testing.assert_allclose(at_measured, fit.prediction_hz[rows], rtol=0, atol=1e-9)

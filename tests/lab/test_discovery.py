@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from mows.lab import FrequencyModel, analyse, catalog, load_plugins
+from mows.lab import FrequencyModel, ProbeSet, analyse, catalog, load_plugins
 from mows.lab.data import synthetic
 from mows.lab.diagnosis import discovery
 from mows.lab.diagnosis.discovery import CHANNELS, discover
@@ -63,7 +63,7 @@ def table(exact, seed: int, hidden_hz=0.0):
 
 
 def physical_fit(measured):
-    return (FrequencyModel(PAPER_PROBE) + catalog()["static_deflection"].at_physics()).fit(measured)
+    return (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + catalog()["static_deflection"].at_physics()).fit(measured)
 
 
 def moment_temperature_hz(measured):
@@ -83,7 +83,7 @@ def test_a_moment_that_changes_with_temperature_is_found_as_field_times_temperat
     measured = base.with_columns(f_hz=base.f_hz + planted)
     fit = physical_fit(measured)
     assert fit.chi2_dof > 5.0, fit.chi2_dof  # far above noise: no catalog effect of the model has it
-    found = discover(fit, PAPER_PROBE)
+    found = discover(fit, ProbeSet.one(PAPER_PROBE))
     assert [t.name for t in found.terms] == ["moment × temperature_k"], found.summary
     term = found.terms[0]
     assert term.channel == "moment" and term.family == "moment_temperature"
@@ -122,7 +122,7 @@ def test_coil_heating_is_found_as_current_squared_and_written_as_the_spring(exac
     base = table(exact, 2)
     measured = base.with_columns(f_hz=base.f_hz + HEATING_HZ_PER_A2 * base.coil_current_a**2)
     fit = physical_fit(measured)
-    found = discover(fit, PAPER_PROBE)
+    found = discover(fit, ProbeSet.one(PAPER_PROBE))
     assert [t.name for t in found.terms] == ["spring × coil_current_a²"], found.summary
     term = found.terms[0]
     assert term.family == "spring_current_squared" and term.factors == ("coil_current_a", "coil_current_a")
@@ -144,7 +144,7 @@ def test_tables_without_a_hidden_effect_give_no_term(exact):
     """The false-alarm bound: at most one of 40 noise seeds reports any term (measured: none)."""
     alarms = {}
     for seed in range(CONTROL_SEEDS):
-        found = discover(physical_fit(table(exact, 100 + seed)), PAPER_PROBE)
+        found = discover(physical_fit(table(exact, 100 + seed)), ProbeSet.one(PAPER_PROBE))
         if found.terms:
             alarms[seed] = [t.name for t in found.terms]
     assert len(alarms) <= 1, alarms
@@ -159,7 +159,7 @@ def test_a_long_table_is_searched_in_seconds():
     measured = base.with_columns(f_hz=base.f_hz + moment_temperature_hz(base) / 3.0)
     fit = physical_fit(measured)
     start = time.process_time()
-    found = discover(fit, PAPER_PROBE)
+    found = discover(fit, ProbeSet.one(PAPER_PROBE))
     assert time.process_time() - start < 5.0
     assert [t.name for t in found.terms] == ["moment × temperature_k"], found.summary
     term = found.terms[0]
@@ -189,7 +189,7 @@ def test_every_channel_writes_a_plugin_whose_signature_is_the_term(exact, tmp_pa
     chosen = BY_NAME[channel]
     assert reading(chosen, factors) and family(chosen, factors).startswith(channel)
     means = {"temperature_k": REFERENCE_K}
-    values = monomial_values(factor_values(measured, PAPER_PROBE), factors, len(measured))
+    values = monomial_values(factor_values(measured, ProbeSet.one(PAPER_PROBE)), factors, len(measured))
     # A bound whose finite-difference step (1e-3 of the range) moves the channel as little as the
     # Jacobian's own step: the frequency is linear in the channel there.
     bound = 1e3 * chosen.step / np.abs(values).max()
@@ -212,7 +212,9 @@ def test_the_verdict_and_the_report_carry_the_discovery(exact):
 
     base = table(exact, 5)
     measured = base.with_columns(f_hz=base.f_hz + moment_temperature_hz(base))
-    report = analyse(measured, PAPER_PROBE, effects=["static_deflection (at physics)"], cross_validate=False)
+    report = analyse(
+        measured, ProbeSet.one(PAPER_PROBE), effects=["static_deflection (at physics)"], cross_validate=False
+    )
     assert report.verdict == "unexplained_structure", report.diagnosis.explanation
     explanation = report.diagnosis.explanation
     assert "finds 1 term: moment × temperature_k" in explanation, explanation
@@ -236,7 +238,7 @@ def test_a_generic_correction_is_searched_without_it(exact):
     stronger = PAPER_PROBE.replace(moment_am2=PAPER_PROBE.moment_am2 * 1.01)
     truth = synthetic.true_frequency_hz(stronger, FIELD, np.radians(theta0), np.radians(AMPLITUDE_DEG))
     measured = table((theta0, columns, truth), 6)
-    report = analyse(measured, PAPER_PROBE, auto=True, cross_validate=False)
+    report = analyse(measured, ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     assert report.verdict == "needs_generic_term", report.history
     assert report.discovery is not None and "moment_scale" not in report.discovery.on_model
     term = report.discovery.terms[0]

@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mows.lab import FrequencyModel, catalog, diagnose
+from mows.lab import FrequencyModel, ProbeSet, catalog, diagnose
 from mows.lab.data import synthetic
 from mows.lab.model import configuration, factors, frequency_model
 from mows.lab.model.effects import Effect, Parameter
@@ -55,13 +55,14 @@ def _fits(table, monkeypatch, grouped: bool):
         monkeypatch.setattr(frequency_model, "distinct_rows_of", _each_row_its_own)
         table = dataclasses.replace(table)  # a table of its own: nothing grouped is cached for it
     pool = [catalog()[name] for name in EFFECTS]
-    base = FrequencyModel(PAPER_PROBE).fit(table)
-    extended = (FrequencyModel(PAPER_PROBE) + pool[0] + pool[2]).fit(table)
-    return base, extended, diagnose(base, pool)
+    probes = ProbeSet.one(PAPER_PROBE)
+    base = FrequencyModel(probes).fit(table)
+    extended = (FrequencyModel(probes) + pool[0] + pool[2]).fit(table)
+    return base, extended, diagnose(base, pool, probes)
 
 
 def test_the_table_has_twelve_configurations(table):
-    distinct, inverse = FrequencyModel(PAPER_PROBE).groups(table)
+    distinct, inverse = FrequencyModel(ProbeSet.one(PAPER_PROBE)).groups(table)
     assert len(table) == ROWS and len(distinct) == 12
     assert np.array_equal(table.theta0_deg, distinct.theta0_deg[inverse])
 
@@ -70,7 +71,7 @@ def test_a_column_that_an_effect_reads_keys_the_groups(table):
     """A time column splits nothing for a model that does not read it; with spring_drift, which
     reads it, every row is its own group, and the fit follows a drift the data carry."""
     timed = table.with_columns(t_s=np.arange(ROWS) * 10.0)
-    base = FrequencyModel(PAPER_PROBE)
+    base = FrequencyModel(ProbeSet.one(PAPER_PROBE))
     drifting = base + catalog()["spring_drift"]
     assert "t_s" not in base.read_columns(timed) and "t_s" in drifting.read_columns(timed)
     assert len(base.groups(timed)[0]) == 12 and len(drifting.groups(timed)[0]) == ROWS
@@ -89,7 +90,7 @@ def test_an_effect_that_reads_every_column_keys_the_groups_by_all(table):
         config.frequency_hz = config.frequency_hz + strength * sum(rows.columns.values())
 
     effect = Effect("reads_all", "test", "", "", (Parameter("strength", "Hz", -1, 1, 1e-3),), read_all)
-    model = FrequencyModel(PAPER_PROBE) + effect
+    model = FrequencyModel(ProbeSet.one(PAPER_PROBE)) + effect
     assert model.read_columns(table) == set(table.columns) - set(frequency_model.MEASURED)
 
 

@@ -7,7 +7,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from mows.lab import FrequencyModel, analyse, catalog, load_plugins
+from mows.lab import FrequencyModel, ProbeSet, analyse, catalog, load_plugins
 from mows.lab.data import synthetic
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
@@ -24,7 +24,7 @@ PLUGIN = textwrap.dedent("""
 
 def test_models_compose_with_plus():
     effects = catalog()
-    model = FrequencyModel(PAPER_PROBE) + effects["gravity"] + effects["thermal_drift"]
+    model = FrequencyModel(ProbeSet.one(PAPER_PROBE)) + effects["gravity"] + effects["thermal_drift"]
     assert model.parameter_names == [
         "f00_hz",
         "gravity.down_x",
@@ -33,8 +33,8 @@ def test_models_compose_with_plus():
     ]
     pair = FrequencyModel() + effects["gravity"] + effects["field_offset"]
     assert pair.effect_names == ["gravity", "field_offset"] and pair.probe is None
-    assert (effects["gravity"] + FrequencyModel(PAPER_PROBE)).effect_names == ["gravity"]
-    assert (FrequencyModel(PAPER_PROBE) + pair).parameter_names == [
+    assert (effects["gravity"] + FrequencyModel(ProbeSet.one(PAPER_PROBE))).effect_names == ["gravity"]
+    assert (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + pair).parameter_names == [
         "f00_hz",
         "gravity.down_x",
         "gravity.down_y",
@@ -76,7 +76,7 @@ def test_a_plugin_file_defines_an_effect_that_the_lab_finds(tmp_path):
         coil_current_a=current,
         **sweep,
     )
-    report = analyse(table, PAPER_PROBE, auto=True, plugins=[str(path)], cross_validate=False)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), auto=True, plugins=[str(path)], cross_validate=False)
     assert report.verdict == "adequate"
     assert "coil_heating" in report.effects
     value = {p.name: (p.value, p.std) for p in report.fit.parameters()}["coil_heating.k_per_a2_nm_per_rad"]
@@ -116,7 +116,9 @@ def test_unknown_plugins_and_effects_are_named():
         load_plugins(["no_such_plugin"])
     with pytest.raises(ValueError, match="gravit"):
         analyse(
-            {"theta0_deg": [0, 90], "f_hz": [112.5, 112.5], "f_std_hz": [1e-3, 1e-3]}, PAPER_PROBE, effects=["gravit"]
+            {"theta0_deg": [0, 90], "f_hz": [112.5, 112.5], "f_std_hz": [1e-3, 1e-3]},
+            ProbeSet.one(PAPER_PROBE),
+            effects=["gravit"],
         )
 
 
@@ -132,9 +134,9 @@ def test_the_same_table_under_two_probes_gives_each_probes_own_prediction():
     narrow = dataclasses.replace(PAPER_PROBE, theta_stop_rad=math.radians(5.0))
     effect = catalog()["finite_amplitude"].at_physics()
     for probe in (PAPER_PROBE, narrow):
-        model = FrequencyModel(probe) + effect
+        model = FrequencyModel(ProbeSet.one(probe)) + effect
         shared = model.predict(bare, [probe.f00_hz])
         fresh = model.predict(bare.with_columns(), [probe.f00_hz])
         np.testing.assert_allclose(shared, fresh, rtol=0, atol=1e-9)
-    wide, small = ((FrequencyModel(p) + effect).predict(bare, [p.f00_hz]) for p in (PAPER_PROBE, narrow))
+    wide, small = ((FrequencyModel(ProbeSet.one(p)) + effect).predict(bare, [p.f00_hz]) for p in (PAPER_PROBE, narrow))
     assert np.max(np.abs(wide - small)) > 1e-3  # the stop matters here: the test can tell them apart

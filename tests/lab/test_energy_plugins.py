@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from mows.lab import FrequencyModel, MeasurementTable, catalog, effect
+from mows.lab import FrequencyModel, MeasurementTable, ProbeSet, catalog, effect
 from mows.lab.model.configuration import Configuration, LeverArc
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE
@@ -47,20 +47,22 @@ def _table(field_along_t, amplitude_deg=None):
 def test_an_induced_moment_adds_alpha_b_squared_to_the_stiffness():
     field_t = np.array([-2e-3, -5e-4, 5e-4, 1e-3, 2e-3])
     alpha = 2e-3  # A·m²/T: at 2 mT, 4e-9 N·m against kM = 1.4e-5
-    model = FrequencyModel(PAPER_PROBE) + induced_moment
+    model = FrequencyModel(ProbeSet.one(PAPER_PROBE)) + induced_moment
     found = model.predict(_table(field_t), [PAPER_PROBE.f00_hz, alpha])
     kM, m = PAPER_PROBE.spring_nm_per_rad, PAPER_PROBE.moment_am2
     expected = PAPER_PROBE.f00_hz * np.sqrt(1.0 + (m * field_t + alpha * field_t**2) / kM)
     np.testing.assert_allclose(found, expected, rtol=1e-11)
-    without = FrequencyModel(PAPER_PROBE).predict(_table(field_t), [PAPER_PROBE.f00_hz])
+    without = FrequencyModel(ProbeSet.one(PAPER_PROBE)).predict(_table(field_t), [PAPER_PROBE.f00_hz])
     assert np.all(np.abs(found - without) > 1e-4)  # the term is there, 0.1–1 mHz and more
 
 
 def test_an_energy_written_moment_is_the_catalog_moment_scale():
     table = _table([3e-4, -8e-4, 1.5e-3])
     c = 0.03
-    energy = (FrequencyModel(PAPER_PROBE) + extra_moment).predict(table, [PAPER_PROBE.f00_hz, c])
-    scaled = (FrequencyModel(PAPER_PROBE) + catalog()["moment_scale"]).predict(table, [PAPER_PROBE.f00_hz, c])
+    energy = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + extra_moment).predict(table, [PAPER_PROBE.f00_hz, c])
+    scaled = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + catalog()["moment_scale"]).predict(
+        table, [PAPER_PROBE.f00_hz, c]
+    )
     np.testing.assert_allclose(energy, scaled, rtol=1e-12)
 
 
@@ -69,7 +71,7 @@ def test_a_stiffening_hinge_is_a_duffing_spring_at_finite_amplitude(amplitude_de
     """In zero field the amplitude readout averages over the ring-down; a constant-amplitude
     check uses the first-harmonic stiffness kM + ¾·k3·A² directly on the lab's potential."""
     k3 = 1e-5  # N·m/rad³: ¾·k3·A² is 0.5 % of kM at 8°
-    model = FrequencyModel(PAPER_PROBE) + hinge
+    model = FrequencyModel(ProbeSet.one(PAPER_PROBE)) + hinge
     table = _table([0.0], amplitude_deg)
     small = model.predict(table, [PAPER_PROBE.f00_hz, k3])
     np.testing.assert_allclose(small, PAPER_PROBE.f00_hz, rtol=1e-12)  # U''(0) has no θ⁴ term

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mows.estimate.ringdown import fit_ringdown
-from mows.lab import FrequencyModel, MeasurementTable, catalog
+from mows.lab import FrequencyModel, MeasurementTable, ProbeSet, catalog
 from mows.lab.data.synthetic import true_frequency_hz
 from mows.lab.data.table import NEIGHBOUR
 from mows.physics import frequency, ringdown_average
@@ -27,7 +27,7 @@ def random_table(rng, n=40, field_scale=2e-3, gradient_scale=0.05, **extra):
 
 def test_the_base_model_is_eq6_exactly_up_to_mT_fields():
     table = random_table(np.random.default_rng(1))
-    h, c = FrequencyModel(PAPER_PROBE).factors(table, [])
+    h, c = FrequencyModel(ProbeSet.one(PAPER_PROBE)).factors(table, [])
     probe = PAPER_PROBE
     axes = table.probe_axes()
     along = np.einsum("ni,ni->n", axes[:, 0], table.field_t)
@@ -52,7 +52,7 @@ def test_with_all_field_effects_the_engine_is_the_exact_potential_in_a_uniform_f
         }
     )
     effects = catalog()
-    model = FrequencyModel(PAPER_PROBE) + effects["static_deflection"] + effects["damping_shift"]
+    model = FrequencyModel(ProbeSet.one(PAPER_PROBE)) + effects["static_deflection"] + effects["damping_shift"]
     exact = true_frequency_hz(PAPER_PROBE, UniformField(field), theta0, 1e-12)
     # Static deflection at 1.4 mT is ~0.4 Hz; the lab and the independent source evaluation agree.
     np.testing.assert_allclose(model.predict(table, [PAPER_PROBE.f00_hz, 1.0, 1.0]), exact, rtol=0, atol=1e-9)
@@ -72,8 +72,10 @@ def test_every_effect_is_off_at_zero(name):
         **dict(zip(NEIGHBOUR, np.full((len(NEIGHBOUR), 40), 1e-5))),  # what mutual_coupling reads
     )
     effect = catalog()[name]
-    base = FrequencyModel(PAPER_PROBE).predict(table, [112.48])
-    with_effect = (FrequencyModel(PAPER_PROBE) + effect).predict(table, [112.48] + [0.0] * len(effect.parameters))
+    base = FrequencyModel(ProbeSet.one(PAPER_PROBE)).predict(table, [112.48])
+    with_effect = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + effect).predict(
+        table, [112.48] + [0.0] * len(effect.parameters)
+    )
     np.testing.assert_allclose(with_effect, base, rtol=0, atol=1e-12)
 
 

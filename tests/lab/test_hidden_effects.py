@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from mows.lab import analyse
+from mows.lab import ProbeSet, analyse
 from mows.lab.data import synthetic
 from mows.physics.field import CurrentLoop, UniformField, anti_helmholtz_pair, helmholtz_pair
 from mows.physics.pose import Pose
@@ -35,12 +35,12 @@ def value_and_std(report, name):
 
 
 def assert_named_and_recovered(table, effect, truths, sigmas=2.0):
-    first = analyse(table, PAPER_PROBE, cross_validate=False)
+    first = analyse(table, ProbeSet.one(PAPER_PROBE), cross_validate=False)
     best = first.candidates[0]
     group = [c.name for c in first.candidates if best.group and c.group == best.group]
     assert best.name == effect or effect in group, [c.name for c in first.candidates[:4]]
     assert first.verdict == "effect_missing"
-    final = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
+    final = analyse(table, ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     assert effect in final.effect_names
     assert final.chi2_dof <= 1.5
     for parameter, truth in truths.items():
@@ -135,8 +135,8 @@ def test_control_without_hidden_effect_is_adequate_and_false_alarms_are_rare(con
             amplitude_deg=SMALL_AMPLITUDE_DEG,
             **sweep,
         )
-        verdicts.append(analyse(table, PAPER_PROBE, cross_validate=False).verdict)
-        added += analyse(table, PAPER_PROBE, auto=True, cross_validate=False).effect_names
+        verdicts.append(analyse(table, ProbeSet.one(PAPER_PROBE), cross_validate=False).verdict)
+        added += analyse(table, ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False).effect_names
     assert verdicts.count("adequate") >= 39, verdicts
     assert added == [], added
 
@@ -153,6 +153,6 @@ def test_structure_no_effect_explains_is_described_not_forced(control_truth):
         truth_hz=truth + 2e-3 * np.cos(4 * np.radians(theta0)),
         **sweep,
     )
-    report = analyse(table, PAPER_PROBE, cross_validate=False)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), cross_validate=False)
     assert report.verdict == "unexplained_structure"
     assert "harmonic 4" in report.structure

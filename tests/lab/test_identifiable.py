@@ -12,7 +12,7 @@ import numpy as np
 
 from lab.tables import tilted_table
 from mows.cli.main import main
-from mows.lab import FrequencyModel, analyse, catalog
+from mows.lab import FrequencyModel, ProbeSet, analyse, catalog
 from mows.lab.data import synthetic
 from mows.physics.field import UniformField
 from mows.physics.pose import Pose
@@ -35,11 +35,11 @@ def test_harmonics_from_two_orientations_are_not_identifiable(tmp_path, capsys):
 def test_exact_aliases_leave_their_parameters_not_identifiable():
     table = tilted_table()
     effects = catalog()
-    both = (FrequencyModel(PAPER_PROBE) + effects["plane_tilt"] + effects["field_offset"]).fit(table)
+    both = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + effects["plane_tilt"] + effects["field_offset"]).fit(table)
     assert both.identifiable.tolist() == [True, False, False, False, False]
     text = both.report()
     assert text.count("not identifiable from this table") == 4 and "f00_hz" in text
-    alone = (FrequencyModel(PAPER_PROBE) + effects["field_offset"]).fit(table)
+    alone = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + effects["field_offset"]).fit(table)
     assert alone.identifiable.all()
 
 
@@ -56,7 +56,7 @@ def test_a_cv_error_that_one_sweep_alone_determines_is_not_identifiable(capsys):
         temperature_k=temperature,
         **sweep,
     )
-    report = analyse(table, PAPER_PROBE, effects=["thermal_drift"], rank=False)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), effects=["thermal_drift"], rank=False)
     base, drift = report.history
     assert base.cv_identifiable and math.isfinite(base.cv_rms_hz)
     assert not drift.cv_identifiable and math.isnan(drift.cv_rms_hz)
@@ -77,6 +77,6 @@ def test_a_bad_model_on_well_sampled_sweeps_still_has_a_cv_error():
         gravity_m_per_s2=Pose.tilted(math.radians(20.0)).gravity_m_per_s2,
         **sweep,
     )
-    base = analyse(table, PAPER_PROBE, rank=False).history[0]
+    base = analyse(table, ProbeSet.one(PAPER_PROBE), rank=False).history[0]
     assert base.chi2_dof > 5000
     assert base.cv_identifiable and math.isfinite(base.cv_rms_hz)

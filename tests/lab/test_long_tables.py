@@ -8,7 +8,7 @@ import pytest
 
 from lab.tables import tilted_table
 from mows.bench.lab_long import HIDDEN_SIGMAS, weak_gradient_table
-from mows.lab import analyse, read_csv
+from mows.lab import ProbeSet, analyse, read_csv
 from mows.lab.data.folds import cv_folds
 from mows.lab.data.readers import _read_cells
 from mows.lab.data.table import MeasurementTable, stratified_rows
@@ -62,7 +62,9 @@ def test_the_subsample_makes_the_choices_every_row_makes(tilted):
     subsample = tilted.subsample(480)
     assert len(subsample) == 480 and "20 of its 60 sweeps" in subsample.notes[-1]
     for auto in (False, True):
-        full, part = (analyse(t, PAPER_PROBE, auto=auto, cross_validate=False) for t in (tilted, subsample))
+        full, part = (
+            analyse(t, ProbeSet.one(PAPER_PROBE), auto=auto, cross_validate=False) for t in (tilted, subsample)
+        )
         assert part.effect_names == full.effect_names == (["gravity"] if auto else [])
         assert part.verdict == full.verdict == ("adequate" if auto else "effect_missing")
         if not auto:
@@ -76,11 +78,13 @@ def test_all_rows_name_the_transverse_gradient_the_subsample_misses():
     strong; 2000 rows at 0.028σ per row cannot."""
     rows = 6000
     every = analyse(
-        weak_gradient_table(rows, HIDDEN_SIGMAS * math.sqrt(500_000 / rows)), PAPER_PROBE, cross_validate=False
+        weak_gradient_table(rows, HIDDEN_SIGMAS * math.sqrt(500_000 / rows)),
+        ProbeSet.one(PAPER_PROBE),
+        cross_validate=False,
     )
     assert every.n == rows and every.verdict == "effect_missing"
     assert every.candidates[0].name == "transverse_gradient" and every.candidates[0].strong
-    few = analyse(weak_gradient_table(2000), PAPER_PROBE, cross_validate=False)
+    few = analyse(weak_gradient_table(2000), ProbeSet.one(PAPER_PROBE), cross_validate=False)
     assert not any(c.strong for c in few.candidates)
 
 

@@ -81,7 +81,7 @@ def test_a_table_without_coupling_adds_nothing(seed):
 
 
 def test_a_one_probe_table_cannot_test_the_coupling():
-    report = analyse(rotation_table(SCENE, amplitude_deg=2.0), PAPER_PROBE, cross_validate=False)
+    report = analyse(rotation_table(SCENE, amplitude_deg=2.0), ProbeSet.one(PAPER_PROBE), cross_validate=False)
     assert "a single probe has no neighbour" in report.untestable["mutual_coupling"]
 
 

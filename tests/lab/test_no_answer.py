@@ -4,7 +4,7 @@ residual follows (covariates and products of two)."""
 
 import numpy as np
 
-from mows.lab import analyse
+from mows.lab import ProbeSet, analyse
 from mows.lab.data import synthetic
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
@@ -29,7 +29,9 @@ def test_a_hidden_current_times_temperature_term_is_pointed_at():
     # No catalog effect is a frequency term ∝ I·ΔT (4 mHz per A·K), ΔT from the probe's reference
     # temperature (where the discovery measures temperatures from).
     hidden = 0.004 * current * (temperature - PAPER_PROBE.reference_temperature_k)
-    report = analyse(table.with_columns(f_hz=table.f_hz + hidden), PAPER_PROBE, auto=True, cross_validate=False)
+    report = analyse(
+        table.with_columns(f_hz=table.f_hz + hidden), ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False
+    )
     assert report.verdict == "unexplained_structure"
     explanation = report.diagnosis.explanation
     assert "The residual follows temperature_k·coil_current_a (correlation +0.9" in explanation
@@ -57,7 +59,9 @@ def test_an_angle_pattern_that_changes_in_time_is_not_a_pile_of_catalog_effects(
         PAPER_PROBE, UniformField((2e-5, 5e-6, 0.0)), theta0, np.random.default_rng(1), amplitude_deg=2.0, **sweep
     )
     hidden = 0.05 * np.cos(3 * np.radians(theta0)) * t / np.ptp(t)  # t from the table's start
-    report = analyse(table.with_columns(f_hz=table.f_hz + hidden), PAPER_PROBE, auto=True, cross_validate=False)
+    report = analyse(
+        table.with_columns(f_hz=table.f_hz + hidden), ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False
+    )
     assert report.base.chi2_dof > 50, report.base.chi2_dof
     assert report.effects == [], report.history
     assert report.verdict == "unexplained_structure"

@@ -25,12 +25,12 @@ def table():
 
 
 def test_a_probe_named_by_its_column_fits_as_the_table_without_it(table):
-    named, probes = with_probes(table.with_columns(probe=np.full(len(table), 3.0)), PAPER_PROBE)
-    alone, one = with_probes(table, PAPER_PROBE)
+    named, probes = with_probes(table.with_columns(probe=np.full(len(table), 3.0)), ProbeSet.one(PAPER_PROBE))
+    alone, one = with_probes(table, ProbeSet.one(PAPER_PROBE))
     assert probes.ids == (3,) and one.f00_names == ["f00_hz"]
     gravity = catalog()["gravity"]
     by_column = (FrequencyModel(probes) + gravity).fit(named)
-    by_itself = (FrequencyModel(PAPER_PROBE) + gravity).fit(alone)
+    by_itself = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + gravity).fit(alone)
     assert by_column.model.parameter_names == ["probe_3.f00_hz", "gravity.down_x", "gravity.down_y"]
     assert by_itself.model.parameter_names[1:] == by_column.model.parameter_names[1:]
     np.testing.assert_allclose(by_column.values, by_itself.values, rtol=1e-9)
@@ -41,7 +41,7 @@ def test_a_probe_named_by_its_column_fits_as_the_table_without_it(table):
 
 
 def test_every_row_of_a_table_without_the_column_is_its_one_probe(table):
-    ((rows, part, entry),) = probe_parts(table, PAPER_PROBE)
+    ((rows, part, entry),) = probe_parts(table, ProbeSet.one(PAPER_PROBE))
     assert part is table and np.array_equal(rows, np.arange(len(table))) and entry.probe == PAPER_PROBE
 
 

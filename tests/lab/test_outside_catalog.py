@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from lab.outside_catalog import CASES, INFO, NOISE_HZ, control, fitted_swing_deg, noise_free
-from mows.lab import analyse, analyse_discovering, discover
+from mows.lab import ProbeSet, analyse, analyse_discovering, discover
 from mows.physics.probe import PAPER_PROBE
 
 
@@ -77,7 +77,7 @@ def test_outside_the_catalog_the_labs_own_plugin_closes_the_gap(case, tmp_path):
         path.write_text(term.plugin)
         return path
 
-    report, added = analyse_discovering(table, PAPER_PROBE, save, cross_validate=False)
+    report, added = analyse_discovering(table, ProbeSet.one(PAPER_PROBE), save, cross_validate=False)
     assert added, report.diagnosis.explanation
     (term,) = added
     assert term.family == info.family, term.text()
@@ -92,7 +92,7 @@ def test_outside_the_catalog_the_labs_own_plugin_closes_the_gap(case, tmp_path):
 def control_selection(case):
     """The ``--auto`` selection on the control's seed 0, which two tests read: made once (the
     module runs on one worker)."""
-    return analyse(control(case, 0)[0], PAPER_PROBE, auto=True, cross_validate=False)
+    return analyse(control(case, 0)[0], ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
 
 
 @pytest.mark.slow  # the truth of every control and 40 fits and searches each
@@ -103,7 +103,7 @@ def test_the_search_beyond_the_catalog_finds_nothing_on_40_controls(case):
     model = control_selection(case).diagnosis.fit.model
     found = {}
     for seed in range(40):
-        discovery = discover(model.fit(control(case, seed)[0]), PAPER_PROBE)
+        discovery = discover(model.fit(control(case, seed)[0]), ProbeSet.one(PAPER_PROBE))
         if discovery.terms:
             found[seed] = discovery.summary
     assert not found, found
@@ -131,7 +131,7 @@ def test_the_users_plugin_explains_the_case(case, form, tmp_path):
     table, info = CASES[case](0)
     path = tmp_path / f"{info.plugin_effect}.py"
     path.write_text(info.energy_plugin_source if form == "energy" else info.plugin_source)
-    report = analyse(table, PAPER_PROBE, auto=True, plugins=[str(path)], cross_validate=False)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), auto=True, plugins=[str(path)], cross_validate=False)
     assert info.plugin_effect in report.effect_names, report.effects
     assert set(report.effect_names) - {info.plugin_effect} <= info.present, report.effects
     assert report.chi2_dof <= 1.5, report.chi2_dof

@@ -15,7 +15,7 @@ configuration.
 import numpy as np
 import pytest
 
-from mows.lab import FrequencyModel, analyse, catalog
+from mows.lab import FrequencyModel, ProbeSet, analyse, catalog
 from mows.lab.data import synthetic
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
@@ -62,7 +62,7 @@ def table():
 
 @pytest.mark.slow  # an --auto selection on 96 rows
 def test_the_catalog_alone_adds_only_what_is_there_and_points_at_the_moment(table):
-    report = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     assert report.base.chi2_dof > 20.0, report.base.chi2_dof  # the hidden effect is far above noise
     assert set(report.effect_names) <= PHYSICAL_KEEP, report.history
     assert report.verdict == "unexplained_structure", report.diagnosis.explanation
@@ -79,7 +79,7 @@ def test_the_catalog_alone_adds_only_what_is_there_and_points_at_the_moment(tabl
 def test_the_users_physical_plugin_explains_the_table_and_reads_the_coefficient(table, tmp_path):
     path = tmp_path / "moment_temperature.py"
     path.write_text(PLUGIN)
-    report = analyse(table, PAPER_PROBE, auto=True, plugins=[str(path)], cross_validate=False)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), auto=True, plugins=[str(path)], cross_validate=False)
     assert "moment_temperature" in report.effect_names, report.history
     assert report.fit.chi2_dof <= 1.5, report.history
     value, std = report.effect_parameter("moment_temperature.c_per_k")
@@ -110,7 +110,7 @@ def test_a_plugins_field_goes_through_the_potential(tmp_path):
     path = tmp_path / "unseen_field.py"
     path.write_text(FIELD_PLUGIN)
     effects = catalog([str(path)])
-    model = FrequencyModel(PAPER_PROBE) + effects["static_deflection"].at_physics()
+    model = FrequencyModel(ProbeSet.one(PAPER_PROBE)) + effects["static_deflection"].at_physics()
     model = model + effects["finite_amplitude"].at_physics() + effects["unseen_field"]
     fit = model.fit(table)
     assert fit.chi2_dof <= 1.5, fit.chi2_dof

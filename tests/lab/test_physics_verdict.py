@@ -5,7 +5,7 @@ from its physical value, or a generic correction in the model, is reported as wh
 """
 
 from lab.tables import rotation_table
-from mows.lab import analyse
+from mows.lab import ProbeSet, analyse
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
 
@@ -19,7 +19,9 @@ def _table(truth_amplitude_deg, table_amplitude_deg, seed=0):
 def test_a_free_physical_strength_far_from_its_value_is_inconsistent_physics():
     # The table says 24°, the ring-downs swung 8°: the amplitude's weakening of the field spring
     # (≈ −A²/8 of 180 mHz at 24°, 3 mHz) is a ninth of the prediction.
-    report = analyse(_table(8.0, 24.0), PAPER_PROBE, effects=["finite_amplitude"], rank=False, cross_validate=False)
+    report = analyse(
+        _table(8.0, 24.0), ProbeSet.one(PAPER_PROBE), effects=["finite_amplitude"], rank=False, cross_validate=False
+    )
     value, std = report.effect_parameter("finite_amplitude.strength")
     assert abs(value - 1.0) > 5 * std  # the premise: the data reject strength 1
     assert report.diagnosis.structure.goodness_p > 0.005  # … while the residuals look like noise
@@ -29,14 +31,16 @@ def test_a_free_physical_strength_far_from_its_value_is_inconsistent_physics():
 
 
 def test_the_same_effect_at_its_physical_value_is_adequate():
-    report = analyse(_table(24.0, 24.0), PAPER_PROBE, effects=["finite_amplitude"], rank=False, cross_validate=False)
+    report = analyse(
+        _table(24.0, 24.0), ProbeSet.one(PAPER_PROBE), effects=["finite_amplitude"], rank=False, cross_validate=False
+    )
     assert report.verdict == "adequate", report.diagnosis.explanation
 
 
 def test_a_generic_term_in_the_model_is_named_not_called_adequate():
     report = analyse(
         _table(24.0, 24.0),
-        PAPER_PROBE,
+        ProbeSet.one(PAPER_PROBE),
         effects=["finite_amplitude (at physics)", "moment_scale"],
         rank=False,
         cross_validate=False,

@@ -14,7 +14,7 @@ import dataclasses
 
 import numpy as np
 
-from mows.lab import FrequencyModel, analyse, catalog
+from mows.lab import FrequencyModel, ProbeSet, analyse, catalog
 from mows.lab.data import synthetic
 from mows.lab.data.reference import curvature_columns
 from mows.lab.diagnosis.plausibility import conflicts
@@ -38,17 +38,17 @@ def _table(probe, source, reference=None, seed=0):
 def test_a_moment_far_off_the_calibration_is_a_finding_not_an_effect():
     true_probe = dataclasses.replace(PAPER_PROBE, moment_am2=PAPER_PROBE.moment_am2 * (1.0 + SCALE_ERROR))
     table = _table(true_probe, UniformField(FIELD_T))
-    report = analyse(table, PAPER_PROBE, cross_validate=False)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), cross_validate=False)
     candidate = next(c for c in report.candidates if c.name == "moment_scale")
     assert not candidate.strong
     (conflict,) = candidate.chosen.conflicts
     assert conflict.parameter == "moment_scale.scale_error" and conflict.sigmas > 10.0, conflict
     assert abs(conflict.value - SCALE_ERROR) < 0.02, conflict  # what it would need: the true error
     assert "Finding: moment_scale would take" in report.diagnosis.explanation, report.diagnosis.explanation
-    automatic = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
+    automatic = analyse(table, ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     assert "moment_scale" not in automatic.effect_names, [step.change for step in automatic.history]
 
-    stated = analyse(table, dataclasses.replace(PAPER_PROBE, beta0_rel_std=0.2), cross_validate=False)
+    stated = analyse(table, ProbeSet.one(dataclasses.replace(PAPER_PROBE, beta0_rel_std=0.2)), cross_validate=False)
     candidate = next(c for c in stated.candidates if c.name == "moment_scale")
     assert candidate.strong and not candidate.chosen.conflicts, candidate.would_need
 
@@ -57,10 +57,10 @@ def test_gravity_cannot_stand_in_for_a_field_it_would_need_more_than_g_for():
     """a·g·l/m = 154 µT: (0.15, 0.15) mT of unreferenced field needs d = (0.97, 0.97)."""
     hidden = UniformField((1.5e-4, 1.5e-4, 0.0))
     table = _table(PAPER_PROBE, UniformField(FIELD_T) + hidden, reference=UniformField(FIELD_T))
-    fit = (FrequencyModel(PAPER_PROBE) + catalog()["gravity"]).fit(table)
-    found = {c.parameter: c for c in conflicts(fit, PAPER_PROBE)}
+    fit = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + catalog()["gravity"]).fit(table)
+    found = {c.parameter: c for c in conflicts(fit, ProbeSet.one(PAPER_PROBE))}
     assert found["|gravity.down|"].value > 1.3 and found["|gravity.down|"].sigmas > 10.0, found
-    report = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     assert "gravity" not in report.effect_names, [step.change for step in report.history]
 
 
@@ -78,13 +78,13 @@ def test_gravity_and_a_plane_tilt_must_be_one_tilt():
     truth = [UniformField(tuple(rotation @ reference + hidden)) for reference in references]
     table = _table(PAPER_PROBE, truth, reference=[UniformField(tuple(reference)) for reference in references])
     effects = catalog()
-    fit = (FrequencyModel(PAPER_PROBE) + effects["gravity"] + effects["plane_tilt"]).fit(table)
+    fit = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + effects["gravity"] + effects["plane_tilt"]).fit(table)
     tilt = fit.effect_parameters("plane_tilt")[0]
     assert abs(tilt.value - tilt_x_rad) < 5 * tilt.std + 0.005, tilt  # the tilt is determined
-    found = [c for c in conflicts(fit, PAPER_PROBE) if c.parameter.endswith("(the plane tilt's)")]
-    assert found and max(c.sigmas for c in found) > 10.0, conflicts(fit, PAPER_PROBE)
-    alone = (FrequencyModel(PAPER_PROBE) + effects["plane_tilt"]).fit(table)
-    assert not [c for c in conflicts(alone, PAPER_PROBE) if "plane tilt" in c.parameter]
+    found = [c for c in conflicts(fit, ProbeSet.one(PAPER_PROBE)) if c.parameter.endswith("(the plane tilt's)")]
+    assert found and max(c.sigmas for c in found) > 10.0, conflicts(fit, ProbeSet.one(PAPER_PROBE))
+    alone = (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + effects["plane_tilt"]).fit(table)
+    assert not [c for c in conflicts(alone, ProbeSet.one(PAPER_PROBE)) if "plane tilt" in c.parameter]
 
 
 def _curvature_table(reference):
@@ -103,13 +103,13 @@ def test_a_curvature_the_references_sources_cannot_make_is_a_finding_not_an_effe
     """The pair alone has no curvature at its centre (0 ± 0.0015 T/m² over 5 mm): the curvature
     the table needs is reported, and --auto does not take it; with the magnet in the reference's
     sources the same curvature is physics and is added."""
-    report = analyse(_curvature_table("pair"), PAPER_PROBE, auto=True, cross_validate=False)
+    report = analyse(_curvature_table("pair"), ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     assert "field_curvature" not in report.effect_names, [step.change for step in report.history]
     candidate = next(c for c in report.candidates if c.name == "field_curvature")
     needed = {c.parameter: c for c in candidate.chosen.conflicts}
     assert needed["field_curvature.hyyy_t_per_m2"].sigmas > 5.0, needed
     assert abs(needed["field_curvature.hyyy_t_per_m2"].value - 0.494) < 0.15, needed
-    physics = analyse(_curvature_table("truth"), PAPER_PROBE, auto=True, cross_validate=False)
+    physics = analyse(_curvature_table("truth"), ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     assert "field_curvature" in physics.effect_names, [step.change for step in physics.history]
 
 
@@ -118,9 +118,13 @@ def test_a_curvature_added_by_hand_at_an_impossible_value_is_not_adequate():
     the verdict reports the value the pair's centre cannot have instead of accepting it."""
     known = ["finite_amplitude (at physics)", "static_deflection (at physics)", "transverse_gradient (at physics)"]
     table = _curvature_table("pair")
-    added = analyse(table, PAPER_PROBE, effects=[*known, "field_curvature"], rank=False, cross_validate=False)
+    added = analyse(
+        table, ProbeSet.one(PAPER_PROBE), effects=[*known, "field_curvature"], rank=False, cross_validate=False
+    )
     assert added.verdict == "inconsistent_physics", added.diagnosis.explanation
     assert "would need field_curvature.hyyy_t_per_m2" in added.diagnosis.explanation
     assert added.fit.chi2_dof < 1.5  # what the statistics alone would have called adequate
-    physics = analyse(_curvature_table("truth"), PAPER_PROBE, effects=[*known, "field_curvature"], rank=False)
+    physics = analyse(
+        _curvature_table("truth"), ProbeSet.one(PAPER_PROBE), effects=[*known, "field_curvature"], rank=False
+    )
     assert physics.verdict == "adequate", physics.diagnosis.explanation

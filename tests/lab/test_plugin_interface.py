@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from mows.lab import FrequencyModel, MeasurementTable, catalog, effect
+from mows.lab import FrequencyModel, MeasurementTable, ProbeSet, catalog, effect
 from mows.physics.probe import PAPER_PROBE
 
 PROBE = PAPER_PROBE
@@ -76,10 +76,10 @@ def test_a_per_row_angle_offset_turns_each_row_by_its_own_angle():
     theta0 = np.arange(0.0, 360.0, 30.0)
     field_t = 1.2e-3
     per_rad = 0.05  # 0 at θ0 = 0, 18° at 330°
-    found = (FrequencyModel(PROBE) + turned).predict(_table(theta0, (field_t, 0.0)), [F00, per_rad])
+    found = (FrequencyModel(ProbeSet.one(PROBE)) + turned).predict(_table(theta0, (field_t, 0.0)), [F00, per_rad])
     angle = np.radians(theta0) * (1.0 + per_rad)
     np.testing.assert_allclose(found, F00 * np.sqrt(1.0 + M * field_t * np.cos(angle) / KM), rtol=1e-12)
-    plain = FrequencyModel(PROBE).predict(_table(theta0, (field_t, 0.0)), [F00])
+    plain = FrequencyModel(ProbeSet.one(PROBE)).predict(_table(theta0, (field_t, 0.0)), [F00])
     assert np.max(np.abs(found - plain)) > 0.1  # Hz: the offset is there
 
 
@@ -87,7 +87,7 @@ def test_a_per_row_angle_offset_turns_each_row_by_its_own_angle():
 def test_a_magnet_moved_along_the_lever_feels_the_field_there_on_a_longer_lever(along_m):
     field_t, gradient = 8e-4, 0.3  # T, T/m along the probe (θ0 = 0)
     table = _table([0.0], (field_t, 0.0), (gradient, 0.0, -gradient))
-    found = (FrequencyModel(PROBE) + moved_magnet).predict(table, [F00, along_m, 0.0, 0.0])
+    found = (FrequencyModel(ProbeSet.one(PROBE)) + moved_magnet).predict(table, [F00, along_m, 0.0, 0.0])
     expected = F00 * math.sqrt(1.0 + M * (field_t + gradient * (LEVER + 2.0 * along_m)) / KM)
     assert found[0] == pytest.approx(expected, rel=1e-12)
     nominal = F00 * math.sqrt(1.0 + M * (field_t + gradient * LEVER) / KM)
@@ -99,7 +99,7 @@ def test_a_moved_pivot_puts_the_magnet_where_the_gradient_changes_the_field():
     field, gradient = np.array([6e-4, -3e-4, 0.0]), np.array([[0.2, 0.05, 0.0], [0.05, -0.1, 0.0], [0.0, 0.0, -0.1]])
     pivot = np.array([2e-3, -1.5e-3, 0.0])
     table = _table(theta0, field[:2], (0.2, 0.05, -0.1))
-    found = (FrequencyModel(PROBE) + moved_pivot).predict(table, [F00, *pivot[:2]])
+    found = (FrequencyModel(ProbeSet.one(PROBE)) + moved_pivot).predict(table, [F00, *pivot[:2]])
     angle = np.radians(theta0)
     axis = np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], -1)
     b_along = axis @ (field + gradient @ pivot)
@@ -109,8 +109,10 @@ def test_a_moved_pivot_puts_the_magnet_where_the_gradient_changes_the_field():
 
 def test_a_parameter_off_at_one_with_the_probes_constants():
     table = _table([0.0, 90.0, 180.0], (1e-3, 0.0))
-    model = FrequencyModel(PROBE) + spring_ratio
-    np.testing.assert_allclose(model.predict(table, [F00, 1.0]), FrequencyModel(PROBE).predict(table, [F00]), rtol=0)
+    model = FrequencyModel(ProbeSet.one(PROBE)) + spring_ratio
+    np.testing.assert_allclose(
+        model.predict(table, [F00, 1.0]), FrequencyModel(ProbeSet.one(PROBE)).predict(table, [F00]), rtol=0
+    )
     ratio = 1.03
     b_along = 1e-3 * np.cos(np.radians([0.0, 90.0, 180.0]))
     expected = F00 * np.sqrt(ratio + M * b_along / KM)
@@ -130,7 +132,7 @@ def test_an_effect_that_is_not_off_at_its_off_value_is_refused_in_words():
         return {"stiffness_nm_per_rad": ratio * 1e-7}  # off at 0, not at the declared 1
 
     with pytest.raises(ValueError, match="always_on .* off values an effect must change nothing"):
-        (FrequencyModel(PROBE) + always_on).predict(_table([0.0]), [F00, 1.0])
+        (FrequencyModel(ProbeSet.one(PROBE)) + always_on).predict(_table([0.0]), [F00, 1.0])
     with pytest.raises(ValueError, match="lower ≤ off value ≤ upper"):
         effect(name="outside", parameters={"k": (3.0, 0.5, 2.0, "1")})
 
@@ -182,7 +184,7 @@ def test_every_offset_with_every_component_against_a_second_implementation(theta
     pivot_xy = (1.2e-3, 0.8e-3)
     pool = catalog()
     model = (
-        FrequencyModel(PROBE)
+        FrequencyModel(ProbeSet.one(PROBE))
         + pool["transverse_gradient"]
         + pool["static_deflection"]
         + pool["field_curvature"]

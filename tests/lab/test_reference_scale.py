@@ -65,7 +65,7 @@ def _scaled(table, factor):
 
 def test_gravity_against_a_weak_field_is_physics_and_the_table_goes_on():
     table = _table(_gravity_cancelling(RESPONSE))
-    checked = check_reference(table, PROBE_)
+    checked = check_reference(table, ProbeSet.one(PROBE_))
     (note,) = [note for note in checked.notes if "times as much" in note]
     response = float(note.split("move ")[1].split(" times")[0])
     # the slope's σ is σf/(spread·√n) = 0.004 on 24 rows: 3σ is 15 % of it
@@ -75,7 +75,7 @@ def test_gravity_against_a_weak_field_is_physics_and_the_table_goes_on():
 
 def test_a_response_near_one_says_nothing():
     table = _table()
-    assert check_reference(table, PROBE_) is table
+    assert check_reference(table, ProbeSet.one(PROBE_)) is table
 
 
 @pytest.mark.parametrize("factor, unit, field_t", [(1e3, "mT", 4e-4), (1e4, "gauss", 4e-5), (1e6, "µT", 1e-6)])
@@ -87,14 +87,14 @@ def test_a_reference_in_another_unit_is_refused_with_the_unit_unless_trusted(fac
     with pytest.raises(
         ValueError, match=f"a factor 10\\^{round(math.log10(factor))} is a unit, the reference in {unit}"
     ):
-        check_reference(wrong, PROBE_)
-    trusted = check_reference(wrong, PROBE_, trust_scale=True)
+        check_reference(wrong, ProbeSet.one(PROBE_))
+    trusted = check_reference(wrong, ProbeSet.one(PROBE_), trust_scale=True)
     assert any("times as much" in note for note in trusted.notes)
 
 
 def test_a_factor_that_is_no_unit_is_a_note():
     table = _scaled(_table(field_t=4e-4), 30.0)
-    checked = check_reference(table, PROBE_)
+    checked = check_reference(table, ProbeSet.one(PROBE_))
     assert any("times as much" in note for note in checked.notes), checked.notes
 
 

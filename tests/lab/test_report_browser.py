@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from lab.outside_catalog import CASES
-from mows.lab import analyse, write_report
+from mows.lab import ProbeSet, analyse, write_report
 from mows.lab.data import synthetic
 from mows.lab.report.html_report import named_covariates
 from mows.physics.field import UniformField, anti_helmholtz_pair
@@ -81,7 +81,7 @@ def report_page(tmp_path_factory):
     table = synthetic.synthesize(
         PAPER_PROBE, source, theta0, np.random.default_rng(0), f_std_hz=3e-4, amplitude_deg=20.0, **sweep
     )
-    report = analyse(table, PAPER_PROBE, auto=True)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), auto=True)
     return write_report(report, tmp_path_factory.mktemp("report") / "lab_report.html"), report
 
 
@@ -89,7 +89,7 @@ def report_page(tmp_path_factory):
 def named_page(tmp_path_factory):
     """The report of a table whose residual follows covariates outside the catalog."""
     table, _ = CASES["moment_temperature"](0)
-    report = analyse(table, PAPER_PROBE, auto=True, cross_validate=False)
+    report = analyse(table, ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     return write_report(report, tmp_path_factory.mktemp("named") / "lab_report.html"), report
 
 

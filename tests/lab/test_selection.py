@@ -9,7 +9,7 @@ import pytest
 
 from lab.tables import rotation_table
 from mows.cli.main import main
-from mows.lab import FrequencyModel, analyse, catalog, load_table
+from mows.lab import FrequencyModel, ProbeSet, analyse, catalog, load_table
 from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE
 from mows.sim.scenario import load_scenario
@@ -25,8 +25,8 @@ def test_an_effect_at_physics_is_the_free_effect_at_its_physical_value():
         fixed = effects[name].at_physics()
         assert fixed.parameters == () and fixed.label == f"{name} (at physics)" and fixed.free is effects[name]
         np.testing.assert_array_equal(
-            (FrequencyModel(PAPER_PROBE) + fixed).predict(table, [112.48]),
-            (FrequencyModel(PAPER_PROBE) + effects[name]).predict(table, [112.48, 1.0]),
+            (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + fixed).predict(table, [112.48]),
+            (FrequencyModel(ProbeSet.one(PAPER_PROBE)) + effects[name]).predict(table, [112.48, 1.0]),
         )
     with pytest.raises(ValueError, match="tilt|known"):
         effects["gravity"].at_physics()
@@ -43,13 +43,13 @@ def test_the_demo_sweep_is_known_physics_not_curvature():
     physics = [
         catalog()[name].at_physics() for name in ("transverse_gradient", "finite_amplitude", "static_deflection")
     ]
-    assert FrequencyModel(probe, physics).fit(table).chi2_dof < 1.0
-    report = analyse(table, probe, auto=True, cross_validate=False)
+    assert FrequencyModel(ProbeSet.one(probe), physics).fit(table).chi2_dof < 1.0
+    report = analyse(table, ProbeSet.one(probe), auto=True, cross_validate=False)
     assert "field_curvature" not in report.effect_names, report.history
     assert {"transverse_gradient (at physics)", "finite_amplitude (at physics)"} <= set(report.effects)
     assert report.history[1].effects == ["transverse_gradient (at physics)"]
     assert "field_curvature" not in {name for step in report.history for name in step.effects}
-    first = analyse(table, probe, cross_validate=False)
+    first = analyse(table, ProbeSet.one(probe), cross_validate=False)
     transverse = next(c for c in first.candidates if c.name == "transverse_gradient")
     assert transverse.form == "at physics"
     assert transverse.free.conflicts[0].parameter == "transverse_gradient.strength"
@@ -66,7 +66,7 @@ def strong_field_table(truth_amplitude_deg, seed=0):
 
 
 def test_known_physics_is_added_at_physics_when_the_data_have_it():
-    report = analyse(strong_field_table(24.0), PAPER_PROBE, auto=True, cross_validate=False)
+    report = analyse(strong_field_table(24.0), ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     assert {"finite_amplitude (at physics)", "static_deflection (at physics)"} <= set(report.effects), report.history
     assert report.verdict == "adequate"
     value, std = report.effect_parameter("finite_amplitude.strength")  # the free fit, as a check
@@ -75,9 +75,9 @@ def test_known_physics_is_added_at_physics_when_the_data_have_it():
 
 def test_known_physics_the_data_do_not_have_is_rejected():
     # The table says 24°, the truth swung 1°: the amplitude effect predicted at physics is absent.
-    report = analyse(strong_field_table(1.0), PAPER_PROBE, auto=True, cross_validate=False)
+    report = analyse(strong_field_table(1.0), ProbeSet.one(PAPER_PROBE), auto=True, cross_validate=False)
     assert "finite_amplitude" not in report.effect_names, report.history
-    first = analyse(strong_field_table(1.0), PAPER_PROBE, cross_validate=False)
+    first = analyse(strong_field_table(1.0), ProbeSet.one(PAPER_PROBE), cross_validate=False)
     amplitude = next(c for c in first.candidates if c.name == "finite_amplitude")
     assert amplitude.physics.signal_chi2 > 100  # it would be seen …
     assert amplitude.physics.delta_bic < -100 and amplitude.physics.p_value > 1e-3  # … and is not there

@@ -14,7 +14,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mows.lab import analyse, reference_at
+from mows.lab import ProbeSet, analyse, reference_at
 from mows.lab.data import synthetic
 from mows.lab.data.table import FIELD, GRADIENT
 from mows.lab.report.lab_report import INCONSISTENT_SIGMAS
@@ -37,7 +37,7 @@ def lab():
         if name not in found:
             scenario = load_scenario(name)
             table = synthetic.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
-            found[name] = scenario, table, analyse(table, scenario.probe, auto=True, cross_validate=False)
+            found[name] = scenario, table, analyse(table, ProbeSet.one(scenario.probe), auto=True, cross_validate=False)
         return found[name]
 
     return run
@@ -146,7 +146,7 @@ def test_earths_field_alone_shows_the_finite_amplitude_when_the_physics_says_it_
     signal against the table's uncertainties (the at-physics form's signal χ²); nothing but
     known physics may be added."""
     scenario, table, report = lab("paper_largest_spacing")
-    base = analyse(table, scenario.probe, cross_validate=False)
+    base = analyse(table, ProbeSet.one(scenario.probe), cross_validate=False)
     amplitude = next(c for c in base.candidates if c.name == "finite_amplitude")
     if amplitude.physics.signal_chi2 > 10:
         assert "finite_amplitude" in report.effect_names, report.history
@@ -174,7 +174,7 @@ def test_a_strong_field_perpendicular_to_the_probe_is_static_deflection_and_fini
         environment=dataclasses.replace(base.environment, sources=(*base.environment.sources, strong))
     )
     table = synthetic.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
-    report = analyse(table, scenario.probe, auto=True, cross_validate=False)
+    report = analyse(table, ProbeSet.one(scenario.probe), auto=True, cross_validate=False)
     assert set(report.effect_names) == {"static_deflection", "finite_amplitude"}, report.history
     assert report.chi2_dof <= 1.5 * max(1.0, repeatability(table)), (repeatability(table), report.history)
     assert report.verdict == "adequate", report.history
@@ -196,7 +196,7 @@ def test_a_temperature_drift_is_thermal_drift_at_its_physical_coefficient():
             environment=dataclasses.replace(base.environment, temperature_rate_k_per_s=rate_k_per_s)
         )
         table = synthetic.simulated_table(scenario, ANGLES_DEG, SWEEPS, np.random.default_rng(SEED))
-        reports[rate_k_per_s] = analyse(table, scenario.probe, auto=True, cross_validate=False)
+        reports[rate_k_per_s] = analyse(table, ProbeSet.one(scenario.probe), auto=True, cross_validate=False)
     control, drifting = reports[0.0], reports[5e-3]
     assert "thermal_drift" not in control.effect_names, control.history
     assert "thermal_drift" in drifting.effect_names, drifting.history

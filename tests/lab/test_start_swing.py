@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from mows.lab import FrequencyModel, TableError, catalog, load_table
+from mows.lab import FrequencyModel, ProbeSet, TableError, catalog, load_table
 from mows.lab.data import synthetic
 from mows.lab.data.intake import tool_table
 from mows.physics.field import UniformField
@@ -66,7 +66,7 @@ def columns():
 
 def physics_model():
     held = [catalog()[name].at_physics() for name in ("static_deflection", "finite_amplitude")]
-    return FrequencyModel(PAPER_PROBE) + held[0] + held[1]
+    return FrequencyModel(ProbeSet.one(PAPER_PROBE)) + held[0] + held[1]
 
 
 def test_the_truth_swings_far_less_than_the_stop_at_the_deflected_rows(columns):

@@ -25,7 +25,7 @@ import time
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from mows.lab import FrequencyModel, analyse, catalog, diagnose
+from mows.lab import FrequencyModel, ProbeSet, analyse, catalog, diagnose
 from mows.lab.data import synthetic
 from mows.physics.field import UniformField, anti_helmholtz_pair
 from mows.physics.probe import PAPER_PROBE
@@ -86,13 +86,14 @@ def run(sweeps: int = SWEEPS, outside_sweeps: int = OUTSIDE_SWEEPS) -> dict:
     table = benchmark_table(sweeps=sweeps)
     effects = list(catalog().values())
     outside = outside_catalog_table(sweeps=outside_sweeps)
+    probes = ProbeSet.one(PAPER_PROBE)
     with threadpool_limits(1):
         start, cpu = time.perf_counter(), time.process_time()
-        fit = FrequencyModel(PAPER_PROBE).fit(table)
-        result = diagnose(fit, effects)
+        fit = FrequencyModel(probes).fit(table)
+        result = diagnose(fit, effects, probes)
         seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
         start, cpu = time.perf_counter(), time.process_time()
-        auto = analyse(outside, PAPER_PROBE, auto=True)
+        auto = analyse(outside, probes, auto=True)
         auto_seconds, auto_cpu_seconds = time.perf_counter() - start, time.process_time() - cpu
     return {
         "rows": len(table),

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mows.lab import FrequencyModel
+from mows.lab import FrequencyModel, ProbeSet
 from mows.lab.data import synthetic
 from mows.lab.data.table import MeasurementTable
 from mows.physics.field import UniformField, anti_helmholtz_pair
@@ -67,7 +67,7 @@ def weak_gradient_table(rows: int = 500_000, hidden_sigmas: float = HIDDEN_SIGMA
         PAPER_PROBE, SOURCE, theta0_deg, np.random.default_rng(seed), f_std_hz=1.0, truth_hz=truth_hz
     )
     exact = sweep.with_columns(f_hz=truth_hz)
-    missed_hz = float(np.sqrt(FrequencyModel(PAPER_PROBE).fit(exact).chi2 / ORIENTATIONS))
+    missed_hz = float(np.sqrt(FrequencyModel(ProbeSet.one(PAPER_PROBE)).fit(exact).chi2 / ORIENTATIONS))
     copies = -(-rows // ORIENTATIONS)
     columns = {name: np.tile(values, copies)[:rows] for name, values in exact.columns.items()}
     columns["f_std_hz"] = np.full(rows, missed_hz / hidden_sigmas)

@@ -179,7 +179,7 @@ def run(args) -> int:
         bar_format="{desc} {bar} {n_fmt}/{total_fmt} stages, {elapsed}",
     )
     with stages, WorkBar(quiet) as work, progress.listening(work):
-        table, probe = _table(args, probe, {i: _probe(path) for i, path in named.items()})
+        table, probes = _table(args, probe, {i: _probe(path) for i, path in named.items()})
         if args.lab_command == "report":  # read: the files a reference pulled in are inputs too
             check_output(args.output, inputs, args.force)
         if args.save_plugin:
@@ -193,12 +193,12 @@ def run(args) -> int:
         added: list = []
         if getattr(args, "discover", False):
             report, added = analyse_discovering(
-                table, probe, _plugin_saver(args, inputs), effects, args.plugin, cross_validate=not args.no_cv
+                table, probes, _plugin_saver(args, inputs), effects, args.plugin, cross_validate=not args.no_cv
             )
         else:
             report = analyse(
                 table,
-                probe,
+                probes,
                 effects=effects,
                 auto=getattr(args, "auto", False),
                 plugins=args.plugin,
@@ -325,7 +325,7 @@ class WorkBar:
 
 
 def _table(args, default, named):
-    """The table to analyse, with its reference, and the probe of its rows
+    """The table to analyse, with its reference, and the probes of its rows
     (:func:`mows.lab.data.scale.table_probes`);
     what is wrong with a file is blamed on that file."""
     with input_file(args.table):
@@ -334,11 +334,11 @@ def _table(args, default, named):
             drop_invalid=args.drop_invalid,
             **({"reference": args.reference, "magnet_position_m": args.magnet_position} if is_bag(args.table) else {}),
         )
-        probe = table_probes(table, default, named)
+        probes = table_probes(table, default, named)
     if args.reference and not is_bag(args.table):
         with input_file(args.reference, "reference"):
             table = with_reference(table, args.reference, args.magnet_position)
-    return check_reference(table, probe, args.trust_reference), probe
+    return check_reference(table, probes, args.trust_reference), probes
 
 
 def probe_options(values: list[str]) -> tuple[str, dict[int, str]]:

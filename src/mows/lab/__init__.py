@@ -3,10 +3,10 @@ which physical effect is missing, and how much adding it helps (docs/model_lab.m
 
 Quick use::
 
-    from mows.lab import load_table, analyse
+    from mows.lab import ProbeSet, load_table, analyse
     from mows.physics.probe import Probe
 
-    report = analyse(load_table("sweep.csv"), Probe.from_yaml("probe.yaml"), auto=True)
+    report = analyse(load_table("sweep.csv"), ProbeSet.one(Probe.from_yaml("probe.yaml")), auto=True)
     print(report.verdict, report.structure)
 
 The sub-packages form a pipeline and are layered in that order: each imports only those

@@ -40,23 +40,22 @@ from mows.physics.sources import PointDipole
 
 
 @dataclasses.dataclass(frozen=True)
-class ProbeSet(Probe):
-    """The constants of every probe of a table (``members``: one
-    :class:`~mows.estimate.probe_set.ProbeEntry` per probe, in id order): what the lab carries
-    as a table's probe, for one probe as for several.
+class ProbeSet:
+    """The probes of a table (``members``: one :class:`~mows.estimate.probe_set.ProbeEntry` per
+    probe, in id order): how the lab holds a table's probes, for one probe as for several.
 
     ``column`` says whether the table's column ``probe`` names each row's probe. Without it,
     the set holds one probe (id 0), every row is its, and its f00 is the parameter ``f00_hz``;
     with it, probe i's f00 is ``probe_<i>.f00_hz``.
 
-    As a :class:`~mows.physics.probe.Probe` it carries its first member's constants: the
-    diagnosis takes them where it needs one probe's for the whole table (its explanatory texts,
-    the physical range of an effect parameter all the probes share). The frequency model
-    evaluates each probe's rows with that probe's own constants and fits one f00 per probe
-    (:mod:`mows.lab.model.frequency_model`), and an effect sees each row's own probe.
+    The frequency model evaluates each probe's rows with that probe's own constants and fits one
+    f00 per probe (:mod:`mows.lab.model.frequency_model`), and an effect sees each row's own
+    probe. Where the diagnosis needs one probe's constants for the whole table (its explanatory
+    texts, the physical range of an effect parameter all the probes share), it takes
+    :attr:`first`'s.
     """
 
-    members: tuple[ProbeEntry, ...] = ()
+    members: tuple[ProbeEntry, ...]
     column: bool = True
 
     @classmethod
@@ -69,15 +68,13 @@ class ProbeSet(Probe):
             raise ValueError("a probe set needs at least one probe")
         if not column and len(ordered) > 1:
             raise ValueError("a table that does not name its rows' probes holds one probe")
-        first = ordered[0].probe
-        fields = {f.name: getattr(first, f.name) for f in dataclasses.fields(Probe)}
-        return cls(**fields, members=ordered, column=column)
+        return cls(ordered, column)
 
     @classmethod
-    def covering(cls, probe: Probe) -> ProbeSet:
-        """``probe`` as the lab's probe set: a set as it is; one Probe, the probe of every row of a
-        table that does not name its rows' probes (:meth:`for_table` lends it to every id)."""
-        return probe if isinstance(probe, cls) else cls.of({0: probe}, column=False)
+    def one(cls, probe: Probe) -> ProbeSet:
+        """The set of ``probe`` alone, the probe of every row of a table that does not name its
+        rows' probes: how a probe file or a table's one probe enters the lab."""
+        return cls.of({0: probe}, column=False)
 
     @classmethod
     def for_table(cls, table: MeasurementTable, default: Probe, named: Mapping[int, Probe]) -> ProbeSet:
@@ -93,6 +90,12 @@ class ProbeSet(Probe):
         if not table.has(PROBE):
             return cls.of({0: default}, column=False)
         return cls.of({i: named.get(i, default) for i in ids})
+
+    @property
+    def first(self) -> Probe:
+        """The constants of the first probe (in id order): those the diagnosis takes for the
+        whole table (class docstring)."""
+        return self.members[0].probe
 
     @property
     def ids(self) -> tuple[int, ...]:
@@ -135,10 +138,8 @@ class ProbePart(NamedTuple):
     entry: ProbeEntry
 
 
-def probe_parts(table: MeasurementTable, probe: Probe) -> list[ProbePart]:
-    """The part of ``table`` of each probe of ``probe`` (:meth:`ProbeSet.covering`) that it
-    holds, in id order."""
-    probes = ProbeSet.covering(probe)
+def probe_parts(table: MeasurementTable, probes: ProbeSet) -> list[ProbePart]:
+    """The part of ``table`` of each probe of ``probes`` that it holds, in id order."""
     index = probes.index(table)
     found = [np.flatnonzero(index == k) for k in range(len(probes.members))]
     return [
@@ -148,12 +149,11 @@ def probe_parts(table: MeasurementTable, probe: Probe) -> list[ProbePart]:
     ]
 
 
-def with_probes(table: MeasurementTable, probe: Probe) -> tuple[MeasurementTable, ProbeSet]:
-    """(table, probes) ready for the lab: the table's :class:`ProbeSet` (``probe`` for every id
-    when it is one Probe) and, for a table with a ``probe`` column, the neighbours' field
-    (:func:`with_neighbour_field`). TableError for a set named by ids given with a table that
-    does not say which row is which probe."""
-    probes = ProbeSet.covering(probe)
+def with_probes(table: MeasurementTable, probes: ProbeSet) -> tuple[MeasurementTable, ProbeSet]:
+    """(table, probes) ready for the lab: the table's :class:`ProbeSet` (the probe of a set of one
+    that names no id lent to every id of a table that names its rows' probes) and, for a table
+    with a ``probe`` column, the neighbours' field (:func:`with_neighbour_field`). TableError for a
+    set named by ids given with a table that does not say which row is which probe."""
     if table.has(PROBE) and not probes.column:
         probes = ProbeSet.for_table(table, probes.members[0].probe, {})
     probes.index(table)

@@ -98,14 +98,15 @@ def check_one_probe(table: MeasurementTable, probe: Probe) -> None:
         )
 
 
-def check_reference(table: MeasurementTable, probe: Probe, trust_scale: bool = False) -> MeasurementTable:
+def check_reference(table: MeasurementTable, probes: ProbeSet, trust_scale: bool = False) -> MeasurementTable:
     """``table``, with a note where its ring-downs move with the reference otherwise than Eq. 6
-    says; ValueError where a row's reference field or gradient is one no ring-down of ``probe``
+    says; ValueError where a row's reference field or gradient is one no ring-down of ``probes``
     could be measured in: its spring alone, kB = m·|B| or kG = l·m·|G| (Eq. 6), would move f by more
     than FREQUENCY_FACTOR from f00 (k/kM > FREQUENCY_FACTOR²), where check_frequencies has
     found the measured ones (a column in mT or µT given as T, or another bench's reference), or
     where the ring-downs move a unit factor more or less than it says (:func:`reference_response`).
     ``trust_scale`` takes the reference as given in both cases."""
+    probe = probes.first  # the scale of a unit: any probe's constants give it
     springs = {
         "field": (FIELD, probe.moment_am2, "T"),
         "gradient": (GRADIENT, probe.lever_m * probe.moment_am2, "T/m"),
@@ -122,7 +123,7 @@ def check_reference(table: MeasurementTable, probe: Probe, trust_scale: bool = F
                 f"itself move the frequency more than a factor {FREQUENCY_FACTOR:g} from f00 (Eq. 6): "
                 f"a column in m{unit} or µ{unit} given in {unit}? (--trust-reference takes it as given)"
             )
-    notes, probes = [], ProbeSet.covering(probe)
+    notes: list[str] = []
     for _, part, entry in probe_parts(table, probes):
         whose = _of_probe(probes, entry)
         response = reference_response(part, entry.probe)

@@ -22,13 +22,13 @@ import numpy as np
 import scipy.stats
 
 from mows.lab import progress
+from mows.lab.data.probe_rows import ProbeSet
 from mows.lab.diagnosis import plausibility
 from mows.lab.diagnosis.plausibility import Conflict
 from mows.lab.diagnosis.projections import Signature, orthonormal_basis, project_out, signature
 from mows.lab.diagnosis.residual_structure import GOODNESS_ALPHA
 from mows.lab.model.effects import Effect, untestable_reason
 from mows.lab.model.least_squares import FitResult, FittedParameter, parameters_dict
-from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
 TIE_DELTA_BIC = 2.0
@@ -265,7 +265,7 @@ def cv_gain(old: FitResult, new: FitResult) -> float:
 
 
 def rank_candidates(
-    fit: FitResult, effects: Iterable[Effect], probe: Probe, worth_refit: WorthRefit | None = None
+    fit: FitResult, effects: Iterable[Effect], probes: ProbeSet, worth_refit: WorthRefit | None = None
 ) -> tuple[list[Candidate], dict[str, str]]:
     """(candidates best first, {effect: why it cannot be tested}) for the ``effects`` not yet in
     ``fit``'s model: score test on the projected signature, then each form's refit where
@@ -278,7 +278,7 @@ def rank_candidates(
     effects = [effect for effect in effects if effect.name not in fit.model.effect_names]
     for done, effect in enumerate(effects):
         progress.stage("ranking candidate effects", done, len(effects))
-        reason = untestable_reason(effect, fit.table, probe)
+        reason = untestable_reason(effect, fit.table, probes)
         test = None if reason else signature(fit.extension_columns(effect), model_basis, residual)
         if test is not None and not test.rank:
             reason = ABSORBED
@@ -289,7 +289,7 @@ def rank_candidates(
         tests.append((effect, test))
     worth_refit = worth_refit or could_be_evidence(fit, [test for _, test in tests])
     candidates = [
-        _candidate(fit, effect, test, functools.partial(worth_refit, effect, test), probe) for effect, test in tests
+        _candidate(fit, effect, test, functools.partial(worth_refit, effect, test), probes) for effect, test in tests
     ]
     phi = dispersion(fit, candidates)
     candidates = [c.at_dispersion(phi, fit.n) for c in candidates]
@@ -314,7 +314,7 @@ def could_be_evidence(fit: FitResult, tests: list[Signature]) -> WorthRefit:
 
 
 def _candidate(
-    fit: FitResult, effect: Effect, test: Signature, refit: Callable[[int], bool], probe: Probe
+    fit: FitResult, effect: Effect, test: Signature, refit: Callable[[int], bool], probes: ProbeSet
 ) -> Candidate:
     """Refit the model with ``effect`` in each form where ``refit(added free parameters)``, or
     take the one-step (linearised) refit along the projected signature. A Δχ² above the strong
@@ -325,14 +325,14 @@ def _candidate(
     free = dataclasses.replace(
         free,
         conflicts=tuple(
-            plausibility.conflicts(free.fit, probe)
+            plausibility.conflicts(free.fit, probes)
             if free.fit is not None
-            else plausibility.effect_conflicts(effect, parameters, probe, fit.table)
+            else plausibility.effect_conflicts(effect, parameters, probes, fit.table)
         ),
     )
     physics = None if effect.physical is None else _physics_form(fit, effect, test, refit(0))
     if physics is not None and physics.fit is not None:
-        physics = dataclasses.replace(physics, conflicts=tuple(plausibility.conflicts(physics.fit, probe)))
+        physics = dataclasses.replace(physics, conflicts=tuple(plausibility.conflicts(physics.fit, probes)))
     inside = all(
         p.lower + 1e-6 * (p.upper - p.lower) < fitted.value < p.upper - 1e-6 * (p.upper - p.lower)
         for p, fitted in zip(effect.parameters, parameters)

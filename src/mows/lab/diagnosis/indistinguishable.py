@@ -27,6 +27,7 @@ from collections.abc import Iterable, Iterator
 import numpy as np
 
 from mows.lab import progress
+from mows.lab.data.probe_rows import ProbeSet
 from mows.lab.data.table import MeasurementTable
 from mows.lab.diagnosis.candidates import ABSORBED, TIE_DELTA_BIC, Candidate
 from mows.lab.diagnosis.physical_aliases import alias_statements
@@ -34,7 +35,6 @@ from mows.lab.diagnosis.projections import Signature, cosine_within, orthonormal
 from mows.lab.diagnosis.what_if import Variant, variants
 from mows.lab.model.effects import Effect
 from mows.lab.model.least_squares import FitResult, parameter_values
-from mows.physics.probe import Probe
 
 GROUP_COSINE = 0.95
 GROUP_SIGNIFICANCE = 0.01
@@ -74,7 +74,9 @@ def _clusters(candidates: list[Candidate]) -> list[list[Candidate]]:
     return [_tie_break([by_name[name] for name in part]) for part in parts if len(part) > 1]
 
 
-def group_candidates(candidates: list[Candidate], fit: FitResult, probe: Probe, separate: bool = True) -> list[Group]:
+def group_candidates(
+    candidates: list[Candidate], fit: FitResult, probes: ProbeSet, separate: bool = True
+) -> list[Group]:
     """Number the groups by rank, put each group's members together in tie-break order
     (``candidates`` is reordered in place) and, with ``separate``, find what separates each group."""
     cluster_of = {c.name: members for members in _clusters(candidates) for c in members}
@@ -90,7 +92,7 @@ def group_candidates(candidates: list[Candidate], fit: FitResult, probe: Probe, 
             ranked.extend(members)
             number = len(groups) + 1
             names = [c.name for c in members]
-            groups.append(_separate(members, fit, probe, number) if separate else Group(number, names, None, "", []))
+            groups.append(_separate(members, fit, probes, number) if separate else Group(number, names, None, "", []))
     candidates[:] = ranked
     return groups
 
@@ -141,7 +143,7 @@ def _extended(
     return extended
 
 
-def _separate(members: list[Candidate], fit: FitResult, probe: Probe, number: int) -> Group:
+def _separate(members: list[Candidate], fit: FitResult, probes: ProbeSet, number: int) -> Group:
     """The cheapest what-if variant that splits the group most; checks for what stays together."""
     names = [c.name for c in members]
     best_variant: Variant | None = None
@@ -150,7 +152,7 @@ def _separate(members: list[Candidate], fit: FitResult, probe: Probe, number: in
     coefficients = {
         c.name: np.linalg.lstsq(c.signature.projected, c.signature.fitted_signal, rcond=None)[0] for c in members
     }
-    what_ifs = variants(fit.table, probe)
+    what_ifs = variants(fit.table, probes)
     for done, variant in enumerate(what_ifs):
         progress.stage(f"separating group {number} (what-if tables)", done, len(what_ifs))
         parts = _partition(
@@ -181,7 +183,7 @@ def _separate(members: list[Candidate], fit: FitResult, probe: Probe, number: in
         None if best_variant is None else best_variant.name,
         text,
         checks,
-        alias_statements(names, fit, probe, fitted),
+        alias_statements(names, fit, probes, fitted),
     )
 
 
@@ -190,7 +192,7 @@ def absorbed_groups(
     effects: Iterable[Effect],
     candidates: list[Candidate],
     untestable: dict[str, str],
-    probe: Probe,
+    probes: ProbeSet,
     first_number: int,
 ) -> list[Group]:
     """Groups of an effect the model holds with the catalog effects it absorbs: an effect not in
@@ -215,7 +217,7 @@ def absorbed_groups(
             if _kept(columns, orthonormal_basis(fit.jacobian[:, keep])) > FREED:
                 absorbing.setdefault(held, []).append(effect)
     return [
-        _absorbed_group(fit, held, absorbed, probe, first_number + i)
+        _absorbed_group(fit, held, absorbed, probes, first_number + i)
         for i, (held, absorbed) in enumerate(absorbing.items())
     ]
 
@@ -235,11 +237,11 @@ def _columns_without_each(fit: FitResult) -> Iterator[tuple[Effect, np.ndarray]]
             yield effect, np.array([owner is not effect for owner in owners])
 
 
-def _absorbed_group(fit: FitResult, held: Effect, absorbed: list[Effect], probe: Probe, number: int) -> Group:
+def _absorbed_group(fit: FitResult, held: Effect, absorbed: list[Effect], probes: ProbeSet, number: int) -> Group:
     names = [held.name] + [e.name for e in absorbed]
     separated: list[str] = []
     variant_name: str | None = None
-    for variant in variants(fit.table, probe):
+    for variant in variants(fit.table, probes):
         joined = variant.table
         model_basis = orthonormal_basis(fit.model_jacobian(joined))
         separated = [e.name for e in absorbed if _kept(fit.extension_columns(e, joined), model_basis) > NEAR_ALIAS]
@@ -256,4 +258,4 @@ def _absorbed_group(fit: FitResult, held: Effect, absorbed: list[Effect], probe:
     if together:
         text += f"; {', '.join(e.name for e in together)} still act identically: check directly"
     checks = [f"{e.name}: {e.check}" for e in [held] + together] if together else []
-    return Group(number, names, variant_name, text, checks, alias_statements(names, fit, probe), [held.label])
+    return Group(number, names, variant_name, text, checks, alias_statements(names, fit, probes), [held.label])

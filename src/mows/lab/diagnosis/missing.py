@@ -25,6 +25,7 @@ import weakref
 
 import numpy as np
 
+from mows.lab.data.probe_rows import ProbeSet
 from mows.lab.diagnosis.candidates import (
     STRONG_DELTA_BIC,
     TIE_DELTA_BIC,
@@ -37,13 +38,12 @@ from mows.lab.diagnosis.discovery import Discovery, discover
 from mows.lab.diagnosis.projections import cosine_within, orthonormal_basis, project_out, unit_columns
 from mows.lab.model.effects import Effect
 from mows.lab.model.least_squares import FitResult
-from mows.physics.probe import Probe
 
 SAME_SIGNATURE = 0.95  # a discovered term this close to a candidate's signature is the candidate's own
 MAX_STAND_INS = 6  # the strongest discovered terms that stand in for physics outside the catalog (a sparse answer)
 
 
-def is_missing(fit: FitResult, candidate: Candidate, probe: Probe) -> bool:
+def is_missing(fit: FitResult, candidate: Candidate, probes: ProbeSet) -> bool:
     """``candidate`` is the effect ``fit``'s model is missing (module docstring)."""
     form = candidate.chosen
     if not candidate.strong or form.fit is None or cv_gain(fit, form.fit) <= TIE_DELTA_BIC:
@@ -54,15 +54,15 @@ def is_missing(fit: FitResult, candidate: Candidate, probe: Probe) -> bool:
         return False
     if closes_the_gap(form):
         return True
-    return not candidate.effect.generic and beside_discovery(fit, candidate, probe)
+    return not candidate.effect.generic and beside_discovery(fit, candidate, probes)
 
 
-def beside_discovery(fit: FitResult, candidate: Candidate, probe: Probe) -> bool:
+def beside_discovery(fit: FitResult, candidate: Candidate, probes: ProbeSet) -> bool:
     """``candidate`` keeps strong evidence beside the terms the residual follows beyond the
     catalog (:func:`stand_ins`; module docstring). The stand-ins enter linearly, so each model's
     χ² beside them is one Gauss–Newton step from its own fit (``fit`` and the candidate's), with
     no refit; judged as :func:`mows.lab.diagnosis.candidates.quasi_gain` judges."""
-    terms_in = stand_ins(fit, candidate, probe)
+    terms_in = stand_ins(fit, candidate, probes)
     with_candidate = candidate.chosen.fit
     if not terms_in or with_candidate is None:
         return True
@@ -79,7 +79,7 @@ def beside_discovery(fit: FitResult, candidate: Candidate, probe: Probe) -> bool
     return (without - within) / phi - len(candidate.effect.parameters) * math.log(fit.n) > STRONG_DELTA_BIC
 
 
-def stand_ins(fit: FitResult, candidate: Candidate, probe: Probe) -> list[Effect]:
+def stand_ins(fit: FitResult, candidate: Candidate, probes: ProbeSet) -> list[Effect]:
     """The terms the residual follows beyond the catalog that ``candidate`` does not make itself,
     the strongest ``MAX_STAND_INS``: found with it in the model (what it leaves) and without it
     (what it may take a share of), each whose signature at ``fit`` lies outside the candidate's
@@ -89,7 +89,7 @@ def stand_ins(fit: FitResult, candidate: Candidate, probe: Probe) -> list[Effect
     model_basis = orthonormal_basis(unit_columns(fit.jacobian))
     found: list[Effect] = []
     for model_fit in (candidate.chosen.fit, fit):
-        for effect in _discovered(model_fit, probe).stand_ins:
+        for effect in _discovered(model_fit, probes).stand_ins:
             column = project_out(fit.extension_columns(effect), model_basis)[:, 0]
             outside = cosine_within(column, candidate.signature.basis) < SAME_SIGNATURE
             if outside and effect.name not in {e.name for e in found}:
@@ -101,7 +101,7 @@ def stand_ins(fit: FitResult, candidate: Candidate, probe: Probe) -> list[Effect
 _DISCOVERED: weakref.WeakKeyDictionary[FitResult, Discovery] = weakref.WeakKeyDictionary()
 
 
-def _discovered(fit: FitResult, probe: Probe) -> Discovery:
+def _discovered(fit: FitResult, probes: ProbeSet) -> Discovery:
     if fit not in _DISCOVERED:
-        _DISCOVERED[fit] = discover(fit, probe, plugins=False)
+        _DISCOVERED[fit] = discover(fit, probes, plugins=False)
     return _DISCOVERED[fit]

@@ -25,6 +25,7 @@ from collections.abc import Iterable
 import numpy as np
 import scipy.special
 
+from mows.lab.data.probe_rows import ProbeSet, probe_parts
 from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import Configuration
 from mows.lab.model.factors import base_start_swing_rad, ringdown_nodes
@@ -40,7 +41,7 @@ FittedValues = dict[str, dict[str, float]]  # effect name → {parameter: fitted
 
 
 def alias_statements(
-    names: Iterable[str], fit: FitResult, probe: Probe, fitted: FittedValues | None = None
+    names: Iterable[str], fit: FitResult, probes: ProbeSet, fitted: FittedValues | None = None
 ) -> list[str]:
     """The exact aliases among ``names`` (effect names) in words and numbers. ``fitted`` maps an
     effect name to {parameter: value} where a member's fitted value is known (default: the
@@ -55,7 +56,7 @@ def alias_statements(
         (("thermal_drift", "spring_drift"), _thermal_spring),
     ):
         if set(pair) <= set(names):
-            text = statement(fit.table, probe, values)
+            text = statement(fit.table, probes, values)
             if text:
                 found.append(text)
     return found
@@ -66,8 +67,8 @@ def gravity_field_t(probe: Probe) -> float:
     return probe.magnet_mass_kg * STANDARD_GRAVITY_M_PER_S2 * probe.lever_m / probe.moment_am2
 
 
-def _gravity_field(table: MeasurementTable, probe: Probe, values: FittedValues) -> str:
-    scale = gravity_field_t(probe)
+def _gravity_field(table: MeasurementTable, probes: ProbeSet, values: FittedValues) -> str:
+    scale = gravity_field_t(probes.first)
     text = (
         f"gravity ≡ field_offset: a plane tilted so that the unit downward vector has the in-plane part d "
         f"acts like an unreferenced field (a·g·l/m)·d, a·g·l/m = {scale * 1e6:.0f} µT"
@@ -93,7 +94,7 @@ def _gravity_field(table: MeasurementTable, probe: Probe, values: FittedValues) 
     return text
 
 
-def _tilt_field(table: MeasurementTable, probe: Probe, values: FittedValues) -> str:
+def _tilt_field(table: MeasurementTable, probes: ProbeSet, values: FittedValues) -> str:
     if not table.has("ref_bz_t") or _spread(table.ref_bz_t) > CONSTANT_SPREAD:
         return ""
     bz = float(np.mean(table.ref_bz_t))
@@ -107,18 +108,23 @@ def _tilt_field(table: MeasurementTable, probe: Probe, values: FittedValues) -> 
     return text
 
 
-def amplitude_scale_error(table: MeasurementTable, probe: Probe) -> tuple[float, float]:
+def amplitude_scale_error(table: MeasurementTable, probes: ProbeSet) -> tuple[float, float]:
     """(ε, spread) with ε = ⟨2·J1(A)/A⟩ − 1 over the rows' ring-down amplitude nodes (the
     moment scale the finite amplitude looks like), spread its range over the rows."""
-    distinct, inverse = FrequencyModel(probe).groups(table)
-    amplitudes, weights = ringdown_nodes(Configuration.base(distinct, probe), base_start_swing_rad(distinct, probe))
-    per_row = ((weights * 2.0 * scipy.special.j1(amplitudes) / amplitudes).sum(-1) - 1.0)[inverse]
+    distinct, inverse = FrequencyModel(probes).groups(table)
+    scale = np.empty(len(distinct))
+    for rows, part, entry in probe_parts(distinct, probes):  # each probe's rows with its constants
+        amplitudes, weights = ringdown_nodes(
+            Configuration.base(part, entry.probe), base_start_swing_rad(part, entry.probe)
+        )
+        scale[rows] = (weights * 2.0 * scipy.special.j1(amplitudes) / amplitudes).sum(-1)
+    per_row = (scale - 1.0)[inverse]
     return float(np.mean(per_row)), float(np.ptp(per_row))
 
 
-def _amplitude_scale(table: MeasurementTable, probe: Probe, values: FittedValues) -> str:
-    epsilon, spread = amplitude_scale_error(table, probe)
-    start = np.degrees(table_start_swing_rad(table, probe))
+def _amplitude_scale(table: MeasurementTable, probes: ProbeSet, values: FittedValues) -> str:
+    epsilon, spread = amplitude_scale_error(table, probes)
+    start = np.degrees(table_start_swing_rad(table, probes))
     text = (
         f"finite_amplitude ≡ moment_scale: the amplitude scales the field spring by ⟨2·J1(A)/A⟩ − 1 ≈ −⟨A²⟩/8 "
         f"= {epsilon * 100:.3g} % over these ring-downs (start {np.median(start):.3g}°)"
@@ -130,7 +136,7 @@ def _amplitude_scale(table: MeasurementTable, probe: Probe, values: FittedValues
     return text
 
 
-def _thermal_spring(table: MeasurementTable, probe: Probe, values: FittedValues) -> str:
+def _thermal_spring(table: MeasurementTable, probes: ProbeSet, values: FittedValues) -> str:
     if not (table.has("temperature_k") and table.has("t_s")) or np.ptp(table.temperature_k) == 0:
         return ""
     correlation = float(np.corrcoef(table.t_s, table.temperature_k)[0, 1])

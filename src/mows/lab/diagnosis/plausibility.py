@@ -29,11 +29,11 @@ import math
 
 import numpy as np
 
+from mows.lab.data.probe_rows import ProbeSet
 from mows.lab.data.table import MeasurementTable
 from mows.lab.model.configuration import rotation_matrix
 from mows.lab.model.effects import Effect
 from mows.lab.model.least_squares import FitResult, FittedParameter
-from mows.physics.probe import Probe
 
 IMPOSSIBLE_SIGMAS = 3.0
 
@@ -68,18 +68,18 @@ class Conflict:
         }
 
 
-def conflicts(fit: FitResult, probe: Probe) -> list[Conflict]:
+def conflicts(fit: FitResult, probes: ProbeSet) -> list[Conflict]:
     """Every parameter of ``fit`` that physics does not allow (module docstring), worst first."""
     found = [
         c
         for effect in fit.model.effects
-        for c in effect_conflicts(effect, fit.effect_parameters(effect.name), probe, fit.table)
+        for c in effect_conflicts(effect, fit.effect_parameters(effect.name), probes, fit.table)
     ]
     return sorted(found + _gravity_conflicts(fit), key=lambda c: -c.sigmas)
 
 
 def effect_conflicts(
-    effect: Effect, fitted: list[FittedParameter], probe: Probe, table: MeasurementTable
+    effect: Effect, fitted: list[FittedParameter], probes: ProbeSet, table: MeasurementTable
 ) -> list[Conflict]:
     """The parameters of one effect, ``fitted`` (a fit's or a one-step estimate's on ``table``),
     that its prior rules out."""
@@ -87,7 +87,7 @@ def effect_conflicts(
         return []
     return [
         dataclasses.replace(conflict, parameter=f"{effect.name}.{parameter.name}")
-        for parameter, prior in zip(fitted, effect.prior(probe, table))
+        for parameter, prior in zip(fitted, effect.prior(probes.first, table))
         if prior is not None and (conflict := _against(parameter, *prior)) is not None
     ]
 

@@ -22,6 +22,7 @@ import dataclasses
 import enum
 from collections.abc import Iterable
 
+from mows.lab.data.probe_rows import ProbeSet
 from mows.lab.diagnosis.candidates import STRONG_DELTA_BIC, Candidate, explains_excess, rank_candidates
 from mows.lab.diagnosis.discovery import WHY, DiscoveredTerm, Discovery, discover
 from mows.lab.diagnosis.indistinguishable import Group, absorbed_groups, group_candidates
@@ -35,7 +36,6 @@ from mows.lab.diagnosis.residual_structure import (
 )
 from mows.lab.model.effects import Effect
 from mows.lab.model.least_squares import FitResult
-from mows.physics.probe import Probe
 
 FIELD_SPRINGS = ("b_along_t", "g_t_per_m")  # covariates that are the model's own magnetic springs
 SLOW_COVARIATES = ("temperature_k", "t_s")  # what a spring drifts with
@@ -68,47 +68,45 @@ class Diagnosis:
         return self.candidates[0] if self.candidates else None
 
 
-def diagnose(
-    fit: FitResult, effects: Iterable[Effect], probe: Probe | None = None, for_report: bool = True
-) -> Diagnosis:
+def diagnose(fit: FitResult, effects: Iterable[Effect], probes: ProbeSet, for_report: bool = True) -> Diagnosis:
     """Rank ``effects`` (an iterable of :class:`Effect`, those already in the model are skipped)
     as explanations of ``fit``'s residual; group, propose separating measurements, verdict.
     ``for_report=False`` leaves out what only a report reads (the separating measurements, the
     groups of effects the model absorbs, the discovery beyond the catalog): a search step's."""
-    probe = probe or fit.model.probe
-    assert probe is not None  # a model that was fitted has its probe
     effects = list(effects)
-    candidates, untestable = rank_candidates(fit, effects, probe)
-    return _diagnosis(fit, effects, probe, candidates, untestable, for_report)
+    candidates, untestable = rank_candidates(fit, effects, probes)
+    return _diagnosis(fit, effects, probes, candidates, untestable, for_report)
 
 
-def completed(found: Diagnosis, effects: Iterable[Effect], probe: Probe) -> Diagnosis:
+def completed(found: Diagnosis, effects: Iterable[Effect], probes: ProbeSet) -> Diagnosis:
     """A search step's diagnosis (``for_report=False``) with what a report reads added."""
-    return _diagnosis(found.fit, list(effects), probe, found.candidates, found.untestable, True)
+    return _diagnosis(found.fit, list(effects), probes, found.candidates, found.untestable, True)
 
 
 def _diagnosis(
     fit: FitResult,
     effects: list[Effect],
-    probe: Probe,
+    probes: ProbeSet,
     candidates: list[Candidate],
     untestable: dict[str, str],
     for_report: bool,
 ) -> Diagnosis:
-    groups = group_candidates(candidates, fit, probe, separate=for_report)
+    groups = group_candidates(candidates, fit, probes, separate=for_report)
     if for_report:
-        groups += absorbed_groups(fit, effects, candidates, untestable, probe, len(groups) + 1)
+        groups += absorbed_groups(fit, effects, candidates, untestable, probes, len(groups) + 1)
     structure = residual_structure(fit)
-    verdict, explanation = _verdict(fit, structure, candidates, probe)
+    verdict, explanation = _verdict(fit, structure, candidates, probes)
     if verdict != Verdict.UNEXPLAINED_STRUCTURE or not for_report:
         return Diagnosis(fit, structure, candidates, groups, untestable, verdict, explanation)
-    discovery = discover(fit, probe)
+    discovery = discover(fit, probes)
     explanation = f"{explanation} {_no_answer(fit, structure, discovery)}".strip()
     return Diagnosis(fit, structure, candidates, groups, untestable, verdict, explanation, discovery)
 
 
 # --- verdict ------------------------------------------------------------------------------------
-def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate], probe: Probe) -> tuple[Verdict, str]:
+def _verdict(
+    fit: FitResult, structure: Structure, candidates: list[Candidate], probes: ProbeSet
+) -> tuple[Verdict, str]:
     """The verdict and its explanation; for ``unexplained_structure`` without what the residual
     follows (:func:`_no_answer` adds it). The best candidate is missing by the search's own
     judgement (:func:`mows.lab.diagnosis.missing.is_missing`) and when it explains half the excess."""
@@ -117,7 +115,7 @@ def _verdict(fit: FitResult, structure: Structure, candidates: list[Candidate], 
     if best is not None and best.strong:
         gain = fit.chi2 - best.chosen.chi2_after
         explains = explains_excess(fit, best.chosen)
-        if explains and is_missing(fit, best, probe):
+        if explains and is_missing(fit, best, probes):
             group = (
                 f" (group {best.group}: the data cannot tell it from "
                 f"{', '.join(c.name for c in candidates if c.group == best.group and c is not best)})"

@@ -15,9 +15,9 @@ import dataclasses
 
 import numpy as np
 
+from mows.lab.data.probe_rows import ProbeSet
 from mows.lab.data.table import WRITER_COLUMN, MeasurementTable, stratified_rows
 from mows.lab.model.frequency_model import table_start_swing_rad
-from mows.physics.probe import Probe
 
 WHAT_IF_ROWS = 120
 
@@ -39,13 +39,13 @@ class Variant:
         return self.present.concatenate(self.extra)
 
 
-def variants(table: MeasurementTable, probe: Probe) -> list[Variant]:
+def variants(table: MeasurementTable, probes: ProbeSet) -> list[Variant]:
     """What-if variants of ``table``, cheapest first (module docstring)."""
     if len(table) > WHAT_IF_ROWS:
         table = table.subset(stratified_rows(table.sweep_ids, WHAT_IF_ROWS))
     # The variants state their excitation: each row's start swing as the model takes it, as a
     # column of a table the user measured (so that halving it is heard).
-    start = np.degrees(table_start_swing_rad(table, probe))
+    start = np.degrees(table_start_swing_rad(table, probes))
     table = dataclasses.replace(
         table, columns={**{k: v for k, v in table.columns.items() if k != WRITER_COLUMN}, "amplitude_deg": start}
     )

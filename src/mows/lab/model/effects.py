@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mows.lab.data.probe_rows import probe_parts
+from mows.lab.data.probe_rows import ProbeSet, probe_parts
 from mows.lab.data.table import MissingColumnError
 from mows.lab.model.configuration import Configuration
 from mows.physics.probe import Probe
@@ -137,7 +137,7 @@ class Effect:
         return f"Effect({self.name!r}, parameters={list(self.parameter_names)})"
 
 
-def untestable_reason(effect_: Effect, table: MeasurementTable, probe: Probe) -> str | None:
+def untestable_reason(effect_: Effect, table: MeasurementTable, probes: ProbeSet) -> str | None:
     """Why the effect cannot be evaluated on ``table``, in words; None when it can."""
     missing = effect_.missing_columns(table)
     if missing and effect_.needs:
@@ -145,7 +145,7 @@ def untestable_reason(effect_: Effect, table: MeasurementTable, probe: Probe) ->
     if missing:
         return f"needs column{'s' if len(missing) > 1 else ''} {', '.join(missing)}"
     row = table.subset(np.arange(1))  # effects read a row's own columns: one row says it
-    ((_, _, entry),) = probe_parts(row, probe)  # with its own probe's constants
+    ((_, _, entry),) = probe_parts(row, probes)  # with its own probe's constants
     try:
         effect_.apply(Configuration.base(row, entry.probe), row, entry.probe, *effect_.off_values)
     except MissingColumnError as error:

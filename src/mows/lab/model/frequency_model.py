@@ -3,7 +3,7 @@
 The weighted residuals, their Jacobian and the fitted result (uncertainties, BIC,
 cross-validation) are :mod:`mows.lab.model.least_squares`.
 
-``FrequencyModel(probe) + catalog()["gravity"] + …`` composes like astropy.modeling; each
+``FrequencyModel(probes) + catalog()["gravity"] + …`` composes like astropy.modeling; each
 effect brings parameters with units and physical bounds like lmfit. The prediction for row i is
 
     f_i = f00·h_i(p) + c_i(p),
@@ -47,17 +47,17 @@ from mows.physics.probe import Probe
 
 
 class FrequencyModel:
-    """The published frequency model plus ``effects`` for ``probe``: a table's
-    :class:`~mows.lab.data.probe_rows.ProbeSet`, held as given, or one
-    :class:`~mows.physics.probe.Probe`, held as its set of one (:meth:`ProbeSet.covering`).
+    """The published frequency model plus ``effects`` for a table's ``probes``
+    (:class:`~mows.lab.data.probe_rows.ProbeSet`; one probe is a set of one).
 
-    ``model + effect`` and ``effect + model`` give new models (``FrequencyModel() + a + b``
-    one without a probe, to add to others); parameters are named by the set's f00s
-    (``f00_hz``, or ``probe_<id>.f00_hz``) and ``<effect>.<parameter>``.
+    ``model + effect`` and ``effect + model`` give new models; parameters are named by the set's
+    f00s (``f00_hz``, or ``probe_<id>.f00_hz``) and ``<effect>.<parameter>``.
+    ``FrequencyModel() + a + b`` is a sum of effects alone, without probes: not a model of any
+    table (it cannot be evaluated), only a part to add to a model that has them.
     """
 
-    def __init__(self, probe: Probe | None = None, effects: Sequence[Effect] = ()) -> None:
-        self.probe = None if probe is None else ProbeSet.covering(probe)
+    def __init__(self, probes: ProbeSet | None = None, effects: Sequence[Effect] = ()) -> None:
+        self.probes = probes
         names = [e.name for e in effects]
         repeated = sorted({n for n in names if names.count(n) > 1})
         if repeated:
@@ -67,7 +67,7 @@ class FrequencyModel:
     @classmethod
     def combine(cls, left: FrequencyModel | Effect, right: FrequencyModel | Effect) -> FrequencyModel:
         parts = [left, right]
-        probe = next((p.probe for p in parts if isinstance(p, FrequencyModel) and p.probe is not None), None)
+        probes = next((p.probes for p in parts if isinstance(p, FrequencyModel) and p.probes is not None), None)
         found: list[Effect] = []
         for part in parts:
             if isinstance(part, FrequencyModel):
@@ -76,7 +76,7 @@ class FrequencyModel:
                 found.append(part)
             else:
                 raise TypeError(f"cannot add {type(part).__name__} to a frequency model")
-        return cls(probe, found)
+        return cls(probes, found)
 
     def __add__(self, other: FrequencyModel | Effect) -> FrequencyModel:
         return FrequencyModel.combine(self, other)
@@ -99,7 +99,7 @@ class FrequencyModel:
         return [e.label for e in self.effects]
 
     def without(self, effect: Effect) -> FrequencyModel:
-        return FrequencyModel(self.probe, [e for e in self.effects if e is not effect])
+        return FrequencyModel(self.probes, [e for e in self.effects if e is not effect])
 
     @property
     def parameters(self) -> list[tuple[str, Parameter]]:
@@ -114,7 +114,7 @@ class FrequencyModel:
     @property
     def f00_names(self) -> list[str]:
         """The nuisance parameters: one f00 per probe (:attr:`ProbeSet.f00_names`)."""
-        return self._require_probe().f00_names
+        return self._require_probes().f00_names
 
     @property
     def f00_count(self) -> int:
@@ -126,16 +126,16 @@ class FrequencyModel:
 
     def probe_index(self, table: MeasurementTable) -> np.ndarray:
         """Each row's f00 (its position in :attr:`f00_names`), (n,)."""
-        return self._require_probe().index(table)
+        return self._require_probes().index(table)
 
     def __repr__(self) -> str:
         return f"FrequencyModel({self.name})"
 
     # --- evaluation -------------------------------------------------------------------------
-    def _require_probe(self) -> ProbeSet:
-        if self.probe is None:
-            raise ValueError("this model has no probe: build it as FrequencyModel(probe) + effects")
-        return self.probe
+    def _require_probes(self) -> ProbeSet:
+        if self.probes is None:
+            raise ValueError("this model has no probes: build it as FrequencyModel(probes) + effects")
+        return self.probes
 
     def groups(self, table: MeasurementTable) -> tuple[MeasurementTable, np.ndarray]:
         """(distinct, inverse): one row of each configuration group of ``table`` for this model,
@@ -151,7 +151,7 @@ class FrequencyModel:
         object.__setattr__(row, "columns", recorder)
         # Reading the row's probe (each probe's rows are evaluated with its own constants) records
         # its column where the set is named by it.
-        ((_, part, entry),) = probe_parts(row, self._require_probe())
+        ((_, part, entry),) = probe_parts(row, self._require_probes())
         self._configuration(part, self.off_values, entry.probe)
         return frozenset(name for name in recorder.read if table.has(name) and name not in MEASURED)
 
@@ -161,7 +161,7 @@ class FrequencyModel:
         """(h, c) of f = f00·h + c of each row of a :meth:`groups` table at effect parameter
         values ``values`` (fit order)."""
         h, c = np.empty(len(distinct)), np.empty(len(distinct))
-        for rows, part, entry in probe_parts(distinct, self._require_probe()):
+        for rows, part, entry in probe_parts(distinct, self._require_probes()):
             config = self._configuration(part, values, entry.probe)
             nodes = functools.partial(cached_nodes, distinct)
             h[rows], c[rows] = frequency_factor(config, entry.probe, nodes)
@@ -198,9 +198,9 @@ class FrequencyModel:
     ) -> FitResult:
         """Weighted least-squares fit to ``table`` (to its ``rows``, indices, when given: a
         cross-validation fold); ``start`` = effect parameter values (default: every effect off)."""
-        probe = self._require_probe()
+        probes = self._require_probes()
         for effect in self.effects:
-            reason = untestable_reason(effect, table, probe)
+            reason = untestable_reason(effect, table, probes)
             if reason:
                 raise ValueError(f"effect {effect.name} cannot be fitted to this table: {reason}")
         problem = Problem(self, table, rows)
@@ -233,13 +233,13 @@ def _in_words(solution: scipy.optimize.OptimizeResult) -> str:
     return f"stopped at the limit of {solution.nfev} model evaluations before the tolerances were met"
 
 
-def table_start_swing_rad(table: MeasurementTable, probe: Probe) -> np.ndarray:
-    """Each row's start swing at the table's reference field and the probe's stop
+def table_start_swing_rad(table: MeasurementTable, probes: ProbeSet) -> np.ndarray:
+    """Each row's start swing at the table's reference field and its probe's stop
     (:func:`mows.lab.model.factors.base_start_swing_rad`), evaluated once per
     configuration group of the published model."""
-    distinct, inverse = FrequencyModel(probe).groups(table)
+    distinct, inverse = FrequencyModel(probes).groups(table)
     found = np.empty(len(distinct))
-    for rows, part, entry in probe_parts(distinct, probe):
+    for rows, part, entry in probe_parts(distinct, probes):
         found[rows] = base_start_swing_rad(part, entry.probe)
     return found[inverse]
 

@@ -31,7 +31,7 @@ from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 
-from mows.lab.data.probe_rows import probe_parts, with_probes
+from mows.lab.data.probe_rows import ProbeSet, probe_parts, with_probes
 from mows.lab.data.readers import from_sweep, load_table
 from mows.lab.data.reference import Reference
 from mows.lab.data.table import MeasurementTable, TableError
@@ -188,7 +188,7 @@ class LabReport:
 
 def analyse(
     table: MeasurementTable | str | os.PathLike[str],
-    probe: Probe,
+    probes: ProbeSet,
     effects: Iterable[str] | None = None,
     auto: bool = False,
     plugins: Iterable[str | pathlib.Path] = (),
@@ -200,8 +200,9 @@ def analyse(
     Parameters
     ----------
     table : a :class:`MeasurementTable`, a CSV path or a bag (see :func:`load_table`).
-    probe : :class:`mows.physics.probe.Probe`: of every row; for a table with a ``probe`` column
-        a :class:`mows.lab.data.probe_rows.ProbeSet`, or one Probe for all its probes.
+    probes : :class:`mows.lab.data.probe_rows.ProbeSet`: the probes of the table's rows
+        (:meth:`~mows.lab.data.probe_rows.ProbeSet.for_table`), or a set of one
+        (:meth:`~mows.lab.data.probe_rows.ProbeSet.one`), lent to every probe a ``probe`` column names.
     effects : effect names added one by one to the base model (each a step of the history);
         ``name (at physics)`` adds the effect held at its physical value.
     auto : then select effects stepwise (module docstring).
@@ -209,10 +210,10 @@ def analyse(
     rank : test the catalog's candidates (``False``: fit and residual structure only).
     cross_validate : compute the cross-validated error (whole sweeps held out) of every step.
     """
-    table, probe = with_probes(load_table(table), probe)
-    table = _evaluable(table, probe)
+    table, probes = with_probes(load_table(table), probes)
+    table = _evaluable(table, probes)
     available = catalog(plugins)
-    fit = FrequencyModel(probe).fit(table)
+    fit = FrequencyModel(probes).fit(table)
     base = fit
     history = [history_step(fit, cross_validate)]
     for effect in resolve(list(effects or ()), available):
@@ -220,25 +221,25 @@ def analyse(
         history.append(history_step(fit, cross_validate, f"add {effect.label}"))
     pool = list(available.values()) if rank else []
     steps = MAX_AUTO_STEPS if auto else 0
-    found = search(diagnose(fit, pool, probe, for_report=False), pool, probe, history, cross_validate, steps)
+    found = search(diagnose(fit, pool, probes, for_report=False), pool, probes, history, cross_validate, steps)
     fit = found.fit
     if not rank:
         found.explanation += " (Candidate effects were not tested: run `mows lab diagnose`.)"
     checks = physics_checks(fit)
     if found.verdict == Verdict.ADEQUATE:
-        found.verdict, found.explanation = _physics_verdict(fit, checks, found.explanation)
+        found.verdict, found.explanation = _physics_verdict(fit, probes, checks, found.explanation)
     if found.verdict == Verdict.NEEDS_GENERIC_TERM:
-        found.discovery = discover(without_generic(fit), probe)
+        found.discovery = discover(without_generic(fit), probes)
     notes = list(table.notes) + [_check_note(c) for c in checks if c.deviation_sigma > CHECK_SIGMAS]
     return LabReport(found, base, history, notes, checks)
 
 
-def _evaluable(table: MeasurementTable, probe: Probe) -> MeasurementTable:
+def _evaluable(table: MeasurementTable, probes: ProbeSet) -> MeasurementTable:
     """The table without the rows the potential cannot evaluate, each named with the reason in
     the notes (:func:`mows.lab.model.factors.unevaluable_rows`); TableError when no row is left."""
-    distinct, inverse = FrequencyModel(probe).groups(table)
+    distinct, inverse = FrequencyModel(probes).groups(table)
     found = {}  # a reason holds for every row of its configuration
-    for rows, part, entry in probe_parts(distinct, probe):
+    for rows, part, entry in probe_parts(distinct, probes):
         found.update({int(rows[row]): reason for row, reason in unevaluable_rows(part, entry.probe).items()})
     problems = {int(row): found[int(inverse[row])] for row in np.flatnonzero(np.isin(inverse, list(found)))}
     if len(problems) == len(table):
@@ -269,10 +270,12 @@ def without_generic(fit: FitResult) -> FitResult:
     parts = np.split(fit.effect_values, np.cumsum(sizes)[:-1]) if sizes else []
     kept = [(e, values) for e, values in zip(fit.model.effects, parts) if not e.generic]
     start = np.concatenate([values for _, values in kept]) if kept else np.zeros(0)
-    return FrequencyModel(fit.model.probe, [e for e, _ in kept]).fit(fit.table, start=start)
+    return FrequencyModel(fit.model.probes, [e for e, _ in kept]).fit(fit.table, start=start)
 
 
-def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation: str) -> tuple[Verdict, str]:
+def _physics_verdict(
+    fit: FitResult, probes: ProbeSet, checks: Sequence[PhysicsCheck], explanation: str
+) -> tuple[Verdict, str]:
     """(verdict, explanation) of a model whose residuals the statistics call adequate:
     ``inconsistent_physics`` when an effect's free fit lies more than 5σ from its physical
     value, or a parameter where physics does not allow it (:func:`plausibility.conflicts`: an
@@ -280,7 +283,7 @@ def _physics_verdict(fit: FitResult, checks: Sequence[PhysicsCheck], explanation
     ``needs_generic_term`` when a generic correction is in the model (what it stands for must
     still be found), else ``adequate``."""
     inconsistent = [c for c in checks if c.deviation_sigma > INCONSISTENT_SIGMAS]
-    impossible = plausibility.conflicts(fit, fit.model.probe) if fit.model.probe is not None else []
+    impossible = plausibility.conflicts(fit, probes)
     generic = [e for e in fit.model.effects if e.generic]
     if not inconsistent and not impossible and not generic:
         return Verdict.ADEQUATE, explanation
@@ -319,7 +322,7 @@ def _check_note(check: PhysicsCheck) -> str:
 
 def analyse_discovering(
     table: MeasurementTable,
-    probe: Probe,
+    probes: ProbeSet,
     save: Callable[[DiscoveredTerm], pathlib.Path],
     effects: Iterable[str] = (),
     plugins: Iterable[str | pathlib.Path] = (),
@@ -339,9 +342,9 @@ def analyse_discovering(
     search runs again with that effect held at physics, and its term replaces the first when its
     model is consistent with physics and lowers χ²/dof."""
     plugins, added = list(plugins), list[DiscoveredTerm]()
-    report = analyse(table, probe, effects, auto=True, plugins=plugins, cross_validate=cross_validate)
+    report = analyse(table, probes, effects, auto=True, plugins=plugins, cross_validate=cross_validate)
     with tempfile.TemporaryDirectory() as scratch:
-        trying = _Trying(table, probe, pathlib.Path(scratch), cross_validate)
+        trying = _Trying(table, probes, pathlib.Path(scratch), cross_validate)
         for _ in range(rounds):
             found = report.discovery
             if found is None or not found.terms or found.terms[0].effect_name in {t.effect_name for t in added}:
@@ -366,7 +369,7 @@ class _Trying:
     """Trials of :func:`analyse_discovering`: a term's plugin written to ``scratch`` and added."""
 
     table: MeasurementTable
-    probe: Probe
+    probes: ProbeSet
     scratch: pathlib.Path
     cross_validate: bool
 
@@ -375,7 +378,7 @@ class _Trying:
         path.write_text(term.plugin, encoding="utf-8")
         chosen = [*labels, term.effect_name]
         return analyse(
-            self.table, self.probe, chosen, auto=True, plugins=[*plugins, path], cross_validate=self.cross_validate
+            self.table, self.probes, chosen, auto=True, plugins=[*plugins, path], cross_validate=self.cross_validate
         )
 
     def beside_physics(
@@ -388,7 +391,7 @@ class _Trying:
         """``first`` (term, trial), or the term found beside ``report``'s effects with ``held``
         at physics and its trial, when that trial is consistent with physics and lowers χ²/dof."""
         labels = [f"{label}{AT_PHYSICS}" if label in held else label for label in report.effects]
-        again = analyse(self.table, self.probe, labels, plugins=plugins, rank=False, cross_validate=False).discovery
+        again = analyse(self.table, self.probes, labels, plugins=plugins, rank=False, cross_validate=False).discovery
         if again is None or not again.terms or again.terms[0].effect_name == first[0].effect_name:
             return first
         trial = self.added(labels, again.terms[0], plugins)
@@ -402,4 +405,4 @@ def analyse_sweep(sweep: SweepMap, reference: Reference, probe: Probe, auto: boo
     ``reference`` with each ring-down's start swing from the sweep's decomposition
     (:func:`mows.lab.data.readers.from_sweep`), analysed as :func:`analyse` does, with ``auto``.
     ValueError (a :class:`TableError`) for a sweep whose table the lab cannot use."""
-    return analyse(from_sweep(sweep.record, reference, probe, sweep.decomposition), probe, auto=auto)
+    return analyse(from_sweep(sweep.record, reference, probe, sweep.decomposition), ProbeSet.one(probe), auto=auto)

@@ -45,6 +45,7 @@ from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
+from mows.lab.data.probe_rows import ProbeSet
 from mows.lab.diagnosis.candidates import (
     NONLINEAR_MARGIN,
     REJECTED_SIGMAS,
@@ -62,7 +63,6 @@ from mows.lab.diagnosis.projections import Signature
 from mows.lab.diagnosis.verdict import Diagnosis, completed, diagnose
 from mows.lab.model.effects import Effect, untestable_reason
 from mows.lab.model.least_squares import FitResult, FittedParameter, parameter_values, parameters_dict
-from mows.physics.probe import Probe
 from mows.records.json_numbers import finite_or_none
 
 MAX_AUTO_STEPS = 6
@@ -121,7 +121,7 @@ def history_step(
 def search(
     found: Diagnosis,
     pool: Sequence[Effect],
-    probe: Probe,
+    probes: ProbeSet,
     history: list[HistoryStep],
     cross_validate: bool = True,
     steps: int = MAX_AUTO_STEPS,
@@ -130,25 +130,25 @@ def search(
     present fit, which may leave out what only a report reads): up to ``steps`` forward steps,
     each followed by the revisit, every model appended to ``history`` (module docstring)."""
     for _ in range(steps):
-        step = _forward_step(found, probe)
+        step = _forward_step(found, probes)
         if step is None:
             # Only now may an effect held at physics be set free: nothing in the catalog is left
             # to explain the residual with the physics held.
-            fit = _revisit(found.fit, pool, probe, history, cross_validate, freeing=True)
+            fit = _revisit(found.fit, pool, probes, history, cross_validate, freeing=True)
             if fit is found.fit:
                 break
         else:
             change, fit, check = step
             history.append(history_step(fit, cross_validate, change, check))
-            fit = _revisit(fit, pool, probe, history, cross_validate, freeing=False)
-        found = diagnose(fit, pool, probe, for_report=False)
+            fit = _revisit(fit, pool, probes, history, cross_validate, freeing=False)
+        found = diagnose(fit, pool, probes, for_report=False)
     if steps:
-        found = prefer_physical(found, pool, probe, history, cross_validate)
-    return completed(found, pool, probe)
+        found = prefer_physical(found, pool, probes, history, cross_validate)
+    return completed(found, pool, probes)
 
 
 def prefer_physical(
-    found: Diagnosis, pool: Sequence[Effect], probe: Probe, history: list[HistoryStep], cross_validate: bool = True
+    found: Diagnosis, pool: Sequence[Effect], probes: ProbeSet, history: list[HistoryStep], cross_validate: bool = True
 ) -> Diagnosis:
     """The diagnosis after each generic correction of the model (``Effect.generic``: moment
     scale, field offset, spring drift, angle offset) is replaced by a physical effect that fits
@@ -159,7 +159,7 @@ def prefer_physical(
     fit = found.fit
     for generic in [e for e in fit.model.effects if e.generic]:
         best: tuple[Effect, FitResult] | None = None
-        for form, new in _physical_replacements(fit, generic, pool, probe):
+        for form, new in _physical_replacements(fit, generic, pool, probes):
             better = best is None or (form.fixed, -new.bic) > (best[0].fixed, -best[1].bic)
             if quasi_gain(fit, new) > -TIE_DELTA_BIC and better:
                 best = (form, new)
@@ -169,7 +169,7 @@ def prefer_physical(
         aliases = alias_statements(
             [generic.name, form.name],
             new,
-            probe,
+            probes,
             {generic.name: parameter_values(fit.effect_parameters(generic.name))},
         )
         history.append(
@@ -184,11 +184,11 @@ def prefer_physical(
             )
         )
         fit = new
-    return found if fit is found.fit else diagnose(fit, pool, probe, for_report=False)
+    return found if fit is found.fit else diagnose(fit, pool, probes, for_report=False)
 
 
 def _physical_replacements(
-    fit: FitResult, generic: Effect, pool: Sequence[Effect], probe: Probe
+    fit: FitResult, generic: Effect, pool: Sequence[Effect], probes: ProbeSet
 ) -> Iterator[tuple[Effect, FitResult]]:
     """(form, fit) of the model with ``generic`` replaced by each physical effect of ``pool``
     not in it: held at physics where it has a physical value, else free, with no more free
@@ -196,7 +196,7 @@ def _physical_replacements(
     reduced = fit.model.without(generic)
     start = fit.values_without(generic)
     for effect in pool:
-        if effect.generic or effect.name in fit.model.effect_names or untestable_reason(effect, fit.table, probe):
+        if effect.generic or effect.name in fit.model.effect_names or untestable_reason(effect, fit.table, probes):
             continue
         form = effect.at_physics() if effect.physical is not None else effect
         if len(form.parameters) > len(generic.parameters):
@@ -204,11 +204,11 @@ def _physical_replacements(
         new = (reduced + form).fit(fit.table, start=np.concatenate([start, form.off_values]))
         values = [p.value for p in new.effect_parameters(form.name)]
         inside = all(p.lower < v < p.upper for p, v in zip(form.parameters, values))
-        if new.ok and inside and not conflicts(new, probe):
+        if new.ok and inside and not conflicts(new, probes):
             yield form, new
 
 
-def _forward_step(found: Diagnosis, probe: Probe) -> tuple[str, FitResult, Sequence[FittedParameter]] | None:
+def _forward_step(found: Diagnosis, probes: ProbeSet) -> tuple[str, FitResult, Sequence[FittedParameter]] | None:
     """(change, fit, check) of the next addition (module docstring), None when there is none.
 
     The best strong candidate in its better form that the judgement of
@@ -221,7 +221,7 @@ def _forward_step(found: Diagnosis, probe: Probe) -> tuple[str, FitResult, Seque
     """
     strong = [c for c in found.candidates if c.strong]
     for best in sorted(strong, key=lambda c: not c.chosen.fixed):  # known physics first, stably
-        if is_missing(found.fit, best, probe):
+        if is_missing(found.fit, best, probes):
             assert best.chosen.fit is not None  # a strong form is always refitted (candidates._candidate)
             return f"add {best.label}", best.chosen.fit, best.parameters if best.chosen.fixed else ()
     for candidate in found.candidates:
@@ -229,7 +229,7 @@ def _forward_step(found: Diagnosis, probe: Probe) -> tuple[str, FitResult, Seque
             fit = candidate.physics.fit or (found.fit.model + candidate.effect.at_physics()).fit(
                 found.fit.table, start=found.fit.effect_values
             )
-            acceptable = not conflicts(fit, probe) and cv_gain(found.fit, fit) > -TIE_DELTA_BIC
+            acceptable = not conflicts(fit, probes) and cv_gain(found.fit, fit) > -TIE_DELTA_BIC
             if quasi_gain(found.fit, fit) > -TIE_DELTA_BIC and acceptable:  # the one-step estimate may be off
                 return (
                     f"add {candidate.label_of(candidate.physics)}: known physics the data cannot reject "
@@ -244,7 +244,7 @@ def _forward_step(found: Diagnosis, probe: Probe) -> tuple[str, FitResult, Seque
 def _revisit(
     fit: FitResult,
     pool: Sequence[Effect],
-    probe: Probe,
+    probes: ProbeSet,
     history: list[HistoryStep],
     cross_validate: bool,
     freeing: bool,
@@ -252,7 +252,7 @@ def _revisit(
     """Apply the best swap or removal while one lowers the BIC (module docstring); ``freeing``:
     setting an effect held at physics free is one of the moves."""
     for _ in range(MAX_REVISIT_MOVES):
-        move = _best_move(fit, pool, probe, freeing)
+        move = _best_move(fit, pool, probes, freeing)
         if move is None:
             break
         change, fit = move
@@ -260,22 +260,26 @@ def _revisit(
     return fit
 
 
-def _best_move(fit: FitResult, pool: Sequence[Effect], probe: Probe, freeing: bool) -> tuple[str, FitResult] | None:
+def _best_move(fit: FitResult, pool: Sequence[Effect], probes: ProbeSet, freeing: bool) -> tuple[str, FitResult] | None:
     """(change, fit) of the best alternative to ``fit`` (:func:`_alternatives`) that the guard
     accepts (:func:`_accepted`; a move that sets free an effect held at physics only when
     ``freeing``); None when there is none."""
     best: tuple[str, FitResult] | None = None
     for effect in fit.model.effects:
-        for change, new, freed in _alternatives(fit, effect, pool, probe):
-            if (freeing or not freed) and _accepted(fit, new, freed, probe) and (best is None or new.bic < best[1].bic):
+        for change, new, freed in _alternatives(fit, effect, pool, probes):
+            if (
+                (freeing or not freed)
+                and _accepted(fit, new, freed, probes)
+                and (best is None or new.bic < best[1].bic)
+            ):
                 best = (change, new)
     return best
 
 
-def _accepted(old: FitResult, new: FitResult, freed: bool, probe: Probe) -> bool:
+def _accepted(old: FitResult, new: FitResult, freed: bool, probes: ProbeSet) -> bool:
     """The guard on a revisit move: the BIC gain :func:`_required_gain` asks, at values physics
     allows, and held-out rows predicted no worse (better, for a move that sets an effect free)."""
-    if quasi_gain(old, new) <= _required_gain(old.k, new.k, freed) or conflicts(new, probe):
+    if quasi_gain(old, new) <= _required_gain(old.k, new.k, freed) or conflicts(new, probes):
         return False
     brought = {e.name for e in new.model.effects if e.generic} - set(old.model.effect_names)
     if brought and not closes_the_gap(new):  # a generic correction must explain the data, however it comes in
@@ -296,7 +300,7 @@ def _required_gain(old_k: int, new_k: int, freed: bool) -> float:
 
 
 def _alternatives(
-    fit: FitResult, effect: Effect, pool: Sequence[Effect], probe: Probe
+    fit: FitResult, effect: Effect, pool: Sequence[Effect], probes: ProbeSet
 ) -> list[tuple[str, FitResult, bool]]:
     """[(change, fit, freed)] of the models that differ from ``fit`` in ``effect``:
 
@@ -312,19 +316,19 @@ def _alternatives(
     found = [(f"remove {effect.label}", reduced, False)]
     found += [
         (f"replace {effect.label} by {label}", new, freed)
-        for label, new, freed in _replacements(fit, reduced, pool, probe, effect)
+        for label, new, freed in _replacements(fit, reduced, pool, probes, effect)
     ]
     if effect.physical is not None and not effect.fixed:
         held = (reduced.model + effect.at_physics()).fit(fit.table, start=reduced.effect_values)
         found += [
             (f"replace {effect.label} by {held.model.labels[-1]} + {label}", new, freed)
-            for label, new, freed in _replacements(fit, held, pool, probe, effect)
+            for label, new, freed in _replacements(fit, held, pool, probes, effect)
         ]
     return found
 
 
 def _replacements(
-    fit: FitResult, start: FitResult, pool: Sequence[Effect], probe: Probe, replaced: Effect
+    fit: FitResult, start: FitResult, pool: Sequence[Effect], probes: ProbeSet, replaced: Effect
 ) -> list[tuple[str, FitResult, bool]]:
     """[(label, fit, freed)] of ``start`` plus one refitted candidate in either form (``freed``:
     the candidate is ``replaced``, held at physics in ``fit``, set free) that improves on
@@ -341,7 +345,7 @@ def _replacements(
         needed = _required_gain(fit.k, k, replaced.fixed and effect.name == replaced.name)
         return start.chi2 - NONLINEAR_MARGIN * test.statistic + k * log_n < fit.bic - needed
 
-    candidates, _ = rank_candidates(start, pool, probe, could_pass)
+    candidates, _ = rank_candidates(start, pool, probes, could_pass)
     # No passengers: what a move adds must itself be positive evidence on ``start``; and a free
     # form pinned at a parameter bound is no minimum, only a fudge (a free damping blend of 100
     # ± 109, bound 100, once bought a nearby-coil table 3 in BIC).

@@ -25,12 +25,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from mows.lab.data.probe_rows import probe_parts
+from mows.lab.data.probe_rows import ProbeSet, probe_parts
 from mows.lab.data.table import KNOWN, LABELS, MAGNET, NEIGHBOUR, NOT_COVARIATES, MeasurementTable
 from mows.lab.model.configuration import Configuration
 from mows.lab.model.frequency_model import FrequencyModel
 from mows.physics.potential import ArcPotential
-from mows.physics.probe import Probe
 
 DEGREE = 2  # products and squares of up to this many factors
 HARMONICS = range(1, 5)  # cos kθ0, sin kθ0
@@ -97,12 +96,12 @@ def per_unit(unit: str, of: str = "Hz") -> str:
     return of if unit == "1" else f"{of}/({unit})" if "·" in unit else f"{of}/{unit}"
 
 
-def model_covariates(table: MeasurementTable, probe: Probe) -> dict[str, np.ndarray]:
+def model_covariates(table: MeasurementTable, probes: ProbeSet) -> dict[str, np.ndarray]:
     """The model's rest angle θs and start swing of every row (rad), at the table's reference in
     full and the probe's stop, as :func:`mows.lab.model.frequency_model.table_start_swing_rad` takes
     them; ``table``'s own rows, each probe of a :class:`ProbeSet` with its constants."""
     found = {name: np.empty(len(table)) for name in MODEL_FACTORS}
-    for rows, part, entry in probe_parts(table, probe):
+    for rows, part, entry in probe_parts(table, probes):
         config = Configuration.base(part, entry.probe)
         _, field, gradient, _ = config.probe_frame()
         potential = ArcPotential.from_local_field(
@@ -113,29 +112,29 @@ def model_covariates(table: MeasurementTable, probe: Probe) -> dict[str, np.ndar
     return found
 
 
-def factor_values(table: MeasurementTable, probe: Probe) -> dict[str, np.ndarray]:
+def factor_values(table: MeasurementTable, probes: ProbeSet) -> dict[str, np.ndarray]:
     """Every factor the table has (:data:`FACTORS`, then its extra numeric columns), in physical
     units, centred where the factor has no physical zero; constant or non-finite ones left out."""
     derived = table.derived_columns()
     found = {name: derived[name] for name in DERIVED_FACTORS if name in derived}
     found.update({name: table.columns[name] for name in TABLE_FACTORS if table.has(name)})
-    distinct, inverse = FrequencyModel(probe).groups(table)
-    found.update({name: values[inverse] for name, values in model_covariates(distinct, probe).items()})
+    distinct, inverse = FrequencyModel(probes).groups(table)
+    found.update({name: values[inverse] for name, values in model_covariates(distinct, probes).items()})
     theta0 = table.theta0_rad
     found.update({f"{trig}({k}θ0)": getattr(np, trig)(k * theta0) for k in HARMONICS for trig in ("cos", "sin")})
     found.update({name: values for name, values in table.columns.items() if name not in NOT_EXTRA})
     usable = {name: values for name, values in found.items() if np.isfinite(values).all() and np.ptp(values) > 0}
-    centres = factor_centres(usable, probe)
+    centres = factor_centres(usable, probes)
     return {name: values - centres[name] if name in centres else values for name, values in usable.items()}
 
 
-def factor_centres(factors: dict[str, np.ndarray], probe: Probe) -> dict[str, float]:
+def factor_centres(factors: dict[str, np.ndarray], probes: ProbeSet) -> dict[str, float]:
     """What the centred factors are measured from: the temperature from the probe's reference
     temperature (where kM and m are given, so that a moment's temperature coefficient is one term
     and not a term and a moment-scale error), the others from the table's mean. Six digits: exact
     enough for a plugin's text (1e-6 of T moves a moment by c·3e-4 K)."""
     return {
-        name: float(probe.reference_temperature_k if name == "temperature_k" else f"{np.mean(values):.6g}")
+        name: float(probes.first.reference_temperature_k if name == "temperature_k" else f"{np.mean(values):.6g}")
         for name, values in factors.items()
         if factor(name).centred
     }

@@ -20,7 +20,6 @@ from mows.lab.diagnosis.discovery.channels import Channel
 from mows.lab.diagnosis.discovery.library import per_unit, product_expression, term_name, term_unit
 from mows.lab.model.effects import Effect
 from mows.lab.model.plugins import OUTPUTS
-from mows.physics.probe import Probe
 
 WHY = {
     "moment_scale": "the moment changes with it, in every magnetic term of the potential",
@@ -57,7 +56,7 @@ class Plugin:
     factors: tuple[str, ...]
     means: dict[str, float]
     bound: float
-    probe: Probe
+    probes: ProbeSet
     reading: str
     note: str = ""
 
@@ -81,7 +80,7 @@ class Plugin:
         found = ["import numpy as np"] if "np." in self.returned() else []
         found.append("from mows.lab import effect")
         if "PROBE" in self.returned():
-            found += _probe_source(self.probe)
+            found += _probe_source(self.probes)
         return found
 
     def parameters(self) -> str:
@@ -127,10 +126,9 @@ class Plugin:
         )
 
 
-def _probe_source(probe: Probe) -> list[str]:
+def _probe_source(probes: ProbeSet) -> list[str]:
     """Lines that build ``PROBE`` (the analysis's probe constants) for a plugin reading the model's own θs or swing."""
     lines = ["from mows.lab.diagnosis.discovery import model_covariates", "from mows.physics.probe import Probe"]
-    probes = ProbeSet.covering(probe)
     members = ", ".join(f"{e.probe_id}: Probe.from_dict({e.probe.to_dict()!r})" for e in probes.members)
     built = f"PROBE = ProbeSet.of({{{members}}}, column={probes.column})"
     return lines + ["from mows.lab.data.probe_rows import ProbeSet", "", built]

@@ -26,6 +26,7 @@ import math
 import numpy as np
 
 from mows.lab.data.folds import cv_folds
+from mows.lab.data.probe_rows import ProbeSet
 from mows.lab.data.table import MeasurementTable, stratified_rows
 from mows.lab.diagnosis.discovery import readings
 from mows.lab.diagnosis.discovery.channels import CHANNELS, FREQUENCY, jacobians
@@ -51,7 +52,6 @@ from mows.lab.diagnosis.discovery.selection import (
 from mows.lab.diagnosis.projections import orthonormal_basis, project_out, unit_columns
 from mows.lab.model.effects import Effect
 from mows.lab.model.least_squares import FitResult, FittedParameter
-from mows.physics.probe import Probe
 
 SCREEN_RESAMPLES = 40  # … for the search's stand-ins (plugins=False), a screen that reports nothing
 MIN_UNITS = 8  # fewer configuration groups than this: half-samples of rows
@@ -97,7 +97,7 @@ class _Search:
     """What :func:`discover` computes once and the plugins reuse."""
 
     fit: FitResult
-    probe: Probe
+    probes: ProbeSet
     table: MeasurementTable  # the rows searched
     residual: Residual
     searched: Searched
@@ -105,7 +105,7 @@ class _Search:
     weight: np.ndarray  # 1/σ of the rows searched
 
 
-def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) -> Discovery:
+def discover(fit: FitResult, probes: ProbeSet, seed: int = 0, plugins: bool = True) -> Discovery:
     """The channel terms that ``fit``'s residual follows beyond what its model absorbs
     (module docstrings of :mod:`mows.lab.diagnosis.discovery`), each with its plugin
     (``plugins=False``: without, on :data:`SCREEN_RESAMPLES` half-samples, for a search that
@@ -120,14 +120,14 @@ def discover(fit: FitResult, probe: Probe, seed: int = 0, plugins: bool = True) 
     weight = fit.problem.row_weight[kept]
     jacobian = unit_columns(fit.jacobian[kept])
     model_basis = orthonormal_basis(jacobian)
-    factors = factor_values(table, probe)
+    factors = factor_values(table, probes)
     # The screen (stand-ins beside which catalog effects are judged, once per candidate of every
     # step) searches the frequency alone: the channels' Jacobians cost a model evaluation each.
     channels = CHANNELS if plugins else (FREQUENCY,)
     searched = searchable(library_terms(factors, jacobians(fit, table, weight, channels), weight), model_basis)
     residual = Residual(fit.weighted_residual[kept], jacobian, model_basis.shape[1], cv_folds(table))
-    means = factor_centres({name: table.columns[name] for name in factors if factor(name).centred}, probe)
-    search = _Search(fit, probe, table, residual, searched, means, weight)
+    means = factor_centres({name: table.columns[name] for name in factors if factor(name).centred}, probes)
+    search = _Search(fit, probes, table, residual, searched, means, weight)
     groups = fit.problem.inverse[kept]
     units = groups if len(np.unique(groups)) >= MIN_UNITS else np.arange(len(table))
     resamples = RESAMPLES if plugins else SCREEN_RESAMPLES
@@ -156,7 +156,7 @@ def _term(
     strength = float(passed.coefficients[i] / length)
     std = float(math.sqrt(passed.covariance[i, i]) / length)
     reading = readings.reading(term.channel, term.factors)
-    plugin = Plugin(term.channel, term.factors, search.means, bound_for(strength, std), search.probe, reading)
+    plugin = Plugin(term.channel, term.factors, search.means, bound_for(strength, std), search.probes, reading)
     parameter, why = None, ""
     if term.channel is FREQUENCY:
         why = "no channel of the potential makes this term on these rows"
@@ -198,7 +198,7 @@ def _last_resort(search: _Search, j: int, reading: str, why: str) -> Plugin:
     frequency = [k for k, term in enumerate(searched.every) if term.channel is FREQUENCY]
     closest = max(frequency, key=lambda k: abs(float(searched.every_unit[:, k] @ searched.unit[:, j])))
     factors = searched.every[closest].factors
-    return Plugin(FREQUENCY, factors, search.means, 1.0, search.probe, reading, f" (Last resort: {why}.)")
+    return Plugin(FREQUENCY, factors, search.means, 1.0, search.probes, reading, f" (Last resort: {why}.)")
 
 
 def _term_fit(search: _Search, passed: Refit, i: int) -> TermFit:

@@ -1,7 +1,7 @@
 """One probe is a probe set of one: the lab takes the same path for it as for several.
 
 Requirement: a table of one probe gives the same fit whether its rows name their probe (the
-column ``probe``, a :class:`ProbeSet` named by id) or not (one Probe, its set of one): the same
+column ``probe``, a :class:`ProbeSet` named by id) or not (``ProbeSet.one``): the same
 parameter values, uncertainties, χ² and diagnosis, only the f00's name telling them apart.
 The truth is the table without the column; nothing here compares the code with itself on one
 path.
@@ -12,8 +12,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mows.lab import FrequencyModel, ProbeSet, TableError, catalog, diagnose, effect, with_probes
+from mows.lab import FrequencyModel, MeasurementTable, ProbeSet, TableError, catalog, diagnose, effect, with_probes
+from mows.lab.data import synthetic
 from mows.lab.data.probe_rows import probe_parts
+from mows.lab.diagnosis.physical_aliases import amplitude_scale_error
+from mows.physics.field import UniformField
 from mows.physics.probe import PAPER_PROBE, Probe
 
 from .tables import tilted_table
@@ -72,3 +75,28 @@ def test_a_plugin_sees_each_rows_own_probe_never_the_set(table):
         (member,) = ids
         assert probe == probes.members[int(member)].probe
     assert {member for _, ids in seen for member in ids} == {0.0, 1.0}
+
+
+def test_each_probe_of_a_set_has_its_own_ring_down_amplitudes():
+    """The amplitude's alias with a moment scale (``amplitude_scale_error``) takes each row's
+    start swing from its own probe's housing stop. The truth is each probe's rows alone, a table
+    of one probe: a probe stopped at half the swing weakens its field spring four times less."""
+    other = dataclasses.replace(PAPER_PROBE, theta_stop_rad=PAPER_PROBE.theta_stop_rad / 2)
+    alone = [_stopped_table(probe, seed) for seed, probe in enumerate((PAPER_PROBE, other))]
+    columns = {name: np.concatenate([t.columns[name] for t in alone]) for name in alone[0].columns}
+    columns["probe"] = np.repeat([0.0, 1.0], [len(t) for t in alone])
+    epsilon, spread = amplitude_scale_error(MeasurementTable(columns), ProbeSet.of({0: PAPER_PROBE, 1: other}))
+    each = [amplitude_scale_error(t, ProbeSet.one(probe))[0] for t, probe in zip(alone, (PAPER_PROBE, other))]
+    assert each[1] == pytest.approx(each[0] / 4, rel=0.1)  # the premise: the stops tell the probes apart
+    # Each row's fit window is 60 periods of the rows that ring alike, here both probes' (their
+    # f00 is one): 1e-5 of it at most.
+    assert epsilon == pytest.approx(np.average(each, weights=[len(t) for t in alone]), rel=1e-5)
+    assert spread >= abs(each[0] - each[1])
+
+
+def _stopped_table(probe, seed):
+    """Ring-downs of ``probe`` in 20 µT, in a table that states no amplitude: the stop decides."""
+    sweep = synthetic.rotation_sweeps(15.0, 2)
+    theta0 = sweep.pop("theta0_deg")
+    table = synthetic.synthesize(probe, UniformField((20e-6, 0.0, 0.0)), theta0, np.random.default_rng(seed), **sweep)
+    return MeasurementTable({name: values for name, values in table.columns.items() if name != "amplitude_deg"})

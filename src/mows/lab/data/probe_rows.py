@@ -88,7 +88,7 @@ class ProbeSet:
                 + ("" if table.has(PROBE) else f" (it has no column '{PROBE}' saying which row is which probe)")
             )
         if not table.has(PROBE):
-            return cls.of({0: default}, column=False)
+            return cls.one(default)
         return cls.of({i: named.get(i, default) for i in ids})
 
     @property
@@ -155,7 +155,7 @@ def with_probes(table: MeasurementTable, probes: ProbeSet) -> tuple[MeasurementT
     with a ``probe`` column, the neighbours' field (:func:`with_neighbour_field`). TableError for a
     set named by ids given with a table that does not say which row is which probe."""
     if table.has(PROBE) and not probes.column:
-        probes = ProbeSet.for_table(table, probes.members[0].probe, {})
+        probes = ProbeSet.for_table(table, probes.first, {})
     probes.index(table)
     return with_neighbour_field(table, probes), probes
 

@@ -58,7 +58,9 @@ def test_a_generic_term_in_the_model_is_grouped_with_the_physics_it_absorbs_and_
     # The lab replaces the generic term by the physics of known size that fits as well, and says why.
     found = diagnose(held.fit, catalog().values(), ProbeSet.one(PAPER_PROBE))
     history = []
-    preferred = prefer_physical(found, list(catalog().values()), PAPER_PROBE, history, cross_validate=False)
+    preferred = prefer_physical(
+        found, list(catalog().values()), ProbeSet.one(PAPER_PROBE), history, cross_validate=False
+    )
     assert preferred.fit.model.labels == ["finite_amplitude (at physics)"]
     change = history[-1].change
     assert change.startswith("replace moment_scale by finite_amplitude (at physics): they fit alike")

@@ -193,7 +193,7 @@ def test_every_channel_writes_a_plugin_whose_signature_is_the_term(exact, tmp_pa
     # A bound whose finite-difference step (1e-3 of the range) moves the channel as little as the
     # Jacobian's own step: the frequency is linear in the channel there.
     bound = 1e3 * chosen.step / np.abs(values).max()
-    plugin = discovery.Plugin(chosen, factors, means, bound, PAPER_PROBE, reading(chosen, factors))
+    plugin = discovery.Plugin(chosen, factors, means, bound, ProbeSet.one(PAPER_PROBE), reading(chosen, factors))
     path = tmp_path / f"{plugin.name}.py"
     path.write_text(plugin.source())
     (effect,) = load_plugins([path])

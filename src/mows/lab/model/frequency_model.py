@@ -57,7 +57,7 @@ class FrequencyModel:
     """
 
     def __init__(self, probes: ProbeSet | None = None, effects: Sequence[Effect] = ()) -> None:
-        self.probes = probes
+        self.probe = probes  # the table's probe set
         names = [e.name for e in effects]
         repeated = sorted({n for n in names if names.count(n) > 1})
         if repeated:
@@ -67,7 +67,7 @@ class FrequencyModel:
     @classmethod
     def combine(cls, left: FrequencyModel | Effect, right: FrequencyModel | Effect) -> FrequencyModel:
         parts = [left, right]
-        probes = next((p.probes for p in parts if isinstance(p, FrequencyModel) and p.probes is not None), None)
+        probes = next((p.probe for p in parts if isinstance(p, FrequencyModel) and p.probe is not None), None)
         found: list[Effect] = []
         for part in parts:
             if isinstance(part, FrequencyModel):
@@ -99,7 +99,7 @@ class FrequencyModel:
         return [e.label for e in self.effects]
 
     def without(self, effect: Effect) -> FrequencyModel:
-        return FrequencyModel(self.probes, [e for e in self.effects if e is not effect])
+        return FrequencyModel(self.probe, [e for e in self.effects if e is not effect])
 
     @property
     def parameters(self) -> list[tuple[str, Parameter]]:
@@ -133,9 +133,9 @@ class FrequencyModel:
 
     # --- evaluation -------------------------------------------------------------------------
     def _require_probes(self) -> ProbeSet:
-        if self.probes is None:
+        if self.probe is None:
             raise ValueError("this model has no probes: build it as FrequencyModel(probes) + effects")
-        return self.probes
+        return self.probe
 
     def groups(self, table: MeasurementTable) -> tuple[MeasurementTable, np.ndarray]:
         """(distinct, inverse): one row of each configuration group of ``table`` for this model,

@@ -270,7 +270,7 @@ def without_generic(fit: FitResult) -> FitResult:
     parts = np.split(fit.effect_values, np.cumsum(sizes)[:-1]) if sizes else []
     kept = [(e, values) for e, values in zip(fit.model.effects, parts) if not e.generic]
     start = np.concatenate([values for _, values in kept]) if kept else np.zeros(0)
-    return FrequencyModel(fit.model.probes, [e for e, _ in kept]).fit(fit.table, start=start)
+    return FrequencyModel(fit.model.probe, [e for e, _ in kept]).fit(fit.table, start=start)
 
 
 def _physics_verdict(

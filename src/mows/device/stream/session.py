@@ -20,6 +20,9 @@ tracking cycle, and the one place that sends commands to the device (``_act``) r
 any that would drive a coil, so no bug upstream can switch one on. :meth:`DeviceSession.disarm`
 switches the coils off at the device's next sample, fails a running cycle and ramps the supply
 to zero. Nothing here knows about ROS.
+
+One module of more than 450 lines: the lock, the poll in flight and the requests that wait for
+it are one ordering rule, which split across files would have to be read in two places.
 """
 
 from __future__ import annotations

@@ -6,7 +6,8 @@ from mows_msgs.msg import CandidateEffect, FieldMap, ModelReport, ProbeField, Sw
 from mows.estimate.probe_set import ProbeEntry, probe_frame_id
 from mows.records import stamps
 from mows.sweep.decomposition import DecompositionStatus
-from mows.sweep.events import SweepFeedback, SweepGoal, SweepMap, SweepOutcome, SweepStep, turn_prompt
+from mows.sweep.events import SweepFeedback, SweepGoal, SweepMap, SweepOutcome, SweepStep
+from mows.sweep.operator import turn_prompt
 from mows.sweep.publication import Publication
 
 # What a probe's point of the field map takes from its SweepDecomposition, as it is there.

@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 from std_srvs.srv import Trigger
 
-from mows.sweep.events import turn_prompt
+from mows.sweep.operator import turn_prompt
 from mows_ros.awaitables import until
 from mows_ros.diagnostics import Health
 from mows_ros.params import ParamSpec

@@ -4,6 +4,7 @@ cleanly (exit 0) after --duration or on a signal; a node that dies makes it fail
 takes a `/**/node` parameter file in a namespace and stops cleanly on SIGTERM."""
 
 import os
+import pathlib
 import re
 import signal
 import subprocess
@@ -168,3 +169,49 @@ def test_a_take_that_fails_as_the_context_shuts_down_is_a_clean_stop_and_only_th
         assert run.returncode == 1 and "RuntimeError: Unable to convert" in run.stderr, run.stderr
     else:
         assert run.returncode == 0, run.stderr
+
+
+KEPT_WHOLE = """
+import ctypes, os, signal, rclpy
+from mows_ros import process
+class FreedTwice:  # as a C extension's object whose freeing at the interpreter's end crashes
+    def __del__(self):
+        ctypes.string_at(0)
+kept = FreedTwice()
+def make_node():
+    node = rclpy.create_node("kept_whole")
+    node.create_timer(0.2, lambda: os.kill(os.getpid(), signal.SIGINT))
+    node.get_logger().info("up")
+    return node
+process.run_node(make_node, ["kept_whole"])
+"""
+
+
+def test_a_stopped_node_ends_its_process_without_taking_it_apart():
+    """Once the node has stopped (released, context shut down, output flushed), its process ends
+    with the code: the interpreter's teardown, where an object freed twice crashes, never runs."""
+    run = subprocess.run([sys.executable, "-c", KEPT_WHOLE], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and "up" in run.stderr, (run.returncode, run.stderr)
+
+
+def shm_segments(pid: int | str) -> set[str]:
+    """The Fast DDS shared-memory segments (not the ports) process ``pid`` has mapped."""
+    try:
+        maps = pathlib.Path(f"/proc/{pid}/maps").read_text()
+    except OSError:  # a process that ended meanwhile
+        return set()
+    return set(re.findall(r"/dev/shm/(fastrtps_[0-9a-f]{16})(?:\s|$)", maps))
+
+
+def test_a_stopped_node_leaves_the_graph_and_none_of_its_shared_memory(ros, diagnostics, start):
+    """The calibrator (action servers, a lifecycle state machine: handles that outlive
+    destroy_node in reference cycles) stopped on SIGINT unlinks its own segments: each it mapped
+    but this process had not mapped before it started (the others are this process's own)."""
+    ours = shm_segments(os.getpid())
+    calibrator = start(*next(node for node in NODES if node.name == "calibrator").command([]))
+    hear_all(ros, diagnostics, {"/calibrator"}, calibrator)
+    its_own = shm_segments(calibrator.pid) - ours
+    assert its_own, "the node maps no segment of its own: nothing to check"
+    calibrator.send_signal(signal.SIGINT)
+    assert exit_code(ros, calibrator) == 0, log(calibrator)
+    assert not {name for name in its_own if (pathlib.Path("/dev/shm") / name).exists()}

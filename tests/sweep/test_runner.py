@@ -13,7 +13,8 @@ from mows.physics.pose import Pose
 from mows.physics.potential import ArcPotential
 from mows.physics.probe import PAPER_PROBE as P
 from mows.sweep.decomposition import Decomposition, DecompositionStatus
-from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings, turn_prompt
+from mows.sweep.events import CycleAnswer, SweepFit, SweepGoal, SweepSettings
+from mows.sweep.operator import turn_prompt
 from mows.sweep.record import SweepPoint
 from mows.sweep.runner import SweepRunner
 

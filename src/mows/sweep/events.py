@@ -43,11 +43,6 @@ class SweepSettings:
             raise ValueError("a sweep's settings need its probes (one probe is a set of one)")
 
 
-def turn_prompt(theta0_rad: float) -> str:
-    """What the operator of a stage without a motor is asked before a cycle at ``theta0_rad``."""
-    return f"turn the probe to θ0 = {math.degrees(theta0_rad):g}° and confirm"
-
-
 @dataclasses.dataclass(frozen=True)
 class SweepGoal:
     """A sweep as asked: no angles, 0 repeats or no model mean the settings' choice. With a
@@ -170,7 +165,7 @@ class SweepOutcome:
 class SweepStep:
     """What the caller does next, in this order: report ``feedback``, publish each of
     ``publish`` (a probe's failed decomposition too, beside others that succeeded), then one of:
-    ask the operator to turn the stage to ``turn`` (rad, :func:`turn_prompt`) and call
+    ask the operator to turn the stage to ``turn`` (rad, :func:`mows.sweep.operator.turn_prompt`) and call
     :meth:`SweepRunner.on_turned` once confirmed, run ``run_cycle``, call ``decompose``
     (CPU-bound, seconds) and feed its result, each probe's decomposition, to
     :meth:`SweepRunner.on_decomposed`, end with ``finished``, or (none of these) wait for fits."""

@@ -27,7 +27,8 @@ from mows.sweep.calibration.schedule import (
     CalibrationSchedule,
     CalibrationStep,
 )
-from mows.sweep.events import CycleAnswer, turn_prompt
+from mows.sweep.events import CycleAnswer
+from mows.sweep.operator import turn_prompt
 
 
 @dataclasses.dataclass(frozen=True)

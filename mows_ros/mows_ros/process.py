@@ -7,17 +7,12 @@ A node starts unconfigured, for a supervisor (mows-graph, ``ros2 lifecycle``) to
 """
 
 import argparse
-import atexit
-import contextlib
 import faulthandler
-import gc
-import os
 import re
 import signal
 import sys
 import time
 from collections.abc import Callable
-from typing import NoReturn
 
 import rclpy
 from rclpy.exceptions import (
@@ -71,30 +66,7 @@ def autostart_asked(args: list[str] | None) -> bool:
     return parser.parse_args(remove_ros_args(sys.argv if args is None else args)[1:]).autostart
 
 
-def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -> NoReturn:
-    """Create the node with ``make_node``, spin it on one thread (:func:`spin_node`) and end the
-    process with its exit code once the node has released what it holds and its context is shut
-    down: at-exit handlers run (logging's flush) and the output is flushed, but the interpreter
-    does not take its modules apart. That took a node 0.7 s of the 1 s between SIGINT and its
-    exit on an idle host, several times that on a loaded one (mows-graph aborts a node that has
-    not stopped within its bound), and it is where a C extension's object freed twice crashes a
-    process that has already said all it had to say. An exception the node did not expect (a
-    bug) still ends the process with its traceback and code 1.
-    """
-    code = spin_node(make_node, args)
-    # The node's last handles (its action servers, its lifecycle state machine) are in reference
-    # cycles: collected now, so that its DDS participant leaves the graph and unlinks its shared
-    # memory, as the teardown did (else others see the node for a lease longer, and its segments
-    # stay in /dev/shm).
-    gc.collect()
-    atexit._run_exitfuncs()
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(OSError):  # a reader that left has been told nothing more
-            stream.flush()
-    os._exit(code)
-
-
-def spin_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -> int:
+def run_node(make_node: Callable[[], MowsNode], args: list[str] | None = None) -> int:
     """Create the node with ``make_node`` and spin it on one thread; return the exit code.
 
     A callback that waits (the driver's run_cycle, the estimator's calibration, the mapper's

@@ -171,29 +171,6 @@ def test_a_take_that_fails_as_the_context_shuts_down_is_a_clean_stop_and_only_th
         assert run.returncode == 0, run.stderr
 
 
-KEPT_WHOLE = """
-import ctypes, os, signal, rclpy
-from mows_ros import process
-class FreedTwice:  # as a C extension's object whose freeing at the interpreter's end crashes
-    def __del__(self):
-        ctypes.string_at(0)
-kept = FreedTwice()
-def make_node():
-    node = rclpy.create_node("kept_whole")
-    node.create_timer(0.2, lambda: os.kill(os.getpid(), signal.SIGINT))
-    node.get_logger().info("up")
-    return node
-process.run_node(make_node, ["kept_whole"])
-"""
-
-
-def test_a_stopped_node_ends_its_process_without_taking_it_apart():
-    """Once the node has stopped (released, context shut down, output flushed), its process ends
-    with the code: the interpreter's teardown, where an object freed twice crashes, never runs."""
-    run = subprocess.run([sys.executable, "-c", KEPT_WHOLE], capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0 and "up" in run.stderr, (run.returncode, run.stderr)
-
-
 def shm_segments(pid: int | str) -> set[str]:
     """The Fast DDS shared-memory segments (not the ports) process ``pid`` has mapped."""
     try:

@@ -357,3 +357,29 @@ def test_the_work_a_signal_cut_short_is_never_taken_apart():
     half-loaded kernel whose freeing would crash leaves the status and the line as they are."""
     run = subprocess.run([sys.executable, "-c", HALF_LOADED], capture_output=True, text=True, timeout=120)
     assert (run.returncode, run.stderr) == (143, "mows sim: terminated\n"), run.stderr
+
+
+SWALLOWED = """
+import os, signal
+from mows.cli import status
+from mows.cli.inputs import report_errors
+status.stop_on_signals()
+def work():
+    try:  # a library that takes the interrupt for its own failure, then fails on its half-done state
+        os.kill(os.getpid(), signal.SIGTERM)
+        while True:
+            pass
+    except BaseException:
+        pass
+    raise {error}("Invalid bounding box")
+os._exit(status.settle("mows lab report", report_errors("mows lab report", work)))
+"""
+
+
+@pytest.mark.parametrize("error", ["ValueError", "RuntimeError"])
+def test_an_error_that_a_signal_left_behind_is_not_said(error):
+    """The signal wins in one line: the error a library raises after swallowing it (matplotlib's
+    'Invalid bounding box' once) is what the signal cut short, a bad input or a bug alike."""
+    code = SWALLOWED.format(error=error)
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert (run.returncode, run.stderr) == (143, "mows lab report: terminated\n"), run.stderr

@@ -34,6 +34,7 @@ from mows.cli.status import (
     caused_by_interrupt,
     interrupted,
     raised_by_a_signal,
+    signalled,
 )
 from mows.physics import ranges
 from mows.physics.schema import unreadable, yaml_problem
@@ -241,7 +242,8 @@ def _status(prog: str, work: Callable[[], int], debug: bool) -> int:
     except INPUT_ERRORS as error:
         if debug:
             raise
-        print(f"{prog}: error: {one_line(error)}", file=sys.stderr)
+        if not signalled():
+            print(f"{prog}: error: {one_line(error)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except Exception as error:  # noqa: BLE001 - the one place a bug is turned into a line
         if debug:
@@ -250,6 +252,8 @@ def _status(prog: str, work: Callable[[], int], debug: bool) -> int:
             line, status = interrupted(prog, error)
             print(line, file=sys.stderr)
             return status
+        if signalled():
+            return EXIT_BUG
         print(
             f"{prog}: internal error: {type(error).__name__}: {one_line(error)} "
             "(a bug: rerun with --debug for the traceback and report it)",

@@ -104,6 +104,13 @@ def raised_by_a_signal() -> bool:
     return bool(_received) or not _handling
 
 
+def signalled() -> bool:
+    """Whether the command's own handlers have seen SIGINT or SIGTERM: an error raised after one
+    is what it cut short (a library that swallows the interrupt and fails on its half-done
+    state), and :func:`settle` says the signal instead."""
+    return bool(_received)
+
+
 def settle(prog: str, status: int) -> int:
     """The command's final status: from here on signals are ignored, and one that came at any
     time before (even one whose exception was swallowed) makes it 130 or 143, saying so in one
